@@ -1,0 +1,1 @@
+"""One module per ``facecast`` subcommand (see facecast/cli.py for the contract)."""

@@ -1,0 +1,29 @@
+"""``facecast bench core``: per-frame cost of the real-time core (prints figures, never asserts)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+
+    p = sub.add_parser("bench", help="run a benchmark and print its figures", formatter_class=HelpFormatter)
+    which = p.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    core = which.add_parser(
+        "core",
+        help="MFCC, context stacking, streaming and batch inversion, Baum-Welch vs hmmlearn",
+        formatter_class=HelpFormatter,
+    )
+    core.add_argument("--json", action="store_true", help="print one JSON document instead of a table")
+    core.add_argument("--quick", action="store_true", help="fewer repetitions and a smaller EM problem")
+    core.add_argument("--no-hmmlearn", action="store_true", help="skip the (slow) hmmlearn EM comparison")
+    core.set_defaults(run=_run_core)
+
+
+def _run_core(args: argparse.Namespace) -> int:
+    from benchmarks.core import CoreBenchConfig, run_core_benchmark
+
+    cfg = CoreBenchConfig(quick=args.quick, hmmlearn=not args.no_hmmlearn)
+    run_core_benchmark(cfg, as_json=args.json)
+    return 0

@@ -1,0 +1,34 @@
+"""realtime_core: the pure, sans-I/O algorithms of facecast.
+
+numpy in, numpy out: no files, sockets, devices, clocks or prints. Streaming stages take
+pushes and return what is ready; each gives the same output fed whole, sample by sample,
+or in random chunks.
+
+Sub-packages:
+    features   MFCCs at the video rate, running CMVN, context stacking (paper Sec. 3)
+    hmm        forward-backward/Viterbi kernels, Gaussian-mixture emissions, Baum-Welch (Sec. 4.1)
+    inversion  HMM inversion, eq. 7: batch EM and the streaming forward form (Sec. 4.2)
+    metrics    AMSE / ACC (eq. 11-12), Pearson R and normalised MSE (paper 002 eq. 6-8)
+"""
+
+from realtime_core.errors import (
+    ConfigError,
+    InvalidAudioError,
+    InvalidFeaturesError,
+    ModelFormatError,
+    RealtimeCoreError,
+    StreamStateError,
+)
+
+VISUAL_PARAMS: tuple[str, ...] = ("upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress")
+"""The four mouth parameters (paper Sec. 3), in this order everywhere: files, CSV, protocol."""
+
+__all__ = [
+    "VISUAL_PARAMS",
+    "ConfigError",
+    "InvalidAudioError",
+    "InvalidFeaturesError",
+    "ModelFormatError",
+    "RealtimeCoreError",
+    "StreamStateError",
+]

@@ -1,0 +1,134 @@
+"""The audio front end: samples -> MFCC -> running CMVN -> context-stacked vectors o_a,t.
+
+One streaming object composes the three stages so the live server, ``facecast animate``
+and training all compute exactly the same features. Fed whole, sample by sample or in
+random chunks it gives the same rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from realtime_core.errors import ConfigError, InvalidAudioError
+from realtime_core.features.cmvn import CmvnConfig, RunningCmvn, mel_level_db
+from realtime_core.features.context import ContextStacker
+from realtime_core.features.mfcc import MfccConfig, MfccStream, as_float_samples
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrontEndConfig:
+    """mfcc: the MFCC settings (``include_c0`` must be False: c0 is used for gating only).
+    cmvn: running-CMVN settings, or None for raw MFCCs.
+    tc: co-articulation context on each side (3 -> 7 frames -> 77 dims with 11 ceps).
+    """
+
+    mfcc: MfccConfig = field(default_factory=MfccConfig)
+    cmvn: CmvnConfig | None = field(default_factory=CmvnConfig)
+    tc: int = 3
+
+    def __post_init__(self) -> None:
+        if self.mfcc.include_c0:
+            raise ConfigError("FrontEndConfig.mfcc.include_c0 must be False (c0 is used for gating)")
+        if not 0 <= self.tc <= 20:
+            raise ConfigError(f"tc must be in 0..20, got {self.tc}")
+
+    @property
+    def n_ceps(self) -> int:
+        return self.mfcc.n_ceps
+
+    @property
+    def audio_dim(self) -> int:
+        """Dimension of o_a,t: ``(2 tc + 1) * n_ceps``."""
+        return (2 * self.tc + 1) * self.mfcc.n_ceps
+
+    @property
+    def delay_frames(self) -> int:
+        """Rows lag the newest complete MFCC frame by tc frames (the lookahead)."""
+        return self.tc
+
+
+class FrontEnd:
+    """``push(samples (n,)) -> (k, audio_dim) float64``; ``flush()`` -> the rest.
+
+    ``cmvn_mean``/``cmvn_var``: ``(n_ceps,)`` warm-start statistics (the model's training
+    statistics); required when ``config.cmvn`` is not None.
+    """
+
+    def __init__(
+        self,
+        config: FrontEndConfig,
+        *,
+        cmvn_mean: np.ndarray | None = None,
+        cmvn_var: np.ndarray | None = None,
+    ) -> None:
+        self.config = config
+        mcfg = config.mfcc
+        self._mfcc = MfccStream(replace(mcfg, include_c0=True))
+        if config.cmvn is not None:
+            if cmvn_mean is None or cmvn_var is None:
+                raise ConfigError("FrontEnd with CMVN needs cmvn_mean and cmvn_var (training statistics)")
+            self._cmvn: RunningCmvn | None = RunningCmvn(config.cmvn, mean=cmvn_mean, var=cmvn_var)
+        else:
+            self._cmvn = None
+        self._ctx = ContextStacker(dim=mcfg.n_ceps, tc=config.tc)
+
+    def reset(self) -> None:
+        self._mfcc.reset()
+        if self._cmvn is not None:
+            self._cmvn.reset()
+        self._ctx.reset()
+
+    @property
+    def frames_out(self) -> int:
+        """Rows released so far (row t is video frame t)."""
+        return self._ctx._next
+
+    def push(self, samples: np.ndarray) -> np.ndarray:
+        return self._ctx.push(self._normalise(self._mfcc.push(samples)))
+
+    def flush(self) -> np.ndarray:
+        rows = self._ctx.push(self._normalise(self._mfcc.flush()))
+        return np.concatenate([rows, self._ctx.flush()])
+
+    def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
+        ceps = c0_ceps[:, 1:]
+        if self._cmvn is None:
+            return ceps
+        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+        return self._cmvn.push(ceps, level)
+
+
+def raw_mfcc_with_level(samples: np.ndarray, mfcc: MfccConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Whole-utterance MFCCs and levels for computing CMVN training statistics.
+
+    Returns ``(ceps (T, n_ceps), level_db (T,))`` on the front end's frame grid.
+    """
+    x = as_float_samples(samples)
+    if x.size < mfcc.window_len:
+        raise InvalidAudioError(f"audio too short: {x.size} samples < one window ({mfcc.window_len})")
+    s = MfccStream(replace(mfcc, include_c0=True))
+    rows = np.concatenate([s.push(x), s.flush()])
+    return rows[:, 1:], mel_level_db(rows[:, 0], mfcc.n_mels)
+
+
+def extract_features(
+    samples: np.ndarray,
+    config: FrontEndConfig,
+    *,
+    cmvn_mean: np.ndarray | None = None,
+    cmvn_var: np.ndarray | None = None,
+) -> np.ndarray:
+    """Whole-utterance o_a: ``(n,)`` samples -> ``(n_frames, audio_dim) float64``.
+
+    Identical to the streaming :class:`FrontEnd` fed the same samples and flushed.
+    """
+    x = as_float_samples(samples)
+    if x.size < config.mfcc.window_len:
+        raise InvalidAudioError(
+            f"audio too short: {x.size} samples, need at least one window of {config.mfcc.window_len}"
+        )
+    fe = FrontEnd(config, cmvn_mean=cmvn_mean, cmvn_var=cmvn_var)
+    return np.concatenate([fe.push(x), fe.flush()])
+

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Idempotent machine and environment set-up for facecast (Debian 12, root). Called by ./go.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+# System packages: espeak-ng (speech synthesis for corpora and the demo), ffmpeg (video I/O),
+# PortAudio (microphone via sounddevice), PulseAudio (a virtual microphone in tests),
+# Mesa EGL (headless moderngl rendering).
+apt_pkgs=(espeak-ng libespeak-ng1 ffmpeg libportaudio2 pulseaudio pulseaudio-utils
+          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv)
+missing=()
+for p in "${apt_pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  python3 -m venv .venv
+fi
+stamp=.venv/.facecast-installed
+want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  echo "setup: installing Python packages"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e '.[dev]'
+  echo "$want" > "$stamp"
+fi
