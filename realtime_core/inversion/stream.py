@@ -1,0 +1,147 @@
+"""Streaming HMM inversion: the live path (paper Sec. 4.2 and 6.3).
+
+Theory of operation
+-------------------
+Once audio up to frame ``t + tc`` has arrived, the front end releases ``o_a,t``. The
+inverter then
+
+1. evaluates every (state, mixture) component's **audio-marginal** likelihood
+   ``c_jk N(o_a,t; mu_a, Sigma_aa)`` and conditional mean ``m_jk(o_a,t)`` with a single
+   matrix-vector product against the precomputed stack ``B`` (see
+   :mod:`realtime_core.inversion.conditional`);
+2. advances the normalised forward recursion (filtered state posteriors);
+3. outputs ``o~_v,t`` by eq. 7 under the component posteriors.
+
+With ``lag = L > 0`` the output for frame t waits for frames up to ``t + L`` and uses
+fixed-lag smoothed posteriors (a backward pass over the last L frames), adding
+``L x 33 ms`` of delay. ``flush()`` ends the utterance and smooths the frames still
+waiting with the backward pass from the last frame, so with ``L >= T`` the stream equals
+the batch audio-posterior estimate (forward-backward over the whole utterance), and with
+``L = 0`` it equals batch forward filtering.
+
+The matrix-vector product runs in float32 by default (``dtype``); the small per-component
+arithmetic after it stays in float64.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
+from realtime_core.hmm.model import LOG_2PI
+from realtime_core.inversion.conditional import ConditionalForm
+
+
+@dataclass(frozen=True, kw_only=True)
+class StreamConfig:
+    """lag: extra frames of fixed-lag smoothing (0 = pure filtering, lowest delay).
+    dtype: "float32" or "float64" for the per-frame matrix-vector product."""
+
+    lag: int = 0
+    dtype: str = "float32"
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.lag <= 100000:
+            raise ConfigError(f"lag must be in 0..100000 frames, got {self.lag}")
+        if self.dtype not in ("float32", "float64"):
+            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+
+
+class StreamingInverter:
+    """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends."""
+
+    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig()) -> None:
+        self.form = form
+        self.config = config
+        dt = np.dtype(config.dtype)
+        self._B = np.ascontiguousarray(form.B, dtype=dt)
+        self._offset = form.offset.astype(dt)
+        self._da, self._dv = form.n_audio, form.n_visual
+        self._n, self._m = form.n_states, form.n_mix
+        self._const = (-form.logdet_a - 0.5 * self._da * LOG_2PI).reshape(self._n, self._m) + form.log_weights
+        self._A = np.exp(form.log_transmat)
+        self._start = np.exp(form.log_startprob)
+        self._phi = form.phi_v  # (C, Dv, Dv)
+        self._phi_flat = form.phi_v.reshape(len(form.phi_v), -1)
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new utterance."""
+        self._f: np.ndarray | None = None  # filtered posterior of the newest frame
+        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, cond means)
+        self._finished = False
+
+    def push(self, oa: np.ndarray) -> np.ndarray:
+        if self._finished:
+            raise StreamStateError("StreamingInverter.push() after flush(); call reset() first")
+        oa = np.asarray(oa)
+        if oa.ndim != 2 or oa.shape[1] != self._da:
+            raise InvalidFeaturesError(f"audio features must be (k, {self._da}), got {oa.shape}")
+        if not np.all(np.isfinite(oa)):
+            raise InvalidFeaturesError("audio features contain NaN or inf")
+        out = []
+        for row in oa:
+            self._pending.append(self._forward(row))
+            if len(self._pending) > self.config.lag:
+                out.append(self._emit_oldest())
+        return np.array(out).reshape(len(out), self._dv)
+
+    def flush(self) -> np.ndarray:
+        if self._finished:
+            raise StreamStateError("StreamingInverter.flush() called twice; call reset() first")
+        self._finished = True
+        if not self._pending:
+            return np.zeros((0, self._dv))
+        # One backward pass from the last frame over everything still waiting.
+        items = list(self._pending)
+        betas = [np.ones(self._n)]
+        for f, b, _, _ in reversed(items[1:]):
+            beta = self._A @ (b * betas[-1])
+            betas.append(beta / beta.sum())
+        betas.reverse()
+        out = [self._combine(f * beta, mix, cond) for (f, _, mix, cond), beta in zip(items, betas)]
+        self._pending.clear()
+        return np.array(out)
+
+    def _forward(self, row: np.ndarray):
+        y = (self._B @ row.astype(self._B.dtype, copy=False) - self._offset).astype(np.float64)
+        y = y.reshape(self._n * self._m, self._da + self._dv)
+        z = y[:, : self._da]
+        logc = (-0.5 * np.einsum("ci,ci->c", z, z)).reshape(self._n, self._m) + self._const
+        mx = logc.max(axis=1, keepdims=True)
+        e = np.exp(logc - mx)
+        s = e.sum(axis=1)
+        mix = e / s[:, None]  # within-state mixture posteriors (N, M)
+        log_b = mx[:, 0] + np.log(s)
+        b = np.exp(log_b - log_b.max())  # state likelihoods, scaled (N,)
+        prior = self._start if self._f is None else self._f @ self._A
+        f = prior * b
+        total = f.sum()
+        if not total > 0:  # every state impossible: restart the filter from the prior
+            f = b / b.sum()
+        else:
+            f = f / total
+        self._f = f
+        return f, b, mix, y[:, self._da :]
+
+    def _emit_oldest(self) -> np.ndarray:
+        f, _, mix, cond = self._pending[0]
+        if self.config.lag:
+            beta = np.ones(self._n)
+            for _, b, _, _ in list(self._pending)[:0:-1]:
+                beta = self._A @ (b * beta)
+                beta /= beta.sum()
+            f = f * beta
+        self._pending.popleft()
+        return self._combine(f, mix, cond)
+
+    def _combine(self, state_post: np.ndarray, mix: np.ndarray, cond: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame: ``(N,), (N, M), (C, Dv) -> (Dv,)``."""
+        r = (state_post[:, None] * mix).reshape(-1)
+        r = r / r.sum()
+        P = (r @ self._phi_flat).reshape(self._dv, self._dv)
+        pm = np.einsum("cij,cj->ci", self._phi, cond)
+        return np.linalg.solve(P, r @ pm)
