@@ -51,7 +51,8 @@ class TrainConfig:
     covar_prior_weight r (pseudo-frames) and covar_prior_scale s: inverse-Wishart prior
     ``Psi = r s diag(global var)``. pseudo_count: Dirichlet pseudo-count on start,
     transition and mixture weights. centering: "exact" (EM) or "previous" (hmmlearn).
-    seed: k-means initialisation. kmeans_max_frames: frames sampled for k-means.
+    seed: k-means initialisation. kmeans_max_frames: frames sampled for k-means;
+    kmeans_restarts: k-means++ runs, the lowest distortion wins. chunk_frames: E-step chunk.
     """
 
     n_states: int = 28
@@ -65,6 +66,7 @@ class TrainConfig:
     centering: str = "exact"
     seed: int = 0
     kmeans_max_frames: int = 30000
+    kmeans_restarts: int = 5
     chunk_frames: int = 20000
 
     def __post_init__(self) -> None:
@@ -116,6 +118,18 @@ def _prior_psi(x: np.ndarray, config: TrainConfig) -> np.ndarray:
     return config.covar_prior_weight * config.covar_prior_scale * var
 
 
+def _kmeans(data: np.ndarray, k: int, rng: np.random.Generator, restarts: int) -> np.ndarray:
+    """k-means++ with restarts; the codebook with the lowest distortion, ``(k, D)``."""
+    best, best_cost = None, np.inf
+    for _ in range(max(restarts, 1)):
+        book, _ = scipy.cluster.vq.kmeans2(data, k, minit="++", seed=rng, iter=30)
+        _, dist = scipy.cluster.vq.vq(data, book)
+        cost = float(np.sum(dist**2))
+        if cost < best_cost:
+            best, best_cost = book, cost
+    return best
+
+
 def init_model(sequences: Sequence[np.ndarray], *, n_audio: int, config: TrainConfig) -> AvHmm:
     """k-means initialisation on whitened data. ``sequences``: list of ``(T_i, D)``."""
     x, lengths = _check_sequences(sequences)
@@ -129,7 +143,7 @@ def init_model(sequences: Sequence[np.ndarray], *, n_audio: int, config: TrainCo
     sample = xw if len(xw) <= config.kmeans_max_frames else xw[rng.choice(len(xw), config.kmeans_max_frames, replace=False)]
     if len(sample) < n * m:
         raise InvalidFeaturesError(f"{len(sample)} frames are too few for {n} states x {m} mixtures")
-    centroids, _ = scipy.cluster.vq.kmeans2(sample, n, minit="++", seed=rng, iter=20)
+    centroids = _kmeans(sample, n, rng, config.kmeans_restarts)
     labels, _ = scipy.cluster.vq.vq(xw, centroids)
     psi = _prior_psi(x, config)
     r = config.covar_prior_weight
@@ -142,9 +156,8 @@ def init_model(sequences: Sequence[np.ndarray], *, n_audio: int, config: TrainCo
         if len(xj) < m:  # an empty state: borrow random frames so it starts somewhere sensible
             xj = x[rng.choice(len(x), max(m, 2 * m), replace=False)]
         if m > 1:
-            sub_c, _ = scipy.cluster.vq.kmeans2(xw[labels == j] if np.sum(labels == j) >= m else (xj - mean) @ whiten,
-                                                m, minit="++", seed=rng, iter=20)
-            sub, _ = scipy.cluster.vq.vq((xj - mean) @ whiten, sub_c)
+            xjw = (xj - mean) @ whiten
+            sub, _ = scipy.cluster.vq.vq(xjw, _kmeans(xjw, m, rng, config.kmeans_restarts))
         else:
             sub = np.zeros(len(xj), dtype=int)
         for k in range(m):

@@ -18,13 +18,16 @@ def random_av_hmm(rng: np.random.Generator, *, n_states: int, n_mix: int, n_audi
         centre = rng.standard_normal(d) * 2.5
         for k in range(n_mix):
             means[j, k] = centre + rng.standard_normal(d) * 0.8
-            a = rng.standard_normal((d, d)) * 0.25
-            cov = a @ a.T + np.eye(d) * 0.3
-            # Couple the visual dims to a few audio dims.
+            # o_v = G o_a + noise within the component: a PD joint covariance by construction.
+            a = rng.standard_normal((n_audio, n_audio)) * 0.25
+            caa = a @ a.T + np.eye(n_audio) * 0.3
             g = rng.standard_normal((n_visual, n_audio)) * coupling / np.sqrt(n_audio)
-            cov[n_audio:, :n_audio] += g @ cov[:n_audio, :n_audio]
-            cov[:n_audio, n_audio:] = cov[n_audio:, :n_audio].T
-            cov[n_audio:, n_audio:] += g @ cov[:n_audio, :n_audio] @ g.T
+            b = rng.standard_normal((n_visual, n_visual)) * 0.1
+            cov = np.empty((d, d))
+            cov[:n_audio, :n_audio] = caa
+            cov[n_audio:, :n_audio] = g @ caa
+            cov[:n_audio, n_audio:] = (g @ caa).T
+            cov[n_audio:, n_audio:] = g @ caa @ g.T + b @ b.T + np.eye(n_visual) * 0.05
             covars[j, k] = 0.5 * (cov + cov.T)
     trans = rng.dirichlet(np.ones(n_states), size=n_states) * (1 - self_loop) + np.eye(n_states) * self_loop
     return AvHmm(
