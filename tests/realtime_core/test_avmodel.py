@@ -11,7 +11,7 @@ from realtime_core import ModelFormatError
 from realtime_core.avmodel import AvModel, decode_model, encode_model
 from realtime_core.features import FrontEndConfig, MfccConfig
 from realtime_core.pipeline import SpeechToParams, speech_to_params
-from tests.realtime_core.synthetic import random_av_hmm
+from realtime_core.hmm.sampling import random_av_hmm
 
 
 def small_model(seed: int = 0) -> AvModel:

@@ -11,7 +11,7 @@ from realtime_core.inversion import (
     ConditionalForm, HmmiConfig, StreamConfig, StreamingInverter, audio_posterior_estimate, hmm_inversion,
 )
 from realtime_core.metrics import acc
-from tests.realtime_core.synthetic import random_av_hmm, sample
+from realtime_core.hmm.sampling import random_av_hmm, sample
 
 DA, DV = 7, 3
 

@@ -1,4 +1,4 @@
-"""Known audio-visual HMMs and samples from them, for tests (an independent generator)."""
+"""Sampling from an audio-visual HMM, and random well-posed models (tests, benchmarks)."""
 
 from __future__ import annotations
 
