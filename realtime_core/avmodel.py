@@ -6,7 +6,8 @@ A model file is an ``.npz`` archive (no pickle) holding:
     names, and free-form training metadata (recipe, corpus, report);
   * the HMM (``startprob, transmat, weights, means, covars``, covariance type, n_audio);
   * the CMVN warm-start statistics (``cmvn_mean, cmvn_var``);
-  * the precomputed streaming matrices (``B, offset, logdet_a, phi_v, chol_vv, logdet_v``).
+  * the precomputed streaming matrices (``center, quad, quad0, reg, reg0, phi_v, chol_vv,
+    logdet_v``, see :mod:`realtime_core.inversion.conditional`).
 
 :func:`decode_model` validates shapes, finiteness and positive-definiteness and checks
 the stored streaming matrices against ones recomputed from the HMM, naming the problem
@@ -33,7 +34,7 @@ from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInve
 FORMAT = "facecast-avmodel"
 VERSION = 1
 _HMM_ARRAYS = ("startprob", "transmat", "weights", "means", "covars")
-_FORM_ARRAYS = ("B", "offset", "logdet_a", "phi_v", "chol_vv", "logdet_v")
+_FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "logdet_v")
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

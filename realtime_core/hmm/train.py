@@ -300,6 +300,18 @@ def _m_step(model: AvHmm, stats: dict, psi: np.ndarray, config: TrainConfig, ori
     )
 
 
+def em_iteration(
+    sequences: Sequence[np.ndarray], model: AvHmm, *, config: TrainConfig
+) -> tuple[AvHmm, float]:
+    """One E-step and M-step. Returns ``(updated model, objective per frame at model)``."""
+    x, lengths = _check_sequences(sequences)
+    psi = _prior_psi(x, config)
+    origin = x.mean(axis=0)
+    stats, loglik = _e_step(model, x, lengths, config, origin)
+    objective = (loglik + _log_prior(model, psi, config)) / len(x)
+    return _m_step(model, stats, psi, config, origin), objective
+
+
 def baum_welch(
     sequences: Sequence[np.ndarray],
     model: AvHmm,
@@ -319,7 +331,7 @@ def baum_welch(
     total = float(len(x))
     history: list[float] = []
     converged = False
-    for it in range(config.n_iter):
+    for it in range(config.n_iter + 1):
         stats, loglik = _e_step(model, x, lengths, config, origin)
         history.append((loglik + _log_prior(model, psi, config)) / total)
         if progress is not None:
@@ -327,10 +339,9 @@ def baum_welch(
         if len(history) > 1 and history[-1] - history[-2] < config.tol:
             converged = True
             break
+        if it == config.n_iter:
+            break
         model = _m_step(model, stats, psi, config, origin)
-    else:
-        _, loglik = _e_step(model, x, lengths, config, origin)
-        history.append((loglik + _log_prior(model, psi, config)) / total)
     return TrainResult(model=model, history=history, converged=converged)
 
 

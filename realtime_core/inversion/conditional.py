@@ -22,10 +22,14 @@ the per-component conditional means:
 
     o_v = [sum_c g_c Phi_v,c]^-1 sum_c g_c Phi_v,c m_c(o_a).
 
-Everything that does not depend on the input is computed once here: the whitening
-matrices ``W_c = L_aa,c^-1`` (4 x 4 and 77 x 77 triangular, from the factor), ``R_c``,
-``Phi_v,c``, log-determinants, stacked into one matrix ``B`` so that a frame costs one
-matrix-vector product ``B @ o_a`` plus O(N M) small work.
+Everything that does not depend on the input is computed once here. The audio
+quadratic form ``(o_a - mu_a)^T Sigma_aa^-1 (o_a - mu_a)`` is expanded around a global
+centre ``g`` (``a = o_a - g``) as ``q_c . [a_i a_j (i <= j); a] + const_c``: the products
+``a_i a_j`` are formed once per frame and shared by every component, so the likelihoods of
+all C components cost one ``(C, Da (Da + 1) / 2 + Da)`` matrix-vector product, half of what
+whitening each component (``L_aa^-1 a``) would cost and with no per-component work. The
+conditional means need a second, ``(C Dv, Da)`` product. ``Sigma_aa^-1 = W^T W`` with
+``W = L_aa^-1`` from a triangular solve.
 """
 
 from __future__ import annotations
@@ -43,19 +47,22 @@ from realtime_core.hmm.model import LOG_2PI, AvHmm
 class ConditionalForm:
     """Precomputed per-component matrices (C = N M components, flattened j-major).
 
-    B: ``(C * (Da + Dv), Da)`` stacked ``[W_c; R_c]``; offset: ``(C * (Da + Dv),)`` so that
-    ``y = B @ o_a - offset`` holds ``W_c (o_a - mu_a,c)`` then ``m_c(o_a)`` per component.
-    logdet_a: ``(C,)`` log|L_aa|; phi_v: ``(C, Dv, Dv)``; chol_vv: ``(C, Dv, Dv)``;
-    logdet_v: ``(C,)`` log|L_vv|; log_weights: ``(N, M)``.
+    center: ``(Da,)`` g; quad: ``(C, K)`` with ``K = Da (Da + 1) / 2 + Da``; quad0: ``(C,)``
+    so that ``log N(o_a; mu_a, Sigma_aa) = -0.5 (quad @ [a_i a_j; a] + quad0)``;
+    reg: ``(C * Dv, Da)`` and reg0: ``(C * Dv,)`` so that ``m_c(o_a) = reg @ a + reg0``;
+    phi_v: ``(C, Dv, Dv)``; chol_vv: ``(C, Dv, Dv)``; logdet_v: ``(C,)`` log|L_vv|;
+    log_weights: ``(N, M)``; log_startprob: ``(N,)``; log_transmat: ``(N, N)``.
     """
 
     n_states: int
     n_mix: int
     n_audio: int
     n_visual: int
-    B: np.ndarray
-    offset: np.ndarray
-    logdet_a: np.ndarray
+    center: np.ndarray
+    quad: np.ndarray
+    quad0: np.ndarray
+    reg: np.ndarray
+    reg0: np.ndarray
     phi_v: np.ndarray
     chol_vv: np.ndarray
     logdet_v: np.ndarray
@@ -70,32 +77,42 @@ class ConditionalForm:
         c = n * m
         L = model.chol.reshape(c, d, d)
         mu = model.means.reshape(c, d)
-        B = np.empty((c, da + dv, da))
-        offset = np.empty((c, da + dv))
+        center = (model.weights.reshape(c, 1) * mu[:, :da]).sum(axis=0) / n
+        iu = np.triu_indices(da)
+        offdiag = np.where(iu[0] == iu[1], 1.0, 2.0)
+        quad = np.empty((c, iu[0].size + da))
+        quad0 = np.empty(c)
+        reg = np.empty((c, dv, da))
+        reg0 = np.empty((c, dv))
         phi_v = np.empty((c, dv, dv))
-        eye = np.eye(da)
+        eye_a, eye_v = np.eye(da), np.eye(dv)
         for i in range(c):
             laa, lva, lvv = L[i, :da, :da], L[i, da:, :da], L[i, da:, da:]
-            W = scipy.linalg.solve_triangular(laa, eye, lower=True, check_finite=False)
-            R = lva @ W
-            B[i, :da] = W
-            B[i, da:] = R
-            offset[i, :da] = W @ mu[i, :da]
-            offset[i, da:] = R @ mu[i, :da] - mu[i, da:]
-            lvv_inv = scipy.linalg.solve_triangular(lvv, np.eye(dv), lower=True, check_finite=False)
+            W = scipy.linalg.solve_triangular(laa, eye_a, lower=True, check_finite=False)
+            P = W.T @ W  # Sigma_aa^-1
+            mc = mu[i, :da] - center
+            quad[i, : iu[0].size] = P[iu] * offdiag
+            quad[i, iu[0].size :] = -2.0 * P @ mc
+            logdet_a = np.log(np.diagonal(laa)).sum()
+            quad0[i] = mc @ P @ mc + 2.0 * logdet_a + da * LOG_2PI
+            R = lva @ W  # Sigma_va Sigma_aa^-1
+            reg[i] = R
+            reg0[i] = mu[i, da:] - R @ mc
+            lvv_inv = scipy.linalg.solve_triangular(lvv, eye_v, lower=True, check_finite=False)
             phi_v[i] = lvv_inv.T @ lvv_inv
-        diag = np.diagonal(L, axis1=1, axis2=2)
         return cls(
             n_states=n,
             n_mix=m,
             n_audio=da,
             n_visual=dv,
-            B=B.reshape(c * (da + dv), da),
-            offset=offset.reshape(-1),
-            logdet_a=np.log(diag[:, :da]).sum(axis=1),
+            center=center,
+            quad=quad,
+            quad0=quad0,
+            reg=reg.reshape(c * dv, da),
+            reg0=reg0.reshape(-1),
             phi_v=phi_v,
             chol_vv=L[:, da:, da:].copy(),
-            logdet_v=np.log(diag[:, da:]).sum(axis=1),
+            logdet_v=np.log(np.diagonal(L[:, da:, da:], axis1=1, axis2=2)).sum(axis=1),
             log_weights=model.log_weights,
             log_startprob=model.log_startprob,
             log_transmat=model.log_transmat,
@@ -105,16 +122,21 @@ class ConditionalForm:
     def n_components(self) -> int:
         return self.n_states * self.n_mix
 
+    def quad_features(self, oa: np.ndarray) -> np.ndarray:
+        """``oa (T, Da) -> (T, K)``: ``[a_i a_j (i <= j); a]`` with ``a = o_a - center``."""
+        a = oa - self.center
+        i0, i1 = np.triu_indices(self.n_audio)
+        return np.concatenate([a[:, i0] * a[:, i1], a], axis=1)
+
     def audio_terms(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For frames ``oa (T, Da)``: ``(log N(o_a; mu_a, Sigma_aa) (T, C), m_c(o_a) (T, C, Dv))``."""
         if oa.ndim != 2 or oa.shape[1] != self.n_audio:
             raise InvalidFeaturesError(f"audio features must be (T, {self.n_audio}), got {oa.shape}")
         if not np.all(np.isfinite(oa)):
             raise InvalidFeaturesError("audio features contain NaN or inf")
-        y = (oa @ self.B.T - self.offset).reshape(len(oa), self.n_components, self.n_audio + self.n_visual)
-        z = y[:, :, : self.n_audio]
-        ll = -0.5 * np.einsum("tci,tci->tc", z, z) - self.logdet_a - 0.5 * self.n_audio * LOG_2PI
-        return ll, y[:, :, self.n_audio :]
+        ll = -0.5 * (self.quad_features(oa) @ self.quad.T + self.quad0)
+        cond = ((oa - self.center) @ self.reg.T + self.reg0).reshape(len(oa), self.n_components, self.n_visual)
+        return ll, cond
 
     def visual_loglik(self, ov: np.ndarray, cond_mean: np.ndarray) -> np.ndarray:
         """``log N(o_v; m_c, S_c)`` for ``ov (T, Dv)``, ``cond_mean (T, C, Dv)`` -> ``(T, C)``."""

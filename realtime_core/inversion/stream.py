@@ -6,9 +6,9 @@ Once audio up to frame ``t + tc`` has arrived, the front end releases ``o_a,t``.
 inverter then
 
 1. evaluates every (state, mixture) component's **audio-marginal** likelihood
-   ``c_jk N(o_a,t; mu_a, Sigma_aa)`` and conditional mean ``m_jk(o_a,t)`` with a single
-   matrix-vector product against the precomputed stack ``B`` (see
-   :mod:`realtime_core.inversion.conditional`);
+   ``c_jk N(o_a,t; mu_a, Sigma_aa)`` with one matrix-vector product over the shared
+   quadratic features of the frame, and the conditional means ``m_jk(o_a,t)`` with a
+   second, smaller one (see :mod:`realtime_core.inversion.conditional`);
 2. advances the normalised forward recursion (filtered state posteriors);
 3. outputs ``o~_v,t`` by eq. 7 under the component posteriors.
 
@@ -29,6 +29,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dposv as _posv
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
 from realtime_core.hmm.model import LOG_2PI
@@ -57,21 +58,30 @@ class StreamingInverter:
         self.form = form
         self.config = config
         dt = np.dtype(config.dtype)
-        self._B = np.ascontiguousarray(form.B, dtype=dt)
-        self._offset = form.offset.astype(dt)
+        self._quad = np.ascontiguousarray(form.quad, dtype=dt)
+        self._center = form.center.astype(dt)
+        self._i0, self._i1 = np.triu_indices(form.n_audio)
+        self._nq = self._i0.size
+        self._feat = np.empty(self._nq + form.n_audio, dtype=dt)
         self._da, self._dv = form.n_audio, form.n_visual
         self._n, self._m = form.n_states, form.n_mix
-        self._const = (-form.logdet_a - 0.5 * self._da * LOG_2PI).reshape(self._n, self._m) + form.log_weights
+        # log c_jk - 0.5 * const_jk: the frame-independent part of each component's log-likelihood.
+        self._const = (-0.5 * form.quad0).reshape(self._n, self._m) + form.log_weights
         self._A = np.exp(form.log_transmat)
         self._start = np.exp(form.log_startprob)
-        self._phi = form.phi_v  # (C, Dv, Dv)
-        self._phi_flat = form.phi_v.reshape(len(form.phi_v), -1)
+        # Eq. 7 numerator: sum_c r_c Phi_c m_c(a) = (sum_c r_c G_c) a + sum_c r_c h_c with
+        # G_c = Phi_c R_c and h_c = Phi_c reg0_c, so conditional means are never formed here.
+        c = self._n * self._m
+        reg = form.reg.reshape(c, self._dv, self._da)
+        self._G = np.einsum("cij,cjk->cik", form.phi_v, reg).reshape(c, self._dv * self._da).astype(dt)
+        self._h = np.einsum("cij,cj->ci", form.phi_v, form.reg0.reshape(c, self._dv))
+        self._phi_flat = form.phi_v.reshape(c, -1)
         self.reset()
 
     def reset(self) -> None:
         """Start a new utterance."""
         self._f: np.ndarray | None = None  # filtered posterior of the newest frame
-        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, cond means)
+        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, centred audio)
         self._finished = False
 
     def push(self, oa: np.ndarray) -> np.ndarray:
@@ -80,7 +90,7 @@ class StreamingInverter:
         oa = np.asarray(oa)
         if oa.ndim != 2 or oa.shape[1] != self._da:
             raise InvalidFeaturesError(f"audio features must be (k, {self._da}), got {oa.shape}")
-        if not np.all(np.isfinite(oa)):
+        if not np.isfinite(np.add.reduce(oa, axis=None)):  # any NaN/inf makes the sum non-finite
             raise InvalidFeaturesError("audio features contain NaN or inf")
         out = []
         for row in oa:
@@ -107,16 +117,15 @@ class StreamingInverter:
         return np.array(out)
 
     def _forward(self, row: np.ndarray):
-        y = (self._B @ row.astype(self._B.dtype, copy=False) - self._offset).astype(np.float64)
-        y = y.reshape(self._n * self._m, self._da + self._dv)
-        z = y[:, : self._da]
-        logc = (-0.5 * np.einsum("ci,ci->c", z, z)).reshape(self._n, self._m) + self._const
-        mx = logc.max(axis=1, keepdims=True)
-        e = np.exp(logc - mx)
-        s = e.sum(axis=1)
-        mix = e / s[:, None]  # within-state mixture posteriors (N, M)
-        log_b = mx[:, 0] + np.log(s)
-        b = np.exp(log_b - log_b.max())  # state likelihoods, scaled (N,)
+        a = row.astype(self._feat.dtype) - self._center
+        feat = self._feat
+        np.multiply(a[self._i0], a[self._i1], out=feat[: self._nq])
+        feat[self._nq :] = a
+        logc = (self._quad @ feat).reshape(self._n, self._m) * -0.5 + self._const
+        # One global shift (not per state) keeps this to a handful of numpy calls per frame.
+        e = np.exp(logc - logc.max())
+        b = e.sum(axis=1)  # state likelihoods, all scaled by the same factor (N,)
+        mix = e / np.maximum(b, 1e-300)[:, None]  # within-state mixture posteriors (N, M)
         prior = self._start if self._f is None else self._f @ self._A
         f = prior * b
         total = f.sum()
@@ -125,7 +134,7 @@ class StreamingInverter:
         else:
             f = f / total
         self._f = f
-        return f, b, mix, y[:, self._da :]
+        return f, b, mix, a
 
     def _emit_oldest(self) -> np.ndarray:
         f, _, mix, cond = self._pending[0]
@@ -138,10 +147,13 @@ class StreamingInverter:
         self._pending.popleft()
         return self._combine(f, mix, cond)
 
-    def _combine(self, state_post: np.ndarray, mix: np.ndarray, cond: np.ndarray) -> np.ndarray:
-        """Eq. 7 for one frame: ``(N,), (N, M), (C, Dv) -> (Dv,)``."""
+    def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame: posteriors ``(N,), (N, M)``, centred audio ``a (Da,)`` -> ``(Dv,)``."""
         r = (state_post[:, None] * mix).reshape(-1)
         r = r / r.sum()
         P = (r @ self._phi_flat).reshape(self._dv, self._dv)
-        pm = np.einsum("cij,cj->ci", self._phi, cond)
-        return np.linalg.solve(P, r @ pm)
+        rhs = ((r.astype(self._G.dtype) @ self._G).reshape(self._dv, self._da) @ a).astype(np.float64) + r @ self._h
+        # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
+        # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
+        _, x, info = _posv(P, rhs)
+        return x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]

@@ -53,8 +53,8 @@ def test_bad_files_name_the_problem():
         (_tamper(good, means=np.full((3, 2, 13), np.nan)), "means contains NaN"),
         (_tamper(good, version=np.array(99)), "version 99"),
         (_tamper(good, format=np.array("other")), "format is 'other'"),
-        (_tamper(good, B=None), "lacks the array 'B'"),
-        (_tamper(good, B=np.load(io.BytesIO(good))["B"] * 1.01), "does not match"),
+        (_tamper(good, quad=None), "lacks the array 'quad'"),
+        (_tamper(good, quad=np.load(io.BytesIO(good))["quad"] * 1.01), "does not match"),
         (_tamper(good, cmvn_var=np.zeros(3)), "cmvn_var"),
     ]
     for data, match in cases:
