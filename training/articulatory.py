@@ -206,7 +206,8 @@ PHONEME_TABLE: dict[str, dict[str, tuple[str, ...]]] = {
         " ɚ=rhotic_vowel o=mid_back_round u=close_back_round ʊ=near_close_back_round"
         " eɪ=mid_front+close_front aɪ=open_front+close_front aʊ=open_front+close_back_round"
         " oʊ=mid_back_round+close_back_round əʊ=mid_central+close_back_round"
-        " ɔɪ=open_mid_back_round+close_front"
+        " ɔɪ=open_mid_back_round+close_front y=close_back_round ø=mid_back_round œ=mid_back_round"
+        " ɨ=near_close_front ʉ=close_back_round ɯ=near_close_front ɤ=mid_central"
     ),
 }
 """label -> articulatory class(es), per inventory. Every class name is a key of CLASSES."""
