@@ -1,0 +1,310 @@
+"""The on-disk corpus layout (the contract with ``facecast train``): writers and reader.
+
+A corpus is a folder::
+
+    manifest.json      {"version": 1, "seed": S, "params": [the 4 names],
+                        "utterances": [{"id", "dir", "language", "voice", "source",
+                                        "duration_s", "sample_rate_hz", "speaker_group", ...}]}
+    <dir>/audio.wav    mono 16-bit PCM
+    <dir>/params.csv   header "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress";
+                       row k at t = k/30 s exactly; n = ceil(duration_s * 30) rows
+    <dir>/phonemes.json  [{"phoneme", "start_s", "end_s"}, ...] (empty list when unknown)
+
+``source`` is "espeak" (synthetic), "real" (real speech labelled from phone alignments by the
+articulatory rules) or "video" (parameters measured on a talking-face video). Keep "real" and
+"video" utterances out of training when they are used for evaluation; ``speaker_group`` lets a
+split keep whole voices/speakers out.
+
+Every file is written atomically (temporary file in the same folder, then ``os.replace``) so an
+interrupted build never leaves a half-written file under its final name. Only JSON, CSV and WAV.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import wave
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from training.errors import (
+    CorpusFormatError,
+    NotAudioError,
+    SilentAudioError,
+    TruncatedFileError,
+    WrongSampleRateError,
+)
+from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
+
+MANIFEST = "manifest.json"
+VERSION = 1
+SOURCES = ("espeak", "real", "video")
+ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
+"""Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
+
+SILENCE_PEAK = 1e-4
+"""Audio whose absolute peak is below this (float full scale 1.0) counts as silent (~-80 dBFS)."""
+
+CSV_HEADER = "t," + ",".join(PARAM_NAMES)
+
+
+@dataclass(frozen=True)
+class PhonemeRecord:
+    phoneme: str
+    start_s: float
+    end_s: float
+
+
+@dataclass(frozen=True)
+class Utterance:
+    """One loaded utterance.
+
+    samples:        (n,) float32 in [-1, 1], mono.
+    sample_rate_hz: rate of ``samples``.
+    params:         (n_frames, 4) float64, IOD units, frame k at t = k/30 s,
+                    n_frames = ceil(n / sample_rate_hz * 30).
+    phonemes:       the phoneme timeline (empty when unknown, e.g. for video).
+    """
+
+    id: str
+    samples: np.ndarray
+    sample_rate_hz: int
+    params: np.ndarray
+    phonemes: tuple[PhonemeRecord, ...]
+    voice: str
+    language: str
+    source: str
+    speaker_group: str
+
+    @property
+    def duration_s(self) -> float:
+        return len(self.samples) / self.sample_rate_hz
+
+
+# --------------------------------------------------------------------------- atomic writes
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def to_int16(samples: np.ndarray) -> np.ndarray:
+    """float in [-1, 1] (n,) -> int16 (n,), rounded, clipped."""
+    return np.clip(np.round(np.asarray(samples, dtype=np.float64) * 32767.0), -32768, 32767).astype(np.int16)
+
+
+def write_wav(path: Path, samples: np.ndarray, rate_hz: int) -> None:
+    """Atomically write mono 16-bit PCM. ``samples``: (n,) int16, or float in [-1, 1]."""
+    pcm = samples if samples.dtype == np.int16 else to_int16(samples)
+    import io
+
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(int(rate_hz))
+        w.writeframes(pcm.astype("<i2").tobytes())
+    _atomic_write_bytes(Path(path), buf.getvalue())
+
+
+def format_params_csv(params: np.ndarray) -> str:
+    """CSV text of a (n_frames, 4) track with the time column t = k/30 (6 decimals)."""
+    params = np.asarray(params, dtype=np.float64)
+    if params.ndim != 2 or params.shape[1] != N_PARAMS:
+        raise ValueError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
+    lines = [CSV_HEADER]
+    for k, row in enumerate(params):
+        lines.append(f"{k / FPS:.6f}," + ",".join(f"{v:.6f}" for v in row))
+    return "\n".join(lines) + "\n"
+
+
+def write_json(path: Path, obj) -> None:
+    _atomic_write_bytes(Path(path), (json.dumps(obj, indent=1, ensure_ascii=False) + "\n").encode("utf-8"))
+
+
+def write_utterance(
+    corpus_dir: Path,
+    *,
+    utt_id: str,
+    samples: np.ndarray,
+    sample_rate_hz: int,
+    params: np.ndarray,
+    phonemes: Iterable,
+    language: str,
+    voice: str,
+    source: str,
+    speaker_group: str,
+    extra: dict | None = None,
+) -> dict:
+    """Write one utterance folder; returns its manifest entry.
+
+    samples: (n,) float in [-1, 1] or int16; params: (ceil(n / rate * 30), 4) float64.
+    phonemes: objects with phoneme/start_s/end_s (seconds). ``extra`` keys (JSON-ready) are
+    added to the manifest entry (e.g. the augmentation drawn).
+    """
+    if source not in SOURCES:
+        raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
+    if sample_rate_hz not in ACCEPTED_RATES_HZ:
+        raise ValueError(f"sample rate {sample_rate_hz} Hz is not one of {ACCEPTED_RATES_HZ}")
+    duration = len(samples) / sample_rate_hz
+    want = n_frames_for(duration)
+    if params.shape != (want, N_PARAMS):
+        raise ValueError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
+    folder = Path(corpus_dir) / utt_id
+    write_wav(folder / "audio.wav", samples, sample_rate_hz)
+    _atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
+    write_json(
+        folder / "phonemes.json",
+        [{"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)} for p in phonemes],
+    )
+    entry = {
+        "id": utt_id,
+        "dir": utt_id,
+        "language": language,
+        "voice": voice,
+        "source": source,
+        "duration_s": round(duration, 6),
+        "sample_rate_hz": int(sample_rate_hz),
+        "speaker_group": speaker_group,
+    }
+    if extra:
+        entry.update(extra)
+    return entry
+
+
+def write_manifest(corpus_dir: Path, entries: Sequence[dict], *, seed: int | None, extra: dict | None = None) -> Path:
+    """Atomically write ``manifest.json`` (entries in the given order)."""
+    doc = {"version": VERSION, "seed": seed, "params": list(PARAM_NAMES), "utterances": list(entries)}
+    if extra:
+        doc.update(extra)
+    path = Path(corpus_dir) / MANIFEST
+    write_json(path, doc)
+    return path
+
+
+# --------------------------------------------------------------------------- reading
+def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True) -> tuple[np.ndarray, int]:
+    """Read a PCM WAV (8/16/24/32-bit, any channel count -> mono mean).
+
+    Returns (samples (n,) float32 in [-1, 1], sample_rate_hz). Raises NotAudioError,
+    TruncatedFileError, WrongSampleRateError or SilentAudioError naming the file.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(12)
+    except OSError as exc:
+        raise NotAudioError(path, f"cannot be read ({exc.strerror or exc})") from exc
+    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+        raise NotAudioError(path, "not audio: not a RIFF/WAVE file")
+    try:
+        with wave.open(str(path), "rb") as w:
+            ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
+            raw = w.readframes(n)
+    except (wave.Error, EOFError) as exc:
+        # the wave module raises EOFError when a header chunk is cut short
+        if isinstance(exc, EOFError):
+            raise TruncatedFileError(path, "truncated WAV: the header ends early") from exc
+        raise NotAudioError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
+    if len(raw) < n * ch * width:
+        have = len(raw) // max(ch * width, 1)
+        raise TruncatedFileError(path, f"truncated WAV: header declares {n} frames, data holds {have}")
+    if width == 1:
+        x = (np.frombuffer(raw, np.uint8).astype(np.float32) - 128.0) / 128.0
+    elif width == 2:
+        x = np.frombuffer(raw, "<i2").astype(np.float32) / 32768.0
+    elif width == 3:
+        b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
+        v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
+        x = (np.where(v >= 1 << 23, v - (1 << 24), v)).astype(np.float32) / float(1 << 23)
+    elif width == 4:
+        x = np.frombuffer(raw, "<i4").astype(np.float32) / float(1 << 31)
+    else:
+        raise NotAudioError(path, f"not audio: unsupported sample width {width} bytes")
+    if ch > 1:
+        x = x.reshape(-1, ch).mean(axis=1)
+    if rate not in ACCEPTED_RATES_HZ:
+        raise WrongSampleRateError(path, f"wrong sample rate: {rate} Hz is not one of {ACCEPTED_RATES_HZ}")
+    if expected_rate_hz is not None and rate != expected_rate_hz:
+        raise WrongSampleRateError(path, f"wrong sample rate: file has {rate} Hz, manifest says {expected_rate_hz} Hz")
+    if len(x) == 0:
+        raise TruncatedFileError(path, "truncated WAV: no samples")
+    if check_silence and float(np.max(np.abs(x))) < SILENCE_PEAK:
+        raise SilentAudioError(path, f"silent: peak amplitude {float(np.max(np.abs(x))):.1e} of full scale")
+    return x.astype(np.float32), int(rate)
+
+
+def read_params_csv(path: Path, n_frames: int) -> np.ndarray:
+    """Read and check a params.csv: header, n_frames rows, t = k/30. Returns (n_frames, 4)."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CorpusFormatError(path, f"cannot be read ({exc})") from exc
+    if not lines or lines[0].strip() != CSV_HEADER:
+        raise CorpusFormatError(path, f"header must be {CSV_HEADER!r}, got {lines[0] if lines else ''!r}")
+    rows = [ln for ln in lines[1:] if ln.strip()]
+    if len(rows) < n_frames:
+        raise TruncatedFileError(path, f"truncated: {len(rows)} frames, the audio needs {n_frames}")
+    if len(rows) > n_frames:
+        raise CorpusFormatError(path, f"{len(rows)} frames, the audio's duration needs {n_frames}")
+    try:
+        arr = np.array([[float(v) for v in r.split(",")] for r in rows], dtype=np.float64).reshape(n_frames, -1)
+    except ValueError as exc:
+        raise CorpusFormatError(path, f"not numeric / wrong column count ({exc})") from exc
+    if arr.shape[1] != N_PARAMS + 1 or not np.all(np.isfinite(arr)):
+        raise CorpusFormatError(path, "every row needs t and 4 finite values")
+    if n_frames and np.max(np.abs(arr[:, 0] - np.arange(n_frames) / FPS)) > 1e-5:
+        raise CorpusFormatError(path, "the t column must be k/30 for row k")
+    return arr[:, 1:]
+
+
+def load_corpus(path: str | Path) -> list[Utterance]:
+    """Load every utterance of a corpus folder (in manifest order), checking the layout."""
+    root = Path(path)
+    mpath = root / MANIFEST
+    if not mpath.is_file():
+        raise CorpusFormatError(mpath, "missing: not a corpus folder (no manifest.json)")
+    try:
+        doc = json.loads(mpath.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CorpusFormatError(mpath, f"not valid JSON ({exc})") from exc
+    if doc.get("version") != VERSION:
+        raise CorpusFormatError(mpath, f"version {doc.get('version')!r} is not {VERSION}")
+    if list(doc.get("params", [])) != list(PARAM_NAMES):
+        raise CorpusFormatError(mpath, f"params must be {list(PARAM_NAMES)}")
+    out: list[Utterance] = []
+    for entry in doc.get("utterances", []):
+        try:
+            uid, folder = entry["id"], root / entry["dir"]
+            rate, source = int(entry["sample_rate_hz"]), entry["source"]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CorpusFormatError(mpath, f"utterance entry lacks {exc}: {entry!r}") from exc
+        if source not in SOURCES:
+            raise CorpusFormatError(mpath, f"{uid}: source {source!r} not one of {SOURCES}")
+        samples, rate = read_wav(folder / "audio.wav", expected_rate_hz=rate)
+        params = read_params_csv(folder / "params.csv", n_frames_for(len(samples) / rate))
+        ppath = folder / "phonemes.json"
+        phon: tuple[PhonemeRecord, ...] = ()
+        if ppath.is_file():
+            try:
+                phon = tuple(PhonemeRecord(str(p["phoneme"]), float(p["start_s"]), float(p["end_s"]))
+                             for p in json.loads(ppath.read_text(encoding="utf-8")))
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+                raise CorpusFormatError(ppath, f"not a phoneme list ({exc})") from exc
+        out.append(Utterance(
+            id=uid, samples=samples, sample_rate_hz=rate, params=params, phonemes=phon,
+            voice=str(entry.get("voice", "")), language=str(entry.get("language", "")),
+            source=source, speaker_group=str(entry.get("speaker_group", "")),
+        ))
+    return out

@@ -1,0 +1,296 @@
+"""Speech with phoneme timings from espeak-ng's C library (``libespeak-ng.so.1``) via ctypes.
+
+How it works: the library is initialised once per process in ``AUDIO_OUTPUT_SYNCHRONOUS`` mode
+with ``espeakINITIALIZE_PHONEME_EVENTS``. ``espeak_Synth`` then returns only when the whole text
+has been synthesised; meanwhile espeak calls our synth callback with blocks of 16-bit samples
+and a list of events terminated by ``espeakEVENT_LIST_TERMINATED``. Every
+``espeakEVENT_PHONEME`` carries the phoneme's mnemonic (espeak's ASCII phoneme names, e.g.
+``p``, ``aI``, ``@U``; ``id.string``, up to 8 bytes) and ``sample``, the absolute index of the
+output sample where the phoneme starts (``audio_position`` is the same instant in ms). A
+phoneme ends where the next one (or a word/sentence end) starts.
+
+The ``espeak_EVENT`` layout (speak_lib.h, API revision 12) on LP64 Linux, verified by
+:func:`_check_event_layout` and by the tests (events at increasing sample positions inside
+the audio, bilabial closures at low energy)::
+
+    offset  0  int   type
+            4  uint  unique_identifier
+            8  int   text_position
+           12  int   length
+           16  int   audio_position   (ms)
+           20  int   sample           (sample index)
+           24  void* user_data
+           32  union {int number; const char* name; char string[8];} id
+    size   40
+
+espeak-ng keeps global state (one voice, one callback), so all calls go through one
+process-wide lock; it is not re-entrant. The library is loaded lazily on first use.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from training.errors import ConfigError, SynthesisError
+
+LIBRARY = "libespeak-ng.so.1"
+
+# speak_lib.h constants
+_AUDIO_OUTPUT_SYNCHRONOUS = 2
+_INITIALIZE_PHONEME_EVENTS = 0x0001
+_INITIALIZE_DONT_EXIT = 0x8000
+_POS_CHARACTER = 1
+_CHARS_UTF8 = 1
+_EVENT_LIST_TERMINATED = 0
+_EVENT_WORD = 1
+_EVENT_SENTENCE = 2
+_EVENT_END = 5
+_EVENT_MSG_TERMINATED = 6
+_EVENT_PHONEME = 7
+_PARAM_RATE = 1
+_PARAM_VOLUME = 2
+_PARAM_PITCH = 3
+_PARAM_RANGE = 4
+_PARAM_WORDGAP = 7
+
+RATE_RANGE_WPM = (80, 450)
+"""espeak's accepted speaking rates, words per minute (espeakRATE_MINIMUM/MAXIMUM)."""
+
+
+class _EventId(ctypes.Union):
+    _fields_ = [("number", ctypes.c_int), ("name", ctypes.c_char_p), ("string", ctypes.c_char * 8)]
+
+
+class _Event(ctypes.Structure):
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("unique_identifier", ctypes.c_uint),
+        ("text_position", ctypes.c_int),
+        ("length", ctypes.c_int),
+        ("audio_position", ctypes.c_int),
+        ("sample", ctypes.c_int),
+        ("user_data", ctypes.c_void_p),
+        ("id", _EventId),
+    ]
+
+
+_CALLBACK = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int, ctypes.POINTER(_Event))
+
+
+def _check_event_layout() -> None:
+    """Fail loudly if ctypes lays out the struct differently from the header (see module doc)."""
+    want = {"type": 0, "audio_position": 16, "sample": 20, "user_data": 24, "id": 32}
+    got = {name: getattr(_Event, name).offset for name in want}
+    if got != want or ctypes.sizeof(_Event) != 40:
+        raise SynthesisError(f"espeak_EVENT layout mismatch: offsets {got}, size {ctypes.sizeof(_Event)}")
+
+
+LANGUAGES: dict[str, tuple[str, ...]] = {
+    # espeak voice (language) names per corpus language; accents vary the phone set slightly.
+    "en": ("en-us", "en", "en-gb-scotland", "en-gb-x-rp", "en-029", "en-us-nyc"),
+    "es": ("es", "es-419"),
+}
+"""Base espeak voices per language code used in the corpus."""
+
+VARIANTS: tuple[str, ...] = (
+    "m1", "m2", "m3", "m4", "m5", "m6", "m7",
+    "f1", "f2", "f3", "f4", "f5",
+)
+"""espeak voice variants (``voices/!v``): male ``m1..m7`` and female ``f1..f5`` formant sets."""
+
+
+@dataclass(frozen=True)
+class Voice:
+    """One espeak-ng speaking voice.
+
+    language:     corpus language code, "en" or "es".
+    base:         espeak language voice, one of ``LANGUAGES[language]`` (e.g. "en-us").
+    variant:      a ``VARIANTS`` entry (e.g. "f3") or None for the base voice.
+    rate_wpm:     speaking rate, words per minute (80..450; espeak's default is 175).
+    pitch:        base pitch 0..100 (50 = the voice's normal).
+    pitch_range:  intonation range 0..100 (0 = monotone, 50 = normal).
+    """
+
+    language: str
+    base: str
+    variant: str | None = None
+    rate_wpm: int = 175
+    pitch: int = 50
+    pitch_range: int = 50
+
+    def __post_init__(self) -> None:
+        if self.language not in LANGUAGES:
+            raise ConfigError(f"unknown language {self.language!r}; known: {sorted(LANGUAGES)}")
+        if self.base not in LANGUAGES[self.language]:
+            raise ConfigError(f"voice {self.base!r} is not one of {LANGUAGES[self.language]} for {self.language!r}")
+        if self.variant is not None and self.variant not in VARIANTS:
+            raise ConfigError(f"unknown variant {self.variant!r}; known: {VARIANTS}")
+        if not RATE_RANGE_WPM[0] <= self.rate_wpm <= RATE_RANGE_WPM[1]:
+            raise ConfigError(f"rate_wpm must be in {RATE_RANGE_WPM}, got {self.rate_wpm}")
+        for name in ("pitch", "pitch_range"):
+            if not 0 <= getattr(self, name) <= 100:
+                raise ConfigError(f"{name} must be in 0..100, got {getattr(self, name)}")
+
+    @property
+    def espeak_name(self) -> str:
+        """The name given to ``espeak_SetVoiceByName``, e.g. "en-us+f3"."""
+        return self.base if self.variant is None else f"{self.base}+{self.variant}"
+
+    @property
+    def label(self) -> str:
+        """A stable human-readable id, e.g. "en-us+f3@r160p55" (used in manifests)."""
+        return f"{self.espeak_name}@r{self.rate_wpm}p{self.pitch}"
+
+
+@dataclass(frozen=True)
+class PhonemeSegment:
+    """One phoneme of a timeline: espeak mnemonic (or ARPAbet label) over [start_s, end_s)."""
+
+    phoneme: str
+    start_s: float
+    end_s: float
+
+
+@dataclass(frozen=True)
+class Synthesis:
+    """What :meth:`EspeakSynthesizer.synthesize` returns.
+
+    samples:         (n,) int16 mono PCM as espeak produced it.
+    sample_rate_hz:  espeak's output rate (22050 Hz for its built-in voices).
+    phonemes:        the phoneme timeline in seconds from the first sample, sorted, gapless
+                     between consecutive events; pauses appear as espeak's "_" phonemes.
+    """
+
+    samples: np.ndarray
+    sample_rate_hz: int
+    phonemes: tuple[PhonemeSegment, ...]
+
+    @property
+    def duration_s(self) -> float:
+        return len(self.samples) / self.sample_rate_hz
+
+
+class EspeakSynthesizer:
+    """A handle on the process-wide espeak-ng library (created lazily, shared, thread-safe).
+
+    Use :func:`synthesizer` to get the shared instance; constructing it loads the library.
+    """
+
+    _lock = threading.Lock()
+
+    def __init__(self) -> None:
+        _check_event_layout()
+        try:
+            lib = ctypes.CDLL(LIBRARY)
+        except OSError as exc:
+            raise SynthesisError(
+                f"cannot load {LIBRARY} ({exc}); install the Debian package libespeak-ng1"
+            ) from exc
+        lib.espeak_Initialize.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_char_p, ctypes.c_int]
+        lib.espeak_Initialize.restype = ctypes.c_int
+        lib.espeak_SetSynthCallback.argtypes = [_CALLBACK]
+        lib.espeak_SetSynthCallback.restype = None
+        lib.espeak_SetVoiceByName.argtypes = [ctypes.c_char_p]
+        lib.espeak_SetVoiceByName.restype = ctypes.c_int
+        lib.espeak_SetParameter.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int]
+        lib.espeak_SetParameter.restype = ctypes.c_int
+        lib.espeak_Synth.argtypes = [
+            ctypes.c_void_p, ctypes.c_size_t, ctypes.c_uint, ctypes.c_int, ctypes.c_uint,
+            ctypes.c_uint, ctypes.POINTER(ctypes.c_uint), ctypes.c_void_p,
+        ]
+        lib.espeak_Synth.restype = ctypes.c_int
+        lib.espeak_Synchronize.argtypes = []
+        lib.espeak_Synchronize.restype = ctypes.c_int
+        rate = lib.espeak_Initialize(
+            _AUDIO_OUTPUT_SYNCHRONOUS, 0, None, _INITIALIZE_PHONEME_EVENTS | _INITIALIZE_DONT_EXIT
+        )
+        if rate <= 0:
+            raise SynthesisError(f"espeak_Initialize failed (returned {rate}); is espeak-ng-data installed?")
+        self._lib = lib
+        self.sample_rate_hz = int(rate)
+        self._chunks: list[np.ndarray] = []
+        self._events: list[tuple[int, str]] = []  # (sample index, phoneme or "" for a boundary)
+        # Keep a reference: ctypes frees the trampoline if the Python object dies.
+        self._callback = _CALLBACK(self._on_synth)
+        lib.espeak_SetSynthCallback(self._callback)
+
+    def _on_synth(self, wav, n_samples, events) -> int:  # noqa: ANN001 - ctypes types
+        if n_samples > 0 and wav:
+            self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
+        i = 0
+        while events[i].type != _EVENT_LIST_TERMINATED:
+            ev = events[i]
+            if ev.type == _EVENT_PHONEME:
+                raw = bytes(ev.id.string).split(b"\0", 1)[0]
+                self._events.append((int(ev.sample), raw.decode("utf-8", "replace")))
+            elif ev.type in (_EVENT_END, _EVENT_MSG_TERMINATED):
+                self._events.append((int(ev.sample), ""))
+            i += 1
+        return 0
+
+    def synthesize(self, text: str, voice: Voice) -> Synthesis:
+        """Speak ``text`` with ``voice``; returns int16 samples and the phoneme timeline.
+
+        Raises SynthesisError if espeak rejects the voice or produces no audio.
+        """
+        if not text.strip():
+            raise ConfigError("cannot synthesise empty text")
+        with self._lock:
+            lib = self._lib
+            if lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
+                raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
+            # SetVoiceByName resets rate/pitch to the voice's defaults, so set them after it.
+            lib.espeak_SetParameter(_PARAM_RATE, voice.rate_wpm, 0)
+            lib.espeak_SetParameter(_PARAM_PITCH, voice.pitch, 0)
+            lib.espeak_SetParameter(_PARAM_RANGE, voice.pitch_range, 0)
+            lib.espeak_SetParameter(_PARAM_VOLUME, 100, 0)
+            self._chunks, self._events = [], []
+            data = text.encode("utf-8") + b"\0"
+            err = lib.espeak_Synth(data, len(data), 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)
+            if err != 0:
+                raise SynthesisError(f"espeak_Synth failed with code {err} for {text[:40]!r}")
+            lib.espeak_Synchronize()
+            chunks, events = self._chunks, self._events
+            self._chunks, self._events = [], []
+        if not chunks:
+            raise SynthesisError(f"espeak produced no audio for {text[:40]!r} with {voice.espeak_name}")
+        samples = np.concatenate(chunks)
+        return Synthesis(samples, self.sample_rate_hz, _timeline(events, len(samples), self.sample_rate_hz))
+
+
+def _timeline(events: list[tuple[int, str]], n_samples: int, rate: int) -> tuple[PhonemeSegment, ...]:
+    """Turn (start sample, phoneme) events into segments; "" events only close the previous one.
+
+    Zero-length phonemes (espeak emits some markers at the same sample) are dropped.
+    """
+    events = sorted(events, key=lambda e: e[0])  # stable: keeps espeak's order at equal samples
+    segs: list[PhonemeSegment] = []
+    for k, (start, name) in enumerate(events):
+        if not name:
+            continue
+        end = n_samples
+        for later, _ in events[k + 1 :]:
+            if later > start:
+                end = later
+                break
+        end = min(end, n_samples)
+        if end > start:
+            segs.append(PhonemeSegment(name, start / rate, end / rate))
+    return tuple(segs)
+
+
+_shared: EspeakSynthesizer | None = None
+_shared_lock = threading.Lock()
+
+
+def synthesizer() -> EspeakSynthesizer:
+    """The process-wide synthesizer (espeak-ng has one global state); loads it on first call."""
+    global _shared
+    with _shared_lock:
+        if _shared is None:
+            _shared = EspeakSynthesizer()
+        return _shared

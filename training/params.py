@@ -1,0 +1,79 @@
+"""The four mouth parameters: the one place where they are defined.
+
+facecast describes the mouth with four numbers per video frame, in the order of
+``realtime_core.VISUAL_PARAMS`` everywhere (files, CSV columns, protocol). Each is measured on
+a face **relative to that face's neutral pose** (lips relaxed and closed, mouth at rest) and
+expressed in units of the face's **inter-ocular distance (IOD)**: the distance between the two
+eye centres (midpoints of the eye corners). Dividing by the IOD makes the values independent of
+the face's size, the camera distance and any one face model. Image "up" is the face's own up
+axis after head pose has been removed (see :mod:`training.video`).
+
+``upper_lip_raise``
+    Upward movement of the upper-lip midpoint (outer contour, philtrum side) relative to the
+    neutral pose. Positive = lip moves up (towards the nose), as in /f v/ or a snarl; negative =
+    the lip is pulled down or pressed, as in a bilabial closure.
+    Typical range -0.03 .. +0.06 IOD.
+
+``lip_stretch``
+    Change of the mouth width: the distance between the two mouth corners minus its neutral
+    value. Positive = wider (spread lips, /i/, /e/, smiling); negative = narrower (rounded lips,
+    /u/ /o/ /w/). Typical range -0.12 .. +0.10 IOD.
+
+``mouth_open``
+    The inner-lip vertical gap: distance between the inner contours of the upper and lower lip
+    at the midline, minus its neutral value (which is ~0 for a closed mouth). 0 = lips touch
+    (bilabial closure /p b m/ and rest); open vowels /a/ reach about 0.25-0.40 IOD.
+    Typical range 0 .. 0.45 IOD. Never negative in the articulatory model (a gap cannot be
+    negative); measured video tracks can dip slightly below 0 by noise.
+
+``lip_corner_depress``
+    Downward movement of the mouth corners relative to the lip midline (the mean height of the
+    upper- and lower-lip midpoints), minus its neutral value. Positive = corners lower than the
+    lips' middle (a frown, the sagging corners of rounded /o u/ and /S Z/); negative = corners
+    higher than the middle (a smile, spread /i e/). Because it is measured against the midline,
+    dropping the jaw alone lowers the midline and so makes the value slightly negative; the
+    articulatory rules and the video measurement share this definition.
+    Typical range -0.05 .. +0.05 IOD.
+
+Frame timing: 30 frames per second; frame ``k`` is the instant ``t = k / 30`` s exactly, and an
+utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+from realtime_core import VISUAL_PARAMS
+
+FPS: int = 30
+"""Video frame rate of every parameter track, frames per second."""
+
+PARAM_NAMES: tuple[str, ...] = VISUAL_PARAMS
+"""("upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress")."""
+
+N_PARAMS: int = len(PARAM_NAMES)
+
+TYPICAL_RANGES: dict[str, tuple[float, float]] = {
+    "upper_lip_raise": (-0.03, 0.06),
+    "lip_stretch": (-0.12, 0.10),
+    "mouth_open": (0.0, 0.45),
+    "lip_corner_depress": (-0.05, 0.05),
+}
+"""Typical range of each parameter in IOD units (for sanity checks and plots, not clipping)."""
+
+
+def n_frames_for(duration_s: float) -> int:
+    """Number of 30 fps frames covering ``duration_s`` seconds: ``ceil(duration_s * 30)``.
+
+    A tiny tolerance absorbs float error, so 1.0 s gives exactly 30 frames, not 31.
+    """
+    if duration_s < 0:
+        raise ValueError(f"duration must be >= 0 s, got {duration_s}")
+    return int(math.ceil(duration_s * FPS - 1e-9))
+
+
+def frame_times(n_frames: int) -> "numpy.ndarray":  # noqa: F821
+    """Times of frames 0..n-1 in seconds, shape (n_frames,), float64: ``k / 30``."""
+    import numpy as np
+
+    return np.arange(n_frames, dtype=np.float64) / FPS
