@@ -15,6 +15,8 @@ import sys
 
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
+    "train": "facecast.commands.train",
+    "animate": "facecast.commands.animate",
     "bench": "facecast.commands.bench",
 }
 

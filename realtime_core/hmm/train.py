@@ -40,8 +40,9 @@ from realtime_core.errors import ConfigError, InvalidFeaturesError
 from realtime_core.hmm.kernels import expected_transitions, forward_backward
 from realtime_core.hmm.model import AvHmm, component_loglik
 
-ProgressFn = Callable[[int, float], None]
-"""Called after each EM iteration with (iteration index, objective per frame)."""
+ProgressFn = Callable[[int, float, AvHmm], None]
+"""Called after each E-step with (iteration index, objective per frame, the model it scored):
+for progress bars and checkpoints (the caller decides what to do; this module does no I/O)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -335,7 +336,7 @@ def baum_welch(
         stats, loglik = _e_step(model, x, lengths, config, origin)
         history.append((loglik + _log_prior(model, psi, config)) / total)
         if progress is not None:
-            progress(it, history[-1])
+            progress(it, history[-1], model)
         if len(history) > 1 and history[-1] - history[-2] < config.tol:
             converged = True
             break
