@@ -132,7 +132,7 @@ def interpolation_weights(
         w = config.beta * np.exp(-((d - dm) ** 2) / dm**2)
         if config.fallback_radius is not None:
             w *= np.exp(-((dm / config.fallback_radius) ** 2))
-        keep = w > 1e-6 * config.beta
+        keep = w > 1e-3 * config.beta  # drop negligible weights: fewer moving vertices, cheaper frames
         rows.append(np.repeat(out, k)[keep.reshape(-1)])
         cols.append(nn.reshape(-1)[keep.reshape(-1)])
         vals.append(w.reshape(-1)[keep.reshape(-1)])
