@@ -216,7 +216,11 @@ def rig_head(
     points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)
     v, t, uv = mesh.vertices, mesh.triangles, mesh.uvs
     snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
-    meta: dict[str, object] = {"head": mesh.name, "landmarks": {k: p.tolist() for k, p in points.items()}}
+    meta: dict[str, object] = {
+        "head": mesh.name,
+        "landmarks": {k: p.tolist() for k, p in points.items()},
+        "simple_landmarks": dict(simple.landmarks),
+    }
     colors = mesh.colors
     try:
         lm = mouth_landmarks(snap)

@@ -33,6 +33,8 @@ class RigConfig:
     projection_2d: "frontal" (face-frame x, y) or "uv" (the head's texture coordinates).
     beta: eq. 10 gain. max_depth: off-plane tolerance for eq. 8-9. fallback_radius: fade of eq. 10
     (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1.
+    connectivity / max_geodesic_ratio: mesh-path rules of the interpolation (see interpolation).
+    normalize_fallback: eq. 10 as a weighted mean (extension; use with beta = 1).
     """
 
     method: Literal["sec5", "rbf"] = "sec5"
@@ -42,6 +44,9 @@ class RigConfig:
     fallback_radius: float | None = 0.6
     rbf_radius: float | None = None
     geodesic_check: bool = True
+    connectivity: bool = True
+    normalize_fallback: bool = False
+    max_geodesic_ratio: float = 2.0
     candidates: int = 24
 
     def __post_init__(self) -> None:
@@ -139,8 +144,19 @@ def head_weights(
             beta=config.beta,
             max_depth=config.max_depth * iod,
             fallback_radius=None if config.fallback_radius is None else config.fallback_radius * iod,
+            max_geodesic_ratio=config.max_geodesic_ratio,
+            normalize_fallback=config.normalize_fallback,
+            geodesic_limit=3.0 * (config.fallback_radius or 1.0) * iod,
         )
-        it = interpolation_weights(h, q, proj.control, simple.triangles, config=icfg, triangle_mask=~proj.bad_triangles)
+        it = interpolation_weights(
+            h,
+            q,
+            proj.control,
+            simple.triangles,
+            config=icfg,
+            triangle_mask=~proj.bad_triangles,
+            head_triangles=head_triangles if config.connectivity else None,
+        )
         g = it.weights
         info["inside"] = int(it.inside.sum())
     else:

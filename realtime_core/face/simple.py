@@ -45,6 +45,25 @@ class SimpleModelConfig:
             raise ConfigError(f"need 3 <= n_mouth <= n_total, got {self.n_mouth}, {self.n_total}")
 
 
+def frontal_visible(q: np.ndarray, *, cell: float = 0.03, tolerance: float = 0.05) -> np.ndarray:
+    """(n,) bool: vertices q (n, 3) (face frame, IOD) on the front-most surface, by a coarse z-buffer.
+
+    A vertex counts as visible if its depth is within ``tolerance`` of the largest depth of any
+    vertex in its (x, y) grid cell or the 8 neighbouring cells; this drops the mouth cavity behind
+    closed lips, the back of the head and the inside of the nostrils.
+    """
+    ij = np.floor(q[:, :2] / cell).astype(np.int64)
+    ij -= ij.min(0)
+    shape = tuple(ij.max(0) + 3)
+    zbuf = np.full(shape, -np.inf)
+    np.maximum.at(zbuf, (ij[:, 0] + 1, ij[:, 1] + 1), q[:, 2])
+    best = zbuf.copy()
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            best = np.maximum(best, np.roll(np.roll(zbuf, dx, 0), dy, 1))
+    return q[:, 2] >= best[ij[:, 0] + 1, ij[:, 1] + 1] - tolerance
+
+
 def _fps(points: np.ndarray, seeds: list[int], n: int) -> list[int]:
     """Farthest-point sampling of n indices into points (k, 3), starting from ``seeds``."""
     chosen = list(dict.fromkeys(seeds))
@@ -83,6 +102,11 @@ def derive_simple_model(
     ok &= q[:, 2] >= config.z_min
     if candidates is not None:
         ok &= np.asarray(candidates, dtype=bool)
+    vis = np.zeros(len(h), dtype=bool)
+    vis[ok] = frontal_visible(q[ok])
+    lm_set = np.zeros(len(h), dtype=bool)
+    lm_set[[int(x) for x in landmark_vertices.values()]] = True
+    ok &= vis | lm_set  # the inner-lip landmarks sit just behind the lip surface
     pool = np.flatnonzero(ok)
     lm = [int(v) for v in landmark_vertices.values()]
     missing = [v for v in lm if not ok[v]]
