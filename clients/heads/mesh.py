@@ -46,8 +46,8 @@ def _sibling_texture(path: Path) -> bytes | None:
 
 
 def _image_bytes(img: object) -> bytes | None:
-    if img is None:
-        return None
+    if img is None or img.size[0] * img.size[1] <= 16:  # type: ignore[attr-defined]
+        return None  # trimesh's placeholder for "no texture" is a tiny grey image
     buf = io.BytesIO()
     img.save(buf, format="PNG")  # type: ignore[attr-defined]
     return buf.getvalue()

@@ -222,6 +222,7 @@ def rig_head(
         "simple_landmarks": dict(simple.landmarks),
     }
     colors = mesh.colors
+    cut_copies = None
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
@@ -229,6 +230,7 @@ def rig_head(
             v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
+            cut_copies = np.arange(len(mesh.vertices), len(v))
             # The inner lower-lip landmark now lives on the copy below the cut.
             lower = snap["lower_inner"]
             copies = np.flatnonzero(origin == lower)
@@ -238,7 +240,9 @@ def rig_head(
         slm = mouth_landmarks(simple.landmarks)
         cal = calibrate_mouth(placed, slm, groups=MOUTH_GROUPS)
         allowed = None if mesh.name != "builtin" else np.asarray(head.part == 0)
-        rig = build_rig(v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta)
+        rig = build_rig(
+            v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
+        )
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name)

@@ -168,7 +168,8 @@ class HeadRenderer:
             from PIL import Image
 
             try:
-                img = Image.open(io.BytesIO(mesh.texture)).convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM)
+                # Rows go up as stored: texture row 0 is v = 0 (checked on the Lee Perry-Smith head).
+                img = Image.open(io.BytesIO(mesh.texture)).convert("RGB")
             except Exception as exc:  # PIL raises several types for corrupt images
                 raise RenderError(f"{mesh.name}: cannot decode texture: {exc}") from exc
             self.texture = ctx.texture(img.size, 3, img.tobytes())

@@ -123,14 +123,17 @@ def project(
     if len(pool) < len(s):
         raise ConfigError(f"head has {len(pool)} usable vertices, fewer than the {len(s)} simple-model vertices")
     k = min(candidates, len(pool))
-    dist, cand = cKDTree(h[pool]).query(s, k=k)
+    dist, cand = cKDTree(h[pool]).query(s, k=k)  # (n_s, k) candidates, nearest first
     dist = dist.reshape(len(s), k)
     cand = pool[cand.reshape(len(s), k)]
     rank = np.zeros(len(s), dtype=np.int64)
     control = np.full(len(s), -1, dtype=np.int64)
     used: dict[int, int] = {}
 
-    def take(i: int) -> bool:
+    tree = cKDTree(h[pool])
+    extra: dict[int, np.ndarray] = {}
+
+    def take(i: int, far: bool = False) -> bool:
         while rank[i] < k:
             c = int(cand[i, rank[i]])
             if c not in used:
@@ -138,10 +141,21 @@ def project(
                 control[i] = c
                 return True
             rank[i] += 1
+        if not far:
+            return False
+        # A coarse head (fewer vertices than the simple model has nearby): look further out.
+        if i not in extra:
+            kk = min(len(pool), 8 * k)
+            extra[i] = pool[tree.query(s[i], k=kk)[1]]
+        for c in extra[i]:
+            if int(c) not in used:
+                used[int(c)] = i
+                control[i] = int(c)
+                return True
         return False
 
     for i in np.argsort(dist[:, 0], kind="stable"):
-        if not take(int(i)):
+        if not take(int(i), far=True):
             raise ConfigError(f"simple vertex {i}: all {k} nearest head vertices are taken; raise `candidates`")
 
     tri = np.asarray(simple_triangles, dtype=np.int64)
@@ -189,7 +203,7 @@ def project(
             if not take(x):
                 exhausted[x] = True
                 rank[x] = 0
-                take(x)  # back to its best free candidate; the triangle may still be marked bad later
+                take(x, far=True)  # back to its best free candidate; the triangle may be marked bad later
             replacements += 1
             changed = True
         if not changed:

@@ -185,19 +185,41 @@ def build_rig(
     head_uvs: np.ndarray | None = None,
     allowed: np.ndarray | None = None,
     meta: dict | None = None,
+    keep_apart: np.ndarray | None = None,
 ) -> Rig:
-    """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights)."""
+    """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights).
+
+    Coincident vertices are welded for the connectivity tests and share weights, except those in
+    ``keep_apart`` (indices, e.g. the copies made by cutting a lip seam), which stay separate.
+    """
     basis = calibration.basis(simple)  # (n_s*3, 4)
-    g, control, info = head_weights(
-        head_vertices,
-        head_triangles,
+    h = np.asarray(head_vertices, dtype=np.float64)
+    canon, welded = weld(h, keep_apart=keep_apart)
+    t_w = canon[np.asarray(head_triangles, dtype=np.int64)]
+    allowed_w = None
+    if allowed is not None:
+        allowed_w = np.zeros(len(welded), dtype=bool)
+        np.logical_or.at(allowed_w, canon, np.asarray(allowed, dtype=bool))
+    uv_w = None
+    if head_uvs is not None:
+        uv_w = np.zeros((len(welded), 2))
+        uv_w[canon] = head_uvs  # one of the twins' texture coordinates
+    g_w, control_w, info = head_weights(
+        welded,
+        t_w,
         simple,
         frame,
         config=config,
-        head_uvs=head_uvs,
+        head_uvs=uv_w,
         training=basis.reshape(simple.n_vertices, 3 * 4),
-        allowed=allowed,
+        allowed=allowed_w,
     )
+    # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
+    g = g_w[canon]
+    first = np.full(len(welded), -1, dtype=np.int64)
+    first[canon[::-1]] = np.arange(len(h))[::-1]
+    control = first[control_w]
+    info["welded_vertices"] = int(len(h) - len(welded))
     moving = np.flatnonzero(np.diff(g.indptr) > 0)
     s = sp.kron(g[moving], sp.identity(3, format="csr"), format="csr")
     m = dict(meta or {})
@@ -213,3 +235,23 @@ def build_rig(
         calibration=calibration,
         meta=m,
     )
+
+
+def weld(
+    vertices: np.ndarray, *, tolerance: float = 1e-9, keep_apart: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Merge coincident vertices (texture seams split them in most files).
+
+    vertices (n, 3) -> canon (n,) index of each vertex's welded copy, welded (n_w, 3). Positions
+    are compared after rounding to ``tolerance`` times the mesh extent.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    scale = max(float(np.ptp(v, axis=0).max()), 1e-300) * tolerance
+    key = np.round(v / scale).astype(np.int64)
+    if keep_apart is not None and len(keep_apart):
+        # A fourth key column that is unique for the listed vertices and 0 for all others.
+        tag = np.zeros((len(v), 1), dtype=np.int64)
+        tag[np.asarray(keep_apart, dtype=np.int64), 0] = np.arange(1, len(keep_apart) + 1)
+        key = np.hstack([key, tag])
+    _, first, canon = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return canon.reshape(-1), v[first]
