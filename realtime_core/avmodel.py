@@ -40,7 +40,7 @@ _FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "l
 @dataclass(frozen=True, kw_only=True, eq=False)
 class AvModel:
     """hmm: the joint HMM over ``[o_a; o_v]``; frontend: how o_a is computed;
-    cmvn_mean/cmvn_var: ``(n_ceps,)`` training statistics (CMVN warm start);
+    cmvn_mean/cmvn_var: ``(n_feat,)`` training statistics (CMVN warm start);
     visual_names: names of the o_v dimensions; metadata: JSON-able training details."""
 
     hmm: AvHmm
@@ -54,14 +54,14 @@ class AvModel:
         if self.hmm.n_audio != self.frontend.audio_dim:
             raise ModelFormatError(
                 f"HMM audio dimension {self.hmm.n_audio} != front end's {self.frontend.audio_dim} "
-                f"((2 tc + 1) x n_ceps = {2 * self.frontend.tc + 1} x {self.frontend.n_ceps})"
+                f"((2 tc + 1) x n_feat = {2 * self.frontend.tc + 1} x {self.frontend.n_feat})"
             )
         if len(self.visual_names) != self.hmm.n_visual:
             raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.hmm.n_visual} visual dims")
         for name in ("cmvn_mean", "cmvn_var"):
             arr = np.asarray(getattr(self, name), dtype=np.float64)
-            if arr.shape != (self.frontend.n_ceps,) or not np.all(np.isfinite(arr)):
-                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_ceps},), got {arr.shape}")
+            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
+                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
             object.__setattr__(self, name, arr)
         if np.any(self.cmvn_var <= 0):
             raise ModelFormatError("cmvn_var must be positive")
@@ -86,7 +86,7 @@ class AvModel:
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
-    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc}
+    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy}
 
 
 def _frontend_from_json(d: dict) -> FrontEndConfig:
@@ -94,6 +94,7 @@ def _frontend_from_json(d: dict) -> FrontEndConfig:
         mfcc=MfccConfig(**d["mfcc"]),
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
         tc=int(d["tc"]),
+        energy=bool(d.get("energy", False)),
     )
 
 

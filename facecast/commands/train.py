@@ -76,7 +76,9 @@ def run(args: argparse.Namespace) -> int:
     start, done = None, 0
     if ckpt.exists():
         prev = load_model(ckpt)
-        if prev.metadata.get("recipe") == rec.as_json() and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
+        same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
+            k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")}
+        if same and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
             start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
             print(f"resuming from {ckpt} (iteration {done})")
     bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
