@@ -17,6 +17,7 @@ import sys
 COMMANDS: dict[str, str] = {
     "train": "facecast.commands.train",
     "animate": "facecast.commands.animate",
+    "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
     "corpus": "facecast.commands.corpus",
 }

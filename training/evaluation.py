@@ -147,3 +147,19 @@ def format_markdown(results: Sequence[tuple[str, SetScore]], command: str) -> st
         lines += ["", f"mean over clips: r(mouth_open) = {mean_r:.3f}, loudness {mean_l:.3f}, "
                   f"margin {mean_r - mean_l:+.3f}", ""]
     return "\n".join(lines) + "\n"
+
+
+EVAL_VARIANTS: tuple[str, ...] = ("f5", "m7")
+"""espeak voice variants kept out of the default model's training, for held-out evaluation."""
+
+
+def video_items(root: str | Path) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
+    """Talking-face clips under ``root`` (mpg/mp4/webm), truth measured by the video extractor."""
+    from training.video import measure_video
+
+    clips = sorted(p for p in Path(root).iterdir() if p.suffix.lower() in (".mpg", ".mp4", ".webm", ".mov"))
+    items = []
+    for clip in clips:
+        track = measure_video(clip)
+        items.append((clip.stem, track.samples, track.sample_rate_hz, track.params))
+    return items
