@@ -17,6 +17,7 @@ import sys
 COMMANDS: dict[str, str] = {
     "bench": "facecast.commands.bench",
     "corpus": "facecast.commands.corpus",
+    "extract": "facecast.commands.extract",
 }
 
 
