@@ -33,6 +33,7 @@ Theory of operation
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from dataclasses import dataclass
@@ -118,6 +119,8 @@ class VideoTrack:
 
 
 # --------------------------------------------------------------------------- ffmpeg
+_DAMAGE = re.compile(r"damaged|corrupt|truncat|incomplete|partial file|error while decoding|invalid nal|"
+                     r"missing picture|concealing|end of file", re.I)
 def _tool(name: str) -> str:
     path = shutil.which(name)
     if path is None:
@@ -133,6 +136,11 @@ def probe(path: Path) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         msg = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"ffprobe exit {proc.returncode}"
+        with path.open("rb") as fh:
+            head = fh.read(12)
+        # an MP4 (valid "ftyp" box first) cut before its index (moov) was written
+        if "moov atom not found" in proc.stderr and head[4:8] == b"ftyp":
+            raise TruncatedFileError(path, "truncated video: the MP4 index (moov atom) is missing")
         raise NotVideoError(path, f"not a video: ffprobe cannot read it ({msg})")
     doc = json.loads(proc.stdout or "{}")
     streams = doc.get("streams", [])
@@ -191,10 +199,14 @@ def track_landmarks(frames: np.ndarray, cfg: ExtractConfig, *, progress=None) ->
     n, h, w, _ = frames.shape
     out = np.full((n, 468, 3), np.nan)
     wrap = progress or (lambda it, **_: it)
-    with mp.solutions.face_mesh.FaceMesh(
+    import warnings
+
+    with warnings.catch_warnings(), mp.solutions.face_mesh.FaceMesh(
         static_image_mode=False, max_num_faces=1, refine_landmarks=True,
         min_detection_confidence=cfg.min_detection_confidence, min_tracking_confidence=cfg.min_tracking_confidence,
     ) as mesh:
+        # mediapipe 0.10.14 calls a protobuf API that protobuf 4.25 marks deprecated, per frame
+        warnings.filterwarnings("ignore", message="SymbolDatabase.GetPrototype", category=UserWarning)
         for k in wrap(range(n), total=n, desc="face mesh", unit="frame", leave=False):
             res = mesh.process(frames[k])
             if res.multi_face_landmarks:
@@ -292,6 +304,11 @@ def measure_video(path: str | Path, config: ExtractConfig = ExtractConfig(), *, 
         raise TruncatedFileError(
             path, f"truncated video: decoded {len(frames)} of {n_expected} frames" + (f" ({err[-160:]})" if err else "")
         )
+    # A cut MPEG program stream still parses: its duration is estimated from what is left, so
+    # the frame count matches. The decoder's complaints about the cut-off picture give it away.
+    if _DAMAGE.search(err):
+        first = next(ln for ln in err.splitlines() if _DAMAGE.search(ln))
+        raise TruncatedFileError(path, f"truncated or damaged video: ffmpeg reports {first.strip()[-120:]!r}")
 
     samples = decode_audio(path, config.audio_rate_hz)
     if float(np.max(np.abs(samples), initial=0.0)) < SILENCE_PEAK:
