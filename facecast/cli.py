@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
     "corpus": "facecast.commands.corpus",
+    "extract": "facecast.commands.extract",
 }
 
 

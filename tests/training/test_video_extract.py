@@ -1,0 +1,81 @@
+"""``facecast extract`` on real GRID clips with real ffmpeg and MediaPipe."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from training.corpus import load_corpus
+from training.params import FPS, n_frames_for
+
+pytestmark = pytest.mark.skipif(
+    importlib.util.find_spec("mediapipe") is None,
+    reason="mediapipe not installed (optional extra: pip install 'facecast[video]')",
+)
+
+
+@pytest.fixture(scope="module")
+def grid(shared_data):
+    folder = shared_data / "video" / "grid"
+    if not (folder / "id2_vcd_swwp2s.mpg").is_file():
+        pytest.skip(f"GRID clips not found in {folder}")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def swwp2s(grid, ffmpeg):
+    from training.video import measure_video
+
+    return measure_video(grid / "id2_vcd_swwp2s.mpg")
+
+
+def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
+    """"set white with p two soon": the lips close in the letter "p" and open in "white"/"two".
+
+    The word times come from swwp2s.align (units of 1/25000 s: the last word ends at
+    74500 = 2.98 s of the 3 s clip, and "set" starts at 12250 = 0.49 s where the audio starts).
+    """
+    from training.video import read_word_alignment
+
+    words = read_word_alignment(grid / "swwp2s.align")
+    assert words[-1][1] == pytest.approx(2.98) and [w for _, _, w in words][1:7] == ["set", "white", "with", "p", "two", "soon"]
+    mo = swwp2s.params[:, 2]
+    t = np.arange(len(mo)) / FPS
+    span = {w: (a, b) for a, b, w in words}
+
+    def window(word):
+        a, b = span[word]
+        return mo[(t >= a) & (t < b)]
+
+    peak = mo.max()
+    assert peak > 0.12, peak  # a real opening, in IOD units
+    assert window("p").min() < 0.1 * peak, window("p")
+    assert window("white").max() > 0.6 * peak
+    assert window("two").max() > 0.4 * peak
+    assert abs(mo[t > 2.4]).max() < 0.03  # at rest after "soon"
+
+
+def test_track_is_30fps_and_correlates_with_audio_energy(grid, ffmpeg, tmp_path) -> None:
+    """lbax4n ("lay blue at x four now"): r(mouth_open, frame RMS dB) >= 0.40 at lag 0.
+
+    Measured 0.56. The threshold is far below what a correct track gives and far above what a
+    time-shifted or broken track gives (|r| < 0.2 after shifting the track by 0.5 s).
+    """
+    from training.video import ExtractConfig, extract_videos, frame_energy_db
+
+    manifest, (track,) = extract_videos([grid / "lbax4n.mpg"], tmp_path, ExtractConfig(), plot=True)
+    (utt,) = load_corpus(tmp_path)
+    assert utt.source == "video" and utt.speaker_group == "video:lbax4n"
+    assert utt.params.shape == (n_frames_for(utt.duration_s), 4)
+    assert utt.sample_rate_hz == 16000 and track.video_fps == 25.0 and track.face_fraction == 1.0
+    assert (tmp_path / "video-lbax4n" / "mouth_open.png").stat().st_size > 10_000
+    mo = utt.params[:, 2]
+    energy = frame_energy_db(utt.samples, utt.sample_rate_hz, len(mo))
+    r = np.corrcoef(mo, energy)[0, 1]
+    assert r >= 0.40, r
+    shifted = np.corrcoef(mo[15:], energy[:-15])[0, 1]
+    assert abs(shifted) < r - 0.2, (r, shifted)
+    # resampling 25 -> 30 fps keeps the values at coinciding instants (t = 0, 0.2, 0.4 ...)
+    np.testing.assert_allclose(utt.params[::6][: len(track.video_params[::5])], track.video_params[::5][: len(utt.params[::6])], atol=1e-5)
