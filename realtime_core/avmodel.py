@@ -20,7 +20,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -41,13 +41,16 @@ _FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "l
 class AvModel:
     """hmm: the joint HMM over ``[o_a; o_v]``; frontend: how o_a is computed;
     cmvn_mean/cmvn_var: ``(n_feat,)`` training statistics (CMVN warm start);
-    visual_names: names of the o_v dimensions; metadata: JSON-able training details."""
+    visual_names: names of the o_v dimensions; likelihood_scale: the audio-likelihood exponent
+    the live path uses (chosen on held-out data, see :class:`StreamConfig`);
+    metadata: JSON-able training details."""
 
     hmm: AvHmm
     frontend: FrontEndConfig
     cmvn_mean: np.ndarray
     cmvn_var: np.ndarray
     visual_names: tuple[str, ...] = VISUAL_PARAMS
+    likelihood_scale: float = 1.0
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -65,6 +68,8 @@ class AvModel:
             object.__setattr__(self, name, arr)
         if np.any(self.cmvn_var <= 0):
             raise ModelFormatError("cmvn_var must be positive")
+        if not 0 < self.likelihood_scale <= 1:
+            raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
 
     @cached_property
     def form(self) -> ConditionalForm:
@@ -80,7 +85,9 @@ class AvModel:
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
     def inverter(self, config: StreamConfig = StreamConfig()) -> StreamingInverter:
-        """A fresh streaming inverter."""
+        """A fresh streaming inverter (with the model's likelihood scale unless ``config`` sets one)."""
+        if config.likelihood_scale is None:
+            config = replace(config, likelihood_scale=self.likelihood_scale)
         return StreamingInverter(self.form, config=config)
 
 
@@ -103,6 +110,7 @@ def encode_model(model: AvModel) -> bytes:
     config = {
         "frontend": _frontend_to_json(model.frontend),
         "visual_names": list(model.visual_names),
+        "likelihood_scale": model.likelihood_scale,
         "covariance_type": model.hmm.covariance_type,
         "n_audio": model.hmm.n_audio,
         "metadata": model.metadata,
@@ -151,6 +159,7 @@ def decode_model(data: bytes) -> AvModel:
             cmvn_mean=arrays["cmvn_mean"],
             cmvn_var=arrays["cmvn_var"],
             visual_names=tuple(config["visual_names"]),
+            likelihood_scale=float(config.get("likelihood_scale", 1.0)),
             metadata=config.get("metadata", {}),
         )
     except ModelFormatError:
