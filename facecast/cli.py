@@ -16,6 +16,7 @@ import sys
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
     "bench": "facecast.commands.bench",
+    "rig": "facecast.commands.rig",
 }
 
 

@@ -200,7 +200,8 @@ class HeadRenderer:
         eye = c + dist * z
         view = _look_at(eye, c, y)
         proj = _perspective(config.fov, w / h, dist * 0.05, dist * 10)
-        self.prog["mvp"].write((proj @ view).T.astype(np.float32).tobytes())
+        self.mvp = proj @ view
+        self.prog["mvp"].write(self.mvp.T.astype(np.float32).tobytes())
         self.prog["eye"].value = tuple(eye)
         key = 0.55 * ax[2] + 0.45 * ax[1] + 0.45 * ax[0]
         fill = 0.8 * ax[2] - 0.6 * ax[0]
@@ -231,6 +232,12 @@ class HeadRenderer:
         h, w = self.config.height, self.config.width
         self._out[:] = np.frombuffer(raw, dtype=np.uint8).reshape(h, w, 3)[::-1]
         return self._out.copy()
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Pixel coordinates (k, 2) (column, row from the top) of 3D points (k, 3)."""
+        p = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))] @ self.mvp.T
+        ndc = p[:, :2] / p[:, 3:4]
+        return np.c_[(ndc[:, 0] + 1) / 2 * self.config.width, (1 - ndc[:, 1]) / 2 * self.config.height]
 
     def close(self) -> None:
         self.ctx.release()
