@@ -129,12 +129,16 @@ def interpolation_weights(
         # Depth: distance from the vertex to the 3D point with the same barycentric coordinates.
         p3 = g @ np.stack([z3[a], z3[b], z3[c]])
         depth = np.linalg.norm(h[cand] - p3, axis=1)
-        better = (depth < best_depth[cand]) & (depth <= config.max_depth)
+        ok_depth = depth <= config.max_depth
         if geo is not None:
             tv = np.array([a, b, c])
             eu = np.linalg.norm(h[cand][:, None, :] - z3[tv][None, :, :], axis=2).min(1)
             gd = geo[tv][:, cand].min(0)
-            better &= gd <= config.max_geodesic_ratio * eu + 1e-12
+            ok_depth &= gd <= config.max_geodesic_ratio * eu + 1e-12
+            # Score by path length too: on a cut seam both copies of a vertex sit on the shared
+            # edge of an upper and a lower triangle; each must take the one on its own side.
+            depth = depth + gd
+        better = (depth < best_depth[cand]) & ok_depth
         sel = cand[better]
         best_tri[sel] = t_i
         best_gamma[sel] = g[better]
@@ -177,6 +181,12 @@ def interpolation_weights(
         nn = nn.reshape(len(out), k)
         if geo is not None:
             g_out = geo[:, out].T  # (n_out, n_s)
+            # Same gate as for triangles: a control point whose mesh path is much longer than the
+            # straight line (the other lip, reached round the mouth corner) is not a neighbour.
+            eu_out = np.linalg.norm(h[out][:, None, :] - z3[None, :, :], axis=2)
+            gated = np.where(g_out <= config.max_geodesic_ratio * eu_out + 1e-12, g_out, np.inf)
+            enough = np.isfinite(gated).sum(1) >= k
+            g_out[enough] = gated[enough]
             reach = np.isfinite(g_out).sum(1) >= k
             if reach.any():
                 gn = np.argsort(g_out[reach], axis=1)[:, :k]

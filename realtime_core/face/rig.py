@@ -254,4 +254,8 @@ def weld(
         tag[np.asarray(keep_apart, dtype=np.int64), 0] = np.arange(1, len(keep_apart) + 1)
         key = np.hstack([key, tag])
     _, first, canon = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return canon.reshape(-1), v[first]
+    # Keep the file's vertex order (np.unique sorts by position, which a rotation would change).
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[canon.reshape(-1)], v[first[order]]
