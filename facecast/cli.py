@@ -17,6 +17,7 @@ import sys
 COMMANDS: dict[str, str] = {
     "bench": "facecast.commands.bench",
     "rig": "facecast.commands.rig",
+    "render": "facecast.commands.render",
 }
 
 

@@ -264,4 +264,6 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))
     centre = sv.mean(0)
+    if slm:
+        centre = centre - 0.5 * fr.iod * axes[2]  # pivot inside the head so a turned view stays framed
     return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config)
