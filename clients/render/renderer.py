@@ -82,7 +82,7 @@ class RenderConfig:
     view: Literal["front", "three_quarter"] = "front"
     samples: int = 4
     fov: float = 25.0
-    margin: float = 1.35
+    margin: float = 1.7
     background: tuple[float, float, float] = (0.16, 0.17, 0.20)
     backend: str | None = "egl"
 
@@ -265,5 +265,6 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))
     centre = sv.mean(0)
     if slm:
-        centre = centre - 0.5 * fr.iod * axes[2]  # pivot inside the head so a turned view stays framed
+        # Pivot inside the head (a turned view stays framed) and a little up (the skull shows).
+        centre = centre - 0.5 * fr.iod * axes[2] + 0.35 * fr.iod * axes[1]
     return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config)
