@@ -53,15 +53,27 @@ def resample(t: np.ndarray, params: np.ndarray, fps: float) -> np.ndarray:
 
 
 def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.ndarray, float]:
-    """HOOK: speech -> mouth parameters (F, 4) in IOD units at the returned frame rate.
+    """HOOK: speech -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
 
-    To be connected to the real-time core (MFCC -> AV-HMM inversion) once it is merged: load the
-    model at ``model`` and run the batch inversion on the audio. Until then this raises.
+    Uses the real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the
+    same computation as a live session) with the trained model loaded by
+    ``training.modelfile.load_model`` (``model`` None = its default). Those modules come from the
+    core/training branches; where they are missing this raises RenderError pointing to --params.
     """
-    raise RenderError(
-        f"{path}: speech -> parameters needs the real-time core's trained model, which is not available on "
-        f"this branch yet (model={model}); pass --params PARAMS.csv (columns t, {', '.join(VISUAL_PARAMS)})"
-    )
+    try:
+        from realtime_core.pipeline import speech_to_params
+        from training.audio_io import read_audio
+        from training.modelfile import load_model
+        from training.trainer import resample as resample_audio
+    except ImportError as exc:
+        raise RenderError(
+            f"{path}: speech -> parameters needs the real-time core's trained model, which is not available on "
+            f"this branch yet ({exc}); pass --params PARAMS.csv (columns t, {', '.join(VISUAL_PARAMS)})"
+        ) from exc
+    av = load_model(model)
+    samples, rate = read_audio(path)
+    params = speech_to_params(av, resample_audio(samples, rate, av.sample_rate_hz))
+    return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s
 
 
 @dataclass(frozen=True)

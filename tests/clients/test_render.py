@@ -61,8 +61,21 @@ def test_params_csv_errors_name_the_file(tmp_path):
     back.write_text("t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n0.1,0,0,0,0\n0.0,0,0,0,0\n")
     with pytest.raises(RenderError, match="back.csv: .*strictly increasing"):
         read_params_csv(back)
-    with pytest.raises(RenderError, match="not available on this branch yet"):
-        params_for_audio(tmp_path / "x.wav", None)
+
+
+
+def test_speech_hook_fails_with_a_package_error(tmp_path):
+    import importlib
+
+    roots: list[type[BaseException]] = [RenderError]
+    for mod, name in (("training.errors", "TrainingError"), ("realtime_core.errors", "RealtimeCoreError")):
+        try:
+            roots.append(getattr(importlib.import_module(mod), name))
+        except ImportError:
+            continue
+    # Without the core's modules: RenderError pointing to --params; with them: a missing model.
+    with pytest.raises(tuple(roots)):
+        params_for_audio(tmp_path / "x.wav", tmp_path / "missing-model.npz")
 
 
 def test_resample_by_hand():
