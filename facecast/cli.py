@@ -21,6 +21,8 @@ COMMANDS: dict[str, str] = {
     "bench": "facecast.commands.bench",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
+    "rig": "facecast.commands.rig",
+    "render": "facecast.commands.render",
 }
 
 

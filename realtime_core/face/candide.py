@@ -109,3 +109,17 @@ def parse_wfm(text: str, *, name: str = "candide3") -> FaceModel:
     if vertices.shape != (n, 3):
         raise ModelFormatError(f"wfm VERTEX LIST: expected {n} rows of 3 numbers")
     return FaceModel(vertices=vertices, triangles=triangles, uvs=uvs, animation_units=au, shape_units=su, name=name)
+
+
+def candide3_mouth_landmarks():
+    """Mouth/eye landmark vertices of Candide-3 (both shipped files share the vertex list).
+
+    7/8 outer lip midpoints, 87/40 the coincident inner-lip midpoints (upper/lower), 31/64 the lip
+    corners (face's left/right), 20/23 and 53/56 the outer/inner eye corners.
+    """
+    from realtime_core.face.model import MouthLandmarks
+
+    return MouthLandmarks(
+        upper_lip=7, lower_lip=8, upper_inner=87, lower_inner=40, corner_left=31, corner_right=64,
+        eye_outer_left=20, eye_inner_left=23, eye_outer_right=53, eye_inner_right=56,
+    )

@@ -126,6 +126,15 @@ def project(
     dist, cand = cKDTree(h[pool]).query(s, k=k)  # (n_s, k) candidates, nearest first
     dist = dist.reshape(len(s), k)
     cand = pool[cand.reshape(len(s), k)]
+    # Symmetric faces give exact distance ties (mirror pairs) that floating-point noise would
+    # break differently after a rotation: compare distances quantised to 1e-9 of the head's size
+    # and break ties by index, so the result is invariant to a similarity transform.
+    quantum = 1e-9 * max(float(np.ptp(h, axis=0).max()), 1e-300)
+    qd = np.round(dist / quantum)
+    order = np.array([np.lexsort((c, d)) for c, d in zip(cand, qd)]).reshape(cand.shape)
+    dist = np.take_along_axis(dist, order, axis=1)
+    cand = np.take_along_axis(cand, order, axis=1)
+    qd = np.take_along_axis(qd, order, axis=1)
     rank = np.zeros(len(s), dtype=np.int64)
     control = np.full(len(s), -1, dtype=np.int64)
     used: dict[int, int] = {}
@@ -146,7 +155,8 @@ def project(
         # A coarse head (fewer vertices than the simple model has nearby): look further out.
         if i not in extra:
             kk = min(len(pool), 8 * k)
-            extra[i] = pool[tree.query(s[i], k=kk)[1]]
+            dd, ii = tree.query(s[i], k=kk)
+            extra[i] = pool[ii][np.lexsort((pool[ii], np.round(dd / quantum)))]
         for c in extra[i]:
             if int(c) not in used:
                 used[int(c)] = i
@@ -154,7 +164,7 @@ def project(
                 return True
         return False
 
-    for i in np.argsort(dist[:, 0], kind="stable"):
+    for i in np.lexsort((np.arange(len(s)), qd[:, 0])):
         if not take(int(i), far=True):
             raise ConfigError(f"simple vertex {i}: all {k} nearest head vertices are taken; raise `candidates`")
 

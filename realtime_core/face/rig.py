@@ -25,6 +25,10 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
 
+RIG_ALGORITHM = 4
+"""Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
+
+
 @dataclass(frozen=True)
 class RigConfig:
     """Lengths are in inter-ocular distances (IOD) of the head so one config fits any scale.
@@ -223,7 +227,7 @@ def build_rig(
     moving = np.flatnonzero(np.diff(g.indptr) > 0)
     s = sp.kron(g[moving], sp.identity(3, format="csr"), format="csr")
     m = dict(meta or {})
-    m.update(info, method=config.method, projection_2d=config.projection_2d, beta=config.beta, iod=frame.iod)
+    m.update(info, algorithm=RIG_ALGORITHM, method=config.method, projection_2d=config.projection_2d, beta=config.beta, iod=frame.iod)
     return Rig(
         neutral=np.asarray(head_vertices, dtype=np.float32),
         triangles=np.asarray(head_triangles, dtype=np.int32),
@@ -254,4 +258,8 @@ def weld(
         tag[np.asarray(keep_apart, dtype=np.int64), 0] = np.arange(1, len(keep_apart) + 1)
         key = np.hstack([key, tag])
     _, first, canon = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return canon.reshape(-1), v[first]
+    # Keep the file's vertex order (np.unique sorts by position, which a rotation would change).
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[canon.reshape(-1)], v[first[order]]
