@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "train": "facecast.commands.train",
     "animate": "facecast.commands.animate",
     "bench": "facecast.commands.bench",
+    "serve": "facecast.commands.serve",
 }
 
 
