@@ -31,6 +31,7 @@ import hmac
 import json
 import logging
 import signal
+import socket
 import time
 import urllib.parse
 from dataclasses import dataclass
@@ -441,6 +442,10 @@ class FacecastServer:
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
         hk, he = encodings[enc_name]
+        if self.config.viewer_socket_buffer_bytes is not None:
+            sock = ws.transport.get_extra_info("socket")
+            if sock is not None:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.config.viewer_socket_buffer_bytes)
         await ws.send(P.dumps(self._description(live, kind, enc_name, hk, he, audio == "1")))
         if live.name not in self.sessions:  # ended while we were sending the description
             raise ProtocolViolation(P.CLOSE_NORMAL, "session ended")

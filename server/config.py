@@ -19,7 +19,9 @@ class ServerConfig:
     messages buffered per viewer before the oldest is dropped; viewer_max_behind_s: a viewer that
     keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
     send its start message; close_timeout_s: wait for a peer's close handshake before dropping TCP;
-    lag: extra fixed-lag smoothing frames of every session; web_root: directory served at ``/``
+    lag: extra fixed-lag smoothing frames of every session; viewer_socket_buffer_bytes: kernel send
+    buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
+    stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions)."""
 
     host: str = "127.0.0.1"
@@ -33,6 +35,7 @@ class ServerConfig:
     start_timeout_s: float = 10.0
     close_timeout_s: float = 2.0
     lag: int = 0
+    viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
 
     def __post_init__(self) -> None:
@@ -59,6 +62,9 @@ class ServerConfig:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30, got {self.lag!r}")
+        b = self.viewer_socket_buffer_bytes
+        if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
+            raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
         if self.web_root is not None:
             object.__setattr__(self, "web_root", Path(self.web_root))
 
