@@ -207,6 +207,7 @@ class FacecastServer:
         self._http_cache: dict[str, tuple[bytes, str]] = {}
         self._tasks: set[asyncio.Task] = set()
         self.started = time.time()
+        self.stopping = False
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -238,10 +239,14 @@ class FacecastServer:
         return f"http://{self.config.host}:{self.port}"
 
     async def stop(self) -> None:
-        """Graceful shutdown: end every session (viewers get their last frames and 1001), then close."""
+        """Graceful shutdown: end every session (viewers get their last frames, then 1001), wait for
+        them (at most close_timeout_s), then close the listener and the remaining connections."""
+        self.stopping = True
         for live in list(self.sessions.values()):
             live.ended.set()
-        await asyncio.sleep(0)
+        deadline = time.monotonic() + self.config.close_timeout_s
+        while self.sessions and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
         if self._server is not None:
             self._server.close(close_connections=True)
             await self._server.wait_closed()
@@ -285,7 +290,10 @@ class FacecastServer:
                     break
             live.finish()
         finally:
-            await self._end_session(live, P.CLOSE_NORMAL, "session ended")
+            if self.stopping:
+                await self._end_session(live, P.CLOSE_GOING_AWAY, "server shutting down")
+            else:
+                await self._end_session(live, P.CLOSE_NORMAL, "session ended")
         return live
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
@@ -375,6 +383,7 @@ class FacecastServer:
                     done, _ = await asyncio.wait({recv, ended_task}, return_when=asyncio.FIRST_COMPLETED)
                     if recv not in done:  # server shutting down
                         recv.cancel()
+                        live.finish()
                         code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
                         break
                     msg = recv.result()
