@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "extract": "facecast.commands.extract",
     "rig": "facecast.commands.rig",
     "render": "facecast.commands.render",
+    "serve": "facecast.commands.serve",
 }
 
 
