@@ -24,6 +24,8 @@ COMMANDS: dict[str, str] = {
     "rig": "facecast.commands.rig",
     "render": "facecast.commands.render",
     "serve": "facecast.commands.serve",
+    "view": "facecast.commands.view",
+    "record": "facecast.commands.record",
 }
 
 

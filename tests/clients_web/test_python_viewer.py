@@ -1,0 +1,93 @@
+"""``facecast view --record`` and ``facecast record`` against a real server on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from clients.client import IngestClient
+from clients.export.curves import read_csv, read_json
+from clients.export.rhubarb import read_tsv
+from facecast.cli import main
+from realtime_core.pipeline import speech_to_params
+from tests.server.conftest import speechlike
+
+
+async def _session_once_watched(srv, name: str, seconds: float, viewers: int) -> dict:
+    """Open session ``name``, wait until ``viewers`` viewers watch it, stream ``seconds`` of audio
+    as fast as possible, end it; returns the server's ``ended`` reply."""
+    x = speechlike(seconds, 16000, seed=3)
+    async with IngestClient(srv.url, session=name, sample_rate_hz=16000) as ing:
+        for _ in range(400):  # at most 20 s
+            live = srv.server.sessions.get(name)
+            if live is not None and len(live.viewers) >= viewers:
+                break
+            await asyncio.sleep(0.05)
+        for i in range(0, len(x), 1600):
+            await ing.send(x[i:i + 1600])
+        return await ing.end()
+
+
+def _probe(path) -> dict:
+    out = subprocess.run(["ffprobe", "-v", "error", "-show_streams", "-count_frames", "-of", "json", str(path)],
+                         capture_output=True, text=True, check=True).stdout
+    return {s["codec_type"]: s for s in json.loads(out)["streams"]}
+
+
+def test_view_record_renders_the_session_with_its_audio(live, tmp_path):
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        pytest.skip("ffmpeg/ffprobe not installed")
+    fut = live.submit(_session_once_watched(live, "pyview", 2.0, viewers=1))
+    out = tmp_path / "view.mp4"
+    assert main(["view", live.url, "--session", "pyview", "--record", str(out), "--width", "320", "--height", "240"]) == 0
+    ended = fut.result(30)
+    streams = _probe(out)
+    assert int(streams["video"]["nb_read_frames"]) == ended["frames"] == 60  # one video frame per session frame
+    assert streams["video"]["width"] == 320 and "audio" in streams
+    assert float(streams["audio"]["duration"]) == pytest.approx(2.0, abs=0.1)
+    # Decode the video: the head is on screen and its mouth moves.
+    raw = subprocess.run(["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "gray", "-"],
+                         capture_output=True, check=True).stdout
+    frames = np.frombuffer(raw, np.uint8).reshape(-1, 240, 320).astype(np.float64)
+    assert frames[30].std() > 20
+    assert np.abs(frames[1:] - frames[:-1]).mean(axis=(1, 2)).max() > 0.5
+
+
+def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
+    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+    x = speechlike(1.5, 16000, seed=3)
+    x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)  # as sent (int16)
+    ref = speech_to_params(model, x).astype(np.float32)  # what the session computes, frame for frame
+    got = {}
+    for suffix in ("json", "csv", "tsv", "glb"):
+        out = tmp_path / f"take.{suffix}"
+        fut = live.submit(_session_once_watched(live, f"rec-{suffix}", 1.5, viewers=1))
+        assert main(["record", live.url, "--session", f"rec-{suffix}", "-o", str(out)]) == 0
+        assert fut.result(30)["frames"] == len(ref)
+        got[suffix] = out
+    np.testing.assert_array_equal(read_json(got["json"].read_bytes()).params.astype(np.float32), ref)
+    csv_track = read_csv(got["csv"].read_bytes())
+    np.testing.assert_array_equal(csv_track.params.astype(np.float32), ref)
+    assert csv_track.times()[0] == 0.0
+    assert read_tsv(got["tsv"].read_bytes())[-1].shape == "X"
+    g = pygltflib.GLTF2().load(str(got["glb"]))
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 4)
+    np.testing.assert_array_equal(w, ref)
+    from training.audio_io import read_audio
+
+    audio, rate = read_audio(tmp_path / "take.wav")  # the session's audio beside the .glb
+    assert rate == 16000 and len(audio) == round(len(ref) / 30 * 16000)
+    n = min(len(audio), len(x))
+    np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
+
+
+def test_view_without_record_explains_itself(capsys):
+    assert main(["view", "http://127.0.0.1:9", "--session", "x"]) == 2
+    assert "open http://127.0.0.1:9/ in a browser" in capsys.readouterr().err
