@@ -24,14 +24,14 @@ REPO = Path(__file__).resolve().parents[2]
 
 def plausible_model(seed: int = 0) -> AvModel:
     """The server tests' random model with its visual space mapped affinely (o_v' = s o_v + c) into
-    the mouth parameters' typical ranges (a few hundredths of an IOD, the mouth opening 0 .. 0.4 IOD):
+    the mouth parameters' typical ranges (a few hundredths of an IOD, the mouth opening 0 .. 0.3 IOD):
     the inversion is affine-equivariant in o_v, so outputs move like speech would move a mouth
     instead of by several IOD (a random model's raw outputs tear the face apart)."""
     m = small_model(seed)
     hmm = m.hmm
     na = hmm.n_audio
-    s = np.array([0.012, 0.025, 0.03, 0.005])
-    c = np.array([0.0, 0.0, 0.3, 0.0])
+    s = np.array([0.012, 0.025, 0.022, 0.005])
+    c = np.array([0.0, 0.0, 0.22, 0.0])
     means = hmm.means.copy()
     means[..., na:] = means[..., na:] * s + c
     cov = hmm.covars.copy()
