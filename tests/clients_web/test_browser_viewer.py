@@ -3,7 +3,9 @@
 A real server on loopback streams a session in real time; ``viewer_check.mjs`` loads the page, which
 must find the session, download the head, show frames and play the audio; the mouth region must
 differ between a closed and an open frame; after the session ends and starts again the page must
-reconnect by itself; no console error may occur. Screenshots go to ``artifacts/clients_web/``.
+reconnect by itself, and again after the whole server restarts on the same port; no console error
+may occur (but the browser's own reports of refused connections while the server is down).
+Screenshots go to ``artifacts/clients_web/``.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.clients_web.conftest import REPO, stream_session
+from tests.clients_web.conftest import REPO, LiveServer, stream_session
 
 CHROMIUM = Path("/usr/bin/chromium")
 SCRIPT = Path(__file__).with_name("viewer_check.mjs")
@@ -51,35 +53,57 @@ def _png(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=np.float64)
 
 
-def test_browser_viewer_shows_the_session_in_sync_and_reconnects(live):
+def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
     _require_browser()
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     name = "webcheck"
-    stops = [asyncio.Event(), asyncio.Event()]  # used only on the server's loop (set through it)
-    first = live.submit(stream_session(live.url, name, 40.0, stop=stops[0]))
-    proc = subprocess.Popen(["node", str(SCRIPT), live.url, name, str(ARTIFACTS)], cwd=REPO, text=True,
+    servers = [LiveServer(model, head)]
+    stops = [asyncio.Event() for _ in range(3)]  # one per session; set only through the server's loop
+    sessions = [servers[0].submit(stream_session(servers[0].url, name, 40.0, stop=stops[0]))]
+    proc = subprocess.Popen(["node", str(SCRIPT), servers[0].url, name, str(ARTIFACTS)], cwd=REPO, text=True,
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    second = None
+
+    def end_session(i: int) -> None:
+        servers[-1].loop.call_soon_threadsafe(stops[i].set)
+        sessions[i].result(30)
+
+    def go() -> None:
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+
     try:
         frames = _read_step(proc, "frames")
         mouth = _read_step(proc, "mouth")
         _read_step(proc, "waiting")
         # End the session and start it again under the same name: the page must follow alone.
-        live.loop.call_soon_threadsafe(stops[0].set)
-        first.result(30)
-        second = live.submit(stream_session(live.url, name, 40.0, seed=1, stop=stops[1]))
-        proc.stdin.write("go\n")
-        proc.stdin.flush()
+        end_session(0)
+        sessions.append(servers[0].submit(stream_session(servers[0].url, name, 40.0, seed=1, stop=stops[1])))
+        go()
         again = _read_step(proc, "reconnected")
+        _read_step(proc, "waiting")
+        # Restart the whole server on the same port (the session with it).
+        end_session(1)
+        port = servers[0].port
+        servers[0].stop()
+        servers.append(LiveServer(model, head, port=port))
+        sessions.append(servers[1].submit(stream_session(servers[1].url, name, 40.0, seed=2, stop=stops[2])))
+        go()
+        restarted = _read_step(proc, "restarted")
         done = _read_step(proc, "done")
     finally:
-        live.loop.call_soon_threadsafe(stops[1].set)
-        live.loop.call_soon_threadsafe(stops[0].set)
+        for i, fut in enumerate(sessions):
+            if not fut.done():
+                servers[-1].loop.call_soon_threadsafe(stops[i].set)
         if proc.poll() is None:
             proc.kill()
         proc.wait(10)
-        if second is not None:
-            second.result(30)
+        for fut in sessions:
+            if not fut.done():
+                fut.result(30)
+        for srv in servers[1:]:
+            srv.stop()
+        if len(servers) == 1:
+            servers[0].stop()
 
     st = frames["state"]
     assert name in frames["listed"]  # the page lists the live session
@@ -103,4 +127,6 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(live):
     assert changed > 0.02, f"only {changed:.1%} of the mouth region changed between closed and open"
 
     assert again["state"]["connections"] >= 2 and again["state"]["received"] >= 15
+    assert restarted["state"]["connections"] > again["state"]["connections"] and restarted["state"]["received"] >= 15
     assert done["console_errors"] == []
+    assert all("ERR_CONNECTION_REFUSED" in e or "WebSocket" in e for e in done["outage_errors"]), done["outage_errors"]

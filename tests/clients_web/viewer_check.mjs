@@ -9,7 +9,10 @@
 //   {"step":"mouth", ...}     closed/open frames captured (their peak vertex deltas, the clip box)
 //   {"step":"waiting"}        then it waits for a line on stdin (the test restarts the session)
 //   {"step":"reconnected",..} the page reconnected on its own and shows frames again
-//   {"step":"done", "console_errors": [...]}
+//   {"step":"waiting"}        again: the test restarts the whole server (same port) and the session
+//   {"step":"restarted",..}   the page found the new server and shows frames again
+//   {"step":"done", "console_errors": [...], "outage_errors": [...]}: errors outside the server's
+//                             outage, and the connection-refused reports during it
 // Exits 1 with {"step":"error", ...} when something does not happen within its time limit.
 
 import { chromium } from "playwright-core";
@@ -23,6 +26,11 @@ const say = (obj) => process.stdout.write(JSON.stringify(obj) + "\n");
 const profile = mkdtempSync(join(tmpdir(), "facecast-chromium-"));
 const errors = [];
 let context;
+// Lines from the test on stdin, one reader for the whole run.
+const lines = [];
+const waiters = [];
+createInterface({ input: process.stdin }).on("line", (l) => (waiters.length ? waiters.shift()(l) : lines.push(l)));
+const nextLine = () => new Promise((resolve) => (lines.length ? resolve(lines.shift()) : waiters.push(resolve)));
 
 async function main() {
   context = await chromium.launchPersistentContext(profile, {
@@ -78,12 +86,23 @@ async function main() {
   // Reconnection: the test ends the session and starts it again; the page must follow by itself.
   const before = st.connections;
   say({ step: "waiting" });
-  await new Promise((resolve) => createInterface({ input: process.stdin }).once("line", resolve));
+  await nextLine();
   await page.waitForFunction((n) => window.facecast.state.connections > n && window.facecast.state.received >= 15,
     before, { timeout: 30000 });
   st = await page.evaluate(() => ({ ...window.facecast.state, audio: window.facecast.audio() }));
   say({ step: "reconnected", state: st });
-  say({ step: "done", console_errors: errors });
+
+  // Server restart: while it is down the browser itself reports refused connections (the page's
+  // polls); those are expected and kept apart from real errors.
+  say({ step: "waiting" });
+  const outageFrom = errors.length;
+  await nextLine();
+  await page.waitForFunction((n) => window.facecast.state.connections > n && window.facecast.state.received >= 15,
+    st.connections, { timeout: 30000 });
+  const outage = errors.splice(outageFrom);
+  st = await page.evaluate(() => ({ ...window.facecast.state, audio: window.facecast.audio() }));
+  say({ step: "restarted", state: st });
+  say({ step: "done", console_errors: errors, outage_errors: outage });
 }
 
 main()

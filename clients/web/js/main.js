@@ -28,7 +28,7 @@ const state = {
   received: 0, // frames received on this connection
   lost: 0, // frames the server dropped or never sent (gaps in the frame index)
   skipped: 0, // frames due together with a newer one (display too slow): not shown
-  resyncs: 0,
+  resyncs: 0, // timeline moves: later after a late frame, earlier once frames come early again
   deliveryMs: null, // server send -> browser receipt (median of the last 30 frames)
   behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
   waitMs: null, // frame arrival -> shown (jitter buffer)
@@ -197,9 +197,9 @@ function onFrame(msg, arrival) {
   state.deliveryMs = median(windows.delivery, 1000 * (Date.now() / 1000 - msg.sendTime));
   const a = audioArrivals.find((b) => b.start <= msg.mediaTime && msg.mediaTime < b.end);
   if (a) state.behindAudioMs = median(windows.behind, 1000 * (arrival - a.arrival));
-  const before = clock.resyncs;
+  const before = clock.resyncs + clock.catchups;
   const due = clock.arrive(msg.mediaTime, arrival);
-  state.resyncs += clock.resyncs - before;
+  state.resyncs += clock.resyncs + clock.catchups - before;
   state.waitMs = median(windows.wait, 1000 * (due - arrival));
   queue.push({ msg, due });
   // Audio that arrived before the first frame fixed the timeline is scheduled now.

@@ -7,7 +7,9 @@
 // blocks arrive earlier than the frames of the same media time (the model needs ~100 ms of
 // lookahead), so they simply wait in WebAudio's schedule. A frame that arrives after its due time
 // pushes offset later by its lateness (a "resync": motion and sound stay together, a short silence
-// absorbs the step).
+// absorbs the step). When every frame of the last 3 s arrived well ahead of time (the hiccup that
+// caused a resync is over), offset moves back by half the excess (a "catch-up": the audio player
+// skips the few milliseconds that now overlap), so the delay does not only ever grow.
 //
 // WebAudio runs on its own clock; AudioContext.getOutputTimestamp() pairs a context time with the
 // performance time at which it leaves the speakers, which converts due(m) into a start time that
@@ -23,21 +25,40 @@ export class PlayoutClock {
     this.bufferS = bufferS;
     this.offset = null; // s: due = media + offset
     this.resyncs = 0;
+    this.catchups = 0;
+    this.minSlack = Infinity; // smallest (due - arrival) since windowStart (s)
+    this.windowStart = null;
   }
 
   reset() {
     this.offset = null;
+    this.minSlack = Infinity;
+    this.windowStart = null;
   }
 
   /** Called for every frame on arrival; returns its due time (s, performance clock). */
   arrive(mediaTime, arrival) {
-    if (this.offset === null) this.offset = arrival - mediaTime + this.bufferS;
+    if (this.offset === null) {
+      this.offset = arrival - mediaTime + this.bufferS;
+      this.windowStart = arrival;
+    }
     const due = mediaTime + this.offset;
     if (arrival > due + 0.001) {
       // Late: move the whole timeline so this frame (and the audio after it) fit again.
       this.offset += arrival - due + this.bufferS / 2;
       this.resyncs += 1;
+      this.minSlack = Infinity;
+      this.windowStart = arrival;
       return mediaTime + this.offset;
+    }
+    this.minSlack = Math.min(this.minSlack, due - arrival);
+    if (arrival - this.windowStart >= 3.0) {
+      if (this.minSlack > 1.5 * this.bufferS) {
+        this.offset -= (this.minSlack - this.bufferS) / 2;
+        this.catchups += 1;
+      }
+      this.minSlack = Infinity;
+      this.windowStart = arrival;
     }
     return due;
   }
@@ -82,16 +103,23 @@ export class AudioOut {
     let when = ts && ts.performanceTime > 0
       ? ts.contextTime + (dueS - ts.performanceTime / 1000)
       : ctx.currentTime + (dueS - nowS()) - (ctx.outputLatency || 0);
-    if (Math.abs(when - this.nextStart) < 0.004) when = this.nextStart; // join blocks without clicks
     let skip = 0;
+    // Joins within 15 ms (the output timestamp moves in steps of one audio callback) are made exact:
+    // no clicks, and 15 ms of audio-visual offset is far below what anyone notices (~45 ms).
+    if (Math.abs(when - this.nextStart) < 0.015) when = this.nextStart;
+    else if (when < this.nextStart) {
+      // The timeline moved earlier (catch-up): skip what would overlap the audio already scheduled.
+      skip = this.nextStart - when;
+      when = this.nextStart;
+    }
     const earliest = ctx.currentTime + 0.005;
     if (when < earliest) {
-      skip = earliest - when;
+      skip += earliest - when;
       when = earliest;
-      if (skip >= samples.length / rateHz) {
-        this.lateDropped += 1;
-        return;
-      }
+    }
+    if (skip >= samples.length / rateHz) {
+      this.lateDropped += 1;
+      return;
     }
     const buffer = ctx.createBuffer(1, samples.length, rateHz);
     buffer.copyToChannel(samples, 0);
