@@ -42,7 +42,7 @@ from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1
-SOURCES = ("espeak", "real", "video")
+SOURCES = ("espeak", "festival", "real", "video")
 ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
 """Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
 
