@@ -90,9 +90,11 @@ def run(args: argparse.Namespace) -> int:
     bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
 
     def on_iteration(it: int, objective: float, model) -> None:
+        # Called after every E-step; the first scores the starting model (no iteration yet).
         bar.set_postfix(objective=f"{objective:.4f}")
-        bar.update(1)
-        save_model(ckpt, model)
+        if it > 0:
+            bar.update(1)
+            save_model(ckpt, model)
 
     from dataclasses import replace
 
