@@ -204,3 +204,14 @@ def test_cut_mouth_on_a_strip():
     assert not uses_copy[~below].any()
     assert uses_copy[below].sum() > 0
     np.testing.assert_array_equal(v2[origin], v2)
+
+
+def test_landmarks_as_points_equal_landmarks_as_indices(shared_data, builtin_head):
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    mesh = load_mesh(mp)
+    spec = read_landmarks(shipped_landmarks(mp))
+    as_points = {k: mesh.vertices[int(v)].tolist() for k, v in spec.items()}
+    r1, _ = rig_head(mesh, spec, head=builtin_head)
+    r2, _ = rig_head(mesh, as_points, head=builtin_head)
+    p = np.array([0.01, 0.02, 0.1, -0.01])
+    np.testing.assert_allclose(r2.displacements(p), r1.displacements(p), atol=1e-6)
