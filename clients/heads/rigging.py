@@ -53,12 +53,25 @@ REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "
 
 @dataclass(frozen=True)
 class SimpleFace:
-    """The simple face model (built-in head coordinates), its landmark vertex per name, and the
-    built-in head vertex each simple vertex came from (n_s,)."""
+    """The simple face model (its own coordinates), its landmark vertex per name, the built-in head
+    vertex each simple vertex came from (n_s,) (empty for Candide-3) and the calibration groups."""
 
     model: FaceModel
     landmarks: dict[str, int]
     source: np.ndarray
+    groups: tuple[tuple[str, ...], ...] = MOUTH_GROUPS
+
+
+def candide_face(model: FaceModel) -> SimpleFace:
+    """Candide-3 as the simple model (the paper's choice): its landmarks, shape units and units."""
+    from realtime_core.face.candide import CANDIDE3_LANDMARKS, candide3_mouth_groups
+
+    return SimpleFace(
+        model=model,
+        landmarks=dict(CANDIDE3_LANDMARKS),
+        source=np.zeros(0, dtype=np.int64),
+        groups=candide3_mouth_groups(model),
+    )
 
 
 def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
@@ -200,15 +213,19 @@ def rig_head(
     landmark_source: str = "landmarks",
     config: RigConfig = RigConfig(),
     head: BuiltinHead | None = None,
+    simple: SimpleFace | None = None,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
-    Returns the rig and the mesh it animates (which differs from ``mesh`` when the lip seam was
-    cut). Raises MeshError / LandmarkError naming the file.
+    ``simple``: the simple face model to carry (default: the one derived from the built-in head;
+    :func:`candide_face` for Candide-3). Returns the rig and the mesh it animates (which differs
+    from ``mesh`` when the lip seam was cut). Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
-    head = head or load_builtin_head()
-    simple = simple_face(head)
+    if simple is None or (landmark_spec is None and mesh.name == "builtin"):
+        head = head or load_builtin_head()
+    if simple is None:
+        simple = simple_face(head)
     if landmark_spec is None:
         if mesh.name != "builtin":
             raise LandmarkError(f"{mesh.name}: a landmarks JSON is required for heads other than the built-in one")
@@ -239,8 +256,8 @@ def rig_head(
                 snap["lower_inner"] = int(copies[-1])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
-        cal = calibrate_mouth(placed, slm, groups=MOUTH_GROUPS)
-        allowed = None if mesh.name != "builtin" else np.asarray(head.part == 0)
+        cal = calibrate_mouth(placed, slm, groups=simple.groups)
+        allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )

@@ -215,3 +215,24 @@ def test_landmarks_as_points_equal_landmarks_as_indices(shared_data, builtin_hea
     r2, _ = rig_head(mesh, as_points, head=builtin_head)
     p = np.array([0.01, 0.02, 0.1, -0.01])
     np.testing.assert_allclose(r2.displacements(p), r1.displacements(p), atol=1e-6)
+
+
+def test_candide3_as_the_simple_model(shared_data):
+    """The paper's set-up: Candide-3 carried onto a head (no built-in head needed)."""
+    from clients.heads.rigging import candide_face, mouth_landmarks
+    from realtime_core.face import parse_wfm
+
+    wfm = shared_data / "candide3" / "candide3-3.1.6.wfm"
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1")))
+    assert [g[0].split()[0] for g in simple.groups] == ["AUV0", "AUV2", "AUV11", "AUV14"]
+    mesh = load_mesh(mp)
+    spec = read_landmarks(shipped_landmarks(mp))
+    rig, rigged = rig_head(mesh, spec, simple=simple)
+    assert len(rig.control) == 113 and len(set(rig.control.tolist())) == 113
+    assert not rig.displacements(np.zeros(4)).any()
+    up = face_frame(mesh.vertices, mouth_landmarks(spec)).axes[1]
+    v = rig.deformed(np.array([0, 0, 0.1, 0]))
+    drop = (v - rig.neutral) @ up
+    assert drop[spec["chin"]] < -0.02 * rig.meta["iod"]  # the jaw goes down
+    assert abs(drop[spec["eye_outer_left"]]) < 0.005 * rig.meta["iod"]
