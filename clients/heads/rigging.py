@@ -48,6 +48,7 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthFrownLeft", "mouthFrownRight"),
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
+ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
 REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
 
 
@@ -200,7 +201,9 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     reg = register(simple.model, idx, dst, warp_radius=WARP_RADIUS)
     # Paper 001 Sec. 3.9: carry the units from the (scaled) generic model to the shaped one.
     generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
-    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles)
+    # Well-conditioned triangles only: with X = [x_i x_j x_k] measured from the model centre, small
+    # or edge-on triangles give wild maps (Candide-3 flipped its jaw drop with the default 1e6).
+    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND)
     units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
     return FaceModel(vertices=reg.model.vertices, triangles=reg.model.triangles, animation_units=units,
                      shape_units=reg.model.shape_units, name=simple.model.name)
