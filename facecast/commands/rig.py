@@ -81,7 +81,20 @@ def run(args: argparse.Namespace) -> int:
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
     credit = "Head: Lee Perry-Smith / Infinite Realities (CC BY 3.0)" if "leeperrysmith" in args.head.lower() else ""
-    plot_control_points(rig, png, title=f"{Path(args.head).name}: {len(rig.control)} control points", credit=credit)
+    from clients.errors import RenderError
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    image = pixels = None
+    try:  # like the paper's Fig. 5: the control points over a render of the head
+        with renderer_for_rig(rig, rigged, RenderConfig(width=800, height=800)) as r:
+            image = r.render()
+            pixels = r.project(rig.neutral[rig.control])
+    except RenderError as exc:
+        print(f"rig: no render for the picture ({exc}); plotting vertices instead")
+    plot_control_points(
+        rig, png, title=f"{Path(args.head).name}: {len(rig.control)} control points", credit=credit,
+        image=image, pixels=pixels,
+    )
     m = rig.meta
     print(
         f"rig {out}: {len(rig.neutral)} vertices, {len(rig.moving)} moving, {len(rig.control)} control points, "
