@@ -76,6 +76,7 @@ def candide_face(model: FaceModel) -> SimpleFace:
 
 
 def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
+    """The :class:`MouthLandmarks` (vertex indices) among named landmarks (extra names ignored)."""
     return MouthLandmarks(**{k: int(names[k]) for k in MouthLandmarks.__dataclass_fields__})
 
 
@@ -247,6 +248,11 @@ def rig_head(
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
+        if (points["nose_tip"] - frame.origin) @ frame.axes[2] <= 0:
+            raise LandmarkError(
+                f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
+                "'right' swapped? ('left' is the face's own left)"
+            )
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
             v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
             colors = None if colors is None else colors[origin]

@@ -64,6 +64,11 @@ def test_landmarks_missing_or_out_of_range_name_the_file(tmp_path, shared_data, 
     far = dict(good, nose_tip=99999)
     with pytest.raises(LandmarkError, match="lm.json: landmark 'nose_tip' vertex 99999 out of range"):
         rig_head(mesh, far, landmark_source="lm.json", head=builtin_head)
+    swapped = dict(good)
+    for a, b in (("eye_outer_left", "eye_outer_right"), ("eye_inner_left", "eye_inner_right"), ("corner_left", "corner_right")):
+        swapped[a], swapped[b] = good[b], good[a]
+    with pytest.raises(LandmarkError, match="lm.json: .*swapped"):
+        rig_head(mesh, swapped, landmark_source="lm.json", head=builtin_head)
     bad = dict(good, chin=[1.0, "x", 2.0])
     with pytest.raises(LandmarkError, match="lm.json: landmark 'chin' must be a vertex index"):
         rig_head(mesh, bad, landmark_source="lm.json", head=builtin_head)
