@@ -39,7 +39,7 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.simple import derive_simple_model, regional_shape_units
+from realtime_core.face.simple import derive_simple_model, lip_contact_vertices, regional_shape_units
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthUpperUpLeft", "mouthUpperUpRight"),
@@ -96,8 +96,9 @@ def simple_face(head: BuiltinHead) -> SimpleFace:
     lm = head.landmarks
     frame = face_frame(v, mouth_landmarks(lm))
     mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]])
+    contact = lip_contact_vertices(v, head.targets["jawOpen"], frame, mouth_centre=mouth, candidates=head.part == 0)
     model, src = derive_simple_model(
-        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0
+        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0, extra=contact
     )
     where = {int(s): i for i, s in enumerate(src)}
     slm = {k: where[int(i)] for k, i in lm.items()}

@@ -25,7 +25,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
 
-RIG_ALGORITHM = 5
+RIG_ALGORITHM = 6
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
