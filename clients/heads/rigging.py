@@ -190,10 +190,16 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
 
 
 def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
-    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam)."""
-    adj = vertex_adjacency(len(vertices), triangles)
-    d = dijkstra(adj, indices=upper, unweighted=True, limit=max_hops)
-    return bool(np.isfinite(d[lower]))
+    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam).
+
+    Coincident vertices (texture seams) are welded first so a split seam does not hide the link.
+    """
+    from realtime_core.face.rig import weld
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    adj = vertex_adjacency(len(welded), canon[np.asarray(triangles, dtype=np.int64)])
+    d = dijkstra(adj, indices=int(canon[upper]), unweighted=True, limit=max_hops)
+    return bool(np.isfinite(d[canon[lower]]))
 
 
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
@@ -227,7 +233,7 @@ def rig_head(
     from ``mesh`` when the lip seam was cut). Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
-    if simple is None or (landmark_spec is None and mesh.name == "builtin"):
+    if simple is None or mesh.name == "builtin":
         head = head or load_builtin_head()
     if simple is None:
         simple = simple_face(head)
@@ -259,11 +265,6 @@ def rig_head(
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
             cut_copies = np.arange(len(mesh.vertices), len(v))
-            # The inner lower-lip landmark now lives on the copy below the cut.
-            lower = snap["lower_inner"]
-            copies = np.flatnonzero(origin == lower)
-            if len(copies) > 1:
-                snap["lower_inner"] = int(copies[-1])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
         cal = calibrate_mouth(placed, slm, groups=simple.groups)
