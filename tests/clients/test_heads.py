@@ -241,3 +241,19 @@ def test_candide3_as_the_simple_model(shared_data):
     drop = (v - rig.neutral) @ up
     assert drop[spec["chin"]] < -0.02 * rig.meta["iod"]  # the jaw goes down
     assert abs(drop[spec["eye_outer_left"]]) < 0.005 * rig.meta["iod"]
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [RigConfig(projection_2d="uv"), RigConfig(method="rbf"), RigConfig(beta=1.0, normalize_fallback=True)],
+    ids=["uv", "rbf", "normalised"],
+)
+def test_rig_variants_zero_and_jaw(builtin_head, cfg):
+    rig, _ = rig_head(builtin_head.mesh, None, head=builtin_head, config=cfg)
+    assert not rig.displacements(np.zeros(4)).any()
+    lm = builtin_head.landmarks
+    from clients.heads.rigging import mouth_landmarks
+
+    up = face_frame(builtin_head.mesh.vertices, mouth_landmarks(lm)).axes[1]
+    drop = (rig.deformed(np.array([0, 0, 0.1, 0])) - rig.neutral) @ up
+    assert drop[lm["lower_lip"]] < -0.03 * rig.meta["iod"] and abs(drop[lm["eye_outer_left"]]) < 0.01 * rig.meta["iod"]
