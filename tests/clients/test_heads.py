@@ -257,3 +257,19 @@ def test_rig_variants_zero_and_jaw(builtin_head, cfg):
     up = face_frame(builtin_head.mesh.vertices, mouth_landmarks(lm)).axes[1]
     drop = (rig.deformed(np.array([0, 0, 0.1, 0])) - rig.neutral) @ up
     assert drop[lm["lower_lip"]] < -0.03 * rig.meta["iod"] and abs(drop[lm["eye_outer_left"]]) < 0.01 * rig.meta["iod"]
+
+
+def test_cache_dir_from_environment(tmp_path, monkeypatch):
+    from clients.errors import AssetError
+    from clients.heads.cache import atomic_savez, cache_dir
+
+    monkeypatch.setenv("FACECAST_CACHE", str(tmp_path / "c"))
+    assert cache_dir() == tmp_path / "c" and (tmp_path / "c").is_dir()
+    out = atomic_savez(tmp_path / "c" / "x.npz", a=np.arange(3))
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["x.npz"]  # no temp file left
+    np.testing.assert_array_equal(np.load(out, allow_pickle=False)["a"], np.arange(3))
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    monkeypatch.setenv("FACECAST_CACHE", str(blocker / "sub"))
+    with pytest.raises(AssetError, match="cannot create the cache directory"):
+        cache_dir()
