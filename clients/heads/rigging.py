@@ -39,7 +39,7 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.simple import derive_simple_model, regional_shape_units
+from realtime_core.face.simple import derive_simple_model, lip_contact_vertices, regional_shape_units
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthUpperUpLeft", "mouthUpperUpRight"),
@@ -48,20 +48,35 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthFrownLeft", "mouthFrownRight"),
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
+ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
 REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
 
 
 @dataclass(frozen=True)
 class SimpleFace:
-    """The simple face model (built-in head coordinates), its landmark vertex per name, and the
-    built-in head vertex each simple vertex came from (n_s,)."""
+    """The simple face model (its own coordinates), its landmark vertex per name, the built-in head
+    vertex each simple vertex came from (n_s,) (empty for Candide-3) and the calibration groups."""
 
     model: FaceModel
     landmarks: dict[str, int]
     source: np.ndarray
+    groups: tuple[tuple[str, ...], ...] = MOUTH_GROUPS
+
+
+def candide_face(model: FaceModel) -> SimpleFace:
+    """Candide-3 as the simple model (the paper's choice): its landmarks, shape units and units."""
+    from realtime_core.face.candide import CANDIDE3_LANDMARKS, candide3_mouth_groups
+
+    return SimpleFace(
+        model=model,
+        landmarks=dict(CANDIDE3_LANDMARKS),
+        source=np.zeros(0, dtype=np.int64),
+        groups=candide3_mouth_groups(model),
+    )
 
 
 def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
+    """The :class:`MouthLandmarks` (vertex indices) among named landmarks (extra names ignored)."""
     return MouthLandmarks(**{k: int(names[k]) for k in MouthLandmarks.__dataclass_fields__})
 
 
@@ -81,8 +96,9 @@ def simple_face(head: BuiltinHead) -> SimpleFace:
     lm = head.landmarks
     frame = face_frame(v, mouth_landmarks(lm))
     mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]])
+    contact = lip_contact_vertices(v, head.targets["jawOpen"], frame, mouth_centre=mouth, candidates=head.part == 0)
     model, src = derive_simple_model(
-        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0
+        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0, extra=contact
     )
     where = {int(s): i for i, s in enumerate(src)}
     slm = {k: where[int(i)] for k, i in lm.items()}
@@ -174,10 +190,16 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
 
 
 def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
-    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam)."""
-    adj = vertex_adjacency(len(vertices), triangles)
-    d = dijkstra(adj, indices=upper, unweighted=True, limit=max_hops)
-    return bool(np.isfinite(d[lower]))
+    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam).
+
+    Coincident vertices (texture seams) are welded first so a split seam does not hide the link.
+    """
+    from realtime_core.face.rig import weld
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    adj = vertex_adjacency(len(welded), canon[np.asarray(triangles, dtype=np.int64)])
+    d = dijkstra(adj, indices=int(canon[upper]), unweighted=True, limit=max_hops)
+    return bool(np.isfinite(d[canon[lower]]))
 
 
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
@@ -187,7 +209,9 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     reg = register(simple.model, idx, dst, warp_radius=WARP_RADIUS)
     # Paper 001 Sec. 3.9: carry the units from the (scaled) generic model to the shaped one.
     generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
-    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles)
+    # Well-conditioned triangles only: with X = [x_i x_j x_k] measured from the model centre, small
+    # or edge-on triangles give wild maps (Candide-3 flipped its jaw drop with the default 1e6).
+    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND)
     units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
     return FaceModel(vertices=reg.model.vertices, triangles=reg.model.triangles, animation_units=units,
                      shape_units=reg.model.shape_units, name=simple.model.name)
@@ -200,15 +224,19 @@ def rig_head(
     landmark_source: str = "landmarks",
     config: RigConfig = RigConfig(),
     head: BuiltinHead | None = None,
+    simple: SimpleFace | None = None,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
-    Returns the rig and the mesh it animates (which differs from ``mesh`` when the lip seam was
-    cut). Raises MeshError / LandmarkError naming the file.
+    ``simple``: the simple face model to carry (default: the one derived from the built-in head;
+    :func:`candide_face` for Candide-3). Returns the rig and the mesh it animates (which differs
+    from ``mesh`` when the lip seam was cut). Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
-    head = head or load_builtin_head()
-    simple = simple_face(head)
+    if simple is None or mesh.name == "builtin":
+        head = head or load_builtin_head()
+    if simple is None:
+        simple = simple_face(head)
     if landmark_spec is None:
         if mesh.name != "builtin":
             raise LandmarkError(f"{mesh.name}: a landmarks JSON is required for heads other than the built-in one")
@@ -227,20 +255,20 @@ def rig_head(
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
+        if (points["nose_tip"] - frame.origin) @ frame.axes[2] <= 0:
+            raise LandmarkError(
+                f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
+                "'right' swapped? ('left' is the face's own left)"
+            )
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
             v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
             cut_copies = np.arange(len(mesh.vertices), len(v))
-            # The inner lower-lip landmark now lives on the copy below the cut.
-            lower = snap["lower_inner"]
-            copies = np.flatnonzero(origin == lower)
-            if len(copies) > 1:
-                snap["lower_inner"] = int(copies[-1])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
-        cal = calibrate_mouth(placed, slm, groups=MOUTH_GROUPS)
-        allowed = None if mesh.name != "builtin" else np.asarray(head.part == 0)
+        cal = calibrate_mouth(placed, slm, groups=simple.groups)
+        allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )

@@ -123,7 +123,8 @@ def project(
     if len(pool) < len(s):
         raise ConfigError(f"head has {len(pool)} usable vertices, fewer than the {len(s)} simple-model vertices")
     k = min(candidates, len(pool))
-    dist, cand = cKDTree(h[pool]).query(s, k=k)  # (n_s, k) candidates, nearest first
+    tree = cKDTree(h[pool])
+    dist, cand = tree.query(s, k=k)  # (n_s, k) candidates, nearest first
     dist = dist.reshape(len(s), k)
     cand = pool[cand.reshape(len(s), k)]
     # Symmetric faces give exact distance ties (mirror pairs) that floating-point noise would
@@ -139,7 +140,6 @@ def project(
     control = np.full(len(s), -1, dtype=np.int64)
     used: dict[int, int] = {}
 
-    tree = cKDTree(h[pool])
     extra: dict[int, np.ndarray] = {}
 
     def take(i: int, far: bool = False) -> bool:

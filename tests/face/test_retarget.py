@@ -109,3 +109,25 @@ def test_affine_adaptation_exact_for_global_affine():
     np.testing.assert_allclose(adapt_displacements(maps, d), d @ a.T, atol=1e-8)
     with pytest.raises(ConfigError):
         affine_adaptation(v, v[:-1], t)
+
+
+@pytest.mark.parametrize("dense", [False, True])
+def test_rig_displacements_equal_the_sparse_chain(dense):
+    import scipy.sparse as sp
+
+    from realtime_core.face import FaceModel, MouthCalibration, Rig
+
+    rng = np.random.default_rng(5)
+    n_h, n_s = 50, 12
+    g = rng.random((n_h, n_s)) if dense else sp.random(n_h, n_s, density=0.2, random_state=5).toarray()
+    s = sp.kron(sp.csr_matrix(g), sp.identity(3), format="csr")
+    basis = rng.normal(size=(n_s * 3, 4))
+    rig = Rig(
+        neutral=rng.normal(size=(n_h, 3)), triangles=np.zeros((0, 3), np.int32), moving=np.arange(n_h), matrix=s,
+        basis=basis, control=np.arange(n_s),
+        simple=FaceModel(vertices=rng.normal(size=(n_s, 3)), triangles=np.zeros((0, 3), int)),
+        calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
+    )
+    p = np.array([0.1, -0.2, 0.3, 0.05])
+    np.testing.assert_allclose(rig.displacements(p), (g @ (basis @ p).reshape(n_s, 3)), rtol=1e-4, atol=1e-5)
+    assert not rig.displacements(np.zeros(4)).any()
