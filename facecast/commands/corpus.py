@@ -30,6 +30,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="also add real speech with phone alignments found under DIR (source 'real'; repeatable), "
         "e.g. ../shared/data/speech",
     )
+    p.add_argument(
+        "--align", action="store_true",
+        help="with --real: also force-align transcribed WAVs (<stem>.txt or metadata.csv) that have no phone "
+        "alignment, with pocketsphinx (pip install 'facecast[align]')",
+    )
     p.add_argument("--lead-ms", type=float, default=33.0, help="move rule labels this much earlier (lips lead sound)")
     p.set_defaults(run=run)
 
@@ -46,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())
     cfg = BuildConfig(
         out_dir=Path(args.out_dir), sentences=args.sentences, languages=langs, seed=args.seed,
-        augment=args.augment, real_dirs=tuple(Path(d) for d in args.real),
+        augment=args.augment, real_dirs=tuple(Path(d) for d in args.real), force_align=args.align,
         articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0),
     )
     t0 = time.perf_counter()
@@ -55,4 +60,6 @@ def run(args: argparse.Namespace) -> int:
     src = ", ".join(f"{k}: {v}" for k, v in sorted(rep.by_source.items()))
     print(f"wrote {rep.n_utterances} utterances ({src}), {rep.audio_s / 60:.1f} min of audio, "
           f"in {wall:.1f} s -> {rep.manifest}")
+    for path, why in rep.skipped:
+        print(f"skipped {path}: {why}")
     return 0
