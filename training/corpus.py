@@ -21,6 +21,7 @@ interrupted build never leaves a half-written file under its final name. Only JS
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -32,6 +33,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from training.errors import (
+    ConfigError,
     CorpusFormatError,
     NotAudioError,
     SilentAudioError,
@@ -106,8 +108,6 @@ def to_int16(samples: np.ndarray) -> np.ndarray:
 def write_wav(path: Path, samples: np.ndarray, rate_hz: int) -> None:
     """Atomically write mono 16-bit PCM. ``samples``: (n,) int16, or float in [-1, 1]."""
     pcm = samples if samples.dtype == np.int16 else to_int16(samples)
-    import io
-
     buf = io.BytesIO()
     with wave.open(buf, "wb") as w:
         w.setnchannels(1)
@@ -121,7 +121,7 @@ def format_params_csv(params: np.ndarray) -> str:
     """CSV text of a (n_frames, 4) track with the time column t = k/30 (6 decimals)."""
     params = np.asarray(params, dtype=np.float64)
     if params.ndim != 2 or params.shape[1] != N_PARAMS:
-        raise ValueError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
+        raise ConfigError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
     lines = [CSV_HEADER]
     for k, row in enumerate(params):
         lines.append(f"{k / FPS:.6f}," + ",".join(f"{v:.6f}" for v in row))
@@ -153,13 +153,13 @@ def write_utterance(
     added to the manifest entry (e.g. the augmentation drawn).
     """
     if source not in SOURCES:
-        raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
+        raise ConfigError(f"source must be one of {SOURCES}, got {source!r}")
     if sample_rate_hz not in ACCEPTED_RATES_HZ:
-        raise ValueError(f"sample rate {sample_rate_hz} Hz is not one of {ACCEPTED_RATES_HZ}")
+        raise ConfigError(f"sample rate {sample_rate_hz} Hz is not one of {ACCEPTED_RATES_HZ}")
     duration = len(samples) / sample_rate_hz
     want = n_frames_for(duration)
     if params.shape != (want, N_PARAMS):
-        raise ValueError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
+        raise ConfigError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
     folder = Path(corpus_dir) / utt_id
     write_wav(folder / "audio.wav", samples, sample_rate_hz)
     _atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
