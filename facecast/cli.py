@@ -15,9 +15,15 @@ import sys
 
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
+    "train": "facecast.commands.train",
+    "animate": "facecast.commands.animate",
+    "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
+    "rig": "facecast.commands.rig",
+    "render": "facecast.commands.render",
+    "serve": "facecast.commands.serve",
 }
 
 

@@ -24,7 +24,9 @@ if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
 stamp=.venv/.facecast-installed
-want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+# Reinstall when the project metadata or the set of top-level packages changes (an editable
+# install only maps the packages that existed when it was made).
+want="$(cat pyproject.toml */__init__.py 2>/dev/null | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setup: installing Python packages"
   .venv/bin/python -m pip install -q --upgrade pip

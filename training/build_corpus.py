@@ -30,7 +30,7 @@ from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import read_wav, write_manifest, write_utterance
 from training.errors import AlignmentFormatError, ConfigError
-from training.espeak import LANGUAGES, VARIANTS, Voice, synthesizer
+from training.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"
@@ -52,6 +52,17 @@ class VoiceSampling:
     rate_wpm: tuple[int, int] = (130, 220)
     pitch: tuple[int, int] = (25, 75)
     pitch_range: tuple[int, int] = (30, 80)
+
+    def __post_init__(self) -> None:
+        if not self.variants:
+            raise ConfigError("variants must name at least one variant (None = the base voice)")
+        unknown = [v for v in self.variants if v is not None and v not in VARIANTS]
+        if unknown:
+            raise ConfigError(f"unknown espeak variants {unknown}; known: {VARIANTS} (or the base voice)")
+        for name, lo_hi, allowed in (("rate_wpm", self.rate_wpm, RATE_RANGE_WPM), ("pitch", self.pitch, (0, 100)),
+                                     ("pitch_range", self.pitch_range, (0, 100))):
+            if not allowed[0] <= lo_hi[0] <= lo_hi[1] <= allowed[1]:
+                raise ConfigError(f"{name} range {lo_hi} must be (low, high) within {allowed}")
 
     def draw(self, language: str, rng: np.random.Generator) -> Voice:
         bases = LANGUAGES[language]

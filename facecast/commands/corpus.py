@@ -35,6 +35,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="with --real: also force-align transcribed WAVs (<stem>.txt or metadata.csv) that have no phone "
         "alignment, with pocketsphinx (pip install 'facecast[align]')",
     )
+    p.add_argument(
+        "--variants", default=None,
+        help="comma-separated espeak voice variants to draw from ('base' = no variant), e.g. to keep the "
+        "evaluation voices f5,m7 out of training; default: all of base,m1..m7,f1..f5",
+    )
     p.add_argument("--lead-ms", type=float, default=33.0, help="move rule labels this much earlier (lips lead sound)")
     p.set_defaults(run=run)
 
@@ -46,13 +51,15 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from training.articulatory import ArticulatoryConfig
-    from training.build_corpus import BuildConfig, build_corpus
+    from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
 
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())
     cfg = BuildConfig(
         out_dir=Path(args.out_dir), sentences=args.sentences, languages=langs, seed=args.seed,
         augment=args.augment, real_dirs=tuple(Path(d) for d in args.real), force_align=args.align,
         articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0),
+        **({} if args.variants is None else {"voices": VoiceSampling(variants=tuple(
+            None if v.strip() == "base" else v.strip() for v in args.variants.split(",") if v.strip()))}),
     )
     t0 = time.perf_counter()
     rep = build_corpus(cfg, progress=tqdm)

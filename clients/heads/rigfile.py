@@ -1,0 +1,138 @@
+"""Rig files: a :class:`Rig` plus the mesh it animates, as one ``.npz`` of plain arrays.
+
+No pickle anywhere: arrays are numeric, the sparse matrix is stored as CSR parts, the simple
+model's units as one stacked array with their names in the JSON metadata string, the texture as
+its encoded bytes (uint8). Written atomically (temp file + ``os.replace``) and read with
+``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from clients.errors import RigFileError
+from clients.heads.cache import atomic_savez
+from clients.heads.mesh import HeadMesh
+from realtime_core.errors import RealtimeCoreError
+from realtime_core.face import FaceModel, MouthCalibration, Rig
+
+FORMAT = "facecast-rig"
+VERSION = 1
+
+
+def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
+    """Write ``rig`` and its ``mesh`` (same vertex count) to ``path`` (.npz) atomically."""
+    if len(mesh.vertices) != len(rig.neutral):
+        raise RigFileError(f"{path}: mesh has {len(mesh.vertices)} vertices, rig {len(rig.neutral)}")
+    names = list(rig.simple.animation_units)
+    meta = {
+        "format": FORMAT,
+        "version": VERSION,
+        "unit_names": names,
+        "groups": [list(g) for g in rig.calibration.groups],
+        "mesh_name": mesh.name,
+        "rig": rig.meta,
+    }
+    m = rig.matrix.tocsr()
+    arrays = {
+        "meta": np.array(json.dumps(meta)),
+        "neutral": np.asarray(rig.neutral, dtype=np.float32),
+        "triangles": np.asarray(rig.triangles, dtype=np.int32),
+        "moving": rig.moving.astype(np.int64),
+        "matrix_data": m.data.astype(np.float32),
+        "matrix_indices": m.indices.astype(np.int32),
+        "matrix_indptr": m.indptr.astype(np.int64),
+        "matrix_shape": np.array(m.shape, dtype=np.int64),
+        "basis": rig.basis.astype(np.float32),
+        "control": rig.control.astype(np.int64),
+        "simple_vertices": rig.simple.vertices,
+        "simple_triangles": rig.simple.triangles,
+        "simple_units": np.stack([rig.simple.animation_units[n] for n in names]) if names else np.zeros((0, rig.simple.n_vertices, 3)),
+        "cal_response": rig.calibration.response,
+        "cal_matrix": rig.calibration.matrix,
+    }
+    if mesh.uvs is not None:
+        arrays["uvs"] = np.asarray(mesh.uvs, dtype=np.float32)
+    if mesh.colors is not None:
+        arrays["colors"] = np.asarray(mesh.colors, dtype=np.float32)
+    if mesh.texture is not None:
+        arrays["texture"] = np.frombuffer(mesh.texture, dtype=np.uint8)
+    return atomic_savez(path, **arrays)
+
+
+def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
+    """Read a rig file; RigFileError naming the file if it is missing, of another format or inconsistent."""
+    p = Path(path)
+    if not p.is_file():
+        raise RigFileError(f"{p}: rig file not found")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+        meta = json.loads(str(a["meta"]))
+    except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
+        raise RigFileError(f"{p}: not a readable rig file: {exc}") from exc
+    if meta.get("format") != FORMAT or meta.get("version") != VERSION:
+        raise RigFileError(f"{p}: expected {FORMAT} version {VERSION}, got {meta.get('format')} {meta.get('version')}")
+    try:
+        names = meta["unit_names"]
+        simple = FaceModel(
+            vertices=a["simple_vertices"],
+            triangles=a["simple_triangles"],
+            animation_units={n: a["simple_units"][i] for i, n in enumerate(names)},
+            name="simple",
+        )
+        cal = MouthCalibration(
+            groups=tuple(tuple(g) for g in meta["groups"]), response=a["cal_response"], matrix=a["cal_matrix"]
+        )
+        shape = tuple(int(x) for x in a["matrix_shape"])
+        matrix = sp.csr_matrix((a["matrix_data"], a["matrix_indices"], a["matrix_indptr"]), shape=shape)
+        rig = Rig(
+            neutral=a["neutral"],
+            triangles=a["triangles"],
+            moving=a["moving"],
+            matrix=matrix,
+            basis=a["basis"],
+            control=a["control"],
+            simple=simple,
+            calibration=cal,
+            meta=meta.get("rig", {}),
+        )
+    except (KeyError, ValueError, IndexError, RealtimeCoreError) as exc:
+        raise RigFileError(f"{p}: inconsistent rig file: {exc}") from exc
+    mesh = HeadMesh(
+        vertices=a["neutral"].astype(np.float64),
+        triangles=a["triangles"].astype(np.int64),
+        uvs=a.get("uvs"),
+        texture=a["texture"].tobytes() if "texture" in a else None,
+        colors=a.get("colors"),
+        name=meta.get("mesh_name", str(p)),
+    )
+    return rig, mesh
+
+
+def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
+    """The built-in head's rig, from the cache or built (and cached) on first use."""
+    from clients.heads.builtin import load_builtin_head
+    from clients.heads.cache import cache_dir
+    from clients.heads.rigging import rig_head
+
+    root = cache or cache_dir()
+    path = root / f"builtin_rig_v{VERSION}.npz"
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    if path.is_file():
+        try:
+            rig, mesh = load_rig(path)
+            if rig.meta.get("algorithm") == RIG_ALGORITHM:
+                return rig, mesh
+        except RigFileError:
+            pass
+        path.unlink()  # unreadable or built by an older algorithm: rebuild below
+    head = load_builtin_head(root)
+    rig, mesh = rig_head(head.mesh, None, head=head)
+    save_rig(rig, mesh, path)
+    return rig, mesh

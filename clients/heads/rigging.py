@@ -1,0 +1,250 @@
+"""Rigging pipeline at the edge: a head mesh plus landmarks -> :class:`realtime_core.face.Rig`.
+
+1. The simple face model comes from the built-in head (:mod:`clients.heads.builtin`): ~220 face
+   vertices sampled from the MakeHuman head, its 52 ARKit targets as animation units, regional
+   shape units, and the mouth landmarks; its mouth calibration maps the four parameters to
+   jawOpen, mouthStretch L+R, mouthUpperUp L+R and mouthFrown L+R.
+2. Registration onto the target head from the shared named landmarks: similarity (Umeyama) plus
+   shape units by least squares; the animation units follow the shape change through paper 001's
+   per-vertex affine adaptation (Sec. 3.9). The built-in head needs no landmark file.
+3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
+   between the two corner landmarks (a shortest edge path that stays near the straight line),
+   the path vertices are duplicated and the faces below take the copies, so the lower lip can
+   separate. The cut opens onto the (dark) inside of the head; there is no mouth cavity.
+4. Sec. 5 weights (or RBF), precomputed into the rig.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+from clients.errors import LandmarkError, MeshError
+from clients.heads.builtin import BuiltinHead, load_builtin_head
+from clients.heads.mesh import HeadMesh, check_mesh
+from realtime_core.errors import RealtimeCoreError
+from realtime_core.face import (
+    FaceModel,
+    MouthLandmarks,
+    Rig,
+    RigConfig,
+    build_rig,
+    calibrate_mouth,
+    face_frame,
+    register,
+)
+from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
+from realtime_core.face.projection import vertex_adjacency
+from realtime_core.face.simple import derive_simple_model, regional_shape_units
+
+MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("mouthUpperUpLeft", "mouthUpperUpRight"),
+    ("mouthStretchLeft", "mouthStretchRight"),
+    ("jawOpen",),
+    ("mouthFrownLeft", "mouthFrownRight"),
+)
+WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
+REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
+
+
+@dataclass(frozen=True)
+class SimpleFace:
+    """The simple face model (built-in head coordinates), its landmark vertex per name, and the
+    built-in head vertex each simple vertex came from (n_s,)."""
+
+    model: FaceModel
+    landmarks: dict[str, int]
+    source: np.ndarray
+
+
+def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
+    return MouthLandmarks(**{k: int(names[k]) for k in MouthLandmarks.__dataclass_fields__})
+
+
+def _region_centres(points: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    p = {k: np.asarray(v, dtype=np.float64) for k, v in points.items()}
+    return {
+        "eyes": 0.25 * (p["eye_outer_left"] + p["eye_inner_left"] + p["eye_outer_right"] + p["eye_inner_right"]),
+        "nose": p["nose_tip"],
+        "mouth": 0.5 * (p["corner_left"] + p["corner_right"]),
+        "chin": p["chin"],
+    }
+
+
+def simple_face(head: BuiltinHead) -> SimpleFace:
+    """Derive the simple face model from the built-in head (deterministic)."""
+    v = head.mesh.vertices
+    lm = head.landmarks
+    frame = face_frame(v, mouth_landmarks(lm))
+    mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]])
+    model, src = derive_simple_model(
+        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0
+    )
+    where = {int(s): i for i, s in enumerate(src)}
+    slm = {k: where[int(i)] for k, i in lm.items()}
+    su = regional_shape_units(model.vertices, frame, _region_centres({k: v[i] for k, i in lm.items()}))
+    model = FaceModel(vertices=model.vertices, triangles=model.triangles, animation_units=model.animation_units,
+                      shape_units=su, name="simple-makehuman")
+    return SimpleFace(model=model, landmarks=slm, source=src)
+
+
+def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: str) -> dict[str, np.ndarray]:
+    """Named landmarks -> (3,) points: each value is a vertex index or an [x, y, z] point.
+    Raises LandmarkError naming ``source`` for missing names and bad values."""
+    missing = [k for k in REQUIRED_LANDMARKS if k not in spec]
+    if missing:
+        raise LandmarkError(f"{source}: missing landmarks {missing} (need {list(REQUIRED_LANDMARKS)})")
+    out: dict[str, np.ndarray] = {}
+    for k in REQUIRED_LANDMARKS:
+        val = spec[k]
+        if isinstance(val, bool):
+            raise LandmarkError(f"{source}: landmark {k!r} must be a vertex index or [x, y, z], got {val!r}")
+        if isinstance(val, int):
+            if not 0 <= val < len(vertices):
+                raise LandmarkError(f"{source}: landmark {k!r} vertex {val} out of range [0, {len(vertices)})")
+            out[k] = np.asarray(vertices[val], dtype=np.float64)
+        else:
+            a = np.asarray(val, dtype=object)
+            try:
+                pt = np.asarray(val, dtype=np.float64)
+            except (TypeError, ValueError):
+                pt = np.zeros(0)
+            if a.shape != (3,) or pt.shape != (3,) or not np.all(np.isfinite(pt)):
+                raise LandmarkError(f"{source}: landmark {k!r} must be a vertex index or [x, y, z], got {val!r}")
+            out[k] = pt
+    return out
+
+
+def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, up: np.ndarray,
+              uvs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+    """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
+    indices) that stays closest to the straight corner-to-corner line is cut open. Interior path
+    vertices are duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
+    Returns new vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).copy()
+    a, b = v[left], v[right]
+    ab = b - a
+    length = float(np.linalg.norm(ab))
+    adj = vertex_adjacency(len(v), t).tocoo()
+
+    def off_line(p: np.ndarray) -> np.ndarray:
+        s = np.clip((p - a) @ ab / length**2, 0, 1)
+        return np.linalg.norm(p - (a + s[:, None] * ab), axis=1)
+
+    # Edge cost: length plus a strong penalty for straying from the line (both ends).
+    elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
+    pen = off_line(v[adj.row]) + off_line(v[adj.col])
+    g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
+    if not np.isfinite(dist[right]):
+        raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+    path = [right]
+    while path[-1] != left:
+        path.append(int(pred[path[-1]]))
+    path = path[::-1]
+    interior = path[1:-1]
+    if not interior:
+        return v, t, uvs, np.arange(len(v))
+    up = np.asarray(up, dtype=np.float64)
+    up = up / np.linalg.norm(up)
+    side_ax = ab / length
+    pp = v[path]
+    new_index = {vi: len(v) + k for k, vi in enumerate(interior)}
+    on_path = set(interior)
+    for f_i, f in enumerate(t):
+        hits = [vi for vi in f if vi in on_path]
+        if not hits:
+            continue
+        c = v[f].mean(0)
+        # Height of the path at the centroid's position along the mouth line.
+        s = (c - a) @ side_ax
+        order = np.argsort((pp - a) @ side_ax)
+        ys = np.interp(s, ((pp - a) @ side_ax)[order], (pp @ up)[order])
+        if c @ up < ys:
+            t[f_i] = [new_index.get(int(x), int(x)) for x in f]
+    origin = np.concatenate([np.arange(len(v)), np.array(interior)])
+    v2 = np.concatenate([v, v[interior]])
+    uv2 = None if uvs is None else np.concatenate([uvs, np.asarray(uvs)[interior]])
+    return v2, t, uv2, origin
+
+
+def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
+    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam)."""
+    adj = vertex_adjacency(len(vertices), triangles)
+    d = dijkstra(adj, indices=upper, unweighted=True, limit=max_hops)
+    return bool(np.isfinite(d[lower]))
+
+
+def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
+    names = list(REQUIRED_LANDMARKS)
+    idx = np.array([simple.landmarks[k] for k in names])
+    dst = np.stack([points[k] for k in names])
+    reg = register(simple.model, idx, dst, warp_radius=WARP_RADIUS)
+    # Paper 001 Sec. 3.9: carry the units from the (scaled) generic model to the shaped one.
+    generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
+    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles)
+    units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
+    return FaceModel(vertices=reg.model.vertices, triangles=reg.model.triangles, animation_units=units,
+                     shape_units=reg.model.shape_units, name=simple.model.name)
+
+
+def rig_head(
+    mesh: HeadMesh,
+    landmark_spec: Mapping[str, object] | None,
+    *,
+    landmark_source: str = "landmarks",
+    config: RigConfig = RigConfig(),
+    head: BuiltinHead | None = None,
+) -> tuple[Rig, HeadMesh]:
+    """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
+
+    Returns the rig and the mesh it animates (which differs from ``mesh`` when the lip seam was
+    cut). Raises MeshError / LandmarkError naming the file.
+    """
+    check_mesh(mesh)
+    head = head or load_builtin_head()
+    simple = simple_face(head)
+    if landmark_spec is None:
+        if mesh.name != "builtin":
+            raise LandmarkError(f"{mesh.name}: a landmarks JSON is required for heads other than the built-in one")
+        landmark_spec = dict(head.landmarks)
+        landmark_source = "builtin landmarks"
+    points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)
+    v, t, uv = mesh.vertices, mesh.triangles, mesh.uvs
+    snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
+    meta: dict[str, object] = {
+        "head": mesh.name,
+        "landmarks": {k: p.tolist() for k, p in points.items()},
+        "simple_landmarks": dict(simple.landmarks),
+    }
+    colors = mesh.colors
+    cut_copies = None
+    try:
+        lm = mouth_landmarks(snap)
+        frame = face_frame(v, lm)
+        if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
+            v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
+            colors = None if colors is None else colors[origin]
+            meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
+            cut_copies = np.arange(len(mesh.vertices), len(v))
+            # The inner lower-lip landmark now lives on the copy below the cut.
+            lower = snap["lower_inner"]
+            copies = np.flatnonzero(origin == lower)
+            if len(copies) > 1:
+                snap["lower_inner"] = int(copies[-1])
+        placed = _place(simple, points)
+        slm = mouth_landmarks(simple.landmarks)
+        cal = calibrate_mouth(placed, slm, groups=MOUTH_GROUPS)
+        allowed = None if mesh.name != "builtin" else np.asarray(head.part == 0)
+        rig = build_rig(
+            v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
+        )
+    except RealtimeCoreError as exc:
+        raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
+    out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name)
+    return rig, out_mesh

@@ -1,0 +1,94 @@
+"""``facecast serve``: the real-time streaming server (WebSocket ingest and viewers, HTTP health)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+
+    p = sub.add_parser(
+        "serve",
+        help="run the streaming server (audio in, animation frames out over WebSocket)",
+        formatter_class=HelpFormatter,
+        description="Serve live sessions: audio arrives over WebSocket (/ingest), from the microphone (--mic) or "
+        "from files (--file); viewers subscribe to a session (/view) and receive mouth parameters, vertex deltas "
+        "or blendshape weights, one binary message per 33 ms frame, plus the session's audio. Plain HTTP on the "
+        "same port: /health, /metrics, /head/mesh (glTF), /head/texture. Protocol: docs/protocol.md. "
+        "Command-line values override the [server] table of --config.",
+    )
+    p.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--port", type=int, default=None, help="TCP port (default 8765; 0 = any free port)")
+    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    head = p.add_mutually_exclusive_group()
+    head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
+    head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
+    head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
+    p.add_argument("--landmarks", type=Path, default=None, help="landmarks JSON for --head (default: shipped ones if known)")
+    p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
+    p.add_argument("--token-env", default=None, metavar="VAR",
+                   help="require the shared token held in this environment variable (kept off the command line)")
+    p.add_argument("--mic", action="store_true", help="also run a session named 'mic' from the default microphone")
+    p.add_argument("--file", type=Path, action="append", default=[],
+                   help="also stream this audio file as a session named after it (repeatable)")
+    p.add_argument("--fast", action="store_true", help="stream --file as fast as possible instead of in real time")
+    p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+    import logging
+    import os
+
+    from server.app import FacecastServer, load_head, run_server
+    from server.config import ServerConfig
+    from server.errors import ServerConfigError
+    from server.sources import FileConfig, FileSource, MicConfig, MicSource
+    from training.modelfile import load_model
+
+    token = None
+    if args.token_env:
+        token = os.environ.get(args.token_env)
+        if not token:
+            raise ServerConfigError(f"--token-env {args.token_env}: the environment variable is empty or unset")
+    web_root = args.web_root
+    if web_root is None:
+        default_web = Path(__file__).resolve().parents[2] / "clients" / "web"
+        web_root = default_web if default_web.is_dir() else None
+    overrides = {"host": args.host, "port": args.port, "token": token, "web_root": web_root}
+    config = (ServerConfig.from_toml(args.config, **overrides) if args.config
+              else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
+    model = load_model(args.model)
+    head = load_head(head=args.head, landmarks=args.landmarks, rig=args.rig, builtin=not args.no_head)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
+    server = FacecastServer(model, head=head, config=config)
+
+    async def main() -> None:
+        ready: asyncio.Future = asyncio.get_running_loop().create_future()
+        extra = []
+        run = asyncio.ensure_future(run_server(server, ready=ready))
+        await ready
+        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}/ingest, /view); "
+              "Ctrl-C stops", flush=True)
+        for path in args.file:
+            src = FileSource(FileConfig(path=path, realtime=not args.fast))
+            name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
+            extra.append(server.run_source(name, src, sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
+        if args.mic:
+            mic = MicSource(MicConfig()).open()
+            print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
+            extra.append(server.run_source("mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels,
+                                           label="microphone"))
+        tasks = [asyncio.ensure_future(c) for c in extra]
+        try:
+            await run
+        finally:
+            for t in tasks:
+                t.cancel()
+
+    asyncio.run(main())
+    return 0

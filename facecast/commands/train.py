@@ -1,0 +1,139 @@
+"""``facecast train``: train the audio-visual HMM on corpora, or select N, M, tc on held-out data."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def _ints(text: str) -> list[int]:
+    try:
+        return [int(v) for v in text.split(",") if v]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+
+    p = sub.add_parser(
+        "train",
+        help="train the audio-visual HMM on corpus folders",
+        formatter_class=HelpFormatter,
+        description="Train the joint audio-visual HMM (full covariances, Baum-Welch) on one or more corpus "
+        "folders (made by `facecast corpus` or `facecast extract`). Training is resumable: a checkpoint "
+        "beside the output is updated after every EM iteration and picked up when the same command runs again. "
+        "With --select, trains a grid of models on 80%% of the utterances and reports held-out accuracy.",
+    )
+    p.add_argument("corpus", nargs="+", type=Path, help="corpus folders (each with manifest.json)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
+    p.add_argument("--states", type=int, default=16, help="HMM states N")
+    p.add_argument("--mix", type=int, default=3, help="Gaussian mixtures per state M")
+    p.add_argument("--covariance", choices=("full", "diag"), default="full", help="covariance structure")
+    p.add_argument("--tc", type=int, default=3, help="co-articulation context frames on each side")
+    p.add_argument("--rate", type=int, default=16000, help="model sample rate in Hz (audio is resampled)")
+    p.add_argument("--iters", type=int, default=25, help="maximum Baum-Welch iterations")
+    p.add_argument("--tol", type=float, default=5e-4, help="stop when the objective gains less per frame")
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation and the split")
+    p.add_argument("--exclude-source", default="", help="comma-separated corpus sources to leave out "
+                   "(espeak, real, video), e.g. to keep evaluation speech out of training")
+    p.add_argument("--select", action="store_true", help="model-selection mode over --grid-states/--grid-mix/"
+                   "--grid-tc, full and diagonal; writes Fig. 7/8 PNGs and a JSON report to --report-dir")
+    p.add_argument("--grid-states", type=_ints, default=[4, 8, 16, 28], help="N values for --select")
+    p.add_argument("--grid-mix", type=_ints, default=[1, 3, 5], help="M values for --select")
+    p.add_argument("--grid-tc", type=_ints, default=[3], help="tc values for --select")
+    p.add_argument("--report-dir", type=Path, default=None, help="where --select writes plots and report "
+                   "(default: OUTPUT's folder)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from realtime_core.hmm import TrainConfig
+    from training.corpus import load_corpus
+    from training.modelfile import load_model, save_model
+    from training.trainer import TrainRecipe, train_av_model
+
+    exclude = {s for s in args.exclude_source.split(",") if s}
+    utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
+    if not utts:
+        from training.errors import ConfigError
+
+        raise ConfigError("no utterances left to train on (check the corpus folders and --exclude-source)")
+    print(f"training on {len(utts)} utterances, {sum(u.duration_s for u in utts) / 60:.1f} min of audio")
+
+    def recipe(n: int, m: int, cov: str, tc: int) -> TrainRecipe:
+        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, hmm=TrainConfig(
+            n_states=n, n_mix=m, covariance_type=cov, n_iter=args.iters, tol=args.tol, seed=args.seed))
+
+    if args.select:
+        return _select(args, utts, recipe)
+
+    rec = recipe(args.states, args.mix, args.covariance, args.tc)
+    ckpt = args.output.with_name(args.output.name + ".checkpoint.npz")
+    start, done = None, 0
+    if ckpt.exists():
+        prev = load_model(ckpt)
+        same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
+            k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")}
+        if same and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
+            start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
+            print(f"resuming from {ckpt} (iteration {done})")
+    bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
+
+    def on_iteration(it: int, objective: float, model) -> None:
+        bar.set_postfix(objective=f"{objective:.4f}")
+        bar.update(1)
+        save_model(ckpt, model)
+
+    from dataclasses import replace
+
+    rec_run = replace(rec, hmm=replace(rec.hmm, n_iter=max(args.iters - done, 0))) if start is not None else rec
+    model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,
+                                   metadata={"corpora": [str(c) for c in args.corpus]})
+    bar.close()
+    from realtime_core.avmodel import AvModel
+
+    model = AvModel(hmm=model.hmm, frontend=model.frontend, cmvn_mean=model.cmvn_mean, cmvn_var=model.cmvn_var,
+                    metadata={**model.metadata, "recipe": rec.as_json()})
+    save_model(args.output, model)
+    ckpt.unlink(missing_ok=True)
+    h = result.history
+    print(f"wrote {args.output}: objective per frame {h[0]:.3f} -> {h[-1]:.3f} in {len(h) - 1} iterations"
+          f"{' (converged)' if result.converged else ''}")
+    return 0
+
+
+def _select(args: argparse.Namespace, utts: list, recipe) -> int:
+    from tqdm import tqdm
+
+    from training.corpus import write_json
+    from training.modelfile import save_model
+    from training.report import plot_selection, plot_tracks
+    from training.trainer import evaluate, split_by_utterance, train_av_model
+
+    train, test = split_by_utterance(utts, seed=args.seed)
+    grid = [(n, m, cov, tc) for tc in args.grid_tc for cov in ("full", "diag") for n in args.grid_states
+            for m in args.grid_mix]
+    rows, best = [], None
+    for n, m, cov, tc in tqdm(grid, desc="model selection", unit="model"):
+        model, _ = train_av_model(train, recipe(n, m, cov, tc))
+        ev = evaluate(model, test)
+        row = {"n_states": n, "n_mix": m, "covariance_type": cov, "tc": tc, "eps": round(ev.eps, 4),
+               "rho": round(ev.rho, 4), "r_per_param": {k: round(v, 4) for k, v in ev.r_per_param.items()},
+               "stream_cost_MN2": m * n * n}
+        rows.append(row)
+        tqdm.write(json.dumps(row))
+        if cov == "full" and (best is None or ev.rho > best[0]):
+            best = (ev.rho, model, ev, row)
+    out_dir = args.report_dir or args.output.parent
+    out_dir.mkdir(parents=True, exist_ok=True)
+    plot_selection(rows, out_dir / "selection_fig7.png")
+    plot_tracks(best[2].tracks, out_dir / "tracks_fig8.png")
+    report = {"train_utterances": len(train), "test_utterances": len(test), "grid": rows, "best_full": best[3]}
+    write_json(out_dir / "selection_report.json", report)
+    save_model(args.output, best[1])
+    print(f"best full-covariance model {best[3]} -> {args.output}; plots and report in {out_dir}")
+    return 0

@@ -1,0 +1,176 @@
+"""The trained audio-visual model as one object, and its file format (bytes in, bytes out).
+
+A model file is an ``.npz`` archive (no pickle) holding:
+  * ``format`` ("facecast-avmodel") and ``version`` (1);
+  * ``config_json``: the front-end configuration (MFCC, CMVN, tc), the visual parameter
+    names, and free-form training metadata (recipe, corpus, report);
+  * the HMM (``startprob, transmat, weights, means, covars``, covariance type, n_audio);
+  * the CMVN warm-start statistics (``cmvn_mean, cmvn_var``);
+  * the precomputed streaming matrices (``center, quad, quad0, reg, reg0, phi_v, chol_vv,
+    logdet_v``, see :mod:`realtime_core.inversion.conditional`).
+
+:func:`decode_model` validates shapes, finiteness and positive-definiteness and checks
+the stored streaming matrices against ones recomputed from the HMM, naming the problem
+when any check fails. Writing the bytes to disk (atomically) is the caller's job: this
+module does no I/O.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.errors import ModelFormatError, RealtimeCoreError
+from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
+from realtime_core.hmm.model import AvHmm
+from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInverter
+
+FORMAT = "facecast-avmodel"
+VERSION = 1
+_HMM_ARRAYS = ("startprob", "transmat", "weights", "means", "covars")
+_FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "logdet_v")
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class AvModel:
+    """hmm: the joint HMM over ``[o_a; o_v]``; frontend: how o_a is computed;
+    cmvn_mean/cmvn_var: ``(n_feat,)`` training statistics (CMVN warm start);
+    visual_names: names of the o_v dimensions; likelihood_scale: the audio-likelihood exponent
+    the live path uses (chosen on held-out data, see :class:`StreamConfig`);
+    metadata: JSON-able training details."""
+
+    hmm: AvHmm
+    frontend: FrontEndConfig
+    cmvn_mean: np.ndarray
+    cmvn_var: np.ndarray
+    visual_names: tuple[str, ...] = VISUAL_PARAMS
+    likelihood_scale: float = 1.0
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.hmm.n_audio != self.frontend.audio_dim:
+            raise ModelFormatError(
+                f"HMM audio dimension {self.hmm.n_audio} != front end's {self.frontend.audio_dim} "
+                f"((2 tc + 1) x n_feat = {2 * self.frontend.tc + 1} x {self.frontend.n_feat})"
+            )
+        if len(self.visual_names) != self.hmm.n_visual:
+            raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.hmm.n_visual} visual dims")
+        for name in ("cmvn_mean", "cmvn_var"):
+            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
+                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        if np.any(self.cmvn_var <= 0):
+            raise ModelFormatError("cmvn_var must be positive")
+        if not 0 < self.likelihood_scale <= 1:
+            raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
+
+    @cached_property
+    def form(self) -> ConditionalForm:
+        """Precomputed inversion matrices (computed once per model)."""
+        return ConditionalForm.from_model(self.hmm)
+
+    @property
+    def sample_rate_hz(self) -> int:
+        return int(self.frontend.mfcc.sample_rate_hz)
+
+    def front_end(self) -> FrontEnd:
+        """A fresh streaming front end for one utterance or live session."""
+        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
+
+    def inverter(self, config: StreamConfig = StreamConfig()) -> StreamingInverter:
+        """A fresh streaming inverter (with the model's likelihood scale unless ``config`` sets one)."""
+        if config.likelihood_scale is None:
+            config = replace(config, likelihood_scale=self.likelihood_scale)
+        return StreamingInverter(self.form, config=config)
+
+
+def _frontend_to_json(fe: FrontEndConfig) -> dict:
+    mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
+    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy}
+
+
+def _frontend_from_json(d: dict) -> FrontEndConfig:
+    return FrontEndConfig(
+        mfcc=MfccConfig(**d["mfcc"]),
+        cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
+        tc=int(d["tc"]),
+        energy=bool(d.get("energy", False)),
+    )
+
+
+def encode_model(model: AvModel) -> bytes:
+    """Serialise to ``.npz`` bytes (no pickle)."""
+    config = {
+        "frontend": _frontend_to_json(model.frontend),
+        "visual_names": list(model.visual_names),
+        "likelihood_scale": model.likelihood_scale,
+        "covariance_type": model.hmm.covariance_type,
+        "n_audio": model.hmm.n_audio,
+        "metadata": model.metadata,
+    }
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT),
+        "version": np.array(VERSION),
+        "config_json": np.array(json.dumps(config, sort_keys=True)),
+        "cmvn_mean": model.cmvn_mean,
+        "cmvn_var": model.cmvn_var,
+    }
+    for name in _HMM_ARRAYS:
+        arrays[name] = getattr(model.hmm, name)
+    for name in _FORM_ARRAYS:
+        arrays[name] = getattr(model.form, name)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def decode_model(data: bytes) -> AvModel:
+    """Parse and validate ``.npz`` bytes; raises :class:`ModelFormatError` naming the problem."""
+    try:
+        npz = np.load(io.BytesIO(data), allow_pickle=False)
+        arrays = {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a facecast model archive ({exc})") from None
+    for key in ("format", "version", "config_json", "cmvn_mean", "cmvn_var", *_HMM_ARRAYS, *_FORM_ARRAYS):
+        if key not in arrays:
+            raise ModelFormatError(f"model archive lacks the array {key!r}")
+    if str(arrays["format"]) != FORMAT:
+        raise ModelFormatError(f"format is {str(arrays['format'])!r}, expected {FORMAT!r}")
+    if int(arrays["version"]) != VERSION:
+        raise ModelFormatError(f"model version {int(arrays['version'])} is not supported (expected {VERSION})")
+    try:
+        config = json.loads(str(arrays["config_json"]))
+        frontend = _frontend_from_json(config["frontend"])
+        hmm = AvHmm(
+            **{k: arrays[k] for k in _HMM_ARRAYS},
+            covariance_type=config["covariance_type"],
+            n_audio=int(config["n_audio"]),
+        )
+        model = AvModel(
+            hmm=hmm,
+            frontend=frontend,
+            cmvn_mean=arrays["cmvn_mean"],
+            cmvn_var=arrays["cmvn_var"],
+            visual_names=tuple(config["visual_names"]),
+            likelihood_scale=float(config.get("likelihood_scale", 1.0)),
+            metadata=config.get("metadata", {}),
+        )
+    except ModelFormatError:
+        raise
+    except (KeyError, TypeError, ValueError, RealtimeCoreError) as exc:
+        raise ModelFormatError(f"invalid model configuration: {exc}") from None
+    form = model.form
+    for name in _FORM_ARRAYS:
+        stored, fresh = arrays[name], getattr(form, name)
+        if stored.shape != fresh.shape:
+            raise ModelFormatError(f"stored streaming matrix {name} has shape {stored.shape}, expected {fresh.shape}")
+        if not np.allclose(stored, fresh, rtol=1e-6, atol=1e-8):
+            raise ModelFormatError(f"stored streaming matrix {name} does not match the HMM it was saved with")
+    return model

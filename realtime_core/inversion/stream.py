@@ -1,0 +1,168 @@
+"""Streaming HMM inversion: the live path (paper Sec. 4.2 and 6.3).
+
+Theory of operation
+-------------------
+Once audio up to frame ``t + tc`` has arrived, the front end releases ``o_a,t``. The
+inverter then
+
+1. evaluates every (state, mixture) component's **audio-marginal** likelihood
+   ``c_jk N(o_a,t; mu_a, Sigma_aa)`` with one matrix-vector product over the shared
+   quadratic features of the frame, and the conditional means ``m_jk(o_a,t)`` with a
+   second, smaller one (see :mod:`realtime_core.inversion.conditional`);
+2. advances the normalised forward recursion (filtered state posteriors);
+3. outputs ``o~_v,t`` by eq. 7 under the component posteriors.
+
+With ``lag = L > 0`` the output for frame t waits for frames up to ``t + L`` and uses
+fixed-lag smoothed posteriors (a backward pass over the last L frames), adding
+``L x 33 ms`` of delay. ``flush()`` ends the utterance and smooths the frames still
+waiting with the backward pass from the last frame, so with ``L >= T`` the stream equals
+the batch audio-posterior estimate (forward-backward over the whole utterance), and with
+``L = 0`` it equals batch forward filtering.
+
+The matrix-vector product runs in float32 by default (``dtype``); the small per-component
+arithmetic after it stays in float64.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg.lapack import dposv as _posv
+
+from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
+from realtime_core.hmm.model import LOG_2PI
+from realtime_core.inversion.conditional import ConditionalForm
+
+
+@dataclass(frozen=True, kw_only=True)
+class StreamConfig:
+    """lag: extra frames of fixed-lag smoothing (0 = pure filtering, lowest delay).
+    dtype: "float32" or "float64" for the per-frame matrix-vector product.
+    likelihood_scale: exponent kappa on the audio likelihoods (None = the model's own, else
+    1). The 77 stacked dims share 7 overlapping frames, so the raw likelihoods are far
+    over-confident; kappa < 1 softens the posteriors, which then average several components'
+    regressions instead of jumping between them (the "acoustic scale" of speech recognisers).
+    """
+
+    lag: int = 0
+    dtype: str = "float32"
+    likelihood_scale: float | None = None
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.lag <= 100000:
+            raise ConfigError(f"lag must be in 0..100000 frames, got {self.lag}")
+        if self.dtype not in ("float32", "float64"):
+            raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if self.likelihood_scale is not None and not 0 < self.likelihood_scale <= 1:
+            raise ConfigError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
+
+
+class StreamingInverter:
+    """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends."""
+
+    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig()) -> None:
+        self.form = form
+        self.config = config
+        dt = np.dtype(config.dtype)
+        kappa = 1.0 if config.likelihood_scale is None else config.likelihood_scale
+        self._quad = np.ascontiguousarray(form.quad * (-0.5 * kappa), dtype=dt)
+        self._center = form.center.astype(dt)
+        self._i0, self._i1 = np.triu_indices(form.n_audio)
+        self._nq = self._i0.size
+        self._feat = np.empty(self._nq + form.n_audio, dtype=dt)
+        self._da, self._dv = form.n_audio, form.n_visual
+        self._n, self._m = form.n_states, form.n_mix
+        # log c_jk - 0.5 kappa const_jk: the frame-independent part of each component's log-likelihood.
+        self._const = (-0.5 * kappa * form.quad0).reshape(self._n, self._m) + form.log_weights
+        self._A = np.exp(form.log_transmat)
+        self._start = np.exp(form.log_startprob)
+        # Eq. 7 numerator: sum_c r_c Phi_c m_c(a) = (sum_c r_c G_c) a + sum_c r_c h_c with
+        # G_c = Phi_c R_c and h_c = Phi_c reg0_c, so conditional means are never formed here.
+        c = self._n * self._m
+        reg = form.reg.reshape(c, self._dv, self._da)
+        self._G = np.einsum("cij,cjk->cik", form.phi_v, reg).reshape(c, self._dv * self._da).astype(dt)
+        self._h = np.einsum("cij,cj->ci", form.phi_v, form.reg0.reshape(c, self._dv))
+        self._phi_flat = form.phi_v.reshape(c, -1)
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new utterance."""
+        self._f: np.ndarray | None = None  # filtered posterior of the newest frame
+        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, centred audio)
+        self._finished = False
+
+    def push(self, oa: np.ndarray) -> np.ndarray:
+        if self._finished:
+            raise StreamStateError("StreamingInverter.push() after flush(); call reset() first")
+        oa = np.asarray(oa)
+        if oa.ndim != 2 or oa.shape[1] != self._da:
+            raise InvalidFeaturesError(f"audio features must be (k, {self._da}), got {oa.shape}")
+        if not np.isfinite(np.add.reduce(oa, axis=None)):  # any NaN/inf makes the sum non-finite
+            raise InvalidFeaturesError("audio features contain NaN or inf")
+        out = []
+        for row in oa:
+            self._pending.append(self._forward(row))
+            if len(self._pending) > self.config.lag:
+                out.append(self._emit_oldest())
+        return np.array(out).reshape(len(out), self._dv)
+
+    def flush(self) -> np.ndarray:
+        if self._finished:
+            raise StreamStateError("StreamingInverter.flush() called twice; call reset() first")
+        self._finished = True
+        if not self._pending:
+            return np.zeros((0, self._dv))
+        # One backward pass from the last frame over everything still waiting.
+        items = list(self._pending)
+        betas = [np.ones(self._n)]
+        for f, b, _, _ in reversed(items[1:]):
+            beta = self._A @ (b * betas[-1])
+            betas.append(beta / beta.sum())
+        betas.reverse()
+        out = [self._combine(f * beta, mix, cond) for (f, _, mix, cond), beta in zip(items, betas)]
+        self._pending.clear()
+        return np.array(out)
+
+    def _forward(self, row: np.ndarray):
+        a = row.astype(self._feat.dtype) - self._center
+        feat = self._feat
+        np.multiply(a[self._i0], a[self._i1], out=feat[: self._nq])
+        feat[self._nq :] = a
+        logc = (self._quad @ feat).reshape(self._n, self._m) + self._const
+        # One global shift (not per state) keeps this to a handful of numpy calls per frame.
+        e = np.exp(logc - logc.max())
+        b = e.sum(axis=1)  # state likelihoods, all scaled by the same factor (N,)
+        mix = e / np.maximum(b, 1e-300)[:, None]  # within-state mixture posteriors (N, M)
+        prior = self._start if self._f is None else self._f @ self._A
+        f = prior * b
+        total = f.sum()
+        if not total > 0:  # every state impossible: restart the filter from the prior
+            f = b / b.sum()
+        else:
+            f = f / total
+        self._f = f
+        return f, b, mix, a
+
+    def _emit_oldest(self) -> np.ndarray:
+        f, _, mix, cond = self._pending[0]
+        if self.config.lag:
+            beta = np.ones(self._n)
+            for _, b, _, _ in list(self._pending)[:0:-1]:
+                beta = self._A @ (b * beta)
+                beta /= beta.sum()
+            f = f * beta
+        self._pending.popleft()
+        return self._combine(f, mix, cond)
+
+    def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame: posteriors ``(N,), (N, M)``, centred audio ``a (Da,)`` -> ``(Dv,)``."""
+        r = (state_post[:, None] * mix).reshape(-1)
+        r = r / r.sum()
+        P = (r @ self._phi_flat).reshape(self._dv, self._dv)
+        rhs = ((r.astype(self._G.dtype) @ self._G).reshape(self._dv, self._da) @ a).astype(np.float64) + r @ self._h
+        # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
+        # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
+        _, x, info = _posv(P, rhs)
+        return x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]

@@ -1,0 +1,92 @@
+"""Server configuration: one frozen dataclass, validated once; optionally read from a TOML file."""
+
+from __future__ import annotations
+
+import ipaddress
+import tomllib
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+
+from server.errors import ServerConfigError
+
+
+@dataclass(frozen=True, kw_only=True)
+class ServerConfig:
+    """host: interface to bind (127.0.0.1 = this machine only); port: TCP port (0 = any free port);
+    token: shared secret required from ingest and viewers (None = open); max_message_bytes: largest
+    WebSocket message accepted (larger ones close that connection with 1009); max_sessions /
+    max_viewers: server-wide limits (over them a connection is closed with 1013); viewer_queue:
+    messages buffered per viewer before the oldest is dropped; viewer_max_behind_s: a viewer that
+    keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
+    send its start message; close_timeout_s: wait for a peer's close handshake before dropping TCP;
+    lag: extra fixed-lag smoothing frames of every session; viewer_socket_buffer_bytes: kernel send
+    buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
+    stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
+    (None: a generated index page listing the sessions)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8765
+    token: str | None = None
+    max_message_bytes: int = 1 << 20
+    max_sessions: int = 200
+    max_viewers: int = 2000
+    viewer_queue: int = 16
+    viewer_max_behind_s: float = 3.0
+    start_timeout_s: float = 10.0
+    close_timeout_s: float = 2.0
+    lag: int = 0
+    viewer_socket_buffer_bytes: int | None = None
+    web_root: Path | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.host, str) or not self.host:
+            raise ServerConfigError(f"host must be a non-empty string, got {self.host!r}")
+        if self.host not in ("localhost",):
+            try:
+                ipaddress.ip_address(self.host)
+            except ValueError:
+                raise ServerConfigError(f"host must be an IP address or 'localhost', got {self.host!r}") from None
+        if not isinstance(self.port, int) or not 0 <= self.port <= 65535:
+            raise ServerConfigError(f"port must be in 0..65535, got {self.port!r}")
+        if self.token is not None and (not isinstance(self.token, str) or not self.token):
+            raise ServerConfigError("token must be a non-empty string or absent")
+        if not isinstance(self.max_message_bytes, int) or not 1024 <= self.max_message_bytes <= 64 << 20:
+            raise ServerConfigError(f"max_message_bytes must be in 1024..{64 << 20}, got {self.max_message_bytes!r}")
+        for name in ("max_sessions", "max_viewers", "viewer_queue"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or not 1 <= v <= 100000:
+                raise ServerConfigError(f"{name} must be an integer in 1..100000, got {v!r}")
+        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not 0 < v <= 3600:
+                raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
+        if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
+            raise ServerConfigError(f"lag must be an integer in 0..30, got {self.lag!r}")
+        b = self.viewer_socket_buffer_bytes
+        if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
+            raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
+        if self.web_root is not None:
+            object.__setattr__(self, "web_root", Path(self.web_root))
+
+    @classmethod
+    def from_toml(cls, path: str | Path, **overrides: object) -> "ServerConfig":
+        """Read the ``[server]`` table of a TOML file (keys = field names); ``overrides`` (non-None) win."""
+        p = Path(path)
+        try:
+            doc = tomllib.loads(p.read_text())
+        except FileNotFoundError:
+            raise ServerConfigError(f"{p}: config file not found") from None
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ServerConfigError(f"{p}: cannot read config: {exc}") from None
+        table = doc.get("server", {})
+        if not isinstance(table, dict):
+            raise ServerConfigError(f"{p}: [server] must be a table")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ServerConfigError(f"{p}: unknown [server] keys {unknown} (known: {sorted(known)})")
+        try:
+            base = cls(**table)
+        except TypeError as exc:
+            raise ServerConfigError(f"{p}: {exc}") from None
+        return replace(base, **{k: v for k, v in overrides.items() if v is not None})

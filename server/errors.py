@@ -1,0 +1,32 @@
+"""The one exception root of :mod:`server`; the CLI prints these as one line."""
+
+from __future__ import annotations
+
+
+class ServerError(Exception):
+    """Root of every error raised by the server package."""
+
+
+class ServerConfigError(ServerError, ValueError):
+    """A server, session or source configuration value is invalid (the message names it)."""
+
+
+class ProtocolViolation(ServerError):
+    """A peer broke the wire protocol: close that one connection with ``code`` and ``reason``.
+
+    code: WebSocket close code (see :mod:`server.protocol`); reason: short text (<= 123 bytes
+    UTF-8, the limit of a close frame).
+    """
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(f"{code}: {reason}")
+        self.code = code
+        self.reason = reason
+
+
+class ControlError(ServerError, ValueError):
+    """A control message names an unknown control or gives an invalid value (the session goes on)."""
+
+
+class AudioSourceError(ServerError, RuntimeError):
+    """An audio source cannot run: no PortAudio, no input device, unreadable file."""

@@ -1,0 +1,82 @@
+"""Context stacking, running CMVN and the composed front end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from realtime_core import ConfigError, InvalidFeaturesError
+from realtime_core.features import (
+    CmvnConfig, ContextStacker, FrontEnd, FrontEndConfig, MfccConfig, RunningCmvn, extract_features, stack_context,
+)
+
+
+def test_context_rows_are_the_neighbouring_frames_with_replicated_edges():
+    a = np.arange(10 * 2, dtype=float).reshape(10, 2)
+    o = stack_context(a, tc=3)
+    assert o.shape == (10, 14)
+    for t in range(10):
+        expect = np.concatenate([a[min(max(s, 0), 9)] for s in range(t - 3, t + 4)])
+        np.testing.assert_array_equal(o[t], expect)
+
+
+def test_context_releases_row_t_when_frame_t_plus_tc_arrives():
+    st = ContextStacker(dim=1, tc=3)
+    released = [st.push(np.array([[float(i)]])).shape[0] for i in range(6)]
+    assert released == [0, 0, 0, 1, 1, 1]
+    assert st.flush().shape[0] == 3
+
+
+def test_context_chunking_invariance():
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((57, 3))
+    whole = stack_context(a, tc=3)
+    st = ContextStacker(dim=3, tc=3)
+    pieces = [st.push(a[i : i + 1]) for i in range(57)] + [st.flush()]
+    np.testing.assert_array_equal(np.concatenate(pieces), whole)
+    st = ContextStacker(dim=3, tc=3)
+    cuts = [0, 1, 2, 9, 30, 31, 57]
+    pieces = [st.push(a[s:e]) for s, e in zip(cuts, cuts[1:])] + [st.flush()]
+    np.testing.assert_array_equal(np.concatenate(pieces), whole)
+
+
+def test_cmvn_warm_start_gating_and_adaptation():
+    rng = np.random.default_rng(0)
+    d = 4
+    cfg = CmvnConfig(prior_frames=50, max_frames=200, gate_db=-50)
+    cm = RunningCmvn(cfg, mean=np.zeros(d), var=np.ones(d))
+    # Warm start: a frame at the training mean maps to ~0 straight away.
+    assert np.allclose(cm.push(np.zeros((1, d)), np.array([0.0])), 0.0)
+    # Silence (below the gate) leaves the statistics alone, however long it lasts.
+    before = cm.push(np.full((1, d), 0.5), np.array([-80.0]))
+    cm.push(np.full((3000, d), -7.0), np.full(3000, -80.0))
+    np.testing.assert_allclose(cm.push(np.full((1, d), 0.5), np.array([-80.0])), before)
+    # A new microphone (gain and offset on the cepstra) is normalised away over time.
+    x = rng.standard_normal((3000, d))
+    ref = RunningCmvn(cfg, mean=np.zeros(d), var=np.ones(d)).push(x, np.zeros(3000))
+    shifted = RunningCmvn(cfg, mean=np.zeros(d), var=np.ones(d)).push(3.0 * x + 5.0, np.zeros(3000))
+    assert np.abs(shifted[-500:] - ref[-500:]).max() < 0.15
+    assert np.abs(shifted[:5] - ref[:5]).max() > 1.0  # ...and at first it was not
+
+
+def test_front_end_same_output_for_any_chunking():
+    rng = np.random.default_rng(3)
+    cfg = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=11025), tc=3)
+    x = (rng.standard_normal(11025) * 0.1).astype(np.float32)
+    x[3000:5000] = 0.0  # a silent stretch, exercising the CMVN gate
+    stats = dict(cmvn_mean=np.zeros(11), cmvn_var=np.ones(11))
+    whole = extract_features(x, cfg, **stats)
+    assert whole.shape == (cfg.mfcc.n_frames_for(x.size), 77)
+    for chunks in ([x[i : i + 1] for i in range(x.size)], np.split(x, np.sort(rng.choice(x.size, 25, replace=False)))):
+        fe = FrontEnd(cfg, **stats)
+        out = np.concatenate([fe.push(c) for c in chunks] + [fe.flush()])
+        np.testing.assert_allclose(out, whole, rtol=0, atol=1e-10)
+
+
+def test_front_end_config_errors():
+    with pytest.raises(ConfigError, match="include_c0"):
+        FrontEndConfig(mfcc=MfccConfig(include_c0=True))
+    with pytest.raises(ConfigError, match="cmvn_mean"):
+        FrontEnd(FrontEndConfig())
+    with pytest.raises(InvalidFeaturesError):
+        RunningCmvn(CmvnConfig(), mean=np.zeros(3), var=np.array([1.0, 0.0, 1.0]))

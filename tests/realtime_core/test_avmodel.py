@@ -1,0 +1,75 @@
+"""The model file format: round trip and validation that names each problem."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+from realtime_core import ModelFormatError
+from realtime_core.avmodel import AvModel, decode_model, encode_model
+from realtime_core.features import FrontEndConfig, MfccConfig
+from realtime_core.pipeline import SpeechToParams, speech_to_params
+from realtime_core.hmm.sampling import random_av_hmm
+
+
+def small_model(seed: int = 0) -> AvModel:
+    fe = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000, n_ceps=3), tc=1)
+    hmm = random_av_hmm(np.random.default_rng(seed), n_states=3, n_mix=2, n_audio=9, n_visual=4)
+    return AvModel(hmm=hmm, frontend=fe, cmvn_mean=np.zeros(3), cmvn_var=np.ones(3), metadata={"recipe": "test"})
+
+
+def _tamper(data: bytes, **changes) -> bytes:
+    npz = np.load(io.BytesIO(data), allow_pickle=False)
+    arrays = {k: npz[k] for k in npz.files}
+    arrays.update(changes)
+    for k, v in list(arrays.items()):
+        if v is None:
+            del arrays[k]
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def test_round_trip_preserves_everything():
+    m = small_model()
+    back = decode_model(encode_model(m))
+    for name in ("startprob", "transmat", "weights", "means", "covars"):
+        np.testing.assert_array_equal(getattr(back.hmm, name), getattr(m.hmm, name))
+    assert back.frontend == m.frontend and back.metadata == {"recipe": "test"}
+    x = np.random.default_rng(0).standard_normal(8000).astype(np.float32) * 0.1
+    np.testing.assert_array_equal(speech_to_params(back, x), speech_to_params(m, x))
+
+
+def test_bad_files_name_the_problem():
+    good = encode_model(small_model())
+    bad_cov = np.load(io.BytesIO(good))["covars"].copy()
+    bad_cov[2, 1] = -np.eye(13)
+    cases = [
+        (b"garbage", "not a facecast model archive"),
+        (_tamper(good, covars=bad_cov), "state 2, mixture 1 is not positive definite"),
+        (_tamper(good, transmat=np.eye(4)), "transmat must have shape"),
+        (_tamper(good, means=np.full((3, 2, 13), np.nan)), "means contains NaN"),
+        (_tamper(good, version=np.array(99)), "version 99"),
+        (_tamper(good, format=np.array("other")), "format is 'other'"),
+        (_tamper(good, quad=None), "lacks the array 'quad'"),
+        (_tamper(good, quad=np.load(io.BytesIO(good))["quad"] * 1.01), "does not match"),
+        (_tamper(good, cmvn_var=np.zeros(3)), "cmvn_var"),
+    ]
+    for data, match in cases:
+        with pytest.raises(ModelFormatError, match=match):
+            decode_model(data)
+
+
+def test_pipeline_stream_equals_whole_and_batch_runs():
+    m = small_model(1)
+    rng = np.random.default_rng(5)
+    x = (rng.standard_normal(16000) * 0.1).astype(np.float32)
+    whole = speech_to_params(m, x)
+    assert whole.shape == (30, 4)
+    p = SpeechToParams(m)
+    cuts = np.sort(rng.choice(np.arange(1, x.size), 50, replace=False))
+    chunked = np.concatenate([p.push(c) for c in np.split(x, cuts)] + [p.flush()])
+    np.testing.assert_allclose(chunked, whole, atol=1e-9)
+    assert speech_to_params(m, x, mode="batch").shape == (30, 4)

@@ -1,0 +1,287 @@
+"""The service over loopback: a real server, real WebSocket clients, no mocks.
+
+Each test runs its own server on a free port inside ``asyncio.run``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import socket
+
+import numpy as np
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
+from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+from realtime_core.pipeline import speech_to_params
+from server import protocol as P
+from server.app import FacecastServer, Head
+from server.config import ServerConfig
+from tests.server.conftest import speechlike
+from training.audio_io import read_audio
+from training.trainer import resample
+
+
+@pytest.fixture(scope="module")
+def head() -> Head:
+    from clients.heads.rigfile import builtin_rig
+
+    try:
+        rig, mesh = builtin_rig()
+    except Exception as exc:  # noqa: BLE001 - any failure to fetch the built-in head skips, naming it
+        pytest.skip(f"built-in head unavailable (first use downloads it): {exc}")
+    return Head(rig, mesh)
+
+
+@contextlib.asynccontextmanager
+async def running(model, head=None, **config):
+    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
+    await srv.start()
+    try:
+        yield srv
+    finally:
+        await srv.stop()
+
+
+def _int16(samples: np.ndarray) -> np.ndarray:
+    """read_audio's float32 (int16 / 32768) back to the file's int16 samples, exactly."""
+    return np.clip(np.rint(samples.astype(np.float64) * 32768), -32768, 32767).astype(np.int16)
+
+
+async def _watch_then_stream(url, name, samples_i16, rate, *, kinds, realtime=False, token=None):
+    """Start a session, attach viewers of the given (kind, encoding) pairs, stream, end; results."""
+    async with IngestClient(url, session=name, sample_rate_hz=rate, token=token) as ing:
+        viewers = [ViewerClient(url, session=name, kind=k, encoding=e, token=token) for k, e in kinds]
+        for v in viewers:
+            await v.__aenter__()
+        tasks = [asyncio.ensure_future(v.collect()) for v in viewers]
+        await stream_samples(ing, samples_i16, realtime=realtime, block_s=0.02)
+        ended = await ing.end()
+        results = await asyncio.gather(*tasks)
+        for v in viewers:
+            await v.__aexit__(None, None, None)
+    return ended, results
+
+
+@pytest.mark.parametrize("which", ["wav16k", "wav48k"])
+def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
+    path = request.getfixturevalue(which)
+    samples, rate = read_audio(path)
+    # What `facecast animate` computes for this file.
+    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+    pcm = _int16(samples)
+
+    async def main():
+        async with running(model) as srv:
+            return await _watch_then_stream(srv.url, "wav", pcm, rate, kinds=[("params", None)])
+
+    ended, (got,) = asyncio.run(main())
+    n = len(ref)
+    assert ended["frames"] == n
+    assert n == int(np.ceil(len(resample(samples, rate, 16000)) / (16000 / 30)))  # one frame per 33.3 ms
+    assert [m.index for m in got.frames] == list(range(n))
+    times = np.array([m.media_time for m in got.frames])
+    assert np.all(np.diff(times) > 0)
+    np.testing.assert_allclose(times, np.arange(n) / 30, atol=1e-12)
+    assert got.close_code == P.CLOSE_NORMAL
+    if rate == model.sample_rate_hz:
+        np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+        # The relayed audio is the session's audio, with media times of its first samples.
+        np.testing.assert_allclose(got.audio_samples(), pcm / 32768.0, atol=0.5 / 32768)
+    else:
+        np.testing.assert_allclose(got.values(), ref.astype(np.float32), rtol=1e-3, atol=1e-3)
+    starts = np.cumsum([0] + [m.values.size for m in got.audio])[:-1]
+    np.testing.assert_allclose([m.media_time for m in got.audio], starts / 16000)
+
+
+def test_every_viewer_kind_decodes_to_the_same_motion(model, head, wav16k):
+    samples, rate = read_audio(wav16k)
+    pcm = _int16(samples)[: rate]  # 1 s is enough
+    kinds = [("params", None), ("deltas", "int16"), ("deltas", "float16"), ("blendshapes", "arkit52"),
+             ("blendshapes", "ovr15")]
+
+    async def main():
+        async with running(model, head) as srv:
+            out = await _watch_then_stream(srv.url, "kinds", pcm, rate, kinds=kinds)
+            mesh_status, glb = await http_get(srv.url, "/head/mesh")
+            return out, mesh_status, glb
+
+    (ended, results), mesh_status, glb = asyncio.run(main())
+    params, d16, dh, ark, ovr = results
+    p = params.values()
+    assert len(p) == ended["frames"] == len(d16.frames) == len(dh.frames) == len(ark.frames) == len(ovr.frames)
+    desc = d16.description
+    moving = np.array(desc["head"]["moving_vertices"])
+    np.testing.assert_array_equal(moving, head.rig.moving)
+    assert desc["values_per_frame"] == 3 * len(moving) and desc["head"]["vertex_count"] == len(head.mesh.vertices)
+    for k in (0, len(p) // 2, len(p) - 1):
+        want = head.rig.displacements(p[k]).reshape(-1)
+        peak = np.abs(want).max()
+        np.testing.assert_allclose(d16.frames[k].values, want, atol=peak / 32767 + 1e-6 * peak)
+        np.testing.assert_allclose(dh.frames[k].values, want, atol=peak * 1e-3)
+    assert ark.description["names"] == list(ARKIT_NAMES)
+    np.testing.assert_allclose(ark.values(), blendshape_weights(p, "arkit52"), atol=1e-5)  # p is float32
+    np.testing.assert_allclose(ovr.values(), blendshape_weights(p, "ovr15"), atol=1e-5)
+    assert mesh_status == 200 and glb[:4] == b"glTF"
+
+
+async def _expect_close(coro_factory) -> tuple[int | None, str]:
+    """Run a misbehaving client; return the close code and reason the server sent it."""
+    try:
+        await coro_factory()
+    except ServerClosed as exc:
+        return exc.code, exc.reason
+    except ConnectionClosed as exc:
+        return (exc.rcvd.code, exc.rcvd.reason) if exc.rcvd else (None, "")
+    except InvalidStatus as exc:  # refused before the handshake: an HTTP status, not a close code
+        return exc.response.status_code, exc.response.body.decode()
+    return None, "not closed"
+
+
+async def _raw(url: str, path: str, *messages, max_size=None):
+    """Connect, send messages in order, then wait for the server to close us."""
+    async with connect(ws_url(url, path), compression=None, max_size=max_size) as ws:
+        for m in messages:
+            await ws.send(m)
+            await asyncio.sleep(0.01)
+        while True:
+            await asyncio.wait_for(ws.recv(), 10)
+
+
+def _start(**kw) -> str:
+    msg = {"type": "start", "session": "bad", "sample_rate": 16000, "format": "pcm_s16le", "token": "sesame"}
+    msg.update(kw)
+    return json.dumps({k: v for k, v in msg.items() if v is not None})
+
+
+def test_bad_clients_get_close_codes_and_a_healthy_session_loses_nothing(model):
+    x = speechlike(2.0, 16000, seed=5)
+    pcm = _int16(x)
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
+    cases = [
+        ("garbage first", lambda u: _raw(u, "/ingest", b"\x00\xffgarbage"), P.CLOSE_UNSUPPORTED_DATA, "expected a JSON start"),
+        ("not json", lambda u: _raw(u, "/ingest", "{garbage"), P.CLOSE_INVALID_PAYLOAD, "not valid JSON"),
+        ("no rate", lambda u: _raw(u, "/ingest", _start(sample_rate=None)), P.CLOSE_BAD_REQUEST, "lacks sample_rate"),
+        ("absurd rate", lambda u: _raw(u, "/ingest", _start(sample_rate=10**9)), P.CLOSE_BAD_REQUEST, "sample_rate must be"),
+        ("garbage audio", lambda u: _raw(u, "/ingest", _start(session="g1"), b"\x01\x02\x03"), P.CLOSE_INVALID_PAYLOAD,
+         "not a whole number"),
+        ("text for binary", lambda u: _raw(u, "/ingest", _start(session="g2"), "hello"), P.CLOSE_UNSUPPORTED_DATA,
+         "audio must be sent as binary"),
+        ("second start", lambda u: _raw(u, "/ingest", _start(session="g3"), _start(session="g3")), P.CLOSE_POLICY,
+         "second start"),
+        ("unknown type", lambda u: _raw(u, "/ingest", _start(session="g4"), json.dumps({"type": "dance"})),
+         P.CLOSE_POLICY, "unknown message type"),
+        ("oversized", lambda u: _raw(u, "/ingest", _start(session="g5"), b"\x00" * 70000), P.CLOSE_TOO_BIG, ""),
+        ("wrong token", lambda u: _raw(u, "/ingest", _start(session="g6", token="nope")), P.CLOSE_UNAUTHORIZED, "token"),
+        ("taken name", lambda u: _raw(u, "/ingest", _start(session="healthy")), P.CLOSE_CONFLICT, "already exists"),
+        ("unknown session", lambda u: ViewerClient(u, session="nosuch", token="sesame").__aenter__(),
+         P.CLOSE_NOT_FOUND, "no session"),
+        ("viewer bad token", lambda u: ViewerClient(u, session="healthy", token="nope").__aenter__(),
+         P.CLOSE_UNAUTHORIZED, "token"),
+        ("viewer bad kind", lambda u: ViewerClient(u, session="healthy", kind="smell", token="sesame").__aenter__(),
+         P.CLOSE_BAD_REQUEST, "kind must be"),
+        ("viewer talks", lambda u: _raw(u, "/view?session=healthy&token=sesame", "hi"), P.CLOSE_POLICY,
+         "viewers do not send"),
+        ("no endpoint", lambda u: _raw(u, "/elsewhere"), 404, "no WebSocket endpoint"),  # HTTP 404
+    ]
+
+    async def main():
+        async with running(model, token="sesame", max_message_bytes=65536) as srv:
+            url = srv.url
+            async with IngestClient(url, session="healthy", sample_rate_hz=16000, token="sesame") as ing:
+                async with ViewerClient(url, session="healthy", token="sesame") as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
+                    outcomes = []
+                    for name, factory, _, _ in cases:
+                        outcomes.append(await asyncio.wait_for(_expect_close(lambda: factory(url)), 15))
+                    await feed
+                    ended = await ing.end()
+                    got = await collect
+            status, body = await http_get(url, "/health")
+            return outcomes, ended, got, status, json.loads(body)
+
+    outcomes, ended, got, status, health = asyncio.run(main())
+    for (name, _, code, reason), (got_code, got_reason) in zip(cases, outcomes):
+        assert got_code == code, f"{name}: closed with {got_code} {got_reason!r}, expected {code}"
+        assert reason in got_reason, f"{name}: reason {got_reason!r} lacks {reason!r}"
+    assert status == 200 and health["status"] == "ok"
+    assert ended["frames"] == len(ref)
+    assert [m.index for m in got.frames] == list(range(len(ref)))  # the healthy session lost no frame
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+
+
+def test_controls_are_applied_or_rejected_with_a_reason(model):
+    pcm = _int16(speechlike(0.6, 16000))
+
+    async def main():
+        async with running(model) as srv:
+            async with IngestClient(srv.url, session="c", sample_rate_hz=16000) as ing:
+                async with ViewerClient(srv.url, session="c", audio=False) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    ok = await ing.control(gain={"mouth_open": 0.0})
+                    bad = await ing.control(eyebrows=1)
+                    await stream_samples(ing, pcm, realtime=False)
+                    await ing.end()
+                    return ok, bad, await collect
+
+    ok, bad, got = asyncio.run(main())
+    assert ok["type"] == "ack" and ok["controls"]["gain"]["mouth_open"] == 0.0
+    assert bad["type"] == "rejected" and "unknown control 'eyebrows'" in bad["reason"]
+    assert len(got.frames) > 0 and np.all(got.values()[:, 2] == 0.0) and np.any(got.values()[:, 0] != 0.0)
+    assert got.audio == []  # audio=0: no audio messages
+
+
+def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
+    pcm = _int16(speechlike(2.5, 16000, seed=7))
+    n_frames = len(speech_to_params(model, pcm.astype(np.float32) / 32768))
+
+    async def main():
+        async with running(model, head, viewer_queue=4, viewer_max_behind_s=0.3,
+                           viewer_socket_buffer_bytes=4096, close_timeout_s=20) as srv:
+            url = srv.url
+            async with IngestClient(url, session="s", sample_rate_hz=16000) as ing:
+                # The stalled viewer: tiny receive buffer, reads the description and then nothing.
+                sock = socket.socket()
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+                sock.connect(("127.0.0.1", srv.port))
+                stalled = await connect(ws_url(url, "/view?session=s&kind=deltas&encoding=float16"), sock=sock,
+                                        compression=None, max_size=None, max_queue=1)
+                await stalled.recv()
+                async with ViewerClient(url, session="s", kind="deltas") as healthy:
+                    collect = asyncio.ensure_future(healthy.collect())
+                    await stream_samples(ing, pcm, realtime=True, block_s=0.02)
+                    await ing.end()
+                    got = await collect
+                metrics = srv.metrics()
+                code = None
+                with contextlib.suppress(ConnectionClosed, TimeoutError):
+                    while True:  # now drain the stalled one: it was closed while behind
+                        await asyncio.wait_for(stalled.recv(), 5)
+                code = stalled.close_code
+                return got, metrics, code
+
+    got, metrics, code = asyncio.run(main())
+    assert [m.index for m in got.frames] == list(range(n_frames))  # nothing lost or delayed out
+    assert metrics["viewers_closed_slow"] == 1 and metrics["dropped_messages"] > 0
+    assert code == P.CLOSE_TOO_SLOW
+
+
+def test_http_endpoints(model, head):
+    async def main():
+        async with running(model, head) as srv:
+            out = {p: await http_get(srv.url, p) for p in ("/health", "/metrics", "/head/mesh.json", "/", "/nope")}
+            return out
+
+    out = asyncio.run(main())
+    assert out["/health"][0] == 200 and json.loads(out["/health"][1])["sessions"] == 0
+    metrics = json.loads(out["/metrics"][1])
+    assert {"sessions", "viewers", "dropped_messages", "timings_ms", "closes"} <= set(metrics)
+    mesh = json.loads(out["/head/mesh.json"][1])
+    assert len(mesh["vertices"]) == 3 * len(head.mesh.vertices) and len(mesh["triangles"]) == 3 * len(head.mesh.triangles)
+    assert out["/"][0] == 200 and b"facecast" in out["/"][1]
+    assert out["/nope"][0] == 404

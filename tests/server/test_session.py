@@ -1,0 +1,163 @@
+"""The sans-I/O core: streaming resampling, the session pipeline, controls and the wire codecs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES, blendshape_weights
+from realtime_core.pipeline import speech_to_params
+from server import protocol as P
+from server.errors import ControlError, ServerConfigError
+from server.resample import StreamingResampler
+from server.session import AudioFormatError, Session, SessionConfig
+from tests.server.conftest import speechlike
+
+
+def _chunks(x: np.ndarray, rng: np.random.Generator, hi: int = 900):
+    i = 0
+    while i < len(x):
+        n = int(rng.integers(1, hi))
+        yield x[i:i + n]
+        i += n
+
+
+@pytest.mark.parametrize("rates", [(48000, 16000), (44100, 16000), (8000, 16000), (22050, 16000), (16000, 16000)])
+def test_resampler_equals_resample_poly_for_any_chunking(rates):
+    fr, to = rates
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(9001)
+    g = math.gcd(fr, to)
+    ref = scipy.signal.resample_poly(x, to // g, fr // g)
+    outs = []
+    for seed in (2, 3):
+        r = StreamingResampler(fr, to)
+        y = np.concatenate([*(r.push(c) for c in _chunks(x, np.random.default_rng(seed))), r.flush()])
+        outs.append(y)
+    r = StreamingResampler(fr, to)
+    whole = np.concatenate([r.push(x), r.flush()])
+    assert whole.shape == ref.shape
+    np.testing.assert_allclose(whole, ref, atol=1e-12)
+    for y in outs:
+        np.testing.assert_array_equal(y, whole)  # bit-identical whatever the chunking
+
+
+def test_resampler_emits_as_soon_as_inputs_arrive():
+    r = StreamingResampler(48000, 16000)
+    y = r.push(np.ones(3000))
+    # Output m needs input n_hi(m); everything with n_hi <= 2999 is out, nothing more.
+    assert r.n_hi(len(y) - 1) <= 2999 < r.n_hi(len(y))
+
+
+def _session_params(model, pcm: bytes, rate: int, fmt: str = "pcm_s16le", channels: int = 1, seed: int = 0):
+    s = Session(model, config=SessionConfig(sample_rate_hz=rate, sample_format=fmt, channels=channels))
+    frame = P.SAMPLE_FORMATS[fmt].itemsize * channels
+    rng = np.random.default_rng(seed)
+    frames, audio, i = [], [], 0
+    while i < len(pcm):
+        n = int(rng.integers(1, 700)) * frame
+        out = s.push_bytes(pcm[i:i + n])
+        frames += out.frames
+        audio += [out.audio] if out.audio else []
+        i += n
+    out = s.flush()
+    frames += out.frames
+    audio += [out.audio] if out.audio else []
+    return s, frames, audio
+
+
+def test_session_params_equal_speech_to_params(model):
+    x = speechlike(1.3, 16000)
+    pcm = np.rint(x * 32768).clip(-32768, 32767).astype("<i2")
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768.0)
+    s, frames, audio = _session_params(model, pcm.tobytes(), 16000)
+    assert [f.index for f in frames] == list(range(len(ref)))
+    np.testing.assert_array_equal(np.array([f.raw_params for f in frames]), ref)
+    np.testing.assert_array_equal(np.array([f.media_time for f in frames]), np.arange(len(ref)) / 30)
+    # The relayed audio is the stream itself, contiguous, stamped by its first sample.
+    np.testing.assert_array_equal(np.concatenate([a.samples for a in audio]), pcm / 32768.0)
+    assert [a.start for a in audio] == list(np.cumsum([0] + [a.samples.size for a in audio])[:-1])
+
+
+def test_session_resamples_and_mixes_down(model):
+    from training.trainer import resample
+
+    x = speechlike(1.0, 48000, seed=3)
+    stereo = np.stack([x, 0.5 * x], axis=1).astype("<f4")
+    s, frames, _ = _session_params(model, stereo.tobytes(), 48000, fmt="f32le", channels=2)
+    mono = stereo.astype(np.float64).mean(axis=1)
+    ref = speech_to_params(model, resample(mono, 48000, 16000))
+    assert len(frames) == len(ref)
+    np.testing.assert_allclose(np.array([f.raw_params for f in frames]), ref, atol=1e-4)
+
+
+def test_frames_come_out_when_their_audio_has_arrived(model):
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000))
+    need = s.model_samples_needed(5)
+    assert len(s.push(np.zeros(need - 1)).frames) == 5  # frames 0..4
+    assert [f.index for f in s.push(np.zeros(1)).frames] == [5]
+    assert s.algorithmic_delay_s == pytest.approx(3 / 30 + s.window_len / 16000)
+
+
+def test_controls_gain_smoothing_and_rejection(model):
+    x = speechlike(0.8, 16000)
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000))
+    state = s.apply_control({"type": "control", "gain": {"mouth_open": 2.0}})
+    assert state["gain"]["mouth_open"] == 2.0
+    frames = s.push(x).frames
+    for f in frames:
+        np.testing.assert_allclose(f.params, f.raw_params * [1, 1, 2, 1])
+    s.apply_control({"smoothing_ms": 100})
+    more = s.flush().frames
+    a = math.exp(-1000 / (30 * 100))
+    prev = frames[-1].params
+    for f in more:
+        np.testing.assert_allclose(f.params, a * prev + (1 - a) * f.raw_params * [1, 1, 2, 1])
+        prev = f.params
+    for bad, match in [({"volume": 3}, "unknown control 'volume'"), ({"gain": {"jaw": 1}}, "unknown parameter 'jaw'"),
+                       ({"gain": {"mouth_open": -1}}, "0..10"), ({"smoothing_ms": "x"}, "smoothing_ms")]:
+        with pytest.raises(ControlError, match=match):
+            s.apply_control(bad)
+    assert s.control_state()["smoothing_ms"] == 100  # a rejected control changes nothing
+
+
+def test_bad_audio_and_config_are_named(model):
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000, sample_format="pcm_s16le", channels=2))
+    with pytest.raises(AudioFormatError, match="not a whole number"):
+        s.push_bytes(b"\x00" * 6)
+    f = Session(model, config=SessionConfig(sample_rate_hz=16000))
+    with pytest.raises(AudioFormatError, match="NaN"):
+        f.push_bytes(np.array([0.1, np.nan], "<f4").tobytes())
+    for kw in ({"sample_rate_hz": 10**9}, {"sample_rate_hz": 0}, {"sample_rate_hz": "16000"},
+               {"sample_rate_hz": 16000, "channels": 0}, {"sample_rate_hz": 16000, "sample_format": "mp3"}):
+        with pytest.raises(ServerConfigError):
+            SessionConfig(**kw)
+
+
+def test_wire_codecs_round_trip():
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((500, 3)).astype(np.float32) * 0.01
+    for enc, tol in ((P.ENC_INT16, None), (P.ENC_FLOAT16, 2e-3), (P.ENC_FLOAT32, 0)):
+        payload, scale = P.encode_payload(d, enc)
+        msg = P.pack_header(P.KIND_DELTAS, enc, 7, d.size, scale, 7 / 30, 123.5) + payload
+        m = P.decode_message(msg)
+        assert (m.kind, m.index, m.media_time, m.send_time) == (P.KIND_DELTAS, 7, 7 / 30, 123.5)
+        err = np.abs(m.values - d.reshape(-1)).max()
+        assert err <= (scale / 2 * 1.001 if tol is None else tol * np.abs(d).max() + 1e-9)
+    with pytest.raises(ValueError, match="shorter"):
+        P.decode_message(b"\x01\x02")
+    with pytest.raises(ValueError, match="payload"):
+        P.decode_message(P.pack_header(P.KIND_PARAMS, P.ENC_FLOAT32, 0, 4, 1.0, 0, 0) + b"\x00" * 12)
+
+
+def test_blendshape_maps():
+    assert len(ARKIT_NAMES) == len(set(ARKIT_NAMES)) == 52 and len(OVR_NAMES) == 15
+    rest = blendshape_weights(np.zeros(4), "ovr15")
+    assert rest[0] == 1.0 and rest[1:].max() == 0.0  # neutral face: silence viseme only
+    wide = dict(zip(ARKIT_NAMES, blendshape_weights(np.array([0, 0, 0.35, 0]), "arkit52")))
+    assert wide["jawOpen"] == pytest.approx(1.0) and wide["mouthSmileLeft"] == 0.0
+    w = blendshape_weights(np.random.default_rng(0).standard_normal((10, 4)), "arkit52")
+    assert w.shape == (10, 52) and w.min() >= 0 and w.max() <= 1

@@ -1,0 +1,154 @@
+"""Audio sources for real: a file paced against the loop clock, and the microphone through a
+private PulseAudio server (null sink + remapped monitor source) driving `facecast serve --mic`."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clients.client import ViewerClient
+from realtime_core.pipeline import speech_to_params
+from server import protocol as P
+from server.app import FacecastServer
+from server.config import ServerConfig
+from server.errors import AudioSourceError
+from server.sources import FileConfig, FileSource
+from training.audio_io import read_audio
+
+
+def test_file_source_real_time_and_fast_give_animate_frames(model, wav16k):
+    samples, rate = read_audio(wav16k)
+    samples = samples[: rate // 2]
+    ref = speech_to_params(model, samples)
+
+    async def main(realtime: bool):
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            src = FileSource.from_array(samples, rate, realtime=realtime, block_s=0.02)
+            loop = asyncio.get_running_loop()
+            t0 = loop.time()
+            task = asyncio.ensure_future(srv.run_source("f", src, sample_rate_hz=rate))
+            while "f" not in srv.sessions:
+                await asyncio.sleep(0)
+            async with ViewerClient(srv.url, session="f", audio=False) as v:
+                got = await v.collect()
+            await task
+            return got, loop.time() - t0
+        finally:
+            await srv.stop()
+
+    for realtime in (True, False):
+        got, elapsed = asyncio.run(main(realtime))
+        # The viewer may attach a few frames late; what it got must be the reference's tail, in order.
+        idx = [m.index for m in got.frames]
+        assert idx == list(range(idx[0], len(ref))) and idx[0] <= 3
+        np.testing.assert_array_equal(got.values(), ref[idx[0]:].astype(np.float32))
+        if realtime:
+            assert elapsed >= 0.5 - 0.02  # paced: cannot finish before the audio's own duration
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    with pytest.raises(AudioSourceError, match="not found"):
+        FileSource(FileConfig(path=tmp_path / "nope.wav"))
+
+
+@pytest.fixture
+def pulse():
+    """A private PulseAudio daemon: sink 'fc', source 'fcmic' = fc's monitor, as the default source."""
+    for tool in ("pulseaudio", "pactl", "paplay"):
+        if shutil.which(tool) is None:
+            pytest.skip(f"{tool} is not installed (apt packages pulseaudio, pulseaudio-utils)")
+    # Short path: the native socket lives in here and unix socket paths are limited to 108 bytes.
+    runtime = Path(tempfile.mkdtemp(prefix="fcpulse"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PULSE_")}
+    # Own runtime dir and HOME: the daemon, its cookie and its socket never touch a real session.
+    env.update(XDG_RUNTIME_DIR=str(runtime), HOME=str(runtime), PULSE_RUNTIME_PATH=str(runtime / "pulse"))
+    cmd = ["pulseaudio", "-n", "--daemonize=yes", "--exit-idle-time=-1", "--disallow-exit=no",
+           "-L", "module-native-protocol-unix",
+           "-L", "module-null-sink sink_name=fc rate=48000",
+           "-L", "module-remap-source master=fc.monitor source_name=fcmic"]
+    # As root, pulseaudio warns that it is meant for --system mode but runs per-user with our own
+    # runtime dir; --system would need the pulse user and system-wide sockets.
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=30)
+    ok = r.returncode == 0 and subprocess.run(["pactl", "info"], env=env, capture_output=True, timeout=10).returncode == 0
+    if not ok:
+        shutil.rmtree(runtime, ignore_errors=True)
+        pytest.skip(f"PulseAudio cannot start here: {r.stderr.strip()[-300:]}")
+    try:
+        subprocess.run(["pactl", "set-default-source", "fcmic"], env=env, check=True, timeout=10)
+        yield env
+    finally:
+        subprocess.run(["pulseaudio", "--kill"], env=env, capture_output=True, timeout=10)
+        shutil.rmtree(runtime, ignore_errors=True)
+
+
+def test_microphone_session_moves_the_mouth(pulse, model_path, wav16k):
+    facecast = Path(sys.executable).parent / "facecast"
+    proc = subprocess.Popen([str(facecast), "serve", "--port", "0", "--model", str(model_path), "--no-head", "--mic"],
+                            env=pulse, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = None
+        deadline = time.monotonic() + 60
+        lines = []
+        while url is None and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            m = re.search(r"listening on (http://\S+)", line)
+            url = m.group(1) if m else None
+        assert url, f"server did not start: {lines} {proc.stderr.read() if proc.poll() is not None else ''}"
+
+        async def watch():
+            for _ in range(200):  # the mic session appears once the device is open
+                try:
+                    viewer = await ViewerClient(url, session="mic").__aenter__()
+                    break
+                except Exception:  # noqa: BLE001 - 4004 until the session exists
+                    await asyncio.sleep(0.05)
+            else:
+                raise AssertionError("no mic session")
+            frames, audio = [], []
+            play_at = None
+            player = None
+            async for m in viewer:
+                (audio if m.kind == P.KIND_AUDIO else frames).append(m)
+                if player is None and audio:
+                    # The stream's first callback has delivered audio: play speech into the sink.
+                    play_at = audio[-1].media_time + audio[-1].values.size / 16000
+                    player = await asyncio.create_subprocess_exec("paplay", "--device=fc", str(wav16k), env=pulse)
+                if player is not None and frames and frames[-1].media_time > play_at + 2.6:
+                    break  # the 2 s of speech have been heard and animated
+            await player.wait()
+            proc.send_signal(signal.SIGTERM)  # graceful shutdown: the viewer gets 1001
+            async for m in viewer:
+                (audio if m.kind == P.KIND_AUDIO else frames).append(m)
+            return frames, audio, play_at, viewer.close_code
+
+        frames, audio, play_at, code = asyncio.run(asyncio.wait_for(watch(), 60))
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == P.CLOSE_GOING_AWAY
+    sig = np.concatenate([m.values for m in audio])
+    t_audio = np.arange(sig.size) / 16000 + audio[0].media_time
+    during = sig[(t_audio > play_at + 0.3) & (t_audio < play_at + 1.8)]
+    assert np.sqrt(np.mean(during**2)) > 0.02, "the microphone did not hear the played speech"
+    params = np.array([m.values for m in frames])
+    t = np.array([m.media_time for m in frames])
+    speaking = params[(t > play_at + 0.3) & (t < play_at + 1.8)]
+    assert len(speaking) > 20 and np.ptp(speaking, axis=0).max() > 0.1, "the mouth did not move with the speech"
