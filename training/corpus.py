@@ -88,7 +88,10 @@ class Utterance:
 
 
 # --------------------------------------------------------------------------- atomic writes
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically: a temporary file in the same folder, then
+    ``os.replace`` (readers see the old file or the new one, never a partial one)."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
@@ -98,6 +101,9 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+_atomic_write_bytes = atomic_write_bytes  # the earlier private name, still used by callers
 
 
 def to_int16(samples: np.ndarray) -> np.ndarray:
@@ -114,7 +120,7 @@ def write_wav(path: Path, samples: np.ndarray, rate_hz: int) -> None:
         w.setsampwidth(2)
         w.setframerate(int(rate_hz))
         w.writeframes(pcm.astype("<i2").tobytes())
-    _atomic_write_bytes(Path(path), buf.getvalue())
+    atomic_write_bytes(Path(path), buf.getvalue())
 
 
 def format_params_csv(params: np.ndarray) -> str:
@@ -129,7 +135,7 @@ def format_params_csv(params: np.ndarray) -> str:
 
 
 def write_json(path: Path, obj) -> None:
-    _atomic_write_bytes(Path(path), (json.dumps(obj, indent=1, ensure_ascii=False) + "\n").encode("utf-8"))
+    atomic_write_bytes(Path(path), (json.dumps(obj, indent=1, ensure_ascii=False) + "\n").encode("utf-8"))
 
 
 def write_utterance(
@@ -162,7 +168,7 @@ def write_utterance(
         raise ConfigError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
     folder = Path(corpus_dir) / utt_id
     write_wav(folder / "audio.wav", samples, sample_rate_hz)
-    _atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
+    atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
     write_json(
         folder / "phonemes.json",
         [{"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)} for p in phonemes],
