@@ -19,6 +19,7 @@ COMMANDS: dict[str, str] = {
     "animate": "facecast.commands.animate",
     "bench": "facecast.commands.bench",
     "serve": "facecast.commands.serve",
+    "demo": "facecast.commands.demo",
 }
 
 
