@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "rig": "facecast.commands.rig",
     "render": "facecast.commands.render",
     "serve": "facecast.commands.serve",
+    "demo": "facecast.commands.demo",
 }
 
 
