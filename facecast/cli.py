@@ -15,16 +15,16 @@ import sys
 
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
-    "train": "facecast.commands.train",
+    "demo": "facecast.commands.demo",
+    "serve": "facecast.commands.serve",
     "animate": "facecast.commands.animate",
-    "eval": "facecast.commands.eval",
-    "bench": "facecast.commands.bench",
+    "render": "facecast.commands.render",
+    "rig": "facecast.commands.rig",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
-    "rig": "facecast.commands.rig",
-    "render": "facecast.commands.render",
-    "serve": "facecast.commands.serve",
-    "demo": "facecast.commands.demo",
+    "train": "facecast.commands.train",
+    "eval": "facecast.commands.eval",
+    "bench": "facecast.commands.bench",
 }
 
 
