@@ -25,7 +25,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
 
-RIG_ALGORITHM = 6
+RIG_ALGORITHM = 8
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
@@ -36,7 +36,8 @@ class RigConfig:
     method: "sec5" (projection + interpolation, paper 000) or "rbf" (paper 001 Sec. 3.5).
     projection_2d: "frontal" (face-frame x, y) or "uv" (the head's texture coordinates).
     beta: eq. 10 gain. max_depth: off-plane tolerance for eq. 8-9. fallback_radius: fade of eq. 10
-    (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1.
+    (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1,
+    with geodesic_walk "greedy" (the paper) or "shortest" and geodesic_slack (see projection).
     connectivity / max_geodesic_ratio: mesh-path rules of the interpolation (see interpolation).
     normalize_fallback: eq. 10 as a weighted mean (extension; use with beta = 1).
     """
@@ -48,6 +49,8 @@ class RigConfig:
     fallback_radius: float | None = 0.6
     rbf_radius: float | None = None
     geodesic_check: bool = True
+    geodesic_walk: Literal["greedy", "shortest"] = "greedy"
+    geodesic_slack: float = 0.3
     connectivity: bool = True
     normalize_fallback: bool = False
     max_geodesic_ratio: float = 2.0
@@ -56,6 +59,10 @@ class RigConfig:
     def __post_init__(self) -> None:
         if self.method not in ("sec5", "rbf"):
             raise ConfigError(f"method must be 'sec5' or 'rbf', got {self.method!r}")
+        if self.geodesic_walk not in ("greedy", "shortest"):
+            raise ConfigError(f"geodesic_walk must be 'greedy' or 'shortest', got {self.geodesic_walk!r}")
+        if not 0 <= self.geodesic_slack < 1:
+            raise ConfigError(f"geodesic_slack must be in [0, 1), got {self.geodesic_slack}")
         if self.projection_2d not in ("frontal", "uv"):
             raise ConfigError(f"projection_2d must be 'frontal' or 'uv', got {self.projection_2d!r}")
         InterpolationConfig(beta=self.beta, max_depth=self.max_depth, fallback_radius=self.fallback_radius)
@@ -142,6 +149,8 @@ def head_weights(
         candidates=config.candidates,
         geodesic_check=config.geodesic_check,
         allowed=allowed,
+        walk=config.geodesic_walk,
+        slack=config.geodesic_slack,
     )
     iod = frame.iod
     info = {
