@@ -25,7 +25,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
 
-RIG_ALGORITHM = 8
+RIG_ALGORITHM = 9
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
