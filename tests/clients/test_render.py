@@ -125,3 +125,15 @@ def test_control_point_plot_without_a_render(tmp_path, builtin_rig):
     from PIL import Image
 
     assert Image.open(out).size[0] > 300
+
+
+def test_caption_only_touches_the_bottom_left():
+    from clients.heads.landmarks import credit_for
+    from clients.render.video import with_caption
+
+    assert "CC BY 3.0" in credit_for("/x/LeePerrySmith.glb") and credit_for("other.glb") == ""
+    img = np.zeros((120, 160, 3), np.uint8)
+    out = with_caption(img, credit_for("LeePerrySmith.glb"))
+    changed = out.any(axis=2)
+    assert changed[-16:, :].sum() > 50 and not changed[:-16, :].any()
+    assert with_caption(img, "") is img
