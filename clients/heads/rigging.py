@@ -39,6 +39,7 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
+from realtime_core.face.rig import recalibrate
 from realtime_core.face.simple import derive_simple_model, lip_contact_vertices, regional_shape_units
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
@@ -136,10 +137,12 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
 
 
 def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, up: np.ndarray,
-              uvs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+              uvs: np.ndarray | None = None, *, through: int | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
-    indices) that stays closest to the straight corner-to-corner line is cut open. Interior path
-    vertices are duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
+    indices) that stays closest to the straight corner-to-corner line (passing through the vertex
+    ``through`` if given, e.g. the inner-lip midpoint) is cut open. Interior path vertices are
+    duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
     Returns new vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
@@ -156,13 +159,21 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = off_line(v[adj.row]) + off_line(v[adj.col])
     g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
-    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
-    if not np.isfinite(dist[right]):
-        raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
-    path = [right]
-    while path[-1] != left:
-        path.append(int(pred[path[-1]]))
-    path = path[::-1]
+    def leg(a_: int, b_: int) -> list[int]:
+        dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
+        if not np.isfinite(dist[b_]):
+            raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+        p_ = [b_]
+        while p_[-1] != a_:
+            p_.append(int(pred[p_[-1]]))
+        return p_[::-1]
+
+    if through is None or through in (left, right):
+        path = leg(left, right)
+    else:
+        path = leg(left, through) + leg(through, right)[1:]
+        if len(set(path)) != len(path):  # the two legs touched: fall back to one leg
+            path = leg(left, right)
     interior = path[1:-1]
     if not interior:
         return v, t, uvs, np.arange(len(v))
@@ -225,12 +236,15 @@ def rig_head(
     config: RigConfig = RigConfig(),
     head: BuiltinHead | None = None,
     simple: SimpleFace | None = None,
+    head_calibration: bool = True,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
     ``simple``: the simple face model to carry (default: the one derived from the built-in head;
     :func:`candide_face` for Candide-3). Returns the rig and the mesh it animates (which differs
-    from ``mesh`` when the lip seam was cut). Raises MeshError / LandmarkError naming the file.
+    from ``mesh`` when the lip seam was cut). ``head_calibration``: correct the parameters by the
+    head's own measured response (:func:`realtime_core.face.rig.recalibrate`). Raises MeshError /
+    LandmarkError naming the file.
     """
     check_mesh(mesh)
     if simple is None or mesh.name == "builtin":
@@ -261,10 +275,16 @@ def rig_head(
                 "'right' swapped? ('left' is the face's own left)"
             )
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
-            v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
+            v, t, uv, origin = cut_mouth(
+                v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
+            )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
             cut_copies = np.arange(len(mesh.vertices), len(v))
+            # The lower inner-lip landmark now lives on its copy below the cut (when it was on it).
+            below = np.flatnonzero(origin[len(mesh.vertices) :] == snap["lower_inner"])
+            if len(below):
+                snap["lower_inner"] = int(len(mesh.vertices) + below[0])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
         cal = calibrate_mouth(placed, slm, groups=simple.groups)
@@ -272,6 +292,8 @@ def rig_head(
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )
+        if head_calibration:
+            rig = recalibrate(rig, mouth_landmarks(snap))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name)

@@ -80,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
-    credit = "Head: Lee Perry-Smith / Infinite Realities (CC BY 3.0)" if "leeperrysmith" in args.head.lower() else ""
+    from clients.heads.landmarks import credit_for
+
+    credit = credit_for(args.head)
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
 
