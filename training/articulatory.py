@@ -23,8 +23,8 @@ Theory of operation
    time (lip rounding is anticipated over several consonants). ``c`` shapes the peak (1 gives
    the original exponential).
 3. **Hard constraints.** (a) Bilabial stops and nasals (/p b m/) close the lips: mouth_open is
-   multiplied by a gate that is exactly 0 over the closure core (the segment, at least one
-   frame wide, centred on the segment centre) and rises back to 1 with a raised-cosine ramp of
+   multiplied by a gate that is exactly 0 over the closure core (the central 60 % of the
+   segment, widened to at least one frame period so a frame always falls inside) and rises back to 1 with a raised-cosine ramp of
    ``closure_ramp_s``; so the closure frame reads exactly 0. (b) Silence is the neutral pose:
    all four parameters are multiplied by an envelope that is exactly 0 inside pauses (farther
    than ``silence_ramp_s`` from speech) and before/after the utterance, with raised-cosine
@@ -46,7 +46,7 @@ clip is thin evidence: tune further as more aligned video arrives.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np

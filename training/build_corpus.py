@@ -9,8 +9,8 @@ noise from libc ``rand()``), so each build synthesises in its own fresh worker p
 seeds ``rand()`` per utterance. The same :class:`BuildConfig` thus writes byte-identical
 files, also when built twice in one process.
 
-Real speech (``real_dirs``): every (WAV, phone alignment) pair found under each folder is
-labelled by the same rules and written with ``source = "real"`` and ``speaker_group`` =
+Real speech (``real_dirs``): every (WAV, phone alignment) pair found under each folder (and,
+with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules and written with ``source = "real"`` and ``speaker_group`` =
 ``real:<folder name>``; it is never augmented, so evaluation can use it as it was recorded.
 """
 
@@ -29,8 +29,8 @@ from training.alignments import find_aligned_audio
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import read_wav, write_manifest, write_utterance
-from training.errors import ConfigError
-from training.espeak import LANGUAGES, VARIANTS, Voice, synthesizer
+from training.errors import AlignmentFormatError, ConfigError
+from training.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"
@@ -52,6 +52,17 @@ class VoiceSampling:
     rate_wpm: tuple[int, int] = (130, 220)
     pitch: tuple[int, int] = (25, 75)
     pitch_range: tuple[int, int] = (30, 80)
+
+    def __post_init__(self) -> None:
+        if not self.variants:
+            raise ConfigError("variants must name at least one variant (None = the base voice)")
+        unknown = [v for v in self.variants if v is not None and v not in VARIANTS]
+        if unknown:
+            raise ConfigError(f"unknown espeak variants {unknown}; known: {VARIANTS} (or the base voice)")
+        for name, lo_hi, allowed in (("rate_wpm", self.rate_wpm, RATE_RANGE_WPM), ("pitch", self.pitch, (0, 100)),
+                                     ("pitch_range", self.pitch_range, (0, 100))):
+            if not allowed[0] <= lo_hi[0] <= lo_hi[1] <= allowed[1]:
+                raise ConfigError(f"{name} range {lo_hi} must be (low, high) within {allowed}")
 
     def draw(self, language: str, rng: np.random.Generator) -> Voice:
         bases = LANGUAGES[language]
@@ -76,6 +87,8 @@ class BuildConfig:
     seed:          the one seed of every draw.
     augment:       apply :mod:`training.augment` to the synthetic utterances.
     real_dirs:     folders searched for real aligned speech (source "real").
+    force_align:   also force-align transcribed WAVs without a phone alignment in
+                   ``real_dirs`` with pocketsphinx (optional extra "align").
     """
 
     out_dir: Path
@@ -84,6 +97,7 @@ class BuildConfig:
     seed: int = 0
     augment: bool = False
     real_dirs: tuple[Path, ...] = ()
+    force_align: bool = False
     voices: VoiceSampling = field(default_factory=VoiceSampling)
     augmentation: AugmentConfig = field(default_factory=AugmentConfig)
     articulatory: ArticulatoryConfig = field(default_factory=ArticulatoryConfig)
@@ -109,6 +123,8 @@ class BuildReport:
     n_utterances: int
     audio_s: float
     by_source: dict
+    skipped: tuple[tuple[str, str], ...] = ()
+    """(file, reason) of real recordings that could not be used."""
 
 
 def _plan(cfg: BuildConfig) -> list[tuple[str, str]]:
@@ -169,8 +185,25 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
             entries.append(_write_synthetic(cfg, out, i, lang, text, voice, rng, pcm, rate, phonemes))
 
     real: list[tuple[Path, Path, object]] = []
+    transcribed: list[tuple[Path, Path, str]] = []
     for d in cfg.real_dirs:
-        real += [(Path(d), wav, al) for wav, al in find_aligned_audio(d)]
+        pairs = find_aligned_audio(d)
+        real += [(Path(d), wav, al) for wav, al in pairs]
+        if cfg.force_align:
+            from training.force_align import find_transcripts
+
+            have = {wav for wav, _ in pairs}
+            transcribed += [(Path(d), wav, text) for wav, text in find_transcripts(d).items() if wav not in have]
+    skipped: list[tuple[str, str]] = []
+    for root, wav, text in wrap(transcribed, total=len(transcribed), desc="aligning", unit="utt"):
+        from training.force_align import force_align
+
+        try:
+            samples, rate = read_wav(wav)
+            real.append((root, wav, force_align(samples, rate, text, source=wav)))
+        except AlignmentFormatError as exc:
+            skipped.append((str(wav), exc.problem))
+    real.sort(key=lambda item: str(item[1]))
     for j, (root, wav, al) in enumerate(wrap(real, total=len(real), desc="real speech", unit="utt")):
         samples, rate = read_wav(wav)
         group = wav.relative_to(root).parts[0] if len(wav.relative_to(root).parts) > 1 else root.name
@@ -178,7 +211,8 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
         entries.append(write_utterance(
             out, utt_id=f"real-{j:04d}-{wav.stem}", samples=samples, sample_rate_hz=rate, params=params,
             phonemes=al.phones, language="en", voice=f"real:{group}", source="real",
-            speaker_group=f"real:{group}", extra={"origin": str(wav.relative_to(root)), "alignment": al.path.name},
+            speaker_group=f"real:{group}", extra={"origin": str(wav.relative_to(root)),
+                   "alignment": al.path.name if al.path != wav else "pocketsphinx forced alignment"},
         ))
 
     manifest = write_manifest(out, entries, seed=cfg.seed, extra={
@@ -188,4 +222,4 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
     by_source: dict = {}
     for e in entries:
         by_source[e["source"]] = by_source.get(e["source"], 0) + 1
-    return BuildReport(manifest, len(entries), float(sum(e["duration_s"] for e in entries)), by_source)
+    return BuildReport(manifest, len(entries), float(sum(e["duration_s"] for e in entries)), by_source, tuple(skipped))

@@ -44,7 +44,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from realtime_core import VISUAL_PARAMS
+from training.errors import ConfigError
 
 FPS: int = 30
 """Video frame rate of every parameter track, frames per second."""
@@ -69,12 +72,10 @@ def n_frames_for(duration_s: float) -> int:
     A tiny tolerance absorbs float error, so 1.0 s gives exactly 30 frames, not 31.
     """
     if duration_s < 0:
-        raise ValueError(f"duration must be >= 0 s, got {duration_s}")
+        raise ConfigError(f"duration must be >= 0 s, got {duration_s}")
     return int(math.ceil(duration_s * FPS - 1e-9))
 
 
-def frame_times(n_frames: int) -> "numpy.ndarray":  # noqa: F821
+def frame_times(n_frames: int) -> np.ndarray:
     """Times of frames 0..n-1 in seconds, shape (n_frames,), float64: ``k / 30``."""
-    import numpy as np
-
     return np.arange(n_frames, dtype=np.float64) / FPS

@@ -36,14 +36,17 @@ caller draws progress and writes checkpoints."""
 @dataclass(frozen=True, kw_only=True)
 class TrainRecipe:
     """sample_rate_hz: model rate (inputs are resampled to it); n_ceps; tc (context);
-    hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed)."""
+    hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed);
+    energy: use c0 as a feature too; likelihood_scale: the live path's audio-likelihood
+    exponent, stored in the model."""
 
     sample_rate_hz: int = 16000
     n_ceps: int = 11
     tc: int = 3
-    energy: bool = False
+    energy: bool = True
     cmvn: CmvnConfig = field(default_factory=CmvnConfig)
     hmm: TrainConfig = field(default_factory=lambda: TrainConfig(n_states=16, n_mix=3, n_iter=25, tol=5e-4))
+    likelihood_scale: float = 0.1
 
     @property
     def frontend(self) -> FrontEndConfig:
@@ -58,7 +61,7 @@ class TrainRecipe:
             "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "energy": self.energy,
             "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
             "n_iter": h.n_iter, "tol": h.tol, "covar_prior_weight": h.covar_prior_weight,
-            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed,
+            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed, "likelihood_scale": self.likelihood_scale,
         }
 
 
@@ -107,7 +110,7 @@ def train_av_model(
 
     def wrap(hmm: AvHmm, extra: dict) -> AvModel:
         return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=VISUAL_PARAMS,
-                       metadata={**meta, **extra})
+                       likelihood_scale=recipe.likelihood_scale, metadata={**meta, **extra})
 
     def progress(it: int, objective: float, hmm: AvHmm) -> None:
         if on_iteration is not None:

@@ -52,13 +52,27 @@ class BuiltinHead:
     landmarks: dict[str, int]
 
 
-def vertex_colors(vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray]) -> np.ndarray:
-    """(n, 3) float32 colours: part colours, lips tinted where the lip-roll targets move the skin,
-    and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+def vertex_colors(
+    vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray], landmarks: dict[str, int]
+) -> np.ndarray:
+    """(n, 3) float32 colours: part colours, a lip tint that fades within ~0.12 IOD of the lip
+    contact lines, and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+    from scipy.spatial import cKDTree
+
+    from realtime_core.face import MouthLandmarks, face_frame
+    from realtime_core.face.simple import lip_contact_vertices
+
     c = PART_COLORS[part].copy()
-    roll = np.linalg.norm(targets["mouthRollUpper"], axis=1) + np.linalg.norm(targets["mouthRollLower"], axis=1)
-    lip = np.clip((roll / roll.max() - 0.6) / 0.2, 0, 1)[:, None] * (part == 0)[:, None]
-    c = (1 - lip) * c + lip * np.array([0.72, 0.40, 0.40], dtype=np.float32)
+    lm = MouthLandmarks(**{k: landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    frame = face_frame(vertices, lm)
+    mouth = 0.5 * (vertices[lm.corner_left] + vertices[lm.corner_right])
+    line = lip_contact_vertices(
+        vertices, targets["jawOpen"], frame, mouth_centre=mouth, candidates=part == 0, spacing=0.01
+    )
+    if len(line):
+        d, _ = cKDTree(vertices[line]).query(vertices)
+        lip = np.clip(1.0 - d / (0.12 * frame.iod), 0, 1) ** 0.7 * (part == 0)
+        c = (1 - lip[:, None]) * c + lip[:, None] * np.array([0.70, 0.38, 0.38], dtype=np.float32)
     for side in (1, -1):
         eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
         if eye.size == 0:
@@ -197,7 +211,7 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
         vertices=vertices,
         triangles=arr["triangles"].astype(np.int64),
         uvs=arr["uvs"],
-        colors=vertex_colors(vertices, part, targets),
+        colors=vertex_colors(vertices, part, targets, {k: int(v) for k, v in meta["landmarks"].items()}),
         name="builtin",
     )
     return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()})

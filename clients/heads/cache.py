@@ -8,12 +8,17 @@ from pathlib import Path
 
 import numpy as np
 
+from clients.errors import AssetError
+
 
 def cache_dir() -> Path:
     """``$FACECAST_CACHE`` or ``~/.cache/facecast`` (created on demand)."""
     root = os.environ.get("FACECAST_CACHE")
     p = Path(root).expanduser() if root else Path.home() / ".cache" / "facecast"
-    p.mkdir(parents=True, exist_ok=True)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise AssetError(f"{p}: cannot create the cache directory (set FACECAST_CACHE): {exc}") from exc
     return p
 
 

@@ -76,6 +76,18 @@ def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.nda
     return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s
 
 
+def with_caption(image: np.ndarray, text: str) -> np.ndarray:
+    """The frame (h, w, 3) uint8 with ``text`` in small light type at the bottom left (e.g. a
+    licence credit); unchanged when text is empty."""
+    if not text:
+        return image
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(image)
+    ImageDraw.Draw(img).text((6, image.shape[0] - 14), text, fill=(225, 225, 225))
+    return np.asarray(img)
+
+
 @dataclass(frozen=True)
 class VideoConfig:
     """fps: video frame rate; crf: H.264 quality (lower is better); ffmpeg: executable name/path."""

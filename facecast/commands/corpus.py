@@ -31,6 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "e.g. ../shared/data/speech",
     )
     p.add_argument(
+        "--align", action="store_true",
+        help="with --real: also force-align transcribed WAVs (<stem>.txt or metadata.csv) that have no phone "
+        "alignment, with pocketsphinx (pip install 'facecast[align]')",
+    )
+    p.add_argument(
         "--variants", default=None,
         help="comma-separated espeak voice variants to draw from ('base' = no variant), e.g. to keep the "
         "evaluation voices f5,m7 out of training; default: all of base,m1..m7,f1..f5",
@@ -51,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())
     cfg = BuildConfig(
         out_dir=Path(args.out_dir), sentences=args.sentences, languages=langs, seed=args.seed,
-        augment=args.augment, real_dirs=tuple(Path(d) for d in args.real),
+        augment=args.augment, real_dirs=tuple(Path(d) for d in args.real), force_align=args.align,
         articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0),
         **({} if args.variants is None else {"voices": VoiceSampling(variants=tuple(
             None if v.strip() == "base" else v.strip() for v in args.variants.split(",") if v.strip()))}),
@@ -62,4 +67,6 @@ def run(args: argparse.Namespace) -> int:
     src = ", ".join(f"{k}: {v}" for k, v in sorted(rep.by_source.items()))
     print(f"wrote {rep.n_utterances} utterances ({src}), {rep.audio_s / 60:.1f} min of audio, "
           f"in {wall:.1f} s -> {rep.manifest}")
+    for path, why in rep.skipped:
+        print(f"skipped {path}: {why}")
     return 0

@@ -29,6 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=480, help="image height in pixels")
     p.add_argument("--fps", type=float, default=30.0, help="video frame rate")
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
+    p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
     p.set_defaults(run=run)
 
 
@@ -70,11 +71,15 @@ def run(args: argparse.Namespace) -> int:
         if fps != args.fps:
             frames = resample(__import__("numpy").arange(len(frames)) / fps, frames, args.fps)
     rig, mesh = load_head(args.head, args.landmarks)
+    from clients.heads.landmarks import credit_for
+    from clients.render.video import with_caption
+
+    credit = args.credit if args.credit is not None else credit_for(mesh.name)
     cfg = RenderConfig(width=args.width, height=args.height, view=args.view, samples=args.samples)
     with renderer_for_rig(rig, mesh, cfg) as r:
         out = write_video(
             frames,
-            lambda p: r.render(rig.deformed(p)),
+            lambda p: with_caption(r.render(rig.deformed(p)), credit),
             args.output,
             size=(cfg.width, cfg.height),
             audio=args.speech,

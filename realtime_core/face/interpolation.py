@@ -190,7 +190,9 @@ def interpolation_weights(
             g_out = geo[:, out].T  # (n_out, n_s)
             # Same gate as for triangles: a control point whose mesh path is much longer than the
             # straight line (the other lip, reached round the mouth corner) is not a neighbour.
-            eu_out = np.linalg.norm(h[out][:, None, :] - z3[None, :, :], axis=2)
+            eu_out = np.empty_like(g_out)
+            for lo in range(0, len(out), 2048):  # bounded memory on big heads
+                eu_out[lo : lo + 2048] = np.linalg.norm(h[out[lo : lo + 2048]][:, None, :] - z3[None], axis=2)
             gated = np.where(g_out <= config.max_geodesic_ratio * eu_out + eps, g_out, np.inf)
             enough = np.isfinite(gated).sum(1) >= k
             g_out[enough] = gated[enough]

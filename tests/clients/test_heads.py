@@ -64,6 +64,11 @@ def test_landmarks_missing_or_out_of_range_name_the_file(tmp_path, shared_data, 
     far = dict(good, nose_tip=99999)
     with pytest.raises(LandmarkError, match="lm.json: landmark 'nose_tip' vertex 99999 out of range"):
         rig_head(mesh, far, landmark_source="lm.json", head=builtin_head)
+    swapped = dict(good)
+    for a, b in (("eye_outer_left", "eye_outer_right"), ("eye_inner_left", "eye_inner_right"), ("corner_left", "corner_right")):
+        swapped[a], swapped[b] = good[b], good[a]
+    with pytest.raises(LandmarkError, match="lm.json: .*swapped"):
+        rig_head(mesh, swapped, landmark_source="lm.json", head=builtin_head)
     bad = dict(good, chin=[1.0, "x", 2.0])
     with pytest.raises(LandmarkError, match="lm.json: landmark 'chin' must be a vertex index"):
         rig_head(mesh, bad, landmark_source="lm.json", head=builtin_head)
@@ -204,3 +209,67 @@ def test_cut_mouth_on_a_strip():
     assert not uses_copy[~below].any()
     assert uses_copy[below].sum() > 0
     np.testing.assert_array_equal(v2[origin], v2)
+
+
+def test_landmarks_as_points_equal_landmarks_as_indices(shared_data, builtin_head):
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    mesh = load_mesh(mp)
+    spec = read_landmarks(shipped_landmarks(mp))
+    as_points = {k: mesh.vertices[int(v)].tolist() for k, v in spec.items()}
+    r1, _ = rig_head(mesh, spec, head=builtin_head)
+    r2, _ = rig_head(mesh, as_points, head=builtin_head)
+    p = np.array([0.01, 0.02, 0.1, -0.01])
+    np.testing.assert_allclose(r2.displacements(p), r1.displacements(p), atol=1e-6)
+
+
+def test_candide3_as_the_simple_model(shared_data):
+    """The paper's set-up: Candide-3 carried onto a head (no built-in head needed)."""
+    from clients.heads.rigging import candide_face, mouth_landmarks
+    from realtime_core.face import parse_wfm
+
+    wfm = shared_data / "candide3" / "candide3-3.1.6.wfm"
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1")))
+    assert [g[0].split()[0] for g in simple.groups] == ["AUV0", "AUV2", "AUV11", "AUV14"]
+    mesh = load_mesh(mp)
+    spec = read_landmarks(shipped_landmarks(mp))
+    rig, rigged = rig_head(mesh, spec, simple=simple)
+    assert len(rig.control) == 113 and len(set(rig.control.tolist())) == 113
+    assert not rig.displacements(np.zeros(4)).any()
+    up = face_frame(mesh.vertices, mouth_landmarks(spec)).axes[1]
+    v = rig.deformed(np.array([0, 0, 0.1, 0]))
+    drop = (v - rig.neutral) @ up
+    assert drop[spec["chin"]] < -0.02 * rig.meta["iod"]  # the jaw goes down
+    assert abs(drop[spec["eye_outer_left"]]) < 0.005 * rig.meta["iod"]
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [RigConfig(projection_2d="uv"), RigConfig(method="rbf"), RigConfig(beta=1.0, normalize_fallback=True)],
+    ids=["uv", "rbf", "normalised"],
+)
+def test_rig_variants_zero_and_jaw(builtin_head, cfg):
+    rig, _ = rig_head(builtin_head.mesh, None, head=builtin_head, config=cfg)
+    assert not rig.displacements(np.zeros(4)).any()
+    lm = builtin_head.landmarks
+    from clients.heads.rigging import mouth_landmarks
+
+    up = face_frame(builtin_head.mesh.vertices, mouth_landmarks(lm)).axes[1]
+    drop = (rig.deformed(np.array([0, 0, 0.1, 0])) - rig.neutral) @ up
+    assert drop[lm["lower_lip"]] < -0.03 * rig.meta["iod"] and abs(drop[lm["eye_outer_left"]]) < 0.01 * rig.meta["iod"]
+
+
+def test_cache_dir_from_environment(tmp_path, monkeypatch):
+    from clients.errors import AssetError
+    from clients.heads.cache import atomic_savez, cache_dir
+
+    monkeypatch.setenv("FACECAST_CACHE", str(tmp_path / "c"))
+    assert cache_dir() == tmp_path / "c" and (tmp_path / "c").is_dir()
+    out = atomic_savez(tmp_path / "c" / "x.npz", a=np.arange(3))
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["x.npz"]  # no temp file left
+    np.testing.assert_array_equal(np.load(out, allow_pickle=False)["a"], np.arange(3))
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    monkeypatch.setenv("FACECAST_CACHE", str(blocker / "sub"))
+    with pytest.raises(AssetError, match="cannot create the cache directory"):
+        cache_dir()

@@ -99,3 +99,41 @@ def test_video_with_audio(tmp_path, renderer, builtin_rig, shared_data):
     info = subprocess.run(["ffprobe", "-v", "error", "-show_entries", "stream=codec_type", "-of", "csv=p=0", str(out)],
                           capture_output=True, text=True, check=True).stdout.split()
     assert sorted(info) == ["audio", "video"]
+
+
+def test_three_quarter_view_frames_the_head(builtin_rig):
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    rig, mesh = builtin_rig
+    try:
+        r = renderer_for_rig(rig, mesh, RenderConfig(width=160, height=120, view="three_quarter", samples=0))
+    except RenderError as exc:
+        pytest.skip(f"no OpenGL 3.3 context through EGL here: {exc}")
+    with r:
+        img = r.render().astype(int)
+    bg = np.array([0.16, 0.17, 0.20]) * 255
+    head = np.abs(img - bg).max(axis=2) > 12
+    assert 0.1 < head.mean() < 0.8
+    rows, cols = np.flatnonzero(head.any(1)), np.flatnonzero(head.any(0))
+    assert cols.min() > 0 and cols.max() < 159  # not cut at the sides
+
+
+def test_control_point_plot_without_a_render(tmp_path, builtin_rig):
+    from clients.heads.plot import plot_control_points
+
+    out = plot_control_points(builtin_rig[0], tmp_path / "c.png", title="t")
+    from PIL import Image
+
+    assert Image.open(out).size[0] > 300
+
+
+def test_caption_only_touches_the_bottom_left():
+    from clients.heads.landmarks import credit_for
+    from clients.render.video import with_caption
+
+    assert "CC BY 3.0" in credit_for("/x/LeePerrySmith.glb") and credit_for("other.glb") == ""
+    img = np.zeros((120, 160, 3), np.uint8)
+    out = with_caption(img, credit_for("LeePerrySmith.glb"))
+    changed = out.any(axis=2)
+    assert changed[-16:, :].sum() > 50 and not changed[:-16, :].any()
+    assert with_caption(img, "") is img

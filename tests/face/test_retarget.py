@@ -109,3 +109,54 @@ def test_affine_adaptation_exact_for_global_affine():
     np.testing.assert_allclose(adapt_displacements(maps, d), d @ a.T, atol=1e-8)
     with pytest.raises(ConfigError):
         affine_adaptation(v, v[:-1], t)
+
+
+@pytest.mark.parametrize("dense", [False, True])
+def test_rig_displacements_equal_the_sparse_chain(dense):
+    import scipy.sparse as sp
+
+    from realtime_core.face import FaceModel, MouthCalibration, Rig
+
+    rng = np.random.default_rng(5)
+    n_h, n_s = 50, 12
+    g = rng.random((n_h, n_s)) if dense else sp.random(n_h, n_s, density=0.2, random_state=5).toarray()
+    s = sp.kron(sp.csr_matrix(g), sp.identity(3), format="csr")
+    basis = rng.normal(size=(n_s * 3, 4))
+    rig = Rig(
+        neutral=rng.normal(size=(n_h, 3)), triangles=np.zeros((0, 3), np.int32), moving=np.arange(n_h), matrix=s,
+        basis=basis, control=np.arange(n_s),
+        simple=FaceModel(vertices=rng.normal(size=(n_s, 3)), triangles=np.zeros((0, 3), int)),
+        calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
+    )
+    p = np.array([0.1, -0.2, 0.3, 0.05])
+    np.testing.assert_allclose(rig.displacements(p), (g @ (basis @ p).reshape(n_s, 3)), rtol=1e-4, atol=1e-5)
+    assert not rig.displacements(np.zeros(4)).any()
+
+
+def test_recalibrate_makes_the_head_show_the_requested_parameters():
+    """A head whose lips move half as far as asked (as eq. 10 with beta 0.5 can do) is corrected."""
+    import scipy.sparse as sp
+
+    from realtime_core.face import FaceModel, MouthCalibration, MouthLandmarks, Rig
+    from realtime_core.face.rig import head_response, recalibrate
+
+    v = np.array(
+        [[1.3, 1, 0], [0.7, 1, 0], [-1.3, 1, 0], [-0.7, 1, 0], [0, -0.9, 0.1], [0, -1.1, 0.1],
+         [0, -0.98, 0.05], [0, -1.02, 0.05], [0.5, -1, 0], [-0.5, -1, 0]], dtype=float)
+    lm = MouthLandmarks(upper_lip=4, lower_lip=5, upper_inner=6, lower_inner=7, corner_left=8, corner_right=9,
+                        eye_outer_left=0, eye_inner_left=1, eye_outer_right=2, eye_inner_right=3)
+    # Simple model = the head itself; basis: unit params move the right vertices by IOD (= 2) units.
+    basis = np.zeros((30, 4))
+    basis[3 * 4 + 1, 0] = 2.0  # upper lip up
+    basis[3 * 8 + 0, 1], basis[3 * 9 + 0, 1] = 1.0, -1.0  # corners apart: width + 2
+    basis[3 * 7 + 1, 2], basis[3 * 5 + 1, 2] = -2.0, -2.0  # lower lip down
+    basis[3 * 8 + 1, 3], basis[3 * 9 + 1, 3] = -2.0, -2.0  # corners down
+    half = sp.identity(30, format="csr") * 0.5
+    rig = Rig(neutral=v, triangles=np.zeros((0, 3), np.int32), moving=np.arange(10), matrix=half, basis=basis,
+              control=np.arange(10), simple=FaceModel(vertices=v, triangles=np.zeros((0, 3), int)),
+              calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)))
+    r = head_response(rig, lm)
+    assert np.all(np.abs(np.diag(r) - 0.5) < 0.05)  # the head shows about half of what was asked
+    fixed = recalibrate(rig, lm)
+    assert fixed.meta["head_calibration"] == "applied"
+    np.testing.assert_allclose(head_response(fixed, lm), np.eye(4), atol=0.02)

@@ -1,0 +1,147 @@
+"""Latency of the streaming server, per stage and end to end (prints JSON; asserts nothing).
+
+Setup: ``facecast serve`` in its own process (BLAS pinned to one thread) with the model (the shipped
+default, else a random model of the paper's size) and the built-in head; one client process streams
+16 kHz pcm_s16le speech-like audio in real time in 10 ms blocks, each block sent the moment its last
+sample exists; a parameter viewer and a vertex-delta viewer record every frame's receipt time.
+
+End to end, per frame k: from the arrival of the last audio sample frame k needs (sample
+``frame_start(k + tc + lag) + window`` at 16 kHz, sent in the block containing it) to the viewer's
+receipt of frame k. That is the server's overhead beyond the algorithmic delay
+``(tc + lag) / fps + window / rate`` (the lookahead the co-articulation context and the analysis
+window impose before any computation can start), which is reported next to it, together with the
+total from frame time ``k / fps`` to receipt (algorithmic delay + block buffering + overhead).
+Per stage: the server's own timings from ``/metrics`` (decode, resample, features, inversion, the
+whole push per frame, encodings, fan-out), median and p99.
+
+``--short`` (CI): 3 s of audio; exits 1 when the per-frame server work (push + encodings, p99)
+exceeds the paper's 24 ms budget.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
+from server.timing import summarise
+
+BUDGET_MS = 24.0  # the paper's per-frame budget (feature extraction + inversion + rendering)
+
+
+@dataclass(frozen=True, kw_only=True)
+class LatencyConfig:
+    """seconds: audio streamed; block_s: ingest block length; model: model file (None: default or
+    paper-size random); head: also run a vertex-delta viewer on the built-in head."""
+
+    seconds: float = 20.0
+    block_s: float = 0.01
+    model: Path | None = None
+    head: bool = True
+
+
+async def _run(url: str, cfg: LatencyConfig, model) -> dict:
+    from clients.client import IngestClient, http_get
+
+    pcm = speech_signal(cfg.seconds)
+    rate = 16000
+    step = int(round(cfg.block_s * rate))
+    logs = {"params": FrameLog()}
+    if cfg.head:
+        logs["deltas"] = FrameLog()
+    sent_at = np.zeros(len(pcm))  # wall-clock time each sample left the client (its block's send time)
+    async with IngestClient(url, session="lat", sample_rate_hz=rate) as ing:
+        viewers = [asyncio.ensure_future(record_viewer(url, "lat", kind=k, log=log)) for k, log in logs.items()]
+        await asyncio.sleep(0.3)  # viewers attached
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        wall0 = time.time() - (loop.time() - t0)
+        for i in range(0, len(pcm), step):
+            block = pcm[i:i + step]
+            due = t0 + (i + len(block)) / rate
+            delay = due - loop.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            await ing.send(block)
+            sent_at[i:i + len(block)] = time.time()
+        await ing.end()
+        await asyncio.gather(*viewers)
+    _, body = await http_get(url, "/metrics")
+    metrics = json.loads(body)
+
+    mf = model.frontend.mfcc
+    d = model.frontend.tc  # lag 0
+    fps = mf.frame_rate_hz
+    algo_s = d / fps + mf.window_len / mf.sample_rate_hz
+    out: dict = {}
+    for kind, log in logs.items():
+        idx = np.array(log.index)
+        rec = np.array(log.received)
+        need = np.array([mf.frame_start(k + d) + mf.window_len for k in idx])  # samples frame k needs
+        live = need <= len(pcm)  # frames completed by streaming, not by the final flush
+        e2e = rec[live] - sent_at[need[live] - 1]
+        from_frame_time = rec[live] - (wall0 + idx[live] / fps)
+        out[kind] = {
+            "frames": int(len(idx)),
+            "end_to_end_after_last_needed_sample_ms": summarise(e2e),
+            "delivery_after_server_send_ms": summarise(rec - np.array(log.sent)),
+            "frame_time_to_receipt_ms": summarise(from_frame_time),
+        }
+    return {"viewers": out, "server_stages_ms": metrics["timings_ms"], "algorithmic_delay_ms": round(algo_s * 1e3, 3),
+            "dropped_messages": metrics["dropped_messages"]}
+
+
+def run_latency_benchmark(cfg: LatencyConfig) -> dict:
+    model, model_path, model_desc = benchmark_model(cfg.model)
+    server = ServerProcess(model_path, head=cfg.head)
+    try:
+        result = asyncio.run(_run(server.url, cfg, model))
+    finally:
+        server.stop()
+    st = result["server_stages_ms"]
+    work_p99 = st["push_per_frame"]["p99_ms"] + st.get("encode_params", {}).get("p99_ms", 0.0) + (
+        st.get("encode_deltas", {}).get("p99_ms", 0.0))
+    result.update({
+        "benchmark": "server_latency",
+        "model": model_desc,
+        "seconds_streamed": cfg.seconds,
+        "block_ms": cfg.block_s * 1e3,
+        "per_frame_work_p99_ms": round(work_p99, 4),
+        "budget_ms": BUDGET_MS,
+        "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
+                "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
+                "this machine's 2 cores with other work.",
+    })
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the JSON; with --short, return 1 if the per-frame work p99 exceeds the 24 ms budget."""
+    ap = argparse.ArgumentParser(prog="server_latency", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=20.0, help="audio streamed in real time")
+    ap.add_argument("--short", action="store_true", help="CI mode: 3 s of audio, exit 1 over the 24 ms budget")
+    ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
+    ap.add_argument("--no-head", action="store_true", help="skip the vertex-delta viewer")
+    args = ap.parse_args(argv)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        cfg = LatencyConfig(seconds=3.0 if args.short else args.seconds, model=args.model, head=not args.no_head)
+        result = run_latency_benchmark(cfg)
+    print(json.dumps(result, indent=2))
+    if args.short and result["per_frame_work_p99_ms"] > BUDGET_MS:
+        print(f"server_latency: per-frame work p99 {result['per_frame_work_p99_ms']} ms exceeds the "
+              f"{BUDGET_MS} ms budget", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
