@@ -32,6 +32,7 @@ const state = {
   deliveryMs: null, // server send -> browser receipt (median of the last 30 frames)
   behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
   waitMs: null, // frame arrival -> shown (jitter buffer)
+  drawMs: null, // time the page spends applying a frame and drawing (median of the last 30)
   lastPeak: 0, // largest vertex delta of the shown frame (mesh units)
   kind: null,
   closeCode: null,
@@ -46,7 +47,7 @@ let desc = null;
 let lastIndex = -1;
 let frozen = false;
 let audioArrivals = []; // [{start, end, arrival}] of recent audio blocks (media s, performance s)
-const windows = { delivery: [], behind: [], wait: [] };
+const windows = { delivery: [], behind: [], wait: [], draw: [] };
 
 function median(list, x) {
   list.push(x);
@@ -245,6 +246,7 @@ function tick() {
     if (show) state.skipped += 1;
     show = item;
   }
+  const drawStart = performance.now();
   if (show) {
     if (state.kind === "deltas") {
       view.applyDeltas(show.msg.values);
@@ -255,6 +257,7 @@ function tick() {
     state.frames += 1;
   }
   view.render();
+  if (show) state.drawMs = median(windows.draw, performance.now() - drawStart);
   updatePanel();
   requestAnimationFrame(tick);
 }
@@ -275,6 +278,7 @@ function updatePanel() {
     `delivery       ${fmt(state.deliveryMs)}`,
     `behind audio   ${fmt(state.behindAudioMs)}`,
     `buffer         ${fmt(state.waitMs)}`,
+    `draw           ${fmt(state.drawMs)}`,
     `resyncs        ${state.resyncs}`,
     `audio          ${audio.running ? `on (${audio.played} blocks)` : "off"}`,
   ].join("\n");
