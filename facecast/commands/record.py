@@ -24,6 +24,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
     p.add_argument("--head", default="builtin",
                    help="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
+    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
+                   help=".glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
     p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
@@ -42,11 +44,15 @@ def run(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() not in FORMATS:
         raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
     token = token_from_env(args.token_env)
-    head = None
+    head = arkit = None
     if args.output.suffix.lower() == ".glb":
         from facecast.commands.render import load_head
 
         head = load_head(args.head, None)
+        if args.glb_morphs == "arkit52" and args.head == "builtin":
+            from clients.export.gltf import builtin_arkit_targets
+
+            arkit = builtin_arkit_targets()
 
     async def main():
         session = await pick_session(args.url, args.session, args.wait)
@@ -63,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     params, first = rec.timeline()
     track = Track(params=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
-    files = export_track(args.output, track, head=head, audio=audio)
+    files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
     print(f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
           f"({track.duration_s:.2f} s) of {session!r}; session closed with {rec.close_code} {rec.close_reason}")
     return 0
