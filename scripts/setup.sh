@@ -5,10 +5,10 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
 # System packages: espeak-ng (speech synthesis for corpora and the demo), ffmpeg (video I/O),
 # PortAudio (microphone via sounddevice), PulseAudio (a virtual microphone in tests),
-# Mesa EGL (headless moderngl rendering) and
-# Chromium (the browser viewer's test).
+# Mesa EGL (headless moderngl rendering), Chromium (the browser viewer's test) and Xvfb (a
+# display for the Python viewer's window test).
 apt_pkgs=(espeak-ng libespeak-ng1 ffmpeg libportaudio2 pulseaudio pulseaudio-utils
-          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv chromium)
+          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv chromium xvfb)
 missing=()
 for p in "${apt_pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

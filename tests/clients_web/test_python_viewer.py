@@ -88,6 +88,63 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
 
 
-def test_view_without_record_explains_itself(capsys):
+def test_view_without_a_display_explains_itself(capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["view", "http://127.0.0.1:9", "--session", "x"]) == 2
     assert "open http://127.0.0.1:9/ in a browser" in capsys.readouterr().err
+
+
+@pytest.fixture()
+def xvfb(monkeypatch):
+    """A private X display (Xvfb) for the live window; skips where Xvfb is not installed."""
+    import os
+    import time
+    from pathlib import Path
+
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb is not installed (scripts/setup.sh installs xvfb)")
+    n = next(n for n in range(150, 250) if not Path(f"/tmp/.X{n}-lock").exists())
+    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    sock = Path(f"/tmp/.X11-unix/X{n}")
+    for _ in range(100):
+        if sock.exists() or proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    if not sock.exists():
+        proc.kill()
+        pytest.skip("Xvfb did not start")
+    monkeypatch.setenv("DISPLAY", f":{n}")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    yield os.environ["DISPLAY"]
+    proc.terminate()
+    proc.wait(5)
+
+
+def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
+    pytest.importorskip("glfw", reason="glfw is not installed")
+    import os
+    import sys
+
+    from tests.clients_web.conftest import REPO, stream_session
+
+    stop = asyncio.Event()
+    fut = live.submit(stream_session(live.url, "window", 30.0, stop=stop))
+    shot = tmp_path / "window.png"
+    # A process of its own, as a user runs it (and GL-wise clean: other tests here made EGL contexts).
+    try:
+        proc = subprocess.run([sys.executable, "-m", "facecast", "view", live.url, "--session", "window",
+                               "--duration", "2", "--screenshot", str(shot), "--width", "320", "--height", "240"],
+                              cwd=REPO, capture_output=True, text=True, timeout=60, env=os.environ.copy())
+    finally:
+        live.loop.call_soon_threadsafe(stop.set)
+        fut.result(30)
+    assert proc.returncode == 0, proc.stderr
+    shown = int(proc.stdout.split("showed ")[1].split(" ")[0])
+    assert shown >= 20, proc.stdout  # about 2 s of frames were drawn in the window
+    assert "sound off" in proc.stdout or "sound on" in proc.stdout
+    from PIL import Image
+
+    img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
+    assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
