@@ -148,3 +148,46 @@ def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
 
     img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
     assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
+
+
+from tests.server.test_sources import pulse  # noqa: E402,F401 - the private PulseAudio fixture
+
+
+def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
+    """Through a private PulseAudio null sink: what the window plays is the session's speech."""
+    pytest.importorskip("glfw", reason="glfw is not installed")
+    import os
+    import sys
+
+    from tests.clients_web.conftest import REPO, stream_session
+
+    if shutil.which("parec") is None:
+        pytest.skip("parec is not installed (pulseaudio-utils)")
+    env = {**pulse, "DISPLAY": os.environ["DISPLAY"]}
+    capture = tmp_path / "heard.raw"
+    rec = subprocess.Popen(["parec", "--device=fc.monitor", "--raw", "--format=s16le", "--rate=16000",
+                            "--channels=1", str(capture)], env=env)
+    stop = asyncio.Event()
+    fut = live.submit(stream_session(live.url, "sound", 30.0, stop=stop))
+    try:
+        proc = subprocess.run([sys.executable, "-m", "facecast", "view", live.url, "--session", "sound",
+                               "--duration", "3", "--width", "160", "--height", "120"],
+                              cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+    finally:
+        live.loop.call_soon_threadsafe(stop.set)
+        fut.result(30)
+        rec.terminate()
+        rec.wait(10)
+    assert proc.returncode == 0, proc.stderr
+    if "sound off" in proc.stdout:
+        pytest.skip(f"PortAudio found no output device through PulseAudio: {proc.stdout.strip()}")
+    heard = np.frombuffer(capture.read_bytes(), "<i2").astype(np.float64) / 32768
+    sent = speechlike(30.0, 16000, seed=0).astype(np.float64)
+    assert len(heard) > 16000 and np.abs(heard).max() > 0.05  # sound came out
+    # The heard audio is the session's: a 1 s excerpt of it correlates with the speech sent.
+    part = heard[np.argmax(np.abs(heard) > 0.05):][:16000]
+    ref = sent[: 16000 * 8]
+    corr = np.correlate(ref, part, mode="valid")
+    window = np.sqrt(np.convolve(ref**2, np.ones(len(part)), "valid"))
+    best = np.max(corr / (np.linalg.norm(part) * np.maximum(window, 1e-9)))
+    assert best > 0.8, best
