@@ -56,7 +56,7 @@ export class HeadView {
   /** Load the head described by a viewer description's `head` (null clears it). */
   async load(head, base = "") {
     const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}` : null;
-    if (key === this.key) {
+    if (head && key === this.key) {
       this.setMoving(head);
       return;
     }
@@ -66,6 +66,7 @@ export class HeadView {
       this.mesh = null;
     }
     this.key = null;
+    this.dirty = true;
     if (!head) return;
     const res = await fetch(base + head.mesh_json_url, { cache: "no-store" });
     if (!res.ok) throw new Error(`head mesh: HTTP ${res.status}`);

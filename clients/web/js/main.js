@@ -80,6 +80,7 @@ async function pollSessions() {
     }
   } catch (err) {
     state.sessions = [];
+    paramsOnly = false; // the server that comes back may have a head
     renderSessionList([]);
     if (!ws) setStatus("server unreachable, retrying");
   }
@@ -112,24 +113,11 @@ function renderSessionList(list) {
   }
 }
 
-async function hasHead() {
-  const res = await fetch("/head/mesh.json", { method: "GET", cache: "no-store" }).catch(() => null);
-  return res !== null && res.ok;
-}
+let paramsOnly = false; // the server has no head (--no-head): watch mouth parameters as bars
 
-let connecting = false;
-
-async function connect(name) {
-  if (ws || connecting) return;
-  connecting = true;
-  // Servers without a head (--no-head) serve mouth parameters only: show them as bars.
-  let kind;
-  try {
-    kind = (await hasHead()) ? "deltas" : "params";
-  } finally {
-    connecting = false;
-  }
+function connect(name) {
   if (ws) return;
+  const kind = paramsOnly ? "params" : "deltas";
   const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
   if (kind === "deltas") q.set("encoding", "int16");
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
@@ -139,13 +127,13 @@ async function connect(name) {
   state.session = name;
   state.kind = kind;
   setStatus(`connecting to "${name}"`);
-  let ready = null; // resolves when the head is loaded; messages wait for it
   sock.onmessage = (ev) => {
     if (typeof ev.data === "string") {
       desc = JSON.parse(ev.data);
-      ready = view.load(kind === "deltas" ? desc.head : null).then(() => {
+      // Frames that arrive while the head downloads are timed and queued; they move the mesh once it exists.
+      const ready = view.load(kind === "deltas" ? desc.head : null).then(() => {
         state.connections += 1;
-        setStatus(`watching "${name}"`);
+        setStatus(kind === "deltas" ? `watching "${name}"` : `watching "${name}": mouth parameters only (the server has no head)`);
         $("bars").hidden = kind === "deltas";
       });
       ready.catch((err) => {
@@ -168,6 +156,12 @@ async function connect(name) {
   sock.onclose = (ev) => {
     if (ws !== sock) return;
     ws = null;
+    if (ev.code === CLOSE.BAD_REQUEST && /no head/.test(ev.reason) && !paramsOnly) {
+      paramsOnly = true; // vertex deltas are unavailable: ask for the parameters instead, at once
+      resetStream();
+      connect(name);
+      return;
+    }
     state.closeCode = ev.code;
     state.closeReason = ev.reason;
     const why = {
