@@ -109,6 +109,8 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
     assert name in frames["listed"]  # the page lists the live session
     assert st["kind"] == "deltas" and st["frames"] >= 30 and st["connections"] == 1
     assert st["audio"]["running"] and st["audio"]["played"] > 0  # the relayed speech was scheduled
+    # ... on the frames' timeline: each block is heard within 20 ms of its frames (joins snap <= 15 ms).
+    assert mouth["state"]["audio"]["syncMs"] is not None and mouth["state"]["audio"]["syncMs"] < 20
     assert st["deliveryMs"] is not None and st["behindAudioMs"] is not None  # delays are measured and shown
 
     # The canvas shows a head, not an empty or one-colour picture.

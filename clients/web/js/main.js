@@ -275,6 +275,7 @@ function updatePanel() {
     `draw           ${fmt(state.drawMs)}`,
     `resyncs        ${state.resyncs}`,
     `audio          ${audio.running ? `on (${audio.played} blocks)` : "off"}`,
+    `audio sync     ${fmt(audio.syncMs)}`,
   ].join("\n");
   $("sound").hidden = audio.running || !audio.ctx;
 }
@@ -289,7 +290,7 @@ window.facecast = {
     return state.lastPeak;
   },
   mouthBox: () => view.mouthBox(),
-  audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped }),
+  audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped, syncMs: audio.syncMs }),
 };
 
 pollSessions();

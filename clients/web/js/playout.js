@@ -77,6 +77,14 @@ export class AudioOut {
     this.played = 0;
     this.lateDropped = 0;
     this.muted = 0;
+    this.syncErrors = []; // s: when each recent block will be heard minus its due time (last 50)
+  }
+
+  /** Median |heard - due| of the recent blocks (ms): how far sound is from the frames' timeline. */
+  get syncMs() {
+    if (!this.syncErrors.length) return null;
+    const s = this.syncErrors.map(Math.abs).sort((a, b) => a - b);
+    return 1000 * s[s.length >> 1];
   }
 
   get running() {
@@ -129,5 +137,11 @@ export class AudioOut {
     src.start(when, skip);
     this.nextStart = when + samples.length / rateHz - skip;
     this.played += 1;
+    // Performance time at which the block's first (unskipped) sample is heard, vs. its due time.
+    const heard = ts && ts.performanceTime > 0
+      ? ts.performanceTime / 1000 + (when - ts.contextTime)
+      : nowS() + (when - ctx.currentTime) + (ctx.outputLatency || 0);
+    this.syncErrors.push(heard - (dueS + skip));
+    if (this.syncErrors.length > 50) this.syncErrors.shift();
   }
 }
