@@ -29,7 +29,7 @@ import numpy as np
 from clients.errors import ClientError
 from clients.heads.mesh import HeadMesh
 from clients.render.renderer import HeadRenderer, RenderConfig
-from clients.viewer.stream import StreamConfig, _connect
+from clients.viewer.stream import StreamConfig, connect_viewer
 from clients.viewer.video import framing
 from server import protocol as P
 
@@ -166,7 +166,7 @@ class _Receiver(threading.Thread):
         cfg, inbox = self.cfg, self.inbox
         while True:
             try:
-                v = await _connect(cfg)
+                v = await connect_viewer(cfg)
             except ClientError as exc:
                 inbox.put(("error", str(exc)))
                 await asyncio.sleep(0.5)

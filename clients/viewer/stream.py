@@ -124,7 +124,7 @@ async def fetch_head(url: str) -> HeadMesh:
         raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
 
 
-async def _connect(cfg: StreamConfig) -> ViewerClient:
+async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
     """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
@@ -144,7 +144,7 @@ async def _connect(cfg: StreamConfig) -> ViewerClient:
 async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
     every frame as it arrives (for progress or live display)."""
-    v = await _connect(cfg)
+    v = await connect_viewer(cfg)
     rec = Recording(description=v.description)
     keep = np.float16 if cfg.kind == "deltas" else np.float32
     try:

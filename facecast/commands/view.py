@@ -33,8 +33,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
     p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
-    p.add_argument("--width", type=int, default=640, help="video width in pixels")
-    p.add_argument("--height", type=int, default=480, help="video height in pixels")
+    p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
+    p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
     p.set_defaults(run=run)
 
 
@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 def _window(args: argparse.Namespace, token: str | None) -> int:
     import asyncio
     import os
+    import statistics
 
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig
@@ -100,8 +101,6 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait)
     st = run_window(cfg, mesh, config=RenderConfig(width=args.width, height=args.height, margin=1.25),
                     buffer_s=args.buffer_ms / 1000, duration_s=args.duration, screenshot=args.screenshot)
-    import statistics
-
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"
     print(f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
           f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
