@@ -92,8 +92,11 @@ class AudioOut:
             return
         try:
             info = sd.query_devices(kind="output")
+            # PortAudio's "high" latency: through ALSA's PulseAudio plugin "low" underran and then
+            # stalled under load (silence while frames went on); the DAC time below accounts for
+            # whatever latency the device has, so sync does not depend on it.
             self.stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
-                                          latency="low")
+                                          latency="high")
             self.stream.start()
             self._clock_delta = self.stream.time - time.perf_counter()
             self.device = str(info["name"])

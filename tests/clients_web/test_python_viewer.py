@@ -184,13 +184,19 @@ def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
     heard = np.frombuffer(capture.read_bytes(), "<i2").astype(np.float64) / 32768
     sent = speechlike(30.0, 16000, seed=0).astype(np.float64)
     assert len(heard) > 16000 and np.abs(heard).max() > 0.05  # sound came out
-    # The heard audio is the session's: a 1 s excerpt of it correlates with the speech sent.
-    part = heard[np.argmax(np.abs(heard) > 0.05):][:16000]
-    ref = sent[: 16000 * 8]
+    # The heard audio is the session's: each loud 0.25 s piece of it is found in the speech sent
+    # (pieces, not the whole take: a timeline resync under load makes the sound jump by design).
     from scipy.signal import correlate
 
-    corr = correlate(ref, part, mode="valid", method="fft")
+    ref = sent[: 16000 * 10]
     c2 = np.concatenate([[0.0], np.cumsum(ref**2)])
-    window = np.sqrt(np.maximum(c2[len(part):] - c2[: len(c2) - len(part)], 0))  # |ref[k:k+len(part)]|
-    best = np.max(corr / (np.linalg.norm(part) * np.maximum(window, 1e-9)))
-    assert best > 0.8, best
+    scores = []
+    for k in range(0, len(heard) - 4000, 4000):
+        part = heard[k:k + 4000]
+        if np.sqrt(np.mean(part**2)) < 0.05:
+            continue  # a pause of the speech
+        corr = correlate(ref, part, mode="valid", method="fft")
+        window = np.sqrt(np.maximum(c2[len(part):] - c2[: len(c2) - len(part)], 1e-12))  # |ref[j:j+len(part)]|
+        scores.append(np.max(corr / (np.linalg.norm(part) * window)))
+    levels = [round(float(np.sqrt(np.mean(heard[k:k + 4000] ** 2))), 3) for k in range(0, len(heard) - 4000, 4000)]
+    assert len(scores) >= 3 and np.median(scores) > 0.8, (scores, levels, proc.stdout)
