@@ -21,6 +21,7 @@ import argparse
 import asyncio
 import json
 import multiprocessing as mp
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -150,7 +151,13 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
                 "worst_viewer_p99_ms": round(max(float(np.percentile(a, 99)) * 1e3 for a, _ in items), 3),
                 "server_send_to_receipt_p99_ms": round(float(np.percentile(sendrec, 99)), 3),
             }
+    from urllib.request import urlopen
+
+    with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
+        timings = json.loads(r.read())["timings_ms"]
     return {
+        "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
+                              if k in timings},
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -169,11 +176,13 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     toml = "[server]\nmax_sessions = 1000\nmax_viewers = 10000\n"
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
+    load_before = os.getloadavg()
     try:
         for i, (n, p, v) in enumerate(cfg.steps):
             r = _step(server.url, model, i, n, p, v if cfg.head else 0, cfg.seconds)
             steps.append(r)
             print(json.dumps({"step": r["sessions"], "pass": r["pass"], "pass_every_viewer": r["pass_every_viewer"],
+                              "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
                               "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                               "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"], "lost": r["frames_lost"]}),
                   flush=True)
@@ -196,6 +205,8 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "sustained_every_viewer": None if best_strict is None else {
             k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
+        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
         "steps": steps,
         "note": "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)",
     }

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -100,6 +101,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
 
 def run_latency_benchmark(cfg: LatencyConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
+    load_before = os.getloadavg()
     server = ServerProcess(model_path, head=cfg.head)
     try:
         result = asyncio.run(_run(server.url, cfg, model))
@@ -115,6 +117,8 @@ def run_latency_benchmark(cfg: LatencyConfig) -> dict:
         "block_ms": cfg.block_s * 1e3,
         "per_frame_work_p99_ms": round(work_p99, 4),
         "budget_ms": BUDGET_MS,
+        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
         "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
                 "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
                 "this machine's 2 cores with other work.",

@@ -227,6 +227,17 @@ class FacecastServer:
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
+        lag = asyncio.ensure_future(self._watch_loop_lag())
+        self._tasks.add(lag)
+
+    async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
+        """Record how late a 10 ms timer fires ("loop_lag"): the time any callback waits for the loop,
+        whether the loop is busy with frames or the process is not scheduled (a shared machine)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            t = loop.time()
+            await asyncio.sleep(period_s)
+            self.times.add("loop_lag", max(0.0, loop.time() - t - period_s))
 
     @property
     def port(self) -> int:
