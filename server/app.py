@@ -59,6 +59,8 @@ from server.timing import StageTimes
 
 log = logging.getLogger("facecast.server")
 
+FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
+
 
 @dataclass(frozen=True)
 class Head:
@@ -138,6 +140,23 @@ class LiveSession:
     def feed_bytes(self, data: bytes) -> int:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
         return self._fanout(self.session.push_bytes(data))
+
+    async def feed_bytes_fairly(self, data: bytes) -> int:
+        """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
+        processed in slices of at most ``FAIR_SLICE_S`` of audio with a yield to the loop between
+        them, so one session's burst never holds up the other sessions for more than a few frames."""
+        s = self.session
+        frame = s.frame_bytes
+        step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
+        if len(data) <= step:
+            return self.feed_bytes(data)
+        if len(data) % frame:
+            self.feed_bytes(data)  # raises the AudioFormatError naming the problem
+        n = 0
+        for i in range(0, len(data), step):
+            n += self.feed_bytes(data[i:i + step])
+            await asyncio.sleep(0)
+        return n
 
     def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
@@ -400,7 +419,7 @@ class FacecastServer:
                     msg = recv.result()
                     if isinstance(msg, bytes):
                         try:
-                            live.feed_bytes(msg)
+                            await live.feed_bytes_fairly(msg)
                         except AudioFormatError as exc:
                             raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, str(exc)) from None
                         continue

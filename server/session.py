@@ -176,6 +176,11 @@ class Session:
         self._audio_index = 0
         self.finished = False
 
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of one sample frame (all channels) in the input format."""
+        return self._frame_bytes
+
     # -- timing facts ----------------------------------------------------------------------------
 
     @property
