@@ -104,7 +104,7 @@ class Viewer:
                 self.closing = True
                 self.server.closed_slow += 1
                 self.queue.clear()
-                asyncio.get_running_loop().create_task(
+                self.server.spawn(
                     self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
                                          f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
                 )
@@ -282,6 +282,13 @@ class FacecastServer:
             await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
+
+    def spawn(self, coro) -> asyncio.Task:
+        """Run a coroutine in the background, holding a reference until it is done."""
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
 
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
         """Close one connection with a code and reason (counted in metrics)."""
