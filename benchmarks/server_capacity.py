@@ -107,7 +107,8 @@ def _viewer_proc(url: str, prefix: str, n: int, n_params: int, n_deltas: int, re
     out.put(("viewers", asyncio.run(main())))
 
 
-def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float) -> dict:
+def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float) -> dict:
+    url = server.url
     ctx = mp.get_context("spawn")
     ready, viewers_ready, out = ctx.Event(), ctx.Event(), ctx.Queue()
     prefix = f"cap{step_no}_"
@@ -115,7 +116,19 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
     view = ctx.Process(target=_viewer_proc, args=(url, prefix, n, n_params, n_deltas, ready, viewers_ready, out))
     ing.start()
     view.start()
-    got = dict(out.get(timeout=seconds + 300) for _ in range(2))
+    # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
+    # later) to the ingest's report (all sessions ended).
+    if not viewers_ready.wait(timeout=300):
+        raise RuntimeError("viewers did not attach within 300 s")
+    cpu0, t0 = server.cpu_seconds(), time.monotonic()
+    got = {}
+    while "ingest" not in got:
+        key, value = out.get(timeout=seconds + 300)
+        got[key] = value
+    cpu1, t1 = server.cpu_seconds(), time.monotonic()
+    while "viewers" not in got:
+        key, value = out.get(timeout=300)
+        got[key] = value
     ing.join()
     view.join()
     sent = got["ingest"]
@@ -156,6 +169,7 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
     with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
         timings = json.loads(r.read())["timings_ms"]
     return {
+        "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
         "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
                               if k in timings},
         "sessions": n,
@@ -179,10 +193,11 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     load_before = os.getloadavg()
     try:
         for i, (n, p, v) in enumerate(cfg.steps):
-            r = _step(server.url, model, i, n, p, v if cfg.head else 0, cfg.seconds)
+            r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds)
             steps.append(r)
             print(json.dumps({"step": r["sessions"], "pass": r["pass"], "pass_every_viewer": r["pass_every_viewer"],
                               "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
+                              "server_cpu_cores": r["server_cpu_cores"],
                               "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                               "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"], "lost": r["frames_lost"]}),
                   flush=True)

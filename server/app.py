@@ -11,8 +11,10 @@ saves and the GIL serialises it anyway), then *fans out*: each frame is encoded 
 (kind, encoding) that somebody watches, given one header with the send time, and offered to every
 viewer of that kind.
 
-Viewers never slow the session or each other. Each has a bounded queue of ready messages and its
-own sender task; offering a message never waits. When a queue is full the oldest message is
+Viewers never slow the session or each other. A viewer that keeps up (nothing queued, socket
+buffer under 64 KiB) gets each message written synchronously, as python-websockets' ``broadcast``
+does, without a task switch per message. Otherwise the message goes to the viewer's bounded queue,
+drained by its own sender task with backpressure; offering a message never waits. When a queue is full the oldest message is
 dropped and counted (the freshest frame matters most for live animation); a viewer that keeps
 dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
 python-websockets' broadcast guide, with drop-oldest instead of unbounded buffering.
@@ -40,7 +42,7 @@ from pathlib import Path
 from typing import AsyncIterator
 
 import numpy as np
-from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
@@ -60,6 +62,24 @@ from server.timing import StageTimes
 log = logging.getLogger("facecast.server")
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
+# A viewer whose socket buffer holds less than this gets messages written synchronously
+# (websockets' broadcast); others go through their queue and sender task (backpressure, drops).
+FAST_PATH_BUFFER_BYTES = 64 * 1024
+
+
+def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+    """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
+    message), the bounded queue for the others."""
+    fast = []
+    for v in viewers:
+        if v.writable_now():
+            fast.append(v)
+        else:
+            v.offer(msg, now)
+    if fast:
+        broadcast([v.ws for v in fast], msg)
+        for v in fast:
+            v.sent += 1
 
 
 @dataclass(frozen=True)
@@ -88,6 +108,15 @@ class Viewer:
         self.sent = 0
         self.behind_since: float | None = None
         self.closing = False
+        self.sending = False
+
+    def writable_now(self) -> bool:
+        """True when a message can be written straight to the socket without reordering or
+        buffering beyond the write limit: nothing queued or in flight, transport buffer low."""
+        if self.closing or self.queue or self.sending:
+            return False
+        transport = self.ws.transport
+        return transport is not None and transport.get_write_buffer_size() <= FAST_PATH_BUFFER_BYTES
 
     def offer(self, msg: bytes, now: float) -> None:
         """Queue one message without waiting; drop the oldest when full; close if behind too long."""
@@ -117,10 +146,14 @@ class Viewer:
         while True:
             await self.wake.wait()
             self.wake.clear()
-            while self.queue:
-                msg = self.queue.popleft()
-                await self.ws.send(msg)
-                self.sent += 1
+            self.sending = True
+            try:
+                while self.queue:
+                    msg = self.queue.popleft()
+                    await self.ws.send(msg)
+                    self.sent += 1
+            finally:
+                self.sending = False
             self.behind_since = None
 
 
@@ -176,17 +209,16 @@ class LiveSession:
             if listeners:
                 a = out.audio
                 msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
-                for v in listeners:
-                    v.offer(msg, now)
-        for frame in out.frames:
-            cache: dict[tuple[int, int], bytes] = {}
-            for v in list(self.viewers):
-                key = (v.kind, v.encoding)
-                msg = cache.get(key)
-                if msg is None:
-                    payload, count, scale = frame.payload(v.kind, v.encoding)
-                    msg = cache[key] = P.pack_header(v.kind, v.encoding, frame.index, count, scale, frame.media_time, now) + payload
-                v.offer(msg, now)
+                _deliver(listeners, msg, now)
+        if out.frames:
+            groups: dict[tuple[int, int], list[Viewer]] = {}
+            for v in self.viewers:
+                groups.setdefault((v.kind, v.encoding), []).append(v)
+            for frame in out.frames:
+                for (kind, enc), members in groups.items():
+                    payload, count, scale = frame.payload(kind, enc)
+                    msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
+                    _deliver(members, msg, now)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)
 
