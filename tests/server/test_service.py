@@ -332,3 +332,48 @@ def test_config_from_toml(tmp_path):
             ServerConfig.from_toml(bad)
     with pytest.raises(ServerConfigError, match="not found"):
         ServerConfig.from_toml(tmp_path / "missing.toml")
+
+
+def test_limits_and_start_timeout(model):
+    async def main():
+        async with running(model, max_sessions=1, max_viewers=1, start_timeout_s=0.2) as srv:
+            url = srv.url
+            async with IngestClient(url, session="one", sample_rate_hz=16000):
+                second = await _expect_close(lambda: _raw(url, "/ingest", _start(session="two", token=None)))
+                async with ViewerClient(url, session="one"):
+                    extra = await _expect_close(lambda: ViewerClient(url, session="one").__aenter__())
+            silent = await _expect_close(lambda: _raw(url, "/ingest"))
+            return second, extra, silent
+
+    second, extra, silent = asyncio.run(main())
+    assert second[0] == P.CLOSE_TRY_LATER and "1 sessions" in second[1]
+    assert extra[0] == P.CLOSE_TRY_LATER and "1 viewers" in extra[1]
+    assert silent[0] == P.CLOSE_POLICY and "no start message" in silent[1]
+
+
+def test_shutdown_flushes_sessions_and_says_going_away(model):
+    pcm = _int16(speechlike(3.0, 16000, seed=11))
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        ing = await IngestClient(srv.url, session="live", sample_rate_hz=16000).__aenter__()
+        view = await ViewerClient(srv.url, session="live", audio=False).__aenter__()
+        collect = asyncio.ensure_future(view.collect())
+        feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True))
+        await asyncio.sleep(1.0)
+        await srv.stop()  # what SIGINT/SIGTERM do
+        got = await collect
+        try:
+            await feed
+            ing_code = None
+        except ServerClosed as exc:
+            ing_code = exc.code
+        if ing_code is None:
+            ing_code = ing.ws.close_code
+        return got, ing_code
+
+    got, ing_code = asyncio.run(main())
+    assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost
