@@ -40,12 +40,15 @@ LIMIT_MS = 10.0
 @dataclass(frozen=True, kw_only=True)
 class CapacityConfig:
     """steps: (sessions, parameter viewers, vertex viewers) per step; seconds: audio per step;
-    model: model file (None: default or paper-size random); head: vertex viewers need the head."""
+    model: model file (None: default or paper-size random); head: vertex viewers need the head;
+    cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
+    separately and project the goal load from them."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     seconds: float = 6.0
     model: Path | None = None
     head: bool = True
+    cost_model: bool = True
 
 
 def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) -> None:
@@ -185,13 +188,40 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
     }
 
 
+def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
+    """Server CPU (cores) of one real-time session, one parameter viewer and one vertex viewer,
+    from three loads differing in one kind of client; and the goal load projected from them."""
+    n = 10
+    base = _step(server, model, 100, n, 0, 0, cfg.seconds)["server_cpu_cores"]
+    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)["server_cpu_cores"]
+    per_session = base / n
+    per_param = max(0.0, with_params - base) / 100
+    per_vertex = None
+    if cfg.head:
+        with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds)["server_cpu_cores"]
+        per_vertex = max(0.0, with_vertex - base) / 20
+    goal = 100 * per_session + 500 * per_param + 100 * (per_vertex or 0.0)
+    return {
+        "cores_per_session": round(per_session, 5),
+        "cores_per_param_viewer": round(per_param, 5),
+        "cores_per_vertex_viewer": None if per_vertex is None else round(per_vertex, 5),
+        "goal_load_cores_projected": round(goal, 3),
+        "note": "CPU seconds of the server process per second of real-time streaming, measured on this "
+                "(shared) machine; one server process runs on at most one core",
+    }
+
+
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
     toml = "[server]\nmax_sessions = 1000\nmax_viewers = 10000\n"
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
     load_before = os.getloadavg()
+    cost: dict | None = None
     try:
+        if cfg.cost_model:
+            cost = _cost_model(server, model, cfg)
+            print(json.dumps({"cost_model": cost}), flush=True)
         for i, (n, p, v) in enumerate(cfg.steps):
             r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds)
             steps.append(r)
@@ -220,6 +250,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "sustained_every_viewer": None if best_strict is None else {
             k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
+        "cost_model": cost,
         "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
                     "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
         "steps": steps,
@@ -234,11 +265,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
+    ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     args = ap.parse_args(argv)
     steps = DEFAULT_STEPS
     if args.steps:
         steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
-    result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model, head=not args.no_head))
+    result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
+                                                   head=not args.no_head, cost_model=not args.no_cost_model))
     print(json.dumps(result, indent=2))
     return 0
 
