@@ -54,9 +54,9 @@ from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
 from server import protocol as P
 from server.config import ServerConfig
-from server.errors import ControlError, ProtocolViolation, ServerConfigError, ServerError
+from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
 from server.glb import mesh_glb, mesh_json, texture_mime
-from server.session import AudioFormatError, Output, Session, SessionConfig
+from server.session import Output, Session, SessionConfig
 from server.timing import StageTimes
 
 log = logging.getLogger("facecast.server")

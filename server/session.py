@@ -33,17 +33,13 @@ from realtime_core.errors import RealtimeCoreError
 from realtime_core.face.rig import Rig
 from realtime_core.inversion import StreamConfig
 from server import protocol as P
-from server.errors import ControlError, ServerConfigError
+from server.errors import AudioFormatError, ControlError, ServerConfigError
 from server.resample import StreamingResampler
 from server.timing import StageTimes
 
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
-
-
-class AudioFormatError(ServerConfigError):
-    """A block of audio bytes cannot be decoded (partial samples, NaN/inf floats)."""
 
 
 @dataclass(frozen=True, kw_only=True)
