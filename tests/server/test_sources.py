@@ -152,3 +152,27 @@ def test_microphone_session_moves_the_mouth(pulse, model_path, wav16k):
     t = np.array([m.media_time for m in frames])
     speaking = params[(t > play_at + 0.3) & (t < play_at + 1.8)]
     assert len(speaking) > 20 and np.ptp(speaking, axis=0).max() > 0.1, "the mouth did not move with the speech"
+
+
+def test_a_source_feeds_a_remote_session_through_the_client(model, wav16k):
+    from clients.client import IngestClient, stream_source
+
+    samples, rate = read_audio(wav16k)
+    samples = samples[: rate // 2]
+    ref = speech_to_params(model, samples)
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            async with IngestClient(srv.url, session="remote", sample_rate_hz=rate, sample_format="f32le") as ing:
+                async with ViewerClient(srv.url, session="remote", audio=False) as v:
+                    collect = asyncio.ensure_future(v.collect())
+                    await stream_source(ing, FileSource.from_array(samples, rate, realtime=False))
+                    await ing.end()
+                    return await collect
+        finally:
+            await srv.stop()
+
+    got = asyncio.run(main())
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
