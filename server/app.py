@@ -11,8 +11,10 @@ saves and the GIL serialises it anyway), then *fans out*: each frame is encoded 
 (kind, encoding) that somebody watches, given one header with the send time, and offered to every
 viewer of that kind.
 
-Viewers never slow the session or each other. Each has a bounded queue of ready messages and its
-own sender task; offering a message never waits. When a queue is full the oldest message is
+Viewers never slow the session or each other. A viewer that keeps up (nothing queued, socket
+buffer under 64 KiB) gets each message written synchronously, as python-websockets' ``broadcast``
+does, without a task switch per message. Otherwise the message goes to the viewer's bounded queue,
+drained by its own sender task with backpressure; offering a message never waits. When a queue is full the oldest message is
 dropped and counted (the freshest frame matters most for live animation); a viewer that keeps
 dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
 python-websockets' broadcast guide, with drop-oldest instead of unbounded buffering.
@@ -40,7 +42,7 @@ from pathlib import Path
 from typing import AsyncIterator
 
 import numpy as np
-from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
@@ -52,12 +54,32 @@ from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
 from server import protocol as P
 from server.config import ServerConfig
-from server.errors import ControlError, ProtocolViolation, ServerConfigError, ServerError
+from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
 from server.glb import mesh_glb, mesh_json, texture_mime
-from server.session import AudioFormatError, Output, Session, SessionConfig
+from server.session import Output, Session, SessionConfig
 from server.timing import StageTimes
 
 log = logging.getLogger("facecast.server")
+
+FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
+# A viewer whose socket buffer holds less than this gets messages written synchronously
+# (websockets' broadcast); others go through their queue and sender task (backpressure, drops).
+FAST_PATH_BUFFER_BYTES = 64 * 1024
+
+
+def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+    """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
+    message), the bounded queue for the others."""
+    fast = []
+    for v in viewers:
+        if v.writable_now():
+            fast.append(v)
+        else:
+            v.offer(msg, now)
+    if fast:
+        broadcast([v.ws for v in fast], msg)
+        for v in fast:
+            v.sent += 1
 
 
 @dataclass(frozen=True)
@@ -86,6 +108,15 @@ class Viewer:
         self.sent = 0
         self.behind_since: float | None = None
         self.closing = False
+        self.sending = False
+
+    def writable_now(self) -> bool:
+        """True when a message can be written straight to the socket without reordering or
+        buffering beyond the write limit: nothing queued or in flight, transport buffer low."""
+        if self.closing or self.queue or self.sending:
+            return False
+        transport = self.ws.transport
+        return transport is not None and transport.get_write_buffer_size() <= FAST_PATH_BUFFER_BYTES
 
     def offer(self, msg: bytes, now: float) -> None:
         """Queue one message without waiting; drop the oldest when full; close if behind too long."""
@@ -102,7 +133,7 @@ class Viewer:
                 self.closing = True
                 self.server.closed_slow += 1
                 self.queue.clear()
-                asyncio.get_running_loop().create_task(
+                self.server.spawn(
                     self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
                                          f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
                 )
@@ -115,10 +146,14 @@ class Viewer:
         while True:
             await self.wake.wait()
             self.wake.clear()
-            while self.queue:
-                msg = self.queue.popleft()
-                await self.ws.send(msg)
-                self.sent += 1
+            self.sending = True
+            try:
+                while self.queue:
+                    msg = self.queue.popleft()
+                    await self.ws.send(msg)
+                    self.sent += 1
+            finally:
+                self.sending = False
             self.behind_since = None
 
 
@@ -139,6 +174,23 @@ class LiveSession:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
         return self._fanout(self.session.push_bytes(data))
 
+    async def feed_bytes_fairly(self, data: bytes) -> int:
+        """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
+        processed in slices of at most ``FAIR_SLICE_S`` of audio with a yield to the loop between
+        them, so one session's burst never holds up the other sessions for more than a few frames."""
+        s = self.session
+        frame = s.frame_bytes
+        step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
+        if len(data) <= step:
+            return self.feed_bytes(data)
+        if len(data) % frame:
+            self.feed_bytes(data)  # raises the AudioFormatError naming the problem
+        n = 0
+        for i in range(0, len(data), step):
+            n += self.feed_bytes(data[i:i + step])
+            await asyncio.sleep(0)
+        return n
+
     def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
         return self._fanout(self.session.push(samples))
@@ -157,17 +209,16 @@ class LiveSession:
             if listeners:
                 a = out.audio
                 msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
-                for v in listeners:
-                    v.offer(msg, now)
-        for frame in out.frames:
-            cache: dict[tuple[int, int], bytes] = {}
-            for v in list(self.viewers):
-                key = (v.kind, v.encoding)
-                msg = cache.get(key)
-                if msg is None:
-                    payload, count, scale = frame.payload(v.kind, v.encoding)
-                    msg = cache[key] = P.pack_header(v.kind, v.encoding, frame.index, count, scale, frame.media_time, now) + payload
-                v.offer(msg, now)
+                _deliver(listeners, msg, now)
+        if out.frames:
+            groups: dict[tuple[int, int], list[Viewer]] = {}
+            for v in self.viewers:
+                groups.setdefault((v.kind, v.encoding), []).append(v)
+            for frame in out.frames:
+                for (kind, enc), members in groups.items():
+                    payload, count, scale = frame.payload(kind, enc)
+                    msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
+                    _deliver(members, msg, now)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)
 
@@ -227,6 +278,17 @@ class FacecastServer:
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
+        lag = asyncio.ensure_future(self._watch_loop_lag())
+        self._tasks.add(lag)
+
+    async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
+        """Record how late a 10 ms timer fires ("loop_lag"): the time any callback waits for the loop,
+        whether the loop is busy with frames or the process is not scheduled (a shared machine)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            t = loop.time()
+            await asyncio.sleep(period_s)
+            self.times.add("loop_lag", max(0.0, loop.time() - t - period_s))
 
     @property
     def port(self) -> int:
@@ -252,6 +314,13 @@ class FacecastServer:
             await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
+
+    def spawn(self, coro) -> asyncio.Task:
+        """Run a coroutine in the background, holding a reference until it is done."""
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
 
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
         """Close one connection with a code and reason (counted in metrics)."""
@@ -389,7 +458,7 @@ class FacecastServer:
                     msg = recv.result()
                     if isinstance(msg, bytes):
                         try:
-                            live.feed_bytes(msg)
+                            await live.feed_bytes_fairly(msg)
                         except AudioFormatError as exc:
                             raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, str(exc)) from None
                         continue

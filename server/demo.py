@@ -126,12 +126,14 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
         announce(f"  open {server.url}/   (viewer page; sessions listed)")
         announce(f"  watch {ws}/view?session=demo&kind=deltas   (or kind=params, kind=blendshapes)")
         announce(f"  metrics {server.url}/metrics")
-        stop = asyncio.Event()
-
         def on_stop() -> None:
-            stop.set()
+            # End the session early: the source stops, the viewer gets the last frames, the MP4
+            # covers what was streamed.
+            live = server.sessions.get("demo")
+            if live is not None:
+                live.ended.set()
             if mic is not None:
-                mic.close()  # the session ends, the viewer gets its last frames
+                mic.close()
 
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, on_stop)
