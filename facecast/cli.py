@@ -17,6 +17,8 @@ import sys
 COMMANDS: dict[str, str] = {
     "demo": "facecast.commands.demo",
     "serve": "facecast.commands.serve",
+    "view": "facecast.commands.view",
+    "record": "facecast.commands.record",
     "animate": "facecast.commands.animate",
     "render": "facecast.commands.render",
     "rig": "facecast.commands.rig",

@@ -12,10 +12,11 @@ import numpy as np
 
 from clients.export.curves import Track, csv_bytes, json_bytes
 from clients.export.errors import ExportError
-from clients.export.gltf import head_glb
+from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
+MORPHS = ("units", "arkit52")
 
 
 def write_atomic(path: str | Path, data: bytes) -> Path:
@@ -51,11 +52,15 @@ def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
 
 
 def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
-                 audio: tuple[np.ndarray, int] | None = None) -> list[Path]:
+                 audio: tuple[np.ndarray, int] | None = None, morphs: str = "units",
+                 arkit_targets: dict[str, np.ndarray] | None = None) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: (rig, HeadMesh), required for .glb; audio: (samples (n,) float or int16,
     rate_hz) starting at the track's first frame, written as ``<stem>.wav`` beside a .glb or .json
-    (and named inside it)."""
+    (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
+    "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights."""
+    if morphs not in MORPHS:
+        raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in FORMATS:
@@ -69,7 +74,12 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
     if suffix == ".glb":
         if head is None:
             raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
-        data = head_glb(head[0], head[1], track, audio=wav_name)
+        if morphs == "units":
+            data = head_glb(head[0], head[1], track, audio=wav_name)
+        elif arkit_targets is None:
+            raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
+        else:
+            data = arkit_glb(head[1], arkit_targets, track, audio=wav_name)
     elif suffix == ".csv":
         data = csv_bytes(track)
     elif suffix == ".json":

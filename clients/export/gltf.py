@@ -147,3 +147,32 @@ def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
     return animated_glb(vertices=rig.neutral, triangles=mesh.triangles, targets=rig_targets(rig),
                         target_names=VISUAL_PARAMS, track=track, uvs=mesh.uvs, colors=mesh.colors,
                         texture=mesh.texture if mesh.uvs is not None else None, audio=audio)
+
+
+def builtin_arkit_targets() -> dict[str, np.ndarray]:
+    """The built-in head's 52 ARKit blendshapes: name -> (n, 3) float64 displacement (mesh units) at
+    weight 1, in the vertex order of ``builtin_rig()``'s mesh (both come from the same cut head)."""
+    from clients.heads.builtin import load_builtin_head
+
+    return load_builtin_head().targets
+
+
+def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str | None = None) -> bytes:
+    """:func:`animated_glb` with ARKit's 52 blendshapes as the morph targets (Apple's order) and the
+    track's mouth parameters mapped to their weights by ``realtime_core.blendshapes`` (the same
+    weights a "blendshapes" viewer receives, in [0, 1]); for engines that drive faces by ARKit names.
+    ``mesh``: the HeadMesh; ``targets``: name -> (n, 3) displacement at weight 1 for all 52 names."""
+    from realtime_core import VISUAL_PARAMS
+    from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+
+    missing = sorted(set(ARKIT_NAMES) - set(targets))
+    if missing:
+        raise ExportError(f"the head lacks ARKit blendshapes {missing[:5]}{'...' if len(missing) > 5 else ''}")
+    if track.names != VISUAL_PARAMS:
+        raise ExportError(f"ARKit weights are computed from the mouth parameters {VISUAL_PARAMS}")
+    weights = Track(params=blendshape_weights(track.params, "arkit52"), fps=track.fps, start_s=track.start_s,
+                    names=ARKIT_NAMES)
+    return animated_glb(vertices=mesh.vertices, triangles=mesh.triangles,
+                        targets=np.stack([targets[n] for n in ARKIT_NAMES]), target_names=ARKIT_NAMES,
+                        track=weights, uvs=mesh.uvs, colors=mesh.colors,
+                        texture=mesh.texture if mesh.uvs is not None else None, audio=audio)

@@ -25,6 +25,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
     p.add_argument("--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)")
+    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
+                   help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
@@ -56,9 +58,14 @@ def run(args: argparse.Namespace) -> int:
 
         track = Track(params=params)
         head = load_head(args.head, None) if args.glb else None
+        arkit = None
+        if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
+            from clients.export.gltf import builtin_arkit_targets
+
+            arkit = builtin_arkit_targets()
         for out in (args.glb, args.json, args.tsv):
             if out is not None:
-                export_track(out, track, head=head, audio=(samples, rate))
+                export_track(out, track, head=head, audio=(samples, rate), morphs=args.glb_morphs, arkit_targets=arkit)
     for out in outputs:
         print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech}")
     return 0

@@ -182,3 +182,26 @@ def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin
     with pytest.raises(ExportError, match="unknown export format"):
         export_track(tmp_path / "x.fbx", tr)
     assert not list(tmp_path.glob(".*tmp"))  # atomic writes leave no temporaries
+
+
+def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(tmp_path, builtin):
+    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+    from clients.export.gltf import builtin_arkit_targets
+    from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+
+    rig, mesh = builtin
+    targets = builtin_arkit_targets()
+    tr = _track(20)
+    export_track(tmp_path / "a.glb", tr, head=builtin, morphs="arkit52", arkit_targets=targets)
+    g = pygltflib.GLTF2().load(str(tmp_path / "a.glb"))
+    blob = g.binary_blob()
+    prim = g.meshes[0].primitives[0]
+    assert g.meshes[0].extras["targetNames"] == list(ARKIT_NAMES) and len(prim.targets) == 52
+    jaw = ARKIT_NAMES.index("jawOpen")
+    np.testing.assert_allclose(_accessor(g, blob, prim.targets[jaw]["POSITION"]), targets["jawOpen"], atol=1e-6)
+    s = g.animations[0].samplers[0]
+    w = _accessor(g, blob, s.output).reshape(20, 52)
+    np.testing.assert_allclose(w, blendshape_weights(tr.params, "arkit52"), atol=1e-7)
+    assert w[:, jaw].max() > 0.3  # the mouth opens in this track
+    with pytest.raises(ExportError, match="need a head that has them"):
+        export_track(tmp_path / "b.glb", tr, head=builtin, morphs="arkit52")
