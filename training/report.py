@@ -57,6 +57,7 @@ def plot_selection(rows: Sequence[dict], path: Path) -> Path:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
     fig.suptitle("Held-out accuracy over N and M (cf. paper Fig. 7)")
+    fig.subplots_adjust(hspace=0.35)
     out = _save(fig, path)
     plt.close(fig)
     return out
