@@ -7,7 +7,8 @@ connection, the microphone or a file) with a sans-I/O :class:`server.session.Ses
 of viewers. When a block of audio arrives the session computes the frames now final inline on the
 loop (a few hundred microseconds per frame with the paper's model; measured by
 ``benchmarks/server_latency.py``: handing such short work to a thread pool costs more than it
-saves and the GIL serialises it anyway), then *fans out*: each frame is encoded once per
+saves and the GIL serialises it anyway; with ``ServerConfig.workers`` it runs in compute processes
+instead, see :mod:`server.workers`), then *fans out*: each frame is encoded once per
 (kind, encoding) that somebody watches, given one header with the send time, and offered to every
 viewer of that kind.
 
