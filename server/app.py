@@ -15,9 +15,9 @@ viewer of that kind.
 Viewers never slow the session or each other. A viewer that keeps up (nothing queued, socket
 buffer under 64 KiB) gets each message written synchronously, as python-websockets' ``broadcast``
 does, without a task switch per message. Otherwise the message goes to the viewer's bounded queue,
-drained by its own sender task with backpressure; offering a message never waits. When a queue is full the oldest message is
-dropped and counted (the freshest frame matters most for live animation); a viewer that keeps
-dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
+drained by its own sender task with backpressure; offering a message never waits. When a queue is
+full the oldest message is dropped and counted (the freshest frame matters most for live
+animation); a viewer that keeps dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
 python-websockets' broadcast guide, with drop-oldest instead of unbounded buffering.
 
 Every protocol breach raises :class:`server.errors.ProtocolViolation` inside that connection's
