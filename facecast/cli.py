@@ -15,11 +15,18 @@ import sys
 
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
-    "train": "facecast.commands.train",
-    "animate": "facecast.commands.animate",
-    "bench": "facecast.commands.bench",
-    "serve": "facecast.commands.serve",
     "demo": "facecast.commands.demo",
+    "serve": "facecast.commands.serve",
+    "view": "facecast.commands.view",
+    "record": "facecast.commands.record",
+    "animate": "facecast.commands.animate",
+    "render": "facecast.commands.render",
+    "rig": "facecast.commands.rig",
+    "corpus": "facecast.commands.corpus",
+    "extract": "facecast.commands.extract",
+    "train": "facecast.commands.train",
+    "eval": "facecast.commands.eval",
+    "bench": "facecast.commands.bench",
 }
 
 
@@ -40,7 +47,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    # Benchmarks forwarded to their own modules take options facecast does not know.
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        if not hasattr(args, "args"):
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
+        args.args = [*args.args, *extra]
     # Package error roots: a user-facing error prints one line, never a traceback.
     roots: list[type[BaseException]] = []
     for mod, name in (

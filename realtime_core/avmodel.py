@@ -20,7 +20,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -40,31 +40,36 @@ _FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "l
 @dataclass(frozen=True, kw_only=True, eq=False)
 class AvModel:
     """hmm: the joint HMM over ``[o_a; o_v]``; frontend: how o_a is computed;
-    cmvn_mean/cmvn_var: ``(n_ceps,)`` training statistics (CMVN warm start);
-    visual_names: names of the o_v dimensions; metadata: JSON-able training details."""
+    cmvn_mean/cmvn_var: ``(n_feat,)`` training statistics (CMVN warm start);
+    visual_names: names of the o_v dimensions; likelihood_scale: the audio-likelihood exponent
+    the live path uses (chosen on held-out data, see :class:`StreamConfig`);
+    metadata: JSON-able training details."""
 
     hmm: AvHmm
     frontend: FrontEndConfig
     cmvn_mean: np.ndarray
     cmvn_var: np.ndarray
     visual_names: tuple[str, ...] = VISUAL_PARAMS
+    likelihood_scale: float = 1.0
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.hmm.n_audio != self.frontend.audio_dim:
             raise ModelFormatError(
                 f"HMM audio dimension {self.hmm.n_audio} != front end's {self.frontend.audio_dim} "
-                f"((2 tc + 1) x n_ceps = {2 * self.frontend.tc + 1} x {self.frontend.n_ceps})"
+                f"((2 tc + 1) x n_feat = {2 * self.frontend.tc + 1} x {self.frontend.n_feat})"
             )
         if len(self.visual_names) != self.hmm.n_visual:
             raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.hmm.n_visual} visual dims")
         for name in ("cmvn_mean", "cmvn_var"):
             arr = np.asarray(getattr(self, name), dtype=np.float64)
-            if arr.shape != (self.frontend.n_ceps,) or not np.all(np.isfinite(arr)):
-                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_ceps},), got {arr.shape}")
+            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
+                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
             object.__setattr__(self, name, arr)
         if np.any(self.cmvn_var <= 0):
             raise ModelFormatError("cmvn_var must be positive")
+        if not 0 < self.likelihood_scale <= 1:
+            raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
 
     @cached_property
     def form(self) -> ConditionalForm:
@@ -80,13 +85,16 @@ class AvModel:
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
     def inverter(self, config: StreamConfig = StreamConfig()) -> StreamingInverter:
-        """A fresh streaming inverter."""
+        """A fresh streaming inverter (with the model's likelihood scale unless ``config`` sets one)."""
+        if config.likelihood_scale is None:
+            config = replace(config, likelihood_scale=self.likelihood_scale)
         return StreamingInverter(self.form, config=config)
 
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
-    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc}
+    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
+            "silence_floor_db": fe.silence_floor_db}
 
 
 def _frontend_from_json(d: dict) -> FrontEndConfig:
@@ -94,6 +102,9 @@ def _frontend_from_json(d: dict) -> FrontEndConfig:
         mfcc=MfccConfig(**d["mfcc"]),
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
         tc=int(d["tc"]),
+        energy=bool(d.get("energy", False)),
+        # Models written before the gate existed were trained without it.
+        silence_floor_db=d.get("silence_floor_db"),
     )
 
 
@@ -102,6 +113,7 @@ def encode_model(model: AvModel) -> bytes:
     config = {
         "frontend": _frontend_to_json(model.frontend),
         "visual_names": list(model.visual_names),
+        "likelihood_scale": model.likelihood_scale,
         "covariance_type": model.hmm.covariance_type,
         "n_audio": model.hmm.n_audio,
         "metadata": model.metadata,
@@ -150,6 +162,7 @@ def decode_model(data: bytes) -> AvModel:
             cmvn_mean=arrays["cmvn_mean"],
             cmvn_var=arrays["cmvn_var"],
             visual_names=tuple(config["visual_names"]),
+            likelihood_scale=float(config.get("likelihood_scale", 1.0)),
             metadata=config.get("metadata", {}),
         )
     except ModelFormatError:

@@ -3,11 +3,14 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-# System packages: espeak-ng (speech synthesis for corpora and the demo), ffmpeg (video I/O),
+# System packages: espeak-ng and Festival with three voices (speech synthesis for corpora and
+# the demo), ffmpeg (video I/O),
 # PortAudio (microphone via sounddevice), PulseAudio (a virtual microphone in tests),
-# Mesa EGL (headless moderngl rendering).
-apt_pkgs=(espeak-ng libespeak-ng1 ffmpeg libportaudio2 pulseaudio pulseaudio-utils
-          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv)
+# Mesa EGL (headless moderngl rendering), Chromium (the browser viewer's test) and Xvfb (a
+# display for the Python viewer's window test).
+apt_pkgs=(espeak-ng libespeak-ng1 festival festvox-kallpc16k festvox-kdlpc16k festvox-us-slt-hts ffmpeg
+          libportaudio2 pulseaudio pulseaudio-utils libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv
+          chromium xvfb)
 missing=()
 for p in "${apt_pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -24,10 +27,23 @@ if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
 stamp=.venv/.facecast-installed
-want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
+# Reinstall when the project metadata or the set of top-level packages changes (an editable
+# install only maps the packages that existed when it was made).
+want="$(cat pyproject.toml */__init__.py 2>/dev/null | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setup: installing Python packages"
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q -e '.[dev]'
   echo "$want" > "$stamp"
+fi
+
+# npm packages (package.json at the root: three.js served to the browser viewer, playwright-core for
+# its test): `npm ci` when the lock file changed since the last install.
+if command -v npm >/dev/null && [ -f package-lock.json ]; then
+  npm_want="$(cat package.json package-lock.json | sha256sum | cut -d' ' -f1)"
+  if [ ! -f node_modules/.facecast-installed ] || [ "$(cat node_modules/.facecast-installed)" != "$npm_want" ]; then
+    echo "setup: installing npm packages"
+    npm ci --no-audit --no-fund --loglevel=error
+    echo "$npm_want" > node_modules/.facecast-installed
+  fi
 fi

@@ -695,8 +695,16 @@ class FacecastServer:
         )
         return _response(HTTPStatus.OK, page.encode(), "text/html; charset=utf-8")
 
+    # Files of npm packages the browser viewer imports (its import map points at /vendor/three/).
+    _VENDOR = {"three": ("build/", "examples/jsm/")}
+
     def _static(self, path: str) -> Response:
         root = self.config.web_root
+        if path.startswith("/vendor/") and self.config.node_modules is not None:
+            package, _, rel = path[len("/vendor/"):].partition("/")
+            prefix = next((d for d in self._VENDOR.get(package, ()) if rel.startswith(d)), None)
+            if prefix is not None:  # root = the allowed folder itself, so ../ cannot leave it
+                root, path = self.config.node_modules / package / prefix, rel[len(prefix):]
         if root is not None:
             target = (root / path.lstrip("/")).resolve()
             if target.is_file() and root.resolve() in target.parents:

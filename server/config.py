@@ -23,7 +23,8 @@ class ServerConfig:
     sessions' per-frame work (0: on the event loop; see server.workers); viewer_socket_buffer_bytes: kernel send
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
-    (None: a generated index page listing the sessions)."""
+    (None: a generated index page listing the sessions); node_modules: npm packages directory from which
+    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -39,6 +40,7 @@ class ServerConfig:
     workers: int = 0
     viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
+    node_modules: Path | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -69,8 +71,9 @@ class ServerConfig:
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
-        if self.web_root is not None:
-            object.__setattr__(self, "web_root", Path(self.web_root))
+        for name in ("web_root", "node_modules"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, Path(getattr(self, name)))
 
     @classmethod
     def from_toml(cls, path: str | Path, **overrides: object) -> "ServerConfig":

@@ -33,7 +33,8 @@ class DemoConfig:
     """host/port: where the server listens (port 0: any free port); mic: listen to the default
     microphone instead of synthesised speech; mic_seconds: stop the microphone after this long
     (None: at Ctrl-C); sentences: what espeak-ng says; voice: espeak voice name (en-us, en, ...);
-    video: MP4 to write (None: no video); width/height: video size in pixels; web_root: served at /."""
+    video: MP4 to write (None: no video); width/height: video size in pixels; web_root: served at /;
+    node_modules: npm packages directory (three.js for the browser viewer, see ServerConfig)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -45,6 +46,7 @@ class DemoConfig:
     width: int = 640
     height: int = 480
     web_root: Path | None = None
+    node_modules: Path | None = None
 
     def __post_init__(self) -> None:
         if not self.sentences and not self.mic:
@@ -103,7 +105,8 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
     from server.sources import FileSource, MicConfig, MicSource
 
     server = FacecastServer(model, head=head, config=ServerConfig(host=config.host, port=config.port,
-                                                                   web_root=config.web_root))
+                                                                   web_root=config.web_root,
+                                                                   node_modules=config.node_modules))
     await server.start()
     loop = asyncio.get_running_loop()
     mic: MicSource | None = None

@@ -20,17 +20,14 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from training.params import PhonemeSegment
 from training.errors import AlignmentFormatError
 
 HTS_UNIT_S = 1e-7
 """HTS label time unit: 100 ns."""
 
 
-@dataclass(frozen=True)
-class Phone:
-    phoneme: str
-    start_s: float
-    end_s: float
+Phone = PhonemeSegment  # the shared timeline type (training.params)
 
 
 @dataclass(frozen=True)
@@ -197,3 +194,31 @@ def find_aligned_audio(root: str | Path) -> list[tuple[Path, Alignment]]:
         except AlignmentFormatError:
             continue  # e.g. a word tier or a VAD label file next to the real phone alignment
     return sorted(pairs.items(), key=lambda kv: str(kv[0]))
+
+
+def phones_from_words(words, *, voice, spellings: dict[str, str] | None = None) -> tuple[Phone, ...]:
+    """An approximate phone alignment from a word alignment: espeak-ng's phonemes of each word
+    (its own pauses dropped) stretched linearly over the word's interval.
+
+    words: [(start_s, end_s, word)]; "sil"/"sp"/"" words become a "_" pause.
+    voice: a :class:`training.espeak.Voice` (its language picks the espeak inventory).
+    spellings: how to say a word (e.g. GRID's letter "p" -> "pee").
+    Returns espeak-inventory phones (``inventory = f"espeak-{voice.language}"``).
+    """
+    from training.espeak import synthesizer
+
+    synth = synthesizer()
+    out: list[Phone] = []
+    for a, b, w in words:
+        if w.lower() in ("sil", "sp", "") or b <= a:
+            out.append(Phone("_", a, b))
+            continue
+        text = (spellings or {}).get(w, w)
+        ph = [p for p in synth.synthesize(text, voice).phonemes if not p.phoneme.startswith("_")]
+        if not ph:
+            out.append(Phone("_", a, b))
+            continue
+        t0, t1 = ph[0].start_s, ph[-1].end_s
+        scale = (b - a) / (t1 - t0)
+        out += [Phone(p.phoneme, a + (p.start_s - t0) * scale, a + (p.end_s - t0) * scale) for p in ph]
+    return tuple(out)

@@ -23,8 +23,8 @@ Theory of operation
    time (lip rounding is anticipated over several consonants). ``c`` shapes the peak (1 gives
    the original exponential).
 3. **Hard constraints.** (a) Bilabial stops and nasals (/p b m/) close the lips: mouth_open is
-   multiplied by a gate that is exactly 0 over the closure core (the segment, at least one
-   frame wide, centred on the segment centre) and rises back to 1 with a raised-cosine ramp of
+   multiplied by a gate that is exactly 0 over the closure core (the central 60 % of the
+   segment, widened to at least one frame period so a frame always falls inside) and rises back to 1 with a raised-cosine ramp of
    ``closure_ramp_s``; so the closure frame reads exactly 0. (b) Silence is the neutral pose:
    all four parameters are multiplied by an envelope that is exactly 0 inside pauses (farther
    than ``silence_ramp_s`` from speech) and before/after the utterance, with raised-cosine
@@ -34,15 +34,19 @@ Theory of operation
    ``lead_s`` (default 33 ms, one frame) earlier.
 
 Everything is pure numpy; a timeline of S segments and n frames costs O(S n).
-The targets are first-guess phonetics (lip and jaw positions from the visual-speech
-literature, scaled to IOD units so an open /a/ opens ~0.33 IOD) and are meant to be tuned
-against the video tracks of :mod:`training.video`.
+The targets are phonetics first (lip and jaw positions from the visual-speech literature,
+scaled to IOD units so an open /a/ opens ~0.33 IOD), then nudged against a real lip track:
+GRID clip ``id2_vcd_swwp2s`` measured by :mod:`training.video`, with phone times from its word
+alignment (espeak's phonemes of each word stretched over the word). That raised the close and
+mid vowels' opening (the speaker's /i: u: E/ open 0.10-0.20 IOD) and made /t d n l s z/ yield
+the jaw to their vowels (lower alpha); r(mouth_open) over the speech went 0.68 -> 0.72. One
+clip is thin evidence: tune further as more aligned video arrives.
 """
 
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -100,9 +104,9 @@ CLASSES: dict[str, ArticulatoryClass] = {
     # dental /T D/: tongue tip between the teeth, small jaw opening
     "dental": _cls((0.005, 0.015, 0.06, 0.0), _CONS_LIPS_WEAK, (25, 25)),
     # alveolar stops/nasal/lateral/tap: jaw fairly high, lips free
-    "alveolar": _cls((0.0, 0.015, 0.05, 0.0), _CONS_LIPS_WEAK, (25, 25)),
+    "alveolar": _cls((0.0, 0.015, 0.06, 0.0), (0.25, 0.25, 0.5, 0.25), (25, 25)),
     # sibilants /s z/: teeth nearly together (jaw high), lips slightly spread
-    "sibilant": _cls((0.005, 0.025, 0.025, -0.005), (0.4, 0.4, 1.5, 0.3), (25, 25)),
+    "sibilant": _cls((0.005, 0.025, 0.025, -0.005), (0.4, 0.4, 0.8, 0.3), (25, 25)),
     # postalveolars /S Z tS dZ/: lips protruded and rounded, corners down
     "postalveolar": _cls((0.02, -0.05, 0.04, 0.015), (1.2, 1.5, 1.5, 1.0), (20, 20)),
     # velars /k g N x/: jaw moderately open, lips free
@@ -116,9 +120,9 @@ CLASSES: dict[str, ArticulatoryClass] = {
     # /j/: spread lips, high jaw
     "palatal": _cls((0.0, 0.04, 0.04, -0.01), (0.6, 1.0, 0.8, 0.6), (22, 22)),
     # vowels. Rounding (lip_stretch < 0) gets low theta: anticipated across consonants.
-    "close_front": _cls((0.005, 0.065, 0.07, -0.02), (1, 1.2, 1, 1), (14, 14)),          # i: i I
-    "near_close_front": _cls((0.005, 0.05, 0.10, -0.015), (1, 1, 1, 1), (15, 15)),      # I
-    "mid_front": _cls((0.01, 0.05, 0.17, -0.015), (1, 1, 1, 1), (14, 14)),               # e E
+    "close_front": _cls((0.005, 0.065, 0.10, -0.02), (1, 1.2, 1, 1), (14, 14)),          # i: i I
+    "near_close_front": _cls((0.005, 0.05, 0.12, -0.015), (1, 1, 1, 1), (15, 15)),      # I
+    "mid_front": _cls((0.01, 0.05, 0.19, -0.015), (1, 1, 1, 1), (14, 14)),               # e E
     "open_front": _cls((0.015, 0.035, 0.30, -0.01), (1, 1, 1.5, 1), (12, 12)),           # ae a
     "open_central": _cls((0.015, 0.02, 0.33, -0.005), (1, 1, 1.5, 1), (12, 12)),         # a (es) A:
     "open_back": _cls((0.01, -0.015, 0.30, 0.005), (1, 1, 1.5, 1), (12, 12)),            # 0 AA
@@ -127,8 +131,8 @@ CLASSES: dict[str, ArticulatoryClass] = {
     "open_mid_central": _cls((0.01, 0.01, 0.20, 0.0), (1, 1, 1, 1), (14, 14)),           # V AH
     "rhotic_vowel": _cls((0.01, -0.03, 0.12, 0.01), (1, 1, 1, 1), (14, 14)),             # 3: ER
     "mid_back_round": _cls((0.01, -0.065, 0.17, 0.02), (1, 1.5, 1, 1), (10, 12)),        # o
-    "close_back_round": _cls((0.015, -0.09, 0.07, 0.025), (1, 2.0, 1, 1), (9, 12)),      # u: u
-    "near_close_back_round": _cls((0.01, -0.06, 0.10, 0.015), (1, 1.5, 1, 1), (11, 13)),  # U
+    "close_back_round": _cls((0.015, -0.09, 0.09, 0.025), (1, 2.0, 1, 1), (9, 12)),      # u: u
+    "near_close_back_round": _cls((0.01, -0.06, 0.11, 0.015), (1, 1.5, 1, 1), (11, 13)),  # U
 }
 
 

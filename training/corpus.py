@@ -21,6 +21,7 @@ interrupted build never leaves a half-written file under its final name. Only JS
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
@@ -31,18 +32,20 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from facecast.files import atomic_write_bytes
 from training.errors import (
+    ConfigError,
     CorpusFormatError,
     NotAudioError,
     SilentAudioError,
     TruncatedFileError,
     WrongSampleRateError,
 )
-from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
+from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1
-SOURCES = ("espeak", "real", "video")
+SOURCES = ("espeak", "festival", "real", "video")
 ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
 """Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
 
@@ -52,11 +55,7 @@ SILENCE_PEAK = 1e-4
 CSV_HEADER = "t," + ",".join(PARAM_NAMES)
 
 
-@dataclass(frozen=True)
-class PhonemeRecord:
-    phoneme: str
-    start_s: float
-    end_s: float
+PhonemeRecord = PhonemeSegment  # the shared timeline type (training.params)
 
 
 @dataclass(frozen=True)
@@ -86,16 +85,6 @@ class Utterance:
 
 
 # --------------------------------------------------------------------------- atomic writes
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def to_int16(samples: np.ndarray) -> np.ndarray:
@@ -106,22 +95,20 @@ def to_int16(samples: np.ndarray) -> np.ndarray:
 def write_wav(path: Path, samples: np.ndarray, rate_hz: int) -> None:
     """Atomically write mono 16-bit PCM. ``samples``: (n,) int16, or float in [-1, 1]."""
     pcm = samples if samples.dtype == np.int16 else to_int16(samples)
-    import io
-
     buf = io.BytesIO()
     with wave.open(buf, "wb") as w:
         w.setnchannels(1)
         w.setsampwidth(2)
         w.setframerate(int(rate_hz))
         w.writeframes(pcm.astype("<i2").tobytes())
-    _atomic_write_bytes(Path(path), buf.getvalue())
+    atomic_write_bytes(Path(path), buf.getvalue())
 
 
 def format_params_csv(params: np.ndarray) -> str:
     """CSV text of a (n_frames, 4) track with the time column t = k/30 (6 decimals)."""
     params = np.asarray(params, dtype=np.float64)
     if params.ndim != 2 or params.shape[1] != N_PARAMS:
-        raise ValueError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
+        raise ConfigError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
     lines = [CSV_HEADER]
     for k, row in enumerate(params):
         lines.append(f"{k / FPS:.6f}," + ",".join(f"{v:.6f}" for v in row))
@@ -129,7 +116,7 @@ def format_params_csv(params: np.ndarray) -> str:
 
 
 def write_json(path: Path, obj) -> None:
-    _atomic_write_bytes(Path(path), (json.dumps(obj, indent=1, ensure_ascii=False) + "\n").encode("utf-8"))
+    atomic_write_bytes(Path(path), (json.dumps(obj, indent=1, ensure_ascii=False) + "\n").encode("utf-8"))
 
 
 def write_utterance(
@@ -153,16 +140,16 @@ def write_utterance(
     added to the manifest entry (e.g. the augmentation drawn).
     """
     if source not in SOURCES:
-        raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
+        raise ConfigError(f"source must be one of {SOURCES}, got {source!r}")
     if sample_rate_hz not in ACCEPTED_RATES_HZ:
-        raise ValueError(f"sample rate {sample_rate_hz} Hz is not one of {ACCEPTED_RATES_HZ}")
+        raise ConfigError(f"sample rate {sample_rate_hz} Hz is not one of {ACCEPTED_RATES_HZ}")
     duration = len(samples) / sample_rate_hz
     want = n_frames_for(duration)
     if params.shape != (want, N_PARAMS):
-        raise ValueError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
+        raise ConfigError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
     folder = Path(corpus_dir) / utt_id
     write_wav(folder / "audio.wav", samples, sample_rate_hz)
-    _atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
+    atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
     write_json(
         folder / "phonemes.json",
         [{"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)} for p in phonemes],

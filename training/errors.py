@@ -60,3 +60,7 @@ class SynthesisError(TrainingError):
 
 class MissingDependencyError(TrainingError):
     """An optional dependency (e.g. mediapipe for video) or tool (ffmpeg) is not installed."""
+
+
+class NotVideoError(FileProblem):
+    """The file is not a readable video (no video stream, unknown format)."""

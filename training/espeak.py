@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from training.params import PhonemeSegment
 from training.errors import ConfigError, SynthesisError
 
 LIBRARY = "libespeak-ng.so.1"
@@ -146,13 +147,6 @@ class Voice:
         return f"{self.espeak_name}@r{self.rate_wpm}p{self.pitch}"
 
 
-@dataclass(frozen=True)
-class PhonemeSegment:
-    """One phoneme of a timeline: espeak mnemonic (or ARPAbet label) over [start_s, end_s)."""
-
-    phoneme: str
-    start_s: float
-    end_s: float
 
 
 @dataclass(frozen=True)
@@ -211,6 +205,8 @@ class EspeakSynthesizer:
         if rate <= 0:
             raise SynthesisError(f"espeak_Initialize failed (returned {rate}); is espeak-ng-data installed?")
         self._lib = lib
+        self._libc = ctypes.CDLL(None)  # the process's C library: srand() for espeak's noise
+        self._libc.srand.argtypes = [ctypes.c_uint]
         self.sample_rate_hz = int(rate)
         self._chunks: list[np.ndarray] = []
         self._events: list[tuple[int, str]] = []  # (sample index, phoneme or "" for a boundary)
@@ -232,15 +228,22 @@ class EspeakSynthesizer:
             i += 1
         return 0
 
-    def synthesize(self, text: str, voice: Voice) -> Synthesis:
+    def synthesize(self, text: str, voice: Voice, *, noise_seed: int | None = None) -> Synthesis:
         """Speak ``text`` with ``voice``; returns int16 samples and the phoneme timeline.
 
+        noise_seed: if given, seeds the C library's ``rand()``, which espeak's wave generator
+            uses for frication/aspiration noise. Note that espeak also carries waveform state
+            (glottal phase, echo buffer) from one call to the next, so bit-identical output
+            needs the same sequence of calls in a freshly loaded library: a fresh process
+            (see :mod:`training.build_corpus`).
         Raises SynthesisError if espeak rejects the voice or produces no audio.
         """
         if not text.strip():
             raise ConfigError("cannot synthesise empty text")
         with self._lock:
             lib = self._lib
+            if noise_seed is not None:
+                self._libc.srand(ctypes.c_uint(noise_seed & 0xFFFFFFFF))
             if lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
                 raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
             # SetVoiceByName resets rate/pitch to the voice's defaults, so set them after it.

@@ -12,7 +12,7 @@ axis after head pose has been removed (see :mod:`training.video`).
     Upward movement of the upper-lip midpoint (outer contour, philtrum side) relative to the
     neutral pose. Positive = lip moves up (towards the nose), as in /f v/ or a snarl; negative =
     the lip is pulled down or pressed, as in a bilabial closure.
-    Typical range -0.03 .. +0.06 IOD.
+    Typical range -0.05 .. +0.06 IOD.
 
 ``lip_stretch``
     Change of the mouth width: the distance between the two mouth corners minus its neutral
@@ -22,7 +22,8 @@ axis after head pose has been removed (see :mod:`training.video`).
 ``mouth_open``
     The inner-lip vertical gap: distance between the inner contours of the upper and lower lip
     at the midline, minus its neutral value (which is ~0 for a closed mouth). 0 = lips touch
-    (bilabial closure /p b m/ and rest); open vowels /a/ reach about 0.25-0.40 IOD.
+    (bilabial closure /p b m/ and rest); open vowels /a/ reach about 0.2-0.4 IOD (GRID talkers:
+    peaks 0.18-0.34).
     Typical range 0 .. 0.45 IOD. Never negative in the articulatory model (a gap cannot be
     negative); measured video tracks can dip slightly below 0 by noise.
 
@@ -33,7 +34,7 @@ axis after head pose has been removed (see :mod:`training.video`).
     higher than the middle (a smile, spread /i e/). Because it is measured against the midline,
     dropping the jaw alone lowers the midline and so makes the value slightly negative; the
     articulatory rules and the video measurement share this definition.
-    Typical range -0.05 .. +0.05 IOD.
+    Typical range -0.10 .. +0.05 IOD.
 
 Frame timing: 30 frames per second; frame ``k`` is the instant ``t = k / 30`` s exactly, and an
 utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
@@ -41,9 +42,14 @@ utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import math
 
+import numpy as np
+
 from realtime_core import VISUAL_PARAMS
+from training.errors import ConfigError
 
 FPS: int = 30
 """Video frame rate of every parameter track, frames per second."""
@@ -54,10 +60,10 @@ PARAM_NAMES: tuple[str, ...] = VISUAL_PARAMS
 N_PARAMS: int = len(PARAM_NAMES)
 
 TYPICAL_RANGES: dict[str, tuple[float, float]] = {
-    "upper_lip_raise": (-0.03, 0.06),
-    "lip_stretch": (-0.12, 0.10),
+    "upper_lip_raise": (-0.05, 0.06),
+    "lip_stretch": (-0.15, 0.12),
     "mouth_open": (0.0, 0.45),
-    "lip_corner_depress": (-0.05, 0.05),
+    "lip_corner_depress": (-0.10, 0.05),
 }
 """Typical range of each parameter in IOD units (for sanity checks and plots, not clipping)."""
 
@@ -68,12 +74,21 @@ def n_frames_for(duration_s: float) -> int:
     A tiny tolerance absorbs float error, so 1.0 s gives exactly 30 frames, not 31.
     """
     if duration_s < 0:
-        raise ValueError(f"duration must be >= 0 s, got {duration_s}")
+        raise ConfigError(f"duration must be >= 0 s, got {duration_s}")
     return int(math.ceil(duration_s * FPS - 1e-9))
 
 
-def frame_times(n_frames: int) -> "numpy.ndarray":  # noqa: F821
+def frame_times(n_frames: int) -> np.ndarray:
     """Times of frames 0..n-1 in seconds, shape (n_frames,), float64: ``k / 30``."""
-    import numpy as np
-
     return np.arange(n_frames, dtype=np.float64) / FPS
+
+
+@dataclass(frozen=True)
+class PhonemeSegment:
+    """One phoneme of a timeline: a label (espeak mnemonic, ARPAbet or IPA) over
+    ``[start_s, end_s)`` seconds from the audio's first sample. The one timeline type of
+    synthesis, alignments, corpora and the articulatory rules."""
+
+    phoneme: str
+    start_s: float
+    end_s: float

@@ -13,12 +13,10 @@ Evaluation runs the exact live path (:func:`realtime_core.pipeline.speech_to_par
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.signal
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
@@ -26,6 +24,7 @@ from realtime_core.features import CmvnConfig, FrontEndConfig, MfccConfig, extra
 from realtime_core.hmm import AvHmm, TrainConfig, TrainResult, baum_welch, init_model
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
+from training.augment import resample
 from training.corpus import Utterance
 from training.errors import ConfigError
 
@@ -37,44 +36,41 @@ caller draws progress and writes checkpoints."""
 @dataclass(frozen=True, kw_only=True)
 class TrainRecipe:
     """sample_rate_hz: model rate (inputs are resampled to it); n_ceps; tc (context);
-    hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed)."""
+    hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed);
+    energy: use c0 as a feature too; likelihood_scale: the live path's audio-likelihood
+    exponent, stored in the model."""
 
     sample_rate_hz: int = 16000
     n_ceps: int = 11
     tc: int = 3
+    energy: bool = True
     cmvn: CmvnConfig = field(default_factory=CmvnConfig)
     hmm: TrainConfig = field(default_factory=lambda: TrainConfig(n_states=16, n_mix=3, n_iter=25, tol=5e-4))
+    likelihood_scale: float = 0.1
 
     @property
     def frontend(self) -> FrontEndConfig:
         return FrontEndConfig(
-            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps), cmvn=self.cmvn, tc=self.tc
+            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps), cmvn=self.cmvn, tc=self.tc,
+            energy=self.energy,
         )
 
     def as_json(self) -> dict:
         h = self.hmm
         return {
-            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc,
+            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "energy": self.energy,
             "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
             "n_iter": h.n_iter, "tol": h.tol, "covar_prior_weight": h.covar_prior_weight,
-            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed,
+            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed, "likelihood_scale": self.likelihood_scale,
         }
 
 
-def resample(samples: np.ndarray, rate_from_hz: int, rate_to_hz: int) -> np.ndarray:
-    """``(n,)`` float at ``rate_from_hz`` -> ``(ceil-ish n * to / from,)`` float32 at ``rate_to_hz``."""
-    if rate_from_hz == rate_to_hz:
-        return np.asarray(samples, dtype=np.float32)
-    g = math.gcd(int(rate_from_hz), int(rate_to_hz))
-    return scipy.signal.resample_poly(samples, rate_to_hz // g, rate_from_hz // g).astype(np.float32)
-
-
 def cmvn_statistics(audio: Sequence[np.ndarray], frontend: FrontEndConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and variance ``(n_ceps,)`` of raw MFCCs over speech frames (level >= gate)."""
+    """Mean and variance ``(n_feat,)`` of raw features over speech frames (level >= gate)."""
     gate = frontend.cmvn.gate_db if frontend.cmvn is not None else -np.inf
     rows = []
     for x in audio:
-        ceps, level = raw_mfcc_with_level(x, frontend.mfcc)
+        ceps, level = raw_mfcc_with_level(x, frontend)
         rows.append(ceps[level >= gate])
     allc = np.concatenate(rows)
     if len(allc) < 10:
@@ -114,7 +110,7 @@ def train_av_model(
 
     def wrap(hmm: AvHmm, extra: dict) -> AvModel:
         return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=VISUAL_PARAMS,
-                       metadata={**meta, **extra})
+                       likelihood_scale=recipe.likelihood_scale, metadata={**meta, **extra})
 
     def progress(it: int, objective: float, hmm: AvHmm) -> None:
         if on_iteration is not None:

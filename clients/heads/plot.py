@@ -9,9 +9,21 @@ import numpy as np
 from realtime_core.face import Rig, face_frame
 
 
-def plot_control_points(rig: Rig, path: str | Path, *, title: str = "", credit: str = "") -> Path:
+def plot_control_points(
+    rig: Rig,
+    path: str | Path,
+    *,
+    title: str = "",
+    credit: str = "",
+    image: np.ndarray | None = None,
+    pixels: np.ndarray | None = None,
+) -> Path:
     """Frontal view (face frame) of the head vertices (grey), moving vertices (light blue), the
-    simple-model triangles on their control points (black) and the control points (red)."""
+    simple-model triangles on their control points (black) and the control points (red).
+
+    With ``image`` (h, w, 3) uint8, a render of the head, and ``pixels`` (n_simple, 2), the control
+    points' pixel positions in it, the triangles and points are drawn over the render instead.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -34,6 +46,21 @@ def plot_control_points(rig: Rig, path: str | Path, *, title: str = "", credit: 
     q = (v - origin) @ ax3.T / iod
     front = q[:, 2] > np.percentile(q[:, 2], 35)
     c = q[rig.control]
+    if image is not None and pixels is not None:
+        h, w = image.shape[:2]
+        fig, ax = plt.subplots(figsize=(w / 100, h / 100 + 0.4), dpi=100)
+        ax.imshow(image)
+        ax.triplot(pixels[:, 0], pixels[:, 1], rig.simple.triangles, color="k", lw=0.4, alpha=0.7)
+        ax.scatter(pixels[:, 0], pixels[:, 1], s=5, c="red", zorder=3)
+        ax.set_axis_off()
+        ax.set_title(title or f"{len(rig.control)} control points, {len(rig.moving)} moving vertices", fontsize=9)
+        if credit:
+            fig.text(0.01, 0.01, credit, fontsize=7, color="k")
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, bbox_inches="tight")
+        plt.close(fig)
+        return path
     fig, ax = plt.subplots(figsize=(6, 7), dpi=110)
     ax.scatter(q[front, 0], q[front, 1], s=0.3, c="0.75")
     mv = np.zeros(len(v), dtype=bool)

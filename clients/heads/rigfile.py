@@ -122,11 +122,16 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
 
     root = cache or cache_dir()
     path = root / f"builtin_rig_v{VERSION}.npz"
+    from realtime_core.face.rig import RIG_ALGORITHM
+
     if path.is_file():
         try:
-            return load_rig(path)
+            rig, mesh = load_rig(path)
+            if rig.meta.get("algorithm") == RIG_ALGORITHM:
+                return rig, mesh
         except RigFileError:
-            path.unlink()  # stale cache from an older build: rebuild below
+            pass
+        path.unlink()  # unreadable or built by an older algorithm: rebuild below
     head = load_builtin_head(root)
     rig, mesh = rig_head(head.mesh, None, head=head)
     save_rig(rig, mesh, path)

@@ -39,7 +39,8 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.simple import derive_simple_model, regional_shape_units
+from realtime_core.face.rig import recalibrate
+from realtime_core.face.simple import derive_simple_model, lip_contact_vertices, regional_shape_units
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthUpperUpLeft", "mouthUpperUpRight"),
@@ -47,20 +48,36 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("jawOpen",),
     ("mouthFrownLeft", "mouthFrownRight"),
 )
+WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
+ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
 REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
 
 
 @dataclass(frozen=True)
 class SimpleFace:
-    """The simple face model (built-in head coordinates), its landmark vertex per name, and the
-    built-in head vertex each simple vertex came from (n_s,)."""
+    """The simple face model (its own coordinates), its landmark vertex per name, the built-in head
+    vertex each simple vertex came from (n_s,) (empty for Candide-3) and the calibration groups."""
 
     model: FaceModel
     landmarks: dict[str, int]
     source: np.ndarray
+    groups: tuple[tuple[str, ...], ...] = MOUTH_GROUPS
+
+
+def candide_face(model: FaceModel) -> SimpleFace:
+    """Candide-3 as the simple model (the paper's choice): its landmarks, shape units and units."""
+    from realtime_core.face.candide import CANDIDE3_LANDMARKS, candide3_mouth_groups
+
+    return SimpleFace(
+        model=model,
+        landmarks=dict(CANDIDE3_LANDMARKS),
+        source=np.zeros(0, dtype=np.int64),
+        groups=candide3_mouth_groups(model),
+    )
 
 
 def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
+    """The :class:`MouthLandmarks` (vertex indices) among named landmarks (extra names ignored)."""
     return MouthLandmarks(**{k: int(names[k]) for k in MouthLandmarks.__dataclass_fields__})
 
 
@@ -80,8 +97,9 @@ def simple_face(head: BuiltinHead) -> SimpleFace:
     lm = head.landmarks
     frame = face_frame(v, mouth_landmarks(lm))
     mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]])
+    contact = lip_contact_vertices(v, head.targets["jawOpen"], frame, mouth_centre=mouth, candidates=head.part == 0)
     model, src = derive_simple_model(
-        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0
+        v, head.mesh.triangles, head.targets, frame, lm, mouth_centre=mouth, candidates=head.part == 0, extra=contact
     )
     where = {int(s): i for i, s in enumerate(src)}
     slm = {k: where[int(i)] for k, i in lm.items()}
@@ -119,10 +137,12 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
 
 
 def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, up: np.ndarray,
-              uvs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+              uvs: np.ndarray | None = None, *, through: int | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
-    indices) that stays closest to the straight corner-to-corner line is cut open. Interior path
-    vertices are duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
+    indices) that stays closest to the straight corner-to-corner line (passing through the vertex
+    ``through`` if given, e.g. the inner-lip midpoint) is cut open. Interior path vertices are
+    duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
     Returns new vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
@@ -139,13 +159,21 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = off_line(v[adj.row]) + off_line(v[adj.col])
     g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
-    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
-    if not np.isfinite(dist[right]):
-        raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
-    path = [right]
-    while path[-1] != left:
-        path.append(int(pred[path[-1]]))
-    path = path[::-1]
+    def leg(a_: int, b_: int) -> list[int]:
+        dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
+        if not np.isfinite(dist[b_]):
+            raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+        p_ = [b_]
+        while p_[-1] != a_:
+            p_.append(int(pred[p_[-1]]))
+        return p_[::-1]
+
+    if through is None or through in (left, right):
+        path = leg(left, right)
+    else:
+        path = leg(left, through) + leg(through, right)[1:]
+        if len(set(path)) != len(path):  # the two legs touched: fall back to one leg
+            path = leg(left, right)
     interior = path[1:-1]
     if not interior:
         return v, t, uvs, np.arange(len(v))
@@ -173,20 +201,28 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
 
 
 def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
-    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam)."""
-    adj = vertex_adjacency(len(vertices), triangles)
-    d = dijkstra(adj, indices=upper, unweighted=True, limit=max_hops)
-    return bool(np.isfinite(d[lower]))
+    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam).
+
+    Coincident vertices (texture seams) are welded first so a split seam does not hide the link.
+    """
+    from realtime_core.face.rig import weld
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    adj = vertex_adjacency(len(welded), canon[np.asarray(triangles, dtype=np.int64)])
+    d = dijkstra(adj, indices=int(canon[upper]), unweighted=True, limit=max_hops)
+    return bool(np.isfinite(d[canon[lower]]))
 
 
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     names = list(REQUIRED_LANDMARKS)
     idx = np.array([simple.landmarks[k] for k in names])
     dst = np.stack([points[k] for k in names])
-    reg = register(simple.model, idx, dst)
+    reg = register(simple.model, idx, dst, warp_radius=WARP_RADIUS)
     # Paper 001 Sec. 3.9: carry the units from the (scaled) generic model to the shaped one.
     generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
-    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles)
+    # Well-conditioned triangles only: with X = [x_i x_j x_k] measured from the model centre, small
+    # or edge-on triangles give wild maps (Candide-3 flipped its jaw drop with the default 1e6).
+    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND)
     units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
     return FaceModel(vertices=reg.model.vertices, triangles=reg.model.triangles, animation_units=units,
                      shape_units=reg.model.shape_units, name=simple.model.name)
@@ -199,15 +235,22 @@ def rig_head(
     landmark_source: str = "landmarks",
     config: RigConfig = RigConfig(),
     head: BuiltinHead | None = None,
+    simple: SimpleFace | None = None,
+    head_calibration: bool = True,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
-    Returns the rig and the mesh it animates (which differs from ``mesh`` when the lip seam was
-    cut). Raises MeshError / LandmarkError naming the file.
+    ``simple``: the simple face model to carry (default: the one derived from the built-in head;
+    :func:`candide_face` for Candide-3). Returns the rig and the mesh it animates (which differs
+    from ``mesh`` when the lip seam was cut). ``head_calibration``: correct the parameters by the
+    head's own measured response (:func:`realtime_core.face.rig.recalibrate`). Raises MeshError /
+    LandmarkError naming the file.
     """
     check_mesh(mesh)
-    head = head or load_builtin_head()
-    simple = simple_face(head)
+    if simple is None or mesh.name == "builtin":
+        head = head or load_builtin_head()
+    if simple is None:
+        simple = simple_face(head)
     if landmark_spec is None:
         if mesh.name != "builtin":
             raise LandmarkError(f"{mesh.name}: a landmarks JSON is required for heads other than the built-in one")
@@ -226,23 +269,31 @@ def rig_head(
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
+        if (points["nose_tip"] - frame.origin) @ frame.axes[2] <= 0:
+            raise LandmarkError(
+                f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
+                "'right' swapped? ('left' is the face's own left)"
+            )
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
-            v, t, uv, origin = cut_mouth(v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv)
+            v, t, uv, origin = cut_mouth(
+                v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
+            )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
             cut_copies = np.arange(len(mesh.vertices), len(v))
-            # The inner lower-lip landmark now lives on the copy below the cut.
-            lower = snap["lower_inner"]
-            copies = np.flatnonzero(origin == lower)
-            if len(copies) > 1:
-                snap["lower_inner"] = int(copies[-1])
+            # The lower inner-lip landmark now lives on its copy below the cut (when it was on it).
+            below = np.flatnonzero(origin[len(mesh.vertices) :] == snap["lower_inner"])
+            if len(below):
+                snap["lower_inner"] = int(len(mesh.vertices) + below[0])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
-        cal = calibrate_mouth(placed, slm, groups=MOUTH_GROUPS)
-        allowed = None if mesh.name != "builtin" else np.asarray(head.part == 0)
+        cal = calibrate_mouth(placed, slm, groups=simple.groups)
+        allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )
+        if head_calibration:
+            rig = recalibrate(rig, mouth_landmarks(snap))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name)

@@ -18,7 +18,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "frame; --mode batch runs batch HMM inversion (eq. 7 EM) over the whole file.",
     )
     p.add_argument("speech", type=Path, help="speech audio (WAV; other formats through ffmpeg)")
-    p.add_argument("--csv", type=Path, required=True, help="output CSV: t (s, frame k at k/30) and the 4 parameters")
+    p.add_argument("--csv", type=Path, default=None, help="output CSV: t (s, frame k at k/30) and the 4 parameters")
+    # Exports (clients/export); at least one of --csv/--glb/--json/--tsv is required.
+    p.add_argument("--glb", type=Path, default=None,
+                   help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it")
+    p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
+    p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
+    p.add_argument("--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)")
+    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
+                   help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
@@ -29,14 +37,35 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
     from training.audio_io import read_audio
-    from training.corpus import _atomic_write_bytes, format_params_csv
+    from facecast.files import atomic_write_bytes
+    from training.corpus import format_params_csv
     from training.modelfile import load_model
     from training.trainer import resample
 
+    outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
+    if not outputs:
+        raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
     model = load_model(args.model)
     samples, rate = read_audio(args.speech)
     x = resample(samples, rate, model.sample_rate_hz)
     params = speech_to_params(model, x, mode=args.mode, stream=StreamConfig(lag=args.lag))
-    _atomic_write_bytes(args.csv, format_params_csv(params).encode())
-    print(f"wrote {args.csv}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech}")
+    if args.csv is not None:
+        atomic_write_bytes(args.csv, format_params_csv(params).encode())
+    if args.glb or args.json or args.tsv:
+        from clients.export.curves import Track
+        from clients.export.files import export_track
+        from facecast.commands.render import load_head
+
+        track = Track(params=params)
+        head = load_head(args.head, None) if args.glb else None
+        arkit = None
+        if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
+            from clients.export.gltf import builtin_arkit_targets
+
+            arkit = builtin_arkit_targets()
+        for out in (args.glb, args.json, args.tsv):
+            if out is not None:
+                export_track(out, track, head=head, audio=(samples, rate), morphs=args.glb_morphs, arkit_targets=arkit)
+    for out in outputs:
+        print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech}")
     return 0

@@ -40,9 +40,11 @@ def run(args: argparse.Namespace) -> int:
     from training.modelfile import load_model
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
+    npm = Path(__file__).resolve().parents[2] / "node_modules"  # three.js for the browser viewer (npm ci)
     cfg = DemoConfig(host=args.host, port=args.port, mic=args.mic, mic_seconds=args.seconds,
                      sentences=tuple(args.text) if args.text else SENTENCES, voice=args.voice,
-                     video=None if args.no_video else args.out, web_root=web if web.is_dir() else None)
+                     video=None if args.no_video else args.out, web_root=web if web.is_dir() else None,
+                     node_modules=npm if npm.is_dir() else None)
     model = load_model(args.model)
     head = load_head(rig=args.rig)
     with threadpool_limits(1):

@@ -64,8 +64,10 @@ def run(args: argparse.Namespace) -> int:
     if web_root is None:
         default_web = Path(__file__).resolve().parents[2] / "clients" / "web"
         web_root = default_web if default_web.is_dir() else None
+    node_modules = Path(__file__).resolve().parents[2] / "node_modules"  # `npm ci` at the repo root (three.js)
     overrides = {"host": getattr(args, "host", None), "port": getattr(args, "port", None), "token": token,
-                 "web_root": web_root, "workers": getattr(args, "workers", None)}
+                 "web_root": web_root, "node_modules": node_modules if node_modules.is_dir() else None,
+                 "workers": getattr(args, "workers", None)}
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_model(args.model)

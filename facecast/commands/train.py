@@ -33,6 +33,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--covariance", choices=("full", "diag"), default="full", help="covariance structure")
     p.add_argument("--tc", type=int, default=3, help="co-articulation context frames on each side")
     p.add_argument("--rate", type=int, default=16000, help="model sample rate in Hz (audio is resampled)")
+    p.add_argument("--no-energy", dest="energy", action="store_false",
+                   help="leave c0 (log energy) out of the audio features (the paper's c1..c11 only)")
+    p.add_argument("--likelihood-scale", type=float, default=0.1,
+                   help="audio-likelihood exponent kappa stored in the model for the live path (0 < kappa <= 1; "
+                   "softens the over-confident posteriors of the 7 overlapping context frames)")
     p.add_argument("--iters", type=int, default=25, help="maximum Baum-Welch iterations")
     p.add_argument("--tol", type=float, default=5e-4, help="stop when the objective gains less per frame")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation and the split")
@@ -65,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"training on {len(utts)} utterances, {sum(u.duration_s for u in utts) / 60:.1f} min of audio")
 
     def recipe(n: int, m: int, cov: str, tc: int) -> TrainRecipe:
-        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, hmm=TrainConfig(
+        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, energy=args.energy, likelihood_scale=args.likelihood_scale,
+                           hmm=TrainConfig(
             n_states=n, n_mix=m, covariance_type=cov, n_iter=args.iters, tol=args.tol, seed=args.seed))
 
     if args.select:
@@ -76,15 +82,19 @@ def run(args: argparse.Namespace) -> int:
     start, done = None, 0
     if ckpt.exists():
         prev = load_model(ckpt)
-        if prev.metadata.get("recipe") == rec.as_json() and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
+        same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
+            k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")}
+        if same and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
             start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
             print(f"resuming from {ckpt} (iteration {done})")
     bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
 
     def on_iteration(it: int, objective: float, model) -> None:
+        # Called after every E-step; the first scores the starting model (no iteration yet).
         bar.set_postfix(objective=f"{objective:.4f}")
-        bar.update(1)
-        save_model(ckpt, model)
+        if it > 0:
+            bar.update(1)
+            save_model(ckpt, model)
 
     from dataclasses import replace
 
@@ -92,10 +102,7 @@ def run(args: argparse.Namespace) -> int:
     model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,
                                    metadata={"corpora": [str(c) for c in args.corpus]})
     bar.close()
-    from realtime_core.avmodel import AvModel
-
-    model = AvModel(hmm=model.hmm, frontend=model.frontend, cmvn_mean=model.cmvn_mean, cmvn_var=model.cmvn_var,
-                    metadata={**model.metadata, "recipe": rec.as_json()})
+    model = replace(model, metadata={**model.metadata, "recipe": rec.as_json()})
     save_model(args.output, model)
     ckpt.unlink(missing_ok=True)
     h = result.history

@@ -8,7 +8,7 @@
     rbf            Gaussian RBF map with GCV-chosen ridge (paper 001 Sec. 3.5)
     adaptation     per-vertex affine transfer of morph targets (paper 001 Sec. 3.9)
     simple         a simple face model sampled from a head with morph targets
-    rig            Rig: params (4,) -> head displacement with one sparse product
+    rig            Rig: params (4,) -> head displacement with one sparse product; head calibration
 """
 
 from realtime_core.face.candide import parse_wfm

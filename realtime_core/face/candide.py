@@ -109,3 +109,39 @@ def parse_wfm(text: str, *, name: str = "candide3") -> FaceModel:
     if vertices.shape != (n, 3):
         raise ModelFormatError(f"wfm VERTEX LIST: expected {n} rows of 3 numbers")
     return FaceModel(vertices=vertices, triangles=triangles, uvs=uvs, animation_units=au, shape_units=su, name=name)
+
+
+CANDIDE3_LANDMARKS: dict[str, int] = {
+    "upper_lip": 7, "lower_lip": 8, "upper_inner": 87, "lower_inner": 40,
+    "corner_left": 31, "corner_right": 64,
+    "eye_outer_left": 20, "eye_inner_left": 23, "eye_outer_right": 53, "eye_inner_right": 56,
+    "nose_tip": 5, "chin": 10,
+}
+"""Named landmark vertices of Candide-3 (both shipped variants share the vertex list)."""
+
+CANDIDE3_MOUTH_UNITS: tuple[str, ...] = ("upper lip raiser", "lip stretcher", "jaw drop", "lip corner depressor")
+"""Substrings (case-insensitive) naming the units that produce the four mouth parameters, in order."""
+
+
+def candide3_mouth_groups(model: FaceModel) -> tuple[tuple[str, ...], ...]:
+    """The calibration groups for a Candide-3 model: one animation unit per mouth parameter.
+
+    Matches :data:`CANDIDE3_MOUTH_UNITS` against the unit names ("AUV0 Upper lip raiser (AU10)" in
+    3.1.6, "Upper lip raiser" in the UV variant); raises ModelFormatError if one is missing.
+    """
+    groups = []
+    for key in CANDIDE3_MOUTH_UNITS:
+        hits = [n for n in model.animation_units if key in n.lower()]
+        if not hits:
+            raise ModelFormatError(f"Candide-3 model has no animation unit named like {key!r}")
+        groups.append((hits[0],))
+    return tuple(groups)
+
+
+def candide3_mouth_landmarks():
+    """The :class:`MouthLandmarks` of Candide-3 (from :data:`CANDIDE3_LANDMARKS`): 7/8 outer lip
+    midpoints, 87/40 the coincident inner-lip midpoints (upper/lower), 31/64 the lip corners (face's
+    left/right), 20/23 and 53/56 the outer/inner eye corners."""
+    from realtime_core.face.model import MouthLandmarks
+
+    return MouthLandmarks(**{k: CANDIDE3_LANDMARKS[k] for k in MouthLandmarks.__dataclass_fields__})

@@ -110,6 +110,10 @@ def interpolation_weights(
     best_gamma = np.zeros((n_h, 3))
     best_depth = np.full(n_h, np.inf)
     tol = config.barycentric_tolerance
+    # Length tolerance relative to the head's size: ties (seam twins, shared triangle edges) must
+    # resolve the same way whatever the head's scale and orientation.
+    eps = 1e-9 * max(float(np.ptp(h, axis=0).max()), 1e-300)
+    q_eps = 1e-9 * max(float(np.ptp(q, axis=0).max()), 1e-300)
     z2 = q[ctrl]  # (n_s, 2) control points in 2D
     z3 = h[ctrl]
     geo = None
@@ -118,7 +122,7 @@ def interpolation_weights(
     for t_i, (a, b, c) in enumerate(tri):
         lo = np.minimum(np.minimum(z2[a], z2[b]), z2[c])
         hi = np.maximum(np.maximum(z2[a], z2[b]), z2[c])
-        cand = np.flatnonzero(np.all((q >= lo - 1e-12) & (q <= hi + 1e-12), axis=1))
+        cand = np.flatnonzero(np.all((q >= lo - q_eps) & (q <= hi + q_eps), axis=1))
         if cand.size == 0:
             continue
         g = barycentric_2d(q[cand], z2[a], z2[b], z2[c])
@@ -129,12 +133,16 @@ def interpolation_weights(
         # Depth: distance from the vertex to the 3D point with the same barycentric coordinates.
         p3 = g @ np.stack([z3[a], z3[b], z3[c]])
         depth = np.linalg.norm(h[cand] - p3, axis=1)
-        better = (depth < best_depth[cand]) & (depth <= config.max_depth)
+        ok_depth = depth <= config.max_depth
         if geo is not None:
             tv = np.array([a, b, c])
             eu = np.linalg.norm(h[cand][:, None, :] - z3[tv][None, :, :], axis=2).min(1)
             gd = geo[tv][:, cand].min(0)
-            better &= gd <= config.max_geodesic_ratio * eu + 1e-12
+            ok_depth &= gd <= config.max_geodesic_ratio * eu + eps
+            # Score by path length too: on a cut seam both copies of a vertex sit on the shared
+            # edge of an upper and a lower triangle; each must take the one on its own side.
+            depth = depth + gd
+        better = (depth < best_depth[cand] - eps) & ok_depth
         sel = cand[better]
         best_tri[sel] = t_i
         best_gamma[sel] = g[better]
@@ -172,14 +180,26 @@ def interpolation_weights(
             anchor[loose] = cen[comp[loose]]
     if out.size and config.beta > 0:
         k = min(3, n_s)
-        d, nn = cKDTree(z3).query(anchor[out], k=k)
-        d = d.reshape(len(out), k)
-        nn = nn.reshape(len(out), k)
+        d, nn = cKDTree(z3).query(anchor[out], k=min(k + 2, n_s))
+        d = d.reshape(len(out), -1)
+        nn = nn.reshape(len(out), -1)
+        order = np.lexsort((nn, np.round(d / eps)), axis=-1)[:, :k] if d.size else np.zeros((0, k), int)
+        d = np.take_along_axis(d, order, axis=1)
+        nn = np.take_along_axis(nn, order, axis=1)
         if geo is not None:
             g_out = geo[:, out].T  # (n_out, n_s)
+            # Same gate as for triangles: a control point whose mesh path is much longer than the
+            # straight line (the other lip, reached round the mouth corner) is not a neighbour.
+            eu_out = np.empty_like(g_out)
+            for lo in range(0, len(out), 2048):  # bounded memory on big heads
+                eu_out[lo : lo + 2048] = np.linalg.norm(h[out[lo : lo + 2048]][:, None, :] - z3[None], axis=2)
+            gated = np.where(g_out <= config.max_geodesic_ratio * eu_out + eps, g_out, np.inf)
+            enough = np.isfinite(gated).sum(1) >= k
+            g_out[enough] = gated[enough]
             reach = np.isfinite(g_out).sum(1) >= k
             if reach.any():
-                gn = np.argsort(g_out[reach], axis=1)[:, :k]
+                # Stable sort of quantised distances: mirror-symmetric ties go to the lower index.
+                gn = np.argsort(np.round(g_out[reach] / eps), axis=1, kind="stable")[:, :k]
                 nn[reach] = gn
                 d[reach] = np.take_along_axis(g_out[reach], gn, axis=1)
         dm = np.maximum(d[:, :1], 1e-12)

@@ -4,7 +4,11 @@ Step 1 (Umeyama 1991): the similarity ``x -> s R x + t`` minimising the squared 
 corresponding landmark points (k >= 3, not collinear), closed form through the SVD of their
 cross-covariance. Step 2: the shape-unit weights sigma minimising
 ``|| s R (L0 + sum_j sigma_j SU_j[L]) + t - P ||^2 + ridge * |sigma|^2`` over the landmarks, which
-is linear in sigma (the similarity is re-estimated once after the shapes are fitted).
+is linear in sigma (the similarity is re-estimated once after the shapes are fitted). Step 3
+(optional, our addition in place of the paper's manual slider adjustment): the landmark residuals
+left after steps 1-2 are spread over the model by a Gaussian RBF warp (exact at the landmarks,
+fading over ``warp_radius`` times the landmarks' RMS radius), so lips, corners and chin land on
+their targets.
 """
 
 from __future__ import annotations
@@ -80,12 +84,14 @@ def register(
     *,
     shape_units: tuple[str, ...] | None = None,
     ridge: float = 1e-3,
+    warp_radius: float | None = None,
 ) -> Registration:
     """Place ``model`` on a head given landmark vertex indices (k,) of the model and their head points (k, 3).
 
     shape_units: the shape units to fit (default: all of the model's); ``ridge`` (dimensionless,
     relative to the landmark spread squared) keeps the weights small when landmarks underdetermine
-    them. Returns the placed model (neutral = shaped and transformed; units rotated and scaled).
+    them; ``warp_radius`` (None = no warp) enables step 3. Returns the placed model (neutral =
+    shaped, warped and transformed; units rotated and scaled, not adapted to the shape change).
     """
     idx = np.asarray(model_landmarks, dtype=np.int64)
     p = np.asarray(head_points, dtype=np.float64)
@@ -111,7 +117,19 @@ def register(
             shaped = base + (a @ weights).reshape(-1, 3)
             sim = fit_similarity(shaped, p)
     sw = {n: float(w) for n, w in zip(names, weights)}
-    shaped_model = model.with_neutral(model.deform(shape=sw))
+    shaped = model.deform(shape=sw)
+    if warp_radius is not None:
+        if not warp_radius > 0:
+            raise ConfigError(f"warp_radius must be > 0, got {warp_radius}")
+        target = (p - sim.translation) @ sim.rotation / sim.scale
+        resid = target - shaped[idx]  # (k, 3) model units
+        c = shaped[idx]
+        r2 = (warp_radius**2) * float(((c - c.mean(0)) ** 2).sum(1).mean())
+        k_ll = np.exp(-((c[:, None] - c[None]) ** 2).sum(-1) / r2)
+        coef = np.linalg.solve(k_ll + 1e-9 * np.eye(len(c)), resid)
+        k_vl = np.exp(-((shaped[:, None] - c[None]) ** 2).sum(-1) / r2)
+        shaped = shaped + k_vl @ coef
+    shaped_model = model.with_neutral(shaped)
     placed = shaped_model.transformed(sim.scale, sim.rotation, sim.translation)
     rms = float(np.sqrt(((placed.vertices[idx] - p) ** 2).sum(1).mean()))
     return Registration(similarity=sim, shape_weights=sw, model=placed, rms=rms)

@@ -12,7 +12,7 @@ is stored with S = kron(G, I_3) restricted to the head vertices that can move. F
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -20,9 +20,13 @@ import scipy.sparse as sp
 
 from realtime_core.errors import ConfigError
 from realtime_core.face.interpolation import InterpolationConfig, interpolation_weights
-from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration
+from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, MouthLandmarks
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
+
+
+RIG_ALGORITHM = 10
+"""Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
 @dataclass(frozen=True)
@@ -32,7 +36,8 @@ class RigConfig:
     method: "sec5" (projection + interpolation, paper 000) or "rbf" (paper 001 Sec. 3.5).
     projection_2d: "frontal" (face-frame x, y) or "uv" (the head's texture coordinates).
     beta: eq. 10 gain. max_depth: off-plane tolerance for eq. 8-9. fallback_radius: fade of eq. 10
-    (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1.
+    (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1,
+    with geodesic_walk "greedy" (the paper) or "shortest" and geodesic_slack (see projection).
     connectivity / max_geodesic_ratio: mesh-path rules of the interpolation (see interpolation).
     normalize_fallback: eq. 10 as a weighted mean (extension; use with beta = 1).
     """
@@ -44,6 +49,8 @@ class RigConfig:
     fallback_radius: float | None = 0.6
     rbf_radius: float | None = None
     geodesic_check: bool = True
+    geodesic_walk: Literal["greedy", "shortest"] = "greedy"
+    geodesic_slack: float = 0.3
     connectivity: bool = True
     normalize_fallback: bool = False
     max_geodesic_ratio: float = 2.0
@@ -52,6 +59,10 @@ class RigConfig:
     def __post_init__(self) -> None:
         if self.method not in ("sec5", "rbf"):
             raise ConfigError(f"method must be 'sec5' or 'rbf', got {self.method!r}")
+        if self.geodesic_walk not in ("greedy", "shortest"):
+            raise ConfigError(f"geodesic_walk must be 'greedy' or 'shortest', got {self.geodesic_walk!r}")
+        if not 0 <= self.geodesic_slack < 1:
+            raise ConfigError(f"geodesic_slack must be in [0, 1), got {self.geodesic_slack}")
         if self.projection_2d not in ("frontal", "uv"):
             raise ConfigError(f"projection_2d must be 'frontal' or 'uv', got {self.projection_2d!r}")
         InterpolationConfig(beta=self.beta, max_depth=self.max_depth, fallback_radius=self.fallback_radius)
@@ -89,10 +100,22 @@ class Rig:
             raise ConfigError("rig moving-vertex index out of range")
         object.__setattr__(self, "matrix", sp.csr_matrix(self.matrix, dtype=np.float32))
         object.__setattr__(self, "basis", np.ascontiguousarray(self.basis, dtype=np.float32))
+        # A dense map (the RBF method: every control point reaches every vertex) costs more as a
+        # sparse product than its folded (n_moving*3, 4) form; Sec. 5 rigs (3 per row) stay sparse.
+        rows = max(self.matrix.shape[0], 1)
+        folded = None
+        if self.matrix.nnz > 12 * rows:
+            folded = np.ascontiguousarray(self.matrix @ self.basis, dtype=np.float32)
+        object.__setattr__(self, "_folded", folded)
 
     def displacements(self, params: np.ndarray) -> np.ndarray:
-        """Head displacement (n_moving, 3) float32 (head units) of the moving vertices for params (4,) (IOD)."""
+        """Head displacement (n_moving, 3) float32 (head units) of the moving vertices for params (4,) (IOD).
+
+        One CSR product S @ (basis @ p); for dense (RBF) rigs the precomputed S @ basis instead.
+        """
         p = np.asarray(params, dtype=np.float32).reshape(4)
+        if self._folded is not None:
+            return (self._folded @ p).reshape(-1, 3)
         return (self.matrix @ (self.basis @ p)).reshape(-1, 3)
 
     def deformed(self, params: np.ndarray) -> np.ndarray:
@@ -126,6 +149,8 @@ def head_weights(
         candidates=config.candidates,
         geodesic_check=config.geodesic_check,
         allowed=allowed,
+        walk=config.geodesic_walk,
+        slack=config.geodesic_slack,
     )
     iod = frame.iod
     info = {
@@ -223,7 +248,7 @@ def build_rig(
     moving = np.flatnonzero(np.diff(g.indptr) > 0)
     s = sp.kron(g[moving], sp.identity(3, format="csr"), format="csr")
     m = dict(meta or {})
-    m.update(info, method=config.method, projection_2d=config.projection_2d, beta=config.beta, iod=frame.iod)
+    m.update(info, algorithm=RIG_ALGORITHM, method=config.method, projection_2d=config.projection_2d, beta=config.beta, iod=frame.iod)
     return Rig(
         neutral=np.asarray(head_vertices, dtype=np.float32),
         triangles=np.asarray(head_triangles, dtype=np.int32),
@@ -254,4 +279,43 @@ def weld(
         tag[np.asarray(keep_apart, dtype=np.int64), 0] = np.arange(1, len(keep_apart) + 1)
         key = np.hstack([key, tag])
     _, first, canon = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return canon.reshape(-1), v[first]
+    # Keep the file's vertex order (np.unique sorts by position, which a rotation would change).
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[canon.reshape(-1)], v[first[order]]
+
+
+def head_response(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05) -> np.ndarray:
+    """(4, 4) mouth parameters measured on the rigged head (its own landmarks, IOD units) per unit
+    of each requested parameter: column j = measure(deformed(probe * e_j)) / probe."""
+    from realtime_core.face.model import measure_mouth
+
+    landmarks.check(len(rig.neutral))
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    r = np.zeros((4, 4))
+    for j in range(4):
+        p = np.zeros(4)
+        p[j] = probe
+        r[:, j] = measure_mouth(v0, rig.deformed(p).astype(np.float64), landmarks) / probe
+    return r
+
+
+def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max_cond: float = 20.0) -> Rig:
+    """The rig with its basis corrected so the *head* shows the requested parameters.
+
+    The simple model is calibrated on its own geometry, but the interpolation (eq. 10's beta, the
+    fading) changes how far the head's own lips move. Measuring the head's response R (4, 4) with
+    :func:`head_response` and using basis @ R^-1 makes the parameters geometric on the target head
+    (to first order). Skipped (meta "head_calibration": "skipped ...") when R is ill-conditioned or
+    a diagonal entry is not positive (landmarks that do not see the motion).
+    """
+    r = head_response(rig, landmarks, probe=probe)
+    meta = dict(rig.meta)
+    meta["head_response"] = r.round(4).tolist()
+    cond = float(np.linalg.cond(r))
+    if not np.isfinite(cond) or cond > max_cond or np.any(np.diag(r) <= 0):
+        meta["head_calibration"] = f"skipped (condition {cond:.3g}, diagonal {np.diag(r).round(3).tolist()})"
+        return replace(rig, meta=meta)
+    meta["head_calibration"] = "applied"
+    return replace(rig, basis=rig.basis.astype(np.float64) @ np.linalg.inv(r), meta=meta)

@@ -88,13 +88,16 @@ def derive_simple_model(
     *,
     mouth_centre: np.ndarray,
     candidates: np.ndarray | None = None,
+    extra: np.ndarray | None = None,
     config: SimpleModelConfig = SimpleModelConfig(),
 ) -> tuple[FaceModel, np.ndarray]:
     """A simple face model and the head vertex (n_s,) each of its vertices was taken from.
 
     head_vertices (n_h, 3), head_triangles (m, 3), targets name -> (n_h, 3) displacement;
     frame: the head's face frame; landmark_vertices: name -> head vertex (always kept);
-    mouth_centre (3,) head units; candidates (n_h,) bool: vertices that may be sampled (skin).
+    mouth_centre (3,) head units; candidates (n_h,) bool: vertices that may be sampled (skin);
+    extra: head vertices to keep like landmarks (e.g. the lip contact lines, which sit just behind
+    the front-most surface).
     """
     h = np.asarray(head_vertices, dtype=np.float64)
     q = (h - frame.origin) @ frame.axes.T / frame.iod  # face frame, IOD units
@@ -106,6 +109,8 @@ def derive_simple_model(
     vis[ok] = frontal_visible(q[ok])
     lm_set = np.zeros(len(h), dtype=bool)
     lm_set[[int(x) for x in landmark_vertices.values()]] = True
+    extra_idx = [] if extra is None else [int(x) for x in extra]
+    lm_set[extra_idx] = True
     ok &= vis | lm_set  # the inner-lip landmarks sit just behind the lip surface
     pool = np.flatnonzero(ok)
     lm = [int(v) for v in landmark_vertices.values()]
@@ -113,7 +118,7 @@ def derive_simple_model(
     if missing:
         raise ConfigError(f"landmark vertices {missing} lie outside the face region")
     pos = {int(v): i for i, v in enumerate(pool)}
-    seeds = [pos[v] for v in lm]
+    seeds = [pos[v] for v in lm] + [pos[v] for v in extra_idx if v in pos]
     mc = (np.asarray(mouth_centre, dtype=np.float64) - frame.origin) @ frame.axes.T / frame.iod
     near_mouth = np.linalg.norm(q[pool] - mc, axis=1) <= config.mouth_radius
     mouth_pool = np.flatnonzero(near_mouth)
@@ -170,3 +175,50 @@ def regional_shape_units(vertices: np.ndarray, frame: FaceFrame, centres: Mappin
     units["face depth"] = step * q[:, 2:3] * z_ax
     units["face width"] = step * q[:, 0:1] * x_ax
     return units
+
+
+def lip_contact_vertices(
+    vertices: np.ndarray,
+    jaw: np.ndarray,
+    frame: FaceFrame,
+    *,
+    mouth_centre: np.ndarray,
+    candidates: np.ndarray | None = None,
+    gap: float = 0.04,
+    spacing: float = 0.07,
+) -> np.ndarray:
+    """Vertices along the two lip contact lines of a closed mouth, about ``spacing`` IOD apart.
+
+    vertices (n, 3); jaw (n, 3) a jaw-opening morph target (it moves the lower lip, not the upper);
+    a contact vertex is a skin vertex within 0.8 IOD of the mouth centre that lies within ``gap``
+    IOD of a vertex of the other lip. Returns head vertex indices (k,).
+    """
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    m = np.linalg.norm(np.asarray(jaw, dtype=np.float64), axis=1)
+    near = np.linalg.norm(v - np.asarray(mouth_centre), axis=1) <= 0.8 * frame.iod
+    if candidates is not None:
+        near &= np.asarray(candidates, dtype=bool)
+    if not near.any() or m[near].max() <= 0:
+        return np.zeros(0, dtype=np.int64)
+    rel = m / m[near].max()
+    upper = np.flatnonzero(near & (rel < 0.15))
+    lower = np.flatnonzero(near & (rel > 0.5))
+    if len(upper) == 0 or len(lower) == 0:
+        return np.zeros(0, dtype=np.int64)
+    d_u, _ = cKDTree(v[lower]).query(v[upper])
+    d_l, _ = cKDTree(v[upper]).query(v[lower])
+    out = []
+    for side in (upper[d_u <= gap * frame.iod], lower[d_l <= gap * frame.iod]):
+        if len(side) == 0:
+            continue
+        q = v[side] / frame.iod
+        chosen = [int(np.argmin(q[:, 0]))]
+        d = np.linalg.norm(q - q[chosen[0]], axis=1)
+        while d.max() > spacing:
+            i = int(np.argmax(d))
+            chosen.append(i)
+            d = np.minimum(d, np.linalg.norm(q - q[i], axis=1))
+        out.extend(side[chosen].tolist())
+    return np.array(sorted(set(out)), dtype=np.int64)

@@ -55,7 +55,7 @@ def mel_level_db(c0: np.ndarray, n_mels: int) -> np.ndarray:
 
     ``c0``: ``(k,)`` -> ``(k,)`` dB (the mean log mel energy, in decibels).
     """
-    return (10.0 / np.log(10.0)) * np.asarray(c0) / np.sqrt(n_mels)
+    return c0 * (10.0 / np.log(10.0) / np.sqrt(n_mels))
 
 
 class RunningCmvn:

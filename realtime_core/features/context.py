@@ -57,10 +57,15 @@ class ContextStacker:
         """Rows ``self._next .. end - 1`` with replicated edges."""
         if end <= self._next or self._n == 0:
             return np.zeros((0, self.out_dim))
-        t = np.arange(self._next, end)
-        idx = np.clip(t[:, None] + np.arange(-self.tc, self.tc + 1)[None, :], 0, self._n - 1)
-        # Frame 0 is kept for the left edge only while rows near the start remain.
-        rows = self._buf[idx - self._buf_start].reshape(t.size, self.out_dim)
+        lo, hi = self._next - self.tc, end - 1 + self.tc
+        if lo >= 0 and hi <= self._n - 1:
+            # Away from the edges each row is a contiguous slice of the buffer.
+            b = lo - self._buf_start
+            rows = np.stack([self._buf[b + i : b + i + 2 * self.tc + 1].reshape(-1) for i in range(end - self._next)])
+        else:
+            t = np.arange(self._next, end)
+            idx = np.clip(t[:, None] + np.arange(-self.tc, self.tc + 1)[None, :], 0, self._n - 1)
+            rows = self._buf[idx - self._buf_start].reshape(t.size, self.out_dim)
         self._next = end
         keep_from = max(0, min(self._next - self.tc, self._n - 1))
         drop = keep_from - self._buf_start

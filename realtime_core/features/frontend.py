@@ -19,14 +19,23 @@ from realtime_core.features.mfcc import MfccConfig, MfccStream, as_float_samples
 
 @dataclass(frozen=True, kw_only=True)
 class FrontEndConfig:
-    """mfcc: the MFCC settings (``include_c0`` must be False: c0 is used for gating only).
+    """mfcc: the MFCC settings (``include_c0`` must be False: see ``energy``).
     cmvn: running-CMVN settings, or None for raw MFCCs.
     tc: co-articulation context on each side (3 -> 7 frames -> 77 dims with 11 ceps).
+    energy: also use c0 (log energy) as a feature, normalised by the running CMVN like the
+    others (the paper uses c1..c11 only; c0 carries loudness, which predicts mouth opening
+    in real speech). Each frame then has n_ceps + 1 values, c0 first.
+    silence_floor_db: frames whose level (dB, :func:`mel_level_db`; about dBFS + 2 for white
+    noise) is below this are replaced by the features of digital silence, so a quiet room's
+    hiss looks exactly like the silent pauses the model was trained on and the mouth stays
+    closed (None disables the gate).
     """
 
     mfcc: MfccConfig = field(default_factory=MfccConfig)
     cmvn: CmvnConfig | None = field(default_factory=CmvnConfig)
     tc: int = 3
+    energy: bool = False
+    silence_floor_db: float | None = -60.0
 
     def __post_init__(self) -> None:
         if self.mfcc.include_c0:
@@ -35,13 +44,14 @@ class FrontEndConfig:
             raise ConfigError(f"tc must be in 0..20, got {self.tc}")
 
     @property
-    def n_ceps(self) -> int:
-        return self.mfcc.n_ceps
+    def n_feat(self) -> int:
+        """Values per frame before stacking: n_ceps (+1 with ``energy``)."""
+        return self.mfcc.n_ceps + (1 if self.energy else 0)
 
     @property
     def audio_dim(self) -> int:
-        """Dimension of o_a,t: ``(2 tc + 1) * n_ceps``."""
-        return (2 * self.tc + 1) * self.mfcc.n_ceps
+        """Dimension of o_a,t: ``(2 tc + 1) * n_feat``."""
+        return (2 * self.tc + 1) * self.n_feat
 
     @property
     def delay_frames(self) -> int:
@@ -52,7 +62,7 @@ class FrontEndConfig:
 class FrontEnd:
     """``push(samples (n,)) -> (k, audio_dim) float64``; ``flush()`` -> the rest.
 
-    ``cmvn_mean``/``cmvn_var``: ``(n_ceps,)`` warm-start statistics (the model's training
+    ``cmvn_mean``/``cmvn_var``: ``(n_feat,)`` warm-start statistics (the model's training
     statistics); required when ``config.cmvn`` is not None.
     """
 
@@ -72,7 +82,10 @@ class FrontEnd:
             self._cmvn: RunningCmvn | None = RunningCmvn(config.cmvn, mean=cmvn_mean, var=cmvn_var)
         else:
             self._cmvn = None
-        self._ctx = ContextStacker(dim=mcfg.n_ceps, tc=config.tc)
+        self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
+        # Raw [c0, c1..] of digital silence (every mel band at the energy floor).
+        probe = MfccStream(replace(mcfg, include_c0=True))
+        self._silence = probe.push(np.zeros(mcfg.window_len))[0]
 
     def reset(self) -> None:
         self._mfcc.reset()
@@ -93,24 +106,29 @@ class FrontEnd:
         return np.concatenate([rows, self._ctx.flush()])
 
     def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
-        ceps = c0_ceps[:, 1:]
+        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+        if self.config.silence_floor_db is not None:
+            quiet = level < self.config.silence_floor_db
+            if quiet.any():
+                c0_ceps = np.where(quiet[:, None], self._silence, c0_ceps)
+        ceps = c0_ceps if self.config.energy else c0_ceps[:, 1:]
         if self._cmvn is None:
             return ceps
-        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
         return self._cmvn.push(ceps, level)
 
 
-def raw_mfcc_with_level(samples: np.ndarray, mfcc: MfccConfig) -> tuple[np.ndarray, np.ndarray]:
+def raw_mfcc_with_level(samples: np.ndarray, config: FrontEndConfig) -> tuple[np.ndarray, np.ndarray]:
     """Whole-utterance MFCCs and levels for computing CMVN training statistics.
 
-    Returns ``(ceps (T, n_ceps), level_db (T,))`` on the front end's frame grid.
+    Returns ``(ceps (T, n_feat), level_db (T,))`` on the front end's frame grid.
     """
+    mfcc = config.mfcc
     x = as_float_samples(samples)
     if x.size < mfcc.window_len:
         raise InvalidAudioError(f"audio too short: {x.size} samples < one window ({mfcc.window_len})")
     s = MfccStream(replace(mfcc, include_c0=True))
     rows = np.concatenate([s.push(x), s.flush()])
-    return rows[:, 1:], mel_level_db(rows[:, 0], mfcc.n_mels)
+    return (rows if config.energy else rows[:, 1:]), mel_level_db(rows[:, 0], mfcc.n_mels)
 
 
 def extract_features(

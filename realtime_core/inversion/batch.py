@@ -37,16 +37,19 @@ def _component_resp(gamma: np.ndarray, logc: np.ndarray, log_b: np.ndarray) -> n
         return (gamma[:, :, None] * np.exp(logc - log_b[:, :, None])).reshape(len(gamma), -1)
 
 
-def audio_posterior_estimate(form: ConditionalForm, oa: np.ndarray, *, smoothing: str = "forward-backward") -> np.ndarray:
+def audio_posterior_estimate(
+    form: ConditionalForm, oa: np.ndarray, *, smoothing: str = "forward-backward", likelihood_scale: float = 1.0
+) -> np.ndarray:
     """Visual estimate from audio-only posteriors: ``oa (T, Da) -> o_v (T, Dv)``.
 
     smoothing: "forward-backward" (offline: each frame sees the whole utterance) or
     "forward" (causal filtering: exactly the streaming path with lag 0).
+    likelihood_scale: exponent on the audio likelihoods (see :class:`StreamConfig`).
     """
     if smoothing not in ("forward-backward", "forward"):
         raise ConfigError(f"smoothing must be 'forward-backward' or 'forward', got {smoothing!r}")
     ll_a, cond = form.audio_terms(np.asarray(oa, dtype=np.float64))
-    logc = ll_a.reshape(len(oa), form.n_states, form.n_mix) + form.log_weights
+    logc = likelihood_scale * ll_a.reshape(len(oa), form.n_states, form.n_mix) + form.log_weights
     log_b = logsumexp(logc, axis=2)
     if smoothing == "forward":
         la, _ = log_forward(form.log_startprob, form.log_transmat, log_b)

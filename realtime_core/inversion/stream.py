@@ -39,16 +39,24 @@ from realtime_core.inversion.conditional import ConditionalForm
 @dataclass(frozen=True, kw_only=True)
 class StreamConfig:
     """lag: extra frames of fixed-lag smoothing (0 = pure filtering, lowest delay).
-    dtype: "float32" or "float64" for the per-frame matrix-vector product."""
+    dtype: "float32" or "float64" for the per-frame matrix-vector product.
+    likelihood_scale: exponent kappa on the audio likelihoods (None = the model's own, else
+    1). The 77 stacked dims share 7 overlapping frames, so the raw likelihoods are far
+    over-confident; kappa < 1 softens the posteriors, which then average several components'
+    regressions instead of jumping between them (the "acoustic scale" of speech recognisers).
+    """
 
     lag: int = 0
     dtype: str = "float32"
+    likelihood_scale: float | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.lag <= 100000:
             raise ConfigError(f"lag must be in 0..100000 frames, got {self.lag}")
         if self.dtype not in ("float32", "float64"):
             raise ConfigError(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if self.likelihood_scale is not None and not 0 < self.likelihood_scale <= 1:
+            raise ConfigError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
 
 
 class StreamingInverter:
@@ -58,15 +66,16 @@ class StreamingInverter:
         self.form = form
         self.config = config
         dt = np.dtype(config.dtype)
-        self._quad = np.ascontiguousarray(form.quad, dtype=dt)
+        kappa = 1.0 if config.likelihood_scale is None else config.likelihood_scale
+        self._quad = np.ascontiguousarray(form.quad * (-0.5 * kappa), dtype=dt)
         self._center = form.center.astype(dt)
         self._i0, self._i1 = np.triu_indices(form.n_audio)
         self._nq = self._i0.size
         self._feat = np.empty(self._nq + form.n_audio, dtype=dt)
         self._da, self._dv = form.n_audio, form.n_visual
         self._n, self._m = form.n_states, form.n_mix
-        # log c_jk - 0.5 * const_jk: the frame-independent part of each component's log-likelihood.
-        self._const = (-0.5 * form.quad0).reshape(self._n, self._m) + form.log_weights
+        # log c_jk - 0.5 kappa const_jk: the frame-independent part of each component's log-likelihood.
+        self._const = (-0.5 * kappa * form.quad0).reshape(self._n, self._m) + form.log_weights
         self._A = np.exp(form.log_transmat)
         self._start = np.exp(form.log_startprob)
         # Eq. 7 numerator: sum_c r_c Phi_c m_c(a) = (sum_c r_c G_c) a + sum_c r_c h_c with
@@ -121,7 +130,7 @@ class StreamingInverter:
         feat = self._feat
         np.multiply(a[self._i0], a[self._i1], out=feat[: self._nq])
         feat[self._nq :] = a
-        logc = (self._quad @ feat).reshape(self._n, self._m) * -0.5 + self._const
+        logc = (self._quad @ feat).reshape(self._n, self._m) + self._const
         # One global shift (not per state) keeps this to a handful of numpy calls per frame.
         e = np.exp(logc - logc.max())
         b = e.sum(axis=1)  # state likelihoods, all scaled by the same factor (N,)

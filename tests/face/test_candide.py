@@ -43,3 +43,21 @@ def test_bad_wfm_names_section():
         parse_wfm("# VERTEX LIST:\n1\n0 0 0\n")
     with pytest.raises(ModelFormatError, match="VERTEX LIST"):
         parse_wfm("# VERTEX LIST:\n3\n0 0 0\n# FACE LIST:\n0\n")
+
+
+def test_candide_uv_variant_calibration(shared_data):
+    from realtime_core.face import calibrate_mouth, measure_mouth
+    from realtime_core.face.candide import candide3_mouth_landmarks
+
+    m = parse_wfm(_read(shared_data, "candide3-uv-variant.wfm"))
+    lm = candide3_mouth_landmarks()
+    # Jaw drop by hand: vertex 40 (lower inner lip) drops 0.26 per unit, 87 stays; IOD = 0.6.
+    p = measure_mouth(m.vertices, m.deform({"Jaw drop": 1.0}), lm)
+    iod = np.linalg.norm(0.5 * (m.vertices[20] + m.vertices[23]) - 0.5 * (m.vertices[53] + m.vertices[56]))
+    assert p[2] == pytest.approx(0.26 / iod, rel=0.05)
+    cal = calibrate_mouth(
+        m, lm, groups=[("Upper lip raiser",), ("Lip stretcher",), ("Jaw drop",), ("Lip corner depressor",)]
+    )
+    target = np.array([0.02, 0.05, 0.15, -0.03])
+    moved = m.deform(cal.weights(target))
+    np.testing.assert_allclose(measure_mouth(m.vertices, moved, lm), target, atol=1e-9)

@@ -89,3 +89,22 @@ def test_fit_similarity_recovers_transform():
     np.testing.assert_allclose(s.apply(a), b, atol=1e-10)
     with pytest.raises(ConfigError, match="collinear"):
         fit_similarity(np.outer(np.arange(4.0), [1, 1, 0]), b[:4])
+
+
+def test_register_recovers_similarity_and_warp_hits_landmarks():
+    from realtime_core.face import register
+
+    m, _ = toy_face()
+    rng = np.random.default_rng(3)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    idx = np.arange(10)
+    dst = 2.0 * m.vertices @ q.T + np.array([1.0, 2.0, 3.0])
+    reg = register(m, idx, dst)
+    assert reg.similarity.scale == pytest.approx(2.0)
+    assert reg.rms < 1e-9
+    bent = dst + rng.normal(scale=0.05, size=dst.shape)  # a head whose proportions differ
+    plain = register(m, idx, bent)
+    warped = register(m, idx, bent, warp_radius=0.5)
+    assert plain.rms > 0.01
+    np.testing.assert_allclose(warped.model.vertices[idx], bent, atol=1e-6)

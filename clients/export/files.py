@@ -1,0 +1,90 @@
+"""Writing exports to disk: atomic files, the audio beside a .glb, the format chosen by suffix."""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+import wave
+from pathlib import Path
+
+import numpy as np
+
+from clients.export.curves import Track, csv_bytes, json_bytes
+from clients.export.errors import ExportError
+from clients.export.gltf import arkit_glb, head_glb
+from clients.export.rhubarb import tsv_bytes
+
+FORMATS = (".glb", ".csv", ".json", ".tsv")
+MORPHS = ("units", "arkit52")
+
+
+def write_atomic(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``:
+    a reader never sees a half-written file, an interrupted write leaves the old one."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
+
+
+def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
+    """Mono 16-bit PCM WAV of samples (n,) float in [-1, 1] (x 32768, the wire's int16 scale,
+    clipped) or int16 as is; rate_hz: samples per second."""
+    x = np.asarray(samples)
+    if x.ndim != 1:
+        raise ExportError(f"audio must be mono (n,), got shape {x.shape}")
+    pcm = x if x.dtype == np.int16 else np.clip(np.rint(x.astype(np.float64) * 32768.0), -32768, 32767)
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(int(rate_hz))
+        w.writeframes(np.asarray(pcm, dtype="<i2").tobytes())
+    return buf.getvalue()
+
+
+def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
+                 audio: tuple[np.ndarray, int] | None = None, morphs: str = "units",
+                 arkit_targets: dict[str, np.ndarray] | None = None) -> list[Path]:
+    """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
+    files written. head: (rig, HeadMesh), required for .glb; audio: (samples (n,) float or int16,
+    rate_hz) starting at the track's first frame, written as ``<stem>.wav`` beside a .glb or .json
+    (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
+    "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights."""
+    if morphs not in MORPHS:
+        raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in FORMATS:
+        raise ExportError(f"{p}: unknown export format {suffix!r} (use {', '.join(FORMATS)})")
+    written: list[Path] = []
+    wav_name = None
+    if audio is not None and suffix in (".glb", ".json"):
+        wav = p.with_suffix(".wav")
+        written.append(write_atomic(wav, wav_bytes(audio[0], audio[1])))
+        wav_name = wav.name
+    if suffix == ".glb":
+        if head is None:
+            raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
+        if morphs == "units":
+            data = head_glb(head[0], head[1], track, audio=wav_name)
+        elif arkit_targets is None:
+            raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
+        else:
+            data = arkit_glb(head[1], arkit_targets, track, audio=wav_name)
+    elif suffix == ".csv":
+        data = csv_bytes(track)
+    elif suffix == ".json":
+        data = json_bytes(track, audio=wav_name)
+    else:
+        data = tsv_bytes(track)
+    written.insert(0, write_atomic(p, data))
+    return written

@@ -1,0 +1,132 @@
+"""Rhubarb Lip Sync style mouth-shape cues from the four mouth parameters, as TSV for 2D tools.
+
+Rhubarb's shapes: A closed (P, B, M), B slightly open with the teeth together (most consonants),
+C open (EH, AE), D wide open (AA), E slightly rounded (AO, ER), F puckered (UW, OW, W), G upper
+teeth on the lower lip (F, V), H tongue raised (L), X idle (rest, pauses).
+
+Each frame's shape, from p = (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress) in
+inter-ocular distances (IOD), by the first rule that matches (thresholds: :class:`ShapeThresholds`,
+set against ``training.params.TYPICAL_RANGES``, e.g. mouth_open spans 0 .. 0.45 IOD):
+
+    mouth_open < closed (0.04):   A if upper_lip_raise <= -press (-0.01, lips pressed) else X
+    upper_lip_raise >= teeth_on_lip (0.03) and mouth_open < g_open (0.15):            G
+    lip_stretch <= -round (-0.06):  F if mouth_open < rounded_open (0.15) else E
+    mouth_open < b_open (0.12): B;   mouth_open < c_open (0.25): C;   otherwise D
+
+H is never chosen: the four parameters do not observe the tongue. Consecutive frames of one shape
+merge into one cue; a run shorter than ``min_cue_frames`` joins the cue before it (Rhubarb, too,
+avoids one-frame flicker). TSV: one ``start<TAB>shape`` line per cue, start in seconds with 2
+decimals, and a last ``end<TAB>X`` line (the mouth rests after the speech), as Rhubarb writes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from clients.export.curves import Track
+from clients.export.errors import ExportError
+from realtime_core import VISUAL_PARAMS
+
+SHAPES = "ABCDEFGHX"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ShapeThresholds:
+    """Thresholds of the rules in the module docstring, in IOD; min_cue_frames >= 1."""
+
+    closed: float = 0.04
+    press: float = 0.01
+    teeth_on_lip: float = 0.03
+    g_open: float = 0.15
+    round: float = 0.06
+    rounded_open: float = 0.15
+    b_open: float = 0.12
+    c_open: float = 0.25
+    min_cue_frames: int = 2
+
+    def __post_init__(self) -> None:
+        if not 0 < self.closed < self.b_open < self.c_open:
+            raise ExportError("thresholds must satisfy 0 < closed < b_open < c_open")
+        if not isinstance(self.min_cue_frames, int) or self.min_cue_frames < 1:
+            raise ExportError(f"min_cue_frames must be an integer >= 1, got {self.min_cue_frames!r}")
+
+
+@dataclass(frozen=True)
+class Cue:
+    """A mouth shape (one of SHAPES) from ``start_s`` (seconds) until the next cue."""
+
+    start_s: float
+    shape: str
+
+
+def frame_shapes(params: np.ndarray, th: ShapeThresholds = ShapeThresholds()) -> list[str]:
+    """params (F, 4) IOD in VISUAL_PARAMS order -> F shape letters by the documented rules."""
+    p = np.asarray(params, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != len(VISUAL_PARAMS):
+        raise ExportError(f"params must be (frames, {len(VISUAL_PARAMS)}), got {p.shape}")
+    out = []
+    for ulr, stretch, op, _cd in p:
+        if op < th.closed:
+            out.append("A" if ulr <= -th.press else "X")
+        elif ulr >= th.teeth_on_lip and op < th.g_open:
+            out.append("G")
+        elif stretch <= -th.round:
+            out.append("F" if op < th.rounded_open else "E")
+        elif op < th.b_open:
+            out.append("B")
+        elif op < th.c_open:
+            out.append("C")
+        else:
+            out.append("D")
+    return out
+
+
+def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
+    """The track's cues: runs of equal shapes, short runs merged into the previous cue."""
+    if track.names != VISUAL_PARAMS:
+        raise ExportError(f"mouth shapes need the parameters {VISUAL_PARAMS}, got {track.names}")
+    shapes = frame_shapes(track.params, th)
+    runs: list[list] = []  # [first frame, shape, length]
+    for k, s in enumerate(shapes):
+        if runs and runs[-1][1] == s:
+            runs[-1][2] += 1
+        else:
+            runs.append([k, s, 1])
+    merged: list[list] = []
+    for first, shape, length in runs:
+        if merged and (length < th.min_cue_frames or merged[-1][1] == shape):
+            merged[-1][2] += length  # too short to show, or equal to the cue it now follows
+        else:
+            merged.append([first, shape, length])
+    return [Cue(track.start_s + first / track.fps, shape) for first, shape, _ in merged]
+
+
+def tsv_bytes(track: Track, th: ShapeThresholds = ShapeThresholds()) -> bytes:
+    """Rhubarb TSV text (UTF-8) of the track's cues, ending with ``end<TAB>X``."""
+    cs = cues(track, th)
+    lines = [f"{c.start_s:.2f}\t{c.shape}" for c in cs]
+    end = track.start_s + track.duration_s
+    if not cs or cs[-1].shape != "X":
+        lines.append(f"{end:.2f}\tX")
+    return ("\n".join(lines) + "\n").encode("utf-8")
+
+
+def read_tsv(data: bytes) -> list[Cue]:
+    """Parse Rhubarb TSV (``start<TAB>shape`` lines); ExportError on a bad line or decreasing times."""
+    out: list[Cue] = []
+    for n, line in enumerate(data.decode("utf-8").splitlines(), 1):
+        if not line.strip():
+            continue
+        parts = line.split("\t")
+        if len(parts) != 2 or parts[1] not in SHAPES:
+            raise ExportError(f"TSV line {n}: expected '<seconds>\\t<one of {SHAPES}>', got {line!r}")
+        try:
+            t = float(parts[0])
+        except ValueError:
+            raise ExportError(f"TSV line {n}: bad time {parts[0]!r}") from None
+        if out and t <= out[-1].start_s:
+            raise ExportError(f"TSV line {n}: time {t} does not increase")
+        out.append(Cue(t, parts[1]))
+    return out

@@ -1,0 +1,147 @@
+"""Offline video: mouth parameters over time -> rendered frames -> MP4 with the speech muxed in.
+
+Parameters come from a CSV (``t, upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress``,
+seconds and IOD units, any rate; resampled linearly to the video rate) or, once the real-time core
+lands on this branch, from :func:`params_for_audio` (the hook to plug the speech->params model in).
+Frames are piped raw to ffmpeg (H.264, yuv420p, AAC audio, ``-shortest``); the MP4 is written to a
+temporary name next to the target and renamed when ffmpeg succeeds.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from clients.errors import RenderError
+from realtime_core import VISUAL_PARAMS
+
+
+def read_params_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Times (T,) seconds and parameters (T, 4) IOD from a CSV with header t + VISUAL_PARAMS."""
+    p = Path(path)
+    if not p.is_file():
+        raise RenderError(f"{p}: parameters file not found")
+    try:
+        with p.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise RenderError(f"{p}: cannot read CSV: {exc}") from exc
+    need = ("t",) + VISUAL_PARAMS
+    if not rows or any(c not in rows[0] for c in need):
+        have = list(rows[0]) if rows else []
+        raise RenderError(f"{p}: expected columns {list(need)}, got {have}")
+    try:
+        a = np.array([[float(r[c]) for c in need] for r in rows])
+    except (TypeError, ValueError) as exc:
+        raise RenderError(f"{p}: non-numeric value: {exc}") from exc
+    if not np.all(np.isfinite(a)) or np.any(np.diff(a[:, 0]) <= 0):
+        raise RenderError(f"{p}: values must be finite and times strictly increasing")
+    return a[:, 0], a[:, 1:]
+
+
+def resample(t: np.ndarray, params: np.ndarray, fps: float) -> np.ndarray:
+    """Parameters (T, 4) at times t (T,) -> (F, 4) at frames k / fps for k < F = floor(t[-1] * fps) + 1."""
+    n = int(np.floor(t[-1] * fps + 1e-9)) + 1
+    ft = np.arange(n) / fps
+    return np.stack([np.interp(ft, t, params[:, j]) for j in range(params.shape[1])], axis=1)
+
+
+def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.ndarray, float]:
+    """HOOK: speech -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
+
+    Uses the real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the
+    same computation as a live session) with the trained model loaded by
+    ``training.modelfile.load_model`` (``model`` None = its default). Those modules come from the
+    core/training branches; where they are missing this raises RenderError pointing to --params.
+    """
+    try:
+        from realtime_core.pipeline import speech_to_params
+        from training.audio_io import read_audio
+        from training.modelfile import load_model
+        from training.trainer import resample as resample_audio
+    except ImportError as exc:
+        raise RenderError(
+            f"{path}: speech -> parameters needs the real-time core's trained model, which is not available on "
+            f"this branch yet ({exc}); pass --params PARAMS.csv (columns t, {', '.join(VISUAL_PARAMS)})"
+        ) from exc
+    av = load_model(model)
+    samples, rate = read_audio(path)
+    params = speech_to_params(av, resample_audio(samples, rate, av.sample_rate_hz))
+    return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s
+
+
+def with_caption(image: np.ndarray, text: str) -> np.ndarray:
+    """The frame (h, w, 3) uint8 with ``text`` in small light type at the bottom left (e.g. a
+    licence credit); unchanged when text is empty."""
+    if not text:
+        return image
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(image)
+    ImageDraw.Draw(img).text((6, image.shape[0] - 14), text, fill=(225, 225, 225))
+    return np.asarray(img)
+
+
+@dataclass(frozen=True)
+class VideoConfig:
+    """fps: video frame rate; crf: H.264 quality (lower is better); ffmpeg: executable name/path."""
+
+    fps: float = 30.0
+    crf: int = 20
+    ffmpeg: str = "ffmpeg"
+
+
+def write_video(
+    frames_params: np.ndarray,
+    render_frame,
+    out: str | Path,
+    *,
+    size: tuple[int, int],
+    audio: str | Path | None = None,
+    png_dir: str | Path | None = None,
+    config: VideoConfig = VideoConfig(),
+) -> Path:
+    """Render one frame per row of frames_params (F, 4) with ``render_frame(params) -> (h, w, 3) uint8``
+    and encode them (plus ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
+    exe = shutil.which(config.ffmpeg)
+    if exe is None:
+        raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.stem}.tmp{out.suffix or '.mp4'}")
+    w, h = size
+    cmd = [exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}",
+           "-r", f"{config.fps}", "-i", "-"]
+    if audio is not None:
+        cmd += ["-i", str(audio), "-c:a", "aac", "-b:a", "128k", "-shortest"]
+    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(config.crf), "-movflags", "+faststart", str(tmp)]
+    if png_dir is not None:
+        Path(png_dir).mkdir(parents=True, exist_ok=True)
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdin is not None and proc.stderr is not None
+    try:
+        for k, p in enumerate(frames_params):
+            img = render_frame(p)
+            proc.stdin.write(np.ascontiguousarray(img).tobytes())
+            if png_dir is not None:
+                from PIL import Image
+
+                Image.fromarray(img).save(Path(png_dir) / f"frame_{k:05d}.png")
+        proc.stdin.close()
+        err = proc.stderr.read().decode(errors="replace")
+        rc = proc.wait()
+    except BrokenPipeError:
+        rc = proc.wait()
+        err = proc.stderr.read().decode(errors="replace")
+    if rc != 0:
+        if tmp.exists():
+            tmp.unlink()
+        raise RenderError(f"{out}: ffmpeg failed ({rc}): {err.strip()[-400:]}")
+    os.replace(tmp, out)
+    return out

@@ -1,0 +1,6 @@
+"""Watching and recording a live session from Python (``facecast view`` and ``facecast record``).
+
+    stream   connect as a viewer (waiting for the session to exist), collect frames and audio,
+             download the served head, lay audio and frames on one media timeline
+    video    render a recorded deltas stream offscreen (EGL) into an MP4 with the audio muxed in
+"""

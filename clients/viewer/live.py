@@ -1,0 +1,303 @@
+"""``facecast view`` with a window: the stream drawn live, its audio played in sync.
+
+Threads: the window (glfw, on the calling thread: GUI toolkits want the main thread) draws; a
+receiver thread runs its own asyncio loop, connects as a deltas viewer (again and again: when the
+session ends or the server restarts it waits for the session to come back, like the browser
+viewer) and hands every message over with its arrival time; PortAudio's callback thread plays.
+
+Sync is the browser viewer's scheme (clients/web/js/playout.js): one clock (``time.perf_counter``);
+frame of media time m is shown at ``m + offset``, fixed by the first frame's arrival plus a jitter
+buffer and moved later by a late frame; the audio callback asks which media time its buffer will be
+heard at (PortAudio's DAC time mapped to the same clock) and copies those samples, so the speech is
+delayed exactly like the frames. Drawing uses the offline renderer (offscreen) and copies each
+image into the window's framebuffer (a second, windowed moderngl context). Both contexts are GLX
+(the renderer's backend is forced to moderngl's default): Mesa refuses a GLX MakeCurrent in a
+process that has created EGL contexts (X error BadAccess), so one process uses one API.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import queue
+import threading
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from clients.errors import ClientError
+from clients.heads.mesh import HeadMesh
+from clients.render.renderer import HeadRenderer, RenderConfig
+from clients.viewer.stream import StreamConfig, connect_viewer
+from clients.viewer.video import framing
+from server import protocol as P
+
+
+@dataclass
+class LiveStats:
+    """What the window did: frames shown/received, index gaps (lost), frames skipped because a
+    newer one was due, timeline moves (resyncs), connections, audio blocks received and whether a
+    sound device played them, delivery delay median (ms, server send -> receipt)."""
+
+    shown: int = 0
+    received: int = 0
+    lost: int = 0
+    skipped: int = 0
+    resyncs: int = 0
+    connections: int = 0
+    audio_blocks: int = 0
+    audio_device: str | None = None
+    delivery_ms: list[float] = field(default_factory=list)
+
+
+class Playout:
+    """due(m) = m + offset (s, perf_counter clock); see the module docstring."""
+
+    def __init__(self, buffer_s: float) -> None:
+        self.buffer_s = buffer_s
+        self.offset: float | None = None
+        self.resyncs = 0
+
+    def arrive(self, media_time: float, arrival: float) -> float:
+        if self.offset is None:
+            self.offset = arrival - media_time + self.buffer_s
+        due = media_time + self.offset
+        if arrival > due + 0.001:
+            self.offset += arrival - due + self.buffer_s / 2
+            self.resyncs += 1
+            due = media_time + self.offset
+        return due
+
+
+class AudioOut:
+    """Plays relayed blocks at their due times through sounddevice (None device: silent)."""
+
+    def __init__(self, rate_hz: int, playout: Playout) -> None:
+        self.rate = rate_hz
+        self.playout = playout
+        self.lock = threading.Lock()
+        self.blocks: list[tuple[int, np.ndarray]] = []  # (first media sample, samples (n,) float32)
+        self.stream = None
+        self.device: str | None = None
+        self._clock_delta = 0.0  # stream clock - perf_counter
+
+    def open(self) -> None:
+        """Start the output stream on the default device; stays silent when there is none."""
+        self.error = ""
+        try:
+            import sounddevice as sd  # PortAudio is loaded here: OSError when it is missing
+        except (ImportError, OSError) as exc:
+            self.error = str(exc)
+            return
+        try:
+            info = sd.query_devices(kind="output")
+            self.stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
+                                          latency="low")
+            self.stream.start()
+            self._clock_delta = self.stream.time - time.perf_counter()
+            self.device = str(info["name"])
+        except (sd.PortAudioError, ValueError) as exc:  # no device, or no default output device
+            self.stream = None
+            self.error = str(exc)
+
+    def add(self, media_time: float, samples: np.ndarray) -> None:
+        with self.lock:
+            self.blocks.append((int(round(media_time * self.rate)), samples))
+            if len(self.blocks) > 400:  # ~8 s of 20 ms blocks: older ones have been played
+                del self.blocks[:100]
+
+    def reset(self) -> None:
+        with self.lock:
+            self.blocks.clear()
+
+    def _callback(self, out: np.ndarray, frames: int, t, status) -> None:
+        out.fill(0)
+        offset = self.playout.offset
+        if offset is None:
+            return
+        heard_at = t.outputBufferDacTime - self._clock_delta  # perf_counter time of out[0]
+        first = int(round((heard_at - offset) * self.rate))  # media sample heard then
+        with self.lock:
+            for start, block in self.blocks:
+                lo, hi = max(first, start), min(first + frames, start + len(block))
+                if hi > lo:
+                    out[lo - first:hi - first, 0] = block[lo - start:hi - start]
+
+    def close(self) -> None:
+        if self.stream is not None:
+            self.stream.stop()
+            self.stream.close()
+
+
+class _Receiver(threading.Thread):
+    """Connects, forwards ("desc", d) / ("msg", Message, arrival) / ("closed", code, reason) /
+    ("error", text) into ``inbox``; reconnects whenever the session ends or the server goes away;
+    :meth:`close` cancels it from another thread."""
+
+    def __init__(self, cfg: StreamConfig, inbox: queue.SimpleQueue) -> None:
+        super().__init__(name="facecast-view-rx", daemon=True)
+        self.cfg, self.inbox = cfg, inbox
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.task: asyncio.Task | None = None
+        self.ready = threading.Event()
+
+    def run(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        try:
+            self.task = self.loop.create_task(self._main())
+            self.ready.set()
+            self.loop.run_until_complete(self.task)
+        except asyncio.CancelledError:
+            pass
+        finally:
+            self.loop.close()
+
+    def close(self) -> None:
+        self.ready.wait(2)
+        if self.loop is not None and self.task is not None and not self.loop.is_closed():
+            try:
+                self.loop.call_soon_threadsafe(self.task.cancel)
+            except RuntimeError:  # the loop closed in between
+                pass
+        self.join(3)
+
+    async def _main(self) -> None:
+        cfg, inbox = self.cfg, self.inbox
+        while True:
+            try:
+                v = await connect_viewer(cfg)
+            except ClientError as exc:
+                inbox.put(("error", str(exc)))
+                await asyncio.sleep(0.5)
+                continue
+            inbox.put(("desc", v.description))
+            try:
+                async for m in v:
+                    inbox.put(("msg", m, time.perf_counter()))
+            finally:
+                await v.__aexit__(None, None, None)
+            inbox.put(("closed", v.close_code, v.close_reason))
+            await asyncio.sleep(0.2)
+
+
+def run_window(cfg: StreamConfig, mesh: HeadMesh, *, config: RenderConfig = RenderConfig(margin=1.25),
+               buffer_s: float = 0.08, duration_s: float | None = None, screenshot=None,
+               status=print) -> LiveStats:
+    """Open a window and show the session live until it is closed (or ``duration_s`` seconds after
+    the first frame); ``screenshot``: PNG path for the last frame shown. ClientError without a display."""
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ClientError("no display (DISPLAY is unset): use --record OUT.mp4, or open the server's URL in a browser")
+    try:
+        import glfw
+        import moderngl
+    except ImportError as exc:
+        raise ClientError(f"the live window needs glfw and moderngl: {exc}") from None
+    if not glfw.init():
+        raise ClientError("cannot open a window: glfw could not initialise the display")
+    stats = LiveStats()
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+    rx = _Receiver(cfg, inbox)
+    audio: AudioOut | None = None
+    renderer: HeadRenderer | None = None
+    last_error = None
+    try:
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.RESIZABLE, glfw.FALSE)  # the image is copied 1:1 into the window
+        win = glfw.create_window(config.width, config.height, f"facecast: {cfg.session}", None, None)
+        if not win:
+            raise ClientError("cannot open a window (no OpenGL 3.3 visual on this display)")
+        glfw.make_context_current(win)
+        glfw.swap_interval(0)  # frames are paced by their due times, not the monitor
+        wctx = moderngl.create_context()
+        screen_tex = wctx.texture((config.width, config.height), 3)
+        screen_fbo = wctx.framebuffer(color_attachments=[screen_tex])
+        neutral = np.asarray(mesh.vertices, dtype=np.float32)
+        moving = np.zeros(0, np.int64)
+        playout = Playout(buffer_s)
+        pending: list[tuple[float, P.Message]] = []
+        last_index = -1
+        first_shown: float | None = None
+        image = None
+        rx.start()
+        while not glfw.window_should_close(win):
+            glfw.poll_events()
+            while True:
+                try:
+                    item = inbox.get_nowait()
+                except queue.Empty:
+                    break
+                if item[0] == "desc":
+                    d = item[1]
+                    if (d.get("head") or {}).get("vertex_count") != len(neutral):
+                        raise ClientError("the server's head changed; restart facecast view")
+                    moving = np.asarray(d["head"]["moving_vertices"], dtype=np.int64)
+                    if renderer is None:
+                        c, ax, size = framing(neutral, moving)
+                        renderer = HeadRenderer(mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None))
+                        glfw.make_context_current(win)
+                    if audio is None and d.get("audio"):
+                        audio = AudioOut(int(d["audio"]["rate_hz"]), playout)
+                        audio.open()
+                        stats.audio_device = audio.device
+                        status(f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}")
+                    playout.offset, last_index = None, -1
+                    pending.clear()
+                    if audio is not None:
+                        audio.reset()
+                    stats.connections += 1
+                    status(f"facecast view: watching {cfg.session!r}")
+                elif item[0] == "msg":
+                    m, arrival = item[1], item[2]
+                    if m.kind == P.KIND_AUDIO:
+                        stats.audio_blocks += 1
+                        if audio is not None:
+                            audio.add(m.media_time, m.values)
+                        continue
+                    if last_index >= 0 and m.index > last_index + 1:
+                        stats.lost += m.index - last_index - 1
+                    last_index = m.index
+                    stats.received += 1
+                    stats.delivery_ms.append(1000 * (time.time() - m.send_time))
+                    pending.append((playout.arrive(m.media_time, arrival), m))
+                elif item[0] == "closed":
+                    status(f"facecast view: session closed ({item[1]} {item[2]}); waiting for it to come back")
+                elif item[0] == "error" and item[1] != last_error:
+                    last_error = item[1]
+                    status(f"facecast view: {item[1]}; retrying")
+            now = time.perf_counter()
+            show = None
+            while pending and pending[0][0] <= now:
+                if show is not None:
+                    stats.skipped += 1
+                show = pending.pop(0)[1]
+            if show is not None and renderer is not None:
+                v = neutral.copy()
+                v[moving] += show.values.reshape(-1, 3)
+                with renderer.ctx:
+                    image = renderer.render(v)
+                glfw.make_context_current(win)
+                screen_tex.write(np.ascontiguousarray(image[::-1]).tobytes())  # GL rows go bottom-up
+                wctx.copy_framebuffer(wctx.screen, screen_fbo)
+                glfw.swap_buffers(win)
+                stats.shown += 1
+                first_shown = first_shown or now
+            elif show is None:
+                glfw.wait_events_timeout(0.004)
+            if duration_s is not None and first_shown is not None and now - first_shown >= duration_s:
+                break
+        stats.resyncs = playout.resyncs
+        if screenshot is not None and image is not None:
+            from PIL import Image
+
+            Image.fromarray(image).save(screenshot)
+        return stats
+    finally:
+        rx.close()
+        if audio is not None:
+            audio.close()
+        if renderer is not None:
+            renderer.close()
+        glfw.terminate()

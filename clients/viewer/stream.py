@@ -1,0 +1,190 @@
+"""A viewer connection that collects one session: its description, frames and relayed audio.
+
+Frames and audio carry media times (seconds of the session's audio), so a recording is laid on one
+timeline: video frame i is session frame ``first + i`` (a frame the server dropped is replaced by
+the one before it, so the timeline never shifts) and the audio starts at the first frame's media
+time. Vertex deltas are kept as float16 (27 kB per frame for the built-in head: about 50 MB per
+minute; the wire's int16 already limits them to 1/32767 of the frame's peak), the few values of
+parameters and blendshapes as the float32 the wire carries, so exports equal the session exactly.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clients.client import ServerClosed, ViewerClient, http_get
+from clients.errors import ClientError
+from clients.heads.mesh import HeadMesh
+from server import protocol as P
+
+
+@dataclass(frozen=True, kw_only=True)
+class StreamConfig:
+    """url: the server (http://host:port); session: its name; kind: "params", "deltas" or
+    "blendshapes"; encoding: None = the kind's default; token: the shared secret, if any;
+    wait_s: how long to wait for the session to appear (0 = it must exist now); max_s: stop
+    after this many seconds of frames (None = until the session ends)."""
+
+    url: str
+    session: str
+    kind: str = "params"
+    encoding: str | None = None
+    token: str | None = None
+    wait_s: float = 10.0
+    max_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in P.VIEW_KINDS:
+            raise ClientError(f"kind must be one of {sorted(P.VIEW_KINDS)}, got {self.kind!r}")
+        if not P.SESSION_NAME.match(self.session):
+            raise ClientError(f"session name must match {P.SESSION_NAME.pattern}, got {self.session!r}")
+        if not (self.wait_s >= 0):
+            raise ClientError(f"wait_s must be >= 0 s, got {self.wait_s!r}")
+        if self.max_s is not None and not (self.max_s > 0):
+            raise ClientError(f"max_s must be > 0 s or None, got {self.max_s!r}")
+        if not self.url.startswith(("http://", "https://", "ws://", "wss://")):
+            raise ClientError(f"url must start with http:// or ws://, got {self.url!r}")
+
+
+@dataclass
+class Recording:
+    """What a viewer collected. description: the server's JSON; index (F,) int64 frame indices;
+    media_time (F,) s; values: F arrays (V,) per frame (V = description values_per_frame; float16
+    for vertex deltas, float32 otherwise);
+    audio: list of (media_time s, samples (n,) float32 in [-1, 1]); close_code/reason: how it ended."""
+
+    description: dict
+    index: list[int] = field(default_factory=list)
+    media_time: list[float] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)
+    audio: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    close_code: int | None = None
+    close_reason: str = ""
+
+    @property
+    def fps(self) -> float:
+        return float(self.description["fps"])
+
+    @property
+    def audio_rate_hz(self) -> int:
+        a = self.description.get("audio") or {}
+        return int(a.get("rate_hz", 16000))
+
+    def timeline(self) -> tuple[np.ndarray, int]:
+        """(frames (N, V) float32, first index): one row per frame index from the first to the last
+        received, gaps (dropped frames) filled with the previous frame."""
+        if not self.index:
+            raise ClientError("the recording has no frames")
+        idx = np.asarray(self.index, dtype=np.int64)
+        first = int(idx[0])
+        rows = idx - first
+        # For each timeline slot, the last received frame at or before it.
+        slot_to_row = np.searchsorted(rows, np.arange(rows[-1] + 1), side="right") - 1
+        return np.asarray(self.values, dtype=np.float32)[slot_to_row], first
+
+    def audio_track(self, start_s: float, n_frames: int) -> np.ndarray:
+        """(n,) float32 samples covering ``n_frames`` frames from media time ``start_s``: each block
+        placed at its media time (silence where nothing arrived)."""
+        rate = self.audio_rate_hz
+        n = int(round(n_frames / self.fps * rate))
+        out = np.zeros(n, dtype=np.float32)
+        for t, block in self.audio:
+            at = int(round((t - start_s) * rate))
+            lo, hi = max(at, 0), min(at + len(block), n)
+            if hi > lo:
+                out[lo:hi] = block[lo - at:hi - at]
+        return out
+
+
+async def fetch_head(url: str) -> HeadMesh:
+    """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept)."""
+    status, body = await http_get(url, "/head/mesh.json")
+    if status != 200:
+        raise ClientError(f"{url}: the server has no head (/head/mesh.json answered {status})")
+    try:
+        m = json.loads(body)
+        texture = None
+        if m.get("uvs") is not None:
+            t_status, t_body = await http_get(url, "/head/texture")
+            texture = t_body if t_status == 200 else None
+        return HeadMesh(
+            vertices=np.asarray(m["vertices"], dtype=np.float64).reshape(-1, 3),
+            triangles=np.asarray(m["triangles"], dtype=np.int64).reshape(-1, 3),
+            uvs=None if m.get("uvs") is None else np.asarray(m["uvs"], dtype=np.float64).reshape(-1, 2),
+            colors=None if m.get("colors") is None else np.asarray(m["colors"], dtype=np.float32).reshape(-1, 3),
+            texture=texture,
+            name=f"{url}/head/mesh.json",
+        )
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
+
+
+async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
+    """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
+    deadline = time.monotonic() + cfg.wait_s
+    while True:
+        v = ViewerClient(cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token)
+        try:
+            await v.__aenter__()
+            return v
+        except ServerClosed as exc:
+            if exc.code != P.CLOSE_NOT_FOUND or time.monotonic() >= deadline:
+                raise ClientError(f"{cfg.url}: cannot watch session {cfg.session!r}: {exc.code} {exc.reason}") from None
+        except OSError as exc:
+            if time.monotonic() >= deadline:
+                raise ClientError(f"{cfg.url}: cannot connect: {exc}") from None
+        await asyncio.sleep(0.25)
+
+
+async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
+    """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
+    every frame as it arrives (for progress or live display)."""
+    v = await connect_viewer(cfg)
+    rec = Recording(description=v.description)
+    keep = np.float16 if cfg.kind == "deltas" else np.float32
+    try:
+        async for m in v:
+            if m.kind == P.KIND_AUDIO:
+                rec.audio.append((m.media_time, m.values))
+                continue
+            rec.index.append(m.index)
+            rec.media_time.append(m.media_time)
+            rec.values.append(m.values.astype(keep))
+            if on_frame is not None:
+                on_frame(m)
+            if cfg.max_s is not None and m.media_time - rec.media_time[0] >= cfg.max_s:
+                break
+    finally:
+        await v.__aexit__(None, None, None)
+    rec.close_code, rec.close_reason = v.close_code, v.close_reason
+    return rec
+
+
+async def live_sessions(url: str) -> list[str]:
+    """Names of the server's live sessions (from ``/metrics``), oldest first."""
+    try:
+        status, body = await http_get(url, "/metrics")
+    except OSError as exc:
+        raise ClientError(f"{url}: cannot connect: {exc}") from None
+    if status != 200:
+        raise ClientError(f"{url}: /metrics answered {status}")
+    return [s["name"] for s in json.loads(body).get("session_list", [])]
+
+
+async def pick_session(url: str, wanted: str | None, wait_s: float) -> str:
+    """``wanted`` if given, else the first live session, waiting up to wait_s for one to start."""
+    if wanted is not None:
+        return wanted
+    deadline = time.monotonic() + wait_s
+    while True:
+        names = await live_sessions(url)
+        if names:
+            return names[0]
+        if time.monotonic() >= deadline:
+            raise ClientError(f"{url}: no live session (waited {wait_s:g} s); start one or pass --session")
+        await asyncio.sleep(0.25)

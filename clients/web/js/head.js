@@ -1,0 +1,181 @@
+// The head in three.js: built from the server's /head/mesh.json (+ /head/texture), moved by frames.
+//
+// The vertex order is the server's, so a frame's vertex deltas (x, y, z of each moving vertex, in
+// the description's moving_vertices order) are added to the neutral positions directly. Normals
+// stay those of the neutral pose, as in the offline renderer (speech barely changes the lighting).
+// Back faces are drawn dark by a second mesh on the same geometry, so an open mouth shows a cavity.
+
+import * as THREE from "three";
+import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+
+function srgbToLinear(c) {
+  // Vertex colours are authored in sRGB like textures; three.js lights in linear space.
+  return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
+}
+
+export class HeadView {
+  constructor(canvas) {
+    this.canvas = canvas;
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    this.renderer.outputColorSpace = THREE.SRGBColorSpace;
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0x292b33);
+    this.camera = new THREE.PerspectiveCamera(25, 1, 0.01, 1000);
+    this.controls = new OrbitControls(this.camera, canvas);
+    this.controls.enableDamping = true;
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x443333, 0.9));
+    const key = new THREE.DirectionalLight(0xffffff, 1.8);
+    key.position.set(0.45, 0.45, 0.55);
+    const fill = new THREE.DirectionalLight(0xffffff, 0.5);
+    fill.position.set(-0.6, 0.0, 0.8);
+    this.scene.add(key, fill);
+    this.key = null; // what the loaded mesh is (to reload only when the server's head changes)
+    this.mesh = null;
+    this.moving = null; // Int32Array of moving vertex indices
+    this.neutral = null; // Float32Array (n*3)
+    this.peak = null; // Float32Array per moving vertex: largest |delta| seen (finds the mouth)
+    this.lastPeak = 0; // largest |delta| of the frame shown (mesh units)
+    // Draw only when something changed (a frame, the camera, the size): software WebGL spends
+    // most of the page's time drawing, and idle redraws delay the WebSocket messages.
+    this.dirty = true;
+    this.controls.addEventListener("change", () => { this.dirty = true; });
+    this.resize();
+    window.addEventListener("resize", () => this.resize());
+  }
+
+  resize() {
+    const w = this.canvas.clientWidth || 640;
+    const h = this.canvas.clientHeight || 480;
+    this.renderer.setSize(w, h, false);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.dirty = true;
+  }
+
+  /** Load the head described by a viewer description's `head` (null clears it). */
+  async load(head, base = "") {
+    const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}` : null;
+    if (head && key === this.key) {
+      this.setMoving(head);
+      return;
+    }
+    if (this.mesh) {
+      this.scene.remove(this.mesh.group);
+      this.mesh.geometry.dispose();
+      this.mesh = null;
+    }
+    this.key = null;
+    this.dirty = true;
+    if (!head) return;
+    const res = await fetch(base + head.mesh_json_url, { cache: "no-store" });
+    if (!res.ok) throw new Error(`head mesh: HTTP ${res.status}`);
+    const m = await res.json();
+    const geometry = new THREE.BufferGeometry();
+    this.neutral = new Float32Array(m.vertices);
+    geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(m.vertices), 3));
+    geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(m.triangles), 1));
+    geometry.computeVertexNormals();
+    const material = new THREE.MeshStandardMaterial({ roughness: 0.75, metalness: 0.0 });
+    if (m.colors) {
+      geometry.setAttribute("color", new THREE.BufferAttribute(new Float32Array(m.colors.map(srgbToLinear)), 3));
+      material.vertexColors = true;
+    } else {
+      material.color = new THREE.Color(0.8, 0.62, 0.52).convertSRGBToLinear();
+    }
+    if (m.uvs) geometry.setAttribute("uv", new THREE.BufferAttribute(new Float32Array(m.uvs), 2));
+    if (m.uvs && head.texture_url) {
+      const tex = await new THREE.TextureLoader().loadAsync(base + head.texture_url);
+      tex.flipY = false; // texture row 0 is v = 0 (as the offline renderer samples it)
+      tex.colorSpace = THREE.SRGBColorSpace;
+      material.map = tex;
+      material.vertexColors = false;
+    }
+    const front = new THREE.Mesh(geometry, material);
+    const back = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: 0x140404, side: THREE.BackSide }));
+    front.frustumCulled = back.frustumCulled = false; // deltas move vertices past the bounding sphere
+    const group = new THREE.Group();
+    group.add(front, back);
+    this.scene.add(group);
+    this.mesh = { group, geometry };
+    this.key = key;
+    this.setMoving(head);
+    this.frame();
+  }
+
+  setMoving(head) {
+    this.moving = Int32Array.from(head.moving_vertices);
+    this.peak = new Float32Array(this.moving.length);
+  }
+
+  /** Point the camera at the face: the moving vertices' box, seen from +z (glTF's forward), y up. */
+  frame() {
+    const pos = this.neutral;
+    const box = new THREE.Box3();
+    const v = new THREE.Vector3();
+    const n = this.moving.length || pos.length / 3;
+    for (let j = 0; j < n; j++) box.expandByPoint(v.fromArray(pos, 3 * (this.moving.length ? this.moving[j] : j)));
+    const centre = box.getCenter(new THREE.Vector3());
+    const size = box.getSize(new THREE.Vector3());
+    const height = Math.max(size.y, size.x / this.camera.aspect);
+    const dist = (1.25 * height) / (2 * Math.tan((this.camera.fov * Math.PI) / 360));
+    this.camera.near = dist / 50;
+    this.camera.far = dist * 50;
+    this.camera.position.set(centre.x, centre.y, centre.z + dist + size.z / 2);
+    this.camera.updateProjectionMatrix();
+    this.controls.target.copy(centre);
+    this.controls.update();
+    this.dirty = true;
+  }
+
+  /** Show one frame of vertex deltas: values (3 * moving) in mesh units. */
+  applyDeltas(values) {
+    if (!this.mesh) return;
+    const attr = this.mesh.geometry.getAttribute("position");
+    const out = attr.array;
+    const base = this.neutral;
+    const moving = this.moving;
+    let peak = 0;
+    for (let j = 0; j < moving.length; j++) {
+      const o = 3 * moving[j];
+      const dx = values[3 * j], dy = values[3 * j + 1], dz = values[3 * j + 2];
+      out[o] = base[o] + dx;
+      out[o + 1] = base[o + 1] + dy;
+      out[o + 2] = base[o + 2] + dz;
+      const a = Math.max(Math.abs(dx), Math.abs(dy), Math.abs(dz));
+      if (a > this.peak[j]) this.peak[j] = a;
+      if (a > peak) peak = a;
+    }
+    this.lastPeak = peak;
+    attr.needsUpdate = true;
+    this.dirty = true;
+  }
+
+  /** Draw if anything changed since the last draw (call once per animation frame). */
+  render() {
+    this.controls.update(); // advances damping; fires "change" while the camera still moves
+    if (!this.dirty) return;
+    this.dirty = false;
+    this.renderer.render(this.scene, this.camera);
+  }
+
+  /** Screen box {x, y, width, height} (CSS pixels, canvas-relative) of the vertices that moved most
+   *  so far (>= 25% of the largest movement): where the mouth is on the canvas. */
+  mouthBox() {
+    if (!this.mesh || !this.peak.length) return null;
+    const top = this.peak.reduce((a, b) => Math.max(a, b), 0);
+    if (!(top > 0)) return null;
+    const rect = this.canvas.getBoundingClientRect();
+    let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
+    const v = new THREE.Vector3();
+    for (let j = 0; j < this.moving.length; j++) {
+      if (this.peak[j] < 0.25 * top) continue;
+      v.fromArray(this.neutral, 3 * this.moving[j]).project(this.camera);
+      const x = ((v.x + 1) / 2) * rect.width;
+      const y = ((1 - v.y) / 2) * rect.height;
+      x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y);
+    }
+    const pad = 0.25 * Math.max(x1 - x0, y1 - y0);
+    return { x: rect.left + x0 - pad, y: rect.top + y0 - pad, width: x1 - x0 + 2 * pad, height: y1 - y0 + 2 * pad };
+  }
+}

@@ -1,0 +1,298 @@
+// facecast browser viewer: pick a live session, watch and hear it, reconnect on its own.
+//
+// Page options (query string): session=NAME (watch this one; default: the first live session),
+// token=T (the server's shared token), buffer_ms=N (jitter buffer, default 80).
+// Automation hook: window.facecast exposes the state shown in the panel, freeze(on) to hold the
+// displayed frame (screenshots) and mouthBox() (where the mouth is on the canvas).
+
+import { decodeMessage, KIND, CLOSE } from "./protocol.js";
+import { PlayoutClock, AudioOut, nowS } from "./playout.js";
+import { HeadView } from "./head.js";
+
+const opts = new URLSearchParams(location.search);
+const token = opts.get("token");
+const bufferS = Math.max(0, Number(opts.get("buffer_ms") ?? 80)) / 1000;
+const POLL_S = 1.0; // session list refresh (and reconnect attempts)
+
+const $ = (id) => document.getElementById(id);
+const view = new HeadView($("view"));
+const audio = new AudioOut();
+
+const state = {
+  status: "starting",
+  session: null, // the session being watched
+  wanted: opts.get("session"), // the session the user asked for (null: the first live one)
+  sessions: [],
+  connections: 0, // descriptions received (one per successful connection)
+  frames: 0, // frames shown
+  received: 0, // frames received on this connection
+  lost: 0, // frames the server dropped or never sent (gaps in the frame index)
+  skipped: 0, // frames due together with a newer one (display too slow): not shown
+  resyncs: 0, // timeline moves: later after a late frame, earlier once frames come early again
+  deliveryMs: null, // server send -> browser receipt (median of the last 30 frames)
+  behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
+  waitMs: null, // frame arrival -> shown (jitter buffer)
+  drawMs: null, // time the page spends applying a frame and drawing (median of the last 30)
+  lastPeak: 0, // largest vertex delta of the shown frame (mesh units)
+  kind: null,
+  closeCode: null,
+  closeReason: "",
+  errors: 0,
+};
+
+let ws = null;
+let clock = new PlayoutClock({ bufferS });
+let queue = []; // received frames {msg, due, arrival} waiting for their due time
+let desc = null;
+let lastIndex = -1;
+let frozen = false;
+let audioArrivals = []; // [{start, end, arrival}] of recent audio blocks (media s, performance s)
+const windows = { delivery: [], behind: [], wait: [], draw: [] };
+
+function median(list, x) {
+  list.push(x);
+  if (list.length > 30) list.shift();
+  const s = [...list].sort((a, b) => a - b);
+  return s[s.length >> 1];
+}
+
+function setStatus(text) {
+  state.status = text;
+  $("status").textContent = text;
+}
+
+function withToken(q) {
+  if (token) q.set("token", token);
+  return q;
+}
+
+async function pollSessions() {
+  try {
+    const res = await fetch("/metrics", { cache: "no-store" });
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    const m = await res.json();
+    state.sessions = (m.session_list || []).map((s) => s.name);
+    renderSessionList(m.session_list || []);
+    if (!ws) {
+      const target = state.wanted ?? state.sessions[0];
+      if (target && state.sessions.includes(target)) connect(target);
+      else setStatus(state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session");
+    }
+  } catch (err) {
+    state.sessions = [];
+    paramsOnly = false; // the server that comes back may have a head
+    renderSessionList([]);
+    if (!ws) setStatus("server unreachable, retrying");
+  }
+}
+
+function renderSessionList(list) {
+  const ul = $("sessions");
+  ul.replaceChildren();
+  if (!list.length) {
+    const li = document.createElement("li");
+    li.textContent = "none";
+    li.className = "none";
+    ul.append(li);
+  }
+  for (const s of list) {
+    const li = document.createElement("li");
+    const a = document.createElement("a");
+    a.href = `?${withToken(new URLSearchParams({ session: s.name }))}`;
+    a.textContent = s.name;
+    a.addEventListener("click", (ev) => {
+      ev.preventDefault();
+      history.replaceState(null, "", a.href);
+      state.wanted = s.name;
+      if (ws) ws.close(1000, "switching session");
+      else connect(s.name);
+    });
+    if (s.name === state.session) li.className = "current";
+    li.append(a, ` ${s.source}, ${s.viewers} viewer${s.viewers === 1 ? "" : "s"}`);
+    ul.append(li);
+  }
+}
+
+let paramsOnly = false; // the server has no head (--no-head): watch mouth parameters as bars
+
+function connect(name) {
+  if (ws) return;
+  const kind = paramsOnly ? "params" : "deltas";
+  const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
+  if (kind === "deltas") q.set("encoding", "int16");
+  const proto = location.protocol === "https:" ? "wss:" : "ws:";
+  const sock = new WebSocket(`${proto}//${location.host}/view?${q}`);
+  sock.binaryType = "arraybuffer";
+  ws = sock;
+  state.session = name;
+  state.kind = kind;
+  setStatus(`connecting to "${name}"`);
+  sock.onmessage = (ev) => {
+    if (typeof ev.data === "string") {
+      desc = JSON.parse(ev.data);
+      // Frames that arrive while the head downloads are timed and queued; they move the mesh once it exists.
+      const ready = view.load(kind === "deltas" ? desc.head : null).then(() => {
+        state.connections += 1;
+        setStatus(kind === "deltas" ? `watching "${name}"` : `watching "${name}": mouth parameters only (the server has no head)`);
+        $("bars").hidden = kind === "deltas";
+      });
+      ready.catch((err) => {
+        console.warn("head download failed", err);
+        sock.close(1000, "head download failed");
+      });
+      return;
+    }
+    const arrival = nowS();
+    let msg;
+    try {
+      msg = decodeMessage(ev.data);
+    } catch (err) {
+      console.warn("undecodable message", err);
+      return;
+    }
+    if (msg.kind === KIND.AUDIO) onAudio(msg, arrival);
+    else onFrame(msg, arrival);
+  };
+  sock.onclose = (ev) => {
+    if (ws !== sock) return;
+    ws = null;
+    if (ev.code === CLOSE.BAD_REQUEST && /no head/.test(ev.reason) && !paramsOnly) {
+      paramsOnly = true; // vertex deltas are unavailable: ask for the parameters instead, at once
+      resetStream();
+      connect(name);
+      return;
+    }
+    state.closeCode = ev.code;
+    state.closeReason = ev.reason;
+    const why = {
+      [CLOSE.NORMAL]: "session ended", [CLOSE.GOING_AWAY]: "server restarting",
+      [CLOSE.NOT_FOUND]: "no such session", [CLOSE.TOO_SLOW]: "too slow, reconnecting",
+      [CLOSE.UNAUTHORIZED]: "wrong or missing token (add ?token=...)",
+    }[ev.code] ?? `connection closed (${ev.code})`;
+    setStatus(`${why}; waiting for "${state.wanted ?? "any session"}" to (re)start`);
+    resetStream();
+    setTimeout(pollSessions, 200);
+  };
+}
+
+function resetStream() {
+  clock = new PlayoutClock({ bufferS });
+  queue = [];
+  lastIndex = -1;
+  audioArrivals = [];
+  audio.reset();
+  state.received = 0;
+}
+
+function onFrame(msg, arrival) {
+  if (lastIndex >= 0 && msg.index > lastIndex + 1) state.lost += msg.index - lastIndex - 1;
+  if (msg.index <= lastIndex) return; // stale (never expected: the server sends in order)
+  lastIndex = msg.index;
+  state.received += 1;
+  state.deliveryMs = median(windows.delivery, 1000 * (Date.now() / 1000 - msg.sendTime));
+  const a = audioArrivals.find((b) => b.start <= msg.mediaTime && msg.mediaTime < b.end);
+  if (a) state.behindAudioMs = median(windows.behind, 1000 * (arrival - a.arrival));
+  const before = clock.resyncs + clock.catchups;
+  const due = clock.arrive(msg.mediaTime, arrival);
+  state.resyncs += clock.resyncs + clock.catchups - before;
+  state.waitMs = median(windows.wait, 1000 * (due - arrival));
+  queue.push({ msg, due });
+  // Audio that arrived before the first frame fixed the timeline is scheduled now.
+  for (const p of pendingAudio.splice(0)) onAudio(p.msg, p.arrival);
+}
+
+const pendingAudio = [];
+
+function onAudio(msg, arrival) {
+  const rate = desc?.audio?.rate_hz ?? 16000;
+  if (!audioArrivals.some((b) => b.start === msg.mediaTime)) {
+    audioArrivals.push({ start: msg.mediaTime, end: msg.mediaTime + msg.count / rate, arrival });
+    if (audioArrivals.length > 200) audioArrivals.shift();
+  }
+  const due = clock.due(msg.mediaTime);
+  if (due === null) {
+    pendingAudio.push({ msg, arrival });
+    if (pendingAudio.length > 500) pendingAudio.shift();
+    return;
+  }
+  audio.schedule(msg.values, rate, due);
+}
+
+function showParams(values) {
+  const names = desc?.params?.names ?? [];
+  const bars = $("bars");
+  if (bars.children.length !== names.length) {
+    bars.replaceChildren(...names.map((n) => {
+      const row = document.createElement("div");
+      row.innerHTML = `<span>${n}</span><meter min="-0.5" max="0.5" value="0"></meter>`;
+      return row;
+    }));
+  }
+  names.forEach((_, i) => { bars.children[i].querySelector("meter").value = values[i]; });
+}
+
+function tick() {
+  const now = nowS();
+  let show = null;
+  while (queue.length && queue[0].due <= now) {
+    const item = queue.shift();
+    if (frozen) continue;
+    if (show) state.skipped += 1;
+    show = item;
+  }
+  const drawStart = performance.now();
+  if (show) {
+    if (state.kind === "deltas") {
+      view.applyDeltas(show.msg.values);
+      state.lastPeak = view.lastPeak;
+    } else {
+      showParams(show.msg.values);
+    }
+    state.frames += 1;
+  }
+  view.render();
+  if (show) state.drawMs = median(windows.draw, performance.now() - drawStart);
+  updatePanel();
+  requestAnimationFrame(tick);
+}
+
+function fmt(x, unit = " ms") {
+  return x === null || x === undefined ? "–" : `${x.toFixed(1)}${unit}`;
+}
+
+let panelAt = 0;
+function updatePanel() {
+  const t = nowS();
+  if (t - panelAt < 0.25) return;
+  panelAt = t;
+  $("stats").textContent = [
+    `frames shown   ${state.frames}`,
+    `lost (gaps)    ${state.lost}`,
+    `skipped        ${state.skipped}`,
+    `delivery       ${fmt(state.deliveryMs)}`,
+    `behind audio   ${fmt(state.behindAudioMs)}`,
+    `buffer         ${fmt(state.waitMs)}`,
+    `draw           ${fmt(state.drawMs)}`,
+    `resyncs        ${state.resyncs}`,
+    `audio          ${audio.running ? `on (${audio.played} blocks)` : "off"}`,
+    `audio sync     ${fmt(audio.syncMs)}`,
+  ].join("\n");
+  $("sound").hidden = audio.running || !audio.ctx;
+}
+
+$("sound").addEventListener("click", () => audio.resume().then(updatePanel));
+window.addEventListener("error", () => { state.errors += 1; });
+
+window.facecast = {
+  state,
+  freeze(on) {
+    frozen = Boolean(on);
+    return state.lastPeak;
+  },
+  mouthBox: () => view.mouthBox(),
+  audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped, syncMs: audio.syncMs }),
+};
+
+pollSessions();
+setInterval(() => { pollSessions(); }, POLL_S * 1000);
+requestAnimationFrame(tick);

@@ -1,0 +1,75 @@
+"""``facecast record [URL] -o OUT``: save a live session as .glb, .csv, .json or .tsv."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+    from facecast.commands.view import DEFAULT_URL
+
+    p = sub.add_parser(
+        "record",
+        help="save a live session's animation (glTF, CSV, JSON or Rhubarb TSV)",
+        formatter_class=HelpFormatter,
+        description="Watch one session's mouth parameters and audio until it ends (or --duration), then write "
+        "them in the format of the output's suffix: .glb (the head with the 4 parameters as morph-target "
+        "weights, audio as .wav beside it), .csv / .json (curves with a time column t, s of the session), "
+        ".tsv (Rhubarb-style mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`.",
+    )
+    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument("--session", default=None, help="session to record (default %(default)s = the first live one)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
+    p.add_argument("--head", default="builtin",
+                   help="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
+    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
+                   help=".glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
+    p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
+    p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from clients.errors import ClientError
+    from clients.export.curves import Track
+    from clients.export.files import FORMATS, export_track
+    from clients.viewer.stream import StreamConfig, pick_session, record_stream
+    from facecast.commands.view import token_from_env
+
+    if args.output.suffix.lower() not in FORMATS:
+        raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
+    token = token_from_env(args.token_env)
+    head = arkit = None
+    if args.output.suffix.lower() == ".glb":
+        from facecast.commands.render import load_head
+
+        head = load_head(args.head, None)
+        if args.glb_morphs == "arkit52" and args.head == "builtin":
+            from clients.export.gltf import builtin_arkit_targets
+
+            arkit = builtin_arkit_targets()
+
+    async def main():
+        session = await pick_session(args.url, args.session, args.wait)
+        cfg = StreamConfig(url=args.url, session=session, kind="params", token=token, wait_s=args.wait,
+                           max_s=args.duration)
+        print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
+        return session, await record_stream(cfg)
+
+    session, rec = asyncio.run(main())
+    served = rec.description.get("head")
+    if head is not None and served is not None and served["vertex_count"] != len(head[1].vertices):
+        raise ClientError(f"--head {args.head} has {len(head[1].vertices)} vertices but the server's head has "
+                          f"{served['vertex_count']}: pass the server's head")
+    params, first = rec.timeline()
+    track = Track(params=params, fps=rec.fps, start_s=first / rec.fps)
+    audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
+    files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
+    print(f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
+          f"({track.duration_s:.2f} s) of {session!r}; session closed with {rec.close_code} {rec.close_reason}")
+    return 0

@@ -1,0 +1,106 @@
+"""``facecast rig HEAD -o RIG.npz``: rig a head mesh for the four mouth parameters (paper Sec. 5)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+
+    p = sub.add_parser(
+        "rig",
+        help="rig a head mesh (glb/obj/ply, or 'builtin') and write a rig file plus a control-point PNG",
+        formatter_class=HelpFormatter,
+        description=(
+            "Places the simple face model on the head from named landmarks, projects its vertices to\n"
+            "control points (with the geodesic check) and precomputes the interpolation weights.\n"
+            "Heads whose lips are one closed surface are cut open along the mouth line."
+        ),
+    )
+    p.add_argument("head", help="head mesh file (.glb/.gltf/.obj/.ply) or 'builtin' for the default head")
+    p.add_argument(
+        "--landmarks",
+        help="landmarks JSON (name -> vertex index or [x, y, z]); default: the shipped file for known heads",
+    )
+    p.add_argument("-o", "--output", required=True, help="rig file to write (.npz)")
+    p.add_argument("--png", help="control-point picture to write (default: OUTPUT with suffix .png)")
+    p.add_argument(
+        "--simple",
+        help="Candide-3 .wfm file to use as the simple face model (the paper's choice); default: the model "
+        "derived from the built-in head",
+    )
+    p.add_argument("--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)")
+    p.add_argument("--projection", choices=("frontal", "uv"), default="frontal", help="2D projection for eq. 8-9")
+    p.add_argument("--beta", type=float, default=0.5, help="gain of eq. 10 for vertices outside every triangle")
+    p.add_argument(
+        "--normalize-fallback", action="store_true", help="eq. 10 as a weighted mean (smoother; use with --beta 1)"
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from clients.errors import LandmarkError
+    from clients.heads.builtin import load_builtin_head
+    from clients.heads.landmarks import read_landmarks, shipped_landmarks
+    from clients.heads.mesh import load_mesh
+    from clients.heads.plot import plot_control_points
+    from clients.heads.rigfile import save_rig
+    from clients.errors import MeshError
+    from clients.heads.rigging import candide_face, rig_head
+    from realtime_core.errors import RealtimeCoreError
+    from realtime_core.face import RigConfig, parse_wfm
+
+    cfg = RigConfig(
+        method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
+    )
+    head = load_builtin_head()
+    if args.head == "builtin":
+        mesh = head.mesh
+        spec = read_landmarks(args.landmarks) if args.landmarks else None
+        source = args.landmarks or "builtin"
+    else:
+        mesh = load_mesh(args.head)
+        lm_path = args.landmarks or shipped_landmarks(args.head)
+        if lm_path is None:
+            raise LandmarkError(f"{args.head}: no landmarks file given (--landmarks L.json) and none shipped for this head")
+        spec = read_landmarks(lm_path)
+        source = str(lm_path)
+    simple = None
+    if args.simple:
+        wfm = Path(args.simple)
+        try:
+            simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1"), name=wfm.stem))
+        except OSError as exc:
+            raise MeshError(f"{wfm}: cannot read Candide-3 file: {exc}") from exc
+        except RealtimeCoreError as exc:
+            raise MeshError(f"{wfm}: not a usable Candide-3 model: {exc}") from exc
+    rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
+    out = save_rig(rig, rigged, args.output)
+    png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
+    from clients.heads.landmarks import credit_for
+
+    credit = credit_for(args.head)
+    from clients.errors import RenderError
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    image = pixels = None
+    try:  # like the paper's Fig. 5: the control points over a render of the head
+        with renderer_for_rig(rig, rigged, RenderConfig(width=800, height=800)) as r:
+            image = r.render()
+            pixels = r.project(rig.neutral[rig.control])
+    except RenderError as exc:
+        print(f"rig: no render for the picture ({exc}); plotting vertices instead")
+    plot_control_points(
+        rig, png, title=f"{Path(args.head).name}: {len(rig.control)} control points", credit=credit,
+        image=image, pixels=pixels,
+    )
+    m = rig.meta
+    print(
+        f"rig {out}: {len(rig.neutral)} vertices, {len(rig.moving)} moving, {len(rig.control)} control points, "
+        f"{m.get('replacements', 0)} geodesic replacements, {m.get('bad_triangles', 0)} bad triangles, "
+        f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
+    )
+    return 0

@@ -1,0 +1,119 @@
+"""A real facecast server on loopback in a background thread, for the viewer and recording tests.
+
+The server runs the way ``facecast serve`` runs it (same class, its own event loop) with a small
+model whose mouth motion stays in the parameters' typical ranges, the built-in head, the browser
+viewer's files and three.js from node_modules. Tests talk to it over real sockets only; coroutines
+(ingest clients) are run on the server's loop with :meth:`LiveServer.call`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from realtime_core.avmodel import AvModel
+from tests.server.conftest import small_model, speechlike
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def plausible_model(seed: int = 0) -> AvModel:
+    """The server tests' random model with its visual space mapped affinely (o_v' = s o_v + c) into
+    the mouth parameters' typical ranges (a few hundredths of an IOD, the mouth opening 0 .. 0.3 IOD):
+    the inversion is affine-equivariant in o_v, so outputs move like speech would move a mouth
+    instead of by several IOD (a random model's raw outputs tear the face apart)."""
+    m = small_model(seed)
+    hmm = m.hmm
+    na = hmm.n_audio
+    s = np.array([0.012, 0.025, 0.022, 0.005])
+    c = np.array([0.0, 0.0, 0.22, 0.0])
+    means = hmm.means.copy()
+    means[..., na:] = means[..., na:] * s + c
+    cov = hmm.covars.copy()
+    cov[..., na:, :] *= s[:, None]
+    cov[..., :, na:] *= s[None, :]
+    return replace(m, hmm=replace(hmm, means=means, covars=cov))
+
+
+class LiveServer:
+    """A started FacecastServer on 127.0.0.1 (free port) served from a daemon thread's loop."""
+
+    def __init__(self, model: AvModel, head, *, port: int = 0) -> None:
+        from server.app import FacecastServer
+        from server.config import ServerConfig
+
+        nm = REPO / "node_modules"
+        self.config = ServerConfig(port=port, web_root=REPO / "clients" / "web",
+                                   node_modules=nm if nm.is_dir() else None, close_timeout_s=0.5)
+        self.server = FacecastServer(model, head=head, config=self.config)
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, name="facecast-test-server", daemon=True)
+        self.thread.start()
+        self.call(self.server.start())
+        self.port = self.server.port
+        self.url = f"http://127.0.0.1:{self.port}"
+
+    def call(self, coro, timeout: float = 60.0):
+        """Run a coroutine on the server's loop and wait for its result."""
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def submit(self, coro):
+        """Start a coroutine on the server's loop; returns its concurrent.futures.Future."""
+        return asyncio.run_coroutine_threadsafe(coro, self.loop)
+
+    def stop(self) -> None:
+        self.call(self.server.stop())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(5)
+        self.loop.close()
+
+
+@pytest.fixture(scope="session")
+def head():
+    from clients.heads.rigfile import builtin_rig
+    from server.app import Head
+
+    try:
+        rig, mesh = builtin_rig()
+    except Exception as exc:  # noqa: BLE001 - any failure to fetch the built-in head skips, naming it
+        pytest.skip(f"built-in head unavailable (first use downloads it): {exc}")
+    return Head(rig, mesh)
+
+
+@pytest.fixture(scope="session")
+def model() -> AvModel:
+    return plausible_model()
+
+
+@pytest.fixture()
+def live(model, head):
+    srv = LiveServer(model, head)
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+async def stream_session(url: str, name: str, seconds: float, *, realtime: bool = True, seed: int = 0,
+                         stop: "asyncio.Event | None" = None) -> dict:
+    """Ingest ``seconds`` of speech-like 16 kHz audio as session ``name`` (in real time unless told
+    otherwise), ending early when ``stop`` is set; returns the server's ``ended`` reply."""
+    from clients.client import IngestClient
+
+    x = speechlike(seconds, 16000, seed=seed)
+    step = 320  # 20 ms blocks
+    async with IngestClient(url, session=name, sample_rate_hz=16000) as ing:
+        loop = asyncio.get_running_loop()
+        t0 = loop.time()
+        for i in range(0, len(x), step):
+            if stop is not None and stop.is_set():
+                break
+            if realtime:
+                await asyncio.sleep(max(0.0, t0 + (i + step) / 16000 - loop.time()))
+            await ing.send(x[i:i + step])
+        return await ing.end()

@@ -1,0 +1,86 @@
+"""Phone alignments for transcribed speech with pocketsphinx's English aligner (optional extra
+``align``: the ``pocketsphinx`` wheel ships its US-English acoustic model and dictionary, so it
+runs offline).
+
+pocketsphinx aligns in two passes over the same audio: the first (with ``set_align_text``)
+finds the words, the second (``set_alignment``) their phones and states; times are in its
+10 ms frames. Audio is resampled to 16 kHz first. Words missing from its dictionary cannot
+be aligned: they are reported in the error rather than guessed.
+
+Transcripts are found next to the audio: ``<stem>.txt`` or an LJ Speech style
+``metadata.csv`` (``id|text|normalised text``) in the same folder.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from training.alignments import Alignment, Phone
+from training.augment import resample
+from training.corpus import to_int16
+from training.errors import AlignmentFormatError, MissingDependencyError
+
+FRAME_S = 0.01
+"""pocketsphinx's frame period: alignment times are multiples of 10 ms."""
+
+
+def normalise_transcript(text: str) -> list[str]:
+    """Lower-case words without punctuation (apostrophes kept: "don't")."""
+    return re.findall(r"[a-z']+", text.lower().replace("’", "'"))
+
+
+def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | Path = "<audio>") -> Alignment:
+    """ARPAbet phones of ``text`` in ``samples`` ((n,) float in [-1, 1] at ``rate_hz``).
+
+    Raises MissingDependencyError without pocketsphinx, AlignmentFormatError (naming
+    ``source``) for words outside the dictionary or when the alignment fails.
+    """
+    try:
+        from pocketsphinx import Decoder  # lazy: optional extra "align"
+    except ImportError as exc:
+        raise MissingDependencyError("forced alignment needs pocketsphinx: pip install 'facecast[align]'") from exc
+    words = normalise_transcript(text)
+    if not words:
+        raise AlignmentFormatError(source, "empty transcript")
+    pcm = to_int16(resample(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
+    decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL")
+    missing = sorted({w for w in words if decoder.lookup_word(w) is None})
+    if missing:
+        raise AlignmentFormatError(source, f"cannot align: words not in the pocketsphinx dictionary: {missing}")
+    decoder.set_align_text(" ".join(words))
+    for second_pass in (False, True):
+        if second_pass:
+            decoder.set_alignment()
+        decoder.start_utt()
+        decoder.process_raw(pcm, full_utt=True)
+        decoder.end_utt()
+    phones: list[Phone] = []
+    for word in decoder.get_alignment():
+        for ph in word:
+            start = ph.start * FRAME_S
+            phones.append(Phone(ph.name, start, start + ph.duration * FRAME_S))
+    if not phones:
+        raise AlignmentFormatError(source, "pocketsphinx found no alignment for the transcript")
+    return Alignment(tuple(phones), "arpabet", Path(source))
+
+
+def find_transcripts(root: str | Path) -> dict[Path, str]:
+    """{wav: transcript} for the WAVs under ``root`` that have a transcript (``<stem>.txt`` or
+    a ``metadata.csv`` entry in their folder)."""
+    out: dict[Path, str] = {}
+    root = Path(root)
+    for meta in sorted(root.rglob("metadata.csv")):
+        for line in meta.read_text(encoding="utf-8", errors="replace").splitlines():
+            parts = line.split("|")
+            if len(parts) >= 2:
+                wav = meta.with_name(parts[0] + ".wav")
+                if wav.is_file():
+                    out[wav] = parts[-1]
+    for txt in sorted(root.rglob("*.txt")):
+        wav = txt.with_suffix(".wav")
+        if wav.is_file() and wav not in out:
+            out[wav] = txt.read_text(encoding="utf-8", errors="replace").strip()
+    return out
