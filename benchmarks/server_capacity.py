@@ -30,7 +30,7 @@ import numpy as np
 
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
-DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
+DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
                  (75, 375, 75), (100, 500, 100))
 RATE = 16000
 BLOCK_S = 0.02
