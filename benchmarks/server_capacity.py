@@ -30,7 +30,7 @@ import numpy as np
 
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
-DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
+DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
                  (75, 375, 75), (100, 500, 100))
 RATE = 16000
 BLOCK_S = 0.02
@@ -42,13 +42,15 @@ class CapacityConfig:
     """steps: (sessions, parameter viewers, vertex viewers) per step; seconds: audio per step;
     model: model file (None: default or paper-size random); head: vertex viewers need the head;
     cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
-    separately and project the goal load from them."""
+    separately and project the goal load from them; workers: the server's compute processes
+    (ServerConfig.workers; the CPU figures are then the event loop's process only)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     seconds: float = 6.0
     model: Path | None = None
     head: bool = True
     cost_model: bool = True
+    workers: int = 0
 
 
 def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) -> None:
@@ -213,7 +215,7 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
 
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
-    toml = "[server]\nmax_sessions = 1000\nmax_viewers = 10000\n"
+    toml = f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
     load_before = os.getloadavg()
@@ -250,6 +252,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "sustained_every_viewer": None if best_strict is None else {
             k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
+        "server_workers": cfg.workers,
         "cost_model": cost,
         "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
                     "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
@@ -265,13 +268,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
+    ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     args = ap.parse_args(argv)
     steps = DEFAULT_STEPS
     if args.steps:
         steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
     result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
-                                                   head=not args.no_head, cost_model=not args.no_cost_model))
+                                                   head=not args.no_head, cost_model=not args.no_cost_model,
+                                                   workers=args.workers))
     print(json.dumps(result, indent=2))
     return 0
 

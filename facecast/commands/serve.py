@@ -37,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--file", type=Path, action="append", default=[],
                    help="also stream this audio file as a session named after it (repeatable)")
     p.add_argument("--fast", action="store_true", help="stream --file as fast as possible instead of in real time")
+    p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
+                   help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
+                   "on the event loop; use up to cores - 1)")
     p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
     p.set_defaults(run=run)
 
@@ -62,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
         default_web = Path(__file__).resolve().parents[2] / "clients" / "web"
         web_root = default_web if default_web.is_dir() else None
     node_modules = Path(__file__).resolve().parents[2] / "node_modules"  # `npm ci` at the repo root (three.js)
-    overrides = {"host": getattr(args, "host", None), "port": getattr(args, "port", None), "token": token, "web_root": web_root,
-                 "node_modules": node_modules if node_modules.is_dir() else None}
+    overrides = {"host": getattr(args, "host", None), "port": getattr(args, "port", None), "token": token,
+                 "web_root": web_root, "node_modules": node_modules if node_modules.is_dir() else None,
+                 "workers": getattr(args, "workers", None)}
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_model(args.model)

@@ -377,3 +377,32 @@ def test_shutdown_flushes_sessions_and_says_going_away(model):
     assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
     idx = [m.index for m in got.frames]
     assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost
+
+
+def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
+    samples, rate = read_audio(wav48k)
+    pcm = _int16(samples)
+    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+
+    async def main():
+        async with running(model, head, workers=2) as srv:
+            url = srv.url
+            async with IngestClient(url, session="w", sample_rate_hz=rate) as ing:
+                ack = await ing.control(gain={"lip_stretch": 2.0})
+                bad = await ing.control(gain={"lip_stretch": 99})
+                async with ViewerClient(url, session="w", kind="deltas", audio=True) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    await stream_samples(ing, pcm, realtime=False)
+                    ended = await ing.end()
+                    got = await collect
+            garbage = await _expect_close(lambda: _raw(url, "/ingest", _start(session="g", token=None), b"\x01\x02\x03"))
+            return ack, bad, ended, got, garbage
+
+    ack, bad, ended, got, garbage = asyncio.run(main())
+    assert ack["controls"]["gain"]["lip_stretch"] == 2.0 and bad["type"] == "rejected"
+    assert ended["frames"] == len(ref) == len(got.frames)
+    want = np.array([head.rig.displacements(p * [1, 2, 1, 1]).reshape(-1) for p in ref])
+    peak = np.abs(want).max(axis=1, keepdims=True)
+    assert np.all(np.abs(got.values() - want) <= peak / 32767 + 1e-3 * peak)
+    assert len(got.audio) > 0
+    assert garbage[0] == P.CLOSE_INVALID_PAYLOAD and "not a whole number" in garbage[1]

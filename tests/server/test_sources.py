@@ -91,6 +91,9 @@ def pulse():
         yield env
     finally:
         subprocess.run(["pulseaudio", "--kill"], env=env, capture_output=True, timeout=10)
+        deadline = time.monotonic() + 5  # --kill only signals: wait until the daemon is gone
+        while time.monotonic() < deadline and subprocess.run(["pulseaudio", "--check"], env=env).returncode == 0:
+            time.sleep(0.05)
         shutil.rmtree(runtime, ignore_errors=True)
 
 
