@@ -162,6 +162,53 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
                       speech=speech, speech_rate_hz=0 if speech is None else rate)
 
 
+async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *,
+                       pause_s: float = 2.0, announce=print) -> int:
+    """After the demo: keep serving and replay the speech as session "demo" until Ctrl-C.
+
+    Each pass is a new live session under the same name, ``pause_s`` apart, so a browser opened
+    at any time finds the head talking (the viewer reconnects when a session ends and starts
+    again). Returns the number of passes played.
+    """
+    from server.app import FacecastServer
+    from server.config import ServerConfig
+    from server.sources import FileSource
+
+    server = FacecastServer(model, head=head, config=ServerConfig(host=config.host, port=config.port,
+                                                                   web_root=config.web_root,
+                                                                   node_modules=config.node_modules))
+    await server.start()
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    announce(f"facecast demo: replaying the speech every {len(speech) / rate_hz + pause_s:.0f} s until Ctrl-C")
+    announce(f"  open {server.url}/ to watch and listen")
+    passes = 0
+    try:
+        while not stop.is_set():
+            source = FileSource.from_array(speech, rate_hz, realtime=True)
+            session = asyncio.ensure_future(server.run_source("demo", source, sample_rate_hz=rate_hz, label="demo"))
+            stopper = asyncio.ensure_future(stop.wait())
+            await asyncio.wait({session, stopper}, return_when=asyncio.FIRST_COMPLETED)
+            if stop.is_set():
+                live = server.sessions.get("demo")
+                if live is not None:
+                    live.ended.set()
+            await session
+            stopper.cancel()
+            passes += 1
+            try:
+                await asyncio.wait_for(stop.wait(), timeout=pause_s)
+            except TimeoutError:
+                pass
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        await server.stop()
+    return passes
+
+
 def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rate_hz: int, *, fps: int = 30,
               width: int = 640, height: int = 480) -> Path:
     """Render params (n, 4) (IOD) on the head's rig with the offline renderer and mux audio (m,)
