@@ -116,7 +116,17 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
     pipe = SpeechToParams(model)
     x = _audio(16000, n_frames / 30 + 0.5, rng)
     ns = _per_call(pipe.push, _hop_blocks(x, fe.mfcc))
-    return {"N=28,M=5,float32": _stats(ns[10:])}
+    out = {"N=28,M=5,float32": _stats(ns[10:])}
+    # The shipped default model, what `facecast serve` runs by default.
+    from training.modelfile import DEFAULT_MODEL, load_model
+
+    if DEFAULT_MODEL.is_file():
+        shipped = load_model(None)
+        pipe = SpeechToParams(shipped)
+        ns = _per_call(pipe.push, _hop_blocks(x, shipped.frontend.mfcc))
+        h = shipped.hmm
+        out[f"shipped N={h.n_states},M={h.n_mix},D={h.n_dim},float32"] = _stats(ns[10:])
+    return out
 
 
 def bench_batch_hmmi(rng: np.random.Generator, T: int) -> dict:

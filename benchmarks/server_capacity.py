@@ -21,6 +21,7 @@ import argparse
 import asyncio
 import json
 import multiprocessing as mp
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +30,7 @@ import numpy as np
 
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
-DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
+DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
                  (75, 375, 75), (100, 500, 100))
 RATE = 16000
 BLOCK_S = 0.02
@@ -39,12 +40,17 @@ LIMIT_MS = 10.0
 @dataclass(frozen=True, kw_only=True)
 class CapacityConfig:
     """steps: (sessions, parameter viewers, vertex viewers) per step; seconds: audio per step;
-    model: model file (None: default or paper-size random); head: vertex viewers need the head."""
+    model: model file (None: default or paper-size random); head: vertex viewers need the head;
+    cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
+    separately and project the goal load from them; workers: the server's compute processes
+    (ServerConfig.workers; the CPU figures are then the event loop's process only)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     seconds: float = 6.0
     model: Path | None = None
     head: bool = True
+    cost_model: bool = True
+    workers: int = 0
 
 
 def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) -> None:
@@ -106,7 +112,8 @@ def _viewer_proc(url: str, prefix: str, n: int, n_params: int, n_deltas: int, re
     out.put(("viewers", asyncio.run(main())))
 
 
-def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float) -> dict:
+def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float) -> dict:
+    url = server.url
     ctx = mp.get_context("spawn")
     ready, viewers_ready, out = ctx.Event(), ctx.Event(), ctx.Queue()
     prefix = f"cap{step_no}_"
@@ -114,7 +121,19 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
     view = ctx.Process(target=_viewer_proc, args=(url, prefix, n, n_params, n_deltas, ready, viewers_ready, out))
     ing.start()
     view.start()
-    got = dict(out.get(timeout=seconds + 300) for _ in range(2))
+    # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
+    # later) to the ingest's report (all sessions ended).
+    if not viewers_ready.wait(timeout=300):
+        raise RuntimeError("viewers did not attach within 300 s")
+    cpu0, t0 = server.cpu_seconds(), time.monotonic()
+    got = {}
+    while "ingest" not in got:
+        key, value = out.get(timeout=seconds + 300)
+        got[key] = value
+    cpu1, t1 = server.cpu_seconds(), time.monotonic()
+    while "viewers" not in got:
+        key, value = out.get(timeout=300)
+        got[key] = value
     ing.join()
     view.join()
     sent = got["ingest"]
@@ -150,7 +169,14 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
                 "worst_viewer_p99_ms": round(max(float(np.percentile(a, 99)) * 1e3 for a, _ in items), 3),
                 "server_send_to_receipt_p99_ms": round(float(np.percentile(sendrec, 99)), 3),
             }
+    from urllib.request import urlopen
+
+    with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
+        timings = json.loads(r.read())["timings_ms"]
     return {
+        "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
+                              if k in timings},
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -164,16 +190,46 @@ def _step(url: str, model, step_no: int, n: int, n_params: int, n_deltas: int, s
     }
 
 
+def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
+    """Server CPU (cores) of one real-time session, one parameter viewer and one vertex viewer,
+    from three loads differing in one kind of client; and the goal load projected from them."""
+    n = 10
+    base = _step(server, model, 100, n, 0, 0, cfg.seconds)["server_cpu_cores"]
+    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)["server_cpu_cores"]
+    per_session = base / n
+    per_param = max(0.0, with_params - base) / 100
+    per_vertex = None
+    if cfg.head:
+        with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds)["server_cpu_cores"]
+        per_vertex = max(0.0, with_vertex - base) / 20
+    goal = 100 * per_session + 500 * per_param + 100 * (per_vertex or 0.0)
+    return {
+        "cores_per_session": round(per_session, 5),
+        "cores_per_param_viewer": round(per_param, 5),
+        "cores_per_vertex_viewer": None if per_vertex is None else round(per_vertex, 5),
+        "goal_load_cores_projected": round(goal, 3),
+        "note": "CPU seconds of the server process per second of real-time streaming, measured on this "
+                "(shared) machine; one server process runs on at most one core",
+    }
+
+
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
-    toml = "[server]\nmax_sessions = 1000\nmax_viewers = 10000\n"
+    toml = f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
+    load_before = os.getloadavg()
+    cost: dict | None = None
     try:
+        if cfg.cost_model:
+            cost = _cost_model(server, model, cfg)
+            print(json.dumps({"cost_model": cost}), flush=True)
         for i, (n, p, v) in enumerate(cfg.steps):
-            r = _step(server.url, model, i, n, p, v if cfg.head else 0, cfg.seconds)
+            r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds)
             steps.append(r)
             print(json.dumps({"step": r["sessions"], "pass": r["pass"], "pass_every_viewer": r["pass_every_viewer"],
+                              "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
+                              "server_cpu_cores": r["server_cpu_cores"],
                               "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                               "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"], "lost": r["frames_lost"]}),
                   flush=True)
@@ -196,6 +252,10 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "sustained_every_viewer": None if best_strict is None else {
             k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
+        "server_workers": cfg.workers,
+        "cost_model": cost,
+        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
         "steps": steps,
         "note": "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)",
     }
@@ -208,11 +268,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
+    ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
+    ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     args = ap.parse_args(argv)
     steps = DEFAULT_STEPS
     if args.steps:
         steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
-    result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model, head=not args.no_head))
+    result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
+                                                   head=not args.no_head, cost_model=not args.no_cost_model,
+                                                   workers=args.workers))
     print(json.dumps(result, indent=2))
     return 0
 

@@ -68,6 +68,13 @@ class ServerProcess:
                 return
         raise RuntimeError("server did not start within 120 s")
 
+    def cpu_seconds(self) -> float:
+        """User + system CPU time the server process has used so far (s), from /proc."""
+        import os
+
+        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
     def stop(self) -> int:
         if self.proc.poll() is None:
             self.proc.terminate()

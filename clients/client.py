@@ -159,6 +159,17 @@ async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bo
     return log
 
 
+async def stream_source(ing: IngestClient, source) -> int:
+    """Forward an audio source of :mod:`server.sources` (microphone, paced file: async iterators of
+    (n, channels) float32 blocks) to a remote session; returns the samples sent. The same sources
+    feed local sessions through ``FacecastServer.run_source``."""
+    n = 0
+    async for block in source:
+        await ing.send(np.asarray(block, dtype=np.float32))
+        n += len(block)
+    return n
+
+
 async def ingest_file(url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02,
                       token: str | None = None) -> dict:
     """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""

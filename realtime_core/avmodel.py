@@ -93,7 +93,8 @@ class AvModel:
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
-    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy}
+    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
+            "silence_floor_db": fe.silence_floor_db}
 
 
 def _frontend_from_json(d: dict) -> FrontEndConfig:
@@ -102,6 +103,8 @@ def _frontend_from_json(d: dict) -> FrontEndConfig:
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
         tc=int(d["tc"]),
         energy=bool(d.get("energy", False)),
+        # Models written before the gate existed were trained without it.
+        silence_floor_db=d.get("silence_floor_db"),
     )
 
 

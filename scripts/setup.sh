@@ -3,12 +3,14 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
-# System packages: espeak-ng (speech synthesis for corpora and the demo), ffmpeg (video I/O),
+# System packages: espeak-ng and Festival with three voices (speech synthesis for corpora and
+# the demo), ffmpeg (video I/O),
 # PortAudio (microphone via sounddevice), PulseAudio (a virtual microphone in tests),
 # Mesa EGL (headless moderngl rendering), Chromium (the browser viewer's test) and Xvfb (a
 # display for the Python viewer's window test).
-apt_pkgs=(espeak-ng libespeak-ng1 ffmpeg libportaudio2 pulseaudio pulseaudio-utils
-          libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv chromium xvfb)
+apt_pkgs=(espeak-ng libespeak-ng1 festival festvox-kallpc16k festvox-kdlpc16k festvox-us-slt-hts ffmpeg
+          libportaudio2 pulseaudio pulseaudio-utils libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv
+          chromium xvfb)
 missing=()
 for p in "${apt_pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -7,14 +7,17 @@ connection, the microphone or a file) with a sans-I/O :class:`server.session.Ses
 of viewers. When a block of audio arrives the session computes the frames now final inline on the
 loop (a few hundred microseconds per frame with the paper's model; measured by
 ``benchmarks/server_latency.py``: handing such short work to a thread pool costs more than it
-saves and the GIL serialises it anyway), then *fans out*: each frame is encoded once per
+saves and the GIL serialises it anyway; with ``ServerConfig.workers`` it runs in compute processes
+instead, see :mod:`server.workers`), then *fans out*: each frame is encoded once per
 (kind, encoding) that somebody watches, given one header with the send time, and offered to every
 viewer of that kind.
 
-Viewers never slow the session or each other. Each has a bounded queue of ready messages and its
-own sender task; offering a message never waits. When a queue is full the oldest message is
-dropped and counted (the freshest frame matters most for live animation); a viewer that keeps
-dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
+Viewers never slow the session or each other. A viewer that keeps up (nothing queued, socket
+buffer under 64 KiB) gets each message written synchronously, as python-websockets' ``broadcast``
+does, without a task switch per message. Otherwise the message goes to the viewer's bounded queue,
+drained by its own sender task with backpressure; offering a message never waits. When a queue is
+full the oldest message is dropped and counted (the freshest frame matters most for live
+animation); a viewer that keeps dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
 python-websockets' broadcast guide, with drop-oldest instead of unbounded buffering.
 
 Every protocol breach raises :class:`server.errors.ProtocolViolation` inside that connection's
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import AsyncIterator
 
 import numpy as np
-from websockets.asyncio.server import Server, ServerConnection, serve
+from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
@@ -52,12 +55,33 @@ from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
 from server import protocol as P
 from server.config import ServerConfig
-from server.errors import ControlError, ProtocolViolation, ServerConfigError, ServerError
+from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
 from server.glb import mesh_glb, mesh_json, texture_mime
-from server.session import AudioFormatError, Output, Session, SessionConfig
+from server.session import Output, Session, SessionConfig
 from server.timing import StageTimes
+from server.workers import RemoteSession, WorkerPool
 
 log = logging.getLogger("facecast.server")
+
+FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
+# A viewer whose socket buffer holds less than this gets messages written synchronously
+# (websockets' broadcast); others go through their queue and sender task (backpressure, drops).
+FAST_PATH_BUFFER_BYTES = 64 * 1024
+
+
+def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+    """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
+    message), the bounded queue for the others."""
+    fast = []
+    for v in viewers:
+        if v.writable_now():
+            fast.append(v)
+        else:
+            v.offer(msg, now)
+    if fast:
+        broadcast([v.ws for v in fast], msg)
+        for v in fast:
+            v.sent += 1
 
 
 @dataclass(frozen=True)
@@ -86,6 +110,15 @@ class Viewer:
         self.sent = 0
         self.behind_since: float | None = None
         self.closing = False
+        self.sending = False
+
+    def writable_now(self) -> bool:
+        """True when a message can be written straight to the socket without reordering or
+        buffering beyond the write limit: nothing queued or in flight, transport buffer low."""
+        if self.closing or self.queue or self.sending:
+            return False
+        transport = self.ws.transport
+        return transport is not None and transport.get_write_buffer_size() <= FAST_PATH_BUFFER_BYTES
 
     def offer(self, msg: bytes, now: float) -> None:
         """Queue one message without waiting; drop the oldest when full; close if behind too long."""
@@ -102,7 +135,7 @@ class Viewer:
                 self.closing = True
                 self.server.closed_slow += 1
                 self.queue.clear()
-                asyncio.get_running_loop().create_task(
+                self.server.spawn(
                     self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
                                          f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
                 )
@@ -115,19 +148,25 @@ class Viewer:
         while True:
             await self.wake.wait()
             self.wake.clear()
-            while self.queue:
-                msg = self.queue.popleft()
-                await self.ws.send(msg)
-                self.sent += 1
+            self.sending = True
+            try:
+                while self.queue:
+                    msg = self.queue.popleft()
+                    await self.ws.send(msg)
+                    self.sent += 1
+            finally:
+                self.sending = False
             self.behind_since = None
 
 
 class LiveSession:
     """A session with its viewers: feed it audio, it fans frames out."""
 
-    def __init__(self, name: str, session: Session, server: "FacecastServer", *, source: str) -> None:
+    def __init__(self, name: str, session: "Session | RemoteSession", server: "FacecastServer", *,
+                 source: str) -> None:
         self.name = name
         self.session = session
+        self.remote = isinstance(session, RemoteSession)
         self.server = server
         self.source = source
         self.viewers: set[Viewer] = set()
@@ -135,17 +174,46 @@ class LiveSession:
         self.started = time.time()
         self.ended = asyncio.Event()
 
-    def feed_bytes(self, data: bytes) -> int:
+    async def feed_bytes(self, data: bytes) -> int:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
+        if self.remote:
+            return self._fanout(await self.session.push_bytes(data))
         return self._fanout(self.session.push_bytes(data))
 
-    def feed(self, samples: np.ndarray) -> int:
+    async def feed_bytes_fairly(self, data: bytes) -> int:
+        """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
+        processed in slices of at most ``FAIR_SLICE_S`` of audio with a yield to the loop between
+        them, so one session's burst never holds up the other sessions for more than a few frames."""
+        s = self.session
+        frame = s.frame_bytes
+        step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
+        if len(data) <= step:
+            return await self.feed_bytes(data)
+        if len(data) % frame:
+            return await self.feed_bytes(data)  # raises the AudioFormatError naming the problem
+        n = 0
+        for i in range(0, len(data), step):
+            n += await self.feed_bytes(data[i:i + step])
+            await asyncio.sleep(0)
+        return n
+
+    async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
+        if self.remote:
+            return self._fanout(await self.session.push(samples))
         return self._fanout(self.session.push(samples))
 
-    def finish(self) -> int:
+    async def finish(self) -> int:
         """End of the audio: flush the remaining frames to the viewers."""
+        if self.remote:
+            return self._fanout(await self.session.flush())
         return self._fanout(self.session.flush())
+
+    async def control(self, msg: dict) -> dict:
+        """Apply a control message (ControlError if rejected); returns the control state."""
+        if self.remote:
+            return await self.session.apply_control(msg)
+        return self.session.apply_control(msg)
 
     def _fanout(self, out: Output) -> int:
         if not self.viewers:
@@ -157,17 +225,16 @@ class LiveSession:
             if listeners:
                 a = out.audio
                 msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
-                for v in listeners:
-                    v.offer(msg, now)
-        for frame in out.frames:
-            cache: dict[tuple[int, int], bytes] = {}
-            for v in list(self.viewers):
-                key = (v.kind, v.encoding)
-                msg = cache.get(key)
-                if msg is None:
-                    payload, count, scale = frame.payload(v.kind, v.encoding)
-                    msg = cache[key] = P.pack_header(v.kind, v.encoding, frame.index, count, scale, frame.media_time, now) + payload
-                v.offer(msg, now)
+                _deliver(listeners, msg, now)
+        if out.frames:
+            groups: dict[tuple[int, int], list[Viewer]] = {}
+            for v in self.viewers:
+                groups.setdefault((v.kind, v.encoding), []).append(v)
+            for frame in out.frames:
+                for (kind, enc), members in groups.items():
+                    payload, count, scale = frame.payload(kind, enc)
+                    msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
+                    _deliver(members, msg, now)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)
 
@@ -208,6 +275,7 @@ class FacecastServer:
         self._tasks: set[asyncio.Task] = set()
         self.started = time.time()
         self.stopping = False
+        self.pool: WorkerPool | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -227,6 +295,20 @@ class FacecastServer:
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
+        if cfg.workers:
+            self.pool = WorkerPool(self.model, cfg.workers)
+            await self.pool.start()
+        lag = asyncio.ensure_future(self._watch_loop_lag())
+        self._tasks.add(lag)
+
+    async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
+        """Record how late a 10 ms timer fires ("loop_lag"): the time any callback waits for the loop,
+        whether the loop is busy with frames or the process is not scheduled (a shared machine)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            t = loop.time()
+            await asyncio.sleep(period_s)
+            self.times.add("loop_lag", max(0.0, loop.time() - t - period_s))
 
     @property
     def port(self) -> int:
@@ -252,6 +334,16 @@ class FacecastServer:
             await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
+        if self.pool is not None:
+            await self.pool.stop()
+            self.pool = None
+
+    def spawn(self, coro) -> asyncio.Task:
+        """Run a coroutine in the background, holding a reference until it is done."""
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
 
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
         """Close one connection with a code and reason (counted in metrics)."""
@@ -263,32 +355,50 @@ class FacecastServer:
 
     # -- local sources -----------------------------------------------------------------------------
 
-    def open_session(self, name: str, config: SessionConfig, *, source: str) -> LiveSession:
+    async def open_session(self, name: str, config: SessionConfig, *, source: str) -> LiveSession:
         """Register a new live session (ServerError if the name is taken or the server is full)."""
         if not P.SESSION_NAME.match(name):
             raise ServerConfigError(f"session name must match {P.SESSION_NAME.pattern}, got {name!r}")
-        if name in self.sessions:
-            raise ServerConfigError(f"session {name!r} already exists")
-        if len(self.sessions) >= self.config.max_sessions:
-            raise ServerConfigError(f"server is full ({self.config.max_sessions} sessions)")
-        live = LiveSession(name, self._make_session(config), self, source=source)
+        if (refused := self._no_room(name)) is not None:
+            raise ServerConfigError(refused[1])
+        session = await self._new_session(config)
+        if (refused := self._no_room(name)) is not None:  # the await may have let another one in
+            await self._discard(session)
+            raise ServerConfigError(refused[1])
+        live = LiveSession(name, session, self, source=source)
         self.sessions[name] = live
         return live
 
-    def _make_session(self, config: SessionConfig) -> Session:
-        return Session(self.model, config=config, rig=self.head.rig if self.head else None, times=self.times)
+    def _no_room(self, name: str) -> tuple[int, str] | None:
+        """Why a session ``name`` cannot open now, as (close code, reason); None if it can."""
+        if name in self.sessions:
+            return P.CLOSE_CONFLICT, f"session {name!r} already exists"
+        if len(self.sessions) >= self.config.max_sessions:
+            return P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)"
+        return None
+
+    async def _new_session(self, config: SessionConfig) -> "Session | RemoteSession":
+        rig = self.head.rig if self.head else None
+        if self.pool is not None:
+            return await self.pool.open(config, rig=rig, times=self.times)
+        return Session(self.model, config=config, rig=rig, times=self.times)
+
+    @staticmethod
+    async def _discard(session: "Session | RemoteSession") -> None:
+        if isinstance(session, RemoteSession):
+            await session.close()
 
     async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
                          channels: int = 1, label: str = "local") -> LiveSession:
         """Run a session from an async iterator of (n,) / (n, channels) float blocks until it ends."""
         cfg = SessionConfig(sample_rate_hz=int(sample_rate_hz), channels=channels, lag=self.config.lag)
-        live = self.open_session(name, cfg, source=label)
+        live = await self.open_session(name, cfg, source=label)
         try:
             async for block in source:
-                live.feed(block)
+                await live.feed(block)
                 if live.ended.is_set():
                     break
-            live.finish()
+            await live.finish()
         finally:
             if self.stopping:
                 await self._end_session(live, P.CLOSE_GOING_AWAY, "server shutting down")
@@ -299,6 +409,7 @@ class FacecastServer:
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
         self.sessions.pop(live.name, None)
         live.ended.set()
+        await self._discard(live.session)  # a worker session that never flushed
         # Let senders drain what is queued (bounded: each viewer queue is small), then close.
         for v in list(live.viewers):
             v.wake.set()
@@ -363,11 +474,13 @@ class FacecastServer:
                                 sample_format=start.get("format", "pcm_s16le"), lag=self.config.lag)
         except ServerConfigError as exc:
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
-        if name in self.sessions:
-            raise ProtocolViolation(P.CLOSE_CONFLICT, f"session {name!r} already exists")
-        if len(self.sessions) >= self.config.max_sessions:
-            raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)")
-        live = LiveSession(name, self._make_session(cfg), self, source="ingest")
+        if (refused := self._no_room(name)) is not None:
+            raise ProtocolViolation(*refused)
+        session = await self._new_session(cfg)
+        if (refused := self._no_room(name)) is not None:  # the await may have let another one in
+            await self._discard(session)
+            raise ProtocolViolation(*refused)
+        live = LiveSession(name, session, self, source="ingest")
         self.sessions[name] = live
         code, reason = P.CLOSE_NORMAL, "session ended"
         try:
@@ -383,13 +496,13 @@ class FacecastServer:
                     done, _ = await asyncio.wait({recv, ended_task}, return_when=asyncio.FIRST_COMPLETED)
                     if recv not in done:  # server shutting down
                         recv.cancel()
-                        live.finish()
+                        await live.finish()
                         code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
                         break
                     msg = recv.result()
                     if isinstance(msg, bytes):
                         try:
-                            live.feed_bytes(msg)
+                            await live.feed_bytes_fairly(msg)
                         except AudioFormatError as exc:
                             raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, str(exc)) from None
                         continue
@@ -403,12 +516,12 @@ class FacecastServer:
                     kind = ctl.get("type")
                     if kind == "control":
                         try:
-                            state = live.session.apply_control(ctl)
+                            state = await live.control(ctl)
                             await ws.send(P.dumps({"type": "ack", "controls": state}))
                         except ControlError as exc:
                             await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
                     elif kind == "end":
-                        live.finish()
+                        await live.finish()
                         await ws.send(P.dumps({"type": "ended", "frames": live.session.frames_out,
                                                "audio_s": live.session.samples_out / live.session.rate_hz}))
                         break
@@ -423,7 +536,7 @@ class FacecastServer:
             raise exc
         except ConnectionClosed:
             # The source hung up without "end": finish what it sent.
-            live.finish()
+            await live.finish()
         finally:
             await self._end_session(live, code, reason)
         await self.close_ws(ws, code, reason)

@@ -19,7 +19,8 @@ class ServerConfig:
     messages buffered per viewer before the oldest is dropped; viewer_max_behind_s: a viewer that
     keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
     send its start message; close_timeout_s: wait for a peer's close handshake before dropping TCP;
-    lag: extra fixed-lag smoothing frames of every session; viewer_socket_buffer_bytes: kernel send
+    lag: extra fixed-lag smoothing frames of every session; workers: compute processes for the
+    sessions' per-frame work (0: on the event loop; see server.workers); viewer_socket_buffer_bytes: kernel send
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
@@ -36,6 +37,7 @@ class ServerConfig:
     start_timeout_s: float = 10.0
     close_timeout_s: float = 2.0
     lag: int = 0
+    workers: int = 0
     viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
     node_modules: Path | None = None
@@ -62,6 +64,8 @@ class ServerConfig:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0 < v <= 3600:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
+        if not isinstance(self.workers, int) or not 0 <= self.workers <= 64:
+            raise ServerConfigError(f"workers must be an integer in 0..64, got {self.workers!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30, got {self.lag!r}")
         b = self.viewer_socket_buffer_bytes

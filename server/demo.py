@@ -129,12 +129,14 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
         announce(f"  open {server.url}/   (viewer page; sessions listed)")
         announce(f"  watch {ws}/view?session=demo&kind=deltas   (or kind=params, kind=blendshapes)")
         announce(f"  metrics {server.url}/metrics")
-        stop = asyncio.Event()
-
         def on_stop() -> None:
-            stop.set()
+            # End the session early: the source stops, the viewer gets the last frames, the MP4
+            # covers what was streamed.
+            live = server.sessions.get("demo")
+            if live is not None:
+                live.ended.set()
             if mic is not None:
-                mic.close()  # the session ends, the viewer gets its last frames
+                mic.close()
 
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, on_stop)
@@ -158,6 +160,53 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
     audio_rate = got.description["audio"]["rate_hz"]
     return DemoResult(params=got.values(), audio=got.audio_samples(), audio_rate_hz=audio_rate, url=url,
                       speech=speech, speech_rate_hz=0 if speech is None else rate)
+
+
+async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *,
+                       pause_s: float = 2.0, announce=print) -> int:
+    """After the demo: keep serving and replay the speech as session "demo" until Ctrl-C.
+
+    Each pass is a new live session under the same name, ``pause_s`` apart, so a browser opened
+    at any time finds the head talking (the viewer reconnects when a session ends and starts
+    again). Returns the number of passes played.
+    """
+    from server.app import FacecastServer
+    from server.config import ServerConfig
+    from server.sources import FileSource
+
+    server = FacecastServer(model, head=head, config=ServerConfig(host=config.host, port=config.port,
+                                                                   web_root=config.web_root,
+                                                                   node_modules=config.node_modules))
+    await server.start()
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    announce(f"facecast demo: replaying the speech every {len(speech) / rate_hz + pause_s:.0f} s until Ctrl-C")
+    announce(f"  open {server.url}/ to watch and listen")
+    passes = 0
+    try:
+        while not stop.is_set():
+            source = FileSource.from_array(speech, rate_hz, realtime=True)
+            session = asyncio.ensure_future(server.run_source("demo", source, sample_rate_hz=rate_hz, label="demo"))
+            stopper = asyncio.ensure_future(stop.wait())
+            await asyncio.wait({session, stopper}, return_when=asyncio.FIRST_COMPLETED)
+            if stop.is_set():
+                live = server.sessions.get("demo")
+                if live is not None:
+                    live.ended.set()
+            await session
+            stopper.cancel()
+            passes += 1
+            try:
+                await asyncio.wait_for(stop.wait(), timeout=pause_s)
+            except TimeoutError:
+                pass
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        await server.stop()
+    return passes
 
 
 def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rate_hz: int, *, fps: int = 30,

@@ -24,6 +24,10 @@ class ProtocolViolation(ServerError):
         self.reason = reason
 
 
+class AudioFormatError(ServerError, ValueError):
+    """A block of audio cannot be used: partial samples, NaN/inf or out-of-range floats, wrong shape."""
+
+
 class ControlError(ServerError, ValueError):
     """A control message names an unknown control or gives an invalid value (the session goes on)."""
 

@@ -33,17 +33,13 @@ from realtime_core.errors import RealtimeCoreError
 from realtime_core.face.rig import Rig
 from realtime_core.inversion import StreamConfig
 from server import protocol as P
-from server.errors import ControlError, ServerConfigError
+from server.errors import AudioFormatError, ControlError, ServerConfigError
 from server.resample import StreamingResampler
 from server.timing import StageTimes
 
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
-
-
-class AudioFormatError(ServerConfigError):
-    """A block of audio bytes cannot be decoded (partial samples, NaN/inf floats)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -174,7 +170,13 @@ class Session:
         self.samples_in = 0  # input samples (per channel) received
         self.samples_out = 0  # model-rate samples produced
         self._audio_index = 0
+        self._cpu0 = 0.0
         self.finished = False
+
+    @property
+    def frame_bytes(self) -> int:
+        """Bytes of one sample frame (all channels) in the input format."""
+        return self._frame_bytes
 
     # -- timing facts ----------------------------------------------------------------------------
 
@@ -221,6 +223,7 @@ class Session:
     def push_bytes(self, data: bytes) -> Output:
         """One binary block (any whole number of sample frames) -> Output."""
         t0 = time.perf_counter()
+        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
         x = self.decode(data)
         self.times.add("decode", time.perf_counter() - t0)
         return self._run(x, t0)
@@ -228,6 +231,7 @@ class Session:
     def push(self, samples: np.ndarray) -> Output:
         """samples: (n,) mono or (n, channels) float in [-1, 1] at the input rate -> Output."""
         t0 = time.perf_counter()
+        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
         x = np.asarray(samples, dtype=np.float64)
         if x.ndim == 2:
             if x.shape[1] != self.config.channels:
@@ -244,6 +248,7 @@ class Session:
         if self.finished:
             return Output([], None)
         t0 = time.perf_counter()
+        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
         self.finished = True
         y = self._resampler.flush()
         audio = self._audio(y)
@@ -295,6 +300,7 @@ class Session:
         now = time.perf_counter()
         work = (now - t0) / len(params)
         self.times.add("push_per_frame", work)
+        self.times.add("push_per_frame_cpu", (time.thread_time() - self._cpu0) / len(params))
         frames = []
         for row, p in zip(params, out):
             k = self.frames_out

@@ -76,7 +76,9 @@ class MicSource:
         try:
             info = sd.query_devices(cfg.device, "input")
         except (ValueError, sd.PortAudioError) as exc:
-            raise AudioSourceError(f"no usable input device {cfg.device!r}: {exc}") from None
+            which = "no default input device (no microphone found?)" if cfg.device is None else (
+                f"no usable input device {cfg.device!r}")
+            raise AudioSourceError(f"{which}: {exc}") from None
         rate = int(cfg.sample_rate_hz or info["default_samplerate"])
         self.sample_rate_hz = rate
 

@@ -20,17 +20,14 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from training.params import PhonemeSegment
 from training.errors import AlignmentFormatError
 
 HTS_UNIT_S = 1e-7
 """HTS label time unit: 100 ns."""
 
 
-@dataclass(frozen=True)
-class Phone:
-    phoneme: str
-    start_s: float
-    end_s: float
+Phone = PhonemeSegment  # the shared timeline type (training.params)
 
 
 @dataclass(frozen=True)

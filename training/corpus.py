@@ -32,6 +32,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from facecast.files import atomic_write_bytes
 from training.errors import (
     ConfigError,
     CorpusFormatError,
@@ -40,7 +41,7 @@ from training.errors import (
     TruncatedFileError,
     WrongSampleRateError,
 )
-from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
+from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1
@@ -54,11 +55,7 @@ SILENCE_PEAK = 1e-4
 CSV_HEADER = "t," + ",".join(PARAM_NAMES)
 
 
-@dataclass(frozen=True)
-class PhonemeRecord:
-    phoneme: str
-    start_s: float
-    end_s: float
+PhonemeRecord = PhonemeSegment  # the shared timeline type (training.params)
 
 
 @dataclass(frozen=True)
@@ -88,22 +85,6 @@ class Utterance:
 
 
 # --------------------------------------------------------------------------- atomic writes
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: a temporary file in the same folder, then
-    ``os.replace`` (readers see the old file or the new one, never a partial one)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-_atomic_write_bytes = atomic_write_bytes  # the earlier private name, still used by callers
 
 
 def to_int16(samples: np.ndarray) -> np.ndarray:

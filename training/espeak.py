@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from training.params import PhonemeSegment
 from training.errors import ConfigError, SynthesisError
 
 LIBRARY = "libespeak-ng.so.1"
@@ -146,13 +147,6 @@ class Voice:
         return f"{self.espeak_name}@r{self.rate_wpm}p{self.pitch}"
 
 
-@dataclass(frozen=True)
-class PhonemeSegment:
-    """One phoneme of a timeline: espeak mnemonic (or ARPAbet label) over [start_s, end_s)."""
-
-    phoneme: str
-    start_s: float
-    end_s: float
 
 
 @dataclass(frozen=True)

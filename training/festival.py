@@ -26,7 +26,7 @@ from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import read_wav, write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
-from training.espeak import PhonemeSegment
+from training.params import PhonemeSegment
 from training.params import n_frames_for
 
 VOICES: tuple[str, ...] = ("kal_diphone", "ked_diphone", "cmu_us_slt_arctic_hts")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from realtime_core.avmodel import AvModel, decode_model, encode_model
 from realtime_core.errors import ModelFormatError
-from training.corpus import _atomic_write_bytes
+from facecast.files import atomic_write_bytes
 from training.errors import FileProblem
 
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "default_model.npz"
@@ -24,7 +24,7 @@ class ModelFileError(FileProblem):
 def save_model(path: str | Path, model: AvModel) -> Path:
     """Write ``model`` to ``path`` atomically (temporary file + rename)."""
     path = Path(path)
-    _atomic_write_bytes(path, encode_model(model))
+    atomic_write_bytes(path, encode_model(model))
     return path
 
 

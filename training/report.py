@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from training.corpus import _atomic_write_bytes
+from facecast.files import atomic_write_bytes
 
 
 def _figure():
@@ -27,7 +27,7 @@ def _figure():
 def _save(fig, path: Path) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    _atomic_write_bytes(Path(path), buf.getvalue())
+    atomic_write_bytes(Path(path), buf.getvalue())
     return Path(path)
 
 
@@ -57,6 +57,7 @@ def plot_selection(rows: Sequence[dict], path: Path) -> Path:
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
     fig.suptitle("Held-out accuracy over N and M (cf. paper Fig. 7)")
+    fig.subplots_adjust(hspace=0.35)
     out = _save(fig, path)
     plt.close(fig)
     return out

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from clients.errors import AssetError
+from facecast.files import atomic_write_bytes
 
 
 def cache_dir() -> Path:
@@ -23,17 +24,7 @@ def cache_dir() -> Path:
 
 
 def atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
-    """``np.savez`` to a temp file in the same directory, then ``os.replace`` (readers never see half a file)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp.npz", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600; caches are shared read-only data
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    """``np.savez`` written atomically (see :func:`facecast.files.atomic_write_bytes`)."""
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return atomic_write_bytes(path, buf.getvalue())

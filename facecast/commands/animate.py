@@ -37,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
     from training.audio_io import read_audio
-    from training.corpus import _atomic_write_bytes, format_params_csv
+    from facecast.files import atomic_write_bytes
+    from training.corpus import format_params_csv
     from training.modelfile import load_model
     from training.trainer import resample
 
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     x = resample(samples, rate, model.sample_rate_hz)
     params = speech_to_params(model, x, mode=args.mode, stream=StreamConfig(lag=args.lag))
     if args.csv is not None:
-        _atomic_write_bytes(args.csv, format_params_csv(params).encode())
+        atomic_write_bytes(args.csv, format_params_csv(params).encode())
     if args.glb or args.json or args.tsv:
         from clients.export.curves import Track
         from clients.export.files import export_track

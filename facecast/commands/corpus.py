@@ -41,6 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "evaluation voices f5,m7 out of training; default: all of base,m1..m7,f1..f5",
     )
     p.add_argument("--lead-ms", type=float, default=33.0, help="move rule labels this much earlier (lips lead sound)")
+    p.add_argument(
+        "--engine", choices=("espeak", "festival"), default="espeak",
+        help="speech engine: espeak-ng (English and Spanish voices) or Festival (English diphone and HTS "
+        "voices, closer to human speech; --sentences counts its utterances, --languages and --variants "
+        "do not apply)",
+    )
     p.set_defaults(run=run)
 
 
@@ -53,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
     from training.articulatory import ArticulatoryConfig
     from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
 
+    if args.engine == "festival":
+        return _festival(args)
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())
     cfg = BuildConfig(
         out_dir=Path(args.out_dir), sentences=args.sentences, languages=langs, seed=args.seed,
@@ -69,4 +77,24 @@ def run(args: argparse.Namespace) -> int:
           f"in {wall:.1f} s -> {rep.manifest}")
     for path, why in rep.skipped:
         print(f"skipped {path}: {why}")
+    return 0
+
+
+def _festival(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from training.articulatory import ArticulatoryConfig
+    from training.build_corpus import load_sentences
+    from training.festival import VOICES, FestivalVoice, build_festival_corpus
+
+    base = load_sentences("en")
+    sentences = [base[i % len(base)] for i in range(args.sentences)]
+    voices = [FestivalVoice(name=v, stretch=x) for v in VOICES for x in (0.85, 1.0, 1.15)]
+    manifest = build_festival_corpus(
+        Path(args.out_dir), sentences, seed=args.seed, voices=voices, augment_audio=args.augment,
+        articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0), progress=tqdm,
+    )
+    print(f"wrote {len(sentences)} Festival utterances -> {manifest}")
     return 0

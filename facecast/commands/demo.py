@@ -27,6 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--text", action="append", default=None, help="a sentence to say instead of the built-in ones (repeatable)")
     p.add_argument("--out", type=Path, default=Path("facecast_demo.mp4"), help="MP4 to write")
     p.add_argument("--no-video", action="store_true", help="do not render the MP4")
+    p.add_argument("--once", action="store_true",
+                   help="exit after the MP4 instead of serving and replaying the speech until Ctrl-C")
     p.set_defaults(run=run)
 
 
@@ -36,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from server.app import load_head
-    from server.demo import SENTENCES, DemoConfig, run_demo, write_mp4
+    from server.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
     from training.modelfile import load_model
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
@@ -54,5 +56,8 @@ def run(args: argparse.Namespace) -> int:
     if cfg.video is not None and len(result.params):
         print(f"facecast demo: rendering {cfg.video} ...", flush=True)
         path = write_mp4(cfg.video, head, result.params, result.audio, result.audio_rate_hz)
-        print(f"facecast demo: wrote {path}")
+        print(f"facecast demo: wrote {path.resolve()}")
+    if not args.once and result.speech is not None:
+        with threadpool_limits(1):
+            asyncio.run(serve_replay(cfg, model, head, result.speech, result.speech_rate_hz))
     return 0

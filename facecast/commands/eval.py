@@ -34,7 +34,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
-    from training.corpus import _atomic_write_bytes, load_corpus
+    from facecast.files import atomic_write_bytes
+    from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set, video_items
     from training.modelfile import load_model
 
@@ -65,6 +66,6 @@ def run(args: argparse.Namespace) -> int:
     text = format_markdown(results, command)
     print(text)
     if args.output is not None:
-        _atomic_write_bytes(args.output, text.encode())
+        atomic_write_bytes(args.output, text.encode())
         print(f"wrote {args.output}")
     return 0

@@ -19,8 +19,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "same port: /health, /metrics, /head/mesh (glTF), /head/texture. Protocol: docs/protocol.md. "
         "Command-line values override the [server] table of --config.",
     )
-    p.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1: this machine only)")
-    p.add_argument("--port", type=int, default=None, help="TCP port (default 8765; 0 = any free port)")
+    # SUPPRESS: unset options fall back to --config, then to ServerConfig's defaults.
+    p.add_argument("--host", default=argparse.SUPPRESS,
+                   help="interface to bind (default: the config's, else 127.0.0.1 = this machine only)")
+    p.add_argument("--port", type=int, default=argparse.SUPPRESS,
+                   help="TCP port (default: the config's, else 8765; 0 = any free port)")
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     head = p.add_mutually_exclusive_group()
     head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
@@ -34,6 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--file", type=Path, action="append", default=[],
                    help="also stream this audio file as a session named after it (repeatable)")
     p.add_argument("--fast", action="store_true", help="stream --file as fast as possible instead of in real time")
+    p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
+                   help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
+                   "on the event loop; use up to cores - 1)")
     p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
     p.set_defaults(run=run)
 
@@ -59,8 +65,9 @@ def run(args: argparse.Namespace) -> int:
         default_web = Path(__file__).resolve().parents[2] / "clients" / "web"
         web_root = default_web if default_web.is_dir() else None
     node_modules = Path(__file__).resolve().parents[2] / "node_modules"  # `npm ci` at the repo root (three.js)
-    overrides = {"host": args.host, "port": args.port, "token": token, "web_root": web_root,
-                 "node_modules": node_modules if node_modules.is_dir() else None}
+    overrides = {"host": getattr(args, "host", None), "port": getattr(args, "port", None), "token": token,
+                 "web_root": web_root, "node_modules": node_modules if node_modules.is_dir() else None,
+                 "workers": getattr(args, "workers", None)}
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_model(args.model)
@@ -70,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     server = FacecastServer(model, head=head, config=config)
 
     async def main() -> None:
+        mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
         ready: asyncio.Future = asyncio.get_running_loop().create_future()
         extra = []
         run = asyncio.ensure_future(run_server(server, ready=ready))
@@ -80,8 +88,7 @@ def run(args: argparse.Namespace) -> int:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))
             name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
             extra.append(server.run_source(name, src, sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
-        if args.mic:
-            mic = MicSource(MicConfig()).open()
+        if mic is not None:
             print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
             extra.append(server.run_source("mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels,
                                            label="microphone"))

@@ -54,6 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from tqdm import tqdm
 
     from realtime_core.hmm import TrainConfig
@@ -94,9 +96,7 @@ def run(args: argparse.Namespace) -> int:
         bar.set_postfix(objective=f"{objective:.4f}")
         if it > 0:
             bar.update(1)
-            save_model(ckpt, model)
-
-    from dataclasses import replace
+            save_model(ckpt, replace(model, metadata={**model.metadata, "iteration": done + it}))
 
     rec_run = replace(rec, hmm=replace(rec.hmm, n_iter=max(args.iters - done, 0))) if start is not None else rec
     model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,

@@ -25,12 +25,17 @@ class FrontEndConfig:
     energy: also use c0 (log energy) as a feature, normalised by the running CMVN like the
     others (the paper uses c1..c11 only; c0 carries loudness, which predicts mouth opening
     in real speech). Each frame then has n_ceps + 1 values, c0 first.
+    silence_floor_db: frames whose level (dB, :func:`mel_level_db`; about dBFS + 2 for white
+    noise) is below this are replaced by the features of digital silence, so a quiet room's
+    hiss looks exactly like the silent pauses the model was trained on and the mouth stays
+    closed (None disables the gate).
     """
 
     mfcc: MfccConfig = field(default_factory=MfccConfig)
     cmvn: CmvnConfig | None = field(default_factory=CmvnConfig)
     tc: int = 3
     energy: bool = False
+    silence_floor_db: float | None = -60.0
 
     def __post_init__(self) -> None:
         if self.mfcc.include_c0:
@@ -78,6 +83,9 @@ class FrontEnd:
         else:
             self._cmvn = None
         self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
+        # Raw [c0, c1..] of digital silence (every mel band at the energy floor).
+        probe = MfccStream(replace(mcfg, include_c0=True))
+        self._silence = probe.push(np.zeros(mcfg.window_len))[0]
 
     def reset(self) -> None:
         self._mfcc.reset()
@@ -98,10 +106,14 @@ class FrontEnd:
         return np.concatenate([rows, self._ctx.flush()])
 
     def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
+        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+        if self.config.silence_floor_db is not None:
+            quiet = level < self.config.silence_floor_db
+            if quiet.any():
+                c0_ceps = np.where(quiet[:, None], self._silence, c0_ceps)
         ceps = c0_ceps if self.config.energy else c0_ceps[:, 1:]
         if self._cmvn is None:
             return ceps
-        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
         return self._cmvn.push(ceps, level)
 
 

@@ -261,7 +261,8 @@ class MfccStream:
 
     def _frames_to_ceps(self, frames: np.ndarray) -> np.ndarray:
         """``(k, window_len)`` pre-emphasised samples -> ``(k, n_outputs)`` cepstra."""
-        spec = scipy.fft.rfft(frames * self._window, n=self.config.n_fft, axis=1)
+        # numpy's pocketfft: measured ~10% faster than scipy.fft on this one-frame-per-call path.
+        spec = np.fft.rfft(frames * self._window, n=self.config.n_fft, axis=1)
         power = (spec.real**2 + spec.imag**2) * (1.0 / self.config.n_fft)
         energies = np.maximum(power @ self._fbank, self.config.energy_floor)
         return np.log(energies) @ self._dct

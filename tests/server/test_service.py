@@ -274,7 +274,8 @@ def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
 def test_http_endpoints(model, head):
     async def main():
         async with running(model, head) as srv:
-            out = {p: await http_get(srv.url, p) for p in ("/health", "/metrics", "/head/mesh.json", "/", "/nope")}
+            out = {p: await http_get(srv.url, p)
+                   for p in ("/health", "/metrics", "/head/mesh", "/head/mesh.json", "/", "/nope")}
             return out
 
     out = asyncio.run(main())
@@ -283,5 +284,125 @@ def test_http_endpoints(model, head):
     assert {"sessions", "viewers", "dropped_messages", "timings_ms", "closes"} <= set(metrics)
     mesh = json.loads(out["/head/mesh.json"][1])
     assert len(mesh["vertices"]) == 3 * len(head.mesh.vertices) and len(mesh["triangles"]) == 3 * len(head.mesh.triangles)
+    # The glTF is readable by an independent loader, with the server's vertex order intact.
+    import io
+
+    import trimesh
+
+    scene = trimesh.load(io.BytesIO(out["/head/mesh"][1]), file_type="glb", process=False)
+    (geom,) = scene.geometry.values()
+    np.testing.assert_allclose(geom.vertices, head.mesh.vertices, atol=1e-4)
+    np.testing.assert_array_equal(geom.faces, head.mesh.triangles)
     assert out["/"][0] == 200 and b"facecast" in out["/"][1]
     assert out["/nope"][0] == 404
+
+
+def test_a_large_block_is_processed_in_fair_slices_with_the_same_frames(model):
+    pcm = _int16(speechlike(3.0, 16000, seed=9))
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
+
+    async def main():
+        async with running(model) as srv:
+            async with IngestClient(srv.url, session="big", sample_rate_hz=16000) as ing:
+                async with ViewerClient(srv.url, session="big", audio=False) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    await ing.send(pcm)  # 3 s in one 96 kB message
+                    await ing.end()
+                    return await collect
+
+    got = asyncio.run(main())
+    assert [m.index for m in got.frames] == list(range(len(ref)))
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+
+
+def test_config_from_toml(tmp_path):
+    from server.errors import ServerConfigError
+
+    good = tmp_path / "ok.toml"
+    good.write_text('[server]\nport = 9000\nmax_sessions = 3\ntoken = "t"\n')
+    cfg = ServerConfig.from_toml(good, port=9100, host=None)
+    assert (cfg.port, cfg.max_sessions, cfg.token, cfg.host) == (9100, 3, "t", "127.0.0.1")
+    for text, match in [('[server]\nprot = 1\n', "unknown \\[server\\] keys \\['prot'\\]"),
+                        ('[server]\nmax_sessions = 0\n', "max_sessions"),
+                        ('[server]\nhost = "example.com"\n', "host must be an IP"),
+                        ("[server\n", "cannot read config")]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(ServerConfigError, match=match):
+            ServerConfig.from_toml(bad)
+    with pytest.raises(ServerConfigError, match="not found"):
+        ServerConfig.from_toml(tmp_path / "missing.toml")
+
+
+def test_limits_and_start_timeout(model):
+    async def main():
+        async with running(model, max_sessions=1, max_viewers=1, start_timeout_s=0.2) as srv:
+            url = srv.url
+            async with IngestClient(url, session="one", sample_rate_hz=16000):
+                second = await _expect_close(lambda: _raw(url, "/ingest", _start(session="two", token=None)))
+                async with ViewerClient(url, session="one"):
+                    extra = await _expect_close(lambda: ViewerClient(url, session="one").__aenter__())
+            silent = await _expect_close(lambda: _raw(url, "/ingest"))
+            return second, extra, silent
+
+    second, extra, silent = asyncio.run(main())
+    assert second[0] == P.CLOSE_TRY_LATER and "1 sessions" in second[1]
+    assert extra[0] == P.CLOSE_TRY_LATER and "1 viewers" in extra[1]
+    assert silent[0] == P.CLOSE_POLICY and "no start message" in silent[1]
+
+
+def test_shutdown_flushes_sessions_and_says_going_away(model):
+    pcm = _int16(speechlike(3.0, 16000, seed=11))
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        ing = await IngestClient(srv.url, session="live", sample_rate_hz=16000).__aenter__()
+        view = await ViewerClient(srv.url, session="live", audio=False).__aenter__()
+        collect = asyncio.ensure_future(view.collect())
+        feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True))
+        await asyncio.sleep(1.0)
+        await srv.stop()  # what SIGINT/SIGTERM do
+        got = await collect
+        try:
+            await feed
+            ing_code = None
+        except ServerClosed as exc:
+            ing_code = exc.code
+        if ing_code is None:
+            ing_code = ing.ws.close_code
+        return got, ing_code
+
+    got, ing_code = asyncio.run(main())
+    assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost
+
+
+def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
+    samples, rate = read_audio(wav48k)
+    pcm = _int16(samples)
+    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+
+    async def main():
+        async with running(model, head, workers=2) as srv:
+            url = srv.url
+            async with IngestClient(url, session="w", sample_rate_hz=rate) as ing:
+                ack = await ing.control(gain={"lip_stretch": 2.0})
+                bad = await ing.control(gain={"lip_stretch": 99})
+                async with ViewerClient(url, session="w", kind="deltas", audio=True) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    await stream_samples(ing, pcm, realtime=False)
+                    ended = await ing.end()
+                    got = await collect
+            garbage = await _expect_close(lambda: _raw(url, "/ingest", _start(session="g", token=None), b"\x01\x02\x03"))
+            return ack, bad, ended, got, garbage
+
+    ack, bad, ended, got, garbage = asyncio.run(main())
+    assert ack["controls"]["gain"]["lip_stretch"] == 2.0 and bad["type"] == "rejected"
+    assert ended["frames"] == len(ref) == len(got.frames)
+    want = np.array([head.rig.displacements(p * [1, 2, 1, 1]).reshape(-1) for p in ref])
+    peak = np.abs(want).max(axis=1, keepdims=True)
+    assert np.all(np.abs(got.values() - want) <= peak / 32767 + 1e-3 * peak)
+    assert len(got.audio) > 0
+    assert garbage[0] == P.CLOSE_INVALID_PAYLOAD and "not a whole number" in garbage[1]

@@ -11,9 +11,9 @@ import scipy.signal
 from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES, blendshape_weights
 from realtime_core.pipeline import speech_to_params
 from server import protocol as P
-from server.errors import ControlError, ServerConfigError
+from server.errors import AudioFormatError, ControlError, ServerConfigError
 from server.resample import StreamingResampler
-from server.session import AudioFormatError, Session, SessionConfig
+from server.session import Session, SessionConfig
 from tests.server.conftest import speechlike
 
 

@@ -91,6 +91,9 @@ def pulse():
         yield env
     finally:
         subprocess.run(["pulseaudio", "--kill"], env=env, capture_output=True, timeout=10)
+        deadline = time.monotonic() + 5  # --kill only signals: wait until the daemon is gone
+        while time.monotonic() < deadline and subprocess.run(["pulseaudio", "--check"], env=env).returncode == 0:
+            time.sleep(0.05)
         shutil.rmtree(runtime, ignore_errors=True)
 
 
@@ -155,3 +158,27 @@ def test_microphone_session_moves_the_mouth(pulse, model_path, wav16k):
     # loaded 2-core CI machine this test's viewer may fall behind, so only a few frames are
     # required, and they must move.
     assert len(speaking) >= 3 and np.ptp(speaking, axis=0).max() > 0.1, "the mouth did not move with the speech"
+
+
+def test_a_source_feeds_a_remote_session_through_the_client(model, wav16k):
+    from clients.client import IngestClient, stream_source
+
+    samples, rate = read_audio(wav16k)
+    samples = samples[: rate // 2]
+    ref = speech_to_params(model, samples)
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            async with IngestClient(srv.url, session="remote", sample_rate_hz=rate, sample_format="f32le") as ing:
+                async with ViewerClient(srv.url, session="remote", audio=False) as v:
+                    collect = asyncio.ensure_future(v.collect())
+                    await stream_source(ing, FileSource.from_array(samples, rate, realtime=False))
+                    await ing.end()
+                    return await collect
+        finally:
+            await srv.stop()
+
+    got = asyncio.run(main())
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))

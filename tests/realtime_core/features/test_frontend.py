@@ -80,3 +80,19 @@ def test_front_end_config_errors():
         FrontEnd(FrontEndConfig())
     with pytest.raises(InvalidFeaturesError):
         RunningCmvn(CmvnConfig(), mean=np.zeros(3), var=np.array([1.0, 0.0, 1.0]))
+
+
+def test_quiet_input_below_the_silence_floor_looks_exactly_like_digital_silence():
+    """Room hiss at -75 dBFS must give the features of the silent pauses the model was trained
+    on (so the mouth stays closed); -40 dBFS noise must not be gated."""
+    rng = np.random.default_rng(0)
+    cfg = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True)
+    stats = dict(cmvn_mean=np.zeros(12), cmvn_var=np.ones(12))
+    zeros = extract_features(np.zeros(16000, np.float32), cfg, **stats)
+    hiss = extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), cfg, **stats)
+    loud = extract_features((rng.standard_normal(16000) * 10 ** (-40 / 20)).astype(np.float32), cfg, **stats)
+    np.testing.assert_array_equal(hiss, zeros)
+    assert np.abs(loud - zeros).max() > 1.0
+    ungated = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True, silence_floor_db=None)
+    assert np.abs(extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), ungated,
+                                   **stats) - zeros).max() > 1.0

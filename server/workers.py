@@ -1,0 +1,260 @@
+"""Optional compute workers: run sessions' per-frame work in other processes (``ServerConfig.workers``).
+
+Theory of operation
+-------------------
+One event loop handles every socket, but one process uses at most one core, and on the paper-size
+model the per-frame work (MFCC, inversion) is most of a session's CPU. With ``workers = N > 0``
+the server starts N processes, each holding the model, and places every new session on the least
+loaded one. The sans-I/O :class:`server.session.Session` runs there unchanged; the loop sends it
+each audio block over a pipe and gets back the frames' parameters, the resampled audio and the
+stage timings, then encodes and fans out as for a local session. A session lives on one worker
+and the pipe is FIFO, so its frames stay in order; a reply is matched to the oldest pending request
+of that worker.
+
+Cost: two pipe messages per audio block (tens of microseconds) against the ~0.3-0.5 ms of work
+per frame they move off the loop. Sending blocks the loop only if a worker's pipe (64 KiB) is
+full, i.e. if that worker is far behind real time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import multiprocessing as mp
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
+from server.errors import AudioFormatError, ControlError, ServerConfigError, ServerError
+from server.session import AudioBlock, Frame, Output, SessionConfig
+from server.timing import StageTimes
+
+_ERRORS = {"AudioFormatError": AudioFormatError, "ControlError": ControlError, "ServerConfigError": ServerConfigError}
+
+
+class _Recorder(StageTimes):
+    """StageTimes that also keeps this push's (stage, seconds) pairs for the reply."""
+
+    def __init__(self) -> None:
+        super().__init__(capacity=16)
+        self.log: list[tuple[str, float]] = []
+
+    def add(self, name: str, seconds: float) -> None:
+        self.log.append((name, seconds))
+
+
+def _pack(out: Output, rec: _Recorder) -> tuple:
+    frames = out.frames
+    raw = np.array([f.raw_params for f in frames]).reshape(len(frames), len(VISUAL_PARAMS))
+    params = np.array([f.params for f in frames]).reshape(len(frames), len(VISUAL_PARAMS))
+    work = frames[0].work_s if frames else 0.0
+    audio = None if out.audio is None else (out.audio.index, out.audio.start, out.audio.samples)
+    log, rec.log = rec.log, []
+    return raw, params, work, audio, log
+
+
+def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing Connection
+    """Worker process: decode the model once, then serve session requests until "stop"."""
+    from threadpoolctl import threadpool_limits
+
+    from realtime_core.avmodel import decode_model
+    from server.session import Session
+
+    with threadpool_limits(1):
+        model = decode_model(model_bytes)
+        conn.send(("ok", None))  # ready
+        sessions: dict[int, tuple[Session, _Recorder]] = {}
+        while True:
+            try:
+                msg = conn.recv()
+            except EOFError:
+                return
+            op = msg[0]
+            if op == "stop":
+                return
+            sid = msg[1]
+            try:
+                if op == "open":
+                    rec = _Recorder()
+                    sessions[sid] = (Session(model, config=SessionConfig(**msg[2]), times=rec), rec)
+                    conn.send(("ok", None))
+                elif op == "push":
+                    s, rec = sessions[sid]
+                    out = s.push_bytes(msg[2]) if isinstance(msg[2], bytes) else s.push(msg[2])
+                    conn.send(("ok", _pack(out, rec)))
+                elif op == "flush":
+                    s, rec = sessions[sid]
+                    conn.send(("ok", _pack(s.flush(), rec)))
+                elif op == "control":
+                    conn.send(("ok", sessions[sid][0].apply_control(msg[2])))
+                elif op == "close":
+                    sessions.pop(sid, None)
+                    conn.send(("ok", None))
+                else:
+                    conn.send(("err", "ServerError", f"unknown worker request {op!r}"))
+            except ServerError as exc:
+                conn.send(("err", type(exc).__name__, str(exc)))
+
+
+class _Worker:
+    def __init__(self, ctx, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing context
+        self.conn, child = ctx.Pipe(duplex=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes), daemon=True)
+        self.proc.start()
+        child.close()
+        self.pending: collections.deque[asyncio.Future] = collections.deque()
+        self.sessions = 0
+
+    def request(self, msg: tuple) -> asyncio.Future:
+        fut = asyncio.get_running_loop().create_future()
+        self.pending.append(fut)
+        self.conn.send(msg)
+        return fut
+
+    def on_readable(self) -> None:
+        while self.conn.poll():
+            try:
+                reply = self.conn.recv()
+            except EOFError:
+                self._fail(ServerError("compute worker died"))
+                return
+            fut = self.pending.popleft()
+            if fut.done():
+                continue
+            if reply[0] == "ok":
+                fut.set_result(reply[1])
+            else:
+                fut.set_exception(_ERRORS.get(reply[1], ServerError)(reply[2]))
+
+    def _fail(self, exc: Exception) -> None:
+        asyncio.get_running_loop().remove_reader(self.conn.fileno())
+        while self.pending:
+            fut = self.pending.popleft()
+            if not fut.done():
+                fut.set_exception(exc)
+
+
+class WorkerPool:
+    """N compute processes holding the model; ``await start()``, ``open()`` sessions, ``await stop()``."""
+
+    def __init__(self, model: AvModel, n: int) -> None:
+        if not 1 <= n <= 64:
+            raise ServerConfigError(f"workers must be in 1..64, got {n}")
+        self.model = model
+        self.n = n
+        self.workers: list[_Worker] = []
+        self._next_id = 0
+
+    async def start(self) -> None:
+        from realtime_core.avmodel import encode_model
+
+        ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
+        data = encode_model(self.model)
+        loop = asyncio.get_running_loop()
+        self.workers = [_Worker(ctx, data) for _ in range(self.n)]
+        for w in self.workers:
+            fut = loop.create_future()
+            w.pending.append(fut)
+            loop.add_reader(w.conn.fileno(), w.on_readable)
+        await asyncio.gather(*(w.pending[0] for w in self.workers))
+
+    async def stop(self) -> None:
+        loop = asyncio.get_running_loop()
+        for w in self.workers:
+            loop.remove_reader(w.conn.fileno())
+            try:
+                w.conn.send(("stop",))
+            except (BrokenPipeError, OSError):
+                pass
+        for w in self.workers:
+            await loop.run_in_executor(None, w.proc.join, 5)
+            if w.proc.is_alive():
+                w.proc.kill()
+        self.workers = []
+
+    async def open(self, config: SessionConfig, *, rig, times: StageTimes) -> "RemoteSession":  # noqa: ANN001
+        w = min(self.workers, key=lambda x: x.sessions)
+        self._next_id += 1
+        sid = self._next_id
+        await w.request(("open", sid, asdict(config)))
+        w.sessions += 1
+        return RemoteSession(self.model, config, w, sid, rig=rig, times=times)
+
+
+class RemoteSession:
+    """A :class:`server.session.Session` running in a worker: the same facts, async methods."""
+
+    def __init__(self, model: AvModel, config: SessionConfig, worker: _Worker, sid: int, *, rig,  # noqa: ANN001
+                 times: StageTimes) -> None:
+        self.model = model
+        self.config = config
+        self.rig = rig
+        self.times = times
+        self._w = worker
+        self._sid = sid
+        self.rate_hz = model.sample_rate_hz
+        self.fps = int(model.frontend.mfcc.frame_rate_hz)
+        self.delay_frames = model.frontend.tc + config.lag
+        self.window_len = int(model.frontend.mfcc.window_len)
+        self.frame_bytes = _sample_bytes(config) * config.channels
+        self.frames_out = 0
+        self.samples_out = 0
+        self.finished = False
+        self._state = {"gain": {n: 1.0 for n in VISUAL_PARAMS}, "smoothing_ms": 0.0}
+
+    @property
+    def algorithmic_delay_s(self) -> float:
+        return self.delay_frames / self.fps + self.window_len / self.rate_hz
+
+    def control_state(self) -> dict:
+        return self._state
+
+    async def push_bytes(self, data: bytes) -> Output:
+        return self._unpack(await self._w.request(("push", self._sid, bytes(data))))
+
+    async def push(self, samples: np.ndarray) -> Output:
+        return self._unpack(await self._w.request(("push", self._sid, np.asarray(samples, dtype=np.float64))))
+
+    async def flush(self) -> Output:
+        if self.finished:
+            return Output([], None)
+        self.finished = True
+        out = self._unpack(await self._w.request(("flush", self._sid)))
+        await self.close()
+        return out
+
+    async def apply_control(self, msg: dict) -> dict:
+        self._state = await self._w.request(("control", self._sid, msg))
+        return self._state
+
+    async def close(self) -> None:
+        if self._sid:
+            sid, self._sid = self._sid, 0
+            self._w.sessions -= 1
+            await self._w.request(("close", sid))
+
+    def _unpack(self, packed: tuple) -> Output:
+        raw, params, work, audio, log = packed
+        for name, seconds in log:
+            self.times.add(name, seconds)
+        now = time.perf_counter()
+        frames = []
+        for r, p in zip(raw, params):
+            k = self.frames_out
+            frames.append(Frame(k, k / self.fps, p, r, work, now, self.rig, self.times))
+            self.frames_out += 1
+        block = None
+        if audio is not None:
+            index, start, samples = audio
+            block = AudioBlock(index, start, start / self.rate_hz, samples)
+            self.samples_out = start + samples.size
+        return Output(frames, block)
+
+
+def _sample_bytes(config: SessionConfig) -> int:
+    from server.protocol import SAMPLE_FORMATS
+
+    return SAMPLE_FORMATS[config.sample_format].itemsize
