@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 import wave
 from pathlib import Path
 
@@ -14,25 +12,15 @@ from clients.export.curves import Track, csv_bytes, json_bytes
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
+from facecast.files import atomic_write_bytes
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
 
 
 def write_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``:
-    a reader never sees a half-written file, an interrupted write leaves the old one."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, p)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return p
+    """Write ``data`` to ``path`` atomically (see :func:`facecast.files.atomic_write_bytes`)."""
+    return atomic_write_bytes(path, data)
 
 
 def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
