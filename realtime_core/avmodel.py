@@ -29,7 +29,7 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
-from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInverter
+from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInverter, StreamPlan
 
 FORMAT = "facecast-avmodel"
 VERSION = 1
@@ -84,11 +84,21 @@ class AvModel:
         """A fresh streaming front end for one utterance or live session."""
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
+    @cached_property
+    def _plans(self) -> dict:
+        """Shared streaming plans by (dtype, likelihood scale): every session of this model
+        reads the same matrices."""
+        return {}
+
     def inverter(self, config: StreamConfig = StreamConfig()) -> StreamingInverter:
         """A fresh streaming inverter (with the model's likelihood scale unless ``config`` sets one)."""
         if config.likelihood_scale is None:
             config = replace(config, likelihood_scale=self.likelihood_scale)
-        return StreamingInverter(self.form, config=config)
+        key = (config.dtype, config.likelihood_scale)
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plans[key] = StreamPlan.build(self.form, config)
+        return StreamingInverter(self.form, config=config, plan=plan)
 
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict:

@@ -59,32 +59,72 @@ class StreamConfig:
             raise ConfigError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
 
 
-class StreamingInverter:
-    """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends."""
+@dataclass(frozen=True, eq=False)
+class StreamPlan:
+    """The read-only per-frame matrices of a streaming inverter, derived once from a
+    :class:`ConditionalForm` and a :class:`StreamConfig`.
 
-    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig()) -> None:
-        self.form = form
-        self.config = config
+    Every live session of a model can share one plan: besides saving memory, the sessions then
+    read the same ~1-2 MB of matrices, which stay in cache instead of each session evicting the
+    others' copies. quad: ``(C, K)`` pre-scaled by ``-kappa/2``; const: ``(N, M)``; G: ``(C, Dv*Da)``;
+    h, phi_flat: ``(C, Dv)``, ``(C, Dv*Dv)``; A: ``(N, N)``; start: ``(N,)``; center: ``(Da,)``.
+    """
+
+    quad: np.ndarray
+    const: np.ndarray
+    center: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    phi_flat: np.ndarray
+    A: np.ndarray
+    start: np.ndarray
+    i0: np.ndarray
+    i1: np.ndarray
+
+    @classmethod
+    def build(cls, form: ConditionalForm, config: StreamConfig) -> StreamPlan:
         dt = np.dtype(config.dtype)
         kappa = 1.0 if config.likelihood_scale is None else config.likelihood_scale
-        self._quad = np.ascontiguousarray(form.quad * (-0.5 * kappa), dtype=dt)
-        self._center = form.center.astype(dt)
-        self._i0, self._i1 = np.triu_indices(form.n_audio)
+        n, m, da, dv = form.n_states, form.n_mix, form.n_audio, form.n_visual
+        c = n * m
+        # Eq. 7 numerator: sum_c r_c Phi_c m_c(a) = (sum_c r_c G_c) a + sum_c r_c h_c with
+        # G_c = Phi_c R_c and h_c = Phi_c reg0_c, so conditional means are never formed per frame.
+        reg = form.reg.reshape(c, dv, da)
+        i0, i1 = np.triu_indices(da)
+        return cls(
+            quad=np.ascontiguousarray(form.quad * (-0.5 * kappa), dtype=dt),
+            # log c_jk - 0.5 kappa const_jk: the frame-independent part of each component's log-likelihood.
+            const=(-0.5 * kappa * form.quad0).reshape(n, m) + form.log_weights,
+            center=form.center.astype(dt),
+            G=np.einsum("cij,cjk->cik", form.phi_v, reg).reshape(c, dv * da).astype(dt),
+            h=np.einsum("cij,cj->ci", form.phi_v, form.reg0.reshape(c, dv)),
+            phi_flat=form.phi_v.reshape(c, -1),
+            A=np.exp(form.log_transmat),
+            start=np.exp(form.log_startprob),
+            i0=i0,
+            i1=i1,
+        )
+
+
+class StreamingInverter:
+    """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends.
+
+    plan: the shared read-only matrices (built from ``form`` and ``config`` when not given;
+    it must have been built from the same two)."""
+
+    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig(),
+                 plan: StreamPlan | None = None) -> None:
+        self.form = form
+        self.config = config
+        p = StreamPlan.build(form, config) if plan is None else plan
+        self.plan = p
+        self._quad, self._const, self._center = p.quad, p.const, p.center
+        self._G, self._h, self._phi_flat, self._A, self._start = p.G, p.h, p.phi_flat, p.A, p.start
+        self._i0, self._i1 = p.i0, p.i1
         self._nq = self._i0.size
-        self._feat = np.empty(self._nq + form.n_audio, dtype=dt)
+        self._feat = np.empty(self._nq + form.n_audio, dtype=p.quad.dtype)  # per-session scratch
         self._da, self._dv = form.n_audio, form.n_visual
         self._n, self._m = form.n_states, form.n_mix
-        # log c_jk - 0.5 kappa const_jk: the frame-independent part of each component's log-likelihood.
-        self._const = (-0.5 * kappa * form.quad0).reshape(self._n, self._m) + form.log_weights
-        self._A = np.exp(form.log_transmat)
-        self._start = np.exp(form.log_startprob)
-        # Eq. 7 numerator: sum_c r_c Phi_c m_c(a) = (sum_c r_c G_c) a + sum_c r_c h_c with
-        # G_c = Phi_c R_c and h_c = Phi_c reg0_c, so conditional means are never formed here.
-        c = self._n * self._m
-        reg = form.reg.reshape(c, self._dv, self._da)
-        self._G = np.einsum("cij,cjk->cik", form.phi_v, reg).reshape(c, self._dv * self._da).astype(dt)
-        self._h = np.einsum("cij,cj->ci", form.phi_v, form.reg0.reshape(c, self._dv))
-        self._phi_flat = form.phi_v.reshape(c, -1)
         self.reset()
 
     def reset(self) -> None:

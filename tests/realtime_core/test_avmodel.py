@@ -73,3 +73,22 @@ def test_pipeline_stream_equals_whole_and_batch_runs():
     chunked = np.concatenate([p.push(c) for c in np.split(x, cuts)] + [p.flush()])
     np.testing.assert_allclose(chunked, whole, atol=1e-9)
     assert speech_to_params(m, x, mode="batch").shape == (30, 4)
+
+
+def test_sessions_of_a_model_share_one_plan_and_match_an_unshared_inverter():
+    from realtime_core.inversion import StreamConfig, StreamingInverter
+
+    m = small_model(2)
+    a, b = m.inverter(), m.inverter()
+    assert a.plan is b.plan  # one copy of the matrices for every live session
+    assert m.inverter(StreamConfig(dtype="float64")).plan is not a.plan
+    oa = np.random.default_rng(1).standard_normal((40, 9))
+    own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale))
+    np.testing.assert_array_equal(np.concatenate([a.push(oa), a.flush()]), np.concatenate([own.push(oa), own.flush()]))
+    # Sharing does not couple the sessions' states: interleaved pushes give each its own result.
+    ref = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale)).push(oa)
+    c = m.inverter()
+    out_b = [b.push(oa[:20])]
+    c.push(oa[::-1])
+    out_b.append(b.push(oa[20:]))
+    np.testing.assert_array_equal(np.concatenate(out_b), ref)
