@@ -47,13 +47,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    # Benchmarks forwarded to their own modules take options facecast does not know.
-    args, extra = parser.parse_known_args(argv)
-    if extra:
-        if not hasattr(args, "args"):
-            parser.error(f"unrecognized arguments: {' '.join(extra)}")
-        args.args = [*args.args, *extra]
+    argv = sys.argv[1:] if argv is None else list(argv)
+    from facecast.commands.bench import FORWARDED, run_forwarded
+
+    if len(argv) >= 2 and argv[0] == "bench" and argv[1] in FORWARDED:
+        # Benchmarks with their own parsers get everything after their name.
+        return run_forwarded(argv[1], argv[2:])
+    args = build_parser().parse_args(argv)
     # Package error roots: a user-facing error prints one line, never a traceback.
     roots: list[type[BaseException]] = []
     for mod, name in (

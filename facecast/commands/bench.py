@@ -5,6 +5,21 @@ from __future__ import annotations
 import argparse
 
 
+FORWARDED: dict[str, tuple[str, str]] = {
+    "latency": ("benchmarks.server_latency",
+                "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
+    "capacity": ("benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
+    "render": ("benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
+}
+"""Benchmarks with their own argument parsers: name -> (module with main(argv), help)."""
+
+
+def run_forwarded(name: str, argv: list[str]) -> int:
+    import importlib
+
+    return int(importlib.import_module(FORWARDED[name][0]).main(argv) or 0)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
 
@@ -19,25 +34,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     core.add_argument("--quick", action="store_true", help="fewer repetitions and a smaller EM problem")
     core.add_argument("--no-hmmlearn", action="store_true", help="skip the (slow) hmmlearn EM comparison")
     core.set_defaults(run=_run_core)
-    # The other benchmarks own their options; `facecast bench NAME --help` shows them.
-    for name, module, text in (
-        ("latency", "benchmarks.server_latency",
-         "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
-        ("capacity", "benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
-        ("render", "benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
-    ):
-        b = which.add_parser(name, help=text, add_help=False, formatter_class=HelpFormatter)
-        b.add_argument("args", nargs=argparse.REMAINDER, help=f"options of {module} (try --help)")
-        b.set_defaults(run=_forward(module))
-
-
-def _forward(module: str):
-    def run(args: argparse.Namespace) -> int:
-        import importlib
-
-        return int(importlib.import_module(module).main(args.args) or 0)
-
-    return run
+    # The other benchmarks own their options (`facecast bench NAME --help` shows them): the
+    # command line hands them everything after their name (see FORWARDED and facecast.cli).
+    for name, (module, text) in FORWARDED.items():
+        which.add_parser(name, help=text, add_help=False)
 
 
 def _run_core(args: argparse.Namespace) -> int:
