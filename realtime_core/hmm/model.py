@@ -127,26 +127,59 @@ class AvHmm:
             return np.log(self.weights)
 
 
-def gaussian_loglik(x: np.ndarray, means: np.ndarray, chol: np.ndarray, *, chunk: int = 512) -> np.ndarray:
+def quadratic_features(x: np.ndarray) -> np.ndarray:
+    """``(T, D) -> (T, D (D + 1) / 2 + D)``: the products ``x_i x_j`` (i <= j), then ``x``.
+
+    Against these, a Gaussian's quadratic form is one dot product (see
+    :func:`quadratic_coefficients`), so all components share one GEMM over the frames.
+    """
+    return quadratic_features_t(np.ascontiguousarray(x.T)).T
+
+
+def quadratic_features_t(xt: np.ndarray) -> np.ndarray:
+    """The same, transposed: ``(D, T) -> (K, T)``. Gathering whole rows (contiguous frames)
+    is several times faster than gathering columns, so the training E-step uses this layout."""
+    i0, i1 = np.triu_indices(xt.shape[0])
+    return np.concatenate([xt[i0] * xt[i1], xt], axis=0)
+
+
+def quadratic_coefficients(means: np.ndarray, chol: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of ``(x - mu_c)^T Sigma_c^-1 (x - mu_c) + log|Sigma_c| + D log 2 pi``.
+
+    ``means``: ``(C, D)``; ``chol``: ``(C, D, D)`` lower Cholesky factors. Returns
+    ``(Q (C, K), q0 (C,))`` with ``-0.5 (quadratic_features(x) @ Q.T + q0)`` the log densities.
+    ``Sigma^-1 = W^T W`` with ``W = L^-1`` from triangular solves (no covariance is inverted).
+    """
+    c, d = means.shape
+    i0, i1 = np.triu_indices(d)
+    weight = np.where(i0 == i1, 1.0, 2.0)
+    eye = np.eye(d)
+    Q = np.empty((c, i0.size + d))
+    q0 = np.empty(c)
+    for k in range(c):
+        W = scipy.linalg.solve_triangular(chol[k], eye, lower=True, check_finite=False)
+        P = W.T @ W
+        Pm = P @ means[k]
+        Q[k, : i0.size] = P[i0, i1] * weight
+        Q[k, i0.size :] = -2.0 * Pm
+        q0[k] = means[k] @ Pm + 2.0 * np.log(np.diagonal(chol[k])).sum() + d * LOG_2PI
+    return Q, q0
+
+
+def gaussian_loglik(x: np.ndarray, means: np.ndarray, chol: np.ndarray, *, chunk: int = 1024) -> np.ndarray:
     """Log densities of every frame under every Gaussian.
 
     ``x``: ``(T, D)``; ``means``: ``(C, D)``; ``chol``: ``(C, D, D)`` lower Cholesky factors.
-    Returns ``(T, C)``. The whitening maps ``W_c = L_c^-1`` come from triangular solves
-    against the identity (the covariances themselves are never inverted); then all
-    components are evaluated together by one GEMM per chunk of frames,
-    ``z = x W^T - mu W^T``, which runs about 1.5x faster than a trsm per component.
+    Returns ``(T, C)``. The quadratic forms are expanded (:func:`quadratic_coefficients`)
+    around the frames' mean, so a chunk of frames costs one ``(t, K) x (K, C)`` GEMM: about
+    a quarter of the flops of whitening the frames for every component.
     """
-    T, d = x.shape
-    c = means.shape[0]
-    eye = np.eye(d)
-    W = np.stack([scipy.linalg.solve_triangular(chol[i], eye, lower=True, check_finite=False) for i in range(c)])
-    Wt = W.reshape(c * d, d).T.copy()  # (D, C*D)
-    shift = np.einsum("cij,cj->ci", W, means).reshape(-1)  # (C*D,)
-    const = -np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1) - 0.5 * d * LOG_2PI
-    out = np.empty((T, c))
-    for s in range(0, T, chunk):
-        z = (x[s : s + chunk] @ Wt - shift).reshape(-1, c, d)
-        out[s : s + chunk] = -0.5 * np.einsum("tci,tci->tc", z, z) + const
+    origin = x.mean(axis=0)
+    Q, q0 = quadratic_coefficients(means - origin, chol)
+    out = np.empty((x.shape[0], means.shape[0]))
+    for s in range(0, x.shape[0], chunk):
+        u = quadratic_features_t(np.ascontiguousarray((x[s : s + chunk] - origin).T))  # (K, t)
+        out[s : s + chunk] = -0.5 * (Q @ u + q0[:, None]).T
     return out
 
 

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.linalg
 
 from realtime_core.errors import InvalidFeaturesError
-from realtime_core.hmm.model import LOG_2PI, AvHmm
+from realtime_core.hmm.model import LOG_2PI, AvHmm, quadratic_coefficients, quadratic_features
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,10 +78,8 @@ class ConditionalForm:
         L = model.chol.reshape(c, d, d)
         mu = model.means.reshape(c, d)
         center = (model.weights.reshape(c, 1) * mu[:, :da]).sum(axis=0) / n
-        iu = np.triu_indices(da)
-        offdiag = np.where(iu[0] == iu[1], 1.0, 2.0)
-        quad = np.empty((c, iu[0].size + da))
-        quad0 = np.empty(c)
+        # The audio marginal's factor is the leading block of the joint one.
+        quad, quad0 = quadratic_coefficients(mu[:, :da] - center, L[:, :da, :da])
         reg = np.empty((c, dv, da))
         reg0 = np.empty((c, dv))
         phi_v = np.empty((c, dv, dv))
@@ -89,15 +87,9 @@ class ConditionalForm:
         for i in range(c):
             laa, lva, lvv = L[i, :da, :da], L[i, da:, :da], L[i, da:, da:]
             W = scipy.linalg.solve_triangular(laa, eye_a, lower=True, check_finite=False)
-            P = W.T @ W  # Sigma_aa^-1
-            mc = mu[i, :da] - center
-            quad[i, : iu[0].size] = P[iu] * offdiag
-            quad[i, iu[0].size :] = -2.0 * P @ mc
-            logdet_a = np.log(np.diagonal(laa)).sum()
-            quad0[i] = mc @ P @ mc + 2.0 * logdet_a + da * LOG_2PI
             R = lva @ W  # Sigma_va Sigma_aa^-1
             reg[i] = R
-            reg0[i] = mu[i, da:] - R @ mc
+            reg0[i] = mu[i, da:] - R @ (mu[i, :da] - center)
             lvv_inv = scipy.linalg.solve_triangular(lvv, eye_v, lower=True, check_finite=False)
             phi_v[i] = lvv_inv.T @ lvv_inv
         return cls(
@@ -124,9 +116,7 @@ class ConditionalForm:
 
     def quad_features(self, oa: np.ndarray) -> np.ndarray:
         """``oa (T, Da) -> (T, K)``: ``[a_i a_j (i <= j); a]`` with ``a = o_a - center``."""
-        a = oa - self.center
-        i0, i1 = np.triu_indices(self.n_audio)
-        return np.concatenate([a[:, i0] * a[:, i1], a], axis=1)
+        return quadratic_features(oa - self.center)
 
     def audio_terms(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For frames ``oa (T, Da)``: ``(log N(o_a; mu_a, Sigma_aa) (T, C), m_c(o_a) (T, C, Dv))``."""
