@@ -54,6 +54,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from threadpoolctl import threadpool_limits
+
+    # One BLAS thread: on 2 cores multi-threaded OpenBLAS made this small-matrix EM many times
+    # slower under load, and one thread keeps the summation order (and the result) fixed.
+    with threadpool_limits(1):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from tqdm import tqdm
