@@ -18,11 +18,6 @@ FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
 
 
-def write_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (see :func:`facecast.files.atomic_write_bytes`)."""
-    return atomic_write_bytes(path, data)
-
-
 def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
     """Mono 16-bit PCM WAV of samples (n,) float in [-1, 1] (x 32768, the wire's int16 scale,
     clipped) or int16 as is; rate_hz: samples per second."""
@@ -57,7 +52,7 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
     wav_name = None
     if audio is not None and suffix in (".glb", ".json"):
         wav = p.with_suffix(".wav")
-        written.append(write_atomic(wav, wav_bytes(audio[0], audio[1])))
+        written.append(atomic_write_bytes(wav, wav_bytes(audio[0], audio[1])))
         wav_name = wav.name
     if suffix == ".glb":
         if head is None:
@@ -74,5 +69,5 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
         data = json_bytes(track, audio=wav_name)
     else:
         data = tsv_bytes(track)
-    written.insert(0, write_atomic(p, data))
+    written.insert(0, atomic_write_bytes(p, data))
     return written

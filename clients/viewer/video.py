@@ -32,7 +32,8 @@ def render_recording(rec: Recording, mesh: HeadMesh, out: str | Path, *,
                      config: RenderConfig = RenderConfig(margin=1.25)) -> tuple[Path, int]:
     """Write ``out`` (.mp4): one video frame per session frame (rec.fps), the relayed audio muxed
     in; returns (path, frames). ``rec`` must be a "deltas" recording of ``mesh``'s server."""
-    from clients.export.files import wav_bytes, write_atomic
+    from clients.export.files import wav_bytes
+    from facecast.files import atomic_write_bytes
 
     d = rec.description
     if d.get("kind") != "deltas" or not d.get("head"):
@@ -52,7 +53,7 @@ def render_recording(rec: Recording, mesh: HeadMesh, out: str | Path, *,
         return r.render(work)
 
     with tempfile.TemporaryDirectory(prefix="facecast-view-") as tmp:
-        wav = write_atomic(Path(tmp) / "audio.wav", wav_bytes(audio, rec.audio_rate_hz))
+        wav = atomic_write_bytes(Path(tmp) / "audio.wav", wav_bytes(audio, rec.audio_rate_hz))
         with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config) as r:
             path = write_video(frames, draw, out, size=(config.width, config.height), audio=wav,
                                config=VideoConfig(fps=rec.fps))

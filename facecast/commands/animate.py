@@ -37,8 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
     from training.audio_io import read_audio
+    from clients.export.curves import Track, csv_bytes
     from facecast.files import atomic_write_bytes
-    from training.corpus import format_params_csv
     from training.modelfile import load_model
     from training.trainer import resample
 
@@ -49,14 +49,14 @@ def run(args: argparse.Namespace) -> int:
     samples, rate = read_audio(args.speech)
     x = resample(samples, rate, model.sample_rate_hz)
     params = speech_to_params(model, x, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    # Every output goes through the exporters (one CSV writer for the whole product).
+    track = Track(params=params)
     if args.csv is not None:
-        atomic_write_bytes(args.csv, format_params_csv(params).encode())
+        atomic_write_bytes(args.csv, csv_bytes(track))
     if args.glb or args.json or args.tsv:
-        from clients.export.curves import Track
         from clients.export.files import export_track
         from facecast.commands.render import load_head
 
-        track = Track(params=params)
         head = load_head(args.head, None) if args.glb else None
         arkit = None
         if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
