@@ -82,11 +82,13 @@ def utterance_audio(utt: Utterance, rate_hz: int) -> np.ndarray:
     return resample(utt.samples, utt.sample_rate_hz, rate_hz)
 
 
-def joint_sequence(utt: Utterance, frontend: FrontEndConfig, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
-    """``(T, Da + 4)`` joint observations of one utterance (T trimmed to the shorter track)."""
-    oa = extract_features(utterance_audio(utt, frontend.mfcc.sample_rate_hz), frontend, cmvn_mean=mean, cmvn_var=var)
-    T = min(len(oa), len(utt.params))
-    return np.hstack([oa[:T], utt.params[:T]])
+def joint_sequence(audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray,
+                   var: np.ndarray) -> np.ndarray:
+    """``(T, Da + 4)`` joint observations of one utterance: ``audio (n,)`` at the model rate and
+    its ``params (n_frames, 4)`` (T trimmed to the shorter track)."""
+    oa = extract_features(audio, frontend, cmvn_mean=mean, cmvn_var=var)
+    T = min(len(oa), len(params))
+    return np.hstack([oa[:T], params[:T]])
 
 
 def train_av_model(
@@ -103,7 +105,7 @@ def train_av_model(
     fe = recipe.frontend
     audio = [utterance_audio(u, recipe.sample_rate_hz) for u in utterances]
     mean, var = cmvn_statistics(audio, fe)
-    seqs = [joint_sequence(u, fe, mean, var) for u in utterances]
+    seqs = [joint_sequence(x, u.params, fe, mean, var) for x, u in zip(audio, utterances)]
     hmm0 = start if start is not None else init_model(seqs, n_audio=fe.audio_dim, config=recipe.hmm)
     meta = {"recipe": recipe.as_json(), "train_utterances": len(utterances),
             "train_frames": int(sum(len(s) for s in seqs)), **(metadata or {})}
