@@ -84,8 +84,10 @@ class SetScore:
 
 
 def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_hz: int, truth: np.ndarray
-               ) -> tuple[ClipScore, np.ndarray]:
-    """Run the live path on ``samples`` and compare with ``truth (n_frames, 4)``."""
+               ) -> tuple[ClipScore, np.ndarray, np.ndarray]:
+    """Run the live path on ``samples`` and compare with ``truth (n_frames, 4)``.
+
+    Returns the score, the estimate ``(T, 4)`` and the loudness track ``(T,)`` dB."""
     est = speech_to_params(model, resample(samples, rate_hz, model.sample_rate_hz))
     T = min(len(est), len(truth))
     est, truth = est[:T], truth[:T]
@@ -93,18 +95,18 @@ def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_h
     lag, r_lag = best_lag(truth[:, MOUTH_OPEN], est[:, MOUTH_OPEN])
     r = pearson_per_param(truth, est)
     return ClipScore(name=name, kind=kind, r=dict(zip(VISUAL_PARAMS, map(float, r))),
-                     r_loudness=pearson(truth[:, MOUTH_OPEN], loud), lag=lag, r_at_lag=r_lag, n_frames=T), est
+                     r_loudness=pearson(truth[:, MOUTH_OPEN], loud), lag=lag, r_at_lag=r_lag, n_frames=T), est, loud
 
 
 def score_set(model: AvModel, kind: str, items: Sequence[tuple[str, np.ndarray, int, np.ndarray]]) -> SetScore:
     """``items``: (name, samples, rate_hz, truth (n_frames, 4)). Pools frames for eps/rho."""
     clips, truths, ests, louds = [], [], [], []
     for name, samples, rate, truth in items:
-        clip, est = score_clip(model, name, kind, samples, rate, truth)
+        clip, est, loud = score_clip(model, name, kind, samples, rate, truth)
         clips.append(clip)
         truths.append(truth[: len(est)])
-        ests.append(est[: len(truth)])
-        louds.append(loudness_db(samples, rate, len(ests[-1])))
+        ests.append(est)
+        louds.append(loud)
     t, e, lv = np.concatenate(truths), np.concatenate(ests), np.concatenate(louds)
     return SetScore(kind=kind, eps=amse(t, e), rho=acc(t, e), r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
                     r_loudness=pearson(t[:, MOUTH_OPEN], lv), clips=clips)
