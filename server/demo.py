@@ -9,10 +9,7 @@ over loopback like any other client, prints the URLs to open, then renders what 
 from __future__ import annotations
 
 import asyncio
-import os
-import shutil
 import signal
-import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -212,41 +209,20 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
 def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rate_hz: int, *, fps: int = 30,
               width: int = 640, height: int = 480) -> Path:
     """Render params (n, 4) (IOD) on the head's rig with the offline renderer and mux audio (m,)
-    float32 at audio_rate_hz into an H.264/AAC MP4, written atomically (temp file + rename)."""
+    float32 at audio_rate_hz into an H.264/AAC MP4 (``clients.render.video.write_video``, atomic)."""
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig, renderer_for_rig
+    from clients.render.video import VideoConfig, write_video
     from training.corpus import write_wav
 
-    ffmpeg = shutil.which("ffmpeg")
-    if ffmpeg is None:
-        raise ServerError("writing the MP4 needs ffmpeg (apt-get install ffmpeg)")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmpdir = Path(tempfile.mkdtemp(prefix=".facecast-demo-", dir=path.parent))
-    try:
-        wav = tmpdir / "audio.wav"
+    with tempfile.TemporaryDirectory(prefix=".facecast-demo-", dir=path.parent) as tmp:
+        wav = Path(tmp) / "audio.wav"
         write_wav(wav, np.asarray(audio, dtype=np.float32), audio_rate_hz)
-        tmp_mp4 = tmpdir / "out.mp4"
-        cmd = [ffmpeg, "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}",
-               "-r", str(fps), "-i", "-", "-i", str(wav), "-c:v", "libx264", "-preset", "veryfast", "-pix_fmt",
-               "yuv420p", "-c:a", "aac", "-b:a", "96k", "-shortest", "-movflags", "+faststart", str(tmp_mp4)]
         try:
-            renderer = renderer_for_rig(head.rig, head.mesh, RenderConfig(width=width, height=height))
+            with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=width, height=height)) as renderer:
+                return write_video(params, lambda p: renderer.render(head.rig.deformed(p)), path,
+                                   size=(width, height), audio=wav, config=VideoConfig(fps=fps))
         except ClientError as exc:
-            raise ServerError(f"cannot render the video: {exc}") from None
-        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
-        try:
-            with renderer:
-                for p in params:
-                    proc.stdin.write(renderer.render(head.rig.deformed(p)).tobytes())
-            proc.stdin.close()
-            err = proc.stderr.read().decode(errors="replace")
-            if proc.wait() != 0:
-                raise ServerError(f"ffmpeg failed writing {path}: {err.strip()[-300:]}")
-        except BrokenPipeError:
-            proc.wait()
-            raise ServerError(f"ffmpeg stopped early writing {path}: {proc.stderr.read().decode(errors='replace')[-300:]}")
-        os.replace(tmp_mp4, path)
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
-    return path
+            raise ServerError(f"cannot write the video {path}: {exc}") from None
