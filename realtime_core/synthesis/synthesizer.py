@@ -1,0 +1,109 @@
+"""Phones with timings -> recorded motion at 30 fps: viseme mapping, unit search, warping.
+
+The sans-I/O front of unit selection (seed 001 Sec. 3.7-3.8): a target phone timeline (labels of
+one inventory, start/end seconds) is made gapless (gaps become pauses, consecutive pauses merge),
+mapped to viseme classes (unknown labels fall back to a neutral open vowel and are reported;
+classes the corpus lacks fall back to look-alikes, :func:`realtime_core.synthesis.visemes.resolve`),
+searched (:func:`realtime_core.synthesis.search.select_units`) and rendered
+(:func:`realtime_core.synthesis.concat.concatenate`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from realtime_core.errors import ConfigError
+from realtime_core.synthesis.concat import concatenate
+from realtime_core.synthesis.corpus import FPS, MotionCorpus
+from realtime_core.synthesis.search import SearchConfig, Selection, UnitGraph, build_graph, select_units
+from realtime_core.synthesis.visemes import VISEME_ID, VISEMES, resolve, viseme_of
+
+UNKNOWN_PHONE_VISEME = "AH"
+"""Class used for a phone label outside the table: a mid-open neutral mouth keeps speech moving."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Target:
+    """A gapless target: labels (T,), visemes (T,) int class ids after fallback, starts_s/ends_s (T,)."""
+
+    labels: tuple[str, ...]
+    visemes: np.ndarray
+    starts_s: np.ndarray
+    ends_s: np.ndarray
+    unknown: tuple[str, ...] = ()
+    substituted: int = 0
+
+    @property
+    def durations_s(self) -> np.ndarray:
+        return self.ends_s - self.starts_s
+
+
+@dataclass(frozen=True, kw_only=True)
+class UnitSynthesis:
+    """frames: (n_frames, D) float64 at k / 30 s (dims named by the corpus); target; selection."""
+
+    frames: np.ndarray
+    target: Target
+    selection: Selection
+
+
+def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, available: frozenset[str]) -> Target:
+    """Phones ``[(label, start_s, end_s)]`` -> a gapless :class:`Target` starting at 0 s."""
+    if not phones:
+        raise ConfigError("no phones to synthesise")
+    rows = sorted(((str(lab), float(a), float(b)) for lab, a, b in phones), key=lambda r: r[1])
+    labels, vis, starts, ends, unknown = [], [], [], [], []
+    substituted = 0
+    t = 0.0
+
+    def add(label: str, v: str, a: float, b: float) -> None:
+        if b - a <= 1e-6:
+            return
+        if vis and v == "sil" and VISEMES[vis[-1]] == "sil":  # merge consecutive pauses
+            ends[-1] = b
+            return
+        labels.append(label), vis.append(VISEME_ID[v]), starts.append(a), ends.append(b)
+
+    for label, a, b in rows:
+        if not np.isfinite(a) or not np.isfinite(b):
+            raise ConfigError(f"phone {label!r} has a non-finite time")
+        if a > t + 1e-6:
+            add("sil", resolve("sil", available), t, a)
+        a = max(a, t)
+        if b <= a:
+            continue
+        v = viseme_of(label, inventory, default=UNKNOWN_PHONE_VISEME)
+        if v == UNKNOWN_PHONE_VISEME and viseme_of(label, inventory, default="sil") == "sil":
+            unknown.append(label)
+        r = resolve(v, available)
+        substituted += r != v
+        add(label, r, a, b)
+        t = b
+    if not labels:
+        raise ConfigError("the phones have no duration")
+    return Target(labels=tuple(labels), visemes=np.array(vis, dtype=np.int16), starts_s=np.array(starts),
+                  ends_s=np.array(ends), unknown=tuple(unknown), substituted=substituted)
+
+
+class UnitSynthesizer:
+    """Unit-selection visual speech from one corpus (the graph is built once; thread-safe reads)."""
+
+    def __init__(self, corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> None:
+        self.corpus = corpus
+        self.graph: UnitGraph = build_graph(corpus, config)
+        self.available = corpus.visemes_present()
+
+    def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
+        return make_target(phones, inventory, self.available)
+
+    def synthesize(self, phones: Sequence[tuple[str, float, float]], inventory: str, *,
+                   n_frames: int | None = None) -> UnitSynthesis:
+        """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es")."""
+        target = self.target(phones, inventory)
+        sel = select_units(self.graph, target.visemes, target.durations_s)
+        frames = concatenate(self.corpus, sel.states, target.starts_s, target.ends_s, parent=self.graph.parent,
+                             n_frames=n_frames, fps=FPS)
+        return UnitSynthesis(frames=frames, target=target, selection=sel)
