@@ -100,7 +100,7 @@ def _check(y: np.ndarray) -> np.ndarray:
 def em_subspace(yc: np.ndarray, k: int, config: EmPcaConfig) -> tuple[np.ndarray, int]:
     """Roweis's EM iterations on centred frames ``yc`` (n, p): an orthonormal (p, k) basis of the
     leading k-dimensional principal subspace and the number of iterations used."""
-    n, p = yc.shape
+    p = yc.shape[1]
     rng = np.random.default_rng(config.seed)
     c = rng.standard_normal((p, k))
     q_old = np.linalg.qr(c)[0]

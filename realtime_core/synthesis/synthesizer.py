@@ -18,8 +18,21 @@ import numpy as np
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.concat import concatenate
 from realtime_core.synthesis.corpus import FPS, MotionCorpus
-from realtime_core.synthesis.search import SearchConfig, Selection, UnitGraph, build_graph, select_units
-from realtime_core.synthesis.visemes import VISEME_ID, VISEMES, resolve, viseme_of
+from realtime_core.synthesis.search import (
+    SearchConfig,
+    Selection,
+    UnitGraph,
+    build_graph,
+    select_units,
+)
+from realtime_core.synthesis.visemes import (
+    PHONE_TO_VISEME,
+    VISEME_ID,
+    VISEMES,
+    normalise_phone,
+    resolve,
+    viseme_of,
+)
 
 UNKNOWN_PHONE_VISEME = "AH"
 """Class used for a phone label outside the table: a mid-open neutral mouth keeps speech moving."""
@@ -75,9 +88,11 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
         a = max(a, t)
         if b <= a:
             continue
-        v = viseme_of(label, inventory, default=UNKNOWN_PHONE_VISEME)
-        if v == UNKNOWN_PHONE_VISEME and viseme_of(label, inventory, default="sil") == "sil":
+        if inventory not in PHONE_TO_VISEME:
+            raise ConfigError(f"unknown phone inventory {inventory!r}")
+        if normalise_phone(label, inventory) not in PHONE_TO_VISEME[inventory]:
             unknown.append(label)
+        v = viseme_of(label, inventory, default=UNKNOWN_PHONE_VISEME)
         r = resolve(v, available)
         substituted += r != v
         add(label, r, a, b)
@@ -91,9 +106,9 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
 class UnitSynthesizer:
     """Unit-selection visual speech from one corpus (the graph is built once; thread-safe reads)."""
 
-    def __init__(self, corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> None:
+    def __init__(self, corpus: MotionCorpus, config: SearchConfig | None = None) -> None:
         self.corpus = corpus
-        self.graph: UnitGraph = build_graph(corpus, config)
+        self.graph: UnitGraph = build_graph(corpus, config or SearchConfig())
         self.available = corpus.visemes_present()
 
     def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
