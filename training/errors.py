@@ -64,3 +64,7 @@ class MissingDependencyError(TrainingError):
 
 class NotVideoError(FileProblem):
     """The file is not a readable video (no video stream, unknown format)."""
+
+
+class LengthMismatchError(FileProblem):
+    """A video's audio and picture differ in duration by more than the extractor accepts."""
