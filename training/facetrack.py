@@ -63,6 +63,10 @@ LOWER_FACE: tuple[int, ...] = tuple(sorted(set(LIPS_OUTER) | set(LIPS_INNER) | s
 # Single points of the parameter definitions (training.params).
 UPPER_LIP_OUTER, UPPER_LIP_INNER, LOWER_LIP_INNER, LOWER_LIP_OUTER = 0, 13, 14, 17
 MOUTH_CORNERS = (61, 291)
+UPPER_LIP_MIDDLE = (0, 37, 267)
+"""Upper lip's outer contour at the midline and either side of it (the philtrum's foot)."""
+LIP_GAP_PAIRS = ((13, 14), (82, 87), (312, 317))
+"""Facing inner-lip points at the midline and either side of it (upper, lower)."""
 RIGHT_EYE_CORNERS = (33, 133)  # the subject's right eye (image left in a frontal video)
 LEFT_EYE_CORNERS = (362, 263)
 NOSE_TIP, SUBNASALE = 4, 2
@@ -83,6 +87,8 @@ class FaceTrack:
     neutral:         (468, 3) float32, the face at rest, same frame.
     params:          (n_frames, 4) float64 mouth parameters (training.params), IOD units.
     face_found:      (n_frames,) bool.
+    closed_gap_iod:  the inner-lip gap when the lips touch (mouth_open's zero), IOD:
+                     ``params == video.mouth_params(landmarks, neutral, closed_gap=closed_gap_iod)``.
     n_frames = ceil(n / sample_rate_hz * 30).
     quality:         per-clip measurement report (face found fraction, jumps, neutral stats).
     """
@@ -94,6 +100,7 @@ class FaceTrack:
     neutral: np.ndarray
     params: np.ndarray
     face_found: np.ndarray
+    closed_gap_iod: float
     quality: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:

@@ -67,16 +67,16 @@ from training.facetrack import (
     EXTRACTOR_VERSION,
     JAW,
     LEFT_EYE_CORNERS,
+    LIP_GAP_PAIRS,
     LIPS_INNER,
     LIPS_OUTER,
     LOWER_FACE,
-    LOWER_LIP_INNER,
     LOWER_LIP_OUTER,
     MOUTH_CORNERS,
     N_LANDMARKS,
     RIGHT_EYE_CORNERS,
     STABLE,
-    UPPER_LIP_INNER,
+    UPPER_LIP_MIDDLE,
     UPPER_LIP_OUTER,
     FaceTrack,
     RawTrack,
@@ -108,6 +108,7 @@ class ExtractConfig:
     rest_margin_s:      silence frames this close to speech are not rest (lips prepare/relax).
     min_rest_frames:    fewer rest frames than this fall back to the next neutral estimate.
     neutral_quantile:   last-resort neutral: the frames with the smallest lip gap (this fraction).
+    closed_quantile:    mouth_open's zero (lips touching) = the mean of this fraction of smallest lip gaps.
     quiet_quantile:     no alignment: rest = the quietest frames (this fraction) ...
     quiet_below_db:     ... that are also this far below the clip's loudest frame.
     jump_iod:           a tracking jump: the lower face moves by more than this (median over its
@@ -123,6 +124,7 @@ class ExtractConfig:
     rest_margin_s: float = 0.15
     min_rest_frames: int = 5
     neutral_quantile: float = 0.1
+    closed_quantile: float = 0.05
     quiet_quantile: float = 0.2
     quiet_below_db: float = 30.0
     jump_iod: float = 0.08
@@ -135,6 +137,8 @@ class ExtractConfig:
             raise ConfigError(f"audio_rate_hz must be 8000/16000/22050/44100/48000, got {self.audio_rate_hz}")
         if not 0.0 < self.neutral_quantile <= 0.5:
             raise ConfigError(f"neutral_quantile must be in (0, 0.5], got {self.neutral_quantile}")
+        if not 0.0 < self.closed_quantile <= 0.5:
+            raise ConfigError(f"closed_quantile must be in (0, 0.5], got {self.closed_quantile}")
         if not 0.0 < self.quiet_quantile <= 0.5:
             raise ConfigError(f"quiet_quantile must be in (0, 0.5], got {self.quiet_quantile}")
         if not 0.0 < self.min_face_fraction <= 1.0:
@@ -387,20 +391,40 @@ def _resample_at(times: np.ndarray, values: np.ndarray, t_out: np.ndarray) -> np
     return ((1 - w) * flat[pos - 1] + w * flat[pos]).reshape((len(t_out),) + values.shape[1:])
 
 
-def mouth_params(landmarks: np.ndarray, neutral: np.ndarray) -> np.ndarray:
+def lip_gap(landmarks: np.ndarray) -> np.ndarray:
+    """Inner-lip gap, (n, 468, 3) -> (n,): the mean 3D distance of the three midline pairs of
+    inner-lip points (:data:`LIP_GAP_PAIRS`; three pairs halve the frame-to-frame jitter of one)."""
+    lm = np.asarray(landmarks, np.float64)
+    return np.mean([np.linalg.norm(lm[:, a] - lm[:, b], axis=1) for a, b in LIP_GAP_PAIRS], axis=0)
+
+
+def mouth_params(landmarks: np.ndarray, neutral: np.ndarray, *, closed_gap: float | None = None) -> np.ndarray:
     """The four mouth parameters of :mod:`training.params` from pose-free landmarks.
 
-    landmarks: (n, 468, 3) face frame, IOD units; neutral: (468, 3) the rest face, same frame.
+    landmarks: (n, 468, 3) face frame, IOD units; neutral: (468, 3) the rest face, same frame;
+    closed_gap: the inner-lip gap (IOD, :func:`lip_gap`) when the lips touch, the zero of
+    mouth_open (default: the neutral face's gap, for a talker whose lips are closed at rest).
     Returns (n, 4) float64 IOD: [upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress].
     """
     lm = np.concatenate([np.asarray(landmarks, np.float64), np.asarray(neutral, np.float64)[None]], axis=0)
-    upper_y = lm[:, UPPER_LIP_OUTER, 1]
+    upper_y = lm[:, list(UPPER_LIP_MIDDLE), 1].mean(axis=1)
     width = np.linalg.norm(lm[:, MOUTH_CORNERS[0]] - lm[:, MOUTH_CORNERS[1]], axis=1)
-    gap = np.linalg.norm(lm[:, UPPER_LIP_INNER] - lm[:, LOWER_LIP_INNER], axis=1)
+    gap = lip_gap(lm)
     midline_y = 0.5 * (lm[:, UPPER_LIP_OUTER, 1] + lm[:, LOWER_LIP_OUTER, 1])
     corners_y = 0.5 * (lm[:, MOUTH_CORNERS[0], 1] + lm[:, MOUTH_CORNERS[1], 1])
     raw = np.stack([-upper_y, width, gap, corners_y - midline_y], axis=1)
-    return raw[:-1] - raw[-1]
+    out = raw[:-1] - raw[-1]
+    if closed_gap is not None:
+        out[:, 2] = gap[:-1] - closed_gap
+    return out
+
+
+def closed_lip_gap(gap: np.ndarray, rest_gap: float, quantile: float = 0.05) -> float:
+    """The inner-lip gap when the lips touch (IOD): the mean of the smallest ``quantile`` of a
+    clip's gaps (its bilabial closures and closed rest), never above the rest gap."""
+    gap = np.sort(np.asarray(gap, np.float64))
+    k = max(1, int(round(quantile * len(gap))))
+    return float(min(gap[:k].mean(), rest_gap))
 
 
 def frame_energy_db(samples: np.ndarray, rate_hz: int, n_frames: int, window_s: float = 0.04) -> np.ndarray:
@@ -481,12 +505,14 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
     rest, method = rest_frames(n_out, words, level, config)
     rest &= face_found
     if rest.sum() < config.min_rest_frames:
-        gap = np.linalg.norm(landmarks[:, UPPER_LIP_INNER] - landmarks[:, LOWER_LIP_INNER], axis=1)
+        gap = lip_gap(landmarks)
         rest = face_found & (gap <= np.quantile(gap[face_found], config.neutral_quantile))
         method = "smallest-gap"
     neutral = np.median(landmarks[rest], axis=0).astype(np.float32)
-    params = mouth_params(landmarks, neutral)
-    gap_rest = float(np.linalg.norm(neutral[UPPER_LIP_INNER] - neutral[LOWER_LIP_INNER]))
+    gaps = lip_gap(landmarks)
+    gap_rest = float(lip_gap(neutral[None])[0])
+    closed = closed_lip_gap(gaps[face_found], gap_rest, config.closed_quantile)
+    params = mouth_params(landmarks, neutral, closed_gap=closed)
     width_rest = float(np.linalg.norm(neutral[MOUTH_CORNERS[0]] - neutral[MOUTH_CORNERS[1]]))
     quality = {
         "file": str(path), "sha1": raw.sha1, "extractor_version": raw.extractor_version,
@@ -499,12 +525,14 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
         "pose_residual_iod_max": round(float(residual.max()), 5), "iod_px": round(iod_px, 3),
         "alignment": str(alignment) if alignment else None,
         "neutral": {"method": method, "n_frames": int(rest.sum()), "lip_gap_iod": round(gap_rest, 4),
-                    "mouth_width_iod": round(width_rest, 4)},
+                    "mouth_width_iod": round(width_rest, 4), "closed_lip_gap_iod": round(closed, 4),
+                    "mouth_open_at_rest": round(gap_rest - closed, 4)},
         "params_min": [round(float(v), 4) for v in params.min(axis=0)],
         "params_max": [round(float(v), 4) for v in params.max(axis=0)],
     }
     return FaceTrack(source=path, samples=samples, sample_rate_hz=raw.sample_rate_hz, landmarks=landmarks,
-                     neutral=neutral, params=params, face_found=face_found, quality=quality)
+                     neutral=neutral, params=params, face_found=face_found, closed_gap_iod=closed,
+                     quality=quality)
 
 
 # --------------------------------------------------------------------------- one clip, cached

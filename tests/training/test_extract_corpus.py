@@ -136,7 +136,10 @@ def test_face_track_invariants(s1, tmp_path, ffmpeg) -> None:
     assert track.params.shape == (n, 4) and track.params.dtype == np.float64
     assert track.face_found.shape == (n,) and track.face_found.all()
     assert np.isfinite(track.landmarks).all()
-    np.testing.assert_allclose(track.params, mouth_params(track.landmarks, track.neutral), atol=1e-6)
+    np.testing.assert_allclose(track.params, mouth_params(track.landmarks, track.neutral,
+                                                          closed_gap=track.closed_gap_iod), atol=1e-6)
+    # mouth_open's zero is lip contact: never far below 0, and the rest face reads its own gap
+    assert track.params[:, 2].min() > -0.01 and 0 <= track.closed_gap_iod <= track.quality["neutral"]["lip_gap_iod"]
     # face frame, IOD units: eye centres at x = -/+ 0.5 on the x axis, the mouth below (y > 0),
     # the nose tip towards the camera (z = x cross y points into the face)
     eye_r, eye_l = track.neutral[list(RIGHT_EYE_CORNERS)].mean(0), track.neutral[list(LEFT_EYE_CORNERS)].mean(0)
