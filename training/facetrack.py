@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from facecast.files import atomic_write_bytes
+from assets.files import atomic_write_bytes
 from training.errors import CorpusFormatError
 
 N_LANDMARKS = 468
