@@ -19,6 +19,15 @@ cost C), so the smoothness the search optimised is the smoothness rendered. A ju
 ``q_{m+1}`` has no recorded parent (a sentence's first phone) is joined by the same crossfade into
 ``q_{m+1}``'s first frame.
 
+**Pauses keep their recorded pace.** Lips move before speech starts (an in-breath, the opening
+for the first sound) and settle after it ends, at a pace tied to the speech, not to the length
+of the pause. Stretching a whole recorded pause onto a longer target pause would slow those
+gestures and move them away from the speech. So a pause before speech (the first target phone)
+is read backwards from its end at the recorded pace, and a pause after speech (the last) forwards
+from its start; what the target pause has beyond the recording holds the recording's far end
+value, and a shorter target pause cuts the far end off. Pauses inside an utterance, with speech
+on both sides, are warped linearly like phones.
+
 Output frames are at ``k / 30`` s, ``k = 0 .. ceil(E_last * 30) - 1``; instants before the first
 target phone or after the last hold the first/last value.
 """
@@ -33,24 +42,35 @@ from realtime_core.synthesis.search import crossfade
 
 
 def warp_sources(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray,
-                 times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 times_s: np.ndarray, anchored: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For output instants ``times_s`` (n,): (target phone index (n,), tau in [0, 1] (n,), source
-    time (n,) on the clock of the selected phone's sentence)."""
+    time (n,) on the clock of the selected phone's sentence).
+
+    anchored: (T,) int8 per target phone: 0 = linear warp; -1 = keep the recorded pace counted
+    back from the phone's end (a pause before speech); +1 = counted on from its start (a pause
+    after speech); the recording's far end is held or cut (see the module doc)."""
     m = np.clip(np.searchsorted(ends_s, times_s, side="right"), 0, len(states) - 1)
     span = ends_s[m] - starts_s[m]
     tau = np.clip((times_s - starts_s[m]) / span, 0.0, 1.0)
     q = states[m]
-    src = corpus.phone_start_s[q] + tau * (corpus.phone_end_s[q] - corpus.phone_start_s[q])
+    s0, s1 = corpus.phone_start_s[q], corpus.phone_end_s[q]
+    src = s0 + tau * (s1 - s0)
+    if anchored is not None:
+        a = np.asarray(anchored)[m]
+        src = np.where(a < 0, np.clip(s1 - (ends_s[m] - times_s), s0, s1), src)
+        src = np.where(a > 0, np.clip(s0 + (times_s - starts_s[m]), s0, s1), src)
     return m, tau, src
 
 
 def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray, *,
-                parent: np.ndarray, n_frames: int | None = None, fps: float = FPS) -> np.ndarray:
+                parent: np.ndarray, n_frames: int | None = None, fps: float = FPS,
+                anchored: np.ndarray | None = None) -> np.ndarray:
     """Motion of the selected units warped onto the target phones and smoothed at the junctions.
 
     states: (T,) corpus phone per target phone; starts_s, ends_s: (T,) target phone boundaries in
     seconds (contiguous: ends_s[m] == starts_s[m + 1], strictly increasing); parent: (N,) the
-    graph's parent array; n_frames: output length (default ``ceil(ends_s[-1] * fps)``).
+    graph's parent array; n_frames: output length (default ``ceil(ends_s[-1] * fps)``); anchored:
+    (T,) per phone 0 / -1 / +1, see :func:`warp_sources` (default: all linear).
     Returns (n_frames, D) float64 at instants ``k / fps``.
     """
     states = np.asarray(states, dtype=np.int64)
@@ -62,7 +82,7 @@ def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, 
     if n_frames is None:
         n_frames = int(np.ceil(ends_s[-1] * fps - 1e-9))
     t = np.arange(n_frames) / fps
-    m, tau, src = warp_sources(corpus, states, starts_s, ends_s, t)
+    m, tau, src = warp_sources(corpus, states, starts_s, ends_s, t, anchored)
     sent = corpus.phone_sentence()
     out = sample_motion(corpus, sent[states[m]], src)
     # junctions: phone m is followed by a jump

@@ -125,3 +125,92 @@ def sample_motion(corpus: MotionCorpus, sentence: np.ndarray, times_s: np.ndarra
     base = fo[sentence] + k0
     f = corpus.frames
     return (1.0 - frac) * f[base] + frac * f[base + 1]
+
+
+# ----------------------------------------------------------------------------- the .npz codec
+CORPUS_FORMAT = "facecast-unit-corpus"
+CORPUS_VERSION = 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class StoredCorpus:
+    """What a unit-corpus file holds: the corpus; the landmark PCA that made its coefficients
+    (``pca_mean`` (P,), ``pca_components`` (K, P) orthonormal, ``pca_variances`` (K,),
+    ``pca_total_variance``), the landmark indices the PCA covers (``landmark_indices`` (P/3,)) and
+    the mean neutral positions of those landmarks (``neutral`` (P/3, 3), IOD units, face frame);
+    ``meta``: JSON-able provenance (sources, credit, build settings)."""
+
+    corpus: MotionCorpus
+    pca_mean: np.ndarray
+    pca_components: np.ndarray
+    pca_variances: np.ndarray
+    pca_total_variance: float
+    landmark_indices: np.ndarray
+    neutral: np.ndarray
+    meta: dict
+
+    def landmark_offsets(self, coefficients: np.ndarray) -> np.ndarray:
+        """(n, K) coefficients -> (n, P/3, 3) landmark displacements from the neutral face (IOD)."""
+        flat = np.asarray(coefficients, dtype=np.float64) @ self.pca_components + self.pca_mean
+        return flat.reshape(len(flat), -1, 3)
+
+
+def encode_corpus(stored: StoredCorpus) -> bytes:
+    """Serialise to compressed ``.npz`` bytes (no pickle)."""
+    import io
+    import json
+
+    c = stored.corpus
+    header = {"sentence_ids": list(c.sentence_ids), "phone_labels": list(c.phone_labels),
+              "n_coefficients": c.n_coefficients, "dim_names": list(c.dim_names), "meta": stored.meta,
+              "pca_total_variance": stored.pca_total_variance}
+    buf = io.BytesIO()
+    np.savez_compressed(
+        buf, format=np.array(CORPUS_FORMAT), version=np.array(CORPUS_VERSION), header_json=np.array(json.dumps(header)),
+        frames=np.asarray(c.frames, dtype=np.float32), frame_offsets=np.asarray(c.frame_offsets, dtype=np.int64),
+        phone_visemes=np.asarray(c.phone_visemes, dtype=np.int16), phone_start_s=c.phone_start_s,
+        phone_end_s=c.phone_end_s, phone_offsets=np.asarray(c.phone_offsets, dtype=np.int64),
+        pca_mean=stored.pca_mean, pca_components=stored.pca_components, pca_variances=stored.pca_variances,
+        landmark_indices=np.asarray(stored.landmark_indices, dtype=np.int64), neutral=stored.neutral,
+    )
+    return buf.getvalue()
+
+
+def decode_corpus(data: bytes) -> StoredCorpus:
+    """Parse and validate ``.npz`` bytes; raises ModelFormatError naming the problem."""
+    import io
+    import json
+    import zipfile
+
+    from realtime_core.errors import ModelFormatError
+
+    try:
+        npz = np.load(io.BytesIO(data), allow_pickle=False)
+        a = {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a unit-corpus archive ({exc})") from None
+    need = ("format", "version", "header_json", "frames", "frame_offsets", "phone_visemes", "phone_start_s",
+            "phone_end_s", "phone_offsets", "pca_mean", "pca_components", "pca_variances", "landmark_indices", "neutral")
+    missing = [k for k in need if k not in a]
+    if missing:
+        raise ModelFormatError(f"unit-corpus archive lacks {missing}")
+    if str(a["format"]) != CORPUS_FORMAT or int(a["version"]) != CORPUS_VERSION:
+        raise ModelFormatError(f"format {str(a['format'])!r} v{int(a['version'])} is not {CORPUS_FORMAT!r} v{CORPUS_VERSION}")
+    try:
+        h = json.loads(str(a["header_json"]))
+        corpus = MotionCorpus(
+            sentence_ids=tuple(h["sentence_ids"]), frames=a["frames"], frame_offsets=a["frame_offsets"],
+            phone_labels=tuple(h["phone_labels"]), phone_visemes=a["phone_visemes"], phone_start_s=a["phone_start_s"],
+            phone_end_s=a["phone_end_s"], phone_offsets=a["phone_offsets"], n_coefficients=int(h["n_coefficients"]),
+            dim_names=tuple(h["dim_names"]),
+        )
+        stored = StoredCorpus(corpus=corpus, pca_mean=a["pca_mean"], pca_components=a["pca_components"],
+                              pca_variances=a["pca_variances"], pca_total_variance=float(h["pca_total_variance"]),
+                              landmark_indices=a["landmark_indices"], neutral=a["neutral"], meta=dict(h["meta"]))
+    except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
+        raise ModelFormatError(f"unit-corpus archive is inconsistent: {exc}") from None
+    k = corpus.n_coefficients
+    if stored.pca_components.shape != (k, stored.pca_mean.shape[0]) or stored.neutral.shape != (
+            len(stored.landmark_indices), 3) or stored.pca_mean.shape[0] != 3 * len(stored.landmark_indices):
+        raise ModelFormatError("unit-corpus PCA, landmark indices and neutral face disagree in size")
+    return stored

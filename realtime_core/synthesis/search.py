@@ -60,14 +60,16 @@ class NoPathError(ConfigError):
 @dataclass(frozen=True, kw_only=True)
 class SearchConfig:
     """beta: weight of the smoothness cost C (>= 0; 0 = fewest units only); points: samples ``L``
-    per phone for C; min_blend_s: floor on the target phone duration in C (a 10 ms phone would
+    per phone for C; cost_components: leading motion-vector dims C is measured on (the largest
+    principal components carry nearly all the motion; fewer dims = faster search); min_blend_s: floor on the target phone duration in C (a 10 ms phone would
     otherwise make any blend infinitely costly); max_active: active-state cap per step (None =
     exact search); lookahead / lookahead_phones: pruning bonus per phone of future recorded
     match, and its cap; mismatch_cost: G for junctions between different visemes in the fallback
     search (inf = the paper, no fallback)."""
 
     beta: float = 0.1
-    points: int = 9
+    points: int = 7
+    cost_components: int = 6
     min_blend_s: float = 0.05
     max_active: int | None = 96
     lookahead: float = 0.9
@@ -77,6 +79,8 @@ class SearchConfig:
     def __post_init__(self) -> None:
         if not self.beta >= 0 or not self.points >= 4 or not self.min_blend_s > 0:
             raise ConfigError("beta must be >= 0, points >= 4 and min_blend_s > 0")
+        if self.cost_components < 1:
+            raise ConfigError(f"cost_components must be >= 1, got {self.cost_components}")
         if self.max_active is not None and self.max_active < 1:
             raise ConfigError(f"max_active must be >= 1 or None, got {self.max_active}")
         if not 0 <= self.lookahead < 1 or self.lookahead_phones < 0:
@@ -130,14 +134,15 @@ class UnitGraph:
         return len(self.visemes)
 
 
-def state_motion(corpus: MotionCorpus, points: int) -> np.ndarray:
-    """(N, L, K) the motion vectors (first K = n_coefficients dims) of every phone, sampled at L
-    evenly spaced instants from its start to its end."""
+def state_motion(corpus: MotionCorpus, points: int, dims: int | None = None) -> np.ndarray:
+    """(N, L, K) the motion vectors (first K = min(dims, n_coefficients) dims) of every phone,
+    sampled at L evenly spaced instants from its start to its end."""
+    k = corpus.n_coefficients if dims is None else min(dims, corpus.n_coefficients)
     tau = np.linspace(0.0, 1.0, points)
     sent = corpus.phone_sentence()
     t = corpus.phone_start_s[:, None] + tau[None, :] * (corpus.phone_end_s - corpus.phone_start_s)[:, None]
-    x = sample_motion(corpus, np.repeat(sent, points), t.ravel())[:, : corpus.n_coefficients]
-    return x.reshape(corpus.n_phones, points, corpus.n_coefficients)
+    x = sample_motion(corpus, np.repeat(sent, points), t.ravel())[:, :k]
+    return x.reshape(corpus.n_phones, points, k)
 
 
 def build_graph(corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> UnitGraph:
@@ -163,7 +168,7 @@ def build_graph(corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> 
     by_viseme = {int(c): idx[has_parent & (vis == c)] for c in np.unique(vis)}
     first_by_viseme = {int(c): idx[vis == c] for c in np.unique(vis)}
 
-    x = state_motion(corpus, config.points)
+    x = state_motion(corpus, config.points, config.cost_components)
     w = crossfade(np.linspace(0.0, 1.0, config.points))
     d = second_difference(config.points)
     du, dv = d * (1.0 - w)[None, :], d * w[None, :]
@@ -183,8 +188,9 @@ def build_graph(corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> 
 def smoothness(graph: UnitGraph, i: np.ndarray, p: np.ndarray, duration_s: float) -> np.ndarray:
     """C(i, p) (normalised) for pairs i (K,) x p (M,) -> (K, M), blended over ``duration_s``."""
     dur = max(duration_s, graph.config.min_blend_s)
-    cross = graph.u[i].astype(np.float64) @ graph.v[p].astype(np.float64).T
-    return (graph.a[i][:, None] + graph.b[p][None, :] + 2.0 * cross) / (dur**4 * graph.c_ref)
+    cross = (graph.u[i] @ graph.v[p].T).astype(np.float64)
+    # clamp: the expansion can round slightly below 0 where the blend is nearly still
+    return np.maximum(graph.a[i][:, None] + graph.b[p][None, :] + 2.0 * cross, 0.0) / (dur**4 * graph.c_ref)
 
 
 @dataclass(frozen=True, kw_only=True)

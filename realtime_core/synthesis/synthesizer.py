@@ -103,6 +103,17 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
                   ends_s=np.array(ends), unknown=tuple(unknown), substituted=substituted)
 
 
+def pause_anchors(visemes: np.ndarray) -> np.ndarray:
+    """(T,) int8: -1 for a leading pause, +1 for a trailing pause, else 0 (concat's ``anchored``)."""
+    out = np.zeros(len(visemes), dtype=np.int8)
+    sil = VISEME_ID["sil"]
+    if len(visemes) > 1 and visemes[0] == sil:
+        out[0] = -1
+    if len(visemes) > 1 and visemes[-1] == sil:
+        out[-1] = 1
+    return out
+
+
 class UnitSynthesizer:
     """Unit-selection visual speech from one corpus (the graph is built once; thread-safe reads)."""
 
@@ -120,5 +131,5 @@ class UnitSynthesizer:
         target = self.target(phones, inventory)
         sel = select_units(self.graph, target.visemes, target.durations_s)
         frames = concatenate(self.corpus, sel.states, target.starts_s, target.ends_s, parent=self.graph.parent,
-                             n_frames=n_frames, fps=FPS)
+                             n_frames=n_frames, fps=FPS, anchored=pause_anchors(target.visemes))
         return UnitSynthesis(frames=frames, target=target, selection=sel)
