@@ -51,6 +51,9 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.corpus import MotionCorpus, sample_motion
+from realtime_core.synthesis.visemes import VISEME_ID
+
+SIL = VISEME_ID["sil"]
 
 
 class NoPathError(ConfigError):
@@ -65,7 +68,10 @@ class SearchConfig:
     otherwise make any blend infinitely costly); max_active: active-state cap per step (None =
     exact search); lookahead / lookahead_phones: pruning bonus per phone of future recorded
     match, and its cap; mismatch_cost: G for junctions between different visemes in the fallback
-    search (inf = the paper, no fallback)."""
+    search (inf = the paper, no fallback); duration_weight: an extension of the paper's 0/inf
+    observation cost, ``d_j(o_t) += duration_weight * |ln(dur_j / dur_t)|`` for phones that are not
+    pauses (prefers recorded tokens of about the target's duration: less warping, and a phone's
+    length goes with how far its articulation goes; 0 = the paper)."""
 
     beta: float = 0.1
     points: int = 7
@@ -75,6 +81,7 @@ class SearchConfig:
     lookahead: float = 0.9
     lookahead_phones: int = 8
     mismatch_cost: float = 20.0
+    duration_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.beta >= 0 or not self.points >= 4 or not self.min_blend_s > 0:
@@ -85,6 +92,8 @@ class SearchConfig:
             raise ConfigError(f"max_active must be >= 1 or None, got {self.max_active}")
         if not 0 <= self.lookahead < 1 or self.lookahead_phones < 0:
             raise ConfigError("lookahead must be in [0, 1) and lookahead_phones >= 0")
+        if not self.duration_weight >= 0:
+            raise ConfigError(f"duration_weight must be >= 0, got {self.duration_weight}")
         if not self.mismatch_cost > 0:
             raise ConfigError("mismatch_cost must be > 0 (inf disables the fallback)")
 
@@ -114,7 +123,8 @@ class UnitGraph:
     the sentence's last state; by_diviseme: {(viseme of parent, viseme): (M,) states};
     by_viseme: {viseme: (M,) states with a parent}; first_by_viseme: {viseme: all states};
     u, v: (N, (L-2) * K) float32 halves of C's quadratic form; a, b: (N,) their squared norms;
-    c_ref: median natural C (normalisation); config: the search configuration."""
+    c_ref: median natural C (normalisation); log_duration: (N,) ln of each phone's recorded
+    duration (s); config: the search configuration."""
 
     visemes: np.ndarray
     parent: np.ndarray
@@ -127,6 +137,7 @@ class UnitGraph:
     a: np.ndarray
     b: np.ndarray
     c_ref: float
+    log_duration: np.ndarray
     config: SearchConfig
 
     @property
@@ -181,7 +192,8 @@ def build_graph(corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> 
     return UnitGraph(
         visemes=vis, parent=parent, sentence_end=sentence_end, by_diviseme=by_diviseme, by_viseme=by_viseme,
         first_by_viseme=first_by_viseme, u=u.astype(np.float32), v=v.astype(np.float32),
-        a=np.einsum("ij,ij->i", u, u), b=np.einsum("ij,ij->i", v, v), c_ref=max(c_ref, 1e-12), config=config,
+        a=np.einsum("ij,ij->i", u, u), b=np.einsum("ij,ij->i", v, v), c_ref=max(c_ref, 1e-12),
+        log_duration=np.log(corpus.phone_end_s - corpus.phone_start_s), config=config,
     )
 
 
@@ -203,6 +215,14 @@ class Selection:
     cost: float
     n_units: int
     n_mismatched: int
+
+
+def observation_cost(graph: UnitGraph, cand: np.ndarray, viseme: int, duration_s: float) -> np.ndarray:
+    """d_j(o_t) for candidates that show the target viseme: 0 (the paper), plus the duration term."""
+    w = graph.config.duration_weight
+    if w == 0 or viseme == SIL:
+        return np.zeros(len(cand))
+    return w * np.abs(graph.log_duration[cand] - np.log(max(duration_s, 1e-3)))
 
 
 def _runs(graph: UnitGraph, cand: np.ndarray, target: np.ndarray, t: int, cap: int) -> np.ndarray:
@@ -233,29 +253,33 @@ def _prune(graph: UnitGraph, cand: np.ndarray, phi: np.ndarray, target: np.ndarr
 
 
 def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
-            mismatch_cost: float = np.inf) -> Selection:
+            mismatch_cost: float = np.inf, banned: np.ndarray | None = None) -> Selection:
     """The least-cost state sequence for target visemes ``target`` (T,) int with target phone
     durations ``durations_s`` (T,) s. ``mismatch_cost`` is G for junctions whose visemes differ
-    (inf = the paper). Raises NoPathError if every path costs infinity."""
+    (inf = the paper); ``banned``: (N,) bool states not to use. Raises NoPathError if every path
+    costs infinity."""
     target = np.asarray(target, dtype=np.int64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     if target.ndim != 1 or len(target) == 0 or durations_s.shape != target.shape:
         raise ConfigError(f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}")
     cfg = graph.config
     relaxed = np.isfinite(mismatch_cost)
-    cand = graph.first_by_viseme.get(int(target[0]), np.zeros(0, np.int64))
+    def allowed(c: np.ndarray) -> np.ndarray:
+        return c if banned is None else c[~banned[c]]
+
+    cand = allowed(graph.first_by_viseme.get(int(target[0]), np.zeros(0, np.int64)))
     if len(cand) == 0:
         raise NoPathError(f"no corpus phone shows viseme id {int(target[0])}")
-    phi = np.zeros(len(cand))
+    phi = observation_cost(graph, cand, int(target[0]), float(durations_s[0]))
     keep = _prune(graph, cand, phi, target, 0)
     active, phi = cand[keep], phi[keep]
     history: list[tuple[np.ndarray, np.ndarray]] = [(active, np.full(len(active), -1))]
     pos = np.full(graph.n_states, -1, dtype=np.int64)
     for t in range(1, len(target)):
         if relaxed:
-            cand = graph.by_viseme.get(int(target[t]), np.zeros(0, np.int64))
+            cand = allowed(graph.by_viseme.get(int(target[t]), np.zeros(0, np.int64)))
         else:
-            cand = graph.by_diviseme.get((int(target[t - 1]), int(target[t])), np.zeros(0, np.int64))
+            cand = allowed(graph.by_diviseme.get((int(target[t - 1]), int(target[t])), np.zeros(0, np.int64)))
         if len(cand) == 0 or len(active) == 0:
             raise NoPathError(f"no admissible unit for target phone {t} (viseme pair {int(target[t - 1])} -> "
                               f"{int(target[t])} was never recorded)")
@@ -279,6 +303,7 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
         new_phi = np.where(better, stay_cost, new_phi)
         back = np.where(better, k, back)
         pos[active] = -1
+        new_phi = new_phi + observation_cost(graph, cand, int(target[t]), float(durations_s[t]))
         keep = _prune(graph, cand, new_phi, target, t)
         if len(keep) == 0:
             raise NoPathError(f"no admissible unit sequence reaches target phone {t}")
@@ -300,12 +325,13 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     return Selection(states=states, cost=cost, n_units=int(1 + jumps.sum()), n_mismatched=mism)
 
 
-def select_units(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray) -> Selection:
+def select_units(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
+                 banned: np.ndarray | None = None) -> Selection:
     """:func:`viterbi` with the paper's costs; if no admissible path exists and the configuration's
     ``mismatch_cost`` is finite, the search is repeated with that finite G (see module doc)."""
     try:
-        return viterbi(graph, target, durations_s)
+        return viterbi(graph, target, durations_s, banned=banned)
     except NoPathError:
         if not np.isfinite(graph.config.mismatch_cost):
             raise
-        return viterbi(graph, target, durations_s, mismatch_cost=graph.config.mismatch_cost)
+        return viterbi(graph, target, durations_s, mismatch_cost=graph.config.mismatch_cost, banned=banned)

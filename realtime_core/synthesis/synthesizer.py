@@ -56,11 +56,13 @@ class Target:
 
 @dataclass(frozen=True, kw_only=True)
 class UnitSynthesis:
-    """frames: (n_frames, D) float64 at k / 30 s (dims named by the corpus); target; selection."""
+    """frames: (n_frames, D) float64 at k / 30 s (dims named by the corpus); target; selection:
+    the best unit sequence; alternatives: the further sequences averaged in (``n_best`` > 1)."""
 
     frames: np.ndarray
     target: Target
     selection: Selection
+    alternatives: tuple[Selection, ...] = ()
 
 
 def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, available: frozenset[str]) -> Target:
@@ -121,15 +123,39 @@ class UnitSynthesizer:
         self.corpus = corpus
         self.graph: UnitGraph = build_graph(corpus, config or SearchConfig())
         self.available = corpus.visemes_present()
+        self._sentence = corpus.phone_sentence()
 
     def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
         return make_target(phones, inventory, self.available)
 
     def synthesize(self, phones: Sequence[tuple[str, float, float]], inventory: str, *,
-                   n_frames: int | None = None) -> UnitSynthesis:
-        """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es")."""
+                   n_frames: int | None = None, n_best: int = 1) -> UnitSynthesis:
+        """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es").
+
+        n_best: 1 = the paper (one unit sequence). k > 1 averages the warped motion of k unit
+        sequences, each searched with the sentences of the previous ones excluded: recorded
+        tokens of the same phones vary from one sentence to the next, and their mean (all warped
+        onto the same target phones, so closures and openings stay aligned) follows an unseen
+        token better than any one of them. Stops early when no further sequence exists."""
+        if not isinstance(n_best, int) or n_best < 1:
+            raise ConfigError(f"n_best must be an integer >= 1, got {n_best!r}")
         target = self.target(phones, inventory)
-        sel = select_units(self.graph, target.visemes, target.durations_s)
-        frames = concatenate(self.corpus, sel.states, target.starts_s, target.ends_s, parent=self.graph.parent,
-                             n_frames=n_frames, fps=FPS, anchored=pause_anchors(target.visemes))
-        return UnitSynthesis(frames=frames, target=target, selection=sel)
+        anchors = pause_anchors(target.visemes)
+        sels: list[Selection] = []
+        banned = np.zeros(self.graph.n_states, dtype=bool)
+        total = None
+        for k in range(n_best):
+            try:
+                sel = select_units(self.graph, target.visemes, target.durations_s, banned=banned if k else None)
+            except NoPathError:
+                if k == 0:
+                    raise
+                break
+            frames = concatenate(self.corpus, sel.states, target.starts_s, target.ends_s, parent=self.graph.parent,
+                                 n_frames=n_frames, fps=FPS, anchored=anchors)
+            total = frames if total is None else total + frames
+            sels.append(sel)
+            used = np.unique(self._sentence[sel.states])
+            banned |= np.isin(self._sentence, used)
+        assert total is not None
+        return UnitSynthesis(frames=total / len(sels), target=target, selection=sels[0], alternatives=tuple(sels[1:]))
