@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "record": "facecast.commands.record",
     "animate": "facecast.commands.animate",
     "render": "facecast.commands.render",
+    "say": "facecast.commands.say",
     "rig": "facecast.commands.rig",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",

@@ -277,6 +277,7 @@ class FacecastServer:
         self.started = time.time()
         self.stopping = False
         self.pool: WorkerPool | None = None
+        self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -434,6 +435,10 @@ class FacecastServer:
                 await self._ingest(ws)
             elif path == "/view":
                 await self._view(ws)
+            elif path == "/text":
+                from server.text_session import handle_text
+
+                await handle_text(self, ws)
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no WebSocket endpoint {path!r} (use /ingest or /view)")
         except ProtocolViolation as exc:
@@ -633,7 +638,7 @@ class FacecastServer:
 
     def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         path = urllib.parse.urlsplit(request.path).path
-        if path in ("/ingest", "/view"):
+        if path in ("/ingest", "/view", "/text"):
             return None  # WebSocket handshake proceeds (websockets answers 426 if it is not one)
         if request.headers.get("Upgrade", "").lower() == "websocket":
             return _response(HTTPStatus.NOT_FOUND, b"no WebSocket endpoint here (use /ingest or /view)\n", "text/plain")

@@ -32,7 +32,13 @@ from realtime_core.synthesis.corpus import MotionCorpus, StoredCorpus
 from realtime_core.synthesis.empca import EmPcaConfig, fit_empca
 from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
 from training.errors import ConfigError, FileProblem
-from training.facetrack import EXTRACTOR_VERSION, LOWER_FACE, FaceTrack, cache_path, default_cache_dir
+from training.facetrack import (
+    EXTRACTOR_VERSION,
+    LOWER_FACE,
+    FaceTrack,
+    cache_path,
+    default_cache_dir,
+)
 from training.grid import GridSentence
 
 BUILD_VERSION = 1
@@ -52,7 +58,7 @@ def track_motion(track: FaceTrack) -> np.ndarray:
     return d.reshape(len(d), -1)
 
 
-def phone_rows(alignment) -> list[tuple[str, float, float]]:  # noqa: ANN001 - Alignment or rows
+def phone_rows(alignment) -> list[tuple[str, float, float]]:
     """(label, start_s, end_s) rows from an Alignment (``.phones`` of PhonemeSegment) or rows."""
     phones = getattr(alignment, "phones", alignment)
     out = []
@@ -88,9 +94,10 @@ def is_extracted(video: Path, cache_dir: str | Path | None = None, rate_hz: int 
     return cache_path(Path(cache_dir) if cache_dir is not None else None, file_sha1(video), rate_hz).is_file()
 
 
-def build_stored_corpus(tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, config: EmPcaConfig = EmPcaConfig(),
+def build_stored_corpus(tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, config: EmPcaConfig | None = None,
                         meta: dict | None = None) -> StoredCorpus:
     """The corpus of ``[(sentence id, face track, ARPAbet phones)]`` (sans file I/O)."""
+    config = config or EmPcaConfig()
     if not tracks:
         raise ConfigError("no sentences to build a unit corpus from")
     motions = [track_motion(t) for _, t, _ in tracks]
@@ -132,7 +139,7 @@ def build_stored_corpus(tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, c
 
 
 def build_grid_corpus(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneRows], *,
-                      cache_dir: str | Path | None = None, config: EmPcaConfig = EmPcaConfig(),
+                      cache_dir: str | Path | None = None, config: EmPcaConfig | None = None,
                       only_extracted: bool = False, progress: Callable | None = None,
                       say: Callable[[str], None] = lambda _: None) -> tuple[StoredCorpus, Path]:
     """The unit corpus of ``sentences`` (their face tracks and phones), from the cache if built before.
@@ -143,6 +150,7 @@ def build_grid_corpus(sentences: Sequence[GridSentence], phones: Mapping[str, Ph
     from assets.unitcorpus import load_unit_corpus, save_unit_corpus
     from training.video import load_face_track
 
+    config = config or EmPcaConfig()
     missing_phones = [s.sentence_id for s in sentences if s.sentence_id not in phones]
     if missing_phones:
         say(f"unit corpus: {len(missing_phones)} sentences have no phone boundaries, skipped")

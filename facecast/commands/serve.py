@@ -40,8 +40,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
                    help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
                    "on the event loop; use up to cores - 1)")
+    p.add_argument("--text", action="store_true",
+                   help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units")
+    p.add_argument("--corpus", type=Path, default=None, help="unit corpus for --text (default: shipped or built)")
+    p.add_argument("--text-n-best", type=int, default=1, help="unit sequences averaged per sentence for --text")
     p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
     p.set_defaults(run=run)
+
+
+def text_backend(corpus: Path | None, *, n_best: int = 1):
+    """The text-session backend: espeak-ng speech (training.tts) + unit selection over the corpus."""
+    from assets.unitcorpus import find_unit_corpus, load_unit_corpus
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from server.text_session import TextBackend
+    from training.espeak import synthesizer
+    from training.tts import INVENTORY, speak
+
+    stored = load_unit_corpus(find_unit_corpus(corpus))
+    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+                       synthesizer=UnitSynthesizer(stored.corpus), languages=tuple(INVENTORY),
+                       sample_rate_hz=synthesizer().sample_rate_hz, n_best=n_best)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,11 +67,11 @@ def run(args: argparse.Namespace) -> int:
     import logging
     import os
 
+    from assets.modelfile import load_model
     from server.app import FacecastServer, load_head, run_server
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
-    from assets.modelfile import load_model
 
     token = None
     if args.token_env:
@@ -75,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)
+    if args.text:
+        server.text_backend = text_backend(args.corpus, n_best=args.text_n_best)
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening

@@ -19,6 +19,7 @@ from realtime_core.errors import ConfigError
 from realtime_core.synthesis.concat import concatenate
 from realtime_core.synthesis.corpus import FPS, MotionCorpus
 from realtime_core.synthesis.search import (
+    NoPathError,
     SearchConfig,
     Selection,
     UnitGraph,
