@@ -50,7 +50,9 @@ from realtime_core.face.rig import Rig
 from server import describe
 from server import protocol as SP
 from server.config import ServerConfig
-from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
+from server.errors import (AudioFormatError, ControlError, IngestOverrun, ProtocolViolation, ServerConfigError,
+                           ServerError)
+from server.guard import ConnectionCounter, IncidentLog, IngestPacer, host_allowed, origin_allowed
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer
 from server.session import Session, SessionConfig
@@ -101,10 +103,12 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
-                               sessions=lambda: [live.describe() for live in self.sessions.values()])
-        self.http.route("/health", lambda: HttpReply.json(self.health()))
+                               sessions=self.session_list)
+        self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
         self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
         self.http.route("/sessions", lambda: HttpReply.json({"sessions": self.session_list()}))
+        self.clients = ConnectionCounter(config.max_connections_per_client)
+        self.incidents = IncidentLog(log)
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -119,6 +123,7 @@ class FacecastServer:
                 compression=None,  # permessage-deflate would cost ~20x the CPU of a frame
                 max_size=cfg.max_message_bytes,
                 close_timeout=cfg.close_timeout_s,
+                open_timeout=cfg.handshake_timeout_s,
                 process_request=self._process_request,
                 server_header="facecast",
             )
@@ -183,7 +188,7 @@ class FacecastServer:
 
     # -- sessions ----------------------------------------------------------------------------------
 
-    def _admission(self, name: str) -> None:
+    def _admission(self, name: str, *, batch: bool = False) -> None:
         """Raise AdmissionRefused if a session ``name`` cannot open now (the one admission check)."""
         if not P.SESSION_NAME.match(name):
             raise AdmissionRefused(P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}")
@@ -193,18 +198,25 @@ class FacecastServer:
             raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists")
         if len(self.sessions) >= self.config.max_sessions:
             raise AdmissionRefused(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)")
+        if batch and sum(live.batch for live in self.sessions.values()) >= self.config.max_batch_sessions:
+            raise AdmissionRefused(P.CLOSE_TRY_LATER, f"batch sessions are full ({self.config.max_batch_sessions})")
 
-    async def open_session(self, name: str, config: SessionConfig, *, source: str) -> LiveSession:
+    async def open_session(self, name: str, config: SessionConfig, *, source: str, batch: bool = False,
+                           paced: bool = False) -> LiveSession:
         """Register a new live session (AdmissionRefused, a ServerConfigError, if the name is taken or
-        the server is full)."""
-        self._admission(name)
+        the server is full). paced: hold its input to real time plus ``ingest_burst_s``."""
+        self._admission(name, batch=batch)
         session = await self._new_session(config)
         try:
-            self._admission(name)  # opening a worker session awaited: another one may have come in
+            self._admission(name, batch=batch)  # opening a worker session awaited: another one may have come in
         except AdmissionRefused:
             await session.close()
             raise
         live = LiveSession(name, session, self, source=source)
+        live.batch = batch
+        if paced and not batch:
+            live.pacer = IngestPacer(self.config.ingest_burst_s)
+            live.overrun = self.config.ingest_overrun
         self.sessions[name] = live
         return live
 
@@ -255,6 +267,8 @@ class FacecastServer:
 
     async def _handle(self, ws: ServerConnection) -> None:
         path = urllib.parse.urlsplit(ws.request.path).path
+        client = _client_address(ws)
+        self.clients.add(client)
         try:
             if path == "/ingest":
                 await self._ingest(ws)
@@ -263,12 +277,15 @@ class FacecastServer:
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
         except ProtocolViolation as exc:
+            self.incidents.client_error(exc.code, exc.reason, time.monotonic())
             await self.close_ws(ws, exc.code, exc.reason)
         except ConnectionClosed:
             pass
-        except Exception:  # noqa: BLE001 - connection boundary: a bug closes this connection only
-            log.exception("internal error on %s", path)
-            await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")
+        except Exception as exc:  # noqa: BLE001 - connection boundary: a bug closes this connection only
+            self.incidents.internal_error(path, exc, time.monotonic())
+            await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")  # never a traceback or path
+        finally:
+            self.clients.remove(client)
 
     async def _ingest(self, ws: ServerConnection) -> None:
         """Drive one ingest connection through :class:`server.protocol.IngestProtocol`."""
@@ -286,10 +303,14 @@ class FacecastServer:
                 return
             ended = asyncio.ensure_future(live.ended.wait())
             try:
+                idle_s = self.config.idle_timeout_s
                 while proto.state is SP.State.STREAMING:
                     recv = asyncio.ensure_future(ws.recv())
-                    done, _ = await asyncio.wait({recv, ended}, return_when=asyncio.FIRST_COMPLETED)
-                    if recv not in done:  # server shutting down
+                    done, _ = await asyncio.wait({recv, ended}, timeout=idle_s, return_when=asyncio.FIRST_COMPLETED)
+                    if not done:
+                        recv.cancel()
+                        actions = proto.idle_timed_out(idle_s)
+                    elif recv not in done:  # server shutting down
                         recv.cancel()
                         actions = proto.shutdown()
                     else:
@@ -320,6 +341,8 @@ class FacecastServer:
                     await live.feed_bytes_fairly(action.data)
                 except AudioFormatError as exc:
                     todo.extend(proto.audio_rejected(str(exc)))
+                except IngestOverrun as exc:
+                    todo.extend(proto.too_fast(str(exc)))
             elif isinstance(action, SP.Control):
                 try:
                     todo.extend(proto.control_applied(await live.control(action.message)))
@@ -331,7 +354,8 @@ class FacecastServer:
                 todo.extend(proto.finished(s.frames_out, s.samples_out / s.rate_hz))
             elif isinstance(action, SP.Open):
                 try:
-                    live = await self.open_session(action.name, action.config, source="ingest")
+                    live = await self.open_session(action.name, action.config, source="ingest", batch=action.batch,
+                                                   paced=True)
                 except AdmissionRefused as exc:
                     todo.extend(proto.refused(exc.code, exc.reason))
                 else:
@@ -374,12 +398,30 @@ class FacecastServer:
     # -- plain HTTP --------------------------------------------------------------------------------
 
     def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
-        path = urllib.parse.urlsplit(request.path).path
-        if path in ("/ingest", "/view"):
-            return None  # WebSocket handshake proceeds (websockets answers 426 if it is not one)
-        if request.headers.get("Upgrade", "").lower() == "websocket":
-            return _response(HttpReply.text(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)\n"))
-        return _response(self.http.handle(path))
+        """Every request before any handshake: Host (DNS rebinding), then for WebSocket upgrades the
+        Origin and the per-client connection limit, else plain HTTP with the token for private routes."""
+        cfg = self.config
+        headers = request.headers
+        if not host_allowed(headers.get("Host"), bound_host=cfg.host, allowed=cfg.allowed_hosts):
+            return self._refuse(HTTPStatus.FORBIDDEN, "Host not allowed")
+        split = urllib.parse.urlsplit(request.path)
+        path = split.path
+        upgrade = headers.get("Upgrade", "").lower() == "websocket"
+        if upgrade or path in ("/ingest", "/view"):
+            if path not in ("/ingest", "/view"):
+                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+            if not origin_allowed(headers.get("Origin"), headers.get("Host"), cfg.allowed_origins):
+                return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
+            if self.clients.full(_client_address(connection)):
+                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
+                                    f"too many connections from this client ({cfg.max_connections_per_client})")
+            return None  # the WebSocket handshake proceeds (websockets answers 426 if it is not one)
+        authorized = SP.token_ok(_request_token(split.query, headers.get("Authorization")), cfg.token)
+        return _response(self.http.handle(path, authorized=authorized))
+
+    def _refuse(self, status: HTTPStatus, text: str) -> Response:
+        self.incidents.client_error(status.value, text, time.monotonic())
+        return _response(HttpReply.text(status, text + "\n"))
 
     def health(self) -> dict:
         return {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
@@ -400,6 +442,22 @@ class FacecastServer:
             "session_list": self.session_list(),
             "uptime_s": round(time.time() - self.started, 3),
         }
+
+
+def _client_address(connection: ServerConnection) -> str:
+    """The peer's IP address (the per-client limit's key)."""
+    peer = connection.remote_address
+    return str(peer[0]) if peer else "?"
+
+
+def _request_token(query: str, authorization: str | None) -> str | None:
+    """The token of a plain HTTP request: ``Authorization: Bearer T`` or ``?token=T``."""
+    if authorization is not None and authorization.lower().startswith("bearer "):
+        return authorization[7:].strip()
+    try:
+        return dict(urllib.parse.parse_qsl(query, max_num_fields=32)).get("token")
+    except ValueError:
+        return None
 
 
 def _response(reply: HttpReply) -> Response:

@@ -24,7 +24,17 @@ class ServerConfig:
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
-    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served)."""
+    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served).
+
+    Hardening (docs/protocol.md section 7): ingest_burst_s: seconds of audio an ingest may run ahead
+    of real time before it is paced (or closed with 4029 when ingest_overrun is "close"); batch
+    sessions (start message ``"batch": true``) are exempt, at most max_batch_sessions at a time;
+    allowed_origins: extra Origin values accepted on WebSocket upgrades besides same-origin
+    (``"*"`` accepts any; a ``null`` Origin is always refused; clients that send no Origin, i.e.
+    not browsers, are accepted); allowed_hosts: Host header names accepted (None: loopback names
+    when bound to loopback, else any); max_connections_per_client: open WebSocket connections per
+    remote address; handshake_timeout_s: time to complete the opening handshake; idle_timeout_s:
+    an ingest that sends nothing for this long is closed (1008)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -41,6 +51,14 @@ class ServerConfig:
     viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
     node_modules: Path | None = None
+    ingest_burst_s: float = 2.0
+    ingest_overrun: str = "pace"
+    max_batch_sessions: int = 2
+    allowed_origins: tuple[str, ...] = ()
+    allowed_hosts: tuple[str, ...] | None = None
+    max_connections_per_client: int = 1024
+    handshake_timeout_s: float = 10.0
+    idle_timeout_s: float = 60.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -60,7 +78,8 @@ class ServerConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or not 1 <= v <= 100000:
                 raise ServerConfigError(f"{name} must be an integer in 1..100000, got {v!r}")
-        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s"):
+        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s", "handshake_timeout_s",
+                     "idle_timeout_s", "ingest_burst_s"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0 < v <= 3600:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
@@ -71,6 +90,21 @@ class ServerConfig:
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
+        if self.ingest_overrun not in ("pace", "close"):
+            raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
+        for name in ("max_batch_sessions", "max_connections_per_client"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 100000:
+                raise ServerConfigError(f"{name} must be an integer in 0..100000, got {v!r}")
+        for name in ("allowed_origins", "allowed_hosts"):
+            v = getattr(self, name)
+            if v is None and name == "allowed_hosts":
+                continue
+            if isinstance(v, str) or not all(isinstance(x, str) and x for x in v):
+                raise ServerConfigError(f"{name} must be a list of non-empty strings, got {v!r}")
+            object.__setattr__(self, name, tuple(x.lower() for x in v))
+        if "null" in self.allowed_origins:
+            raise ServerConfigError("allowed_origins cannot hold 'null': a null Origin is always refused")
         for name in ("web_root", "node_modules"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, Path(getattr(self, name)))

@@ -63,12 +63,13 @@ def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None
     return d
 
 
-def summary(live: "LiveSession", *, private: bool) -> dict:
-    """One session's row; ``private`` (the caller showed the token, or none is set) adds the source
-    label, which may hold a file path."""
+def summary(live: "LiveSession") -> dict:
+    """One session's row. ``source`` is the source's kind only (ingest, file, microphone): a file
+    session's path stays in the server's log, never in a reply."""
     s = live.session
     row = {
         "name": live.name,
+        "source": live.source.split(" ", 1)[0],
         "viewers": len(live.viewers),
         "frames": s.frames_out,
         "audio_s": round(s.samples_out / s.rate_hz, 3),
@@ -77,6 +78,4 @@ def summary(live: "LiveSession", *, private: bool) -> dict:
         "channels": s.config.channels,
         "controls": s.control_state(),
     }
-    if private:
-        row["source"] = live.source
     return row

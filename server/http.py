@@ -59,6 +59,7 @@ class HttpReply:
 
 
 NOT_FOUND = HttpReply.text(HTTPStatus.NOT_FOUND, "not found\n")
+UNAUTHORIZED = HttpReply.text(HTTPStatus.UNAUTHORIZED, "missing or wrong token (?token=... or Authorization: Bearer ...)\n")
 
 Handler = Callable[[], HttpReply]
 
@@ -76,20 +77,28 @@ class HttpRouter:
         self.node_modules = node_modules.resolve() if node_modules is not None else None
         self.head = head
         self.sessions = sessions
-        self.routes: dict[str, Handler] = {"/": self._index, "/index.html": self._index}
+        self.routes: dict[str, tuple[Handler, bool]] = {"/": (self._index, False), "/index.html": (self._index, False)}
+        self._authorized = True
         self._mime = _mime_table()
         self._cache: dict[str, HttpReply] = {}
 
-    def route(self, path: str, handler: Handler) -> None:
-        """Answer GET ``path`` with ``handler()``."""
-        self.routes[path] = handler
+    def route(self, path: str, handler: Handler, *, private: bool = True) -> None:
+        """Answer GET ``path`` with ``handler()``; a private route needs the token (else 401)."""
+        self.routes[path] = (handler, private)
 
-    def handle(self, path: str) -> HttpReply:
+    def handle(self, path: str, *, authorized: bool = True) -> HttpReply:
+        """authorized: the request showed the server's token (or the server has none). Private routes
+        and the head downloads need it; static files do not; the generated index lists sessions only
+        with it."""
         if len(path) > MAX_PATH_CHARS:
             return HttpReply.text(HTTPStatus.REQUEST_URI_TOO_LONG, "request path too long\n")
-        handler = self.routes.get(path)
-        if handler is not None:
-            return handler()
+        hit = self.routes.get(path)
+        private = hit[1] if hit is not None else path.startswith("/head/")
+        if private and not authorized:
+            return UNAUTHORIZED
+        self._authorized = authorized
+        if hit is not None:
+            return hit[0]()
         if path.startswith("/head/"):
             return self._head(path)
         return self._static(path)
@@ -118,6 +127,9 @@ class HttpRouter:
     def _index(self) -> HttpReply:
         if self.web_root is not None and (self.web_root / "index.html").is_file():
             return self._file(self.web_root / "index.html")
+        if not self._authorized:
+            return HttpReply(HTTPStatus.OK, b"<!doctype html><meta charset=utf-8><title>facecast</title><h1>facecast</h1>"
+                             b"<p>This server needs a token: add ?token=... to the address.</p>", "text/html; charset=utf-8")
         rows = "".join(
             f"<li><code>{html.escape(s['name'])}</code> ({s['frames']} frames, {s['viewers']} viewers): "
             f"<code>ws://HOST/view?session={html.escape(s['name'])}&amp;kind=params</code></li>"

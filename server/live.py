@@ -26,6 +26,8 @@ import numpy as np
 from websockets.asyncio.server import ServerConnection, broadcast
 
 from server.describe import summary
+from server.errors import IngestOverrun
+from server.guard import IngestPacer
 from server.session import Output, Session, SessionConfig
 from wire import protocol as P
 
@@ -189,6 +191,10 @@ class LiveSession:
         self.dropped = 0
         self.started = time.time()
         self.ended = asyncio.Event()
+        self.pacer: IngestPacer | None = None  # set for real-time ingests (not batch, not local sources)
+        self.overrun = "pace"
+        self.paced_s = 0.0
+        self.batch = False
 
     async def feed_bytes(self, data: bytes) -> int:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
@@ -201,13 +207,33 @@ class LiveSession:
         s = self.session
         frame = s.frame_bytes
         step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
-        if len(data) <= step or len(data) % frame:
+        if len(data) % frame:
             return await self.feed_bytes(data)  # a partial sample raises the AudioFormatError naming it
+        if len(data) <= step:
+            await self._pace(len(data) // frame)
+            return await self.feed_bytes(data)
         n = 0
         for i in range(0, len(data), step):
-            n += await self.feed_bytes(data[i:i + step])
+            piece = data[i:i + step]
+            await self._pace(len(piece) // frame)
+            n += await self.feed_bytes(piece)
             await asyncio.sleep(0)
         return n
+
+    async def _pace(self, samples: int) -> None:
+        """Hold an ingest to real time plus its burst (:class:`server.guard.IngestPacer`): wait, or
+        raise IngestOverrun when the server is set to close overrunning ingests."""
+        if self.pacer is None:
+            return
+        loop = asyncio.get_running_loop()
+        wait = self.pacer.delay(samples / self.session.config.sample_rate_hz, loop.time())
+        if wait <= 0:
+            return
+        if self.overrun == "close":
+            raise IngestOverrun(f"ingest ran over {self.pacer.burst_s:g} s ahead of real time "
+                                "(send in real time, or start with \"batch\": true)")
+        self.paced_s += wait
+        await asyncio.sleep(wait)
 
     async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
@@ -244,5 +270,5 @@ class LiveSession:
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)
 
-    def describe(self, *, private: bool = True) -> dict:
-        return summary(self, private=private)
+    def describe(self) -> dict:
+        return summary(self)

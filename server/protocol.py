@@ -69,6 +69,7 @@ class Open:
     name: str
     config: SessionConfig
     kind: str
+    batch: bool = False
 
 
 @dataclass(frozen=True)
@@ -169,7 +170,7 @@ SESSION_KINDS: dict[str, SessionKind] = {
 }
 """Start-message ``input`` value -> session kind (``"audio"`` when absent)."""
 
-COMMON_START_FIELDS = frozenset({"type", "session", "token", "input"})
+COMMON_START_FIELDS = frozenset({"type", "session", "token", "input", "batch"})
 
 
 # -- ingest ----------------------------------------------------------------------------------------------
@@ -251,6 +252,16 @@ class IngestProtocol:
             return []
         return self._violation(ProtocolViolation(P.CLOSE_POLICY, f"no start message within {timeout_s:g} s"))
 
+    def idle_timed_out(self, timeout_s: float) -> list[Action]:
+        """A started ingest sent nothing for ``timeout_s``."""
+        if self.state is not State.STREAMING:
+            return []
+        return self._violation(ProtocolViolation(P.CLOSE_POLICY, f"idle: no message for {timeout_s:g} s"))
+
+    def too_fast(self, reason: str) -> list[Action]:
+        """The ingest ran ahead of real time beyond its burst and the server closes rather than paces."""
+        return self._violation(ProtocolViolation(P.CLOSE_TOO_FAST, reason))
+
     def connection_lost(self) -> list[Action]:
         """The peer hung up (without an end message): finish what it sent."""
         if self.state is State.STREAMING:
@@ -324,13 +335,16 @@ class IngestProtocol:
         name = start.get("session")
         if not isinstance(name, str) or not P.SESSION_NAME.match(name):
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+        batch = start.get("batch", False)
+        if not isinstance(batch, bool):
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "batch must be true or false")
         try:
             config = kind.build(start, self.lag)
         except ServerConfigError as exc:
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
         self.state = State.OPENING
         self.name, self.kind = name, kind
-        return [Open(name, config, str(input_kind))]
+        return [Open(name, config, str(input_kind), batch)]
 
     def _violation(self, exc: ProtocolViolation) -> list[Action]:
         if self.state in (State.STREAMING, State.FINISHING):
