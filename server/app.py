@@ -49,12 +49,14 @@ from realtime_core.avmodel import AvModel
 from realtime_core.face.rig import Rig
 from server import describe
 from server import protocol as SP
+from server.cluster import Cluster, RemoteFeed
 from server.config import ServerConfig
 from server.errors import (AudioFormatError, ControlError, IngestOverrun, ProtocolViolation, ServerConfigError,
                            ServerError)
-from server.guard import ConnectionCounter, IncidentLog, IngestPacer, host_allowed, origin_allowed
+from server.guard import (ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed,
+                          origin_allowed)
 from server.http import HttpReply, HttpRouter
-from server.live import LiveSession, LocalSession, SessionHandle, Viewer
+from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig
 from server.timing import StageTimes
 from server.workers import WorkerPool
@@ -102,12 +104,14 @@ class FacecastServer:
         self.started = time.time()
         self.stopping = False
         self.pool: WorkerPool | None = None
+        self.cluster: Cluster | None = None
         self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
                                sessions=self.session_list)
         self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
         self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
-        self.http.route("/sessions", lambda: HttpReply.json({"sessions": self.session_list()}))
+        self.http.route("/sessions", self._sessions_reply)
         self.clients = ConnectionCounter(config.max_connections_per_client)
+        self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
 
     # -- lifecycle ---------------------------------------------------------------------------------
@@ -129,6 +133,20 @@ class FacecastServer:
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
+        if cfg.redis_url is not None:
+            import os
+            import socket as _socket
+
+            node = cfg.node_id or f"{_socket.gethostname()}-{os.getpid()}-{self.port}"
+            self.cluster = Cluster(cfg.redis_url, node=node, advertise=cfg.advertise_url or self.url,
+                                   heartbeat_s=cfg.heartbeat_s, deliver=self._deliver_remote, end_feed=self._end_feed)
+            try:
+                await self.cluster.start()
+            except ServerError:
+                self.cluster = None
+                self._server.close()
+                await self._server.wait_closed()
+                raise
         if cfg.workers:
             self.pool = WorkerPool(self.model, cfg.workers)
             await self.pool.start()
@@ -167,6 +185,9 @@ class FacecastServer:
             await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
+        if self.cluster is not None:
+            await self.cluster.stop()
+            self.cluster = None
         if self.pool is not None:
             await self.pool.stop()
             self.pool = None
@@ -218,6 +239,12 @@ class FacecastServer:
             live.pacer = IngestPacer(self.config.ingest_burst_s)
             live.overrun = self.config.ingest_overrun
         self.sessions[name] = live
+        if self.cluster is not None:
+            owner = await self.cluster.claim(live)
+            if owner is not None:
+                del self.sessions[name]
+                await session.close()
+                raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
         return live
 
     async def _new_session(self, config: SessionConfig) -> SessionHandle:
@@ -248,6 +275,8 @@ class FacecastServer:
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]
         live.ended.set()
+        if self.cluster is not None:
+            await self.cluster.release(live, code, reason)
         await live.session.close()  # a worker session that never flushed
         # Let senders drain what is queued (bounded: each viewer queue is small), then close.
         for v in list(live.viewers):
@@ -366,6 +395,10 @@ class FacecastServer:
         req = SP.parse_view_query(SP.query_args(ws.request.path), token=self.config.token,
                                   has_head=self.head is not None)
         live = self.sessions.get(req.session)
+        if live is None and self.cluster is not None:
+            row = await self.cluster.lookup(req.session)
+            if row is not None:
+                return await self._view_remote(ws, req, row)
         if live is None:
             raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {req.session!r}")
         if self.n_viewers >= self.config.max_viewers:
@@ -395,9 +428,48 @@ class FacecastServer:
             live.viewers.discard(viewer)
             self.n_viewers -= 1
 
+    async def _view_remote(self, ws: ServerConnection, req: SP.ViewRequest, row: dict) -> None:
+        """A viewer of a session owned by another node: fed from that session's Redis channel."""
+        if self.n_viewers >= self.config.max_viewers:
+            raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
+        feed = await self.cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
+        await ws.send(P.dumps(describe.view_description(feed, req, self.head)))
+        viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
+        feed.viewers.add(viewer)
+        self.n_viewers += 1
+        sender = self.spawn(viewer.run())
+        try:
+            reader = asyncio.ensure_future(ws.recv())
+            done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
+            if reader in done and reader.exception() is None:
+                viewer.closing = True
+                raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
+            reader.cancel()
+        finally:
+            sender.cancel()
+            feed.viewers.discard(viewer)
+            self.n_viewers -= 1
+            await self.cluster.drop_feed_if_idle(feed)
+
+    def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
+        """A message of a remote session from Redis -> this node's viewers of it that want it."""
+        if kind == P.KIND_AUDIO:
+            members = [v for v in feed.viewers if v.audio]
+        else:
+            members = [v for v in feed.viewers if v.kind == kind and v.encoding == enc]
+        if members:
+            deliver(members, msg, time.time())
+
+    async def _end_feed(self, feed: RemoteFeed) -> None:
+        code, reason = feed.end
+        for v in list(feed.viewers):
+            v.wake.set()
+        await asyncio.sleep(0)
+        await asyncio.gather(*(self._close_viewer_after_drain(v, code, reason) for v in list(feed.viewers)))
+
     # -- plain HTTP --------------------------------------------------------------------------------
 
-    def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
+    async def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         """Every request before any handshake: Host (DNS rebinding), then for WebSocket upgrades the
         Origin and the per-client connection limit, else plain HTTP with the token for private routes."""
         cfg = self.config
@@ -412,11 +484,17 @@ class FacecastServer:
                 return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
             if not origin_allowed(headers.get("Origin"), headers.get("Host"), cfg.allowed_origins):
                 return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
-            if self.clients.full(_client_address(connection)):
+            client = _client_address(connection)
+            if self.clients.full(client):
                 return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
                                     f"too many connections from this client ({cfg.max_connections_per_client})")
+            if not self.connect_rate.allow(client, time.monotonic()):
+                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
+                                    f"too many new connections from this client (over {cfg.connect_rate_per_s:g}/s)")
             return None  # the WebSocket handshake proceeds (websockets answers 426 if it is not one)
         authorized = SP.token_ok(_request_token(split.query, headers.get("Authorization")), cfg.token)
+        if path == "/sessions" and authorized:
+            return _response(await self._sessions_reply_async())
         return _response(self.http.handle(path, authorized=authorized))
 
     def _refuse(self, status: HTTPStatus, text: str) -> Response:
@@ -424,8 +502,28 @@ class FacecastServer:
         return _response(HttpReply.text(status, text + "\n"))
 
     def health(self) -> dict:
-        return {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
-                "uptime_s": round(time.time() - self.started, 3)}
+        """``status`` ok, or degraded while the cluster's Redis is away (``redis`` says why)."""
+        out = {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
+               "uptime_s": round(time.time() - self.started, 3)}
+        if self.cluster is not None:
+            out.update(self.cluster.health())
+            if not self.cluster.up:
+                out["status"] = "degraded"
+        return out
+
+    def _sessions_reply(self) -> HttpReply:
+        return HttpReply.json({"sessions": self.session_list()})
+
+    async def _sessions_reply_async(self) -> HttpReply:
+        """/sessions: cluster-wide from the registry when there is one (this node's own otherwise)."""
+        if self.cluster is not None:
+            rows = await self.cluster.list_sessions()
+            if rows is not None:
+                local = {r["name"] for r in rows}
+                rows += [dict(r, node=self.cluster.node) for r in self.session_list() if r["name"] not in local]
+                return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"]), "scope": "cluster"})
+            return HttpReply.json({"sessions": self.session_list(), "scope": "node (Redis away)"})
+        return self._sessions_reply()
 
     def session_list(self) -> list[dict]:
         return [live.describe() for live in self.sessions.values()]

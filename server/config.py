@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import ipaddress
+import re
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from server.errors import ServerConfigError
+
+P_NODE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -33,8 +36,14 @@ class ServerConfig:
     (``"*"`` accepts any; a ``null`` Origin is always refused; clients that send no Origin, i.e.
     not browsers, are accepted); allowed_hosts: Host header names accepted (None: loopback names
     when bound to loopback, else any); max_connections_per_client: open WebSocket connections per
-    remote address; handshake_timeout_s: time to complete the opening handshake; idle_timeout_s:
-    an ingest that sends nothing for this long is closed (1008)."""
+    remote address; connect_rate_per_s / connect_burst: new WebSocket connections per remote address
+    (a token bucket; beyond it 429; rate 0 = no limit); handshake_timeout_s: time to complete the opening handshake; idle_timeout_s:
+    an ingest that sends nothing for this long is closed (1008).
+
+    Cluster (docs/deploy.md): redis_url: the Redis every node of a cluster shares (None: one
+    process, no Redis); node_id: this node's name in the registry (None: host-pid-port);
+    advertise_url: the http:// URL clients reach this node at (None: the bound address);
+    heartbeat_s: registry refresh period (rows expire after 3 heartbeats)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -57,8 +66,14 @@ class ServerConfig:
     allowed_origins: tuple[str, ...] = ()
     allowed_hosts: tuple[str, ...] | None = None
     max_connections_per_client: int = 1024
+    connect_rate_per_s: float = 50.0
+    connect_burst: int = 1000
     handshake_timeout_s: float = 10.0
     idle_timeout_s: float = 60.0
+    redis_url: str | None = None
+    node_id: str | None = None
+    advertise_url: str | None = None
+    heartbeat_s: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -90,9 +105,22 @@ class ServerConfig:
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
+        if self.redis_url is not None and (not isinstance(self.redis_url, str) or not self.redis_url.startswith(
+                ("redis://", "rediss://", "unix://"))):
+            raise ServerConfigError(f"redis_url must be a redis://, rediss:// or unix:// URL, got {self.redis_url!r}")
+        if self.node_id is not None and (not isinstance(self.node_id, str) or not P_NODE.match(self.node_id)):
+            raise ServerConfigError(f"node_id must be 1-64 characters of A-Z a-z 0-9 _ . -, got {self.node_id!r}")
+        if self.advertise_url is not None and (not isinstance(self.advertise_url, str)
+                                               or not self.advertise_url.startswith(("http://", "https://"))):
+            raise ServerConfigError(f"advertise_url must be an http:// or https:// URL, got {self.advertise_url!r}")
+        if not isinstance(self.heartbeat_s, (int, float)) or not 0.05 <= self.heartbeat_s <= 60:
+            raise ServerConfigError(f"heartbeat_s must be in 0.05..60 s, got {self.heartbeat_s!r}")
         if self.ingest_overrun not in ("pace", "close"):
             raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
-        for name in ("max_batch_sessions", "max_connections_per_client"):
+        if isinstance(self.connect_rate_per_s, bool) or not isinstance(self.connect_rate_per_s, (int, float)) or not (
+                0 <= self.connect_rate_per_s <= 1e6):
+            raise ServerConfigError(f"connect_rate_per_s must be a number in 0..1e6, got {self.connect_rate_per_s!r}")
+        for name in ("max_batch_sessions", "max_connections_per_client", "connect_burst"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 100000:
                 raise ServerConfigError(f"{name} must be an integer in 0..100000, got {v!r}")

@@ -109,6 +109,30 @@ class ConnectionCounter:
             del self.open[address]
 
 
+@dataclass
+class ConnectionRate:
+    """New WebSocket connections per remote address: a token bucket of ``burst`` connections refilled
+    at ``per_s`` a second (per_s 0 = no limit). Bounds what a client reconnecting in a tight loop
+    can make the server do: beyond the bucket it gets a cheap 429 before any handshake."""
+
+    per_s: float
+    burst: int
+    _buckets: dict = field(default_factory=dict)
+
+    def allow(self, address: str, now: float) -> bool:
+        if self.per_s <= 0:
+            return True
+        tokens, last = self._buckets.get(address, (float(self.burst), now))
+        tokens = min(float(self.burst), tokens + (now - last) * self.per_s)
+        if tokens < 1.0:
+            self._buckets[address] = (tokens, now)
+            return False
+        self._buckets[address] = (tokens - 1.0, now)
+        if len(self._buckets) > 10000:  # forget full buckets (idle clients) so the table stays small
+            self._buckets = {a: (t, n) for a, (t, n) in self._buckets.items() if t < self.burst}
+        return True
+
+
 # -- logging repeated errors once --------------------------------------------------------------------------
 
 

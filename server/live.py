@@ -97,7 +97,7 @@ class LocalSession:
         return self.core.control_state()
 
 
-def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+def deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
     """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
     message), the bounded queue for the others."""
     fast = []
@@ -248,25 +248,32 @@ class LiveSession:
         return await self.session.apply_control(msg)
 
     def _fanout(self, out: Output) -> int:
-        if not self.viewers:
+        cluster = self.server.cluster
+        remote = cluster.wants(self.name) if cluster is not None else ()
+        if not self.viewers and not remote:
             return len(out.frames)
         t0 = time.perf_counter()
         now = time.time()
         if out.audio is not None:
             listeners = [v for v in self.viewers if v.audio]
-            if listeners:
+            if listeners or (P.KIND_AUDIO, P.ENC_INT16) in remote:
                 a = out.audio
-                msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
-                _deliver(listeners, msg, now)
+                msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time,
+                                    now) + a.payload()
+                deliver(listeners, msg, now)
+                if remote:
+                    cluster.publish(self.name, msg)
         if out.frames:
-            groups: dict[tuple[int, int], list[Viewer]] = {}
+            groups: dict[tuple[int, int], list[Viewer]] = {k: [] for k in remote if k[0] != P.KIND_AUDIO}
             for v in self.viewers:
                 groups.setdefault((v.kind, v.encoding), []).append(v)
             for frame in out.frames:
                 for (kind, enc), members in groups.items():
                     payload, count, scale = frame.payload(kind, enc)
                     msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
-                    _deliver(members, msg, now)
+                    deliver(members, msg, now)
+                    if (kind, enc) in remote:
+                        cluster.publish(self.name, msg)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)
 

@@ -6,7 +6,7 @@ import logging
 
 import pytest
 
-from server.guard import ConnectionCounter, IncidentLog, IngestPacer, host_allowed, host_name, origin_allowed
+from server.guard import ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed, host_name, origin_allowed
 
 # (Origin header, Host header, allow-list, accepted?)
 ORIGINS = [
@@ -90,3 +90,11 @@ def test_incidents_are_logged_once_with_a_count(caplog):
     assert "1007 start message is not valid JSON" in lines[0]
     assert lines[1].startswith("10000 more") and "(10001 in all)" in lines[1]
     assert sum(r.exc_info is not None for r in caplog.records) == 1  # one traceback for 500 errors
+
+
+def test_connection_rate_bucket():
+    r = ConnectionRate(per_s=10, burst=3)
+    assert [r.allow("a", 0.0) for _ in range(4)] == [True, True, True, False]
+    assert r.allow("b", 0.0)  # per address
+    assert not r.allow("a", 0.05) and r.allow("a", 0.2)  # refilled at 10/s
+    assert all(ConnectionRate(per_s=0, burst=0).allow("a", 0.0) for _ in range(100))
