@@ -186,7 +186,8 @@ class Cluster:
         s = live.session
         row = summary(live)
         row.update({"node": self.node, "node_url": self.advertise, "fps": s.fps, "rate_hz": s.rate_hz,
-                    "algorithmic_delay_s": s.algorithmic_delay_s})
+                    "algorithmic_delay_s": s.algorithmic_delay_s,
+                    "published_kinds": sorted(self.wanted.get(live.name, ()))})
         return json.dumps(row)
 
     async def claim(self, live: "LiveSession") -> str | None:
