@@ -36,7 +36,12 @@ from websockets.exceptions import ConnectionClosed
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
 from realtime_core.synthesis.text import SentenceChunker, TextError
-from server.errors import ProtocolViolation, ServerConfigError
+from server.errors import (
+    AudioFormatError,
+    ControlError,
+    ProtocolViolation,
+    ServerConfigError,
+)
 from server.session import AudioBlock, Frame, Output
 from server.timing import StageTimes
 from wire import protocol as P
@@ -111,19 +116,28 @@ class TextSession:
         self.finished = False
         self._k = backend.synthesizer.corpus.n_coefficients
 
-    # -- the parts of Session that LiveSession / viewers use --------------------------------------
+    # -- the parts of a session handle (server.live.SessionHandle) that live sessions use --------
+    frame_bytes = 2  # nominal: text sessions take no audio
+
     def control_state(self) -> dict:
         return {}
 
-    def apply_control(self, msg: dict) -> dict:
-        from server.errors import ControlError
-
+    async def apply_control(self, msg: dict) -> dict:
         raise ControlError("text sessions have no controls")
 
-    def flush(self) -> Output:
+    async def push_bytes(self, data: bytes) -> Output:
+        raise AudioFormatError("a text session takes text messages, not audio")
+
+    async def push(self, samples: np.ndarray) -> Output:
+        raise AudioFormatError("a text session takes text messages, not audio")
+
+    async def flush(self) -> Output:
         """End of the text: nothing left to emit here (pending text is spoken by :meth:`finish_text`)."""
         self.finished = True
         return Output([], None)
+
+    async def close(self) -> None:
+        """Nothing to release."""
 
     # -- text ---------------------------------------------------------------------------------
     def push_text(self, text: str) -> list[str]:
@@ -186,7 +200,8 @@ def _text_message(raw: Any) -> dict:
 
 async def handle_text(server, ws: ServerConnection) -> None:
     """The ``/text`` endpoint (protocol in docs/protocol.md)."""
-    from server.app import LiveSession
+    from server.live import LiveSession
+    from server.protocol import token_ok
 
     backend: TextBackend | None = getattr(server, "text_backend", None)
     if backend is None:
@@ -198,7 +213,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
     start = _text_message(first)
     if start.get("type") != "start":
         raise ProtocolViolation(P.CLOSE_POLICY, f"first message must be {{\"type\": \"start\"}}, got {start.get('type')!r}")
-    server._check_token(start.get("token"))
+    if not token_ok(start.get("token"), server.config.token):
+        raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
     unknown = sorted(set(start) - {"type", "session", "language", "voice", "token"})
     if unknown:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {unknown}")
@@ -215,8 +231,10 @@ async def handle_text(server, ws: ServerConnection) -> None:
             await asyncio.to_thread(backend.speak, "a", language, voice)  # a bad voice fails now, not mid-stream
     except ConfigError as exc:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
-    if (refused := server._no_room(name)) is not None:
-        raise ProtocolViolation(*refused)
+    try:
+        server._admission(name)  # the server's one admission check (name, capacity, shutdown)
+    except ServerConfigError as exc:
+        raise ProtocolViolation(getattr(exc, "code", P.CLOSE_BAD_REQUEST), str(exc)) from None
     live = LiveSession(name, session, server, source="text")
     server.sessions[name] = live
     queue: asyncio.Queue = asyncio.Queue()
