@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "rig": "facecast.commands.rig",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
+    "units": "facecast.commands.units",
     "train": "facecast.commands.train",
     "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",

@@ -11,6 +11,7 @@ FORWARDED: dict[str, tuple[str, str]] = {
     "capacity": ("benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
     "soak": ("benchmarks.server_soak", "RSS growth, frames lost, loop lag and latency over minutes (--hostile)"),
     "render": ("benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
+    "units": ("benchmarks.units", "unit search on 20-phone targets, `facecast say` to MP4, first frame of a text session"),
 }
 """Benchmarks with their own argument parsers: name -> (module with main(argv), help)."""
 

@@ -38,9 +38,12 @@ number of following target phones their own sentence goes on matching (capped at
 ``lookahead_phones``), so that a unit that has just started but will run long is not pruned
 among the many equally cheap fresh starts. ``max_active=None`` searches exactly.
 
-When no admissible path exists (a diviseme the corpus never recorded, common for text outside
-the corpus's language), :func:`select_units` with ``mismatch_cost`` finite searches again with
-``G`` finite for those junctions and reports how many it used.
+No admissible path exists when the target holds a diviseme (a pair of consecutive visemes) the
+corpus never recorded, which is common for text outside the corpus's vocabulary or language. With
+a finite ``mismatch_cost``, exactly those steps admit every state of the right viseme, ``G`` =
+``mismatch_cost`` for a junction whose visemes differ (added outside ``beta``, so it outweighs
+any smoothness difference), and the selection reports how many such junctions it used. Every
+other step keeps the paper's ``G``; a strict path, where one exists, is found unchanged.
 """
 
 from __future__ import annotations
@@ -263,7 +266,6 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     if target.ndim != 1 or len(target) == 0 or durations_s.shape != target.shape:
         raise ConfigError(f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}")
     cfg = graph.config
-    relaxed = np.isfinite(mismatch_cost)
     def allowed(c: np.ndarray) -> np.ndarray:
         return c if banned is None else c[~banned[c]]
 
@@ -276,10 +278,13 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     history: list[tuple[np.ndarray, np.ndarray]] = [(active, np.full(len(active), -1))]
     pos = np.full(graph.n_states, -1, dtype=np.int64)
     for t in range(1, len(target)):
+        # the paper's G where the corpus recorded this diviseme; the finite stand-in only where it did not
+        key = (int(target[t - 1]), int(target[t]))
+        relaxed = key not in graph.by_diviseme and np.isfinite(mismatch_cost)
         if relaxed:
             cand = allowed(graph.by_viseme.get(int(target[t]), np.zeros(0, np.int64)))
         else:
-            cand = allowed(graph.by_diviseme.get((int(target[t - 1]), int(target[t])), np.zeros(0, np.int64)))
+            cand = allowed(graph.by_diviseme.get(key, np.zeros(0, np.int64)))
         if len(cand) == 0 or len(active) == 0:
             raise NoPathError(f"no admissible unit for target phone {t} (viseme pair {int(target[t - 1])} -> "
                               f"{int(target[t])} was never recorded)")
@@ -318,20 +323,13 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
         states[t] = st[best]
         best = int(bk[best])
     jumps = graph.parent[states[1:]] != states[:-1]
-    mism = 0
-    if relaxed:
-        par = graph.parent[states[1:]]
-        mism = int(np.sum(jumps & (par >= 0) & (graph.visemes[np.maximum(par, 0)] != graph.visemes[states[:-1]])))
+    par = graph.parent[states[1:]]
+    mism = int(np.sum(jumps & ((par < 0) | (graph.visemes[np.maximum(par, 0)] != graph.visemes[states[:-1]]))))
     return Selection(states=states, cost=cost, n_units=int(1 + jumps.sum()), n_mismatched=mism)
 
 
 def select_units(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
                  banned: np.ndarray | None = None) -> Selection:
-    """:func:`viterbi` with the paper's costs; if no admissible path exists and the configuration's
-    ``mismatch_cost`` is finite, the search is repeated with that finite G (see module doc)."""
-    try:
-        return viterbi(graph, target, durations_s, banned=banned)
-    except NoPathError:
-        if not np.isfinite(graph.config.mismatch_cost):
-            raise
-        return viterbi(graph, target, durations_s, mismatch_cost=graph.config.mismatch_cost, banned=banned)
+    """:func:`viterbi` with the paper's costs, and the configuration's finite ``mismatch_cost`` at the
+    junctions whose diviseme the corpus never recorded (see the module doc)."""
+    return viterbi(graph, target, durations_s, mismatch_cost=graph.config.mismatch_cost, banned=banned)

@@ -131,7 +131,10 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
             continue
         if par < 0:
             return np.inf
-        g = 0.0 if corpus.phone_visemes[par] == corpus.phone_visemes[i] else mismatch
+        recorded = any(corpus.phone_visemes[j] == target[t] and j > po[sent[j]]
+                       and corpus.phone_visemes[j - 1] == target[t - 1] for j in range(corpus.n_phones))
+        # the paper's G; the finite stand-in only at a step whose diviseme the corpus never recorded
+        g = 0.0 if corpus.phone_visemes[par] == corpus.phone_visemes[i] else (np.inf if recorded else mismatch)
         if not np.isfinite(g):
             return np.inf
         cost += 1.0 + cfg.beta * ref.c_of(i, par, durations[t - 1]) / ref.c_ref + g
