@@ -12,9 +12,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("units", help="build the unit-selection motion corpus (GRID s1) or evaluate it on real lips",
                        formatter_class=HelpFormatter)
     which = p.add_subparsers(dest="units", required=True, metavar="ACTION")
-    for name, text in (("build", "build (or find in the cache) the corpus of the GRID s1 train + val sentences"),
-                       ("eval", "held-out test sentences from text with real timings vs the real lips, beside the "
-                                "audio-driven HMM and the articulatory rules (seed 001 Sec. 4.1)")):
+    actions = (("build", "build (or find in the cache) the corpus of the GRID s1 train + val sentences"),
+               ("eval", ("held-out test sentences from text with real timings vs the real lips, beside the "
+                         "audio-driven HMM and the articulatory rules (seed 001 Sec. 4.1)")))
+    for name, text in actions:
         q = which.add_parser(name, help=text, formatter_class=HelpFormatter, description=text)
         q.add_argument("--grid", type=Path, default=None, help="GRID s1 folder (video/, align/); default: "
                        "../shared/data/video/grid_s1 beside the checkout")
@@ -36,9 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _corpus(args: argparse.Namespace):
     from tqdm import tqdm
+    from training.grid_phones import read_grid_phones
 
     from training import grid
-    from training.grid_phones import read_grid_phones
     from training.unit_corpus import build_grid_corpus
 
     root = args.grid or grid.default_root()
