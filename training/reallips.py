@@ -341,3 +341,36 @@ def plot_lips(items: Sequence, scores: LipScores, png: Path, *, title: str, n_cl
     fig.savefig(png, dpi=80)
     plt.close(fig)
     return png
+
+
+BILABIAL_PHONES = frozenset({"p", "b", "m", "P", "B", "M", "m̩"})
+"""/p b m/ in the phone inventories of the alignments (ARPAbet upper case, espeak and IPA lower case)."""
+
+
+def real_speech_clips(root: str | Path) -> list:
+    """Real recordings with phone alignments under ``root`` (ARCTIC, LibriVox, praatio):
+    ``[(name, samples, rate_hz, rules truth (T, 4), bilabial spans)]``. The truth is the articulatory
+    rules on the real phone timings (the ceiling of any audio model against them is their own
+    ~0.5-0.6 against real lips); the spans are the aligned /p b m/ phones, where the rules close
+    the lips exactly: a closure check on other voices that needs no video."""
+    from training.alignments import find_aligned_audio
+    from training.articulatory import render_params
+    from assets.audio import read_audio
+
+    out = []
+    for wav, align in find_aligned_audio(root):
+        samples, rate = read_audio(wav)
+        n = n_frames_for(len(samples) / rate)
+        truth = render_params(align.phones, n, inventory=align.inventory)
+        spans = [(p.start_s, p.end_s, p.phoneme) for p in align.phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
+        out.append((wav.stem, samples, rate, truth, spans))
+    return out
+
+
+def score_real_speech(model, clips: Sequence) -> LipScores:
+    """:func:`score_lips` of ``model``'s live path on :func:`real_speech_clips`."""
+    from realtime_core.pipeline import speech_to_params
+
+    items = [(n, truth, speech_to_params(model, x, rate), loudness_db(x, rate, len(truth)), spans)
+             for n, x, rate, truth, spans in clips]
+    return score_lips(items)
