@@ -29,7 +29,12 @@ from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
-from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInverter, StreamPlan
+from realtime_core.inversion import (
+    ConditionalForm,
+    StreamConfig,
+    StreamingInverter,
+    StreamPlan,
+)
 from realtime_core.output import OutputStage
 
 FORMAT = "facecast-avmodel"

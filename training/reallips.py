@@ -93,7 +93,7 @@ def speed_perturb(utt: Utterance, factor: float) -> Utterance:
     if factor == 1.0:
         return utt
     # play faster = keep the samples, declare them at rate * factor, convert back to the rate
-    up, down = 1000, int(round(1000 * factor))
+    up, down = 1000, round(1000 * factor)
     audio = resample_poly(utt.samples.astype(np.float64), up, down).astype(np.float32)
     n = n_frames_for(len(audio) / utt.sample_rate_hz)
     t_src = np.arange(len(utt.params)) / FPS
@@ -184,7 +184,9 @@ class LipScores:
     per_clip: dict = field(default_factory=dict)
 
     def as_json(self) -> dict:
-        rnd = lambda d: {k: round(float(v), 4) for k, v in d.items()}  # noqa: E731
+        def rnd(d: dict) -> dict:
+            return {k: round(float(v), 4) for k, v in d.items()}
+
         return {"r": rnd(self.r), "best_lag": self.best_lag, "r_best": rnd(self.r_best), "nu": rnd(self.nu),
                 "closure_rate": round(self.closure_rate, 4), "truth_closure_rate": round(self.truth_closure_rate, 4),
                 "n_closures": self.n_closures, "r_loudness": round(self.r_loudness, 4), "n_frames": self.n_frames,
@@ -353,9 +355,9 @@ def real_speech_clips(root: str | Path) -> list:
     rules on the real phone timings (the ceiling of any audio model against them is their own
     ~0.5-0.6 against real lips); the spans are the aligned /p b m/ phones, where the rules close
     the lips exactly: a closure check on other voices that needs no video."""
+    from assets.audio import read_audio
     from training.alignments import find_aligned_audio
     from training.articulatory import render_params
-    from assets.audio import read_audio
 
     out = []
     for wav, align in find_aligned_audio(root):

@@ -48,7 +48,13 @@ def run(args: argparse.Namespace) -> int:
     from assets.modelfile import load_model
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set
-    from training.reallips import evaluate_lips, lips_markdown, other_talker_clips, plot_lips, s1_clips
+    from training.reallips import (
+        evaluate_lips,
+        lips_markdown,
+        other_talker_clips,
+        plot_lips,
+        s1_clips,
+    )
 
     model = load_model(args.model)
     plot_dir = args.output.parent if args.output is not None else None
