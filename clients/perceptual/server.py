@@ -103,7 +103,7 @@ class ExperimentServer:
         await self.runner.setup()
         site = web.TCPSite(self.runner, self.config.host, self.config.port)
         await site.start()
-        self.port = site._server.sockets[0].getsockname()[1]  # the bound port when 0 was asked
+        self.port = self.runner.addresses[0][1]  # the bound port when 0 was asked
 
     async def stop(self) -> None:
         if self.runner is not None:

@@ -190,20 +190,22 @@ class Store:
         if requested_id is not None and not ID_PATTERN.match(requested_id):
             raise AnswerError(f"participant id {requested_id!r} must be 1-40 letters, digits, '-' or '_'")
         token = secrets.token_urlsafe(18)
+        pid = requested_id or f"p-{secrets.token_hex(5)}"
         with self._tx():
-            pid = requested_id or f"p-{secrets.token_hex(5)}"
             old = self.conn.execute("SELECT created_utc, (SELECT count(*) FROM answers WHERE participant = ?) "
                                     "FROM participants WHERE id = ?", (pid, pid)).fetchone()
-            if old is not None:
-                self._event(pid, None, "id_reused", f"a new session asked for id {pid}, already used since {old[0]} "
-                                                     f"({old[1]} answers); refused")
-                raise StoreError(f"participant id {pid} is already used (since {old[0]}, {old[1]} answers): "
-                                 f"choose another id, or continue in the browser that started it")
-            ordinal = self.conn.execute("SELECT coalesce(max(ordinal) + 1, 0) FROM participants").fetchone()[0]
-            plan = plan_for(ordinal, pid)
-            created = _now()
-            self.conn.execute("INSERT INTO participants(id, ordinal, token_sha256, plan, created_utc) "
-                              "VALUES (?, ?, ?, ?, ?)", (pid, ordinal, _sha(token), json.dumps(plan), created))
+            if old is None:
+                ordinal = self.conn.execute("SELECT coalesce(max(ordinal) + 1, 0) FROM participants").fetchone()[0]
+                plan = plan_for(ordinal, pid)
+                created = _now()
+                self.conn.execute("INSERT INTO participants(id, ordinal, token_sha256, plan, created_utc) "
+                                  "VALUES (?, ?, ?, ?, ?)", (pid, ordinal, _sha(token), json.dumps(plan), created))
+        if old is not None:
+            # Logged in its own transaction: the refusal itself must reach the experimenter's page.
+            self.log_event(pid, None, "id_reused", f"a new session asked for id {pid}, already used since {old[0]} "
+                                                   f"({old[1]} answers); refused")
+            raise StoreError(f"participant id {pid} is already used (since {old[0]}, {old[1]} answers): "
+                             f"choose another id, or continue in the browser that started it")
         return Participant(id=pid, ordinal=ordinal, plan=plan, created_utc=created, completed_utc=None), token
 
     def participant(self, pid: str, token: str | None = None) -> Participant:

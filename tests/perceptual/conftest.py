@@ -89,7 +89,11 @@ def http(method: str, url: str, body: dict | None = None) -> tuple[int, dict]:
             raw = r.read()
             return r.status, (json.loads(raw) if raw else {})
     except urllib.error.HTTPError as e:
-        return e.code, json.loads(e.read() or b"{}")
+        raw = e.read()
+        try:
+            return e.code, json.loads(raw or b"{}")
+        except json.JSONDecodeError:
+            return e.code, {"text": raw.decode(errors="replace")}
 
 
 class ServerProcess:

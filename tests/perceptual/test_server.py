@@ -7,6 +7,7 @@ import os
 import signal
 import sqlite3
 import threading
+import time
 
 import pytest
 
@@ -107,8 +108,9 @@ def test_answers_survive_sigkill_mid_session_without_loss_or_duplicates(stimuli,
 
         th = threading.Thread(target=client, args=(srv.url,))
         th.start()
-        while len(confirmed) < half:
-            pass
+        deadline = time.monotonic() + 120
+        while len(confirmed) < half and th.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.002)
         os.kill(srv.proc.pid, signal.SIGKILL)
         th.join(30)
         srv.proc.wait()
