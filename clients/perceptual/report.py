@@ -46,7 +46,7 @@ def write_report(db: str | Path, out_dir: str | Path, *, include_incomplete: boo
                                                                             "reload", "pause")}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    from facecast.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes
 
     atomic_write_bytes(out / "results.json", (json.dumps(res, indent=1) + "\n").encode())
     md = _markdown(res, out)

@@ -326,7 +326,7 @@ class _Builder:
         finally:
             Path(tmp).unlink(missing_ok=True)
         self.index[rel] = sha256_file(out)
-        from facecast.files import atomic_write_bytes
+        from assets.files import atomic_write_bytes
 
         atomic_write_bytes(self.index_path, json.dumps(self.index, indent=0, sort_keys=True).encode())
         self.made += 1
@@ -340,13 +340,13 @@ class _Builder:
 
     # -- audio ------------------------------------------------------------------------------
     def wav(self, key: str, samples: np.ndarray, rate: int) -> Path:
-        from training.corpus import write_wav
+        from assets.audio import write_wav
 
         return self.cached(self.cache / "audio", key, ".wav", lambda p: write_wav(p, samples, rate))
 
     def grid_audio(self, sentence) -> tuple[np.ndarray, np.ndarray, int, str]:
         """Clean GRID speech (n,), its speech mask (n,), rate, and the source video's hash."""
-        from training.audio_io import read_audio
+        from assets.audio import read_audio
         from training.grid import SILENCE_WORDS, read_words
 
         digest = self.sources.get(str(sentence.video)) or sha256_file(sentence.video)
@@ -362,7 +362,7 @@ class _Builder:
     def syllable_audio(self, lang: str, syl: str) -> tuple[np.ndarray, np.ndarray, int, str]:
         """espeak-ng speech of one CV syllable, padded; cached as WAV (espeak is not bit-reproducible
         across processes, the cached file is what every condition uses)."""
-        from training.corpus import read_wav
+        from assets.audio import read_wav
         from training.espeak import Voice, synthesizer
 
         cons = next(c for c in sorted(CONSONANTS, key=len, reverse=True) if syl.startswith(c))
@@ -372,7 +372,7 @@ class _Builder:
         key = _key({"what": "syllable", "lang": lang, "syl": syl, "text": text, "voice": voice.label})
 
         def make(p: Path) -> None:
-            from training.corpus import write_wav
+            from assets.audio import write_wav
 
             s = synthesizer().synthesize(text, voice, noise_seed=self.c.seed)
             got = [ph.phoneme for ph in s.phonemes if not ph.phoneme.startswith("_")]
@@ -408,8 +408,8 @@ class _Builder:
     # -- video ------------------------------------------------------------------------------
     def renderer(self):
         if self._renderer is None:
-            from clients.heads.builtin import load_builtin_head
-            from clients.heads.rigfile import builtin_rig
+            from assets.heads.builtin import load_builtin_head
+            from assets.heads.rigfile import builtin_rig
             from clients.render.renderer import RenderConfig, renderer_for_rig
 
             rig, mesh = builtin_rig()
@@ -421,7 +421,7 @@ class _Builder:
         return self._renderer
 
     def model_digest(self) -> str:
-        from training.modelfile import DEFAULT_MODEL
+        from assets.modelfile import DEFAULT_MODEL
 
         return sha256_file(self.c.model or DEFAULT_MODEL)
 
@@ -586,7 +586,7 @@ def build(config: BuildConfig) -> Manifest:
         "blocks": block_json, "stimuli": stimuli, "sources": b.sources,
         "stats": {"made": b.made, "reused": b.reused},
     }
-    from facecast.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes
 
     atomic_write_bytes(b.root / "manifest.json", (json.dumps(data, indent=1) + "\n").encode("utf-8"))
     _remove_unlisted(b.root, stimuli)
@@ -602,7 +602,7 @@ def _remove_unlisted(root: Path, stimuli: dict[str, dict]) -> None:
 
 
 def _clip_audio(path: Path) -> tuple[np.ndarray, int]:
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
 
     return read_audio(path)
 

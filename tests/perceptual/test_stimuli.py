@@ -24,7 +24,7 @@ def _probe(path) -> dict:
 
 
 def _decoded(path, rate: int) -> np.ndarray:
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
 
     return read_audio(path, rate_hz=rate)[0].astype(np.float64)
 
