@@ -1,7 +1,7 @@
 """Real lips: GRID s1 face tracks as training utterances, acoustic variety, and the real-lips scores.
 
 - :func:`grid_utterances` turns the cached :class:`~training.facetrack.FaceTrack` of every GRID s1
-  sentence of a split (``training.grid.split_of``) into corpus :class:`~training.corpus.Utterance`
+  sentence of a split (``assets.grid.split_of``) into corpus :class:`~training.corpus.Utterance`
   objects (source "video", speaker group ``grid:s1``), extracting what the cache lacks.
 - :func:`speed_perturb` is the acoustic variety that serves other voices (Ko et al. 2015): the audio
   played ``factor`` times faster (resampled: formants, pitch and tempo all scale by ``factor``, like a
@@ -27,7 +27,7 @@ from realtime_core import VISUAL_PARAMS
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
-from training.grid import Split, read_words, sentences
+from assets.grid import Split, read_words, sentences
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
@@ -247,8 +247,8 @@ def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, lis
 
 
 def words_of(video: Path) -> list | None:
-    """The word alignment beside a video (training.grid.align_for_video), or None."""
-    from training.grid import align_for_video
+    """The word alignment beside a video (assets.grid.align_for_video), or None."""
+    from assets.grid import align_for_video
 
     align = align_for_video(video)
     return read_words(align) if align else None
