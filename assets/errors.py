@@ -58,3 +58,11 @@ class RigFileError(AssetsError, ValueError):
 
 class AssetError(AssetsError, RuntimeError):
     """The built-in head's assets could not be fetched or read."""
+
+
+class AlignmentFormatError(FileProblem):
+    """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
+
+
+class SynthesisError(AssetsError):
+    """espeak-ng failed: library missing, unknown voice, or synthesis error."""
