@@ -39,9 +39,9 @@ SAY_TEXT = "Please put the blue box on the table by nine tonight."  # ten words
 
 
 def bench_search(stored, n: int) -> None:
+    from assets.tts import speak
     from realtime_core.synthesis.search import SearchConfig, build_graph, select_units
     from realtime_core.synthesis.synthesizer import make_target
-    from training.tts import speak
 
     t0 = time.perf_counter()
     graph = build_graph(stored.corpus, SearchConfig())
@@ -75,10 +75,10 @@ def bench_say(stored, repeats: int = 3) -> None:
 
     from assets.audio import write_wav
     from assets.heads.rigfile import builtin_rig
+    from assets.tts import speak
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, write_video
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
-    from training.tts import speak
 
     synth = UnitSynthesizer(stored.corpus)
     rig, mesh = builtin_rig()
@@ -106,13 +106,13 @@ def bench_say(stored, repeats: int = 3) -> None:
 
 
 def bench_server(corpus_path, repeats: int = 5) -> None:
+    from websockets.asyncio.client import connect
+
+    from assets.modelfile import load_model
     from clients.client import ViewerClient
     from facecast.commands.serve import text_backend
     from server.app import FacecastServer
     from server.config import ServerConfig
-    from websockets.asyncio.client import connect
-
-    from assets.modelfile import load_model
 
     async def one(srv, name: str) -> float:
         url = srv.url.replace("http", "ws")

@@ -50,7 +50,7 @@ FPS = 30
 
 
 class SpeechLike(Protocol):
-    """What the text-to-speech function returns (e.g. :class:`training.tts.Speech`)."""
+    """What the text-to-speech function returns (e.g. :class:`assets.tts.Speech`)."""
 
     samples: np.ndarray  # (n,) float32 in [-1, 1]
     sample_rate_hz: int

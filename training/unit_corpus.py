@@ -3,7 +3,7 @@
 From the shared real-lips extraction (:func:`training.video.load_face_track`: pose-free 3D
 landmarks and the four mouth parameters at 30 fps, cached per video) and the shared GRID phone
 boundaries (:mod:`training.grid_phones`), for the train + val sentences of the one split
-(:func:`training.grid.split_of`; test sentences are held out for the evaluation):
+(:func:`assets.grid.split_of`; test sentences are held out for the evaluation):
 
 1. every sentence's lower-face landmarks (:data:`training.facetrack.LOWER_FACE`) as displacements
    from that clip's neutral face (IOD units, head pose removed), flattened per frame;
@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.grid import GridSentence
 from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.corpus import MotionCorpus, StoredCorpus
 from realtime_core.synthesis.empca import EmPcaConfig, fit_empca
@@ -39,7 +40,6 @@ from training.facetrack import (
     cache_path,
     default_cache_dir,
 )
-from training.grid import GridSentence
 
 BUILD_VERSION = 1
 """Bumped whenever the corpus construction changes (part of the cache key)."""

@@ -1,7 +1,7 @@
 """Objective evaluation of unit selection on real lips (seed 001 Sec. 4.1), beside the audio-driven
 HMM and the articulatory rules.
 
-Held-out GRID s1 sentences (the test split of :func:`training.grid.split_of`; the unit corpus holds
+Held-out GRID s1 sentences (the test split of :func:`assets.grid.split_of`; the unit corpus holds
 only train + val) are synthesised from the phones of their text with the real phone timings (the
 shared GRID phone boundaries), and compared with the lips measured on their video:
 
@@ -107,8 +107,8 @@ def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRo
     curves) where curves holds the first test sentence's measures for the Fig. 8 plot."""
     import time
 
+    from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
-    from training.params import PhonemeSegment
 
     synth = synthesizer or UnitSynthesizer(stored.corpus)
     k = stored.corpus.n_coefficients

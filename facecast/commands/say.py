@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         duration_s = len(samples) / rate
         t = lap("forced alignment", t)
     else:
-        from training.tts import speak
+        from assets.tts import speak
 
         speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate)
         samples, rate, phones, inventory, duration_s = (speech.samples, speech.sample_rate_hz, list(speech.phones),

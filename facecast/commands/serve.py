@@ -49,12 +49,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def text_backend(corpus: Path | None, *, n_best: int = 1):
-    """The text-session backend: espeak-ng speech (training.tts) + unit selection over the corpus."""
+    """The text-session backend: espeak-ng speech (assets.tts) + unit selection over the corpus."""
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from server.text_session import TextBackend
-    from training.espeak import synthesizer
-    from training.tts import INVENTORY, speak
+    from assets.espeak import synthesizer
+    from assets.tts import INVENTORY, speak
 
     stored = load_unit_corpus(find_unit_corpus(corpus))
     return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),

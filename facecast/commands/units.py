@@ -39,7 +39,7 @@ def _corpus(args: argparse.Namespace):
     from tqdm import tqdm
     from training.grid_phones import read_grid_phones
 
-    from training import grid
+    from assets import grid
     from training.unit_corpus import build_grid_corpus
 
     root = args.grid or grid.default_root()
@@ -67,9 +67,9 @@ def _run_eval(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
     from tqdm import tqdm
 
+    from assets import grid
     from assets.files import atomic_write_bytes
     from assets.modelfile import load_model
-    from training import grid
     from training.errors import FileProblem
     from training.unit_corpus import is_extracted, phone_rows
     from training.unitsel_eval import evaluate, fig8, markdown

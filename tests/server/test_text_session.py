@@ -32,10 +32,10 @@ CORPUS_TEXT = [
 
 @pytest.fixture(scope="module")
 def backend() -> TextBackend:
+    from assets.espeak import synthesizer
+    from assets.tts import INVENTORY, speak
+    from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
-    from training.espeak import synthesizer
-    from training.params import PhonemeSegment
-    from training.tts import INVENTORY, speak
 
     frames, fo, labels, vis, st, en, po = [], [0], [], [], [], [], [0]
     for text in CORPUS_TEXT:

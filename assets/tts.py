@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from assets.espeak import LANGUAGES, VARIANTS, Voice, synthesizer
+from realtime_core.errors import ConfigError
 from realtime_core.synthesis.text import TextError, clean_text
-from training.errors import ConfigError
-from training.espeak import LANGUAGES, VARIANTS, Voice, synthesizer
 
 INVENTORY = {"en": "espeak-en", "es": "espeak-es"}
 """Phone inventory of each language's espeak voices (keys: the supported languages)."""
