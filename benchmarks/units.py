@@ -110,9 +110,9 @@ def bench_server(corpus_path, repeats: int = 5) -> None:
 
     from assets.modelfile import load_model
     from clients.client import ViewerClient
-    from facecast.commands.serve import text_backend
     from server.app import FacecastServer
     from server.config import ServerConfig
+    from server.text_session import espeak_backend
 
     async def one(srv, name: str) -> float:
         url = srv.url.replace("http", "ws")
@@ -135,7 +135,7 @@ def bench_server(corpus_path, repeats: int = 5) -> None:
 
     async def main() -> list[float]:
         srv = FacecastServer(load_model(), config=ServerConfig(port=0))
-        srv.text_backend = text_backend(corpus_path)
+        srv.text_backend = espeak_backend(corpus_path)
         await srv.start()
         try:
             return [await one(srv, f"t{i}") for i in range(repeats)]

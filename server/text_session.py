@@ -27,6 +27,7 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -184,6 +185,19 @@ class TextSession:
                   "duration_s": n / FPS, "units": sel.n_units, "junctions_outside_corpus": sel.n_mismatched,
                   "unknown_phones": sorted(set(tgt.unknown)), "synthesis_ms": round(1000 * (t2 - t0), 1)}
         return outs, report
+
+
+def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> TextBackend:
+    """The standard backend: espeak-ng speech (:mod:`assets.tts`) and unit selection over a unit corpus
+    (``corpus`` None = the shipped or newest built one, :func:`assets.unitcorpus.find_unit_corpus`)."""
+    from assets.espeak import synthesizer
+    from assets.tts import INVENTORY, speak
+    from assets.unitcorpus import find_unit_corpus, load_unit_corpus
+
+    stored = load_unit_corpus(find_unit_corpus(corpus))
+    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+                       synthesizer=UnitSynthesizer(stored.corpus), languages=tuple(INVENTORY),
+                       sample_rate_hz=synthesizer().sample_rate_hz, n_best=n_best)
 
 
 def _text_message(raw: Any) -> dict:

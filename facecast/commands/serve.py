@@ -48,20 +48,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def text_backend(corpus: Path | None, *, n_best: int = 1):
-    """The text-session backend: espeak-ng speech (assets.tts) + unit selection over the corpus."""
-    from assets.unitcorpus import find_unit_corpus, load_unit_corpus
-    from realtime_core.synthesis.synthesizer import UnitSynthesizer
-    from server.text_session import TextBackend
-    from assets.espeak import synthesizer
-    from assets.tts import INVENTORY, speak
-
-    stored = load_unit_corpus(find_unit_corpus(corpus))
-    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
-                       synthesizer=UnitSynthesizer(stored.corpus), languages=tuple(INVENTORY),
-                       sample_rate_hz=synthesizer().sample_rate_hz, n_best=n_best)
-
-
 def run(args: argparse.Namespace) -> int:
     import asyncio
     import logging
@@ -94,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)
     if args.text:
-        server.text_backend = text_backend(args.corpus, n_best=args.text_n_best)
+        from server.text_session import espeak_backend
+
+        server.text_backend = espeak_backend(args.corpus, n_best=args.text_n_best)
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
