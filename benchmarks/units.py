@@ -35,6 +35,13 @@ SENTENCES = (
     "My brother bought a new red car for his long drive home.",
     "All of the students passed the final exam with good marks.",
 )
+SPANISH = (
+    "Hola, me llamo Pedro y vivo en Madrid.", "El tiempo hoy es mucho mejor que la semana pasada.",
+    "¿Puede decirme dónde está la estación de tren?", "Quiero un café con leche y sin azúcar, por favor.",
+    "Los estudiantes aprobaron el examen final con buenas notas.", "Mañana vamos a la playa con mis amigos.",
+)
+GRID_VOCABULARY = ("bin blue at f two now", "place red by z nine again", "set white with p four please",
+                   "lay green in a six soon")
 SAY_TEXT = "Please put the blue box on the table by nine tonight."  # ten words
 
 
@@ -67,6 +74,26 @@ def bench_search(stored, n: int) -> None:
     g = np.asarray(gaps)
     print(f"active-state cap {graph.config.max_active} vs exact search: path cost equal in {np.mean(g < 1e-9):.0%} "
           f"of targets, mean excess {g.mean():.3f}, max {g.max():.3f}")
+
+
+def bench_languages(stored) -> None:
+    """How much recorded context text outside the corpus's vocabulary or language gets."""
+    from assets.tts import speak
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+
+    synth = UnitSynthesizer(stored.corpus)
+    print("| text | phones | phones per unit | junctions outside the recorded divisemes (per phone) |")
+    print("|---|---|---|---|")
+    for name, texts, lang in (("GRID vocabulary (English)", GRID_VOCABULARY, "en"),
+                              ("everyday English", SENTENCES[:6], "en"), ("everyday Spanish", SPANISH, "es")):
+        phones = units = junctions = 0
+        for text in texts:
+            s = speak(text, language=lang)
+            res = synth.synthesize(list(s.phones), s.inventory)
+            phones += len(res.target.labels)
+            units += res.selection.n_units
+            junctions += res.selection.n_mismatched
+        print(f"| {len(texts)} sentences, {name} | {phones} | {phones / units:.1f} | {junctions / phones:.2f} |")
 
 
 def bench_say(stored, repeats: int = 3) -> None:
@@ -163,6 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"corpus {path}")
     with threadpool_limits(limits=1):
         bench_search(stored, args.sentences)
+        bench_languages(stored)
         if not args.skip_say:
             bench_say(stored)
         if not args.skip_server:

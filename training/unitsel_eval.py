@@ -101,6 +101,7 @@ class SystemScore:
 
 def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRows]], *, model=None,
              n_best: Sequence[int] = (1, 10), synthesizer: UnitSynthesizer | None = None,
+             model_label: str = "shipped model",
              progress: Callable | None = None) -> tuple[list[dict], dict]:
     """Scores of unit selection (one row per ``n_best``), the HMM (``model``, skipped if None) and the
     rules on ``tests`` = [(sentence id, real face track, real ARPAbet phones)]. Returns (rows,
@@ -114,7 +115,7 @@ def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRo
     k = stored.corpus.n_coefficients
     systems = [SystemScore(f"unit selection, n_best={n}") for n in n_best]
     rules = SystemScore("articulatory rules (same phones)")
-    hmm = SystemScore("audio-driven HMM (real audio)") if model is not None else None
+    hmm = SystemScore(f"audio-driven HMM, {model_label} (real audio)") if model is not None else None
     truth_p, truth_m, speech = [], [], []
     search_ms: dict[int, list[float]] = {n: [] for n in n_best}
     units: dict[int, list[int]] = {n: [] for n in n_best}

@@ -87,7 +87,8 @@ def _run_eval(args: argparse.Namespace) -> int:
             print(f"skipping {s.sentence_id}: {exc.problem}")
     n_best = tuple(int(x) for x in args.n_best.split(","))
     with threadpool_limits(1):
-        rows, curves = evaluate(stored, tests, model=load_model(args.model), n_best=n_best, progress=tqdm)
+        rows, curves = evaluate(stored, tests, model=load_model(args.model), n_best=n_best, progress=tqdm,
+                                model_label=str(args.model) if args.model else "shipped default model")
     print(json.dumps(rows, indent=1))
     fig = fig8(curves, args.figure)
     cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")

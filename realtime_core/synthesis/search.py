@@ -279,12 +279,11 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     pos = np.full(graph.n_states, -1, dtype=np.int64)
     for t in range(1, len(target)):
         # the paper's G where the corpus recorded this diviseme; the finite stand-in only where it did not
-        key = (int(target[t - 1]), int(target[t]))
-        relaxed = key not in graph.by_diviseme and np.isfinite(mismatch_cost)
+        # (the recorded divisemes are those of the states not banned)
+        cand = allowed(graph.by_diviseme.get((int(target[t - 1]), int(target[t])), np.zeros(0, np.int64)))
+        relaxed = len(cand) == 0 and np.isfinite(mismatch_cost)
         if relaxed:
             cand = allowed(graph.by_viseme.get(int(target[t]), np.zeros(0, np.int64)))
-        else:
-            cand = allowed(graph.by_diviseme.get(key, np.zeros(0, np.int64)))
         if len(cand) == 0 or len(active) == 0:
             raise NoPathError(f"no admissible unit for target phone {t} (viseme pair {int(target[t - 1])} -> "
                               f"{int(target[t])} was never recorded)")

@@ -257,3 +257,23 @@ def test_viseme_table_covers_the_inventories_and_fallbacks_resolve():
     assert resolve("OY", frozenset({"OW", "AA"})) == "OW"
     with pytest.raises(ConfigError):
         resolve("AA", frozenset())
+
+
+def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_diviseme():
+    rng = np.random.default_rng(6)
+    # PBM -> FV is recorded only in sentence 0: the second sequence must cross it without it
+    sents = [["sil", "AA", "PBM", "FV", "IY", "sil"], ["sil", "AA", "PBM", "AA", "sil"], ["sil", "FV", "IY", "sil"],
+             ["sil", "IY", "AA", "PBM", "sil"]]
+    corpus = tiny_corpus(rng, sents)
+    synth = UnitSynthesizer(corpus, SearchConfig(max_active=None))
+    phones = [("sil", 0.0, 0.2), ("aa", 0.2, 0.35), ("p", 0.35, 0.45), ("f", 0.45, 0.55), ("iy", 0.55, 0.7),
+              ("sil", 0.7, 0.9)]
+    one = synth.synthesize(phones, "arpabet")
+    two = synth.synthesize(phones, "arpabet", n_best=2)
+    assert one.selection.n_units == 1 and one.selection.n_mismatched == 0
+    (alt,) = two.alternatives
+    sent = corpus.phone_sentence()
+    assert 0 not in set(sent[alt.states]) and alt.n_mismatched >= 1
+    other = concatenate(corpus, alt.states, one.target.starts_s, one.target.ends_s, parent=synth.graph.parent,
+                        anchored=np.array([-1, 0, 0, 0, 0, 1], dtype=np.int8))
+    np.testing.assert_allclose(two.frames, 0.5 * (one.frames + other), atol=1e-12)
