@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import os
 import time
 
 import numpy as np
@@ -96,6 +97,14 @@ def bench_languages(stored) -> None:
         print(f"| {len(texts)} sentences, {name} | {phones} | {phones / units:.1f} | {junctions / phones:.2f} |")
 
 
+def _cpu_s() -> float:
+    """CPU seconds of this process and its finished children (ffmpeg)."""
+    import resource
+
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ch.ru_utime + ch.ru_stime
+
+
 def bench_say(stored, repeats: int = 3) -> None:
     import tempfile
     from pathlib import Path
@@ -111,10 +120,11 @@ def bench_say(stored, repeats: int = 3) -> None:
     rig, mesh = builtin_rig()
     k = stored.corpus.n_coefficients
     cfg = RenderConfig(width=640, height=480)
-    totals, parts = [], []
+    totals, parts, cpus = [], [], []
     with renderer_for_rig(rig, mesh, cfg) as r, tempfile.TemporaryDirectory() as tmp:
         for i in range(repeats):
             t0 = time.perf_counter()
+            c0 = _cpu_s()
             s = speak(SAY_TEXT)
             t1 = time.perf_counter()
             res = synth.synthesize(list(s.phones), s.inventory, n_frames=int(np.ceil(s.duration_s * 30)))
@@ -123,13 +133,15 @@ def bench_say(stored, repeats: int = 3) -> None:
             write_video(res.frames[:, k:], lambda p: r.render(rig.deformed(p)), Path(tmp) / f"say{i}.mp4",
                         size=(cfg.width, cfg.height), audio=wav, config=VideoConfig(fps=30.0))
             t3 = time.perf_counter()
+            cpus.append(_cpu_s() - c0)
             totals.append(t3 - t0)
             parts.append((t1 - t0, t2 - t1, t3 - t2, len(res.frames)))
     i = int(np.argsort(totals)[len(totals) // 2])
     sp, us, rv, nf = parts[i]
     print(f"say, 10 words ({nf} frames, 640x480) command to MP4 after start-up (goal < 2 s): median "
           f"{np.median(totals):.2f} s = speech {1000 * sp:.0f} ms + units {1000 * us:.0f} ms + render/encode "
-          f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame)")
+          f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame); CPU time (this process + ffmpeg, what an idle "
+          f"machine would take) {np.median(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
 def bench_server(corpus_path, repeats: int = 5) -> None:
