@@ -92,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
         await asyncio.wait({ready, run}, return_when=asyncio.FIRST_COMPLETED)
         if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
             run.result()
-        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}/ingest, /view); "
+        endpoints = "/ingest, /view" + (", /text" if args.text else "")
+        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
               "Ctrl-C stops", flush=True)
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))
