@@ -58,3 +58,7 @@ class RigFileError(AssetsError, ValueError):
 
 class AssetError(AssetsError, RuntimeError):
     """The built-in head's assets could not be fetched or read."""
+
+
+class GlbError(AssetsError, ValueError):
+    """A head or animation cannot be written as glTF (bad shapes, unknown image type)."""

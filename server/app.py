@@ -37,7 +37,6 @@ import signal
 import socket
 import time
 import urllib.parse
-from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
 from typing import AsyncIterator
@@ -48,16 +47,15 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from assets.heads.mesh import HeadMesh
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_names
-from realtime_core.face.rig import Rig
 from wire import JS_PROTOCOL
 from wire import protocol as P
 from server.config import ServerConfig
 from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
-from server.glb import mesh_glb, mesh_json, texture_mime
+from assets.heads.glb import mesh_glb, mesh_json, texture_mime
+from assets.heads.head import Head
 from server.session import Output, Session, SessionConfig
 from server.timing import StageTimes
 from server.workers import RemoteSession, WorkerPool
@@ -83,14 +81,6 @@ def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
         broadcast([v.ws for v in fast], msg)
         for v in fast:
             v.sent += 1
-
-
-@dataclass(frozen=True)
-class Head:
-    """The head viewers animate: its rig (moving vertices, deltas) and mesh (download)."""
-
-    rig: Rig
-    mesh: HeadMesh
 
 
 class Viewer:
@@ -770,25 +760,8 @@ async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" =
 
 def load_head(*, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None,
               builtin: bool = True) -> Head | None:
-    """The head to serve: a rig file, a mesh to rig now (with its landmarks JSON, or the one shipped
-    for it), the built-in head, or None."""
-    if rig is not None:
-        from assets.heads.rigfile import load_rig
+    """The head to serve (:func:`assets.heads.head.resolve_head`): a rig file, a mesh, the built-in head, or None."""
+    from assets.heads.head import resolve_head
 
-        r, m = load_rig(rig)
-        return Head(r, m)
-    if head is not None:
-        from assets.heads.landmarks import read_landmarks, shipped_landmarks
-        from assets.heads.mesh import load_mesh
-        from assets.heads.rigging import rig_head
-
-        m = load_mesh(head)
-        lm_path = landmarks or shipped_landmarks(head)
-        r, m = rig_head(m, None if lm_path is None else read_landmarks(lm_path), landmark_source=str(lm_path))
-        return Head(r, m)
-    if builtin:
-        from assets.heads.rigfile import builtin_rig
-
-        r, m = builtin_rig()
-        return Head(r, m)
-    return None
+    spec = rig or head or ("builtin" if builtin else None)
+    return None if spec is None else resolve_head(spec, landmarks=landmarks)

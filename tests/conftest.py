@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
+# FACECAST_SHARED_DATA: a checkout that does not sit beside shared/ (e.g. a git worktree elsewhere).
+SHARED_DATA = Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
 def shared_file(rel: str) -> Path:
