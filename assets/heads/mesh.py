@@ -55,14 +55,6 @@ def _sibling_texture(path: Path) -> bytes | None:
     return None
 
 
-def _image_bytes(img: object) -> bytes | None:
-    if img is None or img.size[0] * img.size[1] <= 16:  # type: ignore[attr-defined]
-        return None  # trimesh's placeholder for "no texture" is a tiny grey image
-    buf = io.BytesIO()
-    img.save(buf, format="PNG")  # type: ignore[attr-defined]
-    return buf.getvalue()
-
-
 def check_mesh(mesh: HeadMesh) -> None:
     """Raise MeshError (naming ``mesh.name``) if the mesh cannot be rigged."""
     v, t = mesh.vertices, mesh.triangles
@@ -86,19 +78,39 @@ def load_mesh(path: str | Path, *, cache: Path | None = None) -> HeadMesh:
         raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .obj or .ply head, or 'builtin')")
     if p.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{p}: unsupported mesh format {p.suffix!r}; convert it to one of {', '.join(MESH_SUFFIXES)}")
-    if p.suffix.lower() in (".glb", ".gltf"):
-        pieces = _gltf_pieces(p, cache)
+    suffix = p.suffix.lower()
+    if suffix in (".glb", ".gltf"):
+        parts = _gltf_parts(p, cache)
+    elif suffix == ".obj":
+        from assets.heads.obj import read_obj
+
+        o = read_obj(p)
+        parts = _Parts(o.vertices, o.triangles, o.uvs, None, o.material, o.materials, o.group, tuple(o.group_names), {})
     else:
-        pieces = _trimesh_pieces(p)
-    pieces = [x for x in pieces if len(x.triangles)]
-    if not pieces:
+        parts = _ply_parts(p)
+    if len(parts.triangles) == 0:
         raise MeshError(f"{p}: file contains no triangle mesh (point cloud or empty scene); export the head as triangles")
-    mesh = _merge(p, pieces)
+    mesh = _assemble(p, parts)
     check_mesh(mesh)
     return mesh
 
 
-def _gltf_pieces(p: Path, cache: Path | None) -> list:
+@dataclass
+class _Parts:
+    """A mesh before textures are resolved: per-vertex material index (-1 none) into ``materials``."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    uvs: np.ndarray | None
+    colors: np.ndarray | None
+    material: np.ndarray
+    materials: list
+    part: np.ndarray
+    part_names: tuple[str, ...]
+    targets: dict[str, np.ndarray]
+
+
+def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     from assets.heads.decompress import decompressed
     from assets.heads.gltf import NEEDS_DECODER, read_gltf, read_gltf_document
 
@@ -109,69 +121,52 @@ def _gltf_pieces(p: Path, cache: Path | None) -> list:
     used = set(doc.get("extensionsRequired", [])) | set(doc.get("extensionsUsed", []))
     src = decompressed(p, cache) if used & set(NEEDS_DECODER) else p
     prims, materials = read_gltf(src)
-    return [_Piece(x.vertices, x.triangles, x.uvs, x.colors, materials[x.material] if x.material >= 0 else None,
-                   x.targets, x.node or (materials[x.material].name if x.material >= 0 else "")) for x in prims]
+    if not prims:
+        return _Parts(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, None, np.zeros(0, np.int64), [],
+                      np.zeros(0, np.int16), (), {})
+    n = [len(x.vertices) for x in prims]
+    offs = np.concatenate([[0], np.cumsum(n)])
+    have_uv = all(x.uvs is not None for x in prims)
+    colors = None
+    if any(x.colors is not None for x in prims):
+        colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in prims])
+    names = sorted({k for x in prims for k in x.targets})
+    targets = {}
+    for k in names:
+        d = np.zeros((int(offs[-1]), 3))
+        for i, x in enumerate(prims):
+            if k in x.targets:
+                d[offs[i] : offs[i + 1]] = x.targets[k]
+        targets[k] = d
+    return _Parts(
+        vertices=np.concatenate([x.vertices for x in prims]),
+        triangles=np.concatenate([x.triangles + offs[i] for i, x in enumerate(prims)]),
+        uvs=np.concatenate([x.uvs for x in prims]) if have_uv else None,
+        colors=colors,
+        material=np.concatenate([np.full(len(x.vertices), x.material) for x in prims]),
+        materials=materials,
+        part=np.concatenate([np.full(len(x.vertices), i, dtype=np.int16) for i, x in enumerate(prims)]),
+        part_names=tuple(x.node for x in prims),
+        targets=targets,
+    )
 
 
-def _trimesh_pieces(p: Path) -> list:
+def _ply_parts(p: Path) -> _Parts:
     import trimesh
 
-    from assets.heads.gltf import Material
-
     try:
-        loaded = trimesh.load(str(p), process=False, maintain_order=True)
+        g = trimesh.load(str(p), process=False, maintain_order=True, force="mesh")
     except Exception as exc:  # trimesh raises many unrelated types for a bad file
         raise MeshError(f"{p}: cannot read mesh: {exc}") from exc
-    if isinstance(loaded, trimesh.Scene):
-        geoms = []
-        for node in loaded.graph.nodes_geometry:
-            transform, gname = loaded.graph[node]
-            g = loaded.geometry[gname]
-            if isinstance(g, trimesh.Trimesh):
-                g = g.copy()
-                g.apply_transform(transform)
-                geoms.append((str(gname), g))
-    elif isinstance(loaded, trimesh.Trimesh):
-        geoms = [(p.stem, loaded)]
-    else:
-        geoms = []
-    out = []
-    for gname, g in geoms:
-        uv = getattr(g.visual, "uv", None)
-        uv = None if uv is None or len(uv) != len(g.vertices) else np.asarray(uv, dtype=np.float64)
-        if uv is not None:
-            uv = np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])  # OBJ/PLY: v up -> facecast/glTF: v down
-        mat = getattr(g.visual, "material", None)
-        material = None
-        if mat is not None:
-            img = _image_bytes(getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None))
-            color = getattr(mat, "main_color", None)
-            color = np.asarray(color, dtype=np.float64) / 255.0 if color is not None else np.ones(4)
-            material = Material(color=_srgb_to_linear(color), image=img, name=str(getattr(mat, "name", "")))
-        colors = None
-        vc = getattr(g.visual, "vertex_colors", None)
-        if getattr(g.visual, "kind", None) == "vertex" and vc is not None and len(vc) == len(g.vertices):
-            colors = np.asarray(vc, dtype=np.float64)[:, :3] / 255.0
-        out.append(_Piece(np.asarray(g.vertices, dtype=np.float64), np.asarray(g.faces, dtype=np.int64), uv,
-                          colors, material, {}, gname))
-    return out
-
-
-@dataclass
-class _Piece:
-    vertices: np.ndarray
-    triangles: np.ndarray
-    uvs: np.ndarray | None
-    colors: np.ndarray | None
-    material: object
-    targets: dict[str, np.ndarray]
-    name: str
-
-
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    c = np.asarray(c, dtype=np.float64).copy()
-    c[:3] = np.where(c[:3] <= 0.04045, c[:3] / 12.92, ((c[:3] + 0.055) / 1.055) ** 2.4)
-    return c
+    v = np.asarray(getattr(g, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    t = np.asarray(getattr(g, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    uv = getattr(getattr(g, "visual", None), "uv", None)
+    uv = None if uv is None or len(uv) != len(v) else np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])  # v up -> down
+    colors = None
+    vc = getattr(getattr(g, "visual", None), "vertex_colors", None)
+    if getattr(getattr(g, "visual", None), "kind", None) == "vertex" and vc is not None and len(vc) == len(v):
+        colors = np.asarray(vc, dtype=np.float64)[:, :3] / 255.0
+    return _Parts(v, t, uv, colors, np.full(len(v), -1), [], np.zeros(len(v), np.int16), (p.stem,), {})
 
 
 def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
@@ -179,93 +174,69 @@ def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
-def _merge(p: Path, pieces: list) -> HeadMesh:
+def _assemble(p: Path, parts: _Parts) -> HeadMesh:
+    """Resolve textures: one material image -> that texture; several -> an atlas; none -> material
+    colours as vertex colours (or a sibling colour map)."""
     from PIL import Image
 
-    n_total = sum(len(x.vertices) for x in pieces)
-    textured = [x for x in pieces if x.material is not None and getattr(x.material, "image", None) and x.uvs is not None]
+    mats = parts.materials
+    used = sorted({int(m) for m in np.unique(parts.material) if m >= 0})
     images: list[bytes] = []
-    for x in textured:
-        if x.material.image not in images:
-            images.append(x.material.image)
-    verts, tris, uvs, cols, part = [], [], [], [], []
-    off = 0
-    for i, x in enumerate(pieces):
-        verts.append(x.vertices)
-        tris.append(x.triangles + off)
-        off += len(x.vertices)
-        part.append(np.full(len(x.vertices), i, dtype=np.int16))
-        mat = x.material
-        base = np.ones(3) if mat is None else np.asarray(mat.color[:3])
-        if x.colors is not None:
-            cols.append(np.clip(x.colors * base, 0, 1))
+    for m in used:
+        img = getattr(mats[m], "image", None)
+        if img is not None and img not in images:
+            images.append(img)
+    texture, uvs = None, parts.uvs
+    if images and parts.uvs is not None:
+        single = len(images) == 1 and all(getattr(mats[m], "image", None) is not None for m in used) and \
+            (parts.material >= 0).all()
+        if single:
+            texture = images[0]
         else:
-            cols.append(np.tile(_linear_to_srgb(base) if mat is not None else np.array([0.8, 0.62, 0.52]),
-                                (len(x.vertices), 1)))
-    texture = None
-    uv_all = None
-    if len(images) == 1 and len(textured) == len(pieces):
-        texture = images[0]
-        uv_all = np.concatenate([x.uvs for x in pieces])
-    elif images:
-        texture, uv_all = _atlas(pieces, images)
-    elif all(x.uvs is not None for x in pieces):
-        uv_all = np.concatenate([x.uvs for x in pieces])
+            texture, uvs = _atlas(parts, images)
+    elif parts.uvs is not None:
         texture = _sibling_texture(p)
+        if texture is not None and p.suffix.lower() in (".glb", ".gltf"):
+            # An image beside a glTF that does not reference it was made for three.js's
+            # TextureLoader (flipY = true, e.g. the Lee Perry-Smith example): flip it into glTF's convention.
+            buf = io.BytesIO()
+            Image.open(io.BytesIO(texture)).convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM).save(buf, "PNG")
+            texture = buf.getvalue()
     colors = None
-    if texture is None:
-        c = np.concatenate(cols).astype(np.float32)
-        if any(x.colors is not None or x.material is not None for x in pieces):
-            colors = c
-    names = sorted({k for x in pieces for k in x.targets})
-    targets = None
-    if names:
-        targets = {}
-        for k in names:
-            d = np.zeros((n_total, 3))
-            o = 0
-            for x in pieces:
-                if k in x.targets:
-                    d[o : o + len(x.vertices)] = x.targets[k]
-                o += len(x.vertices)
-            targets[k] = d
-    del Image
-    return HeadMesh(
-        vertices=np.concatenate(verts),
-        triangles=np.concatenate(tris),
-        uvs=uv_all,
-        texture=texture,
-        colors=colors,
-        name=str(p),
-        targets=targets,
-        part=np.concatenate(part),
-        part_names=tuple(x.name for x in pieces),
-    )
+    if texture is None and (used or parts.colors is not None):
+        base = np.ones((len(parts.vertices), 3))
+        for m in used:
+            base[parts.material == m] = np.asarray(mats[m].color[:3])
+        lin = base * (parts.colors if parts.colors is not None else 1.0)
+        colors = _linear_to_srgb(lin).astype(np.float32)
+        if parts.colors is None and not used:
+            colors = None
+    return HeadMesh(vertices=parts.vertices, triangles=parts.triangles, uvs=uvs, texture=texture, colors=colors,
+                    name=str(p), targets=parts.targets or None, part=parts.part, part_names=parts.part_names)
 
 
 ATLAS_MAX_TILE = 2048
 
 
-def _atlas(pieces: list, images: list[bytes]) -> tuple[bytes, np.ndarray]:
+def _atlas(parts: _Parts, images: list[bytes]) -> tuple[bytes, np.ndarray]:
     """One PNG with every material's image (or colour) as a square tile, and the UVs moved into the tiles."""
     from PIL import Image
 
-    tiles: list[Image.Image] = []
-    for b in images:
-        tiles.append(Image.open(io.BytesIO(b)).convert("RGB"))
+    tiles = [Image.open(io.BytesIO(b)).convert("RGB") for b in images]
+    tile_of_material: dict[int, int] = {}
     colour_tiles: dict[tuple, int] = {}
-    which = []
-    for x in pieces:
-        img = getattr(x.material, "image", None) if x.material is not None else None
-        if img is not None and x.uvs is not None:
-            which.append(images.index(img))
+    for m in sorted({int(x) for x in np.unique(parts.material)}):
+        mat = parts.materials[m] if m >= 0 else None
+        img = getattr(mat, "image", None)
+        if img is not None:
+            tile_of_material[m] = images.index(img)
             continue
-        base = np.ones(3) if x.material is None else np.asarray(x.material.color[:3])
-        key = tuple(np.round(_linear_to_srgb(base) * 255).astype(int))
+        base = np.ones(3) if mat is None else np.asarray(mat.color[:3])
+        key = tuple(int(x) for x in np.round(_linear_to_srgb(base) * 255))
         if key not in colour_tiles:
             colour_tiles[key] = len(tiles)
             tiles.append(Image.new("RGB", (8, 8), key))
-        which.append(colour_tiles[key])
+        tile_of_material[m] = colour_tiles[key]
     size = min(ATLAS_MAX_TILE, max(max(t.size) for t in tiles))
     n = len(tiles)
     cols = int(np.ceil(np.sqrt(n)))
@@ -274,18 +245,12 @@ def _atlas(pieces: list, images: list[bytes]) -> tuple[bytes, np.ndarray]:
     for i, t in enumerate(tiles):
         atlas.paste(t.resize((size, size), Image.Resampling.BILINEAR), ((i % cols) * size, (i // cols) * size))
     margin = 1.0 / size  # a texel inside the tile: bilinear filtering never reads the neighbour
-    uv_parts = []
-    for x, k in zip(pieces, which):
-        if x.uvs is None:
-            uv = np.full((len(x.vertices), 2), 0.5)
-        else:
-            uv = np.asarray(x.uvs, dtype=np.float64)
-            inside = (uv >= 0) & (uv <= 1)
-            uv = np.where(inside, uv, uv - np.floor(uv))  # repeat-wrapped UVs folded into [0, 1)
-        c, r = k % cols, k // cols
-        u = (c + margin + uv[:, 0] * (1 - 2 * margin)) / cols
-        v = (r + margin + uv[:, 1] * (1 - 2 * margin)) / rows
-        uv_parts.append(np.column_stack([u, v]))
+    uv = np.asarray(parts.uvs, dtype=np.float64)
+    uv = np.where((uv >= 0) & (uv <= 1), uv, uv - np.floor(uv))  # repeat-wrapped UVs folded into [0, 1)
+    k = np.array([tile_of_material[int(m)] for m in parts.material], dtype=np.int64)
+    c, r = k % cols, k // cols
+    u = (c + margin + uv[:, 0] * (1 - 2 * margin)) / cols
+    v = (r + margin + uv[:, 1] * (1 - 2 * margin)) / rows
     buf = io.BytesIO()
     atlas.save(buf, format="PNG")
-    return buf.getvalue(), np.concatenate(uv_parts)
+    return buf.getvalue(), np.column_stack([u, v])

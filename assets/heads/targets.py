@@ -75,7 +75,10 @@ _OVR_BY_KEY = {_norm(v): v for v in VISEME_ARKIT}
 
 def canonical_name(name: str) -> str | None:
     """The ARKit name (``"jawOpen"``) or viseme (``"viseme:aa"``) a morph-target name stands for, or None."""
-    base = re.split(r"[.:|]", name.strip())[-1].strip()
+    segs = re.split(r"[.:|]", name.strip())
+    base = segs[-1].strip()
+    if len(segs) > 1 and base in ("L", "R", "l", "r"):  # Blender's "mouthSmile.L": the side, not a prefix
+        base = segs[-2].strip() + "_" + base
     # Side suffixes: _L/_R, .L/.R, -L, " L", _l, Left/Right in any case.
     m = re.match(r"^(.*?)[_\-. ]?([LlRr])$", base)
     if m and m.group(1) and not m.group(1).endswith(("Left", "Right", "left", "right")):
@@ -183,8 +186,8 @@ def morph_rig(
     or None when too few mouth targets are recognised (``require_enough``) to reproduce the
     :data:`ENOUGH_PROBES`. ``reference``: the built-in head's 52 ARKit targets (name -> (n_ref, 3))."""
     matched = match_targets(list(targets), user_map)
-    if not matched:
-        return None
+    if not any(k.startswith(("jaw", "mouth", "tongue")) for mix in matched.values() for k in mix):
+        return None  # no mouth shape among the recognised targets (eyes, brows only)
     head_names = tuple(matched)
     ref = np.stack([reference[n] for n in ARKIT_NAMES])  # (52, n_ref, 3)
     rows = np.flatnonzero(np.abs(ref).max(axis=(0, 2)) > 0)  # reference vertices any target moves
