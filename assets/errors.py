@@ -62,3 +62,7 @@ class AssetError(AssetsError, RuntimeError):
 
 class GlbError(AssetsError, ValueError):
     """A head or animation cannot be written as glTF (bad shapes, unknown image type)."""
+
+
+class RigCheckError(AssetsError, ValueError):
+    """A rig fails the extreme-pose checks (flipped triangles, stretch, lips, teeth)."""

@@ -160,3 +160,40 @@ def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] 
     except ImportError as exc:  # pragma: no cover - autolandmarks ships with facecast
         raise LandmarkError(f"{mesh.name}: no landmarks given; give --landmarks L.json ({exc})") from exc
     return find_landmarks(mesh), "automatic landmarks"
+
+
+TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
+
+
+def head_checks(head: Head, *, limits=None):  # noqa: ANN001, ANN201 - RigCheckLimits -> RigReport
+    """:func:`realtime_core.face.checks.check_rig` for a head: its landmarks from the rig's meta
+    (nearest vertices), the two sides of a cut lip seam as lip pairs, teeth from the mesh's part names."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face.checks import RigCheckLimits, check_rig
+
+    rig, mesh = head.rig, head.mesh
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    pts = rig.meta.get("landmarks")
+    if not pts:
+        raise MeshError(f"{mesh.name}: the rig records no landmarks; the checks need them (give --landmarks)")
+    idx = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in pts.items()}
+    pairs = None
+    cut = int(rig.meta.get("lip_seam_cut", 0) or 0)
+    if cut:
+        n0 = len(v0) - cut
+        d, j = cKDTree(v0[:n0]).query(v0[n0:])
+        ok = d <= 1e-9 * float(np.ptp(v0, axis=0).max())
+        pairs = np.column_stack([j[ok], np.arange(n0, len(v0))[ok]])  # (upper original, lower copy)
+        # The copy at the lower-inner landmark is the lower lip's.
+        lower = pairs[pairs[:, 0] == idx["lower_inner"], 1]
+        if len(lower):
+            idx["lower_inner"] = int(lower[0])
+    teeth = None
+    if mesh.part is not None and mesh.part_names:
+        ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
+        if ids:
+            teeth = np.flatnonzero(np.isin(mesh.part, ids))
+    return check_rig(rig, mouth_landmarks(idx), lip_pairs=pairs, teeth=teeth, limits=limits or RigCheckLimits())
