@@ -7,8 +7,9 @@
 - a rig file (``.npz``, written by ``facecast rig``);
 - a head mesh (``.glb/.gltf/.obj/.ply``): driven through its own morph targets when it has enough
   mouth targets (:mod:`assets.heads.targets`; no rig step), otherwise rigged now from landmarks
-  (``landmarks`` JSON, else the file shipped for known heads, else found automatically on a
-  render of the face, :mod:`assets.heads.autolandmarks`).
+  (``landmarks`` JSON, else the file shipped for known heads, else ``landmark_finder(mesh)``, e.g.
+  :func:`clients.render.landmarks.find_landmarks`, which finds them on a render of the face; the
+  finder is passed in because rendering lives in a layer above this one).
 
 A :class:`Head` holds the mesh and what animates it: a :class:`realtime_core.face.Rig` (retarget,
 paper 000 Sec. 5) or a :class:`realtime_core.face.keyframes.MorphRig` (own targets, paper 002
@@ -18,7 +19,7 @@ eq. 4). Both have ``neutral``, ``triangles``, ``moving``, ``displacements(params
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Union
@@ -29,6 +30,7 @@ from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
 
 AnyRig = Union[Rig, MorphRig]
+LandmarkFinder = Callable[[HeadMesh], Mapping[str, object]]
 HeadMode = Literal["auto", "morph", "retarget"]
 HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
 
@@ -77,6 +79,7 @@ def resolve_head(
     target_map: str | Path | None = None,
     config: RigConfig = RigConfig(),
     cache: Path | None = None,
+    landmark_finder: LandmarkFinder | None = None,
 ) -> Head:
     """The head named by ``spec`` ('builtin', a rig .npz or a mesh file), see the module docstring.
 
@@ -91,7 +94,7 @@ def resolve_head(
 
             if landmarks is None:
                 return Head(*builtin_rig(cache))
-            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config)
+            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None)
         return builtin_morph_head(cache)
     p = Path(spec)
     if p.suffix.lower() == ".npz":
@@ -114,7 +117,7 @@ def resolve_head(
             n = len(mesh.targets or {})
             raise MeshError(f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
                             "give a mapping with --target-map or use --head-mode retarget")
-    return _rig_mesh(mesh, landmarks, config)
+    return _rig_mesh(mesh, landmarks, config, landmark_finder)
 
 
 def morph_head(mesh: HeadMesh, *, target_map: str | Path | None = None, cache: Path | None = None,
@@ -132,16 +135,17 @@ def morph_head(mesh: HeadMesh, *, target_map: str | Path | None = None, cache: P
     return None if rig is None else Head(rig, mesh)
 
 
-def _rig_mesh(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, config: RigConfig) -> Head:
+def _rig_mesh(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, config: RigConfig,
+              finder: LandmarkFinder | None) -> Head:
     from assets.heads.rigging import rig_head
 
-    spec, source = head_landmarks(mesh, landmarks)
+    spec, source = head_landmarks(mesh, landmarks, finder)
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=config)
     return Head(rig, rigged)
 
 
-def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None
-                   ) -> tuple[dict[str, object] | None, str]:
+def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None,
+                   finder: LandmarkFinder | None = None) -> tuple[dict[str, object] | None, str]:
     """The landmark spec for a mesh and where it came from: given (file or mapping), shipped for a
     known head, the built-in head's own, or found automatically (LandmarkError when that fails)."""
     from assets.heads.landmarks import read_landmarks, shipped_landmarks
@@ -155,11 +159,9 @@ def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] 
     shipped = shipped_landmarks(mesh.name)
     if shipped is not None:
         return read_landmarks(shipped), str(shipped)
-    try:
-        from assets.heads.autolandmarks import find_landmarks
-    except ImportError as exc:  # pragma: no cover - autolandmarks ships with facecast
-        raise LandmarkError(f"{mesh.name}: no landmarks given; give --landmarks L.json ({exc})") from exc
-    return find_landmarks(mesh), "automatic landmarks"
+    if finder is None:
+        raise LandmarkError(f"{mesh.name}: no landmarks file given (--landmarks L.json) and none shipped for this head")
+    return dict(finder(mesh)), "automatic landmarks"
 
 
 TEETH_WORDS = ("teeth", "tooth", "gum", "dent")

@@ -23,6 +23,7 @@ def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head
 def resolve_from_args(args: argparse.Namespace, spec: object = None):  # noqa: ANN201 - assets.heads.head.Head
     """The :class:`assets.heads.head.Head` the options name (``spec`` overrides ``args.head``)."""
     from assets.heads.head import resolve_head
+    from clients.render.landmarks import find_landmarks
 
     return resolve_head(str(spec if spec is not None else args.head), landmarks=args.landmarks,
-                        mode=args.head_mode, target_map=args.target_map)
+                        mode=args.head_mode, target_map=args.target_map, landmark_finder=find_landmarks)

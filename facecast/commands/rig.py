@@ -72,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
         source = args.landmarks or "builtin"
     else:
         mesh = load_mesh(args.head)
-        spec, source = head_landmarks(mesh, args.landmarks)
+        from clients.render.landmarks import find_landmarks
+
+        spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
     if args.show_landmarks:
         from assets.heads.plot import plot_landmarks
 
