@@ -61,7 +61,7 @@ class _Buffer:
         return len(self.views) - 1
 
     def accessor(self, arr: np.ndarray, kind: str, ctype: int, target: int | None, minmax: bool = False) -> int:
-        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": ctype, "count": int(len(arr)),
+        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": ctype, "count": len(arr),
                "type": kind}
         if minmax:
             a = arr.reshape(len(arr), -1)
@@ -199,7 +199,7 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
     return _glb(doc, buf)
 
 
-def rig_targets(rig) -> np.ndarray:  # noqa: ANN001 - a Rig (duck-typed: neutral, moving, displacements)
+def rig_targets(rig) -> np.ndarray:
     """Morph targets (4, n, 3) float32 of a :class:`realtime_core.face.Rig`: the head displacement
     (mesh units) per unit (1 IOD) of each mouth parameter."""
     out = np.zeros((4, len(rig.neutral), 3), dtype=np.float32)
@@ -210,7 +210,7 @@ def rig_targets(rig) -> np.ndarray:  # noqa: ANN001 - a Rig (duck-typed: neutral
     return out
 
 
-def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str | None = None) -> bytes:  # noqa: ANN001
+def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str | None = None) -> bytes:
     """The animated GLB of a rigged head for mouth parameters (F, 4) at ``fps``: a MorphRig animates the
     head's own targets (its weights per frame), a Rig its four exact parameter targets (IOD curves)."""
     from realtime_core import VISUAL_PARAMS

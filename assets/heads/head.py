@@ -22,14 +22,14 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Union
+from typing import Literal
 
 from assets.errors import LandmarkError, MeshError
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
 from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
 
-AnyRig = Union[Rig, MorphRig]
+AnyRig = Rig | MorphRig
 LandmarkFinder = Callable[[HeadMesh], Mapping[str, object]]
 HeadMode = Literal["auto", "morph", "retarget"]
 HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
@@ -51,7 +51,7 @@ class Head:
         """"morph" (own targets) or "retarget" (Sec. 5 rig)."""
         return "morph" if isinstance(self.rig, MorphRig) else "retarget"
 
-    def __iter__(self):  # noqa: ANN204 - unpacks as (rig, mesh), like the tuples callers used to pass
+    def __iter__(self):
         return iter((self.rig, self.mesh))
 
 
@@ -77,7 +77,7 @@ def resolve_head(
     landmarks: str | Path | Mapping[str, object] | None = None,
     mode: HeadMode = "auto",
     target_map: str | Path | None = None,
-    config: RigConfig = RigConfig(),
+    config: RigConfig | None = None,
     cache: Path | None = None,
     landmark_finder: LandmarkFinder | None = None,
 ) -> Head:
@@ -86,6 +86,7 @@ def resolve_head(
     mode: "auto" (own targets when enough, else retarget), "morph" (own targets or an error),
     "retarget" (always a Sec. 5 rig). target_map: a user mapping JSON for morph-target names.
     Raises MeshError / LandmarkError / RigFileError naming the file and what to do."""
+    config = config or RigConfig()
     if mode not in HEAD_MODES:
         raise ValueError(f"mode must be one of {HEAD_MODES}, got {mode!r}")
     if str(spec) == "builtin":
@@ -167,9 +168,10 @@ def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] 
 TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
-def head_checks(head: Head, *, limits=None):  # noqa: ANN001, ANN201 - RigCheckLimits -> RigReport
+def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None):
     """:func:`realtime_core.face.checks.check_rig` for a head: its landmarks from the rig's meta
-    (nearest vertices), the two sides of a cut lip seam as lip pairs, teeth from the mesh's part names."""
+    (nearest vertices; a morph head from a file without them: ``landmark_finder(mesh)``), the two sides
+    of a cut lip seam as lip pairs, teeth from the mesh's part names. Returns a RigReport."""
     import numpy as np
     from scipy.spatial import cKDTree
 
@@ -179,6 +181,8 @@ def head_checks(head: Head, *, limits=None):  # noqa: ANN001, ANN201 - RigCheckL
     rig, mesh = head.rig, head.mesh
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     pts = rig.meta.get("landmarks")
+    if not pts and landmark_finder is not None:
+        pts = dict(landmark_finder(mesh))
     if not pts:
         raise MeshError(f"{mesh.name}: the rig records no landmarks; the checks need them (give --landmarks)")
     idx = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in pts.items()}

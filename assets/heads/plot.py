@@ -98,7 +98,7 @@ LANDMARK_HELP: dict[str, str] = {
 """Each landmark's definition, in the order of landmark files (``assets.heads.rigging.REQUIRED_LANDMARKS``)."""
 
 
-def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, title: str = "") -> Path:  # noqa: ANN001
+def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, title: str = "") -> Path:
     """Frontal picture of the head (its vertices shaded by depth) with each landmark numbered and
     named, and the definitions beside it. mesh: a HeadMesh; points: name -> (3,) position."""
     import matplotlib

@@ -33,7 +33,7 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
         raise ExportError(str(exc)) from exc
 
 
-def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:  # noqa: ANN001
+def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
     """The animated glb of a rigged head (``rig`` and its :class:`assets.heads.mesh.HeadMesh`)."""
     try:
         return glb.head_glb(rig, mesh, track.params, track.fps, audio=audio)
@@ -49,7 +49,7 @@ def builtin_arkit_targets() -> dict[str, np.ndarray]:
     return load_builtin_head().targets
 
 
-def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str | None = None) -> bytes:  # noqa: ANN001
+def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str | None = None) -> bytes:
     """An animated glb with ARKit's 52 blendshapes as the morph targets (Apple's order) and the
     track's mouth parameters mapped to their weights by ``realtime_core.blendshapes`` (the same
     weights a "blendshapes" viewer receives, in [0, 1]); for engines that drive faces by ARKit names.

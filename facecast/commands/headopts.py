@@ -20,7 +20,7 @@ def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head
                    help="JSON mapping the head's morph-target names to ARKit names / visemes (docs/animation.md)")
 
 
-def resolve_from_args(args: argparse.Namespace, spec: object = None):  # noqa: ANN201 - assets.heads.head.Head
+def resolve_from_args(args: argparse.Namespace, spec: object = None):
     """The :class:`assets.heads.head.Head` the options name (``spec`` overrides ``args.head``)."""
     from assets.heads.head import resolve_head
     from clients.render.landmarks import find_landmarks

@@ -89,7 +89,7 @@ def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def check_rig(
-    rig,  # noqa: ANN001 - a Rig or MorphRig (neutral, triangles, deformed)
+    rig,
     landmarks: MouthLandmarks,
     *,
     lip_pairs: np.ndarray | None = None,

@@ -34,7 +34,7 @@ def test_bounded_keyframe_solve_matches_scipy_bvls():
         f = km.cross @ x
         ref = lsq_linear(chol.T, np.linalg.solve(chol, f), bounds=(0, 1), method="bvls").x
 
-        def obj(b):
+        def obj(b, f=f):
             return 0.5 * b @ km.gram @ b - f @ b
 
         assert w.min() >= 0 and w.max() <= 1
@@ -77,9 +77,9 @@ def test_an_arkit_glb_animates_through_its_own_targets_with_no_rig_step(tmp_path
 
 
 def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
-    from realtime_core.face import measure_mouth
-    from assets.heads.rigging import mouth_landmarks
     from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import measure_mouth
 
     b = load_builtin_head()
     vis = {f"viseme_{k}": sum(w * b.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
