@@ -66,3 +66,11 @@ class GlbError(AssetsError, ValueError):
 
 class RigCheckError(AssetsError, ValueError):
     """A rig fails the extreme-pose checks (flipped triangles, stretch, lips, teeth)."""
+
+
+class AlignmentFormatError(FileProblem):
+    """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
+
+
+class SynthesisError(AssetsError):
+    """espeak-ng failed: library missing, unknown voice, or synthesis error."""

@@ -8,8 +8,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-# FACECAST_SHARED_DATA: a checkout that does not sit beside shared/ (e.g. a git worktree elsewhere).
-SHARED_DATA = Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+SHARED_DATA = Path(os.environ.get("FACECAST_SHARED_DATA") or REPO.parent / "shared" / "data")
 
 
 def shared_file(rel: str) -> Path:
