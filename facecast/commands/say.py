@@ -33,7 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--n-best", type=int, default=1, help="average the motion of this many unit sequences from "
                    "different recordings (1 = the paper's single sequence; more = smoother, closer to an average "
                    "token)")
-    p.add_argument("--head", default="builtin", help="head for .mp4/.glb: 'builtin', a rig (.npz) or a mesh")
+    from facecast.commands.headopts import add_head_options
+
+    add_head_options(p, help_head="head for .mp4/.glb: 'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)")
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
     p.add_argument("--verbose", action="store_true", help="print the selected units and stage timings")
@@ -51,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.curves import Track
     from clients.export.files import FORMATS, export_track
-    from facecast.commands.render import load_head
+    from facecast.commands.headopts import resolve_from_args
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from training.errors import ConfigError
 
@@ -96,19 +98,21 @@ def run(args: argparse.Namespace) -> int:
     k = stored.corpus.n_coefficients
     params = res.frames[:, k:]
     track = Track(params=params)
-    head = load_head(args.head, None) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
+    head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
     for out in outs:
         if out.suffix.lower() == ".mp4":
+            from assets.heads.landmarks import credit_for
             from clients.render.renderer import RenderConfig, renderer_for_rig
-            from clients.render.video import VideoConfig, write_video
+            from clients.render.video import VideoConfig, with_caption, write_video
 
             rig, mesh = head
+            credit = credit_for(mesh.name)
             cfg = RenderConfig(width=args.width, height=args.height)
             with tempfile.TemporaryDirectory(prefix=".facecast-say-", dir=out.resolve().parent) as tmp:
                 wav = write_wav(Path(tmp) / "speech.wav", samples, rate)
                 with renderer_for_rig(rig, mesh, cfg) as r:
-                    def frame(p, r=r, rig=rig):
-                        return r.render(rig.deformed(p))
+                    def frame(p, r=r, rig=rig, credit=credit):  # one frame (h, w, 3) uint8 with the credit
+                        return with_caption(r.render(rig.deformed(p)), credit)
 
                     write_video(params, frame, out, size=(cfg.width, cfg.height), audio=wav,
                                 config=VideoConfig(fps=30.0))
