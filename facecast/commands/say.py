@@ -18,11 +18,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "talker's recorded motion (GRID s1), warped onto the phone durations and joined smoothly. With --audio, "
         "the user's own recording of TEXT is force-aligned instead (pocketsphinx, English). The output format "
         "follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + .wav beside it), "
-        ".csv / .json (curves), .tsv (mouth cues).",
+        ".csv / .json (curves), .tsv (mouth cues), .npz (the full motion: landmark PCA coefficients + parameters).",
     )
     p.add_argument("text", help="what to say (for --audio: the transcript of the recording)")
     p.add_argument("-o", "--output", type=Path, action="append", required=True,
-                   help="output file, .mp4/.glb/.csv/.json/.tsv (repeatable)")
+                   help="output file, .mp4/.glb/.csv/.json/.tsv/.npz (repeatable)")
     p.add_argument("--lang", choices=("en", "es"), default="en", help="language of TEXT")
     p.add_argument("--voice", default=None, help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es, or a variant f3")
     p.add_argument("--rate", type=int, default=175, help="speaking rate, words per minute")
@@ -42,6 +42,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def write_motion(path: Path, frames, stored) -> Path:
+    """The whole synthesised motion as ``.npz`` (no pickle): ``frames`` (n, K + 4) float32 at 30 fps
+    (K landmark PCA coefficients, then the four mouth parameters), ``dim_names``, and what turns the
+    coefficients into lower-face landmark displacements from the neutral face (IOD units):
+    ``pca_mean`` (3P,), ``pca_components`` (K, 3P), ``landmark_indices`` (P,) MediaPipe numbering,
+    ``neutral`` (P, 3) the corpus's mean neutral face; displacements = frames[:, :K] @ pca_components
+    + pca_mean, reshaped (n, P, 3)."""
+    import io
+
+    import numpy as np
+
+    from assets.files import atomic_write_bytes
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, frames=np.asarray(frames, dtype=np.float32), fps=np.array(30.0),
+                        dim_names=np.array(stored.corpus.dim_names), pca_mean=stored.pca_mean,
+                        pca_components=stored.pca_components, landmark_indices=stored.landmark_indices,
+                        neutral=stored.neutral)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
 def run(args: argparse.Namespace) -> int:
     import tempfile
     import time
@@ -59,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
 
     t_start = time.perf_counter()
     outs = [Path(o) for o in args.output]
-    bad = [o for o in outs if o.suffix.lower() not in (".mp4", *FORMATS)]
+    bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", *FORMATS)]
     if bad:
-        raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, {', '.join(FORMATS)})")
+        raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, {', '.join(FORMATS)})")
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:
@@ -116,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
 
                     write_video(params, frame, out, size=(cfg.width, cfg.height), audio=wav,
                                 config=VideoConfig(fps=30.0))
+        elif out.suffix.lower() == ".npz":
+            write_motion(out, res.frames, stored)
         else:
             export_track(out, track, head=head, audio=(samples, rate))
         t = lap(f"write {out.suffix}", t)

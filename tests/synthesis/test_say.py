@@ -52,9 +52,16 @@ def test_say_writes_valid_mp4_csv_glb(corpus_file, tmp_path, capsys):
 
 
 def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
-    out = tmp_path / "es.csv"
-    assert main(["say", "¿Dónde está la biblioteca?", "--lang", "es", "--corpus", str(corpus_file), "-o", str(out)]) == 0
+    out, npz = tmp_path / "es.csv", tmp_path / "es.npz"
+    assert main(["say", "¿Dónde está la biblioteca?", "--lang", "es", "--corpus", str(corpus_file), "-o", str(out),
+                 "-o", str(npz)]) == 0
     assert out.is_file() and len(out.read_text().splitlines()) > 20
+    with np.load(npz, allow_pickle=False) as z:  # the full motion: PCA coefficients + parameters
+        frames, names = z["frames"], list(z["dim_names"])
+        assert frames.shape == (len(out.read_text().splitlines()) - 1, len(names))
+        assert names[-4:] == ["upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
+        offsets = frames[:, : len(names) - 4] @ z["pca_components"] + z["pca_mean"]
+        assert offsets.shape[1] == 3 * len(z["landmark_indices"])
     capsys.readouterr()
     for argv, msg in ((["say", "😀😀", "-o", str(tmp_path / "x.csv")], "pronounceable"),
                       (["say", "   ", "-o", str(tmp_path / "x.csv")], "empty text"),
