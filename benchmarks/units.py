@@ -6,7 +6,9 @@ first frame of a server text session.
 1. **Search**: the Viterbi unit search (:func:`realtime_core.synthesis.search.select_units`) for
    20-phone targets over the whole corpus graph: espeak-ng phones of varied English sentences cut
    to their first 20 phones. Median / p95 / max in ms, the active-state cap's cost against an exact
-   search (max_active=None), and the graph build time.
+   search (max_active=None), and the graph build time. Then every 8th corpus sentence from its own
+   phones (it must select itself as one zero-cost unit and reproduce its motion), and how much
+   recorded context everyday English and Spanish text gets (units, junctions outside the corpus).
 2. **say**: command to MP4 for a 10-word sentence, in-process after start-up (imports, corpus,
    graph, head rig and renderer are loaded once first): speech synthesis + unit selection +
    rendering and encoding, median of 3.
@@ -75,6 +77,27 @@ def bench_search(stored, n: int) -> None:
     g = np.asarray(gaps)
     print(f"active-state cap {graph.config.max_active} vs exact search: path cost equal in {np.mean(g < 1e-9):.0%} "
           f"of targets, mean excess {g.mean():.3f}, max {g.max():.3f}")
+
+
+def check_self_selection(stored, step: int = 8) -> None:
+    """Every ``step``-th corpus sentence from its own phones: one unit, zero cost, its motion exactly."""
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+
+    c = stored.corpus
+    synth = UnitSynthesizer(c)
+    picked = range(0, c.n_sentences, step)
+    one = exact = 0
+    for s in picked:
+        a, b = c.phone_offsets[s], c.phone_offsets[s + 1]
+        phones = [(c.phone_labels[q], c.phone_start_s[q], c.phone_end_s[q]) for q in range(a, b)]
+        n = int(c.frame_offsets[s + 1] - c.frame_offsets[s])
+        res = synth.synthesize(phones, "arpabet", n_frames=n)
+        one += res.selection.n_units == 1 and res.selection.cost == 0.0
+        t = np.arange(n) / 30.0
+        covered = (t >= c.phone_start_s[a]) & (t <= c.phone_end_s[b - 1])
+        exact += float(np.abs(res.frames[covered] - c.sentence_frames(s)[covered]).max()) < 1e-5
+    print(f"corpus sentences from their own phones: {one}/{len(picked)} select themselves as one zero-cost unit, "
+          f"{exact}/{len(picked)} reproduce their recorded motion exactly")
 
 
 def bench_languages(stored) -> None:
@@ -202,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"corpus {path}")
     with threadpool_limits(limits=1):
         bench_search(stored, args.sentences)
+        check_self_selection(stored)
         bench_languages(stored)
         if not args.skip_say:
             bench_say(stored)

@@ -1,7 +1,7 @@
 """Phones with timings -> recorded motion at 30 fps: viseme mapping, unit search, warping.
 
 The sans-I/O front of unit selection (seed 001 Sec. 3.7-3.8): a target phone timeline (labels of
-one inventory, start/end seconds) is made gapless (gaps become pauses, consecutive pauses merge),
+one inventory, start/end seconds) is made gapless (a gap becomes a pause, joined to a pause next to it),
 mapped to viseme classes (unknown labels fall back to a neutral open vowel and are reported;
 classes the corpus lacks fall back to look-alikes, :func:`realtime_core.synthesis.visemes.resolve`),
 searched (:func:`realtime_core.synthesis.search.select_units`) and rendered
@@ -75,19 +75,25 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
     substituted = 0
     t = 0.0
 
-    def add(label: str, v: str, a: float, b: float) -> None:
+    inserted = [False]  # whether the last entry is a pause inserted for a gap
+
+    def add(label: str, v: str, a: float, b: float, *, gap: bool = False) -> None:
         if b - a <= 1e-6:
             return
-        if vis and v == "sil" and VISEMES[vis[-1]] == "sil":  # merge consecutive pauses
+        # a gap joins a neighbouring pause (the input's own pauses are kept as they are, so a
+        # corpus sentence's phones reproduce that sentence exactly)
+        if vis and v == "sil" and VISEMES[vis[-1]] == "sil" and (gap or inserted[0]):
             ends[-1] = b
+            inserted[0] = inserted[0] and gap
             return
         labels.append(label), vis.append(VISEME_ID[v]), starts.append(a), ends.append(b)
+        inserted[0] = gap
 
     for label, a, b in rows:
         if not np.isfinite(a) or not np.isfinite(b):
             raise ConfigError(f"phone {label!r} has a non-finite time")
         if a > t + 1e-6:
-            add("sil", resolve("sil", available), t, a)
+            add("sil", resolve("sil", available), t, a, gap=True)
         a = max(a, t)
         if b <= a:
             continue

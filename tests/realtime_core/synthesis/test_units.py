@@ -236,12 +236,14 @@ def test_a_corpus_sentence_from_its_own_phones_selects_itself_and_reproduces_its
     np.testing.assert_allclose(res.frames[covered], corpus.sentence_frames(s)[covered], atol=1e-9)
 
 
-def test_target_fills_gaps_merges_pauses_and_reports_unknown_phones():
+def test_target_fills_gaps_and_reports_unknown_phones():
     avail = frozenset(VISEMES) - {"OY"}
     tgt = make_target([("p", 0.1, 0.2), ("oy", 0.2, 0.4), ("zzz", 0.5, 0.6), ("sil", 0.6, 0.7), ("sp", 0.7, 0.8)],
                       "arpabet", avail)
-    assert tgt.labels == ("sil", "p", "oy", "sil", "zzz", "sil")
-    np.testing.assert_allclose(tgt.starts_s, [0, 0.1, 0.2, 0.4, 0.5, 0.6])
+    assert tgt.labels == ("sil", "p", "oy", "sil", "zzz", "sil", "sp")  # the input's own pauses stay
+    np.testing.assert_allclose(tgt.starts_s, [0, 0.1, 0.2, 0.4, 0.5, 0.6, 0.7])
+    gap = make_target([("p", 0.0, 0.1), ("sil", 0.1, 0.2), ("p", 0.3, 0.4)], "arpabet", avail)
+    assert gap.labels == ("p", "sil", "p") and gap.ends_s[1] == pytest.approx(0.3)  # the gap joins the pause
     np.testing.assert_allclose(tgt.ends_s[-1], 0.8)
     assert VISEMES[tgt.visemes[2]] == "AO" and tgt.substituted == 1
     assert tgt.unknown == ("zzz",)
