@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "rig": "facecast.commands.rig",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
+    "phones": "facecast.commands.phones",
     "train": "facecast.commands.train",
     "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
