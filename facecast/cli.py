@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "extract": "facecast.commands.extract",
     "phones": "facecast.commands.phones",
     "train": "facecast.commands.train",
+    "adapt": "facecast.commands.adapt",
     "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
 }

@@ -10,6 +10,7 @@ FORWARDED: dict[str, tuple[str, str]] = {
                 "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
     "capacity": ("benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
     "render": ("benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
+    "adapt": ("benchmarks.adaptation", "speaker adaptation: r(mouth_open) vs MediaPipe lips before/after enrolment"),
 }
 """Benchmarks with their own argument parsers: name -> (module with main(argv), help)."""
 

@@ -43,11 +43,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 from scipy.special import logsumexp
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError
 from realtime_core.hmm.kernels import forward_backward, log_forward
-from realtime_core.hmm.model import AvHmm, gaussian_loglik
+from realtime_core.hmm.model import LOG_2PI, AvHmm
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,22 +91,48 @@ def _audio_chol(model: AvHmm) -> np.ndarray:
     return model.chol.reshape(n * m, d, d)[:, :da, :da]
 
 
+class _AudioMarginal:
+    """The audio marginals' whitening matrices ``W_c = L_aa,c^-1`` and log-determinants, computed
+    once: adaptation never changes a covariance, so each E-step is one whitening GEMM per component."""
+
+    def __init__(self, model: AvHmm) -> None:
+        chol = _audio_chol(model)
+        da = model.n_audio
+        self.whiten = np.stack([scipy.linalg.solve_triangular(c, np.eye(da), lower=True, check_finite=False)
+                                for c in chol])  # (C, Da, Da)
+        self.const = -np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1) - 0.5 * da * LOG_2PI  # (C,)
+
+    def loglik(self, model: AvHmm, oa: np.ndarray) -> np.ndarray:
+        """``log w_jk + log N(o_a; mu_a,jk, Sigma_aa,jk)``: ``(T, Da) -> (T, N, M)``."""
+        n, m, _ = model.means.shape
+        da = model.n_audio
+        mu = model.means[:, :, :da].reshape(n * m, da)
+        out = np.empty((len(oa), n * m))
+        for c in range(n * m):
+            z = (oa - mu[c]) @ self.whiten[c].T
+            out[:, c] = -0.5 * np.einsum("ti,ti->t", z, z) + self.const[c]
+        return out.reshape(-1, n, m) + model.log_weights[None]
+
+
 def audio_component_loglik(model: AvHmm, oa: np.ndarray) -> np.ndarray:
     """``log w_jk + log N(o_a; mu_a,jk, Sigma_aa,jk)``: ``(T, Da) -> (T, N, M)``."""
-    n, m, _ = model.means.shape
     da = model.n_audio
     if oa.ndim != 2 or oa.shape[1] != da:
         raise InvalidFeaturesError(f"audio features must be (T, {da}), got {oa.shape}")
-    ll = gaussian_loglik(oa, model.means[:, :, :da].reshape(n * m, da), _audio_chol(model))
-    return ll.reshape(-1, n, m) + model.log_weights[None]
+    return _AudioMarginal(model).loglik(model, oa)
 
 
 def audio_log_likelihood(model: AvHmm, sequences: Sequence[np.ndarray]) -> float:
     """Total ``log p(O_a | model)`` of audio-only sequences ``(T_i, Da)`` under the audio marginal HMM."""
+    marginal = _AudioMarginal(model)
     total = 0.0
-    for s in sequences:
-        log_b = logsumexp(audio_component_loglik(model, np.asarray(s, dtype=np.float64)), axis=2)
-        total += log_forward(model.log_startprob, model.log_transmat, log_b)[1]
+    for i, s in enumerate(sequences):
+        s = np.asarray(s, dtype=np.float64)
+        if s.ndim != 2 or s.shape[1] != model.n_audio:
+            raise InvalidFeaturesError(f"audio sequence {i} must be (T, {model.n_audio}), got {s.shape}")
+        if len(s):
+            log_b = logsumexp(marginal.loglik(model, s), axis=2)
+            total += log_forward(model.log_startprob, model.log_transmat, log_b)[1]
     return total
 
 
@@ -135,7 +162,7 @@ def _check(sequences: Sequence[np.ndarray], da: int) -> list[np.ndarray]:
     return out
 
 
-def _e_step(model: AvHmm, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
+def _e_step(model: AvHmm, marginal: _AudioMarginal, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, float]:
     """Occupancies ``(N, M)``, first-order sums ``(N, M, Da)`` and ``log p(O_a)``."""
     n, m, _ = model.means.shape
     da = model.n_audio
@@ -143,7 +170,7 @@ def _e_step(model: AvHmm, seqs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarra
     s1 = np.zeros((n, m, da))
     loglik = 0.0
     for s in seqs:
-        logc = audio_component_loglik(model, s)  # (T, N, M)
+        logc = marginal.loglik(model, s)  # (T, N, M)
         log_b = logsumexp(logc, axis=2)
         gamma, ll, _, _ = forward_backward(model.log_startprob, model.log_transmat, log_b)
         with np.errstate(under="ignore"):
@@ -165,11 +192,12 @@ def map_adapt(model: AvHmm, sequences: Sequence[np.ndarray], *, config: AdaptCon
     if n_frames == 0:
         return AdaptResult(model=model, history=[], occupancy=np.zeros((model.n_states, model.n_mix)), n_frames=0)
     prior = model
+    marginal = _AudioMarginal(prior)  # covariances are never adapted
     tau = config.relevance
     history: list[float] = []
     occ = None
     for it in range(config.n_iter + 1):
-        occ, s1, loglik = _e_step(model, seqs)
+        occ, s1, loglik = _e_step(model, marginal, seqs)
         history.append((loglik + _log_prior(model, prior, config)) / n_frames)
         if it == config.n_iter or (len(history) > 1 and history[-1] - history[-2] < config.tol):
             break
