@@ -36,14 +36,14 @@ def _r(truth: np.ndarray, est: np.ndarray) -> float:
 
 
 def _estimate(model, samples: np.ndarray, rate: int) -> np.ndarray:
+    from realtime_core.features.resample import resample_audio as resample
     from realtime_core.pipeline import speech_to_params
-    from training.trainer import resample
 
     return speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
 
 
 def _at_model_rate(model, samples: np.ndarray, rate: int) -> np.ndarray:
-    from training.trainer import resample
+    from realtime_core.features.resample import resample_audio as resample
 
     return resample(samples, rate, model.sample_rate_hz)
 
@@ -87,10 +87,10 @@ def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
 
 
 def s1_as_new_voice(model, cfg, root: Path, enrol_seconds: float, n_val: int, progress) -> dict:
+    from assets.audio import read_audio
+    from assets.grid import sentences
     from realtime_core.adaptation import adapt_av_model
-    from training.audio_io import read_audio
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-    from training.grid import sentences
     from training.video import measure_video
 
     enrol, total = [], 0.0
@@ -157,8 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     from threadpoolctl import threadpool_limits
     from tqdm import tqdm
 
+    from assets.modelfile import load_model
     from realtime_core.hmm.adapt import AdaptConfig
-    from training.modelfile import load_model
 
     model = load_model(args.model)
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=args.relevance)

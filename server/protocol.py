@@ -1,139 +1,421 @@
-"""The facecast wire protocol: message kinds, binary frame layout, payload codecs, close codes.
+"""The service protocol without I/O: ingest and view connections as state machines.
 
-Pure functions over bytes and numpy arrays, no I/O: the server encodes with them and the Python
-client (``clients/client.py``) decodes with them. ``docs/protocol.md`` is the normative text; this
-module is its reference implementation.
+Theory of operation
+-------------------
+Like h11 or python-websockets' ``protocol.py``, this module reads no socket and no clock. The
+asyncio shell (:mod:`server.app`) feeds an :class:`IngestProtocol` the events of one ingest
+connection (a text or binary message arrived, the start timer ran out, the peer went away, the
+server is stopping, and the outcomes of the work it asked for) and performs the actions it returns,
+in order:
 
-Binary message = 32-byte little-endian header + payload::
+=================  =====================================================================
+action             what the shell does
+=================  =====================================================================
+``Send(msg)``      send the JSON text message ``msg`` to the peer
+``Close(c, r)``    close the connection with code ``c`` and reason ``r``; nothing follows
+``Open(n, cfg)``   open session ``n`` (admission may refuse: :meth:`IngestProtocol.refused`)
+``Feed(data)``     push one binary block into the session (:meth:`IngestProtocol.audio_rejected`)
+``Control(msg)``   apply a control message (:meth:`control_applied` / :meth:`control_rejected`)
+``Finish()``       flush the session's last frames to its viewers, then :meth:`finished`
+=================  =====================================================================
 
-    offset size  field
-    0      u8    version (1)
-    1      u8    kind       (KIND_* below)
-    2      u8    encoding   (ENC_* below)
-    3      u8    reserved (0)
-    4      u32   index      (frame index k; for audio the block's sequence number)
-    8      u32   count      (number of values in the payload)
-    12     f32   scale      (ENC_INT16: value = int16 * scale; otherwise 1.0)
-    16     f64   media_time (s of session audio: frame k at k / fps; audio: time of its first sample)
-    24     f64   send_time  (server wall clock, s since the Unix epoch, when the message was queued)
-    32     ...   payload    (count values: float32, int16 or float16, little-endian)
+The states are ``AWAIT_START -> OPENING -> STREAMING -> FINISHING -> CLOSED``. Every protocol
+breach yields a ``Close`` with a code from :mod:`wire.protocol` and a reason naming the problem;
+:attr:`IngestProtocol.viewer_close` is what the session's viewers are told when it ends.
+
+Extending: a *session kind* (:data:`SESSION_KINDS`, chosen by the start message's ``input`` field,
+default ``"audio"``) names its extra start fields, builds its session configuration and says
+whether binary messages are its input; text message types after the start are dispatched through
+:data:`MESSAGE_TYPES` (``control``, ``end``). A text-driven session adds a kind and a message type.
+
+:func:`parse_view_query` turns a ``/view`` query string into a :class:`ViewRequest` or raises
+:class:`~server.errors.ProtocolViolation` with the close code; :func:`loads_bounded` parses client
+JSON with size and depth limits (a protocol error, never a RecursionError).
 """
 
 from __future__ import annotations
 
+import enum
+import hmac
 import json
-import re
-import struct
+import urllib.parse
 from dataclasses import dataclass
+from typing import Callable, Mapping
 
-import numpy as np
+from server.errors import ProtocolViolation, ServerConfigError
+from server.session import SessionConfig
+from wire import protocol as P
 
-PROTOCOL_VERSION = 1
-HEADER = struct.Struct("<BBBxIIfdd")
-HEADER_BYTES = HEADER.size  # 32
+MAX_JSON_DEPTH = 8  # control and start messages nest two levels; anything deeper is hostile
+MAX_TEXT_BYTES = 64 * 1024  # a text message is a start/control/end object, never this big
 
-# Message kinds (header byte 1).
-KIND_PARAMS = 1
-KIND_DELTAS = 2
-KIND_ARKIT52 = 3
-KIND_OVR15 = 4
-KIND_AUDIO = 5
-KIND_NAMES = {KIND_PARAMS: "params", KIND_DELTAS: "deltas", KIND_ARKIT52: "arkit52", KIND_OVR15: "ovr15", KIND_AUDIO: "audio"}
 
-# Value encodings (header byte 2).
-ENC_FLOAT32 = 1
-ENC_INT16 = 2
-ENC_FLOAT16 = 3
-_ENC_DTYPES = {ENC_FLOAT32: np.dtype("<f4"), ENC_INT16: np.dtype("<i2"), ENC_FLOAT16: np.dtype("<f2")}
-ENCODING_NAMES = {ENC_FLOAT32: "float32", ENC_INT16: "int16", ENC_FLOAT16: "float16"}
-
-# Viewer subscriptions: kind -> {encoding name: (header kind, header encoding)}; first = default.
-VIEW_KINDS: dict[str, dict[str, tuple[int, int]]] = {
-    "params": {"float32": (KIND_PARAMS, ENC_FLOAT32)},
-    "deltas": {"int16": (KIND_DELTAS, ENC_INT16), "float16": (KIND_DELTAS, ENC_FLOAT16)},
-    "blendshapes": {"arkit52": (KIND_ARKIT52, ENC_FLOAT32), "ovr15": (KIND_OVR15, ENC_FLOAT32)},
-}
-
-# Ingest sample formats: name -> (numpy dtype, bytes per sample).
-SAMPLE_FORMATS: dict[str, np.dtype] = {"pcm_s16le": np.dtype("<i2"), "f32le": np.dtype("<f4")}
-
-SESSION_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
-
-# WebSocket close codes used by the server (RFC 6455 section 7.4 plus application codes 4000-4999).
-CLOSE_NORMAL = 1000  # the session ended normally
-CLOSE_GOING_AWAY = 1001  # server shutting down
-CLOSE_UNSUPPORTED_DATA = 1003  # text where binary was expected, or the reverse
-CLOSE_INVALID_PAYLOAD = 1007  # malformed JSON, audio bytes that are not whole samples, NaN/inf samples
-CLOSE_POLICY = 1008  # a message out of order (audio before start, a second start, a viewer talking)
-CLOSE_TOO_BIG = 1009  # a message over the server's max_message_bytes (sent by the websockets library)
-CLOSE_INTERNAL = 1011  # a server bug: only this connection is closed
-CLOSE_TRY_LATER = 1013  # too many sessions or viewers
-CLOSE_TOO_SLOW = 4000  # a viewer stayed behind longer than the server allows
-CLOSE_UNAUTHORIZED = 4001  # missing or wrong token
-CLOSE_NOT_FOUND = 4004  # unknown session or endpoint
-CLOSE_CONFLICT = 4009  # the session name is in use
-CLOSE_BAD_REQUEST = 4400  # a start message or viewer query with missing or invalid fields
+# -- actions (what the shell must do) ----------------------------------------------------------------
 
 
 @dataclass(frozen=True)
-class Message:
-    """A decoded binary message. values: (count,) float32 (dequantised) or, for audio, float32 samples
-    in [-1, 1]; the rest mirrors the header (times in seconds)."""
-
-    kind: int
-    encoding: int
-    index: int
-    media_time: float
-    send_time: float
-    scale: float
-    values: np.ndarray
-
-    @property
-    def kind_name(self) -> str:
-        return KIND_NAMES.get(self.kind, f"kind{self.kind}")
+class Send:
+    message: dict
 
 
-def encode_payload(values: np.ndarray, encoding: int) -> tuple[bytes, float]:
-    """values (count,) float -> (payload bytes, scale). int16 uses a per-message scale max|v| / 32767."""
-    v = np.asarray(values, dtype=np.float32).reshape(-1)
-    if encoding == ENC_INT16:
-        peak = float(np.max(np.abs(v))) if v.size else 0.0
-        scale = peak / 32767.0 if peak > 0 else 1.0
-        q = np.rint(v / np.float32(scale)).astype("<i2")
-        return q.tobytes(), scale
-    if encoding in _ENC_DTYPES:
-        return v.astype(_ENC_DTYPES[encoding]).tobytes(), 1.0
-    raise ValueError(f"unknown encoding {encoding}")
+@dataclass(frozen=True)
+class Close:
+    code: int
+    reason: str
 
 
-def encode_audio_payload(samples: np.ndarray) -> bytes:
-    """samples (n,) float in [-1, 1] -> int16 bytes (scale 1/32768), clipped."""
-    s = np.clip(np.asarray(samples, dtype=np.float64) * 32768.0, -32768, 32767)
-    return np.rint(s).astype("<i2").tobytes()
+@dataclass(frozen=True)
+class Open:
+    name: str
+    config: SessionConfig
+    kind: str
+    batch: bool = False
 
 
-def pack_header(kind: int, encoding: int, index: int, count: int, scale: float, media_time: float, send_time: float) -> bytes:
-    """The 32-byte header (see the module docstring)."""
-    return HEADER.pack(PROTOCOL_VERSION, kind, encoding, index & 0xFFFFFFFF, count, scale, media_time, send_time)
+@dataclass(frozen=True)
+class Feed:
+    data: bytes
 
 
-def decode_message(data: bytes) -> Message:
-    """Parse one binary message; raises ValueError naming the problem."""
-    if len(data) < HEADER_BYTES:
-        raise ValueError(f"message of {len(data)} bytes is shorter than the {HEADER_BYTES}-byte header")
-    version, kind, encoding, index, count, scale, media_time, send_time = HEADER.unpack_from(data)
-    if version != PROTOCOL_VERSION:
-        raise ValueError(f"protocol version {version}, expected {PROTOCOL_VERSION}")
-    dtype = _ENC_DTYPES.get(encoding)
-    if dtype is None:
-        raise ValueError(f"unknown encoding {encoding}")
-    if len(data) != HEADER_BYTES + count * dtype.itemsize:
-        raise ValueError(f"payload of {len(data) - HEADER_BYTES} bytes for {count} {ENCODING_NAMES[encoding]} values")
-    raw = np.frombuffer(data, dtype=dtype, count=count, offset=HEADER_BYTES)
-    values = raw.astype(np.float32) * np.float32(scale) if encoding == ENC_INT16 else raw.astype(np.float32)
-    return Message(kind, encoding, index, media_time, send_time, scale, values)
+@dataclass(frozen=True)
+class Control:
+    message: dict
 
 
-def dumps(obj: dict) -> str:
-    """JSON text of a control/description message (compact, no NaN)."""
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False)
+@dataclass(frozen=True)
+class Finish:
+    pass
+
+
+Action = Send | Close | Open | Feed | Control | Finish
+
+
+# -- bounded JSON --------------------------------------------------------------------------------------
+
+
+def json_depth_exceeds(text: str, limit: int) -> bool:
+    """True if ``text`` nests arrays/objects deeper than ``limit`` (brackets inside strings ignored).
+
+    O(n) in the worst case, but the common message has few brackets and returns at once."""
+    if text.count("[") + text.count("{") <= limit:
+        return False
+    depth = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+        elif ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            if depth > limit:
+                return True
+        elif ch in "]}":
+            depth -= 1
+    return False
+
+
+def loads_bounded(text: str, what: str, *, max_bytes: int = MAX_TEXT_BYTES, max_depth: int = MAX_JSON_DEPTH) -> dict:
+    """Client JSON text -> dict, or ProtocolViolation (1009 too big, 1007 malformed / too deep / not an object)."""
+    if len(text) > max_bytes:
+        raise ProtocolViolation(P.CLOSE_TOO_BIG, f"{what} is over {max_bytes} bytes")
+    if json_depth_exceeds(text, max_depth):
+        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"{what} nests deeper than {max_depth} levels")
+    try:
+        obj = json.loads(text)
+    except (ValueError, RecursionError):
+        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"{what} is not valid JSON") from None
+    if not isinstance(obj, dict):
+        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"{what} must be a JSON object")
+    return obj
+
+
+def token_ok(given: object, want: str | None) -> bool:
+    """Constant-time token check; True when the server has no token."""
+    if want is None:
+        return True
+    return isinstance(given, str) and hmac.compare_digest(given.encode(), want.encode())
+
+
+# -- session kinds -------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SessionKind:
+    """How a start message of this kind becomes a session configuration.
+
+    fields: start-message fields this kind accepts besides type/session/token/input;
+    build: (start message, server lag) -> session configuration (ServerConfigError if invalid);
+    binary_input: True if binary messages after the start are the session's input."""
+
+    fields: frozenset[str]
+    build: Callable[[dict, int], SessionConfig]
+    binary_input: bool = True
+
+
+def _audio_config(start: dict, lag: int) -> SessionConfig:
+    if "sample_rate" not in start:
+        raise ServerConfigError("start message lacks sample_rate")
+    return SessionConfig(sample_rate_hz=start["sample_rate"], channels=start.get("channels", 1),
+                         sample_format=start.get("format", "pcm_s16le"), lag=lag)
+
+
+SESSION_KINDS: dict[str, SessionKind] = {
+    "audio": SessionKind(fields=frozenset({"sample_rate", "format", "channels"}), build=_audio_config),
+}
+"""Start-message ``input`` value -> session kind (``"audio"`` when absent)."""
+
+COMMON_START_FIELDS = frozenset({"type", "session", "token", "input", "batch"})
+
+
+# -- ingest ----------------------------------------------------------------------------------------------
+
+
+class State(enum.Enum):
+    AWAIT_START = "await_start"
+    OPENING = "opening"
+    STREAMING = "streaming"
+    FINISHING = "finishing"
+    CLOSED = "closed"
+
+
+MessageHandler = Callable[["IngestProtocol", dict], list[Action]]
+
+MESSAGE_TYPES: dict[str, MessageHandler] = {}
+"""Text message ``type`` after the start -> handler (``control``, ``end``; extensible)."""
+
+
+def message_type(name: str) -> Callable[[MessageHandler], MessageHandler]:
+    def register(handler: MessageHandler) -> MessageHandler:
+        MESSAGE_TYPES[name] = handler
+        return handler
+
+    return register
+
+
+class IngestProtocol:
+    """One ingest connection's state machine. token: the server's shared secret (None = open);
+    lag: the server's extra smoothing frames for every session."""
+
+    def __init__(self, *, token: str | None = None, lag: int = 0) -> None:
+        self.token = token
+        self.lag = lag
+        self.state = State.AWAIT_START
+        self.name: str | None = None
+        self.kind: SessionKind | None = None
+        self.viewer_close = (P.CLOSE_NORMAL, "session ended")
+        self._ending_reply = True  # "ended" is sent for an end message, not for a shutdown
+
+    # events from the peer
+
+    def receive(self, message: str | bytes) -> list[Action]:
+        """A message arrived from the peer."""
+        try:
+            if self.state is State.AWAIT_START:
+                return self._start(message)
+            if self.state is not State.STREAMING:
+                return []  # after Finish/Close the shell stops reading; late messages are moot
+            if isinstance(message, (bytes, bytearray, memoryview)):
+                if self.kind is None or not self.kind.binary_input:
+                    raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "this session takes no binary messages")
+                return [Feed(bytes(message))]
+            if len(message) > MAX_TEXT_BYTES:
+                raise ProtocolViolation(P.CLOSE_TOO_BIG, f"text message is over {MAX_TEXT_BYTES} bytes")
+            if json_depth_exceeds(message, MAX_JSON_DEPTH):
+                raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"message nests deeper than {MAX_JSON_DEPTH} levels")
+            try:
+                msg = json.loads(message)
+            except (ValueError, RecursionError):
+                raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA,
+                                        "text message is not JSON: audio must be sent as binary messages") from None
+            if not isinstance(msg, dict):
+                raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "a control message must be a JSON object")
+            kind = msg.get("type")
+            if kind == "start":
+                raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
+            handler = MESSAGE_TYPES.get(kind) if isinstance(kind, str) else None
+            if handler is None:
+                raise ProtocolViolation(P.CLOSE_POLICY,
+                                        f"unknown message type {_short(kind)} (expected {' or '.join(MESSAGE_TYPES)})")
+            return handler(self, msg)
+        except ProtocolViolation as exc:
+            return self._violation(exc)
+
+    def start_timed_out(self, timeout_s: float) -> list[Action]:
+        """No start message within the start timeout."""
+        if self.state is not State.AWAIT_START:
+            return []
+        return self._violation(ProtocolViolation(P.CLOSE_POLICY, f"no start message within {timeout_s:g} s"))
+
+    def idle_timed_out(self, timeout_s: float) -> list[Action]:
+        """A started ingest sent nothing for ``timeout_s``."""
+        if self.state is not State.STREAMING:
+            return []
+        return self._violation(ProtocolViolation(P.CLOSE_POLICY, f"idle: no message for {timeout_s:g} s"))
+
+    def too_fast(self, reason: str) -> list[Action]:
+        """The ingest ran ahead of real time beyond its burst and the server closes rather than paces."""
+        return self._violation(ProtocolViolation(P.CLOSE_TOO_FAST, reason))
+
+    def connection_lost(self) -> list[Action]:
+        """The peer hung up (without an end message): finish what it sent."""
+        if self.state is State.STREAMING:
+            self.state = State.FINISHING
+            self._ending_reply = False
+            return [Finish()]
+        self.state = State.CLOSED
+        return []
+
+    def shutdown(self) -> list[Action]:
+        """The server is stopping: flush the session, then close with 1001."""
+        if self.state is State.STREAMING:
+            self.state = State.FINISHING
+            self._ending_reply = False
+            self.viewer_close = (P.CLOSE_GOING_AWAY, "server shutting down")
+            return [Finish()]
+        if self.state is State.CLOSED:
+            return []
+        self.state = State.CLOSED
+        return [Close(P.CLOSE_GOING_AWAY, "server shutting down")]
+
+    # outcomes of the shell's work
+
+    def opened(self, started: dict) -> list[Action]:
+        """The session is open: ``started`` is its description for the peer."""
+        self.state = State.STREAMING
+        return [Send({"type": "started", **started})]
+
+    def refused(self, code: int, reason: str) -> list[Action]:
+        """Admission refused the session (full, name taken)."""
+        self.state = State.CLOSED
+        return [Close(code, reason)]
+
+    def audio_rejected(self, reason: str) -> list[Action]:
+        """A fed block was not usable audio: the source broke the protocol."""
+        return self._violation(ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, reason))
+
+    def control_applied(self, state: dict) -> list[Action]:
+        return [Send({"type": "ack", "controls": state})]
+
+    def control_rejected(self, reason: str) -> list[Action]:
+        return [Send({"type": "rejected", "reason": reason})]
+
+    def finished(self, frames: int, audio_s: float) -> list[Action]:
+        """The session's last frames went out to its viewers."""
+        if self.state is State.CLOSED:
+            return []
+        self.state = State.CLOSED
+        if self._ending_reply:
+            return [Send({"type": "ended", "frames": frames, "audio_s": audio_s}), Close(*self.viewer_close)]
+        return [Close(*self.viewer_close)]
+
+    # internals
+
+    def _start(self, message: str | bytes) -> list[Action]:
+        if not isinstance(message, str):
+            raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "expected a JSON start message (text) first, got binary")
+        start = loads_bounded(message, "start message")
+        if start.get("type") != "start":
+            raise ProtocolViolation(P.CLOSE_POLICY,
+                                    f"first message must be {{\"type\": \"start\"}}, got type {_short(start.get('type'))}")
+        if not token_ok(start.get("token"), self.token):
+            raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
+        input_kind = start.get("input", "audio")
+        kind = SESSION_KINDS.get(input_kind) if isinstance(input_kind, str) else None
+        if kind is None:
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"input must be one of {sorted(SESSION_KINDS)}")
+        unknown = sorted(set(start) - COMMON_START_FIELDS - kind.fields)
+        if unknown:
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {_short(unknown[:5])}")
+        name = start.get("session")
+        if not isinstance(name, str) or not P.SESSION_NAME.match(name):
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+        batch = start.get("batch", False)
+        if not isinstance(batch, bool):
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "batch must be true or false")
+        try:
+            config = kind.build(start, self.lag)
+        except ServerConfigError as exc:
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
+        self.state = State.OPENING
+        self.name, self.kind = name, kind
+        return [Open(name, config, str(input_kind), batch)]
+
+    def _violation(self, exc: ProtocolViolation) -> list[Action]:
+        if self.state in (State.STREAMING, State.FINISHING):
+            # The session ends where it is (no flush); its viewers are told why in one line.
+            self.viewer_close = (P.CLOSE_NORMAL, "session ended: its source broke the protocol")
+        self.state = State.CLOSED
+        return [Close(exc.code, exc.reason)]
+
+
+@message_type("control")
+def _on_control(proto: IngestProtocol, msg: dict) -> list[Action]:
+    return [Control(msg)]
+
+
+@message_type("end")
+def _on_end(proto: IngestProtocol, msg: dict) -> list[Action]:
+    proto.state = State.FINISHING
+    return [Finish()]
+
+
+def _short(value: object, limit: int = 40) -> str:
+    """repr of a client-supplied value, cut so a reason stays within a close frame."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# -- view ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ViewRequest:
+    """A parsed ``/view`` query: session name, subscription kind and encoding names, their header
+    kind/encoding numbers, and whether the session's audio is relayed too."""
+
+    session: str
+    kind: str
+    encoding: str
+    header_kind: int
+    header_encoding: int
+    audio: bool
+
+
+def query_args(path: str) -> dict[str, str]:
+    """The query of a request path as {name: last value} (bounded: at most 32 fields)."""
+    query = urllib.parse.urlsplit(path).query
+    try:
+        pairs = urllib.parse.parse_qsl(query, max_num_fields=32)
+    except ValueError:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "too many query fields") from None
+    return dict(pairs)
+
+
+def parse_view_query(args: Mapping[str, str], *, token: str | None, has_head: bool) -> ViewRequest:
+    """A viewer's query -> ViewRequest, or ProtocolViolation with the close code and reason."""
+    if not token_ok(args.get("token"), token):
+        raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
+    name = args.get("session", "")
+    if not P.SESSION_NAME.match(name):
+        raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {_short(name)}")
+    kind = args.get("kind", "params")
+    encodings = P.VIEW_KINDS.get(kind)
+    if encodings is None:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"kind must be one of {sorted(P.VIEW_KINDS)}, got {_short(kind)}")
+    enc_name = args.get("encoding", next(iter(encodings)))
+    if enc_name not in encodings:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST,
+                                f"encoding for {kind} must be one of {sorted(encodings)}, got {_short(enc_name)}")
+    if kind == "deltas" and not has_head:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "this server has no head rig: vertex deltas are unavailable")
+    audio = args.get("audio", "1")
+    if audio not in ("0", "1"):
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "audio must be 0 or 1")
+    hk, he = encodings[enc_name]
+    return ViewRequest(name, kind, enc_name, hk, he, audio == "1")

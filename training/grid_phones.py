@@ -29,7 +29,7 @@ listed) or ``spread`` (no audio, pocketsphinx unavailable or failed).
 Phone set: ARPAbet as in CMUdict without stress digits, upper case, plus ``SIL``: the
 ``arpabet`` inventory of :mod:`training.articulatory` (which lower-cases and strips stress).
 
-File: ``training/data/grid_s1_phones.json`` (written by ``facecast phones``), read with
+File: ``assets/data/grid_s1_phones.json`` (written by ``facecast phones``), read with
 :func:`read_grid_phones`. The GRID corpus is CC BY 4.0 (Cooke, Barker, Cunningham, Shao 2006);
 the file carries that credit.
 """
@@ -45,10 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
-from facecast.files import atomic_write_bytes
+from assets.files import atomic_write_bytes
+from assets.grid import SILENCE_WORDS, GridSentence, read_words
 from training.alignments import Alignment, Phone
 from training.errors import AlignmentFormatError, ConfigError, MissingDependencyError
-from training.grid import SILENCE_WORDS, GridSentence, read_words
 
 FORMAT = "facecast-grid-phones/1"
 PHONE_SET = "arpabet"
@@ -71,7 +71,7 @@ CREDIT = ("GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S.
           "'An audio-visual corpus for speech perception and automatic speech recognition', "
           "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0.")
 
-DEFAULT_PATH = Path(__file__).resolve().parent / "data" / "grid_s1_phones.json"
+DEFAULT_PATH = Path(__file__).resolve().parents[1] / "assets" / "data" / "grid_s1_phones.json"
 
 PRONUNCIATIONS: dict[str, tuple[str, ...]] = {
     w: tuple(p.split()) for w, p in {

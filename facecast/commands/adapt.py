@@ -38,10 +38,10 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from assets.audio import read_audio
+    from assets.modelfile import load_model, save_model
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
-    from training.audio_io import read_audio
-    from training.modelfile import load_model, save_model
 
     model = load_model(None if args.model == "default" else Path(args.model))
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance,

@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--root", default=None, metavar="DIR",
                    help="GRID s1 folder with video/ and align/ (default: ../shared/data/video/grid_s1)")
     p.add_argument("-o", "--out", default=None, metavar="JSON",
-                   help="file to write (default: training/data/grid_s1_phones.json in the repository)")
+                   help="file to write (default: assets/data/grid_s1_phones.json in the repository)")
     p.add_argument("--workers", type=int, default=2, help="parallel processes")
     p.add_argument("--no-align", action="store_true", help="spread every word's phones (no pocketsphinx, no audio)")
     p.add_argument("--plot", default=None, metavar="PNG", help="also plot waveform, words and phones of --plot-id")
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from training import grid
+    from assets import grid
     from training.errors import ConfigError
     from training.grid_phones import (
         ALIGN_RATE_HZ,

@@ -20,10 +20,10 @@ def test_adapt_writes_a_valid_model_that_fits_the_new_voice_better(ljspeech, tmp
     """Enrol on 8 LJ Speech utterances (one reader, ~50 s, no transcript); 4 others of hers,
     held out, get a higher audio log-likelihood under the adapted model; the file decodes
     (its stored streaming matrices match the adapted HMM) and the visual side is unchanged."""
+    from assets.audio import read_audio
+    from assets.modelfile import load_model
     from realtime_core.adaptation import enrolment_features
     from realtime_core.hmm.adapt import audio_log_likelihood
-    from training.audio_io import read_audio
-    from training.modelfile import load_model
 
     out = tmp_path / "adapted.npz"
     assert main(["adapt", "default", *map(str, ljspeech[:8]), "-o", str(out), "--iters", "3"]) == 0

@@ -10,6 +10,7 @@ import shutil
 import numpy as np
 import pytest
 
+from realtime_core.phones import PhonemeSegment
 from training.alignments import Alignment
 from training.articulatory import classes_for
 from training.errors import AlignmentFormatError
@@ -26,7 +27,6 @@ from training.grid_phones import (
     spread,
     write_grid_phones,
 )
-from training.params import PhonemeSegment
 
 needs_pocketsphinx = pytest.mark.skipif(importlib.util.find_spec("pocketsphinx") is None,
                                         reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')")
@@ -95,7 +95,7 @@ def test_label_sentence_rejects_bad_word_alignments() -> None:
 def test_shipped_file_covers_the_corpus_inside_the_word_spans(grid_root) -> None:
     """Every sentence: phones tile its GRID word spans exactly, in pronunciation order (so every
     word with /p b m/ has them), with plausible durations."""
-    from training.grid import SILENCE_WORDS, read_words, sentences
+    from assets.grid import SILENCE_WORDS, read_words, sentences
 
     shipped = read_grid_phones_file(DEFAULT_PATH)
     sents = sentences(grid_root)
@@ -162,7 +162,7 @@ def test_pronunciations_are_cmudict_but_for_the_british_letters() -> None:
 
 @needs_pocketsphinx
 def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None:
-    from training.grid import read_words
+    from assets.grid import read_words
     from training.grid_phones import SentenceAligner
     from training.video import decode_audio
 
