@@ -10,7 +10,8 @@ Two measurements (``facecast bench adapt``):
      scored on the same halves (a fresh front end per half).
 2. **GRID s1 as a new voice** (only meaningful for a model not trained on s1): enrol on the
    first ``--enrol-seconds`` of s1 *train*-split sentences (audio only), score
-   ``--val-sentences`` s1 *val*-split sentences (never the test split).
+   ``--val-sentences`` s1 *val*-split sentences (never the test split), for each relevance
+   factor of ``--relevance-grid``: the place to choose it (never on the other-talker clips).
 
 Truth: the mouth parameters measured by ``training.video.measure_video`` (MediaPipe).
 Estimates: the live streaming path (``speech_to_params``). Prints a table and writes JSON
@@ -86,10 +87,13 @@ def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
     return rows
 
 
-def s1_as_new_voice(model, cfg, root: Path, enrol_seconds: float, n_val: int, progress) -> dict:
+def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: float, n_val: int, progress
+                    ) -> list[dict]:
+    """One row per relevance factor: enrol on s1 train sentences, score s1 val sentences."""
     from assets.audio import read_audio
     from assets.grid import sentences
     from realtime_core.adaptation import adapt_av_model
+    from realtime_core.hmm.adapt import AdaptConfig
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
     from training.video import measure_video
 
@@ -100,23 +104,27 @@ def s1_as_new_voice(model, cfg, root: Path, enrol_seconds: float, n_val: int, pr
         total += len(x) / model.sample_rate_hz
         if total >= enrol_seconds:
             break
-    adapted, _res = adapt_av_model(model, enrol, config=cfg)
-    truths, before, after, loud = [], [], [], []
-    for s in progress(sentences(root, split="val")[:n_val], desc="s1 val sentences", unit="clip"):
-        tr = measure_video(s.video)
-        e0 = _estimate(model, tr.samples, tr.sample_rate_hz)
-        e1 = _estimate(adapted, tr.samples, tr.sample_rate_hz)
-        n = min(len(tr.params), len(e0), len(e1))
-        truths.append(tr.params[:n, MOUTH_OPEN])
-        before.append(e0[:n, MOUTH_OPEN])
-        after.append(e1[:n, MOUTH_OPEN])
-        loud.append(loudness_db(tr.samples, tr.sample_rate_hz, n))
-    t = np.concatenate(truths)
-    return {"enrol_files": len(enrol), "enrol_seconds": round(total, 1), "val_sentences": len(truths),
-            "frames": len(t), "loudness": pearson(t, np.concatenate(loud)),
-            "before": pearson(t, np.concatenate(before)), "after": pearson(t, np.concatenate(after)),
-            "visited": adapted.metadata["adaptation"]["components_visited"],
-            "audio_loglik_per_frame": adapted.metadata["adaptation"]["audio_loglik_per_frame"]}
+    val = [measure_video(s.video) for s in progress(sentences(root, split="val")[:n_val], desc="s1 val", unit="clip")]
+    truth = np.concatenate([tr.params[:, MOUTH_OPEN] for tr in val])
+    loud = np.concatenate([loudness_db(tr.samples, tr.sample_rate_hz, len(tr.params)) for tr in val])
+
+    def score(m) -> float:
+        est = []
+        for tr in val:
+            e = _estimate(m, tr.samples, tr.sample_rate_hz)[:, MOUTH_OPEN]
+            est.append(np.pad(e, (0, max(0, len(tr.params) - len(e))), mode="edge")[: len(tr.params)])
+        return pearson(truth, np.concatenate(est))
+
+    base = score(model)
+    rows = []
+    for tau in relevances:
+        adapted, _ = adapt_av_model(model, enrol, config=AdaptConfig(relevance=tau, weight_relevance=tau))
+        info = adapted.metadata["adaptation"]
+        rows.append({"relevance": tau, "enrol_files": len(enrol), "enrol_seconds": round(total, 1),
+                     "val_sentences": len(val), "frames": len(truth), "loudness": pearson(truth, loud),
+                     "before": base, "after": score(adapted), "visited": info["components_visited"],
+                     "audio_loglik_per_frame": info["audio_loglik_per_frame"]})
+    return rows
 
 
 def _plot(rows: list[dict], png: Path) -> None:
@@ -150,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--enrol-seconds", type=float, default=45.0, help="s1 enrolment speech (train split)")
     ap.add_argument("--val-sentences", type=int, default=20, help="s1 val-split sentences scored")
     ap.add_argument("--no-s1", action="store_true", help="skip the s1-as-new-voice measurement")
-    ap.add_argument("--relevance", type=float, default=8.0, help="MAP relevance factor (frames)")
+    ap.add_argument("--relevance", type=float, default=8.0, help="MAP relevance factor (frames) for the other talkers")
+    ap.add_argument("--relevance-grid", default="2,4,8,16,32",
+                    help="relevance factors tried on s1 (enrol on train, score val: the place to choose it)")
     ap.add_argument("--out", type=Path, default=Path("adapt_report"), help="folder for JSON and plot")
     args = ap.parse_args(argv)
 
@@ -177,14 +187,19 @@ def main(argv: list[str] | None = None) -> int:
               "other_talkers": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
               "other_talkers_mean": means}
     if not args.no_s1:
+        grid = [float(v) for v in args.relevance_grid.split(",") if v]
         with threadpool_limits(1):
-            s1 = s1_as_new_voice(model, cfg, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm)
+            s1 = s1_as_new_voice(model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm)
         report["s1_new_voice"] = s1
-        print(f"s1 as a new voice: enrol {s1['enrol_seconds']} s ({s1['enrol_files']} train sentences), "
-              f"{s1['val_sentences']} val sentences ({s1['frames']} frames): r(mouth_open) {s1['before']:.3f} -> "
-              f"{s1['after']:.3f} (loudness {s1['loudness']:.3f}); {s1['visited']} components visited; "
-              f"enrolment audio log-lik/frame {s1['audio_loglik_per_frame'][0]:.2f} -> "
-              f"{s1['audio_loglik_per_frame'][1]:.2f}")
+        r0 = s1[0]
+        print(f"s1 as a new voice: enrol {r0['enrol_seconds']} s ({r0['enrol_files']} train sentences), "
+              f"{r0['val_sentences']} val sentences ({r0['frames']} frames); loudness {r0['loudness']:.3f}; "
+              f"before {r0['before']:.3f}")
+        print("| relevance | r(mouth_open) after | components visited | enrolment audio log-lik/frame |")
+        print("|---:|---:|---:|---|")
+        for r in s1:
+            print(f"| {r['relevance']:g} | {r['after']:.3f} | {r['visited']} | "
+                  f"{r['audio_loglik_per_frame'][0]:.2f} -> {r['audio_loglik_per_frame'][1]:.2f} |")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "adaptation.json").write_text(json.dumps(report, indent=2) + "\n")
     _plot(rows, args.out / "adaptation.png")
