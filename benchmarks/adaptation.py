@@ -8,7 +8,8 @@ Two measurements (``facecast bench adapt``):
    * ``self``: enrol on the whole clip (3 s, audio only, no lips), score the same clip;
    * ``halves``: enrol on one half (1.5 s), score the other half, both ways; the baseline is
      scored on the same halves (a fresh front end per half).
-2. **GRID s1 as a new voice** (only meaningful for a model not trained on s1): enrol on the
+2. **GRID s1 as a new voice** (as recorded, ``--speeds 1``, for a model not trained on s1; or
+   speed-perturbed, e.g. ``--speeds 0.85,1.2``, a new voice for a model trained on s1): enrol on the
    first ``--enrol-seconds`` of s1 *train*-split sentences (audio only), score
    ``--val-sentences`` s1 *val*-split sentences (never the test split), for each relevance
    factor of ``--relevance-grid``: the place to choose it (never on the other-talker clips).
@@ -87,32 +88,33 @@ def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
     return rows
 
 
-def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: float, n_val: int, progress
-                    ) -> list[dict]:
-    """One row per relevance factor: enrol on s1 train sentences, score s1 val sentences."""
-    from assets.audio import read_audio
-    from assets.grid import sentences
+def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: float, n_val: int, progress, *,
+                    speed: float = 1.0) -> list[dict]:
+    """One row per relevance factor: enrol on s1 train sentences, score s1 val sentences; with
+    ``speed`` != 1 both played that much faster (``training.reallips.speed_perturb``: pitch,
+    formants and tempo scale together, the lip track re-timed): a new voice for a model trained
+    on s1 as recorded."""
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-    from training.video import measure_video
+    from training.reallips import grid_utterances, speed_perturb
 
     enrol, total = [], 0.0
-    for s in sentences(root, split="train"):
-        x, _ = read_audio(s.video, rate_hz=model.sample_rate_hz)
-        enrol.append(x)
-        total += len(x) / model.sample_rate_hz
+    for u in grid_utterances("train", root=root):
+        u = speed_perturb(u, speed)
+        enrol.append(_at_model_rate(model, u.samples, u.sample_rate_hz))
+        total += len(u.samples) / u.sample_rate_hz
         if total >= enrol_seconds:
             break
-    val = [measure_video(s.video) for s in progress(sentences(root, split="val")[:n_val], desc="s1 val", unit="clip")]
-    truth = np.concatenate([tr.params[:, MOUTH_OPEN] for tr in val])
-    loud = np.concatenate([loudness_db(tr.samples, tr.sample_rate_hz, len(tr.params)) for tr in val])
+    val = [speed_perturb(u, speed) for u in grid_utterances("val", root=root)[:n_val]]
+    truth = np.concatenate([u.params[:, MOUTH_OPEN] for u in val])
+    loud = np.concatenate([loudness_db(u.samples, u.sample_rate_hz, len(u.params)) for u in val])
 
     def score(m) -> float:
         est = []
-        for tr in val:
-            e = _estimate(m, tr.samples, tr.sample_rate_hz)[:, MOUTH_OPEN]
-            est.append(np.pad(e, (0, max(0, len(tr.params) - len(e))), mode="edge")[: len(tr.params)])
+        for u in progress(val, desc="scoring", unit="clip", leave=False):
+            e = _estimate(m, u.samples, u.sample_rate_hz)[:, MOUTH_OPEN]
+            est.append(np.pad(e, (0, max(0, len(u.params) - len(e))), mode="edge")[: len(u.params)])
         return pearson(truth, np.concatenate(est))
 
     base = score(model)
@@ -120,7 +122,7 @@ def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: f
     for tau in relevances:
         adapted, _ = adapt_av_model(model, enrol, config=AdaptConfig(relevance=tau, weight_relevance=tau))
         info = adapted.metadata["adaptation"]
-        rows.append({"relevance": tau, "enrol_files": len(enrol), "enrol_seconds": round(total, 1),
+        rows.append({"speed": speed, "relevance": tau, "enrol_files": len(enrol), "enrol_seconds": round(total, 1),
                      "val_sentences": len(val), "frames": len(truth), "loudness": pearson(truth, loud),
                      "before": base, "after": score(adapted), "visited": info["components_visited"],
                      "audio_loglik_per_frame": info["audio_loglik_per_frame"]})
@@ -158,6 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--enrol-seconds", type=float, default=45.0, help="s1 enrolment speech (train split)")
     ap.add_argument("--val-sentences", type=int, default=20, help="s1 val-split sentences scored")
     ap.add_argument("--no-s1", action="store_true", help="skip the s1-as-new-voice measurement")
+    ap.add_argument("--speeds", default="1",
+                    help="s1 speed factors (0.8-1.25) for the new-voice measurement: 1 = s1 as recorded (for a "
+                    "model not trained on s1), e.g. 0.85,1.2 for a model trained on s1")
     ap.add_argument("--relevance", type=float, default=8.0, help="MAP relevance factor (frames) for the other talkers")
     ap.add_argument("--relevance-grid", default="2,4,8,16,32",
                     help="relevance factors tried on s1 (enrol on train, score val: the place to choose it)")
@@ -188,18 +193,21 @@ def main(argv: list[str] | None = None) -> int:
               "other_talkers_mean": means}
     if not args.no_s1:
         grid = [float(v) for v in args.relevance_grid.split(",") if v]
-        with threadpool_limits(1):
-            s1 = s1_as_new_voice(model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm)
-        report["s1_new_voice"] = s1
-        r0 = s1[0]
-        print(f"s1 as a new voice: enrol {r0['enrol_seconds']} s ({r0['enrol_files']} train sentences), "
-              f"{r0['val_sentences']} val sentences ({r0['frames']} frames); loudness {r0['loudness']:.3f}; "
-              f"before {r0['before']:.3f}")
-        print("| relevance | r(mouth_open) after | components visited | enrolment audio log-lik/frame |")
-        print("|---:|---:|---:|---|")
-        for r in s1:
-            print(f"| {r['relevance']:g} | {r['after']:.3f} | {r['visited']} | "
-                  f"{r['audio_loglik_per_frame'][0]:.2f} -> {r['audio_loglik_per_frame'][1]:.2f} |")
+        report["s1_new_voice"] = []
+        for speed in [float(v) for v in args.speeds.split(",") if v]:
+            with threadpool_limits(1):
+                s1 = s1_as_new_voice(model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm,
+                                     speed=speed)
+            report["s1_new_voice"] += s1
+            r0 = s1[0]
+            print(f"s1 played x{speed:g} as a new voice: enrol {r0['enrol_seconds']} s ({r0['enrol_files']} train "
+                  f"sentences), {r0['val_sentences']} val sentences ({r0['frames']} frames); loudness "
+                  f"{r0['loudness']:.3f}; before {r0['before']:.3f}")
+            print("| relevance | r(mouth_open) after | components visited | enrolment audio log-lik/frame |")
+            print("|---:|---:|---:|---|")
+            for r in s1:
+                print(f"| {r['relevance']:g} | {r['after']:.3f} | {r['visited']} | "
+                      f"{r['audio_loglik_per_frame'][0]:.2f} -> {r['audio_loglik_per_frame'][1]:.2f} |")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "adaptation.json").write_text(json.dumps(report, indent=2) + "\n")
     _plot(rows, args.out / "adaptation.png")
