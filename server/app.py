@@ -254,6 +254,8 @@ class FacecastServer:
         rig = self.head.rig if self.head else None
         if self.pool is not None:
             return await self.pool.open(config, rig=rig, times=self.times)
+        if config.enrol is not None:  # adaptation is CPU work: keep the event loop serving others
+            return LocalSession(await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times))
         return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
     async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
@@ -394,6 +396,8 @@ class FacecastServer:
                                                    paced=True)
                 except AdmissionRefused as exc:
                     todo.extend(proto.refused(exc.code, exc.reason))
+                except AudioFormatError as exc:  # e.g. an enrolment recording the model rejects
+                    todo.extend(proto.refused(P.CLOSE_INVALID_PAYLOAD, str(exc)))
                 else:
                     todo.extend(proto.opened(describe.started(live)))
         return live

@@ -12,6 +12,7 @@ FORWARDED: dict[str, tuple[str, str]] = {
     "soak": ("benchmarks.server_soak", "RSS growth, frames lost, loop lag and latency over minutes (--hostile)"),
     "render": ("benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
     "units": ("benchmarks.units", "unit search on 20-phone targets, `facecast say` to MP4, first frame of a text session"),
+    "adapt": ("benchmarks.adaptation", "speaker adaptation: r(mouth_open) vs MediaPipe lips before/after enrolment"),
 }
 """Benchmarks with their own argument parsers: name -> (module with main(argv), help)."""
 
