@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-
 FORWARDED: dict[str, tuple[str, str]] = {
     "latency": ("benchmarks.server_latency",
                 "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
