@@ -37,9 +37,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _corpus(args: argparse.Namespace):
     from tqdm import tqdm
-    from training.grid_phones import read_grid_phones
 
     from assets import grid
+    from training.grid_phones import read_grid_phones
     from training.unit_corpus import build_grid_corpus
 
     root = args.grid or grid.default_root()
