@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from realtime_core.face.checks import SINGLE_POSES, SPEECH_POSES, SPEECH_SCALE, check_rig
+from realtime_core.face.checks import (
+    SINGLE_POSES,
+    SPEECH_POSES,
+    SPEECH_SCALE,
+    check_rig,
+)
 from realtime_core.face.model import MouthLandmarks
 from training.articulatory import CLASSES
 
