@@ -19,7 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description="Score a model with the live streaming path, beside a loudness baseline (the frame's RMS "
         "level in dB as a mouth-opening predictor). Real lips, truth measured by `facecast extract` (needs the "
-        "video extra): (1) held-out GRID s1 sentences (the test split of training.grid, never tuned on; --grid-split "
+        "video extra): (1) held-out GRID s1 sentences (the test split of assets.grid, never tuned on; --grid-split "
         "val for choices); (2) the other talkers' clips in --video-dir (s1's clip there is left out). Per "
         "parameter: r at lag 0, the best lag and its r, nu = std(est)/std(true), the share of bilabial closures "
         "the estimate reaches (mouth_open <= 0.01 IOD). Then (3) held-out synthetic voices (espeak variants f5, "

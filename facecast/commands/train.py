@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="add the real lips of GRID s1 (default ROOT: ../shared/data/video/grid_s1 or "
                    "$FACECAST_SHARED_DATA/video/grid_s1), face tracks from the extraction cache (measured if missing)")
     p.add_argument("--grid-split", choices=("train", "val", "test", "all"), default="train",
-                   help="which GRID s1 sentences (training.grid.split_of); never 'test' for a reported model")
+                   help="which GRID s1 sentences (assets.grid.split_of); never 'test' for a reported model")
     p.add_argument("--speed", type=lambda t: tuple(float(v) for v in t.split(",") if v), default=(),
                    help="speed-perturbation factors for the GRID utterances, e.g. 0.9,1.1 (one copy each: pitch, "
                    "formants and tempo scaled, lip track re-timed)")
