@@ -15,8 +15,8 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 grid="${1:-${FACECAST_SHARED_DATA:-$(cd .. && pwd)/shared/data}/video/grid_s1}"
 run() { if command -v facecast >/dev/null; then facecast "$@"; else .venv/bin/facecast "$@"; fi; }
-KAPPA=0.1
-BAND=0.0
+KAPPA=0.2
+BAND=0.03
 SPEEDS=""
 run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train ${SPEEDS:+--speed "$SPEEDS"} -o assets/data/default_model.npz \
