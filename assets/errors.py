@@ -60,6 +60,14 @@ class AssetError(AssetsError, RuntimeError):
     """The built-in head's assets could not be fetched or read."""
 
 
+class GlbError(AssetsError, ValueError):
+    """A head or animation cannot be written as glTF (bad shapes, unknown image type)."""
+
+
+class RigCheckError(AssetsError, ValueError):
+    """A rig fails the extreme-pose checks (flipped triangles, stretch, lips, teeth)."""
+
+
 class AlignmentFormatError(FileProblem):
     """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
 
