@@ -372,7 +372,7 @@ class FacecastServer:
                     if not done:
                         recv.cancel()
                         actions = proto.idle_timed_out(idle_s)
-                    elif recv not in done:  # server shutting down
+                    elif ended in done:  # server shutting down: first, even if a message is waiting too
                         recv.cancel()
                         actions = proto.shutdown()
                     else:
