@@ -33,7 +33,6 @@ import signal
 import socket
 import time
 import urllib.parse
-from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
 from typing import AsyncIterator
@@ -44,17 +43,28 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.http11 import Request, Response
 
-from assets.heads.mesh import HeadMesh
+from assets.heads.head import Head
 from realtime_core.avmodel import AvModel
-from realtime_core.face.rig import Rig
 from server import describe
 from server import protocol as SP
 from server.cluster import Cluster, RemoteFeed
 from server.config import ServerConfig
-from server.errors import (AudioFormatError, ControlError, IngestOverrun, ProtocolViolation, ServerConfigError,
-                           ServerError)
-from server.guard import (ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed,
-                          origin_allowed)
+from server.errors import (
+    AudioFormatError,
+    ControlError,
+    IngestOverrun,
+    ProtocolViolation,
+    ServerConfigError,
+    ServerError,
+)
+from server.guard import (
+    ConnectionCounter,
+    ConnectionRate,
+    IncidentLog,
+    IngestPacer,
+    host_allowed,
+    origin_allowed,
+)
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig
@@ -63,14 +73,6 @@ from server.workers import WorkerPool
 from wire import protocol as P
 
 log = logging.getLogger("facecast.server")
-
-
-@dataclass(frozen=True)
-class Head:
-    """The head viewers animate: its rig (moving vertices, deltas) and mesh (download)."""
-
-    rig: Rig
-    mesh: HeadMesh
 
 
 class AdmissionRefused(ServerConfigError):
@@ -105,6 +107,7 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.cluster: Cluster | None = None
+        self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
         self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
                                sessions=self.session_list)
         self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
@@ -252,6 +255,8 @@ class FacecastServer:
         rig = self.head.rig if self.head else None
         if self.pool is not None:
             return await self.pool.open(config, rig=rig, times=self.times)
+        if config.enrol is not None:  # adaptation is CPU work: keep the event loop serving others
+            return LocalSession(await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times))
         return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
     async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
@@ -306,6 +311,10 @@ class FacecastServer:
                 await self._ingest(ws)
             elif path == "/view":
                 await self._view(ws)
+            elif path == "/text":
+                from server.text_session import handle_text
+
+                await handle_text(self, ws)
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
         except ProtocolViolation as exc:
@@ -420,6 +429,8 @@ class FacecastServer:
                                                    paced=True)
                 except AdmissionRefused as exc:
                     todo.extend(proto.refused(exc.code, exc.reason))
+                except AudioFormatError as exc:  # e.g. an enrolment recording the model rejects
+                    todo.extend(proto.refused(P.CLOSE_INVALID_PAYLOAD, str(exc)))
                 else:
                     todo.extend(proto.opened(describe.started(live)))
         return live
@@ -512,9 +523,9 @@ class FacecastServer:
         split = urllib.parse.urlsplit(request.path)
         path = split.path
         upgrade = headers.get("Upgrade", "").lower() == "websocket"
-        if upgrade or path in ("/ingest", "/view"):
-            if path not in ("/ingest", "/view"):
-                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+        if upgrade or path in ("/ingest", "/view", "/text"):
+            if path not in ("/ingest", "/view", "/text"):
+                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest, /view or /text)")
             if not origin_allowed(headers.get("Origin"), headers.get("Host"), cfg.allowed_origins):
                 return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
             client = _client_address(connection)
@@ -633,25 +644,8 @@ async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" =
 
 def load_head(*, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None,
               builtin: bool = True) -> Head | None:
-    """The head to serve: a rig file, a mesh to rig now (with its landmarks JSON, or the one shipped
-    for it), the built-in head, or None."""
-    if rig is not None:
-        from assets.heads.rigfile import load_rig
+    """The head to serve (:func:`assets.heads.head.resolve_head`): a rig file, a mesh, the built-in head, or None."""
+    from assets.heads.head import resolve_head
 
-        r, m = load_rig(rig)
-        return Head(r, m)
-    if head is not None:
-        from assets.heads.landmarks import read_landmarks, shipped_landmarks
-        from assets.heads.mesh import load_mesh
-        from assets.heads.rigging import rig_head
-
-        m = load_mesh(head)
-        lm_path = landmarks or shipped_landmarks(head)
-        r, m = rig_head(m, None if lm_path is None else read_landmarks(lm_path), landmark_source=str(lm_path))
-        return Head(r, m)
-    if builtin:
-        from assets.heads.rigfile import builtin_rig
-
-        r, m = builtin_rig()
-        return Head(r, m)
-    return None
+    spec = rig or head or ("builtin" if builtin else None)
+    return None if spec is None else resolve_head(spec, landmarks=landmarks)

@@ -13,7 +13,7 @@ from realtime_core.blendshapes import blendshape_names
 from wire import protocol as P
 
 if TYPE_CHECKING:
-    from server.app import Head
+    from assets.heads.head import Head
     from server.live import LiveSession
     from server.protocol import ViewRequest
 
@@ -21,8 +21,12 @@ if TYPE_CHECKING:
 def started(live: "LiveSession") -> dict:
     """The ``started`` reply's fields (the protocol adds ``type``)."""
     s = live.session
-    return {"session": live.name, "model_rate_hz": s.rate_hz, "fps": s.fps,
-            "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={live.name}"}
+    out = {"session": live.name, "model_rate_hz": s.rate_hz, "fps": s.fps,
+           "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={live.name}"}
+    cfg = getattr(s, "config", None)
+    if cfg is not None and getattr(cfg, "enrol", None) is not None:
+        out["enrolled_s"] = round(cfg.enrol_seconds(), 2)  # the session's model copy is adapted to this voice
+    return out
 
 
 def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None") -> dict:

@@ -7,17 +7,19 @@ can print it as one line (``facecast corpus: error: ...``).
 from __future__ import annotations
 
 from assets.errors import (  # file problems are the assets edge's; training raises them too
+    AlignmentFormatError,
     CorpusFormatError,
     FileProblem,
     NotAudioError,
     SilentAudioError,
+    SynthesisError,
     TruncatedFileError,
     WrongSampleRateError,
 )
 from realtime_core.errors import ConfigError, FacecastError
 
 __all__ = [
-    "AlignmentFormatError", "ConfigError", "CorpusFormatError", "FileProblem", "MissingDependencyError",
+    "AlignmentFormatError", "ConfigError", "CorpusFormatError", "FileProblem", "LengthMismatchError", "MissingDependencyError",
     "NoFaceError", "NotAudioError", "NotVideoError", "SilentAudioError", "SynthesisError", "TrainingError",
     "TruncatedFileError", "WrongSampleRateError",
 ]
@@ -31,17 +33,13 @@ class NoFaceError(FileProblem, TrainingError):
     """No face (or too few frames with a face) was found in a video."""
 
 
-class AlignmentFormatError(FileProblem, TrainingError):
-    """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
-
-
-class SynthesisError(TrainingError):
-    """espeak-ng failed: library missing, unknown voice, or synthesis error."""
-
-
 class MissingDependencyError(TrainingError):
     """An optional dependency (e.g. mediapipe for video) or tool (ffmpeg) is not installed."""
 
 
 class NotVideoError(FileProblem, TrainingError):
     """The file is not a readable video (no video stream, unknown format)."""
+
+
+class LengthMismatchError(FileProblem, TrainingError):
+    """A video's audio and picture differ in duration by more than the extractor accepts."""
