@@ -90,6 +90,11 @@ class AvModel:
     def sample_rate_hz(self) -> int:
         return int(self.frontend.mfcc.sample_rate_hz)
 
+    def algorithmic_delay_ms(self, lag: int = 0) -> float:
+        """The algorithmic delay of this model's live path with ``lag`` frames of smoothing
+        (:meth:`FrontEndConfig.algorithmic_delay_ms`)."""
+        return self.frontend.algorithmic_delay_ms(lag)
+
     def front_end(self) -> FrontEnd:
         """A fresh streaming front end for one utterance or live session."""
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)

@@ -4,7 +4,8 @@
 inverter. ``push(samples)`` returns the parameter rows now final, ``flush()`` the rest;
 row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
 once the audio reaches frame ``tc + lag`` plus one analysis window: the algorithmic
-delay is ``(tc + lag) / fps`` seconds plus the window.
+delay is ``(tc + lag) / fps`` seconds plus the window
+(:meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`).
 
 :func:`speech_to_params` runs the same objects over a whole utterance, so offline results
 equal what a live session produces frame for frame; ``mode="batch"`` uses batch HMMI
@@ -58,6 +59,13 @@ class SpeechToParams:
     def delay_frames(self) -> int:
         """Frames of lookahead between the newest audio frame and the newest output."""
         return self.model.frontend.tc + self._inv.config.lag
+
+    @property
+    def algorithmic_delay_ms(self) -> float:
+        """The model's algorithmic delay at this chain's lag, plus the resampler's lookahead when the
+        input is not at the model rate (under 1 ms)."""
+        extra = 0.0 if self._resampler is None else 1e3 * self._resampler.delay_samples_in / self.rate_hz
+        return self.model.algorithmic_delay_ms(self._inv.config.lag) + extra
 
     def reset(self) -> None:
         if self._resampler is not None:

@@ -36,13 +36,15 @@ caller draws progress and writes checkpoints."""
 @dataclass(frozen=True, kw_only=True)
 class TrainRecipe:
     """sample_rate_hz: model rate (inputs are resampled to it); n_ceps; tc (context);
-    hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed);
+    window_hops: MFCC analysis window in video hops (with tc it sets the algorithmic delay,
+    :attr:`realtime_core.features.FrontEndConfig.delay_ms`); hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed);
     energy: use c0 as a feature too; likelihood_scale: the live path's audio-likelihood
     exponent, stored in the model."""
 
     sample_rate_hz: int = 16000
     n_ceps: int = 11
     tc: int = 3
+    window_hops: float = 2.0
     energy: bool = True
     cmvn: CmvnConfig = field(default_factory=CmvnConfig)
     hmm: TrainConfig = field(default_factory=lambda: TrainConfig(n_states=16, n_mix=3, n_iter=25, tol=5e-4))
@@ -51,15 +53,16 @@ class TrainRecipe:
     @property
     def frontend(self) -> FrontEndConfig:
         return FrontEndConfig(
-            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps), cmvn=self.cmvn, tc=self.tc,
+            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps, window_hops=self.window_hops),
+            cmvn=self.cmvn, tc=self.tc,
             energy=self.energy,
         )
 
     def as_json(self) -> dict:
         h = self.hmm
         return {
-            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "energy": self.energy,
-            "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
+            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "window_hops": self.window_hops,
+            "energy": self.energy, "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
             "n_iter": h.n_iter, "tol": h.tol, "covar_prior_weight": h.covar_prior_weight,
             "covar_prior_scale": h.covar_prior_scale, "seed": h.seed, "likelihood_scale": self.likelihood_scale,
         }

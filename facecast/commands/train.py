@@ -43,6 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mix", type=int, default=3, help="Gaussian mixtures per state M")
     p.add_argument("--covariance", choices=("full", "diag"), default="full", help="covariance structure")
     p.add_argument("--tc", type=int, default=3, help="co-articulation context frames on each side")
+    p.add_argument("--window-hops", type=float, default=2.0,
+                   help="MFCC analysis window in video hops (1-4); with --tc it sets the algorithmic delay, "
+                   "(tc + window_hops) / 30 s (docs/architecture.md, Delay)")
     p.add_argument("--rate", type=int, default=16000, help="model sample rate in Hz (audio is resampled)")
     p.add_argument("--no-energy", dest="energy", action="store_false",
                    help="leave c0 (log energy) out of the audio features (the paper's c1..c11 only)")
@@ -106,7 +109,7 @@ def _run(args: argparse.Namespace) -> int:
     print(f"training on {len(utts)} utterances, {sum(u.duration_s for u in utts) / 60:.1f} min of audio")
 
     def recipe(n: int, m: int, cov: str, tc: int) -> TrainRecipe:
-        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, energy=args.energy, likelihood_scale=args.likelihood_scale,
+        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, window_hops=args.window_hops, energy=args.energy, likelihood_scale=args.likelihood_scale,
                            hmm=TrainConfig(
             n_states=n, n_mix=m, covariance_type=cov, n_iter=args.iters, tol=args.tol, seed=args.seed))
 

@@ -58,6 +58,26 @@ class FrontEndConfig:
         """Rows lag the newest complete MFCC frame by tc frames (the lookahead)."""
         return self.tc
 
+    def algorithmic_delay_ms(self, lag: int = 0) -> float:
+        """The algorithmic delay in ms with ``lag`` frames of fixed-lag smoothing: the one formula
+        the CLI, the server, ``facecast bench latency`` and the docs use (docs/architecture.md, Delay).
+
+        The output for video frame t (instant t / fps) depends on MFCC frame t + tc + lag (context,
+        then smoothing), whose window of ``window_len`` samples starts at ``frame_start(t + tc + lag)``;
+        so frame t is final ``frame_start(t + tc + lag) + window_len`` samples into the stream. Less
+        t / fps, that is at most (equal whenever (t + tc + lag) * rate / fps is whole)
+
+            delay = (tc + lag) / fps + window_len / sample_rate_hz
+
+        e.g. tc = 3, window 2 hops (1067 samples at 16 kHz): 100 + 66.7 = 166.7 ms. A resampler in
+        front (input not at the model rate) adds its own lookahead
+        (:attr:`realtime_core.pipeline.SpeechToParams.algorithmic_delay_ms`).
+        """
+        if lag < 0:
+            raise ConfigError(f"lag must be >= 0 frames, got {lag}")
+        m = self.mfcc
+        return 1e3 * ((self.tc + lag) / m.frame_rate_hz + m.window_len / m.sample_rate_hz)
+
 
 class FrontEnd:
     """``push(samples (n,)) -> (k, audio_dim) float64``; ``flush()`` -> the rest.
