@@ -27,10 +27,10 @@ from wire import protocol as P
 def benchmark_model(path: Path | None) -> tuple[AvModel, Path, str]:
     """(model, its file, description): ``path``, else the shipped default model, else a random
     model of the paper's size (28 states x 5 mixtures, 11 cepstra, tc = 3: the same per-frame cost)."""
-    from assets.modelfile import DEFAULT_MODEL, load_model, save_model
+    from assets.modelfile import DEFAULT_MODEL, load_model, resolve_model, save_model
 
-    if path is not None:
-        return load_model(path), Path(path), str(path)
+    if path is not None:  # a file or a shipped name (assets.modelfile.resolve_model)
+        return load_model(path), resolve_model(path), str(path)
     if DEFAULT_MODEL.is_file():
         return load_model(None), DEFAULT_MODEL, "shipped default model"
     from realtime_core.features import FrontEndConfig, MfccConfig

@@ -8,7 +8,7 @@ sample exists; a parameter viewer and a vertex-delta viewer record every frame's
 End to end, per frame k: from the arrival of the last audio sample frame k needs (sample
 ``frame_start(k + tc + lag) + window`` at 16 kHz, sent in the block containing it) to the viewer's
 receipt of frame k. That is the server's overhead beyond the algorithmic delay
-``(tc + lag) / fps + window / rate`` (the lookahead the co-articulation context and the analysis
+``(tc + lag) / fps + window / rate`` (``AvModel.algorithmic_delay_ms``: the lookahead the co-articulation context and the analysis
 window impose before any computation can start), which is reported next to it, together with the
 total from frame time ``k / fps`` to receipt (algorithmic delay + block buffering + overhead).
 Per stage: the server's own timings from ``/metrics`` (decode, resample, features, inversion, the
@@ -41,12 +41,12 @@ BUDGET_MS = 24.0  # the paper's per-frame budget (feature extraction + inversion
 
 @dataclass(frozen=True, kw_only=True)
 class LatencyConfig:
-    """seconds: audio streamed; block_s: ingest block length; model: model file (None: default or
-    paper-size random); head: also run a vertex-delta viewer on the built-in head."""
+    """seconds: audio streamed; block_s: ingest block length; model: model file or shipped name
+    (None: default or paper-size random); head: also run a vertex-delta viewer on the built-in head."""
 
     seconds: float = 20.0
     block_s: float = 0.01
-    model: Path | None = None
+    model: Path | str | None = None
     head: bool = True
 
 
@@ -82,7 +82,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
     mf = model.frontend.mfcc
     d = model.frontend.tc  # lag 0
     fps = mf.frame_rate_hz
-    algo_s = d / fps + mf.window_len / mf.sample_rate_hz
+    algo_s = model.algorithmic_delay_ms(0) / 1e3  # the one formula (FrontEndConfig.algorithmic_delay_ms)
     out: dict = {}
     for kind, log in logs.items():
         idx = np.array(log.index)
@@ -134,7 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="server_latency", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="audio streamed in real time")
     ap.add_argument("--short", action="store_true", help="CI mode: 3 s of audio, exit 1 over the 24 ms budget")
-    ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
+    ap.add_argument("--model", default=None, help="model file or shipped name, e.g. low-latency (default: the shipped "
+                    "default model, else a paper-size random one)")
     ap.add_argument("--no-head", action="store_true", help="skip the vertex-delta viewer")
     args = ap.parse_args(argv)
     from threadpoolctl import threadpool_limits

@@ -242,8 +242,9 @@ class Session:
 
     @property
     def algorithmic_delay_s(self) -> float:
-        """From a frame's media time to the end of the audio it needs: delay_frames / fps + window."""
-        return self.delay_frames / self.fps + self.window_len / self.rate_hz
+        """From a frame's media time to the end of the audio it needs: delay_frames / fps + window
+        (the model's formula, :meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`)."""
+        return self.model.algorithmic_delay_ms(self.config.lag) / 1e3
 
     # -- pushing audio ---------------------------------------------------------------------------
 

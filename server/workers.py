@@ -207,7 +207,7 @@ class RemoteSession:
 
     @property
     def algorithmic_delay_s(self) -> float:
-        return self.delay_frames / self.fps + self.window_len / self.rate_hz
+        return self.model.algorithmic_delay_ms(self.config.lag) / 1e3
 
     def control_state(self) -> dict:
         return self._state

@@ -235,14 +235,15 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
                      r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0), n_frames=len(tr), per_clip=per_clip)
 
 
-def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]]) -> list:
-    """Run the live path of ``model`` on ``clips`` (name, samples, rate_hz, truth (T, 4), bilabial
-    spans [(start_s, end_s, label)]) -> items for :func:`score_lips`."""
+def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]], *, lag: int = 0) -> list:
+    """Run the live path of ``model`` (with ``lag`` frames of fixed-lag smoothing) on ``clips`` (name,
+    samples, rate_hz, truth (T, 4), bilabial spans [(start_s, end_s, label)]) -> items for :func:`score_lips`."""
+    from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
 
     out = []
     for name, samples, rate, truth, spans in clips:
-        est = speech_to_params(model, samples, rate)
+        est = speech_to_params(model, samples, rate, stream=StreamConfig(lag=lag))
         out.append((name, truth, est, loudness_db(samples, rate, len(truth)), list(spans)))
     return out
 
@@ -296,9 +297,10 @@ def phone_bilabial_spans(phones: Sequence) -> list[tuple[float, float, str]]:
     return [(p.start_s, p.end_s, p.phoneme) for p in phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
 
 
-def evaluate_lips(model, clips: Sequence[tuple[str, object, list]]) -> tuple[LipScores, list]:
-    """Score ``model``'s live path on ``[(name, FaceTrack, bilabial spans)]``; returns the scores and the items."""
-    items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips])
+def evaluate_lips(model, clips: Sequence[tuple[str, object, list]], *, lag: int = 0) -> tuple[LipScores, list]:
+    """Score ``model``'s live path (``lag`` frames of smoothing) on ``[(name, FaceTrack, bilabial spans)]``;
+    returns the scores and the items."""
+    items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips], lag=lag)
     return score_lips(items), items
 
 

@@ -421,9 +421,9 @@ class _Builder:
         return self._renderer
 
     def model_digest(self) -> str:
-        from assets.modelfile import DEFAULT_MODEL
+        from assets.modelfile import resolve_model
 
-        return sha256_file(self.c.model or DEFAULT_MODEL)
+        return sha256_file(resolve_model(self.c.model))
 
     def head_video(self, speech: Path, expression: str) -> Path:
         """Silent MP4 of the built-in head animated from ``speech`` with ``expression``."""

@@ -21,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=HelpFormatter,
     )
-    p.add_argument("model", metavar="MODEL", help="model to adapt (.npz; 'default' for the shipped model)")
+    p.add_argument("model", metavar="MODEL", help="model to adapt: a .npz file or a shipped name (default, low-latency)")
     p.add_argument("speech", nargs="+", metavar="SPEECH", help="enrolment recordings of the new voice")
     p.add_argument("-o", "--output", required=True, metavar="MODEL", help="adapted model file to write (.npz)")
     p.add_argument("--relevance", type=float, default=8.0,
@@ -34,8 +34,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from tqdm import tqdm
 
     from assets.audio import read_audio
@@ -43,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
 
-    model = load_model(None if args.model == "default" else Path(args.model))
+    model = load_model(args.model)
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance,
                       n_iter=args.iters)
     recordings = []

@@ -28,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_head_options(p, help_head="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/gltf/obj/ply)")
     p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
                    help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) or ARKit's 52 blendshapes (built-in head)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
     p.set_defaults(run=run)
@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         for out in (args.glb, args.json, args.tsv):
             if out is not None:
                 export_track(out, track, head=head, audio=(samples, rate), morphs=args.glb_morphs, arkit_targets=arkit)
+    delay = f"algorithmic delay {model.algorithmic_delay_ms(args.lag):.1f} ms" if args.mode == "stream" else "batch"
     for out in outputs:
-        print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech}")
+        print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech} ({delay})")
     return 0

@@ -21,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=float, default=None, help="with --mic: stop after this long (default: Ctrl-C)")
     p.add_argument("--host", default="127.0.0.1", help="interface to bind")
     p.add_argument("--port", type=int, default=8765, help="TCP port (0 = any free port)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
     p.add_argument("--rig", type=Path, default=None, help="rig file (.npz); default: the built-in head")
     p.add_argument("--voice", default="en-us", help="espeak-ng voice")
     p.add_argument("--text", action="append", default=None, help="a sentence to say instead of the built-in ones (repeatable)")

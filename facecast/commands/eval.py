@@ -26,7 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "m7; truth = the articulatory rules) and (4) real speech with phone alignments (truth = the rules on "
         "the real phone timings).",
     )
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
     p.add_argument("--synthetic", type=Path, default=None, help="held-out synthetic corpus folder "
                    "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)")
     p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
@@ -35,7 +35,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--grid-split", choices=("test", "val"), default="test", help="GRID s1 split to score")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument("--output", type=Path, default=None,
-                   help="write the markdown here (e.g. docs/accuracy.md), plots beside it")
+                   help="write the markdown here (e.g. docs/accuracy.md), plots beside it; an existing latency-dial "
+                   "section of that file is kept")
+    p.add_argument("--dial", nargs="+", default=None, metavar="MODEL",
+                   help="latency dial instead: score these models (files or shipped names) at every --lags on the "
+                   "GRID s1 --grid-split (use val: choices are made on it) against their algorithmic delay; with "
+                   "--output, replace only the dial section of that file and plot beside it")
+    p.add_argument("--lags", type=lambda t: tuple(int(v) for v in t.split(",") if v), default=(0,),
+                   help="fixed-lag smoothing frames for --dial, e.g. 0,1")
     p.set_defaults(run=run)
 
 
@@ -56,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         s1_clips,
     )
 
+    if args.dial:
+        return _run_dial(args)
     model = load_model(args.model)
     plot_dir = args.output.parent if args.output is not None else None
     stem = args.output.stem if args.output is not None else "accuracy"
@@ -125,6 +134,49 @@ def run(args: argparse.Namespace) -> int:
     text = head + "".join(lips_md) + ("## " + body if body else "")
     print(text)
     if args.output is not None:
+        from training.latency import existing_dial_section, splice_dial_section
+
+        # The latency dial (`facecast eval --dial`) is measured separately; keep its section.
+        old = args.output.read_text(encoding="utf-8") if args.output.is_file() else ""
+        text = splice_dial_section(text, existing_dial_section(old))
         atomic_write_bytes(args.output, text.encode())
         print(f"wrote {args.output}")
+    return 0
+
+
+def _run_dial(args: argparse.Namespace) -> int:
+    """``--dial``: every model at every lag on the s1 split -> table (and plot, file section with --output)."""
+    import json
+
+    from tqdm import tqdm
+
+    from assets.files import atomic_write_bytes
+    from assets.modelfile import SHIPPED_MODELS, load_model
+    from training.latency import dial_markdown, plot_dial, score_dial, splice_dial_section
+    from training.reallips import s1_clips
+
+    from training.errors import ConfigError
+
+    if not args.grid_s1.is_dir():
+        raise ConfigError(f"--dial needs the GRID s1 corpus: {args.grid_s1} not found")
+    # Shipped names as they are, files by their stem (the table's first column).
+    models = [(name if name in SHIPPED_MODELS else Path(name).stem, load_model(name)) for name in args.dial]
+    clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+    points = score_dial(models, clips, lags=args.lags, progress=tqdm)
+    png_name = None
+    if args.output is not None:
+        png = plot_dial(points, args.output.parent / f"{args.output.stem}_latency_dial.png",
+                        title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences")
+        png_name = png.name
+    command = f"facecast eval --dial {' '.join(args.dial)} --grid-split {args.grid_split}" + (
+        f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "")
+    section = dial_markdown(points, split=args.grid_split, png_name=png_name,
+                            note=f"{len(clips)} sentences; made by `{command}`.")
+    print(section)
+    print(json.dumps([{**p.as_json(), "scores": {k: v for k, v in p.as_json()["scores"].items() if k != "per_clip"}}
+                      for p in points]))
+    if args.output is not None:
+        old = args.output.read_text(encoding="utf-8") if args.output.is_file() else ""
+        atomic_write_bytes(args.output, splice_dial_section(old, section).encode())
+        print(f"wrote the latency-dial section of {args.output} and {png_name}")
     return 0

@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--mos-sentences", type=int, default=2, help="sentences rated real (N) vs synthetic (S)")
     b.add_argument("--mos-clip", action="append", default=[], metavar="SYSTEM=CLIP.mp4",
                    help="another clip to rate on the five-point scales (repeatable)")
-    b.add_argument("--model", help="speech->parameters model (default: the shipped one)")
+    b.add_argument("--model", help="speech->parameters model: a .npz file or a shipped name (default, low-latency)")
     b.add_argument("--width", type=int, default=640, help="video width")
     b.add_argument("--height", type=int, default=480, help="video height")
     b.add_argument("--seed", type=int, default=0, help="sentence choice and noise seed")

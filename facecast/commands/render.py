@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("speech", help="speech audio (.wav) muxed into the video")
     add_head_options(p)
-    p.add_argument("--model", help="trained speech->parameters model (used when --params is not given)")
+    p.add_argument("--model", help="speech->parameters model (used when --params is not given): a .npz file or a "
+                   "shipped name: default, low-latency")
     p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4)")
     p.add_argument("--png-dir", help="also write every frame as PNG into this folder")

@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="interface to bind (default: the config's, else 127.0.0.1 = this machine only)")
     p.add_argument("--port", type=int, default=argparse.SUPPRESS,
                    help="TCP port (default: the config's, else 8765; 0 = any free port)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
     head = p.add_mutually_exclusive_group()
     head.add_argument("--head", type=Path, default=None,
                       help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up")
@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_model(args.model)
+    print(f"facecast serve: model {args.model or 'default'}, algorithmic delay {model.algorithmic_delay_ms():.1f} ms "
+          "(lag 0; docs/architecture.md, Delay)", flush=True)
     head = None if args.no_head else resolve_from_args(args, args.rig or args.head or "builtin")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise

@@ -1,0 +1,127 @@
+"""The latency dial: accuracy against algorithmic delay over models and smoothing lags.
+
+Each point is one model (its t_c and analysis window, fixed at training) run by the live path with a
+fixed-lag smoothing ``lag`` (chosen at run time), scored on real lips with
+:func:`training.reallips.evaluate_lips`, at the delay of the one formula
+(:meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`). ``facecast eval --dial`` writes
+the table and the plot into ``docs/accuracy.md`` as a marked section that a plain ``facecast eval
+--output`` keeps (:func:`splice_dial_section`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from realtime_core import VISUAL_PARAMS
+from training.reallips import LipScores, evaluate_lips
+
+DIAL_BEGIN = "<!-- latency-dial: written by `facecast eval --dial`, kept by `facecast eval --output` -->"
+DIAL_END = "<!-- /latency-dial -->"
+
+
+@dataclass(frozen=True)
+class DialPoint:
+    """One setting of the dial: ``name`` (how the model was given), its t_c and window (hops), the
+    smoothing lag (frames), the algorithmic delay (ms) and the lip scores."""
+
+    name: str
+    tc: int
+    window_hops: float
+    lag: int
+    delay_ms: float
+    scores: LipScores
+
+    def as_json(self) -> dict:
+        return {"name": self.name, "tc": self.tc, "window_hops": self.window_hops, "lag": self.lag,
+                "delay_ms": round(self.delay_ms, 2), "scores": self.scores.as_json()}
+
+
+def score_dial(models: Sequence[tuple[str, object]], clips: Sequence, *, lags: Sequence[int] = (0,),
+               progress: Callable | None = None) -> list[DialPoint]:
+    """``models``: [(name, AvModel)]; ``clips``: [(name, FaceTrack, bilabial spans)] (e.g.
+    :func:`training.reallips.s1_clips`). Every model at every lag -> points sorted by delay."""
+    jobs = [(name, m, lag) for name, m in models for lag in lags]
+    points = []
+    for name, m, lag in progress(jobs, desc="dial", unit="setting") if progress else jobs:
+        scores, _ = evaluate_lips(m, clips, lag=lag)
+        points.append(DialPoint(name=name, tc=m.frontend.tc, window_hops=float(m.frontend.mfcc.window_hops), lag=lag,
+                                delay_ms=m.algorithmic_delay_ms(lag), scores=scores))
+    return sorted(points, key=lambda p: (p.delay_ms, p.lag))
+
+
+def dial_markdown(points: Sequence[DialPoint], *, split: str, png_name: str | None = None, note: str = "") -> str:
+    """The marked section: a table per point (delay, settings, r per parameter, closures, nu) and the plot."""
+    short = {"upper_lip_raise": "ulr", "lip_stretch": "ls", "mouth_open": "mo", "lip_corner_depress": "lcd"}
+    lines = [DIAL_BEGIN, f"## Latency dial: accuracy against algorithmic delay (GRID s1 {split} split)", ""]
+    if note:
+        lines += [note, ""]
+    lines += ["delay = (t_c + lag) / 30 s + window (`FrontEndConfig.algorithmic_delay_ms`); r at lag 0 against the "
+              "measured lips; closures = share of /p b m/ phones where mouth_open reaches the closed pose; "
+              "nu = std(est) / std(true) for mouth_open.", "",
+              "| model | t_c | window (hops) | lag | delay (ms) | " + " | ".join(f"r {short[p]}" for p in VISUAL_PARAMS)
+              + " | closures | nu mo |",
+              "|---|---:|---:|---:|---:|" + "---:|" * len(VISUAL_PARAMS) + "---:|---:|"]
+    for p in points:
+        s = p.scores
+        lines.append(f"| {p.name} | {p.tc} | {p.window_hops:g} | {p.lag} | {p.delay_ms:.1f} | "
+                     + " | ".join(f"{s.r[q]:.3f}" for q in VISUAL_PARAMS)
+                     + f" | {s.closure_rate:.0%} of {s.n_closures} | {s.nu['mouth_open']:.2f} |")
+    if png_name:
+        lines += ["", f"![latency dial]({png_name})"]
+    return "\n".join(lines + [DIAL_END]) + "\n"
+
+
+def splice_dial_section(doc: str, section: str | None) -> str:
+    """``doc`` with its marked dial section replaced by ``section`` (appended when it has none;
+    ``section`` None keeps ``doc`` as it is)."""
+    if section is None:
+        return doc
+    pattern = re.compile(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", re.S)
+    if pattern.search(doc):
+        return pattern.sub(lambda _: section, doc, count=1)
+    return doc.rstrip("\n") + "\n\n" + section
+
+
+def existing_dial_section(doc: str) -> str | None:
+    """The marked dial section of ``doc`` (to carry over into a regenerated file), or None."""
+    m = re.search(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", doc, re.S)
+    return m.group(0) if m else None
+
+
+def plot_dial(points: Sequence[DialPoint], png: Path, *, title: str) -> Path:
+    """PNG: r(mouth_open) (left axis) and the closure rate (right axis) against the algorithmic delay,
+    one marker per point, labelled with t_c / window / lag."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    ax2 = ax.twinx()
+    xs = [p.delay_ms for p in points]
+    ax.plot(xs, [p.scores.r["mouth_open"] for p in points], "o", color="tab:red", label="r(mouth_open)")
+    ax.plot(xs, [p.scores.r["lip_stretch"] for p in points], "s", color="tab:green", ms=4, label="r(lip_stretch)")
+    ax.plot(xs, [p.scores.r["upper_lip_raise"] for p in points], "^", color="tab:purple", ms=4,
+            label="r(upper_lip_raise)")
+    ax2.plot(xs, [100 * p.scores.closure_rate for p in points], "x", color="tab:blue", label="closures (%)")
+    for p in points:
+        ax.annotate(f"{p.tc}/{p.window_hops:g}/{p.lag}", (p.delay_ms, p.scores.r["mouth_open"]),
+                    textcoords="offset points", xytext=(3, 5), fontsize=7)
+    ax.axvline(80, color="grey", ls=":", lw=1)
+    ax.text(80, ax.get_ylim()[0], " 80 ms", fontsize=7, color="grey", va="bottom")
+    ax.set_xlabel("algorithmic delay (ms)")
+    ax.set_ylabel("r against measured lips (lag 0)")
+    ax2.set_ylabel("bilabial closures reached (%)", color="tab:blue")
+    ax2.set_ylim(0, 105)
+    h1, l1 = ax.get_legend_handles_labels()
+    h2, l2 = ax2.get_legend_handles_labels()
+    ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="lower right")
+    ax.set_title(title + " (labels: t_c / window hops / lag)", fontsize=9)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
+    return png
