@@ -11,7 +11,7 @@ the table and the plot into ``docs/accuracy.md`` as a marked section that a plai
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,22 +33,43 @@ class DialPoint:
     lag: int
     delay_ms: float
     scores: LipScores
+    likelihood_scale: float = 0.2
 
     def as_json(self) -> dict:
         return {"name": self.name, "tc": self.tc, "window_hops": self.window_hops, "lag": self.lag,
-                "delay_ms": round(self.delay_ms, 2), "scores": self.scores.as_json()}
+                "delay_ms": round(self.delay_ms, 2), "likelihood_scale": self.likelihood_scale,
+                "scores": self.scores.as_json()}
+
+
+MIN_CLOSURE_RATE = 0.9
+"""Issue 10's closure goal: with ``likelihood_scales``, a kappa is only chosen if it keeps this share."""
 
 
 def score_dial(models: Sequence[tuple[str, object]], clips: Sequence, *, lags: Sequence[int] = (0,),
+               likelihood_scales: Sequence[float] | None = None, keep_own: Collection[str] = (),
                progress: Callable | None = None) -> list[DialPoint]:
     """``models``: [(name, AvModel)]; ``clips``: [(name, FaceTrack, bilabial spans)] (e.g.
-    :func:`training.reallips.s1_clips`). Every model at every lag -> points sorted by delay."""
+    :func:`training.reallips.s1_clips`). Every model at every lag -> points sorted by delay.
+
+    ``likelihood_scales``: also choose each model's audio-likelihood exponent kappa per lag on these
+    clips: the kappa with the highest r(mouth_open) among those reaching :data:`MIN_CLOSURE_RATE` of the
+    closures (the highest r when none does). The right kappa depends on the context size (2 t_c + 1
+    stacked frames make the likelihoods over-confident by about that factor), so comparing settings at
+    one kappa would favour the setting it was tuned for. None: the kappa stored in each model, as for
+    the models named in ``keep_own`` (the shipped ones, scored as they ship).
+    """
+    from dataclasses import replace
+
     jobs = [(name, m, lag) for name, m in models for lag in lags]
     points = []
     for name, m, lag in progress(jobs, desc="dial", unit="setting") if progress else jobs:
-        scores, _ = evaluate_lips(m, clips, lag=lag)
+        tried = []
+        for kappa in (likelihood_scales if likelihood_scales and name not in keep_own else (m.likelihood_scale,)):
+            scores, _ = evaluate_lips(replace(m, likelihood_scale=kappa), clips, lag=lag)
+            tried.append((scores.closure_rate >= MIN_CLOSURE_RATE, scores.r["mouth_open"], kappa, scores))
+        _, _, kappa, scores = max(tried, key=lambda x: x[:2])
         points.append(DialPoint(name=name, tc=m.frontend.tc, window_hops=float(m.frontend.mfcc.window_hops), lag=lag,
-                                delay_ms=m.algorithmic_delay_ms(lag), scores=scores))
+                                delay_ms=m.algorithmic_delay_ms(lag), scores=scores, likelihood_scale=kappa))
     return sorted(points, key=lambda p: (p.delay_ms, p.lag))
 
 
@@ -58,15 +79,16 @@ def dial_markdown(points: Sequence[DialPoint], *, split: str, png_name: str | No
     lines = [DIAL_BEGIN, f"## Latency dial: accuracy against algorithmic delay (GRID s1 {split} split)", ""]
     if note:
         lines += [note, ""]
-    lines += ["delay = (t_c + lag) / 30 s + window (`FrontEndConfig.algorithmic_delay_ms`); r at lag 0 against the "
-              "measured lips; closures = share of /p b m/ phones where mouth_open reaches the closed pose; "
-              "nu = std(est) / std(true) for mouth_open.", "",
-              "| model | t_c | window (hops) | lag | delay (ms) | " + " | ".join(f"r {short[p]}" for p in VISUAL_PARAMS)
-              + " | closures | nu mo |",
-              "|---|---:|---:|---:|---:|" + "---:|" * len(VISUAL_PARAMS) + "---:|---:|"]
+    lines += [("delay = (t_c + lag) / 30 s + window (`FrontEndConfig.algorithmic_delay_ms`); kappa = the audio-"
+               "likelihood exponent of the live path; r at lag 0 against the measured lips; closures = share of "
+               "/p b m/ phones where mouth_open reaches the closed pose; nu = std(est) / std(true) for mouth_open."),
+              "",
+              "| model | t_c | window (hops) | lag | delay (ms) | kappa | "
+              + " | ".join(f"r {short[p]}" for p in VISUAL_PARAMS) + " | closures | nu mo |",
+              "|---|---:|---:|---:|---:|---:|" + "---:|" * len(VISUAL_PARAMS) + "---:|---:|"]
     for p in points:
         s = p.scores
-        lines.append(f"| {p.name} | {p.tc} | {p.window_hops:g} | {p.lag} | {p.delay_ms:.1f} | "
+        lines.append(f"| {p.name} | {p.tc} | {p.window_hops:g} | {p.lag} | {p.delay_ms:.1f} | {p.likelihood_scale:g} | "
                      + " | ".join(f"{s.r[q]:.3f}" for q in VISUAL_PARAMS)
                      + f" | {s.closure_rate:.0%} of {s.n_closures} | {s.nu['mouth_open']:.2f} |")
     if png_name:
@@ -79,7 +101,7 @@ def splice_dial_section(doc: str, section: str | None) -> str:
     ``section`` None keeps ``doc`` as it is)."""
     if section is None:
         return doc
-    pattern = re.compile(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", re.S)
+    pattern = re.compile(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", re.DOTALL)
     if pattern.search(doc):
         return pattern.sub(lambda _: section, doc, count=1)
     return doc.rstrip("\n") + "\n\n" + section
@@ -87,7 +109,7 @@ def splice_dial_section(doc: str, section: str | None) -> str:
 
 def existing_dial_section(doc: str) -> str | None:
     """The marked dial section of ``doc`` (to carry over into a regenerated file), or None."""
-    m = re.search(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", doc, re.S)
+    m = re.search(re.escape(DIAL_BEGIN) + r".*?" + re.escape(DIAL_END) + r"\n?", doc, re.DOTALL)
     return m.group(0) if m else None
 
 

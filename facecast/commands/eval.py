@@ -43,6 +43,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "--output, replace only the dial section of that file and plot beside it")
     p.add_argument("--lags", type=lambda t: tuple(int(v) for v in t.split(",") if v), default=(0,),
                    help="fixed-lag smoothing frames for --dial, e.g. 0,1")
+    p.add_argument("--kappas", type=lambda t: tuple(float(v) for v in t.split(",") if v), default=None,
+                   help="with --dial: choose each model's audio-likelihood exponent per lag among these on the "
+                   "scored split (highest r(mouth_open) keeping >= 90%% of closures); shipped models (default, "
+                   "low-latency) always run as they ship; default: the models' own")
     p.set_defaults(run=run)
 
 
@@ -152,24 +156,30 @@ def _run_dial(args: argparse.Namespace) -> int:
 
     from assets.files import atomic_write_bytes
     from assets.modelfile import SHIPPED_MODELS, load_model
-    from training.latency import dial_markdown, plot_dial, score_dial, splice_dial_section
-    from training.reallips import s1_clips
-
     from training.errors import ConfigError
+    from training.latency import (
+        dial_markdown,
+        plot_dial,
+        score_dial,
+        splice_dial_section,
+    )
+    from training.reallips import s1_clips
 
     if not args.grid_s1.is_dir():
         raise ConfigError(f"--dial needs the GRID s1 corpus: {args.grid_s1} not found")
     # Shipped names as they are, files by their stem (the table's first column).
     models = [(name if name in SHIPPED_MODELS else Path(name).stem, load_model(name)) for name in args.dial]
     clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
-    points = score_dial(models, clips, lags=args.lags, progress=tqdm)
+    points = score_dial(models, clips, lags=args.lags, likelihood_scales=args.kappas,
+                        keep_own=SHIPPED_MODELS.keys(), progress=tqdm)
     png_name = None
     if args.output is not None:
         png = plot_dial(points, args.output.parent / f"{args.output.stem}_latency_dial.png",
                         title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences")
         png_name = png.name
     command = f"facecast eval --dial {' '.join(args.dial)} --grid-split {args.grid_split}" + (
-        f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "")
+        f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "") + (
+        f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
     section = dial_markdown(points, split=args.grid_split, png_name=png_name,
                             note=f"{len(clips)} sentences; made by `{command}`.")
     print(section)

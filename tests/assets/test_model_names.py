@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from assets.modelfile import DEFAULT_MODEL, LOW_LATENCY_MODEL, ModelFileError, load_model, resolve_model
+from assets.modelfile import (
+    DEFAULT_MODEL,
+    LOW_LATENCY_MODEL,
+    ModelFileError,
+    load_model,
+    resolve_model,
+)
 from facecast.cli import main
 from tests.server.conftest import speechlike
 

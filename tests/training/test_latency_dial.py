@@ -29,7 +29,7 @@ def test_section_is_replaced_in_place_and_carried_over(tmp_path):
     points = [_point(1, 78.3, 0), _point(3, 166.7, 1)]
     section = dial_markdown(points, split="val", png_name="accuracy_latency_dial.png")
     assert section.startswith(DIAL_BEGIN) and section.rstrip().endswith(DIAL_END)
-    assert f"| m0 | 1 | 2 | 0 | 78.3 | {points[0].scores.r['upper_lip_raise']:.3f} |" in section
+    assert f"| m0 | 1 | 2 | 0 | 78.3 | 0.2 | {points[0].scores.r['upper_lip_raise']:.3f} |" in section
     doc = "# Accuracy\n\n## 1. s1\n\ntext\n"
     once = splice_dial_section(doc, section)
     assert once.startswith(doc.rstrip("\n")) and once.count(DIAL_BEGIN) == 1
