@@ -15,8 +15,8 @@ grid="${1:-${FACECAST_SHARED_DATA:-$(cd .. && pwd)/shared/data}/video/grid_s1}"
 run() { if command -v facecast >/dev/null; then facecast "$@"; else .venv/bin/facecast "$@"; fi; }
 TC=1
 WINDOW=1.35
-KAPPA=0.2
-BAND=0.03
+KAPPA=1.0
+BAND=0.04
 run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train -o assets/data/low_latency_model.npz \
     --states 16 --mix 3 --covariance full --tc "$TC" --window-hops "$WINDOW" --iters 12 --tol 3e-4 --seed 0 \
