@@ -177,11 +177,14 @@ def _run_dial(args: argparse.Namespace) -> int:
         png = plot_dial(points, args.output.parent / f"{args.output.stem}_latency_dial.png",
                         title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences")
         png_name = png.name
-    command = f"facecast eval --dial {' '.join(args.dial)} --grid-split {args.grid_split}" + (
+    command = f"facecast eval --dial {' '.join(name for name, _ in models)} --grid-split {args.grid_split}" + (
         f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "") + (
         f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
     section = dial_markdown(points, split=args.grid_split, png_name=png_name,
-                            note=f"{len(clips)} sentences; made by `{command}`.")
+                            note=f"{len(clips)} sentences; made by `bash scripts/latency_dial.sh` (it trains the "
+                            f"tcT_whW models with the default model's recipe, only t_c and the window changed) "
+                            f"running `{command}`. The shipped pair and the choice between them: "
+                            "docs/default_model.md.")
     print(section)
     print(json.dumps([{**p.as_json(), "scores": {k: v for k, v in p.as_json()["scores"].items() if k != "per_clip"}}
                       for p in points]))
