@@ -100,14 +100,18 @@ class AvModel:
             plan = self._plans[key] = StreamPlan.build(self.form, config)
         return StreamingInverter(self.form, config=config, plan=plan)
 
+    def visual_mapper(self, *, lag: int = 0, dtype: str = "float32") -> StreamingInverter:
+        """The :class:`realtime_core.mapping.VisualMapper` of this model: a streaming inverter."""
+        return self.inverter(StreamConfig(lag=lag, dtype=dtype))
 
-def _frontend_to_json(fe: FrontEndConfig) -> dict:
+
+def frontend_to_json(fe: FrontEndConfig) -> dict:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
     return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
             "silence_floor_db": fe.silence_floor_db}
 
 
-def _frontend_from_json(d: dict) -> FrontEndConfig:
+def frontend_from_json(d: dict) -> FrontEndConfig:
     return FrontEndConfig(
         mfcc=MfccConfig(**d["mfcc"]),
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
@@ -121,7 +125,7 @@ def _frontend_from_json(d: dict) -> FrontEndConfig:
 def encode_model(model: AvModel) -> bytes:
     """Serialise to ``.npz`` bytes (no pickle)."""
     config = {
-        "frontend": _frontend_to_json(model.frontend),
+        "frontend": frontend_to_json(model.frontend),
         "visual_names": list(model.visual_names),
         "likelihood_scale": model.likelihood_scale,
         "covariance_type": model.hmm.covariance_type,
@@ -160,7 +164,7 @@ def decode_model(data: bytes) -> AvModel:
         raise ModelFormatError(f"model version {int(arrays['version'])} is not supported (expected {VERSION})")
     try:
         config = json.loads(str(arrays["config_json"]))
-        frontend = _frontend_from_json(config["frontend"])
+        frontend = frontend_from_json(config["frontend"])
         hmm = AvHmm(
             **{k: arrays[k] for k in _HMM_ARRAYS},
             covariance_type=config["covariance_type"],

@@ -1,7 +1,8 @@
 """Speech samples -> mouth parameters, streaming (live) and whole-utterance (offline).
 
-:class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the streaming
-inverter. ``push(samples)`` returns the parameter rows now final, ``flush()`` the rest;
+:class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the model's streaming
+visual mapper (:class:`realtime_core.mapping.VisualMapper`: the HMM inverter of an
+:class:`AvModel`, or the GMM-selected MLP bank of an :class:`MlpSpeechModel`). ``push(samples)`` returns the parameter rows now final, ``flush()`` the rest;
 row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
 once the audio reaches frame ``tc + lag`` plus one analysis window: the algorithmic
 delay is ``(tc + lag) / fps`` seconds plus the window.
@@ -19,21 +20,28 @@ from realtime_core.avmodel import AvModel
 from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
+from realtime_core.mapping import SpeechModel
 
 
 class SpeechToParams:
-    """``push(samples (n,) at model.sample_rate_hz) -> (k, n_visual) float64``; ``flush()``."""
+    """``push(samples (n,) at model.sample_rate_hz) -> (k, n_visual) float64``; ``flush()``.
 
-    def __init__(self, model: AvModel, *, stream: StreamConfig = StreamConfig()) -> None:
+    model: any :class:`realtime_core.mapping.SpeechModel`; ``stream`` sets the HMM inverter's lag,
+    dtype and likelihood scale (an MLP model takes its lag and dtype)."""
+
+    def __init__(self, model: SpeechModel, *, stream: StreamConfig = StreamConfig()) -> None:
         self.model = model
         self._fe = model.front_end()
-        self._inv = model.inverter(stream)
+        if isinstance(model, AvModel):
+            self._inv = model.inverter(stream)
+        else:
+            self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
         self.frames_out = 0
 
     @property
     def delay_frames(self) -> int:
         """Frames of lookahead between the newest audio frame and the newest output."""
-        return self.model.frontend.tc + self._inv.config.lag
+        return self.model.frontend.tc + self._inv.lag_frames
 
     def reset(self) -> None:
         self._fe.reset()
@@ -52,7 +60,7 @@ class SpeechToParams:
 
 
 def speech_to_params(
-    model: AvModel,
+    model: SpeechModel,
     samples: np.ndarray,
     *,
     mode: str = "stream",
@@ -61,10 +69,12 @@ def speech_to_params(
 ) -> np.ndarray:
     """Whole utterance: ``(n,)`` samples at ``model.sample_rate_hz`` -> ``(n_frames, n_visual)``.
 
-    mode "stream" is exactly the live path; "batch" is batch HMMI (eq. 7 EM).
+    mode "stream" is exactly the live path; "batch" is batch HMMI (eq. 7 EM, HMM models only).
     """
     if mode not in ("stream", "batch"):
         raise ConfigError(f"mode must be 'stream' or 'batch', got {mode!r}")
+    if mode == "batch" and not isinstance(model, AvModel):
+        raise ConfigError("mode 'batch' (batch HMMI) needs an HMM model")
     x = as_float_samples(samples)
     if x.size < model.frontend.mfcc.window_len:
         raise InvalidAudioError(

@@ -127,6 +127,11 @@ class StreamingInverter:
         self._n, self._m = form.n_states, form.n_mix
         self.reset()
 
+    @property
+    def lag_frames(self) -> int:
+        """Rows held back for fixed-lag smoothing (the :class:`realtime_core.mapping.VisualMapper` interface)."""
+        return self.config.lag
+
     def reset(self) -> None:
         """Start a new utterance."""
         self._f: np.ndarray | None = None  # filtered posterior of the newest frame
