@@ -57,3 +57,11 @@ def normalised_mse(true: np.ndarray, est: np.ndarray, *, scale: np.ndarray | Non
     s = np.abs(t).max(axis=0) if scale is None else np.asarray(scale, dtype=np.float64)
     s = np.where(s > 0, s, 1.0)
     return float(np.mean(((t - e) / s) ** 2))
+
+
+def average_std(x: np.ndarray) -> float:
+    """Paper 002 eq. 7: ``nu = (1/gamma) sum_c sqrt(Cov[c][c])``, the mean per-dimension standard deviation of ``(T, gamma)``."""
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 2 or a.shape[0] < 2:
+        raise InvalidFeaturesError(f"a track must be (T >= 2, gamma), got {a.shape}")
+    return float(np.sqrt(a.var(axis=0)).mean())

@@ -98,8 +98,12 @@ def train_av_model(
     on_iteration: IterationFn | None = None,
     start: AvHmm | None = None,
     metadata: dict | None = None,
+    visual_names: tuple[str, ...] = VISUAL_PARAMS,
 ) -> tuple[AvModel, TrainResult]:
-    """Train on ``utterances``. ``start``: resume EM from this HMM instead of k-means."""
+    """Train on ``utterances``. ``start``: resume EM from this HMM instead of k-means.
+
+    visual_names: names of the columns of every ``u.params`` (the four mouth parameters by default;
+    Motion-Unit parameters for the MU models)."""
     if not utterances:
         raise ConfigError("no training utterances")
     fe = recipe.frontend
@@ -111,7 +115,7 @@ def train_av_model(
             "train_frames": int(sum(len(s) for s in seqs)), **(metadata or {})}
 
     def wrap(hmm: AvHmm, extra: dict) -> AvModel:
-        return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=VISUAL_PARAMS,
+        return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=visual_names,
                        likelihood_scale=recipe.likelihood_scale, metadata={**meta, **extra})
 
     def progress(it: int, objective: float, hmm: AvHmm) -> None:

@@ -1,0 +1,186 @@
+"""``facecast mu``: train and score paper 002's system on GRID s1 (see :mod:`training.motion_units`)."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.mapping import MlpMapper, MlpSpeechModel, encode_mlp_model
+from realtime_core.motion_units import fit_motion_units
+from training.errors import ConfigError
+from training.mapper import MapperRecipe, fit_bank, fit_readout
+from training.motion_units import (
+    Say,
+    displacement_scale,
+    hmm_estimates,
+    load_clips,
+    lower_face_indices,
+    mlp_estimates,
+    of_split,
+    score_mups,
+    variance_report,
+    with_features,
+)
+
+GRID_CREDIT = "GRID audio-visual corpus, talker s1: Cooke, Barker, Cunningham, Shao 2006 (CC BY 4.0)"
+
+
+@dataclass(frozen=True, kw_only=True)
+class MuTrainConfig:
+    """See ``facecast mu --help``."""
+
+    units: int | None = None
+    variance: float = 0.97
+    classes: tuple[int, ...] = (4, 8, 16, 32, 44)
+    hidden: int = 20
+    baseline_hidden: int = 600
+    hmm_states: int = 16
+    hmm_mix: int = 3
+    hmm_iters: int = 20
+    limit: int | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 15 <= self.hidden <= 25:
+            raise ConfigError(f"hidden must be 15..25 (the paper's range), got {self.hidden}")
+        if not self.classes or min(self.classes) < 1:
+            raise ConfigError(f"classes must be positive integers, got {self.classes}")
+
+
+def _mups_of(clips, mu) -> tuple[np.ndarray, np.ndarray]:
+    x = np.concatenate([c.features for c in clips])
+    y = mu.project(np.concatenate([c.deform for c in clips]).astype(np.float64))
+    return x, y
+
+
+def _per_frame_us(fn, reps: int = 3) -> float:
+    best = np.inf
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        n = fn()
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best * 1e6
+
+
+def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say: Say = print) -> dict:
+    from facecast.files import atomic_write_bytes
+    from training.trainer import TrainRecipe, cmvn_statistics
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    clips = load_clips(root, cache_dir=cache_dir, limit=cfg.limit)
+    train, val, test = (of_split(clips, s) for s in ("train", "val", "test"))
+    say(f"{len(clips)} clips: {len(train)} train, {len(val)} val, {len(test)} test")
+    if not (train and val and test):
+        raise ConfigError("every split needs at least one clip (use more sentences)")
+    # 1. Utterance MUs on the train split.
+    d_train = np.concatenate([c.deform for c in train]).astype(np.float64)
+    mu = fit_motion_units(d_train, n_units=cfg.units, min_variance=cfg.variance)
+    var = variance_report(mu)
+    say("variance explained: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var[:10]))
+    say(f"kept {mu.n_units} Utterance MUs ({100 * mu.explained()[mu.n_units - 1]:.2f}%)")
+    # 2. Audio features: the live front end, CMVN statistics of the train split.
+    recipe = TrainRecipe()
+    fe = recipe.frontend
+    mean, var_ = cmvn_statistics([c.samples for c in train], fe)
+    clips = with_features(clips, fe, mean, var_)
+    train, val, test = (of_split(clips, s) for s in ("train", "val", "test"))
+    x_tr, y_tr = _mups_of(train, mu)
+    readout = fit_readout(y_tr, np.concatenate([c.params for c in train]))
+    scale = displacement_scale(train)
+    centre = (fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat)
+    report: dict = {"credit": GRID_CREDIT, "config": asdict(cfg), "clips": {"train": len(train), "val": len(val),
+                    "test": len(test)}, "landmarks": len(lower_face_indices()), "units": mu.n_units,
+                    "variance": var, "train": {}, "test": {}, "val": {}}
+    # Readout quality: true MUPs -> mouth parameters.
+    rp = np.concatenate([c.params for c in test])
+    rm = mu.project(np.concatenate([c.deform for c in test]).astype(np.float64))
+    report["readout_r_test"] = dict(zip(VISUAL_PARAMS, map(float, np.diag(np.corrcoef(
+        rp.T, (rm @ readout[0].T + readout[1]).T)[:4, 4:]))))
+    # 3. The bank for each K, chosen on val.
+    banks = {}
+    for k in cfg.classes:
+        t0 = time.perf_counter()
+        bank = fit_bank(x_tr, y_tr, MapperRecipe(n_classes=k, hidden=cfg.hidden, seed=cfg.seed), class_slice=centre,
+                        readout=readout)
+        m = MlpMapper(bank)
+        s = score_mups(val, mlp_estimates(m, val), mu, scale, readout)
+        banks[k] = bank
+        report["val"][f"mlp_K{k}"] = s.as_json()
+        say(f"K={k}: val R {s.r:.4f}, MSE {s.mse:.5f} ({time.perf_counter() - t0:.0f} s)")
+    best_k = max(cfg.classes, key=lambda k: report["val"][f"mlp_K{k}"]["R"])
+    report["chosen_classes"] = best_k
+    systems: dict[str, object] = {"mlp": MlpMapper(banks[best_k])}
+    model = MlpSpeechModel(bank=banks[best_k], frontend=fe, cmvn_mean=mean, cmvn_var=var_, visual_names=VISUAL_PARAMS,
+                           metadata={"paper": "Hong, Wen, Huang 2002, Sec. VI-A", "classes": best_k,
+                                     "hidden": cfg.hidden, "units": mu.n_units, "credit": GRID_CREDIT,
+                                     "val_R": report["val"][f"mlp_K{best_k}"]["R"]})
+    atomic_write_bytes(out / "mlp_mapper.npz", encode_mlp_model(model))
+    # 4. The single large MLP of the paper's argument.
+    if cfg.baseline_hidden:
+        t0 = time.perf_counter()
+        base = fit_bank(x_tr, y_tr, MapperRecipe(n_classes=1, hidden=cfg.baseline_hidden, seed=cfg.seed,
+                                                 max_iter=100), class_slice=centre, readout=readout)
+        systems["single_mlp"] = MlpMapper(base)
+        say(f"single MLP ({cfg.baseline_hidden} hidden) trained in {time.perf_counter() - t0:.0f} s")
+    # 5. The HMM of paper 000 on the same UMUP targets.
+    if cfg.hmm_states:
+        from realtime_core.hmm import TrainConfig
+        from training.corpus import Utterance
+        from training.modelfile import save_model
+        from training.trainer import train_av_model
+
+        utts = [Utterance(id=c.sentence_id, samples=c.samples, sample_rate_hz=c.sample_rate_hz,
+                          params=mu.project(c.deform.astype(np.float64)), phonemes=(), voice="s1", language="en",
+                          source="grid", speaker_group="s1") for c in train]
+        hr = TrainRecipe(hmm=TrainConfig(n_states=cfg.hmm_states, n_mix=cfg.hmm_mix, n_iter=cfg.hmm_iters, tol=3e-4,
+                                         seed=cfg.seed))
+        t0 = time.perf_counter()
+        hmm, _ = train_av_model(utts, hr, visual_names=tuple(f"umup{i + 1}" for i in range(mu.n_units)),
+                                metadata={"credit": GRID_CREDIT, "targets": "GRID s1 Utterance MUPs"},
+                                on_iteration=lambda it, obj, _m: say(f"  HMM EM {it}: {obj:.3f}"))
+        say(f"HMM on UMUPs trained in {time.perf_counter() - t0:.0f} s")
+        save_model(out / "hmm_mups.npz", hmm)
+        systems["hmm"] = hmm
+    # 6. Scores on train and test, per-frame cost.
+    for name, sysm in systems.items():
+        for split, cl in (("train", train), ("test", test)):
+            est = hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl)
+            report[split][name] = score_mups(cl, est, mu, scale, readout).as_json()
+        say(f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}, "
+            f"test MSE {report['test'][name]['MSE']:.5f}")
+    report["test"]["true_mups"] = score_mups(test, [mu.project(c.deform.astype(np.float64)) for c in test], mu,
+                                             scale, readout).as_json()
+    np.savez(out / "motion_units.npz", mean=mu.mean, units=mu.units, eigenvalues=mu.eigenvalues,
+             landmarks=np.array(lower_face_indices()), readout=readout[0], readout_bias=readout[1], scale=scale,
+             format=np.array("facecast-motionunits"), version=np.array(1))
+    _plot_variance(var, out / "variance.png", mu.n_units)
+    (out / "report.json").write_text(json.dumps(report, indent=1))
+    return report
+
+
+def _plot_variance(var: list[dict], png: Path, kept: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    k = [r["units"] for r in var]
+    e = [100 * r["explained"] for r in var]
+    fig, ax = plt.subplots(figsize=(6, 3.5), dpi=120)
+    ax.plot(k, e, "o-")
+    ax.axhline(97, color="grey", ls="--", lw=1, label="97 %")
+    ax.axvline(kept, color="C1", ls=":", lw=1, label=f"kept: {kept}")
+    ax.set_xlabel("Utterance MUs")
+    ax.set_ylabel("variance explained (%)")
+    ax.set_title("GRID s1 lower-face deformation: PCA (train split)")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png)
+    plt.close(fig)
