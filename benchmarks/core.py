@@ -118,7 +118,7 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
     ns = _per_call(pipe.push, _hop_blocks(x, fe.mfcc))
     out = {"N=28,M=5,float32": _stats(ns[10:])}
     # The shipped default model, what `facecast serve` runs by default.
-    from training.modelfile import DEFAULT_MODEL, load_model
+    from assets.modelfile import DEFAULT_MODEL, load_model
 
     if DEFAULT_MODEL.is_file():
         shipped = load_model(None)

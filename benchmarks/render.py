@@ -84,8 +84,8 @@ RETARGET_UNITS = (
 
 def retarget_errors() -> dict[str, dict[str, float]]:
     """method -> unit -> relative RMS error |pred - native| / |native| over the target's moving vertices."""
-    from clients.heads.builtin import load_builtin_head
-    from clients.heads.rigging import MOUTH_GROUPS, mouth_landmarks, simple_face
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import MOUTH_GROUPS, mouth_landmarks, simple_face
     from realtime_core.face import RigConfig, face_frame
     from realtime_core.face.rig import head_weights
 
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
 
     n_rig = 2000 if args.quick else 20000
     frames = 50 if args.quick else args.frames

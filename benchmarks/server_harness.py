@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core.avmodel import AvModel
-from server import protocol as P
+from wire import protocol as P
 
 
 def benchmark_model(path: Path | None) -> tuple[AvModel, Path, str]:
     """(model, its file, description): ``path``, else the shipped default model, else a random
     model of the paper's size (28 states x 5 mixtures, 11 cepstra, tc = 3: the same per-frame cost)."""
-    from training.modelfile import DEFAULT_MODEL, load_model, save_model
+    from assets.modelfile import DEFAULT_MODEL, load_model, save_model
 
     if path is not None:
         return load_model(path), Path(path), str(path)

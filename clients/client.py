@@ -1,6 +1,6 @@
 """Python client of the facecast server: ingest audio, watch a session, decode frames.
 
-Async, on python-websockets. The wire format lives in :mod:`server.protocol` (pure, shared with
+Async, on python-websockets. The wire format lives in :mod:`wire.protocol` (pure, shared with
 the server); ``docs/protocol.md`` describes it for other languages.
 
     async with IngestClient(url, session="s1", sample_rate_hz=16000) as ing:
@@ -8,7 +8,7 @@ the server); ``docs/protocol.md`` describes it for other languages.
         await ing.end()
 
     async with ViewerClient(url, session="s1", kind="params") as view:
-        async for msg in view:       # server.protocol.Message, frames and audio
+        async for msg in view:       # wire.protocol.Message, frames and audio
             ...
 """
 
@@ -26,7 +26,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from clients.errors import ClientError
-from server import protocol as P
+from wire import protocol as P
 
 
 class ServerClosed(ClientError):
@@ -173,7 +173,7 @@ async def stream_source(ing: IngestClient, source) -> int:
 async def ingest_file(url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02,
                       token: str | None = None) -> dict:
     """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
 
     samples, rate = read_audio(path)
     async with IngestClient(url, session=session, sample_rate_hz=rate, token=token) as ing:

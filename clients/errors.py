@@ -2,25 +2,11 @@
 
 from __future__ import annotations
 
-
-class ClientError(Exception):
-    """Root of every error raised by clients."""
+from realtime_core.errors import FacecastError
 
 
-class MeshError(ClientError, ValueError):
-    """A head mesh cannot be read or cannot be rigged (no faces, degenerate, ...)."""
-
-
-class LandmarkError(ClientError, ValueError):
-    """A landmarks JSON file is unreadable, incomplete or inconsistent with its mesh."""
-
-
-class RigFileError(ClientError, ValueError):
-    """A rig .npz file is unreadable, of another version, or has inconsistent arrays."""
-
-
-class AssetError(ClientError, RuntimeError):
-    """The built-in head's assets could not be fetched or read."""
+class ClientError(FacecastError):
+    """Root of every error raised by clients (viewers, renderer, exporters, client tools)."""
 
 
 class RenderError(ClientError, RuntimeError):

@@ -13,6 +13,8 @@ import argparse
 import importlib
 import sys
 
+from realtime_core.errors import FacecastError
+
 # name -> module; order is the order shown in --help.
 COMMANDS: dict[str, str] = {
     "demo": "facecast.commands.demo",
@@ -54,21 +56,9 @@ def main(argv: list[str] | None = None) -> int:
         # Benchmarks with their own parsers get everything after their name.
         return run_forwarded(argv[1], argv[2:])
     args = build_parser().parse_args(argv)
-    # Package error roots: a user-facing error prints one line, never a traceback.
-    roots: list[type[BaseException]] = []
-    for mod, name in (
-        ("realtime_core.errors", "RealtimeCoreError"),
-        ("training.errors", "TrainingError"),
-        ("server.errors", "ServerError"),
-        ("clients.errors", "ClientError"),
-    ):
-        try:
-            roots.append(getattr(importlib.import_module(mod), name))
-        except ImportError:
-            continue
     try:
         return int(args.run(args) or 0)
-    except tuple(roots) as exc:  # type: ignore[misc]
+    except FacecastError as exc:  # the one root: a user-facing error prints one line, no traceback
         print(f"facecast {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,4 +1,10 @@
-"""The one exception root of :mod:`realtime_core` and its specific subclasses.
+"""The one exception root of facecast (:class:`FacecastError`), the shared :class:`ConfigError`,
+and the errors of :mod:`realtime_core`.
+
+Every package's family hangs under :class:`FacecastError` (``RealtimeCoreError`` here,
+``assets.errors.AssetsError``, ``server.errors.ServerError``, ``clients.errors.ClientError``,
+``training.errors.TrainingError``), so the command line catches one type and prints one line.
+It lives in the lowest layer because every other package may import it.
 
 Every problem realtime_core detects in its input raises a subclass of
 :class:`RealtimeCoreError` whose message names the problem (and the offending value
@@ -8,12 +14,17 @@ or array), so callers at the I/O edge can catch one type and report it.
 from __future__ import annotations
 
 
-class RealtimeCoreError(Exception):
-    """Root of every error raised by realtime_core."""
+class FacecastError(Exception):
+    """Root of every error facecast raises on purpose (bad input, bad configuration, bad files)."""
 
 
-class ConfigError(RealtimeCoreError, ValueError):
-    """A configuration value is out of range or inconsistent."""
+class ConfigError(FacecastError, ValueError):
+    """A configuration value is out of range or inconsistent (any package's frozen config)."""
+
+
+class RealtimeCoreError(FacecastError):
+    """Root of every error raised by realtime_core on bad input (configuration errors are
+    :class:`ConfigError`, shared by every package)."""
 
 
 class InvalidAudioError(RealtimeCoreError, ValueError):

@@ -2,8 +2,8 @@
 
 :class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the model's streaming
 visual mapper (:class:`realtime_core.mapping.VisualMapper`: the HMM inverter of an
-:class:`AvModel`, or the GMM-selected MLP bank of an :class:`MlpSpeechModel`). ``push(samples)`` returns the parameter rows now final, ``flush()`` the rest;
-row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
+:class:`AvModel`, or the GMM-selected MLP bank of an :class:`MlpSpeechModel`). ``push(samples)``
+returns the parameter rows now final, ``flush()`` the rest; row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
 once the audio reaches frame ``tc + lag`` plus one analysis window: the algorithmic
 delay is ``(tc + lag) / fps`` seconds plus the window.
 
@@ -14,28 +14,49 @@ equal what a live session produces frame for frame; ``mode="batch"`` uses batch 
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from realtime_core.avmodel import AvModel
 from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.mfcc import as_float_samples
+from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
 from realtime_core.mapping import SpeechModel
 
 
+StageObserver = Callable[[str], None]
+"""Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage
+ran on a push: the caller reads its own clock between calls (the core reads none)."""
+
+STAGES = ("resample", "features", "inversion")
+
+
 class SpeechToParams:
-    """``push(samples (n,) at model.sample_rate_hz) -> (k, n_visual) float64``; ``flush()``.
+    """The live chain: ``push(samples (n,) at rate_hz) -> (k, n_visual) float64``; ``flush()``.
+
+    Samples at any ``rate_hz`` (default: the model's rate) go through a :class:`StreamingResampler`
+    (bit-identical to whole-signal ``resample_poly`` for any chunking), the model's front end
+    (MFCC -> CMVN -> context) and the model's streaming visual mapper. ``observer`` (optional) is told
+    after each stage of every push, for per-stage timings.
 
     model: any :class:`realtime_core.mapping.SpeechModel`; ``stream`` sets the HMM inverter's lag,
-    dtype and likelihood scale (an MLP model takes its lag and dtype)."""
+    dtype and likelihood scale (an MLP model takes its lag and dtype).
+    """
 
-    def __init__(self, model: SpeechModel, *, stream: StreamConfig = StreamConfig()) -> None:
+    def __init__(self, model: SpeechModel, *, rate_hz: int | None = None, stream: StreamConfig = StreamConfig(),
+                 observer: StageObserver | None = None) -> None:
         self.model = model
+        self.rate_hz = int(rate_hz) if rate_hz is not None else model.sample_rate_hz
+        self._resampler = (StreamingResampler(self.rate_hz, model.sample_rate_hz)
+                           if self.rate_hz != model.sample_rate_hz else None)
         self._fe = model.front_end()
         if isinstance(model, AvModel):
             self._inv = model.inverter(stream)
         else:
             self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
+        self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
 
     @property
@@ -44,38 +65,62 @@ class SpeechToParams:
         return self.model.frontend.tc + self._inv.lag_frames
 
     def reset(self) -> None:
+        if self._resampler is not None:
+            self._resampler.reset()
         self._fe.reset()
         self._inv.reset()
         self.frames_out = 0
 
     def push(self, samples: np.ndarray) -> np.ndarray:
-        out = self._inv.push(self._fe.push(samples))
+        """samples: (n,) float32/float64 in [-1, 1] or int16, at ``rate_hz``."""
+        x = samples
+        if self._resampler is not None:
+            x = self._resampler.push(as_float_samples(samples))
+        self._observe("resample")
+        feats = self._fe.push(x)
+        self._observe("features")
+        out = self._inv.push(feats)
+        self._observe("inversion")
         self.frames_out += len(out)
         return out
 
     def flush(self) -> np.ndarray:
-        out = np.concatenate([self._inv.push(self._fe.flush()), self._inv.flush()])
+        tail = self._fe.push(self._resampler.flush()) if self._resampler is not None else np.zeros((0, 0))
+        self._observe("resample")
+        feats = self._fe.flush()
+        feats = np.concatenate([tail, feats]) if len(tail) else feats
+        self._observe("features")
+        out = np.concatenate([self._inv.push(feats), self._inv.flush()])
+        self._observe("inversion")
         self.frames_out += len(out)
         return out
+
+
+def _ignore(stage: str) -> None:
+    """The default observer: timings not wanted."""
 
 
 def speech_to_params(
     model: SpeechModel,
     samples: np.ndarray,
+    rate_hz: int | None = None,
     *,
     mode: str = "stream",
     stream: StreamConfig = StreamConfig(),
     hmmi: HmmiConfig = HmmiConfig(),
 ) -> np.ndarray:
-    """Whole utterance: ``(n,)`` samples at ``model.sample_rate_hz`` -> ``(n_frames, n_visual)``.
+    """Whole utterance: ``(n,)`` samples at ``rate_hz`` (default the model's) -> ``(n_frames, n_visual)``.
 
-    mode "stream" is exactly the live path; "batch" is batch HMMI (eq. 7 EM, HMM models only).
+    mode "stream" is exactly the live path (the same :class:`SpeechToParams` objects); "batch" is
+    batch HMMI (eq. 7 EM, HMM models only) on the same resampled audio.
     """
     if mode not in ("stream", "batch"):
         raise ConfigError(f"mode must be 'stream' or 'batch', got {mode!r}")
     if mode == "batch" and not isinstance(model, AvModel):
         raise ConfigError("mode 'batch' (batch HMMI) needs an HMM model")
     x = as_float_samples(samples)
+    if rate_hz is not None and int(rate_hz) != model.sample_rate_hz:
+        x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
     if x.size < model.frontend.mfcc.window_len:
         raise InvalidAudioError(
             f"audio too short: {x.size} samples, need at least {model.frontend.mfcc.window_len} "

@@ -28,7 +28,7 @@ SENTENCE = "Speech goes in, and a face comes out, in real time, on any head you 
 
 def _model():
     from training.errors import TrainingError
-    from training.modelfile import load_model
+    from assets.modelfile import load_model
 
     try:
         return load_model(None), "the shipped model"
@@ -40,14 +40,14 @@ def _model():
 
 def _speech(tmp: Path):
     """(samples (n,) float32 at 16 kHz, what it is): espeak-ng's voice, else speech-like noise."""
-    from training.audio_io import read_audio
-    from training.trainer import resample
+    from assets.audio import read_audio
+    from realtime_core.features.resample import resample_audio
 
     if shutil.which("espeak-ng"):
         wav = tmp / "speech.wav"
         subprocess.run(["espeak-ng", "-s", "150", "-w", str(wav), SENTENCE], check=True, capture_output=True)
         x, rate = read_audio(wav)
-        return resample(x, rate, 16000).astype("float32"), "espeak-ng speech"
+        return resample_audio(x, rate, 16000).astype("float32"), "espeak-ng speech"
     from tests.server.conftest import speechlike
 
     return speechlike(6.0, 16000), "speech-like noise (espeak-ng is not installed)"
@@ -67,7 +67,7 @@ def render_frame(out: Path) -> None:
     import numpy as np
     from PIL import Image
 
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
     from clients.render.renderer import RenderConfig, renderer_for_rig
 
     rig, mesh = builtin_rig()
@@ -83,12 +83,12 @@ def main() -> int:
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
 
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
     from server.app import Head
     from tests.clients_web.conftest import LiveServer
 
     if args.model is not None:
-        from training.modelfile import load_model
+        from assets.modelfile import load_model
 
         model, what = load_model(args.model), str(args.model)
     else:

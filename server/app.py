@@ -48,12 +48,13 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from clients.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
-from server import protocol as P
+from wire import JS_PROTOCOL
+from wire import protocol as P
 from server.config import ServerConfig
 from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
 from server.glb import mesh_glb, mesh_json, texture_mime
@@ -700,6 +701,8 @@ class FacecastServer:
 
     def _static(self, path: str) -> Response:
         root = self.config.web_root
+        if path == "/js/protocol.js":  # the wire format's JS twin lives with the Python one
+            root, path = JS_PROTOCOL.parent, JS_PROTOCOL.name
         if path.startswith("/vendor/") and self.config.node_modules is not None:
             package, _, rel = path[len("/vendor/"):].partition("/")
             prefix = next((d for d in self._VENDOR.get(package, ()) if rel.startswith(d)), None)
@@ -770,21 +773,21 @@ def load_head(*, head: Path | None = None, landmarks: Path | None = None, rig: P
     """The head to serve: a rig file, a mesh to rig now (with its landmarks JSON, or the one shipped
     for it), the built-in head, or None."""
     if rig is not None:
-        from clients.heads.rigfile import load_rig
+        from assets.heads.rigfile import load_rig
 
         r, m = load_rig(rig)
         return Head(r, m)
     if head is not None:
-        from clients.heads.landmarks import read_landmarks, shipped_landmarks
-        from clients.heads.mesh import load_mesh
-        from clients.heads.rigging import rig_head
+        from assets.heads.landmarks import read_landmarks, shipped_landmarks
+        from assets.heads.mesh import load_mesh
+        from assets.heads.rigging import rig_head
 
         m = load_mesh(head)
         lm_path = landmarks or shipped_landmarks(head)
         r, m = rig_head(m, None if lm_path is None else read_landmarks(lm_path), landmark_source=str(lm_path))
         return Head(r, m)
     if builtin:
-        from clients.heads.rigfile import builtin_rig
+        from assets.heads.rigfile import builtin_rig
 
         r, m = builtin_rig()
         return Head(r, m)

@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+from realtime_core.errors import ConfigError, FacecastError
 
-class ServerError(Exception):
+
+class ServerError(FacecastError):
     """Root of every error raised by the server package."""
 
 
-class ServerConfigError(ServerError, ValueError):
+class ServerConfigError(ServerError, ConfigError):
     """A server, session or source configuration value is invalid (the message names it)."""
 
 
 class ProtocolViolation(ServerError):
     """A peer broke the wire protocol: close that one connection with ``code`` and ``reason``.
 
-    code: WebSocket close code (see :mod:`server.protocol`); reason: short text (<= 123 bytes
+    code: WebSocket close code (see :mod:`wire.protocol`); reason: short text (<= 123 bytes
     UTF-8, the limit of a close frame).
     """
 

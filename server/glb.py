@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 
-from clients.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh
 
 
 def _image_mime(data: bytes) -> str:

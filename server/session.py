@@ -4,7 +4,7 @@ Theory of operation
 -------------------
 A session is one audio stream. :meth:`Session.push_bytes` (or :meth:`Session.push` for arrays)
 decodes a block (pcm_s16le or f32le, interleaved channels), mixes it down to mono (channel mean),
-resamples it to the model's rate with :class:`server.resample.StreamingResampler` (equal to
+resamples it to the model's rate with :class:`realtime_core.features.resample.StreamingResampler` (equal to
 ``scipy.signal.resample_poly`` on the whole stream, whatever the chunking), and runs the same
 streaming objects as :func:`realtime_core.pipeline.speech_to_params` (front end, then the streaming
 inverter), so a live session's raw mouth parameters equal ``facecast animate`` frame for frame.
@@ -32,9 +32,9 @@ from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face.rig import Rig
 from realtime_core.inversion import StreamConfig
-from server import protocol as P
+from wire import protocol as P
 from server.errors import AudioFormatError, ControlError, ServerConfigError
-from server.resample import StreamingResampler
+from realtime_core.features.resample import StreamingResampler
 from server.timing import StageTimes
 
 MIN_RATE_HZ = 8000

@@ -145,13 +145,13 @@ class FileSource:
     """A file as an async iterator of (n, 1) float32 blocks (mono, the file's own rate)."""
 
     def __init__(self, config: FileConfig) -> None:
-        from training.audio_io import read_audio
-        from training.errors import TrainingError
+        from assets.audio import read_audio
+        from assets.errors import AssetsError
 
         self.config = config
         try:
             samples, rate = read_audio(config.path)
-        except TrainingError as exc:
+        except AssetsError as exc:
             raise AudioSourceError(str(exc)) from None
         self.samples = np.asarray(samples, dtype=np.float32)
         self.sample_rate_hz = int(rate)

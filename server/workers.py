@@ -255,6 +255,6 @@ class RemoteSession:
 
 
 def _sample_bytes(config: SessionConfig) -> int:
-    from server.protocol import SAMPLE_FORMATS
+    from wire.protocol import SAMPLE_FORMATS
 
     return SAMPLE_FORMATS[config.sample_format].itemsize

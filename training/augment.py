@@ -25,6 +25,7 @@ from math import gcd
 import numpy as np
 from scipy.signal import fftconvolve, resample_poly
 
+from realtime_core.features.resample import resample_audio
 from training.errors import ConfigError
 
 NOISE_KINDS = ("white", "pink")
@@ -97,14 +98,6 @@ def coloured_noise(n: int, kind: str, rng: np.random.Generator) -> np.ndarray:
     return white / max(_rms(white), 1e-12)
 
 
-def resample(samples: np.ndarray, from_hz: int, to_hz: int) -> np.ndarray:
-    """Polyphase resampling, (n,) -> (~n * to_hz / from_hz,), same dtype family (float64)."""
-    if from_hz == to_hz:
-        return samples.astype(np.float64)
-    g = gcd(int(from_hz), int(to_hz))
-    return resample_poly(samples.astype(np.float64), int(to_hz) // g, int(from_hz) // g)
-
-
 def augment(samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Augmented:
     """Degrade one utterance like a real microphone would (see the module doc).
 
@@ -135,6 +128,6 @@ def augment(samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config:
         gain_db += 20.0 * np.log10(0.99 / peak)
     info["gain_db"] = round(gain_db, 2)
     to_hz = int(config.sample_rates_hz[int(rng.integers(len(config.sample_rates_hz)))])
-    x = resample(x, rate_hz, to_hz)
+    x = resample_audio(x, rate_hz, to_hz)
     info["sample_rate_hz"] = to_hz
     return Augmented(np.clip(x, -1.0, 1.0).astype(np.float32), to_hz, info)

@@ -21,37 +21,21 @@ interrupted build never leaves a half-written file under its final name. Only JS
 
 from __future__ import annotations
 
-import io
 import json
-import os
-import tempfile
-import wave
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from facecast.files import atomic_write_bytes
-from training.errors import (
-    ConfigError,
-    CorpusFormatError,
-    NotAudioError,
-    SilentAudioError,
-    TruncatedFileError,
-    WrongSampleRateError,
-)
+from assets.files import atomic_write_bytes
+from assets.audio import ACCEPTED_RATES_HZ, read_wav, write_wav
+from training.errors import ConfigError, CorpusFormatError, TruncatedFileError
 from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1
 SOURCES = ("espeak", "festival", "real", "video")
-ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
-"""Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
-
-SILENCE_PEAK = 1e-4
-"""Audio whose absolute peak is below this (float full scale 1.0) counts as silent (~-80 dBFS)."""
-
 CSV_HEADER = "t," + ",".join(PARAM_NAMES)
 
 
@@ -85,23 +69,6 @@ class Utterance:
 
 
 # --------------------------------------------------------------------------- atomic writes
-
-
-def to_int16(samples: np.ndarray) -> np.ndarray:
-    """float in [-1, 1] (n,) -> int16 (n,), rounded, clipped."""
-    return np.clip(np.round(np.asarray(samples, dtype=np.float64) * 32767.0), -32768, 32767).astype(np.int16)
-
-
-def write_wav(path: Path, samples: np.ndarray, rate_hz: int) -> None:
-    """Atomically write mono 16-bit PCM. ``samples``: (n,) int16, or float in [-1, 1]."""
-    pcm = samples if samples.dtype == np.int16 else to_int16(samples)
-    buf = io.BytesIO()
-    with wave.open(buf, "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(int(rate_hz))
-        w.writeframes(pcm.astype("<i2").tobytes())
-    atomic_write_bytes(Path(path), buf.getvalue())
 
 
 def format_params_csv(params: np.ndarray) -> str:
@@ -180,57 +147,6 @@ def write_manifest(corpus_dir: Path, entries: Sequence[dict], *, seed: int | Non
 
 
 # --------------------------------------------------------------------------- reading
-def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True) -> tuple[np.ndarray, int]:
-    """Read a PCM WAV (8/16/24/32-bit, any channel count -> mono mean).
-
-    Returns (samples (n,) float32 in [-1, 1], sample_rate_hz). Raises NotAudioError,
-    TruncatedFileError, WrongSampleRateError or SilentAudioError naming the file.
-    """
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            head = fh.read(12)
-    except OSError as exc:
-        raise NotAudioError(path, f"cannot be read ({exc.strerror or exc})") from exc
-    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
-        raise NotAudioError(path, "not audio: not a RIFF/WAVE file")
-    try:
-        with wave.open(str(path), "rb") as w:
-            ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
-            raw = w.readframes(n)
-    except (wave.Error, EOFError) as exc:
-        # the wave module raises EOFError when a header chunk is cut short
-        if isinstance(exc, EOFError):
-            raise TruncatedFileError(path, "truncated WAV: the header ends early") from exc
-        raise NotAudioError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
-    if len(raw) < n * ch * width:
-        have = len(raw) // max(ch * width, 1)
-        raise TruncatedFileError(path, f"truncated WAV: header declares {n} frames, data holds {have}")
-    if width == 1:
-        x = (np.frombuffer(raw, np.uint8).astype(np.float32) - 128.0) / 128.0
-    elif width == 2:
-        x = np.frombuffer(raw, "<i2").astype(np.float32) / 32768.0
-    elif width == 3:
-        b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
-        v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
-        x = (np.where(v >= 1 << 23, v - (1 << 24), v)).astype(np.float32) / float(1 << 23)
-    elif width == 4:
-        x = np.frombuffer(raw, "<i4").astype(np.float32) / float(1 << 31)
-    else:
-        raise NotAudioError(path, f"not audio: unsupported sample width {width} bytes")
-    if ch > 1:
-        x = x.reshape(-1, ch).mean(axis=1)
-    if rate not in ACCEPTED_RATES_HZ:
-        raise WrongSampleRateError(path, f"wrong sample rate: {rate} Hz is not one of {ACCEPTED_RATES_HZ}")
-    if expected_rate_hz is not None and rate != expected_rate_hz:
-        raise WrongSampleRateError(path, f"wrong sample rate: file has {rate} Hz, manifest says {expected_rate_hz} Hz")
-    if len(x) == 0:
-        raise TruncatedFileError(path, "truncated WAV: no samples")
-    if check_silence and float(np.max(np.abs(x))) < SILENCE_PEAK:
-        raise SilentAudioError(path, f"silent: peak amplitude {float(np.max(np.abs(x))):.1e} of full scale")
-    return x.astype(np.float32), int(rate)
-
-
 def read_params_csv(path: Path, n_frames: int) -> np.ndarray:
     """Read and check a params.csv: header, n_frames rows, t = k/30. Returns (n_frames, 4)."""
     path = Path(path)

@@ -6,51 +6,32 @@ can print it as one line (``facecast corpus: error: ...``).
 
 from __future__ import annotations
 
-from pathlib import Path
+from assets.errors import (  # file problems are the assets edge's; training raises them too
+    CorpusFormatError,
+    FileProblem,
+    NotAudioError,
+    SilentAudioError,
+    TruncatedFileError,
+    WrongSampleRateError,
+)
+from realtime_core.errors import ConfigError, FacecastError
+
+__all__ = [
+    "AlignmentFormatError", "ConfigError", "CorpusFormatError", "FileProblem", "MissingDependencyError",
+    "NoFaceError", "NotAudioError", "NotVideoError", "SilentAudioError", "SynthesisError", "TrainingError",
+    "TruncatedFileError", "WrongSampleRateError",
+]
 
 
-class TrainingError(Exception):
-    """Root of every error raised by the training package."""
+class TrainingError(FacecastError):
+    """Root of the errors only the training package raises."""
 
 
-class ConfigError(TrainingError, ValueError):
-    """A configuration value is out of range or inconsistent."""
-
-
-class FileProblem(TrainingError):
-    """A problem with one input or corpus file; ``path`` names it and ``problem`` says what."""
-
-    def __init__(self, path: str | Path, problem: str) -> None:
-        self.path = Path(path)
-        self.problem = problem
-        super().__init__(f"{self.path}: {problem}")
-
-
-class NotAudioError(FileProblem):
-    """The file is not a readable audio file (or has no audio stream)."""
-
-
-class SilentAudioError(FileProblem):
-    """The audio holds no signal (all samples at or near zero)."""
-
-
-class WrongSampleRateError(FileProblem):
-    """The audio's sample rate is not one the corpus accepts or not the one declared."""
-
-
-class TruncatedFileError(FileProblem):
-    """The file ends early: a truncated WAV or video, or fewer rows/frames than declared."""
-
-
-class NoFaceError(FileProblem):
+class NoFaceError(FileProblem, TrainingError):
     """No face (or too few frames with a face) was found in a video."""
 
 
-class CorpusFormatError(FileProblem):
-    """A corpus file (manifest, params.csv, phonemes.json) does not follow the layout."""
-
-
-class AlignmentFormatError(FileProblem):
+class AlignmentFormatError(FileProblem, TrainingError):
     """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
 
 
@@ -62,5 +43,5 @@ class MissingDependencyError(TrainingError):
     """An optional dependency (e.g. mediapipe for video) or tool (ffmpeg) is not installed."""
 
 
-class NotVideoError(FileProblem):
+class NotVideoError(FileProblem, TrainingError):
     """The file is not a readable video (no video stream, unknown format)."""

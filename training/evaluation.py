@@ -26,7 +26,6 @@ from realtime_core.avmodel import AvModel
 from realtime_core.features import MfccConfig, frame_log_energy_db
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
-from training.trainer import resample
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
 
@@ -88,7 +87,7 @@ def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_h
     """Run the live path on ``samples`` and compare with ``truth (n_frames, 4)``.
 
     Returns the score, the estimate ``(T, 4)`` and the loudness track ``(T,)`` dB."""
-    est = speech_to_params(model, resample(samples, rate_hz, model.sample_rate_hz))
+    est = speech_to_params(model, samples, rate_hz)
     T = min(len(est), len(truth))
     est, truth = est[:T], truth[:T]
     loud = loudness_db(samples, rate_hz, T)
@@ -116,7 +115,7 @@ def real_speech_items(root: str | Path, *, lead_s: float | None = None) -> list[
     """Real recordings with phone alignments under ``root``, truth from the articulatory rules."""
     from training.alignments import find_aligned_audio
     from training.articulatory import ArticulatoryConfig, render_params
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
     from training.params import n_frames_for
 
     cfg = ArticulatoryConfig() if lead_s is None else ArticulatoryConfig(lead_s=lead_s)

@@ -24,7 +24,8 @@ import numpy as np
 
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
-from training.corpus import read_wav, write_manifest, write_utterance
+from assets.audio import read_wav
+from training.corpus import write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
 from training.params import PhonemeSegment
 from training.params import n_frames_for

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from training.alignments import Alignment, Phone
-from training.augment import resample
-from training.corpus import to_int16
+from realtime_core.features.resample import resample_audio
+from assets.audio import to_int16
 from training.errors import AlignmentFormatError, MissingDependencyError
 
 FRAME_S = 0.01
@@ -45,7 +45,7 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
     words = normalise_transcript(text)
     if not words:
         raise AlignmentFormatError(source, "empty transcript")
-    pcm = to_int16(resample(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
+    pcm = to_int16(resample_audio(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
     decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL")
     missing = sorted({w for w in words if decoder.lookup_word(w) is None})
     if missing:

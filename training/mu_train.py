@@ -68,7 +68,7 @@ def _per_frame_us(fn, reps: int = 3) -> float:
 
 
 def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say: Say = print) -> dict:
-    from facecast.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes
     from training.trainer import TrainRecipe, cmvn_statistics
 
     out = Path(out)
@@ -132,7 +132,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     if cfg.hmm_states:
         from realtime_core.hmm import TrainConfig
         from training.corpus import Utterance
-        from training.modelfile import save_model
+        from assets.modelfile import save_model
         from training.trainer import train_av_model
 
         utts = [Utterance(id=c.sentence_id, samples=c.samples, sample_rate_hz=c.sample_rate_hz,

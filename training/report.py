@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from facecast.files import atomic_write_bytes
+from assets.files import atomic_write_bytes
 
 
 def _figure():

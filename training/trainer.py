@@ -24,7 +24,7 @@ from realtime_core.features import CmvnConfig, FrontEndConfig, MfccConfig, extra
 from realtime_core.hmm import AvHmm, TrainConfig, TrainResult, baum_welch, init_model
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
-from training.augment import resample
+from realtime_core.features.resample import resample_audio
 from training.corpus import Utterance
 from training.errors import ConfigError
 
@@ -79,7 +79,7 @@ def cmvn_statistics(audio: Sequence[np.ndarray], frontend: FrontEndConfig) -> tu
 
 
 def utterance_audio(utt: Utterance, rate_hz: int) -> np.ndarray:
-    return resample(utt.samples, utt.sample_rate_hz, rate_hz)
+    return resample_audio(utt.samples, utt.sample_rate_hz, rate_hz)
 
 
 def joint_sequence(audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray,

@@ -42,7 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from training.corpus import SILENCE_PEAK, write_manifest, write_utterance
+from assets.audio import SILENCE_PEAK
+from training.corpus import write_manifest, write_utterance
 from training.errors import (
     ConfigError,
     MissingDependencyError,

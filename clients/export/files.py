@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import io
-import wave
 from pathlib import Path
 
 import numpy as np
@@ -12,26 +10,11 @@ from clients.export.curves import Track, csv_bytes, json_bytes
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
-from facecast.files import atomic_write_bytes
+from assets.audio import wav_bytes
+from assets.files import atomic_write_bytes
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
-
-
-def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
-    """Mono 16-bit PCM WAV of samples (n,) float in [-1, 1] (x 32768, the wire's int16 scale,
-    clipped) or int16 as is; rate_hz: samples per second."""
-    x = np.asarray(samples)
-    if x.ndim != 1:
-        raise ExportError(f"audio must be mono (n,), got shape {x.shape}")
-    pcm = x if x.dtype == np.int16 else np.clip(np.rint(x.astype(np.float64) * 32768.0), -32768, 32767)
-    buf = io.BytesIO()
-    with wave.open(buf, "wb") as w:
-        w.setnchannels(1)
-        w.setsampwidth(2)
-        w.setframerate(int(rate_hz))
-        w.writeframes(np.asarray(pcm, dtype="<i2").tobytes())
-    return buf.getvalue()
 
 
 def export_track(path: str | Path, track: Track, *, head: tuple | None = None,

@@ -139,7 +139,7 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
 
 
 def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
-    """:func:`animated_glb` of a rigged head (``rig`` and its :class:`clients.heads.mesh.HeadMesh`)."""
+    """:func:`animated_glb` of a rigged head (``rig`` and its :class:`assets.heads.mesh.HeadMesh`)."""
     from realtime_core import VISUAL_PARAMS
 
     if len(mesh.vertices) != len(rig.neutral):
@@ -152,7 +152,7 @@ def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
 def builtin_arkit_targets() -> dict[str, np.ndarray]:
     """The built-in head's 52 ARKit blendshapes: name -> (n, 3) float64 displacement (mesh units) at
     weight 1, in the vertex order of ``builtin_rig()``'s mesh (both come from the same cut head)."""
-    from clients.heads.builtin import load_builtin_head
+    from assets.heads.builtin import load_builtin_head
 
     return load_builtin_head().targets
 

@@ -18,7 +18,7 @@ from typing import Literal
 import numpy as np
 
 from clients.errors import RenderError
-from clients.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference
@@ -252,7 +252,7 @@ class HeadRenderer:
 
 def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
     """A renderer framed on the rig's face (the placed simple model gives the face box and frame)."""
-    from clients.heads.rigging import mouth_landmarks
+    from assets.heads.rigging import mouth_landmarks
     from realtime_core.face import face_frame
 
     slm = rig.meta.get("simple_landmarks")

@@ -53,26 +53,19 @@ def resample(t: np.ndarray, params: np.ndarray, fps: float) -> np.ndarray:
 
 
 def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.ndarray, float]:
-    """HOOK: speech -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
+    """Speech file -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
 
-    Uses the real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the
-    same computation as a live session) with the trained model loaded by
-    ``training.modelfile.load_model`` (``model`` None = its default). Those modules come from the
-    core/training branches; where they are missing this raises RenderError pointing to --params.
+    The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
+    computation as a live session) with the model loaded by ``assets.modelfile.load_model``
+    (``model`` None = the default model).
     """
-    try:
-        from realtime_core.pipeline import speech_to_params
-        from training.audio_io import read_audio
-        from training.modelfile import load_model
-        from training.trainer import resample as resample_audio
-    except ImportError as exc:
-        raise RenderError(
-            f"{path}: speech -> parameters needs the real-time core's trained model, which is not available on "
-            f"this branch yet ({exc}); pass --params PARAMS.csv (columns t, {', '.join(VISUAL_PARAMS)})"
-        ) from exc
+    from assets.audio import read_audio
+    from assets.modelfile import load_model
+    from realtime_core.pipeline import speech_to_params
+
     av = load_model(model)
     samples, rate = read_audio(path)
-    params = speech_to_params(av, resample_audio(samples, rate, av.sample_rate_hz))
+    params = speech_to_params(av, samples, rate)
     return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s
 
 

@@ -27,11 +27,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from clients.errors import ClientError
-from clients.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh
 from clients.render.renderer import HeadRenderer, RenderConfig
 from clients.viewer.stream import StreamConfig, connect_viewer
 from clients.viewer.video import framing
-from server import protocol as P
+from wire import protocol as P
 
 
 @dataclass

@@ -19,8 +19,8 @@ import numpy as np
 
 from clients.client import ServerClosed, ViewerClient, http_get
 from clients.errors import ClientError
-from clients.heads.mesh import HeadMesh
-from server import protocol as P
+from assets.heads.mesh import HeadMesh
+from wire import protocol as P
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -36,19 +36,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
     from clients.export.curves import Track, csv_bytes
-    from facecast.files import atomic_write_bytes
-    from training.modelfile import load_model
-    from training.trainer import resample
+    from assets.files import atomic_write_bytes
+    from assets.modelfile import load_model
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
     model = load_model(args.model)
     samples, rate = read_audio(args.speech)
-    x = resample(samples, rate, model.sample_rate_hz)
-    params = speech_to_params(model, x, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
     # Every output goes through the exporters (one CSV writer for the whole product).
     track = Track(params=params)
     if args.csv is not None:

@@ -38,8 +38,8 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from server.app import load_head
-    from server.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
-    from training.modelfile import load_model
+    from facecast.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
+    from assets.modelfile import load_model
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
     npm = Path(__file__).resolve().parents[2] / "node_modules"  # three.js for the browser viewer (npm ci)

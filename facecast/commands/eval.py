@@ -34,10 +34,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
-    from facecast.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set, video_items
-    from training.modelfile import load_model
+    from assets.modelfile import load_model
 
     model = load_model(args.model)
     results = []

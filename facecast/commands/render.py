@@ -37,11 +37,11 @@ def load_head(head: str, landmarks: str | None):
     """(rig, mesh) for 'builtin', a rig .npz or a mesh file (rigged now)."""
     from pathlib import Path
 
-    from clients.errors import LandmarkError
-    from clients.heads.landmarks import read_landmarks, shipped_landmarks
-    from clients.heads.mesh import load_mesh
-    from clients.heads.rigfile import builtin_rig, load_rig
-    from clients.heads.rigging import rig_head
+    from assets.errors import LandmarkError
+    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+    from assets.heads.mesh import load_mesh
+    from assets.heads.rigfile import builtin_rig, load_rig
+    from assets.heads.rigging import rig_head
 
     if head == "builtin":
         return builtin_rig()
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         if fps != args.fps:
             frames = resample(__import__("numpy").arange(len(frames)) / fps, frames, args.fps)
     rig, mesh = load_head(args.head, args.landmarks)
-    from clients.heads.landmarks import credit_for
+    from assets.heads.landmarks import credit_for
     from clients.render.video import with_caption
 
     credit = args.credit if args.credit is not None else credit_for(mesh.name)

@@ -42,14 +42,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from clients.errors import LandmarkError
-    from clients.heads.builtin import load_builtin_head
-    from clients.heads.landmarks import read_landmarks, shipped_landmarks
-    from clients.heads.mesh import load_mesh
-    from clients.heads.plot import plot_control_points
-    from clients.heads.rigfile import save_rig
-    from clients.errors import MeshError
-    from clients.heads.rigging import candide_face, rig_head
+    from assets.errors import LandmarkError
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+    from assets.heads.mesh import load_mesh
+    from assets.heads.plot import plot_control_points
+    from assets.heads.rigfile import save_rig
+    from assets.errors import MeshError
+    from assets.heads.rigging import candide_face, rig_head
     from realtime_core.errors import RealtimeCoreError
     from realtime_core.face import RigConfig, parse_wfm
 
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
-    from clients.heads.landmarks import credit_for
+    from assets.heads.landmarks import credit_for
 
     credit = credit_for(args.head)
     from clients.errors import RenderError

@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
-    from training.modelfile import load_model
+    from assets.modelfile import load_model
 
     token = None
     if args.token_env:

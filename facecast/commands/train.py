@@ -69,7 +69,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from realtime_core.hmm import TrainConfig
     from training.corpus import load_corpus
-    from training.modelfile import load_model, save_model
+    from assets.modelfile import load_model, save_model
     from training.trainer import TrainRecipe, train_av_model
 
     exclude = {s for s in args.exclude_source.split(",") if s}
@@ -124,7 +124,7 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
     from tqdm import tqdm
 
     from training.corpus import write_json
-    from training.modelfile import save_model
+    from assets.modelfile import save_model
     from training.report import plot_selection, plot_tracks
     from training.trainer import evaluate, split_by_utterance, train_av_model
 

@@ -55,7 +55,6 @@ def token_from_env(var: str | None) -> str | None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
-    from clients.errors import ClientError
     from clients.render.renderer import RenderConfig
     from clients.viewer.stream import StreamConfig, fetch_head, pick_session, record_stream
     from clients.viewer.video import render_recording

@@ -32,7 +32,6 @@ import numpy as np
 from scipy.linalg.lapack import dposv as _posv
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
-from realtime_core.hmm.model import LOG_2PI
 from realtime_core.inversion.conditional import ConditionalForm
 
 

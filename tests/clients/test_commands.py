@@ -16,7 +16,7 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     assert main(["rig", str(mp), "-o", str(out)]) == 0
     assert out.is_file() and out.with_suffix(".png").is_file()
     assert "220 control points" in capsys.readouterr().out
-    from clients.heads.rigfile import load_rig
+    from assets.heads.rigfile import load_rig
 
     rig, mesh = load_rig(out)
     assert rig.displacements(np.array([0, 0, 0.1, 0])).any()
@@ -42,7 +42,7 @@ def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, c
 def test_ply_round_trip(tmp_path, shared_data):
     import trimesh
 
-    from clients.heads.mesh import load_mesh
+    from assets.heads.mesh import load_mesh
 
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     m = load_mesh(mp)

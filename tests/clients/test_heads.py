@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from clients.errors import LandmarkError, MeshError, RigFileError
-from clients.heads.landmarks import read_landmarks, shipped_landmarks
-from clients.heads.mesh import HeadMesh, load_mesh
-from clients.heads.rigfile import load_rig, save_rig
-from clients.heads.rigging import MOUTH_GROUPS, cut_mouth, lips_connected, rig_head, simple_face
+from assets.errors import LandmarkError, MeshError, RigFileError
+from assets.heads.landmarks import read_landmarks, shipped_landmarks
+from assets.heads.mesh import HeadMesh, load_mesh
+from assets.heads.rigfile import load_rig, save_rig
+from assets.heads.rigging import MOUTH_GROUPS, cut_mouth, lips_connected, rig_head, simple_face
 from realtime_core.face import RigConfig, face_frame
 from realtime_core.face.rig import head_weights
 
@@ -114,7 +114,7 @@ def test_zero_params_give_zero_displacement(builtin_rig):
 def test_mouth_open_moves_the_jaw_down(builtin_rig, builtin_head):
     rig, _ = builtin_rig
     lm = builtin_head.landmarks
-    up = face_frame(builtin_head.mesh.vertices, __import__("clients.heads.rigging", fromlist=["x"]).mouth_landmarks(lm)).axes[1]
+    up = face_frame(builtin_head.mesh.vertices, __import__("assets.heads.rigging", fromlist=["x"]).mouth_landmarks(lm)).axes[1]
     v = rig.deformed(np.array([0, 0, 0.1, 0]))
     drop = (v - rig.neutral) @ up
     assert drop[lm["lower_inner"]] < -0.05 * rig.meta["iod"]
@@ -134,7 +134,7 @@ RBF_BOUND = 0.7
 def test_retargeting_onto_its_own_source_head_reproduces_native_targets(builtin_head):
     h = builtin_head
     s = simple_face(h)
-    from clients.heads.rigging import mouth_landmarks
+    from assets.heads.rigging import mouth_landmarks
 
     frame = face_frame(h.mesh.vertices, mouth_landmarks(h.landmarks))
     units = [n for g in MOUTH_GROUPS for n in g]
@@ -224,7 +224,7 @@ def test_landmarks_as_points_equal_landmarks_as_indices(shared_data, builtin_hea
 
 def test_candide3_as_the_simple_model(shared_data):
     """The paper's set-up: Candide-3 carried onto a head (no built-in head needed)."""
-    from clients.heads.rigging import candide_face, mouth_landmarks
+    from assets.heads.rigging import candide_face, mouth_landmarks
     from realtime_core.face import parse_wfm
 
     wfm = shared_data / "candide3" / "candide3-3.1.6.wfm"
@@ -252,7 +252,7 @@ def test_rig_variants_zero_and_jaw(builtin_head, cfg):
     rig, _ = rig_head(builtin_head.mesh, None, head=builtin_head, config=cfg)
     assert not rig.displacements(np.zeros(4)).any()
     lm = builtin_head.landmarks
-    from clients.heads.rigging import mouth_landmarks
+    from assets.heads.rigging import mouth_landmarks
 
     up = face_frame(builtin_head.mesh.vertices, mouth_landmarks(lm)).axes[1]
     drop = (rig.deformed(np.array([0, 0, 0.1, 0])) - rig.neutral) @ up
@@ -260,8 +260,8 @@ def test_rig_variants_zero_and_jaw(builtin_head, cfg):
 
 
 def test_cache_dir_from_environment(tmp_path, monkeypatch):
-    from clients.errors import AssetError
-    from clients.heads.cache import atomic_savez, cache_dir
+    from assets.errors import AssetError
+    from assets.heads.cache import atomic_savez, cache_dir
 
     monkeypatch.setenv("FACECAST_CACHE", str(tmp_path / "c"))
     assert cache_dir() == tmp_path / "c" and (tmp_path / "c").is_dir()

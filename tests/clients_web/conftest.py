@@ -75,7 +75,7 @@ class LiveServer:
 
 @pytest.fixture(scope="session")
 def head():
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
     from server.app import Head
 
     try:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server import protocol as P
+from wire import protocol as P
 
 
 def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_path):

@@ -80,7 +80,7 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     view = g.bufferViews[acc.bufferView]
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 4)
     np.testing.assert_array_equal(w, ref)
-    from training.audio_io import read_audio
+    from assets.audio import read_audio
 
     audio, rate = read_audio(tmp_path / "take.wav")  # the session's audio beside the .glb
     assert rate == 16000 and len(audio) == round(len(ref) / 30 * 16000)

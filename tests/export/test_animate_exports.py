@@ -14,8 +14,8 @@ from tests.server.conftest import speechlike
 def test_animate_writes_every_export_with_equal_curves(tmp_path):
     pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
     from tests.server.conftest import small_model
-    from training.corpus import write_wav
-    from training.modelfile import save_model
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
 
     model = save_model(tmp_path / "m.npz", small_model())
     wav = tmp_path / "s.wav"

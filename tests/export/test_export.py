@@ -144,7 +144,7 @@ def test_glb_also_loads_in_trimesh():
 
 @pytest.fixture(scope="module")
 def builtin():
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
 
     try:
         return builtin_rig()

@@ -44,7 +44,7 @@ def model() -> AvModel:
 
 @pytest.fixture(scope="session")
 def model_path(tmp_path_factory, model) -> Path:
-    from training.modelfile import save_model
+    from assets.modelfile import save_model
 
     return save_model(tmp_path_factory.mktemp("model") / "small.npz", model)
 
@@ -52,7 +52,7 @@ def model_path(tmp_path_factory, model) -> Path:
 @pytest.fixture(scope="session")
 def wav16k(tmp_path_factory) -> Path:
     """2 s of speech-like audio at 16 kHz as a pcm_s16le WAV file."""
-    from training.corpus import write_wav
+    from assets.audio import write_wav
 
     path = tmp_path_factory.mktemp("audio") / "speech16k.wav"
     write_wav(path, speechlike(2.0, 16000), 16000)
@@ -62,7 +62,7 @@ def wav16k(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def wav48k(tmp_path_factory) -> Path:
     """1.5 s of speech-like audio at 48 kHz."""
-    from training.corpus import write_wav
+    from assets.audio import write_wav
 
     path = tmp_path_factory.mktemp("audio") / "speech48k.wav"
     write_wav(path, speechlike(1.5, 48000, seed=1), 48000)

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from realtime_core.pipeline import speech_to_params
-from server.demo import DemoConfig, run_demo, synthesise, write_mp4
-from training.trainer import resample
+from facecast.demo import DemoConfig, run_demo, synthesise, write_mp4
+from realtime_core.features.resample import resample_audio as resample
 
 
 def test_demo_streams_speech_and_writes_an_mp4(model, tmp_path):
@@ -22,7 +22,7 @@ def test_demo_streams_speech_and_writes_an_mp4(model, tmp_path):
     if shutil.which("ffprobe") is None:
         pytest.skip("ffmpeg/ffprobe not installed")
     try:
-        from clients.heads.rigfile import builtin_rig
+        from assets.heads.rigfile import builtin_rig
         from server.app import Head
 
         head = Head(*builtin_rig())

@@ -18,17 +18,17 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
 from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
 from realtime_core.pipeline import speech_to_params
-from server import protocol as P
+from wire import protocol as P
 from server.app import FacecastServer, Head
 from server.config import ServerConfig
 from tests.server.conftest import speechlike
-from training.audio_io import read_audio
-from training.trainer import resample
+from assets.audio import read_audio
+from realtime_core.features.resample import resample_audio as resample
 
 
 @pytest.fixture(scope="module")
 def head() -> Head:
-    from clients.heads.rigfile import builtin_rig
+    from assets.heads.rigfile import builtin_rig
 
     try:
         rig, mesh = builtin_rig()

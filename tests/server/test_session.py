@@ -10,9 +10,9 @@ import scipy.signal
 
 from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES, blendshape_weights
 from realtime_core.pipeline import speech_to_params
-from server import protocol as P
+from wire import protocol as P
 from server.errors import AudioFormatError, ControlError, ServerConfigError
-from server.resample import StreamingResampler
+from realtime_core.features.resample import StreamingResampler
 from server.session import Session, SessionConfig
 from tests.server.conftest import speechlike
 
@@ -83,7 +83,7 @@ def test_session_params_equal_speech_to_params(model):
 
 
 def test_session_resamples_and_mixes_down(model):
-    from training.trainer import resample
+    from realtime_core.features.resample import resample_audio as resample
 
     x = speechlike(1.0, 48000, seed=3)
     stereo = np.stack([x, 0.5 * x], axis=1).astype("<f4")

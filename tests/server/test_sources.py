@@ -19,12 +19,12 @@ import pytest
 
 from clients.client import ViewerClient
 from realtime_core.pipeline import speech_to_params
-from server import protocol as P
+from wire import protocol as P
 from server.app import FacecastServer
 from server.config import ServerConfig
 from server.errors import AudioSourceError
 from server.sources import FileConfig, FileSource
-from training.audio_io import read_audio
+from assets.audio import read_audio
 
 
 def test_file_source_real_time_and_fast_give_animate_frames(model, wav16k):

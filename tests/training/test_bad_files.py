@@ -9,13 +9,14 @@ import wave
 import numpy as np
 import pytest
 
-from training.corpus import load_corpus, read_wav, write_manifest, write_utterance
+from assets.audio import read_wav
+from training.corpus import load_corpus, write_manifest, write_utterance
 from training.errors import (
     NoFaceError,
     NotAudioError,
     NotVideoError,
     SilentAudioError,
-    TrainingError,
+    CorpusFormatError,
     TruncatedFileError,
     WrongSampleRateError,
 )
@@ -86,7 +87,7 @@ def test_corpus_rate_mismatch_and_truncated_params(tmp_path) -> None:
     with pytest.raises(TruncatedFileError, match=r"u1/params\.csv: truncated: 9 frames, the audio needs 15"):
         load_corpus(tmp_path)
     (tmp_path / "manifest.json").write_text("{not json")
-    with pytest.raises(TrainingError, match=r"manifest\.json: not valid JSON"):
+    with pytest.raises(CorpusFormatError, match=r"manifest\.json: not valid JSON"):
         load_corpus(tmp_path)
 
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from training.build_corpus import BuildConfig, build_corpus
-from training.corpus import load_corpus, read_wav
+from assets.audio import read_wav
+from training.corpus import load_corpus
 
 pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("pocketsphinx") is None,

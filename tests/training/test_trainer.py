@@ -12,10 +12,11 @@ import pytest
 from facecast.cli import main
 from realtime_core.pipeline import SpeechToParams
 from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
-from training.corpus import load_corpus, read_wav
+from assets.audio import read_wav
+from training.corpus import load_corpus
 from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-from training.modelfile import load_model
-from training.trainer import resample
+from assets.modelfile import load_model
+from realtime_core.features.resample import resample_audio as resample
 
 
 @pytest.fixture(scope="module")

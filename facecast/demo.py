@@ -213,7 +213,7 @@ def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rat
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, write_video
-    from training.corpus import write_wav
+    from assets.audio import write_wav
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

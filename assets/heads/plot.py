@@ -29,7 +29,7 @@ def plot_control_points(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from clients.heads.rigging import mouth_landmarks
+    from assets.heads.rigging import mouth_landmarks
 
     v = np.asarray(rig.neutral, dtype=np.float64)
     simple_lm = rig.meta.get("simple_landmarks")

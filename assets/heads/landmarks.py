@@ -11,7 +11,7 @@ import json
 from importlib import resources
 from pathlib import Path
 
-from clients.errors import LandmarkError
+from assets.errors import LandmarkError
 
 CREDITS = {
     "leeperrysmith.glb": "Head: Lee Perry-Smith / Infinite Realities (CC BY 3.0)",
@@ -45,7 +45,7 @@ def shipped_landmarks(mesh_path: str | Path) -> Path | None:
     name = SHIPPED.get(Path(mesh_path).name.lower())
     if name is None:
         return None
-    return Path(str(resources.files("clients.heads").joinpath("landmarks", name)))
+    return Path(str(resources.files("assets.heads").joinpath("landmarks", name)))
 
 
 def credit_for(mesh_name: str) -> str:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.errors import MeshError
+from assets.errors import MeshError
 
 MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".ply")
 _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")

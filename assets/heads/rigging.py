@@ -1,6 +1,6 @@
 """Rigging pipeline at the edge: a head mesh plus landmarks -> :class:`realtime_core.face.Rig`.
 
-1. The simple face model comes from the built-in head (:mod:`clients.heads.builtin`): ~220 face
+1. The simple face model comes from the built-in head (:mod:`assets.heads.builtin`): ~220 face
    vertices sampled from the MakeHuman head, its 52 ARKit targets as animation units, regional
    shape units, and the mouth landmarks; its mouth calibration maps the four parameters to
    jawOpen, mouthStretch L+R, mouthUpperUp L+R and mouthFrown L+R.
@@ -23,9 +23,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from clients.errors import LandmarkError, MeshError
-from clients.heads.builtin import BuiltinHead, load_builtin_head
-from clients.heads.mesh import HeadMesh, check_mesh
+from assets.errors import LandmarkError, MeshError
+from assets.heads.builtin import BuiltinHead, load_builtin_head
+from assets.heads.mesh import HeadMesh, check_mesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceModel,

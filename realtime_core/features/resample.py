@@ -27,7 +27,22 @@ import math
 import numpy as np
 import scipy.signal
 
-from server.errors import ServerConfigError
+from realtime_core.errors import ConfigError
+
+
+def resample_audio(samples: np.ndarray, rate_from_hz: int, rate_to_hz: int) -> np.ndarray:
+    """Whole-signal polyphase resampling: ``(n,)`` -> ``(ceil(n up / down),)`` float64.
+
+    Exactly ``scipy.signal.resample_poly`` with the rates reduced by their gcd, which is also what
+    :class:`StreamingResampler` emits for the same signal in any chunking.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    if int(rate_from_hz) <= 0 or int(rate_to_hz) <= 0:
+        raise ConfigError(f"resampling rates must be positive, got {rate_from_hz} -> {rate_to_hz}")
+    if int(rate_from_hz) == int(rate_to_hz):
+        return x
+    g = math.gcd(int(rate_from_hz), int(rate_to_hz))
+    return scipy.signal.resample_poly(x, int(rate_to_hz) // g, int(rate_from_hz) // g)
 
 
 class StreamingResampler:
@@ -38,7 +53,7 @@ class StreamingResampler:
 
     def __init__(self, rate_from_hz: int, rate_to_hz: int) -> None:
         if int(rate_from_hz) <= 0 or int(rate_to_hz) <= 0:
-            raise ServerConfigError(f"resampling rates must be positive, got {rate_from_hz} -> {rate_to_hz}")
+            raise ConfigError(f"resampling rates must be positive, got {rate_from_hz} -> {rate_to_hz}")
         g = math.gcd(int(rate_from_hz), int(rate_to_hz))
         self.up = int(rate_to_hz) // g
         self.down = int(rate_from_hz) // g

@@ -1,0 +1,148 @@
+"""Audio files: PCM WAV read and written directly, every other format decoded through ffmpeg.
+
+One int16 scale everywhere (the wire's): float -> int16 is ``x * 32768`` rounded and clipped to
+``[-32768, 32767]``, int16 -> float is ``/ 32768``, so int16 samples round-trip exactly.
+"""
+
+from __future__ import annotations
+
+import io
+import shutil
+import subprocess
+import wave
+from pathlib import Path
+
+import numpy as np
+
+from assets.errors import NotAudioError, SilentAudioError, TruncatedFileError, WrongSampleRateError
+from assets.files import atomic_write_bytes
+
+ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
+"""Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
+
+SILENCE_PEAK = 1e-4
+"""Audio whose absolute peak is below this (float full scale 1.0) counts as silent (~-80 dBFS)."""
+
+INT16_SCALE = 32768.0
+"""float full scale 1.0 = 32768 int16 steps (the wire format's audio scale)."""
+
+
+def to_int16(samples: np.ndarray) -> np.ndarray:
+    """float in [-1, 1] (n,) -> int16 (n,): ``x * 32768`` rounded, clipped to [-32768, 32767]."""
+    return np.clip(np.rint(np.asarray(samples, dtype=np.float64) * INT16_SCALE), -32768, 32767).astype(np.int16)
+
+
+def wav_bytes(samples: np.ndarray, rate_hz: int) -> bytes:
+    """Mono 16-bit PCM WAV file contents. ``samples``: (n,) int16 as is, or float in [-1, 1]."""
+    x = np.asarray(samples)
+    if x.ndim != 1:
+        raise ValueError(f"audio must be mono (n,), got shape {x.shape}")
+    pcm = x if x.dtype == np.int16 else to_int16(x)
+    buf = io.BytesIO()
+    with wave.open(buf, "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(int(rate_hz))
+        w.writeframes(pcm.astype("<i2").tobytes())
+    return buf.getvalue()
+
+
+def write_wav(path: str | Path, samples: np.ndarray, rate_hz: int) -> Path:
+    """Atomically write mono 16-bit PCM (see :func:`wav_bytes`); returns the path."""
+    return atomic_write_bytes(Path(path), wav_bytes(samples, rate_hz))
+
+
+def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True) -> tuple[np.ndarray, int]:
+    """Read a PCM WAV (8/16/24/32-bit, any channel count -> mono mean).
+
+    Returns (samples (n,) float32 in [-1, 1], sample_rate_hz). Raises NotAudioError,
+    TruncatedFileError, WrongSampleRateError or SilentAudioError naming the file.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(12)
+    except OSError as exc:
+        raise NotAudioError(path, f"cannot be read ({exc.strerror or exc})") from exc
+    if len(head) < 12 or head[:4] != b"RIFF" or head[8:12] != b"WAVE":
+        raise NotAudioError(path, "not audio: not a RIFF/WAVE file")
+    try:
+        with wave.open(str(path), "rb") as w:
+            ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
+            raw = w.readframes(n)
+    except (wave.Error, EOFError) as exc:
+        # the wave module raises EOFError when a header chunk is cut short
+        if isinstance(exc, EOFError):
+            raise TruncatedFileError(path, "truncated WAV: the header ends early") from exc
+        raise NotAudioError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
+    if len(raw) < n * ch * width:
+        have = len(raw) // max(ch * width, 1)
+        raise TruncatedFileError(path, f"truncated WAV: header declares {n} frames, data holds {have}")
+    if width == 1:
+        x = (np.frombuffer(raw, np.uint8).astype(np.float32) - 128.0) / 128.0
+    elif width == 2:
+        x = np.frombuffer(raw, "<i2").astype(np.float32) / INT16_SCALE
+    elif width == 3:
+        b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
+        v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
+        x = (np.where(v >= 1 << 23, v - (1 << 24), v)).astype(np.float32) / float(1 << 23)
+    elif width == 4:
+        x = np.frombuffer(raw, "<i4").astype(np.float32) / float(1 << 31)
+    else:
+        raise NotAudioError(path, f"not audio: unsupported sample width {width} bytes")
+    if ch > 1:
+        x = x.reshape(-1, ch).mean(axis=1)
+    if rate not in ACCEPTED_RATES_HZ:
+        raise WrongSampleRateError(path, f"wrong sample rate: {rate} Hz is not one of {ACCEPTED_RATES_HZ}")
+    if expected_rate_hz is not None and rate != expected_rate_hz:
+        raise WrongSampleRateError(path, f"wrong sample rate: file has {rate} Hz, manifest says {expected_rate_hz} Hz")
+    if len(x) == 0:
+        raise TruncatedFileError(path, "truncated WAV: no samples")
+    if check_silence and float(np.max(np.abs(x))) < SILENCE_PEAK:
+        raise SilentAudioError(path, f"silent: peak amplitude {float(np.max(np.abs(x))):.1e} of full scale")
+    return x.astype(np.float32), int(rate)
+
+
+
+
+def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndarray, int]:
+    """Decode ``path`` to mono: ``(samples (n,) float32 in [-1, 1], sample_rate_hz)``.
+
+    WAV files are read directly; other formats (FLAC, MP3, OGG, the audio of MP4/MPG
+    video...) are decoded by ffmpeg at their own rate, or at ``rate_hz`` when given.
+    Raises :class:`NotAudioError` (or another :class:`training.errors.FileProblem`) naming
+    the file and the problem.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise NotAudioError(path, "file not found")
+    if path.suffix.lower() == ".wav" and rate_hz is None:
+        return read_wav(path)
+    ffmpeg = shutil.which("ffmpeg")
+    if ffmpeg is None:
+        raise NotAudioError(path, "decoding this format needs ffmpeg, which is not installed (apt-get install ffmpeg)")
+    rate = rate_hz or _probe_rate(path)
+    cmd = [ffmpeg, "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", "1", "-ar", str(rate),
+           "-f", "s16le", "-acodec", "pcm_s16le", "-"]
+    proc = subprocess.run(cmd, capture_output=True, check=False)
+    if proc.returncode != 0 or not proc.stdout:
+        msg = proc.stderr.decode(errors="replace").strip().splitlines()
+        raise NotAudioError(path, f"ffmpeg could not decode audio ({msg[-1] if msg else 'no audio stream'})")
+    samples = np.frombuffer(proc.stdout, dtype="<i2").astype(np.float32) / INT16_SCALE
+    return samples, rate
+
+
+def _probe_rate(path: Path) -> int:
+    """The first audio stream's sample rate (ffprobe), 16 kHz if it cannot be told."""
+    ffprobe = shutil.which("ffprobe")
+    if ffprobe is None:
+        return 16000
+    proc = subprocess.run(
+        [ffprobe, "-v", "error", "-select_streams", "a:0", "-show_entries", "stream=sample_rate",
+         "-of", "default=noprint_wrappers=1:nokey=1", str(path)],
+        capture_output=True, check=False, text=True,
+    )
+    try:
+        return int(proc.stdout.strip().splitlines()[0])
+    except (ValueError, IndexError):
+        raise NotAudioError(path, "no audio stream found") from None

@@ -1,0 +1,60 @@
+"""Errors of the file and asset edge (:mod:`assets`), under :class:`realtime_core.errors.FacecastError`.
+
+Every error that concerns a file names the file and the problem, so the command line can print it
+as one line (``facecast render: error: head.obj: no faces``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from realtime_core.errors import FacecastError
+
+
+class AssetsError(FacecastError):
+    """Root of every error raised by the assets package."""
+
+
+class FileProblem(AssetsError):
+    """A problem with one input file; ``path`` names it and ``problem`` says what."""
+
+    def __init__(self, path: str | Path, problem: str) -> None:
+        self.path = Path(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class NotAudioError(FileProblem):
+    """The file is not a readable audio file (or has no audio stream)."""
+
+
+class SilentAudioError(FileProblem):
+    """The audio holds no signal (all samples at or near zero)."""
+
+
+class WrongSampleRateError(FileProblem):
+    """The audio's sample rate is not one the reader accepts or not the one declared."""
+
+
+class TruncatedFileError(FileProblem):
+    """The file ends early: a truncated WAV or video, or fewer rows/frames than declared."""
+
+
+class CorpusFormatError(FileProblem):
+    """A track or corpus file (manifest, params.csv, phonemes.json) does not follow its layout."""
+
+
+class MeshError(AssetsError, ValueError):
+    """A head mesh cannot be read or cannot be rigged (no faces, degenerate, ...)."""
+
+
+class LandmarkError(AssetsError, ValueError):
+    """A landmarks JSON file is unreadable, incomplete or inconsistent with its mesh."""
+
+
+class RigFileError(AssetsError, ValueError):
+    """A rig .npz file is unreadable, of another version, or has inconsistent arrays."""
+
+
+class AssetError(AssetsError, RuntimeError):
+    """The built-in head's assets could not be fetched or read."""
