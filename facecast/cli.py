@@ -28,6 +28,8 @@ COMMANDS: dict[str, str] = {
     "extract": "facecast.commands.extract",
     "train": "facecast.commands.train",
     "eval": "facecast.commands.eval",
+    "mu": "facecast.commands.mu",
+    "fit-maps": "facecast.commands.fit_maps",
     "bench": "facecast.commands.bench",
 }
 

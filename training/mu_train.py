@@ -130,9 +130,9 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         say(f"single MLP ({cfg.baseline_hidden} hidden) trained in {time.perf_counter() - t0:.0f} s")
     # 5. The HMM of paper 000 on the same UMUP targets.
     if cfg.hmm_states:
+        from assets.modelfile import save_model
         from realtime_core.hmm import TrainConfig
         from training.corpus import Utterance
-        from assets.modelfile import save_model
         from training.trainer import train_av_model
 
         utts = [Utterance(id=c.sentence_id, samples=c.samples, sample_rate_hz=c.sample_rate_hz,

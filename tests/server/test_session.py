@@ -158,6 +158,7 @@ def test_blendshape_maps():
     rest = blendshape_weights(np.zeros(4), "ovr15")
     assert rest[0] == 1.0 and rest[1:].max() == 0.0  # neutral face: silence viseme only
     wide = dict(zip(ARKIT_NAMES, blendshape_weights(np.array([0, 0, 0.35, 0]), "arkit52")))
-    assert wide["jawOpen"] == pytest.approx(1.0) and wide["mouthSmileLeft"] == 0.0
+    # Fitted maps (realtime_core.fitted_maps): an open mouth opens the jaw, and does not smile.
+    assert wide["jawOpen"] > 0.3 and wide["mouthSmileLeft"] == 0.0
     w = blendshape_weights(np.random.default_rng(0).standard_normal((10, 4)), "arkit52")
     assert w.shape == (10, 52) and w.min() >= 0 and w.max() <= 1

@@ -104,7 +104,7 @@ def test_nonnegative_and_ridge_against_lstsq() -> None:
     nn = keys.weights(d, nonnegative=True)
     assert (nn >= 0).all()
     # The NNLS optimum is no worse than the clipped unconstrained solution.
-    cost = lambda b: ((aug @ b.T - np.hstack([d, np.zeros((5, 6))]).T) ** 2).sum(0)  # noqa: E731
+    cost = lambda b: ((aug @ b.T - np.hstack([d, np.zeros((5, 6))]).T) ** 2).sum(0)
     assert (cost(nn) <= cost(np.clip(ref, 0, None)) + 1e-12).all()
 
 
