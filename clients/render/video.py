@@ -52,18 +52,18 @@ def resample(t: np.ndarray, params: np.ndarray, fps: float) -> np.ndarray:
     return np.stack([np.interp(ft, t, params[:, j]) for j in range(params.shape[1])], axis=1)
 
 
-def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.ndarray, float]:
+def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str = "hmm") -> tuple[np.ndarray, float]:
     """Speech file -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
 
     The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
     computation as a live session) with the model loaded by ``assets.modelfile.load_model``
-    (``model`` None = the default model).
+    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
     """
     from assets.audio import read_audio
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
     from realtime_core.pipeline import speech_to_params
 
-    av = load_model(model)
+    av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
     params = speech_to_params(av, samples, rate)
     return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s

@@ -8,6 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "animate",
@@ -27,7 +28,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)")
     p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
                    help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None,
+                   help="model file (.npz); default: the shipped HMM model (--mapper mlp needs a mapper file)")
+    add_mapper_options(p)
+    add_expression_options(p)
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
     p.set_defaults(run=run)
@@ -39,14 +43,16 @@ def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
     from clients.export.curves import Track, csv_bytes
     from assets.files import atomic_write_bytes
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
+    from facecast.commands.speech_options import apply_expressions
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
-    model = load_model(args.model)
+    model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
     params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    params = apply_expressions(params, args)
     # Every output goes through the exporters (one CSV writer for the whole product).
     track = Track(params=params)
     if args.csv is not None:

@@ -7,6 +7,7 @@ import argparse
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "render",
@@ -21,6 +22,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--head", default="builtin", help="'builtin', a rig file (.npz) or a head mesh (glb/obj/ply)")
     p.add_argument("--landmarks", help="landmarks JSON when --head is a mesh without shipped landmarks")
     p.add_argument("--model", help="trained speech->parameters model (used when --params is not given)")
+    add_mapper_options(p)
+    add_expression_options(p)
     p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4)")
     p.add_argument("--png-dir", help="also write every frame as PNG into this folder")
@@ -67,9 +70,12 @@ def run(args: argparse.Namespace) -> int:
         t, p = read_params_csv(args.params)
         frames = resample(t, p, args.fps)
     else:
-        frames, fps = params_for_audio(args.speech, args.model)
+        frames, fps = params_for_audio(args.speech, args.model, mapper=args.mapper)
         if fps != args.fps:
             frames = resample(__import__("numpy").arange(len(frames)) / fps, frames, args.fps)
+    from facecast.commands.speech_options import apply_expressions
+
+    frames = apply_expressions(frames, args, fps=args.fps)
     rig, mesh = load_head(args.head, args.landmarks)
     from assets.heads.landmarks import credit_for
     from clients.render.video import with_caption
