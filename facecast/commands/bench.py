@@ -33,6 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     core.add_argument("--json", action="store_true", help="print one JSON document instead of a table")
     core.add_argument("--quick", action="store_true", help="fewer repetitions and a smaller EM problem")
     core.add_argument("--no-hmmlearn", action="store_true", help="skip the (slow) hmmlearn EM comparison")
+    core.add_argument("--mlp", default=None, help="a trained MLP mapper file (facecast mu) to time beside the others")
     core.set_defaults(run=_run_core)
     # The other benchmarks own their options (`facecast bench NAME --help` shows them): the
     # command line hands them everything after their name (see FORWARDED and facecast.cli).
@@ -43,6 +44,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _run_core(args: argparse.Namespace) -> int:
     from benchmarks.core import CoreBenchConfig, run_core_benchmark
 
-    cfg = CoreBenchConfig(quick=args.quick, hmmlearn=not args.no_hmmlearn)
+    cfg = CoreBenchConfig(quick=args.quick, hmmlearn=not args.no_hmmlearn, mlp_file=args.mlp)
     run_core_benchmark(cfg, as_json=args.json)
     return 0
