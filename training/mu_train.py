@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import time
 from dataclasses import asdict, dataclass
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.files import atomic_write_bytes
 from realtime_core import VISUAL_PARAMS
 from realtime_core.mapping import MlpMapper, MlpSpeechModel, encode_mlp_model
 from realtime_core.motion_units import fit_motion_units
@@ -58,17 +60,7 @@ def _mups_of(clips, mu) -> tuple[np.ndarray, np.ndarray]:
     return x, y
 
 
-def _per_frame_us(fn, reps: int = 3) -> float:
-    best = np.inf
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        n = fn()
-        best = min(best, (time.perf_counter() - t0) / n)
-    return best * 1e6
-
-
 def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say: Say = print) -> dict:
-    from assets.files import atomic_write_bytes
     from training.trainer import TrainRecipe, cmvn_statistics
 
     out = Path(out)
@@ -84,6 +76,13 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     var = variance_report(mu)
     say("variance explained: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var[:10]))
     say(f"kept {mu.n_units} Utterance MUs ({100 * mu.explained()[mu.n_units - 1]:.2f}%)")
+    # The same PCA on the lip contours alone (outer + inner, 40 landmarks), for comparison.
+    from training.facetrack import LIPS_INNER, LIPS_OUTER
+
+    pos = {v: i for i, v in enumerate(lower_face_indices())}
+    cols = np.array([3 * pos[v] + j for v in sorted(set(LIPS_OUTER) | set(LIPS_INNER)) for j in range(3)])
+    var_lips = variance_report(fit_motion_units(d_train[:, cols], n_units=1))
+    say("lips only: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var_lips[:10]))
     # 2. Audio features: the live front end, CMVN statistics of the train split.
     recipe = TrainRecipe()
     fe = recipe.frontend
@@ -96,7 +95,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     centre = (fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat)
     report: dict = {"credit": GRID_CREDIT, "config": asdict(cfg), "clips": {"train": len(train), "val": len(val),
                     "test": len(test)}, "landmarks": len(lower_face_indices()), "units": mu.n_units,
-                    "variance": var, "train": {}, "test": {}, "val": {}}
+                    "variance": var, "variance_lips_only": var_lips, "train": {}, "test": {}, "val": {}}
     # Readout quality: true MUPs -> mouth parameters.
     rp = np.concatenate([c.params for c in test])
     rm = mu.project(np.concatenate([c.deform for c in test]).astype(np.float64))
@@ -147,24 +146,93 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         say(f"HMM on UMUPs trained in {time.perf_counter() - t0:.0f} s")
         save_model(out / "hmm_mups.npz", hmm)
         systems["hmm"] = hmm
-    # 6. Scores on train and test, per-frame cost.
+    # 6. Scores on train and test (every mapper's live-path estimates of the UMUPs).
+    ests = {}
     for name, sysm in systems.items():
+        ests[name] = {split: (hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl))
+                      for split, cl in (("train", train), ("test", test))}
         for split, cl in (("train", train), ("test", test)):
-            est = hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl)
-            report[split][name] = score_mups(cl, est, mu, scale, readout).as_json()
+            report[split][name] = score_mups(cl, ests[name][split], mu, scale, readout).as_json()
         say(f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}, "
             f"test MSE {report['test'][name]['MSE']:.5f}")
+    # 7. Expressions (synthetic: the built-in head's ARKit recipes on the speaker's landmarks, see
+    # training.mu_expressions), the Expression MUs, the second-stage mappers and the run-time checks.
+    ests = {k: v for k, v in ests.items() if k in ("mlp", "hmm")}
+    report["expressions"] = _expressions(clips, train, test, mu, scale, readout, ests, root, say)
     report["test"]["true_mups"] = score_mups(test, [mu.project(c.deform.astype(np.float64)) for c in test], mu,
                                              scale, readout).as_json()
-    np.savez(out / "motion_units.npz", mean=mu.mean, units=mu.units, eigenvalues=mu.eigenvalues,
-             landmarks=np.array(lower_face_indices()), readout=readout[0], readout_bias=readout[1], scale=scale,
-             format=np.array("facecast-motionunits"), version=np.array(1))
-    _plot_variance(var, out / "variance.png", mu.n_units)
-    (out / "report.json").write_text(json.dumps(report, indent=1))
+    buf = io.BytesIO()
+    np.savez(buf, mean=mu.mean, units=mu.units, eigenvalues=mu.eigenvalues, landmarks=np.array(lower_face_indices()),
+             readout=readout[0], readout_bias=readout[1], scale=scale, format=np.array("facecast-motionunits"),
+             version=np.array(1))
+    atomic_write_bytes(out / "motion_units.npz", buf.getvalue())
+    _plot_variance(var, var_lips, out / "variance.png", mu.n_units)
+    atomic_write_bytes(out / "report.json", json.dumps(report, indent=1).encode())
     return report
 
 
-def _plot_variance(var: list[dict], png: Path, kept: int) -> None:
+def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> dict:
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.landmarks import read_landmarks
+    from realtime_core.expressions import EXPRESSIONS
+    from training.grid import read_words, sentences
+    from training.motion_units import score
+    from training.mu_expressions import (
+        closure_rate,
+        closure_windows,
+        expression_deformations,
+        expressive,
+        fit_second_stage,
+        fit_units,
+        reconstruct,
+        under_expression,
+    )
+
+    head = load_builtin_head()
+    mp = {k: int(v) for k, v in read_landmarks(
+        Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json").items()}
+    neutral = np.mean([c.neutral for c in train], axis=0)
+    deltas = expression_deformations(neutral, lower_face_indices(), head, mp)
+    out: dict = {"source": "synthetic: built-in head ARKit recipes carried onto the speaker's landmarks",
+                 "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS}}
+    for e in EXPRESSIONS:
+        tr_k, te_k = expressive(train, deltas[e]), expressive(test, deltas[e])
+        ex = fit_units(mu, tr_k, e)
+        out[e] = {"emu_residual_explained_2": float(ex.basis.explained()[1]), "train": {}, "test": {}}
+        for name, est in ests.items():
+            f = fit_second_stage(np.concatenate(est["train"]), mu, ex,
+                                 np.concatenate([c.deform for c in tr_k]).astype(np.float64))
+            for split, cl, e_list in (("train", tr_k, est["train"]), ("test", te_k, est["test"])):
+                d_hat = reconstruct(mu, ex, f(np.concatenate(e_list)))
+                td = np.concatenate([c.deform for c in cl]).astype(np.float64)
+                tp = np.concatenate([c.params for c in cl])
+                # The mouth parameters of the expressive estimate, via the UMUP readout.
+                p_hat = mu.project(d_hat) @ readout[0].T + readout[1]
+                out[e][split][name] = score(td, d_hat, scale, tp, p_hat).as_json()
+        say(f"{e}: test R " + ", ".join(f"{n} {out[e]['test'][n]['R']:.3f}" for n in ests))
+    # Run time: bilabial closures and rounding under a full smile, on the test sentences.
+    align = {s.sentence_id: s.align for s in sentences(root)}
+    windows = [closure_windows(read_words(align[c.sentence_id])) for c in test]
+    truth = [c.params for c in test]
+    theta = 0.03
+    checks: dict = {"threshold_iod": theta, "truth_closure_rate": closure_rate(truth, windows, theta)}
+    tp = np.concatenate(truth)
+    for name, est in ests.items():
+        neutral_p = [m @ readout[0].T + readout[1] for m in est["test"]]
+        row = {}
+        for label, tracks in (("neutral", neutral_p), ("smile", under_expression(neutral_p, "smile", 1.0))):
+            ep = np.concatenate(tracks)
+            row[label] = {"closure_rate": closure_rate(tracks, windows, theta),
+                          "r_mouth_open": float(np.corrcoef(tp[:, 2], ep[:, 2])[0, 1]),
+                          "r_lip_stretch": float(np.corrcoef(tp[:, 1], ep[:, 1])[0, 1])}
+        checks[name] = row
+        say(f"{name}: closure rate {row['neutral']['closure_rate']:.3f} -> {row['smile']['closure_rate']:.3f} "
+            f"under smile; r(mouth_open) {row['neutral']['r_mouth_open']:.3f} -> {row['smile']['r_mouth_open']:.3f}")
+    out["smile_checks"] = checks
+    return out
+
+
+def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -173,7 +241,9 @@ def _plot_variance(var: list[dict], png: Path, kept: int) -> None:
     k = [r["units"] for r in var]
     e = [100 * r["explained"] for r in var]
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=120)
-    ax.plot(k, e, "o-")
+    ax.plot(k, e, "o-", label="lower face (lips, jaw, cheeks)")
+    ax.plot([r["units"] for r in var_lips], [100 * r["explained"] for r in var_lips], "s--", ms=3,
+            label="lip contours only")
     ax.axhline(97, color="grey", ls="--", lw=1, label="97 %")
     ax.axvline(kept, color="C1", ls=":", lw=1, label=f"kept: {kept}")
     ax.set_xlabel("Utterance MUs")
