@@ -25,7 +25,7 @@ from functools import cached_property
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
+from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
@@ -98,7 +98,12 @@ class AvModel:
         plan = self._plans.get(key)
         if plan is None:
             plan = self._plans[key] = StreamPlan.build(self.form, config)
-        return StreamingInverter(self.form, config=config, plan=plan)
+        return StreamingInverter(self.form, config=config, plan=plan, floor=self.visual_floor)
+
+    @cached_property
+    def visual_floor(self) -> np.ndarray:
+        """``(n_visual,)`` lower bounds of the output (the closed pose; -inf where none)."""
+        return visual_floor(self.visual_names)
 
     def visual_mapper(self, *, lag: int = 0, dtype: str = "float32") -> StreamingInverter:
         """The :class:`realtime_core.mapping.VisualMapper` of this model: a streaming inverter."""

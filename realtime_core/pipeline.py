@@ -131,4 +131,4 @@ def speech_to_params(
         return np.concatenate([p.push(x), p.flush()])
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])
-    return hmm_inversion(model.form, oa, config=hmmi).visual
+    return np.maximum(hmm_inversion(model.form, oa, config=hmmi).visual, model.visual_floor)
