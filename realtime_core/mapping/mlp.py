@@ -209,12 +209,14 @@ class MlpMapper:
 
 class StreamingMlpMapper:
     """:class:`realtime_core.mapping.VisualMapper` over a bank: every pushed row is final at once
-    (``lag_frames = 0``), ``flush()`` returns nothing new."""
+    (``lag_frames = 0``), ``flush()`` returns nothing new. floor: ``(n_visual,)`` lower bounds of the
+    output (the closed pose, :func:`realtime_core.visual_floor`; None = none), as the HMM path."""
 
     lag_frames = 0
 
-    def __init__(self, mapper: MlpMapper) -> None:
+    def __init__(self, mapper: MlpMapper, *, floor: np.ndarray | None = None) -> None:
         self._m = mapper
+        self._floor = None if floor is None else np.asarray(floor, dtype=np.float64).reshape(mapper.bank.n_visual)
         self.reset()
 
     def reset(self) -> None:
@@ -223,7 +225,8 @@ class StreamingMlpMapper:
     def push(self, oa: np.ndarray) -> np.ndarray:
         if self._finished:
             raise StreamStateError("StreamingMlpMapper.push() after flush(); call reset() first")
-        return self._m.predict(oa)
+        y = self._m.predict(oa)
+        return y if self._floor is None else np.maximum(y, self._floor)
 
     def flush(self) -> np.ndarray:
         if self._finished:

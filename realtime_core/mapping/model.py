@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
+from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
 from realtime_core.avmodel import frontend_from_json, frontend_to_json
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
@@ -77,7 +77,7 @@ class MlpSpeechModel:
         """A fresh streaming mapper. ``lag`` must be 0: the seven-frame context is the front end's."""
         if lag != 0:
             raise ConfigError(f"the MLP mapper has no smoothing lag (its context is the front end's); got lag={lag}")
-        return StreamingMlpMapper(self.mapper(dtype))
+        return StreamingMlpMapper(self.mapper(dtype), floor=visual_floor(self.visual_names))
 
 
 def encode_mlp_model(model: MlpSpeechModel) -> bytes:
