@@ -134,6 +134,12 @@ class ExpressionTrack:
     def reset(self) -> None:
         self._events.clear()
 
+    def copy(self, config: ExpressionConfig | None = None) -> ExpressionTrack:
+        """The same scheduled changes, with ``config`` (default: this track's)."""
+        out = ExpressionTrack(self.config if config is None else config)
+        out._events = list(self._events)
+        return out
+
     @property
     def events(self) -> list[tuple[float, dict]]:
         """Scheduled changes: (time s, {expression: target intensity})."""

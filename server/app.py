@@ -50,7 +50,8 @@ from websockets.http11 import Request, Response
 
 from assets.heads.mesh import HeadMesh
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
+from realtime_core.expressions import EXPRESSIONS
+from realtime_core.mapping import SpeechModel
 from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
 from wire import JS_PROTOCOL
@@ -261,7 +262,7 @@ class FacecastServer:
     the head download (None: params and blendshapes only); config: limits and network settings.
     """
 
-    def __init__(self, model: AvModel, *, head: Head | None = None, config: ServerConfig = ServerConfig()) -> None:
+    def __init__(self, model: SpeechModel, *, head: Head | None = None, config: ServerConfig = ServerConfig()) -> None:
         self.model = model
         self.head = head
         self.config = config
@@ -578,11 +579,15 @@ class FacecastServer:
         sender = asyncio.ensure_future(viewer.run())
         self._tasks.add(sender)
         try:
-            reader = asyncio.ensure_future(ws.recv())
-            done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
-            if reader in done and reader.exception() is None:
-                viewer.closing = True
-                raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
+            while True:
+                reader = asyncio.ensure_future(ws.recv())
+                done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
+                if reader in done and reader.exception() is None:
+                    if await self._viewer_control(live, ws, reader.result()):
+                        continue
+                    viewer.closing = True
+                    raise ProtocolViolation(P.CLOSE_POLICY, "viewers send only expression controls")
+                break
             reader.cancel()
             if sender in done and sender.exception() is not None and not isinstance(sender.exception(), ConnectionClosed):
                 raise sender.exception()
@@ -591,6 +596,24 @@ class FacecastServer:
             self._tasks.discard(sender)
             live.viewers.discard(viewer)
             self.n_viewers -= 1
+
+    VIEWER_CONTROLS = frozenset({"type", "expression", "expression_ease_s"})
+
+    async def _viewer_control(self, live: LiveSession, ws: ServerConnection, msg: object) -> bool:
+        """A viewer's message: an expression control (the browser's picker) is applied and answered
+        with ack/rejected (True); anything else is a protocol violation (False)."""
+        try:
+            ctl = json.loads(msg) if isinstance(msg, str) else None
+        except ValueError:
+            return False
+        if not isinstance(ctl, dict) or ctl.get("type") != "control" or not set(ctl) <= self.VIEWER_CONTROLS:
+            return False
+        try:
+            state = await live.control(ctl)
+            await ws.send(P.dumps({"type": "ack", "controls": state}))
+        except ControlError as exc:
+            await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
+        return True
 
     def _description(self, live: LiveSession, kind: str, enc_name: str, hk: int, he: int, audio: bool) -> dict:
         s = live.session
@@ -605,6 +628,7 @@ class FacecastServer:
             "header_encoding": he,
             "header_bytes": P.HEADER_BYTES,
             "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
+            "expressions": ["neutral", *EXPRESSIONS],  # what a viewer's expression control may name
             "algorithmic_delay_s": s.algorithmic_delay_s,
             "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if audio else None,
             "values_per_frame": 4,

@@ -8,7 +8,8 @@ resamples it to the model's rate with :class:`realtime_core.features.resample.St
 ``scipy.signal.resample_poly`` on the whole stream, whatever the chunking), and runs the same
 streaming objects as :func:`realtime_core.pipeline.speech_to_params` (front end, then the streaming
 inverter), so a live session's raw mouth parameters equal ``facecast animate`` frame for frame.
-Controls (per-parameter gain, then one-pole smoothing) apply after the model. Each push returns the
+Controls (per-parameter gain, then one-pole smoothing) apply after the model, then the session's
+expression (eased on the media clock, :mod:`realtime_core.expressions`). Each push returns the
 frames now final and the resampled audio block, both stamped with media time (seconds of session
 audio at the model rate: frame ``k`` at ``k / fps``; audio by its first sample).
 
@@ -27,15 +28,23 @@ from typing import NamedTuple
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
-from realtime_core.errors import RealtimeCoreError
+from realtime_core.errors import ConfigError, RealtimeCoreError
+from realtime_core.expressions import (
+    EXPRESSIONS,
+    ExpressionConfig,
+    ExpressionError,
+    ExpressionTrack,
+    apply_expression,
+    check_request,
+)
 from realtime_core.face.rig import Rig
-from realtime_core.inversion import StreamConfig
-from wire import protocol as P
-from server.errors import AudioFormatError, ControlError, ServerConfigError
 from realtime_core.features.resample import StreamingResampler
+from realtime_core.fitted_maps import EXPRESSION_PARAMS
+from realtime_core.mapping import SpeechModel
+from server.errors import AudioFormatError, ControlError, ServerConfigError
 from server.timing import StageTimes
+from wire import protocol as P
 
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
@@ -70,9 +79,11 @@ class SessionConfig:
 class Frame:
     """One video frame of a session.
 
-    index: k; media_time: k / fps (s); params: (4,) float64 after controls (IOD);
+    index: k; media_time: k / fps (s); params: (4,) float64 after controls and expression (IOD);
     raw_params: (4,) float64 as the model produced them; work_s: server compute spent on this
-    frame so far (s); ready_perf: ``perf_counter()`` when it became final.
+    frame so far (s); ready_perf: ``perf_counter()`` when it became final; expression:
+    ``(len(EXPRESSIONS),)`` intensities of this frame and speech_params the parameters before the
+    expression (None: no expression, ``params`` are speech only).
     """
 
     index: int
@@ -83,6 +94,8 @@ class Frame:
     ready_perf: float
     rig: Rig | None = None
     times: StageTimes | None = None
+    expression: np.ndarray | None = None
+    speech_params: np.ndarray | None = None
     _payloads: dict = field(default_factory=dict)
 
     def payload(self, kind: int, encoding: int) -> tuple[bytes, int, float]:
@@ -101,7 +114,9 @@ class Frame:
             values = self.rig.displacements(self.params)  # (n_moving, 3) float32, head units
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
-            values = blendshape_weights(self.params, "arkit52")
+            # ARKit has the expressions' own shapes: speech weights plus the recipes.
+            values = (blendshape_weights(self.params, "arkit52") if self.expression is None else
+                      blendshape_weights(self.speech_params, "arkit52", expression=self.expression))
             stage = "encode_blendshapes"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
@@ -145,11 +160,11 @@ class Output(NamedTuple):
 class Session:
     """One live audio stream through the model. Not thread-safe: one owner calls push/flush/control.
 
-    model: the audio-visual model; config: the input's format; rig: the head rig for vertex deltas
+    model: the speech model (the HMM or the MLP mapper, :class:`realtime_core.mapping.SpeechModel`); config: the input's format; rig: the head rig for vertex deltas
     (None: deltas unavailable); times: where stage durations go (a fresh StageTimes by default).
     """
 
-    def __init__(self, model: AvModel, *, config: SessionConfig, rig: Rig | None = None,
+    def __init__(self, model: SpeechModel, *, config: SessionConfig, rig: Rig | None = None,
                  times: StageTimes | None = None) -> None:
         self.model = model
         self.config = config
@@ -161,8 +176,12 @@ class Session:
         self._frame_bytes = self._dtype.itemsize * config.channels
         self._resampler = StreamingResampler(config.sample_rate_hz, self.rate_hz)
         self._fe = model.front_end()
-        self._inv = model.inverter(StreamConfig(lag=config.lag))
-        self.delay_frames = model.frontend.tc + config.lag
+        try:
+            self._inv = model.visual_mapper(lag=config.lag)
+        except ConfigError as exc:
+            raise ServerConfigError(str(exc)) from None
+        self.delay_frames = model.frontend.tc + self._inv.lag_frames
+        self.expressions = ExpressionTrack(ExpressionConfig())
         self.gains = np.ones(len(VISUAL_PARAMS))
         self.smoothing_ms = 0.0
         self._smoothed: np.ndarray | None = None
@@ -302,9 +321,15 @@ class Session:
         self.times.add("push_per_frame", work)
         self.times.add("push_per_frame_cpu", (time.thread_time() - self._cpu0) / len(params))
         frames = []
-        for row, p in zip(params, out):
+        alpha = speech = None
+        if self.expressions.events:  # an expression was ever set: apply the eased intensities
+            alpha = self.expressions.intensities((self.frames_out + np.arange(len(out))) / self.fps)
+            speech = out
+            out = list(apply_expression(np.array(out), alpha, EXPRESSION_PARAMS))
+        for i, (row, p) in enumerate(zip(params, out)):
             k = self.frames_out
-            frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times))
+            frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times,
+                                None if alpha is None else alpha[i], None if speech is None else speech[i]))
             self.frames_out += 1
         return frames
 
@@ -321,17 +346,21 @@ class Session:
 
     # -- controls --------------------------------------------------------------------------------
 
-    CONTROLS = ("gain", "smoothing_ms")
+    CONTROLS = ("gain", "smoothing_ms", "expression", "expression_ease_s")
 
     def apply_control(self, msg: dict) -> dict:
         """Apply a control message ``{"type": "control", "gain": {...}, "smoothing_ms": x}``.
 
         gain: {parameter name: factor in [0, 10]} (others unchanged); smoothing_ms: time constant of
-        a one-pole low-pass on the parameters, 0..1000 ms (0 = off). Returns the control state.
+        a one-pole low-pass on the parameters, 0..1000 ms (0 = off); expression: ``{"name": "smile",
+        "intensity": 0.7, "at": media time s}`` (intensity default 1, ``at`` default the next frame;
+        "neutral" eases every expression out); expression_ease_s: 0..10 s. Returns the control state.
         Raises ControlError (nothing applied) for an unknown control or an invalid value.
         """
         gains = self.gains.copy()
         smoothing = self.smoothing_ms
+        ease = self.expressions.config.ease_s
+        expression = None
         for key, value in msg.items():
             if key == "type":
                 continue
@@ -348,10 +377,39 @@ class Session:
                 if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1000:
                     raise ControlError(f"smoothing_ms must be a number in 0..1000, got {value!r}")
                 smoothing = float(value)
+            elif key == "expression":
+                expression = self._expression_request(value)
+            elif key == "expression_ease_s":
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 10:
+                    raise ControlError(f"expression_ease_s must be a number in 0..10, got {value!r}")
+                ease = float(value)
             else:
                 raise ControlError(f"unknown control {key!r} (known: {', '.join(self.CONTROLS)})")
-        self.gains, self.smoothing_ms = gains, smoothing
+        track = self.expressions.copy(ExpressionConfig(ease_s=ease))  # committed only if all is valid
+        if expression is not None:
+            name, intensity, at = expression
+            try:
+                track.schedule(name, intensity, at, now_s=self.frames_out / self.fps)
+            except ExpressionError as exc:
+                raise ControlError(f"expression: {exc}") from None
+        self.gains, self.smoothing_ms, self.expressions = gains, smoothing, track
         return self.control_state()
 
+    def _expression_request(self, value: object) -> tuple[str, float, object]:
+        """Validate ``{"name", "intensity", "at"}``; ControlError naming the problem."""
+        if not isinstance(value, dict) or "name" not in value:
+            raise ControlError('expression must be an object {"name": ..., "intensity": 0..1, "at": seconds}')
+        unknown = set(value) - {"name", "intensity", "at"}
+        if unknown:
+            raise ControlError(f"expression: unknown field(s) {sorted(unknown)} (known: name, intensity, at)")
+        try:
+            name, intensity = check_request(value["name"], value.get("intensity", 1.0))
+        except ExpressionError as exc:
+            raise ControlError(f"expression: {exc}") from None
+        # The media time is checked by the track (not in the past, not absurdly far ahead).
+        return name, intensity, value.get("at", self.frames_out / self.fps)
+
     def control_state(self) -> dict:
-        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms}
+        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms,
+                "expression": [{"at": t, "intensity": targets} for t, targets in self.expressions.events[-8:]],
+                "expression_ease_s": self.expressions.config.ease_s, "expressions": list(EXPRESSIONS)}

@@ -24,7 +24,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="interface to bind (default: the config's, else 127.0.0.1 = this machine only)")
     p.add_argument("--port", type=int, default=argparse.SUPPRESS,
                    help="TCP port (default: the config's, else 8765; 0 = any free port)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
+    p.add_argument("--model", type=Path, default=None,
+                   help="model file (.npz); default: the shipped HMM model (--mapper mlp needs a mapper file)")
+    from facecast.commands.speech_options import add_mapper_options
+
+    add_mapper_options(p)
     head = p.add_mutually_exclusive_group()
     head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
 
     token = None
     if args.token_env:
@@ -70,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
                  "workers": getattr(args, "workers", None)}
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
-    model = load_model(args.model)
+    model = load_speech_model(args.mapper, args.model)
     head = load_head(head=args.head, landmarks=args.landmarks, rig=args.rig, builtin=not args.no_head)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise

@@ -7,9 +7,15 @@
 
 from realtime_core.mapping.interface import MAPPER_KINDS, SpeechModel, VisualMapper
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
-from realtime_core.mapping.model import MlpSpeechModel, decode_mlp_model, encode_mlp_model
+from realtime_core.mapping.model import (
+    MlpSpeechModel,
+    decode_mlp_model,
+    decode_speech_model,
+    encode_mlp_model,
+    encode_speech_model,
+)
 
 __all__ = [
     "MAPPER_KINDS", "MlpBank", "MlpMapper", "MlpSpeechModel", "SpeechModel", "StreamingMlpMapper", "VisualMapper",
-    "decode_mlp_model", "encode_mlp_model",
+    "decode_mlp_model", "decode_speech_model", "encode_mlp_model", "encode_speech_model",
 ]

@@ -130,3 +130,21 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
         raise
     except (KeyError, TypeError, ValueError, FacecastError) as exc:
         raise ModelFormatError(f"invalid mapper configuration: {exc}") from None
+
+
+def encode_speech_model(model) -> bytes:
+    """Either kind of :class:`realtime_core.mapping.SpeechModel` to its ``.npz`` bytes."""
+    from realtime_core.avmodel import AvModel, encode_model
+
+    return encode_model(model) if isinstance(model, AvModel) else encode_mlp_model(model)
+
+
+def decode_speech_model(data: bytes):
+    """``.npz`` bytes of either kind (told apart by their ``format``) to the model."""
+    from realtime_core.avmodel import decode_model
+
+    try:
+        kind = str(np.load(io.BytesIO(data), allow_pickle=False)["format"])
+    except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a facecast model archive ({exc})") from None
+    return decode_model(data) if kind == AVMODEL_FORMAT else decode_mlp_model(data)
