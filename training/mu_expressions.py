@@ -28,8 +28,9 @@ NAMED = ("eye_outer_left", "eye_inner_left", "eye_outer_right", "eye_inner_right
          "corner_right", "upper_lip", "lower_lip", "upper_inner", "lower_inner", "chin")
 
 
-def expression_deformations(neutral: np.ndarray, indices: Sequence[int], head, mp_landmarks: dict[str, int]) -> dict:
-    """Each expression's deformation ``(3 L,)`` of the speaker's landmarks ``indices`` (IOD units).
+def head_correspondence(neutral: np.ndarray, indices: Sequence[int], head, mp_landmarks: dict[str, int]):
+    """The built-in head's skin vertex of each speaker landmark in ``indices``, and the similarity
+    speaker -> head: ``(vertices (L,), similarity)``.
 
     neutral: ``(468, 3)`` the speaker's rest face (IOD, face frame); head: the built-in head;
     mp_landmarks: named MediaPipe indices (``assets/heads/landmarks/mediapipe_canonical.json``)."""
@@ -50,13 +51,19 @@ def expression_deformations(neutral: np.ndarray, indices: Sequence[int], head, m
     pts = pts + np.exp(-((pts[:, None] - c[None]) ** 2).sum(-1) / r2) @ coef
     skin = np.flatnonzero(head.part == 0)
     _, nearest = cKDTree(head.mesh.vertices[skin]).query(pts)
-    verts = skin[nearest]
-    out = {}
-    for e in EXPRESSIONS:
-        disp = sum(w * head.targets[n][verts] for n, w in EXPRESSION_RECIPES[e].items())  # head units
-        back = disp @ sim.rotation / sim.scale  # rotation^T, then the speaker's units
-        out[e] = back.reshape(-1)
-    return out
+    return skin[nearest], sim
+
+
+def carried(head, verts: np.ndarray, sim, weights: dict[str, float]) -> np.ndarray:
+    """ARKit ``weights`` on the head, read at ``verts`` and brought into the speaker's frame: ``(3 L,)`` IOD."""
+    disp = sum(w * head.targets[n][verts] for n, w in weights.items())  # head units
+    return (disp @ sim.rotation / sim.scale).reshape(-1)  # rotation^T, then the speaker's units
+
+
+def expression_deformations(neutral: np.ndarray, indices: Sequence[int], head, mp_landmarks: dict[str, int]) -> dict:
+    """Each expression's deformation ``(3 L,)`` of the speaker's landmarks ``indices`` (IOD units)."""
+    verts, sim = head_correspondence(neutral, indices, head, mp_landmarks)
+    return {e: carried(head, verts, sim, EXPRESSION_RECIPES[e]) for e in EXPRESSIONS}
 
 
 def expressive(clips: Sequence[Clip], delta: np.ndarray) -> list[Clip]:

@@ -193,7 +193,25 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
         Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json").items()}
     neutral = np.mean([c.neutral for c in train], axis=0)
     deltas = expression_deformations(neutral, lower_face_indices(), head, mp)
+    # Keyframe sets and the eq. 4 round trip MUPs -> keyframes -> MUPs on the test frames.
+    from realtime_core.blendshapes import ARKIT_NAMES
+    from realtime_core.motion_units import round_trip_error
+    from training.mu_expressions import carried, head_correspondence
+    from training.mu_keyframes import keyframe_sets
+
+    verts, sim = head_correspondence(neutral, lower_face_indices(), head, mp)
+    arkit = {n: carried(head, verts, sim, {n: 1.0}) for n in ARKIT_NAMES}
+    align = {s.sentence_id: s.align for s in sentences(root)}
+    words_of = {c.sentence_id: read_words(align[c.sentence_id]) for c in clips}
+    c_test = mu.project(np.concatenate([c.deform for c in test]).astype(np.float64))
+    round_trip = {}
+    for name, keys in keyframe_sets(train, words_of, deltas, arkit).items():
+        err = round_trip_error(keys, mu, c_test)
+        round_trip[name] = {"keyframes": len(keys.names), "max_error_of_range": float(err.max()),
+                            "mean_error_of_range": float(err.mean()), "per_mu": err.tolist()}
+        say(f"keyframes {name} ({len(keys.names)}): round trip error max {100 * err.max():.2f}% of the MUP range")
     out: dict = {"source": "synthetic: built-in head ARKit recipes carried onto the speaker's landmarks",
+                 "keyframe_round_trip": round_trip,
                  "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS}}
     for e in EXPRESSIONS:
         tr_k, te_k = expressive(train, deltas[e]), expressive(test, deltas[e])
@@ -211,7 +229,6 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
                 out[e][split][name] = score(td, d_hat, scale, tp, p_hat).as_json()
         say(f"{e}: test R " + ", ".join(f"{n} {out[e]['test'][n]['R']:.3f}" for n in ests))
     # Run time: bilabial closures and rounding under a full smile, on the test sentences.
-    align = {s.sentence_id: s.align for s in sentences(root)}
     windows = [closure_windows(read_words(align[c.sentence_id])) for c in test]
     truth = [c.params for c in test]
     theta = 0.03
