@@ -185,7 +185,7 @@ def test_bad_clients_get_close_codes_and_a_healthy_session_loses_nothing(model):
         ("viewer bad kind", lambda u: ViewerClient(u, session="healthy", kind="smell", token="sesame").__aenter__(),
          P.CLOSE_BAD_REQUEST, "kind must be"),
         ("viewer talks", lambda u: _raw(u, "/view?session=healthy&token=sesame", "hi"), P.CLOSE_POLICY,
-         "viewers do not send"),
+         "viewers send only expression controls"),
         ("no endpoint", lambda u: _raw(u, "/elsewhere"), 404, "no WebSocket endpoint"),  # HTTP 404
     ]
 
@@ -234,6 +234,47 @@ def test_controls_are_applied_or_rejected_with_a_reason(model):
     assert bad["type"] == "rejected" and "unknown control 'eyebrows'" in bad["reason"]
     assert len(got.frames) > 0 and np.all(got.values()[:, 2] == 0.0) and np.any(got.values()[:, 0] != 0.0)
     assert got.audio == []  # audio=0: no audio messages
+
+
+def test_expression_controls_from_ingest_and_from_a_viewer(model):
+    """The browser picker's route: a viewer's expression control is applied (ack) or rejected with a
+    reason while the session streams on; the ingest client's control does the same."""
+    from websockets.asyncio.client import connect
+
+    pcm = _int16(speechlike(1.5, 16000, seed=3))
+
+    async def main():
+        async with running(model) as srv:
+            async with IngestClient(srv.url, session="e", sample_rate_hz=16000) as ing:
+                async with ViewerClient(srv.url, session="e", audio=False) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    bad_ingest = await ing.control(expression={"name": "smile", "intensity": 3})
+                    async with connect(srv.url.replace("http", "ws") + "/view?session=e&audio=0") as raw:
+                        desc = json.loads(await raw.recv())
+                        replies = []
+                        for msg in ({"type": "control", "expression": {"name": "joy"}},
+                                    {"type": "control", "expression": {"name": "smile", "intensity": 1.0, "at": 0.0}}):
+                            await raw.send(json.dumps(msg))
+                            while True:  # skip binary frames until the text reply
+                                m = await asyncio.wait_for(raw.recv(), 10)
+                                if isinstance(m, str):
+                                    replies.append(json.loads(m))
+                                    break
+                        await stream_samples(ing, pcm, realtime=False)
+                        await ing.end()
+                    return bad_ingest, desc, replies, await collect
+
+    bad_ingest, desc, replies, got = asyncio.run(main())
+    assert bad_ingest["type"] == "rejected" and "[0, 1]" in bad_ingest["reason"]
+    assert desc["expressions"] == ["neutral", "smile", "sad", "surprise", "anger"]
+    assert replies[0]["type"] == "rejected" and "unknown expression 'joy'" in replies[0]["reason"]
+    assert replies[1]["type"] == "ack" and replies[1]["controls"]["expression"][0]["intensity"]["smile"] == 1.0
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
+    assert len(got.frames) == len(ref)
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    late = got.values()[20:, 1] - ref[20:, 1]  # eased in by 0.3 s: lip_stretch widened by the smile
+    np.testing.assert_allclose(late, EXPRESSION_PARAMS[0, 1], atol=1e-5)
 
 
 def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
