@@ -13,11 +13,11 @@ def _row(name: str, s: dict) -> str:
 
 
 def mu_markdown(rep: dict, command: str) -> str:
-    out = [f"Command: `{command}`. {rep.get('credit', '')}. Sentences: train {rep['clips']['train']}, "
+    out = [(f"Command: `{command}`. {rep.get('credit', '')}. Sentences: train {rep['clips']['train']}, "
            f"val {rep['clips']['val']}, test {rep['clips']['test']} (`training.grid.split_of`); K chosen on val, "
            "numbers on train and test. R, nu, MSE: paper 002 eq. 6-8 on the lower-face landmark displacements "
            "rebuilt from the estimated UMUPs, each coordinate divided by its maximum absolute displacement over "
-           "the training data; r: Pearson r of the four mouth parameters read out of the UMUPs.", ""]
+           "the training data; r: Pearson r of the four mouth parameters read out of the UMUPs."), ""]
     v = {r["units"]: r["explained"] for r in rep["variance"]}
     vl = {r["units"]: r["explained"] for r in rep.get("variance_lips_only", [])}
     out += ["**Utterance MUs** (PCA of the train split; cumulative variance explained):", "",
@@ -41,9 +41,9 @@ def mu_markdown(rep: dict, command: str) -> str:
     ex = rep.get("expressions")
     if ex:
         names = [e for e in ("smile", "sad", "surprise", "anger") if e in ex]
-        out += ["**Expressions** (synthetic: the built-in head's ARKit recipes carried onto the speaker's "
+        out += [("**Expressions** (synthetic: the built-in head's ARKit recipes carried onto the speaker's "
                 "landmarks and added to the real sentences; second-stage MLP per expression, 30 hidden units). "
-                "A constant added deformation leaves R unchanged by construction; MSE shows the offset error.", "",
+                "A constant added deformation leaves R unchanged by construction; MSE shows the offset error."), "",
                 "| expression | residual energy rebuilt by m_k0 + 2 EMUs | mapper | train R | train MSE | test R | test MSE |",
                 "|---|---|---|---|---|---|---|"]
         for e in names:
@@ -52,11 +52,11 @@ def mu_markdown(rep: dict, command: str) -> str:
                 out.append(f"| {e} | {100 * ex[e]['emu_residual_energy_explained']:.1f} % | {m} | {tr['R']:.3f} | "
                            f"{tr['MSE']:.4f} | {te['R']:.3f} | {te['MSE']:.4f} |")
         sc = ex["smile_checks"]
-        out += ["", f"**Speech under a full smile** (test sentences, run-time composition; closure: the smallest "
+        out += ["", (f"**Speech under a full smile** (test sentences, run-time composition; closure: the smallest "
                 f"mouth_open within -60..+120 ms of a /b p/-initial word's start <= {sc['threshold_iod']} IOD; "
-                f"truth closure rate {sc['truth_closure_rate']:.3f}):", "",
-                "| mapper | closure rate neutral | under smile | change (points) | r(mouth_open) neutral | under smile "
-                "| r(lip_stretch) neutral | under smile |", "|---|---|---|---|---|---|---|---|"]
+                f"truth closure rate {sc['truth_closure_rate']:.3f}):"), "",
+                ("| mapper | closure rate neutral | under smile | change (points) | r(mouth_open) neutral | under smile "
+                "| r(lip_stretch) neutral | under smile |"), "|---|---|---|---|---|---|---|---|"]
         for m in ("mlp", "hmm"):
             if m in sc:
                 n, s = sc[m]["neutral"], sc[m]["smile"]
@@ -65,8 +65,8 @@ def mu_markdown(rep: dict, command: str) -> str:
                            f"{s['r_mouth_open']:.3f} | {n['r_lip_stretch']:.3f} | {s['r_lip_stretch']:.3f} |")
         rt = ex.get("keyframe_round_trip")
         if rt:
-            out += ["", "**Keyframe round trip** MUPs -> keyframes -> MUPs (eq. 4, test frames; RMS error per MU / "
-                    "that MU's range):", "", "| keyframe set | keyframes | max over MUs | mean | per MU (%) |",
+            out += ["", ("**Keyframe round trip** MUPs -> keyframes -> MUPs (eq. 4, test frames; RMS error per MU / "
+                    "that MU's range):"), "", "| keyframe set | keyframes | max over MUs | mean | per MU (%) |",
                     "|---|---|---|---|---|"]
             for k, r in rt.items():
                 out.append(f"| {k} | {r['keyframes']} | {100 * r['max_error_of_range']:.1f} % | "
