@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
+from realtime_core.mapping import SpeechModel
 from realtime_core.features import MfccConfig, frame_log_energy_db
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
@@ -82,7 +82,7 @@ class SetScore:
     clips: list = field(default_factory=list)
 
 
-def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_hz: int, truth: np.ndarray
+def score_clip(model: SpeechModel, name: str, kind: str, samples: np.ndarray, rate_hz: int, truth: np.ndarray
                ) -> tuple[ClipScore, np.ndarray, np.ndarray]:
     """Run the live path on ``samples`` and compare with ``truth (n_frames, 4)``.
 
@@ -97,7 +97,7 @@ def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_h
                      r_loudness=pearson(truth[:, MOUTH_OPEN], loud), lag=lag, r_at_lag=r_lag, n_frames=T), est, loud
 
 
-def score_set(model: AvModel, kind: str, items: Sequence[tuple[str, np.ndarray, int, np.ndarray]]) -> SetScore:
+def score_set(model: SpeechModel, kind: str, items: Sequence[tuple[str, np.ndarray, int, np.ndarray]]) -> SetScore:
     """``items``: (name, samples, rate_hz, truth (n_frames, 4)). Pools frames for eps/rho."""
     clips, truths, ests, louds = [], [], [], []
     for name, samples, rate, truth in items:

@@ -13,7 +13,7 @@ import numpy as np
 from assets.files import atomic_write_bytes
 from realtime_core import VISUAL_PARAMS
 from realtime_core.mapping import MlpMapper, MlpSpeechModel, encode_mlp_model
-from realtime_core.motion_units import fit_motion_units
+from realtime_core.motion_units import MotionUnits, fit_motion_units
 from training.errors import ConfigError
 from training.mapper import MapperRecipe, fit_bank, fit_readout
 from training.motion_units import (
@@ -279,3 +279,44 @@ def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) 
     fig.tight_layout()
     fig.savefig(png)
     plt.close(fig)
+
+
+def load_motion_units(path: Path) -> tuple[MotionUnits, tuple[np.ndarray, np.ndarray], np.ndarray, tuple[int, ...]]:
+    """``motion_units.npz`` -> (MUs, readout (matrix, bias), displacement scale, landmark indices); a file
+    of another kind or version is refused naming the file."""
+    from assets.errors import FileProblem
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise FileProblem(path, f"cannot be read as a motion-units file ({exc})") from None
+    if str(a.get("format")) != "facecast-motionunits" or int(a.get("version", -1)) != 1:
+        raise FileProblem(path, f"not a facecast-motionunits v1 file (format {a.get('format')!s}, "
+                                f"version {a.get('version')!s})")
+    mu = MotionUnits(mean=a["mean"], units=a["units"], eigenvalues=a["eigenvalues"])
+    return mu, (a["readout"], a["readout_bias"]), a["scale"], tuple(int(i) for i in a["landmarks"])
+
+
+def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> dict:
+    """Re-score the models ``facecast mu`` wrote to ``out`` on the train and test sentences (``facecast eval
+    --mu OUT``); the expression, variance and keyframe numbers come from ``out/report.json``."""
+    from assets.modelfile import load_mlp_model, load_model
+
+    out = Path(out)
+    mu, readout, scale, idx = load_motion_units(out / "motion_units.npz")
+    if idx != lower_face_indices():
+        raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's LOWER_FACE")
+    mlp = load_mlp_model(out / "mlp_mapper.npz")
+    clips = with_features(load_clips(root, cache_dir=cache_dir), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
+    train, test = of_split(clips, "train"), of_split(clips, "test")
+    report = json.loads((out / "report.json").read_text())
+    systems: dict[str, object] = {"mlp": mlp.mapper()}
+    if (out / "hmm_mups.npz").is_file():
+        systems["hmm"] = load_model(out / "hmm_mups.npz")
+    for name, sysm in systems.items():
+        for split, cl in (("train", train), ("test", test)):
+            est = hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl)
+            report[split][name] = score_mups(cl, est, mu, scale, readout).as_json()
+        say(f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}")
+    return report

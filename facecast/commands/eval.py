@@ -28,6 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
     p.add_argument("--video-dir", type=Path, default=SHARED / "video" / "grid", help="talking-face clips (GRID)")
     p.add_argument("--output", type=Path, default=None, help="write the markdown table here (e.g. docs/accuracy.md)")
+    from facecast.commands.speech_options import add_mapper_options
+
+    add_mapper_options(p)
+    p.add_argument("--mu", type=Path, default=None, metavar="DIR",
+                   help="instead: paper 002's numbers for the models `facecast mu -o DIR` wrote (HMM and MLP re-scored "
+                   "on the GRID s1 train and test sentences; expressions and keyframes from DIR/report.json)")
+    p.add_argument("--grid-root", type=Path, default=SHARED / "video" / "grid_s1", help="GRID s1 folder (for --mu)")
     p.set_defaults(run=run)
 
 
@@ -35,11 +42,13 @@ def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from assets.files import atomic_write_bytes
+    from assets.modelfile import load_speech_model
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set, video_items
-    from assets.modelfile import load_model
 
-    model = load_model(args.model)
+    if args.mu is not None:
+        return _run_mu(args)
+    model = load_speech_model(args.mapper, args.model)
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         syn = args.synthetic
@@ -64,6 +73,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"skipping real faces: {args.video_dir} not found", file=sys.stderr)
     command = "facecast eval" + (f" --model {args.model}" if args.model else "")
     text = format_markdown(results, command)
+    print(text)
+    if args.output is not None:
+        atomic_write_bytes(args.output, text.encode())
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _run_mu(args: argparse.Namespace) -> int:
+    from assets.files import atomic_write_bytes
+    from training.mu_report import mu_markdown
+    from training.mu_train import score_saved
+
+    text = mu_markdown(score_saved(args.mu, args.grid_root), f"facecast eval --mu {args.mu}")
     print(text)
     if args.output is not None:
         atomic_write_bytes(args.output, text.encode())
