@@ -69,9 +69,10 @@ def load_clips(root: str | Path | None = None, *, cache_dir: str | Path | None =
     """Every GRID s1 sentence under ``root`` as a :class:`Clip` (the face tracks from the shared cache)."""
     from tqdm import tqdm
 
-    from training.grid import sentences
+    from training.grid import default_root, sentences
     from training.video import load_face_track
 
+    root = Path(root) if root is not None else default_root()
     items = sentences(root)
     if limit is not None:
         items = items[:limit]
