@@ -41,7 +41,7 @@ from realtime_core.errors import ConfigError, RealtimeCoreError
 NEUTRAL = "neutral"
 
 EXPRESSION_RECIPES = MappingProxyType({
-    "smile": MappingProxyType({"mouthSmileLeft": 0.6, "mouthSmileRight": 0.6, "cheekSquintLeft": 0.5,
+    "smile": MappingProxyType({"mouthSmileLeft": 0.5, "mouthSmileRight": 0.5, "cheekSquintLeft": 0.5,
                                "cheekSquintRight": 0.5, "eyeSquintLeft": 0.2, "eyeSquintRight": 0.2}),
     "sad": MappingProxyType({"browInnerUp": 0.7, "browDownLeft": 0.2, "browDownRight": 0.2, "mouthFrownLeft": 0.6,
                              "mouthFrownRight": 0.6, "mouthShrugLower": 0.2}),
