@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.errors import FacecastError
 from realtime_core.features import FrontEndConfig, extract_features
 from realtime_core.mapping import MlpMapper
 from realtime_core.metrics import average_std, normalised_mse, pearson_per_param, pearson_r_trace
@@ -65,8 +66,11 @@ def deformation_of(landmarks: np.ndarray, neutral: np.ndarray, indices: Sequence
 
 
 def load_clips(root: str | Path | None = None, *, cache_dir: str | Path | None = None, limit: int | None = None,
-               progress: bool = True) -> list[Clip]:
-    """Every GRID s1 sentence under ``root`` as a :class:`Clip` (the face tracks from the shared cache)."""
+               progress: bool = True, skipped: list[str] | None = None) -> list[Clip]:
+    """Every GRID s1 sentence under ``root`` as a :class:`Clip` (the face tracks from the shared cache).
+
+    skipped: when given, sentences the extractor refuses (face lost, damaged file) are left out and
+    listed there with the reason; otherwise the first refusal is raised."""
     from tqdm import tqdm
 
     from training.grid import default_root, sentences
@@ -81,7 +85,13 @@ def load_clips(root: str | Path | None = None, *, cache_dir: str | Path | None =
     idx = lower_face_indices()
     out = []
     for s in tqdm(items, desc="face tracks", disable=not progress, unit="clip"):
-        tr = load_face_track(s.video, cache_dir=cache_dir)
+        try:
+            tr = load_face_track(s.video, cache_dir=cache_dir)
+        except FacecastError as exc:  # the extractor refuses a clip it cannot measure (e.g. face lost)
+            if skipped is None:
+                raise
+            skipped.append(f"{s.sentence_id}: {exc}")
+            continue
         t = min(len(tr.landmarks), len(tr.params))
         out.append(Clip(s.sentence_id, s.split, np.asarray(tr.samples, dtype=np.float32), int(tr.sample_rate_hz),
                         deformation_of(tr.landmarks[:t], tr.neutral, idx), np.asarray(tr.params[:t]),

@@ -65,9 +65,11 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    clips = load_clips(root, cache_dir=cache_dir, limit=cfg.limit)
+    skipped: list[str] = []
+    clips = load_clips(root, cache_dir=cache_dir, limit=cfg.limit, skipped=skipped)
     train, val, test = (of_split(clips, s) for s in ("train", "val", "test"))
-    say(f"{len(clips)} clips: {len(train)} train, {len(val)} val, {len(test)} test")
+    say(f"{len(clips)} clips: {len(train)} train, {len(val)} val, {len(test)} test; {len(skipped)} refused by the "
+        "extractor" + "".join(f"\n  {m}" for m in skipped))
     if not (train and val and test):
         raise ConfigError("every split needs at least one clip (use more sentences)")
     # 1. Utterance MUs on the train split.
@@ -94,7 +96,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     scale = displacement_scale(train)
     centre = (fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat)
     report: dict = {"credit": GRID_CREDIT, "config": asdict(cfg), "clips": {"train": len(train), "val": len(val),
-                    "test": len(test)}, "landmarks": len(lower_face_indices()), "units": mu.n_units,
+                    "test": len(test), "refused": skipped}, "landmarks": len(lower_face_indices()), "units": mu.n_units,
                     "variance": var, "variance_lips_only": var_lips, "train": {}, "test": {}, "val": {}}
     # Readout quality: true MUPs -> mouth parameters.
     rp = np.concatenate([c.params for c in test])
@@ -308,7 +310,8 @@ def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> di
     if idx != lower_face_indices():
         raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's LOWER_FACE")
     mlp = load_mlp_model(out / "mlp_mapper.npz")
-    clips = with_features(load_clips(root, cache_dir=cache_dir), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
+    clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean,
+                          mlp.cmvn_var)
     train, test = of_split(clips, "train"), of_split(clips, "test")
     report = json.loads((out / "report.json").read_text())
     systems: dict[str, object] = {"mlp": mlp.mapper()}
