@@ -14,7 +14,8 @@ def _row(name: str, s: dict) -> str:
 
 def mu_markdown(rep: dict, command: str) -> str:
     out = [(f"Command: `{command}`. {rep.get('credit', '')}. Sentences: train {rep['clips']['train']}, "
-           f"val {rep['clips']['val']}, test {rep['clips']['test']} (`training.grid.split_of`); K chosen on val, "
+           f"val {rep['clips']['val']}, test {rep['clips']['test']} (`training.grid.split_of`; "
+        f"{len(rep['clips'].get('refused', []))} refused by the extractor); K chosen on val, "
            "numbers on train and test. R, nu, MSE: paper 002 eq. 6-8 on the lower-face landmark displacements "
            "rebuilt from the estimated UMUPs, each coordinate divided by its maximum absolute displacement over "
            "the training data; r: Pearson r of the four mouth parameters read out of the UMUPs."), ""]
