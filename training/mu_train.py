@@ -273,6 +273,9 @@ def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) 
             label="lip contours only")
     ax.axhline(97, color="grey", ls="--", lw=1, label="97 %")
     ax.axvline(kept, color="C1", ls=":", lw=1, label=f"kept: {kept}")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("Utterance MUs")
     ax.set_ylabel("variance explained (%)")
     ax.set_title("GRID s1 lower-face deformation: PCA (train split)")
