@@ -236,15 +236,17 @@ def test_controls_are_applied_or_rejected_with_a_reason(model):
     assert got.audio == []  # audio=0: no audio messages
 
 
-def test_expression_controls_from_ingest_and_from_a_viewer(model):
+@pytest.mark.parametrize("workers", [0, 1])
+def test_expression_controls_from_ingest_and_from_a_viewer(model, workers):
     """The browser picker's route: a viewer's expression control is applied (ack) or rejected with a
-    reason while the session streams on; the ingest client's control does the same."""
+    reason while the session streams on; the ingest client's control does the same (in the server's
+    process and in a compute worker)."""
     from websockets.asyncio.client import connect
 
     pcm = _int16(speechlike(1.5, 16000, seed=3))
 
     async def main():
-        async with running(model) as srv:
+        async with running(model, workers=workers) as srv:
             async with IngestClient(srv.url, session="e", sample_rate_hz=16000) as ing:
                 async with ViewerClient(srv.url, session="e", audio=False) as view:
                     collect = asyncio.ensure_future(view.collect())
