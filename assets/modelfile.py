@@ -23,6 +23,11 @@ class ModelFileError(FileProblem):
     """A model file is missing, unreadable or invalid (the message names file and problem)."""
 
 
+DEFAULT_MLP_MODEL = Path(__file__).resolve().parent / "data" / "mlp_mapper.npz"
+"""The MLP mapper ``--mapper mlp`` uses when no file is given: paper 002's GMM-selected MLP bank trained
+by ``facecast mu`` on GRID s1 (Cooke, Barker, Cunningham, Shao 2006, CC BY 4.0; ``docs/motion_units.md``)."""
+
+
 def save_model(path: str | Path, model: AvModel) -> Path:
     """Write ``model`` to ``path`` atomically (temporary file + rename)."""
     path = Path(path)
@@ -70,11 +75,14 @@ def load_mlp_model(path: str | Path) -> MlpSpeechModel:
 
 
 def load_speech_model(mapper: str = "hmm", path: str | Path | None = None) -> SpeechModel:
-    """The model behind ``--mapper``: "hmm" (``path`` or the shipped model) or "mlp" (``path`` required)."""
+    """The model behind ``--mapper``: "hmm" (``path`` or the shipped HMM) or "mlp" (``path`` or the shipped
+    MLP mapper)."""
     if mapper not in MAPPER_KINDS:
         raise ConfigError(f"mapper must be one of {', '.join(MAPPER_KINDS)}, got {mapper!r}")
     if mapper == "hmm":
         return load_model(path)
     if path is None:
-        raise ConfigError("--mapper mlp needs a mapper file (--model MAPPER.npz, written by `facecast mu`)")
+        if not DEFAULT_MLP_MODEL.is_file():
+            raise ConfigError("--mapper mlp needs a mapper file (--model MAPPER.npz, written by `facecast mu`)")
+        path = DEFAULT_MLP_MODEL
     return load_mlp_model(path)

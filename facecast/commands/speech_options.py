@@ -11,7 +11,7 @@ import numpy as np
 def add_mapper_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mapper", choices=("hmm", "mlp"), default="hmm",
                    help="audio-to-visual mapper: the HMM inverter (paper 000) or the GMM-selected MLP bank "
-                   "(paper 002; --model must then be a mapper file written by `facecast mu`)")
+                   "(paper 002; --model is then a mapper file written by `facecast mu`, default the shipped one)")
 
 
 def add_expression_options(p: argparse.ArgumentParser) -> None:
