@@ -23,14 +23,19 @@ COMMANDS: dict[str, str] = {
     "record": "facecast.commands.record",
     "animate": "facecast.commands.animate",
     "render": "facecast.commands.render",
+    "say": "facecast.commands.say",
     "rig": "facecast.commands.rig",
     "corpus": "facecast.commands.corpus",
     "extract": "facecast.commands.extract",
+    "units": "facecast.commands.units",
+    "phones": "facecast.commands.phones",
     "train": "facecast.commands.train",
+    "adapt": "facecast.commands.adapt",
     "eval": "facecast.commands.eval",
     "mu": "facecast.commands.mu",
     "fit-maps": "facecast.commands.fit_maps",
     "bench": "facecast.commands.bench",
+    "perceptual": "facecast.commands.perceptual",
 }
 
 

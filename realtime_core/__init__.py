@@ -11,6 +11,8 @@ Sub-packages:
     metrics    AMSE / ACC (eq. 11-12), Pearson R and normalised MSE (paper 002 eq. 6-8)
 """
 
+import numpy as np
+
 from realtime_core.errors import (
     ConfigError,
     InvalidAudioError,
@@ -29,10 +31,8 @@ pose, ``training.params``); below it one lip would pass through the other. The l
 stage clamps every model's estimate at these bounds (:func:`visual_floor`)."""
 
 
-def visual_floor(names: tuple[str, ...]) -> "np.ndarray":
+def visual_floor(names: tuple[str, ...]) -> np.ndarray:
     """``(len(names),)`` float64 lower bounds for parameters ``names``: :data:`CLOSED_POSE` or -inf."""
-    import numpy as np
-
     return np.array([CLOSED_POSE.get(n, -np.inf) for n in names], dtype=np.float64)
 
 __all__ = [

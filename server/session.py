@@ -2,16 +2,14 @@
 
 Theory of operation
 -------------------
-A session is one audio stream. :meth:`Session.push_bytes` (or :meth:`Session.push` for arrays)
-decodes a block (pcm_s16le or f32le, interleaved channels), mixes it down to mono (channel mean),
-resamples it to the model's rate with :class:`realtime_core.features.resample.StreamingResampler` (equal to
-``scipy.signal.resample_poly`` on the whole stream, whatever the chunking), and runs the same
-streaming objects as :func:`realtime_core.pipeline.speech_to_params` (front end, then the streaming
-inverter), so a live session's raw mouth parameters equal ``facecast animate`` frame for frame.
-Controls (per-parameter gain, then one-pole smoothing) apply after the model, then the session's
-expression (eased on the media clock, :mod:`realtime_core.expressions`). Each push returns the
-frames now final and the resampled audio block, both stamped with media time (seconds of session
-audio at the model rate: frame ``k`` at ``k / fps``; audio by its first sample).
+A session is one audio stream and does four things: it decodes a binary block (pcm_s16le or f32le,
+interleaved channels, mixed down to mono by the channel mean), runs it through the live chain
+:class:`realtime_core.pipeline.SpeechToParams` (resampling to the model's rate, front end, streaming
+inverter: the same objects as ``speech_to_params``, so a live session's raw mouth parameters equal
+``facecast animate`` frame for frame), applies the controls (:mod:`server.controls`) and encodes
+frames for viewers. Each push returns the frames now final and the model-rate audio block the chain
+heard, both stamped with media time (seconds of session audio at the model rate: frame ``k`` at
+``k / fps``; audio by its first sample). Stage timings come from the chain's observer.
 
 Output encodings are computed lazily per frame (:meth:`Frame.payload`) and cached, so a frame with
 a thousand parameter viewers is encoded once, and vertex deltas are only computed when somebody
@@ -20,47 +18,50 @@ watches them. No sockets, clocks or tasks here except ``perf_counter`` for stage
 
 from __future__ import annotations
 
-import math
+import base64
+import binascii
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
-from realtime_core.blendshapes import blendshape_weights
-from realtime_core.errors import ConfigError, RealtimeCoreError
-from realtime_core.expressions import (
-    EXPRESSIONS,
-    ExpressionConfig,
-    ExpressionError,
-    ExpressionTrack,
-    apply_expression,
-    check_request,
-)
-from realtime_core.face.rig import Rig
-from realtime_core.features.resample import StreamingResampler
+from realtime_core.avmodel import AvModel
+from realtime_core.errors import ConfigError
+from realtime_core.expressions import apply_expression
 from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.mapping import SpeechModel
-from server.errors import AudioFormatError, ControlError, ServerConfigError
+from realtime_core.blendshapes import blendshape_weights
+from realtime_core.errors import RealtimeCoreError
+from realtime_core.face.rig import Rig
+from realtime_core.inversion import StreamConfig
+from realtime_core.pipeline import SpeechToParams
+from server.controls import ControlState, apply_controls
+from server.errors import AudioFormatError, ServerConfigError
 from server.timing import StageTimes
 from wire import protocol as P
 
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
+MIN_ENROL_S = 1.0
+MAX_ENROL_S = 120.0
+"""Accepted length of an enrolment recording (30-60 s is the intended amount)."""
 
 
 @dataclass(frozen=True, kw_only=True)
 class SessionConfig:
     """sample_rate_hz: input rate (8000..192000 Hz); channels: interleaved input channels (1..8);
     sample_format: "pcm_s16le" or "f32le"; lag: extra fixed-lag smoothing frames of the inverter
-    (adds lag / fps seconds of delay)."""
+    (adds lag / fps seconds of delay); enrol: optional enrolment recording of the talker, base64 of
+    audio in the session's own input format (rate, format, channels), 1-120 s: the session animates
+    with a copy of the model MAP-adapted to that voice (:mod:`realtime_core.adaptation`)."""
 
     sample_rate_hz: int
     channels: int = 1
     sample_format: str = "f32le"
     lag: int = 0
+    enrol: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.sample_rate_hz, bool) or not isinstance(self.sample_rate_hz, int) or not (
@@ -73,6 +74,31 @@ class SessionConfig:
             raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {self.lag!r}")
+        if self.enrol is not None:
+            if not isinstance(self.enrol, str):
+                raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
+            frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
+            if len(self.enrol_bytes()) % frame:
+                raise ServerConfigError(f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
+                                        f"samples ({frame} bytes each)")
+            seconds = self.enrol_seconds()
+            if not MIN_ENROL_S <= seconds <= MAX_ENROL_S:
+                raise ServerConfigError(f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
+                                        "(30-60 s is the intended amount)")
+
+    def enrol_seconds(self) -> float:
+        """Length of the enrolment recording in seconds (0 without one)."""
+        frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
+        return len(self.enrol_bytes()) / (frame * self.sample_rate_hz)
+
+    def enrol_bytes(self) -> bytes:
+        """The enrolment recording's raw bytes (empty without one); ServerConfigError if not base64."""
+        if self.enrol is None:
+            return b""
+        try:
+            return base64.b64decode(self.enrol, validate=True)
+        except (binascii.Error, ValueError):
+            raise ServerConfigError("enrol is not valid base64") from None
 
 
 @dataclass(eq=False)
@@ -160,7 +186,7 @@ class Output(NamedTuple):
 class Session:
     """One live audio stream through the model. Not thread-safe: one owner calls push/flush/control.
 
-    model: the speech model (the HMM or the MLP mapper, :class:`realtime_core.mapping.SpeechModel`); config: the input's format; rig: the head rig for vertex deltas
+    model: the audio-visual model; config: the input's format; rig: the head rig for vertex deltas
     (None: deltas unavailable); times: where stage durations go (a fresh StageTimes by default).
     """
 
@@ -174,23 +200,45 @@ class Session:
         self.fps = int(model.frontend.mfcc.frame_rate_hz)
         self._dtype = P.SAMPLE_FORMATS[config.sample_format]
         self._frame_bytes = self._dtype.itemsize * config.channels
-        self._resampler = StreamingResampler(config.sample_rate_hz, self.rate_hz)
-        self._fe = model.front_end()
+        self.enrolment: dict | None = None
+        if config.enrol is not None:
+            if not isinstance(model, AvModel):
+                raise ServerConfigError("enrol adapts the HMM model; it is not available with the MLP mapper")
+            self.model = model = self._enrolled(model)
         try:
-            self._inv = model.visual_mapper(lag=config.lag)
-        except ConfigError as exc:
+            self._chain = SpeechToParams(model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag),
+                                         observer=self._observe)
+        except ConfigError as exc:  # e.g. a lag with the MLP mapper, which has none
             raise ServerConfigError(str(exc)) from None
-        self.delay_frames = model.frontend.tc + self._inv.lag_frames
-        self.expressions = ExpressionTrack(ExpressionConfig())
-        self.gains = np.ones(len(VISUAL_PARAMS))
-        self.smoothing_ms = 0.0
-        self._smoothed: np.ndarray | None = None
+        self.delay_frames = self._chain.delay_frames
+        self.controls = ControlState()
         self.frames_out = 0
         self.samples_in = 0  # input samples (per channel) received
         self.samples_out = 0  # model-rate samples produced
         self._audio_index = 0
-        self._cpu0 = 0.0
+        self._mark = 0.0  # perf_counter() at the end of the previous stage
         self.finished = False
+
+    def _enrolled(self, model: AvModel) -> AvModel:
+        """This session's copy of ``model`` adapted to the enrolment recording (the shared model is
+        untouched). CPU work of about 0.3 s per 10 s of speech: callers on an event loop run the
+        constructor in a thread."""
+        from realtime_core.adaptation import adapt_av_model
+        from realtime_core.features.resample import resample_audio
+
+        x = self.decode(self.config.enrol_bytes())
+        x = resample_audio(x, self.config.sample_rate_hz, model.sample_rate_hz)
+        try:
+            adapted, result = adapt_av_model(model, [x])
+        except RealtimeCoreError as exc:
+            raise AudioFormatError(f"the model rejected the enrolment audio: {exc}") from exc
+        self.enrolment = dict(adapted.metadata.get("adaptation", {"frames": result.n_frames}))
+        return adapted
+
+    def _observe(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.times.add(stage, now - self._mark)
+        self._mark = now
 
     @property
     def frame_bytes(self) -> int:
@@ -206,11 +254,6 @@ class Session:
     def model_samples_needed(self, k: int) -> int:
         """Model-rate samples that must have arrived for frame ``k`` to be final (streaming, not flush)."""
         return self.model.frontend.mfcc.frame_start(k + self.delay_frames) + self.window_len
-
-    def input_samples_needed(self, k: int) -> int:
-        """Input-rate samples (per channel) that must have arrived for frame ``k`` to be final."""
-        m = self.model_samples_needed(k) - 1
-        return self._resampler.n_hi(m) + 1 if not self._resampler.passthrough else m + 1
 
     @property
     def algorithmic_delay_s(self) -> float:
@@ -242,15 +285,16 @@ class Session:
     def push_bytes(self, data: bytes) -> Output:
         """One binary block (any whole number of sample frames) -> Output."""
         t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        cpu0 = time.thread_time()  # CPU time: excludes being descheduled
         x = self.decode(data)
-        self.times.add("decode", time.perf_counter() - t0)
-        return self._run(x, t0)
+        self._mark = time.perf_counter()
+        self.times.add("decode", self._mark - t0)
+        return self._run(x, t0, cpu0)
 
     def push(self, samples: np.ndarray) -> Output:
         """samples: (n,) mono or (n, channels) float in [-1, 1] at the input rate -> Output."""
         t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        cpu0 = time.thread_time()
         x = np.asarray(samples, dtype=np.float64)
         if x.ndim == 2:
             if x.shape[1] != self.config.channels:
@@ -260,44 +304,31 @@ class Session:
             raise AudioFormatError(f"samples must be (n,) or (n, channels), got shape {x.shape}")
         if not np.isfinite(x).all():
             raise AudioFormatError("audio block contains NaN or infinite samples")
-        return self._run(x, t0)
+        self._mark = time.perf_counter()
+        return self._run(x, t0, cpu0)
 
     def flush(self) -> Output:
         """End of the stream: the remaining frames (audio zero-padded, as ``speech_to_params``)."""
         if self.finished:
             return Output([], None)
-        t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        t0 = self._mark = time.perf_counter()
+        cpu0 = time.thread_time()
         self.finished = True
-        y = self._resampler.flush()
-        audio = self._audio(y)
-        t1 = time.perf_counter()
         try:
-            oa = np.concatenate([self._fe.push(y), self._fe.flush()])
-            t2 = time.perf_counter()
-            params = np.concatenate([self._inv.push(oa), self._inv.flush()])
+            params = self._chain.flush()
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the audio: {exc}") from exc
-        t3 = time.perf_counter()
-        return Output(self._frames(params, t0, (t1, t2, t3)), audio)
+        return Output(self._frames(params, t0, cpu0), self._audio(self._chain.model_audio))
 
-    def _run(self, x: np.ndarray, t0: float) -> Output:
+    def _run(self, x: np.ndarray, t0: float, cpu0: float) -> Output:
         if self.finished:
             raise AudioFormatError("audio after the end of the session")
         self.samples_in += x.size
-        t1 = time.perf_counter()
-        y = self._resampler.push(x)
-        audio = self._audio(y)
-        t2 = time.perf_counter()
         try:
-            oa = self._fe.push(y)
-            t3 = time.perf_counter()
-            params = self._inv.push(oa)
+            params = self._chain.push(x)
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the audio: {exc}") from exc
-        t4 = time.perf_counter()
-        self.times.add("resample", t2 - t1)
-        return Output(self._frames(params, t0, (t2, t3, t4)), audio)
+        return Output(self._frames(params, t0, cpu0), self._audio(self._chain.model_audio))
 
     def _audio(self, y: np.ndarray) -> AudioBlock | None:
         if y.size == 0:
@@ -307,109 +338,36 @@ class Session:
         self.samples_out += y.size
         return block
 
-    def _frames(self, params: np.ndarray, t0: float, marks: tuple[float, float, float]) -> list[Frame]:
-        t_res, t_fe, t_inv = marks
-        self.times.add("features", t_fe - t_res)
-        self.times.add("inversion", t_inv - t_fe)
+    def _frames(self, params: np.ndarray, t0: float, cpu0: float) -> list[Frame]:
         if len(params) == 0:
             return []
-        out = []
-        for row in params:
-            out.append(self._controlled(row))
+        controlled = [self.controls.apply(row, self.fps) for row in params]
+        # The session's expression, eased on the media clock (None: none was ever set).
+        alpha, speech = self.controls.expression_at((self.frames_out + np.arange(len(params))) / self.fps), None
+        if alpha is not None:
+            speech = controlled
+            controlled = list(apply_expression(np.array(controlled), alpha, EXPRESSION_PARAMS))
         now = time.perf_counter()
         work = (now - t0) / len(params)
         self.times.add("push_per_frame", work)
-        self.times.add("push_per_frame_cpu", (time.thread_time() - self._cpu0) / len(params))
+        self.times.add("push_per_frame_cpu", (time.thread_time() - cpu0) / len(params))
         frames = []
-        alpha = speech = None
-        if self.expressions.events:  # an expression was ever set: apply the eased intensities
-            alpha = self.expressions.intensities((self.frames_out + np.arange(len(out))) / self.fps)
-            speech = out
-            out = list(apply_expression(np.array(out), alpha, EXPRESSION_PARAMS))
-        for i, (row, p) in enumerate(zip(params, out)):
+        for i, (row, p) in enumerate(zip(params, controlled)):
             k = self.frames_out
             frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times,
                                 None if alpha is None else alpha[i], None if speech is None else speech[i]))
             self.frames_out += 1
         return frames
 
-    def _controlled(self, row: np.ndarray) -> np.ndarray:
-        p = row * self.gains
-        if self.smoothing_ms > 0:
-            if self._smoothed is not None:
-                a = math.exp(-1000.0 / (self.fps * self.smoothing_ms))
-                p = a * self._smoothed + (1.0 - a) * p
-            self._smoothed = p
-        else:
-            self._smoothed = p
-        return p
-
     # -- controls --------------------------------------------------------------------------------
 
-    CONTROLS = ("gain", "smoothing_ms", "expression", "expression_ease_s")
-
     def apply_control(self, msg: dict) -> dict:
-        """Apply a control message ``{"type": "control", "gain": {...}, "smoothing_ms": x}``.
-
-        gain: {parameter name: factor in [0, 10]} (others unchanged); smoothing_ms: time constant of
-        a one-pole low-pass on the parameters, 0..1000 ms (0 = off); expression: ``{"name": "smile",
-        "intensity": 0.7, "at": media time s}`` (intensity default 1, ``at`` default the next frame;
-        "neutral" eases every expression out); expression_ease_s: 0..10 s. Returns the control state.
-        Raises ControlError (nothing applied) for an unknown control or an invalid value.
-        """
-        gains = self.gains.copy()
-        smoothing = self.smoothing_ms
-        ease = self.expressions.config.ease_s
-        expression = None
-        for key, value in msg.items():
-            if key == "type":
-                continue
-            if key == "gain":
-                if not isinstance(value, dict) or not value:
-                    raise ControlError("gain must be an object {parameter: factor}")
-                for name, g in value.items():
-                    if name not in VISUAL_PARAMS:
-                        raise ControlError(f"gain: unknown parameter {name!r} (known: {', '.join(VISUAL_PARAMS)})")
-                    if isinstance(g, bool) or not isinstance(g, (int, float)) or not 0 <= g <= 10:
-                        raise ControlError(f"gain for {name} must be a number in 0..10, got {g!r}")
-                    gains[VISUAL_PARAMS.index(name)] = float(g)
-            elif key == "smoothing_ms":
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1000:
-                    raise ControlError(f"smoothing_ms must be a number in 0..1000, got {value!r}")
-                smoothing = float(value)
-            elif key == "expression":
-                expression = self._expression_request(value)
-            elif key == "expression_ease_s":
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 10:
-                    raise ControlError(f"expression_ease_s must be a number in 0..10, got {value!r}")
-                ease = float(value)
-            else:
-                raise ControlError(f"unknown control {key!r} (known: {', '.join(self.CONTROLS)})")
-        track = self.expressions.copy(ExpressionConfig(ease_s=ease))  # committed only if all is valid
-        if expression is not None:
-            name, intensity, at = expression
-            try:
-                track.schedule(name, intensity, at, now_s=self.frames_out / self.fps)
-            except ExpressionError as exc:
-                raise ControlError(f"expression: {exc}") from None
-        self.gains, self.smoothing_ms, self.expressions = gains, smoothing, track
+        """Apply a control message ``{"type": "control", NAME: VALUE, ...}`` (see :mod:`server.controls`:
+        gain {parameter: factor in 0..10}, smoothing_ms 0..1000, expression {name, intensity, at},
+        expression_ease_s 0..10). Returns the control state; raises ControlError (nothing applied) for
+        an unknown control or an invalid value."""
+        self.controls = apply_controls(self.controls, msg, now_s=self.frames_out / self.fps)
         return self.control_state()
 
-    def _expression_request(self, value: object) -> tuple[str, float, object]:
-        """Validate ``{"name", "intensity", "at"}``; ControlError naming the problem."""
-        if not isinstance(value, dict) or "name" not in value:
-            raise ControlError('expression must be an object {"name": ..., "intensity": 0..1, "at": seconds}')
-        unknown = set(value) - {"name", "intensity", "at"}
-        if unknown:
-            raise ControlError(f"expression: unknown field(s) {sorted(unknown)} (known: name, intensity, at)")
-        try:
-            name, intensity = check_request(value["name"], value.get("intensity", 1.0))
-        except ExpressionError as exc:
-            raise ControlError(f"expression: {exc}") from None
-        # The media time is checked by the track (not in the past, not absurdly far ahead).
-        return name, intensity, value.get("at", self.frames_out / self.fps)
-
     def control_state(self) -> dict:
-        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms,
-                "expression": [{"at": t, "intensity": targets} for t, targets in self.expressions.events[-8:]],
-                "expression_ease_s": self.expressions.config.ease_s, "expressions": list(EXPRESSIONS)}
+        return self.controls.describe()

@@ -20,10 +20,9 @@ the mouth-parameter track of the clean utterance labels the augmented one.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from math import gcd
 
 import numpy as np
-from scipy.signal import fftconvolve, resample_poly
+from scipy.signal import fftconvolve
 
 from realtime_core.features.resample import resample_audio
 from training.errors import ConfigError

@@ -31,7 +31,7 @@ from training.augment import AugmentConfig, augment
 from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import AlignmentFormatError, ConfigError
-from training.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
+from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"

@@ -31,7 +31,8 @@ import numpy as np
 from assets.files import atomic_write_bytes
 from assets.audio import ACCEPTED_RATES_HZ, read_wav, write_wav
 from training.errors import ConfigError, CorpusFormatError, TruncatedFileError
-from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
+from realtime_core.phones import PhonemeSegment
+from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1

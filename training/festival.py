@@ -27,7 +27,7 @@ from training.augment import AugmentConfig, augment
 from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
-from training.params import PhonemeSegment
+from realtime_core.phones import PhonemeSegment
 from training.params import n_frames_for
 
 VOICES: tuple[str, ...] = ("kal_diphone", "ked_diphone", "cmu_us_slt_arctic_hts")

@@ -86,7 +86,7 @@ from training.facetrack import (
     read_raw,
     write_raw,
 )
-from training.grid import SILENCE_WORDS, align_for_video, read_words
+from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from training.params import FPS, n_frames_for
 
 __all__ = [
@@ -538,7 +538,7 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
 
 # --------------------------------------------------------------------------- one clip, cached
 def _words_for(video: Path, *, require: bool) -> tuple[list[tuple[float, float, str]] | None, Path | None]:
-    """The word alignment of a video (training.grid layout rules), or None when there is none
+    """The word alignment of a video (assets.grid layout rules), or None when there is none
     (an error when ``require``). A malformed alignment is always an error."""
     align = align_for_video(video)
     if align is None:
@@ -578,7 +578,7 @@ def load_face_track(path_or_video: str | Path, *, cache_dir: str | Path | None =
     """The :class:`FaceTrack` of a video (or of a cache ``.npz``), measuring it if not cached.
 
     cache_dir: default ``$FACECAST_CACHE`` or ``~/.cache/facecast``. words: the word alignment;
-    by default the one found beside the video (GRID layout, see :func:`training.grid.align_for_video`).
+    by default the one found beside the video (GRID layout, see :func:`assets.grid.align_for_video`).
     """
     path = Path(path_or_video)
     if path.suffix == ".npz":
@@ -719,8 +719,8 @@ def write_report(report: ExtractReport, path: Path) -> Path:
 
 # --------------------------------------------------------------------------- corpus folder, plots
 def grid_split_of(video: Path) -> str | None:
-    """The GRID split of a video whose stem is a GRID sentence id (training.grid), else None."""
-    from training.grid import sentence_text, split_of
+    """The GRID split of a video whose stem is a GRID sentence id (assets.grid), else None."""
+    from assets.grid import sentence_text, split_of
 
     try:
         sentence_text(video.stem)

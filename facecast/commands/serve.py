@@ -8,6 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.headopts import add_head_options
 
     p = sub.add_parser(
         "serve",
@@ -30,10 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     add_mapper_options(p)
     head = p.add_mutually_exclusive_group()
-    head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
+    head.add_argument("--head", type=Path, default=None,
+                      help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up")
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
     head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
-    p.add_argument("--landmarks", type=Path, default=None, help="landmarks JSON for --head (default: shipped ones if known)")
+    add_head_options(p, head=False)
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
     p.add_argument("--token-env", default=None, metavar="VAR",
                    help="require the shared token held in this environment variable (kept off the command line)")
@@ -44,6 +46,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
                    help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
                    "on the event loop; use up to cores - 1)")
+    p.add_argument("--text", action="store_true",
+                   help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units")
+    p.add_argument("--corpus", type=Path, default=None, help="unit corpus for --text (default: shipped or built)")
+    p.add_argument("--text-n-best", type=int, default=1, help="unit sequences averaged per sentence for --text")
     p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
     p.set_defaults(run=run)
 
@@ -53,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     import logging
     import os
 
-    from server.app import FacecastServer, load_head, run_server
+    from facecast.commands.headopts import resolve_from_args
+    from server.app import FacecastServer, run_server
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
@@ -75,18 +82,25 @@ def run(args: argparse.Namespace) -> int:
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_speech_model(args.mapper, args.model)
-    head = load_head(head=args.head, landmarks=args.landmarks, rig=args.rig, builtin=not args.no_head)
+    head = None if args.no_head else resolve_from_args(args, args.rig or args.head or "builtin")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)
+    if args.text:
+        from server.text_session import espeak_backend
+
+        server.text_backend = espeak_backend(args.corpus, n_best=args.text_n_best)
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
         ready: asyncio.Future = asyncio.get_running_loop().create_future()
         extra = []
         run = asyncio.ensure_future(run_server(server, ready=ready))
-        await ready
-        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}/ingest, /view); "
+        await asyncio.wait({ready, run}, return_when=asyncio.FIRST_COMPLETED)
+        if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
+            run.result()
+        endpoints = "/ingest, /view" + (", /text" if args.text else "")
+        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
               "Ctrl-C stops", flush=True)
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))

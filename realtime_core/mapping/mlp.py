@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError, ModelFormatError, StreamStateError
+from realtime_core.output import OutputStage
 
 ACTIVATIONS = ("relu", "tanh", "logistic", "identity")
 
@@ -209,14 +210,14 @@ class MlpMapper:
 
 class StreamingMlpMapper:
     """:class:`realtime_core.mapping.VisualMapper` over a bank: every pushed row is final at once
-    (``lag_frames = 0``), ``flush()`` returns nothing new. floor: ``(n_visual,)`` lower bounds of the
-    output (the closed pose, :func:`realtime_core.visual_floor`; None = none), as the HMM path."""
+    (``lag_frames = 0``), ``flush()`` returns nothing new. output: the output stage every estimate goes
+    through (:class:`realtime_core.output.OutputStage`: the closed-pose floor; None = none), as the HMM path."""
 
     lag_frames = 0
 
-    def __init__(self, mapper: MlpMapper, *, floor: np.ndarray | None = None) -> None:
+    def __init__(self, mapper: MlpMapper, *, output: OutputStage | None = None) -> None:
         self._m = mapper
-        self._floor = None if floor is None else np.asarray(floor, dtype=np.float64).reshape(mapper.bank.n_visual)
+        self._output = output
         self.reset()
 
     def reset(self) -> None:
@@ -226,7 +227,7 @@ class StreamingMlpMapper:
         if self._finished:
             raise StreamStateError("StreamingMlpMapper.push() after flush(); call reset() first")
         y = self._m.predict(oa)
-        return y if self._floor is None else np.maximum(y, self._floor)
+        return y if self._output is None else self._output(y)
 
     def flush(self) -> np.ndarray:
         if self._finished:

@@ -23,6 +23,7 @@ from realtime_core.avmodel import frontend_from_json, frontend_to_json
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
+from realtime_core.output import OutputStage
 
 FORMAT = "facecast-mlpmapper"
 VERSION = 1
@@ -77,7 +78,12 @@ class MlpSpeechModel:
         """A fresh streaming mapper. ``lag`` must be 0: the seven-frame context is the front end's."""
         if lag != 0:
             raise ConfigError(f"the MLP mapper has no smoothing lag (its context is the front end's); got lag={lag}")
-        return StreamingMlpMapper(self.mapper(dtype), floor=visual_floor(self.visual_names))
+        return StreamingMlpMapper(self.mapper(dtype), output=self.output_stage)
+
+    @cached_property
+    def output_stage(self) -> OutputStage:
+        """The closed-pose floor every served estimate goes through (no closure band: 0)."""
+        return OutputStage(visual_floor(self.visual_names), 0.0)
 
 
 def encode_mlp_model(model: MlpSpeechModel) -> bytes:

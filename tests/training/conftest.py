@@ -37,7 +37,7 @@ def shared_data() -> Path:
 def espeak():
     """The shared espeak-ng synthesizer (real libespeak-ng.so.1)."""
     from training.errors import SynthesisError
-    from training.espeak import synthesizer
+    from assets.espeak import synthesizer
 
     try:
         return synthesizer()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
-from training.espeak import LANGUAGES, Voice
+from assets.espeak import LANGUAGES, Voice
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = 2

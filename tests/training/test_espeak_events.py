@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from training.errors import ConfigError, SynthesisError
-from training.espeak import LANGUAGES, VARIANTS, Voice
+from assets.espeak import LANGUAGES, VARIANTS, Voice
 
 
 def _rms(x: np.ndarray) -> float:

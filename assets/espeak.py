@@ -35,8 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from training.params import PhonemeSegment
-from training.errors import ConfigError, SynthesisError
+from realtime_core.phones import PhonemeSegment
+from assets.errors import SynthesisError
+from realtime_core.errors import ConfigError
 
 LIBRARY = "libespeak-ng.so.1"
 

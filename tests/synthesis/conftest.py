@@ -1,0 +1,61 @@
+"""Fixtures of the unit-selection tests: a small unit corpus built from synthetic face tracks by the
+real builder (EM-PCA, viseme table, .npz codec), phones covering every ARPAbet viseme class."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from realtime_core.synthesis.visemes import PHONE_TO_VISEME, VISEMES
+
+ARPABET_BY_VISEME = {v: next(p for p, c in PHONE_TO_VISEME["arpabet"].items() if c == v) for v in VISEMES}
+
+
+def synthetic_track(rng: np.random.Generator, n_frames: int):
+    """A FaceTrack whose lower face moves smoothly (3 latent gestures) and whose params follow them."""
+    from training.facetrack import LOWER_FACE, N_LANDMARKS, FaceTrack
+
+    t = np.arange(n_frames) / 30.0
+    gestures = np.stack([np.sin(rng.uniform(3, 9) * t + rng.uniform(0, 6)) for _ in range(3)], axis=1)
+    neutral = rng.normal(size=(N_LANDMARKS, 3)).astype(np.float32)
+    basis = np.random.default_rng(99).normal(scale=0.02, size=(3, len(LOWER_FACE), 3))
+    lm = np.repeat(neutral[None], n_frames, axis=0).astype(np.float64)
+    lm[:, list(LOWER_FACE)] += np.einsum("tg,gpc->tpc", gestures, basis)
+    params = np.stack([0.02 * gestures[:, 0], 0.05 * gestures[:, 1], 0.1 + 0.1 * gestures[:, 2], 0.01 * gestures[:, 0]],
+                      axis=1)
+    return FaceTrack(source=Path("synthetic.mp4"), samples=np.zeros(n_frames * 533, np.float32), sample_rate_hz=16000,
+                     landmarks=lm.astype(np.float32), neutral=neutral, params=params,
+                     face_found=np.ones(n_frames, bool), closed_gap_iod=0.0)
+
+
+@pytest.fixture(scope="session")
+def corpus_rows():
+    """[(sentence id, FaceTrack, ARPAbet phones)] of 30 synthetic sentences."""
+    rng = np.random.default_rng(0)
+    rows = []
+    classes = [v for v in VISEMES if v != "sil"]
+    for s in range(30):
+        labels = ["sil"] + [ARPABET_BY_VISEME[v] for v in rng.choice(classes, 12)] + ["sil"]
+        dur = rng.uniform(0.06, 0.15, len(labels))
+        edges = np.concatenate([[0.0], np.cumsum(dur)])
+        n = int(np.ceil(edges[-1] * 30)) + 1
+        phones = [(lab, edges[i], edges[i + 1]) for i, lab in enumerate(labels)]
+        rows.append((f"s{s:02d}", synthetic_track(rng, n), phones))
+    return rows
+
+
+@pytest.fixture(scope="session")
+def stored_corpus(corpus_rows):
+    from realtime_core.synthesis.empca import EmPcaConfig
+    from training.unit_corpus import build_stored_corpus
+
+    return build_stored_corpus(corpus_rows, config=EmPcaConfig(max_components=6), meta={"test": True})
+
+
+@pytest.fixture(scope="session")
+def corpus_file(stored_corpus, tmp_path_factory) -> Path:
+    from assets.unitcorpus import save_unit_corpus
+
+    return save_unit_corpus(tmp_path_factory.mktemp("units") / "units.npz", stored_corpus)
