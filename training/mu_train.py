@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +121,10 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
                            metadata={"paper": "Hong, Wen, Huang 2002, Sec. VI-A", "classes": best_k,
                                      "hidden": cfg.hidden, "units": mu.n_units, "credit": GRID_CREDIT,
                                      "val_R": report["val"][f"mlp_K{best_k}"]["R"]})
+    band, band_scores = choose_closure_band(model, root, cache_dir=cache_dir)
+    model = replace(model, closure_band=band, metadata={**model.metadata, "closure_band_val": band_scores})
+    report["closure_band"] = {"chosen": band, "val": band_scores}
+    say(f"closure band {band} IOD (val)")
     atomic_write_bytes(out / "mlp_mapper.npz", encode_mlp_model(model))
     # 4. The single large MLP of the paper's argument.
     if cfg.baseline_hidden:
@@ -174,6 +178,27 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
 
     atomic_write_bytes(out / "report.md", mu_markdown(report, "facecast mu -o OUT").encode())
     return report
+
+
+BANDS = (0.0, 0.01, 0.02, 0.03, 0.04, 0.05)
+
+
+def choose_closure_band(model: MlpSpeechModel, root, *, cache_dir=None) -> tuple[float, dict]:
+    """The output stage's closure band for the MLP mapper, chosen on the val split as the HMM's is
+    (scored by :func:`training.reallips.evaluate_lips`): among the bands that do not lower r(mouth_open)
+    below its value without a band, the one whose closure rate is closest to the truth's."""
+    from training.reallips import evaluate_lips, s1_clips
+
+    clips = s1_clips("val", root=root, cache_dir=cache_dir)
+    scores = {}
+    for band in BANDS:
+        s, _ = evaluate_lips(replace(model, closure_band=band), clips)
+        scores[str(band)] = {"r_mouth_open": s.r["mouth_open"], "closure_rate": s.closure_rate,
+                             "truth_closure_rate": s.truth_closure_rate}
+    r0 = scores["0.0"]["r_mouth_open"]
+    ok = [b for b in BANDS if scores[str(b)]["r_mouth_open"] >= r0 - 1e-9] or [0.0]
+    best = min(ok, key=lambda b: abs(scores[str(b)]["closure_rate"] - scores[str(b)]["truth_closure_rate"]))
+    return best, scores
 
 
 def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> dict:

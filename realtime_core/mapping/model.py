@@ -34,7 +34,8 @@ _BANK_ARRAYS = ("gmm_log_weights", "gmm_means", "gmm_vars", "w1", "b1", "w2", "b
 class MlpSpeechModel:
     """bank: the GMM-selected experts; frontend / cmvn_mean / cmvn_var: how ``o_a`` is computed (as
     :class:`realtime_core.avmodel.AvModel`); visual_names: names of the served parameters;
-    metadata: JSON-able training details (K, hidden units, scores, data credits)."""
+    metadata: JSON-able training details (K, hidden units, scores, data credits); closure_band: IOD, the
+    output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off)."""
 
     bank: MlpBank
     frontend: FrontEndConfig
@@ -42,8 +43,11 @@ class MlpSpeechModel:
     cmvn_var: np.ndarray
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     metadata: dict = field(default_factory=dict)
+    closure_band: float = 0.0
 
     def __post_init__(self) -> None:
+        if not 0 <= self.closure_band <= 0.1:
+            raise ModelFormatError(f"closure_band must be in [0, 0.1] IOD, got {self.closure_band}")
         if self.bank.n_audio != self.frontend.audio_dim:
             raise ModelFormatError(f"MLP input width {self.bank.n_audio} != the front end's {self.frontend.audio_dim}")
         if len(self.visual_names) != self.bank.n_visual:
@@ -82,8 +86,8 @@ class MlpSpeechModel:
 
     @cached_property
     def output_stage(self) -> OutputStage:
-        """The closed-pose floor every served estimate goes through (no closure band: 0)."""
-        return OutputStage(visual_floor(self.visual_names), 0.0)
+        """The closed-pose floor and closure band every served estimate goes through."""
+        return OutputStage(visual_floor(self.visual_names), self.closure_band)
 
 
 def encode_mlp_model(model: MlpSpeechModel) -> bytes:
@@ -91,7 +95,7 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
     b = model.bank
     config = {"frontend": frontend_to_json(model.frontend), "visual_names": list(model.visual_names),
               "activation": b.activation, "class_slice": list(b.class_slice), "readout": b.readout is not None,
-              "metadata": model.metadata}
+              "closure_band": model.closure_band, "metadata": model.metadata}
     arrays = {"format": np.array(FORMAT), "version": np.array(VERSION),
               "config_json": np.array(json.dumps(config, sort_keys=True)),
               "cmvn_mean": model.cmvn_mean, "cmvn_var": model.cmvn_var}
@@ -131,7 +135,8 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
                        readout_bias=arrays.get("readout_bias") if has_readout else None)
         return MlpSpeechModel(bank=bank, frontend=frontend_from_json(config["frontend"]),
                               cmvn_mean=arrays["cmvn_mean"], cmvn_var=arrays["cmvn_var"],
-                              visual_names=tuple(config["visual_names"]), metadata=config.get("metadata", {}))
+                              visual_names=tuple(config["visual_names"]), metadata=config.get("metadata", {}),
+                              closure_band=float(config.get("closure_band", 0.0)))
     except ModelFormatError:
         raise
     except (KeyError, TypeError, ValueError, FacecastError) as exc:

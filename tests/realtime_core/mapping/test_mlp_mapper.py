@@ -109,7 +109,13 @@ def test_file_round_trip_and_errors(bank_and_data, tmp_path) -> None:
                            visual_names=("a", "b"), metadata={"k": 4})
     back = decode_mlp_model(encode_mlp_model(model))
     np.testing.assert_array_equal(back.mapper().predict(x[:50]), model.mapper().predict(x[:50]))
-    assert back.metadata == {"k": 4}
+    assert back.metadata == {"k": 4} and back.closure_band == 0.0
+    import dataclasses
+
+    banded = decode_mlp_model(encode_mlp_model(dataclasses.replace(model, closure_band=0.03)))
+    assert banded.closure_band == 0.03
+    with pytest.raises(ModelFormatError, match="closure_band"):
+        dataclasses.replace(model, closure_band=0.5)
     with pytest.raises(ModelFormatError, match="not a facecast mapper archive"):
         decode_mlp_model(b"not a zip")
     import io
