@@ -412,10 +412,13 @@ def parse_viewer_message(message: object) -> dict:
     expression control (size and nesting bounded like every client text)."""
     if not isinstance(message, str):
         raise ProtocolViolation(P.CLOSE_POLICY, "viewers send only expression controls (got a binary message)")
-    msg = loads_bounded(message, "viewer message")
+    try:
+        msg = loads_bounded(message, "viewer message")
+    except ProtocolViolation as exc:  # not a (bounded) JSON object: a viewer talking out of turn
+        raise ProtocolViolation(P.CLOSE_POLICY, f"viewers send only expression controls ({exc.reason})") from None
     if msg.get("type") != "control" or not set(msg) <= VIEWER_CONTROLS or len(msg) < 2:
-        raise ProtocolViolation(P.CLOSE_POLICY, "viewers send only expression controls "
-                                f'({{"type": "control", "expression": {{...}}}}), got keys {sorted(msg)}')
+        raise ProtocolViolation(P.CLOSE_POLICY, 'viewers send only expression controls ({"type": "control", '
+                                '"expression": {...}})')
     return msg
 
 
