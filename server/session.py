@@ -27,14 +27,13 @@ from typing import NamedTuple
 import numpy as np
 
 from realtime_core.avmodel import AvModel
-from realtime_core.errors import ConfigError
-from realtime_core.expressions import apply_expression
-from realtime_core.fitted_maps import EXPRESSION_PARAMS
-from realtime_core.mapping import SpeechModel
 from realtime_core.blendshapes import blendshape_weights
-from realtime_core.errors import RealtimeCoreError
+from realtime_core.errors import ConfigError, RealtimeCoreError
+from realtime_core.expressions import apply_expression
 from realtime_core.face.rig import Rig
+from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.inversion import StreamConfig
+from realtime_core.mapping import SpeechModel
 from realtime_core.pipeline import SpeechToParams
 from server.controls import ControlState, apply_controls
 from server.errors import AudioFormatError, ServerConfigError
