@@ -73,6 +73,7 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
 
     try:
         frames = _read_step(proc, "frames")
+        picker = _read_step(proc, "picker")
         mouth = _read_step(proc, "mouth")
         _read_step(proc, "waiting")
         # End the session and start it again under the same name: the page must follow alone.
@@ -106,6 +107,8 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
             servers[0].stop()
 
     st = frames["state"]
+    assert picker["buttons"] == ["neutral", "smile", "sad", "surprise", "anger"]  # from the description
+    assert picker["smiled"] == "smile: applied"  # the server acknowledged the picker's control
     assert name in frames["listed"]  # the page lists the live session
     assert st["kind"] == "deltas" and st["frames"] >= 30 and st["connections"] == 1
     assert st["audio"]["running"] and st["audio"]["played"] > 0  # the relayed speech was scheduled

@@ -6,6 +6,7 @@
 // on the PNGs written to OUTDIR (closed.png, open.png: the same mouth-region clip with the mouth
 // closed and open; viewer.png: the whole page). Steps:
 //   {"step":"frames", ...}    the page shows frames of SESSION (state, the session list, audio)
+//   {"step":"picker", ...}    the expression picker's buttons; "smile" then "neutral" acknowledged
 //   {"step":"mouth", ...}     closed/open frames captured (their peak vertex deltas, the clip box)
 //   {"step":"waiting"}        then it waits for a line on stdin (the test restarts the session)
 //   {"step":"reconnected",..} the page reconnected on its own and shows frames again
@@ -50,6 +51,19 @@ async function main() {
   const listed = await page.locator("#sessions").textContent();
   let st = await page.evaluate(() => ({ ...window.facecast.state, audio: window.facecast.audio() }));
   say({ step: "frames", listed, state: st });
+
+  // The expression picker: its buttons come from the description; a click is acknowledged by the
+  // server. Back to neutral afterwards so the mouth checks below see speech only.
+  await page.waitForSelector("#expressions button", { timeout: 10000 });
+  const buttons = await page.locator("#expressions button").allTextContents();
+  await page.locator("#expressions button", { hasText: "smile" }).click();
+  await page.waitForFunction(() => /smile: applied/.test(document.getElementById("expression-status").textContent),
+    null, { timeout: 10000 });
+  const smiled = await page.locator("#expression-status").textContent();
+  await page.locator("#expressions button", { hasText: "neutral" }).click();
+  await page.waitForFunction(() => /neutral: applied/.test(document.getElementById("expression-status").textContent),
+    null, { timeout: 10000 });
+  say({ step: "picker", buttons, smiled });
 
   // Let the mouth move for a while so the page knows which vertices move (mouthBox), then learn
   // the range of per-frame peaks and capture a frame near each end of it.
