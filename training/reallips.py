@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.grid import Split, read_words, sentences
 from realtime_core import VISUAL_PARAMS
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
-from assets.grid import Split, read_words, sentences
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")

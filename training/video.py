@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import SILENCE_PEAK
+from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
     ConfigError,
@@ -86,7 +87,6 @@ from training.facetrack import (
     read_raw,
     write_raw,
 )
-from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from training.params import FPS, n_frames_for
 
 __all__ = [

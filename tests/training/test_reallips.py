@@ -124,7 +124,12 @@ def test_real_lips_evaluation_of_the_shipped_model(shared_data, tmp_path, ffmpeg
 
     from assets.modelfile import load_model
     from training.grid_phones import read_grid_phones
-    from training.reallips import evaluate_lips, lips_markdown, phone_bilabial_spans, s1_clips
+    from training.reallips import (
+        evaluate_lips,
+        lips_markdown,
+        phone_bilabial_spans,
+        s1_clips,
+    )
 
     s1 = shared_data / "video" / "grid_s1"
     root = tmp_path / "grid"
