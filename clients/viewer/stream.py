@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from urllib.parse import quote
 import time
 from dataclasses import dataclass, field
 
@@ -101,16 +102,17 @@ class Recording:
         return out
 
 
-async def fetch_head(url: str) -> HeadMesh:
+async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
     """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept)."""
-    status, body = await http_get(url, "/head/mesh.json")
+    auth = f"?token={quote(token)}" if token else ""
+    status, body = await http_get(url, "/head/mesh.json" + auth)
     if status != 200:
         raise ClientError(f"{url}: the server has no head (/head/mesh.json answered {status})")
     try:
         m = json.loads(body)
         texture = None
         if m.get("uvs") is not None:
-            t_status, t_body = await http_get(url, "/head/texture")
+            t_status, t_body = await http_get(url, "/head/texture" + auth)
             texture = t_body if t_status == 200 else None
         return HeadMesh(
             vertices=np.asarray(m["vertices"], dtype=np.float64).reshape(-1, 3),
@@ -165,24 +167,26 @@ async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
     return rec
 
 
-async def live_sessions(url: str) -> list[str]:
-    """Names of the server's live sessions (from ``/metrics``), oldest first."""
+async def live_sessions(url: str, token: str | None = None) -> list[str]:
+    """Names of the server's live sessions (``/sessions``: cluster-wide behind Redis; the token when
+    the server has one)."""
+    path = "/sessions" + (f"?token={quote(token)}" if token else "")
     try:
-        status, body = await http_get(url, "/metrics")
+        status, body = await http_get(url, path)
     except OSError as exc:
         raise ClientError(f"{url}: cannot connect: {exc}") from None
     if status != 200:
-        raise ClientError(f"{url}: /metrics answered {status}")
-    return [s["name"] for s in json.loads(body).get("session_list", [])]
+        raise ClientError(f"{url}: /sessions answered {status}" + (" (wrong or missing token)" if status == 401 else ""))
+    return [s["name"] for s in json.loads(body).get("sessions", [])]
 
 
-async def pick_session(url: str, wanted: str | None, wait_s: float) -> str:
+async def pick_session(url: str, wanted: str | None, wait_s: float, token: str | None = None) -> str:
     """``wanted`` if given, else the first live session, waiting up to wait_s for one to start."""
     if wanted is not None:
         return wanted
     deadline = time.monotonic() + wait_s
     while True:
-        names = await live_sessions(url)
+        names = await live_sessions(url, token)
         if names:
             return names[0]
         if time.monotonic() >= deadline:

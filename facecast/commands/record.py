@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
             arkit = builtin_arkit_targets()
 
     async def main():
-        session = await pick_session(args.url, args.session, args.wait)
+        session = await pick_session(args.url, args.session, args.wait, token)
         cfg = StreamConfig(url=args.url, session=session, kind="params", token=token, wait_s=args.wait,
                            max_s=args.duration)
         print(f"facecast record: recording session {session!r} from {args.url}", flush=True)

@@ -64,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
         return _window(args, token)
 
     async def main():
-        session = await pick_session(args.url, args.session, args.wait)
-        mesh = await fetch_head(args.url)
+        session = await pick_session(args.url, args.session, args.wait, token)
+        mesh = await fetch_head(args.url, token)
         cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token,
                            wait_s=args.wait, max_s=args.duration)
         print(f"facecast view: recording session {session!r} from {args.url}", flush=True)
@@ -94,7 +94,7 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
                           f"{args.url}/ in a browser to watch and listen")
 
     async def setup():
-        return await pick_session(args.url, args.session, args.wait), await fetch_head(args.url)
+        return await pick_session(args.url, args.session, args.wait, token), await fetch_head(args.url, token)
 
     session, mesh = asyncio.run(setup())
     cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait)
