@@ -245,19 +245,25 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "benchmark": "server_capacity",
         "model": model_desc,
         "criterion": f"p99 delivery (last needed sample -> receipt) over all viewers' frames < {LIMIT_MS} ms and no "
-                     "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
-                     "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
+        "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
+        "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
         "goal": {"sessions": 100, "param_viewers": 500, "vertex_viewers": 100},
         "sustained": None if best is None else {k: best[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
-        "sustained_every_viewer": None if best_strict is None else {
-            k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
+        "sustained_every_viewer": None
+        if best_strict is None
+        else {k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
         "server_workers": cfg.workers,
         "cost_model": cost,
-        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
-                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+            "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()],
+        },
         "steps": steps,
-        "note": "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)",
+        "note": (
+            "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)"
+        ),
     }
 
 
@@ -265,15 +271,17 @@ def main(argv: list[str] | None = None) -> int:
     """Print the JSON result (one progress line per step first). Always 0: figures, not a test."""
     ap = argparse.ArgumentParser(prog="server_capacity", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=6.0, help="audio per step (real time)")
-    ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
+    ap.add_argument(
+        "--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'"
+    )
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     args = ap.parse_args(argv)
-    steps = DEFAULT_STEPS
+    steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     if args.steps:
-        steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
+        steps = tuple((int(a), int(b), int(c)) for a, b, c in (s.split(",") for s in args.steps.split(";")))
     result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
                                                    head=not args.no_head, cost_model=not args.no_cost_model,
                                                    workers=args.workers))

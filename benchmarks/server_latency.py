@@ -92,7 +92,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         e2e = rec[live] - sent_at[need[live] - 1]
         from_frame_time = rec[live] - (wall0 + idx[live] / fps)
         out[kind] = {
-            "frames": int(len(idx)),
+            "frames": len(idx),
             "end_to_end_after_last_needed_sample_ms": summarise(e2e),
             "delivery_after_server_send_ms": summarise(rec - np.array(log.sent)),
             "frame_time_to_receipt_ms": summarise(from_frame_time),

@@ -53,6 +53,13 @@ def _closed(exc: ConnectionClosed) -> ServerClosed:
     return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
 
 
+def _open(ws: ClientConnection | None) -> ClientConnection:
+    """The connection of a client used inside ``async with`` (a clear error otherwise)."""
+    if ws is None:
+        raise ClientError("the client is not connected: use it as `async with ...`")
+    return ws
+
+
 class IngestClient:
     """One ingest connection: start message on enter, binary audio, controls, end.
 
@@ -74,7 +81,7 @@ class IngestClient:
         self.ws: ClientConnection | None = None
         self.started: dict = {}
 
-    async def __aenter__(self) -> "IngestClient":
+    async def __aenter__(self) -> IngestClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
         start = {"type": "start", "session": self.session, "sample_rate": self.sample_rate_hz,
                  "channels": self.channels, "format": self.sample_format}
@@ -90,7 +97,7 @@ class IngestClient:
 
     async def _reply(self, *types: str) -> dict:
         try:
-            msg = await self.ws.recv()
+            msg = await _open(self.ws).recv()
         except ConnectionClosed as exc:
             raise _closed(exc) from None
         obj = json.loads(msg)
@@ -112,18 +119,18 @@ class IngestClient:
         """Send one block (array or raw bytes already in the session's format)."""
         data = samples if isinstance(samples, (bytes, bytearray)) else self.encode(samples)
         try:
-            await self.ws.send(data)
+            await _open(self.ws).send(data)
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
     async def control(self, **controls: object) -> dict:
         """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
-        await self.ws.send(json.dumps({"type": "control", **controls}))
+        await _open(self.ws).send(json.dumps({"type": "control", **controls}))
         return await self._reply("ack", "rejected")
 
     async def end(self) -> dict:
         """End the session: the server flushes the last frames and replies ``ended``."""
-        await self.ws.send(json.dumps({"type": "end"}))
+        await _open(self.ws).send(json.dumps({"type": "end"}))
         return await self._reply("ended")
 
 
@@ -222,7 +229,7 @@ class ViewerClient:
         self.close_code: int | None = None
         self.close_reason = ""
 
-    async def __aenter__(self) -> "ViewerClient":
+    async def __aenter__(self) -> ViewerClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
         try:
             self.description = json.loads(await self.ws.recv())
@@ -237,7 +244,7 @@ class ViewerClient:
     async def __aiter__(self):
         while True:
             try:
-                data = await self.ws.recv()
+                data = await _open(self.ws).recv()
             except ConnectionClosed as exc:
                 self.close_code = exc.rcvd.code if exc.rcvd else None
                 self.close_reason = exc.rcvd.reason if exc.rcvd else ""

@@ -37,10 +37,10 @@ import signal
 import socket
 import time
 import urllib.parse
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
-from typing import AsyncIterator
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
@@ -53,14 +53,14 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
-from wire import JS_PROTOCOL
-from wire import protocol as P
 from server.config import ServerConfig
 from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
 from server.glb import mesh_glb, mesh_json, texture_mime
 from server.session import Output, Session, SessionConfig
 from server.timing import StageTimes
 from server.workers import RemoteSession, WorkerPool
+from wire import JS_PROTOCOL
+from wire import protocol as P
 
 log = logging.getLogger("facecast.server")
 

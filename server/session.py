@@ -31,11 +31,11 @@ from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face.rig import Rig
-from realtime_core.inversion import StreamConfig
-from wire import protocol as P
-from server.errors import AudioFormatError, ControlError, ServerConfigError
 from realtime_core.features.resample import StreamingResampler
+from realtime_core.inversion import StreamConfig
+from server.errors import AudioFormatError, ControlError, ServerConfigError
 from server.timing import StageTimes
+from wire import protocol as P
 
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000

@@ -20,10 +20,9 @@ the mouth-parameter track of the clean utterance labels the augmented one.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from math import gcd
 
 import numpy as np
-from scipy.signal import fftconvolve, resample_poly
+from scipy.signal import fftconvolve
 
 from realtime_core.features.resample import resample_audio
 from training.errors import ConfigError
@@ -98,7 +97,9 @@ def coloured_noise(n: int, kind: str, rng: np.random.Generator) -> np.ndarray:
     return white / max(_rms(white), 1e-12)
 
 
-def augment(samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Augmented:
+def augment(
+    samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()
+) -> Augmented:
     """Degrade one utterance like a real microphone would (see the module doc).
 
     samples: (n,) float in [-1, 1] at ``rate_hz``. Returns float32 samples in [-1, 1].

@@ -22,14 +22,14 @@ interrupted build never leaves a half-written file under its final name. Only JS
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
-from assets.files import atomic_write_bytes
 from assets.audio import ACCEPTED_RATES_HZ, read_wav, write_wav
+from assets.files import atomic_write_bytes
 from training.errors import ConfigError, CorpusFormatError, TruncatedFileError
 from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
 
@@ -119,7 +119,10 @@ def write_utterance(
     atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
     write_json(
         folder / "phonemes.json",
-        [{"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)} for p in phonemes],
+        [
+            {"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)}
+            for p in phonemes
+        ],
     )
     entry = {
         "id": utt_id,

@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from training.params import PhonemeSegment
 from training.errors import ConfigError, SynthesisError
+from training.params import PhonemeSegment
 
 LIBRARY = "libespeak-ng.so.1"
 
@@ -214,7 +214,7 @@ class EspeakSynthesizer:
         self._callback = _CALLBACK(self._on_synth)
         lib.espeak_SetSynthCallback(self._callback)
 
-    def _on_synth(self, wav, n_samples, events) -> int:  # noqa: ANN001 - ctypes types
+    def _on_synth(self, wav, n_samples, events) -> int:  # ctypes pointers (untyped: called from C)
         if n_samples > 0 and wav:
             self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
         i = 0

@@ -107,15 +107,23 @@ def score_set(model: AvModel, kind: str, items: Sequence[tuple[str, np.ndarray, 
         ests.append(est)
         louds.append(loud)
     t, e, lv = np.concatenate(truths), np.concatenate(ests), np.concatenate(louds)
-    return SetScore(kind=kind, eps=amse(t, e), rho=acc(t, e), r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
-                    r_loudness=pearson(t[:, MOUTH_OPEN], lv), clips=clips)
+    return SetScore(
+        kind=kind,
+        eps=amse(t, e),
+        rho=acc(t, e),
+        r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
+        r_loudness=pearson(t[:, MOUTH_OPEN], lv),
+        clips=clips,
+    )
 
 
-def real_speech_items(root: str | Path, *, lead_s: float | None = None) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
+def real_speech_items(
+    root: str | Path, *, lead_s: float | None = None
+) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
     """Real recordings with phone alignments under ``root``, truth from the articulatory rules."""
+    from assets.audio import read_audio
     from training.alignments import find_aligned_audio
     from training.articulatory import ArticulatoryConfig, render_params
-    from assets.audio import read_audio
     from training.params import n_frames_for
 
     cfg = ArticulatoryConfig() if lead_s is None else ArticulatoryConfig(lead_s=lead_s)

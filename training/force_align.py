@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from training.alignments import Alignment, Phone
-from realtime_core.features.resample import resample_audio
 from assets.audio import to_int16
+from realtime_core.features.resample import resample_audio
+from training.alignments import Alignment, Phone
 from training.errors import AlignmentFormatError, MissingDependencyError
 
 FRAME_S = 0.01

@@ -42,9 +42,8 @@ utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -70,7 +70,7 @@ class Track:
 def csv_bytes(track: Track) -> bytes:
     """The track as UTF-8 CSV text (see the module docstring)."""
     out = io.StringIO()
-    out.write(",".join(("t",) + track.names) + "\n")
+    out.write(",".join(("t", *track.names)) + "\n")
     for t, row in zip(track.times(), track.params):
         out.write(f"{t:.6f}," + ",".join(f"{v:.9g}" for v in row) + "\n")
     return out.getvalue().encode("utf-8")

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.audio import wav_bytes
+from assets.files import atomic_write_bytes
 from clients.export.curves import Track, csv_bytes, json_bytes
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
-from assets.audio import wav_bytes
-from assets.files import atomic_write_bytes
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")

@@ -32,7 +32,7 @@ def read_params_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             rows = list(csv.DictReader(f))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise RenderError(f"{p}: cannot read CSV: {exc}") from exc
-    need = ("t",) + VISUAL_PARAMS
+    need = ("t", *VISUAL_PARAMS)
     if not rows or any(c not in rows[0] for c in need):
         have = list(rows[0]) if rows else []
         raise RenderError(f"{p}: expected columns {list(need)}, got {have}")

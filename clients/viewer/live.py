@@ -18,6 +18,7 @@ process that has created EGL contexts (X error BadAccess), so one process uses o
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import queue
 import threading
@@ -26,8 +27,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from clients.errors import ClientError
 from assets.heads.mesh import HeadMesh
+from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
 from clients.viewer.stream import StreamConfig, connect_viewer
 from clients.viewer.video import framing
@@ -95,10 +96,11 @@ class AudioOut:
             # PortAudio's "high" latency: through ALSA's PulseAudio plugin "low" underran and then
             # stalled under load (silence while frames went on); the DAC time below accounts for
             # whatever latency the device has, so sync does not depend on it.
-            self.stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
-                                          latency="high")
-            self.stream.start()
-            self._clock_delta = self.stream.time - time.perf_counter()
+            stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
+                                     latency="high")
+            stream.start()
+            self.stream = stream
+            self._clock_delta = stream.time - time.perf_counter()
             self.device = str(info["name"])
         except (sd.PortAudioError, ValueError) as exc:  # no device, or no default output device
             self.stream = None
@@ -159,10 +161,8 @@ class _Receiver(threading.Thread):
     def close(self) -> None:
         self.ready.wait(2)
         if self.loop is not None and self.task is not None and not self.loop.is_closed():
-            try:
+            with contextlib.suppress(RuntimeError):  # the loop closed in between
                 self.loop.call_soon_threadsafe(self.task.cancel)
-            except RuntimeError:  # the loop closed in between
-                pass
         self.join(3)
 
     async def _main(self) -> None:
@@ -239,13 +239,17 @@ def run_window(cfg: StreamConfig, mesh: HeadMesh, *, config: RenderConfig = Rend
                     moving = np.asarray(d["head"]["moving_vertices"], dtype=np.int64)
                     if renderer is None:
                         c, ax, size = framing(neutral, moving)
-                        renderer = HeadRenderer(mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None))
+                        renderer = HeadRenderer(
+                            mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None)
+                        )
                         glfw.make_context_current(win)
                     if audio is None and d.get("audio"):
                         audio = AudioOut(int(d["audio"]["rate_hz"]), playout)
                         audio.open()
                         stats.audio_device = audio.device
-                        status(f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}")
+                        status(
+                            f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}"
+                        )
                     playout.offset, last_index = None, -1
                     pending.clear()
                     if audio is not None:

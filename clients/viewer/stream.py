@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from assets.heads.mesh import HeadMesh
 from clients.client import ServerClosed, ViewerClient, http_get
 from clients.errors import ClientError
-from assets.heads.mesh import HeadMesh
 from wire import protocol as P
 
 
@@ -128,7 +128,9 @@ async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
     """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
-        v = ViewerClient(cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token)
+        v = ViewerClient(
+            cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token
+        )
         try:
             await v.__aenter__()
             return v

@@ -20,13 +20,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("speech", type=Path, help="speech audio (WAV; other formats through ffmpeg)")
     p.add_argument("--csv", type=Path, default=None, help="output CSV: t (s, frame k at k/30) and the 4 parameters")
     # Exports (clients/export); at least one of --csv/--glb/--json/--tsv is required.
-    p.add_argument("--glb", type=Path, default=None,
-                   help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it")
+    p.add_argument(
+        "--glb",
+        type=Path,
+        default=None,
+        help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it",
+    )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
-    p.add_argument("--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)")
-    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
-                   help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
+    p.add_argument(
+        "--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)"
+    )
+    p.add_argument(
+        "--glb-morphs",
+        choices=("units", "arkit52"),
+        default="units",
+        help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)",
+    )
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
@@ -34,12 +44,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from realtime_core.inversion import StreamConfig
-    from realtime_core.pipeline import speech_to_params
     from assets.audio import read_audio
-    from clients.export.curves import Track, csv_bytes
     from assets.files import atomic_write_bytes
     from assets.modelfile import load_model
+    from clients.export.curves import Track, csv_bytes
+    from realtime_core.inversion import StreamConfig
+    from realtime_core.pipeline import speech_to_params
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-
 FORWARDED: dict[str, tuple[str, str]] = {
     "latency": ("benchmarks.server_latency",
                 "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
@@ -36,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     core.set_defaults(run=_run_core)
     # The other benchmarks own their options (`facecast bench NAME --help` shows them): the
     # command line hands them everything after their name (see FORWARDED and facecast.cli).
-    for name, (module, text) in FORWARDED.items():
+    for name, (_module, text) in FORWARDED.items():
         which.add_parser(name, help=text, add_help=False)
 
 

@@ -35,9 +35,9 @@ def run(args: argparse.Namespace) -> int:
     import tempfile
 
     from assets.files import atomic_write_bytes
+    from assets.modelfile import load_model
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set, video_items
-    from assets.modelfile import load_model
 
     model = load_model(args.model)
     results = []
@@ -48,7 +48,9 @@ def run(args: argparse.Namespace) -> int:
             from training.evaluation import EVAL_VARIANTS
 
             syn = Path(tmp) / "heldout"
-            build_corpus(BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS)))
+            build_corpus(
+                BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS))
+            )
         items = [(u.id, u.samples, u.sample_rate_hz, u.params) for u in load_corpus(syn)]
         results.append(("1. Held-out synthetic voices (espeak variants never used in training)",
                         score_set(model, "synthetic", items)))

@@ -37,7 +37,9 @@ def run(args: argparse.Namespace) -> int:
     from training.video import ExtractConfig, extract_videos, frame_energy_db
 
     cfg = ExtractConfig(audio_rate_hz=args.audio_rate, language=args.language)
-    manifest, tracks = extract_videos([Path(v) for v in args.videos], Path(args.out), cfg, plot=args.plot, progress=tqdm)
+    manifest, tracks = extract_videos(
+        [Path(v) for v in args.videos], Path(args.out), cfg, plot=args.plot, progress=tqdm
+    )
     for tr in tracks:
         mo = tr.params[:, 2]
         energy = frame_energy_db(tr.samples, tr.sample_rate_hz, len(mo))

@@ -27,8 +27,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
                    help=".glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
-    p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many seconds (default %(default)s = when the session ends)",
+    )
+    p.add_argument(
+        "--token-env",
+        default=None,
+        metavar="VAR",
+        help="environment variable holding the server's token (default %(default)s = no token)",
+    )
     p.set_defaults(run=run)
 
 

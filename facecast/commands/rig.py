@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="Candide-3 .wfm file to use as the simple face model (the paper's choice); default: the model "
         "derived from the built-in head",
     )
-    p.add_argument("--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)")
+    p.add_argument(
+        "--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)"
+    )
     p.add_argument("--projection", choices=("frontal", "uv"), default="frontal", help="2D projection for eq. 8-9")
     p.add_argument("--beta", type=float, default=0.5, help="gain of eq. 10 for vertices outside every triangle")
     p.add_argument(
@@ -42,13 +44,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from assets.errors import LandmarkError
+    from assets.errors import LandmarkError, MeshError
     from assets.heads.builtin import load_builtin_head
     from assets.heads.landmarks import read_landmarks, shipped_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
-    from assets.errors import MeshError
     from assets.heads.rigging import candide_face, rig_head
     from realtime_core.errors import RealtimeCoreError
     from realtime_core.face import RigConfig, parse_wfm
@@ -65,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
         mesh = load_mesh(args.head)
         lm_path = args.landmarks or shipped_landmarks(args.head)
         if lm_path is None:
-            raise LandmarkError(f"{args.head}: no landmarks file given (--landmarks L.json) and none shipped for this head")
+            raise LandmarkError(
+                f"{args.head}: no landmarks file given (--landmarks L.json) and none shipped for this head"
+            )
         spec = read_landmarks(lm_path)
         source = str(lm_path)
     simple = None

@@ -29,7 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
     head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
-    p.add_argument("--landmarks", type=Path, default=None, help="landmarks JSON for --head (default: shipped ones if known)")
+    p.add_argument(
+        "--landmarks", type=Path, default=None, help="landmarks JSON for --head (default: shipped ones if known)"
+    )
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
     p.add_argument("--token-env", default=None, metavar="VAR",
                    help="require the shared token held in this environment variable (kept off the command line)")
@@ -40,7 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
                    help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
                    "on the event loop; use up to cores - 1)")
-    p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
+    p.add_argument(
+        "--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)"
+    )
     p.set_defaults(run=run)
 
 
@@ -49,11 +53,11 @@ def run(args: argparse.Namespace) -> int:
     import logging
     import os
 
+    from assets.modelfile import load_model
     from server.app import FacecastServer, load_head, run_server
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
-    from assets.modelfile import load_model
 
     token = None
     if args.token_env:
@@ -87,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))
             name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
-            extra.append(server.run_source(name, src, sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
+            extra.append(server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
         if mic is not None:
             print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
             extra.append(server.run_source("mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels,

@@ -67,9 +67,9 @@ def _run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from assets.modelfile import load_model, save_model
     from realtime_core.hmm import TrainConfig
     from training.corpus import load_corpus
-    from assets.modelfile import load_model, save_model
     from training.trainer import TrainRecipe, train_av_model
 
     exclude = {s for s in args.exclude_source.split(",") if s}
@@ -123,8 +123,8 @@ def _run(args: argparse.Namespace) -> int:
 def _select(args: argparse.Namespace, utts: list, recipe) -> int:
     from tqdm import tqdm
 
-    from training.corpus import write_json
     from assets.modelfile import save_model
+    from training.corpus import write_json
     from training.report import plot_selection, plot_tracks
     from training.trainer import evaluate, split_by_utterance, train_av_model
 
@@ -142,6 +142,8 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
         tqdm.write(json.dumps(row))
         if cov == "full" and (best is None or ev.rho > best[0]):
             best = (ev.rho, model, ev, row)
+    if best is None:
+        raise SystemExit("facecast train: no full-covariance model in the grid")
     out_dir = args.report_dir or args.output.parent
     out_dir.mkdir(parents=True, exist_ok=True)
     plot_selection(rows, out_dir / "selection_fig7.png")

@@ -31,8 +31,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)")
     p.add_argument("--buffer-ms", type=float, default=80.0, help="window mode: jitter buffer before a frame is shown")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
-    p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many seconds (default %(default)s = when the session ends)",
+    )
+    p.add_argument(
+        "--token-env",
+        default=None,
+        metavar="VAR",
+        help="environment variable holding the server's token (default %(default)s = no token)",
+    )
     p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
     p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
     p.set_defaults(run=run)

@@ -5,6 +5,19 @@ from realtime_core.hmm.model import AvHmm, component_loglik, gaussian_loglik
 from realtime_core.hmm.train import TrainConfig, TrainResult, baum_welch, em_iteration, fit, init_model, log_likelihood
 
 __all__ = [
-    "AvHmm", "TrainConfig", "TrainResult", "baum_welch", "component_loglik", "em_iteration", "expected_transitions", "fit",
-    "forward_backward", "gaussian_loglik", "init_model", "log_backward", "log_forward", "log_likelihood", "viterbi",
+    "AvHmm",
+    "TrainConfig",
+    "TrainResult",
+    "baum_welch",
+    "component_loglik",
+    "em_iteration",
+    "expected_transitions",
+    "fit",
+    "forward_backward",
+    "gaussian_loglik",
+    "init_model",
+    "log_backward",
+    "log_forward",
+    "log_likelihood",
+    "viterbi",
 ]

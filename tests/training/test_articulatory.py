@@ -11,6 +11,9 @@ from training.articulatory import ArticulatoryConfig, render_params, unknown_lab
 from training.espeak import LANGUAGES, Voice
 from training.params import FPS, n_frames_for
 
+# Real espeak-ng speech.
+pytestmark = pytest.mark.system
+
 MOUTH_OPEN = 2
 
 

@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from training.errors import ConfigError, SynthesisError
+from training.errors import ConfigError
 from training.espeak import LANGUAGES, VARIANTS, Voice
+
+# Real espeak-ng speech.
+pytestmark = pytest.mark.system
 
 
 def _rms(x: np.ndarray) -> float:
@@ -23,8 +26,16 @@ def _core(syn, seg, frac: float = 0.5) -> np.ndarray:
 @pytest.mark.parametrize(
     "voice,text,vowels",
     [
-        (Voice(language="en", base="en-us"), "a papa, a puppy, a happy pup", {"a", "A:", "V", "aa", "a#", "@", "i", "I"}),
-        (Voice(language="es", base="es", variant="f2", rate_wpm=150), "papá pone la pipa en el tapete", {"a", "e", "i", "o"}),
+        (
+            Voice(language="en", base="en-us"),
+            "a papa, a puppy, a happy pup",
+            {"a", "A:", "V", "aa", "a#", "@", "i", "I"},
+        ),
+        (
+            Voice(language="es", base="es", variant="f2", rate_wpm=150),
+            "papá pone la pipa en el tapete",
+            {"a", "e", "i", "o"},
+        ),
     ],
 )
 def test_bilabial_closure_is_quiet(espeak, voice, text, vowels) -> None:
@@ -62,12 +73,20 @@ def test_rate_changes_duration(espeak) -> None:
     assert slow.duration_s > 1.5 * fast.duration_s
 
 
-def test_all_variants_load(espeak) -> None:
+def test_all_voices_and_variants_speak_and_sound_different(espeak) -> None:
+    """Every base voice and every variant synthesises audible speech with an /m/ and a vowel event,
+    and each variant changes the sound (a variant espeak silently ignored would equal the base)."""
     for lang, bases in LANGUAGES.items():
         for base in bases:
-            espeak.synthesize("ma", Voice(language=lang, base=base))
+            syn = espeak.synthesize("ma", Voice(language=lang, base=base))
+            assert _rms(syn.samples) > 100, f"{lang}/{base} is (near) silent"
+            assert "m" in [s.phoneme for s in syn.phonemes], f"{lang}/{base}: {syn.phonemes}"
+    base = espeak.synthesize("ma", Voice(language="es", base="es")).samples
     for v in VARIANTS:
-        espeak.synthesize("ma", Voice(language="es", base="es", variant=v))
+        syn = espeak.synthesize("ma", Voice(language="es", base="es", variant=v))
+        assert _rms(syn.samples) > 100, f"variant {v} is (near) silent"
+        same = len(syn.samples) == len(base) and np.array_equal(syn.samples, base)
+        assert not same, f"variant {v} sounds exactly like the base voice"
 
 
 def test_bad_voice_config() -> None:
@@ -75,4 +94,12 @@ def test_bad_voice_config() -> None:
         Voice(language="en", base="en-us", variant="zz9")
     with pytest.raises(ConfigError, match="rate_wpm"):
         Voice(language="en", base="en-us", rate_wpm=20)
-    assert issubclass(SynthesisError, Exception)
+    with pytest.raises(ConfigError, match="unknown language 'xx'"):
+        Voice(language="xx", base="en-us")
+    with pytest.raises(ConfigError, match="is not one of"):
+        Voice(language="es", base="en-us")
+
+
+def test_empty_text_is_refused(espeak) -> None:
+    with pytest.raises(ConfigError, match="empty text"):
+        espeak.synthesize("", Voice(language="en", base="en-us"))

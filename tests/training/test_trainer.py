@@ -9,14 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from assets.audio import read_wav
+from assets.modelfile import load_model
 from facecast.cli import main
+from realtime_core.features.resample import resample_audio as resample
 from realtime_core.pipeline import SpeechToParams
 from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
-from assets.audio import read_wav
 from training.corpus import load_corpus
 from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-from assets.modelfile import load_model
-from realtime_core.features.resample import resample_audio as resample
+
+# Builds a corpus and trains a model.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from clients.export.files import export_track
 from clients.export.gltf import animated_glb, rig_targets
 from clients.export.rhubarb import SHAPES, ShapeThresholds, cues, frame_shapes, read_tsv, tsv_bytes
 from realtime_core import VISUAL_PARAMS
+from tests.prerequisites import require_module
 
 
 def _track(n: int = 90, seed: int = 0) -> Track:
@@ -93,7 +94,11 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
     table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "C": [0, 0, 0.18, 0], "B": [0, 0, 0.08, 0]}
     tr = Track(params=np.array([table[s] for s in shapes]))
     cs = cues(tr, ShapeThresholds(min_cue_frames=2))
-    assert [(round(c.start_s, 4), c.shape) for c in cs] == [(0.0, "X"), (round(5 / 30, 4), "D"), (round(12 / 30, 4), "B")]
+    assert [(round(c.start_s, 4), c.shape) for c in cs] == [
+        (0.0, "X"),
+        (round(5 / 30, 4), "D"),
+        (round(12 / 30, 4), "B"),
+    ]
     parsed = read_tsv(tsv_bytes(tr))
     assert [c.shape for c in parsed] == ["X", "D", "B", "X"]
     assert parsed[-1].start_s == pytest.approx(16 / 30, abs=0.005)
@@ -111,7 +116,7 @@ def _synthetic_head(n: int = 60, seed: int = 1):
 
 
 def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
-    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+    pygltflib = require_module("pygltflib")
     v, tris, targets = _synthetic_head()
     tr = _track(45)
     data = animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=tr,
@@ -133,7 +138,7 @@ def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
 
 
 def test_glb_also_loads_in_trimesh():
-    trimesh = pytest.importorskip("trimesh")
+    trimesh = require_module("trimesh")
     v, tris, targets = _synthetic_head()
     data = animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=_track(10))
     scene = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
@@ -142,18 +147,9 @@ def test_glb_also_loads_in_trimesh():
     np.testing.assert_array_equal(geom.faces, tris)
 
 
-@pytest.fixture(scope="module")
-def builtin():
-    from assets.heads.rigfile import builtin_rig
-
-    try:
-        return builtin_rig()
-    except Exception as exc:  # noqa: BLE001 - any failure to fetch the built-in head skips, naming it
-        pytest.skip(f"built-in head unavailable (first use downloads it): {exc}")
-
-
-def test_rig_morph_targets_reproduce_the_rig_deformation(builtin):
-    rig, mesh = builtin
+@pytest.mark.system
+def test_rig_morph_targets_reproduce_the_rig_deformation(builtin_rig_file):
+    rig, _mesh = builtin_rig_file
     d = rig_targets(rig)
     p = np.array([0.03, -0.05, 0.3, 0.02])
     via_morphs = rig.neutral + np.tensordot(p, d, axes=1)
@@ -161,11 +157,12 @@ def test_rig_morph_targets_reproduce_the_rig_deformation(builtin):
     assert np.abs(d).max() > 0  # the targets actually move the mouth
 
 
-def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin):
-    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+@pytest.mark.system
+def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin_rig_file):
+    pygltflib = require_module("pygltflib")
     tr = _track(30)
     audio = (np.sin(np.arange(16000) / 10).astype(np.float32) * 0.5, 16000)
-    files = export_track(tmp_path / "take.glb", tr, head=builtin, audio=audio)
+    files = export_track(tmp_path / "take.glb", tr, head=builtin_rig_file, audio=audio)
     assert [f.name for f in files] == ["take.glb", "take.wav"]
     with wave.open(str(tmp_path / "take.wav")) as w:
         assert w.getframerate() == 16000 and w.getnframes() == 16000
@@ -184,15 +181,16 @@ def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin
     assert not list(tmp_path.glob(".*tmp"))  # atomic writes leave no temporaries
 
 
-def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(tmp_path, builtin):
-    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+@pytest.mark.system
+def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(tmp_path, builtin_rig_file):
+    pygltflib = require_module("pygltflib")
     from clients.export.gltf import builtin_arkit_targets
     from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
 
-    rig, mesh = builtin
+    _rig, _mesh = builtin_rig_file
     targets = builtin_arkit_targets()
     tr = _track(20)
-    export_track(tmp_path / "a.glb", tr, head=builtin, morphs="arkit52", arkit_targets=targets)
+    export_track(tmp_path / "a.glb", tr, head=builtin_rig_file, morphs="arkit52", arkit_targets=targets)
     g = pygltflib.GLTF2().load(str(tmp_path / "a.glb"))
     blob = g.binary_blob()
     prim = g.meshes[0].primitives[0]
@@ -204,4 +202,4 @@ def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(t
     np.testing.assert_allclose(w, blendshape_weights(tr.params, "arkit52"), atol=1e-7)
     assert w[:, jaw].max() > 0.3  # the mouth opens in this track
     with pytest.raises(ExportError, match="need a head that has them"):
-        export_track(tmp_path / "b.glb", tr, head=builtin, morphs="arkit52")
+        export_track(tmp_path / "b.glb", tr, head=builtin_rig_file, morphs="arkit52")

@@ -8,6 +8,10 @@ import numpy as np
 import pytest
 
 from facecast.cli import main
+from tests.prerequisites import missing
+
+# CLI subprocesses with real rendering and ffmpeg.
+pytestmark = pytest.mark.system
 
 
 def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head, capsys):
@@ -18,7 +22,7 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     assert "220 control points" in capsys.readouterr().out
     from assets.heads.rigfile import load_rig
 
-    rig, mesh = load_rig(out)
+    rig, _mesh = load_rig(out)
     assert rig.displacements(np.array([0, 0, 0.1, 0])).any()
 
 
@@ -34,7 +38,9 @@ def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, c
     assert main(["rig", str(unknown), "-o", str(tmp_path / "y.npz")]) == 2
     assert "head.obj: no landmarks file given" in capsys.readouterr().err
     empty = tmp_path / "empty.ply"
-    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n")
+    empty.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
     assert main(["rig", str(empty), "--landmarks", str(bad), "-o", str(tmp_path / "z.npz")]) == 2
     assert "empty.ply" in capsys.readouterr().err
 
@@ -55,14 +61,14 @@ def test_ply_round_trip(tmp_path, shared_data):
 
 def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, capsys):
     if shutil.which("ffmpeg") is None:
-        pytest.skip("ffmpeg not installed")
+        missing("ffmpeg not installed")
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
 
     try:
         renderer_for_rig(*builtin_rig, RenderConfig(width=32, height=32)).close()
     except RenderError as exc:
-        pytest.skip(f"no OpenGL 3.3 context through EGL here: {exc}")
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
     csv = tmp_path / "p.csv"
     t = np.arange(0, 0.3, 1 / 30)
     rows = ["t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress"]

@@ -11,12 +11,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.prerequisites import missing
 from wire import protocol as P
+
+# Node.js runs the viewer modules.
+pytestmark = pytest.mark.system
 
 
 def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_path):
     if shutil.which("node") is None:
-        pytest.skip("node is not installed")
+        missing("node is not installed")
     rng = np.random.default_rng(0)
     deltas = rng.standard_normal(300).astype(np.float32) * 0.05
     cases = {
@@ -41,7 +45,12 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
     r = json.loads(out.stdout)
     for name, m in expect.items():
         got = r["decoded"][name]
-        assert (got["kind"], got["encoding"], got["index"], got["count"]) == (m.kind, m.encoding, m.index, len(m.values))
+        assert (got["kind"], got["encoding"], got["index"], got["count"]) == (
+            m.kind,
+            m.encoding,
+            m.index,
+            len(m.values),
+        )
         assert got["mediaTime"] == m.media_time and got["sendTime"] == m.send_time
         np.testing.assert_array_equal(np.float32(got["values"]), m.values, err_msg=name)
     assert "shorter than the header" in r["rejected"]

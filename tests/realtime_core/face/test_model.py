@@ -21,10 +21,14 @@ def toy_face() -> tuple[FaceModel, MouthLandmarks]:
     )
     tri = np.array([[0, 1, 4], [2, 3, 4], [4, 8, 9], [5, 8, 9]])
     z = np.zeros_like(v)
-    jaw = z.copy(); jaw[[5, 7], 1] = -0.2
-    up = z.copy(); up[[4, 6], 1] = 0.1
-    st = z.copy(); st[8, 0] = 0.1; st[9, 0] = -0.1
-    fr = z.copy(); fr[[8, 9], 1] = -0.05
+    jaw = z.copy()
+    jaw[[5, 7], 1] = -0.2
+    up = z.copy()
+    up[[4, 6], 1] = 0.1
+    st = z.copy()
+    st[8, 0], st[9, 0] = 0.1, -0.1
+    fr = z.copy()
+    fr[[8, 9], 1] = -0.05
     m = FaceModel(vertices=v, triangles=tri, animation_units={"jaw": jaw, "up": up, "stretch": st, "frown": fr})
     lm = MouthLandmarks(upper_lip=4, lower_lip=5, upper_inner=6, lower_inner=7, corner_left=8, corner_right=9,
                         eye_outer_left=0, eye_inner_left=1, eye_outer_right=2, eye_inner_right=3)

@@ -3,8 +3,8 @@
 // decoded values per message and the playout clock's behaviour in scripted arrival patterns.
 import { readFileSync, readdirSync } from "node:fs";
 import { join } from "node:path";
-import { decodeMessage } from "../../wire/protocol.js";
-import { PlayoutClock } from "../../clients/web/js/playout.js";
+import { decodeMessage } from "../../../wire/protocol.js";
+import { PlayoutClock } from "../../../clients/web/js/playout.js";
 
 const dir = process.argv[2];
 const decoded = {};

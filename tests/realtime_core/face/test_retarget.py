@@ -58,7 +58,7 @@ def test_projection_is_one_to_one():
 
 
 def test_interpolation_barycentric_and_fallback_eq10():
-    v, t = grid(0, 1, 0, 1, 11, 11)
+    v, _t = grid(0, 1, 0, 1, 11, 11)
     ctrl = np.array([0, 10, 110])  # corners (0,0), (1,0), (0,1)
     tri = np.array([[0, 1, 2]])
     beta = 0.5
@@ -152,9 +152,16 @@ def test_recalibrate_makes_the_head_show_the_requested_parameters():
     basis[3 * 7 + 1, 2], basis[3 * 5 + 1, 2] = -2.0, -2.0  # lower lip down
     basis[3 * 8 + 1, 3], basis[3 * 9 + 1, 3] = -2.0, -2.0  # corners down
     half = sp.identity(30, format="csr") * 0.5
-    rig = Rig(neutral=v, triangles=np.zeros((0, 3), np.int32), moving=np.arange(10), matrix=half, basis=basis,
-              control=np.arange(10), simple=FaceModel(vertices=v, triangles=np.zeros((0, 3), int)),
-              calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)))
+    rig = Rig(
+        neutral=v,
+        triangles=np.zeros((0, 3), np.int32),
+        moving=np.arange(10),
+        matrix=half,
+        basis=basis,
+        control=np.arange(10),
+        simple=FaceModel(vertices=v, triangles=np.zeros((0, 3), int)),
+        calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
+    )
     r = head_response(rig, lm)
     assert np.all(np.abs(np.diag(r) - 0.5) < 0.05)  # the head shows about half of what was asked
     fixed = recalibrate(rig, lm)

@@ -5,34 +5,28 @@ from __future__ import annotations
 
 import asyncio
 import json
-import shutil
 import subprocess
 
 import numpy as np
 import pytest
 
-from realtime_core.pipeline import speech_to_params
 from facecast.demo import DemoConfig, run_demo, synthesise, write_mp4
 from realtime_core.features.resample import resample_audio as resample
+from realtime_core.pipeline import speech_to_params
+from tests.prerequisites import missing
+
+# espeak-ng, a live server and ffmpeg.
+pytestmark = pytest.mark.system
 
 
-def test_demo_streams_speech_and_writes_an_mp4(model, tmp_path):
+def test_demo_streams_speech_and_writes_an_mp4(model, head, ffmpeg, tmp_path):
     from server.errors import AudioSourceError
 
-    if shutil.which("ffprobe") is None:
-        pytest.skip("ffmpeg/ffprobe not installed")
-    try:
-        from assets.heads.rigfile import builtin_rig
-        from server.app import Head
-
-        head = Head(*builtin_rig())
-    except Exception as exc:  # noqa: BLE001 - the built-in head download can fail offline
-        pytest.skip(f"built-in head unavailable: {exc}")
     sentences = ("Hello there.",)
     try:
         synthesise(sentences, "en-us")
     except AudioSourceError as exc:
-        pytest.skip(f"espeak-ng unavailable: {exc}")
+        missing(f"espeak-ng unavailable: {exc}")
     cfg = DemoConfig(port=0, sentences=sentences, video=None)
     lines: list[str] = []
     result = asyncio.run(run_demo(cfg, model, head, announce=lines.append))
@@ -43,9 +37,17 @@ def test_demo_streams_speech_and_writes_an_mp4(model, tmp_path):
     assert result.params.shape == ref.shape
     np.testing.assert_allclose(result.params, ref, rtol=1e-4, atol=1e-4)
     assert any("/view?session=demo" in line for line in lines)
-    out = write_mp4(tmp_path / "demo.mp4", head, result.params, result.audio, result.audio_rate_hz, width=160, height=120)
-    probe = json.loads(subprocess.run(["ffprobe", "-v", "error", "-count_frames", "-show_streams", "-of", "json", str(out)],
-                                      capture_output=True, text=True, check=True).stdout)
+    out = write_mp4(
+        tmp_path / "demo.mp4", head, result.params, result.audio, result.audio_rate_hz, width=160, height=120
+    )
+    probe = json.loads(
+        subprocess.run(
+            ["ffprobe", "-v", "error", "-count_frames", "-show_streams", "-of", "json", str(out)],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    )
     kinds = {s["codec_type"]: s for s in probe["streams"]}
     assert set(kinds) == {"video", "audio"}
     assert abs(int(kinds["video"]["nb_read_frames"]) - len(ref)) <= 1

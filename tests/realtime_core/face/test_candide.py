@@ -5,12 +5,13 @@ import pytest
 
 from realtime_core.errors import ModelFormatError
 from realtime_core.face import parse_wfm
+from tests.prerequisites import missing
 
 
 def _read(shared_data, name):
     p = shared_data / "candide3" / name
     if not p.is_file():
-        pytest.skip(f"Candide-3 file not found: {p}")
+        missing(f"Candide-3 file not found: {p}")
     return p.read_text(encoding="latin-1")
 
 

@@ -1,4 +1,5 @@
-"""A real facecast server on loopback in a background thread, for the viewer and recording tests.
+"""A real facecast server on loopback in a background thread, for the viewer and recording tests
+(fixture ``live`` in tests/clients/conftest.py; also used by scripts/screenshots.py).
 
 The server runs the way ``facecast serve`` runs it (same class, its own event loop) with a small
 model whose mouth motion stays in the parameters' typical ranges, the built-in head, the browser
@@ -10,34 +11,12 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-import pytest
-
 from realtime_core.avmodel import AvModel
-from tests.server.conftest import small_model, speechlike
+from tests.speech import speechlike
 
-REPO = Path(__file__).resolve().parents[2]
-
-
-def plausible_model(seed: int = 0) -> AvModel:
-    """The server tests' random model with its visual space mapped affinely (o_v' = s o_v + c) into
-    the mouth parameters' typical ranges (a few hundredths of an IOD, the mouth opening 0 .. 0.3 IOD):
-    the inversion is affine-equivariant in o_v, so outputs move like speech would move a mouth
-    instead of by several IOD (a random model's raw outputs tear the face apart)."""
-    m = small_model(seed)
-    hmm = m.hmm
-    na = hmm.n_audio
-    s = np.array([0.012, 0.025, 0.022, 0.005])
-    c = np.array([0.0, 0.0, 0.22, 0.0])
-    means = hmm.means.copy()
-    means[..., na:] = means[..., na:] * s + c
-    cov = hmm.covars.copy()
-    cov[..., na:, :] *= s[:, None]
-    cov[..., :, na:] *= s[None, :]
-    return replace(m, hmm=replace(hmm, means=means, covars=cov))
+REPO = Path(__file__).resolve().parents[1]
 
 
 class LiveServer:
@@ -73,34 +52,8 @@ class LiveServer:
         self.loop.close()
 
 
-@pytest.fixture(scope="session")
-def head():
-    from assets.heads.rigfile import builtin_rig
-    from server.app import Head
-
-    try:
-        rig, mesh = builtin_rig()
-    except Exception as exc:  # noqa: BLE001 - any failure to fetch the built-in head skips, naming it
-        pytest.skip(f"built-in head unavailable (first use downloads it): {exc}")
-    return Head(rig, mesh)
-
-
-@pytest.fixture(scope="session")
-def model() -> AvModel:
-    return plausible_model()
-
-
-@pytest.fixture()
-def live(model, head):
-    srv = LiveServer(model, head)
-    try:
-        yield srv
-    finally:
-        srv.stop()
-
-
 async def stream_session(url: str, name: str, seconds: float, *, realtime: bool = True, seed: int = 0,
-                         stop: "asyncio.Event | None" = None) -> dict:
+                         stop: asyncio.Event | None = None) -> dict:
     """Ingest ``seconds`` of speech-like 16 kHz audio as session ``name`` (in real time unless told
     otherwise), ending early when ``stop`` is set; returns the server's ``ended`` reply."""
     from clients.client import IngestClient

@@ -19,7 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.clients_web.conftest import REPO, LiveServer, stream_session
+from tests.live_server import REPO, LiveServer, stream_session
+from tests.prerequisites import missing
+
+# Headless Chromium against a live server (about 30 s).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 CHROMIUM = Path("/usr/bin/chromium")
 SCRIPT = Path(__file__).with_name("viewer_check.mjs")
@@ -28,12 +32,12 @@ ARTIFACTS = REPO / "artifacts" / "clients_web"
 
 def _require_browser() -> None:
     if not CHROMIUM.exists():
-        pytest.skip("Debian's chromium is not installed (scripts/setup.sh installs it: apt-get install chromium)")
+        missing("Debian's chromium is not installed (scripts/setup.sh installs it: apt-get install chromium)")
     if shutil.which("node") is None:
-        pytest.skip("node is not installed")
+        missing("node is not installed")
     for pkg in ("playwright-core", "three"):
         if not (REPO / "node_modules" / pkg / "package.json").is_file():
-            pytest.skip(f"node_modules/{pkg} is missing (scripts/setup.sh runs `npm ci` at the repository root)")
+            missing(f"node_modules/{pkg} is missing (scripts/setup.sh runs `npm ci` at the repository root)")
 
 
 def _read_step(proc: subprocess.Popen, want: str) -> dict:

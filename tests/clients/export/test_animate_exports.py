@@ -2,26 +2,41 @@
 
 from __future__ import annotations
 
+import functools
+import operator
+
 import numpy as np
 import pytest
 
 from clients.export.curves import read_csv, read_json
 from clients.export.rhubarb import read_tsv
 from facecast.cli import main
-from tests.server.conftest import speechlike
+from tests.prerequisites import require_module
+from tests.speech import speechlike
+
+# `facecast animate` in a subprocess.
+pytestmark = pytest.mark.system
 
 
 def test_animate_writes_every_export_with_equal_curves(tmp_path):
-    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
-    from tests.server.conftest import small_model
+    pygltflib = require_module("pygltflib")
     from assets.audio import write_wav
     from assets.modelfile import save_model
+    from tests.speech import small_model
 
     model = save_model(tmp_path / "m.npz", small_model())
     wav = tmp_path / "s.wav"
     write_wav(wav, speechlike(1.0, 16000), 16000)
     out = {s: tmp_path / f"take.{s}" for s in ("csv", "glb", "json", "tsv")}
-    rc = main(["animate", str(wav), "--model", str(model), *sum(([f"--{s}", str(p)] for s, p in out.items()), [])])
+    rc = main(
+        [
+            "animate",
+            str(wav),
+            "--model",
+            str(model),
+            *functools.reduce(operator.iadd, ([f"--{s}", str(p)] for s, p in out.items()), []),
+        ]
+    )
     assert rc == 0
     csv_t = read_csv(out["csv"].read_bytes())
     js = read_json(out["json"].read_bytes())

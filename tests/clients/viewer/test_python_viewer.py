@@ -15,7 +15,11 @@ from clients.export.curves import read_csv, read_json
 from clients.export.rhubarb import read_tsv
 from facecast.cli import main
 from realtime_core.pipeline import speech_to_params
-from tests.server.conftest import speechlike
+from tests.prerequisites import missing, require_module
+from tests.speech import speechlike
+
+# A live server, Xvfb, PulseAudio and `facecast view` processes.
+pytestmark = pytest.mark.system
 
 
 async def _session_once_watched(srv, name: str, seconds: float, viewers: int) -> dict:
@@ -41,10 +45,12 @@ def _probe(path) -> dict:
 
 def test_view_record_renders_the_session_with_its_audio(live, tmp_path):
     if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
-        pytest.skip("ffmpeg/ffprobe not installed")
+        missing("ffmpeg/ffprobe not installed")
     fut = live.submit(_session_once_watched(live, "pyview", 2.0, viewers=1))
     out = tmp_path / "view.mp4"
-    assert main(["view", live.url, "--session", "pyview", "--record", str(out), "--width", "320", "--height", "240"]) == 0
+    assert (
+        main(["view", live.url, "--session", "pyview", "--record", str(out), "--width", "320", "--height", "240"]) == 0
+    )
     ended = fut.result(30)
     streams = _probe(out)
     assert int(streams["video"]["nb_read_frames"]) == ended["frames"] == 60  # one video frame per session frame
@@ -59,7 +65,7 @@ def test_view_record_renders_the_session_with_its_audio(live, tmp_path):
 
 
 def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
-    pygltflib = pytest.importorskip("pygltflib", reason="pygltflib (dev dependency) is not installed")
+    pygltflib = require_module("pygltflib")
     x = speechlike(1.5, 16000, seed=3)
     x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)  # as sent (int16)
     ref = speech_to_params(model, x).astype(np.float32)  # what the session computes, frame for frame
@@ -103,7 +109,7 @@ def xvfb(monkeypatch):
     from pathlib import Path
 
     if shutil.which("Xvfb") is None:
-        pytest.skip("Xvfb is not installed (scripts/setup.sh installs xvfb)")
+        missing("Xvfb is not installed (scripts/setup.sh installs xvfb)")
     n = next(n for n in range(150, 250) if not Path(f"/tmp/.X{n}-lock").exists())
     proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -114,7 +120,7 @@ def xvfb(monkeypatch):
         time.sleep(0.05)
     if not sock.exists():
         proc.kill()
-        pytest.skip("Xvfb did not start")
+        missing("Xvfb did not start")
     monkeypatch.setenv("DISPLAY", f":{n}")
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     yield os.environ["DISPLAY"]
@@ -123,11 +129,11 @@ def xvfb(monkeypatch):
 
 
 def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
-    pytest.importorskip("glfw", reason="glfw is not installed")
+    require_module("glfw")
     import os
     import sys
 
-    from tests.clients_web.conftest import REPO, stream_session
+    from tests.live_server import REPO, stream_session
 
     stop = asyncio.Event()
     fut = live.submit(stream_session(live.url, "window", 30.0, stop=stop))
@@ -150,19 +156,16 @@ def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
     assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
 
 
-from tests.server.test_sources import pulse  # noqa: E402,F401 - the private PulseAudio fixture
-
-
 def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
     """Through a private PulseAudio null sink: what the window plays is the session's speech."""
-    pytest.importorskip("glfw", reason="glfw is not installed")
+    require_module("glfw")
     import os
     import sys
 
-    from tests.clients_web.conftest import REPO, stream_session
+    from tests.live_server import REPO, stream_session
 
     if shutil.which("parec") is None:
-        pytest.skip("parec is not installed (pulseaudio-utils)")
+        missing("parec is not installed (pulseaudio-utils)")
     env = {**pulse, "DISPLAY": os.environ["DISPLAY"]}
     capture = tmp_path / "heard.raw"
     rec = subprocess.Popen(["parec", "--device=fc.monitor", "--raw", "--format=s16le", "--rate=16000",
@@ -180,7 +183,7 @@ def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
         rec.wait(10)
     assert proc.returncode == 0, proc.stderr
     if "sound off" in proc.stdout:
-        pytest.skip(f"PortAudio found no output device through PulseAudio: {proc.stdout.strip()}")
+        missing(f"PortAudio found no output device through PulseAudio: {proc.stdout.strip()}")
     heard = np.frombuffer(capture.read_bytes(), "<i2").astype(np.float64) / 32768
     sent = speechlike(30.0, 16000, seed=0).astype(np.float64)
     assert len(heard) > 16000 and np.abs(heard).max() > 0.05  # sound came out
