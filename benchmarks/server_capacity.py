@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
 DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
@@ -74,14 +75,9 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
 
         async def one(j: int, c: IngestClient) -> None:
             offset = j * BLOCK_S / max(n, 1)  # stagger sessions across a block
-            for b in range(n_blocks):
-                i = b * step
-                block = pcm[i:i + step]
-                delay = t0 + offset + (i + len(block)) / RATE - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
+            async for i, block in paced_blocks(pcm, RATE, block_s=BLOCK_S, start=t0, offset_s=offset):
                 await c.send(block)
-                sent[j, b] = time.time()
+                sent[j, i // step] = time.time()
             await c.end()
 
         await asyncio.gather(*(one(j, c) for j, c in enumerate(clients)))

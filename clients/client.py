@@ -25,6 +25,7 @@ import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+from assets.pacing import paced_blocks
 from clients.errors import ClientError
 from wire import protocol as P
 
@@ -149,18 +150,8 @@ async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bo
     blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
     x = np.asarray(samples if int16 is None else int16)
-    rate = ing.sample_rate_hz
-    step = max(1, int(round(block_s * rate)))
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
     log: list[SentBlock] = []
-    for i in range(0, len(x), step):
-        block = x[i:i + step]
-        if realtime:
-            due = t0 + (i + len(block)) / rate
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+    async for i, block in paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime):
         await ing.send(block)
         log.append(SentBlock(i, len(block), time.time()))
     return log

@@ -1,13 +1,14 @@
-"""server: the asyncio streaming service of facecast.
+"""server: the asyncio streaming service of facecast (layer 3; imports ``assets``, ``wire``, ``realtime_core``).
 
 Layers, inner to outer (the inner ones do no I/O, like python-websockets' protocol core):
 
-    resample   streaming polyphase resampler (same output for any chunking)
-    protocol   the wire format: frame headers, payload encodings, close codes (shared with clients)
     session    sans-I/O session core: audio bytes in, frames (params, deltas, blendshapes) out
+               (resampling by realtime_core.features.resample; the wire format is the ``wire`` package)
+    timing     per-stage timing rings and summaries
     config     ServerConfig (frozen, validated once; from TOML)
-    sources    audio sources as async iterators: microphone, file (paced or fast)
-    app        the asyncio server: ingest and viewer WebSockets, HTTP health/metrics/head
+    errors     ServerError (root of this package) and its families
+    sources    audio sources as async iterators: microphone, file (paced by assets.pacing, or fast)
+    workers    optional compute worker processes for sessions' per-frame work
+    app        the asyncio server: ingest and viewer WebSockets, HTTP health/metrics/head/viewer
     glb        the head mesh as a binary glTF for viewers
-    demo       the `facecast demo` runner: espeak-ng speech through a live session, MP4 out
 """

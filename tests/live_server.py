@@ -56,17 +56,13 @@ async def stream_session(url: str, name: str, seconds: float, *, realtime: bool 
                          stop: asyncio.Event | None = None) -> dict:
     """Ingest ``seconds`` of speech-like 16 kHz audio as session ``name`` (in real time unless told
     otherwise), ending early when ``stop`` is set; returns the server's ``ended`` reply."""
+    from assets.pacing import paced_blocks
     from clients.client import IngestClient
 
     x = speechlike(seconds, 16000, seed=seed)
-    step = 320  # 20 ms blocks
     async with IngestClient(url, session=name, sample_rate_hz=16000) as ing:
-        loop = asyncio.get_running_loop()
-        t0 = loop.time()
-        for i in range(0, len(x), step):
+        async for _, block in paced_blocks(x, 16000, block_s=0.02, realtime=realtime):  # 20 ms blocks
             if stop is not None and stop.is_set():
                 break
-            if realtime:
-                await asyncio.sleep(max(0.0, t0 + (i + step) / 16000 - loop.time()))
-            await ing.send(x[i:i + step])
+            await ing.send(block)
         return await ing.end()

@@ -23,19 +23,11 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
-from realtime_core.features import MfccConfig, frame_log_energy_db
+from realtime_core.features import loudness_db
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
-
-
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    """Per-frame RMS level (dB) on the 30 fps grid, ``(n_frames,)`` (padded/truncated)."""
-    lv = frame_log_energy_db(samples, MfccConfig(sample_rate_hz=int(rate_hz)))
-    out = np.full(n_frames, lv.min() if len(lv) else -120.0)
-    out[: min(n_frames, len(lv))] = lv[:n_frames]
-    return out
 
 
 def pearson(a: np.ndarray, b: np.ndarray) -> float:

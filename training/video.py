@@ -43,6 +43,8 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import SILENCE_PEAK
+from realtime_core.face.registration import fit_similarity as similarity_fit
+from realtime_core.features import loudness_db
 from training.corpus import write_manifest, write_utterance
 from training.errors import (
     ConfigError,
@@ -216,22 +218,6 @@ def track_landmarks(frames: np.ndarray, cfg: ExtractConfig, *, progress=None) ->
     return out
 
 
-def similarity_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Least-squares s, R, t with ``s * src @ R.T + t ~= dst`` (Umeyama 1991).
-
-    src, dst: (k, 3) corresponding points. Returns scale s, rotation R (3, 3), translation (3,).
-    """
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
-    u, sig, vt = np.linalg.svd(b.T @ a / len(src))
-    d = np.ones(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # no reflections
-        d[-1] = -1.0
-    r = u @ np.diag(d) @ vt
-    s = float((sig * d).sum() / max((a**2).sum() / len(src), 1e-12))
-    return s, r, mu_d - s * (r @ mu_s)
-
-
 def remove_head_pose(landmarks: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, float]:
     """Align every frame's face to the clip's Procrustes-mean face, in the face frame.
 
@@ -363,17 +349,6 @@ def find_word_alignment(video: Path) -> Path | None:
     return None
 
 
-def frame_energy_db(samples: np.ndarray, rate_hz: int, n_frames: int, window_s: float = 0.04) -> np.ndarray:
-    """(n_frames,) RMS level in dB of a ``window_s`` window centred on each 30 fps frame time."""
-    half = int(window_s * rate_hz / 2)
-    centres = (np.arange(n_frames) * rate_hz / FPS).astype(int)
-    out = np.empty(n_frames)
-    for k, c in enumerate(centres):
-        seg = samples[max(c - half, 0) : c + half]
-        out[k] = 10 * np.log10(np.mean(np.square(seg, dtype=np.float64)) + 1e-10) if len(seg) else -100.0
-    return out
-
-
 def save_plot(track: VideoTrack, png: Path, words: list[tuple[float, float, str]] | None = None) -> Path:
     """PNG: mouth_open (and the other parameters, lighter) over time, audio level, words."""
     import matplotlib
@@ -382,7 +357,7 @@ def save_plot(track: VideoTrack, png: Path, words: list[tuple[float, float, str]
     import matplotlib.pyplot as plt
 
     t = np.arange(len(track.params)) / FPS
-    energy = frame_energy_db(track.samples, track.sample_rate_hz, len(track.params))
+    energy = loudness_db(track.samples, track.sample_rate_hz, len(track.params))
     fig, (ax, ax2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
     ax.plot(t, track.params[:, 2], "k-", lw=2, label="mouth_open (30 fps)")
     ax.plot(track.video_times_s, track.video_params[:, 2], "o", ms=3, color="tab:red", label="video frames")

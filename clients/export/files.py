@@ -8,10 +8,11 @@ import numpy as np
 
 from assets.audio import wav_bytes
 from assets.files import atomic_write_bytes
-from clients.export.curves import Track, csv_bytes, json_bytes
+from assets.tracks import encode_csv, encode_json
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
+from realtime_core.track import Track
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
@@ -47,9 +48,9 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
         else:
             data = arkit_glb(head[1], arkit_targets, track, audio=wav_name)
     elif suffix == ".csv":
-        data = csv_bytes(track)
+        data = encode_csv(track)
     elif suffix == ".json":
-        data = json_bytes(track, audio=wav_name)
+        data = encode_json(track, audio=wav_name)
     else:
         data = tsv_bytes(track)
     written.insert(0, atomic_write_bytes(p, data))

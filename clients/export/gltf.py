@@ -19,8 +19,8 @@ import struct
 
 import numpy as np
 
-from clients.export.curves import Track
 from clients.export.errors import ExportError
+from realtime_core.track import Track
 
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -92,8 +92,8 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
         raise ExportError(f"triangles must be (m, 3) indices below {n}")
     if d.ndim != 3 or d.shape[1:] != (n, 3) or d.shape[0] != len(target_names):
         raise ExportError(f"targets must be ({len(target_names)}, {n}, 3), got {d.shape}")
-    if track.params.shape[1] != len(target_names):
-        raise ExportError(f"the track has {track.params.shape[1]} curves for {len(target_names)} targets")
+    if track.values.shape[1] != len(target_names):
+        raise ExportError(f"the track has {track.values.shape[1]} curves for {len(target_names)} targets")
     if track.n_frames == 0:
         raise ExportError("the track has no frames")
     buf = _Buffer()
@@ -113,7 +113,7 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
     morphs = [{"POSITION": buf.accessor(d[j], "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)} for j in range(len(d))]
     indices = buf.accessor(t.reshape(-1), "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
     times = np.ascontiguousarray(np.arange(track.n_frames) / track.fps, dtype="<f4")
-    weights = np.ascontiguousarray(track.params, dtype="<f4").reshape(-1)  # frame-major: F x T scalars
+    weights = np.ascontiguousarray(track.values, dtype="<f4").reshape(-1)  # frame-major: F x T scalars
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(weights, "SCALAR", _FLOAT, None)
     body = b"".join(buf.blobs)
@@ -170,7 +170,7 @@ def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str 
         raise ExportError(f"the head lacks ARKit blendshapes {missing[:5]}{'...' if len(missing) > 5 else ''}")
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"ARKit weights are computed from the mouth parameters {VISUAL_PARAMS}")
-    weights = Track(params=blendshape_weights(track.params, "arkit52"), fps=track.fps, start_s=track.start_s,
+    weights = Track(values=blendshape_weights(track.values, "arkit52"), fps=track.fps, start_s=track.start_s,
                     names=ARKIT_NAMES)
     return animated_glb(vertices=mesh.vertices, triangles=mesh.triangles,
                         targets=np.stack([targets[n] for n in ARKIT_NAMES]), target_names=ARKIT_NAMES,

@@ -30,7 +30,7 @@ import numpy as np
 from assets.heads.mesh import HeadMesh
 from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
-from clients.viewer.stream import StreamConfig, connect_viewer
+from clients.viewer.stream import ViewerStreamConfig, connect_viewer
 from clients.viewer.video import framing
 from wire import protocol as P
 
@@ -140,7 +140,7 @@ class _Receiver(threading.Thread):
     ("error", text) into ``inbox``; reconnects whenever the session ends or the server goes away;
     :meth:`close` cancels it from another thread."""
 
-    def __init__(self, cfg: StreamConfig, inbox: queue.SimpleQueue) -> None:
+    def __init__(self, cfg: ViewerStreamConfig, inbox: queue.SimpleQueue) -> None:
         super().__init__(name="facecast-view-rx", daemon=True)
         self.cfg, self.inbox = cfg, inbox
         self.loop: asyncio.AbstractEventLoop | None = None
@@ -184,7 +184,7 @@ class _Receiver(threading.Thread):
             await asyncio.sleep(0.2)
 
 
-def run_window(cfg: StreamConfig, mesh: HeadMesh, *, config: RenderConfig = RenderConfig(margin=1.25),
+def run_window(cfg: ViewerStreamConfig, mesh: HeadMesh, *, config: RenderConfig = RenderConfig(margin=1.25),
                buffer_s: float = 0.08, duration_s: float | None = None, screenshot=None,
                status=print) -> LiveStats:
     """Open a window and show the session live until it is closed (or ``duration_s`` seconds after

@@ -24,7 +24,7 @@ from wire import protocol as P
 
 
 @dataclass(frozen=True, kw_only=True)
-class StreamConfig:
+class ViewerStreamConfig:
     """url: the server (http://host:port); session: its name; kind: "params", "deltas" or
     "blendshapes"; encoding: None = the kind's default; token: the shared secret, if any;
     wait_s: how long to wait for the session to appear (0 = it must exist now); max_s: stop
@@ -124,7 +124,7 @@ async def fetch_head(url: str) -> HeadMesh:
         raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
 
 
-async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
+async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
     """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
@@ -143,7 +143,7 @@ async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
         await asyncio.sleep(0.25)
 
 
-async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
+async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
     every frame as it arrives (for progress or live display)."""
     v = await connect_viewer(cfg)

@@ -45,11 +45,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
-    from assets.files import atomic_write_bytes
     from assets.modelfile import load_model
-    from clients.export.curves import Track, csv_bytes
+    from assets.tracks import write_csv
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
+    from realtime_core.track import Track
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
@@ -57,10 +57,10 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model)
     samples, rate = read_audio(args.speech)
     params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
-    # Every output goes through the exporters (one CSV writer for the whole product).
-    track = Track(params=params)
+    # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
+    track = Track(values=params)
     if args.csv is not None:
-        atomic_write_bytes(args.csv, csv_bytes(track))
+        write_csv(args.csv, track)
     if args.glb or args.json or args.tsv:
         from clients.export.files import export_track
         from facecast.commands.render import load_head

@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from training.video import ExtractConfig, extract_videos, frame_energy_db
+    from realtime_core.features import loudness_db
+    from training.video import ExtractConfig, extract_videos
 
     cfg = ExtractConfig(audio_rate_hz=args.audio_rate, language=args.language)
     manifest, tracks = extract_videos(
@@ -42,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     )
     for tr in tracks:
         mo = tr.params[:, 2]
-        energy = frame_energy_db(tr.samples, tr.sample_rate_hz, len(mo))
+        energy = loudness_db(tr.samples, tr.sample_rate_hz, len(mo))
         r = float(np.corrcoef(mo, energy)[0, 1]) if mo.std() > 0 else float("nan")
         print(f"{tr.path.name}: {len(tr.video_times_s)} frames at {tr.video_fps:g} fps -> {len(mo)} at 30 fps, "
               f"face in {tr.face_fraction:.0%}, mouth_open {mo.min():.3f}..{mo.max():.3f} IOD, "

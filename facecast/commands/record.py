@@ -46,10 +46,10 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from clients.errors import ClientError
-    from clients.export.curves import Track
     from clients.export.files import FORMATS, export_track
-    from clients.viewer.stream import StreamConfig, pick_session, record_stream
+    from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
     from facecast.commands.view import token_from_env
+    from realtime_core.track import Track
 
     if args.output.suffix.lower() not in FORMATS:
         raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def main():
         session = await pick_session(args.url, args.session, args.wait)
-        cfg = StreamConfig(url=args.url, session=session, kind="params", token=token, wait_s=args.wait,
+        cfg = ViewerStreamConfig(url=args.url, session=session, kind="params", token=token, wait_s=args.wait,
                            max_s=args.duration)
         print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
         return session, await record_stream(cfg)
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         raise ClientError(f"--head {args.head} has {len(head[1].vertices)} vertices but the server's head has "
                           f"{served['vertex_count']}: pass the server's head")
     params, first = rec.timeline()
-    track = Track(params=params, fps=rec.fps, start_s=first / rec.fps)
+    track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
     files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
     print(f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "

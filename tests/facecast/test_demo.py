@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from facecast.demo import DemoConfig, run_demo, synthesise, write_mp4
-from realtime_core.features.resample import resample_audio as resample
+from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from tests.prerequisites import missing
 
@@ -33,7 +33,7 @@ def test_demo_streams_speech_and_writes_an_mp4(model, head, ffmpeg, tmp_path):
     # The viewer saw the whole live session: exactly what `facecast animate` gives for the speech.
     # (resampled in float64 like the server; `animate` resamples float32 WAV samples in float32.)
     speech, rate = result.speech, result.speech_rate_hz
-    ref = speech_to_params(model, resample(speech.astype(np.float64), rate, model.sample_rate_hz))
+    ref = speech_to_params(model, resample_audio(speech.astype(np.float64), rate, model.sample_rate_hz))
     assert result.params.shape == ref.shape
     np.testing.assert_allclose(result.params, ref, rtol=1e-4, atol=1e-4)
     assert any("/view?session=demo" in line for line in lines)

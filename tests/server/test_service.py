@@ -18,7 +18,7 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from assets.audio import read_audio
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
 from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
-from realtime_core.features.resample import resample_audio as resample
+from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
@@ -64,7 +64,7 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
     path = request.getfixturevalue(which)
     samples, rate = read_audio(path)
     # What `facecast animate` computes for this file.
-    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+    ref = speech_to_params(model, resample_audio(samples, rate, model.sample_rate_hz))
     pcm = _int16(samples)
 
     async def main():
@@ -74,7 +74,7 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
     ended, (got,) = asyncio.run(main())
     n = len(ref)
     assert ended["frames"] == n
-    assert n == int(np.ceil(len(resample(samples, rate, 16000)) / (16000 / 30)))  # one frame per 33.3 ms
+    assert n == int(np.ceil(len(resample_audio(samples, rate, 16000)) / (16000 / 30)))  # one frame per 33.3 ms
     assert [m.index for m in got.frames] == list(range(n))
     times = np.array([m.media_time for m in got.frames])
     assert np.all(np.diff(times) > 0)
@@ -422,7 +422,7 @@ def test_shutdown_flushes_sessions_and_says_going_away(model):
 def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
     samples, rate = read_audio(wav48k)
     pcm = _int16(samples)
-    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+    ref = speech_to_params(model, resample_audio(samples, rate, model.sample_rate_hz))
 
     async def main():
         async with running(model, head, workers=2) as srv:

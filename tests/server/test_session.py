@@ -47,13 +47,13 @@ def test_session_params_equal_speech_to_params(model):
 
 
 def test_session_resamples_and_mixes_down(model):
-    from realtime_core.features.resample import resample_audio as resample
+    from realtime_core.features.resample import resample_audio
 
     x = speechlike(1.0, 48000, seed=3)
     stereo = np.stack([x, 0.5 * x], axis=1).astype("<f4")
     _s, frames, _ = _session_params(model, stereo.tobytes(), 48000, fmt="f32le", channels=2)
     mono = stereo.astype(np.float64).mean(axis=1)
-    ref = speech_to_params(model, resample(mono, 48000, 16000))
+    ref = speech_to_params(model, resample_audio(mono, 48000, 16000))
     assert len(frames) == len(ref)
     np.testing.assert_allclose(np.array([f.raw_params for f in frames]), ref, atol=1e-4)
 

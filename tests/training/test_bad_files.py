@@ -89,7 +89,7 @@ def test_corpus_rate_mismatch_and_truncated_params(tmp_path) -> None:
     _tiny_corpus(tmp_path)
     csv = tmp_path / "u1" / "params.csv"
     csv.write_text("\n".join(csv.read_text().splitlines()[:10]) + "\n")
-    with pytest.raises(TruncatedFileError, match=r"u1/params\.csv: truncated: 9 frames, the audio needs 15"):
+    with pytest.raises(TruncatedFileError, match=r"u1/params\.csv: truncated: 9 frames, expected 15"):
         load_corpus(tmp_path)
     (tmp_path / "manifest.json").write_text("{not json")
     with pytest.raises(CorpusFormatError, match=r"manifest\.json: not valid JSON"):

@@ -72,7 +72,8 @@ def test_track_is_30fps_and_correlates_with_audio_energy(grid, ffmpeg, tmp_path)
     Measured 0.56. The threshold is far below what a correct track gives and far above what a
     time-shifted or broken track gives (|r| < 0.2 after shifting the track by 0.5 s).
     """
-    from training.video import ExtractConfig, extract_videos, frame_energy_db
+    from realtime_core.features import loudness_db
+    from training.video import ExtractConfig, extract_videos
 
     _manifest, (track,) = extract_videos([grid / "lbax4n.mpg"], tmp_path, ExtractConfig(), plot=True)
     (utt,) = load_corpus(tmp_path)
@@ -81,7 +82,7 @@ def test_track_is_30fps_and_correlates_with_audio_energy(grid, ffmpeg, tmp_path)
     assert utt.sample_rate_hz == 16000 and track.video_fps == 25.0 and track.face_fraction == 1.0
     assert (tmp_path / "video-lbax4n" / "mouth_open.png").stat().st_size > 10_000
     mo = utt.params[:, 2]
-    energy = frame_energy_db(utt.samples, utt.sample_rate_hz, len(mo))
+    energy = loudness_db(utt.samples, utt.sample_rate_hz, len(mo))
     r = np.corrcoef(mo, energy)[0, 1]
     assert r >= 0.40, r
     shifted = np.corrcoef(mo[15:], energy[:-15])[0, 1]
@@ -140,9 +141,10 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
     within +-2 frames (a far lag would mean a timing bug in extraction or labelling).
     """
     require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
+    from realtime_core.features import loudness_db
     from training.articulatory import render_params
     from training.force_align import force_align
-    from training.video import frame_energy_db, measure_video
+    from training.video import measure_video
 
     rs, loud, lags = [], [], []
     for clip in sorted(grid.glob("*.mpg")):
@@ -154,6 +156,6 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
                                    mo[lag:] if lag >= 0 else mo[: len(mo) + lag])[0, 1] for lag in range(-3, 4)}
         rs.append(by_lag[0])
         lags.append(max(by_lag, key=by_lag.get))
-        loud.append(np.corrcoef(frame_energy_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])
+        loud.append(np.corrcoef(loudness_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])
     assert np.mean(rs) >= 0.40 and np.mean(rs) > np.mean(loud), (rs, loud)
     assert all(abs(lag) <= 2 for lag in lags), lags

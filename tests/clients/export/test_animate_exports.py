@@ -8,7 +8,7 @@ import operator
 import numpy as np
 import pytest
 
-from clients.export.curves import read_csv, read_json
+from assets.tracks import decode_csv, decode_json
 from clients.export.rhubarb import read_tsv
 from facecast.cli import main
 from tests.prerequisites import require_module
@@ -38,15 +38,15 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
         ]
     )
     assert rc == 0
-    csv_t = read_csv(out["csv"].read_bytes())
-    js = read_json(out["json"].read_bytes())
+    csv_t = decode_csv(out["csv"].read_bytes())
+    js = decode_json(out["json"].read_bytes())
     assert csv_t.n_frames == js.n_frames == 30
-    np.testing.assert_allclose(js.params, csv_t.params, atol=1e-6)  # the legacy CSV keeps 6 decimals
+    np.testing.assert_allclose(js.values, csv_t.values, rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
     g = pygltflib.GLTF2().load(str(out["glb"]))
     acc = g.accessors[g.animations[0].samplers[0].output]
     view = g.bufferViews[acc.bufferView]
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 4)
-    np.testing.assert_allclose(w, js.params, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(w, js.values, rtol=1e-6, atol=1e-7)
     assert (tmp_path / "take.wav").is_file()
     assert read_tsv(out["tsv"].read_bytes())[-1].shape == "X"
 

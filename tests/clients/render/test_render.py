@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from clients.errors import RenderError
-from clients.render.video import params_for_audio, read_params_csv, resample, write_video
+from clients.render.video import params_for_audio, write_video
 from tests.prerequisites import missing
 
 # Real OpenGL (EGL) rendering and ffmpeg.
@@ -54,33 +54,11 @@ def test_mouth_open_changes_only_the_mouth_region(renderer, builtin_rig):
     assert np.abs(opened - closed)[~region].max() < 60
 
 
-def test_params_csv_errors_name_the_file(tmp_path):
-    with pytest.raises(RenderError, match=r"nope.csv: parameters file not found"):
-        read_params_csv(tmp_path / "nope.csv")
-    bad = tmp_path / "bad.csv"
-    bad.write_text("t,mouth_open\n0,0.1\n")
-    with pytest.raises(RenderError, match=r"bad.csv: expected columns"):
-        read_params_csv(bad)
-    back = tmp_path / "back.csv"
-    back.write_text("t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n0.1,0,0,0,0\n0.0,0,0,0,0\n")
-    with pytest.raises(RenderError, match=r"back.csv: .*strictly increasing"):
-        read_params_csv(back)
-
-
-
 def test_speech_hook_fails_with_an_error_naming_the_file(tmp_path):
     from realtime_core.errors import FacecastError
 
     with pytest.raises(FacecastError, match=r"missing-model.npz: model file not found"):
         params_for_audio(tmp_path / "x.wav", tmp_path / "missing-model.npz")
-
-
-def test_resample_by_hand():
-    t = np.array([0.0, 1.0])
-    p = np.array([[0, 0, 0, 0], [1, 2, 3, 4.0]])
-    f = resample(t, p, 4.0)
-    assert f.shape == (5, 4)
-    np.testing.assert_allclose(f[:, 3], [0, 1, 2, 3, 4])
 
 
 def test_video_with_audio(tmp_path, renderer, builtin_rig, shared_data):

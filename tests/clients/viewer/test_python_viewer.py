@@ -10,8 +10,8 @@ import subprocess
 import numpy as np
 import pytest
 
+from assets.tracks import decode_csv, decode_json
 from clients.client import IngestClient
-from clients.export.curves import read_csv, read_json
 from clients.export.rhubarb import read_tsv
 from facecast.cli import main
 from realtime_core.pipeline import speech_to_params
@@ -76,9 +76,9 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
         assert main(["record", live.url, "--session", f"rec-{suffix}", "-o", str(out)]) == 0
         assert fut.result(30)["frames"] == len(ref)
         got[suffix] = out
-    np.testing.assert_array_equal(read_json(got["json"].read_bytes()).params.astype(np.float32), ref)
-    csv_track = read_csv(got["csv"].read_bytes())
-    np.testing.assert_array_equal(csv_track.params.astype(np.float32), ref)
+    np.testing.assert_array_equal(decode_json(got["json"].read_bytes()).values.astype(np.float32), ref)
+    csv_track = decode_csv(got["csv"].read_bytes())
+    np.testing.assert_array_equal(csv_track.values.astype(np.float32), ref)
     assert csv_track.times()[0] == 0.0
     assert read_tsv(got["tsv"].read_bytes())[-1].shape == "X"
     g = pygltflib.GLTF2().load(str(got["glb"]))

@@ -91,6 +91,10 @@ def test_fit_similarity_recovers_transform():
     assert s.scale == pytest.approx(2.5)
     np.testing.assert_allclose(s.rotation, q, atol=1e-10)
     np.testing.assert_allclose(s.apply(a), b, atol=1e-10)
+    scale, rot, shift = s  # unpacks as (s, R, t) for `s * x @ R.T + t` (training.video's head-pose removal)
+    np.testing.assert_allclose(scale * a @ rot.T + shift, b, atol=1e-10)
+    # a reflected target is fitted by the best proper rotation, never a reflection
+    assert np.linalg.det(fit_similarity(a, b * np.array([1, 1, -1])).rotation) == pytest.approx(1.0)
     with pytest.raises(ConfigError, match="collinear"):
         fit_similarity(np.outer(np.arange(4.0), [1, 1, 0]), b[:4])
 
