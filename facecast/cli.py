@@ -29,6 +29,7 @@ COMMANDS: dict[str, str] = {
     "train": "facecast.commands.train",
     "eval": "facecast.commands.eval",
     "bench": "facecast.commands.bench",
+    "perceptual": "facecast.commands.perceptual",
 }
 
 

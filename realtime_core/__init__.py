@@ -16,6 +16,8 @@ or in random chunks.
     metrics      AMSE / ACC (eq. 11-12), Pearson R and normalised MSE (paper 002 eq. 6-8)
 """
 
+import numpy as np
+
 from realtime_core.errors import (
     ConfigError,
     InvalidAudioError,
@@ -28,8 +30,20 @@ from realtime_core.errors import (
 VISUAL_PARAMS: tuple[str, ...] = ("upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress")
 """The four mouth parameters (paper Sec. 3), in this order everywhere: files, CSV, protocol."""
 
+CLOSED_POSE: dict[str, float] = {"mouth_open": 0.0}
+"""Lower bounds of the parameters that have one: mouth_open 0 is the lips touching (the closed
+pose, ``training.params``); below it one lip would pass through the other. The live path's output
+stage clamps every model's estimate at these bounds (:func:`visual_floor`)."""
+
+
+def visual_floor(names: tuple[str, ...]) -> np.ndarray:
+    """``(len(names),)`` float64 lower bounds for parameters ``names``: :data:`CLOSED_POSE` or -inf."""
+    return np.array([CLOSED_POSE.get(n, -np.inf) for n in names], dtype=np.float64)
+
 __all__ = [
+    "CLOSED_POSE",
     "VISUAL_PARAMS",
+    "visual_floor",
     "ConfigError",
     "InvalidAudioError",
     "InvalidFeaturesError",

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
+from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
@@ -99,7 +99,12 @@ class AvModel:
         plan = self._plans.get(key)
         if plan is None:
             plan = self._plans[key] = StreamPlan.build(self.form, config)
-        return StreamingInverter(self.form, config=config, plan=plan)
+        return StreamingInverter(self.form, config=config, plan=plan, floor=self.visual_floor)
+
+    @cached_property
+    def visual_floor(self) -> np.ndarray:
+        """``(n_visual,)`` lower bounds of the output (the closed pose; -inf where none)."""
+        return visual_floor(self.visual_names)
 
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:

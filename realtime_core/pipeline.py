@@ -49,6 +49,9 @@ class SpeechToParams:
         self._inv = model.inverter(stream)
         self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
+        self.model_audio: np.ndarray = np.zeros(0)
+        """The model-rate samples (n,) float64 the last push/flush fed to the front end (what a live
+        session relays to listeners: the audio the model heard, in step with the frames)."""
 
     @property
     def delay_frames(self) -> int:
@@ -64,9 +67,10 @@ class SpeechToParams:
 
     def push(self, samples: np.ndarray) -> np.ndarray:
         """samples: (n,) float32/float64 in [-1, 1] or int16, at ``rate_hz``."""
-        x = samples
+        x = as_float_samples(samples)
         if self._resampler is not None:
-            x = self._resampler.push(as_float_samples(samples))
+            x = self._resampler.push(x)
+        self.model_audio = x
         self._observe("resample")
         feats = self._fe.push(x)
         self._observe("features")
@@ -76,8 +80,9 @@ class SpeechToParams:
         return out
 
     def flush(self) -> np.ndarray:
-        tail = self._fe.push(self._resampler.flush()) if self._resampler is not None else np.zeros((0, 0))
+        self.model_audio = self._resampler.flush() if self._resampler is not None else np.zeros(0)
         self._observe("resample")
+        tail = self._fe.push(self.model_audio) if self.model_audio.size else np.zeros((0, 0))
         feats = self._fe.flush()
         feats = np.concatenate([tail, feats]) if len(tail) else feats
         self._observe("features")
@@ -120,4 +125,4 @@ def speech_to_params(
         return np.concatenate([p.push(x), p.flush()])
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])
-    return hmm_inversion(model.form, oa, config=hmmi).visual
+    return np.maximum(hmm_inversion(model.form, oa, config=hmmi).visual, model.visual_floor)

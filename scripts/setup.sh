@@ -7,10 +7,11 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 # the demo), ffmpeg (video I/O),
 # PortAudio (microphone via sounddevice), PulseAudio (a virtual microphone in tests),
 # Mesa EGL (headless moderngl rendering), Chromium (the browser viewer's test) and Xvfb (a
-# display for the Python viewer's window test).
+# display for the Python viewer's window test), redis-server (the server's cluster tests and
+# `facecast bench capacity --cluster`).
 apt_pkgs=(espeak-ng libespeak-ng1 festival festvox-kallpc16k festvox-kdlpc16k festvox-us-slt-hts ffmpeg
           libportaudio2 pulseaudio pulseaudio-utils libegl1 libegl-mesa0 libgl1-mesa-dri python3-venv
-          chromium xvfb)
+          chromium xvfb redis-server)
 missing=()
 for p in "${apt_pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1,14 +1,20 @@
-"""server: the asyncio streaming service of facecast (layer 3; imports ``assets``, ``wire``, ``realtime_core``).
+"""server: the asyncio streaming service of facecast.
 
 Layers, inner to outer (the inner ones do no I/O, like python-websockets' protocol core):
 
-    session    sans-I/O session core: audio bytes in, frames (params, deltas, blendshapes) out
-               (resampling by realtime_core.features.resample; the wire format is the ``wire`` package)
-    timing     per-stage timing rings and summaries
+    controls   the control registry (gain, smoothing_ms, ...) and the per-frame state they set
+    session    sans-I/O session core: audio bytes in, frames (params, deltas, blendshapes) out, around
+               realtime_core.pipeline.SpeechToParams
+    protocol   sans-I/O service protocol: the ingest state machine (events in; replies, work and close
+               codes out), session kinds, view-query parsing, bounded JSON
+    describe   JSON descriptions of sessions (started reply, viewer description, list rows)
+    http       the plain-HTTP router (health, metrics, sessions, head downloads, static files)
     config     ServerConfig (frozen, validated once; from TOML)
-    errors     ServerError (root of this package) and its families
-    sources    audio sources as async iterators: microphone, file (paced by assets.pacing, or fast)
-    workers    optional compute worker processes for sessions' per-frame work
-    app        the asyncio server: ingest and viewer WebSockets, HTTP health/metrics/head/viewer
+    live       live sessions (local or worker, one async interface) and viewer fan-out
+    workers    compute processes running sessions off the event loop
+    sources    audio sources as async iterators: microphone, file (paced or fast)
+    app        the asyncio shell: WebSocket connections, lifecycle, admission, metrics
     glb        the head mesh as a binary glTF for viewers
+    timing     per-stage timing rings
+    errors     ServerError and its family
 """

@@ -1,37 +1,33 @@
-"""The asyncio streaming server: ingest and viewer WebSockets plus plain HTTP on one port.
+"""The asyncio shell of the service: ingest and viewer WebSockets plus plain HTTP on one port.
 
 Theory of operation
 -------------------
-One process, one event loop. A *live session* couples one audio source (a WebSocket ingest
-connection, the microphone or a file) with a sans-I/O :class:`server.session.Session` and any number
-of viewers. When a block of audio arrives the session computes the frames now final inline on the
-loop (a few hundred microseconds per frame with the paper's model; measured by
-``benchmarks/server_latency.py``: handing such short work to a thread pool costs more than it
-saves and the GIL serialises it anyway; with ``ServerConfig.workers`` it runs in compute processes
-instead, see :mod:`server.workers`), then *fans out*: each frame is encoded once per
-(kind, encoding) that somebody watches, given one header with the send time, and offered to every
-viewer of that kind.
+One process, one event loop, python-websockets underneath. This module only does I/O and
+bookkeeping; the decisions live in sans-I/O modules:
 
-Viewers never slow the session or each other. A viewer that keeps up (nothing queued, socket
-buffer under 64 KiB) gets each message written synchronously, as python-websockets' ``broadcast``
-does, without a task switch per message. Otherwise the message goes to the viewer's bounded queue,
-drained by its own sender task with backpressure; offering a message never waits. When a queue is
-full the oldest message is dropped and counted (the freshest frame matters most for live
-animation); a viewer that keeps dropping for ``viewer_max_behind_s`` is closed with 4000. This is the per-client queue design of
-python-websockets' broadcast guide, with drop-oldest instead of unbounded buffering.
+* :mod:`server.protocol` decides what an ingest connection's messages mean (start, audio, control,
+  end) and which replies and close codes go out; it also parses viewer queries. The shell here feeds
+  it events and performs the actions it returns (``Send``, ``Close``, ``Open``, ``Feed``,
+  ``Control``, ``Finish``).
+* :mod:`server.live` holds live sessions (local or in a compute worker, one async interface) and
+  fans frames out to viewers with per-viewer backpressure.
+* :mod:`server.describe` writes the JSON descriptions; :mod:`server.http` routes plain HTTP.
 
-Every protocol breach raises :class:`server.errors.ProtocolViolation` inside that connection's
-handler, which closes that connection with the violation's code and reason; the server and the other
-sessions go on. Plain HTTP (``/health``, ``/metrics``, ``/head/...``, ``/``) is answered from the
-websockets ``process_request`` hook before any WebSocket handshake.
+A *live session* couples one audio source (a WebSocket ingest connection, the microphone or a file)
+with a session and any number of viewers. When a block of audio arrives the session computes the
+frames now final (inline on the loop: a few hundred microseconds per frame with the paper's model,
+measured by ``benchmarks/server_latency.py``; with ``ServerConfig.workers`` in compute processes,
+see :mod:`server.workers`), then fans them out.
+
+Every protocol breach closes that one connection with a code and reason (docs/protocol.md); the
+server and the other sessions go on. Plain HTTP is answered from the websockets
+``process_request`` hook before any WebSocket handshake.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
-import hmac
-import json
 import logging
 import signal
 import socket
@@ -43,46 +39,35 @@ from http import HTTPStatus
 from pathlib import Path
 
 import numpy as np
-from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
+from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from assets.heads.mesh import HeadMesh
-from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
-from realtime_core.blendshapes import blendshape_names
 from realtime_core.face.rig import Rig
+from server import describe
+from server import protocol as SP
+from server.cluster import Cluster, RemoteFeed
 from server.config import ServerConfig
-from server.errors import AudioFormatError, ControlError, ProtocolViolation, ServerConfigError, ServerError
-from server.glb import mesh_glb, mesh_json, texture_mime
-from server.session import Output, Session, SessionConfig
+from server.errors import (
+    AudioFormatError,
+    ControlError,
+    IngestOverrun,
+    ProtocolViolation,
+    ServerConfigError,
+    ServerError,
+)
+from server.guard import ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed, origin_allowed
+from server.http import HttpReply, HttpRouter
+from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
+from server.session import Session, SessionConfig
 from server.timing import StageTimes
-from server.workers import RemoteSession, WorkerPool
-from wire import JS_PROTOCOL
+from server.workers import WorkerPool
 from wire import protocol as P
 
 log = logging.getLogger("facecast.server")
-
-FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
-# A viewer whose socket buffer holds less than this gets messages written synchronously
-# (websockets' broadcast); others go through their queue and sender task (backpressure, drops).
-FAST_PATH_BUFFER_BYTES = 64 * 1024
-
-
-def _deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
-    """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
-    message), the bounded queue for the others."""
-    fast = []
-    for v in viewers:
-        if v.writable_now():
-            fast.append(v)
-        else:
-            v.offer(msg, now)
-    if fast:
-        broadcast([v.ws for v in fast], msg)
-        for v in fast:
-            v.sent += 1
 
 
 @dataclass(frozen=True)
@@ -93,165 +78,13 @@ class Head:
     mesh: HeadMesh
 
 
-class Viewer:
-    """One subscriber: a bounded queue of ready messages drained by its own sender task."""
+class AdmissionRefused(ServerConfigError):
+    """A session cannot open now: ``code`` is the close code an ingest is refused with."""
 
-    def __init__(self, ws: ServerConnection, live: "LiveSession", *, kind: int, encoding: int, audio: bool,
-                 server: "FacecastServer") -> None:
-        self.ws = ws
-        self.live = live
-        self.kind = kind
-        self.encoding = encoding
-        self.audio = audio
-        self.server = server
-        self.queue: collections.deque[bytes] = collections.deque()
-        self.limit = server.config.viewer_queue
-        self.wake = asyncio.Event()
-        self.dropped = 0
-        self.sent = 0
-        self.behind_since: float | None = None
-        self.closing = False
-        self.sending = False
-
-    def writable_now(self) -> bool:
-        """True when a message can be written straight to the socket without reordering or
-        buffering beyond the write limit: nothing queued or in flight, transport buffer low."""
-        if self.closing or self.queue or self.sending:
-            return False
-        transport = self.ws.transport
-        return transport is not None and transport.get_write_buffer_size() <= FAST_PATH_BUFFER_BYTES
-
-    def offer(self, msg: bytes, now: float) -> None:
-        """Queue one message without waiting; drop the oldest when full; close if behind too long."""
-        if self.closing:
-            return
-        if len(self.queue) >= self.limit:
-            self.queue.popleft()
-            self.dropped += 1
-            self.live.dropped += 1
-            self.server.dropped += 1
-            if self.behind_since is None:
-                self.behind_since = now
-            elif now - self.behind_since > self.server.config.viewer_max_behind_s:
-                self.closing = True
-                self.server.closed_slow += 1
-                self.queue.clear()
-                self.server.spawn(
-                    self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
-                                         f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
-                )
-                return
-        self.queue.append(msg)
-        self.wake.set()
-
-    async def run(self) -> None:
-        """Send queued messages until the connection closes."""
-        while True:
-            await self.wake.wait()
-            self.wake.clear()
-            self.sending = True
-            try:
-                while self.queue:
-                    msg = self.queue.popleft()
-                    await self.ws.send(msg)
-                    self.sent += 1
-            finally:
-                self.sending = False
-            self.behind_since = None
-
-
-class LiveSession:
-    """A session with its viewers: feed it audio, it fans frames out."""
-
-    def __init__(self, name: str, session: "Session | RemoteSession", server: "FacecastServer", *,
-                 source: str) -> None:
-        self.name = name
-        self.session = session
-        self.remote = isinstance(session, RemoteSession)
-        self.server = server
-        self.source = source
-        self.viewers: set[Viewer] = set()
-        self.dropped = 0
-        self.started = time.time()
-        self.ended = asyncio.Event()
-
-    async def feed_bytes(self, data: bytes) -> int:
-        """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
-        if self.remote:
-            return self._fanout(await self.session.push_bytes(data))
-        return self._fanout(self.session.push_bytes(data))
-
-    async def feed_bytes_fairly(self, data: bytes) -> int:
-        """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
-        processed in slices of at most ``FAIR_SLICE_S`` of audio with a yield to the loop between
-        them, so one session's burst never holds up the other sessions for more than a few frames."""
-        s = self.session
-        frame = s.frame_bytes
-        step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
-        if len(data) <= step:
-            return await self.feed_bytes(data)
-        if len(data) % frame:
-            return await self.feed_bytes(data)  # raises the AudioFormatError naming the problem
-        n = 0
-        for i in range(0, len(data), step):
-            n += await self.feed_bytes(data[i:i + step])
-            await asyncio.sleep(0)
-        return n
-
-    async def feed(self, samples: np.ndarray) -> int:
-        """(n,) or (n, channels) float samples -> frames produced."""
-        if self.remote:
-            return self._fanout(await self.session.push(samples))
-        return self._fanout(self.session.push(samples))
-
-    async def finish(self) -> int:
-        """End of the audio: flush the remaining frames to the viewers."""
-        if self.remote:
-            return self._fanout(await self.session.flush())
-        return self._fanout(self.session.flush())
-
-    async def control(self, msg: dict) -> dict:
-        """Apply a control message (ControlError if rejected); returns the control state."""
-        if self.remote:
-            return await self.session.apply_control(msg)
-        return self.session.apply_control(msg)
-
-    def _fanout(self, out: Output) -> int:
-        if not self.viewers:
-            return len(out.frames)
-        t0 = time.perf_counter()
-        now = time.time()
-        if out.audio is not None:
-            listeners = [v for v in self.viewers if v.audio]
-            if listeners:
-                a = out.audio
-                msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
-                _deliver(listeners, msg, now)
-        if out.frames:
-            groups: dict[tuple[int, int], list[Viewer]] = {}
-            for v in self.viewers:
-                groups.setdefault((v.kind, v.encoding), []).append(v)
-            for frame in out.frames:
-                for (kind, enc), members in groups.items():
-                    payload, count, scale = frame.payload(kind, enc)
-                    msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
-                    _deliver(members, msg, now)
-        self.server.times.add("fanout", time.perf_counter() - t0)
-        return len(out.frames)
-
-    def describe(self) -> dict:
-        s = self.session
-        return {
-            "name": self.name,
-            "source": self.source,
-            "viewers": len(self.viewers),
-            "frames": s.frames_out,
-            "audio_s": round(s.samples_out / s.rate_hz, 3),
-            "dropped": self.dropped,
-            "input_rate_hz": s.config.sample_rate_hz,
-            "channels": s.config.channels,
-            "controls": s.control_state(),
-        }
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+        self.reason = reason
 
 
 class FacecastServer:
@@ -272,11 +105,19 @@ class FacecastServer:
         self.closes: collections.Counter[int] = collections.Counter()
         self.n_viewers = 0
         self._server: Server | None = None
-        self._http_cache: dict[str, tuple[bytes, str]] = {}
         self._tasks: set[asyncio.Task] = set()
         self.started = time.time()
         self.stopping = False
         self.pool: WorkerPool | None = None
+        self.cluster: Cluster | None = None
+        self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
+                               sessions=self.session_list)
+        self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
+        self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
+        self.http.route("/sessions", self._sessions_reply)
+        self.clients = ConnectionCounter(config.max_connections_per_client)
+        self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
+        self.incidents = IncidentLog(log)
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -291,16 +132,30 @@ class FacecastServer:
                 compression=None,  # permessage-deflate would cost ~20x the CPU of a frame
                 max_size=cfg.max_message_bytes,
                 close_timeout=cfg.close_timeout_s,
+                open_timeout=cfg.handshake_timeout_s,
                 process_request=self._process_request,
                 server_header="facecast",
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
+        if cfg.redis_url is not None:
+            import os
+            import socket as _socket
+
+            node = cfg.node_id or f"{_socket.gethostname()}-{os.getpid()}-{self.port}"
+            self.cluster = Cluster(cfg.redis_url, node=node, advertise=cfg.advertise_url or self.url,
+                                   heartbeat_s=cfg.heartbeat_s, deliver=self._deliver_remote, end_feed=self._end_feed)
+            try:
+                await self.cluster.start()
+            except ServerError:
+                self.cluster = None
+                self._server.close()
+                await self._server.wait_closed()
+                raise
         if cfg.workers:
             self.pool = WorkerPool(self.model, cfg.workers)
             await self.pool.start()
-        lag = asyncio.ensure_future(self._watch_loop_lag())
-        self._tasks.add(lag)
+        self.spawn(self._watch_loop_lag())
 
     async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
         """Record how late a 10 ms timer fires ("loop_lag"): the time any callback waits for the loop,
@@ -335,11 +190,14 @@ class FacecastServer:
             await self._server.wait_closed()
         for task in list(self._tasks):
             task.cancel()
+        if self.cluster is not None:
+            await self.cluster.stop()
+            self.cluster = None
         if self.pool is not None:
             await self.pool.stop()
             self.pool = None
 
-    def spawn(self, coro) -> asyncio.Task:
+    def spawn(self, coro) -> asyncio.Task:  # noqa: ANN001 - any coroutine
         """Run a coroutine in the background, holding a reference until it is done."""
         task = asyncio.get_running_loop().create_task(coro)
         self._tasks.add(task)
@@ -354,40 +212,51 @@ class FacecastServer:
         except ConnectionClosed:
             pass
 
-    # -- local sources -----------------------------------------------------------------------------
+    # -- sessions ----------------------------------------------------------------------------------
 
-    async def open_session(self, name: str, config: SessionConfig, *, source: str) -> LiveSession:
-        """Register a new live session (ServerError if the name is taken or the server is full)."""
+    def _admission(self, name: str, *, batch: bool = False) -> None:
+        """Raise AdmissionRefused if a session ``name`` cannot open now (the one admission check)."""
         if not P.SESSION_NAME.match(name):
-            raise ServerConfigError(f"session name must match {P.SESSION_NAME.pattern}, got {name!r}")
-        if (refused := self._no_room(name)) is not None:
-            raise ServerConfigError(refused[1])
+            raise AdmissionRefused(P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}")
+        if self.stopping:
+            raise AdmissionRefused(P.CLOSE_GOING_AWAY, "server shutting down")
+        if name in self.sessions:
+            raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists")
+        if len(self.sessions) >= self.config.max_sessions:
+            raise AdmissionRefused(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)")
+        if batch and sum(live.batch for live in self.sessions.values()) >= self.config.max_batch_sessions:
+            raise AdmissionRefused(P.CLOSE_TRY_LATER, f"batch sessions are full ({self.config.max_batch_sessions})")
+
+    async def open_session(self, name: str, config: SessionConfig, *, source: str, batch: bool = False,
+                           paced: bool = False) -> LiveSession:
+        """Register a new live session (AdmissionRefused, a ServerConfigError, if the name is taken or
+        the server is full). paced: hold its input to real time plus ``ingest_burst_s``."""
+        self._admission(name, batch=batch)
         session = await self._new_session(config)
-        if (refused := self._no_room(name)) is not None:  # the await may have let another one in
-            await self._discard(session)
-            raise ServerConfigError(refused[1])
+        try:
+            self._admission(name, batch=batch)  # opening a worker session awaited: another one may have come in
+        except AdmissionRefused:
+            await session.close()
+            raise
         live = LiveSession(name, session, self, source=source)
+        live.batch = batch
+        if paced and not batch:
+            live.pacer = IngestPacer(self.config.ingest_burst_s)
+            live.overrun = self.config.ingest_overrun
         self.sessions[name] = live
+        if self.cluster is not None:
+            owner = await self.cluster.claim(live)
+            if owner is not None:
+                del self.sessions[name]
+                await session.close()
+                raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
         return live
 
-    def _no_room(self, name: str) -> tuple[int, str] | None:
-        """Why a session ``name`` cannot open now, as (close code, reason); None if it can."""
-        if name in self.sessions:
-            return P.CLOSE_CONFLICT, f"session {name!r} already exists"
-        if len(self.sessions) >= self.config.max_sessions:
-            return P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)"
-        return None
-
-    async def _new_session(self, config: SessionConfig) -> "Session | RemoteSession":
+    async def _new_session(self, config: SessionConfig) -> SessionHandle:
         rig = self.head.rig if self.head else None
         if self.pool is not None:
             return await self.pool.open(config, rig=rig, times=self.times)
-        return Session(self.model, config=config, rig=rig, times=self.times)
-
-    @staticmethod
-    async def _discard(session: "Session | RemoteSession") -> None:
-        if isinstance(session, RemoteSession):
-            await session.close()
+        return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
     async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
                          channels: int = 1, label: str = "local") -> LiveSession:
@@ -408,9 +277,12 @@ class FacecastServer:
         return live
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
-        self.sessions.pop(live.name, None)
+        if self.sessions.get(live.name) is live:
+            del self.sessions[live.name]
         live.ended.set()
-        await self._discard(live.session)  # a worker session that never flushed
+        if self.cluster is not None:
+            await self.cluster.release(live, code, reason)
+        await live.session.close()  # a worker session that never flushed
         # Let senders drain what is queued (bounded: each viewer queue is small), then close.
         for v in list(live.viewers):
             v.wake.set()
@@ -429,154 +301,124 @@ class FacecastServer:
 
     async def _handle(self, ws: ServerConnection) -> None:
         path = urllib.parse.urlsplit(ws.request.path).path
+        client = _client_address(ws)
+        self.clients.add(client)
         try:
             if path == "/ingest":
                 await self._ingest(ws)
             elif path == "/view":
                 await self._view(ws)
             else:
-                raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no WebSocket endpoint {path!r} (use /ingest or /view)")
+                raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
         except ProtocolViolation as exc:
+            self.incidents.client_error(exc.code, exc.reason, time.monotonic())
             await self.close_ws(ws, exc.code, exc.reason)
         except ConnectionClosed:
             pass
-        except Exception:  # noqa: BLE001 - connection boundary: a bug closes this connection only
-            log.exception("internal error on %s", path)
-            await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")
-
-    def _check_token(self, given: object) -> None:
-        want = self.config.token
-        if want is None:
-            return
-        if not isinstance(given, str) or not hmac.compare_digest(given.encode(), want.encode()):
-            raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
+        except Exception as exc:  # noqa: BLE001 - connection boundary: a bug closes this connection only
+            self.incidents.internal_error(path, exc, time.monotonic())
+            await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")  # never a traceback or path
+        finally:
+            self.clients.remove(client)
 
     async def _ingest(self, ws: ServerConnection) -> None:
+        """Drive one ingest connection through :class:`server.protocol.IngestProtocol`."""
+        proto = SP.IngestProtocol(token=self.config.token, lag=self.config.lag)
         try:
             first = await asyncio.wait_for(ws.recv(), self.config.start_timeout_s)
         except TimeoutError:
-            raise ProtocolViolation(P.CLOSE_POLICY, f"no start message within {self.config.start_timeout_s:g} s") from None
-        if not isinstance(first, str):
-            raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "expected a JSON start message (text) first, got binary")
-        start = _parse_json(first, "start message")
-        if start.get("type") != "start":
-            raise ProtocolViolation(P.CLOSE_POLICY, f"first message must be {{\"type\": \"start\"}}, got type {start.get('type')!r}")
-        self._check_token(start.get("token"))
-        unknown = sorted(set(start) - {"type", "sample_rate", "format", "channels", "session", "token"})
-        if unknown:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {unknown}")
-        if "sample_rate" not in start:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "start message lacks sample_rate")
-        name = start.get("session")
-        if not isinstance(name, str) or not P.SESSION_NAME.match(name):
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+            actions = proto.start_timed_out(self.config.start_timeout_s)
+        else:
+            actions = proto.receive(first)
+        live: LiveSession | None = None
         try:
-            cfg = SessionConfig(sample_rate_hz=start["sample_rate"], channels=start.get("channels", 1),
-                                sample_format=start.get("format", "pcm_s16le"), lag=self.config.lag)
-        except ServerConfigError as exc:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
-        if (refused := self._no_room(name)) is not None:
-            raise ProtocolViolation(*refused)
-        session = await self._new_session(cfg)
-        if (refused := self._no_room(name)) is not None:  # the await may have let another one in
-            await self._discard(session)
-            raise ProtocolViolation(*refused)
-        live = LiveSession(name, session, self, source="ingest")
-        self.sessions[name] = live
-        code, reason = P.CLOSE_NORMAL, "session ended"
-        try:
-            s = live.session
-            await ws.send(P.dumps({
-                "type": "started", "session": name, "model_rate_hz": s.rate_hz, "fps": s.fps,
-                "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={name}",
-            }))
-            ended_task = asyncio.ensure_future(live.ended.wait())
+            live = await self._perform(ws, proto, actions, None)
+            if live is None:
+                return
+            ended = asyncio.ensure_future(live.ended.wait())
             try:
-                while True:
+                idle_s = self.config.idle_timeout_s
+                while proto.state is SP.State.STREAMING:
                     recv = asyncio.ensure_future(ws.recv())
-                    done, _ = await asyncio.wait({recv, ended_task}, return_when=asyncio.FIRST_COMPLETED)
-                    if recv not in done:  # server shutting down
+                    done, _ = await asyncio.wait({recv, ended}, timeout=idle_s, return_when=asyncio.FIRST_COMPLETED)
+                    if not done:
                         recv.cancel()
-                        await live.finish()
-                        code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
-                        break
-                    msg = recv.result()
-                    if isinstance(msg, bytes):
-                        try:
-                            await live.feed_bytes_fairly(msg)
-                        except AudioFormatError as exc:
-                            raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, str(exc)) from None
-                        continue
-                    try:
-                        ctl = json.loads(msg)
-                    except ValueError:
-                        raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA,
-                                                "text message is not JSON: audio must be sent as binary messages") from None
-                    if not isinstance(ctl, dict):
-                        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "a control message must be a JSON object")
-                    kind = ctl.get("type")
-                    if kind == "control":
-                        try:
-                            state = await live.control(ctl)
-                            await ws.send(P.dumps({"type": "ack", "controls": state}))
-                        except ControlError as exc:
-                            await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
-                    elif kind == "end":
-                        await live.finish()
-                        await ws.send(P.dumps({"type": "ended", "frames": live.session.frames_out,
-                                               "audio_s": live.session.samples_out / live.session.rate_hz}))
-                        break
-                    elif kind == "start":
-                        raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
+                        actions = proto.idle_timed_out(idle_s)
+                    elif recv not in done:  # server shutting down
+                        recv.cancel()
+                        actions = proto.shutdown()
                     else:
-                        raise ProtocolViolation(P.CLOSE_POLICY, f"unknown message type {kind!r} (expected control or end)")
+                        try:
+                            actions = proto.receive(recv.result())
+                        except ConnectionClosed:
+                            actions = proto.connection_lost()
+                    await self._perform(ws, proto, actions, live)
             finally:
-                ended_task.cancel()
-        except ProtocolViolation as exc:
-            code, reason = P.CLOSE_NORMAL, "session ended: its source broke the protocol"
-            raise exc
-        except ConnectionClosed:
-            # The source hung up without "end": finish what it sent.
-            await live.finish()
+                ended.cancel()
         finally:
-            await self._end_session(live, code, reason)
-        await self.close_ws(ws, code, reason)
+            if live is not None:
+                await self._end_session(live, *proto.viewer_close)
+
+    async def _perform(self, ws: ServerConnection, proto: SP.IngestProtocol, actions: list[SP.Action],
+                       live: LiveSession | None) -> LiveSession | None:
+        """Carry out the protocol's actions in order (and those its answers add); returns the live
+        session once one is open."""
+        todo = collections.deque(actions)
+        while todo:
+            action = todo.popleft()
+            if isinstance(action, SP.Send):
+                await ws.send(P.dumps(action.message))
+            elif isinstance(action, SP.Close):
+                await self.close_ws(ws, action.code, action.reason)
+            elif isinstance(action, SP.Feed):
+                try:
+                    await live.feed_bytes_fairly(action.data)
+                except AudioFormatError as exc:
+                    todo.extend(proto.audio_rejected(str(exc)))
+                except IngestOverrun as exc:
+                    todo.extend(proto.too_fast(str(exc)))
+            elif isinstance(action, SP.Control):
+                try:
+                    todo.extend(proto.control_applied(await live.control(action.message)))
+                except ControlError as exc:
+                    todo.extend(proto.control_rejected(str(exc)))
+            elif isinstance(action, SP.Finish):
+                await live.finish()
+                s = live.session
+                todo.extend(proto.finished(s.frames_out, s.samples_out / s.rate_hz))
+            elif isinstance(action, SP.Open):
+                try:
+                    live = await self.open_session(action.name, action.config, source="ingest", batch=action.batch,
+                                                   paced=True)
+                except AdmissionRefused as exc:
+                    todo.extend(proto.refused(exc.code, exc.reason))
+                else:
+                    todo.extend(proto.opened(describe.started(live)))
+        return live
 
     async def _view(self, ws: ServerConnection) -> None:
-        q = urllib.parse.parse_qs(urllib.parse.urlsplit(ws.request.path).query)
-        arg = {k: v[-1] for k, v in q.items()}
-        self._check_token(arg.get("token"))
-        name = arg.get("session", "")
-        live = self.sessions.get(name)
+        req = SP.parse_view_query(SP.query_args(ws.request.path), token=self.config.token,
+                                  has_head=self.head is not None)
+        live = self.sessions.get(req.session)
+        if live is None and self.cluster is not None:
+            row = await self.cluster.lookup(req.session)
+            if row is not None:
+                return await self._view_remote(ws, req, row)
         if live is None:
-            raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {name!r}")
-        kind = arg.get("kind", "params")
-        encodings = P.VIEW_KINDS.get(kind)
-        if encodings is None:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"kind must be one of {sorted(P.VIEW_KINDS)}, got {kind!r}")
-        enc_name = arg.get("encoding", next(iter(encodings)))
-        if enc_name not in encodings:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"encoding for {kind} must be one of {sorted(encodings)}, got {enc_name!r}")
-        if kind == "deltas" and self.head is None:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "this server has no head rig: vertex deltas are unavailable")
-        audio = arg.get("audio", "1")
-        if audio not in ("0", "1"):
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "audio must be 0 or 1")
+            raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {req.session!r}")
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
-        hk, he = encodings[enc_name]
         if self.config.viewer_socket_buffer_bytes is not None:
             sock = ws.transport.get_extra_info("socket")
             if sock is not None:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.config.viewer_socket_buffer_bytes)
-        await ws.send(P.dumps(self._description(live, kind, enc_name, hk, he, audio == "1")))
-        if live.name not in self.sessions:  # ended while we were sending the description
+        await ws.send(P.dumps(describe.view_description(live, req, self.head)))
+        if self.sessions.get(live.name) is not live:  # ended while we were sending the description
             raise ProtocolViolation(P.CLOSE_NORMAL, "session ended")
-        viewer = Viewer(ws, live, kind=hk, encoding=he, audio=audio == "1", server=self)
+        viewer = Viewer(ws, live, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
         live.viewers.add(viewer)
         self.n_viewers += 1
-        sender = asyncio.ensure_future(viewer.run())
-        self._tasks.add(sender)
+        sender = self.spawn(viewer.run())
         try:
             reader = asyncio.ensure_future(ws.recv())
             done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
@@ -588,66 +430,108 @@ class FacecastServer:
                 raise sender.exception()
         finally:
             sender.cancel()
-            self._tasks.discard(sender)
             live.viewers.discard(viewer)
             self.n_viewers -= 1
 
-    def _description(self, live: LiveSession, kind: str, enc_name: str, hk: int, he: int, audio: bool) -> dict:
-        s = live.session
-        d: dict = {
-            "type": "description",
-            "protocol": P.PROTOCOL_VERSION,
-            "session": live.name,
-            "fps": s.fps,
-            "kind": kind,
-            "encoding": enc_name,
-            "header_kind": hk,
-            "header_encoding": he,
-            "header_bytes": P.HEADER_BYTES,
-            "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
-            "algorithmic_delay_s": s.algorithmic_delay_s,
-            "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if audio else None,
-            "values_per_frame": 4,
-        }
-        if self.head is not None:
-            rig, mesh = self.head.rig, self.head.mesh
-            d["head"] = {
-                "mesh_url": "/head/mesh",
-                "mesh_json_url": "/head/mesh.json",
-                "texture_url": "/head/texture" if mesh.texture is not None else None,
-                "vertex_count": int(len(mesh.vertices)),
-                "moving_vertices": rig.moving.astype(int).tolist(),
-                "units": "mesh units",
-            }
+    async def _view_remote(self, ws: ServerConnection, req: SP.ViewRequest, row: dict) -> None:
+        """A viewer of a session owned by another node: fed from that session's Redis channel."""
+        if self.n_viewers >= self.config.max_viewers:
+            raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
+        feed = await self.cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
+        await ws.send(P.dumps(describe.view_description(feed, req, self.head)))
+        viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
+        feed.viewers.add(viewer)
+        self.n_viewers += 1
+        sender = self.spawn(viewer.run())
+        try:
+            reader = asyncio.ensure_future(ws.recv())
+            done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
+            if reader in done and reader.exception() is None:
+                viewer.closing = True
+                raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
+            reader.cancel()
+        finally:
+            sender.cancel()
+            feed.viewers.discard(viewer)
+            self.n_viewers -= 1
+            await self.cluster.drop_feed_if_idle(feed)
+
+    def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
+        """A message of a remote session from Redis -> this node's viewers of it that want it."""
+        if kind == P.KIND_AUDIO:
+            members = [v for v in feed.viewers if v.audio]
         else:
-            d["head"] = None
-        if kind == "deltas":
-            d["values_per_frame"] = 3 * int(len(self.head.rig.moving))
-            d["layout"] = "x, y, z of each moving vertex in moving_vertices order, added to the neutral mesh"
-        elif kind == "blendshapes":
-            d["names"] = list(blendshape_names(enc_name))
-            d["values_per_frame"] = len(d["names"])
-        return d
+            members = [v for v in feed.viewers if v.kind == kind and v.encoding == enc]
+        if members:
+            deliver(members, msg, time.time())
+
+    async def _end_feed(self, feed: RemoteFeed) -> None:
+        code, reason = feed.end
+        for v in list(feed.viewers):
+            v.wake.set()
+        await asyncio.sleep(0)
+        await asyncio.gather(*(self._close_viewer_after_drain(v, code, reason) for v in list(feed.viewers)))
 
     # -- plain HTTP --------------------------------------------------------------------------------
 
-    def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
-        path = urllib.parse.urlsplit(request.path).path
-        if path in ("/ingest", "/view"):
-            return None  # WebSocket handshake proceeds (websockets answers 426 if it is not one)
-        if request.headers.get("Upgrade", "").lower() == "websocket":
-            return _response(HTTPStatus.NOT_FOUND, b"no WebSocket endpoint here (use /ingest or /view)\n", "text/plain")
-        if path == "/health":
-            body = {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
-                    "uptime_s": round(time.time() - self.started, 3)}
-            return _response(HTTPStatus.OK, P.dumps(body).encode(), "application/json")
-        if path == "/metrics":
-            return _response(HTTPStatus.OK, P.dumps(self.metrics()).encode(), "application/json")
-        if path.startswith("/head/"):
-            return self._head_response(path)
-        if path in ("/", "/index.html"):
-            return self._index()
-        return self._static(path)
+    async def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
+        """Every request before any handshake: Host (DNS rebinding), then for WebSocket upgrades the
+        Origin and the per-client connection limit, else plain HTTP with the token for private routes."""
+        cfg = self.config
+        headers = request.headers
+        if not host_allowed(headers.get("Host"), bound_host=cfg.host, allowed=cfg.allowed_hosts):
+            return self._refuse(HTTPStatus.FORBIDDEN, "Host not allowed")
+        split = urllib.parse.urlsplit(request.path)
+        path = split.path
+        upgrade = headers.get("Upgrade", "").lower() == "websocket"
+        if upgrade or path in ("/ingest", "/view"):
+            if path not in ("/ingest", "/view"):
+                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+            if not origin_allowed(headers.get("Origin"), headers.get("Host"), cfg.allowed_origins):
+                return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
+            client = _client_address(connection)
+            if self.clients.full(client):
+                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
+                                    f"too many connections from this client ({cfg.max_connections_per_client})")
+            if not self.connect_rate.allow(client, time.monotonic()):
+                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
+                                    f"too many new connections from this client (over {cfg.connect_rate_per_s:g}/s)")
+            return None  # the WebSocket handshake proceeds (websockets answers 426 if it is not one)
+        authorized = SP.token_ok(_request_token(split.query, headers.get("Authorization")), cfg.token)
+        if path == "/sessions" and authorized:
+            return _response(await self._sessions_reply_async())
+        return _response(self.http.handle(path, authorized=authorized))
+
+    def _refuse(self, status: HTTPStatus, text: str) -> Response:
+        self.incidents.client_error(status.value, text, time.monotonic())
+        return _response(HttpReply.text(status, text + "\n"))
+
+    def health(self) -> dict:
+        """``status`` ok, or degraded while the cluster's Redis is away (``redis`` says why)."""
+        out = {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
+               "uptime_s": round(time.time() - self.started, 3)}
+        if self.cluster is not None:
+            out.update(self.cluster.health())
+            if not self.cluster.up:
+                out["status"] = "degraded"
+        return out
+
+    def _sessions_reply(self) -> HttpReply:
+        return HttpReply.json({"sessions": self.session_list()})
+
+    async def _sessions_reply_async(self) -> HttpReply:
+        """/sessions: cluster-wide from the registry when there is one (this node's own otherwise)."""
+        if self.cluster is not None:
+            rows = await self.cluster.list_sessions()
+            if rows is not None:
+                local = {r["name"] for r in rows}
+                rows += [dict(r, node=self.cluster.node) for r in self.session_list() if r["name"] not in local]
+                return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"]), "scope": "cluster"})
+            return HttpReply.json({"sessions": self.session_list(), "scope": "node (Redis away)"})
+        return self._sessions_reply()
+
+    def session_list(self) -> list[dict]:
+        return [live.describe() for live in self.sessions.values()]
 
     def metrics(self) -> dict:
         """Sessions, viewers, per-stage timings (ms), dropped frames, closes by code."""
@@ -658,80 +542,31 @@ class FacecastServer:
             "viewers_closed_slow": self.closed_slow,
             "closes": {str(k): v for k, v in sorted(self.closes.items())},
             "timings_ms": self.times.summary(),
-            "session_list": [live.describe() for live in self.sessions.values()],
+            "session_list": self.session_list(),
             "uptime_s": round(time.time() - self.started, 3),
         }
 
-    def _head_response(self, path: str) -> Response:
-        if self.head is None:
-            return _response(HTTPStatus.NOT_FOUND, b"this server has no head\n", "text/plain")
-        mesh = self.head.mesh
-        hit = self._http_cache.get(path)
-        if hit is None:
-            if path == "/head/mesh":
-                hit = (mesh_glb(mesh), "model/gltf-binary")
-            elif path == "/head/mesh.json":
-                hit = (mesh_json(mesh), "application/json")
-            elif path == "/head/texture" and mesh.texture is not None:
-                hit = (mesh.texture, texture_mime(mesh) or "application/octet-stream")
-            else:
-                return _response(HTTPStatus.NOT_FOUND, b"not found\n", "text/plain")
-            self._http_cache[path] = hit
-        return _response(HTTPStatus.OK, hit[0], hit[1])
 
-    def _index(self) -> Response:
-        root = self.config.web_root
-        if root is not None and (root / "index.html").is_file():
-            return _response(HTTPStatus.OK, (root / "index.html").read_bytes(), "text/html; charset=utf-8")
-        rows = "".join(
-            f"<li><code>{n}</code> ({live.source}, {live.session.frames_out} frames, {len(live.viewers)} viewers): "
-            f"<code>ws://HOST/view?session={n}&amp;kind=params</code></li>"
-            for n, live in sorted(self.sessions.items())
-        ) or "<li>none</li>"
-        page = (
-            "<!doctype html><meta charset=utf-8><title>facecast</title>"
-            "<h1>facecast</h1><p>The browser viewer is not built yet. Live sessions:</p>"
-            f"<ul>{rows}</ul><p>See <a href=/health>/health</a>, <a href=/metrics>/metrics</a>, "
-            "<a href=/head/mesh>/head/mesh</a> (glTF) and docs/protocol.md.</p>"
-        )
-        return _response(HTTPStatus.OK, page.encode(), "text/html; charset=utf-8")
-
-    # Files of npm packages the browser viewer imports (its import map points at /vendor/three/).
-    _VENDOR = {"three": ("build/", "examples/jsm/")}
-
-    def _static(self, path: str) -> Response:
-        root = self.config.web_root
-        if path == "/js/protocol.js":  # the wire format's JS twin lives with the Python one
-            root, path = JS_PROTOCOL.parent, JS_PROTOCOL.name
-        if path.startswith("/vendor/") and self.config.node_modules is not None:
-            package, _, rel = path[len("/vendor/"):].partition("/")
-            prefix = next((d for d in self._VENDOR.get(package, ()) if rel.startswith(d)), None)
-            if prefix is not None:  # root = the allowed folder itself, so ../ cannot leave it
-                root, path = self.config.node_modules / package / prefix, rel[len(prefix):]
-        if root is not None:
-            target = (root / path.lstrip("/")).resolve()
-            if target.is_file() and root.resolve() in target.parents:
-                ctype = {".html": "text/html; charset=utf-8", ".js": "text/javascript", ".css": "text/css",
-                         ".json": "application/json", ".png": "image/png", ".jpg": "image/jpeg",
-                         ".glb": "model/gltf-binary", ".wasm": "application/wasm"}.get(target.suffix, "application/octet-stream")
-                return _response(HTTPStatus.OK, target.read_bytes(), ctype)
-        return _response(HTTPStatus.NOT_FOUND, b"not found\n", "text/plain")
+def _client_address(connection: ServerConnection) -> str:
+    """The peer's IP address (the per-client limit's key)."""
+    peer = connection.remote_address
+    return str(peer[0]) if peer else "?"
 
 
-def _response(status: HTTPStatus, body: bytes, ctype: str) -> Response:
-    headers = Headers([("Content-Type", ctype), ("Content-Length", str(len(body))), ("Cache-Control", "no-store"),
-                       ("Connection", "close")])
-    return Response(status.value, status.phrase, headers, body)
-
-
-def _parse_json(text: str, what: str) -> dict:
+def _request_token(query: str, authorization: str | None) -> str | None:
+    """The token of a plain HTTP request: ``Authorization: Bearer T`` or ``?token=T``."""
+    if authorization is not None and authorization.lower().startswith("bearer "):
+        return authorization[7:].strip()
     try:
-        obj = json.loads(text)
+        return dict(urllib.parse.parse_qsl(query, max_num_fields=32)).get("token")
     except ValueError:
-        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"{what} is not valid JSON") from None
-    if not isinstance(obj, dict):
-        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, f"{what} must be a JSON object")
-    return obj
+        return None
+
+
+def _response(reply: HttpReply) -> Response:
+    headers = Headers([("Content-Type", reply.content_type), ("Content-Length", str(len(reply.body))),
+                       ("Cache-Control", "no-store"), ("Connection", "close")])
+    return Response(reply.status.value, reply.status.phrase, headers, reply.body)
 
 
 async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" = None,

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import ipaddress
+import re
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from server.errors import ServerConfigError
+
+P_NODE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -24,7 +27,23 @@ class ServerConfig:
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
-    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served)."""
+    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served).
+
+    Hardening (docs/protocol.md section 7): ingest_burst_s: seconds of audio an ingest may run ahead
+    of real time before it is paced (or closed with 4029 when ingest_overrun is "close"); batch
+    sessions (start message ``"batch": true``) are exempt, at most max_batch_sessions at a time;
+    allowed_origins: extra Origin values accepted on WebSocket upgrades besides same-origin
+    (``"*"`` accepts any; a ``null`` Origin is always refused; clients that send no Origin, i.e.
+    not browsers, are accepted); allowed_hosts: Host header names accepted (None: loopback names
+    when bound to loopback, else any); max_connections_per_client: open WebSocket connections per
+    remote address; connect_rate_per_s / connect_burst: new WebSocket connections per remote address
+    (a token bucket; beyond it 429; rate 0 = no limit); handshake_timeout_s: time to complete the opening handshake; idle_timeout_s:
+    an ingest that sends nothing for this long is closed (1008).
+
+    Cluster (docs/deploy.md): redis_url: the Redis every node of a cluster shares (None: one
+    process, no Redis); node_id: this node's name in the registry (None: host-pid-port);
+    advertise_url: the http:// URL clients reach this node at (None: the bound address);
+    heartbeat_s: registry refresh period (rows expire after 3 heartbeats)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -41,6 +60,20 @@ class ServerConfig:
     viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
     node_modules: Path | None = None
+    ingest_burst_s: float = 2.0
+    ingest_overrun: str = "pace"
+    max_batch_sessions: int = 2
+    allowed_origins: tuple[str, ...] = ()
+    allowed_hosts: tuple[str, ...] | None = None
+    max_connections_per_client: int = 1024
+    connect_rate_per_s: float = 50.0
+    connect_burst: int = 1000
+    handshake_timeout_s: float = 10.0
+    idle_timeout_s: float = 60.0
+    redis_url: str | None = None
+    node_id: str | None = None
+    advertise_url: str | None = None
+    heartbeat_s: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -60,7 +93,8 @@ class ServerConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or not 1 <= v <= 100000:
                 raise ServerConfigError(f"{name} must be an integer in 1..100000, got {v!r}")
-        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s"):
+        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s", "handshake_timeout_s",
+                     "idle_timeout_s", "ingest_burst_s"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0 < v <= 3600:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
@@ -71,6 +105,34 @@ class ServerConfig:
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
+        if self.redis_url is not None and (not isinstance(self.redis_url, str) or not self.redis_url.startswith(
+                ("redis://", "rediss://", "unix://"))):
+            raise ServerConfigError(f"redis_url must be a redis://, rediss:// or unix:// URL, got {self.redis_url!r}")
+        if self.node_id is not None and (not isinstance(self.node_id, str) or not P_NODE.match(self.node_id)):
+            raise ServerConfigError(f"node_id must be 1-64 characters of A-Z a-z 0-9 _ . -, got {self.node_id!r}")
+        if self.advertise_url is not None and (not isinstance(self.advertise_url, str)
+                                               or not self.advertise_url.startswith(("http://", "https://"))):
+            raise ServerConfigError(f"advertise_url must be an http:// or https:// URL, got {self.advertise_url!r}")
+        if not isinstance(self.heartbeat_s, (int, float)) or not 0.05 <= self.heartbeat_s <= 60:
+            raise ServerConfigError(f"heartbeat_s must be in 0.05..60 s, got {self.heartbeat_s!r}")
+        if self.ingest_overrun not in ("pace", "close"):
+            raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
+        if isinstance(self.connect_rate_per_s, bool) or not isinstance(self.connect_rate_per_s, (int, float)) or not (
+                0 <= self.connect_rate_per_s <= 1e6):
+            raise ServerConfigError(f"connect_rate_per_s must be a number in 0..1e6, got {self.connect_rate_per_s!r}")
+        for name in ("max_batch_sessions", "max_connections_per_client", "connect_burst"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 100000:
+                raise ServerConfigError(f"{name} must be an integer in 0..100000, got {v!r}")
+        for name in ("allowed_origins", "allowed_hosts"):
+            v = getattr(self, name)
+            if v is None and name == "allowed_hosts":
+                continue
+            if isinstance(v, str) or not all(isinstance(x, str) and x for x in v):
+                raise ServerConfigError(f"{name} must be a list of non-empty strings, got {v!r}")
+            object.__setattr__(self, name, tuple(x.lower() for x in v))
+        if "null" in self.allowed_origins:
+            raise ServerConfigError("allowed_origins cannot hold 'null': a null Origin is always refused")
         for name in ("web_root", "node_modules"):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, Path(getattr(self, name)))

@@ -36,3 +36,7 @@ class ControlError(ServerError, ValueError):
 
 class AudioSourceError(ServerError, RuntimeError):
     """An audio source cannot run: no PortAudio, no input device, unreadable file."""
+
+
+class IngestOverrun(ServerError):
+    """An ingest ran ahead of real time beyond its burst on a server that closes instead of pacing."""

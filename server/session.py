@@ -2,15 +2,14 @@
 
 Theory of operation
 -------------------
-A session is one audio stream. :meth:`Session.push_bytes` (or :meth:`Session.push` for arrays)
-decodes a block (pcm_s16le or f32le, interleaved channels), mixes it down to mono (channel mean),
-resamples it to the model's rate with :class:`realtime_core.features.resample.StreamingResampler` (equal to
-``scipy.signal.resample_poly`` on the whole stream, whatever the chunking), and runs the same
-streaming objects as :func:`realtime_core.pipeline.speech_to_params` (front end, then the streaming
-inverter), so a live session's raw mouth parameters equal ``facecast animate`` frame for frame.
-Controls (per-parameter gain, then one-pole smoothing) apply after the model. Each push returns the
-frames now final and the resampled audio block, both stamped with media time (seconds of session
-audio at the model rate: frame ``k`` at ``k / fps``; audio by its first sample).
+A session is one audio stream and does four things: it decodes a binary block (pcm_s16le or f32le,
+interleaved channels, mixed down to mono by the channel mean), runs it through the live chain
+:class:`realtime_core.pipeline.SpeechToParams` (resampling to the model's rate, front end, streaming
+inverter: the same objects as ``speech_to_params``, so a live session's raw mouth parameters equal
+``facecast animate`` frame for frame), applies the controls (:mod:`server.controls`) and encodes
+frames for viewers. Each push returns the frames now final and the model-rate audio block the chain
+heard, both stamped with media time (seconds of session audio at the model rate: frame ``k`` at
+``k / fps``; audio by its first sample). Stage timings come from the chain's observer.
 
 Output encodings are computed lazily per frame (:meth:`Frame.payload`) and cached, so a frame with
 a thousand parameter viewers is encoded once, and vertex deltas are only computed when somebody
@@ -19,21 +18,20 @@ watches them. No sockets, clocks or tasks here except ``perf_counter`` for stage
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face.rig import Rig
-from realtime_core.features.resample import StreamingResampler
 from realtime_core.inversion import StreamConfig
-from server.errors import AudioFormatError, ControlError, ServerConfigError
+from realtime_core.pipeline import SpeechToParams
+from server.controls import ControlState, apply_controls
+from server.errors import AudioFormatError, ServerConfigError
 from server.timing import StageTimes
 from wire import protocol as P
 
@@ -159,19 +157,21 @@ class Session:
         self.fps = int(model.frontend.mfcc.frame_rate_hz)
         self._dtype = P.SAMPLE_FORMATS[config.sample_format]
         self._frame_bytes = self._dtype.itemsize * config.channels
-        self._resampler = StreamingResampler(config.sample_rate_hz, self.rate_hz)
-        self._fe = model.front_end()
-        self._inv = model.inverter(StreamConfig(lag=config.lag))
-        self.delay_frames = model.frontend.tc + config.lag
-        self.gains = np.ones(len(VISUAL_PARAMS))
-        self.smoothing_ms = 0.0
-        self._smoothed: np.ndarray | None = None
+        self._chain = SpeechToParams(model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag),
+                                     observer=self._observe)
+        self.delay_frames = self._chain.delay_frames
+        self.controls = ControlState()
         self.frames_out = 0
         self.samples_in = 0  # input samples (per channel) received
         self.samples_out = 0  # model-rate samples produced
         self._audio_index = 0
-        self._cpu0 = 0.0
+        self._mark = 0.0  # perf_counter() at the end of the previous stage
         self.finished = False
+
+    def _observe(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.times.add(stage, now - self._mark)
+        self._mark = now
 
     @property
     def frame_bytes(self) -> int:
@@ -187,11 +187,6 @@ class Session:
     def model_samples_needed(self, k: int) -> int:
         """Model-rate samples that must have arrived for frame ``k`` to be final (streaming, not flush)."""
         return self.model.frontend.mfcc.frame_start(k + self.delay_frames) + self.window_len
-
-    def input_samples_needed(self, k: int) -> int:
-        """Input-rate samples (per channel) that must have arrived for frame ``k`` to be final."""
-        m = self.model_samples_needed(k) - 1
-        return self._resampler.n_hi(m) + 1 if not self._resampler.passthrough else m + 1
 
     @property
     def algorithmic_delay_s(self) -> float:
@@ -223,15 +218,16 @@ class Session:
     def push_bytes(self, data: bytes) -> Output:
         """One binary block (any whole number of sample frames) -> Output."""
         t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        cpu0 = time.thread_time()  # CPU time: excludes being descheduled
         x = self.decode(data)
-        self.times.add("decode", time.perf_counter() - t0)
-        return self._run(x, t0)
+        self._mark = time.perf_counter()
+        self.times.add("decode", self._mark - t0)
+        return self._run(x, t0, cpu0)
 
     def push(self, samples: np.ndarray) -> Output:
         """samples: (n,) mono or (n, channels) float in [-1, 1] at the input rate -> Output."""
         t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        cpu0 = time.thread_time()
         x = np.asarray(samples, dtype=np.float64)
         if x.ndim == 2:
             if x.shape[1] != self.config.channels:
@@ -241,44 +237,31 @@ class Session:
             raise AudioFormatError(f"samples must be (n,) or (n, channels), got shape {x.shape}")
         if not np.isfinite(x).all():
             raise AudioFormatError("audio block contains NaN or infinite samples")
-        return self._run(x, t0)
+        self._mark = time.perf_counter()
+        return self._run(x, t0, cpu0)
 
     def flush(self) -> Output:
         """End of the stream: the remaining frames (audio zero-padded, as ``speech_to_params``)."""
         if self.finished:
             return Output([], None)
-        t0 = time.perf_counter()
-        self._cpu0 = time.thread_time()  # CPU time: excludes being descheduled
+        t0 = self._mark = time.perf_counter()
+        cpu0 = time.thread_time()
         self.finished = True
-        y = self._resampler.flush()
-        audio = self._audio(y)
-        t1 = time.perf_counter()
         try:
-            oa = np.concatenate([self._fe.push(y), self._fe.flush()])
-            t2 = time.perf_counter()
-            params = np.concatenate([self._inv.push(oa), self._inv.flush()])
+            params = self._chain.flush()
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the audio: {exc}") from exc
-        t3 = time.perf_counter()
-        return Output(self._frames(params, t0, (t1, t2, t3)), audio)
+        return Output(self._frames(params, t0, cpu0), self._audio(self._chain.model_audio))
 
-    def _run(self, x: np.ndarray, t0: float) -> Output:
+    def _run(self, x: np.ndarray, t0: float, cpu0: float) -> Output:
         if self.finished:
             raise AudioFormatError("audio after the end of the session")
         self.samples_in += x.size
-        t1 = time.perf_counter()
-        y = self._resampler.push(x)
-        audio = self._audio(y)
-        t2 = time.perf_counter()
         try:
-            oa = self._fe.push(y)
-            t3 = time.perf_counter()
-            params = self._inv.push(oa)
+            params = self._chain.push(x)
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the audio: {exc}") from exc
-        t4 = time.perf_counter()
-        self.times.add("resample", t2 - t1)
-        return Output(self._frames(params, t0, (t2, t3, t4)), audio)
+        return Output(self._frames(params, t0, cpu0), self._audio(self._chain.model_audio))
 
     def _audio(self, y: np.ndarray) -> AudioBlock | None:
         if y.size == 0:
@@ -288,70 +271,29 @@ class Session:
         self.samples_out += y.size
         return block
 
-    def _frames(self, params: np.ndarray, t0: float, marks: tuple[float, float, float]) -> list[Frame]:
-        t_res, t_fe, t_inv = marks
-        self.times.add("features", t_fe - t_res)
-        self.times.add("inversion", t_inv - t_fe)
+    def _frames(self, params: np.ndarray, t0: float, cpu0: float) -> list[Frame]:
         if len(params) == 0:
             return []
-        out = []
-        for row in params:
-            out.append(self._controlled(row))
+        controlled = [self.controls.apply(row, self.fps) for row in params]
         now = time.perf_counter()
         work = (now - t0) / len(params)
         self.times.add("push_per_frame", work)
-        self.times.add("push_per_frame_cpu", (time.thread_time() - self._cpu0) / len(params))
+        self.times.add("push_per_frame_cpu", (time.thread_time() - cpu0) / len(params))
         frames = []
-        for row, p in zip(params, out):
+        for row, p in zip(params, controlled):
             k = self.frames_out
             frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times))
             self.frames_out += 1
         return frames
 
-    def _controlled(self, row: np.ndarray) -> np.ndarray:
-        p = row * self.gains
-        if self.smoothing_ms > 0:
-            if self._smoothed is not None:
-                a = math.exp(-1000.0 / (self.fps * self.smoothing_ms))
-                p = a * self._smoothed + (1.0 - a) * p
-            self._smoothed = p
-        else:
-            self._smoothed = p
-        return p
-
     # -- controls --------------------------------------------------------------------------------
 
-    CONTROLS = ("gain", "smoothing_ms")
-
     def apply_control(self, msg: dict) -> dict:
-        """Apply a control message ``{"type": "control", "gain": {...}, "smoothing_ms": x}``.
-
-        gain: {parameter name: factor in [0, 10]} (others unchanged); smoothing_ms: time constant of
-        a one-pole low-pass on the parameters, 0..1000 ms (0 = off). Returns the control state.
-        Raises ControlError (nothing applied) for an unknown control or an invalid value.
-        """
-        gains = self.gains.copy()
-        smoothing = self.smoothing_ms
-        for key, value in msg.items():
-            if key == "type":
-                continue
-            if key == "gain":
-                if not isinstance(value, dict) or not value:
-                    raise ControlError("gain must be an object {parameter: factor}")
-                for name, g in value.items():
-                    if name not in VISUAL_PARAMS:
-                        raise ControlError(f"gain: unknown parameter {name!r} (known: {', '.join(VISUAL_PARAMS)})")
-                    if isinstance(g, bool) or not isinstance(g, (int, float)) or not 0 <= g <= 10:
-                        raise ControlError(f"gain for {name} must be a number in 0..10, got {g!r}")
-                    gains[VISUAL_PARAMS.index(name)] = float(g)
-            elif key == "smoothing_ms":
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 1000:
-                    raise ControlError(f"smoothing_ms must be a number in 0..1000, got {value!r}")
-                smoothing = float(value)
-            else:
-                raise ControlError(f"unknown control {key!r} (known: {', '.join(self.CONTROLS)})")
-        self.gains, self.smoothing_ms = gains, smoothing
+        """Apply a control message ``{"type": "control", NAME: VALUE, ...}`` (see :mod:`server.controls`:
+        gain {parameter: factor in 0..10}, smoothing_ms 0..1000). Returns the control state; raises
+        ControlError (nothing applied) for an unknown control or an invalid value."""
+        self.controls = apply_controls(self.controls, msg)
         return self.control_state()
 
     def control_state(self) -> dict:
-        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms}
+        return self.controls.describe()

@@ -17,9 +17,20 @@ from assets.errors import (  # file problems are the assets edge's; training rai
 from realtime_core.errors import ConfigError, FacecastError
 
 __all__ = [
-    "AlignmentFormatError", "ConfigError", "CorpusFormatError", "FileProblem", "MissingDependencyError",
-    "NoFaceError", "NotAudioError", "NotVideoError", "SilentAudioError", "SynthesisError", "TrainingError",
-    "TruncatedFileError", "WrongSampleRateError",
+    "AlignmentFormatError",
+    "ConfigError",
+    "CorpusFormatError",
+    "FileProblem",
+    "LengthMismatchError",
+    "MissingDependencyError",
+    "NoFaceError",
+    "NotAudioError",
+    "NotVideoError",
+    "SilentAudioError",
+    "SynthesisError",
+    "TrainingError",
+    "TruncatedFileError",
+    "WrongSampleRateError",
 ]
 
 
@@ -45,3 +56,7 @@ class MissingDependencyError(TrainingError):
 
 class NotVideoError(FileProblem, TrainingError):
     """The file is not a readable video (no video stream, unknown format)."""
+
+
+class LengthMismatchError(FileProblem, TrainingError):
+    """A video's audio and picture differ in duration by more than the extractor accepts."""

@@ -13,9 +13,12 @@ beside the repository (never copied into it).
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
+
+from training.errors import AlignmentFormatError
 
 Split = Literal["train", "val", "test"]
 
@@ -33,8 +36,11 @@ _ADVERB = {"a": "again", "n": "now", "p": "please", "s": "soon"}
 
 
 def default_root() -> Path:
-    """``../shared/data/video/grid_s1`` beside the repository checkout."""
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "video" / "grid_s1"
+    """``$FACECAST_SHARED_DATA/video/grid_s1`` when that variable is set, else
+    ``../shared/data/video/grid_s1`` beside the repository checkout."""
+    shared = os.environ.get("FACECAST_SHARED_DATA")
+    base = Path(shared) if shared else Path(__file__).resolve().parents[2] / "shared" / "data"
+    return base / "video" / "grid_s1"
 
 
 def split_of(sentence_id: str) -> Split:
@@ -70,14 +76,48 @@ def sentences(root: str | Path | None = None, *, split: Split | None = None) -> 
 
 
 def read_words(path: str | Path) -> list[tuple[float, float, str]]:
-    """A GRID ``.align`` file -> ``[(start_s, end_s, word)]`` including ``sil``/``sp``."""
+    """A GRID ``.align`` file -> ``[(start_s, end_s, word)]`` including ``sil``/``sp``.
+
+    Raises :class:`~training.errors.AlignmentFormatError` naming the file for a missing or
+    unreadable file, a line that is not ``start end word`` with integer times, times that run
+    backwards, or no words at all.
+    """
     path = Path(path)
-    out = []
-    for line in path.read_text().splitlines():
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AlignmentFormatError(path, f"cannot be read ({exc})") from exc
+    out: list[tuple[float, float, str]] = []
+    for n, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
         parts = line.split()
-        if len(parts) == 3:
-            out.append((int(parts[0]) * WORD_ALIGN_UNIT_S, int(parts[1]) * WORD_ALIGN_UNIT_S, parts[2]))
+        try:
+            if len(parts) != 3:
+                raise ValueError
+            a, b = int(parts[0]), int(parts[1])
+        except ValueError:
+            raise AlignmentFormatError(path, f"line {n} is not 'start end word' with integer times: {line!r}") from None
+        if b < a or (out and a * WORD_ALIGN_UNIT_S < out[-1][1] - 1e-9):
+            raise AlignmentFormatError(path, f"line {n}: times run backwards ({line!r})")
+        out.append((a * WORD_ALIGN_UNIT_S, b * WORD_ALIGN_UNIT_S, parts[2]))
+    if not out:
+        raise AlignmentFormatError(path, "no words")
     return out
+
+
+def align_for_video(video: str | Path) -> Path | None:
+    """The word alignment of a video, or None: ``<root>/align/<id>.align`` for
+    ``<root>/video/<id>.mp4`` (this corpus's layout), else ``<id>.align`` beside the video, else
+    one beside it whose stem ends the video's stem (GRID's ``id2_vcd_swwp2s.mpg`` <- ``swwp2s.align``)."""
+    video = Path(video)
+    for cand in (video.parent.parent / "align" / f"{video.stem}.align", video.with_suffix(".align")):
+        if cand.is_file():
+            return cand
+    for cand in sorted(video.parent.glob("*.align")):
+        if video.stem.endswith(cand.stem):
+            return cand
+    return None
 
 
 def sentence_text(sentence_id: str) -> str:

@@ -8,33 +8,45 @@ eye centres (midpoints of the eye corners). Dividing by the IOD makes the values
 the face's size, the camera distance and any one face model. Image "up" is the face's own up
 axis after head pose has been removed (see :mod:`training.video`).
 
+The **neutral pose** is the face at rest: on video, the median face over the silences of the
+clip's word alignment (away from speech by 0.15 s: lips prepare before the sound and relax after
+it), else over its quietest frames (:mod:`training.video`, step 6). It replaced "the frames with the
+smallest lip gap", which made a talker whose lips are parted at rest read about 0.1 IOD open in
+silence and measured stretch and corners against pressed lips (a bilabial closure) instead of rest.
+
 ``upper_lip_raise``
-    Upward movement of the upper-lip midpoint (outer contour, philtrum side) relative to the
-    neutral pose. Positive = lip moves up (towards the nose), as in /f v/ or a snarl; negative =
-    the lip is pulled down or pressed, as in a bilabial closure.
+    Upward movement of the upper lip's outer contour at the midline (mean height of the
+    midpoint and its two neighbours, MediaPipe 0, 37, 267: the philtrum's foot) relative to the
+    neutral pose. Positive = lip moves up (towards the nose), as in /f v/ or a snarl and, a
+    little, whenever the mouth opens; negative = the lip is pulled down or pressed, as in a
+    bilabial closure. On GRID s1: +0.011 in f/v words, 0.000 in rounded ones, std 0.015.
     Typical range -0.05 .. +0.06 IOD.
 
 ``lip_stretch``
     Change of the mouth width: the distance between the two mouth corners minus its neutral
     value. Positive = wider (spread lips, /i/, /e/, smiling); negative = narrower (rounded lips,
-    /u/ /o/ /w/). Typical range -0.12 .. +0.10 IOD.
+    /u/ /o/ /w/). On GRID s1: -0.023 in rounded words, -0.001 in spread ones (relative to rest).
+    Typical range -0.12 .. +0.10 IOD.
 
 ``mouth_open``
-    The inner-lip vertical gap: distance between the inner contours of the upper and lower lip
-    at the midline, minus its neutral value (which is ~0 for a closed mouth). 0 = lips touch
-    (bilabial closure /p b m/ and rest); open vowels /a/ reach about 0.2-0.4 IOD (GRID talkers:
-    peaks 0.18-0.34).
-    Typical range 0 .. 0.45 IOD. Never negative in the articulatory model (a gap cannot be
-    negative); measured video tracks can dip slightly below 0 by noise.
+    The inner-lip vertical gap (mean 3D distance of three facing inner-lip point pairs at the
+    midline, MediaPipe 13-14, 82-87, 312-317) minus the gap **when the lips touch** (the closed
+    pose). 0 = lips touch (bilabial closure /p b m/, and rest for a talker whose lips close at
+    rest); it is never meaningfully negative (a gap cannot be; video tracks dip by noise only, and
+    model output is clamped at 0, the closed pose). On video the contact gap is the mean of a
+    clip's smallest 5 % of gaps (its closures), never above the rest gap; so a talker who rests
+    with parted lips reads their real rest opening in silence (GRID brbk7n: 0.10) while GRID s1,
+    whose lips close at rest, reads about 0.01. Open vowels /a/ reach 0.2-0.4 IOD.
+    Typical range 0 .. 0.45 IOD.
 
 ``lip_corner_depress``
     Downward movement of the mouth corners relative to the lip midline (the mean height of the
-    upper- and lower-lip midpoints), minus its neutral value. Positive = corners lower than the
+    upper- and lower-lip outer midpoints), minus its neutral value. Positive = corners lower than the
     lips' middle (a frown, the sagging corners of rounded /o u/ and /S Z/); negative = corners
     higher than the middle (a smile, spread /i e/). Because it is measured against the midline,
-    dropping the jaw alone lowers the midline and so makes the value slightly negative; the
-    articulatory rules and the video measurement share this definition.
-    Typical range -0.10 .. +0.05 IOD.
+    dropping the jaw alone lowers the midline and so makes the value slightly negative (GRID s1:
+    r = -0.41 with mouth_open); the articulatory rules and the video measurement share this
+    definition. Typical range -0.10 .. +0.05 IOD.
 
 Frame timing: 30 frames per second; frame ``k`` is the instant ``t = k / 30`` s exactly, and an
 utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).

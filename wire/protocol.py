@@ -83,6 +83,7 @@ CLOSE_TOO_SLOW = 4000  # a viewer stayed behind longer than the server allows
 CLOSE_UNAUTHORIZED = 4001  # missing or wrong token
 CLOSE_NOT_FOUND = 4004  # unknown session or endpoint
 CLOSE_CONFLICT = 4009  # the session name is in use
+CLOSE_TOO_FAST = 4029  # an ingest ran ahead of real time beyond its burst (servers set to close, not pace)
 CLOSE_BAD_REQUEST = 4400  # a start message or viewer query with missing or invalid fields
 
 

@@ -85,7 +85,9 @@ def run(args: argparse.Namespace) -> int:
         ready: asyncio.Future = asyncio.get_running_loop().create_future()
         extra = []
         run = asyncio.ensure_future(run_server(server, ready=ready))
-        await ready
+        await asyncio.wait({ready, run}, return_when=asyncio.FIRST_COMPLETED)
+        if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
+            run.result()
         print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}/ingest, /view); "
               "Ctrl-C stops", flush=True)
         for path in args.file:

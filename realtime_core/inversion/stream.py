@@ -109,11 +109,13 @@ class StreamingInverter:
     """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends.
 
     plan: the shared read-only matrices (built from ``form`` and ``config`` when not given;
-    it must have been built from the same two)."""
+    it must have been built from the same two). floor: ``(Dv,)`` lower bounds of the output (the
+    closed pose, :data:`realtime_core.CLOSED_POSE`; -inf = none), applied to every emitted frame."""
 
     def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig(),
-                 plan: StreamPlan | None = None) -> None:
+                 plan: StreamPlan | None = None, floor: np.ndarray | None = None) -> None:
         self.form = form
+        self._floor = None if floor is None else np.asarray(floor, dtype=np.float64).reshape(form.n_visual)
         self.config = config
         p = StreamPlan.build(form, config) if plan is None else plan
         self.plan = p
@@ -205,4 +207,6 @@ class StreamingInverter:
         # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
         # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
         _, x, info = _posv(P, rhs)
-        return x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
+        x = x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
+        # the output stage: never below the closed pose (eq. 7's regression can overshoot it)
+        return x if self._floor is None else np.maximum(x, self._floor)

@@ -1,5 +1,5 @@
 """The layer contract (pyproject [tool.importlinter]): imports run one way,
-core <- assets/wire <- server, clients, training <- benchmarks <- facecast, and no package cycle.
+core <- assets/wire <- server, clients, training <- benchmarks, perceptual <- facecast, and no package cycle.
 
 The contract is run on the real tree, and on a small fake tree with a deliberate violation to show
 that it can fail (a contract that cannot fail checks nothing)."""
@@ -20,7 +20,7 @@ from tests.prerequisites import require_tool
 pytestmark = pytest.mark.system
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("realtime_core", "wire", "assets", "server", "clients", "training", "benchmarks", "facecast")
+PACKAGES = ("realtime_core", "wire", "assets", "server", "clients", "training", "benchmarks", "perceptual", "facecast")
 
 
 def _contract() -> dict:

@@ -86,12 +86,30 @@ def test_sessions_of_a_model_share_one_plan_and_match_an_unshared_inverter():
     assert a.plan is b.plan  # one copy of the matrices for every live session
     assert m.inverter(StreamConfig(dtype="float64")).plan is not a.plan
     oa = np.random.default_rng(1).standard_normal((40, 9))
-    own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale))
+    own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale), floor=m.visual_floor)
     np.testing.assert_array_equal(np.concatenate([a.push(oa), a.flush()]), np.concatenate([own.push(oa), own.flush()]))
     # Sharing does not couple the sessions' states: interleaved pushes give each its own result.
-    ref = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale)).push(oa)
+    ref = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale),
+                            floor=m.visual_floor).push(oa)
     c = m.inverter()
     out_b = [b.push(oa[:20])]
     c.push(oa[::-1])
     out_b.append(b.push(oa[20:]))
     np.testing.assert_array_equal(np.concatenate(out_b), ref)
+
+
+def test_output_stage_clamps_at_the_closed_pose():
+    """A model's inverter never emits mouth_open below the closed pose (0); other parameters are
+    untouched: its output equals the unclamped inverter's with mouth_open floored at 0."""
+    from realtime_core import VISUAL_PARAMS
+    from realtime_core.inversion import StreamConfig, StreamingInverter
+
+    m = small_model(2)
+    j = VISUAL_PARAMS.index("mouth_open")
+    assert m.visual_floor[j] == 0.0 and np.isneginf(np.delete(m.visual_floor, j)).all()
+    oa = np.random.default_rng(3).standard_normal((200, 9)) * 3
+    free = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale))
+    raw = np.concatenate([free.push(oa), free.flush()])
+    inv = m.inverter()
+    out = np.concatenate([inv.push(oa), inv.flush()])
+    np.testing.assert_array_equal(out, np.maximum(raw, m.visual_floor))

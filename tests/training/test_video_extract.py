@@ -39,9 +39,9 @@ def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
     The word times come from swwp2s.align (units of 1/25000 s: the last word ends at
     74500 = 2.98 s of the 3 s clip, and "set" starts at 12250 = 0.49 s where the audio starts).
     """
-    from training.video import read_word_alignment
+    from training.grid import read_words
 
-    words = read_word_alignment(grid / "swwp2s.align")
+    words = read_words(grid / "swwp2s.align")
     assert words[-1][1] == pytest.approx(2.98) and [w for _, _, w in words][1:7] == [
         "set",
         "white",
@@ -72,25 +72,31 @@ def test_track_is_30fps_and_correlates_with_audio_energy(grid, ffmpeg, tmp_path)
     Measured 0.56. The threshold is far below what a correct track gives and far above what a
     time-shifted or broken track gives (|r| < 0.2 after shifting the track by 0.5 s).
     """
-    from realtime_core.features import loudness_db
-    from training.video import ExtractConfig, extract_videos
+    from training.video import frame_energy_db, load_face_track, save_plot, write_track_corpus
 
-    _manifest, (track,) = extract_videos([grid / "lbax4n.mpg"], tmp_path, ExtractConfig(), plot=True)
-    (utt,) = load_corpus(tmp_path)
+    track = load_face_track(grid / "lbax4n.mpg", cache_dir=tmp_path / "cache")
+    write_track_corpus([track], tmp_path / "corpus")
+    (utt,) = load_corpus(tmp_path / "corpus")
     assert utt.source == "video" and utt.speaker_group == "video:lbax4n"
     assert utt.params.shape == (n_frames_for(utt.duration_s), 4)
-    assert utt.sample_rate_hz == 16000 and track.video_fps == 25.0 and track.face_fraction == 1.0
-    assert (tmp_path / "video-lbax4n" / "mouth_open.png").stat().st_size > 10_000
+    assert utt.sample_rate_hz == 16000 and track.quality["video_fps"] == 25.0
+    assert track.quality["face_found_fraction"] == 1.0 and track.face_found.all()
+    assert save_plot(track, tmp_path / "lbax4n.png").stat().st_size > 10_000
     mo = utt.params[:, 2]
-    energy = loudness_db(utt.samples, utt.sample_rate_hz, len(mo))
+    energy = frame_energy_db(utt.samples, utt.sample_rate_hz, len(mo))
     r = np.corrcoef(mo, energy)[0, 1]
     assert r >= 0.40, r
     shifted = np.corrcoef(mo[15:], energy[:-15])[0, 1]
     assert abs(shifted) < r - 0.2, (r, shifted)
-    # resampling 25 -> 30 fps keeps the values at coinciding instants (t = 0, 0.2, 0.4 ...)
-    np.testing.assert_allclose(
-        utt.params[::6][: len(track.video_params[::5])], track.video_params[::5][: len(utt.params[::6])], atol=1e-5
-    )
+    # resampling 25 -> 30 fps keeps the values at coinciding instants (t = 0, 0.2, 0.4 ...): the
+    # landmarks of video frame 5j (t = j/5 s) are those of 30 fps frame 6j
+    from training.facetrack import read_raw
+    from training.video import remove_head_pose
+
+    raw = read_raw(next((tmp_path / "cache").rglob("*.npz")))
+    face_v, _, _ = remove_head_pose(raw.video_landmarks)
+    n = min(len(track.landmarks[::6]), len(face_v[::5]))
+    np.testing.assert_allclose(track.landmarks[::6][:n], face_v[::5][:n], atol=1e-5)
 
 
 def test_rules_agree_with_the_measured_lips(swwp2s, grid, espeak) -> None:
@@ -105,9 +111,9 @@ def test_rules_agree_with_the_measured_lips(swwp2s, grid, espeak) -> None:
     from training.alignments import phones_from_words
     from training.articulatory import render_params
     from training.espeak import Voice
-    from training.video import read_word_alignment
+    from training.grid import read_words
 
-    words = read_word_alignment(grid / "swwp2s.align")
+    words = read_words(grid / "swwp2s.align")
     phones = phones_from_words(words, voice=Voice(language="en", base="en"), spellings={"p": "pee"})
     rules = render_params(phones, len(swwp2s.params), inventory="espeak-en")
     t = np.arange(len(rules)) / FPS
@@ -141,10 +147,9 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
     within +-2 frames (a far lag would mean a timing bug in extraction or labelling).
     """
     require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
-    from realtime_core.features import loudness_db
     from training.articulatory import render_params
     from training.force_align import force_align
-    from training.video import measure_video
+    from training.video import frame_energy_db, measure_video
 
     rs, loud, lags = [], [], []
     for clip in sorted(grid.glob("*.mpg")):
@@ -156,6 +161,6 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
                                    mo[lag:] if lag >= 0 else mo[: len(mo) + lag])[0, 1] for lag in range(-3, 4)}
         rs.append(by_lag[0])
         lags.append(max(by_lag, key=by_lag.get))
-        loud.append(np.corrcoef(loudness_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])
+        loud.append(np.corrcoef(frame_energy_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])
     assert np.mean(rs) >= 0.40 and np.mean(rs) > np.mean(loud), (rs, loud)
     assert all(abs(lag) <= 2 for lag in lags), lags

@@ -1,0 +1,414 @@
+"""Scale-out over Redis: a cluster-wide session registry and per-session frame channels.
+
+Theory of operation
+-------------------
+Several facecast processes (on one machine or many) share one Redis (``ServerConfig.redis_url``).
+Every node can own sessions (the node an ingest lands on computes it) and serve viewers of any
+session:
+
+* **Registry.** A node that opens a session claims ``facecast:session:NAME`` with ``SET NX`` (so
+  a name is unique cluster-wide; a taken name answers 4009 naming the owner's node) holding the
+  session's row (its facts for viewer descriptions and its ``/sessions`` row, plus the owner's node
+  id and URL), with a TTL of ``3 x heartbeat``. A heartbeat task refreshes the rows and the node's
+  own key ``facecast:node:ID`` every ``heartbeat_s``; a node that dies drops out within the TTL.
+  ``/sessions`` lists every node's sessions from Redis.
+* **Frames.** The owner publishes each binary message it sends its own viewers (exactly those
+  bytes: header with the owner's send time, payload) on the Redis pub/sub channel
+  ``facecast:frames:NAME``, for each (kind, encoding) some node wants, the audio relay included; at
+  the end it publishes an end marker carrying the close code and reason. Another node's viewers of
+  that session attach to a :class:`RemoteFeed` (one per session per node, one subscription for
+  all its viewers) that hands the messages to them through the same fan-out as local sessions.
+* **Wants.** A node with viewers of a remote session sets ``facecast:want:NAME:KIND:ENC`` (TTL,
+  refreshed by the heartbeat) and publishes it on the owner's control channel so the owner starts
+  publishing that kind at once; the owner re-reads the wants every heartbeat. So a kind nobody
+  outside the owner watches (vertex deltas, say) is never encoded for Redis.
+* **Failure.** A Redis error never reaches a session: publishing goes through a bounded queue
+  drained by one task (messages dropped and counted while Redis is away), the heartbeat retries
+  and re-registers every local session when Redis returns, and ``/health`` says
+  ``"redis": "down: ..."`` (status ``degraded``) meanwhile. Remote feeds resubscribe when Redis
+  returns; their viewers stay connected. A node started with a wrong Redis address says so in one
+  line and does not start.
+
+Pub/sub rather than Streams: measured with ``benchmarks/server_redis_transport.py`` (see
+docs/deploy.md); pub/sub delivers with lower latency and less Redis CPU, stores nothing, and a live
+viewer has no use for frames older than its reconnection (Streams' replay).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from server.errors import ServerError
+from wire import protocol as P
+
+if TYPE_CHECKING:
+    import redis.asyncio as aioredis
+
+    from server.live import LiveSession
+
+log = logging.getLogger("facecast.cluster")
+
+PREFIX = "facecast"
+END_MARK = b"\x00END"  # first bytes of the end marker: never a binary frame (those start with version 1)
+PUBLISH_QUEUE = 4096  # messages waiting for Redis before the oldest is dropped
+
+
+def session_key(name: str) -> str:
+    return f"{PREFIX}:session:{name}"
+
+
+def frames_channel(name: str) -> str:
+    return f"{PREFIX}:frames:{name}"
+
+
+def control_channel(node: str) -> str:
+    return f"{PREFIX}:ctl:{node}"
+
+
+def want_key(name: str, kind: int, encoding: int) -> str:
+    return f"{PREFIX}:want:{name}:{kind}:{encoding}"
+
+
+class SessionFacts:
+    """What a viewer description needs of a session that runs on another node (from its row)."""
+
+    def __init__(self, row: dict) -> None:
+        self.fps = int(row["fps"])
+        self.rate_hz = int(row["rate_hz"])
+        self.algorithmic_delay_s = float(row["algorithmic_delay_s"])
+        self.frames_out = int(row.get("frames", 0))
+        self.samples_out = int(round(float(row.get("audio_s", 0.0)) * self.rate_hz))
+        self.row = row
+
+
+class RemoteFeed:
+    """The viewers this node holds of one session that runs on another node."""
+
+    def __init__(self, name: str, row: dict) -> None:
+        self.name = name
+        self.row = row
+        self.facts = SessionFacts(row)
+        self.viewers: set = set()  # server.live.Viewer objects
+        self.ended = asyncio.Event()
+        self.end: tuple[int, str] = (P.CLOSE_NORMAL, "session ended")
+        self.frames = 0
+        self.dropped = 0
+        self.session = self.facts  # what descriptions read, as of a LiveSession
+
+
+class Cluster:
+    """One node's view of the cluster. ``await start()`` (ServerError in one line if Redis cannot be
+    reached), ``await stop()``.
+
+    url: Redis URL; node: this node's id; advertise: the URL clients reach this node at;
+    heartbeat_s: registry refresh period; deliver: (feed, message bytes, kind, encoding) -> None,
+    the server's fan-out to a feed's viewers; end_feed: (feed) -> coroutine closing its viewers."""
+
+    def __init__(self, url: str, *, node: str, advertise: str, heartbeat_s: float,
+                 deliver: Callable[[RemoteFeed, bytes, int, int], None],
+                 end_feed: Callable[[RemoteFeed], "asyncio.Future | object"]) -> None:
+        self.url = url
+        self.node = node
+        self.advertise = advertise
+        self.heartbeat_s = heartbeat_s
+        self.ttl_ms = int(3000 * heartbeat_s)
+        self._deliver = deliver
+        self._end_feed = end_feed
+        self.redis: "aioredis.Redis | None" = None
+        self.up = False
+        self.error = ""
+        self.local: dict[str, "LiveSession"] = {}
+        self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
+        self.feeds: dict[str, RemoteFeed] = {}
+        self.published = 0
+        self.publish_dropped = 0
+        self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._wake = asyncio.Event()
+        self._tasks: list[asyncio.Task] = []
+        self._pubsub = None
+        self._subscribed: set[str] = set()
+
+    # -- lifecycle -------------------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        import redis.asyncio as aioredis
+        from redis.exceptions import RedisError
+
+        self.redis = aioredis.Redis.from_url(self.url, socket_connect_timeout=2, socket_timeout=5,
+                                             health_check_interval=0)
+        try:
+            await self.redis.ping()
+        except (RedisError, OSError) as exc:
+            await self.redis.aclose()
+            raise ServerError(f"cannot reach Redis at {self.url}: {exc}") from None
+        self.up = True
+        self._tasks = [asyncio.ensure_future(self._publisher()), asyncio.ensure_future(self._heartbeat()),
+                       asyncio.ensure_future(self._listen())]
+
+    async def stop(self) -> None:
+        deadline = time.monotonic() + 1.0  # let the end markers of the last sessions go out
+        while self._queue and self.up and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        for t in self._tasks:
+            t.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self.redis is not None and self.up:
+            try:
+                names = list(self.local)
+                if names:
+                    await self.redis.delete(*(session_key(n) for n in names))
+                await self.redis.delete(f"{PREFIX}:node:{self.node}")
+            except Exception:  # noqa: BLE001 - best effort on the way out: the keys expire anyway
+                pass
+        if self._pubsub is not None:
+            try:
+                await self._pubsub.aclose()
+            except Exception:  # noqa: BLE001 - the connection may already be gone
+                pass
+        if self.redis is not None:
+            await self.redis.aclose()
+
+    def health(self) -> dict:
+        return {"redis": "ok" if self.up else f"down: {self.error}", "node": self.node,
+                "remote_feeds": len(self.feeds), "published": self.published,
+                "publish_dropped": self.publish_dropped}
+
+    # -- sessions this node owns --------------------------------------------------------------------------
+
+    def _row(self, live: "LiveSession") -> str:
+        from server.describe import summary
+
+        s = live.session
+        row = summary(live)
+        row.update({"node": self.node, "node_url": self.advertise, "fps": s.fps, "rate_hz": s.rate_hz,
+                    "algorithmic_delay_s": s.algorithmic_delay_s,
+                    "published_kinds": sorted(self.wanted.get(live.name, ()))})
+        return json.dumps(row)
+
+    async def claim(self, live: "LiveSession") -> str | None:
+        """Register a new local session; returns the owner's node id if the name is taken elsewhere.
+        With Redis away the session opens locally (registered when Redis returns)."""
+        from redis.exceptions import RedisError
+
+        try:
+            ok = await self.redis.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
+            if not ok:
+                raw = await self.redis.get(session_key(live.name))
+                owner = json.loads(raw).get("node", "?") if raw else None
+                if owner is not None and owner != self.node:
+                    return owner
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+        self.local[live.name] = live
+        return None
+
+    async def release(self, live: "LiveSession", code: int, reason: str) -> None:
+        """A local session ended: tell remote viewers (end marker) and drop its registry row."""
+        from redis.exceptions import RedisError
+
+        if self.local.get(live.name) is not live:
+            return
+        del self.local[live.name]
+        self.wanted.pop(live.name, None)
+        self.publish(live.name, END_MARK + json.dumps({"code": code, "reason": reason}).encode())
+        try:
+            await self.redis.delete(session_key(live.name))
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+
+    def wants(self, name: str) -> set[tuple[int, int]]:
+        """(kind, encoding) pairs other nodes watch of local session ``name`` (audio: KIND_AUDIO, int16)."""
+        return self.wanted.get(name, set())
+
+    def publish(self, name: str, message: bytes) -> None:
+        """Queue one message for the session's channel; never waits, never raises."""
+        if len(self._queue) >= PUBLISH_QUEUE:
+            self._queue.popleft()
+            self.publish_dropped += 1
+        self._queue.append((frames_channel(name), message))
+        self._wake.set()
+
+    async def _publisher(self) -> None:
+        from redis.exceptions import RedisError
+
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            while self._queue:
+                batch = [self._queue.popleft() for _ in range(min(len(self._queue), 256))]
+                try:
+                    pipe = self.redis.pipeline(transaction=False)
+                    for channel, msg in batch:
+                        pipe.publish(channel, msg)
+                    await pipe.execute()
+                    self.published += len(batch)
+                except (RedisError, OSError) as exc:
+                    self.publish_dropped += len(batch)
+                    self._down(exc)
+                    await asyncio.sleep(0.2)
+
+    # -- heartbeat, wants, recovery ------------------------------------------------------------------------
+
+    def _down(self, exc: BaseException) -> None:
+        if self.up:
+            log.warning("Redis unreachable at %s: %s (sessions go on; retrying)", self.url, exc)
+        self.up = False
+        self.error = str(exc)[:200] or type(exc).__name__
+
+    async def _heartbeat(self) -> None:
+        from redis.exceptions import RedisError
+
+        while True:
+            try:
+                await self._beat()
+                if not self.up:
+                    log.warning("Redis is back at %s: %d local sessions re-registered", self.url, len(self.local))
+                self.up, self.error = True, ""
+            except (RedisError, OSError) as exc:
+                self._down(exc)
+            await asyncio.sleep(self.heartbeat_s if self.up else min(self.heartbeat_s, 0.5))
+
+    async def _beat(self) -> None:
+        r = self.redis
+        pipe = r.pipeline(transaction=False)
+        pipe.set(f"{PREFIX}:node:{self.node}", json.dumps({"url": self.advertise, "sessions": len(self.local)}),
+                 px=self.ttl_ms)
+        for name, live in self.local.items():
+            pipe.set(session_key(name), self._row(live), px=self.ttl_ms)
+        for name, feed in self.feeds.items():
+            for kind, enc in {(v.kind, v.encoding) for v in feed.viewers} | (
+                    {(P.KIND_AUDIO, P.ENC_INT16)} if any(v.audio for v in feed.viewers) else set()):
+                pipe.set(want_key(name, kind, enc), self.node, px=self.ttl_ms)
+        await pipe.execute()
+        # The owner's side: which kinds of its sessions other nodes want now.
+        wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
+        for name in list(self.local):
+            async for key in r.scan_iter(match=f"{PREFIX}:want:{name}:*", count=100):
+                k = key.decode() if isinstance(key, bytes) else key
+                _, _, _, kind, enc = k.rsplit(":", 4)
+                wanted[name].add((int(kind), int(enc)))
+        self.wanted = wanted
+        if self._pubsub is not None and self._pubsub.connection is None:
+            raise ConnectionError("subscription lost")
+
+    # -- feeds of remote sessions ----------------------------------------------------------------------
+
+    async def lookup(self, name: str) -> dict | None:
+        """The registry row of session ``name`` on another node (None: unknown or Redis away)."""
+        from redis.exceptions import RedisError
+
+        try:
+            raw = await self.redis.get(session_key(name))
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+            return None
+        if raw is None:
+            return None
+        row = json.loads(raw)
+        return None if row.get("node") == self.node else row
+
+    async def list_sessions(self) -> list[dict] | None:
+        """Every node's session rows (None when Redis is away)."""
+        from redis.exceptions import RedisError
+
+        try:
+            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:session:*", count=500)]
+            rows = await self.redis.mget(keys) if keys else []
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+            return None
+        return [json.loads(r) for r in rows if r is not None]
+
+    async def feed(self, name: str, row: dict, kind: int, encoding: int, audio: bool) -> RemoteFeed:
+        """The feed of remote session ``name`` (created and subscribed on first use); tells the
+        owner at once that this node wants ``kind``/``encoding`` (and audio)."""
+        feed = self.feeds.get(name)
+        if feed is None:
+            feed = self.feeds[name] = RemoteFeed(name, row)
+            await self._subscribe(frames_channel(name))
+        pairs = [(kind, encoding)] + ([(P.KIND_AUDIO, P.ENC_INT16)] if audio else [])
+        pipe = self.redis.pipeline(transaction=False)
+        for k, e in pairs:
+            pipe.set(want_key(name, k, e), self.node, px=self.ttl_ms)
+            pipe.publish(control_channel(row["node"]), json.dumps({"want": [name, k, e]}))
+        await pipe.execute()
+        return feed
+
+    async def drop_feed_if_idle(self, feed: RemoteFeed) -> None:
+        if feed.viewers or self.feeds.get(feed.name) is not feed:
+            return
+        del self.feeds[feed.name]
+        await self._unsubscribe(frames_channel(feed.name))
+
+    async def _subscribe(self, channel: str) -> None:
+        self._subscribed.add(channel)
+        if self._pubsub is not None:
+            try:
+                await self._pubsub.subscribe(channel)
+            except Exception as exc:  # noqa: BLE001 - the listener resubscribes when Redis returns
+                self._down(exc)
+
+    async def _unsubscribe(self, channel: str) -> None:
+        self._subscribed.discard(channel)
+        if self._pubsub is not None:
+            try:
+                await self._pubsub.unsubscribe(channel)
+            except Exception as exc:  # noqa: BLE001 - as above
+                self._down(exc)
+
+    async def _listen(self) -> None:
+        """One subscription connection for this node: frame channels of its feeds and its control channel."""
+        from redis.exceptions import RedisError
+
+        while True:
+            try:
+                self._pubsub = self.redis.pubsub(ignore_subscribe_messages=True)
+                await self._pubsub.subscribe(control_channel(self.node), *self._subscribed)
+                while True:
+                    msg = await self._pubsub.get_message(timeout=1.0)
+                    if msg is None:
+                        continue
+                    self._on_message(msg)
+            except asyncio.CancelledError:
+                raise
+            except (RedisError, OSError) as exc:
+                self._down(exc)
+                try:
+                    await self._pubsub.aclose()
+                except Exception:  # noqa: BLE001 - already broken
+                    pass
+                self._pubsub = None
+                await asyncio.sleep(0.5)
+
+    def _on_message(self, msg: dict) -> None:
+        channel = msg["channel"].decode() if isinstance(msg["channel"], bytes) else msg["channel"]
+        data = msg["data"]
+        if channel == control_channel(self.node):
+            want = json.loads(data).get("want")
+            if want and want[0] in self.local:
+                self.wanted[want[0]].add((int(want[1]), int(want[2])))
+            return
+        name = channel[len(f"{PREFIX}:frames:"):]
+        feed = self.feeds.get(name)
+        if feed is None:
+            return
+        if data[:4] == END_MARK:
+            end = json.loads(data[4:])
+            feed.end = (int(end["code"]), str(end["reason"]))
+            feed.ended.set()
+            self.feeds.pop(name, None)
+            asyncio.ensure_future(self._unsubscribe(channel))
+            asyncio.ensure_future(self._end_feed(feed))
+            return
+        if len(data) < P.HEADER_BYTES:
+            return
+        kind, enc = data[1], data[2]
+        if kind != P.KIND_AUDIO:
+            feed.frames += 1
+        self._deliver(feed, data, kind, enc)

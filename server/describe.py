@@ -1,0 +1,81 @@
+"""Session descriptions: what a peer is told about a session, as JSON-ready dicts (no I/O).
+
+``started`` answers an ingest's start message, ``view_description`` is a viewer's first message
+(docs/protocol.md lists every field), ``summary`` is one row of ``/sessions`` and ``/metrics``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.blendshapes import blendshape_names
+from wire import protocol as P
+
+if TYPE_CHECKING:
+    from server.app import Head
+    from server.live import LiveSession
+    from server.protocol import ViewRequest
+
+
+def started(live: "LiveSession") -> dict:
+    """The ``started`` reply's fields (the protocol adds ``type``)."""
+    s = live.session
+    return {"session": live.name, "model_rate_hz": s.rate_hz, "fps": s.fps,
+            "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={live.name}"}
+
+
+def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None") -> dict:
+    """A viewer's first message: the session, the subscription, the value layout and the head."""
+    s = live.session
+    d: dict = {
+        "type": "description",
+        "protocol": P.PROTOCOL_VERSION,
+        "session": live.name,
+        "fps": s.fps,
+        "kind": req.kind,
+        "encoding": req.encoding,
+        "header_kind": req.header_kind,
+        "header_encoding": req.header_encoding,
+        "header_bytes": P.HEADER_BYTES,
+        "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
+        "algorithmic_delay_s": s.algorithmic_delay_s,
+        "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if req.audio else None,
+        "values_per_frame": len(VISUAL_PARAMS),
+        "head": None,
+    }
+    if head is not None:
+        rig, mesh = head.rig, head.mesh
+        d["head"] = {
+            "mesh_url": "/head/mesh",
+            "mesh_json_url": "/head/mesh.json",
+            "texture_url": "/head/texture" if mesh.texture is not None else None,
+            "vertex_count": int(len(mesh.vertices)),
+            "moving_vertices": rig.moving.astype(int).tolist(),
+            "units": "mesh units",
+        }
+    if req.kind == "deltas" and head is not None:
+        d["values_per_frame"] = 3 * int(len(head.rig.moving))
+        d["layout"] = "x, y, z of each moving vertex in moving_vertices order, added to the neutral mesh"
+    elif req.kind == "blendshapes":
+        d["names"] = list(blendshape_names(req.encoding))
+        d["values_per_frame"] = len(d["names"])
+    return d
+
+
+def summary(live: "LiveSession") -> dict:
+    """One session's row. ``source`` is the source's kind only (ingest, file, microphone): a file
+    session's path stays in the server's log, never in a reply."""
+    s = live.session
+    row = {
+        "name": live.name,
+        "source": live.source.split(" ", 1)[0],
+        "viewers": len(live.viewers),
+        "frames": s.frames_out,
+        "audio_s": round(s.samples_out / s.rate_hz, 3),
+        "dropped": live.dropped,
+        "input_rate_hz": s.config.sample_rate_hz,
+        "channels": s.config.channels,
+        "controls": s.control_state(),
+    }
+    return row

@@ -1,0 +1,281 @@
+"""Live sessions and their viewers: fan-out with per-viewer backpressure (asyncio, no sockets opened here).
+
+A :class:`LiveSession` couples one session handle with any number of :class:`Viewer` objects. The
+handle is either a :class:`LocalSession` (the sans-I/O :class:`server.session.Session` run on the
+event loop) or a :class:`server.workers.RemoteSession` (the same session in a compute process):
+both offer the one async interface :class:`SessionHandle`, so nothing here branches on where a
+session runs.
+
+Fan-out: each frame is encoded once per (kind, encoding) that somebody watches, given one header
+with the send time, and offered to every viewer of that kind. A viewer that keeps up (nothing
+queued, socket buffer under 64 KiB) gets each message written synchronously, as python-websockets'
+``broadcast`` does, without a task switch per message. Otherwise the message goes to the viewer's
+bounded queue, drained by its own sender task; offering a message never waits. When a queue is full
+the oldest message is dropped and counted (the freshest frame matters most for live animation); a
+viewer that keeps dropping for ``viewer_max_behind_s`` is closed with 4000.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import time
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from websockets.asyncio.server import ServerConnection, broadcast
+
+from server.describe import summary
+from server.errors import IngestOverrun
+from server.guard import IngestPacer
+from server.session import Output, Session, SessionConfig
+from wire import protocol as P
+
+if TYPE_CHECKING:
+    from server.app import FacecastServer
+
+FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
+# A viewer whose socket buffer holds less than this gets messages written synchronously
+# (websockets' broadcast); others go through their queue and sender task (backpressure, drops).
+FAST_PATH_BUFFER_BYTES = 64 * 1024
+
+
+class SessionHandle(Protocol):
+    """What a live session needs from its session, wherever it runs."""
+
+    config: SessionConfig
+    rate_hz: int
+    fps: int
+    frames_out: int
+    samples_out: int
+    frame_bytes: int
+    algorithmic_delay_s: float
+
+    async def push_bytes(self, data: bytes) -> Output: ...
+    async def push(self, samples: np.ndarray) -> Output: ...
+    async def flush(self) -> Output: ...
+    async def apply_control(self, msg: dict) -> dict: ...
+    async def close(self) -> None: ...
+    def control_state(self) -> dict: ...
+
+
+class LocalSession:
+    """A :class:`Session` run on the event loop behind the async :class:`SessionHandle` interface."""
+
+    def __init__(self, core: Session) -> None:
+        self.core = core
+        self.config = core.config
+        self.rate_hz = core.rate_hz
+        self.fps = core.fps
+        self.frame_bytes = core.frame_bytes
+        self.algorithmic_delay_s = core.algorithmic_delay_s
+
+    @property
+    def frames_out(self) -> int:
+        return self.core.frames_out
+
+    @property
+    def samples_out(self) -> int:
+        return self.core.samples_out
+
+    async def push_bytes(self, data: bytes) -> Output:
+        return self.core.push_bytes(data)
+
+    async def push(self, samples: np.ndarray) -> Output:
+        return self.core.push(samples)
+
+    async def flush(self) -> Output:
+        return self.core.flush()
+
+    async def apply_control(self, msg: dict) -> dict:
+        return self.core.apply_control(msg)
+
+    async def close(self) -> None:
+        """Nothing to release: the session lives in this process."""
+
+    def control_state(self) -> dict:
+        return self.core.control_state()
+
+
+def deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+    """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
+    message), the bounded queue for the others."""
+    fast = []
+    for v in viewers:
+        if v.writable_now():
+            fast.append(v)
+        else:
+            v.offer(msg, now)
+    if fast:
+        broadcast([v.ws for v in fast], msg)
+        for v in fast:
+            v.sent += 1
+
+
+class Viewer:
+    """One subscriber: a bounded queue of ready messages drained by its own sender task."""
+
+    def __init__(self, ws: ServerConnection, live: "LiveSession", *, kind: int, encoding: int, audio: bool,
+                 server: "FacecastServer") -> None:
+        self.ws = ws
+        self.live = live
+        self.kind = kind
+        self.encoding = encoding
+        self.audio = audio
+        self.server = server
+        self.queue: collections.deque[bytes] = collections.deque()
+        self.limit = server.config.viewer_queue
+        self.wake = asyncio.Event()
+        self.dropped = 0
+        self.sent = 0
+        self.behind_since: float | None = None
+        self.closing = False
+        self.sending = False
+
+    def writable_now(self) -> bool:
+        """True when a message can be written straight to the socket without reordering or
+        buffering beyond the write limit: nothing queued or in flight, transport buffer low."""
+        if self.closing or self.queue or self.sending:
+            return False
+        transport = self.ws.transport
+        return transport is not None and transport.get_write_buffer_size() <= FAST_PATH_BUFFER_BYTES
+
+    def offer(self, msg: bytes, now: float) -> None:
+        """Queue one message without waiting; drop the oldest when full; close if behind too long."""
+        if self.closing:
+            return
+        if len(self.queue) >= self.limit:
+            self.queue.popleft()
+            self.dropped += 1
+            self.live.dropped += 1
+            self.server.dropped += 1
+            if self.behind_since is None:
+                self.behind_since = now
+            elif now - self.behind_since > self.server.config.viewer_max_behind_s:
+                self.closing = True
+                self.server.closed_slow += 1
+                self.queue.clear()
+                self.server.spawn(
+                    self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
+                                         f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
+                )
+                return
+        self.queue.append(msg)
+        self.wake.set()
+
+    async def run(self) -> None:
+        """Send queued messages until the connection closes."""
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            self.sending = True
+            try:
+                while self.queue:
+                    msg = self.queue.popleft()
+                    await self.ws.send(msg)
+                    self.sent += 1
+            finally:
+                self.sending = False
+            self.behind_since = None
+
+
+class LiveSession:
+    """A session with its viewers: feed it audio, it fans frames out."""
+
+    def __init__(self, name: str, session: "SessionHandle", server: "FacecastServer", *, source: str) -> None:
+        self.name = name
+        self.session = session
+        self.server = server
+        self.source = source
+        self.viewers: set[Viewer] = set()
+        self.dropped = 0
+        self.started = time.time()
+        self.ended = asyncio.Event()
+        self.pacer: IngestPacer | None = None  # set for real-time ingests (not batch, not local sources)
+        self.overrun = "pace"
+        self.paced_s = 0.0
+        self.batch = False
+
+    async def feed_bytes(self, data: bytes) -> int:
+        """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
+        return self._fanout(await self.session.push_bytes(data))
+
+    async def feed_bytes_fairly(self, data: bytes) -> int:
+        """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
+        processed in slices of at most ``FAIR_SLICE_S`` of audio with a yield to the loop between
+        them, so one session's burst never holds up the other sessions for more than a few frames."""
+        s = self.session
+        frame = s.frame_bytes
+        step = max(1, int(FAIR_SLICE_S * s.config.sample_rate_hz)) * frame
+        if len(data) % frame:
+            return await self.feed_bytes(data)  # a partial sample raises the AudioFormatError naming it
+        if len(data) <= step:
+            await self._pace(len(data) // frame)
+            return await self.feed_bytes(data)
+        n = 0
+        for i in range(0, len(data), step):
+            piece = data[i:i + step]
+            await self._pace(len(piece) // frame)
+            n += await self.feed_bytes(piece)
+            await asyncio.sleep(0)
+        return n
+
+    async def _pace(self, samples: int) -> None:
+        """Hold an ingest to real time plus its burst (:class:`server.guard.IngestPacer`): wait, or
+        raise IngestOverrun when the server is set to close overrunning ingests."""
+        if self.pacer is None:
+            return
+        loop = asyncio.get_running_loop()
+        wait = self.pacer.delay(samples / self.session.config.sample_rate_hz, loop.time())
+        if wait <= 0:
+            return
+        if self.overrun == "close":
+            raise IngestOverrun(f"ingest ran over {self.pacer.burst_s:g} s ahead of real time "
+                                "(send in real time, or start with \"batch\": true)")
+        self.paced_s += wait
+        await asyncio.sleep(wait)
+
+    async def feed(self, samples: np.ndarray) -> int:
+        """(n,) or (n, channels) float samples -> frames produced."""
+        return self._fanout(await self.session.push(samples))
+
+    async def finish(self) -> int:
+        """End of the audio: flush the remaining frames to the viewers."""
+        return self._fanout(await self.session.flush())
+
+    async def control(self, msg: dict) -> dict:
+        """Apply a control message (ControlError if rejected); returns the control state."""
+        return await self.session.apply_control(msg)
+
+    def _fanout(self, out: Output) -> int:
+        cluster = self.server.cluster
+        remote = cluster.wants(self.name) if cluster is not None else ()
+        if not self.viewers and not remote:
+            return len(out.frames)
+        t0 = time.perf_counter()
+        now = time.time()
+        if out.audio is not None:
+            listeners = [v for v in self.viewers if v.audio]
+            if listeners or (P.KIND_AUDIO, P.ENC_INT16) in remote:
+                a = out.audio
+                msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time,
+                                    now) + a.payload()
+                deliver(listeners, msg, now)
+                if remote:
+                    cluster.publish(self.name, msg)
+        if out.frames:
+            groups: dict[tuple[int, int], list[Viewer]] = {k: [] for k in remote if k[0] != P.KIND_AUDIO}
+            for v in self.viewers:
+                groups.setdefault((v.kind, v.encoding), []).append(v)
+            for frame in out.frames:
+                for (kind, enc), members in groups.items():
+                    payload, count, scale = frame.payload(kind, enc)
+                    msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
+                    deliver(members, msg, now)
+                    if (kind, enc) in remote:
+                        cluster.publish(self.name, msg)
+        self.server.times.add("fanout", time.perf_counter() - t0)
+        return len(out.frames)
+
+    def describe(self) -> dict:
+        return summary(self)

@@ -1,0 +1,21 @@
+"""Fixtures of the perceptual-experiment tests: a tiny real stimulus set, built once and cached under
+artifacts/ (helpers in :mod:`tests.perceptual.harness`)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.perceptual.harness import ARTIFACTS, grid_root, tiny_config
+from tests.prerequisites import require
+
+
+@pytest.fixture(scope="session")
+def stimuli():
+    import shutil
+
+    root = grid_root()
+    require(root is not None, "GRID s1 corpus not found in ../shared/data/video/grid_s1")
+    require(shutil.which("ffmpeg") is not None, "ffmpeg is not installed")
+    from perceptual.stimuli import build
+
+    return build(tiny_config(ARTIFACTS / "stimuli", root))

@@ -1,0 +1,251 @@
+"""A cluster of three real facecast processes sharing a real redis-server on a loopback port.
+
+A viewer on node B receives exactly what a viewer on node A receives; killing an edge node makes
+its viewers reconnect to another without the session noticing; Redis going away shows on /health,
+local sessions go on, and the nodes re-register when it returns; a wrong Redis address is one line
+at start. Every wait is bounded: nothing hangs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.server_harness import ServerProcess
+from clients.client import IngestClient, ViewerClient, http_get, stream_samples
+from tests.prerequisites import missing
+from tests.speech import speechlike
+from wire import protocol as P
+
+# Three facecast processes and a real redis-server.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class RedisServer:
+    """redis-server on 127.0.0.1:port, no persistence; stop() and start() again on the same port."""
+
+    def __init__(self, binary: str, port: int) -> None:
+        self.binary, self.port = binary, port
+        self.url = f"redis://127.0.0.1:{port}/0"
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> None:
+        self.proc = subprocess.Popen([self.binary, "--port", str(self.port), "--bind", "127.0.0.1", "--save", "",
+                                      "--appendonly", "no", "--protected-mode", "no"],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2) as c:
+                    c.sendall(b"PING\r\n")
+                    if c.recv(16).startswith(b"+PONG"):
+                        return
+            except OSError:
+                time.sleep(0.05)
+        raise RuntimeError("redis-server did not start within 10 s")
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            self.proc.wait(10)
+
+
+@pytest.fixture()
+def redis_server():
+    binary = shutil.which("redis-server") or (
+        "/usr/bin/redis-server" if Path("/usr/bin/redis-server").exists() else None
+    )
+    if binary is None:
+        missing("redis-server is not installed (apt-get install redis-server; scripts/setup.sh does it)")
+    r = RedisServer(binary, _free_port())
+    r.start()
+    try:
+        yield r
+    finally:
+        r.stop()
+
+
+def _node(model_path, redis_url: str, name: str) -> ServerProcess:
+    toml = f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
+    return ServerProcess(model_path, head=False, config_toml=toml)
+
+
+async def _get_json(url: str, path: str) -> dict:
+    status, body = await http_get(url, path)
+    assert status == 200, (path, status, body[:200])
+    return json.loads(body)
+
+
+async def _until(predicate, timeout_s: float = 10.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = await predicate()
+        if value:
+            return value
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+
+async def _published(url: str, name: str, kinds: set[tuple[int, int]]) -> bool:
+    rows = (await _get_json(url, "/sessions"))["sessions"]
+    row = next((r for r in rows if r["name"] == name), None)
+    return row is not None and kinds <= {tuple(k) for k in row.get("published_kinds", [])}
+
+
+def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
+    nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b", "c")]
+    pcm = np.rint(speechlike(2.0, 16000, seed=4) * 32767).astype(np.int16)
+
+    async def main():
+        a, b, c = (n.url for n in nodes)
+        async with IngestClient(a, session="x", sample_rate_hz=16000) as ing:
+            # Cluster-wide registry: every node lists the session, owned by a.
+            for u in (a, b, c):
+                rows = (await _until(lambda u=u: _get_json(u, "/sessions"), what="sessions"))["sessions"]
+                assert [(r["name"], r["node"]) for r in rows] == [("x", "a")]
+            va = ViewerClient(a, session="x", audio=True)
+            vb = ViewerClient(b, session="x", audio=True)
+            vc = ViewerClient(c, session="x", kind="blendshapes", encoding="arkit52", audio=False)
+            for v in (va, vb, vc):
+                await v.__aenter__()
+            assert vb.description["fps"] == va.description["fps"] and vb.description["session"] == "x"
+            await _until(lambda: _published(a, "x", {(P.KIND_PARAMS, P.ENC_FLOAT32), (P.KIND_AUDIO, P.ENC_INT16),
+                                                       (P.KIND_ARKIT52, P.ENC_FLOAT32)}), what="wants reach the owner")
+            tasks = [asyncio.ensure_future(v.collect()) for v in (va, vb, vc)]
+            await stream_samples(ing, pcm, realtime=True, block_s=0.02)
+            ended = await ing.end()
+            got = await asyncio.wait_for(asyncio.gather(*tasks), 20)
+        health = [await _get_json(u, "/health") for u in (a, b, c)]
+        return ended, got, health
+
+    try:
+        ended, (ga, gb, gc), health = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    n = ended["frames"]
+    assert [m.index for m in ga.frames] == [m.index for m in gb.frames] == list(range(n))
+    np.testing.assert_array_equal(gb.values(), ga.values())  # the same bytes decoded: identical
+    assert [m.send_time for m in gb.frames] == [m.send_time for m in ga.frames]  # the owner's stamps
+    np.testing.assert_array_equal(gb.audio_samples(), ga.audio_samples())
+    assert len(gc.frames) == n and gc.values().shape[1] == 52
+    assert ga.close_code == gb.close_code == gc.close_code == P.CLOSE_NORMAL
+    assert all(h["status"] == "ok" and h["redis"] == "ok" for h in health)
+    # The far node's delivery is close behind the near node's (reported, not a goal of this test).
+    lag = np.array(gb.received) - np.array(ga.received)
+    print(f"cluster: far-node minus near-node receipt, median {np.median(lag) * 1e3:.2f} ms, "
+          f"p99 {np.percentile(lag, 99) * 1e3:.2f} ms")
+
+
+def test_killing_an_edge_node_loses_no_session(model_path, redis_server):
+    nodes = {n: _node(model_path, redis_server.url, n) for n in ("a", "b", "c")}
+    pcm = np.rint(speechlike(3.0, 16000, seed=6) * 32767).astype(np.int16)
+
+    async def main():
+        a, b, c = (nodes[n].url for n in "abc")
+        async with IngestClient(a, session="y", sample_rate_hz=16000) as ing:
+            await _until(lambda: _get_json(c, "/sessions"), what="registry")
+            first = ViewerClient(c, session="y", audio=False)
+            await first.__aenter__()
+            collect1 = asyncio.ensure_future(first.collect())
+            feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
+            await asyncio.sleep(1.0)
+            nodes["c"].proc.send_signal(signal.SIGKILL)  # the edge node dies under load
+            got1 = await asyncio.wait_for(collect1, 10)
+            # The viewer reconnects to another node and goes on watching the same session.
+            second = ViewerClient(b, session="y", audio=False)
+            await second.__aenter__()
+            collect2 = asyncio.ensure_future(second.collect())
+            await feed
+            ended = await ing.end()
+            got2 = await asyncio.wait_for(collect2, 20)
+            sessions = (await _get_json(a, "/sessions"))["sessions"]
+        return got1, got2, ended, sessions
+
+    try:
+        got1, got2, ended, sessions = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes.values():
+            n.stop()
+    assert got1.close_code != P.CLOSE_NORMAL and len(got1.frames) > 0  # cut off by the kill
+    idx2 = [m.index for m in got2.frames]
+    assert idx2 == list(range(idx2[0], ended["frames"]))  # consecutive to the end after reconnecting
+    assert idx2[0] <= got1.frames[-1].index + 40  # reconnected within about a second of frames
+    assert got2.close_code == P.CLOSE_NORMAL
+    assert ended["frames"] == int(np.ceil(len(pcm) / (16000 / 30)))  # the session itself lost nothing
+    assert sessions == []
+
+
+def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_server):
+    nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b")]
+    pcm = np.rint(speechlike(4.0, 16000, seed=8) * 32767).astype(np.int16)
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        async with IngestClient(a, session="z", sample_rate_hz=16000) as ing:
+            async with ViewerClient(a, session="z", audio=False) as local:
+                collect = asyncio.ensure_future(local.collect())
+                feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
+                await asyncio.sleep(0.5)
+                redis_server.stop()
+                down = await _until(lambda: _health_if(a, "degraded"), what="degraded health")
+                await asyncio.sleep(0.5)
+                redis_server.start()
+                up = [await _until(lambda u=u: _health_if(u, "ok"), 15, what="recovery") for u in (a, b)]
+                # Re-registered: node b sees the session again and can serve a viewer of it.
+                rows = await _until(lambda: _rows_if(b, "z"), 10, what="re-registration")
+                remote = ViewerClient(b, session="z", audio=False)
+                await remote.__aenter__()
+                collect_remote = asyncio.ensure_future(remote.collect())
+                await feed
+                ended = await ing.end()
+                got = await asyncio.wait_for(collect, 20)
+                got_remote = await asyncio.wait_for(collect_remote, 20)
+        return down, up, rows, ended, got, got_remote
+
+    try:
+        down, up, rows, ended, got, got_remote = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert down["status"] == "degraded" and down["redis"].startswith("down")
+    assert all(h["redis"] == "ok" for h in up) and rows[0]["node"] == "a"
+    assert [m.index for m in got.frames] == list(range(ended["frames"]))  # the local viewer lost nothing
+    assert got_remote.close_code == P.CLOSE_NORMAL and len(got_remote.frames) > 0
+
+
+async def _health_if(url: str, status: str) -> dict | None:
+    h = await _get_json(url, "/health")
+    return h if h["status"] == status else None
+
+
+async def _rows_if(url: str, name: str) -> list | None:
+    rows = (await _get_json(url, "/sessions"))["sessions"]
+    return rows if any(r["name"] == name for r in rows) and rows[0].get("node") else None
+
+
+def test_a_wrong_redis_address_is_one_line_at_start(model_path):
+    facecast = str(Path(sys.executable).parent / "facecast")
+    cfg = Path(model_path).parent / "bad_redis.toml"
+    cfg.write_text(f'[server]\nredis_url = "redis://127.0.0.1:{_free_port()}/0"\n')
+    out = subprocess.run([facecast, "serve", "--port", "0", "--no-head", "--model", str(model_path), "--config",
+                          str(cfg)], capture_output=True, text=True, timeout=60)
+    assert out.returncode != 0
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "cannot reach Redis at redis://127.0.0.1:" in lines[0], out.stderr

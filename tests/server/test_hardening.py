@@ -1,0 +1,214 @@
+"""Hardening over real sockets: Origin and Host checks, the token on HTTP, ingest pacing and its
+close mode, batch sessions, idle timeout, per-client limits, hostile JSON and paths."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+
+import numpy as np
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
+
+from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, ws_url
+from server.app import FacecastServer
+from server.config import ServerConfig
+from tests.speech import speechlike
+from wire import protocol as P
+
+# A real server over loopback sockets.
+pytestmark = pytest.mark.system
+
+
+@contextlib.asynccontextmanager
+async def running(model, head=None, **config):
+    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
+    await srv.start()
+    try:
+        yield srv
+    finally:
+        await srv.stop()
+
+
+async def raw_http(port: int, request: bytes) -> tuple[int, bytes]:
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(request)
+    await writer.drain()
+    data = await asyncio.wait_for(reader.read(), 10)
+    writer.close()
+    head, _, body = data.partition(b"\r\n\r\n")
+    return int(head.split(b" ", 2)[1]), body
+
+
+async def handshake_status(url: str, path: str, **kw) -> int | None:
+    """HTTP status of a refused WebSocket handshake (None: accepted)."""
+    try:
+        async with connect(ws_url(url, path), compression=None, **kw):
+            return None
+    except InvalidStatus as exc:
+        return exc.response.status_code
+
+
+def _pcm(seconds: float) -> np.ndarray:
+    return np.rint(speechlike(seconds, 16000) * 32767).astype(np.int16)
+
+
+def test_origin_host_and_token_checks(model):
+    async def main():
+        async with running(model, token="sesame", allowed_origins=["http://app.example"]) as srv:
+            url, port = srv.url, srv.port
+            async with IngestClient(url, session="s", sample_rate_hz=16000, token="sesame"):
+                view = "/view?session=s&token=sesame"
+                origins = {o: await handshake_status(url, view, origin=o) for o in
+                           (None, f"http://127.0.0.1:{port}", "http://app.example", "http://evil.example", "null")}
+                status = {}
+                for path in ("/health", "/metrics", "/sessions", "/head/mesh", "/", "/metrics?token=nope",
+                             "/metrics?token=sesame", "/sessions?token=sesame"):
+                    status[path] = await http_get(url, path)
+                bearer = await raw_http(port, b"GET /sessions HTTP/1.1\r\nHost: localhost\r\n"
+                                        b"Authorization: Bearer sesame\r\nConnection: close\r\n\r\n")
+                rebound = await raw_http(
+                    port, b"GET /health HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n"
+                )
+                rebound_ws = await raw_http(port, b"GET /view?session=s&token=sesame HTTP/1.1\r\nHost: evil.example\r\n"
+                                            b"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: "
+                                            b"dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+                return origins, status, bearer, rebound, rebound_ws
+
+    origins, status, bearer, rebound, rebound_ws = asyncio.run(main())
+    assert list(origins.values()) == [None, None, None, 403, 403]
+    assert status["/health"][0] == 200 and b'"s"' not in status["/health"][1]
+    for path in ("/metrics", "/sessions", "/head/mesh", "/metrics?token=nope"):
+        assert status[path][0] == 401, path
+    assert status["/"][0] == 200 and b"token" in status["/"][1] and b">s<" not in status["/"][1]
+    assert status["/metrics?token=sesame"][0] == 200
+    assert json.loads(status["/sessions?token=sesame"][1])["sessions"][0]["name"] == "s"
+    assert bearer[0] == 200
+    assert rebound[0] == 403 and rebound_ws[0] == 403
+
+
+def test_file_paths_never_reach_a_client(model, tmp_path):
+    async def blocks():
+        yield np.zeros(1600, np.float32)
+        await asyncio.sleep(10)
+
+    async def main():
+        async with running(model) as srv:
+            task = asyncio.ensure_future(srv.run_source("f", blocks(), sample_rate_hz=16000,
+                                                        label=f"file {tmp_path}/secret/take1.wav"))
+            while "f" not in srv.sessions:
+                await asyncio.sleep(0.01)
+            out = [await http_get(srv.url, p) for p in ("/metrics", "/sessions", "/")]
+            task.cancel()
+            return out
+
+    for status, body in asyncio.run(main()):
+        assert status == 200 and b"secret" not in body and str(tmp_path).encode() not in body
+
+
+def test_ingest_is_paced_to_real_time_after_its_burst_or_closed_or_batch(model):
+    pcm = _pcm(2.0)
+
+    async def send_all(url):
+        async with IngestClient(url, session="fast", sample_rate_hz=16000) as ing:
+            t0 = time.monotonic()
+            for i in range(0, len(pcm), 1600):
+                await ing.send(pcm[i:i + 1600])
+            ended = await ing.end()
+            return time.monotonic() - t0, ended
+
+    async def batch(url):
+        async with connect(ws_url(url, "/ingest"), compression=None) as ws:
+            await ws.send(json.dumps({"type": "start", "session": "b", "sample_rate": 16000, "batch": True}))
+            json.loads(await ws.recv())
+            t0 = time.monotonic()
+            await ws.send(pcm.tobytes())
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            return time.monotonic() - t0, ended
+
+    async def main():
+        async with running(model, ingest_burst_s=0.5) as srv:
+            paced = await send_all(srv.url)
+            fast = await batch(srv.url)
+        async with running(model, ingest_burst_s=0.5, ingest_overrun="close") as srv:
+            try:
+                await send_all(srv.url)
+                closed = None
+            except ServerClosed as exc:
+                closed = (exc.code, exc.reason)
+        return paced, fast, closed
+
+    (paced_s, ended), (batch_s, batch_ended), closed = asyncio.run(main())
+    assert paced_s >= 1.4 and ended["frames"] == batch_ended["frames"] > 0  # 2 s of audio, 0.5 s ahead at most
+    assert batch_s < paced_s
+    assert closed is not None and closed[0] == P.CLOSE_TOO_FAST and "ahead of real time" in closed[1]
+
+
+def test_idle_timeout_and_per_client_limit(model):
+    async def main():
+        async with running(model, idle_timeout_s=0.3, max_connections_per_client=2) as srv:
+            url = srv.url
+            try:
+                async with IngestClient(url, session="idle", sample_rate_hz=16000) as ing:
+                    async with ViewerClient(url, session="idle"):
+                        third = await handshake_status(url, "/view?session=idle")
+                        await asyncio.sleep(1.0)
+                        await ing.send(np.zeros(160, np.int16))
+                        await ing.end()
+                idle = None
+            except ServerClosed as exc:
+                idle = (exc.code, exc.reason)
+            return third, idle
+
+    third, idle = asyncio.run(main())
+    assert third == 429
+    assert idle is not None and idle[0] == P.CLOSE_POLICY and "idle" in idle[1]
+
+
+def test_hostile_json_and_paths_are_refused_without_internal_errors(model, caplog):
+    deep = "[" * 30000 + "]" * 30000
+
+    async def one(url, *msgs):
+        async with connect(ws_url(url, "/ingest"), compression=None, max_size=None) as ws:
+            for m in msgs:
+                await ws.send(m)
+            with contextlib.suppress(Exception):
+                while True:
+                    await asyncio.wait_for(ws.recv(), 5)
+            return ws.close_code, ws.close_reason
+
+    async def main():
+        async with running(model) as srv:
+            start = json.dumps({"type": "start", "session": "h", "sample_rate": 16000})
+            out = [await one(srv.url, deep) for _ in range(20)]
+            out.append(await one(srv.url, start, '{"type": "control", "gain": ' + deep + "}"))
+            long_path = await http_get(srv.url, "/" + "a" * 5000)
+            long_name = await http_get(srv.url, "/" + "b" * 300)
+            health = await http_get(srv.url, "/health")
+            return out, long_path, long_name, health, srv.metrics()
+
+    with caplog.at_level(logging.INFO, logger="facecast.server"):
+        out, long_path, long_name, health, metrics = asyncio.run(main())
+    assert all(code == P.CLOSE_INVALID_PAYLOAD and "nests deeper" in reason for code, reason in out)
+    assert long_path[0] in (404, 414) and long_name[0] in (404, 414)
+    assert health[0] == 200
+    assert "1011" not in metrics["closes"]
+    messages = [r.getMessage() for r in caplog.records if r.name == "facecast.server"]
+    assert not any(r.exc_info for r in caplog.records)
+    assert len(messages) <= 4, messages  # 21 refusals: logged once per kind, not once each
+
+
+@pytest.mark.parametrize("cfg, match", [({"ingest_overrun": "drop"}, "ingest_overrun"),
+                                        ({"allowed_origins": ["null"]}, "null"),
+                                        ({"allowed_origins": "http://a"}, "allowed_origins"),
+                                        ({"max_connections_per_client": -1}, "max_connections_per_client")])
+def test_bad_hardening_config_is_named(cfg, match):
+    from server.errors import ServerConfigError
+
+    with pytest.raises(ServerConfigError, match=match):
+        ServerConfig(**cfg)

@@ -1,0 +1,70 @@
+"""The HTTP router without sockets: static files and their types, traversal, long paths, the index."""
+
+from __future__ import annotations
+
+from http import HTTPStatus
+
+import pytest
+
+from server.http import HttpRouter
+
+
+@pytest.fixture()
+def router(tmp_path):
+    root = tmp_path / "web"
+    (root / "js").mkdir(parents=True)
+    (root / "index.html").write_text("<h1>viewer</h1>")
+    (root / "js" / "main.js").write_text("export {}")
+    (root / "style.css").write_text("body{}")
+    (root / "blob.xyz123").write_bytes(b"\x00")
+    (tmp_path / "secret.txt").write_text("no")
+    nm = tmp_path / "node_modules" / "three"
+    (nm / "build").mkdir(parents=True)
+    (nm / "build" / "three.module.js").write_text("three")
+    (nm / "package.json").write_text("{}")
+    return HttpRouter(web_root=root, node_modules=tmp_path / "node_modules", head=None,
+                      sessions=lambda: [{"name": "<a>", "frames": 1, "viewers": 0}])
+
+
+# (path, status, content type prefix or None)
+ROUTES = [
+    ("/", HTTPStatus.OK, "text/html; charset=utf-8"),
+    ("/index.html", HTTPStatus.OK, "text/html"),
+    ("/js/main.js", HTTPStatus.OK, "text/javascript"),
+    ("/style.css", HTTPStatus.OK, "text/css"),
+    ("/blob.xyz123", HTTPStatus.OK, "application/octet-stream"),
+    ("/js/protocol.js", HTTPStatus.OK, "text/javascript"),  # the wire format's JS twin
+    ("/vendor/three/build/three.module.js", HTTPStatus.OK, "text/javascript"),
+    ("/vendor/three/package.json", HTTPStatus.NOT_FOUND, None),  # only build/ and examples/jsm/
+    ("/vendor/three/build/../package.json", HTTPStatus.NOT_FOUND, None),
+    ("/../secret.txt", HTTPStatus.NOT_FOUND, None),
+    ("/js/../../secret.txt", HTTPStatus.NOT_FOUND, None),
+    ("/nope", HTTPStatus.NOT_FOUND, None),
+    ("/js", HTTPStatus.NOT_FOUND, None),  # a directory
+    ("/a\x00b", HTTPStatus.NOT_FOUND, None),
+    ("/head/mesh", HTTPStatus.NOT_FOUND, None),  # no head
+    ("/" + "a" * 300, HTTPStatus.REQUEST_URI_TOO_LONG, None),  # one name over the file system's limit
+    ("/" + "a/" * 600, HTTPStatus.REQUEST_URI_TOO_LONG, None),
+]
+
+
+@pytest.mark.parametrize("path, status, ctype", ROUTES, ids=[r[0][:40] for r in ROUTES])
+def test_routes(router, path, status, ctype):
+    reply = router.handle(path)
+    assert reply.status == status, reply.body[:200]
+    if ctype is not None:
+        assert reply.content_type.startswith(ctype)
+
+
+def test_generated_index_escapes_session_names(tmp_path):
+    r = HttpRouter(web_root=None, node_modules=None, head=None,
+                   sessions=lambda: [{"name": "<script>", "frames": 1, "viewers": 0}])
+    body = r.handle("/").body.decode()
+    assert "&lt;script&gt;" in body and "<script>" not in body
+
+
+def test_added_routes_win(router):
+    from server.http import HttpReply
+
+    router.route("/health", lambda: HttpReply.json({"status": "ok"}))
+    assert router.handle("/health").body == b'{"status":"ok"}'

@@ -1,0 +1,256 @@
+"""Real lips: GRID s1 face tracks as training utterances, acoustic variety, and the real-lips scores.
+
+- :func:`grid_utterances` turns the cached :class:`~training.facetrack.FaceTrack` of every GRID s1
+  sentence of a split (``training.grid.split_of``) into corpus :class:`~training.corpus.Utterance`
+  objects (source "video", speaker group ``grid:s1``), extracting what the cache lacks.
+- :func:`speed_perturb` is the acoustic variety that serves other voices (Ko et al. 2015): the audio
+  played ``factor`` times faster (resampled: formants, pitch and tempo all scale by ``factor``, like a
+  shorter vocal tract and a faster talker), the lip track re-timed to match, so labels stay exact.
+  Microphone variety (noise, reverberation, level, rate) comes from :mod:`training.augment`.
+- :func:`bilabial_spans` finds the /p b m/ closures of a GRID sentence from its word alignment and a
+  fixed pronunciation of the GRID vocabulary (which of its 51 words hold a bilabial, and where).
+- :func:`score_lips` scores estimated against measured tracks per parameter: r at lag 0, the best lag
+  within +-3 frames, nu = std(estimate) / std(truth) (seed 002, eq. 7), the share of bilabial closures
+  the estimate reaches (mouth_open within ``closure_tol_iod`` of the closed pose, 0), and the loudness
+  baseline (the frame's RMS level in dB as a mouth_open predictor).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from training.augment import AugmentConfig, augment
+from training.corpus import Utterance
+from training.errors import ConfigError, FileProblem
+from training.grid import Split, read_words, sentences
+from training.params import FPS, n_frames_for
+
+MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
+
+# Where the bilabial sits in each GRID word that has one ("initial": /b p/ opening the word,
+# "final": /m/ ending it): bin, blue, by, place, please, and the letters b ("bee"), p ("pee"),
+# m ("em"). No other GRID word (commands, colours, prepositions, letters, digits, adverbs) has one.
+GRID_BILABIALS: dict[str, str] = {"bin": "initial", "blue": "initial", "by": "initial", "place": "initial",
+                                  "please": "initial", "b": "initial", "p": "initial", "m": "final"}
+CLOSURE_S = 0.10
+"""Length of the span searched for a closure at a bilabial word's start (or end for /m/): a stop
+closure lasts 50-120 ms and the alignment's word boundary falls within a frame of it."""
+
+
+def bilabial_spans(words: Sequence[tuple[float, float, str]]) -> list[tuple[float, float, str]]:
+    """``[(start_s, end_s, word)]`` spans holding a /p b m/ closure, from a GRID word alignment."""
+    out = []
+    for a, b, w in words:
+        where = GRID_BILABIALS.get(w.lower())
+        if where == "initial":
+            out.append((max(a - CLOSURE_S / 2, 0.0), min(a + CLOSURE_S, b), w))
+        elif where == "final":
+            out.append((max(b - CLOSURE_S, a), b + CLOSURE_S / 2, w))
+    return out
+
+
+# --------------------------------------------------------------------------- training data
+def track_to_utterance(track, *, utt_id: str, speaker_group: str = "grid:s1") -> Utterance:
+    """A :class:`FaceTrack` as a corpus utterance (source "video")."""
+    return Utterance(id=utt_id, samples=track.samples, sample_rate_hz=track.sample_rate_hz, params=track.params,
+                     phonemes=(), voice=speaker_group, language="en", source="video", speaker_group=speaker_group)
+
+
+def grid_tracks(split: Split | None, *, root: str | Path | None = None, cache_dir: str | Path | None = None,
+                progress: Callable | None = None, log: Callable[[str], None] | None = None) -> list:
+    """``[(GridSentence, FaceTrack)]`` of a split (None = all), from the cache (extracting what is
+    missing, one process). A sentence that cannot be measured is skipped with one line (``log``)."""
+    from training.video import load_face_track
+
+    wrap = progress or (lambda it, **_: it)
+    out = []
+    for s in wrap(sentences(root, split=split), desc=f"GRID s1 {split or 'all'}", unit="clip"):
+        try:
+            out.append((s, load_face_track(s.video, cache_dir=cache_dir, require_alignment=True)))
+        except FileProblem as exc:
+            (log or print)(f"skipped {s.video}: {exc.problem}")
+    return out
+
+
+def grid_utterances(split: Split | None, **kwargs) -> list[Utterance]:
+    """The GRID s1 sentences of ``split`` as training utterances (see :func:`grid_tracks`)."""
+    return [track_to_utterance(t, utt_id=f"grid-s1-{s.sentence_id}") for s, t in grid_tracks(split, **kwargs)]
+
+
+def speed_perturb(utt: Utterance, factor: float) -> Utterance:
+    """``utt`` played ``factor`` times faster (0.8 .. 1.25): audio resampled (pitch, formants and
+    tempo scale together), the parameter track re-timed (frame k of the result is the original at
+    ``k * factor / 30`` s, linear interpolation). ``factor`` 1 returns ``utt``."""
+    from scipy.signal import resample_poly
+
+    if not 0.8 <= factor <= 1.25:
+        raise ConfigError(f"speed factor must be in [0.8, 1.25], got {factor}")
+    if factor == 1.0:
+        return utt
+    # play faster = keep the samples, declare them at rate * factor, convert back to the rate
+    up, down = 1000, int(round(1000 * factor))
+    audio = resample_poly(utt.samples.astype(np.float64), up, down).astype(np.float32)
+    n = n_frames_for(len(audio) / utt.sample_rate_hz)
+    t_src = np.arange(len(utt.params)) / FPS
+    t_new = np.minimum(np.arange(n) * down / up / FPS, t_src[-1])
+    params = np.stack([np.interp(t_new, t_src, utt.params[:, j]) for j in range(utt.params.shape[1])], axis=1)
+    return Utterance(id=f"{utt.id}-speed{factor:g}", samples=audio, sample_rate_hz=utt.sample_rate_hz,
+                     params=params, phonemes=(), voice=utt.voice, language=utt.language, source=utt.source,
+                     speaker_group=f"{utt.speaker_group}-speed{factor:g}")
+
+
+def microphone_copy(utt: Utterance, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Utterance:
+    """``utt`` through :func:`training.augment.augment` (noise, reverberation, level, rate)."""
+    aug = augment(utt.samples, utt.sample_rate_hz, rng, config)
+    n = n_frames_for(len(aug.samples) / aug.sample_rate_hz)
+    params = (
+        utt.params[:n]
+        if len(utt.params) >= n
+        else np.vstack([utt.params, np.repeat(utt.params[-1:], n - len(utt.params), 0)])
+    )
+    return Utterance(id=f"{utt.id}-mic", samples=aug.samples, sample_rate_hz=aug.sample_rate_hz, params=params,
+                     phonemes=(), voice=utt.voice, language=utt.language, source=utt.source,
+                     speaker_group=utt.speaker_group)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Variety:
+    """How much acoustic variety is added to the real-lips training set.
+
+    speeds:       speed-perturbation factors; each adds one copy of every utterance.
+    mic_copies:   copies of every (original and speed-perturbed) utterance through the microphone
+                  chain (noise, reverberation, level, rate).
+    seed:         seeds the microphone draws.
+    """
+
+    speeds: tuple[float, ...] = ()
+    mic_copies: int = 0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for f in self.speeds:
+            if not 0.8 <= f <= 1.25:
+                raise ConfigError(f"speed factors must be in [0.8, 1.25], got {f}")
+        if self.mic_copies < 0:
+            raise ConfigError(f"mic_copies must be >= 0, got {self.mic_copies}")
+
+
+def add_variety(utts: Sequence[Utterance], variety: Variety) -> list[Utterance]:
+    """The originals, one speed-perturbed copy per factor, then ``mic_copies`` microphone copies of each."""
+    out = list(utts)
+    for f in variety.speeds:
+        out += [speed_perturb(u, f) for u in utts]
+    rng = np.random.default_rng(variety.seed)
+    base = list(out)
+    for _ in range(variety.mic_copies):
+        out += [microphone_copy(u, rng) for u in base]
+    return out
+
+
+# --------------------------------------------------------------------------- scores
+def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
+    from training.evaluation import loudness_db as _loud
+
+    return _loud(samples, rate_hz, n_frames)
+
+
+def _lagged_r(truth: np.ndarray, est: np.ndarray, lag: int) -> float:
+    a, b = (truth[: len(truth) - lag], est[lag:]) if lag >= 0 else (truth[-lag:], est[: len(est) + lag])
+    if len(a) < 3 or a.std() == 0 or b.std() == 0:
+        return 0.0
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+@dataclass(frozen=True)
+class LipScores:
+    """Scores of a set of clips (frames pooled for r and nu; closures counted over all clips).
+
+    r, best_lag, r_best, nu: per parameter name. closure_rate: estimated mouth_open reaches the
+    closed pose (<= ``tol``) in this share of bilabial spans (``n_closures``); truth_closure_rate
+    is the same for the measured track (how well the spans find closures). r_loudness: the
+    loudness baseline's r with the true mouth_open. per_clip: name -> {r mouth_open, r loudness}.
+    """
+
+    r: dict
+    best_lag: dict
+    r_best: dict
+    nu: dict
+    closure_rate: float
+    truth_closure_rate: float
+    n_closures: int
+    r_loudness: float
+    n_frames: int
+    per_clip: dict = field(default_factory=dict)
+
+    def as_json(self) -> dict:
+        rnd = lambda d: {k: round(float(v), 4) for k, v in d.items()}  # noqa: E731
+        return {"r": rnd(self.r), "best_lag": self.best_lag, "r_best": rnd(self.r_best), "nu": rnd(self.nu),
+                "closure_rate": round(self.closure_rate, 4), "truth_closure_rate": round(self.truth_closure_rate, 4),
+                "n_closures": self.n_closures, "r_loudness": round(self.r_loudness, 4), "n_frames": self.n_frames,
+                "per_clip": {k: rnd(v) for k, v in self.per_clip.items()}}
+
+
+def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, list]], *,
+               closure_tol_iod: float = 0.01) -> LipScores:
+    """``items``: (name, truth (T, 4), estimate (T', 4), loudness (T,) dB, bilabial spans [(a, b, w)]).
+
+    Tracks are cut to the shorter length; frames of all clips are pooled for r / lags / nu."""
+    truths, ests, louds, per_clip = [], [], [], {}
+    hits = true_hits = n = 0
+    for name, truth, est, loud, spans in items:
+        T = min(len(truth), len(est), len(loud))
+        truth, est, loud = truth[:T], est[:T], loud[:T]
+        truths.append(truth)
+        ests.append(est)
+        louds.append(loud)
+        per_clip[name] = {"r_mouth_open": _lagged_r(truth[:, MOUTH_OPEN], est[:, MOUTH_OPEN], 0),
+                          "r_loudness": _lagged_r(truth[:, MOUTH_OPEN], loud, 0)}
+        t = np.arange(T) / FPS
+        for a, b, _ in spans:
+            sel = (t >= a - 0.5 / FPS) & (t <= b + 0.5 / FPS)
+            if not sel.any():
+                continue
+            n += 1
+            hits += bool(est[sel, MOUTH_OPEN].min() <= closure_tol_iod)
+            true_hits += bool(truth[sel, MOUTH_OPEN].min() <= closure_tol_iod)
+    tr, es, lo = np.concatenate(truths), np.concatenate(ests), np.concatenate(louds)
+    r, lag, rb, nu = {}, {}, {}, {}
+    for j, name in enumerate(VISUAL_PARAMS):
+        r[name] = _lagged_r(tr[:, j], es[:, j], 0)
+        # lags are found per clip boundary-free: pool shifted clips
+        by_lag = {}
+        for L in range(-3, 4):
+            a = np.concatenate([x[: len(x) - L, j] if L >= 0 else x[-L:, j] for x in truths])
+            b = np.concatenate([y[L:, j] if L >= 0 else y[: len(y) + L, j] for y in ests])
+            by_lag[L] = float(np.corrcoef(a, b)[0, 1]) if a.std() > 0 and b.std() > 0 else 0.0
+        lag[name] = max(by_lag, key=by_lag.__getitem__)
+        rb[name] = by_lag[lag[name]]
+        nu[name] = float(es[:, j].std() / tr[:, j].std()) if tr[:, j].std() > 0 else float("nan")
+    return LipScores(r=r, best_lag=lag, r_best=rb, nu=nu, closure_rate=hits / n if n else float("nan"),
+                     truth_closure_rate=true_hits / n if n else float("nan"), n_closures=n,
+                     r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0), n_frames=len(tr), per_clip=per_clip)
+
+
+def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]]) -> list:
+    """Run the live path of ``model`` on ``clips`` (name, samples, rate_hz, truth (T, 4), words or
+    None) -> items for :func:`score_lips` (bilabial spans from the words; none without words)."""
+    from realtime_core.pipeline import speech_to_params
+
+    out = []
+    for name, samples, rate, truth, words in clips:
+        est = speech_to_params(model, samples, rate)
+        out.append((name, truth, est, loudness_db(samples, rate, len(truth)), bilabial_spans(words or [])))
+    return out
+
+
+def words_of(video: Path) -> list | None:
+    """The word alignment beside a video (training.grid.align_for_video), or None."""
+    from training.grid import align_for_video
+
+    align = align_for_video(video)
+    return read_words(align) if align else None
