@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.features import loudness_db
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
@@ -153,12 +154,6 @@ def add_variety(utts: Sequence[Utterance], variety: Variety) -> list[Utterance]:
 
 
 # --------------------------------------------------------------------------- scores
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    from training.evaluation import loudness_db as _loud
-
-    return _loud(samples, rate_hz, n_frames)
-
-
 def _lagged_r(truth: np.ndarray, est: np.ndarray, lag: int) -> float:
     a, b = (truth[: len(truth) - lag], est[lag:]) if lag >= 0 else (truth[-lag:], est[: len(est) + lag])
     if len(a) < 3 or a.std() == 0 or b.std() == 0:
