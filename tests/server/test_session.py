@@ -125,3 +125,10 @@ def test_blendshape_maps():
     assert wide["jawOpen"] == pytest.approx(1.0) and wide["mouthSmileLeft"] == 0.0
     w = blendshape_weights(np.random.default_rng(0).standard_normal((10, 4)), "arkit52")
     assert w.shape == (10, 52) and w.min() >= 0 and w.max() <= 1
+
+
+@pytest.mark.parametrize("fmt", [{"a": 1}, ["pcm_s16le"], 16, None])
+def test_a_non_string_sample_format_is_a_config_error_not_a_crash(fmt):
+    """Found by tests/server/test_fuzz.py: an unhashable format (a JSON object) raised TypeError (1011)."""
+    with pytest.raises(ServerConfigError, match="format must be one of"):
+        SessionConfig(sample_rate_hz=16000, sample_format=fmt)
