@@ -58,3 +58,19 @@ class RigFileError(AssetsError, ValueError):
 
 class AssetError(AssetsError, RuntimeError):
     """The built-in head's assets could not be fetched or read."""
+
+
+class GlbError(AssetsError, ValueError):
+    """A head or animation cannot be written as glTF (bad shapes, unknown image type)."""
+
+
+class RigCheckError(AssetsError, ValueError):
+    """A rig fails the extreme-pose checks (flipped triangles, stretch, lips, teeth)."""
+
+
+class AlignmentFormatError(FileProblem):
+    """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
+
+
+class SynthesisError(AssetsError):
+    """espeak-ng failed: library missing, unknown voice, or synthesis error."""

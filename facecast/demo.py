@@ -69,8 +69,8 @@ class DemoResult:
 
 def synthesise(sentences: tuple[str, ...], voice: str, *, pause_s: float = 0.5) -> tuple[np.ndarray, int]:
     """espeak-ng speech of the sentences with pauses: ((n,) float32 in [-1, 1], rate Hz)."""
+    from assets.espeak import LANGUAGES, Voice, synthesizer
     from training.errors import TrainingError
-    from training.espeak import LANGUAGES, Voice, synthesizer
 
     lang = next((k for k, v in LANGUAGES.items() if voice in v), None)
     if lang is None:

@@ -1,6 +1,6 @@
 """``facecast perceptual build``: every stimulus of a test, rendered once, cached, listed in a manifest.
 
-Sources. Sentences are GRID s1 *test-split* sentences (``training.grid``; never tuned on): the
+Sources. Sentences are GRID s1 *test-split* sentences (``assets.grid``; never tuned on): the
 real talker's audio and video. Syllables are the 27 CV syllables of seed 000 synthesised by espeak-ng
 in English and Spanish (spelled so that espeak says exactly consonant + vowel; the phonemes it
 reports are checked). Clips for opinion scores may also be any MP4 the experimenter names.
@@ -348,7 +348,7 @@ class _Builder:
     def grid_audio(self, sentence) -> tuple[np.ndarray, np.ndarray, int, str]:
         """Clean GRID speech (n,), its speech mask (n,), rate, and the source video's hash."""
         from assets.audio import read_audio
-        from training.grid import SILENCE_WORDS, read_words
+        from assets.grid import SILENCE_WORDS, read_words
 
         digest = self.sources.get(str(sentence.video)) or sha256_file(sentence.video)
         self.sources[str(sentence.video)] = digest
@@ -364,7 +364,7 @@ class _Builder:
         """espeak-ng speech of one CV syllable, padded; cached as WAV (espeak is not bit-reproducible
         across processes, the cached file is what every condition uses)."""
         from assets.audio import read_wav
-        from training.espeak import Voice, synthesizer
+        from assets.espeak import Voice, synthesizer
 
         cons = next(c for c in sorted(CONSONANTS, key=len, reverse=True) if syl.startswith(c))
         vow = syl[len(cons):]
@@ -482,7 +482,7 @@ class _Builder:
 
 
 def _select_sentences(config: BuildConfig, n: int) -> list:
-    from training.grid import default_root, sentences
+    from assets.grid import default_root, sentences
 
     root = Path(config.grid_root) if config.grid_root is not None else default_root()
     if not (root / "video").is_dir():

@@ -30,7 +30,13 @@ from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
-from realtime_core.inversion import ConditionalForm, StreamConfig, StreamingInverter, StreamPlan
+from realtime_core.inversion import (
+    ConditionalForm,
+    StreamConfig,
+    StreamingInverter,
+    StreamPlan,
+)
+from realtime_core.output import OutputStage
 
 FORMAT = "facecast-avmodel"
 VERSION = 1
@@ -43,7 +49,8 @@ class AvModel:
     """hmm: the joint HMM over ``[o_a; o_v]``; frontend: how o_a is computed;
     cmvn_mean/cmvn_var: ``(n_feat,)`` training statistics (CMVN warm start);
     visual_names: names of the o_v dimensions; likelihood_scale: the audio-likelihood exponent
-    the live path uses (chosen on held-out data, see :class:`StreamConfig`);
+    the live path uses (chosen on held-out data, see :class:`StreamConfig`); closure_band: IOD,
+    the output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off);
     metadata: JSON-able training details."""
 
     hmm: AvHmm
@@ -52,6 +59,7 @@ class AvModel:
     cmvn_var: np.ndarray
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     likelihood_scale: float = 1.0
+    closure_band: float = 0.0
     metadata: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -71,6 +79,8 @@ class AvModel:
             raise ModelFormatError("cmvn_var must be positive")
         if not 0 < self.likelihood_scale <= 1:
             raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
+        if not 0 <= self.closure_band <= 0.1:
+            raise ModelFormatError(f"closure_band must be in [0, 0.1] IOD, got {self.closure_band}")
 
     @cached_property
     def form(self) -> ConditionalForm:
@@ -99,12 +109,17 @@ class AvModel:
         plan = self._plans.get(key)
         if plan is None:
             plan = self._plans[key] = StreamPlan.build(self.form, config)
-        return StreamingInverter(self.form, config=config, plan=plan, floor=self.visual_floor)
+        return StreamingInverter(self.form, config=config, plan=plan, output=self.output_stage)
 
     @cached_property
     def visual_floor(self) -> np.ndarray:
         """``(n_visual,)`` lower bounds of the output (the closed pose; -inf where none)."""
         return visual_floor(self.visual_names)
+
+    @cached_property
+    def output_stage(self) -> OutputStage:
+        """The closed-pose floor and closure band applied to every estimate (:mod:`realtime_core.output`)."""
+        return OutputStage(self.visual_floor, self.closure_band)
 
 
 def _frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
@@ -130,6 +145,7 @@ def encode_model(model: AvModel) -> bytes:
         "frontend": _frontend_to_json(model.frontend),
         "visual_names": list(model.visual_names),
         "likelihood_scale": model.likelihood_scale,
+        "closure_band": model.closure_band,
         "covariance_type": model.hmm.covariance_type,
         "n_audio": model.hmm.n_audio,
         "metadata": model.metadata,
@@ -179,6 +195,7 @@ def decode_model(data: bytes) -> AvModel:
             cmvn_var=arrays["cmvn_var"],
             visual_names=tuple(config["visual_names"]),
             likelihood_scale=float(config.get("likelihood_scale", 1.0)),
+            closure_band=float(config.get("closure_band", 0.0)),  # 0: models from before the band
             metadata=config.get("metadata", {}),
         )
     except ModelFormatError:

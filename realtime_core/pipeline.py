@@ -125,4 +125,4 @@ def speech_to_params(
         return np.concatenate([p.push(x), p.flush()])
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])
-    return np.maximum(hmm_inversion(model.form, oa, config=hmmi).visual, model.visual_floor)
+    return model.output_stage(hmm_inversion(model.form, oa, config=hmmi).visual)

@@ -34,7 +34,6 @@ import socket
 import time
 import urllib.parse
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
 
@@ -44,9 +43,8 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from assets.heads.mesh import HeadMesh
+from assets.heads.head import Head
 from realtime_core.avmodel import AvModel
-from realtime_core.face.rig import Rig
 from server import describe
 from server import protocol as SP
 from server.cluster import Cluster, RemoteFeed
@@ -59,7 +57,14 @@ from server.errors import (
     ServerConfigError,
     ServerError,
 )
-from server.guard import ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed, origin_allowed
+from server.guard import (
+    ConnectionCounter,
+    ConnectionRate,
+    IncidentLog,
+    IngestPacer,
+    host_allowed,
+    origin_allowed,
+)
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig
@@ -68,14 +73,6 @@ from server.workers import WorkerPool
 from wire import protocol as P
 
 log = logging.getLogger("facecast.server")
-
-
-@dataclass(frozen=True)
-class Head:
-    """The head viewers animate: its rig (moving vertices, deltas) and mesh (download)."""
-
-    rig: Rig
-    mesh: HeadMesh
 
 
 class AdmissionRefused(ServerConfigError):
@@ -605,25 +602,8 @@ async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" =
 
 def load_head(*, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None,
               builtin: bool = True) -> Head | None:
-    """The head to serve: a rig file, a mesh to rig now (with its landmarks JSON, or the one shipped
-    for it), the built-in head, or None."""
-    if rig is not None:
-        from assets.heads.rigfile import load_rig
+    """The head to serve (:func:`assets.heads.head.resolve_head`): a rig file, a mesh, the built-in head, or None."""
+    from assets.heads.head import resolve_head
 
-        r, m = load_rig(rig)
-        return Head(r, m)
-    if head is not None:
-        from assets.heads.landmarks import read_landmarks, shipped_landmarks
-        from assets.heads.mesh import load_mesh
-        from assets.heads.rigging import rig_head
-
-        m = load_mesh(head)
-        lm_path = landmarks or shipped_landmarks(head)
-        r, m = rig_head(m, None if lm_path is None else read_landmarks(lm_path), landmark_source=str(lm_path))
-        return Head(r, m)
-    if builtin:
-        from assets.heads.rigfile import builtin_rig
-
-        r, m = builtin_rig()
-        return Head(r, m)
-    return None
+    spec = rig or head or ("builtin" if builtin else None)
+    return None if spec is None else resolve_head(spec, landmarks=landmarks)

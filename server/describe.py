@@ -13,7 +13,7 @@ from realtime_core.blendshapes import blendshape_names
 from wire import protocol as P
 
 if TYPE_CHECKING:
-    from server.app import Head
+    from assets.heads.head import Head
     from server.live import LiveSession
     from server.protocol import ViewRequest
 

@@ -22,12 +22,12 @@ from http import HTTPStatus
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from server.glb import mesh_glb, mesh_json, texture_mime
+from assets.heads.glb import mesh_glb, mesh_json, texture_mime
 from wire import JS_PROTOCOL
 from wire import protocol as P
 
 if TYPE_CHECKING:
-    from server.app import Head
+    from assets.heads.head import Head
 
 MAX_PATH_CHARS = 1024  # longer request paths are refused with 414 before touching the file system
 

@@ -70,6 +70,18 @@ def head(builtin_rig_file):
 
 
 @pytest.fixture(scope="session")
+def espeak():
+    """The shared espeak-ng synthesizer (real libespeak-ng.so.1)."""
+    from assets.espeak import synthesizer
+    from training.errors import SynthesisError
+
+    try:
+        return synthesizer()
+    except SynthesisError as exc:
+        missing(f"espeak-ng library unavailable (apt package libespeak-ng1): {exc}")
+
+
+@pytest.fixture(scope="session")
 def ffmpeg() -> str:
     """The ffmpeg executable (apt package ffmpeg)."""
     require_tool("ffprobe", "apt package ffmpeg")

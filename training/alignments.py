@@ -20,8 +20,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from realtime_core.phones import PhonemeSegment
 from training.errors import AlignmentFormatError
-from training.params import PhonemeSegment
 
 HTS_UNIT_S = 1e-7
 """HTS label time unit: 100 ns."""
@@ -203,11 +203,11 @@ def phones_from_words(words, *, voice, spellings: dict[str, str] | None = None) 
     (its own pauses dropped) stretched linearly over the word's interval.
 
     words: [(start_s, end_s, word)]; "sil"/"sp"/"" words become a "_" pause.
-    voice: a :class:`training.espeak.Voice` (its language picks the espeak inventory).
+    voice: a :class:`assets.espeak.Voice` (its language picks the espeak inventory).
     spellings: how to say a word (e.g. GRID's letter "p" -> "pee").
     Returns espeak-inventory phones (``inventory = f"espeak-{voice.language}"``).
     """
-    from training.espeak import synthesizer
+    from assets.espeak import synthesizer
 
     synth = synthesizer()
     out: list[Phone] = []

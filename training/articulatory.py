@@ -333,7 +333,7 @@ def render_params(
     """The four parameters for frames 0..n_frames-1 (frame k at t = k/30 s).
 
     timeline:   segments with ``phoneme``, ``start_s``, ``end_s`` (seconds from the audio's
-                first sample), e.g. :class:`training.espeak.PhonemeSegment`; gaps are silence.
+                first sample), e.g. :class:`assets.espeak.PhonemeSegment`; gaps are silence.
     inventory:  one of :data:`INVENTORIES`.
     Returns (n_frames, 4) float64, IOD units, order of ``VISUAL_PARAMS``.
     """

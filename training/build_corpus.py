@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import read_wav
+from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.alignments import find_aligned_audio
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import write_manifest, write_utterance
 from training.errors import AlignmentFormatError, ConfigError
-from training.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"

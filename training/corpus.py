@@ -32,9 +32,10 @@ import numpy as np
 from assets.audio import ACCEPTED_RATES_HZ, read_wav, write_wav
 from assets.files import atomic_write_bytes
 from assets.tracks import csv_header, read_csv, write_csv
+from realtime_core.phones import PhonemeSegment
 from realtime_core.track import Track
 from training.errors import ConfigError, CorpusFormatError
-from training.params import FPS, N_PARAMS, PARAM_NAMES, PhonemeSegment, n_frames_for
+from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1

@@ -7,10 +7,12 @@ can print it as one line (``facecast corpus: error: ...``).
 from __future__ import annotations
 
 from assets.errors import (  # file problems are the assets edge's; training raises them too
+    AlignmentFormatError,
     CorpusFormatError,
     FileProblem,
     NotAudioError,
     SilentAudioError,
+    SynthesisError,
     TruncatedFileError,
     WrongSampleRateError,
 )
@@ -40,14 +42,6 @@ class TrainingError(FacecastError):
 
 class NoFaceError(FileProblem, TrainingError):
     """No face (or too few frames with a face) was found in a video."""
-
-
-class AlignmentFormatError(FileProblem, TrainingError):
-    """A phone-alignment file (.lab, TextGrid, phone JSON) cannot be parsed."""
-
-
-class SynthesisError(TrainingError):
-    """espeak-ng failed: library missing, unknown voice, or synthesis error."""
 
 
 class MissingDependencyError(TrainingError):

@@ -4,8 +4,8 @@ Three kinds of truth:
   1. held-out synthetic utterances (espeak voices never used in training): the articulatory
      rules' own tracks -> eps (eq. 11), rho (eq. 12), Pearson r per parameter;
   2. real speech with phone alignments: the same rules applied to the real phone timings;
-  3. real faces (GRID clips): mouth_open measured by ``facecast extract``; Pearson r at lag 0
-     and the lag within +-3 frames that maximises it (a best lag far from 0 means a timing bug).
+  3. real lips (GRID s1 held-out sentences and other talkers' clips, measured by ``facecast
+     extract``): scored by :mod:`training.reallips` (per parameter r, best lag, nu, closures).
 
 The **loudness baseline** predicts mouth opening from the frame's RMS level in dB on the
 same 30 fps frame grid; any model must clearly beat it.
@@ -152,15 +152,3 @@ def format_markdown(results: Sequence[tuple[str, SetScore]], command: str) -> st
 
 EVAL_VARIANTS: tuple[str, ...] = ("f5", "m7")
 """espeak voice variants kept out of the default model's training, for held-out evaluation."""
-
-
-def video_items(root: str | Path) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
-    """Talking-face clips under ``root`` (mpg/mp4/webm), truth measured by the video extractor."""
-    from training.video import measure_video
-
-    clips = sorted(p for p in Path(root).iterdir() if p.suffix.lower() in (".mpg", ".mp4", ".webm", ".mov"))
-    items = []
-    for clip in clips:
-        track = measure_video(clip)
-        items.append((clip.stem, track.samples, track.sample_rate_hz, track.params))
-    return items

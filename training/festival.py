@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import read_wav
+from realtime_core.phones import PhonemeSegment
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
-from training.params import PhonemeSegment, n_frames_for
+from training.params import n_frames_for
 
 VOICES: tuple[str, ...] = ("kal_diphone", "ked_diphone", "cmu_us_slt_arctic_hts")
 """Festival voices of Debian's festvox-kallpc16k, festvox-kdlpc16k and festvox-us-slt-hts."""

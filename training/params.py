@@ -55,7 +55,6 @@ utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -94,12 +93,3 @@ def frame_times(n_frames: int) -> np.ndarray:
     return np.arange(n_frames, dtype=np.float64) / FPS
 
 
-@dataclass(frozen=True)
-class PhonemeSegment:
-    """One phoneme of a timeline: a label (espeak mnemonic, ARPAbet or IPA) over
-    ``[start_s, end_s)`` seconds from the audio's first sample. The one timeline type of
-    synthesis, alignments, corpora and the articulatory rules."""
-
-    phoneme: str
-    start_s: float
-    end_s: float

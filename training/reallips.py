@@ -1,7 +1,7 @@
 """Real lips: GRID s1 face tracks as training utterances, acoustic variety, and the real-lips scores.
 
 - :func:`grid_utterances` turns the cached :class:`~training.facetrack.FaceTrack` of every GRID s1
-  sentence of a split (``training.grid.split_of``) into corpus :class:`~training.corpus.Utterance`
+  sentence of a split (``assets.grid.split_of``) into corpus :class:`~training.corpus.Utterance`
   objects (source "video", speaker group ``grid:s1``), extracting what the cache lacks.
 - :func:`speed_perturb` is the acoustic variety that serves other voices (Ko et al. 2015): the audio
   played ``factor`` times faster (resampled: formants, pitch and tempo all scale by ``factor``, like a
@@ -20,15 +20,16 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from assets.grid import Split, read_words, sentences
 from realtime_core import VISUAL_PARAMS
 from realtime_core.features import loudness_db
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
-from training.grid import Split, read_words, sentences
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
@@ -94,7 +95,7 @@ def speed_perturb(utt: Utterance, factor: float) -> Utterance:
     if factor == 1.0:
         return utt
     # play faster = keep the samples, declare them at rate * factor, convert back to the rate
-    up, down = 1000, int(round(1000 * factor))
+    up, down = 1000, round(1000 * factor)
     audio = resample_poly(utt.samples.astype(np.float64), up, down).astype(np.float32)
     n = n_frames_for(len(audio) / utt.sample_rate_hz)
     t_src = np.arange(len(utt.params)) / FPS
@@ -183,7 +184,9 @@ class LipScores:
     per_clip: dict = field(default_factory=dict)
 
     def as_json(self) -> dict:
-        rnd = lambda d: {k: round(float(v), 4) for k, v in d.items()}  # noqa: E731
+        def rnd(d: dict) -> dict:
+            return {k: round(float(v), 4) for k, v in d.items()}
+
         return {"r": rnd(self.r), "best_lag": self.best_lag, "r_best": rnd(self.r_best), "nu": rnd(self.nu),
                 "closure_rate": round(self.closure_rate, 4), "truth_closure_rate": round(self.truth_closure_rate, 4),
                 "n_closures": self.n_closures, "r_loudness": round(self.r_loudness, 4), "n_frames": self.n_frames,
@@ -231,7 +234,7 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
                      r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0), n_frames=len(tr), per_clip=per_clip)
 
 
-def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]]) -> list:
+def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list | None]]) -> list:
     """Run the live path of ``model`` on ``clips`` (name, samples, rate_hz, truth (T, 4), words or
     None) -> items for :func:`score_lips` (bilabial spans from the words; none without words)."""
     from realtime_core.pipeline import speech_to_params
@@ -244,8 +247,132 @@ def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, lis
 
 
 def words_of(video: Path) -> list | None:
-    """The word alignment beside a video (training.grid.align_for_video), or None."""
-    from training.grid import align_for_video
+    """The word alignment beside a video (assets.grid.align_for_video), or None."""
+    from assets.grid import align_for_video
 
     align = align_for_video(video)
     return read_words(align) if align else None
+
+
+# --------------------------------------------------------------------------- evaluation sets
+S1_CLIPS_IN_GRID = frozenset({"bbaf2n"})
+"""Clips of ``video/grid`` spoken by s1 (the data README: "four talkers, one of them s1 (bbaf2n)"):
+never counted as another talker."""
+
+
+def other_talker_clips(folder: str | Path, *, cache_dir: str | Path | None = None) -> list:
+    """``[(name, FaceTrack, words or None)]`` of the talking-face clips in ``folder`` not spoken by s1."""
+    from training.video import VIDEO_SUFFIXES, load_face_track
+
+    out = []
+    for clip in sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in VIDEO_SUFFIXES):
+        if any(clip.stem.endswith(s) for s in S1_CLIPS_IN_GRID):
+            continue
+        out.append((clip.stem, load_face_track(clip, cache_dir=cache_dir), words_of(clip)))
+    return out
+
+
+def s1_clips(split: Split, *, root: str | Path | None = None, cache_dir: str | Path | None = None,
+             progress: Callable | None = None) -> list:
+    """``[(sentence_id, FaceTrack, words)]`` of a GRID s1 split."""
+    return [(s.sentence_id, t, read_words(s.align)) for s, t in grid_tracks(split, root=root, cache_dir=cache_dir,
+                                                                              progress=progress)]
+
+
+def evaluate_lips(model, clips: Sequence[tuple[str, Any, list | None]]) -> tuple[LipScores, list]:
+    """Score ``model``'s live path on ``[(name, FaceTrack, words)]``; returns the scores and the items."""
+    items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips])
+    return score_lips(items), items
+
+
+def lips_markdown(title: str, s: LipScores, *, note: str = "", goals: dict | None = None) -> str:
+    """A markdown section: the per-parameter table and the mouth_open summary."""
+    lines = [f"## {title}", ""]
+    if note:
+        lines += [note, ""]
+    lines += [f"{len(s.per_clip)} clips, {s.n_frames} frames pooled; loudness baseline r(mouth_open) = "
+              f"{s.r_loudness:.3f}; bilabial closures reached: "
+              + (f"{s.closure_rate:.0%} of {s.n_closures} (the measured lips: {s.truth_closure_rate:.0%})"
+                 if s.n_closures else "no word alignment, not measured"), "",
+              "| parameter | r (lag 0) | best lag (frames) | r at best lag | nu = std(est)/std(true) |",
+              "|---|---:|---:|---:|---:|"]
+    for p in VISUAL_PARAMS:
+        lines.append(f"| {p} | {s.r[p]:.3f} | {s.best_lag[p]:+d} | {s.r_best[p]:.3f} | {s.nu[p]:.2f} |")
+    if len(s.per_clip) <= 10:
+        lines += ["", "| clip | r mouth_open | r loudness |", "|---|---:|---:|"]
+        lines += [f"| {k} | {v['r_mouth_open']:.3f} | {v['r_loudness']:.3f} |" for k, v in s.per_clip.items()]
+    if goals:
+        lines += ["", "Goals: " + "; ".join(f"{k} {'met' if ok else 'MISSED'}" for k, ok in goals.items())]
+    return "\n".join(lines) + "\n\n"
+
+
+def plot_lips(items: Sequence, scores: LipScores, png: Path, *, title: str, n_clips: int = 3) -> Path:
+    """PNG: measured vs estimated mouth_open (and lip_stretch) for the first clips, bilabial spans
+    shaded, and r per parameter beside the loudness baseline."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    show = list(items)[:n_clips]
+    fig, axes = plt.subplots(len(show) + 1, 1, figsize=(10, 2.3 * (len(show) + 1)))
+    for ax, (name, truth, est, _loud, spans) in zip(axes, show):
+        T = min(len(truth), len(est))
+        t = np.arange(T) / FPS
+        ax.plot(t, truth[:T, MOUTH_OPEN], "k-", lw=2, label="mouth_open measured")
+        ax.plot(t, est[:T, MOUTH_OPEN], color="tab:red", lw=1.5, label="mouth_open estimated")
+        j = VISUAL_PARAMS.index("lip_stretch")
+        ax.plot(t, truth[:T, j], color="tab:green", lw=1, alpha=0.6, label="lip_stretch measured")
+        ax.plot(t, est[:T, j], color="tab:green", lw=1, ls="--", label="lip_stretch estimated")
+        for a, b, _ in spans:
+            ax.axvspan(a, b, color="tab:blue", alpha=0.15)
+        ax.axhline(0, color="grey", lw=0.5)
+        ax.set_title(f"{name} (blue: bilabial closures)", fontsize=9)
+        ax.set_ylabel("IOD")
+    axes[0].legend(fontsize=7, loc="upper right")
+    ax = axes[-1]
+    x = np.arange(len(VISUAL_PARAMS))
+    ax.bar(x, [scores.r[p] for p in VISUAL_PARAMS], color="tab:red", label="model r (lag 0)")
+    ax.axhline(scores.r_loudness, color="tab:orange", ls="--", label=f"loudness r(mouth_open) {scores.r_loudness:.2f}")
+    ax.set_xticks(x, VISUAL_PARAMS)
+    ax.set_ylim(min(0, *scores.r.values()) - 0.05, 1)
+    ax.legend(fontsize=7)
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=80)
+    plt.close(fig)
+    return png
+
+
+BILABIAL_PHONES = frozenset({"p", "b", "m", "P", "B", "M", "m̩"})
+"""/p b m/ in the phone inventories of the alignments (ARPAbet upper case, espeak and IPA lower case)."""
+
+
+def real_speech_clips(root: str | Path) -> list:
+    """Real recordings with phone alignments under ``root`` (ARCTIC, LibriVox, praatio):
+    ``[(name, samples, rate_hz, rules truth (T, 4), bilabial spans)]``. The truth is the articulatory
+    rules on the real phone timings (the ceiling of any audio model against them is their own
+    ~0.5-0.6 against real lips); the spans are the aligned /p b m/ phones, where the rules close
+    the lips exactly: a closure check on other voices that needs no video."""
+    from assets.audio import read_audio
+    from training.alignments import find_aligned_audio
+    from training.articulatory import render_params
+
+    out = []
+    for wav, align in find_aligned_audio(root):
+        samples, rate = read_audio(wav)
+        n = n_frames_for(len(samples) / rate)
+        truth = render_params(align.phones, n, inventory=align.inventory)
+        spans = [(p.start_s, p.end_s, p.phoneme) for p in align.phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
+        out.append((wav.stem, samples, rate, truth, spans))
+    return out
+
+
+def score_real_speech(model, clips: Sequence) -> LipScores:
+    """:func:`score_lips` of ``model``'s live path on :func:`real_speech_clips`."""
+    from realtime_core.pipeline import speech_to_params
+
+    items = [(n, truth, speech_to_params(model, x, rate), loudness_db(x, rate, len(truth)), spans)
+             for n, x, rate, truth, spans in clips]
+    return score_lips(items)

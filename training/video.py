@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import SILENCE_PEAK
+from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
@@ -87,7 +88,6 @@ from training.facetrack import (
     read_raw,
     write_raw,
 )
-from training.grid import SILENCE_WORDS, align_for_video, read_words
 from training.params import FPS, n_frames_for
 
 __all__ = [
@@ -523,7 +523,7 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
 
 # --------------------------------------------------------------------------- one clip, cached
 def _words_for(video: Path, *, require: bool) -> tuple[list[tuple[float, float, str]] | None, Path | None]:
-    """The word alignment of a video (training.grid layout rules), or None when there is none
+    """The word alignment of a video (assets.grid layout rules), or None when there is none
     (an error when ``require``). A malformed alignment is always an error."""
     align = align_for_video(video)
     if align is None:
@@ -563,7 +563,7 @@ def load_face_track(path_or_video: str | Path, *, cache_dir: str | Path | None =
     """The :class:`FaceTrack` of a video (or of a cache ``.npz``), measuring it if not cached.
 
     cache_dir: default ``$FACECAST_CACHE`` or ``~/.cache/facecast``. words: the word alignment;
-    by default the one found beside the video (GRID layout, see :func:`training.grid.align_for_video`).
+    by default the one found beside the video (GRID layout, see :func:`assets.grid.align_for_video`).
     """
     path = Path(path_or_video)
     if path.suffix == ".npz":
@@ -704,8 +704,8 @@ def write_report(report: ExtractReport, path: Path) -> Path:
 
 # --------------------------------------------------------------------------- corpus folder, plots
 def grid_split_of(video: Path) -> str | None:
-    """The GRID split of a video whose stem is a GRID sentence id (training.grid), else None."""
-    from training.grid import sentence_text, split_of
+    """The GRID split of a video whose stem is a GRID sentence id (assets.grid), else None."""
+    from assets.grid import sentence_text, split_of
 
     try:
         sentence_text(video.stem)

@@ -1,9 +1,14 @@
-"""Head meshes at the edge: read glb/gltf/obj/ply with trimesh into a plain :class:`HeadMesh`.
+"""Head meshes at the edge: read glb/gltf (:mod:`assets.heads.gltf`) and obj/ply (trimesh) into a :class:`HeadMesh`.
 
-Scene geometries are merged with their node transforms applied; vertex order is kept as in the
-file (``process=False``) so landmark vertex indices stay valid. Texture: the material's embedded
-base-colour image, else a single colour-map image next to the file (``*col*``, ``*diffuse*``,
-``*albedo*`` or the only image there), kept as encoded bytes.
+All pieces (primitives, objects) are merged with their node transforms applied; vertex order is
+kept as in the file so landmark vertex indices stay valid. glTF morph targets are kept by name
+(they drive the head directly, :mod:`assets.heads.targets`). Texture: one per material; a mesh
+with several textured materials gets one atlas (the tiles side by side, each piece's UVs moved
+into its tile), so renderer, browser and exports all handle a single texture. Untextured pieces
+take their material colour as vertex colours. Without any material texture, a single colour-map
+image next to the file (``*col*``, ``*diffuse*``, ``*albedo*`` or the only image there) is used.
+UVs follow glTF's convention (v down, image row 0 at v = 0); OBJ/PLY UVs (v up) are flipped.
+Compressed glTF (meshopt, Draco, KTX2) is decoded first (:mod:`assets.heads.decompress`).
 """
 
 from __future__ import annotations
@@ -24,7 +29,9 @@ _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 class HeadMesh:
     """vertices (n, 3) float64 (file units), triangles (m, 3) int64, uvs (n, 2) or None,
     texture: encoded image bytes (PNG/JPEG) or None, colors (n, 3) float32 in [0, 1] or None,
-    name: where it came from (a path or "builtin")."""
+    name: where it came from (a path or "builtin"); targets: morph-target name -> (n, 3) float64
+    displacement at weight 1, or None; part: (n,) int16 index into part_names (the file's
+    objects/primitives, e.g. "Eye_L", "Teeth") or None."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -32,6 +39,9 @@ class HeadMesh:
     texture: bytes | None = None
     colors: np.ndarray | None = None
     name: str = ""
+    targets: dict[str, np.ndarray] | None = None
+    part: np.ndarray | None = None
+    part_names: tuple[str, ...] = ()
 
 
 def _sibling_texture(path: Path) -> bytes | None:
@@ -43,14 +53,6 @@ def _sibling_texture(path: Path) -> bytes | None:
     if len(images) == 1:
         return images[0].read_bytes()
     return None
-
-
-def _image_bytes(img: object) -> bytes | None:
-    if img is None or img.size[0] * img.size[1] <= 16:  # type: ignore[attr-defined]
-        return None  # trimesh's placeholder for "no texture" is a tiny grey image
-    buf = io.BytesIO()
-    img.save(buf, format="PNG")  # type: ignore[attr-defined]
-    return buf.getvalue()
 
 
 def check_mesh(mesh: HeadMesh) -> None:
@@ -69,52 +71,186 @@ def check_mesh(mesh: HeadMesh) -> None:
         raise MeshError(f"{mesh.name}: mesh is flat (all vertices in one plane); a head must be 3D")
 
 
-def load_mesh(path: str | Path) -> HeadMesh:
+def load_mesh(path: str | Path, *, cache: Path | None = None) -> HeadMesh:
     """Read a head mesh (glb/gltf/obj/ply). Raises MeshError naming the file on any problem."""
-    import trimesh
-
     p = Path(path)
     if not p.is_file():
-        raise MeshError(f"{p}: mesh file not found")
+        raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .obj or .ply head, or 'builtin')")
     if p.suffix.lower() not in MESH_SUFFIXES:
-        raise MeshError(f"{p}: unsupported mesh format {p.suffix!r} (use {', '.join(MESH_SUFFIXES)})")
-    try:
-        loaded = trimesh.load(str(p), process=False)
-    except Exception as exc:  # trimesh raises many unrelated types for a bad file
-        raise MeshError(f"{p}: cannot read mesh: {exc}") from exc
-    if isinstance(loaded, trimesh.Scene):
-        geoms = []
-        for node in loaded.graph.nodes_geometry:
-            transform, gname = loaded.graph[node]
-            g = loaded.geometry[gname]
-            if isinstance(g, trimesh.Trimesh):
-                g = g.copy()
-                g.apply_transform(transform)
-                geoms.append(g)
-    elif isinstance(loaded, trimesh.Trimesh):
-        geoms = [loaded]
+        raise MeshError(f"{p}: unsupported mesh format {p.suffix!r}; convert it to one of {', '.join(MESH_SUFFIXES)}")
+    suffix = p.suffix.lower()
+    if suffix in (".glb", ".gltf"):
+        parts = _gltf_parts(p, cache)
+    elif suffix == ".obj":
+        from assets.heads.obj import read_obj
+
+        o = read_obj(p)
+        parts = _Parts(o.vertices, o.triangles, o.uvs, None, o.material, o.materials, o.group, tuple(o.group_names), {})
     else:
-        geoms = []
-    if not geoms:
-        raise MeshError(f"{p}: file contains no triangle mesh (point cloud or empty scene)")
-    verts, tris, uvs, texture = [], [], [], None
-    have_uv = all(getattr(g.visual, "uv", None) is not None and len(g.visual.uv) == len(g.vertices) for g in geoms)
-    off = 0
-    for g in geoms:
-        verts.append(np.asarray(g.vertices, dtype=np.float64))
-        tris.append(np.asarray(g.faces, dtype=np.int64) + off)
-        off += len(g.vertices)
-        if have_uv:
-            uvs.append(np.asarray(g.visual.uv, dtype=np.float64))
-            mat = getattr(g.visual, "material", None)
-            if texture is None and mat is not None:
-                texture = _image_bytes(getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None))
-    mesh = HeadMesh(
-        vertices=np.concatenate(verts),
-        triangles=np.concatenate(tris) if tris else np.zeros((0, 3), np.int64),
-        uvs=np.concatenate(uvs) if have_uv else None,
-        texture=texture if texture is not None or not have_uv else _sibling_texture(p),
-        name=str(p),
-    )
+        parts = _ply_parts(p)
+    if len(parts.triangles) == 0:
+        raise MeshError(f"{p}: file contains no triangle mesh (point cloud or empty scene); export the head as triangles")
+    mesh = _assemble(p, parts)
     check_mesh(mesh)
     return mesh
+
+
+@dataclass
+class _Parts:
+    """A mesh before textures are resolved: per-vertex material index (-1 none) into ``materials``."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    uvs: np.ndarray | None
+    colors: np.ndarray | None
+    material: np.ndarray
+    materials: list
+    part: np.ndarray
+    part_names: tuple[str, ...]
+    targets: dict[str, np.ndarray]
+
+
+def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
+    from assets.heads.decompress import decompressed
+    from assets.heads.gltf import NEEDS_DECODER, read_gltf, read_gltf_document
+
+    try:
+        doc, _ = read_gltf_document(p)
+    except Exception as exc:  # a bad file raises many unrelated types (struct, json, unicode)
+        raise MeshError(f"{p}: not a readable glTF file: {exc}") from exc
+    used = set(doc.get("extensionsRequired", [])) | set(doc.get("extensionsUsed", []))
+    src = decompressed(p, cache) if used & set(NEEDS_DECODER) else p
+    prims, materials = read_gltf(src)
+    if not prims:
+        return _Parts(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, None, np.zeros(0, np.int64), [],
+                      np.zeros(0, np.int16), (), {})
+    n = [len(x.vertices) for x in prims]
+    offs = np.concatenate([[0], np.cumsum(n)])
+    have_uv = all(x.uvs is not None for x in prims)
+    colors = None
+    if any(x.colors is not None for x in prims):
+        colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in prims])
+    names = sorted({k for x in prims for k in x.targets})
+    targets = {}
+    for k in names:
+        d = np.zeros((int(offs[-1]), 3))
+        for i, x in enumerate(prims):
+            if k in x.targets:
+                d[offs[i] : offs[i + 1]] = x.targets[k]
+        targets[k] = d
+    return _Parts(
+        vertices=np.concatenate([x.vertices for x in prims]),
+        triangles=np.concatenate([x.triangles + offs[i] for i, x in enumerate(prims)]),
+        uvs=np.concatenate([x.uvs for x in prims]) if have_uv else None,
+        colors=colors,
+        material=np.concatenate([np.full(len(x.vertices), x.material) for x in prims]),
+        materials=materials,
+        part=np.concatenate([np.full(len(x.vertices), i, dtype=np.int16) for i, x in enumerate(prims)]),
+        part_names=tuple(x.node for x in prims),
+        targets=targets,
+    )
+
+
+def _ply_parts(p: Path) -> _Parts:
+    import trimesh
+
+    try:
+        g = trimesh.load(str(p), process=False, maintain_order=True, force="mesh")
+    except Exception as exc:  # trimesh raises many unrelated types for a bad file
+        raise MeshError(f"{p}: cannot read mesh: {exc}") from exc
+    v = np.asarray(getattr(g, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    t = np.asarray(getattr(g, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    uv = getattr(getattr(g, "visual", None), "uv", None)
+    uv = None if uv is None or len(uv) != len(v) else np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])  # v up -> down
+    colors = None
+    vc = getattr(getattr(g, "visual", None), "vertex_colors", None)
+    if getattr(getattr(g, "visual", None), "kind", None) == "vertex" and vc is not None and len(vc) == len(v):
+        colors = np.asarray(vc, dtype=np.float64)[:, :3] / 255.0
+    return _Parts(v, t, uv, colors, np.full(len(v), -1), [], np.zeros(len(v), np.int16), (p.stem,), {})
+
+
+def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    c = np.clip(np.asarray(c, dtype=np.float64), 0, 1)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def _assemble(p: Path, parts: _Parts) -> HeadMesh:
+    """Resolve textures: one material image -> that texture; several -> an atlas; none -> material
+    colours as vertex colours (or a sibling colour map)."""
+    from PIL import Image
+
+    mats = parts.materials
+    used = sorted({int(m) for m in np.unique(parts.material) if m >= 0})
+    images: list[bytes] = []
+    for m in used:
+        img = getattr(mats[m], "image", None)
+        if img is not None and img not in images:
+            images.append(img)
+    texture, uvs = None, parts.uvs
+    if images and parts.uvs is not None:
+        single = len(images) == 1 and all(getattr(mats[m], "image", None) is not None for m in used) and \
+            (parts.material >= 0).all()
+        if single:
+            texture = images[0]
+        else:
+            texture, uvs = _atlas(parts, images)
+    elif parts.uvs is not None:
+        texture = _sibling_texture(p)
+        if texture is not None and p.suffix.lower() in (".glb", ".gltf"):
+            # An image beside a glTF that does not reference it was made for three.js's
+            # TextureLoader (flipY = true, e.g. the Lee Perry-Smith example): flip it into glTF's convention.
+            buf = io.BytesIO()
+            Image.open(io.BytesIO(texture)).convert("RGB").transpose(Image.Transpose.FLIP_TOP_BOTTOM).save(buf, "PNG")
+            texture = buf.getvalue()
+    colors = None
+    if texture is None and (used or parts.colors is not None):
+        base = np.ones((len(parts.vertices), 3))
+        for m in used:
+            base[parts.material == m] = np.asarray(mats[m].color[:3])
+        lin = base * (parts.colors if parts.colors is not None else 1.0)
+        colors = _linear_to_srgb(lin).astype(np.float32)
+        if parts.colors is None and not used:
+            colors = None
+    return HeadMesh(vertices=parts.vertices, triangles=parts.triangles, uvs=uvs, texture=texture, colors=colors,
+                    name=str(p), targets=parts.targets or None, part=parts.part, part_names=parts.part_names)
+
+
+ATLAS_MAX_TILE = 2048
+
+
+def _atlas(parts: _Parts, images: list[bytes]) -> tuple[bytes, np.ndarray]:
+    """One PNG with every material's image (or colour) as a square tile, and the UVs moved into the tiles."""
+    from PIL import Image
+
+    tiles = [Image.open(io.BytesIO(b)).convert("RGB") for b in images]
+    tile_of_material: dict[int, int] = {}
+    colour_tiles: dict[tuple, int] = {}
+    for m in sorted({int(x) for x in np.unique(parts.material)}):
+        mat = parts.materials[m] if m >= 0 else None
+        img = getattr(mat, "image", None)
+        if img is not None:
+            tile_of_material[m] = images.index(img)
+            continue
+        base = np.ones(3) if mat is None else np.asarray(mat.color[:3])
+        key = tuple(int(x) for x in np.round(_linear_to_srgb(base) * 255))
+        if key not in colour_tiles:
+            colour_tiles[key] = len(tiles)
+            tiles.append(Image.new("RGB", (8, 8), key))
+        tile_of_material[m] = colour_tiles[key]
+    size = min(ATLAS_MAX_TILE, max(max(t.size) for t in tiles))
+    n = len(tiles)
+    cols = int(np.ceil(np.sqrt(n)))
+    rows = int(np.ceil(n / cols))
+    atlas = Image.new("RGB", (cols * size, rows * size))
+    for i, t in enumerate(tiles):
+        atlas.paste(t.resize((size, size), Image.Resampling.BILINEAR), ((i % cols) * size, (i // cols) * size))
+    margin = 1.0 / size  # a texel inside the tile: bilinear filtering never reads the neighbour
+    uv = np.asarray(parts.uvs, dtype=np.float64)
+    uv = np.where((uv >= 0) & (uv <= 1), uv, uv - np.floor(uv))  # repeat-wrapped UVs folded into [0, 1)
+    k = np.array([tile_of_material[int(m)] for m in parts.material], dtype=np.int64)
+    c, r = k % cols, k // cols
+    u = (c + margin + uv[:, 0] * (1 - 2 * margin)) / cols
+    v = (r + margin + uv[:, 1] * (1 - 2 * margin)) / rows
+    buf = io.BytesIO()
+    atlas.save(buf, format="PNG")
+    return buf.getvalue(), np.column_stack([u, v])

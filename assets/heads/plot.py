@@ -79,3 +79,64 @@ def plot_control_points(
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+LANDMARK_HELP: dict[str, str] = {
+    "eye_outer_left": "outer corner of the face's LEFT eye (viewer's right)",
+    "eye_inner_left": "inner corner of the face's left eye",
+    "eye_outer_right": "outer corner of the face's RIGHT eye (viewer's left)",
+    "eye_inner_right": "inner corner of the face's right eye",
+    "nose_tip": "tip of the nose (most forward point)",
+    "corner_left": "mouth corner on the face's left",
+    "corner_right": "mouth corner on the face's right",
+    "upper_lip": "outer midpoint of the upper lip (vermilion border)",
+    "lower_lip": "outer midpoint of the lower lip",
+    "upper_inner": "inner midpoint of the upper lip (where the lips part)",
+    "lower_inner": "inner midpoint of the lower lip (closed lips: the same vertex as upper_inner)",
+    "chin": "lowest point of the chin on the midline",
+}
+"""Each landmark's definition, in the order of landmark files (``assets.heads.rigging.REQUIRED_LANDMARKS``)."""
+
+
+def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, title: str = "") -> Path:
+    """Frontal picture of the head (its vertices shaded by depth) with each landmark numbered and
+    named, and the definitions beside it. mesh: a HeadMesh; points: name -> (3,) position."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from realtime_core.face import MouthLandmarks
+
+    names = [k for k in LANDMARK_HELP if k in points]
+    pv = np.stack([np.asarray(points[k], dtype=np.float64) for k in names])
+    lm = MouthLandmarks(**{k: names.index(k) for k in MouthLandmarks.__dataclass_fields__})
+    fr = face_frame(pv, lm)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    q = (v - fr.origin) @ fr.axes.T / fr.iod
+    near = (np.abs(q[:, 0]) < 1.6) & (q[:, 1] > -2.6) & (q[:, 1] < 1.2) & (q[:, 2] > -1.5)
+    p = (pv - fr.origin) @ fr.axes.T / fr.iod
+    fig, (ax, tx) = plt.subplots(1, 2, figsize=(11, 6.5), dpi=110, gridspec_kw={"width_ratios": [1.1, 1]})
+    order = np.argsort(q[near, 2])
+    ax.scatter(q[near, 0][order], q[near, 1][order], s=1.2, c=q[near, 2][order], cmap="Greys")
+    for i, _k in enumerate(names):
+        ax.scatter(p[i, 0], p[i, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
+        dx = 0.08 if p[i, 0] >= 0 else -0.08
+        ax.annotate(str(i), (p[i, 0], p[i, 1]), xytext=(p[i, 0] + dx, p[i, 1] + 0.05), fontsize=8, color="darkred",
+                    ha="left" if dx > 0 else "right")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (IOD), as a viewer sees the face: the face's left is on the right of the picture")
+    ax.set_ylabel("y (IOD)")
+    ax.set_title(title or "landmarks", fontsize=9)
+    tx.set_axis_off()
+    lines = [f"{i:2d}  {k}: {LANDMARK_HELP[k]}" for i, k in enumerate(names)]
+    lines += ["", "'left'/'right' are the face's own sides (a viewer sees the face's left on the right).",
+              "Values: a vertex index (file order) or [x, y, z] in the file's units.",
+              "Closed lips: upper_inner = lower_inner (the seam vertex); the mesh is cut there."]
+    tx.text(0, 1, "\n".join(lines), va="top", fontsize=8, family="monospace", wrap=True)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -40,7 +40,11 @@ from realtime_core.face import (
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
 from realtime_core.face.rig import recalibrate
-from realtime_core.face.simple import derive_simple_model, lip_contact_vertices, regional_shape_units
+from realtime_core.face.simple import (
+    derive_simple_model,
+    lip_contact_vertices,
+    regional_shape_units,
+)
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthUpperUpLeft", "mouthUpperUpRight"),
@@ -296,5 +300,9 @@ def rig_head(
             rig = recalibrate(rig, mouth_landmarks(snap))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
-    out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name)
+    part = mesh.part
+    if part is not None and cut_copies is not None:
+        part = part[origin]
+    out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name,
+                        part=part, part_names=mesh.part_names)
     return rig, out_mesh

@@ -22,8 +22,9 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
                  audio: tuple[np.ndarray, int] | None = None, morphs: str = "units",
                  arkit_targets: dict[str, np.ndarray] | None = None) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
-    files written. head: (rig, HeadMesh), required for .glb; audio: (samples (n,) float or int16,
-    rate_hz) starting at the track's first frame, written as ``<stem>.wav`` beside a .glb or .json
+    files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
+    audio: (samples (n,) float or int16, rate_hz) starting at the track's first frame, written as
+    ``<stem>.wav`` beside a .glb or .json
     (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
     "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights."""
     if morphs not in MORPHS:
@@ -42,11 +43,12 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
         if head is None:
             raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
         if morphs == "units":
-            data = head_glb(head[0], head[1], track, audio=wav_name)
+            rig, mesh = head
+            data = head_glb(rig, mesh, track, audio=wav_name)
         elif arkit_targets is None:
             raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
         else:
-            data = arkit_glb(head[1], arkit_targets, track, audio=wav_name)
+            data = arkit_glb(tuple(head)[1], arkit_targets, track, audio=wav_name)
     elif suffix == ".csv":
         data = encode_csv(track)
     elif suffix == ".json":

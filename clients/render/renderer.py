@@ -256,21 +256,45 @@ class HeadRenderer:
 
 
 def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
-    """A renderer framed on the rig's face (the placed simple model gives the face box and frame)."""
+    """A renderer framed on the rig's face: a Sec. 5 rig's placed simple model gives the face box
+    and frame; a MorphRig's landmarks (when known) or the box of the vertices its targets move."""
     from assets.heads.rigging import mouth_landmarks
     from realtime_core.face import face_frame
 
     slm = rig.meta.get("simple_landmarks")
-    sv = rig.simple.vertices
-    if slm:
-        fr = face_frame(sv, mouth_landmarks(slm))
-        axes = fr.axes
+    simple = getattr(rig, "simple", None)
+    if simple is not None:
+        sv = simple.vertices
+        fr = face_frame(sv, mouth_landmarks(slm)) if slm else None
     else:
-        axes = np.eye(3)
+        lm = rig.meta.get("landmarks")
+        pts = np.asarray(rig.neutral, dtype=np.float64)[rig.moving] if len(rig.moving) else np.asarray(rig.neutral)
+        fr = None
+        if lm:
+            names = list(lm)
+            pv = np.array([lm[k] for k in names], dtype=np.float64)
+            fr = face_frame(pv, mouth_landmarks({k: i for i, k in enumerate(names)}))
+        sv = pts
+        if fr is None:
+            # Unknown face frame: glTF's convention (+y up, face towards +z). Targets that move only
+            # the mouth give a small box: frame at least a head-sized region above it.
+            lo, hi = pts.min(0), pts.max(0)
+            span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
+            centre = 0.5 * (lo + hi)
+            if "eyeBlinkLeft" not in getattr(rig, "names", ()):
+                centre = centre + np.array([0.0, 0.6 * span, 0.0])
+                span *= 2.2
+            return HeadRenderer(mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3),
+                                size=1.1 * span, config=config)
+    axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))
     centre = sv.mean(0)
-    if slm:
+    if fr is not None and simple is None:
+        # Landmarks of a morph head: the face spans about 2.6 IOD high around the eyes-mouth middle.
+        size = 2.6 * fr.iod
+        centre = fr.origin - 0.45 * fr.iod * axes[1]
+    if fr is not None:
         # Pivot inside the head (a turned view stays framed) and a little up (the skull shows).
         centre = centre - 0.5 * fr.iod * axes[2] + 0.35 * fr.iod * axes[1]
     return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.headopts import add_head_options
 
     p = sub.add_parser(
         "animate",
@@ -28,14 +29,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
-    p.add_argument(
-        "--head", default="builtin", help="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/obj/ply)"
-    )
+    add_head_options(p, help_head="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/gltf/obj/ply)")
     p.add_argument(
         "--glb-morphs",
         choices=("units", "arkit52"),
         default="units",
-        help="--glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)",
+        help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
+        "or ARKit's 52 blendshapes (built-in head)",
     )
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
@@ -63,9 +63,9 @@ def run(args: argparse.Namespace) -> int:
         write_csv(args.csv, track)
     if args.glb or args.json or args.tsv:
         from clients.export.files import export_track
-        from facecast.commands.render import load_head
+        from facecast.commands.headopts import resolve_from_args
 
-        head = load_head(args.head, None) if args.glb else None
+        head = resolve_from_args(args) if args.glb else None
         arkit = None
         if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
             from clients.export.gltf import builtin_arkit_targets

@@ -39,9 +39,9 @@ def run(args: argparse.Namespace) -> int:
 
     from threadpoolctl import threadpool_limits
 
+    from assets.heads.head import resolve_head
     from assets.modelfile import load_model
     from facecast.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
-    from server.app import load_head
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
     npm = Path(__file__).resolve().parents[2] / "node_modules"  # three.js for the browser viewer (npm ci)
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
                      video=None if args.no_video else args.out, web_root=web if web.is_dir() else None,
                      node_modules=npm if npm.is_dir() else None)
     model = load_model(args.model)
-    head = load_head(rig=args.rig)
+    head = resolve_head(args.rig or "builtin")
     with threadpool_limits(1):
         result = asyncio.run(run_demo(cfg, model, head))
     print(f"facecast demo: the viewer received {len(result.params)} frames "

@@ -35,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--require-alignment", action="store_true",
                    help="skip clips without a word alignment (default: find rest from the audio level instead)")
     p.add_argument("--split", choices=("train", "val", "test"), default=None,
-                   help="with -o: only GRID sentences of this split (training.grid.split_of)")
+                   help="with -o: only GRID sentences of this split (assets.grid.split_of)")
     p.add_argument("--audio-rate", type=int, default=16000, help="sample rate of the extracted audio, Hz")
     p.add_argument("--language", default="en", help="language code written to the manifest")
     p.set_defaults(run=run)
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plots > 0 and ok:
         plot_dir = Path(args.plot_dir) if args.plot_dir else (
             out / "plots" if out else report_path.parent / "plots" if report_path else Path("extract_plots"))
-        from training.grid import align_for_video, read_words
+        from assets.grid import align_for_video, read_words
 
         for v in random.Random(0).sample(ok, min(args.plots, len(ok))):
             track = load(v)

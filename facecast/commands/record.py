@@ -8,6 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.headopts import add_head_options
     from facecast.commands.view import DEFAULT_URL
 
     p = sub.add_parser(
@@ -22,10 +23,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
     p.add_argument("--session", default=None, help="session to record (default %(default)s = the first live one)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
-    p.add_argument("--head", default="builtin",
-                   help="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
-    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
-                   help=".glb morph targets: the rig's 4 mouth units (exact) or ARKit's 52 blendshapes (built-in head)")
+    add_head_options(p, help_head="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
+    p.add_argument(
+        "--glb-morphs",
+        choices=("units", "arkit52"),
+        default="units",
+        help=".glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
+        "or ARKit's 52 blendshapes (built-in head)",
+    )
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
     p.add_argument(
         "--duration",
@@ -56,9 +61,9 @@ def run(args: argparse.Namespace) -> int:
     token = token_from_env(args.token_env)
     head = arkit = None
     if args.output.suffix.lower() == ".glb":
-        from facecast.commands.render import load_head
+        from facecast.commands.headopts import resolve_from_args
 
-        head = load_head(args.head, None)
+        head = resolve_from_args(args)
         if args.glb_morphs == "arkit52" and args.head == "builtin":
             from clients.export.gltf import builtin_arkit_targets
 

@@ -7,6 +7,7 @@ import argparse
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.headopts import add_head_options
 
     p = sub.add_parser(
         "render",
@@ -18,8 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("speech", help="speech audio (.wav) muxed into the video")
-    p.add_argument("--head", default="builtin", help="'builtin', a rig file (.npz) or a head mesh (glb/obj/ply)")
-    p.add_argument("--landmarks", help="landmarks JSON when --head is a mesh without shipped landmarks")
+    add_head_options(p)
     p.add_argument("--model", help="trained speech->parameters model (used when --params is not given)")
     p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4)")
@@ -31,27 +31,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
     p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
     p.set_defaults(run=run)
-
-
-def load_head(head: str, landmarks: str | None):
-    """(rig, mesh) for 'builtin', a rig .npz or a mesh file (rigged now)."""
-    from pathlib import Path
-
-    from assets.errors import LandmarkError
-    from assets.heads.landmarks import read_landmarks, shipped_landmarks
-    from assets.heads.mesh import load_mesh
-    from assets.heads.rigfile import builtin_rig, load_rig
-    from assets.heads.rigging import rig_head
-
-    if head == "builtin":
-        return builtin_rig()
-    if Path(head).suffix.lower() == ".npz":
-        return load_rig(head)
-    mesh = load_mesh(head)
-    lm = landmarks or shipped_landmarks(head)
-    if lm is None:
-        raise LandmarkError(f"{head}: no landmarks file given (--landmarks L.json) and none shipped for this head")
-    return rig_head(mesh, read_landmarks(lm), landmark_source=str(lm))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,7 +51,9 @@ def run(args: argparse.Namespace) -> int:
         if track.fps != args.fps:
             track = frames_from_samples(track.times(), track.values, args.fps)
         frames = track.values
-    rig, mesh = load_head(args.head, args.landmarks)
+    from facecast.commands.headopts import resolve_from_args
+
+    rig, mesh = resolve_from_args(args)
     from assets.heads.landmarks import credit_for
     from clients.render.video import with_caption
 

@@ -23,7 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--landmarks",
         help="landmarks JSON (name -> vertex index or [x, y, z]); default: the shipped file for known heads",
     )
-    p.add_argument("-o", "--output", required=True, help="rig file to write (.npz)")
+    p.add_argument("-o", "--output", help="rig file to write (.npz); not written when the rig fails its checks")
     p.add_argument("--png", help="control-point picture to write (default: OUTPUT with suffix .png)")
     p.add_argument(
         "--simple",
@@ -38,39 +38,52 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--normalize-fallback", action="store_true", help="eq. 10 as a weighted mean (smoother; use with --beta 1)"
     )
+    p.add_argument("--keep-failing", action="store_true",
+                   help="write the rig even when it fails the extreme-pose checks (flipped triangles, edge stretch, "
+                   "lip interpenetration, lip gap at closure, teeth ahead of the lips)")
+    p.add_argument("--show-landmarks", metavar="PNG", default=None,
+                   help="write a picture of the head with its landmarks (numbered, named) and exit")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
     from pathlib import Path
 
-    from assets.errors import LandmarkError, MeshError
+    from assets.errors import MeshError, RigCheckError
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+    from assets.heads.head import Head, builtin_morph_head, head_checks, head_landmarks
+    from assets.heads.landmarks import credit_for, read_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
-    from assets.heads.rigging import candide_face, rig_head
+    from assets.heads.rigging import candide_face, resolve_landmarks, rig_head
     from realtime_core.errors import RealtimeCoreError
     from realtime_core.face import RigConfig, parse_wfm
+    from realtime_core.face.checks import EXTREME_POSES
 
+    if not args.output and not args.show_landmarks:
+        raise SystemExit("facecast rig: error: give -o RIG.npz (or --show-landmarks PNG)")
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )
     head = load_builtin_head()
     if args.head == "builtin":
-        mesh = head.mesh
+        mesh = builtin_morph_head().mesh  # with its parts (teeth) for the checks
         spec = read_landmarks(args.landmarks) if args.landmarks else None
         source = args.landmarks or "builtin"
     else:
         mesh = load_mesh(args.head)
-        lm_path = args.landmarks or shipped_landmarks(args.head)
-        if lm_path is None:
-            raise LandmarkError(
-                f"{args.head}: no landmarks file given (--landmarks L.json) and none shipped for this head"
-            )
-        spec = read_landmarks(lm_path)
-        source = str(lm_path)
+        from clients.render.landmarks import find_landmarks
+
+        spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
+    if args.show_landmarks:
+        from assets.heads.plot import plot_landmarks
+
+        pts = resolve_landmarks(spec if spec is not None else dict(head.landmarks), mesh.vertices, source)
+        out = plot_landmarks(mesh, pts, args.show_landmarks, title=f"{Path(args.head).name}: landmarks ({source})")
+        print(f"rig: landmarks picture {out}")
+        return 0
     simple = None
     if args.simple:
         wfm = Path(args.simple)
@@ -81,10 +94,14 @@ def run(args: argparse.Namespace) -> int:
         except RealtimeCoreError as exc:
             raise MeshError(f"{wfm}: not a usable Candide-3 model: {exc}") from exc
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
+    report = head_checks(Head(rig, rigged))
+    print(f"rig checks at {len(EXTREME_POSES)} extreme poses and closure: {report.summary()}")
+    if not report.passed and not args.keep_failing:
+        raise RigCheckError(f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "
+                            "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing")
+    rig = replace(rig, meta={**rig.meta, "checks": report.as_dict()})
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
-    from assets.heads.landmarks import credit_for
-
     credit = credit_for(args.head)
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig

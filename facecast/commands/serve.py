@@ -8,6 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.headopts import add_head_options
 
     p = sub.add_parser(
         "serve",
@@ -26,12 +27,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="TCP port (default: the config's, else 8765; 0 = any free port)")
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     head = p.add_mutually_exclusive_group()
-    head.add_argument("--head", type=Path, default=None, help="head mesh (glb/gltf/obj/ply) to rig at start-up")
+    head.add_argument("--head", type=Path, default=None,
+                      help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up")
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
     head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
-    p.add_argument(
-        "--landmarks", type=Path, default=None, help="landmarks JSON for --head (default: shipped ones if known)"
-    )
+    add_head_options(p, head=False)
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
     p.add_argument("--token-env", default=None, metavar="VAR",
                    help="require the shared token held in this environment variable (kept off the command line)")
@@ -54,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     import os
 
     from assets.modelfile import load_model
-    from server.app import FacecastServer, load_head, run_server
+    from facecast.commands.headopts import resolve_from_args
+    from server.app import FacecastServer, run_server
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     config = (ServerConfig.from_toml(args.config, **overrides) if args.config
               else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
     model = load_model(args.model)
-    head = load_head(head=args.head, landmarks=args.landmarks, rig=args.rig, builtin=not args.no_head)
+    head = None if args.no_head else resolve_from_args(args, args.rig or args.head or "builtin")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)

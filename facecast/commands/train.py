@@ -26,7 +26,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "beside the output is updated after every EM iteration and picked up when the same command runs again. "
         "With --select, trains a grid of models on 80%% of the utterances and reports held-out accuracy.",
     )
-    p.add_argument("corpus", nargs="+", type=Path, help="corpus folders (each with manifest.json)")
+    p.add_argument("corpus", nargs="*", type=Path, help="corpus folders (each with manifest.json)")
+    p.add_argument("--grid-s1", nargs="?", const="", default=None, metavar="ROOT",
+                   help="add the real lips of GRID s1 (default ROOT: ../shared/data/video/grid_s1 or "
+                   "$FACECAST_SHARED_DATA/video/grid_s1), face tracks from the extraction cache (measured if missing)")
+    p.add_argument("--grid-split", choices=("train", "val", "test", "all"), default="train",
+                   help="which GRID s1 sentences (assets.grid.split_of); never 'test' for a reported model")
+    p.add_argument("--speed", type=lambda t: tuple(float(v) for v in t.split(",") if v), default=(),
+                   help="speed-perturbation factors for the GRID utterances, e.g. 0.9,1.1 (one copy each: pitch, "
+                   "formants and tempo scaled, lip track re-timed)")
+    p.add_argument("--mic-copies", type=int, default=0,
+                   help="copies of every GRID utterance (and speed copy) through noise/reverberation/level/rate")
+    p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
     p.add_argument("--states", type=int, default=16, help="HMM states N")
     p.add_argument("--mix", type=int, default=3, help="Gaussian mixtures per state M")
@@ -64,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
+    from typing import Any
 
     from tqdm import tqdm
 
@@ -74,6 +86,17 @@ def _run(args: argparse.Namespace) -> int:
 
     exclude = {s for s in args.exclude_source.split(",") if s}
     utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
+    data: dict[str, Any] = {"corpora": [str(c) for c in args.corpus]}
+    if args.grid_s1 is not None:
+        from training.reallips import Variety, add_variety, grid_utterances
+
+        split = None if args.grid_split == "all" else args.grid_split
+        grid = grid_utterances(split, root=args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm,
+                               log=lambda line: tqdm.write(line))
+        variety = Variety(speeds=args.speed, mic_copies=args.mic_copies, seed=args.seed)
+        utts += add_variety(grid, variety)
+        data["grid_s1"] = {"split": args.grid_split, "sentences": len(grid), "speeds": list(args.speed),
+                           "mic_copies": args.mic_copies}
     if not utts:
         from training.errors import ConfigError
 
@@ -95,7 +118,7 @@ def _run(args: argparse.Namespace) -> int:
         prev = load_model(ckpt)
         same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
             k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")}
-        if same and prev.metadata.get("corpora") == [str(c) for c in args.corpus]:
+        if same and {k: prev.metadata.get(k) for k in data} == data:
             start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
             print(f"resuming from {ckpt} (iteration {done})")
     bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
@@ -109,7 +132,7 @@ def _run(args: argparse.Namespace) -> int:
 
     rec_run = replace(rec, hmm=replace(rec.hmm, n_iter=max(args.iters - done, 0))) if start is not None else rec
     model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,
-                                   metadata={"corpora": [str(c) for c in args.corpus]})
+                                   metadata=data)
     bar.close()
     model = replace(model, metadata={**model.metadata, "recipe": rec.as_json()})
     save_model(args.output, model)

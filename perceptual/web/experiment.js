@@ -5,8 +5,9 @@
 //   latency_ms    from the Play click (event.timeStamp) to the stimulus start: for video, the display time
 //                 of media time 0 (requestVideoFrameCallback: expectedDisplayTime - mediaTime), and not
 //                 before the element's 'playing' event (audio running); for audio only, 'playing'.
-//   av_offset_ms  median over displayed frames of (frame mid-time - audio clock at its display time), the
-//                 audio clock being the element's currentTime carried forward to expectedDisplayTime.
+//   av_offset_ms  median over displayed frames of (audio clock at the frame's display time - the frame's
+//                 timestamp): how late the picture is behind the sound (0 ideal; negative: picture early).
+//                 The audio clock is the element's currentTime carried forward to expectedDisplayTime.
 // The stimulus is fetched whole into a Blob before Play is enabled, so a click never waits on the network.
 "use strict";
 
@@ -181,7 +182,6 @@ $("play").addEventListener("click", (ev) => {
   state.phase = "playing";
   const m = { trial: t.index, kind: t.kind, has_video: t.has_video, click: tClick, playing: null, videoStart: null,
     offsets: [], frames: 0 };
-  const fps = t.fps || 30;
   if (t.has_video && "requestVideoFrameCallback" in video) {
     const onFrame = (now, md) => {
       // A callback left pending when the previous stimulus ended fires on this one's first frame: ignore.
@@ -191,7 +191,7 @@ $("play").addEventListener("click", (ev) => {
       // The first frames after play() race the clock's start; measure once playback is steady.
       if (m.frames > 3 && !video.paused) {
         const audioAt = video.currentTime + (md.expectedDisplayTime - now) / 1000;
-        m.offsets.push((md.mediaTime + 0.5 / fps - audioAt) * 1000);
+        m.offsets.push((audioAt - md.mediaTime) * 1000);
       }
       if (!video.ended) video.requestVideoFrameCallback(onFrame);
     };

@@ -24,7 +24,10 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 10
+RIG_ALGORITHM = 11
+HARMONIC_MARGIN = 0.0
+"""IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
+0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
@@ -32,7 +35,8 @@ RIG_ALGORITHM = 10
 class RigConfig:
     """Lengths are in inter-ocular distances (IOD) of the head so one config fits any scale.
 
-    method: "sec5" (projection + interpolation, paper 000) or "rbf" (paper 001 Sec. 3.5).
+    method: "sec5" (projection + interpolation, paper 000), "harmonic" (the region Sec. 5 moves, with
+    a harmonic field inside it, :mod:`realtime_core.face.harmonic`; the default) or "rbf" (paper 001 Sec. 3.5).
     projection_2d: "frontal" (face-frame x, y) or "uv" (the head's texture coordinates).
     beta: eq. 10 gain. max_depth: off-plane tolerance for eq. 8-9. fallback_radius: fade of eq. 10
     (None = the paper's unbounded form). rbf_radius: None = paper 001's r. geodesic_check: Sec. 5.1,
@@ -41,7 +45,7 @@ class RigConfig:
     normalize_fallback: eq. 10 as a weighted mean (extension; use with beta = 1).
     """
 
-    method: Literal["sec5", "rbf"] = "sec5"
+    method: Literal["sec5", "rbf", "harmonic"] = "harmonic"
     projection_2d: Literal["frontal", "uv"] = "frontal"
     beta: float = 0.5
     max_depth: float = 0.25
@@ -56,8 +60,8 @@ class RigConfig:
     candidates: int = 24
 
     def __post_init__(self) -> None:
-        if self.method not in ("sec5", "rbf"):
-            raise ConfigError(f"method must be 'sec5' or 'rbf', got {self.method!r}")
+        if self.method not in ("sec5", "rbf", "harmonic"):
+            raise ConfigError(f"method must be 'sec5', 'rbf' or 'harmonic', got {self.method!r}")
         if self.geodesic_walk not in ("greedy", "shortest"):
             raise ConfigError(f"geodesic_walk must be 'greedy' or 'shortest', got {self.geodesic_walk!r}")
         if not 0 <= self.geodesic_slack < 1:
@@ -138,11 +142,16 @@ def head_weights(
     head_uvs: np.ndarray | None = None,
     training: np.ndarray | None = None,
     allowed: np.ndarray | None = None,
+    seam_pairs: np.ndarray | None = None,
+    lower_lip: np.ndarray | None = None,
 ) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
     placed in head coordinates; ``frame`` the head's face frame (IOD scale); ``training`` (n_s, c)
-    displacement fields for the RBF's GCV; ``allowed`` (n_h,) bool control-point candidates."""
+    displacement fields for the RBF's GCV; ``allowed`` (n_h,) bool control-point candidates;
+    ``seam_pairs`` (k, 2) the (upper, lower) sides of a cut lip seam, coincident at rest, and
+    ``lower_lip`` (n_s,) bool the simple vertices that open with the jaw: a control point that
+    landed on the wrong side of the seam (both sides are equally close) moves to the other side."""
     h = np.asarray(head_vertices, dtype=np.float64)
     proj = project(
         simple.vertices,
@@ -156,12 +165,24 @@ def head_weights(
         slack=config.geodesic_slack,
     )
     iod = frame.iod
+    if seam_pairs is not None and lower_lip is not None and len(seam_pairs):
+        ctrl = proj.control.copy()
+        to_lower = dict(zip(seam_pairs[:, 0].tolist(), seam_pairs[:, 1].tolist()))
+        to_upper = dict(zip(seam_pairs[:, 1].tolist(), seam_pairs[:, 0].tolist()))
+        taken = set(ctrl.tolist())
+        for i, c in enumerate(ctrl.tolist()):
+            other = to_lower.get(c) if lower_lip[i] else to_upper.get(c)
+            if other is not None and other not in taken:
+                taken.discard(c)
+                taken.add(other)
+                ctrl[i] = other
+        proj = replace(proj, control=ctrl)
     info = {
         "bad_triangles": int(proj.bad_triangles.sum()),
         "replacements": int(proj.replacements),
         "control_rms_offset_iod": float(np.sqrt(((h[proj.control] - simple.vertices) ** 2).sum(1).mean()) / iod),
     }
-    if config.method == "sec5":
+    if config.method in ("sec5", "harmonic"):
         if config.projection_2d == "uv":
             if head_uvs is None:
                 raise ConfigError("projection_2d='uv' needs head texture coordinates")
@@ -187,6 +208,10 @@ def head_weights(
         )
         g = it.weights
         info["inside"] = int(it.inside.sum())
+        if config.method == "harmonic":
+            from realtime_core.face.harmonic import harmonic_weights
+
+            g = harmonic_weights(h, head_triangles, proj.control, g.tocsr(), margin=HARMONIC_MARGIN * iod)
     else:
         y = training if training is not None else np.zeros((simple.n_vertices, 1))
         fit = rbf_map(h, h[proj.control], y, radius=None if config.rbf_radius is None else config.rbf_radius * iod)
@@ -223,6 +248,19 @@ def build_rig(
     basis = calibration.basis(simple)  # (n_s*3, 4)
     h = np.asarray(head_vertices, dtype=np.float64)
     canon, welded = weld(h, keep_apart=keep_apart)
+    seam_w = lower = None
+    if keep_apart is not None and len(keep_apart):
+        # The copies of a cut seam and the vertices they were copied from (coincident at rest).
+        from scipy.spatial import cKDTree
+
+        ka = np.asarray(keep_apart, dtype=np.int64)
+        others = np.setdiff1d(np.arange(len(h)), ka)
+        d, j = cKDTree(h[others]).query(h[ka])
+        ok = d <= 1e-9 * max(float(np.ptp(h, axis=0).max()), 1e-300)
+        seam_w = np.column_stack([canon[others[j[ok]]], canon[ka[ok]]])
+        # Simple vertices that the mouth-open column moves down (relative to its largest motion): lower lip.
+        dy = basis[:, 2].reshape(-1, 3) @ frame.axes[1]
+        lower = dy < -0.3 * max(float(np.abs(dy).max()), 1e-300)
     t_w = canon[np.asarray(head_triangles, dtype=np.int64)]
     allowed_w = None
     if allowed is not None:
@@ -241,6 +279,8 @@ def build_rig(
         head_uvs=uv_w,
         training=basis.reshape(simple.n_vertices, 3 * 4),
         allowed=allowed_w,
+        seam_pairs=seam_w,
+        lower_lip=lower,
     )
     # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
     g = g_w[canon]

@@ -26,6 +26,7 @@ arithmetic after it stays in float64.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,13 +110,14 @@ class StreamingInverter:
     """``push(o_a (k, Da)) -> o_v (j, Dv) float64`` for the frames now final; ``flush()`` ends.
 
     plan: the shared read-only matrices (built from ``form`` and ``config`` when not given;
-    it must have been built from the same two). floor: ``(Dv,)`` lower bounds of the output (the
-    closed pose, :data:`realtime_core.CLOSED_POSE`; -inf = none), applied to every emitted frame."""
+    it must have been built from the same two). output: the model's output stage
+    (:class:`realtime_core.output.OutputStage`: closed-pose floor and closure band), applied to
+    every emitted frame; None = raw eq. 7 estimates."""
 
     def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig(),
-                 plan: StreamPlan | None = None, floor: np.ndarray | None = None) -> None:
+                 plan: StreamPlan | None = None, output: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.form = form
-        self._floor = None if floor is None else np.asarray(floor, dtype=np.float64).reshape(form.n_visual)
+        self._output = output
         self.config = config
         p = StreamPlan.build(form, config) if plan is None else plan
         self.plan = p
@@ -208,5 +210,4 @@ class StreamingInverter:
         # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
         _, x, info = _posv(P, rhs)
         x = x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
-        # the output stage: never below the closed pose (eq. 7's regression can overshoot it)
-        return x if self._floor is None else np.maximum(x, self._floor)
+        return x if self._output is None else self._output(x)

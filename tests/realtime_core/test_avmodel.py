@@ -86,11 +86,11 @@ def test_sessions_of_a_model_share_one_plan_and_match_an_unshared_inverter():
     assert a.plan is b.plan  # one copy of the matrices for every live session
     assert m.inverter(StreamConfig(dtype="float64")).plan is not a.plan
     oa = np.random.default_rng(1).standard_normal((40, 9))
-    own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale), floor=m.visual_floor)
+    own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale), output=m.output_stage)
     np.testing.assert_array_equal(np.concatenate([a.push(oa), a.flush()]), np.concatenate([own.push(oa), own.flush()]))
     # Sharing does not couple the sessions' states: interleaved pushes give each its own result.
     ref = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale),
-                            floor=m.visual_floor).push(oa)
+                            output=m.output_stage).push(oa)
     c = m.inverter()
     out_b = [b.push(oa[:20])]
     c.push(oa[::-1])
@@ -113,3 +113,25 @@ def test_output_stage_clamps_at_the_closed_pose():
     inv = m.inverter()
     out = np.concatenate([inv.push(oa), inv.flush()])
     np.testing.assert_array_equal(out, np.maximum(raw, m.visual_floor))
+
+
+def test_closure_band_draws_near_closures_shut_and_round_trips():
+    """With a closure band b the output stage maps mouth_open in [0, b] to 0, stretches [b, 3b] onto
+    [0, 3b] linearly, leaves values >= 3b alone (monotone, continuous); the band survives the file."""
+    from dataclasses import replace
+
+    from realtime_core.output import OutputStage
+
+    stage = OutputStage(np.array([-np.inf, -np.inf, 0.0, -np.inf]), band=0.02)
+    x = np.zeros((7, 4))
+    x[:, 2] = [-0.01, 0.0, 0.02, 0.03, 0.05, 0.06, 0.2]
+    x[:, 0] = -1.0
+    y = stage(x.copy())
+    np.testing.assert_allclose(y[:, 2], [0.0, 0.0, 0.0, 0.015, 0.045, 0.06, 0.2])
+    np.testing.assert_array_equal(y[:, 0], x[:, 0])
+    grid = np.zeros((1000, 4))
+    grid[:, 2] = np.linspace(-0.1, 0.3, 1000)
+    assert np.all(np.diff(stage(grid)[:, 2]) >= 0)
+    m = replace(small_model(2), closure_band=0.02)
+    back = decode_model(encode_model(m))
+    assert back.closure_band == 0.02 and decode_model(encode_model(small_model(2))).closure_band == 0.0

@@ -1,4 +1,4 @@
-"""Fixtures of the training-data tests: the espeak-ng synthesizer."""
+"""Fixtures of the training-data tests: a private face-track cache."""
 
 from __future__ import annotations
 
@@ -6,8 +6,6 @@ import os
 from pathlib import Path
 
 import pytest
-
-from tests.prerequisites import missing
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -20,15 +18,3 @@ def private_face_cache(tmp_path_factory):
         os.environ.pop("FACECAST_CACHE", None)
     else:
         os.environ["FACECAST_CACHE"] = old
-
-
-@pytest.fixture(scope="session")
-def espeak():
-    """The shared espeak-ng synthesizer (real libespeak-ng.so.1)."""
-    from training.errors import SynthesisError
-    from training.espeak import synthesizer
-
-    try:
-        return synthesizer()
-    except SynthesisError as exc:
-        missing(f"espeak-ng library unavailable (apt package libespeak-ng1): {exc}")

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from assets.espeak import LANGUAGES, Voice
 from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
-from training.espeak import LANGUAGES, Voice
 from training.params import FPS, n_frames_for
 
 # Real espeak-ng speech.

@@ -168,8 +168,8 @@ def test_face_track_invariants(s1, tmp_path, ffmpeg) -> None:
 
 
 def test_malformed_alignments_name_the_file(tmp_path) -> None:
+    from assets.grid import read_words
     from training.errors import AlignmentFormatError
-    from training.grid import read_words
 
     cases = {"empty.align": "", "text.align": "hello world\n", "float.align": "0 1.5 sil\n",
              "backwards.align": "0 100 sil\n50 20 bin\n"}

@@ -39,7 +39,7 @@ def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
     The word times come from swwp2s.align (units of 1/25000 s: the last word ends at
     74500 = 2.98 s of the 3 s clip, and "set" starts at 12250 = 0.49 s where the audio starts).
     """
-    from training.grid import read_words
+    from assets.grid import read_words
 
     words = read_words(grid / "swwp2s.align")
     assert words[-1][1] == pytest.approx(2.98) and [w for _, _, w in words][1:7] == [
@@ -108,10 +108,10 @@ def test_rules_agree_with_the_measured_lips(swwp2s, grid, espeak) -> None:
     Before 0.6 s the talker holds the mouth open in silence (breath), which no audio-driven
     rule can know, so that part is left out of the mouth_open check.
     """
+    from assets.espeak import Voice
+    from assets.grid import read_words
     from training.alignments import phones_from_words
     from training.articulatory import render_params
-    from training.espeak import Voice
-    from training.grid import read_words
 
     words = read_words(grid / "swwp2s.align")
     phones = phones_from_words(words, voice=Voice(language="en", base="en"), spellings={"p": "pee"})

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from assets.espeak import LANGUAGES, VARIANTS, Voice
 from training.errors import ConfigError
-from training.espeak import LANGUAGES, VARIANTS, Voice
 
 # Real espeak-ng speech.
 pytestmark = pytest.mark.system

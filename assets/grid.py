@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from training.errors import AlignmentFormatError
+from assets.errors import AlignmentFormatError
 
 Split = Literal["train", "val", "test"]
 

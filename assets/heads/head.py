@@ -1,0 +1,205 @@
+"""The one head resolver: whatever the user names as a head becomes one :class:`Head`.
+
+``resolve_head(spec)`` accepts
+
+- ``"builtin"``: the built-in head, driven through its own 52 ARKit targets (``mode="retarget"``:
+  its Sec. 5 rig instead);
+- a rig file (``.npz``, written by ``facecast rig``);
+- a head mesh (``.glb/.gltf/.obj/.ply``): driven through its own morph targets when it has enough
+  mouth targets (:mod:`assets.heads.targets`; no rig step), otherwise rigged now from landmarks
+  (``landmarks`` JSON, else the file shipped for known heads, else ``landmark_finder(mesh)``, e.g.
+  :func:`clients.render.landmarks.find_landmarks`, which finds them on a render of the face; the
+  finder is passed in because rendering lives in a layer above this one).
+
+A :class:`Head` holds the mesh and what animates it: a :class:`realtime_core.face.Rig` (retarget,
+paper 000 Sec. 5) or a :class:`realtime_core.face.keyframes.MorphRig` (own targets, paper 002
+eq. 4). Both have ``neutral``, ``triangles``, ``moving``, ``displacements(params)``,
+``deformed(params)`` and ``meta``, which is all the renderer, the exporters and the server use.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from assets.errors import LandmarkError, MeshError
+from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
+from realtime_core.face import Rig, RigConfig
+from realtime_core.face.keyframes import MorphRig
+
+AnyRig = Rig | MorphRig
+LandmarkFinder = Callable[[HeadMesh], Mapping[str, object]]
+HeadMode = Literal["auto", "morph", "retarget"]
+HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
+
+
+@dataclass(frozen=True)
+class Head:
+    """A head ready to animate: ``rig`` (Rig or MorphRig) and the ``mesh`` it deforms (same vertex order)."""
+
+    rig: AnyRig
+    mesh: HeadMesh
+
+    def __post_init__(self) -> None:
+        if len(self.mesh.vertices) != len(self.rig.neutral):
+            raise MeshError(f"{self.mesh.name}: mesh has {len(self.mesh.vertices)} vertices, its rig {len(self.rig.neutral)}")
+
+    @property
+    def kind(self) -> str:
+        """"morph" (own targets) or "retarget" (Sec. 5 rig)."""
+        return "morph" if isinstance(self.rig, MorphRig) else "retarget"
+
+    def __iter__(self):
+        return iter((self.rig, self.mesh))
+
+
+def builtin_morph_head(cache: Path | None = None) -> Head:
+    """The built-in head animated through its own 52 ARKit targets."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.targets import morph_rig
+
+    b = load_builtin_head(cache)
+    mesh = HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, uvs=b.mesh.uvs, texture=b.mesh.texture,
+                    colors=b.mesh.colors, name="builtin", targets=dict(b.targets), part=b.part.astype("int16"),
+                    part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"))
+    rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets)
+    assert rig is not None  # the reference reproduces itself
+    lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
+    rig.meta["landmarks"] = lm
+    return Head(rig, mesh)
+
+
+def resolve_head(
+    spec: str | Path = "builtin",
+    *,
+    landmarks: str | Path | Mapping[str, object] | None = None,
+    mode: HeadMode = "auto",
+    target_map: str | Path | None = None,
+    config: RigConfig | None = None,
+    cache: Path | None = None,
+    landmark_finder: LandmarkFinder | None = None,
+) -> Head:
+    """The head named by ``spec`` ('builtin', a rig .npz or a mesh file), see the module docstring.
+
+    mode: "auto" (own targets when enough, else retarget), "morph" (own targets or an error),
+    "retarget" (always a Sec. 5 rig). target_map: a user mapping JSON for morph-target names.
+    Raises MeshError / LandmarkError / RigFileError naming the file and what to do."""
+    config = config or RigConfig()
+    if mode not in HEAD_MODES:
+        raise ValueError(f"mode must be one of {HEAD_MODES}, got {mode!r}")
+    if str(spec) == "builtin":
+        if mode == "retarget" or landmarks is not None:
+            from assets.heads.rigfile import builtin_rig
+
+            if landmarks is None:
+                return Head(*builtin_rig(cache))
+            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None)
+        return builtin_morph_head(cache)
+    p = Path(spec)
+    if p.suffix.lower() == ".npz":
+        from assets.heads.rigfile import load_rig
+
+        return Head(*load_rig(p))
+    if p.suffix.lower() not in MESH_SUFFIXES:
+        if not p.exists():
+            raise MeshError(f"{p}: head not found (give 'builtin', a rig .npz or a mesh {', '.join(MESH_SUFFIXES)})")
+        raise MeshError(f"{p}: unsupported head file {p.suffix!r}; give 'builtin', a rig .npz or a mesh "
+                        f"({', '.join(MESH_SUFFIXES)})")
+    from assets.heads.mesh import load_mesh
+
+    mesh = load_mesh(p, cache=cache)
+    if mode != "retarget":
+        head = morph_head(mesh, target_map=target_map, cache=cache, require_enough=mode == "auto")
+        if head is not None:
+            return head
+        if mode == "morph":
+            n = len(mesh.targets or {})
+            raise MeshError(f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
+                            "give a mapping with --target-map or use --head-mode retarget")
+    return _rig_mesh(mesh, landmarks, config, landmark_finder)
+
+
+def morph_head(mesh: HeadMesh, *, target_map: str | Path | None = None, cache: Path | None = None,
+               require_enough: bool = True) -> Head | None:
+    """The mesh driven by its own targets, or None (no targets / not enough mouth targets)."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.targets import morph_rig, read_target_map
+
+    if not mesh.targets:
+        return None
+    user = read_target_map(target_map) if target_map is not None else None
+    ref = load_builtin_head(cache).targets
+    rig = morph_rig(mesh.name, mesh.vertices, mesh.triangles, mesh.targets, ref, user_map=user,
+                    require_enough=require_enough)
+    return None if rig is None else Head(rig, mesh)
+
+
+def _rig_mesh(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, config: RigConfig,
+              finder: LandmarkFinder | None) -> Head:
+    from assets.heads.rigging import rig_head
+
+    spec, source = head_landmarks(mesh, landmarks, finder)
+    rig, rigged = rig_head(mesh, spec, landmark_source=source, config=config)
+    return Head(rig, rigged)
+
+
+def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None,
+                   finder: LandmarkFinder | None = None) -> tuple[dict[str, object] | None, str]:
+    """The landmark spec for a mesh and where it came from: given (file or mapping), shipped for a
+    known head, the built-in head's own, or found automatically (LandmarkError when that fails)."""
+    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+
+    if isinstance(landmarks, Mapping):
+        return dict(landmarks), "landmarks"
+    if landmarks is not None:
+        return read_landmarks(landmarks), str(landmarks)
+    if mesh.name == "builtin":
+        return None, "builtin landmarks"
+    shipped = shipped_landmarks(mesh.name)
+    if shipped is not None:
+        return read_landmarks(shipped), str(shipped)
+    if finder is None:
+        raise LandmarkError(f"{mesh.name}: no landmarks file given (--landmarks L.json) and none shipped for this head")
+    return dict(finder(mesh)), "automatic landmarks"
+
+
+TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
+
+
+def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None):
+    """:func:`realtime_core.face.checks.check_rig` for a head: its landmarks from the rig's meta
+    (nearest vertices; a morph head from a file without them: ``landmark_finder(mesh)``), the two sides
+    of a cut lip seam as lip pairs, teeth from the mesh's part names. Returns a RigReport."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face.checks import RigCheckLimits, check_rig
+
+    rig, mesh = head.rig, head.mesh
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    pts = rig.meta.get("landmarks")
+    if not pts and landmark_finder is not None:
+        pts = dict(landmark_finder(mesh))
+    if not pts:
+        raise MeshError(f"{mesh.name}: the rig records no landmarks; the checks need them (give --landmarks)")
+    idx = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in pts.items()}
+    pairs = None
+    cut = int(rig.meta.get("lip_seam_cut", 0) or 0)
+    if cut:
+        n0 = len(v0) - cut
+        d, j = cKDTree(v0[:n0]).query(v0[n0:])
+        ok = d <= 1e-9 * float(np.ptp(v0, axis=0).max())
+        pairs = np.column_stack([j[ok], np.arange(n0, len(v0))[ok]])  # (upper original, lower copy)
+        # The copy at the lower-inner landmark is the lower lip's.
+        lower = pairs[pairs[:, 0] == idx["lower_inner"], 1]
+        if len(lower):
+            idx["lower_inner"] = int(lower[0])
+    teeth = None
+    if mesh.part is not None and mesh.part_names:
+        ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
+        if ids:
+            teeth = np.flatnonzero(np.isin(mesh.part, ids))
+    return check_rig(rig, mouth_landmarks(idx), lip_pairs=pairs, teeth=teeth, limits=limits or RigCheckLimits())

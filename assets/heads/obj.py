@@ -1,0 +1,149 @@
+"""Wavefront OBJ with MTL for heads: several objects and materials, one texture per material.
+
+Vertex order is the file's ``v`` order, so landmark indices written for the file stay valid; a
+position that appears with several texture coordinates or materials (a UV seam, a material border)
+gets extra copies appended after the file's vertices. UVs are returned in facecast's (glTF's)
+convention, v down: ``v_facecast = 1 - v_obj``. Polygons are fan-triangulated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from assets.errors import MeshError
+from assets.heads.gltf import Material
+
+
+@dataclass
+class ObjMesh:
+    """vertices (n, 3), triangles (m, 3), uvs (n, 2) or None, material (n,) index into materials
+    (-1 none), group (n,) index into group_names (the ``o``/``g`` names)."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    uvs: np.ndarray | None
+    material: np.ndarray
+    materials: list[Material]
+    group: np.ndarray
+    group_names: list[str]
+
+
+def _read_mtl(path: Path) -> dict[str, Material]:
+    out: dict[str, Material] = {}
+    if not path.is_file():
+        return out
+    cur = None
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        parts = line.strip().split(maxsplit=1)
+        if not parts:
+            continue
+        key, rest = parts[0], parts[1] if len(parts) > 1 else ""
+        if key == "newmtl":
+            cur = rest.strip()
+            out[cur] = Material(color=np.ones(4), image=None, name=cur)
+        elif cur is None:
+            continue
+        elif key == "Kd":
+            rgb = [float(x) for x in rest.split()[:3]]
+            out[cur].color = np.array(rgb + [1.0])
+        elif key == "map_Kd":
+            name = rest.split()[-1]  # options (-s, -o, ...) come before the file name
+            img = path.parent / name.replace("\\", "/")
+            if img.is_file():
+                out[cur].image = img.read_bytes()
+    return out
+
+
+def read_obj(path: Path) -> ObjMesh:
+    """Parse ``path`` (and its ``mtllib``); MeshError naming the file on a malformed line."""
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise MeshError(f"{path}: cannot read: {exc}") from exc
+    pos: list[list[float]] = []
+    tex: list[list[float]] = []
+    corners: list[tuple[int, int, int, int]] = []  # (v, vt, material, group) per triangle corner
+    materials: dict[str, Material] = {}
+    mat_names: list[str] = []
+    groups = ["default"]
+    mat, grp = -1, 0
+    for lineno, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            key = parts[0]
+            if key == "v":
+                pos.append([float(x) for x in parts[1:4]])
+            elif key == "vt":
+                tex.append([float(x) for x in parts[1:3]] + [0.0] * (2 - len(parts[1:3])))
+            elif key in ("o", "g"):
+                name = " ".join(parts[1:]) or "default"
+                if name not in groups:
+                    groups.append(name)
+                grp = groups.index(name)
+            elif key == "mtllib":
+                for lib in parts[1:]:
+                    materials.update(_read_mtl(path.parent / lib))
+            elif key == "usemtl":
+                name = " ".join(parts[1:])
+                if name not in mat_names:
+                    mat_names.append(name)
+                mat = mat_names.index(name)
+            elif key == "f":
+                refs = []
+                for c in parts[1:]:
+                    f = c.split("/")
+                    vi = int(f[0])
+                    ti = int(f[1]) if len(f) > 1 and f[1] else 0
+                    refs.append((vi - 1 if vi > 0 else len(pos) + vi, (ti - 1 if ti > 0 else len(tex) + ti) if ti else -1))
+                for k in range(1, len(refs) - 1):
+                    for vi, ti in (refs[0], refs[k], refs[k + 1]):
+                        corners.append((vi, ti, mat, grp))
+        except (ValueError, IndexError) as exc:
+            raise MeshError(f"{path}: line {lineno}: cannot parse {line.strip()[:60]!r}") from exc
+    v = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
+    uv_src = np.asarray(tex, dtype=np.float64).reshape(-1, 2)
+    if not corners:
+        return ObjMesh(v, np.zeros((0, 3), np.int64), None, np.full(len(v), -1), [], np.zeros(len(v), np.int64), groups)
+    c = np.asarray(corners, dtype=np.int64)
+    if c[:, 0].min() < 0 or c[:, 0].max() >= len(v) or (c[:, 1].max() >= len(uv_src)):
+        raise MeshError(f"{path}: a face refers to a vertex or texture coordinate that does not exist")
+    has_uv = bool(len(uv_src)) and bool((c[:, 1] >= 0).all())
+    # One output vertex per distinct (position, uv, material); the first use of a position keeps its index.
+    key = np.stack([c[:, 0], c[:, 1] if has_uv else np.zeros(len(c), np.int64), c[:, 2]], axis=1)
+    uniq, first_use, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    first_of_pos = np.full(len(v), -1, dtype=np.int64)
+    out_index = np.empty(len(uniq), dtype=np.int64)
+    extra: list[int] = []
+    order = np.argsort(first_use)  # file order of first use
+    for u in order:
+        p = uniq[u, 0]
+        if first_of_pos[p] < 0:
+            first_of_pos[p] = u
+            out_index[u] = p
+        else:
+            out_index[u] = len(v) + len(extra)
+            extra.append(u)
+    n_out = len(v) + len(extra)
+    src_pos = np.concatenate([np.arange(len(v)), uniq[extra, 0]]) if extra else np.arange(len(v))
+    verts = v[src_pos]
+    tris = out_index[inv].reshape(-1, 3)
+    uvs = None
+    row_of = np.full(n_out, -1, dtype=np.int64)
+    row_of[out_index] = np.arange(len(uniq))
+    if has_uv:
+        uvs = np.zeros((n_out, 2))
+        ok = row_of >= 0
+        uvs[ok] = uv_src[uniq[row_of[ok], 1]]
+        uvs[:, 1] = 1.0 - uvs[:, 1]  # OBJ: v up -> facecast/glTF: v down
+    material = np.full(n_out, -1, dtype=np.int64)
+    material[out_index] = uniq[:, 2]
+    group = np.zeros(n_out, dtype=np.int64)
+    group[out_index[inv]] = np.repeat(c[:, 3], 1)
+    mats = [materials.get(n, Material(color=np.ones(4), image=None, name=n)) for n in mat_names]
+    return ObjMesh(verts, tris, uvs, material, mats, group, groups)

@@ -1,0 +1,223 @@
+"""A head's own morph targets: recognise them by name and drive them (paper 002 eq. 4).
+
+Name matching (:func:`match_targets`) knows
+
+- ARKit's 52 blendshapes in Apple's spelling (``jawOpen``, ``mouthSmileLeft``) and the common
+  variants: any case, ``_L/_R``, ``.L/.R``, ``Left/Right``, ``_l/_r``, snake case
+  (``mouth_smile_left``), and exporter prefixes up to the last ``.`` or ``:`` (``blendShape1.jawOpen``);
+- the 15 Oculus/OVR visemes (``viseme_aa``, ``viseme_PP``, ``v_aa``, ...);
+- VRM expressions (VRM 1.0 ``aa ih ou ee oh``, VRM 0.x ``A I U E O``, with or without a ``Fcl_MTH_`` prefix);
+- a user mapping file for anything else (:func:`read_target_map`).
+
+Each recognised target gets a *semantic correspondent* on the reference face (the built-in head,
+which carries the 52 ARKit targets): an ARKit target itself, or for a viseme a fixed ARKit mixture
+(:data:`VISEME_ARKIT`). The mouth parameters become a reference motion through the ARKit-52
+weights facecast streams (``realtime_core.blendshapes``), and :class:`realtime_core.face.keyframes.KeyframeMap`
+solves for the head's own weights by bounded least squares. A head whose targets reproduce the
+jaw opening and most of the other parameters ("enough mouth targets", :func:`morph_rig`) is
+animated this way by default, with no rig step.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from assets.errors import MeshError
+from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+from realtime_core.face.keyframes import KeyframeMap, MorphRig
+
+VISEME_ARKIT: dict[str, dict[str, float]] = {
+    # OVR visemes (and VRM vowels, which are the same five vowels) as ARKit mixtures on the
+    # reference face: what each mouth shape looks like in ARKit terms (hand-set, documented).
+    "sil": {},
+    "PP": {"mouthPressLeft": 0.6, "mouthPressRight": 0.6, "mouthRollLower": 0.3, "mouthRollUpper": 0.3},
+    "FF": {"mouthRollLower": 0.6, "mouthUpperUpLeft": 0.3, "mouthUpperUpRight": 0.3, "jawOpen": 0.05},
+    "TH": {"jawOpen": 0.15, "tongueOut": 0.4},
+    "DD": {"jawOpen": 0.2, "mouthLowerDownLeft": 0.2, "mouthLowerDownRight": 0.2},
+    "kk": {"jawOpen": 0.25, "mouthStretchLeft": 0.2, "mouthStretchRight": 0.2},
+    "CH": {"mouthFunnel": 0.5, "jawOpen": 0.15, "mouthShrugUpper": 0.2},
+    "SS": {"mouthStretchLeft": 0.3, "mouthStretchRight": 0.3, "jawOpen": 0.05, "mouthSmileLeft": 0.2,
+           "mouthSmileRight": 0.2},
+    "nn": {"jawOpen": 0.15, "mouthStretchLeft": 0.1, "mouthStretchRight": 0.1},
+    "RR": {"mouthFunnel": 0.3, "mouthPucker": 0.3, "jawOpen": 0.1},
+    "aa": {"jawOpen": 0.6, "mouthLowerDownLeft": 0.3, "mouthLowerDownRight": 0.3},
+    "E": {"jawOpen": 0.3, "mouthStretchLeft": 0.4, "mouthStretchRight": 0.4},
+    "I": {"jawOpen": 0.2, "mouthSmileLeft": 0.4, "mouthSmileRight": 0.4, "mouthStretchLeft": 0.2,
+          "mouthStretchRight": 0.2},
+    "O": {"jawOpen": 0.4, "mouthFunnel": 0.6},
+    "U": {"jawOpen": 0.15, "mouthPucker": 0.8, "mouthFunnel": 0.2},
+}
+_VRM = {"aa": "aa", "a": "aa", "ih": "I", "i": "I", "ou": "U", "u": "U", "ee": "E", "e": "E", "oh": "O", "o": "O"}
+
+# Reference motions that "enough mouth targets" must reproduce: (params (4,), max relative residual).
+# The parameter order is realtime_core.VISUAL_PARAMS (upper_lip_raise, lip_stretch, mouth_open,
+# lip_corner_depress), at about two thirds of each one's typical range.
+ENOUGH_PROBES: tuple[tuple[tuple[float, float, float, float], float], ...] = (
+    ((0.0, 0.0, 0.25, 0.0), 0.5),  # the jaw must open
+    ((0.04, 0.0, 0.0, 0.0), 0.9),
+    ((0.0, 0.07, 0.0, 0.0), 0.9),
+    ((0.0, -0.08, 0.0, 0.0), 0.9),
+)
+
+
+def _norm(s: str) -> str:
+    return re.sub(r"[^a-z0-9]", "", s.lower())
+
+
+_ARKIT_BY_KEY = {_norm(n): n for n in ARKIT_NAMES}
+_OVR_BY_KEY = {_norm(v): v for v in VISEME_ARKIT}
+
+
+def canonical_name(name: str) -> str | None:
+    """The ARKit name (``"jawOpen"``) or viseme (``"viseme:aa"``) a morph-target name stands for, or None."""
+    segs = re.split(r"[.:|]", name.strip())
+    base = segs[-1].strip()
+    if len(segs) > 1 and base in ("L", "R", "l", "r"):  # Blender's "mouthSmile.L": the side, not a prefix
+        base = segs[-2].strip() + "_" + base
+    # Side suffixes: _L/_R, .L/.R, -L, " L", _l, Left/Right in any case.
+    m = re.match(r"^(.*?)[_\-. ]?([LlRr])$", base)
+    if m and m.group(1) and not m.group(1).endswith(("Left", "Right", "left", "right")):
+        stem = m.group(1)
+        key = _norm(stem) + ("left" if m.group(2) in "Ll" else "right")
+        if key in _ARKIT_BY_KEY:
+            return _ARKIT_BY_KEY[key]
+    key = _norm(base)
+    if key in _ARKIT_BY_KEY:
+        return _ARKIT_BY_KEY[key]
+    for prefix in ("viseme", "vrc.v", "v", "fclmth", "mth"):
+        if key.startswith(prefix) and len(key) > len(prefix):
+            rest = key[len(prefix):]
+            if rest in _OVR_BY_KEY:
+                return "viseme:" + _OVR_BY_KEY[rest]
+            if rest in _VRM:
+                return "viseme:" + _VRM[rest]
+    if key in _VRM and len(base) <= 2:  # a bare VRM vowel: "aa", "A", "ih", ...
+        return "viseme:" + _VRM[key]
+    return None
+
+
+def read_target_map(path: str | Path) -> dict[str, dict[str, float]]:
+    """A user mapping file: ``{"targets": {head_target: "jawOpen" | "viseme:aa" | {"jawOpen": 0.5, ...}}}``.
+
+    Each value names the ARKit target (or viseme) the head's target looks like, or an ARKit
+    mixture. Raises MeshError naming the file on any problem."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise MeshError(f"{p}: cannot read the morph-target mapping: {exc}") from exc
+    table = doc.get("targets") if isinstance(doc, dict) else None
+    if not isinstance(table, dict):
+        raise MeshError(f'{p}: expected {{"targets": {{head_target: ARKit name | "viseme:aa" | {{ARKit: weight}}}}}}')
+    out: dict[str, dict[str, float]] = {}
+    for k, v in table.items():
+        try:
+            out[str(k)] = correspondent(v)
+        except ValueError as exc:
+            raise MeshError(f"{p}: target {k!r}: {exc}") from exc
+    return out
+
+
+def correspondent(value: object) -> dict[str, float]:
+    """An ARKit mixture for a mapping value (ARKit name, ``viseme:X`` or {ARKit name: weight})."""
+    if isinstance(value, str):
+        c = canonical_name(value) if not value.startswith("viseme:") else value
+        if c is None:
+            raise ValueError(f"{value!r} is neither an ARKit name nor a viseme")
+        return dict(VISEME_ARKIT[c[7:]]) if c.startswith("viseme:") else {c: 1.0}
+    if isinstance(value, Mapping):
+        mix: dict[str, float] = {}
+        for k, w in value.items():
+            c = canonical_name(str(k))
+            if c is None or c.startswith("viseme:") or isinstance(w, bool) or not isinstance(w, (int, float)):
+                raise ValueError(f"{k!r}: {w!r} is not an ARKit name with a number")
+            mix[c] = mix.get(c, 0.0) + float(w)
+        return mix
+    raise ValueError(f"{value!r} must be an ARKit name, 'viseme:X' or an object of ARKit weights")
+
+
+def match_targets(names: list[str] | tuple[str, ...], user_map: Mapping[str, Mapping[str, float]] | None = None
+                  ) -> dict[str, dict[str, float]]:
+    """Head target name -> ARKit mixture of its correspondent, for every recognised target.
+
+    ARKit targets are preferred: when the head has at least as many ARKit mouth targets as
+    visemes, visemes are left out (avatars often carry both sets; one set drives the mouth).
+    The user map adds to (and overrides) the recognised names."""
+    arkit: dict[str, dict[str, float]] = {}
+    vis: dict[str, dict[str, float]] = {}
+    for n in names:
+        c = canonical_name(n)
+        if c is None:
+            continue
+        if c.startswith("viseme:"):
+            if VISEME_ARKIT[c[7:]] and c not in {canonical_name(x) for x in vis}:
+                vis[n] = dict(VISEME_ARKIT[c[7:]])
+        elif c not in {next(iter(m)) for m in arkit.values()}:
+            arkit[n] = {c: 1.0}
+    n_mouth = sum(1 for m in arkit.values() if next(iter(m)).startswith(("jaw", "mouth")))
+    out = dict(arkit) if n_mouth >= len(vis) else dict(vis)
+    for k, v in (user_map or {}).items():
+        if k in names:
+            out[k] = dict(v)
+    return out
+
+
+def arkit_source(params: np.ndarray) -> np.ndarray:
+    """Mouth parameters (..., 4) -> the ARKit-52 weights facecast streams (..., 52)."""
+    return blendshape_weights(params, "arkit52").astype(np.float64)
+
+
+def morph_rig(
+    name: str,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    targets: Mapping[str, np.ndarray],
+    reference: Mapping[str, np.ndarray],
+    *,
+    user_map: Mapping[str, Mapping[str, float]] | None = None,
+    require_enough: bool = True,
+) -> MorphRig | None:
+    """A :class:`MorphRig` driving the head's own ``targets`` (name -> (n, 3) displacement at weight 1),
+    or None when too few mouth targets are recognised (``require_enough``) to reproduce the
+    :data:`ENOUGH_PROBES`. ``reference``: the built-in head's 52 ARKit targets (name -> (n_ref, 3))."""
+    matched = match_targets(list(targets), user_map)
+    if not any(k.startswith(("jaw", "mouth", "tongue")) for mix in matched.values() for k in mix):
+        return None  # no mouth shape among the recognised targets (eyes, brows only)
+    head_names = tuple(matched)
+    ref = np.stack([reference[n] for n in ARKIT_NAMES])  # (52, n_ref, 3)
+    rows = np.flatnonzero(np.abs(ref).max(axis=(0, 2)) > 0)  # reference vertices any target moves
+    a = ref[:, rows].reshape(len(ARKIT_NAMES), -1)  # (52, d): reference displacement per ARKit weight
+    index = {n: i for i, n in enumerate(ARKIT_NAMES)}
+    mix = np.zeros((len(head_names), len(ARKIT_NAMES)))
+    for i, n in enumerate(head_names):
+        for arkit, w in matched[n].items():
+            mix[i, index[arkit]] = w
+    kprime = mix @ a  # (P, d) correspondents kappa'_i
+    keep = np.abs(kprime).max(axis=1) > 0
+    head_names = tuple(n for n, k in zip(head_names, keep) if k)
+    if not head_names:
+        return None
+    kprime = kprime[keep]
+    keymap = KeyframeMap.from_reference(kprime, a)
+    residuals = [keymap.residual(kprime, a, arkit_source(np.array(p))) for p, _ in ENOUGH_PROBES]
+    enough = all(r <= lim for r, (_, lim) in zip(residuals, ENOUGH_PROBES))
+    if require_enough and not enough:
+        return None
+    d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names])  # (P, n, 3)
+    if d.shape[1:] != np.asarray(vertices).shape:
+        raise MeshError(f"{name}: morph targets do not match the mesh's {len(vertices)} vertices")
+    moving = np.flatnonzero(np.abs(d).max(axis=(0, 2)) > 0)
+    meta = {
+        "head": name,
+        "kind": "morph",
+        "targets": {n: matched[n] for n in head_names},
+        "probe_residuals": [round(r, 4) for r in residuals],
+        "enough_mouth_targets": bool(enough),
+    }
+    return MorphRig(neutral=vertices, triangles=triangles, names=head_names, targets=d[:, moving], moving=moving,
+                    keymap=keymap, source=arkit_source, meta=meta)

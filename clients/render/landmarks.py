@@ -1,0 +1,130 @@
+"""Automatic landmarks for human-like heads: render the head, find the face with MediaPipe, cast back.
+
+1. Render the mesh offscreen (:class:`clients.render.renderer.HeadRenderer`, EGL) from the front,
+   trying the usual orientations in turn (glTF's +y up / face towards +z first, then -z, +x, -x,
+   and z-up files), framed on the whole mesh and, for full-body avatars, on its top.
+2. Run MediaPipe Face Mesh (``mediapipe`` 0.10.14, legacy ``solutions.face_mesh``, static image mode)
+   on the render: 468 points in pixels.
+3. Re-render framed on the detected face (a larger face gives steadier points) and detect again.
+4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
+   camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
+
+The twelve facecast landmarks are MediaPipe indices (the subject's own left/right, as facecast):
+eye corners 263/362 (left) and 33/133 (right), nose tip 1, mouth corners 291 (left) / 61 (right),
+outer lips 0/17, inner lips 13/14, chin 152. Raises LandmarkError naming the file when no face is
+found ("give --landmarks").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from assets.errors import LandmarkError
+from assets.heads.mesh import HeadMesh
+
+MEDIAPIPE_INDEX: dict[str, int] = {
+    "eye_outer_left": 263, "eye_inner_left": 362, "eye_outer_right": 33, "eye_inner_right": 133,
+    "nose_tip": 1, "corner_left": 291, "corner_right": 61, "upper_lip": 0, "lower_lip": 17,
+    "upper_inner": 13, "lower_inner": 14, "chin": 152,
+}
+SIZE = 640  # render size in pixels (MediaPipe works on any size; the face should cover ~1/3 of it)
+
+# (up, forward) axis pairs to try: glTF/three.js (+y up, face +z) first.
+ORIENTATIONS: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...] = (
+    ((0, 1, 0), (0, 0, 1)), ((0, 1, 0), (0, 0, -1)), ((0, 1, 0), (1, 0, 0)), ((0, 1, 0), (-1, 0, 0)),
+    ((0, 0, 1), (0, -1, 0)), ((0, 0, 1), (0, 1, 0)),
+)
+
+
+def _axes(up: np.ndarray, fwd: np.ndarray) -> np.ndarray:
+    x = np.cross(up, fwd)
+    return np.stack([x, up, fwd]).astype(np.float64)
+
+
+def _detect(image: np.ndarray) -> np.ndarray | None:
+    """(468, 2) pixel coordinates of the face in an RGB image, or None."""
+    import mediapipe as mp
+
+    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=False,
+                                         min_detection_confidence=0.5) as fm:
+        res = fm.process(np.ascontiguousarray(image))
+    if not res.multi_face_landmarks:
+        return None
+    h, w = image.shape[:2]
+    lm = res.multi_face_landmarks[0].landmark
+    return np.array([[p.x * w, p.y * h] for p in lm[:468]])
+
+
+def _cast(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> np.ndarray:
+    """3D points (k, 3) on the front-most triangle under each pixel (k, 2); NaN where none is."""
+    from realtime_core.face.interpolation import barycentric_2d
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    clip = np.c_[v, np.ones(len(v))] @ mvp.T
+    w = clip[:, 3]
+    px = np.c_[(clip[:, 0] / w + 1) / 2 * size, (1 - clip[:, 1] / w) / 2 * size]
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    out = np.full((len(pixels), 3), np.nan)
+    lo = px[t].min(axis=1)
+    hi = px[t].max(axis=1)
+    for i, p in enumerate(pixels):
+        cand = np.flatnonzero(np.all((lo <= p) & (hi >= p), axis=1) & (w[t] > 0).all(axis=1))
+        if not len(cand):
+            continue
+        tc = t[cand]
+        g = barycentric_2d(p[None, :], px[tc[:, 0]], px[tc[:, 1]], px[tc[:, 2]])
+        ok = np.all(g >= -1e-6, axis=1) & np.all(np.isfinite(g), axis=1)
+        if not ok.any():
+            continue
+        depth = (g[ok] * w[tc[ok]]).sum(1)
+        k = int(np.argmin(depth))
+        out[i] = g[ok][k] @ v[tc[ok][k]]
+    return out
+
+
+def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
+    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units). LandmarkError when no face is found."""
+    from clients.errors import RenderError
+    from clients.render.renderer import HeadRenderer, RenderConfig
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    cfg = RenderConfig(width=SIZE, height=SIZE, samples=4)
+    try:
+        for up, fwd in ORIENTATIONS:
+            axes = _axes(np.array(up, float), np.array(fwd, float))
+            q = v @ axes.T
+            lo, hi = q.min(0), q.max(0)
+            height = hi[1] - lo[1]
+            # Whole mesh, then its top (a full-body avatar's head), then the top fifth.
+            for top in (1.0, 0.25, 0.12):
+                y0 = hi[1] - top * height
+                sel = q[:, 1] >= y0
+                c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
+                span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
+                centre = c_q @ axes
+                with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=cfg) as r:
+                    pts = _detect(r.render())
+                    if pts is None:
+                        continue
+                    # Re-frame on the face for steadier points.
+                    face = _cast(mesh, r.mvp, pts[[1, 10, 152, 234, 454]], SIZE)
+                if np.isnan(face).any():
+                    continue
+                fc = face.mean(0)
+                fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
+                with HeadRenderer(mesh, centre=fc, axes=axes, size=fspan, config=cfg) as r:
+                    pts2 = _detect(r.render())
+                    use = pts2 if pts2 is not None else None
+                    if use is None:
+                        continue
+                    names = list(MEDIAPIPE_INDEX)
+                    p3 = _cast(mesh, r.mvp, use[[MEDIAPIPE_INDEX[k] for k in names]], SIZE)
+                if np.isnan(p3).any():
+                    continue
+                return {k: p3[i].tolist() for i, k in enumerate(names)}
+    except RenderError as exc:
+        raise LandmarkError(
+            f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"
+        ) from exc
+    raise LandmarkError(f"{mesh.name}: no face-like region found on renders of the head (stylised or not human-like?); "
+                        "give --landmarks L.json (see docs/animation.md, 'Landmarks')")

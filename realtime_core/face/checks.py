@@ -1,0 +1,150 @@
+"""Rig checks at extreme poses: does the mouth stay clean wherever the parameters go?
+
+For a rig (anything with ``neutral``, ``triangles``, ``deformed(params)``) and its mouth landmarks,
+:func:`check_rig` deforms the head at :data:`EXTREME_POSES` (each parameter at both ends of its
+typical range, the widest opening, and combinations) and at the closure pose (the mouth-open
+parameter that closes the neutral inner-lip gap), and measures
+
+- flipped triangles: triangles of the moving region whose normal turns by more than 90 degrees
+  relative to the neutral pose (a fold or a tear in the surface);
+- maximum edge stretch: the largest ratio deformed / neutral edge length (a spike or shard);
+- lip interpenetration: the most negative vertical gap, in IOD, between paired upper and lower
+  lip points (the two sides of a cut seam, else the inner-lip landmarks) over all poses;
+- lip distance at closure: the inner-lip gap (IOD) at the closure pose;
+- teeth ahead of the lips: how far (IOD, along the face's forward axis) the most forward teeth
+  vertex lies in front of the front-most outer lip midpoint, when the head's teeth are known
+  (a tooth that pokes through a lip away from the midline in front of no midpoint is not caught).
+
+Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from realtime_core.errors import ConfigError
+from realtime_core.face.model import MouthLandmarks, face_frame
+
+# (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD: both ends of the typical
+# ranges (training.params.TYPICAL_RANGES) and the combinations speech produces.
+EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = (
+    (0.0, 0.0, 0.45, 0.0),  # widest opening (/a/)
+    (0.0, 0.12, 0.40, 0.0),  # wide and stretched
+    (0.0, -0.12, 0.30, 0.0),  # rounded and open (/o/)
+    (0.0, -0.12, 0.05, 0.0),  # rounded (/u/)
+    (0.0, 0.12, 0.05, -0.05),  # spread, corners up (/i/)
+    (0.06, 0.0, 0.0, 0.0),  # upper lip raised (/f/)
+    (-0.03, 0.0, 0.0, 0.0),  # pressed (/m/, /p/)
+    (-0.03, -0.12, 0.0, 0.0),  # pressed and rounded
+    (0.0, 0.12, 0.0, 0.0),
+    (0.0, 0.0, 0.0, 0.05),
+    (0.0, 0.0, 0.0, -0.05),
+    (0.06, 0.12, 0.45, 0.05),  # every parameter at its upper end
+)
+
+
+@dataclass(frozen=True)
+class RigCheckLimits:
+    """Pass limits: flipped triangles, edge stretch ratio, interpenetration and closure gap (IOD), teeth (IOD)."""
+
+    max_flipped: int = 0
+    max_stretch: float = 4.0
+    max_interpenetration: float = 0.005
+    max_closure_gap: float = 0.01
+    max_teeth_ahead: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.max_flipped < 0 or not self.max_stretch > 1:
+            raise ConfigError("max_flipped must be >= 0 and max_stretch > 1")
+
+
+@dataclass(frozen=True)
+class RigReport:
+    """The measured figures (see the module docstring) and whether they pass the limits."""
+
+    flipped_triangles: int
+    worst_flip_pose: tuple[float, ...]
+    max_edge_stretch: float
+    lip_interpenetration_iod: float
+    closure_gap_iod: float
+    teeth_ahead_iod: float | None
+    passed: bool
+    failures: tuple[str, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def summary(self) -> str:
+        teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
+        return (f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
+                f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
+                f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
+                + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")"))
+
+
+def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+
+
+def check_rig(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    lip_pairs: np.ndarray | None = None,
+    teeth: np.ndarray | None = None,
+    poses: tuple[tuple[float, ...], ...] = EXTREME_POSES,
+    limits: RigCheckLimits = RigCheckLimits(),
+) -> RigReport:
+    """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
+    (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
+    teeth: head vertex indices of the teeth (None: not known, not checked)."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    fr = face_frame(v0, landmarks)
+    iod, up, fwd = fr.iod, fr.axes[1], fr.axes[2]
+    pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
+    gap0 = float((v0[landmarks.upper_inner] - v0[landmarks.lower_inner]) @ up) / iod
+    closure = (0.0, 0.0, -gap0, 0.0)
+    n0 = _normals(v0, t)
+    a0 = np.linalg.norm(n0, axis=1)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
+    ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
+    ok_edge = l0 > 1e-9 * iod
+    worst: tuple[float, ...] = ()
+    flipped, stretch, inter, ahead = 0, 1.0, 0.0, None
+    for pose in (*poses, closure):
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        moved = np.linalg.norm(v - v0, axis=1) > 1e-9 * iod
+        tri_moving = moved[t].any(axis=1) & ok_tri
+        n1 = _normals(v, t)
+        f = int(((np.einsum("ij,ij->i", n0, n1) < 0) & tri_moving).sum())
+        if f > flipped:
+            flipped, worst = f, tuple(float(x) for x in pose)
+        l1 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+        stretch = max(stretch, float(np.max(np.where(ok_edge, l1 / np.maximum(l0, 1e-300), 1.0))))
+        gaps = (v[pairs[:, 0]] - v[pairs[:, 1]]) @ up / iod
+        inter = max(inter, float(-gaps.min()))
+        if teeth is not None and len(teeth):
+            lip_front = max(float(v[landmarks.upper_lip] @ fwd), float(v[landmarks.lower_lip] @ fwd))
+            a = (float((v[np.asarray(teeth)] @ fwd).max()) - lip_front) / iod
+            ahead = a if ahead is None else max(ahead, a)
+    vc = np.asarray(rig.deformed(np.asarray(closure)), dtype=np.float64)
+    closure_gap = abs(float((vc[landmarks.upper_inner] - vc[landmarks.lower_inner]) @ up)) / iod
+    fails = []
+    if flipped > limits.max_flipped:
+        fails.append(f"{flipped} flipped triangles at pose {worst}")
+    if stretch > limits.max_stretch:
+        fails.append(f"edge stretch {stretch:.2f} > {limits.max_stretch}")
+    if inter > limits.max_interpenetration:
+        fails.append(f"lips interpenetrate by {inter:.4f} IOD")
+    if closure_gap > limits.max_closure_gap:
+        fails.append(f"lips {closure_gap:.4f} IOD apart at closure")
+    if ahead is not None and ahead > limits.max_teeth_ahead:
+        fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
+    return RigReport(flipped_triangles=flipped, worst_flip_pose=worst, max_edge_stretch=stretch,
+                     lip_interpenetration_iod=inter, closure_gap_iod=closure_gap, teeth_ahead_iod=ahead,
+                     passed=not fails, failures=tuple(fails))

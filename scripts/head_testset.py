@@ -1,0 +1,174 @@
+"""The head test set: derive the files that reproduce each failure class, check every head, draw it.
+
+    python scripts/head_testset.py [--out build/heads] [--images docs/img/heads]
+
+Heads: the built-in head (own ARKit targets, and retargeted), the built-in head as an ARKit glb
+with exporter spellings, Lee Perry-Smith (hollow, closed lips; shipped landmarks and automatic
+ones), the MediaPipe canonical face, Candide-3, plus derived files: meshopt-compressed and
+quantized Lee Perry-Smith (glTF-Transform; vertex order changes, so automatic landmarks), the
+built-in head as a multi-material OBJ with separate eyes and teeth objects, a viseme-only glb.
+Derived files go to --out (not committed); one picture per head (closed, /a/, /u/, /m/) to
+--images; the rig checks are printed as a Markdown table (docs/animation.md shows it).
+Third-party heads are read from ../shared/data (or $FACECAST_SHARED_DATA).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+POSES = {"closed": (0.0, 0.0, 0.0, 0.0), "/a/": (0.0, 0.02, 0.35, 0.0), "/u/": (0.0, -0.10, 0.08, 0.0),
+         "/m/": (-0.02, 0.0, 0.0, 0.0)}
+
+
+def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
+    """name -> (head spec, resolve options)."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.mesh import HeadMesh
+    from assets.heads.targets import VISEME_ARKIT
+
+    out.mkdir(parents=True, exist_ok=True)
+    heads: dict[str, tuple[Path | str, dict]] = {"builtin (own ARKit targets)": ("builtin", {}),
+                                                   "builtin (retarget)": ("builtin", {"mode": "retarget"})}
+    b = builtin_morph_head().mesh
+    arkit = out / "builtin_arkit_spellings.glb"
+    arkit.write_bytes(mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="a",
+                                        targets={"blendShape1." + k.replace("Left", "_L").replace("Right", "_R"): d
+                                                 for k, d in b.targets.items()})))
+    heads["ARKit glb, exporter spellings"] = (arkit, {})
+    bh = load_builtin_head()
+    vis = {f"viseme_{k}": sum(w * bh.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
+    vg = out / "visemes_only.glb"
+    vg.write_bytes(mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="v",
+                                     targets=vis)))
+    heads["OVR visemes only"] = (vg, {})
+    # Multi-material OBJ with separate eye / teeth / tongue objects (one material each).
+    obj = out / "builtin_parts.obj"
+    cols = {0: (0.80, 0.60, 0.50), 1: (0.92, 0.92, 0.90), 2: (0.95, 0.93, 0.85), 3: (0.95, 0.93, 0.85),
+            4: (0.70, 0.30, 0.32)}
+    names = {0: "skin", 1: "eyes", 2: "upper_teeth", 3: "lower_teeth", 4: "tongue"}
+    (out / "builtin_parts.mtl").write_text("".join(f"newmtl {names[i]}\nKd {c[0]} {c[1]} {c[2]}\n"
+                                                   for i, c in cols.items()))
+    lines = ["mtllib builtin_parts.mtl"] + [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in b.vertices]
+    part = np.asarray(b.part)
+    for i, pname in names.items():
+        tris = b.triangles[part[b.triangles[:, 0]] == i]
+        lines += [f"o {pname}", f"usemtl {pname}"] + [f"f {a + 1} {c + 1} {d + 1}" for a, c, d in tris]
+    obj.write_text("\n".join(lines) + "\n")
+    import json
+
+    lm = {k: int(v) for k, v in bh.landmarks.items()}
+    (out / "builtin_parts.json").write_text(json.dumps({"landmarks": lm}))
+    heads["multi-material OBJ, separate eyes/teeth"] = (obj, {"landmarks": out / "builtin_parts.json",
+                                                              "mode": "retarget"})
+    lps = data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
+    if lps.is_file():
+        heads["Lee Perry-Smith (hollow, closed lips)"] = (lps, {})
+        auto = out / "someone.glb"  # not a shipped name: automatic landmarks
+        shutil.copy(lps, auto)
+        shutil.copy(lps.parent / "Map-COL.jpg", out / "Map-COL.jpg")
+        heads["Lee Perry-Smith, automatic landmarks"] = (auto, {})
+        cli = REPO / "node_modules" / ".bin" / "gltf-transform"
+        for kind in ("meshopt", "quantize"):
+            dst = out / f"lps_{kind}.glb"
+            subprocess.run([str(cli), kind, str(lps), str(dst)], check=True, capture_output=True)
+            heads[f"Lee Perry-Smith, {kind} (glTF-Transform)"] = (dst, {})
+    mp = data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    if mp.is_file():
+        heads["MediaPipe canonical face"] = (mp, {})
+    wfm = data / "candide3" / "candide3-3.1.6.wfm"
+    if wfm.is_file():
+        from realtime_core.face import parse_wfm
+        from realtime_core.face.candide import CANDIDE3_LANDMARKS
+
+        m = parse_wfm(wfm.read_text(encoding="latin-1"), name="candide3")
+        cobj = out / "candide3.obj"
+        cobj.write_text("\n".join([f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
+                                  + [f"f {a + 1} {c + 1} {d + 1}" for a, c, d in m.triangles]) + "\n")
+        (out / "candide3.json").write_text(json.dumps({"landmarks": dict(CANDIDE3_LANDMARKS)}))
+        heads["Candide-3 (its own model as the simple face)"] = (cobj, {"landmarks": out / "candide3.json",
+                                                                       "simple": wfm})
+    return heads
+
+
+def _resolve(spec, opts: dict, finder):
+    """resolve_head, or for a Candide-3 head (fewer vertices than the default simple face) a rig with
+    Candide-3 itself as the simple model (as `facecast rig --simple FILE.wfm`)."""
+    from assets.heads.head import Head, resolve_head
+
+    if "simple" not in opts:
+        return resolve_head(spec, landmark_finder=finder, **opts)
+    from assets.heads.landmarks import read_landmarks
+    from assets.heads.mesh import load_mesh
+    from assets.heads.rigging import candide_face, rig_head
+    from realtime_core.face import parse_wfm
+
+    wfm = opts["simple"]
+    simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1"), name=wfm.stem))
+    rig, mesh = rig_head(load_mesh(spec), read_landmarks(opts["landmarks"]), simple=simple)
+    return Head(rig, mesh)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
+    ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
+    ap.add_argument(
+        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+    )
+    args = ap.parse_args()
+    from PIL import Image, ImageDraw
+    from tqdm import tqdm
+
+    from assets.heads.head import head_checks
+    from clients.render.landmarks import find_landmarks
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+    from realtime_core.errors import FacecastError
+
+    heads = derive(args.out, args.data)
+    args.images.mkdir(parents=True, exist_ok=True)
+    rows = [("| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
+             "lip gap at closure (IOD) | teeth ahead (IOD) | checks |"), "|---|---|---|---|---|---|---|---|"]
+    for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
+        try:
+            head = _resolve(spec, opts, find_landmarks)
+        except FacecastError as exc:
+            rows.append(f"| {name} | cannot rig | - | - | - | - | - | {exc} |")
+            continue
+        try:
+            rep = head_checks(head, landmark_finder=find_landmarks)
+            figs = (
+                f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
+                f"{rep.closure_gap_iod:.4f} | "
+                f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
+                f"{'pass' if rep.passed else 'FAIL'}"
+            )
+        except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
+            figs = f"- | - | - | - | - | not checked ({exc})"
+        kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
+        tiles = []
+        with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:
+            for label, p in POSES.items():
+                img = Image.fromarray(r.render(head.rig.deformed(np.array(p))))
+                ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
+                tiles.append(np.asarray(img))
+        slug = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
+        Image.fromarray(np.hstack(tiles)).save(args.images / f"{slug}.png")
+        rows.append(f"| {name} ![](img/heads/{slug}.png) | {kind} | {figs} |")
+    print("\n".join(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,90 @@
+"""training.reallips: speed perturbation keeps labels in step with the audio; the real-lips scores
+agree with independent computations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from realtime_core import VISUAL_PARAMS
+from training.corpus import Utterance
+from training.params import FPS, n_frames_for
+
+# Real GRID clips and ffmpeg.
+pytestmark = pytest.mark.system
+
+
+def _tone_utterance(freq_hz: float = 200.0, dur_s: float = 2.0, rate: int = 16000) -> Utterance:
+    t = np.arange(int(dur_s * rate)) / rate
+    n = n_frames_for(dur_s)
+    ramp = np.arange(n) / FPS  # params = time itself, so re-timing is visible exactly
+    params = np.stack([ramp, -ramp, 0.1 * ramp, np.zeros(n)], axis=1)
+    return Utterance(id="tone", samples=(0.3 * np.sin(2 * np.pi * freq_hz * t)).astype(np.float32),
+                     sample_rate_hz=rate, params=params, phonemes=(), voice="v", language="en", source="video",
+                     speaker_group="g")
+
+
+@pytest.mark.parametrize("factor", [0.88, 1.12])
+def test_speed_perturbation_scales_pitch_and_time_together(factor) -> None:
+    from training.reallips import speed_perturb
+
+    u = _tone_utterance()
+    v = speed_perturb(u, factor)
+    assert v.sample_rate_hz == u.sample_rate_hz
+    assert abs(len(v.samples) - len(u.samples) / factor) <= 1
+    assert v.params.shape == (n_frames_for(len(v.samples) / v.sample_rate_hz), 4)
+    spec = np.abs(np.fft.rfft(v.samples * np.hanning(len(v.samples))))
+    peak_hz = np.argmax(spec) * v.sample_rate_hz / len(v.samples)
+    assert peak_hz == pytest.approx(200.0 * factor, rel=0.01)
+    # frame k of the result shows the original at k * factor / 30 s (the ramp is time itself)
+    k = np.arange(len(v.params))
+    expect = np.minimum(k * factor / FPS, u.params[-1, 0])
+    np.testing.assert_allclose(v.params[:, 0], expect, atol=2e-3)
+    assert speed_perturb(u, 1.0) is u
+    with pytest.raises(ValueError):
+        speed_perturb(u, 1.5)
+
+
+def test_bilabial_spans_of_a_grid_sentence() -> None:
+    from training.reallips import CLOSURE_S, bilabial_spans
+
+    words = [(0.0, 0.5, "sil"), (0.5, 0.8, "bin"), (0.8, 1.1, "red"), (1.1, 1.3, "at"), (1.3, 1.6, "m"),
+             (1.6, 1.9, "seven"), (1.9, 2.3, "please"), (2.3, 3.0, "sil")]
+    spans = bilabial_spans(words)
+    assert [w for _, _, w in spans] == ["bin", "m", "please"]
+    assert spans[0][:2] == pytest.approx((0.5 - CLOSURE_S / 2, 0.5 + CLOSURE_S))
+    assert spans[1][:2] == pytest.approx((1.6 - CLOSURE_S, 1.6 + CLOSURE_S / 2))  # /m/ ends "em"
+
+
+def test_scores_match_independent_computations() -> None:
+    """r and nu against numpy on the pooled frames; the best lag of a shifted copy; closures counted
+    by hand; the loudness baseline's r."""
+    from training.reallips import score_lips
+
+    rng = np.random.default_rng(0)
+    items, truths, ests = [], [], []
+    for c in range(3):
+        T = 120
+        truth = np.cumsum(rng.standard_normal((T, 4)), axis=0) * 0.01
+        truth[:, 2] = np.abs(truth[:, 2])
+        est = 0.7 * np.roll(truth, 2, axis=0) + 0.01 * rng.standard_normal((T, 4))  # 2 frames late, shrunk
+        est[:2] = truth[:2]
+        loud = truth[:, 2] * 50 + rng.standard_normal(T)
+        # two closure spans per clip: the estimate reaches 0 in the first only
+        est[10:14, 2] = 0.0
+        truth[10:14, 2] = 0.0
+        truth[60:64, 2] = 0.0
+        est[58:66, 2] = 0.05
+        spans = [(10 / FPS, 13 / FPS, "b"), (60 / FPS, 63 / FPS, "p")]
+        items.append((f"clip{c}", truth, est, loud, spans))
+        truths.append(truth)
+        ests.append(est)
+    s = score_lips(items)
+    tr, es = np.concatenate(truths), np.concatenate(ests)
+    for j, p in enumerate(VISUAL_PARAMS):
+        assert s.r[p] == pytest.approx(np.corrcoef(tr[:, j], es[:, j])[0, 1], abs=1e-9)
+        assert s.nu[p] == pytest.approx(es[:, j].std() / tr[:, j].std(), rel=1e-9)
+        assert s.best_lag[p] == 2 and s.r_best[p] > s.r[p]
+    assert s.n_closures == 6 and s.closure_rate == pytest.approx(0.5) and s.truth_closure_rate == 1.0
+    lo = np.concatenate([it[3] for it in items])
+    assert s.r_loudness == pytest.approx(np.corrcoef(tr[:, 2], lo)[0, 1], abs=1e-9)
