@@ -78,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
 
     session, rec = asyncio.run(main())
     served = rec.description.get("head")
-    if head is not None and served is not None and served["vertex_count"] != len(head[1].vertices):
-        raise ClientError(f"--head {args.head} has {len(head[1].vertices)} vertices but the server's head has "
+    if head is not None and served is not None and served["vertex_count"] != len(head.mesh.vertices):
+        raise ClientError(f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
                           f"{served['vertex_count']}: pass the server's head")
     params, first = rec.timeline()
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)

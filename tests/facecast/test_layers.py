@@ -6,6 +6,7 @@ that it can fail (a contract that cannot fail checks nothing)."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -28,7 +29,10 @@ def _contract() -> dict:
 
 
 def _lint_imports(cwd: Path, config: Path) -> subprocess.CompletedProcess[str]:
-    exe = require_tool("lint-imports", "dev extra: pip install -e '.[dev]'")
+    # Beside this interpreter (the project's venv) even when it is not activated, else on PATH.
+    exe = shutil.which("lint-imports", path=str(Path(sys.executable).parent)) or require_tool(
+        "lint-imports", "dev extra: pip install -e '.[dev]'"
+    )
     # The fake tree must shadow the real (editable-installed) packages: put it first on the path.
     env = {"PYTHONPATH": str(cwd), "PATH": str(Path(sys.executable).parent), "HOME": str(cwd)}
     return subprocess.run([exe, "--config", str(config), "--no-cache"], cwd=cwd, env=env, capture_output=True,
