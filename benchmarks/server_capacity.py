@@ -88,33 +88,38 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
     out.put(("ingest", asyncio.run(main())))
 
 
-def _viewer_proc(url: str, prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready, out) -> None:
-    """Child process: attach the viewers once the sessions exist; report every frame's receipt."""
+def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready,
+                 out) -> None:
+    """Child process: attach the viewers once the sessions exist (round-robin over ``urls``, the
+    nodes of a cluster); report every frame's receipt."""
     async def main():
         while not ready.is_set():
             await asyncio.sleep(0.01)
         plan = [("params", j % n) for j in range(n_params)] + [("deltas", j % n) for j in range(n_deltas)]
         logs = [FrameLog() for _ in plan]
         tasks = []
-        for (kind, s), log in zip(plan, logs):
+        for j, ((kind, s), log) in enumerate(zip(plan, logs)):
+            url = urls[j % len(urls)]
             tasks.append(asyncio.ensure_future(record_viewer(url, f"{prefix}{s}", kind=kind, log=log)))
             await asyncio.sleep(0.002)  # do not stampede the handshake
         await asyncio.sleep(0.5)
         viewers_ready.set()
         await asyncio.gather(*tasks, return_exceptions=True)
-        return [(kind, s, np.array(log.index), np.array(log.received), np.array(log.sent))
-                for (kind, s), log in zip(plan, logs)]
+        return [(kind, s, j % len(urls), np.array(log.index), np.array(log.received), np.array(log.sent))
+                for j, ((kind, s), log) in enumerate(zip(plan, logs))]
 
     out.put(("viewers", asyncio.run(main())))
 
 
-def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float) -> dict:
+def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float,
+          view_urls: list[str] | None = None) -> dict:
     url = server.url
+    view_urls = view_urls or [url]
     ctx = mp.get_context("spawn")
     ready, viewers_ready, out = ctx.Event(), ctx.Event(), ctx.Queue()
     prefix = f"cap{step_no}_"
     ing = ctx.Process(target=_ingest_proc, args=(url, prefix, n, seconds, ready, viewers_ready, out))
-    view = ctx.Process(target=_viewer_proc, args=(url, prefix, n, n_params, n_deltas, ready, viewers_ready, out))
+    view = ctx.Process(target=_viewer_proc, args=(view_urls, prefix, n, n_params, n_deltas, ready, viewers_ready, out))
     ing.start()
     view.start()
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
@@ -141,7 +146,8 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
     per_kind: dict[str, list] = {"params": [], "deltas": []}
     worst_p99 = 0.0
     lost = 0
-    for kind, s, idx, rec, srv_sent in got["viewers"]:
+    by_node: dict[int, list] = {}
+    for kind, s, node, idx, rec, srv_sent in got["viewers"]:
         lost += expected - len(set(idx.tolist()))
         need = np.array([mf.frame_start(int(k) + d) + mf.window_len for k in idx], dtype=np.int64)
         live = need <= n_samples
@@ -151,6 +157,7 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         p99 = float(np.percentile(delivery, 99)) * 1e3
         worst_p99 = max(worst_p99, p99)
         per_kind[kind].append((delivery, rec - srv_sent))
+        by_node.setdefault(node, []).append(delivery)
     everything = np.concatenate([a for items in per_kind.values() for a, _ in items] or [np.zeros(0)]) * 1e3
     agg_p99 = float(np.percentile(everything, 99)) if everything.size else float("inf")
     summary = {}
@@ -171,8 +178,9 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         timings = json.loads(r.read())["timings_ms"]
     return {
         "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
-        "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
-                              if k in timings},
+        "server_timings_ms": {
+            k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
+        },
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -183,6 +191,16 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         "pass_every_viewer": bool(worst_p99 < LIMIT_MS and lost == 0),
         "pass": bool(agg_p99 < LIMIT_MS and lost == 0),
         "by_kind": summary,
+        "by_node": {
+            f"node{k}": {
+                "viewers": len(v),
+                "delivery_p50_ms": round(float(np.median(np.concatenate(v))) * 1e3, 3),
+                "delivery_p99_ms": round(float(np.percentile(np.concatenate(v), 99)) * 1e3, 3),
+            }
+            for k, v in sorted(by_node.items())
+        }
+        if len(view_urls) > 1
+        else None,
     }
 
 
@@ -209,9 +227,54 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
     }
 
 
+def run_cluster_benchmark(cfg: CapacityConfig) -> dict:
+    """Two nodes and a redis-server on this machine: the sessions' ingests on node 0, viewers
+    alternating between node 0 (near) and node 1 (far, fed through Redis); per step, each node's
+    viewers' p99 delivery and the far node's excess over the near one."""
+    import shutil
+    import socket
+    import subprocess
+
+    binary = shutil.which("redis-server")
+    if binary is None:
+        raise SystemExit("server_capacity --cluster: redis-server is not installed (scripts/setup.sh installs it)")
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    redis = subprocess.Popen([binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    model, model_path, model_desc = benchmark_model(cfg.model)
+    nodes: list[ServerProcess] = []
+    steps = []
+    try:
+        time.sleep(0.5)
+        for name in ("near", "far"):
+            toml = (f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nconnect_rate_per_s = 0\n"
+                    f'redis_url = "redis://127.0.0.1:{port}/0"\nnode_id = "{name}"\n')
+            nodes.append(ServerProcess(model_path, head=cfg.head, config_toml=toml))
+        time.sleep(1.5)  # both nodes registered
+        for i, (n, p, v) in enumerate(cfg.steps):
+            r = _step(nodes[0], model, i, n, p, v if cfg.head else 0, cfg.seconds, view_urls=[x.url for x in nodes])
+            near, far = r["by_node"]["node0"], r["by_node"]["node1"]
+            r["far_minus_near_p99_ms"] = round(far["delivery_p99_ms"] - near["delivery_p99_ms"], 3)
+            steps.append(r)
+            print(json.dumps({"step": n, "near": near, "far": far, "far_minus_near_p99_ms": r["far_minus_near_p99_ms"],
+                              "lost": r["frames_lost"]}), flush=True)
+    finally:
+        for x in nodes:
+            x.stop()
+        redis.terminate()
+        redis.wait(10)
+    return {"benchmark": "server_capacity_cluster", "model": model_desc, "goal": "far node p99 within 5 ms of near",
+            "seconds_per_step": cfg.seconds, "steps": steps,
+            "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]}}
+
+
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
-    toml = f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
+    # Benchmark clients are trusted: no per-client connection rate (they open hundreds at once).
+    toml = (f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
+            "connect_rate_per_s = 0\n")
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
     load_before = os.getloadavg()
@@ -274,10 +337,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
+    ap.add_argument("--cluster", action="store_true",
+                    help="two nodes + redis-server: viewers split near/far, report the far node's excess p99")
     args = ap.parse_args(argv)
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     if args.steps:
         steps = tuple((int(a), int(b), int(c)) for a, b, c in (s.split(",") for s in args.steps.split(";")))
+    if args.cluster:
+        result = run_cluster_benchmark(CapacityConfig(steps=steps if args.steps else ((5, 20, 0), (10, 40, 0)),
+                                                      seconds=args.seconds, model=args.model, head=not args.no_head))
+        print(json.dumps(result, indent=2))
+        return 0
     result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
                                                    head=not args.no_head, cost_model=not args.no_cost_model,
                                                    workers=args.workers))

@@ -15,6 +15,7 @@ the server); ``docs/protocol.md`` describes it for other languages.
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 import time
 from dataclasses import dataclass, field
@@ -65,11 +66,14 @@ class IngestClient:
     """One ingest connection: start message on enter, binary audio, controls, end.
 
     url: the server's base URL (http:// or ws://); session: its name; sample_rate_hz/channels: of
-    the audio you send; sample_format: "pcm_s16le" or "f32le"; token: the shared secret if any.
+    the audio you send; sample_format: "pcm_s16le" or "f32le"; token: the shared secret if any;
+    enrol: optional enrolment recording of the talker (raw bytes in the same rate/format/channels,
+    1-120 s; the start message carries it base64-encoded, so it must fit the server's message limit).
     """
 
     def __init__(self, url: str, *, session: str, sample_rate_hz: int, channels: int = 1,
-                 sample_format: str = "pcm_s16le", token: str | None = None, max_size: int | None = 1 << 20) -> None:
+                 sample_format: str = "pcm_s16le", token: str | None = None, max_size: int | None = 1 << 20,
+                 enrol: bytes | None = None) -> None:
         if sample_format not in P.SAMPLE_FORMATS:
             raise ClientError(f"sample_format must be one of {sorted(P.SAMPLE_FORMATS)}")
         self.url = ws_url(url, "/ingest")
@@ -79,6 +83,7 @@ class IngestClient:
         self.sample_format = sample_format
         self.token = token
         self.max_size = max_size
+        self.enrol = enrol
         self.ws: ClientConnection | None = None
         self.started: dict = {}
 
@@ -88,6 +93,8 @@ class IngestClient:
                  "channels": self.channels, "format": self.sample_format}
         if self.token is not None:
             start["token"] = self.token
+        if self.enrol is not None:  # enrolment recording in this session's input format (server adapts its model)
+            start["enrol"] = base64.b64encode(self.enrol).decode("ascii")
         await self.ws.send(json.dumps(start))
         self.started = await self._reply("started")
         return self

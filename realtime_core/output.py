@@ -34,12 +34,22 @@ class OutputStage:
         self.floor = np.asarray(floor, dtype=np.float64)
         self.band = float(band)
         self._closed = np.isfinite(self.floor)
+        # (index, closed pose) pairs: one live frame is a few scalar operations (numpy's fancy
+        # indexing on a 4-vector costs ~20x more)
+        self._pairs = [(int(j), float(self.floor[j])) for j in np.flatnonzero(self._closed)] if band > 0 else []
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        """``(Dv,)`` or ``(T, Dv)`` estimates -> the same shape, float64."""
         y = np.maximum(x, self.floor)
-        if self.band > 0 and self._closed.any():
+        gain = KNEE / (KNEE - 1.0)
+        if y.ndim == 1:
+            for j, c in self._pairs:
+                v = y[j]
+                if v < c + KNEE * self.band:
+                    y[j] = c + max(v - c - self.band, 0.0) * gain
+        elif self._pairs:
             c = self.floor[self._closed]
             v = y[..., self._closed]
-            stretched = c + np.maximum(v - c - self.band, 0.0) * (KNEE / (KNEE - 1.0))
+            stretched = c + np.maximum(v - c - self.band, 0.0) * gain
             y[..., self._closed] = np.where(v < c + KNEE * self.band, stretched, v)
         return y

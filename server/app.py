@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.http11 import Request, Response
 
 from assets.heads.head import Head
@@ -107,6 +107,7 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.cluster: Cluster | None = None
+        self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
         self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
                                sessions=self.session_list)
         self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
@@ -141,7 +142,8 @@ class FacecastServer:
 
             node = cfg.node_id or f"{_socket.gethostname()}-{os.getpid()}-{self.port}"
             self.cluster = Cluster(cfg.redis_url, node=node, advertise=cfg.advertise_url or self.url,
-                                   heartbeat_s=cfg.heartbeat_s, deliver=self._deliver_remote, end_feed=self._end_feed)
+                                   heartbeat_s=cfg.heartbeat_s, role=cfg.role, deliver=self._deliver_remote,
+                                   end_feed=self._end_feed)
             try:
                 await self.cluster.start()
             except ServerError:
@@ -253,6 +255,8 @@ class FacecastServer:
         rig = self.head.rig if self.head else None
         if self.pool is not None:
             return await self.pool.open(config, rig=rig, times=self.times)
+        if config.enrol is not None:  # adaptation is CPU work: keep the event loop serving others
+            return LocalSession(await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times))
         return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
     async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
@@ -301,10 +305,16 @@ class FacecastServer:
         client = _client_address(ws)
         self.clients.add(client)
         try:
-            if path == "/ingest":
+            if path == "/ingest" and self.config.role == "edge":
+                await self._forward_ingest(ws)
+            elif path == "/ingest":
                 await self._ingest(ws)
             elif path == "/view":
                 await self._view(ws)
+            elif path == "/text":
+                from server.text_session import handle_text
+
+                await handle_text(self, ws)
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
         except ProtocolViolation as exc:
@@ -317,6 +327,36 @@ class FacecastServer:
             await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")  # never a traceback or path
         finally:
             self.clients.remove(client)
+
+    async def _forward_ingest(self, ws: ServerConnection) -> None:
+        """An edge node relays an ingest to the least loaded computing node, both ways, close code
+        and reason included; the client never knows."""
+        from websockets.asyncio.client import connect
+
+        target = await self.cluster.compute_node() if self.cluster is not None else None
+        if target is None:
+            raise ProtocolViolation(P.CLOSE_TRY_LATER, "no computing node is available")
+        url = target["url"].replace("http", "ws", 1) + "/ingest"
+        try:
+            upstream = await connect(url, compression=None, max_size=self.config.max_message_bytes,
+                                     open_timeout=self.config.handshake_timeout_s)
+        except (OSError, TimeoutError, WebSocketException):
+            raise ProtocolViolation(P.CLOSE_TRY_LATER, "the computing node cannot be reached") from None
+
+        async def pump(src, dst) -> None:  # noqa: ANN001 - websockets connections of either side
+            async for msg in src:
+                await dst.send(msg)
+
+        async with upstream:
+            tasks = [asyncio.ensure_future(pump(ws, upstream)), asyncio.ensure_future(pump(upstream, ws))]
+            await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            if upstream.close_code is not None and ws.close_code is None:
+                await self.close_ws(ws, upstream.close_code, upstream.close_reason or "")
+            elif ws.close_code is not None:
+                await upstream.close()
 
     async def _ingest(self, ws: ServerConnection) -> None:
         """Drive one ingest connection through :class:`server.protocol.IngestProtocol`."""
@@ -341,7 +381,7 @@ class FacecastServer:
                     if not done:
                         recv.cancel()
                         actions = proto.idle_timed_out(idle_s)
-                    elif recv not in done:  # server shutting down
+                    elif ended in done:  # server shutting down: first, even if a message is waiting too
                         recv.cancel()
                         actions = proto.shutdown()
                     else:
@@ -389,6 +429,8 @@ class FacecastServer:
                                                    paced=True)
                 except AdmissionRefused as exc:
                     todo.extend(proto.refused(exc.code, exc.reason))
+                except AudioFormatError as exc:  # e.g. an enrolment recording the model rejects
+                    todo.extend(proto.refused(P.CLOSE_INVALID_PAYLOAD, str(exc)))
                 else:
                     todo.extend(proto.opened(describe.started(live)))
         return live
@@ -481,9 +523,9 @@ class FacecastServer:
         split = urllib.parse.urlsplit(request.path)
         path = split.path
         upgrade = headers.get("Upgrade", "").lower() == "websocket"
-        if upgrade or path in ("/ingest", "/view"):
-            if path not in ("/ingest", "/view"):
-                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+        if upgrade or path in ("/ingest", "/view", "/text"):
+            if path not in ("/ingest", "/view", "/text"):
+                return self._refuse(HTTPStatus.NOT_FOUND, "no WebSocket endpoint here (use /ingest, /view or /text)")
             if not origin_allowed(headers.get("Origin"), headers.get("Host"), cfg.allowed_origins):
                 return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
             client = _client_address(connection)

@@ -22,6 +22,10 @@ session:
   refreshed by the heartbeat) and publishes it on the owner's control channel so the owner starts
   publishing that kind at once; the owner re-reads the wants every heartbeat. So a kind nobody
   outside the owner watches (vertex deltas, say) is never encoded for Redis.
+* **Roles.** ``role = "both"`` (default) computes the sessions whose ingest lands on it and serves
+  viewers; ``"edge"`` computes nothing: an ingest landing on it is forwarded (a WebSocket relay,
+  both ways, close code included) to the least loaded computing node; ``"compute"`` is a hint for
+  the proxy in front (docs/deploy.md) and otherwise acts as ``both``.
 * **Failure.** A Redis error never reaches a session: publishing goes through a bounded queue
   drained by one task (messages dropped and counted while Redis is away), the heartbeat retries
   and re-registers every local session when Redis returns, and ``/health`` says
@@ -110,13 +114,14 @@ class Cluster:
     heartbeat_s: registry refresh period; deliver: (feed, message bytes, kind, encoding) -> None,
     the server's fan-out to a feed's viewers; end_feed: (feed) -> coroutine closing its viewers."""
 
-    def __init__(self, url: str, *, node: str, advertise: str, heartbeat_s: float,
+    def __init__(self, url: str, *, node: str, advertise: str, heartbeat_s: float, role: str = "both",
                  deliver: Callable[[RemoteFeed, bytes, int, int], None],
                  end_feed: Callable[[RemoteFeed], "asyncio.Future | object"]) -> None:
         self.url = url
         self.node = node
         self.advertise = advertise
         self.heartbeat_s = heartbeat_s
+        self.role = role
         self.ttl_ms = int(3000 * heartbeat_s)
         self._deliver = deliver
         self._end_feed = end_feed
@@ -277,8 +282,8 @@ class Cluster:
     async def _beat(self) -> None:
         r = self.redis
         pipe = r.pipeline(transaction=False)
-        pipe.set(f"{PREFIX}:node:{self.node}", json.dumps({"url": self.advertise, "sessions": len(self.local)}),
-                 px=self.ttl_ms)
+        pipe.set(f"{PREFIX}:node:{self.node}", json.dumps({"node": self.node, "url": self.advertise, "role": self.role,
+                                                             "sessions": len(self.local)}), px=self.ttl_ms)
         for name, live in self.local.items():
             pipe.set(session_key(name), self._row(live), px=self.ttl_ms)
         for name, feed in self.feeds.items():
@@ -312,6 +317,19 @@ class Cluster:
             return None
         row = json.loads(raw)
         return None if row.get("node") == self.node else row
+
+    async def compute_node(self) -> dict | None:
+        """The least loaded live node that computes sessions (role compute or both), or None."""
+        from redis.exceptions import RedisError
+
+        try:
+            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:node:*", count=500)]
+            rows = [json.loads(r) for r in (await self.redis.mget(keys) if keys else []) if r is not None]
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+            return None
+        rows = [r for r in rows if r.get("role", "both") != "edge" and r.get("node") != self.node]
+        return min(rows, key=lambda r: r.get("sessions", 0), default=None)
 
     async def list_sessions(self) -> list[dict] | None:
         """Every node's session rows (None when Redis is away)."""

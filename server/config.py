@@ -43,7 +43,9 @@ class ServerConfig:
     Cluster (docs/deploy.md): redis_url: the Redis every node of a cluster shares (None: one
     process, no Redis); node_id: this node's name in the registry (None: host-pid-port);
     advertise_url: the http:// URL clients reach this node at (None: the bound address);
-    heartbeat_s: registry refresh period (rows expire after 3 heartbeats)."""
+    heartbeat_s: registry refresh period (rows expire after 3 heartbeats); role: "both" (compute
+    sessions and serve viewers), "compute", or "edge" (serve viewers; forward ingests to a computing
+    node)."""
 
     host: str = "127.0.0.1"
     port: int = 8765
@@ -74,6 +76,7 @@ class ServerConfig:
     node_id: str | None = None
     advertise_url: str | None = None
     heartbeat_s: float = 1.0
+    role: str = "both"
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -115,6 +118,10 @@ class ServerConfig:
             raise ServerConfigError(f"advertise_url must be an http:// or https:// URL, got {self.advertise_url!r}")
         if not isinstance(self.heartbeat_s, (int, float)) or not 0.05 <= self.heartbeat_s <= 60:
             raise ServerConfigError(f"heartbeat_s must be in 0.05..60 s, got {self.heartbeat_s!r}")
+        if self.role not in ("both", "compute", "edge"):
+            raise ServerConfigError(f"role must be 'both', 'compute' or 'edge', got {self.role!r}")
+        if self.role == "edge" and self.redis_url is None:
+            raise ServerConfigError("role 'edge' needs redis_url (an edge forwards ingests to the cluster's nodes)")
         if self.ingest_overrun not in ("pace", "close"):
             raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
         if isinstance(self.connect_rate_per_s, bool) or not isinstance(self.connect_rate_per_s, (int, float)) or not (

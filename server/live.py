@@ -214,6 +214,8 @@ class LiveSession:
             return await self.feed_bytes(data)
         n = 0
         for i in range(0, len(data), step):
+            if self.ended.is_set():  # shutting down: what was processed is flushed, the rest dropped
+                break
             piece = data[i:i + step]
             await self._pace(len(piece) // frame)
             n += await self.feed_bytes(piece)
@@ -233,7 +235,10 @@ class LiveSession:
             raise IngestOverrun(f"ingest ran over {self.pacer.burst_s:g} s ahead of real time "
                                 "(send in real time, or start with \"batch\": true)")
         self.paced_s += wait
-        await asyncio.sleep(wait)
+        try:  # a shutdown (ended) cuts the wait short
+            await asyncio.wait_for(self.ended.wait(), wait)
+        except TimeoutError:
+            pass
 
     async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""

@@ -48,6 +48,10 @@ from wire import protocol as P
 
 MAX_JSON_DEPTH = 8  # control and start messages nest two levels; anything deeper is hostile
 MAX_TEXT_BYTES = 64 * 1024  # a text message is a start/control/end object, never this big
+MAX_START_BYTES = 64 << 20
+"""A start message may carry an enrolment recording (base64 ``enrol``): it is bounded by the server's
+``max_message_bytes`` (the WebSocket limit, 1 MiB by default: about 24 s of 16 kHz pcm_s16le mono)
+rather than by MAX_TEXT_BYTES; its nesting is still bounded."""
 
 
 # -- actions (what the shell must do) ----------------------------------------------------------------
@@ -162,11 +166,11 @@ def _audio_config(start: dict, lag: int) -> SessionConfig:
     if "sample_rate" not in start:
         raise ServerConfigError("start message lacks sample_rate")
     return SessionConfig(sample_rate_hz=start["sample_rate"], channels=start.get("channels", 1),
-                         sample_format=start.get("format", "pcm_s16le"), lag=lag)
+                         sample_format=start.get("format", "pcm_s16le"), lag=lag, enrol=start.get("enrol"))
 
 
 SESSION_KINDS: dict[str, SessionKind] = {
-    "audio": SessionKind(fields=frozenset({"sample_rate", "format", "channels"}), build=_audio_config),
+    "audio": SessionKind(fields=frozenset({"sample_rate", "format", "channels", "enrol"}), build=_audio_config),
 }
 """Start-message ``input`` value -> session kind (``"audio"`` when absent)."""
 
@@ -319,7 +323,9 @@ class IngestProtocol:
     def _start(self, message: str | bytes) -> list[Action]:
         if not isinstance(message, str):
             raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "expected a JSON start message (text) first, got binary")
-        start = loads_bounded(message, "start message")
+        # Only a start message carrying an enrolment recording may exceed MAX_TEXT_BYTES.
+        limit = MAX_START_BYTES if len(message) > MAX_TEXT_BYTES and '"enrol"' in message else MAX_TEXT_BYTES
+        start = loads_bounded(message, "start message", max_bytes=limit)
         if start.get("type") != "start":
             raise ProtocolViolation(P.CLOSE_POLICY,
                                     f"first message must be {{\"type\": \"start\"}}, got type {_short(start.get('type'))}")

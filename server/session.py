@@ -18,6 +18,8 @@ watches them. No sockets, clocks or tasks here except ``perf_counter`` for stage
 
 from __future__ import annotations
 
+import base64
+import binascii
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -38,18 +40,24 @@ from wire import protocol as P
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
+MIN_ENROL_S = 1.0
+MAX_ENROL_S = 120.0
+"""Accepted length of an enrolment recording (30-60 s is the intended amount)."""
 
 
 @dataclass(frozen=True, kw_only=True)
 class SessionConfig:
     """sample_rate_hz: input rate (8000..192000 Hz); channels: interleaved input channels (1..8);
     sample_format: "pcm_s16le" or "f32le"; lag: extra fixed-lag smoothing frames of the inverter
-    (adds lag / fps seconds of delay)."""
+    (adds lag / fps seconds of delay); enrol: optional enrolment recording of the talker, base64 of
+    audio in the session's own input format (rate, format, channels), 1-120 s: the session animates
+    with a copy of the model MAP-adapted to that voice (:mod:`realtime_core.adaptation`)."""
 
     sample_rate_hz: int
     channels: int = 1
     sample_format: str = "f32le"
     lag: int = 0
+    enrol: str | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.sample_rate_hz, bool) or not isinstance(self.sample_rate_hz, int) or not (
@@ -62,6 +70,31 @@ class SessionConfig:
             raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {self.lag!r}")
+        if self.enrol is not None:
+            if not isinstance(self.enrol, str):
+                raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
+            frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
+            if len(self.enrol_bytes()) % frame:
+                raise ServerConfigError(f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
+                                        f"samples ({frame} bytes each)")
+            seconds = self.enrol_seconds()
+            if not MIN_ENROL_S <= seconds <= MAX_ENROL_S:
+                raise ServerConfigError(f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
+                                        "(30-60 s is the intended amount)")
+
+    def enrol_seconds(self) -> float:
+        """Length of the enrolment recording in seconds (0 without one)."""
+        frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
+        return len(self.enrol_bytes()) / (frame * self.sample_rate_hz)
+
+    def enrol_bytes(self) -> bytes:
+        """The enrolment recording's raw bytes (empty without one); ServerConfigError if not base64."""
+        if self.enrol is None:
+            return b""
+        try:
+            return base64.b64decode(self.enrol, validate=True)
+        except (binascii.Error, ValueError):
+            raise ServerConfigError("enrol is not valid base64") from None
 
 
 @dataclass(eq=False)
@@ -157,6 +190,9 @@ class Session:
         self.fps = int(model.frontend.mfcc.frame_rate_hz)
         self._dtype = P.SAMPLE_FORMATS[config.sample_format]
         self._frame_bytes = self._dtype.itemsize * config.channels
+        self.enrolment: dict | None = None
+        if config.enrol is not None:
+            self.model = model = self._enrolled(model)
         self._chain = SpeechToParams(model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag),
                                      observer=self._observe)
         self.delay_frames = self._chain.delay_frames
@@ -167,6 +203,22 @@ class Session:
         self._audio_index = 0
         self._mark = 0.0  # perf_counter() at the end of the previous stage
         self.finished = False
+
+    def _enrolled(self, model: AvModel) -> AvModel:
+        """This session's copy of ``model`` adapted to the enrolment recording (the shared model is
+        untouched). CPU work of about 0.3 s per 10 s of speech: callers on an event loop run the
+        constructor in a thread."""
+        from realtime_core.adaptation import adapt_av_model
+        from realtime_core.features.resample import resample_audio
+
+        x = self.decode(self.config.enrol_bytes())
+        x = resample_audio(x, self.config.sample_rate_hz, model.sample_rate_hz)
+        try:
+            adapted, result = adapt_av_model(model, [x])
+        except RealtimeCoreError as exc:
+            raise AudioFormatError(f"the model rejected the enrolment audio: {exc}") from exc
+        self.enrolment = dict(adapted.metadata.get("adaptation", {"frames": result.n_frames}))
+        return adapted
 
     def _observe(self, stage: str) -> None:
         now = time.perf_counter()

@@ -122,3 +122,40 @@ def pulse() -> Iterator[dict[str, str]]:
         while time.monotonic() < deadline and subprocess.run(["pulseaudio", "--check"], env=env).returncode == 0:
             time.sleep(0.05)
         shutil.rmtree(runtime, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- unit-selection corpus
+@pytest.fixture(scope="session")
+def corpus_rows():
+    """[(sentence id, FaceTrack, ARPAbet phones)] of 30 synthetic sentences."""
+    import numpy as np
+
+    from realtime_core.synthesis.visemes import VISEMES
+    from tests.unit_corpus import ARPABET_BY_VISEME, synthetic_track
+
+    rng = np.random.default_rng(0)
+    rows = []
+    classes = [v for v in VISEMES if v != "sil"]
+    for s in range(30):
+        labels = ["sil"] + [ARPABET_BY_VISEME[v] for v in rng.choice(classes, 12)] + ["sil"]
+        dur = rng.uniform(0.06, 0.15, len(labels))
+        edges = np.concatenate([[0.0], np.cumsum(dur)])
+        n = int(np.ceil(edges[-1] * 30)) + 1
+        phones = [(lab, edges[i], edges[i + 1]) for i, lab in enumerate(labels)]
+        rows.append((f"s{s:02d}", synthetic_track(rng, n), phones))
+    return rows
+
+
+@pytest.fixture(scope="session")
+def stored_corpus(corpus_rows):
+    from realtime_core.synthesis.empca import EmPcaConfig
+    from training.unit_corpus import build_stored_corpus
+
+    return build_stored_corpus(corpus_rows, config=EmPcaConfig(max_components=6), meta={"test": True})
+
+
+@pytest.fixture(scope="session")
+def corpus_file(stored_corpus, tmp_path_factory) -> Path:
+    from assets.unitcorpus import save_unit_corpus
+
+    return save_unit_corpus(tmp_path_factory.mktemp("units") / "units.npz", stored_corpus)

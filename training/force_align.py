@@ -50,13 +50,16 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
     missing = sorted({w for w in words if decoder.lookup_word(w) is None})
     if missing:
         raise AlignmentFormatError(source, f"cannot align: words not in the pocketsphinx dictionary: {missing}")
-    decoder.set_align_text(" ".join(words))
-    for second_pass in (False, True):
-        if second_pass:
-            decoder.set_alignment()
-        decoder.start_utt()
-        decoder.process_raw(pcm, full_utt=True)
-        decoder.end_utt()
+    try:
+        decoder.set_align_text(" ".join(words))
+        for second_pass in (False, True):
+            if second_pass:
+                decoder.set_alignment()
+            decoder.start_utt()
+            decoder.process_raw(pcm, full_utt=True)
+            decoder.end_utt()
+    except RuntimeError as exc:  # pocketsphinx found no path through the transcript
+        raise AlignmentFormatError(source, f"the transcript could not be aligned to the audio ({exc})") from None
     phones: list[Phone] = []
     for word in decoder.get_alignment():
         for ph in word:

@@ -7,8 +7,9 @@
   played ``factor`` times faster (resampled: formants, pitch and tempo all scale by ``factor``, like a
   shorter vocal tract and a faster talker), the lip track re-timed to match, so labels stay exact.
   Microphone variety (noise, reverberation, level, rate) comes from :mod:`training.augment`.
-- :func:`bilabial_spans` finds the /p b m/ closures of a GRID sentence from its word alignment and a
-  fixed pronunciation of the GRID vocabulary (which of its 51 words hold a bilabial, and where).
+- Bilabial closures (/p b m/): for GRID s1 the phones of the shipped phone labels
+  (:mod:`training.grid_phones`); for a GRID clip with only a word alignment, :func:`bilabial_spans`
+  (which of the 51 GRID words hold a bilabial, and where); for real speech its aligned phones.
 - :func:`score_lips` scores estimated against measured tracks per parameter: r at lag 0, the best lag
   within +-3 frames, nu = std(estimate) / std(truth) (seed 002, eq. 7), the share of bilabial closures
   the estimate reaches (mouth_open within ``closure_tol_iod`` of the closed pose, 0), and the loudness
@@ -234,15 +235,15 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
                      r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0), n_frames=len(tr), per_clip=per_clip)
 
 
-def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list | None]]) -> list:
-    """Run the live path of ``model`` on ``clips`` (name, samples, rate_hz, truth (T, 4), words or
-    None) -> items for :func:`score_lips` (bilabial spans from the words; none without words)."""
+def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]]) -> list:
+    """Run the live path of ``model`` on ``clips`` (name, samples, rate_hz, truth (T, 4), bilabial
+    spans [(start_s, end_s, label)]) -> items for :func:`score_lips`."""
     from realtime_core.pipeline import speech_to_params
 
     out = []
-    for name, samples, rate, truth, words in clips:
+    for name, samples, rate, truth, spans in clips:
         est = speech_to_params(model, samples, rate)
-        out.append((name, truth, est, loudness_db(samples, rate, len(truth)), bilabial_spans(words or [])))
+        out.append((name, truth, est, loudness_db(samples, rate, len(truth)), list(spans)))
     return out
 
 
@@ -261,26 +262,42 @@ never counted as another talker."""
 
 
 def other_talker_clips(folder: str | Path, *, cache_dir: str | Path | None = None) -> list:
-    """``[(name, FaceTrack, words or None)]`` of the talking-face clips in ``folder`` not spoken by s1."""
+    """``[(name, FaceTrack, bilabial spans)]`` of the talking-face clips in ``folder`` not spoken by s1
+    (spans from a GRID word alignment beside the clip, :func:`bilabial_spans`; none without one)."""
     from training.video import VIDEO_SUFFIXES, load_face_track
 
     out = []
     for clip in sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in VIDEO_SUFFIXES):
         if any(clip.stem.endswith(s) for s in S1_CLIPS_IN_GRID):
             continue
-        out.append((clip.stem, load_face_track(clip, cache_dir=cache_dir), words_of(clip)))
+        out.append((clip.stem, load_face_track(clip, cache_dir=cache_dir), bilabial_spans(words_of(clip) or [])))
     return out
 
 
 def s1_clips(split: Split, *, root: str | Path | None = None, cache_dir: str | Path | None = None,
-             progress: Callable | None = None) -> list:
-    """``[(sentence_id, FaceTrack, words)]`` of a GRID s1 split."""
-    return [(s.sentence_id, t, read_words(s.align)) for s, t in grid_tracks(split, root=root, cache_dir=cache_dir,
-                                                                              progress=progress)]
+             progress: Callable | None = None, phones: dict | None = None) -> list:
+    """``[(sentence_id, FaceTrack, bilabial spans)]`` of a GRID s1 split. The spans are the /p b m/
+    phones of the shipped GRID s1 phone labels (``training.grid_phones``; ``phones`` = {id:
+    Alignment} to use others), else from the word alignment (:func:`bilabial_spans`)."""
+    if phones is None:
+        from training.grid_phones import read_grid_phones
+
+        phones = read_grid_phones()
+    out = []
+    for s, t in grid_tracks(split, root=root, cache_dir=cache_dir, progress=progress):
+        al = phones.get(s.sentence_id)
+        spans = (phone_bilabial_spans(al.phones) if al is not None else bilabial_spans(read_words(s.align)))
+        out.append((s.sentence_id, t, spans))
+    return out
 
 
-def evaluate_lips(model, clips: Sequence[tuple[str, Any, list | None]]) -> tuple[LipScores, list]:
-    """Score ``model``'s live path on ``[(name, FaceTrack, words)]``; returns the scores and the items."""
+def phone_bilabial_spans(phones: Sequence) -> list[tuple[float, float, str]]:
+    """``[(start_s, end_s, phone)]`` of the /p b m/ phones of a phone timeline (``PhonemeSegment``)."""
+    return [(p.start_s, p.end_s, p.phoneme) for p in phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
+
+
+def evaluate_lips(model, clips: Sequence[tuple[str, Any, list]]) -> tuple[LipScores, list]:
+    """Score ``model``'s live path on ``[(name, FaceTrack, bilabial spans)]``; returns the scores and the items."""
     items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips])
     return score_lips(items), items
 
@@ -292,7 +309,7 @@ def lips_markdown(title: str, s: LipScores, *, note: str = "", goals: dict | Non
         lines += [note, ""]
     lines += [f"{len(s.per_clip)} clips, {s.n_frames} frames pooled; loudness baseline r(mouth_open) = "
               f"{s.r_loudness:.3f}; bilabial closures reached: "
-              + (f"{s.closure_rate:.0%} of {s.n_closures} (the measured lips: {s.truth_closure_rate:.0%})"
+              + (f"{s.closure_rate:.0%} of {s.n_closures} (the truth track itself: {s.truth_closure_rate:.0%})"
                  if s.n_closures else "no word alignment, not measured"), "",
               "| parameter | r (lag 0) | best lag (frames) | r at best lag | nu = std(est)/std(true) |",
               "|---|---:|---:|---:|---:|"]
@@ -364,8 +381,7 @@ def real_speech_clips(root: str | Path) -> list:
         samples, rate = read_audio(wav)
         n = n_frames_for(len(samples) / rate)
         truth = render_params(align.phones, n, inventory=align.inventory)
-        spans = [(p.start_s, p.end_s, p.phoneme) for p in align.phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
-        out.append((wav.stem, samples, rate, truth, spans))
+        out.append((wav.stem, samples, rate, truth, phone_bilabial_spans(align.phones)))
     return out
 
 

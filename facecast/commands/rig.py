@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
             raise MeshError(f"{wfm}: not a usable Candide-3 model: {exc}") from exc
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     report = head_checks(Head(rig, rigged))
-    print(f"rig checks at {len(EXTREME_POSES)} extreme poses and closure: {report.summary()}")
+    print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")
     if not report.passed and not args.keep_failing:
         raise RigCheckError(f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "
                             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing")

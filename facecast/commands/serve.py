@@ -42,6 +42,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
                    help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
                    "on the event loop; use up to cores - 1)")
+    p.add_argument("--text", action="store_true",
+                   help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units")
+    p.add_argument("--corpus", type=Path, default=None, help="unit corpus for --text (default: shipped or built)")
+    p.add_argument("--text-n-best", type=int, default=1, help="unit sequences averaged per sentence for --text")
     p.add_argument(
         "--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)"
     )
@@ -80,6 +84,10 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)
+    if args.text:
+        from server.text_session import espeak_backend
+
+        server.text_backend = espeak_backend(args.corpus, n_best=args.text_n_best)
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
@@ -89,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         await asyncio.wait({ready, run}, return_when=asyncio.FIRST_COMPLETED)
         if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
             run.result()
-        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}/ingest, /view); "
+        endpoints = "/ingest, /view" + (", /text" if args.text else "")
+        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
               "Ctrl-C stops", flush=True)
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))

@@ -49,6 +49,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--likelihood-scale", type=float, default=0.1,
                    help="audio-likelihood exponent kappa stored in the model for the live path (0 < kappa <= 1; "
                    "softens the over-confident posteriors of the 7 overlapping context frames)")
+    p.add_argument(
+        "--closure-band",
+        type=float,
+        default=0.0,
+        metavar="IOD",
+        help="output stage: mouth_open estimates within this of the closed pose close (realtime_core.output; "
+        "choose on held-out data, 0 = off); stored in the model",
+    )
     p.add_argument("--iters", type=int, default=25, help="maximum Baum-Welch iterations")
     p.add_argument("--tol", type=float, default=5e-4, help="stop when the objective gains less per frame")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation and the split")
@@ -134,7 +142,7 @@ def _run(args: argparse.Namespace) -> int:
     model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,
                                    metadata=data)
     bar.close()
-    model = replace(model, metadata={**model.metadata, "recipe": rec.as_json()})
+    model = replace(model, closure_band=args.closure_band, metadata={**model.metadata, "recipe": rec.as_json()})
     save_model(args.output, model)
     ckpt.unlink(missing_ok=True)
     h = result.history

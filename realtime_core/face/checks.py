@@ -1,8 +1,9 @@
 """Rig checks at extreme poses: does the mouth stay clean wherever the parameters go?
 
 For a rig (anything with ``neutral``, ``triangles``, ``deformed(params)``) and its mouth landmarks,
-:func:`check_rig` deforms the head at :data:`EXTREME_POSES` (each parameter at both ends of its
-typical range, the widest opening, and combinations) and at the closure pose (the mouth-open
+:func:`check_rig` deforms the head at :data:`EXTREME_POSES` (the poses speech produces, every
+articulatory class target scaled to the widest typical opening, and each parameter alone at the
+ends of that span) and at the closure pose (the mouth-open
 parameter that closes the neutral inner-lip gap), and measures
 
 - flipped triangles: triangles of the moving region whose normal turns by more than 90 degrees
@@ -28,22 +29,60 @@ import numpy as np
 from realtime_core.errors import ConfigError
 from realtime_core.face.model import MouthLandmarks, face_frame
 
-# (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD: both ends of the typical
-# ranges (training.params.TYPICAL_RANGES) and the combinations speech produces.
-EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = (
-    (0.0, 0.0, 0.45, 0.0),  # widest opening (/a/)
-    (0.0, 0.12, 0.40, 0.0),  # wide and stretched
-    (0.0, -0.12, 0.30, 0.0),  # rounded and open (/o/)
-    (0.0, -0.12, 0.05, 0.0),  # rounded (/u/)
-    (0.0, 0.12, 0.05, -0.05),  # spread, corners up (/i/)
-    (0.06, 0.0, 0.0, 0.0),  # upper lip raised (/f/)
-    (-0.03, 0.0, 0.0, 0.0),  # pressed (/m/, /p/)
-    (-0.03, -0.12, 0.0, 0.0),  # pressed and rounded
-    (0.0, 0.12, 0.0, 0.0),
-    (0.0, 0.0, 0.0, 0.05),
-    (0.0, 0.0, 0.0, -0.05),
-    (0.06, 0.12, 0.45, 0.05),  # every parameter at its upper end
+# (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD.
+SPEECH_SCALE = 0.45 / 0.33
+"""The articulatory targets' widest opening (0.33 IOD, open vowels) scaled to the typical range's end (0.45 IOD)."""
+
+# The poses speech produces, pushed to their realistic extremes: every articulatory class target of
+# training.articulatory.CLASSES (the labels every model learns; a model's estimate is a smoothed
+# mixture of them) times SPEECH_SCALE, rounded to 3 decimals (tests/face/test_checks.py keeps this
+# table equal to the classes). Measured on the default model over 7,435 frames of real speech
+# (../shared/data/speech) the estimate stays within upper_lip_raise [-0.016, 0.023], lip_stretch
+# [-0.106, 0.089], mouth_open [0, 0.297], lip_corner_depress [-0.023, 0.025], with corr(lip_stretch,
+# lip_corner_depress) = -0.99: every frame lies inside the box these poses span, and combinations
+# speech never makes (spread lips with depressed corners, a smile twice as wide as any vowel's) are
+# not tested.
+SPEECH_POSES: tuple[tuple[float, float, float, float], ...] = (
+    (-0.014, -0.014, 0.0, 0.0),  # bilabial (/m b p/, pressed)
+    (-0.007, -0.007, 0.034, 0.0),  # bilabial approximant
+    (0.034, 0.0, 0.034, 0.007),  # labiodental (/f v/)
+    (0.007, 0.02, 0.082, 0.0),  # dental
+    (0.0, 0.02, 0.082, 0.0),  # alveolar
+    (0.007, 0.034, 0.034, -0.007),  # sibilant
+    (0.027, -0.068, 0.055, 0.02),  # postalveolar (/sh/, rounded)
+    (0.0, 0.0, 0.109, 0.0),  # velar
+    (0.0, 0.0, 0.164, 0.0),  # glottal
+    (0.014, -0.055, 0.082, 0.014),  # rhotic
+    (0.014, -0.116, 0.041, 0.027),  # labiovelar (/w/)
+    (0.0, 0.055, 0.055, -0.014),  # palatal
+    (0.007, 0.089, 0.136, -0.027),  # close front (/i/)
+    (0.007, 0.068, 0.164, -0.02),  # near-close front
+    (0.014, 0.068, 0.259, -0.02),  # mid front (/e/)
+    (0.02, 0.048, 0.409, -0.014),  # open front
+    (0.02, 0.027, 0.45, -0.007),  # open central (/a/, the widest opening)
+    (0.014, -0.02, 0.409, 0.007),  # open back
+    (0.014, -0.068, 0.327, 0.02),  # open-mid back rounded (/o/)
+    (0.007, 0.0, 0.177, 0.0),  # schwa
+    (0.014, 0.014, 0.273, 0.0),  # open-mid central
+    (0.014, -0.041, 0.164, 0.014),  # r-coloured vowel
+    (0.014, -0.089, 0.232, 0.027),  # mid back rounded
+    (0.02, -0.123, 0.123, 0.034),  # close back rounded (/u/)
+    (0.014, -0.082, 0.15, 0.02),  # near-close back rounded
 )
+
+# Each parameter alone at the ends of the span above (the pressed lips of /m/ at mouthPress = 1).
+SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = (
+    (-0.03, 0.0, 0.0, 0.0),
+    (0.034, 0.0, 0.0, 0.0),
+    (0.0, -0.123, 0.0, 0.0),
+    (0.0, 0.089, 0.0, 0.0),
+    (0.0, 0.0, 0.45, 0.0),
+    (0.0, 0.0, 0.0, -0.027),
+    (0.0, 0.0, 0.0, 0.034),
+)
+
+EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SINGLE_POSES
+"""The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 
 @dataclass(frozen=True)

@@ -81,8 +81,9 @@ def redis_server():
         r.stop()
 
 
-def _node(model_path, redis_url: str, name: str) -> ServerProcess:
-    toml = f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
+def _node(model_path, redis_url: str, name: str, role: str = "both") -> ServerProcess:
+    toml = (f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
+            f'role = "{role}"\n')
     return ServerProcess(model_path, head=False, config_toml=toml)
 
 
@@ -238,6 +239,34 @@ async def _health_if(url: str, status: str) -> dict | None:
 async def _rows_if(url: str, name: str) -> list | None:
     rows = (await _get_json(url, "/sessions"))["sessions"]
     return rows if any(r["name"] == name for r in rows) and rows[0].get("node") else None
+
+
+def test_an_ingest_landing_on_an_edge_node_is_forwarded(model_path, redis_server):
+    nodes = [_node(model_path, redis_server.url, "a"), _node(model_path, redis_server.url, "e", role="edge")]
+    pcm = np.rint(speechlike(1.0, 16000, seed=2) * 32767).astype(np.int16)
+
+    async def main():
+        a, e = (n.url for n in nodes)
+        await _until(lambda: _get_json(e, "/health"), what="health")
+        await asyncio.sleep(0.5)  # both nodes have announced themselves
+        async with IngestClient(e, session="fw", sample_rate_hz=16000) as ing:
+            rows = (await _get_json(a, "/sessions"))["sessions"]
+            async with ViewerClient(e, session="fw", audio=False) as view:
+                await _until(lambda: _published(a, "fw", {(P.KIND_PARAMS, P.ENC_FLOAT32)}), what="wants")
+                collect = asyncio.ensure_future(view.collect())
+                await stream_samples(ing, pcm, realtime=False)
+                ended = await ing.end()
+                got = await asyncio.wait_for(collect, 20)
+        return rows, ended, got
+
+    try:
+        rows, ended, got = asyncio.run(asyncio.wait_for(main(), 60))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert [(r["name"], r["node"]) for r in rows] == [("fw", "a")]  # computed on a, not on the edge
+    assert ended["type"] == "ended" and [m.index for m in got.frames] == list(range(ended["frames"]))
+    assert got.close_code == P.CLOSE_NORMAL
 
 
 def test_a_wrong_redis_address_is_one_line_at_start(model_path):

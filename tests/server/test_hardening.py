@@ -212,3 +212,31 @@ def test_bad_hardening_config_is_named(cfg, match):
 
     with pytest.raises(ServerConfigError, match=match):
         ServerConfig(**cfg)
+
+
+def test_shutdown_does_not_wait_for_a_paced_backlog(model):
+    pcm = _pcm(1.0)
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0, ingest_burst_s=0.2, close_timeout_s=1.0))
+        await srv.start()
+        ws = await connect(ws_url(srv.url, "/ingest"), compression=None)
+        await ws.send(json.dumps({"type": "start", "session": "flood", "sample_rate": 16000}))
+        await ws.recv()
+
+        async def flood():  # 100x real time: the server paces it, a backlog builds up
+            with contextlib.suppress(Exception):
+                for _ in range(40):
+                    await ws.send(pcm.tobytes())
+                    await asyncio.sleep(0.01)
+
+        task = asyncio.ensure_future(flood())
+        await asyncio.sleep(1.0)
+        t0 = time.monotonic()
+        await asyncio.wait_for(srv.stop(), 15)
+        took = time.monotonic() - t0
+        task.cancel()
+        return took, ws.close_code
+
+    took, code = asyncio.run(main())
+    assert took < 5.0 and code == P.CLOSE_GOING_AWAY

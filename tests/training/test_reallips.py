@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from realtime_core import VISUAL_PARAMS
+from tests.prerequisites import require_module
 from training.corpus import Utterance
 from training.params import FPS, n_frames_for
 
@@ -88,3 +89,33 @@ def test_scores_match_independent_computations() -> None:
     assert s.n_closures == 6 and s.closure_rate == pytest.approx(0.5) and s.truth_closure_rate == 1.0
     lo = np.concatenate([it[3] for it in items])
     assert s.r_loudness == pytest.approx(np.corrcoef(tr[:, 2], lo)[0, 1], abs=1e-9)
+
+
+@pytest.mark.slow
+def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
+    """`facecast train --grid-s1 ROOT --speed 1.1 --closure-band 0.02` on a three-sentence GRID copy:
+    the model records its data, holds the speed copies, keeps the band, and its output never goes
+    below the closed pose."""
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
+    import shutil
+
+    from assets.modelfile import load_model
+    from facecast.cli import main
+    from realtime_core.pipeline import speech_to_params
+
+    s1 = shared_data / "video" / "grid_s1"
+    root = tmp_path / "grid"
+    (root / "video").mkdir(parents=True)
+    (root / "align").mkdir()
+    for sid in ("bbaf2n", "bbaf3s", "bbal6n"):
+        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
+        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    out = tmp_path / "m.npz"
+    assert main(["train", "--grid-s1", str(root), "--grid-split", "all", "--speed", "1.1", "--closure-band", "0.02",
+                 "--cache-dir", str(tmp_path / "cache"), "-o", str(out), "--states", "2", "--mix", "1",
+                 "--iters", "1"]) == 0
+    m = load_model(out)
+    assert m.metadata["grid_s1"] == {"split": "all", "sentences": 3, "speeds": [1.1], "mic_copies": 0}
+    assert m.metadata["train_utterances"] == 6 and m.closure_band == 0.02
+    x = np.random.default_rng(0).standard_normal(16000).astype(np.float32) * 0.05
+    assert speech_to_params(m, x)[:, VISUAL_PARAMS.index("mouth_open")].min() >= 0.0

@@ -1,0 +1,337 @@
+"""Text sessions for chatbots: text in (whole or streamed in pieces), speech + lip motion out to viewers.
+
+Theory of operation
+-------------------
+A client opens ``/text`` and sends ``{"type": "start", "session": NAME, "language": "en"|"es",
+"voice": optional espeak voice}``, then ``{"type": "text", "text": "..."}`` pieces as a language
+model writes them, and ``{"type": "end"}`` (docs/protocol.md). :class:`TextSession` (sans-I/O)
+collects the pieces into sentences (:class:`realtime_core.synthesis.text.SentenceChunker`); each
+complete sentence is spoken by the injected text-to-speech function, its lip motion selected from
+recorded units (:class:`realtime_core.synthesis.synthesizer.UnitSynthesizer`, the phone timings of
+the synthesiser) and appended to the session's media timeline: sentence audio is padded to a
+whole number of frames so frame ``k`` stays at media time ``k / 30`` and the audio block of frame
+``k`` starts there too. Viewers subscribe with ``/view`` exactly as for audio sessions (same
+messages, same description; the audio rate is the synthesiser's).
+
+The asyncio side (:func:`handle_text`) runs synthesis off the event loop (a thread), releases
+frames at the pace of real time plus ``lead_s`` (so viewers' queues never overflow and playback
+starts at once), speaks pending text after ``stall_s`` without a new piece (a stalled stream still
+gets its words out), and answers bad text with ``{"type": "rejected"}`` while the session goes
+on serving its viewers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from websockets.asyncio.server import ServerConnection
+from websockets.exceptions import ConnectionClosed
+
+from realtime_core.errors import ConfigError
+from realtime_core.synthesis.synthesizer import UnitSynthesizer
+from realtime_core.synthesis.text import SentenceChunker, TextError
+from server.errors import (
+    AudioFormatError,
+    ControlError,
+    ProtocolViolation,
+    ServerConfigError,
+)
+from server.session import AudioBlock, Frame, Output
+from server.timing import StageTimes
+from wire import protocol as P
+
+FPS = 30
+
+
+class SpeechLike(Protocol):
+    """What the text-to-speech function returns (e.g. :class:`assets.tts.Speech`)."""
+
+    samples: np.ndarray  # (n,) float32 in [-1, 1]
+    sample_rate_hz: int
+    phones: tuple  # ((label, start_s, end_s), ...)
+    inventory: str
+    text: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class TextBackend:
+    """Everything a text session needs, injected by the command line (the server does not import
+    training code). speak(text, language, voice) -> SpeechLike, raising a ConfigError subclass for
+    text it cannot speak or a bad language/voice; synthesizer: unit selection over the corpus;
+    languages: the supported language codes; sample_rate_hz: the rate ``speak`` produces (must be a
+    multiple of 30 Hz, e.g. espeak-ng's 22050 Hz); lead_s: how far frames run ahead of real time;
+    stall_s: pending text is spoken after this long without a new piece; n_best: unit sequences
+    averaged (see UnitSynthesizer.synthesize)."""
+
+    speak: Callable[[str, str, str | None], SpeechLike]
+    synthesizer: UnitSynthesizer
+    languages: tuple[str, ...]
+    sample_rate_hz: int
+    lead_s: float = 0.5
+    stall_s: float = 1.5
+    n_best: int = 1
+
+    def __post_init__(self) -> None:
+        if self.sample_rate_hz % FPS:
+            raise ServerConfigError(f"speech rate {self.sample_rate_hz} Hz is not a multiple of {FPS} Hz")
+        if not 0 <= self.lead_s <= 10 or not 0.1 <= self.stall_s <= 60:
+            raise ServerConfigError("lead_s must be in 0..10 s and stall_s in 0.1..60 s")
+
+
+@dataclass(frozen=True)
+class _TextConfig:
+    sample_rate_hz: int
+    channels: int = 1
+
+
+class TextSession:
+    """One text stream -> speech and frames on one media timeline. Duck-types the parts of
+    :class:`server.session.Session` that live sessions and viewers use (rates, counters, flush,
+    controls). Not thread-safe: the owner serialises calls."""
+
+    def __init__(self, backend: TextBackend, *, language: str, voice: str | None, rig=None,
+                 times: StageTimes | None = None) -> None:
+        if language not in backend.languages:
+            raise ServerConfigError(f"unsupported language {language!r}; supported: {list(backend.languages)}")
+        self.backend = backend
+        self.language = language
+        self.voice = voice
+        self.rig = rig
+        self.times = times if times is not None else StageTimes()
+        self.rate_hz = backend.sample_rate_hz
+        self.fps = FPS
+        self.config = _TextConfig(backend.sample_rate_hz)
+        self.algorithmic_delay_s = 0.0
+        self.chunker = SentenceChunker()
+        self.frames_out = 0
+        self.samples_out = 0
+        self._audio_index = 0
+        self.sentences = 0
+        self.finished = False
+        self._k = backend.synthesizer.corpus.n_coefficients
+
+    # -- the parts of a session handle (server.live.SessionHandle) that live sessions use --------
+    frame_bytes = 2  # nominal: text sessions take no audio
+
+    def control_state(self) -> dict:
+        return {}
+
+    async def apply_control(self, msg: dict) -> dict:
+        raise ControlError("text sessions have no controls")
+
+    async def push_bytes(self, data: bytes) -> Output:
+        raise AudioFormatError("a text session takes text messages, not audio")
+
+    async def push(self, samples: np.ndarray) -> Output:
+        raise AudioFormatError("a text session takes text messages, not audio")
+
+    async def flush(self) -> Output:
+        """End of the text: nothing left to emit here (pending text is spoken by :meth:`finish_text`)."""
+        self.finished = True
+        return Output([], None)
+
+    async def close(self) -> None:
+        """Nothing to release."""
+
+    # -- text ---------------------------------------------------------------------------------
+    def push_text(self, text: str) -> list[str]:
+        """A piece of text -> the sentences it completed (speak each with :meth:`speak`)."""
+        return self.chunker.push(text)
+
+    def finish_text(self) -> list[str]:
+        """The pending text as a sentence (stall or end of the stream)."""
+        return self.chunker.flush()
+
+    def speak(self, sentence: str) -> tuple[list[Output], dict]:
+        """Synthesise one sentence -> per-frame Outputs (frame + its audio block) appended to the
+        timeline, and a report. Raises ConfigError (TextError) for text that cannot be spoken."""
+        t0 = time.perf_counter()
+        speech = self.backend.speak(sentence, self.language, self.voice)
+        t1 = time.perf_counter()
+        n = int(np.ceil(len(speech.samples) * FPS / speech.sample_rate_hz - 1e-9))
+        if speech.sample_rate_hz != self.rate_hz:
+            raise ServerConfigError(f"speech came at {speech.sample_rate_hz} Hz, the session runs at {self.rate_hz} Hz")
+        res = self.backend.synthesizer.synthesize(list(speech.phones), speech.inventory, n_frames=n,
+                                                  n_best=self.backend.n_best)
+        t2 = time.perf_counter()
+        self.times.add("text_speech", t1 - t0)
+        self.times.add("text_units", t2 - t1)
+        per = self.rate_hz // FPS
+        audio = np.zeros(n * per)
+        audio[: len(speech.samples)] = speech.samples[: n * per]
+        params = res.frames[:, self._k:]
+        outs = []
+        now = time.perf_counter()
+        for j in range(n):
+            k = self.frames_out
+            frame = Frame(k, k / FPS, params[j].astype(np.float64), params[j].astype(np.float64),
+                          (t2 - t0) / n, now, self.rig, self.times)
+            block = AudioBlock(self._audio_index, self.samples_out, self.samples_out / self.rate_hz,
+                               audio[j * per:(j + 1) * per])
+            self._audio_index += 1
+            self.samples_out += per
+            self.frames_out += 1
+            outs.append(Output([frame], block))
+        self.sentences += 1
+        sel, tgt = res.selection, res.target
+        report = {"type": "spoken", "text": speech.text, "frames": n, "media_time": outs[0].frames[0].media_time,
+                  "duration_s": n / FPS, "units": sel.n_units, "junctions_outside_corpus": sel.n_mismatched,
+                  "unknown_phones": sorted(set(tgt.unknown)), "synthesis_ms": round(1000 * (t2 - t0), 1)}
+        return outs, report
+
+
+def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> TextBackend:
+    """The standard backend: espeak-ng speech (:mod:`assets.tts`) and unit selection over a unit corpus
+    (``corpus`` None = the shipped or newest built one, :func:`assets.unitcorpus.find_unit_corpus`)."""
+    from assets.espeak import synthesizer
+    from assets.tts import INVENTORY, speak
+    from assets.unitcorpus import find_unit_corpus, load_unit_corpus
+
+    stored = load_unit_corpus(find_unit_corpus(corpus))
+    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+                       synthesizer=UnitSynthesizer(stored.corpus), languages=tuple(INVENTORY),
+                       sample_rate_hz=synthesizer().sample_rate_hz, n_best=n_best)
+
+
+def _text_message(raw: Any) -> dict:
+    if not isinstance(raw, str):
+        raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "a text session takes JSON text messages, not binary")
+    try:
+        msg = json.loads(raw)
+    except ValueError:
+        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "message is not JSON") from None
+    if not isinstance(msg, dict):
+        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "a message must be a JSON object")
+    return msg
+
+
+async def handle_text(server, ws: ServerConnection) -> None:
+    """The ``/text`` endpoint (protocol in docs/protocol.md)."""
+    from server.live import LiveSession
+    from server.protocol import token_ok
+
+    backend: TextBackend | None = getattr(server, "text_backend", None)
+    if backend is None:
+        raise ProtocolViolation(P.CLOSE_NOT_FOUND, "text sessions are not enabled on this server (facecast serve --text)")
+    try:
+        first = await asyncio.wait_for(ws.recv(), server.config.start_timeout_s)
+    except TimeoutError:
+        raise ProtocolViolation(P.CLOSE_POLICY, f"no start message within {server.config.start_timeout_s:g} s") from None
+    start = _text_message(first)
+    if start.get("type") != "start":
+        raise ProtocolViolation(P.CLOSE_POLICY, f"first message must be {{\"type\": \"start\"}}, got {start.get('type')!r}")
+    if not token_ok(start.get("token"), server.config.token):
+        raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
+    unknown = sorted(set(start) - {"type", "session", "language", "voice", "token"})
+    if unknown:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {unknown}")
+    name = start.get("session")
+    if not isinstance(name, str) or not P.SESSION_NAME.match(name):
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+    language, voice = start.get("language", "en"), start.get("voice")
+    if voice is not None and not isinstance(voice, str):
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "voice must be a string")
+    try:
+        session = TextSession(backend, language=language, voice=voice,
+                              rig=server.head.rig if server.head else None, times=server.times)
+        if voice is not None:
+            await asyncio.to_thread(backend.speak, "a", language, voice)  # a bad voice fails now, not mid-stream
+    except ConfigError as exc:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
+    try:
+        server._admission(name)  # the server's one admission check (name, capacity, shutdown)
+    except ServerConfigError as exc:
+        raise ProtocolViolation(getattr(exc, "code", P.CLOSE_BAD_REQUEST), str(exc)) from None
+    live = LiveSession(name, session, server, source="text")
+    server.sessions[name] = live
+    queue: asyncio.Queue = asyncio.Queue()
+    clock: dict[str, float] = {}
+    first_piece: list[float] = []
+
+    async def pacer() -> None:
+        """Release frames no earlier than ``lead_s`` before their media time on the wall clock."""
+        while True:
+            out = await queue.get()
+            if out is None:
+                return
+            mt = out.frames[0].media_time
+            if "t0" not in clock:
+                clock["t0"] = time.perf_counter() - mt
+                if first_piece:
+                    clock["first_frame_s"] = time.perf_counter() - first_piece[0]
+            wait = clock["t0"] + mt - backend.lead_s - time.perf_counter()
+            if wait > 0:
+                await asyncio.sleep(wait)
+            elif clock["t0"] + mt < time.perf_counter() - 1.0:  # fell behind (a long pause in the text): re-anchor
+                clock["t0"] = time.perf_counter() - mt
+            live._fanout(out)
+
+    async def say(sentences: list[str]) -> None:
+        for sentence in sentences:
+            try:
+                outs, report = await asyncio.to_thread(session.speak, sentence)
+            except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
+                await ws.send(P.dumps({"type": "rejected", "text": sentence[:200], "reason": str(exc)}))
+                continue
+            for o in outs:
+                queue.put_nowait(o)
+            await ws.send(P.dumps(report))
+
+    pace = asyncio.ensure_future(pacer())
+    code, reason = P.CLOSE_NORMAL, "session ended"
+    try:
+        await ws.send(P.dumps({"type": "started", "session": name, "fps": FPS, "audio_rate_hz": session.rate_hz,
+                               "language": language, "view_path": f"/view?session={name}"}))
+        while True:
+            try:
+                raw = await asyncio.wait_for(ws.recv(), backend.stall_s if session.chunker.pending.strip() else None)
+            except TimeoutError:  # the stream stalled mid-sentence: speak what is there
+                await say(session.finish_text())
+                continue
+            msg = _text_message(raw)
+            kind = msg.get("type")
+            if kind == "text":
+                text = msg.get("text")
+                if not isinstance(text, str):
+                    await ws.send(P.dumps({"type": "rejected", "reason": "text must be a string"}))
+                    continue
+                if not first_piece:
+                    first_piece.append(time.perf_counter())
+                try:
+                    done = session.push_text(text)
+                except TextError as exc:
+                    await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
+                    continue
+                if msg.get("flush"):
+                    done += session.finish_text()
+                await say(done)
+            elif kind == "flush":
+                await say(session.finish_text())
+            elif kind == "end":
+                await say(session.finish_text())
+                queue.put_nowait(None)
+                await pace
+                await ws.send(P.dumps({"type": "ended", "frames": session.frames_out,
+                                       "audio_s": session.samples_out / session.rate_hz,
+                                       "first_frame_ms": round(1000 * clock.get("first_frame_s", float("nan")), 1)}))
+                break
+            elif kind == "start":
+                raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
+            else:
+                raise ProtocolViolation(P.CLOSE_POLICY, f"unknown message type {kind!r} (expected text, flush or end)")
+    except ProtocolViolation:
+        code, reason = P.CLOSE_NORMAL, "session ended: its source broke the protocol"
+        raise
+    except ConnectionClosed:
+        pass
+    finally:
+        pace.cancel()
+        await server._end_session(live, code, reason)
+    await server.close_ws(ws, code, reason)

@@ -1,0 +1,106 @@
+"""Per-session speaker enrolment: a start message carrying a recording of the talker makes that
+session animate with a copy of the model MAP-adapted to the voice (real server over loopback)."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import math
+
+import numpy as np
+import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
+
+from clients.client import IngestClient, ViewerClient, stream_samples, ws_url
+from realtime_core.adaptation import adapt_av_model
+from realtime_core.pipeline import speech_to_params
+from server.app import FacecastServer
+from server.config import ServerConfig
+from server.errors import ServerConfigError
+from server.session import Session, SessionConfig
+from tests.speech import speechlike
+from wire import protocol as P
+
+
+def _i16(x: np.ndarray) -> np.ndarray:
+    return np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767).astype(np.int16)
+
+
+@pytest.fixture(scope="module")
+def audio():
+    enrol = _i16(speechlike(8.0, 16000, seed=3) * 0.6)  # another "voice": quieter, other syllables
+    speech = _i16(speechlike(2.0, 16000, seed=4))
+    return enrol, speech
+
+
+def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> None:
+    enrol, speech = audio
+    adapted, _ = adapt_av_model(model, [enrol / 32768.0])
+    ref = speech_to_params(adapted, speech / 32768.0)
+    plain = speech_to_params(model, speech / 32768.0)
+    assert np.abs(ref - plain).max() > 1e-3  # the enrolment changes the animation
+
+    async def run(url, name, enrol_bytes):
+        async with IngestClient(url, session=name, sample_rate_hz=16000, enrol=enrol_bytes) as ing, \
+                ViewerClient(url, session=name, kind="params") as v:
+            task = asyncio.ensure_future(v.collect())
+            await stream_samples(ing, speech, block_s=0.02)
+            await ing.end()
+            return ing.started, await task
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            started, got = await run(srv.url, "enrolled", enrol.tobytes())
+            # a second session on the same server without enrolment uses the shared model unchanged
+            _, got2 = await run(srv.url, "plain", None)
+            return started, got, got2
+        finally:
+            await srv.stop()
+
+    started, got, got2 = asyncio.run(main())
+    assert started["enrolled_s"] == 8.0
+    assert len(got.frames) == len(ref)
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+    np.testing.assert_array_equal(got2.values(), plain.astype(np.float32))
+
+
+@pytest.mark.parametrize(("enrol", "reason"), [
+    ("@@not base64@@", "base64"),
+    (base64.b64encode(b"\x00" * 1001).decode(), "whole number"),
+    (base64.b64encode(b"\x00" * 3200).decode(), "0.1 s of audio"),
+])
+def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            async with connect(ws_url(srv.url, "/ingest"), compression=None) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bad", "sample_rate": 16000,
+                                          "format": "pcm_s16le", "enrol": enrol}))
+                try:
+                    await asyncio.wait_for(ws.recv(), 10)
+                except ConnectionClosed as exc:
+                    return exc.rcvd.code, exc.rcvd.reason
+            return None, "not closed"
+        finally:
+            await srv.stop()
+
+    code, why = asyncio.run(main())
+    assert code == P.CLOSE_BAD_REQUEST and reason in why, (code, why)
+
+
+def test_session_core_adapts_only_its_own_copy(model, audio) -> None:
+    enrol, _ = audio
+    cfg = SessionConfig(sample_rate_hz=16000, sample_format="pcm_s16le",
+                        enrol=base64.b64encode(enrol.tobytes()).decode())
+    s = Session(model, config=cfg)
+    assert s.model is not model and s.enrolment["frames"] == math.ceil(8.0 * 30)
+    assert not np.allclose(s.model.hmm.means, model.hmm.means)
+    assert Session(model, config=SessionConfig(sample_rate_hz=16000)).model is model
+    with pytest.raises(ServerConfigError, match="120"):
+        SessionConfig(sample_rate_hz=8000, sample_format="pcm_s16le",
+                      enrol=base64.b64encode(b"\x00" * 2 * 8000 * 121).decode())

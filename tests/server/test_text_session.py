@@ -1,0 +1,181 @@
+"""Text sessions: chunking invariance, the media timeline, and a real server over loopback with real
+espeak-ng speech (unit corpus: espeak sentences labelled by the articulatory rules, built here)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+
+import numpy as np
+import pytest
+from websockets.asyncio.client import connect
+
+from clients.client import ViewerClient
+from realtime_core.synthesis.corpus import MotionCorpus
+from realtime_core.synthesis.synthesizer import UnitSynthesizer
+from realtime_core.synthesis.text import SentenceChunker, TextError, clean_text
+from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
+from server.app import FacecastServer
+from server.config import ServerConfig
+from server.text_session import TextBackend, TextSession
+from wire import protocol as P
+
+CORPUS_TEXT = [
+    "Bin blue at f two now.", "Place green by q seven again.", "Lay red with z nine please.",
+    "Set white in a one soon.", "The quick brown fox jumps over the lazy dog.", "How are you today, my friend?",
+    "Thank you very much for the lovely evening.", "She sells sea shells by the sea shore.",
+    "Where were you when the lights went out?", "Our house is on the other side of the river.",
+]
+
+
+@pytest.fixture(scope="module")
+def backend() -> TextBackend:
+    from assets.espeak import synthesizer
+    from assets.tts import INVENTORY, speak
+    from realtime_core.phones import PhonemeSegment
+    from training.articulatory import render_params
+
+    frames, fo, labels, vis, st, en, po = [], [0], [], [], [], [], [0]
+    for text in CORPUS_TEXT:
+        s = speak(text, language="en")
+        n = int(np.ceil(s.duration_s * 30))
+        p = render_params([PhonemeSegment(*ph) for ph in s.phones], n, inventory="espeak-en")
+        frames.append(np.concatenate([p[:, 1:3], p], axis=1))  # 2 "coefficients" + the 4 parameters
+        fo.append(fo[-1] + n)
+        for lab, a, b in s.phones:
+            labels.append(lab)
+            vis.append(VISEME_ID[viseme_of(lab, "espeak-en", default="AH")])
+            st.append(a)
+            en.append(min(b, n / 30))
+        po.append(po[-1] + len(s.phones))
+    corpus = MotionCorpus(
+        sentence_ids=tuple(f"c{i}" for i in range(len(CORPUS_TEXT))), frames=np.concatenate(frames),
+        frame_offsets=np.array(fo), phone_labels=tuple(labels), phone_visemes=np.array(vis, dtype=np.int16),
+        phone_start_s=np.array(st), phone_end_s=np.array(en), phone_offsets=np.array(po), n_coefficients=2,
+        dim_names=("c1", "c2", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"),
+    )
+    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+                       synthesizer=UnitSynthesizer(corpus), languages=tuple(INVENTORY),
+                       sample_rate_hz=synthesizer().sample_rate_hz, stall_s=0.5, lead_s=0.3)
+
+
+def test_chunker_gives_the_same_sentences_for_any_chunking():
+    text = ("Hello there! How are you today? I am fine; thanks. This one has no end and keeps going "
+            "on and on without any full stop at all for a very long while so it must be cut somewhere ok")
+    whole = SentenceChunker(max_chars=60)
+    want = whole.push(text) + whole.flush()
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        c = SentenceChunker(max_chars=60)
+        cuts = np.sort(rng.choice(len(text), size=8, replace=False))
+        got = []
+        for piece in np.split(np.array(list(text)), cuts):
+            got += c.push("".join(piece))
+        got += c.flush()
+        assert got == want
+    assert want[:3] == ["Hello there!", "How are you today?", "I am fine;"]
+    assert all(len(s) <= 60 for s in want)
+
+
+def test_clean_text_keeps_pronounceable_characters_and_rejects_the_rest():
+    assert clean_text("Hi\x00 there 😀 — ¿qué tal?") == "Hi there ¿qué tal?"
+    for bad in ("", "   ", "😀🙂", "...!?", None):
+        with pytest.raises(TextError):
+            clean_text(bad)
+
+
+def test_sentences_share_one_media_timeline(backend):
+    s = TextSession(backend, language="en", voice=None)
+    outs1, rep1 = s.speak("Hello world.")
+    outs2, rep2 = s.speak("Good morning to you.")
+    outs = outs1 + outs2
+    per = backend.sample_rate_hz // 30
+    for k, o in enumerate(outs):
+        (f,) = o.frames
+        assert f.index == k and f.media_time == pytest.approx(k / 30)
+        assert o.audio.start == k * per and o.audio.media_time == pytest.approx(k / 30) and len(o.audio.samples) == per
+    assert rep2["media_time"] == pytest.approx(len(outs1) / 30)
+    assert rep1["frames"] + rep2["frames"] == s.frames_out
+    # the audio carries the speech (not silence) and the mouth moves while it speaks
+    audio = np.concatenate([o.audio.samples for o in outs1])
+    assert np.abs(audio).max() > 0.05
+    assert np.ptp([o.frames[0].params[2] for o in outs1]) > 0.05
+    with pytest.raises(TextError):
+        s.speak("😀")
+    with pytest.raises(Exception, match="unsupported language"):
+        TextSession(backend, language="fr", voice=None)
+
+
+@contextlib.asynccontextmanager
+async def running(model, backend):
+    srv = FacecastServer(model, config=ServerConfig(port=0))
+    srv.text_backend = backend
+    await srv.start()
+    try:
+        yield srv
+    finally:
+        await srv.stop()
+
+
+def test_text_session_over_loopback(model, backend):
+    """Chunks in, viewers get audio + frames on one clock; bad text is rejected and the session goes
+    on; a stalled sentence is spoken after stall_s; the first frame leaves quickly."""
+
+    async def main():
+        async with running(model, backend) as srv:
+            url = srv.url.replace("http", "ws")
+            replies = []
+            async with connect(url + "/text") as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                started = json.loads(await ws.recv())
+                async with ViewerClient(srv.url, session="bot", kind="params") as viewer:
+                    collect = asyncio.ensure_future(viewer.collect())
+                    t0 = time.perf_counter()
+                    for piece in ("Hello the", "re, how are", " you? "):
+                        await ws.send(json.dumps({"type": "text", "text": piece}))
+                    replies.append(json.loads(await ws.recv()))  # "Hello there, how are you?" spoken
+                    await ws.send(json.dumps({"type": "text", "text": "😀😀. "}))
+                    replies.append(json.loads(await ws.recv()))  # rejected, the session goes on
+                    await ws.send(json.dumps({"type": "text", "text": "I am fine thank you"}))
+                    replies.append(json.loads(await ws.recv()))  # stalled: "I am fine thank you" after stall_s
+                    stall_wait = time.perf_counter() - t0
+                    await ws.send(json.dumps({"type": "end"}))
+                    replies.append(json.loads(await ws.recv()))
+                    got = await collect
+            return started, replies, got, stall_wait
+
+    started, replies, got, stall_wait = asyncio.run(main())
+    assert started["type"] == "started" and started["audio_rate_hz"] == 22050
+    spoken1, rejected, spoken2, ended = replies
+    assert spoken1["type"] == "spoken" and spoken1["text"] == "Hello there, how are you?"
+    assert rejected["type"] == "rejected" and "pronounceable" in rejected["reason"]
+    assert spoken2["type"] == "spoken" and spoken2["text"].startswith("I am fine") and stall_wait >= 0.5
+    assert spoken2["media_time"] == pytest.approx(spoken1["frames"] / 30)
+    assert ended["type"] == "ended" and ended["frames"] == spoken1["frames"] + spoken2["frames"]
+    print(f"first frame {ended['first_frame_ms']} ms after the first text piece")
+    assert np.isfinite(ended["first_frame_ms"])
+    # the viewer got every frame in order at k / 30 and the audio on the same clock
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(ended["frames"]))
+    assert all(m.media_time == pytest.approx(m.index / 30) for m in got.frames)
+    assert got.description["audio"]["rate_hz"] == 22050
+    audio_t = [m.media_time for m in got.audio]
+    assert audio_t == pytest.approx([k / 30 for k in range(len(audio_t))])
+    assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
+
+
+def test_text_session_refuses_bad_starts(model, backend):
+    async def attempt(start):
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps(start))
+            with contextlib.suppress(Exception):
+                await ws.recv()
+            await ws.wait_closed()
+            return ws.close_code, ws.close_reason
+
+    code, reason = asyncio.run(attempt({"type": "start", "session": "x", "language": "fr"}))
+    assert code == P.CLOSE_BAD_REQUEST and "unsupported language" in reason
+    code, reason = asyncio.run(attempt({"type": "start", "session": "x", "voice": "xx-nope"}))
+    assert code == P.CLOSE_BAD_REQUEST and "voice" in reason
