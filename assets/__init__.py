@@ -9,5 +9,9 @@ Every reader and writer of a file format lives here, one per format, and every e
     modelfile  model .npz load/save and the shipped default model (data/)
     tracks     the one codec of parameter tracks: CSV (strict corpus mode, resampling render reader) and JSON
     pacing     paced_blocks: the one real-time pacing loop for recorded audio (absolute loop-clock schedule)
+    espeak     espeak-ng speech with phoneme timings (its C library via ctypes)
+    tts        text -> speech with phone timings for unit selection (espeak-ng)
+    grid       the GRID s1 corpus: ids, the one train/val/test split, word alignments, sentence text
+    unitcorpus unit-selection corpus files: atomic save, load naming the file
     heads      meshes, the built-in head, landmark files, rig files and the rigging pipeline (its own map)
 """

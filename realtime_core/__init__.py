@@ -11,6 +11,10 @@ or in random chunks.
     pipeline     SpeechToParams (the live chain: any rate -> (k, 4) params) and speech_to_params
     avmodel      AvModel: front end + CMVN statistics + HMM + streaming matrices; encode/decode bytes
     track        Track (values, channel names, fps, start) and frames_from_samples
+    phones       PhonemeSegment, the phone timeline type shared by synthesis, alignment and corpora
+    output       the output stage: the closed-pose floor and per-model closure band
+    adaptation   speaker adaptation of a whole AvModel from enrolment speech
+    synthesis    text-driven visible speech by unit selection (seed 001): EM-PCA, visemes, search, concat
     face         face models, registration, control-point projection, interpolation, rigs (Sec. 5)
     blendshapes  ARKit-52 / OVR-15 blendshape weights from the four mouth parameters
     metrics      AMSE / ACC (eq. 11-12), Pearson R and normalised MSE (paper 002 eq. 6-8)

@@ -6,4 +6,7 @@
     record   save a live session                                render   offline MP4 of a head
     rig      rig a head mesh                                    serve    the streaming server
     train    train a model                                      view     watch a live session
+    adapt    speaker adaptation from enrolment speech           say      text -> speech + lips (unit selection)
+    units    build the unit-selection corpus                    phones   GRID s1 phone labels
+    perceptual  perceptual tests with people                    headopts the shared --head options
 """
