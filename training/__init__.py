@@ -21,5 +21,6 @@ Stages (see ``docs/training.md``):
     report         training report plots (paper Figs. 7 and 8)
     errors         TrainingError (root of this package) and its file problems
 
-espeak-ng and the GRID corpus reader live in ``assets`` (espeak, grid). Nothing here runs at import time; heavy or optional libraries are imported where used.
+espeak-ng and the GRID corpus reader live in ``assets`` (espeak, grid). Nothing here runs at import
+time; heavy or optional libraries are imported where used.
 """
