@@ -13,7 +13,7 @@ equal what a live session produces frame for frame; ``mode="batch"`` uses batch 
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -22,7 +22,6 @@ from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
-
 
 StageObserver = Callable[[str], None]
 """Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage

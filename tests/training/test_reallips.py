@@ -7,8 +7,12 @@ import numpy as np
 import pytest
 
 from realtime_core import VISUAL_PARAMS
+from tests.prerequisites import require_module
 from training.corpus import Utterance
 from training.params import FPS, n_frames_for
+
+# Real GRID clips and ffmpeg.
+pytestmark = pytest.mark.system
 
 
 def _tone_utterance(freq_hz: float = 200.0, dur_s: float = 2.0, rate: int = 16000) -> Utterance:
@@ -87,11 +91,12 @@ def test_scores_match_independent_computations() -> None:
     assert s.r_loudness == pytest.approx(np.corrcoef(tr[:, 2], lo)[0, 1], abs=1e-9)
 
 
-@pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
+@pytest.mark.slow
 def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
     """`facecast train --grid-s1 ROOT --speed 1.1 --closure-band 0.02` on a three-sentence GRID copy:
     the model records its data, holds the speed copies, keeps the band, and its output never goes
     below the closed pose."""
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
     import shutil
 
     from assets.modelfile import load_model
