@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import asyncio
 import json
-from urllib.parse import quote
 import time
 from dataclasses import dataclass, field
+from urllib.parse import quote
 
 import numpy as np
 
@@ -178,7 +178,8 @@ async def live_sessions(url: str, token: str | None = None) -> list[str]:
     except OSError as exc:
         raise ClientError(f"{url}: cannot connect: {exc}") from None
     if status != 200:
-        raise ClientError(f"{url}: /sessions answered {status}" + (" (wrong or missing token)" if status == 401 else ""))
+        hint = " (wrong or missing token)" if status == 401 else ""
+        raise ClientError(f"{url}: /sessions answered {status}{hint}")
     return [s["name"] for s in json.loads(body).get("sessions", [])]
 
 
