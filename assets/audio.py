@@ -52,7 +52,9 @@ def write_wav(path: str | Path, samples: np.ndarray, rate_hz: int) -> Path:
     return atomic_write_bytes(Path(path), wav_bytes(samples, rate_hz))
 
 
-def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True) -> tuple[np.ndarray, int]:
+def read_wav(
+    path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True
+) -> tuple[np.ndarray, int]:
     """Read a PCM WAV (8/16/24/32-bit, any channel count -> mono mean).
 
     Returns (samples (n,) float32 in [-1, 1], sample_rate_hz). Raises NotAudioError,

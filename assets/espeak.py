@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from realtime_core.phones import PhonemeSegment
 from assets.errors import SynthesisError
 from realtime_core.errors import ConfigError
+from realtime_core.phones import PhonemeSegment
 
 LIBRARY = "libespeak-ng.so.1"
 
@@ -215,7 +215,7 @@ class EspeakSynthesizer:
         self._callback = _CALLBACK(self._on_synth)
         lib.espeak_SetSynthCallback(self._callback)
 
-    def _on_synth(self, wav, n_samples, events) -> int:  # noqa: ANN001 - ctypes types
+    def _on_synth(self, wav, n_samples, events) -> int:
         if n_samples > 0 and wav:
             self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
         i = 0

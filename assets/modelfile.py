@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from assets.errors import FileProblem
+from assets.files import atomic_write_bytes
 from realtime_core.avmodel import AvModel, decode_model, encode_model
 from realtime_core.errors import ConfigError, ModelFormatError
 from realtime_core.mapping import MAPPER_KINDS, MlpSpeechModel, SpeechModel, decode_mlp_model, encode_mlp_model
-from assets.files import atomic_write_bytes
-from assets.errors import FileProblem
 
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "default_model.npz"
 """The model every command uses when none is given (trained by ``scripts/train_default_model.sh``)."""

@@ -22,13 +22,14 @@ small-matrix work many times slower under load, and the server runs that way too
 
 from __future__ import annotations
 
+import itertools
 import json
 import platform
 import sys
 import time
 import warnings
 from dataclasses import dataclass
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -80,7 +81,7 @@ def _audio(rate: int, seconds: float, rng: np.random.Generator) -> np.ndarray:
 def _hop_blocks(x: np.ndarray, cfg: MfccConfig) -> list[np.ndarray]:
     n = cfg.n_frames_for(x.size)
     starts = [cfg.frame_start(k) for k in range(n + 1)]
-    return [x[a:b] for a, b in zip(starts, starts[1:])]
+    return [x[a:b] for a, b in itertools.pairwise(starts)]
 
 
 def bench_features(n_frames: int, rng: np.random.Generator) -> dict:
@@ -120,7 +121,7 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
     pipe = SpeechToParams(model)
     x = _audio(16000, n_frames / 30 + 0.5, rng)
     ns = _per_call(pipe.push, _hop_blocks(x, fe.mfcc))
-    out = {"N=28,M=5,float32": _stats(ns[10:])}
+    out: dict[str, Any] = {"N=28,M=5,float32": _stats(ns[10:])}
     # The shipped default model, what `facecast serve` runs by default.
     from assets.modelfile import DEFAULT_MODEL, load_model
 
@@ -179,7 +180,7 @@ def bench_batch_hmmi(rng: np.random.Generator, T: int) -> dict:
     form = ConditionalForm.from_model(hmm)
     data = sample(hmm, rng, T)[0]
     oa, truth = data[:, :DA], data[:, DA:]
-    out = {}
+    out: dict[str, Any] = {}
     for init in ("audio-posterior", "random"):
         t0 = time.perf_counter_ns()
         res = hmm_inversion(form, oa, config=HmmiConfig(init=init, max_iter=50, tol=1e-4))

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
 DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
@@ -74,14 +75,9 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
 
         async def one(j: int, c: IngestClient) -> None:
             offset = j * BLOCK_S / max(n, 1)  # stagger sessions across a block
-            for b in range(n_blocks):
-                i = b * step
-                block = pcm[i:i + step]
-                delay = t0 + offset + (i + len(block)) / RATE - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
+            async for i, block in paced_blocks(pcm, RATE, block_s=BLOCK_S, start=t0, offset_s=offset):
                 await c.send(block)
-                sent[j, b] = time.time()
+                sent[j, i // step] = time.time()
             await c.end()
 
         await asyncio.gather(*(one(j, c) for j, c in enumerate(clients)))
@@ -182,8 +178,9 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         timings = json.loads(r.read())["timings_ms"]
     return {
         "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
-        "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
-                              if k in timings},
+        "server_timings_ms": {
+            k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
+        },
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -194,9 +191,16 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         "pass_every_viewer": bool(worst_p99 < LIMIT_MS and lost == 0),
         "pass": bool(agg_p99 < LIMIT_MS and lost == 0),
         "by_kind": summary,
-        "by_node": {f"node{k}": {"viewers": len(v), "delivery_p50_ms": round(float(np.median(np.concatenate(v))) * 1e3, 3),
-                                 "delivery_p99_ms": round(float(np.percentile(np.concatenate(v), 99)) * 1e3, 3)}
-                    for k, v in sorted(by_node.items())} if len(view_urls) > 1 else None,
+        "by_node": {
+            f"node{k}": {
+                "viewers": len(v),
+                "delivery_p50_ms": round(float(np.median(np.concatenate(v))) * 1e3, 3),
+                "delivery_p99_ms": round(float(np.percentile(np.concatenate(v), 99)) * 1e3, 3),
+            }
+            for k, v in sorted(by_node.items())
+        }
+        if len(view_urls) > 1
+        else None,
     }
 
 
@@ -300,19 +304,25 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "benchmark": "server_capacity",
         "model": model_desc,
         "criterion": f"p99 delivery (last needed sample -> receipt) over all viewers' frames < {LIMIT_MS} ms and no "
-                     "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
-                     "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
+        "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
+        "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
         "goal": {"sessions": 100, "param_viewers": 500, "vertex_viewers": 100},
         "sustained": None if best is None else {k: best[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
-        "sustained_every_viewer": None if best_strict is None else {
-            k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
+        "sustained_every_viewer": None
+        if best_strict is None
+        else {k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
         "server_workers": cfg.workers,
         "cost_model": cost,
-        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
-                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+            "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()],
+        },
         "steps": steps,
-        "note": "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)",
+        "note": (
+            "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)"
+        ),
     }
 
 
@@ -320,7 +330,9 @@ def main(argv: list[str] | None = None) -> int:
     """Print the JSON result (one progress line per step first). Always 0: figures, not a test."""
     ap = argparse.ArgumentParser(prog="server_capacity", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=6.0, help="audio per step (real time)")
-    ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
+    ap.add_argument(
+        "--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'"
+    )
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
@@ -328,9 +340,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cluster", action="store_true",
                     help="two nodes + redis-server: viewers split near/far, report the far node's excess p99")
     args = ap.parse_args(argv)
-    steps = DEFAULT_STEPS
+    steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     if args.steps:
-        steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
+        steps = tuple((int(a), int(b), int(c)) for a, b, c in (s.split(",") for s in args.steps.split(";")))
     if args.cluster:
         result = run_cluster_benchmark(CapacityConfig(steps=steps if args.steps else ((5, 20, 0), (10, 40, 0)),
                                                       seconds=args.seconds, model=args.model, head=not args.no_head))

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 from server.timing import summarise
 
@@ -55,7 +56,6 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
 
     pcm = speech_signal(cfg.seconds)
     rate = 16000
-    step = int(round(cfg.block_s * rate))
     logs = {"params": FrameLog()}
     if cfg.head:
         logs["deltas"] = FrameLog()
@@ -66,12 +66,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         loop = asyncio.get_running_loop()
         t0 = loop.time()
         wall0 = time.time() - (loop.time() - t0)
-        for i in range(0, len(pcm), step):
-            block = pcm[i:i + step]
-            due = t0 + (i + len(block)) / rate
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+        async for i, block in paced_blocks(pcm, rate, block_s=cfg.block_s, start=t0):
             await ing.send(block)
             sent_at[i:i + len(block)] = time.time()
         await ing.end()
@@ -92,7 +87,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         e2e = rec[live] - sent_at[need[live] - 1]
         from_frame_time = rec[live] - (wall0 + idx[live] / fps)
         out[kind] = {
-            "frames": int(len(idx)),
+            "frames": len(idx),
             "end_to_end_after_last_needed_sample_ms": summarise(e2e),
             "delivery_after_server_send_ms": summarise(rec - np.array(log.sent)),
             "frame_time_to_receipt_ms": summarise(from_frame_time),

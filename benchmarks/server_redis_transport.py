@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import shutil
@@ -103,10 +104,8 @@ async def _run(url: str, transport: str, sessions: int, seconds: float, payload:
             else:
                 pipe.xadd(n, {"m": msg}, maxlen=1000, approximate=True)
         await pipe.execute()
-    try:
+    with contextlib.suppress(TimeoutError):
         await asyncio.wait_for(done.wait(), 5)
-    except TimeoutError:
-        pass
     stop = True
     await asyncio.wait_for(consumer, 5)
     if transport == "pubsub":

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 from server.timing import summarise
 
@@ -42,10 +43,11 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
-async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 - mp.Value
+async def _hostile(url: str, seconds: float, counter) -> None:
     """Hostile traffic for ``seconds``: a fast ingest plus a stream of malformed messages."""
     from websockets.asyncio.client import connect
     from websockets.exceptions import InvalidStatus, WebSocketException
+    from websockets.typing import Origin
 
     from clients.client import ws_url
 
@@ -66,9 +68,14 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
             except (OSError, WebSocketException):
                 await asyncio.sleep(0.1)
 
-    bad_first = [b"\x00\xff" * 10, "{garbage", "[" * 5000 + "]" * 5000, json.dumps({"type": "start"}),
-                 json.dumps({"type": "start", "session": "x" * 100, "sample_rate": RATE}),
-                 json.dumps({"type": "start", "session": "h", "sample_rate": 10**9})]
+    bad_first: list[str | bytes] = [
+        b"\x00\xff" * 10,
+        "{garbage",
+        "[" * 5000 + "]" * 5000,
+        json.dumps({"type": "start"}),
+        json.dumps({"type": "start", "session": "x" * 100, "sample_rate": RATE}),
+        json.dumps({"type": "start", "session": "h", "sample_rate": 10**9}),
+    ]
 
     async def spam() -> None:
         i = 0
@@ -87,7 +94,7 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
                         await asyncio.wait_for(ws.wait_closed(), 5)
                 elif i % 10 == 5:
                     async with connect(ws_url(url, "/view?session=none&kind=smell"), compression=None,
-                                       origin="http://evil.example"):
+                                       origin=Origin("http://evil.example")):
                         pass
                 else:
                     async with connect(ws_url(url, "/ingest"), compression=None) as ws:
@@ -102,7 +109,7 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
     await asyncio.gather(flood_ingest(), spam())
 
 
-def _hostile_proc(url: str, seconds: float, counter) -> None:  # noqa: ANN001 - mp.Value
+def _hostile_proc(url: str, seconds: float, counter) -> None:
     asyncio.run(_hostile(url, seconds, counter))
 
 
@@ -129,12 +136,9 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             loop = asyncio.get_running_loop()
             t0 = loop.time() + s * 0.02 / max(1, sessions)  # staggered across a block
             n_blocks = int(seconds * RATE / BLOCK)
-            for b in range(n_blocks):
-                delay = t0 + (b + 1) * BLOCK / RATE - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-                i = (b * BLOCK) % (len(speech) - BLOCK)
-                await ing.send(speech[i:i + BLOCK])
+            looped = np.concatenate([speech[(b * BLOCK) % (len(speech) - BLOCK):][:BLOCK] for b in range(n_blocks)])
+            async for _, block in paced_blocks(looped, RATE, block_s=BLOCK / RATE, start=t0):
+                await ing.send(block)
                 block_sent[s].append(time.time())
             ended = await ing.end()
             await asyncio.gather(*tasks)
@@ -150,7 +154,9 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
         await asyncio.sleep(max(0.0, half - time.monotonic()))
         phase_metrics["quiet"] = json.loads((await http_get(url, "/metrics"))[1])
         if hostile:
-            hostile_proc = mp.get_context("spawn").Process(target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count))
+            hostile_proc = mp.get_context("spawn").Process(
+                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count)
+            )
             hostile_proc.start()
 
     sampler = asyncio.ensure_future(sample_rss())
@@ -160,19 +166,21 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
     await phase_task
     if hostile_proc is not None:
         hostile_proc.join(30)
-    status, body = await http_get(url, "/health")
+    status, _body = await http_get(url, "/health")
     final = json.loads((await http_get(url, "/metrics"))[1])
     rss.append((time.monotonic() - t_start, _rss_mb(server.proc.pid)))
 
     # End-to-end latency per frame, split at the half-way time (wall clock of the block send).
     half_wall = time.time() - (time.monotonic() - half)
-    e2e = {"quiet": [], "hostile" if hostile else "second_half": []}
+    e2e: dict[str, list[float]] = {"quiet": [], "hostile" if hostile else "second_half": []}
     lost = 0
     for s in range(sessions):
         sent = np.array(block_sent[s])
         for log in logs[s]:
             idx = np.array(log.index)
-            lost += int(ended[s]["frames"] - len(idx)) + int(np.sum(np.diff(idx) != 1)) if len(idx) else ended[s]["frames"]
+            lost += (
+                int(ended[s]["frames"] - len(idx)) + int(np.sum(np.diff(idx) != 1)) if len(idx) else ended[s]["frames"]
+            )
             need = np.array([mf.frame_start(int(k) + d) + mf.window_len for k in idx])
             live = (need - 1) // BLOCK < len(sent)
             t_need = sent[(need[live] - 1) // BLOCK]

@@ -162,10 +162,12 @@ def bench_say(stored, repeats: int = 3, samples: int = 4) -> None:
             parts.append((t1 - t0, t2 - t1, t3 - t2, len(res.frames)))
     i = int(np.argsort(totals)[len(totals) // 2])
     sp, us, rv, nf = parts[i]
-    print(f"say, 10 words ({nf} frames, 640x480, MSAA {samples}) command to MP4 after start-up (goal < 2 s): median "
-          f"{np.median(totals):.2f} s = speech {1000 * sp:.0f} ms + units {1000 * us:.0f} ms + render/encode "
-          f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame); CPU time (this process + ffmpeg, what an idle "
-          f"machine would take) {np.median(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(
+        f"say, 10 words ({nf} frames, 640x480, MSAA {samples}) command to MP4 after start-up (goal < 2 s): median "
+        f"{np.median(totals):.2f} s = speech {1000 * sp:.0f} ms + units {1000 * us:.0f} ms + render/encode "
+        f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame); CPU time (this process + ffmpeg, what an idle "
+        f"machine would take) {np.median(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    )
 
 
 def bench_server(corpus_path, repeats: int = 5) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+from assets.pacing import paced_blocks
 from clients.errors import ClientError
 from wire import protocol as P
 
@@ -54,6 +55,13 @@ def _closed(exc: ConnectionClosed) -> ServerClosed:
     return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
 
 
+def _open(ws: ClientConnection | None) -> ClientConnection:
+    """The connection of a client used inside ``async with`` (a clear error otherwise)."""
+    if ws is None:
+        raise ClientError("the client is not connected: use it as `async with ...`")
+    return ws
+
+
 class IngestClient:
     """One ingest connection: start message on enter, binary audio, controls, end.
 
@@ -79,7 +87,7 @@ class IngestClient:
         self.ws: ClientConnection | None = None
         self.started: dict = {}
 
-    async def __aenter__(self) -> "IngestClient":
+    async def __aenter__(self) -> IngestClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
         start = {"type": "start", "session": self.session, "sample_rate": self.sample_rate_hz,
                  "channels": self.channels, "format": self.sample_format}
@@ -97,7 +105,7 @@ class IngestClient:
 
     async def _reply(self, *types: str) -> dict:
         try:
-            msg = await self.ws.recv()
+            msg = await _open(self.ws).recv()
         except ConnectionClosed as exc:
             raise _closed(exc) from None
         obj = json.loads(msg)
@@ -119,18 +127,18 @@ class IngestClient:
         """Send one block (array or raw bytes already in the session's format)."""
         data = samples if isinstance(samples, (bytes, bytearray)) else self.encode(samples)
         try:
-            await self.ws.send(data)
+            await _open(self.ws).send(data)
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
     async def control(self, **controls: object) -> dict:
         """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
-        await self.ws.send(json.dumps({"type": "control", **controls}))
+        await _open(self.ws).send(json.dumps({"type": "control", **controls}))
         return await self._reply("ack", "rejected")
 
     async def end(self) -> dict:
         """End the session: the server flushes the last frames and replies ``ended``."""
-        await self.ws.send(json.dumps({"type": "end"}))
+        await _open(self.ws).send(json.dumps({"type": "end"}))
         return await self._reply("ended")
 
 
@@ -149,18 +157,8 @@ async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bo
     blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
     x = np.asarray(samples if int16 is None else int16)
-    rate = ing.sample_rate_hz
-    step = max(1, int(round(block_s * rate)))
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
     log: list[SentBlock] = []
-    for i in range(0, len(x), step):
-        block = x[i:i + step]
-        if realtime:
-            due = t0 + (i + len(block)) / rate
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+    async for i, block in paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime):
         await ing.send(block)
         log.append(SentBlock(i, len(block), time.time()))
     return log
@@ -229,7 +227,7 @@ class ViewerClient:
         self.close_code: int | None = None
         self.close_reason = ""
 
-    async def __aenter__(self) -> "ViewerClient":
+    async def __aenter__(self) -> ViewerClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
         try:
             self.description = json.loads(await self.ws.recv())
@@ -244,7 +242,7 @@ class ViewerClient:
     async def __aiter__(self):
         while True:
             try:
-                data = await self.ws.recv()
+                data = await _open(self.ws).recv()
             except ConnectionClosed as exc:
                 self.close_code = exc.rcvd.code if exc.rcvd else None
                 self.close_reason = exc.rcvd.reason if exc.rcvd else ""

@@ -9,6 +9,7 @@ over loopback like any other client, prints the URLs to open, then renders what 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
 import tempfile
 from dataclasses import dataclass
@@ -68,8 +69,8 @@ class DemoResult:
 
 def synthesise(sentences: tuple[str, ...], voice: str, *, pause_s: float = 0.5) -> tuple[np.ndarray, int]:
     """espeak-ng speech of the sentences with pauses: ((n,) float32 in [-1, 1], rate Hz)."""
-    from training.errors import TrainingError
     from assets.espeak import LANGUAGES, Voice, synthesizer
+    from training.errors import TrainingError
 
     lang = next((k for k, v in LANGUAGES.items() if voice in v), None)
     if lang is None:
@@ -107,6 +108,7 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
     await server.start()
     loop = asyncio.get_running_loop()
     mic: MicSource | None = None
+    source: MicSource | FileSource
     speech: np.ndarray | None = None
     try:
         if config.mic:
@@ -185,7 +187,9 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
     try:
         while not stop.is_set():
             source = FileSource.from_array(speech, rate_hz, realtime=True)
-            session = asyncio.ensure_future(server.run_source("demo", source, sample_rate_hz=rate_hz, label="demo"))
+            session = asyncio.ensure_future(
+                server.run_source("demo", aiter(source), sample_rate_hz=rate_hz, label="demo")
+            )
             stopper = asyncio.ensure_future(stop.wait())
             await asyncio.wait({session, stopper}, return_when=asyncio.FIRST_COMPLETED)
             if stop.is_set():
@@ -195,10 +199,8 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
             await session
             stopper.cancel()
             passes += 1
-            try:
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(stop.wait(), timeout=pause_s)
-            except TimeoutError:
-                pass
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
@@ -210,10 +212,10 @@ def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rat
               width: int = 640, height: int = 480) -> Path:
     """Render params (n, 4) (IOD) on the head's rig with the offline renderer and mux audio (m,)
     float32 at audio_rate_hz into an H.264/AAC MP4 (``clients.render.video.write_video``, atomic)."""
+    from assets.audio import write_wav
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, write_video
-    from assets.audio import write_wav
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,7 @@ import json
 import zipfile
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class AvModel:
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     likelihood_scale: float = 1.0
     closure_band: float = 0.0
-    metadata: dict = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.hmm.n_audio != self.frontend.audio_dim:
@@ -95,7 +96,7 @@ class AvModel:
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
     @cached_property
-    def _plans(self) -> dict:
+    def _plans(self) -> dict[tuple[str, float | None], StreamPlan]:
         """Shared streaming plans by (dtype, likelihood scale): every session of this model
         reads the same matrices."""
         return {}
@@ -126,13 +127,13 @@ class AvModel:
 
 
 
-def frontend_to_json(fe: FrontEndConfig) -> dict:
+def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
     return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
             "silence_floor_db": fe.silence_floor_db}
 
 
-def frontend_from_json(d: dict) -> FrontEndConfig:
+def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
     return FrontEndConfig(
         mfcc=MfccConfig(**d["mfcc"]),
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
@@ -166,7 +167,7 @@ def encode_model(model: AvModel) -> bytes:
     for name in _FORM_ARRAYS:
         arrays[name] = getattr(model.form, name)
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
     return buf.getvalue()
 
 

@@ -18,7 +18,9 @@ def _pair(true: np.ndarray, est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if t.ndim == 1:
         t, e = t[:, None], e.reshape(-1, 1)
     if t.shape != e.shape or t.ndim != 2 or t.shape[0] < 2:
-        raise InvalidFeaturesError(f"true and estimated tracks must be equal (T >= 2, R) shapes, got {t.shape}, {e.shape}")
+        raise InvalidFeaturesError(
+            f"true and estimated tracks must be equal (T >= 2, R) shapes, got {t.shape}, {e.shape}"
+        )
     return t, e
 
 

@@ -14,7 +14,7 @@ equal what a live session produces frame for frame; ``mode="batch"`` uses batch 
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -24,7 +24,6 @@ from realtime_core.features.mfcc import as_float_samples
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
 from realtime_core.mapping import SpeechModel
-
 
 StageObserver = Callable[[str], None]
 """Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage

@@ -124,7 +124,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
     ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
-    ap.add_argument("--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data")))
+    ap.add_argument(
+        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+    )
     args = ap.parse_args()
     from PIL import Image, ImageDraw
     from tqdm import tqdm
@@ -146,9 +148,12 @@ def main() -> int:
             continue
         try:
             rep = head_checks(head, landmark_finder=find_landmarks)
-            figs = (f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
-                    f"{rep.closure_gap_iod:.4f} | {'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
-                    f"{'pass' if rep.passed else 'FAIL'}")
+            figs = (
+                f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
+                f"{rep.closure_gap_iod:.4f} | "
+                f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
+                f"{'pass' if rep.passed else 'FAIL'}"
+            )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
             figs = f"- | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"

@@ -33,9 +33,9 @@ import signal
 import socket
 import time
 import urllib.parse
+from collections.abc import AsyncIterator
 from http import HTTPStatus
 from pathlib import Path
-from typing import AsyncIterator
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve

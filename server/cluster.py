@@ -45,7 +45,8 @@ import collections
 import json
 import logging
 import time
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from server.errors import ServerError
 from wire import protocol as P

@@ -16,10 +16,11 @@ from __future__ import annotations
 import errno
 import html
 import mimetypes
+from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from assets.heads.glb import mesh_glb, mesh_json, texture_mime
 from wire import JS_PROTOCOL

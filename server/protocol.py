@@ -39,8 +39,8 @@ import enum
 import hmac
 import json
 import urllib.parse
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable, Mapping
 
 from server.errors import ProtocolViolation, ServerConfigError
 from server.session import SessionConfig

@@ -69,7 +69,7 @@ class SessionConfig:
             raise ServerConfigError(f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}")
         if isinstance(self.channels, bool) or not isinstance(self.channels, int) or not 1 <= self.channels <= MAX_CHANNELS:
             raise ServerConfigError(f"channels must be an integer in 1..{MAX_CHANNELS}, got {self.channels!r}")
-        if self.sample_format not in P.SAMPLE_FORMATS:
+        if not isinstance(self.sample_format, str) or self.sample_format not in P.SAMPLE_FORMATS:
             raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {self.lag!r}")

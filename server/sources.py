@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from server.errors import AudioSourceError, ServerConfigError
 
 
@@ -173,16 +174,6 @@ class FileSource:
         return len(self.samples) / self.sample_rate_hz
 
     async def __aiter__(self):
-        loop = asyncio.get_running_loop()
-        step = max(1, int(round(self.config.block_s * self.sample_rate_hz)))
-        t0 = loop.time()
-        for i in range(0, len(self.samples), step):
-            block = self.samples[i:i + step]
-            if self.config.realtime:
-                due = t0 + (i + len(block)) / self.sample_rate_hz
-                delay = due - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-            else:
-                await asyncio.sleep(0)  # let the loop serve others between blocks
+        async for _, block in paced_blocks(self.samples, self.sample_rate_hz, block_s=self.config.block_s,
+                                           realtime=self.config.realtime):
             yield block[:, None]

@@ -24,8 +24,9 @@ Theory of operation
    the original exponential).
 3. **Hard constraints.** (a) Bilabial stops and nasals (/p b m/) close the lips: mouth_open is
    multiplied by a gate that is exactly 0 over the closure core (the central 60 % of the
-   segment, widened to at least one frame period so a frame always falls inside) and rises back to 1 with a raised-cosine ramp of
-   ``closure_ramp_s``; so the closure frame reads exactly 0. (b) Silence is the neutral pose:
+   segment, widened to at least one frame period so a frame always falls inside) and rises back
+   to 1 with a raised-cosine ramp of ``closure_ramp_s``; so the closure frame reads exactly 0.
+   (b) Silence is the neutral pose:
    all four parameters are multiplied by an envelope that is exactly 0 inside pauses (farther
    than ``silence_ramp_s`` from speech) and before/after the utterance, with raised-cosine
    ramps. (c) mouth_open is never negative.
@@ -46,8 +47,8 @@ clip is thin evidence: tune further as more aligned video arrives.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -85,7 +86,11 @@ class ArticulatoryClass:
 
 
 def _cls(target, alpha=(1.0, 1.0, 1.0, 1.0), theta=(14.0, 14.0), **kw) -> ArticulatoryClass:
-    return ArticulatoryClass(tuple(map(float, target)), tuple(map(float, alpha)), float(theta[0]), float(theta[1]), **kw)
+    t, a = (float(v) for v in target), (float(v) for v in alpha)
+    return ArticulatoryClass(
+        (next(t), next(t), next(t), next(t)), (next(a), next(a), next(a), next(a)), float(theta[0]), float(theta[1]),
+        **kw,
+    )
 
 
 # Targets: (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD units.
@@ -383,7 +388,10 @@ def render_params(
     for a, b in spans[1:]:
         if a - cursor > 2 * config.silence_ramp_s:
             env = np.minimum(
-                env, _raised_cosine_gate(t, cursor + config.silence_ramp_s, a - config.silence_ramp_s, config.silence_ramp_s)
+                env,
+                _raised_cosine_gate(
+                    t, cursor + config.silence_ramp_s, a - config.silence_ramp_s, config.silence_ramp_s
+                ),
             )
         cursor = max(cursor, b)
     out *= env[:, None]

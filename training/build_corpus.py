@@ -10,28 +10,29 @@ seeds ``rand()`` per utterance. The same :class:`BuildConfig` thus writes byte-i
 files, also when built twice in one process.
 
 Real speech (``real_dirs``): every (WAV, phone alignment) pair found under each folder (and,
-with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules and written with ``source = "real"`` and ``speaker_group`` =
-``real:<folder name>``; it is never augmented, so evaluation can use it as it was recorded.
+with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules
+and written with ``source = "real"`` and ``speaker_group`` = ``real:<folder name>``; it is never
+augmented, so evaluation can use it as it was recorded.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable, Iterable
 
 import numpy as np
 
+from assets.audio import read_wav
+from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.alignments import find_aligned_audio
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
-from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import AlignmentFormatError, ConfigError
-from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"
@@ -208,7 +209,9 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
     for j, (root, wav, al) in enumerate(wrap(real, total=len(real), desc="real speech", unit="utt")):
         samples, rate = read_wav(wav)
         group = wav.relative_to(root).parts[0] if len(wav.relative_to(root).parts) > 1 else root.name
-        params = render_params(al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory)
+        params = render_params(
+            al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory
+        )
         entries.append(write_utterance(
             out, utt_id=f"real-{j:04d}-{wav.stem}", samples=samples, sample_rate_hz=rate, params=params,
             phonemes=al.phones, language="en", voice=f"real:{group}", source="real",

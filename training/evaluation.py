@@ -22,20 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.features import loudness_db
 from realtime_core.mapping import SpeechModel
-from realtime_core.features import MfccConfig, frame_log_energy_db
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
-
-
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    """Per-frame RMS level (dB) on the 30 fps grid, ``(n_frames,)`` (padded/truncated)."""
-    lv = frame_log_energy_db(samples, MfccConfig(sample_rate_hz=int(rate_hz)))
-    out = np.full(n_frames, lv.min() if len(lv) else -120.0)
-    out[: min(n_frames, len(lv))] = lv[:n_frames]
-    return out
 
 
 def pearson(a: np.ndarray, b: np.ndarray) -> float:
@@ -107,15 +99,23 @@ def score_set(model: SpeechModel, kind: str, items: Sequence[tuple[str, np.ndarr
         ests.append(est)
         louds.append(loud)
     t, e, lv = np.concatenate(truths), np.concatenate(ests), np.concatenate(louds)
-    return SetScore(kind=kind, eps=amse(t, e), rho=acc(t, e), r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
-                    r_loudness=pearson(t[:, MOUTH_OPEN], lv), clips=clips)
+    return SetScore(
+        kind=kind,
+        eps=amse(t, e),
+        rho=acc(t, e),
+        r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
+        r_loudness=pearson(t[:, MOUTH_OPEN], lv),
+        clips=clips,
+    )
 
 
-def real_speech_items(root: str | Path, *, lead_s: float | None = None) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
+def real_speech_items(
+    root: str | Path, *, lead_s: float | None = None
+) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
     """Real recordings with phone alignments under ``root``, truth from the articulatory rules."""
+    from assets.audio import read_audio
     from training.alignments import find_aligned_audio
     from training.articulatory import ArticulatoryConfig, render_params
-    from assets.audio import read_audio
     from training.params import n_frames_for
 
     cfg = ArticulatoryConfig() if lead_s is None else ArticulatoryConfig(lead_s=lead_s)

@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.audio import read_wav
+from realtime_core.phones import PhonemeSegment
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
-from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
-from realtime_core.phones import PhonemeSegment
 from training.params import n_frames_for
 
 VOICES: tuple[str, ...] = ("kal_diphone", "ked_diphone", "cmu_us_slt_arctic_hts")
@@ -93,7 +93,9 @@ def synthesize_batch(texts: Sequence[str], voice: FestivalVoice) -> list[tuple[n
         for i in range(len(texts)):
             wav, segs = d / f"{i}.wav", d / f"{i}.segs"
             if not wav.is_file() or not segs.is_file():
-                raise SynthesisError(f"festival produced no audio for voice {voice.name} ({proc.stderr.strip()[-300:]})")
+                raise SynthesisError(
+                    f"festival produced no audio for voice {voice.name} ({proc.stderr.strip()[-300:]})"
+                )
             samples, rate = read_wav(wav)
             out.append((samples, rate, read_segs(segs)))
         return out

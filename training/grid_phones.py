@@ -137,7 +137,9 @@ class SentenceAligner:
         try:
             from pocketsphinx import Decoder  # lazy: optional extra "align"
         except ImportError as exc:
-            raise MissingDependencyError("GRID phone alignment needs pocketsphinx: pip install 'facecast[align]'") from exc
+            raise MissingDependencyError(
+                "GRID phone alignment needs pocketsphinx: pip install 'facecast[align]'"
+            ) from exc
         self._decoder = Decoder(samprate=ALIGN_RATE_HZ, bestpath=False, loglevel="FATAL")
         # Private dictionary entries so the aligner uses exactly PRONUNCIATIONS (no alternates).
         last = len(PRONUNCIATIONS) - 1
@@ -383,7 +385,9 @@ class PhoneCheck:
     durations: tuple[tuple[str, float], ...]
 
 
-def check_sentence(phones: tuple[Phone, ...], words: list[tuple[float, float, str]], *, tol_s: float = 1e-3) -> PhoneCheck:
+def check_sentence(
+    phones: tuple[Phone, ...], words: list[tuple[float, float, str]], *, tol_s: float = 1e-3
+) -> PhoneCheck:
     """Phones tile every word span exactly (within ``tol_s``), in the word's pronunciation order
     (so /P B M/ are where the words have them; SIL allowed at a word's edges), and no phone is
     shorter than 5 ms."""
@@ -427,7 +431,10 @@ def save_phone_plot(samples: np.ndarray, rate_hz: int, words: list[tuple[float, 
     ax.plot(t, samples, lw=0.4, color="k")
     ax.set_ylabel("waveform")
     ax.set_title(title)
-    for axis, items in ((axw, [(a, b, w) for a, b, w in words]), (axp, [(p.start_s, p.end_s, p.phoneme) for p in phones])):
+    for axis, items in (
+        (axw, [(a, b, w) for a, b, w in words]),
+        (axp, [(p.start_s, p.end_s, p.phoneme) for p in phones]),
+    ):
         for a, b, label in items:
             bil = label in BILABIALS
             axis.axvspan(a, b, color="tab:red" if bil else ("0.92" if label in (SILENCE, "sil", "sp") else "0.8"),

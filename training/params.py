@@ -54,7 +54,6 @@ utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
 
 from __future__ import annotations
 
-
 import math
 
 import numpy as np

@@ -21,14 +21,16 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from assets.grid import Split, read_words, sentences
 from realtime_core import VISUAL_PARAMS
+from realtime_core.features import loudness_db
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
-from assets.grid import Split, read_words, sentences
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
@@ -109,7 +111,11 @@ def microphone_copy(utt: Utterance, rng: np.random.Generator, config: AugmentCon
     """``utt`` through :func:`training.augment.augment` (noise, reverberation, level, rate)."""
     aug = augment(utt.samples, utt.sample_rate_hz, rng, config)
     n = n_frames_for(len(aug.samples) / aug.sample_rate_hz)
-    params = utt.params[:n] if len(utt.params) >= n else np.vstack([utt.params, np.repeat(utt.params[-1:], n - len(utt.params), 0)])
+    params = (
+        utt.params[:n]
+        if len(utt.params) >= n
+        else np.vstack([utt.params, np.repeat(utt.params[-1:], n - len(utt.params), 0)])
+    )
     return Utterance(id=f"{utt.id}-mic", samples=aug.samples, sample_rate_hz=aug.sample_rate_hz, params=params,
                      phonemes=(), voice=utt.voice, language=utt.language, source=utt.source,
                      speaker_group=utt.speaker_group)
@@ -150,12 +156,6 @@ def add_variety(utts: Sequence[Utterance], variety: Variety) -> list[Utterance]:
 
 
 # --------------------------------------------------------------------------- scores
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    from training.evaluation import loudness_db as _loud
-
-    return _loud(samples, rate_hz, n_frames)
-
-
 def _lagged_r(truth: np.ndarray, est: np.ndarray, lag: int) -> float:
     a, b = (truth[: len(truth) - lag], est[lag:]) if lag >= 0 else (truth[-lag:], est[: len(est) + lag])
     if len(a) < 3 or a.std() == 0 or b.std() == 0:
@@ -227,7 +227,7 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
             a = np.concatenate([x[: len(x) - L, j] if L >= 0 else x[-L:, j] for x in truths])
             b = np.concatenate([y[L:, j] if L >= 0 else y[: len(y) + L, j] for y in ests])
             by_lag[L] = float(np.corrcoef(a, b)[0, 1]) if a.std() > 0 and b.std() > 0 else 0.0
-        lag[name] = max(by_lag, key=by_lag.get)
+        lag[name] = max(by_lag, key=by_lag.__getitem__)
         rb[name] = by_lag[lag[name]]
         nu[name] = float(es[:, j].std() / tr[:, j].std()) if tr[:, j].std() > 0 else float("nan")
     return LipScores(r=r, best_lag=lag, r_best=rb, nu=nu, closure_rate=hits / n if n else float("nan"),
@@ -296,7 +296,7 @@ def phone_bilabial_spans(phones: Sequence) -> list[tuple[float, float, str]]:
     return [(p.start_s, p.end_s, p.phoneme) for p in phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
 
 
-def evaluate_lips(model, clips: Sequence[tuple[str, object, list]]) -> tuple[LipScores, list]:
+def evaluate_lips(model, clips: Sequence[tuple[str, Any, list]]) -> tuple[LipScores, list]:
     """Score ``model``'s live path on ``[(name, FaceTrack, bilabial spans)]``; returns the scores and the items."""
     items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips])
     return score_lips(items), items

@@ -21,10 +21,10 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.features import CmvnConfig, FrontEndConfig, MfccConfig, extract_features, raw_mfcc_with_level
+from realtime_core.features.resample import resample_audio
 from realtime_core.hmm import AvHmm, TrainConfig, TrainResult, baum_welch, init_model
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
-from realtime_core.features.resample import resample_audio
 from training.corpus import Utterance
 from training.errors import ConfigError
 

@@ -154,7 +154,10 @@ def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRo
             curves.update({"sentence": sid, "real": truth_m[-1]})
     rows_out = []
     for sys_, nb in zip(systems, n_best):
-        sys_.extra = {"units_per_sentence": float(np.mean(units[nb])), "synth_ms_median": float(np.median(search_ms[nb]))}
+        sys_.extra = {
+            "units_per_sentence": float(np.mean(units[nb])),
+            "synth_ms_median": float(np.median(search_ms[nb])),
+        }
         rows_out.append(sys_.finish(truth_p, truth_m, speech))
     for other in (hmm, rules):
         if other is not None:

@@ -43,7 +43,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import SILENCE_PEAK
+from assets.grid import SILENCE_WORDS, align_for_video, read_words
+from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
     ConfigError,
@@ -86,7 +88,6 @@ from training.facetrack import (
     read_raw,
     write_raw,
 )
-from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from training.params import FPS, n_frames_for
 
 __all__ = [
@@ -316,22 +317,6 @@ def measure_raw(path: str | Path, config: ExtractConfig, tracker: FaceMeshTracke
 
 
 # --------------------------------------------------------------------------- geometry
-def similarity_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Least-squares s, R, t with ``s * src @ R.T + t ~= dst`` (Umeyama 1991).
-
-    src, dst: (k, 3) corresponding points. Returns scale s, rotation R (3, 3), translation (3,).
-    """
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
-    u, sig, vt = np.linalg.svd(b.T @ a / len(src))
-    d = np.ones(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # no reflections
-        d[-1] = -1.0
-    r = u @ np.diag(d) @ vt
-    s = float((sig * d).sum() / max((a**2).sum() / len(src), 1e-12))
-    return s, r, mu_d - s * (r @ mu_s)
-
-
 def remove_head_pose(landmarks: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, float, np.ndarray]:
     """Align every frame's face to the clip's Procrustes-mean face, in the face frame, IOD units.
 
@@ -686,7 +671,7 @@ def extract_corpus(videos: Sequence[str | Path], *, cache_dir: str | Path | None
     t0 = time.perf_counter()
     results = []
     if workers <= 1 or len(jobs) <= 1:
-        it = map(_work, jobs)
+        it: Iterator[dict] = map(_work, jobs)
         results = _collect(wrap(it, total=len(jobs), desc="extract", unit="clip"), say)
     else:
         ctx = multiprocessing.get_context("spawn")  # MediaPipe's graph threads do not survive fork

@@ -14,7 +14,7 @@ export const ENC = { FLOAT32: 1, INT16: 2, FLOAT16: 3 };
 
 // Close codes the viewer reacts to (server/protocol.py).
 export const CLOSE = { NORMAL: 1000, GOING_AWAY: 1001, TOO_SLOW: 4000, UNAUTHORIZED: 4001, NOT_FOUND: 4004,
-  BAD_REQUEST: 4400 };
+  CONFLICT: 4009, TOO_FAST: 4029, BAD_REQUEST: 4400 };
 
 function halfToFloat(h) {
   // IEEE 754 binary16 -> number (no Float16Array needed).

@@ -79,7 +79,7 @@ def read_gltf_document(path: Path) -> tuple[dict, list[bytes]]:
         doc = json.loads(data.decode("utf-8"))
         bin_chunk = b""
     buffers = []
-    for i, b in enumerate(doc.get("buffers", [])):
+    for _i, b in enumerate(doc.get("buffers", [])):
         uri = b.get("uri")
         if uri is None:
             buffers.append(bin_chunk)

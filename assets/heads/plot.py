@@ -119,7 +119,7 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
     fig, (ax, tx) = plt.subplots(1, 2, figsize=(11, 6.5), dpi=110, gridspec_kw={"width_ratios": [1.1, 1]})
     order = np.argsort(q[near, 2])
     ax.scatter(q[near, 0][order], q[near, 1][order], s=1.2, c=q[near, 2][order], cmap="Greys")
-    for i, k in enumerate(names):
+    for i, _k in enumerate(names):
         ax.scatter(p[i, 0], p[i, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
         dx = 0.08 if p[i, 0] >= 0 else -0.08
         ax.annotate(str(i), (p[i, 0], p[i, 1]), xytext=(p[i, 0] + dx, p[i, 1] + 0.05), fontsize=8, color="darkred",

@@ -123,6 +123,8 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     continue
                 return {k: p3[i].tolist() for i, k in enumerate(names)}
     except RenderError as exc:
-        raise LandmarkError(f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json") from exc
+        raise LandmarkError(
+            f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"
+        ) from exc
     raise LandmarkError(f"{mesh.name}: no face-like region found on renders of the head (stylised or not human-like?); "
                         "give --landmarks L.json (see docs/animation.md, 'Landmarks')")

@@ -14,17 +14,18 @@ import asyncio
 import json
 import time
 from dataclasses import dataclass, field
+from urllib.parse import quote
 
 import numpy as np
 
+from assets.heads.mesh import HeadMesh
 from clients.client import ServerClosed, ViewerClient, http_get
 from clients.errors import ClientError
-from assets.heads.mesh import HeadMesh
 from wire import protocol as P
 
 
 @dataclass(frozen=True, kw_only=True)
-class StreamConfig:
+class ViewerStreamConfig:
     """url: the server (http://host:port); session: its name; kind: "params", "deltas" or
     "blendshapes"; encoding: None = the kind's default; token: the shared secret, if any;
     wait_s: how long to wait for the session to appear (0 = it must exist now); max_s: stop
@@ -101,16 +102,17 @@ class Recording:
         return out
 
 
-async def fetch_head(url: str) -> HeadMesh:
+async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
     """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept)."""
-    status, body = await http_get(url, "/head/mesh.json")
+    auth = f"?token={quote(token)}" if token else ""
+    status, body = await http_get(url, "/head/mesh.json" + auth)
     if status != 200:
         raise ClientError(f"{url}: the server has no head (/head/mesh.json answered {status})")
     try:
         m = json.loads(body)
         texture = None
         if m.get("uvs") is not None:
-            t_status, t_body = await http_get(url, "/head/texture")
+            t_status, t_body = await http_get(url, "/head/texture" + auth)
             texture = t_body if t_status == 200 else None
         return HeadMesh(
             vertices=np.asarray(m["vertices"], dtype=np.float64).reshape(-1, 3),
@@ -124,11 +126,13 @@ async def fetch_head(url: str) -> HeadMesh:
         raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
 
 
-async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
+async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
     """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
-        v = ViewerClient(cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token)
+        v = ViewerClient(
+            cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token
+        )
         try:
             await v.__aenter__()
             return v
@@ -141,7 +145,7 @@ async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
         await asyncio.sleep(0.25)
 
 
-async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
+async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
     every frame as it arrives (for progress or live display)."""
     v = await connect_viewer(cfg)
@@ -165,24 +169,27 @@ async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
     return rec
 
 
-async def live_sessions(url: str) -> list[str]:
-    """Names of the server's live sessions (from ``/metrics``), oldest first."""
+async def live_sessions(url: str, token: str | None = None) -> list[str]:
+    """Names of the server's live sessions (``/sessions``: cluster-wide behind Redis; the token when
+    the server has one)."""
+    path = "/sessions" + (f"?token={quote(token)}" if token else "")
     try:
-        status, body = await http_get(url, "/metrics")
+        status, body = await http_get(url, path)
     except OSError as exc:
         raise ClientError(f"{url}: cannot connect: {exc}") from None
     if status != 200:
-        raise ClientError(f"{url}: /metrics answered {status}")
-    return [s["name"] for s in json.loads(body).get("session_list", [])]
+        hint = " (wrong or missing token)" if status == 401 else ""
+        raise ClientError(f"{url}: /sessions answered {status}{hint}")
+    return [s["name"] for s in json.loads(body).get("sessions", [])]
 
 
-async def pick_session(url: str, wanted: str | None, wait_s: float) -> str:
+async def pick_session(url: str, wanted: str | None, wait_s: float, token: str | None = None) -> str:
     """``wanted`` if given, else the first live session, waiting up to wait_s for one to start."""
     if wanted is not None:
         return wanted
     deadline = time.monotonic() + wait_s
     while True:
-        names = await live_sessions(url)
+        names = await live_sessions(url, token)
         if names:
             return names[0]
         if time.monotonic() >= deadline:

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.errors import ClientError
 from assets.heads.mesh import HeadMesh
+from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
 from clients.render.video import VideoConfig, write_video
 from clients.viewer.stream import Recording
@@ -32,8 +32,8 @@ def render_recording(rec: Recording, mesh: HeadMesh, out: str | Path, *,
                      config: RenderConfig = RenderConfig(margin=1.25)) -> tuple[Path, int]:
     """Write ``out`` (.mp4): one video frame per session frame (rec.fps), the relayed audio muxed
     in; returns (path, frames). ``rec`` must be a "deltas" recording of ``mesh``'s server."""
-    from clients.export.files import wav_bytes
     from assets.files import atomic_write_bytes
+    from clients.export.files import wav_bytes
 
     d = rec.description
     if d.get("kind") != "deltas" or not d.get("head"):

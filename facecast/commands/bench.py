@@ -5,12 +5,17 @@ from __future__ import annotations
 import argparse
 
 FORWARDED: dict[str, tuple[str, str]] = {
-    "latency": ("benchmarks.server_latency",
-                "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)"),
+    "latency": (
+        "benchmarks.server_latency",
+        "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)",
+    ),
     "capacity": ("benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
     "soak": ("benchmarks.server_soak", "RSS growth, frames lost, loop lag and latency over minutes (--hostile)"),
     "render": ("benchmarks.render", "rendering frames per second and the per-frame cost of applying a rig"),
-    "units": ("benchmarks.units", "unit search on 20-phone targets, `facecast say` to MP4, first frame of a text session"),
+    "units": (
+        "benchmarks.units",
+        "unit search on 20-phone targets, `facecast say` to MP4, first frame of a text session",
+    ),
     "adapt": ("benchmarks.adaptation", "speaker adaptation: r(mouth_open) vs MediaPipe lips before/after enrolment"),
 }
 """Benchmarks with their own argument parsers: name -> (module with main(argv), help)."""
@@ -39,7 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     core.set_defaults(run=_run_core)
     # The other benchmarks own their options (`facecast bench NAME --help` shows them): the
     # command line hands them everything after their name (see FORWARDED and facecast.cli).
-    for name, (module, text) in FORWARDED.items():
+    for name, (_module, text) in FORWARDED.items():
         which.add_parser(name, help=text, add_help=False)
 
 

@@ -62,12 +62,14 @@ def run(args: argparse.Namespace) -> int:
     if args.engine == "festival":
         return _festival(args)
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())
+    voices = VoiceSampling()
+    if args.variants is not None:
+        voices = VoiceSampling(variants=tuple(
+            None if v.strip() == "base" else v.strip() for v in args.variants.split(",") if v.strip()))
     cfg = BuildConfig(
         out_dir=Path(args.out_dir), sentences=args.sentences, languages=langs, seed=args.seed,
         augment=args.augment, real_dirs=tuple(Path(d) for d in args.real), force_align=args.align,
-        articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0),
-        **({} if args.variants is None else {"voices": VoiceSampling(variants=tuple(
-            None if v.strip() == "base" else v.strip() for v in args.variants.split(",") if v.strip()))}),
+        articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0), voices=voices,
     )
     t0 = time.perf_counter()
     rep = build_corpus(cfg, progress=tqdm)

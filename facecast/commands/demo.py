@@ -24,7 +24,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
     p.add_argument("--rig", type=Path, default=None, help="rig file (.npz); default: the built-in head")
     p.add_argument("--voice", default="en-us", help="espeak-ng voice")
-    p.add_argument("--text", action="append", default=None, help="a sentence to say instead of the built-in ones (repeatable)")
+    p.add_argument(
+        "--text", action="append", default=None, help="a sentence to say instead of the built-in ones (repeatable)"
+    )
     p.add_argument("--out", type=Path, default=Path("facecast_demo.mp4"), help="MP4 to write")
     p.add_argument("--no-video", action="store_true", help="do not render the MP4")
     p.add_argument("--once", action="store_true",
@@ -38,8 +40,8 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from assets.heads.head import resolve_head
-    from facecast.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
     from assets.modelfile import load_model
+    from facecast.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
     npm = Path(__file__).resolve().parents[2] / "node_modules"  # three.js for the browser viewer (npm ci)

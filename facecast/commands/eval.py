@@ -72,9 +72,13 @@ def run(args: argparse.Namespace) -> int:
         clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
         s, items = evaluate_lips(model, clips)
         summary["s1"] = s
-        goals = {"r(mouth_open) >= 0.92": s.r["mouth_open"] >= 0.92, "r(lip_stretch) >= 0.80": s.r["lip_stretch"] >= 0.80,
-                 "r(upper_lip_raise) >= 0.75": s.r["upper_lip_raise"] >= 0.75,
-                 "closure >= 90%": s.closure_rate >= 0.9, "nu(mouth_open) in 0.8..1.2": 0.8 <= s.nu["mouth_open"] <= 1.2}
+        goals = {
+            "r(mouth_open) >= 0.92": s.r["mouth_open"] >= 0.92,
+            "r(lip_stretch) >= 0.80": s.r["lip_stretch"] >= 0.80,
+            "r(upper_lip_raise) >= 0.75": s.r["upper_lip_raise"] >= 0.75,
+            "closure >= 90%": s.closure_rate >= 0.9,
+            "nu(mouth_open) in 0.8..1.2": 0.8 <= s.nu["mouth_open"] <= 1.2,
+        }
         lips_md.append(lips_markdown(f"1. Real lips: GRID s1 held-out sentences ({args.grid_split} split)", s,
                                      note=f"{len(clips)} sentences the model never trained on; truth = the lips "
                                      "measured by `facecast extract`.", goals=goals))
@@ -117,7 +121,9 @@ def run(args: argparse.Namespace) -> int:
             from training.evaluation import EVAL_VARIANTS
 
             syn = Path(tmp) / "heldout"
-            build_corpus(BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS)))
+            build_corpus(
+                BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS))
+            )
         items = [(u.id, u.samples, u.sample_rate_hz, u.params) for u in load_corpus(syn)]
         results.append(("4. Held-out synthetic voices (espeak variants never used in training; truth = the rules)",
                         score_set(model, "synthetic", items)))

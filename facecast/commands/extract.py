@@ -73,8 +73,10 @@ def run(args: argparse.Namespace) -> int:
         raise TrainingError(f"{first['file']}: {first['reason']}{more}")
     ok = [Path(c["file"]) for c in report.clips]
     rate = len(ok) / report.seconds if report.seconds > 0 else float("nan")
-    print(f"{doc['n_ok']} of {doc['n_videos']} clips ok ({doc['n_extracted']} measured, {doc['n_cached']} from the "
-          f"cache), {doc['n_skipped']} skipped, in {report.seconds:.1f} s ({rate:.2f} clips/s, {report.workers} workers)")
+    print(
+        f"{doc['n_ok']} of {doc['n_videos']} clips ok ({doc['n_extracted']} measured, {doc['n_cached']} from the "
+        f"cache), {doc['n_skipped']} skipped, in {report.seconds:.1f} s ({rate:.2f} clips/s, {report.workers} workers)"
+    )
     if doc["summary"]:
         print("summary:", doc["summary"])
     out = Path(args.out) if args.out else None

@@ -22,9 +22,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     ps = p.add_subparsers(dest="perceptual_command", required=True, metavar="STEP")
 
-    b = ps.add_parser("build", help="render and cache every stimulus; write the manifest", formatter_class=HelpFormatter)
-    b.add_argument("-o", "--output", default="perceptual_stimuli", help="stimulus folder (manifest.json, media/, cache/)")
-    b.add_argument("--grid", help="GRID s1 folder (video/, align/); default ../shared/data/video/grid_s1 beside the checkout")
+    b = ps.add_parser(
+        "build", help="render and cache every stimulus; write the manifest", formatter_class=HelpFormatter
+    )
+    b.add_argument(
+        "-o", "--output", default="perceptual_stimuli", help="stimulus folder (manifest.json, media/, cache/)"
+    )
+    b.add_argument(
+        "--grid", help="GRID s1 folder (video/, align/); default ../shared/data/video/grid_s1 beside the checkout"
+    )
     b.add_argument("--snr", type=float, nargs="+", default=[-5.0, -10.0, -15.0], help="SNRs (dB) of the sentence block")
     b.add_argument("--cv-snr", type=float, nargs="*", default=[-5.0, -10.0, -15.0],
                    help="SNRs (dB) of the syllable block (none: no syllable block)")
@@ -71,9 +77,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_build(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from clients.perceptual.design import SYLLABLES
-    from clients.perceptual.errors import BuildError
-    from clients.perceptual.stimuli import BuildConfig, build
+    from perceptual.design import SYLLABLES
+    from perceptual.errors import BuildError
+    from perceptual.stimuli import BuildConfig, build
 
     clips = []
     for spec in args.mos_clip:
@@ -101,7 +107,7 @@ def run_build(args: argparse.Namespace) -> int:
 def run_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from clients.perceptual.server import ServeConfig, serve
+    from perceptual.server import ServeConfig, serve
 
     serve(ServeConfig(stimuli=Path(args.stimuli), db=Path(args.db), host=args.host, port=args.port,
                       results_key=args.results_key))
@@ -111,7 +117,7 @@ def run_serve(args: argparse.Namespace) -> int:
 def run_report(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from clients.perceptual.report import write_report
+    from perceptual.report import write_report
 
     db = Path(args.db)
     out = Path(args.output) if args.output else db.with_name(db.stem + "_report")

@@ -39,19 +39,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.tracks import read_csv_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, params_for_audio, read_params_csv, resample, write_video
+    from clients.render.video import VideoConfig, params_for_audio, write_video
+    from realtime_core.track import frames_from_samples
 
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:
-        t, p = read_params_csv(args.params)
-        frames = resample(t, p, args.fps)
+        frames = read_csv_resampled(args.params, args.fps).values
     else:
-        frames, fps = params_for_audio(args.speech, args.model, mapper=args.mapper)
-        if fps != args.fps:
-            frames = resample(__import__("numpy").arange(len(frames)) / fps, frames, args.fps)
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper)
+        if track.fps != args.fps:
+            track = frames_from_samples(track.times(), track.values, args.fps)
+        frames = track.values
     from facecast.commands.speech_options import apply_expressions
 
     frames = apply_expressions(frames, args, fps=args.fps)

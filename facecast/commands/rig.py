@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="Candide-3 .wfm file to use as the simple face model (the paper's choice); default: the model "
         "derived from the built-in head",
     )
-    p.add_argument("--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)")
+    p.add_argument(
+        "--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)"
+    )
     p.add_argument("--projection", choices=("frontal", "uv"), default="frontal", help="2D projection for eq. 8-9")
     p.add_argument("--beta", type=float, default=0.5, help="gain of eq. 10 for vertices outside every triangle")
     p.add_argument(

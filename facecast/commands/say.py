@@ -74,10 +74,10 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.audio import read_audio, write_wav
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
-    from clients.export.curves import Track
     from clients.export.files import FORMATS, export_track
     from facecast.commands.headopts import resolve_from_args
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from realtime_core.track import Track
     from training.errors import ConfigError
 
     t_start = time.perf_counter()
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     t = lap("unit selection", t)
     k = stored.corpus.n_coefficients
     params = res.frames[:, k:]
-    track = Track(params=params)
+    track = Track(values=params)
     head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
     for out in outs:
         if out.suffix.lower() == ".mp4":

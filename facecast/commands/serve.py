@@ -50,7 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units")
     p.add_argument("--corpus", type=Path, default=None, help="unit corpus for --text (default: shipped or built)")
     p.add_argument("--text-n-best", type=int, default=1, help="unit sequences averaged per sentence for --text")
-    p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
+    p.add_argument(
+        "--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)"
+    )
     p.set_defaults(run=run)
 
 
@@ -105,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))
             name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
-            extra.append(server.run_source(name, src, sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
+            extra.append(server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
         if mic is not None:
             print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
             extra.append(server.run_source("mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels,

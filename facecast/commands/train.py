@@ -49,9 +49,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--likelihood-scale", type=float, default=0.1,
                    help="audio-likelihood exponent kappa stored in the model for the live path (0 < kappa <= 1; "
                    "softens the over-confident posteriors of the 7 overlapping context frames)")
-    p.add_argument("--closure-band", type=float, default=0.0, metavar="IOD",
-                   help="output stage: mouth_open estimates within this of the closed pose close (realtime_core.output; "
-                   "choose on held-out data, 0 = off); stored in the model")
+    p.add_argument(
+        "--closure-band",
+        type=float,
+        default=0.0,
+        metavar="IOD",
+        help="output stage: mouth_open estimates within this of the closed pose close (realtime_core.output; "
+        "choose on held-out data, 0 = off); stored in the model",
+    )
     p.add_argument("--iters", type=int, default=25, help="maximum Baum-Welch iterations")
     p.add_argument("--tol", type=float, default=5e-4, help="stop when the objective gains less per frame")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation and the split")
@@ -78,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
+    from typing import Any
 
     from tqdm import tqdm
 
@@ -88,7 +94,7 @@ def _run(args: argparse.Namespace) -> int:
 
     exclude = {s for s in args.exclude_source.split(",") if s}
     utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
-    data = {"corpora": [str(c) for c in args.corpus]}
+    data: dict[str, Any] = {"corpora": [str(c) for c in args.corpus]}
     if args.grid_s1 is not None:
         from training.reallips import Variety, add_variety, grid_utterances
 
@@ -167,6 +173,8 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
         tqdm.write(json.dumps(row))
         if cov == "full" and (best is None or ev.rho > best[0]):
             best = (ev.rho, model, ev, row)
+    if best is None:
+        raise SystemExit("facecast train: no full-covariance model in the grid")
     out_dir = args.report_dir or args.output.parent
     out_dir.mkdir(parents=True, exist_ok=True)
     plot_selection(rows, out_dir / "selection_fig7.png")

@@ -31,8 +31,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)")
     p.add_argument("--buffer-ms", type=float, default=80.0, help="window mode: jitter buffer before a frame is shown")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
-    p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many seconds (default %(default)s = when the session ends)",
+    )
+    p.add_argument(
+        "--token-env",
+        default=None,
+        metavar="VAR",
+        help="environment variable holding the server's token (default %(default)s = no token)",
+    )
     p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
     p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
     p.set_defaults(run=run)
@@ -56,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from clients.render.renderer import RenderConfig
-    from clients.viewer.stream import StreamConfig, fetch_head, pick_session, record_stream
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session, record_stream
     from clients.viewer.video import render_recording
 
     token = token_from_env(args.token_env)
@@ -64,9 +74,9 @@ def run(args: argparse.Namespace) -> int:
         return _window(args, token)
 
     async def main():
-        session = await pick_session(args.url, args.session, args.wait)
-        mesh = await fetch_head(args.url)
-        cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token,
+        session = await pick_session(args.url, args.session, args.wait, token)
+        mesh = await fetch_head(args.url, token)
+        cfg = ViewerStreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token,
                            wait_s=args.wait, max_s=args.duration)
         print(f"facecast view: recording session {session!r} from {args.url}", flush=True)
         return session, mesh, await record_stream(cfg)
@@ -87,17 +97,19 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig
     from clients.viewer.live import run_window
-    from clients.viewer.stream import StreamConfig, fetch_head, pick_session
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session
 
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise ClientError(f"no display here: pass --record OUT.mp4 to render the session to a video, or open "
                           f"{args.url}/ in a browser to watch and listen")
 
     async def setup():
-        return await pick_session(args.url, args.session, args.wait), await fetch_head(args.url)
+        return await pick_session(args.url, args.session, args.wait, token), await fetch_head(args.url, token)
 
     session, mesh = asyncio.run(setup())
-    cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait)
+    cfg = ViewerStreamConfig(
+        url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait
+    )
     st = run_window(cfg, mesh, config=RenderConfig(width=args.width, height=args.height, margin=1.25),
                     buffer_s=args.buffer_ms / 1000, duration_s=args.duration, screenshot=args.screenshot)
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"

@@ -15,7 +15,7 @@ import re
 import numpy as np
 
 from realtime_core.errors import ModelFormatError
-from realtime_core.face.model import FaceModel
+from realtime_core.face.model import FaceModel, MouthLandmarks
 
 _SECTION = re.compile(r"^#\s*([A-Z][A-Z ]+):\s*$")
 
@@ -138,10 +138,8 @@ def candide3_mouth_groups(model: FaceModel) -> tuple[tuple[str, ...], ...]:
     return tuple(groups)
 
 
-def candide3_mouth_landmarks():
+def candide3_mouth_landmarks() -> MouthLandmarks:
     """The :class:`MouthLandmarks` of Candide-3 (from :data:`CANDIDE3_LANDMARKS`): 7/8 outer lip
     midpoints, 87/40 the coincident inner-lip midpoints (upper/lower), 31/64 the lip corners (face's
     left/right), 20/23 and 53/56 the outer/inner eye corners."""
-    from realtime_core.face.model import MouthLandmarks
-
     return MouthLandmarks(**{k: CANDIDE3_LANDMARKS[k] for k in MouthLandmarks.__dataclass_fields__})

@@ -22,6 +22,7 @@ Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported e
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -112,7 +113,7 @@ class RigReport:
     passed: bool
     failures: tuple[str, ...]
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def summary(self) -> str:
@@ -128,7 +129,7 @@ def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def check_rig(
-    rig,
+    rig: Any,
     landmarks: MouthLandmarks,
     *,
     lip_pairs: np.ndarray | None = None,
@@ -152,7 +153,8 @@ def check_rig(
     l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     ok_edge = l0 > 1e-9 * iod
-    flipped, worst, stretch, inter, ahead = 0, (), 1.0, 0.0, None
+    worst: tuple[float, ...] = ()
+    flipped, stretch, inter, ahead = 0, 1.0, 0.0, None
     for pose in (*poses, closure):
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
         moved = np.linalg.norm(v - v0, axis=1) > 1e-9 * iod

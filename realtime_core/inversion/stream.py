@@ -138,7 +138,8 @@ class StreamingInverter:
     def reset(self) -> None:
         """Start a new utterance."""
         self._f: np.ndarray | None = None  # filtered posterior of the newest frame
-        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, centred audio)
+        # (filtered, scaled b, within-state mix, centred audio) per frame not yet final
+        self._pending: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque()
         self._finished = False
 
     def push(self, oa: np.ndarray) -> np.ndarray:
@@ -165,7 +166,7 @@ class StreamingInverter:
         # One backward pass from the last frame over everything still waiting.
         items = list(self._pending)
         betas = [np.ones(self._n)]
-        for f, b, _, _ in reversed(items[1:]):
+        for _f, b, _, _ in reversed(items[1:]):
             beta = self._A @ (b * betas[-1])
             betas.append(beta / beta.sum())
         betas.reverse()
@@ -173,7 +174,7 @@ class StreamingInverter:
         self._pending.clear()
         return np.array(out)
 
-    def _forward(self, row: np.ndarray):
+    def _forward(self, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         a = row.astype(self._feat.dtype) - self._center
         feat = self._feat
         np.multiply(a[self._i0], a[self._i1], out=feat[: self._nq])

@@ -97,8 +97,11 @@ def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, 
         # the parent's motion warped onto the same target interval; a parentless successor is
         # represented by its own first instant
         pq = np.where(has_p, p, nq)
-        p_src = np.where(has_p, corpus.phone_start_s[pq] + tau[blend] * (corpus.phone_end_s[pq] - corpus.phone_start_s[pq]),
-                         corpus.phone_start_s[pq])
+        p_src = np.where(
+            has_p,
+            corpus.phone_start_s[pq] + tau[blend] * (corpus.phone_end_s[pq] - corpus.phone_start_s[pq]),
+            corpus.phone_start_s[pq],
+        )
         other = sample_motion(corpus, sent[pq], p_src)
         w = crossfade(tau[blend])[:, None]
         out[blend] = (1.0 - w) * out[blend] + w * other

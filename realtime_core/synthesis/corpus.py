@@ -189,13 +189,29 @@ def decode_corpus(data: bytes) -> StoredCorpus:
         a = {k: npz[k] for k in npz.files}
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
         raise ModelFormatError(f"not a unit-corpus archive ({exc})") from None
-    need = ("format", "version", "header_json", "frames", "frame_offsets", "phone_visemes", "phone_start_s",
-            "phone_end_s", "phone_offsets", "pca_mean", "pca_components", "pca_variances", "landmark_indices", "neutral")
+    need = (
+        "format",
+        "version",
+        "header_json",
+        "frames",
+        "frame_offsets",
+        "phone_visemes",
+        "phone_start_s",
+        "phone_end_s",
+        "phone_offsets",
+        "pca_mean",
+        "pca_components",
+        "pca_variances",
+        "landmark_indices",
+        "neutral",
+    )
     missing = [k for k in need if k not in a]
     if missing:
         raise ModelFormatError(f"unit-corpus archive lacks {missing}")
     if str(a["format"]) != CORPUS_FORMAT or int(a["version"]) != CORPUS_VERSION:
-        raise ModelFormatError(f"format {str(a['format'])!r} v{int(a['version'])} is not {CORPUS_FORMAT!r} v{CORPUS_VERSION}")
+        raise ModelFormatError(
+            f"format {str(a['format'])!r} v{int(a['version'])} is not {CORPUS_FORMAT!r} v{CORPUS_VERSION}"
+        )
     try:
         h = json.loads(str(a["header_json"]))
         corpus = MotionCorpus(

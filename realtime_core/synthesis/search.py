@@ -67,7 +67,8 @@ class NoPathError(ConfigError):
 class SearchConfig:
     """beta: weight of the smoothness cost C (>= 0; 0 = fewest units only); points: samples ``L``
     per phone for C; cost_components: leading motion-vector dims C is measured on (the largest
-    principal components carry nearly all the motion; fewer dims = faster search); min_blend_s: floor on the target phone duration in C (a 10 ms phone would
+    principal components carry nearly all the motion; fewer dims = faster search); min_blend_s:
+    floor on the target phone duration in C (a 10 ms phone would
     otherwise make any blend infinitely costly); max_active: active-state cap per step (None =
     exact search); lookahead / lookahead_phones: pruning bonus per phone of future recorded
     match, and its cap; mismatch_cost: G for junctions between different visemes in the fallback
@@ -264,7 +265,9 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     target = np.asarray(target, dtype=np.int64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     if target.ndim != 1 or len(target) == 0 or durations_s.shape != target.shape:
-        raise ConfigError(f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}")
+        raise ConfigError(
+            f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}"
+        )
     cfg = graph.config
     def allowed(c: np.ndarray) -> np.ndarray:
         return c if banned is None else c[~banned[c]]

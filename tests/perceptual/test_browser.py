@@ -22,15 +22,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.perceptual.conftest import ARTIFACTS, REPO, ServerProcess, answer_all, http, media_index, need, policy
+from tests.perceptual.harness import ARTIFACTS, REPO, ServerProcess, answer_all, http, media_index, policy
+from tests.prerequisites import require
+
+# Headless Chromium, the experiment server and real stimuli.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 SCRIPT = Path(__file__).with_name("session_check.mjs")
 
 
 def _require_browser() -> None:
-    need(Path("/usr/bin/chromium").exists(), "Debian's chromium is not installed (scripts/setup.sh installs it)")
-    need(shutil.which("node") is not None, "node is not installed")
-    need((REPO / "node_modules" / "playwright-core" / "package.json").is_file(),
+    require(Path("/usr/bin/chromium").exists(), "Debian's chromium is not installed (scripts/setup.sh installs it)")
+    require(shutil.which("node") is not None, "node is not installed")
+    require((REPO / "node_modules" / "playwright-core" / "package.json").is_file(),
          "node_modules/playwright-core is missing (scripts/setup.sh runs npm ci)")
 
 
@@ -88,7 +92,7 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
             sessions[p["participant"]] = answer_all(srv.url, p["participant"], p["token"], index)
     finally:
         srv.stop()
-    from clients.perceptual.store import Store
+    from perceptual.store import Store
 
     store = Store.open_existing(db)
     for p in store.participants():

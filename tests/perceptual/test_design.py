@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from clients.perceptual.analysis import mean_ci95, paired_test, relative_visual_contribution
-from clients.perceptual.design import Block, block_trials, plan, validate_response
-from clients.perceptual.errors import AnswerError, ManifestError
-from clients.perceptual.stimuli import add_white_noise, set_level
+from perceptual.analysis import mean_ci95, paired_test, relative_visual_contribution
+from perceptual.design import Block, block_trials, plan, validate_response
+from perceptual.errors import AnswerError, ManifestError
+from perceptual.stimuli import add_white_noise, set_level
 
 
 def _block(per_cell: int = 2) -> Block:

@@ -11,9 +11,12 @@ import time
 
 import pytest
 
-from clients.perceptual.errors import StoreError
-from clients.perceptual.store import Store
-from tests.perceptual.conftest import ServerProcess, http, media_index, policy
+from perceptual.errors import StoreError
+from perceptual.store import Store
+from tests.perceptual.harness import ServerProcess, http, media_index, policy
+
+# The experiment server in subprocesses.
+pytestmark = pytest.mark.system
 
 
 @pytest.fixture()
@@ -26,7 +29,7 @@ def server(stimuli, tmp_path):
 def test_a_database_of_another_test_or_schema_is_refused(stimuli, tmp_path):
     db = tmp_path / "x.sqlite"
     Store.open(db, test_id="0123456789abcdef", manifest={}).close()
-    with pytest.raises(StoreError, match="another test version.*new database"):
+    with pytest.raises(StoreError, match=r"another test version.*new database"):
         Store.open(db, test_id=stimuli.test_id, manifest=stimuli.data)
     conn = sqlite3.connect(db)
     conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'")

@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 from scipy.signal import correlate
 
-from clients.perceptual.errors import ManifestError
-from clients.perceptual.stimuli import build, load_manifest
-from tests.perceptual.conftest import ARTIFACTS, grid_root, tiny_config
+from perceptual.errors import ManifestError
+from perceptual.stimuli import build, load_manifest
+from tests.perceptual.harness import ARTIFACTS, grid_root, tiny_config
+
+# Renders and muxes a real stimulus set (ffmpeg, OpenGL).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def _probe(path) -> dict:
@@ -114,5 +117,5 @@ def test_a_changed_source_makes_the_stimuli_stale(copy, tmp_path):
     src.write_bytes(b"changed since the build")
     man["sources"] = {str(src): "0" * 64}
     (copy / "manifest.json").write_text(json.dumps(man))
-    with pytest.raises(ManifestError, match="source .* changed"):
+    with pytest.raises(ManifestError, match=r"source .* changed"):
         load_manifest(copy)

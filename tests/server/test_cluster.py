@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import shutil
 import signal
 import socket
@@ -24,8 +23,12 @@ import pytest
 
 from benchmarks.server_harness import ServerProcess
 from clients.client import IngestClient, ViewerClient, http_get, stream_samples
-from tests.server.conftest import speechlike
+from tests.prerequisites import missing
+from tests.speech import speechlike
 from wire import protocol as P
+
+# Three facecast processes and a real redis-server.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def _free_port() -> int:
@@ -65,13 +68,11 @@ class RedisServer:
 
 @pytest.fixture()
 def redis_server():
-    binary = shutil.which("redis-server") or ("/usr/bin/redis-server" if Path("/usr/bin/redis-server").exists() else None)
+    binary = shutil.which("redis-server") or (
+        "/usr/bin/redis-server" if Path("/usr/bin/redis-server").exists() else None
+    )
     if binary is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("redis-server is not installed (scripts/setup.sh installs it)")
-        reason = "redis-server is not installed (apt-get install redis-server; scripts/setup.sh does it)"
-        print(f"SKIP: {reason}", file=sys.stderr)
-        pytest.skip(reason)
+        missing("redis-server is not installed (apt-get install redis-server; scripts/setup.sh does it)")
     r = RedisServer(binary, _free_port())
     r.start()
     try:

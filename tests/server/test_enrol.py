@@ -20,7 +20,7 @@ from server.app import FacecastServer
 from server.config import ServerConfig
 from server.errors import ServerConfigError
 from server.session import Session, SessionConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
 
 

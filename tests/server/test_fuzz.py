@@ -26,8 +26,11 @@ from clients.client import IngestClient, ViewerClient, stream_samples
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
+
+# Hypothesis against a live server over loopback (about 20 s).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 DOCUMENTED = {P.CLOSE_NORMAL, P.CLOSE_UNSUPPORTED_DATA, P.CLOSE_INVALID_PAYLOAD, P.CLOSE_POLICY, P.CLOSE_TOO_BIG,
               P.CLOSE_TRY_LATER, P.CLOSE_UNAUTHORIZED, P.CLOSE_NOT_FOUND, P.CLOSE_CONFLICT, P.CLOSE_BAD_REQUEST,

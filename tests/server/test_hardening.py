@@ -17,8 +17,11 @@ from websockets.exceptions import InvalidStatus
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, ws_url
 from server.app import FacecastServer
 from server.config import ServerConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
+
+# A real server over loopback sockets.
+pytestmark = pytest.mark.system
 
 
 @contextlib.asynccontextmanager
@@ -68,7 +71,9 @@ def test_origin_host_and_token_checks(model):
                     status[path] = await http_get(url, path)
                 bearer = await raw_http(port, b"GET /sessions HTTP/1.1\r\nHost: localhost\r\n"
                                         b"Authorization: Bearer sesame\r\nConnection: close\r\n\r\n")
-                rebound = await raw_http(port, b"GET /health HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n")
+                rebound = await raw_http(
+                    port, b"GET /health HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n"
+                )
                 rebound_ws = await raw_http(port, b"GET /view?session=s&token=sesame HTTP/1.1\r\nHost: evil.example\r\n"
                                             b"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: "
                                             b"dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")

@@ -7,9 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
 from assets.espeak import LANGUAGES, Voice
+from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
 from training.params import FPS, n_frames_for
+
+# Real espeak-ng speech.
+pytestmark = pytest.mark.system
 
 MOUTH_OPEN = 2
 

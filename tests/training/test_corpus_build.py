@@ -15,6 +15,9 @@ from training.corpus import CSV_HEADER, load_corpus
 from training.errors import ConfigError
 from training.params import FPS, PARAM_NAMES, n_frames_for
 
+# Synthesises a corpus with espeak-ng.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
 
 def _files(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}

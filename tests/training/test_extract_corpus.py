@@ -3,7 +3,6 @@ the cache resumes, bad clips are skipped and counted, and FaceTrack keeps its in
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
 import subprocess
 from pathlib import Path
@@ -11,19 +10,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.prerequisites import missing, require_module
 from training.params import n_frames_for
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("mediapipe") is None,
-    reason="mediapipe not installed (optional extra: pip install 'facecast[video]')",
-)
+# ffmpeg and MediaPipe on real GRID clips.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+@pytest.fixture(autouse=True)
+def _mediapipe_installed() -> None:
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
 
 
 @pytest.fixture(scope="module")
 def s1(shared_data) -> Path:
     root = shared_data / "video" / "grid_s1"
     if not (root / "video" / "bbaf2n.mp4").is_file():
-        pytest.skip(f"GRID s1 not found in {root}")
+        missing(f"GRID s1 not found in {root}")
     return root
 
 
@@ -165,8 +168,8 @@ def test_face_track_invariants(s1, tmp_path, ffmpeg) -> None:
 
 
 def test_malformed_alignments_name_the_file(tmp_path) -> None:
-    from training.errors import AlignmentFormatError
     from assets.grid import read_words
+    from training.errors import AlignmentFormatError
 
     cases = {"empty.align": "", "text.align": "hello world\n", "float.align": "0 1.5 sil\n",
              "backwards.align": "0 100 sil\n50 20 bin\n"}
@@ -175,5 +178,5 @@ def test_malformed_alignments_name_the_file(tmp_path) -> None:
         p.write_text(text)
         with pytest.raises(AlignmentFormatError, match=rf"{name}: "):
             read_words(p)
-    with pytest.raises(AlignmentFormatError, match="missing.align: cannot be read"):
+    with pytest.raises(AlignmentFormatError, match=r"missing.align: cannot be read"):
         read_words(tmp_path / "missing.align")

@@ -3,17 +3,22 @@ audio, labels the rules know, and a deterministic corpus."""
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 import pytest
 
+from tests.prerequisites import require_tool
 from training.articulatory import render_params, unknown_labels
 from training.corpus import load_corpus
 from training.evaluation import MOUTH_OPEN
 from training.festival import VOICES, FestivalVoice, build_festival_corpus, synthesize_batch
 
-pytestmark = pytest.mark.skipif(shutil.which("festival") is None, reason="festival is not installed (apt package festival)")
+# Festival speech synthesis.
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(autouse=True)
+def _festival_installed() -> None:
+    require_tool("festival", "apt package festival")
 
 
 @pytest.mark.parametrize("voice", VOICES)

@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
-from training.build_corpus import BuildConfig, build_corpus
 from assets.audio import read_wav
+from tests.prerequisites import require_module
+from training.build_corpus import BuildConfig, build_corpus
 from training.corpus import load_corpus
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("pocketsphinx") is None,
-    reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')",
-)
+# pocketsphinx forced alignment on real speech.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+@pytest.fixture(autouse=True)
+def _pocketsphinx_installed() -> None:
+    require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
 
 
 def test_reproduces_the_shipped_librivox_alignment(shared_data) -> None:

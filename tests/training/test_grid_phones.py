@@ -3,7 +3,6 @@ the per-word pocketsphinx alignment and its fallback."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 
@@ -11,6 +10,7 @@ import numpy as np
 import pytest
 
 from realtime_core.phones import PhonemeSegment
+from tests.prerequisites import missing, require_module
 from training.alignments import Alignment
 from training.articulatory import classes_for
 from training.errors import AlignmentFormatError
@@ -28,15 +28,17 @@ from training.grid_phones import (
     write_grid_phones,
 )
 
-needs_pocketsphinx = pytest.mark.skipif(importlib.util.find_spec("pocketsphinx") is None,
-                                        reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')")
+
+@pytest.fixture
+def needs_pocketsphinx() -> None:
+    require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
 
 
 @pytest.fixture(scope="module")
 def grid_root(shared_data):
     root = shared_data / "video" / "grid_s1"
     if not (root / "align").is_dir():
-        pytest.skip(f"GRID s1 corpus not found at {root}")
+        missing(f"GRID s1 corpus not found at {root}")
     return root
 
 
@@ -62,12 +64,12 @@ def test_reader_round_trip(tmp_path) -> None:
 def test_reader_names_the_file_for_bad_input(tmp_path) -> None:
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    with pytest.raises(AlignmentFormatError, match="bad.json"):
+    with pytest.raises(AlignmentFormatError, match=r"bad.json"):
         read_grid_phones_file(bad)
     bad.write_text(json.dumps({"header": {"format": "something else"}}))
     with pytest.raises(AlignmentFormatError, match="not a GRID phones file"):
         read_grid_phones_file(bad)
-    with pytest.raises(AlignmentFormatError, match="missing.json"):
+    with pytest.raises(AlignmentFormatError, match=r"missing.json"):
         read_grid_phones_file(tmp_path / "missing.json")
 
 
@@ -151,7 +153,7 @@ def test_hand_checked_sentence_bbaf2n(grid_root, ffmpeg) -> None:
     assert np.sqrt(np.mean(seg(ph[1]) ** 2)) < 0.5 * np.sqrt(np.mean(seg(ph[2]) ** 2))
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_pronunciations_are_cmudict_but_for_the_british_letters() -> None:
     from pocketsphinx import Decoder
 
@@ -160,7 +162,7 @@ def test_pronunciations_are_cmudict_but_for_the_british_letters() -> None:
     assert differ == {"a", "z"}  # CMUdict's first entries: A = AH (the article), Z = Z IY (American)
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None:
     from assets.grid import read_words
     from training.grid_phones import SentenceAligner
@@ -180,7 +182,7 @@ def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None
         spread_only.phones, read_words(grid_root / "align" / "bbaf2n.align")).problems
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_cli_labels_a_folder_and_names_a_broken_alignment(grid_root, ffmpeg, tmp_path, capsys) -> None:
     from facecast.cli import main
 

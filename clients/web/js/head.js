@@ -8,6 +8,13 @@
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 
+// /head/* are private routes when the server has a token: pass the page's ?token= along.
+function withToken(url) {
+  const token = new URLSearchParams(location.search).get("token");
+  if (!token) return url;
+  return url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token);
+}
+
 function srgbToLinear(c) {
   // Vertex colours are authored in sRGB like textures; three.js lights in linear space.
   return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
@@ -68,7 +75,7 @@ export class HeadView {
     this.key = null;
     this.dirty = true;
     if (!head) return;
-    const res = await fetch(base + head.mesh_json_url, { cache: "no-store" });
+    const res = await fetch(withToken(base + head.mesh_json_url), { cache: "no-store" });
     if (!res.ok) throw new Error(`head mesh: HTTP ${res.status}`);
     const m = await res.json();
     const geometry = new THREE.BufferGeometry();
@@ -85,7 +92,7 @@ export class HeadView {
     }
     if (m.uvs) geometry.setAttribute("uv", new THREE.BufferAttribute(new Float32Array(m.uvs), 2));
     if (m.uvs && head.texture_url) {
-      const tex = await new THREE.TextureLoader().loadAsync(base + head.texture_url);
+      const tex = await new THREE.TextureLoader().loadAsync(withToken(base + head.texture_url));
       tex.flipY = false; // texture row 0 is v = 0 (as the offline renderer samples it)
       tex.colorSpace = THREE.SRGBColorSpace;
       material.map = tex;

@@ -68,11 +68,13 @@ function withToken(q) {
 
 async function pollSessions() {
   try {
-    const res = await fetch("/metrics", { cache: "no-store" });
+    // /sessions is cluster-wide and, like every private route, needs the token when the server has one.
+    const url = token ? `/sessions?token=${encodeURIComponent(token)}` : "/sessions";
+    const res = await fetch(url, { cache: "no-store" });
     if (!res.ok) throw new Error(`HTTP ${res.status}`);
     const m = await res.json();
-    state.sessions = (m.session_list || []).map((s) => s.name);
-    renderSessionList(m.session_list || []);
+    state.sessions = (m.sessions || []).map((s) => s.name);
+    renderSessionList(m.sessions || []);
     if (!ws) {
       const target = state.wanted ?? state.sessions[0];
       if (target && state.sessions.includes(target)) connect(target);

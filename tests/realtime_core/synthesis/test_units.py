@@ -75,7 +75,7 @@ def tiny_corpus(rng: np.random.Generator, visemes_per_sentence: list[list[str]],
         sentence_ids=tuple(f"s{k}" for k in range(len(visemes_per_sentence))), frames=np.concatenate(frames),
         frame_offsets=np.array(fo), phone_labels=tuple(labels), phone_visemes=np.array(vis, dtype=np.int16),
         phone_start_s=np.array(st), phone_end_s=np.array(en), phone_offsets=np.array(po), n_coefficients=d,
-        dim_names=tuple(f"c{k}" for k in range(d)) + ("x",),
+        dim_names=(*tuple(f"c{k}" for k in range(d)), "x"),
     )
 
 
@@ -145,7 +145,7 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
 def test_viterbi_equals_brute_force_on_a_tiny_graph(seed):
     rng = np.random.default_rng(seed)
     cls = ["PBM", "AA", "IY"]
-    sents = [["sil"] + list(rng.choice(cls, 4)) + ["sil"] for _ in range(4)]
+    sents = [["sil", *list(rng.choice(cls, 4)), "sil"] for _ in range(4)]
     corpus = tiny_corpus(rng, sents)
     cfg = SearchConfig(beta=0.7, max_active=None)
     graph = build_graph(corpus, cfg)
