@@ -10,22 +10,20 @@ import numpy as np
 import pytest
 
 import assets
-from tests.conftest import shared_file
 from training.motion_units import Clip, score
 from training.mu_expressions import BILABIAL_WORDS, closure_rate, closure_windows, head_correspondence
 from training.mu_keyframes import viseme_keyframes
 
 
-def test_head_correspondence_lands_on_the_heads_own_landmarks() -> None:
-    from assets.heads.builtin import load_builtin_head
+def test_head_correspondence_lands_on_the_heads_own_landmarks(shared_data: Path, builtin_head) -> None:
     from assets.heads.landmarks import read_landmarks
     from assets.heads.mesh import load_mesh
     from realtime_core.face import MouthLandmarks, face_frame
 
-    canon = load_mesh(shared_file("heads/mediapipe-canonical/canonical_face_model.obj")).vertices
+    canon = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj").vertices
     mp = {k: int(v) for k, v in read_landmarks(Path(assets.__file__).parent / "heads" / "landmarks"
                                                / "mediapipe_canonical.json").items()}
-    head = load_builtin_head()
+    head = builtin_head
     idx = [mp["corner_left"], mp["corner_right"], mp["upper_lip"], mp["lower_lip"], mp["chin"]]
     verts, sim = head_correspondence(canon, idx, head, mp)
     lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
