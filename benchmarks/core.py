@@ -137,12 +137,20 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
 def _random_bank(rng: np.random.Generator, k: int, hidden: int, da: int, dout: int, lo: int, hi: int):
     from realtime_core.mapping import MlpBank
 
-    return MlpBank(gmm_log_weights=np.log(np.full(k, 1 / k)), gmm_means=rng.standard_normal((k, hi - lo)),
-                   gmm_vars=np.ones((k, hi - lo)), class_slice=(lo, hi),
-                   w1=rng.standard_normal((k, hidden, da)) / np.sqrt(da), b1=np.zeros((k, hidden)),
-                   w2=rng.standard_normal((k, 8, hidden)) / np.sqrt(hidden), b2=np.zeros((k, 8)),
-                   hidden=np.full(k, hidden), activation="tanh", readout=rng.standard_normal((dout, 8)) * 0.01,
-                   readout_bias=np.zeros(dout))
+    return MlpBank(
+        gmm_log_weights=np.log(np.full(k, 1 / k)),
+        gmm_means=rng.standard_normal((k, hi - lo)),
+        gmm_vars=np.ones((k, hi - lo)),
+        class_slice=(lo, hi),
+        w1=rng.standard_normal((k, hidden, da)) / np.sqrt(da),
+        b1=np.zeros((k, hidden)),
+        w2=rng.standard_normal((k, 8, hidden)) / np.sqrt(hidden),
+        b2=np.zeros((k, 8)),
+        hidden=np.full(k, hidden),
+        activation="tanh",
+        readout=rng.standard_normal((dout, 8)) * 0.01,
+        readout_bias=np.zeros(dout),
+    )
 
 
 def bench_mappers(n_frames: int, rng: np.random.Generator, mlp_file: str | None = None) -> dict:
@@ -227,11 +235,13 @@ def bench_baum_welch(rng: np.random.Generator, *, hmmlearn_seqs: int, run_hmmlea
         t0 = time.perf_counter()
         ref.fit(np.concatenate(sub), [len(s) for s in sub])
         theirs = (time.perf_counter() - t0) * len(seqs) / len(sub)
-    out.update({
-        "hmmlearn_s": round(theirs, 2),
-        "hmmlearn_measured_on_sequences": len(sub),
-        "speedup": round(theirs / ours, 1),
-    })
+    out.update(
+        {
+            "hmmlearn_s": round(theirs, 2),
+            "hmmlearn_measured_on_sequences": len(sub),
+            "speedup": round(theirs / ours, 1),
+        }
+    )
     return out
 
 
@@ -280,12 +290,16 @@ def _print_table(r: dict, out: TextIO) -> None:
     w(f"\nbatch HMMI, N=28 M=5: {b['us_per_frame_per_iteration']} us per frame per iteration\n")
     for init in ("audio-posterior", "random"):
         s = b[init]
-        w(f"  init={init:16s} iterations={s['iterations']:3d} rho={s['rho']:.3f} eps={s['eps']:.3f} "
-          f"logL/frame={s['log_likelihood_per_frame']:.2f} total {s['us_per_frame_total']} us/frame\n")
+        w(
+            f"  init={init:16s} iterations={s['iterations']:3d} rho={s['rho']:.3f} eps={s['eps']:.3f} "
+            f"logL/frame={s['log_likelihood_per_frame']:.2f} total {s['us_per_frame_total']} us/frame\n"
+        )
     e = r["baum_welch_iteration_N28_M5_D81"]
     w(f"\nBaum-Welch, one iteration, T=20000, N=28, M=5, D=81: facecast {e['facecast_s']} s")
     if "hmmlearn_s" in e:
-        w(f", hmmlearn {e['hmmlearn_s']} s (measured on {e['hmmlearn_measured_on_sequences']} of 100 sequences, "
-          f"scaled), speedup {e['speedup']}x (goal >= 50x)\n")
+        w(
+            f", hmmlearn {e['hmmlearn_s']} s (measured on {e['hmmlearn_measured_on_sequences']} of 100 sequences, "
+            f"scaled), speedup {e['speedup']}x (goal >= 50x)\n"
+        )
     else:
         w(f" (hmmlearn: {e.get('hmmlearn', 'skipped')})\n")

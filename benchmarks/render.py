@@ -77,8 +77,16 @@ def time_render(rig, mesh, samples: int, frames: int) -> float:
 
 
 RETARGET_UNITS = (
-    "jawOpen", "mouthStretchLeft", "mouthStretchRight", "mouthUpperUpLeft", "mouthUpperUpRight",
-    "mouthFrownLeft", "mouthFrownRight", "mouthSmileLeft", "mouthPucker", "mouthFunnel",
+    "jawOpen",
+    "mouthStretchLeft",
+    "mouthStretchRight",
+    "mouthUpperUpLeft",
+    "mouthUpperUpRight",
+    "mouthFrownLeft",
+    "mouthFrownRight",
+    "mouthSmileLeft",
+    "mouthPucker",
+    "mouthFunnel",
 )
 
 
@@ -101,8 +109,9 @@ def retarget_errors() -> dict[str, dict[str, float]]:
     }
     out: dict[str, dict[str, float]] = {}
     for name, cfg in methods.items():
-        g, _, _ = head_weights(h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg,
-                               training=train, allowed=h.part == 0)
+        g, _, _ = head_weights(
+            h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg, training=train, allowed=h.part == 0
+        )
         out[name] = {}
         for u in RETARGET_UNITS:
             native = h.targets[u]

@@ -99,8 +99,9 @@ class FrameLog:
 _HDR = struct.Struct("<BBBxIIfdd")
 
 
-async def record_viewer(url: str, session: str, *, kind: str = "params", encoding: str | None = None,
-                        audio: bool = False, log: FrameLog) -> FrameLog:
+async def record_viewer(
+    url: str, session: str, *, kind: str = "params", encoding: str | None = None, audio: bool = False, log: FrameLog
+) -> FrameLog:
     """A lean viewer: parses only the header of each frame (what a benchmark needs)."""
     from urllib.parse import urlencode
 

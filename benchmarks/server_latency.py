@@ -68,7 +68,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         wall0 = time.time() - (loop.time() - t0)
         async for i, block in paced_blocks(pcm, rate, block_s=cfg.block_s, start=t0):
             await ing.send(block)
-            sent_at[i:i + len(block)] = time.time()
+            sent_at[i : i + len(block)] = time.time()
         await ing.end()
         await asyncio.gather(*viewers)
     _, body = await http_get(url, "/metrics")
@@ -92,8 +92,12 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
             "delivery_after_server_send_ms": summarise(rec - np.array(log.sent)),
             "frame_time_to_receipt_ms": summarise(from_frame_time),
         }
-    return {"viewers": out, "server_stages_ms": metrics["timings_ms"], "algorithmic_delay_ms": round(algo_s * 1e3, 3),
-            "dropped_messages": metrics["dropped_messages"]}
+    return {
+        "viewers": out,
+        "server_stages_ms": metrics["timings_ms"],
+        "algorithmic_delay_ms": round(algo_s * 1e3, 3),
+        "dropped_messages": metrics["dropped_messages"],
+    }
 
 
 def run_latency_benchmark(cfg: LatencyConfig) -> dict:
@@ -105,22 +109,30 @@ def run_latency_benchmark(cfg: LatencyConfig) -> dict:
     finally:
         server.stop()
     st = result["server_stages_ms"]
-    work_p99 = st["push_per_frame"]["p99_ms"] + st.get("encode_params", {}).get("p99_ms", 0.0) + (
-        st.get("encode_deltas", {}).get("p99_ms", 0.0))
-    result.update({
-        "benchmark": "server_latency",
-        "model": model_desc,
-        "seconds_streamed": cfg.seconds,
-        "block_ms": cfg.block_s * 1e3,
-        "per_frame_work_p99_ms": round(work_p99, 4),
-        "per_frame_work_cpu_p99_ms": st.get("push_per_frame_cpu", {}).get("p99_ms"),
-        "budget_ms": BUDGET_MS,
-        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
-                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
-        "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
-                "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
-                "this machine's 2 cores with other work.",
-    })
+    work_p99 = (
+        st["push_per_frame"]["p99_ms"]
+        + st.get("encode_params", {}).get("p99_ms", 0.0)
+        + (st.get("encode_deltas", {}).get("p99_ms", 0.0))
+    )
+    result.update(
+        {
+            "benchmark": "server_latency",
+            "model": model_desc,
+            "seconds_streamed": cfg.seconds,
+            "block_ms": cfg.block_s * 1e3,
+            "per_frame_work_p99_ms": round(work_p99, 4),
+            "per_frame_work_cpu_p99_ms": st.get("push_per_frame_cpu", {}).get("p99_ms"),
+            "budget_ms": BUDGET_MS,
+            "machine": {
+                "cpus": os.cpu_count(),
+                "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+                "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()],
+            },
+            "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
+            "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
+            "this machine's 2 cores with other work.",
+        }
+    )
     return result
 
 
@@ -139,8 +151,11 @@ def main(argv: list[str] | None = None) -> int:
         result = run_latency_benchmark(cfg)
     print(json.dumps(result, indent=2))
     if args.short and result["per_frame_work_p99_ms"] > BUDGET_MS:
-        print(f"server_latency: per-frame work p99 {result['per_frame_work_p99_ms']} ms exceeds the "
-              f"{BUDGET_MS} ms budget", file=sys.stderr)
+        print(
+            f"server_latency: per-frame work p99 {result['per_frame_work_p99_ms']} ms exceeds the "
+            f"{BUDGET_MS} ms budget",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

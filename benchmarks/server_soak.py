@@ -93,8 +93,11 @@ async def _hostile(url: str, seconds: float, counter) -> None:
                         counter.value += 1
                         await asyncio.wait_for(ws.wait_closed(), 5)
                 elif i % 10 == 5:
-                    async with connect(ws_url(url, "/view?session=none&kind=smell"), compression=None,
-                                       origin=Origin("http://evil.example")):
+                    async with connect(
+                        ws_url(url, "/view?session=none&kind=smell"),
+                        compression=None,
+                        origin=Origin("http://evil.example"),
+                    ):
                         pass
                 else:
                     async with connect(ws_url(url, "/ingest"), compression=None) as ws:
@@ -136,7 +139,7 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             loop = asyncio.get_running_loop()
             t0 = loop.time() + s * 0.02 / max(1, sessions)  # staggered across a block
             n_blocks = int(seconds * RATE / BLOCK)
-            looped = np.concatenate([speech[(b * BLOCK) % (len(speech) - BLOCK):][:BLOCK] for b in range(n_blocks)])
+            looped = np.concatenate([speech[(b * BLOCK) % (len(speech) - BLOCK) :][:BLOCK] for b in range(n_blocks)])
             async for _, block in paced_blocks(looped, RATE, block_s=BLOCK / RATE, start=t0):
                 await ing.send(block)
                 block_sent[s].append(time.time())
@@ -189,14 +192,19 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             e2e[list(e2e)[1]].append(lat[t_need >= half_wall])
     warm = next((m for t, m in rss if t >= seconds * 0.1), rss[0][1])
     return {
-        "rss_mb": {"warm": round(warm, 1), "end": round(rss[-1][1], 1),
-                   "growth_percent": round(100 * (rss[-1][1] - warm) / warm, 2),
-                   "samples": [(round(t, 1), round(m, 1)) for t, m in rss]},
+        "rss_mb": {
+            "warm": round(warm, 1),
+            "end": round(rss[-1][1], 1),
+            "growth_percent": round(100 * (rss[-1][1] - warm) / warm, 2),
+            "samples": [(round(t, 1), round(m, 1)) for t, m in rss],
+        },
         "frames_lost": lost,
         "frames_expected": int(sum(e["frames"] for e in ended) * viewers),
         "end_to_end_ms": {k: summarise(np.concatenate(v)) for k, v in e2e.items()},
-        "loop_lag_p99_ms": {"quiet": phase_metrics["quiet"]["timings_ms"].get("loop_lag", {}).get("p99_ms"),
-                            "end": final["timings_ms"].get("loop_lag", {}).get("p99_ms")},
+        "loop_lag_p99_ms": {
+            "quiet": phase_metrics["quiet"]["timings_ms"].get("loop_lag", {}).get("p99_ms"),
+            "end": final["timings_ms"].get("loop_lag", {}).get("p99_ms"),
+        },
         "hostile_messages": int(hostile_count.value),
         "closes_by_code": final["closes"],
         "healthy_at_end": status == 200,
@@ -215,14 +223,30 @@ def main(argv: list[str] | None = None) -> int:
     server = ServerProcess(model_path, head=True)
     load_before = os.getloadavg()
     try:
-        result = asyncio.run(_run(server, model, seconds=args.minutes * 60, sessions=args.sessions,
-                                  viewers=args.viewers, hostile=args.hostile))
+        result = asyncio.run(
+            _run(
+                server,
+                model,
+                seconds=args.minutes * 60,
+                sessions=args.sessions,
+                viewers=args.viewers,
+                hostile=args.hostile,
+            )
+        )
     finally:
         rc = server.stop()
-    result.update({"benchmark": "server_soak", "model": model_desc, "minutes": args.minutes,
-                   "sessions": args.sessions, "viewers_per_session": args.viewers, "server_exit_code": rc,
-                   "loadavg_before": [round(x, 2) for x in load_before],
-                   "loadavg_after": [round(x, 2) for x in os.getloadavg()]})
+    result.update(
+        {
+            "benchmark": "server_soak",
+            "model": model_desc,
+            "minutes": args.minutes,
+            "sessions": args.sessions,
+            "viewers_per_session": args.viewers,
+            "server_exit_code": rc,
+            "loadavg_before": [round(x, 2) for x in load_before],
+            "loadavg_after": [round(x, 2) for x in os.getloadavg()],
+        }
+    )
     print(json.dumps(result, indent=2))
     return 0
 

@@ -44,9 +44,9 @@ def ws_url(base: str, path: str) -> str:
     """``http://h:p`` or ``ws://h:p`` + path -> ``ws://h:p/path``."""
     b = base.rstrip("/")
     if b.startswith("http://"):
-        b = "ws://" + b[len("http://"):]
+        b = "ws://" + b[len("http://") :]
     elif b.startswith("https://"):
-        b = "wss://" + b[len("https://"):]
+        b = "wss://" + b[len("https://") :]
     return b + path
 
 
@@ -71,9 +71,18 @@ class IngestClient:
     1-120 s; the start message carries it base64-encoded, so it must fit the server's message limit).
     """
 
-    def __init__(self, url: str, *, session: str, sample_rate_hz: int, channels: int = 1,
-                 sample_format: str = "pcm_s16le", token: str | None = None, max_size: int | None = 1 << 20,
-                 enrol: bytes | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        session: str,
+        sample_rate_hz: int,
+        channels: int = 1,
+        sample_format: str = "pcm_s16le",
+        token: str | None = None,
+        max_size: int | None = 1 << 20,
+        enrol: bytes | None = None,
+    ) -> None:
         if sample_format not in P.SAMPLE_FORMATS:
             raise ClientError(f"sample_format must be one of {sorted(P.SAMPLE_FORMATS)}")
         self.url = ws_url(url, "/ingest")
@@ -89,8 +98,13 @@ class IngestClient:
 
     async def __aenter__(self) -> IngestClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
-        start = {"type": "start", "session": self.session, "sample_rate": self.sample_rate_hz,
-                 "channels": self.channels, "format": self.sample_format}
+        start = {
+            "type": "start",
+            "session": self.session,
+            "sample_rate": self.sample_rate_hz,
+            "channels": self.channels,
+            "format": self.sample_format,
+        }
         if self.token is not None:
             start["token"] = self.token
         if self.enrol is not None:  # enrolment recording in this session's input format (server adapts its model)
@@ -151,8 +165,14 @@ class SentBlock:
     sent: float
 
 
-async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bool = True, block_s: float = 0.02,
-                         int16: np.ndarray | None = None) -> list[SentBlock]:
+async def stream_samples(
+    ing: IngestClient,
+    samples: np.ndarray,
+    *,
+    realtime: bool = True,
+    block_s: float = 0.02,
+    int16: np.ndarray | None = None,
+) -> list[SentBlock]:
     """Send ``samples`` ((n,) or (n, channels) float, or int16 when the format is pcm_s16le) in
     blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
@@ -175,8 +195,9 @@ async def stream_source(ing: IngestClient, source) -> int:
     return n
 
 
-async def ingest_file(url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02,
-                      token: str | None = None) -> dict:
+async def ingest_file(
+    url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02, token: str | None = None
+) -> dict:
     """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
     from assets.audio import read_audio
 
@@ -213,8 +234,17 @@ class ViewerClient:
     default); audio: also receive the session's audio.
     """
 
-    def __init__(self, url: str, *, session: str, kind: str = "params", encoding: str | None = None,
-                 audio: bool = True, token: str | None = None, max_size: int | None = 64 << 20) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        session: str,
+        kind: str = "params",
+        encoding: str | None = None,
+        audio: bool = True,
+        token: str | None = None,
+        max_size: int | None = 64 << 20,
+    ) -> None:
         q = {"session": session, "kind": kind, "audio": "1" if audio else "0"}
         if encoding is not None:
             q["encoding"] = encoding

@@ -73,8 +73,14 @@ def analyse(answers: list[dict[str, Any]], blocks: list[dict[str, Any]], *, part
     answers count (practice trials never do)."""
     keep = set(participants)
     rows = [a for a in answers if a["participant"] in keep and not a["practice"]]
-    out: dict[str, Any] = {"participants": sorted(keep), "n_answers": len(rows), "intelligibility": {},
-                           "emotion": {}, "mos": {}, "timing": {}}
+    out: dict[str, Any] = {
+        "participants": sorted(keep),
+        "n_answers": len(rows),
+        "intelligibility": {},
+        "emotion": {},
+        "mos": {},
+        "timing": {},
+    }
     for b in blocks:
         if b.get("practice"):
             continue
@@ -99,8 +105,9 @@ def _intelligibility(block: dict[str, Any], rows: list[dict[str, Any]], people: 
         correct[k][1] += a["scored"]
     per: dict[str, dict[str, dict[str, float]]] = {}
     for p in people:
-        per[p] = {s: {c: correct[(p, s, c)][0] / correct[(p, s, c)][1] for c in conds if correct[(p, s, c)][1]}
-                  for s in snrs}
+        per[p] = {
+            s: {c: correct[(p, s, c)][0] / correct[(p, s, c)][1] for c in conds if correct[(p, s, c)][1]} for s in snrs
+        }
     means: dict[str, dict[str, float]] = {}
     cv: dict[str, dict[str, Any]] = {}
     tests: dict[str, dict[str, Any]] = {}
@@ -116,8 +123,11 @@ def _intelligibility(block: dict[str, Any], rows: list[dict[str, Any]], people: 
             for sc in synthetic:
                 if sc not in means[s]:
                     continue
-                each = [relative_visual_contribution(per[p][s]["A"], per[p][s]["N"], per[p][s][sc])
-                        for p in people if all(c in per[p][s] for c in ("A", "N", sc))]
+                each = [
+                    relative_visual_contribution(per[p][s]["A"], per[p][s]["N"], per[p][s][sc])
+                    for p in people
+                    if all(c in per[p][s] for c in ("A", "N", sc))
+                ]
                 defined = [v for v in each if v is not None]
                 cv[s][sc] = {
                     "from_means": relative_visual_contribution(means[s]["A"], means[s]["N"], means[s][sc]),
@@ -126,7 +136,7 @@ def _intelligibility(block: dict[str, Any], rows: list[dict[str, Any]], people: 
                 }
         tests[s] = {}
         for i, c1 in enumerate(conds):
-            for c2 in conds[i + 1:]:
+            for c2 in conds[i + 1 :]:
                 pairs = [(per[p][s][c1], per[p][s][c2]) for p in people if c1 in per[p][s] and c2 in per[p][s]]
                 tests[s][f"{c1} vs {c2}"] = paired_test([x for x, _ in pairs], [y for _, y in pairs])
     keys = ("letter", "digit") if block["kind"] == "keywords" else ("syllable",)
@@ -141,15 +151,22 @@ def _intelligibility(block: dict[str, Any], rows: list[dict[str, Any]], people: 
                 if a["condition"] == c:
                     m[index[a["truth"][key]], index[a["response"][key]]] += 1
             confusion[key][c] = m.tolist()
-    result: dict[str, Any] = {"kind": block["kind"], "conditions": conds, "snrs": snrs, "per_participant": per,
-                              "means": means, "c_v": cv, "tests": tests, "confusion": confusion}
+    result: dict[str, Any] = {
+        "kind": block["kind"],
+        "conditions": conds,
+        "snrs": snrs,
+        "per_participant": per,
+        "means": means,
+        "c_v": cv,
+        "tests": tests,
+        "confusion": confusion,
+    }
     if block["kind"] == "syllable":
         by_consonant: dict[str, dict[str, float | None]] = {}
         for c in conds:
             by_consonant[c] = {}
             for cons in CONSONANTS:
-                hits = [a["correct"] for a in rows
-                        if a["condition"] == c and a["truth"]["syllable"][:-1] == cons]
+                hits = [a["correct"] for a in rows if a["condition"] == c and a["truth"]["syllable"][:-1] == cons]
                 by_consonant[c][cons] = float(np.mean(hits)) if hits else None
         result["by_consonant"] = by_consonant
     return result
@@ -181,8 +198,12 @@ def _timing(rows: list[dict[str, Any]]) -> dict[str, Any]:
         if not v:
             return None
         a = np.asarray(v)
-        return {"n": len(a), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)),
-                "max": float(np.max(np.abs(a)))}
+        return {
+            "n": len(a),
+            "median": float(np.median(a)),
+            "p95": float(np.percentile(a, 95)),
+            "max": float(np.max(np.abs(a))),
+        }
 
     lat = [a["latency_ms"] for a in rows if a["latency_ms"] is not None]
     av = [a["av_offset_ms"] for a in rows if a["av_offset_ms"] is not None]

@@ -130,8 +130,14 @@ class Block:
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> Block:
         try:
-            return cls(**{**d, "conditions": tuple(d["conditions"]), "snrs_db": tuple(d["snrs_db"]),
-                          "items": tuple(d["items"])})
+            return cls(
+                **{
+                    **d,
+                    "conditions": tuple(d["conditions"]),
+                    "snrs_db": tuple(d["snrs_db"]),
+                    "items": tuple(d["items"]),
+                }
+            )
         except (TypeError, KeyError) as exc:
             raise ManifestError(f"malformed block in manifest: {exc}") from exc
 
@@ -159,7 +165,7 @@ def block_trials(block: Block, ordinal: int, seed_text: str) -> list[str]:
         out = []
         for g in range(block.n_cells):
             cond, snr = cells[(g + ordinal) % block.n_cells]
-            out += [stimulus_id(block.name, item, cond, snr) for item in block.items[g * k:(g + 1) * k]]
+            out += [stimulus_id(block.name, item, cond, snr) for item in block.items[g * k : (g + 1) * k]]
     else:
         out = [stimulus_id(block.name, item, c, s) for item in block.items for c, s in cells]
     order = _rng(f"{seed_text}|{block.name}").permutation(len(out))

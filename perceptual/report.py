@@ -20,8 +20,12 @@ from perceptual.design import CONSONANTS, DIGITS, EMOTIONS, EXPRESSIONS, LETTERS
 from perceptual.errors import StoreError
 from perceptual.store import Store
 
-_STYLE = {"A": {"facecolor": "0.75", "linestyle": "-"}, "S": {"facecolor": "white", "linestyle": "-"},
-          "Sn": {"facecolor": "white", "linestyle": "-."}, "N": {"facecolor": "white", "linestyle": "--"}}
+_STYLE = {
+    "A": {"facecolor": "0.75", "linestyle": "-"},
+    "S": {"facecolor": "white", "linestyle": "-"},
+    "Sn": {"facecolor": "white", "linestyle": "-."},
+    "N": {"facecolor": "white", "linestyle": "--"},
+}
 
 
 def write_report(db: str | Path, out_dir: str | Path, *, include_incomplete: bool = False) -> Path:
@@ -37,13 +41,15 @@ def write_report(db: str | Path, out_dir: str | Path, *, include_incomplete: boo
     if not manifest.get("blocks"):
         raise StoreError(f"{db}: the database holds no stimulus manifest")
     if not people:
-        raise StoreError(f"{db}: no participant has finished the test yet (use --include-incomplete to analyse "
-                         f"partial sessions)")
+        raise StoreError(
+            f"{db}: no participant has finished the test yet (use --include-incomplete to analyse partial sessions)"
+        )
     res = analyse(answers, manifest["blocks"], participants=[p.id for p in people])
     res["test_id"] = manifest["test_id"]
     res["database"] = str(db)
-    res["events"] = {k: sum(1 for e in events if e["kind"] == k) for k in ("duplicate", "conflict", "id_reused",
-                                                                            "reload", "pause")}
+    res["events"] = {
+        k: sum(1 for e in events if e["kind"] == k) for k in ("duplicate", "conflict", "id_reused", "reload", "pause")
+    }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     from assets.files import atomic_write_bytes
@@ -66,9 +72,15 @@ def _p(v: float | None) -> str:
 
 
 def _markdown(res: dict[str, Any], out: Path) -> str:
-    lines = [f"# Perceptual test {res['test_id']}", "",
-             (f"Database `{res['database']}`: {len(res['participants'])} participants, {res['n_answers']} scored "
-             f"answers (practice excluded). Events: {res['events']}."), ""]
+    lines = [
+        f"# Perceptual test {res['test_id']}",
+        "",
+        (
+            f"Database `{res['database']}`: {len(res['participants'])} participants, {res['n_answers']} scored "
+            f"answers (practice excluded). Events: {res['events']}."
+        ),
+        "",
+    ]
     for name, r in res["intelligibility"].items():
         lines += [
             f"## Intelligibility: block `{name}` "
@@ -79,26 +91,42 @@ def _markdown(res: dict[str, Any], out: Path) -> str:
         head = "| SNR (dB) | " + " | ".join(f"C_{c}" for c in conds)
         syn = [c for c in conds if c.startswith("S")]
         cv_cols = [f"C_V({c}) eq. 13" for c in syn] if "N" in conds else []
-        lines += [head + "".join(f" | {c}" for c in cv_cols) + " |",
-                  "|" + "---|" * (1 + len(conds) + len(cv_cols))]
+        lines += [head + "".join(f" | {c}" for c in cv_cols) + " |", "|" + "---|" * (1 + len(conds) + len(cv_cols))]
         for s in r["snrs"]:
             row = f"| {s} | " + " | ".join(_fmt(r["means"][s].get(c)) for c in conds)
             for c in syn if cv_cols else []:
                 row += f" | {_fmt(r['c_v'].get(s, {}).get(c, {}).get('from_means'))}"
             lines.append(row + " |")
-        lines += ["", ("Means over participants; C_V from the mean scores as in seed 000 Table 2 "
-                      "(the mean of per-participant C_V is in results.json)."), ""]
-        lines += ["Per participant:", "", "| participant | SNR | " + " | ".join(f"C_{c}" for c in conds) + " |",
-                  "|" + "---|" * (2 + len(conds))]
+        lines += [
+            "",
+            (
+                "Means over participants; C_V from the mean scores as in seed 000 Table 2 "
+                "(the mean of per-participant C_V is in results.json)."
+            ),
+            "",
+        ]
+        lines += [
+            "Per participant:",
+            "",
+            "| participant | SNR | " + " | ".join(f"C_{c}" for c in conds) + " |",
+            "|" + "---|" * (2 + len(conds)),
+        ]
         for p, per in r["per_participant"].items():
             for s in r["snrs"]:
                 lines.append(f"| {p} | {s} | " + " | ".join(_fmt(per[s].get(c)) for c in conds) + " |")
-        lines += ["", "Paired Wilcoxon signed-rank tests over participants (two-sided):", "",
-                  "| SNR | pair | n | median difference | p |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "Paired Wilcoxon signed-rank tests over participants (two-sided):",
+            "",
+            "| SNR | pair | n | median difference | p |",
+            "|---|---|---|---|---|",
+        ]
         for s, tests in r["tests"].items():
             for pair, t in tests.items():
-                lines.append(f"| {s} | {pair} | {t['n']} | {_fmt(t['median_difference'])} | {_p(t['p'])}"
-                             f"{' (' + t['note'] + ')' if t['note'] else ''} |")
+                lines.append(
+                    f"| {s} | {pair} | {t['n']} | {_fmt(t['median_difference'])} | {_p(t['p'])}"
+                    f"{' (' + t['note'] + ')' if t['note'] else ''} |"
+                )
         box = _boxplot(name, r, out)
         lines += ["", f"![{name} boxplots]({box.name})", ""]
         for key, mats in r["confusion"].items():
@@ -108,16 +136,29 @@ def _markdown(res: dict[str, Any], out: Path) -> str:
             png = _by_consonant(name, r["by_consonant"], out)
             lines += [f"![{name} by consonant]({png.name})", ""]
     for name, e in res["emotion"].items():
-        lines += [f"## Emotion perception: block `{name}`", "",
-                  "Counts of the reported emotion (rows) per shown expression (columns), as seed 002 Tables V-VII.", "",
-                  "| reported | " + " | ".join(EXPRESSIONS) + " |", "|" + "---|" * (1 + len(EXPRESSIONS))]
+        lines += [
+            f"## Emotion perception: block `{name}`",
+            "",
+            "Counts of the reported emotion (rows) per shown expression (columns), as seed 002 Tables V-VII.",
+            "",
+            "| reported | " + " | ".join(EXPRESSIONS) + " |",
+            "|" + "---|" * (1 + len(EXPRESSIONS)),
+        ]
         for em in EMOTIONS:
             lines.append(f"| {em} | " + " | ".join(str(e["table"][em][x]) for x in EXPRESSIONS) + " |")
         lines += ["", f"Agreement with the intended emotion: {_fmt(e['accuracy'])}.", ""]
     for name, m in res["mos"].items():
-        lines += [f"## Opinion scores: block `{name}`", "", ("Five-point scale (1 bad ... 5 excellent), mean and 95 % "
-                  "confidence interval over ratings, as seed 001 Table 1."), "",
-                  "| system | n | accuracy | naturalness |", "|---|---|---|---|"]
+        lines += [
+            f"## Opinion scores: block `{name}`",
+            "",
+            (
+                "Five-point scale (1 bad ... 5 excellent), mean and 95 % "
+                "confidence interval over ratings, as seed 001 Table 1."
+            ),
+            "",
+            "| system | n | accuracy | naturalness |",
+            "|---|---|---|---|",
+        ]
         for sysname, v in m.items():
             cells = [
                 f"{v[s]['mean']:.2f} [{v[s]['ci95'][0]:.2f}, {v[s]['ci95'][1]:.2f}]"
@@ -129,9 +170,15 @@ def _markdown(res: dict[str, Any], out: Path) -> str:
     lines += ["## Presentation timing (measured in the participants' browsers)", ""]
     for key, label in (("click_to_start_ms", "click to stimulus start"), ("av_offset_ms", "audio/video offset")):
         v = t.get(key)
-        lines.append(f"- {label}: " + ("not measured" if not v else
-                                        f"median {v['median']:.1f} ms, 95th percentile {v['p95']:.1f} ms, "
-                                        f"largest magnitude {v['max']:.1f} ms over {v['n']} trials"))
+        lines.append(
+            f"- {label}: "
+            + (
+                "not measured"
+                if not v
+                else f"median {v['median']:.1f} ms, 95th percentile {v['p95']:.1f} ms, "
+                f"largest magnitude {v['max']:.1f} ms over {v['n']} trials"
+            )
+        )
     lines.append("")
     return "\n".join(lines)
 
@@ -158,10 +205,18 @@ def _boxplot(name: str, r: dict[str, Any], out: Path) -> Path:
                 continue
             pos = i + (j - (len(conds) - 1) / 2) * width
             st = _STYLE[c]
-            ax.boxplot([vals], positions=[pos], widths=width * 0.8, notch=len(vals) > 1, showmeans=True,
-                       patch_artist=True, meanprops={"marker": "o", "markerfacecolor": "none", "markeredgecolor": "k"},
-                       boxprops={"facecolor": st["facecolor"], "linestyle": st["linestyle"], "edgecolor": "k"},
-                       whiskerprops={"linestyle": st["linestyle"]}, medianprops={"color": "k"})
+            ax.boxplot(
+                [vals],
+                positions=[pos],
+                widths=width * 0.8,
+                notch=len(vals) > 1,
+                showmeans=True,
+                patch_artist=True,
+                meanprops={"marker": "o", "markerfacecolor": "none", "markeredgecolor": "k"},
+                boxprops={"facecolor": st["facecolor"], "linestyle": st["linestyle"], "edgecolor": "k"},
+                whiskerprops={"linestyle": st["linestyle"]},
+                medianprops={"color": "k"},
+            )
         ticks.append(i)
         labels.append(f"{s} dB")
     ax.set_xticks(ticks, labels)
@@ -171,9 +226,19 @@ def _boxplot(name: str, r: dict[str, Any], out: Path) -> Path:
     ax.set_title(f"{name}: " + ", ".join(f"C_{c}" for c in conds) + " (left to right)")
     from matplotlib.patches import Patch
 
-    ax.legend(handles=[Patch(facecolor=_STYLE[c]["facecolor"], edgecolor="k",
-                             linestyle=_STYLE[c]["linestyle"],  # type: ignore[arg-type]  # str from a style table
-                             label=f"C_{c}") for c in conds], loc="lower left", fontsize=8)
+    ax.legend(
+        handles=[
+            Patch(
+                facecolor=_STYLE[c]["facecolor"],
+                edgecolor="k",
+                linestyle=_STYLE[c]["linestyle"],  # type: ignore[arg-type]  # str from a style table
+                label=f"C_{c}",
+            )
+            for c in conds
+        ],
+        loc="lower left",
+        fontsize=8,
+    )
     fig.tight_layout()
     path = out / f"{name}_boxplots.png"
     fig.savefig(path, dpi=110)
@@ -211,8 +276,14 @@ def _by_consonant(name: str, by: dict[str, dict[str, float | None]], out: Path) 
     w = 0.8 / len(conds)
     for j, c in enumerate(conds):
         vals = [np.nan if by[c][k] is None else by[c][k] for k in CONSONANTS]
-        ax.bar(np.arange(len(CONSONANTS)) + (j - (len(conds) - 1) / 2) * w, vals, w,
-               color=_STYLE.get(c, {"facecolor": "0.5"})["facecolor"], edgecolor="k", label=f"C_{c}")
+        ax.bar(
+            np.arange(len(CONSONANTS)) + (j - (len(conds) - 1) / 2) * w,
+            vals,
+            w,
+            color=_STYLE.get(c, {"facecolor": "0.5"})["facecolor"],
+            edgecolor="k",
+            label=f"C_{c}",
+        )
     ax.set_xticks(range(len(CONSONANTS)), [f"/{k}/" for k in CONSONANTS])
     ax.set_ylim(0, 1)
     ax.set_ylabel("recognition rate")

@@ -84,18 +84,20 @@ class ExperimentServer:
         self.runner: web.AppRunner | None = None
         self.port: int | None = None
         app = web.Application(middlewares=[self._errors], client_max_size=64 * 1024)
-        app.add_routes([
-            web.get("/", self._index),
-            web.get("/static/{name}", self._static),
-            web.get("/media/{name}", self._media),
-            web.get("/api/test", self._test),
-            web.post("/api/participants", self._new_participant),
-            web.get("/api/session", self._session),
-            web.post("/api/answers", self._answer),
-            web.post("/api/events", self._event),
-            web.get("/results", self._results_page),
-            web.get("/api/results", self._results_json),
-        ])
+        app.add_routes(
+            [
+                web.get("/", self._index),
+                web.get("/static/{name}", self._static),
+                web.get("/media/{name}", self._media),
+                web.get("/api/test", self._test),
+                web.post("/api/participants", self._new_participant),
+                web.get("/api/session", self._session),
+                web.post("/api/answers", self._answer),
+                web.post("/api/events", self._event),
+                web.get("/results", self._results_page),
+                web.get("/api/results", self._results_json),
+            ]
+        )
         self.app = app
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -178,14 +180,30 @@ class ExperimentServer:
         )
 
     async def _test(self, request: web.Request) -> web.Response:
-        return web.json_response({
-            "test_id": self.manifest.test_id,
-            "blocks": [{"name": b.name, "kind": b.kind, "title": b.title, "instructions": b.instructions,
-                        "practice": b.practice} for b in self.manifest.blocks],
-            "responses": {"letters": LETTERS, "digits": DIGITS, "syllables": SYLLABLES, "emotions": EMOTIONS,
-                          "mos_labels": MOS_LABELS, "mos_scales": MOS_SCALES},
-            "credits": self.manifest.data.get("credits", []),
-        })
+        return web.json_response(
+            {
+                "test_id": self.manifest.test_id,
+                "blocks": [
+                    {
+                        "name": b.name,
+                        "kind": b.kind,
+                        "title": b.title,
+                        "instructions": b.instructions,
+                        "practice": b.practice,
+                    }
+                    for b in self.manifest.blocks
+                ],
+                "responses": {
+                    "letters": LETTERS,
+                    "digits": DIGITS,
+                    "syllables": SYLLABLES,
+                    "emotions": EMOTIONS,
+                    "mos_labels": MOS_LABELS,
+                    "mos_scales": MOS_SCALES,
+                },
+                "credits": self.manifest.data.get("credits", []),
+            }
+        )
 
     async def _new_participant(self, request: web.Request) -> web.Response:
         body = await self._body(request)
@@ -201,11 +219,25 @@ class ExperimentServer:
         for t in p.plan:
             st = self.manifest.stimuli[t["stimulus"]]
             b = self.blocks[t["block"]]
-            trials.append({"index": t["index"], "block": b.name, "kind": b.kind, "practice": b.practice,
-                           "media": f"/media/{Path(st['file']).name}", "has_video": st["has_video"],
-                           "fps": st["fps"]})
-        return web.json_response({"participant": p.id, "trials": trials, "answered": self.store.answered(p.id),
-                                  "complete": p.completed_utc is not None})
+            trials.append(
+                {
+                    "index": t["index"],
+                    "block": b.name,
+                    "kind": b.kind,
+                    "practice": b.practice,
+                    "media": f"/media/{Path(st['file']).name}",
+                    "has_video": st["has_video"],
+                    "fps": st["fps"],
+                }
+            )
+        return web.json_response(
+            {
+                "participant": p.id,
+                "trials": trials,
+                "answered": self.store.answered(p.id),
+                "complete": p.completed_utc is not None,
+            }
+        )
 
     async def _answer(self, request: web.Request) -> web.Response:
         body = await self._body(request)
@@ -216,8 +248,10 @@ class ExperimentServer:
         sid = p.plan[trial]["stimulus"]
         st = self.manifest.stimuli[sid]
         if body.get("media") != f"/media/{Path(st['file']).name}":
-            raise AnswerError(f"participant {p.id}: trial {trial} played {body.get('media')!r}, which is not its "
-                              f"stimulus (the page is out of date: reload it)")
+            raise AnswerError(
+                f"participant {p.id}: trial {trial} played {body.get('media')!r}, which is not its "
+                f"stimulus (the page is out of date: reload it)"
+            )
         block = self.blocks[st["block"]]
         response = validate_response(block.kind, body.get("response"))
         correct, scored = n_correct(block.kind, st["truth"], response)
@@ -226,13 +260,27 @@ class ExperimentServer:
             v = body.get(key)
             return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
 
-        status = self.store.record_answer(p.id, trial, {
-            "block": block.name, "kind": block.kind, "practice": int(block.practice), "stimulus": sid,
-            "item": st["item"], "condition": st["condition"], "snr_db": st["snr_db"],
-            "truth": json.dumps(st["truth"], sort_keys=True), "response": json.dumps(response, sort_keys=True),
-            "correct": correct, "scored": scored, "rt_ms": num("rt_ms"), "latency_ms": num("latency_ms"),
-            "av_offset_ms": num("av_offset_ms"), "plays": int(num("plays") or 0),
-        })
+        status = self.store.record_answer(
+            p.id,
+            trial,
+            {
+                "block": block.name,
+                "kind": block.kind,
+                "practice": int(block.practice),
+                "stimulus": sid,
+                "item": st["item"],
+                "condition": st["condition"],
+                "snr_db": st["snr_db"],
+                "truth": json.dumps(st["truth"], sort_keys=True),
+                "response": json.dumps(response, sort_keys=True),
+                "correct": correct,
+                "scored": scored,
+                "rt_ms": num("rt_ms"),
+                "latency_ms": num("latency_ms"),
+                "av_offset_ms": num("av_offset_ms"),
+                "plays": int(num("plays") or 0),
+            },
+        )
         return web.json_response({"status": status, "trial": trial})
 
     async def _event(self, request: web.Request) -> web.Response:
@@ -253,14 +301,25 @@ class ExperimentServer:
             mine = [a for a in answers if a["participant"] == p.id]
             scored = [a for a in mine if a["scored"] and not a["practice"]]
             lat = [a["latency_ms"] for a in mine if a["latency_ms"] is not None]
-            people.append({
-                "participant": p.id, "ordinal": p.ordinal, "answered": len(mine), "trials": len(p.plan),
-                "started_utc": p.created_utc, "completed_utc": p.completed_utc,
-                "score": (sum(a["correct"] for a in scored) / sum(a["scored"] for a in scored)) if scored else None,
-                "median_latency_ms": sorted(lat)[len(lat) // 2] if lat else None,
-            })
-        return {"test_id": self.manifest.test_id, "database": str(self.config.db), "participants": people,
-                "answers": len(answers), "events": self.store.events()}
+            people.append(
+                {
+                    "participant": p.id,
+                    "ordinal": p.ordinal,
+                    "answered": len(mine),
+                    "trials": len(p.plan),
+                    "started_utc": p.created_utc,
+                    "completed_utc": p.completed_utc,
+                    "score": (sum(a["correct"] for a in scored) / sum(a["scored"] for a in scored)) if scored else None,
+                    "median_latency_ms": sorted(lat)[len(lat) // 2] if lat else None,
+                }
+            )
+        return {
+            "test_id": self.manifest.test_id,
+            "database": str(self.config.db),
+            "participants": people,
+            "answers": len(answers),
+            "events": self.store.events(),
+        }
 
     async def _results_json(self, request: web.Request) -> web.Response:
         self._check_key(request)
@@ -274,20 +333,25 @@ class ExperimentServer:
         for p in r["participants"]:
             score = "" if p["score"] is None else f"{p['score']:.1%}"
             lat = "" if p["median_latency_ms"] is None else f"{p['median_latency_ms']:.0f} ms"
-            rows.append(f"<tr><td>{esc(p['participant'])}</td><td>{p['ordinal']}</td>"
-                        f"<td>{p['answered']} / {p['trials']}</td>"
-                        f"<td>{'done' if p['completed_utc'] else 'in progress'}</td><td>{score}</td><td>{lat}</td>"
-                        f"<td>{esc(p['started_utc'])}</td></tr>")
+            rows.append(
+                f"<tr><td>{esc(p['participant'])}</td><td>{p['ordinal']}</td>"
+                f"<td>{p['answered']} / {p['trials']}</td>"
+                f"<td>{'done' if p['completed_utc'] else 'in progress'}</td><td>{score}</td><td>{lat}</td>"
+                f"<td>{esc(p['started_utc'])}</td></tr>"
+            )
         rows_html = "".join(rows)
         notable = [e for e in r["events"] if e["kind"] in ("id_reused", "duplicate", "conflict", "reload")]
-        events = "".join(f"<tr><td>{esc(e['at_utc'])}</td><td>{esc(str(e['participant']))}</td>"
-                         f"<td>{'' if e['trial'] is None else e['trial']}</td><td>{esc(e['kind'])}</td>"
-                         f"<td>{esc(e['detail'])}</td></tr>" for e in notable[-200:])
+        events = "".join(
+            f"<tr><td>{esc(e['at_utc'])}</td><td>{esc(str(e['participant']))}</td>"
+            f"<td>{'' if e['trial'] is None else e['trial']}</td><td>{esc(e['kind'])}</td>"
+            f"<td>{esc(e['detail'])}</td></tr>"
+            for e in notable[-200:]
+        )
         page = f"""<!doctype html><html><head><meta charset="utf-8"><title>facecast perceptual results</title>
 <meta http-equiv="refresh" content="10"><link rel="stylesheet" href="/static/style.css"></head>
-<body class="results"><h1>Perceptual test {esc(r['test_id'])}</h1>
-<p>Database <code>{esc(r['database'])}</code>: {r['answers']} answers. Report:
-<code>facecast perceptual report {esc(r['database'])}</code>. This page refreshes every 10 s.</p>
+<body class="results"><h1>Perceptual test {esc(r["test_id"])}</h1>
+<p>Database <code>{esc(r["database"])}</code>: {r["answers"]} answers. Report:
+<code>facecast perceptual report {esc(r["database"])}</code>. This page refreshes every 10 s.</p>
 <table id="participants"><tr><th>participant</th><th>#</th><th>answered</th><th>state</th><th>correct so far</th>
 <th>median click-to-start</th><th>started (UTC)</th></tr>{rows_html}</table>
 <h2>Events to know about</h2><p>Reused ids, repeated or conflicting submissions, pages reloaded mid-test.</p>

@@ -72,10 +72,26 @@ CV_PAD_S = 0.35
 
 EXPRESSION_TARGETS: dict[str, dict[str, float]] = {
     "neutral": {},
-    "smile": {"mouthSmileLeft": 1.0, "mouthSmileRight": 1.0, "cheekSquintLeft": 0.7, "cheekSquintRight": 0.7,
-              "eyeSquintLeft": 0.4, "eyeSquintRight": 0.4, "mouthDimpleLeft": 0.3, "mouthDimpleRight": 0.3},
-    "sad": {"mouthFrownLeft": 1.0, "mouthFrownRight": 1.0, "browInnerUp": 1.0, "browDownLeft": 0.25,
-            "browDownRight": 0.25, "mouthShrugLower": 0.4, "eyeSquintLeft": 0.2, "eyeSquintRight": 0.2},
+    "smile": {
+        "mouthSmileLeft": 1.0,
+        "mouthSmileRight": 1.0,
+        "cheekSquintLeft": 0.7,
+        "cheekSquintRight": 0.7,
+        "eyeSquintLeft": 0.4,
+        "eyeSquintRight": 0.4,
+        "mouthDimpleLeft": 0.3,
+        "mouthDimpleRight": 0.3,
+    },
+    "sad": {
+        "mouthFrownLeft": 1.0,
+        "mouthFrownRight": 1.0,
+        "browInnerUp": 1.0,
+        "browDownLeft": 0.25,
+        "browDownRight": 0.25,
+        "mouthShrugLower": 0.4,
+        "eyeSquintLeft": 0.2,
+        "eyeSquintRight": 0.2,
+    },
 }
 """ARKit targets of the built-in head added for each expression (weights before ``expression_strength``).
 Stand-in until the Motion Units' learned expressions are on main."""
@@ -257,8 +273,10 @@ def load_manifest(root: str | Path, *, verify: bool = True, check_sources: bool 
     except (KeyError, TypeError) as exc:
         raise ManifestError(f"{path}: malformed manifest: missing {exc}") from exc
     if _test_id(data["blocks"], stimuli) != test_id:
-        raise ManifestError(f"{path}: the manifest was edited after it was built (its content does not match "
-                            f"test id {test_id}); run `facecast perceptual build` again")
+        raise ManifestError(
+            f"{path}: the manifest was edited after it was built (its content does not match "
+            f"test id {test_id}); run `facecast perceptual build` again"
+        )
     for b in blocks:
         missing = [s for s in b.stimulus_ids() if s not in stimuli]
         if missing:
@@ -272,15 +290,18 @@ def load_manifest(root: str | Path, *, verify: bool = True, check_sources: bool 
             elif f.stat().st_size != st["bytes"] or sha256_file(f) != st["sha256"]:
                 problems.append(f"{st['file']} ({sid}) differs from the manifest")
         if problems:
-            raise ManifestError(f"{path}: stimulus files were tampered with or are stale: {'; '.join(problems[:5])}"
-                                f"{' ...' if len(problems) > 5 else ''} ({len(problems)} in all); run "
-                                f"`facecast perceptual build` again")
+            raise ManifestError(
+                f"{path}: stimulus files were tampered with or are stale: {'; '.join(problems[:5])}"
+                f"{' ...' if len(problems) > 5 else ''} ({len(problems)} in all); run "
+                f"`facecast perceptual build` again"
+            )
     if check_sources:
         for src, digest in data.get("sources", {}).items():
             p = Path(src)
             if p.is_file() and sha256_file(p) != digest:
-                raise ManifestError(f"{path}: stale stimuli: source {p} changed since the build; run "
-                                    f"`facecast perceptual build` again")
+                raise ManifestError(
+                    f"{path}: stale stimuli: source {p} changed since the build; run `facecast perceptual build` again"
+                )
     return Manifest(root=path.parent, test_id=test_id, blocks=blocks, stimuli=stimuli, data=data)
 
 
@@ -334,8 +355,9 @@ class _Builder:
         return out
 
     def run_ffmpeg(self, args: list[str], what: str) -> None:
-        proc = subprocess.run([self.ffmpeg, "-y", "-nostdin", "-loglevel", "error", *args], capture_output=True,
-                              text=True, check=False)
+        proc = subprocess.run(
+            [self.ffmpeg, "-y", "-nostdin", "-loglevel", "error", *args], capture_output=True, text=True, check=False
+        )
         if proc.returncode != 0:
             raise BuildError(f"{what}: ffmpeg failed: {proc.stderr.strip()[-400:]}")
 
@@ -367,7 +389,7 @@ class _Builder:
         from assets.espeak import Voice, synthesizer
 
         cons = next(c for c in sorted(CONSONANTS, key=len, reverse=True) if syl.startswith(c))
-        vow = syl[len(cons):]
+        vow = syl[len(cons) :]
         text = _EN_SPELLING[vow][cons] if lang == "en" else syl
         voice = Voice(language=lang, base=_VOICES[lang])
         key = _key({"what": "syllable", "lang": lang, "syl": syl, "text": text, "voice": voice.label})
@@ -389,11 +411,12 @@ class _Builder:
         env = np.abs(x) > 0.01 * np.max(np.abs(x))
         idx = np.flatnonzero(env)
         active = np.zeros(len(x), dtype=bool)
-        active[idx[0]: idx[-1] + 1] = True
+        active[idx[0] : idx[-1] + 1] = True
         return x, active, rate, sha256_file(path)
 
-    def mixes(self, item: str, x: np.ndarray, active: np.ndarray, rate: int, src: str,
-              snrs: tuple[float | None, ...]) -> dict[float | None, Path]:
+    def mixes(
+        self, item: str, x: np.ndarray, active: np.ndarray, rate: int, src: str, snrs: tuple[float | None, ...]
+    ) -> dict[float | None, Path]:
         """WAV per SNR (None: clean), each at the presentation level."""
         out = {}
         for snr in snrs:
@@ -435,10 +458,17 @@ class _Builder:
 
     def head_video(self, speech: Path, expression: str) -> Path:
         """Silent MP4 of the built-in head animated from ``speech`` with ``expression``."""
-        spec = {"what": "head", "speech": sha256_file(speech), "expression": expression,
-                "strength": self.c.expression_strength, "weights": EXPRESSION_TARGETS[expression],
-                "size": [self.c.width, self.c.height], "fps": self.c.fps, "crf": self.c.crf,
-                "model": self.model_digest()}
+        spec = {
+            "what": "head",
+            "speech": sha256_file(speech),
+            "expression": expression,
+            "strength": self.c.expression_strength,
+            "weights": EXPRESSION_TARGETS[expression],
+            "size": [self.c.width, self.c.height],
+            "fps": self.c.fps,
+            "crf": self.c.crf,
+            "model": self.model_digest(),
+        }
 
         def make(p: Path) -> None:
             from clients.render.video import VideoConfig, params_for_audio, write_video
@@ -452,8 +482,13 @@ class _Builder:
             offset = np.zeros_like(rig.neutral, dtype=np.float32)
             for name, w in EXPRESSION_TARGETS[expression].items():
                 offset += np.float32(self.c.expression_strength * w) * head.targets[name].astype(np.float32)
-            write_video(frames, lambda q: r.render(rig.deformed(q) + offset), p, size=(self.c.width, self.c.height),
-                        config=VideoConfig(fps=self.c.fps, crf=self.c.crf))
+            write_video(
+                frames,
+                lambda q: r.render(rig.deformed(q) + offset),
+                p,
+                size=(self.c.width, self.c.height),
+                config=VideoConfig(fps=self.c.fps, crf=self.c.crf),
+            )
 
         return self.cached(self.cache / "render", _key(spec), ".mp4", make)
 
@@ -462,21 +497,51 @@ class _Builder:
 
     def audio_only(self, wav: Path) -> Path:
         spec = {"what": "A", "audio": sha256_file(wav)}
-        return self.encode(spec, lambda p: ["-i", str(wav), "-c:a", "aac", "-b:a", "128k", "-movflags", "+faststart",
-                                            "-f", "mp4", str(p)], f"{wav} -> audio-only stimulus")
+        return self.encode(
+            spec,
+            lambda p: ["-i", str(wav), "-c:a", "aac", "-b:a", "128k", "-movflags", "+faststart", "-f", "mp4", str(p)],
+            f"{wav} -> audio-only stimulus",
+        )
 
     def with_audio(self, video: Path, wav: Path, what: str, *, reencode: bool) -> Path:
         """``video``'s picture (scaled and padded into the frame when ``reencode``) with ``wav``'s sound."""
-        spec = {"what": "AV", "video": sha256_file(video), "audio": sha256_file(wav), "reencode": reencode,
-                "size": [self.c.width, self.c.height], "crf": self.c.crf}
+        spec = {
+            "what": "AV",
+            "video": sha256_file(video),
+            "audio": sha256_file(wav),
+            "reencode": reencode,
+            "size": [self.c.width, self.c.height],
+            "crf": self.c.crf,
+        }
         w, h = self.c.width, self.c.height
         vf = f"scale={w}:{h}:force_original_aspect_ratio=decrease,pad={w}:{h}:(ow-iw)/2:(oh-ih)/2,setsar=1"
-        vcodec = ["-vf", vf, "-c:v", "libx264", "-crf", str(self.c.crf), "-pix_fmt", "yuv420p"] if reencode \
+        vcodec = (
+            ["-vf", vf, "-c:v", "libx264", "-crf", str(self.c.crf), "-pix_fmt", "yuv420p"]
+            if reencode
             else ["-c:v", "copy"]
+        )
 
         def args(p: Path) -> list[str]:
-            return ["-i", str(video), "-i", str(wav), "-map", "0:v:0", "-map", "1:a:0", *vcodec,
-                    "-c:a", "aac", "-b:a", "128k", "-movflags", "+faststart", "-f", "mp4", str(p)]
+            return [
+                "-i",
+                str(video),
+                "-i",
+                str(wav),
+                "-map",
+                "0:v:0",
+                "-map",
+                "1:a:0",
+                *vcodec,
+                "-c:a",
+                "aac",
+                "-b:a",
+                "128k",
+                "-movflags",
+                "+faststart",
+                "-f",
+                "mp4",
+                str(p),
+            ]
 
         return self.encode(spec, args, what)
 
@@ -509,17 +574,38 @@ def build(config: BuildConfig) -> Manifest:
     by_id = {s.sentence_id: s for s in picked}
     parts, k = [], 0
     for n in counts:
-        parts.append([s.sentence_id for s in picked[k:k + n]])
+        parts.append([s.sentence_id for s in picked[k : k + n]])
         k += n
     practice_ids, grid_ids, emotion_ids, mos_ids = parts
     if practice_ids:
-        blocks.append(Block(name="practice", kind="keywords", design="latin", conditions=grid_conds,
-                            snrs_db=(max(c.snrs_db),), items=tuple(practice_ids), per_cell=1, practice=True,
-                            title="Practice", instructions=_INSTRUCTIONS["practice"]))
+        blocks.append(
+            Block(
+                name="practice",
+                kind="keywords",
+                design="latin",
+                conditions=grid_conds,
+                snrs_db=(max(c.snrs_db),),
+                items=tuple(practice_ids),
+                per_cell=1,
+                practice=True,
+                title="Practice",
+                instructions=_INSTRUCTIONS["practice"],
+            )
+        )
     if grid_ids:
-        blocks.append(Block(name="grid", kind="keywords", design="latin", conditions=grid_conds, snrs_db=c.snrs_db,
-                            items=tuple(grid_ids), per_cell=c.sentences_per_cell, title="Sentences in noise",
-                            instructions=_INSTRUCTIONS["keywords"]))
+        blocks.append(
+            Block(
+                name="grid",
+                kind="keywords",
+                design="latin",
+                conditions=grid_conds,
+                snrs_db=c.snrs_db,
+                items=tuple(grid_ids),
+                per_cell=c.sentences_per_cell,
+                title="Sentences in noise",
+                instructions=_INSTRUCTIONS["keywords"],
+            )
+        )
     if c.cv_languages and c.cv_snrs_db:
         items = tuple(f"{lang}:{s}" for lang in c.cv_languages for s in c.cv_syllables)
         conds = ("A", *c.synthetic_conditions)
@@ -527,22 +613,61 @@ def build(config: BuildConfig) -> Manifest:
         per_cell = max(1, len(items) // n_cells)
         if c.cv_design == "latin" and len(items) < n_cells:
             raise BuildError(f"{len(items)} syllables cannot fill {n_cells} cells; use cv_design 'factorial'")
-        blocks.append(Block(name="cv", kind="syllable", design=c.cv_design, conditions=conds, snrs_db=c.cv_snrs_db,
-                            items=items, per_cell=per_cell, title="Syllables in noise",
-                            instructions=_INSTRUCTIONS["syllable"]))
+        blocks.append(
+            Block(
+                name="cv",
+                kind="syllable",
+                design=c.cv_design,
+                conditions=conds,
+                snrs_db=c.cv_snrs_db,
+                items=items,
+                per_cell=per_cell,
+                title="Syllables in noise",
+                instructions=_INSTRUCTIONS["syllable"],
+            )
+        )
     if emotion_ids:
-        blocks.append(Block(name="emotion", kind="emotion", design="factorial", conditions=EXPRESSIONS,
-                            snrs_db=(None,), items=tuple(emotion_ids), title="Emotion",
-                            instructions=_INSTRUCTIONS["emotion"]))
+        blocks.append(
+            Block(
+                name="emotion",
+                kind="emotion",
+                design="factorial",
+                conditions=EXPRESSIONS,
+                snrs_db=(None,),
+                items=tuple(emotion_ids),
+                title="Emotion",
+                instructions=_INSTRUCTIONS["emotion"],
+            )
+        )
     if mos_ids:
-        blocks.append(Block(name="mos", kind="mos", design="factorial", conditions=("N", "S"), snrs_db=(None,),
-                            items=tuple(mos_ids), title="Opinion scores", instructions=_INSTRUCTIONS["mos"]))
+        blocks.append(
+            Block(
+                name="mos",
+                kind="mos",
+                design="factorial",
+                conditions=("N", "S"),
+                snrs_db=(None,),
+                items=tuple(mos_ids),
+                title="Opinion scores",
+                instructions=_INSTRUCTIONS["mos"],
+            )
+        )
     if c.mos_clips:
         names = tuple(f"{system}/{Path(p).stem}" for system, p in c.mos_clips)
         if len(set(names)) != len(names):
             raise BuildError(f"two rated clips share a system and file name: {names}")
-        blocks.append(Block(name="clips", kind="mos", design="factorial", conditions=("clip",), snrs_db=(None,),
-                            items=names, title="Opinion scores of clips", instructions=_INSTRUCTIONS["mos"]))
+        blocks.append(
+            Block(
+                name="clips",
+                kind="mos",
+                design="factorial",
+                conditions=("clip",),
+                snrs_db=(None,),
+                items=names,
+                title="Opinion scores of clips",
+                instructions=_INSTRUCTIONS["mos"],
+            )
+        )
     if not blocks:
         raise BuildError("the configuration asks for no stimuli at all")
 
@@ -563,8 +688,9 @@ def build(config: BuildConfig) -> Manifest:
                 fps, src_video = _probe_fps(Path(path)), str(path)
             else:
                 if item not in audio_cache:
-                    audio_cache[item] = (b.syllable_audio(*item.split(":")) if blk.kind == "syllable"
-                                         else b.grid_audio(by_id[item]))
+                    audio_cache[item] = (
+                        b.syllable_audio(*item.split(":")) if blk.kind == "syllable" else b.grid_audio(by_id[item])
+                    )
                 x, active, rate, src = audio_cache[item]
                 wavs = b.mixes(item, x, active, rate, src, (None, snr) if snr is not None else (None,))
                 heard = wavs[snr]
@@ -580,10 +706,18 @@ def build(config: BuildConfig) -> Manifest:
                     video = b.head_video(drive, expression)
                     out, fps = b.with_audio(video, heard, f"{item} synthetic head", reencode=False), c.fps
             stimuli[sid] = {
-                "block": blk.name, "kind": blk.kind, "item": item, "condition": cond, "snr_db": snr,
+                "block": blk.name,
+                "kind": blk.kind,
+                "item": item,
+                "condition": cond,
+                "snr_db": snr,
                 "truth": truth_of(blk.kind, item, cond) if blk.name != "clips" else {},
-                "file": str(out.relative_to(b.root)), "sha256": sha256_file(out), "bytes": out.stat().st_size,
-                "has_video": cond != "A", "fps": fps, "source_video": src_video,
+                "file": str(out.relative_to(b.root)),
+                "sha256": sha256_file(out),
+                "bytes": out.stat().st_size,
+                "has_video": cond != "A",
+                "fps": fps,
+                "source_video": src_video,
             }
     finally:
         bar.close()
@@ -591,9 +725,14 @@ def build(config: BuildConfig) -> Manifest:
             b._renderer[2].close()
     block_json = [blk.to_json() for blk in blocks]
     data = {
-        "format": FORMAT, "kit_version": KIT_VERSION, "test_id": _test_id(block_json, stimuli),
-        "settings": c.settings_json(), "credits": [GRID_CREDIT, "Speech synthesis of syllables: espeak-ng"],
-        "blocks": block_json, "stimuli": stimuli, "sources": b.sources,
+        "format": FORMAT,
+        "kit_version": KIT_VERSION,
+        "test_id": _test_id(block_json, stimuli),
+        "settings": c.settings_json(),
+        "credits": [GRID_CREDIT, "Speech synthesis of syllables: espeak-ng"],
+        "blocks": block_json,
+        "stimuli": stimuli,
+        "sources": b.sources,
         "stats": {"made": b.made, "reused": b.reused},
     }
     from assets.files import atomic_write_bytes
@@ -621,8 +760,23 @@ def _probe_fps(path: Path) -> float | None:
     exe = shutil.which("ffprobe")
     if exe is None:
         return None
-    proc = subprocess.run([exe, "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=r_frame_rate",
-                           "-of", "default=nw=1:nk=1", str(path)], capture_output=True, text=True, check=False)
+    proc = subprocess.run(
+        [
+            exe,
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=r_frame_rate",
+            "-of",
+            "default=nw=1:nk=1",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     try:
         num, den = proc.stdout.strip().split("/")
         return float(num) / float(den)
@@ -632,11 +786,15 @@ def _probe_fps(path: Path) -> float | None:
 
 _INSTRUCTIONS = {
     "practice": "A few practice trials to get used to the page. They are not scored.",
-    "keywords": ("Each trial plays a short sentence in noise, like \"bin blue at F two now\". Some trials show "
-                 "the speaker's face, some an animated face, some nothing. Report the letter and the digit you "
-                 "heard. Guess if you are not sure."),
+    "keywords": (
+        'Each trial plays a short sentence in noise, like "bin blue at F two now". Some trials show '
+        "the speaker's face, some an animated face, some nothing. Report the letter and the digit you "
+        "heard. Guess if you are not sure."
+    ),
     "syllable": "Each trial plays one syllable in noise. Choose the syllable you heard. Guess if you are not sure.",
     "emotion": "Each trial shows an animated face saying a sentence. Which emotion does the speaker show?",
-    "mos": ("Rate each clip on two five-point scales: how accurately the lips match the speech, and how natural "
-            "the face looks (1 bad, 2 poor, 3 fair, 4 good, 5 excellent)."),
+    "mos": (
+        "Rate each clip on two five-point scales: how accurately the lips match the speech, and how natural "
+        "the face looks (1 bad, 2 poor, 3 fair, 4 good, 5 excellent)."
+    ),
 }

@@ -112,10 +112,15 @@ class Store:
         if new:
             conn.executescript("BEGIN;" + _SCHEMA + "COMMIT;")
             with store._tx():
-                conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", [
-                    ("schema_version", str(SCHEMA_VERSION)), ("test_id", test_id), ("created_utc", _now()),
-                    ("manifest", json.dumps(manifest)),
-                ])
+                conn.executemany(
+                    "INSERT INTO meta(key, value) VALUES (?, ?)",
+                    [
+                        ("schema_version", str(SCHEMA_VERSION)),
+                        ("test_id", test_id),
+                        ("created_utc", _now()),
+                        ("manifest", json.dumps(manifest)),
+                    ],
+                )
             return store
         store._check_version()
         have = store.meta("test_id")
@@ -159,8 +164,10 @@ class Store:
             raise StoreError(f"{self.path}: not a facecast perceptual database: {exc}") from exc
         if v != str(SCHEMA_VERSION):
             self.conn.close()
-            raise StoreError(f"{self.path}: database schema version {v}, this facecast reads version "
-                             f"{SCHEMA_VERSION}; use the facecast version that wrote it, or a new database")
+            raise StoreError(
+                f"{self.path}: database schema version {v}, this facecast reads version "
+                f"{SCHEMA_VERSION}; use the facecast version that wrote it, or a new database"
+            )
 
     @contextmanager
     def _tx(self) -> Iterator[None]:
@@ -192,20 +199,31 @@ class Store:
         token = secrets.token_urlsafe(18)
         pid = requested_id or f"p-{secrets.token_hex(5)}"
         with self._tx():
-            old = self.conn.execute("SELECT created_utc, (SELECT count(*) FROM answers WHERE participant = ?) "
-                                    "FROM participants WHERE id = ?", (pid, pid)).fetchone()
+            old = self.conn.execute(
+                "SELECT created_utc, (SELECT count(*) FROM answers WHERE participant = ?) "
+                "FROM participants WHERE id = ?",
+                (pid, pid),
+            ).fetchone()
             if old is None:
                 ordinal = self.conn.execute("SELECT coalesce(max(ordinal) + 1, 0) FROM participants").fetchone()[0]
                 plan = plan_for(ordinal, pid)
                 created = _now()
-                self.conn.execute("INSERT INTO participants(id, ordinal, token_sha256, plan, created_utc) "
-                                  "VALUES (?, ?, ?, ?, ?)", (pid, ordinal, _sha(token), json.dumps(plan), created))
+                self.conn.execute(
+                    "INSERT INTO participants(id, ordinal, token_sha256, plan, created_utc) VALUES (?, ?, ?, ?, ?)",
+                    (pid, ordinal, _sha(token), json.dumps(plan), created),
+                )
         if old is not None:
             # Logged in its own transaction: the refusal itself must reach the experimenter's page.
-            self.log_event(pid, None, "id_reused", f"a new session asked for id {pid}, already used since {old[0]} "
-                                                   f"({old[1]} answers); refused")
-            raise StoreError(f"participant id {pid} is already used (since {old[0]}, {old[1]} answers): "
-                             f"choose another id, or continue in the browser that started it")
+            self.log_event(
+                pid,
+                None,
+                "id_reused",
+                f"a new session asked for id {pid}, already used since {old[0]} ({old[1]} answers); refused",
+            )
+            raise StoreError(
+                f"participant id {pid} is already used (since {old[0]}, {old[1]} answers): "
+                f"choose another id, or continue in the browser that started it"
+            )
         return Participant(id=pid, ordinal=ordinal, plan=plan, created_utc=created, completed_utc=None), token
 
     def participant(self, pid: str, token: str | None = None) -> Participant:
@@ -215,24 +233,45 @@ class Store:
             raise AnswerError(f"unknown participant {pid!r}")
         if token is not None and not secrets.compare_digest(_sha(token), row["token_sha256"]):
             raise AnswerError(f"participant {pid}: wrong session token (this id was started in another browser)")
-        return Participant(id=row["id"], ordinal=row["ordinal"], plan=json.loads(row["plan"]),
-                           created_utc=row["created_utc"], completed_utc=row["completed_utc"])
+        return Participant(
+            id=row["id"],
+            ordinal=row["ordinal"],
+            plan=json.loads(row["plan"]),
+            created_utc=row["created_utc"],
+            completed_utc=row["completed_utc"],
+        )
 
     def participants(self) -> list[Participant]:
         rows = self.conn.execute("SELECT id FROM participants ORDER BY ordinal").fetchall()
         return [self.participant(r[0]) for r in rows]
 
     def answered(self, pid: str) -> list[int]:
-        return [r[0] for r in self.conn.execute("SELECT trial FROM answers WHERE participant = ? ORDER BY trial",
-                                                (pid,))]
+        return [
+            r[0] for r in self.conn.execute("SELECT trial FROM answers WHERE participant = ? ORDER BY trial", (pid,))
+        ]
 
     # -- answers ----------------------------------------------------------------------------
     def record_answer(self, pid: str, trial: int, row: dict[str, Any]) -> str:
         """Store one answer in its own committed transaction. Returns ``"stored"``, ``"duplicate"``
         (the same answer again: nothing changes) or ``"conflict"`` (another response for an answered
         trial: the first is kept, an event is logged)."""
-        cols = ("block", "kind", "practice", "stimulus", "item", "condition", "snr_db", "truth", "response",
-                "correct", "scored", "rt_ms", "latency_ms", "av_offset_ms", "plays")
+        cols = (
+            "block",
+            "kind",
+            "practice",
+            "stimulus",
+            "item",
+            "condition",
+            "snr_db",
+            "truth",
+            "response",
+            "correct",
+            "scored",
+            "rt_ms",
+            "latency_ms",
+            "av_offset_ms",
+            "plays",
+        )
         values = [row[c] for c in cols]
         with self._tx():
             cur = self.conn.execute(
@@ -241,19 +280,25 @@ class Store:
                 (pid, trial, *values, _now()),
             )
             if cur.rowcount == 1:
-                plan_len = len(json.loads(self.conn.execute("SELECT plan FROM participants WHERE id = ?",
-                                                            (pid,)).fetchone()[0]))
+                plan_len = len(
+                    json.loads(self.conn.execute("SELECT plan FROM participants WHERE id = ?", (pid,)).fetchone()[0])
+                )
                 n = self.conn.execute("SELECT count(*) FROM answers WHERE participant = ?", (pid,)).fetchone()[0]
                 if n == plan_len:
                     self.conn.execute("UPDATE participants SET completed_utc = ? WHERE id = ?", (_now(), pid))
                 return "stored"
-            first = self.conn.execute("SELECT response FROM answers WHERE participant = ? AND trial = ?",
-                                      (pid, trial)).fetchone()[0]
+            first = self.conn.execute(
+                "SELECT response FROM answers WHERE participant = ? AND trial = ?", (pid, trial)
+            ).fetchone()[0]
             if first == row["response"]:
                 self._event(pid, trial, "duplicate", "the same answer was submitted again; stored once")
                 return "duplicate"
-            self._event(pid, trial, "conflict", f"a different answer {row['response']} arrived for an answered "
-                                                f"trial; the first ({first}) is kept")
+            self._event(
+                pid,
+                trial,
+                "conflict",
+                f"a different answer {row['response']} arrived for an answered trial; the first ({first}) is kept",
+            )
             return "conflict"
 
     def log_event(self, pid: str | None, trial: int | None, kind: str, detail: str) -> None:
@@ -261,8 +306,10 @@ class Store:
             self._event(pid, trial, kind, detail)
 
     def _event(self, pid: str | None, trial: int | None, kind: str, detail: str) -> None:
-        self.conn.execute("INSERT INTO events(participant, trial, kind, detail, at_utc) VALUES (?, ?, ?, ?, ?)",
-                          (pid, trial, kind, detail, _now()))
+        self.conn.execute(
+            "INSERT INTO events(participant, trial, kind, detail, at_utc) VALUES (?, ?, ?, ?, ?)",
+            (pid, trial, kind, detail, _now()),
+        )
 
     def answers(self) -> list[dict[str, Any]]:
         rows = self.conn.execute("SELECT * FROM answers ORDER BY participant, trial").fetchall()

@@ -44,6 +44,7 @@ def visual_floor(names: tuple[str, ...]) -> np.ndarray:
     """``(len(names),)`` float64 lower bounds for parameters ``names``: :data:`CLOSED_POSE` or -inf."""
     return np.array([CLOSED_POSE.get(n, -np.inf) for n in names], dtype=np.float64)
 
+
 __all__ = [
     "CLOSED_POSE",
     "VISUAL_PARAMS",

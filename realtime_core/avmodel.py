@@ -126,11 +126,15 @@ class AvModel:
         return OutputStage(self.visual_floor, self.closure_band)
 
 
-
 def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
-    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
-            "silence_floor_db": fe.silence_floor_db}
+    return {
+        "mfcc": mf,
+        "cmvn": None if fe.cmvn is None else asdict(fe.cmvn),
+        "tc": fe.tc,
+        "energy": fe.energy,
+        "silence_floor_db": fe.silence_floor_db,
+    }
 
 
 def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:

@@ -40,18 +40,54 @@ from realtime_core.errors import ConfigError, RealtimeCoreError
 
 NEUTRAL = "neutral"
 
-EXPRESSION_RECIPES = MappingProxyType({
-    "smile": MappingProxyType({"mouthSmileLeft": 0.5, "mouthSmileRight": 0.5, "cheekSquintLeft": 0.5,
-                               "cheekSquintRight": 0.5, "eyeSquintLeft": 0.2, "eyeSquintRight": 0.2}),
-    "sad": MappingProxyType({"browInnerUp": 0.7, "browDownLeft": 0.2, "browDownRight": 0.2, "mouthFrownLeft": 0.6,
-                             "mouthFrownRight": 0.6, "mouthShrugLower": 0.2}),
-    "surprise": MappingProxyType({"browInnerUp": 0.7, "browOuterUpLeft": 0.7, "browOuterUpRight": 0.7,
-                                  "eyeWideLeft": 0.6, "eyeWideRight": 0.6, "jawOpen": 0.2}),
-    "anger": MappingProxyType({"browDownLeft": 0.7, "browDownRight": 0.7, "eyeSquintLeft": 0.4,
-                               "eyeSquintRight": 0.4, "eyeWideLeft": 0.15, "eyeWideRight": 0.15,
-                               "mouthPressLeft": 0.5, "mouthPressRight": 0.5, "noseSneerLeft": 0.3,
-                               "noseSneerRight": 0.3}),
-})
+EXPRESSION_RECIPES = MappingProxyType(
+    {
+        "smile": MappingProxyType(
+            {
+                "mouthSmileLeft": 0.5,
+                "mouthSmileRight": 0.5,
+                "cheekSquintLeft": 0.5,
+                "cheekSquintRight": 0.5,
+                "eyeSquintLeft": 0.2,
+                "eyeSquintRight": 0.2,
+            }
+        ),
+        "sad": MappingProxyType(
+            {
+                "browInnerUp": 0.7,
+                "browDownLeft": 0.2,
+                "browDownRight": 0.2,
+                "mouthFrownLeft": 0.6,
+                "mouthFrownRight": 0.6,
+                "mouthShrugLower": 0.2,
+            }
+        ),
+        "surprise": MappingProxyType(
+            {
+                "browInnerUp": 0.7,
+                "browOuterUpLeft": 0.7,
+                "browOuterUpRight": 0.7,
+                "eyeWideLeft": 0.6,
+                "eyeWideRight": 0.6,
+                "jawOpen": 0.2,
+            }
+        ),
+        "anger": MappingProxyType(
+            {
+                "browDownLeft": 0.7,
+                "browDownRight": 0.7,
+                "eyeSquintLeft": 0.4,
+                "eyeSquintRight": 0.4,
+                "eyeWideLeft": 0.15,
+                "eyeWideRight": 0.15,
+                "mouthPressLeft": 0.5,
+                "mouthPressRight": 0.5,
+                "noseSneerLeft": 0.3,
+                "noseSneerRight": 0.3,
+            }
+        ),
+    }
+)
 """Expression -> ARKit weights at full intensity (EMFACS prototypes in ARKit names)."""
 
 EXPRESSIONS: tuple[str, ...] = tuple(EXPRESSION_RECIPES)
@@ -157,8 +193,10 @@ class ExpressionTrack:
         if at_s < now_s - self.config.late_tolerance_s:
             raise ExpressionError(f"expression time {at_s:.3f} s is in the past (media time is now {now_s:.3f} s)")
         if at_s > now_s + self.config.max_ahead_s:
-            raise ExpressionError(f"expression time {at_s:.3f} s is more than {self.config.max_ahead_s:g} s ahead "
-                                  f"of the media time {now_s:.3f} s")
+            raise ExpressionError(
+                f"expression time {at_s:.3f} s is more than {self.config.max_ahead_s:g} s ahead "
+                f"of the media time {now_s:.3f} s"
+            )
         target = np.zeros(len(EXPRESSIONS))
         if name != NEUTRAL:
             target[EXPRESSIONS.index(name)] = intensity
@@ -190,7 +228,9 @@ def apply_expression(params: np.ndarray, alpha: np.ndarray, offsets: np.ndarray)
     p = np.asarray(params, dtype=np.float64)
     a = np.asarray(alpha, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != len(VISUAL_PARAMS) or a.shape != (len(p), offsets.shape[0]):
-        raise ExpressionError(f"params (n, 4) and intensities (n, {offsets.shape[0]}) expected, got {p.shape}, {a.shape}")
+        raise ExpressionError(
+            f"params (n, 4) and intensities (n, {offsets.shape[0]}) expected, got {p.shape}, {a.shape}"
+        )
     delta = a @ offsets
     gate = np.clip(p[:, _OPEN] / OPEN_REF_IOD, 0.0, 1.0)
     delta[:, _OPEN] *= gate

@@ -44,12 +44,19 @@ class SpeechToParams:
     dtype and likelihood scale (an MLP model takes its lag and dtype).
     """
 
-    def __init__(self, model: SpeechModel, *, rate_hz: int | None = None, stream: StreamConfig = StreamConfig(),
-                 observer: StageObserver | None = None) -> None:
+    def __init__(
+        self,
+        model: SpeechModel,
+        *,
+        rate_hz: int | None = None,
+        stream: StreamConfig = StreamConfig(),
+        observer: StageObserver | None = None,
+    ) -> None:
         self.model = model
         self.rate_hz = int(rate_hz) if rate_hz is not None else model.sample_rate_hz
-        self._resampler = (StreamingResampler(self.rate_hz, model.sample_rate_hz)
-                           if self.rate_hz != model.sample_rate_hz else None)
+        self._resampler = (
+            StreamingResampler(self.rate_hz, model.sample_rate_hz) if self.rate_hz != model.sample_rate_hz else None
+        )
         self._fe = model.front_end()
         if isinstance(model, AvModel):
             self._inv = model.inverter(stream)

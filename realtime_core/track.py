@@ -41,8 +41,10 @@ class Track:
             raise ConfigError(f"track channel names must be distinct, got {names}")
         if not np.all(np.isfinite(v)):
             raise ConfigError("track values contain NaN or infinite values")
-        if isinstance(self.fps, bool) or not isinstance(self.fps, (int, float, np.number)) or not (
-            np.isfinite(self.fps) and self.fps > 0
+        if (
+            isinstance(self.fps, bool)
+            or not isinstance(self.fps, (int, float, np.number))
+            or not (np.isfinite(self.fps) and self.fps > 0)
         ):
             raise ConfigError(f"track fps must be a positive number, got {self.fps!r}")
         if not (isinstance(self.start_s, (int, float, np.number)) and np.isfinite(self.start_s) and self.start_s >= 0):

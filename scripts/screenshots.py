@@ -104,8 +104,12 @@ def main() -> int:
         stop = asyncio.Event()
         fut = srv.submit(_stream_forever(srv.url, "demo", samples, stop))
         try:
-            subprocess.run(["node", str(REPO / "scripts" / "screenshots.mjs"), srv.url, "demo",
-                            str(args.out / "viewer.png")], cwd=REPO, check=True, timeout=180)
+            subprocess.run(
+                ["node", str(REPO / "scripts" / "screenshots.mjs"), srv.url, "demo", str(args.out / "viewer.png")],
+                cwd=REPO,
+                check=True,
+                timeout=180,
+            )
         finally:
             srv.loop.call_soon_threadsafe(stop.set)
             fut.result(60)

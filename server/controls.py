@@ -61,9 +61,12 @@ class ControlState:
 
     def describe(self) -> dict:
         """The JSON form sent in acks and session descriptions."""
-        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms,
-                "expression": [{"at": t, "intensity": v} for t, v in self.expressions.events[-8:]],
-                "expression_ease_s": self.expressions.config.ease_s}
+        return {
+            "gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))),
+            "smoothing_ms": self.smoothing_ms,
+            "expression": [{"at": t, "intensity": v} for t, v in self.expressions.events[-8:]],
+            "expression_ease_s": self.expressions.config.ease_s,
+        }
 
 
 ControlHandler = Callable[[ControlState, object], None]

@@ -22,8 +22,13 @@ if TYPE_CHECKING:
 def started(live: "LiveSession") -> dict:
     """The ``started`` reply's fields (the protocol adds ``type``)."""
     s = live.session
-    out = {"session": live.name, "model_rate_hz": s.rate_hz, "fps": s.fps,
-           "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={live.name}"}
+    out = {
+        "session": live.name,
+        "model_rate_hz": s.rate_hz,
+        "fps": s.fps,
+        "algorithmic_delay_s": s.algorithmic_delay_s,
+        "view_path": f"/view?session={live.name}",
+    }
     cfg = getattr(s, "config", None)
     if cfg is not None and getattr(cfg, "enrol", None) is not None:
         out["enrolled_s"] = round(cfg.enrol_seconds(), 2)  # the session's model copy is adapted to this voice

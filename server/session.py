@@ -63,11 +63,19 @@ class SessionConfig:
     enrol: str | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.sample_rate_hz, bool) or not isinstance(self.sample_rate_hz, int) or not (
-            MIN_RATE_HZ <= self.sample_rate_hz <= MAX_RATE_HZ
+        if (
+            isinstance(self.sample_rate_hz, bool)
+            or not isinstance(self.sample_rate_hz, int)
+            or not (MIN_RATE_HZ <= self.sample_rate_hz <= MAX_RATE_HZ)
         ):
-            raise ServerConfigError(f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}")
-        if isinstance(self.channels, bool) or not isinstance(self.channels, int) or not 1 <= self.channels <= MAX_CHANNELS:
+            raise ServerConfigError(
+                f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}"
+            )
+        if (
+            isinstance(self.channels, bool)
+            or not isinstance(self.channels, int)
+            or not 1 <= self.channels <= MAX_CHANNELS
+        ):
             raise ServerConfigError(f"channels must be an integer in 1..{MAX_CHANNELS}, got {self.channels!r}")
         if not isinstance(self.sample_format, str) or self.sample_format not in P.SAMPLE_FORMATS:
             raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
@@ -78,12 +86,16 @@ class SessionConfig:
                 raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
             frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
             if len(self.enrol_bytes()) % frame:
-                raise ServerConfigError(f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
-                                        f"samples ({frame} bytes each)")
+                raise ServerConfigError(
+                    f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
+                    f"samples ({frame} bytes each)"
+                )
             seconds = self.enrol_seconds()
             if not MIN_ENROL_S <= seconds <= MAX_ENROL_S:
-                raise ServerConfigError(f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
-                                        "(30-60 s is the intended amount)")
+                raise ServerConfigError(
+                    f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
+                    "(30-60 s is the intended amount)"
+                )
 
     def enrol_seconds(self) -> float:
         """Length of the enrolment recording in seconds (0 without one)."""
@@ -140,8 +152,11 @@ class Frame:
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
             # ARKit has the expressions' own shapes: speech weights plus the recipes.
-            values = (blendshape_weights(self.params, "arkit52") if self.expression is None else
-                      blendshape_weights(self.speech_params, "arkit52", expression=self.expression))
+            values = (
+                blendshape_weights(self.params, "arkit52")
+                if self.expression is None
+                else blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
+            )
             stage = "encode_blendshapes"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
@@ -189,8 +204,9 @@ class Session:
     (None: deltas unavailable); times: where stage durations go (a fresh StageTimes by default).
     """
 
-    def __init__(self, model: SpeechModel, *, config: SessionConfig, rig: Rig | None = None,
-                 times: StageTimes | None = None) -> None:
+    def __init__(
+        self, model: SpeechModel, *, config: SessionConfig, rig: Rig | None = None, times: StageTimes | None = None
+    ) -> None:
         self.model = model
         self.config = config
         self.rig = rig
@@ -205,8 +221,9 @@ class Session:
                 raise ServerConfigError("enrol adapts the HMM model; it is not available with the MLP mapper")
             self.model = model = self._enrolled(model)
         try:
-            self._chain = SpeechToParams(model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag),
-                                         observer=self._observe)
+            self._chain = SpeechToParams(
+                model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag), observer=self._observe
+            )
         except ConfigError as exc:  # e.g. a lag with the MLP mapper, which has none
             raise ServerConfigError(str(exc)) from None
         self.delay_frames = self._chain.delay_frames
@@ -353,8 +370,20 @@ class Session:
         frames = []
         for i, (row, p) in enumerate(zip(params, controlled)):
             k = self.frames_out
-            frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times,
-                                None if alpha is None else alpha[i], None if speech is None else speech[i]))
+            frames.append(
+                Frame(
+                    k,
+                    k / self.fps,
+                    p,
+                    row,
+                    work,
+                    now,
+                    self.rig,
+                    self.times,
+                    None if alpha is None else alpha[i],
+                    None if speech is None else speech[i],
+                )
+            )
             self.frames_out += 1
         return frames
 

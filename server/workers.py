@@ -188,8 +188,16 @@ class WorkerPool:
 class RemoteSession:
     """A :class:`server.session.Session` running in a worker: the same facts, async methods."""
 
-    def __init__(self, model: AvModel, config: SessionConfig, worker: _Worker, sid: int, *, rig,  # noqa: ANN001
-                 times: StageTimes) -> None:
+    def __init__(
+        self,
+        model: AvModel,
+        config: SessionConfig,
+        worker: _Worker,
+        sid: int,
+        *,
+        rig,  # noqa: ANN001
+        times: StageTimes,
+    ) -> None:
         self.model = model
         self.config = config
         self.rig = rig

@@ -66,8 +66,12 @@ def assert_chunk_invariant(
     if not empty_chunks:
         cut_lists = cut_lists.map(lambda c: sorted(set(c)))
 
-    @settings(max_examples=max_examples, deadline=None, derandomize=True,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @settings(
+        max_examples=max_examples,
+        deadline=None,
+        derandomize=True,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+    )
     @given(cuts=cut_lists)
     def random_chunkings(cuts: list[int]) -> None:
         check(run_chunked(make_stage, arrays, cuts), f"chunks cut at {cuts}")

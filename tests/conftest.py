@@ -99,10 +99,19 @@ def pulse() -> Iterator[dict[str, str]]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("PULSE_")}
     # Own runtime dir and HOME: the daemon, its cookie and its socket never touch a real session.
     env.update(XDG_RUNTIME_DIR=str(runtime), HOME=str(runtime), PULSE_RUNTIME_PATH=str(runtime / "pulse"))
-    cmd = ["pulseaudio", "-n", "--daemonize=yes", "--exit-idle-time=-1", "--disallow-exit=no",
-           "-L", "module-native-protocol-unix",
-           "-L", "module-null-sink sink_name=fc rate=48000",
-           "-L", "module-remap-source master=fc.monitor source_name=fcmic"]
+    cmd = [
+        "pulseaudio",
+        "-n",
+        "--daemonize=yes",
+        "--exit-idle-time=-1",
+        "--disallow-exit=no",
+        "-L",
+        "module-native-protocol-unix",
+        "-L",
+        "module-null-sink sink_name=fc rate=48000",
+        "-L",
+        "module-remap-source master=fc.monitor source_name=fcmic",
+    ]
     # As root, pulseaudio warns that it is meant for --system mode but runs per-user with our own
     # runtime dir; --system would need the pulse user and system-wide sockets.
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=30)

@@ -27,8 +27,9 @@ class LiveServer:
         from server.config import ServerConfig
 
         nm = REPO / "node_modules"
-        self.config = ServerConfig(port=port, web_root=REPO / "clients" / "web",
-                                   node_modules=nm if nm.is_dir() else None, close_timeout_s=0.5)
+        self.config = ServerConfig(
+            port=port, web_root=REPO / "clients" / "web", node_modules=nm if nm.is_dir() else None, close_timeout_s=0.5
+        )
         self.server = FacecastServer(model, head=head, config=self.config)
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, name="facecast-test-server", daemon=True)
@@ -52,8 +53,9 @@ class LiveServer:
         self.loop.close()
 
 
-async def stream_session(url: str, name: str, seconds: float, *, realtime: bool = True, seed: int = 0,
-                         stop: asyncio.Event | None = None) -> dict:
+async def stream_session(
+    url: str, name: str, seconds: float, *, realtime: bool = True, seed: int = 0, stop: asyncio.Event | None = None
+) -> dict:
     """Ingest ``seconds`` of speech-like 16 kHz audio as session ``name`` (in real time unless told
     otherwise), ending early when ``stop`` is set; returns the server's ``ended`` reply."""
     from assets.pacing import paced_blocks

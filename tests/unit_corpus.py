@@ -23,8 +23,16 @@ def synthetic_track(rng: np.random.Generator, n_frames: int):
     basis = np.random.default_rng(99).normal(scale=0.02, size=(3, len(LOWER_FACE), 3))
     lm = np.repeat(neutral[None], n_frames, axis=0).astype(np.float64)
     lm[:, list(LOWER_FACE)] += np.einsum("tg,gpc->tpc", gestures, basis)
-    params = np.stack([0.02 * gestures[:, 0], 0.05 * gestures[:, 1], 0.1 + 0.1 * gestures[:, 2], 0.01 * gestures[:, 0]],
-                      axis=1)
-    return FaceTrack(source=Path("synthetic.mp4"), samples=np.zeros(n_frames * 533, np.float32), sample_rate_hz=16000,
-                     landmarks=lm.astype(np.float32), neutral=neutral, params=params,
-                     face_found=np.ones(n_frames, bool), closed_gap_iod=0.0)
+    params = np.stack(
+        [0.02 * gestures[:, 0], 0.05 * gestures[:, 1], 0.1 + 0.1 * gestures[:, 2], 0.01 * gestures[:, 0]], axis=1
+    )
+    return FaceTrack(
+        source=Path("synthetic.mp4"),
+        samples=np.zeros(n_frames * 533, np.float32),
+        sample_rate_hz=16000,
+        landmarks=lm.astype(np.float32),
+        neutral=neutral,
+        params=params,
+        face_found=np.ones(n_frames, bool),
+        closed_gap_iod=0.0,
+    )

@@ -61,8 +61,11 @@ class VoiceSampling:
         unknown = [v for v in self.variants if v is not None and v not in VARIANTS]
         if unknown:
             raise ConfigError(f"unknown espeak variants {unknown}; known: {VARIANTS} (or the base voice)")
-        for name, lo_hi, allowed in (("rate_wpm", self.rate_wpm, RATE_RANGE_WPM), ("pitch", self.pitch, (0, 100)),
-                                     ("pitch_range", self.pitch_range, (0, 100))):
+        for name, lo_hi, allowed in (
+            ("rate_wpm", self.rate_wpm, RATE_RANGE_WPM),
+            ("pitch", self.pitch, (0, 100)),
+            ("pitch_range", self.pitch_range, (0, 100)),
+        ):
             if not allowed[0] <= lo_hi[0] <= lo_hi[1] <= allowed[1]:
                 raise ConfigError(f"{name} range {lo_hi} must be (low, high) within {allowed}")
 
@@ -146,8 +149,18 @@ def _synth_job(job: tuple[str, Voice, int]) -> tuple[np.ndarray, int, tuple]:
     return syn.samples, syn.sample_rate_hz, syn.phonemes
 
 
-def _write_synthetic(cfg: BuildConfig, out: Path, i: int, lang: str, text: str, voice: Voice,
-                     rng: np.random.Generator, pcm: np.ndarray, rate: int, phonemes: tuple) -> dict:
+def _write_synthetic(
+    cfg: BuildConfig,
+    out: Path,
+    i: int,
+    lang: str,
+    text: str,
+    voice: Voice,
+    rng: np.random.Generator,
+    pcm: np.ndarray,
+    rate: int,
+    phonemes: tuple,
+) -> dict:
     """Label, optionally augment, and write synthetic utterance ``i``; returns its entry."""
     samples = pcm.astype(np.float32) / 32768.0
     extra: dict = {"text": text}
@@ -158,9 +171,17 @@ def _write_synthetic(cfg: BuildConfig, out: Path, i: int, lang: str, text: str, 
     n = n_frames_for(len(samples) / rate)
     params = render_params(phonemes, n, inventory=f"espeak-{lang}", config=cfg.articulatory)
     return write_utterance(
-        out, utt_id=f"{lang}-{i:05d}", samples=samples, sample_rate_hz=rate, params=params,
-        phonemes=phonemes, language=lang, voice=voice.label, source="espeak",
-        speaker_group=voice.espeak_name, extra=extra,
+        out,
+        utt_id=f"{lang}-{i:05d}",
+        samples=samples,
+        sample_rate_hz=rate,
+        params=params,
+        phonemes=phonemes,
+        language=lang,
+        voice=voice.label,
+        source="espeak",
+        speaker_group=voice.espeak_name,
+        extra=extra,
     )
 
 
@@ -212,17 +233,38 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
         params = render_params(
             al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory
         )
-        entries.append(write_utterance(
-            out, utt_id=f"real-{j:04d}-{wav.stem}", samples=samples, sample_rate_hz=rate, params=params,
-            phonemes=al.phones, language="en", voice=f"real:{group}", source="real",
-            speaker_group=f"real:{group}", extra={"origin": str(wav.relative_to(root)),
-                   "alignment": al.path.name if al.path != wav else "pocketsphinx forced alignment"},
-        ))
+        entries.append(
+            write_utterance(
+                out,
+                utt_id=f"real-{j:04d}-{wav.stem}",
+                samples=samples,
+                sample_rate_hz=rate,
+                params=params,
+                phonemes=al.phones,
+                language="en",
+                voice=f"real:{group}",
+                source="real",
+                speaker_group=f"real:{group}",
+                extra={
+                    "origin": str(wav.relative_to(root)),
+                    "alignment": al.path.name if al.path != wav else "pocketsphinx forced alignment",
+                },
+            )
+        )
 
-    manifest = write_manifest(out, entries, seed=cfg.seed, extra={
-        "builder": {"sentences": cfg.sentences, "languages": list(cfg.languages), "augment": cfg.augment,
-                    "lead_s": cfg.articulatory.lead_s},
-    })
+    manifest = write_manifest(
+        out,
+        entries,
+        seed=cfg.seed,
+        extra={
+            "builder": {
+                "sentences": cfg.sentences,
+                "languages": list(cfg.languages),
+                "augment": cfg.augment,
+                "lead_s": cfg.articulatory.lead_s,
+            },
+        },
+    )
     by_source: dict = {}
     for e in entries:
         by_source[e["source"]] = by_source.get(e["source"], 0) + 1

@@ -175,13 +175,23 @@ def load_corpus(path: str | Path) -> list[Utterance]:
         phon: tuple[PhonemeRecord, ...] = ()
         if ppath.is_file():
             try:
-                phon = tuple(PhonemeRecord(str(p["phoneme"]), float(p["start_s"]), float(p["end_s"]))
-                             for p in json.loads(ppath.read_text(encoding="utf-8")))
+                phon = tuple(
+                    PhonemeRecord(str(p["phoneme"]), float(p["start_s"]), float(p["end_s"]))
+                    for p in json.loads(ppath.read_text(encoding="utf-8"))
+                )
             except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
                 raise CorpusFormatError(ppath, f"not a phoneme list ({exc})") from exc
-        out.append(Utterance(
-            id=uid, samples=samples, sample_rate_hz=rate, params=params, phonemes=phon,
-            voice=str(entry.get("voice", "")), language=str(entry.get("language", "")),
-            source=source, speaker_group=str(entry.get("speaker_group", "")),
-        ))
+        out.append(
+            Utterance(
+                id=uid,
+                samples=samples,
+                sample_rate_hz=rate,
+                params=params,
+                phonemes=phon,
+                voice=str(entry.get("voice", "")),
+                language=str(entry.get("language", "")),
+                source=source,
+                speaker_group=str(entry.get("speaker_group", "")),
+            )
+        )
     return out

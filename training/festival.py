@@ -126,11 +126,26 @@ def build_festival_corpus(
                 a = augment(samples, rate, np.random.default_rng([seed, i]), augmentation)
                 x, rate, info = a.samples, a.sample_rate_hz, a.info
             params = render_params(phones, n_frames_for(len(x) / rate), inventory="arpabet", config=articulatory)
-            entries.append((i, write_utterance(
-                out_dir, utt_id=f"fest-{i:05d}", samples=x, sample_rate_hz=rate, params=params, phonemes=phones,
-                language="en", voice=voice.label, source="festival", speaker_group=voice.name,
-                extra={"engine": "festival", "text": sentences[i], "augmentation": info} if info else
-                {"engine": "festival", "text": sentences[i]})))
+            entries.append(
+                (
+                    i,
+                    write_utterance(
+                        out_dir,
+                        utt_id=f"fest-{i:05d}",
+                        samples=x,
+                        sample_rate_hz=rate,
+                        params=params,
+                        phonemes=phones,
+                        language="en",
+                        voice=voice.label,
+                        source="festival",
+                        speaker_group=voice.name,
+                        extra={"engine": "festival", "text": sentences[i], "augmentation": info}
+                        if info
+                        else {"engine": "festival", "text": sentences[i]},
+                    ),
+                )
+            )
             if bar:
                 bar.update(1)
     if bar:

@@ -36,9 +36,22 @@ UNIT_IOD = 0.05
 RIDGE = 1e-3
 OVR_RIDGE = 0.05
 SIDE_SHIFTS = ("jawLeft", "jawRight", "jawForward", "mouthLeft", "mouthRight")
-OVR_CLASSES = {"PP": "bilabial", "FF": "labiodental", "TH": "dental", "DD": "alveolar", "kk": "velar",
-               "CH": "postalveolar", "SS": "sibilant", "nn": "alveolar", "RR": "rhotic", "aa": "open_central",
-               "E": "mid_front", "I": "close_front", "O": "mid_back_round", "U": "close_back_round"}
+OVR_CLASSES = {
+    "PP": "bilabial",
+    "FF": "labiodental",
+    "TH": "dental",
+    "DD": "alveolar",
+    "kk": "velar",
+    "CH": "postalveolar",
+    "SS": "sibilant",
+    "nn": "alveolar",
+    "RR": "rhotic",
+    "aa": "open_central",
+    "E": "mid_front",
+    "I": "close_front",
+    "O": "mid_back_round",
+    "U": "close_back_round",
+}
 """OVR viseme -> the articulatory class whose target is its keyframe."""
 
 
@@ -65,8 +78,9 @@ def fit_maps(head, rig) -> dict:
         return np.asarray(rig.displacements(p), dtype=np.float64).reshape(-1)
 
     mouth = tuple(n for n in ARKIT_NAMES if n.startswith(("mouth", "jaw")) and n not in SIDE_SHIFTS)
-    keys = KeyframeSet(names=mouth, shapes=np.column_stack([head.targets[n][mv].reshape(-1) for n in mouth]),
-                       ridge=RIDGE)
+    keys = KeyframeSet(
+        names=mouth, shapes=np.column_stack([head.targets[n][mv].reshape(-1) for n in mouth]), ridge=RIDGE
+    )
     pos_m, neg_m = _signed_fit(keys, shape_of)
     a_pos, a_neg = np.zeros((len(ARKIT_NAMES), 4)), np.zeros((len(ARKIT_NAMES), 4))
     for j, n in enumerate(mouth):
@@ -75,10 +89,19 @@ def fit_maps(head, rig) -> dict:
     ovr = np.column_stack([np.array(CLASSES[OVR_CLASSES[v]].target, dtype=np.float64) for v in OVR_NAMES[1:]])
     lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
     v0 = head.mesh.vertices
-    expr = np.array([measure_mouth(v0, v0 + sum(w * head.targets[n] for n, w in EXPRESSION_RECIPES[e].items()), lm)
-                     for e in EXPRESSIONS])
-    return {"ARKIT_POS": a_pos, "ARKIT_NEG": a_neg, "OVR_KEYFRAMES": ovr, "OVR_RIDGE": np.array([OVR_RIDGE]),
-            "EXPRESSION_PARAMS": expr}
+    expr = np.array(
+        [
+            measure_mouth(v0, v0 + sum(w * head.targets[n] for n, w in EXPRESSION_RECIPES[e].items()), lm)
+            for e in EXPRESSIONS
+        ]
+    )
+    return {
+        "ARKIT_POS": a_pos,
+        "ARKIT_NEG": a_neg,
+        "OVR_KEYFRAMES": ovr,
+        "OVR_RIDGE": np.array([OVR_RIDGE]),
+        "EXPRESSION_PARAMS": expr,
+    }
 
 
 def _literal(a: np.ndarray) -> str:

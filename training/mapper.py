@@ -53,13 +53,21 @@ class MapperRecipe:
             raise ConfigError("l2 >= 0, max_iter >= 1, min_frames >= 10, gmm_frames >= 100 required")
 
     def as_json(self) -> dict:
-        return {"n_classes": self.n_classes, "hidden": self.hidden, "activation": self.activation, "l2": self.l2,
-                "max_iter": self.max_iter, "min_frames": self.min_frames, "gmm_frames": self.gmm_frames,
-                "seed": self.seed}
+        return {
+            "n_classes": self.n_classes,
+            "hidden": self.hidden,
+            "activation": self.activation,
+            "l2": self.l2,
+            "max_iter": self.max_iter,
+            "min_frames": self.min_frames,
+            "gmm_frames": self.gmm_frames,
+            "seed": self.seed,
+        }
 
 
-def export_mlp(mlp: MLPRegressor, x_mean: np.ndarray, x_scale: np.ndarray, y_mean: np.ndarray,
-               y_scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def export_mlp(
+    mlp: MLPRegressor, x_mean: np.ndarray, x_scale: np.ndarray, y_mean: np.ndarray, y_scale: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A fitted one-hidden-layer MLPRegressor on standardised data -> ``w1 (H, Da), b1 (H,), w2 (Dout, H),
     b2 (Dout,)`` on raw data (the standardisation folded into the weights)."""
     if len(mlp.coefs_) != 2:
@@ -72,10 +80,18 @@ def export_mlp(mlp: MLPRegressor, x_mean: np.ndarray, x_scale: np.ndarray, y_mea
 
 
 def _fit_mlp(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, hidden: int, seed: int) -> MLPRegressor:
-    mlp = MLPRegressor(hidden_layer_sizes=(hidden,), activation=recipe.activation, alpha=recipe.l2,
-                       max_iter=recipe.max_iter, early_stopping=len(x) >= 200, validation_fraction=0.1,
-                       n_iter_no_change=10, random_state=seed, learning_rate_init=1e-3,
-                       batch_size=min(256, len(x)))
+    mlp = MLPRegressor(
+        hidden_layer_sizes=(hidden,),
+        activation=recipe.activation,
+        alpha=recipe.l2,
+        max_iter=recipe.max_iter,
+        early_stopping=len(x) >= 200,
+        validation_fraction=0.1,
+        n_iter_no_change=10,
+        random_state=seed,
+        learning_rate_init=1e-3,
+        batch_size=min(256, len(x)),
+    )
     import warnings
 
     from sklearn.exceptions import ConvergenceWarning
@@ -90,15 +106,27 @@ def _fit_mlp(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, hidden: int, se
 def fit_selector(centre: np.ndarray, recipe: MapperRecipe) -> GaussianMixture:
     """The diagonal Gaussian mixture over the current frame's features ``centre (N, F)``."""
     rng = np.random.default_rng(recipe.seed)
-    sub = centre if len(centre) <= recipe.gmm_frames else centre[rng.choice(len(centre), recipe.gmm_frames, replace=False)]
-    gmm = GaussianMixture(n_components=recipe.n_classes, covariance_type="diag", random_state=recipe.seed,
-                          max_iter=200, reg_covar=1e-4)
+    sub = (
+        centre
+        if len(centre) <= recipe.gmm_frames
+        else centre[rng.choice(len(centre), recipe.gmm_frames, replace=False)]
+    )
+    gmm = GaussianMixture(
+        n_components=recipe.n_classes, covariance_type="diag", random_state=recipe.seed, max_iter=200, reg_covar=1e-4
+    )
     gmm.fit(sub)
     return gmm
 
 
-def fit_bank(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, *, class_slice: tuple[int, int],
-             readout: tuple[np.ndarray, np.ndarray] | None = None, progress: Progress | None = None) -> MlpBank:
+def fit_bank(
+    x: np.ndarray,
+    y: np.ndarray,
+    recipe: MapperRecipe,
+    *,
+    class_slice: tuple[int, int],
+    readout: tuple[np.ndarray, np.ndarray] | None = None,
+    progress: Progress | None = None,
+) -> MlpBank:
     """Train on frames ``x (N, Da)`` (front-end features) -> targets ``y (N, Dout)`` (UMUPs).
 
     class_slice: the columns of ``x`` the selector sees (the current frame); readout: optional
@@ -106,7 +134,9 @@ def fit_bank(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, *, class_slice:
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     if x.ndim != 2 or y.ndim != 2 or len(x) != len(y) or len(x) < recipe.min_frames:
-        raise ConfigError(f"need (N >= {recipe.min_frames}, Da) features and (N, Dout) targets, got {x.shape}, {y.shape}")
+        raise ConfigError(
+            f"need (N >= {recipe.min_frames}, Da) features and (N, Dout) targets, got {x.shape}, {y.shape}"
+        )
     lo, hi = class_slice
     x_mean, x_scale = x.mean(0), np.maximum(x.std(0), 1e-6)
     y_mean, y_scale = y.mean(0), np.maximum(y.std(0), 1e-9)
@@ -133,9 +163,20 @@ def fit_bank(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, *, class_slice:
         if progress is not None:
             progress(c + 1, k)
     r, rb = (None, None) if readout is None else readout
-    return MlpBank(gmm_log_weights=log_w, gmm_means=means, gmm_vars=var, class_slice=(lo, hi), w1=w1, b1=b1,
-                   w2=w2, b2=b2, hidden=np.full(k, recipe.hidden), activation=recipe.activation, readout=r,
-                   readout_bias=rb)
+    return MlpBank(
+        gmm_log_weights=log_w,
+        gmm_means=means,
+        gmm_vars=var,
+        class_slice=(lo, hi),
+        w1=w1,
+        b1=b1,
+        w2=w2,
+        b2=b2,
+        hidden=np.full(k, recipe.hidden),
+        activation=recipe.activation,
+        readout=r,
+        readout_bias=rb,
+    )
 
 
 def fit_readout(mups: np.ndarray, params: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,7 @@ Say = Callable[[str], None]
 @dataclass(frozen=True, eq=False)
 class Clip:
     """One sentence: ``deform (T, 3 L) float32`` IOD, ``params (T, 4)``, ``samples (n,) float32`` at
-    ``sample_rate_hz``; ``split`` from :func:`training.grid.split_of`."""
+    ``sample_rate_hz``; ``split`` from :func:`assets.grid.split_of`."""
 
     sentence_id: str
     split: str
@@ -65,15 +65,21 @@ def deformation_of(landmarks: np.ndarray, neutral: np.ndarray, indices: Sequence
     return d.reshape(len(d), -1)
 
 
-def load_clips(root: str | Path | None = None, *, cache_dir: str | Path | None = None, limit: int | None = None,
-               progress: bool = True, skipped: list[str] | None = None) -> list[Clip]:
+def load_clips(
+    root: str | Path | None = None,
+    *,
+    cache_dir: str | Path | None = None,
+    limit: int | None = None,
+    progress: bool = True,
+    skipped: list[str] | None = None,
+) -> list[Clip]:
     """Every GRID s1 sentence under ``root`` as a :class:`Clip` (the face tracks from the shared cache).
 
     skipped: when given, sentences the extractor refuses (face lost, damaged file) are left out and
     listed there with the reason; otherwise the first refusal is raised."""
     from tqdm import tqdm
 
-    from training.grid import default_root, sentences
+    from assets.grid import default_root, sentences
     from training.video import load_face_track
 
     root = Path(root) if root is not None else default_root()
@@ -93,9 +99,17 @@ def load_clips(root: str | Path | None = None, *, cache_dir: str | Path | None =
             skipped.append(f"{s.sentence_id}: {exc}")
             continue
         t = min(len(tr.landmarks), len(tr.params))
-        out.append(Clip(s.sentence_id, s.split, np.asarray(tr.samples, dtype=np.float32), int(tr.sample_rate_hz),
-                        deformation_of(tr.landmarks[:t], tr.neutral, idx), np.asarray(tr.params[:t]),
-                        np.asarray(tr.neutral, dtype=np.float32)))
+        out.append(
+            Clip(
+                s.sentence_id,
+                s.split,
+                np.asarray(tr.samples, dtype=np.float32),
+                int(tr.sample_rate_hz),
+                deformation_of(tr.landmarks[:t], tr.neutral, idx),
+                np.asarray(tr.params[:t]),
+                np.asarray(tr.neutral, dtype=np.float32),
+            )
+        )
     return out
 
 
@@ -105,8 +119,9 @@ def with_features(clips: Sequence[Clip], frontend: FrontEndConfig, mean: np.ndar
     for c in clips:
         oa = extract_features(c.samples, frontend, cmvn_mean=mean, cmvn_var=var)
         t = min(len(oa), len(c.deform))
-        out.append(Clip(c.sentence_id, c.split, c.samples, c.sample_rate_hz, c.deform[:t], c.params[:t], c.neutral,
-                        oa[:t]))
+        out.append(
+            Clip(c.sentence_id, c.split, c.samples, c.sample_rate_hz, c.deform[:t], c.params[:t], c.neutral, oa[:t])
+        )
     return out
 
 
@@ -132,8 +147,14 @@ class Scores:
     frames: int
 
     def as_json(self) -> dict:
-        return {"R": self.r, "nu_d": self.nu_true, "nu_d_est": self.nu_est, "MSE": self.mse,
-                "r_mouth_params": self.r_params, "frames": self.frames}
+        return {
+            "R": self.r,
+            "nu_d": self.nu_true,
+            "nu_d_est": self.nu_est,
+            "MSE": self.mse,
+            "r_mouth_params": self.r_params,
+            "frames": self.frames,
+        }
 
 
 def displacement_scale(clips: Sequence[Clip]) -> np.ndarray:
@@ -145,13 +166,23 @@ def displacement_scale(clips: Sequence[Clip]) -> np.ndarray:
 def score(truth_d: np.ndarray, est_d: np.ndarray, scale: np.ndarray, truth_p: np.ndarray, est_p: np.ndarray) -> Scores:
     t, e = truth_d / scale, est_d / scale
     r = pearson_per_param(truth_p, est_p)
-    return Scores(r=pearson_r_trace(t, e), nu_true=average_std(t), nu_est=average_std(e),
-                  mse=normalised_mse(t, e, scale=np.ones(t.shape[1])), r_params=dict(zip(VISUAL_PARAMS, map(float, r))),
-                  frames=len(t))
+    return Scores(
+        r=pearson_r_trace(t, e),
+        nu_true=average_std(t),
+        nu_est=average_std(e),
+        mse=normalised_mse(t, e, scale=np.ones(t.shape[1])),
+        r_params=dict(zip(VISUAL_PARAMS, map(float, r))),
+        frames=len(t),
+    )
 
 
-def score_mups(clips: Sequence[Clip], est_mups: Sequence[np.ndarray], mu: MotionUnits, scale: np.ndarray,
-               readout: tuple[np.ndarray, np.ndarray]) -> Scores:
+def score_mups(
+    clips: Sequence[Clip],
+    est_mups: Sequence[np.ndarray],
+    mu: MotionUnits,
+    scale: np.ndarray,
+    readout: tuple[np.ndarray, np.ndarray],
+) -> Scores:
     """Scores of estimated UMUPs ``est_mups[i] (T_i, A)`` against the clips' true deformations."""
     td = np.concatenate([c.deform for c in clips]).astype(np.float64)
     tp = np.concatenate([c.params for c in clips])

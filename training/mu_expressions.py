@@ -24,8 +24,20 @@ from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.motion_units import ExpressionUnits, MotionUnits, analyse, compose, fit_expression_units
 from training.motion_units import Clip
 
-NAMED = ("eye_outer_left", "eye_inner_left", "eye_outer_right", "eye_inner_right", "nose_tip", "corner_left",
-         "corner_right", "upper_lip", "lower_lip", "upper_inner", "lower_inner", "chin")
+NAMED = (
+    "eye_outer_left",
+    "eye_inner_left",
+    "eye_outer_right",
+    "eye_inner_right",
+    "nose_tip",
+    "corner_left",
+    "corner_right",
+    "upper_lip",
+    "lower_lip",
+    "upper_inner",
+    "lower_inner",
+    "chin",
+)
 
 
 def head_correspondence(neutral: np.ndarray, indices: Sequence[int], head, mp_landmarks: dict[str, int]):
@@ -68,17 +80,30 @@ def expression_deformations(neutral: np.ndarray, indices: Sequence[int], head, m
 
 def expressive(clips: Sequence[Clip], delta: np.ndarray) -> list[Clip]:
     """The clips as if spoken under an expression of deformation ``delta (3 L,)``."""
-    return [Clip(c.sentence_id, c.split, c.samples, c.sample_rate_hz, (c.deform + delta).astype(np.float32),
-                 c.params, c.neutral, c.features) for c in clips]
+    return [
+        Clip(
+            c.sentence_id,
+            c.split,
+            c.samples,
+            c.sample_rate_hz,
+            (c.deform + delta).astype(np.float32),
+            c.params,
+            c.neutral,
+            c.features,
+        )
+        for c in clips
+    ]
 
 
 def fit_units(mu: MotionUnits, train_k: Sequence[Clip], name: str, n_units: int = 2) -> ExpressionUnits:
-    return fit_expression_units(mu, np.concatenate([c.deform for c in train_k]).astype(np.float64), name=name,
-                                n_units=n_units)
+    return fit_expression_units(
+        mu, np.concatenate([c.deform for c in train_k]).astype(np.float64), name=name, n_units=n_units
+    )
 
 
-def fit_second_stage(est_umup: np.ndarray, mu: MotionUnits, ex: ExpressionUnits, d_k: np.ndarray, *, hidden: int = 30,
-                     seed: int = 0):
+def fit_second_stage(
+    est_umup: np.ndarray, mu: MotionUnits, ex: ExpressionUnits, d_k: np.ndarray, *, hidden: int = 30, seed: int = 0
+):
     """Sec. VI-B: an MLP ``Upsilon_k`` (one hidden layer, 30 units) from estimated UMUPs to the expressive
     frames' (UMUPs, EMUPs). Returns a predict function ``(T, A0) -> (T, A0 + Ak)``."""
     from sklearn.neural_network import MLPRegressor
@@ -87,23 +112,31 @@ def fit_second_stage(est_umup: np.ndarray, mu: MotionUnits, ex: ExpressionUnits,
     y = np.hstack([c0, ck])
     xm, xs = est_umup.mean(0), np.maximum(est_umup.std(0), 1e-9)
     ym, ys = y.mean(0), np.maximum(y.std(0), 1e-9)
-    mlp = MLPRegressor(hidden_layer_sizes=(hidden,), activation="tanh", alpha=1e-3, max_iter=200,
-                       early_stopping=True, n_iter_no_change=10, random_state=seed)
+    mlp = MLPRegressor(
+        hidden_layer_sizes=(hidden,),
+        activation="tanh",
+        alpha=1e-3,
+        max_iter=200,
+        early_stopping=True,
+        n_iter_no_change=10,
+        random_state=seed,
+    )
     mlp.fit((est_umup - xm) / xs, (y - ym) / ys)
     return lambda x: mlp.predict((x - xm) / xs) * ys + ym
 
 
 def reconstruct(mu: MotionUnits, ex: ExpressionUnits, out: np.ndarray) -> np.ndarray:
     """``(T, A0 + Ak)`` second-stage output -> deformations ``(T, 3 L)`` (eq. 2)."""
-    return compose(mu, out[:, : mu.n_units], ex, out[:, mu.n_units:])
+    return compose(mu, out[:, : mu.n_units], ex, out[:, mu.n_units :])
 
 
 BILABIAL_WORDS = frozenset({"bin", "blue", "by", "place", "please", "b", "p"})
 """GRID words that begin with a bilabial closure (/b/ or /p/)."""
 
 
-def closure_windows(words: Sequence[tuple[float, float, str]], fps: float = 30.0, *, before_s: float = 0.06,
-                    after_s: float = 0.12) -> list[tuple[int, int]]:
+def closure_windows(
+    words: Sequence[tuple[float, float, str]], fps: float = 30.0, *, before_s: float = 0.06, after_s: float = 0.12
+) -> list[tuple[int, int]]:
     """Frame ranges ``[lo, hi)`` around the start of each bilabial-initial word."""
     out = []
     for start, _end, w in words:
@@ -118,7 +151,7 @@ def closure_rate(tracks: Sequence[np.ndarray], windows: Sequence[Sequence[tuple[
     j = VISUAL_PARAMS.index("mouth_open")
     for tr, ws in zip(tracks, windows):
         for lo, hi in ws:
-            seg = tr[lo:min(hi, len(tr)), j]
+            seg = tr[lo : min(hi, len(tr)), j]
             if len(seg):
                 tot += 1
                 hit += int(seg.min() <= threshold)

@@ -44,7 +44,7 @@ def viseme_keyframes(clips: Sequence[Clip], words_of: dict[str, list], fps: floa
                     if w.lower() == word:
                         lo = round((start + a * (end - start)) * fps)
                         hi = max(lo + 1, round((start + b * (end - start)) * fps))
-                        rows[v].append(c.deform[lo:min(hi, len(c.deform))])
+                        rows[v].append(c.deform[lo : min(hi, len(c.deform))])
     return {v: np.median(np.concatenate(r), axis=0) for v, r in rows.items() if r and len(np.concatenate(r))}
 
 
@@ -56,12 +56,13 @@ def params_to_deformation(clips: Sequence[Clip]) -> tuple[np.ndarray, np.ndarray
     return coef[:4].T, coef[4]
 
 
-def keyframe_sets(train: Sequence[Clip], words_of: dict[str, list], expr: dict[str, np.ndarray],
-                  arkit: dict[str, np.ndarray]) -> dict[str, KeyframeSet]:
+def keyframe_sets(
+    train: Sequence[Clip], words_of: dict[str, list], expr: dict[str, np.ndarray], arkit: dict[str, np.ndarray]
+) -> dict[str, KeyframeSet]:
     from realtime_core.blendshapes import OVR_NAMES, ovr_keyframes
 
     vis = viseme_keyframes(train, words_of)
-    names = tuple(vis) + ("smile", "sad")
+    names = (*tuple(vis), "smile", "sad")
     paper = KeyframeSet(names=names, shapes=np.column_stack([*vis.values(), expr["smile"], expr["sad"]]))
     ark_names = tuple(n for n, v in arkit.items() if np.abs(v).max() > 0)
     ark = KeyframeSet(names=ark_names, shapes=np.column_stack([arkit[n] for n in ark_names]), ridge=1e-4)

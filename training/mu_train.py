@@ -68,8 +68,10 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     skipped: list[str] = []
     clips = load_clips(root, cache_dir=cache_dir, limit=cfg.limit, skipped=skipped)
     train, val, test = (of_split(clips, s) for s in ("train", "val", "test"))
-    say(f"{len(clips)} clips: {len(train)} train, {len(val)} val, {len(test)} test; {len(skipped)} refused by the "
-        "extractor" + "".join(f"\n  {m}" for m in skipped))
+    say(
+        f"{len(clips)} clips: {len(train)} train, {len(val)} val, {len(test)} test; {len(skipped)} refused by the "
+        "extractor" + "".join(f"\n  {m}" for m in skipped)
+    )
     if not (train and val and test):
         raise ConfigError("every split needs at least one clip (use more sentences)")
     # 1. Utterance MUs on the train split.
@@ -95,20 +97,31 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     readout = fit_readout(y_tr, np.concatenate([c.params for c in train]))
     scale = displacement_scale(train)
     centre = (fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat)
-    report: dict = {"credit": GRID_CREDIT, "config": asdict(cfg), "clips": {"train": len(train), "val": len(val),
-                    "test": len(test), "refused": skipped}, "landmarks": len(lower_face_indices()), "units": mu.n_units,
-                    "variance": var, "variance_lips_only": var_lips, "train": {}, "test": {}, "val": {}}
+    report: dict = {
+        "credit": GRID_CREDIT,
+        "config": asdict(cfg),
+        "clips": {"train": len(train), "val": len(val), "test": len(test), "refused": skipped},
+        "landmarks": len(lower_face_indices()),
+        "units": mu.n_units,
+        "variance": var,
+        "variance_lips_only": var_lips,
+        "train": {},
+        "test": {},
+        "val": {},
+    }
     # Readout quality: true MUPs -> mouth parameters.
     rp = np.concatenate([c.params for c in test])
     rm = mu.project(np.concatenate([c.deform for c in test]).astype(np.float64))
-    report["readout_r_test"] = dict(zip(VISUAL_PARAMS, map(float, np.diag(np.corrcoef(
-        rp.T, (rm @ readout[0].T + readout[1]).T)[:4, 4:]))))
+    report["readout_r_test"] = dict(
+        zip(VISUAL_PARAMS, map(float, np.diag(np.corrcoef(rp.T, (rm @ readout[0].T + readout[1]).T)[:4, 4:])))
+    )
     # 3. The bank for each K, chosen on val.
     banks = {}
     for k in cfg.classes:
         t0 = time.perf_counter()
-        bank = fit_bank(x_tr, y_tr, MapperRecipe(n_classes=k, hidden=cfg.hidden, seed=cfg.seed), class_slice=centre,
-                        readout=readout)
+        bank = fit_bank(
+            x_tr, y_tr, MapperRecipe(n_classes=k, hidden=cfg.hidden, seed=cfg.seed), class_slice=centre, readout=readout
+        )
         m = MlpMapper(bank)
         s = score_mups(val, mlp_estimates(m, val), mu, scale, readout)
         banks[k] = bank
@@ -117,10 +130,21 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     best_k = max(cfg.classes, key=lambda k: report["val"][f"mlp_K{k}"]["R"])
     report["chosen_classes"] = best_k
     systems: dict[str, object] = {"mlp": MlpMapper(banks[best_k])}
-    model = MlpSpeechModel(bank=banks[best_k], frontend=fe, cmvn_mean=mean, cmvn_var=var_, visual_names=VISUAL_PARAMS,
-                           metadata={"paper": "Hong, Wen, Huang 2002, Sec. VI-A", "classes": best_k,
-                                     "hidden": cfg.hidden, "units": mu.n_units, "credit": GRID_CREDIT,
-                                     "val_R": report["val"][f"mlp_K{best_k}"]["R"]})
+    model = MlpSpeechModel(
+        bank=banks[best_k],
+        frontend=fe,
+        cmvn_mean=mean,
+        cmvn_var=var_,
+        visual_names=VISUAL_PARAMS,
+        metadata={
+            "paper": "Hong, Wen, Huang 2002, Sec. VI-A",
+            "classes": best_k,
+            "hidden": cfg.hidden,
+            "units": mu.n_units,
+            "credit": GRID_CREDIT,
+            "val_R": report["val"][f"mlp_K{best_k}"]["R"],
+        },
+    )
     band, band_scores = choose_closure_band(model, root, cache_dir=cache_dir)
     model = replace(model, closure_band=band, metadata={**model.metadata, "closure_band_val": band_scores})
     report["closure_band"] = {"chosen": band, "val": band_scores}
@@ -129,8 +153,13 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     # 4. The single large MLP of the paper's argument.
     if cfg.baseline_hidden:
         t0 = time.perf_counter()
-        base = fit_bank(x_tr, y_tr, MapperRecipe(n_classes=1, hidden=cfg.baseline_hidden, seed=cfg.seed,
-                                                 max_iter=100), class_slice=centre, readout=readout)
+        base = fit_bank(
+            x_tr,
+            y_tr,
+            MapperRecipe(n_classes=1, hidden=cfg.baseline_hidden, seed=cfg.seed, max_iter=100),
+            class_slice=centre,
+            readout=readout,
+        )
         systems["single_mlp"] = MlpMapper(base)
         say(f"single MLP ({cfg.baseline_hidden} hidden) trained in {time.perf_counter() - t0:.0f} s")
     # 5. The HMM of paper 000 on the same UMUP targets.
@@ -140,37 +169,67 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         from training.corpus import Utterance
         from training.trainer import train_av_model
 
-        utts = [Utterance(id=c.sentence_id, samples=c.samples, sample_rate_hz=c.sample_rate_hz,
-                          params=mu.project(c.deform.astype(np.float64)), phonemes=(), voice="s1", language="en",
-                          source="grid", speaker_group="s1") for c in train]
-        hr = TrainRecipe(hmm=TrainConfig(n_states=cfg.hmm_states, n_mix=cfg.hmm_mix, n_iter=cfg.hmm_iters, tol=3e-4,
-                                         seed=cfg.seed))
+        utts = [
+            Utterance(
+                id=c.sentence_id,
+                samples=c.samples,
+                sample_rate_hz=c.sample_rate_hz,
+                params=mu.project(c.deform.astype(np.float64)),
+                phonemes=(),
+                voice="s1",
+                language="en",
+                source="grid",
+                speaker_group="s1",
+            )
+            for c in train
+        ]
+        hr = TrainRecipe(
+            hmm=TrainConfig(n_states=cfg.hmm_states, n_mix=cfg.hmm_mix, n_iter=cfg.hmm_iters, tol=3e-4, seed=cfg.seed)
+        )
         t0 = time.perf_counter()
-        hmm, _ = train_av_model(utts, hr, visual_names=tuple(f"umup{i + 1}" for i in range(mu.n_units)),
-                                metadata={"credit": GRID_CREDIT, "targets": "GRID s1 Utterance MUPs"},
-                                on_iteration=lambda it, obj, _m: say(f"  HMM EM {it}: {obj:.3f}"))
+        hmm, _ = train_av_model(
+            utts,
+            hr,
+            visual_names=tuple(f"umup{i + 1}" for i in range(mu.n_units)),
+            metadata={"credit": GRID_CREDIT, "targets": "GRID s1 Utterance MUPs"},
+            on_iteration=lambda it, obj, _m: say(f"  HMM EM {it}: {obj:.3f}"),
+        )
         say(f"HMM on UMUPs trained in {time.perf_counter() - t0:.0f} s")
         save_model(out / "hmm_mups.npz", hmm)
         systems["hmm"] = hmm
     # 6. Scores on train and test (every mapper's live-path estimates of the UMUPs).
     ests = {}
     for name, sysm in systems.items():
-        ests[name] = {split: (hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl))
-                      for split, cl in (("train", train), ("test", test))}
+        ests[name] = {
+            split: (hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl))
+            for split, cl in (("train", train), ("test", test))
+        }
         for split, cl in (("train", train), ("test", test)):
             report[split][name] = score_mups(cl, ests[name][split], mu, scale, readout).as_json()
-        say(f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}, "
-            f"test MSE {report['test'][name]['MSE']:.5f}")
+        say(
+            f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}, "
+            f"test MSE {report['test'][name]['MSE']:.5f}"
+        )
     # 7. Expressions (synthetic: the built-in head's ARKit recipes on the speaker's landmarks, see
     # training.mu_expressions), the Expression MUs, the second-stage mappers and the run-time checks.
     ests = {k: v for k, v in ests.items() if k in ("mlp", "hmm")}
     report["expressions"] = _expressions(clips, train, test, mu, scale, readout, ests, root, say)
-    report["test"]["true_mups"] = score_mups(test, [mu.project(c.deform.astype(np.float64)) for c in test], mu,
-                                             scale, readout).as_json()
+    report["test"]["true_mups"] = score_mups(
+        test, [mu.project(c.deform.astype(np.float64)) for c in test], mu, scale, readout
+    ).as_json()
     buf = io.BytesIO()
-    np.savez(buf, mean=mu.mean, units=mu.units, eigenvalues=mu.eigenvalues, landmarks=np.array(lower_face_indices()),
-             readout=readout[0], readout_bias=readout[1], scale=scale, format=np.array("facecast-motionunits"),
-             version=np.array(1))
+    np.savez(
+        buf,
+        mean=mu.mean,
+        units=mu.units,
+        eigenvalues=mu.eigenvalues,
+        landmarks=np.array(lower_face_indices()),
+        readout=readout[0],
+        readout_bias=readout[1],
+        scale=scale,
+        format=np.array("facecast-motionunits"),
+        version=np.array(1),
+    )
     atomic_write_bytes(out / "motion_units.npz", buf.getvalue())
     _plot_variance(var, var_lips, out / "variance.png", mu.n_units)
     atomic_write_bytes(out / "report.json", json.dumps(report, indent=1).encode())
@@ -193,8 +252,11 @@ def choose_closure_band(model: MlpSpeechModel, root, *, cache_dir=None) -> tuple
     scores = {}
     for band in BANDS:
         s, _ = evaluate_lips(replace(model, closure_band=band), clips)
-        scores[str(band)] = {"r_mouth_open": s.r["mouth_open"], "closure_rate": s.closure_rate,
-                             "truth_closure_rate": s.truth_closure_rate}
+        scores[str(band)] = {
+            "r_mouth_open": s.r["mouth_open"],
+            "closure_rate": s.closure_rate,
+            "truth_closure_rate": s.truth_closure_rate,
+        }
     r0 = scores["0.0"]["r_mouth_open"]
     ok = [b for b in BANDS if scores[str(b)]["r_mouth_open"] >= r0 - 1e-9] or [0.0]
     best = min(ok, key=lambda b: abs(scores[str(b)]["closure_rate"] - scores[str(b)]["truth_closure_rate"]))
@@ -202,10 +264,10 @@ def choose_closure_band(model: MlpSpeechModel, root, *, cache_dir=None) -> tuple
 
 
 def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> dict:
+    from assets.grid import read_words, sentences
     from assets.heads.builtin import load_builtin_head
     from assets.heads.landmarks import read_landmarks
     from realtime_core.expressions import EXPRESSIONS
-    from training.grid import read_words, sentences
     from training.motion_units import score
     from training.mu_expressions import (
         closure_rate,
@@ -219,8 +281,12 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
     )
 
     head = load_builtin_head()
-    mp = {k: int(v) for k, v in read_landmarks(
-        Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json").items()}
+    mp = {
+        k: int(v)
+        for k, v in read_landmarks(
+            Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json"
+        ).items()
+    }
     neutral = np.mean([c.neutral for c in train], axis=0)
     deltas = expression_deformations(neutral, lower_face_indices(), head, mp)
     # Keyframe sets and the eq. 4 round trip MUPs -> keyframes -> MUPs on the test frames.
@@ -237,12 +303,18 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
     round_trip = {}
     for name, keys in keyframe_sets(train, words_of, deltas, arkit).items():
         err = round_trip_error(keys, mu, c_test)
-        round_trip[name] = {"keyframes": len(keys.names), "max_error_of_range": float(err.max()),
-                            "mean_error_of_range": float(err.mean()), "per_mu": err.tolist()}
+        round_trip[name] = {
+            "keyframes": len(keys.names),
+            "max_error_of_range": float(err.max()),
+            "mean_error_of_range": float(err.mean()),
+            "per_mu": err.tolist(),
+        }
         say(f"keyframes {name} ({len(keys.names)}): round trip error max {100 * err.max():.2f}% of the MUP range")
-    out: dict = {"source": "synthetic: built-in head ARKit recipes carried onto the speaker's landmarks",
-                 "keyframe_round_trip": round_trip,
-                 "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS}}
+    out: dict = {
+        "source": "synthetic: built-in head ARKit recipes carried onto the speaker's landmarks",
+        "keyframe_round_trip": round_trip,
+        "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS},
+    }
     for e in EXPRESSIONS:
         tr_k, te_k = expressive(train, deltas[e]), expressive(test, deltas[e])
         ex = fit_units(mu, tr_k, e)
@@ -250,11 +322,16 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
         # (the paper: >= 98.13 %); and the PCA spectrum of the residuals around that mean.
         r = mu.residual(np.concatenate([c.deform for c in tr_k]).astype(np.float64))
         rec = ex.basis.reconstruct(ex.basis.project(r))
-        out[e] = {"emu_residual_energy_explained": float(1 - ((r - rec) ** 2).sum() / (r**2).sum()),
-                  "emu_residual_explained_2": float(ex.basis.explained()[1]), "train": {}, "test": {}}
+        out[e] = {
+            "emu_residual_energy_explained": float(1 - ((r - rec) ** 2).sum() / (r**2).sum()),
+            "emu_residual_explained_2": float(ex.basis.explained()[1]),
+            "train": {},
+            "test": {},
+        }
         for name, est in ests.items():
-            f = fit_second_stage(np.concatenate(est["train"]), mu, ex,
-                                 np.concatenate([c.deform for c in tr_k]).astype(np.float64))
+            f = fit_second_stage(
+                np.concatenate(est["train"]), mu, ex, np.concatenate([c.deform for c in tr_k]).astype(np.float64)
+            )
             for split, cl, e_list in (("train", tr_k, est["train"]), ("test", te_k, est["test"])):
                 d_hat = reconstruct(mu, ex, f(np.concatenate(e_list)))
                 td = np.concatenate([c.deform for c in cl]).astype(np.float64)
@@ -274,12 +351,16 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
         row = {}
         for label, tracks in (("neutral", neutral_p), ("smile", under_expression(neutral_p, "smile", 1.0))):
             ep = np.concatenate(tracks)
-            row[label] = {"closure_rate": closure_rate(tracks, windows, theta),
-                          "r_mouth_open": float(np.corrcoef(tp[:, 2], ep[:, 2])[0, 1]),
-                          "r_lip_stretch": float(np.corrcoef(tp[:, 1], ep[:, 1])[0, 1])}
+            row[label] = {
+                "closure_rate": closure_rate(tracks, windows, theta),
+                "r_mouth_open": float(np.corrcoef(tp[:, 2], ep[:, 2])[0, 1]),
+                "r_lip_stretch": float(np.corrcoef(tp[:, 1], ep[:, 1])[0, 1]),
+            }
         checks[name] = row
-        say(f"{name}: closure rate {row['neutral']['closure_rate']:.3f} -> {row['smile']['closure_rate']:.3f} "
-            f"under smile; r(mouth_open) {row['neutral']['r_mouth_open']:.3f} -> {row['smile']['r_mouth_open']:.3f}")
+        say(
+            f"{name}: closure rate {row['neutral']['closure_rate']:.3f} -> {row['smile']['closure_rate']:.3f} "
+            f"under smile; r(mouth_open) {row['neutral']['r_mouth_open']:.3f} -> {row['smile']['r_mouth_open']:.3f}"
+        )
     out["smile_checks"] = checks
     return out
 
@@ -294,8 +375,9 @@ def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) 
     e = [100 * r["explained"] for r in var]
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=120)
     ax.plot(k, e, "o-", label="lower face (lips, jaw, cheeks)")
-    ax.plot([r["units"] for r in var_lips], [100 * r["explained"] for r in var_lips], "s--", ms=3,
-            label="lip contours only")
+    ax.plot(
+        [r["units"] for r in var_lips], [100 * r["explained"] for r in var_lips], "s--", ms=3, label="lip contours only"
+    )
     ax.axhline(97, color="grey", ls="--", lw=1, label="97 %")
     ax.axvline(kept, color="C1", ls=":", lw=1, label=f"kept: {kept}")
     from matplotlib.ticker import MaxNLocator
@@ -322,8 +404,9 @@ def load_motion_units(path: Path) -> tuple[MotionUnits, tuple[np.ndarray, np.nda
     except (OSError, ValueError) as exc:
         raise FileProblem(path, f"cannot be read as a motion-units file ({exc})") from None
     if str(a.get("format")) != "facecast-motionunits" or int(a.get("version", -1)) != 1:
-        raise FileProblem(path, f"not a facecast-motionunits v1 file (format {a.get('format')!s}, "
-                                f"version {a.get('version')!s})")
+        raise FileProblem(
+            path, f"not a facecast-motionunits v1 file (format {a.get('format')!s}, version {a.get('version')!s})"
+        )
     mu = MotionUnits(mean=a["mean"], units=a["units"], eigenvalues=a["eigenvalues"])
     return mu, (a["readout"], a["readout_bias"]), a["scale"], tuple(int(i) for i in a["landmarks"])
 
@@ -338,8 +421,7 @@ def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> di
     if idx != lower_face_indices():
         raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's LOWER_FACE")
     mlp = load_mlp_model(out / "mlp_mapper.npz")
-    clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean,
-                          mlp.cmvn_var)
+    clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
     train, test = of_split(clips, "train"), of_split(clips, "test")
     report = json.loads((out / "report.json").read_text())
     systems: dict[str, object] = {"mlp": mlp.mapper()}

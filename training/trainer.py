@@ -51,17 +51,28 @@ class TrainRecipe:
     @property
     def frontend(self) -> FrontEndConfig:
         return FrontEndConfig(
-            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps), cmvn=self.cmvn, tc=self.tc,
+            mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps),
+            cmvn=self.cmvn,
+            tc=self.tc,
             energy=self.energy,
         )
 
     def as_json(self) -> dict:
         h = self.hmm
         return {
-            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "energy": self.energy,
-            "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
-            "n_iter": h.n_iter, "tol": h.tol, "covar_prior_weight": h.covar_prior_weight,
-            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed, "likelihood_scale": self.likelihood_scale,
+            "sample_rate_hz": self.sample_rate_hz,
+            "n_ceps": self.n_ceps,
+            "tc": self.tc,
+            "energy": self.energy,
+            "n_states": h.n_states,
+            "n_mix": h.n_mix,
+            "covariance_type": h.covariance_type,
+            "n_iter": h.n_iter,
+            "tol": h.tol,
+            "covar_prior_weight": h.covar_prior_weight,
+            "covar_prior_scale": h.covar_prior_scale,
+            "seed": h.seed,
+            "likelihood_scale": self.likelihood_scale,
         }
 
 
@@ -82,8 +93,9 @@ def utterance_audio(utt: Utterance, rate_hz: int) -> np.ndarray:
     return resample_audio(utt.samples, utt.sample_rate_hz, rate_hz)
 
 
-def joint_sequence(audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray,
-                   var: np.ndarray) -> np.ndarray:
+def joint_sequence(
+    audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray, var: np.ndarray
+) -> np.ndarray:
     """``(T, Da + 4)`` joint observations of one utterance: ``audio (n,)`` at the model rate and
     its ``params (n_frames, 4)`` (T trimmed to the shorter track)."""
     oa = extract_features(audio, frontend, cmvn_mean=mean, cmvn_var=var)
@@ -111,12 +123,23 @@ def train_av_model(
     mean, var = cmvn_statistics(audio, fe)
     seqs = [joint_sequence(x, u.params, fe, mean, var) for x, u in zip(audio, utterances)]
     hmm0 = start if start is not None else init_model(seqs, n_audio=fe.audio_dim, config=recipe.hmm)
-    meta = {"recipe": recipe.as_json(), "train_utterances": len(utterances),
-            "train_frames": int(sum(len(s) for s in seqs)), **(metadata or {})}
+    meta = {
+        "recipe": recipe.as_json(),
+        "train_utterances": len(utterances),
+        "train_frames": int(sum(len(s) for s in seqs)),
+        **(metadata or {}),
+    }
 
     def wrap(hmm: AvHmm, extra: dict) -> AvModel:
-        return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=visual_names,
-                       likelihood_scale=recipe.likelihood_scale, metadata={**meta, **extra})
+        return AvModel(
+            hmm=hmm,
+            frontend=fe,
+            cmvn_mean=mean,
+            cmvn_var=var,
+            visual_names=visual_names,
+            likelihood_scale=recipe.likelihood_scale,
+            metadata={**meta, **extra},
+        )
 
     def progress(it: int, objective: float, hmm: AvHmm) -> None:
         if on_iteration is not None:
@@ -155,5 +178,4 @@ def evaluate(model: AvModel, utterances: Sequence[Utterance], *, mode: str = "st
         tracks.append((u.id, u.params[:T], e[:T]))
     t, e = np.concatenate(truth), np.concatenate(est)
     r = pearson_per_param(t, e)
-    return Evaluation(eps=amse(t, e), rho=acc(t, e), r_per_param=dict(zip(VISUAL_PARAMS, map(float, r))),
-                      tracks=tracks)
+    return Evaluation(eps=amse(t, e), rho=acc(t, e), r_per_param=dict(zip(VISUAL_PARAMS, map(float, r))), tracks=tracks)

@@ -122,17 +122,26 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
     for i, _k in enumerate(names):
         ax.scatter(p[i, 0], p[i, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
         dx = 0.08 if p[i, 0] >= 0 else -0.08
-        ax.annotate(str(i), (p[i, 0], p[i, 1]), xytext=(p[i, 0] + dx, p[i, 1] + 0.05), fontsize=8, color="darkred",
-                    ha="left" if dx > 0 else "right")
+        ax.annotate(
+            str(i),
+            (p[i, 0], p[i, 1]),
+            xytext=(p[i, 0] + dx, p[i, 1] + 0.05),
+            fontsize=8,
+            color="darkred",
+            ha="left" if dx > 0 else "right",
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x (IOD), as a viewer sees the face: the face's left is on the right of the picture")
     ax.set_ylabel("y (IOD)")
     ax.set_title(title or "landmarks", fontsize=9)
     tx.set_axis_off()
     lines = [f"{i:2d}  {k}: {LANDMARK_HELP[k]}" for i, k in enumerate(names)]
-    lines += ["", "'left'/'right' are the face's own sides (a viewer sees the face's left on the right).",
-              "Values: a vertex index (file order) or [x, y, z] in the file's units.",
-              "Closed lips: upper_inner = lower_inner (the seam vertex); the mesh is cut there."]
+    lines += [
+        "",
+        "'left'/'right' are the face's own sides (a viewer sees the face's left on the right).",
+        "Values: a vertex index (file order) or [x, y, z] in the file's units.",
+        "Closed lips: upper_inner = lower_inner (the seam vertex); the mesh is cut there.",
+    ]
     tx.text(0, 1, "\n".join(lines), va="top", fontsize=8, family="monospace", wrap=True)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

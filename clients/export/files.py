@@ -18,9 +18,15 @@ FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
 
 
-def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
-                 audio: tuple[np.ndarray, int] | None = None, morphs: str = "units",
-                 arkit_targets: dict[str, np.ndarray] | None = None) -> list[Path]:
+def export_track(
+    path: str | Path,
+    track: Track,
+    *,
+    head: tuple | None = None,
+    audio: tuple[np.ndarray, int] | None = None,
+    morphs: str = "units",
+    arkit_targets: dict[str, np.ndarray] | None = None,
+) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
     audio: (samples (n,) float or int16, rate_hz) starting at the track's first frame, written as

@@ -21,14 +21,32 @@ from realtime_core.track import Track
 __all__ = ["animated_glb", "arkit_glb", "builtin_arkit_targets", "head_glb", "rig_targets"]
 
 
-def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.ndarray, target_names: tuple[str, ...],
-                 track: Track, uvs: np.ndarray | None = None, colors: np.ndarray | None = None,
-                 texture: bytes | None = None, audio: str | None = None) -> bytes:
+def animated_glb(
+    *,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    targets: np.ndarray,
+    target_names: tuple[str, ...],
+    track: Track,
+    uvs: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    texture: bytes | None = None,
+    audio: str | None = None,
+) -> bytes:
     """:func:`assets.heads.glb.animated_glb` with the track's values as the weights (ExportError on bad input)."""
     try:
-        return glb.animated_glb(vertices=vertices, triangles=triangles, targets=targets, target_names=target_names,
-                                weights=track.values, fps=track.fps, uvs=uvs, colors=colors, texture=texture,
-                                audio=audio)
+        return glb.animated_glb(
+            vertices=vertices,
+            triangles=triangles,
+            targets=targets,
+            target_names=target_names,
+            weights=track.values,
+            fps=track.fps,
+            uvs=uvs,
+            colors=colors,
+            texture=texture,
+            audio=audio,
+        )
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
 
@@ -62,9 +80,17 @@ def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str 
         raise ExportError(f"the head lacks ARKit blendshapes {missing[:5]}{'...' if len(missing) > 5 else ''}")
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"ARKit weights are computed from the mouth parameters {VISUAL_PARAMS}")
-    weights = Track(values=blendshape_weights(track.values, "arkit52"), fps=track.fps, start_s=track.start_s,
-                    names=ARKIT_NAMES)
-    return animated_glb(vertices=mesh.vertices, triangles=mesh.triangles,
-                        targets=np.stack([targets[n] for n in ARKIT_NAMES]), target_names=ARKIT_NAMES,
-                        track=weights, uvs=mesh.uvs, colors=mesh.colors,
-                        texture=mesh.texture if mesh.uvs is not None else None, audio=audio)
+    weights = Track(
+        values=blendshape_weights(track.values, "arkit52"), fps=track.fps, start_s=track.start_s, names=ARKIT_NAMES
+    )
+    return animated_glb(
+        vertices=mesh.vertices,
+        triangles=mesh.triangles,
+        targets=np.stack([targets[n] for n in ARKIT_NAMES]),
+        target_names=ARKIT_NAMES,
+        track=weights,
+        uvs=mesh.uvs,
+        colors=mesh.colors,
+        texture=mesh.texture if mesh.uvs is not None else None,
+        audio=audio,
+    )

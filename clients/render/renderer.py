@@ -134,8 +134,15 @@ class HeadRenderer:
     z (out of the face) and centre (3,), size (face height, mesh units) frame the camera.
     """
 
-    def __init__(self, mesh: HeadMesh, *, centre: np.ndarray, axes: np.ndarray, size: float,
-                 config: RenderConfig = RenderConfig()) -> None:
+    def __init__(
+        self,
+        mesh: HeadMesh,
+        *,
+        centre: np.ndarray,
+        axes: np.ndarray,
+        size: float,
+        config: RenderConfig = RenderConfig(),
+    ) -> None:
         try:
             import moderngl
         except ImportError as exc:
@@ -284,8 +291,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             if "eyeBlinkLeft" not in getattr(rig, "names", ()):
                 centre = centre + np.array([0.0, 0.6 * span, 0.0])
                 span *= 2.2
-            return HeadRenderer(mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3),
-                                size=1.1 * span, config=config)
+            return HeadRenderer(
+                mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3), size=1.1 * span, config=config
+            )
     axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))

@@ -79,8 +79,22 @@ def write_video(
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp{out.suffix or '.mp4'}")
     w, h = size
-    cmd = [exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}",
-           "-r", f"{config.fps}", "-i", "-"]
+    cmd = [
+        exe,
+        "-y",
+        "-loglevel",
+        "error",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{w}x{h}",
+        "-r",
+        f"{config.fps}",
+        "-i",
+        "-",
+    ]
     if audio is not None:
         cmd += ["-i", str(audio), "-c:a", "aac", "-b:a", "128k", "-shortest"]
     cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(config.crf), "-movflags", "+faststart", str(tmp)]

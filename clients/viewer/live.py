@@ -96,8 +96,9 @@ class AudioOut:
             # PortAudio's "high" latency: through ALSA's PulseAudio plugin "low" underran and then
             # stalled under load (silence while frames went on); the DAC time below accounts for
             # whatever latency the device has, so sync does not depend on it.
-            stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
-                                     latency="high")
+            stream = sd.OutputStream(
+                samplerate=self.rate, channels=1, dtype="float32", callback=self._callback, latency="high"
+            )
             stream.start()
             self.stream = stream
             self._clock_delta = stream.time - time.perf_counter()
@@ -127,7 +128,7 @@ class AudioOut:
             for start, block in self.blocks:
                 lo, hi = max(first, start), min(first + frames, start + len(block))
                 if hi > lo:
-                    out[lo - first:hi - first, 0] = block[lo - start:hi - start]
+                    out[lo - first : hi - first, 0] = block[lo - start : hi - start]
 
     def close(self) -> None:
         if self.stream is not None:
@@ -184,9 +185,16 @@ class _Receiver(threading.Thread):
             await asyncio.sleep(0.2)
 
 
-def run_window(cfg: ViewerStreamConfig, mesh: HeadMesh, *, config: RenderConfig = RenderConfig(margin=1.25),
-               buffer_s: float = 0.08, duration_s: float | None = None, screenshot=None,
-               status=print) -> LiveStats:
+def run_window(
+    cfg: ViewerStreamConfig,
+    mesh: HeadMesh,
+    *,
+    config: RenderConfig = RenderConfig(margin=1.25),
+    buffer_s: float = 0.08,
+    duration_s: float | None = None,
+    screenshot=None,
+    status=print,
+) -> LiveStats:
     """Open a window and show the session live until it is closed (or ``duration_s`` seconds after
     the first frame); ``screenshot``: PNG path for the last frame shown. ClientError without a display."""
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):

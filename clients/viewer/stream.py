@@ -98,7 +98,7 @@ class Recording:
             at = int(round((t - start_s) * rate))
             lo, hi = max(at, 0), min(at + len(block), n)
             if hi > lo:
-                out[lo:hi] = block[lo - at:hi - at]
+                out[lo:hi] = block[lo - at : hi - at]
         return out
 
 

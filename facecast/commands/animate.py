@@ -8,8 +8,8 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
-    from facecast.commands.speech_options import add_expression_options, add_mapper_options
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "animate",
@@ -38,8 +38,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
         "or ARKit's 52 blendshapes (built-in head)",
     )
-    p.add_argument("--model", type=Path, default=None,
-                   help="model file (.npz); default: the shipped HMM model (--mapper mlp: the shipped MLP mapper)")
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="model file (.npz); default: the shipped HMM model (--mapper mlp: the shipped MLP mapper)",
+    )
     add_mapper_options(p)
     add_expression_options(p)
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
@@ -51,10 +55,10 @@ def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
     from assets.modelfile import load_speech_model
     from assets.tracks import write_csv
+    from facecast.commands.speech_options import apply_expressions
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
     from realtime_core.track import Track
-    from facecast.commands.speech_options import apply_expressions
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:

@@ -29,8 +29,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, default=Path("facecast_demo.mp4"), help="MP4 to write")
     p.add_argument("--no-video", action="store_true", help="do not render the MP4")
-    p.add_argument("--once", action="store_true",
-                   help="exit after the MP4 instead of serving and replaying the speech until Ctrl-C")
+    p.add_argument(
+        "--once",
+        action="store_true",
+        help="exit after the MP4 instead of serving and replaying the speech until Ctrl-C",
+    )
     p.set_defaults(run=run)
 
 
@@ -45,16 +48,25 @@ def run(args: argparse.Namespace) -> int:
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
     npm = Path(__file__).resolve().parents[2] / "node_modules"  # three.js for the browser viewer (npm ci)
-    cfg = DemoConfig(host=args.host, port=args.port, mic=args.mic, mic_seconds=args.seconds,
-                     sentences=tuple(args.text) if args.text else SENTENCES, voice=args.voice,
-                     video=None if args.no_video else args.out, web_root=web if web.is_dir() else None,
-                     node_modules=npm if npm.is_dir() else None)
+    cfg = DemoConfig(
+        host=args.host,
+        port=args.port,
+        mic=args.mic,
+        mic_seconds=args.seconds,
+        sentences=tuple(args.text) if args.text else SENTENCES,
+        voice=args.voice,
+        video=None if args.no_video else args.out,
+        web_root=web if web.is_dir() else None,
+        node_modules=npm if npm.is_dir() else None,
+    )
     model = load_model(args.model)
     head = resolve_head(args.rig or "builtin")
     with threadpool_limits(1):
         result = asyncio.run(run_demo(cfg, model, head))
-    print(f"facecast demo: the viewer received {len(result.params)} frames "
-          f"({len(result.params) / 30:.1f} s) and {len(result.audio) / result.audio_rate_hz:.1f} s of audio")
+    print(
+        f"facecast demo: the viewer received {len(result.params)} frames "
+        f"({len(result.params) / 30:.1f} s) and {len(result.audio) / result.audio_rate_hz:.1f} s of audio"
+    )
     if cfg.video is not None and len(result.params):
         print(f"facecast demo: rendering {cfg.video} ...", flush=True)
         path = write_mp4(cfg.video, head, result.params, result.audio, result.audio_rate_hz)

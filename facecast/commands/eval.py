@@ -27,21 +27,32 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "the real phone timings).",
     )
     p.add_argument("--model", type=Path, default=None, help="model file (.npz); default: the shipped model")
-    p.add_argument("--synthetic", type=Path, default=None, help="held-out synthetic corpus folder "
-                   "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)")
+    p.add_argument(
+        "--synthetic",
+        type=Path,
+        default=None,
+        help="held-out synthetic corpus folder "
+        "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)",
+    )
     p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
     p.add_argument("--video-dir", type=Path, default=SHARED / "video" / "grid", help="other talkers' clips (GRID)")
     p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
     p.add_argument("--grid-split", choices=("test", "val"), default="test", help="GRID s1 split to score")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
-    p.add_argument("--output", type=Path, default=None,
-                   help="write the markdown here (e.g. docs/accuracy.md), plots beside it")
+    p.add_argument(
+        "--output", type=Path, default=None, help="write the markdown here (e.g. docs/accuracy.md), plots beside it"
+    )
     from facecast.commands.speech_options import add_mapper_options
 
     add_mapper_options(p)
-    p.add_argument("--mu", type=Path, default=None, metavar="DIR",
-                   help="instead: paper 002's numbers for the models `facecast mu -o DIR` wrote (HMM and MLP re-scored "
-                   "on the GRID s1 train and test sentences; expressions and keyframes from DIR/report.json)")
+    p.add_argument(
+        "--mu",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="instead: paper 002's numbers for the models `facecast mu -o DIR` wrote (HMM and MLP re-scored "
+        "on the GRID s1 train and test sentences; expressions and keyframes from DIR/report.json)",
+    )
     p.set_defaults(run=run)
 
 
@@ -79,9 +90,15 @@ def run(args: argparse.Namespace) -> int:
             "closure >= 90%": s.closure_rate >= 0.9,
             "nu(mouth_open) in 0.8..1.2": 0.8 <= s.nu["mouth_open"] <= 1.2,
         }
-        lips_md.append(lips_markdown(f"1. Real lips: GRID s1 held-out sentences ({args.grid_split} split)", s,
-                                     note=f"{len(clips)} sentences the model never trained on; truth = the lips "
-                                     "measured by `facecast extract`.", goals=goals))
+        lips_md.append(
+            lips_markdown(
+                f"1. Real lips: GRID s1 held-out sentences ({args.grid_split} split)",
+                s,
+                note=f"{len(clips)} sentences the model never trained on; truth = the lips "
+                "measured by `facecast extract`.",
+                goals=goals,
+            )
+        )
         if plot_dir is not None:
             png = plot_lips(items, s, plot_dir / f"{stem}_s1_{args.grid_split}.png", title=f"GRID s1 {args.grid_split}")
             lips_md.append(f"![s1 {args.grid_split}]({png.name})\n\n")
@@ -91,12 +108,19 @@ def run(args: argparse.Namespace) -> int:
         clips = other_talker_clips(args.video_dir, cache_dir=args.cache_dir)
         s, items = evaluate_lips(model, clips)
         summary["other"] = s
-        goals = {"r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
-                 "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20}
-        lips_md.append(lips_markdown("2. Real lips: other talkers (never used for any choice)", s,
-                                     note=f"{len(clips)} clips of talkers other than s1 from {args.video_dir.name}/ "
-                                     "(s1's bbaf2n left out); closures only where a word alignment exists.",
-                                     goals=goals))
+        goals = {
+            "r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
+            "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20,
+        }
+        lips_md.append(
+            lips_markdown(
+                "2. Real lips: other talkers (never used for any choice)",
+                s,
+                note=f"{len(clips)} clips of talkers other than s1 from {args.video_dir.name}/ "
+                "(s1's bbaf2n left out); closures only where a word alignment exists.",
+                goals=goals,
+            )
+        )
         if plot_dir is not None:
             png = plot_lips(items, s, plot_dir / f"{stem}_other_talkers.png", title="other talkers")
             lips_md.append(f"![other talkers]({png.name})\n\n")
@@ -108,11 +132,16 @@ def run(args: argparse.Namespace) -> int:
 
         s = score_real_speech(model, real_speech_clips(args.speech_dir))
         summary["speech"] = s
-        lips_md.append(lips_markdown(
-            "3. Other voices without video: real speech with phone alignments", s,
-            note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone timings "
-            "(their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the closures "
-            "are the aligned /p b m/ phones.", goals={"closure >= 90%": s.closure_rate >= 0.9}))
+        lips_md.append(
+            lips_markdown(
+                "3. Other voices without video: real speech with phone alignments",
+                s,
+                note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone timings "
+                "(their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the closures "
+                "are the aligned /p b m/ phones.",
+                goals={"closure >= 90%": s.closure_rate >= 0.9},
+            )
+        )
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         syn = args.synthetic
@@ -125,15 +154,26 @@ def run(args: argparse.Namespace) -> int:
                 BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS))
             )
         items = [(u.id, u.samples, u.sample_rate_hz, u.params) for u in load_corpus(syn)]
-        results.append(("4. Held-out synthetic voices (espeak variants never used in training; truth = the rules)",
-                        score_set(model, "synthetic", items)))
+        results.append(
+            (
+                "4. Held-out synthetic voices (espeak variants never used in training; truth = the rules)",
+                score_set(model, "synthetic", items),
+            )
+        )
     if args.speech_dir.is_dir():
-        results.append(("5. Real speech, truth from the articulatory rules on real phone timings (per clip)",
-                        score_set(model, "real", real_speech_items(args.speech_dir))))
+        results.append(
+            (
+                "5. Real speech, truth from the articulatory rules on real phone timings (per clip)",
+                score_set(model, "real", real_speech_items(args.speech_dir)),
+            )
+        )
     else:
         print(f"skipping real speech: {args.speech_dir} not found", file=sys.stderr)
-    command = "facecast eval" + (f" --model {args.model}" if args.model else "") + (
-        f" --grid-split {args.grid_split}" if args.grid_split != "test" else "")
+    command = (
+        "facecast eval"
+        + (f" --model {args.model}" if args.model else "")
+        + (f" --grid-split {args.grid_split}" if args.grid_split != "test" else "")
+    )
     rest = format_markdown(results, command)
     head, _, body = rest.partition("\n## ")
     text = head + "".join(lips_md) + ("## " + body if body else "")

@@ -31,10 +31,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "test. Writes OUT/mlp_mapper.npz (serve it with --mapper mlp), OUT/hmm_mups.npz, OUT/motion_units.npz, "
         "OUT/report.json and OUT/variance.png. GRID: Cooke, Barker, Cunningham, Shao 2006 (CC BY 4.0).",
     )
-    p.add_argument("--root", type=Path, default=None, help="GRID s1 folder (video/ + align/); default ../shared/data/video/grid_s1")
-    p.add_argument("--cache-dir", type=Path, default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
+    p.add_argument(
+        "--root", type=Path, default=None, help="GRID s1 folder (video/ + align/); default ../shared/data/video/grid_s1"
+    )
+    p.add_argument(
+        "--cache-dir", type=Path, default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)"
+    )
     p.add_argument("-o", "--out", type=Path, required=True, help="output folder")
-    p.add_argument("--units", type=int, default=None, help="Utterance MUs to keep (default: fewest reaching --variance)")
+    p.add_argument(
+        "--units", type=int, default=None, help="Utterance MUs to keep (default: fewest reaching --variance)"
+    )
     p.add_argument("--variance", type=float, default=0.97, help="variance the kept MUs must explain")
     p.add_argument("--classes", type=_ints, default=[4, 8, 16, 32, 44], help="candidate K (chosen on val)")
     p.add_argument("--hidden", type=int, default=20, help="hidden units per expert (the paper: 15-25)")
@@ -50,9 +56,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from training.mu_train import MuTrainConfig, train_and_score
 
-    cfg = MuTrainConfig(units=args.units, variance=args.variance, classes=tuple(args.classes), hidden=args.hidden,
-                        baseline_hidden=args.baseline_hidden, hmm_states=args.hmm_states, hmm_mix=args.hmm_mix,
-                        hmm_iters=args.hmm_iters, limit=args.limit, seed=args.seed)
+    cfg = MuTrainConfig(
+        units=args.units,
+        variance=args.variance,
+        classes=tuple(args.classes),
+        hidden=args.hidden,
+        baseline_hidden=args.baseline_hidden,
+        hmm_states=args.hmm_states,
+        hmm_mix=args.hmm_mix,
+        hmm_iters=args.hmm_iters,
+        limit=args.limit,
+        seed=args.seed,
+    )
     report = train_and_score(args.root, args.out, cfg, cache_dir=args.cache_dir, say=print)
     print(f"wrote {args.out}: K = {report['chosen_classes']}, test R mlp {report['test']['mlp']['R']:.3f}")
     return 0

@@ -71,20 +71,25 @@ def run(args: argparse.Namespace) -> int:
 
     async def main():
         session = await pick_session(args.url, args.session, args.wait, token)
-        cfg = ViewerStreamConfig(url=args.url, session=session, kind="params", token=token, wait_s=args.wait,
-                           max_s=args.duration)
+        cfg = ViewerStreamConfig(
+            url=args.url, session=session, kind="params", token=token, wait_s=args.wait, max_s=args.duration
+        )
         print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
         return session, await record_stream(cfg)
 
     session, rec = asyncio.run(main())
     served = rec.description.get("head")
     if head is not None and served is not None and served["vertex_count"] != len(head.mesh.vertices):
-        raise ClientError(f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
-                          f"{served['vertex_count']}: pass the server's head")
+        raise ClientError(
+            f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
+            f"{served['vertex_count']}: pass the server's head"
+        )
     params, first = rec.timeline()
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
     files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
-    print(f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
-          f"({track.duration_s:.2f} s) of {session!r}; session closed with {rec.close_code} {rec.close_reason}")
+    print(
+        f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
+        f"({track.duration_s:.2f} s) of {session!r}; session closed with {rec.close_code} {rec.close_reason}"
+    )
     return 0

@@ -7,8 +7,8 @@ import argparse
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
-    from facecast.commands.speech_options import add_expression_options, add_mapper_options
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "render",

@@ -9,15 +9,24 @@ import numpy as np
 
 
 def add_mapper_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--mapper", choices=("hmm", "mlp"), default="hmm",
-                   help="audio-to-visual mapper: the HMM inverter (paper 000) or the GMM-selected MLP bank "
-                   "(paper 002; --model is then a mapper file written by `facecast mu`, default the shipped one)")
+    p.add_argument(
+        "--mapper",
+        choices=("hmm", "mlp"),
+        default="hmm",
+        help="audio-to-visual mapper: the HMM inverter (paper 000) or the GMM-selected MLP bank "
+        "(paper 002; --model is then a mapper file written by `facecast mu`, default the shipped one)",
+    )
 
 
 def add_expression_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--expression", action="append", default=[], metavar="NAME[:INTENSITY][@SECONDS]",
-                   help="expression from a media time on, e.g. smile:0.7@1.2 (smile, sad, surprise, anger, neutral; "
-                   "intensity 0..1, default 1; time default 0); repeat for changes over time")
+    p.add_argument(
+        "--expression",
+        action="append",
+        default=[],
+        metavar="NAME[:INTENSITY][@SECONDS]",
+        help="expression from a media time on, e.g. smile:0.7@1.2 (smile, sad, surprise, anger, neutral; "
+        "intensity 0..1, default 1; time default 0); repeat for changes over time",
+    )
     p.add_argument("--expression-ease", type=float, default=0.3, help="seconds an expression takes to ease in/out")
 
 

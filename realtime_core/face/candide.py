@@ -112,10 +112,18 @@ def parse_wfm(text: str, *, name: str = "candide3") -> FaceModel:
 
 
 CANDIDE3_LANDMARKS: dict[str, int] = {
-    "upper_lip": 7, "lower_lip": 8, "upper_inner": 87, "lower_inner": 40,
-    "corner_left": 31, "corner_right": 64,
-    "eye_outer_left": 20, "eye_inner_left": 23, "eye_outer_right": 53, "eye_inner_right": 56,
-    "nose_tip": 5, "chin": 10,
+    "upper_lip": 7,
+    "lower_lip": 8,
+    "upper_inner": 87,
+    "lower_inner": 40,
+    "corner_left": 31,
+    "corner_right": 64,
+    "eye_outer_left": 20,
+    "eye_inner_left": 23,
+    "eye_outer_right": 53,
+    "eye_inner_right": 56,
+    "nose_tip": 5,
+    "chin": 10,
 }
 """Named landmark vertices of Candide-3 (both shipped variants share the vertex list)."""
 

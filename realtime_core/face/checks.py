@@ -118,10 +118,12 @@ class RigReport:
 
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
-        return (f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
-                f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
-                f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
-                + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")"))
+        return (
+            f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
+            f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
+            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
+            + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
+        )
 
 
 def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -184,6 +186,13 @@ def check_rig(
         fails.append(f"lips {closure_gap:.4f} IOD apart at closure")
     if ahead is not None and ahead > limits.max_teeth_ahead:
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
-    return RigReport(flipped_triangles=flipped, worst_flip_pose=worst, max_edge_stretch=stretch,
-                     lip_interpenetration_iod=inter, closure_gap_iod=closure_gap, teeth_ahead_iod=ahead,
-                     passed=not fails, failures=tuple(fails))
+    return RigReport(
+        flipped_triangles=flipped,
+        worst_flip_pose=worst,
+        max_edge_stretch=stretch,
+        lip_interpenetration_iod=inter,
+        closure_gap_iod=closure_gap,
+        teeth_ahead_iod=ahead,
+        passed=not fails,
+        failures=tuple(fails),
+    )

@@ -214,9 +214,7 @@ def interpolation_weights(
         rows.append(np.repeat(out, k)[keep.reshape(-1)])
         cols.append(nn.reshape(-1)[keep.reshape(-1)])
         vals.append(w.reshape(-1)[keep.reshape(-1)])
-    g_mat = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_h, n_s)
-    )
+    g_mat = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_h, n_s))
     g_mat.sum_duplicates()
     return Interpolation(weights=g_mat, inside=inside)
 

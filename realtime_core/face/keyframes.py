@@ -112,8 +112,9 @@ class KeyframeMap:
         return float(np.linalg.norm(fit - s) / max(float(np.linalg.norm(s)), 1e-300))
 
 
-def _box_qp(g: np.ndarray, f: np.ndarray, lo: float, hi: float, start: np.ndarray, iterations: int,
-            tol: float) -> np.ndarray:
+def _box_qp(
+    g: np.ndarray, f: np.ndarray, lo: float, hi: float, start: np.ndarray, iterations: int, tol: float
+) -> np.ndarray:
     """min 1/2 b^T g b - f^T b subject to lo <= b <= hi (g positive definite, small P).
 
     Active set in the manner of Lawson-Hanson/BVLS: variables at a bound whose gradient points

@@ -311,4 +311,3 @@ def mfcc(samples: np.ndarray, config: MfccConfig) -> np.ndarray:
     stream = MfccStream(config)
     head = stream.push(x)
     return np.concatenate([head, stream.flush()])
-

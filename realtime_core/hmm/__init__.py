@@ -1,9 +1,9 @@
 """The audio-visual HMM: kernels, Gaussian-mixture model, Baum-Welch (paper Sec. 4.1).
 
-    kernels   log-space forward/backward, expected transitions, Viterbi
-    model     AvHmm (joint audio-visual Gaussian mixtures per state), component log-likelihoods
-    train     k-means initialisation, Baum-Welch with covariance priors (TrainConfig, fit)
-    sampling  random well-posed models and sequences (tests and benchmarks)
+kernels   log-space forward/backward, expected transitions, Viterbi
+model     AvHmm (joint audio-visual Gaussian mixtures per state), component log-likelihoods
+train     k-means initialisation, Baum-Welch with covariance priors (TrainConfig, fit)
+sampling  random well-posed models and sequences (tests and benchmarks)
 """
 
 from realtime_core.hmm.kernels import expected_transitions, forward_backward, log_backward, log_forward, viterbi

@@ -311,9 +311,7 @@ def _m_step(
     )
 
 
-def em_iteration(
-    sequences: Sequence[np.ndarray], model: AvHmm, *, config: TrainConfig
-) -> tuple[AvHmm, float]:
+def em_iteration(sequences: Sequence[np.ndarray], model: AvHmm, *, config: TrainConfig) -> tuple[AvHmm, float]:
     """One E-step and M-step. Returns ``(updated model, objective per frame at model)``."""
     x, lengths = _check_sequences(sequences)
     psi = _prior_psi(x, config)

@@ -114,8 +114,14 @@ class StreamingInverter:
     (:class:`realtime_core.output.OutputStage`: closed-pose floor and closure band), applied to
     every emitted frame; None = raw eq. 7 estimates."""
 
-    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig(),
-                 plan: StreamPlan | None = None, output: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        form: ConditionalForm,
+        *,
+        config: StreamConfig = StreamConfig(),
+        plan: StreamPlan | None = None,
+        output: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         self.form = form
         self._output = output
         self.config = config

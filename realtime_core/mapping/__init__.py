@@ -1,8 +1,8 @@
 """Audio-to-visual mappers behind one streaming interface (:class:`VisualMapper`).
 
-    interface  the VisualMapper / SpeechModel protocols the HMM inverter and the MLP mapper share
-    mlp        paper 002 Sec. VI-A: a Gaussian-mixture classifier picks one of K small MLPs
-    model      the MLP speech model and its versioned ``.npz`` format
+interface  the VisualMapper / SpeechModel protocols the HMM inverter and the MLP mapper share
+mlp        paper 002 Sec. VI-A: a Gaussian-mixture classifier picks one of K small MLPs
+model      the MLP speech model and its versioned ``.npz`` format
 """
 
 from realtime_core.mapping.interface import MAPPER_KINDS, SpeechModel, VisualMapper
@@ -16,6 +16,15 @@ from realtime_core.mapping.model import (
 )
 
 __all__ = [
-    "MAPPER_KINDS", "MlpBank", "MlpMapper", "MlpSpeechModel", "SpeechModel", "StreamingMlpMapper", "VisualMapper",
-    "decode_mlp_model", "decode_speech_model", "encode_mlp_model", "encode_speech_model",
+    "MAPPER_KINDS",
+    "MlpBank",
+    "MlpMapper",
+    "MlpSpeechModel",
+    "SpeechModel",
+    "StreamingMlpMapper",
+    "VisualMapper",
+    "decode_mlp_model",
+    "decode_speech_model",
+    "encode_mlp_model",
+    "encode_speech_model",
 ]

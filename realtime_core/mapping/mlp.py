@@ -69,14 +69,18 @@ class MlpBank:
     readout_bias: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        f64 = lambda a: np.asarray(a, dtype=np.float64)
+        def f64(a):
+            return np.asarray(a, dtype=np.float64)
         lw, mu, var = f64(self.gmm_log_weights), f64(self.gmm_means), f64(self.gmm_vars)
         w1, b1, w2, b2 = f64(self.w1), f64(self.b1), f64(self.w2), f64(self.b2)
         k = lw.shape[0] if lw.ndim == 1 else -1
         lo, hi = (int(v) for v in self.class_slice)
         checks = [
             (lw.ndim == 1 and k >= 1, f"gmm_log_weights must be (K,), got {lw.shape}"),
-            (mu.shape == (k, hi - lo) and var.shape == mu.shape, f"gmm means/vars must be ({k}, {hi - lo}), got {mu.shape}, {var.shape}"),
+            (
+                mu.shape == (k, hi - lo) and var.shape == mu.shape,
+                f"gmm means/vars must be ({k}, {hi - lo}), got {mu.shape}, {var.shape}",
+            ),
             (w1.ndim == 3 and w1.shape[0] == k, f"w1 must be ({k}, H, Da), got {w1.shape}"),
         ]
         for ok, msg in checks:
@@ -100,7 +104,9 @@ class MlpBank:
         if self.readout is not None:
             r, rb = f64(self.readout), f64(self.readout_bias)
             if r.ndim != 2 or r.shape[1] != dout or rb.shape != (r.shape[0],):
-                raise ModelFormatError(f"MLP bank: readout must be (Dv, {dout}) with bias (Dv,), got {r.shape}, {rb.shape}")
+                raise ModelFormatError(
+                    f"MLP bank: readout must be (Dv, {dout}) with bias (Dv,), got {r.shape}, {rb.shape}"
+                )
             arrays.update(readout=r, readout_bias=rb)
         for name, arr in arrays.items():
             if not np.isfinite(arr).all():
@@ -145,7 +151,8 @@ class _Plan:
         prec = 1.0 / bank.gmm_vars
         const = bank.gmm_log_weights - 0.5 * (np.log(2 * np.pi * bank.gmm_vars) + bank.gmm_means**2 * prec).sum(axis=1)
         score = np.vstack([-0.5 * prec.T, (bank.gmm_means * prec).T, const[None, :]])
-        cast = lambda a: np.ascontiguousarray(a, dtype=dt)
+        def cast(a):
+            return np.ascontiguousarray(a, dtype=dt)
         if bank.readout is None:
             w2o, b2o = bank.w2, bank.b2
         else:  # R (W2 h + b2) + r0 = (R W2) h + (R b2 + r0): one product fewer per frame
@@ -176,7 +183,7 @@ class MlpMapper:
         return x.astype(self.dtype, copy=False)
 
     def _classify(self, x: np.ndarray) -> np.ndarray:
-        c = x[:, self._lo:self._hi]
+        c = x[:, self._lo : self._hi]
         feats = np.hstack([c * c, c, np.ones((len(x), 1), dtype=self.dtype)])
         return np.argmax(feats @ self.plan.score, axis=1)
 

@@ -93,12 +93,22 @@ class MlpSpeechModel:
 def encode_mlp_model(model: MlpSpeechModel) -> bytes:
     """Serialise to ``.npz`` bytes (no pickle)."""
     b = model.bank
-    config = {"frontend": frontend_to_json(model.frontend), "visual_names": list(model.visual_names),
-              "activation": b.activation, "class_slice": list(b.class_slice), "readout": b.readout is not None,
-              "closure_band": model.closure_band, "metadata": model.metadata}
-    arrays = {"format": np.array(FORMAT), "version": np.array(VERSION),
-              "config_json": np.array(json.dumps(config, sort_keys=True)),
-              "cmvn_mean": model.cmvn_mean, "cmvn_var": model.cmvn_var}
+    config = {
+        "frontend": frontend_to_json(model.frontend),
+        "visual_names": list(model.visual_names),
+        "activation": b.activation,
+        "class_slice": list(b.class_slice),
+        "readout": b.readout is not None,
+        "closure_band": model.closure_band,
+        "metadata": model.metadata,
+    }
+    arrays = {
+        "format": np.array(FORMAT),
+        "version": np.array(VERSION),
+        "config_json": np.array(json.dumps(config, sort_keys=True)),
+        "cmvn_mean": model.cmvn_mean,
+        "cmvn_var": model.cmvn_var,
+    }
     for name in _BANK_ARRAYS:
         arrays[name] = getattr(b, name)
     if b.readout is not None:
@@ -129,14 +139,22 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
     try:
         config = json.loads(str(arrays["config_json"]))
         has_readout = bool(config["readout"])
-        bank = MlpBank(**{k: arrays[k] for k in _BANK_ARRAYS}, activation=config["activation"],
-                       class_slice=tuple(config["class_slice"]),
-                       readout=arrays.get("readout") if has_readout else None,
-                       readout_bias=arrays.get("readout_bias") if has_readout else None)
-        return MlpSpeechModel(bank=bank, frontend=frontend_from_json(config["frontend"]),
-                              cmvn_mean=arrays["cmvn_mean"], cmvn_var=arrays["cmvn_var"],
-                              visual_names=tuple(config["visual_names"]), metadata=config.get("metadata", {}),
-                              closure_band=float(config.get("closure_band", 0.0)))
+        bank = MlpBank(
+            **{k: arrays[k] for k in _BANK_ARRAYS},
+            activation=config["activation"],
+            class_slice=tuple(config["class_slice"]),
+            readout=arrays.get("readout") if has_readout else None,
+            readout_bias=arrays.get("readout_bias") if has_readout else None,
+        )
+        return MlpSpeechModel(
+            bank=bank,
+            frontend=frontend_from_json(config["frontend"]),
+            cmvn_mean=arrays["cmvn_mean"],
+            cmvn_var=arrays["cmvn_var"],
+            visual_names=tuple(config["visual_names"]),
+            metadata=config.get("metadata", {}),
+            closure_band=float(config.get("closure_band", 0.0)),
+        )
     except ModelFormatError:
         raise
     except (KeyError, TypeError, ValueError, FacecastError) as exc:

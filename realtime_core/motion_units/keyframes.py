@@ -72,7 +72,7 @@ class KeyframeSet:
         a = np.vstack([self.shapes, np.sqrt(self._lam) * np.eye(p)])  # type: ignore[attr-defined]
         flat = x.reshape(-1, x.shape[-1])
         out = np.array([nnls(a, np.concatenate([row, np.zeros(p)]))[0] for row in flat])
-        return out.reshape(x.shape[:-1] + (p,))
+        return out.reshape((*x.shape[:-1], p))
 
     def deformation(self, b: np.ndarray) -> np.ndarray:
         """Keyframe weights ``(..., P)`` -> deformation ``(..., D)`` (eq. 3's ``K b``)."""
@@ -82,15 +82,27 @@ class KeyframeSet:
         return b @ self.shapes.T
 
 
-def mups_to_keyframes(keys: KeyframeSet, utterance: MotionUnits, umup: np.ndarray,
-                      expression: ExpressionUnits | None = None, emup: np.ndarray | None = None,
-                      alpha: float = 1.0, *, nonnegative: bool = False) -> np.ndarray:
+def mups_to_keyframes(
+    keys: KeyframeSet,
+    utterance: MotionUnits,
+    umup: np.ndarray,
+    expression: ExpressionUnits | None = None,
+    emup: np.ndarray | None = None,
+    alpha: float = 1.0,
+    *,
+    nonnegative: bool = False,
+) -> np.ndarray:
     """Eq. 4 (third line): MUPs -> keyframe weights ``(..., P)``."""
     return keys.weights(compose(utterance, umup, expression, emup, alpha), nonnegative=nonnegative)
 
 
-def keyframes_to_mups(keys: KeyframeSet, utterance: MotionUnits, b: np.ndarray,
-                      expression: ExpressionUnits | None = None, alpha: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def keyframes_to_mups(
+    keys: KeyframeSet,
+    utterance: MotionUnits,
+    b: np.ndarray,
+    expression: ExpressionUnits | None = None,
+    alpha: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 4 (first two lines): keyframe weights ``(..., P)`` -> (UMUPs, EMUPs)."""
     return analyse(utterance, expression, keys.deformation(b), alpha)
 

@@ -101,8 +101,9 @@ class MotionUnits:
         return MotionUnits(mean=self.mean, units=self.units[:n_units], eigenvalues=self.eigenvalues)
 
 
-def fit_motion_units(d: np.ndarray, *, n_units: int | None = None, min_variance: float = 0.97,
-                     max_units: int = 64) -> MotionUnits:
+def fit_motion_units(
+    d: np.ndarray, *, n_units: int | None = None, min_variance: float = 0.97, max_units: int = 64
+) -> MotionUnits:
     """PCA of deformations ``d (N, D)``: the mean and the leading covariance eigenvectors.
 
     n_units: how many to keep; None = the fewest whose cumulative variance reaches ``min_variance``
@@ -127,7 +128,9 @@ def fit_motion_units(d: np.ndarray, *, n_units: int | None = None, min_variance:
         cum = np.cumsum(w) / w.sum() if w.sum() > 0 else np.ones_like(w)
         n_units = int(min(np.searchsorted(cum, min_variance - 1e-12) + 1, max_units, k))
     if not 0 <= n_units <= k:
-        raise ConfigError(f"n_units must be in 0..{k} for {x.shape[0]} samples of dimension {x.shape[1]}, got {n_units}")
+        raise ConfigError(
+            f"n_units must be in 0..{k} for {x.shape[0]} samples of dimension {x.shape[1]}, got {n_units}"
+        )
     units = v[:, :n_units].T.copy()
     # Fix each eigenvector's sign: its largest-magnitude component is positive.
     flip = np.sign(units[np.arange(n_units), np.abs(units).argmax(axis=1)])
@@ -151,25 +154,31 @@ def fit_expression_units(utterance: MotionUnits, d_k: np.ndarray, *, name: str, 
     return ExpressionUnits(name=name, basis=fit_motion_units(utterance.residual(d_k), n_units=n_units))
 
 
-def analyse(utterance: MotionUnits, expression: ExpressionUnits | None, d: np.ndarray,
-            alpha: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def analyse(
+    utterance: MotionUnits, expression: ExpressionUnits | None, d: np.ndarray, alpha: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Deformations ``(..., D)`` -> ``(UMUPs (..., A_0), EMUPs (..., A_k))`` (eq. 4's projections; no
     expression or ``alpha == 0``: EMUPs are empty / zero)."""
     c0 = utterance.project(d)
     if expression is None:
-        return c0, np.zeros(c0.shape[:-1] + (0,))
+        return c0, np.zeros((*c0.shape[:-1], 0))
     if alpha == 0:
-        return c0, np.zeros(c0.shape[:-1] + (expression.basis.n_units,))
+        return c0, np.zeros((*c0.shape[:-1], expression.basis.n_units))
     r = np.asarray(d, dtype=np.float64) - utterance.reconstruct(c0)
     return c0, expression.basis.project(r / alpha)
 
 
-def compose(utterance: MotionUnits, umup: np.ndarray, expression: ExpressionUnits | None = None,
-            emup: np.ndarray | None = None, alpha: float | np.ndarray = 1.0) -> np.ndarray:
+def compose(
+    utterance: MotionUnits,
+    umup: np.ndarray,
+    expression: ExpressionUnits | None = None,
+    emup: np.ndarray | None = None,
+    alpha: float | np.ndarray = 1.0,
+) -> np.ndarray:
     """Eq. 2: ``d = m_00 + M_0 c_0 + alpha (m_k0 + M_k c_k)`` -> ``(..., D)``; alpha scalar or ``(...,)``."""
     d = utterance.reconstruct(umup)
     if expression is None:
         return d
-    c = np.zeros(np.shape(umup)[:-1] + (expression.basis.n_units,)) if emup is None else emup
+    c = np.zeros((*np.shape(umup)[:-1], expression.basis.n_units)) if emup is None else emup
     a = np.asarray(alpha, dtype=np.float64)
     return d + a[..., None] * expression.basis.reconstruct(c)

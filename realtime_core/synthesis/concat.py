@@ -41,8 +41,14 @@ from realtime_core.synthesis.corpus import FPS, MotionCorpus, sample_motion
 from realtime_core.synthesis.search import crossfade
 
 
-def warp_sources(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray,
-                 times_s: np.ndarray, anchored: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def warp_sources(
+    corpus: MotionCorpus,
+    states: np.ndarray,
+    starts_s: np.ndarray,
+    ends_s: np.ndarray,
+    times_s: np.ndarray,
+    anchored: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For output instants ``times_s`` (n,): (target phone index (n,), tau in [0, 1] (n,), source
     time (n,) on the clock of the selected phone's sentence).
 
@@ -62,9 +68,17 @@ def warp_sources(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray,
     return m, tau, src
 
 
-def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray, *,
-                parent: np.ndarray, n_frames: int | None = None, fps: float = FPS,
-                anchored: np.ndarray | None = None) -> np.ndarray:
+def concatenate(
+    corpus: MotionCorpus,
+    states: np.ndarray,
+    starts_s: np.ndarray,
+    ends_s: np.ndarray,
+    *,
+    parent: np.ndarray,
+    n_frames: int | None = None,
+    fps: float = FPS,
+    anchored: np.ndarray | None = None,
+) -> np.ndarray:
     """Motion of the selected units warped onto the target phones and smoothed at the junctions.
 
     states: (T,) corpus phone per target phone; starts_s, ends_s: (T,) target phone boundaries in

@@ -84,8 +84,13 @@ class Pca:
 
     def truncated(self, k: int) -> Pca:
         """The first ``k`` components."""
-        return Pca(mean=self.mean, components=self.components[:k], variances=self.variances[:k],
-                   total_variance=self.total_variance, iterations=self.iterations)
+        return Pca(
+            mean=self.mean,
+            components=self.components[:k],
+            variances=self.variances[:k],
+            total_variance=self.total_variance,
+            iterations=self.iterations,
+        )
 
 
 def _check(y: np.ndarray) -> np.ndarray:

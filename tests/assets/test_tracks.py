@@ -30,12 +30,15 @@ def _track(n: int = 90, seed: int = 0) -> Track:
     """n frames of plausible mouth motion (IOD): a syllable-rate open/close with small other units."""
     rng = np.random.default_rng(seed)
     k = np.arange(n)
-    p = np.stack([
-        0.04 * np.sin(k / 7.0),
-        0.10 * np.sin(k / 11.0 + 1),
-        0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
-        0.03 * np.cos(k / 5.0),
-    ], axis=1)
+    p = np.stack(
+        [
+            0.04 * np.sin(k / 7.0),
+            0.10 * np.sin(k / 11.0 + 1),
+            0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
+            0.03 * np.cos(k / 5.0),
+        ],
+        axis=1,
+    )
     return Track(values=p.astype(np.float32))
 
 
@@ -54,8 +57,11 @@ finite32 = st.floats(-1e6, 1e6, width=32, allow_subnormal=False)
 
 
 @settings(max_examples=50, deadline=None, derandomize=True)
-@given(v=arrays(np.float32, st.tuples(st.integers(0, 40), st.integers(1, 5)), elements=finite32),
-       fps=st.sampled_from([24.0, 25.0, 30.0, 59.94, 100.0]), start_frames=st.integers(0, 10_000))
+@given(
+    v=arrays(np.float32, st.tuples(st.integers(0, 40), st.integers(1, 5)), elements=finite32),
+    fps=st.sampled_from([24.0, 25.0, 30.0, 59.94, 100.0]),
+    start_frames=st.integers(0, 10_000),
+)
 def test_csv_round_trip_is_bit_exact_for_any_float32_values(v, fps, start_frames):
     """9 significant digits: every float32 value comes back bit-identical (any fps, any start)."""
     names = tuple(f"c{j}" for j in range(v.shape[1]))

@@ -37,9 +37,11 @@ def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, c
     err = capsys.readouterr().err
     assert "bad_landmarks.json: missing landmarks" in err
     box = tmp_path / "box.obj"  # not a face: automatic landmarks find none
-    box.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
-                   "f 1 2 3\nf 1 3 4\nf 5 7 6\nf 5 8 7\nf 1 5 6\nf 1 6 2\nf 2 6 7\nf 2 7 3\nf 3 7 8\nf 3 8 4\n"
-                   "f 4 8 5\nf 4 5 1\n")
+    box.write_text(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+        "f 1 2 3\nf 1 3 4\nf 5 7 6\nf 5 8 7\nf 1 5 6\nf 1 6 2\nf 2 6 7\nf 2 7 3\nf 3 7 8\nf 3 8 4\n"
+        "f 4 8 5\nf 4 5 1\n"
+    )
     assert main(["rig", str(box), "-o", str(tmp_path / "y.npz")]) == 2
     err = capsys.readouterr().err
     assert "box.obj: no face-like region" in err and "--landmarks" in err and not (tmp_path / "y.npz").exists()

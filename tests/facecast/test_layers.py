@@ -35,8 +35,9 @@ def _lint_imports(cwd: Path, config: Path) -> subprocess.CompletedProcess[str]:
     )
     # The fake tree must shadow the real (editable-installed) packages: put it first on the path.
     env = {"PYTHONPATH": str(cwd), "PATH": str(Path(sys.executable).parent), "HOME": str(cwd)}
-    return subprocess.run([exe, "--config", str(config), "--no-cache"], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=300)
+    return subprocess.run(
+        [exe, "--config", str(config), "--no-cache"], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
+    )
 
 
 def test_the_tree_keeps_the_layer_contract():
@@ -70,21 +71,31 @@ def test_a_layer_violation_breaks_the_contract(tmp_path, importer, imported, bro
     for pkg in PACKAGES:
         (tmp_path / pkg).mkdir()
         (tmp_path / pkg / "__init__.py").write_text("")
-    for name in ("realtime_core/core.py", "wire/protocol.py", "server/app.py", "training/corpus.py",
-                 "facecast/cli.py", "clients/view.py"):
+    for name in (
+        "realtime_core/core.py",
+        "wire/protocol.py",
+        "server/app.py",
+        "training/corpus.py",
+        "facecast/cli.py",
+        "clients/view.py",
+    ):
         (tmp_path / name).write_text("")
     (tmp_path / importer).write_text(f"import {imported}\n")
     contract = _contract()
     layers = ",\n".join(f'    "{layer}"' for layer in contract["contracts"][0]["layers"])
     config = tmp_path / "contract.toml"
-    config.write_text(textwrap.dedent(f"""\
+    config.write_text(
+        textwrap.dedent(f"""\
         [tool.importlinter]
         root_packages = {list(PACKAGES)!r}
         [[tool.importlinter.contracts]]
         name = "layers"
         type = "layers"
         layers = [
-        """) + layers + "\n]\n")
+        """)
+        + layers
+        + "\n]\n"
+    )
     r = _lint_imports(tmp_path, config)
     if broken:
         assert r.returncode != 0 and "BROKEN" in r.stdout, r.stdout + r.stderr

@@ -32,9 +32,18 @@ def tiny_config(out_dir: Path, root: Path):
     block and condition, about 20 renders at the real 640x480."""
     from perceptual.stimuli import BuildConfig
 
-    return BuildConfig(out_dir=out_dir, grid_root=root, snrs_db=(-5.0, -10.0), cv_snrs_db=(-5.0, -10.0),
-                       sentences_per_cell=1, cv_languages=("es",), cv_syllables=("pa", "ba", "ma", "ta"),
-                       emotion_sentences=1, mos_sentences=1, progress=False)
+    return BuildConfig(
+        out_dir=out_dir,
+        grid_root=root,
+        snrs_db=(-5.0, -10.0),
+        cv_snrs_db=(-5.0, -10.0),
+        sentences_per_cell=1,
+        cv_languages=("es",),
+        cv_syllables=("pa", "ba", "ma", "ta"),
+        emotion_sentences=1,
+        mos_sentences=1,
+        progress=False,
+    )
 
 
 def policy(kind: str, condition: str, truth: dict) -> dict:
@@ -55,7 +64,8 @@ def policy(kind: str, condition: str, truth: dict) -> dict:
     if kind == "emotion":
         return {"emotion": {"neutral": "neutral", "smile": "happy", "sad": "not sure"}[condition]}
     return {"N": {"accuracy": 5, "naturalness": 4}, "S": {"accuracy": 3, "naturalness": 2}}.get(
-        condition, {"accuracy": 3, "naturalness": 3})
+        condition, {"accuracy": 3, "naturalness": 3}
+    )
 
 
 def http(method: str, url: str, body: dict | None = None) -> tuple[int, dict]:
@@ -78,8 +88,25 @@ class ServerProcess:
 
     def __init__(self, stimuli: Path, db: Path, key: str = "k") -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "facecast", "perceptual", "serve", str(stimuli), "--db", str(db), "--port", "0",
-             "--results-key", key], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "perceptual",
+                "serve",
+                str(stimuli),
+                "--db",
+                str(db),
+                "--port",
+                "0",
+                "--results-key",
+                key,
+            ],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         self.url = None
         deadline = time.monotonic() + 60
         lines = []
@@ -117,8 +144,13 @@ def answer_all(url: str, participant: str, token: str, index: dict[str, dict], *
     assert status == 200, s
     for t in s["trials"][start:]:
         st = index[t["media"]]
-        body = {"participant": participant, "token": token, "trial": t["index"], "media": t["media"],
-                "response": policy(st["kind"], st["condition"], st["truth"])}
+        body = {
+            "participant": participant,
+            "token": token,
+            "trial": t["index"],
+            "media": t["media"],
+            "response": policy(st["kind"], st["condition"], st["truth"]),
+        }
         status, r = http("POST", f"{url}/api/answers", body)
         assert status == 200 and r["status"] in ("stored", "duplicate"), r
     return s["trials"]

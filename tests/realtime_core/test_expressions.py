@@ -24,9 +24,14 @@ def test_parse() -> None:
     assert parse_expression("smile:0.7@1.2") == ("smile", 0.7, 1.2)
     assert parse_expression("sad") == ("sad", 1.0, 0.0)
     assert parse_expression("neutral@3") == ("neutral", 1.0, 3.0)
-    for bad, msg in (("grin", "unknown expression 'grin'"), ("smile:1.5", r"in \[0, 1\]"),
-                     ("smile:-0.1", r"in \[0, 1\]"), ("smile:x", "must be a number"), ("smile@soon", "seconds"),
-                     ("smile@-2", ">= 0")):
+    for bad, msg in (
+        ("grin", "unknown expression 'grin'"),
+        ("smile:1.5", r"in \[0, 1\]"),
+        ("smile:-0.1", r"in \[0, 1\]"),
+        ("smile:x", "must be a number"),
+        ("smile@soon", "seconds"),
+        ("smile@-2", ">= 0"),
+    ):
         with pytest.raises(ExpressionError, match=msg):
             parse_expression(bad)
 
@@ -72,8 +77,14 @@ def test_bad_requests_leave_the_track_unchanged() -> None:
 
 def test_composition_keeps_closures_and_rounding() -> None:
     rng = np.random.default_rng(0)
-    speech = np.column_stack([rng.normal(0, 0.02, 300), rng.normal(0, 0.05, 300),
-                              np.clip(rng.normal(0.1, 0.1, 300), 0, None), rng.normal(0, 0.02, 300)])
+    speech = np.column_stack(
+        [
+            rng.normal(0, 0.02, 300),
+            rng.normal(0, 0.05, 300),
+            np.clip(rng.normal(0.1, 0.1, 300), 0, None),
+            rng.normal(0, 0.02, 300),
+        ]
+    )
     speech[::10, 2] = 0.0  # closures
     alpha = np.zeros((300, len(EXPRESSIONS)))
     alpha[:, SMILE] = 1.0

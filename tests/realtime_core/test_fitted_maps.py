@@ -37,8 +37,14 @@ def test_arkit_weights_reproduce_the_parameters_on_the_head(head_and_rig) -> Non
     v0 = head.mesh.vertices
     targets = np.stack([head.targets[n] for n in ARKIT_NAMES])
     rng = np.random.default_rng(0)
-    p = np.column_stack([rng.uniform(-0.03, 0.05, 60), rng.uniform(-0.10, 0.08, 60), rng.uniform(0, 0.35, 60),
-                         rng.uniform(-0.05, 0.04, 60)])
+    p = np.column_stack(
+        [
+            rng.uniform(-0.03, 0.05, 60),
+            rng.uniform(-0.10, 0.08, 60),
+            rng.uniform(0, 0.35, 60),
+            rng.uniform(-0.05, 0.04, 60),
+        ]
+    )
     w = blendshape_weights(p, "arkit52").astype(np.float64)
     got = np.array([measure_mouth(v0, v0 + np.tensordot(wi, targets, 1), lm) for wi in w])
     r = [np.corrcoef(p[:, i], got[:, i])[0, 1] for i in range(4)]

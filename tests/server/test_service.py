@@ -92,9 +92,14 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
 
 def test_every_viewer_kind_decodes_to_the_same_motion(model, head, wav16k):
     samples, rate = read_audio(wav16k)
-    pcm = _int16(samples)[: rate]  # 1 s is enough
-    kinds = [("params", None), ("deltas", "int16"), ("deltas", "float16"), ("blendshapes", "arkit52"),
-             ("blendshapes", "ovr15")]
+    pcm = _int16(samples)[:rate]  # 1 s is enough
+    kinds = [
+        ("params", None),
+        ("deltas", "int16"),
+        ("deltas", "float16"),
+        ("blendshapes", "arkit52"),
+        ("blendshapes", "ovr15"),
+    ]
 
     async def main():
         async with running(model, head) as srv:
@@ -292,8 +297,10 @@ def test_expression_controls_from_ingest_and_from_a_viewer(model, workers):
                     async with connect(srv.url.replace("http", "ws") + "/view?session=e&audio=0") as raw:
                         desc = json.loads(await raw.recv())
                         replies = []
-                        for msg in ({"type": "control", "expression": {"name": "joy"}},
-                                    {"type": "control", "expression": {"name": "smile", "intensity": 1.0, "at": 0.0}}):
+                        for msg in (
+                            {"type": "control", "expression": {"name": "joy"}},
+                            {"type": "control", "expression": {"name": "smile", "intensity": 1.0, "at": 0.0}},
+                        ):
                             await raw.send(json.dumps(msg))
                             while True:  # skip binary frames until the text reply
                                 m = await asyncio.wait_for(raw.recv(), 10)
@@ -322,16 +329,22 @@ def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
     n_frames = len(speech_to_params(model, pcm.astype(np.float32) / 32768))
 
     async def main():
-        async with running(model, head, viewer_queue=4, viewer_max_behind_s=0.3,
-                           viewer_socket_buffer_bytes=4096, close_timeout_s=20) as srv:
+        async with running(
+            model, head, viewer_queue=4, viewer_max_behind_s=0.3, viewer_socket_buffer_bytes=4096, close_timeout_s=20
+        ) as srv:
             url = srv.url
             async with IngestClient(url, session="s", sample_rate_hz=16000) as ing:
                 # The stalled viewer: tiny receive buffer, reads the description and then nothing.
                 sock = socket.socket()
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
                 sock.connect(("127.0.0.1", srv.port))
-                stalled = await connect(ws_url(url, "/view?session=s&kind=deltas&encoding=float16"), sock=sock,
-                                        compression=None, max_size=None, max_queue=1)
+                stalled = await connect(
+                    ws_url(url, "/view?session=s&kind=deltas&encoding=float16"),
+                    sock=sock,
+                    compression=None,
+                    max_size=None,
+                    max_queue=1,
+                )
                 await stalled.recv()
                 async with ViewerClient(url, session="s", kind="deltas") as healthy:
                     collect = asyncio.ensure_future(healthy.collect())
@@ -355,8 +368,10 @@ def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
 def test_http_endpoints(model, head):
     async def main():
         async with running(model, head) as srv:
-            out = {p: await http_get(srv.url, p)
-                   for p in ("/health", "/metrics", "/head/mesh", "/head/mesh.json", "/", "/nope")}
+            out = {
+                p: await http_get(srv.url, p)
+                for p in ("/health", "/metrics", "/head/mesh", "/head/mesh.json", "/", "/nope")
+            }
             return out
 
     out = asyncio.run(main())
@@ -404,10 +419,12 @@ def test_config_from_toml(tmp_path):
     good.write_text('[server]\nport = 9000\nmax_sessions = 3\ntoken = "t"\n')
     cfg = ServerConfig.from_toml(good, port=9100, host=None)
     assert (cfg.port, cfg.max_sessions, cfg.token, cfg.host) == (9100, 3, "t", "127.0.0.1")
-    for text, match in [('[server]\nprot = 1\n', "unknown \\[server\\] keys \\['prot'\\]"),
-                        ('[server]\nmax_sessions = 0\n', "max_sessions"),
-                        ('[server]\nhost = "example.com"\n', "host must be an IP"),
-                        ("[server\n", "cannot read config")]:
+    for text, match in [
+        ("[server]\nprot = 1\n", "unknown \\[server\\] keys \\['prot'\\]"),
+        ("[server]\nmax_sessions = 0\n", "max_sessions"),
+        ('[server]\nhost = "example.com"\n', "host must be an IP"),
+        ("[server\n", "cannot read config"),
+    ]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text)
         with pytest.raises(ServerConfigError, match=match):

@@ -23,7 +23,7 @@ def _session_params(model, pcm: bytes, rate: int, fmt: str = "pcm_s16le", channe
     frames, audio, i = [], [], 0
     while i < len(pcm):
         n = int(rng.integers(1, 700)) * frame
-        out = s.push_bytes(pcm[i:i + n])
+        out = s.push_bytes(pcm[i : i + n])
         frames += out.frames
         audio += [out.audio] if out.audio else []
         i += n
@@ -81,8 +81,12 @@ def test_controls_gain_smoothing_and_rejection(model):
     for f in more:
         np.testing.assert_allclose(f.params, a * prev + (1 - a) * f.raw_params * [1, 1, 2, 1])
         prev = f.params
-    for bad, match in [({"volume": 3}, "unknown control 'volume'"), ({"gain": {"jaw": 1}}, "unknown parameter 'jaw'"),
-                       ({"gain": {"mouth_open": -1}}, "0..10"), ({"smoothing_ms": "x"}, "smoothing_ms")]:
+    for bad, match in [
+        ({"volume": 3}, "unknown control 'volume'"),
+        ({"gain": {"jaw": 1}}, "unknown parameter 'jaw'"),
+        ({"gain": {"mouth_open": -1}}, "0..10"),
+        ({"smoothing_ms": "x"}, "smoothing_ms"),
+    ]:
         with pytest.raises(ControlError, match=match):
             s.apply_control(bad)
     assert s.control_state()["smoothing_ms"] == 100  # a rejected control changes nothing
@@ -95,8 +99,13 @@ def test_bad_audio_and_config_are_named(model):
     f = Session(model, config=SessionConfig(sample_rate_hz=16000))
     with pytest.raises(AudioFormatError, match="NaN"):
         f.push_bytes(np.array([0.1, np.nan], "<f4").tobytes())
-    for kw in ({"sample_rate_hz": 10**9}, {"sample_rate_hz": 0}, {"sample_rate_hz": "16000"},
-               {"sample_rate_hz": 16000, "channels": 0}, {"sample_rate_hz": 16000, "sample_format": "mp3"}):
+    for kw in (
+        {"sample_rate_hz": 10**9},
+        {"sample_rate_hz": 0},
+        {"sample_rate_hz": "16000"},
+        {"sample_rate_hz": 16000, "channels": 0},
+        {"sample_rate_hz": 16000, "sample_format": "mp3"},
+    ):
         with pytest.raises(ServerConfigError):
             SessionConfig(**kw)
 

@@ -28,7 +28,7 @@ def _run(model, x: np.ndarray, controls: list[tuple[int, dict]], seed: int) -> l
         while pending and pending[0][0] <= i:
             s.apply_control(pending.pop(0)[1])
         n = int(rng.integers(1, 1200))
-        frames += s.push(x[i:i + n]).frames
+        frames += s.push(x[i : i + n]).frames
         i += n
     frames += s.flush().frames
     return frames
@@ -37,8 +37,10 @@ def _run(model, x: np.ndarray, controls: list[tuple[int, dict]], seed: int) -> l
 def test_expression_control_is_chunk_invariant_and_eased() -> None:
     model = small_model()
     x = speechlike(3.0, 16000)
-    ctl = [(0, {"type": "control", "expression": {"name": "smile", "intensity": 0.7, "at": 1.0}}),
-           (0, {"type": "control", "expression": {"name": "neutral", "at": 2.2}, "expression_ease_s": 0.2})]
+    ctl = [
+        (0, {"type": "control", "expression": {"name": "smile", "intensity": 0.7, "at": 1.0}}),
+        (0, {"type": "control", "expression": {"name": "neutral", "at": 2.2}, "expression_ease_s": 0.2}),
+    ]
     a, b = _run(model, x, ctl, 1), _run(model, x, ctl, 2)
     pa, pb = np.array([f.params for f in a]), np.array([f.params for f in b])
     np.testing.assert_array_equal(pa, pb)
@@ -65,15 +67,17 @@ def test_bad_expression_controls_are_rejected_and_the_session_streams_on() -> No
     x = speechlike(2.0, 16000)
     n1 = len(s.push(x[:16000]).frames)
     before = s.control_state()
-    for msg, text in (({"expression": {"name": "grin"}}, "unknown expression 'grin'"),
-                      ({"expression": {"name": "smile", "intensity": 1.5}}, r"\[0, 1\]"),
-                      ({"expression": {"name": "smile", "at": 0.0}}, "in the past"),
-                      ({"expression": {"name": "smile", "at": 1e7}}, "ahead"),
-                      ({"expression": {"name": "smile", "at": "soon"}}, "number of seconds"),
-                      ({"expression": "smile"}, "must be an object"),
-                      ({"expression": {"name": "smile", "colour": 1}}, "unknown field"),
-                      ({"expression_ease_s": 99}, "0..10"),
-                      ({"gain": {"mouth_open": 2}, "expression": {"name": "nope"}}, "unknown expression")):
+    for msg, text in (
+        ({"expression": {"name": "grin"}}, "unknown expression 'grin'"),
+        ({"expression": {"name": "smile", "intensity": 1.5}}, r"\[0, 1\]"),
+        ({"expression": {"name": "smile", "at": 0.0}}, "in the past"),
+        ({"expression": {"name": "smile", "at": 1e7}}, "ahead"),
+        ({"expression": {"name": "smile", "at": "soon"}}, "number of seconds"),
+        ({"expression": "smile"}, "must be an object"),
+        ({"expression": {"name": "smile", "colour": 1}}, "unknown field"),
+        ({"expression_ease_s": 99}, "0..10"),
+        ({"gain": {"mouth_open": 2}, "expression": {"name": "nope"}}, "unknown expression"),
+    ):
         with pytest.raises(ControlError, match=text):
             s.apply_control({"type": "control", **msg})
         assert s.control_state() == before  # nothing applied, not even the valid gain
@@ -84,11 +88,18 @@ def test_bad_expression_controls_are_rejected_and_the_session_streams_on() -> No
 def _mlp_model(fe, seed: int = 0) -> MlpSpeechModel:
     rng = np.random.default_rng(seed)
     k, h, da = 3, 15, fe.audio_dim
-    bank = MlpBank(gmm_log_weights=np.log(np.full(k, 1 / k)), gmm_means=rng.standard_normal((k, fe.n_feat)),
-                   gmm_vars=np.ones((k, fe.n_feat)), class_slice=(fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat),
-                   w1=rng.standard_normal((k, h, da)) * 0.1, b1=np.zeros((k, h)),
-                   w2=rng.standard_normal((k, 4, h)) * 0.05, b2=np.zeros((k, 4)), hidden=np.full(k, h),
-                   activation="tanh")
+    bank = MlpBank(
+        gmm_log_weights=np.log(np.full(k, 1 / k)),
+        gmm_means=rng.standard_normal((k, fe.n_feat)),
+        gmm_vars=np.ones((k, fe.n_feat)),
+        class_slice=(fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat),
+        w1=rng.standard_normal((k, h, da)) * 0.1,
+        b1=np.zeros((k, h)),
+        w2=rng.standard_normal((k, 4, h)) * 0.05,
+        b2=np.zeros((k, 4)),
+        hidden=np.full(k, h),
+        activation="tanh",
+    )
     return MlpSpeechModel(bank=bank, frontend=fe, cmvn_mean=np.zeros(fe.n_feat), cmvn_var=np.ones(fe.n_feat))
 
 

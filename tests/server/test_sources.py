@@ -54,7 +54,7 @@ def test_file_source_real_time_and_fast_give_animate_frames(model, wav16k):
         # The viewer may attach a few frames late; what it got must be the reference's tail, in order.
         idx = [m.index for m in got.frames]
         assert idx == list(range(idx[0], len(ref))) and idx[0] <= 3
-        np.testing.assert_array_equal(got.values(), ref[idx[0]:].astype(np.float32))
+        np.testing.assert_array_equal(got.values(), ref[idx[0] :].astype(np.float32))
         if realtime:
             assert elapsed >= 0.5 - 0.02  # paced: cannot finish before the audio's own duration
 
@@ -66,8 +66,13 @@ def test_missing_file_is_a_clear_error(tmp_path):
 
 def test_microphone_session_moves_the_mouth(pulse, model_path, wav16k):
     facecast = Path(sys.executable).parent / "facecast"
-    proc = subprocess.Popen([str(facecast), "serve", "--port", "0", "--model", str(model_path), "--no-head", "--mic"],
-                            env=pulse, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [str(facecast), "serve", "--port", "0", "--model", str(model_path), "--no-head", "--mic"],
+        env=pulse,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         url = None
         deadline = time.monotonic() + 60

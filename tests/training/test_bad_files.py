@@ -72,8 +72,18 @@ def test_truncated_wav(tmp_path) -> None:
 
 
 def _tiny_corpus(root):
-    entry = write_utterance(root, utt_id="u1", samples=_tone(), sample_rate_hz=16000, params=np.zeros((15, 4)),
-                            phonemes=(), language="en", voice="test", source="espeak", speaker_group="test")
+    entry = write_utterance(
+        root,
+        utt_id="u1",
+        samples=_tone(),
+        sample_rate_hz=16000,
+        params=np.zeros((15, 4)),
+        phonemes=(),
+        language="en",
+        voice="test",
+        source="espeak",
+        speaker_group="test",
+    )
     write_manifest(root, [entry], seed=0)
     return entry
 
@@ -131,8 +141,20 @@ def test_no_face(mediapipe_installed, tmp_path, ffmpeg) -> None:
     from training.video import measure_video
 
     p = tmp_path / "wall.mp4"
-    _ffmpeg("-f", "lavfi", "-i", "testsrc=size=320x240:rate=25:duration=1", "-f", "lavfi",
-            "-i", "sine=frequency=300:duration=1", "-shortest", "-pix_fmt", "yuv420p", p)
+    _ffmpeg(
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc=size=320x240:rate=25:duration=1",
+        "-f",
+        "lavfi",
+        "-i",
+        "sine=frequency=300:duration=1",
+        "-shortest",
+        "-pix_fmt",
+        "yuv420p",
+        p,
+    )
     with pytest.raises(NoFaceError, match=r"wall\.mp4: no face found in 25 of 25 frames"):
         measure_video(p)
 
@@ -144,8 +166,26 @@ def test_silent_video_and_no_audio_track(tmp_path, ffmpeg, shared_data) -> None:
     if not src.is_file():
         missing(f"GRID clip not found: {src}")
     mute = tmp_path / "mute.mp4"
-    _ffmpeg("-i", src, "-f", "lavfi", "-i", "anullsrc=r=16000:cl=mono", "-map", "0:v", "-map", "1:a",
-            "-shortest", "-c:v", "libx264", "-preset", "ultrafast", "-c:a", "aac", mute)
+    _ffmpeg(
+        "-i",
+        src,
+        "-f",
+        "lavfi",
+        "-i",
+        "anullsrc=r=16000:cl=mono",
+        "-map",
+        "0:v",
+        "-map",
+        "1:a",
+        "-shortest",
+        "-c:v",
+        "libx264",
+        "-preset",
+        "ultrafast",
+        "-c:a",
+        "aac",
+        mute,
+    )
     with pytest.raises(SilentAudioError, match=r"mute\.mp4: silent"):
         measure_video(mute)
     noaudio = tmp_path / "noaudio.mp4"

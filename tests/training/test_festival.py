@@ -41,8 +41,9 @@ def test_phone_timings_line_up_with_the_audio(voice):
     params = render_params(phones, int(np.ceil(len(x) / rate * 30)), inventory="arpabet")
     # Labels lead the sound by 33 ms: each /p/ closes the mouth within its (shifted) span.
     lead = 0.033
-    closed = [params[int(np.ceil((p.start_s - lead) * 30)) : int((p.end_s - lead) * 30) + 1, MOUTH_OPEN].min()
-              for p in ps]
+    closed = [
+        params[int(np.ceil((p.start_s - lead) * 30)) : int((p.end_s - lead) * 30) + 1, MOUTH_OPEN].min() for p in ps
+    ]
     assert max(closed) < 0.02 and params[:, MOUTH_OPEN].max() > 0.1
 
 

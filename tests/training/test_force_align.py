@@ -34,8 +34,15 @@ def test_reproduces_the_shipped_librivox_alignment(shared_data) -> None:
 
 
 def test_builder_aligns_transcribed_speech_and_names_what_it_skips(shared_data, tmp_path) -> None:
-    rep = build_corpus(BuildConfig(out_dir=tmp_path, sentences=0, languages=(),
-                                   real_dirs=(shared_data / "speech" / "ljspeech",), force_align=True))
+    rep = build_corpus(
+        BuildConfig(
+            out_dir=tmp_path,
+            sentences=0,
+            languages=(),
+            real_dirs=(shared_data / "speech" / "ljspeech",),
+            force_align=True,
+        )
+    )
     utts = load_corpus(tmp_path)
     assert len(utts) >= 5 and all(u.source == "real" and u.speaker_group == "real:ljspeech" for u in utts)
     for u in utts:  # phones cover the speech and the rules open and close the mouth

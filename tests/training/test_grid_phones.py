@@ -43,9 +43,17 @@ def grid_root(shared_data):
 
 
 def test_reader_round_trip(tmp_path) -> None:
-    a = SentencePhones(sentence_id="bbaf2n", method="pocketsphinx+spread", spread_words=("at",), edge_silences=1,
-                       phones=(PhonemeSegment("SIL", 0.0, 0.95), PhonemeSegment("B", 0.95, 1.0123456),
-                               PhonemeSegment("IH", 1.0123456, 1.18)))
+    a = SentencePhones(
+        sentence_id="bbaf2n",
+        method="pocketsphinx+spread",
+        spread_words=("at",),
+        edge_silences=1,
+        phones=(
+            PhonemeSegment("SIL", 0.0, 0.95),
+            PhonemeSegment("B", 0.95, 1.0123456),
+            PhonemeSegment("IH", 1.0123456, 1.18),
+        ),
+    )
     b = SentencePhones(sentence_id="aaaa0a", method="spread", phones=(PhonemeSegment("EY", 0.5, 0.7),))
     path = write_grid_phones(tmp_path / "p.json", [a, b])
     back = read_grid_phones_file(path)
@@ -144,7 +152,7 @@ def test_hand_checked_sentence_bbaf2n(grid_root, ffmpeg) -> None:
     x = decode_audio(grid_root / "video" / "bbaf2n.mp4", 16000)
 
     def seg(p: PhonemeSegment) -> np.ndarray:
-        return x[int(p.start_s * 16000): int(p.end_s * 16000)]
+        return x[int(p.start_s * 16000) : int(p.end_s * 16000)]
 
     eh, f, t, uw = ph[9], ph[10], ph[11], ph[12]
     assert _high_band_fraction(seg(f)) > 0.2 and _high_band_fraction(seg(t)) > 0.2  # measured 0.46, 0.50
@@ -178,8 +186,10 @@ def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None
         np.testing.assert_allclose([p.end_s for p in got.phones], [p.end_s for p in shipped[sid].phones], atol=2e-4)
     # without audio every word is spread, inside the same spans
     spread_only = label_sentence("bbaf2n", read_words(grid_root / "align" / "bbaf2n.align"), None, None)
-    assert spread_only.method == "spread" and not check_sentence(
-        spread_only.phones, read_words(grid_root / "align" / "bbaf2n.align")).problems
+    assert (
+        spread_only.method == "spread"
+        and not check_sentence(spread_only.phones, read_words(grid_root / "align" / "bbaf2n.align")).problems
+    )
 
 
 @pytest.mark.usefixtures("needs_pocketsphinx")

@@ -21,8 +21,12 @@ def test_head_correspondence_lands_on_the_heads_own_landmarks(shared_data: Path,
     from realtime_core.face import MouthLandmarks, face_frame
 
     canon = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj").vertices
-    mp = {k: int(v) for k, v in read_landmarks(Path(assets.__file__).parent / "heads" / "landmarks"
-                                               / "mediapipe_canonical.json").items()}
+    mp = {
+        k: int(v)
+        for k, v in read_landmarks(
+            Path(assets.__file__).parent / "heads" / "landmarks" / "mediapipe_canonical.json"
+        ).items()
+    }
     head = builtin_head
     idx = [mp["corner_left"], mp["corner_right"], mp["upper_lip"], mp["lower_lip"], mp["chin"]]
     verts, sim = head_correspondence(canon, idx, head, mp)

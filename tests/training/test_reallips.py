@@ -20,9 +20,17 @@ def _tone_utterance(freq_hz: float = 200.0, dur_s: float = 2.0, rate: int = 1600
     n = n_frames_for(dur_s)
     ramp = np.arange(n) / FPS  # params = time itself, so re-timing is visible exactly
     params = np.stack([ramp, -ramp, 0.1 * ramp, np.zeros(n)], axis=1)
-    return Utterance(id="tone", samples=(0.3 * np.sin(2 * np.pi * freq_hz * t)).astype(np.float32),
-                     sample_rate_hz=rate, params=params, phonemes=(), voice="v", language="en", source="video",
-                     speaker_group="g")
+    return Utterance(
+        id="tone",
+        samples=(0.3 * np.sin(2 * np.pi * freq_hz * t)).astype(np.float32),
+        sample_rate_hz=rate,
+        params=params,
+        phonemes=(),
+        voice="v",
+        language="en",
+        source="video",
+        speaker_group="g",
+    )
 
 
 @pytest.mark.parametrize("factor", [0.88, 1.12])
@@ -49,8 +57,16 @@ def test_speed_perturbation_scales_pitch_and_time_together(factor) -> None:
 def test_bilabial_spans_of_a_grid_sentence() -> None:
     from training.reallips import CLOSURE_S, bilabial_spans
 
-    words = [(0.0, 0.5, "sil"), (0.5, 0.8, "bin"), (0.8, 1.1, "red"), (1.1, 1.3, "at"), (1.3, 1.6, "m"),
-             (1.6, 1.9, "seven"), (1.9, 2.3, "please"), (2.3, 3.0, "sil")]
+    words = [
+        (0.0, 0.5, "sil"),
+        (0.5, 0.8, "bin"),
+        (0.8, 1.1, "red"),
+        (1.1, 1.3, "at"),
+        (1.3, 1.6, "m"),
+        (1.6, 1.9, "seven"),
+        (1.9, 2.3, "please"),
+        (2.3, 3.0, "sil"),
+    ]
     spans = bilabial_spans(words)
     assert [w for _, _, w in spans] == ["bin", "m", "please"]
     assert spans[0][:2] == pytest.approx((0.5 - CLOSURE_S / 2, 0.5 + CLOSURE_S))
@@ -111,9 +127,32 @@ def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
         shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
         shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
     out = tmp_path / "m.npz"
-    assert main(["train", "--grid-s1", str(root), "--grid-split", "all", "--speed", "1.1", "--closure-band", "0.02",
-                 "--cache-dir", str(tmp_path / "cache"), "-o", str(out), "--states", "2", "--mix", "1",
-                 "--iters", "1"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--grid-s1",
+                str(root),
+                "--grid-split",
+                "all",
+                "--speed",
+                "1.1",
+                "--closure-band",
+                "0.02",
+                "--cache-dir",
+                str(tmp_path / "cache"),
+                "-o",
+                str(out),
+                "--states",
+                "2",
+                "--mix",
+                "1",
+                "--iters",
+                "1",
+            ]
+        )
+        == 0
+    )
     m = load_model(out)
     assert m.metadata["grid_s1"] == {"split": "all", "sentences": 3, "speeds": [1.1], "mic_copies": 0}
     assert m.metadata["train_utterances"] == 6 and m.closure_band == 0.02

@@ -29,10 +29,18 @@ def corpora(tmp_path_factory, espeak):
     root = tmp_path_factory.mktemp("corpora")
     train = root / "train"
     held = root / "held"
-    build_corpus(BuildConfig(out_dir=train, sentences=60, languages=("en",), seed=1,
-                             voices=VoiceSampling(variants=(None, "m1", "m3", "f2", "f4"))))
-    build_corpus(BuildConfig(out_dir=held, sentences=10, languages=("en",), seed=2,
-                             voices=VoiceSampling(variants=("f5", "m7"))))
+    build_corpus(
+        BuildConfig(
+            out_dir=train,
+            sentences=60,
+            languages=("en",),
+            seed=1,
+            voices=VoiceSampling(variants=(None, "m1", "m3", "f2", "f4")),
+        )
+    )
+    build_corpus(
+        BuildConfig(out_dir=held, sentences=10, languages=("en",), seed=2, voices=VoiceSampling(variants=("f5", "m7")))
+    )
     return train, held
 
 

@@ -34,7 +34,7 @@ def swwp2s(grid, ffmpeg):
 
 
 def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
-    """"set white with p two soon": the lips close in the letter "p" and open in "white"/"two".
+    """ "set white with p two soon": the lips close in the letter "p" and open in "white"/"two".
 
     The word times come from swwp2s.align (units of 1/25000 s: the last word ends at
     74500 = 2.98 s of the 3 s clip, and "set" starts at 12250 = 0.49 s where the audio starts).
@@ -135,8 +135,16 @@ GRID_WORDS = {
 def grid_sentence(stem: str) -> str:
     """GRID's file names spell the sentence: ``bbaf2n`` = "bin blue at f two now"."""
     c = stem.split("_")[-1]
-    return " ".join([GRID_WORDS["command"][c[0]], GRID_WORDS["colour"][c[1]], GRID_WORDS["preposition"][c[2]],
-                     c[3], GRID_WORDS["digit"][c[4]], GRID_WORDS["adverb"][c[5]]])
+    return " ".join(
+        [
+            GRID_WORDS["command"][c[0]],
+            GRID_WORDS["colour"][c[1]],
+            GRID_WORDS["preposition"][c[2]],
+            c[3],
+            GRID_WORDS["digit"][c[4]],
+            GRID_WORDS["adverb"][c[5]],
+        ]
+    )
 
 
 def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
@@ -157,8 +165,12 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
         al = force_align(track.samples, track.sample_rate_hz, grid_sentence(clip.stem), source=clip)
         rules = render_params(al.phones, len(track.params), inventory="arpabet")[:, 2]
         mo = track.params[:, 2]
-        by_lag = {lag: np.corrcoef(rules[: len(rules) - lag] if lag >= 0 else rules[-lag:],
-                                   mo[lag:] if lag >= 0 else mo[: len(mo) + lag])[0, 1] for lag in range(-3, 4)}
+        by_lag = {
+            lag: np.corrcoef(
+                rules[: len(rules) - lag] if lag >= 0 else rules[-lag:], mo[lag:] if lag >= 0 else mo[: len(mo) + lag]
+            )[0, 1]
+            for lag in range(-3, 4)
+        }
         rs.append(by_lag[0])
         lags.append(max(by_lag, key=by_lag.get))
         loud.append(np.corrcoef(frame_energy_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])

@@ -34,8 +34,9 @@ def _png(top: tuple, bottom: tuple, size: int = 64) -> bytes:
 
 def _box(x0: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A thin box (3D, so check_mesh accepts it) whose front face spans y in [0, 1]; glTF UVs: v = 0 at the top."""
-    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, -0.2], [1, 0, -0.2], [1, 1, -0.2], [0, 1, -0.2]],
-                 float)
+    v = np.array(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, -0.2], [1, 0, -0.2], [1, 1, -0.2], [0, 1, -0.2]], float
+    )
     v[:, 0] += x0
     t = np.array([[0, 1, 2], [0, 2, 3], [5, 4, 7], [5, 7, 6]])
     uv = np.column_stack([(v[:, 0] - x0), 1.0 - v[:, 1]])
@@ -46,8 +47,13 @@ def _render_front(mesh: HeadMesh) -> np.ndarray:
     from clients.render.renderer import HeadRenderer, RenderConfig
 
     c = 0.5 * (mesh.vertices.min(0) + mesh.vertices.max(0))
-    with HeadRenderer(mesh, centre=c, axes=np.eye(3), size=float(np.ptp(mesh.vertices[:, :2], axis=0).max()) / 1.1,
-                      config=RenderConfig(width=64, height=64, samples=0)) as r:
+    with HeadRenderer(
+        mesh,
+        centre=c,
+        axes=np.eye(3),
+        size=float(np.ptp(mesh.vertices[:, :2], axis=0).max()) / 1.1,
+        config=RenderConfig(width=64, height=64, samples=0),
+    ) as r:
         return r.render()
 
 
@@ -100,8 +106,13 @@ def _gltf_doc(buffers: bytes, doc: dict) -> bytes:
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
     body = buffers + b"\0" * (-len(buffers) % 4)
-    return (struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(body)) + struct.pack("<I4s", len(js), b"JSON") + js
-            + struct.pack("<I4s", len(body), b"BIN\0") + body)
+    return (
+        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(body))
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(body), b"BIN\0")
+        + body
+    )
 
 
 def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
@@ -114,30 +125,53 @@ def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
     joints = np.zeros((len(v), 4), "<u1")
     weights = np.tile(np.array([1, 0, 0, 0], "<f4"), (len(v), 1))
     ibm = np.eye(4, dtype="<f4").reshape(-1)
-    blobs = [pos.tobytes(), idx.tobytes() + b"\0" * (-idx.nbytes % 4), sparse_idx.tobytes() + b"\0\0",
-             sparse_val.tobytes(), joints.tobytes(), weights.tobytes(), ibm.tobytes()]
+    blobs = [
+        pos.tobytes(),
+        idx.tobytes() + b"\0" * (-idx.nbytes % 4),
+        sparse_idx.tobytes() + b"\0\0",
+        sparse_val.tobytes(),
+        joints.tobytes(),
+        weights.tobytes(),
+        ibm.tobytes(),
+    ]
     offs = np.cumsum([0] + [len(b) for b in blobs])
     views = [{"buffer": 0, "byteOffset": int(o), "byteLength": len(b)} for o, b in zip(offs, blobs)]
     views[0]["byteStride"] = 8
     acc = [
         {"bufferView": 0, "componentType": 5122, "normalized": True, "count": len(v), "type": "VEC3"},
         {"bufferView": 1, "componentType": 5123, "count": len(idx), "type": "SCALAR"},
-        {"componentType": 5126, "count": len(v), "type": "VEC3",
-         "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5123}, "values": {"bufferView": 3}}},
+        {
+            "componentType": 5126,
+            "count": len(v),
+            "type": "VEC3",
+            "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5123}, "values": {"bufferView": 3}},
+        },
         {"bufferView": 4, "componentType": 5121, "count": len(v), "type": "VEC4"},
         {"bufferView": 5, "componentType": 5126, "count": len(v), "type": "VEC4"},
         {"bufferView": 6, "componentType": 5126, "count": 1, "type": "MAT4"},
     ]
     doc = {
-        "asset": {"version": "2.0"}, "extensionsUsed": ["KHR_mesh_quantization"], "scene": 0,
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_mesh_quantization"],
+        "scene": 0,
         "scenes": [{"nodes": [0, 2]}],
-        "nodes": [{"translation": [10, 0, 0], "scale": [2, 2, 2], "children": [1]}, {"mesh": 0},
-                  {"mesh": 1, "skin": 0}, {"translation": [0, 5, 0]}],
+        "nodes": [
+            {"translation": [10, 0, 0], "scale": [2, 2, 2], "children": [1]},
+            {"mesh": 0},
+            {"mesh": 1, "skin": 0},
+            {"translation": [0, 5, 0]},
+        ],
         "skins": [{"joints": [3], "inverseBindMatrices": 5}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 2}]}],
-                    "extras": {"targetNames": ["jawOpen"]}},
-                   {"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 3, "WEIGHTS_0": 4}, "indices": 1}]}],
-        "buffers": [{"byteLength": int(offs[-1])}], "bufferViews": views, "accessors": acc,
+        "meshes": [
+            {
+                "primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 2}]}],
+                "extras": {"targetNames": ["jawOpen"]},
+            },
+            {"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 3, "WEIGHTS_0": 4}, "indices": 1}]},
+        ],
+        "buffers": [{"byteLength": int(offs[-1])}],
+        "bufferViews": views,
+        "accessors": acc,
     }
     path = tmp_path / "q.glb"
     path.write_bytes(_gltf_doc(b"".join(blobs), doc))

@@ -150,8 +150,9 @@ def test_retargeting_onto_its_own_source_head_reproduces_native_targets(builtin_
     units = [n for g in MOUTH_GROUPS for n in g]
     train = np.concatenate([s.model.animation_units[n] for n in units], axis=1)
     for cfg, bound in ((RigConfig(), SEC5_BOUND), (RigConfig(method="rbf"), RBF_BOUND)):
-        g, _control, _ = head_weights(h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg,
-                                     training=train, allowed=h.part == 0)
+        g, _control, _ = head_weights(
+            h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg, training=train, allowed=h.part == 0
+        )
         for n in units:
             err = _relative_rms(g @ s.model.animation_units[n], h.targets[n])
             assert err < bound, f"{cfg.method} {n}: relative RMS {err:.2f} >= {bound}"

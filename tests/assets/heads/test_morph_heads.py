@@ -48,13 +48,30 @@ def test_bounded_keyframe_solve_matches_scipy_bvls():
     np.testing.assert_allclose(km2.weights(np.array([0.2, 0.1, 0, 0.3]))[:4], [0.2, 0.1, 0, 0.3], atol=1e-6)
 
 
-@pytest.mark.parametrize(("name", "want"), [
-    ("jawOpen", "jawOpen"), ("JawOpen", "jawOpen"), ("jaw_open", "jawOpen"), ("blendShape1.jawOpen", "jawOpen"),
-    ("mouthSmile_L", "mouthSmileLeft"), ("mouthSmile_R", "mouthSmileRight"), ("MouthSmileLeft", "mouthSmileLeft"),
-    ("mouth_smile_left", "mouthSmileLeft"), ("mouthSmile.L", "mouthSmileLeft"), ("eyeBlink_l", "eyeBlinkLeft"),
-    ("mouthLeft", "mouthLeft"), ("viseme_aa", "viseme:aa"), ("viseme_PP", "viseme:PP"), ("v_ou", "viseme:U"),
-    ("Fcl_MTH_A", "viseme:aa"), ("aa", "viseme:aa"), ("ih", "viseme:I"), ("Body", None), ("Key 1", None),
-])
+@pytest.mark.parametrize(
+    ("name", "want"),
+    [
+        ("jawOpen", "jawOpen"),
+        ("JawOpen", "jawOpen"),
+        ("jaw_open", "jawOpen"),
+        ("blendShape1.jawOpen", "jawOpen"),
+        ("mouthSmile_L", "mouthSmileLeft"),
+        ("mouthSmile_R", "mouthSmileRight"),
+        ("MouthSmileLeft", "mouthSmileLeft"),
+        ("mouth_smile_left", "mouthSmileLeft"),
+        ("mouthSmile.L", "mouthSmileLeft"),
+        ("eyeBlink_l", "eyeBlinkLeft"),
+        ("mouthLeft", "mouthLeft"),
+        ("viseme_aa", "viseme:aa"),
+        ("viseme_PP", "viseme:PP"),
+        ("v_ou", "viseme:U"),
+        ("Fcl_MTH_A", "viseme:aa"),
+        ("aa", "viseme:aa"),
+        ("ih", "viseme:I"),
+        ("Body", None),
+        ("Key 1", None),
+    ],
+)
 def test_target_names_are_recognised(name, want):
     assert canonical_name(name) == want
 

@@ -29,8 +29,17 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
     write_wav(wav, speechlike(1.0, 16000), 16000)
     out = {s: tmp_path / f"take.{s}" for s in ("csv", "glb", "json", "tsv")}
     # The retargeted built-in head: its glb animates the 4 parameter targets with the curves themselves.
-    rc = main(["animate", str(wav), "--model", str(model), "--head-mode", "retarget",
-               *functools.reduce(operator.iadd, ([f"--{s}", str(p)] for s, p in out.items()), [])])
+    rc = main(
+        [
+            "animate",
+            str(wav),
+            "--model",
+            str(model),
+            "--head-mode",
+            "retarget",
+            *functools.reduce(operator.iadd, ([f"--{s}", str(p)] for s, p in out.items()), []),
+        ]
+    )
     assert rc == 0
     csv_t = decode_csv(out["csv"].read_bytes())
     js = decode_json(out["json"].read_bytes())

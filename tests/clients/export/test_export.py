@@ -22,12 +22,15 @@ def _track(n: int = 90, seed: int = 0) -> Track:
     """n frames of plausible mouth motion (IOD): a syllable-rate open/close with small other units."""
     rng = np.random.default_rng(seed)
     k = np.arange(n)
-    p = np.stack([
-        0.04 * np.sin(k / 7.0),
-        0.10 * np.sin(k / 11.0 + 1),
-        0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
-        0.03 * np.cos(k / 5.0),
-    ], axis=1)
+    p = np.stack(
+        [
+            0.04 * np.sin(k / 7.0),
+            0.10 * np.sin(k / 11.0 + 1),
+            0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
+            0.03 * np.cos(k / 5.0),
+        ],
+        axis=1,
+    )
     return Track(values=p.astype(np.float32))
 
 
@@ -42,16 +45,18 @@ def _accessor(gltf, blob: bytes, index: int) -> np.ndarray:
 
 
 def test_shapes_follow_the_documented_rules():
-    rows = np.array([
-        [0.00, 0.0, 0.01, 0.0],    # closed, not pressed -> X
-        [-0.02, 0.0, 0.01, 0.0],   # closed, lips pressed -> A
-        [0.04, 0.0, 0.08, 0.0],    # upper lip raised, little open -> G
-        [0.00, -0.10, 0.08, 0.0],  # puckered -> F
-        [0.00, -0.10, 0.20, 0.0],  # rounded, open -> E
-        [0.00, 0.0, 0.08, 0.0],    # B
-        [0.00, 0.0, 0.18, 0.0],    # C
-        [0.00, 0.0, 0.35, 0.0],    # D
-    ])
+    rows = np.array(
+        [
+            [0.00, 0.0, 0.01, 0.0],  # closed, not pressed -> X
+            [-0.02, 0.0, 0.01, 0.0],  # closed, lips pressed -> A
+            [0.04, 0.0, 0.08, 0.0],  # upper lip raised, little open -> G
+            [0.00, -0.10, 0.08, 0.0],  # puckered -> F
+            [0.00, -0.10, 0.20, 0.0],  # rounded, open -> E
+            [0.00, 0.0, 0.08, 0.0],  # B
+            [0.00, 0.0, 0.18, 0.0],  # C
+            [0.00, 0.0, 0.35, 0.0],  # D
+        ]
+    )
     assert "".join(frame_shapes(rows)) == "XAGFEBCD"
 
 
@@ -85,8 +90,15 @@ def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
     pygltflib = require_module("pygltflib")
     v, tris, targets = _synthetic_head()
     tr = _track(45)
-    data = animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=tr,
-                        colors=np.full((len(v), 3), 0.5), audio="take.wav")
+    data = animated_glb(
+        vertices=v,
+        triangles=tris,
+        targets=targets,
+        target_names=VISUAL_PARAMS,
+        track=tr,
+        colors=np.full((len(v), 3), 0.5),
+        audio="take.wav",
+    )
     g = pygltflib.GLTF2.load_from_bytes(data)
     blob = g.binary_blob()
     prim = g.meshes[0].primitives[0]

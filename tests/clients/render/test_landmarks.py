@@ -23,8 +23,10 @@ def test_automatic_landmarks_agree_with_the_hand_picked_ones(shared_data):
     auto = find_landmarks(mesh)
     ref = json.loads(shipped_landmarks(lps).read_text())["landmarks"]
     v = mesh.vertices
-    iod = np.linalg.norm(0.5 * (v[ref["eye_outer_left"]] + v[ref["eye_inner_left"]])
-                         - 0.5 * (v[ref["eye_outer_right"]] + v[ref["eye_inner_right"]]))
+    iod = np.linalg.norm(
+        0.5 * (v[ref["eye_outer_left"]] + v[ref["eye_inner_left"]])
+        - 0.5 * (v[ref["eye_outer_right"]] + v[ref["eye_inner_right"]])
+    )
     err = {k: float(np.linalg.norm(np.asarray(p) - v[ref[k]]) / iod) for k, p in auto.items()}
     assert max(err.values()) < 0.2, err  # hand picks and MediaPipe differ by a few vertices
     assert np.mean(list(err.values())) < 0.1, err

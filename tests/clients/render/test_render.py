@@ -69,11 +69,21 @@ def test_video_with_audio(tmp_path, renderer, builtin_rig, shared_data):
     rig, _ = builtin_rig
     frames = np.zeros((6, 4))
     frames[:, 2] = np.linspace(0, 0.1, 6)
-    out = write_video(frames, lambda p: renderer.render(rig.deformed(p)), tmp_path / "v.mp4", size=(320, 240),
-                      audio=wav, png_dir=tmp_path / "png")
+    out = write_video(
+        frames,
+        lambda p: renderer.render(rig.deformed(p)),
+        tmp_path / "v.mp4",
+        size=(320, 240),
+        audio=wav,
+        png_dir=tmp_path / "png",
+    )
     assert len(list((tmp_path / "png").glob("frame_*.png"))) == 6
-    info = subprocess.run(["ffprobe", "-v", "error", "-show_entries", "stream=codec_type", "-of", "csv=p=0", str(out)],
-                          capture_output=True, text=True, check=True).stdout.split()
+    info = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_entries", "stream=codec_type", "-of", "csv=p=0", str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
     assert sorted(info) == ["audio", "video"]
 
 

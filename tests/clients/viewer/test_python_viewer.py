@@ -33,13 +33,17 @@ async def _session_once_watched(srv, name: str, seconds: float, viewers: int) ->
                 break
             await asyncio.sleep(0.05)
         for i in range(0, len(x), 1600):
-            await ing.send(x[i:i + 1600])
+            await ing.send(x[i : i + 1600])
         return await ing.end()
 
 
 def _probe(path) -> dict:
-    out = subprocess.run(["ffprobe", "-v", "error", "-show_streams", "-count_frames", "-of", "json", str(path)],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_streams", "-count_frames", "-of", "json", str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     return {s["codec_type"]: s for s in json.loads(out)["streams"]}
 
 
@@ -57,8 +61,11 @@ def test_view_record_renders_the_session_with_its_audio(live, tmp_path):
     assert streams["video"]["width"] == 320 and "audio" in streams
     assert float(streams["audio"]["duration"]) == pytest.approx(2.0, abs=0.1)
     # Decode the video: the head is on screen and its mouth moves.
-    raw = subprocess.run(["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "gray", "-"],
-                         capture_output=True, check=True).stdout
+    raw = subprocess.run(
+        ["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "gray", "-"],
+        capture_output=True,
+        check=True,
+    ).stdout
     frames = np.frombuffer(raw, np.uint8).reshape(-1, 240, 320).astype(np.float64)
     assert frames[30].std() > 20
     assert np.abs(frames[1:] - frames[:-1]).mean(axis=(1, 2)).max() > 0.5
@@ -112,8 +119,11 @@ def xvfb(monkeypatch):
     if shutil.which("Xvfb") is None:
         missing("Xvfb is not installed (scripts/setup.sh installs xvfb)")
     n = next(n for n in range(150, 250) if not Path(f"/tmp/.X{n}-lock").exists())
-    proc = subprocess.Popen(["Xvfb", f":{n}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        ["Xvfb", f":{n}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     sock = Path(f"/tmp/.X11-unix/X{n}")
     for _ in range(100):
         if sock.exists() or proc.poll() is not None:
@@ -141,9 +151,30 @@ def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
     shot = tmp_path / "window.png"
     # A process of its own, as a user runs it (and GL-wise clean: other tests here made EGL contexts).
     try:
-        proc = subprocess.run([sys.executable, "-m", "facecast", "view", live.url, "--session", "window",
-                               "--duration", "2", "--screenshot", str(shot), "--width", "320", "--height", "240"],
-                              cwd=REPO, capture_output=True, text=True, timeout=60, env=os.environ.copy())
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "view",
+                live.url,
+                "--session",
+                "window",
+                "--duration",
+                "2",
+                "--screenshot",
+                str(shot),
+                "--width",
+                "320",
+                "--height",
+                "240",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=os.environ.copy(),
+        )
     finally:
         live.loop.call_soon_threadsafe(stop.set)
         fut.result(30)
@@ -169,14 +200,35 @@ def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
         missing("parec is not installed (pulseaudio-utils)")
     env = {**pulse, "DISPLAY": os.environ["DISPLAY"]}
     capture = tmp_path / "heard.raw"
-    rec = subprocess.Popen(["parec", "--device=fc.monitor", "--raw", "--format=s16le", "--rate=16000",
-                            "--channels=1", str(capture)], env=env)
+    rec = subprocess.Popen(
+        ["parec", "--device=fc.monitor", "--raw", "--format=s16le", "--rate=16000", "--channels=1", str(capture)],
+        env=env,
+    )
     stop = asyncio.Event()
     fut = live.submit(stream_session(live.url, "sound", 30.0, stop=stop))
     try:
-        proc = subprocess.run([sys.executable, "-m", "facecast", "view", live.url, "--session", "sound",
-                               "--duration", "3", "--width", "160", "--height", "120"],
-                              cwd=REPO, capture_output=True, text=True, timeout=60, env=env)
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "view",
+                live.url,
+                "--session",
+                "sound",
+                "--duration",
+                "3",
+                "--width",
+                "160",
+                "--height",
+                "120",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=env,
+        )
     finally:
         live.loop.call_soon_threadsafe(stop.set)
         fut.result(30)
@@ -196,11 +248,11 @@ def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
     c2 = np.concatenate([[0.0], np.cumsum(ref**2)])
     scores = []
     for k in range(0, len(heard) - 4000, 4000):
-        part = heard[k:k + 4000]
+        part = heard[k : k + 4000]
         if np.sqrt(np.mean(part**2)) < 0.05:
             continue  # a pause of the speech
         corr = correlate(ref, part, mode="valid", method="fft")
-        window = np.sqrt(np.maximum(c2[len(part):] - c2[: len(c2) - len(part)], 1e-12))  # |ref[j:j+len(part)]|
+        window = np.sqrt(np.maximum(c2[len(part) :] - c2[: len(c2) - len(part)], 1e-12))  # |ref[j:j+len(part)]|
         scores.append(np.max(corr / (np.linalg.norm(part) * window)))
-    levels = [round(float(np.sqrt(np.mean(heard[k:k + 4000] ** 2))), 3) for k in range(0, len(heard) - 4000, 4000)]
+    levels = [round(float(np.sqrt(np.mean(heard[k : k + 4000] ** 2))), 3) for k in range(0, len(heard) - 4000, 4000)]
     assert len(scores) >= 3 and np.median(scores) > 0.8, (scores, levels, proc.stdout)

@@ -64,8 +64,14 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
     servers = [LiveServer(model, head)]
     stops = [asyncio.Event() for _ in range(3)]  # one per session; set only through the server's loop
     sessions = [servers[0].submit(stream_session(servers[0].url, name, 40.0, stop=stops[0]))]
-    proc = subprocess.Popen(["node", str(SCRIPT), servers[0].url, name, str(ARTIFACTS)], cwd=REPO, text=True,
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        ["node", str(SCRIPT), servers[0].url, name, str(ARTIFACTS)],
+        cwd=REPO,
+        text=True,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
 
     def end_session(i: int) -> None:
         servers[-1].loop.call_soon_threadsafe(stops[i].set)

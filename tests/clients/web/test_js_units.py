@@ -39,8 +39,9 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
     (tmp_path / "audio.bin").write_bytes(msg)
     expect["audio"] = P.decode_message(msg)
 
-    out = subprocess.run(["node", str(Path(__file__).with_name("units.mjs")), str(tmp_path)],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        ["node", str(Path(__file__).with_name("units.mjs")), str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 0, out.stderr
     r = json.loads(out.stdout)
     for name, m in expect.items():

@@ -24,7 +24,12 @@ def test_viewer_page_modules_and_vendor_files(live):
     assert status == 200 and b"REVISION" in body
     assert get("/vendor/three/examples/jsm/controls/OrbitControls.js")[0] == 200
     # Only three's build/ and examples/jsm/ are public: not its package.json, other packages or ../
-    for path in ("/vendor/three/package.json", "/vendor/playwright-core/package.json",
-                 "/vendor/three/build/../package.json", "/vendor/three/build/%2e%2e/package.json",
-                 "/../pyproject.toml", "/vendor/three/examples/jsm/../../../../pyproject.toml"):
+    for path in (
+        "/vendor/three/package.json",
+        "/vendor/playwright-core/package.json",
+        "/vendor/three/build/../package.json",
+        "/vendor/three/build/%2e%2e/package.json",
+        "/../pyproject.toml",
+        "/vendor/three/examples/jsm/../../../../pyproject.toml",
+    ):
         assert get(path)[0] == 404, path

@@ -16,8 +16,9 @@ from training.articulatory import CLASSES
 
 def test_speech_poses_are_the_articulatory_targets_scaled() -> None:
     # The table in checks.py (realtime_core cannot import training) must follow the classes.
-    want = sorted(tuple(round(float(x) * SPEECH_SCALE, 3) + 0.0 for x in c.target)
-                  for c in CLASSES.values() if not c.silence)
+    want = sorted(
+        tuple(round(float(x) * SPEECH_SCALE, 3) + 0.0 for x in c.target) for c in CLASSES.values() if not c.silence
+    )
     assert sorted(SPEECH_POSES) == want
     span = np.array(SPEECH_POSES)
     lo, hi = span.min(0), span.max(0)
@@ -52,7 +53,17 @@ class _Fold:
 
 def test_check_catches_a_fold() -> None:
     rig = _Fold()
-    lm = MouthLandmarks(eye_outer_left=2, eye_inner_left=5, eye_inner_right=3, eye_outer_right=0,
-                        corner_left=8, corner_right=6, upper_lip=7, lower_lip=7, upper_inner=7, lower_inner=7)
+    lm = MouthLandmarks(
+        eye_outer_left=2,
+        eye_inner_left=5,
+        eye_inner_right=3,
+        eye_outer_right=0,
+        corner_left=8,
+        corner_right=6,
+        upper_lip=7,
+        lower_lip=7,
+        upper_inner=7,
+        lower_inner=7,
+    )
     rep = check_rig(rig, lm)
     assert rep.flipped_triangles > 0 and not rep.passed

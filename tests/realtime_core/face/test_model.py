@@ -12,10 +12,16 @@ def toy_face() -> tuple[FaceModel, MouthLandmarks]:
     """A 10-vertex 'face': eyes at y=1, mouth at y=-1 (IOD = 2), with four simple units."""
     v = np.array(
         [
-            [1.3, 1, 0], [0.7, 1, 0], [-1.3, 1, 0], [-0.7, 1, 0],  # eyes: outer L, inner L, outer R, inner R
-            [0, -0.9, 0.1], [0, -1.1, 0.1],  # outer lips: upper, lower
-            [0, -0.98, 0.05], [0, -1.02, 0.05],  # inner lips
-            [0.5, -1, 0], [-0.5, -1, 0],  # corners L, R
+            [1.3, 1, 0],
+            [0.7, 1, 0],
+            [-1.3, 1, 0],
+            [-0.7, 1, 0],  # eyes: outer L, inner L, outer R, inner R
+            [0, -0.9, 0.1],
+            [0, -1.1, 0.1],  # outer lips: upper, lower
+            [0, -0.98, 0.05],
+            [0, -1.02, 0.05],  # inner lips
+            [0.5, -1, 0],
+            [-0.5, -1, 0],  # corners L, R
         ],
         dtype=float,
     )
@@ -30,8 +36,18 @@ def toy_face() -> tuple[FaceModel, MouthLandmarks]:
     fr = z.copy()
     fr[[8, 9], 1] = -0.05
     m = FaceModel(vertices=v, triangles=tri, animation_units={"jaw": jaw, "up": up, "stretch": st, "frown": fr})
-    lm = MouthLandmarks(upper_lip=4, lower_lip=5, upper_inner=6, lower_inner=7, corner_left=8, corner_right=9,
-                        eye_outer_left=0, eye_inner_left=1, eye_outer_right=2, eye_inner_right=3)
+    lm = MouthLandmarks(
+        upper_lip=4,
+        lower_lip=5,
+        upper_inner=6,
+        lower_inner=7,
+        corner_left=8,
+        corner_right=9,
+        eye_outer_left=0,
+        eye_inner_left=1,
+        eye_outer_right=2,
+        eye_inner_right=3,
+    )
     return m, lm
 
 

@@ -123,8 +123,12 @@ def test_rig_displacements_equal_the_sparse_chain(dense):
     s = sp.kron(sp.csr_matrix(g), sp.identity(3), format="csr")
     basis = rng.normal(size=(n_s * 3, 4))
     rig = Rig(
-        neutral=rng.normal(size=(n_h, 3)), triangles=np.zeros((0, 3), np.int32), moving=np.arange(n_h), matrix=s,
-        basis=basis, control=np.arange(n_s),
+        neutral=rng.normal(size=(n_h, 3)),
+        triangles=np.zeros((0, 3), np.int32),
+        moving=np.arange(n_h),
+        matrix=s,
+        basis=basis,
+        control=np.arange(n_s),
         simple=FaceModel(vertices=rng.normal(size=(n_s, 3)), triangles=np.zeros((0, 3), int)),
         calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
     )
@@ -141,10 +145,32 @@ def test_recalibrate_makes_the_head_show_the_requested_parameters():
     from realtime_core.face.rig import head_response, recalibrate
 
     v = np.array(
-        [[1.3, 1, 0], [0.7, 1, 0], [-1.3, 1, 0], [-0.7, 1, 0], [0, -0.9, 0.1], [0, -1.1, 0.1],
-         [0, -0.98, 0.05], [0, -1.02, 0.05], [0.5, -1, 0], [-0.5, -1, 0]], dtype=float)
-    lm = MouthLandmarks(upper_lip=4, lower_lip=5, upper_inner=6, lower_inner=7, corner_left=8, corner_right=9,
-                        eye_outer_left=0, eye_inner_left=1, eye_outer_right=2, eye_inner_right=3)
+        [
+            [1.3, 1, 0],
+            [0.7, 1, 0],
+            [-1.3, 1, 0],
+            [-0.7, 1, 0],
+            [0, -0.9, 0.1],
+            [0, -1.1, 0.1],
+            [0, -0.98, 0.05],
+            [0, -1.02, 0.05],
+            [0.5, -1, 0],
+            [-0.5, -1, 0],
+        ],
+        dtype=float,
+    )
+    lm = MouthLandmarks(
+        upper_lip=4,
+        lower_lip=5,
+        upper_inner=6,
+        lower_inner=7,
+        corner_left=8,
+        corner_right=9,
+        eye_outer_left=0,
+        eye_inner_left=1,
+        eye_outer_right=2,
+        eye_inner_right=3,
+    )
     # Simple model = the head itself; basis: unit params move the right vertices by IOD (= 2) units.
     basis = np.zeros((30, 4))
     basis[3 * 4 + 1, 0] = 2.0  # upper lip up

@@ -46,8 +46,9 @@ class _CmvnStage:
     """RunningCmvn as a push/flush stage (it releases every frame at once, so flush is empty)."""
 
     def __init__(self, d: int) -> None:
-        self.cmvn = RunningCmvn(CmvnConfig(prior_frames=20, max_frames=60, gate_db=-50), mean=np.zeros(d),
-                                var=np.ones(d))
+        self.cmvn = RunningCmvn(
+            CmvnConfig(prior_frames=20, max_frames=60, gate_db=-50), mean=np.zeros(d), var=np.ones(d)
+        )
         self.d = d
 
     def push(self, features: np.ndarray, level_db: np.ndarray) -> np.ndarray:
@@ -118,5 +119,10 @@ def test_quiet_input_below_the_silence_floor_looks_exactly_like_digital_silence(
     np.testing.assert_array_equal(hiss, zeros)
     assert np.abs(loud - zeros).max() > 1.0
     ungated = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True, silence_floor_db=None)
-    assert np.abs(extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), ungated,
-                                   **stats) - zeros).max() > 1.0
+    assert (
+        np.abs(
+            extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), ungated, **stats)
+            - zeros
+        ).max()
+        > 1.0
+    )

@@ -28,8 +28,19 @@ def test_agrees_with_python_speech_features_on_real_speech():
     assert (cfg.window_len, cfg.n_fft) == (1470, 2048)
     ours = mfcc(x, cfg)
     ref = psf.mfcc(
-        x, samplerate=22050, winlen=1470 / 22050, winstep=735 / 22050, numcep=12, nfilt=26, nfft=2048,
-        lowfreq=0, highfreq=None, preemph=0.97, ceplifter=0, appendEnergy=False, winfunc=np.hamming,
+        x,
+        samplerate=22050,
+        winlen=1470 / 22050,
+        winstep=735 / 22050,
+        numcep=12,
+        nfilt=26,
+        nfft=2048,
+        lowfreq=0,
+        highfreq=None,
+        preemph=0.97,
+        ceplifter=0,
+        appendEnergy=False,
+        winfunc=np.hamming,
     )[:, 1:12]
     complete = (len(x) - 1470) // 735 + 1  # frames entirely inside the audio
     assert ours.shape[0] == cfg.n_frames_for(len(x))
@@ -100,8 +111,14 @@ def test_bad_audio_raises_a_named_error(samples, match):
 
 
 def test_bad_config_and_misuse():
-    for bad in (dict(sample_rate_hz=4000), dict(sample_rate_hz=96000), dict(sample_rate_hz=16000.5),
-                dict(n_ceps=30), dict(preemphasis=1.5), dict(window_hops=0.5)):
+    for bad in (
+        dict(sample_rate_hz=4000),
+        dict(sample_rate_hz=96000),
+        dict(sample_rate_hz=16000.5),
+        dict(n_ceps=30),
+        dict(preemphasis=1.5),
+        dict(window_hops=0.5),
+    ):
         with pytest.raises(ConfigError):
             MfccConfig(**bad)
     st = MfccStream(MfccConfig())

@@ -45,8 +45,11 @@ def test_prior_keeps_every_covariance_positive_definite_with_fewer_frames_than_d
     assert eig.min() > 0
     # The prior is what does it: with no prior the M-step has a singular covariance.
     with pytest.raises(ModelFormatError, match="not positive definite"):
-        baum_welch([x[:30], x[30:]], res.model, config=TrainConfig(n_states=3, n_mix=2, n_iter=1, tol=0,
-                                                                   covar_prior_weight=0.0))
+        baum_welch(
+            [x[:30], x[30:]],
+            res.model,
+            config=TrainConfig(n_states=3, n_mix=2, n_iter=1, tol=0, covar_prior_weight=0.0),
+        )
 
 
 @pytest.mark.slow
@@ -86,13 +89,29 @@ def test_same_trajectory_as_hmmlearn_from_the_same_initial_model():
     rng = np.random.default_rng(3)
     true = random_av_hmm(rng, n_states=3, n_mix=2, n_audio=3, n_visual=2)
     seqs = [sample(true, rng, 200)[0] for _ in range(5)]
-    cfg = TrainConfig(n_states=3, n_mix=2, n_iter=8, tol=0, covar_prior_weight=0.0, pseudo_count=0.0,
-                      centering="previous", resp_floor=0.0)
+    cfg = TrainConfig(
+        n_states=3,
+        n_mix=2,
+        n_iter=8,
+        tol=0,
+        covar_prior_weight=0.0,
+        pseudo_count=0.0,
+        centering="previous",
+        resp_floor=0.0,
+    )
     init = init_model(seqs, n_audio=3, config=cfg)
     ours = baum_welch(seqs, init, config=cfg).history
 
-    ref = hmm.GMMHMM(n_components=3, n_mix=2, covariance_type="full", n_iter=1, tol=0, init_params="",
-                     params="stmcw", implementation="log")
+    ref = hmm.GMMHMM(
+        n_components=3,
+        n_mix=2,
+        covariance_type="full",
+        n_iter=1,
+        tol=0,
+        init_params="",
+        params="stmcw",
+        implementation="log",
+    )
     ref.startprob_, ref.transmat_ = init.startprob.copy(), init.transmat.copy()
     ref.weights_, ref.means_, ref.covars_ = init.weights.copy(), init.means.copy(), init.covars.copy()
     x, lengths = np.concatenate(seqs), [len(s) for s in seqs]
@@ -120,8 +139,20 @@ def test_model_validation_names_the_problem():
     from realtime_core import ModelFormatError
 
     with pytest.raises(ModelFormatError, match="state 1, mixture 0 is not positive definite"):
-        AvHmm(startprob=good.startprob, transmat=good.transmat, weights=good.weights, means=good.means,
-              covars=bad, n_audio=3)
+        AvHmm(
+            startprob=good.startprob,
+            transmat=good.transmat,
+            weights=good.weights,
+            means=good.means,
+            covars=bad,
+            n_audio=3,
+        )
     with pytest.raises(ModelFormatError, match="transmat must have shape"):
-        AvHmm(startprob=good.startprob, transmat=np.eye(3), weights=good.weights, means=good.means,
-              covars=good.covars, n_audio=3)
+        AvHmm(
+            startprob=good.startprob,
+            transmat=np.eye(3),
+            weights=good.weights,
+            means=good.means,
+            covars=good.covars,
+            n_audio=3,
+        )

@@ -56,8 +56,14 @@ def test_eq7_as_printed_equals_the_fast_form(model, data):
 
 
 def test_single_component_gives_the_gaussian_conditional_mean(model, data):
-    one = AvHmm(startprob=[1.0], transmat=[[1.0]], weights=[[1.0]], means=model.means[:1, :1],
-                covars=model.covars[:1, :1], n_audio=DA)
+    one = AvHmm(
+        startprob=[1.0],
+        transmat=[[1.0]],
+        weights=[[1.0]],
+        means=model.means[:1, :1],
+        covars=model.covars[:1, :1],
+        n_audio=DA,
+    )
     mu, S = one.means[0, 0], one.covars[0, 0]
     oa = data[:, :DA]
     expect = mu[DA:] + (S[DA:, :DA] @ np.linalg.solve(S[:DA, :DA], (oa - mu[:DA]).T)).T

@@ -26,8 +26,9 @@ def _data(n: int = 3000, seed: int = 0):
     rng = np.random.default_rng(seed)
     x = rng.standard_normal((n, FE.audio_dim))
     mid = slice(3 * FE.n_feat, 4 * FE.n_feat)
-    y = np.column_stack([np.tanh(x[:, mid] @ rng.standard_normal(FE.n_feat)), x[:, mid][:, 0] * x[:, mid][:, 1],
-                         np.sin(x[:, 0])])
+    y = np.column_stack(
+        [np.tanh(x[:, mid] @ rng.standard_normal(FE.n_feat)), x[:, mid][:, 0] * x[:, mid][:, 1], np.sin(x[:, 0])]
+    )
     return x, y
 
 
@@ -46,8 +47,8 @@ def test_numpy_inference_matches_sklearn(bank_and_data) -> None:
 
     m64 = MlpMapper(bank, dtype="float64")
     # The selector: sklearn's GaussianMixture predict on the same (refitted, deterministic) mixture.
-    gmm = fit_selector(x[:, bank.class_slice[0]:bank.class_slice[1]], recipe)
-    np.testing.assert_array_equal(m64.classify(x), gmm.predict(x[:, bank.class_slice[0]:bank.class_slice[1]]))
+    gmm = fit_selector(x[:, bank.class_slice[0] : bank.class_slice[1]], recipe)
+    np.testing.assert_array_equal(m64.classify(x), gmm.predict(x[:, bank.class_slice[0] : bank.class_slice[1]]))
     # Each expert: the exported weights reproduce an independent forward pass of the stored weights.
     cls = m64.classify(x)
     ref = np.array([bank.w2[c] @ np.tanh(bank.w1[c] @ row + bank.b1[c]) + bank.b2[c] for c, row in zip(cls, x)])
@@ -69,7 +70,8 @@ def test_export_matches_sklearn_predict() -> None:
     y = np.column_stack([x[:, 0] ** 2, x[:, 1]]) * 10
     xm, xsd, ym, ysd = x.mean(0), x.std(0), y.mean(0), y.std(0)
     mlp = MLPRegressor(hidden_layer_sizes=(20,), activation="tanh", max_iter=50, random_state=0).fit(
-        (x - xm) / xsd, (y - ym) / ysd)
+        (x - xm) / xsd, (y - ym) / ysd
+    )
     w1, b1, w2, b2 = export_mlp(mlp, xm, xsd, ym, ysd)
     ours = (w2 @ np.tanh(w1 @ x.T + b1[:, None])).T + b2
     np.testing.assert_allclose(ours, mlp.predict((x - xm) / xsd) * ysd + ym, rtol=1e-9, atol=1e-9)
@@ -77,8 +79,9 @@ def test_export_matches_sklearn_predict() -> None:
 
 def test_streaming_equals_batch_for_any_chunking(bank_and_data) -> None:
     bank, x, _, _ = bank_and_data
-    model = MlpSpeechModel(bank=bank, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat),
-                           visual_names=("a", "b"))
+    model = MlpSpeechModel(
+        bank=bank, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat), visual_names=("a", "b")
+    )
     assert isinstance(model, SpeechModel)
     batch = model.mapper().predict(x[:500])
     rng = np.random.default_rng(1)
@@ -95,7 +98,7 @@ def test_streaming_equals_batch_for_any_chunking(bank_and_data) -> None:
     pieces, i = [], 0
     while i < audio.size:
         n = int(rng.integers(1, 900))
-        pieces.append(p.push(audio[i:i + n]))
+        pieces.append(p.push(audio[i : i + n]))
         i += n
     pieces.append(p.flush())
     np.testing.assert_array_equal(np.concatenate(pieces), whole)
@@ -105,8 +108,14 @@ def test_streaming_equals_batch_for_any_chunking(bank_and_data) -> None:
 
 def test_file_round_trip_and_errors(bank_and_data, tmp_path) -> None:
     bank, x, _, _ = bank_and_data
-    model = MlpSpeechModel(bank=bank, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat),
-                           visual_names=("a", "b"), metadata={"k": 4})
+    model = MlpSpeechModel(
+        bank=bank,
+        frontend=FE,
+        cmvn_mean=np.zeros(FE.n_feat),
+        cmvn_var=np.ones(FE.n_feat),
+        visual_names=("a", "b"),
+        metadata={"k": 4},
+    )
     back = decode_mlp_model(encode_mlp_model(model))
     np.testing.assert_array_equal(back.mapper().predict(x[:50]), model.mapper().predict(x[:50]))
     assert back.metadata == {"k": 4} and back.closure_band == 0.0
@@ -144,9 +153,15 @@ def test_hmm_file_given_as_mlp_mapper_is_named() -> None:
 
     rng = np.random.default_rng(0)
     d = FE.audio_dim + 4
-    hmm = AvHmm(startprob=np.ones(2) / 2, transmat=np.ones((2, 2)) / 2, weights=np.ones((2, 1)),
-                means=rng.standard_normal((2, 1, d)), covars=np.tile(np.eye(d), (2, 1, 1, 1)),
-                covariance_type="full", n_audio=FE.audio_dim)
+    hmm = AvHmm(
+        startprob=np.ones(2) / 2,
+        transmat=np.ones((2, 2)) / 2,
+        weights=np.ones((2, 1)),
+        means=rng.standard_normal((2, 1, d)),
+        covars=np.tile(np.eye(d), (2, 1, 1, 1)),
+        covariance_type="full",
+        n_audio=FE.audio_dim,
+    )
     av = AvModel(hmm=hmm, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat))
     with pytest.raises(ModelFormatError, match="this is an HMM model .* use --mapper hmm"):
         decode_mlp_model(encode_model(av))
@@ -156,8 +171,9 @@ def test_hmm_file_given_as_mlp_mapper_is_named() -> None:
 
 def test_stream_misuse_and_bad_features(bank_and_data) -> None:
     bank, x, _, _ = bank_and_data
-    model = MlpSpeechModel(bank=bank, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat),
-                           visual_names=("a", "b"))
+    model = MlpSpeechModel(
+        bank=bank, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat), visual_names=("a", "b")
+    )
     s = model.visual_mapper()
     with pytest.raises(InvalidFeaturesError, match=r"\(k, 77\)"):
         s.push(x[:3, :10])

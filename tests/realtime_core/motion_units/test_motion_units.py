@@ -43,7 +43,7 @@ def test_variance_rule_and_reconstruction() -> None:
     assert cum[mu.n_units - 1] >= 0.97 and (mu.n_units == 1 or cum[mu.n_units - 2] < 0.97)
     err = d - mu.reconstruct(mu.project(d))
     # What PCA leaves out is exactly the variance of the dropped eigenvalues.
-    np.testing.assert_allclose((err**2).sum() / (len(d) - 1), mu.eigenvalues[mu.n_units:].sum(), rtol=1e-8)
+    np.testing.assert_allclose((err**2).sum() / (len(d) - 1), mu.eigenvalues[mu.n_units :].sum(), rtol=1e-8)
     np.testing.assert_allclose(mu.project(d).mean(0), 0.0, atol=1e-10)
 
 
@@ -87,8 +87,10 @@ def test_keyframe_conversion_matches_lstsq_and_round_trips() -> None:
     c_back, _ = keyframes_to_mups(keys, mu, b)
     np.testing.assert_allclose(c_back, mu.project(ref @ k.T), atol=1e-9)
     # Keyframes that span the MU space (here: built from the units themselves) round-trip exactly.
-    span = KeyframeSet(names=tuple(f"u{i}" for i in range(6)),
-                       shapes=np.column_stack([mu.mean, *mu.units]) @ rng.standard_normal((6, 6)))
+    span = KeyframeSet(
+        names=tuple(f"u{i}" for i in range(6)),
+        shapes=np.column_stack([mu.mean, *mu.units]) @ rng.standard_normal((6, 6)),
+    )
     assert round_trip_error(span, mu, umup).max() < 1e-9
 
 
