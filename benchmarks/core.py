@@ -156,14 +156,14 @@ def _random_bank(rng: np.random.Generator, k: int, hidden: int, da: int, dout: i
 def bench_mappers(n_frames: int, rng: np.random.Generator, mlp_file: str | None = None) -> dict:
     """Per frame: each mapper's step (one o_a row pushed) and the whole live path (one hop of samples)."""
     from assets.modelfile import DEFAULT_MODEL, load_mlp_model, load_model
-    from realtime_core.mapping import MlpSpeechModel
+    from realtime_core.mapping import MlpSpeechModel, SpeechModel
 
     if not DEFAULT_MODEL.is_file():
         return {"skipped": f"{DEFAULT_MODEL} missing"}
     hmm = load_model(None)
     fe = hmm.frontend
     lo, hi = fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat
-    models = {f"hmm shipped N={hmm.hmm.n_states},M={hmm.hmm.n_mix}": hmm}
+    models: dict[str, SpeechModel] = {f"hmm shipped N={hmm.hmm.n_states},M={hmm.hmm.n_mix}": hmm}
     for k, h in ((16, 20), (44, 20), (1, 600)):
         bank = _random_bank(rng, k, h, fe.audio_dim, 4, lo, hi)
         name = f"mlp K={k},H={h}" + (" (single large MLP)" if k == 1 else "")

@@ -13,22 +13,27 @@ The matrices are *fitted*, not hand-set (:mod:`realtime_core.fitted_maps`, gener
 (eq. 4), non-negative, of the built-in head's own ARKit targets to the head rig's motion for each
 signed unit of each parameter. OVR's 14 visemes are keyframes given by their articulatory targets in
 the four parameters and are solved per frame (eq. 4 with ``b >= 0``, a small ridge; at most four
-visemes active), ``sil = clip(1 - sum(others), 0, 1)``. Splitting each parameter into its positive and negative part lets a
-direction recruit its own shapes (a wider mouth ``mouthStretch``, a narrower one ``mouthPucker``)
-where a single affine map would need negative weights. Shapes the four parameters do not observe
-(eyes, brows, cheeks, tongue) stay 0 unless an expression is active: ``expression`` intensities
-add each expression's ARKit recipe (:data:`realtime_core.expressions.EXPRESSION_RECIPES`) on top of
-the weights of the speech parameters. OVR-15 has no expression shapes; it follows the parameters.
+visemes active), ``sil = clip(1 - sum(others), 0, 1)``. Splitting each parameter into its positive
+and negative part lets a direction recruit its own shapes (a wider mouth ``mouthStretch``, a narrower
+one ``mouthPucker``) where a single affine map would need negative weights. Shapes the four
+parameters do not observe (eyes, brows, cheeks, tongue) stay 0 unless an expression is active:
+``expression`` intensities add each expression's ARKit recipe
+(:data:`realtime_core.expressions.EXPRESSION_RECIPES`) on top of the weights of the speech parameters.
+OVR-15 has no expression shapes; it follows the parameters.
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from realtime_core import fitted_maps
+
+if TYPE_CHECKING:
+    from realtime_core.motion_units import KeyframeSet
 
 ARKIT_NAMES: tuple[str, ...] = (
     "eyeBlinkLeft",
@@ -94,7 +99,7 @@ _SETS = MappingProxyType({"arkit52": ARKIT_NAMES, "ovr15": OVR_NAMES})
 
 
 @lru_cache(maxsize=1)
-def _ovr_keys():
+def _ovr_keys() -> KeyframeSet:
     from realtime_core.motion_units import KeyframeSet
 
     return KeyframeSet(names=OVR_NAMES[1:], shapes=fitted_maps.OVR_KEYFRAMES, ridge=float(fitted_maps.OVR_RIDGE[0]))

@@ -177,7 +177,7 @@ class ExpressionTrack:
         return out
 
     @property
-    def events(self) -> list[tuple[float, dict]]:
+    def events(self) -> list[tuple[float, dict[str, float]]]:
         """Scheduled changes: (time s, {expression: target intensity})."""
         return [(t, dict(zip(EXPRESSIONS, map(float, v)))) for t, v in self._events]
 

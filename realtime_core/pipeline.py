@@ -3,9 +3,9 @@
 :class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the model's streaming
 visual mapper (:class:`realtime_core.mapping.VisualMapper`: the HMM inverter of an
 :class:`AvModel`, or the GMM-selected MLP bank of an :class:`MlpSpeechModel`). ``push(samples)``
-returns the parameter rows now final, ``flush()`` the rest; row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
-once the audio reaches frame ``tc + lag`` plus one analysis window: the algorithmic
-delay is ``(tc + lag) / fps`` seconds plus the window.
+returns the parameter rows now final, ``flush()`` the rest; row ``k`` is video frame ``k`` (time ``k / 30`` s).
+The first row of an utterance appears once the audio reaches frame ``tc + lag`` plus one analysis
+window: the algorithmic delay is ``(tc + lag) / fps`` seconds plus the window.
 
 :func:`speech_to_params` runs the same objects over a whole utterance, so offline results
 equal what a live session produces frame for frame; ``mode="batch"`` uses batch HMMI
@@ -23,7 +23,7 @@ from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
-from realtime_core.mapping import SpeechModel
+from realtime_core.mapping import SpeechModel, VisualMapper
 
 StageObserver = Callable[[str], None]
 """Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage
@@ -58,6 +58,7 @@ class SpeechToParams:
             StreamingResampler(self.rate_hz, model.sample_rate_hz) if self.rate_hz != model.sample_rate_hz else None
         )
         self._fe = model.front_end()
+        self._inv: VisualMapper
         if isinstance(model, AvModel):
             self._inv = model.inverter(stream)
         else:
@@ -140,6 +141,7 @@ def speech_to_params(
     if mode == "stream":
         p = SpeechToParams(model, stream=stream)
         return np.concatenate([p.push(x), p.flush()])
+    assert isinstance(model, AvModel)  # refused above otherwise; narrows the type for what follows
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])
     return model.output_stage(hmm_inversion(model.form, oa, config=hmmi).visual)

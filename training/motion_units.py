@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
 from realtime_core.errors import FacecastError
 from realtime_core.features import FrontEndConfig, extract_features
 from realtime_core.mapping import MlpMapper
@@ -191,10 +192,16 @@ def score_mups(
 
 
 def mlp_estimates(mapper: MlpMapper, clips: Sequence[Clip]) -> list[np.ndarray]:
-    return [mapper.mups(c.features) for c in clips]
+    """The MLP bank's estimates of each clip's UMUPs from its ``features`` (see :func:`with_features`)."""
+    out = []
+    for c in clips:
+        if c.features is None:
+            raise ConfigError(f"{c.sentence_id}: no audio features computed (run with_features first)")
+        out.append(mapper.mups(c.features))
+    return out
 
 
-def hmm_estimates(model, clips: Sequence[Clip]) -> list[np.ndarray]:
+def hmm_estimates(model: AvModel, clips: Sequence[Clip]) -> list[np.ndarray]:
     """The HMM's live (streaming) estimates of each clip's UMUPs."""
     from realtime_core.pipeline import speech_to_params
 

@@ -14,7 +14,7 @@ or sad videos), ``D_k`` is simply their measured deformations and every later st
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -66,7 +66,7 @@ def head_correspondence(neutral: np.ndarray, indices: Sequence[int], head, mp_la
     return skin[nearest], sim
 
 
-def carried(head, verts: np.ndarray, sim, weights: dict[str, float]) -> np.ndarray:
+def carried(head, verts: np.ndarray, sim, weights: Mapping[str, float]) -> np.ndarray:
     """ARKit ``weights`` on the head, read at ``verts`` and brought into the speaker's frame: ``(3 L,)`` IOD."""
     disp = sum(w * head.targets[n][verts] for n, w in weights.items())  # head units
     return (disp @ sim.rotation / sim.scale).reshape(-1)  # rotation^T, then the speaker's units

@@ -76,7 +76,10 @@ def mu_markdown(rep: dict, command: str) -> str:
                 "A constant added deformation leaves R unchanged by construction; MSE shows the offset error."
             ),
             "",
-            "| expression | residual energy rebuilt by m_k0 + 2 EMUs | mapper | train R | train MSE | test R | test MSE |",
+            (
+                "| expression | residual energy rebuilt by m_k0 + 2 EMUs | mapper "
+                "| train R | train MSE | test R | test MSE |"
+            ),
             "|---|---|---|---|---|---|---|",
         ]
         for e in names:

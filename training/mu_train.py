@@ -12,6 +12,7 @@ import numpy as np
 
 from assets.files import atomic_write_bytes
 from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
 from realtime_core.mapping import MlpMapper, MlpSpeechModel, encode_mlp_model
 from realtime_core.motion_units import MotionUnits, fit_motion_units
 from training.errors import ConfigError
@@ -129,7 +130,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         say(f"K={k}: val R {s.r:.4f}, MSE {s.mse:.5f} ({time.perf_counter() - t0:.0f} s)")
     best_k = max(cfg.classes, key=lambda k: report["val"][f"mlp_K{k}"]["R"])
     report["chosen_classes"] = best_k
-    systems: dict[str, object] = {"mlp": MlpMapper(banks[best_k])}
+    systems: dict[str, MlpMapper | AvModel] = {"mlp": MlpMapper(banks[best_k])}
     model = MlpSpeechModel(
         bank=banks[best_k],
         frontend=fe,
@@ -201,7 +202,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     ests = {}
     for name, sysm in systems.items():
         ests[name] = {
-            split: (hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl))
+            split: (mlp_estimates(sysm, cl) if isinstance(sysm, MlpMapper) else hmm_estimates(sysm, cl))
             for split, cl in (("train", train), ("test", test))
         }
         for split, cl in (("train", train), ("test", test)):
@@ -264,6 +265,7 @@ def choose_closure_band(model: MlpSpeechModel, root, *, cache_dir=None) -> tuple
 
 
 def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> dict:
+    from assets.errors import LandmarkError
     from assets.grid import read_words, sentences
     from assets.heads.builtin import load_builtin_head
     from assets.heads.landmarks import read_landmarks
@@ -281,12 +283,12 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
     )
 
     head = load_builtin_head()
-    mp = {
-        k: int(v)
-        for k, v in read_landmarks(
-            Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json"
-        ).items()
-    }
+    mp_path = Path(__file__).resolve().parents[1] / "assets" / "heads" / "landmarks" / "mediapipe_canonical.json"
+    mp: dict[str, int] = {}
+    for k, v in read_landmarks(mp_path).items():
+        if not isinstance(v, int):  # this file names MediaPipe vertex indices, not [x, y, z] points
+            raise LandmarkError(f"{mp_path}: landmark {k!r} must be a vertex index, got {v!r}")
+        mp[k] = v
     neutral = np.mean([c.neutral for c in train], axis=0)
     deltas = expression_deformations(neutral, lower_face_indices(), head, mp)
     # Keyframe sets and the eq. 4 round trip MUPs -> keyframes -> MUPs on the test frames.
@@ -424,12 +426,12 @@ def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> di
     clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
     train, test = of_split(clips, "train"), of_split(clips, "test")
     report = json.loads((out / "report.json").read_text())
-    systems: dict[str, object] = {"mlp": mlp.mapper()}
+    systems: dict[str, MlpMapper | AvModel] = {"mlp": mlp.mapper()}
     if (out / "hmm_mups.npz").is_file():
         systems["hmm"] = load_model(out / "hmm_mups.npz")
     for name, sysm in systems.items():
         for split, cl in (("train", train), ("test", test)):
-            est = hmm_estimates(sysm, cl) if name == "hmm" else mlp_estimates(sysm, cl)
+            est = mlp_estimates(sysm, cl) if isinstance(sysm, MlpMapper) else hmm_estimates(sysm, cl)
             report[split][name] = score_mups(cl, est, mu, scale, readout).as_json()
         say(f"{name}: train R {report['train'][name]['R']:.4f}, test R {report['test'][name]['R']:.4f}")
     return report

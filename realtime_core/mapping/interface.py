@@ -41,10 +41,16 @@ class VisualMapper(Protocol):
 
 @runtime_checkable
 class SpeechModel(Protocol):
-    """A trained audio-to-visual model: the front end it was trained with and fresh mappers."""
+    """A trained audio-to-visual model: the front end it was trained with and fresh mappers.
 
-    frontend: FrontEndConfig
-    visual_names: tuple[str, ...]
+    ``frontend`` and ``visual_names`` are read-only properties here so frozen dataclasses (whose
+    fields are read-only) satisfy the protocol."""
+
+    @property
+    def frontend(self) -> FrontEndConfig: ...
+
+    @property
+    def visual_names(self) -> tuple[str, ...]: ...
 
     @property
     def sample_rate_hz(self) -> int: ...

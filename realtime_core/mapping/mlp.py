@@ -69,8 +69,9 @@ class MlpBank:
     readout_bias: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        def f64(a):
+        def f64(a: object) -> np.ndarray:
             return np.asarray(a, dtype=np.float64)
+
         lw, mu, var = f64(self.gmm_log_weights), f64(self.gmm_means), f64(self.gmm_vars)
         w1, b1, w2, b2 = f64(self.w1), f64(self.b1), f64(self.w2), f64(self.b2)
         k = lw.shape[0] if lw.ndim == 1 else -1
@@ -151,8 +152,10 @@ class _Plan:
         prec = 1.0 / bank.gmm_vars
         const = bank.gmm_log_weights - 0.5 * (np.log(2 * np.pi * bank.gmm_vars) + bank.gmm_means**2 * prec).sum(axis=1)
         score = np.vstack([-0.5 * prec.T, (bank.gmm_means * prec).T, const[None, :]])
-        def cast(a):
+
+        def cast(a: np.ndarray) -> np.ndarray:
             return np.ascontiguousarray(a, dtype=dt)
+
         if bank.readout is None:
             w2o, b2o = bank.w2, bank.b2
         else:  # R (W2 h + b2) + r0 = (R W2) h + (R b2 + r0): one product fewer per frame

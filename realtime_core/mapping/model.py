@@ -14,12 +14,13 @@ import json
 import zipfile
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
-from realtime_core.avmodel import frontend_from_json, frontend_to_json
+from realtime_core.avmodel import AvModel, decode_model, encode_model, frontend_from_json, frontend_to_json
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
@@ -42,7 +43,7 @@ class MlpSpeechModel:
     cmvn_mean: np.ndarray
     cmvn_var: np.ndarray
     visual_names: tuple[str, ...] = VISUAL_PARAMS
-    metadata: dict = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
     closure_band: float = 0.0
 
     def __post_init__(self) -> None:
@@ -68,7 +69,7 @@ class MlpSpeechModel:
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
     @cached_property
-    def _mappers(self) -> dict:
+    def _mappers(self) -> dict[str, MlpMapper]:
         return {}
 
     def mapper(self, dtype: str = "float32") -> MlpMapper:
@@ -102,7 +103,7 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
         "closure_band": model.closure_band,
         "metadata": model.metadata,
     }
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
         "version": np.array(VERSION),
         "config_json": np.array(json.dumps(config, sort_keys=True)),
@@ -111,10 +112,10 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
     }
     for name in _BANK_ARRAYS:
         arrays[name] = getattr(b, name)
-    if b.readout is not None:
+    if b.readout is not None and b.readout_bias is not None:  # MlpBank checks both or neither
         arrays["readout"], arrays["readout_bias"] = b.readout, b.readout_bias
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
     return buf.getvalue()
 
 
@@ -161,17 +162,13 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
         raise ModelFormatError(f"invalid mapper configuration: {exc}") from None
 
 
-def encode_speech_model(model) -> bytes:
+def encode_speech_model(model: AvModel | MlpSpeechModel) -> bytes:
     """Either kind of :class:`realtime_core.mapping.SpeechModel` to its ``.npz`` bytes."""
-    from realtime_core.avmodel import AvModel, encode_model
-
     return encode_model(model) if isinstance(model, AvModel) else encode_mlp_model(model)
 
 
-def decode_speech_model(data: bytes):
+def decode_speech_model(data: bytes) -> AvModel | MlpSpeechModel:
     """``.npz`` bytes of either kind (told apart by their ``format``) to the model."""
-    from realtime_core.avmodel import decode_model
-
     try:
         kind = str(np.load(io.BytesIO(data), allow_pickle=False)["format"])
     except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as exc:

@@ -163,7 +163,7 @@ def test_hmm_file_given_as_mlp_mapper_is_named() -> None:
         n_audio=FE.audio_dim,
     )
     av = AvModel(hmm=hmm, frontend=FE, cmvn_mean=np.zeros(FE.n_feat), cmvn_var=np.ones(FE.n_feat))
-    with pytest.raises(ModelFormatError, match="this is an HMM model .* use --mapper hmm"):
+    with pytest.raises(ModelFormatError, match=r"this is an HMM model .* use --mapper hmm"):
         decode_mlp_model(encode_model(av))
     # The HMM path satisfies the same interface.
     assert isinstance(av, SpeechModel) and isinstance(av.visual_mapper(), VisualMapper)
