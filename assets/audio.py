@@ -52,7 +52,9 @@ def write_wav(path: str | Path, samples: np.ndarray, rate_hz: int) -> Path:
     return atomic_write_bytes(Path(path), wav_bytes(samples, rate_hz))
 
 
-def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True) -> tuple[np.ndarray, int]:
+def read_wav(
+    path: str | Path, *, expected_rate_hz: int | None = None, check_silence: bool = True
+) -> tuple[np.ndarray, int]:
     """Read a PCM WAV (8/16/24/32-bit, any channel count -> mono mean).
 
     Returns (samples (n,) float32 in [-1, 1], sample_rate_hz). Raises NotAudioError,
@@ -103,8 +105,6 @@ def read_wav(path: str | Path, *, expected_rate_hz: int | None = None, check_sil
     return x.astype(np.float32), int(rate)
 
 
-
-
 def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndarray, int]:
     """Decode ``path`` to mono: ``(samples (n,) float32 in [-1, 1], sample_rate_hz)``.
 
@@ -122,8 +122,24 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     if ffmpeg is None:
         raise NotAudioError(path, "decoding this format needs ffmpeg, which is not installed (apt-get install ffmpeg)")
     rate = rate_hz or _probe_rate(path)
-    cmd = [ffmpeg, "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", "1", "-ar", str(rate),
-           "-f", "s16le", "-acodec", "pcm_s16le", "-"]
+    cmd = [
+        ffmpeg,
+        "-v",
+        "error",
+        "-nostdin",
+        "-i",
+        str(path),
+        "-vn",
+        "-ac",
+        "1",
+        "-ar",
+        str(rate),
+        "-f",
+        "s16le",
+        "-acodec",
+        "pcm_s16le",
+        "-",
+    ]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:
         msg = proc.stderr.decode(errors="replace").strip().splitlines()
@@ -138,9 +154,21 @@ def _probe_rate(path: Path) -> int:
     if ffprobe is None:
         return 16000
     proc = subprocess.run(
-        [ffprobe, "-v", "error", "-select_streams", "a:0", "-show_entries", "stream=sample_rate",
-         "-of", "default=noprint_wrappers=1:nokey=1", str(path)],
-        capture_output=True, check=False, text=True,
+        [
+            ffprobe,
+            "-v",
+            "error",
+            "-select_streams",
+            "a:0",
+            "-show_entries",
+            "stream=sample_rate",
+            "-of",
+            "default=noprint_wrappers=1:nokey=1",
+            str(path),
+        ],
+        capture_output=True,
+        check=False,
+        text=True,
     )
     try:
         return int(proc.stdout.strip().splitlines()[0])

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from realtime_core.phones import PhonemeSegment
 from assets.errors import SynthesisError
 from realtime_core.errors import ConfigError
+from realtime_core.phones import PhonemeSegment
 
 LIBRARY = "libespeak-ng.so.1"
 
@@ -99,8 +99,18 @@ LANGUAGES: dict[str, tuple[str, ...]] = {
 """Base espeak voices per language code used in the corpus."""
 
 VARIANTS: tuple[str, ...] = (
-    "m1", "m2", "m3", "m4", "m5", "m6", "m7",
-    "f1", "f2", "f3", "f4", "f5",
+    "m1",
+    "m2",
+    "m3",
+    "m4",
+    "m5",
+    "m6",
+    "m7",
+    "f1",
+    "f2",
+    "f3",
+    "f4",
+    "f5",
 )
 """espeak voice variants (``voices/!v``): male ``m1..m7`` and female ``f1..f5`` formant sets."""
 
@@ -148,8 +158,6 @@ class Voice:
         return f"{self.espeak_name}@r{self.rate_wpm}p{self.pitch}"
 
 
-
-
 @dataclass(frozen=True)
 class Synthesis:
     """What :meth:`EspeakSynthesizer.synthesize` returns.
@@ -182,9 +190,7 @@ class EspeakSynthesizer:
         try:
             lib = ctypes.CDLL(LIBRARY)
         except OSError as exc:
-            raise SynthesisError(
-                f"cannot load {LIBRARY} ({exc}); install the Debian package libespeak-ng1"
-            ) from exc
+            raise SynthesisError(f"cannot load {LIBRARY} ({exc}); install the Debian package libespeak-ng1") from exc
         lib.espeak_Initialize.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_char_p, ctypes.c_int]
         lib.espeak_Initialize.restype = ctypes.c_int
         lib.espeak_SetSynthCallback.argtypes = [_CALLBACK]
@@ -194,8 +200,14 @@ class EspeakSynthesizer:
         lib.espeak_SetParameter.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int]
         lib.espeak_SetParameter.restype = ctypes.c_int
         lib.espeak_Synth.argtypes = [
-            ctypes.c_void_p, ctypes.c_size_t, ctypes.c_uint, ctypes.c_int, ctypes.c_uint,
-            ctypes.c_uint, ctypes.POINTER(ctypes.c_uint), ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_size_t,
+            ctypes.c_uint,
+            ctypes.c_int,
+            ctypes.c_uint,
+            ctypes.c_uint,
+            ctypes.POINTER(ctypes.c_uint),
+            ctypes.c_void_p,
         ]
         lib.espeak_Synth.restype = ctypes.c_int
         lib.espeak_Synchronize.argtypes = []
@@ -215,7 +227,7 @@ class EspeakSynthesizer:
         self._callback = _CALLBACK(self._on_synth)
         lib.espeak_SetSynthCallback(self._callback)
 
-    def _on_synth(self, wav, n_samples, events) -> int:  # noqa: ANN001 - ctypes types
+    def _on_synth(self, wav, n_samples, events) -> int:
         if n_samples > 0 and wav:
             self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
         i = 0

@@ -30,8 +30,19 @@ SILENCE_WORDS = frozenset({"sil", "sp"})
 _COMMAND = {"b": "bin", "l": "lay", "p": "place", "s": "set"}
 _COLOUR = {"b": "blue", "g": "green", "r": "red", "w": "white"}
 _PREPOSITION = {"a": "at", "b": "by", "i": "in", "w": "with"}
-_DIGIT = {"z": "zero", "1": "one", "2": "two", "3": "three", "4": "four", "5": "five", "6": "six",
-          "7": "seven", "8": "eight", "9": "nine", "0": "zero"}
+_DIGIT = {
+    "z": "zero",
+    "1": "one",
+    "2": "two",
+    "3": "three",
+    "4": "four",
+    "5": "five",
+    "6": "six",
+    "7": "seven",
+    "8": "eight",
+    "9": "nine",
+    "0": "zero",
+}
 _ADVERB = {"a": "again", "n": "now", "p": "please", "s": "soon"}
 
 
@@ -129,7 +140,8 @@ def sentence_text(sentence_id: str) -> str:
     if len(sid) != 6:
         raise ValueError(f"not a GRID sentence id: {sentence_id!r}")
     try:
-        return " ".join((_COMMAND[sid[0]], _COLOUR[sid[1]], _PREPOSITION[sid[2]], sid[3],
-                         _DIGIT[sid[4]], _ADVERB[sid[5]]))
+        return " ".join(
+            (_COMMAND[sid[0]], _COLOUR[sid[1]], _PREPOSITION[sid[2]], sid[3], _DIGIT[sid[4]], _ADVERB[sid[5]])
+        )
     except KeyError as exc:
         raise ValueError(f"not a GRID sentence id: {sentence_id!r}") from exc

@@ -1,17 +1,19 @@
 """Model files on disk: atomic save, load naming the file, and the shipped default model.
 
-The format itself (``.npz``, no pickle, versioned, validated) is
-:mod:`realtime_core.avmodel`; this module is only the file edge.
+The formats themselves (``.npz``, no pickle, versioned, validated) are :mod:`realtime_core.avmodel`
+(the HMM) and :mod:`realtime_core.mapping.model` (the MLP mapper of paper 002); this module is only
+the file edge. :func:`load_speech_model` picks the reader by ``--mapper hmm|mlp``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from realtime_core.avmodel import AvModel, decode_model, encode_model
-from realtime_core.errors import ModelFormatError
-from assets.files import atomic_write_bytes
 from assets.errors import FileProblem
+from assets.files import atomic_write_bytes
+from realtime_core.avmodel import AvModel, decode_model, encode_model
+from realtime_core.errors import ConfigError, ModelFormatError
+from realtime_core.mapping import MAPPER_KINDS, MlpSpeechModel, SpeechModel, decode_mlp_model, encode_mlp_model
 
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "default_model.npz"
 """The model every command uses when none is given (trained by ``scripts/train_default_model.sh``)."""
@@ -37,6 +39,11 @@ class ModelFileError(FileProblem):
     """A model file is missing, unreadable or invalid (the message names file and problem)."""
 
 
+DEFAULT_MLP_MODEL = Path(__file__).resolve().parent / "data" / "mlp_mapper.npz"
+"""The MLP mapper ``--mapper mlp`` uses when no file is given: paper 002's GMM-selected MLP bank trained
+by ``facecast mu`` on GRID s1 (Cooke, Barker, Cunningham, Shao 2006, CC BY 4.0; ``docs/motion_units.md``)."""
+
+
 def save_model(path: str | Path, model: AvModel) -> Path:
     """Write ``model`` to ``path`` atomically (temporary file + rename)."""
     path = Path(path)
@@ -44,10 +51,7 @@ def save_model(path: str | Path, model: AvModel) -> Path:
     return path
 
 
-def load_model(path: str | Path | None = None) -> AvModel:
-    """Load and validate a model file; ``None`` loads the shipped default model, a shipped name
-    (``"low-latency"``, :func:`resolve_model`) that model."""
-    path = resolve_model(path)
+def _read(path: Path) -> bytes:
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -56,7 +60,47 @@ def load_model(path: str | Path | None = None) -> AvModel:
         raise ModelFileError(path, f"model file not found{hint}") from None
     except OSError as exc:
         raise ModelFileError(path, f"cannot be read ({exc.strerror or exc})") from None
+    return data
+
+
+def load_model(path: str | Path | None = None) -> AvModel:
+    """Load and validate a model file; ``None`` loads the shipped default model, a shipped name
+    (``"low-latency"``, :func:`resolve_model`) that model."""
+    path = resolve_model(path)
+    data = _read(path)
     try:
         return decode_model(data)
     except ModelFormatError as exc:
         raise ModelFileError(path, f"invalid model: {exc}") from None
+
+
+def save_mlp_model(path: str | Path, model: MlpSpeechModel) -> Path:
+    """Write an MLP mapper file atomically."""
+    path = Path(path)
+    atomic_write_bytes(path, encode_mlp_model(model))
+    return path
+
+
+def load_mlp_model(path: str | Path) -> MlpSpeechModel:
+    """Load and validate an MLP mapper file (``facecast mu`` writes one); a file of another kind or
+    version is refused naming the file and what it is."""
+    path = Path(path)
+    data = _read(path)
+    try:
+        return decode_mlp_model(data)
+    except (ModelFormatError, ConfigError) as exc:
+        raise ModelFileError(path, f"invalid MLP mapper: {exc}") from None
+
+
+def load_speech_model(mapper: str = "hmm", path: str | Path | None = None) -> SpeechModel:
+    """The model behind ``--mapper``: "hmm" (``path`` or the shipped HMM) or "mlp" (``path`` or the shipped
+    MLP mapper)."""
+    if mapper not in MAPPER_KINDS:
+        raise ConfigError(f"mapper must be one of {', '.join(MAPPER_KINDS)}, got {mapper!r}")
+    if mapper == "hmm":
+        return load_model(path)
+    if path is None:
+        if not DEFAULT_MLP_MODEL.is_file():
+            raise ConfigError("--mapper mlp needs a mapper file (--model MAPPER.npz, written by `facecast mu`)")
+        path = DEFAULT_MLP_MODEL
+    return load_mlp_model(path)

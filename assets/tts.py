@@ -64,5 +64,6 @@ def speak(text: str, *, language: str = "en", voice: str | None = None, rate_wpm
     if not any(lab not in ("_", "_:", "_!", "_^_", ";") for lab, _, _ in phones):
         raise TextError(f"no pronounceable word in {text[:40]!r}")
     samples = syn.samples.astype(np.float32) / 32768.0
-    return Speech(samples=samples, sample_rate_hz=syn.sample_rate_hz, phones=phones, inventory=INVENTORY[language],
-                  text=cleaned)
+    return Speech(
+        samples=samples, sample_rate_hz=syn.sample_rate_hz, phones=phones, inventory=INVENTORY[language], text=cleaned
+    )

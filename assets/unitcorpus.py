@@ -37,8 +37,11 @@ def find_unit_corpus(path: str | Path | None = None) -> Path:
     built = sorted(cache_folder().glob("grid_s1_units-*.npz"), key=lambda p: p.stat().st_mtime)
     if built:
         return built[-1]
-    raise UnitCorpusFileError(SHIPPED, "no unit corpus shipped or built; run `facecast units build` (needs the "
-                              "GRID s1 videos and their extraction) or pass --corpus")
+    raise UnitCorpusFileError(
+        SHIPPED,
+        "no unit corpus shipped or built; run `facecast units build` (needs the "
+        "GRID s1 videos and their extraction) or pass --corpus",
+    )
 
 
 class UnitCorpusFileError(FileProblem):

@@ -82,14 +82,18 @@ def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
         t = np.concatenate(truths)
         row["halves_before"] = _r(t, np.concatenate(base_est))
         row["halves_after"] = _r(t, np.concatenate(ad_est))
-        row["_tracks"] = (truth[:, MOUTH_OPEN], _estimate(model, x, rate)[:, MOUTH_OPEN],
-                          _estimate(adapted, x, rate)[:, MOUTH_OPEN])
+        row["_tracks"] = (
+            truth[:, MOUTH_OPEN],
+            _estimate(model, x, rate)[:, MOUTH_OPEN],
+            _estimate(adapted, x, rate)[:, MOUTH_OPEN],
+        )
         rows.append(row)
     return rows
 
 
-def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: float, n_val: int, progress, *,
-                    speed: float = 1.0) -> list[dict]:
+def s1_as_new_voice(
+    model, relevances: list[float], root: Path, enrol_seconds: float, n_val: int, progress, *, speed: float = 1.0
+) -> list[dict]:
     """One row per relevance factor: enrol on s1 train sentences, score s1 val sentences; with
     ``speed`` != 1 both played that much faster (``training.reallips.speed_perturb``: pitch,
     formants and tempo scale together, the lip track re-timed): a new voice for a model trained
@@ -122,10 +126,21 @@ def s1_as_new_voice(model, relevances: list[float], root: Path, enrol_seconds: f
     for tau in relevances:
         adapted, _ = adapt_av_model(model, enrol, config=AdaptConfig(relevance=tau, weight_relevance=tau))
         info = adapted.metadata["adaptation"]
-        rows.append({"speed": speed, "relevance": tau, "enrol_files": len(enrol), "enrol_seconds": round(total, 1),
-                     "val_sentences": len(val), "frames": len(truth), "loudness": pearson(truth, loud),
-                     "before": base, "after": score(adapted), "visited": info["components_visited"],
-                     "audio_loglik_per_frame": info["audio_loglik_per_frame"]})
+        rows.append(
+            {
+                "speed": speed,
+                "relevance": tau,
+                "enrol_files": len(enrol),
+                "enrol_seconds": round(total, 1),
+                "val_sentences": len(val),
+                "frames": len(truth),
+                "loudness": pearson(truth, loud),
+                "before": base,
+                "after": score(adapted),
+                "visited": info["components_visited"],
+                "audio_loglik_per_frame": info["audio_loglik_per_frame"],
+            }
+        )
     return rows
 
 
@@ -160,12 +175,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--enrol-seconds", type=float, default=45.0, help="s1 enrolment speech (train split)")
     ap.add_argument("--val-sentences", type=int, default=20, help="s1 val-split sentences scored")
     ap.add_argument("--no-s1", action="store_true", help="skip the s1-as-new-voice measurement")
-    ap.add_argument("--speeds", default="1",
-                    help="s1 speed factors (0.8-1.25) for the new-voice measurement: 1 = s1 as recorded (for a "
-                    "model not trained on s1), e.g. 0.85,1.2 for a model trained on s1")
+    ap.add_argument(
+        "--speeds",
+        default="1",
+        help="s1 speed factors (0.8-1.25) for the new-voice measurement: 1 = s1 as recorded (for a "
+        "model not trained on s1), e.g. 0.85,1.2 for a model trained on s1",
+    )
     ap.add_argument("--relevance", type=float, default=8.0, help="MAP relevance factor (frames) for the other talkers")
-    ap.add_argument("--relevance-grid", default="2,4,8,16,32",
-                    help="relevance factors tried on s1 (enrol on train, score val: the place to choose it)")
+    ap.add_argument(
+        "--relevance-grid",
+        default="2,4,8,16,32",
+        help="relevance factors tried on s1 (enrol on train, score val: the place to choose it)",
+    )
     ap.add_argument("--out", type=Path, default=Path("adapt_report"), help="folder for JSON and plot")
     args = ap.parse_args(argv)
 
@@ -183,31 +204,41 @@ def main(argv: list[str] | None = None) -> int:
     print("| clip | s | loudness | before | after (self, 3 s) | halves before | halves after (1.5 s) |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['clip']} | {r['seconds']:.1f} | {r['loudness']:.3f} | {r['before']:.3f} | {r['self']:.3f} | "
-              f"{r['halves_before']:.3f} | {r['halves_after']:.3f} |")
+        print(
+            f"| {r['clip']} | {r['seconds']:.1f} | {r['loudness']:.3f} | {r['before']:.3f} | {r['self']:.3f} | "
+            f"{r['halves_before']:.3f} | {r['halves_after']:.3f} |"
+        )
     keys = ("loudness", "before", "self", "halves_before", "halves_after")
     means = {k: float(np.mean([r[k] for r in rows])) for k in keys}
     print("| mean | | " + " | ".join(f"{means[k]:.3f}" for k in keys) + " |")
-    report = {"model": args.model or "default", "relevance": args.relevance,
-              "other_talkers": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
-              "other_talkers_mean": means}
+    report = {
+        "model": args.model or "default",
+        "relevance": args.relevance,
+        "other_talkers": [{k: v for k, v in r.items() if not k.startswith("_")} for r in rows],
+        "other_talkers_mean": means,
+    }
     if not args.no_s1:
         grid = [float(v) for v in args.relevance_grid.split(",") if v]
         report["s1_new_voice"] = []
         for speed in [float(v) for v in args.speeds.split(",") if v]:
             with threadpool_limits(1):
-                s1 = s1_as_new_voice(model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm,
-                                     speed=speed)
+                s1 = s1_as_new_voice(
+                    model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm, speed=speed
+                )
             report["s1_new_voice"] += s1
             r0 = s1[0]
-            print(f"s1 played x{speed:g} as a new voice: enrol {r0['enrol_seconds']} s ({r0['enrol_files']} train "
-                  f"sentences), {r0['val_sentences']} val sentences ({r0['frames']} frames); loudness "
-                  f"{r0['loudness']:.3f}; before {r0['before']:.3f}")
+            print(
+                f"s1 played x{speed:g} as a new voice: enrol {r0['enrol_seconds']} s ({r0['enrol_files']} train "
+                f"sentences), {r0['val_sentences']} val sentences ({r0['frames']} frames); loudness "
+                f"{r0['loudness']:.3f}; before {r0['before']:.3f}"
+            )
             print("| relevance | r(mouth_open) after | components visited | enrolment audio log-lik/frame |")
             print("|---:|---:|---:|---|")
             for r in s1:
-                print(f"| {r['relevance']:g} | {r['after']:.3f} | {r['visited']} | "
-                      f"{r['audio_loglik_per_frame'][0]:.2f} -> {r['audio_loglik_per_frame'][1]:.2f} |")
+                print(
+                    f"| {r['relevance']:g} | {r['after']:.3f} | {r['visited']} | "
+                    f"{r['audio_loglik_per_frame'][0]:.2f} -> {r['audio_loglik_per_frame'][1]:.2f} |"
+                )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "adaptation.json").write_text(json.dumps(report, indent=2) + "\n")
     _plot(rows, args.out / "adaptation.png")

@@ -6,6 +6,9 @@ What it measures, per video frame unless said otherwise (median and p99, microse
     and 4-dim visual vectors, float64 and float32;
   * the whole live path, samples -> mouth parameters, at N = 28, M = 5 (goal <= 150 us;
     the paper's budget is 24,600 us for feature extraction, inversion and rendering);
+  * the visual mappers behind ``--mapper hmm|mlp`` (paper 002): the mapper step alone and the whole
+    live path, for the shipped HMM and the GMM-selected MLP bank (K experts of 20 hidden units,
+    goal <= 50 us per frame) and the single large MLP (600 hidden units) of the paper's argument;
   * batch HMMI (eq. 7 EM): cost per frame per iteration, and accuracy from the
     audio-posterior start (ours) vs the paper's random start, on data from a known model;
   * one Baum-Welch iteration at T = 20,000 frames (100 sequences of 200), N = 28, M = 5,
@@ -19,13 +22,14 @@ small-matrix work many times slower under load, and the server runs that way too
 
 from __future__ import annotations
 
+import itertools
 import json
 import platform
 import sys
 import time
 import warnings
 from dataclasses import dataclass
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -45,11 +49,12 @@ SIZES = ((4, 3), (28, 5), (40, 7))
 @dataclass(frozen=True, kw_only=True)
 class CoreBenchConfig:
     """quick: fewer frames and a smaller hmmlearn subset; hmmlearn: run the comparison;
-    seed: data and models."""
+    seed: data and models; mlp_file: a trained MLP mapper (``facecast mu``) to time as well."""
 
     quick: bool = False
     hmmlearn: bool = True
     seed: int = 0
+    mlp_file: str | None = None
 
 
 def _stats(samples_ns: list[int]) -> dict:
@@ -76,7 +81,7 @@ def _audio(rate: int, seconds: float, rng: np.random.Generator) -> np.ndarray:
 def _hop_blocks(x: np.ndarray, cfg: MfccConfig) -> list[np.ndarray]:
     n = cfg.n_frames_for(x.size)
     starts = [cfg.frame_start(k) for k in range(n + 1)]
-    return [x[a:b] for a, b in zip(starts, starts[1:])]
+    return [x[a:b] for a, b in itertools.pairwise(starts)]
 
 
 def bench_features(n_frames: int, rng: np.random.Generator) -> dict:
@@ -116,7 +121,7 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
     pipe = SpeechToParams(model)
     x = _audio(16000, n_frames / 30 + 0.5, rng)
     ns = _per_call(pipe.push, _hop_blocks(x, fe.mfcc))
-    out = {"N=28,M=5,float32": _stats(ns[10:])}
+    out: dict[str, Any] = {"N=28,M=5,float32": _stats(ns[10:])}
     # The shipped default model, what `facecast serve` runs by default.
     from assets.modelfile import DEFAULT_MODEL, load_model
 
@@ -129,12 +134,61 @@ def bench_live_path(n_frames: int, rng: np.random.Generator) -> dict:
     return out
 
 
+def _random_bank(rng: np.random.Generator, k: int, hidden: int, da: int, dout: int, lo: int, hi: int):
+    from realtime_core.mapping import MlpBank
+
+    return MlpBank(
+        gmm_log_weights=np.log(np.full(k, 1 / k)),
+        gmm_means=rng.standard_normal((k, hi - lo)),
+        gmm_vars=np.ones((k, hi - lo)),
+        class_slice=(lo, hi),
+        w1=rng.standard_normal((k, hidden, da)) / np.sqrt(da),
+        b1=np.zeros((k, hidden)),
+        w2=rng.standard_normal((k, 8, hidden)) / np.sqrt(hidden),
+        b2=np.zeros((k, 8)),
+        hidden=np.full(k, hidden),
+        activation="tanh",
+        readout=rng.standard_normal((dout, 8)) * 0.01,
+        readout_bias=np.zeros(dout),
+    )
+
+
+def bench_mappers(n_frames: int, rng: np.random.Generator, mlp_file: str | None = None) -> dict:
+    """Per frame: each mapper's step (one o_a row pushed) and the whole live path (one hop of samples)."""
+    from assets.modelfile import DEFAULT_MODEL, load_mlp_model, load_model
+    from realtime_core.mapping import MlpSpeechModel, SpeechModel
+
+    if not DEFAULT_MODEL.is_file():
+        return {"skipped": f"{DEFAULT_MODEL} missing"}
+    hmm = load_model(None)
+    fe = hmm.frontend
+    lo, hi = fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat
+    models: dict[str, SpeechModel] = {f"hmm shipped N={hmm.hmm.n_states},M={hmm.hmm.n_mix}": hmm}
+    for k, h in ((16, 20), (44, 20), (1, 600)):
+        bank = _random_bank(rng, k, h, fe.audio_dim, 4, lo, hi)
+        name = f"mlp K={k},H={h}" + (" (single large MLP)" if k == 1 else "")
+        models[name] = MlpSpeechModel(bank=bank, frontend=fe, cmvn_mean=hmm.cmvn_mean, cmvn_var=hmm.cmvn_var)
+    if mlp_file:
+        m = load_mlp_model(mlp_file)
+        models[f"mlp trained K={m.bank.n_classes},H={int(m.bank.hidden.max())}"] = m
+    x = _audio(16000, n_frames / 30 + 0.5, rng)
+    oa = hmm.front_end().push(x)
+    out = {}
+    for name, model in models.items():
+        mapper = model.visual_mapper()
+        step = _per_call(mapper.push, [r[None] for r in oa])
+        pipe = SpeechToParams(model)
+        live = _per_call(pipe.push, _hop_blocks(x, model.frontend.mfcc))
+        out[name] = {"mapper_step": _stats(step[10:]), "live_path": _stats(live[10:])}
+    return out
+
+
 def bench_batch_hmmi(rng: np.random.Generator, T: int) -> dict:
     hmm = random_av_hmm(rng, n_states=28, n_mix=5, n_audio=DA, n_visual=DV, coupling=0.6)
     form = ConditionalForm.from_model(hmm)
     data = sample(hmm, rng, T)[0]
     oa, truth = data[:, :DA], data[:, DA:]
-    out = {}
+    out: dict[str, Any] = {}
     for init in ("audio-posterior", "random"):
         t0 = time.perf_counter_ns()
         res = hmm_inversion(form, oa, config=HmmiConfig(init=init, max_iter=50, tol=1e-4))
@@ -181,11 +235,13 @@ def bench_baum_welch(rng: np.random.Generator, *, hmmlearn_seqs: int, run_hmmlea
         t0 = time.perf_counter()
         ref.fit(np.concatenate(sub), [len(s) for s in sub])
         theirs = (time.perf_counter() - t0) * len(seqs) / len(sub)
-    out.update({
-        "hmmlearn_s": round(theirs, 2),
-        "hmmlearn_measured_on_sequences": len(sub),
-        "speedup": round(theirs / ours, 1),
-    })
+    out.update(
+        {
+            "hmmlearn_s": round(theirs, 2),
+            "hmmlearn_measured_on_sequences": len(sub),
+            "speedup": round(theirs / ours, 1),
+        }
+    )
     return out
 
 
@@ -198,6 +254,7 @@ def run_core_benchmark(config: CoreBenchConfig, *, as_json: bool, out: TextIO = 
             "features": bench_features(n, rng),
             "streaming_inversion": bench_streaming(n, rng),
             "live_samples_to_params": bench_live_path(n, rng),
+            "mappers": bench_mappers(n, rng, config.mlp_file),
             "batch_hmmi_N28_M5": bench_batch_hmmi(rng, 300 if config.quick else 900),
             "baum_welch_iteration_N28_M5_D81": bench_baum_welch(
                 rng, hmmlearn_seqs=3 if config.quick else 10, run_hmmlearn=config.hmmlearn
@@ -221,16 +278,28 @@ def _print_table(r: dict, out: TextIO) -> None:
         w(f"{'streaming inversion ' + name:44s} {s['median_us']:9.1f} {s['p99_us']:9.1f}\n")
     for name, s in r["live_samples_to_params"].items():
         w(f"{'live samples->params ' + name:44s} {s['median_us']:9.1f} {s['p99_us']:9.1f}   (goal <= 150 median)\n")
+    w("\nvisual mappers (--mapper hmm|mlp)              mapper step (median/p99)   live path (median/p99)\n")
+    for name, s in r["mappers"].items():
+        if name == "skipped":
+            w(f"  skipped: {s}\n")
+            continue
+        a, b = s["mapper_step"], s["live_path"]
+        w(f"  {name:42s} {a['median_us']:9.1f} {a['p99_us']:9.1f}   {b['median_us']:9.1f} {b['p99_us']:9.1f}\n")
+    w("  (goal: the MLP bank <= 50 us per frame)\n")
     b = r["batch_hmmi_N28_M5"]
     w(f"\nbatch HMMI, N=28 M=5: {b['us_per_frame_per_iteration']} us per frame per iteration\n")
     for init in ("audio-posterior", "random"):
         s = b[init]
-        w(f"  init={init:16s} iterations={s['iterations']:3d} rho={s['rho']:.3f} eps={s['eps']:.3f} "
-          f"logL/frame={s['log_likelihood_per_frame']:.2f} total {s['us_per_frame_total']} us/frame\n")
+        w(
+            f"  init={init:16s} iterations={s['iterations']:3d} rho={s['rho']:.3f} eps={s['eps']:.3f} "
+            f"logL/frame={s['log_likelihood_per_frame']:.2f} total {s['us_per_frame_total']} us/frame\n"
+        )
     e = r["baum_welch_iteration_N28_M5_D81"]
     w(f"\nBaum-Welch, one iteration, T=20000, N=28, M=5, D=81: facecast {e['facecast_s']} s")
     if "hmmlearn_s" in e:
-        w(f", hmmlearn {e['hmmlearn_s']} s (measured on {e['hmmlearn_measured_on_sequences']} of 100 sequences, "
-          f"scaled), speedup {e['speedup']}x (goal >= 50x)\n")
+        w(
+            f", hmmlearn {e['hmmlearn_s']} s (measured on {e['hmmlearn_measured_on_sequences']} of 100 sequences, "
+            f"scaled), speedup {e['speedup']}x (goal >= 50x)\n"
+        )
     else:
         w(f" (hmmlearn: {e.get('hmmlearn', 'skipped')})\n")

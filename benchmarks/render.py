@@ -77,8 +77,16 @@ def time_render(rig, mesh, samples: int, frames: int) -> float:
 
 
 RETARGET_UNITS = (
-    "jawOpen", "mouthStretchLeft", "mouthStretchRight", "mouthUpperUpLeft", "mouthUpperUpRight",
-    "mouthFrownLeft", "mouthFrownRight", "mouthSmileLeft", "mouthPucker", "mouthFunnel",
+    "jawOpen",
+    "mouthStretchLeft",
+    "mouthStretchRight",
+    "mouthUpperUpLeft",
+    "mouthUpperUpRight",
+    "mouthFrownLeft",
+    "mouthFrownRight",
+    "mouthSmileLeft",
+    "mouthPucker",
+    "mouthFunnel",
 )
 
 
@@ -101,8 +109,9 @@ def retarget_errors() -> dict[str, dict[str, float]]:
     }
     out: dict[str, dict[str, float]] = {}
     for name, cfg in methods.items():
-        g, _, _ = head_weights(h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg,
-                               training=train, allowed=h.part == 0)
+        g, _, _ = head_weights(
+            h.mesh.vertices, h.mesh.triangles, s.model, frame, config=cfg, training=train, allowed=h.part == 0
+        )
         out[name] = {}
         for u in RETARGET_UNITS:
             native = h.targets[u]
@@ -129,10 +138,19 @@ def main(argv: list[str] | None = None) -> int:
         print("rig application (rig.displacements, float32), goal < 100 us for 10k vertices")
         for name, r in (("built-in head", rig), ("synthetic 10k", synthetic_rig())):
             med, p99 = time_rig(r, n_rig)
-            print(f"  {name:15s} {len(r.moving):6d} moving, nnz {r.matrix.nnz:6d}: median {med:6.1f} us, p99 {p99:6.1f} us")
-        print(f"rendering 640x480, built-in head ({len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles), goal >= 200 fps")
+            print(
+                f"  {name:15s} {len(r.moving):6d} moving, nnz {r.matrix.nnz:6d}: "
+                f"median {med:6.1f} us, p99 {p99:6.1f} us"
+            )
+        print(
+            f"rendering 640x480, built-in head ({len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles), "
+            "goal >= 200 fps"
+        )
         for s in (0, 2, 4):
-            print(f"  MSAA {s}: {time_render(rig, mesh, s, frames):6.1f} fps (deform + upload + draw + resolve + read-back)")
+            print(
+                f"  MSAA {s}: {time_render(rig, mesh, s, frames):6.1f} fps "
+                "(deform + upload + draw + resolve + read-back)"
+            )
         if args.retarget:
             print("retargeting onto the source head: relative RMS error per unit (0 = exact, 1 = no motion)")
             for name, errs in retarget_errors().items():

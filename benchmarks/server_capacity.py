@@ -28,10 +28,20 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 
-DEFAULT_STEPS = ((5, 25, 5), (10, 50, 10), (15, 75, 15), (20, 100, 20), (30, 150, 30), (40, 200, 40), (50, 250, 50),
-                 (75, 375, 75), (100, 500, 100))
+DEFAULT_STEPS = (
+    (5, 25, 5),
+    (10, 50, 10),
+    (15, 75, 15),
+    (20, 100, 20),
+    (30, 150, 30),
+    (40, 200, 40),
+    (50, 250, 50),
+    (75, 375, 75),
+    (100, 500, 100),
+)
 RATE = 16000
 BLOCK_S = 0.02
 LIMIT_MS = 10.0
@@ -74,14 +84,9 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
 
         async def one(j: int, c: IngestClient) -> None:
             offset = j * BLOCK_S / max(n, 1)  # stagger sessions across a block
-            for b in range(n_blocks):
-                i = b * step
-                block = pcm[i:i + step]
-                delay = t0 + offset + (i + len(block)) / RATE - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
+            async for i, block in paced_blocks(pcm, RATE, block_s=BLOCK_S, start=t0, offset_s=offset):
                 await c.send(block)
-                sent[j, b] = time.time()
+                sent[j, i // step] = time.time()
             await c.end()
 
         await asyncio.gather(*(one(j, c) for j, c in enumerate(clients)))
@@ -92,10 +97,10 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
     out.put(("ingest", asyncio.run(main())))
 
 
-def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready,
-                 out) -> None:
+def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready, out) -> None:
     """Child process: attach the viewers once the sessions exist (round-robin over ``urls``, the
     nodes of a cluster); report every frame's receipt."""
+
     async def main():
         while not ready.is_set():
             await asyncio.sleep(0.01)
@@ -109,14 +114,24 @@ def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: 
         await asyncio.sleep(0.5)
         viewers_ready.set()
         await asyncio.gather(*tasks, return_exceptions=True)
-        return [(kind, s, j % len(urls), np.array(log.index), np.array(log.received), np.array(log.sent))
-                for j, ((kind, s), log) in enumerate(zip(plan, logs))]
+        return [
+            (kind, s, j % len(urls), np.array(log.index), np.array(log.received), np.array(log.sent))
+            for j, ((kind, s), log) in enumerate(zip(plan, logs))
+        ]
 
     out.put(("viewers", asyncio.run(main())))
 
 
-def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_deltas: int, seconds: float,
-          view_urls: list[str] | None = None) -> dict:
+def _step(
+    server: ServerProcess,
+    model,
+    step_no: int,
+    n: int,
+    n_params: int,
+    n_deltas: int,
+    seconds: float,
+    view_urls: list[str] | None = None,
+) -> dict:
     url = server.url
     view_urls = view_urls or [url]
     ctx = mp.get_context("spawn")
@@ -182,8 +197,9 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         timings = json.loads(r.read())["timings_ms"]
     return {
         "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
-        "server_timings_ms": {k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
-                              if k in timings},
+        "server_timings_ms": {
+            k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
+        },
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -194,9 +210,16 @@ def _step(server: ServerProcess, model, step_no: int, n: int, n_params: int, n_d
         "pass_every_viewer": bool(worst_p99 < LIMIT_MS and lost == 0),
         "pass": bool(agg_p99 < LIMIT_MS and lost == 0),
         "by_kind": summary,
-        "by_node": {f"node{k}": {"viewers": len(v), "delivery_p50_ms": round(float(np.median(np.concatenate(v))) * 1e3, 3),
-                                 "delivery_p99_ms": round(float(np.percentile(np.concatenate(v), 99)) * 1e3, 3)}
-                    for k, v in sorted(by_node.items())} if len(view_urls) > 1 else None,
+        "by_node": {
+            f"node{k}": {
+                "viewers": len(v),
+                "delivery_p50_ms": round(float(np.median(np.concatenate(v))) * 1e3, 3),
+                "delivery_p99_ms": round(float(np.percentile(np.concatenate(v), 99)) * 1e3, 3),
+            }
+            for k, v in sorted(by_node.items())
+        }
+        if len(view_urls) > 1
+        else None,
     }
 
 
@@ -219,7 +242,7 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
         "cores_per_vertex_viewer": None if per_vertex is None else round(per_vertex, 5),
         "goal_load_cores_projected": round(goal, 3),
         "note": "CPU seconds of the server process per second of real-time streaming, measured on this "
-                "(shared) machine; one server process runs on at most one core",
+        "(shared) machine; one server process runs on at most one core",
     }
 
 
@@ -237,16 +260,21 @@ def run_cluster_benchmark(cfg: CapacityConfig) -> dict:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    redis = subprocess.Popen([binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    redis = subprocess.Popen(
+        [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     model, model_path, model_desc = benchmark_model(cfg.model)
     nodes: list[ServerProcess] = []
     steps = []
     try:
         time.sleep(0.5)
         for name in ("near", "far"):
-            toml = (f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nconnect_rate_per_s = 0\n"
-                    f'redis_url = "redis://127.0.0.1:{port}/0"\nnode_id = "{name}"\n')
+            toml = (
+                f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nconnect_rate_per_s = 0\n"
+                f'redis_url = "redis://127.0.0.1:{port}/0"\nnode_id = "{name}"\n'
+            )
             nodes.append(ServerProcess(model_path, head=cfg.head, config_toml=toml))
         time.sleep(1.5)  # both nodes registered
         for i, (n, p, v) in enumerate(cfg.steps):
@@ -254,23 +282,37 @@ def run_cluster_benchmark(cfg: CapacityConfig) -> dict:
             near, far = r["by_node"]["node0"], r["by_node"]["node1"]
             r["far_minus_near_p99_ms"] = round(far["delivery_p99_ms"] - near["delivery_p99_ms"], 3)
             steps.append(r)
-            print(json.dumps({"step": n, "near": near, "far": far, "far_minus_near_p99_ms": r["far_minus_near_p99_ms"],
-                              "lost": r["frames_lost"]}), flush=True)
+            print(
+                json.dumps(
+                    {
+                        "step": n,
+                        "near": near,
+                        "far": far,
+                        "far_minus_near_p99_ms": r["far_minus_near_p99_ms"],
+                        "lost": r["frames_lost"],
+                    }
+                ),
+                flush=True,
+            )
     finally:
         for x in nodes:
             x.stop()
         redis.terminate()
         redis.wait(10)
-    return {"benchmark": "server_capacity_cluster", "model": model_desc, "goal": "far node p99 within 5 ms of near",
-            "seconds_per_step": cfg.seconds, "steps": steps,
-            "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]}}
+    return {
+        "benchmark": "server_capacity_cluster",
+        "model": model_desc,
+        "goal": "far node p99 within 5 ms of near",
+        "seconds_per_step": cfg.seconds,
+        "steps": steps,
+        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
+    }
 
 
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
     # Benchmark clients are trusted: no per-client connection rate (they open hundreds at once).
-    toml = (f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
-            "connect_rate_per_s = 0\n")
+    toml = f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\nconnect_rate_per_s = 0\n"
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
     load_before = os.getloadavg()
@@ -282,12 +324,21 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         for i, (n, p, v) in enumerate(cfg.steps):
             r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds)
             steps.append(r)
-            print(json.dumps({"step": r["sessions"], "pass": r["pass"], "pass_every_viewer": r["pass_every_viewer"],
-                              "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
-                              "server_cpu_cores": r["server_cpu_cores"],
-                              "all_p99_ms": r["all_viewers_p99_delivery_ms"],
-                              "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"], "lost": r["frames_lost"]}),
-                  flush=True)
+            print(
+                json.dumps(
+                    {
+                        "step": r["sessions"],
+                        "pass": r["pass"],
+                        "pass_every_viewer": r["pass_every_viewer"],
+                        "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
+                        "server_cpu_cores": r["server_cpu_cores"],
+                        "all_p99_ms": r["all_viewers_p99_delivery_ms"],
+                        "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"],
+                        "lost": r["frames_lost"],
+                    }
+                ),
+                flush=True,
+            )
             if not r["pass"]:
                 break
     finally:
@@ -300,19 +351,25 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "benchmark": "server_capacity",
         "model": model_desc,
         "criterion": f"p99 delivery (last needed sample -> receipt) over all viewers' frames < {LIMIT_MS} ms and no "
-                     "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
-                     "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
+        "frame lost ('pass'); 'pass_every_viewer' asks it of each viewer separately (strict: with a few "
+        "hundred frames per viewer its p99 is the 2nd-3rd worst frame, so one scheduler stall fails it)",
         "goal": {"sessions": 100, "param_viewers": 500, "vertex_viewers": 100},
         "sustained": None if best is None else {k: best[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
-        "sustained_every_viewer": None if best_strict is None else {
-            k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
+        "sustained_every_viewer": None
+        if best_strict is None
+        else {k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
         "server_workers": cfg.workers,
         "cost_model": cost,
-        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
-                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+            "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()],
+        },
         "steps": steps,
-        "note": "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)",
+        "note": (
+            "server, ingest client and viewer client processes share this machine's 2 cores (and other users' work)"
+        ),
     }
 
 
@@ -320,25 +377,43 @@ def main(argv: list[str] | None = None) -> int:
     """Print the JSON result (one progress line per step first). Always 0: figures, not a test."""
     ap = argparse.ArgumentParser(prog="server_capacity", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=6.0, help="audio per step (real time)")
-    ap.add_argument("--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'")
+    ap.add_argument(
+        "--steps", default=None, help="semicolon-separated steps 'sessions,param_viewers,vertex_viewers;...'"
+    )
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
-    ap.add_argument("--cluster", action="store_true",
-                    help="two nodes + redis-server: viewers split near/far, report the far node's excess p99")
+    ap.add_argument(
+        "--cluster",
+        action="store_true",
+        help="two nodes + redis-server: viewers split near/far, report the far node's excess p99",
+    )
     args = ap.parse_args(argv)
-    steps = DEFAULT_STEPS
+    steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     if args.steps:
-        steps = tuple(tuple(int(v) for v in s.split(",")) for s in args.steps.split(";"))
+        steps = tuple((int(a), int(b), int(c)) for a, b, c in (s.split(",") for s in args.steps.split(";")))
     if args.cluster:
-        result = run_cluster_benchmark(CapacityConfig(steps=steps if args.steps else ((5, 20, 0), (10, 40, 0)),
-                                                      seconds=args.seconds, model=args.model, head=not args.no_head))
+        result = run_cluster_benchmark(
+            CapacityConfig(
+                steps=steps if args.steps else ((5, 20, 0), (10, 40, 0)),
+                seconds=args.seconds,
+                model=args.model,
+                head=not args.no_head,
+            )
+        )
         print(json.dumps(result, indent=2))
         return 0
-    result = run_capacity_benchmark(CapacityConfig(steps=steps, seconds=args.seconds, model=args.model,
-                                                   head=not args.no_head, cost_model=not args.no_cost_model,
-                                                   workers=args.workers))
+    result = run_capacity_benchmark(
+        CapacityConfig(
+            steps=steps,
+            seconds=args.seconds,
+            model=args.model,
+            head=not args.no_head,
+            cost_model=not args.no_cost_model,
+            workers=args.workers,
+        )
+    )
     print(json.dumps(result, indent=2))
     return 0
 

@@ -56,6 +56,7 @@ class ServerProcess:
             cfg.write_text(config_toml)
             cmd += ["--config", str(cfg)]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert self.proc.stdout is not None and self.proc.stderr is not None  # both are PIPEs
         self.url = ""
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
@@ -98,8 +99,9 @@ class FrameLog:
 _HDR = struct.Struct("<BBBxIIfdd")
 
 
-async def record_viewer(url: str, session: str, *, kind: str = "params", encoding: str | None = None,
-                        audio: bool = False, log: FrameLog) -> FrameLog:
+async def record_viewer(
+    url: str, session: str, *, kind: str = "params", encoding: str | None = None, audio: bool = False, log: FrameLog
+) -> FrameLog:
     """A lean viewer: parses only the header of each frame (what a benchmark needs)."""
     from urllib.parse import urlencode
 
@@ -116,6 +118,7 @@ async def record_viewer(url: str, session: str, *, kind: str = "params", encodin
         try:
             while True:
                 data = await ws.recv()
+                assert isinstance(data, bytes), "the view stream sends binary frames after its description"
                 now = time.time()
                 _, k, _, index, _, _, _, sent = _HDR.unpack_from(data)
                 if k != P.KIND_AUDIO:

@@ -8,9 +8,10 @@ sample exists; a parameter viewer and a vertex-delta viewer record every frame's
 End to end, per frame k: from the arrival of the last audio sample frame k needs (sample
 ``frame_start(k + tc + lag) + window`` at 16 kHz, sent in the block containing it) to the viewer's
 receipt of frame k. That is the server's overhead beyond the algorithmic delay
-``(tc + lag) / fps + window / rate`` (``AvModel.algorithmic_delay_ms``: the lookahead the co-articulation context and the analysis
-window impose before any computation can start), which is reported next to it, together with the
-total from frame time ``k / fps`` to receipt (algorithmic delay + block buffering + overhead).
+``(tc + lag) / fps + window / rate`` (``FrontEndConfig.algorithmic_delay_ms``: the lookahead the
+co-articulation context and the analysis window impose before any computation can start), which is
+reported next to it, together with the total from frame time ``k / fps`` to receipt (algorithmic
+delay + block buffering + overhead).
 Per stage: the server's own timings from ``/metrics`` (decode, resample, features, inversion, the
 whole push per frame in wall-clock and in CPU time, encodings, fan-out, event-loop lag), median and
 p99. On a shared machine the wall-clock figures include time the process was not scheduled; the
@@ -33,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 from server.timing import summarise
 
@@ -55,7 +57,6 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
 
     pcm = speech_signal(cfg.seconds)
     rate = 16000
-    step = int(round(cfg.block_s * rate))
     logs = {"params": FrameLog()}
     if cfg.head:
         logs["deltas"] = FrameLog()
@@ -66,14 +67,9 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         loop = asyncio.get_running_loop()
         t0 = loop.time()
         wall0 = time.time() - (loop.time() - t0)
-        for i in range(0, len(pcm), step):
-            block = pcm[i:i + step]
-            due = t0 + (i + len(block)) / rate
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+        async for i, block in paced_blocks(pcm, rate, block_s=cfg.block_s, start=t0):
             await ing.send(block)
-            sent_at[i:i + len(block)] = time.time()
+            sent_at[i : i + len(block)] = time.time()
         await ing.end()
         await asyncio.gather(*viewers)
     _, body = await http_get(url, "/metrics")
@@ -82,7 +78,7 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
     mf = model.frontend.mfcc
     d = model.frontend.tc  # lag 0
     fps = mf.frame_rate_hz
-    algo_s = model.algorithmic_delay_ms(0) / 1e3  # the one formula (FrontEndConfig.algorithmic_delay_ms)
+    algo_s = model.frontend.algorithmic_delay_ms(0) / 1e3  # the one formula (FrontEndConfig.algorithmic_delay_ms)
     out: dict = {}
     for kind, log in logs.items():
         idx = np.array(log.index)
@@ -92,13 +88,17 @@ async def _run(url: str, cfg: LatencyConfig, model) -> dict:
         e2e = rec[live] - sent_at[need[live] - 1]
         from_frame_time = rec[live] - (wall0 + idx[live] / fps)
         out[kind] = {
-            "frames": int(len(idx)),
+            "frames": len(idx),
             "end_to_end_after_last_needed_sample_ms": summarise(e2e),
             "delivery_after_server_send_ms": summarise(rec - np.array(log.sent)),
             "frame_time_to_receipt_ms": summarise(from_frame_time),
         }
-    return {"viewers": out, "server_stages_ms": metrics["timings_ms"], "algorithmic_delay_ms": round(algo_s * 1e3, 3),
-            "dropped_messages": metrics["dropped_messages"]}
+    return {
+        "viewers": out,
+        "server_stages_ms": metrics["timings_ms"],
+        "algorithmic_delay_ms": round(algo_s * 1e3, 3),
+        "dropped_messages": metrics["dropped_messages"],
+    }
 
 
 def run_latency_benchmark(cfg: LatencyConfig) -> dict:
@@ -110,22 +110,30 @@ def run_latency_benchmark(cfg: LatencyConfig) -> dict:
     finally:
         server.stop()
     st = result["server_stages_ms"]
-    work_p99 = st["push_per_frame"]["p99_ms"] + st.get("encode_params", {}).get("p99_ms", 0.0) + (
-        st.get("encode_deltas", {}).get("p99_ms", 0.0))
-    result.update({
-        "benchmark": "server_latency",
-        "model": model_desc,
-        "seconds_streamed": cfg.seconds,
-        "block_ms": cfg.block_s * 1e3,
-        "per_frame_work_p99_ms": round(work_p99, 4),
-        "per_frame_work_cpu_p99_ms": st.get("push_per_frame_cpu", {}).get("p99_ms"),
-        "budget_ms": BUDGET_MS,
-        "machine": {"cpus": os.cpu_count(), "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
-                    "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]},
-        "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
-                "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
-                "this machine's 2 cores with other work.",
-    })
+    work_p99 = (
+        st["push_per_frame"]["p99_ms"]
+        + st.get("encode_params", {}).get("p99_ms", 0.0)
+        + (st.get("encode_deltas", {}).get("p99_ms", 0.0))
+    )
+    result.update(
+        {
+            "benchmark": "server_latency",
+            "model": model_desc,
+            "seconds_streamed": cfg.seconds,
+            "block_ms": cfg.block_s * 1e3,
+            "per_frame_work_p99_ms": round(work_p99, 4),
+            "per_frame_work_cpu_p99_ms": st.get("push_per_frame_cpu", {}).get("p99_ms"),
+            "budget_ms": BUDGET_MS,
+            "machine": {
+                "cpus": os.cpu_count(),
+                "loadavg_1_5_15_before": [round(x, 2) for x in load_before],
+                "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()],
+            },
+            "note": "end_to_end is measured from the send of the 10 ms block holding the last sample a frame needs; "
+            "frame_time_to_receipt adds the algorithmic delay and block buffering. Client and server share "
+            "this machine's 2 cores with other work.",
+        }
+    )
     return result
 
 
@@ -134,8 +142,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="server_latency", description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="audio streamed in real time")
     ap.add_argument("--short", action="store_true", help="CI mode: 3 s of audio, exit 1 over the 24 ms budget")
-    ap.add_argument("--model", default=None, help="model file or shipped name, e.g. low-latency (default: the shipped "
-                    "default model, else a paper-size random one)")
+    ap.add_argument(
+        "--model",
+        default=None,
+        help="model file or shipped name, e.g. low-latency (default: the shipped "
+        "default model, else a paper-size random one)",
+    )
     ap.add_argument("--no-head", action="store_true", help="skip the vertex-delta viewer")
     args = ap.parse_args(argv)
     from threadpoolctl import threadpool_limits
@@ -145,8 +157,11 @@ def main(argv: list[str] | None = None) -> int:
         result = run_latency_benchmark(cfg)
     print(json.dumps(result, indent=2))
     if args.short and result["per_frame_work_p99_ms"] > BUDGET_MS:
-        print(f"server_latency: per-frame work p99 {result['per_frame_work_p99_ms']} ms exceeds the "
-              f"{BUDGET_MS} ms budget", file=sys.stderr)
+        print(
+            f"server_latency: per-frame work p99 {result['per_frame_work_p99_ms']} ms exceeds the "
+            f"{BUDGET_MS} ms budget",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import shutil
@@ -103,10 +104,8 @@ async def _run(url: str, transport: str, sessions: int, seconds: float, payload:
             else:
                 pipe.xadd(n, {"m": msg}, maxlen=1000, approximate=True)
         await pipe.execute()
-    try:
+    with contextlib.suppress(TimeoutError):
         await asyncio.wait_for(done.wait(), 5)
-    except TimeoutError:
-        pass
     stop = True
     await asyncio.wait_for(consumer, 5)
     if transport == "pubsub":
@@ -129,8 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     if binary is None:
         raise SystemExit("server_redis_transport: redis-server is not installed (scripts/setup.sh installs it)")
     port = _free_port()
-    proc = subprocess.Popen([binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     url = f"redis://127.0.0.1:{port}/0"
     results: dict[str, list] = {"pubsub": [], "streams": []}
     try:
@@ -138,16 +140,28 @@ def main(argv: list[str] | None = None) -> int:
         for _ in range(args.rounds):
             for transport in ("pubsub", "streams"):
                 cpu0 = _cpu_s(proc.pid)
-                r = asyncio.run(asyncio.wait_for(_run(url, transport, args.sessions, args.seconds, args.payload),
-                                                 args.seconds + 30))
+                r = asyncio.run(
+                    asyncio.wait_for(_run(url, transport, args.sessions, args.seconds, args.payload), args.seconds + 30)
+                )
                 r["redis_cpu_s"] = round(_cpu_s(proc.pid) - cpu0, 3)
                 results[transport].append(r)
     finally:
         proc.terminate()
         proc.wait(10)
-    print(json.dumps({"benchmark": "server_redis_transport", "sessions": args.sessions, "fps": 30,
-                      "seconds": args.seconds, "payload_bytes": args.payload, "runs": results,
-                      "loadavg": [round(x, 2) for x in os.getloadavg()]}, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "server_redis_transport",
+                "sessions": args.sessions,
+                "fps": 30,
+                "seconds": args.seconds,
+                "payload_bytes": args.payload,
+                "runs": results,
+                "loadavg": [round(x, 2) for x in os.getloadavg()],
+            },
+            indent=2,
+        )
+    )
     return 0
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
 from server.timing import summarise
 
@@ -42,10 +43,11 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
-async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 - mp.Value
+async def _hostile(url: str, seconds: float, counter) -> None:
     """Hostile traffic for ``seconds``: a fast ingest plus a stream of malformed messages."""
     from websockets.asyncio.client import connect
     from websockets.exceptions import InvalidStatus, WebSocketException
+    from websockets.typing import Origin
 
     from clients.client import ws_url
 
@@ -66,9 +68,14 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
             except (OSError, WebSocketException):
                 await asyncio.sleep(0.1)
 
-    bad_first = [b"\x00\xff" * 10, "{garbage", "[" * 5000 + "]" * 5000, json.dumps({"type": "start"}),
-                 json.dumps({"type": "start", "session": "x" * 100, "sample_rate": RATE}),
-                 json.dumps({"type": "start", "session": "h", "sample_rate": 10**9})]
+    bad_first: list[str | bytes] = [
+        b"\x00\xff" * 10,
+        "{garbage",
+        "[" * 5000 + "]" * 5000,
+        json.dumps({"type": "start"}),
+        json.dumps({"type": "start", "session": "x" * 100, "sample_rate": RATE}),
+        json.dumps({"type": "start", "session": "h", "sample_rate": 10**9}),
+    ]
 
     async def spam() -> None:
         i = 0
@@ -86,8 +93,11 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
                         counter.value += 1
                         await asyncio.wait_for(ws.wait_closed(), 5)
                 elif i % 10 == 5:
-                    async with connect(ws_url(url, "/view?session=none&kind=smell"), compression=None,
-                                       origin="http://evil.example"):
+                    async with connect(
+                        ws_url(url, "/view?session=none&kind=smell"),
+                        compression=None,
+                        origin=Origin("http://evil.example"),
+                    ):
                         pass
                 else:
                     async with connect(ws_url(url, "/ingest"), compression=None) as ws:
@@ -102,7 +112,7 @@ async def _hostile(url: str, seconds: float, counter) -> None:  # noqa: ANN001 -
     await asyncio.gather(flood_ingest(), spam())
 
 
-def _hostile_proc(url: str, seconds: float, counter) -> None:  # noqa: ANN001 - mp.Value
+def _hostile_proc(url: str, seconds: float, counter) -> None:
     asyncio.run(_hostile(url, seconds, counter))
 
 
@@ -129,12 +139,9 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             loop = asyncio.get_running_loop()
             t0 = loop.time() + s * 0.02 / max(1, sessions)  # staggered across a block
             n_blocks = int(seconds * RATE / BLOCK)
-            for b in range(n_blocks):
-                delay = t0 + (b + 1) * BLOCK / RATE - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-                i = (b * BLOCK) % (len(speech) - BLOCK)
-                await ing.send(speech[i:i + BLOCK])
+            looped = np.concatenate([speech[(b * BLOCK) % (len(speech) - BLOCK) :][:BLOCK] for b in range(n_blocks)])
+            async for _, block in paced_blocks(looped, RATE, block_s=BLOCK / RATE, start=t0):
+                await ing.send(block)
                 block_sent[s].append(time.time())
             ended = await ing.end()
             await asyncio.gather(*tasks)
@@ -150,7 +157,9 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
         await asyncio.sleep(max(0.0, half - time.monotonic()))
         phase_metrics["quiet"] = json.loads((await http_get(url, "/metrics"))[1])
         if hostile:
-            hostile_proc = mp.get_context("spawn").Process(target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count))
+            hostile_proc = mp.get_context("spawn").Process(
+                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count)
+            )
             hostile_proc.start()
 
     sampler = asyncio.ensure_future(sample_rss())
@@ -160,19 +169,21 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
     await phase_task
     if hostile_proc is not None:
         hostile_proc.join(30)
-    status, body = await http_get(url, "/health")
+    status, _body = await http_get(url, "/health")
     final = json.loads((await http_get(url, "/metrics"))[1])
     rss.append((time.monotonic() - t_start, _rss_mb(server.proc.pid)))
 
     # End-to-end latency per frame, split at the half-way time (wall clock of the block send).
     half_wall = time.time() - (time.monotonic() - half)
-    e2e = {"quiet": [], "hostile" if hostile else "second_half": []}
+    e2e: dict[str, list[float]] = {"quiet": [], "hostile" if hostile else "second_half": []}
     lost = 0
     for s in range(sessions):
         sent = np.array(block_sent[s])
         for log in logs[s]:
             idx = np.array(log.index)
-            lost += int(ended[s]["frames"] - len(idx)) + int(np.sum(np.diff(idx) != 1)) if len(idx) else ended[s]["frames"]
+            lost += (
+                int(ended[s]["frames"] - len(idx)) + int(np.sum(np.diff(idx) != 1)) if len(idx) else ended[s]["frames"]
+            )
             need = np.array([mf.frame_start(int(k) + d) + mf.window_len for k in idx])
             live = (need - 1) // BLOCK < len(sent)
             t_need = sent[(need[live] - 1) // BLOCK]
@@ -181,14 +192,19 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             e2e[list(e2e)[1]].append(lat[t_need >= half_wall])
     warm = next((m for t, m in rss if t >= seconds * 0.1), rss[0][1])
     return {
-        "rss_mb": {"warm": round(warm, 1), "end": round(rss[-1][1], 1),
-                   "growth_percent": round(100 * (rss[-1][1] - warm) / warm, 2),
-                   "samples": [(round(t, 1), round(m, 1)) for t, m in rss]},
+        "rss_mb": {
+            "warm": round(warm, 1),
+            "end": round(rss[-1][1], 1),
+            "growth_percent": round(100 * (rss[-1][1] - warm) / warm, 2),
+            "samples": [(round(t, 1), round(m, 1)) for t, m in rss],
+        },
         "frames_lost": lost,
         "frames_expected": int(sum(e["frames"] for e in ended) * viewers),
         "end_to_end_ms": {k: summarise(np.concatenate(v)) for k, v in e2e.items()},
-        "loop_lag_p99_ms": {"quiet": phase_metrics["quiet"]["timings_ms"].get("loop_lag", {}).get("p99_ms"),
-                            "end": final["timings_ms"].get("loop_lag", {}).get("p99_ms")},
+        "loop_lag_p99_ms": {
+            "quiet": phase_metrics["quiet"]["timings_ms"].get("loop_lag", {}).get("p99_ms"),
+            "end": final["timings_ms"].get("loop_lag", {}).get("p99_ms"),
+        },
         "hostile_messages": int(hostile_count.value),
         "closes_by_code": final["closes"],
         "healthy_at_end": status == 200,
@@ -207,14 +223,30 @@ def main(argv: list[str] | None = None) -> int:
     server = ServerProcess(model_path, head=True)
     load_before = os.getloadavg()
     try:
-        result = asyncio.run(_run(server, model, seconds=args.minutes * 60, sessions=args.sessions,
-                                  viewers=args.viewers, hostile=args.hostile))
+        result = asyncio.run(
+            _run(
+                server,
+                model,
+                seconds=args.minutes * 60,
+                sessions=args.sessions,
+                viewers=args.viewers,
+                hostile=args.hostile,
+            )
+        )
     finally:
         rc = server.stop()
-    result.update({"benchmark": "server_soak", "model": model_desc, "minutes": args.minutes,
-                   "sessions": args.sessions, "viewers_per_session": args.viewers, "server_exit_code": rc,
-                   "loadavg_before": [round(x, 2) for x in load_before],
-                   "loadavg_after": [round(x, 2) for x in os.getloadavg()]})
+    result.update(
+        {
+            "benchmark": "server_soak",
+            "model": model_desc,
+            "minutes": args.minutes,
+            "sessions": args.sessions,
+            "viewers_per_session": args.viewers,
+            "server_exit_code": rc,
+            "loadavg_before": [round(x, 2) for x in load_before],
+            "loadavg_after": [round(x, 2) for x in os.getloadavg()],
+        }
+    )
     print(json.dumps(result, indent=2))
     return 0
 

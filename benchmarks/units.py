@@ -40,12 +40,19 @@ SENTENCES = (
     "All of the students passed the final exam with good marks.",
 )
 SPANISH = (
-    "Hola, me llamo Pedro y vivo en Madrid.", "El tiempo hoy es mucho mejor que la semana pasada.",
-    "¿Puede decirme dónde está la estación de tren?", "Quiero un café con leche y sin azúcar, por favor.",
-    "Los estudiantes aprobaron el examen final con buenas notas.", "Mañana vamos a la playa con mis amigos.",
+    "Hola, me llamo Pedro y vivo en Madrid.",
+    "El tiempo hoy es mucho mejor que la semana pasada.",
+    "¿Puede decirme dónde está la estación de tren?",
+    "Quiero un café con leche y sin azúcar, por favor.",
+    "Los estudiantes aprobaron el examen final con buenas notas.",
+    "Mañana vamos a la playa con mis amigos.",
 )
-GRID_VOCABULARY = ("bin blue at f two now", "place red by z nine again", "set white with p four please",
-                   "lay green in a six soon")
+GRID_VOCABULARY = (
+    "bin blue at f two now",
+    "place red by z nine again",
+    "set white with p four please",
+    "lay green in a six soon",
+)
 SAY_TEXT = "Please put the blue box on the table by nine tonight."  # ten words
 
 
@@ -57,8 +64,10 @@ def bench_search(stored, n: int) -> None:
     t0 = time.perf_counter()
     graph = build_graph(stored.corpus, SearchConfig())
     exact = build_graph(stored.corpus, SearchConfig(max_active=None))
-    print(f"graph build: {1000 * (time.perf_counter() - t0) / 2:.0f} ms for {stored.corpus.n_phones} states "
-          f"({stored.corpus.n_sentences} sentences)")
+    print(
+        f"graph build: {1000 * (time.perf_counter() - t0) / 2:.0f} ms for {stored.corpus.n_phones} states "
+        f"({stored.corpus.n_sentences} sentences)"
+    )
     targets = []
     for text in (SENTENCES * ((n // len(SENTENCES)) + 1))[:n]:
         s = speak(text)
@@ -73,11 +82,15 @@ def bench_search(stored, n: int) -> None:
         times.append(1000 * (time.perf_counter() - t))
         gaps.append(sel.cost - select_units(exact, tv, td).cost)
     a = np.asarray(times)
-    print(f"unit search, 20-phone targets x {n} (goal < 50 ms): median {np.median(a):.1f} ms, "
-          f"p95 {np.percentile(a, 95):.1f} ms, max {a.max():.1f} ms")
+    print(
+        f"unit search, 20-phone targets x {n} (goal < 50 ms): median {np.median(a):.1f} ms, "
+        f"p95 {np.percentile(a, 95):.1f} ms, max {a.max():.1f} ms"
+    )
     g = np.asarray(gaps)
-    print(f"active-state cap {graph.config.max_active} vs exact search: path cost equal in {np.mean(g < 1e-9):.0%} "
-          f"of targets, mean excess {g.mean():.3f}, max {g.max():.3f}")
+    print(
+        f"active-state cap {graph.config.max_active} vs exact search: path cost equal in {np.mean(g < 1e-9):.0%} "
+        f"of targets, mean excess {g.mean():.3f}, max {g.max():.3f}"
+    )
 
 
 def check_self_selection(stored, step: int = 8) -> None:
@@ -97,8 +110,10 @@ def check_self_selection(stored, step: int = 8) -> None:
         t = np.arange(n) / 30.0
         covered = (t >= c.phone_start_s[a]) & (t <= c.phone_end_s[b - 1])
         exact += float(np.abs(res.frames[covered] - c.sentence_frames(s)[covered]).max()) < 1e-5
-    print(f"corpus sentences from their own phones: {one}/{len(picked)} select themselves as one zero-cost unit, "
-          f"{exact}/{len(picked)} reproduce their recorded motion exactly")
+    print(
+        f"corpus sentences from their own phones: {one}/{len(picked)} select themselves as one zero-cost unit, "
+        f"{exact}/{len(picked)} reproduce their recorded motion exactly"
+    )
 
 
 def bench_languages(stored) -> None:
@@ -109,8 +124,11 @@ def bench_languages(stored) -> None:
     synth = UnitSynthesizer(stored.corpus)
     print("| text | phones | phones per unit | junctions outside the recorded divisemes (per phone) |")
     print("|---|---|---|---|")
-    for name, texts, lang in (("GRID vocabulary (English)", GRID_VOCABULARY, "en"),
-                              ("everyday English", SENTENCES[:6], "en"), ("everyday Spanish", SPANISH, "es")):
+    for name, texts, lang in (
+        ("GRID vocabulary (English)", GRID_VOCABULARY, "en"),
+        ("everyday English", SENTENCES[:6], "en"),
+        ("everyday Spanish", SPANISH, "es"),
+    ):
         phones = units = junctions = 0
         for text in texts:
             s = speak(text, language=lang)
@@ -154,18 +172,26 @@ def bench_say(stored, repeats: int = 3, samples: int = 4) -> None:
             res = synth.synthesize(list(s.phones), s.inventory, n_frames=int(np.ceil(s.duration_s * 30)))
             t2 = time.perf_counter()
             wav = write_wav(Path(tmp) / "s.wav", s.samples, s.sample_rate_hz)
-            write_video(res.frames[:, k:], lambda p: r.render(rig.deformed(p)), Path(tmp) / f"say{i}.mp4",
-                        size=(cfg.width, cfg.height), audio=wav, config=VideoConfig(fps=30.0))
+            write_video(
+                res.frames[:, k:],
+                lambda p: r.render(rig.deformed(p)),
+                Path(tmp) / f"say{i}.mp4",
+                size=(cfg.width, cfg.height),
+                audio=wav,
+                config=VideoConfig(fps=30.0),
+            )
             t3 = time.perf_counter()
             cpus.append(_cpu_s() - c0)
             totals.append(t3 - t0)
             parts.append((t1 - t0, t2 - t1, t3 - t2, len(res.frames)))
     i = int(np.argsort(totals)[len(totals) // 2])
     sp, us, rv, nf = parts[i]
-    print(f"say, 10 words ({nf} frames, 640x480, MSAA {samples}) command to MP4 after start-up (goal < 2 s): median "
-          f"{np.median(totals):.2f} s = speech {1000 * sp:.0f} ms + units {1000 * us:.0f} ms + render/encode "
-          f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame); CPU time (this process + ffmpeg, what an idle "
-          f"machine would take) {np.median(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(
+        f"say, 10 words ({nf} frames, 640x480, MSAA {samples}) command to MP4 after start-up (goal < 2 s): median "
+        f"{np.median(totals):.2f} s = speech {1000 * sp:.0f} ms + units {1000 * us:.0f} ms + render/encode "
+        f"{1000 * rv:.0f} ms ({1000 * rv / nf:.1f} ms/frame); CPU time (this process + ffmpeg, what an idle "
+        f"machine would take) {np.median(cpus):.2f} s; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    )
 
 
 def bench_server(corpus_path, repeats: int = 5) -> None:
@@ -206,8 +232,10 @@ def bench_server(corpus_path, repeats: int = 5) -> None:
             await srv.stop()
 
     dts = asyncio.run(main())
-    print(f"server text session, first text piece -> viewer has frame 0 (goal < 300 ms): median "
-          f"{1000 * np.median(dts):.0f} ms, max {1000 * max(dts):.0f} ms over {repeats} sessions")
+    print(
+        f"server text session, first text piece -> viewer has frame 0 (goal < 300 ms): median "
+        f"{1000 * np.median(dts):.0f} ms, max {1000 * max(dts):.0f} ms over {repeats} sessions"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,6 +26,7 @@ import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
+from assets.pacing import paced_blocks
 from clients.errors import ClientError
 from wire import protocol as P
 
@@ -43,15 +44,22 @@ def ws_url(base: str, path: str) -> str:
     """``http://h:p`` or ``ws://h:p`` + path -> ``ws://h:p/path``."""
     b = base.rstrip("/")
     if b.startswith("http://"):
-        b = "ws://" + b[len("http://"):]
+        b = "ws://" + b[len("http://") :]
     elif b.startswith("https://"):
-        b = "wss://" + b[len("https://"):]
+        b = "wss://" + b[len("https://") :]
     return b + path
 
 
 def _closed(exc: ConnectionClosed) -> ServerClosed:
     rcvd = exc.rcvd
     return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
+
+
+def _open(ws: ClientConnection | None) -> ClientConnection:
+    """The connection of a client used inside ``async with`` (a clear error otherwise)."""
+    if ws is None:
+        raise ClientError("the client is not connected: use it as `async with ...`")
+    return ws
 
 
 class IngestClient:
@@ -63,9 +71,18 @@ class IngestClient:
     1-120 s; the start message carries it base64-encoded, so it must fit the server's message limit).
     """
 
-    def __init__(self, url: str, *, session: str, sample_rate_hz: int, channels: int = 1,
-                 sample_format: str = "pcm_s16le", token: str | None = None, max_size: int | None = 1 << 20,
-                 enrol: bytes | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        session: str,
+        sample_rate_hz: int,
+        channels: int = 1,
+        sample_format: str = "pcm_s16le",
+        token: str | None = None,
+        max_size: int | None = 1 << 20,
+        enrol: bytes | None = None,
+    ) -> None:
         if sample_format not in P.SAMPLE_FORMATS:
             raise ClientError(f"sample_format must be one of {sorted(P.SAMPLE_FORMATS)}")
         self.url = ws_url(url, "/ingest")
@@ -79,10 +96,15 @@ class IngestClient:
         self.ws: ClientConnection | None = None
         self.started: dict = {}
 
-    async def __aenter__(self) -> "IngestClient":
+    async def __aenter__(self) -> IngestClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
-        start = {"type": "start", "session": self.session, "sample_rate": self.sample_rate_hz,
-                 "channels": self.channels, "format": self.sample_format}
+        start = {
+            "type": "start",
+            "session": self.session,
+            "sample_rate": self.sample_rate_hz,
+            "channels": self.channels,
+            "format": self.sample_format,
+        }
         if self.token is not None:
             start["token"] = self.token
         if self.enrol is not None:  # enrolment recording in this session's input format (server adapts its model)
@@ -97,7 +119,7 @@ class IngestClient:
 
     async def _reply(self, *types: str) -> dict:
         try:
-            msg = await self.ws.recv()
+            msg = await _open(self.ws).recv()
         except ConnectionClosed as exc:
             raise _closed(exc) from None
         obj = json.loads(msg)
@@ -119,18 +141,18 @@ class IngestClient:
         """Send one block (array or raw bytes already in the session's format)."""
         data = samples if isinstance(samples, (bytes, bytearray)) else self.encode(samples)
         try:
-            await self.ws.send(data)
+            await _open(self.ws).send(data)
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
     async def control(self, **controls: object) -> dict:
         """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
-        await self.ws.send(json.dumps({"type": "control", **controls}))
+        await _open(self.ws).send(json.dumps({"type": "control", **controls}))
         return await self._reply("ack", "rejected")
 
     async def end(self) -> dict:
         """End the session: the server flushes the last frames and replies ``ended``."""
-        await self.ws.send(json.dumps({"type": "end"}))
+        await _open(self.ws).send(json.dumps({"type": "end"}))
         return await self._reply("ended")
 
 
@@ -143,24 +165,20 @@ class SentBlock:
     sent: float
 
 
-async def stream_samples(ing: IngestClient, samples: np.ndarray, *, realtime: bool = True, block_s: float = 0.02,
-                         int16: np.ndarray | None = None) -> list[SentBlock]:
+async def stream_samples(
+    ing: IngestClient,
+    samples: np.ndarray,
+    *,
+    realtime: bool = True,
+    block_s: float = 0.02,
+    int16: np.ndarray | None = None,
+) -> list[SentBlock]:
     """Send ``samples`` ((n,) or (n, channels) float, or int16 when the format is pcm_s16le) in
     blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
     x = np.asarray(samples if int16 is None else int16)
-    rate = ing.sample_rate_hz
-    step = max(1, int(round(block_s * rate)))
-    loop = asyncio.get_running_loop()
-    t0 = loop.time()
     log: list[SentBlock] = []
-    for i in range(0, len(x), step):
-        block = x[i:i + step]
-        if realtime:
-            due = t0 + (i + len(block)) / rate
-            delay = due - loop.time()
-            if delay > 0:
-                await asyncio.sleep(delay)
+    async for i, block in paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime):
         await ing.send(block)
         log.append(SentBlock(i, len(block), time.time()))
     return log
@@ -177,8 +195,9 @@ async def stream_source(ing: IngestClient, source) -> int:
     return n
 
 
-async def ingest_file(url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02,
-                      token: str | None = None) -> dict:
+async def ingest_file(
+    url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02, token: str | None = None
+) -> dict:
     """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
     from assets.audio import read_audio
 
@@ -215,8 +234,17 @@ class ViewerClient:
     default); audio: also receive the session's audio.
     """
 
-    def __init__(self, url: str, *, session: str, kind: str = "params", encoding: str | None = None,
-                 audio: bool = True, token: str | None = None, max_size: int | None = 64 << 20) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        session: str,
+        kind: str = "params",
+        encoding: str | None = None,
+        audio: bool = True,
+        token: str | None = None,
+        max_size: int | None = 64 << 20,
+    ) -> None:
         q = {"session": session, "kind": kind, "audio": "1" if audio else "0"}
         if encoding is not None:
             q["encoding"] = encoding
@@ -229,7 +257,7 @@ class ViewerClient:
         self.close_code: int | None = None
         self.close_reason = ""
 
-    async def __aenter__(self) -> "ViewerClient":
+    async def __aenter__(self) -> ViewerClient:
         self.ws = await connect(self.url, compression=None, max_size=self.max_size)
         try:
             self.description = json.loads(await self.ws.recv())
@@ -244,7 +272,7 @@ class ViewerClient:
     async def __aiter__(self):
         while True:
             try:
-                data = await self.ws.recv()
+                data = await _open(self.ws).recv()
             except ConnectionClosed as exc:
                 self.close_code = exc.rcvd.code if exc.rcvd else None
                 self.close_reason = exc.rcvd.reason if exc.rcvd else ""

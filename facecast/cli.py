@@ -32,6 +32,8 @@ COMMANDS: dict[str, str] = {
     "train": "facecast.commands.train",
     "adapt": "facecast.commands.adapt",
     "eval": "facecast.commands.eval",
+    "mu": "facecast.commands.mu",
+    "fit-maps": "facecast.commands.fit_maps",
     "bench": "facecast.commands.bench",
     "perceptual": "facecast.commands.perceptual",
 }

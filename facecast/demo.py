@@ -9,6 +9,7 @@ over loopback like any other client, prints the URLs to open, then renders what 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
 import tempfile
 from dataclasses import dataclass
@@ -68,8 +69,8 @@ class DemoResult:
 
 def synthesise(sentences: tuple[str, ...], voice: str, *, pause_s: float = 0.5) -> tuple[np.ndarray, int]:
     """espeak-ng speech of the sentences with pauses: ((n,) float32 in [-1, 1], rate Hz)."""
-    from training.errors import TrainingError
     from assets.espeak import LANGUAGES, Voice, synthesizer
+    from training.errors import TrainingError
 
     lang = next((k for k, v in LANGUAGES.items() if voice in v), None)
     if lang is None:
@@ -101,12 +102,17 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
     from server.config import ServerConfig
     from server.sources import FileSource, MicConfig, MicSource
 
-    server = FacecastServer(model, head=head, config=ServerConfig(host=config.host, port=config.port,
-                                                                   web_root=config.web_root,
-                                                                   node_modules=config.node_modules))
+    server = FacecastServer(
+        model,
+        head=head,
+        config=ServerConfig(
+            host=config.host, port=config.port, web_root=config.web_root, node_modules=config.node_modules
+        ),
+    )
     await server.start()
     loop = asyncio.get_running_loop()
     mic: MicSource | None = None
+    source: MicSource | FileSource
     speech: np.ndarray | None = None
     try:
         if config.mic:
@@ -117,8 +123,9 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
             source = FileSource.from_array(speech, rate, realtime=True)
             what = f"{len(config.sentences)} espeak-ng sentences ({len(speech) / rate:.1f} s)"
         gate = asyncio.Event()
-        session = asyncio.ensure_future(server.run_source("demo", _gated(source, gate), sample_rate_hz=rate,
-                                                          label="demo"))
+        session = asyncio.ensure_future(
+            server.run_source("demo", _gated(source, gate), sample_rate_hz=rate, label="demo")
+        )
         while "demo" not in server.sessions:
             await asyncio.sleep(0.005)
         ws = server.url.replace("http://", "ws://")
@@ -126,6 +133,7 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
         announce(f"  open {server.url}/   (viewer page; sessions listed)")
         announce(f"  watch {ws}/view?session=demo&kind=deltas   (or kind=params, kind=blendshapes)")
         announce(f"  metrics {server.url}/metrics")
+
         def on_stop() -> None:
             # End the session early: the source stops, the viewer gets the last frames, the MP4
             # covers what was streamed.
@@ -138,8 +146,10 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, on_stop)
         if mic is not None:
-            announce("  speak now; Ctrl-C ends the session" + (f" (or after {config.mic_seconds:g} s)"
-                                                             if config.mic_seconds else ""))
+            announce(
+                "  speak now; Ctrl-C ends the session"
+                + (f" (or after {config.mic_seconds:g} s)" if config.mic_seconds else "")
+            )
             if config.mic_seconds:
                 loop.call_later(config.mic_seconds, on_stop)
         async with ViewerClient(server.url, session="demo", kind="params", audio=True) as viewer:
@@ -155,12 +165,19 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
             mic.close()
         await server.stop()
     audio_rate = got.description["audio"]["rate_hz"]
-    return DemoResult(params=got.values(), audio=got.audio_samples(), audio_rate_hz=audio_rate, url=url,
-                      speech=speech, speech_rate_hz=0 if speech is None else rate)
+    return DemoResult(
+        params=got.values(),
+        audio=got.audio_samples(),
+        audio_rate_hz=audio_rate,
+        url=url,
+        speech=speech,
+        speech_rate_hz=0 if speech is None else rate,
+    )
 
 
-async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *,
-                       pause_s: float = 2.0, announce=print) -> int:
+async def serve_replay(
+    config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *, pause_s: float = 2.0, announce=print
+) -> int:
     """After the demo: keep serving and replay the speech as session "demo" until Ctrl-C.
 
     Each pass is a new live session under the same name, ``pause_s`` apart, so a browser opened
@@ -171,9 +188,13 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
     from server.config import ServerConfig
     from server.sources import FileSource
 
-    server = FacecastServer(model, head=head, config=ServerConfig(host=config.host, port=config.port,
-                                                                   web_root=config.web_root,
-                                                                   node_modules=config.node_modules))
+    server = FacecastServer(
+        model,
+        head=head,
+        config=ServerConfig(
+            host=config.host, port=config.port, web_root=config.web_root, node_modules=config.node_modules
+        ),
+    )
     await server.start()
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -185,7 +206,9 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
     try:
         while not stop.is_set():
             source = FileSource.from_array(speech, rate_hz, realtime=True)
-            session = asyncio.ensure_future(server.run_source("demo", source, sample_rate_hz=rate_hz, label="demo"))
+            session = asyncio.ensure_future(
+                server.run_source("demo", aiter(source), sample_rate_hz=rate_hz, label="demo")
+            )
             stopper = asyncio.ensure_future(stop.wait())
             await asyncio.wait({session, stopper}, return_when=asyncio.FIRST_COMPLETED)
             if stop.is_set():
@@ -195,10 +218,8 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
             await session
             stopper.cancel()
             passes += 1
-            try:
+            with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(stop.wait(), timeout=pause_s)
-            except TimeoutError:
-                pass
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
@@ -206,14 +227,23 @@ async def serve_replay(config: DemoConfig, model, head, speech: np.ndarray, rate
     return passes
 
 
-def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rate_hz: int, *, fps: int = 30,
-              width: int = 640, height: int = 480) -> Path:
+def write_mp4(
+    path: Path,
+    head,
+    params: np.ndarray,
+    audio: np.ndarray,
+    audio_rate_hz: int,
+    *,
+    fps: int = 30,
+    width: int = 640,
+    height: int = 480,
+) -> Path:
     """Render params (n, 4) (IOD) on the head's rig with the offline renderer and mux audio (m,)
     float32 at audio_rate_hz into an H.264/AAC MP4 (``clients.render.video.write_video``, atomic)."""
+    from assets.audio import write_wav
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, write_video
-    from assets.audio import write_wav
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -222,7 +252,13 @@ def write_mp4(path: Path, head, params: np.ndarray, audio: np.ndarray, audio_rat
         write_wav(wav, np.asarray(audio, dtype=np.float32), audio_rate_hz)
         try:
             with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=width, height=height)) as renderer:
-                return write_video(params, lambda p: renderer.render(head.rig.deformed(p)), path,
-                                   size=(width, height), audio=wav, config=VideoConfig(fps=fps))
+                return write_video(
+                    params,
+                    lambda p: renderer.render(head.rig.deformed(p)),
+                    path,
+                    size=(width, height),
+                    audio=wav,
+                    config=VideoConfig(fps=fps),
+                )
         except ClientError as exc:
             raise ServerError(f"cannot write the video {path}: {exc}") from None

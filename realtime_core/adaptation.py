@@ -37,8 +37,9 @@ def enrolment_features(model: AvModel, recordings: Sequence[np.ndarray]) -> list
     return out
 
 
-def adapt_av_model(model: AvModel, recordings: Sequence[np.ndarray], *, config: AdaptConfig | None = None
-                   ) -> tuple[AvModel, AdaptResult]:
+def adapt_av_model(
+    model: AvModel, recordings: Sequence[np.ndarray], *, config: AdaptConfig | None = None
+) -> tuple[AvModel, AdaptResult]:
     """MAP-adapt ``model`` to the voice in ``recordings`` (samples at the model's rate, no
     transcript). Returns the adapted model (with an ``adaptation`` entry in its metadata) and
     the EM details. No recordings (or no frames) returns ``model`` itself."""

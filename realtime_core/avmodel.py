@@ -22,6 +22,7 @@ import json
 import zipfile
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class AvModel:
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     likelihood_scale: float = 1.0
     closure_band: float = 0.0
-    metadata: dict = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.hmm.n_audio != self.frontend.audio_dim:
@@ -100,7 +101,7 @@ class AvModel:
         return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
 
     @cached_property
-    def _plans(self) -> dict:
+    def _plans(self) -> dict[tuple[str, float | None], StreamPlan]:
         """Shared streaming plans by (dtype, likelihood scale): every session of this model
         reads the same matrices."""
         return {}
@@ -120,19 +121,28 @@ class AvModel:
         """``(n_visual,)`` lower bounds of the output (the closed pose; -inf where none)."""
         return visual_floor(self.visual_names)
 
+    def visual_mapper(self, *, lag: int = 0, dtype: str = "float32") -> StreamingInverter:
+        """The :class:`realtime_core.mapping.VisualMapper` of this model: a streaming inverter."""
+        return self.inverter(StreamConfig(lag=lag, dtype=dtype))
+
     @cached_property
     def output_stage(self) -> OutputStage:
         """The closed-pose floor and closure band applied to every estimate (:mod:`realtime_core.output`)."""
         return OutputStage(self.visual_floor, self.closure_band)
 
 
-def _frontend_to_json(fe: FrontEndConfig) -> dict:
+def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
-    return {"mfcc": mf, "cmvn": None if fe.cmvn is None else asdict(fe.cmvn), "tc": fe.tc, "energy": fe.energy,
-            "silence_floor_db": fe.silence_floor_db}
+    return {
+        "mfcc": mf,
+        "cmvn": None if fe.cmvn is None else asdict(fe.cmvn),
+        "tc": fe.tc,
+        "energy": fe.energy,
+        "silence_floor_db": fe.silence_floor_db,
+    }
 
 
-def _frontend_from_json(d: dict) -> FrontEndConfig:
+def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
     return FrontEndConfig(
         mfcc=MfccConfig(**d["mfcc"]),
         cmvn=None if d.get("cmvn") is None else CmvnConfig(**d["cmvn"]),
@@ -146,7 +156,7 @@ def _frontend_from_json(d: dict) -> FrontEndConfig:
 def encode_model(model: AvModel) -> bytes:
     """Serialise to ``.npz`` bytes (no pickle)."""
     config = {
-        "frontend": _frontend_to_json(model.frontend),
+        "frontend": frontend_to_json(model.frontend),
         "visual_names": list(model.visual_names),
         "likelihood_scale": model.likelihood_scale,
         "closure_band": model.closure_band,
@@ -166,7 +176,7 @@ def encode_model(model: AvModel) -> bytes:
     for name in _FORM_ARRAYS:
         arrays[name] = getattr(model.form, name)
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
     return buf.getvalue()
 
 
@@ -186,7 +196,7 @@ def decode_model(data: bytes) -> AvModel:
         raise ModelFormatError(f"model version {int(arrays['version'])} is not supported (expected {VERSION})")
     try:
         config = json.loads(str(arrays["config_json"]))
-        frontend = _frontend_from_json(config["frontend"])
+        frontend = frontend_from_json(config["frontend"])
         hmm = AvHmm(
             **{k: arrays[k] for k in _HMM_ARRAYS},
             covariance_type=config["covariance_type"],

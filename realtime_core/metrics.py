@@ -18,7 +18,9 @@ def _pair(true: np.ndarray, est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if t.ndim == 1:
         t, e = t[:, None], e.reshape(-1, 1)
     if t.shape != e.shape or t.ndim != 2 or t.shape[0] < 2:
-        raise InvalidFeaturesError(f"true and estimated tracks must be equal (T >= 2, R) shapes, got {t.shape}, {e.shape}")
+        raise InvalidFeaturesError(
+            f"true and estimated tracks must be equal (T >= 2, R) shapes, got {t.shape}, {e.shape}"
+        )
     return t, e
 
 
@@ -57,3 +59,12 @@ def normalised_mse(true: np.ndarray, est: np.ndarray, *, scale: np.ndarray | Non
     s = np.abs(t).max(axis=0) if scale is None else np.asarray(scale, dtype=np.float64)
     s = np.where(s > 0, s, 1.0)
     return float(np.mean(((t - e) / s) ** 2))
+
+
+def average_std(x: np.ndarray) -> float:
+    """Paper 002 eq. 7: ``nu = (1/gamma) sum_c sqrt(Cov[c][c])``, the mean per-dimension standard
+    deviation of ``(T, gamma)``."""
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 2 or a.shape[0] < 2:
+        raise InvalidFeaturesError(f"a track must be (T >= 2, gamma), got {a.shape}")
+    return float(np.sqrt(a.var(axis=0)).mean())

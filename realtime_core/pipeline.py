@@ -1,10 +1,11 @@
 """Speech samples -> mouth parameters, streaming (live) and whole-utterance (offline).
 
-:class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the streaming
-inverter. ``push(samples)`` returns the parameter rows now final, ``flush()`` the rest;
-row ``k`` is video frame ``k`` (time ``k / 30`` s). The first row of an utterance appears
-once the audio reaches frame ``tc + lag`` plus one analysis window: the algorithmic
-delay is ``(tc + lag) / fps`` seconds plus the window
+:class:`SpeechToParams` chains the front end (MFCC -> CMVN -> context) and the model's streaming
+visual mapper (:class:`realtime_core.mapping.VisualMapper`: the HMM inverter of an
+:class:`AvModel`, or the GMM-selected MLP bank of an :class:`MlpSpeechModel`). ``push(samples)``
+returns the parameter rows now final, ``flush()`` the rest; row ``k`` is video frame ``k`` (time ``k / 30`` s).
+The first row of an utterance appears once the audio reaches frame ``tc + lag`` plus one analysis
+window: the algorithmic delay is ``(tc + lag) / fps`` seconds plus the window
 (:meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`).
 
 :func:`speech_to_params` runs the same objects over a whole utterance, so offline results
@@ -14,7 +15,7 @@ equal what a live session produces frame for frame; ``mode="batch"`` uses batch 
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
-
+from realtime_core.mapping import SpeechModel, VisualMapper
 
 StageObserver = Callable[[str], None]
 """Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage
@@ -37,18 +38,32 @@ class SpeechToParams:
 
     Samples at any ``rate_hz`` (default: the model's rate) go through a :class:`StreamingResampler`
     (bit-identical to whole-signal ``resample_poly`` for any chunking), the model's front end
-    (MFCC -> CMVN -> context) and the streaming inverter. ``observer`` (optional) is told after each
-    stage of every push, for per-stage timings.
+    (MFCC -> CMVN -> context) and the model's streaming visual mapper. ``observer`` (optional) is told
+    after each stage of every push, for per-stage timings.
+
+    model: any :class:`realtime_core.mapping.SpeechModel`; ``stream`` sets the HMM inverter's lag,
+    dtype and likelihood scale (an MLP model takes its lag and dtype).
     """
 
-    def __init__(self, model: AvModel, *, rate_hz: int | None = None, stream: StreamConfig = StreamConfig(),
-                 observer: StageObserver | None = None) -> None:
+    def __init__(
+        self,
+        model: SpeechModel,
+        *,
+        rate_hz: int | None = None,
+        stream: StreamConfig = StreamConfig(),
+        observer: StageObserver | None = None,
+    ) -> None:
         self.model = model
         self.rate_hz = int(rate_hz) if rate_hz is not None else model.sample_rate_hz
-        self._resampler = (StreamingResampler(self.rate_hz, model.sample_rate_hz)
-                           if self.rate_hz != model.sample_rate_hz else None)
+        self._resampler = (
+            StreamingResampler(self.rate_hz, model.sample_rate_hz) if self.rate_hz != model.sample_rate_hz else None
+        )
         self._fe = model.front_end()
-        self._inv = model.inverter(stream)
+        self._inv: VisualMapper
+        if isinstance(model, AvModel):
+            self._inv = model.inverter(stream)
+        else:
+            self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
         self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
         self.model_audio: np.ndarray = np.zeros(0)
@@ -58,14 +73,14 @@ class SpeechToParams:
     @property
     def delay_frames(self) -> int:
         """Frames of lookahead between the newest audio frame and the newest output."""
-        return self.model.frontend.tc + self._inv.config.lag
+        return self.model.frontend.tc + self._inv.lag_frames
 
     @property
     def algorithmic_delay_ms(self) -> float:
         """The model's algorithmic delay at this chain's lag, plus the resampler's lookahead when the
         input is not at the model rate (under 1 ms)."""
         extra = 0.0 if self._resampler is None else 1e3 * self._resampler.delay_samples_in / self.rate_hz
-        return self.model.algorithmic_delay_ms(self._inv.config.lag) + extra
+        return self.model.frontend.algorithmic_delay_ms(self._inv.lag_frames) + extra
 
     def reset(self) -> None:
         if self._resampler is not None:
@@ -106,7 +121,7 @@ def _ignore(stage: str) -> None:
 
 
 def speech_to_params(
-    model: AvModel,
+    model: SpeechModel,
     samples: np.ndarray,
     rate_hz: int | None = None,
     *,
@@ -117,10 +132,12 @@ def speech_to_params(
     """Whole utterance: ``(n,)`` samples at ``rate_hz`` (default the model's) -> ``(n_frames, n_visual)``.
 
     mode "stream" is exactly the live path (the same :class:`SpeechToParams` objects); "batch" is
-    batch HMMI (eq. 7 EM) on the same resampled audio.
+    batch HMMI (eq. 7 EM, HMM models only) on the same resampled audio.
     """
     if mode not in ("stream", "batch"):
         raise ConfigError(f"mode must be 'stream' or 'batch', got {mode!r}")
+    if mode == "batch" and not isinstance(model, AvModel):
+        raise ConfigError("mode 'batch' (batch HMMI) needs an HMM model")
     x = as_float_samples(samples)
     if rate_hz is not None and int(rate_hz) != model.sample_rate_hz:
         x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
@@ -132,6 +149,7 @@ def speech_to_params(
     if mode == "stream":
         p = SpeechToParams(model, stream=stream)
         return np.concatenate([p.push(x), p.flush()])
+    assert isinstance(model, AvModel)  # refused above otherwise; narrows the type for what follows
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])
     return model.output_stage(hmm_inversion(model.form, oa, config=hmmi).visual)

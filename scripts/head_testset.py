@@ -26,8 +26,12 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-POSES = {"closed": (0.0, 0.0, 0.0, 0.0), "/a/": (0.0, 0.02, 0.35, 0.0), "/u/": (0.0, -0.10, 0.08, 0.0),
-         "/m/": (-0.02, 0.0, 0.0, 0.0)}
+POSES = {
+    "closed": (0.0, 0.0, 0.0, 0.0),
+    "/a/": (0.0, 0.02, 0.35, 0.0),
+    "/u/": (0.0, -0.10, 0.08, 0.0),
+    "/m/": (-0.02, 0.0, 0.0, 0.0),
+}
 
 
 def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
@@ -39,27 +43,46 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
     from assets.heads.targets import VISEME_ARKIT
 
     out.mkdir(parents=True, exist_ok=True)
-    heads: dict[str, tuple[Path | str, dict]] = {"builtin (own ARKit targets)": ("builtin", {}),
-                                                   "builtin (retarget)": ("builtin", {"mode": "retarget"})}
+    heads: dict[str, tuple[Path | str, dict]] = {
+        "builtin (own ARKit targets)": ("builtin", {}),
+        "builtin (retarget)": ("builtin", {"mode": "retarget"}),
+    }
     b = builtin_morph_head().mesh
     arkit = out / "builtin_arkit_spellings.glb"
-    arkit.write_bytes(mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="a",
-                                        targets={"blendShape1." + k.replace("Left", "_L").replace("Right", "_R"): d
-                                                 for k, d in b.targets.items()})))
+    arkit.write_bytes(
+        mesh_glb(
+            HeadMesh(
+                vertices=b.vertices,
+                triangles=b.triangles,
+                colors=b.colors,
+                name="a",
+                targets={
+                    "blendShape1." + k.replace("Left", "_L").replace("Right", "_R"): d for k, d in b.targets.items()
+                },
+            )
+        )
+    )
     heads["ARKit glb, exporter spellings"] = (arkit, {})
     bh = load_builtin_head()
     vis = {f"viseme_{k}": sum(w * bh.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
     vg = out / "visemes_only.glb"
-    vg.write_bytes(mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="v",
-                                     targets=vis)))
+    vg.write_bytes(
+        mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="v", targets=vis))
+    )
     heads["OVR visemes only"] = (vg, {})
     # Multi-material OBJ with separate eye / teeth / tongue objects (one material each).
     obj = out / "builtin_parts.obj"
-    cols = {0: (0.80, 0.60, 0.50), 1: (0.92, 0.92, 0.90), 2: (0.95, 0.93, 0.85), 3: (0.95, 0.93, 0.85),
-            4: (0.70, 0.30, 0.32)}
+    cols = {
+        0: (0.80, 0.60, 0.50),
+        1: (0.92, 0.92, 0.90),
+        2: (0.95, 0.93, 0.85),
+        3: (0.95, 0.93, 0.85),
+        4: (0.70, 0.30, 0.32),
+    }
     names = {0: "skin", 1: "eyes", 2: "upper_teeth", 3: "lower_teeth", 4: "tongue"}
-    (out / "builtin_parts.mtl").write_text("".join(f"newmtl {names[i]}\nKd {c[0]} {c[1]} {c[2]}\n"
-                                                   for i, c in cols.items()))
+    (out / "builtin_parts.mtl").write_text(
+        "".join(f"newmtl {names[i]}\nKd {c[0]} {c[1]} {c[2]}\n" for i, c in cols.items())
+    )
     lines = ["mtllib builtin_parts.mtl"] + [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in b.vertices]
     part = np.asarray(b.part)
     for i, pname in names.items():
@@ -70,8 +93,10 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
 
     lm = {k: int(v) for k, v in bh.landmarks.items()}
     (out / "builtin_parts.json").write_text(json.dumps({"landmarks": lm}))
-    heads["multi-material OBJ, separate eyes/teeth"] = (obj, {"landmarks": out / "builtin_parts.json",
-                                                              "mode": "retarget"})
+    heads["multi-material OBJ, separate eyes/teeth"] = (
+        obj,
+        {"landmarks": out / "builtin_parts.json", "mode": "retarget"},
+    )
     lps = data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
     if lps.is_file():
         heads["Lee Perry-Smith (hollow, closed lips)"] = (lps, {})
@@ -94,11 +119,18 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
 
         m = parse_wfm(wfm.read_text(encoding="latin-1"), name="candide3")
         cobj = out / "candide3.obj"
-        cobj.write_text("\n".join([f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
-                                  + [f"f {a + 1} {c + 1} {d + 1}" for a, c, d in m.triangles]) + "\n")
+        cobj.write_text(
+            "\n".join(
+                [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
+                + [f"f {a + 1} {c + 1} {d + 1}" for a, c, d in m.triangles]
+            )
+            + "\n"
+        )
         (out / "candide3.json").write_text(json.dumps({"landmarks": dict(CANDIDE3_LANDMARKS)}))
-        heads["Candide-3 (its own model as the simple face)"] = (cobj, {"landmarks": out / "candide3.json",
-                                                                       "simple": wfm})
+        heads["Candide-3 (its own model as the simple face)"] = (
+            cobj,
+            {"landmarks": out / "candide3.json", "simple": wfm},
+        )
     return heads
 
 
@@ -124,7 +156,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
     ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
-    ap.add_argument("--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data")))
+    ap.add_argument(
+        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+    )
     args = ap.parse_args()
     from PIL import Image, ImageDraw
     from tqdm import tqdm
@@ -136,8 +170,13 @@ def main() -> int:
 
     heads = derive(args.out, args.data)
     args.images.mkdir(parents=True, exist_ok=True)
-    rows = [("| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
-             "lip gap at closure (IOD) | teeth ahead (IOD) | checks |"), "|---|---|---|---|---|---|---|---|"]
+    rows = [
+        (
+            "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
+            "lip gap at closure (IOD) | teeth ahead (IOD) | checks |"
+        ),
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
@@ -146,9 +185,12 @@ def main() -> int:
             continue
         try:
             rep = head_checks(head, landmark_finder=find_landmarks)
-            figs = (f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
-                    f"{rep.closure_gap_iod:.4f} | {'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
-                    f"{'pass' if rep.passed else 'FAIL'}")
+            figs = (
+                f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
+                f"{rep.closure_gap_iod:.4f} | "
+                f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
+                f"{'pass' if rep.passed else 'FAIL'}"
+            )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
             figs = f"- | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"

@@ -27,13 +27,13 @@ SENTENCE = "Speech goes in, and a face comes out, in real time, on any head you 
 
 
 def _model():
-    from training.errors import TrainingError
     from assets.modelfile import load_model
+    from training.errors import TrainingError
 
     try:
         return load_model(None), "the shipped model"
     except (TrainingError, OSError) as exc:
-        from tests.clients_web.conftest import plausible_model
+        from tests.speech import plausible_model
 
         return plausible_model(), f"the tests' small random model (no shipped model: {exc})"
 
@@ -48,7 +48,7 @@ def _speech(tmp: Path):
         subprocess.run(["espeak-ng", "-s", "150", "-w", str(wav), SENTENCE], check=True, capture_output=True)
         x, rate = read_audio(wav)
         return resample_audio(x, rate, 16000).astype("float32"), "espeak-ng speech"
-    from tests.server.conftest import speechlike
+    from tests.speech import speechlike
 
     return speechlike(6.0, 16000), "speech-like noise (espeak-ng is not installed)"
 
@@ -85,7 +85,7 @@ def main() -> int:
 
     from assets.heads.rigfile import builtin_rig
     from server.app import Head
-    from tests.clients_web.conftest import LiveServer
+    from tests.live_server import LiveServer
 
     if args.model is not None:
         from assets.modelfile import load_model
@@ -104,8 +104,12 @@ def main() -> int:
         stop = asyncio.Event()
         fut = srv.submit(_stream_forever(srv.url, "demo", samples, stop))
         try:
-            subprocess.run(["node", str(REPO / "scripts" / "screenshots.mjs"), srv.url, "demo",
-                            str(args.out / "viewer.png")], cwd=REPO, check=True, timeout=180)
+            subprocess.run(
+                ["node", str(REPO / "scripts" / "screenshots.mjs"), srv.url, "demo", str(args.out / "viewer.png")],
+                cwd=REPO,
+                check=True,
+                timeout=180,
+            )
         finally:
             srv.loop.call_soon_threadsafe(stop.set)
             fut.result(60)

@@ -16,8 +16,8 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 grid="${1:-${FACECAST_SHARED_DATA:-$(cd .. && pwd)/shared/data}/video/grid_s1}"
 run() { if command -v facecast >/dev/null; then facecast "$@"; else .venv/bin/facecast "$@"; fi; }
 KAPPA=0.2
-BAND=0.03
-SPEEDS=""
+BAND=0.035
+SPEEDS="0.9,1.1"
 run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train ${SPEEDS:+--speed "$SPEEDS"} -o assets/data/default_model.npz \
     --states 16 --mix 3 --covariance full --tc 3 --iters 12 --tol 3e-4 --seed 0 \

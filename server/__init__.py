@@ -17,7 +17,7 @@ Layers, inner to outer (the inner ones do no I/O, like python-websockets' protoc
     cluster    scale-out over Redis: registry with heartbeats, per-session pub/sub frame channels
     sources    audio sources as async iterators: microphone, file (paced or fast)
     app        the asyncio shell: WebSocket connections, lifecycle, admission, metrics
-    glb        the head mesh as a binary glTF for viewers
+    text_session  text sessions for chatbots: text in, espeak-ng speech and unit-selection motion out
     timing     per-stage timing rings
     errors     ServerError and its family
 """

@@ -33,9 +33,9 @@ import signal
 import socket
 import time
 import urllib.parse
+from collections.abc import AsyncIterator
 from http import HTTPStatus
 from pathlib import Path
-from typing import AsyncIterator
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -44,7 +44,7 @@ from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.http11 import Request, Response
 
 from assets.heads.head import Head
-from realtime_core.avmodel import AvModel
+from realtime_core.mapping import SpeechModel
 from server import describe
 from server import protocol as SP
 from server.cluster import Cluster, RemoteFeed
@@ -91,7 +91,7 @@ class FacecastServer:
     the head download (None: params and blendshapes only); config: limits and network settings.
     """
 
-    def __init__(self, model: AvModel, *, head: Head | None = None, config: ServerConfig = ServerConfig()) -> None:
+    def __init__(self, model: SpeechModel, *, head: Head | None = None, config: ServerConfig = ServerConfig()) -> None:
         self.model = model
         self.head = head
         self.config = config
@@ -108,8 +108,9 @@ class FacecastServer:
         self.pool: WorkerPool | None = None
         self.cluster: Cluster | None = None
         self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
-        self.http = HttpRouter(web_root=config.web_root, node_modules=config.node_modules, head=head,
-                               sessions=self.session_list)
+        self.http = HttpRouter(
+            web_root=config.web_root, node_modules=config.node_modules, head=head, sessions=self.session_list
+        )
         self.http.route("/health", lambda: HttpReply.json(self.health()), private=False)
         self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
         self.http.route("/sessions", self._sessions_reply)
@@ -141,9 +142,15 @@ class FacecastServer:
             import socket as _socket
 
             node = cfg.node_id or f"{_socket.gethostname()}-{os.getpid()}-{self.port}"
-            self.cluster = Cluster(cfg.redis_url, node=node, advertise=cfg.advertise_url or self.url,
-                                   heartbeat_s=cfg.heartbeat_s, role=cfg.role, deliver=self._deliver_remote,
-                                   end_feed=self._end_feed)
+            self.cluster = Cluster(
+                cfg.redis_url,
+                node=node,
+                advertise=cfg.advertise_url or self.url,
+                heartbeat_s=cfg.heartbeat_s,
+                role=cfg.role,
+                deliver=self._deliver_remote,
+                end_feed=self._end_feed,
+            )
             try:
                 await self.cluster.start()
             except ServerError:
@@ -216,7 +223,9 @@ class FacecastServer:
     def _admission(self, name: str, *, batch: bool = False) -> None:
         """Raise AdmissionRefused if a session ``name`` cannot open now (the one admission check)."""
         if not P.SESSION_NAME.match(name):
-            raise AdmissionRefused(P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}")
+            raise AdmissionRefused(
+                P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}"
+            )
         if self.stopping:
             raise AdmissionRefused(P.CLOSE_GOING_AWAY, "server shutting down")
         if name in self.sessions:
@@ -226,8 +235,9 @@ class FacecastServer:
         if batch and sum(live.batch for live in self.sessions.values()) >= self.config.max_batch_sessions:
             raise AdmissionRefused(P.CLOSE_TRY_LATER, f"batch sessions are full ({self.config.max_batch_sessions})")
 
-    async def open_session(self, name: str, config: SessionConfig, *, source: str, batch: bool = False,
-                           paced: bool = False) -> LiveSession:
+    async def open_session(
+        self, name: str, config: SessionConfig, *, source: str, batch: bool = False, paced: bool = False
+    ) -> LiveSession:
         """Register a new live session (AdmissionRefused, a ServerConfigError, if the name is taken or
         the server is full). paced: hold its input to real time plus ``ingest_burst_s``."""
         self._admission(name, batch=batch)
@@ -259,8 +269,15 @@ class FacecastServer:
             return LocalSession(await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times))
         return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
-    async def run_source(self, name: str, source: AsyncIterator[np.ndarray], *, sample_rate_hz: int,
-                         channels: int = 1, label: str = "local") -> LiveSession:
+    async def run_source(
+        self,
+        name: str,
+        source: AsyncIterator[np.ndarray],
+        *,
+        sample_rate_hz: int,
+        channels: int = 1,
+        label: str = "local",
+    ) -> LiveSession:
         """Run a session from an async iterator of (n,) / (n, channels) float blocks until it ends."""
         cfg = SessionConfig(sample_rate_hz=int(sample_rate_hz), channels=channels, lag=self.config.lag)
         live = await self.open_session(name, cfg, source=label)
@@ -338,8 +355,12 @@ class FacecastServer:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, "no computing node is available")
         url = target["url"].replace("http", "ws", 1) + "/ingest"
         try:
-            upstream = await connect(url, compression=None, max_size=self.config.max_message_bytes,
-                                     open_timeout=self.config.handshake_timeout_s)
+            upstream = await connect(
+                url,
+                compression=None,
+                max_size=self.config.max_message_bytes,
+                open_timeout=self.config.handshake_timeout_s,
+            )
         except (OSError, TimeoutError, WebSocketException):
             raise ProtocolViolation(P.CLOSE_TRY_LATER, "the computing node cannot be reached") from None
 
@@ -396,8 +417,9 @@ class FacecastServer:
             if live is not None:
                 await self._end_session(live, *proto.viewer_close)
 
-    async def _perform(self, ws: ServerConnection, proto: SP.IngestProtocol, actions: list[SP.Action],
-                       live: LiveSession | None) -> LiveSession | None:
+    async def _perform(
+        self, ws: ServerConnection, proto: SP.IngestProtocol, actions: list[SP.Action], live: LiveSession | None
+    ) -> LiveSession | None:
         """Carry out the protocol's actions in order (and those its answers add); returns the live
         session once one is open."""
         todo = collections.deque(actions)
@@ -425,8 +447,9 @@ class FacecastServer:
                 todo.extend(proto.finished(s.frames_out, s.samples_out / s.rate_hz))
             elif isinstance(action, SP.Open):
                 try:
-                    live = await self.open_session(action.name, action.config, source="ingest", batch=action.batch,
-                                                   paced=True)
+                    live = await self.open_session(
+                        action.name, action.config, source="ingest", batch=action.batch, paced=True
+                    )
                 except AdmissionRefused as exc:
                     todo.extend(proto.refused(exc.code, exc.reason))
                 except AudioFormatError as exc:  # e.g. an enrolment recording the model rejects
@@ -436,8 +459,9 @@ class FacecastServer:
         return live
 
     async def _view(self, ws: ServerConnection) -> None:
-        req = SP.parse_view_query(SP.query_args(ws.request.path), token=self.config.token,
-                                  has_head=self.head is not None)
+        req = SP.parse_view_query(
+            SP.query_args(ws.request.path), token=self.config.token, has_head=self.head is not None
+        )
         live = self.sessions.get(req.session)
         if live is None and self.cluster is not None:
             row = await self.cluster.lookup(req.session)
@@ -459,13 +483,28 @@ class FacecastServer:
         self.n_viewers += 1
         sender = self.spawn(viewer.run())
         try:
-            reader = asyncio.ensure_future(ws.recv())
-            done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
-            if reader in done and reader.exception() is None:
-                viewer.closing = True
-                raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
+            while True:
+                reader = asyncio.ensure_future(ws.recv())
+                done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
+                if reader in done and reader.exception() is None:
+                    # An expression control (the browser's picker) is answered; anything else closes.
+                    try:
+                        ctl = SP.parse_viewer_message(reader.result())
+                    except ProtocolViolation:
+                        viewer.closing = True
+                        raise
+                    try:
+                        await ws.send(P.dumps({"type": "ack", "controls": await live.control(ctl)}))
+                    except ControlError as exc:
+                        await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
+                    continue
+                break
             reader.cancel()
-            if sender in done and sender.exception() is not None and not isinstance(sender.exception(), ConnectionClosed):
+            if (
+                sender in done
+                and sender.exception() is not None
+                and not isinstance(sender.exception(), ConnectionClosed)
+            ):
                 raise sender.exception()
         finally:
             sender.cancel()
@@ -530,11 +569,15 @@ class FacecastServer:
                 return self._refuse(HTTPStatus.FORBIDDEN, "Origin not allowed")
             client = _client_address(connection)
             if self.clients.full(client):
-                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
-                                    f"too many connections from this client ({cfg.max_connections_per_client})")
+                return self._refuse(
+                    HTTPStatus.TOO_MANY_REQUESTS,
+                    f"too many connections from this client ({cfg.max_connections_per_client})",
+                )
             if not self.connect_rate.allow(client, time.monotonic()):
-                return self._refuse(HTTPStatus.TOO_MANY_REQUESTS,
-                                    f"too many new connections from this client (over {cfg.connect_rate_per_s:g}/s)")
+                return self._refuse(
+                    HTTPStatus.TOO_MANY_REQUESTS,
+                    f"too many new connections from this client (over {cfg.connect_rate_per_s:g}/s)",
+                )
             return None  # the WebSocket handshake proceeds (websockets answers 426 if it is not one)
         authorized = SP.token_ok(_request_token(split.query, headers.get("Authorization")), cfg.token)
         if path == "/sessions" and authorized:
@@ -547,8 +590,12 @@ class FacecastServer:
 
     def health(self) -> dict:
         """``status`` ok, or degraded while the cluster's Redis is away (``redis`` says why)."""
-        out = {"status": "ok", "sessions": len(self.sessions), "viewers": self.n_viewers,
-               "uptime_s": round(time.time() - self.started, 3)}
+        out = {
+            "status": "ok",
+            "sessions": len(self.sessions),
+            "viewers": self.n_viewers,
+            "uptime_s": round(time.time() - self.started, 3),
+        }
         if self.cluster is not None:
             out.update(self.cluster.health())
             if not self.cluster.up:
@@ -603,13 +650,20 @@ def _request_token(query: str, authorization: str | None) -> str | None:
 
 
 def _response(reply: HttpReply) -> Response:
-    headers = Headers([("Content-Type", reply.content_type), ("Content-Length", str(len(reply.body))),
-                       ("Cache-Control", "no-store"), ("Connection", "close")])
+    headers = Headers(
+        [
+            ("Content-Type", reply.content_type),
+            ("Content-Length", str(len(reply.body))),
+            ("Cache-Control", "no-store"),
+            ("Connection", "close"),
+        ]
+    )
     return Response(reply.status.value, reply.status.phrase, headers, reply.body)
 
 
-async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" = None,
-                     extra: list | None = None) -> None:
+async def run_server(
+    server: FacecastServer, *, ready: "asyncio.Future | None" = None, extra: list | None = None
+) -> None:
     """Run until SIGINT/SIGTERM (or ``extra`` coroutines all finish), then shut down gracefully.
 
     BLAS is pinned to one thread for the whole run: per-frame products are tiny and on a shared
@@ -642,8 +696,9 @@ async def run_server(server: FacecastServer, *, ready: "asyncio.Future | None" =
             await server.stop()
 
 
-def load_head(*, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None,
-              builtin: bool = True) -> Head | None:
+def load_head(
+    *, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None, builtin: bool = True
+) -> Head | None:
     """The head to serve (:func:`assets.heads.head.resolve_head`): a rig file, a mesh, the built-in head, or None."""
     from assets.heads.head import resolve_head
 

@@ -45,7 +45,8 @@ import collections
 import json
 import logging
 import time
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from server.errors import ServerError
 from wire import protocol as P
@@ -113,9 +114,17 @@ class Cluster:
     heartbeat_s: registry refresh period; deliver: (feed, message bytes, kind, encoding) -> None,
     the server's fan-out to a feed's viewers; end_feed: (feed) -> coroutine closing its viewers."""
 
-    def __init__(self, url: str, *, node: str, advertise: str, heartbeat_s: float, role: str = "both",
-                 deliver: Callable[[RemoteFeed, bytes, int, int], None],
-                 end_feed: Callable[[RemoteFeed], "asyncio.Future | object"]) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        node: str,
+        advertise: str,
+        heartbeat_s: float,
+        role: str = "both",
+        deliver: Callable[[RemoteFeed, bytes, int, int], None],
+        end_feed: Callable[[RemoteFeed], "asyncio.Future | object"],
+    ) -> None:
         self.url = url
         self.node = node
         self.advertise = advertise
@@ -144,16 +153,20 @@ class Cluster:
         import redis.asyncio as aioredis
         from redis.exceptions import RedisError
 
-        self.redis = aioredis.Redis.from_url(self.url, socket_connect_timeout=2, socket_timeout=5,
-                                             health_check_interval=0)
+        self.redis = aioredis.Redis.from_url(
+            self.url, socket_connect_timeout=2, socket_timeout=5, health_check_interval=0
+        )
         try:
             await self.redis.ping()
         except (RedisError, OSError) as exc:
             await self.redis.aclose()
             raise ServerError(f"cannot reach Redis at {self.url}: {exc}") from None
         self.up = True
-        self._tasks = [asyncio.ensure_future(self._publisher()), asyncio.ensure_future(self._heartbeat()),
-                       asyncio.ensure_future(self._listen())]
+        self._tasks = [
+            asyncio.ensure_future(self._publisher()),
+            asyncio.ensure_future(self._heartbeat()),
+            asyncio.ensure_future(self._listen()),
+        ]
 
     async def stop(self) -> None:
         deadline = time.monotonic() + 1.0  # let the end markers of the last sessions go out
@@ -179,9 +192,13 @@ class Cluster:
             await self.redis.aclose()
 
     def health(self) -> dict:
-        return {"redis": "ok" if self.up else f"down: {self.error}", "node": self.node,
-                "remote_feeds": len(self.feeds), "published": self.published,
-                "publish_dropped": self.publish_dropped}
+        return {
+            "redis": "ok" if self.up else f"down: {self.error}",
+            "node": self.node,
+            "remote_feeds": len(self.feeds),
+            "published": self.published,
+            "publish_dropped": self.publish_dropped,
+        }
 
     # -- sessions this node owns --------------------------------------------------------------------------
 
@@ -190,9 +207,16 @@ class Cluster:
 
         s = live.session
         row = summary(live)
-        row.update({"node": self.node, "node_url": self.advertise, "fps": s.fps, "rate_hz": s.rate_hz,
-                    "algorithmic_delay_s": s.algorithmic_delay_s,
-                    "published_kinds": sorted(self.wanted.get(live.name, ()))})
+        row.update(
+            {
+                "node": self.node,
+                "node_url": self.advertise,
+                "fps": s.fps,
+                "rate_hz": s.rate_hz,
+                "algorithmic_delay_s": s.algorithmic_delay_s,
+                "published_kinds": sorted(self.wanted.get(live.name, ())),
+            }
+        )
         return json.dumps(row)
 
     async def claim(self, live: "LiveSession") -> str | None:
@@ -281,13 +305,17 @@ class Cluster:
     async def _beat(self) -> None:
         r = self.redis
         pipe = r.pipeline(transaction=False)
-        pipe.set(f"{PREFIX}:node:{self.node}", json.dumps({"node": self.node, "url": self.advertise, "role": self.role,
-                                                             "sessions": len(self.local)}), px=self.ttl_ms)
+        pipe.set(
+            f"{PREFIX}:node:{self.node}",
+            json.dumps({"node": self.node, "url": self.advertise, "role": self.role, "sessions": len(self.local)}),
+            px=self.ttl_ms,
+        )
         for name, live in self.local.items():
             pipe.set(session_key(name), self._row(live), px=self.ttl_ms)
         for name, feed in self.feeds.items():
             for kind, enc in {(v.kind, v.encoding) for v in feed.viewers} | (
-                    {(P.KIND_AUDIO, P.ENC_INT16)} if any(v.audio for v in feed.viewers) else set()):
+                {(P.KIND_AUDIO, P.ENC_INT16)} if any(v.audio for v in feed.viewers) else set()
+            ):
                 pipe.set(want_key(name, kind, enc), self.node, px=self.ttl_ms)
         await pipe.execute()
         # The owner's side: which kinds of its sessions other nodes want now.
@@ -411,7 +439,7 @@ class Cluster:
             if want and want[0] in self.local:
                 self.wanted[want[0]].add((int(want[1]), int(want[2])))
             return
-        name = channel[len(f"{PREFIX}:frames:"):]
+        name = channel[len(f"{PREFIX}:frames:") :]
         feed = self.feeds.get(name)
         if feed is None:
             return

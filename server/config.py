@@ -96,8 +96,14 @@ class ServerConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or not 1 <= v <= 100000:
                 raise ServerConfigError(f"{name} must be an integer in 1..100000, got {v!r}")
-        for name in ("viewer_max_behind_s", "start_timeout_s", "close_timeout_s", "handshake_timeout_s",
-                     "idle_timeout_s", "ingest_burst_s"):
+        for name in (
+            "viewer_max_behind_s",
+            "start_timeout_s",
+            "close_timeout_s",
+            "handshake_timeout_s",
+            "idle_timeout_s",
+            "ingest_burst_s",
+        ):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0 < v <= 3600:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
@@ -108,13 +114,15 @@ class ServerConfig:
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")
-        if self.redis_url is not None and (not isinstance(self.redis_url, str) or not self.redis_url.startswith(
-                ("redis://", "rediss://", "unix://"))):
+        if self.redis_url is not None and (
+            not isinstance(self.redis_url, str) or not self.redis_url.startswith(("redis://", "rediss://", "unix://"))
+        ):
             raise ServerConfigError(f"redis_url must be a redis://, rediss:// or unix:// URL, got {self.redis_url!r}")
         if self.node_id is not None and (not isinstance(self.node_id, str) or not P_NODE.match(self.node_id)):
             raise ServerConfigError(f"node_id must be 1-64 characters of A-Z a-z 0-9 _ . -, got {self.node_id!r}")
-        if self.advertise_url is not None and (not isinstance(self.advertise_url, str)
-                                               or not self.advertise_url.startswith(("http://", "https://"))):
+        if self.advertise_url is not None and (
+            not isinstance(self.advertise_url, str) or not self.advertise_url.startswith(("http://", "https://"))
+        ):
             raise ServerConfigError(f"advertise_url must be an http:// or https:// URL, got {self.advertise_url!r}")
         if not isinstance(self.heartbeat_s, (int, float)) or not 0.05 <= self.heartbeat_s <= 60:
             raise ServerConfigError(f"heartbeat_s must be in 0.05..60 s, got {self.heartbeat_s!r}")
@@ -124,8 +132,11 @@ class ServerConfig:
             raise ServerConfigError("role 'edge' needs redis_url (an edge forwards ingests to the cluster's nodes)")
         if self.ingest_overrun not in ("pace", "close"):
             raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
-        if isinstance(self.connect_rate_per_s, bool) or not isinstance(self.connect_rate_per_s, (int, float)) or not (
-                0 <= self.connect_rate_per_s <= 1e6):
+        if (
+            isinstance(self.connect_rate_per_s, bool)
+            or not isinstance(self.connect_rate_per_s, (int, float))
+            or not (0 <= self.connect_rate_per_s <= 1e6)
+        ):
             raise ServerConfigError(f"connect_rate_per_s must be a number in 0..1e6, got {self.connect_rate_per_s!r}")
         for name in ("max_batch_sessions", "max_connections_per_client", "connect_burst"):
             v = getattr(self, name)

@@ -6,7 +6,12 @@ session's :class:`ControlState`; only if every handler accepts does the draft re
 (a rejected message changes nothing). :meth:`ControlState.apply` is what a session runs on each
 frame's parameters after the model.
 
-To add a control (e.g. expressions), add a field to :class:`ControlState` with its effect in
+The session's expression (:mod:`realtime_core.expressions`) is one: ``expression`` schedules an
+eased change on the media clock (validated against the session's media time, passed in as
+``now_s``), ``expression_ease_s`` sets the easing; :meth:`ControlState.expression_at` gives the
+intensities of frames, which the session applies after :meth:`ControlState.apply`.
+
+To add a control, add a field to :class:`ControlState` with its effect in
 :meth:`ControlState.apply` and its public form in :meth:`ControlState.describe`, and register a
 handler with :func:`control`. No I/O here.
 """
@@ -15,16 +20,18 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.expressions import ExpressionError, ExpressionTrack, check_request
 from server.errors import ControlError
 
 MAX_GAIN = 10.0
 MAX_SMOOTHING_MS = 1000.0
+MAX_EASE_S = 10.0
 
 
 @dataclass
@@ -34,6 +41,8 @@ class ControlState:
 
     gains: np.ndarray = field(default_factory=lambda: np.ones(len(VISUAL_PARAMS)))
     smoothing_ms: float = 0.0
+    expressions: ExpressionTrack = field(default_factory=ExpressionTrack)
+    now_s: float = 0.0  # media time of the next frame when a message is applied (for expression times)
     _smoothed: np.ndarray | None = None
 
     def apply(self, row: np.ndarray, fps: float) -> np.ndarray:
@@ -45,9 +54,19 @@ class ControlState:
         self._smoothed = p
         return p
 
+    def expression_at(self, times_s: np.ndarray) -> np.ndarray | None:
+        """Frames' media times ``(n,)`` -> expression intensities ``(n, len(EXPRESSIONS))``, or None when no
+        expression was ever set (the frames are speech only)."""
+        return self.expressions.intensities(times_s) if self.expressions.events else None
+
     def describe(self) -> dict:
         """The JSON form sent in acks and session descriptions."""
-        return {"gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))), "smoothing_ms": self.smoothing_ms}
+        return {
+            "gain": dict(zip(VISUAL_PARAMS, map(float, self.gains))),
+            "smoothing_ms": self.smoothing_ms,
+            "expression": [{"at": t, "intensity": v} for t, v in self.expressions.events[-8:]],
+            "expression_ease_s": self.expressions.config.ease_s,
+        }
 
 
 ControlHandler = Callable[[ControlState, object], None]
@@ -94,9 +113,37 @@ def _smoothing(state: ControlState, value: object) -> None:
     state.smoothing_ms = float(value)
 
 
-def apply_controls(state: ControlState, msg: dict) -> ControlState:
-    """A control message -> the new state (a copy); ControlError (naming the control) if any part is refused."""
+@control("expression")
+def _expression(state: ControlState, value: object) -> None:
+    """expression: {"name": smile|sad|surprise|anger|neutral, "intensity": 0..1 (default 1), "at": media time
+    s (default the next frame)}; a time in the past or absurdly far ahead is refused."""
+    if not isinstance(value, dict) or "name" not in value:
+        raise ControlError('expression must be an object {"name": ..., "intensity": 0..1, "at": seconds}')
+    unknown = set(value) - {"name", "intensity", "at"}
+    if unknown:
+        raise ControlError(f"expression: unknown field(s) {sorted(unknown)} (known: name, intensity, at)")
+    try:
+        name, intensity = check_request(value["name"], value.get("intensity", 1.0))
+        state.expressions.schedule(name, intensity, value.get("at", state.now_s), now_s=state.now_s)
+    except ExpressionError as exc:
+        raise ControlError(f"expression: {exc}") from None
+
+
+@control("expression_ease_s")
+def _expression_ease(state: ControlState, value: object) -> None:
+    """expression_ease_s: seconds an expression change takes, 0..10."""
+    if not _number(value) or not 0 <= value <= MAX_EASE_S:
+        raise ControlError(f"expression_ease_s must be a number in 0..{MAX_EASE_S:g}, got {value!r}")
+    state.expressions = state.expressions.copy(replace(state.expressions.config, ease_s=float(value)))
+
+
+def apply_controls(state: ControlState, msg: dict, *, now_s: float | None = None) -> ControlState:
+    """A control message -> the new state (a copy); ControlError (naming the control) if any part is refused.
+
+    now_s: media time of the session's next frame (expression times are checked against it)."""
     draft = copy.deepcopy(state)
+    if now_s is not None:
+        draft.now_s = float(now_s)
     for key, value in msg.items():
         if key == "type":
             continue

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.blendshapes import blendshape_names
+from realtime_core.expressions import EXPRESSIONS, NEUTRAL
 from wire import protocol as P
 
 if TYPE_CHECKING:
@@ -21,8 +22,13 @@ if TYPE_CHECKING:
 def started(live: "LiveSession") -> dict:
     """The ``started`` reply's fields (the protocol adds ``type``)."""
     s = live.session
-    out = {"session": live.name, "model_rate_hz": s.rate_hz, "fps": s.fps,
-           "algorithmic_delay_s": s.algorithmic_delay_s, "view_path": f"/view?session={live.name}"}
+    out = {
+        "session": live.name,
+        "model_rate_hz": s.rate_hz,
+        "fps": s.fps,
+        "algorithmic_delay_s": s.algorithmic_delay_s,
+        "view_path": f"/view?session={live.name}",
+    }
     cfg = getattr(s, "config", None)
     if cfg is not None and getattr(cfg, "enrol", None) is not None:
         out["enrolled_s"] = round(cfg.enrol_seconds(), 2)  # the session's model copy is adapted to this voice
@@ -43,6 +49,7 @@ def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None
         "header_encoding": req.header_encoding,
         "header_bytes": P.HEADER_BYTES,
         "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
+        "expressions": [NEUTRAL, *EXPRESSIONS],  # what a viewer's expression control may name
         "algorithmic_delay_s": s.algorithmic_delay_s,
         "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if req.audio else None,
         "values_per_frame": len(VISUAL_PARAMS),

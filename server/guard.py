@@ -47,7 +47,7 @@ def host_name(host_header: str) -> str:
     """``Host`` header value -> lower-case host name without port (IPv6 brackets removed)."""
     h = host_header.strip().lower()
     if h.startswith("["):
-        return h[1:h.find("]")] if "]" in h else h
+        return h[1 : h.find("]")] if "]" in h else h
     return h.rsplit(":", 1)[0] if h.count(":") == 1 else h
 
 

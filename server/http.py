@@ -16,10 +16,11 @@ from __future__ import annotations
 import errno
 import html
 import mimetypes
+from collections.abc import Callable
 from dataclasses import dataclass
 from http import HTTPStatus
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from assets.heads.glb import mesh_glb, mesh_json, texture_mime
 from wire import JS_PROTOCOL
@@ -37,8 +38,14 @@ VENDOR_DIRS = {"three": ("build/", "examples/jsm/")}
 def _mime_table() -> mimetypes.MimeTypes:
     table = mimetypes.MimeTypes()
     # Types some platforms' tables lack or spell the old way; browsers need these exact ones.
-    for ext, ctype in ((".js", "text/javascript"), (".mjs", "text/javascript"), (".glb", "model/gltf-binary"),
-                       (".gltf", "model/gltf+json"), (".wasm", "application/wasm"), (".json", "application/json")):
+    for ext, ctype in (
+        (".js", "text/javascript"),
+        (".mjs", "text/javascript"),
+        (".glb", "model/gltf-binary"),
+        (".gltf", "model/gltf+json"),
+        (".wasm", "application/wasm"),
+        (".json", "application/json"),
+    ):
         table.add_type(ctype, ext)
     return table
 
@@ -59,7 +66,9 @@ class HttpReply:
 
 
 NOT_FOUND = HttpReply.text(HTTPStatus.NOT_FOUND, "not found\n")
-UNAUTHORIZED = HttpReply.text(HTTPStatus.UNAUTHORIZED, "missing or wrong token (?token=... or Authorization: Bearer ...)\n")
+UNAUTHORIZED = HttpReply.text(
+    HTTPStatus.UNAUTHORIZED, "missing or wrong token (?token=... or Authorization: Bearer ...)\n"
+)
 
 Handler = Callable[[], HttpReply]
 
@@ -71,8 +80,14 @@ class HttpRouter:
     ``/vendor/`` (None: not served); head: the served head (None: ``/head/*`` answer 404);
     sessions: () -> rows for the generated index page (name, source, frames, viewers)."""
 
-    def __init__(self, *, web_root: Path | None, node_modules: Path | None, head: "Head | None",
-                 sessions: Callable[[], list[dict]]) -> None:
+    def __init__(
+        self,
+        *,
+        web_root: Path | None,
+        node_modules: Path | None,
+        head: "Head | None",
+        sessions: Callable[[], list[dict]],
+    ) -> None:
         self.web_root = web_root.resolve() if web_root is not None else None
         self.node_modules = node_modules.resolve() if node_modules is not None else None
         self.head = head
@@ -128,13 +143,20 @@ class HttpRouter:
         if self.web_root is not None and (self.web_root / "index.html").is_file():
             return self._file(self.web_root / "index.html")
         if not self._authorized:
-            return HttpReply(HTTPStatus.OK, b"<!doctype html><meta charset=utf-8><title>facecast</title><h1>facecast</h1>"
-                             b"<p>This server needs a token: add ?token=... to the address.</p>", "text/html; charset=utf-8")
-        rows = "".join(
-            f"<li><code>{html.escape(s['name'])}</code> ({s['frames']} frames, {s['viewers']} viewers): "
-            f"<code>ws://HOST/view?session={html.escape(s['name'])}&amp;kind=params</code></li>"
-            for s in sorted(self.sessions(), key=lambda s: s["name"])
-        ) or "<li>none</li>"
+            return HttpReply(
+                HTTPStatus.OK,
+                b"<!doctype html><meta charset=utf-8><title>facecast</title><h1>facecast</h1>"
+                b"<p>This server needs a token: add ?token=... to the address.</p>",
+                "text/html; charset=utf-8",
+            )
+        rows = (
+            "".join(
+                f"<li><code>{html.escape(s['name'])}</code> ({s['frames']} frames, {s['viewers']} viewers): "
+                f"<code>ws://HOST/view?session={html.escape(s['name'])}&amp;kind=params</code></li>"
+                for s in sorted(self.sessions(), key=lambda s: s["name"])
+            )
+            or "<li>none</li>"
+        )
         page = (
             "<!doctype html><meta charset=utf-8><title>facecast</title>"
             "<h1>facecast</h1><p>No browser viewer directory is configured (web_root). Live sessions:</p>"
@@ -148,10 +170,10 @@ class HttpRouter:
         if path == "/js/protocol.js":  # the wire format's JS twin lives with the Python one
             root, rel = JS_PROTOCOL.parent, JS_PROTOCOL.name
         elif path.startswith("/vendor/") and self.node_modules is not None:
-            package, _, sub = path[len("/vendor/"):].partition("/")
+            package, _, sub = path[len("/vendor/") :].partition("/")
             prefix = next((d for d in VENDOR_DIRS.get(package, ()) if sub.startswith(d)), None)
             if prefix is not None:  # root = the allowed folder itself, so ../ cannot leave it
-                root, rel = self.node_modules / package / prefix, sub[len(prefix):]
+                root, rel = self.node_modules / package / prefix, sub[len(prefix) :]
         if root is None or not rel or "\x00" in rel:
             return NOT_FOUND
         try:

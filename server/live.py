@@ -115,8 +115,16 @@ def deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
 class Viewer:
     """One subscriber: a bounded queue of ready messages drained by its own sender task."""
 
-    def __init__(self, ws: ServerConnection, live: "LiveSession", *, kind: int, encoding: int, audio: bool,
-                 server: "FacecastServer") -> None:
+    def __init__(
+        self,
+        ws: ServerConnection,
+        live: "LiveSession",
+        *,
+        kind: int,
+        encoding: int,
+        audio: bool,
+        server: "FacecastServer",
+    ) -> None:
         self.ws = ws
         self.live = live
         self.kind = kind
@@ -156,8 +164,12 @@ class Viewer:
                 self.server.closed_slow += 1
                 self.queue.clear()
                 self.server.spawn(
-                    self.server.close_ws(self.ws, P.CLOSE_TOO_SLOW, f"viewer too slow: behind for over "
-                                         f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped")
+                    self.server.close_ws(
+                        self.ws,
+                        P.CLOSE_TOO_SLOW,
+                        f"viewer too slow: behind for over "
+                        f"{self.server.config.viewer_max_behind_s:g} s, {self.dropped} messages dropped",
+                    )
                 )
                 return
         self.queue.append(msg)
@@ -216,7 +228,7 @@ class LiveSession:
         for i in range(0, len(data), step):
             if self.ended.is_set():  # shutting down: what was processed is flushed, the rest dropped
                 break
-            piece = data[i:i + step]
+            piece = data[i : i + step]
             await self._pace(len(piece) // frame)
             n += await self.feed_bytes(piece)
             await asyncio.sleep(0)
@@ -232,8 +244,10 @@ class LiveSession:
         if wait <= 0:
             return
         if self.overrun == "close":
-            raise IngestOverrun(f"ingest ran over {self.pacer.burst_s:g} s ahead of real time "
-                                "(send in real time, or start with \"batch\": true)")
+            raise IngestOverrun(
+                f"ingest ran over {self.pacer.burst_s:g} s ahead of real time "
+                '(send in real time, or start with "batch": true)'
+            )
         self.paced_s += wait
         try:  # a shutdown (ended) cuts the wait short
             await asyncio.wait_for(self.ended.wait(), wait)
@@ -263,8 +277,10 @@ class LiveSession:
             listeners = [v for v in self.viewers if v.audio]
             if listeners or (P.KIND_AUDIO, P.ENC_INT16) in remote:
                 a = out.audio
-                msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time,
-                                    now) + a.payload()
+                msg = (
+                    P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now)
+                    + a.payload()
+                )
                 deliver(listeners, msg, now)
                 if remote:
                     cluster.publish(self.name, msg)

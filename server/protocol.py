@@ -39,8 +39,8 @@ import enum
 import hmac
 import json
 import urllib.parse
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable, Mapping
 
 from server.errors import ProtocolViolation, ServerConfigError
 from server.session import SessionConfig
@@ -165,8 +165,13 @@ class SessionKind:
 def _audio_config(start: dict, lag: int) -> SessionConfig:
     if "sample_rate" not in start:
         raise ServerConfigError("start message lacks sample_rate")
-    return SessionConfig(sample_rate_hz=start["sample_rate"], channels=start.get("channels", 1),
-                         sample_format=start.get("format", "pcm_s16le"), lag=lag, enrol=start.get("enrol"))
+    return SessionConfig(
+        sample_rate_hz=start["sample_rate"],
+        channels=start.get("channels", 1),
+        sample_format=start.get("format", "pcm_s16le"),
+        lag=lag,
+        enrol=start.get("enrol"),
+    )
 
 
 SESSION_KINDS: dict[str, SessionKind] = {
@@ -235,8 +240,9 @@ class IngestProtocol:
             try:
                 msg = json.loads(message)
             except (ValueError, RecursionError):
-                raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA,
-                                        "text message is not JSON: audio must be sent as binary messages") from None
+                raise ProtocolViolation(
+                    P.CLOSE_UNSUPPORTED_DATA, "text message is not JSON: audio must be sent as binary messages"
+                ) from None
             if not isinstance(msg, dict):
                 raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "a control message must be a JSON object")
             kind = msg.get("type")
@@ -244,8 +250,9 @@ class IngestProtocol:
                 raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
             handler = MESSAGE_TYPES.get(kind) if isinstance(kind, str) else None
             if handler is None:
-                raise ProtocolViolation(P.CLOSE_POLICY,
-                                        f"unknown message type {_short(kind)} (expected {' or '.join(MESSAGE_TYPES)})")
+                raise ProtocolViolation(
+                    P.CLOSE_POLICY, f"unknown message type {_short(kind)} (expected {' or '.join(MESSAGE_TYPES)})"
+                )
             return handler(self, msg)
         except ProtocolViolation as exc:
             return self._violation(exc)
@@ -327,8 +334,9 @@ class IngestProtocol:
         limit = MAX_START_BYTES if len(message) > MAX_TEXT_BYTES and '"enrol"' in message else MAX_TEXT_BYTES
         start = loads_bounded(message, "start message", max_bytes=limit)
         if start.get("type") != "start":
-            raise ProtocolViolation(P.CLOSE_POLICY,
-                                    f"first message must be {{\"type\": \"start\"}}, got type {_short(start.get('type'))}")
+            raise ProtocolViolation(
+                P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got type {_short(start.get("type"))}'
+            )
         if not token_ok(start.get("token"), self.token):
             raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
         input_kind = start.get("input", "audio")
@@ -403,6 +411,26 @@ def query_args(path: str) -> dict[str, str]:
     return dict(pairs)
 
 
+VIEWER_CONTROLS = frozenset({"type", "expression", "expression_ease_s"})
+"""The only message a viewer may send: an expression control (the browser viewer's picker)."""
+
+
+def parse_viewer_message(message: object) -> dict:
+    """A viewer's message -> the control to apply; ProtocolViolation (1008) for anything but an
+    expression control (size and nesting bounded like every client text)."""
+    if not isinstance(message, str):
+        raise ProtocolViolation(P.CLOSE_POLICY, "viewers send only expression controls (got a binary message)")
+    try:
+        msg = loads_bounded(message, "viewer message")
+    except ProtocolViolation as exc:  # not a (bounded) JSON object: a viewer talking out of turn
+        raise ProtocolViolation(P.CLOSE_POLICY, f"viewers send only expression controls ({exc.reason})") from None
+    if msg.get("type") != "control" or not set(msg) <= VIEWER_CONTROLS or len(msg) < 2:
+        raise ProtocolViolation(
+            P.CLOSE_POLICY, 'viewers send only expression controls ({"type": "control", "expression": {...}})'
+        )
+    return msg
+
+
 def parse_view_query(args: Mapping[str, str], *, token: str | None, has_head: bool) -> ViewRequest:
     """A viewer's query -> ViewRequest, or ProtocolViolation with the close code and reason."""
     if not token_ok(args.get("token"), token):
@@ -416,8 +444,9 @@ def parse_view_query(args: Mapping[str, str], *, token: str | None, has_head: bo
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"kind must be one of {sorted(P.VIEW_KINDS)}, got {_short(kind)}")
     enc_name = args.get("encoding", next(iter(encodings)))
     if enc_name not in encodings:
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST,
-                                f"encoding for {kind} must be one of {sorted(encodings)}, got {_short(enc_name)}")
+        raise ProtocolViolation(
+            P.CLOSE_BAD_REQUEST, f"encoding for {kind} must be one of {sorted(encodings)}, got {_short(enc_name)}"
+        )
     if kind == "deltas" and not has_head:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "this server has no head rig: vertex deltas are unavailable")
     audio = args.get("audio", "1")

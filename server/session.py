@@ -28,9 +28,12 @@ import numpy as np
 
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
-from realtime_core.errors import RealtimeCoreError
+from realtime_core.errors import ConfigError, RealtimeCoreError
+from realtime_core.expressions import apply_expression
 from realtime_core.face.rig import Rig
+from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.inversion import StreamConfig
+from realtime_core.mapping import SpeechModel
 from realtime_core.pipeline import SpeechToParams
 from server.controls import ControlState, apply_controls
 from server.errors import AudioFormatError, ServerConfigError
@@ -60,13 +63,21 @@ class SessionConfig:
     enrol: str | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.sample_rate_hz, bool) or not isinstance(self.sample_rate_hz, int) or not (
-            MIN_RATE_HZ <= self.sample_rate_hz <= MAX_RATE_HZ
+        if (
+            isinstance(self.sample_rate_hz, bool)
+            or not isinstance(self.sample_rate_hz, int)
+            or not (MIN_RATE_HZ <= self.sample_rate_hz <= MAX_RATE_HZ)
         ):
-            raise ServerConfigError(f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}")
-        if isinstance(self.channels, bool) or not isinstance(self.channels, int) or not 1 <= self.channels <= MAX_CHANNELS:
+            raise ServerConfigError(
+                f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}"
+            )
+        if (
+            isinstance(self.channels, bool)
+            or not isinstance(self.channels, int)
+            or not 1 <= self.channels <= MAX_CHANNELS
+        ):
             raise ServerConfigError(f"channels must be an integer in 1..{MAX_CHANNELS}, got {self.channels!r}")
-        if self.sample_format not in P.SAMPLE_FORMATS:
+        if not isinstance(self.sample_format, str) or self.sample_format not in P.SAMPLE_FORMATS:
             raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {self.lag!r}")
@@ -75,12 +86,16 @@ class SessionConfig:
                 raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
             frame = P.SAMPLE_FORMATS[self.sample_format].itemsize * self.channels
             if len(self.enrol_bytes()) % frame:
-                raise ServerConfigError(f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
-                                        f"samples ({frame} bytes each)")
+                raise ServerConfigError(
+                    f"enrol is not a whole number of {self.channels}-channel {self.sample_format} "
+                    f"samples ({frame} bytes each)"
+                )
             seconds = self.enrol_seconds()
             if not MIN_ENROL_S <= seconds <= MAX_ENROL_S:
-                raise ServerConfigError(f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
-                                        "(30-60 s is the intended amount)")
+                raise ServerConfigError(
+                    f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
+                    "(30-60 s is the intended amount)"
+                )
 
     def enrol_seconds(self) -> float:
         """Length of the enrolment recording in seconds (0 without one)."""
@@ -101,9 +116,11 @@ class SessionConfig:
 class Frame:
     """One video frame of a session.
 
-    index: k; media_time: k / fps (s); params: (4,) float64 after controls (IOD);
+    index: k; media_time: k / fps (s); params: (4,) float64 after controls and expression (IOD);
     raw_params: (4,) float64 as the model produced them; work_s: server compute spent on this
-    frame so far (s); ready_perf: ``perf_counter()`` when it became final.
+    frame so far (s); ready_perf: ``perf_counter()`` when it became final; expression:
+    ``(len(EXPRESSIONS),)`` intensities of this frame and speech_params the parameters before the
+    expression (None: no expression, ``params`` are speech only).
     """
 
     index: int
@@ -114,6 +131,8 @@ class Frame:
     ready_perf: float
     rig: Rig | None = None
     times: StageTimes | None = None
+    expression: np.ndarray | None = None
+    speech_params: np.ndarray | None = None
     _payloads: dict = field(default_factory=dict)
 
     def payload(self, kind: int, encoding: int) -> tuple[bytes, int, float]:
@@ -132,7 +151,12 @@ class Frame:
             values = self.rig.displacements(self.params)  # (n_moving, 3) float32, head units
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
-            values = blendshape_weights(self.params, "arkit52")
+            # ARKit has the expressions' own shapes: speech weights plus the recipes.
+            values = (
+                blendshape_weights(self.params, "arkit52")
+                if self.expression is None
+                else blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
+            )
             stage = "encode_blendshapes"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
@@ -180,8 +204,9 @@ class Session:
     (None: deltas unavailable); times: where stage durations go (a fresh StageTimes by default).
     """
 
-    def __init__(self, model: AvModel, *, config: SessionConfig, rig: Rig | None = None,
-                 times: StageTimes | None = None) -> None:
+    def __init__(
+        self, model: SpeechModel, *, config: SessionConfig, rig: Rig | None = None, times: StageTimes | None = None
+    ) -> None:
         self.model = model
         self.config = config
         self.rig = rig
@@ -192,9 +217,15 @@ class Session:
         self._frame_bytes = self._dtype.itemsize * config.channels
         self.enrolment: dict | None = None
         if config.enrol is not None:
+            if not isinstance(model, AvModel):
+                raise ServerConfigError("enrol adapts the HMM model; it is not available with the MLP mapper")
             self.model = model = self._enrolled(model)
-        self._chain = SpeechToParams(model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag),
-                                     observer=self._observe)
+        try:
+            self._chain = SpeechToParams(
+                model, rate_hz=config.sample_rate_hz, stream=StreamConfig(lag=config.lag), observer=self._observe
+            )
+        except ConfigError as exc:  # e.g. a lag with the MLP mapper, which has none
+            raise ServerConfigError(str(exc)) from None
         self.delay_frames = self._chain.delay_frames
         self.controls = ControlState()
         self.frames_out = 0
@@ -244,7 +275,7 @@ class Session:
     def algorithmic_delay_s(self) -> float:
         """From a frame's media time to the end of the audio it needs: delay_frames / fps + window
         (the model's formula, :meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`)."""
-        return self.model.algorithmic_delay_ms(self.config.lag) / 1e3
+        return self.model.frontend.algorithmic_delay_ms(self.config.lag) / 1e3
 
     # -- pushing audio ---------------------------------------------------------------------------
 
@@ -328,14 +359,32 @@ class Session:
         if len(params) == 0:
             return []
         controlled = [self.controls.apply(row, self.fps) for row in params]
+        # The session's expression, eased on the media clock (None: none was ever set).
+        alpha, speech = self.controls.expression_at((self.frames_out + np.arange(len(params))) / self.fps), None
+        if alpha is not None:
+            speech = controlled
+            controlled = list(apply_expression(np.array(controlled), alpha, EXPRESSION_PARAMS))
         now = time.perf_counter()
         work = (now - t0) / len(params)
         self.times.add("push_per_frame", work)
         self.times.add("push_per_frame_cpu", (time.thread_time() - cpu0) / len(params))
         frames = []
-        for row, p in zip(params, controlled):
+        for i, (row, p) in enumerate(zip(params, controlled)):
             k = self.frames_out
-            frames.append(Frame(k, k / self.fps, p, row, work, now, self.rig, self.times))
+            frames.append(
+                Frame(
+                    k,
+                    k / self.fps,
+                    p,
+                    row,
+                    work,
+                    now,
+                    self.rig,
+                    self.times,
+                    None if alpha is None else alpha[i],
+                    None if speech is None else speech[i],
+                )
+            )
             self.frames_out += 1
         return frames
 
@@ -343,9 +392,10 @@ class Session:
 
     def apply_control(self, msg: dict) -> dict:
         """Apply a control message ``{"type": "control", NAME: VALUE, ...}`` (see :mod:`server.controls`:
-        gain {parameter: factor in 0..10}, smoothing_ms 0..1000). Returns the control state; raises
-        ControlError (nothing applied) for an unknown control or an invalid value."""
-        self.controls = apply_controls(self.controls, msg)
+        gain {parameter: factor in 0..10}, smoothing_ms 0..1000, expression {name, intensity, at},
+        expression_ease_s 0..10). Returns the control state; raises ControlError (nothing applied) for
+        an unknown control or an invalid value."""
+        self.controls = apply_controls(self.controls, msg, now_s=self.frames_out / self.fps)
         return self.control_state()
 
     def control_state(self) -> dict:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.pacing import paced_blocks
 from server.errors import AudioSourceError, ServerConfigError
 
 
@@ -76,8 +77,11 @@ class MicSource:
         try:
             info = sd.query_devices(cfg.device, "input")
         except (ValueError, sd.PortAudioError) as exc:
-            which = "no default input device (no microphone found?)" if cfg.device is None else (
-                f"no usable input device {cfg.device!r}")
+            which = (
+                "no default input device (no microphone found?)"
+                if cfg.device is None
+                else (f"no usable input device {cfg.device!r}")
+            )
             raise AudioSourceError(f"{which}: {exc}") from None
         rate = int(cfg.sample_rate_hz or info["default_samplerate"])
         self.sample_rate_hz = rate
@@ -88,8 +92,14 @@ class MicSource:
             loop.call_soon_threadsafe(self._deliver, indata.copy())
 
         try:
-            self._stream = sd.InputStream(device=cfg.device, samplerate=rate, channels=cfg.channels, dtype="float32",
-                                          blocksize=max(1, int(round(cfg.block_s * rate))), callback=callback)
+            self._stream = sd.InputStream(
+                device=cfg.device,
+                samplerate=rate,
+                channels=cfg.channels,
+                dtype="float32",
+                blocksize=max(1, int(round(cfg.block_s * rate))),
+                callback=callback,
+            )
             self._stream.start()
         except (ValueError, sd.PortAudioError) as exc:
             raise AudioSourceError(f"cannot open input device {info.get('name', cfg.device)!r}: {exc}") from None
@@ -158,8 +168,9 @@ class FileSource:
         self.channels = 1
 
     @classmethod
-    def from_array(cls, samples: np.ndarray, sample_rate_hz: int, *, realtime: bool = True,
-                   block_s: float = 0.02) -> "FileSource":
+    def from_array(
+        cls, samples: np.ndarray, sample_rate_hz: int, *, realtime: bool = True, block_s: float = 0.02
+    ) -> "FileSource":
         """The same pacing over an in-memory (n,) float array (the demo's synthesised speech)."""
         self = cls.__new__(cls)
         self.config = FileConfig(path=Path("<memory>"), realtime=realtime, block_s=block_s)
@@ -173,16 +184,7 @@ class FileSource:
         return len(self.samples) / self.sample_rate_hz
 
     async def __aiter__(self):
-        loop = asyncio.get_running_loop()
-        step = max(1, int(round(self.config.block_s * self.sample_rate_hz)))
-        t0 = loop.time()
-        for i in range(0, len(self.samples), step):
-            block = self.samples[i:i + step]
-            if self.config.realtime:
-                due = t0 + (i + len(block)) / self.sample_rate_hz
-                delay = due - loop.time()
-                if delay > 0:
-                    await asyncio.sleep(delay)
-            else:
-                await asyncio.sleep(0)  # let the loop serve others between blocks
+        async for _, block in paced_blocks(
+            self.samples, self.sample_rate_hz, block_s=self.config.block_s, realtime=self.config.realtime
+        ):
             yield block[:, None]

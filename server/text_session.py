@@ -96,8 +96,9 @@ class TextSession:
     :class:`server.session.Session` that live sessions and viewers use (rates, counters, flush,
     controls). Not thread-safe: the owner serialises calls."""
 
-    def __init__(self, backend: TextBackend, *, language: str, voice: str | None, rig=None,
-                 times: StageTimes | None = None) -> None:
+    def __init__(
+        self, backend: TextBackend, *, language: str, voice: str | None, rig=None, times: StageTimes | None = None
+    ) -> None:
         if language not in backend.languages:
             raise ServerConfigError(f"unsupported language {language!r}; supported: {list(backend.languages)}")
         self.backend = backend
@@ -158,32 +159,50 @@ class TextSession:
         n = int(np.ceil(len(speech.samples) * FPS / speech.sample_rate_hz - 1e-9))
         if speech.sample_rate_hz != self.rate_hz:
             raise ServerConfigError(f"speech came at {speech.sample_rate_hz} Hz, the session runs at {self.rate_hz} Hz")
-        res = self.backend.synthesizer.synthesize(list(speech.phones), speech.inventory, n_frames=n,
-                                                  n_best=self.backend.n_best)
+        res = self.backend.synthesizer.synthesize(
+            list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best
+        )
         t2 = time.perf_counter()
         self.times.add("text_speech", t1 - t0)
         self.times.add("text_units", t2 - t1)
         per = self.rate_hz // FPS
         audio = np.zeros(n * per)
         audio[: len(speech.samples)] = speech.samples[: n * per]
-        params = res.frames[:, self._k:]
+        params = res.frames[:, self._k :]
         outs = []
         now = time.perf_counter()
         for j in range(n):
             k = self.frames_out
-            frame = Frame(k, k / FPS, params[j].astype(np.float64), params[j].astype(np.float64),
-                          (t2 - t0) / n, now, self.rig, self.times)
-            block = AudioBlock(self._audio_index, self.samples_out, self.samples_out / self.rate_hz,
-                               audio[j * per:(j + 1) * per])
+            frame = Frame(
+                k,
+                k / FPS,
+                params[j].astype(np.float64),
+                params[j].astype(np.float64),
+                (t2 - t0) / n,
+                now,
+                self.rig,
+                self.times,
+            )
+            block = AudioBlock(
+                self._audio_index, self.samples_out, self.samples_out / self.rate_hz, audio[j * per : (j + 1) * per]
+            )
             self._audio_index += 1
             self.samples_out += per
             self.frames_out += 1
             outs.append(Output([frame], block))
         self.sentences += 1
         sel, tgt = res.selection, res.target
-        report = {"type": "spoken", "text": speech.text, "frames": n, "media_time": outs[0].frames[0].media_time,
-                  "duration_s": n / FPS, "units": sel.n_units, "junctions_outside_corpus": sel.n_mismatched,
-                  "unknown_phones": sorted(set(tgt.unknown)), "synthesis_ms": round(1000 * (t2 - t0), 1)}
+        report = {
+            "type": "spoken",
+            "text": speech.text,
+            "frames": n,
+            "media_time": outs[0].frames[0].media_time,
+            "duration_s": n / FPS,
+            "units": sel.n_units,
+            "junctions_outside_corpus": sel.n_mismatched,
+            "unknown_phones": sorted(set(tgt.unknown)),
+            "synthesis_ms": round(1000 * (t2 - t0), 1),
+        }
         return outs, report
 
 
@@ -195,9 +214,13 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
 
     stored = load_unit_corpus(find_unit_corpus(corpus))
-    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
-                       synthesizer=UnitSynthesizer(stored.corpus), languages=tuple(INVENTORY),
-                       sample_rate_hz=synthesizer().sample_rate_hz, n_best=n_best)
+    return TextBackend(
+        speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+        synthesizer=UnitSynthesizer(stored.corpus),
+        languages=tuple(INVENTORY),
+        sample_rate_hz=synthesizer().sample_rate_hz,
+        n_best=n_best,
+    )
 
 
 def _text_message(raw: Any) -> dict:
@@ -219,14 +242,18 @@ async def handle_text(server, ws: ServerConnection) -> None:
 
     backend: TextBackend | None = getattr(server, "text_backend", None)
     if backend is None:
-        raise ProtocolViolation(P.CLOSE_NOT_FOUND, "text sessions are not enabled on this server (facecast serve --text)")
+        raise ProtocolViolation(
+            P.CLOSE_NOT_FOUND, "text sessions are not enabled on this server (facecast serve --text)"
+        )
     try:
         first = await asyncio.wait_for(ws.recv(), server.config.start_timeout_s)
     except TimeoutError:
-        raise ProtocolViolation(P.CLOSE_POLICY, f"no start message within {server.config.start_timeout_s:g} s") from None
+        raise ProtocolViolation(
+            P.CLOSE_POLICY, f"no start message within {server.config.start_timeout_s:g} s"
+        ) from None
     start = _text_message(first)
     if start.get("type") != "start":
-        raise ProtocolViolation(P.CLOSE_POLICY, f"first message must be {{\"type\": \"start\"}}, got {start.get('type')!r}")
+        raise ProtocolViolation(P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got {start.get("type")!r}')
     if not token_ok(start.get("token"), server.config.token):
         raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
     unknown = sorted(set(start) - {"type", "session", "language", "voice", "token"})
@@ -239,8 +266,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
     if voice is not None and not isinstance(voice, str):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "voice must be a string")
     try:
-        session = TextSession(backend, language=language, voice=voice,
-                              rig=server.head.rig if server.head else None, times=server.times)
+        session = TextSession(
+            backend, language=language, voice=voice, rig=server.head.rig if server.head else None, times=server.times
+        )
         if voice is not None:
             await asyncio.to_thread(backend.speak, "a", language, voice)  # a bad voice fails now, not mid-stream
     except ConfigError as exc:
@@ -287,8 +315,18 @@ async def handle_text(server, ws: ServerConnection) -> None:
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
     try:
-        await ws.send(P.dumps({"type": "started", "session": name, "fps": FPS, "audio_rate_hz": session.rate_hz,
-                               "language": language, "view_path": f"/view?session={name}"}))
+        await ws.send(
+            P.dumps(
+                {
+                    "type": "started",
+                    "session": name,
+                    "fps": FPS,
+                    "audio_rate_hz": session.rate_hz,
+                    "language": language,
+                    "view_path": f"/view?session={name}",
+                }
+            )
+        )
         while True:
             try:
                 raw = await asyncio.wait_for(ws.recv(), backend.stall_s if session.chunker.pending.strip() else None)
@@ -318,9 +356,16 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 await say(session.finish_text())
                 queue.put_nowait(None)
                 await pace
-                await ws.send(P.dumps({"type": "ended", "frames": session.frames_out,
-                                       "audio_s": session.samples_out / session.rate_hz,
-                                       "first_frame_ms": round(1000 * clock.get("first_frame_s", float("nan")), 1)}))
+                await ws.send(
+                    P.dumps(
+                        {
+                            "type": "ended",
+                            "frames": session.frames_out,
+                            "audio_s": session.samples_out / session.rate_hz,
+                            "first_frame_ms": round(1000 * clock.get("first_frame_s", float("nan")), 1),
+                        }
+                    )
+                )
                 break
             elif kind == "start":
                 raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")

@@ -53,18 +53,19 @@ def _pack(out: Output, rec: _Recorder) -> tuple:
     work = frames[0].work_s if frames else 0.0
     audio = None if out.audio is None else (out.audio.index, out.audio.start, out.audio.samples)
     log, rec.log = rec.log, []
-    return raw, params, work, audio, log
+    expr = [(f.expression, f.speech_params) for f in frames]  # (None, None) without an expression
+    return raw, params, work, audio, log, expr
 
 
 def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing Connection
     """Worker process: decode the model once, then serve session requests until "stop"."""
     from threadpoolctl import threadpool_limits
 
-    from realtime_core.avmodel import decode_model
+    from realtime_core.mapping import decode_speech_model
     from server.session import Session
 
     with threadpool_limits(1):
-        model = decode_model(model_bytes)
+        model = decode_speech_model(model_bytes)
         conn.send(("ok", None))  # ready
         sessions: dict[int, tuple[Session, _Recorder]] = {}
         while True:
@@ -149,10 +150,10 @@ class WorkerPool:
         self._next_id = 0
 
     async def start(self) -> None:
-        from realtime_core.avmodel import encode_model
+        from realtime_core.mapping import encode_speech_model
 
         ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
-        data = encode_model(self.model)
+        data = encode_speech_model(self.model)
         loop = asyncio.get_running_loop()
         self.workers = [_Worker(ctx, data) for _ in range(self.n)]
         for w in self.workers:
@@ -187,8 +188,16 @@ class WorkerPool:
 class RemoteSession:
     """A :class:`server.session.Session` running in a worker: the same facts, async methods."""
 
-    def __init__(self, model: AvModel, config: SessionConfig, worker: _Worker, sid: int, *, rig,  # noqa: ANN001
-                 times: StageTimes) -> None:
+    def __init__(
+        self,
+        model: AvModel,
+        config: SessionConfig,
+        worker: _Worker,
+        sid: int,
+        *,
+        rig,  # noqa: ANN001
+        times: StageTimes,
+    ) -> None:
         self.model = model
         self.config = config
         self.rig = rig
@@ -203,11 +212,11 @@ class RemoteSession:
         self.frames_out = 0
         self.samples_out = 0
         self.finished = False
-        self._state = {"gain": {n: 1.0 for n in VISUAL_PARAMS}, "smoothing_ms": 0.0}
+        self._state = {"gain": {n: 1.0 for n in VISUAL_PARAMS}, "smoothing_ms": 0.0, "expression": []}
 
     @property
     def algorithmic_delay_s(self) -> float:
-        return self.model.algorithmic_delay_ms(self.config.lag) / 1e3
+        return self.model.frontend.algorithmic_delay_ms(self.config.lag) / 1e3
 
     def control_state(self) -> dict:
         return self._state
@@ -237,14 +246,14 @@ class RemoteSession:
             await self._w.request(("close", sid))
 
     def _unpack(self, packed: tuple) -> Output:
-        raw, params, work, audio, log = packed
+        raw, params, work, audio, log, expr = packed
         for name, seconds in log:
             self.times.add(name, seconds)
         now = time.perf_counter()
         frames = []
-        for r, p in zip(raw, params):
+        for r, p, (alpha, speech) in zip(raw, params, expr):
             k = self.frames_out
-            frames.append(Frame(k, k / self.fps, p, r, work, now, self.rig, self.times))
+            frames.append(Frame(k, k / self.fps, p, r, work, now, self.rig, self.times, alpha, speech))
             self.frames_out += 1
         block = None
         if audio is not None:

@@ -51,7 +51,9 @@ def read_hts_lab(path: str | Path) -> Alignment:
         if not parts:
             continue
         if len(parts) < 3 or not (parts[0].isdigit() and parts[1].isdigit()):
-            raise AlignmentFormatError(path, f"line {n}: expected 'start end label' with integer 100 ns times, got {line!r}")
+            raise AlignmentFormatError(
+                path, f"line {n}: expected 'start end label' with integer 100 ns times, got {line!r}"
+            )
         m = _HTS_CENTRE.search(parts[2])
         label = m.group(1) if m else parts[2]
         phones.append(Phone(label, int(parts[0]) * HTS_UNIT_S, int(parts[1]) * HTS_UNIT_S))

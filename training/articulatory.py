@@ -24,8 +24,9 @@ Theory of operation
    the original exponential).
 3. **Hard constraints.** (a) Bilabial stops and nasals (/p b m/) close the lips: mouth_open is
    multiplied by a gate that is exactly 0 over the closure core (the central 60 % of the
-   segment, widened to at least one frame period so a frame always falls inside) and rises back to 1 with a raised-cosine ramp of
-   ``closure_ramp_s``; so the closure frame reads exactly 0. (b) Silence is the neutral pose:
+   segment, widened to at least one frame period so a frame always falls inside) and rises back
+   to 1 with a raised-cosine ramp of ``closure_ramp_s``; so the closure frame reads exactly 0.
+   (b) Silence is the neutral pose:
    all four parameters are multiplied by an envelope that is exactly 0 inside pauses (farther
    than ``silence_ramp_s`` from speech) and before/after the utterance, with raised-cosine
    ramps. (c) mouth_open is never negative.
@@ -46,8 +47,8 @@ clip is thin evidence: tune further as more aligned video arrives.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -85,7 +86,14 @@ class ArticulatoryClass:
 
 
 def _cls(target, alpha=(1.0, 1.0, 1.0, 1.0), theta=(14.0, 14.0), **kw) -> ArticulatoryClass:
-    return ArticulatoryClass(tuple(map(float, target)), tuple(map(float, alpha)), float(theta[0]), float(theta[1]), **kw)
+    t, a = (float(v) for v in target), (float(v) for v in alpha)
+    return ArticulatoryClass(
+        (next(t), next(t), next(t), next(t)),
+        (next(a), next(a), next(a), next(a)),
+        float(theta[0]),
+        float(theta[1]),
+        **kw,
+    )
 
 
 # Targets: (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD units.
@@ -120,18 +128,18 @@ CLASSES: dict[str, ArticulatoryClass] = {
     # /j/: spread lips, high jaw
     "palatal": _cls((0.0, 0.04, 0.04, -0.01), (0.6, 1.0, 0.8, 0.6), (22, 22)),
     # vowels. Rounding (lip_stretch < 0) gets low theta: anticipated across consonants.
-    "close_front": _cls((0.005, 0.065, 0.10, -0.02), (1, 1.2, 1, 1), (14, 14)),          # i: i I
-    "near_close_front": _cls((0.005, 0.05, 0.12, -0.015), (1, 1, 1, 1), (15, 15)),      # I
-    "mid_front": _cls((0.01, 0.05, 0.19, -0.015), (1, 1, 1, 1), (14, 14)),               # e E
-    "open_front": _cls((0.015, 0.035, 0.30, -0.01), (1, 1, 1.5, 1), (12, 12)),           # ae a
-    "open_central": _cls((0.015, 0.02, 0.33, -0.005), (1, 1, 1.5, 1), (12, 12)),         # a (es) A:
-    "open_back": _cls((0.01, -0.015, 0.30, 0.005), (1, 1, 1.5, 1), (12, 12)),            # 0 AA
+    "close_front": _cls((0.005, 0.065, 0.10, -0.02), (1, 1.2, 1, 1), (14, 14)),  # i: i I
+    "near_close_front": _cls((0.005, 0.05, 0.12, -0.015), (1, 1, 1, 1), (15, 15)),  # I
+    "mid_front": _cls((0.01, 0.05, 0.19, -0.015), (1, 1, 1, 1), (14, 14)),  # e E
+    "open_front": _cls((0.015, 0.035, 0.30, -0.01), (1, 1, 1.5, 1), (12, 12)),  # ae a
+    "open_central": _cls((0.015, 0.02, 0.33, -0.005), (1, 1, 1.5, 1), (12, 12)),  # a (es) A:
+    "open_back": _cls((0.01, -0.015, 0.30, 0.005), (1, 1, 1.5, 1), (12, 12)),  # 0 AA
     "open_mid_back_round": _cls((0.01, -0.05, 0.24, 0.015), (1, 1.3, 1.4, 1), (12, 12)),  # O: AO
-    "mid_central": _cls((0.005, 0.0, 0.13, 0.0), (0.7, 0.7, 0.8, 0.7), (16, 16)),        # @ schwa
-    "open_mid_central": _cls((0.01, 0.01, 0.20, 0.0), (1, 1, 1, 1), (14, 14)),           # V AH
-    "rhotic_vowel": _cls((0.01, -0.03, 0.12, 0.01), (1, 1, 1, 1), (14, 14)),             # 3: ER
-    "mid_back_round": _cls((0.01, -0.065, 0.17, 0.02), (1, 1.5, 1, 1), (10, 12)),        # o
-    "close_back_round": _cls((0.015, -0.09, 0.09, 0.025), (1, 2.0, 1, 1), (9, 12)),      # u: u
+    "mid_central": _cls((0.005, 0.0, 0.13, 0.0), (0.7, 0.7, 0.8, 0.7), (16, 16)),  # @ schwa
+    "open_mid_central": _cls((0.01, 0.01, 0.20, 0.0), (1, 1, 1, 1), (14, 14)),  # V AH
+    "rhotic_vowel": _cls((0.01, -0.03, 0.12, 0.01), (1, 1, 1, 1), (14, 14)),  # 3: ER
+    "mid_back_round": _cls((0.01, -0.065, 0.17, 0.02), (1, 1.5, 1, 1), (10, 12)),  # o
+    "close_back_round": _cls((0.015, -0.09, 0.09, 0.025), (1, 2.0, 1, 1), (9, 12)),  # u: u
     "near_close_back_round": _cls((0.01, -0.06, 0.11, 0.015), (1, 1.5, 1, 1), (11, 13)),  # U
 }
 
@@ -383,7 +391,10 @@ def render_params(
     for a, b in spans[1:]:
         if a - cursor > 2 * config.silence_ramp_s:
             env = np.minimum(
-                env, _raised_cosine_gate(t, cursor + config.silence_ramp_s, a - config.silence_ramp_s, config.silence_ramp_s)
+                env,
+                _raised_cosine_gate(
+                    t, cursor + config.silence_ramp_s, a - config.silence_ramp_s, config.silence_ramp_s
+                ),
             )
         cursor = max(cursor, b)
     out *= env[:, None]

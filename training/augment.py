@@ -97,7 +97,9 @@ def coloured_noise(n: int, kind: str, rng: np.random.Generator) -> np.ndarray:
     return white / max(_rms(white), 1e-12)
 
 
-def augment(samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Augmented:
+def augment(
+    samples: np.ndarray, rate_hz: int, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()
+) -> Augmented:
     """Degrade one utterance like a real microphone would (see the module doc).
 
     samples: (n,) float in [-1, 1] at ``rate_hz``. Returns float32 samples in [-1, 1].

@@ -10,28 +10,29 @@ seeds ``rand()`` per utterance. The same :class:`BuildConfig` thus writes byte-i
 files, also when built twice in one process.
 
 Real speech (``real_dirs``): every (WAV, phone alignment) pair found under each folder (and,
-with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules and written with ``source = "real"`` and ``speaker_group`` =
-``real:<folder name>``; it is never augmented, so evaluation can use it as it was recorded.
+with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules
+and written with ``source = "real"`` and ``speaker_group`` = ``real:<folder name>``; it is never
+augmented, so evaluation can use it as it was recorded.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable, Iterable
 
 import numpy as np
 
+from assets.audio import read_wav
+from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.alignments import find_aligned_audio
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
-from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import AlignmentFormatError, ConfigError
-from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"
@@ -60,8 +61,11 @@ class VoiceSampling:
         unknown = [v for v in self.variants if v is not None and v not in VARIANTS]
         if unknown:
             raise ConfigError(f"unknown espeak variants {unknown}; known: {VARIANTS} (or the base voice)")
-        for name, lo_hi, allowed in (("rate_wpm", self.rate_wpm, RATE_RANGE_WPM), ("pitch", self.pitch, (0, 100)),
-                                     ("pitch_range", self.pitch_range, (0, 100))):
+        for name, lo_hi, allowed in (
+            ("rate_wpm", self.rate_wpm, RATE_RANGE_WPM),
+            ("pitch", self.pitch, (0, 100)),
+            ("pitch_range", self.pitch_range, (0, 100)),
+        ):
             if not allowed[0] <= lo_hi[0] <= lo_hi[1] <= allowed[1]:
                 raise ConfigError(f"{name} range {lo_hi} must be (low, high) within {allowed}")
 
@@ -145,8 +149,18 @@ def _synth_job(job: tuple[str, Voice, int]) -> tuple[np.ndarray, int, tuple]:
     return syn.samples, syn.sample_rate_hz, syn.phonemes
 
 
-def _write_synthetic(cfg: BuildConfig, out: Path, i: int, lang: str, text: str, voice: Voice,
-                     rng: np.random.Generator, pcm: np.ndarray, rate: int, phonemes: tuple) -> dict:
+def _write_synthetic(
+    cfg: BuildConfig,
+    out: Path,
+    i: int,
+    lang: str,
+    text: str,
+    voice: Voice,
+    rng: np.random.Generator,
+    pcm: np.ndarray,
+    rate: int,
+    phonemes: tuple,
+) -> dict:
     """Label, optionally augment, and write synthetic utterance ``i``; returns its entry."""
     samples = pcm.astype(np.float32) / 32768.0
     extra: dict = {"text": text}
@@ -157,9 +171,17 @@ def _write_synthetic(cfg: BuildConfig, out: Path, i: int, lang: str, text: str, 
     n = n_frames_for(len(samples) / rate)
     params = render_params(phonemes, n, inventory=f"espeak-{lang}", config=cfg.articulatory)
     return write_utterance(
-        out, utt_id=f"{lang}-{i:05d}", samples=samples, sample_rate_hz=rate, params=params,
-        phonemes=phonemes, language=lang, voice=voice.label, source="espeak",
-        speaker_group=voice.espeak_name, extra=extra,
+        out,
+        utt_id=f"{lang}-{i:05d}",
+        samples=samples,
+        sample_rate_hz=rate,
+        params=params,
+        phonemes=phonemes,
+        language=lang,
+        voice=voice.label,
+        source="espeak",
+        speaker_group=voice.espeak_name,
+        extra=extra,
     )
 
 
@@ -208,18 +230,41 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
     for j, (root, wav, al) in enumerate(wrap(real, total=len(real), desc="real speech", unit="utt")):
         samples, rate = read_wav(wav)
         group = wav.relative_to(root).parts[0] if len(wav.relative_to(root).parts) > 1 else root.name
-        params = render_params(al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory)
-        entries.append(write_utterance(
-            out, utt_id=f"real-{j:04d}-{wav.stem}", samples=samples, sample_rate_hz=rate, params=params,
-            phonemes=al.phones, language="en", voice=f"real:{group}", source="real",
-            speaker_group=f"real:{group}", extra={"origin": str(wav.relative_to(root)),
-                   "alignment": al.path.name if al.path != wav else "pocketsphinx forced alignment"},
-        ))
+        params = render_params(
+            al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory
+        )
+        entries.append(
+            write_utterance(
+                out,
+                utt_id=f"real-{j:04d}-{wav.stem}",
+                samples=samples,
+                sample_rate_hz=rate,
+                params=params,
+                phonemes=al.phones,
+                language="en",
+                voice=f"real:{group}",
+                source="real",
+                speaker_group=f"real:{group}",
+                extra={
+                    "origin": str(wav.relative_to(root)),
+                    "alignment": al.path.name if al.path != wav else "pocketsphinx forced alignment",
+                },
+            )
+        )
 
-    manifest = write_manifest(out, entries, seed=cfg.seed, extra={
-        "builder": {"sentences": cfg.sentences, "languages": list(cfg.languages), "augment": cfg.augment,
-                    "lead_s": cfg.articulatory.lead_s},
-    })
+    manifest = write_manifest(
+        out,
+        entries,
+        seed=cfg.seed,
+        extra={
+            "builder": {
+                "sentences": cfg.sentences,
+                "languages": list(cfg.languages),
+                "augment": cfg.augment,
+                "lead_s": cfg.articulatory.lead_s,
+            },
+        },
+    )
     by_source: dict = {}
     for e in entries:
         by_source[e["source"]] = by_source.get(e["source"], 0) + 1

@@ -8,6 +8,7 @@ A corpus is a folder::
     <dir>/audio.wav    mono 16-bit PCM
     <dir>/params.csv   header "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress";
                        row k at t = k/30 s exactly; n = ceil(duration_s * 30) rows
+                       (the track codec of :mod:`assets.tracks`, read in its strict mode)
     <dir>/phonemes.json  [{"phoneme", "start_s", "end_s"}, ...] (empty list when unknown)
 
 ``source`` is "espeak" (synthetic), "real" (real speech labelled from phone alignments by the
@@ -22,22 +23,24 @@ interrupted build never leaves a half-written file under its final name. Only JS
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
-from assets.files import atomic_write_bytes
 from assets.audio import ACCEPTED_RATES_HZ, read_wav, write_wav
-from training.errors import ConfigError, CorpusFormatError, TruncatedFileError
+from assets.files import atomic_write_bytes
+from assets.tracks import csv_header, read_csv, write_csv
 from realtime_core.phones import PhonemeSegment
+from realtime_core.track import Track
+from training.errors import ConfigError, CorpusFormatError
 from training.params import FPS, N_PARAMS, PARAM_NAMES, n_frames_for
 
 MANIFEST = "manifest.json"
 VERSION = 1
 SOURCES = ("espeak", "festival", "real", "video")
-CSV_HEADER = "t," + ",".join(PARAM_NAMES)
+CSV_HEADER = csv_header(PARAM_NAMES)
 
 
 PhonemeRecord = PhonemeSegment  # the shared timeline type (training.params)
@@ -70,17 +73,6 @@ class Utterance:
 
 
 # --------------------------------------------------------------------------- atomic writes
-
-
-def format_params_csv(params: np.ndarray) -> str:
-    """CSV text of a (n_frames, 4) track with the time column t = k/30 (6 decimals)."""
-    params = np.asarray(params, dtype=np.float64)
-    if params.ndim != 2 or params.shape[1] != N_PARAMS:
-        raise ConfigError(f"params must be (n_frames, {N_PARAMS}), got {params.shape}")
-    lines = [CSV_HEADER]
-    for k, row in enumerate(params):
-        lines.append(f"{k / FPS:.6f}," + ",".join(f"{v:.6f}" for v in row))
-    return "\n".join(lines) + "\n"
 
 
 def write_json(path: Path, obj) -> None:
@@ -117,10 +109,13 @@ def write_utterance(
         raise ConfigError(f"{utt_id}: params shape {params.shape}, expected ({want}, {N_PARAMS}) for {duration:.4f} s")
     folder = Path(corpus_dir) / utt_id
     write_wav(folder / "audio.wav", samples, sample_rate_hz)
-    atomic_write_bytes(folder / "params.csv", format_params_csv(params).encode())
+    write_csv(folder / "params.csv", Track(values=params, names=PARAM_NAMES, fps=FPS))
     write_json(
         folder / "phonemes.json",
-        [{"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)} for p in phonemes],
+        [
+            {"phoneme": p.phoneme, "start_s": round(float(p.start_s), 6), "end_s": round(float(p.end_s), 6)}
+            for p in phonemes
+        ],
     )
     entry = {
         "id": utt_id,
@@ -148,29 +143,6 @@ def write_manifest(corpus_dir: Path, entries: Sequence[dict], *, seed: int | Non
 
 
 # --------------------------------------------------------------------------- reading
-def read_params_csv(path: Path, n_frames: int) -> np.ndarray:
-    """Read and check a params.csv: header, n_frames rows, t = k/30. Returns (n_frames, 4)."""
-    path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CorpusFormatError(path, f"cannot be read ({exc})") from exc
-    if not lines or lines[0].strip() != CSV_HEADER:
-        raise CorpusFormatError(path, f"header must be {CSV_HEADER!r}, got {lines[0] if lines else ''!r}")
-    rows = [ln for ln in lines[1:] if ln.strip()]
-    if len(rows) < n_frames:
-        raise TruncatedFileError(path, f"truncated: {len(rows)} frames, the audio needs {n_frames}")
-    if len(rows) > n_frames:
-        raise CorpusFormatError(path, f"{len(rows)} frames, the audio's duration needs {n_frames}")
-    try:
-        arr = np.array([[float(v) for v in r.split(",")] for r in rows], dtype=np.float64).reshape(n_frames, -1)
-    except ValueError as exc:
-        raise CorpusFormatError(path, f"not numeric / wrong column count ({exc})") from exc
-    if arr.shape[1] != N_PARAMS + 1 or not np.all(np.isfinite(arr)):
-        raise CorpusFormatError(path, "every row needs t and 4 finite values")
-    if n_frames and np.max(np.abs(arr[:, 0] - np.arange(n_frames) / FPS)) > 1e-5:
-        raise CorpusFormatError(path, "the t column must be k/30 for row k")
-    return arr[:, 1:]
 
 
 def load_corpus(path: str | Path) -> list[Utterance]:
@@ -197,18 +169,29 @@ def load_corpus(path: str | Path) -> list[Utterance]:
         if source not in SOURCES:
             raise CorpusFormatError(mpath, f"{uid}: source {source!r} not one of {SOURCES}")
         samples, rate = read_wav(folder / "audio.wav", expected_rate_hz=rate)
-        params = read_params_csv(folder / "params.csv", n_frames_for(len(samples) / rate))
+        n = n_frames_for(len(samples) / rate)
+        params = read_csv(folder / "params.csv", names=PARAM_NAMES, fps=FPS, n_frames=n, start_s=0.0).values
         ppath = folder / "phonemes.json"
         phon: tuple[PhonemeRecord, ...] = ()
         if ppath.is_file():
             try:
-                phon = tuple(PhonemeRecord(str(p["phoneme"]), float(p["start_s"]), float(p["end_s"]))
-                             for p in json.loads(ppath.read_text(encoding="utf-8")))
+                phon = tuple(
+                    PhonemeRecord(str(p["phoneme"]), float(p["start_s"]), float(p["end_s"]))
+                    for p in json.loads(ppath.read_text(encoding="utf-8"))
+                )
             except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
                 raise CorpusFormatError(ppath, f"not a phoneme list ({exc})") from exc
-        out.append(Utterance(
-            id=uid, samples=samples, sample_rate_hz=rate, params=params, phonemes=phon,
-            voice=str(entry.get("voice", "")), language=str(entry.get("language", "")),
-            source=source, speaker_group=str(entry.get("speaker_group", "")),
-        ))
+        out.append(
+            Utterance(
+                id=uid,
+                samples=samples,
+                sample_rate_hz=rate,
+                params=params,
+                phonemes=phon,
+                voice=str(entry.get("voice", "")),
+                language=str(entry.get("language", "")),
+                source=source,
+                speaker_group=str(entry.get("speaker_group", "")),
+            )
+        )
     return out

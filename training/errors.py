@@ -19,9 +19,20 @@ from assets.errors import (  # file problems are the assets edge's; training rai
 from realtime_core.errors import ConfigError, FacecastError
 
 __all__ = [
-    "AlignmentFormatError", "ConfigError", "CorpusFormatError", "FileProblem", "LengthMismatchError", "MissingDependencyError",
-    "NoFaceError", "NotAudioError", "NotVideoError", "SilentAudioError", "SynthesisError", "TrainingError",
-    "TruncatedFileError", "WrongSampleRateError",
+    "AlignmentFormatError",
+    "ConfigError",
+    "CorpusFormatError",
+    "FileProblem",
+    "LengthMismatchError",
+    "MissingDependencyError",
+    "NoFaceError",
+    "NotAudioError",
+    "NotVideoError",
+    "SilentAudioError",
+    "SynthesisError",
+    "TrainingError",
+    "TruncatedFileError",
+    "WrongSampleRateError",
 ]
 
 

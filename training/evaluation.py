@@ -22,20 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
-from realtime_core.features import MfccConfig, frame_log_energy_db
+from realtime_core.features import loudness_db
+from realtime_core.mapping import SpeechModel
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
-
-
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    """Per-frame RMS level (dB) on the 30 fps grid, ``(n_frames,)`` (padded/truncated)."""
-    lv = frame_log_energy_db(samples, MfccConfig(sample_rate_hz=int(rate_hz)))
-    out = np.full(n_frames, lv.min() if len(lv) else -120.0)
-    out[: min(n_frames, len(lv))] = lv[:n_frames]
-    return out
 
 
 def pearson(a: np.ndarray, b: np.ndarray) -> float:
@@ -82,8 +74,9 @@ class SetScore:
     clips: list = field(default_factory=list)
 
 
-def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_hz: int, truth: np.ndarray
-               ) -> tuple[ClipScore, np.ndarray, np.ndarray]:
+def score_clip(
+    model: SpeechModel, name: str, kind: str, samples: np.ndarray, rate_hz: int, truth: np.ndarray
+) -> tuple[ClipScore, np.ndarray, np.ndarray]:
     """Run the live path on ``samples`` and compare with ``truth (n_frames, 4)``.
 
     Returns the score, the estimate ``(T, 4)`` and the loudness track ``(T,)`` dB."""
@@ -93,11 +86,22 @@ def score_clip(model: AvModel, name: str, kind: str, samples: np.ndarray, rate_h
     loud = loudness_db(samples, rate_hz, T)
     lag, r_lag = best_lag(truth[:, MOUTH_OPEN], est[:, MOUTH_OPEN])
     r = pearson_per_param(truth, est)
-    return ClipScore(name=name, kind=kind, r=dict(zip(VISUAL_PARAMS, map(float, r))),
-                     r_loudness=pearson(truth[:, MOUTH_OPEN], loud), lag=lag, r_at_lag=r_lag, n_frames=T), est, loud
+    return (
+        ClipScore(
+            name=name,
+            kind=kind,
+            r=dict(zip(VISUAL_PARAMS, map(float, r))),
+            r_loudness=pearson(truth[:, MOUTH_OPEN], loud),
+            lag=lag,
+            r_at_lag=r_lag,
+            n_frames=T,
+        ),
+        est,
+        loud,
+    )
 
 
-def score_set(model: AvModel, kind: str, items: Sequence[tuple[str, np.ndarray, int, np.ndarray]]) -> SetScore:
+def score_set(model: SpeechModel, kind: str, items: Sequence[tuple[str, np.ndarray, int, np.ndarray]]) -> SetScore:
     """``items``: (name, samples, rate_hz, truth (n_frames, 4)). Pools frames for eps/rho."""
     clips, truths, ests, louds = [], [], [], []
     for name, samples, rate, truth in items:
@@ -107,15 +111,23 @@ def score_set(model: AvModel, kind: str, items: Sequence[tuple[str, np.ndarray, 
         ests.append(est)
         louds.append(loud)
     t, e, lv = np.concatenate(truths), np.concatenate(ests), np.concatenate(louds)
-    return SetScore(kind=kind, eps=amse(t, e), rho=acc(t, e), r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
-                    r_loudness=pearson(t[:, MOUTH_OPEN], lv), clips=clips)
+    return SetScore(
+        kind=kind,
+        eps=amse(t, e),
+        rho=acc(t, e),
+        r=dict(zip(VISUAL_PARAMS, map(float, pearson_per_param(t, e)))),
+        r_loudness=pearson(t[:, MOUTH_OPEN], lv),
+        clips=clips,
+    )
 
 
-def real_speech_items(root: str | Path, *, lead_s: float | None = None) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
+def real_speech_items(
+    root: str | Path, *, lead_s: float | None = None
+) -> list[tuple[str, np.ndarray, int, np.ndarray]]:
     """Real recordings with phone alignments under ``root``, truth from the articulatory rules."""
+    from assets.audio import read_audio
     from training.alignments import find_aligned_audio
     from training.articulatory import ArticulatoryConfig, render_params
-    from assets.audio import read_audio
     from training.params import n_frames_for
 
     cfg = ArticulatoryConfig() if lead_s is None else ArticulatoryConfig(lead_s=lead_s)
@@ -130,23 +142,40 @@ def real_speech_items(root: str | Path, *, lead_s: float | None = None) -> list[
 
 def format_markdown(results: Sequence[tuple[str, SetScore]], command: str) -> str:
     """The accuracy table for ``docs/accuracy.md``."""
-    lines = ["# facecast accuracy", "", f"Produced by `{command}`.", "",
-             "r = Pearson correlation with the truth track, lag 0; loudness = the frame's RMS level (dB) "
-             "as a mouth_open predictor.", ""]
+    lines = [
+        "# facecast accuracy",
+        "",
+        f"Produced by `{command}`.",
+        "",
+        "r = Pearson correlation with the truth track, lag 0; loudness = the frame's RMS level (dB) "
+        "as a mouth_open predictor.",
+        "",
+    ]
     for title, s in results:
-        lines += [f"## {title}", "",
-                  f"pooled over {sum(c.n_frames for c in s.clips)} frames: eps = {s.eps:.3f}, rho = {s.rho:.3f}; "
-                  f"r(mouth_open) = {s.r['mouth_open']:.3f} vs loudness {s.r_loudness:.3f}", "",
-                  "| clip | frames | " + " | ".join(f"r {p}" for p in VISUAL_PARAMS)
-                  + " | r loudness (mouth_open) | best lag (frames) | r at best lag |",
-                  "|---|---:|" + "---:|" * (len(VISUAL_PARAMS) + 3)]
+        lines += [
+            f"## {title}",
+            "",
+            f"pooled over {sum(c.n_frames for c in s.clips)} frames: eps = {s.eps:.3f}, rho = {s.rho:.3f}; "
+            f"r(mouth_open) = {s.r['mouth_open']:.3f} vs loudness {s.r_loudness:.3f}",
+            "",
+            "| clip | frames | "
+            + " | ".join(f"r {p}" for p in VISUAL_PARAMS)
+            + " | r loudness (mouth_open) | best lag (frames) | r at best lag |",
+            "|---|---:|" + "---:|" * (len(VISUAL_PARAMS) + 3),
+        ]
         for c in s.clips:
-            lines.append(f"| {c.name} | {c.n_frames} | " + " | ".join(f"{c.r[p]:.3f}" for p in VISUAL_PARAMS)
-                         + f" | {c.r_loudness:.3f} | {c.lag:+d} | {c.r_at_lag:.3f} |")
+            lines.append(
+                f"| {c.name} | {c.n_frames} | "
+                + " | ".join(f"{c.r[p]:.3f}" for p in VISUAL_PARAMS)
+                + f" | {c.r_loudness:.3f} | {c.lag:+d} | {c.r_at_lag:.3f} |"
+            )
         mean_r = np.mean([c.r["mouth_open"] for c in s.clips])
         mean_l = np.mean([c.r_loudness for c in s.clips])
-        lines += ["", f"mean over clips: r(mouth_open) = {mean_r:.3f}, loudness {mean_l:.3f}, "
-                  f"margin {mean_r - mean_l:+.3f}", ""]
+        lines += [
+            "",
+            f"mean over clips: r(mouth_open) = {mean_r:.3f}, loudness {mean_l:.3f}, margin {mean_r - mean_l:+.3f}",
+            "",
+        ]
     return "\n".join(lines) + "\n"
 
 

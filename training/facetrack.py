@@ -45,18 +45,101 @@ EXTRACTOR_VERSION = "mp0.10.14-fm1"
 Bump it when anything that changes the cached raw landmarks or audio changes."""
 
 # Outer lip contour, clockwise from the subject's right mouth corner (61) over the lower lip.
-LIPS_OUTER: tuple[int, ...] = (61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291, 409, 270, 269, 267, 0, 37, 39,
-                               40, 185)
+LIPS_OUTER: tuple[int, ...] = (
+    61,
+    146,
+    91,
+    181,
+    84,
+    17,
+    314,
+    405,
+    321,
+    375,
+    291,
+    409,
+    270,
+    269,
+    267,
+    0,
+    37,
+    39,
+    40,
+    185,
+)
 # Inner lip contour (the edge of the mouth opening), same order.
-LIPS_INNER: tuple[int, ...] = (78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308, 415, 310, 311, 312, 13, 82, 81,
-                               80, 191)
+LIPS_INNER: tuple[int, ...] = (
+    78,
+    95,
+    88,
+    178,
+    87,
+    14,
+    317,
+    402,
+    318,
+    324,
+    308,
+    415,
+    310,
+    311,
+    312,
+    13,
+    82,
+    81,
+    80,
+    191,
+)
 # Jaw line from below the right ear over the chin to below the left ear, and the chin midline
 # under the lower lip (18, 200, 199, 175).
 JAW: tuple[int, ...] = (58, 172, 136, 150, 149, 176, 148, 152, 377, 400, 378, 379, 365, 397, 288, 18, 200, 199, 175)
 # Cheeks and the skin around the mouth (nasolabial folds, mouth-corner muscles), mirrored pairs.
-CHEEKS: tuple[int, ...] = (36, 50, 57, 92, 101, 116, 117, 118, 123, 147, 165, 186, 187, 192, 203, 205, 206, 207,
-                           212, 213, 214, 216, 266, 280, 287, 322, 330, 345, 346, 347, 352, 376, 391, 410, 411, 416,
-                           423, 425, 426, 427, 432, 433, 434, 436)
+CHEEKS: tuple[int, ...] = (
+    36,
+    50,
+    57,
+    92,
+    101,
+    116,
+    117,
+    118,
+    123,
+    147,
+    165,
+    186,
+    187,
+    192,
+    203,
+    205,
+    206,
+    207,
+    212,
+    213,
+    214,
+    216,
+    266,
+    280,
+    287,
+    322,
+    330,
+    345,
+    346,
+    347,
+    352,
+    376,
+    391,
+    410,
+    411,
+    416,
+    423,
+    425,
+    426,
+    427,
+    432,
+    433,
+    434,
+    436,
+)
 LOWER_FACE: tuple[int, ...] = tuple(sorted(set(LIPS_OUTER) | set(LIPS_INNER) | set(JAW) | set(CHEEKS)))
 """Every landmark that moves with speech (lips, jaw, cheeks)."""
 
@@ -70,8 +153,32 @@ LIP_GAP_PAIRS = ((13, 14), (82, 87), (312, 317))
 RIGHT_EYE_CORNERS = (33, 133)  # the subject's right eye (image left in a frontal video)
 LEFT_EYE_CORNERS = (362, 263)
 NOSE_TIP, SUBNASALE = 4, 2
-STABLE: tuple[int, ...] = (10, 151, 9, 8, 168, 6, 197, 195, 5, 4, 33, 133, 362, 263, 127, 356, 70, 300, 105, 334,
-                           46, 276, 108, 337)
+STABLE: tuple[int, ...] = (
+    10,
+    151,
+    9,
+    8,
+    168,
+    6,
+    197,
+    195,
+    5,
+    4,
+    33,
+    133,
+    362,
+    263,
+    127,
+    356,
+    70,
+    300,
+    105,
+    334,
+    46,
+    276,
+    108,
+    337,
+)
 """Landmarks that move with the skull only: forehead, nose bridge/tip, eye corners, brows' outer
 ends, temples. Used for the pose fit; lips, cheeks and jaw are excluded."""
 
@@ -106,8 +213,10 @@ class FaceTrack:
     def __post_init__(self) -> None:
         n = len(self.landmarks)
         if self.landmarks.shape != (n, N_LANDMARKS, 3) or self.landmarks.dtype != np.float32:
-            raise ValueError(f"landmarks must be (n_frames, {N_LANDMARKS}, 3) float32, got "
-                             f"{self.landmarks.shape} {self.landmarks.dtype}")
+            raise ValueError(
+                f"landmarks must be (n_frames, {N_LANDMARKS}, 3) float32, got "
+                f"{self.landmarks.shape} {self.landmarks.dtype}"
+            )
         if self.neutral.shape != (N_LANDMARKS, 3) or self.neutral.dtype != np.float32:
             raise ValueError(f"neutral must be ({N_LANDMARKS}, 3) float32, got {self.neutral.shape}")
         if self.params.shape != (n, 4) or self.params.dtype != np.float64:
@@ -165,10 +274,17 @@ def write_raw(path: Path, raw: RawTrack) -> Path:
 
     buf = io.BytesIO()
     np.savez_compressed(
-        buf, samples=raw.samples.astype(np.int16), sample_rate_hz=np.int64(raw.sample_rate_hz),
-        video_landmarks=raw.video_landmarks.astype(np.float32), video_times_s=raw.video_times_s.astype(np.float64),
-        video_fps=np.float64(raw.video_fps), width=np.int64(raw.width), height=np.int64(raw.height),
-        source=np.str_(str(raw.source)), sha1=np.str_(raw.sha1), extractor_version=np.str_(raw.extractor_version),
+        buf,
+        samples=raw.samples.astype(np.int16),
+        sample_rate_hz=np.int64(raw.sample_rate_hz),
+        video_landmarks=raw.video_landmarks.astype(np.float32),
+        video_times_s=raw.video_times_s.astype(np.float64),
+        video_fps=np.float64(raw.video_fps),
+        width=np.int64(raw.width),
+        height=np.int64(raw.height),
+        source=np.str_(str(raw.source)),
+        sha1=np.str_(raw.sha1),
+        extractor_version=np.str_(raw.extractor_version),
     )
     atomic_write_bytes(Path(path), buf.getvalue())
     return Path(path)
@@ -180,10 +296,16 @@ def read_raw(path: str | Path) -> RawTrack:
     try:
         with np.load(path, allow_pickle=False) as z:
             raw = RawTrack(
-                source=Path(str(z["source"])), sha1=str(z["sha1"]), samples=z["samples"],
-                sample_rate_hz=int(z["sample_rate_hz"]), video_landmarks=z["video_landmarks"],
-                video_times_s=z["video_times_s"], video_fps=float(z["video_fps"]), width=int(z["width"]),
-                height=int(z["height"]), extractor_version=str(z["extractor_version"]),
+                source=Path(str(z["source"])),
+                sha1=str(z["sha1"]),
+                samples=z["samples"],
+                sample_rate_hz=int(z["sample_rate_hz"]),
+                video_landmarks=z["video_landmarks"],
+                video_times_s=z["video_times_s"],
+                video_fps=float(z["video_fps"]),
+                width=int(z["width"]),
+                height=int(z["height"]),
+                extractor_version=str(z["extractor_version"]),
             )
     except (OSError, KeyError, ValueError) as exc:
         raise CorpusFormatError(path, f"not a face-track cache file ({exc})") from exc

@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.audio import read_wav
+from realtime_core.phones import PhonemeSegment
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
-from assets.audio import read_wav
 from training.corpus import write_manifest, write_utterance
 from training.errors import ConfigError, SynthesisError
-from realtime_core.phones import PhonemeSegment
 from training.params import n_frames_for
 
 VOICES: tuple[str, ...] = ("kal_diphone", "ked_diphone", "cmu_us_slt_arctic_hts")
@@ -93,7 +93,9 @@ def synthesize_batch(texts: Sequence[str], voice: FestivalVoice) -> list[tuple[n
         for i in range(len(texts)):
             wav, segs = d / f"{i}.wav", d / f"{i}.segs"
             if not wav.is_file() or not segs.is_file():
-                raise SynthesisError(f"festival produced no audio for voice {voice.name} ({proc.stderr.strip()[-300:]})")
+                raise SynthesisError(
+                    f"festival produced no audio for voice {voice.name} ({proc.stderr.strip()[-300:]})"
+                )
             samples, rate = read_wav(wav)
             out.append((samples, rate, read_segs(segs)))
         return out
@@ -124,11 +126,26 @@ def build_festival_corpus(
                 a = augment(samples, rate, np.random.default_rng([seed, i]), augmentation)
                 x, rate, info = a.samples, a.sample_rate_hz, a.info
             params = render_params(phones, n_frames_for(len(x) / rate), inventory="arpabet", config=articulatory)
-            entries.append((i, write_utterance(
-                out_dir, utt_id=f"fest-{i:05d}", samples=x, sample_rate_hz=rate, params=params, phonemes=phones,
-                language="en", voice=voice.label, source="festival", speaker_group=voice.name,
-                extra={"engine": "festival", "text": sentences[i], "augmentation": info} if info else
-                {"engine": "festival", "text": sentences[i]})))
+            entries.append(
+                (
+                    i,
+                    write_utterance(
+                        out_dir,
+                        utt_id=f"fest-{i:05d}",
+                        samples=x,
+                        sample_rate_hz=rate,
+                        params=params,
+                        phonemes=phones,
+                        language="en",
+                        voice=voice.label,
+                        source="festival",
+                        speaker_group=voice.name,
+                        extra={"engine": "festival", "text": sentences[i], "augmentation": info}
+                        if info
+                        else {"engine": "festival", "text": sentences[i]},
+                    ),
+                )
+            )
             if bar:
                 bar.update(1)
     if bar:

@@ -2,7 +2,7 @@
 
 How each sentence is labelled
 -----------------------------
-GRID ships word alignments (``training.grid.read_words``). Its vocabulary is closed (51 words),
+GRID ships word alignments (``assets.grid.read_words``). Its vocabulary is closed (51 words),
 so every word has one pronunciation, fixed here in :data:`PRONUNCIATIONS` (CMUdict as shipped
 with pocketsphinx, except the letters A = ``EY`` and Z = ``Z EH D``, as the British talker says
 them). Then:
@@ -67,27 +67,71 @@ MIN_PHONE_S = 0.02
 ALIGN_PAD_S = 0.15
 """Audio aligned around the speech: GRID's first word start - pad .. last word end + pad."""
 
-CREDIT = ("GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
-          "'An audio-visual corpus for speech perception and automatic speech recognition', "
-          "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0.")
+CREDIT = (
+    "GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
+    "'An audio-visual corpus for speech perception and automatic speech recognition', "
+    "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0."
+)
 
 DEFAULT_PATH = Path(__file__).resolve().parents[1] / "assets" / "data" / "grid_s1_phones.json"
 
 PRONUNCIATIONS: dict[str, tuple[str, ...]] = {
-    w: tuple(p.split()) for w, p in {
+    w: tuple(p.split())
+    for w, p in {
         # commands, colours, prepositions, adverbs
-        "bin": "B IH N", "lay": "L EY", "place": "P L EY S", "set": "S EH T",
-        "blue": "B L UW", "green": "G R IY N", "red": "R EH D", "white": "W AY T",
-        "at": "AE T", "by": "B AY", "in": "IH N", "with": "W IH DH",
-        "again": "AH G EH N", "now": "N AW", "please": "P L IY Z", "soon": "S UW N",
+        "bin": "B IH N",
+        "lay": "L EY",
+        "place": "P L EY S",
+        "set": "S EH T",
+        "blue": "B L UW",
+        "green": "G R IY N",
+        "red": "R EH D",
+        "white": "W AY T",
+        "at": "AE T",
+        "by": "B AY",
+        "in": "IH N",
+        "with": "W IH DH",
+        "again": "AH G EH N",
+        "now": "N AW",
+        "please": "P L IY Z",
+        "soon": "S UW N",
         # digits
-        "zero": "Z IH R OW", "one": "W AH N", "two": "T UW", "three": "TH R IY", "four": "F AO R",
-        "five": "F AY V", "six": "S IH K S", "seven": "S EH V AH N", "eight": "EY T", "nine": "N AY N",
+        "zero": "Z IH R OW",
+        "one": "W AH N",
+        "two": "T UW",
+        "three": "TH R IY",
+        "four": "F AO R",
+        "five": "F AY V",
+        "six": "S IH K S",
+        "seven": "S EH V AH N",
+        "eight": "EY T",
+        "nine": "N AY N",
         # letters (no W in GRID); A and Z as the British talker says them
-        "a": "EY", "b": "B IY", "c": "S IY", "d": "D IY", "e": "IY", "f": "EH F", "g": "JH IY",
-        "h": "EY CH", "i": "AY", "j": "JH EY", "k": "K EY", "l": "EH L", "m": "EH M", "n": "EH N",
-        "o": "OW", "p": "P IY", "q": "K Y UW", "r": "AA R", "s": "EH S", "t": "T IY", "u": "Y UW",
-        "v": "V IY", "x": "EH K S", "y": "W AY", "z": "Z EH D",
+        "a": "EY",
+        "b": "B IY",
+        "c": "S IY",
+        "d": "D IY",
+        "e": "IY",
+        "f": "EH F",
+        "g": "JH IY",
+        "h": "EY CH",
+        "i": "AY",
+        "j": "JH EY",
+        "k": "K EY",
+        "l": "EH L",
+        "m": "EH M",
+        "n": "EH N",
+        "o": "OW",
+        "p": "P IY",
+        "q": "K Y UW",
+        "r": "AA R",
+        "s": "EH S",
+        "t": "T IY",
+        "u": "Y UW",
+        "v": "V IY",
+        "x": "EH K S",
+        "y": "W AY",
+        "z": "Z EH D",
     }.items()
 }
 """Every GRID word -> its ARPAbet phones (CMUdict via pocketsphinx; letters A and Z British)."""
@@ -137,7 +181,9 @@ class SentenceAligner:
         try:
             from pocketsphinx import Decoder  # lazy: optional extra "align"
         except ImportError as exc:
-            raise MissingDependencyError("GRID phone alignment needs pocketsphinx: pip install 'facecast[align]'") from exc
+            raise MissingDependencyError(
+                "GRID phone alignment needs pocketsphinx: pip install 'facecast[align]'"
+            ) from exc
         self._decoder = Decoder(samprate=ALIGN_RATE_HZ, bestpath=False, loglevel="FATAL")
         # Private dictionary entries so the aligner uses exactly PRONUNCIATIONS (no alternates).
         last = len(PRONUNCIATIONS) - 1
@@ -166,15 +212,17 @@ class SentenceAligner:
             got = [(w.name, [(ph.name, ph.start, ph.duration) for ph in w]) for w in d.get_alignment() or ()]
         except RuntimeError:
             return None
-        got = [(name[len("grid_"):], phones) for name, phones in got if name.startswith("grid_")]
+        got = [(name[len("grid_") :], phones) for name, phones in got if name.startswith("grid_")]
         if [w for w, _ in got] != list(words) or any(
-                [p for p, _, _ in phones] != list(PRONUNCIATIONS[w]) for w, phones in got):
+            [p for p, _, _ in phones] != list(PRONUNCIATIONS[w]) for w, phones in got
+        ):
             return None
         return got
 
 
-def _place_word(aligned: list[tuple[str, int, int]], a0: float, a1: float, *, lead_silence: bool,
-                trail_silence: bool) -> tuple[list[Phone], float]:
+def _place_word(
+    aligned: list[tuple[str, int, int]], a0: float, a1: float, *, lead_silence: bool, trail_silence: bool
+) -> tuple[list[Phone], float]:
     """One word's aligned phones (frames) placed to tile its GRID span [a0, a1] (seconds).
 
     At an edge next to a pause (sil/sp or the recording's edge):
@@ -213,8 +261,14 @@ def _place_word(aligned: list[tuple[str, int, int]], a0: float, a1: float, *, le
     return out, max(abs(s0 - t0), abs(s1 - t1))
 
 
-def label_sentence(sentence_id: str, words: list[tuple[float, float, str]], samples_16k: np.ndarray | None,
-                   aligner: SentenceAligner | None, *, source: str | Path = "<grid>") -> SentencePhones:
+def label_sentence(
+    sentence_id: str,
+    words: list[tuple[float, float, str]],
+    samples_16k: np.ndarray | None,
+    aligner: SentenceAligner | None,
+    *,
+    source: str | Path = "<grid>",
+) -> SentencePhones:
     """Phones of one sentence from its word alignment and (optional) 16 kHz audio ((n,) float in [-1, 1]).
 
     Without audio or aligner, or when the alignment fails, every word is spread. Raises
@@ -239,7 +293,7 @@ def label_sentence(sentence_id: str, words: list[tuple[float, float, str]], samp
         last = max(b for _, b, w in words if w not in SILENCE_WORDS)
         f0 = max(0, round((first - ALIGN_PAD_S) / FRAME_S))
         f1 = round((last + ALIGN_PAD_S) / FRAME_S)
-        x = np.asarray(samples_16k, np.float64)[f0 * ALIGN_RATE_HZ // 100: f1 * ALIGN_RATE_HZ // 100]
+        x = np.asarray(samples_16k, np.float64)[f0 * ALIGN_RATE_HZ // 100 : f1 * ALIGN_RATE_HZ // 100]
         pcm = np.clip(np.round(x * 32767.0), -32768, 32767).astype(np.int16)
         got = aligner.align(pcm, speech)
         if got is not None:
@@ -269,10 +323,14 @@ def label_sentence(sentence_id: str, words: list[tuple[float, float, str]], samp
         k += 1
     n_sil_words = sum(w in SILENCE_WORDS for _, _, w in words)
     method = "spread" if not disagreement else "pocketsphinx+spread" if spread_words else "pocketsphinx"
-    return SentencePhones(sentence_id=sentence_id, phones=tuple(phones), method=method,
-                          spread_words=tuple(spread_words),
-                          edge_silences=sum(p.phoneme == SILENCE for p in phones) - n_sil_words,
-                          max_word_offset_s=round(max(disagreement), 3) if disagreement else None)
+    return SentencePhones(
+        sentence_id=sentence_id,
+        phones=tuple(phones),
+        method=method,
+        spread_words=tuple(spread_words),
+        edge_silences=sum(p.phoneme == SILENCE for p in phones) - n_sil_words,
+        max_word_offset_s=round(max(disagreement), 3) if disagreement else None,
+    )
 
 
 # ----------------------------------------------------------------------------- corpus build
@@ -296,8 +354,9 @@ def _label_one(s: GridSentence) -> SentencePhones | tuple[str, str]:
         return (str(s.align), str(exc))
 
 
-def label_corpus(sents: list[GridSentence], *, workers: int = 2, align: bool = True,
-                 progress: Callable | None = None) -> tuple[list[SentencePhones], list[tuple[str, str]]]:
+def label_corpus(
+    sents: list[GridSentence], *, workers: int = 2, align: bool = True, progress: Callable | None = None
+) -> tuple[list[SentencePhones], list[tuple[str, str]]]:
     """Label every sentence (``workers`` processes). Returns (labelled, skipped [(file, reason)])."""
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
@@ -319,11 +378,11 @@ def write_grid_phones(path: str | Path, labelled: list[SentencePhones]) -> Path:
         "format": FORMAT,
         "phone_set": "ARPAbet (CMUdict, no stress digits, upper case) plus SIL for silence",
         "method": "pocketsphinx 5.1.1 forced alignment (en-us model) of the sentence with the fixed "
-                  "pronunciations; each word's phones mapped linearly onto its GRID word span, so phones tile the "
-                  "GRID word spans exactly; next to a pause, aligned silence of 60 ms or more inside a GRID span is "
-                  "SIL. Fallback 'spread' (per word whose aligned edges differ from GRID's by > 0.1 s, or per "
-                  "sentence when alignment fails): the pronunciation spread over the span (vowel 2 : consonant 1). "
-                  "See training/grid_phones.py.",
+        "pronunciations; each word's phones mapped linearly onto its GRID word span, so phones tile the "
+        "GRID word spans exactly; next to a pause, aligned silence of 60 ms or more inside a GRID span is "
+        "SIL. Fallback 'spread' (per word whose aligned edges differ from GRID's by > 0.1 s, or per "
+        "sentence when alignment fails): the pronunciation spread over the span (vowel 2 : consonant 1). "
+        "See training/grid_phones.py.",
         "times": "seconds from the start of the recording",
         "credit": CREDIT,
         "pronunciations": {w: " ".join(p) for w, p in sorted(PRONUNCIATIONS.items())},
@@ -338,8 +397,10 @@ def write_grid_phones(path: str | Path, labelled: list[SentencePhones]) -> Path:
             entry["max_word_offset_s"] = s.max_word_offset_s
         if s.edge_silences:
             entry["edge_silences"] = s.edge_silences
-        lines.append(f"{json.dumps(s.sentence_id)}: {json.dumps(entry, separators=(',', ':'))}"
-                     + ("," if i < len(items) - 1 else ""))
+        lines.append(
+            f"{json.dumps(s.sentence_id)}: {json.dumps(entry, separators=(',', ':'))}"
+            + ("," if i < len(items) - 1 else "")
+        )
     lines += ["}", "}", ""]
     return atomic_write_bytes(path, "\n".join(lines).encode("utf-8"))
 
@@ -359,10 +420,14 @@ def read_grid_phones_file(path: str | Path | None = None) -> dict[str, SentenceP
     try:
         for sid, entry in doc["sentences"].items():
             phones = tuple(Phone(str(p), float(a), float(b)) for a, b, p in entry["phones"])
-            out[sid] = SentencePhones(sentence_id=sid, phones=phones, method=str(entry["method"]),
-                                      spread_words=tuple(entry.get("spread_words", ())),
-                                      edge_silences=int(entry.get("edge_silences", 0)),
-                                      max_word_offset_s=entry.get("max_word_offset_s"))
+            out[sid] = SentencePhones(
+                sentence_id=sid,
+                phones=phones,
+                method=str(entry["method"]),
+                spread_words=tuple(entry.get("spread_words", ())),
+                edge_silences=int(entry.get("edge_silences", 0)),
+                max_word_offset_s=entry.get("max_word_offset_s"),
+            )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise AlignmentFormatError(path, f"malformed sentence entry ({exc})") from exc
     return out
@@ -383,7 +448,9 @@ class PhoneCheck:
     durations: tuple[tuple[str, float], ...]
 
 
-def check_sentence(phones: tuple[Phone, ...], words: list[tuple[float, float, str]], *, tol_s: float = 1e-3) -> PhoneCheck:
+def check_sentence(
+    phones: tuple[Phone, ...], words: list[tuple[float, float, str]], *, tol_s: float = 1e-3
+) -> PhoneCheck:
     """Phones tile every word span exactly (within ``tol_s``), in the word's pronunciation order
     (so /P B M/ are where the words have them; SIL allowed at a word's edges), and no phone is
     shorter than 5 ms."""
@@ -412,8 +479,15 @@ def check_sentence(phones: tuple[Phone, ...], words: list[tuple[float, float, st
     return PhoneCheck(problems=tuple(problems), durations=tuple(durations))
 
 
-def save_phone_plot(samples: np.ndarray, rate_hz: int, words: list[tuple[float, float, str]],
-                    phones: tuple[Phone, ...], png: str | Path, *, title: str = "") -> Path:
+def save_phone_plot(
+    samples: np.ndarray,
+    rate_hz: int,
+    words: list[tuple[float, float, str]],
+    phones: tuple[Phone, ...],
+    png: str | Path,
+    *,
+    title: str = "",
+) -> Path:
     """PNG: waveform with the word spans above and the phones below (bilabials in red)."""
     import matplotlib
 
@@ -422,18 +496,34 @@ def save_phone_plot(samples: np.ndarray, rate_hz: int, words: list[tuple[float, 
 
     png = Path(png)
     t = np.arange(len(samples)) / rate_hz
-    fig, (ax, axw, axp) = plt.subplots(3, 1, figsize=(12, 5), sharex=True,
-                                       gridspec_kw={"height_ratios": [3, 0.6, 0.6]})
+    fig, (ax, axw, axp) = plt.subplots(3, 1, figsize=(12, 5), sharex=True, gridspec_kw={"height_ratios": [3, 0.6, 0.6]})
     ax.plot(t, samples, lw=0.4, color="k")
     ax.set_ylabel("waveform")
     ax.set_title(title)
-    for axis, items in ((axw, [(a, b, w) for a, b, w in words]), (axp, [(p.start_s, p.end_s, p.phoneme) for p in phones])):
+    for axis, items in (
+        (axw, [(a, b, w) for a, b, w in words]),
+        (axp, [(p.start_s, p.end_s, p.phoneme) for p in phones]),
+    ):
         for a, b, label in items:
             bil = label in BILABIALS
-            axis.axvspan(a, b, color="tab:red" if bil else ("0.92" if label in (SILENCE, "sil", "sp") else "0.8"),
-                         alpha=0.5 if bil else 1.0, ec="k", lw=0.5)
-            axis.text(0.5 * (a + b), 0.5, label, ha="center", va="center", fontsize=8 if axis is axp else 10,
-                      color="darkred" if bil else "k", clip_on=True)
+            axis.axvspan(
+                a,
+                b,
+                color="tab:red" if bil else ("0.92" if label in (SILENCE, "sil", "sp") else "0.8"),
+                alpha=0.5 if bil else 1.0,
+                ec="k",
+                lw=0.5,
+            )
+            axis.text(
+                0.5 * (a + b),
+                0.5,
+                label,
+                ha="center",
+                va="center",
+                fontsize=8 if axis is axp else 10,
+                color="darkred" if bil else "k",
+                clip_on=True,
+            )
             ax.axvline(a, color="tab:blue" if axis is axw else "0.7", lw=0.8 if axis is axw else 0.4, ls=":")
         axis.set_yticks([])
     axw.set_ylabel("words", rotation=0, ha="right")

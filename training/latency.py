@@ -36,18 +36,30 @@ class DialPoint:
     likelihood_scale: float = 0.2
 
     def as_json(self) -> dict:
-        return {"name": self.name, "tc": self.tc, "window_hops": self.window_hops, "lag": self.lag,
-                "delay_ms": round(self.delay_ms, 2), "likelihood_scale": self.likelihood_scale,
-                "scores": self.scores.as_json()}
+        return {
+            "name": self.name,
+            "tc": self.tc,
+            "window_hops": self.window_hops,
+            "lag": self.lag,
+            "delay_ms": round(self.delay_ms, 2),
+            "likelihood_scale": self.likelihood_scale,
+            "scores": self.scores.as_json(),
+        }
 
 
 MIN_CLOSURE_RATE = 0.9
 """Issue 10's closure goal: with ``likelihood_scales``, a kappa is only chosen if it keeps this share."""
 
 
-def score_dial(models: Sequence[tuple[str, object]], clips: Sequence, *, lags: Sequence[int] = (0,),
-               likelihood_scales: Sequence[float] | None = None, keep_own: Collection[str] = (),
-               progress: Callable | None = None) -> list[DialPoint]:
+def score_dial(
+    models: Sequence[tuple[str, object]],
+    clips: Sequence,
+    *,
+    lags: Sequence[int] = (0,),
+    likelihood_scales: Sequence[float] | None = None,
+    keep_own: Collection[str] = (),
+    progress: Callable | None = None,
+) -> list[DialPoint]:
     """``models``: [(name, AvModel)]; ``clips``: [(name, FaceTrack, bilabial spans)] (e.g.
     :func:`training.reallips.s1_clips`). Every model at every lag -> points sorted by delay.
 
@@ -64,12 +76,21 @@ def score_dial(models: Sequence[tuple[str, object]], clips: Sequence, *, lags: S
     points = []
     for name, m, lag in progress(jobs, desc="dial", unit="setting") if progress else jobs:
         tried = []
-        for kappa in (likelihood_scales if likelihood_scales and name not in keep_own else (m.likelihood_scale,)):
+        for kappa in likelihood_scales if likelihood_scales and name not in keep_own else (m.likelihood_scale,):
             scores, _ = evaluate_lips(replace(m, likelihood_scale=kappa), clips, lag=lag)
             tried.append((scores.closure_rate >= MIN_CLOSURE_RATE, scores.r["mouth_open"], kappa, scores))
         _, _, kappa, scores = max(tried, key=lambda x: x[:2])
-        points.append(DialPoint(name=name, tc=m.frontend.tc, window_hops=float(m.frontend.mfcc.window_hops), lag=lag,
-                                delay_ms=m.algorithmic_delay_ms(lag), scores=scores, likelihood_scale=kappa))
+        points.append(
+            DialPoint(
+                name=name,
+                tc=m.frontend.tc,
+                window_hops=float(m.frontend.mfcc.window_hops),
+                lag=lag,
+                delay_ms=m.algorithmic_delay_ms(lag),
+                scores=scores,
+                likelihood_scale=kappa,
+            )
+        )
     return sorted(points, key=lambda p: (p.delay_ms, p.lag))
 
 
@@ -79,21 +100,28 @@ def dial_markdown(points: Sequence[DialPoint], *, split: str, png_name: str | No
     lines = [DIAL_BEGIN, f"## Latency dial: accuracy against algorithmic delay (GRID s1 {split} split)", ""]
     if note:
         lines += [note, ""]
-    lines += [("delay = (t_c + lag) / 30 s + window (`FrontEndConfig.algorithmic_delay_ms`); kappa = the audio-"
-               "likelihood exponent of the live path; r at lag 0 against the measured lips; closures = share of "
-               "/p b m/ phones where mouth_open reaches the closed pose; nu = std(est) / std(true) for mouth_open."),
-              "",
-              "| model | t_c | window (hops) | lag | delay (ms) | kappa | "
-              + " | ".join(f"r {short[p]}" for p in VISUAL_PARAMS) + " | closures | nu mo |",
-              "|---|---:|---:|---:|---:|---:|" + "---:|" * len(VISUAL_PARAMS) + "---:|---:|"]
+    lines += [
+        (
+            "delay = (t_c + lag) / 30 s + window (`FrontEndConfig.algorithmic_delay_ms`); kappa = the audio-"
+            "likelihood exponent of the live path; r at lag 0 against the measured lips; closures = share of "
+            "/p b m/ phones where mouth_open reaches the closed pose; nu = std(est) / std(true) for mouth_open."
+        ),
+        "",
+        "| model | t_c | window (hops) | lag | delay (ms) | kappa | "
+        + " | ".join(f"r {short[p]}" for p in VISUAL_PARAMS)
+        + " | closures | nu mo |",
+        "|---|---:|---:|---:|---:|---:|" + "---:|" * len(VISUAL_PARAMS) + "---:|---:|",
+    ]
     for p in points:
         s = p.scores
-        lines.append(f"| {p.name} | {p.tc} | {p.window_hops:g} | {p.lag} | {p.delay_ms:.1f} | {p.likelihood_scale:g} | "
-                     + " | ".join(f"{s.r[q]:.3f}" for q in VISUAL_PARAMS)
-                     + f" | {s.closure_rate:.0%} of {s.n_closures} | {s.nu['mouth_open']:.2f} |")
+        lines.append(
+            f"| {p.name} | {p.tc} | {p.window_hops:g} | {p.lag} | {p.delay_ms:.1f} | {p.likelihood_scale:g} | "
+            + " | ".join(f"{s.r[q]:.3f}" for q in VISUAL_PARAMS)
+            + f" | {s.closure_rate:.0%} of {s.n_closures} | {s.nu['mouth_open']:.2f} |"
+        )
     if png_name:
         lines += ["", f"![latency dial]({png_name})"]
-    return "\n".join(lines + [DIAL_END]) + "\n"
+    return "\n".join([*lines, DIAL_END]) + "\n"
 
 
 def splice_dial_section(doc: str, section: str | None) -> str:
@@ -113,8 +141,9 @@ def existing_dial_section(doc: str) -> str | None:
     return m.group(0) if m else None
 
 
-def plot_dial(points: Sequence[DialPoint], png: Path, *, title: str,
-              shipped: Collection[str] = ("default", "low-latency")) -> Path:
+def plot_dial(
+    points: Sequence[DialPoint], png: Path, *, title: str, shipped: Collection[str] = ("default", "low-latency")
+) -> Path:
     """PNG, two panels against the algorithmic delay: r per parameter (mouth_open labelled with
     t_c / window / lag, its best-so-far frontier as a step line, shipped models ringed) and the
     share of closures reached (with the 90 % goal)."""
@@ -126,8 +155,11 @@ def plot_dial(points: Sequence[DialPoint], png: Path, *, title: str,
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
     xs = [p.delay_ms for p in points]
     mo = [p.scores.r["mouth_open"] for p in points]
-    for name, marker, color in (("lip_stretch", "s", "tab:green"), ("upper_lip_raise", "^", "tab:purple"),
-                                ("lip_corner_depress", "v", "tab:brown")):
+    for name, marker, color in (
+        ("lip_stretch", "s", "tab:green"),
+        ("upper_lip_raise", "^", "tab:purple"),
+        ("lip_corner_depress", "v", "tab:brown"),
+    ):
         ax.plot(xs, [p.scores.r[name] for p in points], marker, color=color, ms=4, alpha=0.7, label=f"r({name})")
     ax.plot(xs, mo, "o", color="tab:red", label="r(mouth_open)")
     best, frontier = -1.0, []
@@ -139,9 +171,14 @@ def plot_dial(points: Sequence[DialPoint], png: Path, *, title: str,
         ring = p.name in shipped and p.lag == 0
         if ring:
             ax.plot(p.delay_ms, p.scores.r["mouth_open"], "o", mfc="none", mec="black", ms=11)
-        ax.annotate(f"{p.tc}/{p.window_hops:g}/{p.lag}" + (f" {p.name}" if ring else ""),
-                    (p.delay_ms, p.scores.r["mouth_open"]), textcoords="offset points", xytext=(4, -10 if p.lag else 4),
-                    fontsize=7, fontweight="bold" if ring else "normal")
+        ax.annotate(
+            f"{p.tc}/{p.window_hops:g}/{p.lag}" + (f" {p.name}" if ring else ""),
+            (p.delay_ms, p.scores.r["mouth_open"]),
+            textcoords="offset points",
+            xytext=(4, -10 if p.lag else 4),
+            fontsize=7,
+            fontweight="bold" if ring else "normal",
+        )
     for a in (ax, bx):
         a.axvline(80, color="grey", ls=":", lw=1)
     ax.set_ylabel("r against measured lips (lag 0)")

@@ -54,7 +54,6 @@ utterance of ``d`` seconds has ``n = ceil(d * 30)`` frames (frame 0 at t = 0).
 
 from __future__ import annotations
 
-
 import math
 
 import numpy as np
@@ -92,5 +91,3 @@ def n_frames_for(duration_s: float) -> int:
 def frame_times(n_frames: int) -> np.ndarray:
     """Times of frames 0..n-1 in seconds, shape (n_frames,), float64: ``k / 30``."""
     return np.arange(n_frames, dtype=np.float64) / FPS
-
-

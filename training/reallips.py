@@ -21,14 +21,16 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from assets.grid import Split, read_words, sentences
 from realtime_core import VISUAL_PARAMS
+from realtime_core.features import loudness_db
 from training.augment import AugmentConfig, augment
 from training.corpus import Utterance
 from training.errors import ConfigError, FileProblem
-from assets.grid import Split, read_words, sentences
 from training.params import FPS, n_frames_for
 
 MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
@@ -36,8 +38,16 @@ MOUTH_OPEN = VISUAL_PARAMS.index("mouth_open")
 # Where the bilabial sits in each GRID word that has one ("initial": /b p/ opening the word,
 # "final": /m/ ending it): bin, blue, by, place, please, and the letters b ("bee"), p ("pee"),
 # m ("em"). No other GRID word (commands, colours, prepositions, letters, digits, adverbs) has one.
-GRID_BILABIALS: dict[str, str] = {"bin": "initial", "blue": "initial", "by": "initial", "place": "initial",
-                                  "please": "initial", "b": "initial", "p": "initial", "m": "final"}
+GRID_BILABIALS: dict[str, str] = {
+    "bin": "initial",
+    "blue": "initial",
+    "by": "initial",
+    "place": "initial",
+    "please": "initial",
+    "b": "initial",
+    "p": "initial",
+    "m": "final",
+}
 CLOSURE_S = 0.10
 """Length of the span searched for a closure at a bilabial word's start (or end for /m/): a stop
 closure lasts 50-120 ms and the alignment's word boundary falls within a frame of it."""
@@ -58,12 +68,27 @@ def bilabial_spans(words: Sequence[tuple[float, float, str]]) -> list[tuple[floa
 # --------------------------------------------------------------------------- training data
 def track_to_utterance(track, *, utt_id: str, speaker_group: str = "grid:s1") -> Utterance:
     """A :class:`FaceTrack` as a corpus utterance (source "video")."""
-    return Utterance(id=utt_id, samples=track.samples, sample_rate_hz=track.sample_rate_hz, params=track.params,
-                     phonemes=(), voice=speaker_group, language="en", source="video", speaker_group=speaker_group)
+    return Utterance(
+        id=utt_id,
+        samples=track.samples,
+        sample_rate_hz=track.sample_rate_hz,
+        params=track.params,
+        phonemes=(),
+        voice=speaker_group,
+        language="en",
+        source="video",
+        speaker_group=speaker_group,
+    )
 
 
-def grid_tracks(split: Split | None, *, root: str | Path | None = None, cache_dir: str | Path | None = None,
-                progress: Callable | None = None, log: Callable[[str], None] | None = None) -> list:
+def grid_tracks(
+    split: Split | None,
+    *,
+    root: str | Path | None = None,
+    cache_dir: str | Path | None = None,
+    progress: Callable | None = None,
+    log: Callable[[str], None] | None = None,
+) -> list:
     """``[(GridSentence, FaceTrack)]`` of a split (None = all), from the cache (extracting what is
     missing, one process). A sentence that cannot be measured is skipped with one line (``log``)."""
     from training.video import load_face_track
@@ -100,19 +125,39 @@ def speed_perturb(utt: Utterance, factor: float) -> Utterance:
     t_src = np.arange(len(utt.params)) / FPS
     t_new = np.minimum(np.arange(n) * down / up / FPS, t_src[-1])
     params = np.stack([np.interp(t_new, t_src, utt.params[:, j]) for j in range(utt.params.shape[1])], axis=1)
-    return Utterance(id=f"{utt.id}-speed{factor:g}", samples=audio, sample_rate_hz=utt.sample_rate_hz,
-                     params=params, phonemes=(), voice=utt.voice, language=utt.language, source=utt.source,
-                     speaker_group=f"{utt.speaker_group}-speed{factor:g}")
+    return Utterance(
+        id=f"{utt.id}-speed{factor:g}",
+        samples=audio,
+        sample_rate_hz=utt.sample_rate_hz,
+        params=params,
+        phonemes=(),
+        voice=utt.voice,
+        language=utt.language,
+        source=utt.source,
+        speaker_group=f"{utt.speaker_group}-speed{factor:g}",
+    )
 
 
 def microphone_copy(utt: Utterance, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Utterance:
     """``utt`` through :func:`training.augment.augment` (noise, reverberation, level, rate)."""
     aug = augment(utt.samples, utt.sample_rate_hz, rng, config)
     n = n_frames_for(len(aug.samples) / aug.sample_rate_hz)
-    params = utt.params[:n] if len(utt.params) >= n else np.vstack([utt.params, np.repeat(utt.params[-1:], n - len(utt.params), 0)])
-    return Utterance(id=f"{utt.id}-mic", samples=aug.samples, sample_rate_hz=aug.sample_rate_hz, params=params,
-                     phonemes=(), voice=utt.voice, language=utt.language, source=utt.source,
-                     speaker_group=utt.speaker_group)
+    params = (
+        utt.params[:n]
+        if len(utt.params) >= n
+        else np.vstack([utt.params, np.repeat(utt.params[-1:], n - len(utt.params), 0)])
+    )
+    return Utterance(
+        id=f"{utt.id}-mic",
+        samples=aug.samples,
+        sample_rate_hz=aug.sample_rate_hz,
+        params=params,
+        phonemes=(),
+        voice=utt.voice,
+        language=utt.language,
+        source=utt.source,
+        speaker_group=utt.speaker_group,
+    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -150,12 +195,6 @@ def add_variety(utts: Sequence[Utterance], variety: Variety) -> list[Utterance]:
 
 
 # --------------------------------------------------------------------------- scores
-def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
-    from training.evaluation import loudness_db as _loud
-
-    return _loud(samples, rate_hz, n_frames)
-
-
 def _lagged_r(truth: np.ndarray, est: np.ndarray, lag: int) -> float:
     a, b = (truth[: len(truth) - lag], est[lag:]) if lag >= 0 else (truth[-lag:], est[: len(est) + lag])
     if len(a) < 3 or a.std() == 0 or b.std() == 0:
@@ -188,14 +227,23 @@ class LipScores:
         def rnd(d: dict) -> dict:
             return {k: round(float(v), 4) for k, v in d.items()}
 
-        return {"r": rnd(self.r), "best_lag": self.best_lag, "r_best": rnd(self.r_best), "nu": rnd(self.nu),
-                "closure_rate": round(self.closure_rate, 4), "truth_closure_rate": round(self.truth_closure_rate, 4),
-                "n_closures": self.n_closures, "r_loudness": round(self.r_loudness, 4), "n_frames": self.n_frames,
-                "per_clip": {k: rnd(v) for k, v in self.per_clip.items()}}
+        return {
+            "r": rnd(self.r),
+            "best_lag": self.best_lag,
+            "r_best": rnd(self.r_best),
+            "nu": rnd(self.nu),
+            "closure_rate": round(self.closure_rate, 4),
+            "truth_closure_rate": round(self.truth_closure_rate, 4),
+            "n_closures": self.n_closures,
+            "r_loudness": round(self.r_loudness, 4),
+            "n_frames": self.n_frames,
+            "per_clip": {k: rnd(v) for k, v in self.per_clip.items()},
+        }
 
 
-def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, list]], *,
-               closure_tol_iod: float = 0.01) -> LipScores:
+def score_lips(
+    items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, list]], *, closure_tol_iod: float = 0.01
+) -> LipScores:
     """``items``: (name, truth (T, 4), estimate (T', 4), loudness (T,) dB, bilabial spans [(a, b, w)]).
 
     Tracks are cut to the shorter length; frames of all clips are pooled for r / lags / nu."""
@@ -207,8 +255,10 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
         truths.append(truth)
         ests.append(est)
         louds.append(loud)
-        per_clip[name] = {"r_mouth_open": _lagged_r(truth[:, MOUTH_OPEN], est[:, MOUTH_OPEN], 0),
-                          "r_loudness": _lagged_r(truth[:, MOUTH_OPEN], loud, 0)}
+        per_clip[name] = {
+            "r_mouth_open": _lagged_r(truth[:, MOUTH_OPEN], est[:, MOUTH_OPEN], 0),
+            "r_loudness": _lagged_r(truth[:, MOUTH_OPEN], loud, 0),
+        }
         t = np.arange(T) / FPS
         for a, b, _ in spans:
             sel = (t >= a - 0.5 / FPS) & (t <= b + 0.5 / FPS)
@@ -227,12 +277,21 @@ def score_lips(items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, li
             a = np.concatenate([x[: len(x) - L, j] if L >= 0 else x[-L:, j] for x in truths])
             b = np.concatenate([y[L:, j] if L >= 0 else y[: len(y) + L, j] for y in ests])
             by_lag[L] = float(np.corrcoef(a, b)[0, 1]) if a.std() > 0 and b.std() > 0 else 0.0
-        lag[name] = max(by_lag, key=by_lag.get)
+        lag[name] = max(by_lag, key=by_lag.__getitem__)
         rb[name] = by_lag[lag[name]]
         nu[name] = float(es[:, j].std() / tr[:, j].std()) if tr[:, j].std() > 0 else float("nan")
-    return LipScores(r=r, best_lag=lag, r_best=rb, nu=nu, closure_rate=hits / n if n else float("nan"),
-                     truth_closure_rate=true_hits / n if n else float("nan"), n_closures=n,
-                     r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0), n_frames=len(tr), per_clip=per_clip)
+    return LipScores(
+        r=r,
+        best_lag=lag,
+        r_best=rb,
+        nu=nu,
+        closure_rate=hits / n if n else float("nan"),
+        truth_closure_rate=true_hits / n if n else float("nan"),
+        n_closures=n,
+        r_loudness=_lagged_r(tr[:, MOUTH_OPEN], lo, 0),
+        n_frames=len(tr),
+        per_clip=per_clip,
+    )
 
 
 def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]], *, lag: int = 0) -> list:
@@ -275,8 +334,14 @@ def other_talker_clips(folder: str | Path, *, cache_dir: str | Path | None = Non
     return out
 
 
-def s1_clips(split: Split, *, root: str | Path | None = None, cache_dir: str | Path | None = None,
-             progress: Callable | None = None, phones: dict | None = None) -> list:
+def s1_clips(
+    split: Split,
+    *,
+    root: str | Path | None = None,
+    cache_dir: str | Path | None = None,
+    progress: Callable | None = None,
+    phones: dict | None = None,
+) -> list:
     """``[(sentence_id, FaceTrack, bilabial spans)]`` of a GRID s1 split. The spans are the /p b m/
     phones of the shipped GRID s1 phone labels (``training.grid_phones``; ``phones`` = {id:
     Alignment} to use others), else from the word alignment (:func:`bilabial_spans`)."""
@@ -287,7 +352,7 @@ def s1_clips(split: Split, *, root: str | Path | None = None, cache_dir: str | P
     out = []
     for s, t in grid_tracks(split, root=root, cache_dir=cache_dir, progress=progress):
         al = phones.get(s.sentence_id)
-        spans = (phone_bilabial_spans(al.phones) if al is not None else bilabial_spans(read_words(s.align)))
+        spans = phone_bilabial_spans(al.phones) if al is not None else bilabial_spans(read_words(s.align))
         out.append((s.sentence_id, t, spans))
     return out
 
@@ -297,7 +362,7 @@ def phone_bilabial_spans(phones: Sequence) -> list[tuple[float, float, str]]:
     return [(p.start_s, p.end_s, p.phoneme) for p in phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
 
 
-def evaluate_lips(model, clips: Sequence[tuple[str, object, list]], *, lag: int = 0) -> tuple[LipScores, list]:
+def evaluate_lips(model, clips: Sequence[tuple[str, Any, list]], *, lag: int = 0) -> tuple[LipScores, list]:
     """Score ``model``'s live path (``lag`` frames of smoothing) on ``[(name, FaceTrack, bilabial spans)]``;
     returns the scores and the items."""
     items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips], lag=lag)
@@ -309,12 +374,18 @@ def lips_markdown(title: str, s: LipScores, *, note: str = "", goals: dict | Non
     lines = [f"## {title}", ""]
     if note:
         lines += [note, ""]
-    lines += [f"{len(s.per_clip)} clips, {s.n_frames} frames pooled; loudness baseline r(mouth_open) = "
-              f"{s.r_loudness:.3f}; bilabial closures reached: "
-              + (f"{s.closure_rate:.0%} of {s.n_closures} (the truth track itself: {s.truth_closure_rate:.0%})"
-                 if s.n_closures else "no word alignment, not measured"), "",
-              "| parameter | r (lag 0) | best lag (frames) | r at best lag | nu = std(est)/std(true) |",
-              "|---|---:|---:|---:|---:|"]
+    lines += [
+        f"{len(s.per_clip)} clips, {s.n_frames} frames pooled; loudness baseline r(mouth_open) = "
+        f"{s.r_loudness:.3f}; bilabial closures reached: "
+        + (
+            f"{s.closure_rate:.0%} of {s.n_closures} (the truth track itself: {s.truth_closure_rate:.0%})"
+            if s.n_closures
+            else "no word alignment, not measured"
+        ),
+        "",
+        "| parameter | r (lag 0) | best lag (frames) | r at best lag | nu = std(est)/std(true) |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for p in VISUAL_PARAMS:
         lines.append(f"| {p} | {s.r[p]:.3f} | {s.best_lag[p]:+d} | {s.r_best[p]:.3f} | {s.nu[p]:.2f} |")
     if len(s.per_clip) <= 10:
@@ -391,6 +462,8 @@ def score_real_speech(model, clips: Sequence) -> LipScores:
     """:func:`score_lips` of ``model``'s live path on :func:`real_speech_clips`."""
     from realtime_core.pipeline import speech_to_params
 
-    items = [(n, truth, speech_to_params(model, x, rate), loudness_db(x, rate, len(truth)), spans)
-             for n, x, rate, truth, spans in clips]
+    items = [
+        (n, truth, speech_to_params(model, x, rate), loudness_db(x, rate, len(truth)), spans)
+        for n, x, rate, truth, spans in clips
+    ]
     return score_lips(items)

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from realtime_core import VISUAL_PARAMS
 from assets.files import atomic_write_bytes
+from realtime_core import VISUAL_PARAMS
 
 
 def _figure():

@@ -21,10 +21,10 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.features import CmvnConfig, FrontEndConfig, MfccConfig, extract_features, raw_mfcc_with_level
+from realtime_core.features.resample import resample_audio
 from realtime_core.hmm import AvHmm, TrainConfig, TrainResult, baum_welch, init_model
 from realtime_core.metrics import acc, amse, pearson_per_param
 from realtime_core.pipeline import speech_to_params
-from realtime_core.features.resample import resample_audio
 from training.corpus import Utterance
 from training.errors import ConfigError
 
@@ -37,7 +37,8 @@ caller draws progress and writes checkpoints."""
 class TrainRecipe:
     """sample_rate_hz: model rate (inputs are resampled to it); n_ceps; tc (context);
     window_hops: MFCC analysis window in video hops (with tc it sets the algorithmic delay,
-    :attr:`realtime_core.features.FrontEndConfig.delay_ms`); hmm: Baum-Welch settings (N, M, covariance type, priors, iterations, seed);
+    :meth:`realtime_core.features.FrontEndConfig.algorithmic_delay_ms`); hmm: Baum-Welch settings (N, M,
+    covariance type, priors, iterations, seed);
     energy: use c0 as a feature too; likelihood_scale: the live path's audio-likelihood
     exponent, stored in the model."""
 
@@ -54,17 +55,28 @@ class TrainRecipe:
     def frontend(self) -> FrontEndConfig:
         return FrontEndConfig(
             mfcc=MfccConfig(sample_rate_hz=self.sample_rate_hz, n_ceps=self.n_ceps, window_hops=self.window_hops),
-            cmvn=self.cmvn, tc=self.tc,
+            cmvn=self.cmvn,
+            tc=self.tc,
             energy=self.energy,
         )
 
     def as_json(self) -> dict:
         h = self.hmm
         return {
-            "sample_rate_hz": self.sample_rate_hz, "n_ceps": self.n_ceps, "tc": self.tc, "window_hops": self.window_hops,
-            "energy": self.energy, "n_states": h.n_states, "n_mix": h.n_mix, "covariance_type": h.covariance_type,
-            "n_iter": h.n_iter, "tol": h.tol, "covar_prior_weight": h.covar_prior_weight,
-            "covar_prior_scale": h.covar_prior_scale, "seed": h.seed, "likelihood_scale": self.likelihood_scale,
+            "sample_rate_hz": self.sample_rate_hz,
+            "n_ceps": self.n_ceps,
+            "tc": self.tc,
+            "window_hops": self.window_hops,
+            "energy": self.energy,
+            "n_states": h.n_states,
+            "n_mix": h.n_mix,
+            "covariance_type": h.covariance_type,
+            "n_iter": h.n_iter,
+            "tol": h.tol,
+            "covar_prior_weight": h.covar_prior_weight,
+            "covar_prior_scale": h.covar_prior_scale,
+            "seed": h.seed,
+            "likelihood_scale": self.likelihood_scale,
         }
 
 
@@ -85,8 +97,9 @@ def utterance_audio(utt: Utterance, rate_hz: int) -> np.ndarray:
     return resample_audio(utt.samples, utt.sample_rate_hz, rate_hz)
 
 
-def joint_sequence(audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray,
-                   var: np.ndarray) -> np.ndarray:
+def joint_sequence(
+    audio: np.ndarray, params: np.ndarray, frontend: FrontEndConfig, mean: np.ndarray, var: np.ndarray
+) -> np.ndarray:
     """``(T, Da + 4)`` joint observations of one utterance: ``audio (n,)`` at the model rate and
     its ``params (n_frames, 4)`` (T trimmed to the shorter track)."""
     oa = extract_features(audio, frontend, cmvn_mean=mean, cmvn_var=var)
@@ -101,8 +114,12 @@ def train_av_model(
     on_iteration: IterationFn | None = None,
     start: AvHmm | None = None,
     metadata: dict | None = None,
+    visual_names: tuple[str, ...] = VISUAL_PARAMS,
 ) -> tuple[AvModel, TrainResult]:
-    """Train on ``utterances``. ``start``: resume EM from this HMM instead of k-means."""
+    """Train on ``utterances``. ``start``: resume EM from this HMM instead of k-means.
+
+    visual_names: names of the columns of every ``u.params`` (the four mouth parameters by default;
+    Motion-Unit parameters for the MU models)."""
     if not utterances:
         raise ConfigError("no training utterances")
     fe = recipe.frontend
@@ -110,12 +127,23 @@ def train_av_model(
     mean, var = cmvn_statistics(audio, fe)
     seqs = [joint_sequence(x, u.params, fe, mean, var) for x, u in zip(audio, utterances)]
     hmm0 = start if start is not None else init_model(seqs, n_audio=fe.audio_dim, config=recipe.hmm)
-    meta = {"recipe": recipe.as_json(), "train_utterances": len(utterances),
-            "train_frames": int(sum(len(s) for s in seqs)), **(metadata or {})}
+    meta = {
+        "recipe": recipe.as_json(),
+        "train_utterances": len(utterances),
+        "train_frames": int(sum(len(s) for s in seqs)),
+        **(metadata or {}),
+    }
 
     def wrap(hmm: AvHmm, extra: dict) -> AvModel:
-        return AvModel(hmm=hmm, frontend=fe, cmvn_mean=mean, cmvn_var=var, visual_names=VISUAL_PARAMS,
-                       likelihood_scale=recipe.likelihood_scale, metadata={**meta, **extra})
+        return AvModel(
+            hmm=hmm,
+            frontend=fe,
+            cmvn_mean=mean,
+            cmvn_var=var,
+            visual_names=visual_names,
+            likelihood_scale=recipe.likelihood_scale,
+            metadata={**meta, **extra},
+        )
 
     def progress(it: int, objective: float, hmm: AvHmm) -> None:
         if on_iteration is not None:
@@ -154,5 +182,4 @@ def evaluate(model: AvModel, utterances: Sequence[Utterance], *, mode: str = "st
         tracks.append((u.id, u.params[:T], e[:T]))
     t, e = np.concatenate(truth), np.concatenate(est)
     r = pearson_per_param(t, e)
-    return Evaluation(eps=amse(t, e), rho=acc(t, e), r_per_param=dict(zip(VISUAL_PARAMS, map(float, r))),
-                      tracks=tracks)
+    return Evaluation(eps=amse(t, e), rho=acc(t, e), r_per_param=dict(zip(VISUAL_PARAMS, map(float, r))), tracks=tracks)

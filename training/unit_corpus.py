@@ -47,8 +47,10 @@ BUILD_VERSION = 1
 PhoneRows = Sequence[tuple[str, float, float]]
 """A phone timeline: (ARPAbet label, start_s, end_s) on the recording's clock."""
 
-GRID_CREDIT = ("GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
-               "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0.")
+GRID_CREDIT = (
+    "GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
+    "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0."
+)
 
 
 def track_motion(track: FaceTrack) -> np.ndarray:
@@ -74,8 +76,11 @@ def phone_rows(alignment) -> list[tuple[str, float, float]]:
 def corpus_key(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneRows], config: EmPcaConfig) -> str:
     """Cache key: a hash of everything the corpus derives from."""
     h = hashlib.sha1()
-    h.update(json.dumps({"build": BUILD_VERSION, "extractor": EXTRACTOR_VERSION, "empca": asdict(config)},
-                        sort_keys=True).encode())
+    h.update(
+        json.dumps(
+            {"build": BUILD_VERSION, "extractor": EXTRACTOR_VERSION, "empca": asdict(config)}, sort_keys=True
+        ).encode()
+    )
     for s in sorted(sentences, key=lambda s: s.sentence_id):
         h.update(s.sentence_id.encode())
         h.update(repr([(a, round(b, 6), round(c, 6)) for a, b, c in phone_rows(phones[s.sentence_id])]).encode())
@@ -94,8 +99,9 @@ def is_extracted(video: Path, cache_dir: str | Path | None = None, rate_hz: int 
     return cache_path(Path(cache_dir) if cache_dir is not None else None, file_sha1(video), rate_hz).is_file()
 
 
-def build_stored_corpus(tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, config: EmPcaConfig | None = None,
-                        meta: dict | None = None) -> StoredCorpus:
+def build_stored_corpus(
+    tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, config: EmPcaConfig | None = None, meta: dict | None = None
+) -> StoredCorpus:
     """The corpus of ``[(sentence id, face track, ARPAbet phones)]`` (sans file I/O)."""
     config = config or EmPcaConfig()
     if not tracks:
@@ -125,23 +131,51 @@ def build_stored_corpus(tracks: Sequence[tuple[str, FaceTrack, PhoneRows]], *, c
         neutral.append(track.neutral[list(LOWER_FACE)])
     k = pca.n_components
     corpus = MotionCorpus(
-        sentence_ids=tuple(sid for sid, _, _ in tracks), frames=np.concatenate(frames), frame_offsets=np.array(fo),
-        phone_labels=tuple(labels), phone_visemes=np.array(vis, dtype=np.int16), phone_start_s=np.array(st),
-        phone_end_s=np.array(en), phone_offsets=np.array(po), n_coefficients=k,
+        sentence_ids=tuple(sid for sid, _, _ in tracks),
+        frames=np.concatenate(frames),
+        frame_offsets=np.array(fo),
+        phone_labels=tuple(labels),
+        phone_visemes=np.array(vis, dtype=np.int16),
+        phone_start_s=np.array(st),
+        phone_end_s=np.array(en),
+        phone_offsets=np.array(po),
+        n_coefficients=k,
         dim_names=tuple(f"pc{i + 1}" for i in range(k)) + VISUAL_PARAMS,
     )
-    info = {"n_sentences": corpus.n_sentences, "n_frames": int(fo[-1]), "n_phones": corpus.n_phones,
-            "n_components": k, "explained": float(pca.explained_ratio[-1]), "empca_iterations": pca.iterations,
-            "empca": asdict(config), "extractor": EXTRACTOR_VERSION, "build": BUILD_VERSION, "credit": GRID_CREDIT}
-    return StoredCorpus(corpus=corpus, pca_mean=pca.mean, pca_components=pca.components, pca_variances=pca.variances,
-                        pca_total_variance=pca.total_variance, landmark_indices=np.array(LOWER_FACE),
-                        neutral=np.mean(neutral, axis=0).astype(np.float64), meta={**info, **(meta or {})})
+    info = {
+        "n_sentences": corpus.n_sentences,
+        "n_frames": int(fo[-1]),
+        "n_phones": corpus.n_phones,
+        "n_components": k,
+        "explained": float(pca.explained_ratio[-1]),
+        "empca_iterations": pca.iterations,
+        "empca": asdict(config),
+        "extractor": EXTRACTOR_VERSION,
+        "build": BUILD_VERSION,
+        "credit": GRID_CREDIT,
+    }
+    return StoredCorpus(
+        corpus=corpus,
+        pca_mean=pca.mean,
+        pca_components=pca.components,
+        pca_variances=pca.variances,
+        pca_total_variance=pca.total_variance,
+        landmark_indices=np.array(LOWER_FACE),
+        neutral=np.mean(neutral, axis=0).astype(np.float64),
+        meta={**info, **(meta or {})},
+    )
 
 
-def build_grid_corpus(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneRows], *,
-                      cache_dir: str | Path | None = None, config: EmPcaConfig | None = None,
-                      only_extracted: bool = False, progress: Callable | None = None,
-                      say: Callable[[str], None] = lambda _: None) -> tuple[StoredCorpus, Path]:
+def build_grid_corpus(
+    sentences: Sequence[GridSentence],
+    phones: Mapping[str, PhoneRows],
+    *,
+    cache_dir: str | Path | None = None,
+    config: EmPcaConfig | None = None,
+    only_extracted: bool = False,
+    progress: Callable | None = None,
+    say: Callable[[str], None] = lambda _: None,
+) -> tuple[StoredCorpus, Path]:
     """The unit corpus of ``sentences`` (their face tracks and phones), from the cache if built before.
 
     only_extracted: skip sentences the shared extraction has not cached yet (instead of running
@@ -174,10 +208,19 @@ def build_grid_corpus(sentences: Sequence[GridSentence], phones: Mapping[str, Ph
         rows.append((s.sentence_id, track, phone_rows(phones[s.sentence_id])))
     if bad:
         say(f"unit corpus: {len(bad)} clips refused by the extraction, skipped (first: {bad[0]})")
-    stored = build_stored_corpus(rows, config=config, meta={"skipped_not_extracted": skipped,
-                                                            "skipped_no_phones": missing_phones,
-                                                            "skipped_bad_clips": bad, "key": key})
+    stored = build_stored_corpus(
+        rows,
+        config=config,
+        meta={
+            "skipped_not_extracted": skipped,
+            "skipped_no_phones": missing_phones,
+            "skipped_bad_clips": bad,
+            "key": key,
+        },
+    )
     save_unit_corpus(path, stored)
-    say(f"unit corpus: {stored.corpus.n_sentences} sentences, {stored.corpus.n_phones} phones, "
-        f"{stored.corpus.n_coefficients} PCA components -> {path}")
+    say(
+        f"unit corpus: {stored.corpus.n_sentences} sentences, {stored.corpus.n_phones} phones, "
+        f"{stored.corpus.n_coefficients} PCA components -> {path}"
+    )
     return stored, path

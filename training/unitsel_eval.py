@@ -99,10 +99,16 @@ class SystemScore:
         return {"system": self.name, "r": r, "r_speech_mouth_open": r_speech, "error_pct": err, **self.extra}
 
 
-def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRows]], *, model=None,
-             n_best: Sequence[int] = (1, 10), synthesizer: UnitSynthesizer | None = None,
-             model_label: str = "shipped model",
-             progress: Callable | None = None) -> tuple[list[dict], dict]:
+def evaluate(
+    stored: StoredCorpus,
+    tests: Sequence[tuple[str, FaceTrack, PhoneRows]],
+    *,
+    model=None,
+    n_best: Sequence[int] = (1, 10),
+    synthesizer: UnitSynthesizer | None = None,
+    model_label: str = "shipped model",
+    progress: Callable | None = None,
+) -> tuple[list[dict], dict]:
     """Scores of unit selection (one row per ``n_best``), the HMM (``model``, skipped if None) and the
     rules on ``tests`` = [(sentence id, real face track, real ARPAbet phones)]. Returns (rows,
     curves) where curves holds the first test sentence's measures for the Fig. 8 plot."""
@@ -154,7 +160,10 @@ def evaluate(stored: StoredCorpus, tests: Sequence[tuple[str, FaceTrack, PhoneRo
             curves.update({"sentence": sid, "real": truth_m[-1]})
     rows_out = []
     for sys_, nb in zip(systems, n_best):
-        sys_.extra = {"units_per_sentence": float(np.mean(units[nb])), "synth_ms_median": float(np.median(search_ms[nb]))}
+        sys_.extra = {
+            "units_per_sentence": float(np.mean(units[nb])),
+            "synth_ms_median": float(np.median(search_ms[nb])),
+        }
         rows_out.append(sys_.finish(truth_p, truth_m, speech))
     for other in (hmm, rules):
         if other is not None:
@@ -198,18 +207,23 @@ def markdown(rows: Sequence[dict], *, n_sentences: int, corpus_meta: Mapping, co
     lines = [
         "## Unit selection (text -> visible speech, seed 001) on real lips",
         "",
-        (f"`{command}`. {n_sentences} held-out GRID s1 test sentences (never in the unit corpus); text from the "
-         "sentence id, the real phone timings (GRID phone boundaries), lips measured on the video. Unit corpus: "
-         f"{corpus_meta.get('n_sentences')} train+val sentences, {corpus_meta.get('n_phones')} phones, "
-         f"{corpus_meta.get('n_components')} EM-PCA components ({100 * corpus_meta.get('explained', 0):.1f} % of "
-         "the lower-face landmark variance). r: Pearson, frames of all sentences pooled, whole clips (as the "
-         "real-lips scores); r speech: mouth_open over the speech spans only. Errors: the paper's normalised lip "
-         "height / width / protrusion (each divided by its maximum, mean |difference|, %); for the HMM and the "
-         "rules height and width come from mouth_open and lip_stretch on the clip's neutral face, protrusion has "
-         "no parameter."),
+        (
+            f"`{command}`. {n_sentences} held-out GRID s1 test sentences (never in the unit corpus); text from the "
+            "sentence id, the real phone timings (GRID phone boundaries), lips measured on the video. Unit corpus: "
+            f"{corpus_meta.get('n_sentences')} train+val sentences, {corpus_meta.get('n_phones')} phones, "
+            f"{corpus_meta.get('n_components')} EM-PCA components ({100 * corpus_meta.get('explained', 0):.1f} % of "
+            "the lower-face landmark variance). r: Pearson, frames of all sentences pooled, whole clips (as the "
+            "real-lips scores); r speech: mouth_open over the speech spans only. Errors: the paper's normalised lip "
+            "height / width / protrusion (each divided by its maximum, mean |difference|, %); for the HMM and the "
+            "rules height and width come from mouth_open and lip_stretch on the clip's neutral face, protrusion has "
+            "no parameter."
+        ),
         "",
-        ("| system | r upper_lip_raise | r lip_stretch | r mouth_open | r lip_corner_depress | r speech (mouth_open) "
-         "| height err % | width err % | protrusion err % | units/sentence | synthesis ms (median) |"),
+        (
+            "| system | r upper_lip_raise | r lip_stretch | r mouth_open | r lip_corner_depress "
+            "| r speech (mouth_open) | height err % | width err % | protrusion err % | units/sentence "
+            "| synthesis ms (median) |"
+        ),
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:

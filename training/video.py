@@ -43,7 +43,7 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -51,6 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import SILENCE_PEAK
+from assets.grid import SILENCE_WORDS, align_for_video, read_words
+from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
     ConfigError,
@@ -86,12 +88,23 @@ from training.facetrack import (
     read_raw,
     write_raw,
 )
-from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from training.params import FPS, n_frames_for
 
 __all__ = [
-    "CHEEKS", "EXTRACTOR_VERSION", "JAW", "LIPS_INNER", "LIPS_OUTER", "LOWER_FACE", "ExtractConfig", "ExtractReport",
-    "FaceTrack", "derive_track", "extract_corpus", "load_face_track", "measure_video", "mouth_params",
+    "CHEEKS",
+    "EXTRACTOR_VERSION",
+    "JAW",
+    "LIPS_INNER",
+    "LIPS_OUTER",
+    "LOWER_FACE",
+    "ExtractConfig",
+    "ExtractReport",
+    "FaceTrack",
+    "derive_track",
+    "extract_corpus",
+    "load_face_track",
+    "measure_video",
+    "mouth_params",
 ]
 
 VIDEO_SUFFIXES = (".mp4", ".mpg", ".mpeg", ".webm", ".mov", ".avi", ".mkv")
@@ -152,8 +165,13 @@ class ExtractConfig:
 
 
 # --------------------------------------------------------------------------- ffmpeg
-_DAMAGE = re.compile(r"damaged|corrupt|truncat|incomplete|partial file|error while decoding|invalid nal|"
-                     r"missing picture|concealing|end of file", re.I)
+_DAMAGE = re.compile(
+    r"damaged|corrupt|truncat|incomplete|partial file|error while decoding|invalid nal|"
+    r"missing picture|concealing|end of file",
+    re.I,
+)
+
+
 def _tool(name: str) -> str:
     path = shutil.which(name)
     if path is None:
@@ -163,9 +181,17 @@ def _tool(name: str) -> str:
 
 def probe(path: Path) -> dict:
     """ffprobe's stream list of ``path`` as {"video": {...}|None, "audio": {...}|None}."""
-    cmd = [_tool("ffprobe"), "-v", "error", "-show_entries",
-           "stream=codec_type,width,height,r_frame_rate,avg_frame_rate,start_time,duration,sample_rate,nb_frames"
-           ":format=duration", "-of", "json", str(path)]
+    cmd = [
+        _tool("ffprobe"),
+        "-v",
+        "error",
+        "-show_entries",
+        "stream=codec_type,width,height,r_frame_rate,avg_frame_rate,start_time,duration,sample_rate,nb_frames"
+        ":format=duration",
+        "-of",
+        "json",
+        str(path),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         msg = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"ffprobe exit {proc.returncode}"
@@ -195,24 +221,56 @@ def _rate(s: dict) -> float:
 
 def decode_audio(path: Path, rate_hz: int) -> np.ndarray:
     """(n,) float32 mono audio of a media file at ``rate_hz``."""
-    cmd = [_tool("ffmpeg"), "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", "1", "-ar", str(rate_hz),
-           "-f", "s16le", "-acodec", "pcm_s16le", "pipe:1"]
+    cmd = [
+        _tool("ffmpeg"),
+        "-v",
+        "error",
+        "-nostdin",
+        "-i",
+        str(path),
+        "-vn",
+        "-ac",
+        "1",
+        "-ar",
+        str(rate_hz),
+        "-f",
+        "s16le",
+        "-acodec",
+        "pcm_s16le",
+        "pipe:1",
+    ]
     proc = subprocess.run(cmd, capture_output=True)
     if proc.returncode != 0 or not proc.stdout:
-        raise NotAudioError(path, f"not audio: ffmpeg cannot decode an audio stream ({proc.stderr.decode(errors='replace').strip()[-200:]})")
+        raise NotAudioError(
+            path,
+            f"not audio: ffmpeg cannot decode an audio stream ({proc.stderr.decode(errors='replace').strip()[-200:]})",
+        )
     return np.frombuffer(proc.stdout, "<i2").astype(np.float32) / 32768.0
 
 
 def decode_frames(path: Path, width: int, height: int) -> tuple[np.ndarray, str]:
     """(n_frames, height, width, 3) uint8 RGB frames and ffmpeg's error text (may be empty)."""
-    cmd = [_tool("ffmpeg"), "-v", "error", "-nostdin", "-i", str(path), "-an", "-f", "rawvideo",
-           "-pix_fmt", "rgb24", "-vsync", "passthrough", "pipe:1"]
+    cmd = [
+        _tool("ffmpeg"),
+        "-v",
+        "error",
+        "-nostdin",
+        "-i",
+        str(path),
+        "-an",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-vsync",
+        "passthrough",
+        "pipe:1",
+    ]
     proc = subprocess.run(cmd, capture_output=True)
     size = width * height * 3
     n = len(proc.stdout) // size
     frames = np.frombuffer(proc.stdout[: n * size], np.uint8).reshape(n, height, width, 3)
     return frames, proc.stderr.decode(errors="replace").strip()
-
 
 
 # --------------------------------------------------------------------------- landmarks (MediaPipe)
@@ -231,7 +289,9 @@ class FaceMeshTracker:
                 "facecast extract needs MediaPipe: pip install 'facecast[video]' (mediapipe==0.10.14)"
             ) from exc
         self._mesh = mp.solutions.face_mesh.FaceMesh(
-            static_image_mode=False, max_num_faces=1, refine_landmarks=True,
+            static_image_mode=False,
+            max_num_faces=1,
+            refine_landmarks=True,
             min_detection_confidence=config.min_detection_confidence,
             min_tracking_confidence=config.min_tracking_confidence,
         )
@@ -270,8 +330,9 @@ def file_sha1(path: Path) -> str:
     return h.hexdigest()
 
 
-def measure_raw(path: str | Path, config: ExtractConfig, tracker: FaceMeshTracker, *, sha1: str | None = None,
-                progress=None) -> RawTrack:
+def measure_raw(
+    path: str | Path, config: ExtractConfig, tracker: FaceMeshTracker, *, sha1: str | None = None, progress=None
+) -> RawTrack:
     """Decode one video and track its face: the cached, expensive part (module doc, steps 1-2)."""
     path = Path(path)
     if not path.is_file():
@@ -307,31 +368,27 @@ def measure_raw(path: str | Path, config: ExtractConfig, tracker: FaceMeshTracke
     times = start_v - start_a + np.arange(len(frames)) / fps
     audio_s, video_s = len(samples) / config.audio_rate_hz, times[-1] + 1.0 / fps
     if abs(audio_s - video_s) > config.max_av_mismatch_s:
-        raise LengthMismatchError(path, f"audio ({audio_s:.2f} s) and video ({video_s:.2f} s) differ in length by "
-                                        f"more than {config.max_av_mismatch_s} s")
+        raise LengthMismatchError(
+            path,
+            f"audio ({audio_s:.2f} s) and video ({video_s:.2f} s) differ in length by "
+            f"more than {config.max_av_mismatch_s} s",
+        )
     lms = tracker.track(frames, progress=progress)
     pcm = np.clip(np.round(samples * 32768.0), -32768, 32767).astype(np.int16)
-    return RawTrack(source=path, sha1=sha1 or file_sha1(path), samples=pcm, sample_rate_hz=config.audio_rate_hz,
-                    video_landmarks=lms, video_times_s=times, video_fps=fps, width=width, height=height)
+    return RawTrack(
+        source=path,
+        sha1=sha1 or file_sha1(path),
+        samples=pcm,
+        sample_rate_hz=config.audio_rate_hz,
+        video_landmarks=lms,
+        video_times_s=times,
+        video_fps=fps,
+        width=width,
+        height=height,
+    )
 
 
 # --------------------------------------------------------------------------- geometry
-def similarity_fit(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-    """Least-squares s, R, t with ``s * src @ R.T + t ~= dst`` (Umeyama 1991).
-
-    src, dst: (k, 3) corresponding points. Returns scale s, rotation R (3, 3), translation (3,).
-    """
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    a, b = src - mu_s, dst - mu_d
-    u, sig, vt = np.linalg.svd(b.T @ a / len(src))
-    d = np.ones(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # no reflections
-        d[-1] = -1.0
-    r = u @ np.diag(d) @ vt
-    s = float((sig * d).sum() / max((a**2).sum() / len(src), 1e-12))
-    return s, r, mu_d - s * (r @ mu_s)
-
-
 def remove_head_pose(landmarks: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, float, np.ndarray]:
     """Align every frame's face to the clip's Procrustes-mean face, in the face frame, IOD units.
 
@@ -439,7 +496,9 @@ def frame_energy_db(samples: np.ndarray, rate_hz: int, n_frames: int, window_s: 
     return out
 
 
-def rest_frames(n_frames: int, words: Words | None, level_db: np.ndarray, config: ExtractConfig) -> tuple[np.ndarray, str]:
+def rest_frames(
+    n_frames: int, words: Words | None, level_db: np.ndarray, config: ExtractConfig
+) -> tuple[np.ndarray, str]:
     """(n_frames,) bool rest mask and how it was found ("silence" from the alignment, "quiet" from
     the audio level); see the module doc, step 6."""
     t = np.arange(n_frames) / FPS
@@ -457,12 +516,15 @@ def rest_frames(n_frames: int, words: Words | None, level_db: np.ndarray, config
                 hi = b - config.rest_margin_s
             rest |= (t >= lo) & (t < hi)
         return rest, "silence"
-    quiet = (level_db <= np.quantile(level_db, config.quiet_quantile)) & (level_db <= level_db.max() - config.quiet_below_db)
+    quiet = (level_db <= np.quantile(level_db, config.quiet_quantile)) & (
+        level_db <= level_db.max() - config.quiet_below_db
+    )
     return quiet, "quiet"
 
 
-def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfig = ExtractConfig(),
-                 *, alignment: Path | None = None) -> FaceTrack:
+def derive_track(
+    raw: RawTrack, words: Words | None = None, config: ExtractConfig = ExtractConfig(), *, alignment: Path | None = None
+) -> FaceTrack:
     """A :class:`FaceTrack` from the cached raw measurement (module doc, steps 3-7).
 
     words: the clip's word alignment [(start_s, end_s, word)] (``sil``/``sp`` = silence) or None.
@@ -484,11 +546,15 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
     if longest_gap_s > config.max_gap_s:
         k_end = int(np.argmax(runs))
         t0 = raw.video_times_s[k_end - max(runs) + 1]
-        raise NoFaceError(path, f"face lost for {longest_gap_s:.2f} s from {t0:.2f} s "
-                                f"(longest allowed gap {config.max_gap_s} s)")
+        raise NoFaceError(
+            path, f"face lost for {longest_gap_s:.2f} s from {t0:.2f} s (longest allowed gap {config.max_gap_s} s)"
+        )
     if fraction < config.min_face_fraction:
-        raise NoFaceError(path, f"no face found in {int((~found_v).sum())} of {n_v} frames "
-                                f"(need a face in at least {config.min_face_fraction:.0%})")
+        raise NoFaceError(
+            path,
+            f"no face found in {int((~found_v).sum())} of {n_v} frames "
+            f"(need a face in at least {config.min_face_fraction:.0%})",
+        )
     face_v, iod_px, residual = remove_head_pose(_fill_gaps(lms, found_v))
     # tracking jumps: the lower face moving implausibly far between consecutive tracked frames
     step = np.median(np.linalg.norm(np.diff(face_v[:, list(LOWER_FACE)], axis=0), axis=2), axis=1)
@@ -516,24 +582,44 @@ def derive_track(raw: RawTrack, words: Words | None = None, config: ExtractConfi
     params = mouth_params(landmarks, neutral, closed_gap=closed)
     width_rest = float(np.linalg.norm(neutral[MOUTH_CORNERS[0]] - neutral[MOUTH_CORNERS[1]]))
     quality = {
-        "file": str(path), "sha1": raw.sha1, "extractor_version": raw.extractor_version,
-        "video_fps": raw.video_fps, "n_video_frames": n_v, "n_frames_30fps": n_out,
+        "file": str(path),
+        "sha1": raw.sha1,
+        "extractor_version": raw.extractor_version,
+        "video_fps": raw.video_fps,
+        "n_video_frames": n_v,
+        "n_frames_30fps": n_out,
         "audio_s": round(len(samples) / raw.sample_rate_hz, 4),
         "video_s": round(float(raw.video_times_s[-1] + 1 / raw.video_fps) if n_v else 0.0, 4),
-        "face_found_fraction": round(fraction, 4), "longest_gap_s": round(longest_gap_s, 3),
-        "tracking_jumps": jumps, "max_lower_face_step_iod": round(float(step.max(initial=0.0)), 4),
+        "face_found_fraction": round(fraction, 4),
+        "longest_gap_s": round(longest_gap_s, 3),
+        "tracking_jumps": jumps,
+        "max_lower_face_step_iod": round(float(step.max(initial=0.0)), 4),
         "pose_residual_iod_median": round(float(np.median(residual)), 5),
-        "pose_residual_iod_max": round(float(residual.max()), 5), "iod_px": round(iod_px, 3),
+        "pose_residual_iod_max": round(float(residual.max()), 5),
+        "iod_px": round(iod_px, 3),
         "alignment": str(alignment) if alignment else None,
-        "neutral": {"method": method, "n_frames": int(rest.sum()), "lip_gap_iod": round(gap_rest, 4),
-                    "mouth_width_iod": round(width_rest, 4), "closed_lip_gap_iod": round(closed, 4),
-                    "mouth_open_at_rest": round(gap_rest - closed, 4)},
+        "neutral": {
+            "method": method,
+            "n_frames": int(rest.sum()),
+            "lip_gap_iod": round(gap_rest, 4),
+            "mouth_width_iod": round(width_rest, 4),
+            "closed_lip_gap_iod": round(closed, 4),
+            "mouth_open_at_rest": round(gap_rest - closed, 4),
+        },
         "params_min": [round(float(v), 4) for v in params.min(axis=0)],
         "params_max": [round(float(v), 4) for v in params.max(axis=0)],
     }
-    return FaceTrack(source=path, samples=samples, sample_rate_hz=raw.sample_rate_hz, landmarks=landmarks,
-                     neutral=neutral, params=params, face_found=face_found, closed_gap_iod=closed,
-                     quality=quality)
+    return FaceTrack(
+        source=path,
+        samples=samples,
+        sample_rate_hz=raw.sample_rate_hz,
+        landmarks=landmarks,
+        neutral=neutral,
+        params=params,
+        face_found=face_found,
+        closed_gap_iod=closed,
+        quality=quality,
+    )
 
 
 # --------------------------------------------------------------------------- one clip, cached
@@ -572,9 +658,14 @@ def _cached_raw(video: Path, config: ExtractConfig, cache_dir: Path | None, *, p
     return raw, False
 
 
-def load_face_track(path_or_video: str | Path, *, cache_dir: str | Path | None = None,
-                    config: ExtractConfig = ExtractConfig(), words: Words | None = None,
-                    require_alignment: bool = False) -> FaceTrack:
+def load_face_track(
+    path_or_video: str | Path,
+    *,
+    cache_dir: str | Path | None = None,
+    config: ExtractConfig = ExtractConfig(),
+    words: Words | None = None,
+    require_alignment: bool = False,
+) -> FaceTrack:
     """The :class:`FaceTrack` of a video (or of a cache ``.npz``), measuring it if not cached.
 
     cache_dir: default ``$FACECAST_CACHE`` or ``~/.cache/facecast``. words: the word alignment;
@@ -593,8 +684,9 @@ def load_face_track(path_or_video: str | Path, *, cache_dir: str | Path | None =
     return derive_track(raw, words, config, alignment=align)
 
 
-def measure_video(path: str | Path, config: ExtractConfig = ExtractConfig(), *, cache_dir: str | Path | None = None
-                  ) -> FaceTrack:
+def measure_video(
+    path: str | Path, config: ExtractConfig = ExtractConfig(), *, cache_dir: str | Path | None = None
+) -> FaceTrack:
     """The :class:`FaceTrack` of one video (cached); the same as :func:`load_face_track`."""
     return load_face_track(path, cache_dir=cache_dir, config=config)
 
@@ -620,16 +712,29 @@ class ExtractReport:
             agg = {
                 "face_found_fraction_min": min(c["face_found_fraction"] for c in q),
                 "clips_with_jumps": sum(c["tracking_jumps"] > 0 for c in q),
-                "neutral_methods": {m: sum(c["neutral"]["method"] == m for c in q)
-                                    for m in sorted({c["neutral"]["method"] for c in q})},
+                "neutral_methods": {
+                    m: sum(c["neutral"]["method"] == m for c in q) for m in sorted({c["neutral"]["method"] for c in q})
+                },
                 "neutral_lip_gap_iod_median": round(float(np.median([c["neutral"]["lip_gap_iod"] for c in q])), 4),
-                "neutral_mouth_width_iod_median": round(float(np.median([c["neutral"]["mouth_width_iod"] for c in q])), 4),
+                "neutral_mouth_width_iod_median": round(
+                    float(np.median([c["neutral"]["mouth_width_iod"] for c in q])), 4
+                ),
                 "iod_px_median": round(float(np.median([c["iod_px"] for c in q])), 2),
             }
-        return {"extractor_version": EXTRACTOR_VERSION, "cache_dir": self.cache_dir, "workers": self.workers,
-                "n_videos": len(self.clips) + len(self.skipped), "n_ok": len(self.clips),
-                "n_skipped": len(self.skipped), "n_extracted": self.n_extracted, "n_cached": self.n_cached,
-                "seconds": round(self.seconds, 2), "summary": agg, "skipped": self.skipped, "clips": self.clips}
+        return {
+            "extractor_version": EXTRACTOR_VERSION,
+            "cache_dir": self.cache_dir,
+            "workers": self.workers,
+            "n_videos": len(self.clips) + len(self.skipped),
+            "n_ok": len(self.clips),
+            "n_skipped": len(self.skipped),
+            "n_extracted": self.n_extracted,
+            "n_cached": self.n_cached,
+            "seconds": round(self.seconds, 2),
+            "summary": agg,
+            "skipped": self.skipped,
+            "clips": self.clips,
+        }
 
 
 def _work(job: tuple[str, ExtractConfig, str | None, bool]) -> dict:
@@ -646,8 +751,12 @@ def _work(job: tuple[str, ExtractConfig, str | None, bool]) -> dict:
         return {"file": video, "status": "skipped", "reason": exc.problem}
     except OSError as exc:
         return {"file": video, "status": "skipped", "reason": f"cannot be read ({exc})"}
-    return {"file": video, "status": "cached" if cached else "extracted", "quality": track.quality,
-            "seconds": round(time.perf_counter() - t0, 3)}
+    return {
+        "file": video,
+        "status": "cached" if cached else "extracted",
+        "quality": track.quality,
+        "seconds": round(time.perf_counter() - t0, 3),
+    }
 
 
 def _init_worker() -> None:
@@ -672,9 +781,16 @@ def find_videos(inputs: Sequence[str | Path]) -> list[Path]:
     return sorted(out)
 
 
-def extract_corpus(videos: Sequence[str | Path], *, cache_dir: str | Path | None = None, workers: int = 2,
-                   config: ExtractConfig = ExtractConfig(), require_alignment: bool = False,
-                   progress: Callable | None = None, log: Callable[[str], None] | None = None) -> ExtractReport:
+def extract_corpus(
+    videos: Sequence[str | Path],
+    *,
+    cache_dir: str | Path | None = None,
+    workers: int = 2,
+    config: ExtractConfig = ExtractConfig(),
+    require_alignment: bool = False,
+    progress: Callable | None = None,
+    log: Callable[[str], None] | None = None,
+) -> ExtractReport:
     """Measure every video into the cache, ``workers`` processes in parallel (one MediaPipe graph
     each); clips already cached cost a hash and a load. A bad clip is skipped with one line
     (``log``) naming it and the reason, and counted; it never aborts the run."""
@@ -686,7 +802,7 @@ def extract_corpus(videos: Sequence[str | Path], *, cache_dir: str | Path | None
     t0 = time.perf_counter()
     results = []
     if workers <= 1 or len(jobs) <= 1:
-        it = map(_work, jobs)
+        it: Iterator[dict] = map(_work, jobs)
         results = _collect(wrap(it, total=len(jobs), desc="extract", unit="clip"), say)
     else:
         ctx = multiprocessing.get_context("spawn")  # MediaPipe's graph threads do not survive fork
@@ -694,12 +810,19 @@ def extract_corpus(videos: Sequence[str | Path], *, cache_dir: str | Path | None
             it = pool.imap_unordered(_work, jobs, chunksize=1)
             results = _collect(wrap(it, total=len(jobs), desc="extract", unit="clip"), say)
     ok = sorted((r for r in results if r["status"] != "skipped"), key=lambda r: r["file"])
-    skipped = sorted(({"file": r["file"], "reason": r["reason"]} for r in results if r["status"] == "skipped"),
-                     key=lambda r: r["file"])
-    return ExtractReport(clips=[r["quality"] for r in ok], skipped=skipped,
-                         n_extracted=sum(r["status"] == "extracted" for r in ok),
-                         n_cached=sum(r["status"] == "cached" for r in ok),
-                         seconds=time.perf_counter() - t0, workers=workers, cache_dir=cdir)
+    skipped = sorted(
+        ({"file": r["file"], "reason": r["reason"]} for r in results if r["status"] == "skipped"),
+        key=lambda r: r["file"],
+    )
+    return ExtractReport(
+        clips=[r["quality"] for r in ok],
+        skipped=skipped,
+        n_extracted=sum(r["status"] == "extracted" for r in ok),
+        n_cached=sum(r["status"] == "cached" for r in ok),
+        seconds=time.perf_counter() - t0,
+        workers=workers,
+        cache_dir=cdir,
+    )
 
 
 def _collect(results, say: Callable[[str], None]) -> list[dict]:
@@ -736,15 +859,29 @@ def write_track_corpus(tracks: Sequence[FaceTrack], out_dir: Path, *, language: 
     for track in tracks:
         video = Path(track.source)
         uid = f"video-{video.stem}"
-        extra = {"origin": video.name, "face_found_fraction": track.quality.get("face_found_fraction"),
-                 "iod_px": track.quality.get("iod_px")}
+        extra = {
+            "origin": video.name,
+            "face_found_fraction": track.quality.get("face_found_fraction"),
+            "iod_px": track.quality.get("iod_px"),
+        }
         split = grid_split_of(video)
         if split is not None:
             extra["grid_split"] = split
-        entries.append(write_utterance(
-            out_dir, utt_id=uid, samples=track.samples, sample_rate_hz=track.sample_rate_hz, params=track.params,
-            phonemes=(), language=language, voice=f"video:{video.stem}", source="video",
-            speaker_group=f"video:{video.stem}", extra=extra))
+        entries.append(
+            write_utterance(
+                out_dir,
+                utt_id=uid,
+                samples=track.samples,
+                sample_rate_hz=track.sample_rate_hz,
+                params=track.params,
+                phonemes=(),
+                language=language,
+                voice=f"video:{video.stem}",
+                source="video",
+                speaker_group=f"video:{video.stem}",
+                extra=extra,
+            )
+        )
     return write_manifest(Path(out_dir), entries, seed=None)
 
 
@@ -783,16 +920,30 @@ def save_plot(track: FaceTrack, png: Path, words: Words | None = None) -> Path:
             ax.axvspan(a0, a1, color="grey", alpha=0.1)
             continue
         bil = any(c in w.lower() for c in "pbm")
-        ax.text(0.5 * (a0 + a1), ax.get_ylim()[1] * 0.92, w, ha="center", fontsize=9,
-                color="tab:red" if bil else "black", weight="bold" if bil else "normal")
+        ax.text(
+            0.5 * (a0 + a1),
+            ax.get_ylim()[1] * 0.92,
+            w,
+            ha="center",
+            fontsize=9,
+            color="tab:red" if bil else "black",
+            weight="bold" if bil else "normal",
+        )
     q = track.quality
-    ax.set_title(f"{Path(track.source).name}: face in {q.get('face_found_fraction', 0):.0%} of frames, "
-                 f"{q.get('tracking_jumps', 0)} jumps, neutral from {q.get('neutral', {}).get('method')} "
-                 f"({q.get('neutral', {}).get('n_frames')} frames)", fontsize=9)
+    ax.set_title(
+        f"{Path(track.source).name}: face in {q.get('face_found_fraction', 0):.0%} of frames, "
+        f"{q.get('tracking_jumps', 0)} jumps, neutral from {q.get('neutral', {}).get('method')} "
+        f"({q.get('neutral', {}).get('n_frames')} frames)",
+        fontsize=9,
+    )
     nf = track.neutral
     ax3.plot(nf[:, 0], nf[:, 1], ".", ms=1.5, color="lightgrey")
-    for group, col, name in ((JAW, "tab:brown", "jaw"), (CHEEKS, "tab:olive", "cheeks"),
-                             (LIPS_OUTER, "tab:red", "lips outer"), (LIPS_INNER, "tab:pink", "lips inner")):
+    for group, col, name in (
+        (JAW, "tab:brown", "jaw"),
+        (CHEEKS, "tab:olive", "cheeks"),
+        (LIPS_OUTER, "tab:red", "lips outer"),
+        (LIPS_INNER, "tab:pink", "lips inner"),
+    ):
         ax3.plot(nf[list(group), 0], nf[list(group), 1], "o", ms=3, color=col, label=name)
     ax3.invert_yaxis()
     ax3.set_aspect("equal")

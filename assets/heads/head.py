@@ -44,11 +44,13 @@ class Head:
 
     def __post_init__(self) -> None:
         if len(self.mesh.vertices) != len(self.rig.neutral):
-            raise MeshError(f"{self.mesh.name}: mesh has {len(self.mesh.vertices)} vertices, its rig {len(self.rig.neutral)}")
+            raise MeshError(
+                f"{self.mesh.name}: mesh has {len(self.mesh.vertices)} vertices, its rig {len(self.rig.neutral)}"
+            )
 
     @property
     def kind(self) -> str:
-        """"morph" (own targets) or "retarget" (Sec. 5 rig)."""
+        """ "morph" (own targets) or "retarget" (Sec. 5 rig)."""
         return "morph" if isinstance(self.rig, MorphRig) else "retarget"
 
     def __iter__(self):
@@ -61,9 +63,17 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
     from assets.heads.targets import morph_rig
 
     b = load_builtin_head(cache)
-    mesh = HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, uvs=b.mesh.uvs, texture=b.mesh.texture,
-                    colors=b.mesh.colors, name="builtin", targets=dict(b.targets), part=b.part.astype("int16"),
-                    part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"))
+    mesh = HeadMesh(
+        vertices=b.mesh.vertices,
+        triangles=b.mesh.triangles,
+        uvs=b.mesh.uvs,
+        texture=b.mesh.texture,
+        colors=b.mesh.colors,
+        name="builtin",
+        targets=dict(b.targets),
+        part=b.part.astype("int16"),
+        part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
+    )
     rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets)
     assert rig is not None  # the reference reproduces itself
     lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
@@ -105,8 +115,10 @@ def resolve_head(
     if p.suffix.lower() not in MESH_SUFFIXES:
         if not p.exists():
             raise MeshError(f"{p}: head not found (give 'builtin', a rig .npz or a mesh {', '.join(MESH_SUFFIXES)})")
-        raise MeshError(f"{p}: unsupported head file {p.suffix!r}; give 'builtin', a rig .npz or a mesh "
-                        f"({', '.join(MESH_SUFFIXES)})")
+        raise MeshError(
+            f"{p}: unsupported head file {p.suffix!r}; give 'builtin', a rig .npz or a mesh "
+            f"({', '.join(MESH_SUFFIXES)})"
+        )
     from assets.heads.mesh import load_mesh
 
     mesh = load_mesh(p, cache=cache)
@@ -116,13 +128,16 @@ def resolve_head(
             return head
         if mode == "morph":
             n = len(mesh.targets or {})
-            raise MeshError(f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
-                            "give a mapping with --target-map or use --head-mode retarget")
+            raise MeshError(
+                f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
+                "give a mapping with --target-map or use --head-mode retarget"
+            )
     return _rig_mesh(mesh, landmarks, config, landmark_finder)
 
 
-def morph_head(mesh: HeadMesh, *, target_map: str | Path | None = None, cache: Path | None = None,
-               require_enough: bool = True) -> Head | None:
+def morph_head(
+    mesh: HeadMesh, *, target_map: str | Path | None = None, cache: Path | None = None, require_enough: bool = True
+) -> Head | None:
     """The mesh driven by its own targets, or None (no targets / not enough mouth targets)."""
     from assets.heads.builtin import load_builtin_head
     from assets.heads.targets import morph_rig, read_target_map
@@ -131,13 +146,18 @@ def morph_head(mesh: HeadMesh, *, target_map: str | Path | None = None, cache: P
         return None
     user = read_target_map(target_map) if target_map is not None else None
     ref = load_builtin_head(cache).targets
-    rig = morph_rig(mesh.name, mesh.vertices, mesh.triangles, mesh.targets, ref, user_map=user,
-                    require_enough=require_enough)
+    rig = morph_rig(
+        mesh.name, mesh.vertices, mesh.triangles, mesh.targets, ref, user_map=user, require_enough=require_enough
+    )
     return None if rig is None else Head(rig, mesh)
 
 
-def _rig_mesh(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, config: RigConfig,
-              finder: LandmarkFinder | None) -> Head:
+def _rig_mesh(
+    mesh: HeadMesh,
+    landmarks: str | Path | Mapping[str, object] | None,
+    config: RigConfig,
+    finder: LandmarkFinder | None,
+) -> Head:
     from assets.heads.rigging import rig_head
 
     spec, source = head_landmarks(mesh, landmarks, finder)
@@ -145,8 +165,9 @@ def _rig_mesh(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | Non
     return Head(rig, rigged)
 
 
-def head_landmarks(mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None,
-                   finder: LandmarkFinder | None = None) -> tuple[dict[str, object] | None, str]:
+def head_landmarks(
+    mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, finder: LandmarkFinder | None = None
+) -> tuple[dict[str, object] | None, str]:
     """The landmark spec for a mesh and where it came from: given (file or mapping), shipped for a
     known head, the built-in head's own, or found automatically (LandmarkError when that fails)."""
     from assets.heads.landmarks import read_landmarks, shipped_landmarks

@@ -89,7 +89,9 @@ def load_mesh(path: str | Path, *, cache: Path | None = None) -> HeadMesh:
     else:
         parts = _ply_parts(p)
     if len(parts.triangles) == 0:
-        raise MeshError(f"{p}: file contains no triangle mesh (point cloud or empty scene); export the head as triangles")
+        raise MeshError(
+            f"{p}: file contains no triangle mesh (point cloud or empty scene); export the head as triangles"
+        )
     mesh = _assemble(p, parts)
     check_mesh(mesh)
     return mesh
@@ -122,8 +124,17 @@ def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     src = decompressed(p, cache) if used & set(NEEDS_DECODER) else p
     prims, materials = read_gltf(src)
     if not prims:
-        return _Parts(np.zeros((0, 3)), np.zeros((0, 3), np.int64), None, None, np.zeros(0, np.int64), [],
-                      np.zeros(0, np.int16), (), {})
+        return _Parts(
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            None,
+            None,
+            np.zeros(0, np.int64),
+            [],
+            np.zeros(0, np.int16),
+            (),
+            {},
+        )
     n = [len(x.vertices) for x in prims]
     offs = np.concatenate([[0], np.cumsum(n)])
     have_uv = all(x.uvs is not None for x in prims)
@@ -188,8 +199,11 @@ def _assemble(p: Path, parts: _Parts) -> HeadMesh:
             images.append(img)
     texture, uvs = None, parts.uvs
     if images and parts.uvs is not None:
-        single = len(images) == 1 and all(getattr(mats[m], "image", None) is not None for m in used) and \
-            (parts.material >= 0).all()
+        single = (
+            len(images) == 1
+            and all(getattr(mats[m], "image", None) is not None for m in used)
+            and (parts.material >= 0).all()
+        )
         if single:
             texture = images[0]
         else:
@@ -211,8 +225,17 @@ def _assemble(p: Path, parts: _Parts) -> HeadMesh:
         colors = _linear_to_srgb(lin).astype(np.float32)
         if parts.colors is None and not used:
             colors = None
-    return HeadMesh(vertices=parts.vertices, triangles=parts.triangles, uvs=uvs, texture=texture, colors=colors,
-                    name=str(p), targets=parts.targets or None, part=parts.part, part_names=parts.part_names)
+    return HeadMesh(
+        vertices=parts.vertices,
+        triangles=parts.triangles,
+        uvs=uvs,
+        texture=texture,
+        colors=colors,
+        name=str(p),
+        targets=parts.targets or None,
+        part=parts.part,
+        part_names=parts.part_names,
+    )
 
 
 ATLAS_MAX_TILE = 2048

@@ -99,7 +99,9 @@ def read_obj(path: Path) -> ObjMesh:
                     f = c.split("/")
                     vi = int(f[0])
                     ti = int(f[1]) if len(f) > 1 and f[1] else 0
-                    refs.append((vi - 1 if vi > 0 else len(pos) + vi, (ti - 1 if ti > 0 else len(tex) + ti) if ti else -1))
+                    refs.append(
+                        (vi - 1 if vi > 0 else len(pos) + vi, (ti - 1 if ti > 0 else len(tex) + ti) if ti else -1)
+                    )
                 for k in range(1, len(refs) - 1):
                     for vi, ti in (refs[0], refs[k], refs[k + 1]):
                         corners.append((vi, ti, mat, grp))

@@ -119,20 +119,29 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
     fig, (ax, tx) = plt.subplots(1, 2, figsize=(11, 6.5), dpi=110, gridspec_kw={"width_ratios": [1.1, 1]})
     order = np.argsort(q[near, 2])
     ax.scatter(q[near, 0][order], q[near, 1][order], s=1.2, c=q[near, 2][order], cmap="Greys")
-    for i, k in enumerate(names):
+    for i, _k in enumerate(names):
         ax.scatter(p[i, 0], p[i, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
         dx = 0.08 if p[i, 0] >= 0 else -0.08
-        ax.annotate(str(i), (p[i, 0], p[i, 1]), xytext=(p[i, 0] + dx, p[i, 1] + 0.05), fontsize=8, color="darkred",
-                    ha="left" if dx > 0 else "right")
+        ax.annotate(
+            str(i),
+            (p[i, 0], p[i, 1]),
+            xytext=(p[i, 0] + dx, p[i, 1] + 0.05),
+            fontsize=8,
+            color="darkred",
+            ha="left" if dx > 0 else "right",
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x (IOD), as a viewer sees the face: the face's left is on the right of the picture")
     ax.set_ylabel("y (IOD)")
     ax.set_title(title or "landmarks", fontsize=9)
     tx.set_axis_off()
     lines = [f"{i:2d}  {k}: {LANDMARK_HELP[k]}" for i, k in enumerate(names)]
-    lines += ["", "'left'/'right' are the face's own sides (a viewer sees the face's left on the right).",
-              "Values: a vertex index (file order) or [x, y, z] in the file's units.",
-              "Closed lips: upper_inner = lower_inner (the seam vertex); the mesh is cut there."]
+    lines += [
+        "",
+        "'left'/'right' are the face's own sides (a viewer sees the face's left on the right).",
+        "Values: a vertex index (file order) or [x, y, z] in the file's units.",
+        "Closed lips: upper_inner = lower_inner (the seam vertex); the mesh is cut there.",
+    ]
     tx.text(0, 1, "\n".join(lines), va="top", fontsize=8, family="monospace", wrap=True)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -51,7 +51,9 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         "control": rig.control.astype(np.int64),
         "simple_vertices": rig.simple.vertices,
         "simple_triangles": rig.simple.triangles,
-        "simple_units": np.stack([rig.simple.animation_units[n] for n in names]) if names else np.zeros((0, rig.simple.n_vertices, 3)),
+        "simple_units": np.stack([rig.simple.animation_units[n] for n in names])
+        if names
+        else np.zeros((0, rig.simple.n_vertices, 3)),
         "cal_response": rig.calibration.response,
         "cal_matrix": rig.calibration.matrix,
     }

@@ -108,8 +108,13 @@ def simple_face(head: BuiltinHead) -> SimpleFace:
     where = {int(s): i for i, s in enumerate(src)}
     slm = {k: where[int(i)] for k, i in lm.items()}
     su = regional_shape_units(model.vertices, frame, _region_centres({k: v[i] for k, i in lm.items()}))
-    model = FaceModel(vertices=model.vertices, triangles=model.triangles, animation_units=model.animation_units,
-                      shape_units=su, name="simple-makehuman")
+    model = FaceModel(
+        vertices=model.vertices,
+        triangles=model.triangles,
+        animation_units=model.animation_units,
+        shape_units=su,
+        name="simple-makehuman",
+    )
     return SimpleFace(model=model, landmarks=slm, source=src)
 
 
@@ -140,9 +145,16 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
     return out
 
 
-def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, up: np.ndarray,
-              uvs: np.ndarray | None = None, *, through: int | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+def cut_mouth(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    left: int,
+    right: int,
+    up: np.ndarray,
+    uvs: np.ndarray | None = None,
+    *,
+    through: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
     indices) that stays closest to the straight corner-to-corner line (passing through the vertex
     ``through`` if given, e.g. the inner-lip midpoint) is cut open. Interior path vertices are
@@ -163,6 +175,7 @@ def cut_mouth(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = off_line(v[adj.row]) + off_line(v[adj.col])
     g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+
     def leg(a_: int, b_: int) -> list[int]:
         dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
         if not np.isfinite(dist[b_]):
@@ -228,8 +241,13 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     # or edge-on triangles give wild maps (Candide-3 flipped its jaw drop with the default 1e6).
     maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND)
     units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
-    return FaceModel(vertices=reg.model.vertices, triangles=reg.model.triangles, animation_units=units,
-                     shape_units=reg.model.shape_units, name=simple.model.name)
+    return FaceModel(
+        vertices=reg.model.vertices,
+        triangles=reg.model.triangles,
+        animation_units=units,
+        shape_units=reg.model.shape_units,
+        name=simple.model.name,
+    )
 
 
 def rig_head(
@@ -303,6 +321,14 @@ def rig_head(
     part = mesh.part
     if part is not None and cut_copies is not None:
         part = part[origin]
-    out_mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=mesh.texture, colors=colors, name=mesh.name,
-                        part=part, part_names=mesh.part_names)
+    out_mesh = HeadMesh(
+        vertices=v,
+        triangles=t,
+        uvs=uv,
+        texture=mesh.texture,
+        colors=colors,
+        name=mesh.name,
+        part=part,
+        part_names=mesh.part_names,
+    )
     return rig, out_mesh

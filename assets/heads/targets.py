@@ -41,14 +41,24 @@ VISEME_ARKIT: dict[str, dict[str, float]] = {
     "DD": {"jawOpen": 0.2, "mouthLowerDownLeft": 0.2, "mouthLowerDownRight": 0.2},
     "kk": {"jawOpen": 0.25, "mouthStretchLeft": 0.2, "mouthStretchRight": 0.2},
     "CH": {"mouthFunnel": 0.5, "jawOpen": 0.15, "mouthShrugUpper": 0.2},
-    "SS": {"mouthStretchLeft": 0.3, "mouthStretchRight": 0.3, "jawOpen": 0.05, "mouthSmileLeft": 0.2,
-           "mouthSmileRight": 0.2},
+    "SS": {
+        "mouthStretchLeft": 0.3,
+        "mouthStretchRight": 0.3,
+        "jawOpen": 0.05,
+        "mouthSmileLeft": 0.2,
+        "mouthSmileRight": 0.2,
+    },
     "nn": {"jawOpen": 0.15, "mouthStretchLeft": 0.1, "mouthStretchRight": 0.1},
     "RR": {"mouthFunnel": 0.3, "mouthPucker": 0.3, "jawOpen": 0.1},
     "aa": {"jawOpen": 0.6, "mouthLowerDownLeft": 0.3, "mouthLowerDownRight": 0.3},
     "E": {"jawOpen": 0.3, "mouthStretchLeft": 0.4, "mouthStretchRight": 0.4},
-    "I": {"jawOpen": 0.2, "mouthSmileLeft": 0.4, "mouthSmileRight": 0.4, "mouthStretchLeft": 0.2,
-          "mouthStretchRight": 0.2},
+    "I": {
+        "jawOpen": 0.2,
+        "mouthSmileLeft": 0.4,
+        "mouthSmileRight": 0.4,
+        "mouthStretchLeft": 0.2,
+        "mouthStretchRight": 0.2,
+    },
     "O": {"jawOpen": 0.4, "mouthFunnel": 0.6},
     "U": {"jawOpen": 0.15, "mouthPucker": 0.8, "mouthFunnel": 0.2},
 }
@@ -91,7 +101,7 @@ def canonical_name(name: str) -> str | None:
         return _ARKIT_BY_KEY[key]
     for prefix in ("viseme", "vrc.v", "v", "fclmth", "mth"):
         if key.startswith(prefix) and len(key) > len(prefix):
-            rest = key[len(prefix):]
+            rest = key[len(prefix) :]
             if rest in _OVR_BY_KEY:
                 return "viseme:" + _OVR_BY_KEY[rest]
             if rest in _VRM:
@@ -141,8 +151,9 @@ def correspondent(value: object) -> dict[str, float]:
     raise ValueError(f"{value!r} must be an ARKit name, 'viseme:X' or an object of ARKit weights")
 
 
-def match_targets(names: list[str] | tuple[str, ...], user_map: Mapping[str, Mapping[str, float]] | None = None
-                  ) -> dict[str, dict[str, float]]:
+def match_targets(
+    names: list[str] | tuple[str, ...], user_map: Mapping[str, Mapping[str, float]] | None = None
+) -> dict[str, dict[str, float]]:
     """Head target name -> ARKit mixture of its correspondent, for every recognised target.
 
     ARKit targets are preferred: when the head has at least as many ARKit mouth targets as
@@ -219,5 +230,13 @@ def morph_rig(
         "probe_residuals": [round(r, 4) for r in residuals],
         "enough_mouth_targets": bool(enough),
     }
-    return MorphRig(neutral=vertices, triangles=triangles, names=head_names, targets=d[:, moving], moving=moving,
-                    keymap=keymap, source=arkit_source, meta=meta)
+    return MorphRig(
+        neutral=vertices,
+        triangles=triangles,
+        names=head_names,
+        targets=d[:, moving],
+        moving=moving,
+        keymap=keymap,
+        source=arkit_source,
+        meta=meta,
+    )

@@ -6,23 +6,31 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.export.curves import Track, csv_bytes, json_bytes
+from assets.audio import wav_bytes
+from assets.files import atomic_write_bytes
+from assets.tracks import encode_csv, encode_json
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
 from clients.export.rhubarb import tsv_bytes
-from assets.audio import wav_bytes
-from assets.files import atomic_write_bytes
+from realtime_core.track import Track
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
 
 
-def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
-                 audio: tuple[np.ndarray, int] | None = None, morphs: str = "units",
-                 arkit_targets: dict[str, np.ndarray] | None = None) -> list[Path]:
+def export_track(
+    path: str | Path,
+    track: Track,
+    *,
+    head: tuple | None = None,
+    audio: tuple[np.ndarray, int] | None = None,
+    morphs: str = "units",
+    arkit_targets: dict[str, np.ndarray] | None = None,
+) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
-    files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb; audio: (samples (n,) float or int16,
-    rate_hz) starting at the track's first frame, written as ``<stem>.wav`` beside a .glb or .json
+    files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
+    audio: (samples (n,) float or int16, rate_hz) starting at the track's first frame, written as
+    ``<stem>.wav`` beside a .glb or .json
     (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
     "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights."""
     if morphs not in MORPHS:
@@ -48,9 +56,9 @@ def export_track(path: str | Path, track: Track, *, head: tuple | None = None,
         else:
             data = arkit_glb(tuple(head)[1], arkit_targets, track, audio=wav_name)
     elif suffix == ".csv":
-        data = csv_bytes(track)
+        data = encode_csv(track)
     elif suffix == ".json":
-        data = json_bytes(track, audio=wav_name)
+        data = encode_json(track, audio=wav_name)
     else:
         data = tsv_bytes(track)
     written.insert(0, atomic_write_bytes(p, data))

@@ -1,4 +1,4 @@
-"""Animated ``.glb`` exports of a :class:`clients.export.curves.Track`, written by the one glTF writer
+"""Animated ``.glb`` exports of a :class:`realtime_core.track.Track`, written by the one glTF writer
 :mod:`assets.heads.glb` (shared with the server's head download).
 
 - :func:`head_glb`: a rigged head (a :class:`realtime_core.face.Rig`: its four exact parameter
@@ -15,20 +15,38 @@ import numpy as np
 from assets.errors import GlbError
 from assets.heads import glb
 from assets.heads.glb import rig_targets
-from clients.export.curves import Track
 from clients.export.errors import ExportError
+from realtime_core.track import Track
 
 __all__ = ["animated_glb", "arkit_glb", "builtin_arkit_targets", "head_glb", "rig_targets"]
 
 
-def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.ndarray, target_names: tuple[str, ...],
-                 track: Track, uvs: np.ndarray | None = None, colors: np.ndarray | None = None,
-                 texture: bytes | None = None, audio: str | None = None) -> bytes:
+def animated_glb(
+    *,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    targets: np.ndarray,
+    target_names: tuple[str, ...],
+    track: Track,
+    uvs: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    texture: bytes | None = None,
+    audio: str | None = None,
+) -> bytes:
     """:func:`assets.heads.glb.animated_glb` with the track's values as the weights (ExportError on bad input)."""
     try:
-        return glb.animated_glb(vertices=vertices, triangles=triangles, targets=targets, target_names=target_names,
-                                weights=track.params, fps=track.fps, uvs=uvs, colors=colors, texture=texture,
-                                audio=audio)
+        return glb.animated_glb(
+            vertices=vertices,
+            triangles=triangles,
+            targets=targets,
+            target_names=target_names,
+            weights=track.values,
+            fps=track.fps,
+            uvs=uvs,
+            colors=colors,
+            texture=texture,
+            audio=audio,
+        )
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
 
@@ -36,7 +54,7 @@ def animated_glb(*, vertices: np.ndarray, triangles: np.ndarray, targets: np.nda
 def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
     """The animated glb of a rigged head (``rig`` and its :class:`assets.heads.mesh.HeadMesh`)."""
     try:
-        return glb.head_glb(rig, mesh, track.params, track.fps, audio=audio)
+        return glb.head_glb(rig, mesh, track.values, track.fps, audio=audio)
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
 
@@ -62,9 +80,17 @@ def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str 
         raise ExportError(f"the head lacks ARKit blendshapes {missing[:5]}{'...' if len(missing) > 5 else ''}")
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"ARKit weights are computed from the mouth parameters {VISUAL_PARAMS}")
-    weights = Track(params=blendshape_weights(track.params, "arkit52"), fps=track.fps, start_s=track.start_s,
-                    names=ARKIT_NAMES)
-    return animated_glb(vertices=mesh.vertices, triangles=mesh.triangles,
-                        targets=np.stack([targets[n] for n in ARKIT_NAMES]), target_names=ARKIT_NAMES,
-                        track=weights, uvs=mesh.uvs, colors=mesh.colors,
-                        texture=mesh.texture if mesh.uvs is not None else None, audio=audio)
+    weights = Track(
+        values=blendshape_weights(track.values, "arkit52"), fps=track.fps, start_s=track.start_s, names=ARKIT_NAMES
+    )
+    return animated_glb(
+        vertices=mesh.vertices,
+        triangles=mesh.triangles,
+        targets=np.stack([targets[n] for n in ARKIT_NAMES]),
+        target_names=ARKIT_NAMES,
+        track=weights,
+        uvs=mesh.uvs,
+        colors=mesh.colors,
+        texture=mesh.texture if mesh.uvs is not None else None,
+        audio=audio,
+    )

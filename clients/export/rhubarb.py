@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clients.export.curves import Track
 from clients.export.errors import ExportError
 from realtime_core import VISUAL_PARAMS
+from realtime_core.track import Track
 
 SHAPES = "ABCDEFGHX"
 
@@ -87,7 +87,7 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
     """The track's cues: runs of equal shapes, short runs merged into the previous cue."""
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"mouth shapes need the parameters {VISUAL_PARAMS}, got {track.names}")
-    shapes = frame_shapes(track.params, th)
+    shapes = frame_shapes(track.values, th)
     runs: list[list] = []  # [first frame, shape, length]
     for k, s in enumerate(shapes):
         if runs and runs[-1][1] == s:

@@ -23,16 +23,29 @@ from assets.errors import LandmarkError
 from assets.heads.mesh import HeadMesh
 
 MEDIAPIPE_INDEX: dict[str, int] = {
-    "eye_outer_left": 263, "eye_inner_left": 362, "eye_outer_right": 33, "eye_inner_right": 133,
-    "nose_tip": 1, "corner_left": 291, "corner_right": 61, "upper_lip": 0, "lower_lip": 17,
-    "upper_inner": 13, "lower_inner": 14, "chin": 152,
+    "eye_outer_left": 263,
+    "eye_inner_left": 362,
+    "eye_outer_right": 33,
+    "eye_inner_right": 133,
+    "nose_tip": 1,
+    "corner_left": 291,
+    "corner_right": 61,
+    "upper_lip": 0,
+    "lower_lip": 17,
+    "upper_inner": 13,
+    "lower_inner": 14,
+    "chin": 152,
 }
 SIZE = 640  # render size in pixels (MediaPipe works on any size; the face should cover ~1/3 of it)
 
 # (up, forward) axis pairs to try: glTF/three.js (+y up, face +z) first.
 ORIENTATIONS: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...] = (
-    ((0, 1, 0), (0, 0, 1)), ((0, 1, 0), (0, 0, -1)), ((0, 1, 0), (1, 0, 0)), ((0, 1, 0), (-1, 0, 0)),
-    ((0, 0, 1), (0, -1, 0)), ((0, 0, 1), (0, 1, 0)),
+    ((0, 1, 0), (0, 0, 1)),
+    ((0, 1, 0), (0, 0, -1)),
+    ((0, 1, 0), (1, 0, 0)),
+    ((0, 1, 0), (-1, 0, 0)),
+    ((0, 0, 1), (0, -1, 0)),
+    ((0, 0, 1), (0, 1, 0)),
 )
 
 
@@ -45,8 +58,9 @@ def _detect(image: np.ndarray) -> np.ndarray | None:
     """(468, 2) pixel coordinates of the face in an RGB image, or None."""
     import mediapipe as mp
 
-    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=False,
-                                         min_detection_confidence=0.5) as fm:
+    with mp.solutions.face_mesh.FaceMesh(
+        static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
+    ) as fm:
         res = fm.process(np.ascontiguousarray(image))
     if not res.multi_face_landmarks:
         return None
@@ -123,6 +137,10 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     continue
                 return {k: p3[i].tolist() for i, k in enumerate(names)}
     except RenderError as exc:
-        raise LandmarkError(f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json") from exc
-    raise LandmarkError(f"{mesh.name}: no face-like region found on renders of the head (stylised or not human-like?); "
-                        "give --landmarks L.json (see docs/animation.md, 'Landmarks')")
+        raise LandmarkError(
+            f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"
+        ) from exc
+    raise LandmarkError(
+        f"{mesh.name}: no face-like region found on renders of the head (stylised or not human-like?); "
+        "give --landmarks L.json (see docs/animation.md, 'Landmarks')"
+    )

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import io
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
-from clients.errors import RenderError
 from assets.heads.mesh import HeadMesh
+from clients.errors import RenderError
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference
@@ -134,15 +134,22 @@ class HeadRenderer:
     z (out of the face) and centre (3,), size (face height, mesh units) frame the camera.
     """
 
-    def __init__(self, mesh: HeadMesh, *, centre: np.ndarray, axes: np.ndarray, size: float,
-                 config: RenderConfig = RenderConfig()) -> None:
+    def __init__(
+        self,
+        mesh: HeadMesh,
+        *,
+        centre: np.ndarray,
+        axes: np.ndarray,
+        size: float,
+        config: RenderConfig = RenderConfig(),
+    ) -> None:
         try:
             import moderngl
         except ImportError as exc:
             raise RenderError(f"moderngl is not installed: {exc}") from exc
         self.config = config
         try:
-            kw = {"backend": config.backend} if config.backend else {}
+            kw: dict[str, Any] = {"backend": config.backend} if config.backend else {}
             self.ctx = moderngl.create_standalone_context(require=330, **kw)
         except Exception as exc:  # glcontext raises bare Exception when EGL is missing
             raise RenderError(f"cannot create an OpenGL 3.3 context (backend={config.backend}): {exc}") from exc
@@ -151,7 +158,11 @@ class HeadRenderer:
         t = np.asarray(mesh.triangles, dtype=np.int32)
         self.n = len(v)
         normals = vertex_normals(v.astype(np.float64), t)
-        colors = np.asarray(mesh.colors, dtype=np.float32) if mesh.colors is not None else np.tile(np.float32(SKIN), (self.n, 1))
+        colors = (
+            np.asarray(mesh.colors, dtype=np.float32)
+            if mesh.colors is not None
+            else np.tile(np.asarray(SKIN, dtype=np.float32), (self.n, 1))
+        )
         uvs = np.asarray(mesh.uvs, dtype=np.float32) if mesh.uvs is not None else np.zeros((self.n, 2), np.float32)
         self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         self.pos_buf = ctx.buffer(v.tobytes(), dynamic=True)
@@ -165,7 +176,7 @@ class HeadRenderer:
         )
         self.texture = None
         use_tex = mesh.texture is not None and mesh.uvs is not None
-        if use_tex:
+        if use_tex and mesh.texture is not None:
             from PIL import Image
 
             try:
@@ -179,6 +190,7 @@ class HeadRenderer:
             self.prog["tex"].value = 0
         self.prog["use_tex"].value = bool(use_tex)
         w, h = config.width, config.height
+        self.fbo_ms: moderngl.Framebuffer | None
         if config.samples:
             self.fbo_ms = ctx.framebuffer(
                 color_attachments=[ctx.renderbuffer((w, h), 4, samples=config.samples)],
@@ -243,14 +255,14 @@ class HeadRenderer:
     def close(self) -> None:
         self.ctx.release()
 
-    def __enter__(self) -> "HeadRenderer":
+    def __enter__(self) -> HeadRenderer:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:  # noqa: ANN001
+def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
     """A renderer framed on the rig's face: a Sec. 5 rig's placed simple model gives the face box
     and frame; a MorphRig's landmarks (when known) or the box of the vertices its targets move."""
     from assets.heads.rigging import mouth_landmarks
@@ -279,8 +291,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             if "eyeBlinkLeft" not in getattr(rig, "names", ()):
                 centre = centre + np.array([0.0, 0.6 * span, 0.0])
                 span *= 2.2
-            return HeadRenderer(mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3),
-                                size=1.1 * span, config=config)
+            return HeadRenderer(
+                mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3), size=1.1 * span, config=config
+            )
     axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))

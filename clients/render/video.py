@@ -1,15 +1,14 @@
 """Offline video: mouth parameters over time -> rendered frames -> MP4 with the speech muxed in.
 
 Parameters come from a CSV (``t, upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress``,
-seconds and IOD units, any rate; resampled linearly to the video rate) or, once the real-time core
-lands on this branch, from :func:`params_for_audio` (the hook to plug the speech->params model in).
-Frames are piped raw to ffmpeg (H.264, yuv420p, AAC audio, ``-shortest``); the MP4 is written to a
+seconds and IOD units, any rate: :func:`assets.tracks.read_csv_resampled` puts them on the video's
+frame grid) or from speech through the model (:func:`params_for_audio`, the real-time core's offline
+path). Frames are piped raw to ffmpeg (H.264, yuv420p, AAC audio, ``-shortest``); the MP4 is written to a
 temporary name next to the target and renamed when ffmpeg succeeds.
 """
 
 from __future__ import annotations
 
-import csv
 import os
 import shutil
 import subprocess
@@ -20,53 +19,24 @@ import numpy as np
 
 from clients.errors import RenderError
 from realtime_core import VISUAL_PARAMS
+from realtime_core.track import DEFAULT_FPS, Track
 
 
-def read_params_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """Times (T,) seconds and parameters (T, 4) IOD from a CSV with header t + VISUAL_PARAMS."""
-    p = Path(path)
-    if not p.is_file():
-        raise RenderError(f"{p}: parameters file not found")
-    try:
-        with p.open(newline="", encoding="utf-8") as f:
-            rows = list(csv.DictReader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise RenderError(f"{p}: cannot read CSV: {exc}") from exc
-    need = ("t",) + VISUAL_PARAMS
-    if not rows or any(c not in rows[0] for c in need):
-        have = list(rows[0]) if rows else []
-        raise RenderError(f"{p}: expected columns {list(need)}, got {have}")
-    try:
-        a = np.array([[float(r[c]) for c in need] for r in rows])
-    except (TypeError, ValueError) as exc:
-        raise RenderError(f"{p}: non-numeric value: {exc}") from exc
-    if not np.all(np.isfinite(a)) or np.any(np.diff(a[:, 0]) <= 0):
-        raise RenderError(f"{p}: values must be finite and times strictly increasing")
-    return a[:, 0], a[:, 1:]
-
-
-def resample(t: np.ndarray, params: np.ndarray, fps: float) -> np.ndarray:
-    """Parameters (T, 4) at times t (T,) -> (F, 4) at frames k / fps for k < F = floor(t[-1] * fps) + 1."""
-    n = int(np.floor(t[-1] * fps + 1e-9)) + 1
-    ft = np.arange(n) / fps
-    return np.stack([np.interp(ft, t, params[:, j]) for j in range(params.shape[1])], axis=1)
-
-
-def params_for_audio(path: str | Path, model: str | Path | None) -> tuple[np.ndarray, float]:
-    """Speech file -> mouth parameters (F, 4) in IOD units and their frame rate (frames/s).
+def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str = "hmm") -> Track:
+    """Speech file -> the mouth-parameter track (F, 4) in IOD units at the model's 30 fps.
 
     The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
     computation as a live session) with the model loaded by ``assets.modelfile.load_model``
-    (``model`` None = the default model).
+    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
     """
     from assets.audio import read_audio
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
     from realtime_core.pipeline import speech_to_params
 
-    av = load_model(model)
+    av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
     params = speech_to_params(av, samples, rate)
-    return np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], 30.0  # row k = frame k / 30 s
+    return Track(values=np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], fps=DEFAULT_FPS)
 
 
 def with_caption(image: np.ndarray, text: str) -> np.ndarray:
@@ -109,8 +79,22 @@ def write_video(
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp{out.suffix or '.mp4'}")
     w, h = size
-    cmd = [exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}",
-           "-r", f"{config.fps}", "-i", "-"]
+    cmd = [
+        exe,
+        "-y",
+        "-loglevel",
+        "error",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{w}x{h}",
+        "-r",
+        f"{config.fps}",
+        "-i",
+        "-",
+    ]
     if audio is not None:
         cmd += ["-i", str(audio), "-c:a", "aac", "-b:a", "128k", "-shortest"]
     cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(config.crf), "-movflags", "+faststart", str(tmp)]

@@ -18,6 +18,7 @@ process that has created EGL contexts (X error BadAccess), so one process uses o
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import queue
 import threading
@@ -26,10 +27,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from clients.errors import ClientError
 from assets.heads.mesh import HeadMesh
+from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
-from clients.viewer.stream import StreamConfig, connect_viewer
+from clients.viewer.stream import ViewerStreamConfig, connect_viewer
 from clients.viewer.video import framing
 from wire import protocol as P
 
@@ -95,10 +96,12 @@ class AudioOut:
             # PortAudio's "high" latency: through ALSA's PulseAudio plugin "low" underran and then
             # stalled under load (silence while frames went on); the DAC time below accounts for
             # whatever latency the device has, so sync does not depend on it.
-            self.stream = sd.OutputStream(samplerate=self.rate, channels=1, dtype="float32", callback=self._callback,
-                                          latency="high")
-            self.stream.start()
-            self._clock_delta = self.stream.time - time.perf_counter()
+            stream = sd.OutputStream(
+                samplerate=self.rate, channels=1, dtype="float32", callback=self._callback, latency="high"
+            )
+            stream.start()
+            self.stream = stream
+            self._clock_delta = stream.time - time.perf_counter()
             self.device = str(info["name"])
         except (sd.PortAudioError, ValueError) as exc:  # no device, or no default output device
             self.stream = None
@@ -125,7 +128,7 @@ class AudioOut:
             for start, block in self.blocks:
                 lo, hi = max(first, start), min(first + frames, start + len(block))
                 if hi > lo:
-                    out[lo - first:hi - first, 0] = block[lo - start:hi - start]
+                    out[lo - first : hi - first, 0] = block[lo - start : hi - start]
 
     def close(self) -> None:
         if self.stream is not None:
@@ -138,7 +141,7 @@ class _Receiver(threading.Thread):
     ("error", text) into ``inbox``; reconnects whenever the session ends or the server goes away;
     :meth:`close` cancels it from another thread."""
 
-    def __init__(self, cfg: StreamConfig, inbox: queue.SimpleQueue) -> None:
+    def __init__(self, cfg: ViewerStreamConfig, inbox: queue.SimpleQueue) -> None:
         super().__init__(name="facecast-view-rx", daemon=True)
         self.cfg, self.inbox = cfg, inbox
         self.loop: asyncio.AbstractEventLoop | None = None
@@ -159,10 +162,8 @@ class _Receiver(threading.Thread):
     def close(self) -> None:
         self.ready.wait(2)
         if self.loop is not None and self.task is not None and not self.loop.is_closed():
-            try:
+            with contextlib.suppress(RuntimeError):  # the loop closed in between
                 self.loop.call_soon_threadsafe(self.task.cancel)
-            except RuntimeError:  # the loop closed in between
-                pass
         self.join(3)
 
     async def _main(self) -> None:
@@ -184,9 +185,16 @@ class _Receiver(threading.Thread):
             await asyncio.sleep(0.2)
 
 
-def run_window(cfg: StreamConfig, mesh: HeadMesh, *, config: RenderConfig = RenderConfig(margin=1.25),
-               buffer_s: float = 0.08, duration_s: float | None = None, screenshot=None,
-               status=print) -> LiveStats:
+def run_window(
+    cfg: ViewerStreamConfig,
+    mesh: HeadMesh,
+    *,
+    config: RenderConfig = RenderConfig(margin=1.25),
+    buffer_s: float = 0.08,
+    duration_s: float | None = None,
+    screenshot=None,
+    status=print,
+) -> LiveStats:
     """Open a window and show the session live until it is closed (or ``duration_s`` seconds after
     the first frame); ``screenshot``: PNG path for the last frame shown. ClientError without a display."""
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
@@ -239,13 +247,17 @@ def run_window(cfg: StreamConfig, mesh: HeadMesh, *, config: RenderConfig = Rend
                     moving = np.asarray(d["head"]["moving_vertices"], dtype=np.int64)
                     if renderer is None:
                         c, ax, size = framing(neutral, moving)
-                        renderer = HeadRenderer(mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None))
+                        renderer = HeadRenderer(
+                            mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None)
+                        )
                         glfw.make_context_current(win)
                     if audio is None and d.get("audio"):
                         audio = AudioOut(int(d["audio"]["rate_hz"]), playout)
                         audio.open()
                         stats.audio_device = audio.device
-                        status(f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}")
+                        status(
+                            f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}"
+                        )
                     playout.offset, last_index = None, -1
                     pending.clear()
                     if audio is not None:

@@ -12,20 +12,20 @@ from __future__ import annotations
 
 import asyncio
 import json
-from urllib.parse import quote
 import time
 from dataclasses import dataclass, field
+from urllib.parse import quote
 
 import numpy as np
 
+from assets.heads.mesh import HeadMesh
 from clients.client import ServerClosed, ViewerClient, http_get
 from clients.errors import ClientError
-from assets.heads.mesh import HeadMesh
 from wire import protocol as P
 
 
 @dataclass(frozen=True, kw_only=True)
-class StreamConfig:
+class ViewerStreamConfig:
     """url: the server (http://host:port); session: its name; kind: "params", "deltas" or
     "blendshapes"; encoding: None = the kind's default; token: the shared secret, if any;
     wait_s: how long to wait for the session to appear (0 = it must exist now); max_s: stop
@@ -98,7 +98,7 @@ class Recording:
             at = int(round((t - start_s) * rate))
             lo, hi = max(at, 0), min(at + len(block), n)
             if hi > lo:
-                out[lo:hi] = block[lo - at:hi - at]
+                out[lo:hi] = block[lo - at : hi - at]
         return out
 
 
@@ -126,11 +126,13 @@ async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
         raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
 
 
-async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
+async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
     """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
-        v = ViewerClient(cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token)
+        v = ViewerClient(
+            cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token
+        )
         try:
             await v.__aenter__()
             return v
@@ -143,7 +145,7 @@ async def connect_viewer(cfg: StreamConfig) -> ViewerClient:
         await asyncio.sleep(0.25)
 
 
-async def record_stream(cfg: StreamConfig, *, on_frame=None) -> Recording:
+async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
     every frame as it arrives (for progress or live display)."""
     v = await connect_viewer(cfg)
@@ -176,7 +178,8 @@ async def live_sessions(url: str, token: str | None = None) -> list[str]:
     except OSError as exc:
         raise ClientError(f"{url}: cannot connect: {exc}") from None
     if status != 200:
-        raise ClientError(f"{url}: /sessions answered {status}" + (" (wrong or missing token)" if status == 401 else ""))
+        hint = " (wrong or missing token)" if status == 401 else ""
+        raise ClientError(f"{url}: /sessions answered {status}{hint}")
     return [s["name"] for s in json.loads(body).get("sessions", [])]
 
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from clients.errors import ClientError
 from assets.heads.mesh import HeadMesh
+from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
 from clients.render.video import VideoConfig, write_video
 from clients.viewer.stream import Recording
@@ -28,12 +28,13 @@ def framing(vertices: np.ndarray, moving: np.ndarray) -> tuple[np.ndarray, np.nd
     return (lo + hi) / 2, np.eye(3), float(max(hi[1] - lo[1], (hi[0] - lo[0]) * 0.75))
 
 
-def render_recording(rec: Recording, mesh: HeadMesh, out: str | Path, *,
-                     config: RenderConfig = RenderConfig(margin=1.25)) -> tuple[Path, int]:
+def render_recording(
+    rec: Recording, mesh: HeadMesh, out: str | Path, *, config: RenderConfig = RenderConfig(margin=1.25)
+) -> tuple[Path, int]:
     """Write ``out`` (.mp4): one video frame per session frame (rec.fps), the relayed audio muxed
     in; returns (path, frames). ``rec`` must be a "deltas" recording of ``mesh``'s server."""
-    from clients.export.files import wav_bytes
     from assets.files import atomic_write_bytes
+    from clients.export.files import wav_bytes
 
     d = rec.description
     if d.get("kind") != "deltas" or not d.get("head"):
@@ -55,6 +56,7 @@ def render_recording(rec: Recording, mesh: HeadMesh, out: str | Path, *,
     with tempfile.TemporaryDirectory(prefix="facecast-view-") as tmp:
         wav = atomic_write_bytes(Path(tmp) / "audio.wav", wav_bytes(audio, rec.audio_rate_hz))
         with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config) as r:
-            path = write_video(frames, draw, out, size=(config.width, config.height), audio=wav,
-                               config=VideoConfig(fps=rec.fps))
+            path = write_video(
+                frames, draw, out, size=(config.width, config.height), audio=wav, config=VideoConfig(fps=rec.fps)
+            )
     return path, len(frames)

@@ -21,13 +21,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=HelpFormatter,
     )
-    p.add_argument("model", metavar="MODEL", help="model to adapt: a .npz file or a shipped name (default, low-latency)")
+    p.add_argument(
+        "model", metavar="MODEL", help="model to adapt: a .npz file or a shipped name (default, low-latency)"
+    )
     p.add_argument("speech", nargs="+", metavar="SPEECH", help="enrolment recordings of the new voice")
     p.add_argument("-o", "--output", required=True, metavar="MODEL", help="adapted model file to write (.npz)")
-    p.add_argument("--relevance", type=float, default=8.0,
-                   help="MAP relevance factor tau for the audio means, in frames (higher = closer to MODEL)")
-    p.add_argument("--weight-relevance", type=float, default=8.0,
-                   help="relevance factor for the mixture weights, in frames")
+    p.add_argument(
+        "--relevance",
+        type=float,
+        default=8.0,
+        help="MAP relevance factor tau for the audio means, in frames (higher = closer to MODEL)",
+    )
+    p.add_argument(
+        "--weight-relevance", type=float, default=8.0, help="relevance factor for the mixture weights, in frames"
+    )
     p.add_argument("--no-weights", action="store_true", help="adapt the audio means only")
     p.add_argument("--iters", type=int, default=5, help="EM iterations")
     p.set_defaults(run=run)
@@ -42,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.hmm.adapt import AdaptConfig
 
     model = load_model(args.model)
-    cfg = AdaptConfig(relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance,
-                      n_iter=args.iters)
+    cfg = AdaptConfig(
+        relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance, n_iter=args.iters
+    )
     recordings = []
     for path in tqdm(args.speech, desc="reading speech", unit="file"):
         samples, _ = read_audio(path, rate_hz=model.sample_rate_hz)
@@ -62,8 +70,10 @@ def run(args: argparse.Namespace) -> int:
     out = save_model(args.output, adapted)
     info = adapted.metadata.get("adaptation", {})
     ll0, ll1 = info.get("audio_loglik_per_frame", [float("nan")] * 2)
-    print(f"adapted on {len(recordings)} file(s), {seconds:.1f} s ({result.n_frames} frames): "
-          f"{info.get('components_visited', 0)} of {model.hmm.n_states * model.hmm.n_mix} components visited; "
-          f"audio log-likelihood per frame {ll0:.2f} -> {ll1:.2f} ({len(result.history) - 1} EM iterations)")
+    print(
+        f"adapted on {len(recordings)} file(s), {seconds:.1f} s ({result.n_frames} frames): "
+        f"{info.get('components_visited', 0)} of {model.hmm.n_states * model.hmm.n_mix} components visited; "
+        f"audio log-likelihood per frame {ll0:.2f} -> {ll1:.2f} ({len(result.history) - 1} EM iterations)"
+    )
     print(f"wrote {out}")
     return 0

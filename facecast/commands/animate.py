@@ -9,6 +9,7 @@ from pathlib import Path
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "animate",
@@ -21,37 +22,56 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("speech", type=Path, help="speech audio (WAV; other formats through ffmpeg)")
     p.add_argument("--csv", type=Path, default=None, help="output CSV: t (s, frame k at k/30) and the 4 parameters")
     # Exports (clients/export); at least one of --csv/--glb/--json/--tsv is required.
-    p.add_argument("--glb", type=Path, default=None,
-                   help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it")
+    p.add_argument(
+        "--glb",
+        type=Path,
+        default=None,
+        help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it",
+    )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
     add_head_options(p, help_head="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/gltf/obj/ply)")
-    p.add_argument("--glb-morphs", choices=("units", "arkit52"), default="units",
-                   help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) or ARKit's 52 blendshapes (built-in head)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
+    p.add_argument(
+        "--glb-morphs",
+        choices=("units", "arkit52"),
+        default="units",
+        help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
+        "or ARKit's 52 blendshapes (built-in head)",
+    )
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md); "
+        "--mapper mlp: default the shipped MLP mapper",
+    )
+    add_mapper_options(p)
+    add_expression_options(p)
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from assets.audio import read_audio
+    from assets.modelfile import load_speech_model
+    from assets.tracks import write_csv
+    from facecast.commands.speech_options import apply_expressions
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
-    from assets.audio import read_audio
-    from clients.export.curves import Track, csv_bytes
-    from assets.files import atomic_write_bytes
-    from assets.modelfile import load_model
+    from realtime_core.track import Track
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
-    model = load_model(args.model)
+    model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
     params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
-    # Every output goes through the exporters (one CSV writer for the whole product).
-    track = Track(params=params)
+    params = apply_expressions(params, args)
+    # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
+    track = Track(values=params)
     if args.csv is not None:
-        atomic_write_bytes(args.csv, csv_bytes(track))
+        write_csv(args.csv, track)
     if args.glb or args.json or args.tsv:
         from clients.export.files import export_track
         from facecast.commands.headopts import resolve_from_args
@@ -65,7 +85,11 @@ def run(args: argparse.Namespace) -> int:
         for out in (args.glb, args.json, args.tsv):
             if out is not None:
                 export_track(out, track, head=head, audio=(samples, rate), morphs=args.glb_morphs, arkit_targets=arkit)
-    delay = f"algorithmic delay {model.algorithmic_delay_ms(args.lag):.1f} ms" if args.mode == "stream" else "batch"
+    delay = (
+        f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"
+        if args.mode == "stream"
+        else "batch"
+    )
     for out in outputs:
         print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech} ({delay})")
     return 0

@@ -26,27 +26,65 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "m7; truth = the articulatory rules) and (4) real speech with phone alignments (truth = the rules on "
         "the real phone timings).",
     )
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
-    p.add_argument("--synthetic", type=Path, default=None, help="held-out synthetic corpus folder "
-                   "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)")
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)",
+    )
+    p.add_argument(
+        "--synthetic",
+        type=Path,
+        default=None,
+        help="held-out synthetic corpus folder "
+        "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)",
+    )
     p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
     p.add_argument("--video-dir", type=Path, default=SHARED / "video" / "grid", help="other talkers' clips (GRID)")
     p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
     p.add_argument("--grid-split", choices=("test", "val"), default="test", help="GRID s1 split to score")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
-    p.add_argument("--output", type=Path, default=None,
-                   help="write the markdown here (e.g. docs/accuracy.md), plots beside it; an existing latency-dial "
-                   "section of that file is kept")
-    p.add_argument("--dial", nargs="+", default=None, metavar="MODEL",
-                   help="latency dial instead: score these models (files or shipped names) at every --lags on the "
-                   "GRID s1 --grid-split (use val: choices are made on it) against their algorithmic delay; with "
-                   "--output, replace only the dial section of that file and plot beside it")
-    p.add_argument("--lags", type=lambda t: tuple(int(v) for v in t.split(",") if v), default=(0,),
-                   help="fixed-lag smoothing frames for --dial, e.g. 0,1")
-    p.add_argument("--kappas", type=lambda t: tuple(float(v) for v in t.split(",") if v), default=None,
-                   help="with --dial: choose each model's audio-likelihood exponent per lag among these on the "
-                   "scored split (highest r(mouth_open) keeping >= 90%% of closures); shipped models (default, "
-                   "low-latency) always run as they ship; default: the models' own")
+    p.add_argument(
+        "--output",
+        type=Path,
+        default=None,
+        help="write the markdown here (e.g. docs/accuracy.md), plots beside it; an existing latency-dial section "
+        "of that file is kept",
+    )
+    p.add_argument(
+        "--dial",
+        nargs="+",
+        default=None,
+        metavar="MODEL",
+        help="latency dial instead: score these models (files or shipped names) at every --lags on the GRID s1 "
+        "--grid-split (use val: choices are made on it) against their algorithmic delay; with --output, replace "
+        "only the dial section of that file and plot beside it",
+    )
+    p.add_argument(
+        "--lags",
+        type=lambda t: tuple(int(v) for v in t.split(",") if v),
+        default=(0,),
+        help="fixed-lag smoothing frames for --dial, e.g. 0,1",
+    )
+    p.add_argument(
+        "--kappas",
+        type=lambda t: tuple(float(v) for v in t.split(",") if v),
+        default=None,
+        help="with --dial: choose each model's audio-likelihood exponent per lag among these on the scored split "
+        "(highest r(mouth_open) keeping >= 90%% of closures); shipped models (default, low-latency) always run "
+        "as they ship; default: the models' own",
+    )
+    from facecast.commands.speech_options import add_mapper_options
+
+    add_mapper_options(p)
+    p.add_argument(
+        "--mu",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="instead: paper 002's numbers for the models `facecast mu -o DIR` wrote (HMM and MLP re-scored "
+        "on the GRID s1 train and test sentences; expressions and keyframes from DIR/report.json)",
+    )
     p.set_defaults(run=run)
 
 
@@ -56,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from assets.files import atomic_write_bytes
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set
     from training.reallips import (
@@ -67,9 +105,11 @@ def run(args: argparse.Namespace) -> int:
         s1_clips,
     )
 
+    if args.mu is not None:
+        return _run_mu(args)
     if args.dial:
         return _run_dial(args)
-    model = load_model(args.model)
+    model = load_speech_model(args.mapper, args.model)
     plot_dir = args.output.parent if args.output is not None else None
     stem = args.output.stem if args.output is not None else "accuracy"
     lips_md, summary = [], {}
@@ -77,12 +117,22 @@ def run(args: argparse.Namespace) -> int:
         clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
         s, items = evaluate_lips(model, clips)
         summary["s1"] = s
-        goals = {"r(mouth_open) >= 0.92": s.r["mouth_open"] >= 0.92, "r(lip_stretch) >= 0.80": s.r["lip_stretch"] >= 0.80,
-                 "r(upper_lip_raise) >= 0.75": s.r["upper_lip_raise"] >= 0.75,
-                 "closure >= 90%": s.closure_rate >= 0.9, "nu(mouth_open) in 0.8..1.2": 0.8 <= s.nu["mouth_open"] <= 1.2}
-        lips_md.append(lips_markdown(f"1. Real lips: GRID s1 held-out sentences ({args.grid_split} split)", s,
-                                     note=f"{len(clips)} sentences the model never trained on; truth = the lips "
-                                     "measured by `facecast extract`.", goals=goals))
+        goals = {
+            "r(mouth_open) >= 0.92": s.r["mouth_open"] >= 0.92,
+            "r(lip_stretch) >= 0.80": s.r["lip_stretch"] >= 0.80,
+            "r(upper_lip_raise) >= 0.75": s.r["upper_lip_raise"] >= 0.75,
+            "closure >= 90%": s.closure_rate >= 0.9,
+            "nu(mouth_open) in 0.8..1.2": 0.8 <= s.nu["mouth_open"] <= 1.2,
+        }
+        lips_md.append(
+            lips_markdown(
+                f"1. Real lips: GRID s1 held-out sentences ({args.grid_split} split)",
+                s,
+                note=f"{len(clips)} sentences the model never trained on; truth = the lips "
+                "measured by `facecast extract`.",
+                goals=goals,
+            )
+        )
         if plot_dir is not None:
             png = plot_lips(items, s, plot_dir / f"{stem}_s1_{args.grid_split}.png", title=f"GRID s1 {args.grid_split}")
             lips_md.append(f"![s1 {args.grid_split}]({png.name})\n\n")
@@ -92,12 +142,19 @@ def run(args: argparse.Namespace) -> int:
         clips = other_talker_clips(args.video_dir, cache_dir=args.cache_dir)
         s, items = evaluate_lips(model, clips)
         summary["other"] = s
-        goals = {"r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
-                 "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20}
-        lips_md.append(lips_markdown("2. Real lips: other talkers (never used for any choice)", s,
-                                     note=f"{len(clips)} clips of talkers other than s1 from {args.video_dir.name}/ "
-                                     "(s1's bbaf2n left out); closures only where a word alignment exists.",
-                                     goals=goals))
+        goals = {
+            "r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
+            "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20,
+        }
+        lips_md.append(
+            lips_markdown(
+                "2. Real lips: other talkers (never used for any choice)",
+                s,
+                note=f"{len(clips)} clips of talkers other than s1 from {args.video_dir.name}/ "
+                "(s1's bbaf2n left out); closures only where a word alignment exists.",
+                goals=goals,
+            )
+        )
         if plot_dir is not None:
             png = plot_lips(items, s, plot_dir / f"{stem}_other_talkers.png", title="other talkers")
             lips_md.append(f"![other talkers]({png.name})\n\n")
@@ -109,11 +166,16 @@ def run(args: argparse.Namespace) -> int:
 
         s = score_real_speech(model, real_speech_clips(args.speech_dir))
         summary["speech"] = s
-        lips_md.append(lips_markdown(
-            "3. Other voices without video: real speech with phone alignments", s,
-            note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone timings "
-            "(their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the closures "
-            "are the aligned /p b m/ phones.", goals={"closure >= 90%": s.closure_rate >= 0.9}))
+        lips_md.append(
+            lips_markdown(
+                "3. Other voices without video: real speech with phone alignments",
+                s,
+                note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone "
+                "timings (their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the "
+                "closures are the aligned /p b m/ phones.",
+                goals={"closure >= 90%": s.closure_rate >= 0.9},
+            )
+        )
     results = []
     with tempfile.TemporaryDirectory() as tmp:
         syn = args.synthetic
@@ -122,17 +184,30 @@ def run(args: argparse.Namespace) -> int:
             from training.evaluation import EVAL_VARIANTS
 
             syn = Path(tmp) / "heldout"
-            build_corpus(BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS)))
+            build_corpus(
+                BuildConfig(out_dir=syn, sentences=40, seed=1234, voices=VoiceSampling(variants=EVAL_VARIANTS))
+            )
         items = [(u.id, u.samples, u.sample_rate_hz, u.params) for u in load_corpus(syn)]
-        results.append(("4. Held-out synthetic voices (espeak variants never used in training; truth = the rules)",
-                        score_set(model, "synthetic", items)))
+        results.append(
+            (
+                "4. Held-out synthetic voices (espeak variants never used in training; truth = the rules)",
+                score_set(model, "synthetic", items),
+            )
+        )
     if args.speech_dir.is_dir():
-        results.append(("5. Real speech, truth from the articulatory rules on real phone timings (per clip)",
-                        score_set(model, "real", real_speech_items(args.speech_dir))))
+        results.append(
+            (
+                "5. Real speech, truth from the articulatory rules on real phone timings (per clip)",
+                score_set(model, "real", real_speech_items(args.speech_dir)),
+            )
+        )
     else:
         print(f"skipping real speech: {args.speech_dir} not found", file=sys.stderr)
-    command = "facecast eval" + (f" --model {args.model}" if args.model else "") + (
-        f" --grid-split {args.grid_split}" if args.grid_split != "test" else "")
+    command = (
+        "facecast eval"
+        + (f" --model {args.model}" if args.model else "")
+        + (f" --grid-split {args.grid_split}" if args.grid_split != "test" else "")
+    )
     rest = format_markdown(results, command)
     head, _, body = rest.partition("\n## ")
     text = head + "".join(lips_md) + ("## " + body if body else "")
@@ -143,6 +218,19 @@ def run(args: argparse.Namespace) -> int:
         # The latency dial (`facecast eval --dial`) is measured separately; keep its section.
         old = args.output.read_text(encoding="utf-8") if args.output.is_file() else ""
         text = splice_dial_section(text, existing_dial_section(old))
+        atomic_write_bytes(args.output, text.encode())
+        print(f"wrote {args.output}")
+    return 0
+
+
+def _run_mu(args: argparse.Namespace) -> int:
+    from assets.files import atomic_write_bytes
+    from training.mu_report import mu_markdown
+    from training.mu_train import score_saved
+
+    text = mu_markdown(score_saved(args.mu, args.grid_s1, cache_dir=args.cache_dir), f"facecast eval --mu {args.mu}")
+    print(text)
+    if args.output is not None:
         atomic_write_bytes(args.output, text.encode())
         print(f"wrote {args.output}")
     return 0
@@ -170,24 +258,40 @@ def _run_dial(args: argparse.Namespace) -> int:
     # Shipped names as they are, files by their stem (the table's first column).
     models = [(name if name in SHIPPED_MODELS else Path(name).stem, load_model(name)) for name in args.dial]
     clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
-    points = score_dial(models, clips, lags=args.lags, likelihood_scales=args.kappas,
-                        keep_own=SHIPPED_MODELS.keys(), progress=tqdm)
+    points = score_dial(
+        models, clips, lags=args.lags, likelihood_scales=args.kappas, keep_own=SHIPPED_MODELS.keys(), progress=tqdm
+    )
     png_name = None
     if args.output is not None:
-        png = plot_dial(points, args.output.parent / f"{args.output.stem}_latency_dial.png",
-                        title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences")
+        png = plot_dial(
+            points,
+            args.output.parent / f"{args.output.stem}_latency_dial.png",
+            title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences",
+        )
         png_name = png.name
-    command = f"facecast eval --dial {' '.join(name for name, _ in models)} --grid-split {args.grid_split}" + (
-        f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "") + (
-        f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
-    section = dial_markdown(points, split=args.grid_split, png_name=png_name,
-                            note=f"{len(clips)} sentences; made by `bash scripts/latency_dial.sh` (it trains the "
-                            f"tcT_whW models with the default model's recipe, only t_c and the window changed) "
-                            f"running `{command}`. The shipped pair and the choice between them: "
-                            "docs/default_model.md.")
+    command = (
+        f"facecast eval --dial {' '.join(name for name, _ in models)} --grid-split {args.grid_split}"
+        + (f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "")
+        + (f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
+    )
+    section = dial_markdown(
+        points,
+        split=args.grid_split,
+        png_name=png_name,
+        note=f"{len(clips)} sentences; made by `bash scripts/latency_dial.sh` (it trains the "
+        f"tcT_whW models with the default model's recipe, only t_c and the window changed) "
+        f"running `{command}`. The shipped pair and the choice between them: "
+        "docs/default_model.md.",
+    )
     print(section)
-    print(json.dumps([{**p.as_json(), "scores": {k: v for k, v in p.as_json()["scores"].items() if k != "per_clip"}}
-                      for p in points]))
+    print(
+        json.dumps(
+            [
+                {**p.as_json(), "scores": {k: v for k, v in p.as_json()["scores"].items() if k != "per_clip"}}
+                for p in points
+            ]
+        )
+    )
     if args.output is not None:
         old = args.output.read_text(encoding="utf-8") if args.output.is_file() else ""
         atomic_write_bytes(args.output, splice_dial_section(old, section).encode())

@@ -27,15 +27,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--out", default=None, metavar="OUT_DIR", help="also write a corpus folder here")
     p.add_argument("--cache-dir", default=None, help="cache folder (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument("--workers", type=int, default=2, help="parallel processes (one MediaPipe graph each)")
-    p.add_argument("--report", default=None, metavar="JSON",
-                   help="quality report (default OUT_DIR/extract_report.json with -o, else none)")
-    p.add_argument("--plots", type=int, default=0, metavar="N",
-                   help="plot N clips (a seeded sample): parameters, audio level, words, neutral face")
+    p.add_argument(
+        "--report",
+        default=None,
+        metavar="JSON",
+        help="quality report (default OUT_DIR/extract_report.json with -o, else none)",
+    )
+    p.add_argument(
+        "--plots",
+        type=int,
+        default=0,
+        metavar="N",
+        help="plot N clips (a seeded sample): parameters, audio level, words, neutral face",
+    )
     p.add_argument("--plot-dir", default=None, help="where the plots go (default OUT_DIR/plots or the report's folder)")
-    p.add_argument("--require-alignment", action="store_true",
-                   help="skip clips without a word alignment (default: find rest from the audio level instead)")
-    p.add_argument("--split", choices=("train", "val", "test"), default=None,
-                   help="with -o: only GRID sentences of this split (assets.grid.split_of)")
+    p.add_argument(
+        "--require-alignment",
+        action="store_true",
+        help="skip clips without a word alignment (default: find rest from the audio level instead)",
+    )
+    p.add_argument(
+        "--split",
+        choices=("train", "val", "test"),
+        default=None,
+        help="with -o: only GRID sentences of this split (assets.grid.split_of)",
+    )
     p.add_argument("--audio-rate", type=int, default=16000, help="sample rate of the extracted audio, Hz")
     p.add_argument("--language", default="en", help="language code written to the manifest")
     p.set_defaults(run=run)
@@ -61,9 +77,15 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = ExtractConfig(audio_rate_hz=args.audio_rate, language=args.language)
     videos = find_videos(args.videos)
-    report = extract_corpus(videos, cache_dir=args.cache_dir, workers=args.workers, config=cfg,
-                            require_alignment=args.require_alignment, progress=tqdm,
-                            log=lambda line: tqdm.write(line, file=sys.stderr))
+    report = extract_corpus(
+        videos,
+        cache_dir=args.cache_dir,
+        workers=args.workers,
+        config=cfg,
+        require_alignment=args.require_alignment,
+        progress=tqdm,
+        log=lambda line: tqdm.write(line, file=sys.stderr),
+    )
     doc = report.as_json()
     if not report.clips:
         from training.errors import TrainingError
@@ -73,8 +95,10 @@ def run(args: argparse.Namespace) -> int:
         raise TrainingError(f"{first['file']}: {first['reason']}{more}")
     ok = [Path(c["file"]) for c in report.clips]
     rate = len(ok) / report.seconds if report.seconds > 0 else float("nan")
-    print(f"{doc['n_ok']} of {doc['n_videos']} clips ok ({doc['n_extracted']} measured, {doc['n_cached']} from the "
-          f"cache), {doc['n_skipped']} skipped, in {report.seconds:.1f} s ({rate:.2f} clips/s, {report.workers} workers)")
+    print(
+        f"{doc['n_ok']} of {doc['n_videos']} clips ok ({doc['n_extracted']} measured, {doc['n_cached']} from the "
+        f"cache), {doc['n_skipped']} skipped, in {report.seconds:.1f} s ({rate:.2f} clips/s, {report.workers} workers)"
+    )
     if doc["summary"]:
         print("summary:", doc["summary"])
     out = Path(args.out) if args.out else None
@@ -82,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     if report_path is not None:
         write_report(report, report_path)
         print(f"wrote {report_path}")
+
     def load(v: Path):
         return load_face_track(v, cache_dir=args.cache_dir, config=cfg)
 
@@ -91,8 +116,11 @@ def run(args: argparse.Namespace) -> int:
         manifest = write_track_corpus(list(tracks), out, language=args.language)
         print(f"wrote {len(keep)} utterances -> {manifest}")
     if args.plots > 0 and ok:
-        plot_dir = Path(args.plot_dir) if args.plot_dir else (
-            out / "plots" if out else report_path.parent / "plots" if report_path else Path("extract_plots"))
+        plot_dir = (
+            Path(args.plot_dir)
+            if args.plot_dir
+            else (out / "plots" if out else report_path.parent / "plots" if report_path else Path("extract_plots"))
+        )
         from assets.grid import align_for_video, read_words
 
         for v in random.Random(0).sample(ok, min(args.plots, len(ok))):

@@ -8,16 +8,29 @@ import argparse
 def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head: str | None = None) -> None:
     """--head, --landmarks, --head-mode, --target-map."""
     if head:
-        p.add_argument("--head", default="builtin",
-                       help=help_head or "'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)")
-    p.add_argument("--landmarks", default=None,
-                   help="landmarks JSON for a head mesh rigged by retargeting (default: shipped for known heads, "
-                   "else found automatically; see docs/animation.md)")
-    p.add_argument("--head-mode", choices=("auto", "morph", "retarget"), default="auto",
-                   help="auto: drive the head's own morph targets when it has enough mouth targets, else "
-                   "retarget; morph: own targets only; retarget: always the Sec. 5 rig")
-    p.add_argument("--target-map", default=None,
-                   help="JSON mapping the head's morph-target names to ARKit names / visemes (docs/animation.md)")
+        p.add_argument(
+            "--head",
+            default="builtin",
+            help=help_head or "'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)",
+        )
+    p.add_argument(
+        "--landmarks",
+        default=None,
+        help="landmarks JSON for a head mesh rigged by retargeting (default: shipped for known heads, "
+        "else found automatically; see docs/animation.md)",
+    )
+    p.add_argument(
+        "--head-mode",
+        choices=("auto", "morph", "retarget"),
+        default="auto",
+        help="auto: drive the head's own morph targets when it has enough mouth targets, else "
+        "retarget; morph: own targets only; retarget: always the Sec. 5 rig",
+    )
+    p.add_argument(
+        "--target-map",
+        default=None,
+        help="JSON mapping the head's morph-target names to ARKit names / visemes (docs/animation.md)",
+    )
 
 
 def resolve_from_args(args: argparse.Namespace, spec: object = None):
@@ -25,5 +38,10 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
     from assets.heads.head import resolve_head
     from clients.render.landmarks import find_landmarks
 
-    return resolve_head(str(spec if spec is not None else args.head), landmarks=args.landmarks,
-                        mode=args.head_mode, target_map=args.target_map, landmark_finder=find_landmarks)
+    return resolve_head(
+        str(spec if spec is not None else args.head),
+        landmarks=args.landmarks,
+        mode=args.head_mode,
+        target_map=args.target_map,
+        landmark_finder=find_landmarks,
+    )

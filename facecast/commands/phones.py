@@ -22,10 +22,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ),
         formatter_class=HelpFormatter,
     )
-    p.add_argument("--root", default=None, metavar="DIR",
-                   help="GRID s1 folder with video/ and align/ (default: ../shared/data/video/grid_s1)")
-    p.add_argument("-o", "--out", default=None, metavar="JSON",
-                   help="file to write (default: assets/data/grid_s1_phones.json in the repository)")
+    p.add_argument(
+        "--root",
+        default=None,
+        metavar="DIR",
+        help="GRID s1 folder with video/ and align/ (default: ../shared/data/video/grid_s1)",
+    )
+    p.add_argument(
+        "-o",
+        "--out",
+        default=None,
+        metavar="JSON",
+        help="file to write (default: assets/data/grid_s1_phones.json in the repository)",
+    )
     p.add_argument("--workers", type=int, default=2, help="parallel processes")
     p.add_argument("--no-align", action="store_true", help="spread every word's phones (no pocketsphinx, no audio)")
     p.add_argument("--plot", default=None, metavar="PNG", help="also plot waveform, words and phones of --plot-id")
@@ -75,20 +84,31 @@ def run(args: argparse.Namespace) -> int:
             durations[ph].append(d)
     print(f"wrote {len(labelled)} sentences -> {out}")
     print("methods: " + ", ".join(f"{m} {n}" for m, n in methods.most_common()))
-    print(f"words spread instead of aligned: {sum(spread.values())} of {n_words} "
-          f"({', '.join(f'{w} {n}' for w, n in spread.most_common(8))})")
-    for group, members in (("vowels", VOWELS), ("bilabials P B M", BILABIALS),
-                           ("other consonants", set(durations) - VOWELS - BILABIALS)):
+    print(
+        f"words spread instead of aligned: {sum(spread.values())} of {n_words} "
+        f"({', '.join(f'{w} {n}' for w, n in spread.most_common(8))})"
+    )
+    for group, members in (
+        ("vowels", VOWELS),
+        ("bilabials P B M", BILABIALS),
+        ("other consonants", set(durations) - VOWELS - BILABIALS),
+    ):
         d = np.array([x for ph in members for x in durations.get(ph, [])]) * 1000
         if len(d):
-            print(f"{group}: {len(d)} phones, duration ms min {d.min():.0f} / p5 {np.percentile(d, 5):.0f} / "
-                  f"median {np.median(d):.0f} / p95 {np.percentile(d, 95):.0f} / max {d.max():.0f}")
+            print(
+                f"{group}: {len(d)} phones, duration ms min {d.min():.0f} / p5 {np.percentile(d, 5):.0f} / "
+                f"median {np.median(d):.0f} / p95 {np.percentile(d, 95):.0f} / max {d.max():.0f}"
+            )
     offs = np.array([s.max_word_offset_s for s in labelled if s.max_word_offset_s is not None]) * 1000
     if len(offs):
-        print(f"largest word-edge difference aligner vs GRID per sentence, ms: median {np.median(offs):.0f}, "
-              f"p95 {np.percentile(offs, 95):.0f}, max {offs.max():.0f}")
-    print(f"SIL found at word edges inside GRID word spans: {sum(s.edge_silences for s in labelled)} "
-          f"in {sum(s.edge_silences > 0 for s in labelled)} sentences")
+        print(
+            f"largest word-edge difference aligner vs GRID per sentence, ms: median {np.median(offs):.0f}, "
+            f"p95 {np.percentile(offs, 95):.0f}, max {offs.max():.0f}"
+        )
+    print(
+        f"SIL found at word edges inside GRID word spans: {sum(s.edge_silences for s in labelled)} "
+        f"in {sum(s.edge_silences > 0 for s in labelled)} sentences"
+    )
     print(f"tiling/pronunciation problems: {len(problems)}")
     for p in problems[:20]:
         print(f"  {p}")
@@ -102,8 +122,13 @@ def run(args: argparse.Namespace) -> int:
         if sid not in by_id:
             raise ConfigError(f"--plot-id {sid!r} is not a sentence under {root}")
         phones = read_grid_phones_file(out)[sid]
-        png = save_phone_plot(decode_audio(by_id[sid].video, ALIGN_RATE_HZ), ALIGN_RATE_HZ,
-                              grid.read_words(by_id[sid].align), phones.phones, args.plot,
-                              title=f"GRID s1 {sid}: '{grid.sentence_text(sid)}' ({phones.method})")
+        png = save_phone_plot(
+            decode_audio(by_id[sid].video, ALIGN_RATE_HZ),
+            ALIGN_RATE_HZ,
+            grid.read_words(by_id[sid].align),
+            phones.phones,
+            args.plot,
+            title=f"GRID s1 {sid}: '{grid.sentence_text(sid)}' ({phones.method})",
+        )
         print(f"plot -> {png}")
     return 0 if not problems else 1

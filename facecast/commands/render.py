@@ -8,6 +8,7 @@ import argparse
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "render",
@@ -20,8 +21,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("speech", help="speech audio (.wav) muxed into the video")
     add_head_options(p)
-    p.add_argument("--model", help="speech->parameters model (used when --params is not given): a .npz file or a "
-                   "shipped name: default, low-latency")
+    p.add_argument(
+        "--model",
+        help="speech->parameters model (used when --params is not given): a .npz file or a shipped name: "
+        "default, low-latency",
+    )
+    add_mapper_options(p)
+    add_expression_options(p)
     p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4)")
     p.add_argument("--png-dir", help="also write every frame as PNG into this folder")
@@ -37,19 +43,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.tracks import read_csv_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, params_for_audio, read_params_csv, resample, write_video
+    from clients.render.video import VideoConfig, params_for_audio, write_video
+    from realtime_core.track import frames_from_samples
 
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:
-        t, p = read_params_csv(args.params)
-        frames = resample(t, p, args.fps)
+        frames = read_csv_resampled(args.params, args.fps).values
     else:
-        frames, fps = params_for_audio(args.speech, args.model)
-        if fps != args.fps:
-            frames = resample(__import__("numpy").arange(len(frames)) / fps, frames, args.fps)
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper)
+        if track.fps != args.fps:
+            track = frames_from_samples(track.times(), track.values, args.fps)
+        frames = track.values
+    from facecast.commands.speech_options import apply_expressions
+
+    frames = apply_expressions(frames, args, fps=args.fps)
     from facecast.commands.headopts import resolve_from_args
 
     rig, mesh = resolve_from_args(args)

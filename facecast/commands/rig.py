@@ -30,17 +30,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="Candide-3 .wfm file to use as the simple face model (the paper's choice); default: the model "
         "derived from the built-in head",
     )
-    p.add_argument("--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)")
+    p.add_argument(
+        "--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)"
+    )
     p.add_argument("--projection", choices=("frontal", "uv"), default="frontal", help="2D projection for eq. 8-9")
     p.add_argument("--beta", type=float, default=0.5, help="gain of eq. 10 for vertices outside every triangle")
     p.add_argument(
         "--normalize-fallback", action="store_true", help="eq. 10 as a weighted mean (smoother; use with --beta 1)"
     )
-    p.add_argument("--keep-failing", action="store_true",
-                   help="write the rig even when it fails the extreme-pose checks (flipped triangles, edge stretch, "
-                   "lip interpenetration, lip gap at closure, teeth ahead of the lips)")
-    p.add_argument("--show-landmarks", metavar="PNG", default=None,
-                   help="write a picture of the head with its landmarks (numbered, named) and exit")
+    p.add_argument(
+        "--keep-failing",
+        action="store_true",
+        help="write the rig even when it fails the extreme-pose checks (flipped triangles, edge stretch, "
+        "lip interpenetration, lip gap at closure, teeth ahead of the lips)",
+    )
+    p.add_argument(
+        "--show-landmarks",
+        metavar="PNG",
+        default=None,
+        help="write a picture of the head with its landmarks (numbered, named) and exit",
+    )
     p.set_defaults(run=run)
 
 
@@ -95,8 +104,10 @@ def run(args: argparse.Namespace) -> int:
     report = head_checks(Head(rig, rigged))
     print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")
     if not report.passed and not args.keep_failing:
-        raise RigCheckError(f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "
-                            "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing")
+        raise RigCheckError(
+            f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "
+            "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
+        )
     rig = replace(rig, meta={**rig.meta, "checks": report.as_dict()})
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
@@ -112,8 +123,12 @@ def run(args: argparse.Namespace) -> int:
     except RenderError as exc:
         print(f"rig: no render for the picture ({exc}); plotting vertices instead")
     plot_control_points(
-        rig, png, title=f"{Path(args.head).name}: {len(rig.control)} control points", credit=credit,
-        image=image, pixels=pixels,
+        rig,
+        png,
+        title=f"{Path(args.head).name}: {len(rig.control)} control points",
+        credit=credit,
+        image=image,
+        pixels=pixels,
     )
     m = rig.meta
     print(

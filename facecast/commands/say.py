@@ -21,25 +21,48 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         ".csv / .json (curves), .tsv (mouth cues), .npz (the full motion: landmark PCA coefficients + parameters).",
     )
     p.add_argument("text", help="what to say (for --audio: the transcript of the recording)")
-    p.add_argument("-o", "--output", type=Path, action="append", required=True,
-                   help="output file, .mp4/.glb/.csv/.json/.tsv/.npz (repeatable)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        action="append",
+        required=True,
+        help="output file, .mp4/.glb/.csv/.json/.tsv/.npz (repeatable)",
+    )
     p.add_argument("--lang", choices=("en", "es"), default="en", help="language of TEXT")
     p.add_argument("--voice", default=None, help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es, or a variant f3")
     p.add_argument("--rate", type=int, default=175, help="speaking rate, words per minute")
-    p.add_argument("--audio", type=Path, default=None, help="a recording of TEXT to animate instead of synthesised "
-                   "speech (forced alignment; English)")
-    p.add_argument("--corpus", type=Path, default=None, help="unit corpus (.npz); default: the shipped one or the "
-                   "newest built by `facecast units build`")
-    p.add_argument("--n-best", type=int, default=1, help="average the motion of this many unit sequences from "
-                   "different recordings (1 = the paper's single sequence; more = smoother, closer to an average "
-                   "token)")
+    p.add_argument(
+        "--audio",
+        type=Path,
+        default=None,
+        help="a recording of TEXT to animate instead of synthesised speech (forced alignment; English)",
+    )
+    p.add_argument(
+        "--corpus",
+        type=Path,
+        default=None,
+        help="unit corpus (.npz); default: the shipped one or the newest built by `facecast units build`",
+    )
+    p.add_argument(
+        "--n-best",
+        type=int,
+        default=1,
+        help="average the motion of this many unit sequences from "
+        "different recordings (1 = the paper's single sequence; more = smoother, closer to an average "
+        "token)",
+    )
     from facecast.commands.headopts import add_head_options
 
     add_head_options(p, help_head="head for .mp4/.glb: 'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)")
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
-    p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing: about half "
-                   "the rendering time with the software renderer)")
+    p.add_argument(
+        "--samples",
+        type=int,
+        default=4,
+        help="MSAA samples (0 disables anti-aliasing: about half the rendering time with the software renderer)",
+    )
     p.add_argument("--verbose", action="store_true", help="print the selected units and stage timings")
     p.set_defaults(run=run)
 
@@ -58,10 +81,16 @@ def write_motion(path: Path, frames, stored) -> Path:
     from assets.files import atomic_write_bytes
 
     buf = io.BytesIO()
-    np.savez_compressed(buf, frames=np.asarray(frames, dtype=np.float32), fps=np.array(30.0),
-                        dim_names=np.array(stored.corpus.dim_names), pca_mean=stored.pca_mean,
-                        pca_components=stored.pca_components, landmark_indices=stored.landmark_indices,
-                        neutral=stored.neutral)
+    np.savez_compressed(
+        buf,
+        frames=np.asarray(frames, dtype=np.float32),
+        fps=np.array(30.0),
+        dim_names=np.array(stored.corpus.dim_names),
+        pca_mean=stored.pca_mean,
+        pca_components=stored.pca_components,
+        landmark_indices=stored.landmark_indices,
+        neutral=stored.neutral,
+    )
     return atomic_write_bytes(path, buf.getvalue())
 
 
@@ -74,10 +103,10 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.audio import read_audio, write_wav
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
-    from clients.export.curves import Track
     from clients.export.files import FORMATS, export_track
     from facecast.commands.headopts import resolve_from_args
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from realtime_core.track import Track
     from training.errors import ConfigError
 
     t_start = time.perf_counter()
@@ -108,8 +137,13 @@ def run(args: argparse.Namespace) -> int:
         from assets.tts import speak
 
         speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate)
-        samples, rate, phones, inventory, duration_s = (speech.samples, speech.sample_rate_hz, list(speech.phones),
-                                                        speech.inventory, speech.duration_s)
+        samples, rate, phones, inventory, duration_s = (
+            speech.samples,
+            speech.sample_rate_hz,
+            list(speech.phones),
+            speech.inventory,
+            speech.duration_s,
+        )
         t = lap("speech synthesis", t)
     stored = load_unit_corpus(find_unit_corpus(args.corpus))
     with threadpool_limits(1):  # small matrices: one BLAS thread is fastest on a loaded machine
@@ -120,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     t = lap("unit selection", t)
     k = stored.corpus.n_coefficients
     params = res.frames[:, k:]
-    track = Track(params=params)
+    track = Track(values=params)
     head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
     for out in outs:
         if out.suffix.lower() == ".mp4":
@@ -134,11 +168,13 @@ def run(args: argparse.Namespace) -> int:
             with tempfile.TemporaryDirectory(prefix=".facecast-say-", dir=out.resolve().parent) as tmp:
                 wav = write_wav(Path(tmp) / "speech.wav", samples, rate)
                 with renderer_for_rig(rig, mesh, cfg) as r:
+
                     def frame(p, r=r, rig=rig, credit=credit):  # one frame (h, w, 3) uint8 with the credit
                         return with_caption(r.render(rig.deformed(p)), credit)
 
-                    write_video(params, frame, out, size=(cfg.width, cfg.height), audio=wav,
-                                config=VideoConfig(fps=30.0))
+                    write_video(
+                        params, frame, out, size=(cfg.width, cfg.height), audio=wav, config=VideoConfig(fps=30.0)
+                    )
         elif out.suffix.lower() == ".npz":
             write_motion(out, res.frames, stored)
         else:
@@ -146,15 +182,20 @@ def run(args: argparse.Namespace) -> int:
         t = lap(f"write {out.suffix}", t)
     sel = res.selection
     tgt = res.target
-    print(f"say: {len(tgt.labels)} phones ({inventory}), {duration_s:.2f} s of speech, {sel.n_units} recorded units"
-          + (f", {sel.n_mismatched} junctions outside the corpus's visemes" if sel.n_mismatched else "")
-          + (f", {tgt.substituted} phones shown by a look-alike viseme" if tgt.substituted else "")
-          + (f", unknown phones {sorted(set(tgt.unknown))}" if tgt.unknown else ""))
+    print(
+        f"say: {len(tgt.labels)} phones ({inventory}), {duration_s:.2f} s of speech, {sel.n_units} recorded units"
+        + (f", {sel.n_mismatched} junctions outside the corpus's visemes" if sel.n_mismatched else "")
+        + (f", {tgt.substituted} phones shown by a look-alike viseme" if tgt.substituted else "")
+        + (f", unknown phones {sorted(set(tgt.unknown))}" if tgt.unknown else "")
+    )
     if args.verbose:
         sent = stored.corpus.phone_sentence()[sel.states]
         print("units:", " ".join(f"{tgt.labels[m]}<{stored.corpus.sentence_ids[s]}>" for m, s in enumerate(sent)))
-        print("timings:", ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in timings.items()),
-              f"| total {1000 * (time.perf_counter() - t_start):.0f} ms")
+        print(
+            "timings:",
+            ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in timings.items()),
+            f"| total {1000 * (time.perf_counter() - t_start):.0f} ms",
+        )
     for out in outs:
         print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s)")
     return 0

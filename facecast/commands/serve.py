@@ -21,32 +21,70 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "Command-line values override the [server] table of --config.",
     )
     # SUPPRESS: unset options fall back to --config, then to ServerConfig's defaults.
-    p.add_argument("--host", default=argparse.SUPPRESS,
-                   help="interface to bind (default: the config's, else 127.0.0.1 = this machine only)")
-    p.add_argument("--port", type=int, default=argparse.SUPPRESS,
-                   help="TCP port (default: the config's, else 8765; 0 = any free port)")
-    p.add_argument("--model", type=Path, default=None, help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md)")
+    p.add_argument(
+        "--host",
+        default=argparse.SUPPRESS,
+        help="interface to bind (default: the config's, else 127.0.0.1 = this machine only)",
+    )
+    p.add_argument(
+        "--port",
+        type=int,
+        default=argparse.SUPPRESS,
+        help="TCP port (default: the config's, else 8765; 0 = any free port)",
+    )
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md); "
+        "--mapper mlp needs a mapper file",
+    )
+    from facecast.commands.speech_options import add_mapper_options
+
+    add_mapper_options(p)
     head = p.add_mutually_exclusive_group()
-    head.add_argument("--head", type=Path, default=None,
-                      help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up")
+    head.add_argument(
+        "--head",
+        type=Path,
+        default=None,
+        help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up",
+    )
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
     head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
     add_head_options(p, head=False)
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
-    p.add_argument("--token-env", default=None, metavar="VAR",
-                   help="require the shared token held in this environment variable (kept off the command line)")
+    p.add_argument(
+        "--token-env",
+        default=None,
+        metavar="VAR",
+        help="require the shared token held in this environment variable (kept off the command line)",
+    )
     p.add_argument("--mic", action="store_true", help="also run a session named 'mic' from the default microphone")
-    p.add_argument("--file", type=Path, action="append", default=[],
-                   help="also stream this audio file as a session named after it (repeatable)")
+    p.add_argument(
+        "--file",
+        type=Path,
+        action="append",
+        default=[],
+        help="also stream this audio file as a session named after it (repeatable)",
+    )
     p.add_argument("--fast", action="store_true", help="stream --file as fast as possible instead of in real time")
-    p.add_argument("--workers", type=int, default=argparse.SUPPRESS,
-                   help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
-                   "on the event loop; use up to cores - 1)")
-    p.add_argument("--text", action="store_true",
-                   help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=argparse.SUPPRESS,
+        help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
+        "on the event loop; use up to cores - 1)",
+    )
+    p.add_argument(
+        "--text",
+        action="store_true",
+        help="enable text sessions (/text): chatbot text -> espeak-ng speech + recorded lip units",
+    )
     p.add_argument("--corpus", type=Path, default=None, help="unit corpus for --text (default: shipped or built)")
     p.add_argument("--text-n-best", type=int, default=1, help="unit sequences averaged per sentence for --text")
-    p.add_argument("--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)")
+    p.add_argument(
+        "--web-root", type=Path, default=None, help="directory served at / (default: clients/web if present)"
+    )
     p.set_defaults(run=run)
 
 
@@ -55,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     import logging
     import os
 
-    from assets.modelfile import load_model
+    from assets.modelfile import load_speech_model
     from facecast.commands.headopts import resolve_from_args
     from server.app import FacecastServer, run_server
     from server.config import ServerConfig
@@ -72,14 +110,25 @@ def run(args: argparse.Namespace) -> int:
         default_web = Path(__file__).resolve().parents[2] / "clients" / "web"
         web_root = default_web if default_web.is_dir() else None
     node_modules = Path(__file__).resolve().parents[2] / "node_modules"  # `npm ci` at the repo root (three.js)
-    overrides = {"host": getattr(args, "host", None), "port": getattr(args, "port", None), "token": token,
-                 "web_root": web_root, "node_modules": node_modules if node_modules.is_dir() else None,
-                 "workers": getattr(args, "workers", None)}
-    config = (ServerConfig.from_toml(args.config, **overrides) if args.config
-              else ServerConfig(**{k: v for k, v in overrides.items() if v is not None}))
-    model = load_model(args.model)
-    print(f"facecast serve: model {args.model or 'default'}, algorithmic delay {model.algorithmic_delay_ms():.1f} ms "
-          "(lag 0; docs/architecture.md, Delay)", flush=True)
+    overrides = {
+        "host": getattr(args, "host", None),
+        "port": getattr(args, "port", None),
+        "token": token,
+        "web_root": web_root,
+        "node_modules": node_modules if node_modules.is_dir() else None,
+        "workers": getattr(args, "workers", None),
+    }
+    config = (
+        ServerConfig.from_toml(args.config, **overrides)
+        if args.config
+        else ServerConfig(**{k: v for k, v in overrides.items() if v is not None})
+    )
+    model = load_speech_model(args.mapper, args.model)
+    print(
+        f"facecast serve: model {args.model or 'default'}, algorithmic delay "
+        f"{model.frontend.algorithmic_delay_ms():.1f} ms (lag 0; docs/architecture.md, Delay)",
+        flush=True,
+    )
     head = None if args.no_head else resolve_from_args(args, args.rig or args.head or "builtin")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
@@ -98,16 +147,22 @@ def run(args: argparse.Namespace) -> int:
         if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
             run.result()
         endpoints = "/ingest, /view" + (", /text" if args.text else "")
-        print(f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
-              "Ctrl-C stops", flush=True)
+        print(
+            f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
+            "Ctrl-C stops",
+            flush=True,
+        )
         for path in args.file:
             src = FileSource(FileConfig(path=path, realtime=not args.fast))
             name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
-            extra.append(server.run_source(name, src, sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
+            extra.append(server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
         if mic is not None:
             print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
-            extra.append(server.run_source("mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels,
-                                           label="microphone"))
+            extra.append(
+                server.run_source(
+                    "mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels, label="microphone"
+                )
+            )
         tasks = [asyncio.ensure_future(c) for c in extra]
         try:
             await run

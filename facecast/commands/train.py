@@ -27,46 +27,93 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "With --select, trains a grid of models on 80%% of the utterances and reports held-out accuracy.",
     )
     p.add_argument("corpus", nargs="*", type=Path, help="corpus folders (each with manifest.json)")
-    p.add_argument("--grid-s1", nargs="?", const="", default=None, metavar="ROOT",
-                   help="add the real lips of GRID s1 (default ROOT: ../shared/data/video/grid_s1 or "
-                   "$FACECAST_SHARED_DATA/video/grid_s1), face tracks from the extraction cache (measured if missing)")
-    p.add_argument("--grid-split", choices=("train", "val", "test", "all"), default="train",
-                   help="which GRID s1 sentences (assets.grid.split_of); never 'test' for a reported model")
-    p.add_argument("--speed", type=lambda t: tuple(float(v) for v in t.split(",") if v), default=(),
-                   help="speed-perturbation factors for the GRID utterances, e.g. 0.9,1.1 (one copy each: pitch, "
-                   "formants and tempo scaled, lip track re-timed)")
-    p.add_argument("--mic-copies", type=int, default=0,
-                   help="copies of every GRID utterance (and speed copy) through noise/reverberation/level/rate")
+    p.add_argument(
+        "--grid-s1",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ROOT",
+        help="add the real lips of GRID s1 (default ROOT: ../shared/data/video/grid_s1 or "
+        "$FACECAST_SHARED_DATA/video/grid_s1), face tracks from the extraction cache (measured if missing)",
+    )
+    p.add_argument(
+        "--grid-split",
+        choices=("train", "val", "test", "all"),
+        default="train",
+        help="which GRID s1 sentences (assets.grid.split_of); never 'test' for a reported model",
+    )
+    p.add_argument(
+        "--speed",
+        type=lambda t: tuple(float(v) for v in t.split(",") if v),
+        default=(),
+        help="speed-perturbation factors for the GRID utterances, e.g. 0.9,1.1 (one copy each: pitch, "
+        "formants and tempo scaled, lip track re-timed)",
+    )
+    p.add_argument(
+        "--mic-copies",
+        type=int,
+        default=0,
+        help="copies of every GRID utterance (and speed copy) through noise/reverberation/level/rate",
+    )
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
     p.add_argument("--states", type=int, default=16, help="HMM states N")
     p.add_argument("--mix", type=int, default=3, help="Gaussian mixtures per state M")
     p.add_argument("--covariance", choices=("full", "diag"), default="full", help="covariance structure")
     p.add_argument("--tc", type=int, default=3, help="co-articulation context frames on each side")
-    p.add_argument("--window-hops", type=float, default=2.0,
-                   help="MFCC analysis window in video hops (1-4); with --tc it sets the algorithmic delay, "
-                   "(tc + window_hops) / 30 s (docs/architecture.md, Delay)")
+    p.add_argument(
+        "--window-hops",
+        type=float,
+        default=2.0,
+        help="MFCC analysis window in video hops (1-4); with --tc it sets the algorithmic delay, "
+        "(tc + window_hops) / 30 s (docs/architecture.md, Delay)",
+    )
     p.add_argument("--rate", type=int, default=16000, help="model sample rate in Hz (audio is resampled)")
-    p.add_argument("--no-energy", dest="energy", action="store_false",
-                   help="leave c0 (log energy) out of the audio features (the paper's c1..c11 only)")
-    p.add_argument("--likelihood-scale", type=float, default=0.1,
-                   help="audio-likelihood exponent kappa stored in the model for the live path (0 < kappa <= 1; "
-                   "softens the over-confident posteriors of the 7 overlapping context frames)")
-    p.add_argument("--closure-band", type=float, default=0.0, metavar="IOD",
-                   help="output stage: mouth_open estimates within this of the closed pose close (realtime_core.output; "
-                   "choose on held-out data, 0 = off); stored in the model")
+    p.add_argument(
+        "--no-energy",
+        dest="energy",
+        action="store_false",
+        help="leave c0 (log energy) out of the audio features (the paper's c1..c11 only)",
+    )
+    p.add_argument(
+        "--likelihood-scale",
+        type=float,
+        default=0.1,
+        help="audio-likelihood exponent kappa stored in the model for the live path (0 < kappa <= 1; "
+        "softens the over-confident posteriors of the 7 overlapping context frames)",
+    )
+    p.add_argument(
+        "--closure-band",
+        type=float,
+        default=0.0,
+        metavar="IOD",
+        help="output stage: mouth_open estimates within this of the closed pose close (realtime_core.output; "
+        "choose on held-out data, 0 = off); stored in the model",
+    )
     p.add_argument("--iters", type=int, default=25, help="maximum Baum-Welch iterations")
     p.add_argument("--tol", type=float, default=5e-4, help="stop when the objective gains less per frame")
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation and the split")
-    p.add_argument("--exclude-source", default="", help="comma-separated corpus sources to leave out "
-                   "(espeak, real, video), e.g. to keep evaluation speech out of training")
-    p.add_argument("--select", action="store_true", help="model-selection mode over --grid-states/--grid-mix/"
-                   "--grid-tc, full and diagonal; writes Fig. 7/8 PNGs and a JSON report to --report-dir")
+    p.add_argument(
+        "--exclude-source",
+        default="",
+        help="comma-separated corpus sources to leave out "
+        "(espeak, real, video), e.g. to keep evaluation speech out of training",
+    )
+    p.add_argument(
+        "--select",
+        action="store_true",
+        help="model-selection mode over --grid-states/--grid-mix/"
+        "--grid-tc, full and diagonal; writes Fig. 7/8 PNGs and a JSON report to --report-dir",
+    )
     p.add_argument("--grid-states", type=_ints, default=[4, 8, 16, 28], help="N values for --select")
     p.add_argument("--grid-mix", type=_ints, default=[1, 3, 5], help="M values for --select")
     p.add_argument("--grid-tc", type=_ints, default=[3], help="tc values for --select")
-    p.add_argument("--report-dir", type=Path, default=None, help="where --select writes plots and report "
-                   "(default: OUTPUT's folder)")
+    p.add_argument(
+        "--report-dir",
+        type=Path,
+        default=None,
+        help="where --select writes plots and report (default: OUTPUT's folder)",
+    )
     p.set_defaults(run=run)
 
 
@@ -81,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
+    from typing import Any
 
     from tqdm import tqdm
 
@@ -91,17 +139,22 @@ def _run(args: argparse.Namespace) -> int:
 
     exclude = {s for s in args.exclude_source.split(",") if s}
     utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
-    data = {"corpora": [str(c) for c in args.corpus]}
+    data: dict[str, Any] = {"corpora": [str(c) for c in args.corpus]}
     if args.grid_s1 is not None:
         from training.reallips import Variety, add_variety, grid_utterances
 
         split = None if args.grid_split == "all" else args.grid_split
-        grid = grid_utterances(split, root=args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm,
-                               log=lambda line: tqdm.write(line))
+        grid = grid_utterances(
+            split, root=args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm, log=lambda line: tqdm.write(line)
+        )
         variety = Variety(speeds=args.speed, mic_copies=args.mic_copies, seed=args.seed)
         utts += add_variety(grid, variety)
-        data["grid_s1"] = {"split": args.grid_split, "sentences": len(grid), "speeds": list(args.speed),
-                           "mic_copies": args.mic_copies}
+        data["grid_s1"] = {
+            "split": args.grid_split,
+            "sentences": len(grid),
+            "speeds": list(args.speed),
+            "mic_copies": args.mic_copies,
+        }
     if not utts:
         from training.errors import ConfigError
 
@@ -109,9 +162,14 @@ def _run(args: argparse.Namespace) -> int:
     print(f"training on {len(utts)} utterances, {sum(u.duration_s for u in utts) / 60:.1f} min of audio")
 
     def recipe(n: int, m: int, cov: str, tc: int) -> TrainRecipe:
-        return TrainRecipe(sample_rate_hz=args.rate, tc=tc, window_hops=args.window_hops, energy=args.energy, likelihood_scale=args.likelihood_scale,
-                           hmm=TrainConfig(
-            n_states=n, n_mix=m, covariance_type=cov, n_iter=args.iters, tol=args.tol, seed=args.seed))
+        return TrainRecipe(
+            sample_rate_hz=args.rate,
+            tc=tc,
+            window_hops=args.window_hops,
+            energy=args.energy,
+            likelihood_scale=args.likelihood_scale,
+            hmm=TrainConfig(n_states=n, n_mix=m, covariance_type=cov, n_iter=args.iters, tol=args.tol, seed=args.seed),
+        )
 
     if args.select:
         return _select(args, utts, recipe)
@@ -122,7 +180,8 @@ def _run(args: argparse.Namespace) -> int:
     if ckpt.exists():
         prev = load_model(ckpt)
         same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
-            k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")}
+            k: v for k, v in rec.as_json().items() if k not in ("n_iter", "tol")
+        }
         if same and {k: prev.metadata.get(k) for k in data} == data:
             start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
             print(f"resuming from {ckpt} (iteration {done})")
@@ -136,15 +195,16 @@ def _run(args: argparse.Namespace) -> int:
             save_model(ckpt, replace(model, metadata={**model.metadata, "iteration": done + it}))
 
     rec_run = replace(rec, hmm=replace(rec.hmm, n_iter=max(args.iters - done, 0))) if start is not None else rec
-    model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration,
-                                   metadata=data)
+    model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration, metadata=data)
     bar.close()
     model = replace(model, closure_band=args.closure_band, metadata={**model.metadata, "recipe": rec.as_json()})
     save_model(args.output, model)
     ckpt.unlink(missing_ok=True)
     h = result.history
-    print(f"wrote {args.output}: objective per frame {h[0]:.3f} -> {h[-1]:.3f} in {len(h) - 1} iterations"
-          f"{' (converged)' if result.converged else ''}")
+    print(
+        f"wrote {args.output}: objective per frame {h[0]:.3f} -> {h[-1]:.3f} in {len(h) - 1} iterations"
+        f"{' (converged)' if result.converged else ''}"
+    )
     return 0
 
 
@@ -157,19 +217,33 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
     from training.trainer import evaluate, split_by_utterance, train_av_model
 
     train, test = split_by_utterance(utts, seed=args.seed)
-    grid = [(n, m, cov, tc) for tc in args.grid_tc for cov in ("full", "diag") for n in args.grid_states
-            for m in args.grid_mix]
+    grid = [
+        (n, m, cov, tc)
+        for tc in args.grid_tc
+        for cov in ("full", "diag")
+        for n in args.grid_states
+        for m in args.grid_mix
+    ]
     rows, best = [], None
     for n, m, cov, tc in tqdm(grid, desc="model selection", unit="model"):
         model, _ = train_av_model(train, recipe(n, m, cov, tc))
         ev = evaluate(model, test)
-        row = {"n_states": n, "n_mix": m, "covariance_type": cov, "tc": tc, "eps": round(ev.eps, 4),
-               "rho": round(ev.rho, 4), "r_per_param": {k: round(v, 4) for k, v in ev.r_per_param.items()},
-               "stream_cost_MN2": m * n * n}
+        row = {
+            "n_states": n,
+            "n_mix": m,
+            "covariance_type": cov,
+            "tc": tc,
+            "eps": round(ev.eps, 4),
+            "rho": round(ev.rho, 4),
+            "r_per_param": {k: round(v, 4) for k, v in ev.r_per_param.items()},
+            "stream_cost_MN2": m * n * n,
+        }
         rows.append(row)
         tqdm.write(json.dumps(row))
         if cov == "full" and (best is None or ev.rho > best[0]):
             best = (ev.rho, model, ev, row)
+    if best is None:
+        raise SystemExit("facecast train: no full-covariance model in the grid")
     out_dir = args.report_dir or args.output.parent
     out_dir.mkdir(parents=True, exist_ok=True)
     plot_selection(rows, out_dir / "selection_fig7.png")

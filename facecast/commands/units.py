@@ -9,25 +9,49 @@ from pathlib import Path
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
 
-    p = sub.add_parser("units", help="build the unit-selection motion corpus (GRID s1) or evaluate it on real lips",
-                       formatter_class=HelpFormatter)
+    p = sub.add_parser(
+        "units",
+        help="build the unit-selection motion corpus (GRID s1) or evaluate it on real lips",
+        formatter_class=HelpFormatter,
+    )
     which = p.add_subparsers(dest="units", required=True, metavar="ACTION")
-    actions = (("build", "build (or find in the cache) the corpus of the GRID s1 train + val sentences"),
-               ("eval", ("held-out test sentences from text with real timings vs the real lips, beside the "
-                         "audio-driven HMM and the articulatory rules (seed 001 Sec. 4.1)")))
+    actions = (
+        ("build", "build (or find in the cache) the corpus of the GRID s1 train + val sentences"),
+        (
+            "eval",
+            (
+                "held-out test sentences from text with real timings vs the real lips, beside the "
+                "audio-driven HMM and the articulatory rules (seed 001 Sec. 4.1)"
+            ),
+        ),
+    )
     for name, text in actions:
         q = which.add_parser(name, help=text, formatter_class=HelpFormatter, description=text)
-        q.add_argument("--grid", type=Path, default=None, help="GRID s1 folder (video/, align/); default: "
-                       "../shared/data/video/grid_s1 beside the checkout")
+        q.add_argument(
+            "--grid",
+            type=Path,
+            default=None,
+            help="GRID s1 folder (video/, align/); default: ../shared/data/video/grid_s1 beside the checkout",
+        )
         q.add_argument("--phones", type=Path, default=None, help="GRID phone boundaries (default: the shipped JSON)")
-        q.add_argument("--cache-dir", type=Path, default=None, help="extraction/corpus cache (default $FACECAST_CACHE "
-                       "or ~/.cache/facecast)")
-        q.add_argument("--only-extracted", action="store_true", help="use only sentences the shared extraction has "
-                       "cached (never run MediaPipe)")
+        q.add_argument(
+            "--cache-dir",
+            type=Path,
+            default=None,
+            help="extraction/corpus cache (default $FACECAST_CACHE or ~/.cache/facecast)",
+        )
+        q.add_argument(
+            "--only-extracted",
+            action="store_true",
+            help="use only sentences the shared extraction has cached (never run MediaPipe)",
+        )
         q.set_defaults(run=_run_build if name == "build" else _run_eval)
         if name == "build":
-            q.add_argument("--ship", action="store_true", help="also write the corpus to assets/data/ (the one "
-                           "`facecast say` uses by default)")
+            q.add_argument(
+                "--ship",
+                action="store_true",
+                help="also write the corpus to assets/data/ (the one `facecast say` uses by default)",
+            )
         else:
             q.add_argument("--model", type=Path, default=None, help="HMM baseline model (default: the shipped one)")
             q.add_argument("--n-best", default="1,10", help="unit sequences averaged, one row per value")
@@ -45,14 +69,21 @@ def _corpus(args: argparse.Namespace):
     root = args.grid or grid.default_root()
     phones = read_grid_phones(args.phones)
     sents = [s for s in grid.sentences(root) if s.split != "test"]
-    return build_grid_corpus(sents, phones, cache_dir=args.cache_dir, only_extracted=args.only_extracted,
-                             progress=tqdm, say=print), root, phones
+    return (
+        build_grid_corpus(
+            sents, phones, cache_dir=args.cache_dir, only_extracted=args.only_extracted, progress=tqdm, say=print
+        ),
+        root,
+        phones,
+    )
 
 
 def _run_build(args: argparse.Namespace) -> int:
     stored, path = _corpus(args)[0]
-    print(f"unit corpus {path}: {stored.corpus.n_sentences} sentences, {stored.corpus.n_phones} phones, "
-          f"{stored.corpus.n_coefficients} EM-PCA components ({100 * stored.meta['explained']:.1f} % of the variance)")
+    print(
+        f"unit corpus {path}: {stored.corpus.n_sentences} sentences, {stored.corpus.n_phones} phones, "
+        f"{stored.corpus.n_coefficients} EM-PCA components ({100 * stored.meta['explained']:.1f} % of the variance)"
+    )
     if args.ship:
         from assets.unitcorpus import SHIPPED, save_unit_corpus
 
@@ -81,19 +112,25 @@ def _run_eval(args: argparse.Namespace) -> int:
         if s.sentence_id not in phones or (args.only_extracted and not is_extracted(s.video, args.cache_dir)):
             continue
         try:
-            tests.append((s.sentence_id, load_face_track(s.video, cache_dir=args.cache_dir),
-                          phone_rows(phones[s.sentence_id])))
+            tests.append(
+                (s.sentence_id, load_face_track(s.video, cache_dir=args.cache_dir), phone_rows(phones[s.sentence_id]))
+            )
         except FileProblem as exc:
             print(f"skipping {s.sentence_id}: {exc.problem}")
     n_best = tuple(int(x) for x in args.n_best.split(","))
     with threadpool_limits(1):
-        rows, curves = evaluate(stored, tests, model=load_model(args.model), n_best=n_best, progress=tqdm,
-                                model_label=str(args.model) if args.model else "shipped default model")
+        rows, curves = evaluate(
+            stored,
+            tests,
+            model=load_model(args.model),
+            n_best=n_best,
+            progress=tqdm,
+            model_label=str(args.model) if args.model else "shipped default model",
+        )
     print(json.dumps(rows, indent=1))
     fig = fig8(curves, args.figure)
     cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
-    text = markdown(rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd,
-                    figure=f"img/{fig.name}")
+    text = markdown(rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=f"img/{fig.name}")
     print(text)
     if args.output is not None:
         atomic_write_bytes(args.output, text.encode())

@@ -25,14 +25,34 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
     p.add_argument("--session", default=None, help="session to watch (default %(default)s = the first live one)")
-    p.add_argument("--record", type=Path, default=None, metavar="OUT.mp4",
-                   help="render the stream into this MP4 instead of showing a window (default %(default)s = window)")
-    p.add_argument("--screenshot", type=Path, default=None, metavar="PNG",
-                   help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)")
+    p.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        metavar="OUT.mp4",
+        help="render the stream into this MP4 instead of showing a window (default %(default)s = window)",
+    )
+    p.add_argument(
+        "--screenshot",
+        type=Path,
+        default=None,
+        metavar="PNG",
+        help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)",
+    )
     p.add_argument("--buffer-ms", type=float, default=80.0, help="window mode: jitter buffer before a frame is shown")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
-    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default %(default)s = when the session ends)")
-    p.add_argument("--token-env", default=None, metavar="VAR", help="environment variable holding the server's token (default %(default)s = no token)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="stop after this many seconds (default %(default)s = when the session ends)",
+    )
+    p.add_argument(
+        "--token-env",
+        default=None,
+        metavar="VAR",
+        help="environment variable holding the server's token (default %(default)s = no token)",
+    )
     p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
     p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
     p.set_defaults(run=run)
@@ -56,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from clients.render.renderer import RenderConfig
-    from clients.viewer.stream import StreamConfig, fetch_head, pick_session, record_stream
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session, record_stream
     from clients.viewer.video import render_recording
 
     token = token_from_env(args.token_env)
@@ -66,16 +86,26 @@ def run(args: argparse.Namespace) -> int:
     async def main():
         session = await pick_session(args.url, args.session, args.wait, token)
         mesh = await fetch_head(args.url, token)
-        cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token,
-                           wait_s=args.wait, max_s=args.duration)
+        cfg = ViewerStreamConfig(
+            url=args.url,
+            session=session,
+            kind="deltas",
+            encoding="int16",
+            token=token,
+            wait_s=args.wait,
+            max_s=args.duration,
+        )
         print(f"facecast view: recording session {session!r} from {args.url}", flush=True)
         return session, mesh, await record_stream(cfg)
 
     session, mesh, rec = asyncio.run(main())
-    out, n = render_recording(rec, mesh, args.record, config=RenderConfig(width=args.width, height=args.height,
-                                                                           margin=1.25))
-    print(f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; "
-          f"session closed with {rec.close_code} {rec.close_reason}")
+    out, n = render_recording(
+        rec, mesh, args.record, config=RenderConfig(width=args.width, height=args.height, margin=1.25)
+    )
+    print(
+        f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; "
+        f"session closed with {rec.close_code} {rec.close_reason}"
+    )
     return 0
 
 
@@ -87,22 +117,34 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig
     from clients.viewer.live import run_window
-    from clients.viewer.stream import StreamConfig, fetch_head, pick_session
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session
 
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise ClientError(f"no display here: pass --record OUT.mp4 to render the session to a video, or open "
-                          f"{args.url}/ in a browser to watch and listen")
+        raise ClientError(
+            f"no display here: pass --record OUT.mp4 to render the session to a video, or open "
+            f"{args.url}/ in a browser to watch and listen"
+        )
 
     async def setup():
         return await pick_session(args.url, args.session, args.wait, token), await fetch_head(args.url, token)
 
     session, mesh = asyncio.run(setup())
-    cfg = StreamConfig(url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait)
-    st = run_window(cfg, mesh, config=RenderConfig(width=args.width, height=args.height, margin=1.25),
-                    buffer_s=args.buffer_ms / 1000, duration_s=args.duration, screenshot=args.screenshot)
+    cfg = ViewerStreamConfig(
+        url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait
+    )
+    st = run_window(
+        cfg,
+        mesh,
+        config=RenderConfig(width=args.width, height=args.height, margin=1.25),
+        buffer_s=args.buffer_ms / 1000,
+        duration_s=args.duration,
+        screenshot=args.screenshot,
+    )
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"
-    print(f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
-          f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
-          f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
-          + (f"; wrote {args.screenshot}" if args.screenshot else ""))
+    print(
+        f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
+        f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
+        f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
+        + (f"; wrote {args.screenshot}" if args.screenshot else "")
+    )
     return 0

@@ -1,14 +1,14 @@
 """Face models and retargeting onto arbitrary heads (paper 000 Sec. 5; paper 001 Sec. 3.5, 3.9).
 
-    model          FaceModel (mesh + animation/shape units), mouth measurement and calibration
-    candide        Candide-3 .wfm text parser
-    registration   similarity (Umeyama) + shape-unit fit from landmarks
-    projection     control points: closest vertex, one-to-one, geodesic check (Sec. 5.1)
-    interpolation  eq. 8-10 weights as one sparse matrix (Sec. 5.2)
-    rbf            Gaussian RBF map with GCV-chosen ridge (paper 001 Sec. 3.5)
-    adaptation     per-vertex affine transfer of morph targets (paper 001 Sec. 3.9)
-    simple         a simple face model sampled from a head with morph targets
-    rig            Rig: params (4,) -> head displacement with one sparse product; head calibration
+model          FaceModel (mesh + animation/shape units), mouth measurement and calibration
+candide        Candide-3 .wfm text parser
+registration   similarity (Umeyama) + shape-unit fit from landmarks
+projection     control points: closest vertex, one-to-one, geodesic check (Sec. 5.1)
+interpolation  eq. 8-10 weights as one sparse matrix (Sec. 5.2)
+rbf            Gaussian RBF map with GCV-chosen ridge (paper 001 Sec. 3.5)
+adaptation     per-vertex affine transfer of morph targets (paper 001 Sec. 3.9)
+simple         a simple face model sampled from a head with morph targets
+rig            Rig: params (4,) -> head displacement with one sparse product; head calibration
 """
 
 from realtime_core.face.candide import parse_wfm

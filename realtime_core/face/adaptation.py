@@ -14,7 +14,9 @@ import numpy as np
 from realtime_core.errors import ConfigError
 
 
-def affine_adaptation(generic: np.ndarray, specific: np.ndarray, triangles: np.ndarray, *, max_cond: float = 1e6) -> np.ndarray:
+def affine_adaptation(
+    generic: np.ndarray, specific: np.ndarray, triangles: np.ndarray, *, max_cond: float = 1e6
+) -> np.ndarray:
     """Per-vertex affine maps (n, 3, 3) taking generic (n, 3) displacements to the specific (n, 3) mesh.
 
     Vertices none of whose triangles is regular get the isotropic map s * I, s the ratio of the

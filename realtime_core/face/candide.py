@@ -15,7 +15,7 @@ import re
 import numpy as np
 
 from realtime_core.errors import ModelFormatError
-from realtime_core.face.model import FaceModel
+from realtime_core.face.model import FaceModel, MouthLandmarks
 
 _SECTION = re.compile(r"^#\s*([A-Z][A-Z ]+):\s*$")
 
@@ -112,10 +112,18 @@ def parse_wfm(text: str, *, name: str = "candide3") -> FaceModel:
 
 
 CANDIDE3_LANDMARKS: dict[str, int] = {
-    "upper_lip": 7, "lower_lip": 8, "upper_inner": 87, "lower_inner": 40,
-    "corner_left": 31, "corner_right": 64,
-    "eye_outer_left": 20, "eye_inner_left": 23, "eye_outer_right": 53, "eye_inner_right": 56,
-    "nose_tip": 5, "chin": 10,
+    "upper_lip": 7,
+    "lower_lip": 8,
+    "upper_inner": 87,
+    "lower_inner": 40,
+    "corner_left": 31,
+    "corner_right": 64,
+    "eye_outer_left": 20,
+    "eye_inner_left": 23,
+    "eye_outer_right": 53,
+    "eye_inner_right": 56,
+    "nose_tip": 5,
+    "chin": 10,
 }
 """Named landmark vertices of Candide-3 (both shipped variants share the vertex list)."""
 
@@ -138,10 +146,8 @@ def candide3_mouth_groups(model: FaceModel) -> tuple[tuple[str, ...], ...]:
     return tuple(groups)
 
 
-def candide3_mouth_landmarks():
+def candide3_mouth_landmarks() -> MouthLandmarks:
     """The :class:`MouthLandmarks` of Candide-3 (from :data:`CANDIDE3_LANDMARKS`): 7/8 outer lip
     midpoints, 87/40 the coincident inner-lip midpoints (upper/lower), 31/64 the lip corners (face's
     left/right), 20/23 and 53/56 the outer/inner eye corners."""
-    from realtime_core.face.model import MouthLandmarks
-
     return MouthLandmarks(**{k: CANDIDE3_LANDMARKS[k] for k in MouthLandmarks.__dataclass_fields__})

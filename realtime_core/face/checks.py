@@ -22,6 +22,7 @@ Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported e
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -112,15 +113,17 @@ class RigReport:
     passed: bool
     failures: tuple[str, ...]
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
-        return (f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
-                f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
-                f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
-                + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")"))
+        return (
+            f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
+            f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
+            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
+            + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
+        )
 
 
 def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -128,7 +131,7 @@ def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def check_rig(
-    rig,
+    rig: Any,
     landmarks: MouthLandmarks,
     *,
     lip_pairs: np.ndarray | None = None,
@@ -152,7 +155,8 @@ def check_rig(
     l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     ok_edge = l0 > 1e-9 * iod
-    flipped, worst, stretch, inter, ahead = 0, (), 1.0, 0.0, None
+    worst: tuple[float, ...] = ()
+    flipped, stretch, inter, ahead = 0, 1.0, 0.0, None
     for pose in (*poses, closure):
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
         moved = np.linalg.norm(v - v0, axis=1) > 1e-9 * iod
@@ -182,6 +186,13 @@ def check_rig(
         fails.append(f"lips {closure_gap:.4f} IOD apart at closure")
     if ahead is not None and ahead > limits.max_teeth_ahead:
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
-    return RigReport(flipped_triangles=flipped, worst_flip_pose=worst, max_edge_stretch=stretch,
-                     lip_interpenetration_iod=inter, closure_gap_iod=closure_gap, teeth_ahead_iod=ahead,
-                     passed=not fails, failures=tuple(fails))
+    return RigReport(
+        flipped_triangles=flipped,
+        worst_flip_pose=worst,
+        max_edge_stretch=stretch,
+        lip_interpenetration_iod=inter,
+        closure_gap_iod=closure_gap,
+        teeth_ahead_iod=ahead,
+        passed=not fails,
+        failures=tuple(fails),
+    )

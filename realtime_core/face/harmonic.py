@@ -26,8 +26,9 @@ from scipy.sparse.linalg import splu
 from realtime_core.face.projection import vertex_adjacency
 
 
-def harmonic_weights(vertices: np.ndarray, triangles: np.ndarray, control: np.ndarray, sec5: sp.csr_matrix,
-                     *, margin: float = 0.0) -> sp.csr_matrix:
+def harmonic_weights(
+    vertices: np.ndarray, triangles: np.ndarray, control: np.ndarray, sec5: sp.csr_matrix, *, margin: float = 0.0
+) -> sp.csr_matrix:
     """(n_head, n_simple) CSR weights. vertices (n, 3), triangles (m, 3), control (n_s,) head vertex of
     each simple vertex, sec5 (n, n_s) the Sec. 5.2 weights (they define the moving region and the
     rows of parts without control points); margin (head units): the region grows by this much so

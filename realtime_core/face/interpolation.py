@@ -164,7 +164,7 @@ def interpolation_weights(
     vals.append(np.ones(n_s))
     out = np.flatnonzero(~inside & ~own)
     anchor = h.copy()
-    if geo is not None and out.size:
+    if geo is not None and head_triangles is not None and out.size:
         from scipy.sparse.csgraph import connected_components
 
         from realtime_core.face.projection import vertex_adjacency
@@ -174,8 +174,10 @@ def interpolation_weights(
         has_ctrl[comp[ctrl]] = True
         loose = ~has_ctrl[comp]
         if loose.any():
-            cnt = np.bincount(comp[loose], minlength=len(has_ctrl)).astype(float)
-            cen = np.stack([np.bincount(comp[loose], weights=h[loose, j], minlength=len(has_ctrl)) for j in range(3)], 1)
+            cnt = np.bincount(comp[loose], minlength=len(has_ctrl)).astype(np.float64)
+            cen: np.ndarray = np.stack(
+                [np.bincount(comp[loose], weights=h[loose, j], minlength=len(has_ctrl)) for j in range(3)], 1
+            )
             cen /= np.maximum(cnt, 1)[:, None]
             anchor[loose] = cen[comp[loose]]
     if out.size and config.beta > 0:
@@ -212,9 +214,7 @@ def interpolation_weights(
         rows.append(np.repeat(out, k)[keep.reshape(-1)])
         cols.append(nn.reshape(-1)[keep.reshape(-1)])
         vals.append(w.reshape(-1)[keep.reshape(-1)])
-    g_mat = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_h, n_s)
-    )
+    g_mat = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n_h, n_s))
     g_mat.sum_duplicates()
     return Interpolation(weights=g_mat, inside=inside)
 

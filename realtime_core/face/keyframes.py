@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -42,6 +43,8 @@ class KeyframeMap:
     cross: np.ndarray
     lo: float = 0.0
     hi: float = 1.0
+    # Set in __post_init__: the Cholesky factor of the Gram matrix.
+    _chol: tuple[np.ndarray, bool] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gram, dtype=np.float64)
@@ -100,17 +103,18 @@ class KeyframeMap:
         g = self.gram
         for i, f in enumerate(rhs):
             out[i] = _box_qp(g, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
-        return out.reshape(x.shape[:-1] + (self.n_keyframes,))
+        return out.reshape((*x.shape[:-1], self.n_keyframes))
 
     def residual(self, keyframes: np.ndarray, source: np.ndarray, x: np.ndarray) -> float:
         """Relative residual ||K' b(x) - A x|| / ||A x|| (how well the keyframes reproduce a motion)."""
         s = np.asarray(x, dtype=np.float64) @ np.asarray(source, dtype=np.float64)
         fit = self.weights(x) @ np.asarray(keyframes, dtype=np.float64)
-        return float(np.linalg.norm(fit - s) / max(np.linalg.norm(s), 1e-300))
+        return float(np.linalg.norm(fit - s) / max(float(np.linalg.norm(s)), 1e-300))
 
 
-def _box_qp(g: np.ndarray, f: np.ndarray, lo: float, hi: float, start: np.ndarray, iterations: int,
-            tol: float) -> np.ndarray:
+def _box_qp(
+    g: np.ndarray, f: np.ndarray, lo: float, hi: float, start: np.ndarray, iterations: int, tol: float
+) -> np.ndarray:
     """min 1/2 b^T g b - f^T b subject to lo <= b <= hi (g positive definite, small P).
 
     Active set in the manner of Lawson-Hanson/BVLS: variables at a bound whose gradient points
@@ -170,12 +174,16 @@ class MorphRig:
     moving: np.ndarray
     keymap: KeyframeMap
     source: Callable[[np.ndarray], np.ndarray]
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    # Set in __post_init__: the targets flattened to (n_moving*3, P).
+    _flat: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         t = np.ascontiguousarray(self.targets, dtype=np.float32)
         if t.ndim != 3 or t.shape[0] != len(self.names) or t.shape[1:] != (len(self.moving), 3):
-            raise ConfigError(f"morph targets {t.shape} do not match {len(self.names)} names, {len(self.moving)} moving vertices")
+            raise ConfigError(
+                f"morph targets {t.shape} do not match {len(self.names)} names, {len(self.moving)} moving vertices"
+            )
         if self.keymap.n_keyframes != len(self.names):
             raise ConfigError(f"keyframe map has {self.keymap.n_keyframes} keyframes for {len(self.names)} targets")
         object.__setattr__(self, "targets", t)

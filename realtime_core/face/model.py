@@ -101,14 +101,17 @@ class FaceModel:
         Unknown unit names raise :class:`ConfigError`; missing names have weight 0.
         """
         out = np.array(self.vertices, dtype=np.float64)
-        for table, kind, w in ((self.shape_units, "shape unit", shape), (self.animation_units, "animation unit", weights)):
+        for table, kind, w in (
+            (self.shape_units, "shape unit", shape),
+            (self.animation_units, "animation unit", weights),
+        ):
             for name, value in (w or {}).items():
                 if name not in table:
                     raise ConfigError(f"unknown {kind} {name!r}")
                 out += float(value) * table[name]
         return out
 
-    def with_neutral(self, vertices: np.ndarray) -> "FaceModel":
+    def with_neutral(self, vertices: np.ndarray) -> FaceModel:
         """The same model with new neutral vertices (n, 3) (e.g. after registration/shape fit)."""
         return FaceModel(
             vertices=vertices,
@@ -119,7 +122,7 @@ class FaceModel:
             name=self.name,
         )
 
-    def transformed(self, scale: float, rotation: np.ndarray, translation: np.ndarray) -> "FaceModel":
+    def transformed(self, scale: float, rotation: np.ndarray, translation: np.ndarray) -> FaceModel:
         """The model under x -> scale * R x + t; units are rotated and scaled too (not translated)."""
         r = np.asarray(rotation, dtype=np.float64)
 
@@ -253,7 +256,7 @@ class MouthCalibration:
         """(n*3, 4) float64 B with displacement.ravel() = B @ params for ``model``'s units."""
         cols = []
         for names in self.groups:
-            cols.append(sum(model.animation_units[n] for n in names).reshape(-1))
+            cols.append(np.sum([model.animation_units[n] for n in names], axis=0).reshape(-1))
         unit = np.stack(cols, axis=1)  # (n*3, k)
         return unit @ self.matrix
 

@@ -14,8 +14,9 @@ Perry-Smith scan fail, while the lips still do (crossing them means a detour rou
 ``walk="shortest"`` instead follows the shortest edge path (Dijkstra) and requires the distance
 to decrease along it with the same slack, and a path at most 3 times the straight line. The
 vertex of a failing triangle that takes part in most failing edges (ties: the one farther from
-its simple-model vertex) is then replaced by its next-closest free head vertex, and the check repeats until every triangle passes
-or the candidates run out (the triangle is then reported and left out of the interpolation).
+its simple-model vertex) is then replaced by its next-closest free head vertex, and the check
+repeats until every triangle passes or the candidates run out (the triangle is then reported and
+left out of the interpolation).
 """
 
 from __future__ import annotations
@@ -155,7 +156,7 @@ def project(
     dist = np.take_along_axis(dist, order, axis=1)
     cand = np.take_along_axis(cand, order, axis=1)
     qd = np.take_along_axis(qd, order, axis=1)
-    rank = np.zeros(len(s), dtype=np.int64)
+    rank: list[int] = [0] * len(s)
     control = np.full(len(s), -1, dtype=np.int64)
     used: dict[int, int] = {}
 
@@ -194,7 +195,9 @@ def project(
         return ProjectionResult(control=control, bad_triangles=bad, replacements=0)
     adj = vertex_adjacency(len(h), head_triangles)
     coo = adj.tocoo()
-    graph = sp.csr_matrix((np.linalg.norm(h[coo.row] - h[coo.col], axis=1) + 1e-300, (coo.row, coo.col)), shape=adj.shape)
+    graph = sp.csr_matrix(
+        (np.linalg.norm(h[coo.row] - h[coo.col], axis=1) + 1e-300, (coo.row, coo.col)), shape=adj.shape
+    )
     cache: dict[tuple[int, int], bool] = {}
 
     def edge_ok(a: int, b: int) -> bool:
@@ -221,14 +224,14 @@ def project(
             for u, v in fails:
                 votes[int(u)] += 1
                 votes[int(v)] += 1
-            order = sorted(
+            worst_first = sorted(
                 (x for x in votes if votes[x] > 0 and not exhausted[x]),
                 key=lambda x: (-votes[x], -dist[x, min(rank[x], k - 1)]),
             )
-            if not order:
+            if not worst_first:
                 bad[t_i] = True
                 continue
-            x = order[0]
+            x = worst_first[0]
             del used[int(control[x])]
             rank[x] += 1
             if not take(x):

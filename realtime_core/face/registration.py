@@ -13,7 +13,9 @@ their targets.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -37,9 +39,14 @@ class Similarity:
         """Transform displacement vectors (..., 3) (no translation)."""
         return self.scale * np.asarray(vectors, dtype=np.float64) @ self.rotation.T
 
+    def __iter__(self) -> Iterator[Any]:
+        """Unpacks as ``scale, rotation, translation`` (``s * x @ R.T + t``)."""
+        return iter((self.scale, self.rotation, self.translation))
+
 
 def fit_similarity(src: np.ndarray, dst: np.ndarray) -> Similarity:
-    """Least-squares similarity mapping ``src`` (k, 3) onto ``dst`` (k, 3) (Umeyama).
+    """Least-squares similarity mapping ``src`` (k, 3) onto ``dst`` (k, 3) (Umeyama 1991): the one
+    implementation (face registration here, head-pose removal in ``training.video``).
 
     Raises ConfigError for fewer than 3 points or (near-)collinear source points.
     """

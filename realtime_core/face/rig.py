@@ -13,7 +13,7 @@ is stored with S = kron(G, I_3) restricted to the head vertices that can move. F
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -24,10 +24,10 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-
 RIG_ALGORITHM = 11
 HARMONIC_MARGIN = 0.0
-"""IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region; 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
+"""IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
+0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
@@ -90,13 +90,17 @@ class Rig:
     control: np.ndarray
     simple: FaceModel
     calibration: MouthCalibration
-    meta: dict = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    # Set in __post_init__: the folded dense (n_moving*3, 4) map, or None to use the sparse product.
+    _folded: np.ndarray | None = field(init=False, default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n_h = len(self.neutral)
         n_s = self.simple.n_vertices
         if self.matrix.shape != (len(self.moving) * 3, n_s * 3):
-            raise ConfigError(f"rig matrix {self.matrix.shape} does not match {len(self.moving)} moving, {n_s} simple vertices")
+            raise ConfigError(
+                f"rig matrix {self.matrix.shape} does not match {len(self.moving)} moving, {n_s} simple vertices"
+            )
         if self.basis.shape != (n_s * 3, 4):
             raise ConfigError(f"rig basis {self.basis.shape} must be ({n_s * 3}, 4)")
         if len(self.moving) and (self.moving.min() < 0 or self.moving.max() >= n_h):
@@ -140,7 +144,7 @@ def head_weights(
     allowed: np.ndarray | None = None,
     seam_pairs: np.ndarray | None = None,
     lower_lip: np.ndarray | None = None,
-) -> tuple[sp.csr_matrix, np.ndarray, dict]:
+) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
     placed in head coordinates; ``frame`` the head's face frame (IOD scale); ``training`` (n_s, c)
@@ -233,7 +237,7 @@ def build_rig(
     config: RigConfig = RigConfig(),
     head_uvs: np.ndarray | None = None,
     allowed: np.ndarray | None = None,
-    meta: dict | None = None,
+    meta: dict[str, Any] | None = None,
     keep_apart: np.ndarray | None = None,
 ) -> Rig:
     """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights).
@@ -287,7 +291,14 @@ def build_rig(
     moving = np.flatnonzero(np.diff(g.indptr) > 0)
     s = sp.kron(g[moving], sp.identity(3, format="csr"), format="csr")
     m = dict(meta or {})
-    m.update(info, algorithm=RIG_ALGORITHM, method=config.method, projection_2d=config.projection_2d, beta=config.beta, iod=frame.iod)
+    m.update(
+        info,
+        algorithm=RIG_ALGORITHM,
+        method=config.method,
+        projection_2d=config.projection_2d,
+        beta=config.beta,
+        iod=frame.iod,
+    )
     return Rig(
         neutral=np.asarray(head_vertices, dtype=np.float32),
         triangles=np.asarray(head_triangles, dtype=np.int32),

@@ -152,7 +152,9 @@ def derive_simple_model(
     return model, verts
 
 
-def regional_shape_units(vertices: np.ndarray, frame: FaceFrame, centres: Mapping[str, np.ndarray], *, sigma: float = 0.45) -> dict[str, np.ndarray]:
+def regional_shape_units(
+    vertices: np.ndarray, frame: FaceFrame, centres: Mapping[str, np.ndarray], *, sigma: float = 0.45
+) -> dict[str, np.ndarray]:
     """Candide-like shape units for a face model without any: smooth regional moves.
 
     vertices (n, 3) head units; centres: region name -> (3,) point (e.g. "eyes_left", "nose",

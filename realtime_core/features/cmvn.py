@@ -43,9 +43,7 @@ class CmvnConfig:
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.prior_frames <= self.max_frames:
-            raise ConfigError(
-                f"need 1 <= prior_frames <= max_frames, got {self.prior_frames}, {self.max_frames}"
-            )
+            raise ConfigError(f"need 1 <= prior_frames <= max_frames, got {self.prior_frames}, {self.max_frames}")
         if self.var_floor <= 0:
             raise ConfigError(f"var_floor must be > 0, got {self.var_floor}")
 

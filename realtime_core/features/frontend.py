@@ -169,4 +169,3 @@ def extract_features(
         )
     fe = FrontEnd(config, cmvn_mean=cmvn_mean, cmvn_var=cmvn_var)
     return np.concatenate([fe.push(x), fe.flush()])
-

@@ -285,6 +285,17 @@ def frame_log_energy_db(samples: np.ndarray, config: MfccConfig) -> np.ndarray:
     return 10.0 * np.log10(np.maximum(rms2, 1e-12))
 
 
+def loudness_db(samples: np.ndarray, rate_hz: int, n_frames: int) -> np.ndarray:
+    """The one per-frame level of facecast: ``(n_frames,) float64`` RMS level in dBFS on the 30 fps
+    analysis grid of :class:`MfccStream` at ``rate_hz`` (:func:`frame_log_energy_db`), truncated or
+    padded with the quietest frame's level to exactly ``n_frames`` (a track's length). The loudness
+    baseline of ``facecast eval``, the speech-energy check of ``facecast extract`` and its plots."""
+    lv = frame_log_energy_db(samples, MfccConfig(sample_rate_hz=int(rate_hz)))
+    out = np.full(n_frames, lv.min() if len(lv) else -120.0)
+    out[: min(n_frames, len(lv))] = lv[:n_frames]
+    return out
+
+
 def mfcc(samples: np.ndarray, config: MfccConfig) -> np.ndarray:
     """Whole-utterance MFCCs: ``(n,)`` samples -> ``(ceil(n * fps / rate), n_outputs) float64``.
 
@@ -300,4 +311,3 @@ def mfcc(samples: np.ndarray, config: MfccConfig) -> np.ndarray:
     stream = MfccStream(config)
     head = stream.push(x)
     return np.concatenate([head, stream.flush()])
-

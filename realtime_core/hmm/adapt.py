@@ -98,8 +98,9 @@ class _AudioMarginal:
     def __init__(self, model: AvHmm) -> None:
         chol = _audio_chol(model)
         da = model.n_audio
-        self.whiten = np.stack([scipy.linalg.solve_triangular(c, np.eye(da), lower=True, check_finite=False)
-                                for c in chol])  # (C, Da, Da)
+        self.whiten = np.stack(
+            [scipy.linalg.solve_triangular(c, np.eye(da), lower=True, check_finite=False) for c in chol]
+        )  # (C, Da, Da)
         self.const = -np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1) - 0.5 * da * LOG_2PI  # (C,)
 
     def loglik(self, model: AvHmm, oa: np.ndarray) -> np.ndarray:
@@ -208,6 +209,13 @@ def map_adapt(model: AvHmm, sequences: Sequence[np.ndarray], *, config: AdaptCon
             tw = config.weight_relevance
             weights = (tw * prior.weights + occ) / (tw + occ.sum(axis=1, keepdims=True))
             weights = weights / weights.sum(axis=1, keepdims=True)
-        model = AvHmm(startprob=model.startprob, transmat=model.transmat, weights=weights, means=means,
-                      covars=model.covars, covariance_type=model.covariance_type, n_audio=da)
+        model = AvHmm(
+            startprob=model.startprob,
+            transmat=model.transmat,
+            weights=weights,
+            means=means,
+            covars=model.covars,
+            covariance_type=model.covariance_type,
+            n_audio=da,
+        )
     return AdaptResult(model=model, history=history, occupancy=occ, n_frames=n_frames)

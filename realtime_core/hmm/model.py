@@ -94,7 +94,7 @@ class AvHmm:
     def chol(self) -> np.ndarray:
         """Lower Cholesky factors ``(N, M, D, D)``; for diag, ``diag(sqrt(var))``."""
         if self.covariance_type == "diag":
-            out = np.zeros(self.means.shape + (self.n_dim,))
+            out = np.zeros((*self.means.shape, self.n_dim))
             idx = np.arange(self.n_dim)
             out[..., idx, idx] = np.sqrt(self.covars)
             return out

@@ -7,8 +7,16 @@ import numpy as np
 from realtime_core.hmm import AvHmm
 
 
-def random_av_hmm(rng: np.random.Generator, *, n_states: int, n_mix: int, n_audio: int, n_visual: int,
-                  coupling: float = 0.8, self_loop: float = 0.8) -> AvHmm:
+def random_av_hmm(
+    rng: np.random.Generator,
+    *,
+    n_states: int,
+    n_mix: int,
+    n_audio: int,
+    n_visual: int,
+    coupling: float = 0.8,
+    self_loop: float = 0.8,
+) -> AvHmm:
     """A well-separated AV-HMM whose visual part depends on the audio part within each
     component (cross-covariance), so inversion has something to recover."""
     d = n_audio + n_visual

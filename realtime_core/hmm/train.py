@@ -124,13 +124,15 @@ def _prior_psi(x: np.ndarray, config: TrainConfig) -> np.ndarray:
 
 def _kmeans(data: np.ndarray, k: int, rng: np.random.Generator, restarts: int) -> np.ndarray:
     """k-means++ with restarts; the codebook with the lowest distortion, ``(k, D)``."""
-    best, best_cost = None, np.inf
+    best: np.ndarray | None = None
+    best_cost = np.inf
     for _ in range(max(restarts, 1)):
         book, _ = scipy.cluster.vq.kmeans2(data, k, minit="++", seed=rng, iter=30)
         _, dist = scipy.cluster.vq.vq(data, book)
         cost = float(np.sum(dist**2))
         if cost < best_cost:
             best, best_cost = book, cost
+    assert best is not None  # at least one restart ran
     return best
 
 
@@ -144,7 +146,9 @@ def init_model(sequences: Sequence[np.ndarray], *, n_audio: int, config: TrainCo
     evals, evecs = np.linalg.eigh(cov)
     whiten = evecs / np.sqrt(np.maximum(evals, 1e-12 * evals.max()))
     xw = (x - mean) @ whiten
-    sample = xw if len(xw) <= config.kmeans_max_frames else xw[rng.choice(len(xw), config.kmeans_max_frames, replace=False)]
+    sample = (
+        xw if len(xw) <= config.kmeans_max_frames else xw[rng.choice(len(xw), config.kmeans_max_frames, replace=False)]
+    )
     if len(sample) < n * m:
         raise InvalidFeaturesError(f"{len(sample)} frames are too few for {n} states x {m} mixtures")
     centroids = _kmeans(sample, n, rng, config.kmeans_restarts)
@@ -171,7 +175,9 @@ def init_model(sequences: Sequence[np.ndarray], *, n_audio: int, config: TrainCo
             means[j, k] = xk.mean(axis=0)
             c = xk - means[j, k]
             if config.covariance_type == "full":
-                covars[j, k] = (c.T @ c + np.diag(psi) + (1e-6 if r == 0 else 0.0) * np.eye(d)) / (len(xk) + max(r, 1.0))
+                covars[j, k] = (c.T @ c + np.diag(psi) + (1e-6 if r == 0 else 0.0) * np.eye(d)) / (
+                    len(xk) + max(r, 1.0)
+                )
             else:
                 covars[j, k] = ((c**2).sum(axis=0) + psi + (1e-6 if r == 0 else 0.0)) / (len(xk) + max(r, 1.0))
             weights[j, k] = len(xk)
@@ -219,7 +225,9 @@ def _log_prior(model: AvHmm, psi: np.ndarray, config: TrainConfig) -> float:
     return total
 
 
-def _e_step(model: AvHmm, x: np.ndarray, lengths: np.ndarray, config: TrainConfig, origin: np.ndarray):
+def _e_step(
+    model: AvHmm, x: np.ndarray, lengths: np.ndarray, config: TrainConfig, origin: np.ndarray
+) -> tuple[dict[str, np.ndarray], float]:
     """Sufficient statistics and log-likelihood at ``model``."""
     n, m, d = model.means.shape
     c = n * m
@@ -270,7 +278,9 @@ def _e_step(model: AvHmm, x: np.ndarray, lengths: np.ndarray, config: TrainConfi
     return stats, loglik
 
 
-def _m_step(model: AvHmm, stats: dict, psi: np.ndarray, config: TrainConfig, origin: np.ndarray) -> AvHmm:
+def _m_step(
+    model: AvHmm, stats: dict[str, np.ndarray], psi: np.ndarray, config: TrainConfig, origin: np.ndarray
+) -> AvHmm:
     n, m, d = model.means.shape
     p = config.pseudo_count
     r = config.covar_prior_weight
@@ -301,9 +311,7 @@ def _m_step(model: AvHmm, stats: dict, psi: np.ndarray, config: TrainConfig, ori
     )
 
 
-def em_iteration(
-    sequences: Sequence[np.ndarray], model: AvHmm, *, config: TrainConfig
-) -> tuple[AvHmm, float]:
+def em_iteration(sequences: Sequence[np.ndarray], model: AvHmm, *, config: TrainConfig) -> tuple[AvHmm, float]:
     """One E-step and M-step. Returns ``(updated model, objective per frame at model)``."""
     x, lengths = _check_sequences(sequences)
     psi = _prior_psi(x, config)
@@ -354,7 +362,9 @@ def fit(
     progress: ProgressFn | None = None,
 ) -> TrainResult:
     """k-means initialisation then Baum-Welch. ``sequences``: list of ``(T_i, D)``."""
-    return baum_welch(sequences, init_model(sequences, n_audio=n_audio, config=config), config=config, progress=progress)
+    return baum_welch(
+        sequences, init_model(sequences, n_audio=n_audio, config=config), config=config, progress=progress
+    )
 
 
 def log_likelihood(model: AvHmm, sequences: Sequence[np.ndarray]) -> float:

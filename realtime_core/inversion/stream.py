@@ -114,8 +114,14 @@ class StreamingInverter:
     (:class:`realtime_core.output.OutputStage`: closed-pose floor and closure band), applied to
     every emitted frame; None = raw eq. 7 estimates."""
 
-    def __init__(self, form: ConditionalForm, *, config: StreamConfig = StreamConfig(),
-                 plan: StreamPlan | None = None, output: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        form: ConditionalForm,
+        *,
+        config: StreamConfig = StreamConfig(),
+        plan: StreamPlan | None = None,
+        output: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
         self.form = form
         self._output = output
         self.config = config
@@ -130,10 +136,16 @@ class StreamingInverter:
         self._n, self._m = form.n_states, form.n_mix
         self.reset()
 
+    @property
+    def lag_frames(self) -> int:
+        """Rows held back for fixed-lag smoothing (the :class:`realtime_core.mapping.VisualMapper` interface)."""
+        return self.config.lag
+
     def reset(self) -> None:
         """Start a new utterance."""
         self._f: np.ndarray | None = None  # filtered posterior of the newest frame
-        self._pending: deque = deque()  # (filtered, scaled b, within-state mix, centred audio)
+        # (filtered, scaled b, within-state mix, centred audio) per frame not yet final
+        self._pending: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque()
         self._finished = False
 
     def push(self, oa: np.ndarray) -> np.ndarray:
@@ -160,7 +172,7 @@ class StreamingInverter:
         # One backward pass from the last frame over everything still waiting.
         items = list(self._pending)
         betas = [np.ones(self._n)]
-        for f, b, _, _ in reversed(items[1:]):
+        for _f, b, _, _ in reversed(items[1:]):
             beta = self._A @ (b * betas[-1])
             betas.append(beta / beta.sum())
         betas.reverse()
@@ -168,7 +180,7 @@ class StreamingInverter:
         self._pending.clear()
         return np.array(out)
 
-    def _forward(self, row: np.ndarray):
+    def _forward(self, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         a = row.astype(self._feat.dtype) - self._center
         feat = self._feat
         np.multiply(a[self._i0], a[self._i1], out=feat[: self._nq])

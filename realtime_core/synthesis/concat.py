@@ -41,8 +41,14 @@ from realtime_core.synthesis.corpus import FPS, MotionCorpus, sample_motion
 from realtime_core.synthesis.search import crossfade
 
 
-def warp_sources(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray,
-                 times_s: np.ndarray, anchored: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def warp_sources(
+    corpus: MotionCorpus,
+    states: np.ndarray,
+    starts_s: np.ndarray,
+    ends_s: np.ndarray,
+    times_s: np.ndarray,
+    anchored: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For output instants ``times_s`` (n,): (target phone index (n,), tau in [0, 1] (n,), source
     time (n,) on the clock of the selected phone's sentence).
 
@@ -62,9 +68,17 @@ def warp_sources(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray,
     return m, tau, src
 
 
-def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray, *,
-                parent: np.ndarray, n_frames: int | None = None, fps: float = FPS,
-                anchored: np.ndarray | None = None) -> np.ndarray:
+def concatenate(
+    corpus: MotionCorpus,
+    states: np.ndarray,
+    starts_s: np.ndarray,
+    ends_s: np.ndarray,
+    *,
+    parent: np.ndarray,
+    n_frames: int | None = None,
+    fps: float = FPS,
+    anchored: np.ndarray | None = None,
+) -> np.ndarray:
     """Motion of the selected units warped onto the target phones and smoothed at the junctions.
 
     states: (T,) corpus phone per target phone; starts_s, ends_s: (T,) target phone boundaries in
@@ -97,8 +111,11 @@ def concatenate(corpus: MotionCorpus, states: np.ndarray, starts_s: np.ndarray, 
         # the parent's motion warped onto the same target interval; a parentless successor is
         # represented by its own first instant
         pq = np.where(has_p, p, nq)
-        p_src = np.where(has_p, corpus.phone_start_s[pq] + tau[blend] * (corpus.phone_end_s[pq] - corpus.phone_start_s[pq]),
-                         corpus.phone_start_s[pq])
+        p_src = np.where(
+            has_p,
+            corpus.phone_start_s[pq] + tau[blend] * (corpus.phone_end_s[pq] - corpus.phone_start_s[pq]),
+            corpus.phone_start_s[pq],
+        )
         other = sample_motion(corpus, sent[pq], p_src)
         w = crossfade(tau[blend])[:, None]
         out[blend] = (1.0 - w) * out[blend] + w * other

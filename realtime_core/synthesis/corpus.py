@@ -97,12 +97,16 @@ class MotionCorpus:
         ph = [np.arange(po[s], po[s + 1]) for s in keep]
         fi, pi = np.concatenate(fr), np.concatenate(ph)
         return MotionCorpus(
-            sentence_ids=tuple(self.sentence_ids[s] for s in keep), frames=self.frames[fi],
+            sentence_ids=tuple(self.sentence_ids[s] for s in keep),
+            frames=self.frames[fi],
             frame_offsets=np.concatenate([[0], np.cumsum([len(a) for a in fr])]).astype(np.int64),
-            phone_labels=tuple(self.phone_labels[i] for i in pi), phone_visemes=self.phone_visemes[pi],
-            phone_start_s=self.phone_start_s[pi], phone_end_s=self.phone_end_s[pi],
+            phone_labels=tuple(self.phone_labels[i] for i in pi),
+            phone_visemes=self.phone_visemes[pi],
+            phone_start_s=self.phone_start_s[pi],
+            phone_end_s=self.phone_end_s[pi],
             phone_offsets=np.concatenate([[0], np.cumsum([len(a) for a in ph])]).astype(np.int64),
-            n_coefficients=self.n_coefficients, dim_names=self.dim_names,
+            n_coefficients=self.n_coefficients,
+            dim_names=self.dim_names,
         )
 
 
@@ -161,17 +165,31 @@ def encode_corpus(stored: StoredCorpus) -> bytes:
     import json
 
     c = stored.corpus
-    header = {"sentence_ids": list(c.sentence_ids), "phone_labels": list(c.phone_labels),
-              "n_coefficients": c.n_coefficients, "dim_names": list(c.dim_names), "meta": stored.meta,
-              "pca_total_variance": stored.pca_total_variance}
+    header = {
+        "sentence_ids": list(c.sentence_ids),
+        "phone_labels": list(c.phone_labels),
+        "n_coefficients": c.n_coefficients,
+        "dim_names": list(c.dim_names),
+        "meta": stored.meta,
+        "pca_total_variance": stored.pca_total_variance,
+    }
     buf = io.BytesIO()
     np.savez_compressed(
-        buf, format=np.array(CORPUS_FORMAT), version=np.array(CORPUS_VERSION), header_json=np.array(json.dumps(header)),
-        frames=np.asarray(c.frames, dtype=np.float32), frame_offsets=np.asarray(c.frame_offsets, dtype=np.int64),
-        phone_visemes=np.asarray(c.phone_visemes, dtype=np.int16), phone_start_s=c.phone_start_s,
-        phone_end_s=c.phone_end_s, phone_offsets=np.asarray(c.phone_offsets, dtype=np.int64),
-        pca_mean=stored.pca_mean, pca_components=stored.pca_components, pca_variances=stored.pca_variances,
-        landmark_indices=np.asarray(stored.landmark_indices, dtype=np.int64), neutral=stored.neutral,
+        buf,
+        format=np.array(CORPUS_FORMAT),
+        version=np.array(CORPUS_VERSION),
+        header_json=np.array(json.dumps(header)),
+        frames=np.asarray(c.frames, dtype=np.float32),
+        frame_offsets=np.asarray(c.frame_offsets, dtype=np.int64),
+        phone_visemes=np.asarray(c.phone_visemes, dtype=np.int16),
+        phone_start_s=c.phone_start_s,
+        phone_end_s=c.phone_end_s,
+        phone_offsets=np.asarray(c.phone_offsets, dtype=np.int64),
+        pca_mean=stored.pca_mean,
+        pca_components=stored.pca_components,
+        pca_variances=stored.pca_variances,
+        landmark_indices=np.asarray(stored.landmark_indices, dtype=np.int64),
+        neutral=stored.neutral,
     )
     return buf.getvalue()
 
@@ -189,28 +207,60 @@ def decode_corpus(data: bytes) -> StoredCorpus:
         a = {k: npz[k] for k in npz.files}
     except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
         raise ModelFormatError(f"not a unit-corpus archive ({exc})") from None
-    need = ("format", "version", "header_json", "frames", "frame_offsets", "phone_visemes", "phone_start_s",
-            "phone_end_s", "phone_offsets", "pca_mean", "pca_components", "pca_variances", "landmark_indices", "neutral")
+    need = (
+        "format",
+        "version",
+        "header_json",
+        "frames",
+        "frame_offsets",
+        "phone_visemes",
+        "phone_start_s",
+        "phone_end_s",
+        "phone_offsets",
+        "pca_mean",
+        "pca_components",
+        "pca_variances",
+        "landmark_indices",
+        "neutral",
+    )
     missing = [k for k in need if k not in a]
     if missing:
         raise ModelFormatError(f"unit-corpus archive lacks {missing}")
     if str(a["format"]) != CORPUS_FORMAT or int(a["version"]) != CORPUS_VERSION:
-        raise ModelFormatError(f"format {str(a['format'])!r} v{int(a['version'])} is not {CORPUS_FORMAT!r} v{CORPUS_VERSION}")
+        raise ModelFormatError(
+            f"format {str(a['format'])!r} v{int(a['version'])} is not {CORPUS_FORMAT!r} v{CORPUS_VERSION}"
+        )
     try:
         h = json.loads(str(a["header_json"]))
         corpus = MotionCorpus(
-            sentence_ids=tuple(h["sentence_ids"]), frames=a["frames"], frame_offsets=a["frame_offsets"],
-            phone_labels=tuple(h["phone_labels"]), phone_visemes=a["phone_visemes"], phone_start_s=a["phone_start_s"],
-            phone_end_s=a["phone_end_s"], phone_offsets=a["phone_offsets"], n_coefficients=int(h["n_coefficients"]),
+            sentence_ids=tuple(h["sentence_ids"]),
+            frames=a["frames"],
+            frame_offsets=a["frame_offsets"],
+            phone_labels=tuple(h["phone_labels"]),
+            phone_visemes=a["phone_visemes"],
+            phone_start_s=a["phone_start_s"],
+            phone_end_s=a["phone_end_s"],
+            phone_offsets=a["phone_offsets"],
+            n_coefficients=int(h["n_coefficients"]),
             dim_names=tuple(h["dim_names"]),
         )
-        stored = StoredCorpus(corpus=corpus, pca_mean=a["pca_mean"], pca_components=a["pca_components"],
-                              pca_variances=a["pca_variances"], pca_total_variance=float(h["pca_total_variance"]),
-                              landmark_indices=a["landmark_indices"], neutral=a["neutral"], meta=dict(h["meta"]))
+        stored = StoredCorpus(
+            corpus=corpus,
+            pca_mean=a["pca_mean"],
+            pca_components=a["pca_components"],
+            pca_variances=a["pca_variances"],
+            pca_total_variance=float(h["pca_total_variance"]),
+            landmark_indices=a["landmark_indices"],
+            neutral=a["neutral"],
+            meta=dict(h["meta"]),
+        )
     except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
         raise ModelFormatError(f"unit-corpus archive is inconsistent: {exc}") from None
     k = corpus.n_coefficients
-    if stored.pca_components.shape != (k, stored.pca_mean.shape[0]) or stored.neutral.shape != (
-            len(stored.landmark_indices), 3) or stored.pca_mean.shape[0] != 3 * len(stored.landmark_indices):
+    if (
+        stored.pca_components.shape != (k, stored.pca_mean.shape[0])
+        or stored.neutral.shape != (len(stored.landmark_indices), 3)
+        or stored.pca_mean.shape[0] != 3 * len(stored.landmark_indices)
+    ):
         raise ModelFormatError("unit-corpus PCA, landmark indices and neutral face disagree in size")
     return stored

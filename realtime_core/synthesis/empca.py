@@ -84,8 +84,13 @@ class Pca:
 
     def truncated(self, k: int) -> Pca:
         """The first ``k`` components."""
-        return Pca(mean=self.mean, components=self.components[:k], variances=self.variances[:k],
-                   total_variance=self.total_variance, iterations=self.iterations)
+        return Pca(
+            mean=self.mean,
+            components=self.components[:k],
+            variances=self.variances[:k],
+            total_variance=self.total_variance,
+            iterations=self.iterations,
+        )
 
 
 def _check(y: np.ndarray) -> np.ndarray:
@@ -105,7 +110,7 @@ def em_subspace(yc: np.ndarray, k: int, config: EmPcaConfig) -> tuple[np.ndarray
     c = rng.standard_normal((p, k))
     q_old = np.linalg.qr(c)[0]
     it = 0
-    for it in range(1, config.max_iterations + 1):
+    for it in range(1, config.max_iterations + 1):  # noqa: B007 - the count is returned after the loop
         x = np.linalg.solve(c.T @ c, c.T @ yc.T)  # E-step: (k, n)
         c = (yc.T @ x.T) @ np.linalg.inv(x @ x.T)  # M-step: (p, k)
         q = np.linalg.qr(c)[0]

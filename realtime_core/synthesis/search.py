@@ -67,7 +67,8 @@ class NoPathError(ConfigError):
 class SearchConfig:
     """beta: weight of the smoothness cost C (>= 0; 0 = fewest units only); points: samples ``L``
     per phone for C; cost_components: leading motion-vector dims C is measured on (the largest
-    principal components carry nearly all the motion; fewer dims = faster search); min_blend_s: floor on the target phone duration in C (a 10 ms phone would
+    principal components carry nearly all the motion; fewer dims = faster search); min_blend_s:
+    floor on the target phone duration in C (a 10 ms phone would
     otherwise make any blend infinitely costly); max_active: active-state cap per step (None =
     exact search); lookahead / lookahead_phones: pruning bonus per phone of future recorded
     match, and its cap; mismatch_cost: G for junctions between different visemes in the fallback
@@ -193,10 +194,19 @@ def build_graph(corpus: MotionCorpus, config: SearchConfig = SearchConfig()) -> 
     natural = np.einsum("ij,ij->i", u + v, u + v) / dur**4
     c_ref = float(np.median(natural)) if n else 1.0
     return UnitGraph(
-        visemes=vis, parent=parent, sentence_end=sentence_end, by_diviseme=by_diviseme, by_viseme=by_viseme,
-        first_by_viseme=first_by_viseme, u=u.astype(np.float32), v=v.astype(np.float32),
-        a=np.einsum("ij,ij->i", u, u), b=np.einsum("ij,ij->i", v, v), c_ref=max(c_ref, 1e-12),
-        log_duration=np.log(corpus.phone_end_s - corpus.phone_start_s), config=config,
+        visemes=vis,
+        parent=parent,
+        sentence_end=sentence_end,
+        by_diviseme=by_diviseme,
+        by_viseme=by_viseme,
+        first_by_viseme=first_by_viseme,
+        u=u.astype(np.float32),
+        v=v.astype(np.float32),
+        a=np.einsum("ij,ij->i", u, u),
+        b=np.einsum("ij,ij->i", v, v),
+        c_ref=max(c_ref, 1e-12),
+        log_duration=np.log(corpus.phone_end_s - corpus.phone_start_s),
+        config=config,
     )
 
 
@@ -255,8 +265,14 @@ def _prune(graph: UnitGraph, cand: np.ndarray, phi: np.ndarray, target: np.ndarr
     return finite[np.argpartition(key, cap - 1)[:cap]]
 
 
-def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
-            mismatch_cost: float = np.inf, banned: np.ndarray | None = None) -> Selection:
+def viterbi(
+    graph: UnitGraph,
+    target: np.ndarray,
+    durations_s: np.ndarray,
+    *,
+    mismatch_cost: float = np.inf,
+    banned: np.ndarray | None = None,
+) -> Selection:
     """The least-cost state sequence for target visemes ``target`` (T,) int with target phone
     durations ``durations_s`` (T,) s. ``mismatch_cost`` is G for junctions whose visemes differ
     (inf = the paper); ``banned``: (N,) bool states not to use. Raises NoPathError if every path
@@ -264,8 +280,11 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     target = np.asarray(target, dtype=np.int64)
     durations_s = np.asarray(durations_s, dtype=np.float64)
     if target.ndim != 1 or len(target) == 0 or durations_s.shape != target.shape:
-        raise ConfigError(f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}")
+        raise ConfigError(
+            f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}"
+        )
     cfg = graph.config
+
     def allowed(c: np.ndarray) -> np.ndarray:
         return c if banned is None else c[~banned[c]]
 
@@ -285,8 +304,10 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
         if relaxed:
             cand = allowed(graph.by_viseme.get(int(target[t]), np.zeros(0, np.int64)))
         if len(cand) == 0 or len(active) == 0:
-            raise NoPathError(f"no admissible unit for target phone {t} (viseme pair {int(target[t - 1])} -> "
-                              f"{int(target[t])} was never recorded)")
+            raise NoPathError(
+                f"no admissible unit for target phone {t} (viseme pair {int(target[t - 1])} -> "
+                f"{int(target[t])} was never recorded)"
+            )
         par = graph.parent[cand]
         # jumps: i (active) -> j (cand) through the junction i | parent(j)
         jump = phi[:, None] + 1.0 + cfg.beta * smoothness(graph, active, par, float(durations_s[t - 1]))
@@ -327,8 +348,9 @@ def viterbi(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
     return Selection(states=states, cost=cost, n_units=int(1 + jumps.sum()), n_mismatched=mism)
 
 
-def select_units(graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *,
-                 banned: np.ndarray | None = None) -> Selection:
+def select_units(
+    graph: UnitGraph, target: np.ndarray, durations_s: np.ndarray, *, banned: np.ndarray | None = None
+) -> Selection:
     """:func:`viterbi` with the paper's costs, and the configuration's finite ``mismatch_cost`` at the
     junctions whose diviseme the corpus never recorded (see the module doc)."""
     return viterbi(graph, target, durations_s, mismatch_cost=graph.config.mismatch_cost, banned=banned)

@@ -108,8 +108,14 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
         t = b
     if not labels:
         raise ConfigError("the phones have no duration")
-    return Target(labels=tuple(labels), visemes=np.array(vis, dtype=np.int16), starts_s=np.array(starts),
-                  ends_s=np.array(ends), unknown=tuple(unknown), substituted=substituted)
+    return Target(
+        labels=tuple(labels),
+        visemes=np.array(vis, dtype=np.int16),
+        starts_s=np.array(starts),
+        ends_s=np.array(ends),
+        unknown=tuple(unknown),
+        substituted=substituted,
+    )
 
 
 def pause_anchors(visemes: np.ndarray) -> np.ndarray:
@@ -135,8 +141,14 @@ class UnitSynthesizer:
     def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
         return make_target(phones, inventory, self.available)
 
-    def synthesize(self, phones: Sequence[tuple[str, float, float]], inventory: str, *,
-                   n_frames: int | None = None, n_best: int = 1) -> UnitSynthesis:
+    def synthesize(
+        self,
+        phones: Sequence[tuple[str, float, float]],
+        inventory: str,
+        *,
+        n_frames: int | None = None,
+        n_best: int = 1,
+    ) -> UnitSynthesis:
         """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es").
 
         n_best: 1 = the paper (one unit sequence). k > 1 averages the warped motion of k unit
@@ -158,8 +170,16 @@ class UnitSynthesizer:
                 if k == 0:
                     raise
                 break
-            frames = concatenate(self.corpus, sel.states, target.starts_s, target.ends_s, parent=self.graph.parent,
-                                 n_frames=n_frames, fps=FPS, anchored=anchors)
+            frames = concatenate(
+                self.corpus,
+                sel.states,
+                target.starts_s,
+                target.ends_s,
+                parent=self.graph.parent,
+                n_frames=n_frames,
+                fps=FPS,
+                anchored=anchors,
+            )
             total = frames if total is None else total + frames
             sels.append(sel)
             used = np.unique(self._sentence[sel.states])

@@ -49,8 +49,30 @@ import re
 from realtime_core.errors import ConfigError
 
 VISEMES: tuple[str, ...] = (
-    "sil", "PBM", "FV", "TH", "TDNL", "SZ", "SH", "KG", "R", "W", "Y",
-    "IY", "EH", "AE", "AA", "AH", "ER", "AO", "UW", "EY", "AY", "AW", "OW", "OY",
+    "sil",
+    "PBM",
+    "FV",
+    "TH",
+    "TDNL",
+    "SZ",
+    "SH",
+    "KG",
+    "R",
+    "W",
+    "Y",
+    "IY",
+    "EH",
+    "AE",
+    "AA",
+    "AH",
+    "ER",
+    "AO",
+    "UW",
+    "EY",
+    "AY",
+    "AW",
+    "OW",
+    "OY",
 )
 """The viseme classes; a class's index in this tuple is its integer id."""
 
@@ -91,11 +113,30 @@ PHONE_TO_VISEME: dict[str, dict[str, str]] = {
 """inventory -> {phone label: viseme class} (the table in the module doc)."""
 
 FALLBACK: dict[str, tuple[str, ...]] = {
-    "sil": ("PBM",), "PBM": ("FV", "sil"), "FV": ("PBM", "TH"), "TH": ("TDNL", "SZ"), "TDNL": ("SZ", "KG"),
-    "SZ": ("TDNL", "TH"), "SH": ("R", "SZ"), "KG": ("TDNL", "AH"), "R": ("W", "SH"), "W": ("UW", "R"),
-    "Y": ("IY", "TDNL"), "IY": ("EH", "Y"), "EH": ("AE", "IY"), "AE": ("EH", "AA"), "AA": ("AH", "AE"),
-    "AH": ("AA", "EH"), "ER": ("R", "AH"), "AO": ("OW", "AA"), "UW": ("OW", "W"), "EY": ("EH", "IY"),
-    "AY": ("AA", "AE"), "AW": ("AA", "AO"), "OW": ("AO", "UW"), "OY": ("AO", "OW"),
+    "sil": ("PBM",),
+    "PBM": ("FV", "sil"),
+    "FV": ("PBM", "TH"),
+    "TH": ("TDNL", "SZ"),
+    "TDNL": ("SZ", "KG"),
+    "SZ": ("TDNL", "TH"),
+    "SH": ("R", "SZ"),
+    "KG": ("TDNL", "AH"),
+    "R": ("W", "SH"),
+    "W": ("UW", "R"),
+    "Y": ("IY", "TDNL"),
+    "IY": ("EH", "Y"),
+    "EH": ("AE", "IY"),
+    "AE": ("EH", "AA"),
+    "AA": ("AH", "AE"),
+    "AH": ("AA", "EH"),
+    "ER": ("R", "AH"),
+    "AO": ("OW", "AA"),
+    "UW": ("OW", "W"),
+    "EY": ("EH", "IY"),
+    "AY": ("AA", "AE"),
+    "AW": ("AA", "AO"),
+    "OW": ("AO", "UW"),
+    "OY": ("AO", "OW"),
 }
 """Per class, the classes that look most alike, in order (used when a corpus lacks a class)."""
 

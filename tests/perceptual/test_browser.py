@@ -22,16 +22,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.perceptual.conftest import ARTIFACTS, REPO, ServerProcess, answer_all, http, media_index, need, policy
+from tests.perceptual.harness import ARTIFACTS, REPO, ServerProcess, answer_all, http, media_index, policy
+from tests.prerequisites import require
+
+# Headless Chromium, the experiment server and real stimuli.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 SCRIPT = Path(__file__).with_name("session_check.mjs")
 
 
 def _require_browser() -> None:
-    need(Path("/usr/bin/chromium").exists(), "Debian's chromium is not installed (scripts/setup.sh installs it)")
-    need(shutil.which("node") is not None, "node is not installed")
-    need((REPO / "node_modules" / "playwright-core" / "package.json").is_file(),
-         "node_modules/playwright-core is missing (scripts/setup.sh runs npm ci)")
+    require(Path("/usr/bin/chromium").exists(), "Debian's chromium is not installed (scripts/setup.sh installs it)")
+    require(shutil.which("node") is not None, "node is not installed")
+    require(
+        (REPO / "node_modules" / "playwright-core" / "package.json").is_file(),
+        "node_modules/playwright-core is missing (scripts/setup.sh runs npm ci)",
+    )
 
 
 def _expected(stimuli, sessions: dict[str, list[dict]]) -> dict:
@@ -66,11 +72,22 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
     try:
         truth = {m: {"kind": st["kind"], "condition": st["condition"], "truth": st["truth"]} for m, st in index.items()}
         opts = tmp_path / "opts.json"
-        opts.write_text(json.dumps({"url": srv.url, "truth": truth, "reloadAt": 4, "pauseAt": 6, "doubleAt": 8,
-                                    "screenshot": str(ARTIFACTS / "session_done.png")}))
+        opts.write_text(
+            json.dumps(
+                {
+                    "url": srv.url,
+                    "truth": truth,
+                    "reloadAt": 4,
+                    "pauseAt": 6,
+                    "doubleAt": 8,
+                    "screenshot": str(ARTIFACTS / "session_done.png"),
+                }
+            )
+        )
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
-        proc = subprocess.run(["node", str(SCRIPT), str(opts)], check=False, cwd=REPO, capture_output=True, text=True,
-                              timeout=900)
+        proc = subprocess.run(
+            ["node", str(SCRIPT), str(opts)], check=False, cwd=REPO, capture_output=True, text=True, timeout=900
+        )
         steps = [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
         assert steps and steps[-1]["step"] == "done", f"{proc.stdout[-3000:]}\n{proc.stderr[-2000:]}"
         done = steps[-1]
@@ -88,7 +105,7 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
             sessions[p["participant"]] = answer_all(srv.url, p["participant"], p["token"], index)
     finally:
         srv.stop()
-    from clients.perceptual.store import Store
+    from perceptual.store import Store
 
     store = Store.open_existing(db)
     for p in store.participants():
@@ -100,14 +117,24 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
     assert n_answers == sum(len(s) for s in sessions.values())
 
     out = tmp_path / "report"
-    run = subprocess.run([sys.executable, "-m", "facecast", "perceptual", "report", str(db), "-o", str(out)],
-                         check=False, cwd=REPO, capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        [sys.executable, "-m", "facecast", "perceptual", "report", str(db), "-o", str(out)],
+        check=False,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr
     res = json.loads((out / "results.json").read_text())
     exp = _expected(stimuli, sessions)
     for (block, pid, snr, cond), score in exp["scores"].items():
-        assert res["intelligibility"][block]["per_participant"][pid][snr][cond] == pytest.approx(score), \
-            (block, pid, snr, cond)
+        assert res["intelligibility"][block]["per_participant"][pid][snr][cond] == pytest.approx(score), (
+            block,
+            pid,
+            snr,
+            cond,
+        )
     grid = res["intelligibility"]["grid"]
     for snr, means in grid["means"].items():
         m = {c: np.mean([exp["scores"][("grid", pid, snr, c)] for pid in sessions]) for c in ("A", "N", "S")}
@@ -121,7 +148,8 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
         assert res["mos"]["mos"][cond]["naturalness"]["mean"] == pytest.approx(np.mean([b for _, b in ratings]))
     cv = res["intelligibility"]["cv"]["confusion"]["syllable"]
     assert sum(np.sum(m) for m in cv.values()) == sum(
-        1 for s in sessions.values() for t in s if index[t["media"]]["block"] == "cv")
+        1 for s in sessions.values() for t in s if index[t["media"]]["block"] == "cv"
+    )
     md = (out / "report.md").read_text()
     assert "C_V(S) eq. 13" in md and (out / "grid_boxplots.png").is_file()
     shutil.copytree(out, ARTIFACTS / "report", dirs_exist_ok=True)
@@ -135,13 +163,23 @@ def test_a_whole_browser_session_and_the_report_match_the_answer_policy(stimuli,
     lat_v = np.array([x["latency_ms"] for x in video])
     off = np.array([o for x in video for o in x["offsets"]])
     timing = {
-        "trials": len(m), "video_trials": len(video),
-        "click_to_start_ms": {"median": float(np.median(lat)), "p95": float(np.percentile(lat, 95)),
-                              "max": float(lat.max()), "video_median": float(np.median(lat_v)),
-                              "video_max": float(lat_v.max())},
-        "av_offset_ms": {"frames": len(off), "median": float(np.median(off)), "p5": float(np.percentile(off, 5)),
-                         "p95": float(np.percentile(off, 95)), "max_abs": float(np.abs(off).max()),
-                         "within_20ms": float(np.mean(np.abs(off) <= 20))},
+        "trials": len(m),
+        "video_trials": len(video),
+        "click_to_start_ms": {
+            "median": float(np.median(lat)),
+            "p95": float(np.percentile(lat, 95)),
+            "max": float(lat.max()),
+            "video_median": float(np.median(lat_v)),
+            "video_max": float(lat_v.max()),
+        },
+        "av_offset_ms": {
+            "frames": len(off),
+            "median": float(np.median(off)),
+            "p5": float(np.percentile(off, 5)),
+            "p95": float(np.percentile(off, 95)),
+            "max_abs": float(np.abs(off).max()),
+            "within_20ms": float(np.mean(np.abs(off) <= 20)),
+        },
     }
     (ARTIFACTS / "timing.json").write_text(json.dumps(timing, indent=1))
     print(json.dumps(timing))

@@ -11,9 +11,12 @@ import time
 
 import pytest
 
-from clients.perceptual.errors import StoreError
-from clients.perceptual.store import Store
-from tests.perceptual.conftest import ServerProcess, http, media_index, policy
+from perceptual.errors import StoreError
+from perceptual.store import Store
+from tests.perceptual.harness import ServerProcess, http, media_index, policy
+
+# The experiment server in subprocesses.
+pytestmark = pytest.mark.system
 
 
 @pytest.fixture()
@@ -26,7 +29,7 @@ def server(stimuli, tmp_path):
 def test_a_database_of_another_test_or_schema_is_refused(stimuli, tmp_path):
     db = tmp_path / "x.sqlite"
     Store.open(db, test_id="0123456789abcdef", manifest={}).close()
-    with pytest.raises(StoreError, match="another test version.*new database"):
+    with pytest.raises(StoreError, match=r"another test version.*new database"):
         Store.open(db, test_id=stimuli.test_id, manifest=stimuli.data)
     conn = sqlite3.connect(db)
     conn.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
@@ -52,8 +55,13 @@ def test_bad_requests_get_clear_errors_and_never_stop_the_server(server, stimuli
     status, s = http("GET", f"{url}/api/session?participant=P01&token={p['token']}")
     t0 = s["trials"][0]
     st = index[t0["media"]]
-    good = {"participant": "P01", "token": p["token"], "trial": 0, "media": t0["media"],
-            "response": policy(st["kind"], st["condition"], st["truth"])}
+    good = {
+        "participant": "P01",
+        "token": p["token"],
+        "trial": 0,
+        "media": t0["media"],
+        "response": policy(st["kind"], st["condition"], st["truth"]),
+    }
     for change, code, words in [
         ({"token": "wrong"}, 400, "wrong session token"),
         ({"participant": "nobody"}, 400, "unknown participant"),
@@ -91,8 +99,15 @@ def test_answers_survive_sigkill_mid_session_without_loss_or_duplicates(stimuli,
         bodies = []
         for t in trials:
             st = index[t["media"]]
-            bodies.append({"participant": pid, "token": token, "trial": t["index"], "media": t["media"],
-                           "response": policy(st["kind"], st["condition"], st["truth"])})
+            bodies.append(
+                {
+                    "participant": pid,
+                    "token": token,
+                    "trial": t["index"],
+                    "media": t["media"],
+                    "response": policy(st["kind"], st["condition"], st["truth"]),
+                }
+            )
         confirmed: list[int] = []
         half = len(trials) // 2
 
@@ -123,7 +138,7 @@ def test_answers_survive_sigkill_mid_session_without_loss_or_duplicates(stimuli,
         assert len(rows) == len(stored) <= n_confirmed + 1  # at most the in-flight one more, none twice
         # The page resends every answer it has no confirmation for (and the last confirmed one again).
         srv = ServerProcess(stimuli.root, db)
-        for b in bodies[n_confirmed - 1:]:
+        for b in bodies[n_confirmed - 1 :]:
             status, r = http("POST", f"{srv.url}/api/answers", b)
             assert status == 200 and r["status"] in ("stored", "duplicate"), r
         _, s2 = http("GET", f"{srv.url}/api/session?participant={pid}&token={token}")
@@ -131,8 +146,9 @@ def test_answers_survive_sigkill_mid_session_without_loss_or_duplicates(stimuli,
     finally:
         srv.stop()
     with sqlite3.connect(db) as conn:
-        rows = conn.execute("SELECT trial, response FROM answers WHERE participant = ? ORDER BY trial",
-                            (pid,)).fetchall()
+        rows = conn.execute(
+            "SELECT trial, response FROM answers WHERE participant = ? ORDER BY trial", (pid,)
+        ).fetchall()
         done = conn.execute("SELECT completed_utc FROM participants WHERE id = ?", (pid,)).fetchone()[0]
     assert [t for t, _ in rows] == list(range(len(trials)))
     assert [json.loads(r) for _, r in rows] == [b["response"] for b in bodies]

@@ -11,15 +11,30 @@ import numpy as np
 import pytest
 from scipy.signal import correlate
 
-from clients.perceptual.errors import ManifestError
-from clients.perceptual.stimuli import build, load_manifest
-from tests.perceptual.conftest import ARTIFACTS, grid_root, tiny_config
+from perceptual.errors import ManifestError
+from perceptual.stimuli import build, load_manifest
+from tests.perceptual.harness import ARTIFACTS, grid_root, tiny_config
+
+# Renders and muxes a real stimulus set (ffmpeg, OpenGL).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def _probe(path) -> dict:
-    out = subprocess.run(["ffprobe", "-v", "error", "-show_entries",
-                          "stream=codec_type,width,height,start_time,duration", "-of", "json", str(path)],
-                         capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-show_entries",
+            "stream=codec_type,width,height,start_time,duration",
+            "-of",
+            "json",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     return {s["codec_type"]: s for s in json.loads(out)["streams"]}
 
 
@@ -54,7 +69,7 @@ def test_a_n_and_s_of_one_cell_carry_the_same_noisy_speech_in_time(stimuli):
         x = _decoded(files[cond], rate)
         n = min(len(ref), len(x))
         # Cross-correlation lag of the decoded audio against the audio-only stimulus: no shift.
-        c = correlate(x[:n], ref[:n], mode="full", method="fft")[n - 1 - 441:n + 441]
+        c = correlate(x[:n], ref[:n], mode="full", method="fft")[n - 1 - 441 : n + 441]
         lag = int(np.argmax(c)) - 441
         assert abs(lag) <= 1, f"{cond} audio is shifted by {lag} samples"
         assert np.corrcoef(x[:n], ref[:n])[0, 1] > 0.95  # the same noise sample, AAC-coded twice
@@ -114,5 +129,5 @@ def test_a_changed_source_makes_the_stimuli_stale(copy, tmp_path):
     src.write_bytes(b"changed since the build")
     man["sources"] = {str(src): "0" * 64}
     (copy / "manifest.json").write_text(json.dumps(man))
-    with pytest.raises(ManifestError, match="source .* changed"):
+    with pytest.raises(ManifestError, match=r"source .* changed"):
         load_manifest(copy)

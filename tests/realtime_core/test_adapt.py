@@ -16,8 +16,14 @@ def _shifted(model: AvHmm, shift: np.ndarray) -> AvHmm:
     """The 'new speaker': the same model with every audio mean moved by ``shift (N, M, Da)``."""
     means = model.means.copy()
     means[:, :, : model.n_audio] += shift
-    return AvHmm(startprob=model.startprob, transmat=model.transmat, weights=model.weights, means=means,
-                 covars=model.covars, n_audio=model.n_audio)
+    return AvHmm(
+        startprob=model.startprob,
+        transmat=model.transmat,
+        weights=model.weights,
+        means=means,
+        covars=model.covars,
+        n_audio=model.n_audio,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -50,8 +56,10 @@ def test_moves_means_towards_the_new_voice_and_fits_its_held_out_speech(setup) -
 
 def test_map_objective_never_decreases(setup) -> None:
     si, _, enrol, _ = setup
-    for cfg in (AdaptConfig(relevance=2.0, n_iter=10, tol=0.0), AdaptConfig(relevance=30.0, weight_relevance=None,
-                                                                           n_iter=10, tol=0.0)):
+    for cfg in (
+        AdaptConfig(relevance=2.0, n_iter=10, tol=0.0),
+        AdaptConfig(relevance=30.0, weight_relevance=None, n_iter=10, tol=0.0),
+    ):
         h = map_adapt(si, enrol[:2], config=cfg).history
         assert len(h) == 11 and np.all(np.diff(h) >= -1e-9), np.diff(h)
         assert h[-1] > h[0]

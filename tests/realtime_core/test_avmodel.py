@@ -10,8 +10,9 @@ import pytest
 from realtime_core import ModelFormatError
 from realtime_core.avmodel import AvModel, decode_model, encode_model
 from realtime_core.features import FrontEndConfig, MfccConfig
-from realtime_core.pipeline import SpeechToParams, speech_to_params
 from realtime_core.hmm.sampling import random_av_hmm
+from realtime_core.pipeline import SpeechToParams, speech_to_params
+from tests.chunking import assert_chunk_invariant
 
 
 def small_model(seed: int = 0) -> AvModel:
@@ -68,10 +69,11 @@ def test_pipeline_stream_equals_whole_and_batch_runs():
     x = (rng.standard_normal(16000) * 0.1).astype(np.float32)
     whole = speech_to_params(m, x)
     assert whole.shape == (30, 4)
-    p = SpeechToParams(m)
-    cuts = np.sort(rng.choice(np.arange(1, x.size), 50, replace=False))
-    chunked = np.concatenate([p.push(c) for c in np.split(x, cuts)] + [p.flush()])
+    chunked = assert_chunk_invariant(lambda: SpeechToParams(m), x, atol=1e-9, max_examples=10)
     np.testing.assert_allclose(chunked, whole, atol=1e-9)
+    # At another input rate the chain resamples itself: still chunk-invariant.
+    x44 = (rng.standard_normal(22050) * 0.1).astype(np.float32)
+    assert_chunk_invariant(lambda: SpeechToParams(m, rate_hz=44100), x44, atol=1e-9, max_examples=5, one_by_one=False)
     assert speech_to_params(m, x, mode="batch").shape == (30, 4)
 
 
@@ -86,8 +88,9 @@ def test_sessions_of_a_model_share_one_plan_and_match_an_unshared_inverter():
     own = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale), output=m.output_stage)
     np.testing.assert_array_equal(np.concatenate([a.push(oa), a.flush()]), np.concatenate([own.push(oa), own.flush()]))
     # Sharing does not couple the sessions' states: interleaved pushes give each its own result.
-    ref = StreamingInverter(m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale),
-                            output=m.output_stage).push(oa)
+    ref = StreamingInverter(
+        m.form, config=StreamConfig(likelihood_scale=m.likelihood_scale), output=m.output_stage
+    ).push(oa)
     c = m.inverter()
     out_b = [b.push(oa[:20])]
     c.push(oa[::-1])

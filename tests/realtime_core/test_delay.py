@@ -35,8 +35,7 @@ def _run(model: AvModel, x: np.ndarray, rate_hz: int, lag: int) -> np.ndarray:
     return np.concatenate([chain.push(x), chain.flush()])
 
 
-def _first_changed_frame(model: AvModel, base: np.ndarray, base_out: np.ndarray, s: int, rate_hz: int,
-                         lag: int) -> int:
+def _first_changed_frame(model: AvModel, base: np.ndarray, base_out: np.ndarray, s: int, rate_hz: int, lag: int) -> int:
     x = base.copy()
     x[s] = 0.95  # a click far louder than the background
     changed = np.flatnonzero(np.any(_run(model, x, rate_hz, lag) != base_out, axis=1))
@@ -66,8 +65,9 @@ def measured_delay_ms(model: AvModel, *, lag: int, rate_hz: int = 16000, frames:
     return worst
 
 
-@pytest.mark.parametrize(("tc", "window_hops", "lag"), [(3, 2.0, 0), (1, 1.35, 0), (0, 2.0, 0), (0, 1.35, 1),
-                                                        (2, 1.0, 2)])
+@pytest.mark.parametrize(
+    ("tc", "window_hops", "lag"), [(3, 2.0, 0), (1, 1.35, 0), (0, 2.0, 0), (0, 1.35, 1), (2, 1.0, 2)]
+)
 def test_formula_equals_the_measured_delay(tc, window_hops, lag):
     model = _model(tc, window_hops)
     formula = model.algorithmic_delay_ms(lag)

@@ -16,8 +16,9 @@ def test_metrics_match_independent_formulas():
     r = [scipy.stats.pearsonr(true[:, i], est[:, i])[0] for i in range(4)]
     np.testing.assert_allclose(pearson_per_param(true, est), r, rtol=1e-12)
     assert acc(true, est) == pytest.approx(np.mean(r))
-    assert amse(true, est) == pytest.approx(np.mean([np.mean((est[:, i] - true[:, i]) ** 2) / true[:, i].var()
-                                                     for i in range(4)]))
+    assert amse(true, est) == pytest.approx(
+        np.mean([np.mean((est[:, i] - true[:, i]) ** 2) / true[:, i].var() for i in range(4)])
+    )
     assert amse(true, true) == 0.0 and acc(true, true) == pytest.approx(1.0)
     flat_t, flat_e = (true - true.mean(0)).ravel(), (est - est.mean(0)).ravel()
     assert pearson_r_trace(true, est) == pytest.approx(flat_t @ flat_e / np.sqrt(flat_t @ flat_t * (flat_e @ flat_e)))

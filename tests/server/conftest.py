@@ -1,40 +1,13 @@
-"""Fixtures of the server tests: a small random model saved to disk, test speech as WAV files.
-
-The shipped default model may not exist yet, so every test builds its own small model (a random
-well-posed AV-HMM with the default front end's shape but fewer cepstra) and passes it explicitly.
-"""
+"""Fixtures of the server tests: a small random model (also saved to disk), test speech as WAV files."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from realtime_core.avmodel import AvModel
-from realtime_core.features import FrontEndConfig, MfccConfig
-from realtime_core.hmm.sampling import random_av_hmm
-
-
-def small_model(seed: int = 0, *, n_ceps: int = 5, tc: int = 3) -> AvModel:
-    """A small model at 16 kHz: n_ceps cepstra, tc frames of context, 4 states x 2 mixtures."""
-    fe = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000, n_ceps=n_ceps), tc=tc)
-    hmm = random_av_hmm(np.random.default_rng(seed), n_states=4, n_mix=2, n_audio=(2 * tc + 1) * n_ceps, n_visual=4)
-    return AvModel(hmm=hmm, frontend=fe, cmvn_mean=np.zeros(n_ceps), cmvn_var=np.ones(n_ceps), metadata={"recipe": "test"})
-
-
-def speechlike(seconds: float, rate_hz: int, seed: int = 0) -> np.ndarray:
-    """(n,) float32 in [-1, 1]: voiced harmonics and noise bursts with a syllable-rate envelope."""
-    rng = np.random.default_rng(seed)
-    n = int(seconds * rate_hz)
-    t = np.arange(n) / rate_hz
-    f0 = 120 + 30 * np.sin(2 * np.pi * 0.7 * t)
-    phase = 2 * np.pi * np.cumsum(f0) / rate_hz
-    voiced = sum(np.sin(h * phase) / h for h in range(1, 12))
-    env = np.clip(np.sin(2 * np.pi * 3.1 * t), 0, None) ** 1.5
-    noise = rng.standard_normal(n) * (np.sin(2 * np.pi * 1.3 * t) > 0.6)
-    x = 0.25 * env * voiced + 0.05 * noise
-    return (x / np.abs(x).max() * 0.8).astype(np.float32)
+from tests.speech import small_model, speechlike
 
 
 @pytest.fixture(scope="session")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import shutil
 import signal
 import socket
@@ -24,8 +23,12 @@ import pytest
 
 from benchmarks.server_harness import ServerProcess
 from clients.client import IngestClient, ViewerClient, http_get, stream_samples
-from tests.server.conftest import speechlike
+from tests.prerequisites import missing
+from tests.speech import speechlike
 from wire import protocol as P
+
+# Three facecast processes and a real redis-server.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 def _free_port() -> int:
@@ -43,9 +46,23 @@ class RedisServer:
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> None:
-        self.proc = subprocess.Popen([self.binary, "--port", str(self.port), "--bind", "127.0.0.1", "--save", "",
-                                      "--appendonly", "no", "--protected-mode", "no"],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.proc = subprocess.Popen(
+            [
+                self.binary,
+                "--port",
+                str(self.port),
+                "--bind",
+                "127.0.0.1",
+                "--save",
+                "",
+                "--appendonly",
+                "no",
+                "--protected-mode",
+                "no",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
             try:
@@ -65,13 +82,11 @@ class RedisServer:
 
 @pytest.fixture()
 def redis_server():
-    binary = shutil.which("redis-server") or ("/usr/bin/redis-server" if Path("/usr/bin/redis-server").exists() else None)
+    binary = shutil.which("redis-server") or (
+        "/usr/bin/redis-server" if Path("/usr/bin/redis-server").exists() else None
+    )
     if binary is None:
-        if os.environ.get("CI") == "true":
-            pytest.fail("redis-server is not installed (scripts/setup.sh installs it)")
-        reason = "redis-server is not installed (apt-get install redis-server; scripts/setup.sh does it)"
-        print(f"SKIP: {reason}", file=sys.stderr)
-        pytest.skip(reason)
+        missing("redis-server is not installed (apt-get install redis-server; scripts/setup.sh does it)")
     r = RedisServer(binary, _free_port())
     r.start()
     try:
@@ -81,8 +96,10 @@ def redis_server():
 
 
 def _node(model_path, redis_url: str, name: str, role: str = "both") -> ServerProcess:
-    toml = (f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
-            f'role = "{role}"\n')
+    toml = (
+        f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
+        f'role = "{role}"\n'
+    )
     return ServerProcess(model_path, head=False, config_toml=toml)
 
 
@@ -125,8 +142,14 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
             for v in (va, vb, vc):
                 await v.__aenter__()
             assert vb.description["fps"] == va.description["fps"] and vb.description["session"] == "x"
-            await _until(lambda: _published(a, "x", {(P.KIND_PARAMS, P.ENC_FLOAT32), (P.KIND_AUDIO, P.ENC_INT16),
-                                                       (P.KIND_ARKIT52, P.ENC_FLOAT32)}), what="wants reach the owner")
+            await _until(
+                lambda: _published(
+                    a,
+                    "x",
+                    {(P.KIND_PARAMS, P.ENC_FLOAT32), (P.KIND_AUDIO, P.ENC_INT16), (P.KIND_ARKIT52, P.ENC_FLOAT32)},
+                ),
+                what="wants reach the owner",
+            )
             tasks = [asyncio.ensure_future(v.collect()) for v in (va, vb, vc)]
             await stream_samples(ing, pcm, realtime=True, block_s=0.02)
             ended = await ing.end()
@@ -149,8 +172,10 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
     assert all(h["status"] == "ok" and h["redis"] == "ok" for h in health)
     # The far node's delivery is close behind the near node's (reported, not a goal of this test).
     lag = np.array(gb.received) - np.array(ga.received)
-    print(f"cluster: far-node minus near-node receipt, median {np.median(lag) * 1e3:.2f} ms, "
-          f"p99 {np.percentile(lag, 99) * 1e3:.2f} ms")
+    print(
+        f"cluster: far-node minus near-node receipt, median {np.median(lag) * 1e3:.2f} ms, "
+        f"p99 {np.percentile(lag, 99) * 1e3:.2f} ms"
+    )
 
 
 def test_killing_an_edge_node_loses_no_session(model_path, redis_server):
@@ -272,8 +297,12 @@ def test_a_wrong_redis_address_is_one_line_at_start(model_path):
     facecast = str(Path(sys.executable).parent / "facecast")
     cfg = Path(model_path).parent / "bad_redis.toml"
     cfg.write_text(f'[server]\nredis_url = "redis://127.0.0.1:{_free_port()}/0"\n')
-    out = subprocess.run([facecast, "serve", "--port", "0", "--no-head", "--model", str(model_path), "--config",
-                          str(cfg)], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [facecast, "serve", "--port", "0", "--no-head", "--model", str(model_path), "--config", str(cfg)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode != 0
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot reach Redis at redis://127.0.0.1:" in lines[0], out.stderr

@@ -20,7 +20,7 @@ from server.app import FacecastServer
 from server.config import ServerConfig
 from server.errors import ServerConfigError
 from server.session import Session, SessionConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
 
 
@@ -43,8 +43,10 @@ def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> Non
     assert np.abs(ref - plain).max() > 1e-3  # the enrolment changes the animation
 
     async def run(url, name, enrol_bytes):
-        async with IngestClient(url, session=name, sample_rate_hz=16000, enrol=enrol_bytes) as ing, \
-                ViewerClient(url, session=name, kind="params") as v:
+        async with (
+            IngestClient(url, session=name, sample_rate_hz=16000, enrol=enrol_bytes) as ing,
+            ViewerClient(url, session=name, kind="params") as v,
+        ):
             task = asyncio.ensure_future(v.collect())
             await stream_samples(ing, speech, block_s=0.02)
             await ing.end()
@@ -68,19 +70,25 @@ def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> Non
     np.testing.assert_array_equal(got2.values(), plain.astype(np.float32))
 
 
-@pytest.mark.parametrize(("enrol", "reason"), [
-    ("@@not base64@@", "base64"),
-    (base64.b64encode(b"\x00" * 1001).decode(), "whole number"),
-    (base64.b64encode(b"\x00" * 3200).decode(), "0.1 s of audio"),
-])
+@pytest.mark.parametrize(
+    ("enrol", "reason"),
+    [
+        ("@@not base64@@", "base64"),
+        (base64.b64encode(b"\x00" * 1001).decode(), "whole number"),
+        (base64.b64encode(b"\x00" * 3200).decode(), "0.1 s of audio"),
+    ],
+)
 def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:
     async def main():
         srv = FacecastServer(model, config=ServerConfig(port=0))
         await srv.start()
         try:
             async with connect(ws_url(srv.url, "/ingest"), compression=None) as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bad", "sample_rate": 16000,
-                                          "format": "pcm_s16le", "enrol": enrol}))
+                await ws.send(
+                    json.dumps(
+                        {"type": "start", "session": "bad", "sample_rate": 16000, "format": "pcm_s16le", "enrol": enrol}
+                    )
+                )
                 try:
                     await asyncio.wait_for(ws.recv(), 10)
                 except ConnectionClosed as exc:
@@ -95,12 +103,14 @@ def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:
 
 def test_session_core_adapts_only_its_own_copy(model, audio) -> None:
     enrol, _ = audio
-    cfg = SessionConfig(sample_rate_hz=16000, sample_format="pcm_s16le",
-                        enrol=base64.b64encode(enrol.tobytes()).decode())
+    cfg = SessionConfig(
+        sample_rate_hz=16000, sample_format="pcm_s16le", enrol=base64.b64encode(enrol.tobytes()).decode()
+    )
     s = Session(model, config=cfg)
     assert s.model is not model and s.enrolment["frames"] == math.ceil(8.0 * 30)
     assert not np.allclose(s.model.hmm.means, model.hmm.means)
     assert Session(model, config=SessionConfig(sample_rate_hz=16000)).model is model
     with pytest.raises(ServerConfigError, match="120"):
-        SessionConfig(sample_rate_hz=8000, sample_format="pcm_s16le",
-                      enrol=base64.b64encode(b"\x00" * 2 * 8000 * 121).decode())
+        SessionConfig(
+            sample_rate_hz=8000, sample_format="pcm_s16le", enrol=base64.b64encode(b"\x00" * 2 * 8000 * 121).decode()
+        )

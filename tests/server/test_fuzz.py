@@ -26,35 +26,63 @@ from clients.client import IngestClient, ViewerClient, stream_samples
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
 
-DOCUMENTED = {P.CLOSE_NORMAL, P.CLOSE_UNSUPPORTED_DATA, P.CLOSE_INVALID_PAYLOAD, P.CLOSE_POLICY, P.CLOSE_TOO_BIG,
-              P.CLOSE_TRY_LATER, P.CLOSE_UNAUTHORIZED, P.CLOSE_NOT_FOUND, P.CLOSE_CONFLICT, P.CLOSE_BAD_REQUEST,
-              P.CLOSE_TOO_FAST}
+# Hypothesis against a live server over loopback (about 20 s).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+DOCUMENTED = {
+    P.CLOSE_NORMAL,
+    P.CLOSE_UNSUPPORTED_DATA,
+    P.CLOSE_INVALID_PAYLOAD,
+    P.CLOSE_POLICY,
+    P.CLOSE_TOO_BIG,
+    P.CLOSE_TRY_LATER,
+    P.CLOSE_UNAUTHORIZED,
+    P.CLOSE_NOT_FOUND,
+    P.CLOSE_CONFLICT,
+    P.CLOSE_BAD_REQUEST,
+    P.CLOSE_TOO_FAST,
+}
 BUDGET_S = 14.0  # fuzzing time; the healthy session streams a few seconds longer
 
-json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-2**40, 2**40), st.floats(allow_nan=False),
-                      st.text(max_size=20))
-json_value = st.recursive(json_leaf, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(
-    st.text(max_size=8), inner, max_size=4), max_leaves=12)
+json_leaf = st.one_of(
+    st.none(), st.booleans(), st.integers(-(2**40), 2**40), st.floats(allow_nan=False), st.text(max_size=20)
+)
+json_value = st.recursive(
+    json_leaf,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=12,
+)
 
 
 def _start_messages():
     good = {"type": "start", "session": "fz", "sample_rate": 16000, "format": "pcm_s16le"}
     field = st.sampled_from(["type", "session", "sample_rate", "format", "channels", "token", "batch", "input", "x"])
-    mutated = st.builds(lambda k, v, drop: {**{a: b for a, b in good.items() if a != drop}, k: v},
-                        field, json_value, st.sampled_from([None, "type", "session", "sample_rate"]))
+    mutated = st.builds(
+        lambda k, v, drop: {**{a: b for a, b in good.items() if a != drop}, k: v},
+        field,
+        json_value,
+        st.sampled_from([None, "type", "session", "sample_rate"]),
+    )
     return st.one_of(
-        st.just(good), mutated,
-        st.builds(lambda r, f, c: {**good, "sample_rate": r, "format": f, "channels": c},
-                  st.integers(0, 400000), st.sampled_from(["pcm_s16le", "f32le", "mp3"]), st.integers(-1, 10)),
+        st.just(good),
+        mutated,
+        st.builds(
+            lambda r, f, c: {**good, "sample_rate": r, "format": f, "channels": c},
+            st.integers(0, 400000),
+            st.sampled_from(["pcm_s16le", "f32le", "mp3"]),
+            st.integers(-1, 10),
+        ),
     ).map(json.dumps)
 
 
 text_messages = st.one_of(
-    st.builds(lambda d: json.dumps({"type": "control", **d}),
-              st.dictionaries(st.sampled_from(["gain", "smoothing_ms", "eyebrows"]), json_value, max_size=3)),
+    st.builds(
+        lambda d: json.dumps({"type": "control", **d}),
+        st.dictionaries(st.sampled_from(["gain", "smoothing_ms", "eyebrows"]), json_value, max_size=3),
+    ),
     st.just(json.dumps({"type": "end"})),
     json_value.map(json.dumps),
     st.text(max_size=50),
@@ -63,14 +91,19 @@ text_messages = st.one_of(
 binary_messages = st.one_of(st.binary(max_size=4000), st.integers(0, 2000).map(lambda n: b"\x00\x01" * n))
 first_messages = st.one_of(_start_messages(), text_messages, binary_messages)
 later_messages = st.lists(st.one_of(text_messages, binary_messages), max_size=5)
-view_queries = st.dictionaries(st.sampled_from(["session", "kind", "encoding", "audio", "token", "zz"]),
-                               st.text(max_size=12), max_size=5)
+view_queries = st.dictionaries(
+    st.sampled_from(["session", "kind", "encoding", "audio", "token", "zz"]), st.text(max_size=12), max_size=5
+)
 
 
 class _Server:
     def __init__(self, model) -> None:
-        self.srv = FacecastServer(model, config=ServerConfig(port=0, start_timeout_s=1.0, idle_timeout_s=1.0,
-                                                             max_message_bytes=1 << 16, close_timeout_s=0.5))
+        self.srv = FacecastServer(
+            model,
+            config=ServerConfig(
+                port=0, start_timeout_s=1.0, idle_timeout_s=1.0, max_message_bytes=1 << 16, close_timeout_s=0.5
+            ),
+        )
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
@@ -94,8 +127,9 @@ def _check_close(ws) -> None:
 
 def _converse(url: str, path: str, messages: list) -> None:
     try:
-        with connect(url.replace("http", "ws") + path, compression=None, open_timeout=5, close_timeout=1,
-                     max_size=None) as ws:
+        with connect(
+            url.replace("http", "ws") + path, compression=None, open_timeout=5, close_timeout=1, max_size=None
+        ) as ws:
             for m in messages:
                 ws.send(m)
             if not messages or isinstance(messages[-1], bytes) or "end" not in str(messages[-1]):
@@ -136,16 +170,14 @@ def test_fuzz_ingest_and_view_against_a_live_server(model, fuzz_server):
     t_end = time.monotonic() + BUDGET_S
     done = {"ingest": 0, "view": 0}
 
-    @settings(max_examples=400, deadline=None, database=None, derandomize=True,
-              suppress_health_check=list(HealthCheck))
+    @settings(max_examples=400, deadline=None, database=None, derandomize=True, suppress_health_check=list(HealthCheck))
     @given(first=first_messages, later=later_messages)
     def ingest(first, later):
         if time.monotonic() < t_end - BUDGET_S / 3:
             _converse(url, "/ingest", [first, *later])
             done["ingest"] += 1
 
-    @settings(max_examples=300, deadline=None, database=None, derandomize=True,
-              suppress_health_check=list(HealthCheck))
+    @settings(max_examples=300, deadline=None, database=None, derandomize=True, suppress_health_check=list(HealthCheck))
     @given(query=view_queries, talk=st.lists(st.one_of(st.text(max_size=5), st.binary(max_size=5)), max_size=1))
     def view(query, talk):
         if time.monotonic() < t_end:

@@ -6,7 +6,15 @@ import logging
 
 import pytest
 
-from server.guard import ConnectionCounter, ConnectionRate, IncidentLog, IngestPacer, host_allowed, host_name, origin_allowed
+from server.guard import (
+    ConnectionCounter,
+    ConnectionRate,
+    IncidentLog,
+    IngestPacer,
+    host_allowed,
+    host_name,
+    origin_allowed,
+)
 
 # (Origin header, Host header, allow-list, accepted?)
 ORIGINS = [

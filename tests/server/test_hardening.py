@@ -17,8 +17,11 @@ from websockets.exceptions import InvalidStatus
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, ws_url
 from server.app import FacecastServer
 from server.config import ServerConfig
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 from wire import protocol as P
+
+# A real server over loopback sockets.
+pytestmark = pytest.mark.system
 
 
 @contextlib.asynccontextmanager
@@ -60,18 +63,36 @@ def test_origin_host_and_token_checks(model):
             url, port = srv.url, srv.port
             async with IngestClient(url, session="s", sample_rate_hz=16000, token="sesame"):
                 view = "/view?session=s&token=sesame"
-                origins = {o: await handshake_status(url, view, origin=o) for o in
-                           (None, f"http://127.0.0.1:{port}", "http://app.example", "http://evil.example", "null")}
+                origins = {
+                    o: await handshake_status(url, view, origin=o)
+                    for o in (None, f"http://127.0.0.1:{port}", "http://app.example", "http://evil.example", "null")
+                }
                 status = {}
-                for path in ("/health", "/metrics", "/sessions", "/head/mesh", "/", "/metrics?token=nope",
-                             "/metrics?token=sesame", "/sessions?token=sesame"):
+                for path in (
+                    "/health",
+                    "/metrics",
+                    "/sessions",
+                    "/head/mesh",
+                    "/",
+                    "/metrics?token=nope",
+                    "/metrics?token=sesame",
+                    "/sessions?token=sesame",
+                ):
                     status[path] = await http_get(url, path)
-                bearer = await raw_http(port, b"GET /sessions HTTP/1.1\r\nHost: localhost\r\n"
-                                        b"Authorization: Bearer sesame\r\nConnection: close\r\n\r\n")
-                rebound = await raw_http(port, b"GET /health HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n")
-                rebound_ws = await raw_http(port, b"GET /view?session=s&token=sesame HTTP/1.1\r\nHost: evil.example\r\n"
-                                            b"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: "
-                                            b"dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+                bearer = await raw_http(
+                    port,
+                    b"GET /sessions HTTP/1.1\r\nHost: localhost\r\n"
+                    b"Authorization: Bearer sesame\r\nConnection: close\r\n\r\n",
+                )
+                rebound = await raw_http(
+                    port, b"GET /health HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n"
+                )
+                rebound_ws = await raw_http(
+                    port,
+                    b"GET /view?session=s&token=sesame HTTP/1.1\r\nHost: evil.example\r\n"
+                    b"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: "
+                    b"dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n",
+                )
                 return origins, status, bearer, rebound, rebound_ws
 
     origins, status, bearer, rebound, rebound_ws = asyncio.run(main())
@@ -93,8 +114,9 @@ def test_file_paths_never_reach_a_client(model, tmp_path):
 
     async def main():
         async with running(model) as srv:
-            task = asyncio.ensure_future(srv.run_source("f", blocks(), sample_rate_hz=16000,
-                                                        label=f"file {tmp_path}/secret/take1.wav"))
+            task = asyncio.ensure_future(
+                srv.run_source("f", blocks(), sample_rate_hz=16000, label=f"file {tmp_path}/secret/take1.wav")
+            )
             while "f" not in srv.sessions:
                 await asyncio.sleep(0.01)
             out = [await http_get(srv.url, p) for p in ("/metrics", "/sessions", "/")]
@@ -112,7 +134,7 @@ def test_ingest_is_paced_to_real_time_after_its_burst_or_closed_or_batch(model):
         async with IngestClient(url, session="fast", sample_rate_hz=16000) as ing:
             t0 = time.monotonic()
             for i in range(0, len(pcm), 1600):
-                await ing.send(pcm[i:i + 1600])
+                await ing.send(pcm[i : i + 1600])
             ended = await ing.end()
             return time.monotonic() - t0, ended
 
@@ -198,10 +220,15 @@ def test_hostile_json_and_paths_are_refused_without_internal_errors(model, caplo
     assert len(messages) <= 4, messages  # 21 refusals: logged once per kind, not once each
 
 
-@pytest.mark.parametrize("cfg, match", [({"ingest_overrun": "drop"}, "ingest_overrun"),
-                                        ({"allowed_origins": ["null"]}, "null"),
-                                        ({"allowed_origins": "http://a"}, "allowed_origins"),
-                                        ({"max_connections_per_client": -1}, "max_connections_per_client")])
+@pytest.mark.parametrize(
+    "cfg, match",
+    [
+        ({"ingest_overrun": "drop"}, "ingest_overrun"),
+        ({"allowed_origins": ["null"]}, "null"),
+        ({"allowed_origins": "http://a"}, "allowed_origins"),
+        ({"max_connections_per_client": -1}, "max_connections_per_client"),
+    ],
+)
 def test_bad_hardening_config_is_named(cfg, match):
     from server.errors import ServerConfigError
 

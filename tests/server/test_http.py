@@ -22,8 +22,12 @@ def router(tmp_path):
     (nm / "build").mkdir(parents=True)
     (nm / "build" / "three.module.js").write_text("three")
     (nm / "package.json").write_text("{}")
-    return HttpRouter(web_root=root, node_modules=tmp_path / "node_modules", head=None,
-                      sessions=lambda: [{"name": "<a>", "frames": 1, "viewers": 0}])
+    return HttpRouter(
+        web_root=root,
+        node_modules=tmp_path / "node_modules",
+        head=None,
+        sessions=lambda: [{"name": "<a>", "frames": 1, "viewers": 0}],
+    )
 
 
 # (path, status, content type prefix or None)
@@ -57,8 +61,9 @@ def test_routes(router, path, status, ctype):
 
 
 def test_generated_index_escapes_session_names(tmp_path):
-    r = HttpRouter(web_root=None, node_modules=None, head=None,
-                   sessions=lambda: [{"name": "<script>", "frames": 1, "viewers": 0}])
+    r = HttpRouter(
+        web_root=None, node_modules=None, head=None, sessions=lambda: [{"name": "<script>", "frames": 1, "viewers": 0}]
+    )
     body = r.handle("/").body.decode()
     assert "&lt;script&gt;" in body and "<script>" not in body
 

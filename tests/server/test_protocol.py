@@ -37,8 +37,13 @@ START_REFUSALS = [
     ("not json", "{garbage", None, P.CLOSE_INVALID_PAYLOAD, "not valid JSON"),
     ("json list", "[1, 2]", None, P.CLOSE_INVALID_PAYLOAD, "must be a JSON object"),
     ("deep json", "[" * 30000 + "]" * 30000, None, P.CLOSE_INVALID_PAYLOAD, "nests deeper"),
-    ("deep in object", '{"type": "start", "x": ' + "[" * 50 + "]" * 50 + "}", None, P.CLOSE_INVALID_PAYLOAD,
-     "nests deeper"),
+    (
+        "deep in object",
+        '{"type": "start", "x": ' + "[" * 50 + "]" * 50 + "}",
+        None,
+        P.CLOSE_INVALID_PAYLOAD,
+        "nests deeper",
+    ),
     ("huge text", json.dumps({"type": "start", "pad": "x" * 70000}), None, P.CLOSE_TOO_BIG, "over"),
     ("wrong type", json.dumps({"type": "control"}), None, P.CLOSE_POLICY, "first message must be"),
     ("no rate", _start(sample_rate=None), None, P.CLOSE_BAD_REQUEST, "lacks sample_rate"),
@@ -81,16 +86,26 @@ def test_a_good_start_opens_with_the_right_config():
 # (name, message after the start, expected actions; None = a Close whose code and words are given)
 STREAMING = [
     ("audio", b"\x00\x01", [Feed(b"\x00\x01")], None, None),
-    ("control", json.dumps({"type": "control", "gain": {"mouth_open": 2}}),
-     [Control({"type": "control", "gain": {"mouth_open": 2}})], None, None),
+    (
+        "control",
+        json.dumps({"type": "control", "gain": {"mouth_open": 2}}),
+        [Control({"type": "control", "gain": {"mouth_open": 2}})],
+        None,
+        None,
+    ),
     ("end", json.dumps({"type": "end"}), [Finish()], None, None),
     ("text audio", "hello", None, P.CLOSE_UNSUPPORTED_DATA, "audio must be sent as binary"),
     ("array", "[1]", None, P.CLOSE_INVALID_PAYLOAD, "must be a JSON object"),
     ("second start", _start(), None, P.CLOSE_POLICY, "second start"),
     ("unknown type", json.dumps({"type": "dance"}), None, P.CLOSE_POLICY, "unknown message type 'dance'"),
     ("type not a string", json.dumps({"type": {"a": 1}}), None, P.CLOSE_POLICY, "unknown message type"),
-    ("deep control", '{"type": "control", "gain": ' + "[" * 5000 + "]" * 5000 + "}", None,
-     P.CLOSE_INVALID_PAYLOAD, "nests deeper"),
+    (
+        "deep control",
+        '{"type": "control", "gain": ' + "[" * 5000 + "]" * 5000 + "}",
+        None,
+        P.CLOSE_INVALID_PAYLOAD,
+        "nests deeper",
+    ),
     ("huge control", json.dumps({"type": "control", "x": "y" * 70000}), None, P.CLOSE_TOO_BIG, "over"),
 ]
 
@@ -114,8 +129,10 @@ def test_end_then_finished_replies_ended_and_closes_normally():
     assert proto.receive(json.dumps({"type": "end"})) == [Finish()]
     assert proto.state is State.FINISHING
     assert proto.receive(b"late audio") == []  # after the end nothing more is read
-    assert proto.finished(30, 1.0) == [Send({"type": "ended", "frames": 30, "audio_s": 1.0}),
-                                       Close(P.CLOSE_NORMAL, "session ended")]
+    assert proto.finished(30, 1.0) == [
+        Send({"type": "ended", "frames": 30, "audio_s": 1.0}),
+        Close(P.CLOSE_NORMAL, "session ended"),
+    ]
     assert proto.finished(30, 1.0) == []
 
 

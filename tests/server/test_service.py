@@ -15,26 +15,18 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+from assets.audio import read_audio
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
 from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
-from wire import protocol as P
-from server.app import FacecastServer, Head
+from server.app import FacecastServer
 from server.config import ServerConfig
-from tests.server.conftest import speechlike
-from assets.audio import read_audio
-from realtime_core.features.resample import resample_audio as resample
+from tests.speech import speechlike
+from wire import protocol as P
 
-
-@pytest.fixture(scope="module")
-def head() -> Head:
-    from assets.heads.rigfile import builtin_rig
-
-    try:
-        rig, mesh = builtin_rig()
-    except Exception as exc:  # noqa: BLE001 - any failure to fetch the built-in head skips, naming it
-        pytest.skip(f"built-in head unavailable (first use downloads it): {exc}")
-    return Head(rig, mesh)
+# A real server and clients over loopback sockets.
+pytestmark = pytest.mark.system
 
 
 @contextlib.asynccontextmanager
@@ -72,7 +64,7 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
     path = request.getfixturevalue(which)
     samples, rate = read_audio(path)
     # What `facecast animate` computes for this file.
-    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+    ref = speech_to_params(model, resample_audio(samples, rate, model.sample_rate_hz))
     pcm = _int16(samples)
 
     async def main():
@@ -82,7 +74,7 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
     ended, (got,) = asyncio.run(main())
     n = len(ref)
     assert ended["frames"] == n
-    assert n == int(np.ceil(len(resample(samples, rate, 16000)) / (16000 / 30)))  # one frame per 33.3 ms
+    assert n == int(np.ceil(len(resample_audio(samples, rate, 16000)) / (16000 / 30)))  # one frame per 33.3 ms
     assert [m.index for m in got.frames] == list(range(n))
     times = np.array([m.media_time for m in got.frames])
     assert np.all(np.diff(times) > 0)
@@ -100,9 +92,14 @@ def test_wav_ingest_gives_animate_params_frame_for_frame(which, model, request):
 
 def test_every_viewer_kind_decodes_to_the_same_motion(model, head, wav16k):
     samples, rate = read_audio(wav16k)
-    pcm = _int16(samples)[: rate]  # 1 s is enough
-    kinds = [("params", None), ("deltas", "int16"), ("deltas", "float16"), ("blendshapes", "arkit52"),
-             ("blendshapes", "ovr15")]
+    pcm = _int16(samples)[:rate]  # 1 s is enough
+    kinds = [
+        ("params", None),
+        ("deltas", "int16"),
+        ("deltas", "float16"),
+        ("blendshapes", "arkit52"),
+        ("blendshapes", "ovr15"),
+    ]
 
     async def main():
         async with running(model, head) as srv:
@@ -163,29 +160,76 @@ def test_bad_clients_get_close_codes_and_a_healthy_session_loses_nothing(model):
     pcm = _int16(x)
     ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
     cases = [
-        ("garbage first", lambda u: _raw(u, "/ingest", b"\x00\xffgarbage"), P.CLOSE_UNSUPPORTED_DATA, "expected a JSON start"),
+        (
+            "garbage first",
+            lambda u: _raw(u, "/ingest", b"\x00\xffgarbage"),
+            P.CLOSE_UNSUPPORTED_DATA,
+            "expected a JSON start",
+        ),
         ("not json", lambda u: _raw(u, "/ingest", "{garbage"), P.CLOSE_INVALID_PAYLOAD, "not valid JSON"),
         ("no rate", lambda u: _raw(u, "/ingest", _start(sample_rate=None)), P.CLOSE_BAD_REQUEST, "lacks sample_rate"),
-        ("absurd rate", lambda u: _raw(u, "/ingest", _start(sample_rate=10**9)), P.CLOSE_BAD_REQUEST, "sample_rate must be"),
-        ("garbage audio", lambda u: _raw(u, "/ingest", _start(session="g1"), b"\x01\x02\x03"), P.CLOSE_INVALID_PAYLOAD,
-         "not a whole number"),
-        ("text for binary", lambda u: _raw(u, "/ingest", _start(session="g2"), "hello"), P.CLOSE_UNSUPPORTED_DATA,
-         "audio must be sent as binary"),
-        ("second start", lambda u: _raw(u, "/ingest", _start(session="g3"), _start(session="g3")), P.CLOSE_POLICY,
-         "second start"),
-        ("unknown type", lambda u: _raw(u, "/ingest", _start(session="g4"), json.dumps({"type": "dance"})),
-         P.CLOSE_POLICY, "unknown message type"),
+        (
+            "absurd rate",
+            lambda u: _raw(u, "/ingest", _start(sample_rate=10**9)),
+            P.CLOSE_BAD_REQUEST,
+            "sample_rate must be",
+        ),
+        (
+            "garbage audio",
+            lambda u: _raw(u, "/ingest", _start(session="g1"), b"\x01\x02\x03"),
+            P.CLOSE_INVALID_PAYLOAD,
+            "not a whole number",
+        ),
+        (
+            "text for binary",
+            lambda u: _raw(u, "/ingest", _start(session="g2"), "hello"),
+            P.CLOSE_UNSUPPORTED_DATA,
+            "audio must be sent as binary",
+        ),
+        (
+            "second start",
+            lambda u: _raw(u, "/ingest", _start(session="g3"), _start(session="g3")),
+            P.CLOSE_POLICY,
+            "second start",
+        ),
+        (
+            "unknown type",
+            lambda u: _raw(u, "/ingest", _start(session="g4"), json.dumps({"type": "dance"})),
+            P.CLOSE_POLICY,
+            "unknown message type",
+        ),
         ("oversized", lambda u: _raw(u, "/ingest", _start(session="g5"), b"\x00" * 70000), P.CLOSE_TOO_BIG, ""),
-        ("wrong token", lambda u: _raw(u, "/ingest", _start(session="g6", token="nope")), P.CLOSE_UNAUTHORIZED, "token"),
+        (
+            "wrong token",
+            lambda u: _raw(u, "/ingest", _start(session="g6", token="nope")),
+            P.CLOSE_UNAUTHORIZED,
+            "token",
+        ),
         ("taken name", lambda u: _raw(u, "/ingest", _start(session="healthy")), P.CLOSE_CONFLICT, "already exists"),
-        ("unknown session", lambda u: ViewerClient(u, session="nosuch", token="sesame").__aenter__(),
-         P.CLOSE_NOT_FOUND, "no session"),
-        ("viewer bad token", lambda u: ViewerClient(u, session="healthy", token="nope").__aenter__(),
-         P.CLOSE_UNAUTHORIZED, "token"),
-        ("viewer bad kind", lambda u: ViewerClient(u, session="healthy", kind="smell", token="sesame").__aenter__(),
-         P.CLOSE_BAD_REQUEST, "kind must be"),
-        ("viewer talks", lambda u: _raw(u, "/view?session=healthy&token=sesame", "hi"), P.CLOSE_POLICY,
-         "viewers do not send"),
+        (
+            "unknown session",
+            lambda u: ViewerClient(u, session="nosuch", token="sesame").__aenter__(),
+            P.CLOSE_NOT_FOUND,
+            "no session",
+        ),
+        (
+            "viewer bad token",
+            lambda u: ViewerClient(u, session="healthy", token="nope").__aenter__(),
+            P.CLOSE_UNAUTHORIZED,
+            "token",
+        ),
+        (
+            "viewer bad kind",
+            lambda u: ViewerClient(u, session="healthy", kind="smell", token="sesame").__aenter__(),
+            P.CLOSE_BAD_REQUEST,
+            "kind must be",
+        ),
+        (
+            "viewer talks",
+            lambda u: _raw(u, "/view?session=healthy&token=sesame", "hi"),
+            P.CLOSE_POLICY,
+            "viewers send only expression controls",
+        ),
         ("no endpoint", lambda u: _raw(u, "/elsewhere"), 404, "no WebSocket endpoint"),  # HTTP 404
     ]
 
@@ -197,8 +241,8 @@ def test_bad_clients_get_close_codes_and_a_healthy_session_loses_nothing(model):
                     collect = asyncio.ensure_future(view.collect())
                     feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
                     outcomes = []
-                    for name, factory, _, _ in cases:
-                        outcomes.append(await asyncio.wait_for(_expect_close(lambda: factory(url)), 15))
+                    for _name, factory, _, _ in cases:
+                        outcomes.append(await asyncio.wait_for(_expect_close(lambda f=factory: f(url)), 15))
                     await feed
                     ended = await ing.end()
                     got = await collect
@@ -219,15 +263,14 @@ def test_controls_are_applied_or_rejected_with_a_reason(model):
     pcm = _int16(speechlike(0.6, 16000))
 
     async def main():
-        async with running(model) as srv:
-            async with IngestClient(srv.url, session="c", sample_rate_hz=16000) as ing:
-                async with ViewerClient(srv.url, session="c", audio=False) as view:
-                    collect = asyncio.ensure_future(view.collect())
-                    ok = await ing.control(gain={"mouth_open": 0.0})
-                    bad = await ing.control(eyebrows=1)
-                    await stream_samples(ing, pcm, realtime=False)
-                    await ing.end()
-                    return ok, bad, await collect
+        async with running(model) as srv, IngestClient(srv.url, session="c", sample_rate_hz=16000) as ing:
+            async with ViewerClient(srv.url, session="c", audio=False) as view:
+                collect = asyncio.ensure_future(view.collect())
+                ok = await ing.control(gain={"mouth_open": 0.0})
+                bad = await ing.control(eyebrows=1)
+                await stream_samples(ing, pcm, realtime=False)
+                await ing.end()
+                return ok, bad, await collect
 
     ok, bad, got = asyncio.run(main())
     assert ok["type"] == "ack" and ok["controls"]["gain"]["mouth_open"] == 0.0
@@ -236,21 +279,72 @@ def test_controls_are_applied_or_rejected_with_a_reason(model):
     assert got.audio == []  # audio=0: no audio messages
 
 
+@pytest.mark.parametrize("workers", [0, 1])
+def test_expression_controls_from_ingest_and_from_a_viewer(model, workers):
+    """The browser picker's route: a viewer's expression control is applied (ack) or rejected with a
+    reason while the session streams on; the ingest client's control does the same (in the server's
+    process and in a compute worker)."""
+    from websockets.asyncio.client import connect
+
+    pcm = _int16(speechlike(1.5, 16000, seed=3))
+
+    async def main():
+        async with running(model, workers=workers) as srv:
+            async with IngestClient(srv.url, session="e", sample_rate_hz=16000) as ing:
+                async with ViewerClient(srv.url, session="e", audio=False) as view:
+                    collect = asyncio.ensure_future(view.collect())
+                    bad_ingest = await ing.control(expression={"name": "smile", "intensity": 3})
+                    async with connect(srv.url.replace("http", "ws") + "/view?session=e&audio=0") as raw:
+                        desc = json.loads(await raw.recv())
+                        replies = []
+                        for msg in (
+                            {"type": "control", "expression": {"name": "joy"}},
+                            {"type": "control", "expression": {"name": "smile", "intensity": 1.0, "at": 0.0}},
+                        ):
+                            await raw.send(json.dumps(msg))
+                            while True:  # skip binary frames until the text reply
+                                m = await asyncio.wait_for(raw.recv(), 10)
+                                if isinstance(m, str):
+                                    replies.append(json.loads(m))
+                                    break
+                        await stream_samples(ing, pcm, realtime=False)
+                        await ing.end()
+                    return bad_ingest, desc, replies, await collect
+
+    bad_ingest, desc, replies, got = asyncio.run(main())
+    assert bad_ingest["type"] == "rejected" and "[0, 1]" in bad_ingest["reason"]
+    assert desc["expressions"] == ["neutral", "smile", "sad", "surprise", "anger"]
+    assert replies[0]["type"] == "rejected" and "unknown expression 'joy'" in replies[0]["reason"]
+    assert replies[1]["type"] == "ack" and replies[1]["controls"]["expression"][0]["intensity"]["smile"] == 1.0
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
+    assert len(got.frames) == len(ref)
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    late = got.values()[20:, 1] - ref[20:, 1]  # eased in by 0.3 s: lip_stretch widened by the smile
+    np.testing.assert_allclose(late, EXPRESSION_PARAMS[0, 1], atol=1e-5)
+
+
 def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
     pcm = _int16(speechlike(2.5, 16000, seed=7))
     n_frames = len(speech_to_params(model, pcm.astype(np.float32) / 32768))
 
     async def main():
-        async with running(model, head, viewer_queue=4, viewer_max_behind_s=0.3,
-                           viewer_socket_buffer_bytes=4096, close_timeout_s=20) as srv:
+        async with running(
+            model, head, viewer_queue=4, viewer_max_behind_s=0.3, viewer_socket_buffer_bytes=4096, close_timeout_s=20
+        ) as srv:
             url = srv.url
             async with IngestClient(url, session="s", sample_rate_hz=16000) as ing:
                 # The stalled viewer: tiny receive buffer, reads the description and then nothing.
                 sock = socket.socket()
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
                 sock.connect(("127.0.0.1", srv.port))
-                stalled = await connect(ws_url(url, "/view?session=s&kind=deltas&encoding=float16"), sock=sock,
-                                        compression=None, max_size=None, max_queue=1)
+                stalled = await connect(
+                    ws_url(url, "/view?session=s&kind=deltas&encoding=float16"),
+                    sock=sock,
+                    compression=None,
+                    max_size=None,
+                    max_queue=1,
+                )
                 await stalled.recv()
                 async with ViewerClient(url, session="s", kind="deltas") as healthy:
                     collect = asyncio.ensure_future(healthy.collect())
@@ -274,8 +368,10 @@ def test_stalled_viewer_does_not_delay_a_healthy_one(model, head):
 def test_http_endpoints(model, head):
     async def main():
         async with running(model, head) as srv:
-            out = {p: await http_get(srv.url, p)
-                   for p in ("/health", "/metrics", "/head/mesh", "/head/mesh.json", "/", "/nope")}
+            out = {
+                p: await http_get(srv.url, p)
+                for p in ("/health", "/metrics", "/head/mesh", "/head/mesh.json", "/", "/nope")
+            }
             return out
 
     out = asyncio.run(main())
@@ -283,7 +379,9 @@ def test_http_endpoints(model, head):
     metrics = json.loads(out["/metrics"][1])
     assert {"sessions", "viewers", "dropped_messages", "timings_ms", "closes"} <= set(metrics)
     mesh = json.loads(out["/head/mesh.json"][1])
-    assert len(mesh["vertices"]) == 3 * len(head.mesh.vertices) and len(mesh["triangles"]) == 3 * len(head.mesh.triangles)
+    assert len(mesh["vertices"]) == 3 * len(head.mesh.vertices) and len(mesh["triangles"]) == 3 * len(
+        head.mesh.triangles
+    )
     # The glTF is readable by an independent loader, with the server's vertex order intact.
     import io
 
@@ -302,13 +400,12 @@ def test_a_large_block_is_processed_in_fair_slices_with_the_same_frames(model):
     ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
 
     async def main():
-        async with running(model) as srv:
-            async with IngestClient(srv.url, session="big", sample_rate_hz=16000) as ing:
-                async with ViewerClient(srv.url, session="big", audio=False) as view:
-                    collect = asyncio.ensure_future(view.collect())
-                    await ing.send(pcm)  # 3 s in one 96 kB message
-                    await ing.end()
-                    return await collect
+        async with running(model) as srv, IngestClient(srv.url, session="big", sample_rate_hz=16000) as ing:
+            async with ViewerClient(srv.url, session="big", audio=False) as view:
+                collect = asyncio.ensure_future(view.collect())
+                await ing.send(pcm)  # 3 s in one 96 kB message
+                await ing.end()
+                return await collect
 
     got = asyncio.run(main())
     assert [m.index for m in got.frames] == list(range(len(ref)))
@@ -322,10 +419,12 @@ def test_config_from_toml(tmp_path):
     good.write_text('[server]\nport = 9000\nmax_sessions = 3\ntoken = "t"\n')
     cfg = ServerConfig.from_toml(good, port=9100, host=None)
     assert (cfg.port, cfg.max_sessions, cfg.token, cfg.host) == (9100, 3, "t", "127.0.0.1")
-    for text, match in [('[server]\nprot = 1\n', "unknown \\[server\\] keys \\['prot'\\]"),
-                        ('[server]\nmax_sessions = 0\n', "max_sessions"),
-                        ('[server]\nhost = "example.com"\n', "host must be an IP"),
-                        ("[server\n", "cannot read config")]:
+    for text, match in [
+        ("[server]\nprot = 1\n", "unknown \\[server\\] keys \\['prot'\\]"),
+        ("[server]\nmax_sessions = 0\n", "max_sessions"),
+        ('[server]\nhost = "example.com"\n', "host must be an IP"),
+        ("[server\n", "cannot read config"),
+    ]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text)
         with pytest.raises(ServerConfigError, match=match):
@@ -379,10 +478,11 @@ def test_shutdown_flushes_sessions_and_says_going_away(model):
     assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost
 
 
+@pytest.mark.slow
 def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
     samples, rate = read_audio(wav48k)
     pcm = _int16(samples)
-    ref = speech_to_params(model, resample(samples, rate, model.sample_rate_hz))
+    ref = speech_to_params(model, resample_audio(samples, rate, model.sample_rate_hz))
 
     async def main():
         async with running(model, head, workers=2) as srv:
@@ -395,7 +495,9 @@ def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
                     await stream_samples(ing, pcm, realtime=False)
                     ended = await ing.end()
                     got = await collect
-            garbage = await _expect_close(lambda: _raw(url, "/ingest", _start(session="g", token=None), b"\x01\x02\x03"))
+            garbage = await _expect_close(
+                lambda: _raw(url, "/ingest", _start(session="g", token=None), b"\x01\x02\x03")
+            )
             return ack, bad, ended, got, garbage
 
     ack, bad, ended, got, garbage = asyncio.run(main())

@@ -4,27 +4,27 @@ private PulseAudio server (null sink + remapped monitor source) driving `facecas
 from __future__ import annotations
 
 import asyncio
-import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from assets.audio import read_audio
 from clients.client import ViewerClient
 from realtime_core.pipeline import speech_to_params
-from wire import protocol as P
 from server.app import FacecastServer
 from server.config import ServerConfig
 from server.errors import AudioSourceError
 from server.sources import FileConfig, FileSource
-from assets.audio import read_audio
+from wire import protocol as P
+
+# Real audio sources: files paced in real time, a private PulseAudio daemon, `facecast serve` processes.
+pytestmark = pytest.mark.system
 
 
 def test_file_source_real_time_and_fast_give_animate_frames(model, wav16k):
@@ -54,7 +54,7 @@ def test_file_source_real_time_and_fast_give_animate_frames(model, wav16k):
         # The viewer may attach a few frames late; what it got must be the reference's tail, in order.
         idx = [m.index for m in got.frames]
         assert idx == list(range(idx[0], len(ref))) and idx[0] <= 3
-        np.testing.assert_array_equal(got.values(), ref[idx[0]:].astype(np.float32))
+        np.testing.assert_array_equal(got.values(), ref[idx[0] :].astype(np.float32))
         if realtime:
             assert elapsed >= 0.5 - 0.02  # paced: cannot finish before the audio's own duration
 
@@ -64,43 +64,15 @@ def test_missing_file_is_a_clear_error(tmp_path):
         FileSource(FileConfig(path=tmp_path / "nope.wav"))
 
 
-@pytest.fixture
-def pulse():
-    """A private PulseAudio daemon: sink 'fc', source 'fcmic' = fc's monitor, as the default source."""
-    for tool in ("pulseaudio", "pactl", "paplay"):
-        if shutil.which(tool) is None:
-            pytest.skip(f"{tool} is not installed (apt packages pulseaudio, pulseaudio-utils)")
-    # Short path: the native socket lives in here and unix socket paths are limited to 108 bytes.
-    runtime = Path(tempfile.mkdtemp(prefix="fcpulse"))
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PULSE_")}
-    # Own runtime dir and HOME: the daemon, its cookie and its socket never touch a real session.
-    env.update(XDG_RUNTIME_DIR=str(runtime), HOME=str(runtime), PULSE_RUNTIME_PATH=str(runtime / "pulse"))
-    cmd = ["pulseaudio", "-n", "--daemonize=yes", "--exit-idle-time=-1", "--disallow-exit=no",
-           "-L", "module-native-protocol-unix",
-           "-L", "module-null-sink sink_name=fc rate=48000",
-           "-L", "module-remap-source master=fc.monitor source_name=fcmic"]
-    # As root, pulseaudio warns that it is meant for --system mode but runs per-user with our own
-    # runtime dir; --system would need the pulse user and system-wide sockets.
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=30)
-    ok = r.returncode == 0 and subprocess.run(["pactl", "info"], env=env, capture_output=True, timeout=10).returncode == 0
-    if not ok:
-        shutil.rmtree(runtime, ignore_errors=True)
-        pytest.skip(f"PulseAudio cannot start here: {r.stderr.strip()[-300:]}")
-    try:
-        subprocess.run(["pactl", "set-default-source", "fcmic"], env=env, check=True, timeout=10)
-        yield env
-    finally:
-        subprocess.run(["pulseaudio", "--kill"], env=env, capture_output=True, timeout=10)
-        deadline = time.monotonic() + 5  # --kill only signals: wait until the daemon is gone
-        while time.monotonic() < deadline and subprocess.run(["pulseaudio", "--check"], env=env).returncode == 0:
-            time.sleep(0.05)
-        shutil.rmtree(runtime, ignore_errors=True)
-
-
 def test_microphone_session_moves_the_mouth(pulse, model_path, wav16k):
     facecast = Path(sys.executable).parent / "facecast"
-    proc = subprocess.Popen([str(facecast), "serve", "--port", "0", "--model", str(model_path), "--no-head", "--mic"],
-                            env=pulse, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [str(facecast), "serve", "--port", "0", "--model", str(model_path), "--no-head", "--mic"],
+        env=pulse,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         url = None
         deadline = time.monotonic() + 60

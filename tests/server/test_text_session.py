@@ -23,10 +23,16 @@ from server.text_session import TextBackend, TextSession
 from wire import protocol as P
 
 CORPUS_TEXT = [
-    "Bin blue at f two now.", "Place green by q seven again.", "Lay red with z nine please.",
-    "Set white in a one soon.", "The quick brown fox jumps over the lazy dog.", "How are you today, my friend?",
-    "Thank you very much for the lovely evening.", "She sells sea shells by the sea shore.",
-    "Where were you when the lights went out?", "Our house is on the other side of the river.",
+    "Bin blue at f two now.",
+    "Place green by q seven again.",
+    "Lay red with z nine please.",
+    "Set white in a one soon.",
+    "The quick brown fox jumps over the lazy dog.",
+    "How are you today, my friend?",
+    "Thank you very much for the lovely evening.",
+    "She sells sea shells by the sea shore.",
+    "Where were you when the lights went out?",
+    "Our house is on the other side of the river.",
 ]
 
 
@@ -51,19 +57,32 @@ def backend() -> TextBackend:
             en.append(min(b, n / 30))
         po.append(po[-1] + len(s.phones))
     corpus = MotionCorpus(
-        sentence_ids=tuple(f"c{i}" for i in range(len(CORPUS_TEXT))), frames=np.concatenate(frames),
-        frame_offsets=np.array(fo), phone_labels=tuple(labels), phone_visemes=np.array(vis, dtype=np.int16),
-        phone_start_s=np.array(st), phone_end_s=np.array(en), phone_offsets=np.array(po), n_coefficients=2,
+        sentence_ids=tuple(f"c{i}" for i in range(len(CORPUS_TEXT))),
+        frames=np.concatenate(frames),
+        frame_offsets=np.array(fo),
+        phone_labels=tuple(labels),
+        phone_visemes=np.array(vis, dtype=np.int16),
+        phone_start_s=np.array(st),
+        phone_end_s=np.array(en),
+        phone_offsets=np.array(po),
+        n_coefficients=2,
         dim_names=("c1", "c2", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"),
     )
-    return TextBackend(speak=lambda text, language, voice: speak(text, language=language, voice=voice),
-                       synthesizer=UnitSynthesizer(corpus), languages=tuple(INVENTORY),
-                       sample_rate_hz=synthesizer().sample_rate_hz, stall_s=0.5, lead_s=0.3)
+    return TextBackend(
+        speak=lambda text, language, voice: speak(text, language=language, voice=voice),
+        synthesizer=UnitSynthesizer(corpus),
+        languages=tuple(INVENTORY),
+        sample_rate_hz=synthesizer().sample_rate_hz,
+        stall_s=0.5,
+        lead_s=0.3,
+    )
 
 
 def test_chunker_gives_the_same_sentences_for_any_chunking():
-    text = ("Hello there! How are you today? I am fine; thanks. This one has no end and keeps going "
-            "on and on without any full stop at all for a very long while so it must be cut somewhere ok")
+    text = (
+        "Hello there! How are you today? I am fine; thanks. This one has no end and keeps going "
+        "on and on without any full stop at all for a very long while so it must be cut somewhere ok"
+    )
     whole = SentenceChunker(max_chars=60)
     want = whole.push(text) + whole.flush()
     rng = np.random.default_rng(0)

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from facecast.cli import main
+from tests.prerequisites import missing
 
 
 @pytest.fixture(scope="module")
 def ljspeech(shared_data):
     wavs = sorted((shared_data / "speech" / "ljspeech").glob("LJ*.wav"))
     if len(wavs) < 12:
-        pytest.skip("LJ Speech clips not found")
+        missing("LJ Speech clips not found")
     return wavs
 
 

@@ -7,9 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
 from assets.espeak import LANGUAGES, Voice
+from training.articulatory import ArticulatoryConfig, render_params, unknown_labels
 from training.params import FPS, n_frames_for
+
+# Real espeak-ng speech.
+pytestmark = pytest.mark.system
 
 MOUTH_OPEN = 2
 
@@ -29,12 +32,15 @@ def _timeline(spec: str, start: float = 0.2, dur: float = 0.09) -> list[Seg]:
     return out
 
 
-@pytest.mark.parametrize("inventory,spec", [
-    ("arpabet", "AA1 P AA1 B AA1 M AA1"),
-    ("espeak-en", "a p a b a m a"),
-    ("espeak-es", "a p a b o m a"),
-    ("ipa", "a p a b a m a"),
-])
+@pytest.mark.parametrize(
+    "inventory,spec",
+    [
+        ("arpabet", "AA1 P AA1 B AA1 M AA1"),
+        ("espeak-en", "a p a b a m a"),
+        ("espeak-es", "a p a b o m a"),
+        ("ipa", "a p a b a m a"),
+    ],
+)
 def test_bilabials_close_to_exactly_zero(inventory, spec) -> None:
     tl = _timeline(spec)
     cfg = ArticulatoryConfig(lead_s=0.0)
@@ -84,8 +90,11 @@ def test_every_espeak_phoneme_of_the_sentence_lists_has_a_target(espeak) -> None
 
     folder = Path(training.__file__).parent / "sentences"
     for lang in LANGUAGES:
-        lines = [ln.strip() for ln in (folder / f"{lang}.txt").read_text().splitlines()
-                 if ln.strip() and not ln.startswith("#")]
+        lines = [
+            ln.strip()
+            for ln in (folder / f"{lang}.txt").read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")
+        ]
         assert len(lines) >= 300, f"{lang}: only {len(lines)} sentences"
         inv = f"espeak-{lang}"
         for base in LANGUAGES[lang]:

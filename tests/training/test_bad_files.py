@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import wave
 
@@ -10,21 +9,25 @@ import numpy as np
 import pytest
 
 from assets.audio import read_wav
+from tests.prerequisites import missing, require_module
 from training.corpus import load_corpus, write_manifest, write_utterance
 from training.errors import (
+    CorpusFormatError,
     NoFaceError,
     NotAudioError,
     NotVideoError,
     SilentAudioError,
-    CorpusFormatError,
     TruncatedFileError,
     WrongSampleRateError,
 )
 
-needs_mediapipe = pytest.mark.skipif(
-    importlib.util.find_spec("mediapipe") is None,
-    reason="mediapipe not installed (optional extra: pip install 'facecast[video]')",
-)
+# ffmpeg, MediaPipe and CLI subprocesses on damaged files.
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture
+def mediapipe_installed() -> None:
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
 
 
 def _wav(path, samples, rate):
@@ -69,8 +72,18 @@ def test_truncated_wav(tmp_path) -> None:
 
 
 def _tiny_corpus(root):
-    entry = write_utterance(root, utt_id="u1", samples=_tone(), sample_rate_hz=16000, params=np.zeros((15, 4)),
-                            phonemes=(), language="en", voice="test", source="espeak", speaker_group="test")
+    entry = write_utterance(
+        root,
+        utt_id="u1",
+        samples=_tone(),
+        sample_rate_hz=16000,
+        params=np.zeros((15, 4)),
+        phonemes=(),
+        language="en",
+        voice="test",
+        source="espeak",
+        speaker_group="test",
+    )
     write_manifest(root, [entry], seed=0)
     return entry
 
@@ -79,12 +92,14 @@ def test_corpus_rate_mismatch_and_truncated_params(tmp_path) -> None:
     _tiny_corpus(tmp_path)
     assert len(load_corpus(tmp_path)) == 1
     _wav(tmp_path / "u1" / "audio.wav", _tone(22050), 22050)
-    with pytest.raises(WrongSampleRateError, match=r"u1/audio\.wav: wrong sample rate: file has 22050 Hz, manifest says 16000"):
+    with pytest.raises(
+        WrongSampleRateError, match=r"u1/audio\.wav: wrong sample rate: file has 22050 Hz, manifest says 16000"
+    ):
         load_corpus(tmp_path)
     _tiny_corpus(tmp_path)
     csv = tmp_path / "u1" / "params.csv"
     csv.write_text("\n".join(csv.read_text().splitlines()[:10]) + "\n")
-    with pytest.raises(TruncatedFileError, match=r"u1/params\.csv: truncated: 9 frames, the audio needs 15"):
+    with pytest.raises(TruncatedFileError, match=r"u1/params\.csv: truncated: 9 frames, expected 15"):
         load_corpus(tmp_path)
     (tmp_path / "manifest.json").write_text("{not json")
     with pytest.raises(CorpusFormatError, match=r"manifest\.json: not valid JSON"):
@@ -109,7 +124,7 @@ def test_truncated_video(tmp_path, ffmpeg, shared_data) -> None:
 
     src = shared_data / "video" / "grid" / "lbax4n.mpg"
     if not src.is_file():
-        pytest.skip(f"GRID clip not found: {src}")
+        missing(f"GRID clip not found: {src}")
     cut = tmp_path / "cut.mpg"
     cut.write_bytes(src.read_bytes()[:150_000])
     with pytest.raises(TruncatedFileError, match=r"cut\.mpg: truncated"):
@@ -122,13 +137,24 @@ def test_truncated_video(tmp_path, ffmpeg, shared_data) -> None:
         measure_video(cut_mp4)
 
 
-@needs_mediapipe
-def test_no_face(tmp_path, ffmpeg) -> None:
+def test_no_face(mediapipe_installed, tmp_path, ffmpeg) -> None:
     from training.video import measure_video
 
     p = tmp_path / "wall.mp4"
-    _ffmpeg("-f", "lavfi", "-i", "testsrc=size=320x240:rate=25:duration=1", "-f", "lavfi",
-            "-i", "sine=frequency=300:duration=1", "-shortest", "-pix_fmt", "yuv420p", p)
+    _ffmpeg(
+        "-f",
+        "lavfi",
+        "-i",
+        "testsrc=size=320x240:rate=25:duration=1",
+        "-f",
+        "lavfi",
+        "-i",
+        "sine=frequency=300:duration=1",
+        "-shortest",
+        "-pix_fmt",
+        "yuv420p",
+        p,
+    )
     with pytest.raises(NoFaceError, match=r"wall\.mp4: no face found in 25 of 25 frames"):
         measure_video(p)
 
@@ -138,10 +164,28 @@ def test_silent_video_and_no_audio_track(tmp_path, ffmpeg, shared_data) -> None:
 
     src = shared_data / "video" / "grid" / "lbax4n.mpg"
     if not src.is_file():
-        pytest.skip(f"GRID clip not found: {src}")
+        missing(f"GRID clip not found: {src}")
     mute = tmp_path / "mute.mp4"
-    _ffmpeg("-i", src, "-f", "lavfi", "-i", "anullsrc=r=16000:cl=mono", "-map", "0:v", "-map", "1:a",
-            "-shortest", "-c:v", "libx264", "-preset", "ultrafast", "-c:a", "aac", mute)
+    _ffmpeg(
+        "-i",
+        src,
+        "-f",
+        "lavfi",
+        "-i",
+        "anullsrc=r=16000:cl=mono",
+        "-map",
+        "0:v",
+        "-map",
+        "1:a",
+        "-shortest",
+        "-c:v",
+        "libx264",
+        "-preset",
+        "ultrafast",
+        "-c:a",
+        "aac",
+        mute,
+    )
     with pytest.raises(SilentAudioError, match=r"mute\.mp4: silent"):
         measure_video(mute)
     noaudio = tmp_path / "noaudio.mp4"

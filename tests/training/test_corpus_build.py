@@ -15,6 +15,9 @@ from training.corpus import CSV_HEADER, load_corpus
 from training.errors import ConfigError
 from training.params import FPS, PARAM_NAMES, n_frames_for
 
+# Synthesises a corpus with espeak-ng.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
 
 def _files(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
@@ -86,8 +89,9 @@ def test_noise_is_added_at_the_drawn_snr() -> None:
     rate = 22050
     rng = np.random.default_rng(0)
     x = (0.2 * np.sin(2 * np.pi * 180 * np.arange(rate) / rate)).astype(np.float32)
-    cfg = AugmentConfig(reverb_prob=0.0, noise_prob=1.0, snr_range_db=(15.0, 15.0), gain_range_db=(0.0, 0.0),
-                        sample_rates_hz=(22050,))
+    cfg = AugmentConfig(
+        reverb_prob=0.0, noise_prob=1.0, snr_range_db=(15.0, 15.0), gain_range_db=(0.0, 0.0), sample_rates_hz=(22050,)
+    )
     a = augment(x, rate, rng, cfg)
     noise = a.samples.astype(np.float64) - x
     snr = 20 * np.log10(np.sqrt(np.mean(x.astype(np.float64) ** 2)) / np.sqrt(np.mean(noise**2)))

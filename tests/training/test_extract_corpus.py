@@ -3,7 +3,6 @@ the cache resumes, bad clips are skipped and counted, and FaceTrack keeps its in
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
 import subprocess
 from pathlib import Path
@@ -11,19 +10,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.prerequisites import missing, require_module
 from training.params import n_frames_for
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("mediapipe") is None,
-    reason="mediapipe not installed (optional extra: pip install 'facecast[video]')",
-)
+# ffmpeg and MediaPipe on real GRID clips.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+@pytest.fixture(autouse=True)
+def _mediapipe_installed() -> None:
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
 
 
 @pytest.fixture(scope="module")
 def s1(shared_data) -> Path:
     root = shared_data / "video" / "grid_s1"
     if not (root / "video" / "bbaf2n.mp4").is_file():
-        pytest.skip(f"GRID s1 not found in {root}")
+        missing(f"GRID s1 not found in {root}")
     return root
 
 
@@ -72,12 +75,33 @@ def test_bad_clips_are_skipped_named_and_counted(s1, tmp_path, ffmpeg) -> None:
     v, a = root / "video", root / "align"
     src = s1 / "video" / "bbal6n.mp4"
     # no face at all: a grey picture with a tone
-    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=360x288:r=25:d=3", "-f", "lavfi", "-i", "sine=f=220:d=3",
-            "-shortest", "-c:v", "libx264", "-c:a", "aac", str(v / "noface.mp4"))
+    _ffmpeg(
+        "-f",
+        "lavfi",
+        "-i",
+        "color=c=gray:s=360x288:r=25:d=3",
+        "-f",
+        "lavfi",
+        "-i",
+        "sine=f=220:d=3",
+        "-shortest",
+        "-c:v",
+        "libx264",
+        "-c:a",
+        "aac",
+        str(v / "noface.mp4"),
+    )
     shutil.copy(s1 / "align" / "bbaf2n.align", a / "noface.align")
     # face lost mid-clip for 1 s (black box over the whole picture from 1.0 to 2.0 s)
-    _ffmpeg("-i", str(src), "-vf", "drawbox=enable='between(t,1,2)':x=0:y=0:w=iw:h=ih:color=black:t=fill",
-            "-c:a", "copy", str(v / "lost.mp4"))
+    _ffmpeg(
+        "-i",
+        str(src),
+        "-vf",
+        "drawbox=enable='between(t,1,2)':x=0:y=0:w=iw:h=ih:color=black:t=fill",
+        "-c:a",
+        "copy",
+        str(v / "lost.mp4"),
+    )
     shutil.copy(s1 / "align" / "bbal6n.align", a / "lost.align")
     # audio cut to 1.5 s under 3 s of video
     _ffmpeg("-i", str(src), "-c:v", "copy", "-af", "atrim=0:1.5", str(v / "short.mp4"))
@@ -105,8 +129,12 @@ def test_bad_clips_are_skipped_named_and_counted(s1, tmp_path, ffmpeg) -> None:
     again = extract_corpus([v / "bbaf5a.mp4"], cache_dir=tmp_path / "cache", workers=1)
     assert again.n_cached == 1 and again.clips[0]["neutral"]["method"] == "quiet"
     # a face lost for a short while is bridged and flagged
-    short_gap = extract_corpus([v / "lost.mp4"], cache_dir=tmp_path / "cache", workers=1,
-                               config=ExtractConfig(max_gap_s=1.5, min_face_fraction=0.6))
+    short_gap = extract_corpus(
+        [v / "lost.mp4"],
+        cache_dir=tmp_path / "cache",
+        workers=1,
+        config=ExtractConfig(max_gap_s=1.5, min_face_fraction=0.6),
+    )
     q = short_gap.clips[0]
     assert 0.6 < q["face_found_fraction"] < 0.7 and short_gap.n_cached == 1
 
@@ -136,8 +164,9 @@ def test_face_track_invariants(s1, tmp_path, ffmpeg) -> None:
     assert track.params.shape == (n, 4) and track.params.dtype == np.float64
     assert track.face_found.shape == (n,) and track.face_found.all()
     assert np.isfinite(track.landmarks).all()
-    np.testing.assert_allclose(track.params, mouth_params(track.landmarks, track.neutral,
-                                                          closed_gap=track.closed_gap_iod), atol=1e-6)
+    np.testing.assert_allclose(
+        track.params, mouth_params(track.landmarks, track.neutral, closed_gap=track.closed_gap_iod), atol=1e-6
+    )
     # mouth_open's zero is lip contact: never far below 0, and the rest face reads its own gap
     assert track.params[:, 2].min() > -0.01 and 0 <= track.closed_gap_iod <= track.quality["neutral"]["lip_gap_iod"]
     # face frame, IOD units: eye centres at x = -/+ 0.5 on the x axis, the mouth below (y > 0),
@@ -165,15 +194,19 @@ def test_face_track_invariants(s1, tmp_path, ffmpeg) -> None:
 
 
 def test_malformed_alignments_name_the_file(tmp_path) -> None:
-    from training.errors import AlignmentFormatError
     from assets.grid import read_words
+    from training.errors import AlignmentFormatError
 
-    cases = {"empty.align": "", "text.align": "hello world\n", "float.align": "0 1.5 sil\n",
-             "backwards.align": "0 100 sil\n50 20 bin\n"}
+    cases = {
+        "empty.align": "",
+        "text.align": "hello world\n",
+        "float.align": "0 1.5 sil\n",
+        "backwards.align": "0 100 sil\n50 20 bin\n",
+    }
     for name, text in cases.items():
         p = tmp_path / name
         p.write_text(text)
         with pytest.raises(AlignmentFormatError, match=rf"{name}: "):
             read_words(p)
-    with pytest.raises(AlignmentFormatError, match="missing.align: cannot be read"):
+    with pytest.raises(AlignmentFormatError, match=r"missing.align: cannot be read"):
         read_words(tmp_path / "missing.align")

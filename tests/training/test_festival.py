@@ -3,17 +3,22 @@ audio, labels the rules know, and a deterministic corpus."""
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 import pytest
 
+from tests.prerequisites import require_tool
 from training.articulatory import render_params, unknown_labels
 from training.corpus import load_corpus
 from training.evaluation import MOUTH_OPEN
 from training.festival import VOICES, FestivalVoice, build_festival_corpus, synthesize_batch
 
-pytestmark = pytest.mark.skipif(shutil.which("festival") is None, reason="festival is not installed (apt package festival)")
+# Festival speech synthesis.
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(autouse=True)
+def _festival_installed() -> None:
+    require_tool("festival", "apt package festival")
 
 
 @pytest.mark.parametrize("voice", VOICES)
@@ -36,8 +41,9 @@ def test_phone_timings_line_up_with_the_audio(voice):
     params = render_params(phones, int(np.ceil(len(x) / rate * 30)), inventory="arpabet")
     # Labels lead the sound by 33 ms: each /p/ closes the mouth within its (shifted) span.
     lead = 0.033
-    closed = [params[int(np.ceil((p.start_s - lead) * 30)) : int((p.end_s - lead) * 30) + 1, MOUTH_OPEN].min()
-              for p in ps]
+    closed = [
+        params[int(np.ceil((p.start_s - lead) * 30)) : int((p.end_s - lead) * 30) + 1, MOUTH_OPEN].min() for p in ps
+    ]
     assert max(closed) < 0.02 and params[:, MOUTH_OPEN].max() > 0.1
 
 

@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
-from training.build_corpus import BuildConfig, build_corpus
 from assets.audio import read_wav
+from tests.prerequisites import require_module
+from training.build_corpus import BuildConfig, build_corpus
 from training.corpus import load_corpus
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("pocketsphinx") is None,
-    reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')",
-)
+# pocketsphinx forced alignment on real speech.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+@pytest.fixture(autouse=True)
+def _pocketsphinx_installed() -> None:
+    require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
 
 
 def test_reproduces_the_shipped_librivox_alignment(shared_data) -> None:
@@ -32,8 +34,15 @@ def test_reproduces_the_shipped_librivox_alignment(shared_data) -> None:
 
 
 def test_builder_aligns_transcribed_speech_and_names_what_it_skips(shared_data, tmp_path) -> None:
-    rep = build_corpus(BuildConfig(out_dir=tmp_path, sentences=0, languages=(),
-                                   real_dirs=(shared_data / "speech" / "ljspeech",), force_align=True))
+    rep = build_corpus(
+        BuildConfig(
+            out_dir=tmp_path,
+            sentences=0,
+            languages=(),
+            real_dirs=(shared_data / "speech" / "ljspeech",),
+            force_align=True,
+        )
+    )
     utts = load_corpus(tmp_path)
     assert len(utts) >= 5 and all(u.source == "real" and u.speaker_group == "real:ljspeech" for u in utts)
     for u in utts:  # phones cover the speech and the rules open and close the mouth

@@ -3,7 +3,6 @@ the per-word pocketsphinx alignment and its fallback."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 
@@ -11,6 +10,7 @@ import numpy as np
 import pytest
 
 from realtime_core.phones import PhonemeSegment
+from tests.prerequisites import missing, require_module
 from training.alignments import Alignment
 from training.articulatory import classes_for
 from training.errors import AlignmentFormatError
@@ -28,22 +28,32 @@ from training.grid_phones import (
     write_grid_phones,
 )
 
-needs_pocketsphinx = pytest.mark.skipif(importlib.util.find_spec("pocketsphinx") is None,
-                                        reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')")
+
+@pytest.fixture
+def needs_pocketsphinx() -> None:
+    require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
 
 
 @pytest.fixture(scope="module")
 def grid_root(shared_data):
     root = shared_data / "video" / "grid_s1"
     if not (root / "align").is_dir():
-        pytest.skip(f"GRID s1 corpus not found at {root}")
+        missing(f"GRID s1 corpus not found at {root}")
     return root
 
 
 def test_reader_round_trip(tmp_path) -> None:
-    a = SentencePhones(sentence_id="bbaf2n", method="pocketsphinx+spread", spread_words=("at",), edge_silences=1,
-                       phones=(PhonemeSegment("SIL", 0.0, 0.95), PhonemeSegment("B", 0.95, 1.0123456),
-                               PhonemeSegment("IH", 1.0123456, 1.18)))
+    a = SentencePhones(
+        sentence_id="bbaf2n",
+        method="pocketsphinx+spread",
+        spread_words=("at",),
+        edge_silences=1,
+        phones=(
+            PhonemeSegment("SIL", 0.0, 0.95),
+            PhonemeSegment("B", 0.95, 1.0123456),
+            PhonemeSegment("IH", 1.0123456, 1.18),
+        ),
+    )
     b = SentencePhones(sentence_id="aaaa0a", method="spread", phones=(PhonemeSegment("EY", 0.5, 0.7),))
     path = write_grid_phones(tmp_path / "p.json", [a, b])
     back = read_grid_phones_file(path)
@@ -62,12 +72,12 @@ def test_reader_round_trip(tmp_path) -> None:
 def test_reader_names_the_file_for_bad_input(tmp_path) -> None:
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    with pytest.raises(AlignmentFormatError, match="bad.json"):
+    with pytest.raises(AlignmentFormatError, match=r"bad.json"):
         read_grid_phones_file(bad)
     bad.write_text(json.dumps({"header": {"format": "something else"}}))
     with pytest.raises(AlignmentFormatError, match="not a GRID phones file"):
         read_grid_phones_file(bad)
-    with pytest.raises(AlignmentFormatError, match="missing.json"):
+    with pytest.raises(AlignmentFormatError, match=r"missing.json"):
         read_grid_phones_file(tmp_path / "missing.json")
 
 
@@ -142,7 +152,7 @@ def test_hand_checked_sentence_bbaf2n(grid_root, ffmpeg) -> None:
     x = decode_audio(grid_root / "video" / "bbaf2n.mp4", 16000)
 
     def seg(p: PhonemeSegment) -> np.ndarray:
-        return x[int(p.start_s * 16000): int(p.end_s * 16000)]
+        return x[int(p.start_s * 16000) : int(p.end_s * 16000)]
 
     eh, f, t, uw = ph[9], ph[10], ph[11], ph[12]
     assert _high_band_fraction(seg(f)) > 0.2 and _high_band_fraction(seg(t)) > 0.2  # measured 0.46, 0.50
@@ -151,7 +161,7 @@ def test_hand_checked_sentence_bbaf2n(grid_root, ffmpeg) -> None:
     assert np.sqrt(np.mean(seg(ph[1]) ** 2)) < 0.5 * np.sqrt(np.mean(seg(ph[2]) ** 2))
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_pronunciations_are_cmudict_but_for_the_british_letters() -> None:
     from pocketsphinx import Decoder
 
@@ -160,7 +170,7 @@ def test_pronunciations_are_cmudict_but_for_the_british_letters() -> None:
     assert differ == {"a", "z"}  # CMUdict's first entries: A = AH (the article), Z = Z IY (American)
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None:
     from assets.grid import read_words
     from training.grid_phones import SentenceAligner
@@ -176,11 +186,13 @@ def test_aligning_again_reproduces_the_shipped_labels(grid_root, ffmpeg) -> None
         np.testing.assert_allclose([p.end_s for p in got.phones], [p.end_s for p in shipped[sid].phones], atol=2e-4)
     # without audio every word is spread, inside the same spans
     spread_only = label_sentence("bbaf2n", read_words(grid_root / "align" / "bbaf2n.align"), None, None)
-    assert spread_only.method == "spread" and not check_sentence(
-        spread_only.phones, read_words(grid_root / "align" / "bbaf2n.align")).problems
+    assert (
+        spread_only.method == "spread"
+        and not check_sentence(spread_only.phones, read_words(grid_root / "align" / "bbaf2n.align")).problems
+    )
 
 
-@needs_pocketsphinx
+@pytest.mark.usefixtures("needs_pocketsphinx")
 def test_cli_labels_a_folder_and_names_a_broken_alignment(grid_root, ffmpeg, tmp_path, capsys) -> None:
     from facecast.cli import main
 

@@ -7,8 +7,12 @@ import numpy as np
 import pytest
 
 from realtime_core import VISUAL_PARAMS
+from tests.prerequisites import require_module
 from training.corpus import Utterance
 from training.params import FPS, n_frames_for
+
+# Real GRID clips and ffmpeg.
+pytestmark = pytest.mark.system
 
 
 def _tone_utterance(freq_hz: float = 200.0, dur_s: float = 2.0, rate: int = 16000) -> Utterance:
@@ -16,9 +20,17 @@ def _tone_utterance(freq_hz: float = 200.0, dur_s: float = 2.0, rate: int = 1600
     n = n_frames_for(dur_s)
     ramp = np.arange(n) / FPS  # params = time itself, so re-timing is visible exactly
     params = np.stack([ramp, -ramp, 0.1 * ramp, np.zeros(n)], axis=1)
-    return Utterance(id="tone", samples=(0.3 * np.sin(2 * np.pi * freq_hz * t)).astype(np.float32),
-                     sample_rate_hz=rate, params=params, phonemes=(), voice="v", language="en", source="video",
-                     speaker_group="g")
+    return Utterance(
+        id="tone",
+        samples=(0.3 * np.sin(2 * np.pi * freq_hz * t)).astype(np.float32),
+        sample_rate_hz=rate,
+        params=params,
+        phonemes=(),
+        voice="v",
+        language="en",
+        source="video",
+        speaker_group="g",
+    )
 
 
 @pytest.mark.parametrize("factor", [0.88, 1.12])
@@ -45,8 +57,16 @@ def test_speed_perturbation_scales_pitch_and_time_together(factor) -> None:
 def test_bilabial_spans_of_a_grid_sentence() -> None:
     from training.reallips import CLOSURE_S, bilabial_spans
 
-    words = [(0.0, 0.5, "sil"), (0.5, 0.8, "bin"), (0.8, 1.1, "red"), (1.1, 1.3, "at"), (1.3, 1.6, "m"),
-             (1.6, 1.9, "seven"), (1.9, 2.3, "please"), (2.3, 3.0, "sil")]
+    words = [
+        (0.0, 0.5, "sil"),
+        (0.5, 0.8, "bin"),
+        (0.8, 1.1, "red"),
+        (1.1, 1.3, "at"),
+        (1.3, 1.6, "m"),
+        (1.6, 1.9, "seven"),
+        (1.9, 2.3, "please"),
+        (2.3, 3.0, "sil"),
+    ]
     spans = bilabial_spans(words)
     assert [w for _, _, w in spans] == ["bin", "m", "please"]
     assert spans[0][:2] == pytest.approx((0.5 - CLOSURE_S / 2, 0.5 + CLOSURE_S))
@@ -87,11 +107,12 @@ def test_scores_match_independent_computations() -> None:
     assert s.r_loudness == pytest.approx(np.corrcoef(tr[:, 2], lo)[0, 1], abs=1e-9)
 
 
-@pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
+@pytest.mark.slow
 def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
     """`facecast train --grid-s1 ROOT --speed 1.1 --closure-band 0.02` on a three-sentence GRID copy:
     the model records its data, holds the speed copies, keeps the band, and its output never goes
     below the closed pose."""
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
     import shutil
 
     from assets.modelfile import load_model
@@ -106,11 +127,67 @@ def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
         shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
         shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
     out = tmp_path / "m.npz"
-    assert main(["train", "--grid-s1", str(root), "--grid-split", "all", "--speed", "1.1", "--closure-band", "0.02",
-                 "--cache-dir", str(tmp_path / "cache"), "-o", str(out), "--states", "2", "--mix", "1",
-                 "--iters", "1"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--grid-s1",
+                str(root),
+                "--grid-split",
+                "all",
+                "--speed",
+                "1.1",
+                "--closure-band",
+                "0.02",
+                "--cache-dir",
+                str(tmp_path / "cache"),
+                "-o",
+                str(out),
+                "--states",
+                "2",
+                "--mix",
+                "1",
+                "--iters",
+                "1",
+            ]
+        )
+        == 0
+    )
     m = load_model(out)
     assert m.metadata["grid_s1"] == {"split": "all", "sentences": 3, "speeds": [1.1], "mic_copies": 0}
     assert m.metadata["train_utterances"] == 6 and m.closure_band == 0.02
     x = np.random.default_rng(0).standard_normal(16000).astype(np.float32) * 0.05
     assert speech_to_params(m, x)[:, VISUAL_PARAMS.index("mouth_open")].min() >= 0.0
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
+def test_real_lips_evaluation_of_the_shipped_model(shared_data, tmp_path, ffmpeg) -> None:
+    """Two s1 sentences through the eval path: closures counted on the shipped phone labels' /p b m/,
+    the estimate never below the closed pose, and the markdown table lists every parameter."""
+    import shutil
+
+    from assets.modelfile import load_model
+    from training.grid_phones import read_grid_phones
+    from training.reallips import (
+        evaluate_lips,
+        lips_markdown,
+        phone_bilabial_spans,
+        s1_clips,
+    )
+
+    s1 = shared_data / "video" / "grid_s1"
+    root = tmp_path / "grid"
+    (root / "video").mkdir(parents=True)
+    (root / "align").mkdir()
+    for sid in ("bbaf2n", "bbal6n"):
+        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
+        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    phones = read_grid_phones()
+    clips = s1_clips(None, root=root, cache_dir=tmp_path / "cache", phones=phones)
+    want = sum(len(phone_bilabial_spans(phones[sid].phones)) for sid in ("bbaf2n", "bbal6n"))
+    assert [c[0] for c in clips] == ["bbaf2n", "bbal6n"] and want >= 2
+    scores, items = evaluate_lips(load_model(None), clips)
+    assert scores.n_closures == want and scores.n_frames == sum(len(t.params) for _, t, _ in clips)
+    assert all(est[:, VISUAL_PARAMS.index("mouth_open")].min() >= 0 for _, _, est, _, _ in items)
+    md = lips_markdown("t", scores)
+    assert all(f"| {p} |" in md for p in VISUAL_PARAMS)

@@ -9,14 +9,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from assets.audio import read_wav
+from assets.modelfile import load_model
 from facecast.cli import main
+from realtime_core.features import loudness_db
+from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import SpeechToParams
 from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
-from assets.audio import read_wav
 from training.corpus import load_corpus
-from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-from assets.modelfile import load_model
-from realtime_core.features.resample import resample_audio as resample
+from training.evaluation import MOUTH_OPEN, pearson
+
+# Builds a corpus and trains a model.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")
@@ -25,10 +29,18 @@ def corpora(tmp_path_factory, espeak):
     root = tmp_path_factory.mktemp("corpora")
     train = root / "train"
     held = root / "held"
-    build_corpus(BuildConfig(out_dir=train, sentences=60, languages=("en",), seed=1,
-                             voices=VoiceSampling(variants=(None, "m1", "m3", "f2", "f4"))))
-    build_corpus(BuildConfig(out_dir=held, sentences=10, languages=("en",), seed=2,
-                             voices=VoiceSampling(variants=("f5", "m7"))))
+    build_corpus(
+        BuildConfig(
+            out_dir=train,
+            sentences=60,
+            languages=("en",),
+            seed=1,
+            voices=VoiceSampling(variants=(None, "m1", "m3", "f2", "f4")),
+        )
+    )
+    build_corpus(
+        BuildConfig(out_dir=held, sentences=10, languages=("en",), seed=2, voices=VoiceSampling(variants=("f5", "m7")))
+    )
     return train, held
 
 
@@ -49,7 +61,7 @@ def test_trained_model_loads_and_beats_loudness_on_held_out_voices(model_path, c
     assert not model_path.with_name(model_path.name + ".checkpoint.npz").exists()
     truth, est, loud = [], [], []
     for u in load_corpus(corpora[1]):
-        e = speech_to_params(model, resample(u.samples, u.sample_rate_hz, model.sample_rate_hz))
+        e = speech_to_params(model, resample_audio(u.samples, u.sample_rate_hz, model.sample_rate_hz))
         T = min(len(e), len(u.params))
         truth.append(u.params[:T, MOUTH_OPEN])
         est.append(e[:T, MOUTH_OPEN])
@@ -71,7 +83,7 @@ def test_animate_equals_the_live_streaming_path(model_path, corpora, tmp_path):
     # The live path: the same model fed 10 ms blocks as a microphone would deliver them.
     model = load_model(model_path)
     samples, rate = read_wav(wav)
-    x = resample(samples, rate, model.sample_rate_hz)
+    x = resample_audio(samples, rate, model.sample_rate_hz)
     live = SpeechToParams(model)
     blocks = [live.push(x[i : i + 160]) for i in range(0, len(x), 160)] + [live.flush()]
     np.testing.assert_allclose(table[:, 1:], np.concatenate(blocks), atol=2e-6)  # CSV has 6 decimals

@@ -2,25 +2,27 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
 
+from tests.prerequisites import missing, require_module
 from training.corpus import load_corpus
 from training.params import FPS, n_frames_for
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("mediapipe") is None,
-    reason="mediapipe not installed (optional extra: pip install 'facecast[video]')",
-)
+# MediaPipe and ffmpeg on real GRID video.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+@pytest.fixture(autouse=True)
+def _mediapipe_installed() -> None:
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
 
 
 @pytest.fixture(scope="module")
 def grid(shared_data):
     folder = shared_data / "video" / "grid"
     if not (folder / "id2_vcd_swwp2s.mpg").is_file():
-        pytest.skip(f"GRID clips not found in {folder}")
+        missing(f"GRID clips not found in {folder}")
     return folder
 
 
@@ -32,7 +34,7 @@ def swwp2s(grid, ffmpeg):
 
 
 def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
-    """"set white with p two soon": the lips close in the letter "p" and open in "white"/"two".
+    """ "set white with p two soon": the lips close in the letter "p" and open in "white"/"two".
 
     The word times come from swwp2s.align (units of 1/25000 s: the last word ends at
     74500 = 2.98 s of the 3 s clip, and "set" starts at 12250 = 0.49 s where the audio starts).
@@ -40,7 +42,14 @@ def test_closes_on_p_and_opens_on_vowels(swwp2s, grid) -> None:
     from assets.grid import read_words
 
     words = read_words(grid / "swwp2s.align")
-    assert words[-1][1] == pytest.approx(2.98) and [w for _, _, w in words][1:7] == ["set", "white", "with", "p", "two", "soon"]
+    assert words[-1][1] == pytest.approx(2.98) and [w for _, _, w in words][1:7] == [
+        "set",
+        "white",
+        "with",
+        "p",
+        "two",
+        "soon",
+    ]
     mo = swwp2s.params[:, 2]
     t = np.arange(len(mo)) / FPS
     span = {w: (a, b) for a, b, w in words}
@@ -99,10 +108,10 @@ def test_rules_agree_with_the_measured_lips(swwp2s, grid, espeak) -> None:
     Before 0.6 s the talker holds the mouth open in silence (breath), which no audio-driven
     rule can know, so that part is left out of the mouth_open check.
     """
-    from training.alignments import phones_from_words
-    from training.articulatory import render_params
     from assets.espeak import Voice
     from assets.grid import read_words
+    from training.alignments import phones_from_words
+    from training.articulatory import render_params
 
     words = read_words(grid / "swwp2s.align")
     phones = phones_from_words(words, voice=Voice(language="en", base="en"), spellings={"p": "pee"})
@@ -118,7 +127,7 @@ GRID_WORDS = {
     "command": {"b": "bin", "l": "lay", "p": "place", "s": "set"},
     "colour": {"b": "blue", "g": "green", "r": "red", "w": "white"},
     "preposition": {"a": "at", "b": "by", "i": "in", "w": "with"},
-    "digit": dict(zip("z123456789", "zero one two three four five six seven eight nine".split())),
+    "digit": dict(zip("z123456789", ["zero", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine"])),
     "adverb": {"a": "again", "n": "now", "p": "please", "s": "soon"},
 }
 
@@ -126,12 +135,18 @@ GRID_WORDS = {
 def grid_sentence(stem: str) -> str:
     """GRID's file names spell the sentence: ``bbaf2n`` = "bin blue at f two now"."""
     c = stem.split("_")[-1]
-    return " ".join([GRID_WORDS["command"][c[0]], GRID_WORDS["colour"][c[1]], GRID_WORDS["preposition"][c[2]],
-                     c[3], GRID_WORDS["digit"][c[4]], GRID_WORDS["adverb"][c[5]]])
+    return " ".join(
+        [
+            GRID_WORDS["command"][c[0]],
+            GRID_WORDS["colour"][c[1]],
+            GRID_WORDS["preposition"][c[2]],
+            c[3],
+            GRID_WORDS["digit"][c[4]],
+            GRID_WORDS["adverb"][c[5]],
+        ]
+    )
 
 
-@pytest.mark.skipif(importlib.util.find_spec("pocketsphinx") is None,
-                    reason="pocketsphinx not installed (optional extra: pip install 'facecast[align]')")
 def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
     """All four GRID clips: the rules on pocketsphinx phone timings vs the measured lips.
 
@@ -139,6 +154,7 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
     without lead), above the loudness track's mean r (0.35), and every clip's best lag
     within +-2 frames (a far lag would mean a timing bug in extraction or labelling).
     """
+    require_module("pocketsphinx", "optional extra: pip install 'facecast[align]'")
     from training.articulatory import render_params
     from training.force_align import force_align
     from training.video import frame_energy_db, measure_video
@@ -149,8 +165,12 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
         al = force_align(track.samples, track.sample_rate_hz, grid_sentence(clip.stem), source=clip)
         rules = render_params(al.phones, len(track.params), inventory="arpabet")[:, 2]
         mo = track.params[:, 2]
-        by_lag = {lag: np.corrcoef(rules[: len(rules) - lag] if lag >= 0 else rules[-lag:],
-                                   mo[lag:] if lag >= 0 else mo[: len(mo) + lag])[0, 1] for lag in range(-3, 4)}
+        by_lag = {
+            lag: np.corrcoef(
+                rules[: len(rules) - lag] if lag >= 0 else rules[-lag:], mo[lag:] if lag >= 0 else mo[: len(mo) + lag]
+            )[0, 1]
+            for lag in range(-3, 4)
+        }
         rs.append(by_lag[0])
         lags.append(max(by_lag, key=by_lag.get))
         loud.append(np.corrcoef(frame_energy_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])

@@ -131,7 +131,13 @@ function connect(name) {
   setStatus(`connecting to "${name}"`);
   sock.onmessage = (ev) => {
     if (typeof ev.data === "string") {
-      desc = JSON.parse(ev.data);
+      const text = JSON.parse(ev.data);
+      if (text.type === "ack" || text.type === "rejected") {
+        onControlReply(text);
+        return;
+      }
+      desc = text;
+      showExpressionPicker(desc.expressions ?? []);
       // Frames that arrive while the head downloads are timed and queued; they move the mesh once it exists.
       const ready = view.load(kind === "deltas" ? desc.head : null).then(() => {
         state.connections += 1;
@@ -176,6 +182,49 @@ function connect(name) {
     setTimeout(pollSessions, 200);
   };
 }
+
+// Expression picker: the buttons send {"type": "control", "expression": {...}} on the viewer's socket;
+// the server eases the session's face to it from the next frame (every viewer of the session sees it).
+let activeExpression = "neutral";
+
+function showExpressionPicker(names) {
+  const box = $("expressions");
+  box.replaceChildren();
+  box.classList.toggle("none", names.length === 0);
+  if (names.length === 0) {
+    box.textContent = "none (this server has no expressions)";
+    return;
+  }
+  for (const name of names) {
+    const b = document.createElement("button");
+    b.textContent = name;
+    b.dataset.name = name;
+    b.classList.toggle("active", name === activeExpression);
+    b.onclick = () => sendExpression(name);
+    box.appendChild(b);
+  }
+}
+
+function sendExpression(name) {
+  if (!ws || ws.readyState !== WebSocket.OPEN) return;
+  const intensity = Number($("intensity").value);
+  ws.send(JSON.stringify({ type: "control", expression: { name, intensity } }));
+  activeExpression = name;
+  for (const b of $("expressions").children) b.classList.toggle("active", b.dataset.name === name);
+  $("expression-status").textContent = `asked for ${name} at ${intensity.toFixed(2)}`;
+}
+
+function onControlReply(msg) {
+  $("expression-status").textContent = msg.type === "ack"
+    ? `${activeExpression}: applied` : `rejected: ${msg.reason}`;
+}
+
+$("intensity").oninput = () => {
+  $("intensity-value").textContent = Number($("intensity").value).toFixed(2);
+};
+$("intensity").onchange = () => {
+  if (activeExpression !== "neutral") sendExpression(activeExpression);
+};
 
 function resetStream() {
   clock = new PlayoutClock({ bufferS });

@@ -7,8 +7,16 @@ import pytest
 
 from realtime_core import ConfigError, InvalidFeaturesError
 from realtime_core.features import (
-    CmvnConfig, ContextStacker, FrontEnd, FrontEndConfig, MfccConfig, RunningCmvn, extract_features, stack_context,
+    CmvnConfig,
+    ContextStacker,
+    FrontEnd,
+    FrontEndConfig,
+    MfccConfig,
+    RunningCmvn,
+    extract_features,
+    stack_context,
 )
+from tests.chunking import assert_chunk_invariant
 
 
 def test_context_rows_are_the_neighbouring_frames_with_replicated_edges():
@@ -30,14 +38,33 @@ def test_context_releases_row_t_when_frame_t_plus_tc_arrives():
 def test_context_chunking_invariance():
     rng = np.random.default_rng(0)
     a = rng.standard_normal((57, 3))
-    whole = stack_context(a, tc=3)
-    st = ContextStacker(dim=3, tc=3)
-    pieces = [st.push(a[i : i + 1]) for i in range(57)] + [st.flush()]
-    np.testing.assert_array_equal(np.concatenate(pieces), whole)
-    st = ContextStacker(dim=3, tc=3)
-    cuts = [0, 1, 2, 9, 30, 31, 57]
-    pieces = [st.push(a[s:e]) for s, e in zip(cuts, cuts[1:])] + [st.flush()]
-    np.testing.assert_array_equal(np.concatenate(pieces), whole)
+    whole = assert_chunk_invariant(lambda: ContextStacker(dim=3, tc=3), a)
+    np.testing.assert_array_equal(whole, stack_context(a, tc=3))
+
+
+class _CmvnStage:
+    """RunningCmvn as a push/flush stage (it releases every frame at once, so flush is empty)."""
+
+    def __init__(self, d: int) -> None:
+        self.cmvn = RunningCmvn(
+            CmvnConfig(prior_frames=20, max_frames=60, gate_db=-50), mean=np.zeros(d), var=np.ones(d)
+        )
+        self.d = d
+
+    def push(self, features: np.ndarray, level_db: np.ndarray) -> np.ndarray:
+        return self.cmvn.push(features, level_db)
+
+    def flush(self) -> np.ndarray:
+        return np.empty((0, self.d))
+
+
+def test_cmvn_chunking_invariance():
+    """The running statistics (warm start, gate, window) update frame by frame whatever the chunking."""
+    rng = np.random.default_rng(4)
+    feats = 3.0 * rng.standard_normal((150, 4)) + 5.0
+    level = np.where(rng.random(150) < 0.3, -80.0, -20.0)  # a third of the frames below the gate
+    whole = assert_chunk_invariant(lambda: _CmvnStage(4), feats, level, atol=1e-12)
+    assert np.abs(whole[-50:].mean(0)).max() < np.abs(feats[-50:].mean(0)).min()  # it did normalise
 
 
 def test_cmvn_warm_start_gating_and_adaptation():
@@ -67,10 +94,8 @@ def test_front_end_same_output_for_any_chunking():
     stats = dict(cmvn_mean=np.zeros(11), cmvn_var=np.ones(11))
     whole = extract_features(x, cfg, **stats)
     assert whole.shape == (cfg.mfcc.n_frames_for(x.size), 77)
-    for chunks in ([x[i : i + 1] for i in range(x.size)], np.split(x, np.sort(rng.choice(x.size, 25, replace=False)))):
-        fe = FrontEnd(cfg, **stats)
-        out = np.concatenate([fe.push(c) for c in chunks] + [fe.flush()])
-        np.testing.assert_allclose(out, whole, rtol=0, atol=1e-10)
+    streamed = assert_chunk_invariant(lambda: FrontEnd(cfg, **stats), x, atol=1e-10, max_examples=10)
+    np.testing.assert_allclose(streamed, whole, rtol=0, atol=1e-10)
 
 
 def test_front_end_config_errors():
@@ -94,5 +119,10 @@ def test_quiet_input_below_the_silence_floor_looks_exactly_like_digital_silence(
     np.testing.assert_array_equal(hiss, zeros)
     assert np.abs(loud - zeros).max() > 1.0
     ungated = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True, silence_floor_db=None)
-    assert np.abs(extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), ungated,
-                                   **stats) - zeros).max() > 1.0
+    assert (
+        np.abs(
+            extract_features((rng.standard_normal(16000) * 10 ** (-75 / 20)).astype(np.float32), ungated, **stats)
+            - zeros
+        ).max()
+        > 1.0
+    )

@@ -8,11 +8,12 @@ import scipy.io.wavfile
 
 from realtime_core import ConfigError, InvalidAudioError, StreamStateError
 from realtime_core.features import MfccConfig, MfccStream, mfcc
-from tests.conftest import shared_file
+from tests.chunking import assert_chunk_invariant
+from tests.prerequisites import require_data, require_module
 
 
 def _speech_22k() -> np.ndarray:
-    rate, x = scipy.io.wavfile.read(shared_file("speech/ljspeech/LJ001-0001.wav"))
+    rate, x = scipy.io.wavfile.read(require_data("speech/ljspeech/LJ001-0001.wav"))
     assert rate == 22050
     return x.astype(np.float64) / 32768.0
 
@@ -21,14 +22,25 @@ def test_agrees_with_python_speech_features_on_real_speech():
     """Same settings (22.05 kHz so the hop is an integer 735 samples, Hamming window of
     1470, 2048-point FFT, 26 HTK filters, pre-emphasis 0.97, no lifter, no energy swap):
     c1..c11 agree with python_speech_features to 1e-8 absolute on every complete frame."""
-    psf = pytest.importorskip("python_speech_features")
+    psf = require_module("python_speech_features")
     x = _speech_22k()
     cfg = MfccConfig(sample_rate_hz=22050, n_mels=26, n_ceps=11)
     assert (cfg.window_len, cfg.n_fft) == (1470, 2048)
     ours = mfcc(x, cfg)
     ref = psf.mfcc(
-        x, samplerate=22050, winlen=1470 / 22050, winstep=735 / 22050, numcep=12, nfilt=26, nfft=2048,
-        lowfreq=0, highfreq=None, preemph=0.97, ceplifter=0, appendEnergy=False, winfunc=np.hamming,
+        x,
+        samplerate=22050,
+        winlen=1470 / 22050,
+        winstep=735 / 22050,
+        numcep=12,
+        nfilt=26,
+        nfft=2048,
+        lowfreq=0,
+        highfreq=None,
+        preemph=0.97,
+        ceplifter=0,
+        appendEnergy=False,
+        winfunc=np.hamming,
     )[:, 1:12]
     complete = (len(x) - 1470) // 735 + 1  # frames entirely inside the audio
     assert ours.shape[0] == cfg.n_frames_for(len(x))
@@ -70,18 +82,9 @@ def test_same_output_whole_sample_by_sample_and_random_chunks(rate, dtype):
     sig = rng.standard_normal(n) * 0.2
     x = (sig * 20000).astype(np.int16) if dtype == np.int16 else sig.astype(dtype)
     cfg = MfccConfig(sample_rate_hz=rate)
-
-    def run(chunks):
-        st = MfccStream(cfg)
-        return np.concatenate([st.push(c) for c in chunks] + [st.flush()])
-
-    whole = run([x])
-    one = run([x[i : i + 1] for i in range(n)])
-    cuts = np.sort(rng.choice(np.arange(1, n), size=40, replace=False))
-    rand = run(np.split(x, cuts))
+    whole = assert_chunk_invariant(lambda: MfccStream(cfg), x, atol=1e-12)
     assert whole.shape == (cfg.n_frames_for(n), 11)
-    np.testing.assert_allclose(one, whole, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(rand, whole, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(whole, mfcc(x, cfg), rtol=0, atol=0)
 
 
 def test_int16_equals_scaled_float():
@@ -108,8 +111,14 @@ def test_bad_audio_raises_a_named_error(samples, match):
 
 
 def test_bad_config_and_misuse():
-    for bad in (dict(sample_rate_hz=4000), dict(sample_rate_hz=96000), dict(sample_rate_hz=16000.5),
-                dict(n_ceps=30), dict(preemphasis=1.5), dict(window_hops=0.5)):
+    for bad in (
+        dict(sample_rate_hz=4000),
+        dict(sample_rate_hz=96000),
+        dict(sample_rate_hz=16000.5),
+        dict(n_ceps=30),
+        dict(preemphasis=1.5),
+        dict(window_hops=0.5),
+    ):
         with pytest.raises(ConfigError):
             MfccConfig(**bad)
     st = MfccStream(MfccConfig())

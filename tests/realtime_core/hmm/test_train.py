@@ -6,11 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from realtime_core import InvalidFeaturesError
+from realtime_core import InvalidFeaturesError, ModelFormatError
 from realtime_core.hmm import AvHmm, TrainConfig, baum_welch, fit, init_model, log_likelihood
+from realtime_core.hmm.sampling import random_av_hmm, sample
 from realtime_core.inversion import ConditionalForm, audio_posterior_estimate
 from realtime_core.metrics import acc, amse
-from realtime_core.hmm.sampling import random_av_hmm, sample
+from tests.prerequisites import require_module
 
 
 def assert_objective_non_decreasing(history, tol=1e-9):
@@ -19,6 +20,7 @@ def assert_objective_non_decreasing(history, tol=1e-9):
     assert np.all(diffs >= -tol), f"EM objective fell: {diffs.min():.3g} in {np.round(history, 6)}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cov", ["full", "diag"])
 def test_em_objective_never_decreases(cov):
     rng = np.random.default_rng(0)
@@ -30,6 +32,7 @@ def test_em_objective_never_decreases(cov):
     assert res.history[-1] > res.history[0] + 0.05  # and it actually learned something
 
 
+@pytest.mark.slow
 def test_prior_keeps_every_covariance_positive_definite_with_fewer_frames_than_dims():
     """81-dim full covariances from 60 frames: without a prior each component's scatter
     has rank < 81; with it every covariance stays PD (AvHmm validates by Cholesky)."""
@@ -41,11 +44,15 @@ def test_prior_keeps_every_covariance_positive_definite_with_fewer_frames_than_d
     eig = np.linalg.eigvalsh(res.model.covars)
     assert eig.min() > 0
     # The prior is what does it: with no prior the M-step has a singular covariance.
-    with pytest.raises(Exception):
-        baum_welch([x[:30], x[30:]], res.model, config=TrainConfig(n_states=3, n_mix=2, n_iter=1, tol=0,
-                                                                   covar_prior_weight=0.0))
+    with pytest.raises(ModelFormatError, match="not positive definite"):
+        baum_welch(
+            [x[:30], x[30:]],
+            res.model,
+            config=TrainConfig(n_states=3, n_mix=2, n_iter=1, tol=0, covar_prior_weight=0.0),
+        )
 
 
+@pytest.mark.slow
 def test_training_recovers_a_known_audio_visual_hmm():
     """Data sampled from a known AV-HMM (N=6, M=2, 77 audio + 4 visual dims, 24k frames).
     The trained model's held-out inversion accuracy (audio-posterior estimate) must come
@@ -74,20 +81,37 @@ def test_training_recovers_a_known_audio_visual_hmm():
     assert log_likelihood(res.model, test) / n > log_likelihood(true, test) / n - 1.5
 
 
+@pytest.mark.slow
 def test_same_trajectory_as_hmmlearn_from_the_same_initial_model():
     """hmmlearn's GMMHMM re-estimates full covariances around the previous means;
     with centering="previous" and no priors, our EM takes the same steps."""
-    hmm = pytest.importorskip("hmmlearn.hmm")
+    hmm = require_module("hmmlearn.hmm")
     rng = np.random.default_rng(3)
     true = random_av_hmm(rng, n_states=3, n_mix=2, n_audio=3, n_visual=2)
     seqs = [sample(true, rng, 200)[0] for _ in range(5)]
-    cfg = TrainConfig(n_states=3, n_mix=2, n_iter=8, tol=0, covar_prior_weight=0.0, pseudo_count=0.0,
-                      centering="previous", resp_floor=0.0)
+    cfg = TrainConfig(
+        n_states=3,
+        n_mix=2,
+        n_iter=8,
+        tol=0,
+        covar_prior_weight=0.0,
+        pseudo_count=0.0,
+        centering="previous",
+        resp_floor=0.0,
+    )
     init = init_model(seqs, n_audio=3, config=cfg)
     ours = baum_welch(seqs, init, config=cfg).history
 
-    ref = hmm.GMMHMM(n_components=3, n_mix=2, covariance_type="full", n_iter=1, tol=0, init_params="",
-                     params="stmcw", implementation="log")
+    ref = hmm.GMMHMM(
+        n_components=3,
+        n_mix=2,
+        covariance_type="full",
+        n_iter=1,
+        tol=0,
+        init_params="",
+        params="stmcw",
+        implementation="log",
+    )
     ref.startprob_, ref.transmat_ = init.startprob.copy(), init.transmat.copy()
     ref.weights_, ref.means_, ref.covars_ = init.weights.copy(), init.means.copy(), init.covars.copy()
     x, lengths = np.concatenate(seqs), [len(s) for s in seqs]
@@ -115,8 +139,20 @@ def test_model_validation_names_the_problem():
     from realtime_core import ModelFormatError
 
     with pytest.raises(ModelFormatError, match="state 1, mixture 0 is not positive definite"):
-        AvHmm(startprob=good.startprob, transmat=good.transmat, weights=good.weights, means=good.means,
-              covars=bad, n_audio=3)
+        AvHmm(
+            startprob=good.startprob,
+            transmat=good.transmat,
+            weights=good.weights,
+            means=good.means,
+            covars=bad,
+            n_audio=3,
+        )
     with pytest.raises(ModelFormatError, match="transmat must have shape"):
-        AvHmm(startprob=good.startprob, transmat=np.eye(3), weights=good.weights, means=good.means,
-              covars=good.covars, n_audio=3)
+        AvHmm(
+            startprob=good.startprob,
+            transmat=np.eye(3),
+            weights=good.weights,
+            means=good.means,
+            covars=good.covars,
+            n_audio=3,
+        )

@@ -72,10 +72,16 @@ def tiny_corpus(rng: np.random.Generator, visemes_per_sentence: list[list[str]],
         en += list(edges[1:])
         po.append(po[-1] + len(seq))
     return MotionCorpus(
-        sentence_ids=tuple(f"s{k}" for k in range(len(visemes_per_sentence))), frames=np.concatenate(frames),
-        frame_offsets=np.array(fo), phone_labels=tuple(labels), phone_visemes=np.array(vis, dtype=np.int16),
-        phone_start_s=np.array(st), phone_end_s=np.array(en), phone_offsets=np.array(po), n_coefficients=d,
-        dim_names=tuple(f"c{k}" for k in range(d)) + ("x",),
+        sentence_ids=tuple(f"s{k}" for k in range(len(visemes_per_sentence))),
+        frames=np.concatenate(frames),
+        frame_offsets=np.array(fo),
+        phone_labels=tuple(labels),
+        phone_visemes=np.array(vis, dtype=np.int16),
+        phone_start_s=np.array(st),
+        phone_end_s=np.array(en),
+        phone_offsets=np.array(po),
+        n_coefficients=d,
+        dim_names=(*tuple(f"c{k}" for k in range(d)), "x"),
     )
 
 
@@ -131,8 +137,10 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
             continue
         if par < 0:
             return np.inf
-        recorded = any(corpus.phone_visemes[j] == target[t] and j > po[sent[j]]
-                       and corpus.phone_visemes[j - 1] == target[t - 1] for j in range(corpus.n_phones))
+        recorded = any(
+            corpus.phone_visemes[j] == target[t] and j > po[sent[j]] and corpus.phone_visemes[j - 1] == target[t - 1]
+            for j in range(corpus.n_phones)
+        )
         # the paper's G; the finite stand-in only at a step whose diviseme the corpus never recorded
         g = 0.0 if corpus.phone_visemes[par] == corpus.phone_visemes[i] else (np.inf if recorded else mismatch)
         if not np.isfinite(g):
@@ -145,7 +153,7 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
 def test_viterbi_equals_brute_force_on_a_tiny_graph(seed):
     rng = np.random.default_rng(seed)
     cls = ["PBM", "AA", "IY"]
-    sents = [["sil"] + list(rng.choice(cls, 4)) + ["sil"] for _ in range(4)]
+    sents = [["sil", *list(rng.choice(cls, 4)), "sil"] for _ in range(4)]
     corpus = tiny_corpus(rng, sents)
     cfg = SearchConfig(beta=0.7, max_active=None)
     graph = build_graph(corpus, cfg)
@@ -212,15 +220,23 @@ def test_warping_maps_every_unit_exactly_onto_its_target_phone():
     want = corpus.phone_start_s[states[m]] + tau * (corpus.phone_end_s - corpus.phone_start_s)[states[m]]
     np.testing.assert_allclose(out[:, 0], want, atol=1e-12)
     # a target boundary instant reads the source boundary exactly: the durations are hit exactly
-    b = concatenate(corpus, states, starts * 0 + np.array([0, 0.2, 0.4, 0.6, 0.8]),
-                    np.array([0.2, 0.4, 0.6, 0.8, 1.0]), parent=graph.parent)
+    b = concatenate(
+        corpus,
+        states,
+        starts * 0 + np.array([0, 0.2, 0.4, 0.6, 0.8]),
+        np.array([0.2, 0.4, 0.6, 0.8, 1.0]),
+        parent=graph.parent,
+    )
     np.testing.assert_allclose(b[[6, 12, 18, 24], 0], corpus.phone_start_s[1:5], atol=1e-12)
 
 
 def test_a_corpus_sentence_from_its_own_phones_selects_itself_and_reproduces_its_motion():
     rng = np.random.default_rng(4)
-    sents = [["sil", "PBM", "AA", "IY", "FV", "AA", "sil"], ["sil", "FV", "AA", "PBM", "IY", "sil"],
-             ["sil", "PBM", "AA", "IY", "sil"]]
+    sents = [
+        ["sil", "PBM", "AA", "IY", "FV", "AA", "sil"],
+        ["sil", "FV", "AA", "PBM", "IY", "sil"],
+        ["sil", "PBM", "AA", "IY", "sil"],
+    ]
     corpus = tiny_corpus(rng, sents)
     synth = UnitSynthesizer(corpus, SearchConfig())
     s = 0
@@ -228,8 +244,9 @@ def test_a_corpus_sentence_from_its_own_phones_selects_itself_and_reproduces_its
     phones = [(VISEMES[corpus.phone_visemes[q]], corpus.phone_start_s[q], corpus.phone_end_s[q]) for q in range(a, b)]
     # viseme names are not phone labels: use ARPAbet stand-ins of each class
     stand_in = {"sil": "sil", "PBM": "p", "AA": "aa", "IY": "iy", "FV": "f"}
-    res = synth.synthesize([(stand_in[v], x, y) for v, x, y in phones], "arpabet",
-                           n_frames=int(np.diff(corpus.frame_offsets)[s]))
+    res = synth.synthesize(
+        [(stand_in[v], x, y) for v, x, y in phones], "arpabet", n_frames=int(np.diff(corpus.frame_offsets)[s])
+    )
     np.testing.assert_array_equal(res.selection.states, np.arange(a, b))
     assert res.selection.n_units == 1 and res.selection.cost == 0.0
     covered = np.arange(len(res.frames)) / FPS <= corpus.phone_end_s[b - 1]  # later frames hold the last value
@@ -238,8 +255,9 @@ def test_a_corpus_sentence_from_its_own_phones_selects_itself_and_reproduces_its
 
 def test_target_fills_gaps_and_reports_unknown_phones():
     avail = frozenset(VISEMES) - {"OY"}
-    tgt = make_target([("p", 0.1, 0.2), ("oy", 0.2, 0.4), ("zzz", 0.5, 0.6), ("sil", 0.6, 0.7), ("sp", 0.7, 0.8)],
-                      "arpabet", avail)
+    tgt = make_target(
+        [("p", 0.1, 0.2), ("oy", 0.2, 0.4), ("zzz", 0.5, 0.6), ("sil", 0.6, 0.7), ("sp", 0.7, 0.8)], "arpabet", avail
+    )
     assert tgt.labels == ("sil", "p", "oy", "sil", "zzz", "sil", "sp")  # the input's own pauses stay
     np.testing.assert_allclose(tgt.starts_s, [0, 0.1, 0.2, 0.4, 0.5, 0.6, 0.7])
     gap = make_target([("p", 0.0, 0.1), ("sil", 0.1, 0.2), ("p", 0.3, 0.4)], "arpabet", avail)
@@ -264,18 +282,34 @@ def test_viseme_table_covers_the_inventories_and_fallbacks_resolve():
 def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_diviseme():
     rng = np.random.default_rng(6)
     # PBM -> FV is recorded only in sentence 0: the second sequence must cross it without it
-    sents = [["sil", "AA", "PBM", "FV", "IY", "sil"], ["sil", "AA", "PBM", "AA", "sil"], ["sil", "FV", "IY", "sil"],
-             ["sil", "IY", "AA", "PBM", "sil"]]
+    sents = [
+        ["sil", "AA", "PBM", "FV", "IY", "sil"],
+        ["sil", "AA", "PBM", "AA", "sil"],
+        ["sil", "FV", "IY", "sil"],
+        ["sil", "IY", "AA", "PBM", "sil"],
+    ]
     corpus = tiny_corpus(rng, sents)
     synth = UnitSynthesizer(corpus, SearchConfig(max_active=None))
-    phones = [("sil", 0.0, 0.2), ("aa", 0.2, 0.35), ("p", 0.35, 0.45), ("f", 0.45, 0.55), ("iy", 0.55, 0.7),
-              ("sil", 0.7, 0.9)]
+    phones = [
+        ("sil", 0.0, 0.2),
+        ("aa", 0.2, 0.35),
+        ("p", 0.35, 0.45),
+        ("f", 0.45, 0.55),
+        ("iy", 0.55, 0.7),
+        ("sil", 0.7, 0.9),
+    ]
     one = synth.synthesize(phones, "arpabet")
     two = synth.synthesize(phones, "arpabet", n_best=2)
     assert one.selection.n_units == 1 and one.selection.n_mismatched == 0
     (alt,) = two.alternatives
     sent = corpus.phone_sentence()
     assert 0 not in set(sent[alt.states]) and alt.n_mismatched >= 1
-    other = concatenate(corpus, alt.states, one.target.starts_s, one.target.ends_s, parent=synth.graph.parent,
-                        anchored=np.array([-1, 0, 0, 0, 0, 1], dtype=np.int8))
+    other = concatenate(
+        corpus,
+        alt.states,
+        one.target.starts_s,
+        one.target.ends_s,
+        parent=synth.graph.parent,
+        anchored=np.array([-1, 0, 0, 0, 0, 1], dtype=np.int8),
+    )
     np.testing.assert_allclose(two.frames, 0.5 * (one.frames + other), atol=1e-12)

@@ -1,0 +1,45 @@
+"""The options every speech-driven command shares: which mapper (``--mapper hmm|mlp``) and which
+expressions (``--expression smile:0.7@1.2``), and turning them into library objects."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+
+def add_mapper_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--mapper",
+        choices=("hmm", "mlp"),
+        default="hmm",
+        help="audio-to-visual mapper: the HMM inverter (paper 000) or the GMM-selected MLP bank "
+        "(paper 002; --model is then a mapper file written by `facecast mu`, default the shipped one)",
+    )
+
+
+def add_expression_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--expression",
+        action="append",
+        default=[],
+        metavar="NAME[:INTENSITY][@SECONDS]",
+        help="expression from a media time on, e.g. smile:0.7@1.2 (smile, sad, surprise, anger, neutral; "
+        "intensity 0..1, default 1; time default 0); repeat for changes over time",
+    )
+    p.add_argument("--expression-ease", type=float, default=0.3, help="seconds an expression takes to ease in/out")
+
+
+def apply_expressions(params: np.ndarray, args: argparse.Namespace, fps: float = 30.0) -> np.ndarray:
+    """``params (n, 4)`` at ``fps`` -> the same under ``args.expression`` (unchanged when none)."""
+    if not args.expression:
+        return params
+    from realtime_core.expressions import ExpressionConfig, ExpressionTrack, apply_expression, parse_expression
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    track = ExpressionTrack(ExpressionConfig(ease_s=args.expression_ease))
+    for spec in args.expression:
+        name, intensity, at = parse_expression(spec)
+        track.schedule(name, intensity, at)
+    alpha = track.intensities(np.arange(len(params)) / fps)
+    return apply_expression(params, alpha, EXPRESSION_PARAMS)

@@ -1,0 +1,176 @@
+"""The MLP speech model (paper 002's audio-to-MUP mapper) as one object, and its file format.
+
+A mapper file is an ``.npz`` archive (no pickle) holding ``format`` ("facecast-mlpmapper"),
+``version`` (1), ``config_json`` (front end, visual names, activation, class slice, metadata), the
+CMVN warm-start statistics and the :class:`MlpBank` arrays. :func:`decode_mlp_model` validates
+kind, version, shapes and finiteness and names the problem; a file of another kind (for example an
+HMM model given to ``--mapper mlp``) is refused with a message saying what it is. No I/O here.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS, visual_floor
+from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
+from realtime_core.avmodel import AvModel, decode_model, encode_model, frontend_from_json, frontend_to_json
+from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
+from realtime_core.features import FrontEnd, FrontEndConfig
+from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
+from realtime_core.output import OutputStage
+
+FORMAT = "facecast-mlpmapper"
+VERSION = 1
+_BANK_ARRAYS = ("gmm_log_weights", "gmm_means", "gmm_vars", "w1", "b1", "w2", "b2", "hidden")
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class MlpSpeechModel:
+    """bank: the GMM-selected experts; frontend / cmvn_mean / cmvn_var: how ``o_a`` is computed (as
+    :class:`realtime_core.avmodel.AvModel`); visual_names: names of the served parameters;
+    metadata: JSON-able training details (K, hidden units, scores, data credits); closure_band: IOD, the
+    output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off)."""
+
+    bank: MlpBank
+    frontend: FrontEndConfig
+    cmvn_mean: np.ndarray
+    cmvn_var: np.ndarray
+    visual_names: tuple[str, ...] = VISUAL_PARAMS
+    metadata: dict[str, Any] = field(default_factory=dict)
+    closure_band: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.closure_band <= 0.1:
+            raise ModelFormatError(f"closure_band must be in [0, 0.1] IOD, got {self.closure_band}")
+        if self.bank.n_audio != self.frontend.audio_dim:
+            raise ModelFormatError(f"MLP input width {self.bank.n_audio} != the front end's {self.frontend.audio_dim}")
+        if len(self.visual_names) != self.bank.n_visual:
+            raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.bank.n_visual} outputs")
+        for name in ("cmvn_mean", "cmvn_var"):
+            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
+                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        if np.any(self.cmvn_var <= 0):
+            raise ModelFormatError("cmvn_var must be positive")
+
+    @property
+    def sample_rate_hz(self) -> int:
+        return int(self.frontend.mfcc.sample_rate_hz)
+
+    def front_end(self) -> FrontEnd:
+        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
+
+    @cached_property
+    def _mappers(self) -> dict[str, MlpMapper]:
+        return {}
+
+    def mapper(self, dtype: str = "float32") -> MlpMapper:
+        """The batch mapper (one shared plan per dtype)."""
+        m = self._mappers.get(dtype)
+        if m is None:
+            m = self._mappers[dtype] = MlpMapper(self.bank, dtype=dtype)
+        return m
+
+    def visual_mapper(self, *, lag: int = 0, dtype: str = "float32") -> StreamingMlpMapper:
+        """A fresh streaming mapper. ``lag`` must be 0: the seven-frame context is the front end's."""
+        if lag != 0:
+            raise ConfigError(f"the MLP mapper has no smoothing lag (its context is the front end's); got lag={lag}")
+        return StreamingMlpMapper(self.mapper(dtype), output=self.output_stage)
+
+    @cached_property
+    def output_stage(self) -> OutputStage:
+        """The closed-pose floor and closure band every served estimate goes through."""
+        return OutputStage(visual_floor(self.visual_names), self.closure_band)
+
+
+def encode_mlp_model(model: MlpSpeechModel) -> bytes:
+    """Serialise to ``.npz`` bytes (no pickle)."""
+    b = model.bank
+    config = {
+        "frontend": frontend_to_json(model.frontend),
+        "visual_names": list(model.visual_names),
+        "activation": b.activation,
+        "class_slice": list(b.class_slice),
+        "readout": b.readout is not None,
+        "closure_band": model.closure_band,
+        "metadata": model.metadata,
+    }
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(FORMAT),
+        "version": np.array(VERSION),
+        "config_json": np.array(json.dumps(config, sort_keys=True)),
+        "cmvn_mean": model.cmvn_mean,
+        "cmvn_var": model.cmvn_var,
+    }
+    for name in _BANK_ARRAYS:
+        arrays[name] = getattr(b, name)
+    if b.readout is not None and b.readout_bias is not None:  # MlpBank checks both or neither
+        arrays["readout"], arrays["readout_bias"] = b.readout, b.readout_bias
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
+    return buf.getvalue()
+
+
+def decode_mlp_model(data: bytes) -> MlpSpeechModel:
+    """Parse and validate ``.npz`` bytes; :class:`ModelFormatError` naming the problem."""
+    try:
+        npz = np.load(io.BytesIO(data), allow_pickle=False)
+        arrays = {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a facecast mapper archive ({exc})") from None
+    kind = str(arrays["format"]) if "format" in arrays else None
+    if kind == AVMODEL_FORMAT:
+        raise ModelFormatError(f"this is an HMM model ({AVMODEL_FORMAT!r}), not an MLP mapper: use --mapper hmm")
+    if kind != FORMAT:
+        raise ModelFormatError(f"format is {kind!r}, expected {FORMAT!r}")
+    if "version" not in arrays or int(arrays["version"]) != VERSION:
+        v = int(arrays["version"]) if "version" in arrays else None
+        raise ModelFormatError(f"MLP mapper version {v} is not supported (expected {VERSION})")
+    for key in ("config_json", "cmvn_mean", "cmvn_var", *_BANK_ARRAYS):
+        if key not in arrays:
+            raise ModelFormatError(f"mapper archive lacks the array {key!r}")
+    try:
+        config = json.loads(str(arrays["config_json"]))
+        has_readout = bool(config["readout"])
+        bank = MlpBank(
+            **{k: arrays[k] for k in _BANK_ARRAYS},
+            activation=config["activation"],
+            class_slice=tuple(config["class_slice"]),
+            readout=arrays.get("readout") if has_readout else None,
+            readout_bias=arrays.get("readout_bias") if has_readout else None,
+        )
+        return MlpSpeechModel(
+            bank=bank,
+            frontend=frontend_from_json(config["frontend"]),
+            cmvn_mean=arrays["cmvn_mean"],
+            cmvn_var=arrays["cmvn_var"],
+            visual_names=tuple(config["visual_names"]),
+            metadata=config.get("metadata", {}),
+            closure_band=float(config.get("closure_band", 0.0)),
+        )
+    except ModelFormatError:
+        raise
+    except (KeyError, TypeError, ValueError, FacecastError) as exc:
+        raise ModelFormatError(f"invalid mapper configuration: {exc}") from None
+
+
+def encode_speech_model(model: AvModel | MlpSpeechModel) -> bytes:
+    """Either kind of :class:`realtime_core.mapping.SpeechModel` to its ``.npz`` bytes."""
+    return encode_model(model) if isinstance(model, AvModel) else encode_mlp_model(model)
+
+
+def decode_speech_model(data: bytes) -> AvModel | MlpSpeechModel:
+    """``.npz`` bytes of either kind (told apart by their ``format``) to the model."""
+    try:
+        kind = str(np.load(io.BytesIO(data), allow_pickle=False)["format"])
+    except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a facecast model archive ({exc})") from None
+    return decode_model(data) if kind == AVMODEL_FORMAT else decode_mlp_model(data)

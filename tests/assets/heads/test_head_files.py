@@ -1,0 +1,216 @@
+"""Real-world head files: glTF reader (transforms, quantized, sparse, skinned, multi-material, compressed),
+OBJ with MTL and several objects, and one UV convention read back from renders."""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from assets.errors import MeshError
+from assets.heads.glb import mesh_glb
+from assets.heads.mesh import HeadMesh, load_mesh
+from tests.prerequisites import require_tool
+
+# Real head files (shared data), OpenGL renders and the Node.js glTF tools.
+pytestmark = pytest.mark.system
+
+TOP, BOTTOM = (220, 30, 30), (30, 30, 220)
+
+
+def _png(top: tuple, bottom: tuple, size: int = 64) -> bytes:
+    a = np.zeros((size, size, 3), np.uint8)
+    a[: size // 2] = top
+    a[size // 2 :] = bottom
+    buf = io.BytesIO()
+    Image.fromarray(a).save(buf, "PNG")
+    return buf.getvalue()
+
+
+def _box(x0: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A thin box (3D, so check_mesh accepts it) whose front face spans y in [0, 1]; glTF UVs: v = 0 at the top."""
+    v = np.array(
+        [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, -0.2], [1, 0, -0.2], [1, 1, -0.2], [0, 1, -0.2]], float
+    )
+    v[:, 0] += x0
+    t = np.array([[0, 1, 2], [0, 2, 3], [5, 4, 7], [5, 7, 6]])
+    uv = np.column_stack([(v[:, 0] - x0), 1.0 - v[:, 1]])
+    return v, t, uv
+
+
+def _render_front(mesh: HeadMesh) -> np.ndarray:
+    from clients.render.renderer import HeadRenderer, RenderConfig
+
+    c = 0.5 * (mesh.vertices.min(0) + mesh.vertices.max(0))
+    with HeadRenderer(
+        mesh,
+        centre=c,
+        axes=np.eye(3),
+        size=float(np.ptp(mesh.vertices[:, :2], axis=0).max()) / 1.1,
+        config=RenderConfig(width=64, height=64, samples=0),
+    ) as r:
+        return r.render()
+
+
+def _colour_at(img: np.ndarray, row: float, col: float = 0.5) -> np.ndarray:
+    h, w, _ = img.shape
+    return img[int(row * h), int(col * w)].astype(int)
+
+
+def _is(c: np.ndarray, want: tuple) -> bool:
+    return int(np.argmax(c)) == int(np.argmax(want)) and c.max() > 60
+
+
+def test_glb_texture_is_upright_in_renderer_and_export(tmp_path):
+    v, t, uv = _box()
+    mesh = HeadMesh(vertices=v, triangles=t, uvs=uv, texture=_png(TOP, BOTTOM), name="box")
+    path = tmp_path / "box.glb"
+    path.write_bytes(mesh_glb(mesh))  # the exporter writes glTF's convention
+    loaded = load_mesh(path)
+    np.testing.assert_allclose(loaded.uvs, uv, atol=1e-6)
+    img = _render_front(loaded)
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
+
+
+def test_obj_with_mtl_and_two_objects_gets_one_atlas_upright(tmp_path):
+    (tmp_path / "a.png").write_bytes(_png(TOP, BOTTOM))
+    (tmp_path / "b.png").write_bytes(_png((30, 200, 30), (200, 30, 30)))
+    (tmp_path / "m.mtl").write_text("newmtl A\nmap_Kd a.png\nnewmtl B\nmap_Kd b.png\n")
+    lines = ["mtllib m.mtl"]
+    off = 0
+    for name, x0 in (("left", 0.0), ("right", 1.5)):
+        v, t, uv = _box(x0)
+        lines.append(f"o {name}")
+        lines += [f"v {a} {b} {c}" for a, b, c in v]
+        lines += [f"vt {a} {1 - b}" for a, b in uv]  # OBJ: v up
+        lines.append(f"usemtl {'A' if name == 'left' else 'B'}")
+        lines += [
+            f"f {a + 1 + off}/{a + 1 + off} {b + 1 + off}/{b + 1 + off} {c + 1 + off}/{c + 1 + off}" for a, b, c in t
+        ]
+        off += len(v)
+    (tmp_path / "two.obj").write_text("\n".join(lines) + "\n")
+    mesh = load_mesh(tmp_path / "two.obj")
+    assert {"left", "right"} <= set(mesh.part_names) and mesh.texture is not None
+    img = _render_front(mesh)
+    left, right = 0.3, 0.7  # the two boxes, x in [0, 1] and [1.5, 2.5], fill the square frame's width
+    assert _is(_colour_at(img, 0.45, left), TOP) and _is(_colour_at(img, 0.55, left), BOTTOM)
+    assert _is(_colour_at(img, 0.45, right), (30, 200, 30)) and _is(_colour_at(img, 0.55, right), (200, 30, 30))
+
+
+def _gltf_doc(buffers: bytes, doc: dict) -> bytes:
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    body = buffers + b"\0" * (-len(buffers) % 4)
+    return (
+        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(body))
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(body), b"BIN\0")
+        + body
+    )
+
+
+def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
+    v, t, _ = _box()
+    q = np.round(v / 1.0 * 32767).astype("<i2")  # KHR_mesh_quantization: normalized int16 positions
+    pos = np.hstack([q, np.zeros((len(q), 1), "<i2")])  # 4-byte aligned stride
+    idx = t.astype("<u2").reshape(-1)
+    sparse_idx = np.array([2], "<u2")
+    sparse_val = np.array([[0, 0, 0.5]], "<f4")  # morph target moving vertex 2 forward
+    joints = np.zeros((len(v), 4), "<u1")
+    weights = np.tile(np.array([1, 0, 0, 0], "<f4"), (len(v), 1))
+    ibm = np.eye(4, dtype="<f4").reshape(-1)
+    blobs = [
+        pos.tobytes(),
+        idx.tobytes() + b"\0" * (-idx.nbytes % 4),
+        sparse_idx.tobytes() + b"\0\0",
+        sparse_val.tobytes(),
+        joints.tobytes(),
+        weights.tobytes(),
+        ibm.tobytes(),
+    ]
+    offs = np.cumsum([0] + [len(b) for b in blobs])
+    views = [{"buffer": 0, "byteOffset": int(o), "byteLength": len(b)} for o, b in zip(offs, blobs)]
+    views[0]["byteStride"] = 8
+    acc = [
+        {"bufferView": 0, "componentType": 5122, "normalized": True, "count": len(v), "type": "VEC3"},
+        {"bufferView": 1, "componentType": 5123, "count": len(idx), "type": "SCALAR"},
+        {
+            "componentType": 5126,
+            "count": len(v),
+            "type": "VEC3",
+            "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5123}, "values": {"bufferView": 3}},
+        },
+        {"bufferView": 4, "componentType": 5121, "count": len(v), "type": "VEC4"},
+        {"bufferView": 5, "componentType": 5126, "count": len(v), "type": "VEC4"},
+        {"bufferView": 6, "componentType": 5126, "count": 1, "type": "MAT4"},
+    ]
+    doc = {
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_mesh_quantization"],
+        "scene": 0,
+        "scenes": [{"nodes": [0, 2]}],
+        "nodes": [
+            {"translation": [10, 0, 0], "scale": [2, 2, 2], "children": [1]},
+            {"mesh": 0},
+            {"mesh": 1, "skin": 0},
+            {"translation": [0, 5, 0]},
+        ],
+        "skins": [{"joints": [3], "inverseBindMatrices": 5}],
+        "meshes": [
+            {
+                "primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 2}]}],
+                "extras": {"targetNames": ["jawOpen"]},
+            },
+            {"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 3, "WEIGHTS_0": 4}, "indices": 1}]},
+        ],
+        "buffers": [{"byteLength": int(offs[-1])}],
+        "bufferViews": views,
+        "accessors": acc,
+    }
+    path = tmp_path / "q.glb"
+    path.write_bytes(_gltf_doc(b"".join(blobs), doc))
+    m = load_mesh(path)
+    n = len(v)
+    np.testing.assert_allclose(m.vertices[:n], v * 2 + [10, 0, 0], atol=1e-3)  # parent scale then translation
+    np.testing.assert_allclose(m.vertices[n:], v + np.array([0, 5, 0]), atol=1e-3)  # skinned: posed by its joint
+    assert list(m.targets) == ["jawOpen"]
+    np.testing.assert_allclose(m.targets["jawOpen"][2], [0, 0, 1.0], atol=1e-6)  # delta scaled by the node
+    assert np.abs(m.targets["jawOpen"][n:]).max() == 0
+
+
+def test_meshopt_compressed_glb_reads_like_the_original(tmp_path, shared_lps):
+    import subprocess
+
+    require_tool("node", "apt package nodejs")
+    repo = Path(__file__).resolve().parents[3]
+    cli = repo / "node_modules" / ".bin" / "gltf-transform"
+    if not cli.exists():
+        pytest.fail("npm packages missing: run `npm install` in the checkout")
+    out = tmp_path / "lps_meshopt.glb"
+    subprocess.run([str(cli), "meshopt", str(shared_lps), str(out)], check=True, capture_output=True)
+    doc = json.loads(out.read_bytes()[20 : 20 + struct.unpack_from("<I", out.read_bytes(), 12)[0]])
+    assert "EXT_meshopt_compression" in doc["extensionsUsed"]
+    a, b = load_mesh(shared_lps), load_mesh(out, cache=tmp_path / "cache")
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(a.vertices).query(b.vertices)
+    assert len(b.vertices) == len(a.vertices) and d.max() < 1e-3 * np.ptp(a.vertices, axis=0).max()
+    assert len(list((tmp_path / "cache" / "gltf").glob("*.glb"))) == 1  # cached, no temp file left
+
+
+def test_bad_files_name_the_file(tmp_path):
+    with pytest.raises(MeshError, match="unsupported mesh format"):
+        (tmp_path / "h.fbx").write_bytes(b"x")
+        load_mesh(tmp_path / "h.fbx")
+    (tmp_path / "bad.glb").write_bytes(b"glTF\x02\0\0\0\x10\0\0\0")
+    with pytest.raises(MeshError, match=r"bad.glb"):
+        load_mesh(tmp_path / "bad.glb")
+    (tmp_path / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
+    with pytest.raises(MeshError, match="no triangle mesh"):
+        load_mesh(tmp_path / "empty.obj")

@@ -1,0 +1,149 @@
+"""Heads driven by their own morph targets: name matching, paper 002 eq. 4 with bounds, the built-in
+head as an ARKit file, visemes, user maps, exports."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+from assets.heads.glb import head_glb, mesh_glb
+from assets.heads.head import builtin_morph_head, resolve_head
+from assets.heads.mesh import HeadMesh
+from assets.heads.targets import VISEME_ARKIT, canonical_name, match_targets
+from realtime_core.face.keyframes import KeyframeMap
+from tests.prerequisites import require_module
+
+# The built-in head (downloaded on first use) and real glTF files.
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def builtin_morph():
+    return builtin_morph_head()
+
+
+def test_bounded_keyframe_solve_matches_scipy_bvls():
+    rng = np.random.default_rng(3)
+    kf = rng.normal(size=(12, 90))
+    kf[3] = kf[2] + 1e-3 * rng.normal(size=90)  # a near duplicate, as target sets often have
+    src = rng.normal(size=(5, 90))
+    km = KeyframeMap.from_reference(kf, src)
+    chol = np.linalg.cholesky(km.gram)
+    for _ in range(50):
+        x = rng.normal(size=5) * 2
+        w = km.weights(x)
+        f = km.cross @ x
+        ref = lsq_linear(chol.T, np.linalg.solve(chol, f), bounds=(0, 1), method="bvls").x
+
+        def obj(b, f=f):
+            return 0.5 * b @ km.gram @ b - f @ b
+
+        assert w.min() >= 0 and w.max() <= 1
+        assert obj(w) <= obj(ref) + 1e-9 * max(1.0, abs(obj(ref)))
+    # Unbounded eq. 4 reproduces a motion that lies in the keyframes' span.
+    km2 = KeyframeMap.from_reference(kf, kf[:4], ridge=1e-12, lo=-10, hi=10)
+    np.testing.assert_allclose(km2.weights(np.array([0.2, 0.1, 0, 0.3]))[:4], [0.2, 0.1, 0, 0.3], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("name", "want"),
+    [
+        ("jawOpen", "jawOpen"),
+        ("JawOpen", "jawOpen"),
+        ("jaw_open", "jawOpen"),
+        ("blendShape1.jawOpen", "jawOpen"),
+        ("mouthSmile_L", "mouthSmileLeft"),
+        ("mouthSmile_R", "mouthSmileRight"),
+        ("MouthSmileLeft", "mouthSmileLeft"),
+        ("mouth_smile_left", "mouthSmileLeft"),
+        ("mouthSmile.L", "mouthSmileLeft"),
+        ("eyeBlink_l", "eyeBlinkLeft"),
+        ("mouthLeft", "mouthLeft"),
+        ("viseme_aa", "viseme:aa"),
+        ("viseme_PP", "viseme:PP"),
+        ("v_ou", "viseme:U"),
+        ("Fcl_MTH_A", "viseme:aa"),
+        ("aa", "viseme:aa"),
+        ("ih", "viseme:I"),
+        ("Body", None),
+        ("Key 1", None),
+    ],
+)
+def test_target_names_are_recognised(name, want):
+    assert canonical_name(name) == want
+
+
+def _arkit_file(tmp_path, builtin, rename):
+    m = builtin.mesh
+    targets = {rename(k): v for k, v in m.targets.items()}
+    mesh = HeadMesh(vertices=m.vertices, triangles=m.triangles, colors=m.colors, name="x", targets=targets)
+    path = tmp_path / "arkit_head.glb"
+    path.write_bytes(mesh_glb(mesh))
+    return path
+
+
+def test_an_arkit_glb_animates_through_its_own_targets_with_no_rig_step(tmp_path, builtin_morph):
+    def rename(k):  # the common spellings: mouthSmile_L, JawOpen, blendShape1. prefixes
+        k = k.replace("Left", "_L").replace("Right", "_R")
+        return "blendShape1." + k[0].upper() + k[1:]
+
+    path = _arkit_file(tmp_path, builtin_morph, rename)
+    head = resolve_head(path)  # no landmarks anywhere: must not need a rig
+    assert head.kind == "morph" and len(head.rig.names) == 52
+    for p in ([0, 0, 0.3, 0], [0.03, 0.05, 0.1, -0.02], [-0.02, -0.1, 0.05, 0.04]):
+        np.testing.assert_allclose(head.rig.deformed(np.array(p)), builtin_morph.rig.deformed(np.array(p)), atol=1e-4)
+
+
+def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import measure_mouth
+
+    b = load_builtin_head()
+    vis = {f"viseme_{k}": sum(w * b.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
+    mesh = HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, name="v", targets=vis)
+    path = tmp_path / "visemes.glb"
+    path.write_bytes(mesh_glb(mesh))
+    head = resolve_head(path)
+    assert head.kind == "morph" and all(n.startswith("viseme_") for n in head.rig.names)
+    lm = mouth_landmarks(b.landmarks)
+    p = np.array([0, 0, 0.3, 0])
+    got = measure_mouth(b.mesh.vertices, head.rig.deformed(p).astype(float), lm)
+    ref = measure_mouth(b.mesh.vertices, builtin_morph.rig.deformed(p).astype(float), lm)
+    assert got[2] > 0.6 * ref[2] > 0  # the jaw opens most of the way the ARKit head does
+
+
+def test_too_few_mouth_targets_fall_back_and_user_maps_add_names(tmp_path, builtin_morph):
+    b = builtin_morph.mesh
+    eyes = {k: v for k, v in b.targets.items() if k.startswith("eye")}
+    eyes["Key 7"] = b.targets["jawOpen"]  # an unnamed jaw target
+    mesh = HeadMesh(vertices=b.vertices, triangles=b.triangles, name="e", targets=eyes)
+    path = tmp_path / "eyes.glb"
+    path.write_bytes(mesh_glb(mesh))
+    assert match_targets(list(eyes)).keys() == {k for k in eyes if k.startswith("eye")}
+    from assets.errors import MeshError
+
+    with pytest.raises(MeshError, match=r"eyes.glb"):
+        resolve_head(path, mode="morph")
+    tmap = tmp_path / "map.json"
+    tmap.write_text(json.dumps({"targets": {"Key 7": "jawOpen"}}))
+    head = resolve_head(path, mode="morph", target_map=tmap)
+    assert "Key 7" in head.rig.names
+    w = head.rig.weights(np.array([0, 0, 0.3, 0]))
+    assert w[list(head.rig.names).index("Key 7")] > 0.5
+
+
+def test_morph_head_glb_animates_its_own_targets(builtin_morph):
+    pygltflib = require_module("pygltflib")
+    params = np.array([[0, 0, 0, 0], [0, 0, 0.3, 0], [0.02, -0.08, 0.1, 0]], float)
+    data = head_glb(builtin_morph.rig, builtin_morph.mesh, params, 30.0)
+    g = pygltflib.GLTF2().load_from_bytes(data)
+    assert g.meshes[0].extras["targetNames"] == list(builtin_morph.rig.names)
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(3, -1)
+    np.testing.assert_allclose(w, builtin_morph.rig.weights(params), atol=1e-6)
+    assert w.min() >= 0 and w.max() <= 1

@@ -1,0 +1,105 @@
+"""espeak-ng through ctypes: phoneme events line up with the synthesised audio."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from assets.espeak import LANGUAGES, VARIANTS, Voice
+from training.errors import ConfigError
+
+# Real espeak-ng speech.
+pytestmark = pytest.mark.system
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(x.astype(np.float64) ** 2))) if len(x) else 0.0
+
+
+def _core(syn, seg, frac: float = 0.5) -> np.ndarray:
+    """Samples of the central ``frac`` of a segment (where a stop's closure is)."""
+    rate = syn.sample_rate_hz
+    mid, half = 0.5 * (seg.start_s + seg.end_s), 0.5 * frac * (seg.end_s - seg.start_s)
+    return syn.samples[int((mid - half) * rate) : int((mid + half) * rate)]
+
+
+@pytest.mark.parametrize(
+    "voice,text,vowels",
+    [
+        (
+            Voice(language="en", base="en-us"),
+            "a papa, a puppy, a happy pup",
+            {"a", "A:", "V", "aa", "a#", "@", "i", "I"},
+        ),
+        (
+            Voice(language="es", base="es", variant="f2", rate_wpm=150),
+            "papá pone la pipa en el tapete",
+            {"a", "e", "i", "o"},
+        ),
+    ],
+)
+def test_bilabial_closure_is_quiet(espeak, voice, text, vowels) -> None:
+    """A /p/'s closure (centre of its event span) is >= 12 dB quieter than the vowels.
+
+    If the event sample positions were off by more than a few tens of ms the /p/ span would
+    overlap a vowel and the ratio would fail.
+    """
+    syn = espeak.synthesize(text, voice)
+    ps = [s for s in syn.phonemes if s.phoneme == "p"]
+    vs = [s for s in syn.phonemes if s.phoneme in vowels]
+    assert len(ps) >= 3 and len(vs) >= 3, [s.phoneme for s in syn.phonemes]
+    vowel_rms = np.median([_rms(_core(syn, s)) for s in vs])
+    for p in ps:
+        ratio_db = 20 * np.log10((_rms(_core(syn, p)) + 1.0) / vowel_rms)
+        assert ratio_db < -12.0, f"/p/ at {p.start_s:.3f}-{p.end_s:.3f}s only {ratio_db:.1f} dB below vowels"
+
+
+def test_events_are_ordered_and_inside_audio(espeak) -> None:
+    syn = espeak.synthesize("Bob moved five blue boxes.", Voice(language="en", base="en", variant="m3", pitch=30))
+    assert syn.sample_rate_hz == 22050
+    assert syn.samples.dtype == np.int16 and syn.samples.ndim == 1
+    starts = [s.start_s for s in syn.phonemes]
+    assert starts == sorted(starts)
+    assert all(0 <= s.start_s < s.end_s <= syn.duration_s + 1e-9 for s in syn.phonemes)
+    names = [s.phoneme for s in syn.phonemes]
+    for expected in ("b", "m", "u:", "f", "v"):
+        assert expected in names, names
+
+
+def test_rate_changes_duration(espeak) -> None:
+    text = "Peter bought a bag of apples."
+    slow = espeak.synthesize(text, Voice(language="en", base="en-us", rate_wpm=120))
+    fast = espeak.synthesize(text, Voice(language="en", base="en-us", rate_wpm=260))
+    assert slow.duration_s > 1.5 * fast.duration_s
+
+
+def test_all_voices_and_variants_speak_and_sound_different(espeak) -> None:
+    """Every base voice and every variant synthesises audible speech with an /m/ and a vowel event,
+    and each variant changes the sound (a variant espeak silently ignored would equal the base)."""
+    for lang, bases in LANGUAGES.items():
+        for base in bases:
+            syn = espeak.synthesize("ma", Voice(language=lang, base=base))
+            assert _rms(syn.samples) > 100, f"{lang}/{base} is (near) silent"
+            assert "m" in [s.phoneme for s in syn.phonemes], f"{lang}/{base}: {syn.phonemes}"
+    base = espeak.synthesize("ma", Voice(language="es", base="es")).samples
+    for v in VARIANTS:
+        syn = espeak.synthesize("ma", Voice(language="es", base="es", variant=v))
+        assert _rms(syn.samples) > 100, f"variant {v} is (near) silent"
+        same = len(syn.samples) == len(base) and np.array_equal(syn.samples, base)
+        assert not same, f"variant {v} sounds exactly like the base voice"
+
+
+def test_bad_voice_config() -> None:
+    with pytest.raises(ConfigError, match="unknown variant"):
+        Voice(language="en", base="en-us", variant="zz9")
+    with pytest.raises(ConfigError, match="rate_wpm"):
+        Voice(language="en", base="en-us", rate_wpm=20)
+    with pytest.raises(ConfigError, match="unknown language 'xx'"):
+        Voice(language="xx", base="en-us")
+    with pytest.raises(ConfigError, match="is not one of"):
+        Voice(language="es", base="en-us")
+
+
+def test_empty_text_is_refused(espeak) -> None:
+    with pytest.raises(ConfigError, match="empty text"):
+        espeak.synthesize("", Voice(language="en", base="en-us"))

@@ -1,0 +1,183 @@
+"""Round trips of every export format: what a reader gets back equals the track that was written."""
+
+from __future__ import annotations
+
+import io
+import wave
+
+import numpy as np
+import pytest
+
+from assets.tracks import decode_csv, decode_json
+from clients.export.errors import ExportError
+from clients.export.files import export_track
+from clients.export.gltf import animated_glb, rig_targets
+from clients.export.rhubarb import SHAPES, ShapeThresholds, cues, frame_shapes, read_tsv, tsv_bytes
+from realtime_core import VISUAL_PARAMS
+from realtime_core.track import Track
+from tests.prerequisites import require_module
+
+
+def _track(n: int = 90, seed: int = 0) -> Track:
+    """n frames of plausible mouth motion (IOD): a syllable-rate open/close with small other units."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    p = np.stack(
+        [
+            0.04 * np.sin(k / 7.0),
+            0.10 * np.sin(k / 11.0 + 1),
+            0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
+            0.03 * np.cos(k / 5.0),
+        ],
+        axis=1,
+    )
+    return Track(values=p.astype(np.float32))
+
+
+def _accessor(gltf, blob: bytes, index: int) -> np.ndarray:
+    """Decode one float32 accessor with pygltflib's document (no facecast code)."""
+    acc = gltf.accessors[index]
+    view = gltf.bufferViews[acc.bufferView]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc.type]
+    assert acc.componentType == 5126
+    a = np.frombuffer(blob, dtype="<f4", count=acc.count * width, offset=view.byteOffset + (acc.byteOffset or 0))
+    return a.reshape(acc.count, width) if width > 1 else a
+
+
+def test_shapes_follow_the_documented_rules():
+    rows = np.array(
+        [
+            [0.00, 0.0, 0.01, 0.0],  # closed, not pressed -> X
+            [-0.02, 0.0, 0.01, 0.0],  # closed, lips pressed -> A
+            [0.04, 0.0, 0.08, 0.0],  # upper lip raised, little open -> G
+            [0.00, -0.10, 0.08, 0.0],  # puckered -> F
+            [0.00, -0.10, 0.20, 0.0],  # rounded, open -> E
+            [0.00, 0.0, 0.08, 0.0],  # B
+            [0.00, 0.0, 0.18, 0.0],  # C
+            [0.00, 0.0, 0.35, 0.0],  # D
+        ]
+    )
+    assert "".join(frame_shapes(rows)) == "XAGFEBCD"
+
+
+def test_tsv_cues_merge_runs_and_end_at_rest():
+    shapes = ["X"] * 5 + ["D"] * 6 + ["C"] + ["B"] * 4  # the single C is too short to show
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "C": [0, 0, 0.18, 0], "B": [0, 0, 0.08, 0]}
+    tr = Track(values=np.array([table[s] for s in shapes]))
+    cs = cues(tr, ShapeThresholds(min_cue_frames=2))
+    assert [(round(c.start_s, 4), c.shape) for c in cs] == [
+        (0.0, "X"),
+        (round(5 / 30, 4), "D"),
+        (round(12 / 30, 4), "B"),
+    ]
+    parsed = read_tsv(tsv_bytes(tr))
+    assert [c.shape for c in parsed] == ["X", "D", "B", "X"]
+    assert parsed[-1].start_s == pytest.approx(16 / 30, abs=0.005)
+    real = read_tsv(tsv_bytes(_track()))
+    assert all(c.shape in SHAPES for c in real) and len(real) >= 4
+
+
+def _synthetic_head(n: int = 60, seed: int = 1):
+    rng = np.random.default_rng(seed)
+    v = rng.standard_normal((n, 3))
+    tris = np.array([[i, (i + 1) % n, (i + 7) % n] for i in range(n)])
+    targets = np.zeros((4, n, 3), np.float32)
+    targets[:, : n // 2] = rng.standard_normal((4, n // 2, 3))
+    return v, tris, targets
+
+
+def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
+    pygltflib = require_module("pygltflib")
+    v, tris, targets = _synthetic_head()
+    tr = _track(45)
+    data = animated_glb(
+        vertices=v,
+        triangles=tris,
+        targets=targets,
+        target_names=VISUAL_PARAMS,
+        track=tr,
+        colors=np.full((len(v), 3), 0.5),
+        audio="take.wav",
+    )
+    g = pygltflib.GLTF2.load_from_bytes(data)
+    blob = g.binary_blob()
+    prim = g.meshes[0].primitives[0]
+    np.testing.assert_allclose(_accessor(g, blob, prim.attributes.POSITION), v.astype(np.float32))
+    assert len(prim.targets) == 4 and g.meshes[0].extras["targetNames"] == list(VISUAL_PARAMS)
+    for j, tgt in enumerate(prim.targets):
+        np.testing.assert_array_equal(_accessor(g, blob, tgt["POSITION"]), targets[j])
+    anim = g.animations[0]
+    assert anim.channels[0].target.path == "weights" and anim.channels[0].target.node == 0
+    s = anim.samplers[anim.channels[0].sampler]
+    assert s.interpolation == "LINEAR"
+    np.testing.assert_allclose(_accessor(g, blob, s.input), np.arange(45) / 30, atol=1e-6)
+    np.testing.assert_array_equal(_accessor(g, blob, s.output).reshape(45, 4), tr.values.astype(np.float32))
+    assert g.asset.extras["facecast"]["audio"] == "take.wav"
+
+
+def test_glb_also_loads_in_trimesh():
+    trimesh = require_module("trimesh")
+    v, tris, targets = _synthetic_head()
+    data = animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=_track(10))
+    scene = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
+    (geom,) = scene.geometry.values()
+    np.testing.assert_allclose(geom.vertices, v, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(geom.faces, tris)
+
+
+@pytest.mark.system
+def test_rig_morph_targets_reproduce_the_rig_deformation(builtin_rig_file):
+    rig, _mesh = builtin_rig_file
+    d = rig_targets(rig)
+    p = np.array([0.03, -0.05, 0.3, 0.02])
+    via_morphs = rig.neutral + np.tensordot(p, d, axes=1)
+    np.testing.assert_allclose(via_morphs, rig.deformed(p), atol=1e-5)
+    assert np.abs(d).max() > 0  # the targets actually move the mouth
+
+
+@pytest.mark.system
+def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin_rig_file):
+    pygltflib = require_module("pygltflib")
+    tr = _track(30)
+    audio = (np.sin(np.arange(16000) / 10).astype(np.float32) * 0.5, 16000)
+    files = export_track(tmp_path / "take.glb", tr, head=builtin_rig_file, audio=audio)
+    assert [f.name for f in files] == ["take.glb", "take.wav"]
+    with wave.open(str(tmp_path / "take.wav")) as w:
+        assert w.getframerate() == 16000 and w.getnframes() == 16000
+    g = pygltflib.GLTF2().load(str(tmp_path / "take.glb"))
+    assert len(g.meshes[0].primitives[0].targets) == 4
+    for suffix, reader in ((".csv", decode_csv), (".json", decode_json)):
+        export_track(tmp_path / f"take{suffix}", tr)
+        back = reader((tmp_path / f"take{suffix}").read_bytes()).values
+        np.testing.assert_array_equal(back.astype(np.float32), tr.values.astype(np.float32))
+    export_track(tmp_path / "take.tsv", tr)
+    assert read_tsv((tmp_path / "take.tsv").read_bytes())
+    with pytest.raises(ExportError, match="needs the head"):
+        export_track(tmp_path / "x.glb", tr)
+    with pytest.raises(ExportError, match="unknown export format"):
+        export_track(tmp_path / "x.fbx", tr)
+    assert not list(tmp_path.glob(".*tmp"))  # atomic writes leave no temporaries
+
+
+@pytest.mark.system
+def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(tmp_path, builtin_rig_file):
+    pygltflib = require_module("pygltflib")
+    from clients.export.gltf import builtin_arkit_targets
+    from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+
+    _rig, _mesh = builtin_rig_file
+    targets = builtin_arkit_targets()
+    tr = _track(20)
+    export_track(tmp_path / "a.glb", tr, head=builtin_rig_file, morphs="arkit52", arkit_targets=targets)
+    g = pygltflib.GLTF2().load(str(tmp_path / "a.glb"))
+    blob = g.binary_blob()
+    prim = g.meshes[0].primitives[0]
+    assert g.meshes[0].extras["targetNames"] == list(ARKIT_NAMES) and len(prim.targets) == 52
+    jaw = ARKIT_NAMES.index("jawOpen")
+    np.testing.assert_allclose(_accessor(g, blob, prim.targets[jaw]["POSITION"]), targets["jawOpen"], atol=1e-6)
+    s = g.animations[0].samplers[0]
+    w = _accessor(g, blob, s.output).reshape(20, 52)
+    np.testing.assert_allclose(w, blendshape_weights(tr.values, "arkit52"), atol=1e-7)
+    assert w[:, jaw].max() > 0.3  # the mouth opens in this track
+    with pytest.raises(ExportError, match="need a head that has them"):
+        export_track(tmp_path / "b.glb", tr, head=builtin_rig_file, morphs="arkit52")

@@ -1,0 +1,40 @@
+"""Automatic landmarks: MediaPipe on an offscreen render, cast back onto the mesh."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from assets.heads.landmarks import shipped_landmarks
+from assets.heads.mesh import load_mesh
+from clients.render.landmarks import find_landmarks
+from facecast.cli import main
+
+# Offscreen OpenGL renders and MediaPipe on real heads.
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+
+def test_automatic_landmarks_agree_with_the_hand_picked_ones(shared_data):
+    lps = shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
+    mesh = load_mesh(lps)
+    auto = find_landmarks(mesh)
+    ref = json.loads(shipped_landmarks(lps).read_text())["landmarks"]
+    v = mesh.vertices
+    iod = np.linalg.norm(
+        0.5 * (v[ref["eye_outer_left"]] + v[ref["eye_inner_left"]])
+        - 0.5 * (v[ref["eye_outer_right"]] + v[ref["eye_inner_right"]])
+    )
+    err = {k: float(np.linalg.norm(np.asarray(p) - v[ref[k]]) / iod) for k, p in auto.items()}
+    assert max(err.values()) < 0.2, err  # hand picks and MediaPipe differ by a few vertices
+    assert np.mean(list(err.values())) < 0.1, err
+
+
+def test_a_human_like_head_rigs_with_no_manual_landmark(tmp_path, shared_data, capsys):
+    head = tmp_path / "someone.glb"  # a name nobody shipped landmarks for
+    shutil.copy(shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb", head)
+    rc = main(["rig", str(head), "-o", str(tmp_path / "r.npz"), "--keep-failing"])
+    assert rc == 0 and (tmp_path / "r.npz").is_file()
+    assert "automatic landmarks" not in capsys.readouterr().err

@@ -1,0 +1,125 @@
+"""Real EGL renders of the built-in head and the video path (skips without EGL/ffmpeg)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from clients.errors import RenderError
+from clients.render.video import params_for_audio, write_video
+from tests.prerequisites import missing
+
+# Real OpenGL (EGL) rendering and ffmpeg.
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def renderer(builtin_rig):
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    rig, mesh = builtin_rig
+    try:
+        r = renderer_for_rig(rig, mesh, RenderConfig(width=320, height=240))
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+    yield r
+    r.close()
+
+
+def test_mouth_open_changes_only_the_mouth_region(renderer, builtin_rig):
+    rig, _ = builtin_rig
+    closed = renderer.render(rig.deformed(np.zeros(4))).astype(int)
+    opened = renderer.render(rig.deformed(np.array([0, 0, 0.15, 0]))).astype(int)
+    again = renderer.render(rig.deformed(np.zeros(4))).astype(int)
+    np.testing.assert_array_equal(closed, again)  # deterministic
+    changed = np.abs(opened - closed).max(axis=2) > 10
+    # Mouth region: the image box of every vertex that moves by more than 0.2% of the largest motion
+    # (the harmonic field fades out smoothly: a 1% cut-off leaves anti-aliased edges outside).
+    d = np.linalg.norm(rig.deformed(np.array([0, 0, 0.15, 0])) - rig.neutral, axis=1)
+    moving = d > 0.002 * d.max()
+    px = renderer.project(np.vstack([rig.neutral[moving], rig.deformed(np.array([0, 0, 0.15, 0]))[moving]]))
+    (c0, r0), (c1, r1) = np.floor(px.min(0)).astype(int) - 3, np.ceil(px.max(0)).astype(int) + 3
+    region = np.zeros_like(changed)
+    region[max(r0, 0) : r1, max(c0, 0) : c1] = True
+    # The region is the lower face, not the whole picture ...
+    assert region.mean() < 0.45
+    lips = renderer.project(rig.neutral[[int(rig.control[0])]])  # sanity: projection lands in the image
+    assert (0 <= lips[0, 0] < 320) and (0 <= lips[0, 1] < 240)
+    # ... the mouth opening changes many pixels there and none elsewhere.
+    assert changed[region].sum() > 150
+    # (up to a few anti-aliased pixels from vertices that move by less than the cut-off)
+    assert changed[~region].sum() <= 5
+    assert np.abs(opened - closed)[~region].max() < 60
+
+
+def test_speech_hook_fails_with_an_error_naming_the_file(tmp_path):
+    from realtime_core.errors import FacecastError
+
+    with pytest.raises(FacecastError, match=r"missing-model.npz: model file not found"):
+        params_for_audio(tmp_path / "x.wav", tmp_path / "missing-model.npz")
+
+
+def test_video_with_audio(tmp_path, renderer, builtin_rig, shared_data):
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        missing("ffmpeg/ffprobe not installed")
+    wav = shared_data / "speech" / "arctic" / "arctic_a0009.wav"
+    rig, _ = builtin_rig
+    frames = np.zeros((6, 4))
+    frames[:, 2] = np.linspace(0, 0.1, 6)
+    out = write_video(
+        frames,
+        lambda p: renderer.render(rig.deformed(p)),
+        tmp_path / "v.mp4",
+        size=(320, 240),
+        audio=wav,
+        png_dir=tmp_path / "png",
+    )
+    assert len(list((tmp_path / "png").glob("frame_*.png"))) == 6
+    info = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_entries", "stream=codec_type", "-of", "csv=p=0", str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    assert sorted(info) == ["audio", "video"]
+
+
+def test_three_quarter_view_frames_the_head(builtin_rig):
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    rig, mesh = builtin_rig
+    try:
+        r = renderer_for_rig(rig, mesh, RenderConfig(width=160, height=120, view="three_quarter", samples=0))
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+    with r:
+        img = r.render().astype(int)
+    bg = np.array([0.16, 0.17, 0.20]) * 255
+    head = np.abs(img - bg).max(axis=2) > 12
+    assert 0.1 < head.mean() < 0.8
+    cols = np.flatnonzero(head.any(0))
+    assert cols.min() > 0 and cols.max() < 159  # not cut at the sides
+
+
+def test_control_point_plot_without_a_render(tmp_path, builtin_rig):
+    from assets.heads.plot import plot_control_points
+
+    out = plot_control_points(builtin_rig[0], tmp_path / "c.png", title="t")
+    from PIL import Image
+
+    assert Image.open(out).size[0] > 300
+
+
+def test_caption_only_touches_the_bottom_left():
+    from assets.heads.landmarks import credit_for
+    from clients.render.video import with_caption
+
+    assert "CC BY 3.0" in credit_for("/x/LeePerrySmith.glb") and credit_for("other.glb") == ""
+    img = np.zeros((120, 160, 3), np.uint8)
+    out = with_caption(img, credit_for("LeePerrySmith.glb"))
+    changed = out.any(axis=2)
+    assert changed[-16:, :].sum() > 50 and not changed[:-16, :].any()
+    assert with_caption(img, "") is img

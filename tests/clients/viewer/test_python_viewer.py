@@ -1,0 +1,258 @@
+"""``facecast view --record`` and ``facecast record`` against a real server on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from assets.tracks import decode_csv, decode_json
+from clients.client import IngestClient
+from clients.export.rhubarb import read_tsv
+from facecast.cli import main
+from realtime_core.pipeline import speech_to_params
+from tests.prerequisites import missing, require_module
+from tests.speech import speechlike
+
+# A live server, Xvfb, PulseAudio and `facecast view` processes.
+pytestmark = pytest.mark.system
+
+
+async def _session_once_watched(srv, name: str, seconds: float, viewers: int) -> dict:
+    """Open session ``name``, wait until ``viewers`` viewers watch it, stream ``seconds`` of audio
+    as fast as possible, end it; returns the server's ``ended`` reply."""
+    x = speechlike(seconds, 16000, seed=3)
+    async with IngestClient(srv.url, session=name, sample_rate_hz=16000) as ing:
+        for _ in range(400):  # at most 20 s
+            live = srv.server.sessions.get(name)
+            if live is not None and len(live.viewers) >= viewers:
+                break
+            await asyncio.sleep(0.05)
+        for i in range(0, len(x), 1600):
+            await ing.send(x[i : i + 1600])
+        return await ing.end()
+
+
+def _probe(path) -> dict:
+    out = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_streams", "-count_frames", "-of", "json", str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    return {s["codec_type"]: s for s in json.loads(out)["streams"]}
+
+
+def test_view_record_renders_the_session_with_its_audio(live, tmp_path):
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        missing("ffmpeg/ffprobe not installed")
+    fut = live.submit(_session_once_watched(live, "pyview", 2.0, viewers=1))
+    out = tmp_path / "view.mp4"
+    assert (
+        main(["view", live.url, "--session", "pyview", "--record", str(out), "--width", "320", "--height", "240"]) == 0
+    )
+    ended = fut.result(30)
+    streams = _probe(out)
+    assert int(streams["video"]["nb_read_frames"]) == ended["frames"] == 60  # one video frame per session frame
+    assert streams["video"]["width"] == 320 and "audio" in streams
+    assert float(streams["audio"]["duration"]) == pytest.approx(2.0, abs=0.1)
+    # Decode the video: the head is on screen and its mouth moves.
+    raw = subprocess.run(
+        ["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "gray", "-"],
+        capture_output=True,
+        check=True,
+    ).stdout
+    frames = np.frombuffer(raw, np.uint8).reshape(-1, 240, 320).astype(np.float64)
+    assert frames[30].std() > 20
+    assert np.abs(frames[1:] - frames[:-1]).mean(axis=(1, 2)).max() > 0.5
+
+
+def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
+    pygltflib = require_module("pygltflib")
+    x = speechlike(1.5, 16000, seed=3)
+    x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)  # as sent (int16)
+    ref = speech_to_params(model, x).astype(np.float32)  # what the session computes, frame for frame
+    got = {}
+    for suffix in ("json", "csv", "tsv", "glb"):
+        out = tmp_path / f"take.{suffix}"
+        fut = live.submit(_session_once_watched(live, f"rec-{suffix}", 1.5, viewers=1))
+        # --head-mode retarget: the .glb then animates the rig's 4 mouth units, which equal the parameters
+        assert main(["record", live.url, "--session", f"rec-{suffix}", "-o", str(out), "--head-mode", "retarget"]) == 0
+        assert fut.result(30)["frames"] == len(ref)
+        got[suffix] = out
+    np.testing.assert_array_equal(decode_json(got["json"].read_bytes()).values.astype(np.float32), ref)
+    csv_track = decode_csv(got["csv"].read_bytes())
+    np.testing.assert_array_equal(csv_track.values.astype(np.float32), ref)
+    assert csv_track.times()[0] == 0.0
+    assert read_tsv(got["tsv"].read_bytes())[-1].shape == "X"
+    g = pygltflib.GLTF2().load(str(got["glb"]))
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 4)
+    np.testing.assert_array_equal(w, ref)
+    from assets.audio import read_audio
+
+    audio, rate = read_audio(tmp_path / "take.wav")  # the session's audio beside the .glb
+    assert rate == 16000 and len(audio) == round(len(ref) / 30 * 16000)
+    n = min(len(audio), len(x))
+    np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
+
+
+def test_view_without_a_display_explains_itself(capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "http://127.0.0.1:9", "--session", "x"]) == 2
+    assert "open http://127.0.0.1:9/ in a browser" in capsys.readouterr().err
+
+
+@pytest.fixture()
+def xvfb(monkeypatch):
+    """A private X display (Xvfb) for the live window; skips where Xvfb is not installed."""
+    import os
+    import time
+    from pathlib import Path
+
+    if shutil.which("Xvfb") is None:
+        missing("Xvfb is not installed (scripts/setup.sh installs xvfb)")
+    n = next(n for n in range(150, 250) if not Path(f"/tmp/.X{n}-lock").exists())
+    proc = subprocess.Popen(
+        ["Xvfb", f":{n}", "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    sock = Path(f"/tmp/.X11-unix/X{n}")
+    for _ in range(100):
+        if sock.exists() or proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    if not sock.exists():
+        proc.kill()
+        missing("Xvfb did not start")
+    monkeypatch.setenv("DISPLAY", f":{n}")
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    yield os.environ["DISPLAY"]
+    proc.terminate()
+    proc.wait(5)
+
+
+def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
+    require_module("glfw")
+    import os
+    import sys
+
+    from tests.live_server import REPO, stream_session
+
+    stop = asyncio.Event()
+    fut = live.submit(stream_session(live.url, "window", 30.0, stop=stop))
+    shot = tmp_path / "window.png"
+    # A process of its own, as a user runs it (and GL-wise clean: other tests here made EGL contexts).
+    try:
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "view",
+                live.url,
+                "--session",
+                "window",
+                "--duration",
+                "2",
+                "--screenshot",
+                str(shot),
+                "--width",
+                "320",
+                "--height",
+                "240",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=os.environ.copy(),
+        )
+    finally:
+        live.loop.call_soon_threadsafe(stop.set)
+        fut.result(30)
+    assert proc.returncode == 0, proc.stderr
+    shown = int(proc.stdout.split("showed ")[1].split(" ")[0])
+    assert shown >= 20, proc.stdout  # about 2 s of frames were drawn in the window
+    assert "sound off" in proc.stdout or "sound on" in proc.stdout
+    from PIL import Image
+
+    img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
+    assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
+
+
+def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
+    """Through a private PulseAudio null sink: what the window plays is the session's speech."""
+    require_module("glfw")
+    import os
+    import sys
+
+    from tests.live_server import REPO, stream_session
+
+    if shutil.which("parec") is None:
+        missing("parec is not installed (pulseaudio-utils)")
+    env = {**pulse, "DISPLAY": os.environ["DISPLAY"]}
+    capture = tmp_path / "heard.raw"
+    rec = subprocess.Popen(
+        ["parec", "--device=fc.monitor", "--raw", "--format=s16le", "--rate=16000", "--channels=1", str(capture)],
+        env=env,
+    )
+    stop = asyncio.Event()
+    fut = live.submit(stream_session(live.url, "sound", 30.0, stop=stop))
+    try:
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "view",
+                live.url,
+                "--session",
+                "sound",
+                "--duration",
+                "3",
+                "--width",
+                "160",
+                "--height",
+                "120",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=env,
+        )
+    finally:
+        live.loop.call_soon_threadsafe(stop.set)
+        fut.result(30)
+        rec.terminate()
+        rec.wait(10)
+    assert proc.returncode == 0, proc.stderr
+    if "sound off" in proc.stdout:
+        missing(f"PortAudio found no output device through PulseAudio: {proc.stdout.strip()}")
+    heard = np.frombuffer(capture.read_bytes(), "<i2").astype(np.float64) / 32768
+    sent = speechlike(30.0, 16000, seed=0).astype(np.float64)
+    assert len(heard) > 16000 and np.abs(heard).max() > 0.05  # sound came out
+    # The heard audio is the session's: each loud 0.25 s piece of it is found in the speech sent
+    # (pieces, not the whole take: a timeline resync under load makes the sound jump by design).
+    from scipy.signal import correlate
+
+    ref = sent[: 16000 * 10]
+    c2 = np.concatenate([[0.0], np.cumsum(ref**2)])
+    scores = []
+    for k in range(0, len(heard) - 4000, 4000):
+        part = heard[k : k + 4000]
+        if np.sqrt(np.mean(part**2)) < 0.05:
+            continue  # a pause of the speech
+        corr = correlate(ref, part, mode="valid", method="fft")
+        window = np.sqrt(np.maximum(c2[len(part) :] - c2[: len(c2) - len(part)], 1e-12))  # |ref[j:j+len(part)]|
+        scores.append(np.max(corr / (np.linalg.norm(part) * window)))
+    levels = [round(float(np.sqrt(np.mean(heard[k : k + 4000] ** 2))), 3) for k in range(0, len(heard) - 4000, 4000)]
+    assert len(scores) >= 3 and np.median(scores) > 0.8, (scores, levels, proc.stdout)

@@ -1,0 +1,147 @@
+"""The browser viewer for real: Debian's Chromium (headless, SwiftShader WebGL) driven by Playwright.
+
+A real server on loopback streams a session in real time; ``viewer_check.mjs`` loads the page, which
+must find the session, download the head, show frames and play the audio; the mouth region must
+differ between a closed and an open frame; after the session ends and starts again the page must
+reconnect by itself, and again after the whole server restarts on the same port; no console error
+may occur (but the browser's own reports of refused connections while the server is down).
+Screenshots go to ``artifacts/clients_web/``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.live_server import REPO, LiveServer, stream_session
+from tests.prerequisites import missing
+
+# Headless Chromium against a live server (about 30 s).
+pytestmark = [pytest.mark.system, pytest.mark.slow]
+
+CHROMIUM = Path("/usr/bin/chromium")
+SCRIPT = Path(__file__).with_name("viewer_check.mjs")
+ARTIFACTS = REPO / "artifacts" / "clients_web"
+
+
+def _require_browser() -> None:
+    if not CHROMIUM.exists():
+        missing("Debian's chromium is not installed (scripts/setup.sh installs it: apt-get install chromium)")
+    if shutil.which("node") is None:
+        missing("node is not installed")
+    for pkg in ("playwright-core", "three"):
+        if not (REPO / "node_modules" / pkg / "package.json").is_file():
+            missing(f"node_modules/{pkg} is missing (scripts/setup.sh runs `npm ci` at the repository root)")
+
+
+def _read_step(proc: subprocess.Popen, want: str) -> dict:
+    """Next JSON line of the script; fails the test with the script's report on an error step."""
+    for line in proc.stdout:
+        msg = json.loads(line)
+        if msg["step"] == "error":
+            pytest.fail(f"viewer_check.mjs: {msg['error']}\nconsole errors: {msg['console_errors']}")
+        if msg["step"] == want:
+            return msg
+    pytest.fail(f"viewer_check.mjs ended before step {want!r}: {proc.stderr.read()}")
+
+
+def _png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.float64)
+
+
+def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
+    _require_browser()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    name = "webcheck"
+    servers = [LiveServer(model, head)]
+    stops = [asyncio.Event() for _ in range(3)]  # one per session; set only through the server's loop
+    sessions = [servers[0].submit(stream_session(servers[0].url, name, 40.0, stop=stops[0]))]
+    proc = subprocess.Popen(
+        ["node", str(SCRIPT), servers[0].url, name, str(ARTIFACTS)],
+        cwd=REPO,
+        text=True,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+
+    def end_session(i: int) -> None:
+        servers[-1].loop.call_soon_threadsafe(stops[i].set)
+        sessions[i].result(30)
+
+    def go() -> None:
+        proc.stdin.write("go\n")
+        proc.stdin.flush()
+
+    try:
+        frames = _read_step(proc, "frames")
+        picker = _read_step(proc, "picker")
+        mouth = _read_step(proc, "mouth")
+        _read_step(proc, "waiting")
+        # End the session and start it again under the same name: the page must follow alone.
+        end_session(0)
+        sessions.append(servers[0].submit(stream_session(servers[0].url, name, 40.0, seed=1, stop=stops[1])))
+        go()
+        again = _read_step(proc, "reconnected")
+        _read_step(proc, "waiting")
+        # Restart the whole server on the same port (the session with it).
+        end_session(1)
+        port = servers[0].port
+        servers[0].stop()
+        servers.append(LiveServer(model, head, port=port))
+        sessions.append(servers[1].submit(stream_session(servers[1].url, name, 40.0, seed=2, stop=stops[2])))
+        go()
+        restarted = _read_step(proc, "restarted")
+        done = _read_step(proc, "done")
+    finally:
+        for i, fut in enumerate(sessions):
+            if not fut.done():
+                servers[-1].loop.call_soon_threadsafe(stops[i].set)
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        for fut in sessions:
+            if not fut.done():
+                fut.result(30)
+        for srv in servers[1:]:
+            srv.stop()
+        if len(servers) == 1:
+            servers[0].stop()
+
+    st = frames["state"]
+    assert picker["buttons"] == ["neutral", "smile", "sad", "surprise", "anger"]  # from the description
+    assert picker["smiled"] == "smile: applied"  # the server acknowledged the picker's control
+    assert name in frames["listed"]  # the page lists the live session
+    assert st["kind"] == "deltas" and st["frames"] >= 30 and st["connections"] == 1
+    assert st["audio"]["running"] and st["audio"]["played"] > 0  # the relayed speech was scheduled
+    # ... on the frames' timeline: each block is heard within 20 ms of its frames (joins snap <= 15 ms).
+    assert mouth["state"]["audio"]["syncMs"] is not None and mouth["state"]["audio"]["syncMs"] < 20
+    assert st["deliveryMs"] is not None and st["behindAudioMs"] is not None  # delays are measured and shown
+
+    # The canvas shows a head, not an empty or one-colour picture.
+    page = _png(ARTIFACTS / "viewer.png")
+    canvas = page[:, : int(page.shape[1] * 0.6)]
+    background = np.median(canvas.reshape(-1, 3), axis=0)
+    covered = np.mean(np.abs(canvas - background).sum(axis=2) > 30)
+    assert 0.1 < covered < 0.9, f"{covered:.0%} of the canvas differs from the background"
+    assert canvas.std() > 20
+
+    # The mouth region differs between a closed and an open frame.
+    assert mouth["peaks"]["open"] > mouth["peaks"]["closed"]
+    closed, opened = _png(ARTIFACTS / "closed.png"), _png(ARTIFACTS / "open.png")
+    assert closed.shape == opened.shape
+    changed = np.mean(np.abs(opened - closed).sum(axis=2) > 60)
+    assert changed > 0.02, f"only {changed:.1%} of the mouth region changed between closed and open"
+
+    assert again["state"]["connections"] >= 2 and again["state"]["received"] >= 15
+    assert restarted["state"]["connections"] > again["state"]["connections"] and restarted["state"]["received"] >= 15
+    assert done["console_errors"] == []
+    assert all("ERR_CONNECTION_REFUSED" in e or "WebSocket" in e for e in done["outage_errors"]), done["outage_errors"]

@@ -1,0 +1,64 @@
+"""The viewer's JavaScript modules under Node: the browser decodes exactly what server/protocol.py
+encodes, and the playout clock resyncs on a late frame and catches up when frames come early again."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.prerequisites import missing
+from wire import protocol as P
+
+# Node.js runs the viewer modules.
+pytestmark = pytest.mark.system
+
+
+def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_path):
+    if shutil.which("node") is None:
+        missing("node is not installed")
+    rng = np.random.default_rng(0)
+    deltas = rng.standard_normal(300).astype(np.float32) * 0.05
+    cases = {
+        "deltas_int16": (P.KIND_DELTAS, P.ENC_INT16, deltas),
+        "deltas_float16": (P.KIND_DELTAS, P.ENC_FLOAT16, deltas),
+        "params": (P.KIND_PARAMS, P.ENC_FLOAT32, np.array([0.01, -0.02, 0.3, 0.0], np.float32)),
+    }
+    expect = {}
+    for name, (kind, enc, values) in cases.items():
+        payload, scale = P.encode_payload(values, enc)
+        msg = P.pack_header(kind, enc, 7, len(values), scale, 7 / 30, 1.7e9) + payload
+        (tmp_path / f"{name}.bin").write_bytes(msg)
+        expect[name] = P.decode_message(msg)
+    audio = (np.sin(np.arange(320) / 5) * 0.5).astype(np.float32)
+    msg = P.pack_header(P.KIND_AUDIO, P.ENC_INT16, 3, 320, 1 / 32768, 0.06, 1.7e9) + P.encode_audio_payload(audio)
+    (tmp_path / "audio.bin").write_bytes(msg)
+    expect["audio"] = P.decode_message(msg)
+
+    out = subprocess.run(
+        ["node", str(Path(__file__).with_name("units.mjs")), str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    r = json.loads(out.stdout)
+    for name, m in expect.items():
+        got = r["decoded"][name]
+        assert (got["kind"], got["encoding"], got["index"], got["count"]) == (
+            m.kind,
+            m.encoding,
+            m.index,
+            len(m.values),
+        )
+        assert got["mediaTime"] == m.media_time and got["sendTime"] == m.send_time
+        np.testing.assert_array_equal(np.float32(got["values"]), m.values, err_msg=name)
+    assert "shorter than the header" in r["rejected"]
+
+    slack = np.array(r["slack"])
+    assert np.allclose(slack[:60], 0.08)  # steady: every frame waits the 80 ms jitter buffer
+    assert r["resyncs"] == 1 and r["afterLate"] > r["beforeLate"] + 0.15  # the late frame moved the timeline
+    assert slack[60] >= 0  # ... so that it is shown, not skipped
+    assert r["catchups"] >= 1 and r["afterRecovery"] < r["afterLate"]  # and it moves back once frames are early
+    assert slack[61:].min() >= 0.08 - 1e-9  # never so far that a frame would be late

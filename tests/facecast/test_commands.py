@@ -1,0 +1,90 @@
+"""`facecast rig` and `facecast render` end to end through the CLI entry point."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from facecast.cli import main
+from tests.prerequisites import missing
+
+# CLI subprocesses with real rendering and ffmpeg.
+pytestmark = pytest.mark.system
+
+
+def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head, capsys):
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    out = tmp_path / "mp.npz"
+    # --keep-failing: the picture and file are written whatever the extreme-pose checks say
+    # (tests/assets/test_rig_checks.py covers refusing a failing rig).
+    assert main(["rig", str(mp), "-o", str(out), "--keep-failing"]) == 0
+    assert out.is_file() and out.with_suffix(".png").is_file()
+    printed = capsys.readouterr().out
+    assert "220 control points" in printed and "rig checks at" in printed
+    from assets.heads.rigfile import load_rig
+
+    rig, _mesh = load_rig(out)
+    assert rig.displacements(np.array([0, 0, 0.1, 0])).any()
+
+
+def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, capsys):
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    bad = tmp_path / "bad_landmarks.json"
+    bad.write_text('{"landmarks": {"chin": 152}}')
+    assert main(["rig", str(mp), "--landmarks", str(bad), "-o", str(tmp_path / "x.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "bad_landmarks.json: missing landmarks" in err
+    box = tmp_path / "box.obj"  # not a face: automatic landmarks find none
+    box.write_text(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+        "f 1 2 3\nf 1 3 4\nf 5 7 6\nf 5 8 7\nf 1 5 6\nf 1 6 2\nf 2 6 7\nf 2 7 3\nf 3 7 8\nf 3 8 4\n"
+        "f 4 8 5\nf 4 5 1\n"
+    )
+    assert main(["rig", str(box), "-o", str(tmp_path / "y.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "box.obj: no face-like region" in err and "--landmarks" in err and not (tmp_path / "y.npz").exists()
+    empty = tmp_path / "empty.ply"
+    empty.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    assert main(["rig", str(empty), "--landmarks", str(bad), "-o", str(tmp_path / "z.npz")]) == 2
+    assert "empty.ply" in capsys.readouterr().err
+
+
+def test_ply_round_trip(tmp_path, shared_data):
+    import trimesh
+
+    from assets.heads.mesh import load_mesh
+
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    m = load_mesh(mp)
+    ply = tmp_path / "face.ply"
+    trimesh.Trimesh(m.vertices, m.triangles, process=False).export(ply)
+    m2 = load_mesh(ply)
+    np.testing.assert_allclose(m2.vertices, m.vertices, rtol=1e-6)
+    np.testing.assert_array_equal(m2.triangles, m.triangles)
+
+
+def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, capsys):
+    if shutil.which("ffmpeg") is None:
+        missing("ffmpeg not installed")
+    from clients.errors import RenderError
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    try:
+        renderer_for_rig(*builtin_rig, RenderConfig(width=32, height=32)).close()
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+    csv = tmp_path / "p.csv"
+    t = np.arange(0, 0.3, 1 / 30)
+    rows = ["t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress"]
+    rows += [f"{x:.4f},0,0,{0.1 * np.sin(10 * x) ** 2:.4f},0" for x in t]
+    csv.write_text("\n".join(rows) + "\n")
+    wav = shared_data / "speech" / "arctic" / "arctic_a0009.wav"
+    out = tmp_path / "v.mp4"
+    args = ["render", str(wav), "--params", str(csv), "-o", str(out), "--width", "160", "--height", "120"]
+    assert main(args) == 0
+    assert out.is_file() and out.stat().st_size > 1000
+    assert f"{len(t)} frames at 30 fps" in capsys.readouterr().out

@@ -1,0 +1,54 @@
+"""`facecast demo`'s pieces for real: espeak-ng speech through a live session watched over loopback,
+then rendered to an MP4 by the offline renderer."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from facecast.demo import DemoConfig, run_demo, synthesise, write_mp4
+from realtime_core.features.resample import resample_audio
+from realtime_core.pipeline import speech_to_params
+from tests.prerequisites import missing
+
+# espeak-ng, a live server and ffmpeg.
+pytestmark = pytest.mark.system
+
+
+def test_demo_streams_speech_and_writes_an_mp4(model, head, ffmpeg, tmp_path):
+    from server.errors import AudioSourceError
+
+    sentences = ("Hello there.",)
+    try:
+        synthesise(sentences, "en-us")
+    except AudioSourceError as exc:
+        missing(f"espeak-ng unavailable: {exc}")
+    cfg = DemoConfig(port=0, sentences=sentences, video=None)
+    lines: list[str] = []
+    result = asyncio.run(run_demo(cfg, model, head, announce=lines.append))
+    # The viewer saw the whole live session: exactly what `facecast animate` gives for the speech.
+    # (resampled in float64 like the server; `animate` resamples float32 WAV samples in float32.)
+    speech, rate = result.speech, result.speech_rate_hz
+    ref = speech_to_params(model, resample_audio(speech.astype(np.float64), rate, model.sample_rate_hz))
+    assert result.params.shape == ref.shape
+    np.testing.assert_allclose(result.params, ref, rtol=1e-4, atol=1e-4)
+    assert any("/view?session=demo" in line for line in lines)
+    out = write_mp4(
+        tmp_path / "demo.mp4", head, result.params, result.audio, result.audio_rate_hz, width=160, height=120
+    )
+    probe = json.loads(
+        subprocess.run(
+            ["ffprobe", "-v", "error", "-count_frames", "-show_streams", "-of", "json", str(out)],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+    )
+    kinds = {s["codec_type"]: s for s in probe["streams"]}
+    assert set(kinds) == {"video", "audio"}
+    assert abs(int(kinds["video"]["nb_read_frames"]) - len(ref)) <= 1
+    assert [p.name for p in tmp_path.iterdir()] == ["demo.mp4"]  # no temporary files left behind

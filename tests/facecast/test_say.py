@@ -1,0 +1,153 @@
+"""`facecast say` end to end: real espeak-ng speech, the real unit search, real rendering and export;
+the files are checked with independent readers (ffprobe, pygltflib, csv)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+
+import numpy as np
+
+from facecast.cli import main
+from tests.prerequisites import require_data, require_tool
+
+
+def _ffprobe(path) -> dict:
+    out = subprocess.run(
+        ["ffprobe", "-v", "error", "-show_streams", "-show_format", "-of", "json", str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout)
+
+
+def test_say_writes_valid_mp4_csv_glb(corpus_file, tmp_path, capsys):
+    require_tool("ffprobe", "apt package ffmpeg")
+    mp4, csv_path, glb = tmp_path / "s.mp4", tmp_path / "s.csv", tmp_path / "s.glb"
+    rc = main(
+        [
+            "say",
+            "Hello there, this is a test of the unit selection.",
+            "--corpus",
+            str(corpus_file),
+            "-o",
+            str(mp4),
+            "-o",
+            str(csv_path),
+            "-o",
+            str(glb),
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--verbose",
+        ]
+    )
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "recorded units" in out and "timings:" in out
+    rows = list(csv.DictReader(csv_path.open()))
+    n = len(rows)
+    assert list(rows[0]) == ["t", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
+    mo = np.array([float(r["mouth_open"]) for r in rows])
+    assert np.ptp(mo) > 0.02  # the mouth moves
+    info = _ffprobe(mp4)
+    kinds = {s["codec_type"]: s for s in info["streams"]}
+    assert set(kinds) == {"video", "audio"}
+    assert (int(kinds["video"]["width"]), int(kinds["video"]["height"])) == (160, 120)
+    assert abs(float(info["format"]["duration"]) - n / 30) < 0.1  # video and speech have the same length
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(glb))
+    assert g.animations and g.meshes[0].primitives[0].targets
+    assert (tmp_path / "s.wav").is_file()
+
+
+def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
+    out, npz = tmp_path / "es.csv", tmp_path / "es.npz"
+    assert (
+        main(
+            [
+                "say",
+                "¿Dónde está la biblioteca?",
+                "--lang",
+                "es",
+                "--corpus",
+                str(corpus_file),
+                "-o",
+                str(out),
+                "-o",
+                str(npz),
+            ]
+        )
+        == 0
+    )
+    assert out.is_file() and len(out.read_text().splitlines()) > 20
+    with np.load(npz, allow_pickle=False) as z:  # the full motion: PCA coefficients + parameters
+        frames, names = z["frames"], list(z["dim_names"])
+        assert frames.shape == (len(out.read_text().splitlines()) - 1, len(names))
+        assert names[-4:] == ["upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
+        offsets = frames[:, : len(names) - 4] @ z["pca_components"] + z["pca_mean"]
+        assert offsets.shape[1] == 3 * len(z["landmark_indices"])
+    capsys.readouterr()
+    for argv, msg in (
+        (["say", "😀😀", "-o", str(tmp_path / "x.csv")], "pronounceable"),
+        (["say", "   ", "-o", str(tmp_path / "x.csv")], "empty text"),
+        (["say", "hi", "--voice", "xx-none", "-o", str(tmp_path / "x.csv")], "voice"),
+        (["say", "hi", "-o", str(tmp_path / "x.avi")], "unknown output format"),
+    ):
+        assert main([*argv, "--corpus", str(corpus_file)]) == 2
+        assert msg in capsys.readouterr().err
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
+    """A real recording (LibriVox, shared test data) and its transcript: forced alignment gives the
+    phone timings; the motion covers the recording."""
+    from pathlib import Path
+
+    shared = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve().parents[3] / "shared" / "data")
+    stem = shared / "speech" / "librivox" / "sense_and_sensibility_01_austen_64kb-0880"
+    require_data(stem.with_suffix(".wav"))
+    from assets.audio import read_audio
+
+    samples, rate = read_audio(stem.with_suffix(".wav"))
+    out = tmp_path / "rec.csv"
+    assert (
+        main(
+            [
+                "say",
+                stem.with_suffix(".txt").read_text(),
+                "--audio",
+                str(stem.with_suffix(".wav")),
+                "--corpus",
+                str(corpus_file),
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    n = len(out.read_text().splitlines()) - 1
+    assert n == int(np.ceil(len(samples) / rate * 30 - 1e-9))
+    # a transcript the aligner cannot use is a clear error naming the problem, not a crash
+    capsys.readouterr()
+    assert (
+        main(
+            [
+                "say",
+                "qwxzzv",
+                "--audio",
+                str(stem.with_suffix(".wav")),
+                "--corpus",
+                str(corpus_file),
+                "-o",
+                str(tmp_path / "bad.csv"),
+            ]
+        )
+        == 2
+    )
+    assert "not in the pocketsphinx dictionary" in capsys.readouterr().err

@@ -1,0 +1,77 @@
+"""The fitted blendshape maps and the expression table: no drift from their recipe, and they do what
+they claim on the built-in head (its own ARKit targets reproduce the requested mouth parameters)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from realtime_core import fitted_maps
+from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES, blendshape_weights
+from realtime_core.expressions import EXPRESSIONS
+
+
+@pytest.fixture(scope="module")
+def head_and_rig():
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigfile import builtin_rig
+
+    rig, _ = builtin_rig()
+    return load_builtin_head(), rig
+
+
+def test_generated_module_matches_a_fresh_fit(head_and_rig) -> None:
+    from training.fit_maps import fit_maps
+
+    fresh = fit_maps(*head_and_rig)
+    for name, value in fresh.items():
+        np.testing.assert_allclose(getattr(fitted_maps, name), value, atol=2e-5, rtol=1e-5, err_msg=name)
+
+
+def test_arkit_weights_reproduce_the_parameters_on_the_head(head_and_rig) -> None:
+    from realtime_core.face import MouthLandmarks
+    from realtime_core.face.model import measure_mouth
+
+    head, _ = head_and_rig
+    lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    v0 = head.mesh.vertices
+    targets = np.stack([head.targets[n] for n in ARKIT_NAMES])
+    rng = np.random.default_rng(0)
+    p = np.column_stack(
+        [
+            rng.uniform(-0.03, 0.05, 60),
+            rng.uniform(-0.10, 0.08, 60),
+            rng.uniform(0, 0.35, 60),
+            rng.uniform(-0.05, 0.04, 60),
+        ]
+    )
+    w = blendshape_weights(p, "arkit52").astype(np.float64)
+    got = np.array([measure_mouth(v0, v0 + np.tensordot(wi, targets, 1), lm) for wi in w])
+    r = [np.corrcoef(p[:, i], got[:, i])[0, 1] for i in range(4)]
+    assert min(r) > 0.8, r
+    assert np.abs(got[:, 2] - p[:, 2]).max() < 0.08  # the gap: within 0.08 IOD over 0..0.35, mixed with the rest
+
+
+def test_ovr_visemes_pick_the_expected_shape() -> None:
+    def top(p):
+        w = blendshape_weights(np.array(p, dtype=float), "ovr15")
+        return OVR_NAMES[int(np.argmax(w))], w
+
+    assert top([0, 0, 0, 0])[0] == "sil"
+    assert top([0.015, 0.02, 0.33, -0.005])[0] == "aa"
+    assert top([0.015, -0.09, 0.09, 0.025])[0] == "U"
+    assert top([0.005, 0.065, 0.10, -0.02])[0] == "I"
+    assert top([0.025, 0.0, 0.025, 0.005])[0] == "FF"
+    w = blendshape_weights(np.random.default_rng(1).normal(0, 0.1, (20, 4)), "ovr15")
+    assert w.shape == (20, 15) and w.min() >= 0 and w.max() <= 1
+
+
+def test_expressions_carry_into_arkit() -> None:
+    e = np.zeros(len(EXPRESSIONS))
+    e[EXPRESSIONS.index("smile")] = 1.0
+    w = dict(zip(ARKIT_NAMES, blendshape_weights(np.zeros(4), "arkit52", expression=e)))
+    assert w["mouthSmileLeft"] == pytest.approx(0.5) and w["cheekSquintRight"] == pytest.approx(0.5)
+    e[:] = 0
+    e[EXPRESSIONS.index("surprise")] = 0.5
+    w = dict(zip(ARKIT_NAMES, blendshape_weights(np.zeros(4), "arkit52", expression=e)))
+    assert w["browOuterUpLeft"] == pytest.approx(0.35)

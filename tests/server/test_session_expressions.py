@@ -1,0 +1,116 @@
+"""Sessions with expressions and with the MLP mapper: controls with media timestamps, chunk
+invariance under an expression, blendshape outputs carrying it, bad requests rejected while the
+session keeps streaming, and an MLP-mapper session equal to the offline path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from realtime_core.blendshapes import ARKIT_NAMES
+from realtime_core.expressions import EXPRESSIONS, ExpressionTrack, apply_expression
+from realtime_core.fitted_maps import EXPRESSION_PARAMS
+from realtime_core.mapping import MlpBank, MlpSpeechModel, decode_speech_model, encode_speech_model
+from realtime_core.pipeline import speech_to_params
+from server.errors import ControlError, ServerConfigError
+from server.session import Session, SessionConfig
+from tests.server.conftest import small_model, speechlike
+from wire import protocol as P
+
+
+def _run(model, x: np.ndarray, controls: list[tuple[int, dict]], seed: int) -> list:
+    """Push ``x`` in random chunks, applying each (sample index, control) once the stream reaches it."""
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000))
+    rng = np.random.default_rng(seed)
+    pending = sorted(controls, key=lambda c: c[0])
+    frames, i = [], 0
+    while i < len(x):
+        while pending and pending[0][0] <= i:
+            s.apply_control(pending.pop(0)[1])
+        n = int(rng.integers(1, 1200))
+        frames += s.push(x[i : i + n]).frames
+        i += n
+    frames += s.flush().frames
+    return frames
+
+
+def test_expression_control_is_chunk_invariant_and_eased() -> None:
+    model = small_model()
+    x = speechlike(3.0, 16000)
+    ctl = [
+        (0, {"type": "control", "expression": {"name": "smile", "intensity": 0.7, "at": 1.0}}),
+        (0, {"type": "control", "expression": {"name": "neutral", "at": 2.2}, "expression_ease_s": 0.2}),
+    ]
+    a, b = _run(model, x, ctl, 1), _run(model, x, ctl, 2)
+    pa, pb = np.array([f.params for f in a]), np.array([f.params for f in b])
+    np.testing.assert_array_equal(pa, pb)
+    speech = speech_to_params(model, x)
+    track = ExpressionTrack()
+    track = track.copy(type(track.config)(ease_s=0.2))
+    track.schedule("smile", 0.7, 1.0)
+    track.schedule("neutral", 1.0, 2.2)
+    alpha = track.intensities(np.arange(len(speech)) / 30)
+    np.testing.assert_allclose(pa, apply_expression(speech, alpha, EXPRESSION_PARAMS), atol=1e-12)
+    t = np.arange(len(pa)) / 30
+    np.testing.assert_array_equal(pa[t < 1.0], speech[t < 1.0])
+    mid = (t > 1.3) & (t < 2.2)
+    assert np.allclose(pa[mid, 1] - speech[mid, 1], 0.7 * EXPRESSION_PARAMS[EXPRESSIONS.index("smile"), 1])
+    # ARKit carries the expression's own shapes; the speech weights underneath stay.
+    f = a[int(np.flatnonzero(mid)[0])]
+    w = dict(zip(ARKIT_NAMES, np.frombuffer(f.payload(P.KIND_ARKIT52, P.ENC_FLOAT32)[0], "<f4")))
+    assert w["mouthSmileLeft"] >= 0.7 * 0.5 - 1e-6 and w["cheekSquintLeft"] == pytest.approx(0.35, abs=1e-6)
+
+
+def test_bad_expression_controls_are_rejected_and_the_session_streams_on() -> None:
+    model = small_model()
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000))
+    x = speechlike(2.0, 16000)
+    n1 = len(s.push(x[:16000]).frames)
+    before = s.control_state()
+    for msg, text in (
+        ({"expression": {"name": "grin"}}, "unknown expression 'grin'"),
+        ({"expression": {"name": "smile", "intensity": 1.5}}, r"\[0, 1\]"),
+        ({"expression": {"name": "smile", "at": 0.0}}, "in the past"),
+        ({"expression": {"name": "smile", "at": 1e7}}, "ahead"),
+        ({"expression": {"name": "smile", "at": "soon"}}, "number of seconds"),
+        ({"expression": "smile"}, "must be an object"),
+        ({"expression": {"name": "smile", "colour": 1}}, "unknown field"),
+        ({"expression_ease_s": 99}, "0..10"),
+        ({"gain": {"mouth_open": 2}, "expression": {"name": "nope"}}, "unknown expression"),
+    ):
+        with pytest.raises(ControlError, match=text):
+            s.apply_control({"type": "control", **msg})
+        assert s.control_state() == before  # nothing applied, not even the valid gain
+    rest = s.push(x[16000:]).frames + s.flush().frames
+    assert n1 + len(rest) == len(speech_to_params(model, x))
+
+
+def _mlp_model(fe, seed: int = 0) -> MlpSpeechModel:
+    rng = np.random.default_rng(seed)
+    k, h, da = 3, 15, fe.audio_dim
+    bank = MlpBank(
+        gmm_log_weights=np.log(np.full(k, 1 / k)),
+        gmm_means=rng.standard_normal((k, fe.n_feat)),
+        gmm_vars=np.ones((k, fe.n_feat)),
+        class_slice=(fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat),
+        w1=rng.standard_normal((k, h, da)) * 0.1,
+        b1=np.zeros((k, h)),
+        w2=rng.standard_normal((k, 4, h)) * 0.05,
+        b2=np.zeros((k, 4)),
+        hidden=np.full(k, h),
+        activation="tanh",
+    )
+    return MlpSpeechModel(bank=bank, frontend=fe, cmvn_mean=np.zeros(fe.n_feat), cmvn_var=np.ones(fe.n_feat))
+
+
+def test_mlp_mapper_session_equals_the_offline_path() -> None:
+    model = _mlp_model(small_model().frontend)
+    x = speechlike(2.0, 16000)
+    frames = _run(model, x, [], 3)
+    np.testing.assert_array_equal(np.array([f.params for f in frames]), speech_to_params(model, x))
+    assert Session(model, config=SessionConfig(sample_rate_hz=16000)).delay_frames == model.frontend.tc
+    with pytest.raises(ServerConfigError, match="no smoothing lag"):
+        Session(model, config=SessionConfig(sample_rate_hz=16000, lag=2))
+    # Compute workers receive the model as bytes: either kind round-trips.
+    back = decode_speech_model(encode_speech_model(model))
+    np.testing.assert_array_equal(speech_to_params(back, x), speech_to_params(model, x))

@@ -1,0 +1,43 @@
+"""The unit corpus: built from face tracks by EM-PCA, stored as .npz (no pickle), read back equal."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from assets.unitcorpus import UnitCorpusFileError, load_unit_corpus
+from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
+from training.facetrack import LOWER_FACE
+
+
+def test_corpus_frames_are_pca_coefficients_then_params(stored_corpus, corpus_rows):
+    c = stored_corpus.corpus
+    k = c.n_coefficients
+    assert k == 3  # three latent gestures make all the motion: explained >= 0.99 keeps exactly them
+    assert c.dim_names[k:] == ("upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress")
+    _, track, phones = corpus_rows[4]
+    frames = c.sentence_frames(4)
+    idx = list(LOWER_FACE)
+    want = track.landmarks[:, idx].astype(np.float64) - track.neutral[idx]
+    np.testing.assert_allclose(stored_corpus.landmark_offsets(frames[:, :k]), want, atol=1e-4)  # float32 tracks
+    np.testing.assert_allclose(frames[:, k:], track.params, atol=1e-6)
+    a, b = c.phone_offsets[4], c.phone_offsets[5]
+    assert c.phone_labels[a:b] == tuple(p[0] for p in phones)
+    assert all(c.phone_visemes[i] == VISEME_ID[viseme_of(lab, "arpabet")] for i, lab in enumerate(c.phone_labels))
+
+
+def test_file_round_trip_and_bad_files(stored_corpus, corpus_file, tmp_path):
+    back = load_unit_corpus(corpus_file)
+    np.testing.assert_array_equal(back.corpus.frames, stored_corpus.corpus.frames.astype(np.float32))
+    np.testing.assert_array_equal(back.corpus.phone_visemes, stored_corpus.corpus.phone_visemes)
+    assert back.corpus.phone_labels == stored_corpus.corpus.phone_labels
+    np.testing.assert_allclose(back.pca_components, stored_corpus.pca_components)
+    assert back.meta["test"] is True
+    with np.load(corpus_file, allow_pickle=False) as z:  # plain arrays only
+        assert "frames" in z.files
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(corpus_file.read_bytes()[:1000])
+    with pytest.raises(UnitCorpusFileError, match=r"cut.npz"):
+        load_unit_corpus(cut)
+    with pytest.raises(UnitCorpusFileError, match="not found"):
+        load_unit_corpus(tmp_path / "missing.npz")

@@ -1,0 +1,133 @@
+"""Fits the blendshape maps and the expression table (``facecast fit-maps``), by eq. 4's least squares.
+
+ARKit-52. The built-in head's own ARKit morph targets are keyframes ``K`` (columns: each target's
+displacement of the rig's moving vertices, head units); for each signed unit of each mouth parameter
+(+-0.05 IOD) the rig's displacement ``d`` is the shape to reproduce, and ``b = argmin |K b - d|^2 +
+lambda |b|^2, b >= 0`` (:class:`realtime_core.motion_units.KeyframeSet`, non-negative) gives that
+direction's weights. Weights are then linear in the positive and negative parts of each parameter:
+``w = clip(A+ max(p, 0) + A- max(-p, 0) + c, 0, 1)``. Side-shift targets (``jawLeft/Right,
+mouthLeft/Right``, and ``jawForward``) are left out: the four parameters are symmetric and say
+nothing of jaw protrusion.
+
+OVR-15. No shipped head has viseme targets, so the keyframes are the visemes' articulatory targets in
+the four parameters (:mod:`training.articulatory`, one phoneme class per viseme). A signed-unit fit
+recruits unrelated visemes to cancel small side effects (a bilabial to trim an /a/'s spread), so
+OVR weights are solved per frame instead: eq. 4 with ``b >= 0`` and ridge :data:`OVR_RIDGE` (at most
+four visemes active), ``sil = 1 - sum(others)``.
+
+Expressions. Each recipe of :data:`realtime_core.expressions.EXPRESSION_RECIPES` is applied to the
+built-in head's targets and measured with :func:`realtime_core.face.model.measure_mouth`: its change
+of the four mouth parameters (IOD).
+
+The result is written as a Python module of constants (``realtime_core/fitted_maps.py``) so the sans-I/O
+core reads no file; a test re-fits and compares, so the module cannot drift from its recipe.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES
+from realtime_core.expressions import EXPRESSION_RECIPES, EXPRESSIONS
+from realtime_core.motion_units import KeyframeSet
+
+UNIT_IOD = 0.05
+RIDGE = 1e-3
+OVR_RIDGE = 0.05
+SIDE_SHIFTS = ("jawLeft", "jawRight", "jawForward", "mouthLeft", "mouthRight")
+OVR_CLASSES = {
+    "PP": "bilabial",
+    "FF": "labiodental",
+    "TH": "dental",
+    "DD": "alveolar",
+    "kk": "velar",
+    "CH": "postalveolar",
+    "SS": "sibilant",
+    "nn": "alveolar",
+    "RR": "rhotic",
+    "aa": "open_central",
+    "E": "mid_front",
+    "I": "close_front",
+    "O": "mid_back_round",
+    "U": "close_back_round",
+}
+"""OVR viseme -> the articulatory class whose target is its keyframe."""
+
+
+def _signed_fit(keys: KeyframeSet, shape_of) -> tuple[np.ndarray, np.ndarray]:
+    """``(P, 4)`` weights per IOD of each parameter's positive part and of its negative part."""
+    pos, neg = np.zeros((len(keys.names), 4)), np.zeros((len(keys.names), 4))
+    for i in range(4):
+        for sign, out in ((1.0, pos), (-1.0, neg)):
+            e = np.zeros(4)
+            e[i] = sign * UNIT_IOD
+            out[:, i] = keys.weights(shape_of(e), nonnegative=True) / UNIT_IOD
+    return pos, neg
+
+
+def fit_maps(head, rig) -> dict:
+    """head: :class:`assets.heads.builtin.BuiltinHead`; rig: its :class:`realtime_core.face.rig.Rig`."""
+    from realtime_core.face import MouthLandmarks
+    from realtime_core.face.model import measure_mouth
+    from training.articulatory import CLASSES
+
+    mv = rig.moving
+
+    def shape_of(p: np.ndarray) -> np.ndarray:
+        return np.asarray(rig.displacements(p), dtype=np.float64).reshape(-1)
+
+    mouth = tuple(n for n in ARKIT_NAMES if n.startswith(("mouth", "jaw")) and n not in SIDE_SHIFTS)
+    keys = KeyframeSet(
+        names=mouth, shapes=np.column_stack([head.targets[n][mv].reshape(-1) for n in mouth]), ridge=RIDGE
+    )
+    pos_m, neg_m = _signed_fit(keys, shape_of)
+    a_pos, a_neg = np.zeros((len(ARKIT_NAMES), 4)), np.zeros((len(ARKIT_NAMES), 4))
+    for j, n in enumerate(mouth):
+        a_pos[ARKIT_NAMES.index(n)], a_neg[ARKIT_NAMES.index(n)] = pos_m[j], neg_m[j]
+    # (4, 14): the visemes after "sil", in OVR order.
+    ovr = np.column_stack([np.array(CLASSES[OVR_CLASSES[v]].target, dtype=np.float64) for v in OVR_NAMES[1:]])
+    lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    v0 = head.mesh.vertices
+    expr = np.array(
+        [
+            measure_mouth(v0, v0 + sum(w * head.targets[n] for n, w in EXPRESSION_RECIPES[e].items()), lm)
+            for e in EXPRESSIONS
+        ]
+    )
+    return {
+        "ARKIT_POS": a_pos,
+        "ARKIT_NEG": a_neg,
+        "OVR_KEYFRAMES": ovr,
+        "OVR_RIDGE": np.array([OVR_RIDGE]),
+        "EXPRESSION_PARAMS": expr,
+    }
+
+
+def _literal(a: np.ndarray) -> str:
+    if a.ndim == 1:
+        return "(" + ", ".join(f"{v:.6g}" for v in a) + ("," if a.size == 1 else "") + ")"
+    return "(\n" + "".join(f"    {_literal(row)},\n" for row in a) + ")"
+
+
+def module_text(maps: dict) -> str:
+    """The generated ``realtime_core/fitted_maps.py``."""
+    head = f'''"""Fitted blendshape maps and expression table: GENERATED by ``facecast fit-maps`` - do not edit.
+
+ARKit-52 weights: ``w = clip(ARKIT_POS @ max(p, 0) + ARKIT_NEG @ max(-p, 0), 0, 1)`` with
+``p = {VISUAL_PARAMS}`` (IOD);
+rows follow :data:`realtime_core.blendshapes.ARKIT_NAMES`, columns the four parameters (weight per
+IOD). Fitted by non-negative least squares (paper 002 eq. 4, ridge {RIDGE:g}) of the built-in head's own
+ARKit targets to the head rig's motion for each signed parameter unit (+-{UNIT_IOD} IOD). OVR_KEYFRAMES
+``(4, 14)``: the 14 non-silence OVR visemes in the four parameters, solved per frame (ridge OVR_RIDGE).
+See :mod:`training.fit_maps`. EXPRESSION_PARAMS ``(len(EXPRESSIONS), 4)``: each expression recipe's
+change of the four mouth parameters (IOD), measured on the built-in head.
+"""
+
+import numpy as np
+
+'''
+    body = []
+    for name in ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS"):
+        body.append(f"{name} = np.array({_literal(np.asarray(maps[name]))})\n{name}.setflags(write=False)\n")
+    return head + "\n".join(body)
