@@ -24,7 +24,7 @@ from realtime_core.avmodel import AvModel
 from wire import protocol as P
 
 
-def benchmark_model(path: Path | None) -> tuple[AvModel, Path, str]:
+def benchmark_model(path: Path | str | None) -> tuple[AvModel, Path, str]:
     """(model, its file, description): ``path``, else the shipped default model, else a random
     model of the paper's size (28 states x 5 mixtures, 11 cepstra, tc = 3: the same per-frame cost)."""
     from assets.modelfile import DEFAULT_MODEL, load_model, resolve_model, save_model

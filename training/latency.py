@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
 from training.reallips import LipScores, evaluate_lips
 
 DIAL_BEGIN = "<!-- latency-dial: written by `facecast eval --dial`, kept by `facecast eval --output` -->"
@@ -52,7 +53,7 @@ MIN_CLOSURE_RATE = 0.9
 
 
 def score_dial(
-    models: Sequence[tuple[str, object]],
+    models: Sequence[tuple[str, AvModel]],
     clips: Sequence,
     *,
     lags: Sequence[int] = (0,),

@@ -279,7 +279,7 @@ def _run_dial(args: argparse.Namespace) -> int:
         split=args.grid_split,
         png_name=png_name,
         note=f"{len(clips)} sentences; made by `bash scripts/latency_dial.sh` (it trains the "
-        f"tcT_whW models with the default model's recipe, only t_c and the window changed) "
+        f"tcT_whW models with one s1-only recipe, only t_c and the window changed) "
         f"running `{command}`. The shipped pair and the choice between them: "
         "docs/default_model.md.",
     )

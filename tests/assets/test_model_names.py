@@ -13,7 +13,7 @@ from assets.modelfile import (
     resolve_model,
 )
 from facecast.cli import main
-from tests.server.conftest import speechlike
+from tests.speech import speechlike
 
 
 def test_names_resolve_to_the_shipped_files_and_paths_stay_paths(tmp_path):
@@ -36,7 +36,7 @@ def test_low_latency_model_loads_is_under_80_ms_and_differs_from_the_default():
 
 def test_animate_and_eval_accept_the_name(tmp_path, capsys):
     from assets.audio import write_wav
-    from clients.export.curves import read_csv
+    from assets.tracks import decode_csv
 
     wav = tmp_path / "s.wav"
     write_wav(wav, speechlike(1.0, 16000), 16000)
@@ -45,5 +45,5 @@ def test_animate_and_eval_accept_the_name(tmp_path, capsys):
         outs[name] = tmp_path / f"{name}.csv"
         assert main(["animate", str(wav), "--model", name, "--csv", str(outs[name])]) == 0
     assert "algorithmic delay 78.3 ms" in capsys.readouterr().out
-    low, default = (read_csv(outs[n].read_bytes()).params for n in ("low-latency", "default"))
+    low, default = (decode_csv(outs[n].read_bytes()).values for n in ("low-latency", "default"))
     assert low.shape == default.shape == (30, 4) and not np.allclose(low, default)
