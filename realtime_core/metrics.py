@@ -62,7 +62,8 @@ def normalised_mse(true: np.ndarray, est: np.ndarray, *, scale: np.ndarray | Non
 
 
 def average_std(x: np.ndarray) -> float:
-    """Paper 002 eq. 7: ``nu = (1/gamma) sum_c sqrt(Cov[c][c])``, the mean per-dimension standard deviation of ``(T, gamma)``."""
+    """Paper 002 eq. 7: ``nu = (1/gamma) sum_c sqrt(Cov[c][c])``, the mean per-dimension standard deviation
+    of ``(T, gamma)``."""
     a = np.asarray(x, dtype=np.float64)
     if a.ndim != 2 or a.shape[0] < 2:
         raise InvalidFeaturesError(f"a track must be (T >= 2, gamma), got {a.shape}")

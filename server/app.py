@@ -28,14 +28,16 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import logging
 import signal
 import socket
 import time
 import urllib.parse
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Coroutine
 from http import HTTPStatus
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -72,6 +74,9 @@ from server.timing import StageTimes
 from server.workers import WorkerPool
 from wire import protocol as P
 
+if TYPE_CHECKING:  # imported lazily at run time: only `--text` servers load unit selection
+    from server.text_session import TextBackend
+
 log = logging.getLogger("facecast.server")
 
 
@@ -107,7 +112,7 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.cluster: Cluster | None = None
-        self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
+        self.text_backend: TextBackend | None = None  # enables /text (set by `facecast serve --text`)
         self.http = HttpRouter(
             web_root=config.web_root, node_modules=config.node_modules, head=head, sessions=self.session_list
         )
@@ -203,7 +208,7 @@ class FacecastServer:
             await self.pool.stop()
             self.pool = None
 
-    def spawn(self, coro) -> asyncio.Task:  # noqa: ANN001 - any coroutine
+    def spawn(self, coro: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         """Run a coroutine in the background, holding a reference until it is done."""
         task = asyncio.get_running_loop().create_task(coro)
         self._tasks.add(task)
@@ -213,10 +218,8 @@ class FacecastServer:
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
         """Close one connection with a code and reason (counted in metrics)."""
         self.closes[code] += 1
-        try:
+        with contextlib.suppress(ConnectionClosed):
             await ws.close(code, reason[:120])
-        except ConnectionClosed:
-            pass
 
     # -- sessions ----------------------------------------------------------------------------------
 
@@ -348,7 +351,7 @@ class FacecastServer:
     async def _forward_ingest(self, ws: ServerConnection) -> None:
         """An edge node relays an ingest to the least loaded computing node, both ways, close code
         and reason included; the client never knows."""
-        from websockets.asyncio.client import connect
+        from websockets.asyncio.client import ClientConnection, connect
 
         target = await self.cluster.compute_node() if self.cluster is not None else None
         if target is None:
@@ -364,7 +367,7 @@ class FacecastServer:
         except (OSError, TimeoutError, WebSocketException):
             raise ProtocolViolation(P.CLOSE_TRY_LATER, "the computing node cannot be reached") from None
 
-        async def pump(src, dst) -> None:  # noqa: ANN001 - websockets connections of either side
+        async def pump(src: ServerConnection | ClientConnection, dst: ServerConnection | ClientConnection) -> None:
             async for msg in src:
                 await dst.send(msg)
 
@@ -661,9 +664,7 @@ def _response(reply: HttpReply) -> Response:
     return Response(reply.status.value, reply.status.phrase, headers, reply.body)
 
 
-async def run_server(
-    server: FacecastServer, *, ready: "asyncio.Future | None" = None, extra: list | None = None
-) -> None:
+async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = None, extra: list | None = None) -> None:
     """Run until SIGINT/SIGTERM (or ``extra`` coroutines all finish), then shut down gracefully.
 
     BLAS is pinned to one thread for the whole run: per-frame products are tiny and on a shared

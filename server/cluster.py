@@ -42,11 +42,12 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import json
 import logging
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any
 
 from server.errors import ServerError
 from wire import protocol as P
@@ -123,7 +124,7 @@ class Cluster:
         heartbeat_s: float,
         role: str = "both",
         deliver: Callable[[RemoteFeed, bytes, int, int], None],
-        end_feed: Callable[[RemoteFeed], "asyncio.Future | object"],
+        end_feed: Callable[[RemoteFeed], Coroutine[Any, Any, None]],
     ) -> None:
         self.url = url
         self.node = node
@@ -133,10 +134,10 @@ class Cluster:
         self.ttl_ms = int(3000 * heartbeat_s)
         self._deliver = deliver
         self._end_feed = end_feed
-        self.redis: "aioredis.Redis | None" = None
+        self.redis: aioredis.Redis | None = None
         self.up = False
         self.error = ""
-        self.local: dict[str, "LiveSession"] = {}
+        self.local: dict[str, LiveSession] = {}
         self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
         self.feeds: dict[str, RemoteFeed] = {}
         self.published = 0
@@ -144,6 +145,9 @@ class Cluster:
         self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task] = []
+        # One-shot tasks started from message callbacks (unsubscribe, end a feed): held here until done,
+        # since the loop keeps only a weak reference to a task.
+        self._oneshots: set[asyncio.Task[None]] = set()
         self._pubsub = None
         self._subscribed: set[str] = set()
 
@@ -184,10 +188,8 @@ class Cluster:
             except Exception:  # noqa: BLE001 - best effort on the way out: the keys expire anyway
                 pass
         if self._pubsub is not None:
-            try:
+            with contextlib.suppress(Exception):  # the connection may already be gone
                 await self._pubsub.aclose()
-            except Exception:  # noqa: BLE001 - the connection may already be gone
-                pass
         if self.redis is not None:
             await self.redis.aclose()
 
@@ -202,7 +204,7 @@ class Cluster:
 
     # -- sessions this node owns --------------------------------------------------------------------------
 
-    def _row(self, live: "LiveSession") -> str:
+    def _row(self, live: LiveSession) -> str:
         from server.describe import summary
 
         s = live.session
@@ -219,7 +221,7 @@ class Cluster:
         )
         return json.dumps(row)
 
-    async def claim(self, live: "LiveSession") -> str | None:
+    async def claim(self, live: LiveSession) -> str | None:
         """Register a new local session; returns the owner's node id if the name is taken elsewhere.
         With Redis away the session opens locally (registered when Redis returns)."""
         from redis.exceptions import RedisError
@@ -236,7 +238,7 @@ class Cluster:
         self.local[live.name] = live
         return None
 
-    async def release(self, live: "LiveSession", code: int, reason: str) -> None:
+    async def release(self, live: LiveSession, code: int, reason: str) -> None:
         """A local session ended: tell remote viewers (end marker) and drop its registry row."""
         from redis.exceptions import RedisError
 
@@ -399,6 +401,11 @@ class Cluster:
             except Exception as exc:  # noqa: BLE001 - the listener resubscribes when Redis returns
                 self._down(exc)
 
+    def _oneshot(self, coro: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.ensure_future(coro)
+        self._oneshots.add(task)
+        task.add_done_callback(self._oneshots.discard)
+
     async def _unsubscribe(self, channel: str) -> None:
         self._subscribed.discard(channel)
         if self._pubsub is not None:
@@ -424,10 +431,8 @@ class Cluster:
                 raise
             except (RedisError, OSError) as exc:
                 self._down(exc)
-                try:
+                with contextlib.suppress(Exception):  # already broken
                     await self._pubsub.aclose()
-                except Exception:  # noqa: BLE001 - already broken
-                    pass
                 self._pubsub = None
                 await asyncio.sleep(0.5)
 
@@ -448,8 +453,8 @@ class Cluster:
             feed.end = (int(end["code"]), str(end["reason"]))
             feed.ended.set()
             self.feeds.pop(name, None)
-            asyncio.ensure_future(self._unsubscribe(channel))
-            asyncio.ensure_future(self._end_feed(feed))
+            self._oneshot(self._unsubscribe(channel))
+            self._oneshot(self._end_feed(feed))
             return
         if len(data) < P.HEADER_BYTES:
             return

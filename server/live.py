@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import time
 from typing import TYPE_CHECKING, Protocol
 
@@ -97,7 +98,7 @@ class LocalSession:
         return self.core.control_state()
 
 
-def deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+def deliver(viewers: list[Viewer], msg: bytes, now: float) -> None:
     """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
     message), the bounded queue for the others."""
     fast = []
@@ -118,12 +119,12 @@ class Viewer:
     def __init__(
         self,
         ws: ServerConnection,
-        live: "LiveSession",
+        live: LiveSession,
         *,
         kind: int,
         encoding: int,
         audio: bool,
-        server: "FacecastServer",
+        server: FacecastServer,
     ) -> None:
         self.ws = ws
         self.live = live
@@ -194,7 +195,7 @@ class Viewer:
 class LiveSession:
     """A session with its viewers: feed it audio, it fans frames out."""
 
-    def __init__(self, name: str, session: "SessionHandle", server: "FacecastServer", *, source: str) -> None:
+    def __init__(self, name: str, session: SessionHandle, server: FacecastServer, *, source: str) -> None:
         self.name = name
         self.session = session
         self.server = server
@@ -249,10 +250,8 @@ class LiveSession:
                 '(send in real time, or start with "batch": true)'
             )
         self.paced_s += wait
-        try:  # a shutdown (ended) cuts the wait short
+        with contextlib.suppress(TimeoutError):  # a shutdown (ended) cuts the wait short
             await asyncio.wait_for(self.ended.wait(), wait)
-        except TimeoutError:
-            pass
 
     async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""

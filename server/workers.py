@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import multiprocessing as mp
 import time
 from dataclasses import asdict
@@ -57,7 +58,7 @@ def _pack(out: Output, rec: _Recorder) -> tuple:
     return raw, params, work, audio, log, expr
 
 
-def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing Connection
+def _worker_main(conn, model_bytes: bytes) -> None:
     """Worker process: decode the model once, then serve session requests until "stop"."""
     from threadpoolctl import threadpool_limits
 
@@ -101,7 +102,7 @@ def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiproce
 
 
 class _Worker:
-    def __init__(self, ctx, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing context
+    def __init__(self, ctx, model_bytes: bytes) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
         self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes), daemon=True)
         self.proc.start()
@@ -166,17 +167,15 @@ class WorkerPool:
         loop = asyncio.get_running_loop()
         for w in self.workers:
             loop.remove_reader(w.conn.fileno())
-            try:
+            with contextlib.suppress(BrokenPipeError, OSError):
                 w.conn.send(("stop",))
-            except (BrokenPipeError, OSError):
-                pass
         for w in self.workers:
             await loop.run_in_executor(None, w.proc.join, 5)
             if w.proc.is_alive():
                 w.proc.kill()
         self.workers = []
 
-    async def open(self, config: SessionConfig, *, rig, times: StageTimes) -> "RemoteSession":  # noqa: ANN001
+    async def open(self, config: SessionConfig, *, rig, times: StageTimes) -> RemoteSession:
         w = min(self.workers, key=lambda x: x.sessions)
         self._next_id += 1
         sid = self._next_id
@@ -195,7 +194,7 @@ class RemoteSession:
         worker: _Worker,
         sid: int,
         *,
-        rig,  # noqa: ANN001
+        rig,
         times: StageTimes,
     ) -> None:
         self.model = model

@@ -220,8 +220,9 @@ def markdown(rows: Sequence[dict], *, n_sentences: int, corpus_meta: Mapping, co
         ),
         "",
         (
-            "| system | r upper_lip_raise | r lip_stretch | r mouth_open | r lip_corner_depress | r speech (mouth_open) "
-            "| height err % | width err % | protrusion err % | units/sentence | synthesis ms (median) |"
+            "| system | r upper_lip_raise | r lip_stretch | r mouth_open | r lip_corner_depress "
+            "| r speech (mouth_open) | height err % | width err % | protrusion err % | units/sentence "
+            "| synthesis ms (median) |"
         ),
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]

@@ -222,7 +222,7 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
             if i in seen:
                 raise MeshError(f"{path}: node hierarchy has a cycle")
             m = _node_matrix(nodes[i])
-            return world_of(parent[i], seen + (i,)) @ m if i in parent else m
+            return world_of(parent[i], (*seen, i)) @ m if i in parent else m
 
         world = [world_of(i) for i in range(len(nodes))]
         scenes = doc.get("scenes", [])

@@ -48,7 +48,7 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             continue
         elif key == "Kd":
             rgb = [float(x) for x in rest.split()[:3]]
-            out[cur].color = np.array(rgb + [1.0])
+            out[cur].color = np.array([*rgb, 1.0])
         elif key == "map_Kd":
             name = rest.split()[-1]  # options (-s, -o, ...) come before the file name
             img = path.parent / name.replace("\\", "/")

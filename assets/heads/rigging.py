@@ -54,7 +54,7 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
 ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
-REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
+REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
 
 @dataclass(frozen=True)

@@ -136,9 +136,9 @@ def run(args: argparse.Namespace) -> int:
             lips_markdown(
                 "3. Other voices without video: real speech with phone alignments",
                 s,
-                note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone timings "
-                "(their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the closures "
-                "are the aligned /p b m/ phones.",
+                note="ARCTIC, LibriVox and praatio recordings; truth = the articulatory rules on the real phone "
+                "timings (their own r against real lips is about 0.5-0.6, so r here is bounded well below 1); the "
+                "closures are the aligned /p b m/ phones.",
                 goals={"closure >= 90%": s.closure_rate >= 0.9},
             )
         )
