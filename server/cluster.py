@@ -54,6 +54,7 @@ from wire import protocol as P
 
 if TYPE_CHECKING:
     import redis.asyncio as aioredis
+    from redis.asyncio.client import PubSub
 
     from server.live import LiveSession
 
@@ -148,8 +149,15 @@ class Cluster:
         # One-shot tasks started from message callbacks (unsubscribe, end a feed): held here until done,
         # since the loop keeps only a weak reference to a task.
         self._oneshots: set[asyncio.Task[None]] = set()
-        self._pubsub = None
+        self._pubsub: PubSub | None = None
         self._subscribed: set[str] = set()
+
+    @property
+    def _client(self) -> aioredis.Redis:
+        """The Redis client, which exists from :meth:`start` on."""
+        if self.redis is None:
+            raise ServerError("the cluster is used before start()")
+        return self.redis
 
     # -- lifecycle -------------------------------------------------------------------------------------
 
@@ -227,9 +235,9 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            ok = await self.redis.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
+            ok = await self._client.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
             if not ok:
-                raw = await self.redis.get(session_key(live.name))
+                raw = await self._client.get(session_key(live.name))
                 owner = json.loads(raw).get("node", "?") if raw else None
                 if owner is not None and owner != self.node:
                     return owner
@@ -248,7 +256,7 @@ class Cluster:
         self.wanted.pop(live.name, None)
         self.publish(live.name, END_MARK + json.dumps({"code": code, "reason": reason}).encode())
         try:
-            await self.redis.delete(session_key(live.name))
+            await self._client.delete(session_key(live.name))
         except (RedisError, OSError) as exc:
             self._down(exc)
 
@@ -273,7 +281,7 @@ class Cluster:
             while self._queue:
                 batch = [self._queue.popleft() for _ in range(min(len(self._queue), 256))]
                 try:
-                    pipe = self.redis.pipeline(transaction=False)
+                    pipe = self._client.pipeline(transaction=False)
                     for channel, msg in batch:
                         pipe.publish(channel, msg)
                     await pipe.execute()
@@ -305,7 +313,7 @@ class Cluster:
             await asyncio.sleep(self.heartbeat_s if self.up else min(self.heartbeat_s, 0.5))
 
     async def _beat(self) -> None:
-        r = self.redis
+        r = self._client
         pipe = r.pipeline(transaction=False)
         pipe.set(
             f"{PREFIX}:node:{self.node}",
@@ -338,7 +346,7 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            raw = await self.redis.get(session_key(name))
+            raw = await self._client.get(session_key(name))
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -352,8 +360,8 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:node:*", count=500)]
-            rows = [json.loads(r) for r in (await self.redis.mget(keys) if keys else []) if r is not None]
+            keys = [k async for k in self._client.scan_iter(match=f"{PREFIX}:node:*", count=500)]
+            rows = [json.loads(r) for r in (await self._client.mget(keys) if keys else []) if r is not None]
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -365,8 +373,8 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:session:*", count=500)]
-            rows = await self.redis.mget(keys) if keys else []
+            keys = [k async for k in self._client.scan_iter(match=f"{PREFIX}:session:*", count=500)]
+            rows = await self._client.mget(keys) if keys else []
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -380,7 +388,7 @@ class Cluster:
             feed = self.feeds[name] = RemoteFeed(name, row)
             await self._subscribe(frames_channel(name))
         pairs = [(kind, encoding)] + ([(P.KIND_AUDIO, P.ENC_INT16)] if audio else [])
-        pipe = self.redis.pipeline(transaction=False)
+        pipe = self._client.pipeline(transaction=False)
         for k, e in pairs:
             pipe.set(want_key(name, k, e), self.node, px=self.ttl_ms)
             pipe.publish(control_channel(row["node"]), json.dumps({"want": [name, k, e]}))
@@ -420,10 +428,10 @@ class Cluster:
 
         while True:
             try:
-                self._pubsub = self.redis.pubsub(ignore_subscribe_messages=True)
-                await self._pubsub.subscribe(control_channel(self.node), *self._subscribed)
+                self._pubsub = pubsub = self._client.pubsub(ignore_subscribe_messages=True)
+                await pubsub.subscribe(control_channel(self.node), *self._subscribed)
                 while True:
-                    msg = await self._pubsub.get_message(timeout=1.0)
+                    msg = await pubsub.get_message(timeout=1.0)
                     if msg is None:
                         continue
                     self._on_message(msg)
@@ -431,8 +439,9 @@ class Cluster:
                 raise
             except (RedisError, OSError) as exc:
                 self._down(exc)
-                with contextlib.suppress(Exception):  # already broken
-                    await self._pubsub.aclose()
+                if self._pubsub is not None:
+                    with contextlib.suppress(Exception):  # already broken
+                        await self._pubsub.aclose()
                 self._pubsub = None
                 await asyncio.sleep(0.5)
 

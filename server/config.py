@@ -7,6 +7,7 @@ import re
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 from server.errors import ServerConfigError
 
@@ -156,7 +157,7 @@ class ServerConfig:
                 object.__setattr__(self, name, Path(getattr(self, name)))
 
     @classmethod
-    def from_toml(cls, path: str | Path, **overrides: object) -> ServerConfig:
+    def from_toml(cls, path: str | Path, **overrides: Any) -> ServerConfig:
         """Read the ``[server]`` table of a TOML file (keys = field names); ``overrides`` (non-None) win."""
         p = Path(path)
         try:

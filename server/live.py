@@ -281,7 +281,7 @@ class LiveSession:
                     + a.payload()
                 )
                 deliver(listeners, msg, now)
-                if remote:
+                if remote and cluster is not None:  # remote is empty without a cluster
                     cluster.publish(self.name, msg)
         if out.frames:
             groups: dict[tuple[int, int], list[Viewer]] = {k: [] for k in remote if k[0] != P.KIND_AUDIO}
@@ -292,7 +292,7 @@ class LiveSession:
                     payload, count, scale = frame.payload(kind, enc)
                     msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
                     deliver(members, msg, now)
-                    if (kind, enc) in remote:
+                    if cluster is not None and (kind, enc) in remote:
                         cluster.publish(self.name, msg)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)

@@ -152,11 +152,11 @@ class Frame:
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
             # ARKit has the expressions' own shapes: speech weights plus the recipes.
-            values = (
-                blendshape_weights(self.params, "arkit52")
-                if self.expression is None
-                else blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
-            )
+            if self.expression is None:
+                values = blendshape_weights(self.params, "arkit52")
+            else:
+                assert self.speech_params is not None  # set together with expression
+                values = blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
             stage = "encode_blendshapes"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -65,7 +66,7 @@ class MicSource:
         self.first_block = asyncio.Event()
         self.overflows = 0
         self._queue: asyncio.Queue[np.ndarray | None] = asyncio.Queue()
-        self._stream = None
+        self._stream: Any = None  # a sounddevice.InputStream (sounddevice has no type information)
         self.sample_rate_hz = 0
         self.channels = config.channels
         self._closed = False
