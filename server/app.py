@@ -321,7 +321,7 @@ class FacecastServer:
     # -- WebSocket connections ---------------------------------------------------------------------
 
     async def _handle(self, ws: ServerConnection) -> None:
-        path = urllib.parse.urlsplit(ws.request.path).path
+        path = urllib.parse.urlsplit(_request_path(ws)).path
         client = _client_address(ws)
         self.clients.add(client)
         try:
@@ -433,6 +433,7 @@ class FacecastServer:
             elif isinstance(action, SP.Close):
                 await self.close_ws(ws, action.code, action.reason)
             elif isinstance(action, SP.Feed):
+                assert live is not None  # the protocol feeds, controls and finishes only an open session
                 try:
                     await live.feed_bytes_fairly(action.data)
                 except AudioFormatError as exc:
@@ -440,11 +441,13 @@ class FacecastServer:
                 except IngestOverrun as exc:
                     todo.extend(proto.too_fast(str(exc)))
             elif isinstance(action, SP.Control):
+                assert live is not None
                 try:
                     todo.extend(proto.control_applied(await live.control(action.message)))
                 except ControlError as exc:
                     todo.extend(proto.control_rejected(str(exc)))
             elif isinstance(action, SP.Finish):
+                assert live is not None
                 await live.finish()
                 s = live.session
                 todo.extend(proto.finished(s.frames_out, s.samples_out / s.rate_hz))
@@ -463,7 +466,7 @@ class FacecastServer:
 
     async def _view(self, ws: ServerConnection) -> None:
         req = SP.parse_view_query(
-            SP.query_args(ws.request.path), token=self.config.token, has_head=self.head is not None
+            SP.query_args(_request_path(ws)), token=self.config.token, has_head=self.head is not None
         )
         live = self.sessions.get(req.session)
         if live is None and self.cluster is not None:
@@ -503,12 +506,9 @@ class FacecastServer:
                     continue
                 break
             reader.cancel()
-            if (
-                sender in done
-                and sender.exception() is not None
-                and not isinstance(sender.exception(), ConnectionClosed)
-            ):
-                raise sender.exception()
+            failure = sender.exception() if sender in done else None
+            if failure is not None and not isinstance(failure, ConnectionClosed):
+                raise failure
         finally:
             sender.cancel()
             live.viewers.discard(viewer)
@@ -516,9 +516,11 @@ class FacecastServer:
 
     async def _view_remote(self, ws: ServerConnection, req: SP.ViewRequest, row: dict) -> None:
         """A viewer of a session owned by another node: fed from that session's Redis channel."""
+        cluster = self.cluster
+        assert cluster is not None  # only a cluster node looks up remote sessions
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
-        feed = await self.cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
+        feed = await cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
         await ws.send(P.dumps(describe.view_description(feed, req, self.head)))
         viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
         feed.viewers.add(viewer)
@@ -535,7 +537,7 @@ class FacecastServer:
             sender.cancel()
             feed.viewers.discard(viewer)
             self.n_viewers -= 1
-            await self.cluster.drop_feed_if_idle(feed)
+            await cluster.drop_feed_if_idle(feed)
 
     def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
         """A message of a remote session from Redis -> this node's viewers of it that want it."""
@@ -636,6 +638,12 @@ class FacecastServer:
         }
 
 
+def _request_path(ws: ServerConnection) -> str:
+    """The path and query of a connection's opening request."""
+    assert ws.request is not None  # set by the opening handshake, before any handler runs
+    return ws.request.path
+
+
 def _client_address(connection: ServerConnection) -> str:
     """The peer's IP address (the per-client limit's key)."""
     peer = connection.remote_address
@@ -687,8 +695,9 @@ async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = N
                 waiters.append(work)
             await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
             for w in waiters:
-                if w.done() and w is not waiters[0] and w.exception() is not None:
-                    raise w.exception()
+                failure = w.exception() if w.done() and w is not waiters[0] else None
+                if failure is not None:
+                    raise failure
         finally:
             for w in waiters:
                 w.cancel()

@@ -15,6 +15,7 @@ from wire import protocol as P
 
 if TYPE_CHECKING:
     from assets.heads.head import Head
+    from server.cluster import RemoteFeed
     from server.live import LiveSession
     from server.protocol import ViewRequest
 
@@ -35,7 +36,7 @@ def started(live: LiveSession) -> dict:
     return out
 
 
-def view_description(live: LiveSession, req: ViewRequest, head: Head | None) -> dict:
+def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Head | None) -> dict:
     """A viewer's first message: the session, the subscription, the value layout and the head."""
     s = live.session
     d: dict = {

@@ -29,11 +29,12 @@ from websockets.asyncio.server import ServerConnection, broadcast
 from server.describe import summary
 from server.errors import IngestOverrun
 from server.guard import IngestPacer
-from server.session import Output, Session, SessionConfig
+from server.session import Output, Session
 from wire import protocol as P
 
 if TYPE_CHECKING:
     from server.app import FacecastServer
+    from server.cluster import RemoteFeed
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -41,16 +42,34 @@ FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a
 FAST_PATH_BUFFER_BYTES = 64 * 1024
 
 
-class SessionHandle(Protocol):
-    """What a live session needs from its session, wherever it runs."""
+class InputFormat(Protocol):
+    """What live sessions and descriptions read of a session's input format (a :class:`SessionConfig`,
+    or a text session's fixed format)."""
 
-    config: SessionConfig
-    rate_hz: int
-    fps: int
-    frames_out: int
-    samples_out: int
-    frame_bytes: int
-    algorithmic_delay_s: float
+    @property
+    def sample_rate_hz(self) -> int: ...
+    @property
+    def channels(self) -> int: ...
+
+
+class SessionHandle(Protocol):
+    """What a live session needs from its session, wherever it runs (read-only facts: a local
+    session's are attributes, a worker's properties)."""
+
+    @property
+    def config(self) -> InputFormat: ...
+    @property
+    def rate_hz(self) -> int: ...
+    @property
+    def fps(self) -> int: ...
+    @property
+    def frames_out(self) -> int: ...
+    @property
+    def samples_out(self) -> int: ...
+    @property
+    def frame_bytes(self) -> int: ...
+    @property
+    def algorithmic_delay_s(self) -> float: ...
 
     async def push_bytes(self, data: bytes) -> Output: ...
     async def push(self, samples: np.ndarray) -> Output: ...
@@ -119,7 +138,7 @@ class Viewer:
     def __init__(
         self,
         ws: ServerConnection,
-        live: LiveSession,
+        live: LiveSession | RemoteFeed,
         *,
         kind: int,
         encoding: int,

@@ -28,7 +28,9 @@ from dataclasses import asdict
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
+from realtime_core.face.keyframes import MorphRig
+from realtime_core.face.rig import Rig
+from realtime_core.mapping import SpeechModel
 from server.errors import AudioFormatError, ControlError, ServerConfigError, ServerError
 from server.session import AudioBlock, Frame, Output, SessionConfig
 from server.timing import StageTimes
@@ -142,7 +144,7 @@ class _Worker:
 class WorkerPool:
     """N compute processes holding the model; ``await start()``, ``open()`` sessions, ``await stop()``."""
 
-    def __init__(self, model: AvModel, n: int) -> None:
+    def __init__(self, model: SpeechModel, n: int) -> None:
         if not 1 <= n <= 64:
             raise ServerConfigError(f"workers must be in 1..64, got {n}")
         self.model = model
@@ -175,7 +177,7 @@ class WorkerPool:
                 w.proc.kill()
         self.workers = []
 
-    async def open(self, config: SessionConfig, *, rig, times: StageTimes) -> RemoteSession:
+    async def open(self, config: SessionConfig, *, rig: Rig | MorphRig | None, times: StageTimes) -> RemoteSession:
         w = min(self.workers, key=lambda x: x.sessions)
         self._next_id += 1
         sid = self._next_id
@@ -189,12 +191,12 @@ class RemoteSession:
 
     def __init__(
         self,
-        model: AvModel,
+        model: SpeechModel,
         config: SessionConfig,
         worker: _Worker,
         sid: int,
         *,
-        rig,
+        rig: Rig | MorphRig | None,
         times: StageTimes,
     ) -> None:
         self.model = model
