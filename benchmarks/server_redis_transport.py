@@ -23,10 +23,14 @@ import struct
 import subprocess
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from server.timing import summarise
+
+if TYPE_CHECKING:
+    from redis.typing import KeyT, StreamIdT
 
 STAMP = struct.Struct("<dI")  # publish time (s), sequence number
 
@@ -77,9 +81,12 @@ async def _run(url: str, transport: str, sessions: int, seconds: float, payload:
         await pub.delete(*names)
 
         async def consume() -> None:
-            last = {n: "0" for n in names}  # the keys were just deleted: everything from now on
+            # the keys were just deleted: everything from now on
+            last: dict[KeyT, StreamIdT] = {n: "0" for n in names}
             while not stop:
-                out = await sub.xread(last, block=200, count=1000)
+                # RESP2 (redis-py's default protocol) replies [[stream, [(id, {field: value})]]]; redis-py
+                # types the reply as the union of its RESP2 and RESP3 shapes
+                out = cast("list[list[Any]]", await sub.xread(last, block=200, count=1000))
                 for key, entries in out:
                     k = key.decode()
                     for eid, fields in entries:

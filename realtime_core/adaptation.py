@@ -50,6 +50,8 @@ def adapt_av_model(
         return model, result
     before = audio_log_likelihood(model.hmm, feats) / result.n_frames
     after = audio_log_likelihood(result.model, feats) / result.n_frames
+    # map_adapt fills occupancy whenever it saw frames (n_frames > 0 here)
+    visited = int(np.sum(result.occupancy > 1.0)) if result.occupancy is not None else 0
     meta = dict(model.metadata)
     meta["adaptation"] = {
         "method": "MAP (Gauvain & Lee) of audio means and mixture weights on the audio marginal",
@@ -59,6 +61,6 @@ def adapt_av_model(
         "weight_relevance": config.weight_relevance,
         "iterations": len(result.history) - 1,
         "audio_loglik_per_frame": [round(before, 4), round(after, 4)],
-        "components_visited": int(np.sum(result.occupancy > 1.0)),
+        "components_visited": visited,
     }
     return replace(model, hmm=result.model, metadata=meta), result

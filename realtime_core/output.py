@@ -48,8 +48,8 @@ class OutputStage:
                 if v < c + KNEE * self.band:
                     y[j] = c + max(v - c - self.band, 0.0) * gain
         elif self._pairs:
-            c = self.floor[self._closed]
-            v = y[..., self._closed]
-            stretched = c + np.maximum(v - c - self.band, 0.0) * gain
-            y[..., self._closed] = np.where(v < c + KNEE * self.band, stretched, v)
+            closed = self.floor[self._closed]
+            vals = y[..., self._closed]
+            stretched = closed + np.maximum(vals - closed - self.band, 0.0) * gain
+            y[..., self._closed] = np.where(vals < closed + KNEE * self.band, stretched, vals)
         return y

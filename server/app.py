@@ -28,14 +28,16 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import logging
 import signal
 import socket
 import time
 import urllib.parse
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Coroutine
 from http import HTTPStatus
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
@@ -72,6 +74,9 @@ from server.timing import StageTimes
 from server.workers import WorkerPool
 from wire import protocol as P
 
+if TYPE_CHECKING:  # imported lazily at run time: only `--text` servers load unit selection
+    from server.text_session import TextBackend
+
 log = logging.getLogger("facecast.server")
 
 
@@ -107,7 +112,7 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.cluster: Cluster | None = None
-        self.text_backend = None  # server.text_session.TextBackend: enables /text (set by `facecast serve --text`)
+        self.text_backend: TextBackend | None = None  # enables /text (set by `facecast serve --text`)
         self.http = HttpRouter(
             web_root=config.web_root, node_modules=config.node_modules, head=head, sessions=self.session_list
         )
@@ -203,7 +208,7 @@ class FacecastServer:
             await self.pool.stop()
             self.pool = None
 
-    def spawn(self, coro) -> asyncio.Task:  # noqa: ANN001 - any coroutine
+    def spawn(self, coro: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         """Run a coroutine in the background, holding a reference until it is done."""
         task = asyncio.get_running_loop().create_task(coro)
         self._tasks.add(task)
@@ -213,10 +218,8 @@ class FacecastServer:
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
         """Close one connection with a code and reason (counted in metrics)."""
         self.closes[code] += 1
-        try:
+        with contextlib.suppress(ConnectionClosed):
             await ws.close(code, reason[:120])
-        except ConnectionClosed:
-            pass
 
     # -- sessions ----------------------------------------------------------------------------------
 
@@ -318,7 +321,7 @@ class FacecastServer:
     # -- WebSocket connections ---------------------------------------------------------------------
 
     async def _handle(self, ws: ServerConnection) -> None:
-        path = urllib.parse.urlsplit(ws.request.path).path
+        path = urllib.parse.urlsplit(_request_path(ws)).path
         client = _client_address(ws)
         self.clients.add(client)
         try:
@@ -348,7 +351,7 @@ class FacecastServer:
     async def _forward_ingest(self, ws: ServerConnection) -> None:
         """An edge node relays an ingest to the least loaded computing node, both ways, close code
         and reason included; the client never knows."""
-        from websockets.asyncio.client import connect
+        from websockets.asyncio.client import ClientConnection, connect
 
         target = await self.cluster.compute_node() if self.cluster is not None else None
         if target is None:
@@ -364,7 +367,7 @@ class FacecastServer:
         except (OSError, TimeoutError, WebSocketException):
             raise ProtocolViolation(P.CLOSE_TRY_LATER, "the computing node cannot be reached") from None
 
-        async def pump(src, dst) -> None:  # noqa: ANN001 - websockets connections of either side
+        async def pump(src: ServerConnection | ClientConnection, dst: ServerConnection | ClientConnection) -> None:
             async for msg in src:
                 await dst.send(msg)
 
@@ -430,6 +433,7 @@ class FacecastServer:
             elif isinstance(action, SP.Close):
                 await self.close_ws(ws, action.code, action.reason)
             elif isinstance(action, SP.Feed):
+                assert live is not None  # the protocol feeds, controls and finishes only an open session
                 try:
                     await live.feed_bytes_fairly(action.data)
                 except AudioFormatError as exc:
@@ -437,11 +441,13 @@ class FacecastServer:
                 except IngestOverrun as exc:
                     todo.extend(proto.too_fast(str(exc)))
             elif isinstance(action, SP.Control):
+                assert live is not None
                 try:
                     todo.extend(proto.control_applied(await live.control(action.message)))
                 except ControlError as exc:
                     todo.extend(proto.control_rejected(str(exc)))
             elif isinstance(action, SP.Finish):
+                assert live is not None
                 await live.finish()
                 s = live.session
                 todo.extend(proto.finished(s.frames_out, s.samples_out / s.rate_hz))
@@ -460,7 +466,7 @@ class FacecastServer:
 
     async def _view(self, ws: ServerConnection) -> None:
         req = SP.parse_view_query(
-            SP.query_args(ws.request.path), token=self.config.token, has_head=self.head is not None
+            SP.query_args(_request_path(ws)), token=self.config.token, has_head=self.head is not None
         )
         live = self.sessions.get(req.session)
         if live is None and self.cluster is not None:
@@ -500,12 +506,9 @@ class FacecastServer:
                     continue
                 break
             reader.cancel()
-            if (
-                sender in done
-                and sender.exception() is not None
-                and not isinstance(sender.exception(), ConnectionClosed)
-            ):
-                raise sender.exception()
+            failure = sender.exception() if sender in done else None
+            if failure is not None and not isinstance(failure, ConnectionClosed):
+                raise failure
         finally:
             sender.cancel()
             live.viewers.discard(viewer)
@@ -513,9 +516,11 @@ class FacecastServer:
 
     async def _view_remote(self, ws: ServerConnection, req: SP.ViewRequest, row: dict) -> None:
         """A viewer of a session owned by another node: fed from that session's Redis channel."""
+        cluster = self.cluster
+        assert cluster is not None  # only a cluster node looks up remote sessions
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
-        feed = await self.cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
+        feed = await cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
         await ws.send(P.dumps(describe.view_description(feed, req, self.head)))
         viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
         feed.viewers.add(viewer)
@@ -532,7 +537,7 @@ class FacecastServer:
             sender.cancel()
             feed.viewers.discard(viewer)
             self.n_viewers -= 1
-            await self.cluster.drop_feed_if_idle(feed)
+            await cluster.drop_feed_if_idle(feed)
 
     def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
         """A message of a remote session from Redis -> this node's viewers of it that want it."""
@@ -633,6 +638,12 @@ class FacecastServer:
         }
 
 
+def _request_path(ws: ServerConnection) -> str:
+    """The path and query of a connection's opening request."""
+    assert ws.request is not None  # set by the opening handshake, before any handler runs
+    return ws.request.path
+
+
 def _client_address(connection: ServerConnection) -> str:
     """The peer's IP address (the per-client limit's key)."""
     peer = connection.remote_address
@@ -661,9 +672,7 @@ def _response(reply: HttpReply) -> Response:
     return Response(reply.status.value, reply.status.phrase, headers, reply.body)
 
 
-async def run_server(
-    server: FacecastServer, *, ready: "asyncio.Future | None" = None, extra: list | None = None
-) -> None:
+async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = None, extra: list | None = None) -> None:
     """Run until SIGINT/SIGTERM (or ``extra`` coroutines all finish), then shut down gracefully.
 
     BLAS is pinned to one thread for the whole run: per-frame products are tiny and on a shared
@@ -686,8 +695,9 @@ async def run_server(
                 waiters.append(work)
             await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
             for w in waiters:
-                if w.done() and w is not waiters[0] and w.exception() is not None:
-                    raise w.exception()
+                failure = w.exception() if w.done() and w is not waiters[0] else None
+                if failure is not None:
+                    raise failure
         finally:
             for w in waiters:
                 w.cancel()

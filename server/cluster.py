@@ -42,17 +42,19 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import json
 import logging
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any
 
 from server.errors import ServerError
 from wire import protocol as P
 
 if TYPE_CHECKING:
     import redis.asyncio as aioredis
+    from redis.asyncio.client import PubSub
 
     from server.live import LiveSession
 
@@ -123,7 +125,7 @@ class Cluster:
         heartbeat_s: float,
         role: str = "both",
         deliver: Callable[[RemoteFeed, bytes, int, int], None],
-        end_feed: Callable[[RemoteFeed], "asyncio.Future | object"],
+        end_feed: Callable[[RemoteFeed], Coroutine[Any, Any, None]],
     ) -> None:
         self.url = url
         self.node = node
@@ -133,10 +135,10 @@ class Cluster:
         self.ttl_ms = int(3000 * heartbeat_s)
         self._deliver = deliver
         self._end_feed = end_feed
-        self.redis: "aioredis.Redis | None" = None
+        self.redis: aioredis.Redis | None = None
         self.up = False
         self.error = ""
-        self.local: dict[str, "LiveSession"] = {}
+        self.local: dict[str, LiveSession] = {}
         self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
         self.feeds: dict[str, RemoteFeed] = {}
         self.published = 0
@@ -144,8 +146,18 @@ class Cluster:
         self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task] = []
-        self._pubsub = None
+        # One-shot tasks started from message callbacks (unsubscribe, end a feed): held here until done,
+        # since the loop keeps only a weak reference to a task.
+        self._oneshots: set[asyncio.Task[None]] = set()
+        self._pubsub: PubSub | None = None
         self._subscribed: set[str] = set()
+
+    @property
+    def _client(self) -> aioredis.Redis:
+        """The Redis client, which exists from :meth:`start` on."""
+        if self.redis is None:
+            raise ServerError("the cluster is used before start()")
+        return self.redis
 
     # -- lifecycle -------------------------------------------------------------------------------------
 
@@ -184,10 +196,8 @@ class Cluster:
             except Exception:  # noqa: BLE001 - best effort on the way out: the keys expire anyway
                 pass
         if self._pubsub is not None:
-            try:
+            with contextlib.suppress(Exception):  # the connection may already be gone
                 await self._pubsub.aclose()
-            except Exception:  # noqa: BLE001 - the connection may already be gone
-                pass
         if self.redis is not None:
             await self.redis.aclose()
 
@@ -202,7 +212,7 @@ class Cluster:
 
     # -- sessions this node owns --------------------------------------------------------------------------
 
-    def _row(self, live: "LiveSession") -> str:
+    def _row(self, live: LiveSession) -> str:
         from server.describe import summary
 
         s = live.session
@@ -219,15 +229,15 @@ class Cluster:
         )
         return json.dumps(row)
 
-    async def claim(self, live: "LiveSession") -> str | None:
+    async def claim(self, live: LiveSession) -> str | None:
         """Register a new local session; returns the owner's node id if the name is taken elsewhere.
         With Redis away the session opens locally (registered when Redis returns)."""
         from redis.exceptions import RedisError
 
         try:
-            ok = await self.redis.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
+            ok = await self._client.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
             if not ok:
-                raw = await self.redis.get(session_key(live.name))
+                raw = await self._client.get(session_key(live.name))
                 owner = json.loads(raw).get("node", "?") if raw else None
                 if owner is not None and owner != self.node:
                     return owner
@@ -236,7 +246,7 @@ class Cluster:
         self.local[live.name] = live
         return None
 
-    async def release(self, live: "LiveSession", code: int, reason: str) -> None:
+    async def release(self, live: LiveSession, code: int, reason: str) -> None:
         """A local session ended: tell remote viewers (end marker) and drop its registry row."""
         from redis.exceptions import RedisError
 
@@ -246,7 +256,7 @@ class Cluster:
         self.wanted.pop(live.name, None)
         self.publish(live.name, END_MARK + json.dumps({"code": code, "reason": reason}).encode())
         try:
-            await self.redis.delete(session_key(live.name))
+            await self._client.delete(session_key(live.name))
         except (RedisError, OSError) as exc:
             self._down(exc)
 
@@ -271,7 +281,7 @@ class Cluster:
             while self._queue:
                 batch = [self._queue.popleft() for _ in range(min(len(self._queue), 256))]
                 try:
-                    pipe = self.redis.pipeline(transaction=False)
+                    pipe = self._client.pipeline(transaction=False)
                     for channel, msg in batch:
                         pipe.publish(channel, msg)
                     await pipe.execute()
@@ -303,7 +313,7 @@ class Cluster:
             await asyncio.sleep(self.heartbeat_s if self.up else min(self.heartbeat_s, 0.5))
 
     async def _beat(self) -> None:
-        r = self.redis
+        r = self._client
         pipe = r.pipeline(transaction=False)
         pipe.set(
             f"{PREFIX}:node:{self.node}",
@@ -336,7 +346,7 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            raw = await self.redis.get(session_key(name))
+            raw = await self._client.get(session_key(name))
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -350,8 +360,8 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:node:*", count=500)]
-            rows = [json.loads(r) for r in (await self.redis.mget(keys) if keys else []) if r is not None]
+            keys = [k async for k in self._client.scan_iter(match=f"{PREFIX}:node:*", count=500)]
+            rows = [json.loads(r) for r in (await self._client.mget(keys) if keys else []) if r is not None]
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -363,8 +373,8 @@ class Cluster:
         from redis.exceptions import RedisError
 
         try:
-            keys = [k async for k in self.redis.scan_iter(match=f"{PREFIX}:session:*", count=500)]
-            rows = await self.redis.mget(keys) if keys else []
+            keys = [k async for k in self._client.scan_iter(match=f"{PREFIX}:session:*", count=500)]
+            rows = await self._client.mget(keys) if keys else []
         except (RedisError, OSError) as exc:
             self._down(exc)
             return None
@@ -378,7 +388,7 @@ class Cluster:
             feed = self.feeds[name] = RemoteFeed(name, row)
             await self._subscribe(frames_channel(name))
         pairs = [(kind, encoding)] + ([(P.KIND_AUDIO, P.ENC_INT16)] if audio else [])
-        pipe = self.redis.pipeline(transaction=False)
+        pipe = self._client.pipeline(transaction=False)
         for k, e in pairs:
             pipe.set(want_key(name, k, e), self.node, px=self.ttl_ms)
             pipe.publish(control_channel(row["node"]), json.dumps({"want": [name, k, e]}))
@@ -399,6 +409,11 @@ class Cluster:
             except Exception as exc:  # noqa: BLE001 - the listener resubscribes when Redis returns
                 self._down(exc)
 
+    def _oneshot(self, coro: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.ensure_future(coro)
+        self._oneshots.add(task)
+        task.add_done_callback(self._oneshots.discard)
+
     async def _unsubscribe(self, channel: str) -> None:
         self._subscribed.discard(channel)
         if self._pubsub is not None:
@@ -413,10 +428,10 @@ class Cluster:
 
         while True:
             try:
-                self._pubsub = self.redis.pubsub(ignore_subscribe_messages=True)
-                await self._pubsub.subscribe(control_channel(self.node), *self._subscribed)
+                self._pubsub = pubsub = self._client.pubsub(ignore_subscribe_messages=True)
+                await pubsub.subscribe(control_channel(self.node), *self._subscribed)
                 while True:
-                    msg = await self._pubsub.get_message(timeout=1.0)
+                    msg = await pubsub.get_message(timeout=1.0)
                     if msg is None:
                         continue
                     self._on_message(msg)
@@ -424,10 +439,9 @@ class Cluster:
                 raise
             except (RedisError, OSError) as exc:
                 self._down(exc)
-                try:
-                    await self._pubsub.aclose()
-                except Exception:  # noqa: BLE001 - already broken
-                    pass
+                if self._pubsub is not None:
+                    with contextlib.suppress(Exception):  # already broken
+                        await self._pubsub.aclose()
                 self._pubsub = None
                 await asyncio.sleep(0.5)
 
@@ -448,8 +462,8 @@ class Cluster:
             feed.end = (int(end["code"]), str(end["reason"]))
             feed.ended.set()
             self.feeds.pop(name, None)
-            asyncio.ensure_future(self._unsubscribe(channel))
-            asyncio.ensure_future(self._end_feed(feed))
+            self._oneshot(self._unsubscribe(channel))
+            self._oneshot(self._end_feed(feed))
             return
         if len(data) < P.HEADER_BYTES:
             return

@@ -7,6 +7,7 @@ import re
 import tomllib
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 from server.errors import ServerConfigError
 
@@ -37,8 +38,8 @@ class ServerConfig:
     not browsers, are accepted); allowed_hosts: Host header names accepted (None: loopback names
     when bound to loopback, else any); max_connections_per_client: open WebSocket connections per
     remote address; connect_rate_per_s / connect_burst: new WebSocket connections per remote address
-    (a token bucket; beyond it 429; rate 0 = no limit); handshake_timeout_s: time to complete the opening handshake; idle_timeout_s:
-    an ingest that sends nothing for this long is closed (1008).
+    (a token bucket; beyond it 429; rate 0 = no limit); handshake_timeout_s: time to complete the
+    opening handshake; idle_timeout_s: an ingest that sends nothing for this long is closed (1008).
 
     Cluster (docs/deploy.md): redis_url: the Redis every node of a cluster shares (None: one
     process, no Redis); node_id: this node's name in the registry (None: host-pid-port);
@@ -156,7 +157,7 @@ class ServerConfig:
                 object.__setattr__(self, name, Path(getattr(self, name)))
 
     @classmethod
-    def from_toml(cls, path: str | Path, **overrides: object) -> "ServerConfig":
+    def from_toml(cls, path: str | Path, **overrides: Any) -> ServerConfig:
         """Read the ``[server]`` table of a TOML file (keys = field names); ``overrides`` (non-None) win."""
         p = Path(path)
         try:

@@ -22,6 +22,7 @@ import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TypeGuard
 
 import numpy as np
 
@@ -86,7 +87,7 @@ def control(name: str) -> Callable[[ControlHandler], ControlHandler]:
     return register
 
 
-def _number(value: object) -> bool:
+def _number(value: object) -> TypeGuard[float]:
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
 

@@ -15,11 +15,12 @@ from wire import protocol as P
 
 if TYPE_CHECKING:
     from assets.heads.head import Head
+    from server.cluster import RemoteFeed
     from server.live import LiveSession
     from server.protocol import ViewRequest
 
 
-def started(live: "LiveSession") -> dict:
+def started(live: LiveSession) -> dict:
     """The ``started`` reply's fields (the protocol adds ``type``)."""
     s = live.session
     out = {
@@ -35,7 +36,7 @@ def started(live: "LiveSession") -> dict:
     return out
 
 
-def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None") -> dict:
+def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Head | None) -> dict:
     """A viewer's first message: the session, the subscription, the value layout and the head."""
     s = live.session
     d: dict = {
@@ -74,7 +75,7 @@ def view_description(live: "LiveSession", req: "ViewRequest", head: "Head | None
     return d
 
 
-def summary(live: "LiveSession") -> dict:
+def summary(live: LiveSession) -> dict:
     """One session's row. ``source`` is the source's kind only (ingest, file, microphone): a file
     session's path stays in the server's log, never in a reply."""
     s = live.session

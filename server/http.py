@@ -57,11 +57,11 @@ class HttpReply:
     content_type: str
 
     @classmethod
-    def text(cls, status: HTTPStatus, text: str) -> "HttpReply":
+    def text(cls, status: HTTPStatus, text: str) -> HttpReply:
         return cls(status, text.encode(), "text/plain; charset=utf-8")
 
     @classmethod
-    def json(cls, obj: dict, status: HTTPStatus = HTTPStatus.OK) -> "HttpReply":
+    def json(cls, obj: dict, status: HTTPStatus = HTTPStatus.OK) -> HttpReply:
         return cls(status, P.dumps(obj).encode(), "application/json")
 
 
@@ -85,7 +85,7 @@ class HttpRouter:
         *,
         web_root: Path | None,
         node_modules: Path | None,
-        head: "Head | None",
+        head: Head | None,
         sessions: Callable[[], list[dict]],
     ) -> None:
         self.web_root = web_root.resolve() if web_root is not None else None

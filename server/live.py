@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import time
 from typing import TYPE_CHECKING, Protocol
 
@@ -28,11 +29,12 @@ from websockets.asyncio.server import ServerConnection, broadcast
 from server.describe import summary
 from server.errors import IngestOverrun
 from server.guard import IngestPacer
-from server.session import Output, Session, SessionConfig
+from server.session import Output, Session
 from wire import protocol as P
 
 if TYPE_CHECKING:
     from server.app import FacecastServer
+    from server.cluster import RemoteFeed
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -40,16 +42,34 @@ FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a
 FAST_PATH_BUFFER_BYTES = 64 * 1024
 
 
-class SessionHandle(Protocol):
-    """What a live session needs from its session, wherever it runs."""
+class InputFormat(Protocol):
+    """What live sessions and descriptions read of a session's input format (a :class:`SessionConfig`,
+    or a text session's fixed format)."""
 
-    config: SessionConfig
-    rate_hz: int
-    fps: int
-    frames_out: int
-    samples_out: int
-    frame_bytes: int
-    algorithmic_delay_s: float
+    @property
+    def sample_rate_hz(self) -> int: ...
+    @property
+    def channels(self) -> int: ...
+
+
+class SessionHandle(Protocol):
+    """What a live session needs from its session, wherever it runs (read-only facts: a local
+    session's are attributes, a worker's properties)."""
+
+    @property
+    def config(self) -> InputFormat: ...
+    @property
+    def rate_hz(self) -> int: ...
+    @property
+    def fps(self) -> int: ...
+    @property
+    def frames_out(self) -> int: ...
+    @property
+    def samples_out(self) -> int: ...
+    @property
+    def frame_bytes(self) -> int: ...
+    @property
+    def algorithmic_delay_s(self) -> float: ...
 
     async def push_bytes(self, data: bytes) -> Output: ...
     async def push(self, samples: np.ndarray) -> Output: ...
@@ -97,7 +117,7 @@ class LocalSession:
         return self.core.control_state()
 
 
-def deliver(viewers: list["Viewer"], msg: bytes, now: float) -> None:
+def deliver(viewers: list[Viewer], msg: bytes, now: float) -> None:
     """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
     message), the bounded queue for the others."""
     fast = []
@@ -118,12 +138,12 @@ class Viewer:
     def __init__(
         self,
         ws: ServerConnection,
-        live: "LiveSession",
+        live: LiveSession | RemoteFeed,
         *,
         kind: int,
         encoding: int,
         audio: bool,
-        server: "FacecastServer",
+        server: FacecastServer,
     ) -> None:
         self.ws = ws
         self.live = live
@@ -194,7 +214,7 @@ class Viewer:
 class LiveSession:
     """A session with its viewers: feed it audio, it fans frames out."""
 
-    def __init__(self, name: str, session: "SessionHandle", server: "FacecastServer", *, source: str) -> None:
+    def __init__(self, name: str, session: SessionHandle, server: FacecastServer, *, source: str) -> None:
         self.name = name
         self.session = session
         self.server = server
@@ -249,10 +269,8 @@ class LiveSession:
                 '(send in real time, or start with "batch": true)'
             )
         self.paced_s += wait
-        try:  # a shutdown (ended) cuts the wait short
+        with contextlib.suppress(TimeoutError):  # a shutdown (ended) cuts the wait short
             await asyncio.wait_for(self.ended.wait(), wait)
-        except TimeoutError:
-            pass
 
     async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
@@ -282,7 +300,7 @@ class LiveSession:
                     + a.payload()
                 )
                 deliver(listeners, msg, now)
-                if remote:
+                if remote and cluster is not None:  # remote is empty without a cluster
                     cluster.publish(self.name, msg)
         if out.frames:
             groups: dict[tuple[int, int], list[Viewer]] = {k: [] for k in remote if k[0] != P.KIND_AUDIO}
@@ -293,7 +311,7 @@ class LiveSession:
                     payload, count, scale = frame.payload(kind, enc)
                     msg = P.pack_header(kind, enc, frame.index, count, scale, frame.media_time, now) + payload
                     deliver(members, msg, now)
-                    if (kind, enc) in remote:
+                    if cluster is not None and (kind, enc) in remote:
                         cluster.publish(self.name, msg)
         self.server.times.add("fanout", time.perf_counter() - t0)
         return len(out.frames)

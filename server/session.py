@@ -30,6 +30,7 @@ from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import ConfigError, RealtimeCoreError
 from realtime_core.expressions import apply_expression
+from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.rig import Rig
 from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.inversion import StreamConfig
@@ -129,7 +130,7 @@ class Frame:
     raw_params: np.ndarray
     work_s: float
     ready_perf: float
-    rig: Rig | None = None
+    rig: Rig | MorphRig | None = None
     times: StageTimes | None = None
     expression: np.ndarray | None = None
     speech_params: np.ndarray | None = None
@@ -152,11 +153,11 @@ class Frame:
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
             # ARKit has the expressions' own shapes: speech weights plus the recipes.
-            values = (
-                blendshape_weights(self.params, "arkit52")
-                if self.expression is None
-                else blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
-            )
+            if self.expression is None:
+                values = blendshape_weights(self.params, "arkit52")
+            else:
+                assert self.speech_params is not None  # set together with expression
+                values = blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
             stage = "encode_blendshapes"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
@@ -205,7 +206,12 @@ class Session:
     """
 
     def __init__(
-        self, model: SpeechModel, *, config: SessionConfig, rig: Rig | None = None, times: StageTimes | None = None
+        self,
+        model: SpeechModel,
+        *,
+        config: SessionConfig,
+        rig: Rig | MorphRig | None = None,
+        times: StageTimes | None = None,
     ) -> None:
         self.model = model
         self.config = config

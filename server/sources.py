@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -65,12 +66,12 @@ class MicSource:
         self.first_block = asyncio.Event()
         self.overflows = 0
         self._queue: asyncio.Queue[np.ndarray | None] = asyncio.Queue()
-        self._stream = None
+        self._stream: Any = None  # a sounddevice.InputStream (sounddevice has no type information)
         self.sample_rate_hz = 0
         self.channels = config.channels
         self._closed = False
 
-    def open(self) -> "MicSource":
+    def open(self) -> MicSource:
         sd = _sounddevice()
         loop = asyncio.get_running_loop()
         cfg = self.config
@@ -86,7 +87,7 @@ class MicSource:
         rate = int(cfg.sample_rate_hz or info["default_samplerate"])
         self.sample_rate_hz = rate
 
-        def callback(indata, frames, time_info, status) -> None:  # noqa: ANN001 - PortAudio thread
+        def callback(indata, frames, time_info, status) -> None:
             if status.input_overflow:
                 self.overflows += 1
             loop.call_soon_threadsafe(self._deliver, indata.copy())
@@ -118,13 +119,13 @@ class MicSource:
             self._stream.close()
             self._queue.put_nowait(None)
 
-    async def __aenter__(self) -> "MicSource":
+    async def __aenter__(self) -> MicSource:
         return self.open()
 
     async def __aexit__(self, *exc: object) -> None:
         self.close()
 
-    def __aiter__(self) -> "MicSource":
+    def __aiter__(self) -> MicSource:
         return self
 
     async def __anext__(self) -> np.ndarray:
@@ -170,7 +171,7 @@ class FileSource:
     @classmethod
     def from_array(
         cls, samples: np.ndarray, sample_rate_hz: int, *, realtime: bool = True, block_s: float = 0.02
-    ) -> "FileSource":
+    ) -> FileSource:
         """The same pacing over an in-memory (n,) float array (the demo's synthesised speech)."""
         self = cls.__new__(cls)
         self.config = FileConfig(path=Path("<memory>"), realtime=realtime, block_s=block_s)

@@ -53,11 +53,16 @@ FPS = 30
 class SpeechLike(Protocol):
     """What the text-to-speech function returns (e.g. :class:`assets.tts.Speech`)."""
 
-    samples: np.ndarray  # (n,) float32 in [-1, 1]
-    sample_rate_hz: int
-    phones: tuple  # ((label, start_s, end_s), ...)
-    inventory: str
-    text: str
+    @property
+    def samples(self) -> np.ndarray: ...  # (n,) float32 in [-1, 1]
+    @property
+    def sample_rate_hz(self) -> int: ...
+    @property
+    def phones(self) -> tuple: ...  # ((label, start_s, end_s), ...)
+    @property
+    def inventory(self) -> str: ...
+    @property
+    def text(self) -> str: ...
 
 
 @dataclass(frozen=True, kw_only=True)

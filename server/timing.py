@@ -37,7 +37,7 @@ class StageTimes:
     def names(self) -> list[str]:
         return list(self._rings)
 
-    def merge_into(self, other: "StageTimes") -> None:
+    def merge_into(self, other: StageTimes) -> None:
         """Add this object's recent samples to ``other`` (for server-wide summaries)."""
         for name in self._rings:
             for s in self.samples(name):

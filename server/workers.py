@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import multiprocessing as mp
 import time
 from dataclasses import asdict
@@ -27,7 +28,9 @@ from dataclasses import asdict
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
-from realtime_core.avmodel import AvModel
+from realtime_core.face.keyframes import MorphRig
+from realtime_core.face.rig import Rig
+from realtime_core.mapping import SpeechModel
 from server.errors import AudioFormatError, ControlError, ServerConfigError, ServerError
 from server.session import AudioBlock, Frame, Output, SessionConfig
 from server.timing import StageTimes
@@ -57,7 +60,7 @@ def _pack(out: Output, rec: _Recorder) -> tuple:
     return raw, params, work, audio, log, expr
 
 
-def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing Connection
+def _worker_main(conn, model_bytes: bytes) -> None:
     """Worker process: decode the model once, then serve session requests until "stop"."""
     from threadpoolctl import threadpool_limits
 
@@ -101,7 +104,7 @@ def _worker_main(conn, model_bytes: bytes) -> None:  # noqa: ANN001 - multiproce
 
 
 class _Worker:
-    def __init__(self, ctx, model_bytes: bytes) -> None:  # noqa: ANN001 - multiprocessing context
+    def __init__(self, ctx, model_bytes: bytes) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
         self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes), daemon=True)
         self.proc.start()
@@ -141,7 +144,7 @@ class _Worker:
 class WorkerPool:
     """N compute processes holding the model; ``await start()``, ``open()`` sessions, ``await stop()``."""
 
-    def __init__(self, model: AvModel, n: int) -> None:
+    def __init__(self, model: SpeechModel, n: int) -> None:
         if not 1 <= n <= 64:
             raise ServerConfigError(f"workers must be in 1..64, got {n}")
         self.model = model
@@ -150,8 +153,12 @@ class WorkerPool:
         self._next_id = 0
 
     async def start(self) -> None:
-        from realtime_core.mapping import encode_speech_model
+        from realtime_core.avmodel import AvModel
+        from realtime_core.mapping import MlpSpeechModel, encode_speech_model
 
+        # Workers receive the model as its file bytes, so only the two model kinds with a file format go.
+        if not isinstance(self.model, AvModel | MlpSpeechModel):
+            raise ServerConfigError(f"compute workers need an HMM or MLP model file, got {type(self.model).__name__}")
         ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
         data = encode_speech_model(self.model)
         loop = asyncio.get_running_loop()
@@ -166,17 +173,15 @@ class WorkerPool:
         loop = asyncio.get_running_loop()
         for w in self.workers:
             loop.remove_reader(w.conn.fileno())
-            try:
+            with contextlib.suppress(BrokenPipeError, OSError):
                 w.conn.send(("stop",))
-            except (BrokenPipeError, OSError):
-                pass
         for w in self.workers:
             await loop.run_in_executor(None, w.proc.join, 5)
             if w.proc.is_alive():
                 w.proc.kill()
         self.workers = []
 
-    async def open(self, config: SessionConfig, *, rig, times: StageTimes) -> "RemoteSession":  # noqa: ANN001
+    async def open(self, config: SessionConfig, *, rig: Rig | MorphRig | None, times: StageTimes) -> RemoteSession:
         w = min(self.workers, key=lambda x: x.sessions)
         self._next_id += 1
         sid = self._next_id
@@ -190,12 +195,12 @@ class RemoteSession:
 
     def __init__(
         self,
-        model: AvModel,
+        model: SpeechModel,
         config: SessionConfig,
         worker: _Worker,
         sid: int,
         *,
-        rig,  # noqa: ANN001
+        rig: Rig | MorphRig | None,
         times: StageTimes,
     ) -> None:
         self.model = model

@@ -390,7 +390,10 @@ def write_grid_phones(path: str | Path, labelled: list[SentencePhones]) -> Path:
     lines = ["{", f'"header": {json.dumps(header)},', '"sentences": {']
     items = sorted(labelled, key=lambda s: s.sentence_id)
     for i, s in enumerate(items):
-        entry = {"method": s.method, "phones": [[round(p.start_s, 4), round(p.end_s, 4), p.phoneme] for p in s.phones]}
+        entry: dict[str, object] = {
+            "method": s.method,
+            "phones": [[round(p.start_s, 4), round(p.end_s, 4), p.phoneme] for p in s.phones],
+        }
         if s.spread_words:
             entry["spread_words"] = list(s.spread_words)
         if s.max_word_offset_s is not None:

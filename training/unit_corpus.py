@@ -24,6 +24,7 @@ import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +33,7 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.corpus import MotionCorpus, StoredCorpus
 from realtime_core.synthesis.empca import EmPcaConfig, fit_empca
 from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
+from training.alignments import Alignment
 from training.errors import ConfigError, FileProblem
 from training.facetrack import (
     EXTRACTOR_VERSION,
@@ -47,6 +49,9 @@ BUILD_VERSION = 1
 PhoneRows = Sequence[tuple[str, float, float]]
 """A phone timeline: (ARPAbet label, start_s, end_s) on the recording's clock."""
 
+PhoneTimeline = Alignment | PhoneRows
+"""A phone timeline as either an :class:`Alignment` (what ``read_grid_phones`` returns) or rows."""
+
 GRID_CREDIT = (
     "GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
     "J. Acoust. Soc. Am. 120(5), 2006, 2421-2424. CC BY 4.0."
@@ -60,10 +65,13 @@ def track_motion(track: FaceTrack) -> np.ndarray:
     return d.reshape(len(d), -1)
 
 
-def phone_rows(alignment) -> list[tuple[str, float, float]]:
+def phone_rows(alignment: PhoneTimeline) -> list[tuple[str, float, float]]:
     """(label, start_s, end_s) rows from an Alignment (``.phones`` of PhonemeSegment) or rows."""
-    phones = getattr(alignment, "phones", alignment)
-    out = []
+    # duck-typed beyond Alignment: any object with ``.phones`` (e.g. grid_phones.SentencePhones) works too
+    phones: Sequence[Any] = (
+        alignment.phones if isinstance(alignment, Alignment) else getattr(alignment, "phones", alignment)
+    )
+    out: list[tuple[str, float, float]] = []
     for p in phones:
         if hasattr(p, "phoneme"):
             out.append((str(p.phoneme), float(p.start_s), float(p.end_s)))
@@ -73,7 +81,7 @@ def phone_rows(alignment) -> list[tuple[str, float, float]]:
     return out
 
 
-def corpus_key(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneRows], config: EmPcaConfig) -> str:
+def corpus_key(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneTimeline], config: EmPcaConfig) -> str:
     """Cache key: a hash of everything the corpus derives from."""
     h = hashlib.sha1()
     h.update(
@@ -168,7 +176,7 @@ def build_stored_corpus(
 
 def build_grid_corpus(
     sentences: Sequence[GridSentence],
-    phones: Mapping[str, PhoneRows],
+    phones: Mapping[str, PhoneTimeline],
     *,
     cache_dir: str | Path | None = None,
     config: EmPcaConfig | None = None,

@@ -445,8 +445,8 @@ def _resample_at(times: np.ndarray, values: np.ndarray, t_out: np.ndarray) -> np
     t0, t1 = times[pos - 1], times[pos]
     w = np.clip((t_out - t0) / np.maximum(t1 - t0, 1e-12), 0.0, 1.0)[:, None]
     if len(times) == 1:
-        return np.repeat(flat[:1], len(t_out), axis=0).reshape((len(t_out),) + values.shape[1:])
-    return ((1 - w) * flat[pos - 1] + w * flat[pos]).reshape((len(t_out),) + values.shape[1:])
+        return np.repeat(flat[:1], len(t_out), axis=0).reshape((len(t_out), *values.shape[1:]))
+    return ((1 - w) * flat[pos - 1] + w * flat[pos]).reshape((len(t_out), *values.shape[1:]))
 
 
 def lip_gap(landmarks: np.ndarray) -> np.ndarray:

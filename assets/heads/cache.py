@@ -26,5 +26,6 @@ def cache_dir() -> Path:
 def atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
     """``np.savez`` written atomically (see :func:`assets.files.atomic_write_bytes`)."""
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    # numpy's stub types **kwds against savez's own allow_pickle: bool, so any **dict of arrays is rejected
+    np.savez(buf, **arrays)  # type: ignore[arg-type]
     return atomic_write_bytes(path, buf.getvalue())

@@ -22,6 +22,7 @@ import json
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -112,7 +113,7 @@ class _Reader:
     def accessor(self, index: int) -> np.ndarray:
         """(count, ncomp) float64 (normalized integers scaled to [0, 1] / [-1, 1])."""
         a = self.doc["accessors"][index]
-        dtype = np.dtype(_CTYPES[a["componentType"]]).newbyteorder("<")
+        dtype: np.dtype[Any] = np.dtype(_CTYPES[a["componentType"]]).newbyteorder("<")
         nc = _NCOMP[a["type"]]
         count = a["count"]
         if "bufferView" in a:
@@ -222,7 +223,7 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
             if i in seen:
                 raise MeshError(f"{path}: node hierarchy has a cycle")
             m = _node_matrix(nodes[i])
-            return world_of(parent[i], seen + (i,)) @ m if i in parent else m
+            return world_of(parent[i], (*seen, i)) @ m if i in parent else m
 
         world = [world_of(i) for i in range(len(nodes))]
         scenes = doc.get("scenes", [])

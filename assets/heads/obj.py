@@ -48,7 +48,7 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             continue
         elif key == "Kd":
             rgb = [float(x) for x in rest.split()[:3]]
-            out[cur].color = np.array(rgb + [1.0])
+            out[cur].color = np.array([*rgb, 1.0])
         elif key == "map_Kd":
             name = rest.split()[-1]  # options (-s, -o, ...) come before the file name
             img = path.parent / name.replace("\\", "/")
@@ -95,8 +95,8 @@ def read_obj(path: Path) -> ObjMesh:
                 mat = mat_names.index(name)
             elif key == "f":
                 refs = []
-                for c in parts[1:]:
-                    f = c.split("/")
+                for ref in parts[1:]:
+                    f = ref.split("/")
                     vi = int(f[0])
                     ti = int(f[1]) if len(f) > 1 and f[1] else 0
                     refs.append(
@@ -116,8 +116,8 @@ def read_obj(path: Path) -> ObjMesh:
         raise MeshError(f"{path}: a face refers to a vertex or texture coordinate that does not exist")
     has_uv = bool(len(uv_src)) and bool((c[:, 1] >= 0).all())
     # One output vertex per distinct (position, uv, material); the first use of a position keeps its index.
-    key = np.stack([c[:, 0], c[:, 1] if has_uv else np.zeros(len(c), np.int64), c[:, 2]], axis=1)
-    uniq, first_use, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    corner_key = np.stack([c[:, 0], c[:, 1] if has_uv else np.zeros(len(c), np.int64), c[:, 2]], axis=1)
+    uniq, first_use, inv = np.unique(corner_key, axis=0, return_index=True, return_inverse=True)
     inv = inv.reshape(-1)
     first_of_pos = np.full(len(v), -1, dtype=np.int64)
     out_index = np.empty(len(uniq), dtype=np.int64)

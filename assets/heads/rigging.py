@@ -54,7 +54,7 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
 ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
-REQUIRED_LANDMARKS = tuple(MouthLandmarks.__dataclass_fields__) + ("nose_tip", "chin")
+REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
 
 @dataclass(frozen=True)
@@ -272,10 +272,12 @@ def rig_head(
     if simple is None or mesh.name == "builtin":
         head = head or load_builtin_head()
     if simple is None:
+        assert head is not None  # loaded above
         simple = simple_face(head)
     if landmark_spec is None:
         if mesh.name != "builtin":
             raise LandmarkError(f"{mesh.name}: a landmarks JSON is required for heads other than the built-in one")
+        assert head is not None  # loaded above for the built-in mesh
         landmark_spec = dict(head.landmarks)
         landmark_source = "builtin landmarks"
     points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)

@@ -93,11 +93,11 @@ def run(args: argparse.Namespace) -> int:
         ("bilabials P B M", BILABIALS),
         ("other consonants", set(durations) - VOWELS - BILABIALS),
     ):
-        d = np.array([x for ph in members for x in durations.get(ph, [])]) * 1000
-        if len(d):
+        ms = np.array([x for ph in members for x in durations.get(ph, [])]) * 1000
+        if len(ms):
             print(
-                f"{group}: {len(d)} phones, duration ms min {d.min():.0f} / p5 {np.percentile(d, 5):.0f} / "
-                f"median {np.median(d):.0f} / p95 {np.percentile(d, 95):.0f} / max {d.max():.0f}"
+                f"{group}: {len(ms)} phones, duration ms min {ms.min():.0f} / p5 {np.percentile(ms, 5):.0f} / "
+                f"median {np.median(ms):.0f} / p95 {np.percentile(ms, 95):.0f} / max {ms.max():.0f}"
             )
     offs = np.array([s.max_word_offset_s for s in labelled if s.max_word_offset_s is not None]) * 1000
     if len(offs):

@@ -162,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
             from clients.render.renderer import RenderConfig, renderer_for_rig
             from clients.render.video import VideoConfig, with_caption, write_video
 
+            assert head is not None  # resolved above whenever an .mp4 is among the outputs
             rig, mesh = head
             credit = credit_for(mesh.name)
             cfg = RenderConfig(width=args.width, height=args.height, samples=args.samples)

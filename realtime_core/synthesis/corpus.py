@@ -12,6 +12,7 @@ four mouth parameters). Sans-I/O: :mod:`training.unit_corpus` builds and stores 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -151,7 +152,7 @@ class StoredCorpus:
     pca_total_variance: float
     landmark_indices: np.ndarray
     neutral: np.ndarray
-    meta: dict
+    meta: dict[str, Any]
 
     def landmark_offsets(self, coefficients: np.ndarray) -> np.ndarray:
         """(n, K) coefficients -> (n, P/3, 3) landmark displacements from the neutral face (IOD)."""

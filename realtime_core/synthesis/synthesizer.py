@@ -71,7 +71,11 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
     if not phones:
         raise ConfigError("no phones to synthesise")
     rows = sorted(((str(lab), float(a), float(b)) for lab, a, b in phones), key=lambda r: r[1])
-    labels, vis, starts, ends, unknown = [], [], [], [], []
+    labels: list[str] = []
+    vis: list[int] = []
+    starts: list[float] = []
+    ends: list[float] = []
+    unknown: list[str] = []
     substituted = 0
     t = 0.0
 
@@ -86,7 +90,10 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
             ends[-1] = b
             inserted[0] = inserted[0] and gap
             return
-        labels.append(label), vis.append(VISEME_ID[v]), starts.append(a), ends.append(b)
+        labels.append(label)
+        vis.append(VISEME_ID[v])
+        starts.append(a)
+        ends.append(b)
         inserted[0] = gap
 
     for label, a, b in rows:

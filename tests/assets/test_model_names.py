@@ -15,6 +15,8 @@ from assets.modelfile import (
 from facecast.cli import main
 from tests.speech import speechlike
 
+pytestmark = pytest.mark.slow  # loads and runs the shipped models
+
 
 def test_names_resolve_to_the_shipped_files_and_paths_stay_paths(tmp_path):
     assert resolve_model(None) == DEFAULT_MODEL

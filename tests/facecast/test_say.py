@@ -9,9 +9,12 @@ import os
 import subprocess
 
 import numpy as np
+import pytest
 
 from facecast.cli import main
 from tests.prerequisites import require_data, require_tool
+
+pytestmark = pytest.mark.system  # espeak-ng, the renderer and ffmpeg
 
 
 def _ffprobe(path) -> dict:

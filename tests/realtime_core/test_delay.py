@@ -18,6 +18,8 @@ from realtime_core.hmm.sampling import random_av_hmm
 from realtime_core.inversion import StreamConfig
 from realtime_core.pipeline import SpeechToParams
 
+pytestmark = pytest.mark.slow  # trains small models per delay setting
+
 N_CEPS = 3
 
 

@@ -23,6 +23,8 @@ from server.session import Session, SessionConfig
 from tests.speech import speechlike
 from wire import protocol as P
 
+pytestmark = pytest.mark.system  # a real server over loopback, and MAP adaptation of a model
+
 
 def _i16(x: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767).astype(np.int16)

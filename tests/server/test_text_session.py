@@ -22,6 +22,8 @@ from server.config import ServerConfig
 from server.text_session import TextBackend, TextSession
 from wire import protocol as P
 
+pytestmark = pytest.mark.system  # a real server over loopback with espeak-ng
+
 CORPUS_TEXT = [
     "Bin blue at f two now.",
     "Place green by q seven again.",

@@ -8,6 +8,8 @@ import pytest
 from facecast.cli import main
 from tests.prerequisites import missing
 
+pytestmark = pytest.mark.slow  # adapts a model from real speech files
+
 
 @pytest.fixture(scope="module")
 def ljspeech(shared_data):

@@ -28,6 +28,8 @@ from training.grid_phones import (
     write_grid_phones,
 )
 
+pytestmark = pytest.mark.slow  # pocketsphinx alignment and the 900-sentence label file
+
 
 @pytest.fixture
 def needs_pocketsphinx() -> None:

@@ -149,6 +149,7 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
     return cost
 
 
+@pytest.mark.slow  # enumerates every state sequence
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_viterbi_equals_brute_force_on_a_tiny_graph(seed):
     rng = np.random.default_rng(seed)
