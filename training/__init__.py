@@ -20,6 +20,14 @@ Stages (see ``docs/training.md``):
     evaluation     accuracy against truth tracks beside a loudness baseline (``facecast eval``)
     report         training report plots (paper Figs. 7 and 8)
     errors         TrainingError (root of this package) and its file problems
+    motion_units   paper 002 on GRID s1: Motion Units, audio-to-MUP mappers, the numbers
+    mapper         training the GMM-selected MLP bank and the single-MLP baseline (scikit-learn)
+    mu_train       ``facecast mu``: train and score paper 002's system
+    mu_expressions expression deformations at the MU landmarks and Expression MUs
+    mu_keyframes   keyframe sets in the MU landmark space (round-trip check)
+    mu_report      Markdown of paper 002's numbers
+    fit_maps       fits the blendshape maps and the expression table (``facecast fit-maps``)
+    latency        the latency dial: accuracy against algorithmic delay
 
 espeak-ng and the GRID corpus reader live in ``assets`` (espeak, grid). Nothing here runs at import
 time; heavy or optional libraries are imported where used.

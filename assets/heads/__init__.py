@@ -7,4 +7,6 @@ landmarks  named landmark JSON files (vertex index or 3D point)
 rigfile    Rig <-> .npz (no pickle)
 rigging    mesh + landmarks -> Rig (registration, lip seam split, Sec. 5 weights, head calibration)
 plot       the control points over the head (PNG, like paper 000 Fig. 5)
+gltf       glTF 2.0 reader: geometry, node transforms, skins, morph targets, materials
+decompress meshopt/Draco/KTX2 glTF files decoded once with glTF-Transform (npm), cached
 """

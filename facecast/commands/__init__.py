@@ -9,4 +9,6 @@ train    train a model                                      view     watch a liv
 adapt    speaker adaptation from enrolment speech           say      text -> speech + lips (unit selection)
 units    build the unit-selection corpus                    phones   GRID s1 phone labels
 perceptual  perceptual tests with people                    headopts the shared --head options
+mu       paper 002 on GRID s1 (Motion Units, MLP mapper)     fit-maps re-fit the blendshape maps
+speech_options  the shared --model/--mapper options
 """

@@ -9,6 +9,9 @@ rbf            Gaussian RBF map with GCV-chosen ridge (paper 001 Sec. 3.5)
 adaptation     per-vertex affine transfer of morph targets (paper 001 Sec. 3.9)
 simple         a simple face model sampled from a head with morph targets
 rig            Rig: params (4,) -> head displacement with one sparse product; head calibration
+harmonic       a smooth (harmonic) deformation field from the control-point motion
+keyframes      keyframe (morph-target) weights by bounded least squares; heads driven by their own targets
+checks         rig checks at the poses speech produces (flips, stretch, interpenetration, closure)
 """
 
 from realtime_core.face.candide import parse_wfm

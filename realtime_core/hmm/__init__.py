@@ -4,6 +4,7 @@ kernels   log-space forward/backward, expected transitions, Viterbi
 model     AvHmm (joint audio-visual Gaussian mixtures per state), component log-likelihoods
 train     k-means initialisation, Baum-Welch with covariance priors (TrainConfig, fit)
 sampling  random well-posed models and sequences (tests and benchmarks)
+adapt     MAP speaker adaptation of the audio side (Gauvain & Lee 1994)
 """
 
 from realtime_core.hmm.kernels import expected_transitions, forward_backward, log_backward, log_forward, viterbi
