@@ -40,7 +40,15 @@ fi
 
 # npm packages (package.json at the root: three.js served to the browser viewer, playwright-core for
 # its test): `npm ci` when the lock file changed since the last install.
-if command -v npm >/dev/null && [ -f package-lock.json ]; then
+# Node.js and npm: the machine image usually has them; a bare Debian gets its own packages (the browser
+# viewer's tests, three.js, and glTF-Transform for compressed heads need them, so CI must not lack them).
+if ! command -v npm >/dev/null; then
+  echo "setup: installing nodejs npm"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
+fi
+if [ -f package-lock.json ]; then
   npm_want="$(cat package.json package-lock.json | sha256sum | cut -d' ' -f1)"
   if [ ! -f node_modules/.facecast-installed ] || [ "$(cat node_modules/.facecast-installed)" != "$npm_want" ]; then
     echo "setup: installing npm packages"
