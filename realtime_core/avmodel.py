@@ -153,6 +153,22 @@ def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
     )
 
 
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """``.npz`` archive bytes of named arrays (no pickle): the container of every model file."""
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
+    return buf.getvalue()
+
+
+def npz_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
+    """The named arrays of ``.npz`` bytes (pickle refused); :class:`ModelFormatError` if it is not one."""
+    try:
+        npz = np.load(io.BytesIO(data), allow_pickle=False)
+        return {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ModelFormatError(f"not a facecast {what} archive ({exc})") from None
+
+
 def encode_model(model: AvModel) -> bytes:
     """Serialise to ``.npz`` bytes (no pickle)."""
     config = {
@@ -175,18 +191,12 @@ def encode_model(model: AvModel) -> bytes:
         arrays[name] = getattr(model.hmm, name)
     for name in _FORM_ARRAYS:
         arrays[name] = getattr(model.form, name)
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
-    return buf.getvalue()
+    return npz_bytes(arrays)
 
 
 def decode_model(data: bytes) -> AvModel:
     """Parse and validate ``.npz`` bytes; raises :class:`ModelFormatError` naming the problem."""
-    try:
-        npz = np.load(io.BytesIO(data), allow_pickle=False)
-        arrays = {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ModelFormatError(f"not a facecast model archive ({exc})") from None
+    arrays = npz_arrays(data, "model")
     for key in ("format", "version", "config_json", "cmvn_mean", "cmvn_var", *_HMM_ARRAYS, *_FORM_ARRAYS):
         if key not in arrays:
             raise ModelFormatError(f"model archive lacks the array {key!r}")

@@ -20,7 +20,15 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
-from realtime_core.avmodel import AvModel, decode_model, encode_model, frontend_from_json, frontend_to_json
+from realtime_core.avmodel import (
+    AvModel,
+    decode_model,
+    encode_model,
+    frontend_from_json,
+    frontend_to_json,
+    npz_arrays,
+    npz_bytes,
+)
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
@@ -114,18 +122,12 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
         arrays[name] = getattr(b, name)
     if b.readout is not None and b.readout_bias is not None:  # MlpBank checks both or neither
         arrays["readout"], arrays["readout_bias"] = b.readout, b.readout_bias
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
-    return buf.getvalue()
+    return npz_bytes(arrays)
 
 
 def decode_mlp_model(data: bytes) -> MlpSpeechModel:
     """Parse and validate ``.npz`` bytes; :class:`ModelFormatError` naming the problem."""
-    try:
-        npz = np.load(io.BytesIO(data), allow_pickle=False)
-        arrays = {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ModelFormatError(f"not a facecast mapper archive ({exc})") from None
+    arrays = npz_arrays(data, "mapper")
     kind = str(arrays["format"]) if "format" in arrays else None
     if kind == AVMODEL_FORMAT:
         raise ModelFormatError(f"this is an HMM model ({AVMODEL_FORMAT!r}), not an MLP mapper: use --mapper hmm")
