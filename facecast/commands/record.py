@@ -9,7 +9,7 @@ from pathlib import Path
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
-    from facecast.commands.view import DEFAULT_URL
+    from facecast.commands.view import DEFAULT_URL, add_session_options
 
     p = sub.add_parser(
         "record",
@@ -31,19 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=".glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
         "or ARKit's 52 blendshapes (built-in head)",
     )
-    p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
-    p.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        help="stop after this many seconds (default %(default)s = when the session ends)",
-    )
-    p.add_argument(
-        "--token-env",
-        default=None,
-        metavar="VAR",
-        help="environment variable holding the server's token (default %(default)s = no token)",
-    )
+    add_session_options(p)
     p.set_defaults(run=run)
 
 

@@ -40,6 +40,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)",
     )
     p.add_argument("--buffer-ms", type=float, default=80.0, help="window mode: jitter buffer before a frame is shown")
+    add_session_options(p)
+    p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
+    p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
+    p.set_defaults(run=run)
+
+
+def add_session_options(p: argparse.ArgumentParser) -> None:
+    """--wait, --duration and --token-env: how view and record attach to a live session."""
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
     p.add_argument(
         "--duration",
@@ -53,9 +61,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="VAR",
         help="environment variable holding the server's token (default %(default)s = no token)",
     )
-    p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
-    p.add_argument("--height", type=int, default=480, help="window or video height in pixels")
-    p.set_defaults(run=run)
 
 
 def token_from_env(var: str | None) -> str | None:
