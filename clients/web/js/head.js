@@ -4,6 +4,11 @@
 // the description's moving_vertices order) are added to the neutral positions directly. Normals
 // stay those of the neutral pose, as in the offline renderer (speech barely changes the lighting).
 // Back faces are drawn dark by a second mesh on the same geometry, so an open mouth shows a cavity.
+//
+// A head driven by its own morph targets (the description's head.morph) is moved the way an engine
+// moves it: mesh.json carries the targets (sparse: the vertices any target moves, x, y, z per target),
+// they become three.js morph attributes, and each frame of the "morph" kind sets
+// morphTargetInfluences (one weight per target, in head.morph.names order); the GPU adds them.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
@@ -43,6 +48,8 @@ export class HeadView {
     this.neutral = null; // Float32Array (n*3)
     this.peak = null; // Float32Array per moving vertex: largest |delta| seen (finds the mouth)
     this.lastPeak = 0; // largest |delta| of the frame shown (mesh units)
+    this.morph = null; // {names, vertices: Int32Array, deltas: [Float32Array], reach: Float32Array} of a morph head
+    this.maxWeight = null; // Float32Array per target: largest weight seen (finds the mouth)
     // Draw only when something changed (a frame, the camera, the size): software WebGL spends
     // most of the page's time drawing, and idle redraws delay the WebSocket messages.
     this.dirty = true;
@@ -62,8 +69,9 @@ export class HeadView {
 
   /** Load the head described by a viewer description's `head` (null clears it). */
   async load(head, base = "") {
-    const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}` : null;
-    if (head && key === this.key) {
+    const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}|${head.morph?.names?.length ?? 0}` : null;
+    const wantMorph = Boolean(head && head.morph);
+    if (head && key === this.key && wantMorph === Boolean(this.morph)) {
       this.setMoving(head);
       return;
     }
@@ -73,6 +81,7 @@ export class HeadView {
       this.mesh = null;
     }
     this.key = null;
+    this.morph = null;
     this.dirty = true;
     if (!head) return;
     const res = await fetch(withToken(base + head.mesh_json_url), { cache: "no-store" });
@@ -83,6 +92,12 @@ export class HeadView {
     geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(m.vertices), 3));
     geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(m.triangles), 1));
     geometry.computeVertexNormals();
+    if (wantMorph) {
+      if (!m.morph || m.morph.names.join("\n") !== head.morph.names.join("\n")) {
+        throw new Error("head mesh: its morph targets do not match the description");
+      }
+      this.morph = this.setMorphTargets(geometry, m.morph, m.vertices.length / 3);
+    }
     const material = new THREE.MeshStandardMaterial({ roughness: 0.75, metalness: 0.0 });
     if (m.colors) {
       geometry.setAttribute("color", new THREE.BufferAttribute(new Float32Array(m.colors.map(srgbToLinear)), 3));
@@ -101,6 +116,7 @@ export class HeadView {
     const front = new THREE.Mesh(geometry, material);
     const back = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: 0x140404, side: THREE.BackSide }));
     front.frustumCulled = back.frustumCulled = false; // deltas move vertices past the bounding sphere
+    this.meshes = [front, back]; // both carry morphTargetInfluences (one per mesh in three.js)
     const group = new THREE.Group();
     group.add(front, back);
     this.scene.add(group);
@@ -113,6 +129,51 @@ export class HeadView {
   setMoving(head) {
     this.moving = Int32Array.from(head.moving_vertices);
     this.peak = new Float32Array(this.moving.length);
+    if (this.morph) this.maxWeight = new Float32Array(this.morph.names.length);
+  }
+
+  /** Dense three.js morph attributes (relative: displacement per unit weight) from mesh.json's sparse
+   *  targets; returns what applyWeights needs. */
+  setMorphTargets(geometry, morph, n) {
+    const vertices = Int32Array.from(morph.vertices);
+    const deltas = [];
+    const reach = new Float32Array(morph.names.length); // largest |displacement| of each target
+    geometry.morphAttributes.position = morph.deltas.map((flat, j) => {
+      const sparse = Float32Array.from(flat);
+      const dense = new Float32Array(3 * n);
+      for (let i = 0; i < vertices.length; i++) {
+        const o = 3 * vertices[i];
+        dense[o] = sparse[3 * i];
+        dense[o + 1] = sparse[3 * i + 1];
+        dense[o + 2] = sparse[3 * i + 2];
+        reach[j] = Math.max(reach[j], Math.abs(sparse[3 * i]), Math.abs(sparse[3 * i + 1]), Math.abs(sparse[3 * i + 2]));
+      }
+      deltas.push(sparse);
+      return new THREE.BufferAttribute(dense, 3);
+    });
+    geometry.morphTargetsRelative = true;
+    return { names: morph.names, vertices, deltas, reach };
+  }
+
+  /** Show one frame of the head's own morph-target weights (values: one per target, names order). */
+  applyWeights(values) {
+    if (!this.mesh || !this.morph) return;
+    let peak = 0;
+    for (const mesh of this.meshes) {
+      const inf = mesh.morphTargetInfluences;
+      for (let j = 0; j < inf.length; j++) inf[j] = values[j];
+    }
+    for (let j = 0; j < values.length; j++) {
+      peak += Math.abs(values[j]) * this.morph.reach[j]; // a bound on the largest vertex displacement
+      if (values[j] > this.maxWeight[j]) this.maxWeight[j] = values[j];
+    }
+    this.lastPeak = peak;
+    this.dirty = true;
+  }
+
+  /** The influences three.js draws with (automation: they must equal the streamed weights). */
+  influences() {
+    return this.meshes && this.morph ? Array.from(this.meshes[0].morphTargetInfluences) : null;
   }
 
   /** Point the camera at the face: the moving vertices' box, seen from +z (glTF's forward), y up. */
@@ -166,9 +227,27 @@ export class HeadView {
     this.renderer.render(this.scene, this.camera);
   }
 
+  /** Per-vertex peaks of a morph head from the largest weights seen (the moving vertices are the
+   *  targets' vertices: the server's moving_vertices are the same set, in the same order). */
+  morphPeaks() {
+    const { vertices, deltas } = this.morph;
+    this.moving = vertices;
+    this.peak = new Float32Array(vertices.length);
+    for (let j = 0; j < deltas.length; j++) {
+      const w = this.maxWeight[j];
+      if (!(w > 0)) continue;
+      const d = deltas[j];
+      for (let i = 0; i < vertices.length; i++) {
+        const a = w * Math.max(Math.abs(d[3 * i]), Math.abs(d[3 * i + 1]), Math.abs(d[3 * i + 2]));
+        if (a > this.peak[i]) this.peak[i] = a;
+      }
+    }
+  }
+
   /** Screen box {x, y, width, height} (CSS pixels, canvas-relative) of the vertices that moved most
    *  so far (>= 25% of the largest movement): where the mouth is on the canvas. */
   mouthBox() {
+    if (this.morph) this.morphPeaks();
     if (!this.mesh || !this.peak.length) return null;
     const top = this.peak.reduce((a, b) => Math.max(a, b), 0);
     if (!(top > 0)) return null;
