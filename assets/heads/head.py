@@ -90,8 +90,10 @@ def resolve_head(
     config: RigConfig | None = None,
     cache: Path | None = None,
     landmark_finder: LandmarkFinder | None = None,
+    parts: tuple[str | Path, ...] = (),
 ) -> Head:
     """The head named by ``spec`` ('builtin', a rig .npz or a mesh file), see the module docstring.
+    parts: further mesh files of the same head (separate eyes, teeth), appended to a mesh file's head.
 
     mode: "auto" (own targets when enough, else retarget), "morph" (own targets or an error),
     "retarget" (always a Sec. 5 rig). target_map: a user mapping JSON for morph-target names.
@@ -99,6 +101,10 @@ def resolve_head(
     config = config or RigConfig()
     if mode not in HEAD_MODES:
         raise ValueError(f"mode must be one of {HEAD_MODES}, got {mode!r}")
+    if parts and (str(spec) == "builtin" or Path(spec).suffix.lower() not in MESH_SUFFIXES):
+        raise MeshError(
+            f"{spec}: --head-part adds meshes to a head mesh file ({', '.join(MESH_SUFFIXES)}), not to this head"
+        )
     if str(spec) == "builtin":
         if mode == "retarget" or landmarks is not None:
             from assets.heads.rigfile import builtin_rig
@@ -121,7 +127,7 @@ def resolve_head(
         )
     from assets.heads.mesh import load_mesh
 
-    mesh = load_mesh(p, cache=cache)
+    mesh = load_mesh(p, cache=cache, parts=parts)
     if mode != "retarget":
         head = morph_head(mesh, target_map=target_map, cache=cache, require_enough=mode == "auto")
         if head is not None:

@@ -344,4 +344,6 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    return rig, out_mesh
+    from assets.heads.parts import with_rigid_parts  # separate eyes / teeth / tongue: rigid with skull or jaw
+
+    return with_rigid_parts(rig, out_mesh, snap), out_mesh

@@ -23,6 +23,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--landmarks",
         help="landmarks JSON (name -> vertex index or [x, y, z]); default: the shipped file for known heads",
     )
+    p.add_argument(
+        "--head-part",
+        action="append",
+        default=[],
+        metavar="MESH",
+        help="another mesh file of the same head (eyes, teeth, tongue); repeatable (docs/animation.md)",
+    )
     p.add_argument("-o", "--output", help="rig file to write (.npz); not written when the rig fails its checks")
     p.add_argument("--png", help="control-point picture to write (default: OUTPUT with suffix .png)")
     p.add_argument(
@@ -76,11 +83,13 @@ def run(args: argparse.Namespace) -> int:
     )
     head = load_builtin_head()
     if args.head == "builtin":
+        if args.head_part:
+            raise MeshError("builtin: --head-part adds meshes to a head mesh file, not to the built-in head")
         mesh = builtin_morph_head().mesh  # with its parts (teeth) for the checks
         spec = read_landmarks(args.landmarks) if args.landmarks else None
         source = args.landmarks or "builtin"
     else:
-        mesh = load_mesh(args.head)
+        mesh = load_mesh(args.head, parts=tuple(args.head_part))
         from clients.render.landmarks import find_landmarks
 
         spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
