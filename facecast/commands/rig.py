@@ -72,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
     from assets.heads.rigging import candide_face, resolve_landmarks, rig_head
-    from realtime_core.errors import RealtimeCoreError
-    from realtime_core.face import RigConfig, parse_wfm
+    from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXTREME_POSES
 
     if not args.output and not args.show_landmarks:
@@ -81,6 +80,11 @@ def run(args: argparse.Namespace) -> int:
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )
+    if Path(args.head).suffix.lower() == ".wfm":
+        raise MeshError(
+            f"{args.head}: a Candide-3 model needs no rig: it is driven by its own animation units; "
+            "give it as --head to render, animate, say or serve"
+        )
     head = load_builtin_head()
     if args.head == "builtin":
         if args.head_part:
@@ -102,13 +106,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     simple = None
     if args.simple:
-        wfm = Path(args.simple)
-        try:
-            simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1"), name=wfm.stem))
-        except OSError as exc:
-            raise MeshError(f"{wfm}: cannot read Candide-3 file: {exc}") from exc
-        except RealtimeCoreError as exc:
-            raise MeshError(f"{wfm}: not a usable Candide-3 model: {exc}") from exc
+        from assets.heads.wfm import read_wfm
+
+        simple = candide_face(read_wfm(args.simple))
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     report = head_checks(Head(rig, rigged))
     print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")
