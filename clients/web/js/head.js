@@ -3,7 +3,7 @@
 // The vertex order is the server's, so a frame's vertex deltas (x, y, z of each moving vertex, in
 // the description's moving_vertices order) are added to the neutral positions directly. Normals
 // stay those of the neutral pose, as in the offline renderer (speech barely changes the lighting).
-// Back faces are drawn dark by a second mesh on the same geometry, so an open mouth shows a cavity.
+// Back faces are drawn dark (the same mesh, both sides), so an open mouth shows a cavity.
 //
 // A head driven by its own morph targets (the description's head.morph) is moved the way an engine
 // moves it: mesh.json carries the targets (sparse: the vertices any target moves, x, y, z per target),
@@ -24,6 +24,8 @@ function srgbToLinear(c) {
   // Vertex colours are authored in sRGB like textures; three.js lights in linear space.
   return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
 }
+
+const BACK_FACE = [0x14 / 255, 0x04 / 255, 0x04 / 255].map((c) => c.toFixed(4)); // output (sRGB) colour of back faces
 
 export class HeadView {
   constructor(canvas) {
@@ -113,12 +115,20 @@ export class HeadView {
       material.map = tex;
       material.vertexColors = false;
     }
+    // One mesh drawn on both sides, back faces painted dark in the fragment shader: a second mesh
+    // for the back faces would run the vertex work (the morph targets' loop) twice.
+    material.side = THREE.DoubleSide;
+    material.onBeforeCompile = (shader) => {
+      shader.fragmentShader = shader.fragmentShader.replace(
+        "#include <dithering_fragment>",
+        "#include <dithering_fragment>\n  if (!gl_FrontFacing) gl_FragColor = vec4(BACK_FACE, 1.0);",
+      ).replace("void main() {", `const vec3 BACK_FACE = vec3(${BACK_FACE.join(", ")});\nvoid main() {`);
+    };
     const front = new THREE.Mesh(geometry, material);
-    const back = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: 0x140404, side: THREE.BackSide }));
-    front.frustumCulled = back.frustumCulled = false; // deltas move vertices past the bounding sphere
-    this.meshes = [front, back]; // both carry morphTargetInfluences (one per mesh in three.js)
+    front.frustumCulled = false; // deltas move vertices past the bounding sphere
+    this.meshes = [front];
     const group = new THREE.Group();
-    group.add(front, back);
+    group.add(front);
     this.scene.add(group);
     this.mesh = { group, geometry };
     this.key = key;
