@@ -186,13 +186,18 @@ export class HeadView {
     return this.meshes && this.morph ? Array.from(this.meshes[0].morphTargetInfluences) : null;
   }
 
-  /** Point the camera at the face: the moving vertices' box, seen from +z (glTF's forward), y up. */
+  /** Point the camera at the face: the moving vertices' box (the whole mesh when it is at most 3 times
+   *  as tall: a head), seen from +z (glTF's forward), y up. */
   frame() {
     const pos = this.neutral;
     const box = new THREE.Box3();
     const v = new THREE.Vector3();
     const n = this.moving.length || pos.length / 3;
     for (let j = 0; j < n; j++) box.expandByPoint(v.fromArray(pos, 3 * (this.moving.length ? this.moving[j] : j)));
+    // A head (not a full-body avatar) is shown whole: its own targets may move the mouth region only.
+    const all = new THREE.Box3();
+    for (let i = 0; i < pos.length; i += 3) all.expandByPoint(v.fromArray(pos, i));
+    if (all.getSize(new THREE.Vector3()).y <= 3 * box.getSize(new THREE.Vector3()).y) box.copy(all);
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3());
     const height = Math.max(size.y, size.x / this.camera.aspect);
