@@ -114,3 +114,31 @@ def test_separate_eye_and_teeth_files_render_and_move_rigidly(split_head, builti
         rgb = img[y - 2 : y + 3, x - 2 : x + 3].reshape(-1, 3).mean(0)
         shade[name] = float(rgb[2] - rgb[0])  # blue over red
     assert shade["with eyes"] > 40 and shade["bare"] < 0, shade
+
+
+def test_a_gltf_scene_with_separate_eye_and_teeth_meshes(split_head, builtin_head, tmp_path):
+    """The same parts as meshes of one glTF scene (named nodes, as avatar exporters write them):
+    classified by their node names and rigid like the separate files."""
+    import trimesh
+
+    _, files = split_head
+    scene = trimesh.Scene()
+    names = {"skin": "Wolf3D_Head", "eyes": "EyeLeft", "teeth": "Wolf3D_Teeth", "tongue": "Tongue"}
+    for k, node in names.items():
+        keep = files[k][1]
+        m = load_mesh(files[k][0])
+        scene.add_geometry(trimesh.Trimesh(m.vertices, m.triangles, process=False), node_name=node, geom_name=node)
+        assert np.allclose(m.vertices, builtin_head.mesh.vertices[keep], atol=1e-6)
+    path = tmp_path / "avatar.glb"
+    scene.export(str(path))
+    # Landmarks as points (the scene's vertex order is the exporter's).
+    points = {k: builtin_head.mesh.vertices[i].tolist() for k, i in builtin_head.landmarks.items()}
+    head = resolve_head(path, landmarks=points, mode="retarget")
+    mesh, rig = head.mesh, head.rig
+    assert {mesh.part_names[i] for i in np.unique(mesh.part)} == set(names.values())
+    n_up = int((builtin_head.part == 2).sum())
+    n_eyes, n_teeth, n_tongue = (len(files[k][1]) for k in ("eyes", "teeth", "tongue"))
+    assert rig.meta["rigid_parts"] == {"skull": n_eyes + n_up, "jaw": n_teeth - n_up + n_tongue}
+    moved = rig.deformed(np.array([0.0, 0.0, 0.35, 0.0])) - rig.neutral
+    eyes = np.flatnonzero(mesh.part == mesh.part_names.index("EyeLeft"))
+    assert np.abs(moved[eyes]).max() == 0
