@@ -23,6 +23,7 @@ import asyncio
 import json
 import multiprocessing as mp
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -233,8 +234,11 @@ def main(argv: list[str] | None = None) -> int:
                 hostile=args.hostile,
             )
         )
-    finally:
+    except Exception:
         rc = server.stop()
+        sys.stderr.write(f"server exit code {rc}; its last output:\n" + "".join(server.log_tail))
+        raise
+    rc = server.stop()
     result.update(
         {
             "benchmark": "server_soak",
