@@ -19,7 +19,19 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def forward_step(row, center, quad, const, i0, i1, feat, A, prev, has_prev, start):  # pragma: no cover - compiled
+def forward_step(  # pragma: no cover - compiled
+    row: np.ndarray,
+    center: np.ndarray,
+    quad: np.ndarray,
+    const: np.ndarray,
+    i0: np.ndarray,
+    i1: np.ndarray,
+    feat: np.ndarray,
+    A: np.ndarray,
+    prev: np.ndarray,
+    has_prev: bool,
+    start: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One frame of ``StreamingInverter._forward``.
 
     row ``(Da,)`` float64; center ``(Da,)`` and quad ``(C, K)`` in the plan's dtype; const ``(N, M)``;
@@ -82,7 +94,9 @@ def forward_step(row, center, quad, const, i0, i1, feat, A, prev, has_prev, star
 
 
 @njit(cache=True, nogil=True)
-def combine_step(state_post, mix, a, G, h, phi_flat):  # pragma: no cover - compiled
+def combine_step(  # pragma: no cover - compiled
+    state_post: np.ndarray, mix: np.ndarray, a: np.ndarray, G: np.ndarray, h: np.ndarray, phi_flat: np.ndarray
+) -> tuple[np.ndarray, bool]:
     """Eq. 7 for one frame, as ``StreamingInverter._combine`` before its output stage.
 
     state_post ``(N,)``, mix ``(N, M)``, a ``(Da,)`` centred audio (plan dtype); G ``(C, Dv*Da)``,

@@ -170,6 +170,11 @@ class StreamingInverter:
         if not np.isfinite(np.add.reduce(oa, axis=None)):  # any NaN/inf makes the sum non-finite
             raise InvalidFeaturesError("audio features contain NaN or inf")
         out = []
+        if not self.config.lag:  # pure filtering: each frame is final at once, no queue
+            for row in oa:
+                f, _, mix, a = self._forward(row)
+                out.append(self._combine(f, mix, a))
+            return np.array(out).reshape(len(out), self._dv)
         for row in oa:
             self._pending.append(self._forward(row))
             if len(self._pending) > self.config.lag:
