@@ -178,7 +178,7 @@ class MfccStream:
         self.kernel = kernel
         if kernel == "numba":
             # Imported here: numba's import costs ~0.5 s, paid only by streams that use it.
-            from realtime_core.features.compiled import spectrum_to_ceps
+            from realtime_core.features.compiled import sparse_filterbank, spectrum_to_ceps
 
             self._spectrum_to_ceps = spectrum_to_ceps
         fmax = config.sample_rate_hz / 2 if config.fmax_hz is None else config.fmax_hz
@@ -198,6 +198,8 @@ class MfccStream:
         if config.lifter > 0:
             dct = dct * (1.0 + (config.lifter / 2.0) * np.sin(np.pi * n / config.lifter))
         self._dct = np.ascontiguousarray(dct)
+        if kernel == "numba":
+            self._fb_sparse = sparse_filterbank(self._fbank)
         self.reset()
 
     def reset(self) -> None:
@@ -279,7 +281,7 @@ class MfccStream:
         spec = np.fft.rfft(frames * self._window, n=self.config.n_fft, axis=1)
         if self.kernel == "numba":
             cfg = self.config
-            return self._spectrum_to_ceps(spec, 1.0 / cfg.n_fft, self._fbank, cfg.energy_floor, self._dct)
+            return self._spectrum_to_ceps(spec, 1.0 / cfg.n_fft, *self._fb_sparse, cfg.energy_floor, self._dct)
         power = (spec.real**2 + spec.imag**2) * (1.0 / self.config.n_fft)
         energies = np.maximum(power @ self._fbank, self.config.energy_floor)
         return np.log(energies) @ self._dct
