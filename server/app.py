@@ -164,7 +164,7 @@ class FacecastServer:
                 await self._server.wait_closed()
                 raise
         if cfg.workers:
-            self.pool = WorkerPool(self.model, cfg.workers)
+            self.pool = WorkerPool(self.model, cfg.workers, rig=self.head.rig if self.head else None)
             await self.pool.start()
         self.spawn(self._watch_loop_lag())
 
