@@ -77,10 +77,11 @@ def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) ->
     from threadpoolctl import threadpool_limits
 
     from realtime_core.mapping import decode_speech_model
-    from server.session import Session
+    from server.session import Session, warm_up
 
     with threadpool_limits(1):
         model = decode_speech_model(model_bytes)
+        warm_up(model, rig)  # the compiled kernels loaded before the first session
         conn.send(("ok", None))  # ready
         sessions: dict[int, tuple[Session, _Recorder]] = {}
         while True:
