@@ -145,3 +145,36 @@ def combine_step(  # pragma: no cover - compiled
             acc -= L[k, i] * x[k]
         x[i] = acc / L[i, i]
     return x, True
+
+
+@njit(cache=True, nogil=True)
+def filter_rows(  # pragma: no cover - compiled
+    oa: np.ndarray,
+    center: np.ndarray,
+    quad: np.ndarray,
+    const: np.ndarray,
+    i0: np.ndarray,
+    i1: np.ndarray,
+    feat: np.ndarray,
+    A: np.ndarray,
+    prev: np.ndarray,
+    has_prev: bool,
+    start: np.ndarray,
+    G: np.ndarray,
+    h: np.ndarray,
+    phi_flat: np.ndarray,
+    out: np.ndarray,
+) -> tuple[np.ndarray, int]:
+    """Lag 0 (pure filtering) over rows ``oa (k, Da)``: :func:`forward_step` then :func:`combine_step`
+    per row into ``out (k, Dv)``, in one call. Returns ``(f, stop)``: the filtered posterior after the
+    rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
+    posterior before that row and its index (the caller finishes from there with the row-wise path)."""
+    f = prev
+    for t in range(oa.shape[0]):
+        f_new, _, mix, a = forward_step(oa[t], center, quad, const, i0, i1, feat, A, f, has_prev or t > 0, start)
+        x, ok = combine_step(f_new, mix, a, G, h, phi_flat)
+        if not ok:
+            return f, t
+        out[t] = x
+        f = f_new
+    return f, -1
