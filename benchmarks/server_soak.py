@@ -171,7 +171,7 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
         phase_metrics["quiet"] = json.loads((await http_get(url, "/metrics"))[1])
         if hostile:
             hostile_proc = mp.get_context("spawn").Process(
-                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count)
+                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count), daemon=True
             )
             hostile_proc.start()
 
@@ -182,6 +182,8 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
     await phase_task
     if hostile_proc is not None:
         hostile_proc.join(30)
+        if hostile_proc.is_alive():  # the sessions ended early (e.g. lost): do not outlive them
+            hostile_proc.terminate()
     status, _body = await http_get(url, "/health")
     final = json.loads((await http_get(url, "/metrics"))[1])
     rss.append((time.monotonic() - t_start, _rss_mb(server.proc.pid)))
