@@ -14,7 +14,9 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,6 +60,8 @@ class ServerProcess:
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         assert self.proc.stdout is not None and self.proc.stderr is not None  # both are PIPEs
         self.url = ""
+        self.log_tail: deque[str] = deque(maxlen=200)
+        """The server's last output lines (stdout and stderr), for a report when it fails."""
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
             line = self.proc.stdout.readline()
@@ -66,8 +70,16 @@ class ServerProcess:
             m = re.search(r"listening on (http://\S+)", line)
             if m:
                 self.url = m.group(1)
+                # Drain both pipes for the rest of the run: a full pipe (64 KB of log) would block the
+                # server's next write and stall its event loop (connections then die of ping timeouts).
+                for pipe in (self.proc.stdout, self.proc.stderr):
+                    threading.Thread(target=self._drain, args=(pipe,), daemon=True).start()
                 return
         raise RuntimeError("server did not start within 120 s")
+
+    def _drain(self, pipe) -> None:
+        for line in pipe:
+            self.log_tail.append(line)
 
     def cpu_seconds(self) -> float:
         """User + system CPU time the server process has used so far (s), from /proc."""

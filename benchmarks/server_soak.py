@@ -23,6 +23,7 @@ import asyncio
 import json
 import multiprocessing as mp
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -117,7 +118,7 @@ def _hostile_proc(url: str, seconds: float, counter) -> None:
 
 
 async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, viewers: int, hostile: bool) -> dict:
-    from clients.client import IngestClient, http_get
+    from clients.client import IngestClient, ServerClosed, http_get
 
     url = server.url
     mf = model.frontend.mfcc
@@ -129,23 +130,35 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
     phase_metrics: dict[str, dict] = {}
     hostile_count = mp.get_context("spawn").Value("l", 0)
     hostile_proc = None
+    dropped: list[dict] = []
     t_start = time.monotonic()
     half = t_start + seconds / 2
 
     async def one_session(s: int) -> dict:
-        async with IngestClient(url, session=f"soak{s}", sample_rate_hz=RATE) as ing:
-            tasks = [asyncio.ensure_future(record_viewer(url, f"soak{s}", log=log)) for log in logs[s]]
-            await asyncio.sleep(0.5)
-            loop = asyncio.get_running_loop()
-            t0 = loop.time() + s * 0.02 / max(1, sessions)  # staggered across a block
-            n_blocks = int(seconds * RATE / BLOCK)
-            looped = np.concatenate([speech[(b * BLOCK) % (len(speech) - BLOCK) :][:BLOCK] for b in range(n_blocks)])
-            async for _, block in paced_blocks(looped, RATE, block_s=BLOCK / RATE, start=t0):
-                await ing.send(block)
-                block_sent[s].append(time.time())
-            ended = await ing.end()
-            await asyncio.gather(*tasks)
-            return ended
+        n_blocks = int(seconds * RATE / BLOCK)
+        tasks: list[asyncio.Future] = []
+        try:
+            async with IngestClient(url, session=f"soak{s}", sample_rate_hz=RATE) as ing:
+                tasks = [asyncio.ensure_future(record_viewer(url, f"soak{s}", log=log)) for log in logs[s]]
+                await asyncio.sleep(0.5)
+                loop = asyncio.get_running_loop()
+                t0 = loop.time() + s * 0.02 / max(1, sessions)  # staggered across a block
+                looped = np.concatenate(
+                    [speech[(b * BLOCK) % (len(speech) - BLOCK) :][:BLOCK] for b in range(n_blocks)]
+                )
+                async for _, block in paced_blocks(looped, RATE, block_s=BLOCK / RATE, start=t0):
+                    await ing.send(block)
+                    block_sent[s].append(time.time())
+                ended = await ing.end()
+                await asyncio.gather(*tasks)
+                return ended
+        except ServerClosed as exc:
+            # One ingest lost (reported, its missing frames counted as lost): the soak goes on.
+            dropped.append(
+                {"session": s, "after_s": round(time.monotonic() - t_start, 1), "code": exc.code, "reason": exc.reason}
+            )
+            await asyncio.gather(*tasks, return_exceptions=True)
+            return {"frames": mf.n_frames_for(n_blocks * BLOCK)}
 
     async def sample_rss() -> None:
         while True:
@@ -158,7 +171,7 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
         phase_metrics["quiet"] = json.loads((await http_get(url, "/metrics"))[1])
         if hostile:
             hostile_proc = mp.get_context("spawn").Process(
-                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count)
+                target=_hostile_proc, args=(url, seconds / 2 - 1, hostile_count), daemon=True
             )
             hostile_proc.start()
 
@@ -169,6 +182,8 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
     await phase_task
     if hostile_proc is not None:
         hostile_proc.join(30)
+        if hostile_proc.is_alive():  # the sessions ended early (e.g. lost): do not outlive them
+            hostile_proc.terminate()
     status, _body = await http_get(url, "/health")
     final = json.loads((await http_get(url, "/metrics"))[1])
     rss.append((time.monotonic() - t_start, _rss_mb(server.proc.pid)))
@@ -205,6 +220,7 @@ async def _run(server: ServerProcess, model, *, seconds: float, sessions: int, v
             "quiet": phase_metrics["quiet"]["timings_ms"].get("loop_lag", {}).get("p99_ms"),
             "end": final["timings_ms"].get("loop_lag", {}).get("p99_ms"),
         },
+        "ingests_lost": dropped,
         "hostile_messages": int(hostile_count.value),
         "closes_by_code": final["closes"],
         "healthy_at_end": status == 200,
@@ -233,8 +249,11 @@ def main(argv: list[str] | None = None) -> int:
                 hostile=args.hostile,
             )
         )
-    finally:
+    except Exception:
         rc = server.stop()
+        sys.stderr.write(f"server exit code {rc}; its last output:\n" + "".join(server.log_tail))
+        raise
+    rc = server.stop()
     result.update(
         {
             "benchmark": "server_soak",

@@ -96,9 +96,9 @@ class AvModel:
         (:meth:`FrontEndConfig.algorithmic_delay_ms`)."""
         return self.frontend.algorithmic_delay_ms(lag)
 
-    def front_end(self) -> FrontEnd:
-        """A fresh streaming front end for one utterance or live session."""
-        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
+    def front_end(self, *, kernel: str = "numba") -> FrontEnd:
+        """A fresh streaming front end for one utterance or live session (kernel: "numba" or the "numpy" reference)."""
+        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var, kernel=kernel)
 
     @cached_property
     def _plans(self) -> dict[tuple[str, float | None], StreamPlan]:

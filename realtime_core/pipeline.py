@@ -42,7 +42,8 @@ class SpeechToParams:
     after each stage of every push, for per-stage timings.
 
     model: any :class:`realtime_core.mapping.SpeechModel`; ``stream`` sets the HMM inverter's lag,
-    dtype and likelihood scale (an MLP model takes its lag and dtype).
+    dtype and likelihood scale (an MLP model takes its lag and dtype), and the per-frame kernels of
+    the front end and the inverter (``stream.kernel``: compiled "numba" or the "numpy" reference).
     """
 
     def __init__(
@@ -58,7 +59,7 @@ class SpeechToParams:
         self._resampler = (
             StreamingResampler(self.rate_hz, model.sample_rate_hz) if self.rate_hz != model.sample_rate_hz else None
         )
-        self._fe = model.front_end()
+        self._fe = model.front_end(kernel=stream.kernel)
         self._inv: VisualMapper
         if isinstance(model, AvModel):
             self._inv = model.inverter(stream)

@@ -69,7 +69,7 @@ from server.guard import (
 )
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
-from server.session import Session, SessionConfig
+from server.session import Session, SessionConfig, warm_up
 from server.timing import StageTimes
 from server.workers import WorkerPool
 from wire import protocol as P
@@ -163,8 +163,10 @@ class FacecastServer:
                 self._server.close()
                 await self._server.wait_closed()
                 raise
+        # Compiled per-frame kernels load (or compile) on first call: here, not in the first session.
+        await asyncio.to_thread(warm_up, self.model, self.head.rig if self.head else None)
         if cfg.workers:
-            self.pool = WorkerPool(self.model, cfg.workers)
+            self.pool = WorkerPool(self.model, cfg.workers, rig=self.head.rig if self.head else None)
             await self.pool.start()
         self.spawn(self._watch_loop_lag())
 

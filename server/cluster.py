@@ -33,6 +33,12 @@ session:
   returns; their viewers stay connected. A node started with a wrong Redis address says so in one
   line and does not start.
 
+Publishing costs one socket write per message: a second, write-only connection to Redis with
+replies switched off (``CLIENT REPLY OFF``) takes the PUBLISH commands straight from the fan-out, in
+the same turn of the loop as the local viewers' writes. Through redis-py's pipeline each frame cost
+a client object, a task switch and a round trip (~0.1 ms of loop CPU, and a frame waited for the
+previous batch's replies); that path remains the fallback (TLS or Unix-socket URLs, reconnecting).
+
 Pub/sub rather than Streams: measured with ``benchmarks/server_redis_transport.py`` (see
 docs/deploy.md); pub/sub delivers with lower latency and less Redis CPU, stores nothing, and a live
 viewer has no use for frames older than its reconnection (Streams' replay).
@@ -108,6 +114,80 @@ class RemoteFeed:
         self.session = self.facts  # what descriptions read, as of a LiveSession
 
 
+def _resp(*parts: bytes) -> bytes:
+    """One Redis command in RESP (the wire format): an array of bulk strings."""
+    out = [b"*%d\r\n" % len(parts)]
+    for p in parts:
+        out.append(b"$%d\r\n%s\r\n" % (len(p), p))
+    return b"".join(out)
+
+
+RAW_BUFFER_LIMIT = 4 << 20  # bytes waiting in the publish socket before messages are dropped (Redis stalled)
+
+
+class RawPublisher:
+    """A write-only Redis connection for PUBLISH with replies off: :meth:`write` is one synchronous
+    socket write (no await, no reply to read). Plain TCP only (``redis://``); the caller falls back to
+    redis-py otherwise."""
+
+    def __init__(self) -> None:
+        self.writer: asyncio.StreamWriter | None = None
+        self._reader: asyncio.StreamReader | None = None
+
+    @staticmethod
+    def supports(redis: aioredis.Redis) -> bool:
+        from redis.asyncio.connection import Connection
+
+        return redis.connection_pool.connection_class is Connection
+
+    async def connect(self, redis: aioredis.Redis, timeout_s: float = 2.0) -> None:
+        """Open the connection with the client's address, credentials and database (OSError, TimeoutError
+        or ServerError if Redis refuses)."""
+        kw = redis.connection_pool.connection_kwargs
+        reader, writer = await asyncio.wait_for(
+            asyncio.open_connection(kw.get("host", "localhost"), int(kw.get("port", 6379))), timeout_s
+        )
+        try:
+            setup = []
+            if kw.get("password"):
+                user = kw.get("username")
+                auth = (b"AUTH", user.encode(), kw["password"].encode()) if user else (b"AUTH", kw["password"].encode())
+                setup.append(_resp(*auth))
+            if int(kw.get("db") or 0):
+                setup.append(_resp(b"SELECT", str(int(kw["db"])).encode()))
+            for cmd in setup:  # these two answer: check before replies go off
+                writer.write(cmd)
+                line = await asyncio.wait_for(reader.readline(), timeout_s)
+                if not line.startswith(b"+"):
+                    raise ServerError(f"Redis refused the publish connection: {line.decode(errors='replace').strip()}")
+            writer.write(_resp(b"CLIENT", b"REPLY", b"OFF"))
+        except BaseException:
+            writer.close()
+            raise
+        self._reader, self.writer = reader, writer
+
+    @property
+    def ready(self) -> bool:
+        """Open, and Redis has not closed its end (an unread reader sees the EOF; the transport of a
+        half-closed TCP socket would stay open until a write failed)."""
+        w, r = self.writer, self._reader
+        return w is not None and r is not None and not w.is_closing() and not r.at_eof()
+
+    def write(self, channel: str, message: bytes) -> bool:
+        """PUBLISH one message now; False if the connection is gone or Redis has stopped reading
+        (the caller queues or drops it)."""
+        w = self.writer
+        if not self.ready or w is None or w.transport.get_write_buffer_size() > RAW_BUFFER_LIMIT:
+            return False
+        w.write(_resp(b"PUBLISH", channel.encode(), message))
+        return True
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+        self.writer = self._reader = None
+
+
 class Cluster:
     """One node's view of the cluster. ``await start()`` (ServerError in one line if Redis cannot be
     reached), ``await stop()``.
@@ -145,6 +225,7 @@ class Cluster:
         self.publish_dropped = 0
         self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
         self._wake = asyncio.Event()
+        self._raw = RawPublisher()
         self._tasks: list[asyncio.Task] = []
         # One-shot tasks started from message callbacks (unsubscribe, end a feed): held here until done,
         # since the loop keeps only a weak reference to a task.
@@ -187,6 +268,7 @@ class Cluster:
         for t in self._tasks:
             t.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._raw.close()
         if self.redis is not None and self.up:
             try:
                 names = list(self.local)
@@ -265,20 +347,41 @@ class Cluster:
         return self.wanted.get(name, set())
 
     def publish(self, name: str, message: bytes) -> None:
-        """Queue one message for the session's channel; never waits, never raises."""
+        """Send one message to the session's channel: written at once on the publish connection when it
+        is up and nothing is queued before it, else queued (bounded); never waits, never raises."""
+        channel = frames_channel(name)
+        if not self._queue and self._raw.write(channel, message):
+            self.published += 1
+            return
         if len(self._queue) >= PUBLISH_QUEUE:
             self._queue.popleft()
             self.publish_dropped += 1
-        self._queue.append((frames_channel(name), message))
+        self._queue.append((channel, message))
         self._wake.set()
 
     async def _publisher(self) -> None:
+        """Drain the queue: through the publish connection once it is (re)opened, else through redis-py."""
         from redis.exceptions import RedisError
 
+        raw_ok = self.redis is not None and RawPublisher.supports(self.redis)
         while True:
             await self._wake.wait()
             self._wake.clear()
+            if raw_ok and not self._raw.ready and self.up:
+                self._raw.close()
+                try:
+                    await self._raw.connect(self._client)
+                except (OSError, TimeoutError, ServerError) as exc:
+                    log.debug("publish connection to Redis failed: %s (using the client)", exc)
+                    self._raw.close()
             while self._queue:
+                if self._raw.ready:
+                    channel, msg = self._queue[0]
+                    if not self._raw.write(channel, msg):
+                        break  # Redis stalled: keep the rest queued (the oldest drop when full)
+                    self._queue.popleft()
+                    self.published += 1
+                    continue
                 batch = [self._queue.popleft() for _ in range(min(len(self._queue), 256))]
                 try:
                     pipe = self._client.pipeline(transaction=False)
@@ -290,6 +393,9 @@ class Cluster:
                     self.publish_dropped += len(batch)
                     self._down(exc)
                     await asyncio.sleep(0.2)
+            if self._queue:  # stalled: try again shortly
+                await asyncio.sleep(0.05)
+                self._wake.set()
 
     # -- heartbeat, wants, recovery ------------------------------------------------------------------------
 

@@ -30,6 +30,7 @@ from server.describe import summary
 from server.errors import IngestOverrun
 from server.guard import IngestPacer
 from server.session import Output, Session
+from server.workers import RemoteSession
 from wire import protocol as P
 
 if TYPE_CHECKING:
@@ -230,7 +231,19 @@ class LiveSession:
 
     async def feed_bytes(self, data: bytes) -> int:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
+        self._set_precompute()
         return self._fanout(await self.session.push_bytes(data))
+
+    def _set_precompute(self) -> None:
+        """Tell a session in a compute worker which vertex-delta payloads its viewers (here and on other
+        nodes) watch, so the worker encodes them off the loop (a local session encodes on the loop)."""
+        if not isinstance(self.session, RemoteSession):
+            return
+        kinds = {(v.kind, v.encoding) for v in self.viewers if v.kind == P.KIND_DELTAS}
+        cluster = self.server.cluster
+        if cluster is not None:
+            kinds.update(k for k in cluster.wants(self.name) if k[0] == P.KIND_DELTAS)
+        self.session.precompute = tuple(sorted(kinds))
 
     async def feed_bytes_fairly(self, data: bytes) -> int:
         """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is
@@ -274,6 +287,7 @@ class LiveSession:
 
     async def feed(self, samples: np.ndarray) -> int:
         """(n,) or (n, channels) float samples -> frames produced."""
+        self._set_precompute()
         return self._fanout(await self.session.push(samples))
 
     async def finish(self) -> int:

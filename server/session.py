@@ -411,3 +411,15 @@ class Session:
 
     def control_state(self) -> dict:
         return self.controls.describe()
+
+
+def warm_up(model: SpeechModel, rig: Rig | MorphRig | None = None) -> None:
+    """Run half a second of noise through a throw-away session (and the rig), so the per-frame
+    compiled kernels are loaded (or compiled, on a fresh install) before the first real session
+    instead of stalling it: numba compiles on first call."""
+    rng = np.random.default_rng(0)
+    s = Session(model, config=SessionConfig(sample_rate_hz=model.sample_rate_hz), rig=rig)
+    out = s.push(0.1 * rng.standard_normal(model.sample_rate_hz // 2))
+    for f in out.frames[:1]:
+        if rig is not None:
+            f.payload(P.KIND_DELTAS, P.ENC_INT16)

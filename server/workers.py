@@ -11,6 +11,12 @@ stage timings, then encodes and fans out as for a local session. A session lives
 and the pipe is FIFO, so its frames stay in order; a reply is matched to the oldest pending request
 of that worker.
 
+Vertex deltas are encoded there too: the loop names, with each push, the (kind, encoding) pairs
+of vertex-delta viewers the session has (its ``precompute``), the worker encodes those payloads with
+its copy of the head rig and sends them back with the frames, so the loop's fan-out finds them ready
+(a head's morph-target solve and GEMV cost ~0.15-0.4 ms per frame, the largest per-frame cost a
+viewer adds on the loop).
+
 Cost: two pipe messages per audio block (tens of microseconds) against the ~0.3-0.5 ms of work
 per frame they move off the loop. Sending blocks the loop only if a worker's pipe (64 KiB) is
 full, i.e. if that worker is far behind real time.
@@ -21,7 +27,9 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import logging
 import multiprocessing as mp
+import pickle
 import time
 from dataclasses import asdict
 
@@ -34,6 +42,8 @@ from realtime_core.mapping import SpeechModel
 from server.errors import AudioFormatError, ControlError, ServerConfigError, ServerError
 from server.session import AudioBlock, Frame, Output, SessionConfig
 from server.timing import StageTimes
+
+log = logging.getLogger("facecast.workers")
 
 _ERRORS = {"AudioFormatError": AudioFormatError, "ControlError": ControlError, "ServerConfigError": ServerConfigError}
 
@@ -49,26 +59,29 @@ class _Recorder(StageTimes):
         self.log.append((name, seconds))
 
 
-def _pack(out: Output, rec: _Recorder) -> tuple:
+def _pack(out: Output, rec: _Recorder, precompute: tuple = ()) -> tuple:
     frames = out.frames
+    # Payloads the loop asked for (vertex deltas), per frame: {(kind, encoding): (bytes, count, scale)}.
+    pre = [{key: f.payload(*key) for key in precompute} for f in frames] if precompute and frames else None
     raw = np.array([f.raw_params for f in frames]).reshape(len(frames), len(VISUAL_PARAMS))
     params = np.array([f.params for f in frames]).reshape(len(frames), len(VISUAL_PARAMS))
     work = frames[0].work_s if frames else 0.0
     audio = None if out.audio is None else (out.audio.index, out.audio.start, out.audio.samples)
     log, rec.log = rec.log, []
     expr = [(f.expression, f.speech_params) for f in frames]  # (None, None) without an expression
-    return raw, params, work, audio, log, expr
+    return raw, params, work, audio, log, expr, pre
 
 
-def _worker_main(conn, model_bytes: bytes) -> None:
+def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) -> None:
     """Worker process: decode the model once, then serve session requests until "stop"."""
     from threadpoolctl import threadpool_limits
 
     from realtime_core.mapping import decode_speech_model
-    from server.session import Session
+    from server.session import Session, warm_up
 
     with threadpool_limits(1):
         model = decode_speech_model(model_bytes)
+        warm_up(model, rig)  # the compiled kernels loaded before the first session
         conn.send(("ok", None))  # ready
         sessions: dict[int, tuple[Session, _Recorder]] = {}
         while True:
@@ -83,12 +96,12 @@ def _worker_main(conn, model_bytes: bytes) -> None:
             try:
                 if op == "open":
                     rec = _Recorder()
-                    sessions[sid] = (Session(model, config=SessionConfig(**msg[2]), times=rec), rec)
+                    sessions[sid] = (Session(model, config=SessionConfig(**msg[2]), rig=rig, times=rec), rec)
                     conn.send(("ok", None))
                 elif op == "push":
                     s, rec = sessions[sid]
                     out = s.push_bytes(msg[2]) if isinstance(msg[2], bytes) else s.push(msg[2])
-                    conn.send(("ok", _pack(out, rec)))
+                    conn.send(("ok", _pack(out, rec, msg[3] if len(msg) > 3 else ())))
                 elif op == "flush":
                     s, rec = sessions[sid]
                     conn.send(("ok", _pack(s.flush(), rec)))
@@ -104,9 +117,9 @@ def _worker_main(conn, model_bytes: bytes) -> None:
 
 
 class _Worker:
-    def __init__(self, ctx, model_bytes: bytes) -> None:
+    def __init__(self, ctx, model_bytes: bytes, rig: Rig | MorphRig | None) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
-        self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes), daemon=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes, rig), daemon=True)
         self.proc.start()
         child.close()
         self.pending: collections.deque[asyncio.Future] = collections.deque()
@@ -142,13 +155,15 @@ class _Worker:
 
 
 class WorkerPool:
-    """N compute processes holding the model; ``await start()``, ``open()`` sessions, ``await stop()``."""
+    """N compute processes holding the model (and the head rig, for vertex deltas); ``await start()``,
+    ``open()`` sessions, ``await stop()``."""
 
-    def __init__(self, model: SpeechModel, n: int) -> None:
+    def __init__(self, model: SpeechModel, n: int, *, rig: Rig | MorphRig | None = None) -> None:
         if not 1 <= n <= 64:
             raise ServerConfigError(f"workers must be in 1..64, got {n}")
         self.model = model
         self.n = n
+        self.rig = rig
         self.workers: list[_Worker] = []
         self._next_id = 0
 
@@ -161,8 +176,14 @@ class WorkerPool:
             raise ServerConfigError(f"compute workers need an HMM or MLP model file, got {type(self.model).__name__}")
         ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
         data = encode_speech_model(self.model)
+        if self.rig is not None:
+            try:  # a rig goes to the workers by pickle; one that cannot keeps its deltas on the loop
+                pickle.dumps(self.rig)
+            except (TypeError, AttributeError, pickle.PicklingError) as exc:
+                log.info("vertex deltas stay on the event loop: the head rig cannot go to workers (%s)", exc)
+                self.rig = None
         loop = asyncio.get_running_loop()
-        self.workers = [_Worker(ctx, data) for _ in range(self.n)]
+        self.workers = [_Worker(ctx, data, self.rig) for _ in range(self.n)]
         for w in self.workers:
             fut = loop.create_future()
             w.pending.append(fut)
@@ -187,7 +208,7 @@ class WorkerPool:
         sid = self._next_id
         await w.request(("open", sid, asdict(config)))
         w.sessions += 1
-        return RemoteSession(self.model, config, w, sid, rig=rig, times=times)
+        return RemoteSession(self.model, config, w, sid, rig=rig, times=times, worker_rig=self.rig is not None)
 
 
 class RemoteSession:
@@ -202,8 +223,10 @@ class RemoteSession:
         *,
         rig: Rig | MorphRig | None,
         times: StageTimes,
+        worker_rig: bool = False,
     ) -> None:
         self.model = model
+        self._worker_rig = worker_rig and rig is not None
         self.config = config
         self.rig = rig
         self.times = times
@@ -217,6 +240,9 @@ class RemoteSession:
         self.frames_out = 0
         self.samples_out = 0
         self.finished = False
+        self.precompute: tuple[tuple[int, int], ...] = ()
+        """(kind, encoding) payloads the worker encodes with each push (set by the live session:
+        the vertex-delta kinds its viewers watch)."""
         self._state = {"gain": {n: 1.0 for n in VISUAL_PARAMS}, "smoothing_ms": 0.0, "expression": []}
 
     @property
@@ -227,10 +253,15 @@ class RemoteSession:
         return self._state
 
     async def push_bytes(self, data: bytes) -> Output:
-        return self._unpack(await self._w.request(("push", self._sid, bytes(data))))
+        return self._unpack(await self._w.request(("push", self._sid, bytes(data), self._precompute())))
 
     async def push(self, samples: np.ndarray) -> Output:
-        return self._unpack(await self._w.request(("push", self._sid, np.asarray(samples, dtype=np.float64))))
+        samples = np.asarray(samples, dtype=np.float64)
+        return self._unpack(await self._w.request(("push", self._sid, samples, self._precompute())))
+
+    def _precompute(self) -> tuple[tuple[int, int], ...]:
+        # Only when the worker holds the same rig (WorkerPool(rig=...)); else the loop encodes.
+        return self.precompute if self._worker_rig else ()
 
     async def flush(self) -> Output:
         if self.finished:
@@ -251,14 +282,17 @@ class RemoteSession:
             await self._w.request(("close", sid))
 
     def _unpack(self, packed: tuple) -> Output:
-        raw, params, work, audio, log, expr = packed
+        raw, params, work, audio, log, expr, pre = packed
         for name, seconds in log:
             self.times.add(name, seconds)
         now = time.perf_counter()
         frames = []
-        for r, p, (alpha, speech) in zip(raw, params, expr):
+        for i, (r, p, (alpha, speech)) in enumerate(zip(raw, params, expr)):
             k = self.frames_out
-            frames.append(Frame(k, k / self.fps, p, r, work, now, self.rig, self.times, alpha, speech))
+            frame = Frame(k, k / self.fps, p, r, work, now, self.rig, self.times, alpha, speech)
+            if pre is not None:
+                frame._payloads.update(pre[i])
+            frames.append(frame)
             self.frames_out += 1
         block = None
         if audio is not None:

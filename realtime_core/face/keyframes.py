@@ -92,17 +92,27 @@ class KeyframeMap:
         rhs = np.asarray(x, dtype=np.float64) @ self.cross.T
         return cho_solve(self._chol, rhs.reshape(-1, self.n_keyframes).T).T.reshape(rhs.shape)
 
-    def weights(self, x: np.ndarray, *, iterations: int = 200, tol: float = 1e-9) -> np.ndarray:
+    def weights(self, x: np.ndarray, *, iterations: int = 200, tol: float = 1e-9, kernel: str = "numba") -> np.ndarray:
         """Bounded eq. 4: (..., k) source coordinates -> (..., P) float64 weights in [lo, hi].
 
         An active-set solve of the box-constrained convex QP (exact once the active set is right;
-        starts from the clipped unbounded solution, a few steps per frame)."""
+        starts from the clipped unbounded solution, a few steps per frame). kernel: "numba" (the
+        solve compiled, :mod:`realtime_core.face.compiled`) or "numpy" (the reference)."""
+        solve: Callable[..., np.ndarray]
+        if kernel == "numba":
+            from realtime_core.face.compiled import box_qp  # numba's import is paid only here
+
+            solve = box_qp
+        elif kernel == "numpy":
+            solve = _box_qp
+        else:
+            raise ConfigError(f"kernel must be 'numba' or 'numpy', got {kernel!r}")
         x = np.asarray(x, dtype=np.float64)
         rhs = (x @ self.cross.T).reshape(-1, self.n_keyframes)
         out = np.empty_like(rhs)
         g = self.gram
         for i, f in enumerate(rhs):
-            out[i] = _box_qp(g, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
+            out[i] = solve(g, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
         return out.reshape((*x.shape[:-1], self.n_keyframes))
 
     def residual(self, keyframes: np.ndarray, source: np.ndarray, x: np.ndarray) -> float:

@@ -59,7 +59,16 @@ def mel_level_db(c0: np.ndarray, n_mels: int) -> np.ndarray:
 class RunningCmvn:
     """Causal CMVN: ``push(features (k, d), level_db (k,)) -> (k, d) float64``."""
 
-    def __init__(self, config: CmvnConfig, *, mean: np.ndarray, var: np.ndarray) -> None:
+    def __init__(self, config: CmvnConfig, *, mean: np.ndarray, var: np.ndarray, kernel: str = "numba") -> None:
+        """kernel: "numba" (the per-frame loop compiled, :mod:`realtime_core.features.compiled`) or
+        "numpy" (the reference; the two agree to rounding)."""
+        if kernel not in ("numba", "numpy"):
+            raise ConfigError(f"kernel must be 'numba' or 'numpy', got {kernel!r}")
+        self.kernel = kernel
+        if kernel == "numba":
+            from realtime_core.features.compiled import cmvn_push  # numba's import is paid only here
+
+            self._compiled_push = cmvn_push
         mean = np.asarray(mean, dtype=np.float64)
         var = np.asarray(var, dtype=np.float64)
         if mean.ndim != 1 or var.shape != mean.shape:
@@ -87,8 +96,13 @@ class RunningCmvn:
             raise InvalidFeaturesError(
                 f"CMVN expects features (k, {self.dim}) and levels (k,), got {x.shape}, {lv.shape}"
             )
-        out = np.empty_like(x)
         cfg = self.config
+        if self.kernel == "numba":
+            out, self._m, self._v, self._c = self._compiled_push(
+                x, lv, self._m, self._v, self._c, cfg.gate_db, cfg.max_frames, cfg.var_floor
+            )
+            return out
+        out = np.empty_like(x)
         m, v, c = self._m, self._v, self._c
         for i in range(x.shape[0]):
             if lv[i] >= cfg.gate_db:

@@ -61,7 +61,11 @@ class ContextStacker:
         if lo >= 0 and hi <= self._n - 1:
             # Away from the edges each row is a contiguous slice of the buffer.
             b = lo - self._buf_start
-            rows = np.stack([self._buf[b + i : b + i + 2 * self.tc + 1].reshape(-1) for i in range(end - self._next)])
+            w = 2 * self.tc + 1
+            if end - self._next == 1:  # the live case: one row, one copy
+                rows = self._buf[b : b + w].reshape(1, -1).copy()
+            else:
+                rows = np.stack([self._buf[b + i : b + i + w].reshape(-1) for i in range(end - self._next)])
         else:
             t = np.arange(self._next, end)
             idx = np.clip(t[:, None] + np.arange(-self.tc, self.tc + 1)[None, :], 0, self._n - 1)

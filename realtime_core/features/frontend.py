@@ -83,7 +83,8 @@ class FrontEnd:
     """``push(samples (n,)) -> (k, audio_dim) float64``; ``flush()`` -> the rest.
 
     ``cmvn_mean``/``cmvn_var``: ``(n_feat,)`` warm-start statistics (the model's training
-    statistics); required when ``config.cmvn`` is not None.
+    statistics); required when ``config.cmvn`` is not None. kernel: "numba" (default) or "numpy" (the
+    reference) for the MFCC and CMVN per-frame steps.
     """
 
     def __init__(
@@ -92,19 +93,20 @@ class FrontEnd:
         *,
         cmvn_mean: np.ndarray | None = None,
         cmvn_var: np.ndarray | None = None,
+        kernel: str = "numba",
     ) -> None:
         self.config = config
         mcfg = config.mfcc
-        self._mfcc = MfccStream(replace(mcfg, include_c0=True))
+        self._mfcc = MfccStream(replace(mcfg, include_c0=True), kernel=kernel)
         if config.cmvn is not None:
             if cmvn_mean is None or cmvn_var is None:
                 raise ConfigError("FrontEnd with CMVN needs cmvn_mean and cmvn_var (training statistics)")
-            self._cmvn: RunningCmvn | None = RunningCmvn(config.cmvn, mean=cmvn_mean, var=cmvn_var)
+            self._cmvn: RunningCmvn | None = RunningCmvn(config.cmvn, mean=cmvn_mean, var=cmvn_var, kernel=kernel)
         else:
             self._cmvn = None
         self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
         # Raw [c0, c1..] of digital silence (every mel band at the energy floor).
-        probe = MfccStream(replace(mcfg, include_c0=True))
+        probe = MfccStream(replace(mcfg, include_c0=True), kernel=kernel)
         self._silence = probe.push(np.zeros(mcfg.window_len))[0]
 
     def reset(self) -> None:

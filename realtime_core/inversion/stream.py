@@ -40,6 +40,8 @@ from realtime_core.inversion.conditional import ConditionalForm
 class StreamConfig:
     """lag: extra frames of fixed-lag smoothing (0 = pure filtering, lowest delay).
     dtype: "float32" or "float64" for the per-frame matrix-vector product.
+    kernel: "numba" (default: the per-frame steps compiled, :mod:`realtime_core.inversion.compiled`)
+    or "numpy" (the reference implementation; the two agree to rounding).
     likelihood_scale: exponent kappa on the audio likelihoods (None = the model's own, else
     1). The 77 stacked dims share 7 overlapping frames, so the raw likelihoods are far
     over-confident; kappa < 1 softens the posteriors, which then average several components'
@@ -49,8 +51,11 @@ class StreamConfig:
     lag: int = 0
     dtype: str = "float32"
     likelihood_scale: float | None = None
+    kernel: str = "numba"
 
     def __post_init__(self) -> None:
+        if self.kernel not in ("numba", "numpy"):
+            raise ConfigError(f"kernel must be 'numba' or 'numpy', got {self.kernel!r}")
         if not 0 <= self.lag <= 100000:
             raise ConfigError(f"lag must be in 0..100000 frames, got {self.lag}")
         if self.dtype not in ("float32", "float64"):
@@ -134,6 +139,16 @@ class StreamingInverter:
         self._feat = np.empty(self._nq + form.n_audio, dtype=p.quad.dtype)  # per-session scratch
         self._da, self._dv = form.n_audio, form.n_visual
         self._n, self._m = form.n_states, form.n_mix
+        self._filter_rows: Callable[..., tuple[np.ndarray, int]] | None = None
+        if config.kernel == "numba":
+            # Imported here: numba's import costs ~0.5 s, paid only by inverters that use it.
+            from realtime_core.inversion import compiled
+
+            self._forward_step = compiled.forward_step
+            self._combine_step = compiled.combine_step
+            self._filter_rows = compiled.filter_rows
+            self._forward = self._forward_compiled  # type: ignore[method-assign]
+            self._combine = self._combine_compiled  # type: ignore[method-assign]
         self.reset()
 
     @property
@@ -156,7 +171,14 @@ class StreamingInverter:
             raise InvalidFeaturesError(f"audio features must be (k, {self._da}), got {oa.shape}")
         if not np.isfinite(np.add.reduce(oa, axis=None)):  # any NaN/inf makes the sum non-finite
             raise InvalidFeaturesError("audio features contain NaN or inf")
+        if not self.config.lag and self._filter_rows is not None:
+            return self._push_filter_compiled(oa)
         out = []
+        if not self.config.lag:  # pure filtering: each frame is final at once, no queue
+            for row in oa:
+                f, _, mix, a = self._forward(row)
+                out.append(self._combine(f, mix, a))
+            return np.array(out).reshape(len(out), self._dv)
         for row in oa:
             self._pending.append(self._forward(row))
             if len(self._pending) > self.config.lag:
@@ -199,6 +221,73 @@ class StreamingInverter:
             f = f / total
         self._f = f
         return f, b, mix, a
+
+    def _push_filter_compiled(self, oa: np.ndarray) -> np.ndarray:
+        """Lag 0: all rows of a push in one compiled call (the row-wise path from a row it cannot solve)."""
+        assert self._filter_rows is not None  # set with kernel="numba"
+        out = np.empty((len(oa), self._dv))
+        prev = self._f
+        f, stop = self._filter_rows(
+            oa,
+            self._center,
+            self._quad,
+            self._const,
+            self._i0,
+            self._i1,
+            self._feat,
+            self._A,
+            self._start if prev is None else prev,
+            prev is not None,
+            self._start,
+            self._G,
+            self._h,
+            self._phi_flat,
+            out,
+        )
+        done = len(oa) if stop < 0 else stop
+        if done:
+            self._f = f
+        for t in range(done, len(oa)):
+            f_t, _, mix, a = self._forward(oa[t])
+            out[t] = self._combine_raw(f_t, mix, a)
+        if self._output is not None:
+            for t in range(len(oa)):
+                out[t] = self._output(out[t])
+        return out
+
+    def _forward_compiled(self, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_forward` in one compiled call."""
+        prev = self._f
+        f, b, mix, a = self._forward_step(
+            row,
+            self._center,
+            self._quad,
+            self._const,
+            self._i0,
+            self._i1,
+            self._feat,
+            self._A,
+            self._start if prev is None else prev,
+            prev is not None,
+            self._start,
+        )
+        self._f = f
+        return f, b, mix, a
+
+    def _combine_compiled(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """:meth:`_combine` in one compiled call (least squares, as there, if P is not positive definite)."""
+        x = self._combine_raw(state_post, mix, a)
+        return x if self._output is None else self._output(x)
+
+    def _combine_raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 compiled, before the output stage."""
+        x, ok = self._combine_step(state_post, mix, a, self._G, self._h, self._phi_flat)
+        if not ok:
+            P = (((state_post[:, None] * mix).reshape(-1) / (state_post @ mix.sum(axis=1))) @ self._phi_flat).reshape(
+                self._dv, self._dv
+            )
+            x = np.linalg.lstsq(P, x, rcond=None)[0]
+        return x
 
     def _emit_oldest(self) -> np.ndarray:
         f, _, mix, cond = self._pending[0]

@@ -73,8 +73,9 @@ class MlpSpeechModel:
     def sample_rate_hz(self) -> int:
         return int(self.frontend.mfcc.sample_rate_hz)
 
-    def front_end(self) -> FrontEnd:
-        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var)
+    def front_end(self, *, kernel: str = "numba") -> FrontEnd:
+        """A fresh streaming front end (kernel: "numba" or the "numpy" reference)."""
+        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var, kernel=kernel)
 
     @cached_property
     def _mappers(self) -> dict[str, MlpMapper]:

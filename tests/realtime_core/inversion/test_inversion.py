@@ -93,29 +93,35 @@ def test_audio_posterior_start_avoids_the_random_start_local_optimum(model, data
     assert acc(data[:, DA:], ap.visual) > acc(data[:, DA:], rnd.visual) + 0.1
 
 
-def test_streaming_with_a_large_lag_equals_the_batch_audio_posterior_estimate(model, data):
+KERNELS = pytest.mark.parametrize("kernel", ["numba", "numpy"])
+
+
+@KERNELS
+def test_streaming_with_a_large_lag_equals_the_batch_audio_posterior_estimate(model, data, kernel):
     form = ConditionalForm.from_model(model)
-    st = StreamingInverter(form, config=StreamConfig(lag=10_000, dtype="float64"))
+    st = StreamingInverter(form, config=StreamConfig(lag=10_000, dtype="float64", kernel=kernel))
     out = np.concatenate([st.push(data[:, :DA]), st.flush()])
     np.testing.assert_allclose(out, audio_posterior_estimate(form, data[:, :DA]), atol=1e-10)
 
 
-def test_streaming_lag_zero_equals_batch_filtering(model, data):
+@KERNELS
+def test_streaming_lag_zero_equals_batch_filtering(model, data, kernel):
     form = ConditionalForm.from_model(model)
-    st = StreamingInverter(form, config=StreamConfig(lag=0, dtype="float64"))
+    st = StreamingInverter(form, config=StreamConfig(lag=0, dtype="float64", kernel=kernel))
     first = st.push(data[:1, :DA])
     assert first.shape == (1, DV)  # lag 0: every row comes out at once
     out = np.concatenate([first, st.push(data[1:, :DA]), st.flush()])
     np.testing.assert_allclose(out, audio_posterior_estimate(form, data[:, :DA], smoothing="forward"), atol=1e-10)
 
 
+@KERNELS
 @pytest.mark.parametrize("lag", [0, 3])
-def test_streaming_same_output_for_any_chunking_and_float32_close(model, data, lag):
+def test_streaming_same_output_for_any_chunking_and_float32_close(model, data, lag, kernel):
     form = ConditionalForm.from_model(model)
     oa = data[:, :DA]
 
     def make(dtype="float64"):
-        return lambda: StreamingInverter(form, config=StreamConfig(lag=lag, dtype=dtype))
+        return lambda: StreamingInverter(form, config=StreamConfig(lag=lag, dtype=dtype, kernel=kernel))
 
     whole = assert_chunk_invariant(make(), oa, atol=1e-12)
     # float32 matrix-vector product: same estimate to a small fraction of the visual spread.
