@@ -119,9 +119,12 @@ def keyframes_to_mups(
 
 def in_mu_space(keys: KeyframeSet, utterance: MotionUnits, *, ridge: float | None = None) -> KeyframeSet:
     """The keyframes projected onto the Utterance MUs' subspace (``M_0^T M_0 K``; see the module doc),
-    same names; ``ridge`` defaults to the set's own."""
+    same names. ``ridge`` defaults to the set's own, and to at least 1e-6 when there are more keyframes
+    than MUs (their projections are then linearly dependent; the solve tends to the minimum-norm one)."""
     u = utterance.units
-    return KeyframeSet(names=keys.names, shapes=u.T @ (u @ keys.shapes), ridge=keys.ridge if ridge is None else ridge)
+    if ridge is None:
+        ridge = max(keys.ridge, 1e-6) if len(keys.names) > utterance.n_units else keys.ridge
+    return KeyframeSet(names=keys.names, shapes=u.T @ (u @ keys.shapes), ridge=ridge)
 
 
 def round_trip_error(
