@@ -34,6 +34,7 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.errors import ModelFormatError
 from realtime_core.expressions import EXPRESSIONS
 
+
 def _dot(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     """``x (n, i) @ w.T`` for ``w (j, i)`` with the same rounding for every row whatever ``n`` (einsum's own
     loop, not BLAS, whose blocking depends on the batch): a stream equals the batch bit for bit."""
