@@ -16,7 +16,8 @@ every consumer of real faces codes against (real-lips training, Motion Units, un
   interpolated from the nearest tracked ones).
 
 Landmark index groups (MediaPipe numbering, canonical_face_model.obj): :data:`LIPS_OUTER`,
-:data:`LIPS_INNER`, :data:`JAW`, :data:`CHEEKS`, and :data:`LOWER_FACE` = their union.
+:data:`LIPS_INNER`, :data:`JAW`, :data:`CHEEKS`, and :data:`LOWER_FACE` = their union; :data:`MU_LANDMARKS`
+(the Motion Units' 69: lips, chin midline, :data:`PERIORAL_CHEEKS`).
 
 The **cache file** (one ``.npz`` per video, no pickle) keeps what is expensive to measure: the
 decoded audio and the raw per-video-frame landmarks in image pixels (NaN where no face). Pose
