@@ -231,10 +231,21 @@ def apply_expression(params: np.ndarray, alpha: np.ndarray, offsets: np.ndarray)
         raise ExpressionError(
             f"params (n, 4) and intensities (n, {offsets.shape[0]}) expected, got {p.shape}, {a.shape}"
         )
-    delta = a @ offsets
-    gate = np.clip(p[:, _OPEN] / OPEN_REF_IOD, 0.0, 1.0)
-    delta[:, _OPEN] *= gate
-    return p + delta
+    return add_expression(p, a @ offsets)
+
+
+def add_expression(params: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """Speech parameters ``(n, 4)`` plus an expression's change ``delta (n, 4)`` (IOD, already scaled by the
+    intensity): added as it is, except that the change of ``mouth_open`` is scaled by
+    ``clip(mouth_open / OPEN_REF_IOD, 0, 1)`` so lips that speech holds closed stay closed. Used with fixed
+    offsets (:func:`apply_expression`) and with the per-frame changes of paper 002's second-stage MLPs
+    (:class:`realtime_core.mapping.expression.ExpressionMapper`)."""
+    p = np.asarray(params, dtype=np.float64)
+    d = np.array(delta, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != len(VISUAL_PARAMS) or d.shape != p.shape:
+        raise ExpressionError(f"params (n, 4) and changes (n, 4) expected, got {p.shape}, {d.shape}")
+    d[:, _OPEN] *= np.clip(p[:, _OPEN] / OPEN_REF_IOD, 0.0, 1.0)
+    return p + d
 
 
 def expression_arkit(alpha: np.ndarray, names: tuple[str, ...]) -> np.ndarray:

@@ -67,6 +67,9 @@ class SpeechToParams:
             self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
         self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
+        self.last_mups: np.ndarray | None = None
+        """The MU parameters ``(j, A0)`` of the rows the last push/flush returned, when the model's mapper
+        emits them (an MLP mapper with expression stages); None otherwise."""
         self.model_audio: np.ndarray = np.zeros(0)
         """The model-rate samples (n,) float64 the last push/flush fed to the front end (what a live
         session relays to listeners: the audio the model heard, in step with the frames)."""
@@ -100,6 +103,7 @@ class SpeechToParams:
         feats = self._fe.push(x)
         self._observe("features")
         out = self._inv.push(feats)
+        self.last_mups = getattr(self._inv, "last_mups", None)
         self._observe("inversion")
         self.frames_out += len(out)
         return out
@@ -111,7 +115,11 @@ class SpeechToParams:
         feats = self._fe.flush()
         feats = np.concatenate([tail, feats]) if len(tail) else feats
         self._observe("features")
-        out = np.concatenate([self._inv.push(feats), self._inv.flush()])
+        head = self._inv.push(feats)
+        mups = getattr(self._inv, "last_mups", None)
+        out = np.concatenate([head, self._inv.flush()])
+        tail_mups = getattr(self._inv, "last_mups", None)
+        self.last_mups = None if mups is None or tail_mups is None else np.concatenate([mups, tail_mups])
         self._observe("inversion")
         self.frames_out += len(out)
         return out
@@ -119,6 +127,23 @@ class SpeechToParams:
 
 def _ignore(stage: str) -> None:
     """The default observer: timings not wanted."""
+
+
+def speech_to_params_and_mups(
+    model: SpeechModel, samples: np.ndarray, rate_hz: int | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The live path over a whole utterance, keeping the mapper's MU parameters: ``(params (n, Dv),
+    mups (n, A0) or None)`` (None when the model's mapper emits none)."""
+    x = as_float_samples(samples)
+    if rate_hz is not None and int(rate_hz) != model.sample_rate_hz:
+        x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
+    p = SpeechToParams(model)
+    a = p.push(x)
+    ma = p.last_mups
+    b = p.flush()
+    mb = p.last_mups
+    mups = None if ma is None or mb is None else np.concatenate([ma, mb])
+    return np.concatenate([a, b]), mups
 
 
 def speech_to_params(

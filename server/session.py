@@ -29,12 +29,11 @@ import numpy as np
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import ConfigError, RealtimeCoreError
-from realtime_core.expressions import apply_expression
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.rig import Rig
-from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.inversion import StreamConfig
 from realtime_core.mapping import SpeechModel
+from realtime_core.mapping.expression import express
 from realtime_core.pipeline import SpeechToParams
 from server.controls import ControlState, apply_controls
 from server.errors import AudioFormatError, ServerConfigError
@@ -374,7 +373,16 @@ class Session:
         alpha, speech = self.controls.expression_at((self.frames_out + np.arange(len(params))) / self.fps), None
         if alpha is not None:
             speech = controlled
-            controlled = list(apply_expression(np.array(controlled), alpha, EXPRESSION_PARAMS))
+            # Paper 002's second-stage MLPs when the mapper emits MUPs (an MLP model with expression
+            # stages); otherwise each expression's fixed change of the four parameters.
+            controlled = list(
+                express(
+                    np.array(controlled),
+                    alpha,
+                    mups=self._chain.last_mups,
+                    mapper=getattr(self.model, "expressions", None),
+                )
+            )
         now = time.perf_counter()
         work = (now - t0) / len(params)
         self.times.add("push_per_frame", work)

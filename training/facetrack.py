@@ -16,7 +16,8 @@ every consumer of real faces codes against (real-lips training, Motion Units, un
   interpolated from the nearest tracked ones).
 
 Landmark index groups (MediaPipe numbering, canonical_face_model.obj): :data:`LIPS_OUTER`,
-:data:`LIPS_INNER`, :data:`JAW`, :data:`CHEEKS`, and :data:`LOWER_FACE` = their union.
+:data:`LIPS_INNER`, :data:`JAW`, :data:`CHEEKS`, and :data:`LOWER_FACE` = their union; :data:`MU_LANDMARKS`
+(the Motion Units' 69: lips, chin midline, :data:`PERIORAL_CHEEKS`).
 
 The **cache file** (one ``.npz`` per video, no pickle) keeps what is expensive to measure: the
 decoded audio and the raw per-video-frame landmarks in image pixels (NaN where no face). Pose
@@ -142,6 +143,24 @@ CHEEKS: tuple[int, ...] = (
 )
 LOWER_FACE: tuple[int, ...] = tuple(sorted(set(LIPS_OUTER) | set(LIPS_INNER) | set(JAW) | set(CHEEKS)))
 """Every landmark that moves with speech (lips, jaw, cheeks)."""
+
+CHIN_MIDLINE: tuple[int, ...] = (18, 200, 199, 175, 152)
+"""Skin points on the chin's midline from under the lower lip to the chin's tip."""
+PERIORAL_CHEEKS: tuple[int, ...] = (
+    36, 57, 92, 165, 186, 203, 205, 206, 207, 212, 214, 216,
+    266, 287, 322, 391, 410, 423, 425, 426, 427, 432, 434, 436,
+)  # fmt: skip
+"""The 24 :data:`CHEEKS` landmarks nearest the mouth (within 0.83 IOD of the mouth centre on the GRID s1
+neutral face), mirrored pairs: the cheek skin around the mouth, where paper 002 put its 24 cheek markers."""
+MU_LANDMARKS: tuple[int, ...] = tuple(
+    sorted(set(LIPS_OUTER) | set(LIPS_INNER) | set(CHIN_MIDLINE) | set(PERIORAL_CHEEKS))
+)
+"""The Motion Units' landmarks (69): paper 002's marker layout on the lower face (30 markers around
+the lips and 24 on the cheeks, Sec. IV-A) in MediaPipe's mesh: both lip contours, the chin midline and
+the 24 perioral cheek points. Left out of :data:`LOWER_FACE`: the jaw outline (silhouette points that
+slide over the skin as the jaw turns; the paper marked none) and the outer cheeks (featureless skin
+whose points MediaPipe places from the whole face rather than tracks: their share of what 8 MUs leave
+unexplained is 3x their share of the variance, the lips' 0.85x; see docs/motion_units.md)."""
 
 # Single points of the parameter definitions (training.params).
 UPPER_LIP_OUTER, UPPER_LIP_INNER, LOWER_LIP_INNER, LOWER_LIP_OUTER = 0, 13, 14, 17

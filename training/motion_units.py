@@ -4,8 +4,11 @@ Theory of operation
 -------------------
 1. **Data.** Every GRID s1 sentence's pose-free 3D landmark track comes from the one extraction
    (:func:`training.video.load_face_track`, cached; nothing here measures video). A frame's
-   deformation is the lower-face landmarks (:data:`training.facetrack.LOWER_FACE`: lips, jaw,
-   cheeks) minus the clip's neutral face, in IOD units, flattened to ``(3 L,)``.
+   deformation is the Motion Units' landmarks (:data:`training.facetrack.MU_LANDMARKS`: both lip
+   contours, the chin midline and the 24 perioral cheek points, paper 002's marker layout) minus the
+   clip's neutral face, in IOD units, flattened to ``(3 L,)``. The whole lower face
+   (:data:`training.facetrack.LOWER_FACE`, adding the jaw outline and outer cheeks) is kept beside it
+   for the variance comparison only.
 2. **Utterance MUs**: PCA of the *train* split's deformations (:mod:`realtime_core.motion_units`);
    the variance explained by 1..20 units is reported. UMUPs are the training targets.
 3. **Audio features**: the live front end (16 kHz MFCCs c0..c11 at 30 fps, running CMVN warm-started
@@ -50,7 +53,14 @@ class Clip:
     deform: np.ndarray
     params: np.ndarray
     neutral: np.ndarray = field(repr=False)  # (468, 3) float32, the clip's rest face
+    lower_face: np.ndarray | None = field(default=None, repr=False)  # (T, 3 x 103) LOWER_FACE deformations
     features: np.ndarray | None = field(default=None, repr=False)  # (T, Da) o_a once computed
+
+
+def mu_landmark_indices() -> tuple[int, ...]:
+    from training.facetrack import MU_LANDMARKS
+
+    return tuple(MU_LANDMARKS)
 
 
 def lower_face_indices() -> tuple[int, ...]:
@@ -89,7 +99,7 @@ def load_clips(
         items = items[:limit]
     if not items:
         raise ConfigError(f"no GRID sentences (video + align) under {root}")
-    idx = lower_face_indices()
+    idx, lower = mu_landmark_indices(), lower_face_indices()
     out = []
     for s in tqdm(items, desc="face tracks", disable=not progress, unit="clip"):
         try:
@@ -109,6 +119,7 @@ def load_clips(
                 deformation_of(tr.landmarks[:t], tr.neutral, idx),
                 np.asarray(tr.params[:t]),
                 np.asarray(tr.neutral, dtype=np.float32),
+                deformation_of(tr.landmarks[:t], tr.neutral, lower),
             )
         )
     return out
@@ -121,7 +132,17 @@ def with_features(clips: Sequence[Clip], frontend: FrontEndConfig, mean: np.ndar
         oa = extract_features(c.samples, frontend, cmvn_mean=mean, cmvn_var=var)
         t = min(len(oa), len(c.deform))
         out.append(
-            Clip(c.sentence_id, c.split, c.samples, c.sample_rate_hz, c.deform[:t], c.params[:t], c.neutral, oa[:t])
+            Clip(
+                c.sentence_id,
+                c.split,
+                c.samples,
+                c.sample_rate_hz,
+                c.deform[:t],
+                c.params[:t],
+                c.neutral,
+                None if c.lower_face is None else c.lower_face[:t],
+                oa[:t],
+            )
         )
     return out
 

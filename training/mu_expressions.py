@@ -89,6 +89,7 @@ def expressive(clips: Sequence[Clip], delta: np.ndarray) -> list[Clip]:
             (c.deform + delta).astype(np.float32),
             c.params,
             c.neutral,
+            None,
             c.features,
         )
         for c in clips
@@ -103,9 +104,11 @@ def fit_units(mu: MotionUnits, train_k: Sequence[Clip], name: str, n_units: int 
 
 def fit_second_stage(
     est_umup: np.ndarray, mu: MotionUnits, ex: ExpressionUnits, d_k: np.ndarray, *, hidden: int = 30, seed: int = 0
-):
-    """Sec. VI-B: an MLP ``Upsilon_k`` (one hidden layer, 30 units) from estimated UMUPs to the expressive
-    frames' (UMUPs, EMUPs). Returns a predict function ``(T, A0) -> (T, A0 + Ak)``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sec. VI-B: an MLP ``Upsilon_k`` (one tanh hidden layer, 30 units, scikit-learn) from estimated UMUPs
+    to the expressive frames' (UMUPs, EMUPs). Returns its weights with the standardisation folded in,
+    ``(w1 (H, A0), b1 (H,), w2 (A0 + Ak, H), b2 (A0 + Ak,))`` as
+    :class:`realtime_core.mapping.expression.ExpressionStage` takes them."""
     from sklearn.neural_network import MLPRegressor
 
     c0, ck = analyse(mu, ex, d_k)
@@ -122,7 +125,51 @@ def fit_second_stage(
         random_state=seed,
     )
     mlp.fit((est_umup - xm) / xs, (y - ym) / ys)
-    return lambda x: mlp.predict((x - xm) / xs) * ys + ym
+    w1, w2 = mlp.coefs_
+    b1, b2 = mlp.intercepts_
+    # tanh(((x - xm) / xs) W1 + b1) = tanh(x (W1 / xs) + (b1 - (xm / xs) W1)); y = (h W2 + b2) ys + ym
+    return (w1 / xs[:, None]).T, b1 - (xm / xs) @ w1, (w2 * ys).T, b2 * ys + ym
+
+
+def mouth_jacobian(neutral: np.ndarray, indices: Sequence[int], eps: float = 1e-4) -> np.ndarray:
+    """``J (4, 3 L)``: how the four mouth parameters (:func:`training.video.mouth_params`) change per IOD of
+    displacement of each coordinate of the landmarks ``indices``, at the rest face ``neutral (468, 3)``
+    (central differences; the parameters are smooth there)."""
+    from training.video import mouth_params
+
+    base = np.asarray(neutral, dtype=np.float64)
+    idx = list(indices)
+    out = np.zeros((len(VISUAL_PARAMS), 3 * len(idx)))
+    for j, v in enumerate(idx):
+        for c in range(3):
+            lm = np.repeat(base[None], 2, axis=0)
+            lm[0, v, c] += eps
+            lm[1, v, c] -= eps
+            p = mouth_params(lm, base)
+            out[:, 3 * j + c] = (p[0] - p[1]) / (2 * eps)
+    return out
+
+
+def expression_stage(name: str, weights, mu: MotionUnits, ex: ExpressionUnits, jacobian: np.ndarray):
+    """The run-time :class:`realtime_core.mapping.expression.ExpressionStage` of a fitted second stage."""
+    from realtime_core.mapping import ExpressionStage
+
+    w1, b1, w2, b2 = weights
+    return ExpressionStage(
+        name=name,
+        w1=w1,
+        b1=b1,
+        w2=w2,
+        b2=b2,
+        emu_params=jacobian @ ex.basis.units.T,
+        emu_bias=jacobian @ ex.basis.mean,
+    )
+
+
+def second_stage_predict(weights, x: np.ndarray) -> np.ndarray:
+    """``(T, A0)`` estimated UMUPs -> ``(T, A0 + Ak)`` with folded weights (as at run time)."""
+    w1, b1, w2, b2 = weights
+    return np.tanh(x @ w1.T + b1) @ w2.T + b2
 
 
 def reconstruct(mu: MotionUnits, ex: ExpressionUnits, out: np.ndarray) -> np.ndarray:

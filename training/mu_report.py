@@ -24,26 +24,31 @@ def mu_markdown(rep: dict, command: str) -> str:
             f"Command: `{command}`. {rep.get('credit', '')}. Sentences: train {rep['clips']['train']}, "
             f"val {rep['clips']['val']}, test {rep['clips']['test']} (`assets.grid.split_of`; "
             f"{len(rep['clips'].get('refused', []))} refused by the extractor); K chosen on val, "
-            "numbers on train and test. R, nu, MSE: paper 002 eq. 6-8 on the lower-face landmark displacements "
+            "numbers on train and test. R, nu, MSE: paper 002 eq. 6-8 on the MU landmarks' displacements "
             "rebuilt from the estimated UMUPs, each coordinate divided by its maximum absolute displacement over "
             "the training data; r: Pearson r of the four mouth parameters read out of the UMUPs."
         ),
         "",
     ]
     v = {r["units"]: r["explained"] for r in rep["variance"]}
-    vl = {r["units"]: r["explained"] for r in rep.get("variance_lips_only", [])}
+    rows = (
+        (f"MU landmarks: lips, chin, perioral cheeks ({rep.get('landmarks', '?')})", v),
+        (
+            "whole lower face (+ jaw outline, outer cheeks: 103)",
+            {r["units"]: r["explained"] for r in rep.get("variance_lower_face", [])},
+        ),
+        ("lip contours only (40)", {r["units"]: r["explained"] for r in rep.get("variance_lips_only", [])}),
+    )
     out += [
-        "**Utterance MUs** (PCA of the train split; cumulative variance explained):",
+        "**Utterance MUs** (PCA of the train split; cumulative variance explained, %):",
         "",
         "| MUs | " + " | ".join(str(k) for k in range(1, 11)) + " |",
         "|---" * 11 + "|",
-        "| lower face (103 landmarks) | " + " | ".join(f"{100 * v[k]:.2f}" for k in range(1, 11) if k in v) + " |",
     ]
-    if vl:
-        out.append(
-            "| lip contours only (40) | " + " | ".join(f"{100 * vl[k]:.2f}" for k in range(1, 11) if k in vl) + " |"
-        )
-    out += ["", f"Kept: {rep['units']} Utterance MUs (the fewest reaching 97 % on the lower face).", ""]
+    for label, vals in rows:
+        if vals:
+            out.append(f"| {label} | " + " | ".join(f"{100 * vals[k]:.2f}" for k in range(1, 11) if k in vals) + " |")
+    out += ["", f"Kept: {rep['units']} Utterance MUs (the fewest reaching 97 % on the MU landmarks).", ""]
     if rep.get("val"):
         out += [
             "**K on the val split** (R of the MLP bank):",
@@ -89,6 +94,22 @@ def mu_markdown(rep: dict, command: str) -> str:
                     f"| {e} | {100 * ex[e]['emu_residual_energy_explained']:.1f} % | {m} | {tr['R']:.3f} | "
                     f"{tr['MSE']:.4f} | {te['R']:.3f} | {te['MSE']:.4f} |"
                 )
+        # The paper's Tables I and II side by side: neutral and each expression, per mapper and split.
+        out += [
+            "",
+            "**Side by side** (paper 002 Tables I and II: neutral and each expression, HMM and MLP mapper):",
+            "",
+            "| split | mapper | metric | neutral | " + " | ".join(names) + " |",
+            "|---" * (4 + len(names)) + "|",
+        ]
+        for split in ("train", "test"):
+            for m in ("hmm", "mlp"):
+                if m not in rep[split] or any(m not in ex[e][split] for e in names):
+                    continue
+                cols = [rep[split][m]] + [ex[e][split][m] for e in names]
+                for key, label in (("R", "R"), ("nu_d", "nu_d"), ("nu_d_est", "nu_d'"), ("MSE", "MSE")):
+                    fmt = "{:.4f}" if key == "MSE" else "{:.3f}"
+                    out.append(f"| {split} | {m} | {label} | " + " | ".join(fmt.format(c[key]) for c in cols) + " |")
         sc = ex["smile_checks"]
         out += [
             "",
@@ -105,13 +126,14 @@ def mu_markdown(rep: dict, command: str) -> str:
             "|---|---|---|---|---|---|---|---|",
         ]
         for m in ("mlp", "hmm"):
-            if m in sc:
-                n, s = sc[m]["neutral"], sc[m]["smile"]
-                out.append(
-                    f"| {m} | {n['closure_rate']:.3f} | {s['closure_rate']:.3f} | "
-                    f"{100 * (s['closure_rate'] - n['closure_rate']):+.1f} | {n['r_mouth_open']:.3f} | "
-                    f"{s['r_mouth_open']:.3f} | {n['r_lip_stretch']:.3f} | {s['r_lip_stretch']:.3f} |"
-                )
+            for key, how in (("smile", "second-stage MLP"), ("smile_fixed", "fixed offsets")):
+                if m in sc and key in sc[m]:
+                    n, s = sc[m]["neutral"], sc[m][key]
+                    out.append(
+                        f"| {m}, {how} | {n['closure_rate']:.3f} | {s['closure_rate']:.3f} | "
+                        f"{100 * (s['closure_rate'] - n['closure_rate']):+.1f} | {n['r_mouth_open']:.3f} | "
+                        f"{s['r_mouth_open']:.3f} | {n['r_lip_stretch']:.3f} | {s['r_lip_stretch']:.3f} |"
+                    )
         rt = ex.get("keyframe_round_trip")
         if rt:
             out += [
@@ -121,14 +143,23 @@ def mu_markdown(rep: dict, command: str) -> str:
                     "that MU's range):"
                 ),
                 "",
-                "| keyframe set | keyframes | max over MUs | mean | per MU (%) |",
-                "|---|---|---|---|---|",
+                "| keyframe set | keyframes | solved in | weights | max over MUs | mean | per MU (%) |",
+                "|---|---|---|---|---|---|---|",
             ]
+            spaces = (
+                ("landmarks", "landmark space (eq. 4 as printed)"),
+                ("mu", "MU subspace"),
+            )
             for k, r in rt.items():
-                out.append(
-                    f"| {k} | {r['keyframes']} | {100 * r['max_error_of_range']:.1f} % | "
-                    f"{100 * r['mean_error_of_range']:.1f} % | "
-                    + " ".join(f"{100 * x:.1f}" for x in r["per_mu"])
-                    + " |"
-                )
+                for space, where in spaces:
+                    for label, how in (("ls", "least squares"), ("nonneg", "b >= 0")):
+                        e = r.get(f"{space}_{label}")
+                        if e is None:
+                            continue
+                        out.append(
+                            f"| {k} | {r['keyframes']} | {where} | {how} | {100 * e['max_error_of_range']:.1f} % | "
+                            f"{100 * e['mean_error_of_range']:.1f} % | "
+                            + " ".join(f"{100 * x:.1f}" for x in e["per_mu"])
+                            + " |"
+                        )
     return "\n".join(out) + "\n"

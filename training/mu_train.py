@@ -24,6 +24,7 @@ from training.motion_units import (
     load_clips,
     lower_face_indices,
     mlp_estimates,
+    mu_landmark_indices,
     of_split,
     score_mups,
     variance_report,
@@ -81,12 +82,17 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     var = variance_report(mu)
     say("variance explained: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var[:10]))
     say(f"kept {mu.n_units} Utterance MUs ({100 * mu.explained()[mu.n_units - 1]:.2f}%)")
-    # The same PCA on the lip contours alone (outer + inner, 40 landmarks), for comparison.
+    # The same PCA on the whole lower face (103 landmarks: + jaw outline, outer cheeks) and on the lip
+    # contours alone (40), for comparison with the MU landmark set.
     from training.facetrack import LIPS_INNER, LIPS_OUTER
 
+    lower_train = np.concatenate([c.lower_face for c in train]).astype(np.float64)
+    var_lower = variance_report(fit_motion_units(lower_train, n_units=1))
     pos = {v: i for i, v in enumerate(lower_face_indices())}
     cols = np.array([3 * pos[v] + j for v in sorted(set(LIPS_OUTER) | set(LIPS_INNER)) for j in range(3)])
-    var_lips = variance_report(fit_motion_units(d_train[:, cols], n_units=1))
+    var_lips = variance_report(fit_motion_units(lower_train[:, cols], n_units=1))
+    del lower_train
+    say("whole lower face: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var_lower[:10]))
     say("lips only: " + ", ".join(f"{r['units']}: {100 * r['explained']:.2f}%" for r in var_lips[:10]))
     # 2. Audio features: the live front end, CMVN statistics of the train split.
     recipe = TrainRecipe()
@@ -102,9 +108,10 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         "credit": GRID_CREDIT,
         "config": asdict(cfg),
         "clips": {"train": len(train), "val": len(val), "test": len(test), "refused": skipped},
-        "landmarks": len(lower_face_indices()),
+        "landmarks": len(mu_landmark_indices()),
         "units": mu.n_units,
         "variance": var,
+        "variance_lower_face": var_lower,
         "variance_lips_only": var_lips,
         "train": {},
         "test": {},
@@ -214,7 +221,17 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     # 7. Expressions (synthetic: the built-in head's ARKit recipes on the speaker's landmarks, see
     # training.mu_expressions), the Expression MUs, the second-stage mappers and the run-time checks.
     ests = {k: v for k, v in ests.items() if k in ("mlp", "hmm")}
-    report["expressions"] = _expressions(clips, train, test, mu, scale, readout, ests, root, say)
+    report["expressions"], stages = _expressions(clips, train, test, mu, scale, readout, ests, root, say)
+    # The shipped mapper carries its second stages (Sec. VI-B) for expressions at run time.
+    if stages.get("mlp"):
+        from realtime_core.mapping import ExpressionMapper
+
+        model = replace(
+            model,
+            expressions=ExpressionMapper(readout=readout[0], readout_bias=readout[1], stages=stages["mlp"]),
+        )
+        atomic_write_bytes(out / "mlp_mapper.npz", encode_mlp_model(model))
+        say(f"mlp_mapper.npz: with second-stage mappers for {', '.join(stages['mlp'])}")
     report["test"]["true_mups"] = score_mups(
         test, [mu.project(c.deform.astype(np.float64)) for c in test], mu, scale, readout
     ).as_json()
@@ -224,7 +241,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         mean=mu.mean,
         units=mu.units,
         eigenvalues=mu.eigenvalues,
-        landmarks=np.array(lower_face_indices()),
+        landmarks=np.array(mu_landmark_indices()),
         readout=readout[0],
         readout_bias=readout[1],
         scale=scale,
@@ -232,7 +249,7 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
         version=np.array(1),
     )
     atomic_write_bytes(out / "motion_units.npz", buf.getvalue())
-    _plot_variance(var, var_lips, out / "variance.png", mu.n_units)
+    _plot_variance(var, var_lower, var_lips, out / "variance.png", mu.n_units)
     atomic_write_bytes(out / "report.json", json.dumps(report, indent=1).encode())
     from training.mu_report import mu_markdown
 
@@ -264,21 +281,26 @@ def choose_closure_band(model: MlpSpeechModel, root, *, cache_dir=None) -> tuple
     return best, scores
 
 
-def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> dict:
+def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -> tuple[dict, dict]:
     from assets.errors import LandmarkError
     from assets.grid import read_words, sentences
     from assets.heads.builtin import load_builtin_head
     from assets.heads.landmarks import read_landmarks
     from realtime_core.expressions import EXPRESSIONS
+    from realtime_core.mapping import ExpressionMapper
+    from realtime_core.mapping.expression import express
     from training.motion_units import score
     from training.mu_expressions import (
         closure_rate,
         closure_windows,
         expression_deformations,
+        expression_stage,
         expressive,
         fit_second_stage,
         fit_units,
+        mouth_jacobian,
         reconstruct,
+        second_stage_predict,
         under_expression,
     )
 
@@ -290,33 +312,49 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
             raise LandmarkError(f"{mp_path}: landmark {k!r} must be a vertex index, got {v!r}")
         mp[k] = v
     neutral = np.mean([c.neutral for c in train], axis=0)
-    deltas = expression_deformations(neutral, lower_face_indices(), head, mp)
+    deltas = expression_deformations(neutral, mu_landmark_indices(), head, mp)
     # Keyframe sets and the eq. 4 round trip MUPs -> keyframes -> MUPs on the test frames.
     from realtime_core.blendshapes import ARKIT_NAMES
-    from realtime_core.motion_units import round_trip_error
+    from realtime_core.motion_units import in_mu_space, round_trip_error
     from training.mu_expressions import carried, head_correspondence
     from training.mu_keyframes import keyframe_sets
 
-    verts, sim = head_correspondence(neutral, lower_face_indices(), head, mp)
+    verts, sim = head_correspondence(neutral, mu_landmark_indices(), head, mp)
     arkit = {n: carried(head, verts, sim, {n: 1.0}) for n in ARKIT_NAMES}
     align = {s.sentence_id: s.align for s in sentences(root)}
     words_of = {c.sentence_id: read_words(align[c.sentence_id]) for c in clips}
     c_test = mu.project(np.concatenate([c.deform for c in test]).astype(np.float64))
+    from training.grid_phones import read_grid_phones_file
+
+    phones_of = {
+        sid: [(p.phoneme, p.start_s, p.end_s) for p in sp.phones] for sid, sp in read_grid_phones_file().items()
+    }
     round_trip = {}
-    for name, keys in keyframe_sets(train, words_of, deltas, arkit).items():
-        err = round_trip_error(keys, mu, c_test)
-        round_trip[name] = {
-            "keyframes": len(keys.names),
-            "max_error_of_range": float(err.max()),
-            "mean_error_of_range": float(err.mean()),
-            "per_mu": err.tolist(),
-        }
-        say(f"keyframes {name} ({len(keys.names)}): round trip error max {100 * err.max():.2f}% of the MUP range")
+    for name, keys in keyframe_sets(train, words_of, deltas, arkit, phones_of).items():
+        row: dict = {"keyframes": len(keys.names), "names": list(keys.names)}
+        # eq. 4 as printed (landmark space) and in the MU subspace, each unconstrained and with b >= 0,
+        # on the held-out test frames of real speech.
+        for space, ks in (("landmarks", keys), ("mu", in_mu_space(keys, mu))):
+            for label, nonneg in (("ls", False), ("nonneg", True)):
+                err = round_trip_error(ks, mu, c_test, nonnegative=nonneg)
+                row[f"{space}_{label}"] = {
+                    "max_error_of_range": float(err.max()),
+                    "mean_error_of_range": float(err.mean()),
+                    "per_mu": err.tolist(),
+                }
+        round_trip[name] = row
+        say(
+            f"keyframes {name} ({len(keys.names)}): round trip max error % of the MUP range: "
+            + ", ".join(f"{k} {100 * v['max_error_of_range']:.2f}" for k, v in row.items() if isinstance(v, dict))
+        )
     out: dict = {
         "source": "synthetic: built-in head ARKit recipes carried onto the speaker's landmarks",
         "keyframe_round_trip": round_trip,
         "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS},
     }
+    # The four mouth parameters' Jacobian at the speaker's rest face: what an EMU does to them at run time.
+    jac = mouth_jacobian(neutral, mu_landmark_indices())
+    stages: dict[str, dict] = {name: {} for name in ests}
     for e in EXPRESSIONS:
         tr_k, te_k = expressive(train, deltas[e]), expressive(test, deltas[e])
         ex = fit_units(mu, tr_k, e)
@@ -331,15 +369,20 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
             "test": {},
         }
         for name, est in ests.items():
-            f = fit_second_stage(
+            weights = fit_second_stage(
                 np.concatenate(est["train"]), mu, ex, np.concatenate([c.deform for c in tr_k]).astype(np.float64)
             )
+            stage = expression_stage(e, weights, mu, ex, jac)
+            stages[name][e] = stage
             for split, cl, e_list in (("train", tr_k, est["train"]), ("test", te_k, est["test"])):
-                d_hat = reconstruct(mu, ex, f(np.concatenate(e_list)))
+                c_in = np.concatenate(e_list)
+                d_hat = reconstruct(mu, ex, second_stage_predict(weights, c_in))
                 td = np.concatenate([c.deform for c in cl]).astype(np.float64)
                 tp = np.concatenate([c.params for c in cl])
-                # The mouth parameters of the expressive estimate, via the UMUP readout.
-                p_hat = mu.project(d_hat) @ readout[0].T + readout[1]
+                # The mouth parameters of the expressive estimate as at run time: speech readout + the
+                # stage's change (realtime_core.mapping.expression); r against the sentence's own parameters.
+                mapper = ExpressionMapper(readout=readout[0], readout_bias=readout[1], stages={e: stage})
+                p_hat = c_in @ readout[0].T + readout[1] + mapper.stage_delta(e, c_in)
                 out[e][split][name] = score(td, d_hat, scale, tp, p_hat).as_json()
         say(f"{e}: test R " + ", ".join(f"{n} {out[e]['test'][n]['R']:.3f}" for n in ests))
     # Run time: bilabial closures and rounding under a full smile, on the test sentences.
@@ -348,10 +391,20 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
     theta = 0.03
     checks: dict = {"threshold_iod": theta, "truth_closure_rate": closure_rate(truth, windows, theta)}
     tp = np.concatenate(truth)
+    smile = np.zeros(len(EXPRESSIONS))
+    smile[EXPRESSIONS.index("smile")] = 1.0
     for name, est in ests.items():
         neutral_p = [m @ readout[0].T + readout[1] for m in est["test"]]
+        mapper = ExpressionMapper(readout=readout[0], readout_bias=readout[1], stages=stages[name])
+        staged = [
+            express(p, np.tile(smile, (len(p), 1)), mups=m, mapper=mapper) for p, m in zip(neutral_p, est["test"])
+        ]
         row = {}
-        for label, tracks in (("neutral", neutral_p), ("smile", under_expression(neutral_p, "smile", 1.0))):
+        for label, tracks in (
+            ("neutral", neutral_p),
+            ("smile_fixed", under_expression(neutral_p, "smile", 1.0)),
+            ("smile", staged),
+        ):
             ep = np.concatenate(tracks)
             row[label] = {
                 "closure_rate": closure_rate(tracks, windows, theta),
@@ -361,13 +414,15 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
         checks[name] = row
         say(
             f"{name}: closure rate {row['neutral']['closure_rate']:.3f} -> {row['smile']['closure_rate']:.3f} "
-            f"under smile; r(mouth_open) {row['neutral']['r_mouth_open']:.3f} -> {row['smile']['r_mouth_open']:.3f}"
+            f"under smile (second stage; fixed offsets {row['smile_fixed']['closure_rate']:.3f}); r(mouth_open) "
+            f"{row['neutral']['r_mouth_open']:.3f} -> {row['smile']['r_mouth_open']:.3f} "
+            f"(fixed {row['smile_fixed']['r_mouth_open']:.3f})"
         )
     out["smile_checks"] = checks
-    return out
+    return out, stages
 
 
-def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) -> None:
+def _plot_variance(var: list[dict], var_lower: list[dict], var_lips: list[dict], png: Path, kept: int) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -376,9 +431,20 @@ def _plot_variance(var: list[dict], var_lips: list[dict], png: Path, kept: int) 
     k = [r["units"] for r in var]
     e = [100 * r["explained"] for r in var]
     fig, ax = plt.subplots(figsize=(6, 3.5), dpi=120)
-    ax.plot(k, e, "o-", label="lower face (lips, jaw, cheeks)")
+    ax.plot(k, e, "o-", label=f"MU landmarks (lips, chin, perioral cheeks: {len(mu_landmark_indices())})")
     ax.plot(
-        [r["units"] for r in var_lips], [100 * r["explained"] for r in var_lips], "s--", ms=3, label="lip contours only"
+        [r["units"] for r in var_lower],
+        [100 * r["explained"] for r in var_lower],
+        "^:",
+        ms=3,
+        label="whole lower face (+ jaw outline, outer cheeks: 103)",
+    )
+    ax.plot(
+        [r["units"] for r in var_lips],
+        [100 * r["explained"] for r in var_lips],
+        "s--",
+        ms=3,
+        label="lip contours only (40)",
     )
     ax.axhline(97, color="grey", ls="--", lw=1, label="97 %")
     ax.axvline(kept, color="C1", ls=":", lw=1, label=f"kept: {kept}")
@@ -420,8 +486,8 @@ def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> di
 
     out = Path(out)
     mu, readout, scale, idx = load_motion_units(out / "motion_units.npz")
-    if idx != lower_face_indices():
-        raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's LOWER_FACE")
+    if idx != mu_landmark_indices():
+        raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's MU_LANDMARKS")
     mlp = load_mlp_model(out / "mlp_mapper.npz")
     clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
     train, test = of_split(clips, "train"), of_split(clips, "test")

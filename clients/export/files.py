@@ -26,13 +26,18 @@ def export_track(
     audio: tuple[np.ndarray, int] | None = None,
     morphs: str = "units",
     arkit_targets: dict[str, np.ndarray] | None = None,
+    arkit_track: Track | None = None,
+    expression: np.ndarray | None = None,
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
     audio: (samples (n,) float or int16, rate_hz) starting at the track's first frame, written as
     ``<stem>.wav`` beside a .glb or .json
     (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
-    "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights."""
+    "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights;
+    with ``expression`` ``(n, len(EXPRESSIONS))`` intensities, the ARKit weights are those of
+    ``arkit_track`` (the speech parameters before the expression; default ``track``) plus the expressions'
+    ARKit recipes, as a live session's ARKit output."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -54,7 +59,13 @@ def export_track(
         elif arkit_targets is None:
             raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
         else:
-            data = arkit_glb(tuple(head)[1], arkit_targets, track, audio=wav_name)
+            data = arkit_glb(
+                tuple(head)[1],
+                arkit_targets,
+                track if arkit_track is None else arkit_track,
+                audio=wav_name,
+                expression=expression,
+            )
     elif suffix == ".csv":
         data = encode_csv(track)
     elif suffix == ".json":

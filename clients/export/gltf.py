@@ -67,11 +67,21 @@ def builtin_arkit_targets() -> dict[str, np.ndarray]:
     return load_builtin_head().targets
 
 
-def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str | None = None) -> bytes:
+def arkit_glb(
+    mesh,
+    targets: dict[str, np.ndarray],
+    track: Track,
+    *,
+    audio: str | None = None,
+    expression: np.ndarray | None = None,
+) -> bytes:
     """An animated glb with ARKit's 52 blendshapes as the morph targets (Apple's order) and the
     track's mouth parameters mapped to their weights by ``realtime_core.blendshapes`` (the same
     weights a "blendshapes" viewer receives, in [0, 1]); for engines that drive faces by ARKit names.
-    ``mesh``: the HeadMesh; ``targets``: name -> (n, 3) displacement at weight 1 for all 52 names."""
+    ``mesh``: the HeadMesh; ``targets``: name -> (n, 3) displacement at weight 1 for all 52 names;
+    ``expression``: ``(n_frames, len(EXPRESSIONS))`` intensities whose ARKit recipes are added to the
+    weights (mouthSmile, brows, cheeks ...), as a live session's ARKit output does; ``track`` is then the
+    speech parameters before the expression."""
     from realtime_core import VISUAL_PARAMS
     from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
 
@@ -80,8 +90,13 @@ def arkit_glb(mesh, targets: dict[str, np.ndarray], track: Track, *, audio: str 
         raise ExportError(f"the head lacks ARKit blendshapes {missing[:5]}{'...' if len(missing) > 5 else ''}")
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"ARKit weights are computed from the mouth parameters {VISUAL_PARAMS}")
+    if expression is not None and np.shape(expression)[0] != len(track.values):
+        raise ExportError(f"{np.shape(expression)[0]} expression rows for {len(track.values)} frames")
     weights = Track(
-        values=blendshape_weights(track.values, "arkit52"), fps=track.fps, start_s=track.start_s, names=ARKIT_NAMES
+        values=blendshape_weights(track.values, "arkit52", expression=expression),
+        fps=track.fps,
+        start_s=track.start_s,
+        names=ARKIT_NAMES,
     )
     return animated_glb(
         vertices=mesh.vertices,

@@ -56,9 +56,9 @@ def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
     from assets.modelfile import load_speech_model
     from assets.tracks import write_csv
-    from facecast.commands.speech_options import apply_expressions
+    from facecast.commands.speech_options import apply_expressions, expression_intensities
     from realtime_core.inversion import StreamConfig
-    from realtime_core.pipeline import speech_to_params
+    from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
     from realtime_core.track import Track
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
@@ -66,8 +66,13 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
-    params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
-    params = apply_expressions(params, args)
+    mups = None
+    if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:
+        params, mups = speech_to_params_and_mups(model, samples, rate)  # the live path, keeping the MUPs
+    else:
+        params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    speech = params
+    params = apply_expressions(params, args, mups=mups, model=model)
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params)
     if args.csv is not None:
@@ -84,7 +89,17 @@ def run(args: argparse.Namespace) -> int:
             arkit = builtin_arkit_targets()
         for out in (args.glb, args.json, args.tsv):
             if out is not None:
-                export_track(out, track, head=head, audio=(samples, rate), morphs=args.glb_morphs, arkit_targets=arkit)
+                export_track(
+                    out,
+                    track,
+                    head=head,
+                    audio=(samples, rate),
+                    morphs=args.glb_morphs,
+                    arkit_targets=arkit,
+                    # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
+                    arkit_track=Track(values=speech),
+                    expression=expression_intensities(args, len(params)),
+                )
     delay = (
         f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"
         if args.mode == "stream"

@@ -30,16 +30,28 @@ def add_expression_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--expression-ease", type=float, default=0.3, help="seconds an expression takes to ease in/out")
 
 
-def apply_expressions(params: np.ndarray, args: argparse.Namespace, fps: float = 30.0) -> np.ndarray:
-    """``params (n, 4)`` at ``fps`` -> the same under ``args.expression`` (unchanged when none)."""
+def expression_intensities(args: argparse.Namespace, n_frames: int, fps: float = 30.0) -> np.ndarray | None:
+    """``(n_frames, len(EXPRESSIONS))`` intensities of ``args.expression`` at ``fps``, None when none is given."""
     if not args.expression:
-        return params
-    from realtime_core.expressions import ExpressionConfig, ExpressionTrack, apply_expression, parse_expression
-    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+        return None
+    from realtime_core.expressions import ExpressionConfig, ExpressionTrack, parse_expression
 
     track = ExpressionTrack(ExpressionConfig(ease_s=args.expression_ease))
     for spec in args.expression:
         name, intensity, at = parse_expression(spec)
         track.schedule(name, intensity, at)
-    alpha = track.intensities(np.arange(len(params)) / fps)
-    return apply_expression(params, alpha, EXPRESSION_PARAMS)
+    return track.intensities(np.arange(n_frames) / fps)
+
+
+def apply_expressions(
+    params: np.ndarray, args: argparse.Namespace, fps: float = 30.0, *, mups: np.ndarray | None = None, model=None
+) -> np.ndarray:
+    """``params (n, 4)`` at ``fps`` -> the same under ``args.expression`` (unchanged when none). With
+    ``mups (n, A0)`` and an MLP ``model`` that has expression stages, paper 002's second-stage MLPs
+    (:func:`realtime_core.mapping.expression.express`), as a live session does."""
+    alpha = expression_intensities(args, len(params), fps)
+    if alpha is None:
+        return params
+    from realtime_core.mapping.expression import express
+
+    return express(params, alpha, mups=mups, mapper=getattr(model, "expressions", None))

@@ -2,9 +2,11 @@
 
 interface  the VisualMapper / SpeechModel protocols the HMM inverter and the MLP mapper share
 mlp        paper 002 Sec. VI-A: a Gaussian-mixture classifier picks one of K small MLPs
+expression paper 002 Sec. VI-B: the second-stage MLPs (UMUPs -> UMUPs + EMUPs) at run time
 model      the MLP speech model and its versioned ``.npz`` format
 """
 
+from realtime_core.mapping.expression import ExpressionMapper, ExpressionStage
 from realtime_core.mapping.interface import MAPPER_KINDS, SpeechModel, VisualMapper
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
 from realtime_core.mapping.model import (
@@ -17,6 +19,8 @@ from realtime_core.mapping.model import (
 
 __all__ = [
     "MAPPER_KINDS",
+    "ExpressionMapper",
+    "ExpressionStage",
     "MlpBank",
     "MlpMapper",
     "MlpSpeechModel",

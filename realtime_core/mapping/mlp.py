@@ -217,30 +217,51 @@ class MlpMapper:
             return np.zeros((0, self.bank.n_visual))
         return self._forward(x, self._classify(x), self.plan.w2_out, self.plan.b2_out).astype(np.float64)
 
+    def predict_with_mups(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(``predict(oa)``, ``mups(oa)``) from one hidden layer per row (bit for bit the same values)."""
+        x = self._check(oa)
+        p = self.plan
+        out = np.empty((len(x), self.bank.n_visual), dtype=self.dtype)
+        mups = np.empty((len(x), self.bank.n_mups), dtype=self.dtype)
+        for t, k in enumerate(self._classify(x) if len(x) else ()):
+            h = _act(self.bank.activation, p.w1[k] @ x[t] + p.b1[k])
+            out[t] = p.w2_out[k] @ h + p.b2_out[k]
+            mups[t] = p.w2[k] @ h + p.b2[k]
+        return out.astype(np.float64), mups.astype(np.float64)
+
 
 class StreamingMlpMapper:
     """:class:`realtime_core.mapping.VisualMapper` over a bank: every pushed row is final at once
     (``lag_frames = 0``), ``flush()`` returns nothing new. output: the output stage every estimate goes
-    through (:class:`realtime_core.output.OutputStage`: the closed-pose floor; None = none), as the HMM path."""
+    through (:class:`realtime_core.output.OutputStage`: the closed-pose floor; None = none), as the HMM path.
+    with_mups: also keep the MU parameters of the rows each push/flush returns in :attr:`last_mups`
+    (``(j, n_mups)`` float64; what paper 002's second-stage expression mappers read)."""
 
     lag_frames = 0
 
-    def __init__(self, mapper: MlpMapper, *, output: OutputStage | None = None) -> None:
+    def __init__(self, mapper: MlpMapper, *, output: OutputStage | None = None, with_mups: bool = False) -> None:
         self._m = mapper
         self._output = output
+        self._with_mups = with_mups
         self.reset()
 
     def reset(self) -> None:
         self._finished = False
+        self.last_mups: np.ndarray | None = np.zeros((0, self._m.bank.n_mups)) if self._with_mups else None
 
     def push(self, oa: np.ndarray) -> np.ndarray:
         if self._finished:
             raise StreamStateError("StreamingMlpMapper.push() after flush(); call reset() first")
-        y = self._m.predict(oa)
+        if self._with_mups:
+            y, self.last_mups = self._m.predict_with_mups(oa)
+        else:
+            y = self._m.predict(oa)
         return y if self._output is None else self._output(y)
 
     def flush(self) -> np.ndarray:
         if self._finished:
             raise StreamStateError("StreamingMlpMapper.flush() called twice; call reset() first")
         self._finished = True
+        if self._with_mups:
+            self.last_mups = np.zeros((0, self._m.bank.n_mups))
         return np.zeros((0, self._m.bank.n_visual))

@@ -31,6 +31,7 @@ from realtime_core.avmodel import (
 )
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
+from realtime_core.mapping.expression import STAGE_ARRAYS, ExpressionMapper, ExpressionStage
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
 from realtime_core.output import OutputStage
 
@@ -44,7 +45,9 @@ class MlpSpeechModel:
     """bank: the GMM-selected experts; frontend / cmvn_mean / cmvn_var: how ``o_a`` is computed (as
     :class:`realtime_core.avmodel.AvModel`); visual_names: names of the served parameters;
     metadata: JSON-able training details (K, hidden units, scores, data credits); closure_band: IOD, the
-    output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off)."""
+    output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off);
+    expressions: paper 002's second-stage mappers (:mod:`realtime_core.mapping.expression`; None = the
+    model has none, and expressions act on the four parameters by fixed offsets)."""
 
     bank: MlpBank
     frontend: FrontEndConfig
@@ -53,8 +56,13 @@ class MlpSpeechModel:
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     metadata: dict[str, Any] = field(default_factory=dict)
     closure_band: float = 0.0
+    expressions: ExpressionMapper | None = None
 
     def __post_init__(self) -> None:
+        if self.expressions is not None and (
+            self.bank.readout is None or not np.allclose(self.bank.readout, self.expressions.readout)
+        ):
+            raise ModelFormatError("expression stages need the bank's UMUP readout (the same matrix)")
         if not 0 <= self.closure_band <= 0.1:
             raise ModelFormatError(f"closure_band must be in [0, 0.1] IOD, got {self.closure_band}")
         if self.bank.n_audio != self.frontend.audio_dim:
@@ -92,7 +100,7 @@ class MlpSpeechModel:
         """A fresh streaming mapper. ``lag`` must be 0: the seven-frame context is the front end's."""
         if lag != 0:
             raise ConfigError(f"the MLP mapper has no smoothing lag (its context is the front end's); got lag={lag}")
-        return StreamingMlpMapper(self.mapper(dtype), output=self.output_stage)
+        return StreamingMlpMapper(self.mapper(dtype), output=self.output_stage, with_mups=self.expressions is not None)
 
     @cached_property
     def output_stage(self) -> OutputStage:
@@ -111,6 +119,7 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
         "readout": b.readout is not None,
         "closure_band": model.closure_band,
         "metadata": model.metadata,
+        "expressions": [] if model.expressions is None else list(model.expressions.stages),
     }
     arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
@@ -123,6 +132,10 @@ def encode_mlp_model(model: MlpSpeechModel) -> bytes:
         arrays[name] = getattr(b, name)
     if b.readout is not None and b.readout_bias is not None:  # MlpBank checks both or neither
         arrays["readout"], arrays["readout_bias"] = b.readout, b.readout_bias
+    if model.expressions is not None:
+        for name, st in model.expressions.stages.items():
+            for a in STAGE_ARRAYS:
+                arrays[f"expr_{name}_{a}"] = getattr(st, a)
     return npz_bytes(arrays)
 
 
@@ -150,6 +163,17 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
             readout=arrays.get("readout") if has_readout else None,
             readout_bias=arrays.get("readout_bias") if has_readout else None,
         )
+        expressions = None
+        if config.get("expressions"):
+            if bank.readout is None or bank.readout_bias is None:
+                raise ModelFormatError("expression stages without the bank's UMUP readout")
+            stages = {}
+            for name in config["expressions"]:
+                missing = [a for a in STAGE_ARRAYS if f"expr_{name}_{a}" not in arrays]
+                if missing:
+                    raise ModelFormatError(f"expression stage {name!r} lacks the array(s) {missing}")
+                stages[name] = ExpressionStage(name=name, **{a: arrays[f"expr_{name}_{a}"] for a in STAGE_ARRAYS})
+            expressions = ExpressionMapper(readout=bank.readout, readout_bias=bank.readout_bias, stages=stages)
         return MlpSpeechModel(
             bank=bank,
             frontend=frontend_from_json(config["frontend"]),
@@ -158,6 +182,7 @@ def decode_mlp_model(data: bytes) -> MlpSpeechModel:
             visual_names=tuple(config["visual_names"]),
             metadata=config.get("metadata", {}),
             closure_band=float(config.get("closure_band", 0.0)),
+            expressions=expressions,
         )
     except ModelFormatError:
         raise

@@ -8,7 +8,17 @@ relative to the neutral face, in the same landmark space as the Motion Units. A 
     c_0 = M_0^T (K b - m_00)                     (eq. 4, first line)
     c_k = M_k^T (K b - m_00 - M_0 c_0 - alpha m_k0) / alpha    (eq. 4, second line)
 
-We write the keyframes as deformations (``kappa' - s_0``) so ``s_0`` cancels. ``lambda`` (relative to
+We write the keyframes as deformations (``kappa' - s_0``) so ``s_0`` cancels.
+
+**Keyframes as the MUs see them** (:func:`in_mu_space`). The paper's ``kappa'_i`` are training
+samples of the MUs, i.e. vectors the MUs represent. A keyframe given from elsewhere (a head's morph
+target carried onto the landmarks, a median of noisy measured frames) also has a part no MU can
+represent; eq. 4's least squares in landmark space then trades MU error for fitting that part, and
+the round trip MUPs -> keyframes -> MUPs loses what the keyframes' span misses. Projecting each
+keyframe onto the MU subspace first (``M_0^T M_0 kappa'``) makes eq. 4 solve the MUPs themselves:
+the unconstrained round trip is exact whenever the projected keyframes span the ``A_0`` MUs.
+
+``lambda`` (relative to
 the mean squared column norm of K) keeps the solve stable when keyframes are nearly collinear (the
 52 ARKit targets are, in a few dozen landmarks); ``nonnegative=True`` solves the same problem with
 ``b >= 0`` (scipy's NNLS), which is what engines expect of blendshape weights.
@@ -107,10 +117,23 @@ def keyframes_to_mups(
     return analyse(utterance, expression, keys.deformation(b), alpha)
 
 
-def round_trip_error(keys: KeyframeSet, utterance: MotionUnits, umup: np.ndarray) -> np.ndarray:
+def in_mu_space(keys: KeyframeSet, utterance: MotionUnits, *, ridge: float | None = None) -> KeyframeSet:
+    """The keyframes projected onto the Utterance MUs' subspace (``M_0^T M_0 K``; see the module doc),
+    same names. ``ridge`` defaults to the set's own, and to at least 1e-6 when there are more keyframes
+    than MUs (their projections are then linearly dependent; the solve tends to the minimum-norm one)."""
+    u = utterance.units
+    if ridge is None:
+        ridge = max(keys.ridge, 1e-6) if len(keys.names) > utterance.n_units else keys.ridge
+    return KeyframeSet(names=keys.names, shapes=u.T @ (u @ keys.shapes), ridge=ridge)
+
+
+def round_trip_error(
+    keys: KeyframeSet, utterance: MotionUnits, umup: np.ndarray, *, nonnegative: bool = False
+) -> np.ndarray:
     """``(A,)``: RMS error per MU of MUPs -> keyframes -> MUPs over the frames ``umup (T, A)``, divided
-    by each MU's range (max - min) over those frames."""
+    by each MU's range (max - min) over those frames. ``nonnegative``: weights solved with ``b >= 0``."""
     c = np.asarray(umup, dtype=np.float64)
-    back, _ = keyframes_to_mups(keys, utterance, mups_to_keyframes(keys, utterance, c))
+    b = mups_to_keyframes(keys, utterance, c, nonnegative=nonnegative)
+    back, _ = keyframes_to_mups(keys, utterance, b)
     rng = c.max(axis=0) - c.min(axis=0)
     return np.sqrt(((back - c) ** 2).mean(axis=0)) / np.where(rng > 0, rng, 1.0)

@@ -114,3 +114,78 @@ def test_mlp_mapper_session_equals_the_offline_path() -> None:
     # Compute workers receive the model as bytes: either kind round-trips.
     back = decode_speech_model(encode_speech_model(model))
     np.testing.assert_array_equal(speech_to_params(back, x), speech_to_params(model, x))
+
+
+def _mlp_model_with_stages(fe, seed: int = 0) -> MlpSpeechModel:
+    """An MLP model emitting 5 MUPs read out to the 4 parameters, with random second stages for smile
+    and sad (2 EMUPs each)."""
+    from dataclasses import replace
+
+    from realtime_core.mapping import ExpressionMapper, ExpressionStage
+
+    rng = np.random.default_rng(seed)
+    base = _mlp_model(fe, seed)
+    k, h, a0 = base.bank.n_classes, 15, 5
+    bank = replace(
+        base.bank,
+        w2=rng.standard_normal((k, a0, h)) * 0.05,
+        b2=np.zeros((k, a0)),
+        readout=rng.standard_normal((4, a0)) * 0.5,
+        readout_bias=np.array([0.0, 0.0, 0.05, 0.0]),
+    )
+    stages = {
+        name: ExpressionStage(
+            name=name,
+            w1=rng.standard_normal((30, a0)),
+            b1=rng.standard_normal(30) * 0.1,
+            w2=rng.standard_normal((a0 + 2, 30)) * 0.05,
+            b2=rng.standard_normal(a0 + 2) * 0.02,
+            emu_params=rng.standard_normal((4, 2)) * 0.1,
+            emu_bias=rng.standard_normal(4) * 0.02,
+        )
+        for name in ("smile", "sad")
+    }
+    ex = ExpressionMapper(readout=bank.readout, readout_bias=bank.readout_bias, stages=stages)
+    return replace(base, bank=bank, expressions=ex)
+
+
+def test_mlp_session_uses_the_second_stage_mlps() -> None:
+    """Paper 002 Sec. VI-B at run time: a session whose MLP mapper has expression stages changes the
+    parameters by Upsilon_k of each frame's UMUPs (equal to the offline computation for any chunking),
+    not by the fixed offsets; an expression without a stage (surprise) falls back to its offset."""
+    from realtime_core.expressions import add_expression
+    from realtime_core.pipeline import speech_to_params_and_mups
+
+    model = _mlp_model_with_stages(small_model().frontend)
+    back = decode_speech_model(encode_speech_model(model))
+    assert isinstance(back, MlpSpeechModel) and back.expressions is not None
+    assert sorted(back.expressions.stages) == ["sad", "smile"]
+    x = speechlike(3.0, 16000)
+    ctl = [
+        (0, {"type": "control", "expression": {"name": "smile", "intensity": 1.0, "at": 0.5}, "expression_ease_s": 0}),
+        (0, {"type": "control", "expression": {"name": "surprise", "intensity": 0.5, "at": 2.0}}),
+    ]
+    a, b = _run(back, x, ctl, 4), _run(back, x, ctl, 5)
+    pa = np.array([f.params for f in a])
+    np.testing.assert_array_equal(pa, np.array([f.params for f in b]))
+    speech, mups = speech_to_params_and_mups(model, x)
+    assert mups is not None and mups.shape == (len(speech), 5)
+    np.testing.assert_array_equal(speech, speech_to_params(model, x))
+    track = ExpressionTrack(type(ExpressionTrack().config)(ease_s=0.0))
+    track.schedule("smile", 1.0, 0.5)
+    track.schedule("surprise", 0.5, 2.0)
+    alpha = track.intensities(np.arange(len(speech)) / 30)
+    # Independent computation of the smile stage: tanh layer, readout of the changed UMUPs, EMUP readout.
+    st, ex = model.expressions.stages["smile"], model.expressions
+    y = np.tanh(mups @ st.w1.T + st.b1) @ st.w2.T + st.b2
+    d_smile = (y[:, :5] - mups) @ ex.readout.T + y[:, 5:] @ st.emu_params.T + st.emu_bias
+    d_surprise = EXPRESSION_PARAMS[EXPRESSIONS.index("surprise")]
+    want = add_expression(speech, alpha[:, :1] * d_smile + alpha[:, 2:3] * d_surprise)
+    np.testing.assert_allclose(pa, want, atol=1e-12)
+    t = np.arange(len(pa)) / 30
+    np.testing.assert_array_equal(pa[t < 0.5], speech[t < 0.5])
+    smile = (t >= 0.5) & (t < 2.0)
+    fixed = apply_expression(speech, alpha, EXPRESSION_PARAMS)
+    assert np.abs(pa[smile] - fixed[smile]).max() > 1e-3  # not the fixed-offset rule
+    # Frame by frame: the change follows the UMUPs (not a constant).
+    assert np.std(pa[smile, 1] - speech[smile, 1]) > 1e-4

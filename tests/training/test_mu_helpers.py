@@ -70,3 +70,63 @@ def test_score_matches_a_hand_computation() -> None:
     assert s.r == pytest.approx((tc * ec).sum() / np.sqrt((tc**2).sum() * (ec**2).sum()))
     assert s.mse == pytest.approx(np.mean((tn - en) ** 2))
     assert s.nu_true == pytest.approx(np.mean(tn.std(0)))
+
+
+def test_second_stage_weights_fold_the_standardisation() -> None:
+    """The folded run-time weights of Upsilon_k reproduce the fitted network on fresh inputs (independent:
+    scikit-learn's own predict of an identically seeded fit), and the stage's parameter change matches
+    the readout of its outputs."""
+    from sklearn.neural_network import MLPRegressor
+
+    from realtime_core.mapping import ExpressionMapper
+    from realtime_core.motion_units import analyse, fit_expression_units, fit_motion_units
+    from training.mu_expressions import expression_stage, fit_second_stage, second_stage_predict
+
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((600, 4)) @ rng.standard_normal((4, 12)) * 0.1 + 0.01 * rng.standard_normal((600, 12))
+    mu = fit_motion_units(d, n_units=3)
+    dk = d + np.linspace(0.05, 0.1, 12)
+    ex = fit_expression_units(mu, dk, name="smile", n_units=2)
+    est = mu.project(d) + 0.02 * rng.standard_normal((600, 3))
+    w = fit_second_stage(est, mu, ex, dk, hidden=8)
+    c0, ck = analyse(mu, ex, dk)
+    y = np.hstack([c0, ck])
+    xm, xs, ym, ys = est.mean(0), est.std(0), y.mean(0), y.std(0)
+    ref = MLPRegressor(
+        hidden_layer_sizes=(8,),
+        activation="tanh",
+        alpha=1e-3,
+        max_iter=200,
+        early_stopping=True,
+        n_iter_no_change=10,
+        random_state=0,
+    ).fit((est - xm) / xs, (y - ym) / ys)
+    fresh = mu.project(d[:50]) + 0.3
+    np.testing.assert_allclose(second_stage_predict(w, fresh), ref.predict((fresh - xm) / xs) * ys + ym, atol=1e-10)
+    jac = rng.standard_normal((4, 12))
+    st = expression_stage("smile", w, mu, ex, jac)
+    readout = rng.standard_normal((4, 3))
+    m = ExpressionMapper(readout=readout, readout_bias=np.zeros(4), stages={"smile": st})
+    out = second_stage_predict(w, fresh)
+    emu_disp = ex.basis.mean + out[:, 3:] @ ex.basis.units  # (50, 12): m_k0 + M_k c_k
+    want = (out[:, :3] - fresh) @ readout.T + emu_disp @ jac.T
+    np.testing.assert_allclose(m.stage_delta("smile", fresh), want, atol=1e-10)
+
+
+def test_mouth_jacobian_matches_the_geometry() -> None:
+    """J of the four mouth parameters at a rest face: a mouth corner moved along the corner-to-corner line
+    widens the mouth one for one; the lower inner lip moved down opens it by a third (three gap pairs)."""
+    from training.facetrack import MOUTH_CORNERS, MU_LANDMARKS
+    from training.mu_expressions import mouth_jacobian
+
+    rng = np.random.default_rng(1)
+    face = rng.standard_normal((468, 3)) * 0.3
+    face[MOUTH_CORNERS[0]] = (-0.4, 1.0, 0.0)
+    face[MOUTH_CORNERS[1]] = (0.4, 1.0, 0.0)
+    for a, b in ((13, 14), (82, 87), (312, 317)):
+        face[b] = face[a] + (0.0, 0.05, 0.0)
+    jac = mouth_jacobian(face, MU_LANDMARKS)
+    pos = {v: i for i, v in enumerate(MU_LANDMARKS)}
+    assert jac[1, 3 * pos[MOUTH_CORNERS[1]]] == pytest.approx(1.0, abs=1e-6)
+    assert jac[1, 3 * pos[MOUTH_CORNERS[0]]] == pytest.approx(-1.0, abs=1e-6)
+    assert jac[2, 3 * pos[14] + 1] == pytest.approx(1 / 3, abs=1e-6)

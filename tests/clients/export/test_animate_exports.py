@@ -57,3 +57,46 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
 def test_animate_needs_an_output(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["animate", str(tmp_path / "missing.wav")])
+
+
+def test_animate_arkit_glb_carries_the_expression_shapes(tmp_path):
+    """``--glb-morphs arkit52 --expression smile:0.7@1.2``: the exported weights, read back from the glb,
+    are the speech's ARKit weights plus the smile's recipe at 0.7 from 1.2 s on (eased over 0.3 s), and
+    exactly the speech's before it; the CSV carries the four parameters under the expression."""
+    pygltflib = require_module("pygltflib")
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from realtime_core.blendshapes import ARKIT_NAMES, blendshape_weights
+    from realtime_core.expressions import EXPRESSION_RECIPES
+    from realtime_core.pipeline import speech_to_params
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = tmp_path / "s.wav"
+    x = speechlike(2.0, 16000)
+    write_wav(wav, x, 16000)
+    glb, csv = tmp_path / "take.glb", tmp_path / "take.csv"
+    argv = ["animate", str(wav), "--model", str(model), "--glb", str(glb), "--csv", str(csv)]
+    assert main([*argv, "--glb-morphs", "arkit52", "--expression", "smile:0.7@1.2"]) == 0
+    g = pygltflib.GLTF2().load(str(glb))
+    assert g.meshes[0].extras["targetNames"] == list(ARKIT_NAMES)
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 52)
+    from assets.audio import read_audio
+
+    samples, _ = read_audio(wav)
+    speech = speech_to_params(small_model(), samples)
+    t = np.arange(len(w)) / 30
+    np.testing.assert_allclose(w[t < 1.2], blendshape_weights(speech[t < 1.2], "arkit52"), atol=1e-6)
+    late = t >= 1.5  # eased in fully
+    for name, v in EXPRESSION_RECIPES["smile"].items():
+        j = ARKIT_NAMES.index(name)
+        base = blendshape_weights(speech[late], "arkit52")[:, j]
+        np.testing.assert_allclose(w[late, j], np.clip(base + 0.7 * v, 0, 1), atol=1e-6)
+    assert w[late, ARKIT_NAMES.index("mouthSmileLeft")].min() >= 0.35 - 1e-6
+    assert w[t < 1.2, ARKIT_NAMES.index("cheekSquintLeft")].max() == 0.0
+    # The four parameters carry the expression too (not only the ARKit weights).
+    p = decode_csv(csv.read_bytes()).values
+    np.testing.assert_allclose(p[t < 1.2], speech[t < 1.2], rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
+    assert np.abs(p[late] - speech[late]).max() > 1e-3

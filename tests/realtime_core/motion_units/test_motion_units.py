@@ -12,6 +12,7 @@ from realtime_core.motion_units import (
     compose,
     fit_expression_units,
     fit_motion_units,
+    in_mu_space,
     keyframes_to_mups,
     mups_to_keyframes,
     round_trip_error,
@@ -92,6 +93,33 @@ def test_keyframe_conversion_matches_lstsq_and_round_trips() -> None:
         shapes=np.column_stack([mu.mean, *mu.units]) @ rng.standard_normal((6, 6)),
     )
     assert round_trip_error(span, mu, umup).max() < 1e-9
+
+
+def test_keyframes_in_the_mu_subspace() -> None:
+    """Keyframes with a part outside the MUs (random columns) lose MUP information in landmark space; in
+    the MU subspace eq. 4 solves the MUPs themselves: exact when the projections span the MUs, and the
+    same as least squares of the MUPs on M_0^T K (independent computation)."""
+    rng = np.random.default_rng(8)
+    d = _data(seed=9)
+    mu = fit_motion_units(d, n_units=5)
+    umup = mu.project(d)
+    keys = KeyframeSet(names=tuple(f"k{i}" for i in range(6)), shapes=rng.standard_normal((30, 6)))
+    proj = in_mu_space(keys, mu)
+    assert proj.names == keys.names
+    np.testing.assert_allclose(mu.units @ proj.shapes, mu.units @ keys.shapes, atol=1e-12)
+    assert round_trip_error(keys, mu, umup).max() > 0.05
+    assert proj.ridge == 1e-6  # 6 keyframes in 5 MUs: dependent, a tiny ridge
+    assert round_trip_error(proj, mu, umup).max() < 1e-4
+    b = mups_to_keyframes(proj, mu, umup)
+    target = umup + mu.units @ mu.mean  # M_0^T d for d = m_00 + M_0 c
+    ref = np.linalg.lstsq(mu.units @ keys.shapes, target.T, rcond=None)[0].T  # the minimum-norm solution
+    np.testing.assert_allclose(b, ref, atol=1e-3 * np.abs(ref).max())
+    five = KeyframeSet(names=keys.names[:5], shapes=keys.shapes[:, :5])
+    assert round_trip_error(in_mu_space(five, mu), mu, umup).max() < 1e-9  # as many as MUs: exact
+    # With b >= 0 the frames outside the keyframes' cone cannot come back: the error is measured, not 0.
+    nn = round_trip_error(proj, mu, umup, nonnegative=True)
+    assert (nn >= 0).all() and nn.max() > 1e-3
+    assert (mups_to_keyframes(proj, mu, umup[:20], nonnegative=True) >= 0).all()
 
 
 def test_nonnegative_and_ridge_against_lstsq() -> None:
