@@ -230,7 +230,7 @@ class Received:
 class ViewerClient:
     """Watch a session: ``async with`` receives the description; iterate for decoded messages.
 
-    kind: "params", "deltas" or "blendshapes"; encoding: see docs/protocol.md (None = the kind's
+    kind: "params", "deltas", "blendshapes" or "morph"; encoding: see docs/protocol.md (None = the kind's
     default); audio: also receive the session's audio.
     """
 

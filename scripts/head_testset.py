@@ -4,9 +4,10 @@
 
 Heads: the built-in head (own ARKit targets, and retargeted), the built-in head as an ARKit glb
 with exporter spellings, Lee Perry-Smith (hollow, closed lips; shipped landmarks and automatic
-ones), the MediaPipe canonical face, Candide-3, plus derived files: meshopt-compressed and
-quantized Lee Perry-Smith (glTF-Transform; vertex order changes, so automatic landmarks), the
-built-in head as a multi-material OBJ with separate eyes and teeth objects, a viseme-only glb.
+ones), the MediaPipe canonical face, Candide-3 (both files, driven by their own animation units), plus
+derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
+so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
+objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb.
 Derived files go to --out (not committed); one picture per head (closed, /a/, /u/, /m/) to
 --images; the rig checks are printed as a Markdown table (docs/animation.md shows it).
 Third-party heads are read from ../shared/data (or $FACECAST_SHARED_DATA).
@@ -112,44 +113,44 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
     mp = data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     if mp.is_file():
         heads["MediaPipe canonical face"] = (mp, {})
-    wfm = data / "candide3" / "candide3-3.1.6.wfm"
-    if wfm.is_file():
-        from realtime_core.face import parse_wfm
-        from realtime_core.face.candide import CANDIDE3_LANDMARKS
-
-        m = parse_wfm(wfm.read_text(encoding="latin-1"), name="candide3")
-        cobj = out / "candide3.obj"
-        cobj.write_text(
+    for wfm in sorted((data / "candide3").glob("*.wfm")):
+        # Candide-3 is a face model of its own: driven through its own animation units, no retarget.
+        heads[f"Candide-3 ({wfm.stem.removeprefix('candide3-')}, own animation units)"] = (wfm, {})
+    # The built-in head as four files: skin, eyes, both teeth rows in one file, tongue (--head-part).
+    keep = {}
+    for pname, ids in (("skin", [0]), ("eyes", [1]), ("teeth", [2, 3]), ("tongue", [4])):
+        sel = np.flatnonzero(np.isin(part, ids))
+        new = -np.ones(len(b.vertices), dtype=np.int64)
+        new[sel] = np.arange(len(sel))
+        tris = new[b.triangles[(new[b.triangles] >= 0).all(axis=1)]]
+        c = cols[ids[0]]
+        (out / f"split_{pname}.mtl").write_text(f"newmtl {pname}\nKd {c[0]} {c[1]} {c[2]}\n")
+        (out / f"split_{pname}.obj").write_text(
             "\n".join(
-                [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in m.vertices]
-                + [f"f {a + 1} {c + 1} {d + 1}" for a, c, d in m.triangles]
+                [f"mtllib split_{pname}.mtl", f"o {pname}", f"usemtl {pname}"]
+                + [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in b.vertices[sel]]
+                + [f"f {a + 1} {c_ + 1} {d + 1}" for a, c_, d in tris]
             )
             + "\n"
         )
-        (out / "candide3.json").write_text(json.dumps({"landmarks": dict(CANDIDE3_LANDMARKS)}))
-        heads["Candide-3 (its own model as the simple face)"] = (
-            cobj,
-            {"landmarks": out / "candide3.json", "simple": wfm},
-        )
+        keep[pname] = sel
+    skin_index = {int(o): i for i, o in enumerate(keep["skin"])}
+    (out / "split_skin.json").write_text(json.dumps({"landmarks": {k: skin_index[v] for k, v in lm.items()}}))
+    heads["separate eye, teeth and tongue files (--head-part)"] = (
+        out / "split_skin.obj",
+        {
+            "landmarks": out / "split_skin.json",
+            "mode": "retarget",
+            "parts": tuple(str(out / f"split_{k}.obj") for k in ("eyes", "teeth", "tongue")),
+        },
+    )
     return heads
 
 
 def _resolve(spec, opts: dict, finder):
-    """resolve_head, or for a Candide-3 head (fewer vertices than the default simple face) a rig with
-    Candide-3 itself as the simple model (as `facecast rig --simple FILE.wfm`)."""
-    from assets.heads.head import Head, resolve_head
+    from assets.heads.head import resolve_head
 
-    if "simple" not in opts:
-        return resolve_head(spec, landmark_finder=finder, **opts)
-    from assets.heads.landmarks import read_landmarks
-    from assets.heads.mesh import load_mesh
-    from assets.heads.rigging import candide_face, rig_head
-    from realtime_core.face import parse_wfm
-
-    wfm = opts["simple"]
-    simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1"), name=wfm.stem))
-    rig, mesh = rig_head(load_mesh(spec), read_landmarks(opts["landmarks"]), simple=simple)
-    return Head(rig, mesh)
+    return resolve_head(spec, landmark_finder=finder, **opts)
 
 
 def main() -> int:
@@ -159,6 +160,7 @@ def main() -> int:
     ap.add_argument(
         "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
     )
+    ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
     args = ap.parse_args()
     from PIL import Image, ImageDraw
     from tqdm import tqdm
@@ -169,6 +171,8 @@ def main() -> int:
     from realtime_core.errors import FacecastError
 
     heads = derive(args.out, args.data)
+    if args.only:
+        heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
     args.images.mkdir(parents=True, exist_ok=True)
     rows = [
         (

@@ -466,7 +466,10 @@ class FacecastServer:
 
     async def _view(self, ws: ServerConnection) -> None:
         req = SP.parse_view_query(
-            SP.query_args(_request_path(ws)), token=self.config.token, has_head=self.head is not None
+            SP.query_args(_request_path(ws)),
+            token=self.config.token,
+            has_head=self.head is not None,
+            morph_head=self.head is not None and self.head.kind == "morph",
         )
         live = self.sessions.get(req.session)
         if live is None and self.cluster is not None:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from realtime_core import VISUAL_PARAMS
 from realtime_core.blendshapes import blendshape_names
 from realtime_core.expressions import EXPRESSIONS, NEUTRAL
+from realtime_core.face.keyframes import MorphRig
 from wire import protocol as P
 
 if TYPE_CHECKING:
@@ -65,10 +66,17 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
             "vertex_count": int(len(mesh.vertices)),
             "moving_vertices": rig.moving.astype(int).tolist(),
             "units": "mesh units",
+            # A head driven by its own targets: their names in the order of the morph kind's weights
+            # (mesh.json carries the targets themselves); null for a retargeted head.
+            "morph": {"names": list(rig.names)} if isinstance(rig, MorphRig) else None,
         }
     if req.kind == "deltas" and head is not None:
         d["values_per_frame"] = 3 * int(len(head.rig.moving))
         d["layout"] = "x, y, z of each moving vertex in moving_vertices order, added to the neutral mesh"
+    elif req.kind == "morph" and head is not None and isinstance(head.rig, MorphRig):
+        d["names"] = list(head.rig.names)
+        d["values_per_frame"] = len(d["names"])
+        d["layout"] = "one weight per morph target in names order (three.js morphTargetInfluences)"
     elif req.kind == "blendshapes":
         d["names"] = list(blendshape_names(req.encoding))
         d["values_per_frame"] = len(d["names"])

@@ -129,7 +129,9 @@ class HttpRouter:
             if path == "/head/mesh":
                 hit = HttpReply(HTTPStatus.OK, mesh_glb(mesh), "model/gltf-binary")
             elif path == "/head/mesh.json":
-                hit = HttpReply(HTTPStatus.OK, mesh_json(mesh), "application/json")
+                # The targets the head drives, in the order of the morph kind's weights (none for a retarget).
+                names = tuple(getattr(self.head.rig, "names", ())) if self.head.kind == "morph" else ()
+                hit = HttpReply(HTTPStatus.OK, mesh_json(mesh, names), "application/json")
             elif path == "/head/texture" and mesh.texture is not None:
                 hit = HttpReply(HTTPStatus.OK, mesh.texture, texture_mime(mesh) or "application/octet-stream")
             else:

@@ -431,8 +431,11 @@ def parse_viewer_message(message: object) -> dict:
     return msg
 
 
-def parse_view_query(args: Mapping[str, str], *, token: str | None, has_head: bool) -> ViewRequest:
-    """A viewer's query -> ViewRequest, or ProtocolViolation with the close code and reason."""
+def parse_view_query(
+    args: Mapping[str, str], *, token: str | None, has_head: bool, morph_head: bool = False
+) -> ViewRequest:
+    """A viewer's query -> ViewRequest, or ProtocolViolation with the close code and reason.
+    has_head: the server has a head (vertex deltas); morph_head: it is driven by its own morph targets."""
     if not token_ok(args.get("token"), token):
         raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
     name = args.get("session", "")
@@ -447,8 +450,12 @@ def parse_view_query(args: Mapping[str, str], *, token: str | None, has_head: bo
         raise ProtocolViolation(
             P.CLOSE_BAD_REQUEST, f"encoding for {kind} must be one of {sorted(encodings)}, got {_short(enc_name)}"
         )
-    if kind == "deltas" and not has_head:
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "this server has no head rig: vertex deltas are unavailable")
+    if kind in ("deltas", "morph") and not has_head:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"this server has no head rig: {kind} are unavailable")
+    if kind == "morph" and not morph_head:
+        raise ProtocolViolation(
+            P.CLOSE_BAD_REQUEST, "this server's head has no morph targets it drives: ask for deltas (or params)"
+        )
     audio = args.get("audio", "1")
     if audio not in ("0", "1"):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "audio must be 0 or 1")

@@ -159,6 +159,11 @@ class Frame:
                 assert self.speech_params is not None  # set together with expression
                 values = blendshape_weights(self.speech_params, "arkit52", expression=self.expression)
             stage = "encode_blendshapes"
+        elif kind == P.KIND_MORPH:
+            if not isinstance(self.rig, MorphRig):
+                raise ServerConfigError("morph weights need a head driven by its own morph targets")
+            values = self.rig.weights(self.params)  # (P,) float32 in [0, 1], the rig's target order
+            stage = "encode_morph"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
             stage = "encode_blendshapes"

@@ -284,6 +284,13 @@ async def handle_text(server, ws: ServerConnection) -> None:
         raise ProtocolViolation(getattr(exc, "code", P.CLOSE_BAD_REQUEST), str(exc)) from None
     live = LiveSession(name, session, server, source="text")
     server.sessions[name] = live
+    if server.cluster is not None:
+        # registered cluster-wide like an audio session: /sessions on every node lists it, and viewers
+        # on other nodes receive its frames and audio through the cluster's channels (live._fanout)
+        owner = await server.cluster.claim(live)
+        if owner is not None:
+            del server.sessions[name]
+            raise ProtocolViolation(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
     queue: asyncio.Queue = asyncio.Queue()
     clock: dict[str, float] = {}
     first_piece: list[float] = []

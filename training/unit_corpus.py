@@ -30,6 +30,7 @@ import numpy as np
 
 from assets.grid import GridSentence
 from realtime_core import VISUAL_PARAMS
+from realtime_core.motion_units.units import fit_motion_units
 from realtime_core.synthesis.corpus import MotionCorpus, StoredCorpus
 from realtime_core.synthesis.empca import EmPcaConfig, fit_empca
 from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
@@ -43,8 +44,8 @@ from training.facetrack import (
     default_cache_dir,
 )
 
-BUILD_VERSION = 1
-"""Bumped whenever the corpus construction changes (part of the cache key)."""
+BUILD_VERSION = 2
+"""Bumped whenever the corpus construction changes (part of the cache key). 2: Motion Units added."""
 
 PhoneRows = Sequence[tuple[str, float, float]]
 """A phone timeline: (ARPAbet label, start_s, end_s) on the recording's clock."""
@@ -116,6 +117,9 @@ def build_stored_corpus(
         raise ConfigError("no sentences to build a unit corpus from")
     motions = [track_motion(t) for _, t, _ in tracks]
     pca = fit_empca(np.concatenate(motions), config)
+    # The Utterance Motion Units of paper 002 (PCA by covariance eigenvectors, 97 % of the variance)
+    # on the same lower-face displacements, so synthesised motion can also be given as MUPs.
+    units = fit_motion_units(np.concatenate(motions))
     frames, fo, labels, vis, st, en, po, neutral = [], [0], [], [], [], [], [0], []
     for (sid, track, rows), m in zip(tracks, motions):
         n = len(m)
@@ -170,7 +174,8 @@ def build_stored_corpus(
         pca_total_variance=pca.total_variance,
         landmark_indices=np.array(LOWER_FACE),
         neutral=np.mean(neutral, axis=0).astype(np.float64),
-        meta={**info, **(meta or {})},
+        meta={**info, "motion_units": units.n_units, **(meta or {})},
+        motion_units=units,
     )
 
 

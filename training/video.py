@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets.audio import SILENCE_PEAK
+from assets.audio import SILENCE_PEAK, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
@@ -220,32 +220,9 @@ def _rate(s: dict) -> float:
 
 
 def decode_audio(path: Path, rate_hz: int) -> np.ndarray:
-    """(n,) float32 mono audio of a media file at ``rate_hz``."""
-    cmd = [
-        _tool("ffmpeg"),
-        "-v",
-        "error",
-        "-nostdin",
-        "-i",
-        str(path),
-        "-vn",
-        "-ac",
-        "1",
-        "-ar",
-        str(rate_hz),
-        "-f",
-        "s16le",
-        "-acodec",
-        "pcm_s16le",
-        "pipe:1",
-    ]
-    proc = subprocess.run(cmd, capture_output=True)
-    if proc.returncode != 0 or not proc.stdout:
-        raise NotAudioError(
-            path,
-            f"not audio: ffmpeg cannot decode an audio stream ({proc.stderr.decode(errors='replace').strip()[-200:]})",
-        )
-    return np.frombuffer(proc.stdout, "<i2").astype(np.float32) / 32768.0
+    """(n,) float32 mono audio of a media file at ``rate_hz`` (the one ffmpeg decoder,
+    :func:`assets.audio.read_audio`)."""
+    return read_audio(path, rate_hz=rate_hz)[0]
 
 
 def decode_frames(path: Path, width: int, height: int) -> tuple[np.ndarray, str]:

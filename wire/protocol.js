@@ -1,5 +1,5 @@
 // The facecast wire protocol in the browser: the 32-byte little-endian header and payload codecs.
-// Normative text: docs/protocol.md; reference implementation: server/protocol.py (keep in step).
+// Normative text: docs/protocol.md; reference implementation: wire/protocol.py (keep in step).
 //
 //   offset size field
 //   0      u8   version (1)        1  u8  kind      2  u8  encoding    3  u8 reserved
@@ -9,7 +9,7 @@
 
 export const PROTOCOL_VERSION = 1;
 export const HEADER_BYTES = 32;
-export const KIND = { PARAMS: 1, DELTAS: 2, ARKIT52: 3, OVR15: 4, AUDIO: 5 };
+export const KIND = { PARAMS: 1, DELTAS: 2, ARKIT52: 3, OVR15: 4, AUDIO: 5, MORPH: 6 };
 export const ENC = { FLOAT32: 1, INT16: 2, FLOAT16: 3 };
 
 // Close codes the viewer reacts to (server/protocol.py).

@@ -39,12 +39,14 @@ KIND_DELTAS = 2
 KIND_ARKIT52 = 3
 KIND_OVR15 = 4
 KIND_AUDIO = 5
+KIND_MORPH = 6  # the served head's own morph-target weights (order: the description's head.morph.names)
 KIND_NAMES = {
     KIND_PARAMS: "params",
     KIND_DELTAS: "deltas",
     KIND_ARKIT52: "arkit52",
     KIND_OVR15: "ovr15",
     KIND_AUDIO: "audio",
+    KIND_MORPH: "morph",
 }
 
 # Value encodings (header byte 2).
@@ -63,6 +65,8 @@ VIEW_KINDS: dict[str, dict[str, tuple[int, int]]] = {
     "params": {"float32": (KIND_PARAMS, ENC_FLOAT32)},
     "deltas": {"int16": (KIND_DELTAS, ENC_INT16), "float16": (KIND_DELTAS, ENC_FLOAT16)},
     "blendshapes": {"arkit52": (KIND_ARKIT52, ENC_FLOAT32), "ovr15": (KIND_OVR15, ENC_FLOAT32)},
+    # A head driven by its own morph targets: one weight per driven target (three.js morphTargetInfluences).
+    "morph": {"float32": (KIND_MORPH, ENC_FLOAT32), "float16": (KIND_MORPH, ENC_FLOAT16)},
 }
 
 # Ingest sample formats: name -> (numpy dtype, bytes per sample).

@@ -2,11 +2,11 @@
 
 ``EXT_meshopt_compression`` and ``KHR_draco_mesh_compression`` (what gltfpack and glTF-Transform
 write) and ``KHR_texture_basisu`` (KTX2 textures) are decoded by ``assets/heads/js/gltf_decompress.mjs``,
-a short Node script on the well-kept ``@gltf-transform`` packages (``package.json``; ``npm install``
-in the checkout), run as a subprocess. The plain GLB is cached under ``$FACECAST_CACHE/gltf/``
-by the SHA-1 of the input, written atomically (no partial file on failure). KTX2 textures are
-converted to PNG when KTX-Software's ``ktx`` tool is on PATH, otherwise dropped (the head is then
-drawn in its material colour) with a note on stderr.
+a short Node script on well-kept npm packages (``package.json``; ``npm ci`` in the checkout), run as a
+subprocess: ``@gltf-transform`` with the meshoptimizer and Draco decoders for the meshes, Basis
+Universal's transcoder (``basis_transcoder.wasm``, shipped by ``three`` for its KTX2Loader) and
+``sharp`` for KTX2 -> PNG. The plain GLB is cached under ``$FACECAST_CACHE/gltf/`` by the SHA-1 of
+the input and of the script (a changed decoder re-decodes), written atomically (no partial file on failure).
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ SCRIPT = "gltf_decompress.mjs"
 def decompressed(path: Path, cache: Path | None = None) -> Path:
     """A plain copy of the glTF ``path`` (cached); MeshError naming the file when Node or the npm
     packages are missing or the decoder fails."""
-    digest = hashlib.sha1(path.read_bytes()).hexdigest()
+    script = Path(str(resources.files("assets.heads").joinpath("js", SCRIPT)))
+    digest = hashlib.sha1(path.read_bytes() + script.read_bytes()).hexdigest()
     root = (cache or cache_dir()) / "gltf"
     out = root / f"{digest}.glb"
     if out.is_file():
@@ -40,7 +41,6 @@ def decompressed(path: Path, cache: Path | None = None) -> Path:
             f"{path}: this file is compressed (meshopt/Draco/KTX2) and decoding it needs Node.js "
             "(apt install nodejs) and `npm install` in the facecast checkout"
         )
-    script = Path(str(resources.files("assets.heads").joinpath("js", SCRIPT)))
     root.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=root, prefix=".tmp-", suffix=".glb")
     os.close(fd)

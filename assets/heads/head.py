@@ -5,6 +5,7 @@
 - ``"builtin"``: the built-in head, driven through its own 52 ARKit targets (``mode="retarget"``:
   its Sec. 5 rig instead);
 - a rig file (``.npz``, written by ``facecast rig``);
+- a Candide-3 model (``.wfm``): driven through its own animation units (:mod:`assets.heads.wfm`);
 - a head mesh (``.glb/.gltf/.obj/.ply``): driven through its own morph targets when it has enough
   mouth targets (:mod:`assets.heads.targets`; no rig step), otherwise rigged now from landmarks
   (``landmarks`` JSON, else the file shipped for known heads, else ``landmark_finder(mesh)``, e.g.
@@ -90,8 +91,10 @@ def resolve_head(
     config: RigConfig | None = None,
     cache: Path | None = None,
     landmark_finder: LandmarkFinder | None = None,
+    parts: tuple[str | Path, ...] = (),
 ) -> Head:
     """The head named by ``spec`` ('builtin', a rig .npz or a mesh file), see the module docstring.
+    parts: further mesh files of the same head (separate eyes, teeth), appended to a mesh file's head.
 
     mode: "auto" (own targets when enough, else retarget), "morph" (own targets or an error),
     "retarget" (always a Sec. 5 rig). target_map: a user mapping JSON for morph-target names.
@@ -99,6 +102,10 @@ def resolve_head(
     config = config or RigConfig()
     if mode not in HEAD_MODES:
         raise ValueError(f"mode must be one of {HEAD_MODES}, got {mode!r}")
+    if parts and (str(spec) == "builtin" or Path(spec).suffix.lower() not in MESH_SUFFIXES):
+        raise MeshError(
+            f"{spec}: --head-part adds meshes to a head mesh file ({', '.join(MESH_SUFFIXES)}), not to this head"
+        )
     if str(spec) == "builtin":
         if mode == "retarget" or landmarks is not None:
             from assets.heads.rigfile import builtin_rig
@@ -108,20 +115,31 @@ def resolve_head(
             return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None)
         return builtin_morph_head(cache)
     p = Path(spec)
+    if p.suffix.lower() == ".wfm":  # Candide-3: a face model with its own animation units
+        from assets.heads.wfm import candide_head
+
+        if mode == "retarget":
+            raise MeshError(f"{p}: a Candide-3 model is driven by its own animation units; use --head-mode auto")
+        if not p.is_file():
+            raise MeshError(f"{p}: Candide-3 file not found")
+        return candide_head(p)
     if p.suffix.lower() == ".npz":
         from assets.heads.rigfile import load_rig
 
         return Head(*load_rig(p))
     if p.suffix.lower() not in MESH_SUFFIXES:
         if not p.exists():
-            raise MeshError(f"{p}: head not found (give 'builtin', a rig .npz or a mesh {', '.join(MESH_SUFFIXES)})")
+            raise MeshError(
+                f"{p}: head not found (give 'builtin', a rig .npz, a Candide-3 .wfm or a mesh "
+                f"{', '.join(MESH_SUFFIXES)})"
+            )
         raise MeshError(
-            f"{p}: unsupported head file {p.suffix!r}; give 'builtin', a rig .npz or a mesh "
+            f"{p}: unsupported head file {p.suffix!r}; give 'builtin', a rig .npz, a Candide-3 .wfm or a mesh "
             f"({', '.join(MESH_SUFFIXES)})"
         )
     from assets.heads.mesh import load_mesh
 
-    mesh = load_mesh(p, cache=cache)
+    mesh = load_mesh(p, cache=cache, parts=parts)
     if mode != "retarget":
         head = morph_head(mesh, target_map=target_map, cache=cache, require_enough=mode == "auto")
         if head is not None:

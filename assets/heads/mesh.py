@@ -71,9 +71,51 @@ def check_mesh(mesh: HeadMesh) -> None:
         raise MeshError(f"{mesh.name}: mesh is flat (all vertices in one plane); a head must be 3D")
 
 
-def load_mesh(path: str | Path, *, cache: Path | None = None) -> HeadMesh:
-    """Read a head mesh (glb/gltf/obj/ply). Raises MeshError naming the file on any problem."""
+def load_mesh(path: str | Path, *, cache: Path | None = None, parts: tuple[str | Path, ...] = ()) -> HeadMesh:
+    """Read a head mesh (glb/gltf/obj/ply), with ``parts``: further files of the same head (eyes,
+    teeth, tongue delivered separately) appended after it in the given order, so the head file's
+    vertex indices stay valid; each file's pieces are parts named ``STEM:OBJECT`` (see
+    :mod:`assets.heads.parts`). Raises MeshError naming the file on any problem."""
     p = Path(path)
+    pieces = [_file_parts(p, cache)]
+    for q in parts:
+        got = _file_parts(Path(q), cache)
+        got.part_names = tuple(f"{Path(q).stem}:{n}" for n in got.part_names)
+        pieces.append(got)
+    mesh = _assemble(p, _concat(pieces) if len(pieces) > 1 else pieces[0])
+    check_mesh(mesh)
+    return mesh
+
+
+def _concat(pieces: list[_Parts]) -> _Parts:
+    """One _Parts of several files: vertices, materials and part names appended in order."""
+    nv = np.cumsum([0] + [len(x.vertices) for x in pieces])
+    nm = np.cumsum([0] + [len(x.materials) for x in pieces])
+    npart = np.cumsum([0] + [len(x.part_names) for x in pieces])
+    uvs = None
+    if any(x.uvs is not None for x in pieces):  # a piece without UVs samples a corner of its (colour) tile
+        uvs = np.concatenate([x.uvs if x.uvs is not None else np.zeros((len(x.vertices), 2)) for x in pieces])
+    colors = None
+    if any(x.colors is not None for x in pieces):
+        colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in pieces])
+    targets = {}
+    for k in sorted({k for x in pieces for k in x.targets}):  # a part without the target does not move with it
+        targets[k] = np.concatenate([x.targets.get(k, np.zeros((len(x.vertices), 3))) for x in pieces])
+    return _Parts(
+        vertices=np.concatenate([x.vertices for x in pieces]),
+        triangles=np.concatenate([x.triangles + nv[i] for i, x in enumerate(pieces)]),
+        uvs=uvs,
+        colors=colors,
+        material=np.concatenate([np.where(x.material >= 0, x.material + nm[i], -1) for i, x in enumerate(pieces)]),
+        materials=[m for x in pieces for m in x.materials],
+        part=np.concatenate([x.part.astype(np.int16) + npart[i] for i, x in enumerate(pieces)]).astype(np.int16),
+        part_names=tuple(n for x in pieces for n in x.part_names),
+        targets=targets,
+    )
+
+
+def _file_parts(p: Path, cache: Path | None) -> _Parts:
+    """One mesh file's pieces (MeshError naming it when it is missing, unsupported or has no triangles)."""
     if not p.is_file():
         raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .obj or .ply head, or 'builtin')")
     if p.suffix.lower() not in MESH_SUFFIXES:
@@ -92,9 +134,7 @@ def load_mesh(path: str | Path, *, cache: Path | None = None) -> HeadMesh:
         raise MeshError(
             f"{p}: file contains no triangle mesh (point cloud or empty scene); export the head as triangles"
         )
-    mesh = _assemble(p, parts)
-    check_mesh(mesh)
-    return mesh
+    return parts
 
 
 @dataclass

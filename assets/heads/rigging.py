@@ -54,6 +54,7 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
 ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
+LANDMARK_REACH = 0.05  # how far (fraction of the mesh extent) a landmark point may lie from the nearest vertex
 REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
 
@@ -142,6 +143,16 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
             if a.shape != (3,) or pt.shape != (3,) or not np.all(np.isfinite(pt)):
                 raise LandmarkError(f"{source}: landmark {k!r} must be a vertex index or [x, y, z], got {val!r}")
             out[k] = pt
+    # Points must lie on the head: within LANDMARK_REACH of the mesh's extent from its nearest vertex.
+    v = np.asarray(vertices, dtype=np.float64)
+    extent = float(np.ptp(v, axis=0).max())
+    for k, pt in out.items():
+        gap = float(np.min(np.linalg.norm(v - pt, axis=1)))
+        if gap > LANDMARK_REACH * extent:
+            raise LandmarkError(
+                f"{source}: landmark {k!r} {np.round(pt, 4).tolist()} lies {gap:.3g} file units off the mesh "
+                f"(extent {extent:.3g}); give points on the head in its file units, or vertex indices"
+            )
     return out
 
 
@@ -333,4 +344,6 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    return rig, out_mesh
+    from assets.heads.parts import with_rigid_parts  # separate eyes / teeth / tongue: rigid with skull or jaw
+
+    return with_rigid_parts(rig, out_mesh, snap), out_mesh

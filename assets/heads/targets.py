@@ -75,6 +75,11 @@ ENOUGH_PROBES: tuple[tuple[tuple[float, float, float, float], float], ...] = (
 )
 
 
+DRIVEN_MIN = 0.01
+"""A head target is driven when its weight reaches this at some speech pose (the built-in head's
+19 mouth targets reach 0.06 or more; the other 33 stay below 0.001)."""
+
+
 def _norm(s: str) -> str:
     return re.sub(r"[^a-z0-9]", "", s.lower())
 
@@ -219,6 +224,16 @@ def morph_rig(
     enough = all(r <= lim for r, (_, lim) in zip(residuals, ENOUGH_PROBES))
     if require_enough and not enough:
         return None
+    # Targets speech never drives (eyes, brows, cheeks of an ARKit head: their weights stay below
+    # DRIVEN_MIN at every speech pose, carrying only the ridge's noise) are left out: each driven
+    # target costs the per-frame solve, the wire and a renderer (a GPU loops over them per vertex).
+    from realtime_core.face.checks import EXTREME_POSES
+
+    driven = keymap.weights(arkit_source(np.asarray(EXTREME_POSES, dtype=np.float64))).max(axis=0) >= DRIVEN_MIN
+    if driven.any() and not driven.all():
+        head_names = tuple(n for n, k in zip(head_names, driven) if k)
+        kprime = kprime[driven]
+        keymap = KeyframeMap.from_reference(kprime, a)
     d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names])  # (P, n, 3)
     if d.shape[1:] != np.asarray(vertices).shape:
         raise MeshError(f"{name}: morph targets do not match the mesh's {len(vertices)} vertices")
@@ -228,6 +243,7 @@ def morph_rig(
         "kind": "morph",
         "targets": {n: matched[n] for n in head_names},
         "probe_residuals": [round(r, 4) for r in residuals],
+        "undriven_targets": len(matched) - len(head_names),
         "enough_mouth_targets": bool(enough),
     }
     return MorphRig(

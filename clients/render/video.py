@@ -9,9 +9,12 @@ temporary name next to the target and renamed when ffmpeg succeeds.
 
 from __future__ import annotations
 
+import functools
 import os
+import queue
 import shutil
 import subprocess
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,23 +44,47 @@ def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str 
 
 def with_caption(image: np.ndarray, text: str) -> np.ndarray:
     """The frame (h, w, 3) uint8 with ``text`` in small light type at the bottom left (e.g. a
-    licence credit); unchanged when text is empty."""
+    licence credit); unchanged when text is empty. The text's coverage is drawn once per (text,
+    frame size) and composited with numpy (drawing it with PIL on every frame cost about as much as
+    rendering a frame without anti-aliasing)."""
     if not text:
         return image
+    alpha = _caption_alpha(text, image.shape[1], image.shape[0])
+    out = np.array(image, dtype=np.uint8, copy=True)
+    strip = out[-len(alpha) :]
+    blended = strip.astype(np.float32) * (1.0 - alpha[..., None]) + 225.0 * alpha[..., None]
+    strip[:] = np.rint(blended).astype(np.uint8)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _caption_alpha(text: str, width: int, height: int) -> np.ndarray:
+    """(rows, width) float32 coverage in [0, 1] of ``text`` drawn at the bottom left of a frame."""
     from PIL import Image, ImageDraw
 
-    img = Image.fromarray(image)
-    ImageDraw.Draw(img).text((6, image.shape[0] - 14), text, fill=(225, 225, 225))
-    return np.asarray(img)
+    rows = min(height, 20)
+    mask = Image.new("L", (width, rows), 0)
+    ImageDraw.Draw(mask).text((6, rows - 14), text, fill=255)
+    a = np.asarray(mask, dtype=np.float32) / 255.0
+    a.flags.writeable = False
+    return a
 
 
 @dataclass(frozen=True)
 class VideoConfig:
-    """fps: video frame rate; crf: H.264 quality (lower is better); ffmpeg: executable name/path."""
+    """fps: video frame rate; crf: H.264 quality (lower is better); preset: x264 speed preset
+    (``veryfast`` encodes a 640x480 talking head about 3x faster than ``medium`` at the same crf, the
+    file a little larger); ffmpeg: executable name/path."""
 
     fps: float = 30.0
     crf: int = 20
+    preset: str = "medium"
     ffmpeg: str = "ffmpeg"
+
+    def __post_init__(self) -> None:
+        presets = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow")
+        if self.preset not in presets:
+            raise RenderError(f"x264 preset must be one of {', '.join(presets)}, got {self.preset!r}")
 
 
 def write_video(
@@ -97,25 +124,66 @@ def write_video(
     ]
     if audio is not None:
         cmd += ["-i", str(audio), "-c:a", "aac", "-b:a", "128k", "-shortest"]
-    cmd += ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", str(config.crf), "-movflags", "+faststart", str(tmp)]
+    cmd += [
+        "-c:v",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p",
+        "-crf",
+        str(config.crf),
+        "-preset",
+        config.preset,
+        "-movflags",
+        "+faststart",
+        str(tmp),
+    ]
     if png_dir is not None:
         Path(png_dir).mkdir(parents=True, exist_ok=True)
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdin is not None and proc.stderr is not None
+    stdin = proc.stdin
+    # A writer thread feeds ffmpeg while the next frame renders (a frame is ~1 MB, far beyond the
+    # pipe's buffer, so an inline write would wait for the encoder every frame).
+    pending: queue.Queue[bytes | None] = queue.Queue(maxsize=4)
+    broken: list[BaseException] = []
+
+    def feed() -> None:
+        while (chunk := pending.get()) is not None:
+            if broken:
+                continue  # drain so the renderer never blocks on a dead encoder
+            try:
+                stdin.write(chunk)
+            except (BrokenPipeError, OSError) as exc:
+                broken.append(exc)
+        try:
+            stdin.close()
+        except (BrokenPipeError, OSError) as exc:
+            broken.append(exc)
+
+    writer = threading.Thread(target=feed, name="ffmpeg-feed", daemon=True)
+    writer.start()
     try:
         for k, p in enumerate(frames_params):
             img = render_frame(p)
-            proc.stdin.write(np.ascontiguousarray(img).tobytes())
+            pending.put(np.ascontiguousarray(img).tobytes())
             if png_dir is not None:
                 from PIL import Image
 
                 Image.fromarray(img).save(Path(png_dir) / f"frame_{k:05d}.png")
-        proc.stdin.close()
-        err = proc.stderr.read().decode(errors="replace")
-        rc = proc.wait()
-    except BrokenPipeError:
-        rc = proc.wait()
-        err = proc.stderr.read().decode(errors="replace")
+            if broken:
+                break
+    except BaseException:
+        pending.put(None)
+        writer.join()
+        proc.wait()
+        tmp.unlink(missing_ok=True)
+        raise
+    pending.put(None)
+    writer.join()
+    err = proc.stderr.read().decode(errors="replace")
+    rc = proc.wait()
+    if rc == 0 and broken:
+        rc = -1
     if rc != 0:
         if tmp.exists():
             tmp.unlink()

@@ -6,13 +6,21 @@ import argparse
 
 
 def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head: str | None = None) -> None:
-    """--head, --landmarks, --head-mode, --target-map."""
+    """--head, --head-part, --landmarks, --head-mode, --target-map."""
     if head:
         p.add_argument(
             "--head",
             default="builtin",
             help=help_head or "'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)",
         )
+    p.add_argument(
+        "--head-part",
+        action="append",
+        default=[],
+        metavar="MESH",
+        help="another mesh file of the same head (eyes, teeth, tongue delivered separately); repeatable. "
+        "Eyes and upper teeth stay with the skull, lower teeth and tongue move with the jaw",
+    )
     p.add_argument(
         "--landmarks",
         default=None,
@@ -44,4 +52,5 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
         mode=args.head_mode,
         target_map=args.target_map,
         landmark_finder=find_landmarks,
+        parts=tuple(getattr(args, "head_part", ()) or ()),
     )

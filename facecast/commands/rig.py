@@ -23,6 +23,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--landmarks",
         help="landmarks JSON (name -> vertex index or [x, y, z]); default: the shipped file for known heads",
     )
+    p.add_argument(
+        "--head-part",
+        action="append",
+        default=[],
+        metavar="MESH",
+        help="another mesh file of the same head (eyes, teeth, tongue); repeatable (docs/animation.md)",
+    )
     p.add_argument("-o", "--output", help="rig file to write (.npz); not written when the rig fails its checks")
     p.add_argument("--png", help="control-point picture to write (default: OUTPUT with suffix .png)")
     p.add_argument(
@@ -65,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
     from assets.heads.rigging import candide_face, resolve_landmarks, rig_head
-    from realtime_core.errors import RealtimeCoreError
-    from realtime_core.face import RigConfig, parse_wfm
+    from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXTREME_POSES
 
     if not args.output and not args.show_landmarks:
@@ -74,13 +80,20 @@ def run(args: argparse.Namespace) -> int:
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )
+    if Path(args.head).suffix.lower() == ".wfm":
+        raise MeshError(
+            f"{args.head}: a Candide-3 model needs no rig: it is driven by its own animation units; "
+            "give it as --head to render, animate, say or serve"
+        )
     head = load_builtin_head()
     if args.head == "builtin":
+        if args.head_part:
+            raise MeshError("builtin: --head-part adds meshes to a head mesh file, not to the built-in head")
         mesh = builtin_morph_head().mesh  # with its parts (teeth) for the checks
         spec = read_landmarks(args.landmarks) if args.landmarks else None
         source = args.landmarks or "builtin"
     else:
-        mesh = load_mesh(args.head)
+        mesh = load_mesh(args.head, parts=tuple(args.head_part))
         from clients.render.landmarks import find_landmarks
 
         spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
@@ -93,13 +106,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     simple = None
     if args.simple:
-        wfm = Path(args.simple)
-        try:
-            simple = candide_face(parse_wfm(wfm.read_text(encoding="latin-1"), name=wfm.stem))
-        except OSError as exc:
-            raise MeshError(f"{wfm}: cannot read Candide-3 file: {exc}") from exc
-        except RealtimeCoreError as exc:
-            raise MeshError(f"{wfm}: not a usable Candide-3 model: {exc}") from exc
+        from assets.heads.wfm import read_wfm
+
+        simple = candide_face(read_wfm(args.simple))
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     report = head_checks(Head(rig, rigged))
     print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError
+from realtime_core.motion_units.units import MotionUnits
 from realtime_core.synthesis.visemes import VISEME_ID, VISEMES
 
 FPS = 30.0
@@ -143,7 +144,10 @@ class StoredCorpus:
     (``pca_mean`` (P,), ``pca_components`` (K, P) orthonormal, ``pca_variances`` (K,),
     ``pca_total_variance``), the landmark indices the PCA covers (``landmark_indices`` (P/3,)) and
     the mean neutral positions of those landmarks (``neutral`` (P/3, 3), IOD units, face frame);
-    ``meta``: JSON-able provenance (sources, credit, build settings)."""
+    ``meta``: JSON-able provenance (sources, credit, build settings); ``motion_units``: the
+    Utterance Motion Units (paper 002) of the same lower-face deformations, fitted on the corpus's
+    frames (None in files written before they were added), which turn synthesised coefficients
+    into MU parameters (:meth:`mups`)."""
 
     corpus: MotionCorpus
     pca_mean: np.ndarray
@@ -153,11 +157,21 @@ class StoredCorpus:
     landmark_indices: np.ndarray
     neutral: np.ndarray
     meta: dict[str, Any]
+    motion_units: MotionUnits | None = None
 
     def landmark_offsets(self, coefficients: np.ndarray) -> np.ndarray:
         """(n, K) coefficients -> (n, P/3, 3) landmark displacements from the neutral face (IOD)."""
         flat = np.asarray(coefficients, dtype=np.float64) @ self.pca_components + self.pca_mean
         return flat.reshape(len(flat), -1, 3)
+
+    def mups(self, coefficients: np.ndarray) -> np.ndarray:
+        """(n, K) coefficients -> (n, A) Utterance MU parameters (paper 002 eq. 1: ``M_0^T (d - m_00)``
+        of the landmark displacements the coefficients stand for). Raises ConfigError if the corpus
+        carries no Motion Units (a file from before they were added: rebuild it)."""
+        if self.motion_units is None:
+            raise ConfigError("this unit corpus carries no Motion Units (built before v2: rebuild it)")
+        d = self.landmark_offsets(coefficients)
+        return self.motion_units.project(d.reshape(len(d), -1))
 
 
 def encode_corpus(stored: StoredCorpus) -> bytes:
@@ -174,24 +188,30 @@ def encode_corpus(stored: StoredCorpus) -> bytes:
         "meta": stored.meta,
         "pca_total_variance": stored.pca_total_variance,
     }
+    arrays: dict[str, np.ndarray] = {
+        "format": np.array(CORPUS_FORMAT),
+        "version": np.array(CORPUS_VERSION),
+        "header_json": np.array(json.dumps(header)),
+        "frames": np.asarray(c.frames, dtype=np.float32),
+        "frame_offsets": np.asarray(c.frame_offsets, dtype=np.int64),
+        "phone_visemes": np.asarray(c.phone_visemes, dtype=np.int16),
+        "phone_start_s": c.phone_start_s,
+        "phone_end_s": c.phone_end_s,
+        "phone_offsets": np.asarray(c.phone_offsets, dtype=np.int64),
+        "pca_mean": stored.pca_mean,
+        "pca_components": stored.pca_components,
+        "pca_variances": stored.pca_variances,
+        "landmark_indices": np.asarray(stored.landmark_indices, dtype=np.int64),
+        "neutral": stored.neutral,
+    }
+    if stored.motion_units is not None:  # optional arrays: files without them still read (no Motion Units)
+        arrays.update(
+            mu_mean=stored.motion_units.mean,
+            mu_units=stored.motion_units.units,
+            mu_eigenvalues=stored.motion_units.eigenvalues,
+        )
     buf = io.BytesIO()
-    np.savez_compressed(
-        buf,
-        format=np.array(CORPUS_FORMAT),
-        version=np.array(CORPUS_VERSION),
-        header_json=np.array(json.dumps(header)),
-        frames=np.asarray(c.frames, dtype=np.float32),
-        frame_offsets=np.asarray(c.frame_offsets, dtype=np.int64),
-        phone_visemes=np.asarray(c.phone_visemes, dtype=np.int16),
-        phone_start_s=c.phone_start_s,
-        phone_end_s=c.phone_end_s,
-        phone_offsets=np.asarray(c.phone_offsets, dtype=np.int64),
-        pca_mean=stored.pca_mean,
-        pca_components=stored.pca_components,
-        pca_variances=stored.pca_variances,
-        landmark_indices=np.asarray(stored.landmark_indices, dtype=np.int64),
-        neutral=stored.neutral,
-    )
+    np.savez_compressed(buf, allow_pickle=False, **arrays)
     return buf.getvalue()
 
 
@@ -254,6 +274,11 @@ def decode_corpus(data: bytes) -> StoredCorpus:
             landmark_indices=a["landmark_indices"],
             neutral=a["neutral"],
             meta=dict(h["meta"]),
+            motion_units=(
+                MotionUnits(mean=a["mu_mean"], units=a["mu_units"], eigenvalues=a["mu_eigenvalues"])
+                if "mu_units" in a
+                else None
+            ),
         )
     except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
         raise ModelFormatError(f"unit-corpus archive is inconsistent: {exc}") from None
@@ -264,4 +289,6 @@ def decode_corpus(data: bytes) -> StoredCorpus:
         or stored.pca_mean.shape[0] != 3 * len(stored.landmark_indices)
     ):
         raise ModelFormatError("unit-corpus PCA, landmark indices and neutral face disagree in size")
+    if stored.motion_units is not None and stored.motion_units.dim != stored.pca_mean.shape[0]:
+        raise ModelFormatError("unit-corpus Motion Units and landmark PCA disagree in size")
     return stored

@@ -155,6 +155,7 @@ class UnitSynthesizer:
         *,
         n_frames: int | None = None,
         n_best: int = 1,
+        exclude: Sequence[str] = (),
     ) -> UnitSynthesis:
         """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es").
 
@@ -162,17 +163,21 @@ class UnitSynthesizer:
         sequences, each searched with the sentences of the previous ones excluded: recorded
         tokens of the same phones vary from one sentence to the next, and their mean (all warped
         onto the same target phones, so closures and openings stay aligned) follows an unseen
-        token better than any one of them. Stops early when no further sequence exists."""
+        token better than any one of them. Stops early when no further sequence exists.
+
+        exclude: corpus sentence ids never to use (a leave-one-out evaluation of a corpus sentence)."""
         if not isinstance(n_best, int) or n_best < 1:
             raise ConfigError(f"n_best must be an integer >= 1, got {n_best!r}")
         target = self.target(phones, inventory)
         anchors = pause_anchors(target.visemes)
         sels: list[Selection] = []
-        banned = np.zeros(self.graph.n_states, dtype=bool)
+        banned = np.isin(self._sentence, [i for i, sid in enumerate(self.corpus.sentence_ids) if sid in set(exclude)])
         total = None
         for k in range(n_best):
             try:
-                sel = select_units(self.graph, target.visemes, target.durations_s, banned=banned if k else None)
+                sel = select_units(
+                    self.graph, target.visemes, target.durations_s, banned=banned if banned.any() else None
+                )
             except NoPathError:
                 if k == 0:
                     raise

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -51,6 +52,75 @@ def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, c
     )
     assert main(["rig", str(empty), "--landmarks", str(bad), "-o", str(tmp_path / "z.npz")]) == 2
     assert "empty.ply" in capsys.readouterr().err
+
+
+def _bad_heads(tmp: Path) -> dict[str, tuple[list[str], str, str]]:
+    """case -> (head arguments, the file the message must name, words of the message)."""
+    import json
+    import struct
+
+    import trimesh
+
+    (tmp / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
+    js = json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": []}], "scene": 0}).encode()
+    js += b" " * (-len(js) % 4)
+    (tmp / "nomesh.glb").write_bytes(
+        struct.pack("<4sII", b"glTF", 2, 20 + len(js)) + struct.pack("<I4s", len(js), b"JSON") + js
+    )
+    trimesh.creation.icosphere(3).export(str(tmp / "sphere.obj"))
+    from assets.heads.rigging import REQUIRED_LANDMARKS
+
+    far = {k: [1000.0, 1000.0, 1000.0 + i] for i, k in enumerate(REQUIRED_LANDMARKS)}
+    (tmp / "far.json").write_text(json.dumps({"landmarks": far}))
+    (tmp / "head.fbx").write_bytes(b"Kaydara FBX Binary  \x00")
+    return {
+        "no mesh (obj)": (["empty.obj"], "empty.obj", "no triangle mesh"),
+        "no mesh (glb)": (["nomesh.glb"], "nomesh.glb", "no triangle mesh"),
+        "no face-like region": (["sphere.obj"], "sphere.obj", "no face-like region"),
+        "landmarks off the mesh": (["sphere.obj", "--landmarks", "far.json"], "far.json", "off the mesh"),
+        "unsupported extension": (["head.fbx"], "head.fbx", "unsupported"),
+    }
+
+
+@pytest.mark.parametrize("command", ["rig", "render"])
+def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(
+    tmp_path, tmp_path_factory, builtin_head, capfd, monkeypatch, command
+):
+    """Each bad-input class of the issue: one line naming the file, the problem and what to do; exit
+    code 2; no rig, picture, video or cache file left behind."""
+    from assets.heads.cache import cache_dir
+
+    cases = _bad_heads(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    from scipy.io import wavfile
+
+    speech = tmp_path / "speech.wav"
+    wavfile.write(speech, 16000, np.zeros(1600, np.int16))
+    # A cache of its own (the shared one is written by other runs), holding only the built-in head.
+    cache = tmp_path_factory.mktemp("cache")
+    for name in ("builtin_head_v1.npz", "builtin_rig_v1.npz"):
+        if (cache_dir() / name).is_file():
+            (cache / name).symlink_to(cache_dir() / name)
+    monkeypatch.setenv("FACECAST_CACHE", str(cache))
+    before_cache = set(cache.rglob("*"))
+    before = set(tmp_path.iterdir())
+    capfd.readouterr()
+    for case, (head, named, words) in cases.items():
+        if command == "rig":
+            argv = ["rig", *head, "-o", "out.npz"]
+        else:
+            argv = ["render", str(speech), "--params", "p.csv", "--head", head[0], *head[1:], "-o", "out.mp4"]
+            (tmp_path / "p.csv").write_text(
+                "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n0.000000,0,0,0,0\n"
+            )
+        assert main(argv) == 2, case
+        err = capfd.readouterr().err.strip().splitlines()
+        assert len(err) == 1, f"{case}: {err}"
+        assert named in err[0] and words in err[0], f"{case}: {err[0]}"
+        assert any(h in err[0] for h in ("give", "convert", "export")), f"{case}: no way forward in {err[0]!r}"
+        (tmp_path / "p.csv").unlink(missing_ok=True)
+        assert set(tmp_path.iterdir()) == before, f"{case}: left {set(tmp_path.iterdir()) - before}"
+    assert set(cache.rglob("*")) == before_cache
 
 
 def test_ply_round_trip(tmp_path, shared_data):

@@ -95,16 +95,36 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
         assert names[-4:] == ["upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
         offsets = frames[:, : len(names) - 4] @ z["pca_components"] + z["pca_mean"]
         assert offsets.shape[1] == 3 * len(z["landmark_indices"])
+        # the Motion Unit parameters of the same frames: eq. 1 by hand, and the MUs rebuild the landmarks
+        mups, units, mean = z["mups"], z["mu_units"], z["mu_mean"]
+        assert mups.shape == (len(frames), len(units))
+        np.testing.assert_allclose(mups, (offsets - mean) @ units.T, rtol=1e-4, atol=1e-5)
+        rebuilt = mups @ units + mean
+        moving = offsets - offsets.mean(0)
+        assert np.sum((rebuilt - offsets) ** 2) < 0.1 * np.sum(moving**2)
     capsys.readouterr()
     for argv, msg in (
         (["say", "😀😀", "-o", str(tmp_path / "x.csv")], "pronounceable"),
         (["say", "   ", "-o", str(tmp_path / "x.csv")], "empty text"),
         (["say", "hi", "--voice", "xx-none", "-o", str(tmp_path / "x.csv")], "voice"),
         (["say", "hi", "-o", str(tmp_path / "x.avi")], "unknown output format"),
+        (["say", "?! ... -- ()", "-o", str(tmp_path / "x.csv")], "no pronounceable word"),
     ):
         assert main([*argv, "--corpus", str(corpus_file)]) == 2
         assert msg in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # an unsupported language: argparse names the choices
+        main(["say", "bonjour", "--lang", "fr", "--corpus", str(corpus_file), "-o", str(tmp_path / "x.csv")])
+    assert exc.value.code == 2 and "invalid choice: 'fr'" in capsys.readouterr().err
     assert not (tmp_path / "x.csv").exists()
+    # characters outside the synthesiser's set (emoji, symbols, control characters) are dropped, the
+    # words around them spoken: the same motion as the text without them (espeak-ng's timings of the
+    # cleaned text can differ by a sample or two)
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert main(["say", "Bin ☃ blue\x07 at 😀 f two now", "--corpus", str(corpus_file), "-o", str(a)]) == 0
+    assert main(["say", "Bin blue at f two now", "--corpus", str(corpus_file), "-o", str(b)]) == 0
+    ta, tb = (np.loadtxt(f, delimiter=",", skiprows=1) for f in (a, b))
+    assert ta.shape == tb.shape
+    np.testing.assert_allclose(ta, tb, atol=2e-3)
 
 
 def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):

@@ -73,3 +73,27 @@ def test_added_routes_win(router):
 
     router.route("/health", lambda: HttpReply.json({"status": "ok"}))
     assert router.handle("/health").body == b'{"status":"ok"}'
+
+
+def test_a_morph_heads_mesh_json_carries_the_driven_targets_in_wire_order(builtin_head):
+    """/head/mesh.json of a head driven by its own targets lists them in the rig's order (the order of
+    the "morph" kind's weights); weights x those targets are exactly the rig's vertex deltas."""
+    import json
+
+    import numpy as np
+
+    from assets.heads.head import builtin_morph_head
+
+    head = builtin_morph_head()
+    router = HttpRouter(web_root=None, node_modules=None, head=head, sessions=list)
+    m = json.loads(router.handle("/head/mesh.json").body)
+    rig = head.rig
+    assert m["morph"]["names"] == list(rig.names)
+    idx = np.array(m["morph"]["vertices"])
+    d = np.array(m["morph"]["deltas"]).reshape(len(rig.names), len(idx), 3)
+    p = np.array([0.01, 0.04, 0.3, -0.01])
+    full = np.zeros((len(m["vertices"]) // 3, 3))
+    full[idx] = np.tensordot(rig.weights(p), d, axes=1)
+    want = np.zeros_like(full)
+    want[rig.moving] = rig.displacements(p)
+    np.testing.assert_allclose(full, want, atol=1e-6 * np.abs(want).max())

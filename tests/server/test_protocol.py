@@ -166,13 +166,18 @@ def test_start_timeout():
     assert _opened().start_timed_out(0.5) == []
 
 
-# (query, token, has_head, close code or None, words of the reason / expected (kind, encoding, audio))
+# (query, token, has_head ("morph": a head driven by its own targets), close code or None, words of the
+# reason / expected (kind, encoding, audio))
 VIEW_QUERIES = [
     ("session=a", None, False, None, ("params", "float32", True)),
     ("session=a&kind=deltas", None, True, None, ("deltas", "int16", True)),
     ("session=a&kind=deltas&encoding=float16&audio=0", None, True, None, ("deltas", "float16", False)),
     ("session=a&kind=blendshapes&encoding=ovr15", None, False, None, ("blendshapes", "ovr15", True)),
     ("session=a&kind=deltas", None, False, P.CLOSE_BAD_REQUEST, "no head rig"),
+    ("session=a&kind=morph", None, "morph", None, ("morph", "float32", True)),
+    ("session=a&kind=morph&encoding=float16", None, "morph", None, ("morph", "float16", True)),
+    ("session=a&kind=morph", None, True, P.CLOSE_BAD_REQUEST, "no morph targets"),
+    ("session=a&kind=morph", None, False, P.CLOSE_BAD_REQUEST, "no head rig"),
     ("session=a&kind=smell", None, False, P.CLOSE_BAD_REQUEST, "kind must be"),
     ("session=a&kind=params&encoding=int8", None, False, P.CLOSE_BAD_REQUEST, "encoding for params"),
     ("session=a&audio=yes", None, False, P.CLOSE_BAD_REQUEST, "audio must be 0 or 1"),
@@ -188,7 +193,9 @@ VIEW_QUERIES = [
 @pytest.mark.parametrize("query, token, has_head, code, want", VIEW_QUERIES)
 def test_view_queries(query, token, has_head, code, want):
     try:
-        req = SP.parse_view_query(SP.query_args("/view?" + query), token=token, has_head=has_head)
+        req = SP.parse_view_query(
+            SP.query_args("/view?" + query), token=token, has_head=bool(has_head), morph_head=has_head == "morph"
+        )
     except ProtocolViolation as exc:
         assert code is not None, f"refused: {exc}"
         assert exc.code == code and want in exc.reason

@@ -20,6 +20,7 @@ from realtime_core.synthesis.visemes import VISEME_ID, viseme_of
 from server.app import FacecastServer
 from server.config import ServerConfig
 from server.text_session import TextBackend, TextSession
+from tests.server.test_cluster import redis_server  # noqa: F401  (the real redis-server fixture)
 from wire import protocol as P
 
 pytestmark = pytest.mark.system  # a real server over loopback with espeak-ng
@@ -200,3 +201,58 @@ def test_text_session_refuses_bad_starts(model, backend):
     assert code == P.CLOSE_BAD_REQUEST and "unsupported language" in reason
     code, reason = asyncio.run(attempt({"type": "start", "session": "x", "voice": "xx-nope"}))
     assert code == P.CLOSE_BAD_REQUEST and "voice" in reason
+
+
+@pytest.mark.slow
+def test_text_session_is_registered_cluster_wide(model, backend, redis_server):  # noqa: F811 (fixture)
+    """Two nodes share a real redis-server: a text session on node A is listed by /sessions on node B,
+    a viewer on B receives every frame and audio block of it on the same clock, and the name is
+    taken cluster-wide (a second text session of that name on B is refused naming node A)."""
+    from clients.client import http_get
+
+    def config(node: str) -> ServerConfig:
+        return ServerConfig(port=0, redis_url=redis_server.url, node_id=node, heartbeat_s=0.2, close_timeout_s=1.0)
+
+    async def main():
+        a = FacecastServer(model, config=config("na"))
+        b = FacecastServer(model, config=config("nb"))
+        a.text_backend = b.text_backend = backend
+        await a.start()
+        await b.start()
+        try:
+            async with connect(a.url.replace("http", "ws") + "/text") as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                status, body = await http_get(b.url, "/sessions")
+                listed = json.loads(body)
+                async with connect(b.url.replace("http", "ws") + "/text") as ws2:
+                    await ws2.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                    with contextlib.suppress(Exception):
+                        await asyncio.wait_for(ws2.recv(), 5)
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(ws2.wait_closed(), 5)  # not refused: stays open, checked below
+                    taken = (ws2.close_code, ws2.close_reason)
+                async with ViewerClient(b.url, session="bot", kind="params") as viewer:
+                    collect = asyncio.ensure_future(viewer.collect())
+                    await asyncio.sleep(0.5)  # the owner learns of B's wants within a heartbeat
+                    await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. "}))
+                    spoken = json.loads(await ws.recv())
+                    await ws.send(json.dumps({"type": "end"}))
+                    ended = json.loads(await ws.recv())
+                    got = await asyncio.wait_for(collect, 20)
+            return status, listed, taken, spoken, ended, got
+        finally:
+            await b.stop()
+            await a.stop()
+
+    status, listed, taken, spoken, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert status == 200 and listed["scope"] == "cluster"
+    rows = {r["name"]: r for r in listed["sessions"]}
+    assert rows["bot"]["node"] == "na" and rows["bot"]["source"] == "text"
+    assert taken[0] == P.CLOSE_CONFLICT and "na" in taken[1]
+    assert spoken["type"] == "spoken" and ended["frames"] == spoken["frames"]
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(ended["frames"]))
+    assert all(m.media_time == pytest.approx(m.index / 30) for m in got.frames)
+    assert len(got.audio) == ended["frames"]
+    assert got.close_code == P.CLOSE_NORMAL

@@ -3,7 +3,12 @@
 // The vertex order is the server's, so a frame's vertex deltas (x, y, z of each moving vertex, in
 // the description's moving_vertices order) are added to the neutral positions directly. Normals
 // stay those of the neutral pose, as in the offline renderer (speech barely changes the lighting).
-// Back faces are drawn dark by a second mesh on the same geometry, so an open mouth shows a cavity.
+// Back faces are drawn dark (the same mesh, both sides), so an open mouth shows a cavity.
+//
+// A head driven by its own morph targets (the description's head.morph) is moved the way an engine
+// moves it: mesh.json carries the targets (sparse: the vertices any target moves, x, y, z per target),
+// they become three.js morph attributes, and each frame of the "morph" kind sets
+// morphTargetInfluences (one weight per target, in head.morph.names order); the GPU adds them.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
@@ -19,6 +24,8 @@ function srgbToLinear(c) {
   // Vertex colours are authored in sRGB like textures; three.js lights in linear space.
   return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
 }
+
+const BACK_FACE = [0x14 / 255, 0x04 / 255, 0x04 / 255].map((c) => c.toFixed(4)); // output (sRGB) colour of back faces
 
 export class HeadView {
   constructor(canvas) {
@@ -43,6 +50,8 @@ export class HeadView {
     this.neutral = null; // Float32Array (n*3)
     this.peak = null; // Float32Array per moving vertex: largest |delta| seen (finds the mouth)
     this.lastPeak = 0; // largest |delta| of the frame shown (mesh units)
+    this.morph = null; // {names, vertices: Int32Array, deltas: [Float32Array], reach: Float32Array} of a morph head
+    this.maxWeight = null; // Float32Array per target: largest weight seen (finds the mouth)
     // Draw only when something changed (a frame, the camera, the size): software WebGL spends
     // most of the page's time drawing, and idle redraws delay the WebSocket messages.
     this.dirty = true;
@@ -62,8 +71,9 @@ export class HeadView {
 
   /** Load the head described by a viewer description's `head` (null clears it). */
   async load(head, base = "") {
-    const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}` : null;
-    if (head && key === this.key) {
+    const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}|${head.morph?.names?.length ?? 0}` : null;
+    const wantMorph = Boolean(head && head.morph);
+    if (head && key === this.key && wantMorph === Boolean(this.morph)) {
       this.setMoving(head);
       return;
     }
@@ -73,6 +83,7 @@ export class HeadView {
       this.mesh = null;
     }
     this.key = null;
+    this.morph = null;
     this.dirty = true;
     if (!head) return;
     const res = await fetch(withToken(base + head.mesh_json_url), { cache: "no-store" });
@@ -83,6 +94,12 @@ export class HeadView {
     geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(m.vertices), 3));
     geometry.setIndex(new THREE.BufferAttribute(new Uint32Array(m.triangles), 1));
     geometry.computeVertexNormals();
+    if (wantMorph) {
+      if (!m.morph || m.morph.names.join("\n") !== head.morph.names.join("\n")) {
+        throw new Error("head mesh: its morph targets do not match the description");
+      }
+      this.morph = this.setMorphTargets(geometry, m.morph, m.vertices.length / 3);
+    }
     const material = new THREE.MeshStandardMaterial({ roughness: 0.75, metalness: 0.0 });
     if (m.colors) {
       geometry.setAttribute("color", new THREE.BufferAttribute(new Float32Array(m.colors.map(srgbToLinear)), 3));
@@ -98,11 +115,20 @@ export class HeadView {
       material.map = tex;
       material.vertexColors = false;
     }
+    // One mesh drawn on both sides, back faces painted dark in the fragment shader: a second mesh
+    // for the back faces would run the vertex work (the morph targets' loop) twice.
+    material.side = THREE.DoubleSide;
+    material.onBeforeCompile = (shader) => {
+      shader.fragmentShader = shader.fragmentShader.replace(
+        "#include <dithering_fragment>",
+        "#include <dithering_fragment>\n  if (!gl_FrontFacing) gl_FragColor = vec4(BACK_FACE, 1.0);",
+      ).replace("void main() {", `const vec3 BACK_FACE = vec3(${BACK_FACE.join(", ")});\nvoid main() {`);
+    };
     const front = new THREE.Mesh(geometry, material);
-    const back = new THREE.Mesh(geometry, new THREE.MeshBasicMaterial({ color: 0x140404, side: THREE.BackSide }));
-    front.frustumCulled = back.frustumCulled = false; // deltas move vertices past the bounding sphere
+    front.frustumCulled = false; // deltas move vertices past the bounding sphere
+    this.meshes = [front];
     const group = new THREE.Group();
-    group.add(front, back);
+    group.add(front);
     this.scene.add(group);
     this.mesh = { group, geometry };
     this.key = key;
@@ -113,15 +139,65 @@ export class HeadView {
   setMoving(head) {
     this.moving = Int32Array.from(head.moving_vertices);
     this.peak = new Float32Array(this.moving.length);
+    if (this.morph) this.maxWeight = new Float32Array(this.morph.names.length);
   }
 
-  /** Point the camera at the face: the moving vertices' box, seen from +z (glTF's forward), y up. */
+  /** Dense three.js morph attributes (relative: displacement per unit weight) from mesh.json's sparse
+   *  targets; returns what applyWeights needs. */
+  setMorphTargets(geometry, morph, n) {
+    const vertices = Int32Array.from(morph.vertices);
+    const deltas = [];
+    const reach = new Float32Array(morph.names.length); // largest |displacement| of each target
+    geometry.morphAttributes.position = morph.deltas.map((flat, j) => {
+      const sparse = Float32Array.from(flat);
+      const dense = new Float32Array(3 * n);
+      for (let i = 0; i < vertices.length; i++) {
+        const o = 3 * vertices[i];
+        dense[o] = sparse[3 * i];
+        dense[o + 1] = sparse[3 * i + 1];
+        dense[o + 2] = sparse[3 * i + 2];
+        reach[j] = Math.max(reach[j], Math.abs(sparse[3 * i]), Math.abs(sparse[3 * i + 1]), Math.abs(sparse[3 * i + 2]));
+      }
+      deltas.push(sparse);
+      return new THREE.BufferAttribute(dense, 3);
+    });
+    geometry.morphTargetsRelative = true;
+    return { names: morph.names, vertices, deltas, reach };
+  }
+
+  /** Show one frame of the head's own morph-target weights (values: one per target, names order). */
+  applyWeights(values) {
+    if (!this.mesh || !this.morph) return;
+    let peak = 0;
+    for (const mesh of this.meshes) {
+      const inf = mesh.morphTargetInfluences;
+      for (let j = 0; j < inf.length; j++) inf[j] = values[j];
+    }
+    for (let j = 0; j < values.length; j++) {
+      peak += Math.abs(values[j]) * this.morph.reach[j]; // a bound on the largest vertex displacement
+      if (values[j] > this.maxWeight[j]) this.maxWeight[j] = values[j];
+    }
+    this.lastPeak = peak;
+    this.dirty = true;
+  }
+
+  /** The influences three.js draws with (automation: they must equal the streamed weights). */
+  influences() {
+    return this.meshes && this.morph ? Array.from(this.meshes[0].morphTargetInfluences) : null;
+  }
+
+  /** Point the camera at the face: the moving vertices' box (the whole mesh when it is at most 3 times
+   *  as tall: a head), seen from +z (glTF's forward), y up. */
   frame() {
     const pos = this.neutral;
     const box = new THREE.Box3();
     const v = new THREE.Vector3();
     const n = this.moving.length || pos.length / 3;
     for (let j = 0; j < n; j++) box.expandByPoint(v.fromArray(pos, 3 * (this.moving.length ? this.moving[j] : j)));
+    // A head (not a full-body avatar) is shown whole: its own targets may move the mouth region only.
+    const all = new THREE.Box3();
+    for (let i = 0; i < pos.length; i += 3) all.expandByPoint(v.fromArray(pos, i));
+    if (all.getSize(new THREE.Vector3()).y <= 3 * box.getSize(new THREE.Vector3()).y) box.copy(all);
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3());
     const height = Math.max(size.y, size.x / this.camera.aspect);
@@ -166,9 +242,27 @@ export class HeadView {
     this.renderer.render(this.scene, this.camera);
   }
 
+  /** Per-vertex peaks of a morph head from the largest weights seen (the moving vertices are the
+   *  targets' vertices: the server's moving_vertices are the same set, in the same order). */
+  morphPeaks() {
+    const { vertices, deltas } = this.morph;
+    this.moving = vertices;
+    this.peak = new Float32Array(vertices.length);
+    for (let j = 0; j < deltas.length; j++) {
+      const w = this.maxWeight[j];
+      if (!(w > 0)) continue;
+      const d = deltas[j];
+      for (let i = 0; i < vertices.length; i++) {
+        const a = w * Math.max(Math.abs(d[3 * i]), Math.abs(d[3 * i + 1]), Math.abs(d[3 * i + 2]));
+        if (a > this.peak[i]) this.peak[i] = a;
+      }
+    }
+  }
+
   /** Screen box {x, y, width, height} (CSS pixels, canvas-relative) of the vertices that moved most
    *  so far (>= 25% of the largest movement): where the mouth is on the canvas. */
   mouthBox() {
+    if (this.morph) this.morphPeaks();
     if (!this.mesh || !this.peak.length) return null;
     const top = this.peak.reduce((a, b) => Math.max(a, b), 0);
     if (!(top > 0)) return null;

@@ -1,9 +1,12 @@
 // facecast browser viewer: pick a live session, watch and hear it, reconnect on its own.
 //
 // Page options (query string): session=NAME (watch this one; default: the first live session),
-// token=T (the server's shared token), buffer_ms=N (jitter buffer, default 80).
+// token=T (the server's shared token), buffer_ms=N (jitter buffer, default 80), kind=morph|deltas|params
+// (what to ask for first; default morph: a head driven by its own morph targets gets its weights, and
+// the page falls back to vertex deltas, then to the mouth parameters, when the server has no such head).
 // Automation hook: window.facecast exposes the state shown in the panel, freeze(on) to hold the
-// displayed frame (screenshots) and mouthBox() (where the mouth is on the canvas).
+// displayed frame (screenshots), mouthBox() (where the mouth is on the canvas) and morph() (the
+// shown frame's streamed weights and the morphTargetInfluences three.js draws with).
 
 import { decodeMessage, KIND, CLOSE } from "./protocol.js";
 import { PlayoutClock, AudioOut, nowS } from "./playout.js";
@@ -33,6 +36,8 @@ const state = {
   behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
   waitMs: null, // frame arrival -> shown (jitter buffer)
   drawMs: null, // time the page spends applying a frame and drawing (median of the last 30)
+  headLoadMs: null, // description -> head downloaded and built (or reused)
+  ticks: 0, // animation frames the page has run (its display rate: ticks per second)
   lastPeak: 0, // largest vertex delta of the shown frame (mesh units)
   kind: null,
   closeCode: null,
@@ -82,7 +87,7 @@ async function pollSessions() {
     }
   } catch (err) {
     state.sessions = [];
-    paramsOnly = false; // the server that comes back may have a head
+    kindLevel = firstKind; // the server that comes back may have another head
     renderSessionList([]);
     if (!ws) setStatus("server unreachable, retrying");
   }
@@ -115,11 +120,15 @@ function renderSessionList(list) {
   }
 }
 
-let paramsOnly = false; // the server has no head (--no-head): watch mouth parameters as bars
+// What to ask for, best first; a refusal ("no morph targets", "no head") moves to the next one.
+const KINDS = ["morph", "deltas", "params"];
+const firstKind = Math.max(0, KINDS.indexOf(opts.get("kind") ?? "morph"));
+let kindLevel = firstKind;
+let shown = null; // the last frame shown {index, values} (automation)
 
 function connect(name) {
   if (ws) return;
-  const kind = paramsOnly ? "params" : "deltas";
+  const kind = KINDS[kindLevel];
   const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
   if (kind === "deltas") q.set("encoding", "int16");
   const proto = location.protocol === "https:" ? "wss:" : "ws:";
@@ -139,10 +148,13 @@ function connect(name) {
       desc = text;
       showExpressionPicker(desc.expressions ?? []);
       // Frames that arrive while the head downloads are timed and queued; they move the mesh once it exists.
-      const ready = view.load(kind === "deltas" ? desc.head : null).then(() => {
+      const head = kind === "params" || !desc.head ? null : { ...desc.head, morph: kind === "morph" ? desc.head.morph : null };
+      const loadStart = performance.now();
+      const ready = view.load(head).then(() => {
+        state.headLoadMs = performance.now() - loadStart;
         state.connections += 1;
-        setStatus(kind === "deltas" ? `watching "${name}"` : `watching "${name}": mouth parameters only (the server has no head)`);
-        $("bars").hidden = kind === "deltas";
+        setStatus(kind !== "params" ? `watching "${name}"` : `watching "${name}": mouth parameters only (the server has no head)`);
+        $("bars").hidden = kind !== "params";
       });
       ready.catch((err) => {
         console.warn("head download failed", err);
@@ -164,8 +176,9 @@ function connect(name) {
   sock.onclose = (ev) => {
     if (ws !== sock) return;
     ws = null;
-    if (ev.code === CLOSE.BAD_REQUEST && /no head/.test(ev.reason) && !paramsOnly) {
-      paramsOnly = true; // vertex deltas are unavailable: ask for the parameters instead, at once
+    if (ev.code === CLOSE.BAD_REQUEST && /no head|no morph targets/.test(ev.reason) && kindLevel < KINDS.length - 1) {
+      // This kind is unavailable (no head driven by its own targets, or no head): ask for the next, at once.
+      kindLevel = /no head/.test(ev.reason) ? KINDS.length - 1 : kindLevel + 1;
       resetStream();
       connect(name);
       return;
@@ -283,6 +296,7 @@ function showParams(values) {
 }
 
 function tick() {
+  state.ticks += 1;
   const now = nowS();
   let show = null;
   while (queue.length && queue[0].due <= now) {
@@ -293,13 +307,17 @@ function tick() {
   }
   const drawStart = performance.now();
   if (show) {
-    if (state.kind === "deltas") {
+    if (state.kind === "morph") {
+      view.applyWeights(show.msg.values);
+      state.lastPeak = view.lastPeak;
+    } else if (state.kind === "deltas") {
       view.applyDeltas(show.msg.values);
       state.lastPeak = view.lastPeak;
     } else {
       showParams(show.msg.values);
     }
     state.frames += 1;
+    shown = { index: show.msg.index, values: show.msg.values };
   }
   view.render();
   if (show) state.drawMs = median(windows.draw, performance.now() - drawStart);
@@ -341,6 +359,8 @@ window.facecast = {
     return state.lastPeak;
   },
   mouthBox: () => view.mouthBox(),
+  morph: () => ({ names: view.morph?.names ?? null, index: shown?.index ?? null,
+    weights: shown && state.kind === "morph" ? Array.from(shown.values) : null, influences: view.influences() }),
   audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped, syncMs: audio.syncMs }),
 };
 

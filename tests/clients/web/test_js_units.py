@@ -1,5 +1,6 @@
-"""The viewer's JavaScript modules under Node: the browser decodes exactly what server/protocol.py
-encodes, and the playout clock resyncs on a late frame and catches up when frames come early again."""
+"""The viewer's JavaScript modules under Node: the browser decodes exactly what wire/protocol.py
+encodes (every kind, the head's own morph weights included; both twins number the kinds alike), and the
+playout clock resyncs on a late frame and catches up when frames come early again."""
 
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
         "deltas_int16": (P.KIND_DELTAS, P.ENC_INT16, deltas),
         "deltas_float16": (P.KIND_DELTAS, P.ENC_FLOAT16, deltas),
         "params": (P.KIND_PARAMS, P.ENC_FLOAT32, np.array([0.01, -0.02, 0.3, 0.0], np.float32)),
+        "morph_float32": (P.KIND_MORPH, P.ENC_FLOAT32, rng.uniform(0, 1, 52).astype(np.float32)),
+        "morph_float16": (P.KIND_MORPH, P.ENC_FLOAT16, rng.uniform(0, 1, 52).astype(np.float32)),
     }
     expect = {}
     for name, (kind, enc, values) in cases.items():
@@ -55,6 +58,9 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
         assert got["mediaTime"] == m.media_time and got["sendTime"] == m.send_time
         np.testing.assert_array_equal(np.float32(got["values"]), m.values, err_msg=name)
     assert "shorter than the header" in r["rejected"]
+    # The twins name the same kinds and encodings with the same numbers.
+    assert {k.lower(): v for k, v in r["kinds"].items()} == {n: k for k, n in P.KIND_NAMES.items()}
+    assert {k.lower(): v for k, v in r["encodings"].items()} == {n: e for e, n in P.ENCODING_NAMES.items()}
 
     slack = np.array(r["slack"])
     assert np.allclose(slack[:60], 0.08)  # steady: every frame waits the 80 ms jitter buffer

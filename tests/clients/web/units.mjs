@@ -3,7 +3,7 @@
 // decoded values per message and the playout clock's behaviour in scripted arrival patterns.
 import { readFileSync, readdirSync } from "node:fs";
 import { join } from "node:path";
-import { decodeMessage } from "../../../wire/protocol.js";
+import { decodeMessage, KIND, ENC } from "../../../wire/protocol.js";
 import { PlayoutClock } from "../../../clients/web/js/playout.js";
 
 const dir = process.argv[2];
@@ -31,5 +31,5 @@ slack.push(clock.arrive(k / 30, k / 30 + 0.2 + 0.15 + 0.08) - (k / 30 + 0.2 + 0.
 k++;
 const afterLate = clock.offset;
 for (; k < 61 + 120; k++) slack.push(clock.arrive(k / 30, k / 30 + 0.2) - (k / 30 + 0.2));
-console.log(JSON.stringify({ decoded, rejected, beforeLate, afterLate, afterRecovery: clock.offset,
+console.log(JSON.stringify({ decoded, rejected, kinds: KIND, encodings: ENC, beforeLate, afterLate, afterRecovery: clock.offset,
   resyncs: clock.resyncs, catchups: clock.catchups, slack }));

@@ -129,6 +129,9 @@ def _reference_cost(ref: ReferenceCost, path, target, durations, mismatch) -> fl
     for t, q in enumerate(path):
         if corpus.phone_visemes[q] != target[t]:
             return np.inf
+        # the duration terms (not the paper's): w |ln(recorded / target duration)|, pauses their own w
+        w = cfg.pause_duration_weight if VISEMES[target[t]] == "sil" else cfg.duration_weight
+        cost += w * abs(np.log((corpus.phone_end_s[q] - corpus.phone_start_s[q]) / max(durations[t], 1e-3)))
         if t == 0:
             continue
         i = path[t - 1]
@@ -195,7 +198,8 @@ def test_fewest_units_win_with_beta_zero():
     # the target is sentence 0's middle run; two other sentences can only give it in pieces
     sents = [["sil", "PBM", "AA", "IY", "FV", "sil"], ["sil", "PBM", "AA", "sil"], ["sil", "IY", "FV", "sil"]]
     corpus = tiny_corpus(rng, sents)
-    graph = build_graph(corpus, SearchConfig(beta=0.0, max_active=None))
+    # the paper's costs only (no duration terms): staying in a recording is free
+    graph = build_graph(corpus, SearchConfig(beta=0.0, max_active=None, duration_weight=0, pause_duration_weight=0))
     target = np.array([VISEME_ID[v] for v in ["PBM", "AA", "IY", "FV"]])
     sel = viterbi(graph, target, np.full(4, 0.1))
     assert sel.n_units == 1 and sel.cost == 0.0

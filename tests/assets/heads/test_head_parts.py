@@ -1,0 +1,144 @@
+"""Heads whose eyes, teeth and tongue come as separate files: merged after the head (its vertex
+indices stay valid), rendered with eyes in the sockets, and rigged with the parts rigid: eyes and
+upper teeth with the skull, lower teeth and tongue with the jaw (the chin's displacement)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from assets.heads.head import resolve_head
+from assets.heads.mesh import load_mesh
+from assets.heads.parts import part_kind
+
+# Rendering (moderngl EGL) and rigging of the built-in head.
+pytestmark = pytest.mark.system
+
+
+COLOURS = {"skin": (0.8, 0.6, 0.5), "eyes": (0.1, 0.2, 0.9), "teeth": (0.95, 0.93, 0.85), "tongue": (0.7, 0.3, 0.3)}
+
+
+def _write_obj(path: Path, v: np.ndarray, t: np.ndarray, name: str) -> None:
+    """One object with one material (its own .mtl): the eyes blue, so a render shows where they are."""
+    path.with_suffix(".mtl").write_text(f"newmtl {name}\nKd {' '.join(map(str, COLOURS[name]))}\n")
+    lines = [f"mtllib {path.with_suffix('.mtl').name}", f"o {name}", f"usemtl {name}"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in v] + [f"f {a} {b} {c}" for a, b, c in t + 1]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture(scope="module")
+def split_head(builtin_head, tmp_path_factory):
+    """The built-in head as skin.obj + eyes.obj + teeth.obj (both rows in one file) + tongue.obj,
+    landmarks in skin.obj's vertex order."""
+    d = tmp_path_factory.mktemp("parts")
+    v, t, part = builtin_head.mesh.vertices, builtin_head.mesh.triangles, builtin_head.part
+    files = {}
+    for name, ids in (("skin", [0]), ("eyes", [1]), ("teeth", [2, 3]), ("tongue", [4])):
+        keep = np.flatnonzero(np.isin(part, ids))
+        new = -np.ones(len(v), dtype=np.int64)
+        new[keep] = np.arange(len(keep))
+        tri = new[t[(new[t] >= 0).all(axis=1)]]
+        _write_obj(d / f"{name}.obj", v[keep], tri, name)
+        files[name] = (d / f"{name}.obj", keep)
+    skin_index = {int(o): i for i, o in enumerate(files["skin"][1])}
+    (d / "lm.json").write_text(
+        json.dumps({"landmarks": {k: skin_index[int(i)] for k, i in builtin_head.landmarks.items()}})
+    )
+    return d, files
+
+
+@pytest.mark.parametrize(
+    "name, kind",
+    [
+        ("Eye_L", "eyes"),
+        ("eyes:default", "eyes"),
+        ("EyeLeft", "eyes"),
+        ("eyebrow", None),
+        ("EyeLid_R", None),
+        ("teethUpper", "upper teeth"),
+        ("Teeth_Lower", "lower teeth"),
+        ("Wolf3D_Teeth", "teeth"),
+        ("Tongue", "tongue"),
+        ("Wolf3D_Head", None),
+    ],
+)
+def test_part_names_are_classified(name, kind):
+    assert part_kind(name) == kind
+
+
+def test_separate_eye_and_teeth_files_render_and_move_rigidly(split_head, builtin_head):
+    d, files = split_head
+    parts = tuple(str(files[k][0]) for k in ("eyes", "teeth", "tongue"))
+    mesh = load_mesh(files["skin"][0], parts=parts)
+    n_skin = len(files["skin"][1])
+    assert len(mesh.vertices) == sum(len(k) for _, k in files.values())
+    np.testing.assert_allclose(mesh.vertices[:n_skin], builtin_head.mesh.vertices[files["skin"][1]], atol=1e-6)
+    used = [mesh.part_names[i] for i in np.unique(mesh.part)]  # each part file's objects, named FILE:OBJECT
+    assert used == ["skin", "eyes:eyes", "teeth:teeth", "tongue:tongue"]
+
+    head = resolve_head(files["skin"][0], parts=parts, landmarks=d / "lm.json", mode="retarget")
+    rig = head.rig
+    offs = np.cumsum([0] + [len(files[k][1]) for k in ("skin", "eyes", "teeth", "tongue")])
+    eyes = np.arange(offs[1], offs[2])
+    teeth = np.arange(offs[2], offs[3])
+    tongue = np.arange(offs[3], offs[4])
+    # The teeth file holds both rows: split by the mouth line, as the built-in head labels them.
+    upper = teeth[np.isin(files["teeth"][1], np.flatnonzero(builtin_head.part == 2))]
+    lower = teeth[np.isin(files["teeth"][1], np.flatnonzero(builtin_head.part == 3))]
+    assert rig.meta["rigid_parts"] == {"skull": len(eyes) + len(upper), "jaw": len(lower) + len(tongue)}
+
+    p = np.array([0.0, 0.0, 0.35, 0.0])  # a wide /a/
+    moved = rig.deformed(p) - rig.neutral
+    assert np.abs(moved[eyes]).max() == 0 and np.abs(moved[upper]).max() == 0  # with the skull
+    chin = rig.meta["jaw_anchor"]
+    for part in (lower, tongue):  # with the jaw: the anchor's displacement, rigidly
+        np.testing.assert_allclose(moved[part], np.broadcast_to(moved[chin], moved[part].shape), atol=1e-7)
+    up = rig.neutral[offs[1] : offs[2]].mean(0) - rig.neutral[chin]
+    assert moved[chin] @ up < 0  # the jaw opens downwards
+    assert np.abs(moved[:n_skin]).max() > 0
+
+    # Rendered: the eye sockets hold the (blue) eyeballs; without the eye file they show the inside of the head.
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    lm = json.loads((d / "lm.json").read_text())["landmarks"]
+    centre = np.mean([rig.neutral[lm[k]] for k in ("eye_outer_left", "eye_inner_left")], axis=0)
+    bare = resolve_head(files["skin"][0], landmarks=d / "lm.json", mode="retarget")
+    shade = {}
+    for name, h in (("with eyes", head), ("bare", bare)):
+        with renderer_for_rig(h.rig, h.mesh, RenderConfig(width=320, height=320, samples=0)) as r:
+            img = r.render()
+            x, y = np.round(r.project(centre[None])[0]).astype(int)
+        rgb = img[y - 2 : y + 3, x - 2 : x + 3].reshape(-1, 3).mean(0)
+        shade[name] = float(rgb[2] - rgb[0])  # blue over red
+    assert shade["with eyes"] > 40 and shade["bare"] < 0, shade
+
+
+def test_a_gltf_scene_with_separate_eye_and_teeth_meshes(split_head, builtin_head, tmp_path):
+    """The same parts as meshes of one glTF scene (named nodes, as avatar exporters write them):
+    classified by their node names and rigid like the separate files."""
+    import trimesh
+
+    _, files = split_head
+    scene = trimesh.Scene()
+    names = {"skin": "Wolf3D_Head", "eyes": "EyeLeft", "teeth": "Wolf3D_Teeth", "tongue": "Tongue"}
+    for k, node in names.items():
+        keep = files[k][1]
+        m = load_mesh(files[k][0])
+        scene.add_geometry(trimesh.Trimesh(m.vertices, m.triangles, process=False), node_name=node, geom_name=node)
+        assert np.allclose(m.vertices, builtin_head.mesh.vertices[keep], atol=1e-6)
+    path = tmp_path / "avatar.glb"
+    scene.export(str(path))
+    # Landmarks as points (the scene's vertex order is the exporter's).
+    points = {k: builtin_head.mesh.vertices[i].tolist() for k, i in builtin_head.landmarks.items()}
+    head = resolve_head(path, landmarks=points, mode="retarget")
+    mesh, rig = head.mesh, head.rig
+    assert {mesh.part_names[i] for i in np.unique(mesh.part)} == set(names.values())
+    n_up = int((builtin_head.part == 2).sum())
+    n_eyes, n_teeth, n_tongue = (len(files[k][1]) for k in ("eyes", "teeth", "tongue"))
+    assert rig.meta["rigid_parts"] == {"skull": n_eyes + n_up, "jaw": n_teeth - n_up + n_tongue}
+    moved = rig.deformed(np.array([0.0, 0.0, 0.35, 0.0])) - rig.neutral
+    eyes = np.flatnonzero(mesh.part == mesh.part_names.index("EyeLeft"))
+    assert np.abs(moved[eyes]).max() == 0
