@@ -7,6 +7,12 @@
   played ``factor`` times faster (resampled: formants, pitch and tempo all scale by ``factor``, like a
   shorter vocal tract and a faster talker), the lip track re-timed to match, so labels stay exact.
   Microphone variety (noise, reverberation, level, rate) comes from :mod:`training.augment`.
+- :func:`voice_perturb` changes the voice without changing the timing: the formants scaled by one
+  factor (a shorter or longer vocal tract, the variation that VTLP, Jaitly and Hinton 2013, models) and
+  the pitch by another (Praat's "Change gender": PSOLA pitch change plus resampling, via parselmouth),
+  so the lip track stays valid frame for frame. :func:`add_variety` applies a random draw to every
+  speed copy, so a stranger's voice (tract length and pitch both unlike s1's) is covered at no extra
+  training cost.
 - Bilabial closures (/p b m/): for GRID s1 the phones of the shipped phone labels
   (:mod:`training.grid_phones`); for a GRID clip with only a word alignment, :func:`bilabial_spans`
   (which of the 51 GRID words hold a bilabial, and where); for real speech its aligned phones.
@@ -138,6 +144,39 @@ def speed_perturb(utt: Utterance, factor: float) -> Utterance:
     )
 
 
+def voice_perturb(utt: Utterance, *, formant_ratio: float, pitch_ratio: float) -> Utterance:
+    """``utt`` with its formants scaled by ``formant_ratio`` (0.7 .. 1.4; > 1 = a shorter vocal tract)
+    and its median pitch by ``pitch_ratio`` (0.5 .. 2), tempo and length unchanged (so the parameter
+    track is kept as it is). Praat's "Change gender" (pitch floor 75 Hz, ceiling 600 Hz) through
+    parselmouth; an utterance with no voiced frame only has its formants shifted."""
+    import parselmouth  # the `train` extra (pyproject.toml); imported only when voices are perturbed
+    from parselmouth.praat import call
+
+    if not 0.7 <= formant_ratio <= 1.4:
+        raise ConfigError(f"formant ratio must be in [0.7, 1.4], got {formant_ratio}")
+    if not 0.5 <= pitch_ratio <= 2.0:
+        raise ConfigError(f"pitch ratio must be in [0.5, 2], got {pitch_ratio}")
+    x = np.asarray(utt.samples, dtype=np.float64)
+    snd = parselmouth.Sound(x, sampling_frequency=float(utt.sample_rate_hz))
+    median_hz = call(call(snd, "To Pitch", 0.0, 75.0, 600.0), "Get quantile", 0.0, 0.0, 0.5, "Hertz")
+    new_median = float(median_hz) * pitch_ratio if np.isfinite(median_hz) else 0.0  # 0 = keep the pitch
+    y = call(snd, "Change gender", 75.0, 600.0, formant_ratio, new_median, 1.0, 1.0).values[0]
+    # Praat may return a sample more or less; the timing (and so the lip track) is unchanged
+    y = y[: len(x)] if len(y) >= len(x) else np.pad(y, (0, len(x) - len(y)))
+    tag = f"-voice{formant_ratio:.3f}x{pitch_ratio:.3f}"
+    return Utterance(
+        id=f"{utt.id}{tag}",
+        samples=y.astype(np.float32),
+        sample_rate_hz=utt.sample_rate_hz,
+        params=utt.params,
+        phonemes=(),
+        voice=utt.voice,
+        language=utt.language,
+        source=utt.source,
+        speaker_group=f"{utt.speaker_group}{tag}",
+    )
+
+
 def microphone_copy(utt: Utterance, rng: np.random.Generator, config: AugmentConfig = AugmentConfig()) -> Utterance:
     """``utt`` through :func:`training.augment.augment` (noise, reverberation, level, rate)."""
     aug = augment(utt.samples, utt.sample_rate_hz, rng, config)
@@ -165,12 +204,17 @@ class Variety:
     """How much acoustic variety is added to the real-lips training set.
 
     speeds:       speed-perturbation factors; each adds one copy of every utterance.
+    formant_range, pitch_range: (low, high) ratios; when set, every speed copy also gets its voice
+                  changed (:func:`voice_perturb`) with ratios drawn log-uniformly from these ranges
+                  (each copy its own draw), so the data size is unchanged. None = plain speed copies.
     mic_copies:   copies of every (original and speed-perturbed) utterance through the microphone
                   chain (noise, reverberation, level, rate).
     seed:         seeds the microphone draws.
     """
 
     speeds: tuple[float, ...] = ()
+    formant_range: tuple[float, float] | None = None
+    pitch_range: tuple[float, float] | None = None
     mic_copies: int = 0
     seed: int = 0
 
@@ -180,14 +224,34 @@ class Variety:
                 raise ConfigError(f"speed factors must be in [0.8, 1.25], got {f}")
         if self.mic_copies < 0:
             raise ConfigError(f"mic_copies must be >= 0, got {self.mic_copies}")
+        if (self.formant_range is None) != (self.pitch_range is None):
+            raise ConfigError("formant_range and pitch_range go together (both None for plain speed copies)")
+        for name, (lo_ok, hi_ok) in (("formant_range", (0.7, 1.4)), ("pitch_range", (0.5, 2.0))):
+            rng = getattr(self, name)
+            if rng is not None and not (len(rng) == 2 and lo_ok <= rng[0] <= rng[1] <= hi_ok):
+                raise ConfigError(f"{name} must be (low, high) within [{lo_ok}, {hi_ok}], got {rng}")
+        if self.formant_range is not None and not self.speeds:
+            raise ConfigError("formant_range/pitch_range perturb the speed copies: give speeds too")
 
 
 def add_variety(utts: Sequence[Utterance], variety: Variety) -> list[Utterance]:
-    """The originals, one speed-perturbed copy per factor, then ``mic_copies`` microphone copies of each."""
+    """The originals, one speed-perturbed copy per factor (voice-perturbed too when the variety has
+    ranges), then ``mic_copies`` microphone copies of each."""
     out = list(utts)
-    for f in variety.speeds:
-        out += [speed_perturb(u, f) for u in utts]
     rng = np.random.default_rng(variety.seed)
+    for f in variety.speeds:
+        copies = [speed_perturb(u, f) for u in utts]
+        if variety.formant_range is not None and variety.pitch_range is not None:
+            (flo, fhi), (plo, phi) = variety.formant_range, variety.pitch_range
+            copies = [
+                voice_perturb(
+                    u,
+                    formant_ratio=float(np.exp(rng.uniform(np.log(flo), np.log(fhi)))),
+                    pitch_ratio=float(np.exp(rng.uniform(np.log(plo), np.log(phi)))),
+                )
+                for u in copies
+            ]
+        out += copies
     base = list(out)
     for _ in range(variety.mic_copies):
         out += [microphone_copy(u, rng) for u in base]

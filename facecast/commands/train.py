@@ -14,6 +14,14 @@ def _ints(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
 
 
+def _ratio_range(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LOW,HIGH (two numbers), got {text!r}") from None
+    return lo, hi
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
 
@@ -48,6 +56,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=(),
         help="speed-perturbation factors for the GRID utterances, e.g. 0.9,1.1 (one copy each: pitch, "
         "formants and tempo scaled, lip track re-timed)",
+    )
+    p.add_argument(
+        "--formant-range",
+        type=_ratio_range,
+        default=None,
+        metavar="LOW,HIGH",
+        help="with --speed: also change the voice of every speed copy, formants scaled by a ratio drawn "
+        "log-uniformly from LOW..HIGH (a shorter/longer vocal tract; Praat via parselmouth, tempo kept)",
+    )
+    p.add_argument(
+        "--pitch-range",
+        type=_ratio_range,
+        default=None,
+        metavar="LOW,HIGH",
+        help="with --formant-range: the median pitch of every speed copy scaled by a ratio drawn from LOW..HIGH",
     )
     p.add_argument(
         "--mic-copies",
@@ -147,12 +170,23 @@ def _run(args: argparse.Namespace) -> int:
         grid = grid_utterances(
             split, root=args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm, log=lambda line: tqdm.write(line)
         )
-        variety = Variety(speeds=args.speed, mic_copies=args.mic_copies, seed=args.seed)
+        variety = Variety(
+            speeds=args.speed,
+            formant_range=args.formant_range,
+            pitch_range=args.pitch_range,
+            mic_copies=args.mic_copies,
+            seed=args.seed,
+        )
         utts += add_variety(grid, variety)
         data["grid_s1"] = {
             "split": args.grid_split,
             "sentences": len(grid),
             "speeds": list(args.speed),
+            **(
+                {"formant_range": list(args.formant_range), "pitch_range": list(args.pitch_range)}
+                if args.formant_range is not None and args.pitch_range is not None
+                else {}
+            ),
             "mic_copies": args.mic_copies,
         }
     if not utts:

@@ -191,3 +191,75 @@ def test_real_lips_evaluation_of_the_shipped_model(shared_data, tmp_path, ffmpeg
     assert all(est[:, VISUAL_PARAMS.index("mouth_open")].min() >= 0 for _, _, est, _, _ in items)
     md = lips_markdown("t", scores)
     assert all(f"| {p} |" in md for p in VISUAL_PARAMS)
+
+
+def _vowel(f0_hz: float, formants_hz: tuple[float, ...], dur_s: float = 1.0, rate: int = 16000) -> np.ndarray:
+    """A steady vowel: a glottal pulse train at ``f0_hz`` through two-pole resonators (80 Hz bandwidth)."""
+    from scipy.signal import lfilter
+
+    n = int(dur_s * rate)
+    x = np.zeros(n)
+    x[:: int(round(rate / f0_hz))] = 1.0
+    for f in formants_hz:
+        r = np.exp(-np.pi * 80.0 / rate)
+        x = lfilter([1.0 - r], [1.0, -2.0 * r * np.cos(2 * np.pi * f / rate), r * r], x)
+    return (0.3 * x / np.abs(x).max()).astype(np.float32)
+
+
+def _f0_hz(x: np.ndarray, rate: int) -> float:
+    """Autocorrelation pitch of the middle half (independent of Praat's tracker)."""
+    seg = x[len(x) // 4 : 3 * len(x) // 4].astype(np.float64)
+    ac = np.correlate(seg, seg, "full")[len(seg) - 1 :]
+    lo, hi = rate // 400, rate // 60
+    return rate / (lo + int(np.argmax(ac[lo:hi])))
+
+
+def _first_formant_hz(x: np.ndarray, rate: int, order: int = 10) -> float:
+    """Lowest LPC resonance above 250 Hz of the middle half (autocorrelation method)."""
+    from scipy.linalg import solve_toeplitz
+
+    seg = x[len(x) // 4 : 3 * len(x) // 4].astype(np.float64) * np.hamming(len(x) // 2)
+    r = np.correlate(seg, seg, "full")[len(seg) - 1 : len(seg) + order]
+    a = solve_toeplitz(r[:order], r[1 : order + 1])
+    roots = np.roots(np.concatenate([[1.0], -a]))
+    f = np.sort(np.angle(roots[np.imag(roots) > 0]) * rate / (2 * np.pi))
+    return float(f[f > 250][0])
+
+
+@pytest.mark.parametrize(("formant", "pitch"), [(1.2, 1.5), (0.88, 0.8)])
+def test_voice_perturbation_moves_formants_and_pitch_but_not_time(formant, pitch) -> None:
+    """The formants move by ``formant`` and the pitch by ``pitch`` (measured independently: LPC and
+    autocorrelation), the length and the lip track are unchanged."""
+    require_module("parselmouth", "pip install -e '.[train]'")
+    from training.reallips import voice_perturb
+
+    rate = 16000
+    x = _vowel(120.0, (700.0, 1200.0))
+    u = _tone_utterance(rate=rate, dur_s=1.0)
+    u = Utterance(**{**u.__dict__, "samples": x})
+    v = voice_perturb(u, formant_ratio=formant, pitch_ratio=pitch)
+    assert len(v.samples) == len(x) and v.samples.dtype == np.float32
+    assert v.params is u.params
+    assert _f0_hz(v.samples, rate) == pytest.approx(120.0 * pitch, rel=0.05)
+    assert _first_formant_hz(v.samples, rate) / _first_formant_hz(x, rate) == pytest.approx(formant, rel=0.08)
+    with pytest.raises(ValueError):
+        voice_perturb(u, formant_ratio=2.0, pitch_ratio=1.0)
+
+
+def test_voice_variety_changes_every_speed_copy_and_keeps_the_size() -> None:
+    require_module("parselmouth", "pip install -e '.[train]'")
+    from training.reallips import Variety, add_variety
+
+    u = _tone_utterance()
+    plain = add_variety([u], Variety(speeds=(0.9, 1.1)))
+    voiced = add_variety([u], Variety(speeds=(0.9, 1.1), formant_range=(0.85, 1.2), pitch_range=(0.7, 1.8)))
+    assert len(voiced) == len(plain) == 3
+    assert voiced[0] is u
+    for p, v in zip(plain[1:], voiced[1:]):
+        assert len(v.samples) == len(p.samples)
+        np.testing.assert_array_equal(v.params, p.params)  # timing unchanged by the voice change
+        assert not np.allclose(v.samples, p.samples)
+    with pytest.raises(ValueError):
+        Variety(formant_range=(0.85, 1.2), pitch_range=(0.7, 1.8))  # no speed copies to perturb
+    with pytest.raises(ValueError):
+        Variety(speeds=(0.9,), formant_range=(0.85, 1.2))  # pitch range missing
