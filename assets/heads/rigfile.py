@@ -56,6 +56,8 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         else np.zeros((0, rig.simple.n_vertices, 3)),
         "cal_response": rig.calibration.response,
         "cal_matrix": rig.calibration.matrix,
+        "contact": np.asarray(rig.contact, dtype=np.int64),
+        "contact_up": np.asarray(rig.contact_up, dtype=np.float64),
     }
     if mesh.uvs is not None:
         arrays["uvs"] = np.asarray(mesh.uvs, dtype=np.float32)
@@ -102,6 +104,8 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
             simple=simple,
             calibration=cal,
             meta=meta.get("rig", {}),
+            contact=a.get("contact", np.zeros((0, 2), dtype=np.int64)),
+            contact_up=a.get("contact_up", np.array([0.0, 1.0, 0.0])),
         )
     except (KeyError, ValueError, IndexError, RealtimeCoreError) as exc:
         raise RigFileError(f"{p}: inconsistent rig file: {exc}") from exc

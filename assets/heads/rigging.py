@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,7 +39,7 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.rig import recalibrate
+from realtime_core.face.rig import lip_columns, recalibrate, repair_rig
 from realtime_core.face.simple import (
     derive_simple_model,
     lip_contact_vertices,
@@ -318,6 +318,13 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
+        if config.method == "harmonic":
+            from realtime_core.face.checks import EXTREME_POSES
+
+            rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
+        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+        contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
+        rig = replace(rig, contact=contact, contact_up=frame.axes[1])
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     part = mesh.part
