@@ -27,7 +27,12 @@ from realtime_core.face.projection import vertex_adjacency
 
 
 def harmonic_weights(
-    vertices: np.ndarray, triangles: np.ndarray, control: np.ndarray, sec5: sp.csr_matrix, *, margin: float = 0.0,
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    control: np.ndarray,
+    sec5: sp.csr_matrix,
+    *,
+    margin: float = 0.0,
     use: np.ndarray | None = None,
 ) -> sp.csr_matrix:
     """(n_head, n_simple) CSR weights. vertices (n, 3), triangles (m, 3), control (n_s,) head vertex of
@@ -63,7 +68,9 @@ def harmonic_weights(
     lap = sp.diags(np.asarray(wm.sum(axis=1)).ravel()) - wm
     l_ff = lap[idx_free][:, idx_free].tocsc()
     # Boundary: control points carry e_i; every other non-free vertex (still under Sec. 5.2) is 0.
-    b = -lap[idx_free][:, ctrl] @ sp.csr_matrix((np.ones(len(cols)), (np.arange(len(cols)), cols)), shape=(len(cols), n_s))
+    b = -lap[idx_free][:, ctrl] @ sp.csr_matrix(
+        (np.ones(len(cols)), (np.arange(len(cols)), cols)), shape=(len(cols), n_s)
+    )
     # Free vertices cut off from every boundary vertex would make L_ff singular: pin them weakly.
     l_ff = l_ff + sp.identity(len(idx_free), format="csc") * (1e-9 * float(w.mean()))
     solved = splu(l_ff).solve(np.asarray(b.todense()))

@@ -46,6 +46,7 @@ def repair_folds(
     max_rounds: int = 200,
     steps: int = 2,
     fixed: np.ndarray | None = None,
+    grow_every: int = 15,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -69,6 +70,7 @@ def repair_folds(
     ok_edge = l0 > 1e-9 * max(float(l0.max()), 1e-300)
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
     touched = np.zeros(n, dtype=bool)
+    stuck = np.zeros(n, dtype=np.int64)
     worst = 0
     rounds = 0
     for rounds in range(1, max_rounds + 1):
@@ -87,10 +89,17 @@ def repair_folds(
             rounds -= 1
             break
         # One ring around the folded vertices, so the smoothed patch blends into its surroundings.
-        # Folds that survive local smoothing need a wider patch: one more ring every 20 rounds.
+        # A fold that survives local smoothing needs a wider patch: around each vertex, one more
+        # ring for every ``grow_every`` rounds it has been part of a fold (stubborn spots only, so
+        # the rest of the mouth keeps its motion).
+        stuck[bad] += 1
         sel = bad.copy()
-        for _ in range(1 + rounds // 20):
-            sel |= adj @ sel.astype(np.float64) > 0
+        front = bad.copy()
+        level = 0
+        while front.any():
+            sel |= adj @ front.astype(np.float64) > 0
+            level += 1
+            front = sel & (stuck >= level * grow_every) if grow_every else np.zeros(n, dtype=bool)
         sel &= ~frozen
         if not sel.any():
             break

@@ -81,7 +81,10 @@ class Rig:
     control (n_s,) int64 head vertex of each simple vertex; simple: the placed simple model;
     calibration: its mouth calibration; meta: JSON-able description.
     contact: (k, 2) int64 head vertices (upper, lower) of the lip columns that must never cross;
-    contact_up: (3,) the head's up axis (unit) in which "above" is measured (see :meth:`displacements`).
+    contact_up: (3,) the head's up axis (unit) in which "above" is measured (see :meth:`displacements`);
+    contact_spread: None, or CSR (n_moving, 2k) how far each column's push reaches (columns 0..k-1 the
+    upper lip's, k..2k-1 the lower lip's; 1 at the column's own vertex, fading over the lip), see
+    :func:`contact_spread`; None pushes the two contact vertices alone.
     """
 
     neutral: np.ndarray
@@ -95,6 +98,7 @@ class Rig:
     meta: dict[str, Any] = field(default_factory=dict)
     contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
     contact_up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    contact_spread: sp.csr_matrix | None = None
     # Set in __post_init__: the folded dense (n_moving*3, 4) map, or None to use the sparse product.
     _folded: np.ndarray | None = field(init=False, default=None, repr=False, compare=False)
     # Set in __post_init__: each contact vertex's row in the moving set (-1: it never moves).
@@ -130,6 +134,12 @@ class Rig:
         object.__setattr__(self, "contact", c)
         object.__setattr__(self, "contact_up", up.astype(np.float32))
         object.__setattr__(self, "_contact_rows", np.where(found, rows, -1))
+        if self.contact_spread is not None:
+            if self.contact_spread.shape != (len(self.moving), 2 * len(c)):
+                raise ConfigError(
+                    f"rig contact spread {self.contact_spread.shape} must be ({len(self.moving)}, {2 * len(c)})"
+                )
+            object.__setattr__(self, "contact_spread", sp.csr_matrix(self.contact_spread, dtype=np.float32))
 
     def displacements(self, params: np.ndarray) -> np.ndarray:
         """Head displacement (n_moving, 3) float32 (head units) of the moving vertices for params (4,) (IOD).
@@ -162,6 +172,9 @@ class Rig:
         mov_u, mov_l = rows[:, 0] >= 0, rows[:, 1] >= 0
         share_u = np.where(mov_u & mov_l, 0.5, np.where(mov_u, 1.0, 0.0))
         share_l = np.where(mov_u & mov_l, 0.5, np.where(mov_l, 1.0, 0.0))
+        if self.contact_spread is not None:
+            amount = self.contact_spread @ np.concatenate([deficit * share_u, -deficit * share_l]).astype(np.float32)
+            return (amount[:, None] * up).astype(np.float32)
         np.add.at(out, rows[mov_u, 0], (deficit * share_u)[mov_u, None] * up)
         np.add.at(out, rows[mov_l, 1], -(deficit * share_l)[mov_l, None] * up)
         return out
@@ -541,3 +554,50 @@ def lip_columns(
             if q[a, 1] >= q[b, 1]:
                 pairs.append(np.array([a, b]))
     return np.unique(np.array(pairs, dtype=np.int64), axis=0)
+
+
+def contact_spread(
+    rig: Rig, *, keep_apart: np.ndarray | None = None, reach: float = 0.1, iod: float = 1.0
+) -> sp.csr_matrix:
+    """CSR (n_moving, 2k) float32: how each lip column's push (:meth:`Rig.displacements`) spreads over
+    its lip, so the push bends the lip smoothly instead of moving one vertex (a fold). Column j < k is
+    the upper vertex of contact pair j, column k + j its lower vertex; each is the harmonic
+    extension (graph Laplacian, weights 1 / edge length) of 1 at that vertex and 0 at every other
+    contact vertex, at every vertex more than ``reach`` (head units: ``reach * iod``) along the mesh
+    from the contact line, and at vertices that never move. ``keep_apart``: the copies of a cut lip
+    seam (welded apart, so the two lips stay separate surfaces)."""
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.sparse.linalg import splu
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    h = np.asarray(rig.neutral, dtype=np.float64)
+    canon, welded = weld(h, keep_apart=keep_apart)
+    n_w = len(welded)
+    t_w = canon[np.asarray(rig.triangles, dtype=np.int64)]
+    c = canon[np.asarray(rig.contact, dtype=np.int64)]  # (k, 2) welded
+    k = len(c)
+    adj = vertex_adjacency(n_w, t_w).tocoo()
+    length = np.linalg.norm(welded[adj.row] - welded[adj.col], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(n_w, n_w))
+    boundary_vals = sp.csr_matrix(
+        (np.ones(2 * k), (np.concatenate([c[:, 0], c[:, 1]]), np.arange(2 * k))), shape=(n_w, 2 * k)
+    )
+    dist = dijkstra(g, indices=np.unique(c), min_only=True, limit=reach * iod)
+    moves = np.zeros(n_w, dtype=bool)
+    moves[canon[rig.moving]] = True
+    is_contact = np.zeros(n_w, dtype=bool)
+    is_contact[c.ravel()] = True
+    free = np.isfinite(dist) & moves & ~is_contact
+    fi = np.flatnonzero(free)
+    w = sp.csr_matrix((1.0 / length, (adj.row, adj.col)), shape=(n_w, n_w))
+    lap = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w
+    out = sp.lil_matrix(boundary_vals)
+    if len(fi):
+        l_ff = lap[fi][:, fi].tocsc() + sp.identity(len(fi), format="csc") * (1e-9 * float(w.data.mean()))
+        rhs = -(lap[fi] @ boundary_vals)
+        x = splu(l_ff).solve(np.asarray(rhs.todense()))
+        x[np.abs(x) < 1e-4] = 0.0
+        out[fi] = x
+    full = out.tocsr()[canon]  # texture-seam twins take their welded vertex's push
+    return full[np.asarray(rig.moving, dtype=np.int64)].astype(np.float32).tocsr()
