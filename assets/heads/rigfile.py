@@ -125,10 +125,12 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     from assets.heads.builtin import load_builtin_head
     from assets.heads.cache import cache_dir
     from assets.heads.rigging import rig_head
+    from realtime_core.face.rig import RIG_ALGORITHM
 
     root = cache or cache_dir()
-    path = root / f"builtin_rig_v{VERSION}.npz"
-    from realtime_core.face.rig import RIG_ALGORITHM
+    # The algorithm in the name: checkouts at different rig algorithms share one cache without
+    # rebuilding each other's file over and over.
+    path = root / f"builtin_rig_v{VERSION}_a{RIG_ALGORITHM}.npz"
 
     if path.is_file():
         try:

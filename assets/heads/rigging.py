@@ -315,14 +315,17 @@ def rig_head(
         # the warp can leave a lip barely answering one unit group (the MediaPipe face's upper lip),
         # and inverting that response gave unit weights of ~100 per IOD, spikes below the mouth.
         # The head's own response is corrected afterwards (recalibrate), where it is well conditioned.
-        cal = calibrate_mouth(simple.model, slm, groups=simple.groups)
+        # The built-in head keeps its rig as it was (the streamed ARKit maps, realtime_core/fitted_maps.py,
+        # are fitted to it; changing it means refitting them).
+        own = mesh.name == "builtin"
+        cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
-        if config.method == "harmonic":
+        if config.method == "harmonic" and not own:
             from realtime_core.face.checks import EXTREME_POSES
 
             rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
@@ -335,10 +338,11 @@ def rig_head(
                 basis[:, 2] /= r_open
                 rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
-        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
-        contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
-        rig = replace(rig, contact=contact, contact_up=frame.axes[1])
-        rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
+        if not own:  # (the built-in head's pressed lips cross at the fit probes: see above)
+            seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+            contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
+            rig = replace(rig, contact=contact, contact_up=frame.axes[1])
+            rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     part = mesh.part
