@@ -261,6 +261,16 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     )
 
 
+OPEN_RESPONSE_RANGE = (0.5, 0.95)
+"""Measured mouth-open responses (inner-lip opening per unit parameter, at the landmarks) the rig
+is rescaled for. Below 0.5 the measure, not the rig, is suspect: automatic inner-lip landmarks on
+Lee Perry-Smith sit 0.02-0.04 IOD off the hand ones (higher and further in, towards the
+inward-curled inner lip surface) and read 0.38 where hand landmarks read 0.74;
+the gain of 2.65 over-opened the jaw (a long face at /a/, 152 flipped triangles against 9 without
+it). The cut seam's central vertex pairs were tried as a steadier measure and read even less (0.44
+hand, 0.002 automatic; the inner surfaces there barely follow the jaw), so they cannot stand in."""
+
+
 def rig_head(
     mesh: HeadMesh,
     landmark_spec: Mapping[str, object] | None,
@@ -344,7 +354,7 @@ def rig_head(
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
             r_open = float(head_response(rig, mouth_landmarks(snap))[2, 2])
             rig.meta["open_response"] = round(r_open, 4)
-            if head_calibration and 0.3 < r_open < 0.95:
+            if head_calibration and OPEN_RESPONSE_RANGE[0] < r_open < OPEN_RESPONSE_RANGE[1]:
                 basis = np.array(rig.basis, dtype=np.float64)
                 basis[:, 2] /= r_open
                 rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
