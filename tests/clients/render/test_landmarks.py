@@ -38,3 +38,17 @@ def test_a_human_like_head_rigs_with_no_manual_landmark(tmp_path, shared_data, c
     rc = main(["rig", str(head), "-o", str(tmp_path / "r.npz"), "--keep-failing"])
     assert rc == 0 and (tmp_path / "r.npz").is_file()
     assert "automatic landmarks" not in capsys.readouterr().err
+
+
+def test_automatic_landmarks_do_not_over_open_the_jaw(shared_data):
+    """Automatic inner-lip points sit a few hundredths of an IOD off the hand ones and read a small
+    lip response; dividing the mouth-open column by it opened the jaw 2.65x (152 flipped triangles,
+    a long face at /a/). The rescale must stay bounded and the rig must not fold like that."""
+    from assets.heads.head import Head, head_checks
+    from assets.heads.rigging import OPEN_RESPONSE_RANGE, rig_head
+
+    mesh = load_mesh(shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    rig, rigged = rig_head(mesh, find_landmarks(mesh), landmark_source="automatic landmarks")
+    assert rig.meta.get("open_rescaled", 1.0) <= 1.0 / OPEN_RESPONSE_RANGE[0] + 1e-3, rig.meta
+    rep = head_checks(Head(rig, rigged))
+    assert rep.flipped_triangles < 40 and rep.max_edge_stretch < 10, rep  # 9 and 4.9 measured; 152 and 30.7 before
