@@ -146,7 +146,7 @@ class HostileTally:
             "sent_by_scenario": dict(self.sent),
             "answered_by_scenario": dict(self.answered),
             "close_codes": {str(k): v for k, v in sorted(self.close_codes.items(), key=lambda kv: str(kv[0]))},
-            "http_status": {str(k): v for k, v in sorted(self.http_status.items())},
+            "http_status": {str(k): v for k, v in sorted(self.http_status.items(), key=lambda kv: str(kv[0]))},
             "connections_unanswered": dict(self.unanswered),
             "connections": self.connections,
             "flood_audio_s": round(self.flood_audio_s, 1),
@@ -163,13 +163,15 @@ async def hostile_traffic(
     workers: int = 6,
     local_host: str | None = None,
     flood: bool = True,
+    rate_per_s: float | None = None,
 ) -> None:
     """Hostile traffic until ``stop()`` is true: ``workers`` concurrent connections cycling through
     the scenarios (started ingests sending invalid controls then a closing message, bad first
     messages, viewers of ``sessions`` (the healthy ones) sending invalid controls then junk, bad
     viewer queries, raw requests with bad headers) and, with ``flood``, one ingest sending 2 s of
     audio every 20 ms (100x real time; the server's ingest guard paces it). ``local_host``: the
-    source address of the connections (a loopback alias: the attacker is a client of its own)."""
+    source address of the connections (a loopback alias: the attacker is a client of its own);
+    ``rate_per_s``: answered messages a second on average (None: as fast as the workers go)."""
     from websockets.asyncio.client import connect
     from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 
@@ -183,26 +185,37 @@ async def hostile_traffic(
         tally.answered[scenario] += n
         answer(n)
 
+    async def text_reply(ws) -> None:
+        """The next text message (a reply), skipping the frames a viewer receives meanwhile."""
+        while not isinstance(await ws.recv(), str):
+            pass
+
+    async def until_closed(ws) -> None:
+        while True:
+            await ws.recv()
+
     async def conversation(scenario: str, path: str, first: list, repeat: list, closer) -> None:
-        """Send ``first`` (a start, unanswered by count), then ``repeat`` (each answered with a
-        reply, pipelined), then ``closer`` (answered by the close code)."""
+        """Send ``first`` (a start: not counted), then ``repeat`` (each answered with a reply,
+        pipelined), then ``closer`` (answered by the close code). With no closer the request itself
+        (a bad viewer query) is the hostile message; a refused handshake is one too (an HTTP status)."""
         tally.connections += 1
         try:
             async with connect(ws_url(url, path), compression=None, max_size=None, open_timeout=10, **local) as ws:
+                if closer is None:
+                    tally.sent[scenario] += 1
                 for m in first:
                     await ws.send(m)
-                    await asyncio.wait_for(ws.recv(), 10)  # started / description
+                    await asyncio.wait_for(text_reply(ws), 10)  # started / description
                 for m in repeat:
                     await ws.send(m)
                     tally.sent[scenario] += 1
                 for _ in repeat:
-                    await asyncio.wait_for(ws.recv(), 10)
+                    await asyncio.wait_for(text_reply(ws), 10)
                     answered(scenario)
                 if closer is not None:
                     await ws.send(closer)
                     tally.sent[scenario] += 1
-                    await asyncio.wait_for(ws.recv(), 10)  # the close: ConnectionClosed
-                tally.unanswered[scenario + ": still open"] += 1
+                await asyncio.wait_for(until_closed(ws), 10)  # ends in ConnectionClosed
         except ConnectionClosed as exc:
             code = exc.rcvd.code if exc.rcvd else None
             tally.close_codes[code] += 1
@@ -211,6 +224,7 @@ async def hostile_traffic(
             else:
                 tally.unanswered[scenario + ": no close frame"] += 1
         except InvalidStatus as exc:
+            tally.sent[scenario] += 1
             tally.http_status[exc.response.status_code] += 1
             answered(scenario)
         except (OSError, InvalidHandshake, TimeoutError) as exc:
@@ -232,14 +246,20 @@ async def hostile_traffic(
                 tally.http_status[int(parts[1])] += 1
                 answered(scenario)
             else:  # the server hung up without a status (e.g. on a request that is not HTTP)
-                tally.unanswered[scenario + ": closed without a status"] += 1
+                tally.http_status["closed without a status"] += 1
                 answered(scenario)
         except (OSError, TimeoutError) as exc:
             tally.unanswered[f"{scenario}: {type(exc).__name__}"] += 1
 
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+
     async def worker(w: int) -> None:
         i = w
         while not stop():
+            if rate_per_s is not None:  # at most rate_per_s answered messages a second on average
+                while sum(tally.answered.values()) >= rate_per_s * (loop.time() - t0) and not stop():
+                    await asyncio.sleep(0.01)
             i += workers
             s = sessions[i % len(sessions)] if sessions else "none"
             kind = i % 8
@@ -284,7 +304,9 @@ async def hostile_traffic(
     await asyncio.gather(*tasks)
 
 
-def _hostile_proc(url: str, sessions: list[str], go, stop, counter, out, local_host: str | None) -> None:
+def _hostile_proc(
+    url: str, sessions: list[str], go, stop, counter, out, local_host: str | None, rate_per_s: float | None
+) -> None:
     """Child process: wait for ``go``, send hostile traffic until ``stop``, report the tally."""
     tally = HostileTally()
 
@@ -295,10 +317,17 @@ def _hostile_proc(url: str, sessions: list[str], go, stop, counter, out, local_h
     async def main() -> None:
         while not go.is_set():
             await asyncio.sleep(0.05)
-        await hostile_traffic(url, sessions, stop=stop.is_set, tally=tally, on_answer=count, local_host=local_host)
+        await hostile_traffic(
+            url, sessions, stop=stop.is_set, tally=tally, on_answer=count, local_host=local_host, rate_per_s=rate_per_s
+        )
 
+    t0, cpu0 = time.monotonic(), time.process_time()
     asyncio.run(main())
-    out.put(tally.report())
+    report = tally.report()
+    wall = time.monotonic() - t0
+    report["sender_cpu_s"] = round(time.process_time() - cpu0, 1)
+    report["sender_wall_s"] = round(wall, 1)
+    out.put(report)
 
 
 def _metrics(url: str) -> dict:
@@ -328,10 +357,13 @@ def _run(
     viewers: int,
     hostile: bool,
     hostile_messages: int,
+    hostile_rate: float | None,
     local_host: str | None,
 ) -> dict:
     """The quiet half (``seconds / 2``), then the hostile half: at least ``seconds / 2`` and until
-    ``hostile_messages`` were answered (at most 10x the half; reported if the target was missed)."""
+    ``hostile_messages`` were answered (at most 10x the half; reported if the target was missed).
+    ``hostile_rate``: hostile messages a second (None: the target spread over the hostile half;
+    0: as fast as the sender goes)."""
     url = server.url
     half_s = seconds / 2
     max_s = half_s + (10 * half_s if hostile else half_s) + 5
@@ -340,9 +372,12 @@ def _run(
     ctx = mp.get_context("spawn")
     counter, go, stop_hostile, hostile_out = ctx.Value("q", 0), ctx.Event(), ctx.Event(), ctx.Queue()
     hostile_proc = None
+    rate = hostile_messages / half_s if hostile_rate is None else (hostile_rate or None)
     if hostile:  # started now (its imports take a second or two), it waits for the half-way mark
         hostile_proc = ctx.Process(
-            target=_hostile_proc, args=(url, names, go, stop_hostile, counter, hostile_out, local_host), daemon=True
+            target=_hostile_proc,
+            args=(url, names, go, stop_hostile, counter, hostile_out, local_host, rate),
+            daemon=True,
         )
         hostile_proc.start()
     clients.wait_viewers()
@@ -453,6 +488,7 @@ def _run(
         q99, h99 = summary["quiet"]["p99_ms"], summary["hostile"]["p99_ms"]
         out["hostile"] = {
             "target_messages": hostile_messages,
+            "paced_at_per_s": None if rate is None else round(rate, 1),
             "target_met": tally is not None and tally["answered"] >= hostile_messages,
             "health_during_hostile": dict(Counter(health_during)),
             **(tally or {}),
@@ -474,6 +510,12 @@ def main(argv: list[str] | None = None) -> int:
         help="the hostile half lasts until this many hostile messages were answered (at least half the run)",
     )
     ap.add_argument(
+        "--hostile-rate",
+        type=float,
+        default=None,
+        help="hostile messages a second (default: the target spread over the hostile half; 0: as fast as possible)",
+    )
+    ap.add_argument(
         "--hostile-from",
         default="127.0.0.2",
         help="source address of the hostile connections (a loopback alias: a client of its own; '' = default)",
@@ -492,6 +534,7 @@ def main(argv: list[str] | None = None) -> int:
             viewers=args.viewers,
             hostile=args.hostile,
             hostile_messages=args.hostile_messages,
+            hostile_rate=args.hostile_rate,
             local_host=args.hostile_from or None,
         )
     except Exception:
