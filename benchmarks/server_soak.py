@@ -1,19 +1,31 @@
 """Soak test of the streaming server: RSS growth, frames lost, loop lag and viewer latency over
 minutes, optionally under hostile traffic (prints JSON; asserts nothing).
 
-Setup: ``facecast serve`` in its own process (the benchmark model, the built-in head). This process
-runs ``--sessions`` real-time ingests (16 kHz speech-like audio in 20 ms blocks, looped) with
-``--viewers`` parameter viewers each, and records every frame's end-to-end latency: from the send
-of the block holding the last sample the frame needs to the viewer's receipt (the server's whole
-overhead beyond the algorithmic delay). Every 5 s it samples the server's resident memory
-(``VmRSS``). With ``--hostile`` the second half of the run adds, from a separate process, a
-100x-real-time ingest (paced by the server's ingest guard) and a stream of malformed or hostile
-messages (bad starts, deep JSON, garbage audio, invalid controls, bad viewer queries, wrong
-Origins); the report gives the healthy viewers' p99 in the quiet and the hostile half.
+Setup: ``facecast serve`` in its own process (the benchmark model, the built-in head, the default
+configuration). The clients run in processes of their own, those of the capacity benchmark
+(``benchmarks.server_capacity.ClientProcesses``): one streams ``--sessions`` real-time ingests
+(16 kHz speech-like audio in 20 ms blocks, looped), one holds ``--viewers`` parameter viewers per
+session, so a client starved on a loaded machine is not measured as server latency. Every frame's
+end-to-end latency is recorded: from the send of the block holding the last sample the frame needs
+to the viewer's receipt (the server's whole overhead beyond the algorithmic delay). Every 5 s the
+server's resident memory (``VmRSS``) is sampled.
 
-Reported: RSS at warm-up (after 10% of the run) and at the end, growth in percent; frames lost
-(index gaps or missing frames per viewer); loop lag p99 from the server's ``/metrics``; end-to-end
-p50/p99 per phase; hostile messages sent; server still healthy at the end.
+With ``--hostile`` the second half adds, from a third process (connections from another loopback
+address, ``--hostile-from``: the attacker is a client of its own), a 100x-real-time ingest (paced by
+the server's ingest guard) and malformed or hostile messages of every kind (``hostile_traffic``):
+started ingests pipelining invalid controls (each answered ``rejected``) then a closing message
+(garbage or NaN audio, non-JSON text, deep JSON, unknown types, a second start, oversized binary or
+text), bad first messages, viewers of the healthy session pipelining invalid expression controls
+then junk, bad viewer queries, and raw requests with bad headers (Host, Origin, WebSocket key and
+version, huge or too many header lines, a path too long, not HTTP). A message counts once the
+server answered it (a reply, a close code or an HTTP status). The hostile half lasts at least half
+the run and until ``--hostile-messages`` were answered, paced by default to spread them over it.
+
+Reported: RSS at warm-up (after 10% of the run), at the end of the quiet half, peak and end; frames
+lost per viewer; loop lag p99 from the server's ``/metrics``; end-to-end p50/p99 per phase and per
+viewer, and the hostile/quiet p99 ratio; the hostile messages sent and answered per scenario, the
+close codes and HTTP statuses the sender received and the server's closes by code in the second
+half; /health during the hostile half; server alive and healthy at the end.
 """
 
 from __future__ import annotations
