@@ -138,6 +138,19 @@ RAW_REQUESTS = [  # bad headers and requests, refused before any handshake (an H
 ]
 
 
+SCENARIO_CYCLE = (  # a worker's turn, in these proportions
+    "ingest_controls",
+    "ingest_controls",
+    "ingest_first",
+    "ingest_first",
+    "viewer_controls",
+    "viewer_query",
+    "bad_request",
+    "bad_request",
+)
+SCENARIOS = frozenset(SCENARIO_CYCLE) | {"flood"}
+
+
 @dataclass
 class HostileTally:
     """What the hostile sender did: messages sent and answered, per scenario; close codes and HTTP
@@ -174,15 +187,15 @@ async def hostile_traffic(
     on_answer=None,
     workers: int = 6,
     local_host: str | None = None,
-    flood: bool = True,
+    scenarios: frozenset[str] = SCENARIOS,
     rate_per_s: float | None = None,
 ) -> None:
     """Hostile traffic until ``stop()`` is true: ``workers`` concurrent connections cycling through
     the scenarios (started ingests sending invalid controls then a closing message, bad first
     messages, viewers of ``sessions`` (the healthy ones) sending invalid controls then junk, bad
-    viewer queries, raw requests with bad headers) and, with ``flood``, one ingest sending 2 s of
-    audio every 20 ms (100x real time; the server's ingest guard paces it). ``local_host``: the
-    source address of the connections (a loopback alias: the attacker is a client of its own);
+    viewer queries, raw requests with bad headers; ``scenarios`` picks some) and, with ``"flood"``,
+    one ingest sending 2 s of audio every 20 ms (100x real time; the server's ingest guard paces
+    it). ``local_host``: the source address of the connections (a loopback alias: the attacker is a client of its own);
     ``rate_per_s``: answered messages a second on average (None: as fast as the workers go)."""
     from websockets.asyncio.client import connect
     from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
@@ -274,8 +287,8 @@ async def hostile_traffic(
                     await asyncio.sleep(0.01)
             i += workers
             s = sessions[i % len(sessions)] if sessions else "none"
-            kind = i % 8
-            if kind in (0, 1):  # a started session sending invalid controls, then a closing message
+            kind = cycle[i % len(cycle)]
+            if kind == "ingest_controls":  # a started session sending invalid controls, then a closing message
                 fmt = "f32le" if i % 3 == 0 else "pcm_s16le"
                 start = json.dumps({"type": "start", "session": f"junk{i}", "sample_rate": RATE, "format": fmt})
                 closer = INGEST_CLOSERS[i % len(INGEST_CLOSERS)]
@@ -283,13 +296,13 @@ async def hostile_traffic(
                     closer = np.full(64, np.nan, "<f4").tobytes()  # NaN samples (1007)
                 controls = [json.dumps(BAD_CONTROLS[(i + k) % len(BAD_CONTROLS)]) for k in range(20)]
                 await conversation("ingest_controls", "/ingest", [start], controls, closer)
-            elif kind in (2, 3):
+            elif kind == "ingest_first":
                 await conversation("ingest_first", "/ingest", [], [], FIRST_MESSAGES[i % len(FIRST_MESSAGES)])
-            elif kind == 4:  # a viewer of a healthy session sending invalid controls, then junk
+            elif kind == "viewer_controls":  # a viewer of a healthy session sending invalid controls, then junk
                 controls = [json.dumps(BAD_VIEWER_CONTROLS[(i + k) % len(BAD_VIEWER_CONTROLS)]) for k in range(10)]
                 closer = VIEWER_CLOSERS[i % len(VIEWER_CLOSERS)]
                 await conversation("viewer_controls", f"/view?session={s}&audio=0", [], controls, closer)
-            elif kind == 5:
+            elif kind == "viewer_query":
                 q = BAD_QUERIES[i % len(BAD_QUERIES)].replace("{s}", s)
                 await conversation("viewer_query", "/view?" + q, [], [], None)
             else:
@@ -312,12 +325,23 @@ async def hostile_traffic(
             except (OSError, InvalidHandshake, ConnectionClosed):
                 await asyncio.sleep(0.1)
 
-    tasks = [worker(w) for w in range(workers)] + ([flood_ingest()] if flood else [])
+    cycle = [k for k in SCENARIO_CYCLE if k in scenarios]
+    tasks = [worker(w) for w in range(workers)] if cycle else []
+    if "flood" in scenarios:
+        tasks.append(flood_ingest())
     await asyncio.gather(*tasks)
 
 
 def _hostile_proc(
-    url: str, sessions: list[str], go, stop, counter, out, local_host: str | None, rate_per_s: float | None
+    url: str,
+    sessions: list[str],
+    go,
+    stop,
+    counter,
+    out,
+    local_host: str | None,
+    rate_per_s: float | None,
+    scenarios: frozenset[str],
 ) -> None:
     """Child process: wait for ``go``, send hostile traffic until ``stop``, report the tally."""
     tally = HostileTally()
@@ -330,7 +354,14 @@ def _hostile_proc(
         while not go.is_set():
             await asyncio.sleep(0.05)
         await hostile_traffic(
-            url, sessions, stop=stop.is_set, tally=tally, on_answer=count, local_host=local_host, rate_per_s=rate_per_s
+            url,
+            sessions,
+            stop=stop.is_set,
+            tally=tally,
+            on_answer=count,
+            local_host=local_host,
+            rate_per_s=rate_per_s,
+            scenarios=scenarios,
         )
 
     t0, cpu0 = time.monotonic(), time.process_time()
@@ -371,6 +402,7 @@ def _run(
     hostile_messages: int,
     hostile_rate: float | None,
     local_host: str | None,
+    scenarios: frozenset[str] = SCENARIOS,
 ) -> dict:
     """The quiet half (``seconds / 2``), then the hostile half: at least ``seconds / 2`` and until
     ``hostile_messages`` were answered (at most 10x the half; reported if the target was missed).
@@ -388,7 +420,7 @@ def _run(
     if hostile:  # started now (its imports take a second or two), it waits for the half-way mark
         hostile_proc = ctx.Process(
             target=_hostile_proc,
-            args=(url, names, go, stop_hostile, counter, hostile_out, local_host, rate),
+            args=(url, names, go, stop_hostile, counter, hostile_out, local_host, rate, scenarios),
             daemon=True,
         )
         hostile_proc.start()
@@ -499,6 +531,7 @@ def _run(
     if hostile:
         q99, h99 = summary["quiet"]["p99_ms"], summary["hostile"]["p99_ms"]
         out["hostile"] = {
+            "scenarios": sorted(scenarios),
             "target_messages": hostile_messages,
             "paced_at_per_s": None if rate is None else round(rate, 1),
             "target_met": tally is not None and tally["answered"] >= hostile_messages,
@@ -528,12 +561,19 @@ def main(argv: list[str] | None = None) -> int:
         help="hostile messages a second (default: the target spread over the hostile half; 0: as fast as possible)",
     )
     ap.add_argument(
+        "--hostile-scenarios",
+        default=",".join(sorted(SCENARIOS)),
+        help=f"comma-separated subset of {','.join(sorted(SCENARIOS))} (to find what costs the healthy viewers)",
+    )
+    ap.add_argument(
         "--hostile-from",
         default="127.0.0.2",
         help="source address of the hostile connections (a loopback alias: a client of its own; '' = default)",
     )
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     args = ap.parse_args(argv)
+    if not set(args.hostile_scenarios.split(",")) <= SCENARIOS:
+        ap.error(f"--hostile-scenarios: choose from {','.join(sorted(SCENARIOS))}")
     model, model_path, model_desc = benchmark_model(args.model)
     server = ServerProcess(model_path, head=True)
     load_before = os.getloadavg()
@@ -547,6 +587,7 @@ def main(argv: list[str] | None = None) -> int:
             hostile=args.hostile,
             hostile_messages=args.hostile_messages,
             hostile_rate=args.hostile_rate,
+            scenarios=frozenset(args.hostile_scenarios.split(",")),
             local_host=args.hostile_from or None,
         )
     except Exception:
