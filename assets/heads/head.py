@@ -226,14 +226,23 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         raise MeshError(f"{mesh.name}: the rig records no landmarks; the checks need them (give --landmarks)")
     idx = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in pts.items()}
     pairs = None
+    contact = getattr(rig, "contact", None)
+    if contact is not None and len(contact):
+        # The rig's own lip columns (a cut seam's two sides, else the inner contours): the pairs its
+        # non-interpenetration constraint holds apart.
+        pairs = np.asarray(contact, dtype=np.int64)
     cut = int(rig.meta.get("lip_seam_cut", 0) or 0)
     if cut:
-        n0 = len(v0) - cut
-        d, j = cKDTree(v0[:n0]).query(v0[n0:])
-        ok = d <= 1e-9 * float(np.ptp(v0, axis=0).max())
-        pairs = np.column_stack([j[ok], np.arange(n0, len(v0))[ok]])  # (upper original, lower copy)
+        if pairs is None:
+            n0 = len(v0) - cut - int(rig.meta.get("mouth_cavity", 0) or 0)
+            d, j = cKDTree(v0[:n0]).query(v0[n0 : n0 + cut])
+            ok = d <= 1e-9 * float(np.ptp(v0, axis=0).max())
+            pairs = np.column_stack([j[ok], np.arange(n0, n0 + cut)[ok]])  # (upper original, lower copy)
         # The copy at the lower-inner landmark is the lower lip's.
-        lower = pairs[pairs[:, 0] == idx["lower_inner"], 1]
+        same = np.linalg.norm(v0[pairs[:, 1]] - v0[idx["lower_inner"]], axis=1) <= 1e-9 * float(
+            np.ptp(v0, axis=0).max()
+        )
+        lower = pairs[(pairs[:, 0] == idx["lower_inner"]) & same & (pairs[:, 1] != idx["lower_inner"]), 1]
         if len(lower):
             idx["lower_inner"] = int(lower[0])
     teeth = None

@@ -56,6 +56,8 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         else np.zeros((0, rig.simple.n_vertices, 3)),
         "cal_response": rig.calibration.response,
         "cal_matrix": rig.calibration.matrix,
+        "contact": np.asarray(rig.contact, dtype=np.int64),
+        "contact_up": np.asarray(rig.contact_up, dtype=np.float64),
     }
     if mesh.uvs is not None:
         arrays["uvs"] = np.asarray(mesh.uvs, dtype=np.float32)
@@ -102,6 +104,8 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
             simple=simple,
             calibration=cal,
             meta=meta.get("rig", {}),
+            contact=a.get("contact", np.zeros((0, 2), dtype=np.int64)),
+            contact_up=a.get("contact_up", np.array([0.0, 1.0, 0.0])),
         )
     except (KeyError, ValueError, IndexError, RealtimeCoreError) as exc:
         raise RigFileError(f"{p}: inconsistent rig file: {exc}") from exc
@@ -121,10 +125,12 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     from assets.heads.builtin import load_builtin_head
     from assets.heads.cache import cache_dir
     from assets.heads.rigging import rig_head
+    from realtime_core.face.rig import RIG_ALGORITHM
 
     root = cache or cache_dir()
-    path = root / f"builtin_rig_v{VERSION}.npz"
-    from realtime_core.face.rig import RIG_ALGORITHM
+    # The algorithm in the name: checkouts at different rig algorithms share one cache without
+    # rebuilding each other's file over and over.
+    path = root / f"builtin_rig_v{VERSION}_a{RIG_ALGORITHM}.npz"
 
     if path.is_file():
         try:

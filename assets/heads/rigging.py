@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,7 +39,7 @@ from realtime_core.face import (
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.rig import recalibrate
+from realtime_core.face.rig import contact_spread, head_response, lip_columns, recalibrate, repair_rig
 from realtime_core.face.simple import (
     derive_simple_model,
     lip_contact_vertices,
@@ -322,13 +322,38 @@ def rig_head(
                 snap["lower_inner"] = int(len(mesh.vertices) + below[0])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
-        cal = calibrate_mouth(placed, slm, groups=simple.groups)
+        # Calibrated on the simple model as it comes (its own shape), not as warped onto the head:
+        # the warp can leave a lip barely answering one unit group (the MediaPipe face's upper lip),
+        # and inverting that response gave unit weights of ~100 per IOD, spikes below the mouth.
+        # The head's own response is corrected afterwards (recalibrate), where it is well conditioned.
+        # The built-in head keeps its rig as it was (the streamed ARKit maps, realtime_core/fitted_maps.py,
+        # are fitted to it; changing it means refitting them).
+        own = mesh.name == "builtin"
+        cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
             v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
+        if config.method == "harmonic" and not own:
+            from realtime_core.face.checks import EXTREME_POSES
+
+            rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
+            # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
+            # asks for (so the closure pose closes the lips) and repair what that stretches again.
+            r_open = float(head_response(rig, mouth_landmarks(snap))[2, 2])
+            rig.meta["open_response"] = round(r_open, 4)
+            if head_calibration and 0.3 < r_open < 0.95:
+                basis = np.array(rig.basis, dtype=np.float64)
+                basis[:, 2] /= r_open
+                rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
+                rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
+        if not own:  # (the built-in head's pressed lips cross at the fit probes: see above)
+            seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+            contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
+            rig = replace(rig, contact=contact, contact_up=frame.axes[1])
+            rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     part = mesh.part
@@ -346,4 +371,128 @@ def rig_head(
     )
     from assets.heads.parts import with_rigid_parts  # separate eyes / teeth / tongue: rigid with skull or jaw
 
-    return with_rigid_parts(rig, out_mesh, snap), out_mesh
+    rig = with_rigid_parts(rig, out_mesh, snap)
+    if cut_copies is not None and not _has_inner_mouth(mesh):
+        rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"])
+    return rig, out_mesh
+
+
+INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
+CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
+
+
+def _has_inner_mouth(mesh: HeadMesh) -> bool:
+    return any(any(w in n.lower() for w in INNER_MOUTH_WORDS) for n in mesh.part_names)
+
+
+def _darkest_texel_uv(texture: bytes) -> tuple[float, float] | None:
+    """The (u, v) centre of the darkest 1/32-of-the-image block of an encoded texture (glTF's UV
+    convention: v = 0 at image row 0), or None if nothing in it is dark (luminance > 0.2)."""
+    import io
+
+    from PIL import Image
+
+    img = Image.open(io.BytesIO(texture)).convert("L")
+    small = np.asarray(img.resize((32, 32), Image.Resampling.BOX), dtype=np.float64) / 255.0
+    r, c = np.unravel_index(int(np.argmin(small)), small.shape)
+    if small[r, c] > 0.2:
+        return None
+    return (c + 0.5) / 32.0, (r + 0.5) / 32.0
+
+
+def _texture_with_dark_strip(texture: bytes, uvs: np.ndarray) -> tuple[bytes, np.ndarray, tuple[float, float]]:
+    """A texture with no dark area gets a strip of CAVITY_COLOR below the image (PNG): the image's
+    UVs are squeezed into the original rows (v scaled by h / (h + strip)), the returned (u, v) is
+    the strip's centre. The strip is 1/32 of the height (at least 16 rows) so mipmaps keep it dark."""
+    import io
+
+    from PIL import Image
+
+    img = Image.open(io.BytesIO(texture)).convert("RGB")
+    w, h = img.size
+    strip = max(16, h // 32)
+    out = Image.new("RGB", (w, h + strip), tuple(int(255 * c) for c in CAVITY_COLOR))
+    out.paste(img, (0, 0))
+    buf = io.BytesIO()
+    out.save(buf, format="PNG")
+    scaled = uvs.copy()
+    scaled[:, 1] *= h / (h + strip)
+    return buf.getvalue(), scaled, (0.5, (h + 0.5 * strip) / (h + strip))
+
+
+def add_mouth_cavity(
+    rig: Rig, mesh: HeadMesh, frame, left: int, right: int, *, rings: int = 6, segments: int = 16
+) -> tuple[Rig, HeadMesh]:
+    """A hollow head (lips cut open, nothing behind them) gets a dark mouth cavity: a half
+    ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
+    mouth corners (inside the skin), 0.85 of the mouth wide, reaching 0.25 IOD up, 0.5 IOD down
+    (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
+    inside instead of the back of the head or the background.
+    It is a separate, still part (``part_names`` gains "mouth cavity"): the lips and jaw open over
+    it. Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
+    (the renderer paints a textured head from its texture alone)."""
+    v0 = np.asarray(mesh.vertices, dtype=np.float64)
+    iod, ax = frame.iod, frame.axes
+    a, b = v0[left], v0[right]
+    centre = 0.5 * (a + b) - 0.15 * iod * ax[2]
+    half_w = 0.5 * float(np.linalg.norm(a - b)) * 0.85
+    th = np.linspace(0.0, np.pi / 2, rings + 1)[1:]  # 0 = the deepest point, pi/2 = the rim
+    ph = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    pts = [centre - 0.45 * iod * ax[2]]
+    for t_ in th:
+        for p_ in ph:
+            x = np.sin(t_) * np.cos(p_) * half_w
+            yr = 0.25 if np.sin(p_) > 0 else 0.5
+            y = np.sin(t_) * np.sin(p_) * yr * iod
+            z = -np.cos(t_) * 0.45 * iod
+            pts.append(centre + x * ax[0] + y * ax[1] + z * ax[2])
+    cv = np.array(pts)
+    tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
+    for i in range(rings - 1):
+        r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
+        for j in range(segments):
+            j1 = (j + 1) % segments
+            tris += [[r0 + j, r0 + j1, r1 + j1], [r0 + j, r1 + j1, r1 + j]]
+    n0 = len(v0)
+    ct = np.array(tris, dtype=np.int64) + n0
+    # Wound so the inside faces the viewer (normals towards +forward at the deepest point).
+    nrm = np.cross(cv[tris[0][1]] - cv[tris[0][0]], cv[tris[0][2]] - cv[tris[0][0]])
+    if nrm @ ax[2] < 0:
+        ct = ct[:, ::-1]
+    colors = mesh.colors
+    n_c = len(cv)
+    if colors is not None:
+        colors = np.vstack([colors, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
+    elif mesh.uvs is None or mesh.texture is None:
+        base = np.full((n0, 3), 0.8, dtype=np.float32)
+        colors = np.vstack([base, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
+    uvs = mesh.uvs
+    texture = mesh.texture
+    if uvs is not None:
+        dark = _darkest_texel_uv(texture) if texture is not None else None
+        if dark is None and texture is not None:
+            texture, uvs, dark = _texture_with_dark_strip(texture, np.asarray(uvs, dtype=np.float64))
+        uvs = np.vstack([uvs, np.tile(np.asarray(dark or (0.0, 0.0), dtype=uvs.dtype), (n_c, 1))])
+    names = tuple(mesh.part_names) or ("head",)
+    part = mesh.part if mesh.part is not None else np.zeros(n0, dtype=np.int16)
+    part = np.concatenate([part, np.full(n_c, len(names), dtype=part.dtype)])
+    out = HeadMesh(
+        vertices=np.vstack([v0, cv]),
+        triangles=np.vstack([np.asarray(mesh.triangles, dtype=np.int64), ct]),
+        uvs=uvs,
+        texture=texture,
+        colors=colors,
+        name=mesh.name,
+        targets=None,
+        part=part,
+        part_names=(*names, "mouth cavity"),
+    )
+    meta = dict(rig.meta)
+    meta["mouth_cavity"] = int(n_c)
+    new = replace(
+        rig,
+        neutral=out.vertices.astype(np.float32),
+        triangles=out.triangles.astype(np.int32),
+        meta=meta,
+    )
+    return new, out

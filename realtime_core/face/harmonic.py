@@ -27,7 +27,13 @@ from realtime_core.face.projection import vertex_adjacency
 
 
 def harmonic_weights(
-    vertices: np.ndarray, triangles: np.ndarray, control: np.ndarray, sec5: sp.csr_matrix, *, margin: float = 0.0
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    control: np.ndarray,
+    sec5: sp.csr_matrix,
+    *,
+    margin: float = 0.0,
+    use: np.ndarray | None = None,
 ) -> sp.csr_matrix:
     """(n_head, n_simple) CSR weights. vertices (n, 3), triangles (m, 3), control (n_s,) head vertex of
     each simple vertex, sec5 (n, n_s) the Sec. 5.2 weights (they define the moving region and the
@@ -35,7 +41,9 @@ def harmonic_weights(
     the motion fades out smoothly instead of stopping at the edge of the Sec. 5.2 region."""
     v = np.asarray(vertices, dtype=np.float64)
     n, n_s = len(v), len(control)
-    ctrl = np.asarray(control, dtype=np.int64)
+    ctrl_all = np.asarray(control, dtype=np.int64)
+    cols = np.arange(n_s) if use is None else np.flatnonzero(np.asarray(use, dtype=bool))
+    ctrl = ctrl_all[cols]
     adj = vertex_adjacency(n, triangles).tocoo()
     length = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     w = 1.0 / np.maximum(length, 1e-12 * max(float(np.ptp(v, axis=0).max()), 1e-300))
@@ -60,7 +68,9 @@ def harmonic_weights(
     lap = sp.diags(np.asarray(wm.sum(axis=1)).ravel()) - wm
     l_ff = lap[idx_free][:, idx_free].tocsc()
     # Boundary: control points carry e_i; every other non-free vertex (still under Sec. 5.2) is 0.
-    b = -lap[idx_free][:, ctrl] @ sp.identity(n_s, format="csr")
+    b = -lap[idx_free][:, ctrl] @ sp.csr_matrix(
+        (np.ones(len(cols)), (np.arange(len(cols)), cols)), shape=(len(cols), n_s)
+    )
     # Free vertices cut off from every boundary vertex would make L_ff singular: pin them weakly.
     l_ff = l_ff + sp.identity(len(idx_free), format="csc") * (1e-9 * float(w.mean()))
     solved = splu(l_ff).solve(np.asarray(b.todense()))
@@ -70,7 +80,7 @@ def harmonic_weights(
     out = sp.lil_matrix((n, n_s))
     rigid = moving & ~has_ctrl[comp]
     out[np.flatnonzero(rigid)] = keep[np.flatnonzero(rigid)]
-    out[ctrl, np.arange(n_s)] = 1.0
+    out[ctrl, cols] = 1.0
     out = out.tocsr()
     place = sp.csr_matrix((np.ones(len(idx_free)), (idx_free, np.arange(len(idx_free)))), shape=(n, len(idx_free)))
     return (out + place @ rows).tocsr()

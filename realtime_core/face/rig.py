@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 11
+RIG_ALGORITHM = 13
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -80,6 +80,11 @@ class Rig:
     float32 simple-model displacement per mouth parameter (IOD units in, head units out);
     control (n_s,) int64 head vertex of each simple vertex; simple: the placed simple model;
     calibration: its mouth calibration; meta: JSON-able description.
+    contact: (k, 2) int64 head vertices (upper, lower) of the lip columns that must never cross;
+    contact_up: (3,) the head's up axis (unit) in which "above" is measured (see :meth:`displacements`);
+    contact_spread: None, or CSR (n_moving, 2k) how far each column's push reaches (columns 0..k-1 the
+    upper lip's, k..2k-1 the lower lip's; 1 at the column's own vertex, fading over the lip), see
+    :func:`contact_spread`; None pushes the two contact vertices alone.
     """
 
     neutral: np.ndarray
@@ -91,8 +96,13 @@ class Rig:
     simple: FaceModel
     calibration: MouthCalibration
     meta: dict[str, Any] = field(default_factory=dict)
+    contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
+    contact_up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    contact_spread: sp.csr_matrix | None = None
     # Set in __post_init__: the folded dense (n_moving*3, 4) map, or None to use the sparse product.
     _folded: np.ndarray | None = field(init=False, default=None, repr=False, compare=False)
+    # Set in __post_init__: each contact vertex's row in the moving set (-1: it never moves).
+    _contact_rows: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n_h = len(self.neutral)
@@ -114,16 +124,68 @@ class Rig:
         if self.matrix.nnz > 12 * rows:
             folded = np.ascontiguousarray(self.matrix @ self.basis, dtype=np.float32)
         object.__setattr__(self, "_folded", folded)
+        c = np.asarray(self.contact, dtype=np.int64).reshape(-1, 2)
+        if len(c) and (c.min() < 0 or c.max() >= n_h):
+            raise ConfigError("rig lip-contact vertex index out of range")
+        up = np.asarray(self.contact_up, dtype=np.float64).reshape(3)
+        up = up / max(float(np.linalg.norm(up)), 1e-300)
+        rows = np.searchsorted(self.moving, c).clip(0, max(len(self.moving) - 1, 0))
+        found = (self.moving[rows] == c) if len(self.moving) else np.zeros(c.shape, dtype=bool)
+        object.__setattr__(self, "contact", c)
+        object.__setattr__(self, "contact_up", up.astype(np.float32))
+        object.__setattr__(self, "_contact_rows", np.where(found, rows, -1))
+        if self.contact_spread is not None:
+            if self.contact_spread.shape != (len(self.moving), 2 * len(c)):
+                raise ConfigError(
+                    f"rig contact spread {self.contact_spread.shape} must be ({len(self.moving)}, {2 * len(c)})"
+                )
+            object.__setattr__(self, "contact_spread", sp.csr_matrix(self.contact_spread, dtype=np.float32))
 
     def displacements(self, params: np.ndarray) -> np.ndarray:
         """Head displacement (n_moving, 3) float32 (head units) of the moving vertices for params (4,) (IOD).
 
         One CSR product S @ (basis @ p); for dense (RBF) rigs the precomputed S @ basis instead.
+        Then the lips' non-interpenetration constraint: in every lip column (``contact``) the lower
+        lip's point is kept at or below the upper lip's along ``contact_up``; a column that would
+        cross is pushed apart to touching, half each way (all of it on the side that moves, when
+        the other never does). Every consumer (renderer, server deltas, exports) goes through here.
         """
         p = np.asarray(params, dtype=np.float32).reshape(4)
         if self._folded is not None:
-            return (self._folded @ p).reshape(-1, 3)
-        return (self.matrix @ (self.basis @ p)).reshape(-1, 3)
+            d = (self._folded @ p).reshape(-1, 3)
+        else:
+            d = (self.matrix @ (self.basis @ p)).reshape(-1, 3)
+        if len(self.contact):
+            d = d + self._contact_push(d)
+        return d
+
+    def _contact_push(self, d: np.ndarray) -> np.ndarray:
+        """(n_moving, 3) float32 correction that separates crossing lip columns, for displacements d."""
+        rows = self._contact_rows
+        up = self.contact_up
+        moved = np.where(rows >= 0, d[rows.clip(0)] @ up, 0.0)  # (k, 2) displacement along up
+        gap = (self.neutral[self.contact] @ up) + moved
+        deficit = np.maximum(gap[:, 1] - gap[:, 0], 0.0)  # lower above upper by this much
+        out = np.zeros_like(d)
+        if not deficit.any():
+            return out
+        mov_u, mov_l = rows[:, 0] >= 0, rows[:, 1] >= 0
+        share_u = np.where(mov_u & mov_l, 0.5, np.where(mov_u, 1.0, 0.0))
+        share_l = np.where(mov_u & mov_l, 0.5, np.where(mov_l, 1.0, 0.0))
+        if self.contact_spread is not None:
+            amount = self.contact_spread @ np.concatenate([deficit * share_u, -deficit * share_l]).astype(np.float32)
+            return (amount[:, None] * up).astype(np.float32)
+        np.add.at(out, rows[mov_u, 0], (deficit * share_u)[mov_u, None] * up)
+        np.add.at(out, rows[mov_l, 1], -(deficit * share_l)[mov_l, None] * up)
+        return out
+
+    def contact_push(self, params: np.ndarray) -> np.ndarray:
+        """The constraint's part of :meth:`displacements` (n_moving, 3) float32 for params (4,)."""
+        p = np.asarray(params, dtype=np.float32).reshape(4)
+        if not len(self.contact):
+            return np.zeros((len(self.moving), 3), dtype=np.float32)
+        d = (self._folded @ p) if self._folded is not None else (self.matrix @ (self.basis @ p))
+        return self._contact_push(d.reshape(-1, 3))
 
     def deformed(self, params: np.ndarray) -> np.ndarray:
         """All head vertices (n_h, 3) float32 for params (4,)."""
@@ -144,6 +206,7 @@ def head_weights(
     allowed: np.ndarray | None = None,
     seam_pairs: np.ndarray | None = None,
     lower_lip: np.ndarray | None = None,
+    upper_lip: np.ndarray | None = None,
 ) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
@@ -177,6 +240,9 @@ def head_weights(
                 taken.add(other)
                 ctrl[i] = other
         proj = replace(proj, control=ctrl)
+    use = None
+    if seam_pairs is not None and lower_lip is not None and upper_lip is not None and len(seam_pairs):
+        use = _same_side_controls(h, head_triangles, proj.control, seam_pairs, lower_lip, upper_lip, frame.iod)
     info = {
         "bad_triangles": int(proj.bad_triangles.sum()),
         "replacements": int(proj.replacements),
@@ -211,7 +277,9 @@ def head_weights(
         if config.method == "harmonic":
             from realtime_core.face.harmonic import harmonic_weights
 
-            g = harmonic_weights(h, head_triangles, proj.control, g.tocsr(), margin=HARMONIC_MARGIN * iod)
+            g = harmonic_weights(h, head_triangles, proj.control, g.tocsr(), margin=HARMONIC_MARGIN * iod, use=use)
+            if use is not None:
+                info["dropped_controls"] = int((~use).sum())
     else:
         y = training if training is not None else np.zeros((simple.n_vertices, 1))
         fit = rbf_map(h, h[proj.control], y, radius=None if config.rbf_radius is None else config.rbf_radius * iod)
@@ -225,6 +293,37 @@ def head_weights(
         g = sp.csr_matrix(w)
         info.update(rbf_lambda=fit.lam, rbf_radius_iod=fit.radius / iod)
     return g.tocsr(), proj.control, info
+
+
+def _same_side_controls(
+    h: np.ndarray,
+    triangles: np.ndarray,
+    control: np.ndarray,
+    seam_pairs: np.ndarray,
+    lower_lip: np.ndarray,
+    upper_lip: np.ndarray,
+    iod: float,
+    reach: float = 0.25,
+) -> np.ndarray:
+    """(n_s,) bool: the control points to keep as constraints of the smooth field. A simple vertex
+    that opens with the jaw (``lower_lip``) whose control point lies on the upper side of a cut lip
+    seam (nearer, along the mesh, to the upper edge of the cut than to the lower one), or a still
+    one (``upper_lip``) that lies on the lower side, within ``reach`` IOD of the cut, would pin the
+    wrong lip to the other lip's motion (a shard across the opening): it is dropped and the field
+    fills in its place from the controls around it."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    adj = vertex_adjacency(len(h), triangles).tocoo()
+    length = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(h), len(h)))
+    d_up = dijkstra(g, indices=np.asarray(seam_pairs[:, 0]), min_only=True, limit=2 * reach * iod)
+    d_lo = dijkstra(g, indices=np.asarray(seam_pairs[:, 1]), min_only=True, limit=2 * reach * iod)
+    c = np.asarray(control, dtype=np.int64)
+    near = np.minimum(d_up[c], d_lo[c]) <= reach * iod
+    wrong = near & ((lower_lip & (d_up[c] < d_lo[c])) | (upper_lip & (d_lo[c] < d_up[c])))
+    return ~wrong
 
 
 def build_rig(
@@ -248,7 +347,7 @@ def build_rig(
     basis = calibration.basis(simple)  # (n_s*3, 4)
     h = np.asarray(head_vertices, dtype=np.float64)
     canon, welded = weld(h, keep_apart=keep_apart)
-    seam_w = lower = None
+    seam_w = lower = upper = None
     if keep_apart is not None and len(keep_apart):
         # The copies of a cut seam and the vertices they were copied from (coincident at rest).
         from scipy.spatial import cKDTree
@@ -261,6 +360,7 @@ def build_rig(
         # Simple vertices that the mouth-open column moves down (relative to its largest motion): lower lip.
         dy = basis[:, 2].reshape(-1, 3) @ frame.axes[1]
         lower = dy < -0.3 * max(float(np.abs(dy).max()), 1e-300)
+        upper = dy > -0.1 * max(float(np.abs(dy).max()), 1e-300)
     t_w = canon[np.asarray(head_triangles, dtype=np.int64)]
     allowed_w = None
     if allowed is not None:
@@ -281,6 +381,7 @@ def build_rig(
         allowed=allowed_w,
         seam_pairs=seam_w,
         lower_lip=lower,
+        upper_lip=upper,
     )
     # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
     g = g_w[canon]
@@ -369,3 +470,134 @@ def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max
         return replace(rig, meta=meta)
     meta["head_calibration"] = "applied"
     return replace(rig, basis=rig.basis.astype(np.float64) @ np.linalg.inv(r), meta=meta)
+
+
+def repair_rig(
+    rig: Rig, poses: tuple[tuple[float, ...], ...], *, keep_apart: np.ndarray | None = None, max_stretch: float = 3.0
+) -> Rig:
+    """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
+    mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
+    tongue, eyes) keep their rigid rows. ``keep_apart``: the copies of a cut lip seam (as in
+    :func:`build_rig`), so the two lips stay separate surfaces. Records the repair in meta."""
+    from scipy.sparse.csgraph import connected_components
+
+    from realtime_core.face.projection import vertex_adjacency
+    from realtime_core.face.repair import repair_folds
+
+    h = np.asarray(rig.neutral, dtype=np.float64)
+    canon, welded = weld(h, keep_apart=keep_apart)
+    t_w = canon[np.asarray(rig.triangles, dtype=np.int64)]
+    n_s = rig.simple.n_vertices
+    # Per-vertex weights back from S = kron(G[moving], I_3): every third row, every third column.
+    g_moving = rig.matrix.tocsr()[0::3][:, 0::3]
+    g = sp.lil_matrix((len(h), n_s))
+    g[rig.moving] = g_moving
+    first = np.full(len(welded), -1, dtype=np.int64)
+    first[canon[::-1]] = np.arange(len(h))[::-1]
+    g_w = g.tocsr()[first]
+    _, comp = connected_components(vertex_adjacency(len(welded), t_w), directed=False)
+    has_ctrl = np.zeros(comp.max() + 1, dtype=bool)
+    has_ctrl[comp[canon[rig.control]]] = True
+    basis = np.asarray(rig.basis, dtype=np.float64)
+    motions = np.stack([(basis @ np.asarray(p, dtype=np.float64)).reshape(n_s, 3) for p in poses])
+    res = repair_folds(welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp])
+    g_new = res.weights[canon]
+    moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
+    s = sp.kron(g_new[moving], sp.identity(3, format="csr"), format="csr")
+    meta = dict(rig.meta)
+    meta["fold_repair"] = {"rounds": res.rounds, "flips_left": res.flips_left, "rows": res.smoothed_rows}
+    return replace(rig, moving=moving.astype(np.int64), matrix=s, meta=meta)
+
+
+def lip_columns(
+    rig: Rig,
+    landmarks: MouthLandmarks,
+    frame: FaceFrame,
+    *,
+    seam_pairs: np.ndarray | None = None,
+    column_width: float = 0.02,
+    band: float = 0.15,
+) -> np.ndarray:
+    """(k, 2) int64 (upper, lower) head vertices along the mouth that must never cross.
+
+    A cut lip seam gives its own pairs (``seam_pairs``, the two coincident sides). Otherwise the
+    mouth between the corners is split into columns ``column_width`` IOD wide along the face's x
+    axis; among the vertices within ``band`` IOD (vertically) of the inner-lip midpoints, those the
+    mouth-open parameter barely moves (< 20% of the most) are upper lip, those it moves most
+    (> 50%) lower lip, and each column pairs the lowest upper-lip vertex with the highest lower-lip
+    vertex (the two inner contours). The inner-lip landmarks are always a pair.
+    """
+    lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
+    if seam_pairs is not None and len(seam_pairs):
+        return np.unique(np.vstack([np.asarray(seam_pairs, dtype=np.int64), lm_pair]), axis=0)
+    v = np.asarray(rig.neutral, dtype=np.float64)
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    e = np.zeros(4)
+    e[2] = 1.0
+    drop = np.zeros(len(v))
+    drop[rig.moving] = -(rig.displacements(e).astype(np.float64) @ frame.axes[1]) / frame.iod
+    if drop.max() <= 0:
+        return lm_pair
+    x0, x1 = sorted((q[landmarks.corner_left, 0], q[landmarks.corner_right, 0]))
+    y_mid = 0.5 * (q[landmarks.upper_inner, 1] + q[landmarks.lower_inner, 1])
+    z_min = min(q[landmarks.corner_left, 2], q[landmarks.corner_right, 2]) - 0.3
+    box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < band) & (q[:, 2] > z_min)
+    upper = box & (drop < 0.2 * drop.max())
+    lower = box & (drop > 0.5 * drop.max())
+    col = np.floor((q[:, 0] - x0) / column_width).astype(np.int64)
+    pairs = [lm_pair[0]]
+    for c in np.unique(col[upper | lower]):
+        u = np.flatnonzero(upper & (col == c))
+        lo = np.flatnonzero(lower & (col == c))
+        if len(u) and len(lo):
+            a, b = u[np.argmin(q[u, 1])], lo[np.argmax(q[lo, 1])]
+            if q[a, 1] >= q[b, 1]:
+                pairs.append(np.array([a, b]))
+    return np.unique(np.array(pairs, dtype=np.int64), axis=0)
+
+
+def contact_spread(
+    rig: Rig, *, keep_apart: np.ndarray | None = None, reach: float = 0.1, iod: float = 1.0
+) -> sp.csr_matrix:
+    """CSR (n_moving, 2k) float32: how each lip column's push (:meth:`Rig.displacements`) spreads over
+    its lip, so the push bends the lip smoothly instead of moving one vertex (a fold). Column j < k is
+    the upper vertex of contact pair j, column k + j its lower vertex; each is the harmonic
+    extension (graph Laplacian, weights 1 / edge length) of 1 at that vertex and 0 at every other
+    contact vertex, at every vertex more than ``reach`` (head units: ``reach * iod``) along the mesh
+    from the contact line, and at vertices that never move. ``keep_apart``: the copies of a cut lip
+    seam (welded apart, so the two lips stay separate surfaces)."""
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.sparse.linalg import splu
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    h = np.asarray(rig.neutral, dtype=np.float64)
+    canon, welded = weld(h, keep_apart=keep_apart)
+    n_w = len(welded)
+    t_w = canon[np.asarray(rig.triangles, dtype=np.int64)]
+    c = canon[np.asarray(rig.contact, dtype=np.int64)]  # (k, 2) welded
+    k = len(c)
+    adj = vertex_adjacency(n_w, t_w).tocoo()
+    length = np.linalg.norm(welded[adj.row] - welded[adj.col], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(n_w, n_w))
+    boundary_vals = sp.csr_matrix(
+        (np.ones(2 * k), (np.concatenate([c[:, 0], c[:, 1]]), np.arange(2 * k))), shape=(n_w, 2 * k)
+    )
+    dist = dijkstra(g, indices=np.unique(c), min_only=True, limit=reach * iod)
+    moves = np.zeros(n_w, dtype=bool)
+    moves[canon[rig.moving]] = True
+    is_contact = np.zeros(n_w, dtype=bool)
+    is_contact[c.ravel()] = True
+    free = np.isfinite(dist) & moves & ~is_contact
+    fi = np.flatnonzero(free)
+    w = sp.csr_matrix((1.0 / length, (adj.row, adj.col)), shape=(n_w, n_w))
+    lap = sp.diags(np.asarray(w.sum(axis=1)).ravel()) - w
+    out = sp.lil_matrix(boundary_vals)
+    if len(fi):
+        l_ff = lap[fi][:, fi].tocsc() + sp.identity(len(fi), format="csc") * (1e-9 * float(w.data.mean()))
+        rhs = -(lap[fi] @ boundary_vals)
+        x = splu(l_ff).solve(np.asarray(rhs.todense()))
+        x[np.abs(x) < 1e-4] = 0.0
+        out[fi] = x
+    full = out.tocsr()[canon]  # texture-seam twins take their welded vertex's push
+    return full[np.asarray(rig.moving, dtype=np.int64)].astype(np.float32).tocsr()

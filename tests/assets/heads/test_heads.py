@@ -187,7 +187,10 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
     assert lips_connected(mesh.vertices, mesh.triangles, spec["upper_inner"], spec["lower_inner"])
     rig, rigged = rig_head(mesh, spec, head=builtin_head)
     assert rig.meta["lip_seam_cut"] > 5
-    copies = np.arange(len(mesh.vertices), len(rigged.vertices))
+    copies = np.arange(len(mesh.vertices), len(mesh.vertices) + rig.meta["lip_seam_cut"])
+    # A hollow head gets a still, dark mouth cavity behind the cut, appended after the copies.
+    assert rig.meta["mouth_cavity"] == len(rigged.vertices) - copies[-1] - 1
+    assert rigged.part_names[-1] == "mouth cavity"
     # Open the mouth: the copies (lower side of the seam) part from their originals.
     v = rig.deformed(np.array([0, 0, 0.1, 0]))
     n_orig = len(mesh.vertices)
@@ -200,6 +203,12 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
     assert gap.max() > 0.02 * rig.meta["iod"]
     v0 = rig.deformed(np.zeros(4))
     np.testing.assert_array_equal(v0[copies], v0[origin[copies]])
+    # The lips never pass through each other, even pressed far beyond speech.
+    up = rig.contact_up.astype(np.float64)
+    for p in ([-0.3, 0, 0, 0], [0, 0, -0.5, 0], [0.1, -0.3, -0.2, 0.1]):
+        vp = rig.deformed(np.array(p, dtype=np.float64)).astype(np.float64)
+        gap = (vp[rig.contact[:, 0]] - vp[rig.contact[:, 1]]) @ up
+        assert gap.min() >= -1e-6 * rig.meta["iod"]
 
 
 def test_cut_mouth_on_a_strip():

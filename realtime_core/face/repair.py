@@ -1,0 +1,114 @@
+"""Fold repair: smooth a rig's deformation field where it folds, until no test pose folds it.
+
+The harmonic field (:mod:`realtime_core.face.harmonic`) pins every control point to its simple
+vertex's motion. On a dense scan, control points a few vertices apart can carry motions that differ
+by a large fraction of the jaw opening (inner and outer lip surface, the chin crease, the edge of the
+moving region): the field is exact at the pins but the triangles between them fold. The cause is the
+pin, so the repair releases it locally: at each of the given poses (the rig checks' extreme poses)
+the flipped and over-stretched triangles are found, and the weight rows of their vertices and one
+ring around them are replaced by the mean of their mesh neighbours' rows (a Jacobi step of the
+uniform Laplacian, which evens out triangle shapes), round after round until no pose folds or the
+round limit is reached. The weights stay a sparse linear map (frames cost the same), and since they
+follow mesh edges a cut lip seam keeps the lips apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from realtime_core.face.projection import vertex_adjacency
+
+
+@dataclass(frozen=True)
+class RepairResult:
+    """weights (n_w, n_s) CSR after repair; rounds run; flips left at the worst pose; rows smoothed."""
+
+    weights: sp.csr_matrix
+    rounds: int
+    flips_left: int
+    smoothed_rows: int
+
+
+def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+
+
+def repair_folds(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    weights: sp.csr_matrix,
+    motions: np.ndarray,
+    *,
+    max_stretch: float = 3.0,
+    max_rounds: int = 200,
+    steps: int = 2,
+    fixed: np.ndarray | None = None,
+    grow_every: int = 15,
+) -> RepairResult:
+    """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
+
+    vertices (n, 3), triangles (m, 3) of a welded mesh (texture-seam twins merged, cut lip seams not);
+    motions (n_poses, n_s, 3) the simple-model displacement at each pose; max_stretch: edges stretched
+    beyond this ratio count as folds too; fixed (n,) bool rows never changed (rigid parts).
+    """
+    v0 = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    n = len(v0)
+    g = sp.csr_matrix(weights, dtype=np.float64)
+    adj = vertex_adjacency(n, t).tocsr()
+    adj.data[:] = 1.0
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    mean_op = sp.diags(1.0 / np.maximum(deg, 1)) @ adj
+    n0 = _normals(v0, t)
+    a0 = np.linalg.norm(n0, axis=1)
+    ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
+    ok_edge = l0 > 1e-9 * max(float(l0.max()), 1e-300)
+    frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
+    touched = np.zeros(n, dtype=bool)
+    stuck = np.zeros(n, dtype=np.int64)
+    worst = 0
+    rounds = 0
+    for rounds in range(1, max_rounds + 1):
+        bad = np.zeros(n, dtype=bool)
+        worst = 0
+        for m in motions:
+            v = v0 + (g @ m)
+            f = (np.einsum("ij,ij->i", n0, _normals(v, t)) < 0) & ok_tri
+            worst = max(worst, int(f.sum()))
+            bad[t[f].ravel()] = True
+            l1 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+            s = ok_edge & (l1 > max_stretch * l0)
+            bad[e[s].ravel()] = True
+        if not bad.any():
+            worst = 0
+            rounds -= 1
+            break
+        # One ring around the folded vertices, so the smoothed patch blends into its surroundings.
+        # A fold that survives local smoothing needs a wider patch: around each vertex, one more
+        # ring for every ``grow_every`` rounds it has been part of a fold (stubborn spots only, so
+        # the rest of the mouth keeps its motion).
+        stuck[bad] += 1
+        sel = bad.copy()
+        front = bad.copy()
+        level = 0
+        while front.any():
+            sel |= adj @ front.astype(np.float64) > 0
+            level += 1
+            front = sel & (stuck >= level * grow_every) if grow_every else np.zeros(n, dtype=bool)
+        sel &= ~frozen
+        if not sel.any():
+            break
+        touched |= sel
+        rows = np.flatnonzero(sel)
+        pick = sp.csr_matrix((np.ones(len(rows)), (rows, rows)), shape=(n, n))
+        keep = sp.diags((~sel).astype(np.float64))
+        for _ in range(steps):
+            g = (keep @ g + pick @ (mean_op @ g)).tocsr()
+        g.data[np.abs(g.data) < 1e-6] = 0.0
+        g.eliminate_zeros()
+    return RepairResult(weights=g.tocsr(), rounds=rounds, flips_left=worst, smoothed_rows=int(touched.sum()))
