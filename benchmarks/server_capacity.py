@@ -63,12 +63,15 @@ class CapacityConfig:
     workers: int = 0
 
 
-def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) -> None:
-    """Child process: open n sessions, wait for the viewers, stream in real time, report send times."""
-    from clients.client import IngestClient
+def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, stop=None) -> None:
+    """Child process: open n sessions, wait for the viewers (``go``), stream in real time, report
+    ``{"sent": (n, n_blocks) wall-clock send time of each block (NaN: never sent), "ended": frames
+    per session, "dropped": ingests the server closed}``. ``seconds``: the audio (speech-like, looped
+    past 20 s); ``stop``: an optional event that ends every session early (after its current block)."""
+    from clients.client import IngestClient, ServerClosed
 
-    pcm = speech_signal(seconds)
     step = int(round(BLOCK_S * RATE))
+    pcm = np.resize(speech_signal(min(seconds, 20.0)), int(seconds * RATE))
     n_blocks = -(-len(pcm) // step)
 
     async def main():
@@ -78,21 +81,31 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out) 
         ready.set()
         while not go.is_set():
             await asyncio.sleep(0.01)
-        sent = np.zeros((n, n_blocks))
+        sent = np.full((n, n_blocks), np.nan)
+        ended = [0] * n
+        dropped: list[dict] = []
         loop = asyncio.get_running_loop()
         t0 = loop.time() + 0.2
 
         async def one(j: int, c: IngestClient) -> None:
             offset = j * BLOCK_S / max(n, 1)  # stagger sessions across a block
-            async for i, block in paced_blocks(pcm, RATE, block_s=BLOCK_S, start=t0, offset_s=offset):
-                await c.send(block)
-                sent[j, i // step] = time.time()
-            await c.end()
+            try:
+                async for i, block in paced_blocks(pcm, RATE, block_s=BLOCK_S, start=t0, offset_s=offset):
+                    if stop is not None and stop.is_set():
+                        break
+                    await c.send(block)
+                    sent[j, i // step] = time.time()
+                ended[j] = (await c.end())["frames"]
+            except ServerClosed as exc:  # one ingest lost: reported (its missing frames count as lost)
+                dropped.append(
+                    {"session": j, "after_s": round(loop.time() - t0, 1), "code": exc.code, "reason": exc.reason}
+                )
+                ended[j] = -1
 
         await asyncio.gather(*(one(j, c) for j, c in enumerate(clients)))
         for c in clients:
             await c.__aexit__(None, None, None)
-        return sent
+        return {"sent": sent, "ended": ended, "dropped": dropped}
 
     out.put(("ingest", asyncio.run(main())))
 
@@ -122,6 +135,76 @@ def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: 
     out.put(("viewers", asyncio.run(main())))
 
 
+class ClientProcesses:
+    """The benchmark's clients in two child processes of their own (so that a client falling
+    behind on a loaded machine is not measured as server latency): one ingest process streaming
+    ``n`` real-time sessions named ``prefix0..``, one viewer process attaching ``n_params``
+    parameter and ``n_deltas`` vertex viewers round-robin over them (and over ``view_urls``, the
+    nodes of a cluster). Streaming starts 0.2 s after the viewers are attached; ``stop`` (set by
+    ``stop()``) ends the sessions early."""
+
+    def __init__(
+        self,
+        url: str,
+        prefix: str,
+        n: int,
+        n_params: int,
+        n_deltas: int,
+        seconds: float,
+        *,
+        view_urls: list[str] | None = None,
+    ) -> None:
+        ctx = mp.get_context("spawn")
+        self.ready, self.viewers_ready, self._stop, self.out = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Queue()
+        self._got: dict = {}
+        self.ingest = ctx.Process(
+            target=_ingest_proc, args=(url, prefix, n, seconds, self.ready, self.viewers_ready, self.out, self._stop)
+        )
+        self.viewers = ctx.Process(
+            target=_viewer_proc,
+            args=(view_urls or [url], prefix, n, n_params, n_deltas, self.ready, self.viewers_ready, self.out),
+        )
+        self.ingest.start()
+        self.viewers.start()
+
+    def wait_viewers(self, timeout: float = 300) -> None:
+        if not self.viewers_ready.wait(timeout=timeout):
+            raise RuntimeError(f"viewers did not attach within {timeout:g} s")
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _wait(self, key: str, timeout: float):
+        while key not in self._got:
+            k, value = self.out.get(timeout=timeout)
+            self._got[k] = value
+        return self._got[key]
+
+    def ingest_done(self) -> bool:
+        """Whether the ingest process has reported (every session ended), without blocking."""
+        import queue
+
+        try:
+            while "ingest" not in self._got:
+                k, value = self.out.get_nowait()
+                self._got[k] = value
+        except queue.Empty:
+            return False
+        return True
+
+    def ingest_result(self, timeout: float) -> dict:
+        """``{"sent", "ended", "dropped"}`` of ``_ingest_proc`` (blocks until the sessions ended)."""
+        result = self._wait("ingest", timeout)
+        self.ingest.join()
+        return result
+
+    def viewer_result(self, timeout: float = 300) -> list:
+        """Per viewer ``(kind, session, node, index, received, sent)`` of ``_viewer_proc``."""
+        result = self._wait("viewers", timeout)
+        self.viewers.join()
+        return result
+
+
 def _step(
     server: ServerProcess,
     model,
@@ -132,31 +215,16 @@ def _step(
     seconds: float,
     view_urls: list[str] | None = None,
 ) -> dict:
-    url = server.url
-    view_urls = view_urls or [url]
-    ctx = mp.get_context("spawn")
-    ready, viewers_ready, out = ctx.Event(), ctx.Event(), ctx.Queue()
-    prefix = f"cap{step_no}_"
-    ing = ctx.Process(target=_ingest_proc, args=(url, prefix, n, seconds, ready, viewers_ready, out))
-    view = ctx.Process(target=_viewer_proc, args=(view_urls, prefix, n, n_params, n_deltas, ready, viewers_ready, out))
-    ing.start()
-    view.start()
+    clients = ClientProcesses(server.url, f"cap{step_no}_", n, n_params, n_deltas, seconds, view_urls=view_urls)
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
     # later) to the ingest's report (all sessions ended).
-    if not viewers_ready.wait(timeout=300):
-        raise RuntimeError("viewers did not attach within 300 s")
+    clients.wait_viewers()
     cpu0, t0 = server.cpu_seconds(), time.monotonic()
-    got = {}
-    while "ingest" not in got:
-        key, value = out.get(timeout=seconds + 300)
-        got[key] = value
+    sent = clients.ingest_result(timeout=seconds + 300)["sent"]
     cpu1, t1 = server.cpu_seconds(), time.monotonic()
-    while "viewers" not in got:
-        key, value = out.get(timeout=300)
-        got[key] = value
-    ing.join()
-    view.join()
-    sent = got["ingest"]
+    got = {"viewers": clients.viewer_result()}
+    url = server.url
+    view_urls = view_urls or [url]
     mf = model.frontend.mfcc
     d = model.frontend.tc
     step = int(round(BLOCK_S * RATE))

@@ -22,6 +22,7 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.expressions import EXPRESSION_RECIPES, EXPRESSIONS, apply_expression
 from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.motion_units import ExpressionUnits, MotionUnits, analyse, compose, fit_expression_units
+from training.facetrack import LIPS_INNER, LIPS_OUTER
 from training.motion_units import Clip
 
 NAMED = (
@@ -59,11 +60,34 @@ def head_correspondence(neutral: np.ndarray, indices: Sequence[int], head, mp_la
     r2 = float(((c - c.mean(0)) ** 2).sum(1).mean())
     k = np.exp(-((c[:, None] - c[None]) ** 2).sum(-1) / r2)
     coef = np.linalg.solve(k + 1e-9 * np.eye(len(c)), dst - c)
-    pts = placed[list(indices)]
+    idx = list(indices)
+    pts = placed[idx]
     pts = pts + np.exp(-((pts[:, None] - c[None]) ** 2).sum(-1) / r2) @ coef
     skin = np.flatnonzero(head.part == 0)
-    _, nearest = cKDTree(head.mesh.vertices[skin]).query(pts)
-    return skin[nearest], sim
+    # A lip landmark takes the nearest vertex *of its own lip*. At rest the lips touch, so the nearest
+    # skin vertex of an inner-lip point is as often on the other lip: unconstrained, two of the three
+    # pairs that measure the lip gap (LIP_GAP_PAIRS) landed on one lip (one pair on one vertex), and
+    # the jaw drop that parts the lips on the head barely parted them on the speaker. Which lip a head
+    # vertex belongs to is read with the head's own jaw fully open (jawOpen = 1), where the lips are
+    # far apart: above or below the line through the open mouth's corners and inner-lip midpoint (at
+    # rest the lips' meeting line is curved and no straight line splits them).
+    v = head.mesh.vertices[skin]
+    opened = head.mesh.vertices + head.targets["jawOpen"]
+    corners = sorted((opened[head.landmarks[n]] for n in ("corner_right", "corner_left")), key=lambda p: p[0])
+    mid = 0.5 * (opened[head.landmarks["upper_inner"]] + opened[head.landmarks["lower_inner"]])
+    o = opened[skin]
+    line_y = np.interp(o[:, 0], [corners[0][0], mid[0], corners[1][0]], [corners[0][1], mid[1], corners[1][1]])
+    above = o[:, 1] > line_y
+    upper = set(LIPS_OUTER[11:]) | set(LIPS_INNER[11:])
+    lower = set(LIPS_OUTER[1:10]) | set(LIPS_INNER[1:10])
+    out = np.empty(len(idx), dtype=np.int64)
+    for side, pool in ((upper, above), (lower, ~above), (None, np.ones(len(v), bool))):
+        rows = [j for j, i in enumerate(idx) if (i in side if side is not None else i not in upper | lower)]
+        if rows:
+            cand = np.flatnonzero(pool)
+            _, nearest = cKDTree(v[cand]).query(pts[rows])
+            out[rows] = skin[cand[nearest]]
+    return out, sim
 
 
 def carried(head, verts: np.ndarray, sim, weights: Mapping[str, float]) -> np.ndarray:
@@ -150,20 +174,51 @@ def mouth_jacobian(neutral: np.ndarray, indices: Sequence[int], eps: float = 1e-
     return out
 
 
-def expression_stage(name: str, weights, mu: MotionUnits, ex: ExpressionUnits, jacobian: np.ndarray):
-    """The run-time :class:`realtime_core.mapping.expression.ExpressionStage` of a fitted second stage."""
+def emu_readout(
+    neutral: np.ndarray, indices: Sequence[int], ex: ExpressionUnits, emups: np.ndarray, *, n_samples: int = 4000
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(P (4, Ak), q (4,))``: the four mouth parameters' change made by the EMU deformation
+    ``m_k0 + M_k c_k`` of the speaker's rest face ``neutral (468, 3)``, as an affine least-squares fit of
+    the parameters really measured (:func:`training.video.mouth_params`) over the EMUPs ``emups (T, Ak)`` of
+    the expressive training frames (at most ``n_samples`` of them, evenly spaced).
+
+    Not the Jacobian at rest (:func:`mouth_jacobian`): mouth_open is a distance between inner-lip points
+    that touch at rest, where its gradient points along whatever tiny offset the lips happen to have; a
+    jaw drop moving the lower lip down and back read through it changed the gap by -0.05 IOD where the
+    measured gap grows by +0.11. The secant over the expression's own range has no such singularity."""
+    from training.video import mouth_params
+
+    c = np.asarray(emups, dtype=np.float64)
+    c = c[np.linspace(0, len(c) - 1, min(n_samples, len(c))).astype(int)]
+    base = np.asarray(neutral, dtype=np.float64)
+    lm = np.repeat(base[None], len(c), axis=0)
+    lm[:, list(indices)] += ex.basis.reconstruct(c).reshape(len(c), -1, 3)
+    p = mouth_params(lm, base)
+    a = np.hstack([c, np.ones((len(c), 1))])
+    coef, *_ = np.linalg.lstsq(a, p, rcond=None)
+    return coef[:-1].T, coef[-1]
+
+
+def expression_stage(
+    name: str,
+    weights,
+    mu: MotionUnits,
+    ex: ExpressionUnits,
+    jacobian: np.ndarray | None = None,
+    *,
+    emu: tuple[np.ndarray, np.ndarray] | None = None,
+):
+    """The run-time :class:`realtime_core.mapping.expression.ExpressionStage` of a fitted second stage; the
+    EMUPs' effect on the four parameters is ``emu`` (:func:`emu_readout`) or else ``jacobian (4, 3 L)`` read
+    on the EMUs (``J M_k``, ``J m_k0``)."""
     from realtime_core.mapping import ExpressionStage
 
+    if emu is None:
+        if jacobian is None:
+            raise ValueError("expression_stage needs a jacobian or an emu readout")
+        emu = (jacobian @ ex.basis.units.T, jacobian @ ex.basis.mean)
     w1, b1, w2, b2 = weights
-    return ExpressionStage(
-        name=name,
-        w1=w1,
-        b1=b1,
-        w2=w2,
-        b2=b2,
-        emu_params=jacobian @ ex.basis.units.T,
-        emu_bias=jacobian @ ex.basis.mean,
-    )
+    return ExpressionStage(name=name, w1=w1, b1=b1, w2=w2, b2=b2, emu_params=emu[0], emu_bias=emu[1])
 
 
 def second_stage_predict(weights, x: np.ndarray) -> np.ndarray:

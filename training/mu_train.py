@@ -257,6 +257,50 @@ def train_and_score(root, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say:
     return report
 
 
+def refit_expression_stages(
+    root, mapper_path: Path, out: Path, cfg: MuTrainConfig, *, cache_dir=None, say: Say = print
+) -> dict:
+    """Refit only the second stages (Sec. VI-B) of a mapper ``facecast mu`` trained, on the same data and
+    settings, and write ``out/mlp_mapper.npz`` (the mapper with its new stages) and
+    ``out/expressions.json`` (the ``expressions`` section of the report, the MLP mapper only).
+
+    The speech bank is kept bit for bit; the Utterance MUs and the UMUP readout are refitted exactly as
+    :func:`train_and_score` fits them and must equal the readout the file carries (else the file was not
+    trained on these clips and settings: refused)."""
+    from assets.modelfile import load_mlp_model
+    from realtime_core.mapping import ExpressionMapper
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    model = load_mlp_model(mapper_path)
+    clips = load_clips(root, cache_dir=cache_dir, limit=cfg.limit, skipped=[])
+    train = of_split(clips, "train")
+    mu = fit_motion_units(
+        np.concatenate([c.deform for c in train]).astype(np.float64), n_units=cfg.units, min_variance=cfg.variance
+    )
+    clips = with_features(clips, model.frontend, model.cmvn_mean, model.cmvn_var)
+    train, test = of_split(clips, "train"), of_split(clips, "test")
+    _, y_tr = _mups_of(train, mu)
+    readout = fit_readout(y_tr, np.concatenate([c.params for c in train]))
+    if model.expressions is not None and not (
+        model.expressions.readout.shape == readout[0].shape
+        and np.allclose(model.expressions.readout, readout[0], atol=1e-6)
+        and np.allclose(model.expressions.readout_bias, readout[1], atol=1e-6)
+    ):
+        raise ConfigError(f"{mapper_path}: its UMUP readout differs from the one refitted on these clips and settings")
+    scale = displacement_scale(train)
+    m = MlpMapper(model.bank)
+    ests = {"mlp": {"train": mlp_estimates(m, train), "test": mlp_estimates(m, test)}}
+    report, stages = _expressions(clips, train, test, mu, scale, readout, ests, root, say)
+    model = replace(
+        model, expressions=ExpressionMapper(readout=readout[0], readout_bias=readout[1], stages=stages["mlp"])
+    )
+    atomic_write_bytes(out / "mlp_mapper.npz", encode_mlp_model(model))
+    atomic_write_bytes(out / "expressions.json", json.dumps(report, indent=1).encode())
+    say(f"{out / 'mlp_mapper.npz'}: second stages for {', '.join(stages['mlp'])} refitted; bank unchanged")
+    return report
+
+
 BANDS = (0.0, 0.01, 0.02, 0.03, 0.04, 0.05)
 
 
@@ -293,12 +337,12 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
     from training.mu_expressions import (
         closure_rate,
         closure_windows,
+        emu_readout,
         expression_deformations,
         expression_stage,
         expressive,
         fit_second_stage,
         fit_units,
-        mouth_jacobian,
         reconstruct,
         second_stage_predict,
         under_expression,
@@ -352,8 +396,6 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
         "keyframe_round_trip": round_trip,
         "delta_rms_iod": {e: float(np.sqrt(np.mean(deltas[e] ** 2))) for e in EXPRESSIONS},
     }
-    # The four mouth parameters' Jacobian at the speaker's rest face: what an EMU does to them at run time.
-    jac = mouth_jacobian(neutral, mu_landmark_indices())
     stages: dict[str, dict] = {name: {} for name in ests}
     for e in EXPRESSIONS:
         tr_k, te_k = expressive(train, deltas[e]), expressive(test, deltas[e])
@@ -368,11 +410,13 @@ def _expressions(clips, train, test, mu, scale, readout, ests, root, say: Say) -
             "train": {},
             "test": {},
         }
+        # The EMUs' effect on the four parameters as measured at the speaker's rest face (see emu_readout).
+        emu = emu_readout(neutral, mu_landmark_indices(), ex, ex.basis.project(r))
         for name, est in ests.items():
             weights = fit_second_stage(
                 np.concatenate(est["train"]), mu, ex, np.concatenate([c.deform for c in tr_k]).astype(np.float64)
             )
-            stage = expression_stage(e, weights, mu, ex, jac)
+            stage = expression_stage(e, weights, mu, ex, emu=emu)
             stages[name][e] = stage
             for split, cl, e_list in (("train", tr_k, est["train"]), ("test", te_k, est["test"])):
                 c_in = np.concatenate(e_list)

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
+import scipy.sparse as sp
 
 from assets.heads.mesh import HeadMesh
 
@@ -118,4 +119,10 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
     rows = (3 * src_row[moving][:, None] + np.arange(3)).reshape(-1)
     counts = {k: int((labels == k).sum()) for k in ("skull", "jaw") if (labels == k).any()}
     meta = {**rig.meta, "rigid_parts": counts, "jaw_anchor": int(anchor)}
-    return replace(rig, moving=moving.astype(np.int64), matrix=rig.matrix[rows], meta=meta)
+    spread = rig.contact_spread
+    if spread is not None:
+        # The lip-contact push is a correction of the lips' own surface: a part that follows the
+        # jaw rigidly takes none of it (it would bend the teeth with the lips).
+        own = (labels[moving] == "").astype(np.float32)
+        spread = sp.diags(own) @ spread[src_row[moving]]
+    return replace(rig, moving=moving.astype(np.int64), matrix=rig.matrix[rows], meta=meta, contact_spread=spread)

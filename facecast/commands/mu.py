@@ -50,6 +50,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--hmm-iters", type=int, default=20, help="Baum-Welch iterations")
     p.add_argument("--limit", type=int, default=None, help="use only the first N sentences (quick runs)")
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice")
+    p.add_argument(
+        "--stages-only",
+        type=Path,
+        default=None,
+        metavar="MAPPER",
+        help="refit only the expression second stages of MAPPER (an mlp_mapper.npz this command wrote, same data "
+        "and settings); its speech bank is kept. Writes OUT/mlp_mapper.npz and OUT/expressions.json",
+    )
     p.set_defaults(run=run)
 
 
@@ -68,6 +76,11 @@ def run(args: argparse.Namespace) -> int:
         limit=args.limit,
         seed=args.seed,
     )
+    if args.stages_only is not None:
+        from training.mu_train import refit_expression_stages
+
+        refit_expression_stages(args.root, args.stages_only, args.out, cfg, cache_dir=args.cache_dir, say=print)
+        return 0
     report = train_and_score(args.root, args.out, cfg, cache_dir=args.cache_dir, say=print)
     print(f"wrote {args.out}: K = {report['chosen_classes']}, test R mlp {report['test']['mlp']['R']:.3f}")
     return 0

@@ -9,9 +9,10 @@ as the expression changes them, and the Expression MUPs of eq. 2. Both are turne
 parameters every output of facecast speaks:
 
 * ``c'_0`` through the same affine UMUP readout as the speech (``R c + r``, fitted on the train frames);
-* ``c_k`` through ``P_k c_k + q_k`` = ``J (M_k c_k + m_k0)``: the Expression MUs' landmark
-  displacements read by ``J``, the Jacobian of the four parameters' landmark definitions at the
-  speaker's neutral face (the EMUs live outside the UMUs' span, where the UMUP readout sees nothing).
+* ``c_k`` through ``P_k c_k + q_k``: the four parameters the Expression MUs' landmark displacement
+  ``M_k c_k + m_k0`` makes at the speaker's neutral face (fitted by training over the expression's
+  range, ``training.mu_expressions.emu_readout``; the EMUs live outside the UMUs' span, where the UMUP
+  readout sees nothing).
 
 The expression's change of the four parameters in a frame is then
 ``delta_k = R (c'_0 - c_0) + P_k c_k + q_k``, and a session at intensities ``alpha_k`` (eq. 2's

@@ -158,3 +158,20 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
     assert main(args) == 0
     assert out.is_file() and out.stat().st_size > 1000
     assert f"{len(t)} frames at 30 fps" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_mu_stages_only_refuses_a_mapper_trained_on_other_clips(tmp_path, shared_data, capsys):
+    """`facecast mu --stages-only` keeps the speech bank and refits only the second stages, so the Utterance MUs
+    it refits must be the ones the bank was trained on: on 30 sentences they are not, and the shipped
+    mapper is refused by name, with nothing written."""
+    import assets
+    from tests.prerequisites import require_data
+
+    root = require_data("video/grid_s1")
+    shipped = Path(assets.__file__).parent / "data" / "mlp_mapper.npz"
+    out = tmp_path / "out"
+    rc = main(["mu", "--root", str(root), "--limit", "30", "--stages-only", str(shipped), "-o", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "mlp_mapper.npz" in err and "UMUP readout differs" in err, err
+    assert not (out / "mlp_mapper.npz").exists()

@@ -119,14 +119,7 @@ def test_each_expression_moves_the_mouth_corners_of_the_builtin_head(name: str) 
     assert moved.min() >= 0.02, (name, moved)
 
 
-KNOWN_SMALL = pytest.mark.xfail(
-    strict=True,
-    reason="surprise's second stage opens the lips by 0.016 IOD (0.101 on the head): the carried jawOpen loses "
-    "the inner-lip gap in the head-to-speaker correspondence, so the corners move 0.011 IOD (docs/accuracy.md)",
-)
-
-
-@pytest.mark.parametrize("name", [pytest.param(e, marks=KNOWN_SMALL) if e == "surprise" else e for e in EXPRESSIONS])
+@pytest.mark.parametrize("name", EXPRESSIONS)
 def test_the_shipped_mlp_mappers_second_stages_move_the_mouth_corners(name: str) -> None:
     """The shipped MLP mapper carries paper 002's second stage for every expression, and what it does
     at run time (Upsilon_k of the frame's UMUPs) is visible on the built-in head: the mouth corners of

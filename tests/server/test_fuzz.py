@@ -197,3 +197,65 @@ def test_fuzz_ingest_and_view_against_a_live_server(model, fuzz_server):
     print(f"fuzz: {done} conversations; closes by code {metrics['closes']}")
     assert "1011" not in metrics["closes"], metrics["closes"]
     assert fuzz_server.srv.sessions == {}
+
+
+def test_hostile_sender_of_the_soak_benchmark_is_answered_by_documented_refusals(model, fuzz_server):
+    """The soak benchmark's hostile sender against a live server while a healthy session streams:
+    every invalid control it pipelines is answered without closing, every closing message gets a
+    documented close code (the server's own tally holds at least what the client saw), refused
+    requests get an HTTP status, and the healthy session loses no frame."""
+    from benchmarks.server_soak import HostileTally, hostile_traffic
+
+    url = fuzz_server.url
+    before = dict(fuzz_server.srv.metrics()["closes"])
+    pcm = np.rint(speechlike(10.0, 16000, seed=22) * 32767).astype(np.int16)
+    ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
+    tally = HostileTally()
+    target = 400
+
+    async def run():
+        async with IngestClient(url, session="calm", sample_rate_hz=16000) as ing:
+            async with ViewerClient(url, session="calm", audio=False) as view:
+                collect = asyncio.ensure_future(view.collect())
+                t_stop = time.monotonic() + 6.0  # the sender stops at the target or after 6 s of the 10 s of audio
+
+                def stop() -> bool:
+                    return sum(tally.answered.values()) >= target or time.monotonic() > t_stop
+
+                hostile = asyncio.ensure_future(hostile_traffic(url, ["calm"], stop=stop, tally=tally, workers=4))
+                await stream_samples(ing, pcm, realtime=True, block_s=0.02)
+                ended = await ing.end()
+                await hostile
+                return ended, await collect
+
+    ended, got = asyncio.run(run())
+    report = tally.report()
+    print(f"hostile sender: {report}")
+    assert ended["frames"] == len(ref)
+    assert [m.index for m in got.frames] == list(range(len(ref)))  # the healthy session lost no frame
+    assert report["answered"] >= 100, report  # the sender did real work while the session streamed
+    assert set(report["answered_by_scenario"]) == {
+        "ingest_controls",
+        "ingest_first",
+        "viewer_controls",
+        "viewer_query",
+        "bad_request",
+    }
+    assert report["connections_unanswered"] == {}, report["connections_unanswered"]
+    codes = {int(k): v for k, v in report["close_codes"].items()}
+    assert set(codes) <= DOCUMENTED, codes
+    statuses = set(report["http_status"]) - {"closed without a status"}
+    assert statuses <= {"400", "403", "404", "414", "426", "429", "431"}, statuses
+    after = fuzz_server.srv.metrics()["closes"]
+    assert "1011" not in after, after
+    server_side = {int(k): v - before.get(k, 0) for k, v in after.items()}
+    for code in (
+        P.CLOSE_UNSUPPORTED_DATA,
+        P.CLOSE_INVALID_PAYLOAD,
+        P.CLOSE_POLICY,
+        P.CLOSE_NOT_FOUND,
+        P.CLOSE_BAD_REQUEST,
+    ):
+        assert codes.get(code, 0) <= server_side.get(code, 0), (code, codes, server_side)
+    # Each pipelined invalid control got its own reply and each connection's last message its close.
+    assert report["answered_by_scenario"] == report["sent_by_scenario"]

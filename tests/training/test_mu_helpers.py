@@ -38,6 +38,94 @@ def test_head_correspondence_lands_on_the_heads_own_landmarks(shared_data: Path,
     assert sim.scale > 0
 
 
+def test_carried_jaw_drop_parts_the_speakers_lips_as_it_parts_the_heads(shared_data: Path, builtin_head) -> None:
+    """Each inner-lip landmark takes a vertex of its own lip: the head's jawOpen carried onto the canonical
+    face opens its lip gap (the mean of the three gap pairs, IOD) as much as it opens the head's at its
+    own named inner-lip vertices, to within a quarter. (Matched to the nearest vertex of either lip, two
+    of the three pairs of the GRID speaker's rest face landed on one lip, and its carried gap was a
+    sixth of the head's.)"""
+    from assets.heads.landmarks import read_landmarks
+    from assets.heads.mesh import load_mesh
+    from realtime_core.face import MouthLandmarks, face_frame
+    from training.facetrack import LIP_GAP_PAIRS, LIPS_INNER, MU_LANDMARKS
+    from training.mu_expressions import carried
+    from training.video import lip_gap
+
+    canon = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj").vertices
+    mp = {
+        k: int(v)
+        for k, v in read_landmarks(
+            Path(assets.__file__).parent / "heads" / "landmarks" / "mediapipe_canonical.json"
+        ).items()
+    }
+    head = builtin_head
+    lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    iod_head = face_frame(head.mesh.vertices, lm).iod
+    # eye centres, as face_frame measures the IOD
+    iod_canon = float(np.linalg.norm(canon[[33, 133]].mean(0) - canon[[362, 263]].mean(0)))
+    face = canon / iod_canon
+    idx = list(MU_LANDMARKS)
+    verts, sim = head_correspondence(face, idx, head, mp)
+    pos = {v: i for i, v in enumerate(idx)}
+    for a, b in LIP_GAP_PAIRS:
+        assert verts[pos[a]] != verts[pos[b]]
+    # The head's jaw carries its lower lip, not its upper: away from the corners, every upper inner-lip
+    # landmark's vertex moves with jawOpen less than every lower one's (unconstrained matching put two
+    # upper inner-lip points of this face on the lower lip).
+    jaw = np.linalg.norm(head.targets["jawOpen"][verts], axis=1)
+    upper_moves = jaw[[pos[i] for i in LIPS_INNER[12:19]]]
+    lower_moves = jaw[[pos[i] for i in LIPS_INNER[2:9]]]
+    assert upper_moves.max() < lower_moves.min(), (upper_moves, lower_moves)
+    w = 0.2
+    opened = face.copy()
+    opened[idx] += carried(head, verts, sim, {"jawOpen": w}).reshape(-1, 3)
+    speaker = float(lip_gap(opened[None])[0] - lip_gap(face[None])[0])
+    hv = head.mesh.vertices
+    u, d = head.landmarks["upper_inner"], head.landmarks["lower_inner"]
+    on_head = (
+        np.linalg.norm(hv[u] + w * head.targets["jawOpen"][u] - hv[d] - w * head.targets["jawOpen"][d])
+        - np.linalg.norm(hv[u] - hv[d])
+    ) / iod_head
+    assert on_head > 0.05
+    assert speaker == pytest.approx(on_head, rel=0.25), (speaker, on_head)
+
+
+def test_emu_readout_is_the_measured_change_of_the_parameters() -> None:
+    """The affine EMUP -> mouth-parameter map reproduces :func:`training.video.mouth_params` of the EMU
+    deformation, and a jaw drop from touching lips opens the mouth (positive mouth_open), which the
+    Jacobian at rest cannot promise (the gap's gradient there points along the lips' tiny offset)."""
+    from realtime_core.motion_units import fit_expression_units, fit_motion_units
+    from training.facetrack import LIP_GAP_PAIRS, MU_LANDMARKS
+    from training.mu_expressions import emu_readout, mouth_jacobian
+    from training.video import mouth_params
+
+    rng = np.random.default_rng(3)
+    face = rng.standard_normal((468, 3)) * 0.3
+    face[61], face[291] = (-0.4, 1.0, 0.0), (0.4, 1.0, 0.0)
+    for a, b in LIP_GAP_PAIRS:
+        face[b] = face[a] + (0.0, 1e-4, -1e-4)  # touching lips, the lower a hair above and behind
+    idx = list(MU_LANDMARKS)
+    pos = {v: i for i, v in enumerate(idx)}
+    speech = rng.standard_normal((400, 3 * len(idx))) * 0.01
+    mu = fit_motion_units(speech, n_units=4)
+    drop = np.zeros(3 * len(idx))
+    for b in (14, 87, 317, 17, 84, 314):
+        drop[3 * pos[b] + 1] = -0.1  # the lower lip down (y up)
+    frames = speech[:300] + rng.uniform(0.2, 1.0, (300, 1)) * drop
+    ex = fit_expression_units(mu, frames, name="surprise", n_units=2)
+    c = ex.basis.project(mu.residual(frames))
+    p, q = emu_readout(face, idx, ex, c)
+    assert p.shape == (4, 2) and q.shape == (4,)
+    lm = np.repeat(face[None], len(c), axis=0)
+    lm[:, idx] += ex.basis.reconstruct(c).reshape(len(c), -1, 3)
+    measured = mouth_params(lm, face)
+    fitted = c @ p.T + q
+    assert np.mean(measured[:, 2]) > 0.05
+    np.testing.assert_allclose(fitted[:, 2], measured[:, 2], atol=0.01)
+    jac = mouth_jacobian(face, idx)  # at rest the gap grows along the lips' offset (up): a drop reads as closing
+    assert np.mean((ex.basis.reconstruct(c) @ jac.T)[:, 2]) < 0
+
+
 def test_closure_windows_and_rate() -> None:
     words = [(0.0, 0.5, "sil"), (0.5, 0.8, "bin"), (0.8, 1.0, "red"), (1.0, 1.3, "please")]
     w = closure_windows(words)
