@@ -70,13 +70,7 @@ class AvModel:
             )
         if len(self.visual_names) != self.hmm.n_visual:
             raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.hmm.n_visual} visual dims")
-        for name in ("cmvn_mean", "cmvn_var"):
-            arr = np.asarray(getattr(self, name), dtype=np.float64)
-            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
-                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
-            object.__setattr__(self, name, arr)
-        if np.any(self.cmvn_var <= 0):
-            raise ModelFormatError("cmvn_var must be positive")
+        validate_cmvn(self)
         if not 0 < self.likelihood_scale <= 1:
             raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
         if not 0 <= self.closure_band <= 0.1:
@@ -129,6 +123,18 @@ class AvModel:
     def output_stage(self) -> OutputStage:
         """The closed-pose floor and closure band applied to every estimate (:mod:`realtime_core.output`)."""
         return OutputStage(self.visual_floor, self.closure_band)
+
+
+def validate_cmvn(model: Any) -> None:
+    """Check and store a speech model's ``cmvn_mean``/``cmvn_var`` as finite ``(n_feat,)`` float64
+    (variance positive), for every model kind that carries the front end's CMVN statistics."""
+    for name in ("cmvn_mean", "cmvn_var"):
+        arr = np.asarray(getattr(model, name), dtype=np.float64)
+        if arr.shape != (model.frontend.n_feat,) or not np.all(np.isfinite(arr)):
+            raise ModelFormatError(f"{name} must be finite with shape ({model.frontend.n_feat},), got {arr.shape}")
+        object.__setattr__(model, name, arr)
+    if np.any(model.cmvn_var <= 0):
+        raise ModelFormatError("cmvn_var must be positive")
 
 
 def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:

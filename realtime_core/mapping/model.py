@@ -28,6 +28,7 @@ from realtime_core.avmodel import (
     frontend_to_json,
     npz_arrays,
     npz_bytes,
+    validate_cmvn,
 )
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
 from realtime_core.features import FrontEnd, FrontEndConfig
@@ -69,13 +70,7 @@ class MlpSpeechModel:
             raise ModelFormatError(f"MLP input width {self.bank.n_audio} != the front end's {self.frontend.audio_dim}")
         if len(self.visual_names) != self.bank.n_visual:
             raise ModelFormatError(f"{len(self.visual_names)} visual names for {self.bank.n_visual} outputs")
-        for name in ("cmvn_mean", "cmvn_var"):
-            arr = np.asarray(getattr(self, name), dtype=np.float64)
-            if arr.shape != (self.frontend.n_feat,) or not np.all(np.isfinite(arr)):
-                raise ModelFormatError(f"{name} must be finite with shape ({self.frontend.n_feat},), got {arr.shape}")
-            object.__setattr__(self, name, arr)
-        if np.any(self.cmvn_var <= 0):
-            raise ModelFormatError("cmvn_var must be positive")
+        validate_cmvn(self)
 
     @property
     def sample_rate_hz(self) -> int:
