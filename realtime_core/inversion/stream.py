@@ -147,6 +147,8 @@ class StreamingInverter:
             self._forward_step = compiled.forward_step
             self._combine_step = compiled.combine_step
             self._filter_rows = compiled.filter_rows
+            # The model's arrays every compiled forward step takes, in the kernels' order (fixed per inverter).
+            self._step_model = (self._center, self._quad, self._const, self._i0, self._i1, self._feat, self._A)
             self._forward = self._forward_compiled  # type: ignore[method-assign]
             self._combine = self._combine_compiled  # type: ignore[method-assign]
         self.reset()
@@ -229,13 +231,7 @@ class StreamingInverter:
         prev = self._f
         f, stop = self._filter_rows(
             oa,
-            self._center,
-            self._quad,
-            self._const,
-            self._i0,
-            self._i1,
-            self._feat,
-            self._A,
+            *self._step_model,
             self._start if prev is None else prev,
             prev is not None,
             self._start,
@@ -260,13 +256,7 @@ class StreamingInverter:
         prev = self._f
         f, b, mix, a = self._forward_step(
             row,
-            self._center,
-            self._quad,
-            self._const,
-            self._i0,
-            self._i1,
-            self._feat,
-            self._A,
+            *self._step_model,
             self._start if prev is None else prev,
             prev is not None,
             self._start,
