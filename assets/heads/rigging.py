@@ -165,11 +165,14 @@ def cut_mouth(
     uvs: np.ndarray | None = None,
     *,
     through: int | None = None,
+    reach: float = 0.25,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
     indices) that stays closest to the straight corner-to-corner line (passing through the vertex
-    ``through`` if given, e.g. the inner-lip midpoint) is cut open. Interior path vertices are
-    duplicated and the triangles below the path (along ``up`` (3,)) take the copies.
+    ``through`` if given, e.g. the inner-lip midpoint) is cut open: within ``reach`` (a fraction of
+    the corner-to-corner distance, along the mesh) of the path, the faces below the mouth surface
+    (the path swept along the depth; below along ``up`` (3,)) take copies of every vertex they share
+    with faces above it, so the two lips become separate surfaces (see :func:`_lower_faces`).
     Returns new vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
@@ -207,25 +210,99 @@ def cut_mouth(
         return v, t, uvs, np.arange(len(v))
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
-    side_ax = ab / length
-    pp = v[path]
-    new_index = {vi: len(v) + k for k, vi in enumerate(interior)}
-    on_path = set(interior)
-    for f_i, f in enumerate(t):
-        hits = [vi for vi in f if vi in on_path]
-        if not hits:
-            continue
-        c = v[f].mean(0)
-        # Height of the path at the centroid's position along the mouth line.
-        s = (c - a) @ side_ax
-        order = np.argsort((pp - a) @ side_ax)
-        ys = np.interp(s, ((pp - a) @ side_ax)[order], (pp @ up)[order])
-        if c @ up < ys:
-            t[f_i] = [new_index.get(int(x), int(x)) for x in f]
-    origin = np.concatenate([np.arange(len(v)), np.array(interior)])
-    v2 = np.concatenate([v, v[interior]])
-    uv2 = None if uvs is None else np.concatenate([uvs, np.asarray(uvs)[interior]])
+    glen = sp.csr_matrix((elen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    lower, near = _lower_faces(v, t, path, glen, up, ab / length, reach=reach * length)
+    # Every vertex shared by a face above and a face below the mouth surface near the path is
+    # split: the faces below take its copy. On a scan whose lips meet in a crease (Lee Perry-Smith)
+    # the path runs along the front of the crease and the crease's back wall joins both lips' inner
+    # surfaces; a cut of the path's vertices alone left that bridge (the lips stayed one surface
+    # behind the cut, which tore into shards across the opening).
+    used_below = np.zeros(len(v), dtype=bool)
+    used_above = np.zeros(len(v), dtype=bool)
+    used_below[t[lower].ravel()] = True
+    used_above[t[near & ~lower].ravel()] = True
+    split = np.flatnonzero(used_below & used_above)
+    split = split[(split != left) & (split != right)]
+    if not len(split):
+        return v, t, uvs, np.arange(len(v))
+    new_index = np.arange(len(v))
+    new_index[split] = len(v) + np.arange(len(split))
+    # Faces beyond the region that touch a split vertex (its rim) take the side their centroid is on.
+    rim = ~near & np.isin(t, split).any(axis=1) & _below_path(v, t, path, up, ab / length)
+    take = lower | rim
+    t[take] = new_index[t[take]]
+    origin = np.concatenate([np.arange(len(v)), split])
+    v2 = np.concatenate([v, v[split]])
+    uv2 = None if uvs is None else np.concatenate([uvs, np.asarray(uvs)[split]])
     return v2, t, uv2, origin
+
+
+def _lower_faces(
+    v: np.ndarray,
+    t: np.ndarray,
+    path: list[int],
+    graph: sp.csr_matrix,
+    up: np.ndarray,
+    side_ax: np.ndarray,
+    *,
+    reach: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) bool the faces on the lower lip's side of the cut path (vertex indices ``path``), and
+    (m,) bool the faces near it (within ``reach``, mesh distance along ``graph``'s edges in head
+    units, of the path's interior and between its ends: the region where the cut may run).
+
+    Each path edge has one face on either side; the one whose third vertex is lower (along ``up``)
+    seeds the lower side, the other the upper side. Every near face joins the side whose seeds are
+    nearer through the faces (centroid to centroid, never across a path edge): a geodesic Voronoi
+    split. In front the path separates the lips; where they meet in a crease whose walls run back
+    into the head (up behind the upper lip, down behind the lower) the split falls midway between
+    the two sides' seeds, where the walls part. A face's height alone is no guide there (an upper
+    lip's tubercle hangs below the contact line at the midline)."""
+    s_p = (v[path] - v[path[0]]) @ side_ax
+    s = (v[t].mean(axis=1) - v[path[0]]) @ side_ax
+    dist = dijkstra(graph, indices=np.asarray(path[1:-1]), min_only=True, limit=reach)
+    near = np.isfinite(dist[t]).all(axis=1) & (s > s_p.min()) & (s < s_p.max())
+    lower = np.zeros(len(t), dtype=bool)
+    idx = np.flatnonzero(near)
+    if not len(idx):
+        return lower, near
+    sub = t[idx]
+    e = np.sort(np.concatenate([sub[:, [0, 1]], sub[:, [1, 2]], sub[:, [2, 0]]]), axis=1)
+    third = np.concatenate([sub[:, 2], sub[:, 0], sub[:, 1]])  # the vertex opposite each edge
+    face = np.tile(np.arange(len(idx)), 3)
+    n = len(v)
+    key = e[:, 0] * n + e[:, 1]
+    o = np.argsort(key, kind="stable")
+    same = key[o][1:] == key[o][:-1]
+    ia, ib = o[:-1][same], o[1:][same]  # the two half-edges of each interior edge
+    pe = np.sort(np.column_stack([path[:-1], path[1:]]), axis=1)
+    on_path = np.isin(key[ia], pe[:, 0] * n + pe[:, 1])
+    fa, fb = face[ia], face[ib]
+    c = v[sub].mean(axis=1)
+    w = np.linalg.norm(c[fa] - c[fb], axis=1) + 1e-12 * reach
+    keep = ~on_path
+    dual = sp.csr_matrix(
+        (np.r_[w[keep], w[keep]], (np.r_[fa[keep], fb[keep]], np.r_[fb[keep], fa[keep]])), shape=(len(idx),) * 2
+    )
+    a_low = v[third[ia[on_path]]] @ up < v[third[ib[on_path]]] @ up
+    seeds_lo = np.unique(np.where(a_low, fa[on_path], fb[on_path]))
+    seeds_up = np.unique(np.where(a_low, fb[on_path], fa[on_path]))
+    if not len(seeds_lo) or not len(seeds_up):
+        return lower, near
+    d_lo = dijkstra(dual, indices=seeds_lo, min_only=True)
+    d_up = dijkstra(dual, indices=seeds_up, min_only=True)
+    lower[idx] = d_lo < d_up
+    return lower, near
+
+
+def _below_path(v: np.ndarray, t: np.ndarray, path: list[int], up: np.ndarray, side_ax: np.ndarray) -> np.ndarray:
+    """(m,) bool: face centroids below the path's height (along ``up``) at their place along ``side_ax``."""
+    pp = v[path]
+    s_p = (pp - pp[0]) @ side_ax
+    order = np.argsort(s_p)
+    c = v[t].mean(axis=1)
+    height = np.interp((c - pp[0]) @ side_ax, s_p[order], (pp @ up)[order])
+    return c @ up < height
 
 
 def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:

@@ -34,11 +34,20 @@ def harmonic_weights(
     *,
     margin: float = 0.0,
     use: np.ndarray | None = None,
+    pinned: np.ndarray | None = None,
+    pinned_rows: sp.csr_matrix | None = None,
+    pinned_reach: float = 0.0,
 ) -> sp.csr_matrix:
     """(n_head, n_simple) CSR weights. vertices (n, 3), triangles (m, 3), control (n_s,) head vertex of
     each simple vertex, sec5 (n, n_s) the Sec. 5.2 weights (they define the moving region and the
     rows of parts without control points); margin (head units): the region grows by this much so
-    the motion fades out smoothly instead of stopping at the edge of the Sec. 5.2 region."""
+    the motion fades out smoothly instead of stopping at the edge of the Sec. 5.2 region.
+    use: (n_s,) bool the control points kept as constraints (default all).
+    pinned (k,) head vertices with given rows ``pinned_rows`` (k, n_s) (the two sides of a cut lip
+    seam, each following its own lip's inner contour): further boundary values of the field; the
+    region also takes every vertex within ``pinned_reach`` (head units, along the mesh) of them, so
+    surfaces that curl in behind the lips (a scan's inner lip sheets, which Sec. 5.2's depth limit
+    leaves still) roll with their lip and fade out over that distance instead of tearing."""
     v = np.asarray(vertices, dtype=np.float64)
     n, n_s = len(v), len(control)
     ctrl_all = np.asarray(control, dtype=np.int64)
@@ -61,6 +70,22 @@ def harmonic_weights(
         moving = moving | (grown & ~rigid_part)
     is_ctrl = np.zeros(n, dtype=bool)
     is_ctrl[ctrl] = True
+    pin = np.zeros(0, dtype=np.int64) if pinned is None else np.asarray(pinned, dtype=np.int64)
+    if len(pin):
+        if pinned_rows is None or pinned_rows.shape != (len(pin), n_s):
+            raise ValueError("pinned_rows must be (len(pinned), n_simple)")
+        if pinned_reach > 0:
+            from scipy.sparse.csgraph import dijkstra
+
+            glen = sp.csr_matrix((length + 1e-12 * float(length.max()), (adj.row, adj.col)), shape=(n, n))
+            d = dijkstra(glen, indices=pin, min_only=True, limit=pinned_reach)
+            moving = moving | (np.isfinite(d) & has_ctrl[comp])
+        moving = moving.copy()
+        moving[pin] = True
+        keep_c = ~np.isin(ctrl, pin)  # a pinned vertex's row is the given one, not a control's
+        cols, ctrl = cols[keep_c], ctrl[keep_c]
+        is_ctrl = is_ctrl.copy()
+        is_ctrl[pin] = True
     free = moving & has_ctrl[comp] & ~is_ctrl
     idx_free = np.flatnonzero(free)
     if len(idx_free) == 0:
@@ -71,6 +96,8 @@ def harmonic_weights(
     b = -lap[idx_free][:, ctrl] @ sp.csr_matrix(
         (np.ones(len(cols)), (np.arange(len(cols)), cols)), shape=(len(cols), n_s)
     )
+    if len(pin):
+        b = b - lap[idx_free][:, pin] @ sp.csr_matrix(pinned_rows)
     # Free vertices cut off from every boundary vertex would make L_ff singular: pin them weakly.
     l_ff = l_ff + sp.identity(len(idx_free), format="csc") * (1e-9 * float(w.mean()))
     solved = splu(l_ff).solve(np.asarray(b.todense()))
@@ -81,6 +108,8 @@ def harmonic_weights(
     rigid = moving & ~has_ctrl[comp]
     out[np.flatnonzero(rigid)] = keep[np.flatnonzero(rigid)]
     out[ctrl, cols] = 1.0
+    if len(pin):
+        out[pin] = sp.csr_matrix(pinned_rows).tolil()
     out = out.tocsr()
     place = sp.csr_matrix((np.ones(len(idx_free)), (idx_free, np.arange(len(idx_free)))), shape=(n, len(idx_free)))
     return (out + place @ rows).tocsr()

@@ -241,8 +241,14 @@ def head_weights(
                 ctrl[i] = other
         proj = replace(proj, control=ctrl)
     use = None
+    pinned = pinned_rows = None
     if seam_pairs is not None and lower_lip is not None and upper_lip is not None and len(seam_pairs):
         use = _same_side_controls(h, head_triangles, proj.control, seam_pairs, lower_lip, upper_lip, frame.iod)
+        if config.method == "harmonic":
+            pinned, pinned_rows, near_seam = _seam_rows(
+                h, head_triangles, simple, frame, seam_pairs, lower_lip, upper_lip, proj.control
+            )
+            use = use & ~near_seam
     info = {
         "bad_triangles": int(proj.bad_triangles.sum()),
         "replacements": int(proj.replacements),
@@ -277,7 +283,17 @@ def head_weights(
         if config.method == "harmonic":
             from realtime_core.face.harmonic import harmonic_weights
 
-            g = harmonic_weights(h, head_triangles, proj.control, g.tocsr(), margin=HARMONIC_MARGIN * iod, use=use)
+            g = harmonic_weights(
+                h,
+                head_triangles,
+                proj.control,
+                g.tocsr(),
+                margin=HARMONIC_MARGIN * iod,
+                use=use,
+                pinned=pinned,
+                pinned_rows=pinned_rows,
+                pinned_reach=SEAM_REACH * iod,
+            )
             if use is not None:
                 info["dropped_controls"] = int((~use).sum())
     else:
@@ -293,6 +309,84 @@ def head_weights(
         g = sp.csr_matrix(w)
         info.update(rbf_lambda=fit.lam, rbf_radius_iod=fit.radius / iod)
     return g.tocsr(), proj.control, info
+
+
+SEAM_REACH = 0.5
+"""IOD: how far along the mesh from a cut lip seam the harmonic field reaches (surfaces that curl in
+behind the lips roll with their lip over this distance, see :func:`_seam_rows`)."""
+SEAM_CLEAR = 0.05
+"""IOD: control points this close (along the mesh) to a cut lip seam are left to the seam's own rows."""
+
+
+def _seam_rows(
+    h: np.ndarray,
+    triangles: np.ndarray,
+    simple: FaceModel,
+    frame: FaceFrame,
+    seam_pairs: np.ndarray,
+    lower_lip: np.ndarray,
+    upper_lip: np.ndarray,
+    control: np.ndarray,
+    *,
+    neighbours: int = 3,
+) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+    """The two sides of a cut lip seam as boundary rows of the harmonic field.
+
+    A closed-lip mesh cut open has no simple-model vertex on its cut (the simple model's inner lips
+    land on whichever surface is nearest: the outer lip, the crease, an inner sheet), so pinning
+    control points there ties neighbouring vertices of one lip to different lips. Instead every
+    vertex of the upper side (``seam_pairs[:, 0]``, welded indices) follows the simple model's upper
+    lip where it lies (inverse-square weights of the ``neighbours`` nearest simple vertices that do
+    not open with the jaw, in the frontal plane), every vertex of the lower side the lower lip's
+    (simple vertices that are not still); at the corners both sides reach the same corner vertices.
+    Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
+    within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    ax = frame.axes[:2]
+    q = (h - frame.origin) @ ax.T
+    qs = (np.asarray(simple.vertices, dtype=np.float64) - frame.origin) @ ax.T
+    n_s = len(qs)
+    adj = vertex_adjacency(len(h), triangles).tocsr()
+    on_up = np.zeros(len(h), dtype=bool)
+    on_lo = np.zeros(len(h), dtype=bool)
+    on_up[seam_pairs[:, 0]] = True
+    on_lo[seam_pairs[:, 1]] = True
+    # Where the cut ends (the mouth corners) a vertex touches both sides: it follows both lips.
+    ends = np.flatnonzero((adj @ on_up > 0) & (adj @ on_lo > 0) & ~on_up & ~on_lo)
+    rows, cols, vals, verts = [], [], [], []
+    base = 0
+    for side, cand in (
+        (seam_pairs[:, 0], ~lower_lip),
+        (seam_pairs[:, 1], ~upper_lip),
+        (ends, np.ones(n_s, dtype=bool)),
+    ):
+        ids = np.flatnonzero(cand)
+        k = min(neighbours, len(ids))
+        if not len(side) or not k:
+            continue
+        d, j = cKDTree(qs[ids]).query(q[side], k=k)
+        d, j = d.reshape(len(side), k), j.reshape(len(side), k)
+        w = 1.0 / np.maximum(d, 1e-6 * frame.iod) ** 2
+        w /= w.sum(axis=1, keepdims=True)
+        rows.append(np.repeat(np.arange(len(side)) + base, k))
+        cols.append(ids[j].ravel())
+        vals.append(w.ravel())
+        verts.append(np.asarray(side, dtype=np.int64))
+        base += len(side)
+    pin = np.concatenate(verts)
+    pin_rows = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(pin), n_s)
+    )
+    adj = adj.tocoo()
+    length = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-12 * frame.iod
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(h), len(h)))
+    dist = dijkstra(g, indices=pin, min_only=True, limit=2 * SEAM_CLEAR * frame.iod)
+    near = dist[np.asarray(control, dtype=np.int64)] <= SEAM_CLEAR * frame.iod
+    return pin, pin_rows, near
 
 
 def _same_side_controls(

@@ -295,3 +295,48 @@ def test_cache_dir_from_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("FACECAST_CACHE", str(blocker / "sub"))
     with pytest.raises(AssetError, match="cannot create the cache directory"):
         cache_dir()
+
+
+def _creased_lips(depth: float = 0.1):
+    """A closed mouth whose lips meet in a crease, as scanned heads have it: the profile runs down the
+    upper lip to the contact line (y = 0, z = 0), back into a crease behind it (slightly above the
+    contact line), and out again down the lower lip; 17 columns from x = -1 to 1, corners at y = 0."""
+    profile = [(0.5, 0.0), (0.25, 0.0), (0.1, 0.0), (0.0, 0.0), (0.02, -depth), (-0.04, -0.5 * depth), (-0.1, 0.0),
+               (-0.25, 0.0), (-0.5, 0.0)]
+    xs = np.linspace(-1.0, 1.0, 17)
+    rows = len(profile)
+    v = []
+    for y, z in profile:
+        for i, x in enumerate(xs):
+            fade = 1.0 if 0 < i < len(xs) - 1 else 0.0  # the crease closes at the corners
+            v.append([x, y * fade if abs(y) < 0.2 else y, z * fade])
+    v = np.array(v)
+    t = []
+    for j in range(rows - 1):
+        for i in range(len(xs) - 1):
+            a = j * len(xs) + i
+            t += [[a, a + len(xs) + 1, a + 1], [a, a + len(xs), a + len(xs) + 1]]
+    contact = 3 * len(xs)
+    return v, np.array(t), contact, contact + len(xs) - 1, contact + len(xs) // 2
+
+
+def test_cut_mouth_separates_lips_that_meet_in_a_crease():
+    """The crease behind the contact line must not keep the lips joined (it did when only the path's
+    vertices were split: the crease wall bridged the two lips, a shard across the opening)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    v, t, left, right, mid = _creased_lips()
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    e = np.concatenate([t2[:, [0, 1]], t2[:, [1, 2]], t2[:, [2, 0]]])
+    w = np.linalg.norm(v2[e[:, 0]] - v2[e[:, 1]], axis=1)
+    g = sp.csr_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v2), len(v2)))
+    top = int(np.argmin(np.linalg.norm(v2 - [0, 0.25, 0], axis=1)))
+    bottom = int(np.argmin(np.linalg.norm(v2 - [0, -0.25, 0], axis=1)))
+    # Only around a mouth corner (x = +-1) can one lip reach the other.
+    assert dijkstra(g, indices=top)[bottom] > 1.5
+    np.testing.assert_array_equal(v2[origin], v2)
+    # No triangle joins a vertex of the upper lip's outer surface to one of the lower lip's.
+    up_side = v2[:, 1] > 0.05
+    low_side = v2[:, 1] < -0.05
+    assert not (up_side[t2].any(axis=1) & low_side[t2].any(axis=1)).any()
