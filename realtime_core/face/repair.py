@@ -47,12 +47,17 @@ def repair_folds(
     steps: int = 2,
     fixed: np.ndarray | None = None,
     grow_every: int = 15,
+    tiny: float = 0.2,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
     vertices (n, 3), triangles (m, 3) of a welded mesh (texture-seam twins merged, cut lip seams not);
     motions (n_poses, n_s, 3) the simple-model displacement at each pose; max_stretch: edges stretched
     beyond this ratio count as folds too; fixed (n,) bool rows never changed (rigid parts).
+    tiny: vertices joined by edges shorter than this fraction of the median edge move as one (their
+    rows are averaged before and after every round): a scan's clusters of sliver triangles
+    (0.001 IOD edges behind Lee Perry-Smith's mouth corners) flip at any motion difference the
+    field leaves between their vertices, however smooth.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -69,6 +74,8 @@ def repair_folds(
     l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
     ok_edge = l0 > 1e-9 * max(float(l0.max()), 1e-300)
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
+    tie = _tie_tiny_edges(n, e, l0, tiny * float(np.median(l0[ok_edge])) if ok_edge.any() else 0.0, frozen)
+    g = (tie @ g).tocsr()
     touched = np.zeros(n, dtype=bool)
     stuck = np.zeros(n, dtype=np.int64)
     worst = 0
@@ -109,6 +116,20 @@ def repair_folds(
         keep = sp.diags((~sel).astype(np.float64))
         for _ in range(steps):
             g = (keep @ g + pick @ (mean_op @ g)).tocsr()
+        g = (tie @ g).tocsr()
         g.data[np.abs(g.data) < 1e-6] = 0.0
         g.eliminate_zeros()
     return RepairResult(weights=g.tocsr(), rounds=rounds, flips_left=worst, smoothed_rows=int(touched.sum()))
+
+
+def _tie_tiny_edges(n: int, edges: np.ndarray, length: np.ndarray, limit: float, frozen: np.ndarray) -> sp.csr_matrix:
+    """(n, n) CSR averaging operator: each cluster of vertices joined by edges shorter than ``limit``
+    (rows not ``frozen``) gets its mean row; every other row is kept."""
+    from scipy.sparse.csgraph import connected_components
+
+    short = (length < limit) & ~frozen[edges[:, 0]] & ~frozen[edges[:, 1]]
+    a = sp.csr_matrix((np.ones(int(short.sum())), (edges[short, 0], edges[short, 1])), shape=(n, n))
+    _, comp = connected_components(a, directed=False)
+    size = np.bincount(comp, minlength=comp.max() + 1).astype(np.float64)
+    member = sp.csr_matrix((np.ones(n), (np.arange(n), comp)), shape=(n, len(size)))
+    return (member @ sp.diags(1.0 / size) @ member.T).tocsr()

@@ -302,8 +302,17 @@ def _creased_lips(depth: float = 0.1):
     upper lip to the contact line (y = 0, z = 0), back into a crease behind it (slightly above the
     contact line), and out again down the lower lip; 17 columns from x = -1 to 1, corners at y = 0,
     the crease shallower towards them."""
-    profile = [(0.5, 0.0), (0.25, 0.0), (0.1, 0.0), (0.0, 0.0), (0.02, -depth), (-0.04, -0.5 * depth), (-0.1, 0.0),
-               (-0.25, 0.0), (-0.5, 0.0)]
+    profile = [
+        (0.5, 0.0),
+        (0.25, 0.0),
+        (0.1, 0.0),
+        (0.0, 0.0),
+        (0.02, -depth),
+        (-0.04, -0.5 * depth),
+        (-0.1, 0.0),
+        (-0.25, 0.0),
+        (-0.5, 0.0),
+    ]
     xs = np.linspace(-1.0, 1.0, 17)
     rows = len(profile)
     v = []

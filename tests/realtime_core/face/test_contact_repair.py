@@ -105,3 +105,29 @@ def test_fold_repair_unfolds_a_pinned_spike():
     # The motion is spread, not removed: the pinned vertex still moves most.
     w = np.asarray(res.weights.todense()).ravel()
     assert w.argmax() == centre and w.max() > 0.1
+
+
+def test_fold_repair_moves_sliver_clusters_as_one():
+    """A vertex 0.2% of an edge away from another (a scan's sliver fan) flips its tiny triangles at
+    the smallest motion difference; the repair ties the two together (equal rows), so they move as
+    one and nothing flips, while the rest of the field keeps its motion."""
+    v, t = _grid()
+    n = len(v)
+    a = n // 2
+    f = int(np.flatnonzero((t == a).any(axis=1))[0])
+    b, c = (x for x in t[f] if x != a)
+    p = v[a] + 0.002 * (v[t[f]].mean(axis=0) - v[a])
+    v = np.vstack([v, p])
+    t = np.vstack([np.delete(t, f, axis=0), [[a, b, n], [b, c, n], [c, a, n]]])
+    g = sp.csr_matrix(([1.0, 0.5], ([a, a - 1], [0, 0])), shape=(n + 1, 1))  # p itself is still
+    motion = np.array([[[0.0, 0.0, 0.0]]])
+    motion[0, 0] = 0.05 * (p - v[a]) / np.linalg.norm(p - v[a])  # a moves past p
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    res = repair_folds(v, t, g, motion, fixed=edge)
+    assert res.flips_left == 0
+    w = np.asarray(res.weights.todense()).ravel()
+    assert w[a] == w[n] and w[a] > 0.3
+    v1 = v + res.weights @ motion[0]
+    n0 = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n1 = np.cross(v1[t[:, 1]] - v1[t[:, 0]], v1[t[:, 2]] - v1[t[:, 0]])
+    assert (np.einsum("ij,ij->i", n0, n1) > 0).all()
