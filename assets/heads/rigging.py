@@ -237,6 +237,14 @@ def cut_mouth(
     return v2, t, uv2, origin
 
 
+CREASE_TO_LOWER = 0.3
+"""How much nearer (a fraction of the cut's reach) the upper lip's seeds must be for a crease face to
+join the upper lip. The crease then rolls with the lower lip (its inner surface) and the upper lip's
+edge stays the smooth contact path. With an even split (0) the upper lip's edge ran through the crease
+in a zigzag: on Lee Perry-Smith a sawtooth hung over the opening at /a/ and /u/, and at /m/ (the upper
+lip pressing down) its crease faces poked through the lower lip as dark lines."""
+
+
 def _lower_faces(
     v: np.ndarray,
     t: np.ndarray,
@@ -253,11 +261,11 @@ def _lower_faces(
 
     Each path edge has one face on either side; the one whose third vertex is lower (along ``up``)
     seeds the lower side, the other the upper side. Every near face joins the side whose seeds are
-    nearer through the faces (centroid to centroid, never across a path edge): a geodesic Voronoi
-    split. In front the path separates the lips; where they meet in a crease whose walls run back
-    into the head (up behind the upper lip, down behind the lower) the split falls midway between
-    the two sides' seeds, where the walls part. A face's height alone is no guide there (an upper
-    lip's tubercle hangs below the contact line at the midline)."""
+    nearer through the faces (centroid to centroid, never across a path edge; the lower lip's by
+    CREASE_TO_LOWER of the reach): a geodesic Voronoi split. In front the path separates the lips;
+    where they meet in a crease whose walls run back into the head (up behind the upper lip, down
+    behind the lower) the split falls inside the crease, near the upper wall. A face's height alone
+    is no guide there (an upper lip's tubercle hangs below the contact line at the midline)."""
     s_p = (v[path] - v[path[0]]) @ side_ax
     s = (v[t].mean(axis=1) - v[path[0]]) @ side_ax
     dist = dijkstra(graph, indices=np.asarray(path[1:-1]), min_only=True, limit=reach)
@@ -291,7 +299,7 @@ def _lower_faces(
         return lower, near
     d_lo = dijkstra(dual, indices=seeds_lo, min_only=True)
     d_up = dijkstra(dual, indices=seeds_up, min_only=True)
-    lower[idx] = d_lo < d_up
+    lower[idx] = d_lo < d_up + CREASE_TO_LOWER * reach
     return lower, near
 
 
