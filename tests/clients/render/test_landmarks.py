@@ -51,4 +51,5 @@ def test_automatic_landmarks_do_not_over_open_the_jaw(shared_data):
     rig, rigged = rig_head(mesh, find_landmarks(mesh), landmark_source="automatic landmarks")
     assert rig.meta.get("open_rescaled", 1.0) <= 1.0 / OPEN_RESPONSE_RANGE[0] + 1e-3, rig.meta
     rep = head_checks(Head(rig, rigged))
-    assert rep.flipped_triangles < 40 and rep.max_edge_stretch < 10, rep  # 9 and 4.9 measured; 152 and 30.7 before
+    # 33 and 8.1 measured with the two-surface lip cut (9 and 4.9 before it); 152 and 30.7 with the unbounded rescale.
+    assert rep.flipped_triangles < 40 and rep.max_edge_stretch < 10, rep
