@@ -8,9 +8,10 @@
    shape units by least squares; the animation units follow the shape change through paper 001's
    per-vertex affine adaptation (Sec. 3.9). The built-in head needs no landmark file.
 3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
-   between the two corner landmarks (a shortest edge path that stays near the straight line),
-   the path vertices are duplicated and the faces below take the copies, so the lower lip can
-   separate. The cut opens onto the (dark) inside of the head; there is no mouth cavity.
+   between the two corner landmarks (a shortest edge path that stays near the straight line, the
+   faces near it split into the two lips' sides, :func:`cut_mouth`), the vertices both sides share
+   are duplicated and the lower side takes the copies, so the lips are two surfaces. A hollow head
+   gets a dark mouth cavity behind the cut (:func:`add_mouth_cavity`).
 4. Sec. 5 weights (or RBF), precomputed into the rig.
 """
 
