@@ -25,7 +25,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
-from assets.heads.mesh import HeadMesh, check_mesh
+from assets.heads.cavity import lip_membrane, opens_onto_nothing
+from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceModel,
@@ -38,8 +39,15 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
+from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.rig import contact_spread, head_response, lip_columns, recalibrate, repair_rig
+from realtime_core.face.rig import (
+    contact_spread,
+    head_response,
+    lip_columns,
+    recalibrate,
+    repair_rig,
+)
 from realtime_core.face.simple import (
     derive_simple_model,
     lip_contact_vertices,
@@ -319,6 +327,14 @@ def rig_head(
                 f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
                 "'right' swapped? ('left' is the face's own left)"
             )
+        # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
+        # instead of cutting along one lip (which left it hanging from the other, keeping them apart).
+        membrane = lip_membrane(
+            v, t, snap["corner_left"], snap["corner_right"], snap["upper_inner"], snap["lower_inner"]
+        )
+        if membrane.any():
+            t = t[~membrane]
+            meta["lip_membrane_removed"] = int(membrane.sum())
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
             v, t, uv, origin = cut_mouth(
                 v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
@@ -384,11 +400,20 @@ def rig_head(
     rig = with_rigid_parts(rig, out_mesh, snap)
     if cut_copies is not None and not _has_inner_mouth(mesh):
         rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"])
+    elif not _has_inner_mouth(mesh) and opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap):
+        # Open lips over nothing (a face mask): a wider cavity, since no lip surface curls inwards to hide its rim.
+        rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], **MASK_CAVITY)
     return rig, out_mesh
 
 
+AnyRig = Rig | MorphRig
+
 INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
 CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
+MASK_CAVITY = {"width": 1.1, "up": 0.3, "down": 0.75}
+"""Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask):
+the lips have no inner surface reaching back, so the rim must lie beyond the widest opening
+(/a/ drops the lower lip 0.45 IOD and more below the corners)."""
 
 
 def _has_inner_mouth(mesh: HeadMesh) -> bool:
@@ -431,32 +456,63 @@ def _texture_with_dark_strip(texture: bytes, uvs: np.ndarray) -> tuple[bytes, np
 
 
 def add_mouth_cavity(
-    rig: Rig, mesh: HeadMesh, frame, left: int, right: int, *, rings: int = 6, segments: int = 16
-) -> tuple[Rig, HeadMesh]:
+    rig: AnyRig,
+    mesh: HeadMesh,
+    frame,
+    left: int,
+    right: int,
+    *,
+    rings: int = 6,
+    segments: int = 16,
+    width: float = 0.85,
+    up: float = 0.25,
+    down: float = 0.5,
+) -> tuple[AnyRig, HeadMesh]:
     """A hollow head (lips cut open, nothing behind them) gets a dark mouth cavity: a half
     ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
-    mouth corners (inside the skin), 0.85 of the mouth wide, reaching 0.25 IOD up, 0.5 IOD down
+    mouth corners, ``width`` of the mouth wide, reaching ``up`` IOD up, ``down`` IOD down
     (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
-    inside instead of the back of the head or the background.
+    inside instead of the back of the head or the background. Every cavity vertex stays at least
+    0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
+    so a wide cavity behind a thin mask or a curved face never pokes through the skin.
     It is a separate, still part (``part_names`` gains "mouth cavity"): the lips and jaw open over
     it. Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
-    (the renderer paints a textured head from its texture alone)."""
+    (the renderer paints a textured head from its texture alone). ``rig``: a Rig or a MorphRig (the
+    cavity does not move, so only the neutral and the triangles grow)."""
+    from assets.heads.cavity import front_depth
+
     v0 = np.asarray(mesh.vertices, dtype=np.float64)
     iod, ax = frame.iod, frame.axes
     a, b = v0[left], v0[right]
     centre = 0.5 * (a + b) - 0.15 * iod * ax[2]
-    half_w = 0.5 * float(np.linalg.norm(a - b)) * 0.85
+    half_w = 0.5 * float(np.linalg.norm(a - b)) * width
     th = np.linspace(0.0, np.pi / 2, rings + 1)[1:]  # 0 = the deepest point, pi/2 = the rim
     ph = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     pts = [centre - 0.45 * iod * ax[2]]
     for t_ in th:
         for p_ in ph:
             x = np.sin(t_) * np.cos(p_) * half_w
-            yr = 0.25 if np.sin(p_) > 0 else 0.5
+            yr = up if np.sin(p_) > 0 else down
             y = np.sin(t_) * np.sin(p_) * yr * iod
             z = -np.cos(t_) * 0.45 * iod
             pts.append(centre + x * ax[0] + y * ax[1] + z * ax[2])
     cv = np.array(pts)
+    # Behind the surface: each vertex at most as far forward as 0.1 IOD behind the front-most skin at
+    # its (x, y), at rest and at the widest opening (the jaw carries the chin back over the cavity).
+    q = (cv - frame.origin) @ ax.T
+    skin = np.fmin.reduce(
+        [
+            front_depth(
+                np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
+                mesh.triangles,
+                frame,
+                q[:, :2],
+            )
+            for p in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.45, 0.0), (0.02, 0.027, 0.45, -0.007))
+        ]
+    )
+    deeper = np.isfinite(skin) & (q[:, 2] > skin - 0.1 * iod)
+    cv[deeper] -= (q[deeper, 2] - (skin[deeper] - 0.1 * iod))[:, None] * ax[2]
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
@@ -474,7 +530,7 @@ def add_mouth_cavity(
     if colors is not None:
         colors = np.vstack([colors, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
     elif mesh.uvs is None or mesh.texture is None:
-        base = np.full((n0, 3), 0.8, dtype=np.float32)
+        base = np.tile(np.asarray(SKIN_COLOR, dtype=np.float32), (n0, 1))  # what the renderer paints uncoloured skin
         colors = np.vstack([base, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
     uvs = mesh.uvs
     texture = mesh.texture

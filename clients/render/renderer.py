@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from assets.heads.mesh import HeadMesh
+from assets.heads.mesh import SKIN_COLOR, HeadMesh
 from clients.errors import RenderError
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
@@ -69,7 +69,7 @@ void main() {
 }
 """
 
-SKIN = (0.80, 0.62, 0.52)
+SKIN = SKIN_COLOR
 
 
 @dataclass(frozen=True)
