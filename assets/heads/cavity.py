@@ -164,10 +164,13 @@ def opens_onto_nothing(
     ql, qr = q[landmarks["corner_left"]], q[landmarks["corner_right"]]
     qu, qd = q[landmarks["upper_inner"]], q[landmarks["lower_inner"]]
     y = 0.5 * (qu[1] + qd[1])
-    start = min(qu[2], qd[2]) - 0.02 * iod
     xs = np.linspace(0.6 * qr[0] + 0.4 * qu[0], 0.6 * ql[0] + 0.4 * qu[0], 5)
-    z = front_depth(vertices, triangles, frame, np.column_stack([xs, np.full(5, y)]), behind=start)
-    near = np.isfinite(z) & (start - z < HOLLOW_DEPTH * iod)
+    xy = np.column_stack([xs, np.full(5, y)])
+    # Each ray starts just behind the lips at its place (the front-most surface there, else the inner lips).
+    lips = front_depth(vertices, triangles, frame, xy)
+    lips = np.where(np.isfinite(lips), lips, min(qu[2], qd[2])) - 0.02 * iod
+    z = np.array([front_depth(vertices, triangles, frame, xy[i : i + 1], behind=lips[i])[0] for i in range(5)])
+    near = np.isfinite(z) & (lips - z < HOLLOW_DEPTH * iod)
     return int(near.sum()) < 3
 
 
@@ -177,7 +180,7 @@ def with_mouth_cavity(head, landmark_points: Mapping[str, object] | None = None)
     they are. Landmarks: ``landmark_points`` (name -> (3,) point) or the rig's meta; without them the
     head is returned unchanged (its mouth cannot be found)."""
     from assets.heads.head import Head
-    from assets.heads.rigging import INNER_MOUTH_WORDS, add_mouth_cavity, mouth_landmarks
+    from assets.heads.rigging import INNER_MOUTH_WORDS, MASK_CAVITY, add_mouth_cavity, mouth_landmarks
     from realtime_core.face import face_frame
 
     rig, mesh = head.rig, head.mesh
@@ -190,7 +193,7 @@ def with_mouth_cavity(head, landmark_points: Mapping[str, object] | None = None)
     frame = face_frame(v, lm)
     if not opens_onto_nothing(v, mesh.triangles, frame, idx):
         return head
-    new_rig, new_mesh = add_mouth_cavity(rig, mesh, frame, idx["corner_left"], idx["corner_right"])
+    new_rig, new_mesh = add_mouth_cavity(rig, mesh, frame, idx["corner_left"], idx["corner_right"], **MASK_CAVITY)
     n_c = len(new_mesh.vertices) - len(v)
     targets = None
     if mesh.targets:
