@@ -352,8 +352,8 @@ def rig_head(
         # the warp can leave a lip barely answering one unit group (the MediaPipe face's upper lip),
         # and inverting that response gave unit weights of ~100 per IOD, spikes below the mouth.
         # The head's own response is corrected afterwards (recalibrate), where it is well conditioned.
-        # The built-in head keeps its rig as it was (the streamed ARKit maps, realtime_core/fitted_maps.py,
-        # are fitted to it; changing it means refitting them).
+        # The streamed ARKit maps (realtime_core/fitted_maps.py) are fitted to the built-in head's rig:
+        # changing it means refitting them (facecast fit-maps).
         own = mesh.name == "builtin"
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
@@ -362,7 +362,7 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
-        if config.method == "harmonic" and not own:
+        if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
             rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
