@@ -255,4 +255,16 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
         if ids:
             teeth = np.flatnonzero(np.isin(mesh.part, ids))
-    return check_rig(rig, mouth_landmarks(idx), lip_pairs=pairs, teeth=teeth, limits=limits or RigCheckLimits())
+    reference = None
+    if rig.meta.get("rest_pose") is not None and isinstance(rig, Rig):
+        from realtime_core.face.rig import modelled_rest
+
+        reference = modelled_rest(rig)  # folds are measured from the head as modelled
+    return check_rig(
+        rig,
+        mouth_landmarks(idx),
+        lip_pairs=pairs,
+        teeth=teeth,
+        limits=limits or RigCheckLimits(),
+        reference=reference,
+    )

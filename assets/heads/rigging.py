@@ -47,6 +47,7 @@ from realtime_core.face.rig import (
     lip_columns,
     recalibrate,
     repair_rig,
+    with_rest_pose,
 )
 from realtime_core.face.simple import (
     derive_simple_model,
@@ -269,6 +270,10 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     )
 
 
+REST_GAP_MAX = 0.01
+"""IOD: a head whose inner lips lie farther apart than this at rest (and are not cut open) rests at
+the pose that closes them (:func:`realtime_core.face.rig.with_rest_pose`); the checks' closure limit."""
+
 OPEN_RESPONSE_RANGE = (0.5, 0.95)
 """Measured mouth-open responses (inner-lip opening per unit parameter, at the landmarks) the rig
 is rescaled for. Below 0.5 the measure, not the rig, is suspect: automatic inner-lip landmarks on
@@ -375,6 +380,15 @@ def rig_head(
                 basis[:, 2] /= r_open
                 rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
+        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
+        if not own and cut_copies is None and gap > REST_GAP_MAX:
+            # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
+            # rig's own response), so silence and /m b p/ show closed lips (mouth_open 0 = lips touching).
+            # After the last change of the map: the checks measure folds from the head as modelled.
+            opening = float(head_response(rig, mouth_landmarks(snap))[2, 2])
+            rig = with_rest_pose(rig, np.array([0.0, 0.0, -gap / max(opening, 0.5), 0.0]))
+            v = np.asarray(rig.neutral, dtype=np.float64)
+            rig.meta["landmarks"] = {k: v[i].tolist() for k, i in snap.items()}
         if not own:  # (the built-in head's pressed lips cross at the fit probes: see above)
             seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
             contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
