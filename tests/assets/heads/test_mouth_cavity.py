@@ -59,6 +59,12 @@ def test_mediapipe_lips_meet_at_closure_and_open_onto_a_cavity(shared_data):
     assert rep.closure_gap_iod <= 0.01, rep.summary()
     assert rep.passed, rep.summary()
     assert head.rig.meta["lip_membrane_removed"] > 0 and "lip_seam_cut" not in head.rig.meta
+    # Modelled 0.09 IOD apart, the lips touch at rest (mouth_open 0 = lips touching): silence, /m b p/.
+    lm = head.rig.meta["landmarks"]
+    v = np.asarray(head.rig.deformed(np.zeros(4)), float)
+    near = {k: int(np.argmin(np.linalg.norm(v - np.asarray(p), axis=1))) for k, p in lm.items()}
+    frame = face_frame(v, mouth_landmarks(near))
+    assert abs((v[near["upper_inner"]] - v[near["lower_inner"]]) @ frame.axes[1]) / frame.iod <= 0.01
     assert head.mesh.part_names[-1] == "mouth cavity"
 
 
