@@ -193,7 +193,7 @@ def with_mouth_cavity(head, landmark_points: Mapping[str, object] | None = None)
     frame = face_frame(v, lm)
     if not opens_onto_nothing(v, mesh.triangles, frame, idx):
         return head
-    new_rig, new_mesh = add_mouth_cavity(rig, mesh, frame, idx["corner_left"], idx["corner_right"], **MASK_CAVITY)
+    new_rig, new_mesh = add_mouth_cavity(rig, mesh, frame, idx["corner_left"], idx["corner_right"], shape=MASK_CAVITY)
     n_c = len(new_mesh.vertices) - len(v)
     targets = None
     if mesh.targets:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -416,15 +417,27 @@ def rig_head(
         rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"])
     elif not _has_inner_mouth(mesh) and opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap):
         # Open lips over nothing (a face mask): a wider cavity, since no lip surface curls inwards to hide its rim.
-        rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], **MASK_CAVITY)
+        rig, out_mesh = add_mouth_cavity(
+            rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
+        )
     return rig, out_mesh
 
 
-AnyRig = Rig | MorphRig
+R = TypeVar("R", Rig, MorphRig)
+
+
+@dataclass(frozen=True)
+class CavityShape:
+    """Mouth cavity size: ``width`` mouth widths, ``up`` / ``down`` IOD above / below the mouth corners."""
+
+    width: float = 0.85
+    up: float = 0.25
+    down: float = 0.5
+
 
 INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
 CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
-MASK_CAVITY = {"width": 1.1, "up": 0.3, "down": 0.75}
+MASK_CAVITY = CavityShape(width=1.1, up=0.3, down=0.75)
 """Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask):
 the lips have no inner surface reaching back, so the rim must lie beyond the widest opening
 (/a/ drops the lower lip 0.45 IOD and more below the corners)."""
@@ -470,7 +483,7 @@ def _texture_with_dark_strip(texture: bytes, uvs: np.ndarray) -> tuple[bytes, np
 
 
 def add_mouth_cavity(
-    rig: AnyRig,
+    rig: R,
     mesh: HeadMesh,
     frame,
     left: int,
@@ -478,14 +491,12 @@ def add_mouth_cavity(
     *,
     rings: int = 6,
     segments: int = 16,
-    width: float = 0.85,
-    up: float = 0.25,
-    down: float = 0.5,
-) -> tuple[AnyRig, HeadMesh]:
+    shape: CavityShape = CavityShape(),
+) -> tuple[R, HeadMesh]:
     """A hollow head (lips cut open, nothing behind them) gets a dark mouth cavity: a half
     ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
-    mouth corners, ``width`` of the mouth wide, reaching ``up`` IOD up, ``down`` IOD down
-    (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
+    mouth corners, ``shape.width`` of the mouth wide, reaching ``shape.up`` IOD up, ``shape.down`` IOD
+    down (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
     inside instead of the back of the head or the background. Every cavity vertex stays at least
     0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
     so a wide cavity behind a thin mask or a curved face never pokes through the skin.
@@ -499,14 +510,14 @@ def add_mouth_cavity(
     iod, ax = frame.iod, frame.axes
     a, b = v0[left], v0[right]
     centre = 0.5 * (a + b) - 0.15 * iod * ax[2]
-    half_w = 0.5 * float(np.linalg.norm(a - b)) * width
+    half_w = 0.5 * float(np.linalg.norm(a - b)) * shape.width
     th = np.linspace(0.0, np.pi / 2, rings + 1)[1:]  # 0 = the deepest point, pi/2 = the rim
     ph = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     pts = [centre - 0.45 * iod * ax[2]]
     for t_ in th:
         for p_ in ph:
             x = np.sin(t_) * np.cos(p_) * half_w
-            yr = up if np.sin(p_) > 0 else down
+            yr = shape.up if np.sin(p_) > 0 else shape.down
             y = np.sin(t_) * np.sin(p_) * yr * iod
             z = -np.cos(t_) * 0.45 * iod
             pts.append(centre + x * ax[0] + y * ax[1] + z * ax[2])
@@ -553,7 +564,7 @@ def add_mouth_cavity(
         if dark is None and texture is not None:
             texture, uvs, dark = _texture_with_dark_strip(texture, np.asarray(uvs, dtype=np.float64))
         uvs = np.vstack([uvs, np.tile(np.asarray(dark or (0.0, 0.0), dtype=uvs.dtype), (n_c, 1))])
-    names = tuple(mesh.part_names) or ("head",)
+    names: tuple[str, ...] = tuple(mesh.part_names) or ("head",)
     part = mesh.part if mesh.part is not None else np.zeros(n0, dtype=np.int16)
     part = np.concatenate([part, np.full(n_c, len(names), dtype=part.dtype)])
     out = HeadMesh(
