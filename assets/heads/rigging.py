@@ -10,7 +10,10 @@
 3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
    between the two corner landmarks (a shortest edge path that stays near the straight line),
    the path vertices are duplicated and the faces below take the copies, so the lower lip can
-   separate. The cut opens onto the (dark) inside of the head; there is no mouth cavity.
+   separate. Distinct inner lips joined by a strip of triangles (the MediaPipe face) have the strip
+   removed instead (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
+   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
+   still mouth cavity (:func:`add_mouth_cavity`).
 4. Sec. 5 weights (or RBF), precomputed into the rig.
 """
 
