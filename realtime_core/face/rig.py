@@ -525,8 +525,7 @@ def lip_columns(
     axis; among the vertices within ``band`` IOD (vertically) of the inner-lip midpoints, those the
     mouth-open parameter barely moves (< 20% of the most) are upper lip, those it moves most
     (> 50%) lower lip, and each column pairs the lowest upper-lip vertex with the highest lower-lip
-    vertex (the two inner contours) unless the upper one lies more than 0.005 IOD below the lower one.
-    The inner-lip landmarks are always a pair.
+    vertex (the two inner contours). The inner-lip landmarks are always a pair.
     """
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if seam_pairs is not None and len(seam_pairs):
@@ -552,9 +551,7 @@ def lip_columns(
         lo = np.flatnonzero(lower & (col == c))
         if len(u) and len(lo):
             a, b = u[np.argmin(q[u, 1])], lo[np.argmax(q[lo, 1])]
-            # (touching lips, a rest pose, tie here: within the interpenetration limit they are a pair,
-            # else rounding decides, and a moved copy of the head gets other columns)
-            if q[a, 1] >= q[b, 1] - 0.005:
+            if q[a, 1] >= q[b, 1]:
                 pairs.append(np.array([a, b]))
     return np.unique(np.array(pairs, dtype=np.int64), axis=0)
 
