@@ -113,8 +113,9 @@ def lip_membrane(
     corner-to-corner path through the upper inner lip and the one through the lower inner lip
     (:func:`mouth_line_path`), found by a flood fill over shared edges from the triangles at the
     inner-lip midpoints that crosses neither path. All False when the inner lips are one vertex
-    (a closed seam, cut instead), when a path is missing, or when the fill would leak past the paths
-    (they do not enclose a region)."""
+    (a closed seam, cut instead), when the two paths share more than half their vertices (the same
+    seam), when a path is missing, or when the fill would leak past the paths (they do not enclose a
+    region)."""
     t = np.asarray(triangles, dtype=np.int64)
     none = np.zeros(len(t), dtype=bool)
     if upper_inner == lower_inner:
@@ -122,6 +123,10 @@ def lip_membrane(
     up = mouth_line_path(vertices, t, left, right, upper_inner)
     lo = mouth_line_path(vertices, t, left, right, lower_inner)
     if not up or not lo:
+        return none
+    if len(set(up) & set(lo)) > 0.5 * min(len(up), len(lo)):
+        # Mostly one path: a closed seam whose inner-lip points snapped to neighbouring vertices
+        # (automatic landmarks on Lee Perry-Smith: 21 of 26 shared), cut instead, not a membrane.
         return none
     fence = {tuple(sorted(e)) for p in (up, lo) for e in pairwise(p)}
     # Triangles sharing an edge that is not on a path are neighbours.

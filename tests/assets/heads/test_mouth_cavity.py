@@ -160,3 +160,18 @@ def test_a_full_body_avatar_without_landmarks_is_framed_on_its_face(tmp_path):
         assert (px >= 0).all() and (px <= 200).all()  # eyes, mouth and chin in the picture
         spans.append(float(np.ptp(px[:2, 0])))
     assert spans[0] == pytest.approx(spans[1], rel=0.25)  # the face as large as the built-in head's
+
+
+def test_a_closed_seam_with_neighbouring_inner_lip_points_is_no_membrane():
+    """Inner-lip points snapped to two neighbouring vertices of one closed seam (automatic landmarks on
+    a scan): the two paths are mostly the same seam, nothing is removed (the seam is cut instead)."""
+    v, t, idx, n_skin = _two_lips_with_a_membrane()
+    closed = t[:n_skin]  # no membrane: the upper and lower rows' inner edges are separate ...
+    # ... so weld the lower inner row onto the upper one: one closed seam.
+    lower = [idx["lower", i] for i in range(1, 8)]
+    upper = [idx["upper", i] for i in range(1, 8)]
+    weld = np.arange(len(v))
+    weld[lower] = upper
+    seam = weld[closed]
+    a, b = idx["upper", 4], idx["upper", 5]  # neighbours on the seam
+    assert not lip_membrane(v, seam, idx["upper", 0], idx["upper", 8], a, b).any()
