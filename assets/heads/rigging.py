@@ -528,6 +528,16 @@ def add_mouth_cavity(
     # Behind the surface: each vertex at most as far forward as 0.1 IOD behind the front-most skin at
     # its (x, y), at rest and at the widest opening (the jaw carries the chin back over the cavity).
     q = (cv - frame.origin) @ ax.T
+    # Inside the head's outline seen from the front: a vertex with no skin in front of it at rest
+    # (below a mask's short chin) moves towards the cavity's centre until it has some.
+    qc = (centre - frame.origin) @ ax.T
+    out = np.flatnonzero(np.isnan(front_depth(v0, mesh.triangles, frame, q[:, :2])))
+    for _ in range(40):
+        if not len(out):
+            break
+        q[out, :2] = qc[:2] + 0.9 * (q[out, :2] - qc[:2])
+        out = out[np.isnan(front_depth(v0, mesh.triangles, frame, q[out, :2]))]
+    cv = frame.origin + q @ ax
     skin = np.fmin.reduce(
         [
             front_depth(
