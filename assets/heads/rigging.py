@@ -531,12 +531,12 @@ def add_mouth_cavity(
     # Inside the head's outline seen from the front: a vertex with no skin in front of it at rest
     # (below a mask's short chin) moves towards the cavity's centre until it has some.
     qc = (centre - frame.origin) @ ax.T
-    out = np.flatnonzero(np.isnan(front_depth(v0, mesh.triangles, frame, q[:, :2])))
+    outside = np.flatnonzero(np.isnan(front_depth(v0, mesh.triangles, frame, q[:, :2])))
     for _ in range(40):
-        if not len(out):
+        if not len(outside):
             break
-        q[out, :2] = qc[:2] + 0.9 * (q[out, :2] - qc[:2])
-        out = out[np.isnan(front_depth(v0, mesh.triangles, frame, q[out, :2]))]
+        q[outside, :2] = qc[:2] + 0.9 * (q[outside, :2] - qc[:2])
+        outside = outside[np.isnan(front_depth(v0, mesh.triangles, frame, q[outside, :2]))]
     cv = frame.origin + q @ ax
     skin = np.fmin.reduce(
         [
