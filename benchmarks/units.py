@@ -122,7 +122,7 @@ def bench_languages(stored) -> None:
     from assets.tts import speak
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
 
-    synth = UnitSynthesizer(stored.corpus)
+    synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     print("| text | phones | phones per unit | junctions outside the recorded divisemes (per phone) |")
     print("|---|---|---|---|")
     for name, texts, lang in (
@@ -160,7 +160,7 @@ def bench_say(stored, repeats: int = 3, samples: int = 0, preset: str = "veryfas
     from clients.render.video import VideoConfig, with_caption, write_video
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
 
-    synth = UnitSynthesizer(stored.corpus)
+    synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     rig, mesh = builtin_rig()
     credit = credit_for(mesh.name)
     k = stored.corpus.n_coefficients

@@ -117,7 +117,7 @@ def evaluate(
     from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
 
-    synth = synthesizer or UnitSynthesizer(stored.corpus)
+    synth = synthesizer or UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     k = stored.corpus.n_coefficients
     systems = [SystemScore(f"unit selection, n_best={n}") for n in n_best]
     rules = SystemScore("articulatory rules (same phones)")

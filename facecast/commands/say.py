@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         t = lap("speech synthesis", t)
     stored = load_unit_corpus(find_unit_corpus(args.corpus))
     with threadpool_limits(1):  # small matrices: one BLAS thread is fastest on a loaded machine
-        synth = UnitSynthesizer(stored.corpus)
+        synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
         t = lap("corpus + graph", t)
         n_frames = int(np.ceil(duration_s * 30 - 1e-9))
         res = synth.synthesize(phones, inventory, n_frames=n_frames, n_best=args.n_best)

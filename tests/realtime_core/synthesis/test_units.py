@@ -304,7 +304,7 @@ def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_divi
         ("sil", 0.7, 0.9),
     ]
     one = synth.synthesize(phones, "arpabet")
-    two = synth.synthesize(phones, "arpabet", n_best=2)
+    two = synth.synthesize(phones, "arpabet", n_best=2, ensemble_gain=1.0)
     assert one.selection.n_units == 1 and one.selection.n_mismatched == 0
     (alt,) = two.alternatives
     sent = corpus.phone_sentence()
@@ -318,3 +318,16 @@ def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_divi
         anchored=np.array([-1, 0, 0, 0, 0, 1], dtype=np.int8),
     )
     np.testing.assert_allclose(two.frames, 0.5 * (one.frames + other), atol=1e-12)
+    # the ensemble's range gain scales the deviation from the rest frame; one sequence is never scaled
+    rest = np.linspace(-0.1, 0.1, corpus.n_dims)
+    gained = UnitSynthesizer(corpus, SearchConfig(max_active=None), rest=rest)
+    np.testing.assert_allclose(
+        gained.synthesize(phones, "arpabet", n_best=2, ensemble_gain=1.3).frames,
+        rest + 1.3 * (two.frames - rest),
+        atol=1e-12,
+    )
+    np.testing.assert_array_equal(gained.synthesize(phones, "arpabet", ensemble_gain=1.3).frames, one.frames)
+    with pytest.raises(ConfigError, match="ensemble_gain"):
+        synth.synthesize(phones, "arpabet", n_best=2, ensemble_gain=0.0)
+    with pytest.raises(ConfigError, match="rest"):
+        UnitSynthesizer(corpus, rest=np.zeros(corpus.n_dims + 1))
