@@ -305,7 +305,6 @@ def viterbi(
         raise ConfigError(
             f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}"
         )
-    cfg = graph.config
 
     def allowed(c: np.ndarray) -> np.ndarray:
         return c if banned is None else c[~banned[c]]
