@@ -53,3 +53,17 @@ def test_rest_frame_is_the_neutral_face_as_closely_as_the_pca_can_show_it(stored
     # and no other coefficient vector comes closer to zero displacement
     other = stored_corpus.landmark_offsets(rest[None, :k] + 0.01).reshape(-1)
     assert np.linalg.norm(offsets) < np.linalg.norm(other)
+
+
+def test_leave_one_out_evaluation_never_uses_the_sentence_itself(stored_corpus, corpus_rows):
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from training.unitsel_eval import evaluate
+
+    synth = UnitSynthesizer(stored_corpus.corpus, rest=stored_corpus.rest_frame())
+    tests = list(corpus_rows[:4])
+    inside = evaluate(stored_corpus, tests, n_best=(1,), synthesizer=synth)[0][0]
+    loo = evaluate(stored_corpus, tests, n_best=(1,), synthesizer=synth, leave_one_out=True)[0][0]
+    assert inside["system"] == loo["system"] == "unit selection, n_best=1"
+    # in the corpus, each sentence selects itself and reproduces its own lips; left out, it cannot
+    assert inside["r"]["mouth_open"] > 0.999
+    assert loo["r"]["mouth_open"] < 0.99
