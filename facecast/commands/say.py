@@ -50,8 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=1,
         help="average the motion of this many unit sequences from "
-        "different recordings (1 = the paper's single sequence; more = smoother, closer to an average "
-        "token)",
+        "different recordings, their range restored (1 = the paper's single sequence; 10 follows held-out "
+        "lips best: r 0.902 against 0.848, at about 45 ms of synthesis per sequence; docs/unit_selection.md)",
     )
     from facecast.commands.headopts import add_head_options
 
