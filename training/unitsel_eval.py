@@ -33,7 +33,7 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.corpus import StoredCorpus
-from realtime_core.synthesis.synthesizer import UnitSynthesizer
+from realtime_core.synthesis.synthesizer import ENSEMBLE_GAIN, UnitSynthesizer
 from training.facetrack import FaceTrack
 from training.unit_corpus import PhoneRows, phone_rows
 
@@ -123,7 +123,9 @@ def evaluate(
 
     synth = synthesizer or UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     k = stored.corpus.n_coefficients
-    systems = [SystemScore(f"unit selection, n_best={n}") for n in n_best]
+    systems = [
+        SystemScore(f"unit selection, n_best={n}" + (f", range x{ENSEMBLE_GAIN:g}" if n > 1 else "")) for n in n_best
+    ]
     rules = SystemScore("articulatory rules (same phones)")
     hmm = SystemScore(f"audio-driven HMM, {model_label} (real audio)") if model is not None else None
     truth_p, truth_m, speech = [], [], []
