@@ -164,10 +164,12 @@ def filter_rows(  # pragma: no cover - compiled
     h: np.ndarray,
     phi_flat: np.ndarray,
     out: np.ndarray,
+    post: np.ndarray,
 ) -> tuple[np.ndarray, int]:
     """Lag 0 (pure filtering) over rows ``oa (k, Da)``: :func:`forward_step` then :func:`combine_step`
-    per row into ``out (k, Dv)``, in one call. Returns ``(f, stop)``: the filtered posterior after the
-    rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
+    per row into ``out (k, Dv)`` (and the normalised component posteriors into ``post (k, N*M)``, for
+    the readout, unless it has 0 rows), in one call. Returns ``(f, stop)``: the filtered posterior after
+    the rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
     posterior before that row and its index (the caller finishes from there with the row-wise path)."""
     f = prev
     for t in range(oa.shape[0]):
@@ -176,5 +178,14 @@ def filter_rows(  # pragma: no cover - compiled
         if not ok:
             return f, t
         out[t] = x
+        if post.shape[0]:
+            n, m = mix.shape
+            s = 0.0
+            for j in range(n):
+                for k in range(m):
+                    s += f_new[j] * mix[j, k]
+            for j in range(n):
+                for k in range(m):
+                    post[t, j * m + k] = f_new[j] * mix[j, k] / s
         f = f_new
     return f, -1
