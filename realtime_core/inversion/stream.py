@@ -155,7 +155,7 @@ class StreamingInverter:
             # The model's arrays every compiled forward step takes, in the kernels' order (fixed per inverter).
             self._step_model = (self._center, self._quad, self._const, self._i0, self._i1, self._feat, self._A)
             self._forward = self._forward_compiled  # type: ignore[method-assign]
-            self._combine = self._combine_compiled  # type: ignore[method-assign]
+            self._raw = self._combine_raw  # type: ignore[method-assign]
         self.reset()
 
     @property
@@ -255,7 +255,7 @@ class StreamingInverter:
             self._f = f
         for t in range(done, len(oa)):
             f_t, _, mix, a = self._forward(oa[t])
-            out[t] = self._combine_raw(f_t, mix, a)
+            out[t] = self._raw(f_t, mix, a)
             if len(post):
                 post[t] = _component_posteriors(f_t, mix)
         if self._readout is not None:
@@ -278,7 +278,7 @@ class StreamingInverter:
         raw, post, audio = np.empty((len(oa), self._dv)), np.empty((len(oa), self._n * self._m)), []
         for t, row in enumerate(oa):
             f, _, mix, a = self._forward(row)
-            raw[t] = self._combine_raw(f, mix, a)
+            raw[t] = self._raw(f, mix, a)
             post[t] = _component_posteriors(f, mix)
             audio.append(a)
         self.reset()
@@ -296,13 +296,6 @@ class StreamingInverter:
         )
         self._f = f
         return f, b, mix, a
-
-    def _combine_compiled(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """:meth:`_combine` in one compiled call (least squares, as there, if P is not positive definite)."""
-        x = self._combine_raw(state_post, mix, a)
-        if self._readout is not None:
-            x = self._readout.step(x, _component_posteriors(state_post, mix), a)
-        return x if self._output is None else self._output(x)
 
     def _combine_raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Eq. 7 compiled, before the output stage."""
@@ -326,7 +319,15 @@ class StreamingInverter:
         return self._combine(f, mix, cond)
 
     def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Eq. 7 for one frame: posteriors ``(N,), (N, M)``, centred audio ``a (Da,)`` -> ``(Dv,)``."""
+        """Eq. 7 for one frame, then the readout and the output stage: posteriors ``(N,), (N, M)``,
+        centred audio ``a (Da,)`` -> ``(Dv,)``."""
+        x = self._raw(state_post, mix, a)
+        if self._readout is not None:
+            x = self._readout.step(x, _component_posteriors(state_post, mix), a)
+        return x if self._output is None else self._output(x)
+
+    def _raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame (the numpy reference), before the readout and the output stage."""
         r = (state_post[:, None] * mix).reshape(-1)
         r = r / r.sum()
         P = (r @ self._phi_flat).reshape(self._dv, self._dv)
@@ -334,10 +335,7 @@ class StreamingInverter:
         # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
         # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
         _, x, info = _posv(P, rhs)
-        x = x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
-        if self._readout is not None:
-            x = self._readout.step(x, r, a)
-        return x if self._output is None else self._output(x)
+        return x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
 
 
 def _component_posteriors(state_post: np.ndarray, mix: np.ndarray) -> np.ndarray:
