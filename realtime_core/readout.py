@@ -112,9 +112,9 @@ class Readout:
             return np.zeros((0, self.n_visual))
         return self.map(self.features(raw, component_post, audio))
 
-    def stream(self) -> ReadoutStream:
-        """Per-session state (the past taps) for the live path."""
-        return ReadoutStream(self)
+    def stream(self, *, kernel: str = "numpy") -> ReadoutStream:
+        """Per-session state (the past taps) for the live path (kernel: "numba" compiled or "numpy")."""
+        return ReadoutStream(self, kernel=kernel)
 
 
 def posterior_features(kind: str, component_post: np.ndarray, n_states: int, n_mix: int) -> np.ndarray:
@@ -138,23 +138,53 @@ def readout_features(raw: np.ndarray, audio: np.ndarray, post: np.ndarray, *, ta
 
 
 class ReadoutStream:
-    """The readout of one stream: ``step(raw (Dv,), component_post (N*M,), audio (Da,)) -> (Dv,)``."""
+    """The readout of one stream: ``step(raw (Dv,), component_post (N*M,), audio (Da,)) -> (Dv,)``.
 
-    def __init__(self, readout: Readout) -> None:
+    kernel: "numba" (one compiled call per frame, :func:`realtime_core.inversion.compiled.readout_step`)
+    or "numpy" (the reference below; the two agree to rounding)."""
+
+    def __init__(self, readout: Readout, *, kernel: str = "numpy") -> None:
         self.readout = readout
         ro = readout
         nx = ro.taps * ro.n_visual
         self._phi = np.zeros(ro.n_features)  # [taps | audio | posteriors], filled in place
         self._hist = self._phi[:nx].reshape(ro.taps, ro.n_visual)
         self._a0, self._a1 = nx, nx + (ro.n_audio if ro.audio else 0)
+        self._post_kind = POSTERIOR_KINDS.index(ro.posteriors)
         self._started = False
+        self._compiled: Any = None
+        if kernel == "numba":
+            # Imported here: numba's import is paid only by streams that use it.
+            from realtime_core.inversion.compiled import readout_step
+
+            self._compiled = readout_step
 
     def reset(self) -> None:
         """A new utterance: forget the past taps."""
         self._started = False
 
     def step(self, raw: np.ndarray, component_post: np.ndarray, audio: np.ndarray) -> np.ndarray:
-        ro, h = self.readout, self._hist
+        ro = self.readout
+        if self._compiled is not None:
+            started, self._started = self._started, True
+            y: np.ndarray = self._compiled(
+                np.asarray(raw, dtype=np.float64),
+                np.asarray(component_post, dtype=np.float64),
+                audio,
+                self._phi,
+                started,
+                ro.taps,
+                self._a0,
+                self._a1,
+                self._post_kind,
+                ro.n_mix,
+                ro.w1,
+                ro.b1,
+                ro.w2,
+                ro.b2,
+            )
+            return y
+        h = self._hist
         if not self._started:
             h[:] = raw  # frames before the first repeat it (as readout_features pads)
             self._started = True

@@ -214,7 +214,6 @@ def run(args: argparse.Namespace) -> int:
     print(text)
     if args.output is not None:
         from training.latency import existing_dial_section, splice_dial_section
-
         from training.report import carry_over_sections
 
         # The latency dial (`facecast eval --dial`) and the sections other commands write (`--mu`,

@@ -133,7 +133,7 @@ class StreamingInverter:
     ) -> None:
         self.form = form
         self._output = output
-        self._readout: ReadoutStream | None = None if readout is None else readout.stream()
+        self._readout: ReadoutStream | None = None if readout is None else readout.stream(kernel=config.kernel)
         self.config = config
         p = StreamPlan.build(form, config) if plan is None else plan
         self.plan = p
