@@ -47,7 +47,9 @@ class Traced:
 class ReadoutSpec:
     """One candidate: taps (K >= 1), audio (use the centred audio row), posteriors ("none", "state",
     "component"), hidden (0 = linear ridge, else ReLU units), alpha (the L2 penalty: ridge alpha, or
-    the MLP's), seed (MLP initialisation and early-stopping split), max_iter (MLP epochs)."""
+    the MLP's), seed (MLP initialisation and early-stopping split), max_iter (MLP epochs), ensemble (MLPs
+    with seeds seed, seed + 1, ... averaged: stored as one layer of ensemble x hidden units whose output
+    weights are divided by ensemble)."""
 
     taps: int = 5
     audio: bool = True
@@ -56,9 +58,11 @@ class ReadoutSpec:
     alpha: float = 1e-3
     seed: int = 0
     max_iter: int = 200
+    ensemble: int = 1
 
     def __post_init__(self) -> None:
-        if self.taps < 1 or self.hidden < 0 or self.alpha < 0 or self.posteriors not in POSTERIOR_KINDS:
+        bad = self.taps < 1 or self.hidden < 0 or self.alpha < 0 or self.ensemble < 1
+        if bad or self.posteriors not in POSTERIOR_KINDS or (self.hidden == 0 and self.ensemble != 1):
             raise ConfigError(f"invalid readout candidate {self}")
 
     def as_json(self) -> dict[str, Any]:
@@ -70,6 +74,7 @@ class ReadoutSpec:
             "alpha": self.alpha,
             "seed": self.seed,
             "max_iter": self.max_iter,
+            "ensemble": self.ensemble,
         }
 
 
@@ -139,20 +144,27 @@ def fit_readout(model: AvModel, train: Sequence[Traced], spec: ReadoutSpec) -> R
         lin = Ridge(alpha=spec.alpha).fit(phi, y)
         return _readout(spec, model, np.zeros((phi.shape[1], 0)), np.zeros(0), lin.coef_.T, lin.intercept_, meta)
     scaler = StandardScaler().fit(phi)
-    mlp = MLPRegressor(
-        hidden_layer_sizes=(spec.hidden,),
-        activation="relu",
-        alpha=spec.alpha,
-        early_stopping=True,
-        max_iter=spec.max_iter,
-        random_state=spec.seed,
-    ).fit(scaler.transform(phi), y)
-    meta["epochs"] = int(mlp.n_iter_)
-    # relu(((phi - mu) / sd) @ W + b) = relu(phi @ (W / sd) + (b - (mu / sd) @ W))
     sd = scaler.scale_
-    w1 = mlp.coefs_[0] / sd[:, None]
-    b1 = mlp.intercepts_[0] - (scaler.mean_ / sd) @ mlp.coefs_[0]
-    return _readout(spec, model, w1, b1, mlp.coefs_[1], mlp.intercepts_[1], meta)
+    w1s, b1s, w2s, b2s, epochs = [], [], [], [], []
+    for k in range(spec.ensemble):
+        mlp = MLPRegressor(
+            hidden_layer_sizes=(spec.hidden,),
+            activation="relu",
+            alpha=spec.alpha,
+            early_stopping=True,
+            max_iter=spec.max_iter,
+            random_state=spec.seed + k,
+        ).fit(scaler.transform(phi), y)
+        epochs.append(int(mlp.n_iter_))
+        # relu(((phi - mu) / sd) @ W + b) = relu(phi @ (W / sd) + (b - (mu / sd) @ W))
+        w1s.append(mlp.coefs_[0] / sd[:, None])
+        b1s.append(mlp.intercepts_[0] - (scaler.mean_ / sd) @ mlp.coefs_[0])
+        w2s.append(mlp.coefs_[1] / spec.ensemble)
+        b2s.append(mlp.intercepts_[1] / spec.ensemble)
+    meta["epochs"] = epochs if spec.ensemble > 1 else epochs[0]
+    return _readout(
+        spec, model, np.concatenate(w1s, axis=1), np.concatenate(b1s), np.concatenate(w2s), np.sum(b2s, axis=0), meta
+    )
 
 
 def estimates(model: AvModel, clips: Sequence[Traced], readout: Readout | None, band: float) -> list:

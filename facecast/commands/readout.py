@@ -10,7 +10,7 @@ SHARED = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve()
 
 
 def _specs(text: str) -> list:
-    """``TAPS:POSTERIORS:HIDDEN:ALPHA[:audio|noaudio]`` candidates, comma-separated."""
+    """``TAPS:POSTERIORS:HIDDEN[xENSEMBLE]:ALPHA[:audio|noaudio]`` candidates, comma-separated."""
     from training.readout import ReadoutSpec
 
     out = []
@@ -19,11 +19,13 @@ def _specs(text: str) -> list:
         if len(parts) not in (4, 5) or (len(parts) == 5 and parts[4] not in ("audio", "noaudio")):
             raise argparse.ArgumentTypeError(f"candidate {item!r} is not TAPS:POSTERIORS:HIDDEN:ALPHA[:audio|noaudio]")
         try:
+            hidden, _, ensemble = parts[2].partition("x")
             out.append(
                 ReadoutSpec(
                     taps=int(parts[0]),
                     posteriors=parts[1],
-                    hidden=int(parts[2]),
+                    hidden=int(hidden),
+                    ensemble=int(ensemble or 1),
                     alpha=float(parts[3]),
                     audio=len(parts) == 4 or parts[4] == "audio",
                 )
@@ -33,7 +35,9 @@ def _specs(text: str) -> list:
     return out
 
 
-DEFAULT_CANDIDATES = "5:state:0:1,5:state:32:1e-3,5:state:64:1e-3,5:state:128:1e-3,8:state:64:1e-3,5:component:64:1e-3"
+DEFAULT_CANDIDATES = (
+    "5:state:0:1,5:state:32:1e-3,5:state:64:1e-3,5:state:128:1e-3,8:state:64:1e-3,5:component:64:1e-3,5:state:64x3:1e-3"
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -59,9 +63,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--candidates",
         type=_specs,
         default=_specs(DEFAULT_CANDIDATES),
-        metavar="K:POST:H:ALPHA,...",
-        help=f"readouts to try: taps, posteriors (none/state/component), hidden units (0 = linear ridge), L2 "
-        f"alpha, optionally ':noaudio'; default {DEFAULT_CANDIDATES}",
+        metavar="K:POST:H[xE]:ALPHA,...",
+        help=f"readouts to try: taps, posteriors (none/state/component), hidden units (0 = linear ridge; 64x3: three "
+        f"64-unit MLPs of seeds 0-2 averaged), L2 alpha, optionally ':noaudio'; default {DEFAULT_CANDIDATES}",
     )
     p.add_argument(
         "--bands",

@@ -67,3 +67,19 @@ def test_chosen_readout_is_what_the_live_path_runs():
         live = np.concatenate([inv.push(oa), inv.flush()])
         np.testing.assert_allclose(live, estimates(fitted, [c], fitted.readout, fitted.closure_band)[0][2], atol=1e-9)
     assert replace(fitted, readout=None).readout is None
+
+
+def test_an_ensemble_readout_is_the_average_of_its_members():
+    rng = np.random.default_rng(3)
+    train = _traced(rng, 6, lambda raw, post, audio: np.tanh(raw) + 0.1 * audio[:, :DV])
+    model = small_model(0)
+    spec = ReadoutSpec(taps=2, hidden=5, max_iter=20)
+    both = fit_readout(model, train, replace(spec, ensemble=2))
+    members = [fit_readout(model, train, replace(spec, seed=s)) for s in (0, 1)]
+    assert both.hidden == 10
+    c = train[0]
+    np.testing.assert_allclose(
+        both.apply(c.raw, c.post, c.audio),
+        np.mean([m.apply(c.raw, c.post, c.audio) for m in members], axis=0),
+        atol=1e-10,
+    )
