@@ -28,7 +28,7 @@ import platform
 import sys
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, TextIO
 
 import numpy as np
@@ -171,6 +171,8 @@ def bench_mappers(n_frames: int, rng: np.random.Generator, mlp_file: str | None 
     fe = hmm.frontend
     lo, hi = fe.tc * fe.n_feat, (fe.tc + 1) * fe.n_feat
     models: dict[str, SpeechModel] = {f"hmm shipped N={hmm.hmm.n_states},M={hmm.hmm.n_mix}": hmm}
+    if hmm.readout is not None:  # the learned readout's share of the live path
+        models["hmm shipped without its readout"] = replace(hmm, readout=None)
     for k, h in ((16, 20), (44, 20), (1, 600)):
         bank = _random_bank(rng, k, h, fe.audio_dim, 4, lo, hi)
         name = f"mlp K={k},H={h}" + (" (single large MLP)" if k == 1 else "")

@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "units": "facecast.commands.units",
     "phones": "facecast.commands.phones",
     "train": "facecast.commands.train",
+    "readout": "facecast.commands.readout",
     "adapt": "facecast.commands.adapt",
     "eval": "facecast.commands.eval",
     "mu": "facecast.commands.mu",

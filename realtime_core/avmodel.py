@@ -7,7 +7,9 @@ A model file is an ``.npz`` archive (no pickle) holding:
   * the HMM (``startprob, transmat, weights, means, covars``, covariance type, n_audio);
   * the CMVN warm-start statistics (``cmvn_mean, cmvn_var``);
   * the precomputed streaming matrices (``center, quad, quad0, reg, reg0, phi_v, chol_vv,
-    logdet_v``, see :mod:`realtime_core.inversion.conditional`).
+    logdet_v``, see :mod:`realtime_core.inversion.conditional`);
+  * optionally a learned readout (``readout_weights, readout_bias``; its sizes in ``config_json``
+    under "readout"; :mod:`realtime_core.readout`).
 
 :func:`decode_model` validates shapes, finiteness and positive-definiteness and checks
 the stored streaming matrices against ones recomputed from the HMM, naming the problem
@@ -37,6 +39,7 @@ from realtime_core.inversion import (
     StreamPlan,
 )
 from realtime_core.output import OutputStage
+from realtime_core.readout import Readout, decode_readout, encode_readout
 
 FORMAT = "facecast-avmodel"
 VERSION = 1
@@ -51,6 +54,7 @@ class AvModel:
     visual_names: names of the o_v dimensions; likelihood_scale: the audio-likelihood exponent
     the live path uses (chosen on held-out data, see :class:`StreamConfig`); closure_band: IOD,
     the output stage's closure band (:mod:`realtime_core.output`, chosen on held-out data; 0 = off);
+    readout: the learned readout after the inversion (:mod:`realtime_core.readout`; None = eq. 7 as is);
     metadata: JSON-able training details."""
 
     hmm: AvHmm
@@ -60,6 +64,7 @@ class AvModel:
     visual_names: tuple[str, ...] = VISUAL_PARAMS
     likelihood_scale: float = 1.0
     closure_band: float = 0.0
+    readout: Readout | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -75,6 +80,14 @@ class AvModel:
             raise ModelFormatError(f"likelihood_scale must be in (0, 1], got {self.likelihood_scale}")
         if not 0 <= self.closure_band <= 0.1:
             raise ModelFormatError(f"closure_band must be in [0, 0.1] IOD, got {self.closure_band}")
+        ro = self.readout
+        if ro is not None:
+            sizes = (self.hmm.n_states, self.hmm.n_mix, self.hmm.n_audio, self.hmm.n_visual)
+            if (ro.n_states, ro.n_mix, ro.n_audio, ro.n_visual) != sizes:
+                raise ModelFormatError(
+                    f"readout sizes (N, M, Da, Dv) = {(ro.n_states, ro.n_mix, ro.n_audio, ro.n_visual)} "
+                    f"do not match the HMM's {sizes}"
+                )
 
     @cached_property
     def form(self) -> ConditionalForm:
@@ -108,7 +121,7 @@ class AvModel:
         plan = self._plans.get(key)
         if plan is None:
             plan = self._plans[key] = StreamPlan.build(self.form, config)
-        return StreamingInverter(self.form, config=config, plan=plan, output=self.output_stage)
+        return StreamingInverter(self.form, config=config, plan=plan, output=self.output_stage, readout=self.readout)
 
     @cached_property
     def visual_floor(self) -> np.ndarray:
@@ -186,6 +199,9 @@ def encode_model(model: AvModel) -> bytes:
         "n_audio": model.hmm.n_audio,
         "metadata": model.metadata,
     }
+    ro_arrays: dict[str, np.ndarray] = {}
+    if model.readout is not None:
+        config["readout"], ro_arrays = encode_readout(model.readout)
     arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
         "version": np.array(VERSION),
@@ -197,6 +213,7 @@ def encode_model(model: AvModel) -> bytes:
         arrays[name] = getattr(model.hmm, name)
     for name in _FORM_ARRAYS:
         arrays[name] = getattr(model.form, name)
+    arrays.update(ro_arrays)
     return npz_bytes(arrays)
 
 
@@ -226,6 +243,7 @@ def decode_model(data: bytes) -> AvModel:
             visual_names=tuple(config["visual_names"]),
             likelihood_scale=float(config.get("likelihood_scale", 1.0)),
             closure_band=float(config.get("closure_band", 0.0)),  # 0: models from before the band
+            readout=decode_readout(config["readout"], arrays) if config.get("readout") is not None else None,
             metadata=config.get("metadata", {}),
         )
     except ModelFormatError:

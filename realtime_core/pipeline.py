@@ -157,8 +157,10 @@ def speech_to_params(
 ) -> np.ndarray:
     """Whole utterance: ``(n,)`` samples at ``rate_hz`` (default the model's) -> ``(n_frames, n_visual)``.
 
-    mode "stream" is exactly the live path (the same :class:`SpeechToParams` objects); "batch" is
-    batch HMMI (eq. 7 EM, HMM models only) on the same resampled audio.
+    mode "stream" is exactly the live path (the same :class:`SpeechToParams` objects, with the model's
+    readout and output stage); "batch" is batch HMMI (eq. 7 EM, HMM models only) on the same resampled
+    audio, then the output stage: the paper's offline estimator, without the learned readout (which is
+    fitted on the live path's filtered posteriors, not HMMI's).
     """
     if mode not in ("stream", "batch"):
         raise ConfigError(f"mode must be 'stream' or 'batch', got {mode!r}")

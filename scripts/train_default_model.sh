@@ -8,7 +8,10 @@
 #    N=16 states, M=3 mixtures, t_c=3, c0..c11, seed 0, audio-likelihood scale KAPPA and closure band
 #    BAND (both chosen on s1 val), SPEEDS speed-perturbation copies (chosen on s1 val and on real
 #    speech of other voices).
-# 3. `facecast eval` scores it on the s1 test split, the other talkers' clips, real speech and held-out
+# 3. `facecast readout` fits the learned readout after the inversion (realtime_core/readout.py) on the
+#    train split's live-path trajectories against the real lips, chooses its form and re-chooses the closure
+#    band on val (the band from step 2 is only the starting point); a separate step, re-runnable on any HMM.
+# 4. `facecast eval` scores it on the s1 test split, the other talkers' clips, real speech and held-out
 #    synthetic voices and rewrites docs/accuracy.md (plots beside it).
 # GRID: Cooke, Barker, Cunningham, Shao (2006), CC BY 4.0.
 set -euo pipefail
@@ -22,4 +25,5 @@ run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train ${SPEEDS:+--speed "$SPEEDS"} -o assets/data/default_model.npz \
     --states 16 --mix 3 --covariance full --tc 3 --iters 12 --tol 3e-4 --seed 0 \
     --likelihood-scale "$KAPPA" --closure-band "$BAND"
+run readout assets/data/default_model.npz -o assets/data/default_model.npz --grid-s1 "$grid"
 run eval --grid-s1 "$grid" --output docs/accuracy.md

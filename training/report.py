@@ -87,3 +87,19 @@ def plot_tracks(tracks: Sequence[tuple[str, np.ndarray, np.ndarray]], path: Path
     out = _save(fig, path)
     plt.close(fig)
     return out
+
+
+def carry_over_sections(new: str, old: str, *, skip: str | None = None) -> str:
+    """``new`` markdown with every ``## `` section of ``old`` that ``new`` does not have (by title) appended in
+    ``old``'s order: sections other commands write into the same file (``facecast eval --mu``, ``facecast units
+    eval``) survive a regeneration. ``skip``: a marked block of ``old`` (e.g. the latency dial, spliced in
+    separately) left out first."""
+    if skip:
+        old = old.replace(skip, "")
+    titles = {line for line in new.splitlines() if line.startswith("## ")}
+    kept = []
+    for part in old.split("\n## ")[1:]:
+        title = "## " + part.splitlines()[0]
+        if title not in titles:
+            kept.append("## " + part.rstrip("\n") + "\n")
+    return new.rstrip("\n") + "\n\n" + "\n".join(kept) if kept else new

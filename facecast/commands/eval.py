@@ -214,10 +214,13 @@ def run(args: argparse.Namespace) -> int:
     print(text)
     if args.output is not None:
         from training.latency import existing_dial_section, splice_dial_section
+        from training.report import carry_over_sections
 
-        # The latency dial (`facecast eval --dial`) is measured separately; keep its section.
+        # The latency dial (`facecast eval --dial`) and the sections other commands write (`--mu`,
+        # `facecast units eval`) are measured separately; keep them.
         old = args.output.read_text(encoding="utf-8") if args.output.is_file() else ""
-        text = splice_dial_section(text, existing_dial_section(old))
+        dial = existing_dial_section(old)
+        text = splice_dial_section(carry_over_sections(text, old, skip=dial), dial)
         atomic_write_bytes(args.output, text.encode())
         print(f"wrote {args.output}")
     return 0

@@ -164,10 +164,12 @@ def filter_rows(  # pragma: no cover - compiled
     h: np.ndarray,
     phi_flat: np.ndarray,
     out: np.ndarray,
+    post: np.ndarray,
 ) -> tuple[np.ndarray, int]:
     """Lag 0 (pure filtering) over rows ``oa (k, Da)``: :func:`forward_step` then :func:`combine_step`
-    per row into ``out (k, Dv)``, in one call. Returns ``(f, stop)``: the filtered posterior after the
-    rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
+    per row into ``out (k, Dv)`` (and the normalised component posteriors into ``post (k, N*M)``, for
+    the readout, unless it has 0 rows), in one call. Returns ``(f, stop)``: the filtered posterior after
+    the rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
     posterior before that row and its index (the caller finishes from there with the row-wise path)."""
     f = prev
     for t in range(oa.shape[0]):
@@ -176,5 +178,67 @@ def filter_rows(  # pragma: no cover - compiled
         if not ok:
             return f, t
         out[t] = x
+        if post.shape[0]:
+            n, m = mix.shape
+            s = 0.0
+            for j in range(n):
+                for k in range(m):
+                    s += f_new[j] * mix[j, k]
+            for j in range(n):
+                for k in range(m):
+                    post[t, j * m + k] = f_new[j] * mix[j, k] / s
         f = f_new
     return f, -1
+
+
+@njit(cache=True, nogil=True)
+def readout_step(  # pragma: no cover - compiled
+    raw: np.ndarray,
+    component_post: np.ndarray,
+    audio: np.ndarray,
+    phi: np.ndarray,
+    started: bool,
+    taps: int,
+    a0: int,
+    a1: int,
+    post_kind: int,
+    n_mix: int,
+    w1: np.ndarray,
+    b1: np.ndarray,
+    w2: np.ndarray,
+    b2: np.ndarray,
+) -> np.ndarray:
+    """One frame of ``realtime_core.readout.ReadoutStream.step`` (the numpy method is the reference).
+
+    phi ``(F,)`` float64: the stream's feature vector, updated in place (taps shifted, audio ``phi[a0:a1]``,
+    posteriors ``phi[a1:]``); post_kind 0 none, 1 state (summed over the ``n_mix`` mixtures), 2 component.
+    w1 ``(F, H)``, b1 ``(H,)``, w2 ``(H or F, Dv)``, b2 ``(Dv,)``; H = 0 is a linear map. Returns ``(Dv,)``."""
+    dv = raw.shape[0]
+    if started:
+        for k in range(taps - 1, 0, -1):
+            for i in range(dv):
+                phi[k * dv + i] = phi[(k - 1) * dv + i]
+    else:  # frames before the first repeat it
+        for k in range(1, taps):
+            for i in range(dv):
+                phi[k * dv + i] = raw[i]
+    for i in range(dv):
+        phi[i] = raw[i]
+    for i in range(a1 - a0):
+        phi[a0 + i] = audio[i]
+    if post_kind == 1:
+        for j in range(phi.shape[0] - a1):
+            s = 0.0
+            for k in range(n_mix):
+                s += component_post[j * n_mix + k]
+            phi[a1 + j] = s
+    elif post_kind == 2:
+        for j in range(phi.shape[0] - a1):
+            phi[a1 + j] = component_post[j]
+    if b1.shape[0] > 0:
+        hid = np.dot(phi, w1) + b1
+        for i in range(hid.shape[0]):
+            if hid[i] < 0.0:
+                hid[i] = 0.0
+        return np.dot(hid, w2) + b2
+    return np.dot(phi, w2) + b2

@@ -34,6 +34,7 @@ from scipy.linalg.lapack import dposv as _posv
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
 from realtime_core.inversion.conditional import ConditionalForm
+from realtime_core.readout import Readout, ReadoutStream
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,7 +118,9 @@ class StreamingInverter:
     plan: the shared read-only matrices (built from ``form`` and ``config`` when not given;
     it must have been built from the same two). output: the model's output stage
     (:class:`realtime_core.output.OutputStage`: closed-pose floor and closure band), applied to
-    every emitted frame; None = raw eq. 7 estimates."""
+    every emitted frame; None = raw eq. 7 estimates. readout: the model's learned readout
+    (:mod:`realtime_core.readout`), applied to every emitted frame's eq. 7 estimate before the output
+    stage, in emission order; None = none."""
 
     def __init__(
         self,
@@ -126,9 +129,11 @@ class StreamingInverter:
         config: StreamConfig = StreamConfig(),
         plan: StreamPlan | None = None,
         output: Callable[[np.ndarray], np.ndarray] | None = None,
+        readout: Readout | None = None,
     ) -> None:
         self.form = form
         self._output = output
+        self._readout: ReadoutStream | None = None if readout is None else readout.stream(kernel=config.kernel)
         self.config = config
         p = StreamPlan.build(form, config) if plan is None else plan
         self.plan = p
@@ -150,7 +155,7 @@ class StreamingInverter:
             # The model's arrays every compiled forward step takes, in the kernels' order (fixed per inverter).
             self._step_model = (self._center, self._quad, self._const, self._i0, self._i1, self._feat, self._A)
             self._forward = self._forward_compiled  # type: ignore[method-assign]
-            self._combine = self._combine_compiled  # type: ignore[method-assign]
+            self._raw = self._combine_raw  # type: ignore[method-assign]
         self.reset()
 
     @property
@@ -164,6 +169,8 @@ class StreamingInverter:
         # (filtered, scaled b, within-state mix, centred audio) per frame not yet final
         self._pending: deque[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque()
         self._finished = False
+        if self._readout is not None:
+            self._readout.reset()
 
     def push(self, oa: np.ndarray) -> np.ndarray:
         if self._finished:
@@ -228,6 +235,8 @@ class StreamingInverter:
         """Lag 0: all rows of a push in one compiled call (the row-wise path from a row it cannot solve)."""
         assert self._filter_rows is not None  # set with kernel="numba"
         out = np.empty((len(oa), self._dv))
+        # component posteriors per row, for the readout (a (0, C) array: not written)
+        post = np.empty((len(oa) if self._readout is not None else 0, self._n * self._m))
         prev = self._f
         f, stop = self._filter_rows(
             oa,
@@ -239,17 +248,41 @@ class StreamingInverter:
             self._h,
             self._phi_flat,
             out,
+            post,
         )
         done = len(oa) if stop < 0 else stop
         if done:
             self._f = f
         for t in range(done, len(oa)):
             f_t, _, mix, a = self._forward(oa[t])
-            out[t] = self._combine_raw(f_t, mix, a)
+            out[t] = self._raw(f_t, mix, a)
+            if len(post):
+                post[t] = _component_posteriors(f_t, mix)
+        if self._readout is not None:
+            audio = oa.astype(self._center.dtype) - self._center  # the centred rows, as the kernels compute them
+            for t in range(len(oa)):
+                out[t] = self._readout.step(out[t], post[t], audio[t])
         if self._output is not None:
             for t in range(len(oa)):
                 out[t] = self._output(out[t])
         return out
+
+    def trace(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The readout's inputs for one utterance at lag 0 (what it sees live; for fitting one):
+        ``oa (T, Da)`` -> raw eq. 7 estimates ``(T, Dv)``, component posteriors ``(T, N*M)``, centred
+        audio ``(T, Da)``. Starts a new utterance (:meth:`reset`) and leaves the inverter reset."""
+        self.reset()
+        oa = np.asarray(oa)
+        if oa.ndim != 2 or oa.shape[1] != self._da:
+            raise InvalidFeaturesError(f"audio features must be (k, {self._da}), got {oa.shape}")
+        raw, post, audio = np.empty((len(oa), self._dv)), np.empty((len(oa), self._n * self._m)), []
+        for t, row in enumerate(oa):
+            f, _, mix, a = self._forward(row)
+            raw[t] = self._raw(f, mix, a)
+            post[t] = _component_posteriors(f, mix)
+            audio.append(a)
+        self.reset()
+        return raw, post, np.array(audio, dtype=np.float64).reshape(len(oa), self._da)
 
     def _forward_compiled(self, row: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`_forward` in one compiled call."""
@@ -263,11 +296,6 @@ class StreamingInverter:
         )
         self._f = f
         return f, b, mix, a
-
-    def _combine_compiled(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """:meth:`_combine` in one compiled call (least squares, as there, if P is not positive definite)."""
-        x = self._combine_raw(state_post, mix, a)
-        return x if self._output is None else self._output(x)
 
     def _combine_raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Eq. 7 compiled, before the output stage."""
@@ -291,7 +319,15 @@ class StreamingInverter:
         return self._combine(f, mix, cond)
 
     def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Eq. 7 for one frame: posteriors ``(N,), (N, M)``, centred audio ``a (Da,)`` -> ``(Dv,)``."""
+        """Eq. 7 for one frame, then the readout and the output stage: posteriors ``(N,), (N, M)``,
+        centred audio ``a (Da,)`` -> ``(Dv,)``."""
+        x = self._raw(state_post, mix, a)
+        if self._readout is not None:
+            x = self._readout.step(x, _component_posteriors(state_post, mix), a)
+        return x if self._output is None else self._output(x)
+
+    def _raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame (the numpy reference), before the readout and the output stage."""
         r = (state_post[:, None] * mix).reshape(-1)
         r = r / r.sum()
         P = (r @ self._phi_flat).reshape(self._dv, self._dv)
@@ -299,5 +335,11 @@ class StreamingInverter:
         # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
         # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
         _, x, info = _posv(P, rhs)
-        x = x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
-        return x if self._output is None else self._output(x)
+        return x if info == 0 else np.linalg.lstsq(P, rhs, rcond=None)[0]
+
+
+def _component_posteriors(state_post: np.ndarray, mix: np.ndarray) -> np.ndarray:
+    """``(N,)`` state and ``(N, M)`` within-state posteriors -> normalised component posteriors ``(N*M,)``
+    (the weights eq. 7 combines with)."""
+    r = (state_post[:, None] * mix).reshape(-1)
+    return r / r.sum()

@@ -1,0 +1,85 @@
+"""Fitting the readout: a linear readout fitted on data made by a known causal linear filter recovers it;
+the fitted MLP readout's live path equals the fit's own estimates."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from tests.realtime_core.test_readout import DA, DV, M, N, small_model
+from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
+
+
+def _traced(rng: np.random.Generator, n_clips: int, make_truth) -> list[Traced]:
+    out = []
+    for i in range(n_clips):
+        T = 60
+        raw = np.cumsum(rng.standard_normal((T, DV)) * 0.1, axis=0)
+        post = rng.dirichlet(np.ones(N * M), T)
+        audio = rng.standard_normal((T, DA))
+        out.append(Traced(f"c{i}", make_truth(raw, post, audio), raw, post, audio, np.zeros(T), []))
+    return out
+
+
+def test_a_linear_readout_recovers_a_known_causal_filter():
+    """truth_t = B0 x_t + B1 x_{t-1} + B2 x_{t-2} + C a_t + D p_t + c (state posteriors): ridge with a
+    tiny penalty on noise-free data gives back B, C, D and c."""
+    rng = np.random.default_rng(0)
+    B = rng.standard_normal((3, DV, DV))
+    C = rng.standard_normal((DA, DV)) * 0.2
+    D = rng.standard_normal((N, DV))
+    c = rng.standard_normal(DV)
+
+    def truth(raw, post, audio):
+        pad = np.concatenate([raw[:1], raw[:1], raw])  # frames before the first repeat it
+        state = post.reshape(len(post), N, M).sum(2)
+        return sum(pad[2 - k : 2 - k + len(raw)] @ B[k] for k in range(3)) + audio @ C + state @ D + c
+
+    train = _traced(rng, 30, truth)
+    model = small_model(0)
+    ro = fit_readout(model, train, ReadoutSpec(taps=3, audio=True, posteriors="state", hidden=0, alpha=1e-9))
+    w = ro.w2
+    np.testing.assert_allclose(w[: 3 * DV].reshape(3, DV, DV), B, atol=1e-5)
+    np.testing.assert_allclose(w[3 * DV : 3 * DV + DA], C, atol=1e-5)
+    # the state posteriors sum to 1, so D is identified only up to a constant shared with the bias
+    d = w[3 * DV + DA :]
+    np.testing.assert_allclose(d - d.mean(0), D - D.mean(0), atol=1e-5)
+    np.testing.assert_allclose(ro.b2 + d.mean(0), c + D.mean(0), atol=1e-5)
+
+
+def test_chosen_readout_is_what_the_live_path_runs():
+    """choose_readout on synthetic clips: the returned model's inverter, fed audio rows, equals the
+    estimates the choice was scored with (readout, then the output stage of the chosen band)."""
+    rng = np.random.default_rng(1)
+    model = small_model(2)
+    oa_clips = [rng.standard_normal((50, DA)) for _ in range(12)]
+    traced = []
+    for i, oa in enumerate(oa_clips):
+        raw, post, audio = model.inverter().trace(oa)
+        truth = np.roll(raw, 1, axis=0) * 0.5 + 0.1  # something a readout can learn
+        traced.append(Traced(f"c{i}", truth, raw, post, audio, np.zeros(len(oa)), []))
+    specs = [ReadoutSpec(taps=2, hidden=0, alpha=1e-3), ReadoutSpec(taps=2, hidden=8, max_iter=30)]
+    fitted, report = choose_readout(model, traced[:8], traced[8:], specs, bands=(0.0, 0.02), log=lambda _: None)
+    assert fitted.readout is not None and len(report["candidates"]) == 3
+    for c, oa in zip(traced[8:], oa_clips[8:], strict=True):
+        inv = fitted.inverter()
+        live = np.concatenate([inv.push(oa), inv.flush()])
+        np.testing.assert_allclose(live, estimates(fitted, [c], fitted.readout, fitted.closure_band)[0][2], atol=1e-9)
+    assert replace(fitted, readout=None).readout is None
+
+
+def test_an_ensemble_readout_is_the_average_of_its_members():
+    rng = np.random.default_rng(3)
+    train = _traced(rng, 6, lambda raw, post, audio: np.tanh(raw) + 0.1 * audio[:, :DV])
+    model = small_model(0)
+    spec = ReadoutSpec(taps=2, hidden=5, max_iter=20)
+    both = fit_readout(model, train, replace(spec, ensemble=2))
+    members = [fit_readout(model, train, replace(spec, seed=s)) for s in (0, 1)]
+    assert both.hidden == 10
+    c = train[0]
+    np.testing.assert_allclose(
+        both.apply(c.raw, c.post, c.audio),
+        np.mean([m.apply(c.raw, c.post, c.audio) for m in members], axis=0),
+        atol=1e-10,
+    )

@@ -1,0 +1,238 @@
+"""Fitting the learned readout of a model (:mod:`realtime_core.readout`) on real lips, re-runnable on any HMM.
+
+- :func:`trace_clips` runs a model's live path (front end, lag-0 inverter, no readout, no output stage)
+  over clips and keeps, per frame, what the readout sees: the raw eq. 7 estimate, the component
+  posteriors and the centred audio row.
+- :func:`fit_readout` fits one readout on traced train clips: scikit-learn's ``Ridge`` for a linear map
+  (hidden = 0), its ``MLPRegressor`` (one ReLU layer, inputs standardised, early stopping on a 10 % slice
+  of the train frames, seeded) otherwise; the input scaling is folded into the stored weights.
+- :func:`choose_readout` fits every candidate on the train split, scores each on the val split through
+  the model's output stage, keeps the best by the mean r of the four parameters, then re-chooses the
+  closure band on val (the highest r(mouth_open) keeping >= ``min_closure`` of the bilabial closures;
+  the readout changes how deep the dips go). The test split is never looked at.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
+from realtime_core.features import loudness_db
+from realtime_core.output import OutputStage
+from realtime_core.readout import POSTERIOR_KINDS, Readout, posterior_features, readout_features
+from training.errors import ConfigError
+from training.reallips import LipScores, score_lips
+
+
+@dataclass(frozen=True)
+class Traced:
+    """One clip through a model: name, truth ``(T, Dv)``, raw ``(T, Dv)``, component posteriors
+    ``(T, N*M)``, centred audio ``(T, Da)``, loudness ``(T,)`` dB, bilabial spans."""
+
+    name: str
+    truth: np.ndarray
+    raw: np.ndarray
+    post: np.ndarray
+    audio: np.ndarray
+    loudness: np.ndarray
+    spans: list
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReadoutSpec:
+    """One candidate: taps (K >= 1), audio (use the centred audio row), posteriors ("none", "state",
+    "component"), hidden (0 = linear ridge, else ReLU units), alpha (the L2 penalty: ridge alpha, or
+    the MLP's), seed (MLP initialisation and early-stopping split), max_iter (MLP epochs), ensemble (MLPs
+    with seeds seed, seed + 1, ... averaged: stored as one layer of ensemble x hidden units whose output
+    weights are divided by ensemble)."""
+
+    taps: int = 5
+    audio: bool = True
+    posteriors: str = "state"
+    hidden: int = 64
+    alpha: float = 1e-3
+    seed: int = 0
+    max_iter: int = 200
+    ensemble: int = 1
+
+    def __post_init__(self) -> None:
+        bad = self.taps < 1 or self.hidden < 0 or self.alpha < 0 or self.ensemble < 1
+        if bad or self.posteriors not in POSTERIOR_KINDS or (self.hidden == 0 and self.ensemble != 1):
+            raise ConfigError(f"invalid readout candidate {self}")
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "taps": self.taps,
+            "audio": self.audio,
+            "posteriors": self.posteriors,
+            "hidden": self.hidden,
+            "alpha": self.alpha,
+            "seed": self.seed,
+            "max_iter": self.max_iter,
+            "ensemble": self.ensemble,
+        }
+
+
+def trace_clips(model: AvModel, clips: Sequence[tuple[str, Any, list]], *, progress: Callable | None = None) -> list:
+    """``[(name, FaceTrack, bilabial spans)]`` -> ``[Traced]`` through ``model``'s live path at lag 0."""
+    from realtime_core.features.resample import resample_audio
+
+    wrap = progress or (lambda it, **_: it)
+    inv = model.inverter()
+    out = []
+    for name, track, spans in wrap(clips, desc="readout inputs", unit="clip"):
+        x = np.asarray(track.samples, dtype=np.float64)
+        if track.sample_rate_hz != model.sample_rate_hz:
+            x = resample_audio(x, track.sample_rate_hz, model.sample_rate_hz)
+        fe = model.front_end()
+        oa = np.concatenate([fe.push(x), fe.flush()])
+        raw, post, audio = inv.trace(oa)
+        T = min(len(raw), len(track.params))
+        loud = loudness_db(track.samples, track.sample_rate_hz, len(track.params))
+        out.append(Traced(name, track.params[:T], raw[:T], post[:T], audio[:T], loud[:T], list(spans)))
+    return out
+
+
+def _features(spec: ReadoutSpec, model: AvModel, clips: Sequence[Traced]) -> np.ndarray:
+    h = model.hmm
+    return np.concatenate(
+        [
+            readout_features(
+                c.raw,
+                c.audio if spec.audio else c.audio[:, :0],
+                posterior_features(spec.posteriors, c.post, h.n_states, h.n_mix),
+                taps=spec.taps,
+            )
+            for c in clips
+        ]
+    )
+
+
+def _readout(spec: ReadoutSpec, model: AvModel, w1, b1, w2, b2, metadata: dict) -> Readout:
+    h = model.hmm
+    return Readout(
+        taps=spec.taps,
+        audio=spec.audio,
+        posteriors=spec.posteriors,
+        n_states=h.n_states,
+        n_mix=h.n_mix,
+        n_audio=h.n_audio,
+        n_visual=h.n_visual,
+        w1=w1,
+        b1=b1,
+        w2=w2,
+        b2=b2,
+        metadata=metadata,
+    )
+
+
+def fit_readout(model: AvModel, train: Sequence[Traced], spec: ReadoutSpec) -> Readout:
+    """Fit one readout of ``spec`` for ``model`` on traced train clips (targets: their truth)."""
+    from sklearn.linear_model import Ridge
+    from sklearn.neural_network import MLPRegressor
+    from sklearn.preprocessing import StandardScaler
+
+    phi = _features(spec, model, train)
+    y = np.concatenate([c.truth for c in train])
+    meta = {**spec.as_json(), "train_frames": len(y)}
+    if spec.hidden == 0:
+        lin = Ridge(alpha=spec.alpha).fit(phi, y)
+        return _readout(spec, model, np.zeros((phi.shape[1], 0)), np.zeros(0), lin.coef_.T, lin.intercept_, meta)
+    scaler = StandardScaler().fit(phi)
+    sd = scaler.scale_
+    w1s, b1s, w2s, b2s, epochs = [], [], [], [], []
+    for k in range(spec.ensemble):
+        mlp = MLPRegressor(
+            hidden_layer_sizes=(spec.hidden,),
+            activation="relu",
+            alpha=spec.alpha,
+            early_stopping=True,
+            max_iter=spec.max_iter,
+            random_state=spec.seed + k,
+        ).fit(scaler.transform(phi), y)
+        epochs.append(int(mlp.n_iter_))
+        # relu(((phi - mu) / sd) @ W + b) = relu(phi @ (W / sd) + (b - (mu / sd) @ W))
+        w1s.append(mlp.coefs_[0] / sd[:, None])
+        b1s.append(mlp.intercepts_[0] - (scaler.mean_ / sd) @ mlp.coefs_[0])
+        w2s.append(mlp.coefs_[1] / spec.ensemble)
+        b2s.append(mlp.intercepts_[1] / spec.ensemble)
+    meta["epochs"] = epochs if spec.ensemble > 1 else epochs[0]
+    return _readout(
+        spec, model, np.concatenate(w1s, axis=1), np.concatenate(b1s), np.concatenate(w2s), np.sum(b2s, axis=0), meta
+    )
+
+
+def estimates(model: AvModel, clips: Sequence[Traced], readout: Readout | None, band: float) -> list:
+    """``score_lips`` items of ``clips`` with ``readout`` (None: eq. 7 as is) and an output stage of ``band``
+    (what the live path of ``replace(model, readout=readout, closure_band=band)`` emits; tested equal)."""
+    stage = OutputStage(model.visual_floor, band)
+    out = []
+    for c in clips:
+        raw = c.raw if readout is None else readout.apply(c.raw, c.post, c.audio)
+        out.append((c.name, c.truth, stage(raw.copy()), c.loudness, c.spans))
+    return out
+
+
+def choose_readout(
+    model: AvModel,
+    train: Sequence[Traced],
+    val: Sequence[Traced],
+    specs: Sequence[ReadoutSpec],
+    *,
+    bands: Sequence[float] = (0.02, 0.025, 0.03, 0.035, 0.04, 0.045, 0.05),
+    min_closure: float = 0.90,
+    log: Callable[[str], None] = print,
+) -> tuple[AvModel, dict[str, Any]]:
+    """The model with the best readout of ``specs`` (fitted on ``train``, chosen on ``val``) and its closure
+    band re-chosen on ``val``; and a JSON-able report of every candidate's val scores."""
+    if not specs:
+        raise ConfigError("no readout candidates given")
+    base = score_lips(estimates(model, val, None, model.closure_band))
+    rows: list[dict[str, Any]] = [{"readout": None, "band": model.closure_band, **_summary(base)}]
+    log(f"val without readout (band {model.closure_band}): {_line(base)}")
+    best: tuple[float, Readout, LipScores] | None = None
+    for spec in specs:
+        ro = fit_readout(model, train, spec)
+        s = score_lips(estimates(model, val, ro, model.closure_band))
+        rows.append({"readout": spec.as_json(), "band": model.closure_band, **_summary(s)})
+        log(f"val {spec.as_json()}: {_line(s)}")
+        key = float(np.mean([s.r[p] for p in VISUAL_PARAMS]))
+        if best is None or key > best[0]:
+            best = (key, ro, s)
+    assert best is not None
+    _, ro, _ = best
+    band_rows = []
+    chosen: tuple[float, float, LipScores] | None = None
+    for band in bands:
+        s = score_lips(estimates(model, val, ro, band))
+        band_rows.append({"band": band, **_summary(s)})
+        log(f"val band {band}: {_line(s)}")
+        ok = s.closure_rate >= min_closure
+        if ok and (chosen is None or s.r["mouth_open"] > chosen[0]):
+            chosen = (s.r["mouth_open"], band, s)
+    if chosen is None:  # no band keeps the closures: the widest closes the most
+        band = max(bands)
+        chosen = (0.0, band, score_lips(estimates(model, val, ro, band)))
+    _, band, s = chosen
+    ro = replace(ro, metadata={**ro.metadata, "val": _summary(s), "band": band})
+    report = {"candidates": rows, "bands": band_rows, "chosen": {**ro.metadata}, "val_without": _summary(base)}
+    log(f"chosen {ro.metadata}")
+    return replace(model, readout=ro, closure_band=band), report
+
+
+def _summary(s: LipScores) -> dict[str, Any]:
+    return {
+        "r": {k: round(float(v), 4) for k, v in s.r.items()},
+        "closure_rate": round(s.closure_rate, 4),
+        "nu_mouth_open": round(s.nu["mouth_open"], 3),
+    }
+
+
+def _line(s: LipScores) -> str:
+    r = " / ".join(f"{s.r[p]:.3f}" for p in VISUAL_PARAMS)
+    return f"r ulr/ls/mo/lcd {r}, closures {100 * s.closure_rate:.0f} %, nu(mo) {s.nu['mouth_open']:.2f}"
