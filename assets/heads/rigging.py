@@ -251,6 +251,12 @@ def cut_mouth(
     return v2, t, uv2, origin
 
 
+SLIVER_TIE = 0.2
+"""Cut heads: the fold repair moves vertices joined by edges shorter than this fraction of the median
+edge as one (Lee Perry-Smith: 3 -> 1 flipped triangles, stretch 4.86 -> 2.83, from a sliver fan behind a
+mouth corner). Other heads keep the repair as it was (the built-in head's ARKit maps are fitted to its
+rig; tying its 720 short edges changed it)."""
+
 CREASE_TO_LOWER = 0.3
 """How much nearer (a fraction of the cut's reach) the upper lip's seeds must be for a crease face to
 join the upper lip. The crease then rolls with the lower lip (its inner surface) and the upper lip's
@@ -460,7 +466,9 @@ def rig_head(
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
-            rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
+            rig = repair_rig(
+                rig, EXTREME_POSES, keep_apart=cut_copies, tiny=SLIVER_TIE if cut_copies is not None else 0.0
+            )
             # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
             r_open = float(head_response(rig, mouth_landmarks(snap))[2, 2])
@@ -468,7 +476,12 @@ def rig_head(
             if head_calibration and OPEN_RESPONSE_RANGE[0] < r_open < OPEN_RESPONSE_RANGE[1]:
                 basis = np.array(rig.basis, dtype=np.float64)
                 basis[:, 2] /= r_open
-                rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
+                rig = repair_rig(
+                    replace(rig, basis=basis),
+                    EXTREME_POSES,
+                    keep_apart=cut_copies,
+                    tiny=SLIVER_TIE if cut_copies is not None else 0.0,
+                )
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:

@@ -47,7 +47,7 @@ def repair_folds(
     steps: int = 2,
     fixed: np.ndarray | None = None,
     grow_every: int = 15,
-    tiny: float = 0.2,
+    tiny: float = 0.0,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -57,7 +57,7 @@ def repair_folds(
     tiny: vertices joined by edges shorter than this fraction of the median edge move as one (their
     rows are averaged before and after every round): a scan's clusters of sliver triangles
     (0.001 IOD edges behind Lee Perry-Smith's mouth corners) flip at any motion difference the
-    field leaves between their vertices, however smooth.
+    field leaves between their vertices, however smooth. 0 (the default) ties nothing.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)

@@ -567,12 +567,18 @@ def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max
 
 
 def repair_rig(
-    rig: Rig, poses: tuple[tuple[float, ...], ...], *, keep_apart: np.ndarray | None = None, max_stretch: float = 3.0
+    rig: Rig,
+    poses: tuple[tuple[float, ...], ...],
+    *,
+    keep_apart: np.ndarray | None = None,
+    max_stretch: float = 3.0,
+    tiny: float = 0.0,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
     tongue, eyes) keep their rigid rows. ``keep_apart``: the copies of a cut lip seam (as in
-    :func:`build_rig`), so the two lips stay separate surfaces. Records the repair in meta."""
+    :func:`build_rig`), so the two lips stay separate surfaces. ``tiny``: sliver clusters move as one
+    (see :func:`realtime_core.face.repair.repair_folds`). Records the repair in meta."""
     from scipy.sparse.csgraph import connected_components
 
     from realtime_core.face.projection import vertex_adjacency
@@ -594,7 +600,7 @@ def repair_rig(
     has_ctrl[comp[canon[rig.control]]] = True
     basis = np.asarray(rig.basis, dtype=np.float64)
     motions = np.stack([(basis @ np.asarray(p, dtype=np.float64)).reshape(n_s, 3) for p in poses])
-    res = repair_folds(welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp])
+    res = repair_folds(welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp], tiny=tiny)
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
     s = sp.kron(g_new[moving], sp.identity(3, format="csr"), format="csr")

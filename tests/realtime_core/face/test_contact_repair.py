@@ -123,7 +123,7 @@ def test_fold_repair_moves_sliver_clusters_as_one():
     motion = np.array([[[0.0, 0.0, 0.0]]])
     motion[0, 0] = 0.05 * (p - v[a]) / np.linalg.norm(p - v[a])  # a moves past p
     edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
-    res = repair_folds(v, t, g, motion, fixed=edge)
+    res = repair_folds(v, t, g, motion, fixed=edge, tiny=0.2)
     assert res.flips_left == 0
     w = np.asarray(res.weights.todense()).ravel()
     assert w[a] == w[n] and w[a] > 0.3
