@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import json
 import multiprocessing as mp
 import os
@@ -78,6 +79,7 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, 
         clients = [IngestClient(url, session=f"{prefix}{j}", sample_rate_hz=RATE) for j in range(n)]
         for c in clients:
             await c.__aenter__()
+        gc.freeze()  # a full collection of the startup heap would stall the sends (measured as server delay)
         ready.set()
         while not go.is_set():
             await asyncio.sleep(0.01)
@@ -115,6 +117,7 @@ def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: 
     nodes of a cluster); report every frame's receipt."""
 
     async def main():
+        gc.freeze()  # a full collection of the startup heap would delay receipts (measured as server delay)
         while not ready.is_set():
             await asyncio.sleep(0.01)
         plan = [("params", j % n) for j in range(n_params)] + [("deltas", j % n) for j in range(n_deltas)]

@@ -70,7 +70,7 @@ from server.guard import (
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig, warm_up
-from server.timing import StageTimes
+from server.timing import GcPauses, StageTimes, freeze_heap
 from server.workers import WorkerPool
 from wire import protocol as P
 
@@ -122,6 +122,7 @@ class FacecastServer:
         self.clients = ConnectionCounter(config.max_connections_per_client)
         self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
+        self._gc_pauses: GcPauses | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -168,6 +169,7 @@ class FacecastServer:
         if cfg.workers:
             self.pool = WorkerPool(self.model, cfg.workers, rig=self.head.rig if self.head else None)
             await self.pool.start()
+        self._gc_pauses = GcPauses(self.times)
         self.spawn(self._watch_loop_lag())
 
     async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
@@ -209,6 +211,9 @@ class FacecastServer:
         if self.pool is not None:
             await self.pool.stop()
             self.pool = None
+        if self._gc_pauses is not None:
+            self._gc_pauses.close()
+            self._gc_pauses = None
 
     def spawn(self, coro: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         """Run a coroutine in the background, holding a reference until it is done."""
@@ -691,6 +696,7 @@ async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = N
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         await server.start()
+        freeze_heap()  # this process is the server's: the startup heap needs no more collecting
         if ready is not None and not ready.done():
             ready.set_result(server)
         try:
