@@ -537,6 +537,12 @@ def _run(
             "quiet": quiet_metrics.get("timings_ms", {}).get("loop_lag", {}).get("p99_ms"),
             "end": final.get("timings_ms", {}).get("loop_lag", {}).get("p99_ms"),
         },
+        # the part of the lag the server's own work can explain (its loop thread's CPU time in the
+        # interval); the rest is the process waiting for a core
+        "loop_lag_cpu_p99_ms": {
+            "quiet": quiet_metrics.get("timings_ms", {}).get("loop_lag_cpu", {}).get("p99_ms"),
+            "end": final.get("timings_ms", {}).get("loop_lag_cpu", {}).get("p99_ms"),
+        },
         "server_gc_pauses_ms": {  # the server's garbage collections (server.timing.GcPauses), whole run
             k: v for k, v in final.get("timings_ms", {}).items() if k.startswith("gc_gen")
         },
