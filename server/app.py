@@ -408,23 +408,37 @@ class FacecastServer:
             live = await self._perform(ws, proto, actions, None)
             if live is None:
                 return
+            # Each message is awaited directly under one timeout (the idle limit), not as a task raced
+            # against the shutdown event: a block then reaches the session one loop turn after it
+            # arrives instead of three, and under a flood of other connections' work every turn
+            # counts. A shutdown cuts the wait short by moving the timeout to now.
+            loop = asyncio.get_running_loop()
+            waiting: list[asyncio.Timeout] = []
             ended = asyncio.ensure_future(live.ended.wait())
+
+            def wake_on_shutdown(_: asyncio.Future) -> None:
+                for w in waiting:
+                    w.reschedule(loop.time())
+
+            ended.add_done_callback(wake_on_shutdown)
             try:
                 idle_s = self.config.idle_timeout_s
                 while proto.state is SP.State.STREAMING:
-                    recv = asyncio.ensure_future(ws.recv())
-                    done, _ = await asyncio.wait({recv, ended}, timeout=idle_s, return_when=asyncio.FIRST_COMPLETED)
-                    if not done:
-                        recv.cancel()
-                        actions = proto.idle_timed_out(idle_s)
-                    elif ended in done:  # server shutting down: first, even if a message is waiting too
-                        recv.cancel()
+                    if live.ended.is_set():  # server shutting down: first, even if a message is waiting too
                         actions = proto.shutdown()
                     else:
                         try:
-                            actions = proto.receive(recv.result())
+                            async with asyncio.timeout(idle_s) as timeout:
+                                waiting.append(timeout)
+                                msg = await ws.recv()
+                        except TimeoutError:
+                            actions = proto.shutdown() if live.ended.is_set() else proto.idle_timed_out(idle_s)
                         except ConnectionClosed:
                             actions = proto.connection_lost()
+                        else:
+                            actions = proto.receive(msg)
+                        finally:
+                            waiting.clear()
                     await self._perform(ws, proto, actions, live)
             finally:
                 ended.cancel()
