@@ -116,13 +116,14 @@ def resolve_head(
         return builtin_morph_head(cache)
     p = Path(spec)
     if p.suffix.lower() == ".wfm":  # Candide-3: a face model with its own animation units
+        from assets.heads.cavity import with_mouth_cavity
         from assets.heads.wfm import candide_head
 
         if mode == "retarget":
             raise MeshError(f"{p}: a Candide-3 model is driven by its own animation units; use --head-mode auto")
         if not p.is_file():
             raise MeshError(f"{p}: Candide-3 file not found")
-        return candide_head(p)
+        return with_mouth_cavity(candide_head(p))  # a face mask: its open mouth shows a dark cavity
     if p.suffix.lower() == ".npz":
         from assets.heads.rigfile import load_rig
 
@@ -167,7 +168,11 @@ def morph_head(
     rig = morph_rig(
         mesh.name, mesh.vertices, mesh.triangles, mesh.targets, ref, user_map=user, require_enough=require_enough
     )
-    return None if rig is None else Head(rig, mesh)
+    if rig is None:
+        return None
+    from assets.heads.cavity import with_mouth_cavity
+
+    return with_mouth_cavity(Head(rig, mesh))  # (needs landmarks in the rig's meta; unchanged without)
 
 
 def _rig_mesh(
@@ -250,4 +255,16 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
         if ids:
             teeth = np.flatnonzero(np.isin(mesh.part, ids))
-    return check_rig(rig, mouth_landmarks(idx), lip_pairs=pairs, teeth=teeth, limits=limits or RigCheckLimits())
+    reference = None
+    if rig.meta.get("rest_pose") is not None and isinstance(rig, Rig):
+        from realtime_core.face.rig import modelled_rest
+
+        reference = modelled_rest(rig)  # folds are measured from the head as modelled
+    return check_rig(
+        rig,
+        mouth_landmarks(idx),
+        lip_pairs=pairs,
+        teeth=teeth,
+        limits=limits or RigCheckLimits(),
+        reference=reference,
+    )

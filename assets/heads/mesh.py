@@ -23,6 +23,8 @@ from assets.errors import MeshError
 
 MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".ply")
 _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+SKIN_COLOR = (0.80, 0.62, 0.52)
+"""RGB in [0, 1] of a head without colours or texture (the renderer paints it so)."""
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,10 @@
 3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
    between the two corner landmarks (a shortest edge path that stays near the straight line),
    the path vertices are duplicated and the faces below take the copies, so the lower lip can
-   separate. The cut opens onto the (dark) inside of the head; there is no mouth cavity.
+   separate. Distinct inner lips joined by a strip of triangles (the MediaPipe face) have the strip
+   removed instead (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
+   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
+   still mouth cavity (:func:`add_mouth_cavity`).
 4. Sec. 5 weights (or RBF), precomputed into the rig.
 """
 
@@ -18,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,7 +29,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
-from assets.heads.mesh import HeadMesh, check_mesh
+from assets.heads.cavity import lip_membrane, opens_onto_nothing
+from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceModel,
@@ -38,8 +43,16 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
+from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import vertex_adjacency
-from realtime_core.face.rig import contact_spread, head_response, lip_columns, recalibrate, repair_rig
+from realtime_core.face.rig import (
+    contact_spread,
+    head_response,
+    lip_columns,
+    recalibrate,
+    repair_rig,
+    with_rest_pose,
+)
 from realtime_core.face.simple import (
     derive_simple_model,
     lip_contact_vertices,
@@ -261,6 +274,10 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     )
 
 
+REST_GAP_MAX = 0.01
+"""IOD: a head whose inner lips lie farther apart than this at rest (and are not cut open) rests at
+the pose that closes them (:func:`realtime_core.face.rig.with_rest_pose`); the checks' closure limit."""
+
 OPEN_RESPONSE_RANGE = (0.5, 0.95)
 """Measured mouth-open responses (inner-lip opening per unit parameter, at the landmarks) the rig
 is rescaled for. Below 0.5 the measure, not the rig, is suspect: automatic inner-lip landmarks on
@@ -319,6 +336,14 @@ def rig_head(
                 f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
                 "'right' swapped? ('left' is the face's own left)"
             )
+        # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
+        # instead of cutting along one lip (which left it hanging from the other, keeping them apart).
+        membrane = lip_membrane(
+            v, t, snap["corner_left"], snap["corner_right"], snap["upper_inner"], snap["lower_inner"]
+        )
+        if membrane.any():
+            t = t[~membrane]
+            meta["lip_membrane_removed"] = int(membrane.sum())
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
             v, t, uv, origin = cut_mouth(
                 v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
@@ -336,8 +361,8 @@ def rig_head(
         # the warp can leave a lip barely answering one unit group (the MediaPipe face's upper lip),
         # and inverting that response gave unit weights of ~100 per IOD, spikes below the mouth.
         # The head's own response is corrected afterwards (recalibrate), where it is well conditioned.
-        # The built-in head keeps its rig as it was (the streamed ARKit maps, realtime_core/fitted_maps.py,
-        # are fitted to it; changing it means refitting them).
+        # The streamed ARKit maps (realtime_core/fitted_maps.py) are fitted to the built-in head's rig:
+        # changing it means refitting them (facecast fit-maps).
         own = mesh.name == "builtin"
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
@@ -346,7 +371,7 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
-        if config.method == "harmonic" and not own:
+        if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
             rig = repair_rig(rig, EXTREME_POSES, keep_apart=cut_copies)
@@ -359,6 +384,15 @@ def rig_head(
                 basis[:, 2] /= r_open
                 rig = repair_rig(replace(rig, basis=basis), EXTREME_POSES, keep_apart=cut_copies)
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
+        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
+        if not own and cut_copies is None and gap > REST_GAP_MAX:
+            # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
+            # rig's own response), so silence and /m b p/ show closed lips (mouth_open 0 = lips touching).
+            # After the last change of the map: the checks measure folds from the head as modelled.
+            opening = float(head_response(rig, mouth_landmarks(snap))[2, 2])
+            rig = with_rest_pose(rig, np.array([0.0, 0.0, -gap / max(opening, 0.5), 0.0]))
+            v = np.asarray(rig.neutral, dtype=np.float64)
+            rig.meta["landmarks"] = {k: v[i].tolist() for k, i in snap.items()}
         if not own:  # (the built-in head's pressed lips cross at the fit probes: see above)
             seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
             contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
@@ -384,11 +418,32 @@ def rig_head(
     rig = with_rigid_parts(rig, out_mesh, snap)
     if cut_copies is not None and not _has_inner_mouth(mesh):
         rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"])
+    elif not _has_inner_mouth(mesh) and opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap):
+        # Open lips over nothing (a face mask): a wider cavity, since no lip surface curls inwards to hide its rim.
+        rig, out_mesh = add_mouth_cavity(
+            rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
+        )
     return rig, out_mesh
+
+
+R = TypeVar("R", Rig, MorphRig)
+
+
+@dataclass(frozen=True)
+class CavityShape:
+    """Mouth cavity size: ``width`` mouth widths, ``up`` / ``down`` IOD above / below the mouth corners."""
+
+    width: float = 0.85
+    up: float = 0.25
+    down: float = 0.5
 
 
 INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
 CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
+MASK_CAVITY = CavityShape(width=1.1, up=0.3, down=0.75)
+"""Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask):
+the lips have no inner surface reaching back, so the rim must lie beyond the widest opening
+(/a/ drops the lower lip 0.45 IOD and more below the corners)."""
 
 
 def _has_inner_mouth(mesh: HeadMesh) -> bool:
@@ -431,32 +486,71 @@ def _texture_with_dark_strip(texture: bytes, uvs: np.ndarray) -> tuple[bytes, np
 
 
 def add_mouth_cavity(
-    rig: Rig, mesh: HeadMesh, frame, left: int, right: int, *, rings: int = 6, segments: int = 16
-) -> tuple[Rig, HeadMesh]:
+    rig: R,
+    mesh: HeadMesh,
+    frame,
+    left: int,
+    right: int,
+    *,
+    rings: int = 6,
+    segments: int = 16,
+    shape: CavityShape = CavityShape(),
+) -> tuple[R, HeadMesh]:
     """A hollow head (lips cut open, nothing behind them) gets a dark mouth cavity: a half
     ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
-    mouth corners (inside the skin), 0.85 of the mouth wide, reaching 0.25 IOD up, 0.5 IOD down
-    (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
-    inside instead of the back of the head or the background.
+    mouth corners, ``shape.width`` of the mouth wide, reaching ``shape.up`` IOD up, ``shape.down`` IOD
+    down (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
+    inside instead of the back of the head or the background. Every cavity vertex stays at least
+    0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
+    so a wide cavity behind a thin mask or a curved face never pokes through the skin.
     It is a separate, still part (``part_names`` gains "mouth cavity"): the lips and jaw open over
     it. Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
-    (the renderer paints a textured head from its texture alone)."""
+    (the renderer paints a textured head from its texture alone). ``rig``: a Rig or a MorphRig (the
+    cavity does not move, so only the neutral and the triangles grow)."""
+    from assets.heads.cavity import front_depth
+
     v0 = np.asarray(mesh.vertices, dtype=np.float64)
     iod, ax = frame.iod, frame.axes
     a, b = v0[left], v0[right]
     centre = 0.5 * (a + b) - 0.15 * iod * ax[2]
-    half_w = 0.5 * float(np.linalg.norm(a - b)) * 0.85
+    half_w = 0.5 * float(np.linalg.norm(a - b)) * shape.width
     th = np.linspace(0.0, np.pi / 2, rings + 1)[1:]  # 0 = the deepest point, pi/2 = the rim
     ph = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     pts = [centre - 0.45 * iod * ax[2]]
     for t_ in th:
         for p_ in ph:
             x = np.sin(t_) * np.cos(p_) * half_w
-            yr = 0.25 if np.sin(p_) > 0 else 0.5
+            yr = shape.up if np.sin(p_) > 0 else shape.down
             y = np.sin(t_) * np.sin(p_) * yr * iod
             z = -np.cos(t_) * 0.45 * iod
             pts.append(centre + x * ax[0] + y * ax[1] + z * ax[2])
     cv = np.array(pts)
+    # Behind the surface: each vertex at most as far forward as 0.1 IOD behind the front-most skin at
+    # its (x, y), at rest and at the widest opening (the jaw carries the chin back over the cavity).
+    q = (cv - frame.origin) @ ax.T
+    # Inside the head's outline seen from the front: a vertex with no skin in front of it at rest
+    # (below a mask's short chin) moves towards the cavity's centre until it has some.
+    qc = (centre - frame.origin) @ ax.T
+    outside = np.flatnonzero(np.isnan(front_depth(v0, mesh.triangles, frame, q[:, :2])))
+    for _ in range(40):
+        if not len(outside):
+            break
+        q[outside, :2] = qc[:2] + 0.9 * (q[outside, :2] - qc[:2])
+        outside = outside[np.isnan(front_depth(v0, mesh.triangles, frame, q[outside, :2]))]
+    cv = frame.origin + q @ ax
+    skin = np.fmin.reduce(
+        [
+            front_depth(
+                np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
+                mesh.triangles,
+                frame,
+                q[:, :2],
+            )
+            for p in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.45, 0.0), (0.02, 0.027, 0.45, -0.007))
+        ]
+    )
+    deeper = np.isfinite(skin) & (q[:, 2] > skin - 0.1 * iod)
+    cv[deeper] -= (q[deeper, 2] - (skin[deeper] - 0.1 * iod))[:, None] * ax[2]
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
@@ -474,7 +568,7 @@ def add_mouth_cavity(
     if colors is not None:
         colors = np.vstack([colors, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
     elif mesh.uvs is None or mesh.texture is None:
-        base = np.full((n0, 3), 0.8, dtype=np.float32)
+        base = np.tile(np.asarray(SKIN_COLOR, dtype=np.float32), (n0, 1))  # what the renderer paints uncoloured skin
         colors = np.vstack([base, np.tile(np.asarray(CAVITY_COLOR, dtype=np.float32), (n_c, 1))])
     uvs = mesh.uvs
     texture = mesh.texture
@@ -483,7 +577,7 @@ def add_mouth_cavity(
         if dark is None and texture is not None:
             texture, uvs, dark = _texture_with_dark_strip(texture, np.asarray(uvs, dtype=np.float64))
         uvs = np.vstack([uvs, np.tile(np.asarray(dark or (0.0, 0.0), dtype=uvs.dtype), (n_c, 1))])
-    names = tuple(mesh.part_names) or ("head",)
+    names: tuple[str, ...] = tuple(mesh.part_names) or ("head",)
     part = mesh.part if mesh.part is not None else np.zeros(n0, dtype=np.int16)
     part = np.concatenate([part, np.full(n_c, len(names), dtype=part.dtype)])
     out = HeadMesh(

@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from assets.heads.mesh import HeadMesh
+from assets.heads.mesh import SKIN_COLOR, HeadMesh
 from clients.errors import RenderError
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
@@ -69,7 +69,7 @@ void main() {
 }
 """
 
-SKIN = (0.80, 0.62, 0.52)
+SKIN = SKIN_COLOR
 
 
 @dataclass(frozen=True)
@@ -283,17 +283,21 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             fr = face_frame(pv, mouth_landmarks({k: i for i, k in enumerate(names)}))
         sv = pts
         if fr is None:
-            # Unknown face frame: glTF's convention (+y up, face towards +z). Targets that move only
-            # the mouth give a small box: frame at least a head-sized region above it.
-            lo, hi = pts.min(0), pts.max(0)
-            span = float(max(hi[0] - lo[0], hi[1] - lo[1]))
-            centre = 0.5 * (lo + hi)
-            if "eyeBlinkLeft" not in getattr(rig, "names", ()):
-                centre = centre + np.array([0.0, 0.6 * span, 0.0])
-                span *= 2.2
-            return HeadRenderer(
-                mesh, centre=centre - np.array([0, 0, 0.3 * span]), axes=np.eye(3), size=1.1 * span, config=config
-            )
+            # Unknown face frame: glTF's convention (+y up, face towards +z). Frame the face from the
+            # vertices the driven targets move most (> 10% of the largest displacement: lips, jaw,
+            # chin; a body, hair or props never move), whatever else the file holds (a full-body
+            # avatar). Their width W is about the jaw's; the ratios reproduce the landmark framing
+            # below on the built-in head (size 1.24 W, centre 0.125 W above their top, 0.56 W behind
+            # their front).
+            targets = getattr(rig, "targets", None)
+            big = np.ones(len(pts), dtype=bool)
+            if targets is not None and len(rig.moving):
+                mag = np.abs(np.asarray(targets)).max(axis=(0, 2))
+                big = mag > 0.1 * max(float(mag.max()), 1e-30)
+            lo, hi = pts[big].min(0), pts[big].max(0)
+            w = float(max(hi[0] - lo[0], 1e-9))
+            centre = np.array([0.5 * (lo[0] + hi[0]), hi[1] + 0.125 * w, hi[2] - 0.56 * w])
+            return HeadRenderer(mesh, centre=centre, axes=np.eye(3), size=1.24 * w, config=config)
     axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))

@@ -46,11 +46,39 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
     from assets.heads.head import resolve_head
     from clients.render.landmarks import find_landmarks
 
-    return resolve_head(
-        str(spec if spec is not None else args.head),
+    name = str(spec if spec is not None else args.head)
+    head = resolve_head(
+        name,
         landmarks=args.landmarks,
         mode=args.head_mode,
         target_map=args.target_map,
         landmark_finder=find_landmarks,
         parts=tuple(getattr(args, "head_part", ()) or ()),
     )
+    if name != "builtin":  # (the built-in head passes: tests/assets/heads)
+        warn_failing_checks(head, name)
+    return head
+
+
+def warn_failing_checks(head, name: str) -> None:
+    """One line on stderr when ``head`` fails the rig checks (the checks ``facecast rig`` refuses a rig
+    for); the head is used anyway. Heads whose landmarks are unknown (own targets, none in the file)
+    are not checked here (finding them means rendering the face)."""
+    import sys
+
+    from assets.heads.head import head_checks
+    from realtime_core.errors import FacecastError
+
+    if not head.rig.meta.get("landmarks"):
+        return
+    try:
+        report = head_checks(head)
+    except FacecastError:
+        return
+    if not report.passed:
+        print(
+            f"facecast: warning: {name} fails the rig checks ({'; '.join(report.failures)}); used anyway. "
+            "The mouth may tear or fold: check the landmarks (facecast rig HEAD --show-landmarks PNG), give "
+            "--landmarks, or try --head-mode morph/retarget (docs/animation.md, Rig checks)",
+            file=sys.stderr,
+        )

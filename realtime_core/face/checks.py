@@ -138,28 +138,32 @@ def check_rig(
     teeth: np.ndarray | None = None,
     poses: tuple[tuple[float, ...], ...] = EXTREME_POSES,
     limits: RigCheckLimits = RigCheckLimits(),
+    reference: np.ndarray | None = None,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
-    teeth: head vertex indices of the teeth (None: not known, not checked)."""
+    teeth: head vertex indices of the teeth (None: not known, not checked); reference: (n, 3) the
+    head as modelled, which flips and stretch are measured from (default the rig's neutral; differs
+    for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
+    vr = v0 if reference is None else np.asarray(reference, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up, fwd = fr.iod, fr.axes[1], fr.axes[2]
     pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
     gap0 = float((v0[landmarks.upper_inner] - v0[landmarks.lower_inner]) @ up) / iod
     closure = (0.0, 0.0, -gap0, 0.0)
-    n0 = _normals(v0, t)
+    n0 = _normals(vr, t)
     a0 = np.linalg.norm(n0, axis=1)
     e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
+    l0 = np.linalg.norm(vr[e[:, 0]] - vr[e[:, 1]], axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     ok_edge = l0 > 1e-9 * iod
     worst: tuple[float, ...] = ()
     flipped, stretch, inter, ahead = 0, 1.0, 0.0, None
     for pose in (*poses, closure):
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
-        moved = np.linalg.norm(v - v0, axis=1) > 1e-9 * iod
+        moved = np.linalg.norm(v - vr, axis=1) > 1e-9 * iod
         tri_moving = moved[t].any(axis=1) & ok_tri
         n1 = _normals(v, t)
         f = int(((np.einsum("ij,ij->i", n0, n1) < 0) & tri_moving).sum())

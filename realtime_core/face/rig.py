@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 13
+RIG_ALGORITHM = 14
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -601,3 +601,34 @@ def contact_spread(
         out[fi] = x
     full = out.tocsr()[canon]  # texture-seam twins take their welded vertex's push
     return full[np.asarray(rig.moving, dtype=np.int64)].astype(np.float32).tocsr()
+
+
+def with_rest_pose(rig: Rig, params: np.ndarray) -> Rig:
+    """The rig at rest in its linear pose at ``params`` (4,) (IOD): neutral += S @ (basis @ params), the
+    same map, so ``new.deformed(p) == rig.deformed(p + params)`` for every p (the lip-contact push acts
+    on the deformed positions). Used for heads modelled with the lips apart: with params = (0, 0, -gap, 0)
+    the parameters' zero is lips touching, as the mouth parameters define it (``mouth_open`` 0 = lips
+    touching), so silence and /m b p/ show closed lips. Recorded as meta "rest_pose";
+    :func:`modelled_rest` gives the head as modelled back (apply this after the map's last change)."""
+    p = np.asarray(params, dtype=np.float64).reshape(4)
+    neutral = np.array(rig.neutral, dtype=np.float32, copy=True)
+    neutral[rig.moving] += _linear(rig, p)
+    meta = dict(rig.meta)
+    meta["rest_pose"] = [float(x) for x in p]
+    return replace(rig, neutral=neutral, meta=meta)
+
+
+def modelled_rest(rig: Rig) -> np.ndarray:
+    """(n_h, 3) float32: the head as modelled, before :func:`with_rest_pose` (the neutral when none)."""
+    out = np.array(rig.neutral, dtype=np.float32, copy=True)
+    rest = rig.meta.get("rest_pose")
+    if rest is not None:
+        out[rig.moving] -= _linear(rig, np.asarray(rest, dtype=np.float64))
+    return out
+
+
+def _linear(rig: Rig, p: np.ndarray) -> np.ndarray:
+    """(n_moving, 3) float32 linear displacement S @ (basis @ p) (no lip-contact push)."""
+    p32 = np.asarray(p, dtype=np.float32).reshape(4)
+    d = (rig._folded @ p32) if rig._folded is not None else (rig.matrix @ (rig.basis @ p32))
+    return np.asarray(d, dtype=np.float32).reshape(-1, 3)

