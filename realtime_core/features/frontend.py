@@ -7,6 +7,7 @@ random chunks it gives the same rows.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -105,9 +106,7 @@ class FrontEnd:
         else:
             self._cmvn = None
         self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
-        # Raw [c0, c1..] of digital silence (every mel band at the energy floor).
-        probe = MfccStream(replace(mcfg, include_c0=True), kernel=kernel)
-        self._silence = probe.push(np.zeros(mcfg.window_len))[0]
+        self._silence = _silence_row(replace(mcfg, include_c0=True), kernel)
 
     def reset(self) -> None:
         self._mfcc.reset()
@@ -171,3 +170,12 @@ def extract_features(
         )
     fe = FrontEnd(config, cmvn_mean=cmvn_mean, cmvn_var=cmvn_var)
     return np.concatenate([fe.push(x), fe.flush()])
+
+
+@functools.lru_cache(maxsize=32)
+def _silence_row(mcfg: MfccConfig, kernel: str) -> np.ndarray:
+    """Raw ``[c0, c1..]`` of digital silence (every mel band at the energy floor), ``(n_outputs,)``
+    float64, read-only: computed once per configuration, not once per session."""
+    row = MfccStream(mcfg, kernel=kernel).push(np.zeros(mcfg.window_len))[0]
+    row.flags.writeable = False
+    return row
