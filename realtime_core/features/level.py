@@ -22,7 +22,8 @@ and every update is a convex step towards the frame, so the tracker is exactly *
 gain of g dB shifts ``P``, ``F`` and the level by g, and the relative level ``level - P`` is
 unchanged from the first frame on. The front end then uses ``c0 - P`` (in c0 units) instead of
 c0 and treats frames more than ``silence_below_peak_db`` under the peak as silence (replacing the
-absolute ``silence_floor_db``), so the whole front end is invariant to the recording gain.
+absolute ``silence_floor_db``), so the whole front end is invariant to the recording gain (exactly,
+as long as no mel band sits at the MFCC energy floor, i.e. away from near-digital silence).
 
 Frame ``t``'s output uses the state after its own update (causal: frames ``<= t`` only), so
 whole-signal and streaming runs agree for any chunking.
