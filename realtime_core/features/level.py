@@ -46,7 +46,9 @@ class LevelNormConfig:
     floor_attack / floor_release: noise-floor fall towards quieter frames / rise towards louder ones.
     speech_above_floor_db: a frame this far above the floor counts as speech (may lower the peak).
     start_peak_above_db: the peak starts this far above the first frame's level (a stream usually
-    starts in a pause; a start in speech is corrected by the release within about a second).
+    starts in a pause; a start in speech is corrected by the release within about a second). Above
+    ``silence_below_peak_db``, so a stream of steady noise alone (a quiet room, at any level) stays
+    silence: its floor never rises towards the peak and only a frame louder than the floor lifts it.
     silence_below_peak_db: frames further under the peak are silence (one fixed feature vector).
     """
 
@@ -55,7 +57,7 @@ class LevelNormConfig:
     floor_attack: float = 0.3
     floor_release: float = 0.005
     speech_above_floor_db: float = 10.0
-    start_peak_above_db: float = 30.0
+    start_peak_above_db: float = 40.0
     silence_below_peak_db: float = 30.0
 
     def __post_init__(self) -> None:

@@ -123,3 +123,17 @@ def test_model_json_keeps_the_level_config_and_old_models_have_none():
     old = frontend_to_json(FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000)))
     assert "level_norm" not in old
     assert frontend_from_json(old).level_norm is None
+
+
+@pytest.mark.parametrize("noise_db", [-75.0, -45.0, -20.0])
+def test_steady_noise_alone_is_silence_at_any_level(noise_db):
+    """A stream of room noise with no speech has no speech peak: it must give exactly the silence
+    features (so the mouth stays still), whatever its level; a voice then starting is not silence."""
+    rng = np.random.default_rng(6)
+    noise = rng.standard_normal(48000) * 10 ** (noise_db / 20)
+    cfg = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True, level_norm=LN, cmvn=None, tc=0)
+    f = extract_features(noise, cfg)
+    np.testing.assert_array_equal(f, np.repeat(f[:1], len(f), 0))
+    voice = np.concatenate([noise, speechlike(1.0, 16000, seed=6) * 10 ** ((noise_db + 40) / 20) / 0.8])
+    g = extract_features(voice, cfg)
+    assert np.abs(g[len(f) :] - f[0]).max(axis=1).mean() > 1.0
