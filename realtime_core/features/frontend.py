@@ -32,7 +32,8 @@ class FrontEndConfig:
     closed (None disables the gate). Ignored with ``level_norm``, whose gate is relative.
     level_norm: None (absolute c0 and levels), or the talker's own speech level removed
     (:mod:`realtime_core.features.level`): c0 becomes c0 minus the tracked speech peak, frames more
-    than ``level_norm.silence_below_peak_db`` under the peak become digital silence, and the levels
+    than ``level_norm.silence_below_peak_db`` under the peak (or near the tracked noise floor) become
+    silence, and the levels
     the CMVN gate sees are relative to the peak (so ``cmvn.gate_db`` is then dB re the peak). The
     whole front end is then invariant to the recording gain.
     """
@@ -164,10 +165,11 @@ class _LevelStage:
     def push(self, c0_ceps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
         if self._tracker is not None and self.config.level_norm is not None:
-            peak = self._tracker.push(level)
+            ln = self.config.level_norm
+            peak, floor = self._tracker.track(level)
+            quiet = (level < peak - ln.silence_below_peak_db) | (level < floor + ln.silence_above_floor_db)
             level = level - peak
             c0_ceps = np.concatenate([c0_ceps[:, :1] - (peak / self._db_per_c0)[:, None], c0_ceps[:, 1:]], axis=1)
-            quiet = level < -self.config.level_norm.silence_below_peak_db
         elif self.config.silence_floor_db is not None:
             quiet = level < self.config.silence_floor_db
         else:
