@@ -141,6 +141,10 @@ class FrontEnd:
         return self._cmvn.push(ceps, level)
 
 
+_SILENT_DB = -1000.0
+"""The level (dB re the speech peak) given to the CMVN for frames that level normalisation made silence."""
+
+
 class _LevelStage:
     """Raw ``[c0, c1..] (k, n_ceps + 1)`` -> ``(features (k, n_feat), level_db (k,))`` before CMVN:
     the silence gate (absolute ``silence_floor_db``, or relative with ``level_norm``), c0 made relative
@@ -168,7 +172,8 @@ class _LevelStage:
             ln = self.config.level_norm
             peak, floor = self._tracker.track(level)
             quiet = (level < peak - ln.silence_below_peak_db) | (level < floor + ln.silence_above_floor_db)
-            level = level - peak
+            # silence never updates the CMVN statistics: its level goes far under any gate
+            level = np.where(quiet, _SILENT_DB, level - peak)
             c0_ceps = np.concatenate([c0_ceps[:, :1] - (peak / self._db_per_c0)[:, None], c0_ceps[:, 1:]], axis=1)
         elif self.config.silence_floor_db is not None:
             quiet = level < self.config.silence_floor_db

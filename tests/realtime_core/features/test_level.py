@@ -134,6 +134,9 @@ def test_steady_noise_alone_is_silence_at_any_level(noise_db):
     cfg = FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), energy=True, level_norm=LN, cmvn=None, tc=0)
     f = extract_features(noise, cfg)
     np.testing.assert_array_equal(f, np.repeat(f[:1], len(f), 0))
+    # ...and with the running CMVN: silence never moves its statistics
+    normed = extract_features(noise, CFG, **_stats(_voice()))
+    np.testing.assert_array_equal(normed, np.repeat(normed[:1], len(normed), 0))
     voice = np.concatenate([noise, speechlike(1.0, 16000, seed=6) * 10 ** ((noise_db + 40) / 20) / 0.8])
     g = extract_features(voice, cfg)
     assert np.abs(g[len(f) :] - f[0]).max(axis=1).mean() > 1.0
