@@ -8,7 +8,8 @@ first frame of a server text session.
    to their first 20 phones. Median / p95 / max in ms, the active-state cap's cost against an exact
    search (max_active=None), and the graph build time. Then every 8th corpus sentence from its own
    phones (it must select itself as one zero-cost unit and reproduce its motion), and how much
-   recorded context everyday English and Spanish text gets (units, junctions outside the corpus).
+   recorded context everyday English and Spanish text gets (units, junctions outside the corpus),
+   and what averaging ``n_best`` unit sequences costs on the say sentence.
 2. **say**: command to MP4 for a 10-word sentence, in-process after start-up (imports, corpus,
    graph, head rig and renderer are loaded once first): speech synthesis + unit selection +
    rendering and encoding, median of 3, with `facecast say`'s defaults (no MSAA, x264 veryfast) and
@@ -122,7 +123,7 @@ def bench_languages(stored) -> None:
     from assets.tts import speak
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
 
-    synth = UnitSynthesizer(stored.corpus)
+    synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     print("| text | phones | phones per unit | junctions outside the recorded divisemes (per phone) |")
     print("|---|---|---|---|")
     for name, texts, lang in (
@@ -138,6 +139,27 @@ def bench_languages(stored) -> None:
             units += res.selection.n_units
             junctions += res.selection.n_mismatched
         print(f"| {len(texts)} sentences, {name} | {phones} | {phones / units:.1f} | {junctions / phones:.2f} |")
+
+
+def bench_n_best(stored, repeats: int = 3) -> None:
+    """What averaging ``n_best`` unit sequences costs: synthesis of the say sentence (search(es),
+    warping, the ensemble), median of ``repeats``."""
+    from assets.tts import speak
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+
+    synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
+    s = speak(SAY_TEXT)
+    phones = list(s.phones)
+    synth.synthesize(phones, s.inventory)  # warm-up
+    cells = []
+    for n in (1, 3, 5, 10):
+        ts = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            synth.synthesize(phones, s.inventory, n_best=n)
+            ts.append(1000 * (time.perf_counter() - t))
+        cells.append(f"n_best={n} {np.median(ts):.0f} ms")
+    print(f"unit synthesis of the say sentence ({len(phones)} phones): " + ", ".join(cells))
 
 
 def _cpu_s() -> float:
@@ -160,7 +182,7 @@ def bench_say(stored, repeats: int = 3, samples: int = 0, preset: str = "veryfas
     from clients.render.video import VideoConfig, with_caption, write_video
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
 
-    synth = UnitSynthesizer(stored.corpus)
+    synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     rig, mesh = builtin_rig()
     credit = credit_for(mesh.name)
     k = stored.corpus.n_coefficients
@@ -260,6 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         bench_search(stored, args.sentences)
         check_self_selection(stored)
         bench_languages(stored)
+        bench_n_best(stored)
         if not args.skip_say:
             bench_say(stored, samples=0, preset="veryfast")  # `facecast say`'s defaults
             bench_say(stored, samples=4, preset="medium")  # the defaults before: MSAA 4, ffmpeg's medium

@@ -221,7 +221,7 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
     stored = load_unit_corpus(find_unit_corpus(corpus))
     return TextBackend(
         speak=lambda text, language, voice: speak(text, language=language, voice=voice),
-        synthesizer=UnitSynthesizer(stored.corpus),
+        synthesizer=UnitSynthesizer(stored.corpus, rest=stored.rest_frame()),
         languages=tuple(INVENTORY),
         sample_rate_hz=synthesizer().sample_rate_hz,
         n_best=n_best,

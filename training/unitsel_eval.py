@@ -33,7 +33,7 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.corpus import StoredCorpus
-from realtime_core.synthesis.synthesizer import UnitSynthesizer
+from realtime_core.synthesis.synthesizer import ENSEMBLE_GAIN, UnitSynthesizer
 from training.facetrack import FaceTrack
 from training.unit_corpus import PhoneRows, phone_rows
 
@@ -108,18 +108,24 @@ def evaluate(
     synthesizer: UnitSynthesizer | None = None,
     model_label: str = "shipped model",
     progress: Callable | None = None,
+    leave_one_out: bool = False,
 ) -> tuple[list[dict], dict]:
     """Scores of unit selection (one row per ``n_best``), the HMM (``model``, skipped if None) and the
     rules on ``tests`` = [(sentence id, real face track, real ARPAbet phones)]. Returns (rows,
-    curves) where curves holds the first test sentence's measures for the Fig. 8 plot."""
+    curves) where curves holds the first test sentence's measures for the Fig. 8 plot.
+
+    leave_one_out: the sentences are in the corpus (the val split): each is synthesised with its
+    own recording excluded, so no unit of the sentence itself is used."""
     import time
 
     from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
 
-    synth = synthesizer or UnitSynthesizer(stored.corpus)
+    synth = synthesizer or UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
     k = stored.corpus.n_coefficients
-    systems = [SystemScore(f"unit selection, n_best={n}") for n in n_best]
+    systems = [
+        SystemScore(f"unit selection, n_best={n}" + (f", range x{ENSEMBLE_GAIN:g}" if n > 1 else "")) for n in n_best
+    ]
     rules = SystemScore("articulatory rules (same phones)")
     hmm = SystemScore(f"audio-driven HMM, {model_label} (real audio)") if model is not None else None
     truth_p, truth_m, speech = [], [], []
@@ -137,7 +143,7 @@ def evaluate(
         truth_m.append(real_measures(track))
         for sys_, nb in zip(systems, n_best):
             t0 = time.perf_counter()
-            res = synth.synthesize(rows, "arpabet", n_frames=n, n_best=nb)
+            res = synth.synthesize(rows, "arpabet", n_frames=n, n_best=nb, exclude=(sid,) if leave_one_out else ())
             search_ms[nb].append(1000 * (time.perf_counter() - t0))
             units[nb].append(res.selection.n_units)
             sys_.params.append(res.frames[:, k:])
@@ -202,13 +208,20 @@ def _pct(x: float) -> str:
     return "-" if np.isnan(x) else f"{x:.2f}"
 
 
-def markdown(rows: Sequence[dict], *, n_sentences: int, corpus_meta: Mapping, command: str, figure: str) -> str:
-    """The docs/accuracy.md section."""
+def markdown(
+    rows: Sequence[dict], *, n_sentences: int, corpus_meta: Mapping, command: str, figure: str, split: str = "test"
+) -> str:
+    """The docs/accuracy.md section (``split``: "test", or "val" for the leave-one-out run)."""
+    which = (
+        "held-out GRID s1 test sentences (never in the unit corpus)"
+        if split == "test"
+        else "GRID s1 val sentences, each with its own recording excluded from the unit corpus (leave-one-out)"
+    )
     lines = [
         "## Unit selection (text -> visible speech, seed 001) on real lips",
         "",
         (
-            f"`{command}`. {n_sentences} held-out GRID s1 test sentences (never in the unit corpus); text from the "
+            f"`{command}`. {n_sentences} {which}; text from the "
             "sentence id, the real phone timings (GRID phone boundaries), lips measured on the video. Unit corpus: "
             f"{corpus_meta.get('n_sentences')} train+val sentences, {corpus_meta.get('n_phones')} phones, "
             f"{corpus_meta.get('n_components')} EM-PCA components ({100 * corpus_meta.get('explained', 0):.1f} % of "

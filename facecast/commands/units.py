@@ -55,6 +55,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         else:
             q.add_argument("--model", type=Path, default=None, help="HMM baseline model (default: the shipped one)")
             q.add_argument("--n-best", default="1,10", help="unit sequences averaged, one row per value")
+            q.add_argument(
+                "--split",
+                choices=("test", "val"),
+                default="test",
+                help="test: the held-out sentences; val: the corpus's val sentences, each with its own "
+                "recording excluded (leave-one-out; where settings are chosen; no HMM row)",
+            )
             q.add_argument("--output", type=Path, default=None, help="write the markdown section here")
             q.add_argument("--figure", type=Path, default=Path("docs/img/unitsel_fig8.png"), help="Fig. 8 PNG")
 
@@ -108,7 +115,7 @@ def _run_eval(args: argparse.Namespace) -> int:
 
     (stored, _), root, phones = _corpus(args)
     tests = []
-    for s in grid.sentences(root, split="test"):
+    for s in grid.sentences(root, split=args.split):
         if s.sentence_id not in phones or (args.only_extracted and not is_extracted(s.video, args.cache_dir)):
             continue
         try:
@@ -122,15 +129,19 @@ def _run_eval(args: argparse.Namespace) -> int:
         rows, curves = evaluate(
             stored,
             tests,
-            model=load_model(args.model),
+            model=load_model(args.model) if args.split == "test" else None,
             n_best=n_best,
             progress=tqdm,
+            leave_one_out=args.split == "val",
             model_label=str(args.model) if args.model else "shipped default model",
         )
     print(json.dumps(rows, indent=1))
     fig = fig8(curves, args.figure)
     cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
-    text = markdown(rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=f"img/{fig.name}")
+    cmd += " --split val" if args.split == "val" else ""
+    text = markdown(
+        rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=f"img/{fig.name}", split=args.split
+    )
     print(text)
     if args.output is not None:
         atomic_write_bytes(args.output, text.encode())

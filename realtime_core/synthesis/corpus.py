@@ -164,6 +164,13 @@ class StoredCorpus:
         flat = np.asarray(coefficients, dtype=np.float64) @ self.pca_components + self.pca_mean
         return flat.reshape(len(flat), -1, 3)
 
+    def rest_frame(self) -> np.ndarray:
+        """(D,) the frame vector of the neutral face: the PCA coefficients of zero displacement
+        (``-components @ mean``) followed by zero for every further dim (the mouth parameters)."""
+        out = np.zeros(self.corpus.n_dims)
+        out[: self.corpus.n_coefficients] = -(self.pca_components @ self.pca_mean)
+        return out
+
     def mups(self, coefficients: np.ndarray) -> np.ndarray:
         """(n, K) coefficients -> (n, A) Utterance MU parameters (paper 002 eq. 1: ``M_0^T (d - m_00)``
         of the landmark displacements the coefficients stand for). Raises ConfigError if the corpus

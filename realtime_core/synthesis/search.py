@@ -226,6 +226,20 @@ def smoothness(graph: UnitGraph, i: np.ndarray, p: np.ndarray, duration_s: float
     return np.maximum(graph.a[i][:, None] + graph.b[p][None, :] + 2.0 * cross, 0.0) / (dur**4 * graph.c_ref)
 
 
+def _jump_costs(graph: UnitGraph, i: np.ndarray, p: np.ndarray, phi: np.ndarray, duration_s: float) -> np.ndarray:
+    """(K, M) ``phi_i + 1 + beta C(i, p)``: the cost of reaching parent ``p`` by a jump from active
+    state ``i`` (the same values as ``phi[:, None] + 1 + beta * smoothness(...)``, computed in place)."""
+    dur = max(duration_s, graph.config.min_blend_s)
+    out = (graph.u[i] @ graph.v[p].T).astype(np.float64)
+    out *= 2.0
+    out += graph.a[i][:, None]
+    out += graph.b[p][None, :]
+    np.maximum(out, 0.0, out=out)
+    out *= graph.config.beta / (dur**4 * graph.c_ref)
+    out += (phi + 1.0)[:, None]
+    return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class Selection:
     """states: (T,) int64 the chosen corpus phone per target phone; cost: the path cost;
@@ -291,7 +305,6 @@ def viterbi(
         raise ConfigError(
             f"target (T,) and durations (T,) must match and be non-empty: {target.shape}, {durations_s.shape}"
         )
-    cfg = graph.config
 
     def allowed(c: np.ndarray) -> np.ndarray:
         return c if banned is None else c[~banned[c]]
@@ -317,20 +330,21 @@ def viterbi(
                 f"{int(target[t])} was never recorded)"
             )
         par = graph.parent[cand]
-        # jumps: i (active) -> j (cand) through the junction i | parent(j)
-        jump = phi[:, None] + 1.0 + cfg.beta * smoothness(graph, active, par, float(durations_s[t - 1]))
+        # jumps: i (active) -> j (cand) through the junction i | parent(j); the (active x cand)
+        # matrix is the search's bulk, so it is built in place (one allocation, no temporaries)
+        jump = _jump_costs(graph, active, par, phi, float(durations_s[t - 1]))
         if relaxed:
             mism = graph.visemes[active][:, None] != graph.visemes[par][None, :]
             # G's finite stand-in is added outside beta so it outweighs any smoothness difference
-            jump = jump + np.where(mism, mismatch_cost, 0.0)
-        jump[active[:, None] == par[None, :]] = np.inf  # that is the recorded transition, not a jump
-        best_i = np.argmin(jump, axis=0)
-        new_phi = jump[best_i, np.arange(len(cand))]
-        back = best_i.copy()
-        # recorded transitions: parent(j) active -> cost unchanged
+            jump += np.where(mism, mismatch_cost, 0.0)
+        # recorded transitions (parent(j) active) are not jumps: they are priced below at no cost
         pos[active] = np.arange(len(active))
         k = pos[par]
         stay = k >= 0
+        jump[k[stay], np.flatnonzero(stay)] = np.inf
+        best_i = np.argmin(jump, axis=0)
+        new_phi = jump[best_i, np.arange(len(cand))]
+        back = best_i.copy()
         stay_cost = np.where(stay, phi[np.maximum(k, 0)], np.inf)
         better = stay_cost <= new_phi
         new_phi = np.where(better, stay_cost, new_phi)

@@ -136,12 +136,26 @@ def pause_anchors(visemes: np.ndarray) -> np.ndarray:
     return out
 
 
-class UnitSynthesizer:
-    """Unit-selection visual speech from one corpus (the graph is built once; thread-safe reads)."""
+ENSEMBLE_GAIN = 1.2
+"""Default articulation-range gain of an ``n_best`` > 1 ensemble (chosen on the val split, see
+:meth:`UnitSynthesizer.synthesize`)."""
 
-    def __init__(self, corpus: MotionCorpus, config: SearchConfig | None = None) -> None:
+
+class UnitSynthesizer:
+    """Unit-selection visual speech from one corpus (the graph is built once; thread-safe reads).
+
+    rest: (D,) the frame vector of the face at rest (the neutral face: its PCA coefficients and
+    zero mouth parameters, :meth:`realtime_core.synthesis.corpus.StoredCorpus.rest_frame`), the
+    centre an ensemble's articulation range is restored around; None = the zero vector."""
+
+    def __init__(
+        self, corpus: MotionCorpus, config: SearchConfig | None = None, *, rest: np.ndarray | None = None
+    ) -> None:
         self.corpus = corpus
         self.graph: UnitGraph = build_graph(corpus, config or SearchConfig())
+        self.rest = np.zeros(corpus.n_dims) if rest is None else np.asarray(rest, dtype=np.float64)
+        if self.rest.shape != (corpus.n_dims,):
+            raise ConfigError(f"rest must be ({corpus.n_dims},) like a corpus frame, got {self.rest.shape}")
         self.available = corpus.visemes_present()
         self._sentence = corpus.phone_sentence()
 
@@ -156,6 +170,7 @@ class UnitSynthesizer:
         n_frames: int | None = None,
         n_best: int = 1,
         exclude: Sequence[str] = (),
+        ensemble_gain: float = ENSEMBLE_GAIN,
     ) -> UnitSynthesis:
         """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es").
 
@@ -163,15 +178,22 @@ class UnitSynthesizer:
         sequences, each searched with the sentences of the previous ones excluded: recorded
         tokens of the same phones vary from one sentence to the next, and their mean (all warped
         onto the same target phones, so closures and openings stay aligned) follows an unseen
-        token better than any one of them. Stops early when no further sequence exists.
+        token better than any one of them. Stops early when no further sequence exists. The mean
+        of tokens that differ in timing and extent moves less than any one of them (mouth_open's
+        standard deviation about 0.89 of the real one with ten), so the ensemble's deviation from
+        the rest face is multiplied by ``ensemble_gain`` (1 = the plain mean; the default restores
+        the range, chosen on the val split: docs/unit_selection.md). One sequence is never scaled.
 
         exclude: corpus sentence ids never to use (a leave-one-out evaluation of a corpus sentence)."""
         if not isinstance(n_best, int) or n_best < 1:
             raise ConfigError(f"n_best must be an integer >= 1, got {n_best!r}")
+        if not 0 < ensemble_gain <= 4:
+            raise ConfigError(f"ensemble_gain must be in (0, 4], got {ensemble_gain!r}")
         target = self.target(phones, inventory)
         anchors = pause_anchors(target.visemes)
         sels: list[Selection] = []
-        banned = np.isin(self._sentence, [i for i, sid in enumerate(self.corpus.sentence_ids) if sid in set(exclude)])
+        skip = set(exclude)
+        banned = np.isin(self._sentence, [i for i, sid in enumerate(self.corpus.sentence_ids) if sid in skip])
         total = None
         for k in range(n_best):
             try:
@@ -194,7 +216,10 @@ class UnitSynthesizer:
             )
             total = frames if total is None else total + frames
             sels.append(sel)
-            used = np.unique(self._sentence[sel.states])
-            banned |= np.isin(self._sentence, used)
+            if k + 1 < n_best:
+                banned |= np.isin(self._sentence, np.unique(self._sentence[sel.states]))
         assert total is not None
-        return UnitSynthesis(frames=total / len(sels), target=target, selection=sels[0], alternatives=tuple(sels[1:]))
+        frames = total / len(sels)
+        if len(sels) > 1 and ensemble_gain != 1.0:
+            frames = self.rest + ensemble_gain * (frames - self.rest)
+        return UnitSynthesis(frames=frames, target=target, selection=sels[0], alternatives=tuple(sels[1:]))

@@ -41,3 +41,29 @@ def test_file_round_trip_and_bad_files(stored_corpus, corpus_file, tmp_path):
         load_unit_corpus(cut)
     with pytest.raises(UnitCorpusFileError, match="not found"):
         load_unit_corpus(tmp_path / "missing.npz")
+
+
+def test_rest_frame_is_the_neutral_face_as_closely_as_the_pca_can_show_it(stored_corpus):
+    k = stored_corpus.corpus.n_coefficients
+    rest = stored_corpus.rest_frame()
+    assert rest.shape == (stored_corpus.corpus.n_dims,) and np.all(rest[k:] == 0.0)
+    offsets = stored_corpus.landmark_offsets(rest[None, :k]).reshape(-1)
+    # least squares: what is left of the zero displacement is orthogonal to every component
+    np.testing.assert_allclose(stored_corpus.pca_components @ offsets, 0.0, atol=1e-9)
+    # and no other coefficient vector comes closer to zero displacement
+    other = stored_corpus.landmark_offsets(rest[None, :k] + 0.01).reshape(-1)
+    assert np.linalg.norm(offsets) < np.linalg.norm(other)
+
+
+def test_leave_one_out_evaluation_never_uses_the_sentence_itself(stored_corpus, corpus_rows):
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from training.unitsel_eval import evaluate
+
+    synth = UnitSynthesizer(stored_corpus.corpus, rest=stored_corpus.rest_frame())
+    tests = list(corpus_rows[:4])
+    inside = evaluate(stored_corpus, tests, n_best=(1,), synthesizer=synth)[0][0]
+    loo = evaluate(stored_corpus, tests, n_best=(1,), synthesizer=synth, leave_one_out=True)[0][0]
+    assert inside["system"] == loo["system"] == "unit selection, n_best=1"
+    # in the corpus, each sentence selects itself and reproduces its own lips; left out, it cannot
+    assert inside["r"]["mouth_open"] > 0.999
+    assert loo["r"]["mouth_open"] < 0.99

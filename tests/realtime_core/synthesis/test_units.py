@@ -304,7 +304,7 @@ def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_divi
         ("sil", 0.7, 0.9),
     ]
     one = synth.synthesize(phones, "arpabet")
-    two = synth.synthesize(phones, "arpabet", n_best=2)
+    two = synth.synthesize(phones, "arpabet", n_best=2, ensemble_gain=1.0)
     assert one.selection.n_units == 1 and one.selection.n_mismatched == 0
     (alt,) = two.alternatives
     sent = corpus.phone_sentence()
@@ -318,3 +318,51 @@ def test_n_best_averages_sequences_from_other_recordings_even_past_a_unique_divi
         anchored=np.array([-1, 0, 0, 0, 0, 1], dtype=np.int8),
     )
     np.testing.assert_allclose(two.frames, 0.5 * (one.frames + other), atol=1e-12)
+    # the ensemble's range gain scales the deviation from the rest frame; one sequence is never scaled
+    rest = np.linspace(-0.1, 0.1, corpus.n_dims)
+    gained = UnitSynthesizer(corpus, SearchConfig(max_active=None), rest=rest)
+    np.testing.assert_allclose(
+        gained.synthesize(phones, "arpabet", n_best=2, ensemble_gain=1.3).frames,
+        rest + 1.3 * (two.frames - rest),
+        atol=1e-12,
+    )
+    np.testing.assert_array_equal(gained.synthesize(phones, "arpabet", ensemble_gain=1.3).frames, one.frames)
+    with pytest.raises(ConfigError, match="ensemble_gain"):
+        synth.synthesize(phones, "arpabet", n_best=2, ensemble_gain=0.0)
+    with pytest.raises(ConfigError, match="rest"):
+        UnitSynthesizer(corpus, rest=np.zeros(corpus.n_dims + 1))
+
+
+def test_in_place_jump_costs_equal_the_smoothness_cost_they_price():
+    from realtime_core.synthesis.search import _jump_costs, smoothness
+
+    rng = np.random.default_rng(11)
+    corpus = tiny_corpus(rng, [["sil", "PBM", "AA", "IY", "sil"], ["sil", "AA", "PBM", "IY", "sil"]])
+    graph = build_graph(corpus, SearchConfig(beta=0.3))
+    i, p = np.array([1, 2, 6]), np.array([2, 3, 5, 7])
+    phi = rng.uniform(0, 3, len(i))
+    for dur in (0.01, 0.12):  # below and above min_blend_s
+        want = phi[:, None] + 1.0 + 0.3 * smoothness(graph, i, p, dur)
+        np.testing.assert_allclose(_jump_costs(graph, i, p, phi, dur), want, rtol=1e-12)
+
+
+def test_a_junction_leaves_one_recording_and_arrives_on_the_next_without_a_step():
+    rng = np.random.default_rng(12)
+    corpus = tiny_corpus(rng, [["sil", "PBM", "AA", "IY", "sil"], ["sil", "AA", "IY", "FV", "sil"]])
+    graph = build_graph(corpus, SearchConfig(max_active=None))
+    states = np.array([1, 2, 7])  # PBM AA of sentence 0, then IY of sentence 1 (its parent 6 is an AA)
+    assert graph.parent[7] == 6 and corpus.phone_visemes[6] == corpus.phone_visemes[2]
+    starts, ends = np.array([0.0, 0.1, 0.25]), np.array([0.1, 0.25, 0.4])
+    fps = 3000.0  # dense: a step would show as one large difference
+    out = concatenate(corpus, states, starts, ends, parent=graph.parent, fps=fps)
+    d = np.abs(np.diff(out, axis=0)).max(axis=1)
+    k0, k1 = int(0.1 * fps), int(0.25 * fps)  # the two target boundaries (the second is the junction)
+    typical = np.median(d)
+    assert d[k0 - 1] < 10 * typical + 1e-9 and d[k1 - 1] < 10 * typical + 1e-9
+    # the blended phone starts exactly on its own unit and ends exactly on the next unit's parent
+    single = concatenate(corpus, np.array([1, 2, 3]), starts, ends, parent=graph.parent, fps=fps)
+    np.testing.assert_allclose(out[:k0], single[:k0], atol=1e-12)  # before the junction's phone: unchanged
+    np.testing.assert_allclose(out[k0], single[k0], atol=1e-12)  # w = 0 at the phone's start
+    into = concatenate(corpus, np.array([5, 6, 7]), starts, ends, parent=graph.parent, fps=fps)
+    np.testing.assert_allclose(out[k1 - 1], into[k1 - 1], atol=1e-3)  # w = 1 at its end
+    np.testing.assert_allclose(out[k1:], into[k1:], atol=1e-12)  # then the recording continues as is
