@@ -473,10 +473,15 @@ def _run(
     sent, ended = ingest["sent"], ingest["ended"]
     second = "hostile" if hostile else "second_half"
     e2e: dict[str, list[np.ndarray]] = {"quiet": [], second: []}
+    # The same split in two: the block's send to the server's fan-out stamp (the frame header's send
+    # time: ingest client, network, the server's loop) and that stamp to the receipt (the write, the
+    # viewer process being scheduled), to tell server stalls from client ones.
+    to_fanout: dict[str, list[np.ndarray]] = {"quiet": [], second: []}
+    to_receipt: dict[str, list[np.ndarray]] = {"quiet": [], second: []}
     per_viewer: list[dict] = []
     lost = 0
     expected = 0
-    for _kind, s, _node, idx, received, _srv_sent in views:
+    for _kind, s, _node, idx, received, srv_sent in views:
         n_frames = ended[s] if ended[s] >= 0 else int(len(idx))
         expected += n_frames
         lost += n_frames - len(set(idx.tolist())) if ended[s] >= 0 else 0
@@ -487,9 +492,16 @@ def _run(
         t_need[ok] = sent[s, blk[ok]]
         live = ~np.isnan(t_need)
         lat = (received[live] - t_need[live]) * 1e3
-        q, h = lat[t_need[live] < half_wall], lat[t_need[live] >= half_wall]
+        in_quiet = t_need[live] < half_wall
+        q, h = lat[in_quiet], lat[~in_quiet]
         e2e["quiet"].append(q)
         e2e[second].append(h)
+        fan = (srv_sent[live] - t_need[live]) * 1e3
+        rec = (received[live] - srv_sent[live]) * 1e3
+        to_fanout["quiet"].append(fan[in_quiet])
+        to_fanout[second].append(fan[~in_quiet])
+        to_receipt["quiet"].append(rec[in_quiet])
+        to_receipt[second].append(rec[~in_quiet])
         per_viewer.append(
             {
                 "session": s,
@@ -518,10 +530,21 @@ def _run(
         "frames_lost": int(lost),
         "frames_expected": int(expected),
         "end_to_end_ms": summary,
+        "send_to_server_fanout_ms": {k: summarise(np.concatenate(v) / 1e3) for k, v in to_fanout.items()},
+        "server_fanout_to_receipt_ms": {k: summarise(np.concatenate(v) / 1e3) for k, v in to_receipt.items()},
         "per_viewer": per_viewer,
         "loop_lag_p99_ms": {
             "quiet": quiet_metrics.get("timings_ms", {}).get("loop_lag", {}).get("p99_ms"),
             "end": final.get("timings_ms", {}).get("loop_lag", {}).get("p99_ms"),
+        },
+        # the part of the lag the server's own work can explain (its loop thread's CPU time in the
+        # interval); the rest is the process waiting for a core
+        "loop_lag_cpu_p99_ms": {
+            "quiet": quiet_metrics.get("timings_ms", {}).get("loop_lag_cpu", {}).get("p99_ms"),
+            "end": final.get("timings_ms", {}).get("loop_lag_cpu", {}).get("p99_ms"),
+        },
+        "server_gc_pauses_ms": {  # the server's garbage collections (server.timing.GcPauses), whole run
+            k: v for k, v in final.get("timings_ms", {}).items() if k.startswith("gc_gen")
         },
         "ingests_lost": ingest["dropped"],
         "server_closes_second_half": closes,

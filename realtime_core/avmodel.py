@@ -30,7 +30,7 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
-from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, MfccConfig
+from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, LevelNormConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
 from realtime_core.inversion import (
     ConditionalForm,
@@ -158,6 +158,7 @@ def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
         "tc": fe.tc,
         "energy": fe.energy,
         "silence_floor_db": fe.silence_floor_db,
+        **({"level_norm": asdict(fe.level_norm)} if fe.level_norm is not None else {}),
     }
 
 
@@ -169,6 +170,8 @@ def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
         energy=bool(d.get("energy", False)),
         # Models written before the gate existed were trained without it.
         silence_floor_db=d.get("silence_floor_db"),
+        # Models written before level normalisation use absolute levels.
+        level_norm=None if d.get("level_norm") is None else LevelNormConfig(**d["level_norm"]),
     )
 
 

@@ -70,7 +70,7 @@ from server.guard import (
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig, warm_up
-from server.timing import StageTimes
+from server.timing import GcPauses, StageTimes, freeze_heap
 from server.workers import WorkerPool
 from wire import protocol as P
 
@@ -122,6 +122,7 @@ class FacecastServer:
         self.clients = ConnectionCounter(config.max_connections_per_client)
         self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
+        self._gc_pauses: GcPauses | None = None
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -168,16 +169,22 @@ class FacecastServer:
         if cfg.workers:
             self.pool = WorkerPool(self.model, cfg.workers, rig=self.head.rig if self.head else None)
             await self.pool.start()
+        self._gc_pauses = GcPauses(self.times)
         self.spawn(self._watch_loop_lag())
 
     async def _watch_loop_lag(self, period_s: float = 0.01) -> None:
         """Record how late a 10 ms timer fires ("loop_lag"): the time any callback waits for the loop,
-        whether the loop is busy with frames or the process is not scheduled (a shared machine)."""
+        whether the loop is busy with frames or the process is not scheduled (a shared machine).
+        "loop_lag_cpu" bounds the part of each lag the loop's own work can explain: the CPU time the
+        loop's thread used in that interval, when less than the lag (the rest is time the process
+        waited for a core)."""
         loop = asyncio.get_running_loop()
         while True:
-            t = loop.time()
+            t, cpu = loop.time(), time.thread_time()
             await asyncio.sleep(period_s)
-            self.times.add("loop_lag", max(0.0, loop.time() - t - period_s))
+            lag = max(0.0, loop.time() - t - period_s)
+            self.times.add("loop_lag", lag)
+            self.times.add("loop_lag_cpu", min(lag, time.thread_time() - cpu))
 
     @property
     def port(self) -> int:
@@ -209,6 +216,9 @@ class FacecastServer:
         if self.pool is not None:
             await self.pool.stop()
             self.pool = None
+        if self._gc_pauses is not None:
+            self._gc_pauses.close()
+            self._gc_pauses = None
 
     def spawn(self, coro: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         """Run a coroutine in the background, holding a reference until it is done."""
@@ -398,23 +408,37 @@ class FacecastServer:
             live = await self._perform(ws, proto, actions, None)
             if live is None:
                 return
+            # Each message is awaited directly under one timeout (the idle limit), not as a task raced
+            # against the shutdown event: a block then reaches the session one loop turn after it
+            # arrives instead of three, and under a flood of other connections' work every turn
+            # counts. A shutdown cuts the wait short by moving the timeout to now.
+            loop = asyncio.get_running_loop()
+            waiting: list[asyncio.Timeout] = []
             ended = asyncio.ensure_future(live.ended.wait())
+
+            def wake_on_shutdown(_: asyncio.Future) -> None:
+                for w in waiting:
+                    w.reschedule(loop.time())
+
+            ended.add_done_callback(wake_on_shutdown)
             try:
                 idle_s = self.config.idle_timeout_s
                 while proto.state is SP.State.STREAMING:
-                    recv = asyncio.ensure_future(ws.recv())
-                    done, _ = await asyncio.wait({recv, ended}, timeout=idle_s, return_when=asyncio.FIRST_COMPLETED)
-                    if not done:
-                        recv.cancel()
-                        actions = proto.idle_timed_out(idle_s)
-                    elif ended in done:  # server shutting down: first, even if a message is waiting too
-                        recv.cancel()
+                    if live.ended.is_set():  # server shutting down: first, even if a message is waiting too
                         actions = proto.shutdown()
                     else:
                         try:
-                            actions = proto.receive(recv.result())
+                            async with asyncio.timeout(idle_s) as timeout:
+                                waiting.append(timeout)
+                                msg = await ws.recv()
+                        except TimeoutError:
+                            actions = proto.shutdown() if live.ended.is_set() else proto.idle_timed_out(idle_s)
                         except ConnectionClosed:
                             actions = proto.connection_lost()
+                        else:
+                            actions = proto.receive(msg)
+                        finally:
+                            waiting.clear()
                     await self._perform(ws, proto, actions, live)
             finally:
                 ended.cancel()
@@ -691,6 +715,7 @@ async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = N
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         await server.start()
+        freeze_heap()  # this process is the server's: the startup heap needs no more collecting
         if ready is not None and not ready.done():
             ready.set_result(server)
         try:

@@ -18,7 +18,6 @@ handler with :func:`control`. No I/O here.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -142,7 +141,14 @@ def apply_controls(state: ControlState, msg: dict, *, now_s: float | None = None
     """A control message -> the new state (a copy); ControlError (naming the control) if any part is refused.
 
     now_s: media time of the session's next frame (expression times are checked against it)."""
-    draft = copy.deepcopy(state)
+    # A copy of exactly what handlers write (not copy.deepcopy: a tenth of a millisecond per
+    # message, which a client sending thousands of controls would take from the event loop).
+    draft = replace(
+        state,
+        gains=state.gains.copy(),
+        expressions=state.expressions.copy(),
+        _smoothed=None if state._smoothed is None else state._smoothed.copy(),
+    )
     if now_s is not None:
         draft.now_s = float(now_s)
     for key, value in msg.items():

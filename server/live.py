@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from websockets.asyncio.server import ServerConnection, broadcast
+from websockets.frames import Frame, Opcode
+from websockets.protocol import OPEN
 
 from server.describe import summary
 from server.errors import IngestOverrun
@@ -120,17 +122,41 @@ class LocalSession:
 
 def deliver(viewers: list[Viewer], msg: bytes, now: float) -> None:
     """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
-    message), the bounded queue for the others."""
-    fast = []
+    message), the bounded queue for the others.
+
+    The synchronous write frames the message once (websockets' own ``Frame.serialize``; a server's
+    frames are unmasked and compression is off, so the bytes are the same for every viewer) and
+    writes those bytes to each viewer's transport: websockets' ``broadcast`` would build, serialise
+    and copy the frame once per viewer, the largest per-viewer cost of fan-out after the send call
+    itself. A connection not plainly open (closing, a fragmented message in progress, an
+    extension negotiated) goes through ``broadcast``, which handles those cases."""
+    fast: list[Viewer] = []
     for v in viewers:
         if v.writable_now():
             fast.append(v)
         else:
             v.offer(msg, now)
-    if fast:
-        broadcast([v.ws for v in fast], msg)
-        for v in fast:
-            v.sent += 1
+    if not fast:
+        return
+    wire: bytes | None = None
+    other = []
+    for v in fast:
+        ws = v.ws
+        proto = ws.protocol
+        if (
+            proto.state is OPEN
+            and not proto.extensions
+            and not proto.expect_continuation_frame
+            and ws.send_in_progress is None
+        ):
+            if wire is None:
+                wire = Frame(Opcode.BINARY, msg).serialize(mask=False)
+            ws.transport.write(wire)
+        else:
+            other.append(ws)
+        v.sent += 1
+    if other:
+        broadcast(other, msg)
 
 
 class Viewer:

@@ -41,7 +41,7 @@ from realtime_core.face.rig import Rig
 from realtime_core.mapping import SpeechModel
 from server.errors import AudioFormatError, ControlError, ServerConfigError, ServerError
 from server.session import AudioBlock, Frame, Output, SessionConfig
-from server.timing import StageTimes
+from server.timing import StageTimes, freeze_heap
 
 log = logging.getLogger("facecast.workers")
 
@@ -82,6 +82,7 @@ def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) ->
     with threadpool_limits(1):
         model = decode_speech_model(model_bytes)
         warm_up(model, rig)  # the compiled kernels loaded before the first session
+        freeze_heap()  # no full collection rescans the model and the modules between frames
         conn.send(("ok", None))  # ready
         sessions: dict[int, tuple[Session, _Recorder]] = {}
         while True:

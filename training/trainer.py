@@ -14,13 +14,20 @@ Evaluation runs the exact live path (:func:`realtime_core.pipeline.speech_to_par
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
-from realtime_core.features import CmvnConfig, FrontEndConfig, MfccConfig, extract_features, raw_mfcc_with_level
+from realtime_core.features import (
+    CmvnConfig,
+    FrontEndConfig,
+    LevelNormConfig,
+    MfccConfig,
+    extract_features,
+    raw_mfcc_with_level,
+)
 from realtime_core.features.resample import resample_audio
 from realtime_core.hmm import AvHmm, TrainConfig, TrainResult, baum_welch, init_model
 from realtime_core.metrics import acc, amse, pearson_per_param
@@ -48,6 +55,7 @@ class TrainRecipe:
     window_hops: float = 2.0
     energy: bool = True
     cmvn: CmvnConfig = field(default_factory=CmvnConfig)
+    level_norm: LevelNormConfig | None = None
     hmm: TrainConfig = field(default_factory=lambda: TrainConfig(n_states=16, n_mix=3, n_iter=25, tol=5e-4))
     likelihood_scale: float = 0.1
 
@@ -58,6 +66,7 @@ class TrainRecipe:
             cmvn=self.cmvn,
             tc=self.tc,
             energy=self.energy,
+            level_norm=self.level_norm,
         )
 
     def as_json(self) -> dict:
@@ -77,6 +86,7 @@ class TrainRecipe:
             "covar_prior_scale": h.covar_prior_scale,
             "seed": h.seed,
             "likelihood_scale": self.likelihood_scale,
+            **({"level_norm": asdict(self.level_norm), "cmvn_gate_db": self.cmvn.gate_db} if self.level_norm else {}),
         }
 
 

@@ -99,6 +99,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="leave c0 (log energy) out of the audio features (the paper's c1..c11 only)",
     )
     p.add_argument(
+        "--level-norm",
+        action="store_true",
+        help="c0 and the silence/CMVN gates relative to the talker's own tracked speech level "
+        "(realtime_core.features.level): features invariant to the recording gain",
+    )
+    p.add_argument(
         "--likelihood-scale",
         type=float,
         default=0.1,
@@ -195,8 +201,17 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError("no utterances left to train on (check the corpus folders and --exclude-source)")
     print(f"training on {len(utts)} utterances, {sum(u.duration_s for u in utts) / 60:.1f} min of audio")
 
+    level: dict[str, Any] = {}
+    if args.level_norm:
+        from realtime_core.features import CmvnConfig, LevelNormConfig
+
+        ln = LevelNormConfig()
+        # with level normalisation the CMVN gate is relative to the speech peak: the silence gate
+        level = {"level_norm": ln, "cmvn": CmvnConfig(gate_db=-ln.silence_below_peak_db)}
+
     def recipe(n: int, m: int, cov: str, tc: int) -> TrainRecipe:
         return TrainRecipe(
+            **level,
             sample_rate_hz=args.rate,
             tc=tc,
             window_hops=args.window_hops,

@@ -7,6 +7,7 @@ random chunks it gives the same rows.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -14,6 +15,7 @@ import numpy as np
 from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.cmvn import CmvnConfig, RunningCmvn, mel_level_db
 from realtime_core.features.context import ContextStacker
+from realtime_core.features.level import LevelNormConfig, LevelTracker
 from realtime_core.features.mfcc import MfccConfig, MfccStream, as_float_samples
 
 
@@ -28,7 +30,13 @@ class FrontEndConfig:
     silence_floor_db: frames whose level (dB, :func:`mel_level_db`; about dBFS + 2 for white
     noise) is below this are replaced by the features of digital silence, so a quiet room's
     hiss looks exactly like the silent pauses the model was trained on and the mouth stays
-    closed (None disables the gate).
+    closed (None disables the gate). Ignored with ``level_norm``, whose gate is relative.
+    level_norm: None (absolute c0 and levels), or the talker's own speech level removed
+    (:mod:`realtime_core.features.level`): c0 becomes c0 minus the tracked speech peak, frames more
+    than ``level_norm.silence_below_peak_db`` under the peak (or near the tracked noise floor) become
+    silence, and the levels
+    the CMVN gate sees are relative to the peak (so ``cmvn.gate_db`` is then dB re the peak). The
+    whole front end is then invariant to the recording gain.
     """
 
     mfcc: MfccConfig = field(default_factory=MfccConfig)
@@ -36,6 +44,7 @@ class FrontEndConfig:
     tc: int = 3
     energy: bool = False
     silence_floor_db: float | None = -60.0
+    level_norm: LevelNormConfig | None = None
 
     def __post_init__(self) -> None:
         if self.mfcc.include_c0:
@@ -105,15 +114,14 @@ class FrontEnd:
         else:
             self._cmvn = None
         self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
-        # Raw [c0, c1..] of digital silence (every mel band at the energy floor).
-        probe = MfccStream(replace(mcfg, include_c0=True), kernel=kernel)
-        self._silence = probe.push(np.zeros(mcfg.window_len))[0]
+        self._level = _LevelStage(config, kernel=kernel)
 
     def reset(self) -> None:
         self._mfcc.reset()
         if self._cmvn is not None:
             self._cmvn.reset()
         self._ctx.reset()
+        self._level.reset()
 
     @property
     def frames_out(self) -> int:
@@ -128,21 +136,61 @@ class FrontEnd:
         return np.concatenate([rows, self._ctx.flush()])
 
     def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
-        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
-        if self.config.silence_floor_db is not None:
-            quiet = level < self.config.silence_floor_db
-            if quiet.any():
-                c0_ceps = np.where(quiet[:, None], self._silence, c0_ceps)
-        ceps = c0_ceps if self.config.energy else c0_ceps[:, 1:]
+        ceps, level = self._level.push(c0_ceps)
         if self._cmvn is None:
             return ceps
         return self._cmvn.push(ceps, level)
 
 
+_SILENT_DB = -1000.0
+"""The level (dB re the speech peak) given to the CMVN for frames that level normalisation made silence."""
+
+
+class _LevelStage:
+    """Raw ``[c0, c1..] (k, n_ceps + 1)`` -> ``(features (k, n_feat), level_db (k,))`` before CMVN:
+    the silence gate (absolute ``silence_floor_db``, or relative with ``level_norm``), c0 made relative
+    to the tracked speech peak with ``level_norm``, c0 dropped unless ``energy``."""
+
+    def __init__(self, config: FrontEndConfig, *, kernel: str = "numba") -> None:
+        self.config = config
+        mcfg = config.mfcc
+        # Raw [c0, c1..] of digital silence (every mel band at the energy floor), shared read-only.
+        self._silence = _silence_row(replace(mcfg, include_c0=True), kernel)
+        self._db_per_c0 = float(mel_level_db(np.ones(1), mcfg.n_mels)[0])
+        self._tracker = LevelTracker(config.level_norm) if config.level_norm is not None else None
+        if config.level_norm is not None:
+            # silence under level normalisation: the silence spectrum at the gate's relative level
+            self._silence = self._silence.copy()
+            self._silence[0] = -config.level_norm.silence_below_peak_db / self._db_per_c0
+
+    def reset(self) -> None:
+        if self._tracker is not None:
+            self._tracker.reset()
+
+    def push(self, c0_ceps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+        if self._tracker is not None and self.config.level_norm is not None:
+            ln = self.config.level_norm
+            peak, floor = self._tracker.track(level)
+            quiet = (level < peak - ln.silence_below_peak_db) | (level < floor + ln.silence_above_floor_db)
+            # silence never updates the CMVN statistics: its level goes far under any gate
+            level = np.where(quiet, _SILENT_DB, level - peak)
+            c0_ceps = np.concatenate([c0_ceps[:, :1] - (peak / self._db_per_c0)[:, None], c0_ceps[:, 1:]], axis=1)
+        elif self.config.silence_floor_db is not None:
+            quiet = level < self.config.silence_floor_db
+        else:
+            quiet = np.zeros(level.shape, dtype=bool)
+        if quiet.any():
+            c0_ceps = np.where(quiet[:, None], self._silence, c0_ceps)
+        return (c0_ceps if self.config.energy else c0_ceps[:, 1:]), level
+
+
 def raw_mfcc_with_level(samples: np.ndarray, config: FrontEndConfig) -> tuple[np.ndarray, np.ndarray]:
     """Whole-utterance MFCCs and levels for computing CMVN training statistics.
 
-    Returns ``(ceps (T, n_feat), level_db (T,))`` on the front end's frame grid.
+    Returns ``(ceps (T, n_feat), level_db (T,))`` on the front end's frame grid: the features the
+    CMVN sees and the levels its gate compares (relative to the speech peak with ``level_norm``).
+    The absolute silence gate is not applied (gated frames are below the CMVN gate by default).
     """
     mfcc = config.mfcc
     x = as_float_samples(samples)
@@ -150,6 +198,8 @@ def raw_mfcc_with_level(samples: np.ndarray, config: FrontEndConfig) -> tuple[np
         raise InvalidAudioError(f"audio too short: {x.size} samples < one window ({mfcc.window_len})")
     s = MfccStream(replace(mfcc, include_c0=True))
     rows = np.concatenate([s.push(x), s.flush()])
+    if config.level_norm is not None:
+        return _LevelStage(config).push(rows)
     return (rows if config.energy else rows[:, 1:]), mel_level_db(rows[:, 0], mfcc.n_mels)
 
 
@@ -171,3 +221,12 @@ def extract_features(
         )
     fe = FrontEnd(config, cmvn_mean=cmvn_mean, cmvn_var=cmvn_var)
     return np.concatenate([fe.push(x), fe.flush()])
+
+
+@functools.lru_cache(maxsize=32)
+def _silence_row(mcfg: MfccConfig, kernel: str) -> np.ndarray:
+    """Raw ``[c0, c1..]`` of digital silence (every mel band at the energy floor), ``(n_outputs,)``
+    float64, read-only: computed once per configuration, not once per session."""
+    row = MfccStream(mcfg, kernel=kernel).push(np.zeros(mcfg.window_len))[0]
+    row.flags.writeable = False
+    return row

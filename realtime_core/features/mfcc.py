@@ -23,8 +23,10 @@ the output.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from fractions import Fraction
+from typing import NamedTuple
 
 import numpy as np
 import scipy.fft
@@ -159,6 +161,47 @@ def as_float_samples(samples: np.ndarray, *, what: str = "samples") -> np.ndarra
     return out
 
 
+class _Tables(NamedTuple):
+    """The constant tables of one :class:`MfccConfig` (read-only, shared by every stream of it)."""
+
+    fbank: np.ndarray  # (n_fft // 2 + 1, n_mels) float64
+    window: np.ndarray  # (window_len,) float64 Hamming
+    dct: np.ndarray  # (n_mels, n_outputs) float64, lifter folded in
+    fb_sparse: tuple[np.ndarray, np.ndarray, np.ndarray] | None  # the numba kernel's sparse filterbank
+
+
+@functools.lru_cache(maxsize=32)
+def _tables(config: MfccConfig, kernel: str) -> _Tables:
+    """Build a configuration's tables once (a few ms of Python loops): a live server opens a stream
+    per session, and on its event loop that build would delay every other session's frames."""
+    fmax = config.sample_rate_hz / 2 if config.fmax_hz is None else config.fmax_hz
+    fbank = mel_filterbank(
+        sample_rate_hz=int(config.sample_rate_hz),
+        n_fft=config.n_fft,
+        n_mels=config.n_mels,
+        fmin_hz=config.fmin_hz,
+        fmax_hz=fmax,
+    )
+    window = np.hamming(config.window_len)
+    first = 0 if config.include_c0 else 1
+    n = np.arange(first, config.n_ceps + 1)
+    # Orthonormal DCT-II rows c_first..c_n as one matrix, with the lifter folded in:
+    # one small matmul per frame instead of a DCT call and a multiply.
+    dct = scipy.fft.dct(np.eye(config.n_mels), type=2, axis=0, norm="ortho")[n].T  # (n_mels, n_out)
+    if config.lifter > 0:
+        dct = dct * (1.0 + (config.lifter / 2.0) * np.sin(np.pi * n / config.lifter))
+    dct = np.ascontiguousarray(dct)
+    fb_sparse = None
+    if kernel == "numba":
+        from realtime_core.features.compiled import sparse_filterbank
+
+        fb_sparse = sparse_filterbank(fbank)
+    arrays = [fbank, window, dct, *(fb_sparse or ())]
+    for a in arrays:
+        a.flags.writeable = False  # shared between streams: nobody may change them
+    return _Tables(fbank, window, dct, fb_sparse)
+
+
 class MfccStream:
     """Streaming MFCC extractor with the push/flush contract.
 
@@ -178,28 +221,16 @@ class MfccStream:
         self.kernel = kernel
         if kernel == "numba":
             # Imported here: numba's import costs ~0.5 s, paid only by streams that use it.
-            from realtime_core.features.compiled import sparse_filterbank, spectrum_to_ceps
+            from realtime_core.features.compiled import spectrum_to_ceps
 
             self._spectrum_to_ceps = spectrum_to_ceps
-        fmax = config.sample_rate_hz / 2 if config.fmax_hz is None else config.fmax_hz
-        self._fbank = mel_filterbank(
-            sample_rate_hz=int(config.sample_rate_hz),
-            n_fft=config.n_fft,
-            n_mels=config.n_mels,
-            fmin_hz=config.fmin_hz,
-            fmax_hz=fmax,
-        )
-        self._window = np.hamming(config.window_len)
-        first = 0 if config.include_c0 else 1
-        n = np.arange(first, config.n_ceps + 1)
-        # Orthonormal DCT-II rows c_first..c_n as one matrix, with the lifter folded in:
-        # one small matmul per frame instead of a DCT call and a multiply.
-        dct = scipy.fft.dct(np.eye(config.n_mels), type=2, axis=0, norm="ortho")[n].T  # (n_mels, n_out)
-        if config.lifter > 0:
-            dct = dct * (1.0 + (config.lifter / 2.0) * np.sin(np.pi * n / config.lifter))
-        self._dct = np.ascontiguousarray(dct)
+        tables = _tables(config, kernel)
+        self._fbank = tables.fbank
+        self._window = tables.window
+        self._dct = tables.dct
         if kernel == "numba":
-            self._fb_sparse = sparse_filterbank(self._fbank)
+            assert tables.fb_sparse is not None  # built for the numba kernel
+            self._fb_sparse = tables.fb_sparse
         self.reset()
 
     def reset(self) -> None:

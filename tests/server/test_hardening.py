@@ -8,11 +8,12 @@ import contextlib
 import json
 import logging
 import time
+from collections import Counter
 
 import numpy as np
 import pytest
 from websockets.asyncio.client import connect
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, ws_url
 from server.app import FacecastServer
@@ -262,3 +263,72 @@ def test_shutdown_does_not_wait_for_a_paced_backlog(model):
 
     took, code = asyncio.run(main())
     assert took < 5.0 and code == P.CLOSE_GOING_AWAY
+
+
+def test_connection_churn_neither_delays_nor_loses_a_healthy_viewers_frames(model):
+    """A client opening and closing WebSocket connections in a loop (from its own loopback address)
+    while a session streams in real time: past its burst it is refused with the documented 429 (never
+    anything else), its accepted connections fit the token bucket, and the healthy viewer receives
+    every frame, in order, never more than MAX_BEHIND frames behind the audio the ingest had sent
+    (counts of frames, not a timing: a loop stalled by handshakes would let the backlog grow)."""
+    rate_per_s, burst = 20.0, 10
+    block, n_blocks = 320, 150  # 20 ms blocks, 3 s of audio
+    max_behind = 15  # frames (0.5 s) beyond the algorithmic delay
+    pcm = _pcm(n_blocks * block / 16000)
+
+    async def churn(url: str, stop: asyncio.Event, tally: dict) -> None:
+        paths = ["/view?session=calm&audio=0", "/view?session=nobody"]
+        i = 0
+        while not stop.is_set():
+            i += 1
+            try:
+                async with connect(ws_url(url, paths[i % 2]), compression=None, local_addr=("127.0.0.2", 0)) as ws:
+                    tally["accepted"] += 1
+                    await ws.recv()  # the description (then the client hangs up) or the 4004 close
+            except InvalidStatus as exc:
+                tally["status"][exc.response.status_code] += 1
+                tally["reasons"].add(exc.response.body.decode().strip())
+            except ConnectionClosed:
+                pass
+            await asyncio.sleep(0)
+
+    async def main():
+        async with running(model, connect_rate_per_s=rate_per_s, connect_burst=burst) as srv:
+            url = srv.url
+            tally: dict = {"accepted": 0, "reasons": set(), "status": Counter()}
+            sent_frames = 0.0
+            behind: list[float] = []
+            async with IngestClient(url, session="calm", sample_rate_hz=16000) as ing:
+                delay_frames = ing.started["algorithmic_delay_s"] * 30
+                async with ViewerClient(url, session="calm", audio=False) as viewer:
+
+                    async def watch() -> list[int]:
+                        got = []
+                        async for m in viewer:
+                            got.append(m.index)
+                            behind.append(sent_frames - delay_frames - m.index)
+                        return got
+
+                    watcher = asyncio.ensure_future(watch())
+                    stop = asyncio.Event()
+                    t0 = time.monotonic()
+                    churner = asyncio.ensure_future(churn(url, stop, tally))
+                    loop = asyncio.get_running_loop()
+                    start = loop.time()
+                    for i in range(n_blocks):  # real time on an absolute schedule
+                        await asyncio.sleep(max(0.0, start + i * block / 16000 - loop.time()))
+                        await ing.send(pcm[i * block : (i + 1) * block])
+                        sent_frames = (i + 1) * block / 16000 * 30
+                    stop.set()
+                    await churner
+                    elapsed = time.monotonic() - t0
+                    ended = await ing.end()
+                    got = await asyncio.wait_for(watcher, 30)
+            return tally, elapsed, ended["frames"], got, behind
+
+    tally, elapsed, n_frames, got, behind = asyncio.run(main())
+    assert set(tally["status"]) == {429}  # refused past the burst, with 429 and nothing else
+    assert all("too many new connections" in r for r in tally["reasons"])
+    assert tally["accepted"] <= burst + rate_per_s * elapsed + 1  # the token bucket's bound
+    assert got == list(range(n_frames)) and n_frames > 80  # nothing accepted is lost, in order
+    assert max(behind) <= max_behind, f"the healthy viewer fell {max(behind):.1f} frames behind"

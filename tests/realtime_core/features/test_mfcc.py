@@ -125,3 +125,25 @@ def test_bad_config_and_misuse():
     st.flush()
     with pytest.raises(StreamStateError):
         st.push(np.zeros(10, dtype=np.float32))
+
+
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])
+def test_streams_of_one_configuration_share_read_only_tables_and_no_state(kernel):
+    """The filterbank, window and DCT are built once per configuration and shared (a live server
+    opens a stream per session): they cannot be written, and a stream that already processed other
+    audio does not change what a fresh one computes, which equals the one-shot function."""
+    cfg = MfccConfig(sample_rate_hz=16000, include_c0=True)
+    rng = np.random.default_rng(3)
+    x, other = rng.uniform(-0.5, 0.5, 8000), rng.uniform(-0.9, 0.9, 12000)
+    busy = MfccStream(cfg, kernel=kernel)
+    busy.push(other)
+    busy.flush()
+    busy.reset()
+    fresh = MfccStream(cfg, kernel=kernel)
+    assert fresh._fbank is busy._fbank and not fresh._fbank.flags.writeable
+    with pytest.raises(ValueError):
+        fresh._dct[0, 0] = 1.0
+    a = np.vstack([fresh.push(x), fresh.flush()])
+    b = np.vstack([busy.push(x), busy.flush()])
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(a, mfcc(x, cfg), rtol=1e-9, atol=1e-9)
