@@ -515,10 +515,11 @@ def rig_head(
     from assets.heads.parts import with_rigid_parts  # separate eyes / teeth / tongue: rigid with skull or jaw
 
     rig = with_rigid_parts(rig, out_mesh, snap)
-    if cut_copies is not None and not _has_inner_mouth(mesh):
-        rig, out_mesh = add_mouth_cavity(rig, out_mesh, frame, snap["corner_left"], snap["corner_right"])
-    elif not _has_inner_mouth(mesh) and opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap):
-        # Open lips over nothing (a face mask): a wider cavity, since no lip surface curls inwards to hide its rim.
+    if not _has_inner_mouth(mesh) and (
+        cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
+    ):
+        # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
+        # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
         )
@@ -540,9 +541,10 @@ class CavityShape:
 INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
 CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
 MASK_CAVITY = CavityShape(width=1.1, up=0.3, down=0.75)
-"""Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask):
-the lips have no inner surface reaching back, so the rim must lie beyond the widest opening
-(/a/ drops the lower lip 0.45 IOD and more below the corners)."""
+"""Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask, a
+hollow scan with its lips cut apart): the lips have no inner surface reaching back, so the rim must lie
+beyond the widest opening (/a/ drops the lower lip 0.45 IOD and more below the corners). On Lee
+Perry-Smith the narrower default showed the inside of the back of the head beside the cavity at /a/."""
 
 
 def _has_inner_mouth(mesh: HeadMesh) -> bool:
@@ -582,6 +584,11 @@ def _texture_with_dark_strip(texture: bytes, uvs: np.ndarray) -> tuple[bytes, np
     scaled = uvs.copy()
     scaled[:, 1] *= h / (h + strip)
     return buf.getvalue(), scaled, (0.5, (h + 0.5 * strip) / (h + strip))
+
+
+CAVITY_FAR_WALL = 0.45
+"""IOD: a surface further than this behind a mouth cavity vertex (the cavity's own depth) is a far wall
+seen through the open mouth, not skin the cavity must stay behind."""
 
 
 def add_mouth_cavity(
@@ -637,17 +644,20 @@ def add_mouth_cavity(
         q[outside, :2] = qc[:2] + 0.9 * (q[outside, :2] - qc[:2])
         outside = outside[np.isnan(front_depth(v0, mesh.triangles, frame, q[outside, :2]))]
     cv = frame.origin + q @ ax
-    skin = np.fmin.reduce(
-        [
-            front_depth(
-                np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
-                mesh.triangles,
-                frame,
-                q[:, :2],
-            )
-            for p in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.45, 0.0), (0.02, 0.027, 0.45, -0.007))
-        ]
-    )
+    # Only surfaces less than CAVITY_FAR_WALL IOD behind a vertex count: further back, the front-most
+    # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
+    # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
+    # skin-coloured back of the head as a flat pink disc.
+    posed = []
+    for p in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.45, 0.0), (0.02, 0.027, 0.45, -0.007)):
+        d = front_depth(
+            np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
+            mesh.triangles,
+            frame,
+            q[:, :2],
+        )
+        posed.append(np.where(d > q[:, 2] - CAVITY_FAR_WALL * iod, d, np.nan))
+    skin = np.fmin.reduce(posed)
     deeper = np.isfinite(skin) & (q[:, 2] > skin - 0.1 * iod)
     cv[deeper] -= (q[deeper, 2] - (skin[deeper] - 0.1 * iod))[:, None] * ax[2]
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
