@@ -223,6 +223,20 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
     assert len(twin) == 1
     width = float(np.linalg.norm(mesh.vertices[spec["corner_left"]] - mesh.vertices[spec["corner_right"]]))
     assert dijkstra(graph, indices=canon[ui])[canon[twin[0]]] > width
+    # Wide open (/a/), the front-most surface in the middle of the opening is the dark cavity (it was
+    # once pushed behind the inside of the back of the head, which then filled the opening, pink).
+    from assets.heads.cavity import front_depth
+    from assets.heads.rigging import mouth_landmarks
+
+    frame = face_frame(mesh.vertices.astype(np.float64), mouth_landmarks(spec))
+    va = rig.deformed(np.array([0.0, 0.02, 0.35, 0.0])).astype(np.float64)
+    mid = 0.5 * (va[ui] + va[twin[0]])
+    xy = ((mid - frame.origin) @ frame.axes.T)[None, :2]
+    tri = np.asarray(rig.triangles, dtype=np.int64)
+    in_cavity = (tri >= len(rigged.vertices) - rig.meta["mouth_cavity"]).all(axis=1)
+    z_all = front_depth(va, tri, frame, xy)[0]
+    z_cavity = front_depth(va, tri[in_cavity], frame, xy)[0]
+    assert np.isfinite(z_cavity) and z_cavity == pytest.approx(z_all)
     # The lips never pass through each other, even pressed far beyond speech.
     up = rig.contact_up.astype(np.float64)
     for p in ([-0.3, 0, 0, 0], [0, 0, -0.5, 0], [0.1, -0.3, -0.2, 0.1]):
