@@ -15,18 +15,21 @@ from training.mu_expressions import BILABIAL_WORDS, closure_rate, closure_window
 from training.mu_keyframes import viseme_keyframes
 
 
-def test_head_correspondence_lands_on_the_heads_own_landmarks(shared_data: Path, builtin_head) -> None:
+@pytest.fixture(scope="module")
+def mediapipe_canonical(shared_data: Path) -> tuple[np.ndarray, dict[str, int]]:
+    """The MediaPipe canonical face's vertices ``(468, 3)`` and its shipped landmark indices by name."""
     from assets.heads.landmarks import read_landmarks
     from assets.heads.mesh import load_mesh
-    from realtime_core.face import MouthLandmarks, face_frame
 
     canon = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj").vertices
-    mp = {
-        k: int(v)
-        for k, v in read_landmarks(
-            Path(assets.__file__).parent / "heads" / "landmarks" / "mediapipe_canonical.json"
-        ).items()
-    }
+    path = Path(assets.__file__).parent / "heads" / "landmarks" / "mediapipe_canonical.json"
+    return canon, {k: int(v) for k, v in read_landmarks(path).items()}
+
+
+def test_head_correspondence_lands_on_the_heads_own_landmarks(mediapipe_canonical, builtin_head) -> None:
+    from realtime_core.face import MouthLandmarks, face_frame
+
+    canon, mp = mediapipe_canonical
     head = builtin_head
     idx = [mp["corner_left"], mp["corner_right"], mp["upper_lip"], mp["lower_lip"], mp["chin"]]
     verts, sim = head_correspondence(canon, idx, head, mp)
@@ -38,26 +41,18 @@ def test_head_correspondence_lands_on_the_heads_own_landmarks(shared_data: Path,
     assert sim.scale > 0
 
 
-def test_carried_jaw_drop_parts_the_speakers_lips_as_it_parts_the_heads(shared_data: Path, builtin_head) -> None:
+def test_carried_jaw_drop_parts_the_speakers_lips_as_it_parts_the_heads(mediapipe_canonical, builtin_head) -> None:
     """Each inner-lip landmark takes a vertex of its own lip: the head's jawOpen carried onto the canonical
     face opens its lip gap (the mean of the three gap pairs, IOD) as much as it opens the head's at its
     own named inner-lip vertices, to within a quarter. (Matched to the nearest vertex of either lip, two
     of the three pairs of the GRID speaker's rest face landed on one lip, and its carried gap was a
     sixth of the head's.)"""
-    from assets.heads.landmarks import read_landmarks
-    from assets.heads.mesh import load_mesh
     from realtime_core.face import MouthLandmarks, face_frame
     from training.facetrack import LIP_GAP_PAIRS, LIPS_INNER, MU_LANDMARKS
     from training.mu_expressions import carried
     from training.video import lip_gap
 
-    canon = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj").vertices
-    mp = {
-        k: int(v)
-        for k, v in read_landmarks(
-            Path(assets.__file__).parent / "heads" / "landmarks" / "mediapipe_canonical.json"
-        ).items()
-    }
+    canon, mp = mediapipe_canonical
     head = builtin_head
     lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
     iod_head = face_frame(head.mesh.vertices, lm).iod
