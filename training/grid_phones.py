@@ -67,6 +67,13 @@ MIN_PHONE_S = 0.02
 ALIGN_PAD_S = 0.15
 """Audio aligned around the speech: GRID's first word start - pad .. last word end + pad."""
 
+HMM_METHOD_TEXT = (
+    "hmm: monophone HMMs (3 states, diagonal Gaussians) trained on this talker's own MFCCs (train+val "
+    "sentences) by embedded Baum-Welch from a flat start inside GRID's word spans, then Viterbi-aligned "
+    "over each whole sentence (optional short pauses between words, word edges within 0.1 s of GRID's; "
+    "silence where the aligner finds it). See training/phone_hmm.py."
+)
+
 CREDIT = (
     "GRID audio-visual sentence corpus, talker s1: M. Cooke, J. Barker, S. Cunningham, X. Shao, "
     "'An audio-visual corpus for speech perception and automatic speech recognition', "
@@ -354,12 +361,35 @@ def _label_one(s: GridSentence) -> SentencePhones | tuple[str, str]:
         return (str(s.align), str(exc))
 
 
+METHODS = ("pocketsphinx", "hmm")
+"""How :func:`label_corpus` labels: ``pocketsphinx`` (above) or ``hmm``: this talker's own monophone
+HMMs by embedded re-estimation (:mod:`training.phone_hmm`; word edges free within 0.1 s of GRID's,
+silence where the aligner finds it)."""
+
+
 def label_corpus(
-    sents: list[GridSentence], *, workers: int = 2, align: bool = True, progress: Callable | None = None
+    sents: list[GridSentence],
+    *,
+    workers: int = 2,
+    align: bool = True,
+    progress: Callable | None = None,
+    method: str = "pocketsphinx",
+    say: Callable[[str], None] = lambda _: None,
 ) -> tuple[list[SentencePhones], list[tuple[str, str]]]:
-    """Label every sentence (``workers`` processes). Returns (labelled, skipped [(file, reason)])."""
+    """Label every sentence (``workers`` processes). Returns (labelled, skipped [(file, reason)]).
+
+    method: one of :data:`METHODS` (``align=False`` spreads every word whatever the method)."""
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
+    if method not in METHODS:
+        raise ConfigError(f"method must be one of {METHODS}, got {method!r}")
+    if method == "hmm" and align:
+        from training.phone_hmm import PhoneHmmConfig, grid_features, label_grid_corpus
+
+        config = PhoneHmmConfig()
+        data, unread = grid_features(sents, config=config, workers=workers, progress=progress)
+        labelled, failed, _ = label_grid_corpus(data, config=config, progress=progress, say=say)
+        return labelled, unread + failed
     if align:
         SentenceAligner()  # fail early and clearly when pocketsphinx is missing
     wrap = progress or (lambda it, **_: it)
@@ -374,10 +404,13 @@ def label_corpus(
 def write_grid_phones(path: str | Path, labelled: list[SentencePhones]) -> Path:
     """One JSON file: a header (format, phone set, method, credit) and per sentence its method
     and ``[[start_s, end_s, phone], ...]`` (times rounded to 0.1 ms). Written atomically."""
+    hmm = bool(labelled) and all(s.method == "hmm" for s in labelled)
     header = {
         "format": FORMAT,
         "phone_set": "ARPAbet (CMUdict, no stress digits, upper case) plus SIL for silence",
-        "method": "pocketsphinx 5.1.1 forced alignment (en-us model) of the sentence with the fixed "
+        "method": HMM_METHOD_TEXT
+        if hmm
+        else "pocketsphinx 5.1.1 forced alignment (en-us model) of the sentence with the fixed "
         "pronunciations; each word's phones mapped linearly onto its GRID word span, so phones tile the "
         "GRID word spans exactly; next to a pause, aligned silence of 60 ms or more inside a GRID span is "
         "SIL. Fallback 'spread' (per word whose aligned edges differ from GRID's by > 0.1 s, or per "
@@ -479,6 +512,42 @@ def check_sentence(
                 problems.append(f"{w}: {p.phoneme} lasts {1000 * (p.end_s - p.start_s):.1f} ms")
             if p.phoneme != SILENCE:
                 durations.append((p.phoneme, p.end_s - p.start_s))
+    return PhoneCheck(problems=tuple(problems), durations=tuple(durations))
+
+
+def check_free_sentence(
+    phones: tuple[Phone, ...], words: list[tuple[float, float, str]], *, slack_s: float = 0.1, tol_s: float = 1e-6
+) -> PhoneCheck:
+    """For labels whose word edges are free (method ``hmm``): the speech phones are the words'
+    pronunciations in order (SIL anywhere between words), contiguous from 0 s, each word within
+    ``slack_s`` of its GRID span, and no phone shorter than 5 ms."""
+    problems: list[str] = []
+    durations: list[tuple[str, float]] = []
+    spoken = [(a, b, w) for a, b, w in words if w not in SILENCE_WORDS]
+    want = [p for _, _, w in spoken for p in PRONUNCIATIONS.get(w.lower(), ())]
+    speech = [p for p in phones if p.phoneme != SILENCE]
+    if [p.phoneme for p in speech] != want:
+        problems.append(f"phones {[p.phoneme for p in speech]} != {want}")
+        return PhoneCheck(problems=tuple(problems), durations=())
+    if phones and abs(phones[0].start_s) > tol_s:
+        problems.append(f"first phone starts at {phones[0].start_s:.3f} s, not 0")
+    for p, q in itertools.pairwise(phones):
+        if abs(p.end_s - q.start_s) > tol_s:
+            problems.append(f"gap between {p.phoneme} and {q.phoneme} at {p.end_s:.3f} s")
+    k = 0
+    for a0, a1, w in spoken:
+        n = len(PRONUNCIATIONS[w.lower()])
+        mine = speech[k : k + n]
+        k += n
+        if mine[0].start_s < a0 - slack_s - tol_s or mine[-1].end_s > a1 + slack_s + tol_s:
+            problems.append(
+                f"{w}: [{mine[0].start_s:.3f}, {mine[-1].end_s:.3f}] outside GRID's [{a0:.3f}, {a1:.3f}] +- {slack_s} s"
+            )
+    for p in phones:
+        if p.end_s - p.start_s < 0.005:
+            problems.append(f"{p.phoneme} at {p.start_s:.3f} s lasts {1000 * (p.end_s - p.start_s):.1f} ms")
+        if p.phoneme != SILENCE:
+            durations.append((p.phoneme, p.end_s - p.start_s))
     return PhoneCheck(problems=tuple(problems), durations=tuple(durations))
 
 

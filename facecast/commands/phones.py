@@ -36,6 +36,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="file to write (default: assets/data/grid_s1_phones.json in the repository)",
     )
     p.add_argument("--workers", type=int, default=2, help="parallel processes")
+    p.add_argument(
+        "--method",
+        choices=("pocketsphinx", "hmm"),
+        default="pocketsphinx",
+        help="pocketsphinx (US-English model, placed in GRID's word spans) or hmm (this talker's own "
+        "monophone HMMs by embedded re-estimation, training/phone_hmm.py; word edges free within 0.1 s)",
+    )
     p.add_argument("--no-align", action="store_true", help="spread every word's phones (no pocketsphinx, no audio)")
     p.add_argument("--plot", default=None, metavar="PNG", help="also plot waveform, words and phones of --plot-id")
     p.add_argument("--plot-id", default="bbaf2n", help="sentence to plot")
@@ -56,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
         BILABIALS,
         DEFAULT_PATH,
         VOWELS,
+        check_free_sentence,
         check_sentence,
         label_corpus,
         save_phone_plot,
@@ -66,7 +74,9 @@ def run(args: argparse.Namespace) -> int:
     sents = grid.sentences(root)
     if not sents:
         raise ConfigError(f"no GRID sentences (video/*.mp4 with align/*.align) under {root}")
-    labelled, skipped = label_corpus(sents, workers=args.workers, align=not args.no_align, progress=tqdm)
+    labelled, skipped = label_corpus(
+        sents, workers=args.workers, align=not args.no_align, progress=tqdm, method=args.method, say=print
+    )
     out = write_grid_phones(Path(args.out) if args.out else DEFAULT_PATH, labelled)
 
     by_id = {s.sentence_id: s for s in sents}
@@ -78,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     for s in labelled:
         words = grid.read_words(by_id[s.sentence_id].align)
         n_words += sum(w not in grid.SILENCE_WORDS for _, _, w in words)
-        chk = check_sentence(s.phones, words)
+        chk = check_free_sentence(s.phones, words) if s.method == "hmm" else check_sentence(s.phones, words)
         problems += [f"{s.sentence_id}: {p}" for p in chk.problems]
         for ph, d in chk.durations:
             durations[ph].append(d)
