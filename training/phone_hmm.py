@@ -37,6 +37,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import logsumexp
 
 from realtime_core.features.mfcc import MfccConfig, mfcc
 from realtime_core.hmm.kernels import expected_transitions, forward_backward, viterbi
@@ -56,7 +57,10 @@ class PhoneHmmConfig:
     100 Hz); n_ceps: MFCCs besides c0; states: emitting states per phone; n_iter: Baum-Welch
     passes; var_floor: variance floor as a fraction of the global variance; self_loop_init: first
     self-loop probability; word_slack_s: how far outside its GRID span a word may be placed (None:
-    unconstrained); min_count: a state seen in fewer frames keeps its previous estimate."""
+    unconstrained); min_count: a state seen in fewer frames keeps its previous estimate; n_mix:
+    Gaussians per state, reached by splitting (HTK ``HHEd MU``: each component's mean moved +-0.2
+    standard deviations) after the single-Gaussian passes, each split followed by ``mix_iter``
+    passes."""
 
     sample_rate_hz: int = 16000
     frame_rate_hz: int = 100
@@ -68,6 +72,8 @@ class PhoneHmmConfig:
     self_loop_init: float = 0.6
     word_slack_s: float | None = 0.1
     min_count: float = 3.0
+    n_mix: int = 1
+    mix_iter: int = 4
 
     def __post_init__(self) -> None:
         if self.states < 1 or self.n_iter < 0:
@@ -76,6 +82,8 @@ class PhoneHmmConfig:
             raise ConfigError(f"self_loop_init must be in (0, 1), got {self.self_loop_init}")
         if not 0.0 < self.var_floor < 1.0:
             raise ConfigError(f"var_floor must be in (0, 1), got {self.var_floor}")
+        if self.n_mix < 1 or self.n_mix & (self.n_mix - 1) or self.mix_iter < 0:
+            raise ConfigError(f"n_mix must be a power of two >= 1 and mix_iter >= 0, got {self.n_mix}, {self.mix_iter}")
         if self.word_slack_s is not None and self.word_slack_s < 0:
             raise ConfigError(f"word_slack_s must be >= 0 or None, got {self.word_slack_s}")
 
@@ -133,10 +141,12 @@ class SentenceGraph:
 @dataclass
 class PhoneHmmSet:
     """Monophone models: ``names`` (phone labels, SIL included), per state (``len(names) * states``
-    rows) ``means``/``vars`` (n_states, D) and ``self_loop`` (n_states,)."""
+    of them) ``weights`` (n_states, M), ``means``/``vars`` (n_states, M, D) of M diagonal Gaussians
+    and ``self_loop`` (n_states,)."""
 
     names: tuple[str, ...]
     states: int
+    weights: np.ndarray
     means: np.ndarray
     vars: np.ndarray
     self_loop: np.ndarray
@@ -149,12 +159,33 @@ class PhoneHmmSet:
             return self.names.index(SILENCE) * self.states + self.states // 2
         return self.names.index(phone) * self.states + k
 
+    def component_log_densities(self, x: np.ndarray) -> np.ndarray:
+        """``(T, D)`` -> ``(T, n_states, M)``: log(weight) + diagonal Gaussian log density."""
+        s, m, d = self.means.shape
+        mu, var = self.means.reshape(s * m, d), self.vars.reshape(s * m, d)
+        iv = 1.0 / var
+        const = -0.5 * (d * np.log(2 * np.pi) + np.log(var).sum(axis=1))
+        quad = (x * x) @ iv.T - 2.0 * x @ (mu * iv).T + ((mu**2) * iv).sum(axis=1)
+        with np.errstate(divide="ignore"):
+            lw = np.log(self.weights).reshape(s * m)
+        return (const - 0.5 * quad + lw).reshape(len(x), s, m)
+
     def log_emissions(self, x: np.ndarray) -> np.ndarray:
-        """``(T, D)`` -> ``(T, n_states)`` diagonal Gaussian log densities."""
-        iv = 1.0 / self.vars
-        const = -0.5 * (x.shape[1] * np.log(2 * np.pi) + np.log(self.vars).sum(axis=1))
-        quad = (x * x) @ iv.T - 2.0 * x @ (self.means * iv).T + ((self.means**2) * iv).sum(axis=1)
-        return const - 0.5 * quad
+        """``(T, D)`` -> ``(T, n_states)`` log densities of the state mixtures."""
+        return logsumexp(self.component_log_densities(x), axis=2)
+
+    def split(self) -> PhoneHmmSet:
+        """Every component split in two, means moved +-0.2 standard deviations, weights halved."""
+        sd = np.sqrt(self.vars)
+        return PhoneHmmSet(
+            names=self.names,
+            states=self.states,
+            weights=np.repeat(self.weights / 2.0, 2, axis=1),
+            means=np.concatenate([self.means - 0.2 * sd, self.means + 0.2 * sd], axis=1),
+            vars=np.concatenate([self.vars, self.vars], axis=1),
+            self_loop=self.self_loop.copy(),
+            history=list(self.history),
+        )
 
 
 def build_graph(
@@ -234,8 +265,12 @@ def build_graph(
 
 
 def _graph_log_b(model: PhoneHmmSet, graph: SentenceGraph, x: np.ndarray) -> np.ndarray:
-    lb = model.log_emissions(x)[:, graph.tied]
-    t = np.arange(len(x))[:, None]
+    return _restrict(model.log_emissions(x)[:, graph.tied], graph)
+
+
+def _restrict(lb: np.ndarray, graph: SentenceGraph) -> np.ndarray:
+    """(T, N) graph log emissions with the word windows and the final state enforced (in place)."""
+    t = np.arange(len(lb))[:, None]
     lb[(t < graph.window[None, :, 0]) | (t >= graph.window[None, :, 1])] = -np.inf
     lb[-1, :-1] = -np.inf  # end in the final SIL state
     return lb
@@ -289,8 +324,9 @@ def init_models(
     return PhoneHmmSet(
         names=tuple(names),
         states=config.states,
-        means=means,
-        vars=vars_,
+        weights=np.ones((n, 1)),
+        means=means[:, None, :],
+        vars=vars_[:, None, :],
         self_loop=np.full(n, config.self_loop_init),
     )
 
@@ -303,37 +339,50 @@ def baum_welch_pass(
 ) -> tuple[PhoneHmmSet, float]:
     """One embedded re-estimation pass over ``[(features, graph)]``. Returns (new model, total
     log-likelihood per frame of the old model: the EM objective)."""
-    n, d = model.means.shape
-    occ = np.zeros(n)
-    s1 = np.zeros((n, d))
-    s2 = np.zeros((n, d))
+    n, m, d = model.means.shape
+    occ = np.zeros((n, m))
+    s1 = np.zeros((n, m, d))
+    s2 = np.zeros((n, m, d))
     stay = np.zeros(n)
     out = np.zeros(n)
     total, frames = 0.0, 0
     for x, g in data:
-        lb = _graph_log_b(model, g, x)
+        comp = model.component_log_densities(x)  # (T, n, m)
+        state_ll = logsumexp(comp, axis=2)  # (T, n)
+        lb = _restrict(state_ll[:, g.tied], g)
         gamma, ll, la, lbeta = forward_backward(g.log_start, g.log_trans, lb)
         if not np.isfinite(ll):
             continue  # no path through this sentence's graph (too short for its phones): skipped
         total += ll
         frames += len(x)
         xi = expected_transitions(la, lbeta, g.log_trans, lb, ll)
-        np.add.at(occ, g.tied, gamma.sum(axis=0))
-        np.add.at(s1, g.tied, gamma.T @ x)
-        np.add.at(s2, g.tied, gamma.T @ (x * x))
+        # occupation of each model state (graph states tied to it summed), then of its components
+        w = np.zeros((len(x), n))
+        np.add.at(w.T, g.tied, gamma.T)
+        used = np.flatnonzero(w.sum(axis=0) > 0)
+        r = np.exp(comp[:, used] - state_ll[:, used, None]) * w[:, used, None]  # (T, u, m)
+        occ[used] += r.sum(axis=0)
+        s1[used] += np.einsum("tum,td->umd", r, x)
+        s2[used] += np.einsum("tum,td->umd", r, x * x)
         np.add.at(stay, g.tied, np.diag(xi))
         np.add.at(out, g.tied, gamma[:-1].sum(axis=0))
     seen = occ >= config.min_count
     means = model.means.copy()
     vars_ = model.vars.copy()
-    means[seen] = s1[seen] / occ[seen, None]
-    vars_[seen] = np.maximum(s2[seen] / occ[seen, None] - means[seen] ** 2, floor_var)
+    means[seen] = s1[seen] / occ[seen][:, None]
+    vars_[seen] = np.maximum(s2[seen] / occ[seen][:, None] - means[seen] ** 2, floor_var)
+    weights = model.weights.copy()
+    tot = occ.sum(axis=1)
+    ok_w = tot >= config.min_count
+    weights[ok_w] = np.maximum(occ[ok_w] / tot[ok_w, None], 1e-4)
+    weights /= weights.sum(axis=1, keepdims=True)
     loop = model.self_loop.copy()
     ok = out > config.min_count
     loop[ok] = np.clip(stay[ok] / out[ok], 0.01, 0.99)
     new = PhoneHmmSet(
         names=model.names,
         states=model.states,
+        weights=weights,
         means=means,
         vars=vars_,
         self_loop=loop,
@@ -391,12 +440,20 @@ def train(
     model = init_models(segs, names, config)
     allx = np.concatenate([x for x, _, _ in sentences])
     floor_var = config.var_floor * allx.var(axis=0)
-    for it in range(config.n_iter):
-        # transitions live in the graphs: rebuild them from the current self-loops each pass
-        graphs = [(x, build_graph(model, pw, len(x), spans=_spans(words), config=config)) for x, pw, words in sentences]
-        model, ll = baum_welch_pass(model, graphs, config, floor_var)
-        if progress is not None:
-            progress(it, ll)
+    schedule = [config.n_iter] + [config.mix_iter] * int(np.log2(config.n_mix))
+    it = 0
+    for stage, passes in enumerate(schedule):
+        if stage > 0:
+            model = model.split()
+        for _ in range(passes):
+            # transitions live in the graphs: rebuild them from the current self-loops each pass
+            graphs = [
+                (x, build_graph(model, pw, len(x), spans=_spans(words), config=config)) for x, pw, words in sentences
+            ]
+            model, ll = baum_welch_pass(model, graphs, config, floor_var)
+            if progress is not None:
+                progress(it, ll)
+            it += 1
     return model
 
 

@@ -125,3 +125,23 @@ def test_features_shape_and_mean_normalised() -> None:
     x = features(rng.normal(0, 0.1, 16000).astype(np.float32), CONFIG)
     assert x.shape == (100, 39)
     assert np.allclose(x[:, :13].mean(axis=0), 0.0, atol=1e-9)
+
+
+def test_two_gaussian_mixtures_keep_em_monotone_and_boundaries() -> None:
+    """Splitting to two Gaussians per state (HHEd MU style): within each stage the likelihood never
+    falls, the split model scores at least the single-Gaussian one, and boundaries stay found."""
+    data = _corpus(2, 40)
+    cfg = PhoneHmmConfig(n_iter=4, n_mix=2, mix_iter=3, word_slack_s=0.1)
+    model = train([(x, pw, words) for x, pw, words, _ in data], cfg)
+    assert model.means.shape[1] == 2 and np.allclose(model.weights.sum(axis=1), 1.0)
+    h = np.array(model.history)
+    assert len(h) == 7
+    assert np.all(np.diff(h[:4]) >= -1e-6) and np.all(np.diff(h[4:]) >= -1e-6), h
+    assert h[-1] >= h[3] - 1e-6
+    exact = []
+    for x, pw, words, truth in data:
+        g = build_graph(model, pw, len(x), spans=[(a, b) for a, b, w in words if w != "sil"], config=cfg)
+        segs, _ = align_states(model, g, x)
+        got = [(lab, a) for lab, a, _ in segs if lab != "SP"]
+        exact += [a == ta for (_, a), (_, ta, _) in zip(got[1:], truth[1:])]
+    assert np.mean(exact) > 0.9
