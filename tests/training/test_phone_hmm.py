@@ -145,3 +145,17 @@ def test_two_gaussian_mixtures_keep_em_monotone_and_boundaries() -> None:
         got = [(lab, a) for lab, a, _ in segs if lab != "SP"]
         exact += [a == ta for (_, a), (_, ta, _) in zip(got[1:], truth[1:])]
     assert np.mean(exact) > 0.9
+
+
+def test_free_word_edge_check_accepts_aligned_and_names_problems() -> None:
+    from training.alignments import Phone
+    from training.grid_phones import check_free_sentence
+
+    words = [(0.0, 0.5, "sil"), (0.5, 0.8, "bin"), (0.8, 1.0, "sil")]
+    good = (Phone(SILENCE, 0.0, 0.52), Phone("B", 0.52, 0.6), Phone("IH", 0.6, 0.7), Phone("N", 0.7, 0.85))
+    good += (Phone(SILENCE, 0.85, 1.0),)
+    assert check_free_sentence(good, words).problems == ()
+    late = (Phone(SILENCE, 0.0, 0.65), Phone("B", 0.65, 0.7), Phone("IH", 0.7, 0.8), Phone("N", 0.8, 0.95))
+    assert any("outside GRID" in p for p in check_free_sentence(late, words, slack_s=0.1).problems)
+    wrong = (Phone(SILENCE, 0.0, 0.5), Phone("P", 0.5, 0.6), Phone("IH", 0.6, 0.7), Phone("N", 0.7, 1.0))
+    assert check_free_sentence(wrong, words).problems
