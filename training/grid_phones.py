@@ -81,6 +81,10 @@ CREDIT = (
 )
 
 DEFAULT_PATH = Path(__file__).resolve().parents[1] / "assets" / "data" / "grid_s1_phones.json"
+HMM_PATH = DEFAULT_PATH.with_name("grid_s1_phones_hmm.json")
+"""The same sentences labelled by this talker's own HMMs (``facecast phones --method hmm``,
+:mod:`training.phone_hmm`): what the unit-selection corpus and its evaluation use by default
+(chosen on the val split, docs/unit_selection.md); every other consumer reads DEFAULT_PATH."""
 
 PRONUNCIATIONS: dict[str, tuple[str, ...]] = {
     w: tuple(p.split())

@@ -3,7 +3,8 @@ HMM and the articulatory rules.
 
 Held-out GRID s1 sentences (the test split of :func:`assets.grid.split_of`; the unit corpus holds
 only train + val) are synthesised from the phones of their text with the real phone timings (the
-shared GRID phone boundaries), and compared with the lips measured on their video:
+GRID phone boundaries: by default the talker-specific HMM labels, :data:`training.grid_phones.HMM_PATH`),
+and compared with the lips measured on their video:
 
 - **r** per mouth parameter, frames of all sentences pooled (the protocol of
   :func:`training.reallips.score_lips`, whole clips including pauses), and r(mouth_open) over the
@@ -222,7 +223,8 @@ def markdown(
         "",
         (
             f"`{command}`. {n_sentences} {which}; text from the "
-            "sentence id, the real phone timings (GRID phone boundaries), lips measured on the video. Unit corpus: "
+            "sentence id, the real phone timings (GRID phone boundaries by the talker-specific HMM aligner, "
+            "`facecast phones --method hmm`), lips measured on the video. Unit corpus: "
             f"{corpus_meta.get('n_sentences')} train+val sentences, {corpus_meta.get('n_phones')} phones, "
             f"{corpus_meta.get('n_components')} EM-PCA components ({100 * corpus_meta.get('explained', 0):.1f} % of "
             "the lower-face landmark variance). r: Pearson, frames of all sentences pooled, whole clips (as the "

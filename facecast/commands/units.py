@@ -33,7 +33,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             default=None,
             help="GRID s1 folder (video/, align/); default: ../shared/data/video/grid_s1 beside the checkout",
         )
-        q.add_argument("--phones", type=Path, default=None, help="GRID phone boundaries (default: the shipped JSON)")
+        q.add_argument(
+            "--phones",
+            type=Path,
+            default=None,
+            help="GRID phone boundaries (default: the shipped talker-specific HMM labels, "
+            "assets/data/grid_s1_phones_hmm.json; the pocketsphinx ones: assets/data/grid_s1_phones.json)",
+        )
         q.add_argument(
             "--cache-dir",
             type=Path,
@@ -70,11 +76,11 @@ def _corpus(args: argparse.Namespace):
     from tqdm import tqdm
 
     from assets import grid
-    from training.grid_phones import read_grid_phones
+    from training.grid_phones import HMM_PATH, read_grid_phones
     from training.unit_corpus import build_grid_corpus
 
     root = args.grid or grid.default_root()
-    phones = read_grid_phones(args.phones)
+    phones = read_grid_phones(args.phones or HMM_PATH)
     sents = [s for s in grid.sentences(root) if s.split != "test"]
     return (
         build_grid_corpus(

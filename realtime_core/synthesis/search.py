@@ -89,8 +89,10 @@ class SearchConfig:
     mismatch_cost: float = 20.0
     # chosen on the val split (leave-one-out, docs/accuracy.md): the pause term took r(mouth_open) from
     # 0.794 to 0.835 with one unit sequence and from 0.880 to 0.895 averaging ten; the phone term did
-    # not help (0.826 / 0.895 at 0.5), so it stays at the paper's 0
-    duration_weight: float = 0.0
+    # not help on the pocketsphinx labels (0.826 / 0.895 at 0.5) but does on the talker-specific HMM
+    # labels the corpus is now built on (0.823 / 0.899 at 0 -> 0.847 / 0.901 at 0.5; 0.25: 0.899,
+    # 1: 0.900 with ten; docs/unit_selection.md)
+    duration_weight: float = 0.5
     pause_duration_weight: float = 2.0
 
     def __post_init__(self) -> None:
