@@ -213,3 +213,26 @@ def test_cli_labels_a_folder_and_names_a_broken_alignment(grid_root, ffmpeg, tmp
     assert "wrote 2 sentences" in text and "tiling/pronunciation problems: 0" in text
     assert "skipped" in text and "bbaf4p.align" in text and "gap or overlap" in text
     assert set(read_grid_phones_file(out)) == {"bbaf2n", "bbaf3s"} and png.stat().st_size > 10_000
+
+
+def test_shipped_hmm_file_covers_the_corpus_near_the_word_spans(grid_root) -> None:
+    """The talker-specific labels (unit selection's default): every sentence has the words'
+    pronunciations in order, contiguous from 0 s to about the recording's end, each word within
+    0.1 s of its GRID span (plus the 10 ms frame the window is rounded to and the 7.5 ms from a
+    frame edge to its boundary), phones at least 30 ms (3 states of 10 ms)."""
+    from assets.grid import read_words, sentences
+    from training.grid_phones import HMM_PATH, check_free_sentence
+
+    shipped = read_grid_phones_file(HMM_PATH)
+    sents = sentences(grid_root)
+    assert {s.sentence_id for s in sents} == set(shipped)
+    durations = []
+    for s in sents:
+        words = read_words(s.align)
+        entry = shipped[s.sentence_id]
+        chk = check_free_sentence(entry.phones, words, slack_s=0.1 + 0.0175 + 1e-6)
+        assert not chk.problems, (s.sentence_id, chk.problems)
+        assert entry.method == "hmm" and entry.phones[-1].end_s == pytest.approx(words[-1][1], abs=0.05)
+        durations += [d for _, d in chk.durations]
+    d = np.array(durations)
+    assert d.min() >= 0.03 - 1e-6 and np.median(d) == pytest.approx(0.075, abs=0.03)
