@@ -276,6 +276,11 @@ def _step(
         # the whole server (its compute workers included), and its event loop's process alone
         "server_cpu_cores": round((tree1 - tree0) / (t1 - t0), 3),
         "loop_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        # CPU seconds per second of the sessions' audio: what the step's work costs at real time,
+        # even when a server short of CPU (a busy machine) took longer than real time to do it
+        "server_cpu_per_audio_s": round((tree1 - tree0) / seconds, 4),
+        "loop_cpu_per_audio_s": round((cpu1 - cpu0) / seconds, 4),
+        "wall_s": round(t1 - t0, 2),
         "server_timings_ms": {
             k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
         },
@@ -315,9 +320,11 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
         vertex = None if with_vertex is None else max(0.0, with_vertex[key] - b) / 20
         return b / n, max(0.0, with_params[key] - b) / 100, vertex
 
-    per_session, per_param, per_vertex = per_unit("server_cpu_cores")
+    # Per second of audio, not of wall time: a server the machine starves of CPU takes longer than
+    # real time, and CPU / wall time would then cap every figure at its share of the machine.
+    per_session, per_param, per_vertex = per_unit("server_cpu_per_audio_s")
     goal = 100 * per_session + 500 * per_param + 100 * (per_vertex or 0.0)
-    loop_session, loop_param, loop_vertex = per_unit("loop_cpu_cores")
+    loop_session, loop_param, loop_vertex = per_unit("loop_cpu_per_audio_s")
     loop_goal = 100 * loop_session + 500 * loop_param + 100 * (loop_vertex or 0.0)
     return {
         "cores_per_session": round(per_session, 5),
@@ -330,8 +337,9 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
         "loop_cores_per_param_viewer": round(loop_param, 5),
         "loop_cores_per_vertex_viewer": None if loop_vertex is None else round(loop_vertex, 5),
         "loop_goal_load_cores_projected": round(loop_goal, 3),
+        "steps_wall_s": [base["wall_s"], with_params["wall_s"], None if with_vertex is None else with_vertex["wall_s"]],
         "note": "CPU seconds of the server (all its processes; loop_: the event loop's process) per second of "
-        "real-time streaming, measured on this (shared) machine",
+        f"the sessions' audio ({cfg.seconds:g} s per step), measured on this (shared) machine",
     }
 
 
