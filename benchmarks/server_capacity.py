@@ -53,7 +53,9 @@ class CapacityConfig:
     """steps: (sessions, parameter viewers, vertex viewers) per step; seconds: audio per step;
     model: model file (None: default or paper-size random); head: vertex viewers need the head;
     cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
-    separately and project the goal load from them; workers: the server's compute processes
+    separately and project the goal load from them, on a base of ``cost_sessions`` sessions (the
+    per-session cost falls as the loop gets busier: fixed costs of each wake-up are shared by more
+    messages, so a larger base is closer to the goal's load); workers: the server's compute processes
     (ServerConfig.workers; the CPU figures are then the event loop's process only)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
@@ -61,6 +63,7 @@ class CapacityConfig:
     model: Path | None = None
     head: bool = True
     cost_model: bool = True
+    cost_sessions: int = 10
     workers: int = 0
 
 
@@ -310,7 +313,7 @@ def _step(
 def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
     """Server CPU (cores) of one real-time session, one parameter viewer and one vertex viewer,
     from three loads differing in one kind of client; and the goal load projected from them."""
-    n = 10
+    n = cfg.cost_sessions
     base = _step(server, model, 100, n, 0, 0, cfg.seconds)
     with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)
     with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds) if cfg.head else None
@@ -327,6 +330,7 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
     loop_session, loop_param, loop_vertex = per_unit("loop_cpu_per_audio_s")
     loop_goal = 100 * loop_session + 500 * loop_param + 100 * (loop_vertex or 0.0)
     return {
+        "base_sessions": n,
         "cores_per_session": round(per_session, 5),
         "cores_per_param_viewer": round(per_param, 5),
         "cores_per_vertex_viewer": None if per_vertex is None else round(per_vertex, 5),
@@ -482,6 +486,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
+    ap.add_argument("--cost-sessions", type=int, default=10, help="sessions the cost model's three loads share")
     ap.add_argument(
         "--cluster",
         action="store_true",
@@ -509,6 +514,7 @@ def main(argv: list[str] | None = None) -> int:
             model=args.model,
             head=not args.no_head,
             cost_model=not args.no_cost_model,
+            cost_sessions=args.cost_sessions,
             workers=args.workers,
         )
     )
