@@ -2,10 +2,14 @@
 
 Why compiled: a live push is one video frame, and the front end's numpy code spends most of it in
 some forty calls on vectors of 12..1025 values (power spectrum, mel energies, log, DCT, the
-running CMVN's per-frame update); one compiled call each for the spectrum-to-cepstra step and the
-CMVN step does the same arithmetic in the same order. The FFT stays numpy's (numba has none). The
-numpy code (``kernel="numpy"``) is the reference; tests/realtime_core/features/test_compiled.py
-holds the two equal to rounding.
+running CMVN's per-frame update, context stacking). A live push is three calls: :func:`frames_push`
+(pre-emphasis, buffer, framing, window, on preallocated state), numpy's FFT (numba has none), then
+:func:`spectrum_to_ceps`; and :func:`normalise_stack` (silence gate, CMVN, context stacking) when the
+front end has no level normalisation. Each does the reference's arithmetic in the same order. Fewer
+calls matter more than the arithmetic here: inside the live loop the inverter's matrices evict the
+caches every frame, and each numpy call then costs several times what it costs timed alone (see
+:mod:`realtime_core.inversion.compiled`). The numpy code (``kernel="numpy"``) is the reference;
+tests/realtime_core/features/test_compiled.py holds the two equal to rounding.
 
 Compiled lazily on first use and cached next to this file (``cache=True``).
 """

@@ -119,7 +119,7 @@ class FrontEnd:
         # normalisation, whose tracker stays numpy): the three stages were some fifteen numpy calls
         # per live frame, each slowed by the cache misses the inverter's matrices cause.
         self._tail = (
-            _CompiledTail(config, self._level, self._cmvn) if kernel == "numba" and not config.level_norm else None
+            _CompiledTail(config, self._level, self._cmvn) if kernel == "numba" and config.level_norm is None else None
         )
 
     def reset(self) -> None:

@@ -3,10 +3,21 @@
 Why compiled: at the sizes of a live model (N x M = 48..140 components, 77..88 audio dims, 4 visual
 dims) one frame of :class:`realtime_core.inversion.StreamingInverter` is two matrix-vector products
 plus some thirty small numpy calls; the calls, not the arithmetic, were most of the per-frame cost
-(``facecast bench core``). Each kernel here is one call doing exactly what the numpy methods
-``_forward`` / ``_combine`` do, in the same order and the same dtypes: the big products still go
-through BLAS (``np.dot``), the rest are plain loops. The numpy methods stay the reference; the tests
-hold the two equal to rounding (tests/realtime_core/inversion/test_compiled.py).
+(``facecast bench core``). Each kernel here is one call doing what the numpy methods ``_forward`` /
+``_raw`` (and, for the readout and the output stage, :class:`realtime_core.readout.ReadoutStream` and
+:class:`realtime_core.output.OutputStage`) do: the likelihood product still goes through BLAS
+(``np.dot``), the rest are plain loops. At lag 0 (the live case) :func:`filter_rows` runs a whole push
+- forward step, component posteriors (once, shared by eq. 7 and the readout), eq. 7, readout, output
+stage - in one call on the session's state arrays, so no per-frame Python sits between the stages.
+
+Why it matters beyond the call count: on this machine the live path is bound by cache misses. The
+likelihood matrix (1.7 MB at N=28, M=5 in float32) streams through the 2 MB L2 every frame and evicts
+everything else, so each numpy call after it ran several times slower than timed alone (the front end
+took 41 us alone and 88 us inside the live loop). Fewer calls and less memory touched per frame
+(components under ``SKIP_POSTERIOR`` skipped) is what cut the live path, not faster arithmetic.
+
+The numpy methods stay the reference; the tests hold the two equal to rounding
+(tests/realtime_core/inversion/test_compiled.py).
 
 Compiled lazily on first use and cached next to this file (``cache=True``), so importing this module
 costs numba's import only.
