@@ -284,14 +284,12 @@ class StreamingInverter:
             self._f = f
             if ro is not None:
                 ro.started = True
-        for t in range(done, len(oa)):
-            f_t, _, mix, a = self._forward(oa[t])
-            out[t] = self._combine(f_t, mix, a, output=not self._output_in_kernel)
-            if self._output_in_kernel and self._output is not None:
-                out[t] = self._output(out[t])
-        if not self._output_in_kernel and self._output is not None:
+        if not self._output_in_kernel and self._output is not None:  # an output stage of another kind
             for t in range(done):
                 out[t] = self._output(out[t])
+        for t in range(done, len(oa)):
+            f_t, _, mix, a = self._forward(oa[t])
+            out[t] = self._combine(f_t, mix, a)
         return out
 
     def trace(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -345,13 +343,13 @@ class StreamingInverter:
         self._pending.popleft()
         return self._combine(f, mix, cond)
 
-    def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray, *, output: bool = True) -> np.ndarray:
-        """Eq. 7 for one frame, then the readout and (``output``) the output stage: posteriors ``(N,),
-        (N, M)``, centred audio ``a (Da,)`` -> ``(Dv,)``."""
+    def _combine(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 7 for one frame, then the readout and the output stage: posteriors ``(N,), (N, M)``,
+        centred audio ``a (Da,)`` -> ``(Dv,)``."""
         x = self._raw(state_post, mix, a)
         if self._readout is not None:
             x = self._readout.step(x, _component_posteriors(state_post, mix), a)
-        return x if self._output is None or not output else self._output(x)
+        return x if self._output is None else self._output(x)
 
     def _raw(self, state_post: np.ndarray, mix: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Eq. 7 for one frame (the numpy reference), before the readout and the output stage."""

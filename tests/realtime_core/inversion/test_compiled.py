@@ -106,3 +106,23 @@ def test_fused_kernel_with_readout_and_output_stage_equals_the_reference_at_pape
     assert np.ptp(out["numpy"][0], axis=0).min() > 0.01  # a moving estimate
     closed = VISUAL_PARAMS.index("mouth_open")
     assert out["numba"][0][:, closed].min() >= 0.0  # the output stage ran in the kernel
+
+
+def test_an_output_callable_of_another_kind_runs_after_the_compiled_kernel(paper_size):
+    """Only an OutputStage runs inside the kernel; any other callable is applied to each frame after it."""
+    form, data = paper_size
+    oa = data[:60, :77]
+    out = []
+    for kernel in ("numba", "numpy"):
+        calls: list[int] = []
+
+        def double(x, calls=calls):
+            calls.append(1)
+            return 2.0 * x
+
+        st = StreamingInverter(form, config=StreamConfig(kernel=kernel), output=double)
+        out.append(np.concatenate([st.push(oa[:25]), st.push(oa[25:]), st.flush()]))
+        assert len(calls) == 60
+    plain = StreamingInverter(form, config=StreamConfig(kernel="numba"))
+    np.testing.assert_allclose(out[0], out[1], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out[0], 2.0 * np.concatenate([plain.push(oa), plain.flush()]), rtol=0, atol=1e-12)
