@@ -136,7 +136,7 @@ def vtlp_copies(
     rng = np.random.default_rng(config.seed)
     out: list = []
     for _ in range(config.copies):
-        warps = rng.uniform(*config.warp_range, len(clips))
+        warps = [float(w) for w in rng.uniform(*config.warp_range, len(clips))]
         out += trace_clips(model, clips, warps=warps, progress=progress)
     return out
 
