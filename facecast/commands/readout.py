@@ -92,18 +92,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--vtlp-copies",
         type=int,
-        default=2,
+        default=4,
         help="vocal-tract-length copies of every train sentence added to the fit (the filterbank warped, the lips "
         "kept; issue 10: one training talker, chosen on val and its voice-changed copies); 0 = none",
     )
     p.add_argument(
         "--vtlp-range",
         type=_pair,
-        default=(0.88, 1.12),
+        default=(0.85, 1.18),
         metavar="LOW,HIGH",
         help="the copies' filterbank warps, drawn uniformly per copy and sentence (> 1: a shorter vocal tract)",
     )
-    p.add_argument("--vtlp-seed", type=int, default=0, help="seeds the copies' warps")
+    p.add_argument("--vtlp-seed", type=int, default=1, help="seeds the copies' warps")
     p.add_argument("--report", type=Path, default=None, help="write the val scores of every candidate here (JSON)")
     p.set_defaults(run=run)
 
