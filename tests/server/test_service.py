@@ -22,21 +22,12 @@ from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
+from tests.live_server import running
 from tests.speech import speechlike
 from wire import protocol as P
 
 # A real server and clients over loopback sockets.
 pytestmark = pytest.mark.system
-
-
-@contextlib.asynccontextmanager
-async def running(model, head=None, **config):
-    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
-    await srv.start()
-    try:
-        yield srv
-    finally:
-        await srv.stop()
 
 
 def _int16(samples: np.ndarray) -> np.ndarray:

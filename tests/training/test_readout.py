@@ -11,6 +11,10 @@ import pytest
 from tests.realtime_core.test_readout import DA, DV, M, N, small_model
 from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
 
+# The MLPs here are cut to a few epochs to keep the tests fast; the properties tested (the live path equals
+# the scoring, an ensemble is its members' mean) hold for any weights, so sklearn's "not converged" is noise.
+FEW_EPOCHS = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
 
 def _traced(rng: np.random.Generator, n_clips: int, make_truth) -> list[Traced]:
     out = []
@@ -49,6 +53,7 @@ def test_a_linear_readout_recovers_a_known_causal_filter():
     np.testing.assert_allclose(ro.b2 + d.mean(0), c + D.mean(0), atol=1e-5)
 
 
+@FEW_EPOCHS
 def test_chosen_readout_is_what_the_live_path_runs():
     """choose_readout on synthetic clips: the returned model's inverter, fed audio rows, equals the
     estimates the choice was scored with (readout, then the output stage of the chosen band)."""
@@ -70,6 +75,7 @@ def test_chosen_readout_is_what_the_live_path_runs():
     assert replace(fitted, readout=None).readout is None
 
 
+@FEW_EPOCHS
 def test_an_ensemble_readout_is_the_average_of_its_members():
     rng = np.random.default_rng(3)
     train = _traced(rng, 6, lambda raw, post, audio: np.tanh(raw) + 0.1 * audio[:, :DV])
