@@ -130,3 +130,16 @@ def test_vtlp_copies_change_the_voice_not_the_lips():
         trace_clips(model, clips, warps=[1.0])
     with pytest.raises(ConfigError, match="VTLP"):
         VtlpConfig(copies=1, warp_range=(0.7, 1.1))
+
+
+def test_readout_command_refuses_a_bad_vtlp_range_before_any_work(tmp_path, capsys):
+    """`facecast readout --vtlp-range` must be LOW,HIGH within the warp's range: refused with a message naming
+    it, before the corpus is read, and no model is written."""
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    with pytest.raises(SystemExit) as exc:
+        main(["readout", "default", "-o", str(out), "--vtlp-range", "1.1"])
+    assert exc.value.code == 2 and "LOW,HIGH" in capsys.readouterr().err
+    rc = main(["readout", "default", "-o", str(out), "--vtlp-range", "0.7,1.1", "--grid-s1", str(tmp_path)])
+    assert rc != 0 and "VTLP" in capsys.readouterr().err and not out.exists()
