@@ -246,9 +246,10 @@ class MfccStream:
         self.kernel = kernel
         if kernel == "numba":
             # Imported here: numba's import costs ~0.5 s, paid only by streams that use it.
-            from realtime_core.features.compiled import spectrum_to_ceps
+            from realtime_core.features.compiled import frames_push, spectrum_to_ceps
 
             self._spectrum_to_ceps = spectrum_to_ceps
+            self._frames_push = frames_push
         tables = _tables(config, kernel)
         self._fbank = tables.fbank
         self._window = tables.window
@@ -260,6 +261,12 @@ class MfccStream:
 
     def reset(self) -> None:
         """Start a new utterance."""
+        if self.kernel == "numba":
+            # The compiled framing's state (:func:`realtime_core.features.compiled.frames_push`), kept in
+            # place: a preallocated buffer and [n_buf, buf_start, n_received, next_frame], [last sample].
+            self._cbuf = np.zeros(4 * self.config.window_len)
+            self._ist = np.zeros(4, dtype=np.int64)
+            self._last = np.zeros(1)
         self._buf = np.zeros(0)  # pre-emphasised samples from absolute index self._buf_start
         self._buf_start = 0
         self._n_received = 0
@@ -270,18 +277,20 @@ class MfccStream:
     @property
     def frames_emitted(self) -> int:
         """Rows returned so far in this utterance."""
-        return self._next_frame
+        return int(self._ist[3]) if self.kernel == "numba" else self._next_frame
 
     @property
     def samples_received(self) -> int:
         """Samples pushed so far in this utterance."""
-        return self._n_received
+        return int(self._ist[2]) if self.kernel == "numba" else self._n_received
 
     def push(self, samples: np.ndarray) -> np.ndarray:
         """Add samples; return the newly complete rows, ``(k, n_outputs) float64``."""
         if self._finished:
             raise StreamStateError("MfccStream.push() after flush(); call reset() first")
         x = as_float_samples(samples)
+        if self.kernel == "numba":
+            return self._compiled_emit(x, final=False)
         if x.size:
             pre = np.empty_like(x)
             pre[0] = x[0] - self.config.preemphasis * self._last_sample
@@ -295,9 +304,30 @@ class MfccStream:
         """End the utterance; return the remaining rows (zero-padded past the end)."""
         if self._finished:
             raise StreamStateError("MfccStream.flush() called twice; call reset() first")
-        out = self._emit(final=True)
+        out = self._compiled_emit(np.zeros(0), final=True) if self.kernel == "numba" else self._emit(final=True)
         self._finished = True
         return out
+
+    def _compiled_emit(self, x: np.ndarray, *, final: bool) -> np.ndarray:
+        """:meth:`push` / :meth:`flush` with the framing compiled (pre-emphasis, buffer, frames, window
+        in one call on preallocated state; :meth:`_emit` is the reference), then the FFT and the
+        compiled spectrum-to-cepstra step."""
+        cfg = self.config
+        frames, self._cbuf = self._frames_push(
+            x,
+            self._cbuf,
+            self._ist,
+            self._last,
+            cfg.preemphasis,
+            int(cfg.sample_rate_hz),
+            int(cfg.frame_rate_hz),
+            self._window,
+            final,
+        )
+        if not len(frames):
+            return np.zeros((0, cfg.n_outputs))
+        spec = np.fft.rfft(frames, n=cfg.n_fft, axis=1)
+        return self._spectrum_to_ceps(spec, 1.0 / cfg.n_fft, *self._fb_sparse, cfg.energy_floor, self._dct)
 
     def _emit(self, *, final: bool) -> np.ndarray:
         cfg = self.config
