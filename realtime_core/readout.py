@@ -61,7 +61,7 @@ class Readout:
             raise ModelFormatError(f"readout posteriors must be one of {POSTERIOR_KINDS}, got {self.posteriors!r}")
         if not 1 <= self.taps <= 64:
             raise ModelFormatError(f"readout taps must be in 1..64, got {self.taps}")
-        arrays = {k: np.ascontiguousarray(getattr(self, k), dtype=np.float64) for k in _ARRAYS}
+        arrays = {k: _flush_subnormals(np.array(getattr(self, k), dtype=np.float64, order="C")) for k in _ARRAYS}
         hidden = arrays["b1"].shape[0] if arrays["b1"].ndim == 1 else -1
         f, dv = self.n_features, self.n_visual
         want = {
@@ -118,6 +118,17 @@ class Readout:
     def stream(self, *, kernel: str = "numpy") -> ReadoutStream:
         """Per-session state (the past taps) for the live path (kernel: "numba" compiled or "numpy")."""
         return ReadoutStream(self, kernel=kernel)
+
+
+def _flush_subnormals(a: np.ndarray) -> np.ndarray:
+    """``a`` (a fresh contiguous float64 array) with its subnormal values (0 < |x| < 2.2e-308) set to 0.
+
+    Why: the L2 penalty drives the weights of a dead ReLU unit towards 0 until they are subnormal, and
+    arithmetic on subnormals is many times slower on x86: two such units of the fourth-round default
+    readout made every live frame about 15 us slower. Their contribution is below 1e-307, so this changes
+    no estimate."""
+    a[(a != 0) & (np.abs(a) < np.finfo(np.float64).tiny)] = 0.0
+    return a
 
 
 def posterior_features(kind: str, component_post: np.ndarray, n_states: int, n_mix: int) -> np.ndarray:
