@@ -231,7 +231,7 @@ class FacecastServer:
         """Close one connection with a code and reason (counted in metrics)."""
         self.closes[code] += 1
         with contextlib.suppress(ConnectionClosed):
-            await ws.close(code, reason[:120])
+            await ws.close(code, SP.fit_close_reason(reason))
 
     # -- sessions ----------------------------------------------------------------------------------
 
