@@ -485,12 +485,12 @@ def rig_head(
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
             # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
             # contact, where the cut passes (see CONTACT_FACING).
-            contact = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
-            if contact != snap["upper_inner"] or contact != snap["lower_inner"]:
-                meta["inner_lip_contact"] = int(contact)
+            front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
+            if front != snap["upper_inner"] or front != snap["lower_inner"]:
+                meta["inner_lip_contact"] = int(front)
             for k in ("upper_inner", "lower_inner"):
-                snap[k] = contact
-                points[k] = np.asarray(v[contact], dtype=np.float64)
+                snap[k] = front
+                points[k] = np.asarray(v[front], dtype=np.float64)
             meta["landmarks"] = {k: p.tolist() for k, p in points.items()}
             v, t, uv, origin = cut_mouth(
                 v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
