@@ -53,7 +53,9 @@ class CapacityConfig:
     """steps: (sessions, parameter viewers, vertex viewers) per step; seconds: audio per step;
     model: model file (None: default or paper-size random); head: vertex viewers need the head;
     cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
-    separately and project the goal load from them; workers: the server's compute processes
+    separately and project the goal load from them, on a base of ``cost_sessions`` sessions (the
+    per-session cost falls as the loop gets busier: fixed costs of each wake-up are shared by more
+    messages, so a larger base is closer to the goal's load); workers: the server's compute processes
     (ServerConfig.workers; the CPU figures are then the event loop's process only)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
@@ -61,6 +63,7 @@ class CapacityConfig:
     model: Path | None = None
     head: bool = True
     cost_model: bool = True
+    cost_sessions: int = 10
     workers: int = 0
 
 
@@ -222,9 +225,9 @@ def _step(
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
     # later) to the ingest's report (all sessions ended).
     clients.wait_viewers()
-    cpu0, t0 = server.cpu_seconds(), time.monotonic()
+    cpu0, tree0, t0 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
     sent = clients.ingest_result(timeout=seconds + 300)["sent"]
-    cpu1, t1 = server.cpu_seconds(), time.monotonic()
+    cpu1, tree1, t1 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
     got = {"viewers": clients.viewer_result()}
     url = server.url
     view_urls = view_urls or [url]
@@ -273,7 +276,14 @@ def _step(
     with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
         timings = json.loads(r.read())["timings_ms"]
     return {
-        "server_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        # the whole server (its compute workers included), and its event loop's process alone
+        "server_cpu_cores": round((tree1 - tree0) / (t1 - t0), 3),
+        "loop_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        # CPU seconds per second of the sessions' audio: what the step's work costs at real time,
+        # even when a server short of CPU (a busy machine) took longer than real time to do it
+        "server_cpu_per_audio_s": round((tree1 - tree0) / seconds, 4),
+        "loop_cpu_per_audio_s": round((cpu1 - cpu0) / seconds, 4),
+        "wall_s": round(t1 - t0, 2),
         "server_timings_ms": {
             k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
         },
@@ -303,23 +313,37 @@ def _step(
 def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
     """Server CPU (cores) of one real-time session, one parameter viewer and one vertex viewer,
     from three loads differing in one kind of client; and the goal load projected from them."""
-    n = 10
-    base = _step(server, model, 100, n, 0, 0, cfg.seconds)["server_cpu_cores"]
-    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)["server_cpu_cores"]
-    per_session = base / n
-    per_param = max(0.0, with_params - base) / 100
-    per_vertex = None
-    if cfg.head:
-        with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds)["server_cpu_cores"]
-        per_vertex = max(0.0, with_vertex - base) / 20
+    n = cfg.cost_sessions
+    base = _step(server, model, 100, n, 0, 0, cfg.seconds)
+    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)
+    with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds) if cfg.head else None
+
+    def per_unit(key: str) -> tuple[float, float, float | None]:
+        b = base[key]
+        vertex = None if with_vertex is None else max(0.0, with_vertex[key] - b) / 20
+        return b / n, max(0.0, with_params[key] - b) / 100, vertex
+
+    # Per second of audio, not of wall time: a server the machine starves of CPU takes longer than
+    # real time, and CPU / wall time would then cap every figure at its share of the machine.
+    per_session, per_param, per_vertex = per_unit("server_cpu_per_audio_s")
     goal = 100 * per_session + 500 * per_param + 100 * (per_vertex or 0.0)
+    loop_session, loop_param, loop_vertex = per_unit("loop_cpu_per_audio_s")
+    loop_goal = 100 * loop_session + 500 * loop_param + 100 * (loop_vertex or 0.0)
     return {
+        "base_sessions": n,
         "cores_per_session": round(per_session, 5),
         "cores_per_param_viewer": round(per_param, 5),
         "cores_per_vertex_viewer": None if per_vertex is None else round(per_vertex, 5),
         "goal_load_cores_projected": round(goal, 3),
-        "note": "CPU seconds of the server process per second of real-time streaming, measured on this "
-        "(shared) machine; one server process runs on at most one core",
+        # The event loop's process alone (differs from the above with compute workers): one
+        # process runs on at most one core, so this must stay well under 1 at the goal load.
+        "loop_cores_per_session": round(loop_session, 5),
+        "loop_cores_per_param_viewer": round(loop_param, 5),
+        "loop_cores_per_vertex_viewer": None if loop_vertex is None else round(loop_vertex, 5),
+        "loop_goal_load_cores_projected": round(loop_goal, 3),
+        "steps_wall_s": [base["wall_s"], with_params["wall_s"], None if with_vertex is None else with_vertex["wall_s"]],
+        "note": "CPU seconds of the server (all its processes; loop_: the event loop's process) per second of "
+        f"the sessions' audio ({cfg.seconds:g} s per step), measured on this (shared) machine",
     }
 
 
@@ -409,6 +433,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
                         "pass_every_viewer": r["pass_every_viewer"],
                         "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
                         "server_cpu_cores": r["server_cpu_cores"],
+                        "loop_cpu_cores": r["loop_cpu_cores"],
                         "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                         "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"],
                         "lost": r["frames_lost"],
@@ -461,6 +486,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
     ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
+    ap.add_argument("--cost-sessions", type=int, default=10, help="sessions the cost model's three loads share")
     ap.add_argument(
         "--cluster",
         action="store_true",
@@ -488,6 +514,7 @@ def main(argv: list[str] | None = None) -> int:
             model=args.model,
             head=not args.no_head,
             cost_model=not args.no_cost_model,
+            cost_sessions=args.cost_sessions,
             workers=args.workers,
         )
     )

@@ -9,6 +9,7 @@ the same wall clock the server stamps its send times with.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import re
 import struct
 import subprocess
@@ -81,12 +82,25 @@ class ServerProcess:
         for line in pipe:
             self.log_tail.append(line)
 
-    def cpu_seconds(self) -> float:
-        """User + system CPU time the server process has used so far (s), from /proc."""
+    def cpu_seconds(self, *, tree: bool = False) -> float:
+        """User + system CPU time the server process has used so far (s), from /proc; ``tree``: its
+        live child processes' too (the compute workers of ``--workers``)."""
         import os
 
-        fields = Path(f"/proc/{self.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        pids = [self.proc.pid]
+        if tree:
+            i = 0
+            while i < len(pids):  # breadth-first over /proc/<pid>/task/<tid>/children
+                with contextlib.suppress(OSError):
+                    for task in Path(f"/proc/{pids[i]}/task").iterdir():
+                        pids += [int(c) for c in (task / "children").read_text().split()]
+                i += 1
+        total = 0
+        for pid in pids:
+            with contextlib.suppress(OSError):  # a child that just exited
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += int(fields[11]) + int(fields[12])
+        return total / os.sysconf("SC_CLK_TCK")
 
     def stop(self) -> int:
         if self.proc.poll() is None:

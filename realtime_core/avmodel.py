@@ -103,9 +103,13 @@ class AvModel:
         (:meth:`FrontEndConfig.algorithmic_delay_ms`)."""
         return self.frontend.algorithmic_delay_ms(lag)
 
-    def front_end(self, *, kernel: str = "numba") -> FrontEnd:
-        """A fresh streaming front end for one utterance or live session (kernel: "numba" or the "numpy" reference)."""
-        return FrontEnd(self.frontend, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var, kernel=kernel)
+    def front_end(self, *, kernel: str = "numba", warp: float = 1.0) -> FrontEnd:
+        """A fresh streaming front end for one utterance or live session (kernel: "numba" or the "numpy" reference).
+        warp: the filterbank's frequency warp (``MfccConfig.warp``; training's vocal-tract-length copies)."""
+        fe = self.frontend
+        if warp != 1.0:
+            fe = replace(fe, mfcc=replace(fe.mfcc, warp=warp))
+        return FrontEnd(fe, cmvn_mean=self.cmvn_mean, cmvn_var=self.cmvn_var, kernel=kernel)
 
     @cached_property
     def _plans(self) -> dict[tuple[str, float | None], StreamPlan]:
@@ -152,6 +156,8 @@ def validate_cmvn(model: Any) -> None:
 
 def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
     mf = {k: v for k, v in asdict(fe.mfcc).items() if k not in ("window_len", "n_fft")}
+    if mf.get("warp") == 1.0:  # files of unwarped models read as before the field existed
+        del mf["warp"]
     return {
         "mfcc": mf,
         "cmvn": None if fe.cmvn is None else asdict(fe.cmvn),

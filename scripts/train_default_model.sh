@@ -11,6 +11,7 @@
 # 3. `facecast readout` fits the learned readout after the inversion (realtime_core/readout.py) on the
 #    train split's live-path trajectories against the real lips, chooses its form and re-chooses the closure
 #    band on val (the band from step 2 is only the starting point); a separate step, re-runnable on any HMM.
+#    Its fit data: the train sentences and 4 vocal-tract-length copies of each (the filterbank warped).
 # 4. `facecast eval` scores it on the s1 test split, the other talkers' clips, real speech and held-out
 #    synthetic voices and rewrites docs/accuracy.md (plots beside it).
 # GRID: Cooke, Barker, Cunningham, Shao (2006), CC BY 4.0.
@@ -21,9 +22,14 @@ run() { if command -v facecast >/dev/null; then facecast "$@"; else .venv/bin/fa
 KAPPA=0.2
 BAND=0.035
 SPEEDS="0.9,1.1"
+# The readout's form (third round of issue 10, chosen on val among `facecast readout`'s default candidates);
+# since the fourth round it is fitted on the train sentences plus 4 vocal-tract-length copies of each
+# (filterbank warps 0.85-1.18, chosen on val and its voice-changed copies; docs/default_model.md).
+READOUT="5:state:64x3:1e-3"
 run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train ${SPEEDS:+--speed "$SPEEDS"} -o assets/data/default_model.npz \
     --states 16 --mix 3 --covariance full --tc 3 --iters 12 --tol 3e-4 --seed 0 \
     --likelihood-scale "$KAPPA" --closure-band "$BAND"
-run readout assets/data/default_model.npz -o assets/data/default_model.npz --grid-s1 "$grid"
+run readout assets/data/default_model.npz -o assets/data/default_model.npz --grid-s1 "$grid" \
+    --candidates "$READOUT" --vtlp-copies 4 --vtlp-range 0.85,1.18 --vtlp-seed 1
 run eval --grid-s1 "$grid" --output docs/accuracy.md

@@ -231,7 +231,7 @@ class FacecastServer:
         """Close one connection with a code and reason (counted in metrics)."""
         self.closes[code] += 1
         with contextlib.suppress(ConnectionClosed):
-            await ws.close(code, reason[:120])
+            await ws.close(code, SP.fit_close_reason(reason))
 
     # -- sessions ----------------------------------------------------------------------------------
 
@@ -510,7 +510,7 @@ class FacecastServer:
             sock = ws.transport.get_extra_info("socket")
             if sock is not None:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.config.viewer_socket_buffer_bytes)
-        await ws.send(P.dumps(describe.view_description(live, req, self.head)))
+        await ws.send(describe.view_description_text(live, req, self.head))
         if self.sessions.get(live.name) is not live:  # ended while we were sending the description
             raise ProtocolViolation(P.CLOSE_NORMAL, "session ended")
         viewer = Viewer(ws, live, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
@@ -550,7 +550,7 @@ class FacecastServer:
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
         feed = await cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
-        await ws.send(P.dumps(describe.view_description(feed, req, self.head)))
+        await ws.send(describe.view_description_text(feed, req, self.head))
         viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
         feed.viewers.add(viewer)
         self.n_viewers += 1

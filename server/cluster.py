@@ -63,6 +63,7 @@ if TYPE_CHECKING:
     from redis.asyncio.client import PubSub
 
     from server.live import LiveSession
+    from server.protocol import ViewRequest
 
 log = logging.getLogger("facecast.cluster")
 
@@ -112,6 +113,7 @@ class RemoteFeed:
         self.frames = 0
         self.dropped = 0
         self.session = self.facts  # what descriptions read, as of a LiveSession
+        self.descriptions: dict[ViewRequest, str] = {}  # server.describe.view_description_text's cache
 
 
 def _resp(*parts: bytes) -> bytes:

@@ -38,6 +38,7 @@ from wire import protocol as P
 if TYPE_CHECKING:
     from server.app import FacecastServer
     from server.cluster import RemoteFeed
+    from server.protocol import ViewRequest
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -250,6 +251,7 @@ class LiveSession:
         self.dropped = 0
         self.started = time.time()
         self.ended = asyncio.Event()
+        self.descriptions: dict[ViewRequest, str] = {}  # server.describe.view_description_text's cache
         self.pacer: IngestPacer | None = None  # set for real-time ingests (not batch, not local sources)
         self.overrun = "pace"
         self.paced_s = 0.0

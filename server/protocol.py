@@ -379,6 +379,21 @@ def _on_end(proto: IngestProtocol, msg: dict) -> list[Action]:
     return [Finish()]
 
 
+CLOSE_REASON_BYTES = 123
+"""A close frame's payload is at most 125 bytes (RFC 6455 5.5): the 2-byte code, then the reason."""
+
+
+def fit_close_reason(reason: str) -> str:
+    """``reason`` cut to at most :data:`CLOSE_REASON_BYTES` of UTF-8, at a character boundary.
+
+    Counted in bytes, not characters: a reason quoting a client's non-ASCII value (up to 4 bytes a
+    character) would otherwise make the close frame too long, and websockets would raise instead of
+    closing (an internal error for what is a protocol error). A lone surrogate (JSON allows
+    ``"\\ud800"``) cannot be encoded at all: it becomes "?"."""
+    data = reason.encode("utf-8", "replace")[:CLOSE_REASON_BYTES]
+    return data.decode("utf-8", "ignore")  # "ignore" drops a character the cut split
+
+
 def _short(value: object, limit: int = 40) -> str:
     """repr of a client-supplied value, cut so a reason stays within a close frame."""
     text = repr(value)

@@ -72,8 +72,9 @@ def _pack(out: Output, rec: _Recorder, precompute: tuple = ()) -> tuple:
     return raw, params, work, audio, log, expr, pre
 
 
-def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) -> None:
-    """Worker process: decode the model once, then serve session requests until "stop"."""
+def _worker_main(conn, model_bytes: bytes, rig_bytes: bytes | None = None) -> None:
+    """Worker process: decode the model (and unpickle the head rig) once, then serve session
+    requests until "stop"."""
     from threadpoolctl import threadpool_limits
 
     from realtime_core.mapping import decode_speech_model
@@ -81,6 +82,7 @@ def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) ->
 
     with threadpool_limits(1):
         model = decode_speech_model(model_bytes)
+        rig: Rig | MorphRig | None = None if rig_bytes is None else pickle.loads(rig_bytes)
         warm_up(model, rig)  # the compiled kernels loaded before the first session
         freeze_heap()  # no full collection rescans the model and the modules between frames
         conn.send(("ok", None))  # ready
@@ -118,9 +120,9 @@ def _worker_main(conn, model_bytes: bytes, rig: Rig | MorphRig | None = None) ->
 
 
 class _Worker:
-    def __init__(self, ctx, model_bytes: bytes, rig: Rig | MorphRig | None) -> None:
+    def __init__(self, ctx, model_bytes: bytes, rig_bytes: bytes | None) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
-        self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes, rig), daemon=True)
+        self.proc = ctx.Process(target=_worker_main, args=(child, model_bytes, rig_bytes), daemon=True)
         self.proc.start()
         child.close()
         self.pending: collections.deque[asyncio.Future] = collections.deque()
@@ -177,14 +179,17 @@ class WorkerPool:
             raise ServerConfigError(f"compute workers need an HMM or MLP model file, got {type(self.model).__name__}")
         ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
         data = encode_speech_model(self.model)
+        rig_bytes = None
         if self.rig is not None:
-            try:  # a rig goes to the workers by pickle; one that cannot keeps its deltas on the loop
-                pickle.dumps(self.rig)
+            # Pickled once here, the same bytes to every worker (each Process would pickle the rig
+            # again: 1.5 MB for the built-in head); a rig that cannot go keeps its deltas on the loop.
+            try:
+                rig_bytes = pickle.dumps(self.rig, protocol=pickle.HIGHEST_PROTOCOL)
             except (TypeError, AttributeError, pickle.PicklingError) as exc:
                 log.info("vertex deltas stay on the event loop: the head rig cannot go to workers (%s)", exc)
                 self.rig = None
         loop = asyncio.get_running_loop()
-        self.workers = [_Worker(ctx, data, self.rig) for _ in range(self.n)]
+        self.workers = [_Worker(ctx, data, rig_bytes) for _ in range(self.n)]
         for w in self.workers:
             fut = loop.create_future()
             w.pending.append(fut)

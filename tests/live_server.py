@@ -10,6 +10,7 @@ viewer's files and three.js from node_modules. Tests talk to it over real socket
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 from pathlib import Path
 
@@ -17,6 +18,20 @@ from realtime_core.avmodel import AvModel
 from tests.speech import speechlike
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+@contextlib.asynccontextmanager
+async def running(model: AvModel, head=None, **config):
+    """A FacecastServer started on this event loop (free port, ``ServerConfig(**config)``), stopped on exit."""
+    from server.app import FacecastServer
+    from server.config import ServerConfig
+
+    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
+    await srv.start()
+    try:
+        yield srv
+    finally:
+        await srv.stop()
 
 
 class LiveServer:

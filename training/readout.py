@@ -78,23 +78,66 @@ class ReadoutSpec:
         }
 
 
-def trace_clips(model: AvModel, clips: Sequence[tuple[str, Any, list]], *, progress: Callable | None = None) -> list:
-    """``[(name, FaceTrack, bilabial spans)]`` -> ``[Traced]`` through ``model``'s live path at lag 0."""
+def trace_clips(
+    model: AvModel,
+    clips: Sequence[tuple[str, Any, list]],
+    *,
+    warps: Sequence[float] | None = None,
+    progress: Callable | None = None,
+) -> list:
+    """``[(name, FaceTrack, bilabial spans)]`` -> ``[Traced]`` through ``model``'s live path at lag 0.
+    warps: one filterbank warp per clip (:meth:`AvModel.front_end`; a vocal-tract-length copy of the
+    clip's voice, its lips unchanged), None = the voice as recorded."""
     from realtime_core.features.resample import resample_audio
 
+    if warps is not None and len(warps) != len(clips):
+        raise ConfigError(f"{len(warps)} warps for {len(clips)} clips")
     wrap = progress or (lambda it, **_: it)
     inv = model.inverter()
     out = []
-    for name, track, spans in wrap(clips, desc="readout inputs", unit="clip"):
+    for i, (name, track, spans) in enumerate(wrap(clips, desc="readout inputs", unit="clip")):
         x = np.asarray(track.samples, dtype=np.float64)
         if track.sample_rate_hz != model.sample_rate_hz:
             x = resample_audio(x, track.sample_rate_hz, model.sample_rate_hz)
-        fe = model.front_end()
+        warp = 1.0 if warps is None else float(warps[i])
+        fe = model.front_end(warp=warp)
         oa = np.concatenate([fe.push(x), fe.flush()])
         raw, post, audio = inv.trace(oa)
         T = min(len(raw), len(track.params))
         loud = loudness_db(track.samples, track.sample_rate_hz, len(track.params))
-        out.append(Traced(name, track.params[:T], raw[:T], post[:T], audio[:T], loud[:T], list(spans)))
+        tag = "" if warps is None else f"-warp{warp:.3f}"
+        out.append(Traced(f"{name}{tag}", track.params[:T], raw[:T], post[:T], audio[:T], loud[:T], list(spans)))
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class VtlpConfig:
+    """Vocal-tract-length copies of the readout's train clips (issue 10: one training talker; the readout
+    learns to read other vocal tracts the same way). copies: copies of every clip (0 = none); warp_range:
+    (low, high) filterbank warps (``MfccConfig.warp``), each copy of each clip its own uniform draw; seed."""
+
+    copies: int = 0
+    warp_range: tuple[float, float] = (0.88, 1.12)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        lo, hi = self.warp_range
+        if self.copies < 0 or not 0.8 <= lo <= hi <= 1.25:
+            raise ConfigError(f"invalid VTLP copies {self}: copies >= 0, 0.8 <= low <= high <= 1.25")
+
+    def as_json(self) -> dict[str, Any]:
+        return {"copies": self.copies, "warp_range": list(self.warp_range), "seed": self.seed}
+
+
+def vtlp_copies(
+    model: AvModel, clips: Sequence[tuple[str, Any, list]], config: VtlpConfig, *, progress: Callable | None = None
+) -> list:
+    """``config.copies`` warped traces of every clip (:func:`trace_clips` with a warp drawn per clip)."""
+    rng = np.random.default_rng(config.seed)
+    out: list = []
+    for _ in range(config.copies):
+        warps = [float(w) for w in rng.uniform(*config.warp_range, len(clips))]
+        out += trace_clips(model, clips, warps=warps, progress=progress)
     return out
 
 

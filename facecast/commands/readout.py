@@ -35,6 +35,15 @@ def _specs(text: str) -> list:
     return out
 
 
+def _pair(text: str) -> tuple[float, float]:
+    """``LOW,HIGH`` -> (low, high)."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not LOW,HIGH") from None
+    return lo, hi
+
+
 DEFAULT_CANDIDATES = (
     "5:state:0:1,5:state:32:1e-3,5:state:64:1e-3,5:state:128:1e-3,8:state:64:1e-3,5:component:64:1e-3,5:state:64x3:1e-3"
 )
@@ -80,6 +89,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="share of the val closures a band must keep: the goal is 0.90; with val's 110 closures 0.915 asks for "
         "one closure of margin (101 of 110)",
     )
+    p.add_argument(
+        "--vtlp-copies",
+        type=int,
+        default=4,
+        help="vocal-tract-length copies of every train sentence added to the fit (the filterbank warped, the lips "
+        "kept; issue 10: one training talker, chosen on val and its voice-changed copies); 0 = none",
+    )
+    p.add_argument(
+        "--vtlp-range",
+        type=_pair,
+        default=(0.85, 1.18),
+        metavar="LOW,HIGH",
+        help="the copies' filterbank warps, drawn uniformly per copy and sentence (> 1: a shorter vocal tract)",
+    )
+    p.add_argument("--vtlp-seed", type=int, default=1, help="seeds the copies' warps")
     p.add_argument("--report", type=Path, default=None, help="write the val scores of every candidate here (JSON)")
     p.set_defaults(run=run)
 
@@ -100,15 +124,18 @@ def _run(args: argparse.Namespace) -> int:
 
     from assets.modelfile import load_model, save_model
     from training.corpus import write_json
-    from training.readout import choose_readout, trace_clips
+    from training.readout import VtlpConfig, choose_readout, trace_clips, vtlp_copies
     from training.reallips import s1_clips
 
+    vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
     model = replace(load_model(args.model), readout=None)
     sets = {}
     for split in ("train", "val"):
         clips = s1_clips(split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
         sets[split] = trace_clips(model, clips, progress=tqdm)
-    print(f"{len(sets['train'])} train and {len(sets['val'])} val sentences")
+        if split == "train" and vtlp.copies:
+            sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)
+    print(f"{len(sets['train'])} train traces ({vtlp.copies} VTLP copies) and {len(sets['val'])} val sentences")
     fitted, report = choose_readout(
         model,
         sets["train"],
@@ -118,6 +145,7 @@ def _run(args: argparse.Namespace) -> int:
         min_closure=args.min_closure,
         log=tqdm.write,
     )
+    report["chosen"]["vtlp"] = vtlp.as_json()
     fitted = replace(fitted, metadata={**fitted.metadata, "readout": report["chosen"]})
     if args.report is not None:
         write_json(args.report, report)

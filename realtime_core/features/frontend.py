@@ -115,8 +115,16 @@ class FrontEnd:
             self._cmvn = None
         self._ctx = ContextStacker(dim=config.n_feat, tc=config.tc)
         self._level = _LevelStage(config, kernel=kernel)
+        # The level gate, CMVN and context stacking in one compiled call per push (without level
+        # normalisation, whose tracker stays numpy): the three stages were some fifteen numpy calls
+        # per live frame, each slowed by the cache misses the inverter's matrices cause.
+        self._tail = (
+            _CompiledTail(config, self._level, self._cmvn) if kernel == "numba" and config.level_norm is None else None
+        )
 
     def reset(self) -> None:
+        if self._tail is not None:
+            self._tail.reset()
         self._mfcc.reset()
         if self._cmvn is not None:
             self._cmvn.reset()
@@ -126,12 +134,16 @@ class FrontEnd:
     @property
     def frames_out(self) -> int:
         """Rows released so far (row t is video frame t)."""
-        return self._ctx._next
+        return int(self._tail.cist[1]) if self._tail is not None else self._ctx._next
 
     def push(self, samples: np.ndarray) -> np.ndarray:
+        if self._tail is not None:
+            return self._tail.push(self._mfcc.push(samples), final=False)
         return self._ctx.push(self._normalise(self._mfcc.push(samples)))
 
     def flush(self) -> np.ndarray:
+        if self._tail is not None:
+            return self._tail.push(self._mfcc.flush(), final=True)
         rows = self._ctx.push(self._normalise(self._mfcc.flush()))
         return np.concatenate([rows, self._ctx.flush()])
 
@@ -183,6 +195,55 @@ class _LevelStage:
         if quiet.any():
             c0_ceps = np.where(quiet[:, None], self._silence, c0_ceps)
         return (c0_ceps if self.config.energy else c0_ceps[:, 1:]), level
+
+
+class _CompiledTail:
+    """Level gate -> running CMVN -> context stacking as one compiled call
+    (:func:`realtime_core.features.compiled.normalise_stack`) on state kept in place; ``_LevelStage``,
+    :class:`RunningCmvn` and :class:`ContextStacker` are the reference. Without level normalisation."""
+
+    def __init__(self, config: FrontEndConfig, level: _LevelStage, cmvn: RunningCmvn | None) -> None:
+        from realtime_core.features.compiled import normalise_stack  # numba's import is paid only here
+
+        self._kernel = normalise_stack
+        self.config = config
+        self._silence = level._silence
+        self._db_per_c0 = level._db_per_c0
+        floor = config.silence_floor_db
+        self._floor_db = -np.inf if floor is None else float(floor)
+        self._cmvn = cmvn
+        c = config.cmvn
+        self._cmvn_consts = (c.gate_db, c.max_frames, c.var_floor) if c is not None else (0.0, 1.0, 1.0)
+        self.reset()
+
+    def reset(self) -> None:
+        cm = self._cmvn
+        d = self.config.n_feat
+        self._m = cm._mean0.copy() if cm is not None else np.zeros(d)
+        self._v = cm._var0.copy() if cm is not None else np.ones(d)
+        self._cst = np.array([cm.config.prior_frames if cm is not None else 1.0])
+        self._ring = np.zeros((2 * self.config.tc + 1, d))
+        self.cist = np.zeros(2, dtype=np.int64)
+        """[frames received, rows released]"""
+
+    def push(self, c0_ceps: np.ndarray, *, final: bool) -> np.ndarray:
+        rows: np.ndarray = self._kernel(
+            c0_ceps,
+            self._db_per_c0,
+            self._floor_db,
+            self._silence,
+            self.config.energy,
+            self._cmvn is not None,
+            self._m,
+            self._v,
+            self._cst,
+            *self._cmvn_consts,
+            self._ring,
+            self.cist,
+            self.config.tc,
+            final,
+        )
+        return rows
 
 
 def raw_mfcc_with_level(samples: np.ndarray, config: FrontEndConfig) -> tuple[np.ndarray, np.ndarray]:

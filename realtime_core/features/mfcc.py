@@ -66,6 +66,24 @@ def mel_filterbank(*, sample_rate_hz: int, n_fft: int, n_mels: int, fmin_hz: flo
     return fb.T.copy()
 
 
+def vtlp_warp_hz(freqs_hz: np.ndarray, warp: float, nyquist_hz: float) -> np.ndarray:
+    """The piecewise-linear vocal-tract-length warp of frequencies (Jaitly & Hinton 2013; Kaldi's VTLN
+    form): ``f -> warp * f`` up to ``f0 = 0.8 * nyquist * min(1, 1 / warp)``, then the straight line to
+    ``(nyquist, nyquist)``, so the band edge stays put. ``freqs_hz`` any shape; returns the same shape."""
+    f = np.asarray(freqs_hz, dtype=np.float64)
+    f0 = 0.8 * nyquist_hz * min(1.0, 1.0 / warp)
+    return np.where(f <= f0, warp * f, warp * f0 + (nyquist_hz - warp * f0) * (f - f0) / (nyquist_hz - f0))
+
+
+def warp_filterbank(fbank: np.ndarray, *, sample_rate_hz: int, n_fft: int, warp: float) -> np.ndarray:
+    """A filterbank ``(n_fft // 2 + 1, n_mels)`` that reads the spectrum as if its frequencies were scaled
+    by ``warp`` (:func:`vtlp_warp_hz`): a formant at ``f`` lands in the filters of ``warp * f``, so
+    ``warp`` > 1 makes a voice look like a shorter vocal tract's. Each filter is resampled linearly."""
+    f = np.arange(fbank.shape[0]) * sample_rate_hz / n_fft
+    w = vtlp_warp_hz(f, warp, sample_rate_hz / 2)
+    return np.stack([np.interp(w, f, fbank[:, m]) for m in range(fbank.shape[1])], axis=1)
+
+
 @dataclass(frozen=True, kw_only=True)
 class MfccConfig:
     """Settings of the MFCC front end. Validated once at construction.
@@ -79,6 +97,8 @@ class MfccConfig:
     preemphasis: first-order pre-emphasis coefficient (0 disables).
     lifter: sinusoidal cepstral lifter L (0 disables), as in HTK.
     energy_floor: power floor before the log (input scaled to [-1, 1]).
+    warp: frequency warp of the filterbank (:func:`warp_filterbank`, 0.8-1.25; 1 = none): training
+        uses it to make copies of a voice with a longer or shorter vocal tract (VTLP, issue 10).
     """
 
     sample_rate_hz: int = 16000
@@ -92,6 +112,7 @@ class MfccConfig:
     preemphasis: float = 0.97
     lifter: float = 0.0
     energy_floor: float = 1e-10
+    warp: float = 1.0
     # Derived values, computed once.
     window_len: int = field(init=False)
     n_fft: int = field(init=False)
@@ -116,6 +137,8 @@ class MfccConfig:
             raise ConfigError(f"preemphasis must be in [0, 1), got {self.preemphasis}")
         if self.lifter < 0 or self.energy_floor <= 0:
             raise ConfigError("lifter must be >= 0 and energy_floor > 0")
+        if not 0.8 <= self.warp <= 1.25:
+            raise ConfigError(f"warp must be in [0.8, 1.25], got {self.warp}")
         win = int(round(self.window_hops * self.sample_rate_hz / self.frame_rate_hz))
         object.__setattr__(self, "window_len", win)
         object.__setattr__(self, "n_fft", 1 << (win - 1).bit_length())
@@ -182,6 +205,8 @@ def _tables(config: MfccConfig, kernel: str) -> _Tables:
         fmin_hz=config.fmin_hz,
         fmax_hz=fmax,
     )
+    if config.warp != 1.0:
+        fbank = warp_filterbank(fbank, sample_rate_hz=int(config.sample_rate_hz), n_fft=config.n_fft, warp=config.warp)
     window = np.hamming(config.window_len)
     first = 0 if config.include_c0 else 1
     n = np.arange(first, config.n_ceps + 1)
@@ -221,9 +246,10 @@ class MfccStream:
         self.kernel = kernel
         if kernel == "numba":
             # Imported here: numba's import costs ~0.5 s, paid only by streams that use it.
-            from realtime_core.features.compiled import spectrum_to_ceps
+            from realtime_core.features.compiled import frames_push, spectrum_to_ceps
 
             self._spectrum_to_ceps = spectrum_to_ceps
+            self._frames_push = frames_push
         tables = _tables(config, kernel)
         self._fbank = tables.fbank
         self._window = tables.window
@@ -235,6 +261,12 @@ class MfccStream:
 
     def reset(self) -> None:
         """Start a new utterance."""
+        if self.kernel == "numba":
+            # The compiled framing's state (:func:`realtime_core.features.compiled.frames_push`), kept in
+            # place: a preallocated buffer and [n_buf, buf_start, n_received, next_frame], [last sample].
+            self._cbuf = np.zeros(4 * self.config.window_len)
+            self._ist = np.zeros(4, dtype=np.int64)
+            self._last = np.zeros(1)
         self._buf = np.zeros(0)  # pre-emphasised samples from absolute index self._buf_start
         self._buf_start = 0
         self._n_received = 0
@@ -245,18 +277,20 @@ class MfccStream:
     @property
     def frames_emitted(self) -> int:
         """Rows returned so far in this utterance."""
-        return self._next_frame
+        return int(self._ist[3]) if self.kernel == "numba" else self._next_frame
 
     @property
     def samples_received(self) -> int:
         """Samples pushed so far in this utterance."""
-        return self._n_received
+        return int(self._ist[2]) if self.kernel == "numba" else self._n_received
 
     def push(self, samples: np.ndarray) -> np.ndarray:
         """Add samples; return the newly complete rows, ``(k, n_outputs) float64``."""
         if self._finished:
             raise StreamStateError("MfccStream.push() after flush(); call reset() first")
         x = as_float_samples(samples)
+        if self.kernel == "numba":
+            return self._compiled_emit(x, final=False)
         if x.size:
             pre = np.empty_like(x)
             pre[0] = x[0] - self.config.preemphasis * self._last_sample
@@ -270,9 +304,30 @@ class MfccStream:
         """End the utterance; return the remaining rows (zero-padded past the end)."""
         if self._finished:
             raise StreamStateError("MfccStream.flush() called twice; call reset() first")
-        out = self._emit(final=True)
+        out = self._compiled_emit(np.zeros(0), final=True) if self.kernel == "numba" else self._emit(final=True)
         self._finished = True
         return out
+
+    def _compiled_emit(self, x: np.ndarray, *, final: bool) -> np.ndarray:
+        """:meth:`push` / :meth:`flush` with the framing compiled (pre-emphasis, buffer, frames, window
+        in one call on preallocated state; :meth:`_emit` is the reference), then the FFT and the
+        compiled spectrum-to-cepstra step."""
+        cfg = self.config
+        frames, self._cbuf = self._frames_push(
+            x,
+            self._cbuf,
+            self._ist,
+            self._last,
+            cfg.preemphasis,
+            int(cfg.sample_rate_hz),
+            int(cfg.frame_rate_hz),
+            self._window,
+            final,
+        )
+        if not len(frames):
+            return np.zeros((0, cfg.n_outputs))
+        spec = np.fft.rfft(frames, n=cfg.n_fft, axis=1)
+        return self._spectrum_to_ceps(spec, 1.0 / cfg.n_fft, *self._fb_sparse, cfg.energy_floor, self._dct)
 
     def _emit(self, *, final: bool) -> np.ndarray:
         cfg = self.config

@@ -3,10 +3,21 @@
 Why compiled: at the sizes of a live model (N x M = 48..140 components, 77..88 audio dims, 4 visual
 dims) one frame of :class:`realtime_core.inversion.StreamingInverter` is two matrix-vector products
 plus some thirty small numpy calls; the calls, not the arithmetic, were most of the per-frame cost
-(``facecast bench core``). Each kernel here is one call doing exactly what the numpy methods
-``_forward`` / ``_combine`` do, in the same order and the same dtypes: the big products still go
-through BLAS (``np.dot``), the rest are plain loops. The numpy methods stay the reference; the tests
-hold the two equal to rounding (tests/realtime_core/inversion/test_compiled.py).
+(``facecast bench core``). Each kernel here is one call doing what the numpy methods ``_forward`` /
+``_raw`` (and, for the readout and the output stage, :class:`realtime_core.readout.ReadoutStream` and
+:class:`realtime_core.output.OutputStage`) do: the likelihood product still goes through BLAS
+(``np.dot``), the rest are plain loops. At lag 0 (the live case) :func:`filter_rows` runs a whole push
+- forward step, component posteriors (once, shared by eq. 7 and the readout), eq. 7, readout, output
+stage - in one call on the session's state arrays, so no per-frame Python sits between the stages.
+
+Why it matters beyond the call count: on this machine the live path is bound by cache misses. The
+likelihood matrix (1.7 MB at N=28, M=5 in float32) streams through the 2 MB L2 every frame and evicts
+everything else, so each numpy call after it ran several times slower than timed alone (the front end
+took 41 us alone and 88 us inside the live loop). Fewer calls and less memory touched per frame
+(components under ``SKIP_POSTERIOR`` skipped) is what cut the live path, not faster arithmetic.
+
+The numpy methods stay the reference; the tests hold the two equal to rounding
+(tests/realtime_core/inversion/test_compiled.py).
 
 Compiled lazily on first use and cached next to this file (``cache=True``), so importing this module
 costs numba's import only.
@@ -17,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from realtime_core.inversion.stream import SKIP_POSTERIOR
+
 
 @njit(cache=True, nogil=True)
 def forward_step(  # pragma: no cover - compiled
@@ -24,8 +37,6 @@ def forward_step(  # pragma: no cover - compiled
     center: np.ndarray,
     quad: np.ndarray,
     const: np.ndarray,
-    i0: np.ndarray,
-    i1: np.ndarray,
     feat: np.ndarray,
     A: np.ndarray,
     prev: np.ndarray,
@@ -35,17 +46,20 @@ def forward_step(  # pragma: no cover - compiled
     """One frame of ``StreamingInverter._forward``.
 
     row ``(Da,)`` float64; center ``(Da,)`` and quad ``(C, K)`` in the plan's dtype; const ``(N, M)``;
-    i0, i1 ``(K - Da,)`` upper-triangle indices; feat ``(K,)`` scratch; A ``(N, N)``; prev ``(N,)``
-    the previous filtered posterior (ignored unless ``has_prev``); start ``(N,)``.
-    Returns ``(f (N,), b (N,), mix (N, M), a (Da,))`` as the numpy method does.
+    feat ``(K,)`` scratch, filled with ``[a_i a_j (i <= j, row-major as np.triu_indices); a]``;
+    A ``(N, N)``; prev ``(N,)`` the previous filtered posterior (ignored unless ``has_prev``);
+    start ``(N,)``. Returns ``(f (N,), b (N,), mix (N, M), a (Da,))`` as the numpy method does.
     """
     a = row.astype(center.dtype) - center
-    nq = i0.shape[0]
     da = a.shape[0]
-    for k in range(nq):
-        feat[k] = a[i0[k]] * a[i1[k]]
+    q = 0
+    for i in range(da):  # the upper triangle row by row: no index arrays to read
+        ai = a[i]
+        for j in range(i, da):
+            feat[q] = ai * a[j]
+            q += 1
     for k in range(da):
-        feat[nq + k] = a[k]
+        feat[q + k] = a[k]
     lin = np.dot(quad, feat)
     n, m = const.shape
     logc = np.empty((n, m))
@@ -94,36 +108,59 @@ def forward_step(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def combine_step(  # pragma: no cover - compiled
-    state_post: np.ndarray, mix: np.ndarray, a: np.ndarray, G: np.ndarray, h: np.ndarray, phi_flat: np.ndarray
-) -> tuple[np.ndarray, bool]:
-    """Eq. 7 for one frame, as ``StreamingInverter._combine`` before its output stage.
-
-    state_post ``(N,)``, mix ``(N, M)``, a ``(Da,)`` centred audio (plan dtype); G ``(C, Dv*Da)``,
-    h ``(C, Dv)``, phi_flat ``(C, Dv*Dv)``. Returns ``(x (Dv,), ok)``: ``ok`` False when the
-    weighted precision is not positive definite (the caller then solves by least squares).
-    """
+def component_posteriors(state_post: np.ndarray, mix: np.ndarray, r: np.ndarray) -> None:  # pragma: no cover
+    """``(N,)`` state and ``(N, M)`` within-state posteriors -> the normalised component posteriors,
+    written into ``r (N*M,)`` (``stream._component_posteriors``)."""
     n, m = mix.shape
-    c = n * m
-    r = np.empty(c)
     s = 0.0
     for j in range(n):
         for k in range(m):
             v = state_post[j] * mix[j, k]
             r[j * m + k] = v
             s += v
-    for i in range(c):
+    for i in range(n * m):
         r[i] /= s
+
+
+@njit(cache=True, nogil=True)
+def eq7(  # pragma: no cover - compiled
+    r: np.ndarray, a: np.ndarray, G: np.ndarray, h: np.ndarray, phi_flat: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Eq. 7 for one frame from its component posteriors ``r (C,)`` and centred audio ``a (Da,)``
+    (plan dtype); G ``(C, Dv*Da)``, h ``(C, Dv)``, phi_flat ``(C, Dv*Dv)``. Returns ``(x (Dv,), ok)``:
+    ``ok`` False when the weighted precision is not positive definite (the caller then solves by least
+    squares; x is then the right-hand side).
+
+    The sums over components run in float64 over those with ``r >= SKIP_POSTERIOR`` only (a live
+    frame has a dozen or so): G's float32 entries convert exactly, so the sum is the reference's
+    ``r @ G`` in float64 to rounding, with ~10x fewer of G's rows read."""
+    c = r.shape[0]
     dv = h.shape[1]
     da = a.shape[0]
-    P = np.dot(r, phi_flat).reshape(dv, dv)
-    Gr = np.dot(r.astype(G.dtype), G).reshape(dv, da)
-    rhs = np.dot(Gr, a).astype(np.float64) + np.dot(r, h)
+    nd = dv * da
+    P = np.zeros(dv * dv)
+    Gr = np.zeros(nd)
+    rhs = np.zeros(dv)
+    for i in range(c):
+        ri = r[i]
+        if ri < SKIP_POSTERIOR:
+            continue
+        for q in range(dv * dv):
+            P[q] += ri * phi_flat[i, q]
+        for q in range(nd):
+            Gr[q] += ri * G[i, q]
+        for q in range(dv):
+            rhs[q] += ri * h[i, q]
+    for q in range(dv):
+        acc = 0.0
+        for k in range(da):
+            acc += Gr[q * da + k] * a[k]
+        rhs[q] += acc
     # Cholesky P = L L^T, then two triangular solves (Dv is 4: loops beat any call).
     L = np.zeros((dv, dv))
     for i in range(dv):
         for j in range(i + 1):
-            acc = P[i, j]
+            acc = P[i * dv + j]
             for k in range(j):
                 acc -= L[i, k] * L[j, k]
             if i == j:
@@ -148,13 +185,35 @@ def combine_step(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def combine_step(  # pragma: no cover - compiled
+    state_post: np.ndarray, mix: np.ndarray, a: np.ndarray, G: np.ndarray, h: np.ndarray, phi_flat: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Eq. 7 for one frame, as ``StreamingInverter._raw``: state_post ``(N,)``, mix ``(N, M)``, then
+    :func:`eq7`."""
+    r = np.empty(mix.shape[0] * mix.shape[1])
+    component_posteriors(state_post, mix, r)
+    return eq7(r, a, G, h, phi_flat)
+
+
+@njit(cache=True, nogil=True)
+def output_step(x: np.ndarray, floor: np.ndarray, band: float, knee: float) -> None:  # pragma: no cover
+    """``realtime_core.output.OutputStage`` on one frame ``x (Dv,)``, in place: the closure band
+    (``band`` > 0, parameters with a finite ``floor``), then the floor."""
+    gain = knee / (knee - 1.0)
+    for j in range(x.shape[0]):
+        c = floor[j]
+        v = max(x[j], c)
+        if band > 0.0 and np.isfinite(c) and v < c + knee * band:
+            v = c + max(v - c - band, 0.0) * gain
+        x[j] = v
+
+
+@njit(cache=True, nogil=True)
 def filter_rows(  # pragma: no cover - compiled
     oa: np.ndarray,
     center: np.ndarray,
     quad: np.ndarray,
     const: np.ndarray,
-    i0: np.ndarray,
-    i1: np.ndarray,
     feat: np.ndarray,
     A: np.ndarray,
     prev: np.ndarray,
@@ -164,29 +223,44 @@ def filter_rows(  # pragma: no cover - compiled
     h: np.ndarray,
     phi_flat: np.ndarray,
     out: np.ndarray,
-    post: np.ndarray,
+    ro_phi: np.ndarray,
+    ro_started: bool,
+    ro_sizes: np.ndarray,
+    ro_w1: np.ndarray,
+    ro_b1: np.ndarray,
+    ro_w2: np.ndarray,
+    ro_b2: np.ndarray,
+    floor: np.ndarray,
+    band: float,
+    knee: float,
 ) -> tuple[np.ndarray, int]:
-    """Lag 0 (pure filtering) over rows ``oa (k, Da)``: :func:`forward_step` then :func:`combine_step`
-    per row into ``out (k, Dv)`` (and the normalised component posteriors into ``post (k, N*M)``, for
-    the readout, unless it has 0 rows), in one call. Returns ``(f, stop)``: the filtered posterior after
-    the rows done and ``stop = -1``, or, at a row whose weighted precision is not positive definite, the
-    posterior before that row and its index (the caller finishes from there with the row-wise path)."""
+    """The whole lag-0 inverter over rows ``oa (k, Da)`` in one call: per row :func:`forward_step`,
+    the component posteriors (once), :func:`eq7`, the learned readout (:func:`readout_step`, unless
+    ``ro_phi`` has 0 entries; ``ro_sizes`` = ``[taps, a0, a1, post_kind, n_mix]``) and the output
+    stage (:func:`output_step`, unless ``floor`` has 0 entries), into ``out (k, Dv)``.
+
+    Returns ``(f, stop)``: the filtered posterior after the rows done and ``stop = -1``, or, at a row
+    whose weighted precision is not positive definite, the posterior before that row and its index
+    (the caller finishes from there with the row-wise path)."""
     f = prev
+    n, m = const.shape
+    r = np.empty(n * m)
+    started = ro_started
     for t in range(oa.shape[0]):
-        f_new, _, mix, a = forward_step(oa[t], center, quad, const, i0, i1, feat, A, f, has_prev or t > 0, start)
-        x, ok = combine_step(f_new, mix, a, G, h, phi_flat)
+        f_new, _, mix, a = forward_step(oa[t], center, quad, const, feat, A, f, has_prev or t > 0, start)
+        component_posteriors(f_new, mix, r)
+        x, ok = eq7(r, a, G, h, phi_flat)
         if not ok:
             return f, t
+        if ro_phi.shape[0]:
+            x = readout_step(
+                x, r, a, ro_phi, started, ro_sizes[0], ro_sizes[1], ro_sizes[2], ro_sizes[3], ro_sizes[4],
+                ro_w1, ro_b1, ro_w2, ro_b2,
+            )  # fmt: skip
+            started = True
+        if floor.shape[0]:
+            output_step(x, floor, band, knee)
         out[t] = x
-        if post.shape[0]:
-            n, m = mix.shape
-            s = 0.0
-            for j in range(n):
-                for k in range(m):
-                    s += f_new[j] * mix[j, k]
-            for j in range(n):
-                for k in range(m):
-                    post[t, j * m + k] = f_new[j] * mix[j, k] / s
         f = f_new
     return f, -1
 
@@ -235,10 +309,23 @@ def readout_step(  # pragma: no cover - compiled
     elif post_kind == 2:
         for j in range(phi.shape[0] - a1):
             phi[a1 + j] = component_post[j]
-    if b1.shape[0] > 0:
-        hid = np.dot(phi, w1) + b1
-        for i in range(hid.shape[0]):
-            if hid[i] < 0.0:
-                hid[i] = 0.0
-        return np.dot(hid, w2) + b2
-    return np.dot(phi, w2) + b2
+    # Both layers as loops over the inputs (rows of w1 and w2 are contiguous): inputs under
+    # SKIP_POSTERIOR in size (most posterior features, units the ReLU zeroed) are skipped.
+    nh = b1.shape[0]
+    w_out = w2 if nh == 0 else w1
+    acc = np.zeros(w_out.shape[1])
+    for i in range(phi.shape[0]):
+        v = phi[i]
+        if abs(v) < SKIP_POSTERIOR:
+            continue
+        for k in range(acc.shape[0]):
+            acc[k] += v * w_out[i, k]
+    if nh == 0:
+        return acc + b2
+    y = np.zeros(dv)
+    for i in range(nh):
+        v = acc[i] + b1[i]
+        if v > 0.0:
+            for k in range(dv):
+                y[k] += v * w2[i, k]
+    return y + b2

@@ -34,7 +34,17 @@ from scipy.linalg.lapack import dposv as _posv
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError, StreamStateError
 from realtime_core.inversion.conditional import ConditionalForm
+from realtime_core.output import KNEE, OutputStage
 from realtime_core.readout import Readout, ReadoutStream
+
+SKIP_POSTERIOR = 1e-30
+"""Components whose normalised posterior is below this are left out of eq. 7's weighted sums (both
+kernels). Their total share is under ``N M x 1e-30``, some fourteen orders below float64's resolution,
+so the estimate is the same to rounding; and cast to float32 they would be subnormal numbers, which
+this CPU multiplies some hundred times slower than normal ones (at N=28, M=5 on speech-like input
+about 90 of the 140 posteriors are: the float32 product over them cost ~30 us per frame). The
+compiled readout skips its inputs under this size alike. (Compiled into the numba kernels: their
+on-disk cache keys on compiled.py, so a change here needs that cache cleared.)"""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,7 +163,18 @@ class StreamingInverter:
             self._combine_step = compiled.combine_step
             self._filter_rows = compiled.filter_rows
             # The model's arrays every compiled forward step takes, in the kernels' order (fixed per inverter).
-            self._step_model = (self._center, self._quad, self._const, self._i0, self._i1, self._feat, self._A)
+            self._step_model = (self._center, self._quad, self._const, self._feat, self._A)
+            # The readout's and the output stage's arrays for the fused lag-0 kernel (0-length: none).
+            ro = self._readout
+            self._ro_args = (
+                (np.zeros(0), np.zeros(0, dtype=np.int64), *(np.zeros((0, 0)), np.zeros(0)) * 2)
+                if ro is None
+                else ro.kernel_arrays()
+            )
+            self._out_args = (
+                (output.floor, output.band, KNEE) if isinstance(output, OutputStage) else (np.zeros(0), 0.0, KNEE)
+            )
+            self._output_in_kernel = isinstance(output, OutputStage)
             self._forward = self._forward_compiled  # type: ignore[method-assign]
             self._raw = self._combine_raw  # type: ignore[method-assign]
         self.reset()
@@ -232,12 +253,13 @@ class StreamingInverter:
         return f, b, mix, a
 
     def _push_filter_compiled(self, oa: np.ndarray) -> np.ndarray:
-        """Lag 0: all rows of a push in one compiled call (the row-wise path from a row it cannot solve)."""
+        """Lag 0: all rows of a push in one compiled call (eq. 7, the readout and the output stage), then
+        the row-wise path from a row it cannot solve."""
         assert self._filter_rows is not None  # set with kernel="numba"
         out = np.empty((len(oa), self._dv))
-        # component posteriors per row, for the readout (a (0, C) array: not written)
-        post = np.empty((len(oa) if self._readout is not None else 0, self._n * self._m))
         prev = self._f
+        ro = self._readout
+        phi, sizes, w1, b1, w2, b2 = self._ro_args
         f, stop = self._filter_rows(
             oa,
             *self._step_model,
@@ -248,23 +270,26 @@ class StreamingInverter:
             self._h,
             self._phi_flat,
             out,
-            post,
+            phi,
+            ro is not None and ro.started,
+            sizes,
+            w1,
+            b1,
+            w2,
+            b2,
+            *self._out_args,
         )
         done = len(oa) if stop < 0 else stop
         if done:
             self._f = f
+            if ro is not None:
+                ro.started = True
+        if not self._output_in_kernel and self._output is not None:  # an output stage of another kind
+            for t in range(done):
+                out[t] = self._output(out[t])
         for t in range(done, len(oa)):
             f_t, _, mix, a = self._forward(oa[t])
-            out[t] = self._raw(f_t, mix, a)
-            if len(post):
-                post[t] = _component_posteriors(f_t, mix)
-        if self._readout is not None:
-            audio = oa.astype(self._center.dtype) - self._center  # the centred rows, as the kernels compute them
-            for t in range(len(oa)):
-                out[t] = self._readout.step(out[t], post[t], audio[t])
-        if self._output is not None:
-            for t in range(len(oa)):
-                out[t] = self._output(out[t])
+            out[t] = self._combine(f_t, mix, a)
         return out
 
     def trace(self, oa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -330,8 +355,13 @@ class StreamingInverter:
         """Eq. 7 for one frame (the numpy reference), before the readout and the output stage."""
         r = (state_post[:, None] * mix).reshape(-1)
         r = r / r.sum()
-        P = (r @ self._phi_flat).reshape(self._dv, self._dv)
-        rhs = ((r.astype(self._G.dtype) @ self._G).reshape(self._dv, self._da) @ a).astype(np.float64) + r @ self._h
+        # Components under SKIP_POSTERIOR are left out (as in the compiled kernel, which says why);
+        # the sums over the rest run in float64 (G's float32 entries promote exactly).
+        keep = np.flatnonzero(r >= SKIP_POSTERIOR)
+        rk = r[keep]
+        P = (rk @ self._phi_flat[keep]).reshape(self._dv, self._dv)
+        Gr = (rk @ self._G[keep]).reshape(self._dv, self._da)
+        rhs = Gr @ a.astype(np.float64) + rk @ self._h[keep]
         # P is a positive combination of SPD matrices: Cholesky solve straight from LAPACK
         # (np.linalg.solve's Python overhead is ~10x the arithmetic at this size).
         _, x, info = _posv(P, rhs)

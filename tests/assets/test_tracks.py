@@ -24,26 +24,11 @@ from assets.tracks import (
 )
 from realtime_core import VISUAL_PARAMS
 from realtime_core.track import Track
-
-
-def _track(n: int = 90, seed: int = 0) -> Track:
-    """n frames of plausible mouth motion (IOD): a syllable-rate open/close with small other units."""
-    rng = np.random.default_rng(seed)
-    k = np.arange(n)
-    p = np.stack(
-        [
-            0.04 * np.sin(k / 7.0),
-            0.10 * np.sin(k / 11.0 + 1),
-            0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
-            0.03 * np.cos(k / 5.0),
-        ],
-        axis=1,
-    )
-    return Track(values=p.astype(np.float32))
+from tests.tracks import syllable_track
 
 
 def test_csv_round_trip_is_exact_for_float32_and_has_time_column():
-    tr = _track()
+    tr = syllable_track()
     data = encode_csv(tr)
     header = data.decode().splitlines()[0].split(",")
     assert header == ["t", *VISUAL_PARAMS]
@@ -80,7 +65,7 @@ def test_float64_values_round_trip_to_nine_significant_digits():
 
 
 def test_json_round_trip_is_exact():
-    tr = Track(values=_track().values, start_s=2.0)
+    tr = Track(values=syllable_track().values, start_s=2.0)
     doc = encode_json(tr, audio="take.wav")
     back = decode_json(doc)
     np.testing.assert_array_equal(back.values, tr.values)
@@ -91,9 +76,9 @@ def test_json_round_trip_is_exact():
 
 def test_strict_mode_is_the_corpus_contract(tmp_path):
     """Exact header, exactly n_frames rows (fewer: truncated), t = k / 30 from 0."""
-    path = write_csv(tmp_path / "params.csv", _track(15))
+    path = write_csv(tmp_path / "params.csv", syllable_track(15))
     ok = read_csv(path, names=VISUAL_PARAMS, n_frames=15, start_s=0.0)
-    np.testing.assert_array_equal(ok.values.astype(np.float32), _track(15).values)
+    np.testing.assert_array_equal(ok.values.astype(np.float32), syllable_track(15).values)
     with pytest.raises(TruncatedFileError, match=r"params\.csv: truncated: 15 frames, expected 20"):
         read_csv(path, names=VISUAL_PARAMS, n_frames=20)
     with pytest.raises(CorpusFormatError, match=r"params\.csv: 15 frames, expected 10"):
@@ -159,7 +144,7 @@ def test_resampling_reader_errors_name_the_file(tmp_path):
 
 def test_json_file_errors(tmp_path):
     p = tmp_path / "c.json"
-    p.write_bytes(encode_json(_track(5)))
+    p.write_bytes(encode_json(syllable_track(5)))
     assert read_json(p).n_frames == 5
     p.write_text(json.dumps({"format": "other"}))
     with pytest.raises(CorpusFormatError, match=r"c\.json: expected facecast-curves version 1"):

@@ -135,3 +135,19 @@ def test_closure_band_draws_near_closures_shut_and_round_trips():
     m = replace(small_model(2), closure_band=0.02)
     back = decode_model(encode_model(m))
     assert back.closure_band == 0.02 and decode_model(encode_model(small_model(2))).closure_band == 0.0
+
+
+def test_filterbank_warp_round_trips_and_unwarped_files_read_as_before():
+    """MfccConfig.warp is written only when it is not 1 (files of unwarped models are as before it
+    existed) and read back; AvModel.front_end(warp=...) warps one stream without changing the model."""
+    from dataclasses import replace as dc_replace
+
+    from realtime_core.avmodel import frontend_from_json, frontend_to_json
+    from realtime_core.features import FrontEndConfig, MfccConfig
+
+    plain = FrontEndConfig(mfcc=MfccConfig(n_ceps=11))
+    assert "warp" not in frontend_to_json(plain)["mfcc"]
+    warped = dc_replace(plain, mfcc=dc_replace(plain.mfcc, warp=1.1))
+    assert frontend_to_json(warped)["mfcc"]["warp"] == 1.1
+    assert frontend_from_json(frontend_to_json(warped)) == warped
+    assert frontend_from_json(frontend_to_json(plain)) == plain

@@ -159,3 +159,22 @@ def test_readout_round_trips_through_the_model_file_and_bad_ones_are_named():
             decode_model(bad)
     with pytest.raises(ModelFormatError, match="do not match the HMM"):
         replace(small_model(7), readout=replace(m.readout, n_mix=M + 1))
+
+
+def test_subnormal_weights_are_stored_as_zeros_and_change_no_estimate():
+    """A dead ReLU unit's weights decay to subnormal floats (slow arithmetic on x86): the readout stores them
+    as 0, leaves every normal weight as it was, and its estimates equal those of the unflushed weights."""
+    ro = random_readout(taps=3, posteriors="state", hidden=6, seed=5)
+    w1 = ro.w1.copy()
+    w1[:, 2] = 3e-318  # unit 2 dead: subnormal in
+    w2 = ro.w2.copy()
+    w2[2] = -4e-317  # and out
+    flushed = replace(ro, w1=w1, w2=w2)
+    assert np.all(flushed.w1[:, 2] == 0) and np.all(flushed.w2[2] == 0)
+    np.testing.assert_array_equal(np.delete(flushed.w1, 2, axis=1), np.delete(ro.w1, 2, axis=1))
+    rng = np.random.default_rng(6)
+    raw, audio = rng.standard_normal((40, DV)), rng.standard_normal((40, DA))
+    post = rng.dirichlet(np.ones(N * M), 40)
+    phi = flushed.features(raw, post, audio)
+    with_subnormals = np.maximum(phi @ w1 + ro.b1, 0.0) @ w2 + ro.b2
+    np.testing.assert_array_equal(flushed.apply(raw, post, audio), with_subnormals)

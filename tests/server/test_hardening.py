@@ -18,21 +18,12 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, ws_url
 from server.app import FacecastServer
 from server.config import ServerConfig
+from tests.live_server import running
 from tests.speech import speechlike
 from wire import protocol as P
 
 # A real server over loopback sockets.
 pytestmark = pytest.mark.system
-
-
-@contextlib.asynccontextmanager
-async def running(model, head=None, **config):
-    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
-    await srv.start()
-    try:
-        yield srv
-    finally:
-        await srv.stop()
 
 
 async def raw_http(port: int, request: bytes) -> tuple[int, bytes]:

@@ -211,3 +211,23 @@ def test_json_depth_scan_ignores_brackets_in_strings():
     assert not SP.json_depth_exceeds(json.dumps({"a": '\\"[[[[[[[[[[[[[[[[[[[['}), 3)
     assert SP.json_depth_exceeds(json.dumps({"a": [[[[1]]]]}), 3)
     assert not SP.json_depth_exceeds(json.dumps({"a": [[[1]]]}), 4)
+
+
+@pytest.mark.parametrize(
+    "reason",
+    [
+        "ordinary reason",
+        "x" * 200,
+        "sample_rate must be an integer, got " + "\U000f44d1" * 40,  # 4-byte characters
+        "é" * 70 + "x",  # a cut through a 2-byte character
+        "lone surrogate \udb91 in a client's value",
+    ],
+)
+def test_close_reasons_fit_a_close_frame(reason):
+    """RFC 6455: a close frame carries at most 125 bytes, 2 of them the code; websockets raises on
+    more (it did for a reason quoting a non-ASCII value: an internal error instead of a refusal)."""
+    fitted = SP.fit_close_reason(reason)
+    data = fitted.encode("utf-8")  # strict: what websockets does
+    assert len(data) <= 123
+    kept = reason.encode("utf-8", "replace")
+    assert kept.startswith(data) and len(data) >= min(len(kept), 123) - 3  # a prefix, cut at most one character

@@ -22,21 +22,12 @@ from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
+from tests.live_server import running
 from tests.speech import speechlike
 from wire import protocol as P
 
 # A real server and clients over loopback sockets.
 pytestmark = pytest.mark.system
-
-
-@contextlib.asynccontextmanager
-async def running(model, head=None, **config):
-    srv = FacecastServer(model, head=head, config=ServerConfig(port=0, **config))
-    await srv.start()
-    try:
-        yield srv
-    finally:
-        await srv.stop()
 
 
 def _int16(samples: np.ndarray) -> np.ndarray:
@@ -393,6 +384,39 @@ def test_http_endpoints(model, head):
     np.testing.assert_array_equal(geom.faces, head.mesh.triangles)
     assert out["/"][0] == 200 and b"facecast" in out["/"][1]
     assert out["/nope"][0] == 404
+
+
+def test_viewer_descriptions_are_made_once_per_subscription_and_stay_correct(model, head):
+    """The description (~15 KB of JSON with the head) is encoded once per session and subscription:
+    later viewers get the same text, which is the description of their own subscription."""
+    from server import describe
+    from server.protocol import parse_view_query
+
+    async def first_message(url, query):
+        async with connect(ws_url(url, "/view?" + query), compression=None) as ws:
+            return await asyncio.wait_for(ws.recv(), 10)
+
+    async def main():
+        async with running(model, head) as srv, IngestClient(srv.url, session="d", sample_rate_hz=16000):
+            texts = {}
+            for q in ("session=d&kind=deltas&encoding=int16", "session=d&kind=deltas&encoding=int16", "session=d"):
+                texts.setdefault(q, []).append(await first_message(srv.url, q))
+            live = srv.sessions["d"]
+            fresh = {
+                q: describe.view_description(
+                    live, parse_view_query(dict(p.split("=") for p in q.split("&")), token=None, has_head=True), head
+                )
+                for q in texts
+            }
+            return texts, fresh, len(live.descriptions)
+
+    texts, fresh, cached = asyncio.run(main())
+    deltas, params = texts["session=d&kind=deltas&encoding=int16"], texts["session=d"]
+    assert len(deltas) == 2 and deltas[0] == deltas[1] and cached == 2
+    assert json.loads(deltas[0]) == fresh["session=d&kind=deltas&encoding=int16"]
+    assert json.loads(params[0]) == fresh["session=d"]
+    assert json.loads(deltas[0])["values_per_frame"] == 3 * len(head.rig.moving)
+    assert json.loads(params[0])["values_per_frame"] == 4
 
 
 def test_a_large_block_is_processed_in_fair_slices_with_the_same_frames(model):

@@ -6,9 +6,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from tests.realtime_core.test_readout import DA, DV, M, N, small_model
 from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
+
+# The MLPs here are cut to a few epochs to keep the tests fast; the properties tested (the live path equals
+# the scoring, an ensemble is its members' mean) hold for any weights, so sklearn's "not converged" is noise.
+FEW_EPOCHS = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 
 
 def _traced(rng: np.random.Generator, n_clips: int, make_truth) -> list[Traced]:
@@ -48,6 +53,7 @@ def test_a_linear_readout_recovers_a_known_causal_filter():
     np.testing.assert_allclose(ro.b2 + d.mean(0), c + D.mean(0), atol=1e-5)
 
 
+@FEW_EPOCHS
 def test_chosen_readout_is_what_the_live_path_runs():
     """choose_readout on synthetic clips: the returned model's inverter, fed audio rows, equals the
     estimates the choice was scored with (readout, then the output stage of the chosen band)."""
@@ -69,6 +75,7 @@ def test_chosen_readout_is_what_the_live_path_runs():
     assert replace(fitted, readout=None).readout is None
 
 
+@FEW_EPOCHS
 def test_an_ensemble_readout_is_the_average_of_its_members():
     rng = np.random.default_rng(3)
     train = _traced(rng, 6, lambda raw, post, audio: np.tanh(raw) + 0.1 * audio[:, :DV])
@@ -83,3 +90,56 @@ def test_an_ensemble_readout_is_the_average_of_its_members():
         np.mean([m.apply(c.raw, c.post, c.audio) for m in members], axis=0),
         atol=1e-10,
     )
+
+
+def _speechlike_clip(rng: np.random.Generator, name: str):
+    """A 1 s clip of amplitude-modulated harmonics (a voice-like spectrum) with a made-up lip track."""
+    from types import SimpleNamespace
+
+    t = np.arange(16000) / 16000
+    x = sum(np.sin(2 * np.pi * 120 * k * t) / k for k in range(1, 30)) * (0.6 + 0.4 * np.sin(2 * np.pi * 3 * t))
+    x = 0.05 * x + 0.003 * rng.standard_normal(len(t))
+    params = rng.standard_normal((30, 4)) * 0.01
+    return name, SimpleNamespace(samples=x.astype(np.float32), sample_rate_hz=16000, params=params), []
+
+
+@pytest.mark.slow
+def test_vtlp_copies_change_the_voice_not_the_lips():
+    """trace_clips with warp 1 is the plain trace; a warped copy keeps the lips (truth) and the frame count and
+    changes the audio rows the readout reads; vtlp_copies draws one warp per copy and clip, reproducibly."""
+    from assets.modelfile import load_model
+    from training.errors import ConfigError
+    from training.readout import VtlpConfig, trace_clips, vtlp_copies
+
+    model = replace(load_model("default"), readout=None)
+    rng = np.random.default_rng(4)
+    clips = [_speechlike_clip(rng, "a"), _speechlike_clip(rng, "b")]
+    plain = trace_clips(model, clips)
+    same = trace_clips(model, clips, warps=[1.0, 1.0])
+    warped = trace_clips(model, clips, warps=[1.1, 0.9])
+    for p, s, w in zip(plain, same, warped):
+        np.testing.assert_array_equal(s.audio, p.audio)
+        np.testing.assert_array_equal(w.truth, p.truth)
+        assert w.audio.shape == p.audio.shape and not np.allclose(w.audio, p.audio)
+    assert [w.name for w in warped] == ["a-warp1.100", "b-warp0.900"]
+    cfg = VtlpConfig(copies=2, warp_range=(0.88, 1.12), seed=0)
+    copies = vtlp_copies(model, clips, cfg)
+    assert len(copies) == 4 and [c.name for c in copies] == [c.name for c in vtlp_copies(model, clips, cfg)]
+    assert all(0.88 <= float(c.name.rsplit("warp", 1)[1]) <= 1.12 for c in copies)
+    with pytest.raises(ConfigError, match="warps"):
+        trace_clips(model, clips, warps=[1.0])
+    with pytest.raises(ConfigError, match="VTLP"):
+        VtlpConfig(copies=1, warp_range=(0.7, 1.1))
+
+
+def test_readout_command_refuses_a_bad_vtlp_range_before_any_work(tmp_path, capsys):
+    """`facecast readout --vtlp-range` must be LOW,HIGH within the warp's range: refused with a message naming
+    it, before the corpus is read, and no model is written."""
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    with pytest.raises(SystemExit) as exc:
+        main(["readout", "default", "-o", str(out), "--vtlp-range", "1.1"])
+    assert exc.value.code == 2 and "LOW,HIGH" in capsys.readouterr().err
+    rc = main(["readout", "default", "-o", str(out), "--vtlp-range", "0.7,1.1", "--grid-s1", str(tmp_path)])
+    assert rc != 0 and "VTLP" in capsys.readouterr().err and not out.exists()

@@ -149,3 +149,24 @@ def test_morph_head_glb_animates_its_own_targets(builtin_morph):
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(3, -1)
     np.testing.assert_allclose(w, builtin_morph.rig.weights(params), atol=1e-6)
     assert w.min() >= 0 and w.max() <= 1
+
+
+def test_morph_displacements_equal_the_reference_solve_and_a_float64_product(builtin_morph):
+    """The per-frame path a server's vertex viewer costs (one compiled keyframe solve, then a
+    row-vector product over the (P, n_moving*3) targets) against the numpy reference solve and the
+    targets summed in float64, at speech poses from closed to wide open."""
+    from realtime_core.face.checks import EXTREME_POSES
+
+    rig = builtin_morph.rig
+    rng = np.random.default_rng(4)
+    poses = np.vstack([np.asarray(EXTREME_POSES, dtype=np.float64), rng.uniform(-0.1, 0.5, (20, 4))])
+    x = rig.source(poses)
+    ref_w = rig.keymap.weights(x, kernel="numpy")
+    assert 0.1 < np.mean((ref_w <= 0) | (ref_w >= 1)) < 0.95  # bounds active: the active set matters
+    np.testing.assert_allclose(rig.keymap.weights(x), ref_w, rtol=0, atol=1e-10)
+    targets = rig.targets.astype(np.float64)  # (P, n_moving, 3)
+    for p, w in zip(poses, ref_w):
+        want = np.einsum("p,pvc->vc", w.astype(np.float32).astype(np.float64), targets)
+        got = rig.displacements(p)
+        assert got.shape == (len(rig.moving), 3) and got.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-5 * max(np.abs(want).max(), 1e-3))

@@ -16,22 +16,7 @@ from clients.export.rhubarb import SHAPES, ShapeThresholds, cues, frame_shapes, 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.track import Track
 from tests.prerequisites import require_module
-
-
-def _track(n: int = 90, seed: int = 0) -> Track:
-    """n frames of plausible mouth motion (IOD): a syllable-rate open/close with small other units."""
-    rng = np.random.default_rng(seed)
-    k = np.arange(n)
-    p = np.stack(
-        [
-            0.04 * np.sin(k / 7.0),
-            0.10 * np.sin(k / 11.0 + 1),
-            0.22 * (1 - np.cos(k / 4.0)) + 0.002 * rng.standard_normal(n),
-            0.03 * np.cos(k / 5.0),
-        ],
-        axis=1,
-    )
-    return Track(values=p.astype(np.float32))
+from tests.tracks import syllable_track
 
 
 def _accessor(gltf, blob: bytes, index: int) -> np.ndarray:
@@ -73,7 +58,7 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
     parsed = read_tsv(tsv_bytes(tr))
     assert [c.shape for c in parsed] == ["X", "D", "B", "X"]
     assert parsed[-1].start_s == pytest.approx(16 / 30, abs=0.005)
-    real = read_tsv(tsv_bytes(_track()))
+    real = read_tsv(tsv_bytes(syllable_track()))
     assert all(c.shape in SHAPES for c in real) and len(real) >= 4
 
 
@@ -89,7 +74,7 @@ def _synthetic_head(n: int = 60, seed: int = 1):
 def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
     pygltflib = require_module("pygltflib")
     v, tris, targets = _synthetic_head()
-    tr = _track(45)
+    tr = syllable_track(45)
     data = animated_glb(
         vertices=v,
         triangles=tris,
@@ -118,7 +103,9 @@ def test_glb_loads_back_with_pygltflib_morph_targets_and_sampler_values():
 def test_glb_also_loads_in_trimesh():
     trimesh = require_module("trimesh")
     v, tris, targets = _synthetic_head()
-    data = animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=_track(10))
+    data = animated_glb(
+        vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=syllable_track(10)
+    )
     scene = trimesh.load(io.BytesIO(data), file_type="glb", process=False)
     (geom,) = scene.geometry.values()
     np.testing.assert_allclose(geom.vertices, v, rtol=1e-6, atol=1e-6)
@@ -138,7 +125,7 @@ def test_rig_morph_targets_reproduce_the_rig_deformation(builtin_rig_file):
 @pytest.mark.system
 def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin_rig_file):
     pygltflib = require_module("pygltflib")
-    tr = _track(30)
+    tr = syllable_track(30)
     audio = (np.sin(np.arange(16000) / 10).astype(np.float32) * 0.5, 16000)
     files = export_track(tmp_path / "take.glb", tr, head=builtin_rig_file, audio=audio)
     assert [f.name for f in files] == ["take.glb", "take.wav"]
@@ -167,7 +154,7 @@ def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(t
 
     _rig, _mesh = builtin_rig_file
     targets = builtin_arkit_targets()
-    tr = _track(20)
+    tr = syllable_track(20)
     export_track(tmp_path / "a.glb", tr, head=builtin_rig_file, morphs="arkit52", arkit_targets=targets)
     g = pygltflib.GLTF2().load(str(tmp_path / "a.glb"))
     blob = g.binary_blob()

@@ -49,3 +49,40 @@ def test_mfcc_and_cmvn_kernels_equal_the_reference_on_many_frames_at_once():
 def test_unknown_kernel_is_refused():
     with pytest.raises(ConfigError, match="kernel"):
         MfccStream(MfccConfig(), kernel="fortran")
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=16000), cmvn=None, silence_floor_db=None, tc=0),
+        FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=8000, n_ceps=5), tc=1, energy=True),
+        FrontEndConfig(mfcc=MfccConfig(sample_rate_hz=22050), tc=5, silence_floor_db=-30.0),
+    ],
+    ids=["no-cmvn-no-gate-tc0", "8k-tc1-energy", "22k-tc5-gate"],
+)
+@pytest.mark.parametrize("seconds", [0.07, 0.2, 1.5])
+def test_compiled_framing_and_tail_equal_the_reference_with_flush_edges(cfg, seconds):
+    """The compiled framing (pre-emphasis, buffer, window) and the compiled level gate, CMVN and context
+    stacking against the numpy stages, on utterances shorter than the context (every row then comes from
+    the flush, with both edges replicated) and longer, pushed in uneven chunks, twice across a reset."""
+    rng = np.random.default_rng(7)
+    d = cfg.n_feat
+    mean, var = rng.standard_normal(d), rng.uniform(0.5, 2.0, d)
+    rate = int(cfg.mfcc.sample_rate_hz)
+    x = _speechy(rng, 2.0)[: int(seconds * rate)]
+    cuts = np.cumsum(rng.integers(0, 700, 40))
+    cuts = cuts[cuts < x.size]
+    out = {}
+    for kernel in ("numba", "numpy"):
+        fe = FrontEnd(cfg, cmvn_mean=mean, cmvn_var=var, kernel=kernel)
+        runs = []
+        for _ in range(2):
+            runs.append(np.concatenate([*(fe.push(b) for b in np.split(x, cuts)), fe.flush()]))
+            assert fe.frames_out == len(runs[-1])
+            fe.reset()
+        out[kernel] = runs
+    n = cfg.mfcc.n_frames_for(x.size)
+    for a, b in zip(out["numba"], out["numpy"], strict=True):
+        assert a.shape == b.shape == (n, cfg.audio_dim)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-11)
+    np.testing.assert_array_equal(out["numba"][0], out["numba"][1])  # reset forgets everything
