@@ -333,6 +333,47 @@ def _below_path(v: np.ndarray, t: np.ndarray, path: list[int], up: np.ndarray, s
     return c @ up < height
 
 
+CONTACT_FACING = 30.0
+"""Degrees: on closed lips the inner-lip landmark is moved to the nearest vertex (along the mesh) whose
+surface faces within this angle of the face's forward axis: the front edge of the lips' contact, where
+the lip cut starts. A point found on a render lands a little inside the crease between the lips (the
+camera looks along the file's axis, not the face's: Lee Perry-Smith's automatic points sat 0.03 IOD up
+the lower lip's crease wall, whose surface faces 42 degrees up from forward); cut from there, the lower
+lip's inner surface stayed with the upper lip and the rig folded (33 flipped triangles, stretch 8.1). The
+hand-picked vertex (the front of the lower lip where the crease begins, 23 degrees) stays."""
+CONTACT_REACH = 0.1
+"""IOD: how far along the mesh :func:`front_contact` looks for that vertex."""
+
+
+def front_contact(vertices: np.ndarray, triangles: np.ndarray, start: int, forward: np.ndarray, *, reach: float) -> int:
+    """The vertex nearest ``start`` along the mesh (within ``reach``, head units) whose normal lies within
+    CONTACT_FACING degrees of ``forward`` (3,), or ``start`` when none does. Normals are area-weighted
+    over the welded mesh (texture-seam twins count as one vertex) and oriented so the majority of the
+    region faces forward (files wound either way)."""
+    import trimesh
+
+    from realtime_core.face.rig import weld
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    tw = canon[np.asarray(triangles, dtype=np.int64)]
+    adj = vertex_adjacency(len(welded), tw).tocoo()
+    length = np.linalg.norm(welded[adj.row] - welded[adj.col], axis=1) + 1e-12 * reach
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(welded),) * 2)
+    dist = dijkstra(g, indices=int(canon[start]), limit=reach)
+    near = np.flatnonzero(np.isfinite(dist))
+    normals = trimesh.Trimesh(welded, tw, process=False).vertex_normals
+    facing = normals[near] @ (np.asarray(forward, dtype=np.float64) / np.linalg.norm(forward))
+    if facing.sum() < 0:  # wound inwards
+        facing = -facing
+    ok = facing >= np.cos(np.radians(CONTACT_FACING))
+    if not ok.any():
+        return int(start)
+    best = int(near[ok][np.argmin(dist[near[ok]])])
+    if best == canon[start]:
+        return int(start)
+    return int(np.flatnonzero(canon == best)[0])
+
+
 def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
     """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam).
 
@@ -370,14 +411,19 @@ REST_GAP_MAX = 0.01
 """IOD: a head whose inner lips lie farther apart than this at rest (and are not cut open) rests at
 the pose that closes them (:func:`realtime_core.face.rig.with_rest_pose`); the checks' closure limit."""
 
-OPEN_RESPONSE_RANGE = (0.5, 0.95)
+OPEN_RESPONSE_RANGE = (0.5, 2.0)
 """Measured mouth-open responses (inner-lip opening per unit parameter, at the landmarks) the rig
 is rescaled for. Below 0.5 the measure, not the rig, is suspect: automatic inner-lip landmarks on
 Lee Perry-Smith sit 0.02-0.04 IOD off the hand ones (higher and further in, towards the
 inward-curled inner lip surface) and read 0.38 where hand landmarks read 0.74;
 the gain of 2.65 over-opened the jaw (a long face at /a/, 152 flipped triangles against 9 without
 it). The cut seam's central vertex pairs were tried as a steadier measure and read even less (0.44
-hand, 0.002 automatic; the inner surfaces there barely follow the jaw), so they cannot stand in."""
+hand, 0.002 automatic; the inner surfaces there barely follow the jaw), so they cannot stand in.
+Above 1 the smoothing carried the jaw's motion further than asked (automatic Lee Perry-Smith landmarks
+read 1.68: the jaw opened 0.75 IOD at /a/ and the chin crease folded, 33 flipped triangles); the
+rescale (0.59) brings the opening back to the parameter's."""
+OPEN_RESPONSE_TOLERANCE = 0.05
+"""Responses within this of 1 are left as they are (the rescale and second repair would change nothing visible)."""
 
 
 def rig_head(
@@ -437,6 +483,15 @@ def rig_head(
             t = t[~membrane]
             meta["lip_membrane_removed"] = int(membrane.sum())
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
+            # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
+            # contact, where the cut passes (see CONTACT_FACING).
+            front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
+            if front != snap["upper_inner"] or front != snap["lower_inner"]:
+                meta["inner_lip_contact"] = int(front)
+            for k in ("upper_inner", "lower_inner"):
+                snap[k] = front
+                points[k] = np.asarray(v[front], dtype=np.float64)
+            meta["landmarks"] = {k: p.tolist() for k, p in points.items()}
             v, t, uv, origin = cut_mouth(
                 v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
             )
@@ -473,7 +528,8 @@ def rig_head(
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
             r_open = float(head_response(rig, mouth_landmarks(snap))[2, 2])
             rig.meta["open_response"] = round(r_open, 4)
-            if head_calibration and OPEN_RESPONSE_RANGE[0] < r_open < OPEN_RESPONSE_RANGE[1]:
+            in_range = OPEN_RESPONSE_RANGE[0] < r_open < OPEN_RESPONSE_RANGE[1]
+            if head_calibration and in_range and abs(r_open - 1.0) > OPEN_RESPONSE_TOLERANCE:
                 basis = np.array(rig.basis, dtype=np.float64)
                 basis[:, 2] /= r_open
                 rig = repair_rig(

@@ -99,3 +99,22 @@ def test_harmonic_field_opens_creased_lips_cleanly():
     assert ratio.max() < 3.0
     centre = copies[np.argmin(np.abs(v2[copies, 0]) + np.abs(v2[copies, 2]))]
     assert v1[origin[centre], 1] - v1[centre, 1] == pytest.approx(0.15)
+
+
+def test_front_contact_moves_a_point_inside_the_crease_to_the_lips_front_edge():
+    """A landmark found on a render lands inside the crease between closed lips (Lee Perry-Smith's automatic
+    inner-lip points sat up the lower lip's crease wall; the cut from there folded the rig, 33 flipped
+    triangles). front_contact moves it to the front edge of the lower lip where the crease begins, and
+    leaves a point already there (the hand-picked kind) where it is."""
+    from assets.heads.rigging import front_contact
+
+    v, t, _, _, mid = _creased_lips()
+    cols = 17
+    forward = np.array([0.0, 0.0, 1.0])
+    wall = mid + 2 * cols  # row 5: the crease's lower wall, facing up and back
+    edge = mid + 3 * cols  # row 6: where the lower lip's front meets the crease
+    assert v[wall, 2] < -0.01 and abs(v[edge, 2]) < 1e-12
+    assert front_contact(v, t, wall, forward, reach=0.5) == edge
+    assert front_contact(v, t, edge, forward, reach=0.5) == edge
+    # Wound the other way round: the same answer.
+    assert front_contact(v, t[:, ::-1], wall, forward, reach=0.5) == edge

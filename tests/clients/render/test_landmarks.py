@@ -51,5 +51,25 @@ def test_automatic_landmarks_do_not_over_open_the_jaw(shared_data):
     rig, rigged = rig_head(mesh, find_landmarks(mesh), landmark_source="automatic landmarks")
     assert rig.meta.get("open_rescaled", 1.0) <= 1.0 / OPEN_RESPONSE_RANGE[0] + 1e-3, rig.meta
     rep = head_checks(Head(rig, rigged))
-    # 33 and 8.1 measured with the two-surface lip cut (9 and 4.9 before it); 152 and 30.7 with the unbounded rescale.
-    assert rep.flipped_triangles < 40 and rep.max_edge_stretch < 10, rep
+    # 152 flips and stretch 30.7 with the unbounded rescale; 33 and 8.1 with the cut started inside the
+    # crease between the lips (the automatic inner-lip points, before front_contact moved them to its front).
+    assert rep.flipped_triangles == 0 and rep.max_edge_stretch < 5.0, rep
+    assert rep.lip_interpenetration_iod <= 0.005 and rep.closure_gap_iod <= 0.01, rep
+
+
+def test_automatic_inner_lip_points_move_to_the_front_of_the_lips_contact(shared_data):
+    """On Lee Perry-Smith's closed lips the automatic inner-lip points land inside the crease (0.03 IOD up
+    its lower wall); rigging moves both to the one vertex at the crease's front, the hand-picked one."""
+    from assets.heads.rigging import CONTACT_REACH, front_contact, mouth_landmarks, resolve_landmarks
+    from realtime_core.face import face_frame
+
+    lps = shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
+    mesh = load_mesh(lps)
+    v = mesh.vertices
+    ref = json.loads(shipped_landmarks(lps).read_text())["landmarks"]
+    auto = resolve_landmarks(find_landmarks(mesh), v, "automatic")
+    snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in auto.items()}
+    frame = face_frame(v, mouth_landmarks(snap))
+    assert snap["lower_inner"] != ref["lower_inner"]  # the render's point: inside the crease
+    got = front_contact(v, mesh.triangles, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
+    assert got == ref["lower_inner"]
