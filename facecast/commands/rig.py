@@ -38,7 +38,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "derived from the built-in head",
     )
     p.add_argument(
-        "--method", choices=("sec5", "rbf"), default="sec5", help="interpolation: paper 000 Sec. 5 or RBF (paper 001)"
+        "--method",
+        choices=("harmonic", "sec5", "rbf"),
+        default="harmonic",
+        help="deformation: the region paper 000 Sec. 5 moves with a harmonic field inside it (what every other "
+        "command rigs a mesh with), plain Sec. 5 interpolation, or RBF (paper 001)",
     )
     p.add_argument("--projection", choices=("frontal", "uv"), default="frontal", help="2D projection for eq. 8-9")
     p.add_argument("--beta", type=float, default=0.5, help="gain of eq. 10 for vertices outside every triangle")

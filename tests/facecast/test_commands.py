@@ -27,7 +27,13 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     from assets.heads.rigfile import load_rig
 
     rig, _mesh = load_rig(out)
-    assert rig.displacements(np.array([0, 0, 0.1, 0])).any()
+    p = np.array([0.02, -0.05, 0.2, 0.03])
+    assert rig.displacements(p).any()
+    # The rig `facecast rig` writes is the one every other command builds from the same mesh (it once
+    # defaulted to plain Sec. 5 interpolation while render/serve used the harmonic field).
+    from assets.heads.head import resolve_head
+
+    np.testing.assert_allclose(rig.displacements(p), resolve_head(mp).rig.displacements(p), atol=1e-9)
 
 
 def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, capsys):
