@@ -84,6 +84,12 @@ class RunningCmvn:
     def dim(self) -> int:
         return self._mean0.size
 
+    @property
+    def initial_state(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(mean (d,), var (d,), count)`` float64 copies of the warm start a reset returns to: what a
+        fused kernel that keeps the running statistics itself starts from."""
+        return self._mean0.copy(), self._var0.copy(), float(self.config.prior_frames)
+
     def reset(self) -> None:
         self._m = self._mean0.copy()
         self._v = self._var0.copy()

@@ -219,9 +219,9 @@ class _CompiledTail:
     def reset(self) -> None:
         cm = self._cmvn
         d = self.config.n_feat
-        self._m = cm._mean0.copy() if cm is not None else np.zeros(d)
-        self._v = cm._var0.copy() if cm is not None else np.ones(d)
-        self._cst = np.array([cm.config.prior_frames if cm is not None else 1.0])
+        m, v, count = cm.initial_state if cm is not None else (np.zeros(d), np.ones(d), 1.0)
+        self._m, self._v = m, v
+        self._cst = np.array([count])
         self._ring = np.zeros((2 * self.config.tc + 1, d))
         self.cist = np.zeros(2, dtype=np.int64)
         """[frames received, rows released]"""
