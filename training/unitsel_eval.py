@@ -271,5 +271,15 @@ def markdown(
         errs = " | ".join(_pct(e[m]) for m in MEASURES)
         tail = f"{r['units_per_sentence']:.2f} | {r['synth_ms_median']:.0f}" if "units_per_sentence" in r else "- | -"
         lines.append(f"| {r['system']} | {cells} | {r['r_speech_mouth_open']:.3f} | {errs} | {tail} |")
+    if any(r["system"].startswith("text + recording") for r in rows):
+        lines += [
+            "",
+            (
+                "Text + recording rows use the sentence's real audio beyond its phone timings: the audio-driven "
+                "model's output on it mixed into the unit selection output with the weights shown, for the leading "
+                "pause, speech and the trailing pause (`realtime_core.synthesis.recording`, `facecast say --audio`). "
+                "The unit selection rows are text with timings only."
+            ),
+        ]
     lines += ["", f"![Fig. 8 style: lip width, height, protrusion]({figure})", ""]
     return "\n".join(lines)
