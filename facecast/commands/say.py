@@ -16,8 +16,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Speak TEXT with espeak-ng and animate the head with recorded lip motion (seed 001, Ma et al. "
         "2006): the phones and their timings from the synthesiser select the longest matching stretches of a real "
         "talker's recorded motion (GRID s1), warped onto the phone durations and joined smoothly. With --audio, "
-        "the user's own recording of TEXT is force-aligned instead (pocketsphinx, English). The output format "
-        "follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + .wav beside it), "
+        "the user's own recording of TEXT is force-aligned instead (pocketsphinx, English) and the audio-driven "
+        "model's motion on it is mixed in, most before speech where the in-breath is heard but not written. "
+        "The output format follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + "
+        ".wav beside it), "
         ".csv / .json (curves), .tsv (mouth cues), .npz (the full motion: landmark PCA coefficients, the four "
         "parameters and the Motion Unit parameters of paper 002).",
     )
@@ -59,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=1,
         help="average the motion of this many unit sequences from "
         "different recordings, their range restored (1 = the paper's single sequence; 10 follows held-out "
-        "lips best: r 0.902 against 0.848, at about 45 ms of synthesis per sequence; docs/unit_selection.md)",
+        "lips best: r 0.908 against 0.846, at about 15-45 ms of synthesis per sequence; docs/unit_selection.md)",
     )
     from facecast.commands.headopts import add_head_options
 
