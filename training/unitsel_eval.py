@@ -34,6 +34,7 @@ import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.corpus import StoredCorpus
+from realtime_core.synthesis.recording import RecordingBlend
 from realtime_core.synthesis.synthesizer import ENSEMBLE_GAIN, UnitSynthesizer
 from training.facetrack import FaceTrack
 from training.unit_corpus import PhoneRows, phone_rows
@@ -110,13 +111,19 @@ def evaluate(
     model_label: str = "shipped model",
     progress: Callable | None = None,
     leave_one_out: bool = False,
+    recording: RecordingBlend | None = RecordingBlend(),
 ) -> tuple[list[dict], dict]:
     """Scores of unit selection (one row per ``n_best``), the HMM (``model``, skipped if None) and the
     rules on ``tests`` = [(sentence id, real face track, real ARPAbet phones)]. Returns (rows,
     curves) where curves holds the first test sentence's measures for the Fig. 8 plot.
 
     leave_one_out: the sentences are in the corpus (the val split): each is synthesised with its
-    own recording excluded, so no unit of the sentence itself is used."""
+    own recording excluded, so no unit of the sentence itself is used.
+
+    recording: with a ``model``, also score **text + recording** (one row per ``n_best``): the unit
+    selection output with the audio-driven model's output on the same real audio mixed in
+    (:meth:`UnitSynthesizer.with_recording`); None = pure text rows only. These rows use the audio
+    and are labelled so; the pure text rows never do."""
     import time
 
     from realtime_core.phones import PhonemeSegment
@@ -128,6 +135,18 @@ def evaluate(
         SystemScore(f"unit selection, n_best={n}" + (f", range x{ENSEMBLE_GAIN:g}" if n > 1 else "")) for n in n_best
     ]
     rules = SystemScore("articulatory rules (same phones)")
+    blend = recording if model is not None else None
+    mixed = (
+        [
+            SystemScore(
+                f"text + recording: n_best={n}, audio-driven model mixed in (lead {blend.lead:g} / speech "
+                f"{blend.speech:g} / trail {blend.trail:g})"
+            )
+            for n in n_best
+        ]
+        if blend is not None
+        else []
+    )
     hmm = SystemScore(f"audio-driven HMM, {model_label} (real audio)") if model is not None else None
     truth_p, truth_m, speech = [], [], []
     search_ms: dict[int, list[float]] = {n: [] for n in n_best}
@@ -142,19 +161,7 @@ def evaluate(
         speech.append((t >= spoken[0][1]) & (t < spoken[-1][2]) if spoken else np.zeros(n, bool))
         truth_p.append(track.params)
         truth_m.append(real_measures(track))
-        for sys_, nb in zip(systems, n_best):
-            t0 = time.perf_counter()
-            res = synth.synthesize(rows, "arpabet", n_frames=n, n_best=nb, exclude=(sid,) if leave_one_out else ())
-            search_ms[nb].append(1000 * (time.perf_counter() - t0))
-            units[nb].append(res.selection.n_units)
-            sys_.params.append(res.frames[:, k:])
-            sys_.measures.append(unit_measures(stored, res.frames[:, :k], track))
-            if idx == 0:
-                curves[sys_.name] = sys_.measures[-1]
-        segs = [PhonemeSegment(lab, a, b) for lab, a, b in rows]
-        rp = render_params(segs, n, inventory="arpabet")
-        rules.params.append(rp)
-        rules.measures.append(param_measures(rp, track))
+        hp = None
         if hmm is not None:
             from realtime_core.pipeline import speech_to_params
 
@@ -163,6 +170,23 @@ def evaluate(
                 hp = np.concatenate([hp, np.repeat(hp[-1:], n - len(hp), axis=0)])
             hmm.params.append(hp)
             hmm.measures.append(param_measures(hp, track))
+        for j, (sys_, nb) in enumerate(zip(systems, n_best)):
+            t0 = time.perf_counter()
+            res = synth.synthesize(rows, "arpabet", n_frames=n, n_best=nb, exclude=(sid,) if leave_one_out else ())
+            search_ms[nb].append(1000 * (time.perf_counter() - t0))
+            units[nb].append(res.selection.n_units)
+            sys_.params.append(res.frames[:, k:])
+            sys_.measures.append(unit_measures(stored, res.frames[:, :k], track))
+            if idx == 0:
+                curves[sys_.name] = sys_.measures[-1]
+            if blend is not None and hp is not None:
+                both = synth.with_recording(res, hp, blend)
+                mixed[j].params.append(both[:, k:])
+                mixed[j].measures.append(unit_measures(stored, both[:, :k], track))
+        segs = [PhonemeSegment(lab, a, b) for lab, a, b in rows]
+        rp = render_params(segs, n, inventory="arpabet")
+        rules.params.append(rp)
+        rules.measures.append(param_measures(rp, track))
         if idx == 0:
             curves.update({"sentence": sid, "real": truth_m[-1]})
     rows_out = []
@@ -172,7 +196,7 @@ def evaluate(
             "synth_ms_median": float(np.median(search_ms[nb])),
         }
         rows_out.append(sys_.finish(truth_p, truth_m, speech))
-    for other in (hmm, rules):
+    for other in (*mixed, hmm, rules):
         if other is not None:
             rows_out.append(other.finish(truth_p, truth_m, speech))
     return rows_out, curves
@@ -247,5 +271,15 @@ def markdown(
         errs = " | ".join(_pct(e[m]) for m in MEASURES)
         tail = f"{r['units_per_sentence']:.2f} | {r['synth_ms_median']:.0f}" if "units_per_sentence" in r else "- | -"
         lines.append(f"| {r['system']} | {cells} | {r['r_speech_mouth_open']:.3f} | {errs} | {tail} |")
+    if any(r["system"].startswith("text + recording") for r in rows):
+        lines += [
+            "",
+            (
+                "Text + recording rows use the sentence's real audio beyond its phone timings: the audio-driven "
+                "model's output on it mixed into the unit selection output with the weights shown, for the leading "
+                "pause, speech and the trailing pause (`realtime_core.synthesis.recording`, `facecast say --audio`). "
+                "The unit selection rows are text with timings only."
+            ),
+        ]
     lines += ["", f"![Fig. 8 style: lip width, height, protrusion]({figure})", ""]
     return "\n".join(lines)

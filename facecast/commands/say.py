@@ -16,8 +16,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Speak TEXT with espeak-ng and animate the head with recorded lip motion (seed 001, Ma et al. "
         "2006): the phones and their timings from the synthesiser select the longest matching stretches of a real "
         "talker's recorded motion (GRID s1), warped onto the phone durations and joined smoothly. With --audio, "
-        "the user's own recording of TEXT is force-aligned instead (pocketsphinx, English). The output format "
-        "follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + .wav beside it), "
+        "the user's own recording of TEXT is force-aligned instead (pocketsphinx, English) and the audio-driven "
+        "model's motion on it is mixed in, most before speech where the in-breath is heard but not written. "
+        "The output format follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + "
+        ".wav beside it), "
         ".csv / .json (curves), .tsv (mouth cues), .npz (the full motion: landmark PCA coefficients, the four "
         "parameters and the Motion Unit parameters of paper 002).",
     )
@@ -40,6 +42,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="a recording of TEXT to animate instead of synthesised speech (forced alignment; English)",
     )
     p.add_argument(
+        "--audio-blend",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="with --audio: mix the audio-driven model's motion on the recording into the unit-selection motion, "
+        "most in the pause before speech, where the in-breath is heard but not written (text + recording; "
+        "--no-audio-blend: the recording gives only the phone timings; docs/unit_selection.md)",
+    )
+    p.add_argument(
         "--corpus",
         type=Path,
         default=None,
@@ -51,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=1,
         help="average the motion of this many unit sequences from "
         "different recordings, their range restored (1 = the paper's single sequence; 10 follows held-out "
-        "lips best: r 0.902 against 0.848, at about 45 ms of synthesis per sequence; docs/unit_selection.md)",
+        "lips best: r 0.908 against 0.846, at about 15-45 ms of synthesis per sequence; docs/unit_selection.md)",
     )
     from facecast.commands.headopts import add_head_options
 
@@ -173,9 +183,16 @@ def run(args: argparse.Namespace) -> int:
         t = lap("corpus + graph", t)
         n_frames = int(np.ceil(duration_s * 30 - 1e-9))
         res = synth.synthesize(phones, inventory, n_frames=n_frames, n_best=args.n_best)
-    t = lap("unit selection", t)
+        t = lap("unit selection", t)
+        motion = res.frames
+        if args.audio is not None and args.audio_blend:
+            from assets.modelfile import load_model
+            from realtime_core.pipeline import speech_to_params
+
+            motion = synth.with_recording(res, speech_to_params(load_model(None), samples, rate))
+            t = lap("audio-driven blend", t)
     k = stored.corpus.n_coefficients
-    params = res.frames[:, k:]
+    params = motion[:, k:]
     track = Track(values=params)
     head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
     for out in outs:
@@ -204,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
                         config=VideoConfig(fps=30.0, preset=args.preset),
                     )
         elif out.suffix.lower() == ".npz":
-            write_motion(out, res.frames, stored)
+            write_motion(out, motion, stored)
         else:
             export_track(out, track, head=head, audio=(samples, rate))
         t = lap(f"write {out.suffix}", t)
@@ -215,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
         + (f", {sel.n_mismatched} junctions outside the corpus's visemes" if sel.n_mismatched else "")
         + (f", {tgt.substituted} phones shown by a look-alike viseme" if tgt.substituted else "")
         + (f", unknown phones {sorted(set(tgt.unknown))}" if tgt.unknown else "")
+        + (", the recording's audio-driven motion mixed in" if motion is not res.frames else "")
     )
     if args.verbose:
         sent = stored.corpus.phone_sentence()[sel.states]

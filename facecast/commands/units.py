@@ -66,7 +66,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                 choices=("test", "val"),
                 default="test",
                 help="test: the held-out sentences; val: the corpus's val sentences, each with its own "
-                "recording excluded (leave-one-out; where settings are chosen; no HMM row)",
+                "recording excluded (leave-one-out; where settings are chosen)",
+            )
+            q.add_argument(
+                "--recording",
+                default="default",
+                metavar="LEAD,SPEECH,TRAIL|default|none",
+                help="also score text + recording: the audio-driven model's output on the real audio mixed "
+                "into the unit selection output with these weights in the leading pause, speech and the "
+                "trailing pause (default: realtime_core.synthesis.recording.RecordingBlend's; none: pure "
+                "text rows only)",
             )
             q.add_argument("--output", type=Path, default=None, help="write the markdown section here")
             q.add_argument("--figure", type=Path, default=Path("docs/img/unitsel_fig8.png"), help="Fig. 8 PNG")
@@ -114,11 +123,24 @@ def _run_eval(args: argparse.Namespace) -> int:
     from assets import grid
     from assets.files import atomic_write_bytes
     from assets.modelfile import load_model
-    from training.errors import FileProblem
+    from realtime_core.synthesis.recording import RecordingBlend
+    from training.errors import ConfigError, FileProblem
     from training.unit_corpus import is_extracted, phone_rows
     from training.unitsel_eval import evaluate, fig8, markdown
     from training.video import load_face_track
 
+    if args.recording == "none":
+        recording = None
+    elif args.recording == "default":
+        recording = RecordingBlend()
+    else:
+        try:
+            lead, speech, trail = (float(x) for x in args.recording.split(","))
+        except ValueError:
+            raise ConfigError(
+                f"--recording: expected LEAD,SPEECH,TRAIL weights, default or none, got {args.recording!r}"
+            ) from None
+        recording = RecordingBlend(lead=lead, speech=speech, trail=trail)
     (stored, _), root, phones = _corpus(args)
     tests = []
     for s in grid.sentences(root, split=args.split):
@@ -135,11 +157,12 @@ def _run_eval(args: argparse.Namespace) -> int:
         rows, curves = evaluate(
             stored,
             tests,
-            model=load_model(args.model) if args.split == "test" else None,
+            model=load_model(args.model),
             n_best=n_best,
             progress=tqdm,
             leave_one_out=args.split == "val",
             model_label=str(args.model) if args.model else "shipped default model",
+            recording=recording,
         )
     print(json.dumps(rows, indent=1))
     fig = fig8(curves, args.figure)

@@ -7,5 +7,6 @@ Modules (sans-I/O, numpy in, numpy out):
     search       the phonetic transition graph and the Viterbi unit search (Sec. 3.7)
     concat       time warping of units to target durations and junction smoothing (Sec. 3.8)
     synthesizer  phones with timings -> 30 fps motion, the three above in one call
+    recording    text + recording: the audio-driven model's motion mixed in (pauses most)
     text         text cleaning, checks and sentence chunks
 """

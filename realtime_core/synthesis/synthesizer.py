@@ -18,6 +18,12 @@ import numpy as np
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.concat import concatenate
 from realtime_core.synthesis.corpus import FPS, MotionCorpus
+from realtime_core.synthesis.recording import (
+    RecordingBlend,
+    blend_recording,
+    param_to_coefficient_map,
+    region_weights,
+)
 from realtime_core.synthesis.search import (
     NoPathError,
     SearchConfig,
@@ -158,6 +164,7 @@ class UnitSynthesizer:
             raise ConfigError(f"rest must be ({corpus.n_dims},) like a corpus frame, got {self.rest.shape}")
         self.available = corpus.visemes_present()
         self._sentence = corpus.phone_sentence()
+        self._coefficient_map: np.ndarray | None = None  # fitted on first use (text + recording only)
 
     def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
         return make_target(phones, inventory, self.available)
@@ -223,3 +230,16 @@ class UnitSynthesizer:
         if len(sels) > 1 and ensemble_gain != 1.0:
             frames = self.rest + ensemble_gain * (frames - self.rest)
         return UnitSynthesis(frames=frames, target=target, selection=sels[0], alternatives=tuple(sels[1:]))
+
+    def with_recording(
+        self, result: UnitSynthesis, audio_params: np.ndarray, config: RecordingBlend = RecordingBlend()
+    ) -> np.ndarray:
+        """Text + recording: ``result.frames`` (n, K + 4) with the audio-driven model's parameters
+        ``audio_params`` (m, 4) at 30 fps from the same recording mixed in, most in the leading pause
+        (:mod:`realtime_core.synthesis.recording`). Only for phones aligned on a real recording
+        (the in-breath before speech is in the audio, not in the text)."""
+        if self._coefficient_map is None:
+            self._coefficient_map = param_to_coefficient_map(self.corpus)
+        tgt = result.target
+        w = region_weights(tgt.visemes, tgt.starts_s, tgt.ends_s, len(result.frames), config)
+        return blend_recording(result.frames, audio_params, w, self._coefficient_map)

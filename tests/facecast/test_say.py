@@ -156,6 +156,18 @@ def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
     )
     n = len(out.read_text().splitlines()) - 1
     assert n == int(np.ceil(len(samples) / rate * 30 - 1e-9))
+    # text + recording (the default with --audio) lies between the text-only motion and the
+    # audio-driven model's output on the same recording, and moved towards the latter
+    text_only = tmp_path / "text_only.csv"
+    args = ["say", stem.with_suffix(".txt").read_text(), "--audio", str(stem.with_suffix(".wav"))]
+    assert main([*args, "--no-audio-blend", "--corpus", str(corpus_file), "-o", str(text_only)]) == 0
+    from assets.modelfile import load_model
+    from realtime_core.pipeline import speech_to_params
+
+    audio = np.asarray(speech_to_params(load_model(None), samples, rate))[:n]
+    both, text = (np.loadtxt(f, delimiter=",", skiprows=1)[: len(audio), 1:] for f in (out, text_only))
+    assert np.all((both - text) * (audio - both) >= -1e-6)
+    assert np.mean(np.abs(both - audio)) < 0.9 * np.mean(np.abs(text - audio))
     # a transcript the aligner cannot use is a clear error naming the problem, not a crash
     capsys.readouterr()
     assert (

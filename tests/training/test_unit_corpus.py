@@ -67,3 +67,34 @@ def test_leave_one_out_evaluation_never_uses_the_sentence_itself(stored_corpus, 
     # in the corpus, each sentence selects itself and reproduces its own lips; left out, it cannot
     assert inside["r"]["mouth_open"] > 0.999
     assert loo["r"]["mouth_open"] < 0.99
+
+
+@pytest.mark.slow  # runs the audio-driven model six times
+def test_text_and_recording_rows_span_the_text_rows_and_the_audio_driven_model(stored_corpus, corpus_rows):
+    """The text + recording rows are the pure text rows at weight 0 and the audio-driven model's
+    row at weight 1; the pure text rows do not depend on whether a model is given."""
+    import dataclasses
+
+    from assets.modelfile import load_model
+    from realtime_core.synthesis.recording import RecordingBlend
+    from realtime_core.synthesis.synthesizer import UnitSynthesizer
+    from training.unitsel_eval import evaluate
+
+    rng = np.random.default_rng(3)
+    tests = [  # audible noise in place of the synthetic tracks' silence, so the model's output moves
+        (sid, dataclasses.replace(track, samples=rng.normal(0, 0.1, track.samples.shape).astype(np.float32)), ph)
+        for sid, track, ph in corpus_rows[:3]
+    ]
+    synth = UnitSynthesizer(stored_corpus.corpus, rest=stored_corpus.rest_frame())
+    model = load_model(None)
+    rows = {}
+    for w in (0.0, 1.0):
+        blend = RecordingBlend(lead=w, speech=w, trail=w, ramp_s=0.0)
+        out = evaluate(stored_corpus, tests, model=model, n_best=(1,), synthesizer=synth, recording=blend)[0]
+        rows[w] = {r["system"].split(",")[0].split(":")[0]: r for r in out}
+    text_only = evaluate(stored_corpus, tests, n_best=(1,), synthesizer=synth)[0][0]
+    systems = {"unit selection", "text + recording", "audio-driven HMM", "articulatory rules (same phones)"}
+    assert set(rows[0.0]) == systems
+    assert rows[0.0]["unit selection"]["r"] == rows[1.0]["unit selection"]["r"] == text_only["r"]
+    assert rows[0.0]["text + recording"]["r"] == pytest.approx(text_only["r"], abs=1e-9)
+    assert rows[1.0]["text + recording"]["r"] == pytest.approx(rows[1.0]["audio-driven HMM"]["r"], abs=1e-9)
