@@ -280,12 +280,14 @@ def _lower_faces(
     units, of the path's interior and between its ends: the region where the cut may run).
 
     Each path edge has one face on either side; the one whose third vertex is lower (along ``up``)
-    seeds the lower side, the other the upper side. Every near face joins the side whose seeds are
+    seeds the lower side, the other the upper side (and stays there). Every near face joins the side whose seeds are
     nearer through the faces (centroid to centroid, never across a path edge; the lower lip's by
     CREASE_TO_LOWER of the reach): a geodesic Voronoi split. In front the path separates the lips;
     where they meet in a crease whose walls run back into the head (up behind the upper lip, down
     behind the lower) the split falls inside the crease, near the upper wall. A face's height alone
-    is no guide there (an upper lip's tubercle hangs below the contact line at the midline)."""
+    is no guide there (an upper lip's tubercle hangs below the contact line at the midline). Round
+    each path vertex, the faces between two path edges whose seeds on one side agree join them, so
+    every interior path vertex has faces on both sides (it is split)."""
     s_p = (v[path] - v[path[0]]) @ side_ax
     s = (v[t].mean(axis=1) - v[path[0]]) @ side_ax
     dist = dijkstra(graph, indices=np.asarray(path[1:-1]), min_only=True, limit=reach)
@@ -319,8 +321,43 @@ def _lower_faces(
         return lower, near
     d_lo = dijkstra(dual, indices=seeds_lo, min_only=True)
     d_up = dijkstra(dual, indices=seeds_up, min_only=True)
-    lower[idx] = d_lo < d_up + CREASE_TO_LOWER * reach
+    side = d_lo < d_up + CREASE_TO_LOWER * reach
+    # A path edge's upper seed stays upper even within the lower seeds' reach: where the height test
+    # turns round along the path (the path crossing the crease), the reach swallowed both sides of
+    # a path vertex and left it unsplit, tying the lips together there (Lee Perry-Smith's meshopt
+    # file: 6 such vertices, its 5 flipped triangles beside them).
+    side[np.setdiff1d(seeds_up, seeds_lo)] = False
+    lower[idx] = side
+    # The faces round a path vertex between two path edges whose seeds on that side agree go with
+    # them (a face between two upper seeds left to the lower lip made a sawtooth fan: stretch 4.1).
+    for fan in _path_fans(t, path):
+        if near[fan].all() and lower[fan[0]] == lower[fan[-1]]:
+            lower[fan] = lower[fan[0]]
     return lower, near
+
+
+def _path_fans(t: np.ndarray, path: list[int]) -> list[np.ndarray]:
+    """The faces around each interior vertex of ``path``, in two fans: those turning from the edge to
+    the next path vertex round to the edge to the previous one, and the rest (face indices, each fan
+    in order, its first and last faces on the path's edges). A vertex whose faces do not close
+    round it in one cycle (the mesh's border, a non-manifold vertex) gives none."""
+    out = []
+    for i in range(1, len(path) - 1):
+        p, prev, nxt = path[i], path[i - 1], path[i + 1]
+        inc = np.flatnonzero((t == p).any(axis=1))
+        step: dict[int, tuple[int, int]] = {}  # rim vertex -> (next rim vertex, face), in winding order
+        for face in inc:
+            k = int(np.flatnonzero(t[face] == p)[0])
+            step[int(t[face, (k + 1) % 3])] = (int(t[face, (k + 2) % 3]), int(face))
+        for start, stop in ((nxt, prev), (prev, nxt)):
+            fan: list[int] = []
+            cur = start
+            while cur != stop and cur in step and len(fan) <= len(inc):
+                cur, f = step[cur]
+                fan.append(f)
+            if cur == stop:
+                out.append(np.asarray(fan, dtype=np.int64))
+    return out
 
 
 def _below_path(v: np.ndarray, t: np.ndarray, path: list[int], up: np.ndarray, side_ax: np.ndarray) -> np.ndarray:

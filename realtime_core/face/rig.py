@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 16
+RIG_ALGORITHM = 17
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -316,6 +316,11 @@ SEAM_REACH = 0.5
 behind the lips roll with their lip over this distance, see :func:`_seam_rows`)."""
 SEAM_CLEAR = 0.05
 """IOD: control points this close (along the mesh) to a cut lip seam are left to the seam's own rows."""
+SEAM_TAPER = 0.1
+"""IOD: within this distance (frontal plane) of the cut's ends (the mouth corners) a seam vertex's row
+blends linearly into the corner row (both lips' simple vertices), so the cut opens gradually from the
+corner (Lee Perry-Smith, hand-picked landmarks: its last flipped triangle, a sliver beside the left corner
+at 0.42 IOD, went, with 0.05 as with 0.1; the meshopt file's stretch 4.14 -> 4.12 / 4.09)."""
 
 
 def _seam_rows(
@@ -338,7 +343,8 @@ def _seam_rows(
     vertex of the upper side (``seam_pairs[:, 0]``, welded indices) follows the simple model's upper
     lip where it lies (inverse-square weights of the ``neighbours`` nearest simple vertices that do
     not open with the jaw, in the frontal plane), every vertex of the lower side the lower lip's
-    (simple vertices that are not still); at the corners both sides reach the same corner vertices.
+    (simple vertices that are not still); at the corners both sides reach the same corner vertices,
+    and within SEAM_TAPER IOD of them a side's row blends into that corner row.
     Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
     within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
     from scipy.sparse.csgraph import dijkstra
@@ -359,22 +365,30 @@ def _seam_rows(
     ends = np.flatnonzero((adj @ on_up > 0) & (adj @ on_lo > 0) & ~on_up & ~on_lo)
     rows, cols, vals, verts = [], [], [], []
     base = 0
+    # Near the cut's ends a side's row blends into the corner row (both lips'), so the two sides
+    # part gradually towards the corner instead of at full opening right beside it.
+    taper = SEAM_TAPER * frame.iod
+    end_d = cKDTree(q[ends]).query(q)[0] if len(ends) and taper > 0 else np.full(len(h), np.inf)
     for side, cand in (
         (seam_pairs[:, 0], ~lower_lip),
         (seam_pairs[:, 1], ~upper_lip),
         (ends, np.ones(n_s, dtype=bool)),
     ):
-        ids = np.flatnonzero(cand)
-        k = min(neighbours, len(ids))
-        if not len(side) or not k:
+        if not len(side) or not cand.any():
             continue
-        d, j = cKDTree(qs[ids]).query(q[side], k=k)
-        d, j = d.reshape(len(side), k), j.reshape(len(side), k)
-        w = 1.0 / np.maximum(d, 1e-6 * frame.iod) ** 2
-        w /= w.sum(axis=1, keepdims=True)
-        rows.append(np.repeat(np.arange(len(side)) + base, k))
-        cols.append(ids[j].ravel())
-        vals.append(w.ravel())
+        blend = np.clip(1.0 - end_d[side] / max(taper, 1e-300), 0.0, 1.0)
+        for ids, share in ((np.flatnonzero(cand), 1.0 - blend), (np.arange(n_s), blend)):
+            k = min(neighbours, len(ids))
+            keep = share > 0
+            if not k or not keep.any():
+                continue
+            d, j = cKDTree(qs[ids]).query(q[side[keep]], k=k)
+            d, j = d.reshape(-1, k), j.reshape(-1, k)
+            w = 1.0 / np.maximum(d, 1e-6 * frame.iod) ** 2
+            w *= (share[keep] / w.sum(axis=1))[:, None]
+            rows.append(np.repeat(np.flatnonzero(keep) + base, k))
+            cols.append(ids[j].ravel())
+            vals.append(w.ravel())
         verts.append(np.asarray(side, dtype=np.int64))
         base += len(side)
     pin = np.concatenate(verts)

@@ -118,3 +118,37 @@ def test_front_contact_moves_a_point_inside_the_crease_to_the_lips_front_edge():
     assert front_contact(v, t, edge, forward, reach=0.5) == edge
     # Wound the other way round: the same answer.
     assert front_contact(v, t[:, ::-1], wall, forward, reach=0.5) == edge
+
+
+def test_every_interior_vertex_of_the_cut_path_is_split():
+    """Where the per-edge height test contradicts itself along the path (on Lee Perry-Smith's crease it
+    did for 22-48% of the path's edges), a path vertex must still be split: left whole on one lip it
+    tied the lips together there, and the rig folded around it (meshopt's 5 flipped triangles sat at
+    its 6 unsplit path vertices). A flat strip whose path is the middle row; over x in [0.2, 0.3] the
+    rows beside the path are swapped in height, so the faces above the path there have the lower
+    third vertex. The lower lip's seeds reach further (CREASE_TO_LOWER: here 0.15, 3 columns), so
+    before they swallowed the upper seeds on both sides of the path from x = 0.1 to 0.35."""
+    xs = np.linspace(-1.0, 1.0, 41)
+    ys = [0.5, 0.25, 0.05, 0.0, -0.05, -0.25, -0.5]
+    v = []
+    for y in ys:
+        for x in xs:
+            swapped = 0.2 <= x <= 0.3 and abs(y) == 0.05
+            v.append([x, -1.5 * y if swapped else y, 0.0])
+    v = np.array(v)
+    cols = len(xs)
+    t = []
+    for j in range(len(ys) - 1):
+        for i in range(cols - 1):
+            a = j * cols + i
+            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
+    t = np.array(t)
+    left, right = 3 * cols, 4 * cols - 1
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]))
+    split = set(origin[len(v) :].tolist())
+    interior = range(left + 1, right)
+    assert not [int(p) for p in interior if p not in split]
+    # Each copy is used only by faces that no longer use its original (the two sides really part).
+    for c in range(len(v), len(v2)):
+        faces_c = (t2 == c).any(axis=1)
+        assert faces_c.any() and not (faces_c & (t2 == origin[c]).any(axis=1)).any()
