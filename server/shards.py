@@ -413,6 +413,7 @@ async def _request_line(sock: socket.socket, timeout: float) -> bytes | None:
     within ``timeout`` s and MAX_REQUEST_LINE bytes, or the peer hangs up."""
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
+    poll_s = 0.001
     while True:
         try:
             data = sock.recv(MAX_REQUEST_LINE, socket.MSG_PEEK)
@@ -441,8 +442,10 @@ async def _request_line(sock: socket.socket, timeout: float) -> bytes | None:
                 return None
             finally:
                 loop.remove_reader(sock.fileno())
-        else:  # part of a line: readable stays true until it is consumed, so poll
-            await asyncio.sleep(min(0.002, remaining))
+        else:  # part of a line: readable stays true until it is consumed, so poll, backing off
+            # (a client trickling its request line costs the front a few wake-ups a second, not a busy loop)
+            await asyncio.sleep(min(poll_s, remaining))
+            poll_s = min(2 * poll_s, 0.1)
 
 
 def _set_once(fut: asyncio.Future[None]) -> None:

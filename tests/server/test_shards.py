@@ -8,6 +8,7 @@ import asyncio
 import json
 import os
 import signal
+import socket
 
 import numpy as np
 import pytest
@@ -202,3 +203,41 @@ def test_shutdown_flushes_worker_sessions_and_says_going_away(model):
     assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
     idx = [m.index for m in got.frames]
     assert idx == list(range(len(idx))) and 20 <= len(idx) < 90
+
+
+def test_request_line_is_peeked_whole_or_not_at_all():
+    """The front reads a new connection's request line without consuming it: whole when it comes in
+    pieces, None when the peer hangs up first, is too long or too slow."""
+    from server.shards import MAX_REQUEST_LINE, _request_line
+
+    async def main():
+        out = []
+        for pieces, timeout in (
+            ([b"GET /view?ses", b"sion=a HTTP/1.1\r\nHost: x\r\n\r\n"], 5.0),
+            ([b"GET /ingest HTTP/1.1"], 0.3),  # never finished
+            ([b"G" * (MAX_REQUEST_LINE + 10)], 5.0),
+            ([], 5.0),  # hangs up
+        ):
+            a, b = socket.socketpair()
+            a.setblocking(False)
+            b.setblocking(False)
+
+            async def send(b=b, pieces=pieces):
+                for p in pieces:
+                    b.sendall(p)
+                    await asyncio.sleep(0.05)
+                if not pieces:
+                    b.close()
+
+            sender = asyncio.ensure_future(send())
+            line = await _request_line(a, timeout)
+            await sender
+            rest = a.recv(1 << 16) if line is not None else b""
+            out.append((line, rest))
+            a.close()
+            b.close()
+        return out
+
+    (line, rest), (slow, _), (long, _), (gone, _) = asyncio.run(main())
+    assert line == b"GET /view?session=a HTTP/1.1" and rest.startswith(line + b"\r\nHost: x")  # not consumed
+    assert slow is None and long is None and gone is None
