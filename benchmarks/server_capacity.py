@@ -227,9 +227,12 @@ def _step(
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
     # later) to the ingest's report (all sessions ended).
     clients.wait_viewers()
-    cpu0, tree0, t0 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
+    by0, t0 = server.cpu_by_process(), time.monotonic()
     sent = clients.ingest_result(timeout=seconds + 300)["sent"]
-    cpu1, tree1, t1 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
+    by1, t1 = server.cpu_by_process(), time.monotonic()
+    pid = server.proc.pid
+    cpu0, cpu1, tree0, tree1 = by0.get(pid, 0.0), by1.get(pid, 0.0), sum(by0.values()), sum(by1.values())
+    children = sorted((by1[p] - by0.get(p, 0.0) for p in by1 if p != pid), reverse=True)
     got = {"viewers": clients.viewer_result()}
     url = server.url
     view_urls = view_urls or [url]
@@ -283,6 +286,8 @@ def _step(
         # the whole server (its compute workers included), and its event loop's process alone
         "server_cpu_cores": round((tree1 - tree0) / (t1 - t0), 3),
         "loop_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        # each child process's share, busiest first (the workers; multiprocessing's resource tracker ~0)
+        "worker_cpu_cores": [round(c / (t1 - t0), 3) for c in children],
         # CPU seconds per second of the sessions' audio: what the step's work costs at real time,
         # even when a server short of CPU (a busy machine) took longer than real time to do it
         "server_cpu_per_audio_s": round((tree1 - tree0) / seconds, 4),
@@ -446,6 +451,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
                         ],
                         "server_cpu_cores": r["server_cpu_cores"],
                         "loop_cpu_cores": r["loop_cpu_cores"],
+                        "worker_cpu_cores": r["worker_cpu_cores"],
                         "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                         "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"],
                         "lost": r["frames_lost"],
