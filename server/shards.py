@@ -60,6 +60,7 @@ from typing import TYPE_CHECKING, Any
 
 from server.errors import ServerError
 from server.workers import model_file_bytes
+from wire import protocol as P
 
 if TYPE_CHECKING:
     from websockets.asyncio.server import ServerConnection
@@ -463,8 +464,12 @@ class FrontRegistry:
         self.link = link
 
     async def claim(self, name: str, *, batch: bool) -> tuple[int, str] | None:
-        """None if the name is now this worker's; else the (close code, reason) to refuse with."""
-        refused = await self.link.request({"op": "claim", "name": name, "batch": batch})
+        """None if the name is now this worker's; else the (close code, reason) to refuse with (1013
+        when the front does not answer within ASK_TIMEOUT_S or is gone)."""
+        try:
+            refused = await self.link.request({"op": "claim", "name": name, "batch": batch}, timeout=ASK_TIMEOUT_S)
+        except (ServerError, TimeoutError):
+            return P.CLOSE_TRY_LATER, "the server cannot register a session now"
         return None if refused is None else (int(refused[0]), str(refused[1]))
 
     def release(self, name: str) -> None:
