@@ -55,8 +55,9 @@ class CapacityConfig:
     cost_model: first measure the server CPU of a session, a parameter viewer and a vertex viewer
     separately and project the goal load from them, on a base of ``cost_sessions`` sessions (the
     per-session cost falls as the loop gets busier: fixed costs of each wake-up are shared by more
-    messages, so a larger base is closer to the goal's load); workers: the server's compute processes
-    (ServerConfig.workers; the CPU figures are then the event loop's process only)."""
+    messages, so a larger base is closer to the goal's load); workers / worker_mode: the server's worker
+    processes (ServerConfig.workers, .worker_mode; ``server_cpu`` counts them, ``loop_cpu`` is the
+    listening process alone)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     seconds: float = 6.0
@@ -65,6 +66,7 @@ class CapacityConfig:
     cost_model: bool = True
     cost_sessions: int = 10
     workers: int = 0
+    worker_mode: str = "compute"
 
 
 def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, stop=None) -> None:
@@ -225,9 +227,12 @@ def _step(
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
     # later) to the ingest's report (all sessions ended).
     clients.wait_viewers()
-    cpu0, tree0, t0 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
+    by0, t0 = server.cpu_by_process(), time.monotonic()
     sent = clients.ingest_result(timeout=seconds + 300)["sent"]
-    cpu1, tree1, t1 = server.cpu_seconds(), server.cpu_seconds(tree=True), time.monotonic()
+    by1, t1 = server.cpu_by_process(), time.monotonic()
+    pid = server.proc.pid
+    cpu0, cpu1, tree0, tree1 = by0.get(pid, 0.0), by1.get(pid, 0.0), sum(by0.values()), sum(by1.values())
+    children = sorted((by1[p] - by0.get(p, 0.0) for p in by1 if p != pid), reverse=True)
     got = {"viewers": clients.viewer_result()}
     url = server.url
     view_urls = view_urls or [url]
@@ -274,19 +279,25 @@ def _step(
     from urllib.request import urlopen
 
     with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
-        timings = json.loads(r.read())["timings_ms"]
+        metrics = json.loads(r.read())
+    timings = metrics["timings_ms"]
+    keys = ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
     return {
         # the whole server (its compute workers included), and its event loop's process alone
         "server_cpu_cores": round((tree1 - tree0) / (t1 - t0), 3),
         "loop_cpu_cores": round((cpu1 - cpu0) / (t1 - t0), 3),
+        # each child process's share, busiest first (the workers; multiprocessing's resource tracker ~0)
+        "worker_cpu_cores": [round(c / (t1 - t0), 3) for c in children],
         # CPU seconds per second of the sessions' audio: what the step's work costs at real time,
         # even when a server short of CPU (a busy machine) took longer than real time to do it
         "server_cpu_per_audio_s": round((tree1 - tree0) / seconds, 4),
         "loop_cpu_per_audio_s": round((cpu1 - cpu0) / seconds, 4),
         "wall_s": round(t1 - t0, 2),
-        "server_timings_ms": {
-            k: timings[k] for k in ("loop_lag", "push_per_frame", "fanout", "encode_deltas") if k in timings
-        },
+        "server_timings_ms": {k: timings[k] for k in keys if k in timings},
+        # connection workers (worker_mode "connections"): each one's own loop
+        "worker_timings_ms": [{k: w["timings_ms"][k] for k in keys if k in w["timings_ms"]} for w in metrics["workers"]]
+        if "workers" in metrics
+        else None,
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -413,7 +424,10 @@ def run_cluster_benchmark(cfg: CapacityConfig) -> dict:
 def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     model, model_path, model_desc = benchmark_model(cfg.model)
     # Benchmark clients are trusted: no per-client connection rate (they open hundreds at once).
-    toml = f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\nconnect_rate_per_s = 0\n"
+    toml = (
+        f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
+        f'worker_mode = "{cfg.worker_mode}"\nconnect_rate_per_s = 0\n'
+    )
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
     load_before = os.getloadavg()
@@ -432,8 +446,12 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
                         "pass": r["pass"],
                         "pass_every_viewer": r["pass_every_viewer"],
                         "loop_lag_p99_ms": r["server_timings_ms"].get("loop_lag", {}).get("p99_ms"),
+                        "worker_loop_lag_p99_ms": [
+                            w.get("loop_lag", {}).get("p99_ms") for w in r["worker_timings_ms"] or []
+                        ],
                         "server_cpu_cores": r["server_cpu_cores"],
                         "loop_cpu_cores": r["loop_cpu_cores"],
+                        "worker_cpu_cores": r["worker_cpu_cores"],
                         "all_p99_ms": r["all_viewers_p99_delivery_ms"],
                         "worst_viewer_p99_ms": r["worst_viewer_p99_delivery_ms"],
                         "lost": r["frames_lost"],
@@ -462,6 +480,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         else {k: best_strict[k] for k in ("sessions", "param_viewers", "vertex_viewers")},
         "seconds_per_step": cfg.seconds,
         "server_workers": cfg.workers,
+        "server_worker_mode": cfg.worker_mode,
         "cost_model": cost,
         "machine": {
             "cpus": os.cpu_count(),
@@ -484,7 +503,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--model", type=Path, default=None, help="model file (default: shipped, else paper-size random)")
     ap.add_argument("--no-head", action="store_true", help="no vertex viewers")
-    ap.add_argument("--workers", type=int, default=0, help="server compute processes (0: per-frame work on the loop)")
+    ap.add_argument("--workers", type=int, default=0, help="server worker processes (0: everything on one loop)")
+    ap.add_argument(
+        "--worker-mode",
+        choices=("compute", "connections"),
+        default="compute",
+        help="compute: workers run the model, sockets stay on the front; connections: whole sessions, sockets too",
+    )
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     ap.add_argument("--cost-sessions", type=int, default=10, help="sessions the cost model's three loads share")
     ap.add_argument(
@@ -516,6 +541,7 @@ def main(argv: list[str] | None = None) -> int:
             cost_model=not args.no_cost_model,
             cost_sessions=args.cost_sessions,
             workers=args.workers,
+            worker_mode=args.worker_mode,
         )
     )
     print(json.dumps(result, indent=2))

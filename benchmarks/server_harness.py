@@ -82,9 +82,9 @@ class ServerProcess:
         for line in pipe:
             self.log_tail.append(line)
 
-    def cpu_seconds(self, *, tree: bool = False) -> float:
-        """User + system CPU time the server process has used so far (s), from /proc; ``tree``: its
-        live child processes' too (the compute workers of ``--workers``)."""
+    def cpu_by_process(self, *, tree: bool = True) -> dict[int, float]:
+        """{pid: user + system CPU seconds so far, from /proc} of the server process and, with ``tree``,
+        its live descendants (the workers of ``--workers``)."""
         import os
 
         pids = [self.proc.pid]
@@ -95,12 +95,12 @@ class ServerProcess:
                     for task in Path(f"/proc/{pids[i]}/task").iterdir():
                         pids += [int(c) for c in (task / "children").read_text().split()]
                 i += 1
-        total = 0
+        out = {}
         for pid in pids:
             with contextlib.suppress(OSError):  # a child that just exited
                 fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-                total += int(fields[11]) + int(fields[12])
-        return total / os.sysconf("SC_CLK_TCK")
+                out[pid] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        return out
 
     def stop(self) -> int:
         if self.proc.poll() is None:

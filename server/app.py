@@ -34,7 +34,7 @@ import signal
 import socket
 import time
 import urllib.parse
-from collections.abc import AsyncIterator, Coroutine
+from collections.abc import AsyncIterator, Callable, Coroutine
 from http import HTTPStatus
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -43,7 +43,9 @@ import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed, WebSocketException
+from websockets.frames import DATA_OPCODES, Frame, Opcode
 from websockets.http11 import Request, Response
+from websockets.protocol import Event
 
 from assets.heads.head import Head
 from realtime_core.mapping import SpeechModel
@@ -70,6 +72,7 @@ from server.guard import (
 from server.http import HttpReply, HttpRouter
 from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
 from server.session import Session, SessionConfig, warm_up
+from server.shards import ConnectionWorkers, FrontRegistry
 from server.timing import GcPauses, StageTimes, freeze_heap
 from server.workers import WorkerPool
 from wire import protocol as P
@@ -111,6 +114,8 @@ class FacecastServer:
         self.started = time.time()
         self.stopping = False
         self.pool: WorkerPool | None = None
+        self.shards: ConnectionWorkers | None = None  # worker_mode "connections": this is the front
+        self.registry: FrontRegistry | None = None  # set in a connection worker: names are claimed at the front
         self.cluster: Cluster | None = None
         self.text_backend: TextBackend | None = None  # enables /text (set by `facecast serve --text`)
         self.http = HttpRouter(
@@ -126,20 +131,30 @@ class FacecastServer:
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
-    async def start(self) -> None:
-        """Bind and start accepting connections (port 0 picks a free port: see :attr:`port`)."""
+    async def start(self, *, listen: bool = True) -> None:
+        """Bind and start accepting connections (port 0 picks a free port: see :attr:`port`).
+        listen=False: no listener; connections come through :meth:`adopt` (a connection worker)."""
         cfg = self.config
+        if cfg.workers and cfg.worker_mode == "connections":
+            self.shards = ConnectionWorkers(self, cfg.workers)
+        where: dict[str, Any] = {"host": cfg.host, "port": cfg.port}
+        if not listen:
+            # websockets answers 503 unless its server is serving: it serves on a Unix socket of no name
+            # (Linux gives it an abstract address; nobody is told it), the connections come by adopt().
+            hidden = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            hidden.bind("")  # an empty name: Linux picks an abstract one
+            where = {"sock": hidden}
         try:
             self._server = await serve(
                 self._handle,
-                cfg.host,
-                cfg.port,
                 compression=None,  # permessage-deflate would cost ~20x the CPU of a frame
                 max_size=cfg.max_message_bytes,
                 close_timeout=cfg.close_timeout_s,
                 open_timeout=cfg.handshake_timeout_s,
                 process_request=self._process_request,
                 server_header="facecast",
+                create_connection=_connection_class(self.shards),
+                **where,
             )
         except OSError as exc:
             raise ServerError(f"cannot listen on {cfg.host}:{cfg.port}: {exc.strerror or exc}") from None
@@ -166,7 +181,15 @@ class FacecastServer:
                 raise
         # Compiled per-frame kernels load (or compile) on first call: here, not in the first session.
         await asyncio.to_thread(warm_up, self.model, self.head.rig if self.head else None)
-        if cfg.workers:
+        if self.shards is not None:
+            try:
+                await self.shards.start()
+            except ServerError:
+                await self.shards.stop()
+                self._server.close()
+                await self._server.wait_closed()
+                raise
+        elif cfg.workers:
             self.pool = WorkerPool(self.model, cfg.workers, rig=self.head.rig if self.head else None)
             await self.pool.start()
         self._gc_pauses = GcPauses(self.times)
@@ -186,6 +209,16 @@ class FacecastServer:
             self.times.add("loop_lag", lag)
             self.times.add("loop_lag_cpu", min(lag, time.thread_time() - cpu))
 
+    async def adopt(self, sock: socket.socket) -> None:
+        """Serve a connection accepted elsewhere (the front of connection workers, server.shards) as
+        if this server's listener had accepted it: the same handshake checks and handlers.
+
+        websockets has no public call for this; asyncio's Server keeps the connection factory that
+        websockets' ``serve`` gave it, so the connection is made exactly as an accepted one would be."""
+        assert self._server is not None  # started
+        factory = self._server.server._protocol_factory  # type: ignore[attr-defined]  # see above
+        await asyncio.get_running_loop().connect_accepted_socket(factory, sock)
+
     @property
     def port(self) -> int:
         if self._server is None:
@@ -202,6 +235,7 @@ class FacecastServer:
         self.stopping = True
         for live in list(self.sessions.values()):
             live.ended.set()
+        shards_stopped = asyncio.ensure_future(self.shards.stop()) if self.shards is not None else None
         deadline = time.monotonic() + self.config.close_timeout_s
         while self.sessions and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
@@ -216,6 +250,9 @@ class FacecastServer:
         if self.pool is not None:
             await self.pool.stop()
             self.pool = None
+        if shards_stopped is not None:
+            await shards_stopped
+            self.shards = None
         if self._gc_pauses is not None:
             self._gc_pauses.close()
             self._gc_pauses = None
@@ -237,18 +274,27 @@ class FacecastServer:
 
     def _admission(self, name: str, *, batch: bool = False) -> None:
         """Raise AdmissionRefused if a session ``name`` cannot open now (the one admission check)."""
+        refused = self.admission_refusal(name, batch=batch)
+        if refused is not None:
+            raise AdmissionRefused(*refused)
+
+    def admission_refusal(self, name: str, *, batch: bool = False) -> tuple[int, str] | None:
+        """Why a session ``name`` cannot open now, as (close code, reason); None if it can. Counts the
+        sessions of connection workers too when this is their front."""
+        shards = self.shards
         if not P.SESSION_NAME.match(name):
-            raise AdmissionRefused(
-                P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}"
-            )
+            return P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}"
         if self.stopping:
-            raise AdmissionRefused(P.CLOSE_GOING_AWAY, "server shutting down")
-        if name in self.sessions:
-            raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists")
-        if len(self.sessions) >= self.config.max_sessions:
-            raise AdmissionRefused(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)")
-        if batch and sum(live.batch for live in self.sessions.values()) >= self.config.max_batch_sessions:
-            raise AdmissionRefused(P.CLOSE_TRY_LATER, f"batch sessions are full ({self.config.max_batch_sessions})")
+            return P.CLOSE_GOING_AWAY, "server shutting down"
+        if name in self.sessions or (shards is not None and shards.owns(name)):
+            return P.CLOSE_CONFLICT, f"session {name!r} already exists"
+        n = len(self.sessions) + (shards.session_count() if shards is not None else 0)
+        if n >= self.config.max_sessions:
+            return P.CLOSE_TRY_LATER, f"server is full ({self.config.max_sessions} sessions)"
+        n_batch = sum(live.batch for live in self.sessions.values()) + (shards.batch_count() if shards else 0)
+        if batch and n_batch >= self.config.max_batch_sessions:
+            return P.CLOSE_TRY_LATER, f"batch sessions are full ({self.config.max_batch_sessions})"
+        return None
 
     async def open_session(
         self, name: str, config: SessionConfig, *, source: str, batch: bool = False, paced: bool = False
@@ -256,11 +302,23 @@ class FacecastServer:
         """Register a new live session (AdmissionRefused, a ServerConfigError, if the name is taken or
         the server is full). paced: hold its input to real time plus ``ingest_burst_s``."""
         self._admission(name, batch=batch)
-        session = await self._new_session(config)
+        registry = self.registry
+        if registry is not None:  # a connection worker: the name is claimed server-wide, at the front
+            refused = await registry.claim(name, batch=batch)
+            if refused is not None:
+                raise AdmissionRefused(*refused)
+        try:
+            session = await self._new_session(config)
+        except BaseException:
+            if registry is not None:
+                registry.release(name)
+            raise
         try:
             self._admission(name, batch=batch)  # opening a worker session awaited: another one may have come in
         except AdmissionRefused:
             await session.close()
+            if registry is not None:
+                registry.release(name)
             raise
         live = LiveSession(name, session, self, source=source)
         live.batch = batch
@@ -312,6 +370,8 @@ class FacecastServer:
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]
+            if self.registry is not None:
+                self.registry.release(live.name)
         live.ended.set()
         if self.cluster is not None:
             await self.cluster.release(live, code, reason)
@@ -397,15 +457,18 @@ class FacecastServer:
     async def _ingest(self, ws: ServerConnection) -> None:
         """Drive one ingest connection through :class:`server.protocol.IngestProtocol`."""
         proto = SP.IngestProtocol(token=self.config.token, lag=self.config.lag)
+        got_first = False
         try:
             first = await asyncio.wait_for(ws.recv(), self.config.start_timeout_s)
         except TimeoutError:
             actions = proto.start_timed_out(self.config.start_timeout_s)
         else:
-            actions = proto.receive(first)
+            actions, got_first = proto.receive(first), True
         live: LiveSession | None = None
         try:
             live = await self._perform(ws, proto, actions, None)
+            if got_first:
+                _handled(ws)
             if live is None:
                 return
             # Each message is awaited directly under one timeout (the idle limit), not as a task raced
@@ -421,30 +484,59 @@ class FacecastServer:
                     w.reschedule(loop.time())
 
             ended.add_done_callback(wake_on_shutdown)
+            fast = ws if isinstance(ws, FacecastConnection) else None
+            if fast is not None:
+                self._fast_feed(fast, proto, live)
             try:
                 idle_s = self.config.idle_timeout_s
+                idle_from = loop.time()
                 while proto.state is SP.State.STREAMING:
+                    received = False
                     if live.ended.is_set():  # server shutting down: first, even if a message is waiting too
                         actions = proto.shutdown()
                     else:
                         try:
-                            async with asyncio.timeout(idle_s) as timeout:
+                            async with asyncio.timeout_at(idle_from + idle_s) as timeout:
                                 waiting.append(timeout)
                                 msg = await ws.recv()
                         except TimeoutError:
-                            actions = proto.shutdown() if live.ended.is_set() else proto.idle_timed_out(idle_s)
+                            if live.ended.is_set():
+                                actions = proto.shutdown()
+                            elif fast is not None and fast.last_fed > idle_from:  # blocks came by the fast path
+                                idle_from = fast.last_fed
+                                continue
+                            else:
+                                actions = proto.idle_timed_out(idle_s)
                         except ConnectionClosed:
                             actions = proto.connection_lost()
                         else:
-                            actions = proto.receive(msg)
+                            actions, received, idle_from = proto.receive(msg), True, loop.time()
                         finally:
                             waiting.clear()
                     await self._perform(ws, proto, actions, live)
+                    if received:
+                        _handled(ws)
             finally:
                 ended.cancel()
+                if fast is not None:
+                    fast.sink = None
         finally:
             if live is not None:
                 await self._end_session(live, *proto.viewer_close)
+
+    def _fast_feed(self, ws: FacecastConnection, proto: SP.IngestProtocol, live: LiveSession) -> None:
+        """Let the connection feed binary blocks to the session straight from its data callback
+        (:class:`FacecastConnection`), skipping the message queue and this handler's wake-up, when
+        nothing needs awaiting (:meth:`LiveSession.feed_now`)."""
+        loop = asyncio.get_running_loop()
+
+        def sink(data: bytes) -> bool:
+            if not proto.feeds_binary() or not live.feed_now(data):
+                return False
+            ws.last_fed = loop.time()
+            return True
+
+        ws.sink = sink
 
     async def _perform(
         self, ws: ServerConnection, proto: SP.IngestProtocol, actions: list[SP.Action], live: LiveSession | None
@@ -616,6 +708,8 @@ class FacecastServer:
         authorized = SP.token_ok(_request_token(split.query, headers.get("Authorization")), cfg.token)
         if path == "/sessions" and authorized:
             return _response(await self._sessions_reply_async())
+        if self.shards is not None and (path == "/health" or (path == "/metrics" and authorized)):
+            return _response(HttpReply.json(await (self._health_all() if path == "/health" else self._metrics_all())))
         return _response(self.http.handle(path, authorized=authorized))
 
     def _refuse(self, status: HTTPStatus, text: str) -> Response:
@@ -636,6 +730,33 @@ class FacecastServer:
                 out["status"] = "degraded"
         return out
 
+    async def _health_all(self) -> dict:
+        """/health of a front: its own, with the connection workers' sessions and viewers added."""
+        out = self.health()
+        for h in await self._ask_shards("health"):
+            out["sessions"] += h["sessions"]
+            out["viewers"] += h["viewers"]
+        return out
+
+    async def _metrics_all(self) -> dict:
+        """/metrics of a front: counts summed over it and its connection workers; ``timings_ms`` are the
+        front's own (its loop), each worker's under ``workers``."""
+        out = self.metrics()
+        closes = collections.Counter({int(k): v for k, v in out["closes"].items()})
+        out["workers"] = []
+        for m in await self._ask_shards("metrics"):
+            for key in ("sessions", "viewers", "dropped_messages", "viewers_closed_slow"):
+                out[key] += m[key]
+            closes.update({int(k): v for k, v in m["closes"].items()})
+            out["session_list"] += m["session_list"]
+            out["workers"].append({"sessions": m["sessions"], "viewers": m["viewers"], "timings_ms": m["timings_ms"]})
+        out["closes"] = {str(k): v for k, v in sorted(closes.items())}
+        out["session_list"].sort(key=lambda r: r["name"])
+        return out
+
+    async def _ask_shards(self, what: str) -> list[Any]:
+        return [] if self.shards is None else await self.shards.ask(what)
+
     def _sessions_reply(self) -> HttpReply:
         return HttpReply.json({"sessions": self.session_list()})
 
@@ -648,6 +769,9 @@ class FacecastServer:
                 rows += [dict(r, node=self.cluster.node) for r in self.session_list() if r["name"] not in local]
                 return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"]), "scope": "cluster"})
             return HttpReply.json({"sessions": self.session_list(), "scope": "node (Redis away)"})
+        if self.shards is not None:
+            rows = self.session_list() + [r for rows in await self._ask_shards("rows") for r in rows]
+            return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"])})
         return self._sessions_reply()
 
     def session_list(self) -> list[dict]:
@@ -665,6 +789,64 @@ class FacecastServer:
             "session_list": self.session_list(),
             "uptime_s": round(time.time() - self.started, 3),
         }
+
+
+class FacecastConnection(ServerConnection):
+    """websockets' server connection with two additions.
+
+    * A fast path for ingest blocks: while ``sink`` is set (by the ingest handler of a streaming
+      session), a complete binary message is offered to it straight from ``process_event`` (the
+      override point websockets documents), in the data callback, instead of going through the
+      message queue to a ``recv()`` and a wake-up of the handler task: about half of a block's
+      receive cost. Order is kept: the sink is used only while no message is queued or being handled
+      by the handler (``queued``, which the handler decrements as it finishes each one; see
+      :func:`_handled`); a message the sink declines goes the usual way.
+    * ``router`` (the front of connection workers, server.shards): each new connection is offered to
+      the workers before a byte of it is read."""
+
+    router: ConnectionWorkers | None = None
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.sink: Callable[[bytes], bool] | None = None
+        self.queued = 0  # complete data messages passed to the queue and not yet handled
+        self.last_fed = 0.0  # loop time of the last block the sink took (the idle timeout counts it)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        router = self.router
+        if router is not None and not router.stopping:
+            router.route(self)
+
+    def process_event(self, event: Event) -> None:
+        if isinstance(event, Frame) and event.opcode in DATA_OPCODES:
+            sink = self.sink
+            if sink is not None and not self.queued and event.opcode is Opcode.BINARY and event.fin:
+                try:
+                    if sink(bytes(event.data)):
+                        return
+                except Exception:  # noqa: BLE001 - a bug: the usual path meets it again and closes with 1011
+                    self.sink = None
+            if event.fin:
+                self.queued += 1
+        super().process_event(event)
+
+
+def _handled(ws: ServerConnection) -> None:
+    """The handler is done with a message it received (the fast path may go on, see FacecastConnection)."""
+    if isinstance(ws, FacecastConnection):
+        ws.queued -= 1
+
+
+def _connection_class(shards: ConnectionWorkers | None) -> type[FacecastConnection]:
+    """The connection class of one server (with its router, when it is the front of connection workers)."""
+    if shards is None:
+        return FacecastConnection
+
+    class RoutedConnection(FacecastConnection):
+        router = shards
+
+    return RoutedConnection
 
 
 def _request_path(ws: ServerConnection) -> str:

@@ -24,7 +24,9 @@ class ServerConfig:
     keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
     send its start message; close_timeout_s: wait for a peer's close handshake before dropping TCP;
     lag: extra fixed-lag smoothing frames of every session; workers: compute processes for the
-    sessions' per-frame work (0: on the event loop; see server.workers); viewer_socket_buffer_bytes: kernel send
+    sessions' per-frame work (0: on the event loop); worker_mode: what a worker process takes, "compute" (a
+    session's per-frame work, its sockets stay on the front's loop; server.workers) or "connections" (whole
+    sessions with their ingest and viewer sockets; server.shards); viewer_socket_buffer_bytes: kernel send
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
@@ -60,6 +62,7 @@ class ServerConfig:
     close_timeout_s: float = 2.0
     lag: int = 0
     workers: int = 0
+    worker_mode: str = "compute"
     viewer_socket_buffer_bytes: int | None = None
     web_root: Path | None = None
     node_modules: Path | None = None
@@ -110,6 +113,12 @@ class ServerConfig:
                 raise ServerConfigError(f"{name} must be a number of seconds in (0, 3600], got {v!r}")
         if not isinstance(self.workers, int) or not 0 <= self.workers <= 64:
             raise ServerConfigError(f"workers must be an integer in 0..64, got {self.workers!r}")
+        if self.worker_mode not in ("compute", "connections"):
+            raise ServerConfigError(f"worker_mode must be 'compute' or 'connections', got {self.worker_mode!r}")
+        if self.worker_mode == "connections" and self.workers and self.redis_url is not None:
+            raise ServerConfigError(
+                "worker_mode 'connections' cannot be combined with redis_url yet (use 'compute' workers in a cluster)"
+            )
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30, got {self.lag!r}")
         b = self.viewer_socket_buffer_bytes

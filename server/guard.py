@@ -33,10 +33,15 @@ class IngestPacer:
     audio_s: float = 0.0
 
     def delay(self, audio_s: float, now: float) -> float:
+        wait = self.would_wait(audio_s, now)
         if self.t0 is None:
             self.t0 = now
         self.audio_s += audio_s
-        ahead = self.audio_s - (now - self.t0)
+        return wait
+
+    def would_wait(self, audio_s: float, now: float) -> float:
+        """What :meth:`delay` would return, without counting the audio."""
+        ahead = self.audio_s + audio_s - (now - (now if self.t0 is None else self.t0))
         return max(0.0, ahead - self.burst_s)
 
 

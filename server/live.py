@@ -29,7 +29,7 @@ from websockets.frames import Frame, Opcode
 from websockets.protocol import OPEN
 
 from server.describe import summary
-from server.errors import IngestOverrun
+from server.errors import AudioFormatError, IngestOverrun
 from server.guard import IngestPacer
 from server.session import Output, Session
 from server.workers import RemoteSession
@@ -272,6 +272,30 @@ class LiveSession:
         if cluster is not None:
             kinds.update(k for k in cluster.wants(self.name) if k[0] == P.KIND_DELTAS)
         self.session.precompute = tuple(sorted(kinds))
+
+    def feed_now(self, data: bytes) -> bool:
+        """Feed one binary block synchronously (from the connection's data callback) when that needs no
+        waiting: a session on this loop, a whole number of samples within one fair slice, the pacer
+        has no delay. False, having done nothing, otherwise (and when the block is malformed: the
+        caller then takes :meth:`feed_bytes_fairly`, which raises the error naming it)."""
+        s = self.session
+        if not isinstance(s, LocalSession) or self.ended.is_set():
+            return False
+        frame, rate = s.frame_bytes, s.config.sample_rate_hz
+        n = len(data) // frame
+        if len(data) % frame or n > max(1, int(FAIR_SLICE_S * rate)):
+            return False
+        now = asyncio.get_running_loop().time() if self.pacer is not None else 0.0
+        if self.pacer is not None and self.pacer.would_wait(n / rate, now) > 0:
+            return False
+        try:
+            out = s.core.push_bytes(data)
+        except AudioFormatError:
+            return False
+        if self.pacer is not None:
+            self.pacer.delay(n / rate, now)  # counted as the awaited path would have (0: no wait)
+        self._fanout(out)
+        return True
 
     async def feed_bytes_fairly(self, data: bytes) -> int:
         """Like :meth:`feed_bytes`, but a large block (a client sending faster than real time) is

@@ -263,6 +263,11 @@ class IngestProtocol:
             return []
         return self._violation(ProtocolViolation(P.CLOSE_POLICY, f"no start message within {timeout_s:g} s"))
 
+    def feeds_binary(self) -> bool:
+        """Whether a binary message now would be answered by exactly ``[Feed(message)]`` (the shell
+        may then feed it without calling :meth:`receive`)."""
+        return self.state is State.STREAMING and self.kind is not None and self.kind.binary_input
+
     def idle_timed_out(self, timeout_s: float) -> list[Action]:
         """A started ingest sent nothing for ``timeout_s``."""
         if self.state is not State.STREAMING:

@@ -119,6 +119,17 @@ def _worker_main(conn, model_bytes: bytes, rig_bytes: bytes | None = None) -> No
                 conn.send(("err", type(exc).__name__, str(exc)))
 
 
+def model_file_bytes(model: SpeechModel) -> bytes:
+    """The model as its file bytes, the form worker processes receive it in (ServerConfigError for a
+    model kind without a file format: only HMM and MLP models go)."""
+    from realtime_core.avmodel import AvModel
+    from realtime_core.mapping import MlpSpeechModel, encode_speech_model
+
+    if not isinstance(model, AvModel | MlpSpeechModel):
+        raise ServerConfigError(f"worker processes need an HMM or MLP model file, got {type(model).__name__}")
+    return encode_speech_model(model)
+
+
 class _Worker:
     def __init__(self, ctx, model_bytes: bytes, rig_bytes: bytes | None) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
@@ -171,14 +182,8 @@ class WorkerPool:
         self._next_id = 0
 
     async def start(self) -> None:
-        from realtime_core.avmodel import AvModel
-        from realtime_core.mapping import MlpSpeechModel, encode_speech_model
-
-        # Workers receive the model as its file bytes, so only the two model kinds with a file format go.
-        if not isinstance(self.model, AvModel | MlpSpeechModel):
-            raise ServerConfigError(f"compute workers need an HMM or MLP model file, got {type(self.model).__name__}")
         ctx = mp.get_context("spawn")  # no fork of a process with a running loop and threads
-        data = encode_speech_model(self.model)
+        data = model_file_bytes(self.model)
         rig_bytes = None
         if self.rig is not None:
             # Pickled once here, the same bytes to every worker (each Process would pickle the rig

@@ -72,8 +72,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--workers",
         type=int,
         default=argparse.SUPPRESS,
-        help="compute processes for the sessions' per-frame work (default: the config's, else 0 = "
-        "on the event loop; use up to cores - 1)",
+        help="worker processes (default: the config's, else 0 = everything on one event loop)",
+    )
+    p.add_argument(
+        "--worker-mode",
+        choices=("compute", "connections"),
+        default=argparse.SUPPRESS,
+        help="compute: workers run the sessions' per-frame work, sockets stay here (use up to cores - 1); "
+        "connections: workers run whole sessions with their ingest and viewer sockets (use one per core)",
     )
     p.add_argument(
         "--text",
@@ -117,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         "web_root": web_root,
         "node_modules": node_modules if node_modules.is_dir() else None,
         "workers": getattr(args, "workers", None),
+        "worker_mode": getattr(args, "worker_mode", None),
     }
     config = (
         ServerConfig.from_toml(args.config, **overrides)

@@ -14,6 +14,7 @@ import json
 import threading
 import time
 import urllib.parse
+import urllib.request
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ from server.config import ServerConfig
 from tests.speech import speechlike
 from wire import protocol as P
 
-# Hypothesis against a live server over loopback (about 20 s).
+# Hypothesis against a live server over loopback (about 20 s per server layout).
 pytestmark = [pytest.mark.system, pytest.mark.slow]
 
 DOCUMENTED = {
@@ -97,11 +98,17 @@ view_queries = st.dictionaries(
 
 
 class _Server:
-    def __init__(self, model) -> None:
+    def __init__(self, model, workers: int = 0) -> None:
         self.srv = FacecastServer(
             model,
             config=ServerConfig(
-                port=0, start_timeout_s=1.0, idle_timeout_s=1.0, max_message_bytes=1 << 16, close_timeout_s=0.5
+                port=0,
+                start_timeout_s=1.0,
+                idle_timeout_s=1.0,
+                max_message_bytes=1 << 16,
+                close_timeout_s=0.5,
+                workers=workers,
+                worker_mode="connections",
             ),
         )
         self.loop = asyncio.new_event_loop()
@@ -112,6 +119,11 @@ class _Server:
 
     def call(self, coro, timeout: float = 60.0):
         return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def metrics(self) -> dict:
+        """/metrics as a client reads it (with connection workers: summed over the front and them)."""
+        with urllib.request.urlopen(self.url + "/metrics", timeout=10) as r:
+            return json.loads(r.read())
 
     def stop(self) -> None:
         self.call(self.srv.stop())
@@ -144,9 +156,11 @@ def _converse(url: str, path: str, messages: list) -> None:
     _check_close(ws)
 
 
-@pytest.fixture(scope="module")
-def fuzz_server(model):
-    s = _Server(model)
+@pytest.fixture(scope="module", params=[0, 2], ids=["one-process", "connection-workers"])
+def fuzz_server(model, request):
+    """The server fuzzed: one process, and a front with two connection workers (server.shards: the
+    front peeks at every request line and hands ingests and views over)."""
+    s = _Server(model, workers=request.param)
     yield s
     s.stop()
 
@@ -193,10 +207,10 @@ def test_fuzz_ingest_and_view_against_a_live_server(model, fuzz_server):
     assert ended["frames"] == len(ref)
     assert [m.index for m in got.frames] == list(range(len(ref)))  # the healthy session lost no frame
     assert done["ingest"] >= 30 and done["view"] >= 30, done  # the budget bought real work
-    metrics = fuzz_server.srv.metrics()
+    metrics = fuzz_server.metrics()
     print(f"fuzz: {done} conversations; closes by code {metrics['closes']}")
     assert "1011" not in metrics["closes"], metrics["closes"]
-    assert fuzz_server.srv.sessions == {}
+    assert metrics["sessions"] == 0
 
 
 def test_hostile_sender_of_the_soak_benchmark_is_answered_by_documented_refusals(model, fuzz_server):
@@ -207,7 +221,7 @@ def test_hostile_sender_of_the_soak_benchmark_is_answered_by_documented_refusals
     from benchmarks.server_soak import HostileTally, hostile_traffic
 
     url = fuzz_server.url
-    before = dict(fuzz_server.srv.metrics()["closes"])
+    before = dict(fuzz_server.metrics()["closes"])
     pcm = np.rint(speechlike(10.0, 16000, seed=22) * 32767).astype(np.int16)
     ref = speech_to_params(model, pcm.astype(np.float32) / 32768)
     tally = HostileTally()
@@ -246,7 +260,7 @@ def test_hostile_sender_of_the_soak_benchmark_is_answered_by_documented_refusals
     assert set(codes) <= DOCUMENTED, codes
     statuses = set(report["http_status"]) - {"closed without a status"}
     assert statuses <= {"400", "403", "404", "414", "426", "429", "431"}, statuses
-    after = fuzz_server.srv.metrics()["closes"]
+    after = fuzz_server.metrics()["closes"]
     assert "1011" not in after, after
     server_side = {int(k): v - before.get(k, 0) for k, v in after.items()}
     for code in (

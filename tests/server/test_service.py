@@ -532,3 +532,47 @@ def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
     assert np.all(np.abs(got.values() - want) <= peak / 32767 + 1e-3 * peak)
     assert len(got.audio) > 0
     assert garbage[0] == P.CLOSE_INVALID_PAYLOAD and "not a whole number" in garbage[1]
+
+
+def test_controls_pipelined_between_blocks_apply_where_they_were_sent(model):
+    """Blocks may be fed straight from the connection's data callback (app.FacecastConnection's fast
+    path) while a control waits for the handler: the control must still apply between the blocks it
+    was sent between. Pipelined (no waiting for the ack) gives the frames of waiting for it; several
+    controls in a row, and blocks of any size."""
+    pcm = _int16(speechlike(1.5, 16000, seed=13))
+    sizes = [320, 320, 960, 320, 4000, 320] * 20  # 20 ms blocks, and larger ones (a fair slice is 1600)
+    blocks, i = [], 0
+    for n in sizes:
+        if i >= len(pcm):
+            break
+        blocks.append(pcm[i : i + n])
+        i += n
+    controls = {7: {"lip_stretch": 2.0}, 8: {"mouth_open": 0.5}, 20: {"lip_stretch": 0.5}}
+
+    async def run(srv, name: str, pipelined: bool, controls=controls):
+        async with IngestClient(srv.url, session=name, sample_rate_hz=16000) as ing:
+            async with ViewerClient(srv.url, session=name, audio=False) as view:
+                collect = asyncio.ensure_future(view.collect())
+                acks = 0
+                for k, block in enumerate(blocks):
+                    if k in controls:
+                        await ing.ws.send(json.dumps({"type": "control", "gain": controls[k]}))
+                        if not pipelined:
+                            assert json.loads(await ing.ws.recv())["type"] == "ack"
+                        else:
+                            acks += 1
+                    await ing.send(block)
+                for _ in range(acks):
+                    assert json.loads(await ing.ws.recv())["type"] == "ack"
+                await ing.end()
+                return (await collect).values()
+
+    async def main():
+        async with running(model) as srv:
+            plain = await run(srv, "plain", True, {})
+            return plain, await run(srv, "waited", False), await run(srv, "pipelined", True)
+
+    plain, waited, pipelined = asyncio.run(main())
+    assert len(plain) == len(waited) == len(pipelined) > 40
+    np.testing.assert_array_equal(waited, pipelined)
+    assert not np.array_equal(plain, waited)  # the controls changed the frames
