@@ -64,6 +64,23 @@ def run(args: argparse.Namespace) -> int:
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
+    from clients.export.errors import ExportError
+    from clients.export.files import check_outputs
+
+    # Every refusal comes before the first output is written (no partial set of files) and before the
+    # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
+    exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}
+    for fmt, out in exports.items():
+        if out is not None and out.suffix.lower() != f".{fmt}":
+            raise ExportError(f"{out}: --{fmt} writes a .{fmt} file; give a name ending in .{fmt}")
+    check_outputs([o for o in exports.values() if o is not None], source=args.speech)
+    if args.glb and args.glb_morphs == "arkit52" and args.head != "builtin":
+        raise ExportError(f"{args.glb}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
+    head = None
+    if args.glb:
+        from facecast.commands.headopts import resolve_from_args
+
+        head = resolve_from_args(args)
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
     mups = None
@@ -79,9 +96,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv(args.csv, track)
     if args.glb or args.json or args.tsv:
         from clients.export.files import export_track
-        from facecast.commands.headopts import resolve_from_args
 
-        head = resolve_from_args(args) if args.glb else None
         arkit = None
         if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
             from clients.export.gltf import builtin_arkit_targets

@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.audio import read_audio, write_wav
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
-    from clients.export.files import FORMATS, export_track
+    from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from realtime_core.track import Track
@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", *FORMATS)]
     if bad:
         raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, {', '.join(FORMATS)})")
+    check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:

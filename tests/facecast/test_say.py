@@ -103,7 +103,10 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
         moving = offsets - offsets.mean(0)
         assert np.sum((rebuilt - offsets) ** 2) < 0.1 * np.sum(moving**2)
     capsys.readouterr()
+    take = tmp_path / "take.wav"  # a user's recording: the .wav beside take.glb must not replace it
+    take.write_bytes(b"RIFF recording")
     for argv, msg in (
+        (["say", "hi", "--audio", str(take), "-o", str(tmp_path / "take.glb")], "would overwrite the input"),
         (["say", "😀😀", "-o", str(tmp_path / "x.csv")], "pronounceable"),
         (["say", "   ", "-o", str(tmp_path / "x.csv")], "empty text"),
         (["say", "hi", "--voice", "xx-none", "-o", str(tmp_path / "x.csv")], "voice"),
@@ -115,7 +118,8 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:  # an unsupported language: argparse names the choices
         main(["say", "bonjour", "--lang", "fr", "--corpus", str(corpus_file), "-o", str(tmp_path / "x.csv")])
     assert exc.value.code == 2 and "invalid choice: 'fr'" in capsys.readouterr().err
-    assert not (tmp_path / "x.csv").exists()
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "take.glb").exists()
+    assert take.read_bytes() == b"RIFF recording"
     # characters outside the synthesiser's set (emoji, symbols, control characters) are dropped, the
     # words around them spoken: the same motion as the text without them (espeak-ng's timings of the
     # cleaned text can differ by a sample or two)
