@@ -33,12 +33,17 @@ def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str 
     (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
     """
     from assets.audio import read_audio
+    from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
+    from realtime_core.errors import InvalidAudioError
     from realtime_core.pipeline import speech_to_params
 
     av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
-    params = speech_to_params(av, samples, rate)
+    try:
+        params = speech_to_params(av, samples, rate)
+    except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
+        raise FileProblem(path, str(exc)) from None
     return Track(values=np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], fps=DEFAULT_FPS)
 
 

@@ -54,9 +54,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
+    from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
     from assets.tracks import write_csv
     from facecast.commands.speech_options import apply_expressions, expression_intensities
+    from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
     from realtime_core.track import Track
@@ -84,10 +86,13 @@ def run(args: argparse.Namespace) -> int:
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
     mups = None
-    if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:
-        params, mups = speech_to_params_and_mups(model, samples, rate)  # the live path, keeping the MUPs
-    else:
-        params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    try:
+        if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:
+            params, mups = speech_to_params_and_mups(model, samples, rate)  # the live path, keeping the MUPs
+        else:
+            params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
+        raise FileProblem(args.speech, str(exc)) from None
     speech = params
     params = apply_expressions(params, args, mups=mups, model=model)
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.

@@ -135,3 +135,24 @@ def test_animate_refuses_before_writing_anything(tmp_path, capsys):
         assert len(err.splitlines()) == 1 and named in err and "Traceback" not in err, err
         assert sorted(p.name for p in tmp_path.iterdir()) == ["m.npz", "notes.txt", "take.wav"], named
     assert wav.read_bytes() == before
+
+
+def test_too_short_speech_names_the_file(tmp_path, capsys):
+    """20 ms of speech (less than one analysis window) is refused by animate and render with one line that
+    names the file and both durations, exit 2, nothing written."""
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = tmp_path / "blip.wav"
+    write_wav(wav, speechlike(1.0, 16000)[:320], 16000)
+    capsys.readouterr()
+    for argv in (
+        ["animate", str(wav), "--csv", str(tmp_path / "o.csv")],
+        ["render", str(wav), "-o", str(tmp_path / "o.mp4")],
+    ):
+        assert main([*argv, "--model", str(model)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and f"{wav}: audio too short: 20 ms" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blip.wav", "m.npz"]
