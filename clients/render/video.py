@@ -92,6 +92,18 @@ class VideoConfig:
             raise RenderError(f"x264 preset must be one of {', '.join(presets)}, got {self.preset!r}")
 
 
+VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".mkv")  # containers that hold H.264 + AAC (WebM does not)
+
+
+def check_video_path(out: str | Path) -> Path:
+    """``out`` as a Path, or RenderError when its suffix names no container of H.264 + AAC; called before
+    any work (rigging a head and rendering take minutes, and ffmpeg only refuses at the end)."""
+    p = Path(out)
+    if p.suffix.lower() not in VIDEO_SUFFIXES:
+        raise RenderError(f"{p}: not a video file name: use {', '.join(VIDEO_SUFFIXES)} (H.264 + AAC)")
+    return p
+
+
 def write_video(
     frames_params: np.ndarray,
     render_frame,
@@ -104,12 +116,12 @@ def write_video(
 ) -> Path:
     """Render one frame per row of frames_params (F, 4) with ``render_frame(params) -> (h, w, 3) uint8``
     and encode them (plus ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
+    out = check_video_path(out)
     exe = shutil.which(config.ffmpeg)
     if exe is None:
         raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.tmp{out.suffix or '.mp4'}")
+    tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
     w, h = size
     cmd = [
         exe,

@@ -46,9 +46,10 @@ def run(args: argparse.Namespace) -> int:
     from assets.tracks import read_csv_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, params_for_audio, write_video
+    from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
     from realtime_core.track import frames_from_samples
 
+    check_video_path(args.output)
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:
