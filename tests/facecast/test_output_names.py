@@ -1,5 +1,6 @@
-"""A video output whose name no H.264 + AAC container fits is refused first: before the speech is read, a head
-rigged (minutes for a scan), frames rendered or a live session watched, with one line and exit 2."""
+"""An output name the command cannot write usefully (a video no H.264 + AAC container fits, a rig not .npz)
+is refused first: before the speech is read, a head rigged (minutes for a scan), frames rendered or a live
+session watched, with one line and exit 2."""
 
 from __future__ import annotations
 
@@ -20,4 +21,12 @@ def test_a_bad_video_name_is_refused_before_any_work(argv, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "not a video file name: use .mp4" in err, err
     assert str(tmp_path / "take.") in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_rig_refuses_an_output_that_is_not_npz_before_rigging(tmp_path, capsys):
+    """A rig written as take.txt could never be given back as --head (heads are told apart by suffix)."""
+    assert main(["rig", "builtin", "-o", str(tmp_path / "face.rig")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{tmp_path / 'face.rig'}: a rig file is written as .npz" in err, err
     assert list(tmp_path.iterdir()) == []
