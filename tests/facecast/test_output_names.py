@@ -30,3 +30,14 @@ def test_rig_refuses_an_output_that_is_not_npz_before_rigging(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{tmp_path / 'face.rig'}: a rig file is written as .npz" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_record_refuses_arkit_morphs_on_a_mesh_head_before_watching(tmp_path, shared_data, capsys):
+    """Was refused by the exporter only after the whole live take had been recorded."""
+    head = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    out = tmp_path / "take.glb"
+    argv = ["record", "http://127.0.0.1:9", "-o", str(out), "--glb-morphs", "arkit52", "--head", str(head)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{out}: --glb-morphs arkit52 needs the built-in head" in err, err
+    assert list(tmp_path.iterdir()) == []
