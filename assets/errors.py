@@ -28,6 +28,11 @@ class NotAudioError(FileProblem):
     """The file is not a readable audio file (or has no audio stream)."""
 
 
+class UnsupportedWavError(NotAudioError):
+    """A RIFF/WAVE file in an encoding the built-in PCM reader does not decode (float, 24-bit or
+    multichannel WAVE_FORMAT_EXTENSIBLE, mu-law ...); :func:`assets.audio.read_audio` hands it to ffmpeg."""
+
+
 class SilentAudioError(FileProblem):
     """The audio holds no signal (all samples at or near zero)."""
 
