@@ -41,3 +41,13 @@ def test_record_refuses_arkit_morphs_on_a_mesh_head_before_watching(tmp_path, sh
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{out}: --glb-morphs arkit52 needs the built-in head" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("option", ["--show-landmarks", "--png"])
+def test_rig_refuses_a_picture_name_matplotlib_cannot_write(option, tmp_path, capsys):
+    """Was a matplotlib traceback from savefig (after rigging, for --png)."""
+    argv = ["rig", "builtin", option, str(tmp_path / "face.txt")]
+    assert main([*argv, "-o", str(tmp_path / "face.npz")] if option == "--png" else argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{tmp_path / 'face.txt'}: not a picture file name; use .png" in err, err
+    assert list(tmp_path.iterdir()) == []
