@@ -24,6 +24,10 @@ class FileProblem(AssetsError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class CannotWriteError(FileProblem):
+    """An output cannot be written where it was asked for: its folder is a file, no permission, disk full."""
+
+
 class NotAudioError(FileProblem):
     """The file is not a readable audio file (or has no audio stream)."""
 

@@ -116,11 +116,13 @@ def write_video(
 ) -> Path:
     """Render one frame per row of frames_params (F, 4) with ``render_frame(params) -> (h, w, 3) uint8``
     and encode them (plus ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
+    from assets.files import make_parent
+
     out = check_video_path(out)
     exe = shutil.which(config.ffmpeg)
     if exe is None:
         raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_parent(out)
     tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
     w, h = size
     cmd = [

@@ -44,13 +44,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.files import make_parent
     from assets.tracks import read_csv_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
     from realtime_core.track import frames_from_samples
 
-    check_video_path(args.output)
+    make_parent(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:

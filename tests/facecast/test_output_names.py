@@ -51,3 +51,10 @@ def test_rig_refuses_a_picture_name_matplotlib_cannot_write(option, tmp_path, ca
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{tmp_path / 'face.txt'}: not a picture file name; use .png" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_render_says_a_folder_cannot_be_made_before_any_work(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main(["render", str(tmp_path / "missing.wav"), "-o", str(tmp_path / "notes.txt" / "v.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err and "Traceback" not in err
