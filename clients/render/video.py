@@ -157,7 +157,7 @@ def write_video(
         str(tmp),
     ]
     if png_dir is not None:
-        Path(png_dir).mkdir(parents=True, exist_ok=True)
+        make_parent(Path(png_dir) / "frame_00000.png")
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdin is not None and proc.stderr is not None
     stdin = proc.stdin

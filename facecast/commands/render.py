@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.track import frames_from_samples
 
     make_parent(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
+    if args.png_dir:
+        make_parent(Path(args.png_dir) / "frame_00000.png")
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:

@@ -58,3 +58,14 @@ def test_render_says_a_folder_cannot_be_made_before_any_work(tmp_path, capsys):
     assert main(["render", str(tmp_path / "missing.wav"), "-o", str(tmp_path / "notes.txt" / "v.mp4")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err and "Traceback" not in err
+    argv = [
+        "render",
+        str(tmp_path / "missing.wav"),
+        "-o",
+        str(tmp_path / "v.mp4"),
+        "--png-dir",
+        str(tmp_path / "notes.txt"),
+    ]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err and "Traceback" not in err
