@@ -14,7 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from assets.errors import NotAudioError, SilentAudioError, TruncatedFileError, WrongSampleRateError
+from assets.errors import (
+    NotAudioError,
+    SilentAudioError,
+    TruncatedFileError,
+    UnsupportedWavError,
+    WrongSampleRateError,
+)
 from assets.files import atomic_write_bytes
 
 ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
@@ -76,7 +82,7 @@ def read_wav(
         # the wave module raises EOFError when a header chunk is cut short
         if isinstance(exc, EOFError):
             raise TruncatedFileError(path, "truncated WAV: the header ends early") from exc
-        raise NotAudioError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
+        raise UnsupportedWavError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
     if len(raw) < n * ch * width:
         have = len(raw) // max(ch * width, 1)
         raise TruncatedFileError(path, f"truncated WAV: header declares {n} frames, data holds {have}")
@@ -108,8 +114,10 @@ def read_wav(
 def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndarray, int]:
     """Decode ``path`` to mono: ``(samples (n,) float32 in [-1, 1], sample_rate_hz)``.
 
-    WAV files are read directly; other formats (FLAC, MP3, OGG, the audio of MP4/MPG
-    video...) are decoded by ffmpeg at their own rate, or at ``rate_hz`` when given.
+    PCM WAV files are read directly; other formats (FLAC, MP3, OGG, the audio of MP4/MPG
+    video...), WAVs in encodings the PCM reader does not decode (float, WAVE_FORMAT_EXTENSIBLE as
+    24-bit and multichannel recorders write, mu-law) or at a rate outside ``ACCEPTED_RATES_HZ``
+    (96 kHz) are decoded by ffmpeg at their own rate, or at ``rate_hz`` when given.
     Raises :class:`NotAudioError` (or another :class:`training.errors.FileProblem`) naming
     the file and the problem.
     """
@@ -117,7 +125,10 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     if not path.is_file():
         raise NotAudioError(path, "file not found")
     if path.suffix.lower() == ".wav" and rate_hz is None:
-        return read_wav(path)
+        try:
+            return read_wav(path)
+        except (UnsupportedWavError, WrongSampleRateError):
+            pass  # a real WAV the strict corpus reader refuses: ffmpeg decodes it below
     ffmpeg = shutil.which("ffmpeg")
     if ffmpeg is None:
         raise NotAudioError(path, "decoding this format needs ffmpeg, which is not installed (apt-get install ffmpeg)")

@@ -24,8 +24,17 @@ class FileProblem(AssetsError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class CannotWriteError(FileProblem):
+    """An output cannot be written where it was asked for: its folder is a file, no permission, disk full."""
+
+
 class NotAudioError(FileProblem):
     """The file is not a readable audio file (or has no audio stream)."""
+
+
+class UnsupportedWavError(NotAudioError):
+    """A RIFF/WAVE file in an encoding the built-in PCM reader does not decode (float, 24-bit or
+    multichannel WAVE_FORMAT_EXTENSIBLE, mu-law ...); :func:`assets.audio.read_audio` hands it to ffmpeg."""
 
 
 class SilentAudioError(FileProblem):

@@ -11,20 +11,41 @@ import os
 import tempfile
 from pathlib import Path
 
+from assets.errors import CannotWriteError
+
+
+def make_parent(path: str | os.PathLike) -> Path:
+    """Create ``path``'s folder (and its parents); CannotWriteError naming ``path`` when the file system
+    refuses (a parent is a file, no permission), so the command line prints one line, not a traceback."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        blocker = next((q for q in path.parents if q.exists() and not q.is_dir()), None)
+        why = f"{blocker} is a file, not a folder" if blocker else f"{exc.strerror or exc} ({exc.filename})"
+        raise CannotWriteError(path, f"cannot write here: {why}") from None
+    return path
+
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path``: a temporary file in the same folder, then ``os.replace``.
 
     The file gets mode 0644 (mkstemp's 0600 would hide shared caches and models from others).
+    Raises CannotWriteError naming ``path`` when the file system refuses.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    path = make_parent(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise CannotWriteError(path, f"cannot write here: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
+    except OSError as exc:  # disk full, the name is a folder ...: nothing is left behind
+        Path(tmp).unlink(missing_ok=True)
+        raise CannotWriteError(path, f"cannot write here: {exc.strerror or exc}") from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -49,10 +49,9 @@ def parse_voice(language: str, voice: str | None = None, *, rate_wpm: int = 175)
             variant = head
         else:
             base, variant = head, tail or None
-    try:
-        return Voice(language=language, base=base, variant=variant, rate_wpm=rate_wpm)
-    except ConfigError as exc:
-        raise ConfigError(f"voice {voice!r}: {exc}") from None
+    # Voice's own errors name the offending value ("voice 'xx' is not one of ...", "unknown variant 'zz'",
+    # "rate_wpm must be in (80, 450), got 0"); a "voice None: ..." prefix on a bad rate only confused.
+    return Voice(language=language, base=base, variant=variant, rate_wpm=rate_wpm)
 
 
 def speak(text: str, *, language: str = "en", voice: str | None = None, rate_wpm: int = 175) -> Speech:

@@ -41,7 +41,15 @@ COMMANDS: dict[str, str] = {
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
-    """Shows defaults and keeps the descriptions' line breaks."""
+    """Shows defaults and keeps the descriptions' line breaks. A default is not appended where it would
+    say nothing or say it twice: None, off flags, empty lists, required options, and help texts that
+    already state their default in words ("(default: the config's, else 8765)")."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if action.required or action.default in (None, False, [], ()) or "(default" in text:
+            return action.help
+        return super()._get_help_string(action)
 
 
 def build_parser() -> argparse.ArgumentParser:

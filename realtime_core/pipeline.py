@@ -171,8 +171,9 @@ def speech_to_params(
         x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
     if x.size < model.frontend.mfcc.window_len:
         raise InvalidAudioError(
-            f"audio too short: {x.size} samples, need at least {model.frontend.mfcc.window_len} "
-            f"({1000 * model.frontend.mfcc.window_len / model.sample_rate_hz:.0f} ms)"
+            f"audio too short: {1000 * x.size / model.sample_rate_hz:.0f} ms, need at least "
+            f"{1000 * model.frontend.mfcc.window_len / model.sample_rate_hz:.0f} ms "
+            f"({x.size} < {model.frontend.mfcc.window_len} samples at {model.sample_rate_hz} Hz)"
         )
     if mode == "stream":
         p = SpeechToParams(model, stream=stream)

@@ -9,6 +9,20 @@ import numpy as np
 from realtime_core.face import Rig, face_frame
 
 
+def check_picture_path(path: str | Path) -> Path:
+    """``path`` as a Path, or MeshError naming it when matplotlib cannot write its suffix (checked before
+    rigging, which takes minutes, rather than failing in savefig with a traceback)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from assets.errors import MeshError
+
+    p = Path(path)
+    known = FigureCanvasBase.get_supported_filetypes()
+    if p.suffix.lower().lstrip(".") not in known:
+        raise MeshError(f"{p}: not a picture file name; use .png (or {', '.join(f'.{k}' for k in sorted(known))})")
+    return p
+
+
 def plot_control_points(
     rig: Rig,
     path: str | Path,

@@ -16,6 +16,32 @@ from realtime_core.track import Track
 
 FORMATS = (".glb", ".csv", ".json", ".tsv")
 MORPHS = ("units", "arkit52")
+AUDIO_BESIDE = (".glb", ".json")  # the formats that name a .wav written beside them
+
+
+def audio_beside(path: str | Path) -> Path | None:
+    """The ``.wav`` :func:`export_track` writes beside ``path`` when given audio (.glb, .json), else None."""
+    p = Path(path)
+    return p.with_suffix(".wav") if p.suffix.lower() in AUDIO_BESIDE else None
+
+
+def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> None:
+    """Refuse, before anything is written, exports of unknown format and a ``.wav`` beside a .glb/.json
+    that would overwrite ``source`` (the speech the audio was read from: ``take.wav --glb take.glb``
+    would replace the user's recording by its mono copy) or another of ``paths``. Raises ExportError."""
+    for p in paths:
+        if p.suffix.lower() not in FORMATS:
+            raise ExportError(f"{p}: unknown export format {p.suffix.lower()!r} (use {', '.join(FORMATS)})")
+    taken = {Path(p).resolve(): "an output" for p in paths}
+    if source is not None:
+        taken[Path(source).resolve()] = "the input speech"
+    for p in paths:
+        wav = audio_beside(p)
+        if wav is not None and wav.resolve() in taken:
+            raise ExportError(
+                f"{p}: the audio written beside it, {wav}, would overwrite {taken[wav.resolve()]}; "
+                "give the export another name"
+            )
 
 
 def export_track(
@@ -42,23 +68,25 @@ def export_track(
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
     suffix = p.suffix.lower()
-    if suffix not in FORMATS:
-        raise ExportError(f"{p}: unknown export format {suffix!r} (use {', '.join(FORMATS)})")
+    # Everything that can be refused is refused before the first byte is written (no .wav left behind).
+    if suffix == ".glb" and head is None:
+        raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
+    if suffix == ".glb" and morphs == "arkit52" and arkit_targets is None:
+        raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
+    check_outputs([p])
     written: list[Path] = []
     wav_name = None
-    if audio is not None and suffix in (".glb", ".json"):
-        wav = p.with_suffix(".wav")
+    wav = audio_beside(p)
+    if audio is not None and wav is not None:
         written.append(atomic_write_bytes(wav, wav_bytes(audio[0], audio[1])))
         wav_name = wav.name
     if suffix == ".glb":
-        if head is None:
-            raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
+        assert head is not None  # refused above otherwise
         if morphs == "units":
             rig, mesh = head
             data = head_glb(rig, mesh, track, audio=wav_name)
-        elif arkit_targets is None:
-            raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
         else:
+            assert arkit_targets is not None  # refused above otherwise
             data = arkit_glb(
                 tuple(head)[1],
                 arkit_targets,

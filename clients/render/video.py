@@ -33,12 +33,17 @@ def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str 
     (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
     """
     from assets.audio import read_audio
+    from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
+    from realtime_core.errors import InvalidAudioError
     from realtime_core.pipeline import speech_to_params
 
     av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
-    params = speech_to_params(av, samples, rate)
+    try:
+        params = speech_to_params(av, samples, rate)
+    except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
+        raise FileProblem(path, str(exc)) from None
     return Track(values=np.asarray(params, dtype=np.float64)[:, : len(VISUAL_PARAMS)], fps=DEFAULT_FPS)
 
 
@@ -87,6 +92,18 @@ class VideoConfig:
             raise RenderError(f"x264 preset must be one of {', '.join(presets)}, got {self.preset!r}")
 
 
+VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".mkv")  # containers that hold H.264 + AAC (WebM does not)
+
+
+def check_video_path(out: str | Path) -> Path:
+    """``out`` as a Path, or RenderError when its suffix names no container of H.264 + AAC; called before
+    any work (rigging a head and rendering take minutes, and ffmpeg only refuses at the end)."""
+    p = Path(out)
+    if p.suffix.lower() not in VIDEO_SUFFIXES:
+        raise RenderError(f"{p}: not a video file name: use {', '.join(VIDEO_SUFFIXES)} (H.264 + AAC)")
+    return p
+
+
 def write_video(
     frames_params: np.ndarray,
     render_frame,
@@ -99,12 +116,14 @@ def write_video(
 ) -> Path:
     """Render one frame per row of frames_params (F, 4) with ``render_frame(params) -> (h, w, 3) uint8``
     and encode them (plus ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
+    from assets.files import make_parent
+
+    out = check_video_path(out)
     exe = shutil.which(config.ffmpeg)
     if exe is None:
         raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.tmp{out.suffix or '.mp4'}")
+    make_parent(out)
+    tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
     w, h = size
     cmd = [
         exe,
@@ -138,7 +157,7 @@ def write_video(
         str(tmp),
     ]
     if png_dir is not None:
-        Path(png_dir).mkdir(parents=True, exist_ok=True)
+        make_parent(Path(png_dir) / "frame_00000.png")
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdin is not None and proc.stderr is not None
     stdin = proc.stdin

@@ -54,9 +54,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assets.audio import read_audio
+    from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
     from assets.tracks import write_csv
     from facecast.commands.speech_options import apply_expressions, expression_intensities
+    from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
     from realtime_core.track import Track
@@ -64,13 +66,33 @@ def run(args: argparse.Namespace) -> int:
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
         raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
+    from clients.export.errors import ExportError
+    from clients.export.files import check_outputs
+
+    # Every refusal comes before the first output is written (no partial set of files) and before the
+    # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
+    exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}
+    for fmt, out in exports.items():
+        if out is not None and out.suffix.lower() != f".{fmt}":
+            raise ExportError(f"{out}: --{fmt} writes a .{fmt} file; give a name ending in .{fmt}")
+    check_outputs([o for o in exports.values() if o is not None], source=args.speech)
+    if args.glb and args.glb_morphs == "arkit52" and args.head != "builtin":
+        raise ExportError(f"{args.glb}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
+    head = None
+    if args.glb:
+        from facecast.commands.headopts import resolve_from_args
+
+        head = resolve_from_args(args)
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
     mups = None
-    if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:
-        params, mups = speech_to_params_and_mups(model, samples, rate)  # the live path, keeping the MUPs
-    else:
-        params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    try:
+        if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:
+            params, mups = speech_to_params_and_mups(model, samples, rate)  # the live path, keeping the MUPs
+        else:
+            params = speech_to_params(model, samples, rate, mode=args.mode, stream=StreamConfig(lag=args.lag))
+    except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
+        raise FileProblem(args.speech, str(exc)) from None
     speech = params
     params = apply_expressions(params, args, mups=mups, model=model)
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
@@ -79,9 +101,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv(args.csv, track)
     if args.glb or args.json or args.tsv:
         from clients.export.files import export_track
-        from facecast.commands.headopts import resolve_from_args
 
-        head = resolve_from_args(args) if args.glb else None
         arkit = None
         if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
             from clients.export.gltf import builtin_arkit_targets

@@ -46,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.output.suffix.lower() not in FORMATS:
         raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
+    if args.output.suffix.lower() == ".glb" and args.glb_morphs == "arkit52" and args.head != "builtin":
+        # refused before the session is watched: export_track would refuse it only after the whole take
+        raise ClientError(
+            f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
+        )
     token = token_from_env(args.token_env)
     head = arkit = None
     if args.output.suffix.lower() == ".glb":
@@ -76,8 +81,9 @@ def run(args: argparse.Namespace) -> int:
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
     files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
+    late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
-        f"({track.duration_s:.2f} s) of {session!r}; session closed with {rec.close_code} {rec.close_reason}"
+        f"({track.duration_s:.2f} s) of {session!r}{late}; session closed with {rec.close_code} {rec.close_reason}"
     )
     return 0

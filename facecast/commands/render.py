@@ -15,11 +15,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="render an animated head to MP4 (with the speech muxed in) and optionally PNG frames",
         formatter_class=HelpFormatter,
         description=(
-            "Mouth parameters come from --params (CSV: t, upper_lip_raise, lip_stretch, mouth_open,\n"
-            "lip_corner_depress) or, when the real-time core is available, from the speech via --model."
+            "Mouth parameters come from the speech by the live streaming path (--model, --mapper), as\n"
+            "`facecast animate` does, or from --params (CSV: t, upper_lip_raise, lip_stretch, mouth_open,\n"
+            "lip_corner_depress; e.g. an edited `facecast animate --csv`)."
         ),
     )
-    p.add_argument("speech", help="speech audio (.wav) muxed into the video")
+    p.add_argument("speech", help="speech audio (WAV; other formats through ffmpeg), muxed into the video")
     add_head_options(p)
     p.add_argument(
         "--model",
@@ -29,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_mapper_options(p)
     add_expression_options(p)
     p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
-    p.add_argument("-o", "--output", required=True, help="video file to write (.mp4)")
+    p.add_argument("-o", "--output", required=True, help="video file to write (.mp4; also .mov, .m4v, .mkv)")
     p.add_argument("--png-dir", help="also write every frame as PNG into this folder")
     p.add_argument("--view", choices=("front", "three_quarter"), default="front", help="camera view")
     p.add_argument("--width", type=int, default=640, help="image width in pixels")
@@ -43,12 +44,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.files import make_parent
     from assets.tracks import read_csv_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, params_for_audio, write_video
+    from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
     from realtime_core.track import frames_from_samples
 
+    make_parent(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
+    if args.png_dir:
+        make_parent(Path(args.png_dir) / "frame_00000.png")
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:

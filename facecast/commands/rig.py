@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
     from pathlib import Path
 
-    from assets.errors import MeshError, RigCheckError
+    from assets.errors import MeshError, RigCheckError, RigFileError
     from assets.heads.builtin import load_builtin_head
     from assets.heads.head import Head, builtin_morph_head, head_checks, head_landmarks
     from assets.heads.landmarks import credit_for, read_landmarks
@@ -81,6 +81,14 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.output and not args.show_landmarks:
         raise SystemExit("facecast rig: error: give -o RIG.npz (or --show-landmarks PNG)")
+    if args.output and Path(args.output).suffix.lower() != ".npz":
+        # --head takes a rig by its suffix: any other name would make the file unusable (and rigging takes minutes)
+        raise RigFileError(f"{args.output}: a rig file is written as .npz; give a name ending in .npz")
+    from assets.heads.plot import check_picture_path
+
+    for picture in (args.show_landmarks, args.png):
+        if picture:
+            check_picture_path(picture)
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )

@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "model's motion on it is mixed in, most before speech where the in-breath is heard but not written. "
         "The output format follows the suffix: .mp4 (rendered, speech muxed in), .glb (morph-target animation + "
         ".wav beside it), "
-        ".csv / .json (curves), .tsv (mouth cues), .npz (the full motion: landmark PCA coefficients, the four "
+        ".csv / .json (curves), .tsv (mouth cues), .wav (the speech alone, e.g. beside a .csv or .tsv), "
+        ".npz (the full motion: landmark PCA coefficients, the four "
         "parameters and the Motion Unit parameters of paper 002).",
     )
     p.add_argument("text", help="what to say (for --audio: the transcript of the recording)")
@@ -30,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         action="append",
         required=True,
-        help="output file, .mp4/.glb/.csv/.json/.tsv/.npz (repeatable)",
+        help="output file, .mp4/.glb/.csv/.json/.tsv/.wav/.npz (repeatable)",
     )
     p.add_argument("--lang", choices=("en", "es"), default="en", help="language of TEXT")
     p.add_argument("--voice", default=None, help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es, or a variant f3")
@@ -135,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.audio import read_audio, write_wav
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
-    from clients.export.files import FORMATS, export_track
+    from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from realtime_core.track import Track
@@ -143,9 +144,12 @@ def run(args: argparse.Namespace) -> int:
 
     t_start = time.perf_counter()
     outs = [Path(o) for o in args.output]
-    bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", *FORMATS)]
+    bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", ".wav", *FORMATS)]
     if bad:
-        raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, {', '.join(FORMATS)})")
+        raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, .wav, {', '.join(FORMATS)})")
+    check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
+    if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):
+        raise ConfigError(f"{args.audio}: an output would overwrite the --audio recording; give it another name")
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:
@@ -222,6 +226,8 @@ def run(args: argparse.Namespace) -> int:
                     )
         elif out.suffix.lower() == ".npz":
             write_motion(out, motion, stored)
+        elif out.suffix.lower() == ".wav":  # the speech the motion is timed to (16-bit mono, its own rate)
+            write_wav(out, samples, rate)
         else:
             export_track(out, track, head=head, audio=(samples, rate))
         t = lap(f"write {out.suffix}", t)

@@ -147,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
+        files = [(path, FileSource(FileConfig(path=path, realtime=not args.fast))) for path in args.file]  # too
         ready: asyncio.Future = asyncio.get_running_loop().create_future()
         extra = []
         run = asyncio.ensure_future(run_server(server, ready=ready))
@@ -159,8 +160,7 @@ def run(args: argparse.Namespace) -> int:
             "Ctrl-C stops",
             flush=True,
         )
-        for path in args.file:
-            src = FileSource(FileConfig(path=path, realtime=not args.fast))
+        for path, src in files:
             name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
             extra.append(server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
         if mic is not None:

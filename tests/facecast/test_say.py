@@ -70,7 +70,7 @@ def test_say_writes_valid_mp4_csv_glb(corpus_file, tmp_path, capsys):
 
 
 def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
-    out, npz = tmp_path / "es.csv", tmp_path / "es.npz"
+    out, npz, wav = tmp_path / "es.csv", tmp_path / "es.npz", tmp_path / "es_speech.wav"
     assert (
         main(
             [
@@ -84,11 +84,17 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
                 str(out),
                 "-o",
                 str(npz),
+                "-o",
+                str(wav),
             ]
         )
         == 0
     )
     assert out.is_file() and len(out.read_text().splitlines()) > 20
+    from assets.audio import read_audio
+
+    speech, rate = read_audio(wav)  # the speech the curves are timed to: as long as the frames, to one frame
+    assert abs(len(speech) / rate - (len(out.read_text().splitlines()) - 1) / 30) < 1 / 30
     with np.load(npz, allow_pickle=False) as z:  # the full motion: PCA coefficients + parameters
         frames, names = z["frames"], list(z["dim_names"])
         assert frames.shape == (len(out.read_text().splitlines()) - 1, len(names))
@@ -103,10 +109,15 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
         moving = offsets - offsets.mean(0)
         assert np.sum((rebuilt - offsets) ** 2) < 0.1 * np.sum(moving**2)
     capsys.readouterr()
+    take = tmp_path / "take.wav"  # a user's recording: the .wav beside take.glb must not replace it
+    take.write_bytes(b"RIFF recording")
     for argv, msg in (
+        (["say", "hi", "--audio", str(take), "-o", str(tmp_path / "take.glb")], "would overwrite the input"),
+        (["say", "hi", "--audio", str(take), "-o", str(take)], "would overwrite the --audio recording"),
         (["say", "😀😀", "-o", str(tmp_path / "x.csv")], "pronounceable"),
         (["say", "   ", "-o", str(tmp_path / "x.csv")], "empty text"),
-        (["say", "hi", "--voice", "xx-none", "-o", str(tmp_path / "x.csv")], "voice"),
+        (["say", "hi", "--voice", "xx-none", "-o", str(tmp_path / "x.csv")], "error: voice 'xx-none' is not one of"),
+        (["say", "hi", "--rate", "0", "-o", str(tmp_path / "x.csv")], "error: rate_wpm must be in (80, 450), got 0"),
         (["say", "hi", "-o", str(tmp_path / "x.avi")], "unknown output format"),
         (["say", "?! ... -- ()", "-o", str(tmp_path / "x.csv")], "no pronounceable word"),
     ):
@@ -115,7 +126,8 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:  # an unsupported language: argparse names the choices
         main(["say", "bonjour", "--lang", "fr", "--corpus", str(corpus_file), "-o", str(tmp_path / "x.csv")])
     assert exc.value.code == 2 and "invalid choice: 'fr'" in capsys.readouterr().err
-    assert not (tmp_path / "x.csv").exists()
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "take.glb").exists()
+    assert take.read_bytes() == b"RIFF recording"
     # characters outside the synthesiser's set (emoji, symbols, control characters) are dropped, the
     # words around them spoken: the same motion as the text without them (espeak-ng's timings of the
     # cleaned text can differ by a sample or two)

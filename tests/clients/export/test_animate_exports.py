@@ -100,3 +100,59 @@ def test_animate_arkit_glb_carries_the_expression_shapes(tmp_path):
     p = decode_csv(csv.read_bytes()).values
     np.testing.assert_allclose(p[t < 1.2], speech[t < 1.2], rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
     assert np.abs(p[late] - speech[late]).max() > 1e-3
+
+
+def test_animate_refuses_before_writing_anything(tmp_path, capsys):
+    """Every refusal is one line, exit 2, and leaves no file: the .wav beside a .glb/.json would be the input
+    speech itself (a stereo recording would be replaced by its mono copy), an export whose suffix is not its
+    option's format, --glb-morphs arkit52 on a head without ARKit targets, a head that is not a mesh."""
+    import wave
+
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = tmp_path / "take.wav"
+    with wave.open(str(wav), "wb") as w:  # stereo: the mono copy that would replace it differs
+        w.setnchannels(2)
+        w.setsampwidth(2)
+        w.setframerate(16000)
+        x = np.round(speechlike(1.0, 16000) * 16000).astype("<i2")
+        w.writeframes(np.stack([x, x // 2], axis=1).tobytes())
+    before = wav.read_bytes()
+    not_a_head = tmp_path / "notes.txt"
+    not_a_head.write_text("hello")
+    cases = {
+        "take.wav": ["--csv", "o.csv", "--glb", "take.glb"],
+        "o.csv": ["--csv", "o.csv", "--json", "o.csv"],
+        "arkit": ["--csv", "o.csv", "--glb", "o.glb", "--glb-morphs", "arkit52", "--head", str(not_a_head)],
+        "notes.txt": ["--csv", "o.csv", "--glb", "o.glb", "--head", str(not_a_head)],
+    }
+    for named, outs in cases.items():
+        argv = [str(tmp_path / o) if o.startswith(("o.", "take.")) else o for o in outs]
+        assert main(["animate", str(wav), "--model", str(model), *argv]) == 2, named
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and named in err and "Traceback" not in err, err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["m.npz", "notes.txt", "take.wav"], named
+    assert wav.read_bytes() == before
+
+
+def test_too_short_speech_names_the_file(tmp_path, capsys):
+    """20 ms of speech (less than one analysis window) is refused by animate and render with one line that
+    names the file and both durations, exit 2, nothing written."""
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = tmp_path / "blip.wav"
+    write_wav(wav, speechlike(1.0, 16000)[:320], 16000)
+    capsys.readouterr()
+    for argv in (
+        ["animate", str(wav), "--csv", str(tmp_path / "o.csv")],
+        ["render", str(wav), "-o", str(tmp_path / "o.mp4")],
+    ):
+        assert main([*argv, "--model", str(model)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and f"{wav}: audio too short: 20 ms" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blip.wav", "m.npz"]

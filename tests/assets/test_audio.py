@@ -1,0 +1,49 @@
+"""``read_audio`` on the WAVs recorders, DAWs and Python tools actually write: float, 24-bit and
+multichannel (WAVE_FORMAT_EXTENSIBLE), mu-law, 96 kHz. The PCM reader refuses them; ffmpeg decodes them,
+to the same samples as the 16-bit original."""
+
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+
+from assets.audio import read_audio, write_wav
+from assets.errors import NotAudioError
+from tests.speech import speechlike
+
+pytestmark = pytest.mark.system  # ffmpeg
+
+
+@pytest.mark.parametrize(
+    ("name", "codec", "extra", "rate", "atol"),
+    [
+        ("float.wav", "pcm_f32le", [], 16000, 1e-6),
+        ("24bit.wav", "pcm_s24le", [], 16000, 1e-6),
+        ("six.wav", "pcm_s16le", ["-ac", "6"], 16000, 0.0),  # 5.1: ffmpeg's downmix matrix, not the channel mean
+        ("mulaw.wav", "pcm_mulaw", [], 16000, 0.02),  # 8-bit companding
+        ("hi_rate.wav", "pcm_s16le", ["-ar", "96000"], 96000, None),
+    ],
+)
+def test_wav_encodings_the_pcm_reader_refuses_are_decoded_by_ffmpeg(tmp_path, ffmpeg, name, codec, extra, rate, atol):
+    src = write_wav(tmp_path / "src.wav", speechlike(1.0, 16000), 16000)
+    ref, _ = read_audio(src)
+    out = tmp_path / name
+    subprocess.run([ffmpeg, "-v", "error", "-y", "-i", str(src), "-c:a", codec, *extra, str(out)], check=True)
+    x, got_rate = read_audio(out)
+    assert got_rate == rate and x.dtype == np.float32
+    if atol is None:  # resampled: the same duration and loudness
+        assert abs(len(x) / rate - len(ref) / 16000) < 1e-3
+        assert abs(np.sqrt(np.mean(x**2)) / np.sqrt(np.mean(ref**2)) - 1) < 0.02
+    elif atol == 0.0:  # the same waveform up to a gain
+        assert len(x) == len(ref) and np.corrcoef(x, ref)[0, 1] > 0.999
+    else:
+        np.testing.assert_allclose(x, ref, atol=atol)
+
+
+def test_a_corrupt_wav_is_still_one_error_naming_the_file(tmp_path, ffmpeg):
+    bad = tmp_path / "bad.wav"
+    bad.write_bytes(b"RIFF\x24\x00\x00\x00WAVEfmt \x10\x00\x00\x00" + b"\xff" * 40)
+    with pytest.raises(NotAudioError, match=r"bad\.wav: "):
+        read_audio(bad)

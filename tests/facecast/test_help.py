@@ -1,0 +1,29 @@
+"""Every command's ``--help``: it renders, shows real defaults once, and no empty ones."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from facecast.cli import COMMANDS, main
+
+
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_help_states_each_default_once_and_no_empty_ones(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines anywhere: compare unwrapped
+    assert "(default: None)" not in text and "(default: False)" not in text and "(default: [])" not in text
+    # one option's help (up to the next option) never states its default twice
+    for option in re.split(r"\s(?=-{1,2}[a-z][\w-]* )", text):
+        assert option.count("(default") <= 1, option
+
+
+def test_help_keeps_informative_defaults(capsys):
+    with pytest.raises(SystemExit):
+        main(["animate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "streaming (live) or batch HMMI (default: stream)" in text
+    assert "(default: builtin)" in text

@@ -1,0 +1,19 @@
+"""``facecast serve --file`` with a file it cannot read fails before it listens (as --mic does)."""
+
+from __future__ import annotations
+
+from facecast.cli import main
+
+
+def test_a_bad_file_source_fails_before_listening(tmp_path, capsys):
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    notes = tmp_path / "notes.wav"
+    notes.write_text("not audio")
+    for bad, problem in ((tmp_path / "missing.wav", "file not found"), (notes, "not audio")):
+        assert main(["serve", "--port", "0", "--no-head", "--model", str(model), "--file", str(bad)]) == 2
+        out, err = capsys.readouterr()
+        assert "listening" not in out, out
+        assert len(err.strip().splitlines()) == 1 and f"{bad}: {problem}" in err, err
