@@ -20,12 +20,13 @@ eq. 4). Both have ``neutral``, ``triangles``, ``moving``, ``displacements(params
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from assets.errors import LandmarkError, MeshError
+from assets.errors import CannotWriteError, LandmarkError, MeshError, RigFileError
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
 from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
@@ -112,7 +113,7 @@ def resolve_head(
 
             if landmarks is None:
                 return Head(*builtin_rig(cache))
-            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None)
+            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None, cache=cache)
         return builtin_morph_head(cache)
     p = Path(spec)
     if p.suffix.lower() == ".wfm":  # Candide-3: a face model with its own animation units
@@ -151,7 +152,7 @@ def resolve_head(
                 f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
                 "give a mapping with --target-map or use --head-mode retarget"
             )
-    return _rig_mesh(mesh, landmarks, config, landmark_finder)
+    return _rig_mesh(mesh, landmarks, config, landmark_finder, cache=cache)
 
 
 def morph_head(
@@ -180,12 +181,66 @@ def _rig_mesh(
     landmarks: str | Path | Mapping[str, object] | None,
     config: RigConfig,
     finder: LandmarkFinder | None,
+    *,
+    cache: Path | None = None,
 ) -> Head:
+    """Rig ``mesh``, or read the rig cached for the same mesh content, landmarks, configuration and rig
+    algorithm (``<cache>/rigs/``): rigging a scanned head takes minutes, and every command taking
+    ``--head MESH`` would otherwise pay it again."""
+    from assets.heads.cache import cache_dir
+    from assets.heads.rigfile import load_rig, save_rig
     from assets.heads.rigging import rig_head
 
+    path = (cache or cache_dir()) / "rigs" / f"{_rig_key(mesh, landmarks, config, finder)}.npz"
+    if path.is_file():
+        try:
+            return Head(*load_rig(path))
+        except RigFileError:
+            path.unlink(missing_ok=True)  # unreadable (an older writer): rig again below
     spec, source = head_landmarks(mesh, landmarks, finder)
     rig, rigged = rig_head(mesh, spec, landmark_source=source, config=config)
+    with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
+        save_rig(rig, rigged, path)
     return Head(rig, rigged)
+
+
+def _rig_key(
+    mesh: HeadMesh,
+    landmarks: str | Path | Mapping[str, object] | None,
+    config: RigConfig,
+    finder: LandmarkFinder | None,
+) -> str:
+    """Hex digest of everything a rig is made from: the mesh as loaded (its name included: errors and
+    pictures name it), the landmarks as given (a file's bytes, a mapping's JSON; without them the
+    shipped file's bytes, or which finder would place them), the rig configuration and the rig
+    algorithm."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    from assets.heads.rigfile import VERSION
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    h = hashlib.sha256(f"rig {VERSION} {RIG_ALGORITHM} {config!r} {mesh.name}".encode())
+    for a in (mesh.vertices, mesh.triangles, mesh.uvs, mesh.colors, mesh.part):
+        h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    h.update(mesh.texture or b"-")
+    h.update(json.dumps(list(mesh.part_names)).encode())
+    if isinstance(landmarks, Mapping):
+        h.update(json.dumps(landmarks, sort_keys=True, default=str).encode())
+    else:
+        from assets.heads.landmarks import shipped_landmarks
+
+        given = Path(landmarks) if landmarks is not None else shipped_landmarks(mesh.name)
+        if given is not None:
+            try:
+                h.update(given.read_bytes())
+            except OSError:  # unreadable: head_landmarks names the file when it reads it
+                h.update(str(given).encode())
+        else:
+            h.update(f"finder {getattr(finder, '__qualname__', type(finder).__name__)}".encode())
+    return h.hexdigest()[:32]
 
 
 def head_landmarks(

@@ -28,6 +28,8 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
     """Write ``rig`` and its ``mesh`` (same vertex count) to ``path`` (.npz) atomically."""
     if len(mesh.vertices) != len(rig.neutral):
         raise RigFileError(f"{path}: mesh has {len(mesh.vertices)} vertices, rig {len(rig.neutral)}")
+    if mesh.part is not None and len(mesh.part) != len(mesh.vertices):
+        raise RigFileError(f"{path}: mesh has {len(mesh.vertices)} vertices, its part labels {len(mesh.part)}")
     names = list(rig.simple.animation_units)
     meta = {
         "format": FORMAT,
@@ -35,6 +37,7 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         "unit_names": names,
         "groups": [list(g) for g in rig.calibration.groups],
         "mesh_name": mesh.name,
+        "part_names": list(mesh.part_names),
         "rig": rig.meta,
     }
     m = rig.matrix.tocsr()
@@ -65,6 +68,8 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         arrays["colors"] = np.asarray(mesh.colors, dtype=np.float32)
     if mesh.texture is not None:
         arrays["texture"] = np.frombuffer(mesh.texture, dtype=np.uint8)
+    if mesh.part is not None:  # which file object each vertex came from: teeth and eyes are found by name
+        arrays["part"] = np.asarray(mesh.part, dtype=np.int16)
     return atomic_savez(path, **arrays)
 
 
@@ -116,6 +121,8 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
         texture=a["texture"].tobytes() if "texture" in a else None,
         colors=a.get("colors"),
         name=meta.get("mesh_name", str(p)),
+        part=a.get("part"),
+        part_names=tuple(meta.get("part_names", ())),
     )
     return rig, mesh
 

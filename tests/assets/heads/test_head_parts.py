@@ -142,3 +142,26 @@ def test_a_gltf_scene_with_separate_eye_and_teeth_meshes(split_head, builtin_hea
     moved = rig.deformed(np.array([0.0, 0.0, 0.35, 0.0])) - rig.neutral
     eyes = np.flatnonzero(mesh.part == mesh.part_names.index("EyeLeft"))
     assert np.abs(moved[eyes]).max() == 0
+
+
+def test_a_mesh_rig_is_cached_by_content_and_keeps_its_parts(split_head, tmp_path):
+    """The second resolve of the same mesh and landmarks reads the rig written by the first (the same
+    arrays, the part labels kept: teeth and eyes are found by name); other landmarks rig anew."""
+    d, files = split_head
+    parts = tuple(str(files[k][0]) for k in ("eyes", "teeth", "tongue"))
+    first = resolve_head(files["skin"][0], parts=parts, landmarks=d / "lm.json", mode="retarget", cache=tmp_path)
+    cached = sorted((tmp_path / "rigs").glob("*.npz"))
+    assert len(cached) == 1
+    again = resolve_head(files["skin"][0], parts=parts, landmarks=d / "lm.json", mode="retarget", cache=tmp_path)
+    assert sorted((tmp_path / "rigs").glob("*.npz")) == cached
+    np.testing.assert_array_equal(
+        again.rig.deformed(np.array([0.0, 0.1, 0.3, 0.0])), first.rig.deformed(np.array([0.0, 0.1, 0.3, 0.0]))
+    )
+    np.testing.assert_array_equal(again.mesh.part, first.mesh.part)
+    assert again.mesh.part_names == first.mesh.part_names and again.rig.meta == first.rig.meta
+
+    moved = json.loads((d / "lm.json").read_text())
+    moved["landmarks"]["chin"] = next(i for i in range(len(files["skin"][1])) if i != moved["landmarks"]["chin"])
+    (tmp_path / "lm2.json").write_text(json.dumps(moved))
+    resolve_head(files["skin"][0], parts=parts, landmarks=tmp_path / "lm2.json", mode="retarget", cache=tmp_path)
+    assert len(list((tmp_path / "rigs").glob("*.npz"))) == 2
