@@ -126,7 +126,9 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
         raise NotAudioError(path, "file not found")
     if path.suffix.lower() == ".wav" and rate_hz is None:
         try:
-            return read_wav(path)
+            # A silent clip is a take, not a mistake (a pause line): it animates a closed mouth, as an
+            # mp3 of the same silence does; corpora check silence with read_wav's default.
+            return read_wav(path, check_silence=False)
         except (UnsupportedWavError, WrongSampleRateError):
             pass  # a real WAV the strict corpus reader refuses: ffmpeg decodes it below
     ffmpeg = shutil.which("ffmpeg")

@@ -156,3 +156,18 @@ def test_too_short_speech_names_the_file(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and f"{wav}: audio too short: 20 ms" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blip.wav", "m.npz"]
+
+
+def test_a_silent_take_animates_a_closed_mouth(tmp_path):
+    """Digital silence is a take (a pause line), not an error: every frame the rest pose, one rest cue."""
+    from assets.audio import write_wav
+
+    wav = tmp_path / "pause.wav"
+    write_wav(wav, np.zeros(16000, dtype=np.float32), 16000)
+    rc = main(["animate", str(wav), "--csv", str(tmp_path / "p.csv"), "--tsv", str(tmp_path / "p.tsv")])
+    assert rc == 0
+    track = decode_csv((tmp_path / "p.csv").read_bytes())
+    assert track.n_frames == 30
+    assert np.all(track.values == track.values[0])  # no motion at all
+    assert track.values[0, 2] == 0.0  # mouth_open at the closed pose
+    assert [c.shape for c in read_tsv((tmp_path / "p.tsv").read_bytes())] == ["X"]
