@@ -136,11 +136,13 @@ class Voice:
 
     def __post_init__(self) -> None:
         if self.language not in LANGUAGES:
-            raise ConfigError(f"unknown language {self.language!r}; known: {sorted(LANGUAGES)}")
+            raise ConfigError(f"unknown language {self.language!r}; known: {', '.join(sorted(LANGUAGES))}")
         if self.base not in LANGUAGES[self.language]:
-            raise ConfigError(f"voice {self.base!r} is not one of {LANGUAGES[self.language]} for {self.language!r}")
+            raise ConfigError(
+                f"voice {self.base!r} is not one of {', '.join(LANGUAGES[self.language])} for {self.language!r}"
+            )
         if self.variant is not None and self.variant not in VARIANTS:
-            raise ConfigError(f"unknown variant {self.variant!r}; known: {VARIANTS}")
+            raise ConfigError(f"unknown variant {self.variant!r}; known: {', '.join(VARIANTS)}")
         if not RATE_RANGE_WPM[0] <= self.rate_wpm <= RATE_RANGE_WPM[1]:
             raise ConfigError(f"rate_wpm must be in {RATE_RANGE_WPM}, got {self.rate_wpm}")
         for name in ("pitch", "pitch_range"):
