@@ -170,26 +170,13 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
     return out
 
 
-def cut_mouth(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    left: int,
-    right: int,
-    up: np.ndarray,
-    uvs: np.ndarray | None = None,
-    *,
-    through: int | None = None,
-    reach: float = 0.25,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
-    """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
-    indices) that stays closest to the straight corner-to-corner line (passing through the vertex
-    ``through`` if given, e.g. the inner-lip midpoint) is cut open: within ``reach`` (a fraction of
-    the corner-to-corner distance, along the mesh) of the path, the faces below the mouth surface
-    (the path swept along the depth; below along ``up`` (3,)) take copies of every vertex they share
-    with faces above it, so the two lips become separate surfaces (see :func:`_lower_faces`).
-    Returns new vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
+def cut_path(
+    vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, through: int | None = None
+) -> list[int]:
+    """The edge path (vertex indices) from mouth corner ``left`` to ``right`` that stays closest to the
+    straight corner-to-corner line, through the vertex ``through`` if given (see :func:`cut_mouth`)."""
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64).copy()
+    t = np.asarray(triangles, dtype=np.int64)
     a, b = v[left], v[right]
     ab = b - a
     length = float(np.linalg.norm(ab))
@@ -214,11 +201,90 @@ def cut_mouth(
         return p_[::-1]
 
     if through is None or through in (left, right):
+        return leg(left, right)
+    path = leg(left, through) + leg(through, right)[1:]
+    if len(set(path)) != len(path):  # the two legs touched: fall back to one leg
         path = leg(left, right)
-    else:
-        path = leg(left, through) + leg(through, right)[1:]
-        if len(set(path)) != len(path):  # the two legs touched: fall back to one leg
-            path = leg(left, right)
+    return path
+
+
+CONTACT_DIP = 0.015
+"""IOD: on closed lips, a cut-path vertex this far below both its path neighbours (the inner-lip point the
+path is pulled through: Lee Perry-Smith's front-contact vertex 2889, 0.028 IOD) is bypassed (:func:`level_path`)."""
+
+
+def level_path(
+    vertices: np.ndarray, triangles: np.ndarray, path: list[int], point: int, up: np.ndarray, *, iod: float
+) -> tuple[list[int], int]:
+    """``path`` with the vertex ``point`` bypassed when the path dips there by more than CONTACT_DIP IOD
+    along ``up`` (the V it makes leaves a wedge of the lower lip's front on the upper side): its two path
+    neighbours are joined by the shortest mesh path that avoids it and dips less. Returns the path and the
+    vertex that stands for ``point`` (itself, or the detour's vertex nearest it)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    h = v @ (np.asarray(up, dtype=np.float64) / np.linalg.norm(up))
+    if point not in path[1:-1]:
+        return path, point
+    i = path.index(point)
+    prev, nxt = path[i - 1], path[i + 1]
+    if min(h[prev], h[nxt]) - h[point] <= CONTACT_DIP * iod:
+        return path, point
+    adj = vertex_adjacency(len(v), np.asarray(triangles, dtype=np.int64)).tocoo()
+    keep = ~np.isin(adj.row, path[: i - 1] + path[i : i + 1] + path[i + 2 :]) & ~np.isin(
+        adj.col, path[: i - 1] + path[i : i + 1] + path[i + 2 :]
+    )
+    w = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)[keep]
+    g = sp.csr_matrix((w + 1e-12 * iod, (adj.row[keep], adj.col[keep])), shape=(len(v), len(v)))
+    dist, pred = dijkstra(g, indices=prev, return_predecessors=True)
+    if not np.isfinite(dist[nxt]) or dist[nxt] > 3.0 * (
+        np.linalg.norm(v[prev] - v[point]) + np.linalg.norm(v[nxt] - v[point])
+    ):
+        return path, point
+    detour = [nxt]
+    while detour[-1] != prev:
+        detour.append(int(pred[detour[-1]]))
+    detour = detour[::-1]
+    inner = detour[1:-1]
+    ends_h = np.interp(np.arange(len(detour)), [0, len(detour) - 1], [h[prev], h[nxt]])
+    if inner and float((ends_h[1:-1] - h[inner]).max()) > CONTACT_DIP * iod:
+        return path, point
+    new = path[:i] + inner + path[i + 1 :]
+    stand = min(inner or [prev, nxt], key=lambda c: float(np.linalg.norm(v[c] - v[point])))
+    return new, int(stand)
+
+
+def cut_mouth(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    left: int,
+    right: int,
+    up: np.ndarray,
+    uvs: np.ndarray | None = None,
+    *,
+    through: int | None = None,
+    path: list[int] | None = None,
+    reach: float = 0.25,
+    forward: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+    """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
+    indices) that stays closest to the straight corner-to-corner line (passing through the vertex
+    ``through`` if given, e.g. the inner-lip midpoint) is cut open: within ``reach`` (a fraction of
+    the corner-to-corner distance, along the mesh) of the path, the faces below the mouth surface
+    (the path swept along the depth; below along ``up`` (3,)) take copies of every vertex they share
+    with faces above it, so the two lips become separate surfaces (see :func:`_lower_faces`).
+    ``path``: the corner-to-corner vertex path to cut along, if already chosen (:func:`cut_path`,
+    :func:`level_path`). ``forward`` (3,), the face's forward axis: if given, the upper lip's skin beside
+    the corners is kept whole (:func:`_mend_front`). Returns new vertices (n', 3), triangles, uvs and the
+    (n',) index of the original vertex."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).copy()
+    a, b = v[left], v[right]
+    ab = b - a
+    length = float(np.linalg.norm(ab))
+    adj = vertex_adjacency(len(v), t).tocoo()
+    elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
+    if path is None:
+        path = cut_path(v, t, left, right, through=through)
+    path = list(path)
     interior = path[1:-1]
     if not interior:
         return v, t, uvs, np.arange(len(v))
@@ -226,6 +292,8 @@ def cut_mouth(
     up = up / np.linalg.norm(up)
     glen = sp.csr_matrix((elen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
     lower, near = _lower_faces(v, t, path, glen, up, ab / length, reach=reach * length)
+    if forward is not None:
+        lower = _mend_front(v, t, path, lower, near, up, forward, margin=FRONT_MEND_MARGIN * length)
     # Every vertex shared by a face above and a face below the mouth surface near the path is
     # split: the faces below take its copy. On a scan whose lips meet in a crease (Lee Perry-Smith)
     # the path runs along the front of the crease and the crease's back wall joins both lips' inner
@@ -334,6 +402,62 @@ def _lower_faces(
         if near[fan].all() and lower[fan[0]] == lower[fan[-1]]:
             lower[fan] = lower[fan[0]]
     return lower, near
+
+
+FRONT_MEND_ROUNDS = 50
+"""At most this many rounds of :func:`_mend_front` (each moves the lower side's edge one ring of faces)."""
+FRONT_MEND_MARGIN = 0.01
+"""Fraction of the corner-to-corner distance: how far above and in front of the cut path a vertex must be
+to count as the upper lip's skin in :func:`_mend_front`."""
+END_MEND = 0.2
+"""Fraction of the corner-to-corner distance: :func:`_mend_front` works only this near the mouth corners.
+Over the whole cut (0.25 reached the midline on Lee Perry-Smith's meshopt file) it pushed the lower side
+down into the lower lip's front and the lower lip's inner edge tore into pink shards at /a/."""
+
+
+def _mend_front(
+    v: np.ndarray,
+    t: np.ndarray,
+    path: list[int],
+    lower: np.ndarray,
+    near: np.ndarray,
+    up: np.ndarray,
+    forward: np.ndarray,
+    *,
+    margin: float,
+) -> np.ndarray:
+    """``lower`` with the upper lip's skin kept whole: a vertex off the path, above it and in front of it by
+    more than ``margin`` (head units, along ``up`` and ``forward`` (3,)) with faces on both sides would be
+    split in the visible skin (a crack rising from the mouth corner); its near faces join the upper side
+    (the faces on the path's edges keep theirs), round after round until no such vertex is left."""
+    fwd = np.asarray(forward, dtype=np.float64) / np.linalg.norm(forward)
+    pp = v[path]
+    ax = pp[-1] - pp[0]
+    ax = ax / np.linalg.norm(ax)
+    s_p = (pp - pp[0]) @ ax
+    o = np.argsort(s_p)
+    sv = (v - pp[0]) @ ax
+    depth = np.interp(sv, s_p[o], (pp @ fwd)[o])
+    height = np.interp(sv, s_p[o], (pp @ up)[o])
+    skin = (v @ fwd > depth + margin) & (v @ up > height + margin)
+    skin &= np.minimum(sv - s_p.min(), s_p.max() - sv) < END_MEND * (s_p.max() - s_p.min())
+    skin[path] = False
+    pe = np.sort(np.column_stack([path[:-1], path[1:]]), axis=1)
+    ts = np.sort(t, axis=1)
+    fixed = np.zeros(len(t), dtype=bool)
+    for a, b in ((0, 1), (1, 2), (0, 2)):
+        fixed |= np.isin(ts[:, a] * len(v) + ts[:, b], pe[:, 0] * len(v) + pe[:, 1])
+    lower = lower.copy()
+    idx = np.flatnonzero(near & ~fixed)
+    for _ in range(FRONT_MEND_ROUNDS):
+        n_lo = np.bincount(t[near & lower].ravel(), minlength=len(v))
+        n_up = np.bincount(t[near & ~lower].ravel(), minlength=len(v))
+        bad = skin & (n_lo > 0) & (n_up > 0)
+        flip = idx[lower[idx] & bad[t[idx]].any(axis=1)]
+        if not len(flip):
+            break
+        lower[flip] = False
+    return lower
 
 
 def _path_fans(t: np.ndarray, path: list[int]) -> list[np.ndarray]:
@@ -523,14 +647,23 @@ def rig_head(
             # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
             # contact, where the cut passes (see CONTACT_FACING).
             front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
+            path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
+            path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)
+            # The simple face is placed at the front contact (placed at the detour's vertex, up the crease
+            # wall, it brought corner flips back: hand 1 / 2.58, meshopt 2 / 3.77). The rig's upper inner-lip
+            # vertex is the one the cut passes; its lower one the front contact below it, on the lower lip's
+            # front (the detour vertex's lower copy sits on the crease wall, which opens less: the mouth-open
+            # rescale then overshot, automatic landmarks stretch 4.46 at the right corner, 2.78 so).
+            snap["upper_inner"], snap["lower_inner"] = stand, front
+            if stand != front:
+                meta["inner_lip_cut"] = int(stand)  # the cut's vertex at the inner-lip midpoint
             for k in ("upper_inner", "lower_inner"):
-                snap[k] = front
                 points[k] = np.asarray(v[front], dtype=np.float64)
             meta["landmarks"] = {k: p.tolist() for k, p in points.items()}
             v, t, uv, origin = cut_mouth(
-                v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, through=snap["lower_inner"]
+                v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, path=path, forward=frame.axes[2]
             )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
