@@ -20,6 +20,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import TypeVar
@@ -817,6 +818,18 @@ CAVITY_FAR_WALL = 0.45
 seen through the open mouth, not skin the cavity must stay behind."""
 
 
+CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
+    (0.0, 0.0, 0.0, 0.0),
+    *itertools.product((-0.035, 0.055), (-0.12, 0.08), (0.0, 0.47), (-0.11, 0.03)),
+)
+"""Poses (IOD) at which the mouth cavity must lie behind the skin: rest and the corners of the box the
+shipped model's parameters span on real speech of other voices (7,435 frames of ../shared/data/speech:
+upper_lip_raise -0.034..0.053, lip_stretch -0.112..0.077, mouth_open 0..0.464, lip_corner_depress
+-0.102..0.026). The rig is linear in the parameters, so every frame lies between these. With the
+widest opening alone, Lee Perry-Smith's chin came forward of the cavity at mouth_open 0.26 with the
+corners at -0.05, and the cavity showed through it as a dark hole."""
+
+
 def add_mouth_cavity(
     rig: R,
     mesh: HeadMesh,
@@ -875,7 +888,7 @@ def add_mouth_cavity(
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
     # skin-coloured back of the head as a flat pink disc.
     posed = []
-    for p in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.45, 0.0), (0.02, 0.027, 0.45, -0.007)):
+    for p in CAVITY_POSES:
         d = front_depth(
             np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
             mesh.triangles,
