@@ -70,7 +70,7 @@ from server.guard import (
     origin_allowed,
 )
 from server.http import HttpReply, HttpRouter
-from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
+from server.live import LiveSession, LocalSession, SessionHandle, TurnDeltas, Viewer, deliver
 from server.session import Session, SessionConfig, warm_up
 from server.shards import ConnectionWorkers, FrontRegistry
 from server.timing import GcPauses, StageTimes, freeze_heap
@@ -105,6 +105,7 @@ class FacecastServer:
         self.config = config
         self.sessions: dict[str, LiveSession] = {}
         self.times = StageTimes()
+        self.turn_deltas = TurnDeltas()  # vertex deltas computed once per loop turn (server.live)
         self.dropped = 0
         self.closed_slow = 0
         self.closes: collections.Counter[int] = collections.Counter()
@@ -368,6 +369,7 @@ class FacecastServer:
         return live
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
+        self.turn_deltas.flush()  # its frames waiting for the turn's end go before the close
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]
             if self.registry is not None:
