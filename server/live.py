@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import logging
 import time
 from typing import TYPE_CHECKING, Protocol
 
@@ -39,6 +40,8 @@ if TYPE_CHECKING:
     from server.app import FacecastServer
     from server.cluster import RemoteFeed
     from server.protocol import ViewRequest
+
+log = logging.getLogger("facecast.server")
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -445,11 +448,15 @@ class TurnDeltas:
         for live, out in pending:
             kinds = {(v.kind, v.encoding) for v in live.viewers if v.kind == P.KIND_DELTAS}
             for frame in out.frames:
-                for kind, enc in kinds:
-                    frame.payload(kind, enc)
+                with contextlib.suppress(Exception):  # a failing payload raises again in the fan-out, logged
+                    for kind, enc in kinds:
+                        frame.payload(kind, enc)
                 n += 1 if kinds else 0
         if n:
             self.batches += 1
             self.frames += n
         for live, out in pending:
-            live._fanout_now(out)
+            try:
+                live._fanout_now(out)
+            except Exception:  # a bug: logged, and the other sessions' frames still go out
+                log.exception("fan-out of session %r failed", live.name)
