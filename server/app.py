@@ -70,7 +70,7 @@ from server.guard import (
     origin_allowed,
 )
 from server.http import HttpReply, HttpRouter
-from server.live import LiveSession, LocalSession, SessionHandle, Viewer, deliver
+from server.live import FAIR_SLICE_S, LiveSession, LocalSession, SessionHandle, TurnDeltas, Viewer, deliver
 from server.session import Session, SessionConfig, warm_up
 from server.shards import ConnectionWorkers, FrontRegistry
 from server.timing import GcPauses, StageTimes, freeze_heap
@@ -105,6 +105,7 @@ class FacecastServer:
         self.config = config
         self.sessions: dict[str, LiveSession] = {}
         self.times = StageTimes()
+        self.turn_deltas = TurnDeltas()  # vertex deltas computed once per loop turn (server.live)
         self.dropped = 0
         self.closed_slow = 0
         self.closes: collections.Counter[int] = collections.Counter()
@@ -368,6 +369,7 @@ class FacecastServer:
         return live
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
+        self.turn_deltas.flush()  # its frames waiting for the turn's end go before the close
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]
             if self.registry is not None:
@@ -487,6 +489,8 @@ class FacecastServer:
             fast = ws if isinstance(ws, FacecastConnection) else None
             if fast is not None:
                 self._fast_feed(fast, proto, live)
+            per_second = live.session.frame_bytes * live.session.config.sample_rate_hz  # bytes of one second
+            share = 0.0  # seconds of audio handled since this task last let the loop run others
             try:
                 idle_s = self.config.idle_timeout_s
                 idle_from = loop.time()
@@ -516,6 +520,14 @@ class FacecastServer:
                     await self._perform(ws, proto, actions, live)
                     if received:
                         _handled(ws)
+                        if isinstance(msg, bytes):
+                            share += len(msg) / per_second
+                        if share >= FAIR_SLICE_S:
+                            # A backlog (an overloaded server, a batch ingest): recv() of a queued message
+                            # does not yield, so without this one connection's buffered blocks would all be
+                            # processed in one loop turn, holding up timers, /health and other sessions.
+                            share = 0.0
+                            await asyncio.sleep(0)
             finally:
                 ended.cancel()
                 if fast is not None:
@@ -529,10 +541,14 @@ class FacecastServer:
         (:class:`FacecastConnection`), skipping the message queue and this handler's wake-up, when
         nothing needs awaiting (:meth:`LiveSession.feed_now`)."""
         loop = asyncio.get_running_loop()
+        per_second = live.session.frame_bytes * live.session.config.sample_rate_hz  # bytes of one second
 
         def sink(data: bytes) -> bool:
+            if ws.turn_audio_s >= FAIR_SLICE_S:  # this callback's share is used: the handler takes the rest
+                return False
             if not proto.feeds_binary() or not live.feed_now(data):
                 return False
+            ws.turn_audio_s += len(data) / per_second
             ws.last_fed = loop.time()
             return True
 
@@ -792,7 +808,7 @@ class FacecastServer:
 
 
 class FacecastConnection(ServerConnection):
-    """websockets' server connection with two additions.
+    """websockets' server connection with three additions.
 
     * A fast path for ingest blocks: while ``sink`` is set (by the ingest handler of a streaming
       session), a complete binary message is offered to it straight from ``process_event`` (the
@@ -801,6 +817,10 @@ class FacecastConnection(ServerConnection):
       receive cost. Order is kept: the sink is used only while no message is queued or being handled
       by the handler (``queued``, which the handler decrements as it finishes each one; see
       :func:`_handled`); a message the sink declines goes the usual way.
+    * A per-turn budget: the sink takes at most ``FAIR_SLICE_S`` of audio per data callback (one
+      read of the socket, this connection's share of a loop turn); the rest of a large read (a
+      backlog, when the server is overloaded) goes to the queue, and the handler yields to the loop
+      after each such share, so timers, /health and other connections run between shares.
     * ``router`` (the front of connection workers, server.shards): each new connection is offered to
       the workers before a byte of it is read."""
 
@@ -811,6 +831,13 @@ class FacecastConnection(ServerConnection):
         self.sink: Callable[[bytes], bool] | None = None
         self.queued = 0  # complete data messages passed to the queue and not yet handled
         self.last_fed = 0.0  # loop time of the last block the sink took (the idle timeout counts it)
+        self.turn_audio_s = 0.0  # audio the sink took in this data callback (at most FAIR_SLICE_S: see sink)
+
+    def data_received(self, data: bytes) -> None:
+        # One data callback is this connection's share of a loop turn: the sink takes at most
+        # FAIR_SLICE_S of audio of it; the rest queues for the handler, which yields between shares.
+        self.turn_audio_s = 0.0
+        super().data_received(data)
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         super().connection_made(transport)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import logging
 import time
 from typing import TYPE_CHECKING, Protocol
 
@@ -39,6 +40,8 @@ if TYPE_CHECKING:
     from server.app import FacecastServer
     from server.cluster import RemoteFeed
     from server.protocol import ViewRequest
+
+log = logging.getLogger("facecast.server")
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -344,13 +347,32 @@ class LiveSession:
 
     async def finish(self) -> int:
         """End of the audio: flush the remaining frames to the viewers."""
-        return self._fanout(await self.session.flush())
+        out = await self.session.flush()
+        self.server.turn_deltas.flush()  # what waits for the turn's end goes first, then the last frames
+        return self._fanout_now(out)
 
     async def control(self, msg: dict) -> dict:
         """Apply a control message (ControlError if rejected); returns the control state."""
         return await self.session.apply_control(msg)
 
     def _fanout(self, out: Output) -> int:
+        """Hand one push's frames and audio to the viewers (here and, with a cluster, on other nodes).
+
+        When the frames need vertex deltas computed on this loop, the whole output waits for the end
+        of the loop turn (:class:`TurnDeltas`), so the deltas of every session served in the turn are
+        computed back to back; a session with output waiting queues behind it (its order is kept)."""
+        turn = self.server.turn_deltas
+        if turn.holds(self) or (out.frames and self._deltas_here()):
+            turn.add(self, out)
+            return len(out.frames)
+        return self._fanout_now(out)
+
+    def _deltas_here(self) -> bool:
+        """Whether this session's frames get vertex deltas computed on this loop (a local session with
+        a delta viewer; a compute worker's session brings them ready)."""
+        return isinstance(self.session, LocalSession) and any(v.kind == P.KIND_DELTAS for v in self.viewers)
+
+    def _fanout_now(self, out: Output) -> int:
         cluster = self.server.cluster
         remote = cluster.wants(self.name) if cluster is not None else ()
         if not self.viewers and not remote:
@@ -384,3 +406,57 @@ class LiveSession:
 
     def describe(self) -> dict:
         return summary(self)
+
+
+class TurnDeltas:
+    """Outputs whose vertex deltas are computed at the end of the event loop's turn, together.
+
+    Why: a vertex viewer's frame costs the morph head's keyframe solve, a (19, 8319) product over
+    632 KB of float32 targets and the int16 encoding; on a busy loop each of those starts cold (the
+    other sessions' work has evicted the targets and the code's data), ~170 us a frame, while the
+    same work for several frames back to back costs ~70-100 us each (docs/service.md, "Vertex deltas
+    by loop turn"). So instead of encoding deltas in each connection's callback, a session with a
+    delta viewer queues its output here; one callback per turn (scheduled with ``call_soon``, so it
+    runs before the next turn's I/O callbacks) computes every queued frame's deltas, then fans the
+    outputs out in the order they came. Each frame is computed by the same call as before
+    (:meth:`server.session.Frame.payload`), so the bytes are the same; what changes is when: at the
+    end of the turn instead of in the middle, at most one turn's work later. ``flush`` is also called
+    directly where the order with a later message matters (a session's last frames, its end)."""
+
+    def __init__(self) -> None:
+        self.pending: list[tuple[LiveSession, Output]] = []
+        self._holding: set[LiveSession] = set()
+        self.batches = 0  # flushes that computed deltas, and the frames they held (metrics, tests)
+        self.frames = 0
+
+    def holds(self, live: LiveSession) -> bool:
+        return live in self._holding
+
+    def add(self, live: LiveSession, out: Output) -> None:
+        if not self.pending:
+            asyncio.get_running_loop().call_soon(self.flush)
+        self.pending.append((live, out))
+        self._holding.add(live)
+
+    def flush(self) -> None:
+        """Compute the queued frames' deltas, then fan every queued output out, in order."""
+        pending, self.pending = self.pending, []
+        self._holding.clear()
+        if not pending:
+            return
+        n = 0
+        for live, out in pending:
+            kinds = {(v.kind, v.encoding) for v in live.viewers if v.kind == P.KIND_DELTAS}
+            for frame in out.frames:
+                with contextlib.suppress(Exception):  # a failing payload raises again in the fan-out, logged
+                    for kind, enc in kinds:
+                        frame.payload(kind, enc)
+                n += 1 if kinds else 0
+        if n:
+            self.batches += 1
+            self.frames += n
+        for live, out in pending:
+            try:
+                live._fanout_now(out)
+            except Exception:  # a bug: logged, and the other sessions' frames still go out
+                log.exception("fan-out of session %r failed", live.name)

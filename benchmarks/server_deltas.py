@@ -1,0 +1,86 @@
+"""What a vertex viewer's frame costs the server, one at a time or several back to back (prints JSON).
+
+A delta frame (``server.session.Frame.payload(KIND_DELTAS, ...)``: the head's keyframe solve, the
+(P, n_moving*3) product over the targets, the int16 encoding) is computed either in each
+connection's callback, between other sessions' work, or for all the frames of a loop turn together
+(:class:`server.live.TurnDeltas`). Here the other work is stood in for by a sweep over ``--evict-mb``
+of memory between groups (0: everything stays in cache; 32: the L3 of this machine), and B frames
+are computed back to back per group: CPU time per frame for B = 1..8. Also the one-pass product
+``(B, P) @ (P, n)`` against B row products (numpy, BLAS pinned to one thread as in the server): its
+time per frame and whether it gives the same bytes as the rows one by one.
+
+``python -m benchmarks.server_deltas [--evict-mb 0,2,32] [--repeats 200]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--evict-mb", default="0,2,32", help="memory swept between groups (MB, comma-separated)")
+    ap.add_argument("--repeats", type=int, default=200)
+    ap.add_argument("--batch", default="1,2,4,8", help="frames per group (comma-separated)")
+    args = ap.parse_args(argv)
+    from threadpoolctl import threadpool_limits
+
+    from realtime_core.face.keyframes import MorphRig
+    from server.app import load_head
+    from server.session import Frame
+    from wire import protocol as P
+
+    head = load_head()
+    assert head is not None
+    rig = head.rig
+    rng = np.random.default_rng(0)
+    params = rng.normal(0.0, 0.05, (256, 4))
+    params[:, 1] = np.abs(params[:, 1])
+    sizes = [int(b) for b in args.batch.split(",")]
+    report: dict = {"rig": type(rig).__name__, "moving": len(rig.moving), "per_frame_us": {}}
+    with threadpool_limits(1):
+        for mb in (int(x) for x in args.evict_mb.split(",")):
+            junk = np.ones(max(mb, 1) << 20, dtype=np.uint8)
+            row: dict = {}
+            for b in sizes:
+                cpu = []
+                for r in range(args.repeats):
+                    if mb:
+                        junk[::64] += 1  # one write per cache line: the rest of the turn's work
+                    frames = [
+                        Frame(i, 0.0, params[(r * b + i) % len(params)], params[0], 0.0, 0.0, rig) for i in range(b)
+                    ]
+                    t0 = time.thread_time_ns()
+                    for f in frames:
+                        f.payload(P.KIND_DELTAS, P.ENC_INT16)
+                    cpu.append((time.thread_time_ns() - t0) / b / 1e3)
+                row[f"B={b}"] = round(float(np.median(cpu)), 1)
+            report["per_frame_us"][f"evict {mb} MB"] = row
+        if isinstance(rig, MorphRig):  # a morph head: the one-pass product against the row products
+            rows = rig._rows
+            w = rig.weights(params[:8])
+            gemm: dict = {}
+            for b in sizes:
+                same = bool(np.array_equal(w[:b] @ rows, np.stack([np.dot(x, rows) for x in w[:b]])))
+                t = []
+                for _ in range(args.repeats):
+                    t0 = time.thread_time_ns()
+                    w[:b] @ rows
+                    t1 = time.thread_time_ns()
+                    for x in w[:b]:
+                        np.dot(x, rows)
+                    t.append(((t1 - t0) / b / 1e3, (time.thread_time_ns() - t1) / b / 1e3))
+                med = np.median(np.array(t), axis=0)
+                one_pass, by_rows = (round(float(x), 1) for x in med)
+                gemm[f"B={b}"] = {"one_pass_us": one_pass, "rows_us": by_rows, "same_bytes": same}
+            report["product_per_frame_warm"] = gemm
+    print(json.dumps(report, indent=1))
+    return report
+
+
+if __name__ == "__main__":
+    main()
