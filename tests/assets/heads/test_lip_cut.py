@@ -9,6 +9,16 @@ import pytest
 from assets.heads.rigging import cut_mouth
 
 
+def _grid_triangles(rows: int, cols: int) -> np.ndarray:
+    """(2 (rows - 1) (cols - 1), 3) int triangles of a row-major ``rows`` x ``cols`` vertex grid."""
+    t = []
+    for j in range(rows - 1):
+        for i in range(cols - 1):
+            a = j * cols + i
+            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
+    return np.array(t)
+
+
 def _creased_lips(depth: float = 0.1):
     """A closed mouth whose lips meet in a crease, as scanned heads have it: the profile runs down the
     upper lip to the contact line (y = 0, z = 0), back into a crease behind it (slightly above the
@@ -137,12 +147,7 @@ def test_every_interior_vertex_of_the_cut_path_is_split():
             v.append([x, -1.5 * y if swapped else y, 0.0])
     v = np.array(v)
     cols = len(xs)
-    t = []
-    for j in range(len(ys) - 1):
-        for i in range(cols - 1):
-            a = j * cols + i
-            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
-    t = np.array(t)
+    t = _grid_triangles(len(ys), cols)
     left, right = 3 * cols, 4 * cols - 1
     v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]))
     split = set(origin[len(v) :].tolist())
@@ -165,12 +170,7 @@ def test_level_path_bypasses_an_inner_lip_point_below_the_contact_line():
     ys = [0.3, 0.1, 0.0, -0.1, -0.3]
     v = np.array([[x, y, 0.0] for y in ys for x in xs])
     cols = len(xs)
-    t = []
-    for j in range(len(ys) - 1):
-        for i in range(cols - 1):
-            a = j * cols + i
-            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
-    t = np.array(t)
+    t = _grid_triangles(len(ys), cols)
     left, right = 2 * cols, 3 * cols - 1
     dip = 3 * cols + 10  # x = 0, one row below the contact line (y = -0.1)
     up = np.array([0.0, 1.0, 0.0])
@@ -195,12 +195,7 @@ def test_mend_front_keeps_the_upper_lips_skin_whole_near_the_corners():
     ys = [0.3, 0.2, 0.1, 0.0, -0.1, -0.3]
     v = np.array([[x, y, 0.5 * max(y, 0.0)] for y in ys for x in xs])  # the upper rows lean forward (+z)
     cols = len(xs)
-    t = []
-    for j in range(len(ys) - 1):
-        for i in range(cols - 1):
-            a = j * cols + i
-            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
-    t = np.array(t)
+    t = _grid_triangles(len(ys), cols)
     left, right = 3 * cols, 4 * cols - 1
     path = cut_path(v, t, left, right)
     assert np.abs(v[path, 1]).max() < 1e-12
