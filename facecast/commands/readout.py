@@ -124,6 +124,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from assets.modelfile import load_model, save_model
     from training.corpus import write_json
+    from training.errors import ConfigError
     from training.readout import VtlpConfig, choose_readout, trace_clips, vtlp_copies
     from training.reallips import s1_clips
 
@@ -132,6 +133,8 @@ def _run(args: argparse.Namespace) -> int:
     sets = {}
     for split in ("train", "val"):
         clips = s1_clips(split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+        if not clips:
+            raise ConfigError(f"no GRID s1 {split} sentences (video + .align) under {args.grid_s1}")
         sets[split] = trace_clips(model, clips, progress=tqdm)
         if split == "train" and vtlp.copies:
             sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)

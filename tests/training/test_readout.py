@@ -143,3 +143,15 @@ def test_readout_command_refuses_a_bad_vtlp_range_before_any_work(tmp_path, caps
     assert exc.value.code == 2 and "LOW,HIGH" in capsys.readouterr().err
     rc = main(["readout", "default", "-o", str(out), "--vtlp-range", "0.7,1.1", "--grid-s1", str(tmp_path)])
     assert rc != 0 and "VTLP" in capsys.readouterr().err and not out.exists()
+
+
+def test_readout_command_names_a_corpus_folder_without_sentences(tmp_path, capsys):
+    """`facecast readout --grid-s1 DIR` where DIR holds no GRID s1 sentences: one line naming the folder and
+    the split, no traceback, no model written (it used to fail deep in the scoring on empty arrays)."""
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    rc = main(["readout", "default", "-o", str(out), "--grid-s1", str(tmp_path / "nowhere")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "no GRID s1 train sentences" in err and str(tmp_path / "nowhere") in err
+    assert "Traceback" not in err and not out.exists()
