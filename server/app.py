@@ -500,9 +500,14 @@ class FacecastServer:
                         actions = proto.shutdown()
                     else:
                         try:
-                            async with asyncio.timeout_at(idle_from + idle_s) as timeout:
-                                waiting.append(timeout)
+                            if fast is not None and fast.queued:
+                                # A whole message is queued (a backlog): recv() returns it without
+                                # waiting, so no idle timer (a Timeout and a timer handle per block).
                                 msg = await ws.recv()
+                            else:
+                                async with asyncio.timeout_at(idle_from + idle_s) as timeout:
+                                    waiting.append(timeout)
+                                    msg = await ws.recv()
                         except TimeoutError:
                             if live.ended.is_set():
                                 actions = proto.shutdown()

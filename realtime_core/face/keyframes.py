@@ -105,9 +105,11 @@ class KeyframeMap:
             # The whole frame (right-hand side, unbounded start, active set) in one compiled call.
             from realtime_core.face.compiled import keyframe_weights  # numba's import is paid only here
 
+            chol, g = self._chol[0], self.gram
+            if x.ndim == 1:  # one frame (a live vertex viewer's): the kernel's own result, no batch wrapper
+                return keyframe_weights(np.ascontiguousarray(x), self.cross, chol, g, self.lo, self.hi, iterations, tol)
             rows = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
             out = np.empty((len(rows), self.n_keyframes))
-            chol, g = self._chol[0], self.gram
             for i, row in enumerate(rows):
                 out[i] = keyframe_weights(row, self.cross, chol, g, self.lo, self.hi, iterations, tol)
             return out.reshape((*x.shape[:-1], self.n_keyframes))

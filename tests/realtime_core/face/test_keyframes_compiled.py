@@ -27,6 +27,22 @@ def test_compiled_box_qp_equals_the_numpy_reference_and_scipy_bvls():
         np.testing.assert_allclose(w, bvls, atol=1e-6)
 
 
+def test_one_frame_equals_its_row_of_a_batch_bit_for_bit():
+    # A live vertex viewer solves one frame at a time (the kernel called directly); a batch goes
+    # through the per-row loop. The same frame must give the same bytes either way.
+    rng = np.random.default_rng(9)
+    km = KeyframeMap.from_reference(rng.normal(size=(19, 90)), rng.normal(size=(52, 90)))
+    xs = np.abs(rng.normal(size=(40, 52)))
+    batch = km.weights(xs)
+    for x, row in zip(xs, batch):
+        one = km.weights(x)
+        assert one.shape == (19,) and one.dtype == np.float64
+        assert one.tobytes() == row.tobytes()
+    strided = np.stack([xs[0], -xs[0]], axis=1)[:, 0]  # a non-contiguous (52,) view of xs[0]
+    assert not strided.flags.c_contiguous
+    assert km.weights(strided).tobytes() == batch[0].tobytes()
+
+
 def test_unknown_kernel_is_refused():
     km = KeyframeMap.from_reference(np.eye(3), np.eye(3))
     with pytest.raises(ConfigError, match="kernel"):
