@@ -36,7 +36,7 @@ from websockets.exceptions import ConnectionClosed
 
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
-from realtime_core.synthesis.text import SentenceChunker, TextError
+from realtime_core.synthesis.text import MAX_TEXT_CHARS, SentenceChunker, TextError
 from server.errors import (
     AudioFormatError,
     ControlError,
@@ -148,7 +148,11 @@ class TextSession:
 
     # -- text ---------------------------------------------------------------------------------
     def push_text(self, text: str) -> list[str]:
-        """A piece of text -> the sentences it completed (speak each with :meth:`speak`)."""
+        """A piece of text -> the sentences it completed (speak each with :meth:`speak`). Raises
+        TextError for a piece over MAX_TEXT_CHARS (nothing of it is kept): the limit holds per
+        message, not only per sentence, or one message could queue minutes of speech."""
+        if len(text) > MAX_TEXT_CHARS:
+            raise TextError(f"text piece is {len(text)} characters long; the limit is {MAX_TEXT_CHARS}")
         return self.chunker.push(text)
 
     def finish_text(self) -> list[str]:

@@ -14,6 +14,8 @@ import contextlib
 import threading
 from pathlib import Path
 
+import numpy as np
+
 from realtime_core.avmodel import AvModel
 from tests.speech import speechlike
 
@@ -69,14 +71,22 @@ class LiveServer:
 
 
 async def stream_session(
-    url: str, name: str, seconds: float, *, realtime: bool = True, seed: int = 0, stop: asyncio.Event | None = None
+    url: str,
+    name: str,
+    seconds: float,
+    *,
+    realtime: bool = True,
+    seed: int = 0,
+    stop: asyncio.Event | None = None,
+    samples: np.ndarray | None = None,
 ) -> dict:
-    """Ingest ``seconds`` of speech-like 16 kHz audio as session ``name`` (in real time unless told
-    otherwise), ending early when ``stop`` is set; returns the server's ``ended`` reply."""
+    """Ingest ``seconds`` of speech-like 16 kHz audio (or ``samples``, (n,) float32 at 16 kHz) as
+    session ``name`` (in real time unless told otherwise), ending early when ``stop`` is set; returns
+    the server's ``ended`` reply."""
     from assets.pacing import paced_blocks
     from clients.client import IngestClient
 
-    x = speechlike(seconds, 16000, seed=seed)
+    x = speechlike(seconds, 16000, seed=seed) if samples is None else samples
     async with IngestClient(url, session=name, sample_rate_hz=16000) as ing:
         async for _, block in paced_blocks(x, 16000, block_s=0.02, realtime=realtime):  # 20 ms blocks
             if stop is not None and stop.is_set():

@@ -3,7 +3,9 @@
 Threads: the window (glfw, on the calling thread: GUI toolkits want the main thread) draws; a
 receiver thread runs its own asyncio loop, connects as a deltas viewer (again and again: when the
 session ends or the server restarts it waits for the session to come back, like the browser
-viewer) and hands every message over with its arrival time; PortAudio's callback thread plays.
+viewer) and hands every frame over with its arrival time, and every audio block straight to the
+sound output (never through the window's loop: a slow draw under load must not starve the sound
+device); PortAudio's callback thread plays.
 
 Sync is the browser viewer's scheme (clients/web/js/playout.js): one clock (``time.perf_counter``);
 frame of media time m is shown at ``m + offset``, fixed by the first frame's arrival plus a jitter
@@ -24,6 +26,7 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -50,6 +53,7 @@ class LiveStats:
     audio_blocks: int = 0
     audio_device: str | None = None
     delivery_ms: list[float] = field(default_factory=list)
+    saved_sound: Path | None = None  # the WAV written for save_sound (None: none asked, or no description came)
 
 
 class Playout:
@@ -72,20 +76,27 @@ class Playout:
 
 
 class AudioOut:
-    """Plays relayed blocks at their due times through sounddevice (None device: silent)."""
+    """Plays relayed blocks at their due times through sounddevice (None device: silent).
 
-    def __init__(self, rate_hz: int, playout: Playout) -> None:
-        self.rate = rate_hz
+    ``add``/``reset`` come from the receiver thread, the callback from PortAudio's; ``keep_played``
+    keeps every buffer handed to the device (``played()``: what the device was given, silence
+    included), for ``facecast view --save-sound``."""
+
+    def __init__(self, playout: Playout, *, keep_played: bool = False) -> None:
+        self.rate: int | None = None  # Hz, from the first description (open)
         self.playout = playout
         self.lock = threading.Lock()
         self.blocks: list[tuple[int, np.ndarray]] = []  # (first media sample, samples (n,) float32)
+        self.received = 0  # audio blocks added
         self.stream = None
         self.device: str | None = None
-        self._clock_delta = 0.0  # stream clock - perf_counter
-
-    def open(self) -> None:
-        """Start the output stream on the default device; stays silent when there is none."""
         self.error = ""
+        self._clock_delta = 0.0  # stream clock - perf_counter
+        self._played: list[np.ndarray] | None = [] if keep_played else None
+
+    def open(self, rate_hz: int) -> None:
+        """Start the output stream on the default device at ``rate_hz``; stays silent when there is none."""
+        self.rate = rate_hz
         try:
             import sounddevice as sd  # PortAudio is loaded here: OSError when it is missing
         except (ImportError, OSError) as exc:
@@ -107,9 +118,11 @@ class AudioOut:
             self.stream = None
             self.error = str(exc)
 
-    def add(self, media_time: float, samples: np.ndarray) -> None:
+    def add(self, media_time: float, samples: np.ndarray, rate_hz: int) -> None:
+        """Keep one relayed block (media time in s, samples (n,) at ``rate_hz``) until it is played."""
         with self.lock:
-            self.blocks.append((int(round(media_time * self.rate)), samples))
+            self.received += 1
+            self.blocks.append((int(round(media_time * rate_hz)), samples))
             if len(self.blocks) > 400:  # ~8 s of 20 ms blocks: older ones have been played
                 del self.blocks[:100]
 
@@ -129,6 +142,14 @@ class AudioOut:
                 lo, hi = max(first, start), min(first + frames, start + len(block))
                 if hi > lo:
                     out[lo - first : hi - first, 0] = block[lo - start : hi - start]
+        if self._played is not None:
+            self._played.append(out[:, 0].copy())
+
+    def played(self) -> np.ndarray:
+        """Every buffer given to the device so far, in order (float32, at ``rate``); needs keep_played."""
+        if self._played is None:
+            raise ValueError("AudioOut(keep_played=False) keeps nothing")
+        return np.concatenate(self._played) if self._played else np.zeros(0, np.float32)
 
     def close(self) -> None:
         if self.stream is not None:
@@ -138,12 +159,13 @@ class AudioOut:
 
 class _Receiver(threading.Thread):
     """Connects, forwards ("desc", d) / ("msg", Message, arrival) / ("closed", code, reason) /
-    ("error", text) into ``inbox``; reconnects whenever the session ends or the server goes away;
-    :meth:`close` cancels it from another thread."""
+    ("error", text) into ``inbox``, audio blocks into ``audio`` directly (cleared at each new
+    connection before any of its blocks); reconnects whenever the session ends or the server goes
+    away; :meth:`close` cancels it from another thread."""
 
-    def __init__(self, cfg: ViewerStreamConfig, inbox: queue.SimpleQueue) -> None:
+    def __init__(self, cfg: ViewerStreamConfig, inbox: queue.SimpleQueue, audio: AudioOut) -> None:
         super().__init__(name="facecast-view-rx", daemon=True)
-        self.cfg, self.inbox = cfg, inbox
+        self.cfg, self.inbox, self.audio = cfg, inbox, audio
         self.loop: asyncio.AbstractEventLoop | None = None
         self.task: asyncio.Task | None = None
         self.ready = threading.Event()
@@ -175,10 +197,16 @@ class _Receiver(threading.Thread):
                 inbox.put(("error", str(exc)))
                 await asyncio.sleep(0.5)
                 continue
+            # A new connection's media times start again: the old blocks must not sound for them.
+            self.audio.reset()
+            rate = int((v.description.get("audio") or {}).get("rate_hz", 16000))
             inbox.put(("desc", v.description))
             try:
                 async for m in v:
-                    inbox.put(("msg", m, time.perf_counter()))
+                    if m.kind == P.KIND_AUDIO:
+                        self.audio.add(m.media_time, m.values, rate)
+                    else:
+                        inbox.put(("msg", m, time.perf_counter()))
             finally:
                 await v.__aexit__(None, None, None)
             inbox.put(("closed", v.close_code, v.close_reason))
@@ -193,10 +221,12 @@ def run_window(
     buffer_s: float = 0.08,
     duration_s: float | None = None,
     screenshot=None,
+    save_sound=None,
     status=print,
 ) -> LiveStats:
     """Open a window and show the session live until it is closed (or ``duration_s`` seconds after
-    the first frame); ``screenshot``: PNG path for the last frame shown. ClientError without a display."""
+    the first frame); ``screenshot``: PNG path for the last frame shown; ``save_sound``: WAV path for
+    the sound as given to the device (silence included). ClientError without a display."""
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise ClientError("no display (DISPLAY is unset): use --record OUT.mp4, or open the server's URL in a browser")
     try:
@@ -208,8 +238,9 @@ def run_window(
         raise ClientError("cannot open a window: glfw could not initialise the display")
     stats = LiveStats()
     inbox: queue.SimpleQueue = queue.SimpleQueue()
-    rx = _Receiver(cfg, inbox)
-    audio: AudioOut | None = None
+    playout = Playout(buffer_s)
+    audio = AudioOut(playout, keep_played=save_sound is not None)
+    rx = _Receiver(cfg, inbox, audio)
     renderer: HeadRenderer | None = None
     last_error = None
     try:
@@ -227,7 +258,6 @@ def run_window(
         screen_fbo = wctx.framebuffer(color_attachments=[screen_tex])
         neutral = np.asarray(mesh.vertices, dtype=np.float32)
         moving = np.zeros(0, np.int64)
-        playout = Playout(buffer_s)
         pending: list[tuple[float, P.Message]] = []
         last_index = -1
         first_shown: float | None = None
@@ -250,27 +280,25 @@ def run_window(
                         renderer = HeadRenderer(
                             mesh, centre=c, axes=ax, size=size, config=replace(config, backend=None)
                         )
+                        # The first draw compiles the shaders while holding the GIL (~0.4 s under
+                        # load): done before the sound starts, whose callback needs the GIL every
+                        # few ms (a starved callback underruns, and ALSA's PulseAudio plugin then
+                        # stays silent for about 2 s).
+                        with renderer.ctx:
+                            renderer.render(neutral)
                         glfw.make_context_current(win)
-                    if audio is None and d.get("audio"):
-                        audio = AudioOut(int(d["audio"]["rate_hz"]), playout)
-                        audio.open()
+                    if audio.rate is None and d.get("audio"):
+                        audio.open(int(d["audio"]["rate_hz"]))
                         stats.audio_device = audio.device
                         status(
                             f"facecast view: sound {'on ' + audio.device if audio.device else 'off (no output device)'}"
                         )
                     playout.offset, last_index = None, -1
                     pending.clear()
-                    if audio is not None:
-                        audio.reset()
                     stats.connections += 1
                     status(f"facecast view: watching {cfg.session!r}")
                 elif item[0] == "msg":
                     m, arrival = item[1], item[2]
-                    if m.kind == P.KIND_AUDIO:
-                        stats.audio_blocks += 1
-                        if audio is not None:
-                            audio.add(m.media_time, m.values)
-                        continue
                     if last_index >= 0 and m.index > last_index + 1:
                         stats.lost += m.index - last_index - 1
                     last_index = m.index
@@ -304,6 +332,7 @@ def run_window(
             if duration_s is not None and first_shown is not None and now - first_shown >= duration_s:
                 break
         stats.resyncs = playout.resyncs
+        stats.audio_blocks = audio.received
         if screenshot is not None and image is not None:
             from PIL import Image
 
@@ -311,8 +340,11 @@ def run_window(
         return stats
     finally:
         rx.close()
-        if audio is not None:
-            audio.close()
+        audio.close()
+        if save_sound is not None and audio.rate is not None:
+            from assets.audio import write_wav
+
+            stats.saved_sound = write_wav(save_sound, audio.played(), audio.rate)
         if renderer is not None:
             renderer.close()
         glfw.terminate()

@@ -59,7 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--show-landmarks",
         metavar="PNG",
         default=None,
-        help="write a picture of the head with its landmarks (numbered, named) and exit",
+        help="write a picture of the head with its landmarks (numbered, named); without -o, only that",
     )
     p.set_defaults(run=run)
 
@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         pts = resolve_landmarks(spec if spec is not None else dict(head.landmarks), mesh.vertices, source)
         out = plot_landmarks(mesh, pts, args.show_landmarks, title=f"{Path(args.head).name}: landmarks ({source})")
         print(f"rig: landmarks picture {out}")
-        return 0
+        if not args.output:
+            return 0  # only the picture was asked for; with -o the rig is made too
     simple = None
     if args.simple:
         from assets.heads.wfm import read_wfm

@@ -39,6 +39,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="PNG",
         help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)",
     )
+    p.add_argument(
+        "--save-sound",
+        type=Path,
+        default=None,
+        metavar="WAV",
+        help="window mode: on exit, write the sound as handed to the sound device (its silences and "
+        "timeline moves included) to this WAV, to check what was played (default %(default)s = none)",
+    )
     p.add_argument("--buffer-ms", type=float, default=80.0, help="window mode: jitter buffer before a frame is shown")
     add_session_options(p)
     p.add_argument("--width", type=int, default=640, help="window or video width in pixels")
@@ -147,6 +155,7 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
         buffer_s=args.buffer_ms / 1000,
         duration_s=args.duration,
         screenshot=args.screenshot,
+        save_sound=args.save_sound,
     )
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"
     print(
@@ -154,5 +163,6 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
         f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
         f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
         + (f"; wrote {args.screenshot}" if args.screenshot else "")
+        + (f"; wrote {st.saved_sound}" if st.saved_sound else "")
     )
     return 0

@@ -19,9 +19,11 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     out = tmp_path / "mp.npz"
     # --keep-failing: the picture and file are written whatever the extreme-pose checks say
-    # (tests/assets/test_rig_checks.py covers refusing a failing rig).
-    assert main(["rig", str(mp), "-o", str(out), "--keep-failing"]) == 0
-    assert out.is_file() and out.with_suffix(".png").is_file()
+    # (tests/assets/test_rig_checks.py covers refusing a failing rig). --show-landmarks with -o: the
+    # landmarks picture and the rig (it once drew the picture and exited without the rig asked for).
+    landmarks = tmp_path / "landmarks.png"
+    assert main(["rig", str(mp), "-o", str(out), "--keep-failing", "--show-landmarks", str(landmarks)]) == 0
+    assert out.is_file() and out.with_suffix(".png").is_file() and landmarks.is_file()
     printed = capsys.readouterr().out
     assert "220 control points" in printed and "rig checks at" in printed
     from assets.heads.rigfile import load_rig

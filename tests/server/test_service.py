@@ -474,11 +474,19 @@ def test_limits_and_start_timeout(model):
     assert silent[0] == P.CLOSE_POLICY and "no start message" in silent[1]
 
 
-def test_shutdown_flushes_sessions_and_says_going_away(model):
+@pytest.mark.parametrize(
+    "layout",
+    [
+        pytest.param({}, id="one-process"),
+        # Sessions in a connection worker process (server.shards): it loads the model and kernels.
+        pytest.param({"workers": 1, "worker_mode": "connections"}, id="connection-workers", marks=pytest.mark.slow),
+    ],
+)
+def test_shutdown_flushes_sessions_and_says_going_away(model, layout):
     pcm = _int16(speechlike(3.0, 16000, seed=11))
 
     async def main():
-        srv = FacecastServer(model, config=ServerConfig(port=0))
+        srv = FacecastServer(model, config=ServerConfig(port=0, **layout))
         await srv.start()
         ing = await IngestClient(srv.url, session="live", sample_rate_hz=16000).__aenter__()
         view = await ViewerClient(srv.url, session="live", audio=False).__aenter__()
@@ -489,11 +497,9 @@ def test_shutdown_flushes_sessions_and_says_going_away(model):
         got = await collect
         try:
             await feed
-            ing_code = None
+            ing_code = ing.ws.close_code
         except ServerClosed as exc:
             ing_code = exc.code
-        if ing_code is None:
-            ing_code = ing.ws.close_code
         return got, ing_code
 
     got, ing_code = asyncio.run(main())

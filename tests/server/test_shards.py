@@ -176,35 +176,6 @@ def test_a_dead_worker_ends_its_sessions_only(model):
     assert [m.index for m in got_b.frames] == list(range(b_ended["frames"])) and b_ended["frames"] == 90
 
 
-def test_shutdown_flushes_worker_sessions_and_says_going_away(model):
-    pcm = _int16(speechlike(3.0, 16000, seed=11))
-
-    async def main():
-        from server.app import FacecastServer
-        from server.config import ServerConfig
-
-        srv = FacecastServer(model, config=ServerConfig(port=0, workers=1, worker_mode="connections"))
-        await srv.start()
-        ing = await IngestClient(srv.url, session="live", sample_rate_hz=16000).__aenter__()
-        view = await ViewerClient(srv.url, session="live", audio=False).__aenter__()
-        collect = asyncio.ensure_future(view.collect())
-        feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True))
-        await asyncio.sleep(1.0)
-        await srv.stop()  # what SIGINT/SIGTERM do
-        got = await collect
-        try:
-            await feed
-            ing_code = ing.ws.close_code
-        except ServerClosed as exc:
-            ing_code = exc.code
-        return got, ing_code
-
-    got, ing_code = asyncio.run(main())
-    assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
-    idx = [m.index for m in got.frames]
-    assert idx == list(range(len(idx))) and 20 <= len(idx) < 90
-
-
 def test_request_line_is_peeked_whole_or_not_at_all():
     """The front reads a new connection's request line without consuming it: whole when it comes in
     pieces, None when the peer hangs up first, is too long or too slow."""

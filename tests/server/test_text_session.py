@@ -130,6 +130,20 @@ def test_sentences_share_one_media_timeline(backend):
         TextSession(backend, language="fr", voice=None)
 
 
+def test_a_piece_over_the_text_limit_is_rejected_whole(backend):
+    """docs/protocol.md section 9: a text piece over 5000 characters is answered with "rejected" (it
+    was chunked and spoken: 6000 characters made three minutes of speech from one message)."""
+    from realtime_core.synthesis.text import MAX_TEXT_CHARS
+
+    s = TextSession(backend, language="en", voice=None)
+    assert s.push_text("Hello there. How") == ["Hello there."]
+    with pytest.raises(TextError, match=f"limit is {MAX_TEXT_CHARS}"):
+        s.push_text("word " * (MAX_TEXT_CHARS // 5 + 1))
+    assert s.chunker.pending == "How"  # nothing of the refused piece was kept
+    # Within the limit: accepted, and cut into sentences the chunker's size.
+    assert all(0 < len(x) <= s.chunker.max_chars for x in s.push_text("word " * (MAX_TEXT_CHARS // 5 - 1)))
+
+
 @contextlib.asynccontextmanager
 async def running(model, backend):
     srv = FacecastServer(model, config=ServerConfig(port=0))

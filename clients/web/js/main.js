@@ -5,8 +5,11 @@
 // (what to ask for first; default morph: a head driven by its own morph targets gets its weights, and
 // the page falls back to vertex deltas, then to the mouth parameters, when the server has no such head).
 // Automation hook: window.facecast exposes the state shown in the panel, freeze(on) to hold the
-// displayed frame (screenshots), mouthBox() (where the mouth is on the canvas) and morph() (the
-// shown frame's streamed weights and the morphTargetInfluences three.js draws with).
+// displayed frame (screenshots), mouthBox() (where the mouth is on the canvas), morph() (the
+// shown frame's streamed weights and the morphTargetInfluences three.js draws with), applied(from)
+// (the record of every frame applied: {n, index, peak}, n counting from 0), and freezeWhen({above}
+// or {below}) + caught(): the page itself freezes on the first frame applied after the call whose
+// peak passes the bound, so a check never depends on polling a value that changes 30 times a second.
 
 import { decodeMessage, KIND, CLOSE } from "./protocol.js";
 import { PlayoutClock, AudioOut, nowS } from "./playout.js";
@@ -125,6 +128,11 @@ const KINDS = ["morph", "deltas", "params"];
 const firstKind = Math.max(0, KINDS.indexOf(opts.get("kind") ?? "morph"));
 let kindLevel = firstKind;
 let shown = null; // the last frame shown {index, values} (automation)
+const appliedLog = []; // the last APPLIED_KEEP frames applied {n, index, peak} (automation)
+const APPLIED_KEEP = 2000;
+let appliedCount = 0;
+let armed = null; // freezeWhen's bound {above} or {below}, until a frame passes it
+let caught = null; // the frame that froze the page {n, index, peak}
 
 function connect(name) {
   if (ws) return;
@@ -318,6 +326,14 @@ function tick() {
     }
     state.frames += 1;
     shown = { index: show.msg.index, values: show.msg.values };
+    const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak };
+    appliedLog.push(rec);
+    if (appliedLog.length > APPLIED_KEEP) appliedLog.shift();
+    if (armed && (armed.above !== undefined ? rec.peak >= armed.above : rec.peak <= armed.below)) {
+      frozen = true; // this frame stays on screen: drawn just below, never replaced while frozen
+      caught = rec;
+      armed = null;
+    }
   }
   view.render();
   if (show) state.drawMs = median(windows.draw, performance.now() - drawStart);
@@ -356,8 +372,16 @@ window.facecast = {
   state,
   freeze(on) {
     frozen = Boolean(on);
+    if (!frozen) caught = null;
     return state.lastPeak;
   },
+  applied: (from = 0) => appliedLog.filter((r) => r.n >= from),
+  appliedCount: () => appliedCount,
+  freezeWhen(bound) {
+    caught = null;
+    armed = bound;
+  },
+  caught: () => caught,
   mouthBox: () => view.mouthBox(),
   morph: () => ({ names: view.morph?.names ?? null, index: shown?.index ?? null,
     weights: shown && state.kind === "morph" ? Array.from(shown.values) : null, influences: view.influences() }),

@@ -42,37 +42,41 @@ export async function openViewer(url) {
 }
 
 /**
- * Let the mouth move for 2 s so the page knows which vertices move (mouthBox) and the range of its
- * per-frame peaks, then freeze a frame near each end of that range and screenshot the same clip around
+ * Let the mouth move for at least 4 s of frames so the page knows which vertices move (mouthBox) and
+ * the range of its per-frame peaks, then freeze a frame near each end of that range and screenshot the same clip around
  * the mouth as `${prefix}closed.png` and `${prefix}open.png` in outDir. `describe(page)` (optional)
- * adds what the caller wants to know about the frozen frame. Returns {shots, range, clip}.
+ * adds what the caller wants to know about the frozen frame. Returns {shots, range, clip}; each shot
+ * has the frozen frame's peak and index (caughtIndex).
+ *
+ * Both the range and the freezing use the page's own record of the frames it applied
+ * (facecast.applied, facecast.freezeWhen): polling the shown frame's peak from here missed short
+ * openings on a loaded machine, where a poll takes longer than a frame is shown.
  */
 export async function captureMouth(page, outDir, prefix = "", describe = async () => ({})) {
-  const peaks = [];
-  const t0 = Date.now();
-  while (Date.now() - t0 < 2000) {
-    peaks.push(await page.evaluate(() => window.facecast.state.lastPeak));
-    await page.waitForTimeout(30);
-  }
+  const from = await page.evaluate(() => window.facecast.appliedCount());
+  await page.waitForTimeout(3000);
+  // At least 120 applied frames (4 s of speech: many syllables; a loaded machine applies fewer per
+  // second and a short record can span too little of the mouth's range), at most 40 s.
+  await page.waitForFunction((n) => window.facecast.appliedCount() >= n + 120, from, { timeout: 40000 });
+  const peaks = (await page.evaluate((n) => window.facecast.applied(n), from)).map((r) => r.peak);
   const lo = Math.min(...peaks), hi = Math.max(...peaks);
   const box = await page.evaluate(() => window.facecast.mouthBox());
   const clip = { x: Math.max(0, box.x), y: Math.max(0, box.y), width: Math.max(8, box.width), height: Math.max(8, box.height) };
   const shots = {};
   const closedBelow = lo + 0.2 * (hi - lo), openAbove = hi - 0.2 * (hi - lo);
-  for (const [name, test] of [["closed", `p <= ${closedBelow}`], ["open", `p >= ${openAbove}`]]) {
-    const deadline = Date.now() + 15000;
-    let got = null;
-    while (got === null && Date.now() < deadline) {
-      // Read the shown frame's peak and freeze in one evaluation, so the screenshot is that frame.
-      got = await page.evaluate(`(() => { const p = window.facecast.state.lastPeak;
-        if (${test}) { window.facecast.freeze(true); return p; } return null; })()`);
-      if (got === null) await page.waitForTimeout(15);
+  for (const [name, bound] of [["closed", { below: closedBelow }], ["open", { above: openAbove }]]) {
+    // The page freezes on the first frame it applies past the bound, then draws that frame.
+    await page.evaluate((b) => window.facecast.freezeWhen(b), bound);
+    try {
+      await page.waitForFunction(() => window.facecast.caught() !== null, null, { timeout: 30000 });
+    } catch (err) {
+      throw new Error(`no ${name} frame within 30 s (peaks ${lo}..${hi}, bound ${JSON.stringify(bound)})`);
     }
-    if (got === null) throw new Error(`no ${name} frame within 15 s (peaks ${lo}..${hi})`);
+    const got = await page.evaluate(() => window.facecast.caught());
     await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r))));
     const more = await describe(page);
     await page.screenshot({ path: join(outDir, `${prefix}${name}.png`), clip });
-    shots[name] = { peak: got, ...more };
+    shots[name] = { peak: got.peak, caughtIndex: got.index, ...more };
     await page.evaluate(() => window.facecast.freeze(false));
   }
   return { shots, range: [lo, hi], clip };

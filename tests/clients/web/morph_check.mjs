@@ -36,7 +36,9 @@ async function main() {
   // Shown frames: the streamed weights and the influences, read in one evaluation (one frame).
   const samples = [];
   let names = null;
-  for (let i = 0; i < 80; i++) {
+  // Until 40 distinct frames are seen (a loaded machine shows fewer per poll), at most 60 s.
+  const until = Date.now() + 60000;
+  for (let i = 0; (i < 80 || samples.length < 40) && Date.now() < until; i++) {
     const m = await page.evaluate(() => window.facecast.morph());
     names = m.names;
     if (m.index !== null && (!samples.length || samples[samples.length - 1].index !== m.index)) {

@@ -21,6 +21,7 @@ import pytest
 
 from tests.live_server import REPO, LiveServer, stream_session
 from tests.prerequisites import missing
+from tests.speech import speechlike
 
 # Headless Chromium against a live server (about 30 s).
 pytestmark = [pytest.mark.system, pytest.mark.slow]
@@ -28,6 +29,14 @@ pytestmark = [pytest.mark.system, pytest.mark.slow]
 CHROMIUM = Path("/usr/bin/chromium")
 SCRIPT = Path(__file__).with_name("viewer_check.mjs")
 ARTIFACTS = REPO / "artifacts" / "clients_web"
+# Every session streams until the test stops it: long enough that a loaded machine never sees one end
+# while the page is still checking it.
+SESSION_S = 150.0
+
+
+def _speech(seed: int) -> np.ndarray:
+    """SESSION_S of speech-like audio, made here rather than on the server's loop (seconds of work)."""
+    return speechlike(SESSION_S, 16000, seed=seed)
 
 
 def _require_browser() -> None:
@@ -63,7 +72,7 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
     name = "webcheck"
     servers = [LiveServer(model, head)]
     stops = [asyncio.Event() for _ in range(3)]  # one per session; set only through the server's loop
-    sessions = [servers[0].submit(stream_session(servers[0].url, name, 40.0, stop=stops[0]))]
+    sessions = [servers[0].submit(stream_session(servers[0].url, name, SESSION_S, stop=stops[0], samples=_speech(0)))]
     proc = subprocess.Popen(
         ["node", str(SCRIPT), servers[0].url, name, str(ARTIFACTS)],
         cwd=REPO,
@@ -88,7 +97,9 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
         _read_step(proc, "waiting")
         # End the session and start it again under the same name: the page must follow alone.
         end_session(0)
-        sessions.append(servers[0].submit(stream_session(servers[0].url, name, 40.0, seed=1, stop=stops[1])))
+        sessions.append(
+            servers[0].submit(stream_session(servers[0].url, name, SESSION_S, stop=stops[1], samples=_speech(1)))
+        )
         go()
         again = _read_step(proc, "reconnected")
         _read_step(proc, "waiting")
@@ -97,7 +108,9 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
         port = servers[0].port
         servers[0].stop()
         servers.append(LiveServer(model, head, port=port))
-        sessions.append(servers[1].submit(stream_session(servers[1].url, name, 40.0, seed=2, stop=stops[2])))
+        sessions.append(
+            servers[1].submit(stream_session(servers[1].url, name, SESSION_S, stop=stops[2], samples=_speech(2)))
+        )
         go()
         restarted = _read_step(proc, "restarted")
         done = _read_step(proc, "done")
@@ -170,7 +183,7 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
     name = "morphcheck"
     srv = LiveServer(model, morph_head)
     stop = asyncio.Event()
-    session = srv.submit(stream_session(srv.url, name, 60.0, stop=stop))
+    session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(0)))
 
     async def watch_params():
         for _ in range(100):  # the session appears once the ingest's start is accepted
@@ -227,7 +240,13 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
 
     # The rendered mouth opens: the clip around it differs between a closed and an open frame.
     shots = mouth["shots"]
-    assert shots["open"]["weights"][jaw] > shots["closed"]["weights"][jaw] + 0.1
+    for shot in shots.values():
+        # The screenshot shows the frame the page froze on when it was applied (not a later one).
+        assert shot["index"] == shot["caughtIndex"]
+        np.testing.assert_allclose(
+            np.float32(shot["weights"]), rig.weights(by_index[shot["index"]].astype(np.float64)), atol=1e-6
+        )
+    assert shots["open"]["weights"][jaw] > shots["closed"]["weights"][jaw] + 0.1, mouth["range"]
     closed, opened = _png(ARTIFACTS / "morph_closed.png"), _png(ARTIFACTS / "morph_open.png")
     assert closed.shape == opened.shape
     changed = np.mean(np.abs(opened - closed).sum(axis=2) > 60)
