@@ -8,8 +8,10 @@ ones), the MediaPipe canonical face, Candide-3 (both files, driven by their own 
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb.
-Derived files go to --out (not committed); one picture per head (closed, /a/, /u/, /m/) to
---images; the rig checks are printed as a Markdown table (docs/animation.md shows it).
+Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
+the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
+fold, a tear, a sliver or a tooth past the lips shows at this size); the rig checks are printed
+as a Markdown table (docs/animation.md shows it).
 Third-party heads are read from ../shared/data (or $FACECAST_SHARED_DATA).
 """
 
@@ -147,6 +149,30 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
     return heads
 
 
+CLOSE_UP_WIDTH = 1.1
+"""IOD: the width the mouth close-up shows (a mouth is about 0.6 IOD wide; /a/ opens 0.45 IOD)."""
+
+
+def mouth_renderer(head, finder, config):
+    """A renderer framed on the mouth (front view, CLOSE_UP_WIDTH IOD wide), from the rig's landmarks or
+    the finder's (as :func:`assets.heads.head.head_checks` takes them); None when there are none."""
+    from assets.heads.rigging import mouth_landmarks
+    from clients.render.renderer import HeadRenderer
+    from realtime_core.face import face_frame
+
+    pts = head.rig.meta.get("landmarks") or dict(finder(head.mesh))
+    if not pts:
+        return None
+    names = list(pts)
+    pv = np.array([pts[k] for k in names], dtype=np.float64)
+    fr = face_frame(pv, mouth_landmarks({k: i for i, k in enumerate(names)}))
+    mouth = 0.5 * (np.asarray(pts["corner_left"]) + np.asarray(pts["corner_right"]))
+    # Pivot behind the lips (as the face view's), a little below the corners (/a/ opens downwards).
+    centre = mouth - 0.5 * fr.iod * fr.axes[2] - 0.08 * fr.iod * fr.axes[1]
+    size = CLOSE_UP_WIDTH * fr.iod * config.height / config.width
+    return HeadRenderer(head.mesh, centre=centre, axes=fr.axes, size=size, config=config)
+
+
 def _resolve(spec, opts: dict, finder):
     from assets.heads.head import resolve_head
 
@@ -206,7 +232,23 @@ def main() -> int:
                 tiles.append(np.asarray(img))
         slug = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
         Image.fromarray(np.hstack(tiles)).save(args.images / f"{slug}.png")
-        rows.append(f"| {name} ![](img/heads/{slug}.png) | {kind} | {figs} |")
+        close = []
+        try:
+            mr = mouth_renderer(head, find_landmarks, RenderConfig(width=400, height=300))
+        except FacecastError:
+            mr = None
+        if mr is not None:
+            with mr as r:
+                for label, p in POSES.items():
+                    img = Image.fromarray(r.render(head.rig.deformed(np.array(p))))
+                    ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
+                    close.append(np.asarray(img))
+            # JPEG (quality 92): a textured close-up is 0.3-0.45 MB as PNG, ~0.1 MB so, defects as visible.
+            Image.fromarray(np.hstack(close)).save(args.images / f"{slug}_mouth.jpg", quality=92)
+            pics = f"![](img/heads/{slug}.png) ![](img/heads/{slug}_mouth.jpg)"
+        else:
+            pics = f"![](img/heads/{slug}.png)"
+        rows.append(f"| {name} {pics} | {kind} | {figs} |")
     print("\n".join(rows))
     return 0
 

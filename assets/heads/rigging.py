@@ -747,6 +747,8 @@ def rig_head(
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
         # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
+        if cut_copies is not None:  # a cut crease's inner walls go (see inner_lip_vertices)
+            rig, out_mesh = without_inner_lips(rig, out_mesh, inner_lip_vertices(out_mesh, frame, snap))
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
         )
@@ -820,14 +822,84 @@ seen through the open mouth, not skin the cavity must stay behind."""
 
 CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.0, 0.0, 0.0, 0.0),
-    *itertools.product((-0.035, 0.055), (-0.12, 0.08), (0.0, 0.47), (-0.11, 0.03)),
+    *itertools.product((-0.085, 0.055), (-0.125, 0.095), (0.0, 0.47), (-0.105, 0.04)),
 )
 """Poses (IOD) at which the mouth cavity must lie behind the skin: rest and the corners of the box the
-shipped model's parameters span on real speech of other voices (7,435 frames of ../shared/data/speech:
-upper_lip_raise -0.034..0.053, lip_stretch -0.112..0.077, mouth_open 0..0.464, lip_corner_depress
--0.102..0.026). The rig is linear in the parameters, so every frame lies between these. With the
-widest opening alone, Lee Perry-Smith's chin came forward of the cavity at mouth_open 0.26 with the
+shipped models' parameters span on real speech (the default and low-latency models and `facecast say`
+over 21,651 frames: upper_lip_raise -0.084..0.053, lip_stretch -0.112..0.094, mouth_open 0..0.464,
+lip_corner_depress -0.103..0.039, with the articulatory targets' lip_stretch -0.123; see
+realtime_core/face/checks.py). The rig is linear in the parameters, so every frame lies between these.
+With the widest opening alone, Lee Perry-Smith's chin came forward of the cavity at mouth_open 0.26 with the
 corners at -0.05, and the cavity showed through it as a dark hole."""
+
+
+INNER_LIP_DEPTH = 0.003
+"""IOD: a vertex of the lips this far or more behind the head's front surface at rest (seen from the
+front) is inner-lip surface: the walls of a closed-lip scan's crease, hidden while the lips touch."""
+
+
+INNER_LIP_REACH = 0.3
+"""IOD: how far behind the front surface the inner-lip surfaces reach (Lee Perry-Smith's crease walls lie
+within 0.1 IOD; the inside of the back of its hollow head lies 1.3 IOD and more behind the lips)."""
+
+
+def inner_lip_vertices(
+    mesh: HeadMesh, frame, landmarks: Mapping[str, int], *, depth: float = INNER_LIP_DEPTH
+) -> np.ndarray:
+    """(k,) int64 head vertices of the inner-lip surfaces: between the mouth corners (face-frame x) and
+    the outer lip midpoints (y), at least ``depth`` IOD behind the front-most surface at their place.
+
+    On a scan whose lips meet in a crease (Lee Perry-Smith) the crease's walls curl in behind the cut;
+    once the lips part the field pulls them into the opening (between the two lips' motions, folding
+    where a wall turns back), and lit with the skin texture they showed as thin pink slivers along the
+    lower lip's inner edge and across the corners at /a/ (1280x960). They go (:func:`without_inner_lips`):
+    the open mouth shows the dark cavity there, and at rest they were never seen."""
+    from assets.heads.cavity import front_depth
+
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    q = (v - frame.origin) @ frame.axes.T
+    iod = frame.iod
+    x0, x1 = sorted((q[landmarks["corner_left"], 0], q[landmarks["corner_right"], 0]))
+    y0, y1 = sorted((q[landmarks["lower_lip"], 1], q[landmarks["upper_lip"], 1]))
+    band = np.flatnonzero((q[:, 0] > x0) & (q[:, 0] < x1) & (q[:, 1] > y0) & (q[:, 1] < y1))
+    if not len(band):
+        return band.astype(np.int64)
+    front = front_depth(v, mesh.triangles, frame, q[band, :2])
+    # Only within INNER_LIP_REACH of the front: further back is the inside of a hollow head's back.
+    behind = front - q[band, 2]
+    hidden = np.isfinite(front) & (behind > depth * iod) & (behind < INNER_LIP_REACH * iod)
+    return band[hidden].astype(np.int64)
+
+
+FIN_ROUNDS = 10
+"""At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
+
+
+def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, HeadMesh]:
+    """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
+    :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
+    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    n_in = np.isin(t, inner).sum(axis=1)
+    gone = n_in == 3
+    # Then the fins left hanging into the gap: a face with two inner vertices joined to the rest by one
+    # edge alone (pink dashes floating in the opening at /a/); a face with two inner vertices along the
+    # lip's edge (two or three neighbours) stays, or the edge turned into a sawtooth.
+    n = len(mesh.vertices)
+    e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2)
+    key = e[..., 0] * n + e[..., 1]  # (m, 3)
+    for _ in range(FIN_ROUNDS):
+        k, c = np.unique(key[~gone], return_counts=True)
+        at = np.searchsorted(k, key).clip(max=len(k) - 1)
+        shared = ((k[at] == key) & (c[at] > 1)).sum(axis=1)
+        fin = ~gone & (n_in >= 2) & (shared <= 1)
+        if not fin.any():
+            break
+        gone |= fin
+    meta = dict(rig.meta)
+    meta["inner_lip_removed"] = int(gone.sum())
+    keep = t[~gone]
+    return replace(rig, triangles=keep.astype(np.int32), meta=meta), replace(mesh, triangles=keep)
 
 
 def add_mouth_cavity(

@@ -1,10 +1,10 @@
 """Rig checks at extreme poses: does the mouth stay clean wherever the parameters go?
 
 For a rig (anything with ``neutral``, ``triangles``, ``deformed(params)``) and its mouth landmarks,
-:func:`check_rig` deforms the head at :data:`EXTREME_POSES` (the poses speech produces, every
-articulatory class target scaled to the widest typical opening, and each parameter alone at the
-ends of that span) and at the closure pose (the mouth-open
-parameter that closes the neutral inner-lip gap), and measures
+:func:`check_rig` deforms the head at :data:`EXTREME_POSES` (every articulatory class target scaled to
+the widest typical opening, each parameter alone at the ends of what the shipped models produce on
+real speech, and measured frames whose hull holds every frame measured) and at the closure pose (the
+mouth-open parameter that closes the neutral inner-lip gap), and measures
 
 - flipped triangles: triangles of the moving region whose normal turns by more than 90 degrees
   relative to the neutral pose (a fold or a tear in the surface);
@@ -33,15 +33,9 @@ from realtime_core.face.model import MouthLandmarks, face_frame
 SPEECH_SCALE = 0.45 / 0.33
 """The articulatory targets' widest opening (0.33 IOD, open vowels) scaled to the typical range's end (0.45 IOD)."""
 
-# The poses speech produces, pushed to their realistic extremes: every articulatory class target of
-# training.articulatory.CLASSES (the labels every model learns; a model's estimate is a smoothed
-# mixture of them) times SPEECH_SCALE, rounded to 3 decimals (tests/face/test_checks.py keeps this
-# table equal to the classes). Measured on the default model over 7,435 frames of real speech
-# (../shared/data/speech) the estimate stays within upper_lip_raise [-0.016, 0.023], lip_stretch
-# [-0.106, 0.089], mouth_open [0, 0.297], lip_corner_depress [-0.023, 0.025], with corr(lip_stretch,
-# lip_corner_depress) = -0.99: every frame lies inside the box these poses span, and combinations
-# speech never makes (spread lips with depressed corners, a smile twice as wide as any vowel's) are
-# not tested.
+# The articulatory poses: every articulatory class target of training.articulatory.CLASSES (the labels
+# every model learns) times SPEECH_SCALE, rounded to 3 decimals (tests/realtime_core/face/test_checks.py
+# keeps this table equal to the classes).
 SPEECH_POSES: tuple[tuple[float, float, float, float], ...] = (
     (-0.014, -0.014, 0.0, 0.0),  # bilabial (/m b p/, pressed)
     (-0.007, -0.007, 0.034, 0.0),  # bilabial approximant
@@ -70,18 +64,71 @@ SPEECH_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.014, -0.082, 0.15, 0.02),  # near-close back rounded
 )
 
-# Each parameter alone at the ends of the span above (the pressed lips of /m/ at mouthPress = 1).
+# What the shipped models really produce reaches further than those targets (their readout is fitted to
+# real lips, GRID s1). Measured by
+#   python scripts/measure_param_box.py --data ../shared/data
+# on the 39 speech wavs of ../shared/data/speech (7,435 frames) and 36 GRID s1 val sentences (3,240
+# frames) through the default and the low-latency model (the live path), plus 6 `facecast say` sentences
+# (unit selection, 301 frames): 21,651 frames within upper_lip_raise [-0.084, 0.053] (the low-latency
+# model; the default [-0.036, 0.053]), lip_stretch [-0.112, 0.094], mouth_open [0, 0.464],
+# lip_corner_depress [-0.103, 0.039] (the old table's box: [-0.014, 0.034], [-0.123, 0.089], [0, 0.45],
+# [-0.027, 0.034]). Jointly, speech reaches 50-86% of both ends of most parameter pairs at once (e.g.
+# spread lips with depressed corners 0.86, a raised upper lip at the widest opening 0.81; corr(upper_lip_raise,
+# mouth_open) = 0.64, corr(lip_stretch, lip_corner_depress) = -0.35), so the checks test real frames
+# there rather than the box's 16 corners (all four ends at once is a face speech never makes: the frame
+# reaching furthest towards (+, +, +, +) is (0.053, 0.052, 0.333, -0.008)).
+
+# Each parameter alone at both ends of the measured box or of SPEECH_POSES, whichever is further.
 SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = (
-    (-0.03, 0.0, 0.0, 0.0),
-    (0.034, 0.0, 0.0, 0.0),
-    (0.0, -0.123, 0.0, 0.0),
-    (0.0, 0.089, 0.0, 0.0),
-    (0.0, 0.0, 0.45, 0.0),
-    (0.0, 0.0, 0.0, -0.027),
-    (0.0, 0.0, 0.0, 0.034),
+    (-0.084, 0.000, 0.000, 0.000),
+    (0.054, 0.000, 0.000, 0.000),
+    (0.000, -0.123, 0.000, 0.000),
+    (0.000, 0.094, 0.000, 0.000),
+    (0.000, 0.000, 0.465, 0.000),
+    (0.000, 0.000, 0.000, -0.103),
+    (0.000, 0.000, 0.000, 0.039),
 )
 
-EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SINGLE_POSES
+# Measured frames (rounded away from 0) chosen by the script one at a time, the one furthest outside
+# first, until every measured frame lies within 0.002 IOD of the convex hull of SPEECH_POSES +
+# SINGLE_POSES + these. The rig is linear in the parameters (before the lip-contact push), so an edge's
+# stretch and a tooth's lead at any frame are at most their largest value at these poses.
+MEASURED_POSES: tuple[tuple[float, float, float, float], ...] = (
+    (-0.049, 0.088, 0.000, -0.082),
+    (0.028, 0.068, 0.207, -0.103),
+    (-0.021, -0.101, 0.278, -0.028),
+    (0.038, -0.066, 0.465, -0.003),
+    (-0.084, 0.015, 0.000, -0.079),
+    (0.053, 0.052, 0.333, -0.008),
+    (-0.026, 0.094, 0.100, -0.086),
+    (-0.055, -0.066, 0.000, -0.021),
+    (0.014, 0.058, 0.261, -0.092),
+    (0.019, 0.077, 0.256, -0.079),
+    (-0.021, -0.106, 0.042, -0.027),
+    (0.028, -0.059, 0.086, 0.037),
+    (-0.046, -0.064, 0.000, -0.046),
+    (-0.014, 0.076, 0.083, -0.102),
+    (-0.017, -0.112, 0.100, 0.004),
+    (-0.044, -0.080, 0.000, -0.006),
+    (-0.009, -0.079, 0.258, -0.045),
+    (0.049, 0.050, 0.299, 0.002),
+    (-0.015, 0.048, 0.000, 0.019),
+    (0.054, 0.002, 0.310, -0.007),
+    (-0.027, -0.104, 0.230, -0.027),
+    (-0.044, 0.092, 0.000, -0.081),
+    (-0.040, -0.089, 0.000, -0.016),
+    (0.034, -0.006, 0.228, -0.053),
+    (-0.038, 0.089, 0.051, -0.090),
+    (0.029, 0.068, 0.166, -0.078),
+    (0.028, 0.047, 0.100, 0.010),
+    (0.046, -0.045, 0.378, -0.005),
+    (-0.036, -0.075, 0.000, 0.003),
+    (0.021, 0.061, 0.268, -0.086),
+    (0.019, -0.019, 0.135, -0.068),
+    (0.005, 0.041, 0.000, -0.057),
+)
+
+EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SINGLE_POSES + MEASURED_POSES
 """The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 

@@ -19,12 +19,13 @@ def _grid_triangles(rows: int, cols: int) -> np.ndarray:
     return np.array(t)
 
 
-def _creased_lips(depth: float = 0.1):
+def _creased_lips(depth: float = 0.1, profile: list[tuple[float, float]] | None = None):
     """A closed mouth whose lips meet in a crease, as scanned heads have it: the profile runs down the
     upper lip to the contact line (y = 0, z = 0), back into a crease behind it (slightly above the
     contact line), and out again down the lower lip; 17 columns from x = -1 to 1, corners at y = 0,
-    the crease shallower towards them."""
-    profile = [
+    the crease shallower towards them. ``profile``: (y, z) rows from the top instead, the contact
+    line the fourth."""
+    profile = profile or [
         (0.5, 0.0),
         (0.25, 0.0),
         (0.1, 0.0),
@@ -214,3 +215,47 @@ def test_mend_front_keeps_the_upper_lips_skin_whole_near_the_corners():
     assert not (skin & (n_lo > 0) & (n_up > 0)).any()
     assert (out[on_path] == lower[on_path]).all()
     assert (out[mid_lump] == lower[mid_lump]).all() and not out[corner_lump].any()
+
+
+def test_the_cut_creases_inner_walls_are_removed_and_the_lips_fronts_kept():
+    """A cut crease's walls (hidden behind the lips at rest) pulled into the opening showed as pink
+    slivers along the lower lip and across the corners of Lee Perry-Smith's /a/: they go, with the
+    fins they leave, while every face of the lips' front surfaces stays."""
+    from dataclasses import dataclass, field
+
+    from assets.heads.mesh import HeadMesh
+    from assets.heads.rigging import inner_lip_vertices, without_inner_lips
+    from realtime_core.face.model import FaceFrame
+
+    @dataclass(frozen=True)
+    class _Still:
+        triangles: np.ndarray
+        meta: dict = field(default_factory=dict)
+
+    # A deep crease: three rows curl back and up behind the upper lip's front, two come down to the lower lip.
+    deep = [(0.5, 0.0), (0.25, 0.0), (0.1, 0.0), (0.0, 0.0), (0.03, -0.05), (0.05, -0.1), (0.03, -0.15)]
+    deep += [(-0.02, -0.12), (-0.05, -0.06), (-0.1, 0.0), (-0.25, 0.0), (-0.5, 0.0)]
+    v, t, left, right, mid = _creased_lips(profile=deep)
+    v2, t2, _, _ = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    mesh = HeadMesh(vertices=v2, triangles=t2, name="creased lips")
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=2.0)
+    lm = {
+        "corner_left": left,
+        "corner_right": right,
+        "upper_lip": int(np.argmin(np.linalg.norm(v2 - [0, 0.25, 0], axis=1))),
+        "lower_lip": int(np.argmin(np.linalg.norm(v2 - [0, -0.25, 0], axis=1))),
+    }
+    inner = inner_lip_vertices(mesh, frame, lm)
+    # The crease's rows behind the upper lip's front (y > 0); those below the contact line are the
+    # front-most surface at their place (the crease opens to the front there) and stay.
+    crease = np.flatnonzero((v2[:, 2] < -1e-9) & (v2[:, 1] > 0) & (np.abs(v2[:, 0]) < 1 - 1e-9))
+    assert len(crease) >= 3 * 15
+    np.testing.assert_array_equal(np.sort(inner), crease)
+    rig, out = without_inner_lips(_Still(triangles=t2), mesh, inner)
+    np.testing.assert_array_equal(rig.triangles, out.triangles)
+    kept = np.asarray(out.triangles)
+    # No face lies wholly in the crease; every face of the front surfaces (z = 0) is kept.
+    assert not np.isin(kept, crease).all(axis=1).any()
+    front = (np.abs(v2[t2][:, :, 2]) < 1e-9).all(axis=1)
+    assert front.sum() == (np.abs(v2[kept][:, :, 2]) < 1e-9).all(axis=1).sum()
+    assert rig.meta["inner_lip_removed"] == len(t2) - len(kept) > 0
