@@ -62,7 +62,7 @@ class Head:
 def builtin_morph_head(cache: Path | None = None) -> Head:
     """The built-in head animated through its own 52 ARKit targets."""
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.targets import morph_rig
+    from assets.heads.targets import morph_rig, reference_lips
 
     b = load_builtin_head(cache)
     mesh = HeadMesh(
@@ -76,7 +76,8 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         part=b.part.astype("int16"),
         part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
     )
-    rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets)
+    lips = reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks)
+    rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
     assert rig is not None  # the reference reproduces itself
     lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
     rig.meta["landmarks"] = lm
@@ -160,14 +161,21 @@ def morph_head(
 ) -> Head | None:
     """The mesh driven by its own targets, or None (no targets / not enough mouth targets)."""
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.targets import morph_rig, read_target_map
+    from assets.heads.targets import morph_rig, read_target_map, reference_lips
 
     if not mesh.targets:
         return None
     user = read_target_map(target_map) if target_map is not None else None
-    ref = load_builtin_head(cache).targets
+    b = load_builtin_head(cache)
     rig = morph_rig(
-        mesh.name, mesh.vertices, mesh.triangles, mesh.targets, ref, user_map=user, require_enough=require_enough
+        mesh.name,
+        mesh.vertices,
+        mesh.triangles,
+        mesh.targets,
+        b.targets,
+        user_map=user,
+        require_enough=require_enough,
+        lips=reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks),
     )
     if rig is None:
         return None

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -183,6 +184,57 @@ def match_targets(
     return out
 
 
+@dataclass(frozen=True)
+class ReferenceLips:
+    """The reference face's lip columns, whose gaps the keyframe solve keeps from crossing
+    (:class:`realtime_core.face.keyframes.KeyframeMap`): pairs (m, 2) reference vertex indices
+    (upper, lower); rest (m,) their gap along the face's up axis at rest (IOD); axis (3,) up / IOD."""
+
+    pairs: np.ndarray
+    rest: np.ndarray
+    axis: np.ndarray
+
+
+LIP_COLUMN_WIDTH = 0.04
+"""IOD: the width of a reference lip column (the mouth is ~0.6 IOD wide: ~15 columns)."""
+
+
+def reference_lips(vertices: np.ndarray, jaw: np.ndarray, landmarks: Mapping[str, int]) -> ReferenceLips:
+    """The reference face's lip columns: vertices (n, 3); jaw (n, 3) its jaw-opening target (moves the
+    lower lip, not the upper); landmarks: name -> vertex index (the mouth landmarks).
+
+    Between the corners, in columns LIP_COLUMN_WIDTH IOD wide, the lowest vertex the jaw barely moves
+    (< 20% of the most there) and the highest it moves most (> 50%) within 0.15 IOD of the inner-lip midpoints
+    and in front of the corners' depth less 0.3 IOD (the inner contours, as
+    :func:`realtime_core.face.rig.lip_columns` pairs them on a rig); the inner-lip landmarks always."""
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face.model import face_frame
+
+    v = np.asarray(vertices, dtype=np.float64)
+    lm = mouth_landmarks(dict(landmarks))
+    fr = face_frame(v, lm)
+    q = (v - fr.origin) @ fr.axes.T / fr.iod
+    drop = -(np.asarray(jaw, dtype=np.float64) @ fr.axes[1]) / fr.iod
+    pairs = [(lm.upper_inner, lm.lower_inner)]
+    if drop.max() > 0:
+        x0, x1 = sorted((q[lm.corner_left, 0], q[lm.corner_right, 0]))
+        y_mid = 0.5 * (q[lm.upper_inner, 1] + q[lm.lower_inner, 1])
+        z_min = min(q[lm.corner_left, 2], q[lm.corner_right, 2]) - 0.3
+        box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < 0.15) & (q[:, 2] > z_min)
+        top = drop[box].max() if box.any() else 0.0  # the lower lip's drop (the chin drops further)
+        upper, lower = box & (drop < 0.2 * top), box & (drop > 0.5 * top)
+        col = np.floor((q[:, 0] - x0) / LIP_COLUMN_WIDTH).astype(np.int64)
+        for c in np.unique(col[upper | lower]):
+            u, lo = np.flatnonzero(upper & (col == c)), np.flatnonzero(lower & (col == c))
+            if len(u) and len(lo):
+                a, b = u[np.argmin(q[u, 1])], lo[np.argmax(q[lo, 1])]
+                if q[a, 1] >= q[b, 1]:
+                    pairs.append((int(a), int(b)))
+    pr = np.unique(np.array(pairs, dtype=np.int64), axis=0)
+    axis = fr.axes[1] / fr.iod
+    return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
+
+
 def arkit_source(params: np.ndarray) -> np.ndarray:
     """Mouth parameters (..., 4) -> the ARKit-52 weights facecast streams (..., 52)."""
     return blendshape_weights(params, "arkit52").astype(np.float64)
@@ -197,10 +249,13 @@ def morph_rig(
     *,
     user_map: Mapping[str, Mapping[str, float]] | None = None,
     require_enough: bool = True,
+    lips: ReferenceLips | None = None,
 ) -> MorphRig | None:
     """A :class:`MorphRig` driving the head's own ``targets`` (name -> (n, 3) displacement at weight 1),
     or None when too few mouth targets are recognised (``require_enough``) to reproduce the
-    :data:`ENOUGH_PROBES`. ``reference``: the built-in head's 52 ARKit targets (name -> (n_ref, 3))."""
+    :data:`ENOUGH_PROBES`. ``reference``: the built-in head's 52 ARKit targets (name -> (n_ref, 3)).
+    ``lips``: the reference's lip columns (:func:`reference_lips`): the weights never cross them further
+    than the reference motion does (None: not constrained)."""
     matched = match_targets(list(targets), user_map)
     if not any(k.startswith(("jaw", "mouth", "tongue")) for mix in matched.values() for k in mix):
         return None  # no mouth shape among the recognised targets (eyes, brows only)
@@ -219,7 +274,19 @@ def morph_rig(
     if not head_names:
         return None
     kprime = kprime[keep]
-    keymap = KeyframeMap.from_reference(kprime, a)
+    contact = None
+    if lips is not None:
+        # The lip gaps as linear functions of the flat reference displacement over ``rows``.
+        where = -np.ones(ref.shape[1], dtype=np.int64)
+        where[rows] = np.arange(len(rows))
+        gap = np.zeros((len(lips.pairs), len(rows), 3))
+        for i, (u, lo) in enumerate(lips.pairs):
+            if where[u] >= 0:
+                gap[i, where[u]] += lips.axis
+            if where[lo] >= 0:
+                gap[i, where[lo]] -= lips.axis
+        contact = (lips.rest, gap.reshape(len(lips.pairs), -1))
+    keymap = KeyframeMap.from_reference(kprime, a, contact=contact)
     residuals = [keymap.residual(kprime, a, arkit_source(np.array(p))) for p, _ in ENOUGH_PROBES]
     enough = all(r <= lim for r, (_, lim) in zip(residuals, ENOUGH_PROBES))
     if require_enough and not enough:
@@ -233,7 +300,7 @@ def morph_rig(
     if driven.any() and not driven.all():
         head_names = tuple(n for n, k in zip(head_names, driven) if k)
         kprime = kprime[driven]
-        keymap = KeyframeMap.from_reference(kprime, a)
+        keymap = KeyframeMap.from_reference(kprime, a, contact=contact)
     d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names])  # (P, n, 3)
     if d.shape[1:] != np.asarray(vertices).shape:
         raise MeshError(f"{name}: morph targets do not match the mesh's {len(vertices)} vertices")

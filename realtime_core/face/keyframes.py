@@ -15,6 +15,18 @@ quadratic program is precomputed:
 
     b(x) = argmin_{lo <= b <= hi} 1/2 b^T H b - b^T (C x),   H = K'^T K' + ridge I,  C = K'^T A.
 
+Lip contact: the fit may cross the lips where the motion it reproduces does not (an OVR head's PP
+viseme, pressed and rolled lips, chosen for a closed smile, drove the lips 0.017 IOD through each
+other). Given the reference face's lip gaps (IOD, at m columns along the contact line) as linear
+functions of the weights, ``rest + R b``, and of the source, ``rest + S x``, the solve keeps
+
+    rest + R b >= min(0, rest + S x)        (never crosses more than the motion itself)
+
+by its Lagrange dual: b(lambda) solves the box QP with right-hand side C x + R^T lambda, and each
+gap grows with its own multiplier, so a few 1-D searches per violated column find lambda >= 0.
+Frames whose unconstrained fit keeps the lips apart (all but closed-lip frames on such heads, every
+frame of a head whose targets are the reference's own) cost one comparison more.
+
 :class:`MorphRig` applies b to the head's own targets; it has the interface the renderer, the
 exporters and the server's sessions use for a :class:`realtime_core.face.Rig` (``neutral``,
 ``triangles``, ``moving``, ``displacements(params)``, ``deformed(params)``, ``meta``).
@@ -31,6 +43,13 @@ from scipy.linalg import cho_factor, cho_solve
 
 from realtime_core.errors import ConfigError
 
+CONTACT_TOL = 1e-5
+"""IOD: a lip gap below its floor by less than this is kept (the dual search stops within it)."""
+CONTACT_SWEEPS = 4
+"""Dual coordinate-ascent steps per contact column (one or two columns bind on a closed-lip frame)."""
+CONTACT_SEARCH = 40
+"""Box-QP solves per 1-D multiplier search (doubling, then bisection)."""
+
 
 @dataclass(frozen=True)
 class KeyframeMap:
@@ -43,8 +62,15 @@ class KeyframeMap:
     cross: np.ndarray
     lo: float = 0.0
     hi: float = 1.0
-    # Set in __post_init__: the Cholesky factor of the Gram matrix.
+    # Lip contact (see the module docstring), all or none: contact_rest (m,) the reference's lip gaps
+    # (IOD) at rest, contact_rows (m, P) per unit keyframe weight, contact_source (m, k) per unit source.
+    contact_rest: np.ndarray | None = None
+    contact_rows: np.ndarray | None = None
+    contact_source: np.ndarray | None = None
+    # Set in __post_init__: the Cholesky factor of the Gram matrix; [cross | contact_rows^T] (P, k + m).
     _chol: tuple[np.ndarray, bool] = field(init=False, repr=False, compare=False)
+    _cross_contact: np.ndarray = field(init=False, repr=False, compare=False)
+    _contact_slope: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gram, dtype=np.float64)
@@ -58,6 +84,27 @@ class KeyframeMap:
         object.__setattr__(self, "gram", g)
         object.__setattr__(self, "cross", c)
         object.__setattr__(self, "_chol", cho_factor(g, lower=False))  # upper: the compiled kernel reads U
+        given = [a is not None for a in (self.contact_rest, self.contact_rows, self.contact_source)]
+        if any(given) and not all(given):
+            raise ConfigError("lip contact needs contact_rest, contact_rows and contact_source together")
+        cc = c
+        if all(given):
+            rest = np.asarray(self.contact_rest, dtype=np.float64).reshape(-1)
+            rows = np.asarray(self.contact_rows, dtype=np.float64)
+            src = np.asarray(self.contact_source, dtype=np.float64)
+            if rows.shape != (len(rest), g.shape[0]) or src.shape != (len(rest), c.shape[1]):
+                raise ConfigError(
+                    f"lip contact rows {rows.shape} / source {src.shape} must be ({len(rest)}, {g.shape[0]}) / "
+                    f"({len(rest)}, {c.shape[1]})"
+                )
+            object.__setattr__(self, "contact_rest", rest)
+            object.__setattr__(self, "contact_rows", rows)
+            object.__setattr__(self, "contact_source", src)
+            cc = np.ascontiguousarray(np.hstack([c, rows.T]))
+            # Each column's gap per unit of its own multiplier with no bound held (R H^-1 R^T diagonal).
+            slope = np.maximum(np.einsum("mp,pm->m", rows, cho_solve(self._chol, rows.T)), 1e-12)
+            object.__setattr__(self, "_contact_slope", slope)
+        object.__setattr__(self, "_cross_contact", cc)
 
     @property
     def n_keyframes(self) -> int:
@@ -72,10 +119,13 @@ class KeyframeMap:
         ridge: float = 1e-5,
         lo: float = 0.0,
         hi: float = 1.0,
+        contact: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> KeyframeMap:
         """keyframes: (P, d) the correspondents kappa'_i as flat reference displacements; source:
         (k, d) the reference displacement per unit of each source coordinate (the columns of A).
-        ridge: relative to the mean diagonal of K'^T K' (keeps the normal equations definite)."""
+        ridge: relative to the mean diagonal of K'^T K' (keeps the normal equations definite).
+        contact: None, or (rest (m,), gap (m, d)) the reference's lip gaps (IOD) at rest and per unit
+        reference displacement (a row of +-up / iod at the two lips' vertices): kept apart."""
         kf = np.asarray(keyframes, dtype=np.float64)
         a = np.asarray(source, dtype=np.float64)
         if kf.ndim != 2 or a.ndim != 2 or kf.shape[1] != a.shape[1]:
@@ -85,7 +135,20 @@ class KeyframeMap:
         if not scale > 0:
             raise ConfigError("every keyframe correspondent is zero: nothing to solve for")
         g = g + ridge * scale * np.eye(len(g))
-        return cls(gram=g, cross=kf @ a.T, lo=lo, hi=hi)
+        if contact is None:
+            return cls(gram=g, cross=kf @ a.T, lo=lo, hi=hi)
+        rest, gap = (np.asarray(z, dtype=np.float64) for z in contact)
+        if gap.ndim != 2 or gap.shape != (len(rest), kf.shape[1]):
+            raise ConfigError(f"lip contact gap rows must be ({len(rest)}, {kf.shape[1]}), got {gap.shape}")
+        return cls(
+            gram=g,
+            cross=kf @ a.T,
+            lo=lo,
+            hi=hi,
+            contact_rest=rest,
+            contact_rows=gap @ kf.T,
+            contact_source=gap @ a.T,
+        )
 
     def unbounded(self, x: np.ndarray) -> np.ndarray:
         """Eq. 4 without bounds: (..., k) -> (..., P)."""
@@ -107,18 +170,85 @@ class KeyframeMap:
 
             chol, g = self._chol[0], self.gram
             if x.ndim == 1:  # one frame (a live vertex viewer's): the kernel's own result, no batch wrapper
-                return keyframe_weights(np.ascontiguousarray(x), self.cross, chol, g, self.lo, self.hi, iterations, tol)
+                xc = np.ascontiguousarray(x)
+                b = keyframe_weights(xc, self.cross, chol, g, self.lo, self.hi, iterations, tol)
+                return b if self._apart_already(b) else self._apart(xc, b, kernel, iterations, tol)
             rows = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
             out = np.empty((len(rows), self.n_keyframes))
             for i, row in enumerate(rows):
-                out[i] = keyframe_weights(row, self.cross, chol, g, self.lo, self.hi, iterations, tol)
+                b = keyframe_weights(row, self.cross, chol, g, self.lo, self.hi, iterations, tol)
+                out[i] = b if self._apart_already(b) else self._apart(row, b, kernel, iterations, tol)
             return out.reshape((*x.shape[:-1], self.n_keyframes))
-        rhs = (x @ self.cross.T).reshape(-1, self.n_keyframes)
-        out = np.empty_like(rhs)
-        g = self.gram
-        for i, f in enumerate(rhs):
-            out[i] = _box_qp(g, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
+        rows = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        out = np.empty((len(rows), self.n_keyframes))
+        for i, row in enumerate(rows):
+            b = self._solve(row, None, "numpy", iterations, tol)
+            out[i] = b if self._apart_already(b) else self._apart(row, b, "numpy", iterations, tol)
         return out.reshape((*x.shape[:-1], self.n_keyframes))
+
+    def _solve(self, x: np.ndarray, lam: np.ndarray | None, kernel: str, iterations: int, tol: float) -> np.ndarray:
+        """The box QP for one frame x (k,) with the lip multipliers lam (m,) (None: none)."""
+        if kernel == "numba":
+            from realtime_core.face.compiled import keyframe_weights
+
+            xl, cross = (x, self.cross) if lam is None else (np.concatenate([x, lam]), self._cross_contact)
+            return keyframe_weights(xl, cross, self._chol[0], self.gram, self.lo, self.hi, iterations, tol)
+        f = self.cross @ x
+        if lam is not None:
+            f = f + self._cross_contact[:, len(x) :] @ lam
+        return _box_qp(self.gram, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
+
+    def _apart_already(self, b: np.ndarray) -> bool:
+        """No lip contact, or every column's gap at or above 0 (above any floor): the common frame, one
+        small product."""
+        if self.contact_rows is None or self.contact_rest is None:
+            return True
+        return bool((self.contact_rest + self.contact_rows @ b).min() >= -CONTACT_TOL)
+
+    def _apart(self, x: np.ndarray, b: np.ndarray, kernel: str, iterations: int, tol: float) -> np.ndarray:
+        """The weights for one frame x (k,) (b: its unconstrained solution) with the lips kept apart
+        (module docstring): dual coordinate ascent on the most violated column, each step a bracketed
+        1-D search on its multiplier (its gap is nondecreasing and piecewise linear in it: secant steps,
+        bisection when a secant step leaves the bracket's same end twice), ending on the feasible side."""
+        assert self.contact_rest is not None and self.contact_rows is not None and self.contact_source is not None
+        rest, rows = self.contact_rest, self.contact_rows
+        floor = np.minimum(0.0, rest + self.contact_source @ x)
+        lam = np.zeros(len(rest))
+        aim = 0.5 * CONTACT_TOL
+        for _ in range(CONTACT_SWEEPS * len(rest)):
+            gap = rest + rows @ b - floor
+            j = int(np.argmin(gap))
+            if gap[j] >= -CONTACT_TOL:
+                break
+            lo_l, g_lo = float(lam[j]), float(gap[j])
+            hi_l, g_hi, b_hi = -1.0, 0.0, b
+            step = (aim - g_lo) / self._contact_slope[j]  # the unbounded slope: a lower bound on the step
+            last, same = "", 0  # the bracket end moved last, and how many times in a row
+            for _ in range(CONTACT_SEARCH):
+                if hi_l < 0:
+                    t = lo_l + step
+                elif same >= 2:
+                    t = 0.5 * (lo_l + hi_l)
+                else:
+                    t = lo_l + (hi_l - lo_l) * (aim - g_lo) / (g_hi - g_lo)
+                trial = lam.copy()
+                trial[j] = t
+                bt = self._solve(x, trial, kernel, iterations, tol)
+                gj = float(rest[j] + rows[j] @ bt - floor[j])
+                side = "hi" if gj >= 0.0 else "lo"
+                same, last = (same + 1 if side == last else 1), side
+                if gj >= 0.0:
+                    hi_l, g_hi, b_hi = t, gj, bt
+                    if gj <= CONTACT_TOL:
+                        break
+                else:
+                    lo_l, g_lo = t, gj
+                    if hi_l < 0:
+                        step *= 2.0
+            if hi_l < 0:
+                break  # the weights' bounds cannot open this column further: the best the box allows
+            lam[j], b = hi_l, b_hi
+        return b
 
     def residual(self, keyframes: np.ndarray, source: np.ndarray, x: np.ndarray) -> float:
         """Relative residual ||K' b(x) - A x|| / ||A x|| (how well the keyframes reproduce a motion)."""

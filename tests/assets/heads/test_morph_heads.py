@@ -170,3 +170,25 @@ def test_morph_displacements_equal_the_reference_solve_and_a_float64_product(bui
         got = rig.displacements(p)
         assert got.shape == (len(rig.moving), 3) and got.dtype == np.float32
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-5 * max(np.abs(want).max(), 1e-3))
+
+
+def test_a_viseme_only_head_keeps_its_lips_apart_at_closed_lip_poses(tmp_path):
+    # OVR visemes at closed-lip poses with the corners up or the upper lip raised: the least-squares
+    # fit took the PP viseme (pressed, rolled lips) and drove the inner lips 0.017 IOD through each
+    # other; the reference's lip columns now bound the solve.
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    b = load_builtin_head()
+    vis = {f"viseme_{k}": sum(w * b.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
+    path = tmp_path / "visemes.glb"
+    path.write_bytes(mesh_glb(HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, name="v", targets=vis)))
+    head = resolve_head(path)
+    lm = mouth_landmarks(b.landmarks)
+    fr = face_frame(b.mesh.vertices, lm)
+    for pose in ((0, 0, 0, -0.103), (0.054, 0, 0, 0), (-0.084, 0.015, 0, -0.079)):
+        v = head.rig.deformed(np.array(pose, dtype=float)).astype(float)
+        gap = float((v[lm.upper_inner] - v[lm.lower_inner]) @ fr.axes[1]) / fr.iod
+        assert gap >= -1e-4, (pose, gap)
+        assert head.rig.weights(np.array(pose, dtype=float))[head.rig.names.index("viseme_PP")] > 0.3  # still pressed
