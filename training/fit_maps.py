@@ -25,6 +25,8 @@ core reads no file; a test re-fits and compares, so the module cannot drift from
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
@@ -72,6 +74,10 @@ def fit_maps(head, rig) -> dict:
     from realtime_core.face.model import measure_mouth
     from training.articulatory import CLASSES
 
+    # The maps reproduce the rig's field, not its lip-contact push: the push acts only on frames whose
+    # lips would cross (the pressed-lip probe, mouth_open -0.05, crosses the built-in head's 0.007 IOD
+    # rest gap), and fitted into a map it would move the lips apart at poses where they do not cross.
+    rig = replace(rig, contact=np.zeros((0, 2), dtype=np.int64), contact_spread=None)
     mv = rig.moving
 
     def shape_of(p: np.ndarray) -> np.ndarray:

@@ -254,12 +254,14 @@ def animated_glb(
 
 def rig_targets(rig) -> np.ndarray:
     """Morph targets (4, n, 3) float32 of a :class:`realtime_core.face.Rig`: the head displacement
-    (mesh units) per unit (1 IOD) of each mouth parameter."""
+    (mesh units) per unit (1 IOD) of each mouth parameter: the rig's linear field, without its
+    lip-contact push (a whole IOD of one parameter crosses the lips of a rig with contact columns, and
+    the push at that unit pose would be baked into every frame's blend)."""
     out = np.zeros((4, len(rig.neutral), 3), dtype=np.float32)
     for j in range(4):
         e = np.zeros(4, dtype=np.float32)
         e[j] = 1.0
-        out[j, rig.moving] = rig.displacements(e)
+        out[j, rig.moving] = rig.displacements(e) - rig.contact_push(e)
     return out
 
 

@@ -719,11 +719,12 @@ def rig_head(
             rig = with_rest_pose(rig, np.array([0.0, 0.0, -gap / max(opening, 0.5), 0.0]))
             v = np.asarray(rig.neutral, dtype=np.float64)
             rig.meta["landmarks"] = {k: v[i].tolist() for k, i in snap.items()}
-        if not own:  # (the built-in head's pressed lips cross at the fit probes: see above)
-            seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
-            contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
-            rig = replace(rig, contact=contact, contact_up=frame.axes[1])
-            rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
+        # Every head, the built-in one too: its ARKit maps are fitted to the field without the push
+        # (training/fit_maps.py), so the push keeps its pressed lips apart without changing them.
+        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+        contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
+        rig = replace(rig, contact=contact, contact_up=frame.axes[1])
+        rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     part = mesh.part

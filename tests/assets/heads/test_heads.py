@@ -131,6 +131,25 @@ def test_mouth_open_moves_the_jaw_down(builtin_rig, builtin_head):
     assert abs(drop[lm["eye_outer_left"]]) < 0.01 * rig.meta["iod"]
 
 
+def test_the_builtin_rig_keeps_its_lips_apart_at_closed_lip_poses(builtin_rig, builtin_head):
+    # Closed lips with the corners up (lip_corner_depress -0.103, the shipped models' end) pushed the
+    # lower lip 0.006 IOD through the upper: the built-in rig had no lip-contact push (its ARKit maps
+    # were fitted to the rig with it). Now it has one, and the maps are fitted to the field without it.
+    from assets.heads.head import Head, head_checks
+    from assets.heads.rigging import mouth_landmarks
+
+    rig, mesh = builtin_rig
+    assert len(rig.contact) > 5
+    lm = builtin_head.landmarks
+    up = face_frame(builtin_head.mesh.vertices, mouth_landmarks(lm)).axes[1]
+    for pose in ((0, 0, 0, -0.103), (-0.084, 0.015, 0, -0.079)):
+        v = rig.deformed(np.array(pose, dtype=float)).astype(float)
+        gaps = (v[rig.contact[:, 0]] - v[rig.contact[:, 1]]) @ up / rig.meta["iod"]
+        assert gaps.min() >= -1e-4, (pose, gaps.min())
+    rep = head_checks(Head(rig, mesh))
+    assert rep.passed, rep.summary()
+
+
 def _relative_rms(pred, native):
     m = np.linalg.norm(native, axis=1) > 1e-9
     return float(np.sqrt(((pred - native)[m] ** 2).sum() / (native[m] ** 2).sum()))
