@@ -275,15 +275,16 @@ def head_landmarks(
 TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
-def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None):
+def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):
     """:func:`realtime_core.face.checks.check_rig` for a head: its landmarks from the rig's meta
     (nearest vertices; a morph head from a file without them: ``landmark_finder(mesh)``), the two sides
-    of a cut lip seam as lip pairs, teeth from the mesh's part names. Returns a RigReport."""
+    of a cut lip seam as lip pairs, teeth from the mesh's part names; ``poses`` (None: the checks'
+    :data:`EXTREME_POSES`). Returns a RigReport."""
     import numpy as np
     from scipy.spatial import cKDTree
 
     from assets.heads.rigging import mouth_landmarks
-    from realtime_core.face.checks import RigCheckLimits, check_rig
+    from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
 
     rig, mesh = head.rig, head.mesh
     v0 = np.asarray(rig.neutral, dtype=np.float64)
@@ -330,4 +331,5 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         teeth=teeth,
         limits=limits or RigCheckLimits(),
         reference=reference,
+        poses=EXTREME_POSES if poses is None else poses,
     )
