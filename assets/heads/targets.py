@@ -203,34 +203,18 @@ def reference_lips(vertices: np.ndarray, jaw: np.ndarray, landmarks: Mapping[str
     """The reference face's lip columns: vertices (n, 3); jaw (n, 3) its jaw-opening target (moves the
     lower lip, not the upper); landmarks: name -> vertex index (the mouth landmarks).
 
-    Between the corners, in columns LIP_COLUMN_WIDTH IOD wide, the lowest vertex the jaw barely moves
-    (< 20% of the most there) and the highest it moves most (> 50%) within 0.15 IOD of the inner-lip midpoints
-    and in front of the corners' depth less 0.3 IOD (the inner contours, as
-    :func:`realtime_core.face.rig.lip_columns` pairs them on a rig); the inner-lip landmarks always."""
+    The inner contours' pairs by :func:`realtime_core.face.rig.lip_pairs_by_drop` (the rule a rig's lip
+    columns follow), in columns LIP_COLUMN_WIDTH IOD wide, with the jaw target's drop relative to its
+    largest within the mouth (the chin drops further than the lower lip); the inner-lip landmarks always."""
     from assets.heads.rigging import mouth_landmarks
     from realtime_core.face.model import face_frame
+    from realtime_core.face.rig import lip_pairs_by_drop
 
     v = np.asarray(vertices, dtype=np.float64)
     lm = mouth_landmarks(dict(landmarks))
     fr = face_frame(v, lm)
-    q = (v - fr.origin) @ fr.axes.T / fr.iod
     drop = -(np.asarray(jaw, dtype=np.float64) @ fr.axes[1]) / fr.iod
-    pairs = [(lm.upper_inner, lm.lower_inner)]
-    if drop.max() > 0:
-        x0, x1 = sorted((q[lm.corner_left, 0], q[lm.corner_right, 0]))
-        y_mid = 0.5 * (q[lm.upper_inner, 1] + q[lm.lower_inner, 1])
-        z_min = min(q[lm.corner_left, 2], q[lm.corner_right, 2]) - 0.3
-        box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < 0.15) & (q[:, 2] > z_min)
-        top = drop[box].max() if box.any() else 0.0  # the lower lip's drop (the chin drops further)
-        upper, lower = box & (drop < 0.2 * top), box & (drop > 0.5 * top)
-        col = np.floor((q[:, 0] - x0) / LIP_COLUMN_WIDTH).astype(np.int64)
-        for c in np.unique(col[upper | lower]):
-            u, lo = np.flatnonzero(upper & (col == c)), np.flatnonzero(lower & (col == c))
-            if len(u) and len(lo):
-                a, b = u[np.argmin(q[u, 1])], lo[np.argmax(q[lo, 1])]
-                if q[a, 1] >= q[b, 1]:
-                    pairs.append((int(a), int(b)))
-    pr = np.unique(np.array(pairs, dtype=np.int64), axis=0)
+    pr = lip_pairs_by_drop(v, drop, lm, fr, column_width=LIP_COLUMN_WIDTH, top_in_box=True)
     axis = fr.axes[1] / fr.iod
     return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
 

@@ -645,19 +645,39 @@ def lip_columns(
     if seam_pairs is not None and len(seam_pairs):
         return np.unique(np.vstack([np.asarray(seam_pairs, dtype=np.int64), lm_pair]), axis=0)
     v = np.asarray(rig.neutral, dtype=np.float64)
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
     e = np.zeros(4)
     e[2] = 1.0
     drop = np.zeros(len(v))
     drop[rig.moving] = -(rig.displacements(e).astype(np.float64) @ frame.axes[1]) / frame.iod
+    return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band)
+
+
+def lip_pairs_by_drop(
+    vertices: np.ndarray,
+    drop: np.ndarray,
+    landmarks: MouthLandmarks,
+    frame: FaceFrame,
+    *,
+    column_width: float,
+    band: float = 0.15,
+    top_in_box: bool = False,
+) -> np.ndarray:
+    """(k, 2) int64 (upper, lower) vertex pairs of the two inner lip contours, from vertices (n, 3)
+    and drop (n,) each vertex's downward motion (IOD) when the mouth opens (:func:`lip_columns`'s
+    rule; also the reference face's lip columns for the keyframe solve, from its jaw target).
+    top_in_box: the "most" motion is the largest inside the mouth box, not over the whole face (a jaw
+    target drops the chin further than the lower lip)."""
+    lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if drop.max() <= 0:
         return lm_pair
+    q = (np.asarray(vertices, dtype=np.float64) - frame.origin) @ frame.axes.T / frame.iod
     x0, x1 = sorted((q[landmarks.corner_left, 0], q[landmarks.corner_right, 0]))
     y_mid = 0.5 * (q[landmarks.upper_inner, 1] + q[landmarks.lower_inner, 1])
     z_min = min(q[landmarks.corner_left, 2], q[landmarks.corner_right, 2]) - 0.3
     box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < band) & (q[:, 2] > z_min)
-    upper = box & (drop < 0.2 * drop.max())
-    lower = box & (drop > 0.5 * drop.max())
+    top = (drop[box].max() if box.any() else 0.0) if top_in_box else drop.max()
+    upper = box & (drop < 0.2 * top)
+    lower = box & (drop > 0.5 * top)
     col = np.floor((q[:, 0] - x0) / column_width).astype(np.int64)
     pairs = [lm_pair[0]]
     for c in np.unique(col[upper | lower]):
