@@ -71,10 +71,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--candidates",
         type=_specs,
-        default=_specs(DEFAULT_CANDIDATES),
+        # A string default: argparse parses it only when the option is not given, so building the
+        # parser (every facecast command's start-up) does not import training.readout (scipy.signal, ~2 s).
+        default=DEFAULT_CANDIDATES,
         metavar="K:POST:H[xE]:ALPHA,...",
-        help=f"readouts to try: taps, posteriors (none/state/component), hidden units (0 = linear ridge; 64x3: three "
-        f"64-unit MLPs of seeds 0-2 averaged), L2 alpha, optionally ':noaudio'; default {DEFAULT_CANDIDATES}",
+        help="readouts to try: taps, posteriors (none/state/component), hidden units (0 = linear ridge; 64x3: three "
+        "64-unit MLPs of seeds 0-2 averaged), L2 alpha, optionally ':noaudio'",
     )
     p.add_argument(
         "--bands",
