@@ -37,6 +37,7 @@ COMMANDS: dict[str, str] = {
     "fit-maps": "facecast.commands.fit_maps",
     "bench": "facecast.commands.bench",
     "perceptual": "facecast.commands.perceptual",
+    "warm-up": "facecast.commands.warm_up",
 }
 
 

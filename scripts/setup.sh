@@ -38,6 +38,19 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "$want" > "$stamp"
 fi
 
+# The per-frame numba kernels (realtime_core/*/compiled.py), compiled here once rather than by the
+# first say/render/animate/serve (facecast warm-up: ~20 s of CPU, minutes of wall time on a busy
+# machine). numba keys its cache by each source file's mtime and size (and numba's version, which
+# the package stamp above covers), so this stamp is keyed the same way.
+kstamp=realtime_core/__pycache__/facecast-kernels.stamp
+kwant="$({ stat -c '%n %Y %s' realtime_core/*/compiled.py; cat "$stamp"; } | sha256sum | cut -d' ' -f1)"
+if [ ! -f "$kstamp" ] || [ "$(cat "$kstamp")" != "$kwant" ]; then
+  echo "setup: compiling the numba kernels (facecast warm-up; once per change of them)"
+  .venv/bin/facecast warm-up
+  mkdir -p realtime_core/__pycache__
+  echo "$kwant" > "$kstamp"
+fi
+
 # npm packages (package.json at the root: three.js served to the browser viewer, playwright-core for
 # its test): `npm ci` when the lock file changed since the last install.
 # Node.js and npm: the machine image usually has them; a bare Debian gets its own packages (the browser

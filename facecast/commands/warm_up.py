@@ -1,0 +1,49 @@
+"""``facecast warm-up``: compile (or load) the per-frame numba kernels now, not in the first say/render/serve."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+
+    p = sub.add_parser(
+        "warm-up",
+        help="compile the per-frame numba kernels now (scripts/setup.sh, so ./go, runs it once per change of them)",
+        formatter_class=HelpFormatter,
+        description=(
+            "The live path's front end and inverter and the morph-target keyframe solve are numba kernels\n"
+            "(realtime_core/*/compiled.py), compiled on their first call and cached beside their source files\n"
+            "(numba's cache=True; in the user's cache directory when the tree is read-only). On a fresh clone that\n"
+            "first call would be the first say, render, animate or serve: some 15 s of CPU, a minute or more of\n"
+            "wall time on a busy machine. This runs them once on the default model and a small keyframe problem,\n"
+            "with the argument types those commands use, and prints how long it took (about a second when cached)."
+        ),
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from assets.modelfile import load_speech_model
+    from realtime_core.face.keyframes import KeyframeMap
+    from server.session import warm_up
+
+    t0 = time.perf_counter()
+    # The live path (front end, inverter, readout, output stage) as a session runs it; render and
+    # animate run the same chain (realtime_core.pipeline) with the same argument types.
+    warm_up(load_speech_model())
+    t1 = time.perf_counter()
+    # The keyframe solve as a morph-target head (the built-in one) calls it, one frame and a batch;
+    # a small random problem has the same argument types as any head's map.
+    rng = np.random.default_rng(0)
+    keymap = KeyframeMap.from_reference(rng.normal(size=(6, 30)), rng.normal(size=(4, 30)))
+    keymap.weights(rng.normal(size=4))
+    keymap.weights(rng.normal(size=(3, 4)))
+    t2 = time.perf_counter()
+    print(f"warm-up: numba kernels ready: live path {t1 - t0:.1f} s, keyframe solve {t2 - t1:.1f} s")
+    return 0
