@@ -624,6 +624,8 @@ class FacecastServer:
             if sock is not None:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.config.viewer_socket_buffer_bytes)
         await ws.send(describe.view_description_text(live, req, self.head))
+        # A text session's sentence now playing, from its first frame (docs/protocol.md section 3).
+        await live.send_sentence(ws, req.header_kind, req.header_encoding, req.audio)
         if self.sessions.get(live.name) is not live:  # ended while we were sending the description
             raise ProtocolViolation(P.CLOSE_NORMAL, "session ended")
         viewer = Viewer(ws, live, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)

@@ -124,6 +124,54 @@ class LocalSession:
         return self.core.control_state()
 
 
+def audio_message(out: Output, now: float) -> bytes:
+    """The wire message of an output's audio block (``out.audio`` set), sent at ``now`` (epoch s)."""
+    a = out.audio
+    assert a is not None
+    return P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now) + a.payload()
+
+
+def frame_messages(out: Output, kind: int, encoding: int, now: float) -> list[bytes]:
+    """The wire messages of an output's frames in one (kind, encoding), sent at ``now`` (epoch s)."""
+    msgs = []
+    for frame in out.frames:
+        payload, count, scale = frame.payload(kind, encoding)
+        msgs.append(P.pack_header(kind, encoding, frame.index, count, scale, frame.media_time, now) + payload)
+    return msgs
+
+
+class SentenceReplay:
+    """A text session's sentence now playing, as fanned out so far (docs/protocol.md section 3).
+
+    Why: a text session's frames leave at real time (plus a short lead), so a viewer that joined
+    after a sentence began, e.g. ``facecast view --record`` started beside the chatbot, got only the
+    sentence's tail; now it is first sent the sentence from its first frame, then the live stream.
+    The text pacer marks where each sentence starts and until when it plays on the wall clock
+    (:meth:`begin`); the fan-out adds each output when it is delivered (:meth:`add`), so an output
+    still waiting for its turn's vertex deltas is not here yet and reaches a joining viewer once."""
+
+    def __init__(self) -> None:
+        self.outputs: list[Output] = []  # the sentence's outputs delivered so far, in order
+        self.first_index = -1  # the frame index the next sentence to be delivered starts with
+        self.playing_until = float("-inf")  # time.perf_counter() when the sentence's last frame has played
+
+    def begin(self, first_index: int, playing_until: float) -> None:
+        self.first_index, self.playing_until = first_index, playing_until
+
+    def add(self, out: Output) -> None:
+        if out.frames and out.frames[0].index == self.first_index:
+            self.outputs = []
+        self.outputs.append(out)
+
+    def playing(self, now: float) -> bool:
+        """Whether a sentence is still playing at ``now`` (time.perf_counter()): worth replaying."""
+        return bool(self.outputs) and now < self.playing_until
+
+    def since(self, index: int) -> list[Output]:
+        """The kept outputs whose frames start at ``index`` or later."""
+        return [o for o in self.outputs if o.frames and o.frames[0].index >= index]
+
+
 def deliver(viewers: list[Viewer], msg: bytes, now: float) -> None:
     """Hand one message to viewers: a synchronous write for those keeping up (no task switch per
     message), the bounded queue for the others.
@@ -259,6 +307,7 @@ class LiveSession:
         self.overrun = "pace"
         self.paced_s = 0.0
         self.batch = False
+        self.replay: SentenceReplay | None = None  # text sessions: the sentence a joining viewer gets first
 
     async def feed_bytes(self, data: bytes) -> int:
         """One binary block of the session's format -> frames produced (AudioFormatError if bad)."""
@@ -355,6 +404,25 @@ class LiveSession:
         """Apply a control message (ControlError if rejected); returns the control state."""
         return await self.session.apply_control(msg)
 
+    async def send_sentence(self, ws: ServerConnection, kind: int, encoding: int, audio: bool) -> None:
+        """Send a joining viewer the sentence now playing (text sessions: :class:`SentenceReplay`) from
+        its first frame until caught up with the fan-out, each audio block before its frame as the
+        fan-out sends them. The caller registers the viewer right after, with no await in between,
+        so the viewer then gets every later output once. Straight to the socket, not through the
+        viewer's bounded queue: a sentence is more messages than the queue holds."""
+        replay = self.replay
+        if replay is None or not replay.playing(time.perf_counter()):
+            return
+        nxt = -1
+        while outs := replay.since(nxt):
+            for out in outs:
+                now = time.time()
+                if audio and out.audio is not None:
+                    await ws.send(audio_message(out, now))
+                for msg in frame_messages(out, kind, encoding, now):
+                    await ws.send(msg)
+            nxt = outs[-1].frames[-1].index + 1
+
     def _fanout(self, out: Output) -> int:
         """Hand one push's frames and audio to the viewers (here and, with a cluster, on other nodes).
 
@@ -373,6 +441,8 @@ class LiveSession:
         return isinstance(self.session, LocalSession) and any(v.kind == P.KIND_DELTAS for v in self.viewers)
 
     def _fanout_now(self, out: Output) -> int:
+        if self.replay is not None:
+            self.replay.add(out)
         cluster = self.server.cluster
         remote = cluster.wants(self.name) if cluster is not None else ()
         if not self.viewers and not remote:
@@ -382,11 +452,7 @@ class LiveSession:
         if out.audio is not None:
             listeners = [v for v in self.viewers if v.audio]
             if listeners or (P.KIND_AUDIO, P.ENC_INT16) in remote:
-                a = out.audio
-                msg = (
-                    P.pack_header(P.KIND_AUDIO, P.ENC_INT16, a.index, a.samples.size, 1 / 32768, a.media_time, now)
-                    + a.payload()
-                )
+                msg = audio_message(out, now)
                 deliver(listeners, msg, now)
                 if remote and cluster is not None:  # remote is empty without a cluster
                     cluster.publish(self.name, msg)

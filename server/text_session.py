@@ -246,7 +246,7 @@ def _text_message(raw: Any) -> dict:
 
 async def handle_text(server, ws: ServerConnection) -> None:
     """The ``/text`` endpoint (protocol in docs/protocol.md)."""
-    from server.live import LiveSession
+    from server.live import LiveSession, SentenceReplay
     from server.protocol import token_ok
 
     backend: TextBackend | None = getattr(server, "text_backend", None)
@@ -287,6 +287,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
     except ServerConfigError as exc:
         raise ProtocolViolation(getattr(exc, "code", P.CLOSE_BAD_REQUEST), str(exc)) from None
     live = LiveSession(name, session, server, source="text")
+    live.replay = SentenceReplay()
     server.sessions[name] = live
     if server.cluster is not None:
         # registered cluster-wide like an audio session: /sessions on every node lists it, and viewers
@@ -298,6 +299,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
     queue: asyncio.Queue = asyncio.Queue()
     clock: dict[str, float] = {}
     first_piece: list[float] = []
+    sentence_ends: dict[int, float] = {}  # a sentence's first frame index -> its end, media time (s)
 
     async def pacer() -> None:
         """Release frames no earlier than ``lead_s`` before their media time on the wall clock."""
@@ -315,6 +317,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 await asyncio.sleep(wait)
             elif clock["t0"] + mt < time.perf_counter() - 1.0:  # fell behind (a long pause in the text): re-anchor
                 clock["t0"] = time.perf_counter() - mt
+            end = sentence_ends.pop(out.frames[0].index, None)
+            if end is not None and live.replay is not None:  # a sentence starts: what a joining viewer gets
+                live.replay.begin(out.frames[0].index, clock["t0"] + end)
             live._fanout(out)
 
     async def say(sentences: list[str]) -> None:
@@ -324,6 +329,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
             except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
                 await ws.send(P.dumps({"type": "rejected", "text": sentence[:200], "reason": str(exc)}))
                 continue
+            sentence_ends[outs[0].frames[0].index] = outs[-1].frames[-1].media_time + 1 / FPS
             for o in outs:
                 queue.put_nowait(o)
             await ws.send(P.dumps(report))

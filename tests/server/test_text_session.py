@@ -202,6 +202,49 @@ def test_text_session_over_loopback(model, backend):
     assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
 
 
+LONG = "Where were you when the lights went out, and the quick brown fox jumps over the lazy dog? "
+
+
+def test_a_viewer_joining_mid_sentence_gets_that_sentence_from_its_first_frame(model, backend):
+    """docs/protocol.md section 3: a viewer that joins a text session while a sentence plays is sent that
+    sentence from its first frame (frames and audio, in order), then the live stream; one that joins
+    after the sentence has played starts with the next frame. (A late `facecast view --record` used to
+    miss the first sentence's start: the frames leave at real time, and it got only those after it joined.)"""
+
+    async def join(srv):
+        async with ViewerClient(srv.url, session="bot", kind="params") as viewer:
+            return await viewer.collect()
+
+    async def main():
+        async with running(model, backend) as srv:
+            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await ws.send(json.dumps({"type": "text", "text": LONG}))
+                first = json.loads(await ws.recv())
+                t_spoken = time.perf_counter()
+                await asyncio.sleep(0.5)  # the sentence (several seconds) is playing, ~0.8 s of it released
+                mid = asyncio.ensure_future(join(srv))
+                await asyncio.sleep(first["duration_s"] + 0.5 - (time.perf_counter() - t_spoken))  # it has played
+                after = asyncio.ensure_future(join(srv))
+                await asyncio.sleep(0.5)  # connected before the next sentence starts
+                await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. "}))
+                second = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "end"}))
+                ended = json.loads(await ws.recv())
+                return first, second, ended, await asyncio.wait_for(mid, 30), await asyncio.wait_for(after, 30)
+
+    first, second, ended, mid, after = asyncio.run(asyncio.wait_for(main(), 90))
+    assert first["duration_s"] > 3 and second["media_time"] == pytest.approx(first["duration_s"])
+    n = ended["frames"]
+    assert [m.index for m in mid.frames] == list(range(n))  # the whole first sentence, then the rest
+    assert [m.media_time for m in mid.audio] == pytest.approx([k / 30 for k in range(n)])
+    assert all(m.media_time == pytest.approx(m.index / 30) for m in mid.frames)
+    assert [m.index for m in after.frames] == list(range(first["frames"], n))  # the next sentence only
+    assert len(after.audio) == second["frames"]
+    assert mid.close_code == after.close_code == P.CLOSE_NORMAL
+
+
 def test_text_session_refuses_bad_starts(model, backend):
     async def attempt(start):
         async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
