@@ -52,6 +52,7 @@ class LiveStats:
     connections: int = 0
     audio_blocks: int = 0
     audio_device: str | None = None
+    audio_underruns: int = 0  # device callbacks flagged "output underflow" (AudioOut.underruns)
     delivery_ms: list[float] = field(default_factory=list)
     saved_sound: Path | None = None  # the WAV written for save_sound (None: none asked, or no description came)
 
@@ -91,6 +92,12 @@ class AudioOut:
         self.stream = None
         self.device: str | None = None
         self.error = ""
+        # Callbacks PortAudio flagged "output underflow": the device ran dry (the callback missed its
+        # turn, e.g. starved of the GIL). Through ALSA's PulseAudio plugin each one is followed by
+        # 1.2-2 s in which the device asks for nothing, so is heard as that much silence; the
+        # callback then resumes at the right media time (the stream clock stays locked to
+        # perf_counter), measured on a PulseAudio null sink (docs/service.md, "The Python viewer's sound").
+        self.underruns = 0
         self._clock_delta = 0.0  # stream clock - perf_counter
         self._played: list[np.ndarray] | None = [] if keep_played else None
 
@@ -132,6 +139,8 @@ class AudioOut:
 
     def _callback(self, out: np.ndarray, frames: int, t, status) -> None:
         out.fill(0)
+        if status.output_underflow:
+            self.underruns += 1
         offset = self.playout.offset
         if offset is None:
             return
@@ -333,6 +342,7 @@ def run_window(
                 break
         stats.resyncs = playout.resyncs
         stats.audio_blocks = audio.received
+        stats.audio_underruns = audio.underruns
         if screenshot is not None and image is not None:
             from PIL import Image
 

@@ -162,6 +162,11 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
         f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
         f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
         f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
+        + (
+            f" ({st.audio_underruns} device underrun(s): each about 2 s of silence through PulseAudio)"
+            if st.audio_underruns
+            else ""
+        )
         + (f"; wrote {args.screenshot}" if args.screenshot else "")
         + (f"; wrote {st.saved_sound}" if st.saved_sound else "")
     )

@@ -298,3 +298,55 @@ def test_view_window_plays_the_session_audio(live, xvfb, pulse, tmp_path):
     # a piece of anything else about 0.3.
     out = _found_in(heard, played.astype(np.float64), piece=400)
     assert out and max(out) > 0.9 and np.median(out) > 0.7, (out, proc.stdout)
+
+
+STARVE = """
+import sys, time
+import numpy as np
+from clients.viewer.live import AudioOut, Playout
+playout = Playout(0.08)
+audio = AudioOut(playout, keep_played=True)
+audio.open(22050)
+if audio.stream is None:
+    print("no device", audio.error)
+    sys.exit(0)
+playout.offset = time.perf_counter() + 0.1  # media time 0 is heard 0.1 s from now
+tone = (0.5 * np.sin(2 * np.pi * 440 * np.arange(22050 * 8) / 22050)).astype(np.float32)
+for k in range(0, len(tone), 735):
+    audio.add(k / 22050, tone[k : k + 735], 22050)
+time.sleep(1.0)
+# Starve the callback thread as a long draw holding the GIL does: one switch a second, 0.5 s busy.
+sys.setswitchinterval(1.0)
+end = time.perf_counter() + 0.5
+while time.perf_counter() < end:
+    pass
+sys.setswitchinterval(0.005)
+before = len(audio.played())  # samples handed to the device up to the underrun
+time.sleep(3.0)
+audio.close()
+after = audio.played()[before:]
+print("underruns", audio.underruns, "after", len(after), "loud", int((np.abs(after) > 0.1).sum()))
+"""
+
+
+def test_a_starved_sound_callback_is_counted_as_an_underrun_and_the_sound_resumes(pulse):
+    """Through a private PulseAudio null sink: a callback starved of the GIL for 0.5 s (longer than
+    the device's buffer) underruns; AudioOut counts it (facecast view prints it) and afterwards
+    hands the device the tone again. (ALSA's PulseAudio plugin asks for nothing for 1.2-2 s after
+    an underrun: docs/service.md, "The Python viewer's sound".)"""
+    import sys
+
+    from tests.live_server import REPO
+
+    proc = subprocess.run(
+        [sys.executable, "-c", STARVE], cwd=REPO, env=pulse, capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr
+    if proc.stdout.startswith("no device"):
+        missing(f"PortAudio found no output device through PulseAudio: {proc.stdout.strip()}")
+    words = proc.stdout.split()
+    underruns, after, loud = int(words[1]), int(words[3]), int(words[5])
+    assert underruns >= 1, proc.stdout
+    # After the underrun the device asked again and was handed the tone (the right media samples:
+    # the tone runs 8 s), at least 0.3 s of it in the 3 s that followed, less than 3 s (the gap).
+    assert loud > 0.3 * 22050 and after < 3.0 * 22050, proc.stdout
