@@ -7,11 +7,12 @@
 # pyproject.toml changed since the last install.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-cd "$here"
-bash scripts/setup.sh >&2
+bash "$here/scripts/setup.sh" >&2
 # shellcheck disable=SC1091
-source .venv/bin/activate
+source "$here/.venv/bin/activate"
 case "${1:-demo}" in
-  test) shift; exec python -m pytest "$@" ;;
+  # The tests run from the checkout (pytest's rootdir and configuration); a facecast command from
+  # where it was called, so relative paths (-o out.mp4, a speech file) mean what the caller meant.
+  test) shift; cd "$here"; exec python -m pytest "$@" ;;
   *) exec facecast "$@" ;;
 esac
