@@ -31,8 +31,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description="Train the joint audio-visual HMM (full covariances, Baum-Welch) on one or more corpus "
         "folders (made by `facecast corpus` or `facecast extract`). Training is resumable: a checkpoint "
-        "beside the output is updated after every EM iteration and picked up when the same command runs again. "
-        "With --select, trains a grid of models on 80%% of the utterances and reports held-out accuracy.",
+        "beside the output (OUTPUT.checkpoint.npz) is updated after every EM iteration and picked up when the same "
+        "command runs again; a finished OUTPUT renamed to it continues with more --iters, exactly as one run of "
+        "that many iterations. With --select, trains a grid of models on 80%% of the utterances and reports "
+        "held-out accuracy.",
     )
     p.add_argument("corpus", nargs="*", type=Path, help="corpus folders (each with manifest.json)")
     p.add_argument(
