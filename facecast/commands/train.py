@@ -31,8 +31,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description="Train the joint audio-visual HMM (full covariances, Baum-Welch) on one or more corpus "
         "folders (made by `facecast corpus` or `facecast extract`). Training is resumable: a checkpoint "
-        "beside the output is updated after every EM iteration and picked up when the same command runs again. "
-        "With --select, trains a grid of models on 80%% of the utterances and reports held-out accuracy.",
+        "beside the output (OUTPUT.checkpoint.npz) is updated after every EM iteration and picked up when the same "
+        "command runs again; a finished OUTPUT renamed to it continues with more --iters, exactly as one run of "
+        "that many iterations. With --select, trains a grid of models on 80%% of the utterances and reports "
+        "held-out accuracy.",
     )
     p.add_argument("corpus", nargs="*", type=Path, help="corpus folders (each with manifest.json)")
     p.add_argument(
@@ -226,6 +228,9 @@ def _run(args: argparse.Namespace) -> int:
     rec = recipe(args.states, args.mix, args.covariance, args.tc)
     ckpt = args.output.with_name(args.output.name + ".checkpoint.npz")
     start, done = None, 0
+    # The objective per frame of every model so far (history[i]: after i iterations); a checkpoint
+    # carries it, so a resumed run's file records the same history as an uninterrupted one.
+    history: list[float] = []
     if ckpt.exists():
         prev = load_model(ckpt)
         same = {k: v for k, v in prev.metadata.get("recipe", {}).items() if k not in ("n_iter", "tol")} == {
@@ -233,23 +238,35 @@ def _run(args: argparse.Namespace) -> int:
         }
         if same and {k: prev.metadata.get(k) for k in data} == data:
             start, done = prev.hmm, int(prev.metadata.get("iteration", 0))
+            # The resumed run scores the checkpoint's model again as its first objective.
+            history = [float(v) for v in prev.metadata.get("em_history", [])][:done]
             print(f"resuming from {ckpt} (iteration {done})")
     bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
 
     def on_iteration(it: int, objective: float, model) -> None:
         # Called after every E-step; the first scores the starting model (no iteration yet).
+        history.append(objective)
         bar.set_postfix(objective=f"{objective:.4f}")
         if it > 0:
             bar.update(1)
-            save_model(ckpt, replace(model, metadata={**model.metadata, "iteration": done + it}))
+            meta = {**model.metadata, "iteration": done + it, "em_history": list(history)}
+            save_model(ckpt, replace(model, metadata=meta))
 
     rec_run = replace(rec, hmm=replace(rec.hmm, n_iter=max(args.iters - done, 0))) if start is not None else rec
     model, result = train_av_model(utts, rec_run, start=start, on_iteration=on_iteration, metadata=data)
     bar.close()
-    model = replace(model, closure_band=args.closure_band, metadata={**model.metadata, "recipe": rec.as_json()})
+    # A finished file is also a checkpoint: renamed to OUTPUT.checkpoint.npz, it continues with more --iters.
+    # A history that does not reach back to iteration 0 (a checkpoint without one) is kept as this run's.
+    meta = {
+        **model.metadata,
+        "recipe": rec.as_json(),
+        "iteration": done + len(result.history) - 1,
+        **({"em_history": history} if len(history) == done + len(result.history) else {}),
+    }
+    model = replace(model, closure_band=args.closure_band, metadata=meta)
     save_model(args.output, model)
     ckpt.unlink(missing_ok=True)
-    h = result.history
+    h = model.metadata["em_history"]
     print(
         f"wrote {args.output}: objective per frame {h[0]:.3f} -> {h[-1]:.3f} in {len(h) - 1} iterations"
         f"{' (converged)' if result.converged else ''}"
