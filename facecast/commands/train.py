@@ -266,7 +266,7 @@ def _run(args: argparse.Namespace) -> int:
     model = replace(model, closure_band=args.closure_band, metadata=meta)
     save_model(args.output, model)
     ckpt.unlink(missing_ok=True)
-    h = model.metadata["em_history"]
+    h = model.metadata.get("em_history", result.history)  # an old checkpoint: this run's part only
     print(
         f"wrote {args.output}: objective per frame {h[0]:.3f} -> {h[-1]:.3f} in {len(h) - 1} iterations"
         f"{' (converged)' if result.converged else ''}"
