@@ -62,6 +62,16 @@ def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
         "contact": np.asarray(rig.contact, dtype=np.int64),
         "contact_up": np.asarray(rig.contact_up, dtype=np.float64),
     }
+    if rig.contact_spread is not None:
+        # The push's spread over the lips: without it a loaded rig pushes the two contact vertices of a
+        # crossing column alone, a different (folding) deformation from the rig that was saved.
+        cs = rig.contact_spread.tocsr()
+        arrays.update(
+            spread_data=cs.data.astype(np.float32),
+            spread_indices=cs.indices.astype(np.int32),
+            spread_indptr=cs.indptr.astype(np.int64),
+            spread_shape=np.array(cs.shape, dtype=np.int64),
+        )
     if mesh.uvs is not None:
         arrays["uvs"] = np.asarray(mesh.uvs, dtype=np.float32)
     if mesh.colors is not None:
@@ -99,6 +109,12 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
         )
         shape = tuple(int(x) for x in a["matrix_shape"])
         matrix = sp.csr_matrix((a["matrix_data"], a["matrix_indices"], a["matrix_indptr"]), shape=shape)
+        spread = None
+        if "spread_data" in a:  # (files written before the spread was stored push the contact vertices alone)
+            spread = sp.csr_matrix(
+                (a["spread_data"], a["spread_indices"], a["spread_indptr"]),
+                shape=tuple(int(x) for x in a["spread_shape"]),
+            )
         rig = Rig(
             neutral=a["neutral"],
             triangles=a["triangles"],
@@ -111,6 +127,7 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
             meta=meta.get("rig", {}),
             contact=a.get("contact", np.zeros((0, 2), dtype=np.int64)),
             contact_up=a.get("contact_up", np.array([0.0, 1.0, 0.0])),
+            contact_spread=spread,
         )
     except (KeyError, ValueError, IndexError, RealtimeCoreError) as exc:
         raise RigFileError(f"{p}: inconsistent rig file: {exc}") from exc

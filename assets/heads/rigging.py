@@ -689,11 +689,27 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
+        walls = None
+        if cut_copies is not None and not _has_inner_mouth(mesh):
+            # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
+            # measures only the faces that stay (it still smooths across the walls) and the lip-contact
+            # spread is computed once they are gone, so both judge the mesh the rig animates. Measuring the
+            # walls too (Lee Perry-Smith, automatic landmarks), the repair ended its 200 rounds with a wall's
+            # fold left and an edge by the right corner stretched 5.26x (4.63 so); spread over them, the push reached a
+            # lip vertex's neighbours only through wall faces that were then gone and moved that vertex alone
+            # (a flipped triangle at closed lips with the corners up).
+            cut_mesh = HeadMesh(vertices=v, triangles=t, name=mesh.name)
+            walls = inner_lip_vertices(cut_mesh, frame, snap)
+        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls)
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
             rig = repair_rig(
-                rig, EXTREME_POSES, keep_apart=cut_copies, tiny=SLIVER_TIE if cut_copies is not None else 0.0
+                rig,
+                EXTREME_POSES,
+                keep_apart=cut_copies,
+                tiny=SLIVER_TIE if cut_copies is not None else 0.0,
+                measured=measured,
             )
             # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
@@ -708,8 +724,12 @@ def rig_head(
                     EXTREME_POSES,
                     keep_apart=cut_copies,
                     tiny=SLIVER_TIE if cut_copies is not None else 0.0,
+                    measured=measured,
                 )
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
+        if walls is not None:
+            rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
+            t = cut_mesh.triangles
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
@@ -748,8 +768,6 @@ def rig_head(
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
         # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
-        if cut_copies is not None:  # a cut crease's inner walls go (see inner_lip_vertices)
-            rig, out_mesh = without_inner_lips(rig, out_mesh, inner_lip_vertices(out_mesh, frame, snap))
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
         )
@@ -876,19 +894,17 @@ FIN_ROUNDS = 10
 """At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
 
 
-def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, HeadMesh]:
-    """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
-    :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
-    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
-    t = np.asarray(mesh.triangles, dtype=np.int64)
+def inner_lip_faces(triangles: np.ndarray, n_vertices: int, inner: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces :func:`without_inner_lips` removes from ``triangles`` (m, 3) of a mesh with
+    ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves."""
+    t = np.asarray(triangles, dtype=np.int64)
     n_in = np.isin(t, inner).sum(axis=1)
     gone = n_in == 3
     # Then the fins left hanging into the gap: a face with two inner vertices joined to the rest by one
     # edge alone (pink dashes floating in the opening at /a/); a face with two inner vertices along the
     # lip's edge (two or three neighbours) stays, or the edge turned into a sawtooth.
-    n = len(mesh.vertices)
     e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2)
-    key = e[..., 0] * n + e[..., 1]  # (m, 3)
+    key = e[..., 0] * n_vertices + e[..., 1]  # (m, 3)
     for _ in range(FIN_ROUNDS):
         k, c = np.unique(key[~gone], return_counts=True)
         at = np.searchsorted(k, key).clip(max=len(k) - 1)
@@ -897,6 +913,15 @@ def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, He
         if not fin.any():
             break
         gone |= fin
+    return gone
+
+
+def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, HeadMesh]:
+    """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
+    :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
+    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    gone = inner_lip_faces(t, len(mesh.vertices), inner)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
     keep = t[~gone]

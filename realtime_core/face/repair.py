@@ -48,6 +48,7 @@ def repair_folds(
     fixed: np.ndarray | None = None,
     grow_every: int = 15,
     tiny: float = 0.0,
+    measured: np.ndarray | None = None,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -58,6 +59,9 @@ def repair_folds(
     rows are averaged before and after every round): a scan's clusters of sliver triangles
     (0.001 IOD edges behind Lee Perry-Smith's mouth corners) flip at any motion difference the
     field leaves between their vertices, however smooth. 0 (the default) ties nothing.
+    measured: (m,) bool the triangles whose flips and edges count (None: all); the smoothing still runs
+    over every triangle's edges (faces that will be removed, e.g. hidden inner lip walls, join the surface
+    but their folds are never seen).
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -73,6 +77,9 @@ def repair_folds(
     e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
     l0 = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1)
     ok_edge = l0 > 1e-9 * max(float(l0.max()), 1e-300)
+    seen = np.ones(len(t), dtype=bool) if measured is None else np.asarray(measured, dtype=bool)
+    ok_tri = ok_tri & seen
+    ok_edge_measured = ok_edge & np.tile(seen, 3)
     frozen = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
     tie = _tie_tiny_edges(n, e, l0, tiny * float(np.median(l0[ok_edge])) if ok_edge.any() else 0.0, frozen)
     g = (tie @ g).tocsr()
@@ -87,7 +94,7 @@ def repair_folds(
         # exactly): measuring those alone gives the same answer at a fraction of the cost.
         moves = np.diff(g.indptr) > 0
         tri = np.flatnonzero(moves[t].any(axis=1) & ok_tri)
-        edge = np.flatnonzero(moves[e].any(axis=1) & ok_edge)
+        edge = np.flatnonzero(moves[e].any(axis=1) & ok_edge_measured)
         t_m, e_m = t[tri], e[edge]
         for m in motions:
             v = v0 + (g @ m)

@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 21
+RIG_ALGORITHM = 22
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -399,7 +399,14 @@ def _seam_rows(
     length = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-12 * frame.iod
     g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(h), len(h)))
     dist = dijkstra(g, indices=pin, min_only=True, limit=2 * SEAM_CLEAR * frame.iod)
-    near = dist[np.asarray(control, dtype=np.int64)] <= SEAM_CLEAR * frame.iod
+    ctrl = np.asarray(control, dtype=np.int64)
+    # Near the cut's ends (within the taper, frontal plane) the tapered seam rows stand for the control
+    # points too: a control point there pins the skin beside the corner to its lip's full motion while
+    # the corner's own row moves between the lips', and the tiny triangles between fold at the widest
+    # opening (Lee Perry-Smith through glTF-Transform's meshopt, automatic landmarks, whose corner
+    # points sit 0.02-0.04 IOD inside the hand-picked ones; with the fold repair run on the mesh without
+    # the crease walls: 1 flip / stretch 4.14 -> 0 / 3.98, docs/animation.md).
+    near = (dist[ctrl] <= SEAM_CLEAR * frame.iod) | (end_d[ctrl] < taper)
     return pin, pin_rows, near
 
 
@@ -587,12 +594,14 @@ def repair_rig(
     keep_apart: np.ndarray | None = None,
     max_stretch: float = 3.0,
     tiny: float = 0.0,
+    measured: np.ndarray | None = None,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
     tongue, eyes) keep their rigid rows. ``keep_apart``: the copies of a cut lip seam (as in
     :func:`build_rig`), so the two lips stay separate surfaces. ``tiny``: sliver clusters move as one
-    (see :func:`realtime_core.face.repair.repair_folds`). Records the repair in meta."""
+    (see :func:`realtime_core.face.repair.repair_folds`). ``measured``: (m,) bool the triangles whose folds
+    and edges count (None: all; hidden faces about to be removed do not). Records the repair in meta."""
     from scipy.sparse.csgraph import connected_components
 
     from realtime_core.face.projection import vertex_adjacency
@@ -614,7 +623,9 @@ def repair_rig(
     has_ctrl[comp[canon[rig.control]]] = True
     basis = np.asarray(rig.basis, dtype=np.float64)
     motions = np.stack([(basis @ np.asarray(p, dtype=np.float64)).reshape(n_s, 3) for p in poses])
-    res = repair_folds(welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp], tiny=tiny)
+    res = repair_folds(
+        welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp], tiny=tiny, measured=measured
+    )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
     s = sp.kron(g_new[moving], sp.identity(3, format="csr"), format="csr")

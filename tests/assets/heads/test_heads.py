@@ -90,6 +90,13 @@ def test_rig_file_round_trip_and_bad_file(tmp_path, builtin_rig):
     rig2, mesh2 = load_rig(path)
     p = np.array([0.02, -0.03, 0.1, 0.01])
     np.testing.assert_allclose(rig2.displacements(p), rig.displacements(p), rtol=1e-6, atol=1e-7)
+    # Pressed lips (the rest gap is 0.007 IOD): the lip-contact push acts, spread over the lips. A file
+    # that dropped the spread pushed the two contact vertices of each column alone (a fold).
+    pressed = np.array([0.0, 0.0, -0.05, 0.0])
+    assert rig.contact_spread is not None and np.abs(rig.contact_push(pressed)).max() > 0
+    assert rig2.contact_spread is not None
+    np.testing.assert_allclose(rig2.contact_push(pressed), rig.contact_push(pressed), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(rig2.displacements(pressed), rig.displacements(pressed), rtol=1e-6, atol=1e-7)
     np.testing.assert_array_equal(mesh2.triangles, mesh.triangles)
     junk = tmp_path / "junk.npz"
     np.savez(junk, a=np.zeros(3))
@@ -224,6 +231,14 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
     assert gap.max() > 0.02 * rig.meta["iod"]
     v0 = rig.deformed(np.zeros(4))
     np.testing.assert_array_equal(v0[copies], v0[origin[copies]])
+    # The lip-contact push spreads over the mesh the rig animates (the crease's hidden walls go first):
+    # spread over the walls that were removed afterwards, a column's push reached its vertex's remaining
+    # neighbours only through faces that were gone and moved that vertex alone (a flipped triangle).
+    from realtime_core.face.rig import contact_spread
+
+    assert rig.meta["inner_lip_removed"] > 0 and rig.contact_spread is not None
+    again = contact_spread(rig, keep_apart=copies, iod=rig.meta["iod"])
+    np.testing.assert_allclose(rig.contact_spread.toarray(), again.toarray(), atol=1e-6)
     # The lips are two surfaces: from the inner-lip midpoint to its copy the mesh path goes round a
     # mouth corner (more than the mouth's width). Before the crease behind the contact line was
     # split too, its back wall joined the lips (0.56 of the width), a shard across the opening.

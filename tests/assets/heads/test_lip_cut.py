@@ -259,3 +259,28 @@ def test_the_cut_creases_inner_walls_are_removed_and_the_lips_fronts_kept():
     front = (np.abs(v2[t2][:, :, 2]) < 1e-9).all(axis=1)
     assert front.sum() == (np.abs(v2[kept][:, :, 2]) < 1e-9).all(axis=1).sum()
     assert rig.meta["inner_lip_removed"] == len(t2) - len(kept) > 0
+
+
+def test_control_points_near_the_cuts_ends_are_left_to_the_seam_rows():
+    """Within SEAM_TAPER of a cut's end (a mouth corner) the tapered seam rows stand for the control points,
+    as within SEAM_CLEAR of the seam: a control point beside the corner pinned the skin there to its lip's
+    full motion while the corner's row moves between both lips' (Lee Perry-Smith through meshopt: a flip and
+    stretch 4.14 at the widest opening). Control points further off stay."""
+    from realtime_core.face.model import FaceFrame, FaceModel
+    from realtime_core.face.rig import SEAM_CLEAR, SEAM_TAPER, _seam_rows
+
+    v, t, left, right, mid = _creased_lips()
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    copies = np.arange(len(v), len(v2))
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=3.0)
+    # (1, 0.25): 0.25 from the corner (1, 0), under SEAM_TAPER (0.3 here) but more than SEAM_CLEAR (0.15)
+    # from the seam along the mesh; (0, 0.25) and (0, -0.25): the lips' middles, 0.25 off the seam.
+    spots = ([1.0, 0.25, 0.0], [0.0, 0.25, 0.0], [0.0, -0.25, 0.0])
+    control = np.array([int(np.argmin(np.linalg.norm(v2 - p, axis=1))) for p in spots])
+    assert np.linalg.norm(v2[control[0]] - v2[right]) < SEAM_TAPER * frame.iod
+    simple = FaceModel(vertices=v2[control], triangles=np.array([[0, 1, 2]]), name="three points")
+    seam = np.column_stack([origin[copies], copies])
+    lower = np.array([False, False, True])
+    _pin, _rows, near = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control)
+    assert near.tolist() == [True, False, False]
+    assert SEAM_CLEAR < SEAM_TAPER

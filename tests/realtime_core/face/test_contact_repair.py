@@ -107,6 +107,28 @@ def test_fold_repair_unfolds_a_pinned_spike():
     assert w.argmax() == centre and w.max() > 0.1
 
 
+def test_fold_repair_ignores_folds_of_faces_it_is_told_are_not_seen():
+    """Faces about to be removed (a hollow head's hidden inner lip walls) must not steer the repair: a fold
+    made only of unmeasured faces leaves the field as it is (the repair once spent its 200 rounds on such
+    folds and left a stretched edge on the faces that stay); measured, the same fold is smoothed away."""
+    v, t = _grid()
+    n = len(v)
+    centre = n // 2
+    g = sp.csr_matrix(([1.0], ([centre], [0])), shape=(n, 1))
+    motion = np.array([[[0.3, 0.0, 0.0]]])  # folds the faces round the centre (and stretches their edges)
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    # Every face within two rings of the centre: their edges are the only ones the motion changes.
+    ring = np.zeros(n, dtype=bool)
+    ring[centre] = True
+    for _ in range(2):
+        ring[np.unique(t[ring[t].any(axis=1)])] = True
+    hidden = ring[t].any(axis=1)
+    res = repair_folds(v, t, g, motion, fixed=edge, measured=~hidden)
+    assert res.rounds == 0 and (res.weights != g).nnz == 0
+    res = repair_folds(v, t, g, motion, fixed=edge)
+    assert res.rounds > 0 and res.flips_left == 0
+
+
 def test_fold_repair_moves_sliver_clusters_as_one():
     """A vertex 0.2% of an edge away from another (a scan's sliver fan) flips its tiny triangles at
     the smallest motion difference; the repair ties the two together (equal rows), so they move as
