@@ -597,14 +597,18 @@ def rig_head(
     head: BuiltinHead | None = None,
     simple: SimpleFace | None = None,
     head_calibration: bool = True,
+    walls_in_repair: bool = True,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
     ``simple``: the simple face model to carry (default: the one derived from the built-in head;
     :func:`candide_face` for Candide-3). Returns the rig and the mesh it animates (which differs
     from ``mesh`` when the lip seam was cut). ``head_calibration``: correct the parameters by the
-    head's own measured response (:func:`realtime_core.face.rig.recalibrate`). Raises MeshError /
-    LandmarkError naming the file.
+    head's own measured response (:func:`realtime_core.face.rig.recalibrate`). ``walls_in_repair``: on a
+    hollow head whose closed lips are cut, the fold repair smooths across the crease's hidden inner walls
+    before they are removed (True) or runs on the final mesh without them (False); neither passes every
+    head (:func:`assets.heads.head.rig_checked` tries the second when the first fails its checks). Raises
+    MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
     if simple is None or mesh.name == "builtin":
@@ -701,6 +705,13 @@ def rig_head(
             cut_mesh = HeadMesh(vertices=v, triangles=t, name=mesh.name)
             walls = inner_lip_vertices(cut_mesh, frame, snap)
         measured = None if walls is None else ~inner_lip_faces(t, len(v), walls)
+        if walls is not None and not walls_in_repair:
+            # The repair on the final mesh: it then smooths over the faces that stay only (docs/animation.md,
+            # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
+            # Perry-Smith, smoothing across the walls its hand-landmark rig).
+            rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
+            t, walls, measured = cut_mesh.triangles, None, None
+            rig.meta["fold_repair_mesh"] = "final"
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 

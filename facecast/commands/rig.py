@@ -70,12 +70,12 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.errors import MeshError, RigCheckError, RigFileError
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.head import Head, builtin_morph_head, head_checks, head_landmarks
+    from assets.heads.head import builtin_morph_head, head_landmarks, rig_checked
     from assets.heads.landmarks import credit_for, read_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
-    from assets.heads.rigging import candide_face, resolve_landmarks, rig_head
+    from assets.heads.rigging import candide_face, resolve_landmarks
     from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXTREME_POSES
 
@@ -122,8 +122,7 @@ def run(args: argparse.Namespace) -> int:
         from assets.heads.wfm import read_wfm
 
         simple = candide_face(read_wfm(args.simple))
-    rig, rigged = rig_head(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
-    report = head_checks(Head(rig, rigged))
+    rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")
     if not report.passed and not args.keep_failing:
         raise RigCheckError(
