@@ -33,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "folders (made by `facecast corpus` or `facecast extract`). Training is resumable: a checkpoint "
         "beside the output (OUTPUT.checkpoint.npz) is updated after every EM iteration and picked up when the same "
         "command runs again; a finished OUTPUT renamed to it continues with more --iters, exactly as one run of "
-        "that many iterations. With --select, trains a grid of models on 80%% of the utterances and reports "
+        "that many iterations. With --select, trains a grid of models on 80% of the utterances and reports "
         "held-out accuracy.",
     )
     p.add_argument("corpus", nargs="*", type=Path, help="corpus folders (each with manifest.json)")

@@ -15,6 +15,8 @@ def test_help_states_each_default_once_and_no_empty_ones(command, capsys):
         main([command, "--help"])
     assert exc.value.code == 0
     text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines anywhere: compare unwrapped
+    # a description is not %-formatted by argparse (only option helps are): "%%" there prints as is
+    assert "%%" not in text
     assert "(default: None)" not in text and "(default: False)" not in text and "(default: [])" not in text
     # one option's help (up to the next option) never states its default twice
     for option in re.split(r"\s(?=-{1,2}[a-z][\w-]* )", text):
