@@ -203,15 +203,15 @@ def main() -> int:
     rows = [
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
-            "lip gap at closure (IOD) | teeth ahead (IOD) | checks |"
+            "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | checks |"
         ),
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            rows.append(f"| {name} | cannot rig | - | - | - | - | - | {exc} |")
+            rows.append(f"| {name} | cannot rig | - | - | - | - | - | - | {exc} |")
             continue
         try:
             rep = head_checks(head, landmark_finder=find_landmarks)
@@ -219,10 +219,11 @@ def main() -> int:
                 f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
                 f"{rep.closure_gap_iod:.4f} | "
                 f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
-                f"{'pass' if rep.passed else 'FAIL'}"
+                f"{'n/a' if rep.lip_edge_notch_iod is None else f'{rep.lip_edge_notch_iod:.4f}'} | "
+                f"{'pass' if rep.passed else 'FAIL'}{' (notch warning)' if rep.warnings else ''}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
-            figs = f"- | - | - | - | - | not checked ({exc})"
+            figs = f"- | - | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
         tiles = []
         with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:

@@ -356,4 +356,5 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         limits=limits or RigCheckLimits(),
         reference=reference,
         poses=EXTREME_POSES if poses is None else poses,
+        cavity_vertices=int(rig.meta.get("mouth_cavity", 0) or 0),
     )

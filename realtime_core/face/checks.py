@@ -14,9 +14,14 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
 - lip distance at closure: the inner-lip gap (IOD) at the closure pose;
 - teeth ahead of the lips: how far (IOD, along the face's forward axis) the most forward teeth
   vertex lies in front of the front-most outer lip midpoint, when the head's teeth are known
-  (a tooth that pokes through a lip away from the midline in front of no midpoint is not caught).
+  (a tooth that pokes through a lip away from the midline in front of no midpoint is not caught);
+- lip edge notch: how far (IOD) the lips' free edges leave their own course, seen from the front
+  (:func:`lip_edge_notch`): a jagged cut, a notch or a sliver hole along the lip line, which the
+  figures above do not see (they measure faces and vertex pairs, not the outline a render shows).
 
-Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way.
+Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
+notch is advisory (:attr:`RigCheckLimits.max_lip_edge_notch`): over its limit it is reported as a
+warning and does not fail the rig.
 """
 
 from __future__ import annotations
@@ -132,6 +137,11 @@ EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SI
 """The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 
+LIP_EDGE_NOTCH_LIMIT = 0.015
+"""IOD: the advisory limit of :func:`lip_edge_notch` (see docs/animation.md, "Lip edge notch", for the rows
+it was chosen from)."""
+
+
 @dataclass(frozen=True)
 class RigCheckLimits:
     """Pass limits: flipped triangles, edge stretch ratio, interpenetration and closure gap (IOD), teeth (IOD)."""
@@ -141,10 +151,14 @@ class RigCheckLimits:
     max_interpenetration: float = 0.005
     max_closure_gap: float = 0.01
     max_teeth_ahead: float = 0.0
+    max_lip_edge_notch: float = LIP_EDGE_NOTCH_LIMIT
+    """IOD, advisory: a larger :func:`lip_edge_notch` is a warning in the report, not a failure."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
             raise ConfigError("max_flipped must be >= 0 and max_stretch > 1")
+        if not self.max_lip_edge_notch > 0:
+            raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
 
 
 @dataclass(frozen=True)
@@ -159,18 +173,165 @@ class RigReport:
     teeth_ahead_iod: float | None
     passed: bool
     failures: tuple[str, ...]
+    lip_edge_notch_iod: float | None = None
+    warnings: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
+        notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
-            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD: "
+            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
+            + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
+
+
+NOTCH_WINDOW = 0.05
+"""IOD of edge length either side of a point: the chord :func:`lip_edge_notch` measures from. A smooth lip
+edge of radius R (>= 0.3 IOD away from the corners) leaves it by NOTCH_WINDOW**2 / (2 R) <= 0.004 IOD; a notch
+narrower than the window by its depth."""
+NOTCH_BAND = 0.06
+"""IOD: boundary edges within this of the corner-to-corner line (along up, at rest) are the lips' edges."""
+NOTCH_DEPTH = 0.3
+"""IOD: boundary edges further than this behind the mouth corners are no lip edge (a hollow head's back)."""
+NOTCH_SPAN = 0.8
+"""The middle fraction of the corner-to-corner width whose points are scored (the corners are sharp by shape)."""
+
+
+def boundary_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 2) sorted vertex pairs of the edges that belong to exactly one of ``triangles`` (m, 3), and (k,)
+    the third vertex of that triangle (which side of the edge the surface lies on)."""
+    t = np.asarray(triangles, dtype=np.int64)
+    e = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    third = np.concatenate([t[:, 2], t[:, 0], t[:, 1]])
+    u, first, c = np.unique(e, axis=0, return_index=True, return_counts=True)
+    return u[c == 1], third[first[c == 1]]
+
+
+def edge_chains(edges: np.ndarray) -> list[tuple[list[int], bool]]:
+    """Split undirected ``edges`` (k, 2) into chains: (vertex indices in order, closed). A chain ends at a
+    vertex with other than two of the edges (an open end, or where boundaries touch)."""
+    nb: dict[int, list[int]] = {}
+    for a, b in np.asarray(edges, dtype=np.int64).tolist():
+        nb.setdefault(a, []).append(b)
+        nb.setdefault(b, []).append(a)
+    used: set[tuple[int, int]] = set()
+    out: list[tuple[list[int], bool]] = []
+    # Chain ends first, so an open chain is walked from one end; what is left are closed loops.
+    for start in sorted(nb, key=lambda k: len(nb[k]) == 2):
+        for first in nb[start]:
+            if (min(start, first), max(start, first)) in used:
+                continue
+            chain, prev, cur, closed = [start], start, first, False
+            while True:
+                used.add((min(prev, cur), max(prev, cur)))
+                if cur == start:
+                    closed = True
+                    break
+                chain.append(cur)
+                if len(nb[cur]) != 2:
+                    break
+                nxt = nb[cur][1] if nb[cur][0] == prev else nb[cur][0]
+                if (min(cur, nxt), max(cur, nxt)) in used:
+                    break
+                prev, cur = cur, nxt
+            out.append((chain, closed))
+    return out
+
+
+def chord_offsets(points: np.ndarray, closed: bool, window: float) -> np.ndarray:
+    """(n,) for a polyline ``points`` (n, 2) (``closed``: its last point joins its first): each point's
+    signed distance from the chord between the points ``window`` along the line before and after it
+    (clipped at an open line's ends), positive to the left of the line's direction. A closed line no
+    longer than 2 ``window`` (a hole or an island smaller than the window) gives every point half its
+    largest extent, on the outside of the loop."""
+    p = np.asarray(points, dtype=np.float64)
+    n = len(p)
+    q = np.vstack([p, p[:1]]) if closed else p
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))]
+    total = float(s[-1])
+    if n < 3:
+        return np.zeros(n)
+    if closed and total <= 2 * window:
+        area = 0.5 * float(np.sum(q[:-1, 0] * q[1:, 1] - q[1:, 0] * q[:-1, 1]))  # > 0: counter-clockwise
+        return np.full(n, -np.sign(area) * 0.5 * float(np.ptp(p, axis=0).max()))
+    si = s[:n]
+    if closed:
+        sa, sb = (si - window) % total, (si + window) % total
+    else:
+        sa, sb = np.maximum(si - window, 0.0), np.minimum(si + window, total)
+    a = np.column_stack([np.interp(sa, s, q[:, 0]), np.interp(sa, s, q[:, 1])])
+    b = np.column_stack([np.interp(sb, s, q[:, 0]), np.interp(sb, s, q[:, 1])])
+    d = b - a
+    ln = np.linalg.norm(d, axis=1)
+    r = p - a
+    cross = d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0]
+    return np.where(ln > 1e-12 * max(window, 1e-300), cross / np.maximum(ln, 1e-300), 0.0)
+
+
+def lip_edge_notch(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    skip_vertices: int = 0,
+) -> float | None:
+    """The lips' free edges' largest departure from their own course, IOD, seen from the front, over
+    ``poses``: the boundary edges of the rig's triangles (those of the last ``skip_vertices`` vertices, a
+    mouth cavity, left out) whose ends lie between the mouth corners, within NOTCH_BAND IOD of the
+    corner-to-corner line at rest and less than NOTCH_DEPTH IOD behind the corners are chained,
+    projected on the face's frontal plane at each pose, and each point in the middle NOTCH_SPAN of the
+    mouth's width scored by :func:`chord_offsets` over NOTCH_WINDOW IOD. A smooth edge scores its
+    sagitta (<= 0.004 IOD away from the corners), a notch narrower than the window its depth, an edge
+    that doubles back on itself (a slit, an island of faces, a flap) up to NOTCH_WINDOW. None: the
+    mouth has no free edge (lips joined, or a closed mouth bag)."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    if skip_vertices:
+        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
+    fr = face_frame(v0, landmarks)
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
+    side = (cl - cr) / max(width, 1e-300)
+    x = (v0 - mid) @ side
+    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
+    line_h = (cr + along[:, None] * (cl - cr) - mid) @ fr.axes[1]
+    band = (np.abs(x) < 0.5 * width) & (np.abs((v0 - mid) @ fr.axes[1] - line_h) < NOTCH_BAND * fr.iod)
+    band &= (v0 - mid) @ fr.axes[2] > -NOTCH_DEPTH * fr.iod
+    e, third = boundary_edges(t)
+    inside = band[e].all(axis=1)
+    e, third = e[inside], third[inside]
+    if not len(e):
+        return None
+    plane = fr.axes[:2].T / fr.iod  # (3, 2): head units -> frontal IOD
+    p0 = v0 @ plane
+    opposite = {(int(a), int(b)): int(c) for (a, b), c in zip(e, third, strict=True)}
+    chains: list[tuple[np.ndarray, bool]] = []
+    sides: list[float] = []
+    for walk, closed in edge_chains(e):
+        c = np.asarray(walk, dtype=np.int64)
+        ends = np.column_stack([c, np.roll(c, -1)])[: len(c) if closed else len(c) - 1]
+        # Which side of the walk the surface lies on (the chain's faces' third vertices at rest, summed
+        # by their lever): the opening is on the other side.
+        d = p0[ends[:, 1]] - p0[ends[:, 0]]
+        w = p0[[opposite[(min(a, b), max(a, b))] for a, b in ends.tolist()]] - p0[ends[:, 0]]
+        sides.append(1.0 if float(np.sum(d[:, 0] * w[:, 1] - d[:, 1] * w[:, 0])) >= 0 else -1.0)
+        chains.append((c, closed))
+    scored = [np.abs(x[c]) < 0.5 * NOTCH_SPAN * width for c, _ in chains]
+    worst = 0.0
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        for (c, closed), side, keep in zip(chains, sides, scored, strict=True):
+            if keep.any():
+                # A point on the opening's side of its chord: the lip pokes into the opening there.
+                h = -side * chord_offsets(v[c] @ plane, closed, NOTCH_WINDOW)
+                worst = max(worst, float(h[keep].max()))
+    return worst
 
 
 def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -186,12 +347,14 @@ def check_rig(
     poses: tuple[tuple[float, ...], ...] = EXTREME_POSES,
     limits: RigCheckLimits = RigCheckLimits(),
     reference: np.ndarray | None = None,
+    cavity_vertices: int = 0,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
     teeth: head vertex indices of the teeth (None: not known, not checked); reference: (n, 3) the
     head as modelled, which flips and stretch are measured from (default the rig's neutral; differs
-    for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`)."""
+    for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
+    many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
     vr = v0 if reference is None else np.asarray(reference, dtype=np.float64)
@@ -237,6 +400,10 @@ def check_rig(
         fails.append(f"lips {closure_gap:.4f} IOD apart at closure")
     if ahead is not None and ahead > limits.max_teeth_ahead:
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
+    notch = lip_edge_notch(rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices)
+    warns = []
+    if notch is not None and notch > limits.max_lip_edge_notch:
+        warns.append(f"a lip edge leaves its course by {notch:.4f} IOD > {limits.max_lip_edge_notch} (jagged)")
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -246,4 +413,6 @@ def check_rig(
         teeth_ahead_iod=ahead,
         passed=not fails,
         failures=tuple(fails),
+        lip_edge_notch_iod=notch,
+        warnings=tuple(warns),
     )

@@ -101,3 +101,109 @@ def test_check_catches_a_fold() -> None:
     )
     rep = check_rig(rig, lm)
     assert rep.flipped_triangles > 0 and not rep.passed
+
+
+class _Lips:
+    """Two lip strips meeting on a cut from corner (x = -0.3) to corner (x = 0.3), IOD 1 (eye centres at
+    x = +-0.5, y = 1, not part of any triangle). ``zigzag``: the cut's interior vertices alternate
+    ``zigzag`` above and below the corner line (a cut through zig-zagging landmark points); else it is
+    straight. mouth_open p drops the lower strip by ``p * (1 - (x / 0.3)**2)``: a smooth opening."""
+
+    COLS = 25  # 0.025 IOD apart
+
+    def __init__(self, zigzag: float) -> None:
+        x = np.linspace(-0.3, 0.3, self.COLS)
+        cut = np.where(np.arange(self.COLS) % 2 == 1, zigzag, -zigzag)
+        cut[[0, -1]] = 0.0
+        self.x, self.cut = x, cut
+        rows = []
+        # Upper strip: the cut and two rows above it; lower strip: its own copy of the cut and two rows below.
+        for dy in (0.0, 0.1, 0.2):
+            rows.append(np.column_stack([x, cut + dy, np.zeros_like(x)]))
+        for dy in (0.0, -0.1, -0.2):
+            rows.append(np.column_stack([x, cut + dy, np.zeros_like(x)]))
+        eyes = np.array([[0.6, 1.0, 0.0], [0.4, 1.0, 0.0], [-0.4, 1.0, 0.0], [-0.6, 1.0, 0.0]])
+        self.neutral = np.vstack([*rows, eyes])
+        n = self.COLS
+        t = []
+        for strip in (0, 3):
+            for r in range(2):
+                for c in range(n - 1):
+                    a = (strip + r) * n + c
+                    b = a + n
+                    # Same winding for both strips as seen from +z.
+                    t += [[a, a + 1, b + 1], [a, b + 1, b]] if strip == 0 else [[a, b + 1, a + 1], [a, b, b + 1]]
+        self.triangles = np.array(t)
+        self.lower = np.arange(3 * n, 6 * n)
+        self.drop = 1.0 - (np.tile(x, 3) / 0.3) ** 2
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = self.neutral.copy()
+        v[self.lower, 1] -= float(p[2]) * self.drop
+        return v
+
+    def landmarks(self) -> MouthLandmarks:
+        n, mid = self.COLS, self.COLS // 2
+        e = 6 * n
+        return MouthLandmarks(
+            eye_outer_left=e,
+            eye_inner_left=e + 1,
+            eye_inner_right=e + 2,
+            eye_outer_right=e + 3,
+            corner_left=n - 1,
+            corner_right=0,
+            upper_lip=2 * n + mid,
+            lower_lip=5 * n + mid,
+            upper_inner=mid,
+            lower_inner=3 * n + mid,
+        )
+
+
+def test_lip_edge_notch_flags_a_zigzag_cut_and_passes_a_smooth_one() -> None:
+    from realtime_core.face.checks import LIP_EDGE_NOTCH_LIMIT, lip_edge_notch
+
+    smooth, jagged = _Lips(0.0), _Lips(0.02)
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0))
+    s = lip_edge_notch(smooth, smooth.landmarks(), poses=poses)
+    z = lip_edge_notch(jagged, jagged.landmarks(), poses=poses)
+    assert s is not None and z is not None
+    # The smooth opening is convex (a straight upper edge, a parabolic lower one): no point of either lip
+    # lies on the opening's side of its neighbours' chord.
+    assert s < 1e-6
+    # The zigzag: every other cut vertex 0.04 IOD (peak to peak) off its neighbours. Each tooth pointing
+    # into the opening stands off the chord through the teeth beside it by about that (the chord joins
+    # two points at the other extreme, 0.05 IOD along the edge away: most of the 0.04).
+    assert z >= 0.5 * 0.04
+    assert z > LIP_EDGE_NOTCH_LIMIT
+    # check_rig reports it as a warning; the rig still passes the other checks.
+    rep = check_rig(jagged, jagged.landmarks(), poses=poses)
+    assert rep.passed and rep.warnings and rep.lip_edge_notch_iod == pytest.approx(z)
+    assert "lip edge notch" in rep.summary() and "warning" in rep.summary()
+    assert check_rig(smooth, smooth.landmarks(), poses=poses).warnings == ()
+
+
+def test_lip_edge_notch_flags_an_island_in_the_opening() -> None:
+    from realtime_core.face.checks import LIP_EDGE_NOTCH_LIMIT, lip_edge_notch
+
+    # A fleck: one triangle (0.04 IOD across) floating in the open mouth, joined to neither lip (what the
+    # cut left on Lee Perry-Smith's lip line). It scores half its size: a lip edge would have to leave
+    # its course that far to hide it.
+    rig = _Lips(0.0)
+    n0 = len(rig.neutral)
+    fleck = np.array([[0.0, -0.05, 0.0], [0.04, -0.05, 0.0], [0.02, -0.03, 0.0]])
+    rig.neutral = np.vstack([rig.neutral, fleck])
+    rig.triangles = np.vstack([rig.triangles, [[n0, n0 + 1, n0 + 2]]])
+    got = lip_edge_notch(rig, rig.landmarks(), poses=((0.0, 0.0, 0.3, 0.0),))
+    assert got == pytest.approx(0.02)
+    assert got > LIP_EDGE_NOTCH_LIMIT
+
+
+def test_lip_edge_notch_is_none_for_lips_without_a_free_edge() -> None:
+    from realtime_core.face.checks import lip_edge_notch
+
+    rig = _Lips(0.0)
+    n = rig.COLS
+    t = rig.triangles.copy()
+    t[(t >= 3 * n) & (t < 4 * n)] -= 3 * n  # the lower strip hangs from the upper strip's cut row: one sheet
+    rig.triangles = t
+    assert lip_edge_notch(rig, rig.landmarks(), poses=((0.0, 0.0, 0.0, 0.0),)) is None
