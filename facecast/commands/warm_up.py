@@ -44,6 +44,13 @@ def run(args: argparse.Namespace) -> int:
     keymap = KeyframeMap.from_reference(rng.normal(size=(6, 30)), rng.normal(size=(4, 30)))
     keymap.weights(rng.normal(size=4))
     keymap.weights(rng.normal(size=(3, 4)))
+    # A server's vertex frames of a morph head (server.session.morph_delta_payloads): the one-pass
+    # product and the int16 quantisation, with the argument types (float32 rows, int16 out) it passes.
+    from realtime_core.face.compiled import morph_displacements, morph_displacements_int16
+
+    w, rows = rng.uniform(size=(2, 5)).astype(np.float32), rng.normal(size=(5, 30)).astype(np.float32)
+    d = morph_displacements(w, rows, np.empty((2, 30), dtype=np.float32))
+    morph_displacements_int16(w, rows, d, np.empty(d.shape, dtype="<i2"), np.empty(2))
     t2 = time.perf_counter()
     print(f"warm-up: numba kernels ready: live path {t1 - t0:.1f} s, keyframe solve {t2 - t1:.1f} s")
     return 0
