@@ -13,12 +13,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="compile the per-frame numba kernels now (scripts/setup.sh, so ./go, runs it once per change of them)",
         formatter_class=HelpFormatter,
         description=(
-            "The live path's front end and inverter and the morph-target keyframe solve are numba kernels\n"
-            "(realtime_core/*/compiled.py), compiled on their first call and cached beside their source files\n"
-            "(numba's cache=True; in the user's cache directory when the tree is read-only). On a fresh clone that\n"
-            "first call would be the first say, render, animate or serve: some 15 s of CPU, a minute or more of\n"
-            "wall time on a busy machine. This runs them once on the default model and a small keyframe problem,\n"
-            "with the argument types those commands use, and prints how long it took (about a second when cached)."
+            "The live path's front end and inverter, the morph-target keyframe solve and a server's morph-head\n"
+            "vertex deltas are numba kernels (realtime_core/*/compiled.py), compiled on their first call and cached\n"
+            "beside their source files (numba's cache=True; in the user's cache directory when the tree is\n"
+            "read-only). On a fresh clone that first call would be the first say, render, animate or serve: some\n"
+            "15 s of CPU, a minute or more of wall time on a busy machine. This runs them once on the default model\n"
+            "and a small keyframe problem, with the argument types those commands use, and prints how long it took\n"
+            "(about a second when cached)."
         ),
     )
     p.set_defaults(run=run)
