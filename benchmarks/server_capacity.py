@@ -281,7 +281,7 @@ def _step(
     with urlopen(url + "/metrics", timeout=10) as r:  # the server's own view of the step
         metrics = json.loads(r.read())
     timings = metrics["timings_ms"]
-    keys = ("loop_lag", "push_per_frame", "fanout", "encode_deltas")
+    keys = ("loop_lag", "push_per_frame", "push_per_frame_cpu", "fanout", "encode_deltas")
     return {
         # the whole server (its compute workers included), and its event loop's process alone
         "server_cpu_cores": round((tree1 - tree0) / (t1 - t0), 3),
@@ -353,6 +353,13 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
         "loop_cores_per_vertex_viewer": None if loop_vertex is None else round(loop_vertex, 5),
         "loop_goal_load_cores_projected": round(loop_goal, 3),
         "steps_wall_s": [base["wall_s"], with_params["wall_s"], None if with_vertex is None else with_vertex["wall_s"]],
+        # The live chain's own CPU per frame (median) in the three loads: whether adding viewers makes
+        # the sessions' work itself dearer (a busier machine, colder caches), which the differences
+        # above charge to the viewers.
+        "push_cpu_p50_ms": [
+            x["server_timings_ms"].get("push_per_frame_cpu", {}).get("p50_ms") if x is not None else None
+            for x in (base, with_params, with_vertex)
+        ],
         "note": "CPU seconds of the server (all its processes; loop_: the event loop's process) per second of "
         f"the sessions' audio ({cfg.seconds:g} s per step), measured on this (shared) machine",
     }

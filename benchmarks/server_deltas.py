@@ -5,9 +5,12 @@ A delta frame (``server.session.Frame.payload(KIND_DELTAS, ...)``: the head's ke
 connection's callback, between other sessions' work, or for all the frames of a loop turn together
 (:class:`server.live.TurnDeltas`). Here the other work is stood in for by a sweep over ``--evict-mb``
 of memory between groups (0: everything stays in cache; 32: the L3 of this machine), and B frames
-are computed back to back per group: CPU time per frame for B = 1..8. Also the one-pass product
-``(B, P) @ (P, n)`` against B row products (numpy, BLAS pinned to one thread as in the server): its
-time per frame and whether it gives the same bytes as the rows one by one.
+are computed back to back per group: CPU time per frame for B = 1..8, one ``Frame.payload`` at a time
+and (a morph head) all B in one ``server.session.morph_delta_payloads`` call, as ``TurnDeltas`` does,
+against the numpy reference frame by frame (the server's path before the compiled one), alternating.
+Also numpy's one-pass product ``(B, P) @ (P, n)`` and the compiled one (``MorphRig.displacements_rows``)
+against B row products (BLAS pinned to one thread as in the server): time per frame and whether each
+gives the same bytes as the rows one by one.
 
 ``python -m benchmarks.server_deltas [--evict-mb 0,2,32] [--repeats 200]``
 """
@@ -31,7 +34,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     from realtime_core.face.keyframes import MorphRig
     from server.app import load_head
-    from server.session import Frame
+    from server.session import Frame, morph_delta_payloads
     from wire import protocol as P
 
     head = load_head()
@@ -59,24 +62,59 @@ def main(argv: list[str] | None = None) -> dict:
                         f.payload(P.KIND_DELTAS, P.ENC_INT16)
                     cpu.append((time.thread_time_ns() - t0) / b / 1e3)
                 row[f"B={b}"] = round(float(np.median(cpu)), 1)
+                if isinstance(rig, MorphRig):
+                    # All B in one call, as TurnDeltas does, interleaved (alternating order) with the
+                    # numpy reference frame by frame, as the server computed them before (rig.displacements,
+                    # wire.protocol.encode_payload): the same memory sweeps before each.
+                    together, reference = [], []
+                    for r in range(args.repeats):
+                        ps = [params[(r * b + i) % len(params)] for i in range(b)]
+                        for which in (0, 1) if r % 2 else (1, 0):
+                            if mb:
+                                junk[::64] += 1
+                            if which == 0:
+                                t0 = time.thread_time_ns()
+                                for p in ps:
+                                    P.encode_payload(rig.displacements(p), P.ENC_INT16)
+                                reference.append((time.thread_time_ns() - t0) / b / 1e3)
+                            else:
+                                frames = [Frame(i, 0.0, p, p, 0.0, 0.0, rig) for i, p in enumerate(ps)]
+                                t0 = time.thread_time_ns()
+                                morph_delta_payloads(frames, P.ENC_INT16)
+                                together.append((time.thread_time_ns() - t0) / b / 1e3)
+                    row[f"B={b} together"] = round(float(np.median(together)), 1)
+                    row[f"B={b} numpy frame by frame"] = round(float(np.median(reference)), 1)
             report["per_frame_us"][f"evict {mb} MB"] = row
         if isinstance(rig, MorphRig):  # a morph head: the one-pass product against the row products
             rows = rig._rows
             w = rig.weights(params[:8])
             gemm: dict = {}
             for b in sizes:
-                same = bool(np.array_equal(w[:b] @ rows, np.stack([np.dot(x, rows) for x in w[:b]])))
+                wb = np.ascontiguousarray(w[:b])
+                by_row = np.stack([np.dot(x, rows) for x in wb])
+                same = bool(np.array_equal(wb @ rows, by_row))
+                compiled_same = bool(np.array_equal(rig.displacements_rows(wb), by_row))
                 t = []
                 for _ in range(args.repeats):
                     t0 = time.thread_time_ns()
-                    w[:b] @ rows
+                    wb @ rows
                     t1 = time.thread_time_ns()
-                    for x in w[:b]:
+                    for x in wb:
                         np.dot(x, rows)
-                    t.append(((t1 - t0) / b / 1e3, (time.thread_time_ns() - t1) / b / 1e3))
+                    t2 = time.thread_time_ns()
+                    rig.displacements_rows(wb)
+                    t.append(((t1 - t0) / b / 1e3, (t2 - t1) / b / 1e3, (time.thread_time_ns() - t2) / b / 1e3))
                 med = np.median(np.array(t), axis=0)
-                one_pass, by_rows = (round(float(x), 1) for x in med)
-                gemm[f"B={b}"] = {"one_pass_us": one_pass, "rows_us": by_rows, "same_bytes": same}
+                one_pass, by_rows, compiled = (round(float(x), 1) for x in med)
+                gemm[f"B={b}"] = {
+                    "one_pass_us": one_pass,
+                    "rows_us": by_rows,
+                    "same_bytes": same,
+                    # MorphRig.displacements_rows: the server's fixed-order kernel (equal to BLAS only to
+                    # rounding in general; whether its bytes happen to equal this BLAS's rows)
+                    "compiled_us": compiled,
+                    "compiled_same_bytes_as_rows": compiled_same,
+                }
             report["product_per_frame_warm"] = gemm
     print(json.dumps(report, indent=1))
     return report

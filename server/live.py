@@ -29,10 +29,12 @@ from websockets.asyncio.server import ServerConnection, broadcast
 from websockets.frames import Frame, Opcode
 from websockets.protocol import OPEN
 
+from realtime_core.face.keyframes import MorphRig
 from server.describe import summary
 from server.errors import AudioFormatError, IngestOverrun
 from server.guard import IngestPacer
-from server.session import Output, Session
+from server.session import Frame as VideoFrame
+from server.session import Output, Session, morph_delta_payloads
 from server.workers import RemoteSession
 from wire import protocol as P
 
@@ -511,13 +513,22 @@ class TurnDeltas:
         if not pending:
             return
         n = 0
+        # Morph-target heads' frames, by (rig, encoding): each group in one compiled pass over the
+        # targets (server.session.morph_delta_payloads: the same bytes as frame by frame).
+        morph: dict[tuple[int, int], list[VideoFrame]] = {}
         for live, out in pending:
             kinds = {(v.kind, v.encoding) for v in live.viewers if v.kind == P.KIND_DELTAS}
             for frame in out.frames:
-                with contextlib.suppress(Exception):  # a failing payload raises again in the fan-out, logged
-                    for kind, enc in kinds:
-                        frame.payload(kind, enc)
+                for kind, enc in kinds:
+                    if isinstance(frame.rig, MorphRig):
+                        morph.setdefault((id(frame.rig), enc), []).append(frame)
+                    else:
+                        with contextlib.suppress(Exception):  # a failing payload raises again in the fan-out, logged
+                            frame.payload(kind, enc)
                 n += 1 if kinds else 0
+        for (_, enc), frames in morph.items():
+            with contextlib.suppress(Exception):  # as above: the fan-out's own call raises it again, logged
+                morph_delta_payloads(frames, enc)
         if n:
             self.batches += 1
             self.frames += n

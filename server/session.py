@@ -148,6 +148,9 @@ class Frame:
         elif kind == P.KIND_DELTAS:
             if self.rig is None:
                 raise ServerConfigError("vertex deltas need a head rig")
+            if isinstance(self.rig, MorphRig):  # the batch path, so alone or batched the same bytes
+                morph_delta_payloads([self], encoding)
+                return self._payloads[key]
             values = self.rig.displacements(self.params)  # (n_moving, 3) float32, head units
             stage = "encode_deltas"
         elif kind == P.KIND_ARKIT52:
@@ -176,6 +179,50 @@ class Frame:
         if self.times is not None:
             self.times.add(stage, dt)
         return out
+
+
+def morph_delta_payloads(frames: list[Frame], encoding: int) -> None:
+    """The vertex-delta payloads (``KIND_DELTAS`` in ``encoding``) of frames sharing one morph-target rig,
+    computed together and cached in each frame (``Frame.payload`` then returns them).
+
+    Why together: a server's loop turn has several sessions' frames to encode (:class:`server.live.TurnDeltas`),
+    and frame by frame each re-reads the rig's 632 KB of targets (the built-in head) and runs six numpy
+    passes of the int16 encoding; here one compiled pass over the targets serves every frame
+    (:meth:`MorphRig.displacements_rows`; with int16, the product and one compiled pass per frame for the
+    encoding in one call, :func:`realtime_core.face.compiled.morph_displacements_int16`, the encoding
+    byte-equal to ``wire.protocol.encode_payload``).
+    Each frame's weights come from its own ``rig.weights`` call and each output row is computed in a
+    fixed order, so a frame's bytes do not depend on the batch it was computed in
+    (tests/server/test_session.py). Frames whose payload is cached already are skipped; the time is
+    shared equally among the frames computed (stage ``encode_deltas``)."""
+    key = (P.KIND_DELTAS, encoding)
+    todo = [f for f in frames if key not in f._payloads]
+    if not todo:
+        return
+    rig = todo[0].rig
+    assert isinstance(rig, MorphRig) and all(f.rig is rig for f in todo)
+    t0 = time.perf_counter()
+    w = np.empty((len(todo), len(rig.names)), dtype=np.float32)
+    for i, f in enumerate(todo):
+        w[i] = rig.weights(f.params)  # each frame's own call: the same weights alone or batched
+    if encoding == P.ENC_INT16:
+        from realtime_core.face.compiled import morph_displacements_int16
+
+        values, scales = np.empty((len(todo), 3 * len(rig.moving)), dtype=np.float32), np.empty(len(todo))
+        q = morph_displacements_int16(w, rig.flat_targets, values, np.empty(values.shape, dtype="<i2"), scales)
+        out = [(q[i].tobytes(), values.shape[1], float(scales[i])) for i in range(len(todo))]
+    else:
+        values = rig.displacements_rows(w)  # (B, n_moving*3) float32
+        out = []
+        for v in values:
+            data, scale = P.encode_payload(v, encoding)
+            out.append((data, values.shape[1], scale))
+    dt = (time.perf_counter() - t0) / len(todo)
+    for f, payload in zip(todo, out):
+        f._payloads[key] = payload
+        f.work_s += dt
+        if f.times is not None:
+            f.times.add("encode_deltas", dt)
 
 
 @dataclass(eq=False)

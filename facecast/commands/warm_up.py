@@ -13,12 +13,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="compile the per-frame numba kernels now (scripts/setup.sh, so ./go, runs it once per change of them)",
         formatter_class=HelpFormatter,
         description=(
-            "The live path's front end and inverter and the morph-target keyframe solve are numba kernels\n"
-            "(realtime_core/*/compiled.py), compiled on their first call and cached beside their source files\n"
-            "(numba's cache=True; in the user's cache directory when the tree is read-only). On a fresh clone that\n"
-            "first call would be the first say, render, animate or serve: some 15 s of CPU, a minute or more of\n"
-            "wall time on a busy machine. This runs them once on the default model and a small keyframe problem,\n"
-            "with the argument types those commands use, and prints how long it took (about a second when cached)."
+            "The live path's front end and inverter, the morph-target keyframe solve and a server's morph-head\n"
+            "vertex deltas are numba kernels (realtime_core/*/compiled.py), compiled on their first call and cached\n"
+            "beside their source files (numba's cache=True; in the user's cache directory when the tree is\n"
+            "read-only). On a fresh clone that first call would be the first say, render, animate or serve: some\n"
+            "15 s of CPU, a minute or more of wall time on a busy machine. This runs them once on the default model\n"
+            "and a small keyframe problem, with the argument types those commands use, and prints how long it took\n"
+            "(about a second when cached)."
         ),
     )
     p.set_defaults(run=run)
@@ -44,6 +45,13 @@ def run(args: argparse.Namespace) -> int:
     keymap = KeyframeMap.from_reference(rng.normal(size=(6, 30)), rng.normal(size=(4, 30)))
     keymap.weights(rng.normal(size=4))
     keymap.weights(rng.normal(size=(3, 4)))
+    # A server's vertex frames of a morph head (server.session.morph_delta_payloads): the one-pass
+    # product and the int16 quantisation, with the argument types (float32 rows, int16 out) it passes.
+    from realtime_core.face.compiled import morph_displacements, morph_displacements_int16
+
+    w, rows = rng.uniform(size=(2, 5)).astype(np.float32), rng.normal(size=(5, 30)).astype(np.float32)
+    d = morph_displacements(w, rows, np.empty((2, 30), dtype=np.float32))
+    morph_displacements_int16(w, rows, d, np.empty(d.shape, dtype="<i2"), np.empty(2))
     t2 = time.perf_counter()
     print(f"warm-up: numba kernels ready: live path {t1 - t0:.1f} s, keyframe solve {t2 - t1:.1f} s")
     return 0

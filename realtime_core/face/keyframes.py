@@ -350,6 +350,30 @@ class MorphRig:
         # matrix times w walks P-float rows and took ~2.3x longer per frame (a server's vertex viewer).
         return np.dot(w, self._rows).reshape(-1, 3)
 
+    @property
+    def flat_targets(self) -> np.ndarray:
+        """The targets as (P, n_moving*3) float32, C-contiguous (a view of ``targets``; do not write)."""
+        return self._rows
+
+    def displacements_rows(self, weights: np.ndarray, *, kernel: str = "numba") -> np.ndarray:
+        """Target weights (B, P) (each row a frame's :meth:`weights`) -> flat displacements
+        (B, n_moving*3) float32, head units, vertex-major as ``displacements(...).reshape(-1)``.
+
+        kernel "numba": one pass over the targets for all B frames
+        (:func:`realtime_core.face.compiled.morph_displacements`, a fixed summation order: a frame's
+        row is the same bits at any B); "numpy": the reference, each row numpy's product as
+        :meth:`displacements` computes it (equal to the compiled rows to float32 rounding)."""
+        w = np.ascontiguousarray(weights, dtype=np.float32)
+        if w.ndim != 2 or w.shape[1] != len(self.names):
+            raise ConfigError(f"weights must be (B, {len(self.names)}), got {w.shape}")
+        if kernel == "numpy":
+            return np.stack([np.dot(row, self._rows) for row in w]) if len(w) else np.empty((0, self._rows.shape[1]))
+        if kernel != "numba":
+            raise ConfigError(f"kernel must be 'numba' or 'numpy', got {kernel!r}")
+        from realtime_core.face.compiled import morph_displacements  # numba's import is paid only here
+
+        return morph_displacements(w, self._rows, np.empty((len(w), self._rows.shape[1]), dtype=np.float32))
+
     def deformed(self, params: np.ndarray) -> np.ndarray:
         """All head vertices (n, 3) float32 for params (4,)."""
         out = np.array(self.neutral, dtype=np.float32, copy=True)

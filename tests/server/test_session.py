@@ -11,7 +11,7 @@ import pytest
 from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES, blendshape_weights
 from realtime_core.pipeline import speech_to_params
 from server.errors import AudioFormatError, ControlError, ServerConfigError
-from server.session import Session, SessionConfig
+from server.session import Frame, Session, SessionConfig
 from tests.speech import speechlike
 from wire import protocol as P
 
@@ -142,3 +142,55 @@ def test_a_non_string_sample_format_is_a_config_error_not_a_crash(fmt):
     """Found by tests/server/test_fuzz.py: an unhashable format (a JSON object) raised TypeError (1011)."""
     with pytest.raises(ServerConfigError, match="format must be one of"):
         SessionConfig(sample_rate_hz=16000, sample_format=fmt)
+
+
+def test_compiled_int16_rows_equal_the_wire_encoding_byte_for_byte():
+    # server.session.morph_delta_payloads quantises with the compiled kernel; viewers must get the bytes
+    # wire.protocol.encode_payload (the reference) gives, ties and signs included.
+    from realtime_core.face.compiled import quantize_int16_rows
+
+    rng = np.random.default_rng(3)
+    v = (rng.standard_normal((5, 3001)) * 0.01).astype(np.float32)
+    v[1] = 0.0  # scale 1, all zeros
+    v[2, :8] = [0.5, 1.5, 2.5, -0.5, -1.5, -2.5, 32766.5, -32767.0]  # ties at a scale of 1 (peak 32767)
+    v[2, 8:] = np.clip(v[2, 8:] * 1e6, -32767, 32767)
+    v[3] = -np.abs(v[3])  # the peak is negative
+    v[4, 0] = -0.0
+    scales = np.empty(5)
+    q = quantize_int16_rows(v, np.empty(v.shape, dtype="<i2"), scales)
+    for row, qrow, scale in zip(v, q, scales):
+        data, want_scale = P.encode_payload(row, P.ENC_INT16)
+        assert qrow.tobytes() == data and float(scale) == want_scale
+
+
+def test_morph_delta_payloads_are_the_same_bytes_alone_or_batched_and_match_the_reference(model, builtin_head):
+    # A loop turn's vertex frames are encoded together (server.live.TurnDeltas); one frame alone
+    # (Frame.payload) must give the same bytes, and both the numpy rig's values to rounding.
+    from assets.heads.head import builtin_morph_head
+    from server.session import morph_delta_payloads
+
+    head = builtin_morph_head()  # driven by its own morph targets, as facecast serve's default head
+
+    x = speechlike(1.0, 16000)
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000), rig=head.rig)
+    params = [f.params for f in s.push(x).frames + s.flush().frames]
+    assert len(params) > 20
+
+    def frames():
+        return [Frame(k, k / 30, p, p, 0.0, 0.0, head.rig) for k, p in enumerate(params)]
+
+    alone = {}
+    for enc in (P.ENC_INT16, P.ENC_FLOAT16, P.ENC_FLOAT32):
+        alone[enc] = [f.payload(P.KIND_DELTAS, enc) for f in frames()]
+        for b in (2, 7, len(params)):
+            fs = frames()
+            for i in range(0, len(fs), b):
+                morph_delta_payloads(fs[i : i + b][::-1], enc)
+            assert [f.payload(P.KIND_DELTAS, enc) for f in fs] == alone[enc]
+    for p, (data, count, _), (data16, _, scale) in zip(params, alone[P.ENC_FLOAT32], alone[P.ENC_INT16]):
+        want = head.rig.displacements(p).reshape(-1)  # the numpy rig
+        peak = max(float(np.abs(want).max()), 1e-9)
+        assert count == want.size
+        np.testing.assert_allclose(np.frombuffer(data, dtype="<f4"), want, rtol=0, atol=1e-6 * peak)
+        got16 = np.frombuffer(data16, dtype="<i2") * scale
+        np.testing.assert_allclose(got16, want, rtol=0, atol=scale * 0.501 + 1e-6 * peak)

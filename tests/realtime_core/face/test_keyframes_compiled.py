@@ -93,3 +93,47 @@ def test_the_lip_contact_changes_no_frame_that_keeps_the_lips_apart_or_that_the_
     floor = min(0.0, float((rest + gap @ (x @ a)).min()))
     w = km.weights(x)
     assert floor < 0 and (rest + gap @ (w @ kf)).min() >= floor - 1e-5
+
+
+def test_the_compiled_morph_product_equals_numpy_and_gives_each_frame_the_same_bits_at_any_batch():
+    # A server computes a loop turn's vertex frames in one pass (MorphRig.displacements_rows): a frame's
+    # row must not depend on which other frames shared its batch. Shapes off the kernel's steps: 19
+    # targets (4 + 4 + 4 + 4 + 3), columns spanning three blocks and a partial one.
+    from realtime_core.face.compiled import MORPH_BLOCK, morph_displacements
+
+    rng = np.random.default_rng(12)
+    n = 3 * MORPH_BLOCK + 77
+    rows = (rng.normal(size=(19, n)) * 1e-3).astype(np.float32)
+    w = rng.uniform(0, 1, size=(11, 19)).astype(np.float32)
+    w[3] = 0.0  # silence: exactly zero
+    whole = morph_displacements(w, rows, np.empty((11, n), dtype=np.float32))
+    ref = np.stack([np.dot(x.astype(np.float64), rows.astype(np.float64)) for x in w])  # float64 product
+    peak = np.abs(ref).max()
+    np.testing.assert_allclose(whole, ref, rtol=0, atol=4e-7 * peak)  # float32 rounding of 19 terms
+    assert not whole[3].any()
+    for b in (1, 2, 5):  # batches of other sizes, in another order
+        for i0 in range(0, 11, b):
+            idx = np.arange(i0, min(i0 + b, 11))[::-1]
+            part = morph_displacements(np.ascontiguousarray(w[idx]), rows, np.empty((len(idx), n), dtype=np.float32))
+            assert part.tobytes() == whole[idx].tobytes()
+
+
+def test_morph_rig_rows_compiled_equal_the_numpy_reference(builtin_head):
+    from assets.heads.head import builtin_morph_head
+    from realtime_core.face.keyframes import MorphRig
+
+    rig = builtin_morph_head().rig  # the head facecast serve animates by default
+    assert isinstance(rig, MorphRig)
+    rng = np.random.default_rng(13)
+    params = rng.normal(0.0, 0.05, (6, 4))
+    params[:, 2] = np.abs(params[:, 2])
+    w = np.stack([rig.weights(p) for p in params])
+    fast, ref = rig.displacements_rows(w), rig.displacements_rows(w, kernel="numpy")
+    assert fast.shape == ref.shape == (6, 3 * len(rig.moving)) and fast.dtype == np.float32
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+    for p, row in zip(params, ref):  # the reference is the one-frame displacements
+        assert rig.displacements(p).reshape(-1).tobytes() == row.tobytes()
+    with pytest.raises(ConfigError, match="weights must be"):
+        rig.displacements_rows(w[:, :5])
+    with pytest.raises(ConfigError, match="kernel"):
+        rig.displacements_rows(w, kernel="gpu")

@@ -1,0 +1,95 @@
+"""What one viewer's message costs the server's fan-out (prints JSON; asserts nothing).
+
+``server.live.deliver`` to N real websockets connections over loopback (a child process drains them,
+as a viewer would), CPU time of the sending thread (``time.thread_time_ns``: user and kernel, so the
+``send`` system call and the loopback delivery it runs are included) per viewer and message, for a
+parameter frame (48 bytes) and a vertex frame of the built-in head (16.7 KB int16). The capacity
+benchmark's cost model charges a parameter viewer ~0.0012 cores (~40 us per frame at 30 frames/s);
+this is the part that is the viewer's own write.
+
+``python -m benchmarks.server_fanout [--viewers 1,10,40] [--rounds 40]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import multiprocessing as mp
+import time
+import types
+
+import numpy as np
+
+PER_ROUND = 50  # messages to every viewer per timed round (a round then sleeps 20 ms: the socket drains)
+
+
+def _drain(port: int, n: int) -> None:
+    """Child process: n viewer connections reading and discarding every message."""
+    from websockets.asyncio.client import connect
+
+    async def main() -> None:
+        async def one() -> None:
+            async with connect(f"ws://127.0.0.1:{port}/", compression=None, max_size=None) as ws:
+                async for _ in ws:
+                    pass
+
+        await asyncio.gather(*(one() for _ in range(n)), return_exceptions=True)
+
+    asyncio.run(main())
+
+
+async def _measure(n: int, rounds: int, size: int) -> float:
+    """CPU microseconds per viewer and message of ``deliver`` to n connected viewers."""
+    from websockets.asyncio.server import ServerConnection, serve
+
+    from server.live import Viewer, deliver
+
+    conns: list[ServerConnection] = []
+    all_in = asyncio.Event()
+
+    async def handler(ws: ServerConnection) -> None:
+        conns.append(ws)
+        if len(conns) == n:
+            all_in.set()
+        await ws.wait_closed()
+
+    async with serve(handler, "127.0.0.1", 0, compression=None) as srv:
+        port = srv.sockets[0].getsockname()[1]
+        child = mp.get_context("spawn").Process(target=_drain, args=(port, n))
+        child.start()
+        await all_in.wait()
+        # Viewer needs its server only for the queue bound (the slow path, not taken here).
+        server = types.SimpleNamespace(config=types.SimpleNamespace(viewer_queue=64))
+        viewers = [Viewer(ws, None, kind=1, encoding=1, audio=False, server=server) for ws in conns]  # type: ignore[arg-type]
+        msg = b"x" * size
+        cpu = []
+        for _ in range(rounds):
+            t0 = time.thread_time_ns()
+            for _ in range(PER_ROUND):
+                deliver(viewers, msg, 0.0)
+            cpu.append((time.thread_time_ns() - t0) / (PER_ROUND * n) / 1e3)
+            await asyncio.sleep(0.02)
+        for ws in conns:
+            await ws.close()
+        child.join()
+    return float(np.median(cpu))
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--viewers", default="1,10,40", help="viewer counts (comma-separated)")
+    ap.add_argument("--rounds", type=int, default=40)
+    args = ap.parse_args(argv)
+    report: dict = {"cpu_us_per_viewer_message": {}}
+    for n in (int(x) for x in args.viewers.split(",")):
+        report["cpu_us_per_viewer_message"][f"{n} viewers"] = {
+            "params_48_B": round(asyncio.run(_measure(n, args.rounds, 48)), 2),
+            "deltas_16.7_KB": round(asyncio.run(_measure(n, args.rounds, 32 + 2 * 8319)), 2),
+        }
+    print(json.dumps(report, indent=1))
+    return report
+
+
+if __name__ == "__main__":
+    main()
