@@ -69,6 +69,14 @@ PARAM_NAMES: tuple[str, ...] = VISUAL_PARAMS
 
 N_PARAMS: int = len(PARAM_NAMES)
 
+DEFINITION_VERSION: int = 1
+"""The version of the definitions above as measured on video: bump it whenever a definition, its
+measurement (``training.video.mouth_params``) or the rest pose it is measured against
+(``training.video``, step 6) changes. It is part of the cache key of everything stored that holds measured
+parameters or rest-relative landmarks (the unit-selection corpus, ``training.unit_corpus``), so a changed
+definition rebuilds them instead of mixing old and new values. The face-track cache holds only the raw
+landmarks (keyed by ``training.facetrack.EXTRACTOR_VERSION``) and derives the parameters on every load."""
+
 TYPICAL_RANGES: dict[str, tuple[float, float]] = {
     "upper_lip_raise": (-0.05, 0.06),
     "lip_stretch": (-0.15, 0.12),

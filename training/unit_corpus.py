@@ -13,8 +13,9 @@ boundaries (:mod:`training.grid_phones`), for the train + val sentences of the o
 3. the phones of each sentence with their viseme classes.
 
 The result is one compressed ``.npz`` (:mod:`assets.unitcorpus`), cached under
-``$FACECAST_CACHE/unitsel/`` by a key over everything it derives from (extractor version, sentence
-ids, phone boundaries, settings), so it is rebuilt only when an input changes.
+``$FACECAST_CACHE/unitsel/`` by a key over everything it derives from (extractor version, the
+parameter definitions' version :data:`training.params.DEFINITION_VERSION`, sentence ids, phone boundaries,
+settings), so it is rebuilt only when an input changes.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from training.facetrack import (
     cache_path,
     default_cache_dir,
 )
+from training.params import DEFINITION_VERSION
 
 BUILD_VERSION = 2
 """Bumped whenever the corpus construction changes (part of the cache key). 2: Motion Units added."""
@@ -87,7 +89,13 @@ def corpus_key(sentences: Sequence[GridSentence], phones: Mapping[str, PhoneTime
     h = hashlib.sha1()
     h.update(
         json.dumps(
-            {"build": BUILD_VERSION, "extractor": EXTRACTOR_VERSION, "empca": asdict(config)}, sort_keys=True
+            {
+                "build": BUILD_VERSION,
+                "extractor": EXTRACTOR_VERSION,
+                "params": DEFINITION_VERSION,
+                "empca": asdict(config),
+            },
+            sort_keys=True,
         ).encode()
     )
     for s in sorted(sentences, key=lambda s: s.sentence_id):
@@ -163,6 +171,7 @@ def build_stored_corpus(
         "empca_iterations": pca.iterations,
         "empca": asdict(config),
         "extractor": EXTRACTOR_VERSION,
+        "params": DEFINITION_VERSION,
         "build": BUILD_VERSION,
         "credit": GRID_CREDIT,
     }

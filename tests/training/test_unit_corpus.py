@@ -98,3 +98,22 @@ def test_text_and_recording_rows_span_the_text_rows_and_the_audio_driven_model(s
     assert rows[0.0]["unit selection"]["r"] == rows[1.0]["unit selection"]["r"] == text_only["r"]
     assert rows[0.0]["text + recording"]["r"] == pytest.approx(text_only["r"], abs=1e-9)
     assert rows[1.0]["text + recording"]["r"] == pytest.approx(rows[1.0]["audio-driven HMM"]["r"], abs=1e-9)
+
+
+def test_cache_key_changes_with_the_parameter_definitions_and_every_other_input(monkeypatch, tmp_path):
+    """A changed definition of the mouth parameters (training.params.DEFINITION_VERSION) must rebuild the
+    cached corpus, which stores them, instead of handing back values measured the old way."""
+    from pathlib import Path
+
+    import training.unit_corpus as uc
+    from assets.grid import GridSentence
+    from realtime_core.synthesis.empca import EmPcaConfig
+    from training.params import DEFINITION_VERSION
+
+    s = [GridSentence(sentence_id="bbaf2n", video=Path("bbaf2n.mp4"), align=Path("bbaf2n.align"))]
+    phones = {"bbaf2n": [("sil", 0.0, 0.5), ("b", 0.5, 0.6)]}
+    key = uc.corpus_key(s, phones, EmPcaConfig())
+    assert uc.corpus_key(s, phones, EmPcaConfig()) == key  # a pure function of its inputs
+    assert uc.corpus_key(s, {"bbaf2n": [("sil", 0.0, 0.5), ("b", 0.5, 0.65)]}, EmPcaConfig()) != key
+    monkeypatch.setattr(uc, "DEFINITION_VERSION", DEFINITION_VERSION + 1)
+    assert uc.corpus_key(s, phones, EmPcaConfig()) != key
