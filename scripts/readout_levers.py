@@ -46,6 +46,8 @@ from training.readout import (
     _readout,
     estimates,
     fit_readout,
+    mlp_layers,
+    mlp_regressor,
     trace_clips,
     vtlp_copies,
 )
@@ -73,33 +75,12 @@ def fit_weighted(model: AvModel, train: list[Traced], spec: ReadoutSpec, weights
     """``training.readout.fit_readout`` with per-parameter loss weights: MLPRegressor's squared error
     weighs each output by the square of its scale, so the targets are scaled by sqrt(w) for the fit
     and the output layer divided by it afterwards (the same readout form, the live path unchanged)."""
-    from sklearn.neural_network import MLPRegressor
-    from sklearn.preprocessing import StandardScaler
-
     phi = _features(spec, model, train)
     c = np.sqrt(np.asarray(weights, np.float64))
     y = np.concatenate([t.truth for t in train]) * c
-    scaler = StandardScaler().fit(phi)
-    sd = scaler.scale_
-    w1s, b1s, w2s, b2s, epochs = [], [], [], [], []
-    for k in range(spec.ensemble):
-        mlp = MLPRegressor(
-            hidden_layer_sizes=(spec.hidden,),
-            activation="relu",
-            alpha=spec.alpha,
-            early_stopping=True,
-            max_iter=spec.max_iter,
-            random_state=spec.seed + k,
-        ).fit(scaler.transform(phi), y)
-        epochs.append(int(mlp.n_iter_))
-        w1s.append(mlp.coefs_[0] / sd[:, None])
-        b1s.append(mlp.intercepts_[0] - (scaler.mean_ / sd) @ mlp.coefs_[0])
-        w2s.append(mlp.coefs_[1] / c / spec.ensemble)
-        b2s.append(mlp.intercepts_[1] / c / spec.ensemble)
+    w1, b1, w2, b2, epochs = mlp_layers(spec, phi, y)
     meta = {**spec.as_json(), "loss_weights": list(weights), "epochs": epochs}
-    return _readout(
-        spec, model, np.concatenate(w1s, axis=1), np.concatenate(b1s), np.concatenate(w2s), np.sum(b2s, axis=0), meta
-    )
+    return _readout(spec, model, w1, b1, w2 / c, b2 / c, meta)
 
 
 @dataclass
@@ -118,23 +99,12 @@ class AudioTaps:
 
     @classmethod
     def fit(cls, model: AvModel, train: list[Traced], spec: ReadoutSpec) -> AudioTaps:
-        from sklearn.neural_network import MLPRegressor
         from sklearn.preprocessing import StandardScaler
 
         phi = np.concatenate([cls.inputs(model, c, spec) for c in train])
         y = np.concatenate([c.truth for c in train])
         scaler = StandardScaler().fit(phi)
-        nets = [
-            MLPRegressor(
-                hidden_layer_sizes=(spec.hidden,),
-                activation="relu",
-                alpha=spec.alpha,
-                early_stopping=True,
-                max_iter=spec.max_iter,
-                random_state=spec.seed + k,
-            ).fit(scaler.transform(phi), y)
-            for k in range(spec.ensemble)
-        ]
+        nets = [mlp_regressor(spec, k).fit(scaler.transform(phi), y) for k in range(spec.ensemble)]
         return cls(spec, scaler, nets)
 
     def apply(self, model: AvModel, c: Traced) -> np.ndarray:

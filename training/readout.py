@@ -177,8 +177,6 @@ def _readout(spec: ReadoutSpec, model: AvModel, w1, b1, w2, b2, metadata: dict) 
 def fit_readout(model: AvModel, train: Sequence[Traced], spec: ReadoutSpec) -> Readout:
     """Fit one readout of ``spec`` for ``model`` on traced train clips (targets: their truth)."""
     from sklearn.linear_model import Ridge
-    from sklearn.neural_network import MLPRegressor
-    from sklearn.preprocessing import StandardScaler
 
     phi = _features(spec, model, train)
     y = np.concatenate([c.truth for c in train])
@@ -186,28 +184,43 @@ def fit_readout(model: AvModel, train: Sequence[Traced], spec: ReadoutSpec) -> R
     if spec.hidden == 0:
         lin = Ridge(alpha=spec.alpha).fit(phi, y)
         return _readout(spec, model, np.zeros((phi.shape[1], 0)), np.zeros(0), lin.coef_.T, lin.intercept_, meta)
+    w1, b1, w2, b2, epochs = mlp_layers(spec, phi, y)
+    meta["epochs"] = epochs if spec.ensemble > 1 else epochs[0]
+    return _readout(spec, model, w1, b1, w2, b2, meta)
+
+
+def mlp_regressor(spec: ReadoutSpec, k: int) -> Any:
+    """The ``k``-th net of ``spec``'s ensemble (scikit-learn ``MLPRegressor``, unfitted, seed ``spec.seed + k``)."""
+    from sklearn.neural_network import MLPRegressor
+
+    return MLPRegressor(
+        hidden_layer_sizes=(spec.hidden,),
+        activation="relu",
+        alpha=spec.alpha,
+        early_stopping=True,
+        max_iter=spec.max_iter,
+        random_state=spec.seed + k,
+    )
+
+
+def mlp_layers(spec: ReadoutSpec, phi: np.ndarray, y: np.ndarray) -> tuple[Any, Any, Any, Any, list[int]]:
+    """Fit ``spec``'s ensemble of ReLU nets on standardised inputs ``phi`` (frames, d) against ``y``
+    (frames, 4) and fold them into one layer: (w1 (d, E*h), b1 (E*h,), w2 (E*h, 4), b2 (4,), epochs per net),
+    the scaler folded into w1/b1 and the ensemble mean into w2/b2 (the live readout's form)."""
+    from sklearn.preprocessing import StandardScaler
+
     scaler = StandardScaler().fit(phi)
     sd = scaler.scale_
     w1s, b1s, w2s, b2s, epochs = [], [], [], [], []
     for k in range(spec.ensemble):
-        mlp = MLPRegressor(
-            hidden_layer_sizes=(spec.hidden,),
-            activation="relu",
-            alpha=spec.alpha,
-            early_stopping=True,
-            max_iter=spec.max_iter,
-            random_state=spec.seed + k,
-        ).fit(scaler.transform(phi), y)
+        mlp = mlp_regressor(spec, k).fit(scaler.transform(phi), y)
         epochs.append(int(mlp.n_iter_))
         # relu(((phi - mu) / sd) @ W + b) = relu(phi @ (W / sd) + (b - (mu / sd) @ W))
         w1s.append(mlp.coefs_[0] / sd[:, None])
         b1s.append(mlp.intercepts_[0] - (scaler.mean_ / sd) @ mlp.coefs_[0])
         w2s.append(mlp.coefs_[1] / spec.ensemble)
         b2s.append(mlp.intercepts_[1] / spec.ensemble)
-    meta["epochs"] = epochs if spec.ensemble > 1 else epochs[0]
-    return _readout(
-        spec, model, np.concatenate(w1s, axis=1), np.concatenate(b1s), np.concatenate(w2s), np.sum(b2s, axis=0), meta
-    )
+    return np.concatenate(w1s, axis=1), np.concatenate(b1s), np.concatenate(w2s), np.sum(b2s, axis=0), epochs
 
 
 def estimates(model: AvModel, clips: Sequence[Traced], readout: Readout | None, band: float) -> list:
