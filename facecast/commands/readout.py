@@ -97,8 +97,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=_weights,
         default={},
         metavar="NAME=W,...",
-        help="per-parameter weights of the fit's squared error, applied to every candidate (e.g. lip_stretch=4; "
-        "the others 1; names: upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress): the targets are scaled "
+        help="per-parameter weights of the fit's squared error, applied to every candidate (default: 1 each; e.g. "
+        "lip_stretch=4; names: upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress): the targets are scaled "
         "by sqrt(W) for the fit and the output layer scaled back, so the readout's form and the live path are the "
         "same; stored in the model's readout metadata",
     )
