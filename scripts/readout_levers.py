@@ -1,6 +1,9 @@
 """Cheap levers on the default model's learned readout, scored on s1 val (issue 10, eighth round).
 
-    python scripts/readout_levers.py [NAME ...]     # default: every candidate below, in this order
+    python scripts/readout_levers.py [NAME[@SEED] ...]     # default: every candidate below, in this order
+
+``@SEED`` fits the candidate's nets with MLP seeds SEED, SEED + 1, ... instead of 0, 1, ... (the ninth round
+scores ``R0 W4K8 R0@3 W4K8@3``: seed sets A = 0-2 and B = 3-5).
 
 The shipped HMM (`assets/data/default_model.npz`) is traced once over the 716 train sentences plus the
 shipped recipe's 4 vocal-tract-length copies of each (warps 0.85-1.18, `--vtlp-seed 1`: 322,200 frames)
@@ -12,8 +15,8 @@ candidate goes to stdout. Candidates (each the shipped form 5:state:64x3:1e-3 bu
 
 - ``shipped``: the readout in the model file, as stored (the reference);
 - ``R0``: the shipped recipe refitted on today's traces (the refit's own noise);
-- ``W2``, ``W4``: lip_stretch's loss weight 2 or 4 (its target scaled by sqrt(w) in the fit, the output
-  layer scaled back, so the live path's readout form is unchanged);
+- ``W2``, ``W4``: lip_stretch's loss weight 2 or 4 (``ReadoutSpec.loss_weight``: its target scaled by
+  sqrt(w) in the fit, the output layer scaled back, so the live path's readout form is unchanged);
 - ``K8``, ``K12``: 8 or 12 causal taps of the eq. 7 estimate; ``W4K8``: both;
 - ``H128``: 128 units per net; ``A4``: L2 penalty 1e-4; ``E6``: 6 nets (seeds 0-5) averaged;
 - ``AT``: the audio rows of frames t-3 and t-6 added to the inputs (the readout's audio window widened
@@ -37,16 +40,13 @@ from realtime_core.avmodel import AvModel
 from realtime_core.features import loudness_db
 from realtime_core.features.resample import resample_audio
 from realtime_core.output import OutputStage
-from realtime_core.readout import Readout
 from training.readout import (
     ReadoutSpec,
     Traced,
     VtlpConfig,
     _features,
-    _readout,
     estimates,
     fit_readout,
-    mlp_layers,
     mlp_regressor,
     trace_clips,
     vtlp_copies,
@@ -60,6 +60,8 @@ AUDIO_LAGS = (3, 6)
 
 
 def spec_of(name: str) -> ReadoutSpec:
+    """``NAME[@SEED]`` -> its candidate (the shipped form but for the change named; MLP seeds from SEED, default 0)."""
+    name, _, seed = name.partition("@")
     taps = {"K8": 8, "K12": 12, "W4K8": 8}.get(name, 5)
     hidden = 128 if name == "H128" else 64
     return ReadoutSpec(
@@ -68,19 +70,9 @@ def spec_of(name: str) -> ReadoutSpec:
         hidden=hidden,
         alpha=1e-4 if name == "A4" else 1e-3,
         ensemble=6 if name == "E6" else 3,
+        seed=int(seed or 0),
+        loss_weight={"lip_stretch": {"W2": 2.0, "W4": 4.0, "W4K8": 4.0}.get(name, 1.0)},
     )
-
-
-def fit_weighted(model: AvModel, train: list[Traced], spec: ReadoutSpec, weights: tuple[float, ...]) -> Readout:
-    """``training.readout.fit_readout`` with per-parameter loss weights: MLPRegressor's squared error
-    weighs each output by the square of its scale, so the targets are scaled by sqrt(w) for the fit
-    and the output layer divided by it afterwards (the same readout form, the live path unchanged)."""
-    phi = _features(spec, model, train)
-    c = np.sqrt(np.asarray(weights, np.float64))
-    y = np.concatenate([t.truth for t in train]) * c
-    w1, b1, w2, b2, epochs = mlp_layers(spec, phi, y)
-    meta = {**spec.as_json(), "loss_weights": list(weights), "epochs": epochs}
-    return _readout(spec, model, w1, b1, w2 / c, b2 / c, meta)
 
 
 @dataclass
@@ -171,14 +163,13 @@ def main(names: list[str]) -> None:
             if not train:
                 train = trace_clips(base, train_clips) + vtlp_copies(base, train_clips, vtlp)
             spec = spec_of(name)
-            if name == "AT":
+            if name.partition("@")[0] == "AT":
                 at = AudioTaps.fit(base, train, spec)
                 band, s = choose_band(lambda b, at=at: score_lips(at.items(base, val, b)))
                 real = at.real_speech(base, speech, band)
                 row["epochs"] = [int(net.n_iter_) for net in at.nets]
             else:
-                weights = {"W2": (1, 2, 1, 1), "W4": (1, 4, 1, 1), "W4K8": (1, 4, 1, 1)}.get(name)
-                ro = fit_weighted(base, train, spec, weights) if weights else fit_readout(base, train, spec)
+                ro = fit_readout(base, train, spec)
                 band, s = choose_band(lambda b, ro=ro: score_lips(estimates(base, val, ro, b)))
                 real = score_real_speech(replace(base, readout=ro, closure_band=band), speech)
                 row["epochs"] = ro.metadata["epochs"]

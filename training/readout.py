@@ -5,7 +5,8 @@
   posteriors and the centred audio row.
 - :func:`fit_readout` fits one readout on traced train clips: scikit-learn's ``Ridge`` for a linear map
   (hidden = 0), its ``MLPRegressor`` (one ReLU layer, inputs standardised, early stopping on a 10 % slice
-  of the train frames, seeded) otherwise; the input scaling is folded into the stored weights.
+  of the train frames, seeded) otherwise; the input scaling is folded into the stored weights, and so is a
+  per-parameter loss weight (the targets scaled by sqrt(w) for the fit, the output layer scaled back).
 - :func:`choose_readout` fits every candidate on the train split, scores each on the val split through
   the model's output stage, keeps the best by the mean r of the four parameters, then re-chooses the
   closure band on val (the highest r(mouth_open) keeping >= ``min_closure`` of the bilabial closures;
@@ -14,7 +15,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -49,7 +51,9 @@ class ReadoutSpec:
     "component"), hidden (0 = linear ridge, else ReLU units), alpha (the L2 penalty: ridge alpha, or
     the MLP's), seed (MLP initialisation and early-stopping split), max_iter (MLP epochs), ensemble (MLPs
     with seeds seed, seed + 1, ... averaged: stored as one layer of ensemble x hidden units whose output
-    weights are divided by ensemble)."""
+    weights are divided by ensemble), loss_weight (each parameter's weight in the fit's squared error: four
+    positive floats in ``VISUAL_PARAMS`` order, or a mapping by parameter name, the others 1; stored as the
+    four-tuple). The loss weight changes only the fit: the stored readout's form is the same."""
 
     taps: int = 5
     audio: bool = True
@@ -59,11 +63,18 @@ class ReadoutSpec:
     seed: int = 0
     max_iter: int = 200
     ensemble: int = 1
+    loss_weight: tuple[float, ...] | Mapping[str, float] = (1.0, 1.0, 1.0, 1.0)
 
     def __post_init__(self) -> None:
         bad = self.taps < 1 or self.hidden < 0 or self.alpha < 0 or self.ensemble < 1
         if bad or self.posteriors not in POSTERIOR_KINDS or (self.hidden == 0 and self.ensemble != 1):
             raise ConfigError(f"invalid readout candidate {self}")
+        object.__setattr__(self, "loss_weight", _loss_weight(self.loss_weight))
+
+    @property
+    def weights(self) -> np.ndarray:
+        """The loss weight per parameter, ``(4,)`` in ``VISUAL_PARAMS`` order."""
+        return np.asarray(self.loss_weight, dtype=np.float64)
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -75,7 +86,30 @@ class ReadoutSpec:
             "seed": self.seed,
             "max_iter": self.max_iter,
             "ensemble": self.ensemble,
+            "loss_weight": dict(zip(VISUAL_PARAMS, self.weights.tolist(), strict=True)),
         }
+
+
+def _loss_weight(value: Any) -> tuple[float, ...]:
+    """``ReadoutSpec.loss_weight`` as four floats in ``VISUAL_PARAMS`` order, or ConfigError naming the problem."""
+    if isinstance(value, Mapping):
+        unknown = sorted(str(k) for k in value if k not in VISUAL_PARAMS)
+        if unknown:
+            known = ", ".join(VISUAL_PARAMS)
+            raise ConfigError(f"readout loss weight for unknown parameter(s) {unknown}: known are {known}")
+        named = dict(value)
+        value = tuple(named.get(p, 1.0) for p in VISUAL_PARAMS)
+    try:
+        weights = tuple(float(w) for w in value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"readout loss weight must be four numbers or a mapping by name, got {value!r}") from None
+    if len(weights) != len(VISUAL_PARAMS):
+        names = ", ".join(VISUAL_PARAMS)
+        raise ConfigError(f"readout loss weight needs {len(VISUAL_PARAMS)} values ({names}), got {len(weights)}")
+    bad = [f"{p}={w}" for p, w in zip(VISUAL_PARAMS, weights, strict=True) if not (math.isfinite(w) and w > 0)]
+    if bad:
+        raise ConfigError(f"readout loss weights must be finite and > 0: {', '.join(bad)}")
+    return weights
 
 
 def trace_clips(
@@ -175,18 +209,26 @@ def _readout(spec: ReadoutSpec, model: AvModel, w1, b1, w2, b2, metadata: dict) 
 
 
 def fit_readout(model: AvModel, train: Sequence[Traced], spec: ReadoutSpec) -> Readout:
-    """Fit one readout of ``spec`` for ``model`` on traced train clips (targets: their truth)."""
+    """Fit one readout of ``spec`` for ``model`` on traced train clips (targets: their truth).
+
+    ``spec.loss_weight``: the fits minimise an unweighted squared error summed over the outputs, so a
+    parameter of weight w is fitted as its target times sqrt(w) (its error then counts w times) and the
+    output layer (w2, b2) divided by sqrt(w) afterwards: the same readout form, the live path unchanged.
+    Weights of 1 scale by exactly 1.0, so the fit is bit for bit the unweighted one. (Ridge fits each
+    output on its own, so a weight changes a linear readout only by rounding.)"""
     from sklearn.linear_model import Ridge
 
     phi = _features(spec, model, train)
-    y = np.concatenate([c.truth for c in train])
+    scale = np.sqrt(spec.weights)  # (4,)
+    y = np.concatenate([c.truth for c in train]) * scale
     meta = {**spec.as_json(), "train_frames": len(y)}
     if spec.hidden == 0:
         lin = Ridge(alpha=spec.alpha).fit(phi, y)
-        return _readout(spec, model, np.zeros((phi.shape[1], 0)), np.zeros(0), lin.coef_.T, lin.intercept_, meta)
+        w2, b2 = lin.coef_.T / scale, lin.intercept_ / scale
+        return _readout(spec, model, np.zeros((phi.shape[1], 0)), np.zeros(0), w2, b2, meta)
     w1, b1, w2, b2, epochs = mlp_layers(spec, phi, y)
     meta["epochs"] = epochs if spec.ensemble > 1 else epochs[0]
-    return _readout(spec, model, w1, b1, w2, b2, meta)
+    return _readout(spec, model, w1, b1, w2 / scale, b2 / scale, meta)
 
 
 def mlp_regressor(spec: ReadoutSpec, k: int) -> Any:

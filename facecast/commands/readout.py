@@ -44,6 +44,20 @@ def _pair(text: str) -> tuple[float, float]:
     return lo, hi
 
 
+def _weights(text: str) -> dict[str, float]:
+    """``NAME=W[,NAME=W...]`` -> {name: weight} (names and values are checked by ``ReadoutSpec``)."""
+    out = {}
+    for item in (t for t in text.split(",") if t):
+        name, eq, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"loss weight {item!r} is not NAME=WEIGHT") from None
+        if not eq:
+            raise argparse.ArgumentTypeError(f"loss weight {item!r} is not NAME=WEIGHT")
+    return out
+
+
 DEFAULT_CANDIDATES = (
     "5:state:0:1,5:state:32:1e-3,5:state:64:1e-3,5:state:128:1e-3,8:state:64:1e-3,5:component:64:1e-3,5:state:64x3:1e-3"
 )
@@ -77,6 +91,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="K:POST:H[xE]:ALPHA,...",
         help="readouts to try: taps, posteriors (none/state/component), hidden units (0 = linear ridge; 64x3: three "
         "64-unit MLPs of seeds 0-2 averaged), L2 alpha, optionally ':noaudio'",
+    )
+    p.add_argument(
+        "--loss-weight",
+        type=_weights,
+        default={},
+        metavar="NAME=W,...",
+        help="per-parameter weights of the fit's squared error, applied to every candidate (default: 1 each; e.g. "
+        "lip_stretch=4; names: upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress): the targets are scaled "
+        "by sqrt(W) for the fit and the output layer scaled back, so the readout's form and the live path are the "
+        "same; stored in the model's readout metadata",
     )
     p.add_argument(
         "--bands",
@@ -131,6 +155,8 @@ def _run(args: argparse.Namespace) -> int:
     from training.reallips import s1_clips
 
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
+    # Checked here, before the corpus is read: an unknown name or a weight <= 0 is a ConfigError naming it.
+    candidates = [replace(spec, loss_weight=args.loss_weight) for spec in args.candidates]
     model = replace(load_model(args.model), readout=None)
     sets = {}
     for split in ("train", "val"):
@@ -145,7 +171,7 @@ def _run(args: argparse.Namespace) -> int:
         model,
         sets["train"],
         sets["val"],
-        args.candidates,
+        candidates,
         bands=args.bands,
         min_closure=args.min_closure,
         log=tqdm.write,

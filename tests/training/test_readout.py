@@ -1,5 +1,5 @@
 """Fitting the readout: a linear readout fitted on data made by a known causal linear filter recovers it;
-the fitted MLP readout's live path equals the fit's own estimates."""
+the fitted MLP readout's live path equals the fit's own estimates; per-parameter loss weights."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from realtime_core import VISUAL_PARAMS
 from tests.realtime_core.test_readout import DA, DV, M, N, small_model
 from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
 
@@ -155,3 +156,123 @@ def test_readout_command_names_a_corpus_folder_without_sentences(tmp_path, capsy
     err = capsys.readouterr().err
     assert rc != 0 and "no GRID s1 train sentences" in err and str(tmp_path / "nowhere") in err
     assert "Traceback" not in err and not out.exists()
+
+
+def _inverter_traced(model, rng: np.random.Generator, n_clips: int, T: int = 50):
+    """Clips of random audio rows through ``model``'s inverter, with a truth a readout can partly learn."""
+    oa_clips = [rng.standard_normal((T, DA)) for _ in range(n_clips)]
+    traced = []
+    for i, oa in enumerate(oa_clips):
+        raw, post, audio = model.inverter().trace(oa)
+        truth = np.tanh(np.roll(raw, 2, axis=0)) * 0.5 + 0.1 * audio[:, :DV]
+        traced.append(Traced(f"c{i}", truth, raw, post, audio, np.zeros(T), []))
+    return oa_clips, traced
+
+
+@FEW_EPOCHS
+@pytest.mark.parametrize("hidden", [0, 5])
+def test_loss_weight_one_is_the_unweighted_fit_bit_for_bit(hidden):
+    """Weights of 1 (the default, four ones, or a mapping of ones) give exactly the weights of the plain fit:
+    scikit-learn's Ridge, or training.readout.mlp_layers, on the unscaled targets."""
+    from sklearn.linear_model import Ridge
+
+    from training.readout import _features, mlp_layers
+
+    rng = np.random.default_rng(5)
+    model = small_model(1)
+    train = _traced(rng, 6, lambda raw, post, audio: np.tanh(raw) + 0.1 * audio[:, :DV])
+    spec = ReadoutSpec(taps=3, hidden=hidden, alpha=1e-3, max_iter=15, ensemble=2 if hidden else 1)
+    phi = _features(spec, model, train)
+    y = np.concatenate([c.truth for c in train])
+    if hidden:
+        w1, b1, w2, b2, _ = mlp_layers(spec, phi, y)
+    else:
+        lin = Ridge(alpha=spec.alpha).fit(phi, y)
+        w1, b1, w2, b2 = np.zeros((phi.shape[1], 0)), np.zeros(0), lin.coef_.T, lin.intercept_
+    for weight in [(1.0, 1.0, 1.0, 1.0), [1, 1, 1, 1], {"lip_stretch": 1.0}, {}]:
+        ro = fit_readout(model, train, replace(spec, loss_weight=weight))
+        for got, want in zip((ro.w1, ro.b1, ro.w2, ro.b2), (w1, b1, w2, b2), strict=True):
+            np.testing.assert_array_equal(got, want)
+        assert ro.metadata["loss_weight"] == dict.fromkeys(VISUAL_PARAMS, 1.0)
+
+
+@FEW_EPOCHS
+def test_a_weighted_readout_runs_live_as_its_nets_predict():
+    """lip_stretch weighted 4, 8 taps, two nets: the stored readout, run by the live kernel (the inverter's
+    compiled lag-0 push, before the output stage), equals the mean of the fitted nets' own predictions on the
+    standardised inputs with lip_stretch divided back by sqrt(4), then the output stage; and the weight changed
+    the fit."""
+    from sklearn.preprocessing import StandardScaler
+
+    from training.readout import _features, mlp_regressor
+
+    rng = np.random.default_rng(6)
+    model = replace(small_model(2), closure_band=0.0)
+    oa_clips, traced = _inverter_traced(model, rng, 10)
+    train, held = traced[:8], list(zip(oa_clips[8:], traced[8:], strict=True))
+    spec = ReadoutSpec(taps=8, hidden=6, max_iter=25, ensemble=2, loss_weight={"lip_stretch": 4.0})
+    ro = fit_readout(model, train, spec)
+    assert ro.taps == 8 and ro.metadata["loss_weight"]["lip_stretch"] == 4.0
+
+    phi = _features(spec, model, train)
+    scaler = StandardScaler().fit(phi)
+    scale = np.array([1.0, 2.0, 1.0, 1.0])
+    y = np.concatenate([c.truth for c in train]) * scale
+    nets = [mlp_regressor(spec, k).fit(scaler.transform(phi), y) for k in range(spec.ensemble)]
+    live_model = replace(model, readout=ro)
+    for oa, c in held:
+        own = np.mean([net.predict(scaler.transform(_features(spec, model, [c]))) for net in nets], axis=0) / scale
+        inv = live_model.inverter()
+        live = np.concatenate([inv.push(oa), inv.flush()])
+        # then the output stage (band 0: the closed-pose floor only), as the live path applies it
+        np.testing.assert_allclose(live, live_model.output_stage(own.copy()), atol=1e-9)
+
+    plain = fit_readout(model, train, replace(spec, loss_weight=(1.0, 1.0, 1.0, 1.0)))
+    assert not np.allclose(plain.w2, ro.w2)
+
+
+@pytest.mark.parametrize(
+    ("weight", "named"),
+    [
+        ({"lip_strech": 4.0}, "lip_strech"),
+        ({"lip_stretch": 0.0}, "lip_stretch=0.0"),
+        ({"mouth_open": -1.0}, "mouth_open=-1.0"),
+        ((1.0, float("nan"), 1.0, 1.0), "lip_stretch=nan"),
+        ((1.0, 4.0, 1.0), "needs 4 values"),
+        ("heavy", "four numbers"),
+    ],
+)
+def test_bad_loss_weights_are_refused_naming_the_problem(weight, named):
+    from training.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="loss weight") as exc:
+        ReadoutSpec(loss_weight=weight)
+    assert named in str(exc.value)
+
+
+def test_the_loss_weight_is_in_the_model_files_readout_metadata(tmp_path):
+    """A weighted readout written by the model writer and read back keeps its weights in the metadata."""
+    from assets.modelfile import load_model, save_model
+
+    rng = np.random.default_rng(7)
+    model = small_model(0)
+    train = _traced(rng, 4, lambda raw, post, audio: raw * 0.5)
+    ro = fit_readout(model, train, ReadoutSpec(taps=2, hidden=0, loss_weight=(2.0, 4.0, 1.0, 0.5)))
+    back = load_model(save_model(tmp_path / "m.npz", replace(model, readout=ro)))
+    assert back.readout is not None
+    assert back.readout.metadata["loss_weight"] == dict(zip(VISUAL_PARAMS, (2.0, 4.0, 1.0, 0.5), strict=True))
+
+
+def test_readout_command_refuses_bad_loss_weights_before_any_work(tmp_path, capsys):
+    """`facecast readout --loss-weight`: not NAME=W is a usage error (exit 2); an unknown name or a weight <= 0
+    is refused naming it, before the corpus is read (the folder holds no corpus), and no model is written."""
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    with pytest.raises(SystemExit) as exc:
+        main(["readout", "default", "-o", str(out), "--loss-weight", "lip_stretch"])
+    assert exc.value.code == 2 and "NAME=WEIGHT" in capsys.readouterr().err
+    for bad, named in (("lip_strech=4", "lip_strech"), ("lip_stretch=0", "lip_stretch=0.0")):
+        rc = main(["readout", "default", "-o", str(out), "--loss-weight", bad, "--grid-s1", str(tmp_path)])
+        err = capsys.readouterr().err
+        assert rc != 0 and named in err and "GRID" not in err and "Traceback" not in err and not out.exists()
