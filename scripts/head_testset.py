@@ -4,7 +4,8 @@
 
 Heads: the built-in head (own ARKit targets, and retargeted), the built-in head as an ARKit glb
 with exporter spellings, Lee Perry-Smith (hollow, closed lips; shipped landmarks and automatic
-ones), the MediaPipe canonical face, Candide-3 (both files, driven by their own animation units), plus
+ones, with and without its colour map), the MediaPipe canonical face, Candide-3 (both files,
+driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb.
@@ -107,6 +108,11 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
         shutil.copy(lps, auto)
         shutil.copy(lps.parent / "Map-COL.jpg", out / "Map-COL.jpg")
         heads["Lee Perry-Smith, automatic landmarks"] = (auto, {})
+        # The .glb alone, as a user may copy it (or any scan without a texture): rendered untextured.
+        (out / "untextured").mkdir(exist_ok=True)
+        bare = out / "untextured" / "someone.glb"
+        shutil.copy(lps, bare)
+        heads["Lee Perry-Smith, automatic landmarks, no colour map"] = (bare, {})
         cli = REPO / "node_modules" / ".bin" / "gltf-transform"
         for kind in ("meshopt", "quantize"):
             dst = out / f"lps_{kind}.glb"

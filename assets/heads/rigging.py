@@ -536,17 +536,49 @@ def front_contact(vertices: np.ndarray, triangles: np.ndarray, start: int, forwa
     return int(np.flatnonzero(canon == best)[0])
 
 
-def lips_connected(vertices: np.ndarray, triangles: np.ndarray, upper: int, lower: int, max_hops: int = 3) -> bool:
-    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam).
+LIPS_TOUCH = 0.01
+"""IOD: closed lips whose inner-lip points lie on the two walls of the crease between them still touch:
+the mesh around one comes this close to the mesh around the other (Lee Perry-Smith without its colour
+map: the render's upper inner-lip point lands on the upper lip's underside, 24 edges along the mesh from
+the lower one, the walls 0.003 IOD apart within TOUCH_REACH; the built-in head's open lips 0.022, the
+MediaPipe face's 0.078). The rig checks' own closure tolerance (lip gap at closure <= 0.01 IOD)."""
+TOUCH_REACH = 0.2
+"""IOD: how far along the mesh from each inner-lip point :func:`lips_connected` compares the two lips."""
+
+
+def lips_connected(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    upper: int,
+    lower: int,
+    max_hops: int = 3,
+    *,
+    iod: float | None = None,
+) -> bool:
+    """True if the upper and lower inner-lip vertices are within ``max_hops`` mesh edges (closed seam),
+    or, given the head's ``iod`` (head units), if the lips touch: the mesh within TOUCH_REACH of one
+    comes within LIPS_TOUCH of the mesh within TOUCH_REACH of the other (closed lips with a crease
+    between them, the points on its two walls).
 
     Coincident vertices (texture seams) are welded first so a split seam does not hide the link.
     """
+    from scipy.spatial import cKDTree
+
     from realtime_core.face.rig import weld
 
     canon, welded = weld(np.asarray(vertices, dtype=np.float64))
-    adj = vertex_adjacency(len(welded), canon[np.asarray(triangles, dtype=np.int64)])
+    tw = canon[np.asarray(triangles, dtype=np.int64)]
+    adj = vertex_adjacency(len(welded), tw)
     d = dijkstra(adj, indices=int(canon[upper]), unweighted=True, limit=max_hops)
-    return bool(np.isfinite(d[canon[lower]]))
+    if np.isfinite(d[canon[lower]]) or iod is None:
+        return bool(np.isfinite(d[canon[lower]]))
+    a = adj.tocoo()
+    length = np.linalg.norm(welded[a.row] - welded[a.col], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((length, (a.row, a.col)), shape=(len(welded),) * 2)
+    near = dijkstra(g, indices=[int(canon[upper]), int(canon[lower])], limit=TOUCH_REACH * iod)
+    up, lo = welded[np.isfinite(near[0])], welded[np.isfinite(near[1])]
+    gap = cKDTree(up).query(lo)[0].min()
+    return bool(gap <= LIPS_TOUCH * iod)
 
 
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
@@ -648,7 +680,7 @@ def rig_head(
         if membrane.any():
             t = t[~membrane]
             meta["lip_membrane_removed"] = int(membrane.sum())
-        if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"]):
+        if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"], iod=frame.iod):
             # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
             # contact, where the cut passes (see CONTACT_FACING).
             front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)

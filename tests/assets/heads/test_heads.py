@@ -11,7 +11,7 @@ from assets.errors import LandmarkError, MeshError, RigFileError
 from assets.heads.landmarks import read_landmarks, shipped_landmarks
 from assets.heads.mesh import HeadMesh, load_mesh
 from assets.heads.rigfile import load_rig, save_rig
-from assets.heads.rigging import MOUTH_GROUPS, cut_mouth, lips_connected, rig_head, simple_face
+from assets.heads.rigging import MOUTH_GROUPS, cut_mouth, lips_connected, mouth_landmarks, rig_head, simple_face
 from realtime_core.face import RigConfig, face_frame
 from realtime_core.face.rig import head_weights
 from tests.prerequisites import missing
@@ -114,6 +114,10 @@ def test_builtin_head_assets(builtin_head):
     assert set(np.unique(h.part)) == {0, 1, 2, 3, 4}  # skin, eyes, teeth (2 rows), tongue
     # The lips are separate surfaces: no short mesh path from the upper to the lower inner lip.
     assert not lips_connected(h.mesh.vertices, h.mesh.triangles, h.landmarks["upper_inner"], h.landmarks["lower_inner"])
+    # Nor do they touch: 0.022 IOD apart, over twice the LIPS_TOUCH tolerance.
+    iod = face_frame(h.mesh.vertices, mouth_landmarks(h.landmarks)).iod
+    lm = h.landmarks
+    assert not lips_connected(h.mesh.vertices, h.mesh.triangles, lm["upper_inner"], lm["lower_inner"], iod=iod)
     s = simple_face(h)
     assert 100 <= s.model.n_vertices <= 300
 
@@ -204,6 +208,23 @@ def test_similarity_moved_head_gets_the_same_relative_deformation(shared_data, b
         # 5e-3: the fold repair's thresholded smoothing (200 rounds on this head, an edge over the
         # stretch limit each round) amplifies rounding to 2.4e-3 of the motion (membrane removed, i12e).
         np.testing.assert_allclose(d2, s * d1 @ r.T, atol=5e-3 * s * scale)
+
+
+def test_closed_lips_with_points_on_the_two_walls_of_their_crease_are_connected(shared_data):
+    """Lee Perry-Smith's closed lips are two sheets pressed together: from the upper lip's underside to
+    the lower lip's top is 0.035 IOD in space but 24 edges (0.74 IOD) along the mesh. Inner-lip points on
+    the two walls, as a render of the head without its colour map places them (vertices 2467 and 2882),
+    are still closed lips: the walls touch (the built-in head's open lips, 0.022 IOD apart, do not:
+    test_builtin_head_assets)."""
+    lps = shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
+    mesh = load_mesh(lps)
+    spec = read_landmarks(shipped_landmarks(lps))
+    v, t = mesh.vertices, mesh.triangles
+    iod = face_frame(v, mouth_landmarks(spec)).iod
+    upper, lower = 2467, 2882
+    # The two walls: the upper faces down, the lower up, no short mesh path between them.
+    assert not lips_connected(v, t, upper, lower)
+    assert lips_connected(v, t, upper, lower, iod=iod)
 
 
 def test_closed_lips_are_cut_open(shared_data, builtin_head):
