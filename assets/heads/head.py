@@ -281,22 +281,44 @@ def rig_checked(
     mesh: HeadMesh, spec: Mapping[str, object] | None, **rig_options: Any
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
-    ``(rig, the mesh it animates, RigReport)``. A hollow head whose closed lips were cut and whose rig fails
-    its checks is rigged again with the fold repair on the final mesh (``walls_in_repair=False``), and that
-    rig kept if it passes:
-    the repair smoothing across the crease's hidden walls passes Lee Perry-Smith with its hand landmarks
-    but not its automatic-landmark and glTF-Transform copies, the repair on the final mesh the other way
-    round (docs/animation.md, "Any head, cleanly"), so a head gets whichever passes (twice the repair
-    time, only for such a head that fails the first)."""
+    ``(rig, the mesh it animates, RigReport)``. Tried in this order, the first rig that passes kept (else
+    the first one without clean lips): a closed-lip cut (1) with clean lips (``clean_lips=True``: fewer
+    islands, no slit into the upper lip, smoothed seam rows; docs/animation.md, "Clean lips"), on a hollow
+    head (2) also with the fold repair on the final mesh (``walls_in_repair=False``), then (3) without clean
+    lips, as before, and on a hollow head (4) with the repair on the final mesh: the repair smoothing across
+    the crease's hidden walls passes some rigs of Lee Perry-Smith, the repair on the final mesh others
+    ("Any head, cleanly"). A head with no cut is rigged once; a cut head up to four times, only while its
+    rigs fail. Meta "rig_attempts": the failures of the rigs tried before the one returned."""
     from assets.heads.rigging import rig_head
 
-    rig, rigged = rig_head(mesh, spec, **rig_options)
-    report = head_checks(Head(rig, rigged))
-    if report.passed or not rig.meta.get("inner_lip_removed"):
-        return rig, rigged, report
-    rig2, rigged2 = rig_head(mesh, spec, **rig_options, walls_in_repair=False)
-    report2 = head_checks(Head(rig2, rigged2))
-    return (rig2, rigged2, report2) if report2.passed else (rig, rigged, report)
+    tries: list[dict[str, Any]] = [
+        {"clean_lips": True},
+        {"clean_lips": True, "walls_in_repair": False},
+        {},
+        {"walls_in_repair": False},
+    ]
+    attempts: list[dict[str, object]] = []
+    hollow = False  # known from the first rig: a cut whose crease's hidden walls were removed
+    plain: tuple[Rig, HeadMesh, RigReport] | None = None
+    for options in tries:
+        if options.get("walls_in_repair") is False and not hollow:
+            continue
+        rig, rigged = rig_head(mesh, spec, **rig_options, **options)
+        report = head_checks(Head(rig, rigged))
+        if not rig.meta.get("lip_seam_cut"):
+            return rig, rigged, report  # no cut: the other rigs would be this one
+        hollow = bool(rig.meta.get("inner_lip_removed"))
+        if report.passed:
+            break
+        attempts.append({**options, "failures": list(report.failures)})
+        if not options:
+            plain = (rig, rigged, report)
+    else:
+        assert plain is not None  # the third try always runs
+        rig, rigged, report = plain
+    if attempts:
+        rig.meta["rig_attempts"] = attempts
+    return rig, rigged, report
 
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):

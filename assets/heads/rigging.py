@@ -265,6 +265,7 @@ def cut_mouth(
     path: list[int] | None = None,
     reach: float = 0.25,
     forward: np.ndarray | None = None,
+    hidden: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
     indices) that stays closest to the straight corner-to-corner line (passing through the vertex
@@ -274,8 +275,11 @@ def cut_mouth(
     with faces above it, so the two lips become separate surfaces (see :func:`_lower_faces`).
     ``path``: the corner-to-corner vertex path to cut along, if already chosen (:func:`cut_path`,
     :func:`level_path`). ``forward`` (3,), the face's forward axis: if given, the upper lip's skin beside
-    the corners is kept whole (:func:`_mend_front`). Returns new vertices (n', 3), triangles, uvs and the
-    (n',) index of the original vertex."""
+    the corners is kept whole (:func:`_mend_front`). ``hidden`` (m,) bool, the faces the mesh loses after
+    the cut (a hollow head's crease walls; all False for none): if given, the side assignment is changed so
+    that the cut leaves fewer islands on the faces that stay (:func:`_without_islands`) and no slit into the
+    upper lip's skin (:func:`_without_rim_ties`). Returns new vertices (n', 3), triangles, uvs and the (n',)
+    index of the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
     a, b = v[left], v[right]
@@ -300,24 +304,207 @@ def cut_mouth(
     # the path runs along the front of the crease and the crease's back wall joins both lips' inner
     # surfaces; a cut of the path's vertices alone left that bridge (the lips stayed one surface
     # behind the cut, which tore into shards across the opening).
-    used_below = np.zeros(len(v), dtype=bool)
-    used_above = np.zeros(len(v), dtype=bool)
-    used_below[t[lower].ravel()] = True
-    used_above[t[near & ~lower].ravel()] = True
-    split = np.flatnonzero(used_below & used_above)
-    split = split[(split != left) & (split != right)]
+    if hidden is not None:
+        lower = _without_islands(v, t, path, lower, near, up, ab / length, (left, right), np.asarray(hidden, bool))
+        lower = _without_rim_ties(v, t, path, lower, near, up, ab / length, np.asarray(hidden, bool))
+    split, take = _split_faces(v, t, path, lower, near, up, ab / length, (left, right))
     if not len(split):
         return v, t, uvs, np.arange(len(v))
     new_index = np.arange(len(v))
     new_index[split] = len(v) + np.arange(len(split))
-    # Faces beyond the region that touch a split vertex (its rim) take the side their centroid is on.
-    rim = ~near & np.isin(t, split).any(axis=1) & _below_path(v, t, path, up, ab / length)
-    take = lower | rim
     t[take] = new_index[t[take]]
     origin = np.concatenate([np.arange(len(v)), split])
     v2 = np.concatenate([v, v[split]])
     uv2 = None if uvs is None else np.concatenate([uvs, np.asarray(uvs)[split]])
     return v2, t, uv2, origin
+
+
+def _split_faces(
+    v: np.ndarray,
+    t: np.ndarray,
+    path: list[int],
+    lower: np.ndarray,
+    near: np.ndarray,
+    up: np.ndarray,
+    side_ax: np.ndarray,
+    corners: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cut of :func:`cut_mouth` for a side assignment: ((k,) the vertices split, shared by a face
+    above and a face below the mouth surface near the path, the corners never; (m,) bool the faces that
+    take the copies: those below, and those beyond the region that touch a split vertex (its rim) and
+    whose centroid is below the path)."""
+    used_below = np.zeros(len(v), dtype=bool)
+    used_above = np.zeros(len(v), dtype=bool)
+    used_below[t[lower].ravel()] = True
+    used_above[t[near & ~lower].ravel()] = True
+    split = np.flatnonzero(used_below & used_above)
+    split = split[~np.isin(split, corners)]
+    rim = ~near & np.isin(t, split).any(axis=1) & _below_path(v, t, path, up, side_ax)
+    return split, lower | rim
+
+
+ISLAND_ROUNDS = 20
+"""At most this many rounds of :func:`_without_islands` (each joins every island left to a lip)."""
+
+
+def _edge_pairs(t: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces on either side of each interior edge of ``t`` (m, 3): (e,) face a, (e,) face b, (e,) the
+    edge's key ``min * n_vertices + max`` (vertex indices)."""
+    e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=2).reshape(-1, 2)
+    key = e[:, 0] * n_vertices + e[:, 1]
+    face = np.repeat(np.arange(len(t)), 3)
+    o = np.argsort(key, kind="stable")
+    same = key[o][1:] == key[o][:-1]
+    return face[o[:-1][same]], face[o[1:][same]], key[o[:-1][same]]
+
+
+def _face_components(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndarray:
+    """(m,) the component of each face of ``t``, faces joined through shared edges, faces ``gone`` (m,) bool
+    left out (each its own component)."""
+    from scipy.sparse.csgraph import connected_components
+
+    fa, fb, _ = _edge_pairs(t, n_vertices)
+    keep = ~gone[fa] & ~gone[fb]
+    fa, fb = fa[keep], fb[keep]
+    g = sp.csr_matrix((np.ones(len(fa)), (fa, fb)), shape=(len(t),) * 2)
+    return connected_components(g, directed=False)[1]
+
+
+def _without_islands(
+    v: np.ndarray,
+    t: np.ndarray,
+    path: list[int],
+    lower: np.ndarray,
+    near: np.ndarray,
+    up: np.ndarray,
+    side_ax: np.ndarray,
+    corners: tuple[int, int],
+    gone: np.ndarray,
+) -> np.ndarray:
+    """``lower`` (m,) bool with fewer islands on the faces that stay (``gone`` (m,) bool: the faces the mesh
+    loses after the cut, a hollow head's hidden crease walls). An island is a component of the cut mesh
+    (faces joined through shared edges, walls left out) with faces near the path or on the lower side that
+    is neither lip (the largest component holding each side's near faces). Each island whose edges to the
+    other faces (path edges and walls not counted) lead more often to the other side than to its own joins
+    the other side (its near faces change side), unless that leaves a path vertex split before unsplit;
+    each island is judged once, round after round, until no island is left or none joins. Small ones left
+    are dropped after the walls (:func:`lip_islands`).
+
+    On Lee Perry-Smith the cut left upper-side faces on the path (the path edges' upper seeds; hand
+    landmarks 4, 12 and 4 faces) cut off from the upper lip by crease faces the lower side's reach took
+    (CREASE_TO_LOWER); once the walls went they joined neither lip and at /a/ hung in the opening as pink
+    flecks (docs/animation.md, "The lip edge notch"). Removing them after the cut opened a gap along the
+    closed lip line, re-attaching them to their own lip stretched, and corridors to it ran through the walls
+    or tore the lip ("Islands prevented at the cut"): on the surface that stays they lie on the other lip,
+    but joining it leaves their path vertices unsplit, the lips tied there (at the inner-lip landmark), so
+    those keep their side; islands off the path join ("Clean lips")."""
+    fa, fb, key = _edge_pairs(t, len(v))
+    pe = np.sort(np.column_stack([path[:-1], path[1:]]), axis=1)
+    on_path = np.isin(key, pe[:, 0] * len(v) + pe[:, 1])
+    keep = ~on_path & ~gone[fa] & ~gone[fb]
+    fa, fb = fa[keep], fb[keep]
+    lower = lower.copy()
+    joined = np.zeros(len(t), dtype=bool)  # islands judged: never again
+    interior = np.intersect1d(path[1:-1], _split_faces(v, t, path, lower, near, up, side_ax, corners)[0])
+    for _ in range(ISLAND_ROUNDS):
+        split, take = _split_faces(v, t, path, lower, near, up, side_ax, corners)
+        new_index = np.arange(len(v))
+        new_index[split] = len(v) + np.arange(len(split))
+        comp = _face_components(np.where(take[:, None], new_index[t], t), len(v) + len(split), gone)
+        size = np.bincount(comp)
+        lips = []
+        for side in (False, True):
+            held = np.unique(comp[(take == side) & near & ~gone])
+            if len(held):
+                lips.append(held[np.argmax(size[held])])
+        island = (near | take) & ~gone & ~joined & ~np.isin(comp, lips)
+        if not island.any():
+            break
+        changed = False
+        for c in np.unique(comp[island]):
+            members = comp == c
+            side = bool(take[members].mean() > 0.5)
+            beside = np.r_[fb[members[fa] & ~members[fb]], fa[members[fb] & ~members[fa]]]
+            if (take[beside] != side).sum() > (take[beside] == side).sum():
+                trial = lower.copy()
+                trial[members & near] = not side
+                # Every interior path vertex stays split: joined across the path, an island tied the lips at
+                # its path vertices (Lee Perry-Smith: the inner-lip landmark's vertex, whose lips' gap then did
+                # not answer mouth_open at all and the closure check measured a vertex against itself).
+                if np.isin(interior, _split_faces(v, t, path, trial, near, up, side_ax, corners)[0]).all():
+                    lower = trial
+                    changed = True
+                joined |= members
+        if not changed:
+            break
+    return lower
+
+
+RIM_TIE_ROUNDS = 20
+"""At most this many rounds of :func:`_without_rim_ties` (each moves the lower side's edge one ring of faces)."""
+
+
+def _without_rim_ties(
+    v: np.ndarray,
+    t: np.ndarray,
+    path: list[int],
+    lower: np.ndarray,
+    near: np.ndarray,
+    up: np.ndarray,
+    side_ax: np.ndarray,
+    gone: np.ndarray,
+) -> np.ndarray:
+    """``lower`` with no lower-side face tied to the upper lip's skin at the edge of the near region: a vertex
+    above the path used by lower-side faces and by faces beyond the region above the path but by no
+    upper-side face near it is not split, so the lower faces pull a slit into the upper lip there (Lee
+    Perry-Smith's meshopt file: a V from the cut up to vertex 5020, 0.05 IOD off the lip's course); those
+    lower faces join the upper side, round after round."""
+    above = ~_below_path(v, t, path, up, side_ax)
+    rim = ~near & above & ~gone  # (the hidden walls go: a tie through them is none)
+    near = near & ~gone
+    pe = np.sort(np.column_stack([path[:-1], path[1:]]), axis=1)
+    ts = np.sort(t, axis=1)
+    fixed = np.zeros(len(t), dtype=bool)
+    for a, b in ((0, 1), (1, 2), (0, 2)):
+        fixed |= np.isin(ts[:, a] * len(v) + ts[:, b], pe[:, 0] * len(v) + pe[:, 1])
+    lower = lower.copy()
+    for _ in range(RIM_TIE_ROUNDS):
+        n_rim = np.bincount(t[rim].ravel(), minlength=len(v))
+        n_lo = np.bincount(t[near & lower].ravel(), minlength=len(v))
+        n_up = np.bincount(t[near & ~lower].ravel(), minlength=len(v))
+        tie = (n_rim > 0) & (n_lo > 0) & (n_up == 0)
+        tie[path] = False
+        flip = near & lower & ~fixed & tie[t].any(axis=1)
+        if not flip.any():
+            break
+        lower[flip] = False
+    return lower
+
+
+SEAM_SMOOTH = 0.06
+"""IOD: with ``clean_lips``, the cut seam's rows mix the nearest simple vertices by a Gaussian of this width
+(:func:`realtime_core.face.rig._seam_rows`). Chosen on Lee Perry-Smith's automatic-landmark rig among 0.04,
+0.06 and 0.08 (8, 8, 12 neighbours) by the rule "the lowest lip edge notch whose rig passes its checks":
+notch 0.0134, 0.0118, 0.0166 (stretch 2.99, 2.99, 3.85; 0.0166 with the inverse-square rows), measured before
+islands were kept from unsplitting path vertices (docs/animation.md, "Clean lips"; not chosen again since)."""
+
+LIP_ISLAND_FACES = 3
+"""Faces: a piece of the cut mesh this small, apart from the rest and holding a vertex of the cut, is dropped
+when the islands are joined (:func:`lip_islands`)."""
+
+
+def lip_islands(triangles: np.ndarray, n_vertices: int, cut: np.ndarray) -> np.ndarray:
+    """(m,) bool the faces of the pieces of ``triangles`` (m, 3) (faces joined through shared edges) of at
+    most LIP_ISLAND_FACES faces that hold one of the vertices ``cut`` (the split vertices and their copies).
+    What :func:`_without_islands` leaves, a fleck in the opening scoring the lip edge notch's ceiling (0.05
+    IOD): with only path edges and hidden walls beside it, or on the path (two single faces on Lee
+    Perry-Smith's automatic-landmark cut before joins that unsplit path vertices were refused; none since)."""
+    t = np.asarray(triangles, dtype=np.int64)
+    comp = _face_components(t, n_vertices, np.zeros(len(t), dtype=bool))
+    size = np.bincount(comp)
+    touches = np.zeros(len(size), dtype=bool)
+    touches[comp[np.isin(t, cut).any(axis=1)]] = True
+    return (size[comp] <= LIP_ISLAND_FACES) & touches[comp]
 
 
 SLIVER_TIE = 0.2
@@ -630,6 +817,7 @@ def rig_head(
     simple: SimpleFace | None = None,
     head_calibration: bool = True,
     walls_in_repair: bool = True,
+    clean_lips: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -639,8 +827,13 @@ def rig_head(
     head's own measured response (:func:`realtime_core.face.rig.recalibrate`). ``walls_in_repair``: on a
     hollow head whose closed lips are cut, the fold repair smooths across the crease's hidden inner walls
     before they are removed (True) or runs on the final mesh without them (False); neither passes every
-    head (:func:`assets.heads.head.rig_checked` tries the second when the first fails its checks). Raises
-    MeshError / LandmarkError naming the file.
+    head (:func:`assets.heads.head.rig_checked` tries the second when the first fails its checks).
+    ``clean_lips``: on cut closed lips, the cut's side assignment joins the pieces it would leave apart
+    from both lips to the lip beside them (:func:`_without_islands`; on a hollow head, judged on the faces
+    that stay once the hidden walls go) and unties the lower side from the upper lip's skin
+    (:func:`_without_rim_ties`), the small pieces left are dropped (:func:`lip_islands`) and the seam's
+    rows are smoothed (SEAM_SMOOTH); meta "clean_lips" is then true (rig_checked tries this first).
+    Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
     if simple is None or mesh.name == "builtin":
@@ -699,8 +892,24 @@ def rig_head(
             for k in ("upper_inner", "lower_inner"):
                 points[k] = np.asarray(v[front], dtype=np.float64)
             meta["landmarks"] = {k: p.tolist() for k, p in points.items()}
+            # A hollow head loses the crease's hidden walls after the cut (below): the cut leaves no island
+            # on the faces that stay (see _without_islands).
+            hidden = None
+            if clean_lips and _has_inner_mouth(mesh):
+                hidden = np.zeros(len(t), dtype=bool)
+            elif clean_lips:
+                uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
+                hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap))
             v, t, uv, origin = cut_mouth(
-                v, t, snap["corner_left"], snap["corner_right"], frame.axes[1], uv, path=path, forward=frame.axes[2]
+                v,
+                t,
+                snap["corner_left"],
+                snap["corner_right"],
+                frame.axes[1],
+                uv,
+                path=path,
+                forward=frame.axes[2],
+                hidden=hidden,
             )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
@@ -721,7 +930,17 @@ def rig_head(
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
         rig = build_rig(
-            v, t, placed, cal, frame, config=config, head_uvs=uv, allowed=allowed, meta=meta, keep_apart=cut_copies
+            v,
+            t,
+            placed,
+            cal,
+            frame,
+            config=config,
+            head_uvs=uv,
+            allowed=allowed,
+            meta=meta,
+            keep_apart=cut_copies,
+            seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
@@ -773,6 +992,11 @@ def rig_head(
         if walls is not None:
             rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
             t = cut_mesh.triangles
+        if clean_lips and cut_copies is not None:
+            drop = lip_islands(t, len(v), np.r_[origin[cut_copies], cut_copies])
+            t = np.asarray(t, dtype=np.int64)[~drop]
+            meta_i = {**rig.meta, "clean_lips": True, "lip_islands_removed": int(drop.sum())}
+            rig = replace(rig, triangles=t.astype(np.int32), meta=meta_i)
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the

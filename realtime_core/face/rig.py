@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 24
+RIG_ALGORITHM = 25
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -207,6 +207,7 @@ def head_weights(
     seam_pairs: np.ndarray | None = None,
     lower_lip: np.ndarray | None = None,
     upper_lip: np.ndarray | None = None,
+    seam_smooth: float | None = None,
 ) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
@@ -214,7 +215,8 @@ def head_weights(
     displacement fields for the RBF's GCV; ``allowed`` (n_h,) bool control-point candidates;
     ``seam_pairs`` (k, 2) the (upper, lower) sides of a cut lip seam, coincident at rest, and
     ``lower_lip`` (n_s,) bool the simple vertices that open with the jaw: a control point that
-    landed on the wrong side of the seam (both sides are equally close) moves to the other side."""
+    landed on the wrong side of the seam (both sides are equally close) moves to the other side.
+    ``seam_smooth``: see :func:`_seam_rows` (``smooth``)."""
     h = np.asarray(head_vertices, dtype=np.float64)
     proj = project(
         simple.vertices,
@@ -246,7 +248,7 @@ def head_weights(
         use = _same_side_controls(h, head_triangles, proj.control, seam_pairs, lower_lip, upper_lip, frame.iod)
         if config.method == "harmonic":
             pinned, pinned_rows, near_seam = _seam_rows(
-                h, head_triangles, simple, frame, seam_pairs, lower_lip, upper_lip, proj.control
+                h, head_triangles, simple, frame, seam_pairs, lower_lip, upper_lip, proj.control, smooth=seam_smooth
             )
             use = use & ~near_seam
     info = {
@@ -323,6 +325,10 @@ corner (Lee Perry-Smith, hand-picked landmarks: its last flipped triangle, a sli
 at 0.42 IOD, went, with 0.05 as with 0.1; the meshopt file's stretch 4.14 -> 4.12 / 4.09)."""
 
 
+SEAM_NEIGHBOURS = 8
+"""How many nearest simple vertices a seam row mixes when it is smoothed (:func:`_seam_rows`, ``smooth``)."""
+
+
 def _seam_rows(
     h: np.ndarray,
     triangles: np.ndarray,
@@ -334,6 +340,7 @@ def _seam_rows(
     control: np.ndarray,
     *,
     neighbours: int = 3,
+    smooth: float | None = None,
 ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """The two sides of a cut lip seam as boundary rows of the harmonic field.
 
@@ -345,6 +352,12 @@ def _seam_rows(
     not open with the jaw, in the frontal plane), every vertex of the lower side the lower lip's
     (simple vertices that are not still); at the corners both sides reach the same corner vertices,
     and within SEAM_TAPER IOD of them a side's row blends into that corner row.
+    ``smooth`` (IOD): the weights of the SEAM_NEIGHBOURS nearest instead, a Gaussian of this width in
+    the distance beyond the nearest one, so a row changes gradually along the seam. The inverse-square
+    weights of the 3 nearest jump where those three change and put nearly all the weight on a simple
+    vertex a seam vertex lies close to, so neighbouring seam vertices ~0.05 IOD apart took different
+    motions (Lee Perry-Smith, automatic landmarks: its lower lip's inner edge stepped 0.03-0.09 IOD at
+    /a/, the steps right and left of centre in the close-ups; docs/animation.md, "Clean lips").
     Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
     within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
     from scipy.sparse.csgraph import dijkstra
@@ -378,13 +391,16 @@ def _seam_rows(
             continue
         blend = np.clip(1.0 - end_d[side] / max(taper, 1e-300), 0.0, 1.0)
         for ids, share in ((np.flatnonzero(cand), 1.0 - blend), (np.arange(n_s), blend)):
-            k = min(neighbours, len(ids))
+            k = min(neighbours if smooth is None else SEAM_NEIGHBOURS, len(ids))
             keep = share > 0
             if not k or not keep.any():
                 continue
             d, j = cKDTree(qs[ids]).query(q[side[keep]], k=k)
             d, j = d.reshape(-1, k), j.reshape(-1, k)
-            w = 1.0 / np.maximum(d, 1e-6 * frame.iod) ** 2
+            if smooth is None:
+                w = 1.0 / np.maximum(d, 1e-6 * frame.iod) ** 2
+            else:
+                w = np.exp(-0.5 * ((d - d[:, :1]) / (smooth * frame.iod)) ** 2)
             w *= (share[keep] / w.sum(axis=1))[:, None]
             rows.append(np.repeat(np.flatnonzero(keep) + base, k))
             cols.append(ids[j].ravel())
@@ -453,11 +469,13 @@ def build_rig(
     allowed: np.ndarray | None = None,
     meta: dict[str, Any] | None = None,
     keep_apart: np.ndarray | None = None,
+    seam_smooth: float | None = None,
 ) -> Rig:
     """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights).
 
     Coincident vertices are welded for the connectivity tests and share weights, except those in
     ``keep_apart`` (indices, e.g. the copies made by cutting a lip seam), which stay separate.
+    ``seam_smooth``: the cut seam's rows smoothed (IOD, :func:`_seam_rows`), None: as before.
     """
     basis = calibration.basis(simple)  # (n_s*3, 4)
     h = np.asarray(head_vertices, dtype=np.float64)
@@ -497,6 +515,7 @@ def build_rig(
         seam_pairs=seam_w,
         lower_lip=lower,
         upper_lip=upper,
+        seam_smooth=seam_smooth,
     )
     # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
     g = g_w[canon]

@@ -284,3 +284,172 @@ def test_control_points_near_the_cuts_ends_are_left_to_the_seam_rows():
     _pin, _rows, near = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control)
     assert near.tolist() == [True, False, False]
     assert SEAM_CLEAR < SEAM_TAPER
+
+
+def _face_components(t: np.ndarray, faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """(number, (len(faces),) labels) of the components of ``t[faces]`` joined through shared edges,
+    counted from the triangles alone (scipy)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    sub = t[faces]
+    edge_face: dict[tuple[int, int], list[int]] = {}
+    for f, tri in enumerate(sub):
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            edge_face.setdefault((min(tri[a], tri[b]), max(tri[a], tri[b])), []).append(f)
+    pairs = [(fs[0], fs[1]) for fs in edge_face.values() if len(fs) == 2]
+    rows = [p[0] for p in pairs] + [p[1] for p in pairs]
+    cols = [p[1] for p in pairs] + [p[0] for p in pairs]
+    g = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(sub),) * 2)
+    return connected_components(g, directed=False)
+
+
+def _lips_with_an_island(hidden_cells: list[tuple[int, int]]):
+    """A flat 9 x 7 vertex grid (x -1..1, y 0.75..-0.75), cut along its middle row (y = 0, a path from
+    border to border), with a side assignment as the lower side's reach leaves it on a crease: the two
+    upper faces of cells (band 2, columns 3 and 4) on the path (the path edges' upper seeds) and the
+    rest of the upper side, but the cells round them (band 2 columns 2 and 5, band 1 columns 2 to 5)
+    taken by the lower side. ``hidden_cells``: (band, column) cells whose faces the cut mesh loses
+    afterwards (the crease's hidden walls). Returns v, t, path, lower, near, gone, the island's faces."""
+    cols, rows = 9, 7
+    xs = np.linspace(-1.0, 1.0, cols)
+    ys = np.linspace(0.75, -0.75, rows)
+    v = np.array([[x, y, 0.0] for y in ys for x in xs])
+    t = _grid_triangles(rows, cols)
+
+    def cell(j: int, i: int) -> list[int]:
+        return [2 * (j * (cols - 1) + i), 2 * (j * (cols - 1) + i) + 1]
+
+    lower = v[t].mean(axis=1)[:, 1] < 0
+    for j, i in [(2, 2), (2, 5), (1, 2), (1, 3), (1, 4), (1, 5)]:
+        lower[cell(j, i)] = True
+    gone = np.zeros(len(t), dtype=bool)
+    for j, i in hidden_cells:
+        gone[cell(j, i)] = True
+    path = list(range(3 * cols, 4 * cols))
+    island = np.array(cell(2, 3) + cell(2, 4))
+    return v, t, path, lower, np.ones(len(t), dtype=bool), gone, island
+
+
+def _cut(v, t, path, lower, near):
+    from assets.heads.rigging import _split_faces
+
+    split, take = _split_faces(
+        v, t, path, lower, near, np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]), (path[0], path[-1])
+    )
+    new_index = np.arange(len(v))
+    new_index[split] = len(v) + np.arange(len(split))
+    return np.where(take[:, None], new_index[t], t), take
+
+
+UP, SIDE = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])
+
+
+def test_an_island_off_the_path_joins_the_lip_around_it():
+    """Upper-side faces (band 2, columns 3 and 4) enclosed by lower-side ones (a pocket of the lower side
+    above the path, bands 1 to 3) are a piece of the cut mesh apart from both lips; every face beside them is the lower
+    lip's, so they join it: the cut mesh is then two pieces (counted by scipy from the triangles alone), the
+    lips share no vertex but the corners, and the path vertices split before stay split."""
+    from assets.heads.rigging import _without_islands
+
+    cols, rows = 9, 9  # the path along vertex row 4 (y = 0)
+    xs, ys = np.linspace(-1.0, 1.0, cols), np.linspace(1.0, -1.0, rows)
+    v = np.array([[x, y, 0.0] for y in ys for x in xs])
+    t = _grid_triangles(rows, cols)
+    path = list(range(4 * cols, 5 * cols))
+    near, gone = np.ones(len(t), dtype=bool), np.zeros(len(t), dtype=bool)
+    lower = v[t].mean(axis=1)[:, 1] < 0
+
+    def cell(j: int, i: int) -> list[int]:
+        return [2 * (j * (cols - 1) + i), 2 * (j * (cols - 1) + i) + 1]
+
+    for j, i in [(3, 2), (3, 3), (3, 4), (3, 5), (2, 2), (2, 5), (1, 2), (1, 3), (1, 4), (1, 5)]:
+        lower[cell(j, i)] = True
+    island = np.array(cell(2, 3) + cell(2, 4))
+    before, _ = _cut(v, t, path, lower, near)
+    assert _face_components(before, np.arange(len(t)))[0] == 3  # the upper lip, the lower lip, the island
+    fixed = _without_islands(v, t, path, lower, near, UP, SIDE, (path[0], path[-1]), gone)
+    after, take = _cut(v, t, path, fixed, near)
+    assert _face_components(after, np.arange(len(t)))[0] == 2
+    assert take[island].all() and (fixed != lower).sum() == len(island)  # the island alone changes side
+    upper_vertices = set(after[~take].ravel().tolist())
+    lower_vertices = set(after[take].ravel().tolist())
+    assert upper_vertices & lower_vertices <= {path[0], path[-1]}  # the corners only
+
+    def split(cut, side):  # path vertices the upper side keeps while the lower side has their copy
+        return {p for p in path[1:-1] if (cut[~side] == p).any() and not (cut[side] == p).any()}
+
+    assert split(after, take) == split(before, _cut(v, t, path, lower, near)[1])
+
+
+def test_an_island_on_the_path_keeps_its_side_so_every_path_vertex_stays_split():
+    """Upper-side faces on the path (its upper seeds) cut off from the upper lip by faces the lower side took:
+    joining them to the lower lip would leave their path vertices unsplit, the lips tied there (on Lee
+    Perry-Smith the inner-lip landmark's vertex: the lips' gap then did not answer mouth_open and the
+    closure check measured a vertex against itself). The rule leaves them: every interior path vertex still
+    has a copy in the cut mesh."""
+    from assets.heads.rigging import _without_islands
+
+    for hidden in ([], [(1, i) for i in range(1, 7)] + [(2, 1), (2, 6)]):
+        v, t, path, lower, near, gone, island = _lips_with_an_island(hidden)
+        fixed = _without_islands(v, t, path, lower, near, UP, SIDE, (path[0], path[-1]), gone)
+        np.testing.assert_array_equal(fixed, lower)
+        after, take = _cut(v, t, path, fixed, near)
+        assert not take[island].any()
+        for p in path[1:-1]:  # used by both sides: the upper side keeps p, the lower side its copy
+            assert (after[~take] == p).any() and not (after[take] == p).any()
+
+
+def test_an_island_with_only_the_cut_and_walls_beside_it_is_left_and_then_dropped():
+    """An island whose only edges to the rest are path edges and hidden walls has no lip beside it: the side
+    rule leaves it, and :func:`lip_islands` finds exactly its faces (no more: every face of the lips stays),
+    as scipy's components of the faces that stay count it."""
+    from assets.heads.rigging import LIP_ISLAND_FACES, _without_islands, lip_islands
+
+    # The island is one cell's two upper faces on the path (band 2, column 4); the walls are the cells
+    # round it on the upper side.
+    cols = 9
+    hidden = [(2, 3), (2, 5), (1, 3), (1, 4), (1, 5)]
+    v, t, path, lower, near, gone, _ = _lips_with_an_island(hidden)
+    lower = v[t].mean(axis=1)[:, 1] < 0  # a plain cut: upper faces above the path, lower below
+    island = np.array([2 * (2 * (cols - 1) + 4), 2 * (2 * (cols - 1) + 4) + 1])
+    fixed = _without_islands(v, t, path, lower, near, UP, SIDE, (path[0], path[-1]), gone)
+    np.testing.assert_array_equal(fixed, lower)
+    after, _ = _cut(v, t, path, fixed, near)
+    stays = np.flatnonzero(~gone)
+    n, labels = _face_components(after, stays)
+    sizes = np.bincount(labels)
+    assert n == 3 and sorted(sizes.tolist())[0] == len(island) <= LIP_ISLAND_FACES
+    copies = np.unique(after[after >= len(v)])
+    drop = lip_islands(after[stays], len(v) + len(copies), np.r_[path, copies])  # the cut's vertices
+    np.testing.assert_array_equal(stays[drop], island)
+
+
+def test_no_lower_face_stays_tied_to_the_upper_lips_skin_at_the_edge_of_the_cut_region():
+    """Lower-side faces that reach from the path up to the edge of the region the cut may take (band 1 columns
+    3 to 5, above band 2 column 4; the region is bands 1 to 4) share vertices with the upper lip's skin
+    beyond it (band 0) and with no upper face in the region, and those are not split:
+    a slit into the upper lip that opens from the cut to its tip (Lee Perry-Smith's meshopt file, vertex
+    5020). :func:`_without_rim_ties` gives those faces back to the upper side: no vertex of the cut mesh
+    but the corners is then shared by a face of each side."""
+    from assets.heads.rigging import _without_rim_ties
+
+    cols = 9
+    v, t, path, _, _, gone, _ = _lips_with_an_island([])
+    c = v[t].mean(axis=1)
+    near = np.abs(c[:, 1]) < 0.5  # bands 1 to 4 (band height 0.25)
+    lower = c[:, 1] < 0
+    top = [2 * (1 * (cols - 1) + i) + k for i in (3, 4, 5) for k in (0, 1)]
+    lower[top] = True
+    lower[[2 * (2 * (cols - 1) + 4), 2 * (2 * (cols - 1) + 4) + 1]] = True
+
+    def ties(low):
+        after, take = _cut(v, t, path, low, near)
+        both = set(after[take].ravel().tolist()) & set(after[~take].ravel().tolist())
+        return both - {path[0], path[-1]}
+
+    assert ties(lower)  # the slit: band 0's skin and the lower faces share a vertex
+    fixed = _without_rim_ties(v, t, path, lower, near, UP, SIDE, gone)
+    assert not ties(fixed)
+    assert fixed[top].sum() < len(top) / 2  # most given back to the upper lip
+    np.testing.assert_array_equal(fixed[c[:, 1] < 0], lower[c[:, 1] < 0])  # the lower lip unchanged

@@ -110,14 +110,15 @@ def test_the_automatic_landmark_rig_passes_every_check(automatic_rig, tmp_path):
     up (the lip-contact push was spread over the crease walls removed afterwards; a rig file dropped the
     spread altogether) and one edge by the right corner stretched 5.26x at the widest opening; 22: 0 flips,
     4.63; 23: the fold repair on the final mesh, chosen as the first rig fails, 0 flips, 3.41 (all three
-    with its colour map; docs/animation.md, test set). Without it (this rig, RIG_ALGORITHM 24): the lips
-    cut from the same front contact, the first rig passes (fold repair across the crease walls), 0 flips,
-    2.77; before, its lips were never cut (13 flips at mouth_open 0.465, stretch 13.8)."""
+    with its colour map; docs/animation.md, test set). Without it: RIG_ALGORITHM 24, the lips cut from the
+    same front contact, 0 flips, 2.77 (before, its lips were never cut: 13 flips at mouth_open 0.465,
+    stretch 13.8); 25: clean lips tried first (docs/animation.md, "Clean lips")."""
     from assets.heads.head import Head, head_checks
     from assets.heads.rigfile import load_rig, save_rig
 
     head = automatic_rig[1]
     assert head.rig.contact_spread is not None
+    assert head.rig.meta.get("clean_lips"), head.rig.meta.get("rig_attempts")
     rep = head_checks(head)
     assert rep.passed, rep
     rig, mesh = load_rig(save_rig(head.rig, head.mesh, tmp_path / "r.npz"))
