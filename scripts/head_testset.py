@@ -8,7 +8,9 @@ ones, with and without its colour map), the MediaPipe canonical face, Candide-3 
 driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
-objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb.
+objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
+Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs (``heldout_heads.lowpoly_heads``;
+the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
 Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
 the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
 fold, a tear, a sliver or a tooth past the lips shows at this size); the rig checks are printed
@@ -29,6 +31,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
 POSES = {
     "closed": (0.0, 0.0, 0.0, 0.0),
@@ -118,6 +121,10 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             dst = out / f"lps_{kind}.glb"
             subprocess.run([str(cli), kind, str(lps), str(dst)], check=True, capture_output=True)
             heads[f"Lee Perry-Smith, {kind} (glTF-Transform)"] = (dst, {})
+        # Low-poly textured OBJ copies (decimated by meshoptimizer): found in the held-out heads, kept here.
+        from heldout_heads import lowpoly_heads
+
+        heads.update(lowpoly_heads(out / "lowpoly", data))
     mp = data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     if mp.is_file():
         heads["MediaPipe canonical face"] = (mp, {})

@@ -723,39 +723,22 @@ def front_contact(vertices: np.ndarray, triangles: np.ndarray, start: int, forwa
     return int(np.flatnonzero(canon == best)[0])
 
 
-INNER_SNAP = 0.04
-"""IOD: on closed lips, an inner-lip point with no vertex this near lies on a coarse mesh's long edges or
-faces. Lee Perry-Smith decimated to ~1,500 triangles: the automatic point's nearest vertex, 0.14 IOD away on
-the lower lip's front, was also the lower outer-lip point's; the cut pulled through it ran as a V down the
-lower lip, only a wedge at one corner opened and the inner-lip points never parted (open_response 0), yet
-every check passed. The cut then follows the corner-to-corner line alone and the inner-lip vertex is its
-vertex nearest the point (:func:`contact_path`). The test set's automatic inner-lip points lie within 0.016
-IOD of a vertex (Lee Perry-Smith, with and without its colour map), the ~4,000-triangle decimation's 0.068."""
+WINDING_REACH = 1.0
+"""IOD: the face region (around the nose tip) whose triangles' summed normal tells which way a head is wound."""
 
 
-def contact_path(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    left: int,
-    right: int,
-    front: int,
-    inner_at: np.ndarray,
-    axes: np.ndarray,
-    *,
-    iod: float,
-) -> tuple[list[int], int, bool]:
-    """The closed lips' cut path from mouth corner ``left`` to ``right`` and the path vertex standing for the
-    inner-lip point ``inner_at`` (3,): through the front-contact vertex ``front`` (:func:`front_contact`), or,
-    when no vertex lies within INNER_SNAP IOD of the point (a coarse mesh), the corner-to-corner path alone and
-    its interior vertex nearest the point in the face's frontal plane (``axes`` (3, 3): the face frame's x, y,
-    z rows). Returns (path, that vertex, whether the point was off every vertex)."""
+def wound_inwards(
+    vertices: np.ndarray, triangles: np.ndarray, nose_tip: np.ndarray, forward: np.ndarray, *, iod: float
+) -> bool:
+    """True when the triangles within WINDING_REACH IOD of ``nose_tip`` (3,) face, summed by area, away from
+    ``forward`` (3,): the file is wound clockwise (a mirrored export). Rigging then reverses every triangle: the
+    cut's sides, the crease's hidden walls and the fold checks read the winding (Lee Perry-Smith with its
+    winding reversed rigged with lips that never parted, mouth opening 0, while every other figure passed)."""
     v = np.asarray(vertices, dtype=np.float64)
-    if float(np.linalg.norm(v - inner_at, axis=1).min()) <= INNER_SNAP * iod:
-        return cut_path(v, triangles, left, right, through=front), front, False
-    path = cut_path(v, triangles, left, right)
-    inner = np.asarray(path[1:-1] or path, dtype=np.int64)
-    d = (v[inner] - inner_at) @ np.asarray(axes, dtype=np.float64)[:2].T
-    return path, int(inner[np.argmin(np.linalg.norm(d, axis=1))]), True
+    t = np.asarray(triangles, dtype=np.int64)
+    near = np.linalg.norm(v[t].mean(axis=1) - np.asarray(nose_tip, dtype=np.float64), axis=1) <= WINDING_REACH * iod
+    n = np.cross(v[t[near, 1]] - v[t[near, 0]], v[t[near, 2]] - v[t[near, 0]]).sum(axis=0)
+    return bool(n @ np.asarray(forward, dtype=np.float64) < 0)
 
 
 LIPS_TOUCH = 0.01
@@ -900,6 +883,9 @@ def rig_head(
                 f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
                 "'right' swapped? ('left' is the face's own left)"
             )
+        if wound_inwards(v, t, points["nose_tip"], frame.axes[2], iod=frame.iod):
+            t = np.ascontiguousarray(np.asarray(t)[:, ::-1])
+            meta["winding_reversed"] = True
         # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
         # instead of cutting along one lip (which left it hanging from the other, keeping them apart).
         membrane = lip_membrane(
@@ -912,12 +898,7 @@ def rig_head(
             # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
             # contact, where the cut passes (see CONTACT_FACING).
             front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
-            inner_at = 0.5 * (points["upper_inner"] + points["lower_inner"])
-            path, front, off_vertex = contact_path(
-                v, t, snap["corner_left"], snap["corner_right"], front, inner_at, frame.axes, iod=frame.iod
-            )
-            if off_vertex:
-                meta["inner_lip_off_vertex"] = True
+            path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
             path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)

@@ -149,7 +149,7 @@ it was chosen from)."""
 MIN_OPEN_RESPONSE = 0.5
 """The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
 what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
-(assets.heads.rigging.OPEN_RESPONSE_RANGE); the test set's rigs open 0.9-1.1."""
+(assets.heads.rigging.OPEN_RESPONSE_RANGE); the test set's heads open 0.74-1.07 (docs/animation.md)."""
 
 
 @dataclass(frozen=True)

@@ -455,31 +455,19 @@ def test_no_lower_face_stays_tied_to_the_upper_lips_skin_at_the_edge_of_the_cut_
     np.testing.assert_array_equal(fixed[c[:, 1] < 0], lower[c[:, 1] < 0])  # the lower lip unchanged
 
 
-def test_on_a_coarse_mesh_the_cut_keeps_to_the_contact_line_when_no_vertex_is_near_the_inner_lip_point():
-    """Lee Perry-Smith decimated to ~1,500 triangles: the lips' contact line has a vertex every 0.3 IOD, the
-    automatic inner-lip point lies on a long edge between two of them, and its nearest vertex (0.14 IOD away)
-    is on the lower lip's front. The cut pulled through that vertex ran down the lower lip and the mouth did
-    not open at the midline. contact_path then cuts along the corner-to-corner line and names the contact
-    vertex nearest the point; with a vertex at the point (a dense mesh) it still cuts through it."""
-    from assets.heads.rigging import INNER_SNAP, contact_path
+def test_a_head_wound_the_other_way_round_is_recognised():
+    """A mirrored export winds every triangle clockwise: the face's triangles then face into the head, and
+    rigging reads the winding (the cut's sides, the crease's walls). wound_inwards tells the two apart from
+    the face region's summed normal; a head wound either way gives opposite answers."""
+    from assets.heads.rigging import wound_inwards
 
-    # The contact line C0..C3 (y = 0), the upper lip A0..A2 above it, the lower lip B0..B2 below, B1 0.12 under
-    # the midline.
-    xy = [(-1.0, 0.0), (-0.35, 0.0), (0.35, 0.0), (1.0, 0.0), (-1.0, 0.5), (0.0, 0.5), (1.0, 0.5)]
-    xy += [(-1.0, -0.3), (0.0, -0.12), (1.0, -0.3)]
-    v = np.c_[np.array(xy), np.zeros(len(xy))]
-    t = np.array(
-        [[0, 1, 4], [1, 5, 4], [1, 2, 5], [2, 6, 5], [2, 3, 6], [0, 7, 1], [1, 7, 8], [1, 8, 2], [2, 8, 9], [2, 9, 3]]
-    )
-    axes = np.eye(3)
-    left, right, low = 3, 0, 8  # corners; the lower lip's front vertex under the point
-    point = np.array([0.0, -0.02, 0.0])
-    assert np.linalg.norm(v - point, axis=1).min() > INNER_SNAP  # iod 1: no vertex near the point
-    assert int(np.argmin(np.linalg.norm(v - point, axis=1))) == low
-    path, stand, off = contact_path(v, t, left, right, low, point, axes, iod=1.0)
-    assert off and path[0] == left and path[-1] == right
-    assert np.abs(v[path, 1]).max() < 1e-12  # along the contact line, not down through the lower lip
-    assert stand in path[1:-1] and stand in (1, 2)
-    # A vertex at the point: the cut goes through it (the rule for dense meshes is unchanged).
-    path2, stand2, off2 = contact_path(v, t, left, right, low, v[low], axes, iod=1.0)
-    assert not off2 and stand2 == low and low in path2
+    xs = np.linspace(-1.0, 1.0, 11)
+    v = np.array([[x, y, 1.0 - 0.3 * (x * x + y * y)] for y in xs for x in xs])  # a face bulging towards +z
+    t = _grid_triangles(len(xs), len(xs))
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    forward = np.array([0.0, 0.0, 1.0])
+    if (n @ forward).sum() < 0:
+        t = t[:, ::-1]  # the grid's own winding: make it face forward
+    nose = v[len(v) // 2]
+    assert not wound_inwards(v, t, nose, forward, iod=0.5)
+    assert wound_inwards(v, t[:, ::-1], nose, forward, iod=0.5)
