@@ -103,3 +103,21 @@ def test_demo_refuses_a_video_it_cannot_write_before_streaming(out, tmp_path, ca
     assert len(err.splitlines()) == 1 and str(tmp_path / out.split("/")[0]) in err and "Traceback" not in err, err
     assert "streaming" not in captured.out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["record", "http://127.0.0.1:9", "--session", "s", "-o", "{tmp}/notes.txt/take.csv"],  # port 9: nothing listens
+        ["view", "http://127.0.0.1:9", "--session", "s", "--record", "{tmp}/notes.txt/take.mp4"],
+    ],
+    ids=["record", "view"],
+)
+def test_a_take_whose_folder_cannot_be_made_is_refused_before_watching(argv, tmp_path, capsys):
+    """Was found only when the take was written, after the whole session had been watched (the take lost);
+    the closed port shows the folder is checked first."""
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
