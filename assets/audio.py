@@ -78,11 +78,13 @@ def read_wav(
         with wave.open(str(path), "rb") as w:
             ch, width, rate, n = w.getnchannels(), w.getsampwidth(), w.getframerate(), w.getnframes()
             raw = w.readframes(n)
-    except (wave.Error, EOFError) as exc:
-        # the wave module raises EOFError when a header chunk is cut short
+    except (wave.Error, EOFError, RuntimeError) as exc:
+        # the wave module raises EOFError when a header chunk is cut short, and a bare RuntimeError when
+        # a chunk declares more bytes than its RIFF container holds (a mangled header)
         if isinstance(exc, EOFError):
             raise TruncatedFileError(path, "truncated WAV: the header ends early") from exc
-        raise UnsupportedWavError(path, f"not audio: unsupported or corrupt WAV ({exc})") from exc
+        why = str(exc) or "a chunk runs past the end of the RIFF data"
+        raise UnsupportedWavError(path, f"not audio: unsupported or corrupt WAV ({why})") from exc
     if len(raw) < n * ch * width:
         have = len(raw) // max(ch * width, 1)
         raise TruncatedFileError(path, f"truncated WAV: header declares {n} frames, data holds {have}")

@@ -75,6 +75,7 @@ def _parse(data: bytes, source: str | Path) -> tuple[tuple[str, ...], np.ndarray
         raise CorpusFormatError(source, f"cannot be read as CSV ({exc})") from exc
     if not rows or rows[0][:1] != ["t"] or len(rows[0]) < 2:
         got = ",".join(rows[0]) if rows else ""
+        got = got if len(got) <= 60 else got[:60] + "..."  # a one-line JSON given as CSV is all "header"
         raise CorpusFormatError(source, f"header must be 't,<channel names>', got {got!r}")
     names = tuple(c.strip() for c in rows[0][1:])
     width = len(names) + 1

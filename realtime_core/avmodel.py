@@ -188,8 +188,15 @@ def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     return buf.getvalue()
 
 
+NOT_NPZ = "not an .npz file (no zip header)"
+"""Why bytes that do not start as a zip archive are refused. numpy takes any such file for a pickle and
+says to load it unsafely with ``allow_pickle``: advice a user must not be given."""
+
+
 def npz_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
     """The named arrays of ``.npz`` bytes (pickle refused); :class:`ModelFormatError` if it is not one."""
+    if not data.startswith(b"PK"):
+        raise ModelFormatError(f"not a facecast {what} archive: {NOT_NPZ}")
     try:
         npz = np.load(io.BytesIO(data), allow_pickle=False)
         return {k: npz[k] for k in npz.files}

@@ -384,7 +384,10 @@ async def handle_text(server, ws: ServerConnection) -> None:
                             "type": "ended",
                             "frames": session.frames_out,
                             "audio_s": session.samples_out / session.rate_hz,
-                            "first_frame_ms": round(1000 * clock.get("first_frame_s", float("nan")), 1),
+                            # null when nothing was spoken (JSON has no NaN)
+                            "first_frame_ms": (
+                                round(1000 * clock["first_frame_s"], 1) if "first_frame_s" in clock else None
+                            ),
                         }
                     )
                 )

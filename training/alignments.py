@@ -176,14 +176,18 @@ def _audio_for(align: Path) -> Path | None:
     return None
 
 
-def find_aligned_audio(root: str | Path) -> list[tuple[Path, Alignment]]:
+def find_aligned_audio(
+    root: str | Path, *, skipped: list[tuple[Path, str]] | None = None
+) -> list[tuple[Path, Alignment]]:
     """All (wav, phone alignment) pairs under ``root``, sorted by wav path.
 
     Files that are not phone alignments (word-only TextGrids, voice-activity .lab files) are
-    skipped; a WAV with several usable alignments uses the first by name.
+    skipped; a WAV with several usable alignments uses the first by name. ``skipped``, when given,
+    receives ``(wav, "ALIGNMENT: problem")`` for each WAV none of whose alignment files could be read.
     """
     root = Path(root)
     pairs: dict[Path, Alignment] = {}
+    problems: dict[Path, str] = {}  # wav -> the first alignment problem, reported if no alignment works
     for f in sorted(p for p in root.rglob("*") if p.is_file()):
         n = f.name.lower()
         if not (n.endswith(".lab") or n.endswith(".textgrid") or n.endswith(".phone.json")):
@@ -193,8 +197,10 @@ def find_aligned_audio(root: str | Path) -> list[tuple[Path, Alignment]]:
             continue
         try:
             pairs[wav] = read_alignment(f)
-        except AlignmentFormatError:
-            continue  # e.g. a word tier or a VAD label file next to the real phone alignment
+        except AlignmentFormatError as exc:  # e.g. a word tier or a VAD label file next to the phone alignment
+            problems.setdefault(wav, f"{f.name}: {exc.problem}")
+    if skipped is not None:
+        skipped += [(wav, why) for wav, why in sorted(problems.items()) if wav not in pairs]
     return sorted(pairs.items(), key=lambda kv: str(kv[0]))
 
 

@@ -27,12 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import read_wav
+from assets.errors import FileProblem
 from assets.espeak import LANGUAGES, RATE_RANGE_WPM, VARIANTS, Voice, synthesizer
 from training.alignments import find_aligned_audio
 from training.articulatory import ArticulatoryConfig, render_params
 from training.augment import AugmentConfig, augment
 from training.corpus import write_manifest, write_utterance
-from training.errors import AlignmentFormatError, ConfigError
+from training.errors import ConfigError
 from training.params import n_frames_for
 
 SENTENCES_DIR = Path(__file__).parent / "sentences"
@@ -209,26 +210,32 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
 
     real: list[tuple[Path, Path, object]] = []
     transcribed: list[tuple[Path, Path, str]] = []
+    unaligned: list[tuple[Path, str]] = []
     for d in cfg.real_dirs:
-        pairs = find_aligned_audio(d)
+        pairs = find_aligned_audio(d, skipped=unaligned)
         real += [(Path(d), wav, al) for wav, al in pairs]
         if cfg.force_align:
             from training.force_align import find_transcripts
 
             have = {wav for wav, _ in pairs}
             transcribed += [(Path(d), wav, text) for wav, text in find_transcripts(d).items() if wav not in have]
-    skipped: list[tuple[str, str]] = []
+    skipped: list[tuple[str, str]] = [(str(wav), why) for wav, why in unaligned]
     for root, wav, text in wrap(transcribed, total=len(transcribed), desc="aligning", unit="utt"):
         from training.force_align import force_align
 
         try:
             samples, rate = read_wav(wav)
             real.append((root, wav, force_align(samples, rate, text, source=wav)))
-        except AlignmentFormatError as exc:
+        except FileProblem as exc:  # an unreadable WAV, or no alignment
             skipped.append((str(wav), exc.problem))
     real.sort(key=lambda item: str(item[1]))
-    for j, (root, wav, al) in enumerate(wrap(real, total=len(real), desc="real speech", unit="utt")):
-        samples, rate = read_wav(wav)
+    n_real = 0  # utterance ids count the recordings used, so a skipped one leaves no gap
+    for root, wav, al in wrap(real, total=len(real), desc="real speech", unit="utt"):
+        try:
+            samples, rate = read_wav(wav)
+        except FileProblem as exc:  # one bad recording never aborts a build of hundreds
+            skipped.append((str(wav), exc.problem))
+            continue
         group = wav.relative_to(root).parts[0] if len(wav.relative_to(root).parts) > 1 else root.name
         params = render_params(
             al.phones, n_frames_for(len(samples) / rate), inventory=al.inventory, config=cfg.articulatory
@@ -236,7 +243,7 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
         entries.append(
             write_utterance(
                 out,
-                utt_id=f"real-{j:04d}-{wav.stem}",
+                utt_id=f"real-{n_real:04d}-{wav.stem}",
                 samples=samples,
                 sample_rate_hz=rate,
                 params=params,
@@ -251,6 +258,7 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
                 },
             )
         )
+        n_real += 1
 
     manifest = write_manifest(
         out,

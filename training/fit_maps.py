@@ -110,10 +110,21 @@ def fit_maps(head, rig) -> dict:
     }
 
 
-def _literal(a: np.ndarray) -> str:
+def _row(a: np.ndarray, indent: str) -> str:
+    """One 1-D array as a tuple literal, on one line when it fits in 120 columns, else one value a line."""
+    line = "(" + ", ".join(f"{v:.6g}" for v in a) + ("," if a.size == 1 else "") + ")"
+    if len(indent) + len(line) + 1 <= 120:
+        return line
+    return "(\n" + "".join(f"{indent}    {v:.6g},\n" for v in a) + f"{indent})"
+
+
+def _assignment(name: str, a: np.ndarray) -> str:
+    """``name = np.array(...)`` laid out as ``ruff format`` lays it out, so the generated module passes
+    CI's ``ruff format --check`` as written (it did not: every run of fit-maps had to be reformatted)."""
     if a.ndim == 1:
-        return "(" + ", ".join(f"{v:.6g}" for v in a) + ("," if a.size == 1 else "") + ")"
-    return "(\n" + "".join(f"    {_literal(row)},\n" for row in a) + ")"
+        return f"{name} = np.array({_row(a, '')})"
+    rows = "".join(f"        {_row(row, '        ')},\n" for row in a)
+    return f"{name} = np.array(\n    (\n{rows}    )\n)"
 
 
 def module_text(maps: dict) -> str:
@@ -135,5 +146,5 @@ import numpy as np
 '''
     body = []
     for name in ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS"):
-        body.append(f"{name} = np.array({_literal(np.asarray(maps[name]))})\n{name}.setflags(write=False)\n")
+        body.append(f"{_assignment(name, np.asarray(maps[name]))}\n{name}.setflags(write=False)\n")
     return head + "\n".join(body)

@@ -126,3 +126,103 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
         own = (labels[moving] == "").astype(np.float32)
         spread = sp.diags(own) @ spread[src_row[moving]]
     return replace(rig, moving=moving.astype(np.int64), matrix=rig.matrix[rows], meta=meta, contact_spread=spread)
+
+
+JAW_FULL = 0.5
+"""Fraction of the way from the mouth line down to the chin at which an inner-mouth piece follows the jaw
+fully (:func:`inner_mouth_weights`); above the mouth line it keeps the field's motion."""
+INNER_REACH = (1.0, 1.5)
+"""IOD: how far from the mouth's centre an inner-mouth piece may reach sideways and back (the inside of
+a mouth; ears, hair and the back of a bust lie further)."""
+
+
+def inner_mouth_weights(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    part: np.ndarray | None,
+    landmarks: Mapping[str, int],
+    axes: np.ndarray,
+    iod: float,
+) -> np.ndarray:
+    """(n,) float64 in [0, 1]: how much each vertex of an *inner-mouth piece* follows the jaw, 0 elsewhere.
+
+    An inner-mouth piece is a connected piece of the face's own part (the nose tip's; the whole mesh
+    without parts) apart from the face's surface, lying wholly behind the mouth corners (their midpoint,
+    along the face's z = axes[2]), above the chin and within INNER_REACH of the mouth: the inside of a
+    scanned mouth (gums, the cheeks' insides; Lee Perry-Smith has one each side, 225 vertices). The field
+    moves such a piece by the frontal position of its vertices, not with the skin in front of it: at a
+    wide /a/ the chin skin went back 0.25-0.3 IOD and the piece behind it 0.05-0.07, through the chin
+    (a dark fleck below the lower lip). Each vertex's weight rises with its height below the mouth line
+    (along axes[1]), from 0 at the line to 1 at JAW_FULL of the way to the chin: a lower gum follows the
+    jaw as a separate lower-teeth part does (:func:`with_rigid_parts`), the piece stays whole.
+    ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
+    vertex index (corner_left, corner_right, chin, nose_tip)."""
+    from scipy.sparse.csgraph import connected_components
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    n = len(v)
+    out = np.zeros(n)
+    if part is not None:
+        t = t[(np.asarray(part)[t] == part[landmarks["nose_tip"]]).all(axis=1)]
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    adj = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, comp = connected_components(adj, directed=False)
+    used = np.zeros(n, dtype=bool)
+    used[t.ravel()] = True
+    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
+    local = (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod  # (n, 3): sideways, up, out
+    chin = float(local[landmarks["chin"], 1])
+    if not chin < 0:
+        return out
+    face = comp[landmarks["nose_tip"]]
+    inside = (
+        used
+        & (comp != face)
+        & (local[:, 2] < 0)
+        & (local[:, 2] > -INNER_REACH[1])
+        & (np.abs(local[:, 0]) < INNER_REACH[0])
+        & (local[:, 1] > chin)
+    )
+    # A piece counts only if every one of its vertices lies there.
+    outside = np.bincount(comp[used & ~inside], minlength=comp.max() + 1) > 0
+    piece = inside & ~outside[comp]
+    out[piece] = np.clip(local[piece, 1] / (JAW_FULL * chin), 0.0, 1.0)
+    return out
+
+
+def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
+    """The :class:`realtime_core.face.Rig` whose vertex i moves by (1 - w_i) of its own displacement plus
+    w_i of vertex ``anchor``'s (the jaw's, as :func:`with_rigid_parts` takes it); ``weights`` (n,) in
+    [0, 1]. A still vertex with a weight joins the moving set. The lip-contact push is left out of the
+    weighted part (as for rigid jaw parts). Records ``inner_mouth_pieces`` (vertices weighted) in the meta."""
+    n = len(rig.neutral)
+    w = np.asarray(weights, dtype=np.float64)
+    row = -np.ones(n, dtype=np.int64)
+    row[rig.moving] = np.arange(len(rig.moving))
+    if row[anchor] < 0 or not (w > 0).any():
+        return rig
+    moving = np.union1d(rig.moving, np.flatnonzero(w > 0)).astype(np.int64)
+    k = len(moving)
+    own = row[moving]  # -1 for a vertex that did not move
+    wm = w[moving]
+    # New rows: (1 - w) x own rows + w x the anchor's rows, per coordinate.
+    r = (3 * np.arange(k)[:, None] + np.arange(3)).ravel()
+    has = np.repeat(own >= 0, 3)
+    pick_own = sp.csr_matrix(
+        (np.repeat(1.0 - wm, 3)[has], (r[has], (3 * own[:, None] + np.arange(3)).ravel()[has])),
+        shape=(3 * k, rig.matrix.shape[0]),
+    )
+    pick_anchor = sp.csr_matrix(
+        (np.repeat(wm, 3), (r, np.tile(3 * row[anchor] + np.arange(3), k))), shape=(3 * k, rig.matrix.shape[0])
+    )
+    matrix = ((pick_own + pick_anchor) @ rig.matrix).tocsr()
+    matrix.eliminate_zeros()
+    spread = rig.contact_spread
+    if spread is not None:
+        keep = sp.csr_matrix(
+            ((1.0 - wm)[own >= 0], (np.flatnonzero(own >= 0), own[own >= 0])), shape=(k, spread.shape[0])
+        )
+        spread = (keep @ spread).tocsr()
+    meta = {**rig.meta, "inner_mouth_pieces": int((w > 0).sum())}
+    return replace(rig, moving=moving, matrix=matrix, meta=meta, contact_spread=spread)

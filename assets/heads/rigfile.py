@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from assets.errors import RigFileError
 from assets.heads.cache import atomic_savez
 from assets.heads.mesh import HeadMesh
+from realtime_core.avmodel import NOT_NPZ
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import FaceModel, MouthCalibration, Rig
 
@@ -88,6 +89,13 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
     p = Path(path)
     if not p.is_file():
         raise RigFileError(f"{p}: rig file not found")
+    try:
+        with p.open("rb") as fh:
+            zipped = fh.read(2) == b"PK"
+    except OSError as exc:
+        raise RigFileError(f"{p}: cannot be read: {exc.strerror or exc}") from None
+    if not zipped:
+        raise RigFileError(f"{p}: not a readable rig file: {NOT_NPZ}")
     try:
         with np.load(p, allow_pickle=False) as z:
             a = {k: z[k] for k in z.files}

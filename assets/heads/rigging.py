@@ -1048,9 +1048,17 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    from assets.heads.parts import with_rigid_parts  # separate eyes / teeth / tongue: rigid with skull or jaw
+    from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
 
-    rig = with_rigid_parts(rig, out_mesh, snap)
+    rig = with_rigid_parts(rig, out_mesh, snap)  # separate eyes / teeth / tongue: rigid with skull or jaw
+    # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
+    # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
+    # copies and the cavity, appended after its vertices, take no weight).
+    jaw = inner_mouth_weights(mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod)
+    if jaw.any():
+        row_ok = np.isin(snap["chin"], rig.moving)
+        jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]
+        rig = with_jaw_weights(rig, jaw, snap["chin"] if row_ok else snap["lower_lip"])
     if not _has_inner_mouth(mesh) and (
         cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):

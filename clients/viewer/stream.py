@@ -105,7 +105,10 @@ class Recording:
 async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
     """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept)."""
     auth = f"?token={quote(token)}" if token else ""
-    status, body = await http_get(url, "/head/mesh.json" + auth)
+    try:
+        status, body = await http_get(url, "/head/mesh.json" + auth)
+    except OSError as exc:
+        raise ClientError(f"{url}: cannot connect: {exc}") from None
     if status != 200:
         raise ClientError(f"{url}: the server has no head (/head/mesh.json answered {status})")
     try:

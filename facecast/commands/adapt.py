@@ -41,13 +41,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import numpy as np
     from tqdm import tqdm
 
-    from assets.audio import read_audio
-    from assets.modelfile import load_model, save_model
+    from assets.audio import SILENCE_PEAK, read_audio
+    from assets.errors import SilentAudioError
+    from assets.modelfile import ModelFileError, load_model, save_model
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
 
+    # Model files are .npz (shipped, written, documented); `-o low-latency` would write a file that
+    # --model low-latency never reads (a shipped name wins over a file of that name).
+    if Path(args.output).suffix.lower() != ".npz":
+        raise ModelFileError(args.output, "a model file is written as .npz; give a name ending in .npz")
     model = load_model(args.model)
     cfg = AdaptConfig(
         relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance, n_iter=args.iters
@@ -55,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     recordings = []
     for path in tqdm(args.speech, desc="reading speech", unit="file"):
         samples, _ = read_audio(path, rate_hz=model.sample_rate_hz)
+        if float(np.max(np.abs(samples), initial=0.0)) < SILENCE_PEAK:  # its frames would pull a component to silence
+            raise SilentAudioError(path, "silent: no voice to adapt to; nothing written")
         recordings.append(samples)
     seconds = sum(len(x) for x in recordings) / model.sample_rate_hz
     if seconds < 10:

@@ -47,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
 
     from threadpoolctl import threadpool_limits
 
+    from assets.files import make_parent
     from assets.heads.head import resolve_head
     from assets.modelfile import load_model
+    from clients.render.video import check_video_path
     from facecast.demo import SENTENCES, DemoConfig, run_demo, serve_replay, write_mp4
 
     web = Path(__file__).resolve().parents[2] / "clients" / "web"
@@ -64,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         web_root=web if web.is_dir() else None,
         node_modules=npm if npm.is_dir() else None,
     )
+    if cfg.video is not None:  # refused now, not after the session has been streamed in real time
+        make_parent(check_video_path(cfg.video))
     model = load_model(args.model)
     head = resolve_head(args.rig or "builtin")
     with threadpool_limits(1):

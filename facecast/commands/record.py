@@ -38,6 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
+    from assets.files import make_parent
     from clients.errors import ClientError
     from clients.export.files import FORMATS, export_track
     from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
@@ -51,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
         raise ClientError(
             f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
         )
+    make_parent(args.output)  # a folder that cannot be made fails now, not after the whole take
     token = token_from_env(args.token_env)
     head = arkit = None
     if args.output.suffix.lower() == ".glb":

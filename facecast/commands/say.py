@@ -135,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from assets.audio import read_audio, write_wav
+    from assets.files import make_parent
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
@@ -150,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
     check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):
         raise ConfigError(f"{args.audio}: an output would overwrite the --audio recording; give it another name")
+    for o in outs:  # before any work; an .mp4's temporary folder is made beside it, so its folder must exist
+        make_parent(o)
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:

@@ -228,8 +228,11 @@ def decode_corpus(data: bytes) -> StoredCorpus:
     import json
     import zipfile
 
+    from realtime_core.avmodel import NOT_NPZ
     from realtime_core.errors import ModelFormatError
 
+    if not data.startswith(b"PK"):
+        raise ModelFormatError(f"not a unit-corpus archive: {NOT_NPZ}")
     try:
         npz = np.load(io.BytesIO(data), allow_pickle=False)
         a = {k: npz[k] for k in npz.files}

@@ -47,3 +47,14 @@ def test_a_corrupt_wav_is_still_one_error_naming_the_file(tmp_path, ffmpeg):
     bad.write_bytes(b"RIFF\x24\x00\x00\x00WAVEfmt \x10\x00\x00\x00" + b"\xff" * 40)
     with pytest.raises(NotAudioError, match=r"bad\.wav: "):
         read_audio(bad)
+
+
+def test_a_wav_whose_chunk_runs_past_the_riff_size_is_one_error_naming_the_file(tmp_path, ffmpeg):
+    # A chunk declaring more bytes than its RIFF container holds (a cut download, a mangled header):
+    # Python's wave module raises a bare RuntimeError for it, which reached the user as a traceback.
+    good = write_wav(tmp_path / "good.wav", speechlike(0.5, 16000), 16000).read_bytes()
+    bad = tmp_path / "bad.wav"
+    junk = b"junk" + (10**6).to_bytes(4, "little")
+    bad.write_bytes(good[:4] + (20).to_bytes(4, "little") + good[8:12] + junk + good[12:])
+    with pytest.raises(NotAudioError, match=r"bad\.wav: "):
+        read_audio(bad)

@@ -152,3 +152,12 @@ def test_json_file_errors(tmp_path):
     p.write_text('{"format": "facecast-curves", "version": 1, "fps": 30, "names": ["a"], "curves": {}}')
     with pytest.raises(CorpusFormatError, match=r"c\.json: inconsistent curves JSON"):
         read_json(p)
+
+
+def test_a_json_given_for_a_csv_is_refused_in_a_short_line(tmp_path):
+    """`render --params take.json` quoted the whole one-line JSON (every curve, thousands of characters)."""
+    p = tmp_path / "take.json"
+    p.write_bytes(encode_json(syllable_track(200)))
+    with pytest.raises(CorpusFormatError, match=r"take\.json: header must be 't,<channel names>'") as info:
+        read_csv_resampled(p, 30.0)
+    assert len(str(info.value)) < len(str(p)) + 150 and '{"format":"facecast-curves"' in str(info.value)

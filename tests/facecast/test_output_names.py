@@ -69,3 +69,55 @@ def test_render_says_a_folder_cannot_be_made_before_any_work(tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err and "Traceback" not in err
+
+
+def test_rig_says_a_folder_cannot_be_made_before_rigging(tmp_path, capsys):
+    """Was refused by save_rig only after the head had been rigged (minutes for a scan): the missing head
+    shows the folder is checked first."""
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main(["rig", str(tmp_path / "missing.glb"), "-o", str(tmp_path / "notes.txt" / "face.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_say_says_a_folder_cannot_be_made_before_any_work(tmp_path, capsys):
+    """Was a NotADirectoryError traceback from the temporary folder beside an .mp4 (after synthesis); the
+    missing --audio recording shows the folder is checked first."""
+    (tmp_path / "notes.txt").write_text("hello")
+    argv = ["say", "hello", "--audio", str(tmp_path / "missing.wav"), "-o", str(tmp_path / "notes.txt" / "hi.mp4")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+@pytest.mark.parametrize("out", ["take.avi", "notes.txt/take.mp4"])
+def test_demo_refuses_a_video_it_cannot_write_before_streaming(out, tmp_path, capsys):
+    """Was refused (.avi) or a traceback (a file for a folder) only after the whole live session had been
+    streamed, ~15 s of real time."""
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main(["demo", "--once", "--port", "0", "--out", str(tmp_path / out)]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and str(tmp_path / out.split("/")[0]) in err and "Traceback" not in err, err
+    assert "streaming" not in captured.out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["record", "http://127.0.0.1:9", "--session", "s", "-o", "{tmp}/notes.txt/take.csv"],  # port 9: nothing listens
+        ["view", "http://127.0.0.1:9", "--session", "s", "--record", "{tmp}/notes.txt/take.mp4"],
+    ],
+    ids=["record", "view"],
+)
+def test_a_take_whose_folder_cannot_be_made_is_refused_before_watching(argv, tmp_path, capsys):
+    """Was found only when the take was written, after the whole session had been watched (the take lost);
+    the closed port shows the folder is checked first."""
+    (tmp_path / "notes.txt").write_text("hello")
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -198,3 +198,15 @@ def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
         == 2
     )
     assert "not in the pocketsphinx dictionary" in capsys.readouterr().err
+
+
+def test_say_writes_a_video_into_a_folder_it_makes(corpus_file, tmp_path, capsys):
+    """Every other command makes an output's missing folders; say's .mp4 was a FileNotFoundError traceback
+    (its temporary folder is made beside the video)."""
+    require_tool("ffprobe", "apt package ffmpeg")
+    mp4 = tmp_path / "new" / "sub" / "hi.mp4"
+    size = ["--width", "160", "--height", "120"]
+    assert main(["say", "Hello there.", "--corpus", str(corpus_file), "-o", str(mp4), *size]) == 0
+    streams = {s["codec_type"]: s for s in _ffprobe(mp4)["streams"]}
+    assert streams["video"]["codec_name"] == "h264" and streams["audio"]["codec_name"] == "aac"
+    assert [p.name for p in mp4.parent.iterdir()] == ["hi.mp4"]  # the temporary folder is gone

@@ -28,6 +28,21 @@ def test_generated_module_matches_a_fresh_fit(head_and_rig) -> None:
         np.testing.assert_allclose(getattr(fitted_maps, name), value, atol=2e-5, rtol=1e-5, err_msg=name)
 
 
+def test_the_module_is_written_as_ruff_formats_it() -> None:
+    """`facecast fit-maps` wrote a layout CI's `ruff format --check` refused. Written again from its own
+    values (printed at 6 significant digits, which re-print the same), the committed, ruff-formatted module
+    comes back byte for byte; a row too long for 120 columns is split one value a line, as ruff splits it."""
+    from pathlib import Path
+
+    from training.fit_maps import module_text
+
+    names = ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS")
+    text = module_text({n: getattr(fitted_maps, n) for n in names})
+    assert text == Path(fitted_maps.__file__).read_text()
+    long = module_text({**{n: getattr(fitted_maps, n) for n in names}, "OVR_KEYFRAMES": np.full((1, 14), 0.123456)})
+    assert "        (\n            0.123456,\n" in long and max(map(len, long.splitlines())) <= 120
+
+
 def test_arkit_weights_reproduce_the_parameters_on_the_head(head_and_rig) -> None:
     from realtime_core.face import MouthLandmarks
     from realtime_core.face.model import measure_mouth

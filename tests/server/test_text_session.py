@@ -245,6 +245,27 @@ def test_a_viewer_joining_mid_sentence_gets_that_sentence_from_its_first_frame(m
     assert mid.close_code == after.close_code == P.CLOSE_NORMAL
 
 
+def test_a_text_session_that_speaks_nothing_ends_normally(model, backend):
+    """Only unspeakable text, then end: `ended` with 0 frames and first_frame_ms null, close 1000 (was a
+    NaN first_frame_ms that the JSON encoder refused: close 1011, an internal error)."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "mute", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            await ws.send(json.dumps({"type": "text", "text": "\u0001\u0002"}))
+            rejected = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            await ws.wait_closed()
+            return rejected, ended, ws.close_code
+
+    rejected, ended, code = asyncio.run(asyncio.wait_for(main(), 60))
+    assert rejected["type"] == "rejected" and "pronounceable" in rejected["reason"]
+    assert ended == {"type": "ended", "frames": 0, "audio_s": 0.0, "first_frame_ms": None}
+    assert code == P.CLOSE_NORMAL
+
+
 def test_text_session_refuses_bad_starts(model, backend):
     async def attempt(start):
         async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:

@@ -53,3 +53,25 @@ def test_adapt_names_a_bad_speech_file(tmp_path, capsys) -> None:
     assert main(["adapt", "default", str(bad), "-o", str(tmp_path / "m.npz")]) == 2
     err = capsys.readouterr().err
     assert "notes.wav" in err and not (tmp_path / "m.npz").exists()
+
+
+def test_adapt_refuses_a_silent_recording_naming_it(tmp_path, capsys) -> None:
+    """Three seconds of digital silence were 'adapted' to (the silence component moved) and written."""
+    from assets.audio import write_wav
+    from tests.speech import speechlike
+
+    speech = write_wav(tmp_path / "speech.wav", speechlike(2.0, 16000), 16000)
+    silent = write_wav(tmp_path / "silent.wav", np.zeros(3 * 16000, np.float32), 16000)
+    assert main(["adapt", "default", str(speech), str(silent), "-o", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.splitlines()[-1].endswith(f"{silent}: silent: no voice to adapt to; nothing written"), err
+    assert "Traceback" not in err
+    assert not (tmp_path / "m.npz").exists()
+
+
+def test_adapt_refuses_an_output_that_is_not_npz_before_reading(tmp_path, capsys) -> None:
+    """A model written as m.txt (it was) is not what --model expects; refused before the speech is read."""
+    assert main(["adapt", "default", str(tmp_path / "missing.wav"), "-o", str(tmp_path / "m.txt")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{tmp_path / 'm.txt'}: a model file is written as .npz" in err, err
+    assert list(tmp_path.iterdir()) == []

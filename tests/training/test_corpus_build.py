@@ -96,3 +96,22 @@ def test_noise_is_added_at_the_drawn_snr() -> None:
     noise = a.samples.astype(np.float64) - x
     snr = 20 * np.log10(np.sqrt(np.mean(x.astype(np.float64) ** 2)) / np.sqrt(np.mean(noise**2)))
     assert snr == pytest.approx(15.0, abs=0.2) and a.info["noise"]["snr_db"] == 15.0
+
+
+def test_real_speech_that_cannot_be_used_is_skipped_named_and_counted(shared_data, tmp_path) -> None:
+    """A recording whose only alignment is malformed was dropped without a word, and an unreadable WAV beside
+    a good alignment aborted the whole build; both are now skipped with the file and the reason."""
+    arctic = shared_data / "speech" / "arctic"
+    real = tmp_path / "real"
+    real.mkdir()
+    for stem in ("good", "badlab", "badwav"):
+        (real / f"{stem}.wav").write_bytes((arctic / "arctic_a0009.wav").read_bytes())
+    (real / "good_phone.lab").write_bytes((arctic / "arctic_a0009_phone.lab").read_bytes())
+    (real / "badlab_phone.lab").write_text("garbage line\n")
+    (real / "badwav_phone.lab").write_bytes((arctic / "arctic_a0009_phone.lab").read_bytes())
+    (real / "badwav.wav").write_bytes(b"RIFF\x04\x00\x00\x00WAVE")  # a header and nothing else
+    rep = build_corpus(BuildConfig(out_dir=tmp_path / "out", sentences=0, languages=(), real_dirs=(real,)))
+    assert rep.by_source == {"real": 1} and [u.id for u in load_corpus(tmp_path / "out")] == ["real-0000-good"]
+    why = {Path(f).name: reason for f, reason in rep.skipped}
+    assert sorted(why) == ["badlab.wav", "badwav.wav"], rep.skipped
+    assert why["badlab.wav"].startswith("badlab_phone.lab: ") and why["badwav.wav"], rep.skipped

@@ -1,0 +1,89 @@
+"""A scan's inner-mouth pieces follow the jaw below the mouth line (:func:`assets.heads.parts.inner_mouth_weights`,
+:func:`assets.heads.parts.with_jaw_weights`): the weights on a synthetic mesh, the rows on the built-in rig."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from assets.heads.parts import JAW_FULL, inner_mouth_weights, with_jaw_weights
+
+
+def _patch(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, n: int = 5):
+    """A separate n x n grid patch from (x0, y0, z0) to (x1, y1, z1) (z varies along y): vertices, triangles."""
+    xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(0.0, 1.0, n))
+    v = np.c_[xs.ravel(), y0 + (y1 - y0) * ys.ravel(), z0 + (z1 - z0) * ys.ravel()]
+    t = []
+    for j in range(n - 1):
+        for i in range(n - 1):
+            a = j * n + i
+            t += [[a, a + n + 1, a + 1], [a, a + n, a + n + 1]]
+    return v, np.array(t)
+
+
+def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line():
+    """A face sheet (z = 0; mouth corners at (+-0.5, 0), chin at y = -1, nose tip at y = 0.6; IOD 1) and
+    separate pieces: one behind the mouth reaching from above the mouth line to below it (the inner-mouth
+    piece), one as far back but 1.6 to the side (an ear), one below the chin (the bust), one poking out in
+    front of the corners, one behind the mouth in another part (teeth). Only the first is weighted, each
+    of its vertices by its depth below the mouth line: 0 above, -y / (JAW_FULL * 1) below, at most 1."""
+    xs, ys = np.meshgrid(np.linspace(-2, 2, 21), np.linspace(-2, 2, 21))
+    face = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    ft = _patch(-2, 2, -2, 2, 0, 0, n=21)[1]
+    pieces = {
+        "inner": _patch(-0.3, 0.3, -0.8, 0.3, -0.3, -0.2),
+        "ear": _patch(1.4, 1.8, -0.6, 0.2, -0.5, -0.5),
+        "bust": _patch(-0.3, 0.3, -1.6, -1.2, -0.3, -0.3),
+        "front": _patch(-0.3, 0.3, -0.6, 0.0, -0.2, 0.1),
+        "teeth": _patch(-0.3, 0.3, -0.5, 0.0, -0.1, -0.1),
+    }
+    v, t, at = [face], [ft], {}
+    n = len(face)
+    for name, (pv, pt) in pieces.items():
+        at[name] = np.arange(n, n + len(pv))
+        v.append(pv)
+        t.append(pt + n)
+        n += len(pv)
+    v, t = np.vstack(v), np.vstack(t)
+    part = np.zeros(n, dtype=np.int64)
+    part[at["teeth"]] = 1
+
+    def near(p):
+        return int(np.argmin(np.linalg.norm(face - p, axis=1)))
+
+    lm = {"corner_left": near([0.5, 0, 0]), "corner_right": near([-0.5, 0, 0]), "chin": near([0, -1, 0])}
+    lm["nose_tip"] = near([0, 0.6, 0])
+    w = inner_mouth_weights(v, t, part, lm, np.eye(3), 1.0)
+
+    y = v[at["inner"], 1]
+    np.testing.assert_allclose(w[at["inner"]], np.clip(-y / JAW_FULL, 0, 1), atol=1e-12)
+    assert (w[at["inner"]] == 1).any() and (w[at["inner"]] == 0).any()  # both ends of the ramp are there
+    others = np.setdiff1d(np.arange(n), at["inner"])
+    assert not w[others].any()
+    # Without parts, the teeth patch is a piece of the face's part like any other: weighted too.
+    w2 = inner_mouth_weights(v, t, None, lm, np.eye(3), 1.0)
+    np.testing.assert_allclose(w2[at["teeth"]], np.clip(-v[at["teeth"], 1] / JAW_FULL, 0, 1), atol=1e-12)
+
+
+@pytest.mark.system
+def test_jaw_weights_mix_a_vertexs_own_motion_with_the_jaws(builtin_rig, builtin_head):
+    """On the built-in rig: a moving vertex weighted 0.4 moves by 0.6 of its old displacement plus 0.4 of
+    the chin's, a still vertex weighted 1 by the chin's (it joins the moving set), every other vertex as
+    before (displacements taken from the old and new rigs' own ``deformed``)."""
+    rig, _ = builtin_rig
+    chin = int(builtin_head.landmarks["chin"])
+    p = np.array([0.01, 0.02, 0.35, -0.03])
+    old = rig.deformed(p).astype(np.float64) - rig.neutral
+    moved = np.flatnonzero(np.linalg.norm(old, axis=1) > 1e-3 * rig.meta["iod"])
+    mixed = int(moved[np.argmax(np.linalg.norm(rig.neutral[moved] - rig.neutral[chin], axis=1))])
+    still = int(np.setdiff1d(np.arange(len(rig.neutral)), rig.moving)[0])
+    w = np.zeros(len(rig.neutral))
+    w[mixed], w[still] = 0.4, 1.0
+    new = with_jaw_weights(rig, w, chin)
+    got = new.deformed(p).astype(np.float64) - new.neutral
+    np.testing.assert_allclose(got[mixed], 0.6 * old[mixed] + 0.4 * old[chin], atol=1e-6)
+    np.testing.assert_allclose(got[still], old[chin], atol=1e-6)
+    assert np.linalg.norm(old[chin]) > 0.05 * rig.meta["iod"]  # the check above means something
+    rest = np.setdiff1d(np.arange(len(rig.neutral)), [mixed, still])
+    np.testing.assert_allclose(got[rest], old[rest], atol=1e-6)
+    assert new.meta["inner_mouth_pieces"] == 2 and still in new.moving
