@@ -8,7 +8,9 @@ ones, with and without its colour map), the MediaPipe canonical face, Candide-3 
 driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
-objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb.
+objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
+Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs (``heldout_heads.lowpoly_heads``;
+the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
 Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
 the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
 fold, a tear, a sliver or a tooth past the lips shows at this size); the rig checks are printed
@@ -29,6 +31,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
 POSES = {
     "closed": (0.0, 0.0, 0.0, 0.0),
@@ -118,6 +121,10 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             dst = out / f"lps_{kind}.glb"
             subprocess.run([str(cli), kind, str(lps), str(dst)], check=True, capture_output=True)
             heads[f"Lee Perry-Smith, {kind} (glTF-Transform)"] = (dst, {})
+        # Low-poly textured OBJ copies (decimated by meshoptimizer): found in the held-out heads, kept here.
+        from heldout_heads import lowpoly_heads
+
+        heads.update(lowpoly_heads(out / "lowpoly", data))
     mp = data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     if mp.is_file():
         heads["MediaPipe canonical face"] = (mp, {})
@@ -185,15 +192,11 @@ def _resolve(spec, opts: dict, finder):
     return resolve_head(spec, landmark_finder=finder, **opts)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
-    ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
-    ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
-    args = ap.parse_args()
+def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", describe=None) -> list[str]:
+    """Resolve, check and draw every head (name -> (spec, resolve options)); the pictures go to ``images``
+    (linked in the table as ``link``/...), the checks come back as the rows of a Markdown table.
+    ``describe(head, report or None) -> (header, cell)``: an extra column after the head's name
+    (``describe(None, None)`` gives the header; None: no extra column)."""
     from PIL import Image, ImageDraw
     from tqdm import tqdm
 
@@ -202,10 +205,7 @@ def main() -> int:
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from realtime_core.errors import FacecastError
 
-    heads = derive(args.out, args.data)
-    if args.only:
-        heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
-    args.images.mkdir(parents=True, exist_ok=True)
+    images.mkdir(parents=True, exist_ok=True)
     rows = [
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
@@ -213,14 +213,18 @@ def main() -> int:
         ),
         "|---|---|---|---|---|---|---|---|---|",
     ]
+    if describe is not None:
+        rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            rows.append(f"| {name} | cannot rig | - | - | - | - | - | - | {exc} |")
+            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | {exc} |")
             continue
+        rep = None
         try:
             rep = head_checks(head, landmark_finder=find_landmarks)
+            print(f"{name}: {rep.summary()}", file=sys.stderr)
             figs = (
                 f"{rep.flipped_triangles} | {rep.max_edge_stretch:.2f} | {rep.lip_interpenetration_iod:.4f} | "
                 f"{rep.closure_gap_iod:.4f} | "
@@ -238,7 +242,7 @@ def main() -> int:
                 ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
                 tiles.append(np.asarray(img))
         slug = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
-        Image.fromarray(np.hstack(tiles)).save(args.images / f"{slug}.png")
+        Image.fromarray(np.hstack(tiles)).save(images / f"{slug}.png")
         close = []
         try:
             mr = mouth_renderer(head, find_landmarks, RenderConfig(width=400, height=300))
@@ -251,12 +255,28 @@ def main() -> int:
                     ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
                     close.append(np.asarray(img))
             # JPEG (quality 92): a textured close-up is 0.3-0.45 MB as PNG, ~0.1 MB so, defects as visible.
-            Image.fromarray(np.hstack(close)).save(args.images / f"{slug}_mouth.jpg", quality=92)
-            pics = f"![](img/heads/{slug}.png) ![](img/heads/{slug}_mouth.jpg)"
+            Image.fromarray(np.hstack(close)).save(images / f"{slug}_mouth.jpg", quality=92)
+            pics = f"![]({link}/{slug}.png) ![]({link}/{slug}_mouth.jpg)"
         else:
-            pics = f"![](img/heads/{slug}.png)"
-        rows.append(f"| {name} {pics} | {kind} | {figs} |")
-    print("\n".join(rows))
+            pics = f"![]({link}/{slug}.png)"
+        extra = f" {describe(head, rep)[1]} |" if describe else ""
+        rows.append(f"| {name} {pics} |{extra} {kind} | {figs} |")
+    return rows
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
+    ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
+    ap.add_argument(
+        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+    )
+    ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
+    args = ap.parse_args()
+    heads = derive(args.out, args.data)
+    if args.only:
+        heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
+    print("\n".join(check_and_draw(heads, args.images)))
     return 0
 
 

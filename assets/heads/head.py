@@ -360,6 +360,19 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         lower = pairs[(pairs[:, 0] == idx["lower_inner"]) & same & (pairs[:, 1] != idx["lower_inner"]), 1]
         if len(lower):
             idx["lower_inner"] = int(lower[0])
+    if idx["upper_inner"] == idx["lower_inner"]:
+        # Closed lips given as one point where the upper and lower inner lips are two coincident vertices (a
+        # wireframe like Candide-3's): the one the mouth-open parameter lifts most is the upper lip's, the one
+        # it drops most the lower's. Measured at one vertex, the lips' gap is 0 at every pose.
+        tol = 1e-9 * float(np.ptp(v0, axis=0).max())
+        twins = np.flatnonzero(np.linalg.norm(v0 - v0[idx["upper_inner"]], axis=1) <= tol)
+        if len(twins) > 1:
+            lm0 = mouth_landmarks(idx)
+            from realtime_core.face import face_frame
+
+            up = face_frame(v0, lm0).axes[1]
+            rise = (np.asarray(rig.deformed(np.array([0.0, 0.0, 0.3, 0.0])))[twins] - v0[twins]) @ up
+            idx["upper_inner"], idx["lower_inner"] = int(twins[np.argmax(rise)]), int(twins[np.argmin(rise)])
     teeth = None
     if mesh.part is not None and mesh.part_names:
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]

@@ -723,6 +723,24 @@ def front_contact(vertices: np.ndarray, triangles: np.ndarray, start: int, forwa
     return int(np.flatnonzero(canon == best)[0])
 
 
+WINDING_REACH = 1.0
+"""IOD: the face region (around the nose tip) whose triangles' summed normal tells which way a head is wound."""
+
+
+def wound_inwards(
+    vertices: np.ndarray, triangles: np.ndarray, nose_tip: np.ndarray, forward: np.ndarray, *, iod: float
+) -> bool:
+    """True when the triangles within WINDING_REACH IOD of ``nose_tip`` (3,) face, summed by area, away from
+    ``forward`` (3,): the file is wound clockwise (a mirrored export). Rigging then reverses every triangle: the
+    cut's sides, the crease's hidden walls and the fold checks read the winding (Lee Perry-Smith with its
+    winding reversed rigged with lips that never parted, mouth opening 0, while every other figure passed)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    near = np.linalg.norm(v[t].mean(axis=1) - np.asarray(nose_tip, dtype=np.float64), axis=1) <= WINDING_REACH * iod
+    n = np.cross(v[t[near, 1]] - v[t[near, 0]], v[t[near, 2]] - v[t[near, 0]]).sum(axis=0)
+    return bool(n @ np.asarray(forward, dtype=np.float64) < 0)
+
+
 LIPS_TOUCH = 0.01
 """IOD: closed lips whose inner-lip points lie on the two walls of the crease between them still touch:
 the mesh around one comes this close to the mesh around the other (Lee Perry-Smith without its colour
@@ -865,6 +883,9 @@ def rig_head(
                 f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "
                 "'right' swapped? ('left' is the face's own left)"
             )
+        if wound_inwards(v, t, points["nose_tip"], frame.axes[2], iod=frame.iod):
+            t = np.ascontiguousarray(np.asarray(t)[:, ::-1])
+            meta["winding_reversed"] = True
         # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
         # instead of cutting along one lip (which left it hanging from the other, keeping them apart).
         membrane = lip_membrane(

@@ -12,6 +12,10 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
 - lip interpenetration: the most negative vertical gap, in IOD, between paired upper and lower
   lip points (the two sides of a cut seam, else the inner-lip landmarks) over all poses;
 - lip distance at closure: the inner-lip gap (IOD) at the closure pose;
+- mouth opening: how far the lips part per unit of mouth_open between the closure pose and the widest
+  opening among the poses, the median over the lip pairs in the middle half of the mouth's width (1 = as
+  the parameter asks; a cut that missed the lips' contact opens a wedge beside a corner and leaves the
+  middle shut, 0, and passed every figure above);
 - teeth ahead of the lips: how far (IOD, along the face's forward axis) the most forward teeth
   vertex lies in front of the front-most outer lip midpoint, when the head's teeth are known
   (a tooth that pokes through a lip away from the midline in front of no midpoint is not caught);
@@ -142,6 +146,12 @@ LIP_EDGE_NOTCH_LIMIT = 0.015
 it was chosen from)."""
 
 
+MIN_OPEN_RESPONSE = 0.5
+"""The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
+what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
+(assets.heads.rigging.OPEN_RESPONSE_RANGE); the test set's heads open 0.74-1.07 (docs/animation.md)."""
+
+
 @dataclass(frozen=True)
 class RigCheckLimits:
     """Pass limits: flipped triangles, edge stretch ratio, interpenetration and closure gap (IOD), teeth (IOD)."""
@@ -153,10 +163,13 @@ class RigCheckLimits:
     max_teeth_ahead: float = 0.0
     max_lip_edge_notch: float = LIP_EDGE_NOTCH_LIMIT
     """IOD, advisory: a larger :func:`lip_edge_notch` is a warning in the report, not a failure."""
+    min_open_response: float = MIN_OPEN_RESPONSE
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
             raise ConfigError("max_flipped must be >= 0 and max_stretch > 1")
+        if not 0 <= self.min_open_response < 1:
+            raise ConfigError("min_open_response must be in [0, 1)")
         if not self.max_lip_edge_notch > 0:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
 
@@ -175,6 +188,8 @@ class RigReport:
     failures: tuple[str, ...]
     lip_edge_notch_iod: float | None = None
     warnings: tuple[str, ...] = ()
+    open_response: float | None = None
+    """Inner-lip gap gained per unit mouth_open (None: no pose opens the mouth)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -182,10 +197,12 @@ class RigReport:
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
+        opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
-            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD: "
+            f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
+            f"mouth opening {opening}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -338,6 +355,17 @@ def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
 
 
+def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: MouthLandmarks, fr: Any) -> np.ndarray:
+    """IOD: the vertical gaps of the lip pairs (k, 2) whose rest position lies in the middle half of the
+    corner-to-corner width, at the deformed vertices ``v``; the inner-lip landmarks' gap where none does
+    (on a cut head the two inner-lip landmarks can be one vertex, off the cut: its pairs say how it opens)."""
+    x = (v0 - fr.origin) @ fr.axes[0]
+    xl, xr = float(x[landmarks.corner_left]), float(x[landmarks.corner_right])
+    mid = np.abs(x[pairs[:, 0]] - 0.5 * (xl + xr)) <= 0.25 * abs(xl - xr)
+    use = pairs[mid] if mid.any() else np.array([[landmarks.upper_inner, landmarks.lower_inner]])
+    return (v[use[:, 0]] - v[use[:, 1]]) @ fr.axes[1] / fr.iod
+
+
 def check_rig(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -389,6 +417,14 @@ def check_rig(
             ahead = a if ahead is None else max(ahead, a)
     vc = np.asarray(rig.deformed(np.asarray(closure)), dtype=np.float64)
     closure_gap = abs(float((vc[landmarks.upper_inner] - vc[landmarks.lower_inner]) @ up)) / iod
+    widest = max(poses, key=lambda q: float(q[2]), default=None)
+    opening = None
+    if widest is not None and float(widest[2]) > closure[2] + 0.1:
+        vw = np.asarray(rig.deformed(np.asarray(widest, dtype=np.float64)), dtype=np.float64)
+        opening = float(
+            np.median(_middle_gaps(vw, v0, pairs, landmarks, fr) - _middle_gaps(vc, v0, pairs, landmarks, fr))
+        )
+        opening /= float(widest[2]) - closure[2]
     fails = []
     if flipped > limits.max_flipped:
         fails.append(f"{flipped} flipped triangles at pose {worst}")
@@ -400,6 +436,8 @@ def check_rig(
         fails.append(f"lips {closure_gap:.4f} IOD apart at closure")
     if ahead is not None and ahead > limits.max_teeth_ahead:
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
+    if opening is not None and opening < limits.min_open_response:
+        fails.append(f"the lips part by {opening:.2f} of the mouth opening asked (< {limits.min_open_response})")
     notch = lip_edge_notch(rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices)
     warns = []
     if notch is not None and notch > limits.max_lip_edge_notch:
@@ -415,4 +453,5 @@ def check_rig(
         failures=tuple(fails),
         lip_edge_notch_iod=notch,
         warnings=tuple(warns),
+        open_response=opening,
     )

@@ -453,3 +453,21 @@ def test_no_lower_face_stays_tied_to_the_upper_lips_skin_at_the_edge_of_the_cut_
     assert not ties(fixed)
     assert fixed[top].sum() < len(top) / 2  # most given back to the upper lip
     np.testing.assert_array_equal(fixed[c[:, 1] < 0], lower[c[:, 1] < 0])  # the lower lip unchanged
+
+
+def test_a_head_wound_the_other_way_round_is_recognised():
+    """A mirrored export winds every triangle clockwise: the face's triangles then face into the head, and
+    rigging reads the winding (the cut's sides, the crease's walls). wound_inwards tells the two apart from
+    the face region's summed normal; a head wound either way gives opposite answers."""
+    from assets.heads.rigging import wound_inwards
+
+    xs = np.linspace(-1.0, 1.0, 11)
+    v = np.array([[x, y, 1.0 - 0.3 * (x * x + y * y)] for y in xs for x in xs])  # a face bulging towards +z
+    t = _grid_triangles(len(xs), len(xs))
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    forward = np.array([0.0, 0.0, 1.0])
+    if (n @ forward).sum() < 0:
+        t = t[:, ::-1]  # the grid's own winding: make it face forward
+    nose = v[len(v) // 2]
+    assert not wound_inwards(v, t, nose, forward, iod=0.5)
+    assert wound_inwards(v, t[:, ::-1], nose, forward, iod=0.5)

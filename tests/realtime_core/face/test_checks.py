@@ -207,3 +207,24 @@ def test_lip_edge_notch_is_none_for_lips_without_a_free_edge() -> None:
     t[(t >= 3 * n) & (t < 4 * n)] -= 3 * n  # the lower strip hangs from the upper strip's cut row: one sheet
     rig.triangles = t
     assert lip_edge_notch(rig, rig.landmarks(), poses=((0.0, 0.0, 0.0, 0.0),)) is None
+
+
+def test_a_rig_whose_lips_do_not_part_at_the_midline_fails_the_opening_check() -> None:
+    """A cut that misses the lips' contact (Lee Perry-Smith decimated to ~1,500 triangles: the cut ran down the
+    lower lip from one corner) opens a wedge beside a corner and leaves the inner-lip points together. Every
+    other figure passed; the mouth opening, the inner-lip gap gained per unit mouth_open, is 0 there and 1 for
+    the smooth opening."""
+    from realtime_core.face.checks import MIN_OPEN_RESPONSE
+
+    smooth = _Lips(0.0)
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0))
+    rep = check_rig(smooth, smooth.landmarks(), poses=poses)
+    assert rep.passed and rep.open_response == pytest.approx(1.0)
+    wedge = _Lips(0.0)
+    x = np.tile(wedge.x, 3)
+    wedge.drop = np.clip((x - 0.15) / 0.15, 0.0, 1.0)  # only the lower lip's left quarter drops
+    rep = check_rig(wedge, wedge.landmarks(), poses=poses)
+    assert rep.flipped_triangles == 0 and rep.lip_interpenetration_iod == 0 and rep.closure_gap_iod == 0
+    assert rep.open_response == pytest.approx(0.0, abs=1e-12) and rep.open_response < MIN_OPEN_RESPONSE
+    assert not rep.passed and any("lips part" in f for f in rep.failures)
+    assert "mouth opening 0.00" in rep.summary()
