@@ -193,10 +193,15 @@ NOT_NPZ = "not an .npz file (no zip header)"
 says to load it unsafely with ``allow_pickle``: advice a user must not be given."""
 
 
-def npz_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
-    """The named arrays of ``.npz`` bytes (pickle refused); :class:`ModelFormatError` if it is not one."""
+def require_npz(data: bytes, what: str) -> None:
+    """:class:`ModelFormatError` naming ``what`` unless ``data`` starts as a zip archive (an ``.npz``)."""
     if not data.startswith(b"PK"):
         raise ModelFormatError(f"not a facecast {what} archive: {NOT_NPZ}")
+
+
+def npz_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
+    """The named arrays of ``.npz`` bytes (pickle refused); :class:`ModelFormatError` if it is not one."""
+    require_npz(data, what)
     try:
         npz = np.load(io.BytesIO(data), allow_pickle=False)
         return {k: npz[k] for k in npz.files}

@@ -21,7 +21,6 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
 from realtime_core.avmodel import (
-    NOT_NPZ,
     AvModel,
     decode_model,
     encode_model,
@@ -29,6 +28,7 @@ from realtime_core.avmodel import (
     frontend_to_json,
     npz_arrays,
     npz_bytes,
+    require_npz,
     validate_cmvn,
 )
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError
@@ -193,8 +193,7 @@ def encode_speech_model(model: AvModel | MlpSpeechModel) -> bytes:
 
 def decode_speech_model(data: bytes) -> AvModel | MlpSpeechModel:
     """``.npz`` bytes of either kind (told apart by their ``format``) to the model."""
-    if not data.startswith(b"PK"):
-        raise ModelFormatError(f"not a facecast model archive: {NOT_NPZ}")
+    require_npz(data, "model")  # before numpy, which reads other bytes as a pickle
     try:
         kind = str(np.load(io.BytesIO(data), allow_pickle=False)["format"])
     except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as exc:

@@ -224,20 +224,12 @@ def encode_corpus(stored: StoredCorpus) -> bytes:
 
 def decode_corpus(data: bytes) -> StoredCorpus:
     """Parse and validate ``.npz`` bytes; raises ModelFormatError naming the problem."""
-    import io
     import json
-    import zipfile
 
-    from realtime_core.avmodel import NOT_NPZ
+    from realtime_core.avmodel import npz_arrays
     from realtime_core.errors import ModelFormatError
 
-    if not data.startswith(b"PK"):
-        raise ModelFormatError(f"not a unit-corpus archive: {NOT_NPZ}")
-    try:
-        npz = np.load(io.BytesIO(data), allow_pickle=False)
-        a = {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ModelFormatError(f"not a unit-corpus archive ({exc})") from None
+    a = npz_arrays(data, "unit-corpus")
     need = (
         "format",
         "version",
