@@ -1,7 +1,7 @@
 """A knife cut along a coarse head's lip contact line: vertices inserted where the line crosses the mesh.
 
 A decimated (low-poly) head's closed lips meet along a few long edges (Lee Perry-Smith at 1,428
-triangles: the lower lip's top is one 0.6 IOD edge between the mouth corners, under a thin strip of
+triangles: the lower lip's top is one edge from mouth corner to mouth corner, under a thin strip of
 slivers that hangs from the upper lip). No edge path between the corners then follows the lips'
 contact: the path through the mesh vertex nearest the inner-lip point ran as a V down the lower lip
 (that vertex lay 0.1 IOD below the contact), and a path along the corner-to-corner line had too few
@@ -25,9 +25,9 @@ from scipy.sparse.csgraph import dijkstra
 
 COARSE_EDGES = 8.0
 """A closed mouth is coarse when its corner-to-corner width spans fewer than this many median edges of
-the mesh round the mouth (Lee Perry-Smith: 1,428 triangles 2.9, 3,810 triangles 4.6; the full scan
-~30): it is then knife-cut (:func:`knife_contact`). Finer meshes have a vertex close to any point of
-the contact and keep the edge path of :func:`assets.heads.rigging.cut_path`."""
+the mesh round the mouth (Lee Perry-Smith: 1,428 triangles 2.6, 3,810 triangles 4.1, the full scan 17.7;
+the stylised held-out head 5.0): it is then knife-cut (:func:`knife_contact`). Finer meshes have a
+vertex close to any point of the contact and keep the edge path of :func:`assets.heads.rigging.cut_path`."""
 MOUTH_REACH = 0.5
 """IOD: the edges within this distance of the mouth centre measure the mesh's resolution there."""
 KNIFE_SNAP = 0.02

@@ -10,7 +10,9 @@
 3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
    between the two corner landmarks (a shortest edge path that stays near the straight line, the
    faces near it split into the two lips' sides, :func:`cut_mouth`), the vertices both sides share
-   are duplicated and the lower side takes the copies, so the lips are two surfaces. Distinct inner
+   are duplicated and the lower side takes the copies, so the lips are two surfaces (a coarse mouth is
+   first knife-cut along the lips' contact curve and cut along the vertices that puts on it,
+   :mod:`assets.heads.knife`). Distinct inner
    lips joined by a strip of triangles (the MediaPipe face) have the strip removed instead
    (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
    (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
