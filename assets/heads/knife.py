@@ -120,8 +120,7 @@ def knife_contact(
     mesh stays conforming, and every new vertex lies on an old edge (the surface, its UVs and colours are
     unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the
     edge is split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`).
-    Returns None when the cut pieces do not join
-    the corners."""
+    Returns None when the cut pieces do not join the corners."""
     ax = np.asarray(axes, dtype=np.float64)
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -185,10 +184,9 @@ def split_long_edges(
     the lips can part along it. Each face on a split edge becomes a fan from its third vertex. ``among``:
     split only edges between two of the first ``among`` vertices (the mesh's own edges that the contact
     curve runs along; the knife's pieces across a face are left whole: on Lee Perry-Smith at 1,428
-    triangles their fans were slivers tied to the mouth corners that the fold repair held shut, mouth
-    opening 0.69 -> 0.08). Returns
-    vertices (n + k, 3), triangles, the (k, 2) edge each new vertex lies on and (k,) where on it (see
-    :class:`KnifeCut`), and the path with the new vertices."""
+    triangles their fans were slivers tied to the mouth corners, and the rig opened 0.19 instead of 0.69,
+    see docs/animation.md). Returns vertices (n + k, 3), triangles, the (k, 2) edge each new vertex lies
+    on and (k,) where on it (see :class:`KnifeCut`), and the path with the new vertices."""
     v0 = np.asarray(vertices, dtype=np.float64)
     n = len(v0)
     added: list[np.ndarray] = []
