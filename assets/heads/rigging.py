@@ -868,6 +868,10 @@ def rig_head(
     points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)
     v, t, uv = mesh.vertices, mesh.triangles, mesh.uvs
     snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
+    # One notion of a landmark: its vertex. The cut and the checks use the nearest vertex, so the simple
+    # face is placed there too (placed at the given points, up to 0.03 IOD off those vertices, the avatar's
+    # automatic landmarks folded its rig: 24 flipped triangles against 9 at the vertices).
+    points = {k: np.asarray(v[i], dtype=np.float64) for k, i in snap.items()}
     meta: dict[str, object] = {
         "head": mesh.name,
         "landmarks": {k: p.tolist() for k, p in points.items()},
