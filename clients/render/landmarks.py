@@ -25,6 +25,7 @@ import numpy as np
 
 from assets.errors import LandmarkError
 from assets.heads.mesh import HeadMesh
+from assets.heads.rigging import lips_connected
 
 MEDIAPIPE_INDEX: dict[str, int] = {
     "eye_outer_left": 263,
@@ -207,9 +208,9 @@ def _into_corner_crease(
     """The mouth corner cast at ``point`` (3,) from ``pixel`` (2,), moved into the lips' crease behind it when
     it is hidden: the deepest crease vertex (``crease``, (n,) bool) of the cast point's part within
     CORNER_RAY_REACH of the view ray and CORNER_DEPTH behind the point. A visible corner (the pixel shows the
-    crease: a crease vertex on the triangle under it or on one sharing a vertex with it; closed lips whose
-    seam ends there, Lee Perry-Smith, 1 edge from it), or no crease found: the point as cast. (The built-in
-    head's geometry, open lips tucked in, shows skin 3 edges from its crease.)"""
+    crease: a crease vertex on the triangle under it or on one sharing a vertex with it), or no crease found:
+    the point as cast. (The built-in head's geometry, open lips tucked in, shows skin 3 edges from its crease.)
+    Called for lips modelled apart only (:func:`_refined`)."""
     v = np.asarray(mesh.vertices, dtype=np.float64)
     hit = _cast_hits(mesh, mvp, pixel[None, :], SIZE)[1][0]
     t = np.asarray(mesh.triangles, dtype=np.int64)
@@ -261,9 +262,15 @@ def _refined(
     up = up - x * (up @ x)
     up = up / np.linalg.norm(up)
     out = dict(points)
-    crease = _crease_vertices(mesh, up)
-    for k in ("corner_left", "corner_right"):
-        out[k] = _into_corner_crease(mesh, mvp, pixels[k], points[k], crease, iod)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    inner = [int(np.argmin(np.linalg.norm(v - points[k], axis=1))) for k in ("upper_inner", "lower_inner")]
+    if not lips_connected(v, mesh.triangles, inner[0], inner[1], iod=iod):
+        # Only lips modelled apart tuck their corners in; closed lips' seam ends where the corner is seen (on
+        # the untextured render of Lee Perry-Smith a corner pixel lies 2 edges from the seam's crease, and
+        # moving it 0.09 IOD into the crease tore that corner at /a/, /u/ and /m/).
+        crease = _crease_vertices(mesh, up)
+        for k in ("corner_left", "corner_right"):
+            out[k] = _into_corner_crease(mesh, mvp, pixels[k], points[k], crease, iod)
     lower = _lower_lip_front(mesh, mvp, pixels["lower_inner"], pixels["lower_lip"], np.cross(x, up), iod)
     if lower is not None:
         out["lower_lip"] = lower

@@ -17,6 +17,7 @@ from clients.render.landmarks import (
     _into_corner_crease,
     _lower_lip_front,
     _onto_lips,
+    _refined,
 )
 
 # A camera on +z looking back (w = 2 - z: nearer surfaces have smaller w), as in the first test.
@@ -138,3 +139,40 @@ def test_the_lower_lip_point_is_the_lowest_point_of_the_lips_front():
     want = -0.1 - np.sqrt(LOWER_LIP_FLAT / 2.0)
     assert want - 1e-9 <= got[1] < want + 0.3 / 32 * 1.2, (got, want)  # within one step of the search
     assert abs(got[0]) < 1e-4  # on the midline (to the pixel grid)
+
+
+def test_only_lips_modelled_apart_have_their_corners_moved_into_the_crease():
+    """The whole refinement (:func:`_refined`): the same hidden-corner geometry beside lips modelled apart (inner
+    lips 0.4 IOD apart, two pieces) has its corner moved into the crease; beside closed lips (the inner-lip
+    points one vertex of a joined lip surface) it stays as cast: closed lips' seam ends where the corner is seen."""
+    x = 0.5
+    crease, tc = _crease(x, -0.05, -0.15, 0)
+    skin, ts = _quad(0.3, 0.7, -0.1, 0.1, 0.0, 4)
+    upper, tu = _quad(-0.2, 0.2, 0.2, 0.3, 0.0, 8)
+    points = {
+        "eye_outer_left": np.array([0.6, 1.0, 0.0]),
+        "eye_inner_left": np.array([0.4, 1.0, 0.0]),
+        "eye_outer_right": np.array([-0.6, 1.0, 0.0]),
+        "eye_inner_right": np.array([-0.4, 1.0, 0.0]),
+        "corner_left": np.array([x, 0.0, 0.0]),
+        "corner_right": np.array([-x, 0.0, 0.0]),  # nothing there: stays
+        "upper_inner": np.array([0.0, 0.2, 0.0]),
+        "lower_lip": np.array([0.0, -0.3, 0.0]),
+    }
+    pixels = {k: _pixel(p, MVP) for k, p in points.items()}
+    for closed in (False, True):
+        if closed:  # the lower lip hangs from the upper one's inner edge
+            lower = np.array([[-0.2, 0.2, 0.0], [0.2, 0.2, 0.0], [0.2, -0.3, 0.0], [-0.2, -0.3, 0.0]])
+            points["lower_inner"] = np.array([-0.2, 0.2, 0.0])
+        else:
+            lower = _quad(-0.2, 0.2, -0.3, -0.2, 0.0, 0)[0]
+            points["lower_inner"] = np.array([-0.2, -0.2, 0.0])
+        tl = np.array([[0, 1, 2], [0, 2, 3]]) + 12
+        mesh = HeadMesh(
+            vertices=np.vstack([crease, skin, upper, lower]), triangles=np.vstack([tc, ts, tu, tl]), name="lips"
+        )
+        pixels["lower_inner"] = _pixel(points["lower_inner"], MVP)
+        got = _refined(mesh, MVP, pixels, dict(points))
+        want = points["corner_left"] if closed else crease[1]
+        np.testing.assert_array_equal(got["corner_left"], want)
+        np.testing.assert_array_equal(got["corner_right"], points["corner_right"])
