@@ -8,6 +8,9 @@
 3. Re-render framed on the detected face (a larger face gives steadier points) and detect again.
 4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
    camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
+5. Take two points to facecast's definitions (:func:`_refined`): on lips modelled apart, a mouth corner hidden
+   behind skin moves into the lips' crease behind it; the lower lip point is the lowest point of the lip's front
+   (MediaPipe 17 is the vermilion's lower edge). The rig then takes each point at its nearest vertex.
 
 The twelve facecast landmarks are MediaPipe indices (the subject's own left/right, as facecast):
 eye corners 263/362 (left) and 33/133 (right), nose tip 1, mouth corners 291 (left) / 61 (right),
