@@ -8,6 +8,9 @@
 3. Re-render framed on the detected face (a larger face gives steadier points) and detect again.
 4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
    camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
+5. Take two points to facecast's definitions (:func:`_refined`): on lips modelled apart, a mouth corner hidden
+   behind skin moves into the lips' crease behind it; the lower lip point is the lowest point of the lip's front
+   (MediaPipe 17 is the vermilion's lower edge). The rig then takes each point at its nearest vertex.
 
 The twelve facecast landmarks are MediaPipe indices (the subject's own left/right, as facecast):
 eye corners 263/362 (left) and 33/133 (right), nose tip 1, mouth corners 291 (left) / 61 (right),
@@ -25,6 +28,7 @@ import numpy as np
 
 from assets.errors import LandmarkError
 from assets.heads.mesh import HeadMesh
+from assets.heads.rigging import lips_connected
 
 MEDIAPIPE_INDEX: dict[str, int] = {
     "eye_outer_left": 263,
@@ -49,6 +53,23 @@ or past open lips into a mouth bag. The point is then the first one on the lip m
 outer lip midpoint (:func:`_onto_lips`). Every head of the test set casts its inner-lip points within
 0.02 IOD of the outer lip's depth or in front of it."""
 INNER_LIP_STEPS = 32  # pixels tried between an inner-lip point and its outer lip point
+LOWER_LIP_STEPS = 32  # pixels tried from the lower inner-lip point down to MediaPipe's lower vermilion edge
+LOWER_LIP_FLAT = 0.01
+"""IOD: the lower lip's outer midpoint (``lower_lip``) is the lowest midline point of the lip's front, i.e. the
+lowest point on the render's segment from the lower inner-lip point (MediaPipe 14) to the vermilion's lower edge
+(MediaPipe 17) lying within this of the segment's front-most depth (:func:`_lower_lip_front`). MediaPipe 17 sits
+where the lip has turned back towards the chin's crease (0.08 IOD below the hand-picked point on the built-in
+head's geometry); the front-most point alone is ill-defined on a flat lip (Lee Perry-Smith's front varies by
+under 0.01 IOD over 0.06 IOD of height)."""
+CORNER_RAY_REACH = 0.05
+"""IOD: how far from the view ray through a mouth corner's pixel a vertex of the lips' crease may lie."""
+CORNER_DEPTH = 0.25
+"""IOD: how far behind the cast mouth-corner point the crease is looked for. A corner hidden in a frontal view
+(lips modelled apart whose corners tuck in behind the lip and cheek: the built-in head's geometry, 0.15 IOD behind
+the front-most skin) lies in the lips' crease behind the skin the pixel shows (:func:`_into_corner_crease`)."""
+CREASE_FACING = 0.3
+"""A crease vertex: among its triangles one faces up and one faces down by more than this (the cosine of the
+normal with the render's up axis): the lower lip's top meeting the upper lip's underside."""
 
 SIZE = 640  # render size in pixels (MediaPipe works on any size; the face should cover ~1/3 of it)
 
@@ -104,6 +125,12 @@ def _detect(image: np.ndarray) -> np.ndarray | None:
 
 def _cast(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> np.ndarray:
     """3D points (k, 3) on the front-most triangle under each pixel (k, 2); NaN where none is."""
+    return _cast_hits(mesh, mvp, pixels, size)[0]
+
+
+def _cast_hits(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(3D points (k, 3), triangle indices (k,)) of the front-most triangle under each pixel (k, 2); NaN / -1
+    where none is."""
     from realtime_core.face.interpolation import barycentric_2d
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
@@ -112,6 +139,7 @@ def _cast(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> np.
     px = np.c_[(clip[:, 0] / w + 1) / 2 * size, (1 - clip[:, 1] / w) / 2 * size]
     t = np.asarray(mesh.triangles, dtype=np.int64)
     out = np.full((len(pixels), 3), np.nan)
+    face = np.full(len(pixels), -1, dtype=np.int64)
     lo = px[t].min(axis=1)
     hi = px[t].max(axis=1)
     for i, p in enumerate(pixels):
@@ -126,7 +154,8 @@ def _cast(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> np.
         depth = (g[ok] * w[tc[ok]]).sum(1)
         k = int(np.argmin(depth))
         out[i] = g[ok][k] @ v[tc[ok][k]]
-    return out
+        face[i] = cand[ok][k]
+    return out, face
 
 
 def _onto_lips(
@@ -148,6 +177,106 @@ def _onto_lips(
         on_lip = np.flatnonzero(np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod))
         if len(on_lip):
             out[inner] = hit[on_lip[0]]
+    return out
+
+
+def _ray(mvp: np.ndarray, pixel: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The view ray through ``pixel`` (2,): (a point on it (3,), its unit direction (3,) away from the camera)."""
+    ndc = np.array([2.0 * pixel[0] / size - 1.0, 1.0 - 2.0 * pixel[1] / size])
+    inv = np.linalg.inv(mvp)
+    # Two depths inside any camera's range; clip w grows away from the camera, which orients the ray.
+    ends = [inv @ np.array([ndc[0], ndc[1], z, 1.0]) for z in (0.0, 0.5)]
+    a, b = (e[:3] / e[3] for e in ends)
+    d = (b - a) / np.linalg.norm(b - a)
+    return a, d if float(mvp[3, :3] @ d) > 0 else -d
+
+
+def _crease_vertices(mesh: HeadMesh, up: np.ndarray) -> np.ndarray:
+    """(n,) bool: vertices with a triangle facing up and one facing down (CREASE_FACING) about them."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    facing = (n @ up) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
+    hi = np.full(len(v), -np.inf)
+    lo = np.full(len(v), np.inf)
+    for j in range(3):
+        np.maximum.at(hi, t[:, j], facing)
+        np.minimum.at(lo, t[:, j], facing)
+    return (hi > CREASE_FACING) & (lo < -CREASE_FACING)
+
+
+def _into_corner_crease(
+    mesh: HeadMesh, mvp: np.ndarray, pixel: np.ndarray, point: np.ndarray, crease: np.ndarray, iod: float
+) -> np.ndarray:
+    """The mouth corner cast at ``point`` (3,) from ``pixel`` (2,), moved into the lips' crease behind it when
+    it is hidden: the deepest crease vertex (``crease``, (n,) bool) of the cast point's part within
+    CORNER_RAY_REACH of the view ray and CORNER_DEPTH behind the point. A visible corner (the pixel shows the
+    crease: a crease vertex on the triangle under it or on one sharing a vertex with it), or no crease found:
+    the point as cast. (The built-in head's geometry, open lips tucked in, shows skin 3 edges from its crease.)
+    Called for lips modelled apart only (:func:`_refined`)."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    hit = _cast_hits(mesh, mvp, pixel[None, :], SIZE)[1][0]
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    if hit < 0:
+        return point
+    beside = t[np.isin(t, t[hit]).any(axis=1)]  # the triangle under the pixel and the ones sharing a vertex
+    if crease[beside].any():
+        return point
+    _, d = _ray(mvp, pixel, SIZE)
+    rel = v - point
+    depth = rel @ d  # distance behind the cast point along the ray
+    lateral = np.linalg.norm(rel - np.outer(depth, d), axis=1)
+    ok = crease & (lateral <= CORNER_RAY_REACH * iod) & (depth >= 0.0) & (depth <= CORNER_DEPTH * iod)
+    if mesh.part is not None:
+        ok &= mesh.part == mesh.part[int(np.argmin(np.linalg.norm(rel, axis=1)))]
+    if not ok.any():
+        return point
+    i = np.flatnonzero(ok)
+    return v[i[np.argmax(depth[i])]]
+
+
+def _lower_lip_front(
+    mesh: HeadMesh, mvp: np.ndarray, inner: np.ndarray, edge: np.ndarray, forward: np.ndarray, iod: float
+) -> np.ndarray | None:
+    """``lower_lip`` (3,): the lowest point of the lower lip's front on the midline (LOWER_LIP_FLAT; front along
+    the face's ``forward`` (3,)), cast from the pixels from ``inner`` (MediaPipe 14) to ``edge`` (MediaPipe 17),
+    both (2,); None when nothing is hit."""
+    s = np.linspace(0.0, 1.0, LOWER_LIP_STEPS + 1)[:, None]
+    hit = _cast(mesh, mvp, inner[None, :] * (1.0 - s) + edge[None, :] * s, SIZE)
+    ok = np.isfinite(hit).all(axis=1)
+    if not ok.any():
+        return None
+    front = hit @ forward
+    best = np.nanmax(np.where(ok, front, np.nan))
+    last = np.flatnonzero(ok & (front >= best - LOWER_LIP_FLAT * iod))[-1]
+    return hit[last]
+
+
+def _refined(
+    mesh: HeadMesh, mvp: np.ndarray, pixels: dict[str, np.ndarray], points: dict[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """``points`` with the mouth corners moved into the lips' crease and the lower lip at its front's lowest
+    point (see CORNER_DEPTH, LOWER_LIP_FLAT): the definitions of docs/animation.md, "Landmarks". Up and forward
+    are the face frame's (:func:`realtime_core.face.model.face_frame`) of the points as cast."""
+    eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
+    iod = float(np.linalg.norm(eyes[0] - eyes[1]))
+    x = (eyes[0] - eyes[1]) / iod
+    up = 0.5 * (eyes[0] + eyes[1]) - 0.5 * (points["corner_left"] + points["corner_right"])
+    up = up - x * (up @ x)
+    up = up / np.linalg.norm(up)
+    out = dict(points)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    inner = [int(np.argmin(np.linalg.norm(v - points[k], axis=1))) for k in ("upper_inner", "lower_inner")]
+    if not lips_connected(v, mesh.triangles, inner[0], inner[1], iod=iod):
+        # Only lips modelled apart tuck their corners in; closed lips' seam ends where the corner is seen (on
+        # the untextured render of Lee Perry-Smith a corner pixel lies 2 edges from the seam's crease, and
+        # moving it 0.09 IOD into the crease tore that corner at /a/, /u/ and /m/).
+        crease = _crease_vertices(mesh, up)
+        for k in ("corner_left", "corner_right"):
+            out[k] = _into_corner_crease(mesh, mvp, pixels[k], points[k], crease, iod)
+    lower = _lower_lip_front(mesh, mvp, pixels["lower_inner"], pixels["lower_lip"], np.cross(x, up), iod)
+    if lower is not None:
+        out["lower_lip"] = lower
     return out
 
 
@@ -191,9 +320,9 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     p3 = _cast(mesh, r.mvp, pix, SIZE)
                     if np.isnan(p3).any():
                         continue
-                    found = _onto_lips(
-                        mesh, r.mvp, dict(zip(names, pix)), dict(zip(names, p3)), np.asarray(axes[2], np.float64)
-                    )
+                    pixels = dict(zip(names, pix))
+                    found = _onto_lips(mesh, r.mvp, pixels, dict(zip(names, p3)), np.asarray(axes[2], np.float64))
+                    found = _refined(mesh, r.mvp, pixels, found)
                 return {k: found[k].tolist() for k in names}
     except RenderError as exc:
         raise LandmarkError(

@@ -333,6 +333,27 @@ def test_landmarks_as_points_equal_landmarks_as_indices(shared_data, builtin_hea
     np.testing.assert_allclose(r2.displacements(p), r1.displacements(p), atol=1e-6)
 
 
+def test_points_off_their_vertices_rig_as_their_nearest_vertices(shared_data, builtin_head):
+    """A landmark given as a point is its nearest vertex, for the simple face's placement too (not only the cut
+    and the checks): points moved off their vertices (by a third of the distance to the next vertex, so the
+    nearest one stays) rig exactly as the vertex indices do."""
+    from scipy.spatial import cKDTree
+
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    mesh = load_mesh(mp)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    spec = {k: int(i) for k, i in read_landmarks(shipped_landmarks(mp)).items()}
+    gap = cKDTree(v).query(v[list(spec.values())], k=2)[0][:, 1]
+    rng = np.random.default_rng(3)
+    step = rng.normal(size=(len(spec), 3))
+    step *= (gap / 3.0 / np.linalg.norm(step, axis=1))[:, None]
+    off = {k: (v[i] + d).tolist() for (k, i), d in zip(spec.items(), step, strict=True)}
+    r1, _ = rig_head(mesh, spec, head=builtin_head)
+    r2, _ = rig_head(mesh, off, head=builtin_head)
+    p = np.array([0.05, -0.03, 0.4, 0.05])
+    np.testing.assert_allclose(r2.displacements(p), r1.displacements(p), atol=1e-9)
+
+
 def test_candide3_as_the_simple_model(shared_data):
     """The paper's set-up: Candide-3 carried onto a head (no built-in head needed)."""
     from assets.heads.rigging import candide_face, mouth_landmarks
