@@ -528,7 +528,7 @@ def join_path_islands(
     island's new cut vertices' rows: the island moves with the lip it joined.
 
     Why: on a hollow scan the cut's side rule and the removal of the crease's hidden walls leave the upper lip's
-    contact strip (Lee Perry-Smith, hand landmarks: 14 faces on the path, x = -0.2 to +0.05 IOD) joined to the
+    contact strip (Lee Perry-Smith, hand landmarks: 14 faces on the path, x = -0.17 to +0.04 IOD) joined to the
     upper lip through nothing but path vertices, and to the lower lip's crease faces through their twins. Moving
     with the upper seam it hung below the upper lip's underside at /a/ and /u/ as a pink fleck and counted as a
     free lip edge (lip edge notch 0.05 IOD). Joined to the lower lip it lies on the lower lip's top, where it was
@@ -1321,7 +1321,7 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
     """(m,) bool: the faces ``gone`` (m,) bool that would leave holes in a surface that stays, pieces of at most
     WALL_HOLE_FACES gone faces (joined through shared edges) each of whose edges is shared with another face,
     and none of them with a face of another gone piece. Lee Perry-Smith's upper lip, hand landmarks: two
-    two-face holes on the lip line (x = +0.04 and +0.12 IOD) whose rims folded over in the frontal view at /a/
+    two-face holes on the lip line (x = +0.04 and +0.09 IOD) whose rims folded over in the frontal view at /a/
     (each scoring the lip edge notch's 0.05 IOD); walls are removed so the opening shows the cavity, and a hole
     in the lip shows nothing else."""
     comp = _face_components(t, n_vertices, ~gone)
