@@ -10,7 +10,9 @@
 3. Heads whose lips are one closed surface (Lee Perry-Smith): the mesh is cut along the mouth line
    between the two corner landmarks (a shortest edge path that stays near the straight line, the
    faces near it split into the two lips' sides, :func:`cut_mouth`), the vertices both sides share
-   are duplicated and the lower side takes the copies, so the lips are two surfaces. Distinct inner
+   are duplicated and the lower side takes the copies, so the lips are two surfaces (a coarse mouth is
+   first knife-cut along the lips' contact curve and cut along the vertices that puts on it,
+   :mod:`assets.heads.knife`). Distinct inner
    lips joined by a strip of triangles (the MediaPipe face) have the strip removed instead
    (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
    (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
@@ -32,6 +34,7 @@ from scipy.sparse.csgraph import dijkstra
 from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
 from assets.heads.cavity import lip_membrane, opens_onto_nothing
+from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
@@ -965,6 +968,8 @@ def rig_head(
         "simple_landmarks": dict(simple.landmarks),
     }
     colors = mesh.colors
+    part = mesh.part
+    n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
     cut_copies = None
     try:
         lm = mouth_landmarks(snap)
@@ -986,11 +991,29 @@ def rig_head(
             t = t[~membrane]
             meta["lip_membrane_removed"] = int(membrane.sum())
         if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"], iod=frame.iod):
-            # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
-            # contact, where the cut passes (see CONTACT_FACING).
-            front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
-            path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
-            path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
+            knife = None
+            if mouth_resolution(v, t, snap["corner_left"], snap["corner_right"], iod=frame.iod) < COARSE_EDGES:
+                # A coarse mouth: its lips touch along a few long edges and no vertex need lie near the
+                # inner-lip point; the knife puts vertices on the contact curve (assets/heads/knife.py).
+                inner = 0.5 * (points["upper_inner"] + points["lower_inner"])
+                knife = knife_contact(v, t, snap["corner_left"], snap["corner_right"], inner, frame.axes, iod=frame.iod)
+            if knife is not None:
+                v, t = knife.vertices, knife.triangles
+                uv = None if uv is None else knife.carry(uv)
+                colors = None if colors is None else knife.carry(colors)
+                part = None if part is None else knife.carry_nearest(part)
+                n_base = len(v)
+                path = knife.path
+                # The inner-lip landmarks: the knife path's vertex nearest the inner-lip point (the cut
+                # splits it, so the rig's lower inner-lip vertex is its copy below the cut).
+                front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
+                meta["contact_knife"] = len(knife.edge)
+            else:
+                # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
+                # contact, where the cut passes (see CONTACT_FACING).
+                front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
+                path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
+                path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)
             # The simple face is placed at the front contact (placed at the detour's vertex, up the crease
@@ -1024,12 +1047,14 @@ def rig_head(
                 hidden=hidden,
             )
             colors = None if colors is None else colors[origin]
-            meta["lip_seam_cut"] = int(len(v) - len(mesh.vertices))
-            cut_copies = np.arange(len(mesh.vertices), len(v))
+            meta["lip_seam_cut"] = int(len(v) - n_base)
+            cut_copies = np.arange(n_base, len(v))
+            if part is not None:
+                part = part[origin]
             # The lower inner-lip landmark now lives on its copy below the cut (when it was on it).
-            below = np.flatnonzero(origin[len(mesh.vertices) :] == snap["lower_inner"])
+            below = np.flatnonzero(origin[n_base:] == snap["lower_inner"])
             if len(below):
-                snap["lower_inner"] = int(len(mesh.vertices) + below[0])
+                snap["lower_inner"] = int(n_base + below[0])
         placed = _place(simple, points)
         slm = mouth_landmarks(simple.landmarks)
         # Calibrated on the simple model as it comes (its own shape), not as warped onto the head:
@@ -1135,9 +1160,6 @@ def rig_head(
         rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
-    part = mesh.part
-    if part is not None and cut_copies is not None:
-        part = part[origin]
     out_mesh = HeadMesh(
         vertices=v,
         triangles=t,

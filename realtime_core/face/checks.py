@@ -21,7 +21,9 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   (a tooth that pokes through a lip away from the midline in front of no midpoint is not caught);
 - lip edge notch: how far (IOD) the lips' free edges leave their own course, seen from the front
   (:func:`lip_edge_notch`): a jagged cut, a notch or a sliver hole along the lip line, which the
-  figures above do not see (they measure faces and vertex pairs, not the outline a render shows).
+  figures above do not see (they measure faces and vertex pairs, not the outline a render shows); and
+  at how many places they leave it by more than the limit (:func:`lip_edge_shards`: one notch, or shards
+  hanging in the opening all along it).
 
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
 notch is advisory (:attr:`RigCheckLimits.max_lip_edge_notch`): over its limit it is reported as a
@@ -190,6 +192,9 @@ class RigReport:
     warnings: tuple[str, ...] = ()
     open_response: float | None = None
     """Inner-lip gap gained per unit mouth_open (None: no pose opens the mouth)."""
+    lip_edge_shards: int | None = None
+    """At the pose where it is most, how many places of the lips' free edges leave their course by more than
+    the notch limit (:func:`lip_edge_shards`; None: no free lip edge)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -298,15 +303,39 @@ def lip_edge_notch(
     poses: tuple[tuple[float, ...], ...],
     skip_vertices: int = 0,
 ) -> float | None:
-    """The lips' free edges' largest departure from their own course, IOD, seen from the front, over
-    ``poses``: the boundary edges of the rig's triangles (those of the last ``skip_vertices`` vertices, a
-    mouth cavity, left out) whose ends lie between the mouth corners, within NOTCH_BAND IOD of the
-    corner-to-corner line at rest and less than NOTCH_DEPTH IOD behind the corners are chained,
-    projected on the face's frontal plane at each pose, and each point in the middle NOTCH_SPAN of the
-    mouth's width scored by :func:`chord_offsets` over NOTCH_WINDOW IOD. A smooth edge scores its
-    sagitta (<= 0.004 IOD away from the corners), a notch narrower than the window its depth, an edge
-    that doubles back on itself (a slit, an island of faces, a flap) up to NOTCH_WINDOW. None: the
-    mouth has no free edge (lips joined, or a closed mouth bag)."""
+    """:func:`lip_edge_shards`' largest departure alone (IOD; None: no free lip edge)."""
+    found = lip_edge_shards(rig, landmarks, poses=poses, skip_vertices=skip_vertices)
+    return None if found is None else found[0]
+
+
+def _runs(over: np.ndarray, closed: bool) -> int:
+    """How many separate runs of True ``over`` (n,) holds (a closed line's first and last points adjoin)."""
+    if not over.any():
+        return 0
+    if over.all():
+        return 1
+    starts = int(np.count_nonzero(over[1:] & ~over[:-1])) + int(over[0])
+    return starts - int(closed and over[0] and over[-1])
+
+
+def lip_edge_shards(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    skip_vertices: int = 0,
+    limit: float = LIP_EDGE_NOTCH_LIMIT,
+) -> tuple[float, int] | None:
+    """(the lips' free edges' largest departure from their own course, IOD; at the pose with the most,
+    the number of places where they leave it by more than ``limit`` IOD: shards, flaps and notches
+    counted one each). The departure is seen from the front, over ``poses``: the boundary edges of the
+    rig's triangles (those of the last ``skip_vertices`` vertices, a mouth cavity, left out) whose ends
+    lie between the mouth corners, within NOTCH_BAND IOD of the corner-to-corner line at rest and less
+    than NOTCH_DEPTH IOD behind the corners are chained, projected on the face's frontal plane at each
+    pose, and each point in the middle NOTCH_SPAN of the mouth's width scored by :func:`chord_offsets`
+    over NOTCH_WINDOW IOD. A smooth edge scores its sagitta (<= 0.004 IOD away from the corners), a notch
+    narrower than the window its depth, an edge that doubles back on itself (a slit, an island of faces,
+    a flap) up to NOTCH_WINDOW. None: the mouth has no free edge (lips joined, or a closed mouth bag)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
     if skip_vertices:
@@ -340,15 +369,18 @@ def lip_edge_notch(
         sides.append(1.0 if float(np.sum(d[:, 0] * w[:, 1] - d[:, 1] * w[:, 0])) >= 0 else -1.0)
         chains.append((c, closed))
     scored = [np.abs(x[c]) < 0.5 * NOTCH_SPAN * width for c, _ in chains]
-    worst = 0.0
+    worst, places = 0.0, 0
     for pose in poses:
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        n_over = 0
         for (c, closed), side, keep in zip(chains, sides, scored, strict=True):
             if keep.any():
                 # A point on the opening's side of its chord: the lip pokes into the opening there.
                 h = -side * chord_offsets(v[c] @ plane, closed, NOTCH_WINDOW)
                 worst = max(worst, float(h[keep].max()))
-    return worst
+                n_over += _runs(keep & (h > limit), closed)
+        places = max(places, n_over)
+    return worst, places
 
 
 def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -438,10 +470,16 @@ def check_rig(
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
     if opening is not None and opening < limits.min_open_response:
         fails.append(f"the lips part by {opening:.2f} of the mouth opening asked (< {limits.min_open_response})")
-    notch = lip_edge_notch(rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices)
+    found = lip_edge_shards(
+        rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
+    )
+    notch, shards = (None, None) if found is None else found
     warns = []
     if notch is not None and notch > limits.max_lip_edge_notch:
-        warns.append(f"a lip edge leaves its course by {notch:.4f} IOD > {limits.max_lip_edge_notch} (jagged)")
+        warns.append(
+            f"a lip edge leaves its course by {notch:.4f} IOD > {limits.max_lip_edge_notch} (jagged) "
+            f"at {shards} place{'s' if shards != 1 else ''}"
+        )
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -452,6 +490,7 @@ def check_rig(
         passed=not fails,
         failures=tuple(fails),
         lip_edge_notch_iod=notch,
+        lip_edge_shards=shards,
         warnings=tuple(warns),
         open_response=opening,
     )

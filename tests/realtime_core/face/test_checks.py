@@ -228,3 +228,34 @@ def test_a_rig_whose_lips_do_not_part_at_the_midline_fails_the_opening_check() -
     assert rep.open_response == pytest.approx(0.0, abs=1e-12) and rep.open_response < MIN_OPEN_RESPONSE
     assert not rep.passed and any("lips part" in f for f in rep.failures)
     assert "mouth opening 0.00" in rep.summary()
+
+
+def test_lip_edge_shards_counts_each_fleck_and_tooth_over_the_limit() -> None:
+    """Shards hanging in the opening (the stylised held-out head's at /a/) score no more than one fleck does;
+    their number tells them apart. Flecks added one at a time to the open mouth of :class:`_Lips`, apart
+    from each other and from the lips, count one each; the smooth opening counts none. On the zigzag cut
+    every tooth pointing into the opening (both lips' edges, the middle 80% of the width) is a place."""
+    from realtime_core.face.checks import NOTCH_SPAN, lip_edge_shards
+
+    pose = ((0.0, 0.0, 0.3, 0.0),)
+    rig = _Lips(0.0)
+    found = lip_edge_shards(rig, rig.landmarks(), poses=pose)
+    assert found is not None and found[1] == 0
+    for k, x in enumerate((-0.15, 0.0, 0.15), start=1):
+        n0 = len(rig.neutral)
+        fleck = np.array([[x, -0.05, 0.0], [x + 0.04, -0.05, 0.0], [x + 0.02, -0.03, 0.0]])
+        rig.neutral = np.vstack([rig.neutral, fleck])
+        rig.triangles = np.vstack([rig.triangles, [[n0, n0 + 1, n0 + 2]]])
+        found = lip_edge_shards(rig, rig.landmarks(), poses=pose)
+        assert found is not None and found[0] == pytest.approx(0.02) and found[1] == k
+    rep = check_rig(rig, rig.landmarks(), poses=pose)
+    assert rep.lip_edge_shards == 3 and "at 3 places" in rep.summary()
+    jagged = _Lips(0.02)
+    found = lip_edge_shards(jagged, jagged.landmarks(), poses=pose)
+    assert found is not None
+    # Every scored cut vertex but the span's two ends (whose chords reach past it) is a tooth into the
+    # opening of one lip or the other: the even columns point down from the upper edge, the odd ones up
+    # from the lower edge. One place each.
+    x = jagged.x
+    scored = np.flatnonzero(np.abs(x) < 0.5 * NOTCH_SPAN * (x[-1] - x[0]))
+    assert found[1] == len(scored) - 2

@@ -1,0 +1,288 @@
+"""A knife cut along a coarse head's lip contact line: vertices inserted where the line crosses the mesh.
+
+A decimated (low-poly) head's closed lips meet along a few long edges (Lee Perry-Smith at 1,428
+triangles: the lower lip's top is one edge from mouth corner to mouth corner, under a thin strip of
+slivers that hangs from the upper lip). No edge path between the corners then follows the lips'
+contact: the path through the mesh vertex nearest the inner-lip point ran as a V down the lower lip
+(that vertex lay 0.1 IOD below the contact), and a path along the corner-to-corner line had too few
+vertices to split for the lips to part. Modelling tools' knife does what is needed: it cuts the
+triangles a line crosses, inserting a vertex on every edge it passes. Here the line is the lips'
+contact curve seen from the front: the parabola through the two mouth corners and the inner-lip point
+(in the face frame's side/up plane), swept along the depth axis over the mouth's front. The new
+vertices form an edge path from corner to corner on the curve, with a vertex at every edge the curve
+crosses, so the cut (:func:`assets.heads.rigging.cut_mouth`) separates the lips wherever they touch
+and the inner-lip point lies on the path (a vertex of it is within one crossed edge of the point).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+
+COARSE_EDGES = 8.0
+"""A closed mouth is coarse when its corner-to-corner width spans fewer than this many median edges of
+the mesh round the mouth (Lee Perry-Smith: 1,428 triangles 2.6, 3,810 triangles 4.1, the full scan 17.7;
+the stylised held-out head 5.0): it is then knife-cut (:func:`knife_contact`). Finer meshes have a
+vertex close to any point of the contact and keep the edge path of :func:`assets.heads.rigging.cut_path`."""
+MOUTH_REACH = 0.5
+"""IOD: the edges within this distance of the mouth centre measure the mesh's resolution there."""
+KNIFE_SNAP = 0.02
+"""IOD: a crossing this close to an edge's end moves onto that end (the vertex joins the path), so the
+cut leaves no sliver shorter than this along an edge."""
+KNIFE_DEPTH = 0.1
+"""IOD: the knife cuts faces whose vertices all lie no further behind the mouth corners than this (the
+lips' front and their contact; a hollow head's inner walls and the back of the head stay whole)."""
+KNIFE_SIDE = 0.02
+"""IOD: how far beyond a mouth corner, sideways, a cut face's vertices may reach."""
+KNIFE_HEIGHT = 0.35
+"""IOD: a cut face reaches within this distance above or below the contact curve (the lips' height; the
+nose and chin stay as they are)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class KnifeCut:
+    """A mesh with vertices inserted on edges. ``vertices`` (n + k, 3): the original n first;
+    ``triangles`` (m', 3); ``edge`` (k, 2) the two vertices each new vertex lies between (earlier
+    vertices: an original one or a new one before it) and ``at`` (k,) where (0 = edge[:, 0],
+    1 = edge[:, 1]); ``path`` the corner-to-corner vertex path along the contact (indices into
+    ``vertices``)."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    edge: np.ndarray
+    at: np.ndarray
+    path: list[int]
+
+    def carry(self, values: np.ndarray) -> np.ndarray:
+        """Per-vertex ``values`` (n, ...) extended to the new vertices by linear interpolation along
+        their edges (UVs, colours)."""
+        a = np.asarray(values)
+        out = np.concatenate([a, np.zeros((len(self.edge), *a.shape[1:]), dtype=a.dtype)])
+        n = len(a)
+        for k, ((i, j), w) in enumerate(zip(self.edge.tolist(), self.at.tolist(), strict=True)):
+            out[n + k] = (1.0 - w) * out[i] + w * out[j]
+        return out
+
+    def carry_nearest(self, values: np.ndarray) -> np.ndarray:
+        """Per-vertex labels (n,) extended to the new vertices from their edge's nearer end (part ids)."""
+        a = np.asarray(values)
+        out = np.concatenate([a, np.zeros(len(self.edge), dtype=a.dtype)])
+        n = len(a)
+        for k, ((i, j), w) in enumerate(zip(self.edge.tolist(), self.at.tolist(), strict=True)):
+            out[n + k] = out[i] if w < 0.5 else out[j]
+        return out
+
+
+def mouth_resolution(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, iod: float) -> float:
+    """How many median edges (of those within MOUTH_REACH IOD of the corners' midpoint) the
+    corner-to-corner distance spans: the mesh's resolution across the mouth."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    mid = 0.5 * (v[left] + v[right])
+    near = np.linalg.norm(0.5 * (v[e[:, 0]] + v[e[:, 1]]) - mid, axis=1) <= MOUTH_REACH * iod
+    if not near.any():
+        return 0.0
+    el = float(np.median(np.linalg.norm(v[e[near, 0]] - v[e[near, 1]], axis=1)))
+    return float(np.linalg.norm(v[left] - v[right])) / max(el, 1e-12 * iod)
+
+
+def contact_offset(q: np.ndarray, left: np.ndarray, right: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """(n,) how far above the contact curve each point of ``q`` (n, 3) lies, in the face frame's
+    (side, up, forward) coordinates: the up coordinate minus the parabola's (through the corners
+    ``left``, ``right`` and the inner-lip point ``inner``, each (3,) in the same coordinates) at the
+    point's side coordinate."""
+    xs = np.array([left[0], inner[0], right[0]])
+    ys = np.array([left[1], inner[1], right[1]])
+    coef = np.polyfit(xs, ys, 2)
+    return q[:, 1] - np.polyval(coef, q[:, 0])
+
+
+def knife_contact(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    left: int,
+    right: int,
+    inner: np.ndarray,
+    axes: np.ndarray,
+    *,
+    iod: float,
+) -> KnifeCut | None:
+    """Cut ``triangles`` along the lip contact curve (:func:`contact_offset`: through the corner
+    vertices ``left``, ``right`` and the inner-lip point ``inner`` (3,)), ``axes`` (3, 3) the face
+    frame's side, up and forward axes (rows). Every face within the mouth's width and front (KNIFE_SIDE,
+    KNIFE_DEPTH, KNIFE_HEIGHT) that the curve crosses gets a vertex on each crossed edge (a crossing
+    within KNIFE_SNAP IOD of an end takes that end); faces sharing a split edge are split too, so the
+    mesh stays conforming, and every new vertex lies on an old edge (the surface, its UVs and colours are
+    unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the
+    edge is split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`).
+    Returns None when the cut pieces do not join the corners."""
+    ax = np.asarray(axes, dtype=np.float64)
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    width = float(np.linalg.norm(v[left] - v[right]))
+    qi = np.asarray(inner, dtype=np.float64) @ ax.T
+    q = v @ ax.T
+    s = contact_offset(q, q[left], q[right], qi)
+    s[np.abs(s) <= 1e-9 * iod] = 0.0  # on the curve to rounding (a contact edge the curve runs along)
+    s[[left, right]] = 0.0
+    region = _knife_region(q, t, left, right, iod, s)
+    e_all = np.concatenate([t[region][:, [0, 1]], t[region][:, [1, 2]], t[region][:, [2, 0]]])
+    e_all = np.unique(np.sort(e_all, axis=1), axis=0)
+    # Crossings near an edge's end move onto it (that vertex is then on the curve): no slivers.
+    for _ in range(10):
+        a, b = e_all[:, 0], e_all[:, 1]
+        cross = s[a] * s[b] < 0
+        w = np.where(cross, s[a] / np.where(cross, s[a] - s[b], 1.0), 0.0)
+        length = np.linalg.norm(v[a] - v[b], axis=1)
+        snap_a = cross & (w * length < KNIFE_SNAP * iod) & (w <= 0.5)
+        snap_b = cross & ((1 - w) * length < KNIFE_SNAP * iod) & (w > 0.5)
+        if not (snap_a.any() or snap_b.any()):
+            break
+        s[e_all[snap_a, 0]] = 0.0
+        s[e_all[snap_b, 1]] = 0.0
+    cross = s[e_all[:, 0]] * s[e_all[:, 1]] < 0
+    edge = e_all[cross]
+    at = s[edge[:, 0]] / (s[edge[:, 0]] - s[edge[:, 1]])
+    n = len(v)
+    on = np.r_[s == 0, np.ones(len(edge), dtype=bool)]  # the vertices on the curve, the new ones too
+    v2, t2 = _split_edges(v, t, edge, at)
+    region2 = _knife_region(np.r_[q, v2[n:] @ ax.T], t2, left, right, iod, np.r_[s, np.zeros(len(edge))])
+    # The curve's pieces: edges of the cut faces whose two ends are on the curve.
+    e2 = np.concatenate([t2[region2][:, [0, 1]], t2[region2][:, [1, 2]], t2[region2][:, [2, 0]]])
+    e2 = np.unique(np.sort(e2, axis=1), axis=0)
+    e2 = e2[on[e2[:, 0]] & on[e2[:, 1]]]
+    if not len(e2):
+        return None
+    lw = np.linalg.norm(v2[e2[:, 0]] - v2[e2[:, 1]], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((np.r_[lw, lw], (np.r_[e2[:, 0], e2[:, 1]], np.r_[e2[:, 1], e2[:, 0]])), shape=(len(v2),) * 2)
+    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
+    if not np.isfinite(dist[right]):
+        return None
+    path = [right]
+    while path[-1] != left:
+        path.append(int(pred[path[-1]]))
+    v3, t3, edge3, at3, path3 = split_long_edges(v2, t2, path[::-1], width / COARSE_EDGES, among=n)
+    return KnifeCut(
+        vertices=v3,
+        triangles=t3,
+        edge=np.concatenate([edge.astype(np.int64), edge3]),
+        at=np.concatenate([at, at3]),
+        path=path3,
+    )
+
+
+def split_long_edges(
+    vertices: np.ndarray, triangles: np.ndarray, path: list[int], longest: float, *, among: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[int]]:
+    """Split every edge of ``path`` longer than ``longest`` (head units) into equal pieces: a contact that
+    is one long edge (a decimated head's lips) gets vertices on it, so the cut has vertices to split and
+    the lips can part along it. Each face on a split edge becomes a fan from its third vertex. ``among``:
+    split only edges between two of the first ``among`` vertices (the mesh's own edges that the contact
+    curve runs along; the knife's pieces across a face are left whole: on Lee Perry-Smith at 1,428
+    triangles their fans were slivers tied to the mouth corners, and the rig opened 0.19 instead of 0.69,
+    see docs/animation.md). Returns vertices (n + k, 3), triangles, the (k, 2) edge each new vertex lies
+    on and (k,) where on it (see :class:`KnifeCut`), and the path with the new vertices."""
+    v0 = np.asarray(vertices, dtype=np.float64)
+    n = len(v0)
+    added: list[np.ndarray] = []
+    tris = [tuple(f) for f in np.asarray(triangles, dtype=np.int64).tolist()]
+    edges: list[tuple[int, int]] = []
+    ats: list[float] = []
+    out_path = [path[0]]
+    for a, b in itertools.pairwise(path):
+        pieces = int(np.ceil(float(np.linalg.norm(v0[a] - v0[b])) / longest - 1e-9)) if longest > 0 else 1
+        if pieces >= 2 and (among is None or max(a, b) < among):
+            fracs = np.arange(1, pieces) / pieces
+            ids = list(range(n + len(edges), n + len(edges) + pieces - 1))
+            edges += [(a, b)] * (pieces - 1)
+            ats += fracs.tolist()
+            added.append((1 - fracs)[:, None] * v0[a] + fracs[:, None] * v0[b])
+            chain = [a, *ids, b]
+            fans: list[tuple[int, ...]] = []
+            for f in tris:
+                for r in range(3):
+                    p, q, o = f[r], f[(r + 1) % 3], f[(r + 2) % 3]
+                    if (p, q) in ((a, b), (b, a)):
+                        seq = chain if p == a else chain[::-1]
+                        fans += [(seq[i], seq[i + 1], o) for i in range(len(seq) - 1)]
+                        break
+                else:
+                    fans.append(f)
+            tris = fans
+            out_path += ids
+        out_path.append(b)
+    return (
+        np.concatenate([v0, *added]) if added else v0,
+        np.asarray(tris, dtype=np.int64).reshape(-1, 3),
+        np.asarray(edges, dtype=np.int64).reshape(-1, 2),
+        np.asarray(ats, dtype=np.float64),
+        out_path,
+    )
+
+
+def _knife_region(q: np.ndarray, t: np.ndarray, left: int, right: int, iod: float, s: np.ndarray) -> np.ndarray:
+    """(m,) bool the faces the knife may cut: every vertex within the mouth's width (KNIFE_SIDE beyond
+    the corners) and no further than KNIFE_DEPTH behind the corners, and the face reaching within
+    KNIFE_HEIGHT of the contact curve (``s`` (n,), :func:`contact_offset`); ``q`` (n, 3) the vertices in
+    the face frame."""
+    x_lo, x_hi = sorted((q[left, 0], q[right, 0]))
+    back = min(q[left, 2], q[right, 2]) - KNIFE_DEPTH * iod
+    qt = q[t]
+    return (
+        (qt[:, :, 0] >= x_lo - KNIFE_SIDE * iod).all(axis=1)
+        & (qt[:, :, 0] <= x_hi + KNIFE_SIDE * iod).all(axis=1)
+        & (qt[:, :, 2] >= back).all(axis=1)
+        & (s[t].min(axis=1) <= KNIFE_HEIGHT * iod)
+        & (s[t].max(axis=1) >= -KNIFE_HEIGHT * iod)
+    )
+
+
+def _split_edges(v: np.ndarray, t: np.ndarray, edge: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Insert a vertex on each edge (k, 2) (sorted pairs) at ``at`` (k,) along it and split every face
+    with split edges: one split edge into two faces (a fan from the opposite vertex), two into three
+    (the lone vertex's corner and the quad left, along its shorter diagonal), three into four (the
+    midpoint subdivision). Windings are kept. Returns vertices (n + k, 3) and triangles."""
+    n = len(v)
+    new_id = {(int(i), int(j)): n + k for k, (i, j) in enumerate(np.asarray(edge).tolist())}
+    v2 = np.concatenate([v, (1 - at)[:, None] * v[edge[:, 0]] + at[:, None] * v[edge[:, 1]]]) if len(edge) else v
+
+    def mid(i: int, j: int) -> int | None:
+        return new_id.get((i, j) if i < j else (j, i))
+
+    out: list[tuple[int, int, int]] = []
+    for i, j, k in t.tolist():
+        ms = [mid(i, j), mid(j, k), mid(k, i)]
+        cut = [m is not None for m in ms]
+        if not any(cut):
+            out.append((i, j, k))
+            continue
+        if all(cut):
+            a, b, c = ms
+            assert a is not None and b is not None and c is not None
+            out += [(i, a, c), (a, j, b), (c, b, k), (a, b, c)]
+            continue
+        # Rotate so that the first edge (c0 -> c1) is split.
+        r = cut.index(True)
+        c0, c1, c2 = [(i, j, k)[(r + o) % 3] for o in range(3)]
+        m01, m12, m20 = mid(c0, c1), mid(c1, c2), mid(c2, c0)
+        assert m01 is not None
+        if m12 is None and m20 is None:
+            out += [(c0, m01, c2), (m01, c1, c2)]
+        elif m12 is not None:  # c1 alone on one side
+            out += [(m01, c1, m12), *_quad(v2, c0, m01, m12, c2)]
+        else:  # c0 alone on one side
+            assert m20 is not None
+            out += [(c0, m01, m20), *_quad(v2, m01, c1, c2, m20)]
+    return v2, np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+
+def _quad(v: np.ndarray, a: int, b: int, c: int, d: int) -> list[tuple[int, int, int]]:
+    """The quad a-b-c-d (in winding order) as two triangles split along its shorter diagonal."""
+    if np.linalg.norm(v[a] - v[c]) <= np.linalg.norm(v[b] - v[d]):
+        return [(a, b, c), (a, c, d)]
+    return [(a, b, d), (b, c, d)]

@@ -1,0 +1,199 @@
+"""The knife cut of a coarse head's lip contact (:mod:`assets.heads.knife`) on synthetic meshes: a closed
+mouth whose lips touch along one long edge, and a contact curve that crosses triangles."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from assets.heads.knife import COARSE_EDGES, KNIFE_SNAP, contact_offset, knife_contact, mouth_resolution
+from assets.heads.rigging import cut_mouth
+
+
+def _facing_forward(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``t`` with every triangle wound so that its normal points to +z (the face's front)."""
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    return np.where((n[:, 2] < 0)[:, None], t[:, ::-1], t)
+
+
+def _one_edge_mouth():
+    """A decimated closed mouth: the corners L (-1, 0) and R (1, 0) joined by one edge, the upper lip one
+    triangle up to (0, 0.4), the lower lip one down to (0, -0.4), a ring of skin round them, on a dome
+    bulging to +z; four eye-corner points (IOD 1) apart from the mesh. Returns v, t, L, R, upper, lower."""
+    pts = [
+        (-1.0, 0.0),  # 0 L
+        (1.0, 0.0),  # 1 R
+        (0.0, 0.4),  # 2 upper lip
+        (0.0, -0.4),  # 3 lower lip
+        (-1.5, 1.0),  # 4
+        (0.0, 1.2),  # 5
+        (1.5, 1.0),  # 6
+        (1.5, -1.0),  # 7
+        (0.0, -1.2),  # 8
+        (-1.5, -1.0),  # 9
+        (-2.0, 0.0),  # 10
+        (2.0, 0.0),  # 11
+    ]
+    v = np.array([[x, y, 0.3 * (1 - x * x / 4 - y * y / 2)] for x, y in pts])
+    t = np.array(
+        [
+            [0, 1, 2],
+            [0, 1, 3],
+            [0, 2, 4],
+            [2, 5, 4],
+            [2, 6, 5],
+            [2, 1, 6],
+            [1, 11, 6],
+            [0, 4, 10],
+            [0, 9, 3],
+            [3, 9, 8],
+            [3, 8, 7],
+            [3, 7, 1],
+            [1, 7, 11],
+            [0, 10, 9],
+        ]
+    )
+    eyes = np.array([[0.6, 2.0, 0.0], [0.4, 2.0, 0.0], [-0.4, 2.0, 0.0], [-0.6, 2.0, 0.0]])
+    return np.vstack([v, eyes]), _facing_forward(v, t), 0, 1, 2, 3
+
+
+class _Rig:
+    """mouth_open p moves every vertex by p times its column of ``field`` (n, 3): enough of a rig for
+    :func:`realtime_core.face.checks.check_rig`."""
+
+    def __init__(self, neutral: np.ndarray, triangles: np.ndarray, field: np.ndarray) -> None:
+        self.neutral, self.triangles, self.field = neutral, triangles, field
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        return self.neutral + float(p[2]) * self.field
+
+
+def test_lips_touching_along_one_edge_get_vertices_to_split_and_open():
+    """The 1,428-triangle Lee Perry-Smith's case: the lips' contact is one edge between the corners, so no
+    edge path has an interior vertex to split and the lips never part. The knife splits the contact edge
+    into COARSE_EDGES pieces: after the cut the upper and lower lip triangles share only the corners, the
+    split vertices lie on the corner-to-corner segment, and a harmonic field pinning the upper side still
+    and dropping the lower side opens the mouth with the checks passing (the opening it asks for, no flip)."""
+    import scipy.sparse as sp
+
+    from realtime_core.face import MouthLandmarks
+    from realtime_core.face.checks import MIN_OPEN_RESPONSE, check_rig
+    from realtime_core.face.harmonic import harmonic_weights
+
+    v_all, t, left, right, upper, lower = _one_edge_mouth()
+    v, eyes = v_all[:12], v_all[12:]
+    axes = np.eye(3)
+    assert mouth_resolution(v, t, left, right, iod=1.0) < COARSE_EDGES
+    inner = 0.5 * (v[left] + v[right])
+    knife = knife_contact(v, t, left, right, inner, axes, iod=1.0)
+    assert knife is not None
+    path = knife.path
+    assert path[0] == left and path[-1] == right
+    between = knife.vertices[path[1:-1]]
+    np.testing.assert_allclose(between[:, 1], 0.0, atol=1e-12)  # on the segment L-R (y = 0 ...)
+    np.testing.assert_allclose(between[:, 2], v[left, 2], atol=1e-12)  # (... and its height on the dome)
+    assert np.all(np.diff(between[:, 0]) > 0)
+    v2, t2, _, origin = cut_mouth(knife.vertices, knife.triangles, left, right, np.array([0.0, 1.0, 0.0]), path=path)
+    copies = np.arange(len(knife.vertices), len(v2))
+    assert len(copies) == len(path) - 2
+    np.testing.assert_array_equal(np.sort(origin[copies]), np.sort(path[1:-1]))
+    up_faces = np.isin(t2, upper).any(axis=1)
+    low_faces = np.isin(t2, lower).any(axis=1)
+    shared = np.intersect1d(t2[up_faces], t2[low_faces])
+    assert set(shared.tolist()) <= {left, right}
+
+    # The field: upper side pinned still, lower side's copies pinned to drop by 1 - x^2 at mouth_open 1
+    # (a rig's seam rows fade into the still corners), the skin ring still; the lip vertices in between
+    # harmonic.
+    ring = np.arange(4, 12)
+    pin = np.concatenate([origin[copies], copies])
+    drop = np.r_[np.ones(len(copies)), 1.0 - v2[copies, 0] ** 2]
+    rows = sp.csr_matrix(
+        (drop, (np.arange(len(pin)), np.r_[np.zeros(len(copies)), np.ones(len(copies))])),
+        shape=(len(pin), 2),
+    )
+    # Sec. 5.2's region (nonzero rows): everything but the ring.
+    sec5 = np.zeros((len(v2), 2))
+    sec5[:, 0] = 1.0
+    sec5[ring] = 0.0
+    g = harmonic_weights(v2, t2, np.array([upper, lower]), sp.csr_matrix(sec5), pinned=pin, pinned_rows=rows)
+    field = np.asarray(g @ np.array([[0.0, 0.0, 0.0], [0.0, -1.0, 0.0]]))
+    mid = int(path[len(path) // 2])
+    mid_copy = int(copies[np.flatnonzero(origin[copies] == mid)[0]])
+    n = len(v2)
+    rig = _Rig(np.vstack([v2, eyes]), t2, np.vstack([field, np.zeros((4, 3))]))
+    lm = MouthLandmarks(
+        upper_lip=upper,
+        lower_lip=lower,
+        upper_inner=mid,
+        lower_inner=mid_copy,
+        corner_left=right,  # the face's own left is the viewer's right (+x here)
+        corner_right=left,
+        eye_outer_left=n,
+        eye_inner_left=n + 1,
+        eye_inner_right=n + 2,
+        eye_outer_right=n + 3,
+    )
+    pairs = np.column_stack([origin[copies], copies])
+    rep = check_rig(rig, lm, lip_pairs=pairs, poses=((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0)))
+    # The middle half's pairs drop by 1 - x^2 for |x| <= 0.5 (their median, measured along the face
+    # frame's up axis, which tilts a little from y).
+    mid_drops = 1.0 - v2[copies, 0][np.abs(v2[copies, 0]) <= 0.5] ** 2
+    assert rep.open_response is not None
+    assert rep.open_response == pytest.approx(float(np.median(mid_drops)), abs=0.01)
+    assert rep.open_response >= MIN_OPEN_RESPONSE
+    assert rep.flipped_triangles == 0 and rep.passed, rep.summary()
+
+
+def _grid_dome(cols: int = 9, rows: int = 9):
+    xs = np.linspace(-1.0, 1.0, cols)
+    ys = np.linspace(-1.0, 1.0, rows)
+    v = np.array([[x, y, 0.4 * (1 - 0.3 * (x * x + y * y))] for y in ys for x in xs])
+    t = []
+    for j in range(rows - 1):
+        for i in range(cols - 1):
+            a = j * cols + i
+            t += [[a, a + cols + 1, a + 1], [a, a + cols, a + cols + 1]]
+    return v, _facing_forward(v, np.array(t)), xs, ys
+
+
+def test_the_knife_cuts_along_the_contact_curve_and_keeps_the_surface_whole():
+    """A contact curve that runs between vertex rows (the inner-lip point 0.13 above the corners' row,
+    the corners 0.5 apart from the grid's sides): every path vertex lies on the curve (the parabola through
+    the corners and the point, computed here independently), the surface keeps its area, every edge is
+    still shared by at most two triangles and the mesh's boundary is unchanged (no T-junction, no hole)."""
+    v, t, xs, _ = _grid_dome()
+    cols = len(xs)
+    row = 4  # y = 0
+    left, right = row * cols + 2, row * cols + 6  # x = -0.5 and 0.5
+    inner = np.array([0.0, 0.13, 0.4])
+    knife = knife_contact(v, t, left, right, inner, np.eye(3), iod=1.0)
+    assert knife is not None
+    v2, t2 = knife.vertices, knife.triangles
+    p = v2[knife.path]
+    # The parabola through (-0.5, 0), (0, 0.13), (0.5, 0): y = 0.13 (1 - 4 x^2). Crossings are on it;
+    # vertices within KNIFE_SNAP of a crossing along an edge took its place.
+    off = p[:, 1] - 0.13 * (1 - 4 * p[:, 0] ** 2)
+    assert np.abs(off).max() <= KNIFE_SNAP
+    np.testing.assert_allclose(contact_offset(p, v[left], v[right], inner), off, atol=1e-9)
+    assert np.all(np.diff(p[:, 0]) > 0)  # corner to corner along the curve, never back
+
+    def area(vv: np.ndarray, tt: np.ndarray) -> float:
+        return float(np.linalg.norm(np.cross(vv[tt[:, 1]] - vv[tt[:, 0]], vv[tt[:, 2]] - vv[tt[:, 0]]), axis=1).sum())
+
+    # The new vertices lie on the old edges (which are straight), so the area is the same.
+    assert area(v2, t2) == pytest.approx(area(v, t), rel=1e-12)
+
+    def edge_counts(tt: np.ndarray) -> np.ndarray:
+        e = np.sort(np.concatenate([tt[:, [0, 1]], tt[:, [1, 2]], tt[:, [2, 0]]]), axis=1)
+        return np.unique(e, axis=0, return_counts=True)[1]
+
+    c0, c2 = edge_counts(t), edge_counts(t2)
+    assert c2.max() == 2
+    # Boundary edges: the grid's 4 (cols - 1), unchanged (a T-junction would leave a new boundary edge).
+    assert (c2 == 1).sum() == (c0 == 1).sum() == 4 * (cols - 1)
+    # Every triangle keeps facing forward.
+    n = np.cross(v2[t2[:, 1]] - v2[t2[:, 0]], v2[t2[:, 2]] - v2[t2[:, 0]])
+    assert (n[:, 2] > 0).all()
+    # UVs (here: the positions' x, y) carried to the new vertices equal their own x, y.
+    np.testing.assert_allclose(knife.carry(v[:, :2]), v2[:, :2], atol=1e-12)
