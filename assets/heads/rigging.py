@@ -510,6 +510,97 @@ def lip_islands(triangles: np.ndarray, n_vertices: int, cut: np.ndarray) -> np.n
     return (size[comp] <= LIP_ISLAND_FACES) & touches[comp]
 
 
+PATH_ISLAND_FACES = 30
+"""Faces: a piece of the cut mesh at most this large, apart from the rest (no edge shared with another face) and
+holding the copies of one side of the cut only, is moved onto the other lip (:func:`join_path_islands`)."""
+
+
+def join_path_islands(
+    triangles: np.ndarray, vertices: np.ndarray, seam: np.ndarray
+) -> tuple[np.ndarray, dict[int, tuple[np.ndarray, np.ndarray]]]:
+    """(``triangles`` (m, 3) with every island on the cut moved onto the other lip, {vertex: (anchors (a,),
+    weights (a,))} for the rig rows of the island's other vertices).
+
+    ``seam`` (k, 2): the cut's vertex pairs (upper original, lower copy), at one place each. An island is a piece
+    of at most PATH_ISLAND_FACES faces sharing no edge with any other face that holds cut vertices of one side
+    only and whose other vertices no other face uses, and is not the largest piece holding that side's cut vertices
+    (the lip itself). Its cut vertices become their twins on the other side
+    (which the island's edges then share with that lip's faces); both twins of every pair stay (the side the
+    island leaves keeps its vertex and rows even when no face uses it), so no pair is tied and the lips' pairs
+    move as before. Each other vertex of the island is given the inverse-square-distance mix (at rest) of the
+    island's new cut vertices' rows: the island moves with the lip it joined.
+
+    Why: on a hollow scan the cut's side rule and the removal of the crease's hidden walls leave the upper lip's
+    contact strip (Lee Perry-Smith, hand landmarks: 14 faces on the path, x = -0.17 to +0.04 IOD) joined to the
+    upper lip through nothing but path vertices, and to the lower lip's crease faces through their twins. Moving
+    with the upper seam it hung below the upper lip's underside at /a/ and /u/ as a pink fleck and counted as a
+    free lip edge (lip edge notch 0.05 IOD). Joined to the lower lip it lies on the lower lip's top, where it was
+    at rest (the closed lips render as before); joining it at the cut instead unsplit its path vertices, tying the
+    lips (:func:`_without_islands`)."""
+    t = np.array(triangles, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+    seam = np.asarray(seam, dtype=np.int64).reshape(-1, 2)
+    if not len(seam) or not len(t):
+        return t, {}
+    twin = np.arange(len(v))
+    twin[seam[:, 0]], twin[seam[:, 1]] = seam[:, 1], seam[:, 0]
+    upper = np.zeros(len(v), dtype=bool)
+    upper[seam[:, 0]] = True
+    on_cut = twin != np.arange(len(v))
+    comp = _face_components(t, len(v), np.zeros(len(t), dtype=bool))
+    size = np.bincount(comp)
+    uses = np.bincount(t.ravel(), minlength=len(v))
+    mix: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    lips = []  # the largest piece holding each side's cut vertices: that side's lip, never an island
+    for side in (seam[:, 0], seam[:, 1]):
+        held = np.unique(comp[np.isin(t, side).any(axis=1)])
+        if len(held):
+            lips.append(held[np.argmax(size[held])])
+    for c in np.setdiff1d(np.flatnonzero(size <= PATH_ISLAND_FACES), lips):
+        members = np.flatnonzero(comp == c)
+        vs = np.unique(t[members])
+        cut_vs, own = vs[on_cut[vs]], vs[~on_cut[vs]]
+        if not len(cut_vs) or len(np.unique(upper[cut_vs])) > 1:
+            continue  # off the cut, or on both of its sides
+        if (uses[own] != np.bincount(t[members].ravel(), minlength=len(v))[own]).any():
+            continue  # another face shares one of its vertices: moving it would move that face too
+        t[members] = twin[t[members]] * on_cut[t[members]] + t[members] * ~on_cut[t[members]]
+        anchors = twin[cut_vs]
+        for a in own:
+            w = 1.0 / np.maximum(np.sum((v[anchors] - v[a]) ** 2, axis=1), 1e-24)
+            mix[int(a)] = (anchors, w / w.sum())
+    return t, mix
+
+
+def with_rows_mixed(rig: Rig, mix: Mapping[int, tuple[np.ndarray, np.ndarray]]) -> Rig:
+    """``rig`` whose vertex ``a`` moves, for each ``a: (anchors, weights)`` of ``mix``, by the weighted sum of the
+    anchors' displacements (their rows and lip-contact spread mixed; an anchor that never moves adds nothing);
+    a still vertex given moving anchors joins the moving set."""
+    if not mix:
+        return rig
+    n = len(rig.neutral)
+    row = -np.ones(n, dtype=np.int64)
+    row[rig.moving] = np.arange(len(rig.moving))
+    moving = np.union1d(rig.moving, np.fromiter(mix, dtype=np.int64)).astype(np.int64)
+    src, dst, val = [], [], []
+    for k, a in enumerate(moving):
+        if int(a) in mix:
+            anchors, w = mix[int(a)]
+            ok = row[anchors] >= 0
+            src += list(row[anchors][ok])
+            dst += [k] * int(ok.sum())
+            val += list(np.asarray(w, dtype=np.float64)[ok])
+        elif row[a] >= 0:
+            src.append(row[a])
+            dst.append(k)
+            val.append(1.0)
+    pick = sp.csr_matrix((val, (dst, src)), shape=(len(moving), len(rig.moving)))
+    matrix = (sp.kron(pick, sp.identity(3), format="csr") @ rig.matrix).tocsr()
+    matrix.eliminate_zeros()
+    spread = None if rig.contact_spread is None else (pick @ rig.contact_spread).tocsr()
+    return replace(rig, moving=moving, matrix=matrix, contact_spread=spread)
+
+
 SLIVER_TIE = 0.2
 """Cut heads: the fold repair moves vertices joined by edges shorter than this fraction of the median
 edge as one (Lee Perry-Smith: 3 -> 1 flipped triangles, stretch 4.86 -> 2.83, from a sliver fan behind a
@@ -1044,9 +1135,18 @@ def rig_head(
             rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
             t = cut_mesh.triangles
         if clean_lips and cut_copies is not None:
+            before = np.asarray(t, dtype=np.int64)
+            t, mix = join_path_islands(before, v, np.column_stack([origin[cut_copies], cut_copies]))
+            rig = with_rows_mixed(rig, mix)
+            n_joined = int((t != before).any(axis=1).sum())
             drop = lip_islands(t, len(v), np.r_[origin[cut_copies], cut_copies])
             t = np.asarray(t, dtype=np.int64)[~drop]
-            meta_i = {**rig.meta, "clean_lips": True, "lip_islands_removed": int(drop.sum())}
+            meta_i = {
+                **rig.meta,
+                "clean_lips": True,
+                "lip_islands_removed": int(drop.sum()),
+                "lip_island_faces_joined": n_joined,
+            }
             rig = replace(rig, triangles=t.astype(np.int32), meta=meta_i)
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:
@@ -1236,7 +1336,31 @@ def inner_lip_faces(triangles: np.ndarray, n_vertices: int, inner: np.ndarray) -
         if not fin.any():
             break
         gone |= fin
-    return gone
+    return gone & ~_enclosed_holes(t, n_vertices, gone)
+
+
+WALL_HOLE_FACES = 4
+"""Faces: a piece of removed crease wall at most this large with a face that stays across each of its edges is
+kept (:func:`_enclosed_holes`)."""
+
+
+def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces ``gone`` (m,) bool that would leave holes in a surface that stays, pieces of at most
+    WALL_HOLE_FACES gone faces (joined through shared edges) each of whose edges is shared with another face,
+    and none of them with a face of another gone piece. Lee Perry-Smith's upper lip, hand landmarks: two
+    two-face holes on the lip line (x = +0.04 and +0.09 IOD) whose rims folded over in the frontal view at /a/
+    (each scoring the lip edge notch's 0.05 IOD); walls are removed so the opening shows the cavity, and a hole
+    in the lip shows nothing else."""
+    comp = _face_components(t, n_vertices, ~gone)
+    fa, fb, _ = _edge_pairs(t, n_vertices)
+    n_edges = np.bincount(np.r_[fa, fb], minlength=len(t))
+    size = np.bincount(comp[gone], minlength=comp.max() + 1)
+    small = gone & (size[comp] <= WALL_HOLE_FACES) & (n_edges == 3)
+    # A gone piece touching another gone piece (an edge between faces of two pieces cannot exist: pieces are
+    # joined through edges) or a free edge is not a hole; every face of a hole is small and fully shared.
+    bad = np.zeros(comp.max() + 1, dtype=bool)
+    bad[comp[gone & ~small]] = True
+    return small & ~bad[comp]
 
 
 def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, HeadMesh]:

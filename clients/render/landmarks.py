@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -121,6 +122,54 @@ def _detect(image: np.ndarray) -> np.ndarray | None:
     h, w = image.shape[:2]
     lm = res.multi_face_landmarks[0].landmark
     return np.array([[p.x * w, p.y * h] for p in lm[:468]])
+
+
+FACING_GRID = 24
+"""Samples per side of the frontal grid :func:`facing_viewer` looks at the front-most surface through."""
+
+
+def facing_viewer(mesh: HeadMesh, axes: np.ndarray) -> HeadMesh:
+    """``mesh`` wound so that the surface a viewer looking along -``axes[2]`` (the camera in front, (3,) rows
+    x, up, towards the camera) sees first faces it: reversed when, over a FACING_GRID x FACING_GRID grid across
+    the mesh's frontal extent, more of the front-most triangles face away than towards the viewer.
+
+    The renderer draws back faces dark (the inside of a mouth), so a file wound the other way (a mirrored export)
+    renders as a dark face, and MediaPipe's points on it land elsewhere: Lee Perry-Smith as an OBJ with its
+    winding reversed gave a nose tip 0.12 IOD and lip points 0.02-0.03 IOD from the same OBJ's wound normally,
+    and its cut ran elsewhere (mouth opening 0.48, flaps across the opening). Orthographic (the grid only
+    samples which surface is in front), winding-independent, so every file wound consistently either way gives
+    the same render."""
+    from realtime_core.face.interpolation import barycentric_2d
+
+    v = np.asarray(mesh.vertices, dtype=np.float64) @ np.asarray(axes, dtype=np.float64).T
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    if not len(t):
+        return mesh
+    p2 = v[:, :2]
+    lo_t, hi_t = p2[t].min(axis=1), p2[t].max(axis=1)
+    lo, hi = p2.min(axis=0), p2.max(axis=0)
+    s = (np.arange(FACING_GRID) + 0.5) / FACING_GRID
+    grid = np.stack(np.meshgrid(lo[0] + s * (hi[0] - lo[0]), lo[1] + s * (hi[1] - lo[1])), axis=-1).reshape(-1, 2)
+    # Twice the signed area in the view plane: > 0 when the triangle runs anticlockwise as seen, i.e. faces
+    # the viewer (OpenGL's default front face).
+    a, b, c = p2[t[:, 0]], p2[t[:, 1]], p2[t[:, 2]]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    towards = away = 0
+    for q in grid:
+        cand = np.flatnonzero(np.all((lo_t <= q) & (hi_t >= q), axis=1) & (area != 0))
+        if not len(cand):
+            continue
+        g = barycentric_2d(q[None, :], a[cand], b[cand], c[cand])
+        ok = np.all(g >= -1e-9, axis=1)
+        if not ok.any():
+            continue
+        depth = (g[ok] * v[t[cand[ok]], 2]).sum(axis=1)  # towards the camera
+        front = cand[ok][int(np.argmax(depth))]
+        towards += int(area[front] > 0)
+        away += int(area[front] < 0)
+    if away <= towards:
+        return mesh
+    return replace(mesh, triangles=np.ascontiguousarray(t[:, ::-1]))
 
 
 def _cast(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -> np.ndarray:
@@ -290,6 +339,7 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
     try:
         for up, fwd in ORIENTATIONS:
             axes = _axes(np.array(up, float), np.array(fwd, float))
+            mesh = facing_viewer(mesh, axes)
             q = v @ axes.T
             lo, hi = q.min(0), q.max(0)
             height = hi[1] - lo[1]

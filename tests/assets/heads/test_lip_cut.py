@@ -471,3 +471,127 @@ def test_a_head_wound_the_other_way_round_is_recognised():
     nose = v[len(v) // 2]
     assert not wound_inwards(v, t, nose, forward, iod=0.5)
     assert wound_inwards(v, t[:, ::-1], nose, forward, iod=0.5)
+
+
+def _cut_with_seam(v, t, path, lower, near):
+    """The cut mesh's triangles and its (original, copy) vertex pairs."""
+    from assets.heads.rigging import _split_faces
+
+    split, take = _split_faces(v, t, path, lower, near, UP, SIDE, (path[0], path[-1]))
+    new_index = np.arange(len(v))
+    new_index[split] = len(v) + np.arange(len(split))
+    after = np.where(take[:, None], new_index[t], t)
+    return after, np.column_stack([split, new_index[split]]), take
+
+
+def test_an_island_on_the_cut_joins_the_other_lip_through_the_copies_and_moves_with_it():
+    """The island on the path that :func:`_without_islands` must leave on its side (joining it at the cut ties
+    the lips): once the walls round it are gone (here the upper faces round it; the upper lip reaches the path
+    further out) it is a piece of its own, its path vertices the upper side's and its other vertices its own.
+    :func:`join_path_islands` moves it onto the lower lip through the path vertices' copies: the faces that stay
+    are then two pieces (scipy, from the triangles alone), every pair of the cut keeps both its vertices (no face
+    of either side uses the other's twin: nothing is tied), and each of the island's own vertices is given rows
+    that mix the copies it now shares, nearer ones more."""
+    from assets.heads.rigging import join_path_islands
+
+    cols = 9
+    hidden = [(1, i) for i in range(2, 6)] + [(2, 2), (2, 5)]  # the walls round the island
+    v, t, path, _, near, gone, island = _lips_with_an_island(hidden)
+    lower = v[t].mean(axis=1)[:, 1] < 0  # a plain cut: the island's own vertices (row 2) are not split
+    after, seam, take = _cut_with_seam(v, t, path, lower, near)
+    stays = np.flatnonzero(~gone)
+    n_before, labels = _face_components(after, stays)
+    island_piece = labels[np.searchsorted(stays, island)]
+    assert n_before == 3 and len(np.unique(island_piece)) == 1  # the upper lip, the lower lip, the island
+    v2 = np.vstack([v, v[seam[:, 0]]])
+    joined, mix = join_path_islands(after[stays], v2, seam)
+    assert _face_components(joined, np.arange(len(joined)))[0] == 2
+    moved = np.flatnonzero((joined != after[stays]).any(axis=1))
+    np.testing.assert_array_equal(stays[moved], island)  # the island's faces alone change
+    at = np.searchsorted(stays, island)
+    assert not np.isin(joined[at], seam[:, 0]).any()  # it uses the copies only
+    upper_faces = np.setdiff1d(np.arange(len(joined)), np.r_[at, np.flatnonzero(take[stays])])
+    assert not np.isin(joined[upper_faces], seam[:, 1]).any()  # the upper lip never the copies
+    own = np.setdiff1d(joined[at].ravel(), seam[:, 1])
+    assert sorted(mix) == own.tolist() == [2 * cols + 3, 2 * cols + 4, 2 * cols + 5]
+    for a in own:
+        anchors, w = mix[int(a)]
+        assert np.isin(anchors, seam[:, 1]).all() and abs(w.sum() - 1.0) < 1e-12
+        d = np.linalg.norm(v2[anchors] - v2[a], axis=1)
+        np.testing.assert_allclose(w, (1 / d**2) / (1 / d**2).sum())
+
+
+def test_a_piece_sharing_its_own_vertex_with_a_lip_is_not_joined():
+    """Only islands move: the island of the test above with the walls round it gone but cell (1, 2) of the upper
+    lip kept, which touches it at one vertex (row 2, column 3; not split, a plain cut): moving the island would
+    drag that face of the upper lip along, so nothing changes and no rows are mixed."""
+    from assets.heads.rigging import join_path_islands
+
+    v, t, path, _, near, gone, island = _lips_with_an_island([(1, 3), (1, 4), (1, 5), (2, 2), (2, 5)])
+    lower = v[t].mean(axis=1)[:, 1] < 0
+    after, seam, _ = _cut_with_seam(v, t, path, lower, near)
+    stays = np.flatnonzero(~gone)
+    v2 = np.vstack([v, v[seam[:, 0]]])
+    n, labels = _face_components(after, stays)
+    assert n == 3 and len(np.unique(labels[np.searchsorted(stays, island)])) == 1  # the island is a piece
+    assert 2 * 9 + 3 not in seam[:, 0]
+    joined, mix = join_path_islands(after[stays], v2, seam)
+    np.testing.assert_array_equal(joined, after[stays])
+    assert mix == {}
+
+
+@pytest.mark.system
+def test_rows_mixed_move_a_vertex_by_its_anchors_displacements(builtin_rig):
+    """On the built-in rig: a moving vertex given two anchors moves by their weighted displacements, a still one
+    given a moving anchor joins the moving set and moves by that anchor's, every other vertex as before (the
+    displacements taken from the old and new rigs' own ``deformed``)."""
+    from assets.heads.rigging import with_rows_mixed
+
+    rig, _ = builtin_rig
+    p = np.array([0.01, 0.02, 0.35, -0.03])
+    old = rig.deformed(p).astype(np.float64) - rig.neutral
+    moved = np.flatnonzero(np.linalg.norm(old, axis=1) > 1e-3 * rig.meta["iod"])
+    a, b, c = (int(x) for x in moved[[0, len(moved) // 2, -1]])
+    still = int(np.setdiff1d(np.arange(len(rig.neutral)), rig.moving)[0])
+    new = with_rows_mixed(rig, {a: (np.array([b, c]), np.array([0.25, 0.75])), still: (np.array([c]), np.ones(1))})
+    got = new.deformed(p).astype(np.float64) - new.neutral
+    np.testing.assert_allclose(got[a], 0.25 * old[b] + 0.75 * old[c], atol=1e-6)
+    np.testing.assert_allclose(got[still], old[c], atol=1e-6)
+    assert np.linalg.norm(old[b] - old[c]) > 1e-3 * rig.meta["iod"]  # the mix means something
+    rest = np.setdiff1d(np.arange(len(rig.neutral)), [a, still])
+    np.testing.assert_allclose(got[rest], old[rest], atol=1e-6)
+    assert still in new.moving
+
+
+def test_the_walls_removal_leaves_no_small_hole_in_a_surface_that_stays():
+    """:func:`inner_lip_faces` removes the faces whose three vertices are hidden walls, but a piece of at most
+    WALL_HOLE_FACES such faces with a face that stays across each of its edges is a hole it would punch in a
+    surface that stays (Lee Perry-Smith's upper lip on the lip line): it stays. A larger piece, or one at the
+    mesh's free edge, goes. Holes counted from the boundary edges (edges of one face) of what stays."""
+    from assets.heads.rigging import WALL_HOLE_FACES, inner_lip_faces
+
+    cols = rows = 9
+    t = _grid_triangles(rows, cols)
+
+    def cell_vertices(j: int, i: int) -> list[int]:
+        return [j * cols + i, j * cols + i + 1, (j + 1) * cols + i, (j + 1) * cols + i + 1]
+
+    def boundary_edges(tri: np.ndarray) -> int:
+        e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+        return int((np.unique(e, axis=0, return_counts=True)[1] == 1).sum())
+
+    hole = cell_vertices(2, 2)  # one cell, two faces, inside the grid
+    big = sorted({x for j in (4, 5, 6) for i in (4, 5, 6) for x in cell_vertices(j, i)})  # nine cells
+    edge = cell_vertices(0, 7)  # a cell on the grid's border
+    assert 2 <= WALL_HOLE_FACES < 18
+    hole_faces = np.flatnonzero(np.isin(t, hole).all(axis=1))
+    big_faces = np.flatnonzero(np.isin(t, big).all(axis=1))
+    edge_faces = np.flatnonzero(np.isin(t, edge).all(axis=1))
+    assert len(hole_faces) == 2 and len(big_faces) == 18 and len(edge_faces) == 2
+    gone = inner_lip_faces(t, rows * cols, np.array(hole + big + edge))
+    assert not gone[hole_faces].any() and gone[big_faces].all() and gone[edge_faces].all()
+    # The hole's vertices change nothing: no boundary appears round it.
+    without_hole = inner_lip_faces(t, rows * cols, np.array(big + edge))
+    np.testing.assert_array_equal(gone, without_hole)
+    assert boundary_edges(t[~gone]) > boundary_edges(t)  # (the big piece's rim and the border notch)
+    assert not inner_lip_faces(t, rows * cols, np.array(hole)).any()
