@@ -976,6 +976,7 @@ def rig_head(
     part = mesh.part
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
     cut_copies = None
+    coarse = False  # a knife-cut mouth (assets/heads/knife.py): its crease walls keep no holes (_enclosed_holes)
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
@@ -1013,6 +1014,7 @@ def rig_head(
                 # splits it, so the rig's lower inner-lip vertex is its copy below the cut).
                 front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
                 meta["contact_knife"] = len(knife.edge)
+                coarse = True
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
@@ -1039,7 +1041,7 @@ def rig_head(
                 hidden = np.zeros(len(t), dtype=bool)
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
-                hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap))
+                hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
             v, t, uv, origin = cut_mouth(
                 v,
                 t,
@@ -1097,12 +1099,14 @@ def rig_head(
             # (a flipped triangle at closed lips with the corners up).
             cut_mesh = HeadMesh(vertices=v, triangles=t, name=mesh.name)
             walls = inner_lip_vertices(cut_mesh, frame, snap)
-        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls)
+        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls, keep_holes=not coarse)
         if walls is not None and not walls_in_repair:
             # The repair on the final mesh: it then smooths over the faces that stay only (docs/animation.md,
             # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
             # Perry-Smith, smoothing across the walls its hand-landmark rig).
-            rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
+            rig, cut_mesh = without_inner_lips(
+                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+            )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
@@ -1132,7 +1136,9 @@ def rig_head(
                 )
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
         if walls is not None:
-            rig, cut_mesh = without_inner_lips(rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls)
+            rig, cut_mesh = without_inner_lips(
+                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+            )
             t = cut_mesh.triangles
         if clean_lips and cut_copies is not None:
             before = np.asarray(t, dtype=np.int64)
@@ -1317,7 +1323,9 @@ FIN_ROUNDS = 10
 """At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
 
 
-def inner_lip_faces(triangles: np.ndarray, n_vertices: int, inner: np.ndarray) -> np.ndarray:
+def inner_lip_faces(
+    triangles: np.ndarray, n_vertices: int, inner: np.ndarray, *, keep_holes: bool = True
+) -> np.ndarray:
     """(m,) bool: the faces :func:`without_inner_lips` removes from ``triangles`` (m, 3) of a mesh with
     ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves."""
     t = np.asarray(triangles, dtype=np.int64)
@@ -1336,6 +1344,10 @@ def inner_lip_faces(triangles: np.ndarray, n_vertices: int, inner: np.ndarray) -
         if not fin.any():
             break
         gone |= fin
+    if not keep_holes:
+        # A coarse (knife-cut) mouth: a wall face there is a large piece of the lip, not a pin-hole; kept, one
+        # hung in the stylised held-out head's opening and turned over at mouth_open 0.16 (1 flipped triangle).
+        return gone
     return gone & ~_enclosed_holes(t, n_vertices, gone)
 
 
@@ -1363,12 +1375,12 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
     return small & ~bad[comp]
 
 
-def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray) -> tuple[R, HeadMesh]:
+def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True) -> tuple[R, HeadMesh]:
     """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
     :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
     lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
     t = np.asarray(mesh.triangles, dtype=np.int64)
-    gone = inner_lip_faces(t, len(mesh.vertices), inner)
+    gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
     keep = t[~gone]

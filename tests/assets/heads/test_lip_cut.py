@@ -595,3 +595,6 @@ def test_the_walls_removal_leaves_no_small_hole_in_a_surface_that_stays():
     np.testing.assert_array_equal(gone, without_hole)
     assert boundary_edges(t[~gone]) > boundary_edges(t)  # (the big piece's rim and the border notch)
     assert not inner_lip_faces(t, rows * cols, np.array(hole)).any()
+    # A coarse (knife-cut) mouth keeps no hole: every face of the inner vertices goes.
+    coarse = inner_lip_faces(t, rows * cols, np.array(hole + big + edge), keep_holes=False)
+    assert coarse[hole_faces].all() and coarse[big_faces].all() and coarse[edge_faces].all()
