@@ -49,6 +49,7 @@ def repair_folds(
     grow_every: int = 15,
     tiny: float = 0.0,
     measured: np.ndarray | None = None,
+    tie_rounds: int = 60,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -62,6 +63,15 @@ def repair_folds(
     measured: (m,) bool the triangles whose flips and edges count (None: all); the smoothing still runs
     over every triangle's edges (faces that will be removed, e.g. hidden inner lip walls, join the surface
     but their folds are never seen).
+    tie_rounds: when flips are left after ``max_rounds``, up to this many more rounds in which each
+    triangle still flipped at some pose has its apex (the vertex with the largest rest angle, the one
+    nearest the opposite edge) tied for good to that edge: the apex's row becomes the interpolation of
+    the edge's two rows at the apex's projection on it, so the apex moves as the edge's point beside it
+    does and the triangle keeps its rest height over the edge (it can flip only if the edge itself turns
+    over). Uniform-Laplacian smoothing alone cannot unflip such a thin triangle: its fixed point puts a
+    vertex at its neighbours' mean, which on an irregular coarse mesh is not the field's linear value
+    at the vertex (Lee Perry-Smith decimated to 3,810 triangles kept one flip at a mouth corner through
+    200 rounds). Rigs whose folds the smoothing removes never reach this phase and come out unchanged.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -87,8 +97,11 @@ def repair_folds(
     stuck = np.zeros(n, dtype=np.int64)
     worst = 0
     rounds = 0
-    for rounds in range(1, max_rounds + 1):
+    on_edge: dict[int, tuple[int, int, float]] = {}  # apex -> (a, b, s): row = (1 - s) row a + s row b
+    tie_edges = sp.identity(n, format="csr")
+    for rounds in range(1, max_rounds + tie_rounds + 1):
         bad = np.zeros(n, dtype=bool)
+        flipped_any = np.zeros(len(t), dtype=bool)
         worst = 0
         # Only triangles and edges with a moving vertex can fold (the others keep their rest shape
         # exactly): measuring those alone gives the same answer at a fraction of the cost.
@@ -101,13 +114,18 @@ def repair_folds(
             f = tri[np.einsum("ij,ij->i", n0[tri], _normals(v, t_m)) < 0]
             worst = max(worst, len(f))
             bad[t[f].ravel()] = True
+            flipped_any[f] = True
             l1 = np.linalg.norm(v[e_m[:, 0]] - v[e_m[:, 1]], axis=1)
             s = edge[l1 > max_stretch * l0[edge]]
             bad[e[s].ravel()] = True
-        if not bad.any():
+        # After max_rounds only flips keep the repair going (stretch alone ends it, as before).
+        if not bad.any() or (rounds > max_rounds and worst == 0):
             worst = 0
             rounds -= 1
             break
+        if rounds > max_rounds:
+            on_edge.update(_apexes(v0, t[flipped_any], frozen))
+            tie_edges = _on_edge_operator(n, on_edge)
         # One ring around the folded vertices, so the smoothed patch blends into its surroundings.
         # A fold that survives local smoothing needs a wider patch: around each vertex, one more
         # ring for every ``grow_every`` rounds it has been part of a fold (stubborn spots only, so
@@ -129,10 +147,44 @@ def repair_folds(
         keep = sp.diags((~sel).astype(np.float64))
         for _ in range(steps):
             g = (keep @ g + pick @ (mean_op @ g)).tocsr()
+        for _ in range(3 if on_edge else 0):  # an apex on an edge whose end is an apex too: a few passes
+            g = (tie_edges @ g).tocsr()
         g = (tie @ g).tocsr()
         g.data[np.abs(g.data) < 1e-6] = 0.0
         g.eliminate_zeros()
     return RepairResult(weights=g.tocsr(), rounds=rounds, flips_left=worst, smoothed_rows=int(touched.sum()))
+
+
+def _apexes(v: np.ndarray, flipped: np.ndarray, frozen: np.ndarray) -> dict[int, tuple[int, int, float]]:
+    """For each ``flipped`` (k, 3) triangle of rest positions ``v`` (n, 3): its apex (largest rest angle;
+    not ``frozen``) -> (a, b, s), the opposite edge's ends and the apex's projection on it (0..1 from a)."""
+    out: dict[int, tuple[int, int, float]] = {}
+    for tri in flipped:
+        p = v[tri]
+        cos = []
+        for k in range(3):
+            u, w = p[(k + 1) % 3] - p[k], p[(k + 2) % 3] - p[k]
+            cos.append(float(u @ w) / max(float(np.linalg.norm(u) * np.linalg.norm(w)), 1e-300))
+        k = int(np.argmin(cos))
+        apex, a, b = int(tri[k]), int(tri[(k + 1) % 3]), int(tri[(k + 2) % 3])
+        if frozen[apex] or apex in out:
+            continue
+        ab = p[(k + 2) % 3] - p[(k + 1) % 3]
+        s = float(np.clip((p[k] - p[(k + 1) % 3]) @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0))
+        out[apex] = (a, b, s)
+    return out
+
+
+def _on_edge_operator(n: int, on_edge: dict[int, tuple[int, int, float]]) -> sp.csr_matrix:
+    """(n, n) CSR: identity, but each apex's row the interpolation of its edge's rows."""
+    keep = np.ones(n)
+    rows, cols, vals = [], [], []
+    for apex, (a, b, s) in on_edge.items():
+        keep[apex] = 0.0
+        rows += [apex, apex]
+        cols += [a, b]
+        vals += [1.0 - s, s]
+    return (sp.diags(keep) + sp.csr_matrix((vals, (rows, cols)), shape=(n, n))).tocsr()
 
 
 def _tie_tiny_edges(n: int, edges: np.ndarray, length: np.ndarray, limit: float, frozen: np.ndarray) -> sp.csr_matrix:

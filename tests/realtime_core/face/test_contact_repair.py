@@ -168,3 +168,52 @@ def test_a_rest_pose_shifts_the_parameters_exactly(values):
     np.testing.assert_allclose(new.deformed(p), rig.deformed(p + rest), atol=2e-5)
     np.testing.assert_allclose(modelled_rest(new), rig.neutral, atol=2e-5)
     np.testing.assert_allclose(modelled_rest(rig), rig.neutral, atol=1e-6)  # (float32)
+
+
+def _flipped(v: np.ndarray, t: np.ndarray, weights: sp.csr_matrix, motion: np.ndarray) -> int:
+    v1 = v + weights @ motion
+    n0 = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n1 = np.cross(v1[t[:, 1]] - v1[t[:, 0]], v1[t[:, 2]] - v1[t[:, 0]])
+    return int((np.einsum("ij,ij->i", n0, n1) < 0).sum())
+
+
+def test_fold_repair_unflips_a_thin_corner_triangle_that_smoothing_cannot():
+    """A coarse mouth corner: a thin triangle (a, b, c) whose apex c lies 0.02 above its long edge ab (a on
+    the lip inward, b beyond the corner, both still), c's other neighbour the upper skin e, pinned to drop
+    0.6 (a lip raise pulling the corner down). Uniform smoothing puts c at its neighbours' mean (a third of
+    e's drop, 0.2): below ab, flipped, however many rounds. The repair's last phase ties c to ab: 0 flips
+    at both poses, c where the edge's linear field puts it, and the pinned skin and jaw (fixed rows) still
+    move exactly as their simple vertices ask."""
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 0.02, 0], [0.5, 1, 0], [0.5, -1, 0]])
+    a, b, c, e, d = range(5)
+    t = np.array([[a, b, c], [a, c, e], [c, b, e], [a, d, b]])
+    g = sp.csr_matrix(([1.0, 1.0, 1.0], ([e, d, c], [0, 1, 0])), shape=(5, 2))  # c follows the skin's drop
+    motion = np.array([[[0.0, -0.6, 0.0], [0.0, -0.4, 0.0]]])  # skin down 0.6, jaw down 0.4
+    motions = np.concatenate([motion, 0.5 * motion])
+    fixed = np.array([True, True, False, True, True])
+    assert _flipped(v, t, g, motion[0]) == 1
+    smoothed_only = repair_folds(v, t, g, motions, fixed=fixed, tie_rounds=0)
+    assert smoothed_only.flips_left == 1 and _flipped(v, t, smoothed_only.weights, motion[0]) == 1
+    res = repair_folds(v, t, g, motions, fixed=fixed)
+    assert res.flips_left == 0
+    assert _flipped(v, t, res.weights, motion[0]) == 0 and _flipped(v, t, res.weights, motions[1]) == 0
+    w = res.weights.toarray()
+    np.testing.assert_allclose(w[c], 0.5 * w[a] + 0.5 * w[b], atol=1e-12)  # c's projection halves ab
+    np.testing.assert_array_equal(w[[a, b, d, e]], g.toarray()[[a, b, d, e]])
+    d1 = res.weights @ motion[0]
+    np.testing.assert_allclose(d1[e], [0.0, -0.6, 0.0])
+    np.testing.assert_allclose(d1[d], [0.0, -0.4, 0.0])
+
+
+def test_fold_repair_leaves_a_field_smoothing_unfolds_as_smoothing_left_it():
+    """The tie phase runs only on flips the smoothing rounds leave: a fold they remove comes out of the
+    repair with the very same weights as without that phase (rigs that passed keep their field)."""
+    v, t = _grid()
+    n = len(v)
+    g = sp.csr_matrix(([1.0], ([n // 2], [0])), shape=(n, 1))
+    motion = np.array([[[0.3, 0.0, 0.0]]])
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    with_ties = repair_folds(v, t, g, motion, fixed=edge)
+    without = repair_folds(v, t, g, motion, fixed=edge, tie_rounds=0)
+    assert with_ties.flips_left == 0 and with_ties.rounds == without.rounds
+    assert (with_ties.weights != without.weights).nnz == 0
