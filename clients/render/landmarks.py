@@ -30,6 +30,7 @@ import numpy as np
 from assets.errors import LandmarkError
 from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
+from realtime_core.face import face_frame_at
 
 MEDIAPIPE_INDEX: dict[str, int] = {
     "eye_outer_left": 263,
@@ -308,11 +309,9 @@ def _refined(
     point (see CORNER_DEPTH, LOWER_LIP_FLAT): the definitions of docs/animation.md, "Landmarks". Up and forward
     are the face frame's (:func:`realtime_core.face.model.face_frame`) of the points as cast."""
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
-    iod = float(np.linalg.norm(eyes[0] - eyes[1]))
-    x = (eyes[0] - eyes[1]) / iod
-    up = 0.5 * (eyes[0] + eyes[1]) - 0.5 * (points["corner_left"] + points["corner_right"])
-    up = up - x * (up @ x)
-    up = up / np.linalg.norm(up)
+    mouth = 0.5 * (points["corner_left"] + points["corner_right"])
+    frame = face_frame_at(eye_left=eyes[0], eye_right=eyes[1], mouth=mouth)
+    iod, up, forward = frame.iod, frame.axes[1], frame.axes[2]
     out = dict(points)
     v = np.asarray(mesh.vertices, dtype=np.float64)
     inner = [int(np.argmin(np.linalg.norm(v - points[k], axis=1))) for k in ("upper_inner", "lower_inner")]
@@ -323,7 +322,7 @@ def _refined(
         crease = _crease_vertices(mesh, up)
         for k in ("corner_left", "corner_right"):
             out[k] = _into_corner_crease(mesh, mvp, pixels[k], points[k], crease, iod)
-    lower = _lower_lip_front(mesh, mvp, pixels["lower_inner"], pixels["lower_lip"], np.cross(x, up), iod)
+    lower = _lower_lip_front(mesh, mvp, pixels["lower_inner"], pixels["lower_lip"], forward, iod)
     if lower is not None:
         out["lower_lip"] = lower
     return out

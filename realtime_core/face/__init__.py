@@ -22,6 +22,7 @@ from realtime_core.face.model import (
     MouthLandmarks,
     calibrate_mouth,
     face_frame,
+    face_frame_at,
     measure_mouth,
 )
 from realtime_core.face.registration import Registration, Similarity, fit_similarity, register
@@ -39,6 +40,7 @@ __all__ = [
     "build_rig",
     "calibrate_mouth",
     "face_frame",
+    "face_frame_at",
     "fit_similarity",
     "measure_mouth",
     "parse_wfm",

@@ -186,14 +186,21 @@ def face_frame(neutral: np.ndarray, lm: MouthLandmarks) -> FaceFrame:
     """The frame (x: right eye -> left eye, y: mouth -> eyes, orthogonalised; z = x cross y) of (n, 3) ``neutral``."""
     v = np.asarray(neutral, dtype=np.float64)
     lm.check(len(v))
-    el = 0.5 * (v[lm.eye_outer_left] + v[lm.eye_inner_left])
-    er = 0.5 * (v[lm.eye_outer_right] + v[lm.eye_inner_right])
+    return face_frame_at(
+        eye_left=0.5 * (v[lm.eye_outer_left] + v[lm.eye_inner_left]),
+        eye_right=0.5 * (v[lm.eye_outer_right] + v[lm.eye_inner_right]),
+        mouth=0.5 * (v[lm.corner_left] + v[lm.corner_right]),
+    )
+
+
+def face_frame_at(*, eye_left: np.ndarray, eye_right: np.ndarray, mouth: np.ndarray) -> FaceFrame:
+    """:func:`face_frame` from the two eye centres and the mouth centre, each (3,) (points off any mesh)."""
+    el, er = np.asarray(eye_left, dtype=np.float64), np.asarray(eye_right, dtype=np.float64)
     iod = float(np.linalg.norm(el - er))
     if not iod > 0:
         raise ConfigError("eye centres coincide: inter-ocular distance is zero")
     x = (el - er) / iod
-    mouth = 0.5 * (v[lm.corner_left] + v[lm.corner_right])
-    up = 0.5 * (el + er) - mouth
+    up = 0.5 * (el + er) - np.asarray(mouth, dtype=np.float64)
     up = up - x * (up @ x)
     nu = np.linalg.norm(up)
     if not nu > 1e-9 * iod:
