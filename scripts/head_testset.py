@@ -192,6 +192,19 @@ def _resolve(spec, opts: dict, finder):
     return resolve_head(spec, landmark_finder=finder, **opts)
 
 
+def _warned(rep) -> str:
+    """The advisory figures over their limits, as the table's checks column notes them."""
+    from realtime_core.face.checks import RigCheckLimits
+
+    lim = RigCheckLimits()
+    over = []
+    if rep.lip_edge_notch_iod is not None and rep.lip_edge_notch_iod > lim.max_lip_edge_notch:
+        over.append("notch")
+    if rep.lip_backs_iod2 is not None and rep.lip_backs_iod2 > lim.max_lip_backs:
+        over.append("backs")
+    return f" ({' + '.join(over)} warning)" if over else ""
+
+
 def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", describe=None) -> list[str]:
     """Resolve, check and draw every head (name -> (spec, resolve options)); the pictures go to ``images``
     (linked in the table as ``link``/...), the checks come back as the rows of a Markdown table.
@@ -209,9 +222,10 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
     rows = [
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
-            "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | checks |"
+            "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | lip backs seen (1e-3 IOD^2) | "
+            "checks |"
         ),
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     if describe is not None:
         rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
@@ -219,7 +233,7 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | {exc} |")
+            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | - | {exc} |")
             continue
         rep = None
         try:
@@ -230,10 +244,11 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
                 f"{rep.closure_gap_iod:.4f} | "
                 f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
                 f"{'n/a' if rep.lip_edge_notch_iod is None else f'{rep.lip_edge_notch_iod:.4f}'} | "
-                f"{'pass' if rep.passed else 'FAIL'}{' (notch warning)' if rep.warnings else ''}"
+                f"{'n/a' if rep.lip_backs_iod2 is None else f'{1000 * rep.lip_backs_iod2:.2f}'} | "
+                f"{'pass' if rep.passed else 'FAIL'}{_warned(rep)}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
-            figs = f"- | - | - | - | - | - | not checked ({exc})"
+            figs = f"- | - | - | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
         tiles = []
         with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:
