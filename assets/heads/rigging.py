@@ -1201,8 +1201,9 @@ def rig_head(
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
         )
-    if out_mesh.texture is None or out_mesh.uvs is None:
-        # Untextured: the inner lip walls and the mouth bag would be skin-coloured; shade them dark.
+    if out_mesh.texture is None and mesh.colors is None:
+        # No colour at all (a texture or the file's colours paint the inside as their author chose): the inner
+        # lip walls and the mouth bag would be skin-coloured; shade them dark.
         cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
         wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
         out_mesh = with_dark_mouth_inside(out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide)
@@ -1235,11 +1236,12 @@ def with_dark_mouth_inside(
     skip: int = 0,
     wide: np.ndarray | None = None,
 ) -> HeadMesh:
-    """``mesh`` with the inside of its mouth shaded towards CAVITY_COLOR, for a head without a texture there (the
-    last ``skip`` vertices, a mouth cavity, keep their colour): every
+    """``mesh`` with the inside of its mouth shaded towards CAVITY_COLOR, for a head that carries no colour there
+    (no texture, no vertex colours; the last ``skip`` vertices, a mouth cavity, keep theirs): every
     vertex that the closed lips hide from the front at ``rest`` (n, 3) (the rig's neutral, lips touching; the
     surface within INSIDE_COVER IOD in front of it does not count), lies in INSIDE_BOX around the mouth and
-    behind the lips' contact (the inner-lip landmarks' front-most depth) takes CAVITY_COLOR in proportion to its
+    behind the lips' contact (the inner-lip landmarks' front-most depth in the middle, the corners' at the
+    corners, in between linearly across the mouth) takes CAVITY_COLOR in proportion to its
     depth behind the contact, all of it from INSIDE_RAMP IOD on, if the hidden vertices join it to the lips' crease
     (INSIDE_SEED) and, given ``wide`` (n, 3), the rig at its widest opening, the opening can show it there
     (INSIDE_OPENING). A real mouth's inner walls darken the same way:
@@ -1253,7 +1255,11 @@ def with_dark_mouth_inside(
     cl, cr = q[snap["corner_left"]], q[snap["corner_right"]]
     mid = 0.5 * (cl + cr)
     half = 0.5 * abs(float(cl[0] - cr[0]))
-    contact = max(float(q[snap["upper_inner"], 2]), float(q[snap["lower_inner"], 2]))
+    # The lips' contact runs from the inner-lip points back to the corners (tucked in on some heads): its depth at
+    # each vertex's place across the mouth, so the corners themselves keep their colour.
+    middle = max(float(q[snap["upper_inner"], 2]), float(q[snap["lower_inner"], 2]))
+    ends = 0.5 * float(cl[2] + cr[2])
+    contact = middle + (min(ends, middle) - middle) * np.clip(np.abs(q[:, 0] - mid[0]) / max(half, 1e-300), 0.0, 1.0)
     side, up, down, back = INSIDE_BOX
     dy = q[:, 1] - mid[1]
     box = (np.abs(q[:, 0] - mid[0]) <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
@@ -1284,7 +1290,7 @@ def with_dark_mouth_inside(
         hidden = hidden[r <= INSIDE_OPENING**2]
     if not len(hidden):
         return mesh
-    w = np.clip((contact - q[hidden, 2]) / (INSIDE_RAMP * iod), 0.0, 1.0)[:, None]
+    w = np.clip((contact[hidden] - q[hidden, 2]) / (INSIDE_RAMP * iod), 0.0, 1.0)[:, None]
     colors = (
         np.array(mesh.colors, dtype=np.float32)
         if mesh.colors is not None
