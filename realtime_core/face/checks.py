@@ -154,8 +154,8 @@ it was chosen from)."""
 
 LIP_BACKS_LIMIT = 0.0005
 """IOD squared: the advisory limit of :func:`lip_backs_seen`, a patch about 8 pixels across in the test set's
-400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the clean rows score 0 (see
-docs/animation.md, "Lip backs seen")."""
+400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the test-set rows whose close-ups look
+clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
 MIN_OPEN_RESPONSE = 0.5
 """The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
 what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
@@ -402,9 +402,9 @@ def lip_edge_shards(
 
 
 LIP_BACKS_BAND = 0.15
-"""IOD: the faces of the lips, for :func:`lip_backs_seen`, have every vertex at most LIP_BACKS_BEYOND IOD past the mouth
-corners (sideways), within this
-of the corner-to-corner line (along up, at rest) and less than NOTCH_DEPTH IOD behind the corners."""
+"""IOD: the faces of the lips, for :func:`lip_backs_seen`, have every vertex within this of the corner-to-corner line
+(along up, at rest), at most LIP_BACKS_BEYOND IOD past the mouth corners (sideways) and less than NOTCH_DEPTH IOD
+behind the corners."""
 LIP_BACKS_BEYOND = 0.05
 """IOD: the lips' faces reach this far past the mouth corners (the corners' own faces, where shards show)."""
 LIP_BACKS_VIEWS = (0.0, 35.0, -35.0)
