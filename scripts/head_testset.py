@@ -205,11 +205,15 @@ def _warned(rep) -> str:
     return f" ({' + '.join(over)} warning)" if over else ""
 
 
-def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", describe=None) -> list[str]:
+def check_and_draw(
+    heads: dict, images: Path, *, link: str = "img/heads", describe=None, three_quarter: bool = False
+) -> list[str]:
     """Resolve, check and draw every head (name -> (spec, resolve options)); the pictures go to ``images``
     (linked in the table as ``link``/...), the checks come back as the rows of a Markdown table.
     ``describe(head, report or None) -> (header, cell)``: an extra column after the head's name
-    (``describe(None, None)`` gives the header; None: no extra column)."""
+    (``describe(None, None)`` gives the header; None: no extra column). ``three_quarter``: the mouth close-ups
+    also from the renderer's three-quarter view (``SLUG_mouth_34.jpg``: a lip face that shows its back, drawn
+    dark, shows there first; docs/animation.md, "Three-quarter view")."""
     from PIL import Image, ImageDraw
     from tqdm import tqdm
 
@@ -272,6 +276,16 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
             # JPEG (quality 92): a textured close-up is 0.3-0.45 MB as PNG, ~0.1 MB so, defects as visible.
             Image.fromarray(np.hstack(close)).save(images / f"{slug}_mouth.jpg", quality=92)
             pics = f"![]({link}/{slug}.png) ![]({link}/{slug}_mouth.jpg)"
+            if three_quarter:
+                side = []
+                turned = RenderConfig(width=400, height=300, view="three_quarter")
+                with mouth_renderer(head, find_landmarks, turned) as r:
+                    for label, p in POSES.items():
+                        img = Image.fromarray(r.render(head.rig.deformed(np.array(p))))
+                        ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
+                        side.append(np.asarray(img))
+                Image.fromarray(np.hstack(side)).save(images / f"{slug}_mouth_34.jpg", quality=92)
+                pics += f" ![]({link}/{slug}_mouth_34.jpg)"
         else:
             pics = f"![]({link}/{slug}.png)"
         extra = f" {describe(head, rep)[1]} |" if describe else ""
@@ -287,11 +301,12 @@ def main() -> int:
         "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
     )
     ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
+    ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")
     args = ap.parse_args()
     heads = derive(args.out, args.data)
     if args.only:
         heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
-    print("\n".join(check_and_draw(heads, args.images)))
+    print("\n".join(check_and_draw(heads, args.images, three_quarter=args.three_quarter)))
     return 0
 
 

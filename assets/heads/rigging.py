@@ -1201,9 +1201,9 @@ def rig_head(
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
         )
-    if out_mesh.texture is None and mesh.colors is None:
-        # No colour at all (a texture or the file's colours paint the inside as their author chose): the inner
-        # lip walls and the mouth bag would be skin-coloured; shade them dark.
+    if out_mesh.texture is None:
+        # No texture: unless the file's colours paint the inside, the inner lip walls and the mouth bag would have
+        # the skin's (or the material's one) colour; shade them dark.
         cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
         wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
         out_mesh = with_dark_mouth_inside(out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide)
@@ -1222,6 +1222,8 @@ INSIDE_SEED = 0.05
 """IOD: hidden vertices between the corners and this close to the mouth line (the lips' crease) start the inside."""
 INSIDE_OPENING = 1.2
 """How much larger than the widest opening's ellipse (corners, inner-lip points) the inside that can show is."""
+PAINTED = 0.02
+"""Colour units: vertex colours of the inside that differ by more than this were painted by the file's author."""
 INSIDE_COVER = 0.01
 """IOD: a vertex with the head's surface more than this in front of it (along the face's forward axis, at rest)
 is hidden from the front."""
@@ -1236,8 +1238,9 @@ def with_dark_mouth_inside(
     skip: int = 0,
     wide: np.ndarray | None = None,
 ) -> HeadMesh:
-    """``mesh`` with the inside of its mouth shaded towards CAVITY_COLOR, for a head that carries no colour there
-    (no texture, no vertex colours; the last ``skip`` vertices, a mouth cavity, keep theirs): every
+    """``mesh`` with the inside of its mouth shaded towards CAVITY_COLOR, for a head that carries no colour detail
+    there (no texture, and no vertex colours or one colour over the whole inside, within PAINTED: a material's; the
+    last ``skip`` vertices, a mouth cavity, keep theirs): every
     vertex that the closed lips hide from the front at ``rest`` (n, 3) (the rig's neutral, lips touching; the
     surface within INSIDE_COVER IOD in front of it does not count), lies in INSIDE_BOX around the mouth and
     behind the lips' contact (the inner-lip landmarks' front-most depth in the middle, the corners' at the
@@ -1278,6 +1281,12 @@ def with_dark_mouth_inside(
     _, label = connected_components(sub, directed=False)
     seed = (np.abs(q[hidden, 0] - mid[0]) <= half) & (np.abs(dy[hidden]) <= INSIDE_SEED * iod)
     hidden = hidden[np.isin(label, label[seed])]
+    if (
+        mesh.colors is not None
+        and len(hidden)
+        and float(np.ptp(np.asarray(mesh.colors)[hidden], axis=0).max()) > PAINTED
+    ):
+        return mesh  # the file paints its mouth's inside: leave it as its author made it
     if wide is not None:
         # And only what the widest opening can show: seen from the front there, inside the ellipse through its
         # corners and inner-lip points (INSIDE_OPENING times as large).

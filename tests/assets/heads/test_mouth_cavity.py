@@ -233,3 +233,27 @@ def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour
         assert (z > q[i, 2] + 0.005 * fr.iod).any(), i
     for name in ("upper_lip", "lower_lip", "corner_left", "corner_right", "chin", "nose_tip"):
         assert b.landmarks[name] not in set(changed.tolist()), name
+
+
+def test_a_mouth_inside_painted_by_the_file_is_left_as_painted_and_one_material_colour_is_shaded():
+    """Vertex colours that vary over the inside (the file's author painted it) are kept; one colour over the whole
+    head (a material's) is no painting: shaded as an uncoloured head's skin is."""
+    from dataclasses import replace
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.mesh import SKIN_COLOR
+    from assets.heads.rigging import with_dark_mouth_inside
+
+    b = load_builtin_head()
+    v = np.asarray(b.mesh.vertices, dtype=np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    painted = np.random.default_rng(0).uniform(0.2, 0.9, size=(len(v), 3)).astype(np.float32)
+    mesh = replace(b.mesh, colors=painted, uvs=None, texture=None)
+    assert with_dark_mouth_inside(mesh, v, fr, b.landmarks) is mesh
+    grey = np.tile(np.float32([0.7, 0.7, 0.75]), (len(v), 1))
+    out = with_dark_mouth_inside(replace(b.mesh, colors=grey, uvs=None, texture=None), v, fr, b.landmarks)
+    bare = with_dark_mouth_inside(replace(b.mesh, colors=None, uvs=None, texture=None), v, fr, b.landmarks)
+    assert out.colors is not None and bare.colors is not None
+    shaded = np.abs(out.colors - grey).max(axis=1) > 1e-6
+    skin = np.asarray(SKIN_COLOR, dtype=np.float32)
+    assert shaded.sum() > 20 and np.array_equal(shaded, np.abs(bare.colors - skin).max(axis=1) > 1e-6)
