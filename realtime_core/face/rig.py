@@ -161,14 +161,25 @@ class Rig:
 
     def _contact_push(self, d: np.ndarray) -> np.ndarray:
         """(n_moving, 3) float32 correction that separates crossing lip columns, for displacements d."""
+        deficit = self._deficits(d)
+        if not deficit.any():
+            return np.zeros_like(d)
+        return self._push_of(deficit)
+
+    def _deficits(self, d: np.ndarray) -> np.ndarray:
+        """(k,) how far (head units, along ``contact_up``) each lip column's lower point is above its upper
+        point for linear displacements d (n_moving, 3); 0 where the lips do not cross."""
+        rows = self._contact_rows
+        moved = np.where(rows >= 0, d[rows.clip(0)] @ self.contact_up, 0.0)  # (k, 2) displacement along up
+        gap = (self.neutral[self.contact] @ self.contact_up) + moved
+        return np.maximum(gap[:, 1] - gap[:, 0], 0.0)  # lower above upper by this much
+
+    def _push_of(self, deficit: np.ndarray) -> np.ndarray:
+        """(n_moving, 3) float32 push that closes the columns' deficits (k,) (head units): half each way,
+        all of it on the side that moves when the other never does."""
         rows = self._contact_rows
         up = self.contact_up
-        moved = np.where(rows >= 0, d[rows.clip(0)] @ up, 0.0)  # (k, 2) displacement along up
-        gap = (self.neutral[self.contact] @ up) + moved
-        deficit = np.maximum(gap[:, 1] - gap[:, 0], 0.0)  # lower above upper by this much
-        out = np.zeros_like(d)
-        if not deficit.any():
-            return out
+        out = np.zeros((len(self.moving), 3), dtype=np.float32)
         mov_u, mov_l = rows[:, 0] >= 0, rows[:, 1] >= 0
         share_u = np.where(mov_u & mov_l, 0.5, np.where(mov_u, 1.0, 0.0))
         share_l = np.where(mov_u & mov_l, 0.5, np.where(mov_l, 1.0, 0.0))
@@ -186,6 +197,29 @@ class Rig:
             return np.zeros((len(self.moving), 3), dtype=np.float32)
         d = (self._folded @ p) if self._folded is not None else (self.matrix @ (self.basis @ p))
         return self._contact_push(d.reshape(-1, 3))
+
+    def contact_deficits(self, params: np.ndarray) -> np.ndarray:
+        """(n_frames, k) float32: each lip column's crossing (head units) for params (n_frames, 4) (IOD),
+        the weights of :meth:`contact_targets`: ``displacements(p) = linear(p) + deficits(p) @ targets``,
+        so an exporter can bake the (non-linear) constraint as k morph targets animated per frame."""
+        p = np.asarray(params, dtype=np.float32).reshape(-1, 4)
+        out = np.zeros((len(p), len(self.contact)), dtype=np.float32)
+        if len(self.contact):
+            for i, row in enumerate(p):
+                d = (self._folded @ row) if self._folded is not None else (self.matrix @ (self.basis @ row))
+                out[i] = self._deficits(np.asarray(d, dtype=np.float32).reshape(-1, 3))
+        return out
+
+    def contact_targets(self) -> np.ndarray:
+        """(k, n_moving, 3) float32: the push per unit deficit (head units) of each lip column (see
+        :meth:`contact_deficits`); the push is linear in the deficits, so these are exact."""
+        k = len(self.contact)
+        out = np.zeros((k, len(self.moving), 3), dtype=np.float32)
+        for j in range(k):
+            unit = np.zeros(k, dtype=np.float64)
+            unit[j] = 1.0
+            out[j] = self._push_of(unit)
+        return out
 
     def deformed(self, params: np.ndarray) -> np.ndarray:
         """All head vertices (n_h, 3) float32 for params (4,)."""
