@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 32
+RIG_ALGORITHM = 33
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -703,8 +703,14 @@ def lip_columns(
     axis; among the vertices within ``band`` IOD (vertically) of the inner-lip midpoints, those the
     mouth-open parameter barely moves (< 20% of the most) are upper lip, those it moves most
     (> 50%) lower lip, and each column pairs the lowest upper-lip vertex with the highest lower-lip
-    vertex (the two inner contours). The inner-lip landmarks are always a pair.
+    vertex (the two inner contours). Only the lips' own surface counts: the mesh pieces (texture seams
+    welded) holding the inner-lip landmarks, so separate teeth, tongue or gums inside the box never
+    stand for a lip. The inner-lip landmarks are always a pair.
     """
+    from scipy.sparse.csgraph import connected_components
+
+    from realtime_core.face.projection import vertex_adjacency
+
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if seam_pairs is not None and len(seam_pairs):
         return np.unique(np.vstack([np.asarray(seam_pairs, dtype=np.int64), lm_pair]), axis=0)
@@ -713,7 +719,16 @@ def lip_columns(
     e[2] = 1.0
     drop = np.zeros(len(v))
     drop[rig.moving] = -(rig.displacements(e).astype(np.float64) @ frame.axes[1]) / frame.iod
-    return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band)
+    # An upper tooth lies in the box, barely moves with mouth_open and sits below the upper lip's inner
+    # contour at the corners, so it was taken for the upper lip there (the full-body avatar without
+    # targets: 3 of its 11 columns). A lower lip that rises at the corners (upper_lip_raise 0.054,
+    # lip_corner_depress -0.103) then "crossed" a tooth it lies in front of, and the push meant to
+    # part the lips dragged the lip corner down 0.07-0.08 IOD alone: 2 flipped triangles.
+    canon, welded = weld(v)
+    _, comp = connected_components(vertex_adjacency(len(welded), canon[np.asarray(rig.triangles)]), directed=False)
+    comp = comp[canon]
+    on_lips = np.isin(comp, comp[lm_pair[0]])
+    return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band, candidates=on_lips)
 
 
 def lip_pairs_by_drop(
@@ -725,12 +740,14 @@ def lip_pairs_by_drop(
     column_width: float,
     band: float = 0.15,
     top_in_box: bool = False,
+    candidates: np.ndarray | None = None,
 ) -> np.ndarray:
     """(k, 2) int64 (upper, lower) vertex pairs of the two inner lip contours, from vertices (n, 3)
     and drop (n,) each vertex's downward motion (IOD) when the mouth opens (:func:`lip_columns`'s
     rule; also the reference face's lip columns for the keyframe solve, from its jaw target).
     top_in_box: the "most" motion is the largest inside the mouth box, not over the whole face (a jaw
-    target drops the chin further than the lower lip)."""
+    target drops the chin further than the lower lip). candidates: (n,) bool the vertices that may
+    stand for a lip (None: all)."""
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if drop.max() <= 0:
         return lm_pair
@@ -739,6 +756,8 @@ def lip_pairs_by_drop(
     y_mid = 0.5 * (q[landmarks.upper_inner, 1] + q[landmarks.lower_inner, 1])
     z_min = min(q[landmarks.corner_left, 2], q[landmarks.corner_right, 2]) - 0.3
     box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < band) & (q[:, 2] > z_min)
+    if candidates is not None:
+        box &= np.asarray(candidates, dtype=bool)
     top = (drop[box].max() if box.any() else 0.0) if top_in_box else drop.max()
     upper = box & (drop < 0.2 * top)
     lower = box & (drop > 0.5 * top)
