@@ -1,5 +1,6 @@
-"""The knife cut of a coarse head's lip contact (:mod:`assets.heads.knife`) on synthetic meshes: a closed
-mouth whose lips touch along one long edge, and a contact curve that crosses triangles."""
+"""The knife cut of a coarse head's lip contact (:mod:`assets.heads.knife`) on synthetic meshes (a closed
+mouth whose lips touch along one long edge, a contact curve that crosses triangles) and on Lee Perry-Smith
+decimated to ~1,500 triangles (the simple face's corners at their points, ``corners_at_points``)."""
 
 from __future__ import annotations
 
