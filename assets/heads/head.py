@@ -79,7 +79,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         part=b.part.astype("int16"),
         part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
     )
-    lips = reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks)
+    lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
     rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
     assert rig is not None  # the reference reproduces itself
     lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
@@ -178,7 +178,7 @@ def morph_head(
         b.targets,
         user_map=user,
         require_enough=require_enough,
-        lips=reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks),
+        lips=reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks),
     )
     if rig is None:
         return None

@@ -705,12 +705,8 @@ def lip_columns(
     (> 50%) lower lip, and each column pairs the lowest upper-lip vertex with the highest lower-lip
     vertex (the two inner contours). Only the lips' own surface counts: the mesh pieces (texture seams
     welded) holding the inner-lip landmarks, so separate teeth, tongue or gums inside the box never
-    stand for a lip. The inner-lip landmarks are always a pair.
+    stand for a lip (:func:`lip_pieces`). The inner-lip landmarks are always a pair.
     """
-    from scipy.sparse.csgraph import connected_components
-
-    from realtime_core.face.projection import vertex_adjacency
-
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if seam_pairs is not None and len(seam_pairs):
         return np.unique(np.vstack([np.asarray(seam_pairs, dtype=np.int64), lm_pair]), axis=0)
@@ -719,16 +715,30 @@ def lip_columns(
     e[2] = 1.0
     drop = np.zeros(len(v))
     drop[rig.moving] = -(rig.displacements(e).astype(np.float64) @ frame.axes[1]) / frame.iod
-    # An upper tooth lies in the box, barely moves with mouth_open and sits below the upper lip's inner
-    # contour at the corners, so it was taken for the upper lip there (the full-body avatar without
-    # targets: 3 of its 11 columns). A lower lip that rises at the corners (upper_lip_raise 0.054,
-    # lip_corner_depress -0.103) then "crossed" a tooth it lies in front of, and the push meant to
-    # part the lips dragged the lip corner down 0.07-0.08 IOD alone: 2 flipped triangles.
-    canon, welded = weld(v)
-    _, comp = connected_components(vertex_adjacency(len(welded), canon[np.asarray(rig.triangles)]), directed=False)
-    comp = comp[canon]
-    on_lips = np.isin(comp, comp[lm_pair[0]])
+    on_lips = lip_pieces(v, rig.triangles, landmarks)
     return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band, candidates=on_lips)
+
+
+def lip_pieces(vertices: np.ndarray, triangles: np.ndarray, landmarks: MouthLandmarks) -> np.ndarray:
+    """(n,) bool: the vertices (n, 3) on the mesh pieces (triangles (m, 3); texture seams welded) that
+    hold the two inner-lip landmarks: the only vertices that may stand for a lip in a lip column
+    (:func:`lip_columns`, and the keyframe solve's reference face, ``assets.heads.targets.reference_lips``).
+
+    An upper tooth lies in the mouth box, barely moves when the mouth opens and sits below the upper
+    lip's inner contour at the corners, so it was taken for the upper lip there (the full-body avatar
+    without targets: 3 of its 11 columns; the built-in head's reference face: 1 of its 2 columns paired
+    an upper with a lower tooth). A lower lip that rises at the corners (upper_lip_raise 0.054,
+    lip_corner_depress -0.103) then "crossed" a tooth it lies in front of, and the push meant to part
+    the lips dragged the lip corner down 0.07-0.08 IOD alone: 2 flipped triangles."""
+    from scipy.sparse.csgraph import connected_components
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    t = canon[np.asarray(triangles, dtype=np.int64)]
+    _, comp = connected_components(vertex_adjacency(len(welded), t), directed=False)
+    comp = comp[canon]
+    return np.isin(comp, comp[[landmarks.upper_inner, landmarks.lower_inner]])
 
 
 def lip_pairs_by_drop(
