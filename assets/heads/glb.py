@@ -7,10 +7,12 @@ the written mesh directly. UVs are written as stored (glTF's convention, v down:
   ``/head/mesh.json``), with the head's morph targets when it has any.
 - :func:`animated_glb`: a head whose morph targets are animated by one LINEAR sampler
   (``mesh.extras.targetNames``, the convention three.js and Blender read).
-- :func:`head_glb`: the animated glb of a rigged head. A :class:`realtime_core.face.Rig` is linear,
-  ``deformed(p) = neutral + sum_j p_j D_j``, so its four ``D_j`` are exact morph targets animated
-  by the parameter curves (IOD, may be negative). A :class:`realtime_core.face.keyframes.MorphRig`
-  animates the head's own targets with the weights it computes per frame (in [0, 1]).
+- :func:`head_glb`: the animated glb of a rigged head. A :class:`realtime_core.face.Rig` is linear
+  but for its lip-contact push, ``deformed(p) = neutral + sum_j p_j D_j + sum_k c_k(p) C_k``: its four
+  ``D_j`` animated by the parameter curves (IOD, may be negative) and one sparse target ``C_k`` per lip
+  column animated by that column's crossing ``c_k(p)`` (head units, 0 unless the lips would cross).
+  A :class:`realtime_core.face.keyframes.MorphRig` animates the head's own targets with the weights it
+  computes per frame (in [0, 1]).
 """
 
 from __future__ import annotations
@@ -69,6 +71,27 @@ class _Buffer:
         self.accessors.append(acc)
         return len(self.accessors) - 1
 
+    def sparse_vec3(self, arr: np.ndarray) -> int:
+        """A float32 VEC3 accessor (n, 3) stored as glTF sparse: no base view (zeros), the rows that are
+        not zero as uint32 indices + values (a morph target that moves a few vertices of a large head)."""
+        idx = np.flatnonzero(np.abs(arr).max(axis=1) > 0).astype("<u4")
+        vals = np.ascontiguousarray(arr[idx], dtype="<f4")
+        acc: dict = {
+            "componentType": _FLOAT,
+            "count": len(arr),
+            "type": "VEC3",
+            "min": [float(x) for x in arr.min(axis=0)],
+            "max": [float(x) for x in arr.max(axis=0)],
+        }
+        if len(idx):  # glTF: sparse.count >= 1; an all-zero target is just the zero-initialised accessor
+            acc["sparse"] = {
+                "count": len(idx),
+                "indices": {"bufferView": self.view(idx.tobytes()), "componentType": _UINT32},
+                "values": {"bufferView": self.view(vals.tobytes())},
+            }
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
 
 def _glb(doc: dict, buf: _Buffer) -> bytes:
     body = b"".join(buf.blobs)
@@ -94,7 +117,9 @@ def _primitive(
     colors: np.ndarray | None,
     texture: bytes | None,
     targets: np.ndarray | None,
+    sparse: bool = False,
 ) -> dict:
+    """sparse: store a target that moves under a quarter of the vertices as a sparse accessor."""
     v = np.ascontiguousarray(vertices, dtype="<f4")
     t = np.ascontiguousarray(triangles, dtype="<u4")
     n = len(v)
@@ -117,8 +142,14 @@ def _primitive(
         d = np.ascontiguousarray(targets, dtype="<f4")
         if d.ndim != 3 or d.shape[1:] != (n, 3):
             raise GlbError(f"targets must be (T, {n}, 3), got {d.shape}")
+        moved = (np.abs(d).max(axis=2) > 0).sum(axis=1)  # (T,) vertices each target moves
         prim["targets"] = [
-            {"POSITION": buf.accessor(d[j], "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)} for j in range(len(d))
+            {
+                "POSITION": buf.sparse_vec3(d[j])
+                if sparse and moved[j] * 4 < n
+                else buf.accessor(d[j], "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)
+            }
+            for j in range(len(d))
         ]
     prim["indices"] = buf.accessor(t.reshape(-1), "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
     doc["materials"] = [material]
@@ -200,11 +231,13 @@ def animated_glb(
     texture: bytes | None = None,
     audio: str | None = None,
     units: str = "IOD",
+    sparse: bool = False,
 ) -> bytes:
     """GLB bytes. vertices (n, 3) neutral positions (mesh units); triangles (m, 3) vertex indices;
     targets (T, n, 3) displacement per unit weight; target_names (T,); weights (F, T) per frame at
     ``fps`` (the animation starts at 0 s); uvs (n, 2) with texture (PNG/JPEG bytes) or colors (n, 3)
-    in [0, 1]; audio: file name recorded in asset.extras; units: what the weights measure."""
+    in [0, 1]; audio: file name recorded in asset.extras; units: what the weights measure; sparse: a
+    target that moves under a quarter of the vertices is stored as a glTF sparse accessor."""
     w = np.asarray(weights, dtype=np.float64)
     d = np.asarray(targets)
     if d.ndim != 3 or d.shape[0] != len(target_names):
@@ -223,7 +256,7 @@ def animated_glb(
             "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units, "curves": list(target_names)}},
         }
     }
-    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d)
+    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse)
     times = np.ascontiguousarray(np.arange(len(w)) / fps, dtype="<f4")
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(np.ascontiguousarray(w, dtype="<f4").reshape(-1), "SCALAR", _FLOAT, None)  # frame-major
@@ -291,15 +324,23 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
             audio=audio,
             units="morph weight",
         )
+    # The lip-contact push is not linear in the parameters, but it is linear in each lip column's
+    # crossing (deficit): one sparse target per column, animated by its deficit per frame, makes the
+    # file deform exactly as the renderer and the server's deltas do (lips never pass each other).
+    contact = np.zeros((len(rig.contact), len(rig.neutral), 3), dtype=np.float32)
+    contact[:, rig.moving] = rig.contact_targets()
+    names = tuple(VISUAL_PARAMS) + tuple(f"lip_contact_{k:02d}" for k in range(len(rig.contact)))
     return animated_glb(
         vertices=rig.neutral,
         triangles=mesh.triangles,
-        targets=rig_targets(rig),
-        target_names=VISUAL_PARAMS,
-        weights=p,
+        targets=np.concatenate([rig_targets(rig), contact]),
+        target_names=names,
+        weights=np.hstack([p, rig.contact_deficits(p)]),
         fps=fps,
         uvs=mesh.uvs,
         colors=mesh.colors,
         texture=texture,
         audio=audio,
+        units="IOD (mouth parameters); head units (lip_contact_k: that lip column's crossing, pushed apart)",
+        sparse=True,
     )

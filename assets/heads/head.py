@@ -79,7 +79,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         part=b.part.astype("int16"),
         part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
     )
-    lips = reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks)
+    lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
     rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
     assert rig is not None  # the reference reproduces itself
     lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
@@ -178,7 +178,7 @@ def morph_head(
         b.targets,
         user_map=user,
         require_enough=require_enough,
-        lips=reference_lips(b.mesh.vertices, b.targets["jawOpen"], b.landmarks),
+        lips=reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks),
     )
     if rig is None:
         return None
@@ -287,8 +287,11 @@ def rig_checked(
     head (2) also with the fold repair on the final mesh (``walls_in_repair=False``), then (3) without clean
     lips, as before, and on a hollow head (4) with the repair on the final mesh: the repair smoothing across
     the crease's hidden walls passes some rigs of Lee Perry-Smith, the repair on the final mesh others
-    ("Any head, cleanly"). A head with no cut is rigged once; a cut head up to four times, only while its
-    rigs fail. Meta "rig_attempts": the failures of the rigs tried before the one returned."""
+    ("Any head, cleanly"). A knife-cut (coarse) mouth whose four rigs fail is then rigged the same four ways with
+    the simple face's mouth corners at the given corner points (``corners_at_points=True``; docs/animation.md, "A
+    coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
+    with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail.
+    Meta "rig_attempts": the failures of the rigs tried before the one returned."""
     from assets.heads.rigging import rig_head
 
     tries: list[dict[str, Any]] = [
@@ -297,17 +300,24 @@ def rig_checked(
         {},
         {"walls_in_repair": False},
     ]
+    # A knife-cut (coarse) mouth whose rigs all fail: the same four with the simple face's mouth corners at the
+    # given corner points, not their vertices (rig_head, corners_at_points; rigs that pass are left as they were).
+    tries += [{**o, "corners_at_points": True} for o in tries]
     attempts: list[dict[str, object]] = []
     hollow = False  # known from the first rig: a cut whose crease's hidden walls were removed
+    coarse = False  # known from the first rig: a knife-cut mouth
     plain: tuple[Rig, HeadMesh, RigReport] | None = None
     for options in tries:
         if options.get("walls_in_repair") is False and not hollow:
+            continue
+        if options.get("corners_at_points") and not coarse:
             continue
         rig, rigged = rig_head(mesh, spec, **rig_options, **options)
         report = head_checks(Head(rig, rigged))
         if not rig.meta.get("lip_seam_cut"):
             return rig, rigged, report  # no cut: the other rigs would be this one
         hollow = bool(rig.meta.get("inner_lip_removed"))
+        coarse = bool(rig.meta.get("contact_knife"))
         if report.passed:
             break
         attempts.append({**options, "failures": list(report.failures)})

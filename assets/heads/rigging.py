@@ -931,6 +931,7 @@ def rig_head(
     head_calibration: bool = True,
     walls_in_repair: bool = True,
     clean_lips: bool = False,
+    corners_at_points: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -946,6 +947,13 @@ def rig_head(
     that stay once the hidden walls go) and unties the lower side from the upper lip's skin
     (:func:`_without_rim_ties`), the small pieces left are dropped (:func:`lip_islands`) and the seam's
     rows are smoothed (SEAM_SMOOTH); meta "clean_lips" is then true (rig_checked tries this first).
+    ``corners_at_points``: on a knife-cut (coarse) mouth, the simple face's mouth corners are placed at the given
+    corner points instead of their vertices (meta "simple_corners_at_points"). A decimated mouth's corner vertex
+    lies where decimation left it: on Lee Perry-Smith at 1,428 triangles both lie 0.04 IOD the same way
+    sideways, which shifts the simple face's mouth against its midline; its lips then open 0.48 of mouth_open
+    at the inner-lip point, under the rescale's floor (OPEN_RESPONSE_RANGE), and part by 0.38 (< 0.5); with the
+    corners at their points 0.61 (docs/animation.md, "A coarse mouth's corners at their points";
+    :func:`assets.heads.head.rig_checked` tries it on a knife-cut mouth whose other rigs fail).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1063,6 +1071,11 @@ def rig_head(
             below = np.flatnonzero(origin[n_base:] == snap["lower_inner"])
             if len(below):
                 snap["lower_inner"] = int(n_base + below[0])
+        if coarse and corners_at_points:
+            # A decimated mouth's corner vertices lie where decimation left them (see corners_at_points above).
+            for k in ("corner_left", "corner_right"):
+                at_vertex[k] = np.asarray(points[k], dtype=np.float64)
+            meta["simple_corners_at_points"] = True
         placed = _place(simple, at_vertex)
         slm = mouth_landmarks(simple.landmarks)
         # Calibrated on the simple model as it comes (its own shape), not as warped onto the head:

@@ -196,25 +196,32 @@ class ReferenceLips:
 
 
 LIP_COLUMN_WIDTH = 0.04
-"""IOD: the width of a reference lip column (the mouth is ~0.6 IOD wide: ~15 columns)."""
+"""IOD: the width of a reference lip column (the built-in head's mouth is 0.8 IOD wide: 20 columns, 4 of
+which hold a lip-skin pair besides the inner-lip landmarks)."""
 
 
-def reference_lips(vertices: np.ndarray, jaw: np.ndarray, landmarks: Mapping[str, int]) -> ReferenceLips:
-    """The reference face's lip columns: vertices (n, 3); jaw (n, 3) its jaw-opening target (moves the
-    lower lip, not the upper); landmarks: name -> vertex index (the mouth landmarks).
+def reference_lips(
+    vertices: np.ndarray, triangles: np.ndarray, jaw: np.ndarray, landmarks: Mapping[str, int]
+) -> ReferenceLips:
+    """The reference face's lip columns: vertices (n, 3); triangles (m, 3); jaw (n, 3) its jaw-opening
+    target (moves the lower lip, not the upper); landmarks: name -> vertex index (the mouth landmarks).
 
     The inner contours' pairs by :func:`realtime_core.face.rig.lip_pairs_by_drop` (the rule a rig's lip
     columns follow), in columns LIP_COLUMN_WIDTH IOD wide, with the jaw target's drop relative to its
-    largest within the mouth (the chin drops further than the lower lip); the inner-lip landmarks always."""
+    largest within the mouth (the chin drops further than the lower lip), among the lips' own pieces only
+    (:func:`realtime_core.face.rig.lip_pieces`); the inner-lip landmarks always."""
     from assets.heads.rigging import mouth_landmarks
     from realtime_core.face.model import face_frame
-    from realtime_core.face.rig import lip_pairs_by_drop
+    from realtime_core.face.rig import lip_pairs_by_drop, lip_pieces
 
     v = np.asarray(vertices, dtype=np.float64)
     lm = mouth_landmarks(dict(landmarks))
     fr = face_frame(v, lm)
     drop = -(np.asarray(jaw, dtype=np.float64) @ fr.axes[1]) / fr.iod
-    pr = lip_pairs_by_drop(v, drop, lm, fr, column_width=LIP_COLUMN_WIDTH, top_in_box=True)
+    # Without the pieces the built-in head's teeth stood for a lip: its 2 columns were the inner-lip
+    # landmarks and an upper tooth over a lower tooth (x = 0.22 IOD), so the solve kept teeth apart.
+    on_lips = lip_pieces(v, triangles, lm)
+    pr = lip_pairs_by_drop(v, drop, lm, fr, column_width=LIP_COLUMN_WIDTH, top_in_box=True, candidates=on_lips)
     axis = fr.axes[1] / fr.iod
     return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
 

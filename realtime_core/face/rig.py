@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 33
+RIG_ALGORITHM = 35
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -161,14 +161,25 @@ class Rig:
 
     def _contact_push(self, d: np.ndarray) -> np.ndarray:
         """(n_moving, 3) float32 correction that separates crossing lip columns, for displacements d."""
+        deficit = self._deficits(d)
+        if not deficit.any():
+            return np.zeros_like(d)
+        return self._push_of(deficit)
+
+    def _deficits(self, d: np.ndarray) -> np.ndarray:
+        """(k,) how far (head units, along ``contact_up``) each lip column's lower point is above its upper
+        point for linear displacements d (n_moving, 3); 0 where the lips do not cross."""
+        rows = self._contact_rows
+        moved = np.where(rows >= 0, d[rows.clip(0)] @ self.contact_up, 0.0)  # (k, 2) displacement along up
+        gap = (self.neutral[self.contact] @ self.contact_up) + moved
+        return np.maximum(gap[:, 1] - gap[:, 0], 0.0)  # lower above upper by this much
+
+    def _push_of(self, deficit: np.ndarray) -> np.ndarray:
+        """(n_moving, 3) float32 push that closes the columns' deficits (k,) (head units): half each way,
+        all of it on the side that moves when the other never does."""
         rows = self._contact_rows
         up = self.contact_up
-        moved = np.where(rows >= 0, d[rows.clip(0)] @ up, 0.0)  # (k, 2) displacement along up
-        gap = (self.neutral[self.contact] @ up) + moved
-        deficit = np.maximum(gap[:, 1] - gap[:, 0], 0.0)  # lower above upper by this much
-        out = np.zeros_like(d)
-        if not deficit.any():
-            return out
+        out = np.zeros((len(self.moving), 3), dtype=np.float32)
         mov_u, mov_l = rows[:, 0] >= 0, rows[:, 1] >= 0
         share_u = np.where(mov_u & mov_l, 0.5, np.where(mov_u, 1.0, 0.0))
         share_l = np.where(mov_u & mov_l, 0.5, np.where(mov_l, 1.0, 0.0))
@@ -186,6 +197,29 @@ class Rig:
             return np.zeros((len(self.moving), 3), dtype=np.float32)
         d = (self._folded @ p) if self._folded is not None else (self.matrix @ (self.basis @ p))
         return self._contact_push(d.reshape(-1, 3))
+
+    def contact_deficits(self, params: np.ndarray) -> np.ndarray:
+        """(n_frames, k) float32: each lip column's crossing (head units) for params (n_frames, 4) (IOD),
+        the weights of :meth:`contact_targets`: ``displacements(p) = linear(p) + deficits(p) @ targets``,
+        so an exporter can bake the (non-linear) constraint as k morph targets animated per frame."""
+        p = np.asarray(params, dtype=np.float32).reshape(-1, 4)
+        out = np.zeros((len(p), len(self.contact)), dtype=np.float32)
+        if len(self.contact):
+            for i, row in enumerate(p):
+                d = (self._folded @ row) if self._folded is not None else (self.matrix @ (self.basis @ row))
+                out[i] = self._deficits(np.asarray(d, dtype=np.float32).reshape(-1, 3))
+        return out
+
+    def contact_targets(self) -> np.ndarray:
+        """(k, n_moving, 3) float32: the push per unit deficit (head units) of each lip column (see
+        :meth:`contact_deficits`); the push is linear in the deficits, so these are exact."""
+        k = len(self.contact)
+        out = np.zeros((k, len(self.moving), 3), dtype=np.float32)
+        for j in range(k):
+            unit = np.zeros(k, dtype=np.float64)
+            unit[j] = 1.0
+            out[j] = self._push_of(unit)
+        return out
 
     def deformed(self, params: np.ndarray) -> np.ndarray:
         """All head vertices (n_h, 3) float32 for params (4,)."""
@@ -669,7 +703,9 @@ def lip_columns(
     axis; among the vertices within ``band`` IOD (vertically) of the inner-lip midpoints, those the
     mouth-open parameter barely moves (< 20% of the most) are upper lip, those it moves most
     (> 50%) lower lip, and each column pairs the lowest upper-lip vertex with the highest lower-lip
-    vertex (the two inner contours). The inner-lip landmarks are always a pair.
+    vertex (the two inner contours). Only the lips' own surface counts: the mesh pieces (texture seams
+    welded) holding the inner-lip landmarks, so separate teeth, tongue or gums inside the box never
+    stand for a lip (:func:`lip_pieces`). The inner-lip landmarks are always a pair.
     """
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if seam_pairs is not None and len(seam_pairs):
@@ -679,7 +715,30 @@ def lip_columns(
     e[2] = 1.0
     drop = np.zeros(len(v))
     drop[rig.moving] = -(rig.displacements(e).astype(np.float64) @ frame.axes[1]) / frame.iod
-    return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band)
+    on_lips = lip_pieces(v, rig.triangles, landmarks)
+    return lip_pairs_by_drop(v, drop, landmarks, frame, column_width=column_width, band=band, candidates=on_lips)
+
+
+def lip_pieces(vertices: np.ndarray, triangles: np.ndarray, landmarks: MouthLandmarks) -> np.ndarray:
+    """(n,) bool: the vertices (n, 3) on the mesh pieces (triangles (m, 3); texture seams welded) that
+    hold the two inner-lip landmarks: the only vertices that may stand for a lip in a lip column
+    (:func:`lip_columns`, and the keyframe solve's reference face, ``assets.heads.targets.reference_lips``).
+
+    An upper tooth lies in the mouth box, barely moves when the mouth opens and sits below the upper
+    lip's inner contour at the corners, so it was taken for the upper lip there (the full-body avatar
+    without targets: 3 of its 11 columns; the built-in head's reference face: 1 of its 2 columns paired
+    an upper with a lower tooth). A lower lip that rises at the corners (upper_lip_raise 0.054,
+    lip_corner_depress -0.103) then "crossed" a tooth it lies in front of, and the push meant to part
+    the lips dragged the lip corner down 0.07-0.08 IOD alone: 2 flipped triangles."""
+    from scipy.sparse.csgraph import connected_components
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    t = canon[np.asarray(triangles, dtype=np.int64)]
+    _, comp = connected_components(vertex_adjacency(len(welded), t), directed=False)
+    comp = comp[canon]
+    return np.isin(comp, comp[[landmarks.upper_inner, landmarks.lower_inner]])
 
 
 def lip_pairs_by_drop(
@@ -691,12 +750,14 @@ def lip_pairs_by_drop(
     column_width: float,
     band: float = 0.15,
     top_in_box: bool = False,
+    candidates: np.ndarray | None = None,
 ) -> np.ndarray:
     """(k, 2) int64 (upper, lower) vertex pairs of the two inner lip contours, from vertices (n, 3)
     and drop (n,) each vertex's downward motion (IOD) when the mouth opens (:func:`lip_columns`'s
     rule; also the reference face's lip columns for the keyframe solve, from its jaw target).
     top_in_box: the "most" motion is the largest inside the mouth box, not over the whole face (a jaw
-    target drops the chin further than the lower lip)."""
+    target drops the chin further than the lower lip). candidates: (n,) bool the vertices that may
+    stand for a lip (None: all)."""
     lm_pair = np.array([[landmarks.upper_inner, landmarks.lower_inner]], dtype=np.int64)
     if drop.max() <= 0:
         return lm_pair
@@ -705,6 +766,8 @@ def lip_pairs_by_drop(
     y_mid = 0.5 * (q[landmarks.upper_inner, 1] + q[landmarks.lower_inner, 1])
     z_min = min(q[landmarks.corner_left, 2], q[landmarks.corner_right, 2]) - 0.3
     box = (q[:, 0] > x0) & (q[:, 0] < x1) & (np.abs(q[:, 1] - y_mid) < band) & (q[:, 2] > z_min)
+    if candidates is not None:
+        box &= np.asarray(candidates, dtype=bool)
     top = (drop[box].max() if box.any() else 0.0) if top_in_box else drop.max()
     upper = box & (drop < 0.2 * top)
     lower = box & (drop > 0.5 * top)

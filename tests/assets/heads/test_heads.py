@@ -122,6 +122,16 @@ def test_builtin_head_assets(builtin_head):
     assert 100 <= s.model.n_vertices <= 300
 
 
+def test_the_builtin_rigs_lip_columns_are_skin_never_teeth(builtin_rig, builtin_head):
+    """The built-in head's teeth are separate pieces inside the mouth box: none may stand for a lip in the
+    lip-contact columns (RIG_ALGORITHM 32 paired the upper lip with a lower tooth in 3 of its 13 columns, so
+    the push parted a lip from a tooth; on the full-body avatar an upper tooth's pairs folded the lip corners)."""
+    rig, _ = builtin_rig
+    c = np.asarray(rig.contact)
+    assert len(c) >= 8
+    assert (builtin_head.part[c] == 0).all()
+
+
 def test_zero_params_give_zero_displacement(builtin_rig):
     rig, _ = builtin_rig
     d = rig.displacements(np.zeros(4))

@@ -192,3 +192,39 @@ def test_a_viseme_only_head_keeps_its_lips_apart_at_closed_lip_poses(tmp_path):
         gap = float((v[lm.upper_inner] - v[lm.lower_inner]) @ fr.axes[1]) / fr.iod
         assert gap >= -1e-4, (pose, gap)
         assert head.rig.weights(np.array(pose, dtype=float))[head.rig.names.index("viseme_PP")] > 0.3  # still pressed
+
+
+def test_the_reference_lip_columns_pair_lip_skin_and_the_solve_keeps_them_from_crossing(tmp_path, builtin_morph):
+    # The keyframe solve's reference face (the built-in head) had 2 columns: the inner-lip landmarks and
+    # an upper tooth over a lower tooth (parts 2 and 3), so "lips never cross" was partly kept on teeth.
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import mouth_landmarks
+    from assets.heads.targets import arkit_source, reference_lips
+    from realtime_core.blendshapes import ARKIT_NAMES
+    from realtime_core.face import face_frame
+
+    b = load_builtin_head()
+    lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
+    pairs = np.asarray(lips.pairs)
+    lm = mouth_landmarks(b.landmarks)
+    # Independent of the rule's own piece search: the asset's part labels (0 = skin) of each pair's
+    # vertices are those of the inner-lip landmarks, and the columns reach both halves of the mouth.
+    assert b.part[lm.upper_inner] == b.part[lm.lower_inner] == 0
+    assert (b.part[pairs] == 0).all(), pairs[(b.part[pairs] != 0).any(axis=1)]
+    fr = face_frame(b.mesh.vertices, lm)
+    x = (b.mesh.vertices[pairs[:, 0]] - b.mesh.vertices[lm.upper_inner]) @ fr.axes[0] / fr.iod
+    assert len(pairs) >= 4 and (x > 0.05).any() and (x < -0.05).any()
+    vis = {f"viseme_{k}": sum(w * b.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
+    path = tmp_path / "visemes.glb"
+    path.write_bytes(mesh_glb(HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, name="v", targets=vis)))
+    v0 = b.mesh.vertices.astype(np.float64)
+    ref = np.stack([b.targets[n] for n in ARKIT_NAMES]).astype(np.float64)  # (52, n, 3)
+    # Bilabial and pressing poses: closed, /m/, the corners up, the upper lip raised.
+    for head in (builtin_morph, resolve_head(path)):
+        for pose in ((0, 0, 0, 0), (-0.02, 0, 0, 0), (0, 0, 0, -0.103), (0.054, 0, 0, 0), (-0.084, 0.015, 0, -0.079)):
+            p = np.array(pose, dtype=np.float64)
+            v = head.rig.deformed(p).astype(np.float64)  # the same mesh as the reference face
+            src = v0 + np.einsum("k,knd->nd", arkit_source(p), ref)  # the reference motion itself
+            gap = (v[pairs[:, 0]] - v[pairs[:, 1]]) @ lips.axis
+            floor = np.minimum(0.0, (src[pairs[:, 0]] - src[pairs[:, 1]]) @ lips.axis)
+            assert (gap >= floor - 1e-4).all(), (head.rig.meta["head"], pose, gap.round(4), floor.round(4))

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io
+import subprocess
 import wave
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,17 +17,31 @@ from clients.export.gltf import animated_glb, rig_targets
 from clients.export.rhubarb import SHAPES, ShapeThresholds, cues, frame_shapes, read_tsv, tsv_bytes
 from realtime_core import VISUAL_PARAMS
 from realtime_core.track import Track
-from tests.prerequisites import require_module
+from tests.prerequisites import require_module, require_tool
 from tests.tracks import syllable_track
 
 
 def _accessor(gltf, blob: bytes, index: int) -> np.ndarray:
-    """Decode one float32 accessor with pygltflib's document (no facecast code)."""
+    """Decode one float32 accessor with pygltflib's document (no facecast code), sparse ones included
+    (glTF 2.0 3.6.2.3: the base view, or zeros without one, then the listed rows replaced)."""
     acc = gltf.accessors[index]
-    view = gltf.bufferViews[acc.bufferView]
     width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[acc.type]
     assert acc.componentType == 5126
-    a = np.frombuffer(blob, dtype="<f4", count=acc.count * width, offset=view.byteOffset + (acc.byteOffset or 0))
+    if acc.bufferView is None:
+        a = np.zeros(acc.count * width, dtype="<f4")
+    else:
+        view = gltf.bufferViews[acc.bufferView]
+        off = view.byteOffset + (acc.byteOffset or 0)
+        a = np.frombuffer(blob, dtype="<f4", count=acc.count * width, offset=off).copy()
+    if acc.sparse is not None:
+        sp = acc.sparse
+        assert sp.indices.componentType == 5125  # uint32
+        iv, vv = gltf.bufferViews[sp.indices.bufferView], gltf.bufferViews[sp.values.bufferView]
+        idx = np.frombuffer(blob, dtype="<u4", count=sp.count, offset=iv.byteOffset + (sp.indices.byteOffset or 0))
+        at = vv.byteOffset + (sp.values.byteOffset or 0)
+        vals = np.frombuffer(blob, dtype="<f4", count=sp.count * width, offset=at)
+        a = a.reshape(acc.count, width)
+        a[idx] = vals.reshape(-1, width)
     return a.reshape(acc.count, width) if width > 1 else a
 
 
@@ -123,6 +139,47 @@ def test_rig_morph_targets_reproduce_the_rig_deformation(builtin_rig_file):
 
 
 @pytest.mark.system
+def test_rig_glb_keeps_the_lips_apart_as_the_rig_does(builtin_rig_file, tmp_path):
+    """The exported file deforms exactly as the rig (and so the renderer and the server's deltas) at
+    every frame, the lip-contact push included: at the pressed-lip poses where the push acts, the four
+    linear targets alone would cross the lips; decoded with pygltflib, not facecast's reader."""
+    from assets.heads.glb import head_glb
+    from realtime_core.face.checks import EXTREME_POSES
+
+    pygltflib = require_module("pygltflib")
+    rig, mesh = builtin_rig_file
+    poses = np.array(EXTREME_POSES, dtype=np.float64)
+    pushed = [i for i, q in enumerate(poses) if np.abs(rig.contact_push(q)).max() > 1e-4]
+    assert pushed, "no pose of the checks makes the built-in rig's lips cross: the test would prove nothing"
+    params = np.vstack([poses, [0.03, -0.05, 0.3, 0.02]])
+    data = head_glb(rig, mesh, params, 30.0)
+    g = pygltflib.GLTF2.load_from_bytes(data)
+    blob = g.binary_blob()
+    prim = g.meshes[0].primitives[0]
+    names = g.meshes[0].extras["targetNames"]
+    assert names[:4] == list(VISUAL_PARAMS) and len(names) == 4 + len(rig.contact) == len(prim.targets)
+    base = _accessor(g, blob, prim.attributes.POSITION)
+    targets = np.stack([_accessor(g, blob, t["POSITION"]) for t in prim.targets])
+    assert all(g.accessors[t["POSITION"]].sparse is not None for t in prim.targets[4:])  # lip-local: stored sparse
+    s = g.animations[0].samplers[0]
+    weights = _accessor(g, blob, s.output).reshape(len(params), len(names))
+    for i, q in enumerate(params):
+        np.testing.assert_allclose(base + np.tensordot(weights[i], targets, axes=1), rig.deformed(q), atol=2e-5)
+    linear_only = base + np.tensordot(weights[pushed[0], :4], targets[:4], axes=1)
+    assert np.abs(linear_only - rig.deformed(poses[pushed[0]])).max() > 1e-4  # the contact targets did the work
+    # The Khronos validator (through glTF-Transform, the npm tooling the project installs) accepts the file,
+    # sparse targets and their min/max included: exit code 1 on any error.
+    require_tool("node", "apt package nodejs")
+    cli = Path(__file__).resolve().parents[3] / "node_modules" / ".bin" / "gltf-transform"
+    if not cli.exists():
+        pytest.fail("npm packages missing: run `npm install` in the checkout")
+    path = tmp_path / "take.glb"
+    path.write_bytes(data)
+    done = subprocess.run([str(cli), "validate", str(path)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+
+
+@pytest.mark.system
 def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin_rig_file):
     pygltflib = require_module("pygltflib")
     tr = syllable_track(30)
@@ -132,7 +189,7 @@ def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin
     with wave.open(str(tmp_path / "take.wav")) as w:
         assert w.getframerate() == 16000 and w.getnframes() == 16000
     g = pygltflib.GLTF2().load(str(tmp_path / "take.glb"))
-    assert len(g.meshes[0].primitives[0].targets) == 4
+    assert g.meshes[0].extras["targetNames"][:4] == list(VISUAL_PARAMS)  # then one target per lip-contact column
     for suffix, reader in ((".csv", decode_csv), (".json", decode_json)):
         export_track(tmp_path / f"take{suffix}", tr)
         back = reader((tmp_path / f"take{suffix}").read_bytes()).values

@@ -7,7 +7,7 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from realtime_core.face import FaceModel, MouthCalibration, Rig
+from realtime_core.face import FaceModel, MouthCalibration, MouthLandmarks, Rig
 from realtime_core.face.repair import repair_folds
 
 
@@ -217,3 +217,98 @@ def test_fold_repair_leaves_a_field_smoothing_unfolds_as_smoothing_left_it():
     without = repair_folds(v, t, g, motion, fixed=edge, tie_rounds=0)
     assert with_ties.flips_left == 0 and with_ties.rounds == without.rounds
     assert (with_ties.weights != without.weights).nnz == 0
+
+
+def _mouth_with_teeth() -> tuple[Rig, MouthLandmarks, np.ndarray, np.ndarray, np.ndarray]:
+    """Two lip strips 0.02 IOD apart (upper rows y = 0.01.., lower rows y = -0.01..) and, behind them, a
+    separate strip of upper teeth whose edge is level with the lower lip's inner contour (y = -0.01,
+    z = -0.05): in every column the lowest vertex that mouth_open leaves still is a tooth. mouth_open
+    drops the lower lip 1 IOD per unit, upper_lip_raise lifts it 1 IOD per unit (a lip corner rising
+    with the upper lip); the upper lip and the teeth never move. IOD 1 (eye centres at x = +-0.5, y = 1).
+    Returns the rig, its landmarks and the upper lip's, lower lip's and teeth's inner rows."""
+    xs = np.linspace(-0.5, 0.5, 11)
+
+    def strip(ys, z):
+        v = np.array([[x, y, z] for y in ys for x in xs])
+        k = len(xs)
+        t = [[r * k + i, r * k + i + 1, (r + 1) * k + i] for r in range(len(ys) - 1) for i in range(k - 1)] + [
+            [r * k + i + 1, (r + 1) * k + i + 1, (r + 1) * k + i] for r in range(len(ys) - 1) for i in range(k - 1)
+        ]
+        return v, np.array(t)
+
+    up_v, up_t = strip([0.01, 0.03, 0.05], 0.0)
+    lo_v, lo_t = strip([-0.01, -0.03, -0.05], 0.0)
+    th_v, th_t = strip([-0.01, 0.02], -0.05)
+    eyes = np.array([[0.6, 1.0, 0.0], [0.4, 1.0, 0.0], [-0.6, 1.0, 0.0], [-0.4, 1.0, 0.0]])
+    n_u, n_l, n_t = len(up_v), len(lo_v), len(th_v)
+    neutral = np.vstack([up_v, lo_v, th_v, eyes])
+    tri = np.vstack([up_t, lo_t + n_u, th_t + n_u + n_l]).astype(np.int32)
+    k = len(xs)
+    upper_row, lower_row, teeth_row = np.arange(k), n_u + np.arange(k), n_u + n_l + np.arange(k)
+    mid = k // 2
+    e = n_u + n_l + n_t
+    lm = MouthLandmarks(
+        upper_lip=2 * k + mid,
+        lower_lip=n_u + 2 * k + mid,
+        upper_inner=int(upper_row[mid]),
+        lower_inner=int(lower_row[mid]),
+        corner_left=int(upper_row[-1]),
+        corner_right=int(upper_row[0]),
+        eye_outer_left=e,
+        eye_inner_left=e + 1,
+        eye_outer_right=e + 2,
+        eye_inner_right=e + 3,
+    )
+    moving = np.arange(e)
+    g = np.zeros((e, 2))
+    g[n_u : n_u + n_l, 1] = 1.0  # the lower lip follows simple vertex 1 (the jaw); the rest, 0 (still)
+    basis = np.zeros((6, 4))
+    basis[4, 0] = 1.0  # upper_lip_raise lifts the jaw vertex (y)
+    basis[4, 2] = -1.0  # mouth_open drops it
+    rig = Rig(
+        neutral=neutral,
+        triangles=tri,
+        moving=moving,
+        matrix=sp.kron(sp.csr_matrix(g), sp.identity(3), format="csr"),
+        basis=basis,
+        control=np.arange(2),
+        simple=FaceModel(vertices=np.zeros((2, 3)), triangles=np.zeros((0, 3), int)),
+        calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
+    )
+    return rig, lm, upper_row, lower_row, teeth_row
+
+
+def test_lip_columns_pair_the_lips_never_a_tooth_and_push_only_lips_that_cross():
+    """Separate teeth behind the lips are not lips: every column pairs the upper lip's inner row with the
+    lower lip's (the rule without the lips' own pieces picks the tooth in every column), so a lower lip
+    lifted in front of the teeth but short of the upper lip is left exactly where the field puts it
+    (before: pushed down as if it crossed), and one lifted past the upper lip is pushed back to touching."""
+    import dataclasses
+
+    from realtime_core.face.model import face_frame
+    from realtime_core.face.rig import contact_spread, lip_columns, lip_pairs_by_drop
+
+    rig, lm, upper_row, lower_row, teeth_row = _mouth_with_teeth()
+    frame = face_frame(rig.neutral, lm)
+    pairs = lip_columns(rig, lm, frame, column_width=0.05)
+    inner = set(zip(upper_row[1:-1].tolist(), lower_row[1:-1].tolist(), strict=True))
+    assert {tuple(p) for p in pairs.tolist()} == inner  # 9 columns strictly between the corners
+    # What the rule gives when every vertex in the box may stand for a lip: the teeth.
+    drop = np.zeros(len(rig.neutral))
+    drop[rig.moving] = -rig.displacements(np.array([0.0, 0.0, 1.0, 0.0]))[:, 1]
+    old = lip_pairs_by_drop(rig.neutral, drop, lm, frame, column_width=0.05)
+    assert np.isin(old[:, 0], teeth_row).sum() == 9
+
+    def with_contact(c):
+        r = dataclasses.replace(rig, contact=c, contact_up=frame.axes[1])
+        return dataclasses.replace(r, contact_spread=contact_spread(r, iod=frame.iod))
+
+    new_rig, old_rig = with_contact(pairs), with_contact(old)
+    lift = np.array([0.015, 0.0, 0.0, 0.0])  # the lower lip 0.015 up: 0.005 below the upper lip
+    linear = (rig.matrix @ (rig.basis @ lift.astype(np.float32))).reshape(-1, 3)
+    np.testing.assert_array_equal(new_rig.displacements(lift), linear)
+    # The tooth pairs dragged the lip down by half the 0.015 it rose above the teeth's edge (half each way).
+    np.testing.assert_allclose(old_rig.contact_push(lift)[lower_row[1:-1], 1], -0.0075, atol=1e-6)
+    past = np.array([0.05, 0.0, 0.0, 0.0])  # 0.03 past the upper lip: pushed apart to touching
+    v = new_rig.deformed(past)
+    np.testing.assert_allclose(v[upper_row[1:-1], 1], v[lower_row[1:-1], 1], atol=1e-6)
