@@ -41,6 +41,19 @@ POSES = {
 }
 
 
+def _warned(rep) -> str:
+    """The advisory figures over their limits, as the checks column notes them."""
+    notes = [
+        w
+        for w, over in (
+            ("notch", any("lip edge" in w for w in rep.warnings)),
+            ("/m/", any("/m/" in w for w in rep.warnings)),
+        )
+        if over
+    ]
+    return f" ({', '.join(notes)} warning)" if notes else ""
+
+
 def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
     """name -> (head spec, resolve options)."""
     from assets.heads.builtin import load_builtin_head
@@ -230,7 +243,7 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
                 f"{rep.closure_gap_iod:.4f} | "
                 f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
                 f"{'n/a' if rep.lip_edge_notch_iod is None else f'{rep.lip_edge_notch_iod:.4f}'} | "
-                f"{'pass' if rep.passed else 'FAIL'}{' (notch warning)' if rep.warnings else ''}"
+                f"{'pass' if rep.passed else 'FAIL'}{_warned(rep)}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
             figs = f"- | - | - | - | - | - | not checked ({exc})"

@@ -23,11 +23,15 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   (:func:`lip_edge_notch`): a jagged cut, a notch or a sliver hole along the lip line, which the
   figures above do not see (they measure faces and vertex pairs, not the outline a render shows); and
   at how many places they leave it by more than the limit (:func:`lip_edge_shards`: one notch, or shards
-  hanging in the opening all along it).
+  hanging in the opening all along it);
+- lip gap at /m/: the largest inner-lip gap (IOD) at :data:`BILABIAL_POSES` (pressed lips, mouth_open 0:
+  the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
+  instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
 
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
-notch is advisory (:attr:`RigCheckLimits.max_lip_edge_notch`): over its limit it is reported as a
-warning and does not fail the rig.
+notch and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
+:attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are reported as warnings and do not fail
+the rig.
 """
 
 from __future__ import annotations
@@ -143,6 +147,11 @@ EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SI
 """The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 
+BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in SPEECH_POSES if p[2] == 0.0)
+"""The pressed bilabial rows of SPEECH_POSES (/m b p/: mouth_open 0, the upper lip lowered): where
+:func:`bilabial_gap` measures that the lips close."""
+
+
 LIP_EDGE_NOTCH_LIMIT = 0.015
 """IOD: the advisory limit of :func:`lip_edge_notch` (see docs/animation.md, "Lip edge notch", for the rows
 it was chosen from)."""
@@ -166,6 +175,9 @@ class RigCheckLimits:
     max_lip_edge_notch: float = LIP_EDGE_NOTCH_LIMIT
     """IOD, advisory: a larger :func:`lip_edge_notch` is a warning in the report, not a failure."""
     min_open_response: float = MIN_OPEN_RESPONSE
+    max_bilabial_gap: float = 0.01
+    """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
+    the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
@@ -174,6 +186,8 @@ class RigCheckLimits:
             raise ConfigError("min_open_response must be in [0, 1)")
         if not self.max_lip_edge_notch > 0:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
+        if not self.max_bilabial_gap >= 0:
+            raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
 
 
 @dataclass(frozen=True)
@@ -195,6 +209,8 @@ class RigReport:
     lip_edge_shards: int | None = None
     """At the pose where it is most, how many places of the lips' free edges leave their course by more than
     the notch limit (:func:`lip_edge_shards`; None: no free lip edge)."""
+    bilabial_gap_iod: float | None = None
+    """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -203,11 +219,12 @@ class RigReport:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
+        at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"mouth opening {opening}: "
+            f"mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -398,6 +415,20 @@ def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: Mo
     return (v[use[:, 0]] - v[use[:, 1]]) @ fr.axes[1] / fr.iod
 
 
+def bilabial_gap(
+    rig: Any, landmarks: MouthLandmarks, *, poses: tuple[tuple[float, ...], ...] = BILABIAL_POSES
+) -> float:
+    """IOD: the largest vertical gap between the inner-lip landmarks (upper minus lower along the face's up
+    axis; negative: pressed past each other) of ``rig`` deformed at ``poses`` (pressed-lip poses)."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    fr = face_frame(v0, landmarks)
+    gaps = []
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        gaps.append(float((v[landmarks.upper_inner] - v[landmarks.lower_inner]) @ fr.axes[1]) / fr.iod)
+    return max(gaps)
+
+
 def check_rig(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -470,6 +501,7 @@ def check_rig(
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
     if opening is not None and opening < limits.min_open_response:
         fails.append(f"the lips part by {opening:.2f} of the mouth opening asked (< {limits.min_open_response})")
+    at_m = bilabial_gap(rig, landmarks)
     found = lip_edge_shards(
         rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
     )
@@ -480,6 +512,8 @@ def check_rig(
             f"a lip edge leaves its course by {notch:.4f} IOD > {limits.max_lip_edge_notch} (jagged) "
             f"at {shards} place{'s' if shards != 1 else ''}"
         )
+    if at_m > limits.max_bilabial_gap:
+        warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -493,4 +527,5 @@ def check_rig(
         lip_edge_shards=shards,
         warnings=tuple(warns),
         open_response=opening,
+        bilabial_gap_iod=at_m,
     )
