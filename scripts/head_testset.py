@@ -41,19 +41,6 @@ POSES = {
 }
 
 
-def _warned(rep) -> str:
-    """The advisory figures over their limits, as the checks column notes them."""
-    notes = [
-        w
-        for w, over in (
-            ("notch", any("lip edge" in w for w in rep.warnings)),
-            ("/m/", any("/m/" in w for w in rep.warnings)),
-        )
-        if over
-    ]
-    return f" ({', '.join(notes)} warning)" if notes else ""
-
-
 def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
     """name -> (head spec, resolve options)."""
     from assets.heads.builtin import load_builtin_head
@@ -205,11 +192,30 @@ def _resolve(spec, opts: dict, finder):
     return resolve_head(spec, landmark_finder=finder, **opts)
 
 
-def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", describe=None) -> list[str]:
+def _warned(rep) -> str:
+    """The advisory figures over their limits, as the table's checks column notes them."""
+    from realtime_core.face.checks import RigCheckLimits
+
+    lim = RigCheckLimits()
+    over = []
+    if rep.lip_edge_notch_iod is not None and rep.lip_edge_notch_iod > lim.max_lip_edge_notch:
+        over.append("notch")
+    if rep.lip_backs_iod2 is not None and rep.lip_backs_iod2 > lim.max_lip_backs:
+        over.append("backs")
+    if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
+        over.append("/m/")
+    return f" ({' + '.join(over)} warning)" if over else ""
+
+
+def check_and_draw(
+    heads: dict, images: Path, *, link: str = "img/heads", describe=None, three_quarter: bool = False
+) -> list[str]:
     """Resolve, check and draw every head (name -> (spec, resolve options)); the pictures go to ``images``
     (linked in the table as ``link``/...), the checks come back as the rows of a Markdown table.
     ``describe(head, report or None) -> (header, cell)``: an extra column after the head's name
-    (``describe(None, None)`` gives the header; None: no extra column)."""
+    (``describe(None, None)`` gives the header; None: no extra column). ``three_quarter``: the mouth close-ups
+    also from the renderer's three-quarter view (``SLUG_mouth_34.jpg``: a lip face that shows its back, drawn
+    dark, shows there first; docs/animation.md, "Three-quarter view")."""
     from PIL import Image, ImageDraw
     from tqdm import tqdm
 
@@ -222,9 +228,10 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
     rows = [
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
-            "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | checks |"
+            "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | lip backs seen (1e-3 IOD^2) | "
+            "checks |"
         ),
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     if describe is not None:
         rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
@@ -232,7 +239,7 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | {exc} |")
+            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | - | {exc} |")
             continue
         rep = None
         try:
@@ -243,10 +250,11 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
                 f"{rep.closure_gap_iod:.4f} | "
                 f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
                 f"{'n/a' if rep.lip_edge_notch_iod is None else f'{rep.lip_edge_notch_iod:.4f}'} | "
+                f"{'n/a' if rep.lip_backs_iod2 is None else f'{1000 * rep.lip_backs_iod2:.2f}'} | "
                 f"{'pass' if rep.passed else 'FAIL'}{_warned(rep)}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
-            figs = f"- | - | - | - | - | - | not checked ({exc})"
+            figs = f"- | - | - | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
         tiles = []
         with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:
@@ -270,6 +278,16 @@ def check_and_draw(heads: dict, images: Path, *, link: str = "img/heads", descri
             # JPEG (quality 92): a textured close-up is 0.3-0.45 MB as PNG, ~0.1 MB so, defects as visible.
             Image.fromarray(np.hstack(close)).save(images / f"{slug}_mouth.jpg", quality=92)
             pics = f"![]({link}/{slug}.png) ![]({link}/{slug}_mouth.jpg)"
+            if three_quarter:
+                side = []
+                turned = RenderConfig(width=400, height=300, view="three_quarter")
+                with mouth_renderer(head, find_landmarks, turned) as r:
+                    for label, p in POSES.items():
+                        img = Image.fromarray(r.render(head.rig.deformed(np.array(p))))
+                        ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
+                        side.append(np.asarray(img))
+                Image.fromarray(np.hstack(side)).save(images / f"{slug}_mouth_34.jpg", quality=92)
+                pics += f" ![]({link}/{slug}_mouth_34.jpg)"
         else:
             pics = f"![]({link}/{slug}.png)"
         extra = f" {describe(head, rep)[1]} |" if describe else ""
@@ -285,11 +303,12 @@ def main() -> int:
         "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
     )
     ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
+    ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")
     args = ap.parse_args()
     heads = derive(args.out, args.data)
     if args.only:
         heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
-    print("\n".join(check_and_draw(heads, args.images)))
+    print("\n".join(check_and_draw(heads, args.images, three_quarter=args.three_quarter)))
     return 0
 
 

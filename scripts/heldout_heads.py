@@ -378,6 +378,7 @@ def main() -> int:
     ap.add_argument("--link", default="img/heldout", help="picture directory as the table links it")
     ap.add_argument("--with-lowpoly", action="store_true", help="also the low-poly rows of the head test set")
     ap.add_argument("--derive-only", action="store_true", help="write the files and list them, check nothing")
+    ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")
     args = ap.parse_args()
     heads = derive(args.out, args.data)
     if args.with_lowpoly:
@@ -404,7 +405,9 @@ def main() -> int:
             f"attempt {tries}"
         )
 
-    rows = check_and_draw(heads, args.images or args.out / "img", link=args.link, describe=describe)
+    rows = check_and_draw(
+        heads, args.images or args.out / "img", link=args.link, describe=describe, three_quarter=args.three_quarter
+    )
     print("\n".join(rows))
     return 0
 

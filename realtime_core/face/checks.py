@@ -24,14 +24,18 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   figures above do not see (they measure faces and vertex pairs, not the outline a render shows); and
   at how many places they leave it by more than the limit (:func:`lip_edge_shards`: one notch, or shards
   hanging in the opening all along it);
+- lip backs seen: how much of the lips' faces shows its back (IOD squared, as seen) from the front or a
+  three-quarter view (:func:`lip_backs_seen`): a renderer draws a back face dark, so a lip face turned past
+  edge-on, or a cut's crease wall seen from the side, is a dark shard that no figure above sees (a flip
+  needs a turn over 90 degrees from rest; the notch looks from the front only);
 - lip gap at /m/: the largest inner-lip gap (IOD) at :data:`BILABIAL_POSES` (pressed lips, mouth_open 0:
   the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
   instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
 
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
-notch and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
-:attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are reported as warnings and do not fail
-the rig.
+notch, the lip backs seen and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
+:attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are
+reported as warnings and do not fail the rig.
 """
 
 from __future__ import annotations
@@ -157,6 +161,10 @@ LIP_EDGE_NOTCH_LIMIT = 0.015
 it was chosen from)."""
 
 
+LIP_BACKS_LIMIT = 0.0005
+"""IOD squared: the advisory limit of :func:`lip_backs_seen`, a patch about 8 pixels across in the test set's
+400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the test-set rows whose close-ups look
+clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
 MIN_OPEN_RESPONSE = 0.5
 """The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
 what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
@@ -174,6 +182,8 @@ class RigCheckLimits:
     max_teeth_ahead: float = 0.0
     max_lip_edge_notch: float = LIP_EDGE_NOTCH_LIMIT
     """IOD, advisory: a larger :func:`lip_edge_notch` is a warning in the report, not a failure."""
+    max_lip_backs: float = LIP_BACKS_LIMIT
+    """IOD squared, advisory: a larger :func:`lip_backs_seen` is a warning in the report, not a failure."""
     min_open_response: float = MIN_OPEN_RESPONSE
     max_bilabial_gap: float = 0.01
     """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
@@ -186,6 +196,8 @@ class RigCheckLimits:
             raise ConfigError("min_open_response must be in [0, 1)")
         if not self.max_lip_edge_notch > 0:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
+        if not self.max_lip_backs > 0:
+            raise ConfigError("max_lip_backs must be > 0 (IOD squared)")
         if not self.max_bilabial_gap >= 0:
             raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
 
@@ -209,6 +221,11 @@ class RigReport:
     lip_edge_shards: int | None = None
     """At the pose where it is most, how many places of the lips' free edges leave their course by more than
     the notch limit (:func:`lip_edge_shards`; None: no free lip edge)."""
+    lip_backs_iod2: float | None = None
+    """IOD squared: the largest area of lip faces seen from behind, front or three-quarter view
+    (:func:`lip_backs_seen`; None: no lip faces found)."""
+    lip_backs_faces: int | None = None
+    """How many faces make :attr:`lip_backs_iod2`."""
     bilabial_gap_iod: float | None = None
     """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
 
@@ -219,12 +236,13 @@ class RigReport:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
+        backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
+            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -400,6 +418,133 @@ def lip_edge_shards(
     return worst, places
 
 
+LIP_BACKS_BAND = 0.15
+"""IOD: the faces of the lips, for :func:`lip_backs_seen`, have every vertex within this of the corner-to-corner line
+(along up, at rest), at most LIP_BACKS_BEYOND IOD past the mouth corners (sideways) and less than NOTCH_DEPTH IOD
+behind the corners."""
+LIP_BACKS_BEYOND = 0.05
+"""IOD: the lips' faces reach this far past the mouth corners (the corners' own faces, where shards show)."""
+LIP_BACKS_VIEWS = (0.0, 35.0, -35.0)
+"""Degrees about the face's up axis: the views :func:`lip_backs_seen` looks from (front, and the renderer's
+three-quarter view turned to either side)."""
+LIP_BACKS_FACING = 0.17
+"""A face shows its back to a view when its unit normal points away from the viewer by more than this (sin 10
+degrees): a face seen edge-on is a line, whichever side shows."""
+_BACKS_CELL = 0.02
+"""IOD: the grid cell that sorts the possible occluders for :func:`lip_backs_seen` (about a low-poly lip face)."""
+
+
+def _hidden(points: np.ndarray, tris: np.ndarray, skip: np.ndarray, cell: float, tol: float) -> np.ndarray:
+    """(k,) bool: is each of ``points`` (k, 3) (view coordinates: u, w across the view, depth towards the
+    viewer) covered by one of ``tris`` (m, 3, 3) (the same coordinates) more than ``tol`` nearer the viewer?
+    ``skip`` (k,): the index into ``tris`` of each point's own triangle (never its own occluder). The
+    triangles are binned by their bounding boxes on a grid of ``cell``, so only point-triangle pairs that
+    share a cell are tested."""
+    k = len(points)
+    hidden = np.zeros(k, dtype=bool)
+    if not k or not len(tris):
+        return hidden
+    lo_pt, hi_pt = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+    lo, hi = tris[:, :, :2].min(axis=1), tris[:, :, :2].max(axis=1)
+    use = np.flatnonzero((hi >= lo_pt).all(axis=1) & (lo <= hi_pt).all(axis=1))
+    if not len(use):
+        return hidden
+    g0 = np.floor((np.maximum(lo[use], lo_pt) - lo_pt) / cell).astype(np.int64)
+    g1 = np.floor((np.minimum(hi[use], hi_pt) - lo_pt) / cell).astype(np.int64)
+    ncol = int(np.floor((hi_pt[0] - lo_pt[0]) / cell)) + 1
+    span = g1 - g0 + 1
+    count = span[:, 0] * span[:, 1]
+    # Every (cell, triangle) pair: triangle i covers cells g0[i] + (a % span_x, a // span_x), a < count[i].
+    owner = np.repeat(np.arange(len(use)), count)
+    a = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    gx = g0[owner, 0] + a % span[owner, 0]
+    gy = g0[owner, 1] + a // span[owner, 0]
+    key = gy * ncol + gx
+    order = np.argsort(key, kind="stable")
+    key, owner = key[order], use[owner[order]]
+    pg = np.floor((points[:, :2] - lo_pt) / cell).astype(np.int64)
+    pk = pg[:, 1] * ncol + pg[:, 0]
+    start, stop = np.searchsorted(key, pk, side="left"), np.searchsorted(key, pk, side="right")
+    n = stop - start
+    who = np.repeat(np.arange(k), n)
+    tri = owner[np.repeat(start, n) + np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)]
+    keep = tri != skip[who]
+    who, tri = who[keep], tri[keep]
+    p0, p1, p2 = tris[tri, 0], tris[tri, 1], tris[tri, 2]
+    d1, d2, r = p1[:, :2] - p0[:, :2], p2[:, :2] - p0[:, :2], points[who, :2] - p0[:, :2]
+    den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = np.abs(den) > 1e-30
+    den = np.where(ok, den, 1.0)
+    s = (r[:, 0] * d2[:, 1] - r[:, 1] * d2[:, 0]) / den
+    t = (d1[:, 0] * r[:, 1] - d1[:, 1] * r[:, 0]) / den
+    depth = p0[:, 2] + s * (p1[:, 2] - p0[:, 2]) + t * (p2[:, 2] - p0[:, 2])
+    cover = ok & (s >= 0) & (t >= 0) & (s + t <= 1) & (depth > points[who, 2] + tol)
+    hidden[who[cover]] = True
+    return hidden
+
+
+def lip_backs_seen(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    skip_vertices: int = 0,
+) -> tuple[float, int] | None:
+    """(the largest area, IOD squared as seen, of the lips' faces that show their back to a viewer; how many
+    faces make it), over ``poses`` and the views LIP_BACKS_VIEWS (orthographic, about the face's up axis).
+    A renderer draws a back face dark: on a lip it is a dark shard or sliver (a face turned past edge-on, a
+    crease wall of a cut seen from the side, a fold) that the flip count (> 90 degrees from rest) and the
+    frontal notch do not see. The lips' faces: LIP_BACKS_BAND; a face counts where its centroid is seen, no
+    face of the rig (the last ``skip_vertices`` vertices, a mouth cavity, left out) lying in front of it.
+    None: the mouth has no such face."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    if skip_vertices:
+        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
+    fr = face_frame(v0, landmarks)
+    iod = fr.iod
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
+    x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
+    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
+    line_h = (cr + along[:, None] * (cl - cr) - mid) @ fr.axes[1]
+    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
+    band &= np.abs((v0 - mid) @ fr.axes[1] - line_h) < LIP_BACKS_BAND * iod
+    band &= (v0 - mid) @ fr.axes[2] > -NOTCH_DEPTH * iod
+    lips = np.flatnonzero(band[t].all(axis=1))
+    if not len(lips):
+        return None
+    # Occluders: what lies within reach of the mouth (a ray from a lip towards a viewer leaves the head there).
+    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
+    at = np.full(len(t), -1, dtype=np.int64)
+    at[near] = np.arange(len(near))
+    ax, up, fwd = fr.axes
+    frames = []
+    for deg in LIP_BACKS_VIEWS:
+        d = np.cos(np.radians(deg)) * fwd + np.sin(np.radians(deg)) * ax
+        side = np.cross(up, d)
+        frames.append((d, np.stack([side, up, d], axis=1)))  # (3, 3): head units -> (u, w, depth)
+    worst, faces = 0.0, 0
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        tri = v[t[lips]]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        twice = np.linalg.norm(nrm, axis=1)
+        unit = nrm / np.maximum(twice, 1e-300)[:, None]
+        occ = v[t[near]]
+        for d, to_view in frames:
+            facing = unit @ d
+            away = np.flatnonzero(facing < -LIP_BACKS_FACING)
+            if not len(away):
+                continue
+            centroids = tri[away].mean(axis=1) @ to_view
+            seen = ~_hidden(centroids, occ @ to_view, at[lips[away]], _BACKS_CELL * iod, 1e-4 * iod)
+            area = float(np.sum(0.5 * twice[away][seen] * -facing[away][seen])) / iod**2
+            if area > worst:
+                worst, faces = area, int(seen.sum())
+    return worst, faces
+
+
 def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
 
@@ -512,6 +657,13 @@ def check_rig(
             f"a lip edge leaves its course by {notch:.4f} IOD > {limits.max_lip_edge_notch} (jagged) "
             f"at {shards} place{'s' if shards != 1 else ''}"
         )
+    seen = lip_backs_seen(rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices)
+    backs, back_faces = (None, None) if seen is None else seen
+    if backs is not None and backs > limits.max_lip_backs:
+        warns.append(
+            f"lip faces show their back (a dark shard) over {1000 * backs:.2f}e-3 IOD^2 > "
+            f"{1000 * limits.max_lip_backs:.2f}e-3 ({back_faces} face{'s' if back_faces != 1 else ''})"
+        )
     if at_m > limits.max_bilabial_gap:
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     return RigReport(
@@ -527,5 +679,7 @@ def check_rig(
         lip_edge_shards=shards,
         warnings=tuple(warns),
         open_response=opening,
+        lip_backs_iod2=backs,
+        lip_backs_faces=back_faces,
         bilabial_gap_iod=at_m,
     )

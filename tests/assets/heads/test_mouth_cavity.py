@@ -189,3 +189,71 @@ def test_a_closed_seam_with_neighbouring_inner_lip_points_is_no_membrane():
     seam = weld[closed]
     a, b = idx["upper", 4], idx["upper", 5]  # neighbours on the seam
     assert not lip_membrane(v, seam, idx["upper", 0], idx["upper", 8], a, b).any()
+
+
+def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour():
+    """The built-in head's geometry without colours or texture (the stylised held-out head's kind): the walls of
+    its mouth bag behind the lips, which the lips hide from the front, go dark with their depth behind the lips'
+    contact, the cavity colour from INSIDE_RAMP IOD on; what the front view shows (a changed vertex has a
+    triangle of the head in front of it, found here by testing every triangle) and the landmarks (the corners,
+    tucked in behind the lips on this head, too) keep the skin colour."""
+    from dataclasses import replace
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.mesh import SKIN_COLOR
+    from assets.heads.rigging import CAVITY_COLOR, INSIDE_RAMP, with_dark_mouth_inside
+    from realtime_core.face.interpolation import barycentric_2d
+
+    b = load_builtin_head()
+    mesh = replace(b.mesh, colors=None, uvs=None, texture=None)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    out = with_dark_mouth_inside(mesh, v, fr, b.landmarks)
+    assert out.colors is not None and len(out.colors) == len(v)
+    changed = np.flatnonzero(np.abs(out.colors - np.asarray(SKIN_COLOR)).max(axis=1) > 1e-6)
+    assert len(changed) > 20
+    q = (v - fr.origin) @ fr.axes.T
+    lm = b.landmarks
+    middle = max(q[lm["upper_inner"], 2], q[lm["lower_inner"], 2])
+    cx = 0.5 * (q[lm["corner_left"], 0] + q[lm["corner_right"], 0])
+    half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
+    ends = min(0.5 * (q[lm["corner_left"], 2] + q[lm["corner_right"], 2]), middle)
+    contact = middle + (ends - middle) * np.clip(np.abs(q[:, 0] - cx) / half, 0, 1)
+    # Depth behind the contact (from the inner-lip points' to the corners' across the mouth) sets the shade: the
+    # cavity colour itself from INSIDE_RAMP IOD on; nothing in front of the contact changes.
+    assert (q[changed, 2] < contact[changed]).all()
+    deep = changed[contact[changed] - q[changed, 2] >= INSIDE_RAMP * fr.iod]
+    assert len(deep) and np.allclose(out.colors[deep], CAVITY_COLOR, atol=1e-6)
+    # Each changed vertex has some triangle of the head in front of it (brute force over all triangles).
+    t = np.asarray(mesh.triangles)
+    for i in changed[:: max(1, len(changed) // 40)]:
+        g = barycentric_2d(np.repeat(q[i : i + 1, :2], len(t), axis=0), q[t[:, 0], :2], q[t[:, 1], :2], q[t[:, 2], :2])
+        over = np.all(g >= -1e-9, axis=1) & np.all(np.isfinite(g), axis=1)
+        z = np.einsum("ij,ij->i", g[over], q[t[over], 2])
+        assert (z > q[i, 2] + 0.005 * fr.iod).any(), i
+    for name in ("upper_lip", "lower_lip", "corner_left", "corner_right", "chin", "nose_tip"):
+        assert b.landmarks[name] not in set(changed.tolist()), name
+
+
+def test_a_mouth_inside_painted_by_the_file_is_left_as_painted_and_one_material_colour_is_shaded():
+    """Vertex colours that vary over the inside (the file's author painted it) are kept; one colour over the whole
+    head (a material's) is no painting: shaded as an uncoloured head's skin is."""
+    from dataclasses import replace
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.mesh import SKIN_COLOR
+    from assets.heads.rigging import with_dark_mouth_inside
+
+    b = load_builtin_head()
+    v = np.asarray(b.mesh.vertices, dtype=np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    painted = np.random.default_rng(0).uniform(0.2, 0.9, size=(len(v), 3)).astype(np.float32)
+    mesh = replace(b.mesh, colors=painted, uvs=None, texture=None)
+    assert with_dark_mouth_inside(mesh, v, fr, b.landmarks) is mesh
+    grey = np.tile(np.float32([0.7, 0.7, 0.75]), (len(v), 1))
+    out = with_dark_mouth_inside(replace(b.mesh, colors=grey, uvs=None, texture=None), v, fr, b.landmarks)
+    bare = with_dark_mouth_inside(replace(b.mesh, colors=None, uvs=None, texture=None), v, fr, b.landmarks)
+    assert out.colors is not None and bare.colors is not None
+    shaded = np.abs(out.colors - grey).max(axis=1) > 1e-6
+    skin = np.asarray(SKIN_COLOR, dtype=np.float32)
+    assert shaded.sum() > 20 and np.array_equal(shaded, np.abs(bare.colors - skin).max(axis=1) > 1e-6)

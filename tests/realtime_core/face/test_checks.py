@@ -261,6 +261,70 @@ def test_lip_edge_shards_counts_each_fleck_and_tooth_over_the_limit() -> None:
     assert found[1] == len(scored) - 2
 
 
+class _Door(_Lips):
+    """:class:`_Lips` whose lower lip beyond x = 0.15 (towards the left corner) swings ``degrees`` towards the
+    viewer about a vertical axis at x = 0.15 with mouth_open 0.3, as a door on its hinge: its faces turn by
+    ``degrees`` (under 90: no flip) to face the right side (-x), so a three-quarter view from the left shows
+    their backs past the lip's free edge."""
+
+    HINGE = 0.15
+
+    def __init__(self, degrees: float) -> None:
+        super().__init__(0.0)
+        self.angle = np.radians(degrees)
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        a = self.angle * float(p[2]) / 0.3
+        door = self.lower[v[self.lower, 0] > self.HINGE]
+        r = v[door, 0] - self.HINGE
+        v[door, 0] = self.HINGE + r * np.cos(a)
+        v[door, 2] = r * np.sin(a)
+        return v
+
+
+def test_lip_backs_seen_flags_a_face_turned_past_edge_on_that_no_other_figure_sees() -> None:
+    """Part of a lip turned 76 degrees sideways (the corner slivers of Lee Perry-Smith's rows at /a/ turn
+    60-89 degrees) shows its back, drawn dark, to a three-quarter view: a dark shard. It is no flip (< 90
+    degrees) and its frontal outline stays convex (no notch); the lip backs seen measure it: the area as seen,
+    computed here from the turned faces' corners. The smooth opening shows no back; the same door with a
+    flap of lip hanging in front of it is hidden, and is not counted."""
+    from realtime_core.face.checks import LIP_BACKS_BAND, LIP_BACKS_LIMIT, LIP_EDGE_NOTCH_LIMIT, lip_backs_seen
+
+    pose = ((0.0, 0.0, 0.3, 0.0),)
+    smooth = _Lips(0.0)
+    assert lip_backs_seen(smooth, smooth.landmarks(), poses=pose) == (0.0, 0)
+    door = _Door(76.0)
+    lm = door.landmarks()
+    got = lip_backs_seen(door, lm, poses=pose)
+    assert got is not None
+    rep = check_rig(door, lm, poses=pose)
+    assert rep.flipped_triangles == 0 and (rep.lip_edge_notch_iod or 0.0) < LIP_EDGE_NOTCH_LIMIT
+    # Independent: the faces of the lower lip's top row (within LIP_BACKS_BAND of the lips' line at rest) that
+    # face away from a view 35 degrees to the left (+x): the door's, and the faces over its hinge that turn
+    # with it; by their area as projected on that view (the door is flat and nothing lies in front of it).
+    v = door.deformed(np.array(pose[0]))
+    d = np.array([np.sin(np.radians(35.0)), 0.0, np.cos(np.radians(35.0))])
+    on = np.zeros(len(v), dtype=bool)
+    on[door.lower[np.abs(door.neutral[door.lower, 1]) < LIP_BACKS_BAND]] = True
+    t = door.triangles[on[door.triangles].all(axis=1)]
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    facing = n @ d / np.linalg.norm(n, axis=1)
+    t, n, facing = t[facing < -0.17], n[facing < -0.17], facing[facing < -0.17]
+    assert len(t) and (v[t, 0] >= door.HINGE - 1e-9).all()
+    want = float(np.sum(0.5 * np.linalg.norm(n, axis=1) * -facing))
+    assert got[0] == pytest.approx(want, rel=1e-9) and got[1] == len(t)
+    assert got[0] > LIP_BACKS_LIMIT
+    assert rep.passed and any("show their back" in w for w in rep.warnings) and "lip backs seen" in rep.summary()
+    # A flap (facing the viewer) hanging in front of the door from the left hides it.
+    n0 = len(door.neutral)
+    flap = np.array([[0.1, -0.5, 0.3], [0.6, -0.5, 0.3], [0.35, 0.3, 0.3]])
+    door.neutral = np.vstack([door.neutral, flap])
+    door.triangles = np.vstack([door.triangles, [[n0, n0 + 1, n0 + 2]]])
+    hidden = lip_backs_seen(door, lm, poses=pose)
+    assert hidden is not None and hidden[0] < 0.5 * got[0]
+
+
 class _LoweredUpperLip(_Lips):
     """:class:`_Lips` whose lowered upper lip (upper_lip_raise < 0) moves both strips down by as much, and
     also drops the lower strip by ``opens`` times it: a map that answers a lowered upper lip with a jaw
