@@ -202,6 +202,8 @@ def _warned(rep) -> str:
         over.append("notch")
     if rep.lip_backs_iod2 is not None and rep.lip_backs_iod2 > lim.max_lip_backs:
         over.append("backs")
+    if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
+        over.append("/m/")
     return f" ({' + '.join(over)} warning)" if over else ""
 
 

@@ -4,7 +4,9 @@ ARKit-52. The built-in head's own ARKit morph targets are keyframes ``K`` (colum
 displacement of the rig's moving vertices, head units); for each signed unit of each mouth parameter
 (+-0.05 IOD) the rig's displacement ``d`` is the shape to reproduce, and ``b = argmin |K b - d|^2 +
 lambda |b|^2, b >= 0`` (:class:`realtime_core.motion_units.KeyframeSet`, non-negative) gives that
-direction's weights. Weights are then linear in the positive and negative parts of each parameter:
+direction's weights (for a lowered upper lip and rounded lips also reproducing the rig's lip gaps and
+mouth corners, :data:`LIP_GAP_DIRECTIONS`: else a lowered upper lip opened the lips). Weights are then
+linear in the positive and negative parts of each parameter:
 ``w = clip(A+ max(p, 0) + A- max(-p, 0) + c, 0, 1)``. Side-shift targets (``jawLeft/Right,
 mouthLeft/Right``, and ``jawForward``) are left out: the four parameters are symmetric and say
 nothing of jaw protrusion.
@@ -28,6 +30,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.optimize import nnls
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.blendshapes import ARKIT_NAMES, OVR_NAMES
@@ -37,6 +40,18 @@ from realtime_core.motion_units import KeyframeSet
 UNIT_IOD = 0.05
 RIDGE = 1e-3
 OVR_RIDGE = 0.05
+LIP_GAP_DIRECTIONS = ((0, -1.0), (1, -1.0))
+"""(parameter index, sign) of the signed units whose fit also reproduces the rig's lip gaps and mouth corners:
+the lowered upper lip and the rounded lips, the two of the pressed bilabial pose (/m b p/). Fitted to the
+whole-region motion alone, the lowered upper lip took jawOpen 2.20 and mouthFunnel 2.52 per IOD and opened the
+inner lips by 1.38 IOD per IOD (a line of teeth at every /m/) where the rig closes them by 0.04; rounding opened
+them by 0.10. The corners-up direction (lip_corner_depress < 0) stays as it was: reproduced, the rig's gaps
+cross the lips by 0.006 IOD at the checks' corners-up poses (the rig's lip-contact push, which no linear map
+has, keeps its own lips apart there); the others are within 0.008 IOD per 0.05 IOD unit of the rig's."""
+LIP_GAP_WEIGHT = 1e3
+"""Weight of a gap or corner row relative to one displacement coordinate's (head units, squared). 1e2 left the
+lips 0.0127 IOD apart at upper_lip_raise -0.084, 1e3 0.0024, 1e4 0.0032; the lip_corner_depress correlation
+of test_fitted_maps (0.888 unweighted) 0.83 with the corner rows at 1e3 and 1e4, 0.78 without them."""
 SIDE_SHIFTS = ("jawLeft", "jawRight", "jawForward", "mouthLeft", "mouthRight")
 OVR_CLASSES = {
     "PP": "bilabial",
@@ -57,19 +72,34 @@ OVR_CLASSES = {
 """OVR viseme -> the articulatory class whose target is its keyframe."""
 
 
-def _signed_fit(keys: KeyframeSet, shape_of) -> tuple[np.ndarray, np.ndarray]:
-    """``(P, 4)`` weights per IOD of each parameter's positive part and of its negative part."""
-    pos, neg = np.zeros((len(keys.names), 4)), np.zeros((len(keys.names), 4))
+def _signed_fit(keys: KeyframeSet, shape_of, gaps: np.ndarray, gap_of) -> tuple[np.ndarray, np.ndarray]:
+    """``(P, 4)`` weights per IOD of each parameter's positive part and of its negative part.
+
+    gaps: ``(m, P)`` each keyframe's change of the reference lip pairs' vertical gaps and of the mouth
+    corners' height (head units); gap_of: a rig displacement ``(D,)`` -> its change of those ``(m,)``. For
+    :data:`LIP_GAP_DIRECTIONS` they enter as extra least-squares rows weighted :data:`LIP_GAP_WEIGHT`: the fit
+    reproduces the rig's lips first and its whole-region motion second."""
+    p = len(keys.names)
+    w = np.sqrt(LIP_GAP_WEIGHT)
+    # The ridge as KeyframeSet's non-negative fit sets it (relative to the mean squared column norm).
+    lam = keys.ridge * float((keys.shapes**2).sum(axis=0).mean())
+    a = np.vstack([keys.shapes, np.sqrt(lam) * np.eye(p), w * gaps])
+    pos, neg = np.zeros((p, 4)), np.zeros((p, 4))
     for i in range(4):
         for sign, out in ((1.0, pos), (-1.0, neg)):
             e = np.zeros(4)
             e[i] = sign * UNIT_IOD
-            out[:, i] = keys.weights(shape_of(e), nonnegative=True) / UNIT_IOD
+            d = shape_of(e)
+            if (i, sign) in LIP_GAP_DIRECTIONS:
+                out[:, i] = nnls(a, np.concatenate([d, np.zeros(p), w * gap_of(d)]))[0] / UNIT_IOD
+            else:
+                out[:, i] = keys.weights(d, nonnegative=True) / UNIT_IOD
     return pos, neg
 
 
 def fit_maps(head, rig) -> dict:
     """head: :class:`assets.heads.builtin.BuiltinHead`; rig: its :class:`realtime_core.face.rig.Rig`."""
+    from assets.heads.targets import reference_lips
     from realtime_core.face import MouthLandmarks
     from realtime_core.face.model import measure_mouth
     from training.articulatory import CLASSES
@@ -87,7 +117,20 @@ def fit_maps(head, rig) -> dict:
     keys = KeyframeSet(
         names=mouth, shapes=np.column_stack([head.targets[n][mv].reshape(-1) for n in mouth]), ridge=RIDGE
     )
-    pos_m, neg_m = _signed_fit(keys, shape_of)
+    lips = reference_lips(head.mesh.vertices, head.mesh.triangles, head.targets["jawOpen"], head.landmarks)
+    up, lo = lips.pairs[:, 0], lips.pairs[:, 1]
+    axis = lips.axis / float(np.linalg.norm(lips.axis))  # the face's up axis: gaps in head units
+    corners = np.array([head.landmarks["corner_left"], head.landmarks["corner_right"]])
+    gaps = np.array(
+        [np.r_[(head.targets[n][up] - head.targets[n][lo]) @ axis, head.targets[n][corners] @ axis] for n in mouth]
+    ).T
+
+    def gap_of(d: np.ndarray) -> np.ndarray:
+        dv = np.zeros_like(head.mesh.vertices)
+        dv[mv] = d.reshape(-1, 3)
+        return np.r_[(dv[up] - dv[lo]) @ axis, dv[corners] @ axis]
+
+    pos_m, neg_m = _signed_fit(keys, shape_of, gaps, gap_of)
     a_pos, a_neg = np.zeros((len(ARKIT_NAMES), 4)), np.zeros((len(ARKIT_NAMES), 4))
     for j, n in enumerate(mouth):
         a_pos[ARKIT_NAMES.index(n)], a_neg[ARKIT_NAMES.index(n)] = pos_m[j], neg_m[j]
@@ -135,7 +178,8 @@ ARKit-52 weights: ``w = clip(ARKIT_POS @ max(p, 0) + ARKIT_NEG @ max(-p, 0), 0, 
 ``p = {VISUAL_PARAMS}`` (IOD);
 rows follow :data:`realtime_core.blendshapes.ARKIT_NAMES`, columns the four parameters (weight per
 IOD). Fitted by non-negative least squares (paper 002 eq. 4, ridge {RIDGE:g}) of the built-in head's own
-ARKit targets to the head rig's motion for each signed parameter unit (+-{UNIT_IOD} IOD). OVR_KEYFRAMES
+ARKit targets to the head rig's motion for each signed parameter unit (+-{UNIT_IOD} IOD); a lowered upper lip
+and rounded lips also reproduce its lip gaps and mouth corners (weight {LIP_GAP_WEIGHT:g}). OVR_KEYFRAMES
 ``(4, 14)``: the 14 non-silence OVR visemes in the four parameters, solved per frame (ridge OVR_RIDGE).
 See :mod:`training.fit_maps`. EXPRESSION_PARAMS ``(len(EXPRESSIONS), 4)``: each expression recipe's
 change of the four mouth parameters (IOD), measured on the built-in head.

@@ -16,9 +16,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="re-fit the blendshape maps and expression table from the built-in head's ARKit targets",
         formatter_class=HelpFormatter,
         description="Non-negative least squares (paper 002 eq. 4) of the built-in head's own ARKit morph targets "
-        "to its rig's motion for each signed unit of each mouth parameter; the OVR visemes' keyframes from their "
-        "articulatory targets; each expression recipe's effect on the four mouth parameters, measured on the head. "
-        "Writes the generated Python module the sans-I/O core reads (realtime_core/fitted_maps.py).",
+        "to its rig's motion for each signed unit of each mouth parameter (a lowered upper lip and rounded lips also "
+        "keeping the rig's lip gaps and mouth corners, so the lips stay closed at /m/); the OVR visemes' keyframes "
+        "from their articulatory targets; each expression recipe's effect on the four mouth parameters, measured on "
+        "the head. Writes the generated Python module the sans-I/O core reads (realtime_core/fitted_maps.py).",
     )
     p.add_argument("-o", "--output", type=Path, default=DEFAULT_OUT, help="the generated module")
     p.set_defaults(run=run)

@@ -27,11 +27,15 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
 - lip backs seen: how much of the lips' faces shows its back (IOD squared, as seen) from the front or a
   three-quarter view (:func:`lip_backs_seen`): a renderer draws a back face dark, so a lip face turned past
   edge-on, or a cut's crease wall seen from the side, is a dark shard that no figure above sees (a flip
-  needs a turn over 90 degrees from rest; the notch looks from the front only).
+  needs a turn over 90 degrees from rest; the notch looks from the front only);
+- lip gap at /m/: the largest inner-lip gap (IOD) at :data:`BILABIAL_POSES` (pressed lips, mouth_open 0:
+  the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
+  instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
 
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
-notch and the lip backs seen are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
-:attr:`RigCheckLimits.max_lip_backs`): over their limits they are reported as warnings and do not fail the rig.
+notch, the lip backs seen and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
+:attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are
+reported as warnings and do not fail the rig.
 """
 
 from __future__ import annotations
@@ -147,6 +151,11 @@ EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SI
 """The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 
+BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in SPEECH_POSES if p[2] == 0.0)
+"""The pressed bilabial rows of SPEECH_POSES (/m b p/: mouth_open 0, the upper lip lowered): where
+:func:`bilabial_gap` measures that the lips close."""
+
+
 LIP_EDGE_NOTCH_LIMIT = 0.015
 """IOD: the advisory limit of :func:`lip_edge_notch` (see docs/animation.md, "Lip edge notch", for the rows
 it was chosen from)."""
@@ -176,6 +185,9 @@ class RigCheckLimits:
     max_lip_backs: float = LIP_BACKS_LIMIT
     """IOD squared, advisory: a larger :func:`lip_backs_seen` is a warning in the report, not a failure."""
     min_open_response: float = MIN_OPEN_RESPONSE
+    max_bilabial_gap: float = 0.01
+    """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
+    the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
@@ -186,6 +198,8 @@ class RigCheckLimits:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
         if not self.max_lip_backs > 0:
             raise ConfigError("max_lip_backs must be > 0 (IOD squared)")
+        if not self.max_bilabial_gap >= 0:
+            raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
 
 
 @dataclass(frozen=True)
@@ -212,6 +226,8 @@ class RigReport:
     (:func:`lip_backs_seen`; None: no lip faces found)."""
     lip_backs_faces: int | None = None
     """How many faces make :attr:`lip_backs_iod2`."""
+    bilabial_gap_iod: float | None = None
+    """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -221,11 +237,12 @@ class RigReport:
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
+        at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}: "
+            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -543,6 +560,20 @@ def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: Mo
     return (v[use[:, 0]] - v[use[:, 1]]) @ fr.axes[1] / fr.iod
 
 
+def bilabial_gap(
+    rig: Any, landmarks: MouthLandmarks, *, poses: tuple[tuple[float, ...], ...] = BILABIAL_POSES
+) -> float:
+    """IOD: the largest vertical gap between the inner-lip landmarks (upper minus lower along the face's up
+    axis; negative: pressed past each other) of ``rig`` deformed at ``poses`` (pressed-lip poses)."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    fr = face_frame(v0, landmarks)
+    gaps = []
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        gaps.append(float((v[landmarks.upper_inner] - v[landmarks.lower_inner]) @ fr.axes[1]) / fr.iod)
+    return max(gaps)
+
+
 def check_rig(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -615,6 +646,7 @@ def check_rig(
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
     if opening is not None and opening < limits.min_open_response:
         fails.append(f"the lips part by {opening:.2f} of the mouth opening asked (< {limits.min_open_response})")
+    at_m = bilabial_gap(rig, landmarks)
     found = lip_edge_shards(
         rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
     )
@@ -632,6 +664,8 @@ def check_rig(
             f"lip faces show their back (a dark shard) over {1000 * backs:.2f}e-3 IOD^2 > "
             f"{1000 * limits.max_lip_backs:.2f}e-3 ({back_faces} face{'s' if back_faces != 1 else ''})"
         )
+    if at_m > limits.max_bilabial_gap:
+        warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -647,4 +681,5 @@ def check_rig(
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,
+        bilabial_gap_iod=at_m,
     )

@@ -90,3 +90,32 @@ def test_expressions_carry_into_arkit() -> None:
     e[EXPRESSIONS.index("surprise")] = 0.5
     w = dict(zip(ARKIT_NAMES, blendshape_weights(np.zeros(4), "arkit52", expression=e)))
     assert w["browOuterUpLeft"] == pytest.approx(0.35)
+
+
+def test_a_lowered_upper_lip_keeps_the_built_in_heads_lips_closed(head_and_rig) -> None:
+    """Streamed weights on the head's own targets, at every checked pose with the mouth closed (mouth_open 0)
+    and the upper lip lowered (/m b p/ and what speech reaches beside them): the inner lips never cross, and
+    stay within the closure limit (0.01 IOD) unless the lips are also spread or the corners raised (directions
+    fitted as before, up to 0.012). Fitted to the rig's whole-region motion alone, the lowered upper lip came
+    with jawOpen and mouthFunnel: 0.028 IOD apart at the pressed bilabial pose, 0.123 at -0.084, 0.128 at most."""
+    from realtime_core.face import MouthLandmarks, face_frame
+    from realtime_core.face.checks import BILABIAL_POSES, EXTREME_POSES
+
+    head, _ = head_and_rig
+    lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
+    v0 = head.mesh.vertices
+    fr = face_frame(v0, lm)
+    targets = np.stack([head.targets[n] for n in ARKIT_NAMES])
+
+    def gaps(poses: np.ndarray) -> np.ndarray:
+        w = blendshape_weights(poses, "arkit52").astype(np.float64)
+        v = v0 + np.tensordot(w, targets, 1)  # (k, n, 3)
+        return (v[:, lm.upper_inner] - v[:, lm.lower_inner]) @ fr.axes[1] / fr.iod
+
+    closed = np.array([p for p in EXTREME_POSES if p[2] == 0.0 and p[0] < 0])
+    assert len(closed) >= 10
+    g = gaps(closed)
+    assert g.min() >= 0.0 and g.max() < 0.015, dict(zip(map(tuple, closed), g))
+    neither = closed[(closed[:, 1] <= 0) & (closed[:, 3] >= 0)]  # not spread, corners not raised
+    assert len(neither) >= 3 and gaps(neither).max() < 0.01
+    assert gaps(np.array(BILABIAL_POSES)).max() < 0.01

@@ -323,3 +323,40 @@ def test_lip_backs_seen_flags_a_face_turned_past_edge_on_that_no_other_figure_se
     door.triangles = np.vstack([door.triangles, [[n0, n0 + 1, n0 + 2]]])
     hidden = lip_backs_seen(door, lm, poses=pose)
     assert hidden is not None and hidden[0] < 0.5 * got[0]
+
+
+class _LoweredUpperLip(_Lips):
+    """:class:`_Lips` whose lowered upper lip (upper_lip_raise < 0) moves both strips down by as much, and
+    also drops the lower strip by ``opens`` times it: a map that answers a lowered upper lip with a jaw
+    opening (the streamed ARKit map before branch i12lipm: the lips parted at every /m/)."""
+
+    def __init__(self, opens: float) -> None:
+        super().__init__(0.0)
+        self.opens = opens
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        down = max(-float(p[0]), 0.0)
+        v[:, 1] -= down
+        v[self.lower, 1] -= self.opens * down * self.drop
+        return v
+
+
+def test_the_lip_gap_at_m_flags_a_rig_that_opens_its_lips_for_a_lowered_upper_lip() -> None:
+    """The closure figure (mouth_open = -rest gap) does not see it: the lips open only at the pressed
+    bilabial pose, whose gap the check reports (a warning over 0.01 IOD; the rig still passes)."""
+    from realtime_core.face.checks import BILABIAL_POSES, bilabial_gap
+
+    assert BILABIAL_POSES and all(p[2] == 0.0 and p[0] < 0 for p in BILABIAL_POSES)
+    lowered = max(-p[0] for p in BILABIAL_POSES)  # the furthest-lowered upper lip: 0.014 IOD
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0))
+    opening, closing = _LoweredUpperLip(2.0), _LoweredUpperLip(0.0)
+    # The inner-lip landmarks sit at the midline (drop 1): the gap is 2 x the lowering.
+    assert bilabial_gap(opening, opening.landmarks()) == pytest.approx(2.0 * lowered)
+    rep = check_rig(opening, opening.landmarks(), poses=poses)
+    assert rep.closure_gap_iod == pytest.approx(0.0, abs=1e-12) and rep.lip_interpenetration_iod == 0
+    assert rep.bilabial_gap_iod == pytest.approx(2.0 * lowered) and rep.bilabial_gap_iod > 0.01
+    assert rep.passed and any("/m/" in w for w in rep.warnings)
+    assert f"lip gap at /m/ {2.0 * lowered:.4f} IOD" in rep.summary()
+    rep = check_rig(closing, closing.landmarks(), poses=poses)
+    assert rep.bilabial_gap_iod == pytest.approx(0.0, abs=1e-12) and rep.warnings == () and rep.passed
