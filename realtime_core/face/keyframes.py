@@ -27,6 +27,11 @@ gap grows with its own multiplier, so a few 1-D searches per violated column fin
 Frames whose unconstrained fit keeps the lips apart (all but closed-lip frames on such heads, every
 frame of a head whose targets are the reference's own) cost one comparison more.
 
+Closed lips held closed (branch i12ovr): the same fit may also *open* lips the motion keeps closed (an
+OVR head at /m/ took viseme_U and viseme_E and parted them 0.03 IOD). Each column also has a ceiling,
+``gap <= max(0, s) + LIP_OPEN_TOL + LIP_OPEN_RAMP max(0, s - LIP_CLOSED_GAP)`` with s = rest + S x, in
+the same dual with the column's multiplier negative (closing); the floor wins where both cannot hold.
+
 :class:`MorphRig` applies b to the head's own targets; it has the interface the renderer, the
 exporters and the server's sessions use for a :class:`realtime_core.face.Rig` (``neutral``,
 ``triangles``, ``moving``, ``displacements(params)``, ``deformed(params)``, ``meta``).
