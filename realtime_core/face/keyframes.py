@@ -27,6 +27,11 @@ gap grows with its own multiplier, so a few 1-D searches per violated column fin
 Frames whose unconstrained fit keeps the lips apart (all but closed-lip frames on such heads, every
 frame of a head whose targets are the reference's own) cost one comparison more.
 
+Closed lips held closed (branch i12ovr): the same fit may also *open* lips the motion keeps closed (an
+OVR head at /m/ took viseme_U and viseme_E and parted them 0.03 IOD). Each column also has a ceiling,
+``gap <= max(0, s) + LIP_OPEN_TOL + LIP_OPEN_RAMP max(0, s - LIP_CLOSED_GAP)`` with s = rest + S x, in
+the same dual with the column's multiplier negative (closing); the floor wins where both cannot hold.
+
 :class:`MorphRig` applies b to the head's own targets; it has the interface the renderer, the
 exporters and the server's sessions use for a :class:`realtime_core.face.Rig` (``neutral``,
 ``triangles``, ``moving``, ``displacements(params)``, ``deformed(params)``, ``meta``).
@@ -45,6 +50,18 @@ from realtime_core.errors import ConfigError
 
 CONTACT_TOL = 1e-5
 """IOD: a lip gap below its floor by less than this is kept (the dual search stops within it)."""
+LIP_OPEN_TOL = 0.003
+"""IOD: how far past the source's own gap the fit may open a closed lip column. The rig checks' lip gap
+at /m/ is advisory above 0.01 and the built-in head's source gap there is 0.006; an OVR-visemes head
+rounds closed lips only with viseme_U, which opens them, and at 0.002 its rounding probe
+(``assets.heads.targets.ENOUGH_PROBES``, limit 0.9) reached residual 0.91 (0.003: 0.88)."""
+LIP_CLOSED_GAP = 0.02
+"""IOD: a lip column whose source gap is below this is closed or nearly (the built-in head's inner lips
+rest 0.007 apart, its other reference columns 0.027-0.113: the ceiling holds the lips' contact, not
+columns the lips' shape keeps apart, which the visemes cannot all close at once)."""
+LIP_OPEN_RAMP = 10.0
+"""Per IOD of source gap above LIP_CLOSED_GAP, how much the ceiling rises: it lets go within ~0.01 IOD
+(0.1 IOD of slack) and without a step from one frame to the next."""
 CONTACT_SWEEPS = 4
 """Dual coordinate-ascent steps per contact column (one or two columns bind on a closed-lip frame)."""
 CONTACT_SEARCH = 40
@@ -71,6 +88,8 @@ class KeyframeMap:
     _chol: tuple[np.ndarray, bool] = field(init=False, repr=False, compare=False)
     _cross_contact: np.ndarray = field(init=False, repr=False, compare=False)
     _contact_slope: np.ndarray = field(init=False, repr=False, compare=False)
+    _check: np.ndarray = field(init=False, repr=False, compare=False)
+    _check_limit: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gram, dtype=np.float64)
@@ -104,6 +123,16 @@ class KeyframeMap:
             # Each column's gap per unit of its own multiplier with no bound held (R H^-1 R^T diagonal).
             slope = np.maximum(np.einsum("mp,pm->m", rows, cho_solve(self._chol, rows.T)), 1e-12)
             object.__setattr__(self, "_contact_slope", slope)
+            # [b; x] -> three rows per column against _check_limit: the floor (-R b <= rest + CONTACT_TOL:
+            # the gap at or above 0) and the ceiling's two linear lower bounds (R b - S x <= LIP_OPEN_TOL;
+            # R b - (1 + ramp) S x <= LIP_OPEN_TOL + ramp (rest - LIP_CLOSED_GAP)); gaps: rest + R b, rest + S x.
+            ramp = LIP_OPEN_RAMP
+            check = np.block([[-rows, np.zeros_like(src)], [rows, -src], [rows, -(1.0 + ramp) * src]])
+            limit = np.concatenate(
+                [rest + CONTACT_TOL, np.full(len(rest), LIP_OPEN_TOL), LIP_OPEN_TOL + ramp * (rest - LIP_CLOSED_GAP)]
+            )
+            object.__setattr__(self, "_check", np.ascontiguousarray(check))
+            object.__setattr__(self, "_check_limit", limit)
         object.__setattr__(self, "_cross_contact", cc)
 
     @property
@@ -172,18 +201,18 @@ class KeyframeMap:
             if x.ndim == 1:  # one frame (a live vertex viewer's): the kernel's own result, no batch wrapper
                 xc = np.ascontiguousarray(x)
                 b = keyframe_weights(xc, self.cross, chol, g, self.lo, self.hi, iterations, tol)
-                return b if self._apart_already(b) else self._apart(xc, b, kernel, iterations, tol)
+                return b if self._apart_already(xc, b, kernel) else self._apart(xc, b, kernel, iterations, tol)
             rows = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
             out = np.empty((len(rows), self.n_keyframes))
             for i, row in enumerate(rows):
                 b = keyframe_weights(row, self.cross, chol, g, self.lo, self.hi, iterations, tol)
-                out[i] = b if self._apart_already(b) else self._apart(row, b, kernel, iterations, tol)
+                out[i] = b if self._apart_already(row, b, kernel) else self._apart(row, b, kernel, iterations, tol)
             return out.reshape((*x.shape[:-1], self.n_keyframes))
         rows = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
         out = np.empty((len(rows), self.n_keyframes))
         for i, row in enumerate(rows):
             b = self._solve(row, None, "numpy", iterations, tol)
-            out[i] = b if self._apart_already(b) else self._apart(row, b, "numpy", iterations, tol)
+            out[i] = b if self._apart_already(row, b) else self._apart(row, b, "numpy", iterations, tol)
         return out.reshape((*x.shape[:-1], self.n_keyframes))
 
     def _solve(self, x: np.ndarray, lam: np.ndarray | None, kernel: str, iterations: int, tol: float) -> np.ndarray:
@@ -198,56 +227,120 @@ class KeyframeMap:
             f = f + self._cross_contact[:, len(x) :] @ lam
         return _box_qp(self.gram, f, self.lo, self.hi, cho_solve(self._chol, f), iterations, tol)
 
-    def _apart_already(self, b: np.ndarray) -> bool:
-        """No lip contact, or every column's gap at or above 0 (above any floor): the common frame, one
-        small product."""
-        if self.contact_rows is None or self.contact_rest is None:
+    def _apart_already(self, x: np.ndarray, b: np.ndarray, kernel: str = "numpy") -> bool:
+        """No lip contact, or every column's gap at or above 0 (so above any floor) and under one of two
+        linear lower bounds on its ceiling (:meth:`_bounds`: source gap + LIP_OPEN_TOL, and that plus
+        LIP_OPEN_RAMP (source gap - LIP_CLOSED_GAP)): the common frame, one small product
+        (:attr:`_check`). A frame this does not clear may still be within its bounds (:meth:`_dual`
+        then returns b unchanged, bit for bit)."""
+        if self.contact_rows is None:
             return True
-        return bool((self.contact_rest + self.contact_rows @ b).min() >= -CONTACT_TOL)
+        if kernel == "numba":
+            from realtime_core.face.compiled import lip_bounds_clear
+
+            return bool(lip_bounds_clear(self._check, self._check_limit, b, x))
+        r = (self._check @ np.concatenate((b, x)) - self._check_limit).reshape(3, -1)
+        return bool(np.maximum(r[0], np.minimum(r[1], r[2])).max() <= 0.0)
+
+    def _bounds(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The lip columns' floor and ceiling (m,) (IOD) for one frame x (k,): never crossed more than
+        the source crosses them, never opened more than LIP_OPEN_TOL past the source's own gap plus
+        LIP_OPEN_RAMP times how far the source gap is above LIP_CLOSED_GAP (the ceiling binds on closed and
+        nearly closed lips and rises steeply but continuously away from them: no frame jumps as it lets go)."""
+        assert self.contact_rest is not None and self.contact_source is not None
+        src = self.contact_rest + self.contact_source @ x
+        # A source that crosses the lips (the closure check's mouth_open < 0) closes the ceiling no lower
+        # than touching: the fit is never pushed through.
+        ceil = np.maximum(0.0, src) + LIP_OPEN_TOL + LIP_OPEN_RAMP * np.maximum(0.0, src - LIP_CLOSED_GAP)
+        return np.minimum(0.0, src), ceil
 
     def _apart(self, x: np.ndarray, b: np.ndarray, kernel: str, iterations: int, tol: float) -> np.ndarray:
-        """The weights for one frame x (k,) (b: its unconstrained solution) with the lips kept apart
-        (module docstring): dual coordinate ascent on the most violated column, each step a bracketed
-        1-D search on its multiplier (its gap is nondecreasing and piecewise linear in it: secant steps,
-        bisection when a secant step leaves the bracket's same end twice), ending on the feasible side."""
+        """The weights for one frame x (k,) (b: its unconstrained solution) with each lip column between
+        its floor and ceiling (module docstring): dual coordinate ascent on the most violated bound, each
+        step a bracketed 1-D search on its column's multiplier (signed: positive opens, negative closes;
+        the gap is nondecreasing and piecewise linear in it: secant steps, bisection when a secant step
+        leaves the bracket's same end twice), ending on the feasible side."""
         assert self.contact_rest is not None and self.contact_rows is not None and self.contact_source is not None
+        floor, ceil = self._bounds(x)
+        out = self._dual(x, b, floor, ceil, kernel, iterations, tol)
+        if (self.contact_rest + self.contact_rows @ out - floor).min() < -CONTACT_TOL:
+            # Ceilings and floors the box cannot meet together (an OVR head's lowered upper lip: closing
+            # one column crossed another): the floor wins, as it did before there were ceilings.
+            out = self._dual(x, b, floor, np.full_like(ceil, np.inf), kernel, iterations, tol)
+        return out
+
+    def _dual(
+        self,
+        x: np.ndarray,
+        b: np.ndarray,
+        floor: np.ndarray,
+        ceil: np.ndarray,
+        kernel: str,
+        iterations: int,
+        tol: float,
+    ) -> np.ndarray:
+        """:meth:`_apart`'s dual coordinate ascent for given floor and ceiling (m,) (a ceiling the box
+        cannot meet is dropped)."""
+        assert self.contact_rest is not None and self.contact_rows is not None
         rest, rows = self.contact_rest, self.contact_rows
-        floor = np.minimum(0.0, rest + self.contact_source @ x)
+        ceil = ceil.copy()
         lam = np.zeros(len(rest))
         aim = 0.5 * CONTACT_TOL
         for _ in range(CONTACT_SWEEPS * len(rest)):
-            gap = rest + rows @ b - floor
-            j = int(np.argmin(gap))
-            if gap[j] >= -CONTACT_TOL:
+            gap = rest + rows @ b
+            under, over = gap - floor, ceil - gap  # each >= 0 where its bound holds
+            j_lo, j_hi = int(np.argmin(under)), int(np.argmin(over))
+            if min(under[j_lo], over[j_hi]) >= -CONTACT_TOL:
                 break
-            lo_l, g_lo = float(lam[j]), float(gap[j])
-            hi_l, g_hi, b_hi = -1.0, 0.0, b
+            # s = +1: raise column j to its floor (multiplier up); s = -1: lower it to its ceiling (down).
+            j, s, bound = (j_lo, 1.0, floor[j_lo]) if under[j_lo] <= over[j_hi] else (j_hi, -1.0, ceil[j_hi])
+            # u = s * lam[j]; slack(u) = s * (gap_j - bound) is nondecreasing in u, feasible at >= 0.
+            lo_u, g_lo = s * float(lam[j]), s * float(gap[j] - bound)
+            if lo_u < 0:
+                # The multiplier holds column j's other bound: coordinate ascent goes through 0 first (at 0
+                # this bound may already hold; the other, if violated there, is the next step's).
+                zero = lam.copy()
+                zero[j] = 0.0
+                b0 = self._solve(x, zero if zero.any() else None, kernel, iterations, tol)
+                g0 = s * float(rest[j] + rows[j] @ b0 - bound)
+                if g0 >= 0.0:
+                    lam, b = zero, b0
+                    continue
+                lo_u, g_lo = 0.0, g0
+            hi_u, g_hi, b_hi, bracketed = 0.0, 0.0, b, False
             step = (aim - g_lo) / self._contact_slope[j]  # the unbounded slope: a lower bound on the step
             last, same = "", 0  # the bracket end moved last, and how many times in a row
             for _ in range(CONTACT_SEARCH):
-                if hi_l < 0:
-                    t = lo_l + step
+                if not bracketed:
+                    t = lo_u + step
                 elif same >= 2:
-                    t = 0.5 * (lo_l + hi_l)
+                    t = 0.5 * (lo_u + hi_u)
                 else:
-                    t = lo_l + (hi_l - lo_l) * (aim - g_lo) / (g_hi - g_lo)
+                    t = lo_u + (hi_u - lo_u) * (aim - g_lo) / (g_hi - g_lo)
                 trial = lam.copy()
-                trial[j] = t
+                trial[j] = s * t
                 bt = self._solve(x, trial, kernel, iterations, tol)
-                gj = float(rest[j] + rows[j] @ bt - floor[j])
+                gj = s * float(rest[j] + rows[j] @ bt - bound)
                 side = "hi" if gj >= 0.0 else "lo"
                 same, last = (same + 1 if side == last else 1), side
                 if gj >= 0.0:
-                    hi_l, g_hi, b_hi = t, gj, bt
+                    hi_u, g_hi, b_hi, bracketed = t, gj, bt, True
                     if gj <= CONTACT_TOL:
                         break
                 else:
-                    lo_l, g_lo = t, gj
-                    if hi_l < 0:
+                    lo_u, g_lo = t, gj
+                    if not bracketed:
                         step *= 2.0
-            if hi_l < 0:
+            if not bracketed:
+                if s < 0:
+                    # The box cannot close this column that far: let it be (and let go of what it held).
+                    ceil[j] = np.inf
+                    if lam[j] < 0:
+                        lam[j] = 0.0
+                        b = self._solve(x, lam if lam.any() else None, kernel, iterations, tol)
+                    continue
                 break  # the weights' bounds cannot open this column further: the best the box allows
-            lam[j], b = hi_l, b_hi
+            lam[j], b = s * hi_u, b_hi
         return b
 
     def residual(self, keyframes: np.ndarray, source: np.ndarray, x: np.ndarray) -> float:

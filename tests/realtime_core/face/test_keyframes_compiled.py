@@ -85,14 +85,54 @@ def test_the_lip_contact_changes_no_frame_that_keeps_the_lips_apart_or_that_the_
     kf, a, rest, gap = _lip_problem()
     free = KeyframeMap.from_reference(kf, a)
     km = KeyframeMap.from_reference(kf, a, contact=(rest, gap))
-    apart = np.array([0.1, 0.5])  # the fit raises the lower lip 0.005: apart
-    assert (rest + gap @ (free.weights(apart) @ kf)).min() > 0
+    apart = np.array([0.1, 0.1])  # the fit keeps the lips 0.006-0.007 apart, no wider than the source's 0.009
+    fit = rest + gap @ (free.weights(apart) @ kf)
+    assert fit.min() > 0 and fit.max() < (rest + gap @ (apart @ a)).min()
     assert km.weights(apart).tobytes() == free.weights(apart).tobytes()
     # A source that itself crosses by 0.006 (rest 0.01, raised 0.016): the fit may cross as far, no further.
     x = np.array([2.0, 0.0])
     floor = min(0.0, float((rest + gap @ (x @ a)).min()))
     w = km.weights(x)
     assert floor < 0 and (rest + gap @ (w @ kf)).min() >= floor - 1e-5
+
+
+def test_the_lip_contact_holds_closed_lips_at_the_source_gap_and_leaves_open_frames_bit_identical():
+    # An OVR head at /m/: the reference motion keeps the lips closed (gap 0.005) while moving elsewhere, and
+    # the only keyframe with that motion also opens the lips by 0.05 (the least-squares fit took it).
+    from scipy.optimize import minimize
+
+    from realtime_core.face.keyframes import LIP_CLOSED_GAP, LIP_OPEN_TOL
+
+    a = np.array([[-0.005, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0], [0.0, -0.1, 0.0, 0.0]])  # press, other, open
+    kf = np.array([[0.05, 0.0, 1.0, 0.0], [0.0, 0.0, 0.3, 1.0], [-0.01, 0.0, 0.0, 0.5], [0.0, -0.1, 0.0, 0.0]])
+    rest, gap = np.array([0.01]), np.array([[1.0, -1.0, 0.0, 0.0]])  # upper y minus lower y
+    free = KeyframeMap.from_reference(kf, a)
+    km = KeyframeMap.from_reference(kf, a, contact=(rest, gap))
+    x = np.array([1.0, 0.2, 0.0])
+    src = float(rest[0] + gap[0] @ (x @ a))
+    assert src == pytest.approx(0.005) and src < LIP_CLOSED_GAP
+    assert rest[0] + gap[0] @ (free.weights(x) @ kf) > src + 0.03  # the unconstrained fit opens the lips
+    obj = lambda b: 0.5 * b @ km.gram @ b - b @ (km.cross @ x)
+    cons = [
+        {"type": "ineq", "fun": lambda b: rest + gap @ (b @ kf)},
+        {"type": "ineq", "fun": lambda b: src + LIP_OPEN_TOL - (rest + gap @ (b @ kf))},
+    ]
+    ref = minimize(obj, np.zeros(4), bounds=[(0, 1)] * 4, constraints=cons, method="SLSQP", tol=1e-14).x
+    ws = {kernel: km.weights(x, kernel=kernel) for kernel in ("numba", "numpy")}
+    np.testing.assert_allclose(ws["numba"], ws["numpy"], rtol=0, atol=1e-10)
+    for w in ws.values():
+        g = float(rest[0] + gap[0] @ (w @ kf))
+        assert src <= g <= src + LIP_OPEN_TOL + 1e-5  # held at the source's gap (plus the tolerance)
+        assert obj(w) <= obj(ref) + 1e-3 * abs(obj(ref))
+        np.testing.assert_allclose(w, ref, atol=2e-3)
+    # Open frames (the source parts the lips 0.1: the ceiling lets go) are the unconstrained solve, bit for
+    # bit, also where the fit opens them further than the source (0.05 past it here).
+    for x_open in (np.array([1.0, 0.2, 1.0]), np.array([0.0, 0.5, 0.6]), np.array([0.3, 0.0, 0.9])):
+        assert rest[0] + gap[0] @ (x_open @ a) > LIP_CLOSED_GAP + 0.03
+        for kernel in ("numba", "numpy"):
+            assert km.weights(x_open, kernel=kernel).tobytes() == free.weights(x_open, kernel=kernel).tobytes()
+    fit_open = rest[0] + gap[0] @ (free.weights(np.array([1.0, 0.2, 1.0])) @ kf)
+    assert fit_open > rest[0] + gap[0] @ (np.array([1.0, 0.2, 1.0]) @ a) + 0.03
 
 
 def test_the_compiled_morph_product_equals_numpy_and_gives_each_frame_the_same_bits_at_any_batch():
