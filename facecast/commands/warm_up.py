@@ -42,7 +42,9 @@ def run(args: argparse.Namespace) -> int:
     # The keyframe solve as a morph-target head (the built-in one) calls it, one frame and a batch;
     # a small random problem has the same argument types as any head's map.
     rng = np.random.default_rng(0)
-    keymap = KeyframeMap.from_reference(rng.normal(size=(6, 30)), rng.normal(size=(4, 30)))
+    # With lip contact, as every own-target head's map has it (its compiled bounds check per frame).
+    contact = (np.full(2, 0.01), rng.normal(size=(2, 30)))
+    keymap = KeyframeMap.from_reference(rng.normal(size=(6, 30)), rng.normal(size=(4, 30)), contact=contact)
     keymap.weights(rng.normal(size=4))
     keymap.weights(rng.normal(size=(3, 4)))
     # A server's vertex frames of a morph head (server.session.morph_delta_payloads): the one-pass
