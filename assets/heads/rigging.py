@@ -53,6 +53,7 @@ from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import vertex_adjacency
 from realtime_core.face.rig import (
     contact_spread,
+    decouple_opening,
     head_response,
     lip_columns,
     recalibrate,
@@ -1168,6 +1169,11 @@ def rig_head(
                 "lip_island_faces_joined": n_joined,
             }
             rig = replace(rig, triangles=t.astype(np.int32), meta=meta_i)
+        if head_calibration and str(rig.meta.get("head_calibration", "")).startswith("skipped"):
+            # The whole response was too ill-conditioned to invert, but its mouth_open row is not: without
+            # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
+            # lowered upper lip, 0.017 IOD at /m/ (docs/animation.md, "Lips apart at /m/").
+            rig = decouple_opening(rig, mouth_landmarks(snap))
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the

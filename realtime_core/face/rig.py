@@ -24,7 +24,7 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 
-RIG_ALGORITHM = 35
+RIG_ALGORITHM = 36
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -638,6 +638,25 @@ def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max
         return replace(rig, meta=meta)
     meta["head_calibration"] = "applied"
     return replace(rig, basis=rig.basis.astype(np.float64) @ np.linalg.inv(r), meta=meta)
+
+
+def decouple_opening(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05) -> Rig:
+    """The rig with the inner lips' gap answering ``mouth_open`` only: each other parameter's column loses
+    the multiple of the mouth_open column that cancels its own change of the inner-lip gap (the mouth_open
+    row of :func:`recalibrate`'s correction alone, for rigs whose whole response R is too ill-conditioned to
+    invert). mouth_open is that gap by definition (:func:`realtime_core.face.model.measure_mouth`); a field
+    that opens it for a lowered upper lip (the MediaPipe face: -1.0 IOD of gap per IOD of upper_lip_raise
+    after the fold repair) parts pressed lips at /m b p/. The response is measured on the linear map (call
+    it before the lip contact is set). Meta "opening_decoupled": the gap per unit of each parameter before."""
+    r = head_response(rig, landmarks, probe=probe)[2]
+    if not r[2] > 0:
+        return rig  # the landmarks do not see the opening: nothing to cancel against
+    basis = np.array(rig.basis, dtype=np.float64)
+    for k in (0, 1, 3):
+        basis[:, k] -= (r[k] / r[2]) * basis[:, 2]
+    meta = dict(rig.meta)
+    meta["opening_decoupled"] = r.round(4).tolist()
+    return replace(rig, basis=basis, meta=meta)
 
 
 def repair_rig(
