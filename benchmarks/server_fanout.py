@@ -39,7 +39,7 @@ def _drain(port: int, n: int) -> None:
     asyncio.run(main())
 
 
-async def _measure(n: int, rounds: int, size: int, queued: list[int] | None = None) -> float:
+async def measure(n: int, rounds: int, size: int, queued: list[int] | None = None) -> float:
     """CPU microseconds per viewer and message of ``deliver`` to n connected viewers; ``queued[0]`` (if given)
     is increased by the messages that took the slow path (a socket buffer full: queued, not written)."""
     queued = [0] if queued is None else queued
@@ -97,8 +97,8 @@ def main(argv: list[str] | None = None) -> dict:
     report: dict = {"cpu_us_per_viewer_message": {}}
     for n in (int(x) for x in args.viewers.split(",")):
         report["cpu_us_per_viewer_message"][f"{n} viewers"] = {
-            "params_48_B": round(asyncio.run(_measure(n, args.rounds, 48)), 2),
-            "deltas_16.7_KB": round(asyncio.run(_measure(n, args.rounds, 32 + 2 * 8319)), 2),
+            "params_48_B": round(asyncio.run(measure(n, args.rounds, 48)), 2),
+            "deltas_16.7_KB": round(asyncio.run(measure(n, args.rounds, 32 + 2 * 8319)), 2),
         }
     print(json.dumps(report, indent=1))
     return report

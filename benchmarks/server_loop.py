@@ -22,11 +22,12 @@ import argparse
 import asyncio
 import json
 import multiprocessing as mp
+import os
 import time
 
 import numpy as np
 
-from benchmarks.server_fanout import _measure as measure_fanout
+from benchmarks.server_fanout import measure as measure_fanout
 from server.eventloop import EVENT_LOOPS
 from server.eventloop import run as run_on_loop
 
@@ -132,8 +133,6 @@ def main(argv: list[str] | None = None) -> dict:
             r["queued_not_written"] = queued[0]  # slow-path messages (a full socket buffer), both loops together
             report["fanout_cpu_us_per_viewer_message"][f"{n} viewers, {label}"] = r
             print(json.dumps({"fanout": n, "message": label, **r}), flush=True)
-    import os
-
     report["machine"] = {"cpus": os.cpu_count(), "loadavg_1_5_15_after": [round(x, 2) for x in os.getloadavg()]}
     print(json.dumps(report, indent=1))
     return report

@@ -33,8 +33,9 @@ class ServerConfig:
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
     ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served);
     event_loop: the loop ``facecast serve`` and its connection workers run on, "uvloop" (the default on Linux:
-    less CPU per message and per viewer write, docs/service.md "uvloop") or "asyncio" (the standard loop;
-    the default elsewhere); a server run inside a caller's loop (``run_server``) uses that loop.
+    less CPU per received block, docs/service.md "uvloop") or "asyncio" (the standard loop; the default
+    elsewhere); the front of connection workers always runs on asyncio's (server.eventloop.process_loop), and
+    a server run inside a caller's loop (``run_server``) uses that loop.
 
     Hardening (docs/protocol.md section 7): ingest_burst_s: seconds of audio an ingest may run ahead
     of real time before it is paced (or closed with 4029 when ingest_overrun is "close"); batch
