@@ -31,6 +31,8 @@ import numpy as np
 
 from assets.pacing import paced_blocks
 from benchmarks.server_harness import FrameLog, ServerProcess, benchmark_model, record_viewer, speech_signal
+from server.eventloop import DEFAULT_EVENT_LOOP, EVENT_LOOPS
+from server.eventloop import run as run_on_loop
 
 DEFAULT_STEPS = (
     (5, 25, 5),
@@ -57,7 +59,8 @@ class CapacityConfig:
     per-session cost falls as the loop gets busier: fixed costs of each wake-up are shared by more
     messages, so a larger base is closer to the goal's load); workers / worker_mode: the server's worker
     processes (ServerConfig.workers, .worker_mode; ``server_cpu`` counts them, ``loop_cpu`` is the
-    listening process alone)."""
+    listening process alone); event_loop: the server's loop (ServerConfig.event_loop) and the client
+    processes' (they share the machine's cores with the server, so their loop's cost is the server's loss)."""
 
     steps: tuple[tuple[int, int, int], ...] = DEFAULT_STEPS
     seconds: float = 6.0
@@ -67,9 +70,14 @@ class CapacityConfig:
     cost_sessions: int = 10
     workers: int = 0
     worker_mode: str = "compute"
+    event_loop: str = DEFAULT_EVENT_LOOP
+
+    def __post_init__(self) -> None:
+        if self.event_loop not in EVENT_LOOPS:
+            raise ValueError(f"event_loop must be one of {EVENT_LOOPS}, got {self.event_loop!r}")
 
 
-def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, stop=None) -> None:
+def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, stop=None, loop="asyncio") -> None:
     """Child process: open n sessions, wait for the viewers (``go``), stream in real time, report
     ``{"sent": (n, n_blocks) wall-clock send time of each block (NaN: never sent), "ended": frames
     per session, "dropped": ingests the server closed}``. ``seconds``: the audio (speech-like, looped
@@ -114,12 +122,14 @@ def _ingest_proc(url: str, prefix: str, n: int, seconds: float, ready, go, out, 
             await c.__aexit__(None, None, None)
         return {"sent": sent, "ended": ended, "dropped": dropped}
 
-    out.put(("ingest", asyncio.run(main())))
+    out.put(("ingest", run_on_loop(main(), loop)))
 
 
-def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready, out) -> None:
+def _viewer_proc(
+    urls: list[str], prefix: str, n: int, n_params: int, n_deltas: int, ready, viewers_ready, out, loop="asyncio"
+) -> None:
     """Child process: attach the viewers once the sessions exist (round-robin over ``urls``, the
-    nodes of a cluster); report every frame's receipt."""
+    nodes of a cluster); report every frame's receipt. ``loop``: its event loop (server.eventloop)."""
 
     async def main():
         gc.freeze()  # a full collection of the startup heap would delay receipts (measured as server delay)
@@ -140,7 +150,7 @@ def _viewer_proc(urls: list[str], prefix: str, n: int, n_params: int, n_deltas: 
             for j, ((kind, s), log) in enumerate(zip(plan, logs))
         ]
 
-    out.put(("viewers", asyncio.run(main())))
+    out.put(("viewers", run_on_loop(main(), loop)))
 
 
 class ClientProcesses:
@@ -149,7 +159,7 @@ class ClientProcesses:
     ``n`` real-time sessions named ``prefix0..``, one viewer process attaching ``n_params``
     parameter and ``n_deltas`` vertex viewers round-robin over them (and over ``view_urls``, the
     nodes of a cluster). Streaming starts 0.2 s after the viewers are attached; ``stop`` (set by
-    ``stop()``) ends the sessions early."""
+    ``stop()``) ends the sessions early. ``event_loop``: both processes' loop (server.eventloop)."""
 
     def __init__(
         self,
@@ -161,16 +171,21 @@ class ClientProcesses:
         seconds: float,
         *,
         view_urls: list[str] | None = None,
+        event_loop: str = DEFAULT_EVENT_LOOP,
     ) -> None:
         ctx = mp.get_context("spawn")
         self.ready, self.viewers_ready, self._stop, self.out = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Queue()
         self._got: dict = {}
         self.ingest = ctx.Process(
-            target=_ingest_proc, args=(url, prefix, n, seconds, self.ready, self.viewers_ready, self.out, self._stop)
+            target=_ingest_proc,
+            args=(url, prefix, n, seconds, self.ready, self.viewers_ready, self.out, self._stop, event_loop),
         )
         self.viewers = ctx.Process(
             target=_viewer_proc,
-            args=(view_urls or [url], prefix, n, n_params, n_deltas, self.ready, self.viewers_ready, self.out),
+            args=(
+                *(view_urls or [url], prefix, n, n_params, n_deltas),
+                *(self.ready, self.viewers_ready, self.out, event_loop),
+            ),
         )
         self.ingest.start()
         self.viewers.start()
@@ -222,8 +237,11 @@ def _step(
     n_deltas: int,
     seconds: float,
     view_urls: list[str] | None = None,
+    event_loop: str = DEFAULT_EVENT_LOOP,
 ) -> dict:
-    clients = ClientProcesses(server.url, f"cap{step_no}_", n, n_params, n_deltas, seconds, view_urls=view_urls)
+    clients = ClientProcesses(
+        server.url, f"cap{step_no}_", n, n_params, n_deltas, seconds, view_urls=view_urls, event_loop=event_loop
+    )
     # Server CPU while the audio streams: from the viewers being ready (streaming starts 0.2 s
     # later) to the ingest's report (all sessions ended).
     clients.wait_viewers()
@@ -298,6 +316,7 @@ def _step(
         "worker_timings_ms": [{k: w["timings_ms"][k] for k in keys if k in w["timings_ms"]} for w in metrics["workers"]]
         if "workers" in metrics
         else None,
+        "event_loop": metrics.get("event_loop"),  # the server's, as it reports it
         "sessions": n,
         "param_viewers": n_params,
         "vertex_viewers": n_deltas,
@@ -325,9 +344,10 @@ def _cost_model(server: ServerProcess, model, cfg: CapacityConfig) -> dict:
     """Server CPU (cores) of one real-time session, one parameter viewer and one vertex viewer,
     from three loads differing in one kind of client; and the goal load projected from them."""
     n = cfg.cost_sessions
-    base = _step(server, model, 100, n, 0, 0, cfg.seconds)
-    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds)
-    with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds) if cfg.head else None
+    loop = cfg.event_loop
+    base = _step(server, model, 100, n, 0, 0, cfg.seconds, event_loop=loop)
+    with_params = _step(server, model, 101, n, 100, 0, cfg.seconds, event_loop=loop)
+    with_vertex = _step(server, model, 102, n, 0, 20, cfg.seconds, event_loop=loop) if cfg.head else None
 
     def per_unit(key: str) -> tuple[float, float, float | None]:
         b = base[key]
@@ -392,12 +412,22 @@ def run_cluster_benchmark(cfg: CapacityConfig) -> dict:
         for name in ("near", "far"):
             toml = (
                 f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nconnect_rate_per_s = 0\n"
-                f'redis_url = "redis://127.0.0.1:{port}/0"\nnode_id = "{name}"\n'
+                f'redis_url = "redis://127.0.0.1:{port}/0"\nnode_id = "{name}"\nevent_loop = "{cfg.event_loop}"\n'
             )
             nodes.append(ServerProcess(model_path, head=cfg.head, config_toml=toml))
         time.sleep(1.5)  # both nodes registered
         for i, (n, p, v) in enumerate(cfg.steps):
-            r = _step(nodes[0], model, i, n, p, v if cfg.head else 0, cfg.seconds, view_urls=[x.url for x in nodes])
+            r = _step(
+                nodes[0],
+                model,
+                i,
+                n,
+                p,
+                v if cfg.head else 0,
+                cfg.seconds,
+                view_urls=[x.url for x in nodes],
+                event_loop=cfg.event_loop,
+            )
             near, far = r["by_node"]["node0"], r["by_node"]["node1"]
             r["far_minus_near_p99_ms"] = round(far["delivery_p99_ms"] - near["delivery_p99_ms"], 3)
             steps.append(r)
@@ -433,7 +463,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
     # Benchmark clients are trusted: no per-client connection rate (they open hundreds at once).
     toml = (
         f"[server]\nmax_sessions = 1000\nmax_viewers = 10000\nworkers = {cfg.workers}\n"
-        f'worker_mode = "{cfg.worker_mode}"\nconnect_rate_per_s = 0\n'
+        f'worker_mode = "{cfg.worker_mode}"\nconnect_rate_per_s = 0\nevent_loop = "{cfg.event_loop}"\n'
     )
     server = ServerProcess(model_path, head=cfg.head, config_toml=toml)
     steps = []
@@ -444,7 +474,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
             cost = _cost_model(server, model, cfg)
             print(json.dumps({"cost_model": cost}), flush=True)
         for i, (n, p, v) in enumerate(cfg.steps):
-            r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds)
+            r = _step(server, model, i, n, p, v if cfg.head else 0, cfg.seconds, event_loop=cfg.event_loop)
             steps.append(r)
             print(
                 json.dumps(
@@ -488,6 +518,7 @@ def run_capacity_benchmark(cfg: CapacityConfig) -> dict:
         "seconds_per_step": cfg.seconds,
         "server_workers": cfg.workers,
         "server_worker_mode": cfg.worker_mode,
+        "event_loop": cfg.event_loop,
         "cost_model": cost,
         "machine": {
             "cpus": os.cpu_count(),
@@ -517,6 +548,12 @@ def main(argv: list[str] | None = None) -> int:
         default="compute",
         help="compute: workers run the model, sockets stay on the front; connections: whole sessions, sockets too",
     )
+    ap.add_argument(
+        "--event-loop",
+        choices=EVENT_LOOPS,
+        default=DEFAULT_EVENT_LOOP,
+        help="the server's and the client processes' event loop (ServerConfig.event_loop)",
+    )
     ap.add_argument("--no-cost-model", action="store_true", help="skip the per-client CPU cost measurement")
     ap.add_argument("--cost-sessions", type=int, default=10, help="sessions the cost model's three loads share")
     ap.add_argument(
@@ -535,6 +572,7 @@ def main(argv: list[str] | None = None) -> int:
                 seconds=args.seconds,
                 model=args.model,
                 head=not args.no_head,
+                event_loop=args.event_loop,
             )
         )
         print(json.dumps(result, indent=2))
@@ -549,6 +587,7 @@ def main(argv: list[str] | None = None) -> int:
             cost_sessions=args.cost_sessions,
             workers=args.workers,
             worker_mode=args.worker_mode,
+            event_loop=args.event_loop,
         )
     )
     print(json.dumps(result, indent=2))

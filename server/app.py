@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import inspect
 import logging
 import signal
 import socket
@@ -61,6 +62,7 @@ from server.errors import (
     ServerConfigError,
     ServerError,
 )
+from server.eventloop import running_loop_name
 from server.guard import (
     ConnectionCounter,
     ConnectionRate,
@@ -137,6 +139,8 @@ class FacecastServer:
         listen=False: no listener; connections come through :meth:`adopt` (a connection worker)."""
         cfg = self.config
         if cfg.workers and cfg.worker_mode == "connections":
+            if running_loop_name() != "asyncio":  # it would read every request itself: server.eventloop.process_loop
+                raise ServerConfigError("the front of connection workers must run on asyncio's event loop")
             self.shards = ConnectionWorkers(self, cfg.workers)
         where: dict[str, Any] = {"host": cfg.host, "port": cfg.port}
         if not listen:
@@ -214,10 +218,11 @@ class FacecastServer:
         """Serve a connection accepted elsewhere (the front of connection workers, server.shards) as
         if this server's listener had accepted it: the same handshake checks and handlers.
 
-        websockets has no public call for this; asyncio's Server keeps the connection factory that
-        websockets' ``serve`` gave it, so the connection is made exactly as an accepted one would be."""
+        websockets has no public call for this; its server's ``create_server`` closes over the connection
+        factory it gives the loop's listener (uvloop's listener, unlike asyncio's, does not expose it), so the
+        connection is made exactly as an accepted one would be."""
         assert self._server is not None  # started
-        factory = self._server.server._protocol_factory  # type: ignore[attr-defined]  # see above
+        factory = inspect.getclosurevars(self._server.create_server).nonlocals["protocol_factory"]  # see above
         await asyncio.get_running_loop().connect_accepted_socket(factory, sock)
 
     @property
@@ -772,7 +777,14 @@ class FacecastServer:
                 out[key] += m[key]
             closes.update({int(k): v for k, v in m["closes"].items()})
             out["session_list"] += m["session_list"]
-            out["workers"].append({"sessions": m["sessions"], "viewers": m["viewers"], "timings_ms": m["timings_ms"]})
+            out["workers"].append(
+                {
+                    "sessions": m["sessions"],
+                    "viewers": m["viewers"],
+                    "timings_ms": m["timings_ms"],
+                    "event_loop": m["event_loop"],
+                }
+            )
         out["closes"] = {str(k): v for k, v in sorted(closes.items())}
         out["session_list"].sort(key=lambda r: r["name"])
         return out
@@ -811,6 +823,7 @@ class FacecastServer:
             "timings_ms": self.times.summary(),
             "session_list": self.session_list(),
             "uptime_s": round(time.time() - self.started, 3),
+            "event_loop": running_loop_name(),
         }
 
 

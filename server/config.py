@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from server.errors import ServerConfigError
+from server.eventloop import DEFAULT_EVENT_LOOP, EVENT_LOOPS, loop_available
 
 P_NODE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
@@ -30,7 +31,11 @@ class ServerConfig:
     buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
     stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
     (None: a generated index page listing the sessions); node_modules: npm packages directory from which
-    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served).
+    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served);
+    event_loop: the loop ``facecast serve`` and its connection workers run on, "uvloop" (the default on Linux:
+    less CPU per received block, docs/service.md "uvloop") or "asyncio" (the standard loop; the default
+    elsewhere); the front of connection workers always runs on asyncio's (server.eventloop.process_loop), and
+    a server run inside a caller's loop (``run_server``) uses that loop.
 
     Hardening (docs/protocol.md section 7): ingest_burst_s: seconds of audio an ingest may run ahead
     of real time before it is paced (or closed with 4029 when ingest_overrun is "close"); batch
@@ -81,6 +86,7 @@ class ServerConfig:
     advertise_url: str | None = None
     heartbeat_s: float = 1.0
     role: str = "both"
+    event_loop: str = DEFAULT_EVENT_LOOP
 
     def __post_init__(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -140,6 +146,13 @@ class ServerConfig:
             raise ServerConfigError(f"role must be 'both', 'compute' or 'edge', got {self.role!r}")
         if self.role == "edge" and self.redis_url is None:
             raise ServerConfigError("role 'edge' needs redis_url (an edge forwards ingests to the cluster's nodes)")
+        if self.event_loop not in EVENT_LOOPS:
+            raise ServerConfigError(f"event_loop must be one of {EVENT_LOOPS}, got {self.event_loop!r}")
+        if not loop_available(self.event_loop):
+            raise ServerConfigError(
+                f"event_loop {self.event_loop!r}: the package is not installed (pip install uvloop), "
+                "or set event_loop = 'asyncio'"
+            )
         if self.ingest_overrun not in ("pace", "close"):
             raise ServerConfigError(f"ingest_overrun must be 'pace' or 'close', got {self.ingest_overrun!r}")
         if (

@@ -59,6 +59,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from server.errors import ServerError
+from server.eventloop import run as run_on_loop
 from server.workers import model_file_bytes
 from wire import protocol as P
 
@@ -485,7 +486,7 @@ def _worker_main(sock: socket.socket, model_bytes: bytes, head_bytes: bytes | No
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)
     with threadpool_limits(1):
-        asyncio.run(_worker(sock, model_bytes, head_bytes, config))
+        run_on_loop(_worker(sock, model_bytes, head_bytes, config), config.event_loop)
 
 
 async def _worker(sock: socket.socket, model_bytes: bytes, head_bytes: bytes | None, config: ServerConfig) -> None:

@@ -29,6 +29,7 @@ import collections
 import contextlib
 import logging
 import multiprocessing as mp
+import os
 import pickle
 import time
 from dataclasses import asdict
@@ -199,6 +200,10 @@ class WorkerPool:
             fut = loop.create_future()
             w.pending.append(fut)
             loop.add_reader(w.conn.fileno(), w.on_readable)
+            # uvloop's add_reader makes the descriptor non-blocking (libuv polls it so); multiprocessing's
+            # Connection reads and writes whole messages and needs it blocking, as asyncio's loop leaves it
+            # (else a message half arrived raises BlockingIOError mid-read and the stream is lost).
+            os.set_blocking(w.conn.fileno(), True)
         await asyncio.gather(*(w.pending[0] for w in self.workers))
 
     async def stop(self) -> None:

@@ -42,13 +42,14 @@ class LiveServer:
     def __init__(self, model: AvModel, head, *, port: int = 0) -> None:
         from server.app import FacecastServer
         from server.config import ServerConfig
+        from server.eventloop import loop_factory
 
         nm = REPO / "node_modules"
         self.config = ServerConfig(
             port=port, web_root=REPO / "clients" / "web", node_modules=nm if nm.is_dir() else None, close_timeout_s=0.5
         )
         self.server = FacecastServer(model, head=head, config=self.config)
-        self.loop = asyncio.new_event_loop()
+        self.loop = loop_factory(self.config.event_loop)()  # the loop `facecast serve` would run it on
         self.thread = threading.Thread(target=self.loop.run_forever, name="facecast-test-server", daemon=True)
         self.thread.start()
         self.call(self.server.start())

@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     from server.app import FacecastServer, run_server
     from server.config import ServerConfig
     from server.errors import ServerConfigError
+    from server.eventloop import process_loop
+    from server.eventloop import run as run_on_loop
     from server.sources import FileConfig, FileSource, MicConfig, MicSource
 
     token = None
@@ -177,5 +179,6 @@ def run(args: argparse.Namespace) -> int:
             for t in tasks:
                 t.cancel()
 
-    asyncio.run(main())
+    front = config.workers > 0 and config.worker_mode == "connections"
+    run_on_loop(main(), process_loop(config.event_loop, connection_front=front))
     return 0

@@ -1,13 +1,35 @@
-"""Fixtures of the server tests: a small random model (also saved to disk), test speech as WAV files."""
+"""Fixtures of the server tests: a small random model (also saved to disk), test speech as WAV files; every
+test's ``asyncio.run`` on the loop ``facecast serve`` runs on."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import pytest
 
 from realtime_core.avmodel import AvModel
 from tests.speech import small_model, speechlike
+
+
+@pytest.fixture(autouse=True)
+def server_event_loop():
+    """Most tests run a server inside their own ``asyncio.run``: make that the loop the server runs on in
+    production (``ServerConfig().event_loop``, uvloop on Linux), not the standard one. Servers in child
+    processes pick theirs from their configuration."""
+    from server.eventloop import DEFAULT_EVENT_LOOP
+
+    if DEFAULT_EVENT_LOOP != "uvloop":
+        yield
+        return
+    import uvloop
+
+    old = asyncio.get_event_loop_policy()
+    asyncio.set_event_loop_policy(uvloop.EventLoopPolicy())
+    try:
+        yield
+    finally:
+        asyncio.set_event_loop_policy(old)
 
 
 @pytest.fixture(scope="session")

@@ -27,6 +27,7 @@ from clients.client import IngestClient, ViewerClient, stream_samples
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
+from server.eventloop import loop_factory, process_loop
 from tests.speech import speechlike
 from wire import protocol as P
 
@@ -111,7 +112,9 @@ class _Server:
                 worker_mode="connections",
             ),
         )
-        self.loop = asyncio.new_event_loop()
+        cfg = self.srv.config
+        front = cfg.workers > 0 and cfg.worker_mode == "connections"
+        self.loop = loop_factory(process_loop(cfg.event_loop, connection_front=front))()  # as `facecast serve`
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()
         self.call(self.srv.start())

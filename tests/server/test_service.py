@@ -22,6 +22,8 @@ from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from server.app import FacecastServer
 from server.config import ServerConfig
+from server.eventloop import process_loop
+from server.eventloop import run as run_on_loop
 from tests.live_server import running
 from tests.speech import speechlike
 from wire import protocol as P
@@ -502,7 +504,8 @@ def test_shutdown_flushes_sessions_and_says_going_away(model, layout):
             ing_code = exc.code
         return got, ing_code
 
-    got, ing_code = asyncio.run(main())
+    cfg = ServerConfig(**layout)
+    got, ing_code = run_on_loop(main(), process_loop(cfg.event_loop, connection_front=cfg.workers > 0))
     assert got.close_code == P.CLOSE_GOING_AWAY and ing_code == P.CLOSE_GOING_AWAY
     idx = [m.index for m in got.frames]
     assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost

@@ -27,6 +27,13 @@ pytestmark = [pytest.mark.system, pytest.mark.slow]  # worker processes load the
 KINDS = [("params", None), ("deltas", "int16"), ("blendshapes", "arkit52")]
 
 
+@pytest.fixture(autouse=True)
+def server_event_loop():
+    """These tests run a front of connection workers in their own ``asyncio.run``: on asyncio's loop, as
+    ``facecast serve`` runs one (server.eventloop.process_loop; the workers run on the configured loop)."""
+    yield
+
+
 async def _two_sessions(url: str, pcms: list[np.ndarray], rate: int) -> tuple[list[dict], list[list], dict, dict]:
     """Sessions s0, s1 streamed at once, each watched by a viewer of every kind in KINDS (with audio);
     returns the ingests' end replies, each session's viewers' results, /sessions and /metrics while
