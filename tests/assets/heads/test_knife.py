@@ -10,6 +10,23 @@ import pytest
 from assets.heads.knife import COARSE_EDGES, KNIFE_SNAP, contact_offset, knife_contact, mouth_resolution
 from assets.heads.rigging import cut_mouth
 
+_LPS_1500_POINTS = {
+    "eye_outer_left": [0.727652, 1.707158, 1.801179],
+    "eye_inner_left": [0.217168, 1.712960, 1.846744],
+    "eye_outer_right": [-0.940700, 1.708137, 1.842614],
+    "eye_inner_right": [-0.440162, 1.711964, 1.853698],
+    "nose_tip": [-0.134175, 1.007839, 2.526668],
+    "corner_left": [0.322727, 0.391083, 2.106256],
+    "corner_right": [-0.502443, 0.375156, 2.088942],
+    "upper_lip": [-0.112229, 0.583792, 2.339322],
+    "lower_lip": [-0.098722, 0.304451, 2.283403],
+    "upper_inner": [-0.107402, 0.445460, 2.162054],
+    "lower_inner": [-0.100486, 0.396535, 2.229062],
+    "chin": [-0.099908, -0.405464, 2.182652],
+}
+"""The automatic landmarks `facecast rig` finds on Lee Perry-Smith decimated to ~1,500 triangles (the head test set's
+row; MediaPipe on a render, cast back), saved as points in the file's units, so no render runs in the tests."""
+
 
 def _facing_forward(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     """``t`` with every triangle wound so that its normal points to +z (the face's front)."""
@@ -237,20 +254,7 @@ def test_a_knife_cut_mouth_whose_rigs_fail_at_the_corner_vertices_opens_with_its
     low = load_mesh(low_glb, cache=tmp_path / "cache")
     pos, inv = np.unique(np.round(low.vertices, 9), axis=0, return_inverse=True)
     mesh = HeadMesh(vertices=pos, triangles=inv.reshape(-1)[low.triangles], name="lps_1500")
-    spec = {
-        "eye_outer_left": [0.727652, 1.707158, 1.801179],
-        "eye_inner_left": [0.217168, 1.712960, 1.846744],
-        "eye_outer_right": [-0.940700, 1.708137, 1.842614],
-        "eye_inner_right": [-0.440162, 1.711964, 1.853698],
-        "nose_tip": [-0.134175, 1.007839, 2.526668],
-        "corner_left": [0.322727, 0.391083, 2.106256],
-        "corner_right": [-0.502443, 0.375156, 2.088942],
-        "upper_lip": [-0.112229, 0.583792, 2.339322],
-        "lower_lip": [-0.098722, 0.304451, 2.283403],
-        "upper_inner": [-0.107402, 0.445460, 2.162054],
-        "lower_inner": [-0.100486, 0.396535, 2.229062],
-        "chin": [-0.099908, -0.405464, 2.182652],
-    }
+    spec = _LPS_1500_POINTS
 
     at_vertices, cut = rig_head(mesh, spec, head=builtin_head, clean_lips=True)
     assert at_vertices.meta.get("contact_knife")  # a coarse mouth: knife-cut
@@ -274,3 +278,56 @@ def test_a_knife_cut_mouth_whose_rigs_fail_at_the_corner_vertices_opens_with_its
     pose = np.array([0.05, -0.03, 0.4, 0.05])
     np.testing.assert_array_equal(r1.displacements(pose), r0.displacements(pose))
     assert "simple_corners_at_points" not in r1.meta
+
+
+def test_seam_consistent_gives_a_texture_seams_copies_the_largest_weight_among_them():
+    """Coincident vertices (a texture seam's copies) share the largest weight among them; the others keep theirs."""
+    from assets.heads.parts import seam_consistent
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 0, 0]])
+    w = np.array([0.0, 0.3, 0.5, 0.0, 0.2, 0.1])
+    np.testing.assert_array_equal(seam_consistent(v, w), [0.5, 0.3, 0.5, 0.3, 0.2, 0.3])
+
+
+@pytest.mark.slow
+def test_a_knife_cut_mouths_texture_seams_do_not_tear(tmp_path, shared_lps, builtin_head):
+    """Lee Perry-Smith decimated to ~1,500 triangles, read with its texture seams (a vertex per position and UV, as
+    the head test set's OBJ row is read), rigged with the automatic landmarks of the test above. Behind the lips its
+    inner lining below the contact is a piece apart from the face's surface only across texture seams, so
+    ``inner_mouth_weights`` mixed the jaw's motion into its vertices and not into their seam copies on the upper lip's
+    inner wall: at a wide /a/ the two sides of the seam parted by up to 0.2 IOD (the wall hung into the opening, the
+    dark shards there). Every vertex of the mesh as it came must move as its seam copies do (the rig's field is built
+    on the welded mesh; only the lip cut's copies, appended after them, part)."""
+    import subprocess
+    from pathlib import Path
+
+    from assets.heads.mesh import load_mesh
+    from assets.heads.rigging import rig_head
+    from realtime_core.face.rig import weld
+    from tests.prerequisites import missing, require_tool
+
+    require_tool("node", "apt package nodejs")
+    cli = Path(__file__).resolve().parents[3] / "node_modules" / ".bin" / "gltf-transform"
+    if not cli.exists():
+        missing("npm packages missing: run `npm install` in the checkout")
+    full = load_mesh(shared_lps)
+    low_glb = tmp_path / "lps_1500.glb"
+    ratio = 1500 / 2.0 / len(full.vertices)
+    subprocess.run(
+        [str(cli), "simplify", str(shared_lps), str(low_glb), "--ratio", f"{ratio:.4f}", "--error", "1"],
+        check=True,
+        capture_output=True,
+    )
+    low = load_mesh(low_glb, cache=tmp_path / "cache")
+    canon, welded = weld(np.asarray(low.vertices, dtype=np.float64))
+    assert len(welded) < len(low.vertices)  # texture seams: coincident vertices
+    rig, _ = rig_head(low, _LPS_1500_POINTS, head=builtin_head, clean_lips=True)
+    assert rig.meta.get("contact_knife") and rig.meta.get("inner_mouth_pieces")
+    n = len(low.vertices)
+    iod = float(rig.meta["iod"])
+    for pose in ((0.0, 0.0, 0.465, 0.0), (0.0, 0.02, 0.35, 0.0), (0.0, -0.10, 0.08, 0.0)):
+        d = np.asarray(rig.deformed(np.array(pose)), dtype=np.float64)[:n] - np.asarray(rig.neutral)[:n]
+        first = np.full(len(welded), -1)
+        first[canon[::-1]] = np.arange(n)[::-1]
+        apart = np.linalg.norm(d - d[first[canon]], axis=1) / iod
+        assert apart.max() < 1e-5, (pose, np.flatnonzero(apart > 1e-5).tolist(), float(apart.max()))
