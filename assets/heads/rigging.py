@@ -986,6 +986,7 @@ def rig_head(
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
     cut_copies = None
     coarse = False  # a knife-cut mouth (assets/heads/knife.py): its crease walls keep no holes (_enclosed_holes)
+    on_contact: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # knife vertices on a contact edge: its ends, weights
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
@@ -1024,6 +1025,7 @@ def rig_head(
                 front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
                 meta["contact_knife"] = len(knife.edge)
                 coarse = True
+                on_contact = knife.along_path()
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
@@ -1168,6 +1170,12 @@ def rig_head(
                 "lip_island_faces_joined": n_joined,
             }
             rig = replace(rig, triangles=t.astype(np.int32), meta=meta_i)
+        if on_contact:
+            # The upper lip's side of a long contact edge the knife split (knife.split_long_edges) moves as the edge's
+            # point: its fans are slivers of the decimated lip's lowest strip, which turned over when the new vertex
+            # moved off the edge's line (Lee Perry-Smith at 3,810 triangles: a dark shard at the left corner at /a/).
+            rig = with_rows_mixed(rig, on_contact)
+            rig.meta["contact_edge_vertices"] = len(on_contact)
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         if not own and cut_copies is None and gap > REST_GAP_MAX:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
