@@ -57,6 +57,17 @@ class KnifeCut:
     at: np.ndarray
     path: list[int]
 
+    def along_path(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """The new vertices on an edge the path runs along (:func:`split_long_edges`'s: both ends on the path),
+        each -> (the edge's two ends (2,), their weights (2,) at the vertex's place)."""
+        n = len(self.vertices) - len(self.edge)
+        on = set(self.path)
+        return {
+            n + k: (np.asarray((i, j), dtype=np.int64), np.array([1.0 - w, w]))
+            for k, ((i, j), w) in enumerate(zip(self.edge.tolist(), self.at.tolist(), strict=True))
+            if i in on and j in on and n + k in on
+        }
+
     def carry(self, values: np.ndarray) -> np.ndarray:
         """Per-vertex ``values`` (n, ...) extended to the new vertices by linear interpolation along
         their edges (UVs, colours)."""

@@ -191,6 +191,23 @@ def inner_mouth_weights(
     return out
 
 
+def seam_consistent(vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(n,) ``weights`` with every group of coincident ``vertices`` (n, 3) (a texture seam's copies) given the
+    largest weight among them. :func:`inner_mouth_weights` finds its pieces on the mesh as it came, where a
+    texture seam parts a piece from the surface it continues; the seam's copies on the other side keep weight 0
+    and the two sides of the seam move apart (a tear). On Lee Perry-Smith decimated to 3,810 and 1,428 triangles
+    the piece is the lips' own inner lining below the contact, joined to the upper lip's inner wall only across
+    such a seam: the wall hung from the upper lip into the open mouth (the dark shards and lip backs seen there)
+    while the lining below it went back with the jaw (docs/animation.md, "Decimated mouths: the seam tear")."""
+    from realtime_core.face.rig import weld
+
+    w = np.asarray(weights, dtype=np.float64)
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    top = np.zeros(len(welded))
+    np.maximum.at(top, canon, w)
+    return top[canon]
+
+
 def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
     """The :class:`realtime_core.face.Rig` whose vertex i moves by (1 - w_i) of its own displacement plus
     w_i of vertex ``anchor``'s (the jaw's, as :func:`with_rigid_parts` takes it); ``weights`` (n,) in

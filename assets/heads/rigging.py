@@ -987,6 +987,7 @@ def rig_head(
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
     cut_copies = None
     coarse = False  # a knife-cut mouth (assets/heads/knife.py): its crease walls keep no holes (_enclosed_holes)
+    on_contact: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # knife vertices on a contact edge: its ends, weights
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
@@ -1025,6 +1026,7 @@ def rig_head(
                 front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
                 meta["contact_knife"] = len(knife.edge)
                 coarse = True
+                on_contact = knife.along_path()
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
@@ -1169,6 +1171,12 @@ def rig_head(
                 "lip_island_faces_joined": n_joined,
             }
             rig = replace(rig, triangles=t.astype(np.int32), meta=meta_i)
+        if on_contact:
+            # The upper lip's side of a long contact edge the knife split (knife.split_long_edges) moves as the edge's
+            # point: its fans are slivers of the decimated lip's lowest strip, which turned over when the new vertex
+            # moved off the edge's line (Lee Perry-Smith at 3,810 triangles: a dark shard at the left corner at /a/).
+            rig = with_rows_mixed(rig, on_contact)
+            rig.meta["contact_edge_vertices"] = len(on_contact)
         if head_calibration and str(rig.meta.get("head_calibration", "")).startswith("skipped"):
             # The whole response was too ill-conditioned to invert, but its mouth_open row is not: without
             # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
@@ -1201,13 +1209,18 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
+    from assets.heads.parts import inner_mouth_weights, seam_consistent, with_jaw_weights, with_rigid_parts
 
     rig = with_rigid_parts(rig, out_mesh, snap)  # separate eyes / teeth / tongue: rigid with skull or jaw
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
     # copies and the cavity, appended after its vertices, take no weight).
     jaw = inner_mouth_weights(mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod)
+    if coarse and jaw.any():
+        # A decimated mouth's inner lining is such a piece only across texture seams; their copies on the upper
+        # lip's inner wall take the same weight, or the seam tears open at /a/ (seam_consistent). Full scans keep
+        # their weights as they were (their rows are measured elsewhere; docs/animation.md, "the seam tear").
+        jaw = seam_consistent(mesh.vertices, jaw)
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]

@@ -1,6 +1,7 @@
 """The knife cut of a coarse head's lip contact (:mod:`assets.heads.knife`) on synthetic meshes (a closed
 mouth whose lips touch along one long edge, a contact curve that crosses triangles) and on Lee Perry-Smith
-decimated to ~1,500 triangles (the simple face's corners at their points, ``corners_at_points``)."""
+decimated to ~1,500 triangles (the simple face's corners at their points, ``corners_at_points``; its texture seams
+do not tear) and ~4,000 triangles (a split contact edge's sliver fan shows no back)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,47 @@ import pytest
 
 from assets.heads.knife import COARSE_EDGES, KNIFE_SNAP, contact_offset, knife_contact, mouth_resolution
 from assets.heads.rigging import cut_mouth
+
+_LPS_1500_POINTS = {
+    "eye_outer_left": [0.727652, 1.707158, 1.801179],
+    "eye_inner_left": [0.217168, 1.712960, 1.846744],
+    "eye_outer_right": [-0.940700, 1.708137, 1.842614],
+    "eye_inner_right": [-0.440162, 1.711964, 1.853698],
+    "nose_tip": [-0.134175, 1.007839, 2.526668],
+    "corner_left": [0.322727, 0.391083, 2.106256],
+    "corner_right": [-0.502443, 0.375156, 2.088942],
+    "upper_lip": [-0.112229, 0.583792, 2.339322],
+    "lower_lip": [-0.098722, 0.304451, 2.283403],
+    "upper_inner": [-0.107402, 0.445460, 2.162054],
+    "lower_inner": [-0.100486, 0.396535, 2.229062],
+    "chin": [-0.099908, -0.405464, 2.182652],
+}
+"""The automatic landmarks `facecast rig` finds on Lee Perry-Smith decimated to ~1,500 triangles (the head test set's
+row; MediaPipe on a render, cast back), saved as points in the file's units, so no render runs in the tests."""
+
+
+def _decimated_lps(tmp_path, shared_lps, triangles: int):
+    """Lee Perry-Smith decimated by meshoptimizer to about ``triangles`` triangles (as the head test set's rows:
+    gltf-transform simplify), read with its texture seams (a vertex per position and UV)."""
+    import subprocess
+    from pathlib import Path
+
+    from assets.heads.mesh import load_mesh
+    from tests.prerequisites import missing, require_tool
+
+    require_tool("node", "apt package nodejs")
+    cli = Path(__file__).resolve().parents[3] / "node_modules" / ".bin" / "gltf-transform"
+    if not cli.exists():
+        missing("npm packages missing: run `npm install` in the checkout")
+    full = load_mesh(shared_lps)
+    low_glb = tmp_path / f"lps_{triangles}.glb"
+    ratio = triangles / 2.0 / len(full.vertices)
+    subprocess.run(
+        [str(cli), "simplify", str(shared_lps), str(low_glb), "--ratio", f"{ratio:.4f}", "--error", "1"],
+        check=True,
+        capture_output=True,
+    )
+    return load_mesh(low_glb, cache=tmp_path / "cache")
 
 
 def _facing_forward(v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -237,20 +279,7 @@ def test_a_knife_cut_mouth_whose_rigs_fail_at_the_corner_vertices_opens_with_its
     low = load_mesh(low_glb, cache=tmp_path / "cache")
     pos, inv = np.unique(np.round(low.vertices, 9), axis=0, return_inverse=True)
     mesh = HeadMesh(vertices=pos, triangles=inv.reshape(-1)[low.triangles], name="lps_1500")
-    spec = {
-        "eye_outer_left": [0.727652, 1.707158, 1.801179],
-        "eye_inner_left": [0.217168, 1.712960, 1.846744],
-        "eye_outer_right": [-0.940700, 1.708137, 1.842614],
-        "eye_inner_right": [-0.440162, 1.711964, 1.853698],
-        "nose_tip": [-0.134175, 1.007839, 2.526668],
-        "corner_left": [0.322727, 0.391083, 2.106256],
-        "corner_right": [-0.502443, 0.375156, 2.088942],
-        "upper_lip": [-0.112229, 0.583792, 2.339322],
-        "lower_lip": [-0.098722, 0.304451, 2.283403],
-        "upper_inner": [-0.107402, 0.445460, 2.162054],
-        "lower_inner": [-0.100486, 0.396535, 2.229062],
-        "chin": [-0.099908, -0.405464, 2.182652],
-    }
+    spec = _LPS_1500_POINTS
 
     at_vertices, cut = rig_head(mesh, spec, head=builtin_head, clean_lips=True)
     assert at_vertices.meta.get("contact_knife")  # a coarse mouth: knife-cut
@@ -274,3 +303,80 @@ def test_a_knife_cut_mouth_whose_rigs_fail_at_the_corner_vertices_opens_with_its
     pose = np.array([0.05, -0.03, 0.4, 0.05])
     np.testing.assert_array_equal(r1.displacements(pose), r0.displacements(pose))
     assert "simple_corners_at_points" not in r1.meta
+
+
+def test_seam_consistent_gives_a_texture_seams_copies_the_largest_weight_among_them():
+    """Coincident vertices (a texture seam's copies) share the largest weight among them; the others keep theirs."""
+    from assets.heads.parts import seam_consistent
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 0, 0]])
+    w = np.array([0.0, 0.3, 0.5, 0.0, 0.2, 0.1])
+    np.testing.assert_array_equal(seam_consistent(v, w), [0.5, 0.3, 0.5, 0.3, 0.2, 0.3])
+
+
+@pytest.mark.slow
+def test_a_knife_cut_mouths_texture_seams_do_not_tear(tmp_path, shared_lps, builtin_head):
+    """Lee Perry-Smith decimated to ~1,500 triangles, read with its texture seams (a vertex per position and UV, as
+    the head test set's OBJ row is read), rigged with the automatic landmarks of the test above. Behind the lips its
+    inner lining below the contact is a piece apart from the face's surface only across texture seams, so
+    ``inner_mouth_weights`` mixed the jaw's motion into its vertices and not into their seam copies on the upper lip's
+    inner wall: at a wide /a/ the two sides of the seam parted by up to 0.2 IOD (the wall hung into the opening, the
+    dark shards there). Every vertex of the mesh as it came must move as its seam copies do (the rig's field is built
+    on the welded mesh; only the lip cut's copies, appended after them, part)."""
+    from assets.heads.rigging import rig_head
+    from realtime_core.face.rig import weld
+
+    low = _decimated_lps(tmp_path, shared_lps, 1500)
+    canon, welded = weld(np.asarray(low.vertices, dtype=np.float64))
+    assert len(welded) < len(low.vertices)  # texture seams: coincident vertices
+    rig, _ = rig_head(low, _LPS_1500_POINTS, head=builtin_head, clean_lips=True)
+    assert rig.meta.get("contact_knife") and rig.meta.get("inner_mouth_pieces")
+    n = len(low.vertices)
+    iod = float(rig.meta["iod"])
+    for pose in ((0.0, 0.0, 0.465, 0.0), (0.0, 0.02, 0.35, 0.0), (0.0, -0.10, 0.08, 0.0)):
+        d = np.asarray(rig.deformed(np.array(pose)), dtype=np.float64)[:n] - np.asarray(rig.neutral)[:n]
+        first = np.full(len(welded), -1)
+        first[canon[::-1]] = np.arange(n)[::-1]
+        apart = np.linalg.norm(d - d[first[canon]], axis=1) / iod
+        assert apart.max() < 1e-5, (pose, np.flatnonzero(apart > 1e-5).tolist(), float(apart.max()))
+
+
+_LPS_4000_POINTS = {
+    "eye_outer_left": [0.719111, 1.704200, 1.837129],
+    "eye_inner_left": [0.220879, 1.697872, 1.835188],
+    "eye_outer_right": [-0.949393, 1.677796, 1.824984],
+    "eye_inner_right": [-0.446589, 1.686730, 1.845460],
+    "nose_tip": [-0.102597, 0.987727, 2.538150],
+    "corner_left": [0.336795, 0.401645, 2.073450],
+    "corner_right": [-0.482838, 0.378248, 2.083255],
+    "upper_lip": [-0.085331, 0.589458, 2.331633],
+    "lower_lip": [-0.073099, 0.296200, 2.286173],
+    "upper_inner": [-0.082136, 0.457127, 2.227837],
+    "lower_inner": [-0.075287, 0.424381, 2.227231],
+    "chin": [-0.079155, -0.415126, 2.184465],
+}
+"""The automatic landmarks of Lee Perry-Smith decimated to ~4,000 triangles (the head test set's 3,810-triangle row)."""
+
+
+@pytest.mark.slow
+def test_the_upper_lips_side_of_a_split_contact_edge_stays_on_the_edge_and_shows_no_back(
+    tmp_path, shared_lps, builtin_head
+):
+    """Lee Perry-Smith decimated to ~4,000 triangles, rigged as rig_checked keeps it (clean lips, the repair on the
+    final mesh). Its lips' contact runs along a long edge by the left corner, which the knife splits
+    (``split_long_edges``) into a fan of slivers of the upper lip's lowest strip (0.01 IOD tall over 0.25 IOD). The
+    new vertices' rows came from the seam's smoothing, 0.05 IOD off their edge's line at a wide /a/, and the sliver by
+    the corner turned 72-76 degrees: a dark shard at the corner (lip backs seen 4.1e-3 IOD^2 at the test set's /a/).
+    The upper side's new vertices now move as their edge's point (the fan stays in its face's plane), and no lip face
+    shows its back at the test set's poses (closed, /a/, /u/, /m/), with no flip."""
+    from assets.heads.head import Head, head_checks
+    from assets.heads.rigging import rig_head
+    from realtime_core.face.checks import LIP_BACKS_LIMIT
+
+    low = _decimated_lps(tmp_path, shared_lps, 4000)
+    rig, mesh = rig_head(low, _LPS_4000_POINTS, head=builtin_head, clean_lips=True, walls_in_repair=False)
+    assert rig.meta.get("contact_knife") and rig.meta.get("contact_edge_vertices", 0) >= 1
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.02, 0.35, 0.0), (0.0, -0.10, 0.08, 0.0), (-0.02, 0.0, 0.0, 0.0))
+    report = head_checks(Head(rig, mesh), poses=poses)
+    assert report.flipped_triangles == 0
+    assert report.lip_backs_iod2 is not None and report.lip_backs_iod2 <= LIP_BACKS_LIMIT, report.lip_backs_iod2
