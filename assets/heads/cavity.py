@@ -26,8 +26,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from realtime_core.face import FaceFrame
-from realtime_core.face.interpolation import barycentric_2d
 from realtime_core.face.projection import vertex_adjacency
+from realtime_core.face.visibility import front_most
 
 HOLLOW_DEPTH = 0.8
 """IOD: a mouth whose nearest surface behind the inner lips lies farther back than this (or nowhere)
@@ -44,24 +44,7 @@ def front_depth(
     there, going back)."""
     q = (np.asarray(vertices, dtype=np.float64) - frame.origin) @ frame.axes.T
     t = np.asarray(triangles, dtype=np.int64)
-    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    lo, hi = q[t, :2].min(axis=1), q[t, :2].max(axis=1)
-    out = np.full(len(p), np.nan)
-    for i, pt in enumerate(p):
-        cand = np.flatnonzero((lo[:, 0] <= pt[0]) & (hi[:, 0] >= pt[0]) & (lo[:, 1] <= pt[1]) & (hi[:, 1] >= pt[1]))
-        if not len(cand):
-            continue
-        tc = t[cand]
-        g = barycentric_2d(pt[None, :], q[tc[:, 0], :2], q[tc[:, 1], :2], q[tc[:, 2], :2])
-        inside = np.all(g >= -1e-9, axis=1) & np.all(np.isfinite(g), axis=1)
-        if not inside.any():
-            continue
-        z = np.einsum("ij,ij->i", g[inside], q[tc[inside], 2])
-        if behind is not None:
-            z = z[z < behind]
-        if len(z):
-            out[i] = float(z.max())
-    return out
+    return front_most(np.asarray(xy, dtype=np.float64).reshape(-1, 2), q[t], below=behind, tolerance=1e-9)
 
 
 def mouth_line_path(

@@ -797,7 +797,7 @@ def front_contact(vertices: np.ndarray, triangles: np.ndarray, start: int, forwa
     region faces forward (files wound either way)."""
     import trimesh
 
-    from realtime_core.face.rig import weld
+    from realtime_core.face.welding import weld
 
     canon, welded = weld(np.asarray(vertices, dtype=np.float64))
     tw = canon[np.asarray(triangles, dtype=np.int64)]
@@ -865,7 +865,7 @@ def lips_connected(
     """
     from scipy.spatial import cKDTree
 
-    from realtime_core.face.rig import weld
+    from realtime_core.face.welding import weld
 
     canon, welded = weld(np.asarray(vertices, dtype=np.float64))
     tw = canon[np.asarray(triangles, dtype=np.int64)]

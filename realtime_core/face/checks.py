@@ -47,6 +47,7 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.face.model import MouthLandmarks, face_frame
+from realtime_core.face.visibility import front_most
 
 # (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD.
 SPEECH_SCALE = 0.45 / 0.33
@@ -434,55 +435,6 @@ _BACKS_CELL = 0.02
 """IOD: the grid cell that sorts the possible occluders for :func:`lip_backs_seen` (about a low-poly lip face)."""
 
 
-def _hidden(points: np.ndarray, tris: np.ndarray, skip: np.ndarray, cell: float, tol: float) -> np.ndarray:
-    """(k,) bool: is each of ``points`` (k, 3) (view coordinates: u, w across the view, depth towards the
-    viewer) covered by one of ``tris`` (m, 3, 3) (the same coordinates) more than ``tol`` nearer the viewer?
-    ``skip`` (k,): the index into ``tris`` of each point's own triangle (never its own occluder). The
-    triangles are binned by their bounding boxes on a grid of ``cell``, so only point-triangle pairs that
-    share a cell are tested."""
-    k = len(points)
-    hidden = np.zeros(k, dtype=bool)
-    if not k or not len(tris):
-        return hidden
-    lo_pt, hi_pt = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-    lo, hi = tris[:, :, :2].min(axis=1), tris[:, :, :2].max(axis=1)
-    use = np.flatnonzero((hi >= lo_pt).all(axis=1) & (lo <= hi_pt).all(axis=1))
-    if not len(use):
-        return hidden
-    g0 = np.floor((np.maximum(lo[use], lo_pt) - lo_pt) / cell).astype(np.int64)
-    g1 = np.floor((np.minimum(hi[use], hi_pt) - lo_pt) / cell).astype(np.int64)
-    ncol = int(np.floor((hi_pt[0] - lo_pt[0]) / cell)) + 1
-    span = g1 - g0 + 1
-    count = span[:, 0] * span[:, 1]
-    # Every (cell, triangle) pair: triangle i covers cells g0[i] + (a % span_x, a // span_x), a < count[i].
-    owner = np.repeat(np.arange(len(use)), count)
-    a = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    gx = g0[owner, 0] + a % span[owner, 0]
-    gy = g0[owner, 1] + a // span[owner, 0]
-    key = gy * ncol + gx
-    order = np.argsort(key, kind="stable")
-    key, owner = key[order], use[owner[order]]
-    pg = np.floor((points[:, :2] - lo_pt) / cell).astype(np.int64)
-    pk = pg[:, 1] * ncol + pg[:, 0]
-    start, stop = np.searchsorted(key, pk, side="left"), np.searchsorted(key, pk, side="right")
-    n = stop - start
-    who = np.repeat(np.arange(k), n)
-    tri = owner[np.repeat(start, n) + np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)]
-    keep = tri != skip[who]
-    who, tri = who[keep], tri[keep]
-    p0, p1, p2 = tris[tri, 0], tris[tri, 1], tris[tri, 2]
-    d1, d2, r = p1[:, :2] - p0[:, :2], p2[:, :2] - p0[:, :2], points[who, :2] - p0[:, :2]
-    den = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    ok = np.abs(den) > 1e-30
-    den = np.where(ok, den, 1.0)
-    s = (r[:, 0] * d2[:, 1] - r[:, 1] * d2[:, 0]) / den
-    t = (d1[:, 0] * r[:, 1] - d1[:, 1] * r[:, 0]) / den
-    depth = p0[:, 2] + s * (p1[:, 2] - p0[:, 2]) + t * (p2[:, 2] - p0[:, 2])
-    cover = ok & (s >= 0) & (t >= 0) & (s + t <= 1) & (depth > points[who, 2] + tol)
-    hidden[who[cover]] = True
-    return hidden
-
-
 def lip_backs_seen(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -538,7 +490,9 @@ def lip_backs_seen(
             if not len(away):
                 continue
             centroids = tri[away].mean(axis=1) @ to_view
-            seen = ~_hidden(centroids, occ @ to_view, at[lips[away]], _BACKS_CELL * iod, 1e-4 * iod)
+            # A centroid is hidden where another face of the rig lies more than 1e-4 IOD nearer the viewer.
+            nearest = front_most(centroids[:, :2], occ @ to_view, cell=_BACKS_CELL * iod, skip=at[lips[away]])
+            seen = ~(nearest > centroids[:, 2] + 1e-4 * iod)
             area = float(np.sum(0.5 * twice[away][seen] * -facing[away][seen])) / iod**2
             if area > worst:
                 worst, faces = area, int(seen.sum())

@@ -165,11 +165,10 @@ def interpolation_weights(
     out = np.flatnonzero(~inside & ~own)
     anchor = h.copy()
     if geo is not None and head_triangles is not None and out.size:
-        from scipy.sparse.csgraph import connected_components
+        from realtime_core.face.welding import welded_pieces
 
-        from realtime_core.face.projection import vertex_adjacency
-
-        _, comp = connected_components(vertex_adjacency(n_h, head_triangles), directed=False)
+        # The head was welded by the caller (a cut seam's copies kept apart): its pieces as they are.
+        _, _, comp = welded_pieces(h, head_triangles, welded_already=True)
         has_ctrl = np.zeros(comp.max() + 1, dtype=bool)
         has_ctrl[comp[ctrl]] = True
         loose = ~has_ctrl[comp]

@@ -23,6 +23,7 @@ from realtime_core.face.interpolation import InterpolationConfig, interpolation_
 from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, MouthLandmarks
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
+from realtime_core.face.welding import weld, welded_pieces
 
 RIG_ALGORITHM = 38
 HARMONIC_MARGIN = 0.0
@@ -581,30 +582,6 @@ def build_rig(
     )
 
 
-def weld(
-    vertices: np.ndarray, *, tolerance: float = 1e-9, keep_apart: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Merge coincident vertices (texture seams split them in most files).
-
-    vertices (n, 3) -> canon (n,) index of each vertex's welded copy, welded (n_w, 3). Positions
-    are compared after rounding to ``tolerance`` times the mesh extent.
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    scale = max(float(np.ptp(v, axis=0).max()), 1e-300) * tolerance
-    key = np.round(v / scale).astype(np.int64)
-    if keep_apart is not None and len(keep_apart):
-        # A fourth key column that is unique for the listed vertices and 0 for all others.
-        tag = np.zeros((len(v), 1), dtype=np.int64)
-        tag[np.asarray(keep_apart, dtype=np.int64), 0] = np.arange(1, len(keep_apart) + 1)
-        key = np.hstack([key, tag])
-    _, first, canon = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    # Keep the file's vertex order (np.unique sorts by position, which a rotation would change).
-    order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return rank[canon.reshape(-1)], v[first[order]]
-
-
 def head_response(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05) -> np.ndarray:
     """(4, 4) mouth parameters measured on the rigged head (its own landmarks, IOD units) per unit
     of each requested parameter: column j = measure(deformed(probe * e_j)) / probe."""
@@ -674,13 +651,10 @@ def repair_rig(
     :func:`build_rig`), so the two lips stay separate surfaces. ``tiny``: sliver clusters move as one
     (see :func:`realtime_core.face.repair.repair_folds`). ``measured``: (m,) bool the triangles whose folds
     and edges count (None: all; hidden faces about to be removed do not). Records the repair in meta."""
-    from scipy.sparse.csgraph import connected_components
-
-    from realtime_core.face.projection import vertex_adjacency
     from realtime_core.face.repair import repair_folds
 
     h = np.asarray(rig.neutral, dtype=np.float64)
-    canon, welded = weld(h, keep_apart=keep_apart)
+    canon, welded, comp = welded_pieces(h, rig.triangles, keep_apart=keep_apart)
     t_w = canon[np.asarray(rig.triangles, dtype=np.int64)]
     n_s = rig.simple.n_vertices
     # Per-vertex weights back from S = kron(G[moving], I_3): every third row, every third column.
@@ -690,7 +664,6 @@ def repair_rig(
     first = np.full(len(welded), -1, dtype=np.int64)
     first[canon[::-1]] = np.arange(len(h))[::-1]
     g_w = g.tocsr()[first]
-    _, comp = connected_components(vertex_adjacency(len(welded), t_w), directed=False)
     has_ctrl = np.zeros(comp.max() + 1, dtype=bool)
     has_ctrl[comp[canon[rig.control]]] = True
     basis = np.asarray(rig.basis, dtype=np.float64)
@@ -749,15 +722,9 @@ def lip_pieces(vertices: np.ndarray, triangles: np.ndarray, landmarks: MouthLand
     an upper with a lower tooth). A lower lip that rises at the corners (upper_lip_raise 0.054,
     lip_corner_depress -0.103) then "crossed" a tooth it lies in front of, and the push meant to part
     the lips dragged the lip corner down 0.07-0.08 IOD alone: 2 flipped triangles."""
-    from scipy.sparse.csgraph import connected_components
-
-    from realtime_core.face.projection import vertex_adjacency
-
-    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
-    t = canon[np.asarray(triangles, dtype=np.int64)]
-    _, comp = connected_components(vertex_adjacency(len(welded), t), directed=False)
-    comp = comp[canon]
-    return np.isin(comp, comp[[landmarks.upper_inner, landmarks.lower_inner]])
+    canon, _, comp = welded_pieces(vertices, triangles)
+    piece = comp[canon]
+    return np.isin(piece, piece[[landmarks.upper_inner, landmarks.lower_inner]])
 
 
 def lip_pairs_by_drop(

@@ -276,7 +276,7 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
     import scipy.sparse as sp
     from scipy.sparse.csgraph import dijkstra
 
-    from realtime_core.face.rig import weld
+    from realtime_core.face.welding import weld
 
     canon, welded = weld(v0.astype(np.float64), keep_apart=copies)
     tw = canon[np.asarray(rig.triangles, dtype=np.int64)]
