@@ -199,7 +199,7 @@ def seam_consistent(vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
     the piece is the lips' own inner lining below the contact, joined to the upper lip's inner wall only across
     such a seam: the wall hung from the upper lip into the open mouth (the dark shards and lip backs seen there)
     while the lining below it went back with the jaw (docs/animation.md, "Decimated mouths: the seam tear")."""
-    from realtime_core.face.rig import weld
+    from realtime_core.face.welding import weld
 
     w = np.asarray(weights, dtype=np.float64)
     canon, welded = weld(np.asarray(vertices, dtype=np.float64))
