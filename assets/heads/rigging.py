@@ -1175,8 +1175,8 @@ def rig_head(
             # The upper lip's side of a long contact edge the knife split (knife.split_long_edges) moves as the edge's
             # point: its fans are slivers of the decimated lip's lowest strip, which turned over when the new vertex
             # moved off the edge's line (Lee Perry-Smith at 3,810 triangles: a dark shard at the left corner at /a/).
-            rig = with_rows_mixed(rig, on_contact)
-            rig.meta["contact_edge_vertices"] = len(on_contact)
+            mixed = with_rows_mixed(rig, on_contact)
+            rig = replace(mixed, meta={**mixed.meta, "contact_edge_vertices": len(on_contact)})
         if head_calibration and str(rig.meta.get("head_calibration", "")).startswith("skipped"):
             # The whole response was too ill-conditioned to invert, but its mouth_open row is not: without
             # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
