@@ -165,10 +165,10 @@ def interpolation_weights(
     out = np.flatnonzero(~inside & ~own)
     anchor = h.copy()
     if geo is not None and head_triangles is not None and out.size:
-        from realtime_core.face.welding import welded_pieces
+        from realtime_core.face.welding import mesh_pieces
 
         # The head was welded by the caller (a cut seam's copies kept apart): its pieces as they are.
-        _, _, comp = welded_pieces(h, head_triangles, welded_already=True)
+        comp = mesh_pieces(len(h), head_triangles)
         has_ctrl = np.zeros(comp.max() + 1, dtype=bool)
         has_ctrl[comp[ctrl]] = True
         loose = ~has_ctrl[comp]

@@ -32,23 +32,21 @@ def weld(
     return rank[canon.reshape(-1)], v[first[order]]
 
 
+def mesh_pieces(n_vertices: int, triangles: np.ndarray) -> np.ndarray:
+    """(n_vertices,) int: each vertex's connected piece of the mesh ``triangles`` (m, 3) as they are (no weld: for a
+    caller whose vertices were welded with cut copies kept apart and must not be merged again)."""
+    _, piece = connected_components(vertex_adjacency(n_vertices, np.asarray(triangles, dtype=np.int64)), directed=False)
+    return np.asarray(piece)
+
+
 def welded_pieces(
     vertices: np.ndarray,
     triangles: np.ndarray,
     *,
     keep_apart: np.ndarray | None = None,
-    welded_already: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The connected pieces of a mesh (vertices (n, 3), triangles (m, 3)) once texture seams are welded
     (:func:`weld`, ``keep_apart`` as there): canon (n,) each vertex's welded index, welded (n_w, 3) and
-    piece (n_w,) int each welded vertex's piece label (a vertex's own piece: ``piece[canon]``).
-    ``welded_already``: the vertices are taken as they are (canon the identity), for a caller whose
-    vertices were welded with cut copies kept apart and must not be merged again."""
-    v = np.asarray(vertices, dtype=np.float64)
-    if welded_already:
-        canon, welded = np.arange(len(v)), v
-    else:
-        canon, welded = weld(v, keep_apart=keep_apart)
-    t = canon[np.asarray(triangles, dtype=np.int64)]
-    _, piece = connected_components(vertex_adjacency(len(welded), t), directed=False)
-    return canon, welded, piece
+    piece (n_w,) int each welded vertex's piece label (a vertex's own piece: ``piece[canon]``)."""
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64), keep_apart=keep_apart)
+    return canon, welded, mesh_pieces(len(welded), canon[np.asarray(triangles, dtype=np.int64)])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from realtime_core.face.visibility import front_most
-from realtime_core.face.welding import welded_pieces
+from realtime_core.face.welding import mesh_pieces, welded_pieces
 
 
 def _brute(points: np.ndarray, tris: np.ndarray, skip: np.ndarray, below: np.ndarray) -> np.ndarray:
@@ -66,5 +66,5 @@ def test_welded_pieces_join_texture_seam_twins_and_keep_cut_copies_apart() -> No
     _, _, apart = welded_pieces(v, t, keep_apart=np.array([10, 11]))
     assert len(np.unique(apart)) == 3
     # As they are: no twin joined, four pieces.
-    canon0, _, as_is = welded_pieces(v, t, welded_already=True)
-    assert (canon0 == np.arange(len(v))).all() and len(np.unique(as_is[t[:, 0]])) == 4
+    as_is = mesh_pieces(len(v), t)
+    assert len(as_is) == len(v) and len(np.unique(as_is[t[:, 0]])) == 4
