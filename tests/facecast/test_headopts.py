@@ -28,23 +28,16 @@ def test_commands_say_when_a_head_fails_its_checks(shared_data, capsys):
 
 
 @pytest.mark.slow  # a real first rig of the MediaPipe face (~10 s)
-def test_a_first_rig_is_checked_once_and_a_reload_not_again(shared_data, builtin_head, tmp_path, monkeypatch, capsys):
+def test_a_first_rig_is_checked_once_and_a_reload_not_again(shared_data, own_cache, tmp_path, monkeypatch, capsys):
     """`--head MESH` on a mesh not rigged yet measured the rig checks twice (rig_checked, then the warning on the
     fresh rig) and once more at every load of the cached rig. The report is kept in the rig's meta ("checks"):
     one measurement per rig, and the warning still comes from it."""
     from dataclasses import replace
 
     import realtime_core.face.checks as checks
-    from assets.heads.builtin import HEAD_FILE
-    from assets.heads.cache import cache_dir
     from facecast.cli import build_parser
     from facecast.commands.headopts import resolve_from_args, warn_failing_checks
 
-    # A cache of its own (no rig of this mesh in it), holding only the built-in head.
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    (cache / HEAD_FILE).symlink_to(cache_dir() / HEAD_FILE)
-    monkeypatch.setenv("FACECAST_CACHE", str(cache))
     calls = []
     measure = checks.check_rig
 
@@ -56,7 +49,7 @@ def test_a_first_rig_is_checked_once_and_a_reload_not_again(shared_data, builtin
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     args = build_parser().parse_args(["say", "hello", "-o", str(tmp_path / "x.glb"), "--head", str(mp)])
     first = resolve_from_args(args)
-    assert len(calls) == 1 and len(list((cache / "rigs").glob("*.npz"))) == 1
+    assert len(calls) == 1 and len(list((own_cache / "rigs").glob("*.npz"))) == 1
     kept = first.rig.meta["checks"]
     assert kept["passed"] is True and kept["failures"] == [] and kept["flipped_triangles"] == 0
     again = resolve_from_args(args)  # the cached rig
