@@ -8,3 +8,6 @@ demo       the ``facecast demo`` runner: espeak-ng speech through a live session
 """
 
 __version__ = "0.1.0"
+PACKAGES = ("realtime_core", "wire", "assets", "server", "clients", "training", "benchmarks", "perceptual", "facecast")
+"""The top-level packages facecast installs (the layer contract's root packages; tests/facecast/test_layers.py
+holds it to pyproject and to the tree)."""

@@ -81,9 +81,7 @@ def _signed_fit(keys: KeyframeSet, shape_of, gaps: np.ndarray, gap_of) -> tuple[
     reproduces the rig's lips first and its whole-region motion second."""
     p = len(keys.names)
     w = np.sqrt(LIP_GAP_WEIGHT)
-    # The ridge as KeyframeSet's non-negative fit sets it (relative to the mean squared column norm).
-    lam = keys.ridge * float((keys.shapes**2).sum(axis=0).mean())
-    a = np.vstack([keys.shapes, np.sqrt(lam) * np.eye(p), w * gaps])
+    a = np.vstack([keys.ridge_rows(), w * gaps])  # the set's own ridge, as its non-negative fit has it
     pos, neg = np.zeros((p, 4)), np.zeros((p, 4))
     for i in range(4):
         for sign, out in ((1.0, pos), (-1.0, neg)):

@@ -291,7 +291,11 @@ def rig_checked(
     the simple face's mouth corners at the given corner points (``corners_at_points=True``; docs/animation.md, "A
     coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
     with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail.
-    Meta "rig_attempts": the failures of the rigs tried before the one returned."""
+    Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
+    rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
+    not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
+    from dataclasses import replace
+
     from assets.heads.rigging import rig_head
 
     tries: list[dict[str, Any]] = [
@@ -315,7 +319,7 @@ def rig_checked(
         rig, rigged = rig_head(mesh, spec, **rig_options, **options)
         report = head_checks(Head(rig, rigged))
         if not rig.meta.get("lip_seam_cut"):
-            return rig, rigged, report  # no cut: the other rigs would be this one
+            break  # no cut: the other rigs would be this one
         hollow = bool(rig.meta.get("inner_lip_removed"))
         coarse = bool(rig.meta.get("contact_knife"))
         if report.passed:
@@ -326,9 +330,10 @@ def rig_checked(
     else:
         assert plain is not None  # the third try always runs
         rig, rigged, report = plain
+    meta = {**rig.meta, "checks": report.as_dict()}
     if attempts:
-        rig.meta["rig_attempts"] = attempts
-    return rig, rigged, report
+        meta["rig_attempts"] = attempts
+    return replace(rig, meta=meta), rigged, report
 
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):

@@ -62,22 +62,29 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
 
 def warn_failing_checks(head, name: str) -> None:
     """One line on stderr when ``head`` fails the rig checks (the checks ``facecast rig`` refuses a rig
-    for); the head is used anyway. Heads whose landmarks are unknown (own targets, none in the file)
-    are not checked here (finding them means rendering the face)."""
+    for); the head is used anyway. A rig that records its checks (meta "checks": a mesh rigged now or
+    read from the rig cache, a ``facecast rig`` file) is not measured again; heads whose landmarks are
+    unknown (own targets, none in the file) are not checked here (finding them means rendering the face)."""
     import sys
 
     from assets.heads.head import head_checks
     from realtime_core.errors import FacecastError
 
-    if not head.rig.meta.get("landmarks"):
+    kept = head.rig.meta.get("checks")
+    if isinstance(kept, dict) and "passed" in kept and "failures" in kept:
+        # Measured when the head was rigged (assets.heads.head.rig_checked): a first rig measured them twice.
+        passed, failures = bool(kept["passed"]), [str(f) for f in kept["failures"]]
+    elif not head.rig.meta.get("landmarks"):
         return
-    try:
-        report = head_checks(head)
-    except FacecastError:
-        return
-    if not report.passed:
+    else:
+        try:
+            report = head_checks(head)
+        except FacecastError:
+            return
+        passed, failures = report.passed, list(report.failures)
+    if not passed:
         print(
-            f"facecast: warning: {name} fails the rig checks ({'; '.join(report.failures)}); used anyway. "
+            f"facecast: warning: {name} fails the rig checks ({'; '.join(failures)}); used anyway. "
             "The mouth may tear or fold: check the landmarks (facecast rig HEAD --show-landmarks PNG), give "
             "--landmarks, or try --head-mode morph/retarget (docs/animation.md, Rig checks)",
             file=sys.stderr,

@@ -65,7 +65,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
     from pathlib import Path
 
     from assets.errors import MeshError, RigCheckError, RigFileError
@@ -132,7 +131,6 @@ def run(args: argparse.Namespace) -> int:
             f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "
             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
         )
-    rig = replace(rig, meta={**rig.meta, "checks": report.as_dict()})
     out = save_rig(rig, rigged, args.output)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
     credit = credit_for(args.head)

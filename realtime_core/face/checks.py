@@ -231,7 +231,9 @@ class RigReport:
     """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
 
     def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The figures as JSON holds them (tuples as lists): a rig's meta "checks" is the same dict before its
+        file is written and after it is read."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"

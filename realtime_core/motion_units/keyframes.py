@@ -70,6 +70,13 @@ class KeyframeSet:
         """``(P, D)``: ``(K^T K + lambda I)^-1 K^T``."""
         return self._solve  # type: ignore[attr-defined]
 
+    def ridge_rows(self) -> np.ndarray:
+        """``(D + P, P)``: ``[K; sqrt(lambda) I]``, the ridge as extra rows, so ``min |K b - d|^2 + lambda |b|^2``
+        is the least squares of ``[d; 0]`` (what :meth:`weights` gives NNLS with ``b >= 0``; a caller adding
+        rows of its own stacks them under these)."""
+        p = self.shapes.shape[1]
+        return np.vstack([self.shapes, np.sqrt(self._lam) * np.eye(p)])  # type: ignore[attr-defined]
+
     def weights(self, d: np.ndarray, *, nonnegative: bool = False) -> np.ndarray:
         """Deformations ``(..., D)`` -> keyframe weights ``(..., P)``."""
         x = np.asarray(d, dtype=np.float64)
@@ -77,9 +84,8 @@ class KeyframeSet:
             raise InvalidFeaturesError(f"deformations must be (..., {self.shapes.shape[0]}), got {x.shape}")
         if not nonnegative:
             return x @ self.solver.T
-        # Ridge as extra rows: min |K b - d|^2 + lam |b|^2 subject to b >= 0.
         p = self.shapes.shape[1]
-        a = np.vstack([self.shapes, np.sqrt(self._lam) * np.eye(p)])  # type: ignore[attr-defined]
+        a = self.ridge_rows()
         flat = x.reshape(-1, x.shape[-1])
         out = np.array([nnls(a, np.concatenate([row, np.zeros(p)]))[0] for row in flat])
         return out.reshape((*x.shape[:-1], p))

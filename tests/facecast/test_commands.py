@@ -91,26 +91,16 @@ def _bad_heads(tmp: Path) -> dict[str, tuple[list[str], str, str]]:
 
 
 @pytest.mark.parametrize("command", ["rig", "render"])
-def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(
-    tmp_path, tmp_path_factory, builtin_head, capfd, monkeypatch, command
-):
+def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(tmp_path, own_cache, capfd, monkeypatch, command):
     """Each bad-input class of the issue: one line naming the file, the problem and what to do; exit
     code 2; no rig, picture, video or cache file left behind."""
-    from assets.heads.cache import cache_dir
-
     cases = _bad_heads(tmp_path)
     monkeypatch.chdir(tmp_path)
     from scipy.io import wavfile
 
     speech = tmp_path / "speech.wav"
     wavfile.write(speech, 16000, np.zeros(1600, np.int16))
-    # A cache of its own (the shared one is written by other runs), holding only the built-in head.
-    cache = tmp_path_factory.mktemp("cache")
-    for name in ("builtin_head_v1.npz", "builtin_rig_v1.npz"):
-        if (cache_dir() / name).is_file():
-            (cache / name).symlink_to(cache_dir() / name)
-    monkeypatch.setenv("FACECAST_CACHE", str(cache))
-    before_cache = set(cache.rglob("*"))
+    before_cache = set(own_cache.rglob("*"))
     before = set(tmp_path.iterdir())
     capfd.readouterr()
     for case, (head, named, words) in cases.items():
@@ -128,7 +118,7 @@ def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(
         assert any(h in err[0] for h in ("give", "convert", "export")), f"{case}: no way forward in {err[0]!r}"
         (tmp_path / "p.csv").unlink(missing_ok=True)
         assert set(tmp_path.iterdir()) == before, f"{case}: left {set(tmp_path.iterdir()) - before}"
-    assert set(cache.rglob("*")) == before_cache
+    assert set(own_cache.rglob("*")) == before_cache
 
 
 def test_ply_round_trip(tmp_path, shared_data):

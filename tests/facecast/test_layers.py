@@ -15,13 +15,13 @@ from pathlib import Path
 
 import pytest
 
+from facecast import PACKAGES
 from tests.prerequisites import require_tool
 
 # Runs the lint-imports tool.
 pytestmark = pytest.mark.system
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("realtime_core", "wire", "assets", "server", "clients", "training", "benchmarks", "perceptual", "facecast")
 
 
 def _contract() -> dict:

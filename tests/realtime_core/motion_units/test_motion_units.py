@@ -129,6 +129,7 @@ def test_nonnegative_and_ridge_against_lstsq() -> None:
     d = rng.standard_normal((5, 20))
     lam = 0.1 * (k**2).sum(0).mean()
     aug = np.vstack([k, np.sqrt(lam) * np.eye(6)])
+    np.testing.assert_allclose(keys.ridge_rows(), aug, rtol=1e-15)  # the one ridge system (training.fit_maps's too)
     ref = np.linalg.lstsq(aug, np.hstack([d, np.zeros((5, 6))]).T, rcond=None)[0].T
     np.testing.assert_allclose(keys.weights(d), ref, atol=1e-9)
     nn = keys.weights(d, nonnegative=True)
