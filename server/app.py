@@ -681,12 +681,25 @@ class FacecastServer:
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
         feed = await cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
-        await ws.send(describe.view_description_text(feed, req, self.head))
         viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
-        feed.viewers.add(viewer)
-        self.n_viewers += 1
-        sender = self.spawn(viewer.run())
+        join = None
+        sender = None
         try:
+            await ws.send(describe.view_description_text(feed, req, self.head))
+            if feed.row.get("replay"):
+                # A text session's sentence now playing, from the owner (as _view's send_sentence): then
+                # what came since, straight to the socket; registered with no await after the last check,
+                # so every later message reaches the viewer once.
+                join = await cluster.replay(feed, req.header_kind, req.header_encoding, req.audio)
+                await cluster.answer(join)
+                while join.messages:
+                    await ws.send(join.messages.popleft())
+                cluster.forget(feed, join)
+            if feed.ended.is_set():  # ended while it joined (its viewers were closed): it has had every frame
+                raise ProtocolViolation(*feed.end)
+            feed.viewers.add(viewer)
+            self.n_viewers += 1
+            sender = self.spawn(viewer.run())
             reader = asyncio.ensure_future(ws.recv())
             done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
             if reader in done and reader.exception() is None:
@@ -694,9 +707,12 @@ class FacecastServer:
                 raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
             reader.cancel()
         finally:
-            sender.cancel()
-            feed.viewers.discard(viewer)
-            self.n_viewers -= 1
+            if sender is not None:
+                sender.cancel()
+                feed.viewers.discard(viewer)
+                self.n_viewers -= 1
+            if join is not None:
+                cluster.forget(feed, join)
             await cluster.drop_feed_if_idle(feed)
 
     def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
