@@ -264,6 +264,9 @@ class Cluster:
         self.error = ""
         self.local: dict[str, LiveSession] = {}
         self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
+        # Wants announced while the heartbeat scans the want keys (None when it is not scanning): kept
+        # through the scan's result, which may have missed their keys.
+        self._wanted_meanwhile: set[tuple[str, int, int]] | None = None
         self.feeds: dict[str, RemoteFeed] = {}
         self.published = 0
         self.publish_dropped = 0
@@ -489,12 +492,19 @@ class Cluster:
         await pipe.execute()
         # The owner's side: which kinds of its sessions other nodes want now.
         wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
-        for name in list(self.local):
-            async for key in r.scan_iter(match=f"{PREFIX}:want:{name}:*", count=100):
-                k = key.decode() if isinstance(key, bytes) else key
-                _, _, _, kind, enc = k.rsplit(":", 4)
-                wanted[name].add((int(kind), int(enc)))
-        self.wanted = wanted
+        self._wanted_meanwhile = set()
+        try:
+            for name in list(self.local):
+                async for key in r.scan_iter(match=f"{PREFIX}:want:{name}:*", count=100):
+                    k = key.decode() if isinstance(key, bytes) else key
+                    _, _, _, kind, enc = k.rsplit(":", 4)
+                    wanted[name].add((int(kind), int(enc)))
+            for name, kind, enc in self._wanted_meanwhile:
+                if name in self.local:
+                    wanted[name].add((kind, enc))
+            self.wanted = wanted
+        finally:
+            self._wanted_meanwhile = None
         if self._pubsub is not None and self._pubsub.connection is None:
             raise ConnectionError("subscription lost")
 
@@ -613,9 +623,9 @@ class Cluster:
             return
         live = self.local.get(name)
         if live is not None:
-            self.wanted[name].add((kind, encoding))
+            self._want(name, kind, encoding)
             if audio:
-                self.wanted[name].add((P.KIND_AUDIO, P.ENC_INT16))
+                self._want(name, P.KIND_AUDIO, P.ENC_INT16)
             try:
                 messages = live.sentence_messages(kind, encoding, bool(audio))
             except ServerConfigError as exc:  # a kind this node cannot encode (no head here): frames only
@@ -625,6 +635,12 @@ class Cluster:
                 self._publish_to(reply, REPLAY_MARK + tag + m)
         self._publish_to(reply, REPLAY_DONE + tag)
         self.replays_answered += 1
+
+    def _want(self, name: str, kind: int, encoding: int) -> None:
+        """Another node wants ``kind``/``encoding`` of local session ``name`` now (its want key is set)."""
+        self.wanted[name].add((kind, encoding))
+        if self._wanted_meanwhile is not None:
+            self._wanted_meanwhile.add((name, kind, encoding))
 
     async def drop_feed_if_idle(self, feed: RemoteFeed) -> None:
         if feed.viewers or feed.joining or self.feeds.get(feed.name) is not feed:
@@ -699,7 +715,7 @@ class Cluster:
             ctl = json.loads(data)
             want = ctl.get("want")
             if want and want[0] in self.local:
-                self.wanted[want[0]].add((int(want[1]), int(want[2])))
+                self._want(want[0], int(want[1]), int(want[2]))
             if ctl.get("replay"):
                 self._answer_replay(ctl["replay"])
             return
