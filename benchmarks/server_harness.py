@@ -48,12 +48,16 @@ def benchmark_model(path: Path | str | None) -> tuple[AvModel, Path, str]:
 
 
 class ServerProcess:
-    """``facecast serve`` in a child process on a free port; ``url`` once started; ``stop()`` sends SIGTERM."""
+    """``facecast serve`` in a child process on a free port; ``url`` once started; ``stop()`` sends SIGTERM.
+    args: more command-line options (e.g. ``("--text",)``)."""
 
-    def __init__(self, model_path: Path, *, head: bool = True, config_toml: str | None = None) -> None:
+    def __init__(
+        self, model_path: Path, *, head: bool = True, config_toml: str | None = None, args: tuple[str, ...] = ()
+    ) -> None:
         cmd = [str(Path(sys.executable).parent / "facecast"), "serve", "--port", "0", "--model", str(model_path)]
         if not head:
             cmd.append("--no-head")
+        cmd += args
         if config_toml:
             cfg = Path(tempfile.mkdtemp(prefix="fcbench")) / "server.toml"
             cfg.write_text(config_toml)

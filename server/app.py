@@ -29,7 +29,6 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
-import inspect
 import logging
 import signal
 import socket
@@ -47,6 +46,7 @@ from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.frames import DATA_OPCODES, Frame, Opcode
 from websockets.http11 import Request, Response
 from websockets.protocol import Event
+from websockets.server import ServerProtocol
 
 from assets.heads.head import Head
 from realtime_core.mapping import SpeechModel
@@ -118,6 +118,7 @@ class FacecastServer:
         self.stopping = False
         self.pool: WorkerPool | None = None
         self.shards: ConnectionWorkers | None = None  # worker_mode "connections": this is the front
+        self._connection_class: type[FacecastConnection] = FacecastConnection  # with a router at a front (start)
         self.registry: FrontRegistry | None = None  # set in a connection worker: names are claimed at the front
         self.cluster: Cluster | None = None
         self.text_backend: TextBackend | None = None  # enables /text (set by `facecast serve --text`)
@@ -142,6 +143,7 @@ class FacecastServer:
             if running_loop_name() != "asyncio":  # it would read every request itself: server.eventloop.process_loop
                 raise ServerConfigError("the front of connection workers must run on asyncio's event loop")
             self.shards = ConnectionWorkers(self, cfg.workers)
+        self._connection_class = _connection_class(self.shards)
         where: dict[str, Any] = {"host": cfg.host, "port": cfg.port}
         if not listen:
             # websockets answers 503 unless its server is serving: it serves on a Unix socket of no name
@@ -153,12 +155,12 @@ class FacecastServer:
             self._server = await serve(
                 self._handle,
                 compression=None,  # permessage-deflate would cost ~20x the CPU of a frame
-                max_size=cfg.max_message_bytes,
-                close_timeout=cfg.close_timeout_s,
                 open_timeout=cfg.handshake_timeout_s,
+                **_protocol_options(cfg),
+                **_connection_options(cfg),
                 process_request=self._process_request,
                 server_header="facecast",
-                create_connection=_connection_class(self.shards),
+                create_connection=self._connection_class,
                 **where,
             )
         except OSError as exc:
@@ -218,12 +220,21 @@ class FacecastServer:
         """Serve a connection accepted elsewhere (the front of connection workers, server.shards) as
         if this server's listener had accepted it: the same handshake checks and handlers.
 
-        websockets has no public call for this; its server's ``create_server`` closes over the connection
-        factory it gives the loop's listener (uvloop's listener, unlike asyncio's, does not expose it), so the
-        connection is made exactly as an accepted one would be."""
-        assert self._server is not None  # started
-        factory = inspect.getclosurevars(self._server.create_server).nonlocals["protocol_factory"]  # see above
-        await asyncio.get_running_loop().connect_accepted_socket(factory, sock)
+        Built from websockets' public pieces as its ``serve`` builds an accepted connection: a sans-I/O
+        ``ServerProtocol`` and a ``ServerConnection`` (our class, ``serve``'s ``create_connection``) of this
+        server, whose ``connection_made`` starts the server's handler (handshake with ``open_timeout``,
+        then :meth:`_handle`), with the options ``serve`` was given (:func:`_protocol_options`,
+        :func:`_connection_options`; the rest are the same defaults on both sides: no compression means
+        no extensions, and Origin is checked in :meth:`_process_request`, not by ``origins``)."""
+        server = self._server
+        assert server is not None  # started
+        cfg = self.config
+
+        def connection() -> ServerConnection:
+            protocol = ServerProtocol(**_protocol_options(cfg))
+            return self._connection_class(protocol, server, **_connection_options(cfg))
+
+        await asyncio.get_running_loop().connect_accepted_socket(connection, sock)
 
     @property
     def port(self) -> int:
@@ -670,12 +681,25 @@ class FacecastServer:
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
         feed = await cluster.feed(req.session, row, req.header_kind, req.header_encoding, req.audio)
-        await ws.send(describe.view_description_text(feed, req, self.head))
         viewer = Viewer(ws, feed, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
-        feed.viewers.add(viewer)
-        self.n_viewers += 1
-        sender = self.spawn(viewer.run())
+        join = None
+        sender = None
         try:
+            await ws.send(describe.view_description_text(feed, req, self.head))
+            if feed.row.get("replay"):
+                # A text session's sentence now playing, from the owner (as _view's send_sentence): then
+                # what came since, straight to the socket; registered with no await after the last check,
+                # so every later message reaches the viewer once.
+                join = await cluster.replay(feed, req.header_kind, req.header_encoding, req.audio)
+                await cluster.answer(join)
+                while join.messages:
+                    await ws.send(join.messages.popleft())
+                cluster.forget(feed, join)
+            if feed.ended.is_set():  # ended while it joined (its viewers were closed): it has had every frame
+                raise ProtocolViolation(*feed.end)
+            feed.viewers.add(viewer)
+            self.n_viewers += 1
+            sender = self.spawn(viewer.run())
             reader = asyncio.ensure_future(ws.recv())
             done, _ = await asyncio.wait({reader, sender}, return_when=asyncio.FIRST_COMPLETED)
             if reader in done and reader.exception() is None:
@@ -683,9 +707,12 @@ class FacecastServer:
                 raise ProtocolViolation(P.CLOSE_POLICY, "viewers do not send messages")
             reader.cancel()
         finally:
-            sender.cancel()
-            feed.viewers.discard(viewer)
-            self.n_viewers -= 1
+            if sender is not None:
+                sender.cancel()
+                feed.viewers.discard(viewer)
+                self.n_viewers -= 1
+            if join is not None:
+                cluster.forget(feed, join)
             await cluster.drop_feed_if_idle(feed)
 
     def _deliver_remote(self, feed: RemoteFeed, msg: bytes, kind: int, enc: int) -> None:
@@ -883,6 +910,16 @@ def _handled(ws: ServerConnection) -> None:
     """The handler is done with a message it received (the fast path may go on, see FacecastConnection)."""
     if isinstance(ws, FacecastConnection):
         ws.queued -= 1
+
+
+def _protocol_options(cfg: ServerConfig) -> dict[str, Any]:
+    """Options of websockets' ``ServerProtocol`` that differ from its defaults (``serve`` and adopt)."""
+    return {"max_size": cfg.max_message_bytes}
+
+
+def _connection_options(cfg: ServerConfig) -> dict[str, Any]:
+    """Options of websockets' ``ServerConnection`` that differ from its defaults (``serve`` and adopt)."""
+    return {"close_timeout": cfg.close_timeout_s}
 
 
 def _connection_class(shards: ConnectionWorkers | None) -> type[FacecastConnection]:

@@ -22,6 +22,10 @@ session:
   refreshed by the heartbeat) and publishes it on the owner's control channel so the owner starts
   publishing that kind at once; the owner re-reads the wants every heartbeat. So a kind nobody
   outside the owner watches (vertex deltas, say) is never encoded for Redis.
+* **Late text viewers.** A viewer joining a text session on another node mid-sentence gets what a
+  viewer joining on the owner gets (the sentence so far, then live): its node asks the owner
+  (:meth:`Cluster.replay`), which answers on the asking node's control channel in order with the frames
+  (:class:`ReplayJoin`).
 * **Roles.** ``role = "both"`` (default) computes the sessions whose ingest lands on it and serves
   viewers; ``"edge"`` computes nothing: an ingest landing on it is forwarded (a WebSocket relay,
   both ways, close code included) to the least loaded computing node; ``"compute"`` is a hint for
@@ -51,11 +55,12 @@ import collections
 import contextlib
 import json
 import logging
+import os
 import time
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any
 
-from server.errors import ServerError
+from server.errors import ServerConfigError, ServerError
 from wire import protocol as P
 
 if TYPE_CHECKING:
@@ -69,6 +74,13 @@ log = logging.getLogger("facecast.cluster")
 
 PREFIX = "facecast"
 END_MARK = b"\x00END"  # first bytes of the end marker: never a binary frame (those start with version 1)
+# A text session's sentence replayed to one joining viewer on another node (see Cluster.replay): each
+# message as REPLAY_MARK + request id + the message, then REPLAY_DONE + request id.
+REPLAY_MARK = b"\x00RPL"
+REPLAY_DONE = b"\x00RPD"
+REQUEST_ID_BYTES = 16  # a request id: 16 hex characters
+SUBSCRIBE_WAIT_S = 2.0  # how long a replay request waits for Redis to confirm the feed's subscription
+ANSWER_WAIT_S = 2.0  # how long a joining viewer waits for the owner's replay before joining without it
 PUBLISH_QUEUE = 4096  # messages waiting for Redis before the oldest is dropped
 
 
@@ -114,6 +126,36 @@ class RemoteFeed:
         self.dropped = 0
         self.session = self.facts  # what descriptions read, as of a LiveSession
         self.descriptions: dict[ViewRequest, str] = {}  # server.describe.view_description_text's cache
+        self.joining: dict[bytes, ReplayJoin] = {}  # viewers being sent the owner's replay, by request id
+
+
+class ReplayJoin:
+    """One viewer joining a remote text session: what it is to be sent before it joins the feed's
+    fan-out, in order. The owner's answer (the sentence so far, then a done marker) leaves on the owner's
+    one publish connection in the same turn that adds the viewer's kind to its wants, so on this node's
+    one subscription connection every live message of the session arrives either before the done marker
+    (already in the sentence, or before it: dropped, as the owner's own joining viewer never gets it) or
+    after it (kept here until the viewer has been sent the sentence). Without an answer within the
+    timeout the viewer joins without the sentence (``gave_up``)."""
+
+    def __init__(self, kind: int, encoding: int, audio: bool) -> None:
+        self.kind, self.encoding, self.audio = kind, encoding, audio
+        self.messages: collections.deque[bytes] = collections.deque()
+        self.answered = asyncio.Event()
+        self.gave_up = False
+        self.request_id = b""
+
+    def replayed(self, message: bytes) -> None:
+        if not self.gave_up and not self.answered.is_set():
+            self.messages.append(message)
+
+    def live(self, message: bytes, kind: int, encoding: int) -> None:
+        """A live message of the session: kept once the answer is complete (or given up on), if the
+        viewer watches its kind."""
+        if not (self.answered.is_set() or self.gave_up):
+            return
+        if (kind == P.KIND_AUDIO and self.audio) or (kind == self.kind and encoding == self.encoding):
+            self.messages.append(message)
 
 
 def _resp(*parts: bytes) -> bytes:
@@ -222,6 +264,9 @@ class Cluster:
         self.error = ""
         self.local: dict[str, LiveSession] = {}
         self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
+        # Wants announced while the heartbeat scans the want keys (None when it is not scanning): kept
+        # through the scan's result, which may have missed their keys.
+        self._wanted_meanwhile: set[tuple[str, int, int]] | None = None
         self.feeds: dict[str, RemoteFeed] = {}
         self.published = 0
         self.publish_dropped = 0
@@ -234,6 +279,9 @@ class Cluster:
         self._oneshots: set[asyncio.Task[None]] = set()
         self._pubsub: PubSub | None = None
         self._subscribed: set[str] = set()
+        self._confirmed: dict[str, asyncio.Event] = {}  # channel -> set when Redis confirms the subscription
+        self._joins: dict[bytes, ReplayJoin] = {}  # this node's replay requests waiting for their answer
+        self.replays_answered = 0
 
     @property
     def _client(self) -> aioredis.Redis:
@@ -292,6 +340,7 @@ class Cluster:
             "remote_feeds": len(self.feeds),
             "published": self.published,
             "publish_dropped": self.publish_dropped,
+            "replays_answered": self.replays_answered,
         }
 
     # -- sessions this node owns --------------------------------------------------------------------------
@@ -309,6 +358,7 @@ class Cluster:
                 "rate_hz": s.rate_hz,
                 "algorithmic_delay_s": s.algorithmic_delay_s,
                 "published_kinds": sorted(self.wanted.get(live.name, ())),
+                "replay": live.replay is not None,  # a joining viewer first gets the sentence so far
             }
         )
         return json.dumps(row)
@@ -351,7 +401,11 @@ class Cluster:
     def publish(self, name: str, message: bytes) -> None:
         """Send one message to the session's channel: written at once on the publish connection when it
         is up and nothing is queued before it, else queued (bounded); never waits, never raises."""
-        channel = frames_channel(name)
+        self._publish_to(frames_channel(name), message)
+
+    def _publish_to(self, channel: str, message: bytes) -> None:
+        """:meth:`publish` to any channel: one path for every message, so they reach Redis in the order
+        they were published (a replay answer and the session's frames, see :class:`ReplayJoin`)."""
         if not self._queue and self._raw.write(channel, message):
             self.published += 1
             return
@@ -438,12 +492,19 @@ class Cluster:
         await pipe.execute()
         # The owner's side: which kinds of its sessions other nodes want now.
         wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
-        for name in list(self.local):
-            async for key in r.scan_iter(match=f"{PREFIX}:want:{name}:*", count=100):
-                k = key.decode() if isinstance(key, bytes) else key
-                _, _, _, kind, enc = k.rsplit(":", 4)
-                wanted[name].add((int(kind), int(enc)))
-        self.wanted = wanted
+        self._wanted_meanwhile = set()
+        try:
+            for name in list(self.local):
+                async for key in r.scan_iter(match=f"{PREFIX}:want:{name}:*", count=100):
+                    k = key.decode() if isinstance(key, bytes) else key
+                    _, _, _, kind, enc = k.rsplit(":", 4)
+                    wanted[name].add((int(kind), int(enc)))
+            for name, kind, enc in self._wanted_meanwhile:
+                if name in self.local:
+                    wanted[name].add((kind, enc))
+            self.wanted = wanted
+        finally:
+            self._wanted_meanwhile = None
         if self._pubsub is not None and self._pubsub.connection is None:
             raise ConnectionError("subscription lost")
 
@@ -503,14 +564,93 @@ class Cluster:
         await pipe.execute()
         return feed
 
+    async def replay(self, feed: RemoteFeed, kind: int, encoding: int, audio: bool) -> ReplayJoin:
+        """Ask the owner of remote text session ``feed`` for the sentence now playing, encoded for one
+        joining viewer (``kind``/``encoding``, and audio), as its own joining viewer gets it
+        (server.live.LiveSession.send_sentence). The answer comes on this node's control channel, in
+        order with the session's frames (:class:`ReplayJoin`); wait for it with :meth:`answer`, then
+        send the join's messages and register the viewer, and :meth:`forget` the join in any case.
+
+        Request/answer rather than the owner keeping the sentence in Redis (a stream): the replay is
+        encoded for the joining viewer's kind, which the owner would otherwise publish in every kind for
+        every frame of every text session; it holds the sentence in memory already; and an answer on
+        the owner's one publish connection lines up with the live frames, so the viewer gets each
+        output once with no gap (a stream read and a subscription are two connections, unordered)."""
+        from redis.exceptions import RedisError
+
+        join = ReplayJoin(kind, encoding, audio)
+        join.request_id = rid = os.urandom(REQUEST_ID_BYTES // 2).hex().encode()
+        feed.joining[rid] = join
+        self._joins[rid] = join
+        confirmed = self._confirmed.get(frames_channel(feed.name))
+        try:
+            # The answer's done marker is where the viewer switches to the live frames: the feed's
+            # subscription must be in place before the owner sends it, or frames right after it are lost.
+            if confirmed is None:
+                raise ConnectionError("the feed is not subscribed")
+            await asyncio.wait_for(confirmed.wait(), SUBSCRIBE_WAIT_S)
+            request = {"replay": [feed.name, kind, encoding, audio, self.node, rid.decode()]}
+            await self._client.publish(control_channel(feed.row["node"]), json.dumps(request))
+        except (RedisError, OSError, TimeoutError) as exc:
+            log.debug("replay request for %r failed: %s (the viewer joins without it)", feed.name, exc)
+            join.gave_up = True
+        return join
+
+    async def answer(self, join: ReplayJoin, timeout_s: float = ANSWER_WAIT_S) -> None:
+        """Wait for the owner's whole answer (or the end of the session); without it in ``timeout_s`` the
+        viewer joins without the sentence."""
+        if join.gave_up:
+            return
+        try:
+            await asyncio.wait_for(join.answered.wait(), timeout_s)
+        except TimeoutError:
+            log.warning("no replay from the owner within %g s (the viewer joins without it)", timeout_s)
+            join.gave_up = True
+            join.messages.clear()
+
+    def forget(self, feed: RemoteFeed, join: ReplayJoin) -> None:
+        feed.joining.pop(join.request_id, None)
+        self._joins.pop(join.request_id, None)
+
+    def _answer_replay(self, request: list) -> None:
+        """The owner's side of :meth:`replay`: note the viewer's kinds as wanted, then publish the sentence
+        so far and the done marker to the asking node, all in this turn of the loop."""
+        try:
+            name, kind, encoding, audio, node, rid = request
+            kind, encoding, reply, tag = int(kind), int(encoding), control_channel(str(node)), str(rid).encode()
+        except (ValueError, TypeError):  # not from a node of this version: nothing to answer
+            log.warning("malformed replay request %.200r ignored", request)
+            return
+        live = self.local.get(name)
+        if live is not None:
+            self._want(name, kind, encoding)
+            if audio:
+                self._want(name, P.KIND_AUDIO, P.ENC_INT16)
+            try:
+                messages = live.sentence_messages(kind, encoding, bool(audio))
+            except ServerConfigError as exc:  # a kind this node cannot encode (no head here): frames only
+                log.warning("replay of %r as kind %d/%d failed: %s", name, kind, encoding, exc)
+                messages = []
+            for m in messages:
+                self._publish_to(reply, REPLAY_MARK + tag + m)
+        self._publish_to(reply, REPLAY_DONE + tag)
+        self.replays_answered += 1
+
+    def _want(self, name: str, kind: int, encoding: int) -> None:
+        """Another node wants ``kind``/``encoding`` of local session ``name`` now (its want key is set)."""
+        self.wanted[name].add((kind, encoding))
+        if self._wanted_meanwhile is not None:
+            self._wanted_meanwhile.add((name, kind, encoding))
+
     async def drop_feed_if_idle(self, feed: RemoteFeed) -> None:
-        if feed.viewers or self.feeds.get(feed.name) is not feed:
+        if feed.viewers or feed.joining or self.feeds.get(feed.name) is not feed:
             return
         del self.feeds[feed.name]
         await self._unsubscribe(frames_channel(feed.name))
 
     async def _subscribe(self, channel: str) -> None:
         self._subscribed.add(channel)
+        self._confirmed.setdefault(channel, asyncio.Event())
         if self._pubsub is not None:
             try:
                 await self._pubsub.subscribe(channel)
@@ -524,6 +664,7 @@ class Cluster:
 
     async def _unsubscribe(self, channel: str) -> None:
         self._subscribed.discard(channel)
+        self._confirmed.pop(channel, None)
         if self._pubsub is not None:
             try:
                 await self._pubsub.unsubscribe(channel)
@@ -536,17 +677,24 @@ class Cluster:
 
         while True:
             try:
-                self._pubsub = pubsub = self._client.pubsub(ignore_subscribe_messages=True)
+                self._pubsub = pubsub = self._client.pubsub()
                 await pubsub.subscribe(control_channel(self.node), *self._subscribed)
                 while True:
                     msg = await pubsub.get_message(timeout=1.0)
                     if msg is None:
                         continue
-                    self._on_message(msg)
+                    if msg["type"] == "message":
+                        self._on_message(msg)
+                    elif msg["type"] == "subscribe":  # Redis confirms: messages on it reach us from now on
+                        confirmed = self._confirmed.get(_text(msg["channel"]))
+                        if confirmed is not None:
+                            confirmed.set()
             except asyncio.CancelledError:
                 raise
             except (RedisError, OSError) as exc:
                 self._down(exc)
+                for confirmed in self._confirmed.values():
+                    confirmed.clear()
                 if self._pubsub is not None:
                     with contextlib.suppress(Exception):  # already broken
                         await self._pubsub.aclose()
@@ -554,12 +702,22 @@ class Cluster:
                 await asyncio.sleep(0.5)
 
     def _on_message(self, msg: dict) -> None:
-        channel = msg["channel"].decode() if isinstance(msg["channel"], bytes) else msg["channel"]
+        channel = _text(msg["channel"])
         data = msg["data"]
         if channel == control_channel(self.node):
-            want = json.loads(data).get("want")
+            if data[:4] in (REPLAY_MARK, REPLAY_DONE):  # an answer to this node's replay request
+                join = self._joins.get(data[4 : 4 + REQUEST_ID_BYTES])
+                if join is not None and data[:4] == REPLAY_MARK:
+                    join.replayed(data[4 + REQUEST_ID_BYTES :])
+                elif join is not None:
+                    join.answered.set()
+                return
+            ctl = json.loads(data)
+            want = ctl.get("want")
             if want and want[0] in self.local:
-                self.wanted[want[0]].add((int(want[1]), int(want[2])))
+                self._want(want[0], int(want[1]), int(want[2]))
+            if ctl.get("replay"):
+                self._answer_replay(ctl["replay"])
             return
         name = channel[len(f"{PREFIX}:frames:") :]
         feed = self.feeds.get(name)
@@ -569,6 +727,8 @@ class Cluster:
             end = json.loads(data[4:])
             feed.end = (int(end["code"]), str(end["reason"]))
             feed.ended.set()
+            for join in feed.joining.values():  # nothing more will come: they send what they have
+                join.answered.set()
             self.feeds.pop(name, None)
             self._oneshot(self._unsubscribe(channel))
             self._oneshot(self._end_feed(feed))
@@ -578,4 +738,11 @@ class Cluster:
         kind, enc = data[1], data[2]
         if kind != P.KIND_AUDIO:
             feed.frames += 1
+        for join in feed.joining.values():
+            join.live(data, kind, enc)
         self._deliver(feed, data, kind, enc)
+
+
+def _text(channel: bytes | str) -> str:
+    """A channel name as redis-py reports it (bytes unless the client decodes responses) -> str."""
+    return channel.decode() if isinstance(channel, bytes) else channel

@@ -22,6 +22,7 @@ import collections
 import contextlib
 import logging
 import time
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -172,6 +173,16 @@ class SentenceReplay:
     def since(self, index: int) -> list[Output]:
         """The kept outputs whose frames start at ``index`` or later."""
         return [o for o in self.outputs if o.frames and o.frames[0].index >= index]
+
+
+def _replay_messages(outs: list[Output], kind: int, encoding: int, audio: bool) -> Iterator[bytes]:
+    """Replayed outputs' messages in the fan-out's order (each audio block before its frame), stamped
+    as they are made."""
+    for out in outs:
+        now = time.time()
+        if audio and out.audio is not None:
+            yield audio_message(out, now)
+        yield from frame_messages(out, kind, encoding, now)
 
 
 def deliver(viewers: list[Viewer], msg: bytes, now: float) -> None:
@@ -417,13 +428,17 @@ class LiveSession:
             return
         nxt = -1
         while outs := replay.since(nxt):
-            for out in outs:
-                now = time.time()
-                if audio and out.audio is not None:
-                    await ws.send(audio_message(out, now))
-                for msg in frame_messages(out, kind, encoding, now):
-                    await ws.send(msg)
+            for msg in _replay_messages(outs, kind, encoding, audio):
+                await ws.send(msg)
             nxt = outs[-1].frames[-1].index + 1
+
+    def sentence_messages(self, kind: int, encoding: int, audio: bool) -> list[bytes]:
+        """The sentence now playing as :meth:`send_sentence` would send it now, all at once ([] when none
+        is playing): a viewer joining on another node is sent these (server.cluster.Cluster.replay)."""
+        replay = self.replay
+        if replay is None or not replay.playing(time.perf_counter()):
+            return []
+        return list(_replay_messages(replay.since(-1), kind, encoding, audio))
 
     def _fanout(self, out: Output) -> int:
         """Hand one push's frames and audio to the viewers (here and, with a cluster, on other nodes).

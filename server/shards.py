@@ -15,9 +15,10 @@ in its own process, and the *front* (the process that listens) hands it accepted
   else (plain HTTP, ``/text``, a viewer of a session the front runs itself or of no session, a request
   line that does not come) stays in the front. A connection handed over is sent with ``SCM_RIGHTS``
   (``socket.send_fds``) over the worker's control socket; the front then drops its own descriptor.
-  The worker adopts it (``loop.connect_accepted_socket`` with its websockets server's connection
-  factory) and runs the whole handshake (Host, Origin, token checks) and the connection there, so a
-  session's receive, model, encoding and fan-out all happen in the process that owns it.
+  The worker adopts it (``FacecastServer.adopt``: ``loop.connect_accepted_socket`` with a connection
+  built as its websockets server builds an accepted one) and runs the whole handshake (Host, Origin,
+  token checks) and the connection there, so a session's receive, model, encoding and fan-out all
+  happen in the process that owns it.
 * Session names stay unique server-wide: a worker opening a session *claims* the name from the front
   (the front runs the one admission check, ``FacecastServer._admission``, over its own sessions and
   every worker's) and releases it when the session ends. The front routes viewers by that registry.

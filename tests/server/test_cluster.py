@@ -20,9 +20,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from websockets.asyncio.client import connect
 
 from benchmarks.server_harness import ServerProcess
-from clients.client import IngestClient, ViewerClient, http_get, stream_samples
+from clients.client import IngestClient, ViewerClient, http_get, stream_samples, ws_url
 from tests.prerequisites import missing
 from tests.speech import speechlike
 from wire import protocol as P
@@ -95,12 +96,12 @@ def redis_server():
         r.stop()
 
 
-def _node(model_path, redis_url: str, name: str, role: str = "both") -> ServerProcess:
+def _node(model_path, redis_url: str, name: str, role: str = "both", args: tuple[str, ...] = ()) -> ServerProcess:
     toml = (
         f'[server]\nredis_url = "{redis_url}"\nnode_id = "{name}"\nheartbeat_s = 0.2\nclose_timeout_s = 1.0\n'
         f'role = "{role}"\n'
     )
-    return ServerProcess(model_path, head=False, config_toml=toml)
+    return ServerProcess(model_path, head=False, config_toml=toml, args=args)
 
 
 async def _get_json(url: str, path: str) -> dict:
@@ -176,6 +177,79 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
         f"cluster: far-node minus near-node receipt, median {np.median(lag) * 1e3:.2f} ms, "
         f"p99 {np.percentile(lag, 99) * 1e3:.2f} ms"
     )
+
+
+LONG = "Where were you when the lights went out, and the quick brown fox jumps over the lazy dog? "
+
+
+async def _messages(viewer: ViewerClient) -> tuple[list[P.Message], list[float]]:
+    """Every message a viewer receives until the server closes, in order (frames and audio interleaved),
+    and when each arrived (time.perf_counter())."""
+    out, at = [], []
+    async for m in viewer:
+        out.append(m)
+        at.append(time.perf_counter())
+    return out, at
+
+
+def test_a_late_text_viewer_on_any_node_gets_the_sentence_so_far(model_path, redis_server):
+    """docs/protocol.md section 3 across the cluster: viewers that join a text session mid-sentence at the
+    same moment, one on the owner node and one on another node, receive the same messages in the same
+    order: the sentence from its first frame (each audio block before its frame), then the live stream
+    to the end. (The viewer on the other node used to get only the frames after it joined.)"""
+    nodes = [_node(model_path, redis_server.url, n, args=("--text",)) for n in ("a", "b")]
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        async with connect(ws_url(a, "/text")) as ws:
+            await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            await _until(lambda: _rows_if(b, "bot"), what="registry")
+            await ws.send(json.dumps({"type": "text", "text": LONG}))
+            spoken = json.loads(await ws.recv())
+            t_spoken = time.perf_counter()
+            await asyncio.sleep(1.0)  # the sentence (several seconds) is playing, ~1.5 s of it released
+            va, vb = (ViewerClient(u, session="bot", audio=True) for u in (a, b))
+            await asyncio.gather(va.__aenter__(), vb.__aenter__())
+            t_joined = time.perf_counter()
+            joined_s = t_joined - t_spoken
+            got = asyncio.gather(_messages(va), _messages(vb))
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            (ma, at_a), (mb, at_b) = await asyncio.wait_for(got, 30)
+        health = await _get_json(a, "/health")
+        # Reported, not asserted: how long each viewer took to get the sentence so far (the frames up to
+        # its media time at the join, which had left the owner by then).
+        for node, msgs, at in (("a (owner)", ma, at_a), ("b", mb, at_b)):
+            k = max(i for i, m in enumerate(msgs) if m.media_time <= joined_s)
+            print(
+                f"late text viewer on node {node}: first message {1e3 * (at[0] - t_joined):.1f} ms after the "
+                f"join, the {k + 1} messages of the sentence so far {1e3 * (at[k] - t_joined):.1f} ms"
+            )
+        return spoken, joined_s, ended, (ma, va.close_code), (mb, vb.close_code), health
+
+    try:
+        spoken, joined_s, ended, (ma, ca), (mb, cb), health = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert joined_s < spoken["duration_s"] - 1.0  # they joined while the sentence played
+    n = ended["frames"]
+    assert [m.index for m in ma if m.kind != P.KIND_AUDIO] == list(range(n))  # from the sentence's first frame
+    assert [m.index for m in ma if m.kind == P.KIND_AUDIO] == list(range(n))
+    assert ma[0].kind == P.KIND_AUDIO and ma[1].kind == P.KIND_PARAMS  # each audio block before its frame
+    assert len(mb) == len(ma)
+    for x, y in zip(ma, mb):  # the same messages but for the send-time stamps
+        assert (x.kind, x.encoding, x.index, x.media_time, x.scale) == (
+            y.kind,
+            y.encoding,
+            y.index,
+            y.media_time,
+            y.scale,
+        )
+        np.testing.assert_array_equal(x.values, y.values)
+    assert ca == cb == P.CLOSE_NORMAL
+    assert health["replays_answered"] == 1  # b's viewer was answered by the owner
 
 
 def test_killing_an_edge_node_loses_no_session(model_path, redis_server):

@@ -102,14 +102,18 @@ def test_connection_workers_give_the_frames_of_one_process(model, head, wav48k):
     assert sorted(w["sessions"] for w in metrics["workers"]) == [1, 1]  # one per worker
 
 
-def test_bad_clients_close_one_connection_and_names_stay_unique(model):
-    """A malformed message closes that connection with its code and reason; a session name taken
-    on one worker is refused on the other; a viewer of no session gets 4004; the healthy session
-    loses no frame."""
+@pytest.mark.parametrize("worker_loop", ["uvloop", "asyncio"])
+def test_bad_clients_close_one_connection_and_names_stay_unique(model, worker_loop):
+    """A malformed message closes that connection with its code and reason; a message over
+    max_message_bytes gets 1009 (the adopted connection has the listener's limits); a session name
+    taken on one worker is refused on the other; a viewer of no session gets 4004; the healthy
+    session loses no frame. Workers on either loop (each adopts the connections the front hands it)."""
     pcm = _int16(speechlike(2.0, 16000, seed=5))
 
     async def main():
-        async with running(model, workers=2, worker_mode="connections") as srv:
+        async with running(
+            model, workers=2, worker_mode="connections", event_loop=worker_loop, max_message_bytes=1 << 16
+        ) as srv:
             url = srv.url
             async with IngestClient(url, session="dup", sample_rate_hz=16000) as ing:
                 async with ViewerClient(url, session="dup", audio=False) as view:
@@ -123,16 +127,18 @@ def test_bad_clients_close_one_connection_and_names_stay_unique(model):
                         lambda: _raw(url, "/ingest", _start(session="g", token=None), b"\x01\x02\x03")
                     )
                     nobody = await _expect_close(lambda: ViewerClient(url, session="nobody").__aenter__())
+                    big = await _expect_close(lambda: _raw(url, "/ingest", b"\x00" * 70000))
                     await feed
                     ended = await ing.end()
                     got = await collect
             status, body = await http_get(url, "/health")
-            return taken, garbage, nobody, ended, got, status, json.loads(body)
+            return taken, garbage, nobody, big, ended, got, status, json.loads(body)
 
-    taken, garbage, nobody, ended, got, status, health = asyncio.run(main())
+    taken, garbage, nobody, big, ended, got, status, health = asyncio.run(main())
     assert taken[0] == P.CLOSE_CONFLICT and "already exists" in taken[1]
     assert garbage[0] == P.CLOSE_INVALID_PAYLOAD and "not a whole number" in garbage[1]
     assert nobody[0] == P.CLOSE_NOT_FOUND
+    assert big[0] == P.CLOSE_TOO_BIG
     assert [m.index for m in got.frames] == list(range(ended["frames"])) and ended["frames"] > 50
     assert status == 200 and health["status"] == "ok" and health["sessions"] == 0
 
