@@ -136,6 +136,8 @@ let caught = null; // the frame that froze the page {n, index, peak}
 
 function connect(name) {
   if (ws) return;
+  // A new connection is a new timeline: what the last one left queued is dropped only now (see onclose).
+  resetStream();
   const kind = KINDS[kindLevel];
   const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
   if (kind === "deltas") q.set("encoding", "int16");
@@ -187,7 +189,6 @@ function connect(name) {
     if (ev.code === CLOSE.BAD_REQUEST && /no head|no morph targets/.test(ev.reason) && kindLevel < KINDS.length - 1) {
       // This kind is unavailable (no head driven by its own targets, or no head): ask for the next, at once.
       kindLevel = /no head/.test(ev.reason) ? KINDS.length - 1 : kindLevel + 1;
-      resetStream();
       connect(name);
       return;
     }
@@ -199,7 +200,9 @@ function connect(name) {
       [CLOSE.UNAUTHORIZED]: "wrong or missing token (add ?token=...)",
     }[ev.code] ?? `connection closed (${ev.code})`;
     setStatus(`${why}; waiting for "${state.wanted ?? "any session"}" to (re)start`);
-    resetStream();
+    // The queue is kept: a session's last frames (its lookahead, flushed at the end) arrive just before
+    // the close and wait for their due time while their audio, already scheduled, still plays; tick()
+    // shows them, so the face ends where the speech ends instead of freezing on the frame shown at the close.
     setTimeout(pollSessions, 200);
   };
 }

@@ -258,3 +258,34 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
 
     assert deltas["state"]["kind"] == "deltas" and deltas["state"]["frames"] >= 30  # the fallback still works
     assert done["console_errors"] == []
+
+
+END_SCRIPT = Path(__file__).with_name("end_check.mjs")
+
+
+def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
+    """The last frames of a session arrive together just before the server closes the socket (the
+    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
+    time, while their audio is already scheduled. The page must still show them: the face ends where
+    the speech ends, not frozen on whatever frame was due when the socket closed."""
+    _require_browser()
+    name = "endcheck"
+    srv = LiveServer(model, head)
+    session = srv.submit(stream_session(srv.url, name, 12.0, samples=speechlike(12.0, 16000, seed=3)))
+    proc = subprocess.Popen(
+        ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        ended = _read_step(proc, "ended")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        reply = session.result(60)
+        srv.stop()
+
+    assert ended["closeCode"] == 1000  # the session ended normally
+    last_sent = reply["frames"] - 1  # frame indices count from 0
+    applied = [r["index"] for r in ended["applied"]]
+    assert applied and applied[-1] == last_sent, f"last frames applied {applied[-8:]}, the session's last {last_sent}"
+    assert ended["console_errors"] == []
