@@ -208,7 +208,10 @@ def run(args: argparse.Namespace) -> int:
     k = stored.corpus.n_coefficients
     params = motion[:, k:]
     track = Track(values=params)
-    head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
+    head = None
+    if any(o.suffix.lower() in (".mp4", ".glb") for o in outs):
+        head = resolve_from_args(args)
+        t = lap("head", t)  # its own lap: it was counted in the first output's time (e.g. "write .csv 3852 ms")
     for out in outs:
         if out.suffix.lower() == ".mp4":
             from assets.heads.landmarks import credit_for

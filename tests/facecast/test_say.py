@@ -52,6 +52,7 @@ def test_say_writes_valid_mp4_csv_glb(corpus_file, tmp_path, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert "recorded units" in out and "timings:" in out
+    assert ", head " in out  # resolving the head is timed on its own, not in the first output's time
     rows = list(csv.DictReader(csv_path.open()))
     n = len(rows)
     assert list(rows[0]) == ["t", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
