@@ -289,3 +289,33 @@ def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
     applied = [r["index"] for r in ended["applied"]]
     assert applied and applied[-1] == last_sent, f"last frames applied {applied[-8:]}, the session's last {last_sent}"
     assert ended["console_errors"] == []
+
+
+START_SCRIPT = Path(__file__).with_name("start_check.mjs")
+
+
+def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
+    """A page opened on ?session=S before S starts polls for it; the server replays nothing to a later
+    viewer and S's first frame leaves ~0.2 s after its audio starts, so the page must find S within
+    that. The session starts right after one of the page's polls: polling every 1 s, the page's
+    first frame was about frame 25."""
+    _require_browser()
+    name = "startcheck"
+    srv = LiveServer(model, head)
+    proc = subprocess.Popen(
+        ["node", str(START_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    session = None
+    try:
+        _read_step(proc, "polled")
+        session = srv.submit(stream_session(srv.url, name, 4.0, samples=speechlike(4.0, 16000, seed=5)))
+        joined = _read_step(proc, "joined")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        if session is not None:
+            session.result(60)
+        srv.stop()
+    assert joined["state"]["firstIndex"] <= 3, joined["state"]
+    assert joined["console_errors"] == []
