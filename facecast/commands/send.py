@@ -8,7 +8,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
-    from facecast.commands.view import DEFAULT_URL
+    from facecast.commands.view import DEFAULT_URL, add_token_option
 
     p = sub.add_parser(
         "send",
@@ -24,12 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
     p.add_argument("--session", default=None, help="session name (default %(default)s = the file's name)")
     p.add_argument("--fast", action="store_true", help="send as fast as the server takes it instead of in real time")
-    p.add_argument(
-        "--token-env",
-        default=None,
-        metavar="VAR",
-        help="environment variable holding the server's token (default %(default)s = no token)",
-    )
+    add_token_option(p)
     p.set_defaults(run=run)
 
 
