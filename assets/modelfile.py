@@ -55,8 +55,10 @@ def _read(path: Path) -> bytes:
     try:
         data = path.read_bytes()
     except FileNotFoundError:
-        shipped = path in SHIPPED_MODELS.values()
-        hint = " (shipped models come with facecast; reinstall or pass --model FILE)" if shipped else ""
+        if path in SHIPPED_MODELS.values():
+            hint = " (shipped models come with facecast; reinstall or pass --model FILE)"
+        else:  # a mistyped shipped name reads as a missing file: say which names there are
+            hint = f" (nor a shipped name: {', '.join(SHIPPED_MODELS)})"
         raise ModelFileError(path, f"model file not found{hint}") from None
     except OSError as exc:
         raise ModelFileError(path, f"cannot be read ({exc.strerror or exc})") from None

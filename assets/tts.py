@@ -36,6 +36,24 @@ class Speech:
     def duration_s(self) -> float:
         return len(self.samples) / self.sample_rate_hz
 
+    def followed_by_pause(self, seconds: float) -> Speech:
+        """The same speech with ``seconds`` of silence after it, timed as espeak's pause phone ``_``.
+        espeak-ng ends an utterance 7 ms after its last phone, so a face animated to it stops
+        mid-phone (the mouth open after "there"); the pause lets it come back to rest."""
+        if not seconds >= 0:
+            raise ConfigError(f"pause must be >= 0 s, got {seconds}")
+        n = int(round(seconds * self.sample_rate_hz))
+        if n == 0:
+            return self
+        end = self.duration_s
+        return Speech(
+            samples=np.concatenate([self.samples, np.zeros(n, dtype=self.samples.dtype)]),
+            sample_rate_hz=self.sample_rate_hz,
+            phones=(*self.phones, ("_", end, end + n / self.sample_rate_hz)),
+            inventory=self.inventory,
+            text=self.text,
+        )
+
 
 def parse_voice(language: str, voice: str | None = None, *, rate_wpm: int = 175) -> Voice:
     """An espeak voice for ``language`` ("en", "es"): ``voice`` like "en-us", "en-gb-x-rp+f3", "es"

@@ -24,7 +24,7 @@ from urllib.parse import urlencode
 
 import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 
 from assets.pacing import paced_blocks
 from clients.errors import ClientError
@@ -97,7 +97,14 @@ class IngestClient:
         self.started: dict = {}
 
     async def __aenter__(self) -> IngestClient:
-        self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        try:
+            self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        except OSError as exc:
+            raise ClientError(f"{self.url}: cannot connect: {exc}") from None
+        except InvalidURI:
+            raise ClientError(f"{self.url}: not a server URL (give http://HOST:PORT)") from None
+        except InvalidHandshake as exc:  # e.g. HTTP 401/403/429 instead of the upgrade
+            raise ClientError(f"{self.url}: the server refused the connection: {exc}") from None
         start = {
             "type": "start",
             "session": self.session,

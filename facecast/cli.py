@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "demo": "facecast.commands.demo",
     "serve": "facecast.commands.serve",
     "view": "facecast.commands.view",
+    "send": "facecast.commands.send",
     "record": "facecast.commands.record",
     "animate": "facecast.commands.animate",
     "render": "facecast.commands.render",

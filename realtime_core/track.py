@@ -84,7 +84,7 @@ def frames_from_samples(
     times_s: np.ndarray, values: np.ndarray, fps: float, *, names: tuple[str, ...] = VISUAL_PARAMS
 ) -> Track:
     """Samples at strictly increasing ``times_s`` ``(T,)`` seconds with ``values`` ``(T, C)`` -> the
-    track at frames ``k / fps`` for ``k < floor(times_s[-1] * fps) + 1``, linearly interpolated per
+    track at frames ``k / fps`` for ``k < floor(times_s[-1] * fps + 1e-4) + 1``, linearly interpolated per
     channel (held constant before the first sample). Starts at 0 s whatever the first time."""
     t = np.asarray(times_s, dtype=np.float64)
     v = np.asarray(values, dtype=np.float64)
@@ -94,7 +94,9 @@ def frames_from_samples(
         raise ConfigError("sample times must be finite and strictly increasing")
     if not fps > 0:
         raise ConfigError(f"fps must be > 0, got {fps}")
-    n = max(int(np.floor(t[-1] * fps + 1e-9)) + 1, 0)
+    # A sample within 1e-4 of a frame before its time is that frame's: a track file's times are rounded
+    # (facecast's CSV writes 1/30 s as 0.033333, 1.5e-5 frames early), and a strict floor dropped the last frame.
+    n = max(int(np.floor(t[-1] * fps + 1e-4)) + 1, 0)
     ft = np.arange(n) / fps
     out = np.zeros((n, v.shape[1]))
     for j in range(v.shape[1]):

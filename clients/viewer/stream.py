@@ -23,6 +23,13 @@ from clients.client import ServerClosed, ViewerClient, http_get
 from clients.errors import ClientError
 from wire import protocol as P
 
+RETRY_S = 0.05
+"""Wait between attempts to watch a session that has not started (4004) or to find one. A session's
+first frame leaves the server about 0.2 s after its audio starts (the algorithmic delay and a block),
+and the server replays nothing to a later viewer: retried every 0.25 s, a recording started before
+the speech lost its first 3-11 frames (0.1-0.37 s). 20 attempts a second stay well inside a
+server's per-client connection rate (``connect_rate_per_s``, 50/s)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class ViewerStreamConfig:
@@ -130,7 +137,7 @@ async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
 
 
 async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
-    """A connected viewer, retrying every 0.25 s while the session does not exist (up to wait_s)."""
+    """A connected viewer, retrying every :data:`RETRY_S` while the session does not exist (up to wait_s)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
         v = ViewerClient(
@@ -145,7 +152,7 @@ async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
         except OSError as exc:
             if time.monotonic() >= deadline:
                 raise ClientError(f"{cfg.url}: cannot connect: {exc}") from None
-        await asyncio.sleep(0.25)
+        await asyncio.sleep(RETRY_S)
 
 
 async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
@@ -197,4 +204,4 @@ async def pick_session(url: str, wanted: str | None, wait_s: float, token: str |
             return names[0]
         if time.monotonic() >= deadline:
             raise ClientError(f"{url}: no live session (waited {wait_s:g} s); start one or pass --session")
-        await asyncio.sleep(0.25)
+        await asyncio.sleep(RETRY_S)

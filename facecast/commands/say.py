@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+END_PAUSE_S = 0.25
+"""Silence added after synthesised speech, so the clip ends with the face at rest (the mouth is back
+within 2-3 frames of the pause's start: "Hello there." ended at mouth_open 0.095 without it, 0.004 with
+it); a user's --audio recording keeps its own end."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -175,7 +180,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         from assets.tts import speak
 
-        speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate)
+        speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate).followed_by_pause(
+            END_PAUSE_S
+        )
         samples, rate, phones, inventory, duration_s = (
             speech.samples,
             speech.sample_rate_hz,
@@ -201,7 +208,10 @@ def run(args: argparse.Namespace) -> int:
     k = stored.corpus.n_coefficients
     params = motion[:, k:]
     track = Track(values=params)
-    head = resolve_from_args(args) if any(o.suffix.lower() in (".mp4", ".glb") for o in outs) else None
+    head = None
+    if any(o.suffix.lower() in (".mp4", ".glb") for o in outs):
+        head = resolve_from_args(args)
+        t = lap("head", t)  # its own lap: it was counted in the first output's time (e.g. "write .csv 3852 ms")
     for out in outs:
         if out.suffix.lower() == ".mp4":
             from assets.heads.landmarks import credit_for

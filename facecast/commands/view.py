@@ -63,6 +63,11 @@ def add_session_options(p: argparse.ArgumentParser) -> None:
         default=None,
         help="stop after this many seconds (default %(default)s = when the session ends)",
     )
+    add_token_option(p)
+
+
+def add_token_option(p: argparse.ArgumentParser) -> None:
+    """--token-env: the environment variable holding the server's token (read by :func:`token_from_env`)."""
     p.add_argument(
         "--token-env",
         default=None,

@@ -33,6 +33,7 @@ from realtime_core.synthesis.search import (
     select_units,
 )
 from realtime_core.synthesis.visemes import (
+    LINKS,
     PHONE_TO_VISEME,
     VISEME_ID,
     VISEMES,
@@ -112,6 +113,14 @@ def make_target(phones: Sequence[tuple[str, float, float]], inventory: str, avai
             continue
         if inventory not in PHONE_TO_VISEME:
             raise ConfigError(f"unknown phone inventory {inventory!r}")
+        if normalise_phone(label, inventory) in LINKS[inventory]:
+            # a link, not a phone: the lips go on from the phone before it (a pause at the very start)
+            if labels:
+                ends[-1] = b
+            else:
+                add("sil", resolve("sil", available), a, b, gap=True)
+            t = b
+            continue
         if normalise_phone(label, inventory) not in PHONE_TO_VISEME[inventory]:
             unknown.append(label)
         v = viseme_of(label, inventory, default=UNKNOWN_PHONE_VISEME)

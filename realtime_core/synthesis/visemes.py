@@ -10,7 +10,7 @@ corpus labelled in ARPAbet serves targets from espeak-ng's English and Spanish p
 =========  =========================================  ==================  =====================  ==============
 class      looks like                                 ARPAbet             espeak-ng English      espeak-ng Spanish
 =========  =========================================  ==================  =====================  ==============
-sil        mouth at rest                              sil sp pau spn      _ _: _! _^_ ;           _ _: _!
+sil        mouth at rest                              sil sp pau spn      _ _: _! _^_             _ _: _!
 PBM        lips pressed together                      p b m em            p b m                   p b m B
 FV         lower lip under the upper teeth            f v                 f v                     f
 TH         tongue tip between the teeth               th dh               T D                     T D
@@ -37,9 +37,12 @@ OY         rounded gliding to spread                  oy                  OI    
 =========  =========================================  ==================  =====================  ==============
 
 Diphthongs are classes of their own: their lips move within the phone, and the recorded unit of
-the same diphthong carries exactly that glide. Spanish has no /ʌ/, /æ/ or English /r/; its
-mid back /o/ is closest to English /ɔ/ (AO). When a corpus lacks a class, :data:`FALLBACK`
-names the classes that look most alike, in order (e.g. OY -> AO -> OW).
+the same diphthong carries exactly that glide. espeak-ng's ``;`` (between two vowels, "my
+umbrella" ``maI; Vmbr'El@``, "see it" ``s'i:; It``) is no phone of its own but a link, voiced and
+with the lips moving on from the vowel before: :data:`LINKS` gives its time to that vowel.
+Spanish has no /ʌ/, /æ/ or English /r/; its mid back /o/ is closest to English /ɔ/ (AO). When a
+corpus lacks a class, :data:`FALLBACK` names the classes that look most alike, in order (e.g. OY
+-> AO -> OW).
 """
 
 from __future__ import annotations
@@ -111,6 +114,14 @@ PHONE_TO_VISEME: dict[str, dict[str, str]] = {
     ),
 }
 """inventory -> {phone label: viseme class} (the table in the module doc)."""
+
+LINKS: dict[str, frozenset[str]] = {
+    "arpabet": frozenset(),
+    "espeak-en": frozenset({";"}),
+    "espeak-es": frozenset({";"}),
+}
+"""inventory -> labels that mark a link between phones rather than a phone (espeak's ``;``, written
+between two vowels): a target gives their time to the phone before them."""
 
 FALLBACK: dict[str, tuple[str, ...]] = {
     "sil": ("PBM",),

@@ -26,6 +26,11 @@ def test_names_resolve_to_the_shipped_files_and_paths_stay_paths(tmp_path):
     assert resolve_model("./low-latency").name == "low-latency"  # a file of that name, written as a path
     with pytest.raises(ModelFileError, match="low-latencyy: model file not found"):
         load_model("low-latencyy")
+    # a mistyped name says which names there are (it read as a missing file only)
+    with pytest.raises(
+        ModelFileError, match=r"low_latency: model file not found \(nor a shipped name: default, low-latency\)"
+    ):
+        load_model("low_latency")
 
 
 def test_low_latency_model_loads_is_under_80_ms_and_differs_from_the_default():

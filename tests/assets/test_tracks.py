@@ -129,6 +129,19 @@ def test_resampling_reader_takes_any_rate_and_column_order(tmp_path):
         np.testing.assert_allclose(tr.values[:, j], np.interp(ft, t, cols[n]), atol=1e-8)
 
 
+def test_resampling_reader_keeps_every_frame_of_a_facecast_csv(tmp_path):
+    """`facecast animate --csv` (t to 6 decimals) -> `facecast render --params` at the same rate: the
+    same frames, the last included, whatever way k/30 s was rounded in the file (1/30 s is written
+    0.033333, below the frame's time)."""
+    path = tmp_path / "take.csv"
+    for n in range(1, 40):
+        tr = syllable_track(n)
+        write_csv(path, tr)
+        back = read_csv_resampled(path, tr.fps)
+        assert back.n_frames == n, f"{n} frames written, {back.n_frames} read"
+        np.testing.assert_allclose(back.values, tr.values, atol=1e-6)
+
+
 def test_resampling_reader_errors_name_the_file(tmp_path):
     with pytest.raises(CorpusFormatError, match=r"nope\.csv: parameters file not found"):
         read_csv_resampled(tmp_path / "nope.csv", 30.0)

@@ -52,6 +52,7 @@ def test_say_writes_valid_mp4_csv_glb(corpus_file, tmp_path, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert "recorded units" in out and "timings:" in out
+    assert ", head " in out  # resolving the head is timed on its own, not in the first output's time
     rows = list(csv.DictReader(csv_path.open()))
     n = len(rows)
     assert list(rows[0]) == ["t", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"]
@@ -210,3 +211,20 @@ def test_say_writes_a_video_into_a_folder_it_makes(corpus_file, tmp_path, capsys
     streams = {s["codec_type"]: s for s in _ffprobe(mp4)["streams"]}
     assert streams["video"]["codec_name"] == "h264" and streams["audio"]["codec_name"] == "aac"
     assert [p.name for p in mp4.parent.iterdir()] == ["hi.mp4"]  # the temporary folder is gone
+
+
+def test_say_ends_with_the_face_at_rest(tmp_path):
+    """espeak-ng stops 7 ms after the last phone: "Hello there." ended with the mouth open on the
+    vowel (mouth_open 0.095 in the last frame, shipped corpus). say adds a pause after the speech,
+    silent in the .wav, so the clip ends with the lips together."""
+    from assets.audio import read_audio
+    from facecast.commands.say import END_PAUSE_S
+
+    out, wav = tmp_path / "hi.csv", tmp_path / "hi.wav"
+    assert main(["say", "Hello there.", "-o", str(out), "-o", str(wav)]) == 0
+    mo = np.loadtxt(out, delimiter=",", skiprows=1)[:, 3]
+    assert np.max(mo) > 0.05  # the mouth opened while speaking ...
+    assert mo[-1] < 0.01, mo[-8:]  # ... and is closed at the end
+    speech, rate = read_audio(wav)
+    assert abs(len(speech) / rate - len(mo) / 30) < 1 / 30  # the speech the curves are timed to
+    assert np.all(speech[-int(0.9 * END_PAUSE_S * rate) :] == 0)  # the pause is silent

@@ -19,6 +19,11 @@ const opts = new URLSearchParams(location.search);
 const token = opts.get("token");
 const bufferS = Math.max(0, Number(opts.get("buffer_ms") ?? 80)) / 1000;
 const POLL_S = 1.0; // session list refresh (and reconnect attempts)
+// While waiting for a session on a reachable server the list is polled this often: a session's first
+// frame leaves the server ~0.2 s after its audio starts and a later viewer gets no replay, so a page
+// polling only every POLL_S joined up to a second late and never showed the start of the speech.
+const WAIT_POLL_S = 0.1;
+let waitTimer = null;
 
 const $ = (id) => document.getElementById(id);
 const view = new HeadView($("view"));
@@ -32,6 +37,7 @@ const state = {
   connections: 0, // descriptions received (one per successful connection)
   frames: 0, // frames shown
   received: 0, // frames received on this connection
+  firstIndex: null, // index of the first frame received on this connection (0: watched from the start)
   lost: 0, // frames the server dropped or never sent (gaps in the frame index)
   skipped: 0, // frames due together with a newer one (display too slow): not shown
   resyncs: 0, // timeline moves: later after a late frame, earlier once frames come early again
@@ -86,7 +92,11 @@ async function pollSessions() {
     if (!ws) {
       const target = state.wanted ?? state.sessions[0];
       if (target && state.sessions.includes(target)) connect(target);
-      else setStatus(state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session");
+      else {
+        setStatus(state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session");
+        clearTimeout(waitTimer); // one pending fast poll at most (the POLL_S interval also calls this)
+        waitTimer = setTimeout(pollSessions, WAIT_POLL_S * 1000);
+      }
     }
   } catch (err) {
     state.sessions = [];
@@ -136,6 +146,8 @@ let caught = null; // the frame that froze the page {n, index, peak}
 
 function connect(name) {
   if (ws) return;
+  // A new connection is a new timeline: what the last one left queued is dropped only now (see onclose).
+  resetStream();
   const kind = KINDS[kindLevel];
   const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
   if (kind === "deltas") q.set("encoding", "int16");
@@ -187,7 +199,6 @@ function connect(name) {
     if (ev.code === CLOSE.BAD_REQUEST && /no head|no morph targets/.test(ev.reason) && kindLevel < KINDS.length - 1) {
       // This kind is unavailable (no head driven by its own targets, or no head): ask for the next, at once.
       kindLevel = /no head/.test(ev.reason) ? KINDS.length - 1 : kindLevel + 1;
-      resetStream();
       connect(name);
       return;
     }
@@ -199,7 +210,9 @@ function connect(name) {
       [CLOSE.UNAUTHORIZED]: "wrong or missing token (add ?token=...)",
     }[ev.code] ?? `connection closed (${ev.code})`;
     setStatus(`${why}; waiting for "${state.wanted ?? "any session"}" to (re)start`);
-    resetStream();
+    // The queue is kept: a session's last frames (its lookahead, flushed at the end) arrive just before
+    // the close and wait for their due time while their audio, already scheduled, still plays; tick()
+    // shows them, so the face ends where the speech ends instead of freezing on the frame shown at the close.
     setTimeout(pollSessions, 200);
   };
 }
@@ -254,11 +267,13 @@ function resetStream() {
   audioArrivals = [];
   audio.reset();
   state.received = 0;
+  state.firstIndex = null;
 }
 
 function onFrame(msg, arrival) {
   if (lastIndex >= 0 && msg.index > lastIndex + 1) state.lost += msg.index - lastIndex - 1;
   if (msg.index <= lastIndex) return; // stale (never expected: the server sends in order)
+  if (state.firstIndex === null) state.firstIndex = msg.index;
   lastIndex = msg.index;
   state.received += 1;
   state.deliveryMs = median(windows.delivery, 1000 * (Date.now() / 1000 - msg.sendTime));

@@ -357,3 +357,35 @@ def test_a_starved_sound_callback_is_counted_as_an_underrun_and_the_sound_resume
     # After the underrun the device asked again and was handed the tone (the right media samples:
     # the tone runs 12 s), at least 0.3 s of it in the 3 s that followed, less than 3 s (the gap).
     assert loud > 0.3 * 22050 and after < 3.0 * 22050, proc.stdout
+
+
+def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, capsys):
+    """`facecast record --session S` waits for S; the server replays nothing to a later viewer, so the
+    wait's retries must come faster than the session's first frame (about 0.2 s after its audio
+    starts). The session starts right after a refused attempt (4004): retried every 0.25 s, the
+    recording began at frame 2-11."""
+    import threading
+
+    from tests.live_server import stream_session
+
+    name = "early"
+
+    def start_after_a_refusal():
+        before = live.server.closes[4004]
+        for _ in range(2000):  # the record command's first attempts are refused: S is not live yet
+            if live.server.closes[4004] > before:
+                break
+            threading.Event().wait(0.002)
+        live.submit(stream_session(live.url, name, 1.5, seed=5)).result(30)
+
+    starter = threading.Thread(target=start_after_a_refusal)
+    starter.start()
+    out = tmp_path / "take.csv"
+    try:
+        assert main(["record", live.url, "--session", name, "-o", str(out), "--wait", "20"]) == 0
+    finally:
+        starter.join(30)
+    printed = capsys.readouterr().out
+    take = decode_csv(out.read_bytes())
+    assert take.start_s == 0.0 and "joined at" not in printed, printed
+    assert take.n_frames == 45  # the whole 1.5 s

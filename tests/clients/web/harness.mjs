@@ -22,8 +22,8 @@ export function watch(page) {
   return page;
 }
 
-/** A page of the browser (launched on first use) showing `url`, once it has drawn 30 frames. */
-export async function openViewer(url) {
+/** A page of the browser (launched on first use) showing `url`, as soon as it has loaded. */
+export async function openPage(url) {
   if (!context) {
     context = await chromium.launchPersistentContext(profile, {
       executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
@@ -37,6 +37,12 @@ export async function openViewer(url) {
   const fresh = context.pages().find((p) => p.url() === "about:blank");
   const page = watch(fresh ?? (await context.newPage()));
   await page.goto(url);
+  return page;
+}
+
+/** A page of the browser (launched on first use) showing `url`, once it has drawn 30 frames. */
+export async function openViewer(url) {
+  const page = await openPage(url);
   await page.waitForFunction(() => window.facecast && window.facecast.state.frames >= 30, null, { timeout: 30000 });
   return page;
 }

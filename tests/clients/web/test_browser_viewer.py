@@ -258,3 +258,64 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
 
     assert deltas["state"]["kind"] == "deltas" and deltas["state"]["frames"] >= 30  # the fallback still works
     assert done["console_errors"] == []
+
+
+END_SCRIPT = Path(__file__).with_name("end_check.mjs")
+
+
+def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
+    """The last frames of a session arrive together just before the server closes the socket (the
+    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
+    time, while their audio is already scheduled. The page must still show them: the face ends where
+    the speech ends, not frozen on whatever frame was due when the socket closed."""
+    _require_browser()
+    name = "endcheck"
+    srv = LiveServer(model, head)
+    session = srv.submit(stream_session(srv.url, name, 12.0, samples=speechlike(12.0, 16000, seed=3)))
+    proc = subprocess.Popen(
+        ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        ended = _read_step(proc, "ended")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        reply = session.result(60)
+        srv.stop()
+
+    assert ended["closeCode"] == 1000  # the session ended normally
+    last_sent = reply["frames"] - 1  # frame indices count from 0
+    applied = [r["index"] for r in ended["applied"]]
+    assert applied and applied[-1] == last_sent, f"last frames applied {applied[-8:]}, the session's last {last_sent}"
+    assert ended["console_errors"] == []
+
+
+START_SCRIPT = Path(__file__).with_name("start_check.mjs")
+
+
+def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
+    """A page opened on ?session=S before S starts polls for it; the server replays nothing to a later
+    viewer and S's first frame leaves ~0.2 s after its audio starts, so the page must find S within
+    that. The session starts right after one of the page's polls: polling every 1 s, the page's
+    first frame was about frame 25."""
+    _require_browser()
+    name = "startcheck"
+    srv = LiveServer(model, head)
+    proc = subprocess.Popen(
+        ["node", str(START_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    session = None
+    try:
+        _read_step(proc, "polled")
+        session = srv.submit(stream_session(srv.url, name, 4.0, samples=speechlike(4.0, 16000, seed=5)))
+        joined = _read_step(proc, "joined")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        if session is not None:
+            session.result(60)
+        srv.stop()
+    assert joined["state"]["firstIndex"] <= 3, joined["state"]
+    assert joined["console_errors"] == []

@@ -274,6 +274,18 @@ def test_target_fills_gaps_and_reports_unknown_phones():
         make_target([], "arpabet", avail)
 
 
+def test_target_gives_an_espeak_link_to_the_vowel_before_it():
+    """espeak-ng writes ``;`` between two vowels ("my umbrella": maI; Vmbr'El@): no phone of its own
+    and no unknown phone, its time belongs to the vowel before."""
+    avail = frozenset(VISEMES)
+    tgt = make_target([("m", 0.0, 0.05), ("aI", 0.05, 0.1), (";", 0.1, 0.15), ("V", 0.15, 0.2)], "espeak-en", avail)
+    assert tgt.labels == ("m", "aI", "V") and tgt.unknown == ()
+    np.testing.assert_allclose(tgt.ends_s, [0.05, 0.15, 0.2])
+    assert [VISEMES[v] for v in tgt.visemes] == ["PBM", "AY", "AH"]
+    first = make_target([(";", 0.0, 0.05), ("a", 0.05, 0.1)], "espeak-es", avail)
+    assert first.labels == ("sil", "a") and first.unknown == ()
+
+
 def test_viseme_table_covers_the_inventories_and_fallbacks_resolve():
     assert viseme_of("AH0", "arpabet") == "AH" and viseme_of("aI", "espeak-en") == "AY"
     assert viseme_of("**", "espeak-es") == "TDNL" and viseme_of("B", "espeak-es") == "PBM"

@@ -1,0 +1,49 @@
+"""``facecast send SPEECH [URL]``: stream a speech file into a running server as one live session."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from facecast.cli import HelpFormatter
+    from facecast.commands.view import DEFAULT_URL, add_token_option
+
+    p = sub.add_parser(
+        "send",
+        help="stream a speech file into a running server as a live session (the ingest client)",
+        formatter_class=HelpFormatter,
+        description="Connect to a `facecast serve` server's /ingest and stream SPEECH (WAV; other formats "
+        "through ffmpeg) as one session, in real time unless --fast, then end the session and print the "
+        "server's reply (frames made, seconds of audio). Viewers watch it meanwhile: the browser viewer "
+        "at the server's URL, `facecast view` or `facecast record`. A file on the server's own machine can "
+        "also be streamed by `facecast serve --file`.",
+    )
+    p.add_argument("speech", type=Path, help="speech audio file")
+    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument("--session", default=None, help="session name (default %(default)s = the file's name)")
+    p.add_argument("--fast", action="store_true", help="send as fast as the server takes it instead of in real time")
+    add_token_option(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from clients.client import ingest_file
+    from clients.errors import ClientError
+    from facecast.commands.view import token_from_env
+
+    if not args.speech.is_file():
+        raise ClientError(f"{args.speech}: speech file not found")
+    token = token_from_env(args.token_env)
+    session = args.session if args.session is not None else args.speech.stem
+    pace = "as fast as the server takes it" if args.fast else "in real time"
+    print(f"facecast send: streaming {args.speech} as session {session!r} to {args.url} {pace}", flush=True)
+    ended = asyncio.run(ingest_file(args.url, args.speech, session=session, realtime=not args.fast, token=token))
+    print(
+        f"facecast send: session {session!r} ended: {ended.get('frames')} frames, "
+        f"{float(ended.get('audio_s', 0.0)):.2f} s of audio"
+    )
+    return 0

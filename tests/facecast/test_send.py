@@ -1,0 +1,84 @@
+"""``facecast send``: a speech file streamed into a real server on loopback as one live session, and
+what a user gets wrong (no server there, a file that is not audio, a session name already live)."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+
+import numpy as np
+import pytest
+
+from assets.audio import read_audio, write_wav
+from facecast.cli import main
+from tests.live_server import LiveServer, stream_session
+from tests.speech import speechlike
+
+pytestmark = pytest.mark.system  # a real server over loopback
+
+
+async def _watch(url: str, name: str):
+    """A params viewer of session ``name`` from its first frame (retried until the session is live)."""
+    from clients.client import ServerClosed, ViewerClient
+
+    for _ in range(400):
+        try:
+            async with ViewerClient(url, session=name, kind="params", audio=False) as v:
+                return await v.collect()
+        except ServerClosed:  # 4004: not live yet
+            await asyncio.sleep(0.005)
+    raise AssertionError(f"session {name!r} never became watchable")
+
+
+def test_send_streams_a_file_as_a_live_session_equal_to_animate(tmp_path, model, capsys):
+    from realtime_core.pipeline import speech_to_params
+
+    x = speechlike(1.5, 16000, seed=4)
+    wav = write_wav(tmp_path / "hello.wav", x, 16000)
+    srv = LiveServer(model, None)
+    try:
+        watched = srv.submit(_watch(srv.url, "hello"))
+        assert main(["send", str(wav), srv.url]) == 0  # real time, session named after the file
+        got = watched.result(30)
+    finally:
+        srv.stop()
+    out = capsys.readouterr().out
+    samples, rate = read_audio(wav)  # the 16-bit samples the file holds
+    want = speech_to_params(model, samples, rate)  # what `facecast animate` computes
+    assert f"session 'hello' ended: {len(want)} frames" in out, out
+    assert got.close_code == 1000
+    by_index = {m.index: m.values for m in got.frames}
+    assert len(by_index) >= len(want) - 3  # the viewer joined within the first frames
+    for k, v in by_index.items():
+        np.testing.assert_allclose(v, want[k], atol=1e-5)
+
+
+def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
+    wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
+    with socket.socket() as s:  # a port that was free a moment ago: nothing listens on it
+        s.bind(("127.0.0.1", 0))
+        closed = f"http://127.0.0.1:{s.getsockname()[1]}"
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not audio\n")
+    srv = LiveServer(model, None)
+    try:
+        live = srv.submit(stream_session(srv.url, "taken", 20.0))
+        cases = [
+            ([str(wav), closed], "cannot connect"),
+            ([str(wav), "127.0.0.1:1"], "not a server URL"),
+            ([str(tmp_path / "nope.wav"), srv.url], "nope.wav: speech file not found"),
+            ([str(notes), srv.url], "notes.txt"),
+        ]
+        for args, want in cases:
+            assert main(["send", *args]) == 2, args
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and want in err, (args, err)
+        for _ in range(200):  # the other session is live once its start is accepted
+            if main(["send", str(wav), srv.url, "--session", "taken", "--fast"]) == 2:
+                break
+        err = capsys.readouterr().err.strip()
+        assert "4009" in err and "taken" in err, err
+        live.cancel()
+    finally:
+        srv.stop()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.wav", "notes.txt"]  # nothing left behind
