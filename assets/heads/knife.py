@@ -17,7 +17,7 @@ and the inner-lip point lies on the path (a vertex of it is within one crossed e
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -41,6 +41,15 @@ KNIFE_SIDE = 0.02
 KNIFE_HEIGHT = 0.35
 """IOD: a cut face reaches within this distance above or below the contact curve (the lips' height; the
 nose and chin stay as they are)."""
+LIP_BACK_HEIGHT = 0.04
+"""IOD: an edge whose ends lie on the knife's path or no higher than this above the contact curve, and which
+passes behind path vertices, is the upper lip's back running along the cut (:func:`split_lip_back`)."""
+LIP_BACK_SPAN = 0.5
+"""Such an edge is split when it is at least this fraction of the mouth's corner-to-corner width long: an upper lip
+of a handful of faces (Lee Perry-Smith at 1,428 triangles: 0.72 and 0.74), which the rig also pins to the simple
+face's upper lip and smooths on its own (:func:`assets.heads.rigging.rig_head`). Its 3,810 copy's longest is 0.45,
+the stylised held-out head's 0.32: split (with that rig), their lip backs seen rose, 1.64 -> 1.73 and 4.55 -> 27.97
+(1e-3 IOD^2; docs/animation.md, "The 1,428 copy's flap")."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -56,6 +65,8 @@ class KnifeCut:
     edge: np.ndarray
     at: np.ndarray
     path: list[int]
+    behind: dict[int, int] = field(default_factory=dict)
+    """New vertices on the upper lip's back (:func:`split_lip_back`) -> the path vertex in front of each."""
 
     def along_path(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """The new vertices on an edge the path runs along (:func:`split_long_edges`'s: both ends on the path),
@@ -178,13 +189,85 @@ def knife_contact(
     while path[-1] != left:
         path.append(int(pred[path[-1]]))
     v3, t3, edge3, at3, path3 = split_long_edges(v2, t2, path[::-1], width / COARSE_EDGES, among=n)
+    s3 = np.r_[s, np.zeros(len(v3) - n)]  # the knife's vertices lie on the curve
+    v4, t4, edge4, at4, behind = split_lip_back(v3, t3, path3, s3, ax, iod=iod, longest=LIP_BACK_SPAN * width)
     return KnifeCut(
-        vertices=v3,
-        triangles=t3,
-        edge=np.concatenate([edge.astype(np.int64), edge3]),
-        at=np.concatenate([at, at3]),
+        vertices=v4,
+        triangles=t4,
+        edge=np.concatenate([edge.astype(np.int64), edge3, edge4]),
+        at=np.concatenate([at, at3, at4]),
         path=path3,
+        behind=behind,
     )
+
+
+def split_lip_back(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    path: list[int],
+    s: np.ndarray,
+    axes: np.ndarray,
+    *,
+    iod: float,
+    longest: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[int, int]]:
+    """Split the upper lip's back where it runs behind the knife's ``path`` (corner to corner): every edge at
+    least ``longest`` long (head units), not on the path, whose two ends are path vertices or lie no higher
+    than LIP_BACK_HEIGHT IOD above the contact curve (``s`` (n,), :func:`contact_offset`, head units), gets a
+    vertex where it passes more than KNIFE_SNAP IOD behind an interior path vertex and not below it (the face
+    frame's side coordinate; ``axes`` (3, 3) its rows), each split a fan as in :func:`split_long_edges`. On a
+    decimated mouth such an edge can span most of the mouth (Lee Perry-Smith at 1,428 triangles: 292-410, 0.51
+    IOD from beside the right corner, 0.04-0.06 IOD behind three path vertices): straight, it cannot follow the
+    cut's upper edge, which bends down towards the corners as the jaw opens, and the face above it hung below
+    the cut into the opening, a pink flap (docs/animation.md, "The 1,428 copy's flap"). Returns vertices
+    (n + k, 3), triangles, the (k, 2) edge each new vertex lies on, (k,) where on it (see :class:`KnifeCut`)
+    and new vertex -> the path vertex in front of it (the rig moves it as that vertex's upper side)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    q = v @ np.asarray(axes, dtype=np.float64).T
+    on = np.zeros(len(v), dtype=bool)
+    on[path] = True
+    low = on | ((s > 0) & (s <= LIP_BACK_HEIGHT * iod))
+    interior = np.asarray(path[1:-1], dtype=np.int64)
+    path_edges = {(min(a, b), max(a, b)) for a, b in itertools.pairwise(path)}
+    e = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0)
+    e = e[low[e[:, 0]] & low[e[:, 1]] & ~(on[e[:, 0]] & on[e[:, 1]])]
+    e = e[np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1) >= longest]
+    edges: list[tuple[int, int]] = []
+    ats: list[float] = []
+    behind: dict[int, int] = {}
+    for a, b in e.tolist():
+        if (a, b) in path_edges:
+            continue
+        dx = q[b, 0] - q[a, 0]
+        if abs(dx) <= KNIFE_SNAP * iod:
+            continue
+        f = (q[interior, 0] - q[a, 0]) / dx
+        length = float(np.linalg.norm(v[b] - v[a]))
+        inside = (f * length > KNIFE_SNAP * iod) & ((1 - f) * length > KNIFE_SNAP * iod)
+        point = q[a] + f[:, None] * (q[b] - q[a])
+        # Behind the path vertex and not below it: the lip's back, which the cut's upper edge hides at rest.
+        hidden = inside & (point[:, 2] < q[interior, 2] - KNIFE_SNAP * iod) & (point[:, 1] >= q[interior, 1])
+        for fr, p in sorted(zip(f[hidden].tolist(), interior[hidden].tolist(), strict=True)):
+            edges.append((a, b))
+            ats.append(fr)
+            behind[len(v) + len(edges) - 1] = p
+    if not edges:
+        return v, t, np.zeros((0, 2), dtype=np.int64), np.zeros(0), {}
+    # One split at a time, each on what is left of its edge (the pieces as :func:`_split_edges` makes them).
+    out_edge: list[tuple[int, int]] = []
+    out_at: list[float] = []
+    v2, t2 = v, t
+    last: dict[tuple[int, int], tuple[int, float]] = {}  # edge -> (the vertex its remaining piece starts at, fraction)
+    for (a, b), fr in zip(edges, ats, strict=True):
+        start, f0 = last.get((a, b), (a, 0.0))
+        w = (fr - f0) / (1.0 - f0)
+        lo, hi, at = (start, b, w) if start < b else (b, start, 1.0 - w)
+        v2, t2 = _split_edges(v2, t2, np.array([[lo, hi]]), np.array([at]))
+        out_edge.append((lo, hi))
+        out_at.append(at)
+        last[(a, b)] = (len(v2) - 1, fr)
+    return v2, t2, np.asarray(out_edge, dtype=np.int64), np.asarray(out_at), behind
 
 
 def split_long_edges(

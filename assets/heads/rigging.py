@@ -58,6 +58,7 @@ from realtime_core.face.rig import (
     lip_columns,
     recalibrate,
     repair_rig,
+    upper_lip_side,
     with_rest_pose,
 )
 from realtime_core.face.simple import (
@@ -988,6 +989,7 @@ def rig_head(
     cut_copies = None
     coarse = False  # a knife-cut mouth (assets/heads/knife.py): its crease walls keep no holes (_enclosed_holes)
     on_contact: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # knife vertices on a contact edge: its ends, weights
+    behind: dict[int, int] = {}  # knife vertices on a long upper lip's back -> the cut's vertex in front (knife.py)
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
@@ -1027,6 +1029,9 @@ def rig_head(
                 meta["contact_knife"] = len(knife.edge)
                 coarse = True
                 on_contact = knife.along_path()
+                behind = dict(knife.behind)
+                if behind:
+                    meta["lip_back_vertices"] = len(behind)
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
@@ -1102,6 +1107,7 @@ def rig_head(
             meta=meta,
             keep_apart=cut_copies,
             seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
+            pin_upper_lip=bool(behind),
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
@@ -1126,6 +1132,18 @@ def rig_head(
             )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
+        upper = None
+        if behind and cut_copies is not None:
+            # An upper lip so coarse that its back spans half the mouth (knife.split_lip_back): a handful of faces
+            # joined round the corners to the jaw. Pinned to the simple face's upper lip (build_rig), it is smoothed
+            # over its own rows only, and its back moves with the cut: smoothed over all its neighbours it dropped
+            # with the jaw, and its straight back hung below the cut, a pink flap in the opening (Lee Perry-Smith at
+            # 1,428 triangles; docs/animation.md, "The 1,428 copy's flap").
+            x_lo, x_hi = sorted(
+                float((v[snap[k]] - frame.origin) @ frame.axes[0]) for k in ("corner_left", "corner_right")
+            )
+            seam0 = np.column_stack([origin[cut_copies], cut_copies])
+            upper = upper_lip_side(v, t, seam0, frame, x_range=(x_lo, x_hi))
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
@@ -1135,6 +1153,8 @@ def rig_head(
                 keep_apart=cut_copies,
                 tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                 measured=measured,
+                own_side=upper,
+                ties=behind or None,
             )
             # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
@@ -1150,6 +1170,8 @@ def rig_head(
                     keep_apart=cut_copies,
                     tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                     measured=measured,
+                    own_side=upper,
+                    ties=behind or None,
                 )
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
         if walls is not None:

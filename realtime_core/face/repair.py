@@ -50,6 +50,8 @@ def repair_folds(
     tiny: float = 0.0,
     measured: np.ndarray | None = None,
     tie_rounds: int = 60,
+    own_side: np.ndarray | None = None,
+    ties: dict[int, int] | None = None,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -72,6 +74,14 @@ def repair_folds(
     vertex at its neighbours' mean, which on an irregular coarse mesh is not the field's linear value
     at the vertex (Lee Perry-Smith decimated to 3,810 triangles kept one flip at a mouth corner through
     200 rounds). Rigs whose folds the smoothing removes never reach this phase and come out unchanged.
+    own_side: (n,) bool vertices whose rows are smoothed over each other's only (a vertex with no such
+    neighbour over all of them), so no motion enters them from the others through the smoothing: a coarse
+    upper lip above a cut lip seam, whose neighbours round the mouth corners carry the jaw's motion (Lee
+    Perry-Smith decimated to 1,428 triangles: smoothed over all of them, its upper lip dropped 0.42 IOD per unit
+    of mouth_open; docs/animation.md, "The 1,428 copy's flap"). None (the default): every neighbour counts.
+    ties: vertex -> the vertex whose row it takes, from the first round on (a coarse upper lip's back split
+    behind the lip cut moves as the cut, :func:`assets.heads.knife.split_lip_back`); the smoothing then evens
+    out the folds round them with the ties in place, and the tie rounds' apexes never replace them.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -79,8 +89,16 @@ def repair_folds(
     g = sp.csr_matrix(weights, dtype=np.float64)
     adj = vertex_adjacency(n, t).tocsr()
     adj.data[:] = 1.0
-    deg = np.asarray(adj.sum(axis=1)).ravel()
-    mean_op = sp.diags(1.0 / np.maximum(deg, 1)) @ adj
+    mix = adj
+    if own_side is not None:
+        own = np.asarray(own_side, dtype=bool)
+        # An own-side vertex's mean over its own-side neighbours (where it has any): drop its other entries.
+        coo = adj.tocoo()
+        has_own = np.bincount(coo.row[own[coo.col]], minlength=n) > 0
+        keep_entry = ~(own[coo.row] & has_own[coo.row] & ~own[coo.col])
+        mix = sp.csr_matrix((coo.data[keep_entry], (coo.row[keep_entry], coo.col[keep_entry])), shape=(n, n))
+    deg = np.asarray(mix.sum(axis=1)).ravel()
+    mean_op = sp.diags(1.0 / np.maximum(deg, 1)) @ mix
     n0 = _normals(v0, t)
     a0 = np.linalg.norm(n0, axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
@@ -97,8 +115,12 @@ def repair_folds(
     stuck = np.zeros(n, dtype=np.int64)
     worst = 0
     rounds = 0
-    on_edge: dict[int, tuple[int, int, float]] = {}  # apex -> (a, b, s): row = (1 - s) row a + s row b
-    tie_edges = sp.identity(n, format="csr")
+    given = dict(ties or {})
+    # apex -> (a, b, s): row = (1 - s) row a + s row b (a given tie: its vertex's row, a = b)
+    on_edge: dict[int, tuple[int, int, float]] = {i: (j, j, 0.0) for i, j in given.items()}
+    tie_edges = _on_edge_operator(n, on_edge) if on_edge else sp.identity(n, format="csr")
+    for _ in range(3 if on_edge else 0):
+        g = (tie_edges @ g).tocsr()
     for rounds in range(1, max_rounds + tie_rounds + 1):
         bad = np.zeros(n, dtype=bool)
         flipped_any = np.zeros(len(t), dtype=bool)
@@ -124,7 +146,7 @@ def repair_folds(
             rounds -= 1
             break
         if rounds > max_rounds:
-            on_edge.update(_apexes(v0, t[flipped_any], frozen))
+            on_edge.update({k: e for k, e in _apexes(v0, t[flipped_any], frozen).items() if k not in given})
             tie_edges = _on_edge_operator(n, on_edge)
         # One ring around the folded vertices, so the smoothed patch blends into its surroundings.
         # A fold that survives local smoothing needs a wider patch: around each vertex, one more

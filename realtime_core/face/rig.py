@@ -25,7 +25,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
 
-RIG_ALGORITHM = 38
+RIG_ALGORITHM = 39
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -243,6 +243,7 @@ def head_weights(
     lower_lip: np.ndarray | None = None,
     upper_lip: np.ndarray | None = None,
     seam_smooth: float | None = None,
+    pin_upper_lip: bool = False,
 ) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
@@ -251,7 +252,7 @@ def head_weights(
     ``seam_pairs`` (k, 2) the (upper, lower) sides of a cut lip seam, coincident at rest, and
     ``lower_lip`` (n_s,) bool the simple vertices that open with the jaw: a control point that
     landed on the wrong side of the seam (both sides are equally close) moves to the other side.
-    ``seam_smooth``: see :func:`_seam_rows` (``smooth``)."""
+    ``seam_smooth``, ``pin_upper_lip``: see :func:`_seam_rows` (``smooth``, ``pin_upper_lip``)."""
     h = np.asarray(head_vertices, dtype=np.float64)
     proj = project(
         simple.vertices,
@@ -283,7 +284,16 @@ def head_weights(
         use = _same_side_controls(h, head_triangles, proj.control, seam_pairs, lower_lip, upper_lip, frame.iod)
         if config.method == "harmonic":
             pinned, pinned_rows, near_seam = _seam_rows(
-                h, head_triangles, simple, frame, seam_pairs, lower_lip, upper_lip, proj.control, smooth=seam_smooth
+                h,
+                head_triangles,
+                simple,
+                frame,
+                seam_pairs,
+                lower_lip,
+                upper_lip,
+                proj.control,
+                smooth=seam_smooth,
+                pin_upper_lip=pin_upper_lip,
             )
             use = use & ~near_seam
     info = {
@@ -376,6 +386,7 @@ def _seam_rows(
     *,
     neighbours: int = 3,
     smooth: float | None = None,
+    pin_upper_lip: bool = False,
 ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """The two sides of a cut lip seam as boundary rows of the harmonic field.
 
@@ -393,6 +404,10 @@ def _seam_rows(
     vertex a seam vertex lies close to, so neighbouring seam vertices ~0.05 IOD apart took different
     motions (Lee Perry-Smith, automatic landmarks: its lower lip's inner edge stepped 0.03-0.09 IOD at
     /a/, the steps right and left of centre in the close-ups; docs/animation.md, "Clean lips").
+    ``pin_upper_lip``: the upper lip over the seam's width (:func:`upper_lip_side`) is pinned as the seam's upper
+    side is (a coarse lip's few vertices, which the field would otherwise fill from the corners beside them, that
+    drop with the jaw: on Lee Perry-Smith at 1,428 triangles a vertex 0.03 IOD beside a corner took -0.42 IOD per
+    unit of mouth_open, the one beside it on the lip -0.26).
     Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
     within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
     from scipy.sparse.csgraph import dijkstra
@@ -417,8 +432,15 @@ def _seam_rows(
     # part gradually towards the corner instead of at full opening right beside it.
     taper = SEAM_TAPER * frame.iod
     end_d = cKDTree(q[ends]).query(q)[0] if len(ends) and taper > 0 else np.full(len(h), np.inf)
+    upper_side = seam_pairs[:, 0]
+    if pin_upper_lip:
+        # The upper lip over the seam's width joins its upper side (a coarse lip's few vertices, which the harmonic
+        # field would fill from the corners beside them; see ``pin_upper_lip``).
+        x_range = (float(q[upper_side, 0].min()), float(q[upper_side, 0].max()))
+        lip = upper_lip_side(h, triangles, seam_pairs, frame, x_range=x_range, closed=True)
+        upper_side = np.r_[upper_side, np.flatnonzero(lip & ~on_up & ~on_lo)]
     for side, cand in (
-        (seam_pairs[:, 0], ~lower_lip),
+        (upper_side, ~lower_lip),
         (seam_pairs[:, 1], ~upper_lip),
         (ends, np.ones(n_s, dtype=bool)),
     ):
@@ -461,6 +483,46 @@ def _seam_rows(
     return pin, pin_rows, near
 
 
+def seam_distances(
+    vertices: np.ndarray, triangles: np.ndarray, seam_pairs: np.ndarray, *, iod: float, limit: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(n,), (n,): each vertex's distance along the mesh's edges (head units, inf beyond ``limit`` IOD) to the
+    upper side of a cut lip seam (``seam_pairs[:, 0]``) and to its lower side (``seam_pairs[:, 1]``)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from realtime_core.face.projection import vertex_adjacency
+
+    h = np.asarray(vertices, dtype=np.float64)
+    adj = vertex_adjacency(len(h), triangles).tocoo()
+    length = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-12 * iod
+    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(h), len(h)))
+    d_up = dijkstra(g, indices=np.asarray(seam_pairs[:, 0]), min_only=True, limit=limit * iod)
+    d_lo = dijkstra(g, indices=np.asarray(seam_pairs[:, 1]), min_only=True, limit=limit * iod)
+    return d_up, d_lo
+
+
+def upper_lip_side(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    seam_pairs: np.ndarray,
+    frame: FaceFrame,
+    *,
+    x_range: tuple[float, float],
+    closed: bool = False,
+    reach: float = SEAM_REACH,
+) -> np.ndarray:
+    """(n,) bool: the upper lip above a cut lip seam (``seam_pairs`` (k, 2) upper, lower): the vertices whose
+    coordinate along the face's x axis (head units from the frame's origin) lies inside ``x_range`` (its ends
+    too when ``closed``), within ``reach`` IOD of the seam's upper side along the mesh and nearer to it than to
+    its lower side. Round the mouth corners the mesh joins them to the jaw."""
+    h = np.asarray(vertices, dtype=np.float64)
+    d_up, d_lo = seam_distances(h, triangles, np.asarray(seam_pairs, dtype=np.int64), iod=frame.iod, limit=reach)
+    x = (h - frame.origin) @ frame.axes[0]
+    lo, hi = x_range
+    inside = (x >= lo) & (x <= hi) if closed else (x > lo) & (x < hi)
+    return inside & np.isfinite(d_up) & (d_up < d_lo)
+
+
 def _same_side_controls(
     h: np.ndarray,
     triangles: np.ndarray,
@@ -477,15 +539,7 @@ def _same_side_controls(
     one (``upper_lip``) that lies on the lower side, within ``reach`` IOD of the cut, would pin the
     wrong lip to the other lip's motion (a shard across the opening): it is dropped and the field
     fills in its place from the controls around it."""
-    from scipy.sparse.csgraph import dijkstra
-
-    from realtime_core.face.projection import vertex_adjacency
-
-    adj = vertex_adjacency(len(h), triangles).tocoo()
-    length = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-12 * iod
-    g = sp.csr_matrix((length, (adj.row, adj.col)), shape=(len(h), len(h)))
-    d_up = dijkstra(g, indices=np.asarray(seam_pairs[:, 0]), min_only=True, limit=2 * reach * iod)
-    d_lo = dijkstra(g, indices=np.asarray(seam_pairs[:, 1]), min_only=True, limit=2 * reach * iod)
+    d_up, d_lo = seam_distances(h, triangles, seam_pairs, iod=iod, limit=2 * reach)
     c = np.asarray(control, dtype=np.int64)
     near = np.minimum(d_up[c], d_lo[c]) <= reach * iod
     wrong = near & ((lower_lip & (d_up[c] < d_lo[c])) | (upper_lip & (d_lo[c] < d_up[c])))
@@ -505,12 +559,14 @@ def build_rig(
     meta: dict[str, Any] | None = None,
     keep_apart: np.ndarray | None = None,
     seam_smooth: float | None = None,
+    pin_upper_lip: bool = False,
 ) -> Rig:
     """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights).
 
     Coincident vertices are welded for the connectivity tests and share weights, except those in
     ``keep_apart`` (indices, e.g. the copies made by cutting a lip seam), which stay separate.
-    ``seam_smooth``: the cut seam's rows smoothed (IOD, :func:`_seam_rows`), None: as before.
+    ``seam_smooth``: the cut seam's rows smoothed (IOD, :func:`_seam_rows`), None: as before. ``pin_upper_lip``:
+    the upper lip over a cut seam pinned with it (:func:`_seam_rows`).
     """
     basis = calibration.basis(simple)  # (n_s*3, 4)
     h = np.asarray(head_vertices, dtype=np.float64)
@@ -551,6 +607,7 @@ def build_rig(
         lower_lip=lower,
         upper_lip=upper,
         seam_smooth=seam_smooth,
+        pin_upper_lip=pin_upper_lip,
     )
     # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
     g = g_w[canon]
@@ -644,13 +701,18 @@ def repair_rig(
     max_stretch: float = 3.0,
     tiny: float = 0.0,
     measured: np.ndarray | None = None,
+    own_side: np.ndarray | None = None,
+    ties: dict[int, int] | None = None,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
     tongue, eyes) keep their rigid rows. ``keep_apart``: the copies of a cut lip seam (as in
     :func:`build_rig`), so the two lips stay separate surfaces. ``tiny``: sliver clusters move as one
     (see :func:`realtime_core.face.repair.repair_folds`). ``measured``: (m,) bool the triangles whose folds
-    and edges count (None: all; hidden faces about to be removed do not). Records the repair in meta."""
+    and edges count (None: all; hidden faces about to be removed do not). ``own_side``: (n_h,) bool the
+    vertices smoothed over each other only (see :func:`realtime_core.face.repair.repair_folds`; a welded
+    vertex is on it when one of its twins is). ``ties``: head vertex -> the head vertex whose row it takes
+    throughout (ibid.). Records the repair in meta."""
     from realtime_core.face.repair import repair_folds
 
     h = np.asarray(rig.neutral, dtype=np.float64)
@@ -668,8 +730,21 @@ def repair_rig(
     has_ctrl[comp[canon[rig.control]]] = True
     basis = np.asarray(rig.basis, dtype=np.float64)
     motions = np.stack([(basis @ np.asarray(p, dtype=np.float64)).reshape(n_s, 3) for p in poses])
+    own_w = None
+    if own_side is not None:
+        own_w = np.zeros(len(welded), dtype=bool)
+        np.logical_or.at(own_w, canon, np.asarray(own_side, dtype=bool))
     res = repair_folds(
-        welded, t_w, g_w, motions, max_stretch=max_stretch, fixed=~has_ctrl[comp], tiny=tiny, measured=measured
+        welded,
+        t_w,
+        g_w,
+        motions,
+        max_stretch=max_stretch,
+        fixed=~has_ctrl[comp],
+        tiny=tiny,
+        measured=measured,
+        own_side=own_w,
+        ties=None if ties is None else {int(canon[i]): int(canon[j]) for i, j in ties.items()},
     )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)

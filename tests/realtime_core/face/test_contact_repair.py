@@ -312,3 +312,49 @@ def test_lip_columns_pair_the_lips_never_a_tooth_and_push_only_lips_that_cross()
     past = np.array([0.05, 0.0, 0.0, 0.0])  # 0.03 past the upper lip: pushed apart to touching
     v = new_rig.deformed(past)
     np.testing.assert_allclose(v[upper_row[1:-1], 1], v[lower_row[1:-1], 1], atol=1e-6)
+
+
+def _lip_over_jaw():
+    """A 9 x 9 grid: rows y >= 0.5 an upper lip following simple vertex 0 (still), the rest a jaw following simple
+    vertex 1, except one jaw vertex just below the lip pinned far up (simple vertex 2): the grid folds round it
+    at its motion, and the repair smooths the rows there, the lip's among them. Returns v, t, weights, motion,
+    the lip's vertices, the boundary."""
+    v, t = _grid()
+    n = len(v)
+    lip = v[:, 1] >= 0.5
+    spike = int(np.flatnonzero((np.abs(v[:, 0] - 0.5) < 1e-9) & (np.abs(v[:, 1] - 0.375) < 1e-9))[0])
+    g = np.zeros((n, 3))
+    g[lip, 0] = 1.0
+    g[~lip, 1] = 1.0
+    g[spike] = [0.0, 0.0, 1.0]
+    motion = np.array([[[0.0, 0.0, 0.0], [0.0, -0.2, 0.0], [0.0, 0.4, 0.0]]])
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    return v, t, sp.csr_matrix(g), motion, lip, edge
+
+
+def test_an_own_side_takes_no_motion_from_its_other_neighbours():
+    """Smoothed over every neighbour, the lip's rows beside the fold take the jaw's and the spike's motion (the
+    coarse upper lip that dropped with the jaw); smoothed over each other only (``own_side``), the lip's rows keep
+    weighing its own simple vertex alone, and the fold still goes (the jaw's side gives way)."""
+    v, t, g, motion, lip, edge = _lip_over_jaw()
+    everyone = repair_folds(v, t, g, motion, fixed=edge)
+    assert everyone.flips_left == 0
+    assert np.abs(everyone.weights.toarray()[lip][:, 1:]).max() > 0.01
+    own = repair_folds(v, t, g, motion, fixed=edge, own_side=lip)
+    assert own.flips_left == 0
+    w = own.weights.toarray()
+    np.testing.assert_array_equal(w[lip][:, 1:], 0.0)
+    np.testing.assert_allclose(w[lip][:, 0], 1.0)
+
+
+def test_a_tied_vertex_moves_as_its_vertex_through_the_repair():
+    """``ties``: the vertex takes its vertex's row from the start and keeps it while the smoothing changes that
+    row (the spike's own row is smoothed, and the vertex tied to it follows), and the fold still goes."""
+    v, t, g, motion, _, edge = _lip_over_jaw()
+    spike = int(np.flatnonzero(g.toarray()[:, 2])[0])
+    left = spike - 1  # its neighbour in the same grid row
+    res = repair_folds(v, t, g, motion, fixed=edge, ties={left: spike})
+    assert res.flips_left == 0
+    w = res.weights.toarray()
+    np.testing.assert_allclose(w[left], w[spike], atol=1e-6)
+    assert not np.allclose(w[spike], [0.0, 0.0, 1.0])  # the row it follows was smoothed
