@@ -134,6 +134,10 @@ fully (:func:`inner_mouth_weights`); above the mouth line it keeps the field's m
 INNER_REACH = (1.0, 1.5)
 """IOD: how far from the mouth's centre an inner-mouth piece may reach sideways and back (the inside of
 a mouth; ears, hair and the back of a bust lie further)."""
+SEAM_RAMP = 0.2
+"""IOD: along an inner-mouth piece from a texture seam that joins it to the face's surface, how far its jaw weight
+rises from the surface's 0 to its full value (:func:`inner_mouth_weights`; the scan's pieces' edges are about 0.13
+IOD long, so the seam's neighbours keep most of theirs)."""
 
 
 def inner_mouth_weights(
@@ -155,9 +159,17 @@ def inner_mouth_weights(
     (a dark fleck below the lower lip). Each vertex's weight rises with its height below the mouth line
     (along axes[1]), from 0 at the line to 1 at JAW_FULL of the way to the chin: a lower gum follows the
     jaw as a separate lower-teeth part does (:func:`with_rigid_parts`), the piece stays whole.
+
+    Pieces are found on the mesh as it came, where texture seams part coincident copies of a vertex: a scan's
+    inside of the mouth is such a piece only across a seam (Lee Perry-Smith: its lining continues the lips' inner
+    walls, 48 welded positions). Welded, it is no piece at all, and its jaw weight and the dark fleck through the
+    chin come back (docs/animation.md, "The seam tear at the right depth"). Weighted as it came, the seam's copies
+    on the surface kept 0 while the piece's took up to 0.58, and the seam tore open at /a/ (0.12-0.23 IOD). So
+    the weight is taken on the welded mesh: 0 at a position the piece shares with the surface, rising to the
+    height's weight SEAM_RAMP IOD along the piece (:func:`_away_from_seams`); every position has one weight.
     ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
     vertex index (corner_left, corner_right, chin, nose_tip)."""
-    from scipy.sparse.csgraph import connected_components
+    from realtime_core.face.welding import mesh_pieces
 
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -165,9 +177,7 @@ def inner_mouth_weights(
     out = np.zeros(n)
     if part is not None:
         t = t[(np.asarray(part)[t] == part[landmarks["nose_tip"]]).all(axis=1)]
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    adj = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, comp = connected_components(adj, directed=False)
+    comp = mesh_pieces(n, t)
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
     mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
@@ -188,24 +198,28 @@ def inner_mouth_weights(
     outside = np.bincount(comp[used & ~inside], minlength=comp.max() + 1) > 0
     piece = inside & ~outside[comp]
     out[piece] = np.clip(local[piece, 1] / (JAW_FULL * chin), 0.0, 1.0)
-    return out
+    return out * _away_from_seams(v, t, piece, used, iod)
 
 
-def seam_consistent(vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n,) ``weights`` with every group of coincident ``vertices`` (n, 3) (a texture seam's copies) given the
-    largest weight among them. :func:`inner_mouth_weights` finds its pieces on the mesh as it came, where a
-    texture seam parts a piece from the surface it continues; the seam's copies on the other side keep weight 0
-    and the two sides of the seam move apart (a tear). On Lee Perry-Smith decimated to 3,810 and 1,428 triangles
-    the piece is the lips' own inner lining below the contact, joined to the upper lip's inner wall only across
-    such a seam: the wall hung from the upper lip into the open mouth (the dark shards and lip backs seen there)
-    while the lining below it went back with the jaw (docs/animation.md, "Decimated mouths: the seam tear")."""
+def _away_from_seams(v: np.ndarray, t: np.ndarray, piece: np.ndarray, used: np.ndarray, iod: float) -> np.ndarray:
+    """(n,) in [0, 1]: for each vertex of the inner-mouth pieces (``piece`` (n,) bool) its distance along them from
+    the nearest position they share with the rest of the mesh (``used`` (n,) bool: vertices of ``t``), over
+    SEAM_RAMP IOD, at most 1 (1 on a piece that shares none); the same for every copy of a position."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from realtime_core.face.projection import edge_length_graph
     from realtime_core.face.welding import weld
 
-    w = np.asarray(weights, dtype=np.float64)
-    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
-    top = np.zeros(len(welded))
-    np.maximum.at(top, canon, w)
-    return top[canon]
+    canon, welded = weld(v)
+    surface = np.zeros(len(welded), dtype=bool)
+    surface[canon[used & ~piece]] = True
+    seams = np.unique(canon[piece & surface[canon]])
+    if not len(seams):
+        return np.ones(len(v))
+    # Along the pieces welded: a seam between two of them (Lee Perry-Smith's two sides) is no end.
+    graph = edge_length_graph(welded, canon[t[piece[t].all(axis=1)]])
+    dist = dijkstra(graph, directed=False, indices=seams, min_only=True)
+    return np.clip(dist[canon] / (SEAM_RAMP * iod), 0.0, 1.0)
 
 
 def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
