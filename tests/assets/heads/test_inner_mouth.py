@@ -65,15 +65,15 @@ def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line
     np.testing.assert_allclose(w2[at["teeth"]], np.clip(-v[at["teeth"], 1] / JAW_FULL, 0, 1), atol=1e-12)
 
 
-def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_per_position_rising_from_it():
+def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_per_position_blended_across_it():
     """A face sheet (as above) with a lip's inner wall joined to it by its edges, running back to z = -0.2 below the
     mouth line, and a lining that continues the wall down behind the chin but whose vertices along the wall's lower
     edge are copies (a texture seam: same positions, other indices), as Lee Perry-Smith's inside of the mouth. On
     the mesh as loaded the lining is a piece of its own: its seam copies took the height's weight while the wall's
     kept 0, and at /a/ the seam's two sides parted (0.12-0.23 IOD on the scan; docs/animation.md, "The seam tear
-    at the right depth"). Now every position has one weight: 0 where the lining meets the wall, rising along the
-    lining to the height's weight SEAM_RAMP away (each lining row's distance from the seam computed here from the
-    patch's row spacing). A piece truly apart (no shared position) is weighted by its height alone, as before."""
+    at the right depth"). Now every position has one weight, the height's times a blend: 0.5 at the seam, rising to 1
+    SEAM_RAMP along the lining and falling to 0 SEAM_RAMP up the wall (each row's distance from the seam computed
+    here from the patches' row spacing). A piece truly apart (no shared position) is weighted by its height alone."""
     xs, ys = np.meshgrid(np.linspace(-2, 2, 21), np.linspace(-2, 2, 21))
     face = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
     ft = _patch(-2, 2, -2, 2, 0, 0, n=21)[1]
@@ -102,15 +102,24 @@ def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_pe
 
     w = inner_mouth_weights(v, t, None, lm, np.eye(3), 1.0)
 
+    def height(i):
+        return np.clip(-v[i, 1] / JAW_FULL, 0, 1)
+
     for i, j in zip(lining[:5], wall_bottom, strict=True):
-        assert w[i] == w[j] == 0.0, (i, j, w[i], w[j])  # one weight per position: no tear
-    row = np.repeat(np.arange(5), 5)  # each lining vertex's row, 0 at the seam
-    from_seam = row * np.hypot(0.7, 0.1) / 4
-    height = np.clip(-v[lining, 1] / JAW_FULL, 0, 1)
-    np.testing.assert_allclose(w[lining], height * np.clip(from_seam / SEAM_RAMP, 0, 1), atol=1e-9)
-    assert 0 < w[lining[5]] < height[5] and (w[lining] == 1).any()  # the ramp's middle and its full end are there
-    assert not w[wall_index].any() and not w[: len(face)].any()
-    np.testing.assert_allclose(w[apart], np.clip(-v[apart, 1] / JAW_FULL, 0, 1), atol=1e-12)
+        assert w[i] == w[j] == pytest.approx(0.5 * height(i)), (i, j, w[i], w[j])  # one weight per position
+    row = np.repeat(np.arange(5), 5)  # each patch vertex's row: 0 at the wall's top and at the lining's seam
+    into_lining = row * np.hypot(0.7, 0.1) / 4
+    np.testing.assert_allclose(
+        w[lining], height(lining) * (0.5 + 0.5 * np.clip(into_lining / SEAM_RAMP, 0, 1)), atol=1e-9
+    )
+    up_the_wall = (4 - row) * np.hypot(0.1, 0.2) / 4
+    np.testing.assert_allclose(
+        w[wall_index], height(wall_index) * (0.5 - 0.5 * np.clip(up_the_wall / SEAM_RAMP, 0, 1)), atol=1e-9
+    )
+    assert (w[lining] == 1).any() and (w[wall_index[5:15]] > 0).all()  # both ramps are there
+    assert not np.delete(w[: len(face)], wall_index[[0, 2, 4]]).any()  # the sheet lies beyond the wall's ramp
+    np.testing.assert_allclose(w[apart], height(apart), atol=1e-12)
+    assert (w[apart] > 0.5).any()
 
 
 @pytest.mark.system
