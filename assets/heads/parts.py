@@ -134,6 +134,10 @@ fully (:func:`inner_mouth_weights`); above the mouth line it keeps the field's m
 INNER_REACH = (1.0, 1.5)
 """IOD: how far from the mouth's centre an inner-mouth piece may reach sideways and back (the inside of
 a mouth; ears, hair and the back of a bust lie further)."""
+SEAM_RAMP = 0.2
+"""IOD: where a texture seam joins an inner-mouth piece to the face's surface, how far along each side the jaw weight
+blends between them (:func:`inner_mouth_weights`: half the height's weight at the seam, all of it this far into the
+piece, none this far into the surface; the scan's pieces' edges are about 0.13 IOD long)."""
 
 
 def inner_mouth_weights(
@@ -144,7 +148,8 @@ def inner_mouth_weights(
     axes: np.ndarray,
     iod: float,
 ) -> np.ndarray:
-    """(n,) float64 in [0, 1]: how much each vertex of an *inner-mouth piece* follows the jaw, 0 elsewhere.
+    """(n,) float64 in [0, 1]: how much each vertex of an *inner-mouth piece* (and of the surface within SEAM_RAMP of
+    a texture seam joining one to it) follows the jaw, 0 elsewhere.
 
     An inner-mouth piece is a connected piece of the face's own part (the nose tip's; the whole mesh
     without parts) apart from the face's surface, lying wholly behind the mouth corners (their midpoint,
@@ -155,9 +160,17 @@ def inner_mouth_weights(
     (a dark fleck below the lower lip). Each vertex's weight rises with its height below the mouth line
     (along axes[1]), from 0 at the line to 1 at JAW_FULL of the way to the chin: a lower gum follows the
     jaw as a separate lower-teeth part does (:func:`with_rigid_parts`), the piece stays whole.
+
+    Pieces are found on the mesh as it came, where texture seams part coincident copies of a vertex: a scan's
+    inside of the mouth is such a piece only across seams (Lee Perry-Smith: it continues the lips' inner walls at 48
+    welded positions). Welded, it is no piece at all, and the dark fleck through the chin comes back; weighted on its
+    side of the seam alone, its copies took up to 0.58 while the wall's kept 0 and the seam tore open at /a/ (0.12-0.23
+    IOD; docs/animation.md, "The seam tear at the right depth"). So the weight is blended on the welded mesh
+    (:func:`_seam_blend`): every position has one weight, half the height's at a seam, rising to all of it SEAM_RAMP
+    IOD into the piece and falling to none SEAM_RAMP IOD into the surface.
     ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
     vertex index (corner_left, corner_right, chin, nose_tip)."""
-    from scipy.sparse.csgraph import connected_components
+    from realtime_core.face.welding import mesh_pieces
 
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -165,9 +178,7 @@ def inner_mouth_weights(
     out = np.zeros(n)
     if part is not None:
         t = t[(np.asarray(part)[t] == part[landmarks["nose_tip"]]).all(axis=1)]
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    adj = sp.csr_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, comp = connected_components(adj, directed=False)
+    comp = mesh_pieces(n, t)
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
     mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
@@ -187,32 +198,48 @@ def inner_mouth_weights(
     # A piece counts only if every one of its vertices lies there.
     outside = np.bincount(comp[used & ~inside], minlength=comp.max() + 1) > 0
     piece = inside & ~outside[comp]
-    out[piece] = np.clip(local[piece, 1] / (JAW_FULL * chin), 0.0, 1.0)
-    return out
+    height = np.clip(local[:, 1] / (JAW_FULL * chin), 0.0, 1.0)
+    return np.where(used, height * _seam_blend(v, t, piece, used, iod), 0.0)
 
 
-def seam_consistent(vertices: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n,) ``weights`` with every group of coincident ``vertices`` (n, 3) (a texture seam's copies) given the
-    largest weight among them. :func:`inner_mouth_weights` finds its pieces on the mesh as it came, where a
-    texture seam parts a piece from the surface it continues; the seam's copies on the other side keep weight 0
-    and the two sides of the seam move apart (a tear). On Lee Perry-Smith decimated to 3,810 and 1,428 triangles
-    the piece is the lips' own inner lining below the contact, joined to the upper lip's inner wall only across
-    such a seam: the wall hung from the upper lip into the open mouth (the dark shards and lip backs seen there)
-    while the lining below it went back with the jaw (docs/animation.md, "Decimated mouths: the seam tear")."""
+def _seam_blend(v: np.ndarray, t: np.ndarray, piece: np.ndarray, used: np.ndarray, iod: float) -> np.ndarray:
+    """(n,) in [0, 1], one value per position of ``v`` (n, 3): 1 on the inner-mouth pieces (``piece`` (n,) bool), 0 on
+    the rest of the mesh (``used`` (n,) bool: the vertices of ``t``), blended across the seams where they share a
+    position: 0.5 there, rising to 1 at SEAM_RAMP IOD along the pieces and falling to 0 at SEAM_RAMP IOD along the
+    rest (edge-path distances on the welded mesh; a seam between two pieces is no seam)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from realtime_core.face.projection import edge_length_graph
     from realtime_core.face.welding import weld
 
-    w = np.asarray(weights, dtype=np.float64)
-    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
-    top = np.zeros(len(welded))
-    np.maximum.at(top, canon, w)
-    return top[canon]
+    canon, welded = weld(v)
+    surface = np.zeros(len(welded), dtype=bool)
+    surface[canon[used & ~piece]] = True
+    inner = np.zeros(len(welded), dtype=bool)
+    inner[canon[piece]] = True
+    seams = np.flatnonzero(inner & surface)
+    if not len(seams):
+        return piece.astype(np.float64)
+    reach = SEAM_RAMP * iod
+    in_piece = piece[t].all(axis=1)
+    into_piece = dijkstra(edge_length_graph(welded, canon[t[in_piece]]), indices=seams, min_only=True, limit=reach)
+    into_surface = dijkstra(edge_length_graph(welded, canon[t[~in_piece]]), indices=seams, min_only=True, limit=reach)
+    blend = np.where(
+        inner & ~surface,
+        0.5 + 0.5 * np.clip(into_piece / reach, 0.0, 1.0),
+        0.5 - 0.5 * np.clip(into_surface / reach, 0.0, 1.0),
+    )
+    return blend[canon]
 
 
 def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
     """The :class:`realtime_core.face.Rig` whose vertex i moves by (1 - w_i) of its own displacement plus
     w_i of vertex ``anchor``'s (the jaw's, as :func:`with_rigid_parts` takes it); ``weights`` (n,) in
-    [0, 1]. A still vertex with a weight joins the moving set. The lip-contact push is left out of the
-    weighted part (as for rigid jaw parts). Records ``inner_mouth_pieces`` (vertices weighted) in the meta."""
+    [0, 1]. A still vertex with a weight joins the moving set. Each vertex keeps its whole lip-contact push: the
+    push closes the crossing measured on the final rows, so a lip vertex weighted w (the lips' inner walls by the seams
+    of :func:`inner_mouth_weights`) that kept only (1 - w) of it left its lips crossed (Lee Perry-Smith, hand
+    landmarks: by 2.6e-5 IOD pressed beyond speech); the inner-mouth pieces lie beyond the push's reach. Records
+    ``inner_mouth_pieces`` (vertices weighted) in the meta."""
     n = len(rig.neutral)
     w = np.asarray(weights, dtype=np.float64)
     row = -np.ones(n, dtype=np.int64)
@@ -238,7 +265,7 @@ def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
     spread = rig.contact_spread
     if spread is not None:
         keep = sp.csr_matrix(
-            ((1.0 - wm)[own >= 0], (np.flatnonzero(own >= 0), own[own >= 0])), shape=(k, spread.shape[0])
+            (np.ones(int((own >= 0).sum())), (np.flatnonzero(own >= 0), own[own >= 0])), shape=(k, spread.shape[0])
         )
         spread = (keep @ spread).tocsr()
     meta = {**rig.meta, "inner_mouth_pieces": int((w > 0).sum())}

@@ -1231,18 +1231,13 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    from assets.heads.parts import inner_mouth_weights, seam_consistent, with_jaw_weights, with_rigid_parts
+    from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
 
     rig = with_rigid_parts(rig, out_mesh, snap)  # separate eyes / teeth / tongue: rigid with skull or jaw
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
     # copies and the cavity, appended after its vertices, take no weight).
     jaw = inner_mouth_weights(mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod)
-    if coarse and jaw.any():
-        # A decimated mouth's inner lining is such a piece only across texture seams; their copies on the upper
-        # lip's inner wall take the same weight, or the seam tears open at /a/ (seam_consistent). Full scans keep
-        # their weights as they were (their rows are measured elsewhere; docs/animation.md, "the seam tear").
-        jaw = seam_consistent(mesh.vertices, jaw)
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]

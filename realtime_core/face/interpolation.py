@@ -222,9 +222,6 @@ def _geodesic_from_controls(h: np.ndarray, triangles: np.ndarray, ctrl: np.ndarr
     """Edge-path distances (n_s, n_h) from every control point (inf beyond ``limit`` or unreachable)."""
     from scipy.sparse.csgraph import dijkstra
 
-    from realtime_core.face.projection import vertex_adjacency
+    from realtime_core.face.projection import edge_length_graph
 
-    adj = vertex_adjacency(len(h), triangles).tocoo()
-    w = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-300
-    graph = sp.csr_matrix((w, (adj.row, adj.col)), shape=adj.shape)
-    return dijkstra(graph, indices=ctrl, limit=limit)
+    return dijkstra(edge_length_graph(h, triangles), indices=ctrl, limit=limit)

@@ -40,6 +40,15 @@ def vertex_adjacency(n_vertices: int, triangles: np.ndarray) -> sp.csr_matrix:
     return a
 
 
+def edge_length_graph(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
+    """Symmetric (n, n) CSR graph of the edges of ``triangles`` (m, 3) weighted by their lengths between
+    ``vertices`` (n, 3) (plus 1e-300, so that an edge between coincident vertices stays an edge)."""
+    h = np.asarray(vertices, dtype=np.float64)
+    adj = vertex_adjacency(len(h), triangles).tocoo()
+    w = np.linalg.norm(h[adj.row] - h[adj.col], axis=1) + 1e-300
+    return sp.csr_matrix((w, (adj.row, adj.col)), shape=adj.shape)
+
+
 def greedy_walk_reaches(
     vertices: np.ndarray,
     adjacency: sp.csr_matrix,

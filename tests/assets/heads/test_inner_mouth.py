@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from assets.heads.parts import JAW_FULL, inner_mouth_weights, with_jaw_weights
+from assets.heads.parts import JAW_FULL, SEAM_RAMP, inner_mouth_weights, with_jaw_weights
 
 
 def _patch(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, n: int = 5):
@@ -63,6 +63,63 @@ def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line
     # Without parts, the teeth patch is a piece of the face's part like any other: weighted too.
     w2 = inner_mouth_weights(v, t, None, lm, np.eye(3), 1.0)
     np.testing.assert_allclose(w2[at["teeth"]], np.clip(-v[at["teeth"], 1] / JAW_FULL, 0, 1), atol=1e-12)
+
+
+def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_per_position_blended_across_it():
+    """A face sheet (as above) with a lip's inner wall joined to it by its edges, running back to z = -0.2 below the
+    mouth line, and a lining that continues the wall down behind the chin but whose vertices along the wall's lower
+    edge are copies (a texture seam: same positions, other indices), as Lee Perry-Smith's inside of the mouth. On
+    the mesh as loaded the lining is a piece of its own: its seam copies took the height's weight while the wall's
+    kept 0, and at /a/ the seam's two sides parted (0.12-0.23 IOD on the scan; docs/animation.md, "The seam tear
+    at the right depth"). Now every position has one weight, the height's times a blend: 0.5 at the seam, rising to 1
+    SEAM_RAMP along the lining and falling to 0 SEAM_RAMP up the wall (each row's distance from the seam computed
+    here from the patches' row spacing). A piece truly apart (no shared position) is weighted by its height alone."""
+    xs, ys = np.meshgrid(np.linspace(-2, 2, 21), np.linspace(-2, 2, 21))
+    face = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    ft = _patch(-2, 2, -2, 2, 0, 0, n=21)[1]
+
+    def near(p):
+        return int(np.argmin(np.linalg.norm(face - p, axis=1)))
+
+    # The wall: 5 columns from x = -0.2 to 0.2, from the face's row y = 0 (the face's own vertices at x = -0.2, 0,
+    # 0.2) to z = -0.2.
+    wv, wt = _patch(-0.2, 0.2, 0.0, -0.1, 0.0, -0.2, n=5)
+    wall_index = len(face) + np.arange(len(wv))
+    wall_index[[0, 2, 4]] = [near([x, 0.0, 0.0]) for x in (-0.2, 0.0, 0.2)]
+    v = np.vstack([face, wv])
+    t = np.vstack([ft, wall_index[wt]])
+    wall_bottom = wall_index[-5:]
+    # The lining, 5 rows: from the wall's lower edge (copies of its vertices) down to y = -0.8, z = -0.3.
+    lv, lt = _patch(-0.2, 0.2, -0.1, -0.8, -0.2, -0.3, n=5)
+    lining = len(v) + np.arange(len(lv))
+    v, t = np.vstack([v, lv]), np.vstack([t, lt + len(v)])
+    np.testing.assert_array_equal(v[lining[:5]], v[wall_bottom])  # the seam: coincident copies
+    apart_v, apart_t = _patch(0.6, 0.9, -0.2, -0.7, -0.4, -0.5)  # a piece truly apart, behind the mouth
+    apart = len(v) + np.arange(len(apart_v))
+    v, t = np.vstack([v, apart_v]), np.vstack([t, apart_t + len(v)])
+    lm = {"corner_left": near([0.5, 0, 0]), "corner_right": near([-0.5, 0, 0]), "chin": near([0, -1, 0])}
+    lm["nose_tip"] = near([0, 0.6, 0])
+
+    w = inner_mouth_weights(v, t, None, lm, np.eye(3), 1.0)
+
+    def height(i):
+        return np.clip(-v[i, 1] / JAW_FULL, 0, 1)
+
+    for i, j in zip(lining[:5], wall_bottom, strict=True):
+        assert w[i] == w[j] == pytest.approx(0.5 * height(i)), (i, j, w[i], w[j])  # one weight per position
+    row = np.repeat(np.arange(5), 5)  # each patch vertex's row: 0 at the wall's top and at the lining's seam
+    into_lining = row * np.hypot(0.7, 0.1) / 4
+    np.testing.assert_allclose(
+        w[lining], height(lining) * (0.5 + 0.5 * np.clip(into_lining / SEAM_RAMP, 0, 1)), atol=1e-9
+    )
+    up_the_wall = (4 - row) * np.hypot(0.1, 0.2) / 4
+    np.testing.assert_allclose(
+        w[wall_index], height(wall_index) * (0.5 - 0.5 * np.clip(up_the_wall / SEAM_RAMP, 0, 1)), atol=1e-9
+    )
+    assert (w[lining] == 1).any() and (w[wall_index[5:15]] > 0).all()  # both ramps are there
+    assert not np.delete(w[: len(face)], wall_index[[0, 2, 4]]).any()  # the sheet lies beyond the wall's ramp
+    np.testing.assert_allclose(w[apart], height(apart), atol=1e-12)
+    assert (w[apart] > 0.5).any()
 
 
 @pytest.mark.system

@@ -352,15 +352,6 @@ def test_a_knife_cut_mouth_whose_rigs_fail_at_the_corner_vertices_opens_with_its
     assert "simple_corners_at_points" not in r1.meta
 
 
-def test_seam_consistent_gives_a_texture_seams_copies_the_largest_weight_among_them():
-    """Coincident vertices (a texture seam's copies) share the largest weight among them; the others keep theirs."""
-    from assets.heads.parts import seam_consistent
-
-    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 0, 0]])
-    w = np.array([0.0, 0.3, 0.5, 0.0, 0.2, 0.1])
-    np.testing.assert_array_equal(seam_consistent(v, w), [0.5, 0.3, 0.5, 0.3, 0.2, 0.3])
-
-
 @pytest.mark.slow
 def test_a_knife_cut_mouths_texture_seams_do_not_tear(tmp_path, shared_lps, builtin_head):
     """Lee Perry-Smith decimated to ~1,500 triangles, read with its texture seams (a vertex per position and UV, as
@@ -369,7 +360,8 @@ def test_a_knife_cut_mouths_texture_seams_do_not_tear(tmp_path, shared_lps, buil
     ``inner_mouth_weights`` mixed the jaw's motion into its vertices and not into their seam copies on the upper lip's
     inner wall: at a wide /a/ the two sides of the seam parted by up to 0.2 IOD (the wall hung into the opening, the
     dark shards there). Every vertex of the mesh as it came must move as its seam copies do (the rig's field is built
-    on the welded mesh; only the lip cut's copies, appended after them, part)."""
+    on the welded mesh, and ``inner_mouth_weights`` gives every position one weight; only the lip cut's copies,
+    appended after them, part)."""
     from assets.heads.rigging import rig_head
     from realtime_core.face.rig import weld
 
