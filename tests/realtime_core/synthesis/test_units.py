@@ -380,9 +380,10 @@ def test_a_junction_leaves_one_recording_and_arrives_on_the_next_without_a_step(
     np.testing.assert_allclose(out[k1:], into[k1:], atol=1e-12)  # then the recording continues as is
 
 
-def test_loading_the_shipped_corpus_does_not_import_the_speech_model():
+def test_loading_the_shipped_corpus_imports_neither_the_speech_model_nor_scipy_optimize():
     """`facecast say` loads the unit corpus on every run: reading its .npz must not import realtime_core.avmodel
-    (the HMM, the front end, scipy.cluster: ~90 ms of its "corpus + graph" stage) for a container helper."""
+    (the HMM, the front end, scipy.cluster: ~90 ms of its "corpus + graph" stage) for a container helper, nor
+    scipy.optimize (0.3-0.7 s) for the Motion Units' nonnegative fit that a load never runs."""
     import subprocess
     import sys
     from pathlib import Path
@@ -395,7 +396,8 @@ def test_loading_the_shipped_corpus_does_not_import_the_speech_model():
         "import sys\n"
         "from assets.unitcorpus import SHIPPED, load_unit_corpus\n"
         "assert len(load_unit_corpus(SHIPPED).corpus.frames) > 0\n"
-        "print(sorted(m for m in sys.modules if m in ('realtime_core.avmodel', 'realtime_core.hmm')))\n"
+        "heavy = ('realtime_core.avmodel', 'realtime_core.hmm', 'scipy.optimize')\n"
+        "print(sorted(m for m in sys.modules if m in heavy))\n"
     )
     root = Path(__file__).resolve().parents[3]
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True)
