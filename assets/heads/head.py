@@ -66,8 +66,6 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
     """The built-in head animated through its own 52 ARKit targets: its morph rig is read from the cache
     (``<cache>/builtin_morph_<key>.npz``, :func:`assets.heads.targets.morph_rig_key`), built and written there
     when missing."""
-    import numpy as np
-
     from assets.heads.builtin import load_builtin_head
     from assets.heads.cache import atomic_savez, cache_dir
     from assets.heads.targets import (
@@ -77,6 +75,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         morph_rig_key,
         reference_lips,
     )
+    from realtime_core.archive import npz_arrays
 
     b = load_builtin_head(cache)
     mesh = HeadMesh(
@@ -90,15 +89,14 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         part=b.part.astype("int16"),
         part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
     )
-    path = (
-        cache or cache_dir()
-    ) / f"builtin_morph_{morph_rig_key(mesh.vertices, mesh.triangles, b.targets, b.landmarks)}.npz"
+    key = morph_rig_key(mesh.vertices, mesh.triangles, b.targets, b.landmarks)
+    path = (cache or cache_dir()) / f"builtin_morph_{key}.npz"
     rig = None
     if path.is_file():
         try:
-            with np.load(path, allow_pickle=False) as z:
-                rig = morph_rig_from_arrays({k: z[k] for k in z.files}, mesh.vertices, mesh.triangles)
-        except (OSError, KeyError, ValueError):  # unreadable or another writer's: built again below
+            arrays = npz_arrays(path.read_bytes(), "built-in morph rig")
+            rig = morph_rig_from_arrays(arrays, mesh.vertices, mesh.triangles)
+        except (OSError, KeyError, ValueError):  # unreadable (ModelFormatError), another writer's: built again
             path.unlink(missing_ok=True)
     if rig is None:
         # The build solves the keyframe map's QP at the probe and speech poses (0.8 s of a `facecast say`

@@ -252,9 +252,9 @@ def test_builtin_morph_rig_is_cached_and_read_back_identical(tmp_path, monkeypat
     np.testing.assert_array_equal(read.rig.weights(poses), built.rig.weights(poses))
     for p in poses[::4]:
         np.testing.assert_array_equal(read.rig.deformed(p), built.rig.deformed(p))
-    # A cache file another writer left unreadable is built again, not an error.
+    # A cache file left unreadable (cut short: a zip without its directory) is built again, not an error.
     path = next(tmp_path.glob("builtin_morph_*.npz"))
-    path.write_bytes(b"not an npz")
+    path.write_bytes(path.read_bytes()[:1000])
     again = builtin_morph_head(tmp_path)
     assert len(builds) == 2
     np.testing.assert_array_equal(again.rig.weights(poses), built.rig.weights(poses))
