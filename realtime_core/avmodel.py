@@ -19,9 +19,7 @@ module does no I/O.
 
 from __future__ import annotations
 
-import io
 import json
-import zipfile
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -29,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
+from realtime_core.archive import npz_arrays, npz_bytes
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, LevelNormConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
@@ -179,34 +178,6 @@ def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
         # Models written before level normalisation use absolute levels.
         level_norm=None if d.get("level_norm") is None else LevelNormConfig(**d["level_norm"]),
     )
-
-
-def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
-    """``.npz`` archive bytes of named arrays (no pickle): the container of every model file."""
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)  # type: ignore[arg-type]  # numpy stubs type **kwds as allow_pickle
-    return buf.getvalue()
-
-
-NOT_NPZ = "not an .npz file (no zip header)"
-"""Why bytes that do not start as a zip archive are refused. numpy takes any such file for a pickle and
-says to load it unsafely with ``allow_pickle``: advice a user must not be given."""
-
-
-def require_npz(data: bytes, what: str) -> None:
-    """:class:`ModelFormatError` naming ``what`` unless ``data`` starts as a zip archive (an ``.npz``)."""
-    if not data.startswith(b"PK"):
-        raise ModelFormatError(f"not a facecast {what} archive: {NOT_NPZ}")
-
-
-def npz_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
-    """The named arrays of ``.npz`` bytes (pickle refused); :class:`ModelFormatError` if it is not one."""
-    require_npz(data, what)
-    try:
-        npz = np.load(io.BytesIO(data), allow_pickle=False)
-        return {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ModelFormatError(f"not a facecast {what} archive ({exc})") from None
 
 
 def encode_model(model: AvModel) -> bytes:

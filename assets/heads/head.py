@@ -63,9 +63,19 @@ class Head:
 
 
 def builtin_morph_head(cache: Path | None = None) -> Head:
-    """The built-in head animated through its own 52 ARKit targets."""
+    """The built-in head animated through its own 52 ARKit targets: its morph rig is read from the cache
+    (``<cache>/builtin_morph_<key>.npz``, :func:`assets.heads.targets.morph_rig_key`), built and written there
+    when missing."""
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.targets import morph_rig, reference_lips
+    from assets.heads.cache import atomic_savez, cache_dir
+    from assets.heads.targets import (
+        morph_rig,
+        morph_rig_arrays,
+        morph_rig_from_arrays,
+        morph_rig_key,
+        reference_lips,
+    )
+    from realtime_core.archive import npz_arrays
 
     b = load_builtin_head(cache)
     mesh = HeadMesh(
@@ -79,11 +89,24 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         part=b.part.astype("int16"),
         part_names=("skin", "eyes", "upper teeth", "lower teeth", "tongue"),
     )
-    lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
-    rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
-    assert rig is not None  # the reference reproduces itself
-    lm = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
-    rig.meta["landmarks"] = lm
+    key = morph_rig_key(mesh.vertices, mesh.triangles, b.targets, b.landmarks)
+    path = (cache or cache_dir()) / f"builtin_morph_{key}.npz"
+    rig = None
+    if path.is_file():
+        try:
+            arrays = npz_arrays(path.read_bytes(), "built-in morph rig")
+            rig = morph_rig_from_arrays(arrays, mesh.vertices, mesh.triangles)
+        except (OSError, KeyError, ValueError):  # unreadable (ModelFormatError), another writer's: built again
+            path.unlink(missing_ok=True)
+    if rig is None:
+        # The build solves the keyframe map's QP at the probe and speech poses (0.8 s of a `facecast say`
+        # on 2 cores); its result depends only on what the key holds.
+        lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
+        rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
+        assert rig is not None  # the reference reproduces itself
+        rig.meta["landmarks"] = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
+        with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
+            atomic_savez(path, **morph_rig_arrays(rig))
     return Head(rig, mesh)
 
 

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from assets.errors import RigFileError
 from assets.heads.cache import atomic_savez
 from assets.heads.mesh import HeadMesh
-from realtime_core.avmodel import NOT_NPZ
+from realtime_core.archive import NOT_NPZ
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import FaceModel, MouthCalibration, Rig
 

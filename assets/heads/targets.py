@@ -226,6 +226,11 @@ def reference_lips(
     return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
 
 
+MORPH_RIG_VERSION = 1
+"""Bump when :func:`morph_rig` or :func:`reference_lips` builds something else from the same inputs: the built-in
+head's morph rig is cached under a key holding it (:func:`morph_rig_key`)."""
+
+
 def arkit_source(params: np.ndarray) -> np.ndarray:
     """Mouth parameters (..., 4) -> the ARKit-52 weights facecast streams (..., 52)."""
     return blendshape_weights(params, "arkit52").astype(np.float64)
@@ -313,4 +318,89 @@ def morph_rig(
         keymap=keymap,
         source=arkit_source,
         meta=meta,
+    )
+
+
+def morph_rig_key(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    targets: Mapping[str, np.ndarray],
+    landmarks: Mapping[str, int],
+) -> str:
+    """Hex digest of what the built-in head's morph rig is made from (:func:`morph_rig` of its own targets with
+    :func:`reference_lips`): vertices (n, 3), triangles (m, 3), the 52 ARKit targets (n, 3) each, the landmark
+    vertex indices, the ARKit weights at the probe and speech poses (so a changed ARKit mapping or pose set
+    rebuilds it), the constants the build reads and the algorithm versions (this module's and the rig's, whose
+    lip-column rule :func:`reference_lips` follows)."""
+    import hashlib
+
+    from realtime_core.face import keyframes
+    from realtime_core.face.checks import EXTREME_POSES
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    consts = (
+        ENOUGH_PROBES,
+        DRIVEN_MIN,
+        LIP_COLUMN_WIDTH,
+        keyframes.CONTACT_TOL,
+        keyframes.LIP_OPEN_TOL,
+        keyframes.LIP_CLOSED_GAP,
+        keyframes.LIP_OPEN_RAMP,
+        keyframes.CONTACT_SWEEPS,
+        keyframes.CONTACT_SEARCH,
+    )
+    h = hashlib.sha256(f"morph {MORPH_RIG_VERSION} {RIG_ALGORITHM} {consts!r}".encode())
+    for a in (vertices, triangles, *(targets[n] for n in ARKIT_NAMES)):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    h.update(json.dumps(dict(landmarks), sort_keys=True).encode())
+    poses = np.array([p for p, _ in ENOUGH_PROBES] + list(EXTREME_POSES), dtype=np.float64)
+    h.update(arkit_source(poses).tobytes())
+    return h.hexdigest()[:32]
+
+
+def morph_rig_arrays(rig: MorphRig) -> dict[str, np.ndarray]:
+    """What :func:`morph_rig` computed, as plain arrays for an ``.npz`` (no pickle): the driven targets, the
+    vertices they move, the keyframe map's matrices and the meta as JSON. The neutral mesh, its triangles
+    and the source function are the caller's (:func:`morph_rig_from_arrays`)."""
+    km = rig.keymap
+    arrays = {
+        "names": np.array(rig.names, dtype=str),
+        "targets": rig.targets,
+        "moving": rig.moving,
+        "gram": km.gram,
+        "cross": km.cross,
+        "bounds": np.array([km.lo, km.hi]),
+        "meta": np.array(json.dumps(rig.meta)),
+    }
+    if km.contact_rest is not None and km.contact_rows is not None and km.contact_source is not None:
+        arrays |= {
+            "contact_rest": km.contact_rest,
+            "contact_rows": km.contact_rows,
+            "contact_source": km.contact_source,
+        }
+    return arrays
+
+
+def morph_rig_from_arrays(arrays: Mapping[str, np.ndarray], vertices: np.ndarray, triangles: np.ndarray) -> MorphRig:
+    """The :class:`MorphRig` :func:`morph_rig_arrays` stored, on ``vertices`` (n, 3) and ``triangles`` (m, 3),
+    driven by :func:`arkit_source`. Raises KeyError / ValueError on a file that is not such arrays."""
+    lo, hi = (float(v) for v in arrays["bounds"])
+    keymap = KeyframeMap(
+        gram=arrays["gram"],
+        cross=arrays["cross"],
+        lo=lo,
+        hi=hi,
+        contact_rest=arrays.get("contact_rest"),
+        contact_rows=arrays.get("contact_rows"),
+        contact_source=arrays.get("contact_source"),
+    )
+    return MorphRig(
+        neutral=vertices,
+        triangles=triangles,
+        names=tuple(str(n) for n in arrays["names"]),
+        targets=arrays["targets"],
+        moving=arrays["moving"],
+        keymap=keymap,
+        source=arkit_source,
+        meta=json.loads(str(arrays["meta"])),
     )

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
+from realtime_core.archive import npz_arrays, npz_bytes, require_npz
 from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
 from realtime_core.avmodel import (
     AvModel,
@@ -26,9 +27,6 @@ from realtime_core.avmodel import (
     encode_model,
     frontend_from_json,
     frontend_to_json,
-    npz_arrays,
-    npz_bytes,
-    require_npz,
     validate_cmvn,
 )
 from realtime_core.errors import ConfigError, FacecastError, ModelFormatError

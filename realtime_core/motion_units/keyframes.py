@@ -29,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import nnls
 
 from realtime_core.errors import ConfigError, InvalidFeaturesError
 from realtime_core.motion_units.units import ExpressionUnits, MotionUnits, analyse, compose
@@ -84,6 +83,10 @@ class KeyframeSet:
             raise InvalidFeaturesError(f"deformations must be (..., {self.shapes.shape[0]}), got {x.shape}")
         if not nonnegative:
             return x @ self.solver.T
+        # Imported here: scipy.optimize costs 0.3-0.7 s to import, and every unit-corpus load (each `facecast say`)
+        # imports this package for MotionUnits without ever solving a nonnegative fit.
+        from scipy.optimize import nnls
+
         p = self.shapes.shape[1]
         a = self.ridge_rows()
         flat = x.reshape(-1, x.shape[-1])

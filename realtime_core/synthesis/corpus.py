@@ -226,7 +226,7 @@ def decode_corpus(data: bytes) -> StoredCorpus:
     """Parse and validate ``.npz`` bytes; raises ModelFormatError naming the problem."""
     import json
 
-    from realtime_core.avmodel import npz_arrays
+    from realtime_core.archive import npz_arrays
     from realtime_core.errors import ModelFormatError
 
     a = npz_arrays(data, "unit-corpus")

@@ -45,6 +45,7 @@ def test_after_warm_up_the_first_commands_compile_no_kernel(builtin_head, tmp_pa
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "NUMBA_DEBUG_CACHE": "1"}
     warm = _run(["-m", "facecast", "warm-up"], env)
     assert "warm-up: numba kernels ready" in warm
+    assert "warm-up: built-in head's morph rig ready" in warm  # in the facecast cache: say reads it back
     compiled = {line.split("'")[1] for line in warm.splitlines() if "data saved to" in line}
     # Every kernel module was compiled into the fresh directory (so the check below can fail).
     for module in ("features", "inversion", "face"):

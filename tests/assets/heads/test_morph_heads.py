@@ -228,3 +228,33 @@ def test_the_reference_lip_columns_pair_lip_skin_and_the_solve_keeps_them_from_c
             gap = (v[pairs[:, 0]] - v[pairs[:, 1]]) @ lips.axis
             floor = np.minimum(0.0, (src[pairs[:, 0]] - src[pairs[:, 1]]) @ lips.axis)
             assert (gap >= floor - 1e-4).all(), (head.rig.meta["head"], pose, gap.round(4), floor.round(4))
+
+
+def test_builtin_morph_rig_is_cached_and_read_back_identical(tmp_path, monkeypatch):
+    """The built-in head's morph rig is built once per cache (the build solves the keyframe QP at every probe
+    and speech pose) and read back afterwards: the read rig gives the built rig's weights and vertices bit for bit."""
+    from assets.heads import targets
+    from assets.heads.builtin import HEAD_FILE, load_builtin_head
+    from assets.heads.cache import cache_dir
+    from realtime_core.face.checks import EXTREME_POSES
+
+    load_builtin_head()  # the user's cache holds the cut head (downloaded once); link it, not the morph rig
+    (tmp_path / HEAD_FILE).symlink_to(cache_dir() / HEAD_FILE)
+    builds = []
+    real = targets.morph_rig
+    monkeypatch.setattr(targets, "morph_rig", lambda *a, **k: builds.append(1) or real(*a, **k))
+    built = builtin_morph_head(tmp_path)
+    assert len(builds) == 1 and len(list(tmp_path.glob("builtin_morph_*.npz"))) == 1
+    read = builtin_morph_head(tmp_path)
+    assert len(builds) == 1  # the second head came from the cache file
+    assert read.rig is not built.rig and read.rig.names == built.rig.names and read.rig.meta == built.rig.meta
+    poses = np.array([*EXTREME_POSES, (0.0, 0.0, 0.0, 0.0), (0.01, -0.02, 0.13, 0.005)])
+    np.testing.assert_array_equal(read.rig.weights(poses), built.rig.weights(poses))
+    for p in poses[::4]:
+        np.testing.assert_array_equal(read.rig.deformed(p), built.rig.deformed(p))
+    # A cache file left unreadable (cut short: a zip without its directory) is built again, not an error.
+    path = next(tmp_path.glob("builtin_morph_*.npz"))
+    path.write_bytes(path.read_bytes()[:1000])
+    again = builtin_morph_head(tmp_path)
+    assert len(builds) == 2
+    np.testing.assert_array_equal(again.rig.weights(poses), built.rig.weights(poses))

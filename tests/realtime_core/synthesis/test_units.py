@@ -378,3 +378,27 @@ def test_a_junction_leaves_one_recording_and_arrives_on_the_next_without_a_step(
     into = concatenate(corpus, np.array([5, 6, 7]), starts, ends, parent=graph.parent, fps=fps)
     np.testing.assert_allclose(out[k1 - 1], into[k1 - 1], atol=1e-3)  # w = 1 at its end
     np.testing.assert_allclose(out[k1:], into[k1:], atol=1e-12)  # then the recording continues as is
+
+
+def test_loading_the_shipped_corpus_imports_neither_the_speech_model_nor_scipy_optimize():
+    """`facecast say` loads the unit corpus on every run: reading its .npz must not import realtime_core.avmodel
+    (the HMM, the front end, scipy.cluster: ~90 ms of its "corpus + graph" stage) for a container helper, nor
+    scipy.optimize (0.3-0.7 s) for the Motion Units' nonnegative fit that a load never runs."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from assets.unitcorpus import SHIPPED
+
+    if not SHIPPED.is_file():
+        pytest.skip("no shipped unit corpus")
+    code = (
+        "import sys\n"
+        "from assets.unitcorpus import SHIPPED, load_unit_corpus\n"
+        "assert len(load_unit_corpus(SHIPPED).corpus.frames) > 0\n"
+        "heavy = ('realtime_core.avmodel', 'realtime_core.hmm', 'scipy.optimize')\n"
+        "print(sorted(m for m in sys.modules if m in heavy))\n"
+    )
+    root = Path(__file__).resolve().parents[3]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
