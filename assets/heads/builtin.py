@@ -71,7 +71,7 @@ MOUTH_SHADE_START = 0.08
 (upper ~0.0, lower ~0.1 IOD behind it) stays lit."""
 MOUTH_SHADE_LENGTH = 0.1
 """IOD: each this much deeper into the mouth keeps 1/e of the light (the lower teeth behind the mouth
-corners, ~0.35 IOD: ~15%; the molars and the tongue's back, >= 0.6 IOD: the floor)."""
+corners, ~0.35 IOD: ~10%; the molars and the tongue's back, >= 0.6 IOD: the floor)."""
 MOUTH_SHADE_FLOOR = 0.04
 """The darkest an inner-mouth surface gets (fraction of its colour)."""
 
