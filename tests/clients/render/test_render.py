@@ -123,3 +123,38 @@ def test_caption_only_touches_the_bottom_left():
     changed = out.any(axis=2)
     assert changed[-16:, :].sum() > 50 and not changed[:-16, :].any()
     assert with_caption(img, "") is img
+
+
+@pytest.mark.parametrize("view", ["front", "three_quarter"])
+def test_builtin_open_mouth_is_dark_inside_with_teeth_and_no_pale_corners(builtin_head, view):
+    """Issue 12: the built-in head's open mouth lit its inside like the face: the lower teeth behind the
+    corners showed as pale slabs, the tongue's back as a bright slab, nothing was dark. Measured between
+    the deformed mouth corners and inner-lip points at /a/ and wide open: the middle third is mostly dark,
+    the outer quarters hold no near-white (teeth-coloured) pixel, and the incisors still show in between."""
+    from assets.heads.head import builtin_morph_head
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    head = builtin_morph_head()
+    lm = builtin_head.landmarks
+    try:
+        r = renderer_for_rig(head.rig, head.mesh, RenderConfig(width=320, height=240, samples=0, view=view))
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+    with r:
+        for mouth_open in (0.35, 0.5):
+            v = head.rig.deformed(np.array([0.0, 0.0, mouth_open, 0.0]))
+            img = r.render(v).astype(int)
+            (x0, x1), (y0, y1) = (
+                np.sort(r.project(v[[lm[a], lm[b]]])[:, k])
+                for a, b, k in (("corner_left", "corner_right", 0), ("upper_inner", "lower_inner", 1))
+            )
+            assert y1 - y0 > 10, "the mouth did not open"
+            box = img[int(y0) : int(np.ceil(y1)), int(x0) : int(np.ceil(x1))]
+            w = box.shape[1]
+            # Near-white: bright and grey (lit teeth); lit skin and lips are bright but saturated.
+            white = (box.min(axis=2) > 140) & (np.ptp(box, axis=2) < 45)
+            middle = box[:, w // 3 : w - w // 3]
+            # (before the fix: 0.02-0.06 dark; 31-111 near-white pixels in the outer quarters)
+            assert (middle.sum(axis=2) < 150).mean() > 0.3, (view, mouth_open)
+            assert white[:, : w // 4].sum() + white[:, w - w // 4 :].sum() <= 4, (view, mouth_open)
+            assert white[:, w // 4 : w - w // 4].sum() >= 20, (view, mouth_open)
