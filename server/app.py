@@ -564,16 +564,10 @@ class FacecastServer:
         loop = asyncio.get_running_loop()
         per_second = live.session.frame_bytes * live.session.config.sample_rate_hz  # bytes of one second
 
-        def failed(code: int, reason: str) -> None:
-            # A queued block the model rejected when pushed at the turn's end (the usual path would
-            # have raised it to the handler): the connection closes with the code the handler would use.
-            ws.sink = None
-            self.spawn(self.close_ws(ws, code, reason))
-
         def sink(data: bytes) -> bool:
             if ws.turn_audio_s >= FAIR_SLICE_S:  # this callback's share is used: the handler takes the rest
                 return False
-            if not proto.feeds_binary() or not live.feed_now(data, failed):
+            if not proto.feeds_binary() or not live.feed_now(data):
                 return False
             ws.turn_audio_s += len(data) / per_second
             ws.last_fed = loop.time()

@@ -22,7 +22,7 @@ import collections
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -338,14 +338,11 @@ class LiveSession:
             kinds.update(k for k in cluster.wants(self.name) if k[0] == P.KIND_DELTAS)
         self.session.precompute = tuple(sorted(kinds))
 
-    def feed_now(self, data: bytes, failed: Callable[[int, str], None]) -> bool:
-        """Take one binary block synchronously (from the connection's data callback) when that needs no
+    def feed_now(self, data: bytes) -> bool:
+        """Feed one binary block synchronously (from the connection's data callback) when that needs no
         waiting: a session on this loop, a whole number of samples within one fair slice, the pacer
-        has no delay. The block is decoded here and pushed at the end of the loop turn, back to back
-        with the other sessions' blocks of the turn (:class:`TurnDeltas`). False, having done nothing,
-        otherwise (and when the block is malformed: the caller then takes :meth:`feed_bytes_fairly`,
-        which raises the error naming it). ``failed(close_code, reason)`` is called if the model
-        rejects the block when it is pushed."""
+        has no delay. False, having done nothing, otherwise (and when the block is malformed: the
+        caller then takes :meth:`feed_bytes_fairly`, which raises the error naming it)."""
         s = self.session
         if not isinstance(s, LocalSession) or self.ended.is_set():
             return False
@@ -357,12 +354,12 @@ class LiveSession:
         if self.pacer is not None and self.pacer.would_wait(n / rate, now) > 0:
             return False
         try:
-            x = s.core.decode(data)  # a malformed block is declined here, before it is queued
+            out = s.core.push_bytes(data)
         except AudioFormatError:
             return False
         if self.pacer is not None:
             self.pacer.delay(n / rate, now)  # counted as the awaited path would have (0: no wait)
-        self.server.turn_deltas.add_block(self, x, failed)
+        self._fanout(out)
         return True
 
     async def feed_bytes_fairly(self, data: bytes) -> int:
@@ -412,7 +409,6 @@ class LiveSession:
 
     async def finish(self) -> int:
         """End of the audio: flush the remaining frames to the viewers."""
-        self.server.turn_deltas.flush()  # blocks queued in this turn are pushed before the end of the audio
         out = await self.session.flush()
         self.server.turn_deltas.flush()  # what waits for the turn's end goes first, then the last frames
         return self._fanout_now(out)
@@ -496,61 +492,46 @@ class LiveSession:
 
 
 class TurnDeltas:
-    """Ingest blocks pushed, and vertex deltas computed, at the end of the event loop's turn, together.
+    """Outputs whose vertex deltas are computed at the end of the event loop's turn, together.
 
-    Why: the live chain of one block (``Session.push``) and a vertex viewer's frame (the morph head's
-    keyframe solve, a (19, 8319) product over 632 KB of float32 targets and the int16 encoding) each
-    start cold on a busy loop: the socket path, websockets' parse and the fan-out writes between two
-    of them evict the model's matrices and the targets. The same work done back to back costs much
-    less per item after the first (docs/service.md, "Vertex deltas by loop turn", "Per-session
-    receive cost, profiled"). So the ingest fast path queues a decoded block here instead of pushing
-    it in the connection's callback (:meth:`add_block`), and a session with a delta viewer queues its
-    output (:meth:`add`); one callback per turn (scheduled with ``call_soon``, so it runs before the
-    next turn's I/O callbacks and before any handler woken in this turn) pushes every queued block,
-    computes every queued frame's deltas, then fans the outputs out in the order they came. Each
-    block and frame is computed by the same calls as before, so the bytes are the same; what changes
-    is when: at the end of the turn instead of in the middle, at most one turn's work later. A
-    session with anything queued queues its later output behind it; ``flush`` is also called
+    Why: a vertex viewer's frame costs the morph head's keyframe solve, a (19, 8319) product over
+    632 KB of float32 targets and the int16 encoding; on a busy loop each of those starts cold (the
+    other sessions' work has evicted the targets and the code's data), ~170 us a frame, while the
+    same work for several frames back to back costs ~70-100 us each (docs/service.md, "Vertex deltas
+    by loop turn"). So instead of encoding deltas in each connection's callback, a session with a
+    delta viewer queues its output here; one callback per turn (scheduled with ``call_soon``, so it
+    runs before the next turn's I/O callbacks) computes every queued frame's deltas, then fans the
+    outputs out in the order they came. Each frame is computed by the same call as before
+    (:meth:`server.session.Frame.payload`), so the bytes are the same; what changes is when: at the
+    end of the turn instead of in the middle, at most one turn's work later. ``flush`` is also called
     directly where the order with a later message matters (a session's last frames, its end)."""
 
     def __init__(self) -> None:
-        # (session, its output or a decoded (n,) float64 block to push, the block's failure callback)
-        self.pending: list[tuple[LiveSession, Output | np.ndarray, Callable[[int, str], None] | None]] = []
+        self.pending: list[tuple[LiveSession, Output]] = []
         self._holding: set[LiveSession] = set()
         self.batches = 0  # flushes that computed deltas, and the frames they held (metrics, tests)
         self.frames = 0
-        self.block_turns = 0  # flushes that pushed ingest blocks, and the blocks they pushed (metrics, tests)
-        self.blocks = 0
 
     def holds(self, live: LiveSession) -> bool:
         return live in self._holding
 
     def add(self, live: LiveSession, out: Output) -> None:
-        """Queue an output (a session with a delta viewer, or one with something queued already)."""
-        self._queue(live, out, None)
-
-    def add_block(self, live: LiveSession, x: np.ndarray, failed: Callable[[int, str], None]) -> None:
-        """Queue one decoded (n,) float64 block of a session on this loop, to be pushed at the turn's end."""
-        self._queue(live, x, failed)
-
-    def _queue(self, live: LiveSession, item: Output | np.ndarray, failed: Callable[[int, str], None] | None) -> None:
         if not self.pending:
             asyncio.get_running_loop().call_soon(self.flush)
-        self.pending.append((live, item, failed))
+        self.pending.append((live, out))
         self._holding.add(live)
 
     def flush(self) -> None:
-        """Push the queued blocks, compute the queued frames' deltas, then fan every output out, in order."""
+        """Compute the queued frames' deltas, then fan every queued output out, in order."""
         pending, self.pending = self.pending, []
         self._holding.clear()
         if not pending:
             return
-        outputs = self._push(pending)
         n = 0
         # Morph-target heads' frames, by (rig, encoding): each group in one compiled pass over the
         # targets (server.session.morph_delta_payloads: the same bytes as frame by frame).
         morph: dict[tuple[int, int], list[VideoFrame]] = {}
-        for live, out in outputs:
+        for live, out in pending:
             kinds = {(v.kind, v.encoding) for v in live.viewers if v.kind == P.KIND_DELTAS}
             for frame in out.frames:
                 for kind, enc in kinds:
@@ -566,40 +547,8 @@ class TurnDeltas:
         if n:
             self.batches += 1
             self.frames += n
-        for live, out in outputs:
+        for live, out in pending:
             try:
                 live._fanout_now(out)
             except Exception:  # a bug: logged, and the other sessions' frames still go out
                 log.exception("fan-out of session %r failed", live.name)
-
-    def _push(
-        self, pending: list[tuple[LiveSession, Output | np.ndarray, Callable[[int, str], None] | None]]
-    ) -> list[tuple[LiveSession, Output]]:
-        """The queued items as outputs, in order: every queued block pushed, back to back (nothing else
-        runs between two pushes, so the model's matrices stay in cache). A block the model rejects
-        closes its connection (``failed``) and drops that session's later queued blocks."""
-        outputs: list[tuple[LiveSession, Output]] = []
-        broken: set[LiveSession] = set()
-        pushed = 0
-        for live, item, failed in pending:
-            if isinstance(item, Output):
-                outputs.append((live, item))
-                continue
-            if live in broken:
-                continue
-            session = live.session
-            assert isinstance(session, LocalSession) and failed is not None  # add_block's callers
-            try:
-                outputs.append((live, session.core.push(item)))
-                pushed += 1
-            except AudioFormatError as exc:
-                broken.add(live)
-                failed(P.CLOSE_INVALID_PAYLOAD, str(exc))
-            except Exception:  # a bug: logged, that connection closed, the other sessions go on
-                log.exception("push of session %r failed", live.name)
-                broken.add(live)
-                failed(P.CLOSE_INTERNAL, "internal error")
-        if pushed:
-            self.block_turns += 1
-            self.blocks += pushed
-        return outputs
