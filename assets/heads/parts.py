@@ -147,9 +147,11 @@ def inner_mouth_weights(
     landmarks: Mapping[str, int],
     axes: np.ndarray,
     iod: float,
+    *,
+    still: np.ndarray | None = None,
 ) -> np.ndarray:
     """(n,) float64 in [0, 1]: how much each vertex of an *inner-mouth piece* (and of the surface within SEAM_RAMP of
-    a texture seam joining one to it) follows the jaw, 0 elsewhere.
+    a texture seam joining one to it) follows the jaw, 0 elsewhere and at every position of ``still``.
 
     An inner-mouth piece is a connected piece of the face's own part (the nose tip's; the whole mesh
     without parts) apart from the face's surface, lying wholly behind the mouth corners (their midpoint,
@@ -168,9 +170,14 @@ def inner_mouth_weights(
     IOD; docs/animation.md, "The seam tear at the right depth"). So the weight is blended on the welded mesh
     (:func:`_seam_blend`): every position has one weight, half the height's at a seam, rising to all of it SEAM_RAMP
     IOD into the piece and falling to none SEAM_RAMP IOD into the surface.
+    ``still``: vertex indices that follow no jaw whatever their height, with every copy of their positions: the upper
+    lip's contact row, the mouth line itself. A knife-cut mouth's row sags up to 0.005 IOD below the corners' line and
+    the surface's blend beside a seam gave it a trace of the jaw, which undid its upper lip's pinned rows: Lee
+    Perry-Smith at ~1,500 triangles, 0.0017 of the jaw on the contact vertex by the right corner turned the corner's
+    wall by 91 degrees at a wide /a/ (a flipped triangle; 89.1 without it).
     ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
     vertex index (corner_left, corner_right, chin, nose_tip)."""
-    from realtime_core.face.welding import mesh_pieces
+    from realtime_core.face.welding import mesh_pieces, weld
 
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -199,20 +206,24 @@ def inner_mouth_weights(
     outside = np.bincount(comp[used & ~inside], minlength=comp.max() + 1) > 0
     piece = inside & ~outside[comp]
     height = np.clip(local[:, 1] / (JAW_FULL * chin), 0.0, 1.0)
-    return np.where(used, height * _seam_blend(v, t, piece, used, iod), 0.0)
+    canon, welded = weld(v)
+    if still is not None:
+        height[np.isin(canon, canon[np.asarray(still, dtype=np.int64)])] = 0.0
+    return np.where(used, height * _seam_blend(canon, welded, t, piece, used, iod), 0.0)
 
 
-def _seam_blend(v: np.ndarray, t: np.ndarray, piece: np.ndarray, used: np.ndarray, iod: float) -> np.ndarray:
-    """(n,) in [0, 1], one value per position of ``v`` (n, 3): 1 on the inner-mouth pieces (``piece`` (n,) bool), 0 on
-    the rest of the mesh (``used`` (n,) bool: the vertices of ``t``), blended across the seams where they share a
-    position: 0.5 there, rising to 1 at SEAM_RAMP IOD along the pieces and falling to 0 at SEAM_RAMP IOD along the
-    rest (edge-path distances on the welded mesh; a seam between two pieces is no seam)."""
+def _seam_blend(
+    canon: np.ndarray, welded: np.ndarray, t: np.ndarray, piece: np.ndarray, used: np.ndarray, iod: float
+) -> np.ndarray:
+    """(n,) in [0, 1], one value per welded position (``canon`` (n,): each vertex's row of ``welded`` (p, 3)): 1 on the
+    inner-mouth pieces (``piece`` (n,) bool), 0 on the rest of the mesh (``used`` (n,) bool: the vertices of ``t``),
+    blended across the seams where they share a position: 0.5 there, rising to 1 at SEAM_RAMP IOD along the pieces
+    and falling to 0 at SEAM_RAMP IOD along the rest (edge-path distances on the welded mesh; a seam between two
+    pieces is no seam)."""
     from scipy.sparse.csgraph import dijkstra
 
     from realtime_core.face.projection import edge_length_graph
-    from realtime_core.face.welding import weld
 
-    canon, welded = weld(v)
     surface = np.zeros(len(welded), dtype=bool)
     surface[canon[used & ~piece]] = True
     inner = np.zeros(len(welded), dtype=bool)

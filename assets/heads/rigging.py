@@ -1237,7 +1237,18 @@ def rig_head(
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
     # copies and the cavity, appended after its vertices, take no weight).
-    jaw = inner_mouth_weights(mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod)
+    # The upper lip's contact row is the mouth line the weights are measured from, however far it sags below the
+    # corners' line: it stays off the jaw (inner_mouth_weights, ``still``).
+    upper_row = np.asarray(rig.contact, dtype=np.int64)[:, 0]
+    jaw = inner_mouth_weights(
+        mesh.vertices,
+        mesh.triangles,
+        mesh.part,
+        snap,
+        frame.axes,
+        frame.iod,
+        still=upper_row[upper_row < len(mesh.vertices)],
+    )
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]

@@ -73,7 +73,10 @@ def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_pe
     kept 0, and at /a/ the seam's two sides parted (0.12-0.23 IOD on the scan; docs/animation.md, "The seam tear
     at the right depth"). Now every position has one weight, the height's times a blend: 0.5 at the seam, rising to 1
     SEAM_RAMP along the lining and falling to 0 SEAM_RAMP up the wall (each row's distance from the seam computed
-    here from the patches' row spacing). A piece truly apart (no shared position) is weighted by its height alone."""
+    here from the patches' row spacing). A piece truly apart (no shared position) is weighted by its height alone.
+    Positions given as ``still`` take 0 on every copy (the seam's lining copy too) and leave every other weight as it
+    was: the upper lip's contact row that sagged below the corners' line took a trace of the jaw and turned a corner
+    wall over (test_knife.py, the 1,500-triangle copy)."""
     xs, ys = np.meshgrid(np.linspace(-2, 2, 21), np.linspace(-2, 2, 21))
     face = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
     ft = _patch(-2, 2, -2, 2, 0, 0, n=21)[1]
@@ -120,6 +123,12 @@ def test_an_inner_piece_joined_to_the_face_by_a_texture_seam_takes_one_weight_pe
     assert not np.delete(w[: len(face)], wall_index[[0, 2, 4]]).any()  # the sheet lies beyond the wall's ramp
     np.testing.assert_allclose(w[apart], height(apart), atol=1e-12)
     assert (w[apart] > 0.5).any()
+    # Positions held still (the upper lip's contact row, the mouth line) take 0 on every copy, the rest as before.
+    held = [wall_bottom[2], wall_index[7]]
+    still_w = inner_mouth_weights(v, t, None, lm, np.eye(3), 1.0, still=np.array(held))
+    zero = [*held, lining[2]]
+    assert w[zero].min() > 0 and not still_w[zero].any(), (w[zero], still_w[zero])
+    np.testing.assert_array_equal(np.delete(still_w, zero), np.delete(w, zero))
 
 
 @pytest.mark.system
