@@ -1273,11 +1273,12 @@ def rig_head(
 WIDE_OPEN = 0.465
 """IOD: the widest mouth_open the shipped models produce (realtime_core.face.checks.SINGLE_POSES)."""
 INSIDE_RAMP = 0.1
-"""IOD: the inside of an untextured mouth goes from the skin's colour at the lips' contact to CAVITY_COLOR this far
-behind it (:func:`with_dark_mouth_inside`)."""
-INSIDE_BOX = (0.1, 0.35, 0.5, 0.6)
-"""IOD: the inside of the mouth lies at most this far past the corners (sideways), above and below the mouth line,
-and behind the lips' contact (a mouth bag's walls, the lips' inner walls) for :func:`with_dark_mouth_inside`."""
+"""IOD: the inside of an untextured mouth goes from the skin's colour at the lips' crease to CAVITY_COLOR this far
+from it: behind the lips' contact, or away from the crease (straight-line) (:func:`with_dark_mouth_inside`)."""
+INSIDE_BOX = (0.1, 0.35, 0.5)
+"""IOD: the inside of the mouth lies at most this far past the corners (sideways), above and below the mouth line
+(a mouth bag's walls, the lips' inner walls) for :func:`with_dark_mouth_inside`; any depth behind the lips' contact
+(the stylised held-out head's bag floor, 0.7-0.8 IOD back, showed skin-coloured at /a/ past a 0.6 IOD limit)."""
 INSIDE_SEED = 0.05
 """IOD: hidden vertices between the corners and this close to the mouth line (the lips' crease) start the inside."""
 INSIDE_OPENING = 1.2
@@ -1304,8 +1305,9 @@ def with_dark_mouth_inside(
     vertex that the closed lips hide from the front at ``rest`` (n, 3) (the rig's neutral, lips touching; the
     surface within INSIDE_COVER IOD in front of it does not count), lies in INSIDE_BOX around the mouth and
     behind the lips' contact (the inner-lip landmarks' front-most depth in the middle, the corners' at the
-    corners, in between linearly across the mouth) takes CAVITY_COLOR in proportion to its
-    depth behind the contact, all of it from INSIDE_RAMP IOD on, if the hidden vertices join it to the lips' crease
+    corners, in between linearly across the mouth), at any depth, takes CAVITY_COLOR in proportion to how far
+    inside it is (its depth behind the contact or its distance from the lips' crease, whichever is larger), all of
+    it from INSIDE_RAMP IOD on, if the hidden vertices join it to the lips' crease
     (INSIDE_SEED) and, given ``wide`` (n, 3), the rig at its widest opening, the opening can show it there
     (INSIDE_OPENING). A real mouth's inner walls darken the same way:
     shadow. Without it the inner lip walls and a mouth bag are skin-coloured, and a wall that crosses the
@@ -1323,10 +1325,10 @@ def with_dark_mouth_inside(
     middle = max(float(q[snap["upper_inner"], 2]), float(q[snap["lower_inner"], 2]))
     ends = 0.5 * float(cl[2] + cr[2])
     contact = middle + (min(ends, middle) - middle) * np.clip(np.abs(q[:, 0] - mid[0]) / max(half, 1e-300), 0.0, 1.0)
-    side, up, down, back = INSIDE_BOX
+    side, up, down = INSIDE_BOX
     dy = q[:, 1] - mid[1]
     box = (np.abs(q[:, 0] - mid[0]) <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
-    box &= (q[:, 2] < contact) & (q[:, 2] > contact - back * iod)
+    box &= q[:, 2] < contact
     box[n0 - skip :] = False
     cand = np.flatnonzero(box)
     if not len(cand):
@@ -1340,6 +1342,7 @@ def with_dark_mouth_inside(
     sub = vertex_adjacency(n0, mesh.triangles)[hidden][:, hidden]
     _, label = connected_components(sub, directed=False)
     seed = (np.abs(q[hidden, 0] - mid[0]) <= half) & (np.abs(dy[hidden]) <= INSIDE_SEED * iod)
+    crease = q[hidden[seed]]
     hidden = hidden[np.isin(label, label[seed])]
     if (
         mesh.colors is not None
@@ -1359,7 +1362,12 @@ def with_dark_mouth_inside(
         hidden = hidden[r <= INSIDE_OPENING**2]
     if not len(hidden):
         return mesh
-    w = np.clip((contact[hidden] - q[hidden, 2]) / (INSIDE_RAMP * iod), 0.0, 1.0)[:, None]
+    # How far inside: behind the contact, or away from the crease (a wall just behind the contact
+    # but 0.2-0.3 IOD above the mouth line, the stylised head's, crosses the opening at /a/: it is no lip).
+    from scipy.spatial import cKDTree
+
+    inside = np.maximum(contact[hidden] - q[hidden, 2], cKDTree(crease).query(q[hidden])[0])  # crease: hidden is seeded
+    w = np.clip(inside / (INSIDE_RAMP * iod), 0.0, 1.0)[:, None]
     colors = (
         np.array(mesh.colors, dtype=np.float32)
         if mesh.colors is not None

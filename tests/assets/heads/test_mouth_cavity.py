@@ -191,6 +191,28 @@ def test_a_closed_seam_with_neighbouring_inner_lip_points_is_no_membrane():
     assert not lip_membrane(v, seam, idx["upper", 0], idx["upper", 8], a, b).any()
 
 
+def _contact(v: np.ndarray, fr, lm) -> tuple[np.ndarray, np.ndarray]:
+    """``v`` (n, 3) in the face frame (n, 3, z forward), and the lips' contact depth (n,) at each vertex's place
+    across the mouth: the inner-lip points' front-most depth in the middle, the corners' (if further back) at and
+    past the corners."""
+    q = (v - fr.origin) @ fr.axes.T
+    middle = max(q[lm["upper_inner"], 2], q[lm["lower_inner"], 2])
+    cx = 0.5 * (q[lm["corner_left"], 0] + q[lm["corner_right"], 0])
+    half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
+    ends = min(0.5 * (q[lm["corner_left"], 2] + q[lm["corner_right"], 2]), middle)
+    return q, middle + (ends - middle) * np.clip(np.abs(q[:, 0] - cx) / half, 0, 1)
+
+
+def _covered(q: np.ndarray, t: np.ndarray, i: int, margin: float) -> bool:
+    """Whether some triangle of ``t`` lies more than ``margin`` in front of vertex ``i`` of ``q`` (face frame, z
+    forward) where it projects (brute force over every triangle)."""
+    from realtime_core.face.interpolation import barycentric_2d
+
+    g = barycentric_2d(np.repeat(q[i : i + 1, :2], len(t), axis=0), q[t[:, 0], :2], q[t[:, 1], :2], q[t[:, 2], :2])
+    over = np.all(g >= -1e-9, axis=1) & np.all(np.isfinite(g), axis=1)
+    return bool((np.einsum("ij,ij->i", g[over], q[t[over], 2]) > q[i, 2] + margin).any())
+
+
 def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour():
     """The built-in head's geometry without colours or texture (the stylised held-out head's kind): the walls of
     its mouth bag behind the lips, which the lips hide from the front, go dark with their depth behind the lips'
@@ -202,7 +224,6 @@ def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour
     from assets.heads.builtin import load_builtin_head
     from assets.heads.mesh import SKIN_COLOR
     from assets.heads.rigging import CAVITY_COLOR, INSIDE_RAMP, with_dark_mouth_inside
-    from realtime_core.face.interpolation import barycentric_2d
 
     b = load_builtin_head()
     mesh = replace(b.mesh, colors=None, uvs=None, texture=None)
@@ -212,13 +233,7 @@ def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour
     assert out.colors is not None and len(out.colors) == len(v)
     changed = np.flatnonzero(np.abs(out.colors - np.asarray(SKIN_COLOR)).max(axis=1) > 1e-6)
     assert len(changed) > 20
-    q = (v - fr.origin) @ fr.axes.T
-    lm = b.landmarks
-    middle = max(q[lm["upper_inner"], 2], q[lm["lower_inner"], 2])
-    cx = 0.5 * (q[lm["corner_left"], 0] + q[lm["corner_right"], 0])
-    half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
-    ends = min(0.5 * (q[lm["corner_left"], 2] + q[lm["corner_right"], 2]), middle)
-    contact = middle + (ends - middle) * np.clip(np.abs(q[:, 0] - cx) / half, 0, 1)
+    q, contact = _contact(v, fr, b.landmarks)
     # Depth behind the contact (from the inner-lip points' to the corners' across the mouth) sets the shade: the
     # cavity colour itself from INSIDE_RAMP IOD on; nothing in front of the contact changes.
     assert (q[changed, 2] < contact[changed]).all()
@@ -227,12 +242,61 @@ def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour
     # Each changed vertex has some triangle of the head in front of it (brute force over all triangles).
     t = np.asarray(mesh.triangles)
     for i in changed[:: max(1, len(changed) // 40)]:
-        g = barycentric_2d(np.repeat(q[i : i + 1, :2], len(t), axis=0), q[t[:, 0], :2], q[t[:, 1], :2], q[t[:, 2], :2])
-        over = np.all(g >= -1e-9, axis=1) & np.all(np.isfinite(g), axis=1)
-        z = np.einsum("ij,ij->i", g[over], q[t[over], 2])
-        assert (z > q[i, 2] + 0.005 * fr.iod).any(), i
+        assert _covered(q, t, i, 0.005 * fr.iod), i
     for name in ("upper_lip", "lower_lip", "corner_left", "corner_right", "chin", "nose_tip"):
         assert b.landmarks[name] not in set(changed.tolist()), name
+
+
+def test_an_untextured_mouth_inside_is_dark_whatever_its_depth_and_away_from_the_crease():
+    """The stylised held-out head showed at /a/ a light triangle (its bag's floor 0.7-0.8 IOD behind the lips'
+    contact, past a 0.6 IOD depth limit: skin-coloured) and light bands (walls just behind the contact but 0.2-0.3
+    IOD above the mouth line, only partly darkened by a depth-only ramp). On the built-in head's geometry without
+    colours: every vertex of the mouth's separate pieces (those apart from the skin that lie within the mouth's
+    reach: its bag, reaching 1.5 IOD back) hidden from the front and INSIDE_RAMP IOD or more behind the contact
+    is the cavity colour, some of them more than 0.6 IOD back; every vertex shaded at least INSIDE_RAMP IOD above
+    or below the lips' crease is the cavity colour; nothing past INSIDE_BOX's reach sideways, up or down changes."""
+    from dataclasses import replace
+
+    from scipy.sparse.csgraph import connected_components
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.mesh import SKIN_COLOR
+    from assets.heads.rigging import (
+        CAVITY_COLOR,
+        INSIDE_BOX,
+        INSIDE_RAMP,
+        INSIDE_SEED,
+        vertex_adjacency,
+        with_dark_mouth_inside,
+    )
+
+    b = load_builtin_head()
+    mesh = replace(b.mesh, colors=None, uvs=None, texture=None)
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    t = np.asarray(mesh.triangles)
+    lm = b.landmarks
+    fr = face_frame(v, mouth_landmarks(lm))
+    out = with_dark_mouth_inside(mesh, v, fr, lm)
+    assert out.colors is not None
+    dark = np.abs(out.colors - np.asarray(CAVITY_COLOR)).max(axis=1) <= 1e-6
+    changed = np.abs(out.colors - np.asarray(SKIN_COLOR)).max(axis=1) > 1e-6
+    q, contact = _contact(v, fr, lm)
+    iod = fr.iod
+    mid = 0.5 * (q[lm["corner_left"]] + q[lm["corner_right"]])
+    half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
+    side, up, down = INSIDE_BOX
+    dx, dy = np.abs(q[:, 0] - mid[0]), q[:, 1] - mid[1]
+    reach = (dx <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
+    assert changed.any() and reach[changed].all()
+    _, piece = connected_components(vertex_adjacency(len(v), t), directed=False)
+    skin = piece[lm["upper_lip"]]
+    inner = [p for p in np.unique(piece) if p != skin and reach[piece == p].all()]
+    deep = np.flatnonzero(np.isin(piece, inner) & (contact - q[:, 2] >= INSIDE_RAMP * iod))
+    deep = np.array([i for i in deep if _covered(q, t, i, 0.01 * iod)])
+    assert len(deep) > 100 and (contact[deep] - q[deep, 2] > 0.6 * iod).sum() > 20
+    assert dark[deep].all(), np.round((contact - q[:, 2])[deep[~dark[deep]]] / iod, 2)
+    far = changed & (np.abs(dy) >= (INSIDE_SEED + INSIDE_RAMP) * iod)
+    assert far.any() and dark[far].all()
 
 
 def test_a_mouth_inside_painted_by_the_file_is_left_as_painted_and_one_material_colour_is_shaded():
