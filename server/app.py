@@ -690,11 +690,17 @@ class FacecastServer:
                 # A text session's sentence now playing, from the owner (as _view's send_sentence): then
                 # what came since, straight to the socket; registered with no await after the last check,
                 # so every later message reaches the viewer once.
-                join = await cluster.replay(feed, req.header_kind, req.header_encoding, req.audio)
+                join = await cluster.replay(
+                    feed, req.header_kind, req.header_encoding, req.audio, limit=self.config.viewer_queue
+                )
                 await cluster.answer(join)
-                while join.messages:
-                    await ws.send(join.messages.popleft())
+                while (msg := join.next_message()) is not None:
+                    await ws.send(msg)
                 cluster.forget(feed, join)
+                # Counted as the viewer's queue counts its drops (Viewer.offer).
+                viewer.dropped += join.dropped
+                feed.dropped += join.dropped
+                self.dropped += join.dropped
             if feed.ended.is_set():  # ended while it joined (its viewers were closed): it has had every frame
                 raise ProtocolViolation(*feed.end)
             feed.viewers.add(viewer)

@@ -135,12 +135,20 @@ class ReplayJoin:
     one publish connection in the same turn that adds the viewer's kind to its wants, so on this node's
     one subscription connection every live message of the session arrives either before the done marker
     (already in the sentence, or before it: dropped, as the owner's own joining viewer never gets it) or
-    after it (kept here until the viewer has been sent the sentence). Without an answer within the
-    timeout the viewer joins without the sentence (``gave_up``)."""
+    after it (held here until the viewer has been sent the sentence). Without an answer within the
+    timeout the viewer joins without the sentence (``gave_up``).
 
-    def __init__(self, kind: int, encoding: int, audio: bool) -> None:
+    The held live messages are bounded like the viewer's own queue (server.live.Viewer.offer): at
+    ``limit`` (the server's ``viewer_queue``) the oldest is dropped and counted in ``dropped``, so a
+    viewer slow to take the sentence costs this node at most one queue's worth of messages; the
+    sentence itself is not bounded here (the owner's sentence is, and the viewer needs all of it)."""
+
+    def __init__(self, kind: int, encoding: int, audio: bool, *, limit: int) -> None:
         self.kind, self.encoding, self.audio = kind, encoding, audio
-        self.messages: collections.deque[bytes] = collections.deque()
+        self.limit = limit
+        self.messages: collections.deque[bytes] = collections.deque()  # the owner's answer
+        self.held: collections.deque[bytes] = collections.deque()  # live messages after it (bounded)
+        self.dropped = 0
         self.answered = asyncio.Event()
         self.gave_up = False
         self.request_id = b""
@@ -150,12 +158,23 @@ class ReplayJoin:
             self.messages.append(message)
 
     def live(self, message: bytes, kind: int, encoding: int) -> None:
-        """A live message of the session: kept once the answer is complete (or given up on), if the
-        viewer watches its kind."""
+        """A live message of the session: held once the answer is complete (or given up on), if the
+        viewer watches its kind; the oldest held is dropped at the bound."""
         if not (self.answered.is_set() or self.gave_up):
             return
         if (kind == P.KIND_AUDIO and self.audio) or (kind == self.kind and encoding == self.encoding):
-            self.messages.append(message)
+            if len(self.held) >= self.limit:
+                self.held.popleft()
+                self.dropped += 1
+            self.held.append(message)
+
+    def next_message(self) -> bytes | None:
+        """The next message to send the viewer (the sentence, then the held live ones), None when done."""
+        if self.messages:
+            return self.messages.popleft()
+        if self.held:
+            return self.held.popleft()
+        return None
 
 
 def _resp(*parts: bytes) -> bytes:
@@ -564,12 +583,13 @@ class Cluster:
         await pipe.execute()
         return feed
 
-    async def replay(self, feed: RemoteFeed, kind: int, encoding: int, audio: bool) -> ReplayJoin:
+    async def replay(self, feed: RemoteFeed, kind: int, encoding: int, audio: bool, *, limit: int) -> ReplayJoin:
         """Ask the owner of remote text session ``feed`` for the sentence now playing, encoded for one
         joining viewer (``kind``/``encoding``, and audio), as its own joining viewer gets it
-        (server.live.LiveSession.send_sentence). The answer comes on this node's control channel, in
-        order with the session's frames (:class:`ReplayJoin`); wait for it with :meth:`answer`, then
-        send the join's messages and register the viewer, and :meth:`forget` the join in any case.
+        (server.live.LiveSession.send_sentence), then at most ``limit`` live messages held after it. The
+        answer comes on this node's control channel, in order with the session's frames
+        (:class:`ReplayJoin`); wait for it with :meth:`answer`, then send the join's messages
+        (:meth:`ReplayJoin.next_message`) and register the viewer, and :meth:`forget` the join in any case.
 
         Request/answer rather than the owner keeping the sentence in Redis (a stream): the replay is
         encoded for the joining viewer's kind, which the owner would otherwise publish in every kind for
@@ -578,7 +598,7 @@ class Cluster:
         output once with no gap (a stream read and a subscription are two connections, unordered)."""
         from redis.exceptions import RedisError
 
-        join = ReplayJoin(kind, encoding, audio)
+        join = ReplayJoin(kind, encoding, audio, limit=limit)
         join.request_id = rid = os.urandom(REQUEST_ID_BYTES // 2).hex().encode()
         feed.joining[rid] = join
         self._joins[rid] = join
@@ -607,6 +627,7 @@ class Cluster:
             log.warning("no replay from the owner within %g s (the viewer joins without it)", timeout_s)
             join.gave_up = True
             join.messages.clear()
+            join.held.clear()
 
     def forget(self, feed: RemoteFeed, join: ReplayJoin) -> None:
         feed.joining.pop(join.request_id, None)

@@ -1,9 +1,11 @@
-"""Cache directory and atomic file writes."""
+"""Cache directory and atomic file writes; stale generations of a cache file removed."""
 
 from __future__ import annotations
 
 import io
 import os
+import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -29,3 +31,29 @@ def atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
     # numpy's stub types **kwds against savez's own allow_pickle: bool, so any **dict of arrays is rejected
     np.savez(buf, **arrays)  # type: ignore[arg-type]
     return atomic_write_bytes(path, buf.getvalue())
+
+
+# A sibling written within this long may be another checkout's current file: checkouts at different rig
+# algorithms share one cache (benchmarks alternate a parent commit and its child on the same cache), and
+# removing it at once would have each rebuild the other's file on every run.
+STALE_AFTER_S = 24 * 3600.0
+
+
+def remove_stale_siblings(path: Path, family: re.Pattern[str], *, now: float | None = None) -> list[Path]:
+    """After ``path`` (a cache file of ``family``, a pattern its name fully matches) was written: remove
+    the other files in its folder whose names fully match ``family`` and that were last written over
+    :data:`STALE_AFTER_S` ago (each rig algorithm or key change leaves one, 0.7 MB or more). Other
+    files are never touched; a file that cannot be removed (read-only cache, removed meanwhile) is
+    skipped. Returns the removed paths."""
+    now = time.time() if now is None else now
+    removed = []
+    for p in path.parent.iterdir():
+        if p.name == path.name or not family.fullmatch(p.name):
+            continue
+        try:
+            if now - p.stat().st_mtime > STALE_AFTER_S:
+                p.unlink()
+                removed.append(p)
+        except OSError:  # read-only cache, a folder of that name, another process removed it: kept
+            continue
+    return removed

@@ -21,6 +21,7 @@ eq. 4). Both have ``neutral``, ``triangles``, ``moving``, ``displacements(params
 from __future__ import annotations
 
 import contextlib
+import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,8 @@ AnyRig = Rig | MorphRig
 LandmarkFinder = Callable[[HeadMesh], Mapping[str, object]]
 HeadMode = Literal["auto", "morph", "retarget"]
 HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
+# The built-in morph rig's cache files (``builtin_morph_<key>.npz``): one per key, the newest current.
+MORPH_CACHE_FAMILY = re.compile(r"builtin_morph_[0-9a-f]+\.npz")
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
     (``<cache>/builtin_morph_<key>.npz``, :func:`assets.heads.targets.morph_rig_key`), built and written there
     when missing."""
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.cache import atomic_savez, cache_dir
+    from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
     from assets.heads.targets import (
         morph_rig,
         morph_rig_arrays,
@@ -107,6 +110,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         rig.meta["landmarks"] = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
         with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
             atomic_savez(path, **morph_rig_arrays(rig))
+            remove_stale_siblings(path, MORPH_CACHE_FAMILY)
     return Head(rig, mesh)
 
 

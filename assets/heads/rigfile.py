@@ -9,6 +9,7 @@ its encoded bytes (uint8). Written atomically (temp file + ``os.replace``) and r
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,9 @@ from realtime_core.face import FaceModel, MouthCalibration, Rig
 
 FORMAT = "facecast-rig"
 VERSION = 1
+# The built-in head's rig cache files (``builtin_rig_v<VERSION>_a<RIG_ALGORITHM>_c<COLORS_VERSION>.npz``):
+# the one of this checkout's versions is current.
+BUILTIN_RIG_FAMILY = re.compile(r"builtin_rig_v\d+_a\d+_c\d+\.npz")
 
 
 def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:
@@ -155,7 +159,7 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
 def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     """The built-in head's rig, from the cache or built (and cached) on first use."""
     from assets.heads.builtin import COLORS_VERSION, load_builtin_head
-    from assets.heads.cache import cache_dir
+    from assets.heads.cache import cache_dir, remove_stale_siblings
     from assets.heads.rigging import rig_head
     from realtime_core.face.rig import RIG_ALGORITHM
 
@@ -175,4 +179,5 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
     head = load_builtin_head(root)
     rig, mesh = rig_head(head.mesh, None, head=head)
     save_rig(rig, mesh, path)
+    remove_stale_siblings(path, BUILTIN_RIG_FAMILY)
     return rig, mesh
