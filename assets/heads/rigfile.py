@@ -175,7 +175,7 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
                 return rig, mesh
         except RigFileError:
             pass
-        path.unlink()  # unreadable or built by an older algorithm: rebuild below
+        path.unlink(missing_ok=True)  # unreadable or built by an older algorithm (or removed meanwhile): rebuilt below
     head = load_builtin_head(root)
     rig, mesh = rig_head(head.mesh, None, head=head)
     save_rig(rig, mesh, path)
