@@ -23,7 +23,7 @@ import pytest
 from websockets.asyncio.client import connect
 
 from benchmarks.server_harness import ServerProcess
-from clients.client import IngestClient, ViewerClient, http_get, stream_samples, ws_url
+from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
 from tests.prerequisites import missing
 from tests.speech import speechlike
 from wire import protocol as P
@@ -437,6 +437,54 @@ def test_a_far_viewer_joining_as_the_session_ends_gets_its_end(model_path, redis
 
 async def _gone(r, key: str) -> bool:
     return await r.exists(key) == 0
+
+
+def test_far_viewers_joining_around_a_real_session_end_all_get_an_end(model_path, redis_server):
+    """The same race with the real owner: viewers on node b join a text session of node a every 10 ms
+    while its last sentence plays and it ends. Each one, whenever it lands (before the end, during the owner's replay
+    answer, between the marker and the row's drop, after), gets a close code within 10 s: the session's
+    (1000) or "no such session" (4004, it had gone); none hangs, and node b keeps no feed."""
+    import redis.asyncio as aioredis
+
+    nodes = [_node(model_path, redis_server.url, n, args=("--text",)) for n in ("a", "b")]
+
+    async def join(b: str) -> int | None:
+        viewer = ViewerClient(b, session="bot", audio=True)
+        try:
+            await asyncio.wait_for(viewer.__aenter__(), 10)
+        except ServerClosed as exc:
+            return exc.code
+        return (await asyncio.wait_for(viewer.collect(), 10)).close_code
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        r = aioredis.Redis.from_url(redis_server.url)
+        try:
+            async with connect(ws_url(a, "/text")) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await _until(lambda: _rows_if(b, "bot"), what="registry")
+                await ws.send(json.dumps({"type": "text", "text": "Bob bought a map."}))
+                assert json.loads(await ws.recv())["type"] == "spoken"
+                await ws.send(json.dumps({"type": "end"}))  # it ends once the sentence has played
+                joins, after = [], 0
+                while after < 5 and len(joins) < 400:  # until five joins after the row is gone
+                    joins.append(asyncio.ensure_future(join(b)))
+                    await asyncio.sleep(0.01)
+                    after += await r.exists("facecast:session:bot") == 0
+                codes = await asyncio.gather(*joins)
+                await _until(lambda: _no_feed(b, r, "bot"), what="node b drops the feed and its subscription")
+            return codes
+        finally:
+            await r.aclose()
+
+    try:
+        codes = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert set(codes) <= {P.CLOSE_NORMAL, P.CLOSE_NOT_FOUND}, codes
+    assert P.CLOSE_NORMAL in codes and P.CLOSE_NOT_FOUND in codes  # some joined before the end, some after
 
 
 async def _no_feed(url: str, r, name: str) -> bool:
