@@ -806,7 +806,14 @@ class FacecastServer:
         closes = collections.Counter({int(k): v for k, v in out["closes"].items()})
         out["workers"] = []
         for m in await self._ask_shards("metrics"):
-            for key in ("sessions", "viewers", "dropped_messages", "viewers_closed_slow"):
+            for key in (
+                "sessions",
+                "viewers",
+                "dropped_messages",
+                "viewers_closed_slow",
+                "delta_batches",
+                "delta_batch_frames",
+            ):
                 out[key] += m[key]
             closes.update({int(k): v for k, v in m["closes"].items()})
             out["session_list"] += m["session_list"]
@@ -852,6 +859,10 @@ class FacecastServer:
             "viewers": self.n_viewers,
             "dropped_messages": self.dropped,
             "viewers_closed_slow": self.closed_slow,
+            # vertex deltas by loop turn (server.live.TurnDeltas): turns that computed deltas, and the
+            # frames they held (frames / batches: how many frames a turn's batch shares)
+            "delta_batches": self.turn_deltas.batches,
+            "delta_batch_frames": self.turn_deltas.frames,
             "closes": {str(k): v for k, v in sorted(self.closes.items())},
             "timings_ms": self.times.summary(),
             "session_list": self.session_list(),

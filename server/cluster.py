@@ -15,7 +15,9 @@ session:
 * **Frames.** The owner publishes each binary message it sends its own viewers (exactly those
   bytes: header with the owner's send time, payload) on the Redis pub/sub channel
   ``facecast:frames:NAME``, for each (kind, encoding) some node wants, the audio relay included; at
-  the end it publishes an end marker carrying the close code and reason. Another node's viewers of
+  the end it publishes an end marker carrying the close code and reason (and, just before, leaves the
+  same in ``facecast:ended:NAME`` for :data:`ENDED_KEEP_MS`: a viewer whose node subscribed only after
+  the marker went out reads it there and closes with it). Another node's viewers of
   that session attach to a :class:`RemoteFeed` (one per session per node, one subscription for
   all its viewers) that hands the messages to them through the same fan-out as local sessions.
 * **Wants.** A node with viewers of a remote session sets ``facecast:want:NAME:KIND:ENC`` (TTL,
@@ -82,6 +84,7 @@ REQUEST_ID_BYTES = 16  # a request id: 16 hex characters
 SUBSCRIBE_WAIT_S = 2.0  # how long a replay request waits for Redis to confirm the feed's subscription
 ANSWER_WAIT_S = 2.0  # how long a joining viewer waits for the owner's replay before joining without it
 PUBLISH_QUEUE = 4096  # messages waiting for Redis before the oldest is dropped
+ENDED_KEEP_MS = 10_000  # how long a session's end record outlives it: longer than a viewer's join takes
 
 
 def session_key(name: str) -> str:
@@ -90,6 +93,10 @@ def session_key(name: str) -> str:
 
 def frames_channel(name: str) -> str:
     return f"{PREFIX}:frames:{name}"
+
+
+def ended_key(name: str) -> str:
+    return f"{PREFIX}:ended:{name}"
 
 
 def control_channel(node: str) -> str:
@@ -389,7 +396,9 @@ class Cluster:
 
         try:
             ok = await self._client.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
-            if not ok:
+            if ok:  # an earlier session of this name has ended: its end record is not this one's
+                await self._client.delete(ended_key(live.name))
+            else:
                 raw = await self._client.get(session_key(live.name))
                 owner = json.loads(raw).get("node", "?") if raw else None
                 if owner is not None and owner != self.node:
@@ -407,7 +416,14 @@ class Cluster:
             return
         del self.local[live.name]
         self.wanted.pop(live.name, None)
-        self.publish(live.name, END_MARK + json.dumps({"code": code, "reason": reason}).encode())
+        end = json.dumps({"code": code, "reason": reason})
+        try:
+            # Before the marker: a node that subscribes after the marker went out finds the end here
+            # (Cluster.feed), one that subscribed before it gets the marker.
+            await self._client.set(ended_key(live.name), end, px=max(ENDED_KEEP_MS, self.ttl_ms))
+        except (RedisError, OSError) as exc:
+            self._down(exc)
+        self.publish(live.name, END_MARK + end.encode())
         try:
             await self._client.delete(session_key(live.name))
         except (RedisError, OSError) as exc:
@@ -575,6 +591,7 @@ class Cluster:
         if feed is None:
             feed = self.feeds[name] = RemoteFeed(name, row)
             await self._subscribe(frames_channel(name))
+            await self._end_if_ended(feed)
         pairs = [(kind, encoding)] + ([(P.KIND_AUDIO, P.ENC_INT16)] if audio else [])
         pipe = self._client.pipeline(transaction=False)
         for k, e in pairs:
@@ -582,6 +599,35 @@ class Cluster:
             pipe.publish(control_channel(row["node"]), json.dumps({"want": [name, k, e]}))
         await pipe.execute()
         return feed
+
+    async def _end_if_ended(self, feed: RemoteFeed) -> None:
+        """A session that ended between this node's lookup and its subscription published its end marker
+        to no one here: once the subscription is confirmed, its end record (:meth:`release`, written before
+        the marker) says whether it ended, and how. Without it, every later end marker arrives."""
+        from redis.exceptions import RedisError
+
+        confirmed = self._confirmed.get(frames_channel(feed.name))
+        try:
+            if confirmed is None:
+                raise ConnectionError("the feed is not subscribed")
+            await asyncio.wait_for(confirmed.wait(), SUBSCRIBE_WAIT_S)
+            raw = await self._client.get(ended_key(feed.name))
+        except (RedisError, OSError, TimeoutError) as exc:
+            log.debug("end record of %r not read: %s", feed.name, exc)
+            return
+        if raw is not None and self.feeds.get(feed.name) is feed:
+            end = json.loads(raw)
+            self._feed_ended(feed, int(end["code"]), str(end["reason"]))
+
+    def _feed_ended(self, feed: RemoteFeed, code: int, reason: str) -> None:
+        """Remote session ``feed`` ended with ``code``/``reason``: close its viewers, drop the feed."""
+        feed.end = (code, reason)
+        feed.ended.set()
+        for join in feed.joining.values():  # nothing more will come: they send what they have
+            join.answered.set()
+        self.feeds.pop(feed.name, None)
+        self._oneshot(self._unsubscribe(frames_channel(feed.name)))
+        self._oneshot(self._end_feed(feed))
 
     async def replay(self, feed: RemoteFeed, kind: int, encoding: int, audio: bool, *, limit: int) -> ReplayJoin:
         """Ask the owner of remote text session ``feed`` for the sentence now playing, encoded for one
@@ -746,13 +792,7 @@ class Cluster:
             return
         if data[:4] == END_MARK:
             end = json.loads(data[4:])
-            feed.end = (int(end["code"]), str(end["reason"]))
-            feed.ended.set()
-            for join in feed.joining.values():  # nothing more will come: they send what they have
-                join.answered.set()
-            self.feeds.pop(name, None)
-            self._oneshot(self._unsubscribe(channel))
-            self._oneshot(self._end_feed(feed))
+            self._feed_ended(feed, int(end["code"]), str(end["reason"]))
             return
         if len(data) < P.HEADER_BYTES:
             return

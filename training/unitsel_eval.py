@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.synthesis.closure import CLOSED_IOD, bilabials_closed
 from realtime_core.synthesis.corpus import StoredCorpus
 from realtime_core.synthesis.recording import RecordingBlend
 from realtime_core.synthesis.synthesizer import ENSEMBLE_GAIN, UnitSynthesizer
@@ -86,8 +87,10 @@ class SystemScore:
     measures: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
 
-    def finish(self, truth_params: list, truth_measures: list, speech: list) -> dict:
+    def finish(self, truth_params: list, truth_measures: list, speech: list, targets: list) -> dict:
         tp, ep = np.concatenate(truth_params), np.concatenate(self.params)
+        closed = np.concatenate([_closed(p, t) for p, t in zip(self.params, targets)])
+        real = np.concatenate([_closed(p, t) for p, t in zip(truth_params, targets)])
         tm, em = np.concatenate(truth_measures), np.concatenate(self.measures)
         sp = np.concatenate(speech)
         r = {n: float(np.corrcoef(tp[:, j], ep[:, j])[0, 1]) for j, n in enumerate(VISUAL_PARAMS)}
@@ -98,7 +101,21 @@ class SystemScore:
                 err[m] = float("nan")
                 continue
             err[m] = float(100 * np.mean(np.abs(em[:, j] / np.max(em[:, j]) - tm[:, j] / np.max(tm[:, j]))))
-        return {"system": self.name, "r": r, "r_speech_mouth_open": r_speech, "error_pct": err, **self.extra}
+        return {
+            "system": self.name,
+            "r": r,
+            "r_speech_mouth_open": r_speech,
+            "error_pct": err,
+            "bilabials": len(closed),
+            "bilabials_closed_pct": float(100 * np.mean(closed)),
+            "bilabials_closed_real_pct": float(100 * np.mean(real)),
+            **self.extra,
+        }
+
+
+def _closed(params: np.ndarray, target) -> np.ndarray:
+    """(n_pbm,) bool: the /p b m/ of a synthesis target whose mouth_open (params (n, 4)) closes."""
+    return bilabials_closed(params[:, MOUTH_OPEN], target.visemes, target.starts_s, target.ends_s)
 
 
 def evaluate(
@@ -148,7 +165,7 @@ def evaluate(
         else []
     )
     hmm = SystemScore(f"audio-driven HMM, {model_label} (real audio)") if model is not None else None
-    truth_p, truth_m, speech = [], [], []
+    truth_p, truth_m, speech, targets = [], [], [], []
     search_ms: dict[int, list[float]] = {n: [] for n in n_best}
     units: dict[int, list[int]] = {n: [] for n in n_best}
     curves: dict = {}
@@ -161,6 +178,7 @@ def evaluate(
         speech.append((t >= spoken[0][1]) & (t < spoken[-1][2]) if spoken else np.zeros(n, bool))
         truth_p.append(track.params)
         truth_m.append(real_measures(track))
+        targets.append(synth.target(rows, "arpabet"))
         hp = None
         if hmm is not None:
             from realtime_core.pipeline import speech_to_params
@@ -195,10 +213,10 @@ def evaluate(
             "units_per_sentence": float(np.mean(units[nb])),
             "synth_ms_median": float(np.median(search_ms[nb])),
         }
-        rows_out.append(sys_.finish(truth_p, truth_m, speech))
+        rows_out.append(sys_.finish(truth_p, truth_m, speech, targets))
     for other in (*mixed, hmm, rules):
         if other is not None:
-            rows_out.append(other.finish(truth_p, truth_m, speech))
+            rows_out.append(other.finish(truth_p, truth_m, speech, targets))
     return rows_out, curves
 
 
@@ -261,16 +279,28 @@ def markdown(
         (
             "| system | r upper_lip_raise | r lip_stretch | r mouth_open | r lip_corner_depress "
             "| r speech (mouth_open) | height err % | width err % | protrusion err % | units/sentence "
-            "| synthesis ms (median) |"
+            "| synthesis ms (median) | /p b m/ closed % |"
         ),
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         e = r["error_pct"]
         cells = " | ".join(f"{r['r'][n]:.3f}" for n in VISUAL_PARAMS)
         errs = " | ".join(_pct(e[m]) for m in MEASURES)
         tail = f"{r['units_per_sentence']:.2f} | {r['synth_ms_median']:.0f}" if "units_per_sentence" in r else "- | -"
-        lines.append(f"| {r['system']} | {cells} | {r['r_speech_mouth_open']:.3f} | {errs} | {tail} |")
+        lines.append(
+            f"| {r['system']} | {cells} | {r['r_speech_mouth_open']:.3f} | {errs} | {tail} "
+            f"| {r['bilabials_closed_pct']:.1f} |"
+        )
+    if rows:
+        lines += [
+            "",
+            (
+                f"/p b m/ closed: the share of the {rows[0]['bilabials']} target /p b m/ whose mouth_open comes to "
+                f"<= {CLOSED_IOD:g} IOD inside the phone label (the real lips: "
+                f"{rows[0]['bilabials_closed_real_pct']:.1f} %)."
+            ),
+        ]
     if any(r["system"].startswith("text + recording") for r in rows):
         lines += [
             "",

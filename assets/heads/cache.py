@@ -6,6 +6,7 @@ import io
 import os
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -39,19 +40,26 @@ def atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> Path:
 STALE_AFTER_S = 24 * 3600.0
 
 
-def remove_stale_siblings(path: Path, family: re.Pattern[str], *, now: float | None = None) -> list[Path]:
+def remove_stale_siblings(
+    path: Path,
+    family: re.Pattern[str],
+    *,
+    now: float | None = None,
+    stale: Callable[[Path], bool] | None = None,
+) -> list[Path]:
     """After ``path`` (a cache file of ``family``, a pattern its name fully matches) was written: remove
     the other files in its folder whose names fully match ``family`` and that were last written over
-    :data:`STALE_AFTER_S` ago (each rig algorithm or key change leaves one, 0.7 MB or more). Other
-    files are never touched; a file that cannot be removed (read-only cache, removed meanwhile) is
-    skipped. Returns the removed paths."""
+    :data:`STALE_AFTER_S` ago (each rig algorithm or key change leaves one, 0.7 MB or more) and, if
+    ``stale`` is given, for which it is true (a family whose names do not tell the current file from
+    an older generation's). Other files are never touched; a file that cannot be removed (read-only
+    cache, removed meanwhile) is skipped. Returns the removed paths."""
     now = time.time() if now is None else now
     removed = []
     for p in path.parent.iterdir():
         if p.name == path.name or not family.fullmatch(p.name):
             continue
         try:
-            if now - p.stat().st_mtime > STALE_AFTER_S:
+            if now - p.stat().st_mtime > STALE_AFTER_S and (stale is None or stale(p)):
                 p.unlink()
                 removed.append(p)
         except OSError:  # read-only cache, a folder of that name, another process removed it: kept

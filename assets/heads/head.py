@@ -238,7 +238,20 @@ def _rig_mesh(
     rig, rigged, _ = rig_checked(mesh, spec, landmark_source=source, config=config)
     with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
         save_rig(rig, rigged, path)
+        remove_stale_rigs(path)
     return Head(rig, rigged)
+
+
+def remove_stale_rigs(written: Path) -> list[Path]:
+    """After ``written`` (a rig in ``<cache>/rigs/``) was saved: remove the rigs there that an older (or
+    another) rig algorithm built and that were written over a day ago (each algorithm change leaves one
+    file per head, 7 MB or more). A current algorithm's rig (another head's) is kept whatever its age;
+    so is everything not named like a rig key (assets.heads.cache.remove_stale_siblings)."""
+    from assets.heads.cache import remove_stale_siblings
+    from assets.heads.rigfile import RIG_CACHE_FAMILY, rig_algorithm
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    return remove_stale_siblings(written, RIG_CACHE_FAMILY, stale=lambda p: rig_algorithm(p) != RIG_ALGORITHM)
 
 
 def _rig_key(

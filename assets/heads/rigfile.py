@@ -27,6 +27,21 @@ VERSION = 1
 # The built-in head's rig cache files (``builtin_rig_v<VERSION>_a<RIG_ALGORITHM>_c<COLORS_VERSION>.npz``):
 # the one of this checkout's versions is current.
 BUILTIN_RIG_FAMILY = re.compile(r"builtin_rig_v\d+_a\d+_c\d+\.npz")
+# Rigs of meshes given by the user, cached as ``<cache>/rigs/<key>.npz`` (assets.heads.head._rig_key): the
+# key hashes the rig algorithm in, so only the file's metadata tells an older algorithm's file.
+RIG_CACHE_FAMILY = re.compile(r"[0-9a-f]{32}\.npz")
+
+
+def rig_algorithm(path: str | Path) -> int | None:
+    """The rig algorithm (``realtime_core.face.rig.RIG_ALGORITHM``) a rig file was built by, reading only
+    its metadata; None if the file is not a readable rig file."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+        algorithm = meta["rig"]["algorithm"]
+    except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError):
+        return None
+    return algorithm if isinstance(algorithm, int) else None
 
 
 def save_rig(rig: Rig, mesh: HeadMesh, path: str | Path) -> Path:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from realtime_core.errors import ConfigError
+from realtime_core.synthesis.closure import ClosureConfig, close_bilabials, closed_pose
 from realtime_core.synthesis.concat import concatenate
 from realtime_core.synthesis.corpus import FPS, MotionCorpus
 from realtime_core.synthesis.recording import (
@@ -161,10 +162,18 @@ class UnitSynthesizer:
 
     rest: (D,) the frame vector of the face at rest (the neutral face: its PCA coefficients and
     zero mouth parameters, :meth:`realtime_core.synthesis.corpus.StoredCorpus.rest_frame`), the
-    centre an ensemble's articulation range is restored around; None = the zero vector."""
+    centre an ensemble's articulation range is restored around; None = the zero vector.
+
+    closure: how every /p b m/ is made to close (:mod:`realtime_core.synthesis.closure`); None = the
+    selected motion as it is. Needs a ``mouth_open`` dim and closing PBM tokens in the corpus (else off)."""
 
     def __init__(
-        self, corpus: MotionCorpus, config: SearchConfig | None = None, *, rest: np.ndarray | None = None
+        self,
+        corpus: MotionCorpus,
+        config: SearchConfig | None = None,
+        *,
+        rest: np.ndarray | None = None,
+        closure: ClosureConfig | None = ClosureConfig(),
     ) -> None:
         self.corpus = corpus
         self.graph: UnitGraph = build_graph(corpus, config or SearchConfig())
@@ -174,6 +183,9 @@ class UnitSynthesizer:
         self.available = corpus.visemes_present()
         self._sentence = corpus.phone_sentence()
         self._coefficient_map: np.ndarray | None = None  # fitted on first use (text + recording only)
+        self.closure = closure
+        self._mouth_open = corpus.dim_names.index("mouth_open") if "mouth_open" in corpus.dim_names else None
+        self._closed = closed_pose(corpus, self._mouth_open) if closure and self._mouth_open is not None else None
 
     def target(self, phones: Sequence[tuple[str, float, float]], inventory: str) -> Target:
         return make_target(phones, inventory, self.available)
@@ -238,6 +250,8 @@ class UnitSynthesizer:
         frames = total / len(sels)
         if len(sels) > 1 and ensemble_gain != 1.0:
             frames = self.rest + ensemble_gain * (frames - self.rest)
+        # after averaging and the gain: an ensemble smears closures most (docs/unit_selection.md)
+        frames = self._close(frames, target)
         return UnitSynthesis(frames=frames, target=target, selection=sels[0], alternatives=tuple(sels[1:]))
 
     def with_recording(
@@ -251,4 +265,19 @@ class UnitSynthesizer:
             self._coefficient_map = param_to_coefficient_map(self.corpus)
         tgt = result.target
         w = region_weights(tgt.visemes, tgt.starts_s, tgt.ends_s, len(result.frames), config)
-        return blend_recording(result.frames, audio_params, w, self._coefficient_map)
+        # the audio-driven model's lips, mixed in, reopen some closures: close them again
+        return self._close(blend_recording(result.frames, audio_params, w, self._coefficient_map), tgt)
+
+    def _close(self, frames: np.ndarray, target: Target) -> np.ndarray:
+        """frames (n, D) with every /p b m/ of ``target`` closed (:mod:`realtime_core.synthesis.closure`)."""
+        if self.closure is None or self._closed is None or self._mouth_open is None:
+            return frames
+        return close_bilabials(
+            frames,
+            target.visemes,
+            target.starts_s,
+            target.ends_s,
+            self._closed,
+            mouth_open_dim=self._mouth_open,
+            config=self.closure,
+        )

@@ -23,7 +23,7 @@ import pytest
 from websockets.asyncio.client import connect
 
 from benchmarks.server_harness import ServerProcess
-from clients.client import IngestClient, ViewerClient, http_get, stream_samples, ws_url
+from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, stream_samples, ws_url
 from tests.prerequisites import missing
 from tests.speech import speechlike
 from wire import protocol as P
@@ -380,3 +380,115 @@ def test_a_wrong_redis_address_is_one_line_at_start(model_path):
     assert out.returncode != 0
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot reach Redis at redis://127.0.0.1:" in lines[0], out.stderr
+
+
+@pytest.mark.parametrize("replay", [True, False], ids=["text", "audio"])
+def test_a_far_viewer_joining_as_the_session_ends_gets_its_end(model_path, redis_server, replay):
+    """Issue 15: a session on node a ends while a viewer on node b joins. The owner publishes the end
+    marker, then drops its row; a viewer whose node looked the row up before the drop but subscribed
+    after the marker hears no marker. It must still get the session's end (its close code, docs/protocol.md
+    section 4) instead of waiting forever, and its node must keep nothing of the session (feed,
+    subscription). The owner's release is replayed here step by step on the real Redis (row of a real
+    text session of node a, end record, marker, row not yet dropped), since the real one passes that
+    point within a millisecond; for a text session b first asks node a for the sentence (answered
+    empty: a has no such session)."""
+    import redis.asyncio as aioredis
+
+    nodes = [_node(model_path, redis_server.url, n, args=("--text",)) for n in ("a", "b")]
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        r = aioredis.Redis.from_url(redis_server.url)
+        try:
+            async with connect(ws_url(a, "/text")) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await _until(lambda: _rows_if(b, "bot"), what="registry")
+                row = json.loads(await r.get("facecast:session:bot"))
+                row.update({"name": "gone", "replay": replay})
+                end = json.dumps({"code": P.CLOSE_GOING_AWAY, "reason": "server shutting down"})
+                # node a's Cluster.release, up to the moment before it drops the row
+                await r.set("facecast:session:gone", json.dumps(row), px=5000)
+                await r.set("facecast:ended:gone", end, px=10_000)
+                assert await r.publish("facecast:frames:gone", b"\x00END" + end.encode()) == 0  # no one heard it
+                viewer = ViewerClient(b, session="gone", audio=True)
+                await asyncio.wait_for(viewer.__aenter__(), 10)
+                got = await asyncio.wait_for(viewer.collect(), 10)  # before the fix: no end, ever
+                await _until(lambda: _no_feed(b, r, "gone"), what="node b drops the feed and its subscription")
+                # the real session on a goes on, and its own end leaves an end record like the one above
+                await ws.send(json.dumps({"type": "end"}))
+                assert json.loads(await ws.recv())["type"] == "ended"
+                record = await _until(lambda: r.get("facecast:ended:bot"), what="end record")
+                # written before the marker; the row goes after it
+                await _until(lambda: _gone(r, "facecast:session:bot"), what="the row dropped")
+            return got, json.loads(record)
+        finally:
+            await r.aclose()
+
+    try:
+        got, record = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
+    assert got.frames == [] and got.audio == []
+    assert record == {"code": P.CLOSE_NORMAL, "reason": record["reason"]}
+
+
+async def _gone(r, key: str) -> bool:
+    return await r.exists(key) == 0
+
+
+def test_far_viewers_joining_around_a_real_session_end_all_get_an_end(model_path, redis_server):
+    """The same race with the real owner: viewers on node b join a text session of node a every 10 ms
+    while its last sentence plays and it ends. Each one, whenever it lands (before the end, during the owner's replay
+    answer, between the marker and the row's drop, after), gets a close code within 10 s: the session's
+    (1000) or "no such session" (4004, it had gone); none hangs, and node b keeps no feed."""
+    import redis.asyncio as aioredis
+
+    nodes = [_node(model_path, redis_server.url, n, args=("--text",)) for n in ("a", "b")]
+
+    async def join(b: str) -> int | None:
+        viewer = ViewerClient(b, session="bot", audio=True)
+        try:
+            await asyncio.wait_for(viewer.__aenter__(), 10)
+        except ServerClosed as exc:
+            return exc.code
+        return (await asyncio.wait_for(viewer.collect(), 10)).close_code
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        r = aioredis.Redis.from_url(redis_server.url)
+        try:
+            async with connect(ws_url(a, "/text")) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await _until(lambda: _rows_if(b, "bot"), what="registry")
+                await ws.send(json.dumps({"type": "text", "text": "Bob bought a map."}))
+                assert json.loads(await ws.recv())["type"] == "spoken"
+                await ws.send(json.dumps({"type": "end"}))  # it ends once the sentence has played
+                joins, after = [], 0
+                while after < 5 and len(joins) < 400:  # until five joins after the row is gone
+                    joins.append(asyncio.ensure_future(join(b)))
+                    await asyncio.sleep(0.01)
+                    after += await r.exists("facecast:session:bot") == 0
+                codes = await asyncio.gather(*joins)
+                await _until(lambda: _no_feed(b, r, "bot"), what="node b drops the feed and its subscription")
+            return codes
+        finally:
+            await r.aclose()
+
+    try:
+        codes = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes:
+            n.stop()
+    assert set(codes) <= {P.CLOSE_NORMAL, P.CLOSE_NOT_FOUND}, codes
+    assert P.CLOSE_NORMAL in codes and P.CLOSE_NOT_FOUND in codes  # some joined before the end, some after
+
+
+async def _no_feed(url: str, r, name: str) -> bool:
+    """Node ``url`` holds no feed and Redis no subscription of session ``name``."""
+    health = await _get_json(url, "/health")
+    subscribers = dict(await r.pubsub_numsub(f"facecast:frames:{name}"))
+    return health["remote_feeds"] == 0 and all(n == 0 for n in subscribers.values())

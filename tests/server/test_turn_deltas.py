@@ -5,11 +5,12 @@ frame, while the server computes the deltas of several frames per turn."""
 from __future__ import annotations
 
 import asyncio
+import json
 
 import numpy as np
 import pytest
 
-from clients.client import IngestClient, ViewerClient, stream_samples
+from clients.client import IngestClient, ViewerClient, http_get, stream_samples
 from server.session import Session, SessionConfig
 from tests.live_server import running
 from tests.speech import speechlike
@@ -52,9 +53,11 @@ def test_deltas_of_a_turn_are_computed_together_and_equal_the_per_frame_path(mod
             got = await asyncio.gather(*tasks)
             for c in (*viewers, *ingests):
                 await c.__aexit__(None, None, None)
-            return ended, got, srv.turn_deltas.batches, srv.turn_deltas.frames
+            status, body = await http_get(srv.url, "/metrics")
+            assert status == 200
+            return ended, got, srv.turn_deltas.batches, srv.turn_deltas.frames, json.loads(body)
 
-    ended, got, batches, frames = asyncio.run(main())
+    ended, got, batches, frames, metrics = asyncio.run(main())
     for clip, end, rec in zip(clips, ended, got):
         want = _reference(model, head.rig, clip, rate)
         assert end["frames"] == len(want) == len(rec.frames) > 30
@@ -68,3 +71,5 @@ def test_deltas_of_a_turn_are_computed_together_and_equal_the_per_frame_path(mod
     total = sum(len(r.frames) for r in got)
     assert total // 2 < frames < total
     assert 0 < batches < frames
+    # /metrics exports the same counters (docs/service.md, "Vertex deltas by loop turn")
+    assert (metrics["delta_batches"], metrics["delta_batch_frames"]) == (batches, frames)

