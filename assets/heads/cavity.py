@@ -372,6 +372,11 @@ def with_mouth_cavity(
             pts = dict(landmark_finder(mesh))
         except LandmarkError:
             pts = None  # no face found: the head as it came
+        if pts:
+            # Kept with the rig, as a retargeted head's are: found again on the shaded mesh (the finder reads a
+            # render), they moved (the avatar's inner-lip points: its checks' lip interpenetration 0.0004 -> 0.0058).
+            rig = replace(rig, meta={**rig.meta, "landmarks": {k: np.asarray(p).tolist() for k, p in pts.items()}})
+            head = Head(rig, mesh)
     if not pts:
         return head
     v = np.asarray(mesh.vertices, dtype=np.float64)
