@@ -407,3 +407,23 @@ def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
     assert (np.asarray(out.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
     shaded = builtin_morph_head()
     assert with_mouth_cavity(Head(shaded.rig, shaded.mesh)).mesh is shaded.mesh
+
+
+def test_an_own_target_head_without_landmarks_is_located_by_the_finder_and_keeps_its_points():
+    """A glb with its own targets and teeth but no landmarks (the full-body avatar) is located by the landmark
+    finder (here the built-in head's hand points, as a finder returns them: name -> point), shaded as with
+    landmarks, and the points travel with its rig: found again on the shaded mesh they moved (the finder reads a
+    render), and the checks measured the avatar's lips at other vertices. Without a finder it comes back as it is."""
+    from dataclasses import replace
+
+    from assets.heads.cavity import with_mouth_cavity
+    from assets.heads.head import Head
+
+    head, b, colors = _material_head()
+    points = {k: head.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
+    bare = Head(replace(head.rig, meta={k: v for k, v in head.rig.meta.items() if k != "landmarks"}), head.mesh)
+    assert with_mouth_cavity(bare) is bare
+    found = with_mouth_cavity(bare, landmark_finder=lambda mesh: points)
+    assert found.rig.meta["landmarks"] == points
+    assert np.allclose(found.mesh.colors, with_mouth_cavity(head).mesh.colors, atol=1e-6)
+    assert (np.asarray(found.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
