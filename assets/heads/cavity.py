@@ -226,17 +226,22 @@ def shade_inside(colors: np.ndarray, depth: np.ndarray, *, lining: np.ndarray, w
     return (base * inside_light(depth)[:, None]).astype(np.float32)
 
 
+def _inner_parts(mesh: HeadMesh) -> list[int]:
+    """Indices into ``mesh.part_names`` of the parts inside its mouth (:data:`INNER_MOUTH_WORDS`)."""
+    return [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in INNER_MOUTH_WORDS)]
+
+
 def has_inner_mouth(mesh: HeadMesh) -> bool:
     """Whether a part of ``mesh`` lies inside its mouth (:data:`INNER_MOUTH_WORDS`)."""
-    return any(any(w in n.lower() for w in INNER_MOUTH_WORDS) for n in mesh.part_names)
+    return bool(_inner_parts(mesh))
 
 
 def inner_mouth_vertices(mesh: HeadMesh) -> np.ndarray:
     """(n,) bool: the vertices of ``mesh``'s inner-mouth parts (teeth, tongue, gums: :data:`INNER_MOUTH_WORDS`)."""
     out = np.zeros(len(mesh.vertices), dtype=bool)
-    if mesh.part is None or not has_inner_mouth(mesh):
+    ids = _inner_parts(mesh)
+    if mesh.part is None or not ids:
         return out
-    ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in INNER_MOUTH_WORDS)]
     part = np.asarray(mesh.part)[: len(out)]
     out[: len(part)] = np.isin(part, ids)
     return out
