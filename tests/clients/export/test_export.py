@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from assets.heads.glb import mesh_glb
+from assets.heads.mesh import HeadMesh
 from assets.tracks import decode_csv, decode_json
 from clients.export.errors import ExportError
 from clients.export.files import export_track
@@ -126,6 +128,29 @@ def test_glb_also_loads_in_trimesh():
     (geom,) = scene.geometry.values()
     np.testing.assert_allclose(geom.vertices, v, rtol=1e-6, atol=1e-6)
     np.testing.assert_array_equal(geom.faces, tris)
+
+
+def test_glb_carries_smooth_unit_normals_so_viewers_do_not_shade_it_flat():
+    """glTF 2.0 3.7.2.1: without NORMAL a client MUST shade flat, so three.js, Blender and the Khronos
+    viewer showed every exported head faceted, unlike facecast's renderer. On a sphere the written
+    normals (decoded with pygltflib) are the radial directions, computed here independently."""
+    pygltflib = require_module("pygltflib")
+    trimesh = require_module("trimesh")
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.0)
+    v, tris = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    targets = np.zeros((4, len(v), 3), np.float32)
+    targets[2, :, 1] = -0.1 * (v[:, 1] < 0)  # a "jaw" that moves the lower half
+    radial = v / np.linalg.norm(v, axis=1, keepdims=True)
+    for data in (
+        animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=syllable_track(5)),
+        mesh_glb(HeadMesh(vertices=v, triangles=tris, name="sphere")),
+    ):
+        g = pygltflib.GLTF2.load_from_bytes(data)
+        prim = g.meshes[0].primitives[0]
+        assert prim.attributes.NORMAL is not None, "no NORMAL: viewers must shade the head flat"
+        n = _accessor(g, g.binary_blob(), prim.attributes.NORMAL)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
+        assert np.degrees(np.arccos(np.clip((n * radial).sum(axis=1), -1, 1))).max() < 3.0
 
 
 @pytest.mark.system
