@@ -380,3 +380,38 @@ def test_a_wrong_redis_address_is_one_line_at_start(model_path):
     assert out.returncode != 0
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot reach Redis at redis://127.0.0.1:" in lines[0], out.stderr
+
+
+def test_a_healthy_redis_never_reads_as_down_at_start(redis_server, caplog):
+    """The first heartbeat used to run while the subscription connection was still being opened and
+    took its missing connection for a lost one: every node logged "Redis unreachable ... subscription
+    lost" at start and /health read degraded for half a second, with redis-server up all along."""
+    from server.cluster import Cluster
+
+    async def main() -> list[bool]:
+        async def end_feed(feed) -> None:
+            return None
+
+        cluster = Cluster(
+            redis_server.url,
+            node="a",
+            advertise="http://127.0.0.1:1",
+            heartbeat_s=0.2,
+            deliver=lambda *a: None,
+            end_feed=end_feed,
+        )
+        await cluster.start()
+        seen = []
+        try:
+            deadline = time.monotonic() + 1.5  # seven heartbeats
+            while time.monotonic() < deadline:
+                seen.append(cluster.up)
+                await asyncio.sleep(0.005)
+        finally:
+            await cluster.stop()
+        return seen
+
+    with caplog.at_level("WARNING", logger="facecast.cluster"):
+        seen = asyncio.run(asyncio.wait_for(main(), 30))
+    assert all(seen), f"read as down in {seen.count(False)} of {len(seen)} polls"
+    assert not [r for r in caplog.records if "unreachable" in r.getMessage()]
