@@ -64,7 +64,8 @@ class Recording:
     """What a viewer collected. description: the server's JSON; index (F,) int64 frame indices;
     media_time (F,) s; values: F arrays (V,) per frame (V = description values_per_frame; float16
     for vertex deltas, float32 otherwise);
-    audio: list of (media_time s, samples (n,) float32 in [-1, 1]); close_code/reason: how it ended."""
+    audio: list of (media_time s, samples (n,) float32 in [-1, 1]); close_code/reason: how it ended
+    (None / "" when the viewer stopped at its max_s: ``stopped`` is then True)."""
 
     description: dict
     index: list[int] = field(default_factory=list)
@@ -73,6 +74,15 @@ class Recording:
     audio: list[tuple[float, np.ndarray]] = field(default_factory=list)
     close_code: int | None = None
     close_reason: str = ""
+    stopped: bool = False
+
+    @property
+    def ending(self) -> str:
+        """How the recording ended, for a person: the server's close, or the viewer's own stop (a
+        --duration run printed "session closed with None" while the session went on)."""
+        if self.stopped:
+            return f"stopped after {len(self.index) / self.fps:.2f} s of frames (the session goes on)"
+        return f"session closed with {self.close_code} {self.close_reason}".rstrip()
 
     @property
     def fps(self) -> float:
@@ -172,6 +182,7 @@ async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
             if on_frame is not None:
                 on_frame(m)
             if cfg.max_s is not None and m.media_time - rec.media_time[0] >= cfg.max_s:
+                rec.stopped = True
                 break
     finally:
         await v.__aexit__(None, None, None)

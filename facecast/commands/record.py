@@ -86,6 +86,6 @@ def run(args: argparse.Namespace) -> int:
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
-        f"({track.duration_s:.2f} s) of {session!r}{late}; session closed with {rec.close_code} {rec.close_reason}"
+        f"({track.duration_s:.2f} s) of {session!r}{late}; {rec.ending}"
     )
     return 0

@@ -389,3 +389,21 @@ def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, 
     take = decode_csv(out.read_bytes())
     assert take.start_s == 0.0 and "joined at" not in printed, printed
     assert take.n_frames == 45  # the whole 1.5 s
+
+
+def test_record_stopped_by_duration_says_so_not_closed_with_none(live, tmp_path, capsys):
+    """`facecast record/view --duration` stops the viewer while the session goes on: the summary
+    line used to read "session closed with None"."""
+    from tests.live_server import stream_session
+
+    name = "longer"
+    session = live.submit(stream_session(live.url, name, 4.0, seed=6))
+    out = tmp_path / "take.csv"
+    try:
+        assert main(["record", live.url, "--session", name, "-o", str(out), "--duration", "0.5", "--wait", "20"]) == 0
+    finally:
+        session.result(30)
+    printed = capsys.readouterr().out
+    assert "None" not in printed and "the session goes on" in printed, printed
+    take = decode_csv(out.read_bytes())
+    assert 15 <= take.n_frames < 4 * 30  # stopped after about 0.5 s, before the 4 s session ended
