@@ -165,10 +165,18 @@ async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
         await asyncio.sleep(RETRY_S)
 
 
-async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
+async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None, check_description=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
-    every frame as it arrives (for progress or live display)."""
+    every frame as it arrives (for progress or live display); ``check_description(description)`` right
+    after connecting, before any frame: what it raises ends the watch at once (a take that cannot be
+    written is refused at its start, not after it)."""
     v = await connect_viewer(cfg)
+    if check_description is not None:
+        try:
+            check_description(v.description)
+        except BaseException:
+            await v.__aexit__(None, None, None)
+            raise
     rec = Recording(description=v.description)
     keep = np.float16 if cfg.kind == "deltas" else np.float32
     try:
