@@ -34,6 +34,7 @@ Theory of operation
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import multiprocessing
@@ -47,6 +48,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -251,6 +253,24 @@ def decode_frames(path: Path, width: int, height: int) -> tuple[np.ndarray, str]
 
 
 # --------------------------------------------------------------------------- landmarks (MediaPipe)
+@contextlib.contextmanager
+def _cpp_stderr_silenced() -> Iterator[None]:
+    """File descriptor 2 to /dev/null for the duration. MediaPipe's C++ side (absl logging, which
+    GLOG_minloglevel does not reach) writes notices from its graph threads whenever a clip's graph
+    starts: 186 lines through `facecast eval`'s progress bar (the worker processes of `facecast extract`
+    silence their whole stderr instead). Python exceptions still propagate; only the descriptor is swapped."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 class FaceMeshTracker:
     """One MediaPipe face-mesh graph (video mode), reused for many clips: :meth:`track` resets
     the tracking state first, so clips never see each other. Not thread-safe; one per process."""
@@ -265,22 +285,33 @@ class FaceMeshTracker:
             raise MissingDependencyError(
                 "facecast extract needs MediaPipe: pip install 'facecast[video]' (mediapipe==0.10.14)"
             ) from exc
-        self._mesh = mp.solutions.face_mesh.FaceMesh(
-            static_image_mode=False,
-            max_num_faces=1,
-            refine_landmarks=True,
-            min_detection_confidence=config.min_detection_confidence,
-            min_tracking_confidence=config.min_tracking_confidence,
-        )
-        self._used = False
+        self._mp, self._config = mp, config
+        # Made on the first clip, inside its silenced window: its threads log while it starts up,
+        # after the constructor has returned (one line leaked while the first clip was decoded).
+        self._mesh: Any = None
 
     def track(self, frames: np.ndarray, *, progress=None) -> np.ndarray:
-        """(n, H, W, 3) uint8 RGB -> (n, 468, 3) float32 pixels (x W, y H, z W), NaN where no face."""
+        """(n, H, W, 3) uint8 RGB -> (n, 468, 3) float32 pixels (x W, y H, z W), NaN where no face.
+        Without ``progress`` the graph's C++ notices are kept off stderr (they come from its threads
+        while the first frames run, so the whole clip is silenced; a progress bar keeps stderr)."""
+        if progress is not None:
+            return self._track(frames, progress)
+        with _cpp_stderr_silenced():
+            return self._track(frames, None)
+
+    def _track(self, frames: np.ndarray, progress) -> np.ndarray:
         import warnings
 
-        if self._used:
+        if self._mesh is None:
+            self._mesh = self._mp.solutions.face_mesh.FaceMesh(
+                static_image_mode=False,
+                max_num_faces=1,
+                refine_landmarks=True,
+                min_detection_confidence=self._config.min_detection_confidence,
+                min_tracking_confidence=self._config.min_tracking_confidence,
+            )
+        else:
             self._mesh.reset()
-        self._used = True
         n, h, w, _ = frames.shape
         out = np.full((n, N_LANDMARKS, 3), np.nan, dtype=np.float32)
         wrap = progress or (lambda it, **_: it)
@@ -295,7 +326,8 @@ class FaceMeshTracker:
         return out
 
     def close(self) -> None:
-        self._mesh.close()
+        if self._mesh is not None:
+            self._mesh.close()
 
 
 def file_sha1(path: Path) -> str:
