@@ -34,7 +34,6 @@ Theory of operation
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import multiprocessing
@@ -54,6 +53,7 @@ import numpy as np
 
 from assets.audio import SILENCE_PEAK, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
+from assets.mediapipe_log import native_stderr_quiet
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
@@ -253,24 +253,6 @@ def decode_frames(path: Path, width: int, height: int) -> tuple[np.ndarray, str]
 
 
 # --------------------------------------------------------------------------- landmarks (MediaPipe)
-@contextlib.contextmanager
-def _cpp_stderr_silenced() -> Iterator[None]:
-    """File descriptor 2 to /dev/null for the duration. MediaPipe's C++ side (absl logging, which
-    GLOG_minloglevel does not reach) writes notices from its graph threads whenever a clip's graph
-    starts: 186 lines through `facecast eval`'s progress bar (the worker processes of `facecast extract`
-    silence their whole stderr instead). Python exceptions still propagate; only the descriptor is swapped."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-
-
 class FaceMeshTracker:
     """One MediaPipe face-mesh graph (video mode), reused for many clips: :meth:`track` resets
     the tracking state first, so clips never see each other. Not thread-safe; one per process."""
@@ -296,7 +278,7 @@ class FaceMeshTracker:
         while the first frames run, so the whole clip is silenced; a progress bar keeps stderr)."""
         if progress is not None:
             return self._track(frames, progress)
-        with _cpp_stderr_silenced():
+        with native_stderr_quiet():
             return self._track(frames, None)
 
     def _track(self, frames: np.ndarray, progress) -> np.ndarray:
