@@ -3,7 +3,8 @@
 Vertex order is kept exactly (no re-indexing), so moving-vertex indices and vertex deltas address
 the written mesh directly. UVs are written as stored (glTF's convention, v down: facecast's own).
 
-Every primitive carries smooth NORMALs of the neutral mesh (without them glTF clients shade flat).
+Every primitive carries smooth NORMALs of the neutral mesh (without them glTF clients shade flat);
+vertex colours (sRGB in a HeadMesh) are written linear, as glTF's COLOR_0 is read.
 
 - :func:`mesh_glb` / :func:`mesh_json`: the static head the server offers (``/head/mesh``,
   ``/head/mesh.json``), with the head's morph targets when it has any.
@@ -25,7 +26,7 @@ import struct
 import numpy as np
 
 from assets.errors import GlbError
-from assets.heads.mesh import HeadMesh, vertex_normals
+from assets.heads.mesh import HeadMesh, srgb_to_linear, vertex_normals
 
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -138,7 +139,10 @@ def _primitive(
     if uvs is not None:
         attributes["TEXCOORD_0"] = buf.accessor(np.ascontiguousarray(uvs, dtype="<f4"), "VEC2", _FLOAT, _ARRAY_BUFFER)
     if colors is not None:
-        attributes["COLOR_0"] = buf.accessor(np.ascontiguousarray(colors, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
+        # glTF's COLOR_0 is linear, facecast's colours sRGB: unconverted, every glTF viewer showed the head
+        # paler and each write + read brightened it (skin 0.80, 0.60, 0.50 -> 0.91, 0.80, 0.74).
+        linear = np.ascontiguousarray(srgb_to_linear(colors), dtype="<f4")
+        attributes["COLOR_0"] = buf.accessor(linear, "VEC3", _FLOAT, _ARRAY_BUFFER)
     if texture is not None and uvs is not None:
         doc["images"] = [{"bufferView": buf.view(texture), "mimeType": image_mime(texture)}]
         doc["textures"] = [{"source": 0}]

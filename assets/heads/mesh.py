@@ -240,6 +240,13 @@ def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
 
 
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB colours in [0, 1] (facecast's, as HeadMesh holds them) -> linear light (glTF's COLOR_0),
+    IEC 61966-2-1; the inverse of how a glTF file's colours are read here."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0, 1)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
 def _assemble(p: Path, parts: _Parts) -> HeadMesh:
     """Resolve textures: one material image -> that texture; several -> an atlas; none -> material
     colours as vertex colours (or a sibling colour map)."""

@@ -153,6 +153,29 @@ def test_glb_carries_smooth_unit_normals_so_viewers_do_not_shade_it_flat():
         assert np.degrees(np.arccos(np.clip((n * radial).sum(axis=1), -1, 1))).max() < 3.0
 
 
+def test_glb_vertex_colours_are_linear_as_gltf_says_and_survive_a_round_trip(tmp_path):
+    """glTF 2.0 3.7.2.1: COLOR_0 is linear; facecast's colours are sRGB (the renderer and the browser viewer
+    treat them so) and were written unconverted: every glTF viewer showed exported heads paler, and each
+    write + read brightened the skin (0.80, 0.60, 0.50) -> (0.91, 0.80, 0.74) -> (0.96, 0.91, 0.87)."""
+    from assets.heads.mesh import load_mesh
+
+    pygltflib = require_module("pygltflib")
+    v, tris, targets = _synthetic_head()
+    srgb = np.tile(np.array([[0.80, 0.60, 0.50]], np.float32), (len(v), 1))
+    srgb[0] = (0.04045, 0.5, 1.0)  # the two branches of the sRGB curve and its end
+    data = animated_glb(
+        vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=syllable_track(5), colors=srgb
+    )
+    g = pygltflib.GLTF2.load_from_bytes(data)
+    written = _accessor(g, g.binary_blob(), g.meshes[0].primitives[0].attributes.COLOR_0)
+    # IEC 61966-2-1, computed here: 0.04045 / 12.92, ((0.5 + 0.055) / 1.055) ** 2.4, 1
+    np.testing.assert_allclose(written[0], [0.0031308, 0.2140411, 1.0], atol=1e-6)
+    np.testing.assert_allclose(written[1], [0.6038273, 0.3185468, 0.2140411], atol=1e-6)
+    path = tmp_path / "head.glb"
+    path.write_bytes(mesh_glb(HeadMesh(vertices=v, triangles=tris, colors=srgb, name="h")))
+    np.testing.assert_allclose(load_mesh(path).colors, srgb, atol=1e-5)
+
+
 @pytest.mark.system
 def test_rig_morph_targets_reproduce_the_rig_deformation(builtin_rig_file):
     rig, _mesh = builtin_rig_file
