@@ -95,7 +95,13 @@ async def _gated(source, gate: asyncio.Event):
         yield block
 
 
-async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoResult:
+def _announce(line: str) -> None:
+    """Print at once: piped (`| tee`, nohup, CI) stdout is block-buffered, and the URLs and "speak now"
+    appeared only after the session had ended and the server was gone."""
+    print(line, flush=True)
+
+
+async def run_demo(config: DemoConfig, model, head, *, announce=_announce) -> DemoResult:
     """Serve, stream one live session, watch it as a client; returns what the viewer received."""
     from clients.client import ViewerClient
     from server.app import FacecastServer
@@ -176,7 +182,7 @@ async def run_demo(config: DemoConfig, model, head, *, announce=print) -> DemoRe
 
 
 async def serve_replay(
-    config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *, pause_s: float = 2.0, announce=print
+    config: DemoConfig, model, head, speech: np.ndarray, rate_hz: int, *, pause_s: float = 2.0, announce=_announce
 ) -> int:
     """After the demo: keep serving and replay the speech as session "demo" until Ctrl-C.
 

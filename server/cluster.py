@@ -304,6 +304,9 @@ class Cluster:
         # since the loop keeps only a weak reference to a task.
         self._oneshots: set[asyncio.Task[None]] = set()
         self._pubsub: PubSub | None = None
+        # True once the listener's SUBSCRIBE returned: until then the pubsub has no connection yet, and the
+        # heartbeat must not read that as a lost subscription (every node logged Redis down at start).
+        self._pubsub_ready = False
         self._subscribed: set[str] = set()
         self._confirmed: dict[str, asyncio.Event] = {}  # channel -> set when Redis confirms the subscription
         self._joins: dict[bytes, ReplayJoin] = {}  # this node's replay requests waiting for their answer
@@ -540,7 +543,7 @@ class Cluster:
             self.wanted = wanted
         finally:
             self._wanted_meanwhile = None
-        if self._pubsub is not None and self._pubsub.connection is None:
+        if self._pubsub is not None and self._pubsub_ready and self._pubsub.connection is None:
             raise ConnectionError("subscription lost")
 
     # -- feeds of remote sessions ----------------------------------------------------------------------
@@ -744,8 +747,10 @@ class Cluster:
 
         while True:
             try:
+                self._pubsub_ready = False
                 self._pubsub = pubsub = self._client.pubsub()
                 await pubsub.subscribe(control_channel(self.node), *self._subscribed)
+                self._pubsub_ready = True
                 while True:
                     msg = await pubsub.get_message(timeout=1.0)
                     if msg is None:

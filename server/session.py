@@ -26,6 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from assets.audio import INT16_SCALE, SILENCE_PEAK
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import ConfigError, RealtimeCoreError
@@ -96,6 +97,11 @@ class SessionConfig:
                     f"enrol holds {seconds:.1f} s of audio; {MIN_ENROL_S:g}-{MAX_ENROL_S:g} s accepted "
                     "(30-60 s is the intended amount)"
                 )
+            raw = np.frombuffer(self.enrol_bytes(), dtype=P.SAMPLE_FORMATS[self.sample_format])
+            peak = float(np.max(np.abs(raw.astype(np.float64)), initial=0.0))
+            if peak / (INT16_SCALE if raw.dtype.kind == "i" else 1.0) < SILENCE_PEAK:
+                # as `facecast adapt`: the silence's frames would pull a component towards digital silence
+                raise ServerConfigError("enrol is silent: it needs a recording of the talker's speech")
 
     def enrol_seconds(self) -> float:
         """Length of the enrolment recording in seconds (0 without one)."""

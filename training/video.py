@@ -47,11 +47,13 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from assets.audio import SILENCE_PEAK, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
+from assets.mediapipe_log import native_stderr_quiet
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
@@ -265,22 +267,33 @@ class FaceMeshTracker:
             raise MissingDependencyError(
                 "facecast extract needs MediaPipe: pip install 'facecast[video]' (mediapipe==0.10.14)"
             ) from exc
-        self._mesh = mp.solutions.face_mesh.FaceMesh(
-            static_image_mode=False,
-            max_num_faces=1,
-            refine_landmarks=True,
-            min_detection_confidence=config.min_detection_confidence,
-            min_tracking_confidence=config.min_tracking_confidence,
-        )
-        self._used = False
+        self._mp, self._config = mp, config
+        # Made on the first clip, inside its silenced window: its threads log while it starts up,
+        # after the constructor has returned (one line leaked while the first clip was decoded).
+        self._mesh: Any = None
 
     def track(self, frames: np.ndarray, *, progress=None) -> np.ndarray:
-        """(n, H, W, 3) uint8 RGB -> (n, 468, 3) float32 pixels (x W, y H, z W), NaN where no face."""
+        """(n, H, W, 3) uint8 RGB -> (n, 468, 3) float32 pixels (x W, y H, z W), NaN where no face.
+        Without ``progress`` the graph's C++ notices are kept off stderr (they come from its threads
+        while the first frames run, so the whole clip is silenced; a progress bar keeps stderr)."""
+        if progress is not None:
+            return self._track(frames, progress)
+        with native_stderr_quiet():
+            return self._track(frames, None)
+
+    def _track(self, frames: np.ndarray, progress) -> np.ndarray:
         import warnings
 
-        if self._used:
+        if self._mesh is None:
+            self._mesh = self._mp.solutions.face_mesh.FaceMesh(
+                static_image_mode=False,
+                max_num_faces=1,
+                refine_landmarks=True,
+                min_detection_confidence=self._config.min_detection_confidence,
+                min_tracking_confidence=self._config.min_tracking_confidence,
+            )
+        else:
             self._mesh.reset()
-        self._used = True
         n, h, w, _ = frames.shape
         out = np.full((n, N_LANDMARKS, 3), np.nan, dtype=np.float32)
         wrap = progress or (lambda it, **_: it)
@@ -295,7 +308,8 @@ class FaceMeshTracker:
         return out
 
     def close(self) -> None:
-        self._mesh.close()
+        if self._mesh is not None:
+            self._mesh.close()
 
 
 def file_sha1(path: Path) -> str:

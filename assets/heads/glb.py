@@ -3,6 +3,9 @@
 Vertex order is kept exactly (no re-indexing), so moving-vertex indices and vertex deltas address
 the written mesh directly. UVs are written as stored (glTF's convention, v down: facecast's own).
 
+Every primitive carries smooth NORMALs of the neutral mesh (without them glTF clients shade flat);
+vertex colours (sRGB in a HeadMesh) are written linear, as glTF's COLOR_0 is read.
+
 - :func:`mesh_glb` / :func:`mesh_json`: the static head the server offers (``/head/mesh``,
   ``/head/mesh.json``), with the head's morph targets when it has any.
 - :func:`animated_glb`: a head whose morph targets are animated by one LINEAR sampler
@@ -23,7 +26,7 @@ import struct
 import numpy as np
 
 from assets.errors import GlbError
-from assets.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh, srgb_to_linear, vertex_normals
 
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -128,11 +131,18 @@ def _primitive(
     if t.ndim != 2 or t.shape[1] != 3 or len(t) == 0 or t.max() >= n:
         raise GlbError(f"triangles must be (m, 3) indices below {n}")
     attributes = {"POSITION": buf.accessor(v, "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)}
+    # Without NORMAL a glTF client must shade flat (glTF 2.0 3.7.2.1): three.js showed the head faceted.
+    # The neutral face's smooth normals, as facecast's renderer lights every frame.
+    normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t)
+    attributes["NORMAL"] = buf.accessor(np.ascontiguousarray(normals, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
     material: dict = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.8}, "doubleSided": True}
     if uvs is not None:
         attributes["TEXCOORD_0"] = buf.accessor(np.ascontiguousarray(uvs, dtype="<f4"), "VEC2", _FLOAT, _ARRAY_BUFFER)
     if colors is not None:
-        attributes["COLOR_0"] = buf.accessor(np.ascontiguousarray(colors, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
+        # glTF's COLOR_0 is linear, facecast's colours sRGB: unconverted, every glTF viewer showed the head
+        # paler and each write + read brightened it (skin 0.80, 0.60, 0.50 -> 0.91, 0.80, 0.74).
+        linear = np.ascontiguousarray(srgb_to_linear(colors), dtype="<f4")
+        attributes["COLOR_0"] = buf.accessor(linear, "VEC3", _FLOAT, _ARRAY_BUFFER)
     if texture is not None and uvs is not None:
         doc["images"] = [{"bufferView": buf.view(texture), "mimeType": image_mime(texture)}]
         doc["textures"] = [{"source": 0}]
@@ -165,7 +175,7 @@ def mesh_targets(mesh: HeadMesh, names: tuple[str, ...] | None = None) -> tuple[
 
 
 def mesh_glb(mesh: HeadMesh) -> bytes:
-    """One-mesh GLB: POSITION (float32), TEXCOORD_0 + the embedded texture when present, COLOR_0
+    """One-mesh GLB: POSITION and NORMAL (float32), TEXCOORD_0 + the embedded texture when present, COLOR_0
     when the mesh has vertex colours, its morph targets (names in ``mesh.extras.targetNames``), uint32 indices."""
     buf = _Buffer()
     doc: dict = {"asset": {"version": "2.0", "generator": "facecast"}}

@@ -46,6 +46,19 @@ class HeadMesh:
     part_names: tuple[str, ...] = ()
 
 
+def vertex_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (n, 3) float32 of vertices (n, 3) and triangles (m, 3), the
+    smooth shading the renderer and the glb exports share. A vertex no triangle with area touches gets
+    +z: glTF requires every NORMAL to be unit length, and such a vertex draws nothing anyway."""
+    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n = np.zeros((len(v), 3), dtype=np.float64)
+    for c in range(3):
+        np.add.at(n, t[:, c], fn)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    out = np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), [0.0, 0.0, 1.0])
+    return out.astype(np.float32)
+
+
 def _sibling_texture(path: Path) -> bytes | None:
     images = sorted(p for p in path.parent.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
     for key in ("col", "diffuse", "albedo", path.stem.lower()):
@@ -225,6 +238,13 @@ def _ply_parts(p: Path) -> _Parts:
 def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
     c = np.clip(np.asarray(c, dtype=np.float64), 0, 1)
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """sRGB colours in [0, 1] (facecast's, as HeadMesh holds them) -> linear light (glTF's COLOR_0),
+    IEC 61966-2-1; the inverse of how a glTF file's colours are read here."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0, 1)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def _assemble(p: Path, parts: _Parts) -> HeadMesh:

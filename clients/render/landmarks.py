@@ -20,9 +20,6 @@ found ("give --landmarks").
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -30,6 +27,7 @@ import numpy as np
 from assets.errors import LandmarkError
 from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
+from assets.mediapipe_log import native_stderr_quiet
 from realtime_core.face import face_frame_at
 
 MEDIAPIPE_INDEX: dict[str, int] = {
@@ -91,28 +89,12 @@ def _axes(up: np.ndarray, fwd: np.ndarray) -> np.ndarray:
     return np.stack([x, up, fwd]).astype(np.float64)
 
 
-@contextlib.contextmanager
-def _native_stderr_quiet():
-    """Silence file descriptor 2 for a block: MediaPipe's C++ runtime logs warnings there (TFLite
-    "feedback manager" lines) that would bury the one-line error a user gets when no face is found."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
-
-
 def _detect(image: np.ndarray) -> np.ndarray | None:
     """(468, 2) pixel coordinates of the face in an RGB image, or None."""
     import mediapipe as mp
 
     with (
-        _native_stderr_quiet(),
+        native_stderr_quiet(),
         mp.solutions.face_mesh.FaceMesh(
             static_image_mode=True, max_num_faces=1, refine_landmarks=False, min_detection_confidence=0.5
         ) as fm,

@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from assets.heads.mesh import SKIN_COLOR, HeadMesh
+from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
 from clients.errors import RenderError
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
@@ -94,16 +94,6 @@ class RenderConfig:
             raise RenderError(f"view must be 'front' or 'three_quarter', got {self.view!r}")
         if self.samples not in (0, 2, 4, 8, 16):
             raise RenderError(f"samples must be 0, 2, 4, 8 or 16, got {self.samples}")
-
-
-def vertex_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (n, 3) float32 of vertices (n, 3) and triangles (m, 3)."""
-    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    n = np.zeros_like(v)
-    for c in range(3):
-        np.add.at(n, t[:, c], fn)
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return (n / np.where(norm > 0, norm, 1)).astype(np.float32)
 
 
 def _look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

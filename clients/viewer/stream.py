@@ -64,7 +64,8 @@ class Recording:
     """What a viewer collected. description: the server's JSON; index (F,) int64 frame indices;
     media_time (F,) s; values: F arrays (V,) per frame (V = description values_per_frame; float16
     for vertex deltas, float32 otherwise);
-    audio: list of (media_time s, samples (n,) float32 in [-1, 1]); close_code/reason: how it ended."""
+    audio: list of (media_time s, samples (n,) float32 in [-1, 1]); close_code/reason: how it ended
+    (None / "" when the viewer stopped at its max_s: ``stopped`` is then True)."""
 
     description: dict
     index: list[int] = field(default_factory=list)
@@ -73,6 +74,15 @@ class Recording:
     audio: list[tuple[float, np.ndarray]] = field(default_factory=list)
     close_code: int | None = None
     close_reason: str = ""
+    stopped: bool = False
+
+    @property
+    def ending(self) -> str:
+        """How the recording ended, for a person: the server's close, or the viewer's own stop (a
+        --duration run printed "session closed with None" while the session went on)."""
+        if self.stopped:
+            return f"stopped after {len(self.index) / self.fps:.2f} s of frames (the session goes on)"
+        return f"session closed with {self.close_code} {self.close_reason}".rstrip()
 
     @property
     def fps(self) -> float:
@@ -155,10 +165,18 @@ async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
         await asyncio.sleep(RETRY_S)
 
 
-async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
+async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None, check_description=None) -> Recording:
     """Collect the session until it ends (or max_s of frames); ``on_frame(message)`` is called for
-    every frame as it arrives (for progress or live display)."""
+    every frame as it arrives (for progress or live display); ``check_description(description)`` right
+    after connecting, before any frame: what it raises ends the watch at once (a take that cannot be
+    written is refused at its start, not after it)."""
     v = await connect_viewer(cfg)
+    if check_description is not None:
+        try:
+            check_description(v.description)
+        except BaseException:
+            await v.__aexit__(None, None, None)
+            raise
     rec = Recording(description=v.description)
     keep = np.float16 if cfg.kind == "deltas" else np.float32
     try:
@@ -172,6 +190,7 @@ async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None) -> Recording:
             if on_frame is not None:
                 on_frame(m)
             if cfg.max_s is not None and m.media_time - rec.media_time[0] >= cfg.max_s:
+                rec.stopped = True
                 break
     finally:
         await v.__aexit__(None, None, None)

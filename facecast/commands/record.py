@@ -70,15 +70,18 @@ def run(args: argparse.Namespace) -> int:
             url=args.url, session=session, kind="params", token=token, wait_s=args.wait, max_s=args.duration
         )
         print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
-        return session, await record_stream(cfg)
+        return session, await record_stream(cfg, check_description=same_head)
+
+    def same_head(description: dict) -> None:
+        # checked on connecting: after the take, a wrong --head threw the whole recording away
+        served = description.get("head")
+        if head is not None and served is not None and served["vertex_count"] != len(head.mesh.vertices):
+            raise ClientError(
+                f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
+                f"{served['vertex_count']}: pass the server's head"
+            )
 
     session, rec = asyncio.run(main())
-    served = rec.description.get("head")
-    if head is not None and served is not None and served["vertex_count"] != len(head.mesh.vertices):
-        raise ClientError(
-            f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
-            f"{served['vertex_count']}: pass the server's head"
-        )
     params, first = rec.timeline()
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
@@ -86,6 +89,6 @@ def run(args: argparse.Namespace) -> int:
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
-        f"({track.duration_s:.2f} s) of {session!r}{late}; session closed with {rec.close_code} {rec.close_reason}"
+        f"({track.duration_s:.2f} s) of {session!r}{late}; {rec.ending}"
     )
     return 0

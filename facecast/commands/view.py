@@ -124,10 +124,7 @@ def run(args: argparse.Namespace) -> int:
     out, n = render_recording(
         rec, mesh, args.record, config=RenderConfig(width=args.width, height=args.height, margin=1.25)
     )
-    print(
-        f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; "
-        f"session closed with {rec.close_code} {rec.close_reason}"
-    )
+    print(f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; {rec.ending}")
     return 0
 
 

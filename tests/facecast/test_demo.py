@@ -52,3 +52,32 @@ def test_demo_streams_speech_and_writes_an_mp4(model, head, ffmpeg, tmp_path):
     assert set(kinds) == {"video", "audio"}
     assert abs(int(kinds["video"]["nb_read_frames"]) - len(ref)) <= 1
     assert [p.name for p in tmp_path.iterdir()] == ["demo.mp4"]  # no temporary files left behind
+
+
+def test_demo_prints_its_urls_while_the_session_runs_when_piped(tmp_path):
+    """`facecast demo` piped (`| tee log`, nohup, CI) printed the viewer URL and "speak now" into a
+    block buffer: they appeared after the session had ended and the server was gone. The URL read
+    from the pipe must answer while the demo still streams."""
+    import os
+    import sys
+    import urllib.request
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    env.pop("PYTHONUNBUFFERED", None)
+    sentence = "Please bring me my umbrella before the big storm arrives tonight, and also my coat."
+    cmd = [sys.executable, "-m", "facecast", "demo", "--port", "0", "--once", "--no-video", "--text", sentence]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        while line and "  open http://" not in line:
+            line = proc.stdout.readline()
+        assert line, f"no URL printed: {proc.stderr.read() if proc.stderr else ''}"[-500:]
+        url = line.split()[1]
+        with urllib.request.urlopen(url + "health", timeout=5) as r:  # the server is still up
+            assert json.loads(r.read())["sessions"] == 1
+    finally:
+        proc.kill()
+        proc.wait(30)

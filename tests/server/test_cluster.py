@@ -492,3 +492,38 @@ async def _no_feed(url: str, r, name: str) -> bool:
     health = await _get_json(url, "/health")
     subscribers = dict(await r.pubsub_numsub(f"facecast:frames:{name}"))
     return health["remote_feeds"] == 0 and all(n == 0 for n in subscribers.values())
+
+
+def test_a_healthy_redis_never_reads_as_down_at_start(redis_server, caplog):
+    """The first heartbeat used to run while the subscription connection was still being opened and
+    took its missing connection for a lost one: every node logged "Redis unreachable ... subscription
+    lost" at start and /health read degraded for half a second, with redis-server up all along."""
+    from server.cluster import Cluster
+
+    async def main() -> list[bool]:
+        async def end_feed(feed) -> None:
+            return None
+
+        cluster = Cluster(
+            redis_server.url,
+            node="a",
+            advertise="http://127.0.0.1:1",
+            heartbeat_s=0.2,
+            deliver=lambda *a: None,
+            end_feed=end_feed,
+        )
+        await cluster.start()
+        seen = []
+        try:
+            deadline = time.monotonic() + 1.5  # seven heartbeats
+            while time.monotonic() < deadline:
+                seen.append(cluster.up)
+                await asyncio.sleep(0.005)
+        finally:
+            await cluster.stop()
+        return seen
+
+    with caplog.at_level("WARNING", logger="facecast.cluster"):
+        seen = asyncio.run(asyncio.wait_for(main(), 30))
+    assert all(seen), f"read as down in {seen.count(False)} of {len(seen)} polls"
+    assert not [r for r in caplog.records if "unreachable" in r.getMessage()]

@@ -78,6 +78,9 @@ def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> Non
         ("@@not base64@@", "base64"),
         (base64.b64encode(b"\x00" * 1001).decode(), "whole number"),
         (base64.b64encode(b"\x00" * 3200).decode(), "0.1 s of audio"),
+        # 10 s of digital silence: `facecast adapt` refuses it (its frames would pull a component towards
+        # silence); the server adapted to it and answered started with enrolled_s 10.0
+        (base64.b64encode(b"\x00" * 2 * 16000 * 10).decode(), "silent"),
     ],
 )
 def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:

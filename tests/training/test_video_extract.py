@@ -176,3 +176,14 @@ def test_rules_from_forced_alignment_match_all_grid_clips(grid, ffmpeg) -> None:
         loud.append(np.corrcoef(frame_energy_db(track.samples, track.sample_rate_hz, len(mo)), mo)[0, 1])
     assert np.mean(rs) >= 0.40 and np.mean(rs) > np.mean(loud), (rs, loud)
     assert all(abs(lag) <= 2 for lag in lags), lags
+
+
+def test_measuring_in_process_keeps_mediapipes_notices_off_stderr(grid, ffmpeg, tmp_path, capfd) -> None:
+    """`facecast eval` measures clips in its own process: MediaPipe's C++ side wrote two notices per clip
+    ("inference_feedback_manager ... Feedback manager requires a model ...") through its progress bar."""
+    from training.video import load_face_track
+
+    for clip in ("lbax4n", "brbk7n"):  # the second one restarts the graph (a reset)
+        load_face_track(grid / f"{clip}.mpg", cache_dir=tmp_path / "cache")
+    err = capfd.readouterr().err
+    assert "inference_feedback_manager" not in err and "W0000" not in err, err[-600:]

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from assets.heads.glb import mesh_glb
+from assets.heads.mesh import HeadMesh
 from assets.tracks import decode_csv, decode_json
 from clients.export.errors import ExportError
 from clients.export.files import export_track
@@ -126,6 +128,52 @@ def test_glb_also_loads_in_trimesh():
     (geom,) = scene.geometry.values()
     np.testing.assert_allclose(geom.vertices, v, rtol=1e-6, atol=1e-6)
     np.testing.assert_array_equal(geom.faces, tris)
+
+
+def test_glb_carries_smooth_unit_normals_so_viewers_do_not_shade_it_flat():
+    """glTF 2.0 3.7.2.1: without NORMAL a client MUST shade flat, so three.js, Blender and the Khronos
+    viewer showed every exported head faceted, unlike facecast's renderer. On a sphere the written
+    normals (decoded with pygltflib) are the radial directions, computed here independently."""
+    pygltflib = require_module("pygltflib")
+    trimesh = require_module("trimesh")
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=2.0)
+    v, tris = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    targets = np.zeros((4, len(v), 3), np.float32)
+    targets[2, :, 1] = -0.1 * (v[:, 1] < 0)  # a "jaw" that moves the lower half
+    radial = v / np.linalg.norm(v, axis=1, keepdims=True)
+    for data in (
+        animated_glb(vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=syllable_track(5)),
+        mesh_glb(HeadMesh(vertices=v, triangles=tris, name="sphere")),
+    ):
+        g = pygltflib.GLTF2.load_from_bytes(data)
+        prim = g.meshes[0].primitives[0]
+        assert prim.attributes.NORMAL is not None, "no NORMAL: viewers must shade the head flat"
+        n = _accessor(g, g.binary_blob(), prim.attributes.NORMAL)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-6)
+        assert np.degrees(np.arccos(np.clip((n * radial).sum(axis=1), -1, 1))).max() < 3.0
+
+
+def test_glb_vertex_colours_are_linear_as_gltf_says_and_survive_a_round_trip(tmp_path):
+    """glTF 2.0 3.7.2.1: COLOR_0 is linear; facecast's colours are sRGB (the renderer and the browser viewer
+    treat them so) and were written unconverted: every glTF viewer showed exported heads paler, and each
+    write + read brightened the skin (0.80, 0.60, 0.50) -> (0.91, 0.80, 0.74) -> (0.96, 0.91, 0.87)."""
+    from assets.heads.mesh import load_mesh
+
+    pygltflib = require_module("pygltflib")
+    v, tris, targets = _synthetic_head()
+    srgb = np.tile(np.array([[0.80, 0.60, 0.50]], np.float32), (len(v), 1))
+    srgb[0] = (0.04045, 0.5, 1.0)  # the two branches of the sRGB curve and its end
+    data = animated_glb(
+        vertices=v, triangles=tris, targets=targets, target_names=VISUAL_PARAMS, track=syllable_track(5), colors=srgb
+    )
+    g = pygltflib.GLTF2.load_from_bytes(data)
+    written = _accessor(g, g.binary_blob(), g.meshes[0].primitives[0].attributes.COLOR_0)
+    # IEC 61966-2-1, computed here: 0.04045 / 12.92, ((0.5 + 0.055) / 1.055) ** 2.4, 1
+    np.testing.assert_allclose(written[0], [0.0031308, 0.2140411, 1.0], atol=1e-6)
+    np.testing.assert_allclose(written[1], [0.6038273, 0.3185468, 0.2140411], atol=1e-6)
+    path = tmp_path / "head.glb"
+    path.write_bytes(mesh_glb(HeadMesh(vertices=v, triangles=tris, colors=srgb, name="h")))
+    np.testing.assert_allclose(load_mesh(path).colors, srgb, atol=1e-5)
 
 
 @pytest.mark.system

@@ -389,3 +389,53 @@ def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, 
     take = decode_csv(out.read_bytes())
     assert take.start_s == 0.0 and "joined at" not in printed, printed
     assert take.n_frames == 45  # the whole 1.5 s
+
+
+def test_record_stopped_by_duration_says_so_not_closed_with_none(live, tmp_path, capsys):
+    """`facecast record/view --duration` stops the viewer while the session goes on: the summary
+    line used to read "session closed with None"."""
+    from tests.live_server import stream_session
+
+    name = "longer"
+    session = live.submit(stream_session(live.url, name, 4.0, seed=6))
+    out = tmp_path / "take.csv"
+    try:
+        assert main(["record", live.url, "--session", name, "-o", str(out), "--duration", "0.5", "--wait", "20"]) == 0
+    finally:
+        session.result(30)
+    printed = capsys.readouterr().out
+    assert "None" not in printed and "the session goes on" in printed, printed
+    take = decode_csv(out.read_bytes())
+    assert 15 <= take.n_frames < 4 * 30  # stopped after about 0.5 s, before the 4 s session ended
+
+
+def test_record_with_another_head_than_the_servers_is_refused_at_the_start(live, tmp_path, capsys):
+    """`record -o take.glb --head H` with H not the server's head used to find out after the whole take
+    (and throw it away); it is refused on connecting, while the session still runs."""
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.mesh import HeadMesh
+    from tests.live_server import stream_session
+
+    b = builtin_morph_head().mesh  # the server's head plus one vertex: a different head, resolved fast
+    other = tmp_path / "other.glb"
+    other.write_bytes(
+        mesh_glb(
+            HeadMesh(
+                vertices=np.vstack([b.vertices, b.vertices[:1]]),
+                triangles=b.triangles,
+                name="other",
+                targets={k: np.vstack([d, np.zeros((1, 3))]) for k, d in (b.targets or {}).items()},
+            )
+        )
+    )
+    name = "take"
+    session = live.submit(stream_session(live.url, name, 8.0, seed=7))
+    try:
+        code = main(["record", live.url, "--session", name, "-o", str(tmp_path / "t.glb"), "--head", str(other)])
+        still_running = name in live.server.sessions
+    finally:
+        session.result(30)
+    assert code == 2 and "pass the server's head" in capsys.readouterr().err
+    assert still_running, "refused only after the session had ended"
+    assert not (tmp_path / "t.glb").exists()
