@@ -20,6 +20,14 @@ from realtime_core.synthesis.text import TextError, clean_text
 INVENTORY = {"en": "espeak-en", "es": "espeak-es"}
 """Phone inventory of each language's espeak voices (keys: the supported languages)."""
 
+LEAD_PAUSE_S = 0.2
+"""Silence put before synthesised speech (:meth:`Speech.padded`): the face opens from rest into the
+first phone over it (0.2 s, the ramp of :class:`realtime_core.synthesis.rest.RestPauses`)."""
+
+END_PAUSE_S = 0.25
+"""Silence put after synthesised speech, so the face ends at rest (the mouth is back within 2-3
+frames of the pause's start: "Hello there." ended at mouth_open 0.095 without it, 0.004 with it)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class Speech:
@@ -36,20 +44,24 @@ class Speech:
     def duration_s(self) -> float:
         return len(self.samples) / self.sample_rate_hz
 
-    def followed_by_pause(self, seconds: float) -> Speech:
-        """The same speech with ``seconds`` of silence after it, timed as espeak's pause phone ``_``.
-        espeak-ng ends an utterance 7 ms after its last phone, so a face animated to it stops
-        mid-phone (the mouth open after "there"); the pause lets it come back to rest."""
-        if not seconds >= 0:
-            raise ConfigError(f"pause must be >= 0 s, got {seconds}")
-        n = int(round(seconds * self.sample_rate_hz))
-        if n == 0:
+    def padded(self, *, before_s: float = LEAD_PAUSE_S, after_s: float = END_PAUSE_S) -> Speech:
+        """The same speech with ``before_s`` seconds of silence before it and ``after_s`` after it,
+        timed as espeak's pause phone ``_`` (the phones shifted by the leading pause). espeak-ng starts
+        speaking within ~12 ms and ends 7 ms after its last phone, so a face animated to it would
+        start and stop mid-phone; the pauses give it time to leave the rest pose and come back to it
+        (:mod:`realtime_core.synthesis.rest`)."""
+        if not (before_s >= 0 and after_s >= 0):
+            raise ConfigError(f"pauses must be >= 0 s, got {before_s} and {after_s}")
+        rate = self.sample_rate_hz
+        n0, n1 = int(round(before_s * rate)), int(round(after_s * rate))
+        if n0 == 0 and n1 == 0:
             return self
-        end = self.duration_s
+        lead, end = n0 / rate, n0 / rate + self.duration_s
+        phones = tuple((lab, a + lead, b + lead) for lab, a, b in self.phones)
         return Speech(
-            samples=np.concatenate([self.samples, np.zeros(n, dtype=self.samples.dtype)]),
-            sample_rate_hz=self.sample_rate_hz,
-            phones=(*self.phones, ("_", end, end + n / self.sample_rate_hz)),
+            samples=np.concatenate([np.zeros(n0, self.samples.dtype), self.samples, np.zeros(n1, self.samples.dtype)]),
+            sample_rate_hz=rate,
+            phones=(("_", 0.0, lead),) * (n0 > 0) + phones + (("_", end, end + n1 / rate),) * (n1 > 0),
             inventory=self.inventory,
             text=self.text,
         )

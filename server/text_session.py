@@ -35,6 +35,7 @@ from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
 
 from realtime_core.errors import ConfigError
+from realtime_core.synthesis.rest import RestPauses
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
 from realtime_core.synthesis.text import MAX_TEXT_CHARS, SentenceChunker, TextError
 from server.errors import (
@@ -63,6 +64,7 @@ class SpeechLike(Protocol):
     def inventory(self) -> str: ...
     @property
     def text(self) -> str: ...
+    def padded(self) -> SpeechLike: ...  # with the silences the face rests in before and after it
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -163,13 +165,15 @@ class TextSession:
         """Synthesise one sentence -> per-frame Outputs (frame + its audio block) appended to the
         timeline, and a report. Raises ConfigError (TextError) for text that cannot be spoken."""
         t0 = time.perf_counter()
-        speech = self.backend.speak(sentence, self.language, self.voice)
+        # silence before and after each sentence, the face at rest there: a sentence starts and
+        # ends with the lips together, so sentences join without a jump (synthesised speech has no in-breath)
+        speech = self.backend.speak(sentence, self.language, self.voice).padded()
         t1 = time.perf_counter()
         n = int(np.ceil(len(speech.samples) * FPS / speech.sample_rate_hz - 1e-9))
         if speech.sample_rate_hz != self.rate_hz:
             raise ServerConfigError(f"speech came at {speech.sample_rate_hz} Hz, the session runs at {self.rate_hz} Hz")
         res = self.backend.synthesizer.synthesize(
-            list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best
+            list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best, rest_pauses=RestPauses()
         )
         t2 = time.perf_counter()
         self.times.add("text_speech", t1 - t0)

@@ -54,34 +54,61 @@ def run(args: argparse.Namespace) -> int:
         )
     make_parent(args.output)  # a folder that cannot be made fails now, not after the whole take
     token = token_from_env(args.token_env)
-    head = arkit = None
-    if args.output.suffix.lower() == ".glb":
+    glb = args.output.suffix.lower() == ".glb"
+
+    def resolve():  # (head, ARKit targets or None), in a thread: rigging a new mesh takes seconds
         from facecast.commands.headopts import resolve_from_args
 
         head = resolve_from_args(args)
         if args.glb_morphs == "arkit52" and args.head == "builtin":
             from clients.export.gltf import builtin_arkit_targets
 
-            arkit = builtin_arkit_targets()
+            return head, builtin_arkit_targets()
+        return head, None
 
-    async def main():
-        session = await pick_session(args.url, args.session, args.wait, token)
-        cfg = ViewerStreamConfig(
-            url=args.url, session=session, kind="params", token=token, wait_s=args.wait, max_s=args.duration
-        )
-        print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
-        return session, await record_stream(cfg, check_description=same_head)
-
-    def same_head(description: dict) -> None:
-        # checked on connecting: after the take, a wrong --head threw the whole recording away
+    def same_head(head, description: dict) -> None:
+        # checked on connecting (or when the head is ready): after the take, a wrong --head threw the
+        # whole recording away
         served = description.get("head")
-        if head is not None and served is not None and served["vertex_count"] != len(head.mesh.vertices):
+        if served is not None and served["vertex_count"] != len(head.mesh.vertices):
             raise ClientError(
                 f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
                 f"{served['vertex_count']}: pass the server's head"
             )
 
-    session, rec = asyncio.run(main())
+    async def main():
+        described: asyncio.Future[dict] = asyncio.get_running_loop().create_future()
+
+        async def watch():
+            session = await pick_session(args.url, args.session, args.wait, token)
+            cfg = ViewerStreamConfig(
+                url=args.url, session=session, kind="params", token=token, wait_s=args.wait, max_s=args.duration
+            )
+            print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
+            return session, await record_stream(cfg, check_description=described.set_result)
+
+        if not glb:
+            return *(await watch()), (None, None)
+
+        async def head_checked():
+            resolved = await asyncio.to_thread(resolve)
+            same_head(resolved[0], await described)
+            return resolved
+
+        # The head resolves while the session is watched and its frames are kept: resolving first (0.8 s
+        # with the rig cached, ~13 s for a new mesh) missed the start of a session started just after the
+        # recorder. A head that fails, or is not the server's, ends the watch as soon as it is known.
+        watching, checking = asyncio.ensure_future(watch()), asyncio.ensure_future(head_checked())
+        await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
+        for task, other in ((checking, watching), (watching, checking)):
+            failure = task.exception() if task.done() else None
+            if failure is not None:
+                other.cancel()
+                await asyncio.gather(other, return_exceptions=True)  # the viewer is closed before raising
+                raise failure
+        return *watching.result(), checking.result()
+
+    session, rec, (head, arkit) = asyncio.run(main())
     params, first = rec.timeline()
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)

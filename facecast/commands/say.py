@@ -5,11 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-END_PAUSE_S = 0.25
-"""Silence added after synthesised speech, so the clip ends with the face at rest (the mouth is back
-within 2-3 frames of the pause's start: "Hello there." ended at mouth_open 0.095 without it, 0.004 with
-it); a user's --audio recording keeps its own end."""
-
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -144,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
+    from realtime_core.synthesis.rest import RestPauses
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from realtime_core.track import Track
     from training.errors import ConfigError
@@ -180,9 +176,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         from assets.tts import speak
 
-        speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate).followed_by_pause(
-            END_PAUSE_S
-        )
+        # silence before and after, the face at rest there (a user's --audio keeps its own ends)
+        speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate).padded()
         samples, rate, phones, inventory, duration_s = (
             speech.samples,
             speech.sample_rate_hz,
@@ -196,7 +191,9 @@ def run(args: argparse.Namespace) -> int:
         synth = UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
         t = lap("corpus + graph", t)
         n_frames = int(np.ceil(duration_s * 30 - 1e-9))
-        res = synth.synthesize(phones, inventory, n_frames=n_frames, n_best=args.n_best)
+        # synthesised speech has no in-breath: its pauses at rest; a recording's breath is real
+        rest = RestPauses() if args.audio is None else None
+        res = synth.synthesize(phones, inventory, n_frames=n_frames, n_best=args.n_best, rest_pauses=rest)
         t = lap("unit selection", t)
         motion = res.frames
         if args.audio is not None and args.audio_blend:

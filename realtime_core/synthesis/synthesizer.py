@@ -25,6 +25,7 @@ from realtime_core.synthesis.recording import (
     param_to_coefficient_map,
     region_weights,
 )
+from realtime_core.synthesis.rest import RestPauses, ease_to_rest
 from realtime_core.synthesis.search import (
     NoPathError,
     SearchConfig,
@@ -199,6 +200,7 @@ class UnitSynthesizer:
         n_best: int = 1,
         exclude: Sequence[str] = (),
         ensemble_gain: float = ENSEMBLE_GAIN,
+        rest_pauses: RestPauses | None = None,
     ) -> UnitSynthesis:
         """Motion for ``phones`` (labels of ``inventory``: "arpabet", "espeak-en", "espeak-es").
 
@@ -212,7 +214,11 @@ class UnitSynthesizer:
         the rest face is multiplied by ``ensemble_gain`` (1 = the plain mean; the default restores
         the range, chosen on the val split: docs/unit_selection.md). One sequence is never scaled.
 
-        exclude: corpus sentence ids never to use (a leave-one-out evaluation of a corpus sentence)."""
+        exclude: corpus sentence ids never to use (a leave-one-out evaluation of a corpus sentence).
+
+        rest_pauses: for a synthesiser's phones (no in-breath before them), the leading and trailing
+        pauses eased to the rest pose (:mod:`realtime_core.synthesis.rest`, :attr:`rest`); None = the
+        recorded pauses as selected (phones aligned on a real recording, whose in-breath is real)."""
         if not isinstance(n_best, int) or n_best < 1:
             raise ConfigError(f"n_best must be an integer >= 1, got {n_best!r}")
         if not 0 < ensemble_gain <= 4:
@@ -252,6 +258,8 @@ class UnitSynthesizer:
             frames = self.rest + ensemble_gain * (frames - self.rest)
         # after averaging and the gain: an ensemble smears closures most (docs/unit_selection.md)
         frames = self._close(frames, target)
+        if rest_pauses is not None:
+            frames = ease_to_rest(frames, target.visemes, target.starts_s, target.ends_s, self.rest, rest_pauses)
         return UnitSynthesis(frames=frames, target=target, selection=sels[0], alternatives=tuple(sels[1:]))
 
     def with_recording(

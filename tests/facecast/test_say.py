@@ -213,18 +213,22 @@ def test_say_writes_a_video_into_a_folder_it_makes(corpus_file, tmp_path, capsys
     assert [p.name for p in mp4.parent.iterdir()] == ["hi.mp4"]  # the temporary folder is gone
 
 
-def test_say_ends_with_the_face_at_rest(tmp_path):
-    """espeak-ng stops 7 ms after the last phone: "Hello there." ended with the mouth open on the
-    vowel (mouth_open 0.095 in the last frame, shipped corpus). say adds a pause after the speech,
-    silent in the .wav, so the clip ends with the lips together."""
+def test_say_starts_and_ends_with_the_face_at_rest(tmp_path):
+    """espeak-ng starts speaking within ~12 ms and stops 7 ms after the last phone: "Hello there."
+    ended with the mouth open on the vowel (mouth_open 0.095 in the last frame, shipped corpus), and
+    "Hello, how are you today?" started at 0.156 over silence (a recorded GRID pause, mid in-breath).
+    say adds a pause before and after the speech, silent in the .wav, with the face at rest there and
+    opening into speech over a few frames."""
     from assets.audio import read_audio
-    from facecast.commands.say import END_PAUSE_S
+    from assets.tts import END_PAUSE_S, LEAD_PAUSE_S
 
     out, wav = tmp_path / "hi.csv", tmp_path / "hi.wav"
-    assert main(["say", "Hello there.", "-o", str(out), "-o", str(wav)]) == 0
+    assert main(["say", "Hello, how are you today?", "-o", str(out), "-o", str(wav)]) == 0
     mo = np.loadtxt(out, delimiter=",", skiprows=1)[:, 3]
     assert np.max(mo) > 0.05  # the mouth opened while speaking ...
-    assert mo[-1] < 0.01, mo[-8:]  # ... and is closed at the end
+    assert abs(mo[0]) < 1e-6 and abs(mo[-1]) < 1e-6, (mo[:8], mo[-8:])  # ... and is at rest at both ends
+    assert np.max(np.abs(np.diff(mo[:8]))) < 0.06  # opening smoothly, no pop
     speech, rate = read_audio(wav)
     assert abs(len(speech) / rate - len(mo) / 30) < 1 / 30  # the speech the curves are timed to
-    assert np.all(speech[-int(0.9 * END_PAUSE_S * rate) :] == 0)  # the pause is silent
+    assert np.all(speech[: int(0.9 * LEAD_PAUSE_S * rate)] == 0)  # the pauses are silent
+    assert np.all(speech[-int(0.9 * END_PAUSE_S * rate) :] == 0)

@@ -124,6 +124,11 @@ def test_sentences_share_one_media_timeline(backend):
     audio = np.concatenate([o.audio.samples for o in outs1])
     assert np.abs(audio).max() > 0.05
     assert np.ptp([o.frames[0].params[2] for o in outs1]) > 0.05
+    # each sentence starts and ends at rest (the synthesizer's rest pose: zero parameters here) in
+    # a silent pause, so one sentence joins the next without a jump
+    for o in (outs1[0], outs1[-1], outs2[0], outs2[-1]):
+        np.testing.assert_allclose(o.frames[0].params, 0.0, atol=1e-12)
+        assert not np.any(o.audio.samples)
     with pytest.raises(TextError):
         s.speak("😀")
     with pytest.raises(Exception, match="unsupported language"):

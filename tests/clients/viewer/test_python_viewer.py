@@ -359,27 +359,33 @@ def test_a_starved_sound_callback_is_counted_as_an_underrun_and_the_sound_resume
     assert loud > 0.3 * 22050 and after < 3.0 * 22050, proc.stdout
 
 
-def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, capsys):
-    """`facecast record --session S` waits for S; the server replays nothing to a later viewer, so the
-    wait's retries must come faster than the session's first frame (about 0.2 s after its audio
-    starts). The session starts right after a refused attempt (4004): retried every 0.25 s, the
-    recording began at frame 2-11."""
+def _start_after_a_refusal(live, name: str, within_s: float):
+    """A thread starting a 1.5 s session ``name`` once a viewer has been refused (4004: the recorder
+    under test is waiting for it), or after ``within_s`` seconds at the latest."""
     import threading
 
     from tests.live_server import stream_session
 
-    name = "early"
-
-    def start_after_a_refusal():
+    def start():
         before = live.server.closes[4004]
-        for _ in range(2000):  # the record command's first attempts are refused: S is not live yet
+        for _ in range(int(within_s / 0.002)):  # the record command's first attempts are refused: not live yet
             if live.server.closes[4004] > before:
                 break
             threading.Event().wait(0.002)
         live.submit(stream_session(live.url, name, 1.5, seed=5)).result(30)
 
-    starter = threading.Thread(target=start_after_a_refusal)
+    starter = threading.Thread(target=start)
     starter.start()
+    return starter
+
+
+def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, capsys):
+    """`facecast record --session S` waits for S; the server replays nothing to a later viewer, so the
+    wait's retries must come faster than the session's first frame (about 0.2 s after its audio
+    starts). The session starts right after a refused attempt (4004): retried every 0.25 s, the
+    recording began at frame 2-11."""
+    name = "early"
+    starter = _start_after_a_refusal(live, name, 4.0)
     out = tmp_path / "take.csv"
     try:
         assert main(["record", live.url, "--session", name, "-o", str(out), "--wait", "20"]) == 0
@@ -439,3 +445,45 @@ def test_record_with_another_head_than_the_servers_is_refused_at_the_start(live,
     assert code == 2 and "pass the server's head" in capsys.readouterr().err
     assert still_running, "refused only after the session had ended"
     assert not (tmp_path / "t.glb").exists()
+
+
+def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(live, tmp_path, capsys):
+    """`record -o take.glb --head MESH` resolved (rigged) the head before connecting: ~13 s for a mesh
+    never rigged, so a session started meanwhile was joined late (0.17 s in with a cached rig, 0.8 s
+    to resolve). The head now resolves while the session is watched. The session here starts as
+    soon as the recorder has been refused once (it is watching), or 2 s after the recorder started
+    (before the fix it was still rigging then and found the 1.5 s session over)."""
+    import json
+    import uuid
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.cache import cache_dir
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.mesh import HeadMesh
+
+    pygltflib = require_module("pygltflib")
+    # the server's head as a plain mesh (no morph targets) with its landmarks: rigged for real. The
+    # landmarks file carries this run's id, so the rig is not in the cache (its key hashes the file).
+    m = builtin_morph_head().mesh
+    mesh, landmarks = tmp_path / "plain.glb", tmp_path / "landmarks.json"
+    mesh.write_bytes(mesh_glb(HeadMesh(vertices=m.vertices, triangles=m.triangles, name="plain")))
+    landmarks.write_text(json.dumps({"landmarks": load_builtin_head().landmarks, "run": uuid.uuid4().hex}))
+    rigs = cache_dir() / "rigs"
+    before = set(rigs.glob("*.npz"))
+
+    name = "new-head"
+    starter = _start_after_a_refusal(live, name, 2.0)
+    out = tmp_path / "take.glb"
+    argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
+    try:
+        assert main([*argv, "--head", str(mesh), "--landmarks", str(landmarks), "--head-mode", "retarget"]) == 0
+    finally:
+        starter.join(30)
+        for rig in set(rigs.glob("*.npz")) - before:  # this run's rig, never used again
+            rig.unlink()
+    printed = capsys.readouterr().out
+    assert "joined at" not in printed, printed
+    g = pygltflib.GLTF2().load(str(out))
+    times = g.accessors[g.animations[0].samplers[0].input]
+    assert times.count == 45 and times.min[0] == 0.0  # the whole 1.5 s, from frame 0
