@@ -179,7 +179,17 @@ def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
 
     audio = np.asarray(speech_to_params(load_model(None), samples, rate))[:n]
     both, text = (np.loadtxt(f, delimiter=",", skiprows=1)[: len(audio), 1:] for f in (out, text_only))
-    assert np.all((both - text) * (audio - both) >= -1e-6)
+    # ... except where the /p b m/ closure rule pulls the mix to the closed pose after mixing (a phone's most
+    # closed frame at the rule's target opening, and the frames of its fade): tests/realtime_core/synthesis
+    from realtime_core.synthesis.closure import ClosureConfig
+
+    rule = ClosureConfig()
+    pulled = np.flatnonzero(np.abs(both[:, 2] - rule.mouth_open_iod) < 1e-4)
+    near = np.zeros(len(both), dtype=bool)
+    for d in range(-rule.ramp_frames - rule.hold_frames, rule.ramp_frames + rule.hold_frames + 1):
+        near[np.clip(pulled + d, 0, len(both) - 1)] = True
+    assert 0 < near.sum() < len(both) // 4
+    assert np.all((both - text)[~near] * (audio - both)[~near] >= -1e-6)
     assert np.mean(np.abs(both - audio)) < 0.9 * np.mean(np.abs(text - audio))
     # a transcript the aligner cannot use is a clear error naming the problem, not a crash
     capsys.readouterr()
