@@ -114,6 +114,8 @@ def crease_occlusion(
     from realtime_core.face.projection import vertex_normals
     from realtime_core.face.visibility import front_most
 
+    if not len(sel):
+        return np.zeros(0)
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     r = radius * frame.iod
