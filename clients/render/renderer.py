@@ -19,7 +19,6 @@ import numpy as np
 
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
 from clients.errors import RenderError
-from realtime_core.face.projection import vertex_normals
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference

@@ -40,18 +40,6 @@ def vertex_adjacency(n_vertices: int, triangles: np.ndarray) -> sp.csr_matrix:
     return a
 
 
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (n, 3) float32 of ``vertices`` (n, 3) and ``triangles`` (m, 3)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    n = np.zeros_like(v)
-    for c in range(3):
-        np.add.at(n, t[:, c], fn)
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return (n / np.where(norm > 0, norm, 1)).astype(np.float32)
-
-
 def edge_length_graph(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
     """Symmetric (n, n) CSR graph of the edges of ``triangles`` (m, 3) weighted by their lengths between
     ``vertices`` (n, 3) (plus 1e-300, so that an edge between coincident vertices stays an edge)."""
