@@ -598,3 +598,46 @@ def test_the_walls_removal_leaves_no_small_hole_in_a_surface_that_stays():
     # A coarse (knife-cut) mouth keeps no hole: every face of the inner vertices goes.
     coarse = inner_lip_faces(t, rows * cols, np.array(hole + big + edge), keep_holes=False)
     assert coarse[hole_faces].all() and coarse[big_faces].all() and coarse[edge_faces].all()
+
+
+def test_a_thin_wedge_upper_lips_flat_underside_stays_with_the_upper_lip():
+    """A decimated stylised mouth (the held-out stylised head): its lips are thin wedges that meet in a crease of flat
+    faces, the upper lip's underside running straight back from the contact line (facing down) over the lower lip's
+    top. The geodesic split seeds the lower side with every face below a path edge, so the underside went with the
+    lower lip, which carried it down at /a/ facing away from the viewer (dark shards by the corner, lip backs seen
+    4.55e-3 IOD^2). With ``underside`` (a knife-cut mouth) the faces facing down stay with the upper lip: none of
+    them takes a copy, and the lower lip's top and the fronts keep their sides."""
+    profile = [
+        (0.5, 0.0),
+        (0.25, 0.0),
+        (0.1, 0.0),
+        (0.0, 0.0),  # the contact line
+        (0.0, -0.1),  # the upper lip's underside, flat: its faces face straight down
+        (-0.05, -0.15),  # the crease's back
+        (-0.02, -0.05),  # the lower lip's top, coming forward under the underside
+        (-0.1, 0.0),
+        (-0.25, 0.0),
+        (-0.5, 0.0),
+    ]
+    v, t, left, right, _ = _creased_lips(profile=profile)
+    cols = 17
+    up = np.array([0, 1.0, 0])
+    normal = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    row = t.min(axis=1) // cols  # the profile row each face starts at
+    underside = row == 3
+    inner = np.abs(v[t].mean(axis=1)[:, 0]) < 0.75  # away from the corners, where the crease fades
+    assert (normal[underside & inner] @ up < -0.99).all()  # the mechanism's premise: they face straight down
+    path = list(range(left, right + 1))
+
+    def took_copies(**kw) -> np.ndarray:
+        _, t2, _, _ = cut_mouth(v, t, left, right, up, path=path, **kw)
+        return (t2 >= len(v)).any(axis=1)
+
+    before = took_copies()
+    assert before[underside & inner].all()  # the geodesic split alone: the underside goes with the lower lip
+    after = took_copies(underside=True)
+    assert not after[underside & inner].any()
+    # The lips now part behind the underside: the crease's back takes the copies; the upper lip's front never does.
+    assert after[(row == 4) & inner].all()
+    assert not after[row < 3].any()
