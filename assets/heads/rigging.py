@@ -699,9 +699,9 @@ def _lower_faces(
         # A decimated mouth whose lips are thin wedges (the stylised held-out head) meets in a crease of flat faces
         # behind the knife's path. The geodesic split gave the upper lip's underside there (two faces 8 degrees from
         # straight down, behind the path by its right corner) to the lower lip, which carried it down at /a/ facing
-        # away from the viewer, and the path vertex in front of it (split) let the upper lip's lining by that corner
-        # hang into the opening: dark shards across the opening's top (docs/animation.md, "The stylised head's lip
-        # shards"). A face facing down is the upper lip's, whichever seeds are nearer.
+        # away from the viewer: dark shards by the corner, lip backs seen 4.55e-3 IOD^2 with a third face
+        # (docs/animation.md, "The stylised head's lip shards"). A face facing down is the upper lip's, whichever
+        # seeds are nearer.
         f = t[idx]
         normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
@@ -1129,6 +1129,7 @@ def rig_head(
             keep_apart=cut_copies,
             seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
             pin_upper_lip=bool(behind),
+            seam_hinges=coarse,
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
