@@ -277,6 +277,7 @@ def cut_mouth(
     reach: float = 0.25,
     forward: np.ndarray | None = None,
     hidden: np.ndarray | None = None,
+    underside: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
     indices) that stays closest to the straight corner-to-corner line (passing through the vertex
@@ -289,8 +290,9 @@ def cut_mouth(
     the corners is kept whole (:func:`_mend_front`). ``hidden`` (m,) bool, the faces the mesh loses after
     the cut (a hollow head's crease walls; all False for none): if given, the side assignment is changed so
     that the cut leaves fewer islands on the faces that stay (:func:`_without_islands`) and no slit into the
-    upper lip's skin (:func:`_without_rim_ties`). Returns new vertices (n', 3), triangles, uvs and the (n',)
-    index of the original vertex."""
+    upper lip's skin (:func:`_without_rim_ties`). ``underside``: the faces near the path that face down (within
+    UNDERSIDE_FACING degrees) stay with the upper lip (a knife-cut mouth; see :func:`_lower_faces`). Returns new
+    vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
     a, b = v[left], v[right]
@@ -307,7 +309,7 @@ def cut_mouth(
     up = np.asarray(up, dtype=np.float64)
     up = up / np.linalg.norm(up)
     glen = sp.csr_matrix((elen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
-    lower, near = _lower_faces(v, t, path, glen, up, ab / length, reach=reach * length)
+    lower, near = _lower_faces(v, t, path, glen, up, ab / length, reach=reach * length, underside=underside)
     if forward is not None:
         lower = _mend_front(v, t, path, lower, near, up, forward, margin=FRONT_MEND_MARGIN * length)
     # Every vertex shared by a face above and a face below the mouth surface near the path is
@@ -354,6 +356,9 @@ def _split_faces(
     return split, lower | rim
 
 
+UNDERSIDE_FACING = 10.0
+"""Degrees: on a knife-cut (coarse) mouth, a face near the cut whose normal lies within this angle of straight down is
+the upper lip's underside and stays with the upper lip (:func:`_lower_faces`, ``underside``)."""
 ISLAND_ROUNDS = 20
 """At most this many rounds of :func:`_without_islands` (each joins every island left to a lip)."""
 
@@ -632,6 +637,7 @@ def _lower_faces(
     side_ax: np.ndarray,
     *,
     reach: float,
+    underside: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(m,) bool the faces on the lower lip's side of the cut path (vertex indices ``path``), and
     (m,) bool the faces near it (within ``reach``, mesh distance along ``graph``'s edges in head
@@ -645,7 +651,10 @@ def _lower_faces(
     behind the lower) the split falls inside the crease, near the upper wall. A face's height alone
     is no guide there (an upper lip's tubercle hangs below the contact line at the midline). Round
     each path vertex, the faces between two path edges whose seeds on one side agree join them, so
-    every interior path vertex has faces on both sides (it is split)."""
+    every interior path vertex has faces on both sides (it is split). ``underside``: then the near faces facing
+    down (their normal within UNDERSIDE_FACING degrees of -``up``) join the upper side; a path vertex all of whose
+    lower faces were such faces is left whole on the upper lip (the lips part behind it, along the underside's
+    back edge)."""
     s_p = (v[path] - v[path[0]]) @ side_ax
     s = (v[t].mean(axis=1) - v[path[0]]) @ side_ax
     dist = dijkstra(graph, indices=np.asarray(path[1:-1]), min_only=True, limit=reach)
@@ -691,6 +700,17 @@ def _lower_faces(
     for fan in _path_fans(t, path):
         if near[fan].all() and lower[fan[0]] == lower[fan[-1]]:
             lower[fan] = lower[fan[0]]
+    if underside:
+        # A decimated mouth whose lips are thin wedges (the stylised held-out head) meets in a crease of flat faces
+        # behind the knife's path. The geodesic split gave the upper lip's underside there (two faces 8 degrees from
+        # straight down, behind the path by its right corner) to the lower lip, which carried it down at /a/ facing
+        # away from the viewer: dark shards by the corner, lip backs seen 4.55e-3 IOD^2 with a third face
+        # (docs/animation.md, "The stylised head's lip shards"). A face facing down is the upper lip's, whichever
+        # seeds are nearer.
+        f = t[idx]
+        normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+        lower[idx[normal @ up < -np.cos(np.radians(UNDERSIDE_FACING))]] = False
     return lower, near
 
 
@@ -1074,6 +1094,7 @@ def rig_head(
                 path=path,
                 forward=frame.axes[2],
                 hidden=hidden,
+                underside=coarse,
             )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - n_base)
@@ -1113,6 +1134,7 @@ def rig_head(
             keep_apart=cut_copies,
             seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
             pin_upper_lip=bool(behind),
+            seam_hinges=coarse,
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))

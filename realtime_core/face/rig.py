@@ -244,6 +244,7 @@ def head_weights(
     upper_lip: np.ndarray | None = None,
     seam_smooth: float | None = None,
     pin_upper_lip: bool = False,
+    seam_hinges: bool = False,
 ) -> tuple[sp.csr_matrix, np.ndarray, dict[str, Any]]:
     """Weights G (n_h, n_s) CSR from simple-vertex to head-vertex displacement, control points (n_s,)
     and a dict of diagnostics. head_vertices (n_h, 3), head_triangles (m, 3); ``simple`` already
@@ -252,7 +253,8 @@ def head_weights(
     ``seam_pairs`` (k, 2) the (upper, lower) sides of a cut lip seam, coincident at rest, and
     ``lower_lip`` (n_s,) bool the simple vertices that open with the jaw: a control point that
     landed on the wrong side of the seam (both sides are equally close) moves to the other side.
-    ``seam_smooth``, ``pin_upper_lip``: see :func:`_seam_rows` (``smooth``, ``pin_upper_lip``)."""
+    ``seam_smooth``, ``pin_upper_lip``, ``seam_hinges``: see :func:`_seam_rows` (``smooth``, ``pin_upper_lip``,
+    ``hinges``)."""
     h = np.asarray(head_vertices, dtype=np.float64)
     proj = project(
         simple.vertices,
@@ -294,6 +296,7 @@ def head_weights(
                 proj.control,
                 smooth=seam_smooth,
                 pin_upper_lip=pin_upper_lip,
+                hinges=seam_hinges,
             )
             use = use & ~near_seam
     info = {
@@ -387,6 +390,7 @@ def _seam_rows(
     neighbours: int = 3,
     smooth: float | None = None,
     pin_upper_lip: bool = False,
+    hinges: bool = False,
 ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
     """The two sides of a cut lip seam as boundary rows of the harmonic field.
 
@@ -408,6 +412,8 @@ def _seam_rows(
     side is (a coarse lip's few vertices, which the field would otherwise fill from the corners beside them, that
     drop with the jaw: on Lee Perry-Smith at 1,428 triangles a vertex 0.03 IOD beside a corner took -0.42 IOD per
     unit of mouth_open, the one beside it on the lip -0.26).
+    ``hinges``: a vertex that touches both sides between the upper side's outermost vertices (sideways) is no end of
+    the cut but a hinge of the crease behind it, and follows the side it lies on (a knife-cut mouth; see below).
     Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
     within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
     from scipy.sparse.csgraph import dijkstra
@@ -426,22 +432,35 @@ def _seam_rows(
     on_lo[seam_pairs[:, 1]] = True
     # Where the cut ends (the mouth corners) a vertex touches both sides: it follows both lips.
     ends = np.flatnonzero((adj @ on_up > 0) & (adj @ on_lo > 0) & ~on_up & ~on_lo)
+    # With ``hinges``, a vertex that touches both sides within the cut's span (between its upper side's outermost
+    # vertices) is no end of it but a hinge of the crease behind it: it joins the side it lies on (above or below the
+    # upper side's line). Taken for an end, it followed both lips: on the stylised held-out head the upper lip's lining
+    # behind the knife's cut (vertices 585, 435) went down 0.16-0.17 IOD at /a/ with the corners and hung into the
+    # opening, dark shards (docs/animation.md, "The stylised head's lip shards"). Off for the full scans: their
+    # figures moved both ways with it (hand landmarks stretch 2.79 -> 2.91, meshopt lip backs 7.42 -> 8.86).
+    x_up = q[seam_pairs[:, 0], 0]
+    hinge = (q[ends, 0] > x_up.min()) & (q[ends, 0] < x_up.max()) & hinges
+    order = np.argsort(x_up)
+    line = np.interp(q[ends[hinge], 0], x_up[order], q[seam_pairs[order, 0], 1])
+    above = q[ends[hinge], 1] >= line
+    upper_side = np.r_[seam_pairs[:, 0], ends[hinge][above]]
+    lower_side = np.r_[seam_pairs[:, 1], ends[hinge][~above]]
+    ends = ends[~hinge]
     rows, cols, vals, verts = [], [], [], []
     base = 0
     # Near the cut's ends a side's row blends into the corner row (both lips'), so the two sides
     # part gradually towards the corner instead of at full opening right beside it.
     taper = SEAM_TAPER * frame.iod
     end_d = cKDTree(q[ends]).query(q)[0] if len(ends) and taper > 0 else np.full(len(h), np.inf)
-    upper_side = seam_pairs[:, 0]
     if pin_upper_lip:
         # The upper lip over the seam's width joins its upper side (a coarse lip's few vertices, which the harmonic
         # field would fill from the corners beside them; see ``pin_upper_lip``).
         x_range = (float(q[upper_side, 0].min()), float(q[upper_side, 0].max()))
         lip = upper_lip_side(h, triangles, seam_pairs, frame, x_range=x_range, closed=True)
-        upper_side = np.r_[upper_side, np.flatnonzero(lip & ~on_up & ~on_lo)]
+        upper_side = np.r_[upper_side, np.setdiff1d(np.flatnonzero(lip & ~on_up & ~on_lo), upper_side)]
     for side, cand in (
         (upper_side, ~lower_lip),
-        (seam_pairs[:, 1], ~upper_lip),
+        (lower_side, ~upper_lip),
         (ends, np.ones(n_s, dtype=bool)),
     ):
         if not len(side) or not cand.any():
@@ -560,13 +579,15 @@ def build_rig(
     keep_apart: np.ndarray | None = None,
     seam_smooth: float | None = None,
     pin_upper_lip: bool = False,
+    seam_hinges: bool = False,
 ) -> Rig:
     """Rig a head (n_h, 3)/(m, 3) with a placed simple model and its mouth calibration (see head_weights).
 
     Coincident vertices are welded for the connectivity tests and share weights, except those in
     ``keep_apart`` (indices, e.g. the copies made by cutting a lip seam), which stay separate.
     ``seam_smooth``: the cut seam's rows smoothed (IOD, :func:`_seam_rows`), None: as before. ``pin_upper_lip``:
-    the upper lip over a cut seam pinned with it (:func:`_seam_rows`).
+    the upper lip over a cut seam pinned with it (:func:`_seam_rows`). ``seam_hinges``: vertices touching both sides
+    of the seam inside its span follow their own side (:func:`_seam_rows`, ``hinges``).
     """
     basis = calibration.basis(simple)  # (n_s*3, 4)
     h = np.asarray(head_vertices, dtype=np.float64)
@@ -608,6 +629,7 @@ def build_rig(
         upper_lip=upper,
         seam_smooth=seam_smooth,
         pin_upper_lip=pin_upper_lip,
+        seam_hinges=seam_hinges,
     )
     # Every original vertex (texture-seam twins included) takes its welded vertex's weights.
     g = g_w[canon]

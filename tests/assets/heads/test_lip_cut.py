@@ -598,3 +598,88 @@ def test_the_walls_removal_leaves_no_small_hole_in_a_surface_that_stays():
     # A coarse (knife-cut) mouth keeps no hole: every face of the inner vertices goes.
     coarse = inner_lip_faces(t, rows * cols, np.array(hole + big + edge), keep_holes=False)
     assert coarse[hole_faces].all() and coarse[big_faces].all() and coarse[edge_faces].all()
+
+
+def test_a_thin_wedge_upper_lips_flat_underside_stays_with_the_upper_lip():
+    """A decimated stylised mouth (the held-out stylised head): its lips are thin wedges that meet in a crease of flat
+    faces, the upper lip's underside running straight back from the contact line (facing down) over the lower lip's
+    top. The geodesic split seeds the lower side with every face below a path edge, so the underside went with the
+    lower lip, which carried it down at /a/ facing away from the viewer (dark shards by the corner, lip backs seen
+    4.55e-3 IOD^2). With ``underside`` (a knife-cut mouth) the faces facing down stay with the upper lip: none of
+    them takes a copy, and the lower lip's top and the fronts keep their sides."""
+    profile = [
+        (0.5, 0.0),
+        (0.25, 0.0),
+        (0.1, 0.0),
+        (0.0, 0.0),  # the contact line
+        (0.0, -0.1),  # the upper lip's underside, flat: its faces face straight down
+        (-0.05, -0.15),  # the crease's back
+        (-0.02, -0.05),  # the lower lip's top, coming forward under the underside
+        (-0.1, 0.0),
+        (-0.25, 0.0),
+        (-0.5, 0.0),
+    ]
+    v, t, left, right, _ = _creased_lips(profile=profile)
+    cols = 17
+    up = np.array([0, 1.0, 0])
+    normal = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    row = t.min(axis=1) // cols  # the profile row each face starts at
+    underside = row == 3
+    inner = np.abs(v[t].mean(axis=1)[:, 0]) < 0.75  # away from the corners, where the crease fades
+    assert (normal[underside & inner] @ up < -0.99).all()  # the mechanism's premise: they face straight down
+    path = list(range(left, right + 1))
+
+    def took_copies(**kw) -> np.ndarray:
+        _, t2, _, _ = cut_mouth(v, t, left, right, up, path=path, **kw)
+        return (t2 >= len(v)).any(axis=1)
+
+    before = took_copies()
+    assert before[underside & inner].all()  # the geodesic split alone: the underside goes with the lower lip
+    after = took_copies(underside=True)
+    assert not after[underside & inner].any()
+    # The lips now part behind the underside: the crease's back takes the copies; the upper lip's front never does.
+    assert after[(row == 4) & inner].all()
+    assert not after[row < 3].any()
+
+
+@pytest.mark.parametrize("height", [0.01, -0.01])
+def test_a_vertex_touching_both_sides_inside_the_cut_joins_the_side_it_lies_on(height):
+    """A vertex that touches both sides of the cut between its ends (on the stylised held-out head the upper lip's
+    lining behind the cut, joined to both lips' crease faces) was taken for an end of the cut and pinned to the
+    corner row, both lips' simple vertices: it went down with the jaw and the lining hung into the opening at /a/
+    (dark shards). It joins the side it lies on: above the cut's line the upper lip's simple vertices only, below it
+    the lower lip's (``hinges``, on knife-cut mouths). Here one path vertex of the cut creased lips is left whole (its
+    copy merged back) and moved ``height`` off the cut's line; the mouth's corners stay ends."""
+    from realtime_core.face.model import FaceFrame, FaceModel
+    from realtime_core.face.rig import _seam_rows
+
+    v, t, left, right, mid = _creased_lips()
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    copies = np.arange(len(v), len(v2))
+    seam = np.column_stack([origin[copies], copies])
+    whole = int(np.argmin(np.abs(v2[seam[:, 0], 0])))  # the pair at the midline
+    hinge, copy = seam[whole]
+    t2 = np.where(t2 == copy, hinge, t2)
+    seam = np.delete(seam, whole, axis=0)
+    v2 = v2.copy()
+    v2[hinge, 1] += height
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=3.0)
+    spots = ([0.5, 0.25, 0.0], [0.0, 0.25, 0.0], [0.0, -0.25, 0.0])  # upper lip, upper lip, lower lip
+    control = np.array([int(np.argmin(np.linalg.norm(v2 - p, axis=1))) for p in spots])
+    simple = FaceModel(vertices=v2[control], triangles=np.array([[0, 1, 2]]), name="three points")
+    lower = np.array([False, False, True])
+    pin0, rows0, _ = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control)
+    assert rows0.toarray()[int(np.flatnonzero(pin0 == hinge)[0])][2] > 0.0  # without: an end, both lips' row
+    pin, rows, _ = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control, hinges=True)
+    assert (pin == hinge).sum() == 1
+    row = rows.toarray()[int(np.flatnonzero(pin == hinge)[0])]
+    assert row.sum() == pytest.approx(1.0)
+    if height > 0:
+        assert row[2] == 0.0 and row[:2].sum() == pytest.approx(1.0)
+    else:
+        assert row[2] == pytest.approx(1.0)
+    # The corners still follow both lips.
+    for corner in (left, right):
+        if (pin == corner).any():
+            assert rows.toarray()[int(np.flatnonzero(pin == corner)[0])][2] > 0.0
