@@ -322,6 +322,11 @@ def with_dark_mouth_inside(
         _, label = connected_components(vertex_adjacency(n0, mesh.triangles)[bag][:, bag], directed=False)
         seed = (np.abs(q[bag, 0] - mid[0]) <= half) & (np.abs(dy[bag]) <= INSIDE_SEED * iod)
         crease = q[bag[seed]]
+        if modelled:
+            # Unbounded, hidden skin at the mouth line's height HOLLOW_DEPTH or more behind the lips is the back of
+            # the head, not the crease: through it the back of the head and neck, hidden from the front but seen from
+            # the side, joined the inside (the full-body avatars: 558 vertices 2.5-2.8 IOD back, the neck darkened).
+            seed &= contact[bag] - q[bag, 2] < HOLLOW_DEPTH * iod
         bag = bag[np.isin(label, label[seed])]
     if wide is not None and len(bag) and not modelled:
         # And only what the widest opening can show: seen from the front there, inside the ellipse through its

@@ -398,6 +398,42 @@ def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_f
     assert len(wall) >= 10 and (out[wall].max(axis=1) <= 0.2 * colors[wall].max(axis=1)).all()
 
 
+def test_the_back_of_a_head_with_teeth_at_the_mouths_height_stays_skin():
+    """A head with its own teeth has the built-in head's bag, unbounded: hidden skin joined to the lips' crease. The
+    back of a head (and the neck below it, a full-body avatar's) is hidden from the front too, and at the mouth line's
+    height it lies between the corners: it is no crease. Here a closed skin box 2.5 IOD behind the mouth (hidden
+    behind the face, spanning the mouth line) keeps its colour, and the inside is shaded as without it."""
+    from dataclasses import replace
+
+    from assets.heads.cavity import with_dark_mouth_inside
+    from assets.heads.rigging import WIDE_OPEN
+
+    head, b, colors = _material_head()
+    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    lm = b.landmarks
+    fr = face_frame(v, mouth_landmarks(lm))
+    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    alone = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
+    mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]]) - 2.5 * fr.iod * fr.axes[2]
+    corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (-0.02, 0.3) for z in (-0.3, 0.3)]) * fr.iod
+    box = mouth + corners @ fr.axes
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    bt = np.array([[q[0], q[1], q[2]] for q in quads] + [[q[0], q[2], q[3]] for q in quads]) + len(v)
+    n = len(v)
+    mesh = replace(
+        head.mesh,
+        vertices=np.vstack([head.mesh.vertices, box]),
+        triangles=np.vstack([head.mesh.triangles, bt]),
+        colors=np.vstack([colors, np.tile(colors[lm["chin"]], (8, 1))]),
+        part=np.r_[np.asarray(head.mesh.part), np.zeros(8, dtype=np.asarray(head.mesh.part).dtype)],
+        targets=None,
+    )
+    out = with_dark_mouth_inside(mesh, np.vstack([v, box]), fr, lm, wide=np.vstack([wide, box])).colors
+    assert out is not None and alone is not None
+    assert np.array_equal(out[n:], mesh.colors[n:])  # the back stays skin
+    assert np.allclose(out[:n], alone, atol=1e-6)
+
+
 def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
     """A head driven by its own targets (a glb with ARKit targets) was given no shading at all: the same function
     shades it (:func:`assets.heads.cavity.with_mouth_cavity`, its landmarks from the rig), and a head shaded once
