@@ -353,6 +353,19 @@ def _material_head():
     return Head(head.rig, replace(head.mesh, colors=colors, uvs=None, texture=None)), b, colors
 
 
+def _rest_frame_wide(head):
+    """The rig's rest (n, 3) float64, its face frame from the built-in head's landmarks and its widest opening."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import WIDE_OPEN
+
+    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    return (
+        v,
+        face_frame(v, mouth_landmarks(load_builtin_head().landmarks)),
+        head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])),
+    )
+
+
 def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_face_keeps_its_colour():
     """Issue 12: a file head's own teeth and tongue (one material each) were lit like the face at /a/ (a bright
     pink tongue and white teeth filling the opening), because a painted inside was left as it came. Now, by their
@@ -365,14 +378,11 @@ def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_f
     three-quarter view at /a/) keep at most 20% of their colour."""
     from assets.heads.builtin import mouth_bag
     from assets.heads.cavity import with_dark_mouth_inside
-    from assets.heads.rigging import WIDE_OPEN
     from realtime_core.face.simple import lip_contact_vertices
 
     head, b, colors = _material_head()
-    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    v, fr, wide = _rest_frame_wide(head)
     lm = b.landmarks
-    fr = face_frame(v, mouth_landmarks(lm))
-    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
     out = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
     assert out is not None
     q = (v - fr.origin) @ fr.axes.T / fr.iod
@@ -406,13 +416,10 @@ def test_the_back_of_a_head_with_teeth_at_the_mouths_height_stays_skin():
     from dataclasses import replace
 
     from assets.heads.cavity import with_dark_mouth_inside
-    from assets.heads.rigging import WIDE_OPEN
 
     head, b, colors = _material_head()
-    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    v, fr, wide = _rest_frame_wide(head)
     lm = b.landmarks
-    fr = face_frame(v, mouth_landmarks(lm))
-    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
     alone = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
     mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]]) - 2.5 * fr.iod * fr.axes[2]
     corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (-0.02, 0.3) for z in (-0.3, 0.3)]) * fr.iod
@@ -440,13 +447,10 @@ def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
     (the built-in head's own colours) is not shaded twice."""
     from assets.heads.cavity import with_dark_mouth_inside, with_mouth_cavity
     from assets.heads.head import Head, builtin_morph_head
-    from assets.heads.rigging import WIDE_OPEN
 
     head, b, colors = _material_head()
     out = with_mouth_cavity(head)
-    v = np.asarray(head.rig.neutral, dtype=np.float64)
-    fr = face_frame(v, mouth_landmarks(b.landmarks))
-    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    v, fr, wide = _rest_frame_wide(head)
     same = with_dark_mouth_inside(head.mesh, v, fr, b.landmarks, wide=wide).colors
     assert np.allclose(out.mesh.colors, same, atol=1e-6)  # (its frame from the float64 mesh, here the float32 rig)
     assert (np.asarray(out.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
