@@ -358,7 +358,6 @@ def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> Landmark
             raise LandmarkError(str(doc["error"]))
         return points
 
-    find.__qualname__ = name  # the same finder to the rig cache's key (_rig_key)
     return find
 
 
