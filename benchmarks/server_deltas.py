@@ -32,14 +32,12 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args(argv)
     from threadpoolctl import threadpool_limits
 
+    from assets.heads.head import resolve_head
     from realtime_core.face.keyframes import MorphRig
-    from server.app import load_head
     from server.session import Frame, morph_delta_payloads
     from wire import protocol as P
 
-    head = load_head()
-    assert head is not None
-    rig = head.rig
+    rig = resolve_head("builtin").rig
     rng = np.random.default_rng(0)
     params = rng.normal(0.0, 0.05, (256, 4))
     params[:, 1] = np.abs(params[:, 1])

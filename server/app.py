@@ -36,7 +36,6 @@ import time
 import urllib.parse
 from collections.abc import AsyncIterator, Callable, Coroutine
 from http import HTTPStatus
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -1017,13 +1016,3 @@ async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = N
             for sig in (signal.SIGINT, signal.SIGTERM):
                 loop.remove_signal_handler(sig)
             await server.stop()
-
-
-def load_head(
-    *, head: Path | None = None, landmarks: Path | None = None, rig: Path | None = None, builtin: bool = True
-) -> Head | None:
-    """The head to serve (:func:`assets.heads.head.resolve_head`): a rig file, a mesh, the built-in head, or None."""
-    from assets.heads.head import resolve_head
-
-    spec = rig or head or ("builtin" if builtin else None)
-    return None if spec is None else resolve_head(spec, landmarks=landmarks)

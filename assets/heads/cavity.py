@@ -187,13 +187,15 @@ INSIDE_RAMP = 0.1
 """IOD: the inside of an unpainted mouth bag goes from the skin's colour at the lips' crease to CAVITY_COLOR this
 far from it: behind the lips' contact, or away from the crease (straight-line) (:func:`with_dark_mouth_inside`)."""
 INSIDE_BOX = (0.1, 0.35, 0.5)
-"""IOD: the inside of the mouth lies at most this far past the corners (sideways), above and below the mouth line
-(a mouth bag's walls, the lips' inner walls) for :func:`with_dark_mouth_inside`; any depth behind the lips' contact
-(the stylised held-out head's bag floor, 0.7-0.8 IOD back, showed skin-coloured at /a/ past a 0.6 IOD limit)."""
+"""IOD: the inside of a mouth without inner-mouth parts lies at most this far past the corners (sideways), above and
+below the mouth line (a mouth bag's walls, the lips' inner walls) for :func:`with_dark_mouth_inside`; any depth behind
+the lips' contact (the stylised held-out head's bag floor, 0.7-0.8 IOD back, showed skin-coloured at /a/ past a 0.6
+IOD limit)."""
 INSIDE_SEED = 0.05
 """IOD: hidden vertices between the corners and this close to the mouth line (the lips' crease) start the inside."""
 INSIDE_OPENING = 1.2
-"""How much larger than the widest opening's ellipse (corners, inner-lip points) the inside that can show is."""
+"""How much larger than the widest opening's ellipse (corners, inner-lip points) the inside that can show is (a mouth
+without inner-mouth parts; a three-quarter view shows more of a modelled bag: its cheeks' lining past the corners)."""
 PAINTED = 0.02
 """Colour units: vertex colours of the mouth bag that differ by more than this were painted by the file's author
 (its hue is kept); within it, one colour (none, or a material's) gets CAVITY_COLOR."""
@@ -259,15 +261,17 @@ def with_dark_mouth_inside(
     """``mesh`` (untextured) with the inside of its mouth darkened by its depth behind the lips' contact
     (:func:`inside_light`): its inner-mouth parts (teeth, tongue, gums; :func:`inner_mouth_vertices`) and its mouth
     bag; the last ``skip`` vertices, a mouth cavity, keep theirs. ``rest`` (n, 3): the rig's neutral, lips touching;
-    ``snap``: landmark vertex indices; ``wide`` (n, 3): the rig at its widest opening (None: no such limit, and the
-    contact's depth from the inner-lip points).
+    ``snap``: landmark vertex indices; ``wide`` (n, 3): the rig at its widest opening (None: no opening limit on a
+    head without inner-mouth parts, and the contact's depth from the inner-lip points).
 
     The bag: every skin vertex that the closed lips hide from the front at ``rest`` (the surface within
-    INSIDE_COVER IOD in front of it does not count), lies in INSIDE_BOX around the mouth and behind the lips'
-    contact (the inner-lip landmarks' front-most depth in the middle, the corners' at the corners, in between
-    linearly across the mouth), at any depth, if the hidden vertices join it to the lips' crease (INSIDE_SEED: a
-    crease elsewhere, the chin's fold under the lower lip, hidden at rest and shown when the jaw drops, is skin)
-    and, given ``wide``, the opening can show it there (INSIDE_OPENING). A bag the file does not paint (no vertex
+    INSIDE_COVER IOD in front of it does not count) and that lies behind the lips' contact (the inner-lip landmarks'
+    front-most depth in the middle, the corners' at the corners, in between linearly across the mouth), at any
+    depth, if the hidden vertices join it to the lips' crease (INSIDE_SEED: a crease elsewhere, the chin's fold under
+    the lower lip, hidden at rest and shown when the jaw drops, is skin). On a head without inner-mouth parts (no
+    modelled mouth bag: a hollow scan, a stylised head) also only in INSIDE_BOX around the mouth and, given ``wide``,
+    where the opening can show it (INSIDE_OPENING); a head with them has the built-in head's bag (its cheeks' lining
+    behind the corners, seen in three-quarter view). A bag the file does not paint (no vertex
     colours, or one colour within PAINTED: a material's) first takes CAVITY_COLOR in proportion to how far inside it
     is (its depth behind the contact or its distance from the lips' crease, whichever is larger), all of it from
     INSIDE_RAMP IOD on: without it the inner lip walls are skin-coloured, and a wall that crosses the opening at /a/
@@ -299,8 +303,15 @@ def with_dark_mouth_inside(
     contact = middle + (min(ends, middle) - middle) * np.clip(np.abs(q[:, 0] - mid[0]) / max(half, 1e-300), 0.0, 1.0)
     side, up, down = INSIDE_BOX
     dy = q[:, 1] - mid[1]
-    box = (np.abs(q[:, 0] - mid[0]) <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
-    box &= (q[:, 2] < contact) & ~inner
+    # A head with its own teeth, tongue or gums has a mouth bag around them: all of its hidden skin joined to the
+    # crease is inside, as the built-in head's (assets.heads.builtin.mouth_bag). Bounded by the box and the opening
+    # (below), its cheeks' inner walls behind the corners (up to 0.19 IOD past them) stayed skin-coloured and showed
+    # as a light wall at the near corner in three-quarter view at /a/ (the multi-material OBJ, the --head-part row).
+    # A head without one reaches further that way (a hollow scan's inside, the chin's fold): the box bounds it.
+    modelled = bool(inner.any())
+    box = (q[:, 2] < contact) & ~inner
+    if not modelled:
+        box &= (np.abs(q[:, 0] - mid[0]) <= half + side * iod) & (dy <= up * iod) & (dy >= -down * iod)
     box[n0 - skip :] = False
     bag = np.flatnonzero(box)
     crease = np.zeros((0, 3))
@@ -311,8 +322,13 @@ def with_dark_mouth_inside(
         _, label = connected_components(vertex_adjacency(n0, mesh.triangles)[bag][:, bag], directed=False)
         seed = (np.abs(q[bag, 0] - mid[0]) <= half) & (np.abs(dy[bag]) <= INSIDE_SEED * iod)
         crease = q[bag[seed]]
+        if modelled:
+            # Unbounded, hidden skin at the mouth line's height HOLLOW_DEPTH or more behind the lips is the back of
+            # the head, not the crease: through it the back of the head and neck, hidden from the front but seen from
+            # the side, joined the inside (the full-body avatars: 558 vertices 2.5-2.8 IOD back, the neck darkened).
+            seed &= contact[bag] - q[bag, 2] < HOLLOW_DEPTH * iod
         bag = bag[np.isin(label, label[seed])]
-    if wide is not None and len(bag):
+    if wide is not None and len(bag) and not modelled:
         # And only what the widest opening can show: seen from the front there, inside the ellipse through its
         # corners and inner-lip points (INSIDE_OPENING times as large).
         w = (np.asarray(wide, dtype=np.float64)[:n0] - frame.origin) @ frame.axes.T

@@ -41,6 +41,8 @@ HeadMode = Literal["auto", "morph", "retarget"]
 HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
 # The built-in morph rig's cache files (``builtin_morph_<key>.npz``): one per key, the newest current.
 MORPH_CACHE_FAMILY = re.compile(r"builtin_morph_[0-9a-f]+\.npz")
+# The automatic landmarks found for own-target heads (``landmarks/a<RIG_ALGORITHM>_<key>.json``, cached_finder).
+LANDMARK_CACHE_FAMILY = re.compile(r"a[0-9]+_[0-9a-f]{32}\.json")
 
 
 @dataclass(frozen=True)
@@ -220,7 +222,8 @@ def morph_head(
         return None
     from assets.heads.cavity import with_mouth_cavity
 
-    return with_mouth_cavity(Head(rig, mesh), landmark_finder=landmark_finder)  # unchanged without landmarks
+    finder = None if landmark_finder is None else cached_finder(landmark_finder, cache)
+    return with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)  # unchanged without landmarks
 
 
 def _rig_mesh(
@@ -276,16 +279,11 @@ def _rig_key(
     import hashlib
     import json
 
-    import numpy as np
-
     from assets.heads.rigfile import VERSION
     from realtime_core.face.rig import RIG_ALGORITHM
 
-    h = hashlib.sha256(f"rig {VERSION} {RIG_ALGORITHM} {config!r} {mesh.name}".encode())
-    for a in (mesh.vertices, mesh.triangles, mesh.uvs, mesh.colors, mesh.part):
-        h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
-    h.update(mesh.texture or b"-")
-    h.update(json.dumps(list(mesh.part_names)).encode())
+    h = hashlib.sha256(f"rig {VERSION} {RIG_ALGORITHM} {config!r}".encode())
+    _hash_mesh(h, mesh)
     if isinstance(landmarks, Mapping):
         h.update(json.dumps(landmarks, sort_keys=True, default=str).encode())
     else:
@@ -300,6 +298,67 @@ def _rig_key(
         else:
             h.update(f"finder {getattr(finder, '__qualname__', type(finder).__name__)}".encode())
     return h.hexdigest()[:32]
+
+
+def _hash_mesh(h, mesh: HeadMesh) -> None:
+    """Feed ``h`` (a hashlib object) the mesh as loaded: its name, geometry, colours, texture and parts (what a
+    rig or a render of it is made from; its morph targets are not drawn at rest)."""
+    import json
+
+    import numpy as np
+
+    h.update(f" {mesh.name}".encode())
+    for a in (mesh.vertices, mesh.triangles, mesh.uvs, mesh.colors, mesh.part):
+        h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    h.update(mesh.texture or b"-")
+    h.update(json.dumps(list(mesh.part_names)).encode())
+
+
+def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> LandmarkFinder:
+    """``finder`` whose answer for a mesh is kept in ``<cache>/landmarks/`` (JSON, written atomically) under a
+    digest of the mesh as loaded, the finder's name and ``RIG_ALGORITHM`` (the automatic landmarks change with
+    it, as the rigs they make do): an untextured head driven by its own targets with no landmarks in its file
+    (a full-body avatar) is located on every load to shade its mouth's inside
+    (:func:`assets.heads.cavity.with_mouth_cavity`), and the finder (an offscreen render and MediaPipe) took
+    most of that load. A finder that found no face (LandmarkError) is kept too, and raises again."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    from assets.files import atomic_write_bytes
+    from assets.heads.cache import cache_dir, remove_stale_siblings
+    from realtime_core.face.rig import RIG_ALGORITHM
+
+    name = getattr(finder, "__qualname__", type(finder).__name__)
+
+    def find(mesh: HeadMesh) -> dict[str, object]:
+        h = hashlib.sha256(f"landmarks {name}".encode())
+        _hash_mesh(h, mesh)
+        path = (cache or cache_dir()) / "landmarks" / f"a{RIG_ALGORITHM}_{h.hexdigest()[:32]}.json"
+        try:
+            kept = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # none yet, or unreadable: found again below
+            kept = None
+        if isinstance(kept, dict) and "landmarks" in kept:
+            if kept["landmarks"] is None:
+                raise LandmarkError(str(kept.get("error", f"{mesh.name}: no face found")))
+            return dict(kept["landmarks"])
+        try:
+            points: dict[str, object] | None = {k: np.asarray(p).tolist() for k, p in finder(mesh).items()}
+            doc: dict[str, object] = {"landmarks": points}
+        except LandmarkError as exc:
+            points, doc = None, {"landmarks": None, "error": str(exc)}
+        with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the landmarks
+            atomic_write_bytes(path, json.dumps(doc).encode())
+            remove_stale_siblings(
+                path, LANDMARK_CACHE_FAMILY, stale=lambda p: not p.name.startswith(f"a{RIG_ALGORITHM}_")
+            )
+        if points is None:
+            raise LandmarkError(str(doc["error"]))
+        return points
+
+    return find
 
 
 def head_landmarks(

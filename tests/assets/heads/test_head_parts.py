@@ -165,3 +165,60 @@ def test_a_mesh_rig_is_cached_by_content_and_keeps_its_parts(split_head, tmp_pat
     (tmp_path / "lm2.json").write_text(json.dumps(moved))
     resolve_head(files["skin"][0], parts=parts, landmarks=tmp_path / "lm2.json", mode="retarget", cache=tmp_path)
     assert len(list((tmp_path / "rigs").glob("*.npz"))) == 2
+
+
+def test_an_own_target_head_without_landmarks_is_located_once_and_shaded_alike(split_head, builtin_head, tmp_path):
+    """An untextured head driven by its own targets, with teeth and a tongue and no landmarks (the skin a glb with
+    the built-in head's ARKit targets, its teeth and tongue --head-part files, like a full-body avatar's) is located
+    by the automatic landmark finder to shade its mouth's inside: on the first load only. The second load reads the
+    points the first kept in the cache (the finder is not called) and gives the same colours and points."""
+    from assets.heads.glb import mesh_glb
+    from assets.heads.mesh import HeadMesh
+    from clients.render.landmarks import find_landmarks
+
+    _, files = split_head
+    keep = files["skin"][1]
+    skin = load_mesh(files["skin"][0])
+    targets = {k: np.asarray(t)[keep] for k, t in builtin_head.targets.items()}
+    glb = tmp_path / "avatar.glb"
+    glb.write_bytes(mesh_glb(HeadMesh(vertices=skin.vertices, triangles=skin.triangles, name="a", targets=targets)))
+    parts = tuple(str(files[k][0]) for k in ("eyes", "teeth", "tongue"))
+    calls = []
+
+    def find_landmarks_counted(mesh):
+        calls.append(mesh.name)
+        return find_landmarks(mesh)
+
+    cache = tmp_path / "cache"
+    first = resolve_head(glb, parts=parts, landmark_finder=find_landmarks_counted, cache=cache)
+    assert first.kind == "morph" and first.rig.meta["landmarks"] and len(calls) == 1
+    again = resolve_head(glb, parts=parts, landmark_finder=find_landmarks_counted, cache=cache)
+    assert len(calls) == 1  # not located again
+    np.testing.assert_array_equal(again.mesh.colors, first.mesh.colors)
+    assert again.rig.meta["landmarks"] == first.rig.meta["landmarks"]
+    plain = resolve_head(glb, parts=parts, cache=cache)  # no finder: the mouth is not found, nothing shaded
+    darker = (np.asarray(first.mesh.colors) < np.asarray(plain.mesh.colors) - 1e-3).any(axis=1)
+    assert darker.sum() > 100 and not darker[: len(keep)].all()
+
+
+def test_a_finder_that_finds_no_face_is_asked_once(tmp_path):
+    """A mesh the finder finds no face on raises LandmarkError on every load, but the finder (a render) runs once."""
+    from assets.errors import LandmarkError
+    from assets.heads.head import cached_finder
+    from assets.heads.mesh import HeadMesh
+
+    calls = []
+
+    def no_face(mesh):
+        calls.append(mesh.name)
+        raise LandmarkError(f"{mesh.name}: no face found on the render")
+
+    box = HeadMesh(
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64),
+        triangles=np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]),
+        name="box",
+    )
+    for _ in range(2):
+        with pytest.raises(LandmarkError, match="box: no face found"):
+            cached_finder(no_face, tmp_path)(box)
+    assert calls == ["box"]

@@ -353,22 +353,36 @@ def _material_head():
     return Head(head.rig, replace(head.mesh, colors=colors, uvs=None, texture=None)), b, colors
 
 
+def _rest_frame_wide(head):
+    """The rig's rest (n, 3) float64, its face frame from the built-in head's landmarks and its widest opening."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import WIDE_OPEN
+
+    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    return (
+        v,
+        face_frame(v, mouth_landmarks(load_builtin_head().landmarks)),
+        head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])),
+    )
+
+
 def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_face_keeps_its_colour():
     """Issue 12: a file head's own teeth and tongue (one material each) were lit like the face at /a/ (a bright
     pink tongue and white teeth filling the opening), because a painted inside was left as it came. Now, by their
     depth behind the upper inner lip (measured here, not from the code's lip contact line, which lies at most
     0.07 IOD behind it on this head): every tooth and tongue vertex 0.4 IOD or more behind it keeps at most 15% of
     its file colour, with its hue; the upper incisors' front (the upper teeth within 0.1 IOD behind the upper inner
-    lip) keeps its colour exactly; every vertex outside the mouth's box (more than 0.5 IOD below or 0.35 above the
-    mouth line, or 0.1 IOD past a corner) and the eyes keep theirs exactly."""
+    lip) keeps its colour exactly; every skin vertex outside the built-in head's own mouth bag (skin hidden from the
+    front joined to the lips' contact line, :func:`assets.heads.builtin.mouth_bag`) and the eyes keep theirs exactly;
+    the bag's cheek walls more than 0.1 IOD past a corner (they showed as a light wall at the near corner in
+    three-quarter view at /a/) keep at most 20% of their colour."""
+    from assets.heads.builtin import mouth_bag
     from assets.heads.cavity import with_dark_mouth_inside
-    from assets.heads.rigging import WIDE_OPEN
+    from realtime_core.face.simple import lip_contact_vertices
 
     head, b, colors = _material_head()
-    v = np.asarray(head.rig.neutral, dtype=np.float64)
+    v, fr, wide = _rest_frame_wide(head)
     lm = b.landmarks
-    fr = face_frame(v, mouth_landmarks(lm))
-    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
     out = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
     assert out is not None
     q = (v - fr.origin) @ fr.axes.T / fr.iod
@@ -381,12 +395,50 @@ def test_a_files_teeth_and_tongue_go_dark_with_depth_keeping_their_hue_and_the_f
     upper = np.flatnonzero(part == 2)
     front = upper[q[lm["upper_inner"], 2] - q[upper, 2] <= 0.1]
     assert len(front) >= 5 and np.array_equal(out[front], colors[front])
+    bv = np.asarray(b.mesh.vertices, dtype=np.float64)
+    centre = 0.5 * (bv[lm["corner_left"]] + bv[lm["corner_right"]])
+    line = lip_contact_vertices(bv, b.targets["jawOpen"], fr, mouth_centre=centre, candidates=part == 0, spacing=0.01)
+    bag = np.zeros(len(v), dtype=bool)
+    bag[mouth_bag(bv, b.mesh.triangles, part, line, fr)] = True
+    keep = ((part == 0) & ~bag) | (part == 1)
+    assert keep.sum() > 3000 and np.array_equal(out[keep], colors[keep])
     mid = 0.5 * (q[lm["corner_left"]] + q[lm["corner_right"]])
     half = 0.5 * abs(q[lm["corner_left"], 0] - q[lm["corner_right"], 0])
-    dy = q[:, 1] - mid[1]
-    outside = (dy > 0.35) | (dy < -0.5) | (np.abs(q[:, 0] - mid[0]) > half + 0.1)
-    keep = (outside & (part == 0)) | (part == 1)
-    assert keep.sum() > 3000 and np.array_equal(out[keep], colors[keep])
+    wall = np.flatnonzero(bag & (np.abs(q[:, 0] - mid[0]) > half + 0.1))
+    assert len(wall) >= 10 and (out[wall].max(axis=1) <= 0.2 * colors[wall].max(axis=1)).all()
+
+
+def test_the_back_of_a_head_with_teeth_at_the_mouths_height_stays_skin():
+    """A head with its own teeth has the built-in head's bag, unbounded: hidden skin joined to the lips' crease. The
+    back of a head (and the neck below it, a full-body avatar's) is hidden from the front too, and at the mouth line's
+    height it lies between the corners: it is no crease. Here a closed skin box 2.5 IOD behind the mouth (hidden
+    behind the face, spanning the mouth line) keeps its colour, and the inside is shaded as without it."""
+    from dataclasses import replace
+
+    from assets.heads.cavity import with_dark_mouth_inside
+
+    head, b, colors = _material_head()
+    v, fr, wide = _rest_frame_wide(head)
+    lm = b.landmarks
+    alone = with_dark_mouth_inside(head.mesh, v, fr, lm, wide=wide).colors
+    mouth = 0.5 * (v[lm["corner_left"]] + v[lm["corner_right"]]) - 2.5 * fr.iod * fr.axes[2]
+    corners = np.array([[x, y, z] for x in (-0.15, 0.15) for y in (-0.02, 0.3) for z in (-0.3, 0.3)]) * fr.iod
+    box = mouth + corners @ fr.axes
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    bt = np.array([[q[0], q[1], q[2]] for q in quads] + [[q[0], q[2], q[3]] for q in quads]) + len(v)
+    n = len(v)
+    mesh = replace(
+        head.mesh,
+        vertices=np.vstack([head.mesh.vertices, box]),
+        triangles=np.vstack([head.mesh.triangles, bt]),
+        colors=np.vstack([colors, np.tile(colors[lm["chin"]], (8, 1))]),
+        part=np.r_[np.asarray(head.mesh.part), np.zeros(8, dtype=np.asarray(head.mesh.part).dtype)],
+        targets=None,
+    )
+    out = with_dark_mouth_inside(mesh, np.vstack([v, box]), fr, lm, wide=np.vstack([wide, box])).colors
+    assert out is not None and alone is not None
+    assert np.array_equal(out[n:], mesh.colors[n:])  # the back stays skin
+    assert np.allclose(out[:n], alone, atol=1e-6)
 
 
 def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
@@ -395,13 +447,10 @@ def test_an_own_target_head_with_a_lit_inner_mouth_gets_the_same_dark_inside():
     (the built-in head's own colours) is not shaded twice."""
     from assets.heads.cavity import with_dark_mouth_inside, with_mouth_cavity
     from assets.heads.head import Head, builtin_morph_head
-    from assets.heads.rigging import WIDE_OPEN
 
     head, b, colors = _material_head()
     out = with_mouth_cavity(head)
-    v = np.asarray(head.rig.neutral, dtype=np.float64)
-    fr = face_frame(v, mouth_landmarks(b.landmarks))
-    wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    v, fr, wide = _rest_frame_wide(head)
     same = with_dark_mouth_inside(head.mesh, v, fr, b.landmarks, wide=wide).colors
     assert np.allclose(out.mesh.colors, same, atol=1e-6)  # (its frame from the float64 mesh, here the float32 rig)
     assert (np.asarray(out.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
