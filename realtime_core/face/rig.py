@@ -25,7 +25,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
 
-RIG_ALGORITHM = 45
+RIG_ALGORITHM = 46
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -413,7 +413,8 @@ def _seam_rows(
     drop with the jaw: on Lee Perry-Smith at 1,428 triangles a vertex 0.03 IOD beside a corner took -0.42 IOD per
     unit of mouth_open, the one beside it on the lip -0.26).
     ``hinges``: a vertex that touches both sides between the upper side's outermost vertices (sideways) is no end of
-    the cut but a hinge of the crease behind it, and follows the side it lies on (a knife-cut mouth; see below).
+    the cut but a hinge of the crease behind it, and follows the side it lies on (a knife-cut mouth; see below); and
+    the upper side tapers only into the corners, the ends touching its outermost vertices.
     Returns the pinned vertices (k,), their rows (k, n_s) CSR and (n_s,) bool the control points
     within SEAM_CLEAR IOD of the seam (left out of the field, the seam rows stand for them)."""
     from scipy.sparse.csgraph import dijkstra
@@ -452,20 +453,33 @@ def _seam_rows(
     # part gradually towards the corner instead of at full opening right beside it.
     taper = SEAM_TAPER * frame.iod
     end_d = cKDTree(q[ends]).query(q)[0] if len(ends) and taper > 0 else np.full(len(h), np.inf)
+    # With ``hinges``, the upper side blends only into the cut's corners, the ends that touch its outermost pair
+    # (sideways). An end beyond the upper side's last vertex that touches the sides only mid-cut, through the crease
+    # behind the lips, tapers the lower side alone: the upper lip's edge stays with the upper lip up to the corner.
+    # On the stylised held-out head the crease vertex 1289 (0.16 IOD inside the left corner, joined to the pair at
+    # 0.1 IOD from the midline) blended the upper vertex 1294 63% into the corner row: it went down 0.14 IOD at /a/,
+    # a step in the upper lip's edge. The lower side keeps that taper (the cut stops 0.19 IOD short of the corner
+    # there; without it the lower lip's corner faces crossed the opening, lip backs 0.86 -> 10.2e-3 IOD^2).
+    up_d = end_d
+    if hinges and len(ends) and taper > 0:
+        outer = seam_pairs[[order[0], order[-1]]].ravel()
+        corner = np.asarray(adj[ends][:, outer].sum(axis=1)).ravel() > 0
+        if corner.any():
+            up_d = cKDTree(q[ends[corner]]).query(q)[0]
     if pin_upper_lip:
         # The upper lip over the seam's width joins its upper side (a coarse lip's few vertices, which the harmonic
         # field would fill from the corners beside them; see ``pin_upper_lip``).
         x_range = (float(q[upper_side, 0].min()), float(q[upper_side, 0].max()))
         lip = upper_lip_side(h, triangles, seam_pairs, frame, x_range=x_range, closed=True)
         upper_side = np.r_[upper_side, np.setdiff1d(np.flatnonzero(lip & ~on_up & ~on_lo), upper_side)]
-    for side, cand in (
-        (upper_side, ~lower_lip),
-        (lower_side, ~upper_lip),
-        (ends, np.ones(n_s, dtype=bool)),
+    for side, cand, side_d in (
+        (upper_side, ~lower_lip, up_d),
+        (lower_side, ~upper_lip, end_d),
+        (ends, np.ones(n_s, dtype=bool), end_d),
     ):
         if not len(side) or not cand.any():
             continue
-        blend = np.clip(1.0 - end_d[side] / max(taper, 1e-300), 0.0, 1.0)
+        blend = np.clip(1.0 - side_d[side] / max(taper, 1e-300), 0.0, 1.0)
         for ids, share in ((np.flatnonzero(cand), 1.0 - blend), (np.arange(n_s), blend)):
             k = min(neighbours if smooth is None else SEAM_NEIGHBOURS, len(ids))
             keep = share > 0

@@ -683,3 +683,58 @@ def test_a_vertex_touching_both_sides_inside_the_cut_joins_the_side_it_lies_on(h
     for corner in (left, right):
         if (pin == corner).any():
             assert rows.toarray()[int(np.flatnonzero(pin == corner)[0])][2] > 0.0
+
+
+def test_a_crease_end_short_of_the_corner_tapers_the_lower_side_only():
+    """The stylised held-out head's cut stops 0.19 IOD short of its left corner, and a crease vertex behind the lips
+    there (1289), joined to both sides mid-cut, is an end of the cut beyond the upper side's last vertex. The taper
+    blended the upper side's last vertex (1294, 0.037 IOD from it) 63% into the corner row, both lips' simple
+    vertices: it went down 0.14 IOD at /a/, a step in the upper lip's edge. With ``hinges`` (knife-cut mouths) the
+    upper side tapers only into the corners, the ends touching its outermost pair; the lower side and the crease
+    end keep their rows. Here the cut creased lips' outermost right pair is merged back (the cut stops a column short
+    of the corner) and a crease vertex is joined to a mid-cut pair, 0.03 IOD beside the upper side's last vertex."""
+    from realtime_core.face.model import FaceFrame, FaceModel
+    from realtime_core.face.rig import SEAM_TAPER, _seam_rows
+
+    v, t, left, right, mid = _creased_lips()
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    copies = np.arange(len(v), len(v2))
+    seam = np.column_stack([origin[copies], copies])
+    seam = seam[np.argsort(v2[seam[:, 0], 0])]  # left to right
+    corner_end = seam[-1, 0]  # the pair by the right corner: merged back, it is the cut's corner end now
+    t2 = np.where(t2 == seam[-1, 1], corner_end, t2)
+    seam = seam[:-1]
+    x = v2[seam[:, 0], 0]
+    last = len(seam) - 1  # the upper side's last pair
+    at = int(np.argmin(np.abs(x - 0.25)))  # a pair mid-cut
+    crease = len(v2)
+    v2 = np.vstack([v2, [x[last] + 0.03, 0.01, -0.1]])
+    t2 = np.vstack([t2, [[crease, seam[at, 0], seam[at - 1, 0]], [crease, seam[at - 1, 1], seam[at, 1]]]])
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    corner_gap = float(np.linalg.norm(v2[seam[last, 0], :2] - v2[corner_end, :2]))
+    assert corner_gap > SEAM_TAPER  # the premise: the upper side's last vertex is out of the corner's taper
+    spots = ([0.5, 0.25, 0.0], [0.0, 0.25, 0.0], [0.0, -0.25, 0.0])  # upper lip, upper lip, lower lip
+    control = np.array([int(np.argmin(np.linalg.norm(v2 - p, axis=1))) for p in spots])
+    simple = FaceModel(vertices=v2[control], triangles=np.array([[0, 1, 2]]), name="three points")
+    lower = np.array([False, False, True])
+
+    def row_of(pin: np.ndarray, rows, vertex: int) -> np.ndarray:
+        assert (pin == vertex).sum() == 1
+        return rows.toarray()[int(np.flatnonzero(pin == vertex)[0])]
+
+    pin, rows, _ = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control, hinges=True)
+    up, lo = row_of(pin, rows, seam[last, 0]), row_of(pin, rows, seam[last, 1])
+    assert up.sum() == pytest.approx(1.0) and lo.sum() == pytest.approx(1.0)
+    assert up[2] == 0.0  # the upper side's last vertex follows the upper lip alone (the taper mixed the lower lip in)
+    # The lower side's last vertex: blended into the corner row (inverse-square weights of all three simple vertices,
+    # frontal plane) by its distance to the crease end, the rest the lower lip's.
+    p = v2[seam[last, 1], :2]
+    blend = 1.0 - np.linalg.norm(p - v2[crease, :2]) / SEAM_TAPER
+    w = 1.0 / np.linalg.norm(v2[control, :2] - p, axis=1) ** 2
+    np.testing.assert_allclose(lo, blend * w / w.sum() + (1.0 - blend) * np.array([0.0, 0.0, 1.0]), atol=1e-9)
+    assert 0.6 < blend < 0.7
+    end = row_of(pin, rows, crease)
+    assert end[:2].sum() > 0.0 and end[2] > 0.0  # the crease vertex is still an end, both lips' row
+    # Without ``hinges`` (the full scans) both sides taper into every end, as before.
+    pin0, rows0, _ = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control)
+    assert row_of(pin0, rows0, seam[last, 0])[2] > 0.0
