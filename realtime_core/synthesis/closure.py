@@ -7,7 +7,7 @@ an open /m/ as a mispronunciation, so every target phone of the PBM class is pul
 corpus's **closed pose** (:func:`closed_pose`: the mean frame at the lips' minimum of the corpus's
 closing PBM tokens, landmark coefficients and mouth parameters together), by just enough that
 mouth_open reaches ``ClosureConfig.mouth_open_iod`` at the phone's most closed frame(s), and the
-pull fades in and out over a few frames with a raised cosine. The whole frame vector is blended,
+pull fades in and out over a few frames (the junctions' smoothstep blend). The whole frame vector is blended,
 so the lips in the landmark frames close with the parameter. A phone that already closes is left
 as it is.
 """
@@ -20,6 +20,7 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.corpus import FPS, MotionCorpus
+from realtime_core.synthesis.search import crossfade
 from realtime_core.synthesis.visemes import VISEME_ID
 
 CLOSED_IOD = 0.03
@@ -32,7 +33,7 @@ BILABIAL = VISEME_ID["PBM"]
 class ClosureConfig:
     """mouth_open_iod: the opening the pulled frames reach (IOD, <= :data:`CLOSED_IOD`);
     hold_frames: frames on each side of a phone's most closed frame (inside the phone) that reach
-    it too; ramp_frames: frames over which the pull fades in before and out after (raised cosine).
+    it too; ramp_frames: frames over which the pull fades in before and out after (smoothstep).
 
     Defaults chosen on the val split (docs/unit_selection.md, "Bilabial closures"): 0.01 IOD puts the
     landmarks' inner lips as close as the corpus's own closed frames (a landmark gap of ~0.017 IOD,
@@ -125,8 +126,8 @@ def close_bilabials(
         need = float(np.max(np.clip((mo[h0:h1] - target) / (mo[h0:h1] - mo_closed), 0.0, 1.0)))
         if need <= 0.0:
             continue
-        # 1 over the held frames, a raised cosine down to 0 at ramp_frames + 1 frames outside them
+        # 1 over the held frames, the junctions' blend down to 0 at ramp_frames + 1 frames outside them
         dist = np.maximum(np.maximum(h0 - k, k - (h1 - 1)), 0)
-        shape = np.where(dist <= config.ramp_frames, 0.5 + 0.5 * np.cos(np.pi * dist / (config.ramp_frames + 1)), 0.0)
+        shape = crossfade(1.0 - dist / (config.ramp_frames + 1))
         weight = np.maximum(weight, need * shape)
     return frames + weight[:, None] * (closed - frames)

@@ -62,6 +62,15 @@ def param_to_coefficient_map(corpus: MotionCorpus) -> np.ndarray:
     return slopes[: len(VISUAL_PARAMS)]
 
 
+def speech_span(visemes: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray) -> tuple[float, float] | None:
+    """(onset, offset) seconds of speech in a target (visemes (T,) class ids, starts_s/ends_s (T,)): the first
+    spoken (non-pause) phone's start and the last one's end, inner pauses included; None with no spoken phone."""
+    spoken = np.flatnonzero(np.asarray(visemes) != VISEME_ID["sil"])
+    if spoken.size == 0:
+        return None
+    return float(starts_s[spoken[0]]), float(ends_s[spoken[-1]])
+
+
 def region_weights(
     visemes: np.ndarray, starts_s: np.ndarray, ends_s: np.ndarray, n_frames: int, config: RecordingBlend
 ) -> np.ndarray:
@@ -70,10 +79,10 @@ def region_weights(
     phone, ``config.trail`` from the end of the last one, ``config.speech`` between, smoothed by a
     raised-cosine window of ``config.ramp_s``. A target with no spoken phone is all leading pause."""
     t = np.arange(n_frames) / FPS
-    spoken = np.flatnonzero(np.asarray(visemes) != VISEME_ID["sil"])
+    span = speech_span(visemes, starts_s, ends_s)
     w = np.full(n_frames, float(config.lead))
-    if spoken.size:
-        onset, offset = float(starts_s[spoken[0]]), float(ends_s[spoken[-1]])
+    if span is not None:
+        onset, offset = span
         w[t >= onset] = config.speech
         w[t >= offset] = config.trail
     half = int(round(config.ramp_s * FPS / 2))

@@ -6,7 +6,8 @@ from text and timings"): "Hello, how are you today?" started at mouth_open 0.156
 Synthesised speech has no in-breath, so a viewer expects the lips together before the first word
 and after the last. :func:`ease_to_rest` pulls every frame before the first spoken phone and after
 the last one to the rest pose (the whole frame vector: landmark coefficients and mouth parameters),
-with a raised-cosine ramp of ``RestPauses.ramp_s`` that reaches the recorded motion exactly at the
+with a smooth ramp of ``RestPauses.ramp_s`` (:func:`realtime_core.synthesis.search.crossfade`, the junctions'
+blend) that reaches the recorded motion exactly at the
 first spoken phone's start (and leaves it at the last one's end): speech itself, inner pauses
 included, is unchanged. Only for phones of a synthesiser; a real recording's in-breath is real
 (:mod:`realtime_core.synthesis.recording`).
@@ -20,15 +21,16 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.corpus import FPS
-from realtime_core.synthesis.visemes import VISEME_ID
+from realtime_core.synthesis.recording import speech_span
+from realtime_core.synthesis.search import crossfade
 
 
 @dataclass(frozen=True, kw_only=True)
 class RestPauses:
     """ramp_s: seconds over which the face leaves the rest pose before the first spoken phone (and
-    comes back to it after the last one), a raised cosine; shortened to the pause when the pause is
+    comes back to it after the last one), the junctions' smoothstep blend; shortened to the pause when the pause is
     shorter, so the first and last frames are at rest whenever there is a pause at all. The default
-    0.2 s (6 frames): the steepest step of the ramp is pi / 12 ~ 0.26 of the distance between the rest
+    0.2 s (6 frames): the steepest step of the ramp is 1.5 / 6 = 0.25 of the distance between the rest
     pose and speech's first frame, under the speech's own largest frame-to-frame change
     (docs/unit_selection.md, "The face at rest before and after synthesised speech")."""
 
@@ -49,24 +51,22 @@ def rest_weights(
 ) -> np.ndarray:
     """(n_frames,) weight of the rest pose at frame k (time k / fps) for a gapless target (visemes (T,)
     class ids, starts_s/ends_s (T,) seconds): 1 in the leading and trailing pauses, 0 from the first
-    spoken phone's start to the last one's end, a raised cosine over ``config.ramp_s`` (or the whole
+    spoken phone's start to the last one's end, the smoothstep blend over ``config.ramp_s`` (or the whole
     pause when it is shorter) into and out of speech. A target with no spoken phone is all rest."""
     t = np.arange(n_frames) / fps
-    spoken = np.flatnonzero(np.asarray(visemes) != VISEME_ID["sil"])
-    if spoken.size == 0:
+    span = speech_span(visemes, starts_s, ends_s)
+    if span is None:
         return np.ones(n_frames)
-    onset, offset = float(starts_s[spoken[0]]), float(ends_s[spoken[-1]])
+    onset, offset = span
     w = np.zeros(n_frames)
     lead = min(config.ramp_s, onset)
     if lead > 0:
         # 1 up to onset - lead, then down to 0 at the onset
-        x = np.clip((onset - t) / lead, 0.0, 1.0)
-        w = np.where(t < onset, 0.5 - 0.5 * np.cos(np.pi * x), w)
+        w = np.where(t < onset, crossfade((onset - t) / lead), w)
     last = (n_frames - 1) / fps
     trail = min(config.ramp_s, last - offset)
     if trail > 0:
-        x = np.clip((t - offset) / trail, 0.0, 1.0)
-        w = np.where(t > offset, 0.5 - 0.5 * np.cos(np.pi * x), w)
+        w = np.where(t > offset, crossfade((t - offset) / trail), w)
     return w
 
 

@@ -202,9 +202,7 @@ def test_a_late_text_viewer_on_any_node_gets_the_sentence_so_far(model_path, red
     async def main():
         a, b = (n.url for n in nodes)
         async with connect(ws_url(a, "/text")) as ws:
-            await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
-            await _until(lambda: _rows_if(b, "bot"), what="registry")
+            await _start_text_session(ws, b, "bot")
             await ws.send(json.dumps({"type": "text", "text": LONG}))
             spoken = json.loads(await ws.recv())
             t_spoken = time.perf_counter()
@@ -401,9 +399,7 @@ def test_a_far_viewer_joining_as_the_session_ends_gets_its_end(model_path, redis
         r = aioredis.Redis.from_url(redis_server.url)
         try:
             async with connect(ws_url(a, "/text")) as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
-                await _until(lambda: _rows_if(b, "bot"), what="registry")
+                await _start_text_session(ws, b, "bot")
                 row = json.loads(await r.get("facecast:session:bot"))
                 row.update({"name": "gone", "replay": replay})
                 end = json.dumps({"code": P.CLOSE_GOING_AWAY, "reason": "server shutting down"})
@@ -435,6 +431,13 @@ def test_a_far_viewer_joining_as_the_session_ends_gets_its_end(model_path, redis
     assert record == {"code": P.CLOSE_NORMAL, "reason": record["reason"]}
 
 
+async def _start_text_session(ws, far: str, name: str) -> None:
+    """Start text session ``name`` on the connection ``ws`` and wait until the node at ``far`` lists it."""
+    await ws.send(json.dumps({"type": "start", "session": name, "language": "en"}))
+    assert json.loads(await ws.recv())["type"] == "started"
+    await _until(lambda: _rows_if(far, name), what="registry")
+
+
 async def _gone(r, key: str) -> bool:
     return await r.exists(key) == 0
 
@@ -461,9 +464,7 @@ def test_far_viewers_joining_around_a_real_session_end_all_get_an_end(model_path
         r = aioredis.Redis.from_url(redis_server.url)
         try:
             async with connect(ws_url(a, "/text")) as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
-                await _until(lambda: _rows_if(b, "bot"), what="registry")
+                await _start_text_session(ws, b, "bot")
                 await ws.send(json.dumps({"type": "text", "text": "Bob bought a map."}))
                 assert json.loads(await ws.recv())["type"] == "spoken"
                 await ws.send(json.dumps({"type": "end"}))  # it ends once the sentence has played
