@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import shutil
 import subprocess
@@ -453,7 +454,28 @@ def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(
     to resolve). The head now resolves while the session is watched. The session here starts as
     soon as the recorder has been refused once (it is watching), or 2 s after the recorder started
     (before the fix it was still rigging then and found the 1.5 s session over)."""
-    import json
+    pygltflib = require_module("pygltflib")
+    name = "new-head"
+    starter = _start_after_a_refusal(live, name, 2.0)
+    out = tmp_path / "take.glb"
+    argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
+    try:
+        with _new_head(tmp_path) as head_args:
+            assert main([*argv, *head_args]) == 0
+    finally:
+        starter.join(30)
+    printed = capsys.readouterr().out
+    assert "joined at" not in printed, printed
+    g = pygltflib.GLTF2().load(str(out))
+    times = g.accessors[g.animations[0].samplers[0].input]
+    assert times.count == 45 and times.min[0] == 0.0  # the whole 1.5 s, from frame 0
+
+
+@contextlib.contextmanager
+def _new_head(tmp_path):
+    """`record` options naming a head never rigged: the server's head as a plain mesh (no morph targets)
+    with its landmarks, rigged for real (~13 s). The landmarks file carries this run's id, so the rig is
+    not in the cache (its key hashes the file); the rig made is removed afterwards."""
     import uuid
 
     from assets.heads.builtin import load_builtin_head
@@ -462,28 +484,38 @@ def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(
     from assets.heads.head import builtin_morph_head
     from assets.heads.mesh import HeadMesh
 
-    pygltflib = require_module("pygltflib")
-    # the server's head as a plain mesh (no morph targets) with its landmarks: rigged for real. The
-    # landmarks file carries this run's id, so the rig is not in the cache (its key hashes the file).
     m = builtin_morph_head().mesh
     mesh, landmarks = tmp_path / "plain.glb", tmp_path / "landmarks.json"
     mesh.write_bytes(mesh_glb(HeadMesh(vertices=m.vertices, triangles=m.triangles, name="plain")))
     landmarks.write_text(json.dumps({"landmarks": load_builtin_head().landmarks, "run": uuid.uuid4().hex}))
     rigs = cache_dir() / "rigs"
     before = set(rigs.glob("*.npz"))
-
-    name = "new-head"
-    starter = _start_after_a_refusal(live, name, 2.0)
-    out = tmp_path / "take.glb"
-    argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
     try:
-        assert main([*argv, "--head", str(mesh), "--landmarks", str(landmarks), "--head-mode", "retarget"]) == 0
+        yield ["--head", str(mesh), "--landmarks", str(landmarks), "--head-mode", "retarget"]
     finally:
-        starter.join(30)
         for rig in set(rigs.glob("*.npz")) - before:  # this run's rig, never used again
             rig.unlink()
-    printed = capsys.readouterr().out
-    assert "joined at" not in printed, printed
-    g = pygltflib.GLTF2().load(str(out))
-    times = g.accessors[g.animations[0].samplers[0].input]
-    assert times.count == 45 and times.min[0] == 0.0  # the whole 1.5 s, from frame 0
+
+
+def test_record_reports_a_watch_error_while_a_new_head_is_still_rigging(live, tmp_path, capsys):
+    """`record -o take.glb --head NEW_MESH` rigs the head in a thread while it watches. An error while
+    watching (here: no such session, --wait 0) is reported while the rig is still being made: asyncio.run
+    used to join that thread before returning, so the error came out when the rig was done (9.5 s for a
+    new mesh instead of 0.2 s). Checked by what is still running when `record` returns, not by a clock."""
+    import threading
+
+    from assets.heads.cache import cache_dir
+
+    rigs = cache_dir() / "rigs"
+    threads = set(threading.enumerate())
+    out = tmp_path / "take.glb"
+    with _new_head(tmp_path) as head_args:
+        before = set(rigs.glob("*.npz"))
+        code = main(["record", live.url, "--session", "nobody", "-o", str(out), "--wait", "0", *head_args])
+        rigging = [t for t in threading.enumerate() if t not in threads and t.is_alive()]
+        rigged = set(rigs.glob("*.npz")) - before
+        for t in rigging:  # let it finish before its rig is removed
+            t.join(120)
+    assert code == 2 and "no session 'nobody'" in capsys.readouterr().err
+    assert rigging and not rigged, "the error was reported only once the head had been rigged"
+    assert not out.exists()
