@@ -204,7 +204,9 @@ function connect(name) {
     }
     state.closeCode = ev.code;
     state.closeReason = ev.reason;
-    const why = {
+    // 1001 is also a cluster node's word that the session's own node stopped: the session is over.
+    const lost = ev.code === CLOSE.GOING_AWAY && ev.reason.startsWith("session lost");
+    const why = lost ? `session ended (${ev.reason})` : {
       [CLOSE.NORMAL]: "session ended", [CLOSE.GOING_AWAY]: "server restarting",
       [CLOSE.NOT_FOUND]: "no such session", [CLOSE.TOO_SLOW]: "too slow, reconnecting",
       [CLOSE.UNAUTHORIZED]: "wrong or missing token (add ?token=...)",
