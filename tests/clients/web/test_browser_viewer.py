@@ -291,6 +291,52 @@ def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
     assert ended["console_errors"] == []
 
 
+def _cut_mid_word(seconds: float, seed: int) -> np.ndarray:
+    """``seconds`` of speech-like 16 kHz audio cut short at the loudest 20 ms block of its last 2 s: the
+    session ends mid-word, its last frames with the mouth open."""
+    x = speechlike(seconds, 16000, seed=seed)
+    blocks = x[: len(x) // 320 * 320].reshape(-1, 320)
+    tail = len(blocks) - 100  # the last 2 s
+    loudest = tail + int(np.argmax((blocks[tail:] ** 2).mean(axis=1)))
+    return x[: (loudest + 1) * 320]
+
+
+def test_browser_eases_to_rest_after_a_session_ends_mid_word(model, head):
+    """An audio session closed mid-word ends on a frame with the mouth open; the page used to keep that
+    frame on screen until another session started. Once its last frames have been shown, the face eases
+    to rest (~0.2 s): the vertex offsets drawn (or a morph head's influences) go back to 0, and the page
+    says the session ended."""
+    _require_browser()
+    name = "restcheck"
+    srv = LiveServer(model, head)
+    session = srv.submit(stream_session(srv.url, name, 0.0, samples=_cut_mid_word(16.0, seed=3)))
+    proc = subprocess.Popen(
+        ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        ended = _read_step(proc, "ended")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+        reply = session.result(60)
+        srv.stop()
+
+    assert ended["closeCode"] == 1000
+    peaks = [r["peak"] for r in ended["applied"]]
+    last = ended["applied"][-1]
+    assert last["index"] == reply["frames"] - 1  # the session's last frame was shown
+    assert last["peak"] > 0.3 * max(peaks), f"the session did not end mid-word: last peaks {peaks[-8:]}"
+    print(
+        f"browser: last frame's peak {last['peak']:.4g} (max of the last 40: {max(peaks):.4g}); 2 s after the "
+        f"close: peak {ended['lastPeak']:.4g}, {ended.get('restSteps')} animation frames of easing ({ended['kind']})"
+    )
+    # the largest vertex offset drawn (deltas; a bound on it for a morph head), and a morph head's influences
+    assert ended["lastPeak"] == 0 and not any(ended["influences"] or []), "the last frame is still held"
+    assert ended["status"].startswith("session ended")
+    assert ended["console_errors"] == []
+
+
 START_SCRIPT = Path(__file__).with_name("start_check.mjs")
 
 
