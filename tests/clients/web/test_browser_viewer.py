@@ -21,7 +21,7 @@ import pytest
 
 from tests.live_server import REPO, LiveServer, stream_session
 from tests.prerequisites import missing
-from tests.speech import speechlike
+from tests.speech import cut_mid_word, speechlike
 
 # Headless Chromium against a live server (about 30 s).
 pytestmark = [pytest.mark.system, pytest.mark.slow]
@@ -263,15 +263,12 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
 END_SCRIPT = Path(__file__).with_name("end_check.mjs")
 
 
-def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
-    """The last frames of a session arrive together just before the server closes the socket (the
-    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
-    time, while their audio is already scheduled. The page must still show them: the face ends where
-    the speech ends, not frozen on whatever frame was due when the socket closed."""
+def _watched_to_its_end(model, head, name: str, samples: np.ndarray) -> tuple[dict, dict]:
+    """Stream ``samples`` (16 kHz) as session ``name`` in real time while ``end_check.mjs`` watches it in
+    the page; returns the script's "ended" step and the server's ``ended`` reply."""
     _require_browser()
-    name = "endcheck"
     srv = LiveServer(model, head)
-    session = srv.submit(stream_session(srv.url, name, 12.0, samples=speechlike(12.0, 16000, seed=3)))
+    session = srv.submit(stream_session(srv.url, name, 0.0, samples=samples))
     proc = subprocess.Popen(
         ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
@@ -283,7 +280,15 @@ def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
         proc.wait(10)
         reply = session.result(60)
         srv.stop()
+    return ended, reply
 
+
+def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
+    """The last frames of a session arrive together just before the server closes the socket (the
+    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
+    time, while their audio is already scheduled. The page must still show them: the face ends where
+    the speech ends, not frozen on whatever frame was due when the socket closed."""
+    ended, reply = _watched_to_its_end(model, head, "endcheck", speechlike(12.0, 16000, seed=3))
     assert ended["closeCode"] == 1000  # the session ended normally
     last_sent = reply["frames"] - 1  # frame indices count from 0
     applied = [r["index"] for r in ended["applied"]]
@@ -291,37 +296,12 @@ def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
     assert ended["console_errors"] == []
 
 
-def _cut_mid_word(seconds: float, seed: int) -> np.ndarray:
-    """``seconds`` of speech-like 16 kHz audio cut short at the loudest 20 ms block of its last 2 s: the
-    session ends mid-word, its last frames with the mouth open."""
-    x = speechlike(seconds, 16000, seed=seed)
-    blocks = x[: len(x) // 320 * 320].reshape(-1, 320)
-    tail = len(blocks) - 100  # the last 2 s
-    loudest = tail + int(np.argmax((blocks[tail:] ** 2).mean(axis=1)))
-    return x[: (loudest + 1) * 320]
-
-
 def test_browser_eases_to_rest_after_a_session_ends_mid_word(model, head):
     """An audio session closed mid-word ends on a frame with the mouth open; the page used to keep that
     frame on screen until another session started. Once its last frames have been shown, the face eases
     to rest (~0.2 s): the vertex offsets drawn (or a morph head's influences) go back to 0, and the page
     says the session ended."""
-    _require_browser()
-    name = "restcheck"
-    srv = LiveServer(model, head)
-    session = srv.submit(stream_session(srv.url, name, 0.0, samples=_cut_mid_word(16.0, seed=3)))
-    proc = subprocess.Popen(
-        ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
-    try:
-        ended = _read_step(proc, "ended")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
-        reply = session.result(60)
-        srv.stop()
-
+    ended, reply = _watched_to_its_end(model, head, "restcheck", cut_mid_word(16.0, seed=3))
     assert ended["closeCode"] == 1000
     peaks = [r["peak"] for r in ended["applied"]]
     last = ended["applied"][-1]
