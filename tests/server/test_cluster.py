@@ -364,6 +364,13 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
         a, b = (n.url for n in nodes)
         async with IngestClient(a, session="z", sample_rate_hz=16000) as ing:
             async with ViewerClient(a, session="z", audio=False) as local:
+                # A far viewer watching through the outage: the restarted Redis holds no row of "z" until a
+                # re-registers it, which must not read as a's death (1001 "session lost").
+                await _until(lambda: _rows_if(b, "z"), what="registry")
+                far = ViewerClient(b, session="z", audio=False)
+                await far.__aenter__()
+                await _until(lambda: _published(a, "z", {(P.KIND_PARAMS, P.ENC_FLOAT32)}), what="wants")
+                collect_far = asyncio.ensure_future(far.collect())
                 collect = asyncio.ensure_future(local.collect())
                 feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
                 await asyncio.sleep(0.5)
@@ -381,10 +388,11 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
                 ended = await ing.end()
                 got = await asyncio.wait_for(collect, 20)
                 got_remote = await asyncio.wait_for(collect_remote, 20)
-        return down, up, rows, ended, got, got_remote
+                got_far = await asyncio.wait_for(collect_far, 20)
+        return down, up, rows, ended, got, got_remote, got_far
 
     try:
-        down, up, rows, ended, got, got_remote = asyncio.run(asyncio.wait_for(main(), 90))
+        down, up, rows, ended, got, got_remote, got_far = asyncio.run(asyncio.wait_for(main(), 90))
     finally:
         for n in nodes:
             n.stop()
@@ -392,6 +400,8 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
     assert all(h["redis"] == "ok" for h in up) and rows[0]["node"] == "a"
     assert [m.index for m in got.frames] == list(range(ended["frames"]))  # the local viewer lost nothing
     assert got_remote.close_code == P.CLOSE_NORMAL and len(got_remote.frames) > 0
+    assert (got_far.close_code, got_far.close_reason) == (P.CLOSE_NORMAL, "session ended")
+    assert got_far.frames[-1].index == ended["frames"] - 1  # it went on to the end after the outage
 
 
 async def _health_if(url: str, status: str) -> dict | None:
