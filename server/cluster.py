@@ -567,11 +567,11 @@ class Cluster:
         holds no rows until each live node's next heartbeat re-registers its sessions."""
         if not self.feeds or time.monotonic() - self._up_since < self.ttl_ms / 1000:
             return
-        names = list(self.feeds)
+        feeds = list(self.feeds.values())
+        names = [f.name for f in feeds]
         values = await self._client.mget([session_key(n) for n in names] + [ended_key(n) for n in names])
-        for name, raw, end in zip(names, values[: len(names)], values[len(names) :]):
-            feed = self.feeds.get(name)
-            if feed is None:  # ended while Redis answered
+        for feed, raw, end in zip(feeds, values[: len(names)], values[len(names) :]):
+            if self.feeds.get(feed.name) is not feed:  # ended while Redis answered (a new feed is read next time)
                 continue
             if raw is not None and json.loads(raw).get("node") == feed.row.get("node"):
                 continue
@@ -579,7 +579,7 @@ class Cluster:
                 record = json.loads(end)
                 self._feed_ended(feed, int(record["code"]), str(record["reason"]))
                 continue
-            log.warning("session %r lost: its node %s stopped without ending it", name, feed.row.get("node"))
+            log.warning("session %r lost: its node %s stopped without ending it", feed.name, feed.row.get("node"))
             self.feeds_lost += 1
             self._feed_ended(feed, *LOST)
 
