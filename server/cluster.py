@@ -37,7 +37,8 @@ session:
   and re-registers every local session when Redis returns, and ``/health`` says
   ``"redis": "down: ..."`` (status ``degraded``) meanwhile. Remote feeds resubscribe when Redis
   returns; their viewers stay connected. A node started with a wrong Redis address says so in one
-  line and does not start.
+  line and does not start. A node that dies sends no end marker: the other nodes see its sessions'
+  rows expire and close their viewers of them with 1001 "session lost" (:meth:`Cluster._end_lost_feeds`).
 
 Publishing costs one socket write per message: a second, write-only connection to Redis with
 replies switched off (``CLIENT REPLY OFF``) takes the PUBLISH commands straight from the fan-out, in
@@ -85,6 +86,8 @@ SUBSCRIBE_WAIT_S = 2.0  # how long a replay request waits for Redis to confirm t
 ANSWER_WAIT_S = 2.0  # how long a joining viewer waits for the owner's replay before joining without it
 PUBLISH_QUEUE = 4096  # messages waiting for Redis before the oldest is dropped
 ENDED_KEEP_MS = 10_000  # how long a session's end record outlives it: longer than a viewer's join takes
+# The close of far viewers whose session's node stopped without ending it (its row expired).
+LOST = (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
 
 
 def session_key(name: str) -> str:
@@ -311,6 +314,8 @@ class Cluster:
         self._confirmed: dict[str, asyncio.Event] = {}  # channel -> set when Redis confirms the subscription
         self._joins: dict[bytes, ReplayJoin] = {}  # this node's replay requests waiting for their answer
         self.replays_answered = 0
+        self._up_since = 0.0  # time.monotonic() when Redis was last seen back (or first reached)
+        self.feeds_lost = 0
 
     @property
     def _client(self) -> aioredis.Redis:
@@ -334,6 +339,7 @@ class Cluster:
             await self.redis.aclose()
             raise ServerError(f"cannot reach Redis at {self.url}: {exc}") from None
         self.up = True
+        self._up_since = time.monotonic()
         self._tasks = [
             asyncio.ensure_future(self._publisher()),
             asyncio.ensure_future(self._heartbeat()),
@@ -370,6 +376,7 @@ class Cluster:
             "published": self.published,
             "publish_dropped": self.publish_dropped,
             "replays_answered": self.replays_answered,
+            "feeds_lost": self.feeds_lost,
         }
 
     # -- sessions this node owns --------------------------------------------------------------------------
@@ -507,7 +514,9 @@ class Cluster:
                 await self._beat()
                 if not self.up:
                     log.warning("Redis is back at %s: %d local sessions re-registered", self.url, len(self.local))
+                    self._up_since = time.monotonic()
                 self.up, self.error = True, ""
+                await self._end_lost_feeds()
             except (RedisError, OSError) as exc:
                 self._down(exc)
             await asyncio.sleep(self.heartbeat_s if self.up else min(self.heartbeat_s, 0.5))
@@ -545,6 +554,34 @@ class Cluster:
             self._wanted_meanwhile = None
         if self._pubsub is not None and self._pubsub_ready and self._pubsub.connection is None:
             raise ConnectionError("subscription lost")
+
+    async def _end_lost_feeds(self) -> None:
+        """End the feeds of remote sessions whose node stopped without ending them (killed, cut off from
+        Redis): no end marker will come, and their viewers would wait with no frames and no close. Such a
+        session's row expires ``ttl`` after its node's last heartbeat (or names another node: the name was
+        claimed again), so one heartbeat here later its viewers are closed with :data:`LOST`, within four
+        heartbeats of the node's death. A row missing because the session ended normally left its end
+        record first (:meth:`release`): that code is used (the marker may still be on its way).
+
+        Only once Redis has been up, as this node saw it, for a whole TTL: a Redis that restarted empty
+        holds no rows until each live node's next heartbeat re-registers its sessions."""
+        if not self.feeds or time.monotonic() - self._up_since < self.ttl_ms / 1000:
+            return
+        feeds = list(self.feeds.values())
+        names = [f.name for f in feeds]
+        values = await self._client.mget([session_key(n) for n in names] + [ended_key(n) for n in names])
+        for feed, raw, end in zip(feeds, values[: len(names)], values[len(names) :]):
+            if self.feeds.get(feed.name) is not feed:  # ended while Redis answered (a new feed is read next time)
+                continue
+            if raw is not None and json.loads(raw).get("node") == feed.row.get("node"):
+                continue
+            if raw is None and end is not None:
+                record = json.loads(end)
+                self._feed_ended(feed, int(record["code"]), str(record["reason"]))
+                continue
+            log.warning("session %r lost: its node %s stopped without ending it", feed.name, feed.row.get("node"))
+            self.feeds_lost += 1
+            self._feed_ended(feed, *LOST)
 
     # -- feeds of remote sessions ----------------------------------------------------------------------
 

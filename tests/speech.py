@@ -55,3 +55,13 @@ def plausible_model(seed: int = 0) -> AvModel:
     cov[..., na:, :] *= s[:, None]
     cov[..., :, na:] *= s[None, :]
     return replace(m, hmm=replace(hmm, means=means, covars=cov))
+
+
+def cut_mid_word(seconds: float, seed: int) -> np.ndarray:
+    """``seconds`` of speech-like 16 kHz audio cut short at the loudest 20 ms block of its last 2 s: the
+    session ends mid-word, its last frames with the mouth open."""
+    x = speechlike(seconds, 16000, seed=seed)
+    blocks = x[: len(x) // 320 * 320].reshape(-1, 320)
+    tail = len(blocks) - 100  # the last 2 s
+    loudest = tail + int(np.argmax((blocks[tail:] ** 2).mean(axis=1)))
+    return x[: (loudest + 1) * 320]

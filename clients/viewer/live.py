@@ -37,6 +37,9 @@ from clients.viewer.stream import ViewerStreamConfig, connect_viewer
 from clients.viewer.video import framing
 from wire import protocol as P
 
+REST_EASE_S = 0.2
+"""How long the face takes to ease to rest after a session's last frame (the browser viewer's too)."""
+
 
 @dataclass
 class LiveStats:
@@ -55,6 +58,7 @@ class LiveStats:
     audio_underruns: int = 0  # device callbacks flagged "output underflow" (AudioOut.underruns)
     delivery_ms: list[float] = field(default_factory=list)
     saved_sound: Path | None = None  # the WAV written for save_sound (None: none asked, or no description came)
+    rest_steps: int = 0  # images drawn easing the face to rest after sessions ended (REST_EASE_S each)
 
 
 class Playout:
@@ -271,6 +275,26 @@ def run_window(
         last_index = -1
         first_shown: float | None = None
         image = None
+        last_drawn: np.ndarray | None = None  # the deltas (3 k,) of the frame on screen
+        # After a session's end its last frames are shown, then the face eases to rest: a session cut off
+        # mid-word used to leave its open mouth in the window until it came back. to_rest: the session
+        # closed, the easing starts once the pending frames are drawn; rest: (start time, deltas eased).
+        to_rest = False
+        rest: tuple[float, np.ndarray] | None = None
+
+        def draw(values: np.ndarray) -> None:
+            nonlocal image, last_drawn
+            assert renderer is not None  # frames are drawn once a description made it
+            v = neutral.copy()
+            v[moving] += values.reshape(-1, 3)
+            with renderer.ctx:
+                image = renderer.render(v)
+            glfw.make_context_current(win)
+            screen_tex.write(np.ascontiguousarray(image[::-1]).tobytes())  # GL rows go bottom-up
+            wctx.copy_framebuffer(wctx.screen, screen_fbo)
+            glfw.swap_buffers(win)
+            last_drawn = values
+
         rx.start()
         while not glfw.window_should_close(win):
             glfw.poll_events()
@@ -304,6 +328,7 @@ def run_window(
                         )
                     playout.offset, last_index = None, -1
                     pending.clear()
+                    to_rest, rest = False, None
                     stats.connections += 1
                     status(f"facecast view: watching {cfg.session!r}")
                 elif item[0] == "msg":
@@ -316,6 +341,7 @@ def run_window(
                     pending.append((playout.arrive(m.media_time, arrival), m))
                 elif item[0] == "closed":
                     status(f"facecast view: session closed ({item[1]} {item[2]}); waiting for it to come back")
+                    to_rest = last_drawn is not None
                 elif item[0] == "error" and item[1] != last_error:
                     last_error = item[1]
                     status(f"facecast view: {item[1]}; retrying")
@@ -326,16 +352,19 @@ def run_window(
                     stats.skipped += 1
                 show = pending.pop(0)[1]
             if show is not None and renderer is not None:
-                v = neutral.copy()
-                v[moving] += show.values.reshape(-1, 3)
-                with renderer.ctx:
-                    image = renderer.render(v)
-                glfw.make_context_current(win)
-                screen_tex.write(np.ascontiguousarray(image[::-1]).tobytes())  # GL rows go bottom-up
-                wctx.copy_framebuffer(wctx.screen, screen_fbo)
-                glfw.swap_buffers(win)
+                draw(show.values)
                 stats.shown += 1
                 first_shown = first_shown or now
+            elif (to_rest or rest is not None) and not pending and last_drawn is not None:
+                if rest is None:
+                    rest, to_rest = (now, np.array(last_drawn, dtype=np.float32)), False
+                f = min(1.0, (now - rest[0]) / REST_EASE_S)
+                draw(rest[1] * np.float32(1 - f * f * (3 - 2 * f)))  # smoothstep: no jump at either end
+                stats.rest_steps += 1
+                if f >= 1.0:
+                    rest = None
+                else:
+                    glfw.wait_events_timeout(0.016)  # about 60 steps a second, not a busy loop
             elif show is None:
                 glfw.wait_events_timeout(0.004)
             if duration_s is not None and first_shown is not None and now - first_shown >= duration_s:

@@ -37,6 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import asyncio
+    import contextlib
+    import threading
 
     from assets.files import make_parent
     from clients.errors import ClientError
@@ -66,6 +68,34 @@ def run(args: argparse.Namespace) -> int:
             return head, builtin_arkit_targets()
         return head, None
 
+    def in_daemon_thread(fn, *, name: str) -> asyncio.Future:
+        # Not asyncio.to_thread: asyncio.run joins its executor's threads before it returns (and the
+        # interpreter joins them before it exits), so an error while watching was printed only once the
+        # rig had finished (9.5 s for a new mesh instead of 0.6 s). A daemon thread is abandoned instead;
+        # what it writes to the rig cache is written atomically (assets/files.py), so it leaves no half.
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future = loop.create_future()
+
+        def settle(result, error: BaseException | None) -> None:
+            if future.done():  # cancelled: the watch failed first
+                return
+            if error is not None:
+                future.set_exception(error)
+            else:
+                future.set_result(result)
+
+        def run() -> None:
+            result, error = None, None
+            try:
+                result = fn()
+            except Exception as exc:  # noqa: BLE001 - handed to the awaiting task, which raises it
+                error = exc
+            with contextlib.suppress(RuntimeError):  # the loop has closed: nobody waits for the head
+                loop.call_soon_threadsafe(settle, result, error)
+
+        threading.Thread(target=run, name=name, daemon=True).start()
+        return future
+
     def same_head(head, description: dict) -> None:
         # checked on connecting (or when the head is ready): after the take, a wrong --head threw the
         # whole recording away
@@ -91,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             return *(await watch()), (None, None)
 
         async def head_checked():
-            resolved = await asyncio.to_thread(resolve)
+            resolved = await in_daemon_thread(resolve, name="facecast-record-head")
             same_head(resolved[0], await described)
             return resolved
 

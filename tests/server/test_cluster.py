@@ -9,6 +9,7 @@ at start. Every wait is bounded: nothing hangs.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import shutil
 import signal
@@ -289,6 +290,72 @@ def test_killing_an_edge_node_loses_no_session(model_path, redis_server):
     assert sessions == []
 
 
+def test_far_viewers_of_a_session_whose_node_dies_are_told_it_is_lost(model_path, redis_server):
+    """Issue 15: node a dies (SIGKILL, no end marker) while node b serves a viewer of a's session. Its row
+    expires (three missed heartbeats); b must then close that viewer with 1001 "session lost: its node
+    stopped" (docs/protocol.md section 5) and drop the feed, instead of leaving it open with no frames and
+    no end. b's viewers of its own session and of a session on node c lose nothing. (Before: the viewer
+    got nothing more and was never closed.)"""
+    nodes = {n: _node(model_path, redis_server.url, n) for n in "abc"}
+    pcm = np.rint(speechlike(3.0, 16000, seed=9) * 32767).astype(np.int16)
+
+    async def main():
+        a, b, c = (nodes[n].url for n in "abc")
+        ingests = {
+            name: IngestClient(u, session=name, sample_rate_hz=16000)
+            for name, u in (("on-a", a), ("on-b", b), ("on-c", c))
+        }
+        streams: dict[str, asyncio.Future] = {}
+        for ing in ingests.values():
+            await ing.__aenter__()
+        try:
+            await _until(lambda: _rows_if(b, "on-a"), what="registry")
+            await _until(lambda: _rows_if(b, "on-c"), what="registry")
+            viewers = {name: ViewerClient(b, session=name, audio=False) for name in ingests}
+            for v in viewers.values():
+                await v.__aenter__()
+            for name, owner in (("on-a", a), ("on-c", c)):
+                await _until(lambda n=name, o=owner: _published(o, n, {(P.KIND_PARAMS, P.ENC_FLOAT32)}), what="wants")
+            got = {name: asyncio.ensure_future(v.collect()) for name, v in viewers.items()}
+            for name, ing in ingests.items():
+                streams[name] = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True))
+            await asyncio.sleep(1.0)
+            nodes["a"].proc.send_signal(signal.SIGKILL)
+            killed = time.perf_counter()
+            lost = await asyncio.wait_for(got["on-a"], 10)  # before the fix: never
+            lost_after_s = time.perf_counter() - killed
+            health = await _until(lambda: _health_with(b, remote_feeds=1), what="b drops the lost feed")
+            await asyncio.gather(streams["on-b"], streams["on-c"])
+            ended = {name: await ingests[name].end() for name in ("on-b", "on-c")}
+            kept = {name: await asyncio.wait_for(got[name], 20) for name in ("on-b", "on-c")}
+        finally:
+            for t in streams.values():  # node a's fails once a is gone
+                t.cancel()
+            await asyncio.gather(*streams.values(), return_exceptions=True)
+            for ing in ingests.values():
+                with contextlib.suppress(Exception):  # node a's is cut off
+                    await ing.__aexit__(None, None, None)
+        print(f"cluster: the far viewer of the dead node's session was closed {lost_after_s:.2f} s after the kill")
+        return lost, health, ended, kept
+
+    try:
+        lost, health, ended, kept = asyncio.run(asyncio.wait_for(main(), 90))
+    finally:
+        for n in nodes.values():
+            n.stop()
+    assert (lost.close_code, lost.close_reason) == (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
+    assert len(lost.frames) > 0  # it was watching when a died
+    assert health["remote_feeds"] == 1  # the feed of c's session only
+    for name in ("on-b", "on-c"):  # untouched: every frame, then the session's own end
+        assert [m.index for m in kept[name].frames] == list(range(ended[name]["frames"]))
+        assert kept[name].close_code == P.CLOSE_NORMAL
+
+
+async def _health_with(url: str, **fields) -> dict | None:
+    h = await _get_json(url, "/health")
+    return h if all(h.get(k) == v for k, v in fields.items()) else None
+
+
 def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_server):
     nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b")]
     pcm = np.rint(speechlike(4.0, 16000, seed=8) * 32767).astype(np.int16)
@@ -297,6 +364,13 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
         a, b = (n.url for n in nodes)
         async with IngestClient(a, session="z", sample_rate_hz=16000) as ing:
             async with ViewerClient(a, session="z", audio=False) as local:
+                # A far viewer watching through the outage: the restarted Redis holds no row of "z" until a
+                # re-registers it, which must not read as a's death (1001 "session lost").
+                await _until(lambda: _rows_if(b, "z"), what="registry")
+                far = ViewerClient(b, session="z", audio=False)
+                await far.__aenter__()
+                await _until(lambda: _published(a, "z", {(P.KIND_PARAMS, P.ENC_FLOAT32)}), what="wants")
+                collect_far = asyncio.ensure_future(far.collect())
                 collect = asyncio.ensure_future(local.collect())
                 feed = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
                 await asyncio.sleep(0.5)
@@ -314,10 +388,11 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
                 ended = await ing.end()
                 got = await asyncio.wait_for(collect, 20)
                 got_remote = await asyncio.wait_for(collect_remote, 20)
-        return down, up, rows, ended, got, got_remote
+                got_far = await asyncio.wait_for(collect_far, 20)
+        return down, up, rows, ended, got, got_remote, got_far
 
     try:
-        down, up, rows, ended, got, got_remote = asyncio.run(asyncio.wait_for(main(), 90))
+        down, up, rows, ended, got, got_remote, got_far = asyncio.run(asyncio.wait_for(main(), 90))
     finally:
         for n in nodes:
             n.stop()
@@ -325,6 +400,8 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
     assert all(h["redis"] == "ok" for h in up) and rows[0]["node"] == "a"
     assert [m.index for m in got.frames] == list(range(ended["frames"]))  # the local viewer lost nothing
     assert got_remote.close_code == P.CLOSE_NORMAL and len(got_remote.frames) > 0
+    assert (got_far.close_code, got_far.close_reason) == (P.CLOSE_NORMAL, "session ended")
+    assert got_far.frames[-1].index == ended["frames"] - 1  # it went on to the end after the outage
 
 
 async def _health_if(url: str, status: str) -> dict | None:

@@ -51,6 +51,8 @@ const state = {
   kind: null,
   closeCode: null,
   closeReason: "",
+  restSteps: 0, // animation frames drawn between a session's last frame and the rest pose (the easing)
+  ended: null, // how the last session ended (shown while the page waits for the next), null while watching
   errors: 0,
 };
 
@@ -93,7 +95,10 @@ async function pollSessions() {
       const target = state.wanted ?? state.sessions[0];
       if (target && state.sessions.includes(target)) connect(target);
       else {
-        setStatus(state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session");
+        // The last session's end stays said while the page waits (the poll 0.2 s after a close used to
+        // replace "session ended" by a bare "waiting").
+        const waiting = state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session";
+        setStatus(state.ended ? `${state.ended}; ${waiting}` : waiting);
         clearTimeout(waitTimer); // one pending fast poll at most (the POLL_S interval also calls this)
         waitTimer = setTimeout(pollSessions, WAIT_POLL_S * 1000);
       }
@@ -143,6 +148,11 @@ const APPLIED_KEEP = 2000;
 let appliedCount = 0;
 let armed = null; // freezeWhen's bound {above} or {below}, until a frame passes it
 let caught = null; // the frame that froze the page {n, index, peak}
+// A session that ends mid-word (an audio or microphone session closed while the mouth is open) would
+// leave its last frame on screen until another session starts: once the frames queued at the close have
+// been shown, the face eases to rest (zero weights, deltas or parameters) over REST_EASE_S.
+const REST_EASE_S = 0.2;
+let toRest = null; // null, or {start: null} from the close until the queue drains, then {start, from}
 
 function connect(name) {
   if (ws) return;
@@ -157,6 +167,7 @@ function connect(name) {
   ws = sock;
   state.session = name;
   state.kind = kind;
+  state.ended = null;
   setStatus(`connecting to "${name}"`);
   sock.onmessage = (ev) => {
     if (typeof ev.data === "string") {
@@ -204,11 +215,15 @@ function connect(name) {
     }
     state.closeCode = ev.code;
     state.closeReason = ev.reason;
-    const why = {
+    if (shown) toRest = { start: null };
+    // 1001 is also a cluster node's word that the session's own node stopped: the session is over.
+    const lost = ev.code === CLOSE.GOING_AWAY && ev.reason.startsWith("session lost");
+    const why = lost ? `session ended (${ev.reason})` : {
       [CLOSE.NORMAL]: "session ended", [CLOSE.GOING_AWAY]: "server restarting",
       [CLOSE.NOT_FOUND]: "no such session", [CLOSE.TOO_SLOW]: "too slow, reconnecting",
       [CLOSE.UNAUTHORIZED]: "wrong or missing token (add ?token=...)",
     }[ev.code] ?? `connection closed (${ev.code})`;
+    state.ended = why;
     setStatus(`${why}; waiting for "${state.wanted ?? "any session"}" to (re)start`);
     // The queue is kept: a session's last frames (its lookahead, flushed at the end) arrive just before
     // the close and wait for their due time while their audio, already scheduled, still plays; tick()
@@ -268,6 +283,7 @@ function resetStream() {
   audio.reset();
   state.received = 0;
   state.firstIndex = null;
+  toRest = null;
 }
 
 function onFrame(msg, arrival) {
@@ -318,6 +334,27 @@ function showParams(values) {
   names.forEach((_, i) => { bars.children[i].querySelector("meter").value = values[i]; });
 }
 
+function applyValues(values) {
+  if (state.kind === "morph") {
+    view.applyWeights(values);
+    state.lastPeak = view.lastPeak;
+  } else if (state.kind === "deltas") {
+    view.applyDeltas(values);
+    state.lastPeak = view.lastPeak;
+  } else {
+    showParams(values);
+  }
+}
+
+function easeToRest(now) {
+  if (toRest.start === null) toRest = { start: now, from: Float32Array.from(shown.values) };
+  const f = Math.min(1, (now - toRest.start) / REST_EASE_S);
+  const k = 1 - f * f * (3 - 2 * f); // smoothstep: no jump at either end
+  applyValues(toRest.from.map((v) => v * k));
+  if (f > 0 && f < 1) state.restSteps += 1;
+  if (f >= 1) toRest = null;
+}
+
 function tick() {
   state.ticks += 1;
   const now = nowS();
@@ -329,16 +366,9 @@ function tick() {
     show = item;
   }
   const drawStart = performance.now();
+  if (!show && toRest && !queue.length && !frozen) easeToRest(now);
   if (show) {
-    if (state.kind === "morph") {
-      view.applyWeights(show.msg.values);
-      state.lastPeak = view.lastPeak;
-    } else if (state.kind === "deltas") {
-      view.applyDeltas(show.msg.values);
-      state.lastPeak = view.lastPeak;
-    } else {
-      showParams(show.msg.values);
-    }
+    applyValues(show.msg.values);
     state.frames += 1;
     shown = { index: show.msg.index, values: show.msg.values };
     const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak };

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import shutil
 import subprocess
@@ -141,41 +142,39 @@ def xvfb(monkeypatch):
     proc.wait(5)
 
 
-def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
-    require_module("glfw")
+def _run_view(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """`facecast view ARGS` in a process of its own, as a user runs it (and GL-wise clean: other tests
+    here made EGL contexts), on this test's display."""
     import os
     import sys
 
-    from tests.live_server import REPO, stream_session
+    from tests.live_server import REPO
+
+    cmd = [sys.executable, "-m", "facecast", "view", *args]
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=timeout, env=os.environ.copy())
+
+
+def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
+    require_module("glfw")
+
+    from tests.live_server import stream_session
 
     stop = asyncio.Event()
     fut = live.submit(stream_session(live.url, "window", 30.0, stop=stop))
     shot = tmp_path / "window.png"
-    # A process of its own, as a user runs it (and GL-wise clean: other tests here made EGL contexts).
     try:
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "facecast",
-                "view",
-                live.url,
-                "--session",
-                "window",
-                "--duration",
-                "2",
-                "--screenshot",
-                str(shot),
-                "--width",
-                "320",
-                "--height",
-                "240",
-            ],
-            cwd=REPO,
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env=os.environ.copy(),
+        proc = _run_view(
+            live.url,
+            "--session",
+            "window",
+            "--duration",
+            "2",
+            "--screenshot",
+            str(shot),
+            "--width",
+            "320",
+            "--height",
+            "240",
         )
     finally:
         live.loop.call_soon_threadsafe(stop.set)
@@ -188,6 +187,58 @@ def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
 
     img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
     assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
+
+
+def test_view_window_eases_to_rest_after_the_session_ends_mid_word(live, xvfb, tmp_path):
+    """A session cut off mid-word ends on a frame with the mouth open; the window kept drawing that frame
+    until the session came back. It now eases to rest after the session's last frames: the window's last
+    image (--screenshot, taken 1 s or more after the end) is the neutral head, drawn here by the offline
+    renderer with the window's framing, and the session's last frame was not."""
+    require_module("glfw")
+
+    from PIL import Image
+
+    from clients.render.renderer import HeadRenderer, RenderConfig
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, record_stream
+    from clients.viewer.video import framing
+    from tests.live_server import stream_session
+    from tests.speech import cut_mid_word
+
+    x = cut_mid_word(8.0, seed=3)
+    # the session's frames as a deltas viewer gets them: its last one is what the window used to keep
+    frames = live.submit(record_stream(ViewerStreamConfig(url=live.url, session="cut", kind="deltas", wait_s=20)))
+    fut = live.submit(stream_session(live.url, "cut", 0.0, samples=x))
+    shot = tmp_path / "window.png"
+    try:
+        proc = _run_view(
+            *(live.url, "--session", "cut", "--wait", "20", "--duration", f"{len(x) / 16000 + 1.0:.2f}"),
+            *("--screenshot", str(shot), "--width", "320", "--height", "240"),
+            timeout=90,
+        )
+    finally:
+        fut.result(30)
+        rec = frames.result(30)
+    assert proc.returncode == 0, proc.stderr
+    assert "session closed (1000" in proc.stdout, proc.stdout  # it saw the end before its duration ran out
+
+    mesh = asyncio.run(fetch_head(live.url))
+    rig = live.server.head.rig
+    neutral = np.asarray(mesh.vertices, dtype=np.float32)
+    centre, axes, size = framing(neutral, rig.moving)
+    last = neutral.copy()
+    last[rig.moving] += rec.values[-1].astype(np.float32).reshape(-1, 3)
+    with HeadRenderer(
+        mesh, centre=centre, axes=axes, size=size, config=RenderConfig(width=320, height=240, margin=1.25)
+    ) as r:
+        at_rest, held = r.render(neutral).astype(np.float64), r.render(last).astype(np.float64)
+    img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.float64)
+    off_rest = float(np.mean(np.abs(img - at_rest) > 40))  # share of pixels unlike the neutral head
+    off_held = float(np.mean(np.abs(held - at_rest) > 40))  # ... of the held last frame
+    print(
+        f"view window: pixels off the neutral head at the end {off_rest:.4f}, with the last frame held {off_held:.4f}"
+    )
+    assert off_held > 0.002  # the session ended with the mouth open
+    assert off_rest < off_held / 10, "the window still shows the session's last frame"
 
 
 def _found_in(signal: np.ndarray, ref: np.ndarray, piece: int = 1600, loud: float = 0.05) -> list[float]:
@@ -453,7 +504,28 @@ def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(
     to resolve). The head now resolves while the session is watched. The session here starts as
     soon as the recorder has been refused once (it is watching), or 2 s after the recorder started
     (before the fix it was still rigging then and found the 1.5 s session over)."""
-    import json
+    pygltflib = require_module("pygltflib")
+    name = "new-head"
+    starter = _start_after_a_refusal(live, name, 2.0)
+    out = tmp_path / "take.glb"
+    argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
+    try:
+        with _new_head(tmp_path) as head_args:
+            assert main([*argv, *head_args]) == 0
+    finally:
+        starter.join(30)
+    printed = capsys.readouterr().out
+    assert "joined at" not in printed, printed
+    g = pygltflib.GLTF2().load(str(out))
+    times = g.accessors[g.animations[0].samplers[0].input]
+    assert times.count == 45 and times.min[0] == 0.0  # the whole 1.5 s, from frame 0
+
+
+@contextlib.contextmanager
+def _new_head(tmp_path):
+    """`record` options naming a head never rigged: the server's head as a plain mesh (no morph targets)
+    with its landmarks, rigged for real (~13 s). The landmarks file carries this run's id, so the rig is
+    not in the cache (its key hashes the file); the rig made is removed afterwards."""
     import uuid
 
     from assets.heads.builtin import load_builtin_head
@@ -462,28 +534,38 @@ def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(
     from assets.heads.head import builtin_morph_head
     from assets.heads.mesh import HeadMesh
 
-    pygltflib = require_module("pygltflib")
-    # the server's head as a plain mesh (no morph targets) with its landmarks: rigged for real. The
-    # landmarks file carries this run's id, so the rig is not in the cache (its key hashes the file).
     m = builtin_morph_head().mesh
     mesh, landmarks = tmp_path / "plain.glb", tmp_path / "landmarks.json"
     mesh.write_bytes(mesh_glb(HeadMesh(vertices=m.vertices, triangles=m.triangles, name="plain")))
     landmarks.write_text(json.dumps({"landmarks": load_builtin_head().landmarks, "run": uuid.uuid4().hex}))
     rigs = cache_dir() / "rigs"
     before = set(rigs.glob("*.npz"))
-
-    name = "new-head"
-    starter = _start_after_a_refusal(live, name, 2.0)
-    out = tmp_path / "take.glb"
-    argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
     try:
-        assert main([*argv, "--head", str(mesh), "--landmarks", str(landmarks), "--head-mode", "retarget"]) == 0
+        yield ["--head", str(mesh), "--landmarks", str(landmarks), "--head-mode", "retarget"]
     finally:
-        starter.join(30)
         for rig in set(rigs.glob("*.npz")) - before:  # this run's rig, never used again
             rig.unlink()
-    printed = capsys.readouterr().out
-    assert "joined at" not in printed, printed
-    g = pygltflib.GLTF2().load(str(out))
-    times = g.accessors[g.animations[0].samplers[0].input]
-    assert times.count == 45 and times.min[0] == 0.0  # the whole 1.5 s, from frame 0
+
+
+def test_record_reports_a_watch_error_while_a_new_head_is_still_rigging(live, tmp_path, capsys):
+    """`record -o take.glb --head NEW_MESH` rigs the head in a thread while it watches. An error while
+    watching (here: no such session, --wait 0) is reported while the rig is still being made: asyncio.run
+    used to join that thread before returning, so the error came out when the rig was done (9.5 s for a
+    new mesh instead of 0.2 s). Checked by what is still running when `record` returns, not by a clock."""
+    import threading
+
+    from assets.heads.cache import cache_dir
+
+    rigs = cache_dir() / "rigs"
+    threads = set(threading.enumerate())
+    out = tmp_path / "take.glb"
+    with _new_head(tmp_path) as head_args:
+        before = set(rigs.glob("*.npz"))
+        code = main(["record", live.url, "--session", "nobody", "-o", str(out), "--wait", "0", *head_args])
+        rigging = [t for t in threading.enumerate() if t not in threads and t.is_alive()]
+        rigged = set(rigs.glob("*.npz")) - before
+        for t in rigging:  # let it finish before its rig is removed
+            t.join(120)
+    assert code == 2 and "no session 'nobody'" in capsys.readouterr().err
+    assert rigging and not rigged, "the error was reported only once the head had been rigged"
+    assert not out.exists()

@@ -21,7 +21,7 @@ import pytest
 
 from tests.live_server import REPO, LiveServer, stream_session
 from tests.prerequisites import missing
-from tests.speech import speechlike
+from tests.speech import cut_mid_word, speechlike
 
 # Headless Chromium against a live server (about 30 s).
 pytestmark = [pytest.mark.system, pytest.mark.slow]
@@ -263,15 +263,12 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
 END_SCRIPT = Path(__file__).with_name("end_check.mjs")
 
 
-def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
-    """The last frames of a session arrive together just before the server closes the socket (the
-    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
-    time, while their audio is already scheduled. The page must still show them: the face ends where
-    the speech ends, not frozen on whatever frame was due when the socket closed."""
+def _watched_to_its_end(model, head, name: str, samples: np.ndarray) -> tuple[dict, dict]:
+    """Stream ``samples`` (16 kHz) as session ``name`` in real time while ``end_check.mjs`` watches it in
+    the page; returns the script's "ended" step and the server's ``ended`` reply."""
     _require_browser()
-    name = "endcheck"
     srv = LiveServer(model, head)
-    session = srv.submit(stream_session(srv.url, name, 12.0, samples=speechlike(12.0, 16000, seed=3)))
+    session = srv.submit(stream_session(srv.url, name, 0.0, samples=samples))
     proc = subprocess.Popen(
         ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
@@ -283,11 +280,40 @@ def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
         proc.wait(10)
         reply = session.result(60)
         srv.stop()
+    return ended, reply
 
+
+def test_browser_shows_a_sessions_last_frames_after_it_ends(model, head):
+    """The last frames of a session arrive together just before the server closes the socket (the
+    algorithmic delay's lookahead is flushed at the end) and wait in the page's queue for their due
+    time, while their audio is already scheduled. The page must still show them: the face ends where
+    the speech ends, not frozen on whatever frame was due when the socket closed."""
+    ended, reply = _watched_to_its_end(model, head, "endcheck", speechlike(12.0, 16000, seed=3))
     assert ended["closeCode"] == 1000  # the session ended normally
     last_sent = reply["frames"] - 1  # frame indices count from 0
     applied = [r["index"] for r in ended["applied"]]
     assert applied and applied[-1] == last_sent, f"last frames applied {applied[-8:]}, the session's last {last_sent}"
+    assert ended["console_errors"] == []
+
+
+def test_browser_eases_to_rest_after_a_session_ends_mid_word(model, head):
+    """An audio session closed mid-word ends on a frame with the mouth open; the page used to keep that
+    frame on screen until another session started. Once its last frames have been shown, the face eases
+    to rest (~0.2 s): the vertex offsets drawn (or a morph head's influences) go back to 0, and the page
+    says the session ended."""
+    ended, reply = _watched_to_its_end(model, head, "restcheck", cut_mid_word(16.0, seed=3))
+    assert ended["closeCode"] == 1000
+    peaks = [r["peak"] for r in ended["applied"]]
+    last = ended["applied"][-1]
+    assert last["index"] == reply["frames"] - 1  # the session's last frame was shown
+    assert last["peak"] > 0.3 * max(peaks), f"the session did not end mid-word: last peaks {peaks[-8:]}"
+    print(
+        f"browser: last frame's peak {last['peak']:.4g} (max of the last 40: {max(peaks):.4g}); 2 s after the "
+        f"close: peak {ended['lastPeak']:.4g}, {ended.get('restSteps')} animation frames of easing ({ended['kind']})"
+    )
+    # the largest vertex offset drawn (deltas; a bound on it for a morph head), and a morph head's influences
+    assert ended["lastPeak"] == 0 and not any(ended["influences"] or []), "the last frame is still held"
+    assert ended["status"].startswith("session ended")
     assert ended["console_errors"] == []
 
 
