@@ -190,7 +190,8 @@ def inner_mouth_weights(
     wide /a/ the chin skin went back 0.25-0.3 IOD and the piece behind it 0.05-0.07, through the chin
     (a dark fleck below the lower lip). Each vertex's weight rises with its height below the mouth line
     (along axes[1]), from 0 at the line to 1 at JAW_FULL of the way to the chin: a lower gum follows the
-    jaw as a separate lower-teeth part does (:func:`with_rigid_parts`), the piece stays whole.
+    jaw (the chin's displacement whole; a separate lower-teeth part takes the lower lip's share along the face's up
+    axis, :func:`with_rigid_parts`), the piece stays whole.
 
     Pieces are found on the mesh as it came, where texture seams part coincident copies of a vertex: a scan's
     inside of the mouth is such a piece only across seams (Lee Perry-Smith: it continues the lips' inner walls at 48
@@ -274,7 +275,7 @@ def _seam_blend(
 
 def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
     """The :class:`realtime_core.face.Rig` whose vertex i moves by (1 - w_i) of its own displacement plus
-    w_i of vertex ``anchor``'s (the jaw's, as :func:`with_rigid_parts` takes it); ``weights`` (n,) in
+    w_i of vertex ``anchor``'s (the chin's, the anchor of :func:`with_rigid_parts`); ``weights`` (n,) in
     [0, 1]. A still vertex with a weight joins the moving set. Each vertex keeps its whole lip-contact push: the
     push closes the crossing measured on the final rows, so a lip vertex weighted w (the lips' inner walls by the seams
     of :func:`inner_mouth_weights`) that kept only (1 - w) of it left its lips crossed (Lee Perry-Smith, hand
