@@ -9,9 +9,9 @@ where it sits, and given a rigid motion:
 
 - ``skull``: eyes (eyeball, iris, cornea, pupil, sclera, eyelashes...) and upper teeth/gums: still;
 - ``jaw``: lower teeth/gums and the tongue: one displacement for every vertex, the chin landmark's (the jaw's
-  motion; the lower outer-lip midpoint when the rig does not move the chin) across and along the face's up axis,
-  and TEETH_FOLLOW of the lower inner lip's drop along it (the lower teeth's edge shows above the lip as the
-  built-in head's does, not their whole front).
+  motion; the lower outer-lip midpoint when the rig does not move the chin) sideways and forwards (square to the
+  face's up axis), and TEETH_FOLLOW of the lower inner lip's drop along that axis (the lower teeth's edge shows
+  above the lip as the built-in head's does, not their whole front).
 
 The part holding the face (the nose-tip landmark) is never reclassified, whatever its name. A teeth
 part whose name says neither upper nor lower is split by connected pieces: above the mouth line
@@ -127,7 +127,7 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
     jaw_row = row[anchor]
     if (labels == "jaw").any() and row[lip] >= 0:
         # The jaw's parts drop TEETH_FOLLOW of the lower inner lip's drop (along the face's up axis) and keep the
-        # anchor's motion across and along it: see TEETH_FOLLOW. One appended vertex row carries that motion.
+        # anchor's motion square to that axis: see TEETH_FOLLOW. One appended vertex row carries that motion.
         up = _face_up(np.asarray(rig.neutral, dtype=np.float64), landmarks)
         vertical = np.outer(up, up)
         chin = matrix[3 * row[anchor] + np.arange(3)]
@@ -151,10 +151,10 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
 
 def _face_up(vertices: np.ndarray, landmarks: Mapping[str, int]) -> np.ndarray:
     """(3,) unit: the face frame's up axis (mouth -> eyes) of ``vertices`` (n, 3) at the named landmark vertices."""
-    from realtime_core.face import MouthLandmarks, face_frame
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
 
-    lm = MouthLandmarks(**{k: int(landmarks[k]) for k in MouthLandmarks.__dataclass_fields__})
-    return face_frame(vertices, lm).axes[1]
+    return face_frame(vertices, mouth_landmarks(landmarks)).axes[1]
 
 
 JAW_FULL = 0.5

@@ -98,7 +98,7 @@ def test_separate_eye_and_teeth_files_render_and_move_rigidly(split_head, builti
     jaw = moved[lower[0]]
     for part in (lower, tongue):  # with the jaw: one displacement, rigidly
         np.testing.assert_allclose(moved[part], np.broadcast_to(jaw, moved[part].shape), atol=1e-7)
-    # The jaw's displacement: the chin's across and along the face's up axis, TEETH_FOLLOW of the lower inner lip's
+    # The jaw's displacement: the chin's square to the face's up axis, TEETH_FOLLOW of the lower inner lip's
     # drop along it (the face frame computed here from the eye and mouth-corner landmarks).
     lm = json.loads((d / "lm.json").read_text())["landmarks"]
     v0 = rig.neutral.astype(np.float64)
