@@ -8,8 +8,10 @@ lip, eyeballs dragged by the cheeks). Here each part is classified by its name, 
 where it sits, and given a rigid motion:
 
 - ``skull``: eyes (eyeball, iris, cornea, pupil, sclera, eyelashes...) and upper teeth/gums: still;
-- ``jaw``: lower teeth/gums and the tongue: the displacement of the chin landmark (the jaw's
-  motion; the lower outer-lip midpoint when the rig does not move the chin), the same for every vertex.
+- ``jaw``: lower teeth/gums and the tongue: one displacement for every vertex, the chin landmark's (the jaw's
+  motion; the lower outer-lip midpoint when the rig does not move the chin) sideways and forwards (square to the
+  face's up axis), and TEETH_FOLLOW of the lower inner lip's drop along that axis (the lower teeth's edge shows
+  above the lip as the built-in head's does, not their whole front).
 
 The part holding the face (the nose-tip landmark) is never reclassified, whatever its name. A teeth
 part whose name says neither upper nor lower is split by connected pieces: above the mouth line
@@ -101,6 +103,14 @@ def _split_rows(v: np.ndarray, triangles: np.ndarray, sel: np.ndarray, mouth: np
     return np.where(mean[comp] >= 0, "skull", "jaw")
 
 
+TEETH_FOLLOW = 0.71
+"""Fraction of the lower inner lip's drop (at its middle, along the face's up axis) the lower teeth and tongue take
+(:func:`with_rigid_parts`). The built-in head driven by its own targets at /a/ (mouth open 0.35): its lower incisors'
+edge drops 0.234 IOD, its lower inner lip 0.329 (0.71); the edge shows above the lip, not the teeth's front. Moved
+with the chin instead, a retarget's lower teeth dropped 0.54 of the lip (the full-body avatar without targets: chin
+0.177 IOD, lip 0.329) and a tall band of lower-teeth fronts filled the opening's lower half."""
+
+
 def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
     """The :class:`realtime_core.face.Rig` with the rows of its separate parts replaced by their rigid
     motion (see the module docstring); the rig unchanged when the mesh has no such parts. Records
@@ -112,9 +122,20 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
     row = -np.ones(n, dtype=np.int64)  # each vertex's row among the moving ones
     row[rig.moving] = np.arange(len(rig.moving))
     anchor = landmarks["chin"] if row[landmarks["chin"]] >= 0 else landmarks["lower_lip"]
-    source = np.arange(n)
-    source[labels == "jaw"] = anchor
-    src_row = np.where(labels == "skull", -1, row[source])
+    lip = landmarks["lower_inner"]
+    matrix = rig.matrix
+    jaw_row = row[anchor]
+    if (labels == "jaw").any() and row[lip] >= 0:
+        # The jaw's parts drop TEETH_FOLLOW of the lower inner lip's drop (along the face's up axis) and keep the
+        # anchor's motion square to that axis: see TEETH_FOLLOW. One appended vertex row carries that motion.
+        up = _face_up(np.asarray(rig.neutral, dtype=np.float64), landmarks)
+        vertical = np.outer(up, up)
+        chin = matrix[3 * row[anchor] + np.arange(3)]
+        lower = matrix[3 * row[lip] + np.arange(3)]
+        jaw_rows = sp.csr_matrix(np.eye(3) - vertical) @ chin + sp.csr_matrix(TEETH_FOLLOW * vertical) @ lower
+        matrix = sp.vstack([matrix, jaw_rows.astype(matrix.dtype)]).tocsr()
+        jaw_row = len(rig.moving)
+    src_row = np.where(labels == "skull", -1, np.where(labels == "jaw", jaw_row, row))
     moving = np.flatnonzero(src_row >= 0)
     rows = (3 * src_row[moving][:, None] + np.arange(3)).reshape(-1)
     counts = {k: int((labels == k).sum()) for k in ("skull", "jaw") if (labels == k).any()}
@@ -124,8 +145,16 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
         # The lip-contact push is a correction of the lips' own surface: a part that follows the
         # jaw rigidly takes none of it (it would bend the teeth with the lips).
         own = (labels[moving] == "").astype(np.float32)
-        spread = sp.diags(own) @ spread[src_row[moving]]
-    return replace(rig, moving=moving.astype(np.int64), matrix=rig.matrix[rows], meta=meta, contact_spread=spread)
+        spread = sp.diags(own) @ spread[np.where(labels[moving] == "", src_row[moving], 0)]
+    return replace(rig, moving=moving.astype(np.int64), matrix=matrix[rows], meta=meta, contact_spread=spread)
+
+
+def _face_up(vertices: np.ndarray, landmarks: Mapping[str, int]) -> np.ndarray:
+    """(3,) unit: the face frame's up axis (mouth -> eyes) of ``vertices`` (n, 3) at the named landmark vertices."""
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    return face_frame(vertices, mouth_landmarks(landmarks)).axes[1]
 
 
 JAW_FULL = 0.5
@@ -161,7 +190,8 @@ def inner_mouth_weights(
     wide /a/ the chin skin went back 0.25-0.3 IOD and the piece behind it 0.05-0.07, through the chin
     (a dark fleck below the lower lip). Each vertex's weight rises with its height below the mouth line
     (along axes[1]), from 0 at the line to 1 at JAW_FULL of the way to the chin: a lower gum follows the
-    jaw as a separate lower-teeth part does (:func:`with_rigid_parts`), the piece stays whole.
+    jaw (the chin's displacement whole; a separate lower-teeth part takes the lower lip's share along the face's up
+    axis, :func:`with_rigid_parts`), the piece stays whole.
 
     Pieces are found on the mesh as it came, where texture seams part coincident copies of a vertex: a scan's
     inside of the mouth is such a piece only across seams (Lee Perry-Smith: it continues the lips' inner walls at 48
@@ -245,7 +275,7 @@ def _seam_blend(
 
 def with_jaw_weights(rig, weights: np.ndarray, anchor: int):
     """The :class:`realtime_core.face.Rig` whose vertex i moves by (1 - w_i) of its own displacement plus
-    w_i of vertex ``anchor``'s (the jaw's, as :func:`with_rigid_parts` takes it); ``weights`` (n,) in
+    w_i of vertex ``anchor``'s (the chin's, the anchor of :func:`with_rigid_parts`); ``weights`` (n,) in
     [0, 1]. A still vertex with a weight joins the moving set. Each vertex keeps its whole lip-contact push: the
     push closes the crossing measured on the final rows, so a lip vertex weighted w (the lips' inner walls by the seams
     of :func:`inner_mouth_weights`) that kept only (1 - w) of it left its lips crossed (Lee Perry-Smith, hand

@@ -1,6 +1,7 @@
 """Heads whose eyes, teeth and tongue come as separate files: merged after the head (its vertex
 indices stay valid), rendered with eyes in the sockets, and rigged with the parts rigid: eyes and
-upper teeth with the skull, lower teeth and tongue with the jaw (the chin's displacement)."""
+upper teeth with the skull, lower teeth and tongue with the jaw (the chin's displacement, their drop a share of the
+lower lip's as the built-in head's own targets drop them)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import pytest
 
 from assets.heads.head import resolve_head
 from assets.heads.mesh import load_mesh
-from assets.heads.parts import part_kind
+from assets.heads.parts import TEETH_FOLLOW, part_kind
 
 # Rendering (moderngl EGL) and rigging of the built-in head.
 pytestmark = pytest.mark.system
@@ -94,16 +95,28 @@ def test_separate_eye_and_teeth_files_render_and_move_rigidly(split_head, builti
     moved = rig.deformed(p) - rig.neutral
     assert np.abs(moved[eyes]).max() == 0 and np.abs(moved[upper]).max() == 0  # with the skull
     chin = rig.meta["jaw_anchor"]
-    for part in (lower, tongue):  # with the jaw: the anchor's displacement, rigidly
-        np.testing.assert_allclose(moved[part], np.broadcast_to(moved[chin], moved[part].shape), atol=1e-7)
-    up = rig.neutral[offs[1] : offs[2]].mean(0) - rig.neutral[chin]
-    assert moved[chin] @ up < 0  # the jaw opens downwards
+    jaw = moved[lower[0]]
+    for part in (lower, tongue):  # with the jaw: one displacement, rigidly
+        np.testing.assert_allclose(moved[part], np.broadcast_to(jaw, moved[part].shape), atol=1e-7)
+    # The jaw's displacement: the chin's square to the face's up axis, TEETH_FOLLOW of the lower inner lip's
+    # drop along it (the face frame computed here from the eye and mouth-corner landmarks).
+    lm = json.loads((d / "lm.json").read_text())["landmarks"]
+    v0 = rig.neutral.astype(np.float64)
+    eyes = [0.5 * (v0[lm[f"eye_outer_{s}"]] + v0[lm[f"eye_inner_{s}"]]) for s in ("left", "right")]
+    x = (eyes[0] - eyes[1]) / np.linalg.norm(eyes[0] - eyes[1])
+    up = 0.5 * (eyes[0] + eyes[1]) - 0.5 * (v0[lm["corner_left"]] + v0[lm["corner_right"]])
+    up -= x * (up @ x)
+    up /= np.linalg.norm(up)
+    lip = moved[lm["lower_inner"]].astype(np.float64)
+    assert lip @ up < 0 and jaw @ up < 0  # the lip and the jaw open downwards
+    np.testing.assert_allclose(jaw @ up, TEETH_FOLLOW * (lip @ up), rtol=1e-4)
+    across = moved[chin] - (moved[chin] @ up) * up
+    np.testing.assert_allclose(jaw - (jaw @ up) * up, across, atol=1e-6)
     assert np.abs(moved[:n_skin]).max() > 0
 
     # Rendered: the eye sockets hold the (blue) eyeballs; without the eye file they show the inside of the head.
     from clients.render.renderer import RenderConfig, renderer_for_rig
 
-    lm = json.loads((d / "lm.json").read_text())["landmarks"]
     centre = np.mean([rig.neutral[lm[k]] for k in ("eye_outer_left", "eye_inner_left")], axis=0)
     bare = resolve_head(files["skin"][0], landmarks=d / "lm.json", mode="retarget")
     shade = {}
@@ -222,3 +235,27 @@ def test_a_finder_that_finds_no_face_is_asked_once(tmp_path):
         with pytest.raises(LandmarkError, match="box: no face found"):
             cached_finder(no_face, tmp_path)(box)
     assert calls == ["box"]
+
+
+def test_teeth_follow_is_the_builtin_heads_own_share_of_the_lip_drop():
+    """TEETH_FOLLOW: the built-in head driven by its own targets at /a/ (mouth open 0.35) drops its lower incisors' edge
+    (the front-most lower-teeth vertices by the midline, the highest) this share of its lower inner lip's drop."""
+    from assets.heads.builtin import PARTS, load_builtin_head
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    b = load_builtin_head()
+    head = builtin_morph_head()
+    v0 = np.asarray(head.rig.neutral, dtype=np.float64)
+    lm = b.landmarks
+    frame = face_frame(v0, mouth_landmarks(lm))
+    q = (v0 - frame.origin) @ frame.axes.T
+    moved = (np.asarray(head.rig.deformed(np.array([0.0, 0.02, 0.35, 0.0])), dtype=np.float64) - v0) @ frame.axes.T
+    lower = np.flatnonzero(b.part == PARTS["helper-lower-teeth"])
+    mid = 0.5 * (q[lm["corner_left"], 0] + q[lm["corner_right"], 0])
+    front = lower[np.abs(q[lower, 0] - mid) < 0.08 * frame.iod]
+    front = front[q[front, 2] > q[front, 2].max() - 0.08 * frame.iod]  # the incisors' front
+    edge = front[np.argmax(q[front, 1])]
+    share = moved[edge, 1] / moved[lm["lower_inner"], 1]
+    assert abs(share - TEETH_FOLLOW) < 0.01, share
