@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from assets.heads.mesh import HeadMesh
+from realtime_core.face import MouthLandmarks, face_frame
 
 EYE_WORDS = ("eye", "iris", "cornea", "pupil", "sclera", "lash")
 TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
@@ -151,10 +152,7 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
 
 def _face_up(vertices: np.ndarray, landmarks: Mapping[str, int]) -> np.ndarray:
     """(3,) unit: the face frame's up axis (mouth -> eyes) of ``vertices`` (n, 3) at the named landmark vertices."""
-    from assets.heads.rigging import mouth_landmarks
-    from realtime_core.face import face_frame
-
-    return face_frame(vertices, mouth_landmarks(landmarks)).axes[1]
+    return face_frame(vertices, MouthLandmarks.among(landmarks)).axes[1]
 
 
 JAW_FULL = 0.5

@@ -42,6 +42,7 @@ from assets.heads.cavity import (
 )
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
+from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceModel,
@@ -109,7 +110,7 @@ def candide_face(model: FaceModel) -> SimpleFace:
 
 def mouth_landmarks(names: Mapping[str, int]) -> MouthLandmarks:
     """The :class:`MouthLandmarks` (vertex indices) among named landmarks (extra names ignored)."""
-    return MouthLandmarks(**{k: int(names[k]) for k in MouthLandmarks.__dataclass_fields__})
+    return MouthLandmarks.among(names)
 
 
 def _region_centres(points: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -1258,8 +1259,6 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
-
     rig = with_rigid_parts(rig, out_mesh, snap)  # separate eyes / teeth / tongue: rigid with skull or jaw
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's

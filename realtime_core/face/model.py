@@ -164,6 +164,11 @@ class MouthLandmarks:
             if int(v) != v or v < 0:
                 raise ConfigError(f"landmark {k} must be a non-negative vertex index, got {v!r}")
 
+    @classmethod
+    def among(cls, names: Mapping[str, int]) -> MouthLandmarks:
+        """The mouth landmarks among named landmark vertex indices (extra names ignored)."""
+        return cls(**{k: int(names[k]) for k in cls.__dataclass_fields__})
+
     def as_dict(self) -> dict[str, int]:
         return {k: int(getattr(self, k)) for k in self.__dataclass_fields__}
 
