@@ -271,5 +271,7 @@ def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(t
     w = _accessor(g, blob, s.output).reshape(20, 52)
     np.testing.assert_allclose(w, blendshape_weights(tr.values, "arkit52"), atol=1e-7)
     assert w[:, jaw].max() > 0.3  # the mouth opens in this track
+    # The curves are blendshape weights in [0, 1], not mouth parameters: the file said "IOD".
+    assert g.asset.extras["facecast"]["units"] == "morph weight"
     with pytest.raises(ExportError, match="need a head that has them"):
         export_track(tmp_path / "b.glb", tr, head=builtin_rig_file, morphs="arkit52")
