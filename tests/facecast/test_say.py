@@ -110,6 +110,12 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
         moving = offsets - offsets.mean(0)
         assert np.sum((rebuilt - offsets) ** 2) < 0.1 * np.sum(moving**2)
     capsys.readouterr()
+    # A Spanish voice alone speaks Spanish (it was refused as "not one of en-us, ... for 'en'"); an explicit
+    # --lang still wins and names the mismatch.
+    assert main(["say", "Hola amigo.", "--voice", "es", "--corpus", str(corpus_file), "-o", str(out), "--verbose"]) == 0
+    assert "(espeak-es)" in capsys.readouterr().out
+    assert main(["say", "Hola.", "--voice", "es", "--lang", "en", "--corpus", str(corpus_file), "-o", str(out)]) == 2
+    assert "voice 'es' is not one of" in capsys.readouterr().err
     take = tmp_path / "take.wav"  # a user's recording: the .wav beside take.glb must not replace it
     take.write_bytes(b"RIFF recording")
     for argv, msg in (
