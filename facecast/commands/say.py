@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -173,12 +174,20 @@ def run(args: argparse.Namespace) -> int:
     lang = args.lang or language_of_voice(args.voice)
     t = time.perf_counter()
     if args.audio is not None:
-        from training.force_align import force_align
+        from training.force_align import force_align, speech_in_pauses_s
 
         if lang != "en":
             raise ConfigError("--audio needs English (the forced aligner's model is US English)")
         samples, rate = read_audio(args.audio)
         alignment = force_align(samples, rate, args.text, source=args.audio)
+        speech_s, unaligned_s = speech_in_pauses_s(samples, rate, alignment)
+        if unaligned_s > 1.0 and unaligned_s > 0.3 * speech_s:
+            # pocketsphinx aligns any transcript: one that does not match the recording used to pass silently
+            print(
+                f"facecast say: warning: {unaligned_s:.1f} of the {speech_s:.1f} s of speech in {args.audio} fall "
+                "outside the transcript's words: does the text match the recording?",
+                file=sys.stderr,
+            )
         phones = [(p.phoneme, p.start_s, p.end_s) for p in alignment.phones]
         inventory = "arpabet"
         duration_s = len(samples) / rate
