@@ -283,7 +283,11 @@ class EspeakSynthesizer:
 def _timeline(events: list[tuple[int, str]], n_samples: int, rate: int) -> tuple[PhonemeSegment, ...]:
     """Turn (start sample, phoneme) events into segments; "" events only close the previous one.
 
-    Zero-length phonemes (espeak emits some markers at the same sample) are dropped.
+    Zero-length phonemes (espeak emits some markers at the same sample) are dropped: a phoneme followed
+    at its own sample by another phoneme (boundary events between them aside) has no length.
+    espeak-ng starts a sentence-initial /m/ with a pause marker at the same sample ("Hello there. My":
+    ``_``, a clause end, ``m``); both were given the /m/'s span, and the unit selection, reading the
+    pause first, dropped the /m/: the lips stayed open through it.
     """
     events = sorted(events, key=lambda e: e[0])  # stable: keeps espeak's order at equal samples
     segs: list[PhonemeSegment] = []
@@ -291,9 +295,12 @@ def _timeline(events: list[tuple[int, str]], n_samples: int, rate: int) -> tuple
         if not name:
             continue
         end = n_samples
-        for later, _ in events[k + 1 :]:
+        for later, other in events[k + 1 :]:
             if later > start:
                 end = later
+                break
+            if other:  # another phoneme at this very sample: this one has no length
+                end = start
                 break
         end = min(end, n_samples)
         if end > start:

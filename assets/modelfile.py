@@ -85,8 +85,9 @@ def save_mlp_model(path: str | Path, model: MlpSpeechModel) -> Path:
 
 def load_mlp_model(path: str | Path) -> MlpSpeechModel:
     """Load and validate an MLP mapper file (``facecast mu`` writes one); a file of another kind or
-    version is refused naming the file and what it is."""
-    path = Path(path)
+    version is refused naming the file and what it is. A shipped model's name (``--mapper mlp --model
+    low-latency``) reads that file, to be refused as an HMM model rather than reported missing."""
+    path = resolve_model(path)
     data = _read(path)
     try:
         return decode_mlp_model(data)

@@ -15,7 +15,8 @@ Three ways in, one parser:
   (within 10 us); ``names`` / ``n_frames`` / ``start_s`` make it strict (the corpus contract:
   the exact header, exactly ``n_frames`` rows - fewer is :class:`TruncatedFileError` - and t = k / 30).
 - :func:`read_csv_resampled` (the renderer): any sample times, strictly increasing, columns picked by
-  name in any order, put on the video's frame grid by :func:`realtime_core.track.frames_from_samples`.
+  name in any order, put on the video's frame grid by :func:`realtime_core.track.frames_from_samples`;
+  :func:`read_params_resampled` the same for a CSV or a JSON of curves (``facecast render --params``).
 
 JSON (``facecast-curves`` version 1)::
 
@@ -196,3 +197,18 @@ def decode_json(data: bytes, *, source: str | Path = "<json>") -> Track:
 def read_json(path: str | Path) -> Track:
     """:func:`decode_json` of a file (errors name it)."""
     return decode_json(_read_bytes(path), source=Path(path))
+
+
+def read_params_resampled(path: str | Path, fps: float, *, names: tuple[str, ...] | None = None) -> Track:
+    """:func:`read_csv_resampled`, or for a ``.json`` file (``facecast animate --json``, ``say -o x.json``) its
+    curves picked by name and put on the frame grid ``k / fps`` the same way. `render --params x.json` was
+    refused with "header must be 't,<channel names>'" for facecast's own JSON export."""
+    if Path(path).suffix.lower() != ".json":
+        return read_csv_resampled(path, fps, names=names)
+    want = tuple(VISUAL_PARAMS if names is None else names)
+    tr = read_json(path)
+    missing = [n for n in want if n not in tr.names]
+    if missing or not len(tr.values):
+        raise CorpusFormatError(path, f"expected curves {list(want)} and at least one frame, got {list(tr.names)}")
+    cols = [tr.names.index(n) for n in want]
+    return frames_from_samples(tr.times(), tr.values[:, cols], fps, names=want)

@@ -67,6 +67,13 @@ class Speech:
         )
 
 
+def language_of_voice(voice: str | None, default: str = "en") -> str:
+    """The language whose espeak voices include ``voice``'s base ("es", "es-419+f2" -> "es"); ``default``
+    for None, a bare variant ("f3") or an unknown voice (which :func:`parse_voice` then names)."""
+    base = (voice or "").partition("+")[0]
+    return next((lang for lang, bases in LANGUAGES.items() if base in bases), default)
+
+
 def parse_voice(language: str, voice: str | None = None, *, rate_wpm: int = 175) -> Voice:
     """An espeak voice for ``language`` ("en", "es"): ``voice`` like "en-us", "en-gb-x-rp+f3", "es"
     or just a variant "f3"; None = the language's first voice."""

@@ -71,13 +71,16 @@ def main(argv: list[str] | None = None) -> int:
     from facecast.commands.bench import FORWARDED, run_forwarded
 
     if len(argv) >= 2 and argv[0] == "bench" and argv[1] in FORWARDED:
-        # Benchmarks with their own parsers get everything after their name.
-        return run_forwarded(argv[1], argv[2:])
-    args = build_parser().parse_args(argv)
+        # Benchmarks with their own parsers get everything after their name (and the same one-line errors:
+        # `bench latency --model missing.npz` was a traceback).
+        command, run = "bench", lambda: run_forwarded(argv[1], argv[2:])
+    else:
+        args = build_parser().parse_args(argv)
+        command, run = args.command, lambda: args.run(args)
     try:
-        return int(args.run(args) or 0)
+        return int(run() or 0)
     except FacecastError as exc:  # the one root: a user-facing error prints one line, no traceback
-        print(f"facecast {args.command}: error: {exc}", file=sys.stderr)
+        print(f"facecast {command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

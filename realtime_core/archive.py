@@ -13,6 +13,12 @@ import numpy as np
 
 from realtime_core.errors import ModelFormatError
 
+AVMODEL_FORMAT = "facecast-avmodel"
+"""``format`` of an HMM model file (:mod:`realtime_core.avmodel`)."""
+MLP_MAPPER_FORMAT = "facecast-mlpmapper"
+"""``format`` of an MLP mapper file (:mod:`realtime_core.mapping.model`). Both names live here so that each
+reader can tell a file of the other kind by name ("use --mapper mlp") without importing the other."""
+
 
 def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     """``.npz`` archive bytes of named arrays (no pickle): the container of every model file."""

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
-from realtime_core.archive import npz_arrays, npz_bytes
+from realtime_core.archive import AVMODEL_FORMAT, MLP_MAPPER_FORMAT, npz_arrays, npz_bytes
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
 from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, LevelNormConfig, MfccConfig
 from realtime_core.hmm.model import AvHmm
@@ -40,7 +40,7 @@ from realtime_core.inversion import (
 from realtime_core.output import OutputStage
 from realtime_core.readout import Readout, decode_readout, encode_readout
 
-FORMAT = "facecast-avmodel"
+FORMAT = AVMODEL_FORMAT
 VERSION = 1
 _HMM_ARRAYS = ("startprob", "transmat", "weights", "means", "covars")
 _FORM_ARRAYS = ("center", "quad", "quad0", "reg", "reg0", "phi_v", "chol_vv", "logdet_v")
@@ -212,11 +212,15 @@ def encode_model(model: AvModel) -> bytes:
 def decode_model(data: bytes) -> AvModel:
     """Parse and validate ``.npz`` bytes; raises :class:`ModelFormatError` naming the problem."""
     arrays = npz_arrays(data, "model")
+    # The kind first: a mapper file given as a model was refused for lacking 'startprob'.
+    kind = str(arrays["format"]) if "format" in arrays else None
+    if kind == MLP_MAPPER_FORMAT:
+        raise ModelFormatError(f"this is an MLP mapper ({MLP_MAPPER_FORMAT!r}), not an HMM model: use --mapper mlp")
+    if kind is not None and kind != FORMAT:
+        raise ModelFormatError(f"format is {kind!r}, expected {FORMAT!r}")
     for key in ("format", "version", "config_json", "cmvn_mean", "cmvn_var", *_HMM_ARRAYS, *_FORM_ARRAYS):
         if key not in arrays:
             raise ModelFormatError(f"model archive lacks the array {key!r}")
-    if str(arrays["format"]) != FORMAT:
-        raise ModelFormatError(f"format is {str(arrays['format'])!r}, expected {FORMAT!r}")
     if int(arrays["version"]) != VERSION:
         raise ModelFormatError(f"model version {int(arrays['version'])} is not supported (expected {VERSION})")
     try:

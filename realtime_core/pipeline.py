@@ -137,13 +137,29 @@ def speech_to_params_and_mups(
     x = as_float_samples(samples)
     if rate_hz is not None and int(rate_hz) != model.sample_rate_hz:
         x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
-    p = SpeechToParams(model)
-    a = p.push(x)
-    ma = p.last_mups
-    b = p.flush()
-    mb = p.last_mups
-    mups = None if ma is None or mb is None else np.concatenate([ma, mb])
-    return np.concatenate([a, b]), mups
+    return _run_blocks(SpeechToParams(model), x)
+
+
+PUSH_BLOCK_S = 10.0
+"""Seconds of audio per push when a whole utterance runs through the live chain. One push of a whole
+file framed all of it at once (the MFCC frames and spectra of every hop): 610 MB of numpy arrays at
+the peak for a 10-minute file, growing with its length; blocks keep that bounded (41 MB) and give the
+same rows bit for bit (the chain is chunking-invariant)."""
+
+
+def _run_blocks(p: SpeechToParams, x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``x (n,)`` model-rate samples through ``p`` in :data:`PUSH_BLOCK_S` blocks, then its flush:
+    ``(params (F, Dv), mups (F, A0) or None)``."""
+    step = max(1, int(PUSH_BLOCK_S * p.model.sample_rate_hz))
+    rows: list[np.ndarray] = []
+    mups: list[np.ndarray] | None = []
+    for i in [*range(0, len(x), step), -1]:
+        rows.append(p.push(x[i : i + step]) if i >= 0 else p.flush())
+        if mups is not None and p.last_mups is not None:
+            mups.append(p.last_mups)
+        else:
+            mups = None
+    return np.concatenate(rows), None if mups is None else np.concatenate(mups)
 
 
 def speech_to_params(
@@ -176,8 +192,7 @@ def speech_to_params(
             f"({x.size} < {model.frontend.mfcc.window_len} samples at {model.sample_rate_hz} Hz)"
         )
     if mode == "stream":
-        p = SpeechToParams(model, stream=stream)
-        return np.concatenate([p.push(x), p.flush()])
+        return _run_blocks(SpeechToParams(model, stream=stream), x)[0]
     assert isinstance(model, AvModel)  # refused above otherwise; narrows the type for what follows
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])

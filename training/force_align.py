@@ -19,12 +19,17 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import to_int16
+from realtime_core.features.mfcc import loudness_db
 from realtime_core.features.resample import resample_audio
+from realtime_core.synthesis.visemes import viseme_of
 from training.alignments import Alignment, Phone
 from training.errors import AlignmentFormatError, MissingDependencyError
 
 FRAME_S = 0.01
 """pocketsphinx's frame period: alignment times are multiples of 10 ms."""
+
+SPEECH_BELOW_PEAK_DB = 25.0
+"""A frame is speech when its level is within this of the recording's loud frames (95th percentile)."""
 
 
 def normalise_transcript(text: str) -> list[str]:
@@ -87,3 +92,21 @@ def find_transcripts(root: str | Path) -> dict[Path, str]:
         if wav.is_file() and wav not in out:
             out[wav] = txt.read_text(encoding="utf-8", errors="replace").strip()
     return out
+
+
+def speech_in_pauses_s(samples: np.ndarray, rate_hz: int, alignment: Alignment) -> tuple[float, float]:
+    """``(speech_s, in_pauses_s)``: seconds of speech in the recording (30 fps frames within
+    :data:`SPEECH_BELOW_PEAK_DB` of its 95th-percentile level, :func:`loudness_db`) and how many of them the
+    alignment puts in its pauses. pocketsphinx aligns any transcript, matching or not, and pads the rest
+    with silence: on the shared LibriVox and LJ Speech clips with their own transcripts 0.0-0.3 s (0-11 %)
+    of the speech fell in pauses; with another clip's transcript, or one word, 3.5-6.0 s (55-93 %)."""
+    n = int(len(samples) * 30 / rate_hz)
+    if n == 0:
+        return 0.0, 0.0
+    level = loudness_db(samples, rate_hz, n)
+    speech = level > np.percentile(level, 95) - SPEECH_BELOW_PEAK_DB
+    pause = np.zeros(n, dtype=bool)
+    for ph in alignment.phones:
+        if viseme_of(ph.phoneme, alignment.inventory, default="sil") == "sil":
+            pause[int(round(ph.start_s * 30)) : int(round(ph.end_s * 30))] = True
+    return float(speech.sum() / 30), float((speech & pause).sum() / 30)

@@ -533,9 +533,13 @@ def score_saved(out: Path, root=None, *, cache_dir=None, say: Say = print) -> di
     if idx != mu_landmark_indices():
         raise ConfigError(f"{out / 'motion_units.npz'}: landmark set differs from this version's MU_LANDMARKS")
     mlp = load_mlp_model(out / "mlp_mapper.npz")
-    clips = with_features(load_clips(root, cache_dir=cache_dir, skipped=[]), mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
-    train, test = of_split(clips, "train"), of_split(clips, "test")
     report = json.loads((out / "report.json").read_text())
+    # The sentences the run used: a `facecast mu --limit N` run was re-scored on all 900 (measuring every
+    # uncached clip's face first, ~1.3 s each) and reported beside test numbers of other sentences.
+    limit = report.get("config", {}).get("limit")
+    clips = load_clips(root, cache_dir=cache_dir, limit=limit, skipped=[])
+    clips = with_features(clips, mlp.frontend, mlp.cmvn_mean, mlp.cmvn_var)
+    train, test = of_split(clips, "train"), of_split(clips, "test")
     systems: dict[str, MlpMapper | AvModel] = {"mlp": mlp.mapper()}
     if (out / "hmm_mups.npz").is_file():
         systems["hmm"] = load_model(out / "hmm_mups.npz")

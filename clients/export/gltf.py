@@ -32,8 +32,10 @@ def animated_glb(
     colors: np.ndarray | None = None,
     texture: bytes | None = None,
     audio: str | None = None,
+    units: str = "IOD",
 ) -> bytes:
-    """:func:`assets.heads.glb.animated_glb` with the track's values as the weights (ExportError on bad input)."""
+    """:func:`assets.heads.glb.animated_glb` with the track's values as the weights (ExportError on bad input);
+    ``units``: what the weights measure, recorded in ``asset.extras.facecast``."""
     try:
         return glb.animated_glb(
             vertices=vertices,
@@ -46,6 +48,7 @@ def animated_glb(
             colors=colors,
             texture=texture,
             audio=audio,
+            units=units,
         )
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
@@ -108,4 +111,5 @@ def arkit_glb(
         colors=mesh.colors,
         texture=mesh.texture if mesh.uvs is not None else None,
         audio=audio,
+        units="morph weight",  # ARKit weights in [0, 1], as a morph head's own targets' glb says
     )

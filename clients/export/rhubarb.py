@@ -13,9 +13,13 @@ set against ``training.params.TYPICAL_RANGES``, e.g. mouth_open spans 0 .. 0.45 
     lip_stretch <= -round (-0.06):  F if mouth_open < rounded_open (0.15) else E
     mouth_open < b_open (0.12): B;   mouth_open < c_open (0.25): C;   otherwise D
 
-H is never chosen: the four parameters do not observe the tongue. Consecutive frames of one shape
-merge into one cue; a run shorter than ``min_cue_frames`` joins the cue before it (Rhubarb, too,
-avoids one-frame flicker). TSV: one ``start<TAB>shape`` line per cue, start in seconds with 2
+H is never chosen: the four parameters do not observe the tongue. Lips closed for at most
+``closure_frames`` (0.2 s) between open frames are a closure, A, pressed or not: X is Rhubarb's idle
+shape for pauses, and a /m/ closed without the press read as a pause inside the word. Consecutive
+frames of one shape merge into one cue; a run shorter than ``min_cue_frames`` joins the cue before it
+(Rhubarb, too, avoids one-frame flicker), except A: a closure is shown however short (merged, a
+one-frame /b/ vanished into the vowel before it; 3 of the 9 /p b m/ of a 10-word `facecast say`
+sentence had no A cue). TSV: one ``start<TAB>shape`` line per cue, start in seconds with 2
 decimals, and a last ``end<TAB>X`` line (the mouth rests after the speech), as Rhubarb writes.
 """
 
@@ -34,7 +38,8 @@ SHAPES = "ABCDEFGHX"
 
 @dataclass(frozen=True, kw_only=True)
 class ShapeThresholds:
-    """Thresholds of the rules in the module docstring, in IOD; min_cue_frames >= 1."""
+    """Thresholds of the rules in the module docstring, in IOD; min_cue_frames >= 1 and closure_frames >= 0
+    in frames."""
 
     closed: float = 0.04
     press: float = 0.01
@@ -45,12 +50,15 @@ class ShapeThresholds:
     b_open: float = 0.12
     c_open: float = 0.25
     min_cue_frames: int = 2
+    closure_frames: int = 6
 
     def __post_init__(self) -> None:
         if not 0 < self.closed < self.b_open < self.c_open:
             raise ExportError("thresholds must satisfy 0 < closed < b_open < c_open")
         if not isinstance(self.min_cue_frames, int) or self.min_cue_frames < 1:
             raise ExportError(f"min_cue_frames must be an integer >= 1, got {self.min_cue_frames!r}")
+        if not isinstance(self.closure_frames, int) or self.closure_frames < 0:
+            raise ExportError(f"closure_frames must be an integer >= 0, got {self.closure_frames!r}")
 
 
 @dataclass(frozen=True)
@@ -88,6 +96,18 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"mouth shapes need the parameters {VISUAL_PARAMS}, got {track.names}")
     shapes = frame_shapes(track.values, th)
+    closed = [s in "AX" for s in shapes]
+    k = 0
+    while k < len(shapes):  # a short closed run between open frames is a closure: A
+        if not closed[k]:
+            k += 1
+            continue
+        end = k
+        while end < len(shapes) and closed[end]:
+            end += 1
+        if k > 0 and end < len(shapes) and end - k <= th.closure_frames:
+            shapes[k:end] = ["A"] * (end - k)
+        k = end
     runs: list[list] = []  # [first frame, shape, length]
     for k, s in enumerate(shapes):
         if runs and runs[-1][1] == s:
@@ -96,7 +116,7 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
             runs.append([k, s, 1])
     merged: list[list] = []
     for first, shape, length in runs:
-        if merged and (length < th.min_cue_frames or merged[-1][1] == shape):
+        if merged and ((length < th.min_cue_frames and shape != "A") or merged[-1][1] == shape):
             merged[-1][2] += length  # too short to show, or equal to the cue it now follows
         else:
             merged.append([first, shape, length])

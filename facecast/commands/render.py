@@ -29,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_mapper_options(p)
     add_expression_options(p)
-    p.add_argument("--params", help="mouth parameters CSV instead of the speech model")
+    p.add_argument("--params", help="mouth parameters CSV (or facecast's JSON curves) instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4; also .mov, .m4v, .mkv)")
     p.add_argument("--png-dir", help="also write every frame as PNG into this folder")
     p.add_argument("--view", choices=("front", "three_quarter"), default="front", help="camera view")
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from assets.files import make_parent
-    from assets.tracks import read_csv_resampled
+    from assets.tracks import read_params_resampled
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if not Path(args.speech).is_file():
         raise RenderError(f"{args.speech}: speech file not found")
     if args.params:
-        frames = read_csv_resampled(args.params, args.fps).values
+        frames = read_params_resampled(args.params, args.fps).values
     else:
         track = params_for_audio(args.speech, args.model, mapper=args.mapper)
         if track.fps != args.fps:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -33,8 +34,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         required=True,
         help="output file, .mp4/.glb/.csv/.json/.tsv/.wav/.npz (repeatable)",
     )
-    p.add_argument("--lang", choices=("en", "es"), default="en", help="language of TEXT")
-    p.add_argument("--voice", default=None, help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es, or a variant f3")
+    p.add_argument(
+        "--lang", choices=("en", "es"), default=None, help="language of TEXT (default: the --voice's, else en)"
+    )
+    p.add_argument(
+        "--voice",
+        default=None,
+        help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es (Spanish without --lang), or a variant f3",
+    )
     p.add_argument("--rate", type=int, default=175, help="speaking rate, words per minute")
     p.add_argument(
         "--audio",
@@ -161,14 +168,26 @@ def run(args: argparse.Namespace) -> int:
         timings[name] = now - t0
         return now
 
+    from assets.tts import language_of_voice
+
+    # `--voice es` alone was refused as "not one of en-us, en, ... for 'en'": the voice names its language
+    lang = args.lang or language_of_voice(args.voice)
     t = time.perf_counter()
     if args.audio is not None:
-        from training.force_align import force_align
+        from training.force_align import force_align, speech_in_pauses_s
 
-        if args.lang != "en":
+        if lang != "en":
             raise ConfigError("--audio needs English (the forced aligner's model is US English)")
         samples, rate = read_audio(args.audio)
         alignment = force_align(samples, rate, args.text, source=args.audio)
+        speech_s, unaligned_s = speech_in_pauses_s(samples, rate, alignment)
+        if unaligned_s > 1.0 and unaligned_s > 0.3 * speech_s:
+            # pocketsphinx aligns any transcript: one that does not match the recording used to pass silently
+            print(
+                f"facecast say: warning: {unaligned_s:.1f} of the {speech_s:.1f} s of speech in {args.audio} fall "
+                "outside the transcript's words: does the text match the recording?",
+                file=sys.stderr,
+            )
         phones = [(p.phoneme, p.start_s, p.end_s) for p in alignment.phones]
         inventory = "arpabet"
         duration_s = len(samples) / rate
@@ -177,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         from assets.tts import speak
 
         # silence before and after, the face at rest there (a user's --audio keeps its own ends)
-        speech = speak(args.text, language=args.lang, voice=args.voice, rate_wpm=args.rate).padded()
+        speech = speak(args.text, language=lang, voice=args.voice, rate_wpm=args.rate).padded()
         samples, rate, phones, inventory, duration_s = (
             speech.samples,
             speech.sample_rate_hz,

@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         help="model file (.npz) or a shipped name: default, low-latency (docs/default_model.md); "
-        "--mapper mlp needs a mapper file",
+        "with --mapper mlp: a mapper file (default: the shipped one)",
     )
     from facecast.commands.speech_options import add_mapper_options
 
@@ -133,8 +133,9 @@ def run(args: argparse.Namespace) -> int:
         else ServerConfig(**{k: v for k, v in overrides.items() if v is not None})
     )
     model = load_speech_model(args.mapper, args.model)
+    kind = "MLP mapper" if args.mapper == "mlp" else "model"
     print(
-        f"facecast serve: model {args.model or 'default'}, algorithmic delay "
+        f"facecast serve: {kind} {args.model or 'default'}, algorithmic delay "
         f"{model.frontend.algorithmic_delay_ms():.1f} ms (lag 0; docs/architecture.md, Delay)",
         flush=True,
     )

@@ -36,7 +36,10 @@ def expression_intensities(args: argparse.Namespace, n_frames: int, fps: float =
         return None
     from realtime_core.expressions import ExpressionConfig, ExpressionTrack, parse_expression
 
-    track = ExpressionTrack(ExpressionConfig(ease_s=args.expression_ease))
+    # A file's whole length is known: a change may be set anywhere in it. The live limit (600 s ahead of the
+    # newest frame) refused `--expression smile@700` on a 13-minute file.
+    ahead = min(86400.0, max(ExpressionConfig.max_ahead_s, n_frames / fps))
+    track = ExpressionTrack(ExpressionConfig(ease_s=args.expression_ease, max_ahead_s=ahead))
     for spec in args.expression:
         name, intensity, at = parse_expression(spec)
         track.schedule(name, intensity, at)

@@ -19,8 +19,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS, visual_floor
-from realtime_core.archive import npz_arrays, npz_bytes, require_npz
-from realtime_core.avmodel import FORMAT as AVMODEL_FORMAT
+from realtime_core.archive import AVMODEL_FORMAT, MLP_MAPPER_FORMAT, npz_arrays, npz_bytes, require_npz
 from realtime_core.avmodel import (
     AvModel,
     decode_model,
@@ -35,7 +34,7 @@ from realtime_core.mapping.expression import STAGE_ARRAYS, ExpressionMapper, Exp
 from realtime_core.mapping.mlp import MlpBank, MlpMapper, StreamingMlpMapper
 from realtime_core.output import OutputStage
 
-FORMAT = "facecast-mlpmapper"
+FORMAT = MLP_MAPPER_FORMAT
 VERSION = 1
 _BANK_ARRAYS = ("gmm_log_weights", "gmm_means", "gmm_vars", "w1", "b1", "w2", "b2", "hidden")
 

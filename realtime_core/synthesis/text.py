@@ -7,8 +7,11 @@ pushes of any size and returns the sentences now complete (a sentence ends at ``
 sentences come out whatever the chunking (tested).
 
 :func:`clean_text` keeps what a synthesiser can pronounce: letters of any alphabet, digits, white
-space and ordinary punctuation; anything else (control characters, emoji, symbols) becomes a
-space. Text with nothing pronounceable left raises :class:`TextError` naming the problem.
+space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``:
+espeak-ng reads "$20 or 50%" as "dollar twenty or fifty percent"; without the signs it was "twenty or
+fifty"); anything else (control characters, emoji, other symbols) becomes a space. ``#``
+and ``*`` go too: in a chatbot's markdown they are headings and emphasis, not words. Text with nothing
+pronounceable left raises :class:`TextError` naming the problem.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ MAX_TEXT_CHARS = 5000
 """Longest text accepted in one request (about five minutes of speech)."""
 
 _KEEP_PUNCT = set(".,;:!?'\"-()¿¡’")
+_SPOKEN_SYMBOLS = set("%&+=/@°")
+"""Symbols the synthesiser reads as words ("percent", "and", "plus" ...); currency signs (category Sc) too."""
 _SENTENCE_END = re.compile(r"[.!?;:]+[\"')\]]*\s+|\n\s*")
 
 
@@ -41,7 +46,8 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     out = []
     for ch in unicodedata.normalize("NFC", text):
         cat = unicodedata.category(ch)
-        out.append(ch if cat[0] in "LN" or ch in _KEEP_PUNCT or ch.isspace() else " ")
+        keep = cat[0] in "LN" or cat == "Sc" or ch in _KEEP_PUNCT or ch in _SPOKEN_SYMBOLS or ch.isspace()
+        out.append(ch if keep else " ")
     cleaned = re.sub(r"\s+", " ", "".join(out)).strip()
     if not cleaned:
         raise TextError("empty text" if not text.strip() else f"no pronounceable characters in {text[:40]!r}")

@@ -33,6 +33,15 @@ def test_names_resolve_to_the_shipped_files_and_paths_stay_paths(tmp_path):
         load_model("low_latency")
 
 
+def test_a_shipped_hmm_name_given_to_the_mlp_mapper_is_named_as_such():
+    # `--mapper mlp --model low-latency` said "model file not found (nor a shipped name: default, low-latency)".
+    from assets.modelfile import load_speech_model
+
+    for name in ("low-latency", "default"):
+        with pytest.raises(ModelFileError, match=r"this is an HMM model .* use --mapper hmm"):
+            load_speech_model("mlp", name)
+
+
 def test_low_latency_model_loads_is_under_80_ms_and_differs_from_the_default():
     low, default = load_model("low-latency"), load_model("default")
     assert low.algorithmic_delay_ms() <= 80.0 < default.algorithmic_delay_ms()

@@ -142,6 +142,24 @@ def test_resampling_reader_keeps_every_frame_of_a_facecast_csv(tmp_path):
         np.testing.assert_allclose(back.values, tr.values, atol=1e-6)
 
 
+def test_render_reads_a_facecast_json_like_its_csv(tmp_path):
+    """`render --params take.json` (facecast's own `animate --json` export) was refused: "header must be
+    't,<channel names>'". Now the same frames as the CSV of the same track, at 30 fps and resampled."""
+    from assets.tracks import read_params_resampled
+
+    tr = syllable_track(37)
+    (tmp_path / "take.json").write_bytes(encode_json(tr))
+    write_csv(tmp_path / "take.csv", tr)
+    for fps in (30.0, 25.0):
+        js, cs = (read_params_resampled(tmp_path / f"take.{ext}", fps) for ext in ("json", "csv"))
+        assert js.names == cs.names == VISUAL_PARAMS and js.n_frames == cs.n_frames
+        np.testing.assert_allclose(js.values, cs.values, atol=1e-6)
+    other = Track(values=np.zeros((3, 2)), names=("a", "b"))
+    (tmp_path / "other.json").write_bytes(encode_json(other))
+    with pytest.raises(CorpusFormatError, match=r"other\.json: expected curves"):
+        read_params_resampled(tmp_path / "other.json", 30.0)
+
+
 def test_resampling_reader_errors_name_the_file(tmp_path):
     with pytest.raises(CorpusFormatError, match=r"nope\.csv: parameters file not found"):
         read_csv_resampled(tmp_path / "nope.csv", 30.0)

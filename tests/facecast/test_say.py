@@ -110,6 +110,12 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
         moving = offsets - offsets.mean(0)
         assert np.sum((rebuilt - offsets) ** 2) < 0.1 * np.sum(moving**2)
     capsys.readouterr()
+    # A Spanish voice alone speaks Spanish (it was refused as "not one of en-us, ... for 'en'"); an explicit
+    # --lang still wins and names the mismatch.
+    assert main(["say", "Hola amigo.", "--voice", "es", "--corpus", str(corpus_file), "-o", str(out), "--verbose"]) == 0
+    assert "(espeak-es)" in capsys.readouterr().out
+    assert main(["say", "Hola.", "--voice", "es", "--lang", "en", "--corpus", str(corpus_file), "-o", str(out)]) == 2
+    assert "voice 'es' is not one of" in capsys.readouterr().err
     take = tmp_path / "take.wav"  # a user's recording: the .wav beside take.glb must not replace it
     take.write_bytes(b"RIFF recording")
     for argv, msg in (
@@ -169,6 +175,13 @@ def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
     )
     n = len(out.read_text().splitlines()) - 1
     assert n == int(np.ceil(len(samples) / rate * 30 - 1e-9))
+    assert "warning" not in capsys.readouterr().err
+    # another clip's transcript is aligned all the same (pocketsphinx pads it with silence): it used to pass
+    # silently; now most of the recording's speech falling in the alignment's pauses is pointed out
+    other = stem.with_name("sense_and_sensibility_01_austen_64kb-0870.wav")
+    argv = ["say", stem.with_suffix(".txt").read_text(), "--audio", str(other), "--corpus", str(corpus_file)]
+    assert main([*argv, "-o", str(tmp_path / "other.csv")]) == 0
+    assert "s of speech in" in capsys.readouterr().err
     # text + recording (the default with --audio) lies between the text-only motion and the
     # audio-driven model's output on the same recording, and moved towards the latter
     text_only = tmp_path / "text_only.csv"

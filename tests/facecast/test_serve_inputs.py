@@ -17,3 +17,12 @@ def test_a_bad_file_source_fails_before_listening(tmp_path, capsys):
         out, err = capsys.readouterr()
         assert "listening" not in out, out
         assert len(err.strip().splitlines()) == 1 and f"{bad}: {problem}" in err, err
+
+
+def test_the_start_line_names_the_mlp_mapper(tmp_path, capsys):
+    # `facecast serve --mapper mlp` announced "model default" (the HMM's name) for the MLP mapper it served.
+    notes = tmp_path / "notes.wav"
+    notes.write_text("not audio")
+    assert main(["serve", "--port", "0", "--no-head", "--mapper", "mlp", "--file", str(notes)]) == 2
+    out = capsys.readouterr().out
+    assert "facecast serve: MLP mapper default, algorithmic delay" in out, out

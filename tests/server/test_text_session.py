@@ -108,6 +108,23 @@ def test_clean_text_keeps_pronounceable_characters_and_rejects_the_rest():
             clean_text(bad)
 
 
+def test_clean_text_keeps_the_symbols_a_synthesiser_reads_as_words():
+    # "$19.99 or 50%" lost its dollar and percent: espeak-ng reads both signs, the cleaning dropped them.
+    assert clean_text("Pay $19.99 or 50% (€5, £3) at 3:45 on 12/05 & a+b=c @ 20°") == (
+        "Pay $19.99 or 50% (€5, £3) at 3:45 on 12/05 & a+b=c @ 20°"
+    )
+    # Markdown marks and emoji are not words.
+    assert clean_text("## Title **bold** 👍") == "Title bold"
+
+
+def test_spoken_symbols_reach_the_synthesiser(espeak):
+    from assets.tts import speak
+
+    # More phones with the sign than without: the words "percent" and "dollar" are spoken.
+    with_signs, without = speak("$20 or 50%", language="en"), speak("20 or 50", language="en")
+    assert len(with_signs.phones) >= len(without.phones) + 8
+
+
 def test_sentences_share_one_media_timeline(backend):
     s = TextSession(backend, language="en", voice=None)
     outs1, rep1 = s.speak("Hello world.")

@@ -80,6 +80,19 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
     assert all(c.shape in SHAPES for c in real) and len(real) >= 4
 
 
+def test_a_closure_inside_speech_is_an_a_cue_however_short():
+    # A one-frame /b/ merged into the vowel before it, and lips closed without the press read as X, the
+    # idle shape for pauses: 3 of the 9 /p b m/ of a 10-word `facecast say` sentence had no A cue.
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "A": [-0.02, 0, 0.01, 0], "B": [0, 0, 0.08, 0]}
+    shapes = ["X"] * 8 + ["D"] * 4 + ["A"] + ["D"] * 4 + ["X"] * 2 + ["B"] * 4 + ["X"] * 8
+    tr = Track(values=np.array([table[s] for s in shapes]))
+    assert "".join(frame_shapes(tr.values)) == "".join(shapes)  # the per-frame rules are unchanged
+    got = [(round(c.start_s * 30), c.shape) for c in cues(tr)]
+    # the rests before and after stay X; the pressed frame and the unpressed closure are A
+    assert got == [(0, "X"), (8, "D"), (12, "A"), (13, "D"), (17, "A"), (19, "B"), (23, "X")]
+    assert [c.shape for c in cues(tr, ShapeThresholds(closure_frames=1))][4] == "X"  # 2 frames: a pause
+
+
 def _synthetic_head(n: int = 60, seed: int = 1):
     rng = np.random.default_rng(seed)
     v = rng.standard_normal((n, 3))
@@ -271,5 +284,7 @@ def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(t
     w = _accessor(g, blob, s.output).reshape(20, 52)
     np.testing.assert_allclose(w, blendshape_weights(tr.values, "arkit52"), atol=1e-7)
     assert w[:, jaw].max() > 0.3  # the mouth opens in this track
+    # The curves are blendshape weights in [0, 1], not mouth parameters: the file said "IOD".
+    assert g.asset.extras["facecast"]["units"] == "morph weight"
     with pytest.raises(ExportError, match="need a head that has them"):
         export_track(tmp_path / "b.glb", tr, head=builtin_rig_file, morphs="arkit52")

@@ -169,6 +169,21 @@ def test_hmm_file_given_as_mlp_mapper_is_named() -> None:
     assert isinstance(av, SpeechModel) and isinstance(av.visual_mapper(), VisualMapper)
 
 
+def test_mlp_mapper_given_as_hmm_model_is_named(bank_and_data) -> None:
+    # The reverse of the above was refused for "lacking the array 'startprob'".
+    from realtime_core.avmodel import decode_model
+
+    model = MlpSpeechModel(
+        bank=bank_and_data[0],
+        frontend=FE,
+        cmvn_mean=np.zeros(FE.n_feat),
+        cmvn_var=np.ones(FE.n_feat),
+        visual_names=("a", "b"),
+    )
+    with pytest.raises(ModelFormatError, match=r"this is an MLP mapper .* use --mapper mlp"):
+        decode_model(encode_mlp_model(model))
+
+
 def test_stream_misuse_and_bad_features(bank_and_data) -> None:
     bank, x, _, _ = bank_and_data
     model = MlpSpeechModel(
