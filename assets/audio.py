@@ -113,6 +113,17 @@ def read_wav(
     return x.astype(np.float32), int(rate)
 
 
+def check_audio_path(path: str | Path) -> Path:
+    """``path`` as a Path when it names an existing file; else :class:`NotAudioError` saying what it is instead
+    (missing, or a folder: a user giving a folder of takes is told so, not that nothing is there)."""
+    path = Path(path)
+    if path.is_dir():
+        raise NotAudioError(path, "is a folder, not an audio file (give one file)")
+    if not path.is_file():
+        raise NotAudioError(path, "file not found")
+    return path
+
+
 def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndarray, int]:
     """Decode ``path`` to mono: ``(samples (n,) float32 in [-1, 1], sample_rate_hz)``.
 
@@ -123,9 +134,7 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     Raises :class:`NotAudioError` (or another :class:`training.errors.FileProblem`) naming
     the file and the problem.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise NotAudioError(path, "file not found")
+    path = check_audio_path(path)
     if path.suffix.lower() == ".wav" and rate_hz is None:
         try:
             # A silent clip is a take, not a mistake (a pause line): it animates a closed mouth, as an

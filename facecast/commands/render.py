@@ -44,9 +44,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.audio import check_audio_path
     from assets.files import make_parent
     from assets.tracks import read_params_resampled
-    from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
     from realtime_core.track import frames_from_samples
@@ -54,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
     make_parent(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     if args.png_dir:
         make_parent(Path(args.png_dir) / "frame_00000.png")
-    if not Path(args.speech).is_file():
-        raise RenderError(f"{args.speech}: speech file not found")
+    check_audio_path(args.speech)
     if args.params:
         frames = read_params_resampled(args.params, args.fps).values
     else:

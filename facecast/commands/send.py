@@ -31,12 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
+    from assets.audio import check_audio_path
     from clients.client import ingest_file
-    from clients.errors import ClientError
     from facecast.commands.view import token_from_env
 
-    if not args.speech.is_file():
-        raise ClientError(f"{args.speech}: speech file not found")
+    check_audio_path(args.speech)
     token = token_from_env(args.token_env)
     session = args.session if args.session is not None else args.speech.stem
     pace = "as fast as the server takes it" if args.fast else "in real time"

@@ -58,3 +58,12 @@ def test_a_wav_whose_chunk_runs_past_the_riff_size_is_one_error_naming_the_file(
     bad.write_bytes(good[:4] + (20).to_bytes(4, "little") + good[8:12] + junk + good[12:])
     with pytest.raises(NotAudioError, match=r"bad\.wav: "):
         read_audio(bad)
+
+
+def test_a_folder_or_a_missing_file_is_named_as_such(tmp_path):
+    """A folder given as speech (a user pointing at a folder of takes) is told it is a folder, not that nothing
+    is there; a missing path says it is missing."""
+    with pytest.raises(NotAudioError, match="is a folder, not an audio file"):
+        read_audio(tmp_path)
+    with pytest.raises(NotAudioError, match=r"nope\.wav: file not found"):
+        read_audio(tmp_path / "nope.wav")

@@ -66,7 +66,8 @@ def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
         cases = [
             ([str(wav), closed], "cannot connect"),
             ([str(wav), "127.0.0.1:1"], "not a server URL"),
-            ([str(tmp_path / "nope.wav"), srv.url], "nope.wav: speech file not found"),
+            ([str(tmp_path / "nope.wav"), srv.url], "nope.wav: file not found"),
+            ([str(tmp_path), srv.url], "is a folder, not an audio file"),
             ([str(notes), srv.url], "notes.txt"),
         ]
         for args, want in cases:
