@@ -72,7 +72,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "lips best: r 0.908 against 0.846, at about 15-45 ms of synthesis per sequence; docs/unit_selection.md)",
     )
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.speech_options import add_expression_options
 
+    add_expression_options(p)
     add_head_options(p, help_head="head for .mp4/.glb: 'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)")
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
@@ -146,6 +148,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
+    from facecast.commands.speech_options import apply_expressions
     from realtime_core.synthesis.rest import RestPauses
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
     from realtime_core.track import Track
@@ -157,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, .wav, {', '.join(FORMATS)})")
     check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
+    apply_expressions(np.zeros((1, 4)), args)  # a misspelt --expression fails before any synthesis
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):
         raise ConfigError(f"{args.audio}: an output would overwrite the --audio recording; give it another name")
     for o in outs:  # before any work; an .mp4's temporary folder is made beside it, so its folder must exist
@@ -215,14 +219,19 @@ def run(args: argparse.Namespace) -> int:
         res = synth.synthesize(phones, inventory, n_frames=n_frames, n_best=args.n_best, rest_pauses=rest)
         t = lap("unit selection", t)
         motion = res.frames
-        if args.audio is not None and args.audio_blend:
+        mixed = args.audio is not None and args.audio_blend
+        if mixed:
             from assets.modelfile import load_model
             from realtime_core.pipeline import speech_to_params
 
             motion = synth.with_recording(res, speech_to_params(load_model(None), samples, rate))
             t = lap("audio-driven blend", t)
     k = stored.corpus.n_coefficients
-    params = motion[:, k:]
+    # Expressions layer on the four parameters as on an audio-driven file (animate, render): every output
+    # carries them, the .npz's parameter columns too (its landmark coefficients stay the recorded lips').
+    params = apply_expressions(motion[:, k:], args)
+    if args.expression:
+        motion = np.concatenate([motion[:, :k], params], axis=1)
     track = Track(values=params)
     head = None
     if any(o.suffix.lower() in (".mp4", ".glb") for o in outs):
@@ -267,7 +276,7 @@ def run(args: argparse.Namespace) -> int:
         + (f", {sel.n_mismatched} junctions outside the corpus's visemes" if sel.n_mismatched else "")
         + (f", {tgt.substituted} phones shown by a look-alike viseme" if tgt.substituted else "")
         + (f", unknown phones {sorted(set(tgt.unknown))}" if tgt.unknown else "")
-        + (", the recording's audio-driven motion mixed in" if motion is not res.frames else "")
+        + (", the recording's audio-driven motion mixed in" if mixed else "")
     )
     if args.verbose:
         sent = stored.corpus.phone_sentence()[sel.states]

@@ -255,3 +255,32 @@ def test_say_starts_and_ends_with_the_face_at_rest(tmp_path):
     assert abs(len(speech) / rate - len(mo) / 30) < 1 / 30  # the speech the curves are timed to
     assert np.all(speech[: int(0.9 * LEAD_PAUSE_S * rate)] == 0)  # the pauses are silent
     assert np.all(speech[-int(0.9 * END_PAUSE_S * rate) :] == 0)
+
+
+def test_say_layers_expressions_on_the_text_driven_lips(corpus_file, tmp_path, capsys):
+    """`say --expression smile` moves the four parameters as `animate --expression` does on audio (the fixed
+    change of realtime_core.fitted_maps through add_expression, computed here independently of the command), and
+    every output carries it; a misspelt expression fails before any synthesis, naming it."""
+    from realtime_core.expressions import EXPRESSIONS, add_expression
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    text = "Bin blue at f two now"
+    plain, smile = tmp_path / "plain.csv", tmp_path / "smile.csv"
+    assert main(["say", text, "--corpus", str(corpus_file), "-o", str(plain)]) == 0
+    argv = ["say", text, "--corpus", str(corpus_file), "--expression", "smile:0.8", "--expression-ease", "0"]
+    assert main([*argv, "-o", str(smile), "-o", str(tmp_path / "smile.npz")]) == 0
+    p, s = (np.loadtxt(f, delimiter=",", skiprows=1)[:, 1:] for f in (plain, smile))
+    alpha = np.zeros((len(p), len(EXPRESSIONS)))
+    alpha[:, list(EXPRESSIONS).index("smile")] = 0.8
+    want = add_expression(p, alpha @ EXPRESSION_PARAMS)  # one row of changes per expression
+    # 1e-3: two espeak-ng runs of one text can differ by a sample, moving an opening frame by ~4e-4 IOD; the
+    # smile itself moves lip_stretch by 0.13
+    np.testing.assert_allclose(s, want, atol=1e-3)
+    assert np.abs(s - p).max() > 0.01  # the smile is there
+    with np.load(tmp_path / "smile.npz") as z:
+        stored = next(z[k] for k in z.files if z[k].ndim == 2 and z[k].shape[0] == len(p) and z[k].shape[1] > 4)
+    np.testing.assert_allclose(stored[:, -4:], s, atol=2e-4)
+    capsys.readouterr()
+    assert main(["say", text, "--corpus", str(corpus_file), "--expression", "grin", "-o", str(tmp_path / "g.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown expression 'grin'" in err and not (tmp_path / "g.csv").exists()
