@@ -1198,6 +1198,11 @@ def rig_head(
         own = mesh.name == "builtin"
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
+        # A knife-cut mouth's lower edge lying on the lower lip as another layer moves with it (lip_edge_glue).
+        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+        glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
+        if glue:
+            meta["lip_edge_glued"] = len(glue)
         rig = build_rig(
             v,
             t,
@@ -1213,11 +1218,6 @@ def rig_head(
             pin_upper_lip=bool(behind),
             seam_hinges=coarse,
         )
-        # A knife-cut mouth's lower edge lying on the lower lip as another layer moves with it (lip_edge_glue).
-        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
-        glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
-        if glue:
-            rig.meta["lip_edge_glued"] = len(glue)
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
         walls = None
