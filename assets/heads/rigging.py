@@ -636,7 +636,7 @@ def lip_edge_glue(
 
     On the stylised held-out head the knife's path runs through the upper lip's overhang: the cut's lower side is a
     strip of it, joined to the lower lip only round the corners, lying 0.02-0.06 IOD on the lower lip's own surface
-    (0.5-1.0 IOD from it along the mesh). Pinned to the simple face's lower lip it dropped 0.03-0.07 IOD more than
+    (0.5-1.0 IOD from it along the mesh). Pinned to the simple face's lower lip it dropped up to 0.08 IOD more than
     that surface at /a/ and its down-facing faces turned to the viewer: a light strip with a dark line under it
     across the lip, and a flap at the face's left corner (docs/animation.md, "The stylised head's lower lip as one
     layer"). On the decimated Lee Perry-Smith copies the cut's lower side is the lip's own surface (no such layer)."""

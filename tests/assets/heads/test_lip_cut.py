@@ -772,7 +772,7 @@ def _lower_edge_on_the_lip():
 
 def test_a_knife_cut_lower_edge_lying_on_the_lower_lip_moves_with_it():
     """The stylised held-out head's cut lower side is a strip of the upper lip's overhang lying 0.02-0.06 IOD on the
-    lower lip, joined to it only round the corners. Pinned to the simple face's lower lip it dropped 0.03-0.07 IOD more
+    lower lip, joined to it only round the corners. Pinned to the simple face's lower lip it dropped up to 0.08 IOD more
     than that lip at /a/ and its down-facing faces turned to the viewer: a light strip with a dark line under it
     across the lip, a flap at a corner. Each vertex of such a side moves, through the fold repair, as the point of the
     lower lip's surface nearest it (:func:`assets.heads.rigging.lip_edge_glue`, the repair's face ties); a cut whose
