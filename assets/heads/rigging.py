@@ -45,6 +45,7 @@ from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
+    FaceFrame,
     FaceModel,
     MouthLandmarks,
     Rig,
@@ -55,8 +56,9 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
+from realtime_core.face.checks import LIP_BACKS_BAND
 from realtime_core.face.keyframes import MorphRig
-from realtime_core.face.projection import vertex_adjacency
+from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
     contact_spread,
     decouple_opening,
@@ -615,6 +617,81 @@ def with_rows_mixed(rig: Rig, mix: Mapping[int, tuple[np.ndarray, np.ndarray]]) 
     return replace(rig, moving=moving, matrix=matrix, contact_spread=spread)
 
 
+LIP_GLUE = 0.1
+"""IOD: on a knife-cut mouth whose cut's lower side lies on the lower lip as another layer, a vertex of that side this
+near a face of the lower lip moves with that face through the fold repair (:func:`lip_edge_glue`)."""
+LIP_LAYER = 0.3
+"""IOD: a lower-lip face whose every vertex lies farther than this along the mesh from a vertex of the cut's lower side
+is another layer of the lip than that vertex (the cut's own neighbours are nearer; :func:`lip_edge_glue`)."""
+
+
+def lip_edge_glue(
+    vertices: np.ndarray, triangles: np.ndarray, seam_pairs: np.ndarray, frame: FaceFrame
+) -> dict[int, tuple[tuple[int, ...], tuple[float, ...]]]:
+    """Lower side of a knife-cut lip seam (``seam_pairs`` (k, 2) upper, lower) -> the face of the lower lip each of its
+    vertices moves with: (the face's three vertices, the barycentric weights of its point nearest the vertex), for
+    the fold repair's ``ties``; empty unless the side lies on the lower lip as another layer (over half its vertices
+    within LIP_GLUE IOD of a face more than LIP_LAYER IOD from them along the mesh). The lower lip's faces: every
+    vertex below the seam's upper side (its height along the face's x axis) by less than LIP_BACKS_BAND IOD, none on
+    the seam. vertices (n, 3), triangles (m, 3): the cut mesh, head units.
+
+    On the stylised held-out head the knife's path runs through the upper lip's overhang: the cut's lower side is a
+    strip of it, joined to the lower lip only round the corners, lying 0.02-0.06 IOD on the lower lip's own surface
+    (0.5-1.0 IOD from it along the mesh). Pinned to the simple face's lower lip it dropped up to 0.08 IOD more than
+    that surface at /a/ and its down-facing faces turned to the viewer: a light strip with a dark line under it
+    across the lip, and a flap at the face's left corner (docs/animation.md, "The stylised head's lower lip as one
+    layer"). On the decimated Lee Perry-Smith copies the cut's lower side is the lip's own surface (no such layer)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    upper = np.asarray(seam_pairs[:, 0], dtype=np.int64)
+    lower = np.asarray(seam_pairs[:, 1], dtype=np.int64)
+    q = (v - frame.origin) @ frame.axes[:2].T
+    order = np.argsort(q[upper, 0])
+    below = q[:, 1] - np.interp(q[:, 0], q[upper[order], 0], q[upper[order], 1])
+    on_seam = np.zeros(len(v), dtype=bool)
+    on_seam[seam_pairs.ravel()] = True
+    lip = (below[t] < 0).all(axis=1) & (below[t] > -LIP_BACKS_BAND * frame.iod).all(axis=1)
+    faces = t[lip & ~on_seam[t].any(axis=1)]
+    if not len(faces):
+        return {}
+    along = dijkstra(edge_length_graph(v, t), indices=lower, limit=LIP_LAYER * frame.iod)
+    glue: dict[int, tuple[tuple[int, ...], tuple[float, ...]]] = {}
+    layered = 0
+    for k, i in enumerate(lower.tolist()):
+        dist, w = _nearest_on_faces(v[i], v[faces[:, 0]], v[faces[:, 1]], v[faces[:, 2]])
+        j = int(np.argmin(dist))
+        if dist[j] <= LIP_GLUE * frame.iod:
+            glue[i] = (tuple(int(a) for a in faces[j]), tuple(float(x) for x in w[j]))
+            layered += int(not np.isfinite(along[k][faces[j]]).any())
+    return glue if 2 * layered > len(lower) else {}
+
+
+def _nearest_on_faces(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) distance from ``p`` (3,) to each triangle (a, b, c) (m, 3) and (m, 3) the barycentric weights of its
+    nearest point (on the face, on an edge or at a corner)."""
+    m = len(a)
+    ab, ac, ap = b - a, c - a, p - a
+    d00, d01, d11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
+    d20, d21 = (ap * ab).sum(1), (ap * ac).sum(1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    s = (d11 * d20 - d01 * d21) / den
+    r = (d00 * d21 - d01 * d20) / den
+    best_w = np.column_stack([1.0 - s - r, s, r])
+    inside = (s >= 0) & (r >= 0) & (s + r <= 1)
+    best_d = np.where(inside, np.linalg.norm(a + s[:, None] * ab + r[:, None] * ac - p, axis=1), np.inf)
+    corners = (a, b, c)
+    for i0, i1 in ((0, 1), (1, 2), (2, 0)):
+        e = corners[i1] - corners[i0]
+        u = np.clip(((p - corners[i0]) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+        d = np.linalg.norm(corners[i0] + u[:, None] * e - p, axis=1)
+        w = np.zeros((m, 3))
+        w[:, i0], w[:, i1] = 1.0 - u, u
+        better = d < best_d
+        best_d = np.where(better, d, best_d)
+        best_w = np.where(better[:, None], w, best_w)
+    return best_d, best_w
+
+
 SLIVER_TIE = 0.2
 """Cut heads: the fold repair moves vertices joined by edges shorter than this fraction of the median
 edge as one (Lee Perry-Smith: 3 -> 1 flipped triangles, stretch 4.86 -> 2.83, from a sliver fan behind a
@@ -1122,6 +1199,11 @@ def rig_head(
         own = mesh.name == "builtin"
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
+        # A knife-cut mouth's lower edge lying on the lower lip as another layer moves with it (lip_edge_glue).
+        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
+        glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
+        if glue:
+            meta["lip_edge_glued"] = len(glue)
         rig = build_rig(
             v,
             t,
@@ -1161,7 +1243,7 @@ def rig_head(
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
         upper = None
-        if behind and cut_copies is not None:
+        if behind and seam is not None:
             # An upper lip so coarse that its back spans half the mouth (knife.split_lip_back): a handful of faces
             # joined round the corners to the jaw. Pinned to the simple face's upper lip (build_rig), it is smoothed
             # over its own rows only, and its back moves with the cut: smoothed over all its neighbours it dropped
@@ -1170,8 +1252,7 @@ def rig_head(
             x_lo, x_hi = sorted(
                 float((v[snap[k]] - frame.origin) @ frame.axes[0]) for k in ("corner_left", "corner_right")
             )
-            seam0 = np.column_stack([origin[cut_copies], cut_copies])
-            upper = upper_lip_side(v, t, seam0, frame, x_range=(x_lo, x_hi))
+            upper = upper_lip_side(v, t, seam, frame, x_range=(x_lo, x_hi))
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import EXTREME_POSES
 
@@ -1182,7 +1263,7 @@ def rig_head(
                 tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                 measured=measured,
                 own_side=upper,
-                ties=behind or None,
+                ties={**behind, **glue} or None,
             )
             # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
             # asks for (so the closure pose closes the lips) and repair what that stretches again.
@@ -1199,7 +1280,7 @@ def rig_head(
                     tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                     measured=measured,
                     own_side=upper,
-                    ties=behind or None,
+                    ties={**behind, **glue} or None,
                 )
                 rig.meta["open_rescaled"] = round(1.0 / r_open, 4)
         if walls is not None:
@@ -1207,9 +1288,9 @@ def rig_head(
                 rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
             )
             t = cut_mesh.triangles
-        if clean_lips and cut_copies is not None:
+        if clean_lips and seam is not None:
             before = np.asarray(t, dtype=np.int64)
-            t, mix = join_path_islands(before, v, np.column_stack([origin[cut_copies], cut_copies]))
+            t, mix = join_path_islands(before, v, seam)
             rig = with_rows_mixed(rig, mix)
             n_joined = int((t != before).any(axis=1).sum())
             drop = lip_islands(t, len(v), np.r_[origin[cut_copies], cut_copies])
@@ -1243,7 +1324,6 @@ def rig_head(
             rig.meta["landmarks"] = {k: v[i].tolist() for k, i in snap.items()}
         # Every head, the built-in one too: its ARKit maps are fitted to the field without the push
         # (training/fit_maps.py), so the push keeps its pressed lips apart without changing them.
-        seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
         contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
         rig = replace(rig, contact=contact, contact_up=frame.axes[1])
         rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))

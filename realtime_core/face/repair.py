@@ -14,6 +14,7 @@ follow mesh edges a cut lip seam keeps the lips apart.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +52,7 @@ def repair_folds(
     measured: np.ndarray | None = None,
     tie_rounds: int = 60,
     own_side: np.ndarray | None = None,
-    ties: dict[int, int] | None = None,
+    ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -80,8 +81,10 @@ def repair_folds(
     Perry-Smith decimated to 1,428 triangles: smoothed over all of them, its upper lip dropped 0.42 IOD per unit
     of mouth_open; docs/animation.md, "The 1,428 copy's flap"). None (the default): every neighbour counts.
     ties: vertex -> the vertex whose row it takes, from the first round on (a coarse upper lip's back split
-    behind the lip cut moves as the cut, :func:`assets.heads.knife.split_lip_back`); the smoothing then evens
-    out the folds round them with the ties in place, and the tie rounds' apexes never replace them.
+    behind the lip cut moves as the cut, :func:`assets.heads.knife.split_lip_back`), or -> (vertices, weights):
+    the weighted sum of their rows, a point of a face it moves with (a knife-cut lower lip's edge glued to the
+    lip under it, :func:`assets.heads.rigging.lip_edge_glue`); the smoothing then evens out the folds round them
+    with the ties in place, and the tie rounds' apexes never replace them.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -116,8 +119,10 @@ def repair_folds(
     worst = 0
     rounds = 0
     given = dict(ties or {})
-    # apex -> (a, b, s): row = (1 - s) row a + s row b (a given tie: its vertex's row, a = b)
-    on_edge: dict[int, tuple[int, int, float]] = {i: (j, j, 0.0) for i, j in given.items()}
+    # tied vertex -> (vertices, weights): its row the weighted sum of theirs (an apex: its edge's two ends)
+    on_edge: dict[int, tuple[tuple[int, ...], tuple[float, ...]]] = {
+        i: ((j,), (1.0,)) if isinstance(j, int | np.integer) else (tuple(j[0]), tuple(j[1])) for i, j in given.items()
+    }
     tie_edges = _on_edge_operator(n, on_edge) if on_edge else sp.identity(n, format="csr")
     for _ in range(3 if on_edge else 0):
         g = (tie_edges @ g).tocsr()
@@ -146,7 +151,8 @@ def repair_folds(
             rounds -= 1
             break
         if rounds > max_rounds:
-            on_edge.update({k: e for k, e in _apexes(v0, t[flipped_any], frozen).items() if k not in given})
+            apexes = _apexes(v0, t[flipped_any], frozen).items()
+            on_edge.update({k: ((a, b), (1.0 - s_, s_)) for k, (a, b, s_) in apexes if k not in given})
             tie_edges = _on_edge_operator(n, on_edge)
         # One ring around the folded vertices, so the smoothed patch blends into its surroundings.
         # A fold that survives local smoothing needs a wider patch: around each vertex, one more
@@ -197,15 +203,17 @@ def _apexes(v: np.ndarray, flipped: np.ndarray, frozen: np.ndarray) -> dict[int,
     return out
 
 
-def _on_edge_operator(n: int, on_edge: dict[int, tuple[int, int, float]]) -> sp.csr_matrix:
-    """(n, n) CSR: identity, but each apex's row the interpolation of its edge's rows."""
+def _on_edge_operator(n: int, on_edge: dict[int, tuple[tuple[int, ...], tuple[float, ...]]]) -> sp.csr_matrix:
+    """(n, n) CSR: identity, but each tied vertex's row the weighted sum of its anchors' rows."""
     keep = np.ones(n)
-    rows, cols, vals = [], [], []
-    for apex, (a, b, s) in on_edge.items():
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[float] = []
+    for apex, (anchors, weights) in on_edge.items():
         keep[apex] = 0.0
-        rows += [apex, apex]
-        cols += [a, b]
-        vals += [1.0 - s, s]
+        rows += [apex] * len(anchors)
+        cols += list(anchors)
+        vals += list(weights)
     return (sp.diags(keep) + sp.csr_matrix((vals, (rows, cols)), shape=(n, n))).tocsr()
 
 

@@ -12,6 +12,7 @@ is stored with S = kron(G, I_3) restricted to the head vertices that can move. F
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
@@ -25,7 +26,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
 
-RIG_ALGORITHM = 47
+RIG_ALGORITHM = 48
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -738,7 +739,7 @@ def repair_rig(
     tiny: float = 0.0,
     measured: np.ndarray | None = None,
     own_side: np.ndarray | None = None,
-    ties: dict[int, int] | None = None,
+    ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
@@ -748,7 +749,8 @@ def repair_rig(
     and edges count (None: all; hidden faces about to be removed do not). ``own_side``: (n_h,) bool the
     vertices smoothed over each other only (see :func:`realtime_core.face.repair.repair_folds`; a welded
     vertex is on it when one of its twins is). ``ties``: head vertex -> the head vertex whose row it takes
-    throughout (ibid.). Records the repair in meta."""
+    throughout, or -> (head vertices, weights) whose rows' weighted sum it takes (ibid.). Records the repair in
+    meta."""
     from realtime_core.face.repair import repair_folds
 
     h = np.asarray(rig.neutral, dtype=np.float64)
@@ -780,7 +782,7 @@ def repair_rig(
         tiny=tiny,
         measured=measured,
         own_side=own_w,
-        ties=None if ties is None else {int(canon[i]): int(canon[j]) for i, j in ties.items()},
+        ties=None if ties is None else {int(canon[i]): _welded_tie(canon, j) for i, j in ties.items()},
     )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
@@ -788,6 +790,16 @@ def repair_rig(
     meta = dict(rig.meta)
     meta["fold_repair"] = {"rounds": res.rounds, "flips_left": res.flips_left, "rows": res.smoothed_rows}
     return replace(rig, moving=moving.astype(np.int64), matrix=s, meta=meta)
+
+
+def _welded_tie(
+    canon: np.ndarray, tie: int | tuple[Sequence[int], Sequence[float]]
+) -> int | tuple[tuple[int, ...], tuple[float, ...]]:
+    """A tie of :func:`repair_rig` in welded vertex indices (``canon`` (n_h,): head vertex -> welded one)."""
+    if isinstance(tie, int | np.integer):
+        return int(canon[tie])
+    anchors, weights = tie
+    return tuple(int(canon[a]) for a in anchors), tuple(float(w) for w in weights)
 
 
 def lip_columns(

@@ -3,6 +3,8 @@ cut's two sides pinned to their own lips, on synthetic meshes (no head files nee
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -738,3 +740,74 @@ def test_a_crease_end_short_of_the_corner_tapers_the_lower_side_only():
     # Without ``hinges`` (the full scans) both sides taper into every end, as before.
     pin0, rows0, _ = _seam_rows(v2, t2, simple, frame, seam, lower, ~lower, control)
     assert row_of(pin0, rows0, seam[last, 0])[2] > 0.0
+
+
+def _lower_edge_on_the_lip():
+    """A knife-cut mouth whose cut's lower side is another layer lying on the lower lip (the stylised held-out head:
+    the knife's path runs through the upper lip's overhang). Columns x = -1..1 (9); the upper lip rows y = 0, 0.1, 0.2
+    (z = 0), its bottom row the cut's upper side; the cut's lower side (copies of that row's 7 inner vertices) and a
+    row 0.03 behind and 0.005 below it, the overhang's underside; the lower lip's own surface rows y = -0.02, -0.08,
+    -0.14 at z = -0.01, joined to the rest only at the corners (the upper row's end vertices). Returns vertices,
+    triangles and the seam's (upper, lower) pairs."""
+    xs = np.linspace(-1.0, 1.0, 9)
+    v = [[x, y, 0.0] for y in (0.0, 0.1, 0.2) for x in xs]  # upper lip: row r, column i at 9 r + i
+
+    def add(points):
+        v.extend(points)
+        return list(range(len(v) - len(points), len(v)))
+
+    lower = add([[x, 0.0, 0.0] for x in xs[1:-1]])
+    under = add([[x, -0.005, -0.03] for x in xs[1:-1]])
+    lip = [add([[x, y, -0.01] for x in xs[1:-1]]) for y in (-0.02, -0.08, -0.14)]
+    t = [[9 * r + i, 9 * (r + 1) + i + 1, 9 * r + i + 1] for r in range(2) for i in range(8)]
+    t += [[9 * r + i, 9 * (r + 1) + i, 9 * (r + 1) + i + 1] for r in range(2) for i in range(8)]
+    edge = [0, *lower, 8]  # the lower side between the corners
+    back = [0, *under, 8]
+    t += [[edge[i], edge[i + 1], back[i + 1]] for i in range(8)] + [[edge[i], back[i + 1], back[i]] for i in range(8)]
+    for a, b in itertools.pairwise(lip):
+        t += [[a[i], a[i + 1], b[i + 1]] for i in range(6)] + [[a[i], b[i + 1], b[i]] for i in range(6)]
+    t += [[0, lip[0][0], back[1]], [8, back[7], lip[0][6]]]  # the lip joins the rest round the corners only
+    return np.array(v, dtype=np.float64), np.array(t), np.column_stack([np.arange(1, 8), lower])
+
+
+def test_a_knife_cut_lower_edge_lying_on_the_lower_lip_moves_with_it():
+    """The stylised held-out head's cut lower side is a strip of the upper lip's overhang lying 0.02-0.06 IOD on the
+    lower lip, joined to it only round the corners. Pinned to the simple face's lower lip it dropped up to 0.08 IOD more
+    than that lip at /a/ and its down-facing faces turned to the viewer: a light strip with a dark line under it
+    across the lip, a flap at a corner. Each vertex of such a side moves, through the fold repair, as the point of the
+    lower lip's surface nearest it (:func:`assets.heads.rigging.lip_edge_glue`, the repair's face ties); a cut whose
+    lower side is the lip's own surface (the creased lips, the decimated scans) is left as it was."""
+    import scipy.sparse as sp
+
+    from assets.heads.rigging import LIP_GLUE, lip_edge_glue
+    from realtime_core.face.model import FaceFrame
+    from realtime_core.face.repair import repair_folds
+
+    v, t, seam = _lower_edge_on_the_lip()
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    glue = lip_edge_glue(v, t, seam, frame)
+    assert sorted(glue) == sorted(seam[:, 1].tolist())
+    for i, (anchors, w) in glue.items():
+        assert min(w) >= 0.0 and sum(w) == pytest.approx(1.0)
+        point = np.asarray(w) @ v[list(anchors)]
+        # The lip sheet lies in z = -0.01 between y = -0.14 and -0.02: its point nearest (x, 0, 0) is its top edge's.
+        np.testing.assert_allclose(point, [v[i, 0], -0.02, -0.01], atol=1e-9)
+        assert np.linalg.norm(point - v[i]) <= LIP_GLUE
+    # The repair with those ties: the lower side (pinned 1.3 of the lower lip's drop, as the simple face's lower lip
+    # dropped more than the surface under it) moves as its glue point; without them it keeps its own drop.
+    n = len(v)
+    lip_rows = v[:, 1] < -0.01
+    g = np.zeros((n, 2))
+    g[v[:, 1] >= 0.0, 0] = 1.0
+    g[lip_rows, 1] = 1.0
+    g[seam[:, 1]] = g[np.isclose(v[:, 1], -0.005)] = [0.0, 1.3]
+    motions = np.array([[[0.0, 0.0, 0.0], [0.0, -0.1, 0.0]]])
+    moved = repair_folds(v, t, sp.csr_matrix(g), motions).weights @ motions[0]
+    assert (moved[seam[:, 1], 1] < -0.11).all()
+    moved = repair_folds(v, t, sp.csr_matrix(g), motions, ties=glue).weights @ motions[0]
+    np.testing.assert_allclose(moved[seam[:, 1], 1], -0.1, atol=1e-9)
+    # Creased lips cut open: the lower side is the lower lip's own surface, no other layer under it.
+    v, t, left, right, mid = _creased_lips()
+    v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
+    copies = np.arange(len(v), len(v2))
+    assert lip_edge_glue(v2, t2, np.column_stack([origin[copies], copies]), frame) == {}
