@@ -18,7 +18,7 @@ from dataclasses import replace
 import numpy as np
 
 from assets.audio import read_audio
-from assets.grid import sentences
+from assets.grid import default_root, sentences
 from assets.modelfile import load_model
 from realtime_core.features import InputGainConfig, LevelTracker, loudness_db
 from realtime_core.pipeline import speech_to_params
@@ -89,8 +89,16 @@ def main() -> None:
             s = score_lips(one_stream_items(model, scaled) if args.one_stream else lip_items(model, scaled))
             print(f"| val {g:+.0f} dB | {s.r['mouth_open']:.3f} / {s.closure_rate:.0%} |", flush=True)
     if "real" not in skip:
-        s = score_real_speech(model, real_speech_clips("/work/shared/data/speech"))
+        speech = real_speech_clips(str(default_root().parent.parent / "speech"))
+        s = score_real_speech(model, speech)
         print(f"| real speech | {s.r['mouth_open']:.3f} / {s.closure_rate:.0%} of {s.n_closures} |", flush=True)
+        # the user's check: the same file quieter against its own output at the original level
+        own = [speech_to_params(model, x, r)[:, MOUTH_OPEN] for _, x, r, _, _ in speech]
+        for g in (-3.0, -6.0, -12.0):
+            est = [speech_to_params(model, x * 10.0 ** (g / 20.0), r)[:, MOUTH_OPEN] for _, x, r, _, _ in speech]
+            a, b = np.concatenate(own), np.concatenate(est)
+            r_own, diff = np.corrcoef(a, b)[0, 1], np.abs(a - b).max()
+            print(f"| real speech {g:+.0f} dB against its own 0 dB output | r {r_own:.3f}, max diff {diff:.3f} IOD |")
     if "noise" not in skip:
         rng = np.random.default_rng(0)
         white = rng.standard_normal(3 * 16000)

@@ -98,8 +98,8 @@ class InputGain:
         self._n = 0
         self._block = np.empty(self.block_len)
         self._fill = 0
-        self._amp_prev = 1.0
         self._amp = 1.0
+        self._curve = np.ones(self.block_len)  # the current block's amplitude per sample
         self.gain_db = 0.0
         """The gain (dB) the current block ramps to."""
         self.speech_db = self.config.reference_db
@@ -112,7 +112,7 @@ class InputGain:
         while i < x.size:
             m = min(self.block_len - self._fill, x.size - i)
             a, b = self._fill, self._fill + m
-            out[i : i + m] = x[i : i + m] * (self._amp_prev + (self._amp - self._amp_prev) * self._ramp[a:b])
+            np.multiply(x[i : i + m], self._curve[a:b], out=out[i : i + m])
             self._block[a:b] = x[i : i + m]
             self._fill = b
             i += m
@@ -126,7 +126,7 @@ class InputGain:
 
     def _next_gain(self) -> None:
         cfg = self.config
-        level = 10.0 * np.log10(max(float(np.mean(self._block**2)), 1e-12))
+        level = 10.0 * np.log10(max(float(np.dot(self._block, self._block)) / self.block_len, 1e-12))
         _, floor = self._tracker.track(np.array([level]))
         speech = level > floor[0] + cfg.tracker.speech_above_floor_db
         if speech:
@@ -134,5 +134,7 @@ class InputGain:
             self.speech_db += (level - self.speech_db) / min(cfg.prior_blocks + self._n, cfg.memory_blocks)
         g = min(max(cfg.reference_db - self.speech_db, -cfg.max_gain_db), cfg.max_gain_db)
         self.gain_db = g
-        self._amp_prev, self._amp = self._amp, 10.0 ** (g / 20.0)
+        amp = 10.0 ** (g / 20.0)
+        self._curve = self._amp + (amp - self._amp) * self._ramp
+        self._amp = amp
         self._fill = 0
