@@ -3,8 +3,8 @@
 Theory of operation
 -------------------
 The shipped model reads loudness as an absolute c0 and gates pauses at an absolute -60 dB, so the
-same file 3 dB quieter moves its mouth differently (docs/default_model.md, "Run-time gain"). A
-retrained, level-normalised front end was measured and not shipped; this stage leaves the model
+same file 3 dB quieter moves its mouth differently. A retrained, level-normalised front end was
+measured and not shipped; this stage leaves the model
 alone and changes its input instead, causally and per stream:
 
 - the input is cut into blocks of ``block_ms`` on the absolute sample index (so any chunking of
@@ -26,7 +26,8 @@ alone and changes its input instead, causally and per stream:
 - within a block the amplitude ramps linearly from the previous block's gain to the new one (a
   step would add a click the MFCCs see as a broadband burst).
 
-The gain of block ``i`` uses blocks ``< i`` only: no lookahead, no added delay.
+The gain of block ``i`` uses blocks ``< i`` only: no lookahead, no added delay. Measured against
+the shipped model and off in the shipped files: docs/default_model.md, "Run-time input gain".
 """
 
 from __future__ import annotations
