@@ -29,7 +29,14 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS, visual_floor
 from realtime_core.archive import AVMODEL_FORMAT, MLP_MAPPER_FORMAT, npz_arrays, npz_bytes
 from realtime_core.errors import ModelFormatError, RealtimeCoreError
-from realtime_core.features import CmvnConfig, FrontEnd, FrontEndConfig, LevelNormConfig, MfccConfig
+from realtime_core.features import (
+    CmvnConfig,
+    FrontEnd,
+    FrontEndConfig,
+    InputGainConfig,
+    LevelNormConfig,
+    MfccConfig,
+)
 from realtime_core.hmm.model import AvHmm
 from realtime_core.inversion import (
     ConditionalForm,
@@ -164,6 +171,7 @@ def frontend_to_json(fe: FrontEndConfig) -> dict[str, Any]:
         "energy": fe.energy,
         "silence_floor_db": fe.silence_floor_db,
         **({"level_norm": asdict(fe.level_norm)} if fe.level_norm is not None else {}),
+        **({"input_gain": asdict(fe.input_gain)} if fe.input_gain is not None else {}),
     }
 
 
@@ -177,7 +185,13 @@ def frontend_from_json(d: dict[str, Any]) -> FrontEndConfig:
         silence_floor_db=d.get("silence_floor_db"),
         # Models written before level normalisation use absolute levels.
         level_norm=None if d.get("level_norm") is None else LevelNormConfig(**d["level_norm"]),
+        # Models written before the run-time gain stage take the samples as given.
+        input_gain=None if d.get("input_gain") is None else _input_gain_from_json(d["input_gain"]),
     )
+
+
+def _input_gain_from_json(d: dict[str, Any]) -> InputGainConfig:
+    return InputGainConfig(**{**d, "tracker": LevelNormConfig(**d["tracker"])})
 
 
 def encode_model(model: AvModel) -> bytes:

@@ -15,6 +15,7 @@ import numpy as np
 from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.cmvn import CmvnConfig, RunningCmvn, mel_level_db
 from realtime_core.features.context import ContextStacker
+from realtime_core.features.gain import InputGain, InputGainConfig
 from realtime_core.features.level import LevelNormConfig, LevelTracker
 from realtime_core.features.mfcc import MfccConfig, MfccStream, as_float_samples
 
@@ -37,6 +38,9 @@ class FrontEndConfig:
     silence, and the levels
     the CMVN gate sees are relative to the peak (so ``cmvn.gate_db`` is then dB re the peak). The
     whole front end is then invariant to the recording gain.
+    input_gain: None (the samples as given), or a run-time gain in front of the MFCCs that brings the
+    talker's tracked speech level to the training level (:mod:`realtime_core.features.gain`; the
+    model is unchanged, only its input).
     """
 
     mfcc: MfccConfig = field(default_factory=MfccConfig)
@@ -45,6 +49,7 @@ class FrontEndConfig:
     energy: bool = False
     silence_floor_db: float | None = -60.0
     level_norm: LevelNormConfig | None = None
+    input_gain: InputGainConfig | None = None
 
     def __post_init__(self) -> None:
         if self.mfcc.include_c0:
@@ -107,6 +112,9 @@ class FrontEnd:
         self.config = config
         mcfg = config.mfcc
         self._mfcc = MfccStream(replace(mcfg, include_c0=True), kernel=kernel)
+        self._gain = (
+            InputGain(config.input_gain, sample_rate_hz=mcfg.sample_rate_hz) if config.input_gain is not None else None
+        )
         if config.cmvn is not None:
             if cmvn_mean is None or cmvn_var is None:
                 raise ConfigError("FrontEnd with CMVN needs cmvn_mean and cmvn_var (training statistics)")
@@ -126,6 +134,8 @@ class FrontEnd:
         if self._tail is not None:
             self._tail.reset()
         self._mfcc.reset()
+        if self._gain is not None:
+            self._gain.reset()
         if self._cmvn is not None:
             self._cmvn.reset()
         self._ctx.reset()
@@ -137,6 +147,8 @@ class FrontEnd:
         return int(self._tail.cist[1]) if self._tail is not None else self._ctx._next
 
     def push(self, samples: np.ndarray) -> np.ndarray:
+        if self._gain is not None:
+            samples = self._gain.push(as_float_samples(samples))
         if self._tail is not None:
             return self._tail.push(self._mfcc.push(samples), final=False)
         return self._ctx.push(self._normalise(self._mfcc.push(samples)))
