@@ -273,9 +273,13 @@ def test_say_layers_expressions_on_the_text_driven_lips(corpus_file, tmp_path, c
     alpha = np.zeros((len(p), len(EXPRESSIONS)))
     alpha[:, list(EXPRESSIONS).index("smile")] = 0.8
     want = add_expression(p, alpha @ EXPRESSION_PARAMS)  # one row of changes per expression
-    # 1e-3: two espeak-ng runs of one text can differ by a sample, moving an opening frame by ~4e-4 IOD; the
-    # smile itself moves lip_stretch by 0.13
-    np.testing.assert_allclose(s, want, atol=1e-3)
+    # Two `say` runs of one text on a small test corpus can differ a little in the opening (one CI run: 1.1e-3 IOD
+    # at one frame of 54; the shipped corpus gives identical runs): the opening is checked at 3e-3 and for its
+    # closures, the three other parameters (the smile's own change: lip_stretch +0.13) at 1e-3.
+    other = [0, 1, 3]
+    np.testing.assert_allclose(s[:, other], want[:, other], atol=1e-3)
+    np.testing.assert_allclose(s[:, 2], want[:, 2], atol=3e-3)
+    assert (s[p[:, 2] <= 0.01, 2] <= 0.011).all()  # lips speech holds closed stay closed under the smile
     assert np.abs(s - p).max() > 0.01  # the smile is there
     with np.load(tmp_path / "smile.npz") as z:
         stored = next(z[k] for k in z.files if z[k].ndim == 2 and z[k].shape[0] == len(p) and z[k].shape[1] > 4)
