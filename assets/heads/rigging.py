@@ -30,6 +30,7 @@ from typing import TypeVar
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
+from trimesh.triangles import closest_point, points_to_barycentric
 
 from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
@@ -668,28 +669,12 @@ def lip_edge_glue(
 
 def _nearest_on_faces(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(m,) distance from ``p`` (3,) to each triangle (a, b, c) (m, 3) and (m, 3) the barycentric weights of its
-    nearest point (on the face, on an edge or at a corner)."""
-    m = len(a)
-    ab, ac, ap = b - a, c - a, p - a
-    d00, d01, d11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
-    d20, d21 = (ap * ab).sum(1), (ap * ac).sum(1)
-    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
-    s = (d11 * d20 - d01 * d21) / den
-    r = (d00 * d21 - d01 * d20) / den
-    best_w = np.column_stack([1.0 - s - r, s, r])
-    inside = (s >= 0) & (r >= 0) & (s + r <= 1)
-    best_d = np.where(inside, np.linalg.norm(a + s[:, None] * ab + r[:, None] * ac - p, axis=1), np.inf)
-    corners = (a, b, c)
-    for i0, i1 in ((0, 1), (1, 2), (2, 0)):
-        e = corners[i1] - corners[i0]
-        u = np.clip(((p - corners[i0]) * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
-        d = np.linalg.norm(corners[i0] + u[:, None] * e - p, axis=1)
-        w = np.zeros((m, 3))
-        w[:, i0], w[:, i1] = 1.0 - u, u
-        better = d < best_d
-        best_d = np.where(better, d, best_d)
-        best_w = np.where(better[:, None], w, best_w)
-    return best_d, best_w
+    nearest point (on the face, on an edge or at a corner), by trimesh; weights clipped to [0, 1] and renormalised
+    (trimesh's barycentric solve leaves ~1e-14 below 0 on an edge)."""
+    tri = np.stack([a, b, c], axis=1)
+    near = closest_point(tri, np.broadcast_to(p, (len(tri), 3)))
+    w = np.clip(points_to_barycentric(tri, near), 0.0, 1.0)
+    return np.linalg.norm(near - p, axis=1), w / w.sum(axis=1, keepdims=True)
 
 
 SLIVER_TIE = 0.2
