@@ -8,8 +8,8 @@ EXTREME_POSES only. This deforms each head (made as ``scripts/head_testset.py`` 
 :func:`realtime_core.face.checks.pose_figures` (flipped triangles, max edge stretch, lip interpenetration,
 teeth ahead of the lips) and the pose where each is worst:
 
-- test: every frame the shipped default model produces on the audio of the GRID s1 test split (reporting
-  only: nothing is tuned on it), as ``scripts/measure_param_box.py`` runs the live path;
+- test: every frame (or every --test-stride-th) the shipped default model produces on the audio of the GRID s1
+  test split (reporting only: nothing is tuned on it), as ``scripts/measure_param_box.py`` runs the live path;
 - say: ``facecast say`` on --say-texts sentences with each expression (smile, sad, surprise, anger) at
   intensity 1;
 - grid: 5 levels of each parameter over training.params.TYPICAL_RANGES (625 poses);
@@ -46,8 +46,8 @@ def grid_poses() -> np.ndarray:
     return np.array(list(itertools.product(*axes)), dtype=np.float64)
 
 
-def pose_sets(data: Path, sets: list[str], say_texts: int) -> dict[str, np.ndarray]:
-    """name -> (P, 4) poses."""
+def pose_sets(data: Path, sets: list[str], say_texts: int, test_stride: int = 1) -> dict[str, np.ndarray]:
+    """name -> (P, 4) poses; ``test_stride``: every so many frames of the test set."""
     from measure_param_box import SAY_TEXTS, model_frames, say_frames
 
     from assets.grid import split_of
@@ -60,7 +60,7 @@ def pose_sets(data: Path, sets: list[str], say_texts: int) -> dict[str, np.ndarr
             clips = sorted(p for p in videos if split_of(p.stem) == "test")
             if not clips:
                 raise SystemExit(f"{data}: no GRID s1 test sentences (give --data)")
-            out[s] = model_frames("default", clips)
+            out[s] = model_frames("default", clips)[::test_stride]
         elif s == "say":
             out[s] = np.concatenate([say_frames(SAY_TEXTS[:say_texts], extra=("--expression", e)) for e in EXPRESSIONS])
         elif s == "grid":
@@ -122,6 +122,7 @@ def main() -> int:
     ap.add_argument("--only", default=None, help="only the heads whose name contains this text")
     ap.add_argument("--sets", default="grid,extreme,say,test", help="comma-separated pose sets")
     ap.add_argument("--say-texts", type=int, default=3, help="`facecast say` sentences per expression")
+    ap.add_argument("--test-stride", type=int, default=1, help="every so many frames of the test set (30 fps)")
     args = ap.parse_args()
     import head_testset
     import heldout_heads
@@ -135,7 +136,7 @@ def main() -> int:
     heads.update(heldout_heads.derive(args.out / "heldout", args.data))
     if args.only:
         heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
-    sets = pose_sets(args.data, args.sets.split(","), args.say_texts)
+    sets = pose_sets(args.data, args.sets.split(","), args.say_texts, args.test_stride)
     results: dict[str, dict[str, dict | None]] = {}
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
