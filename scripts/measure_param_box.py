@@ -57,15 +57,16 @@ def model_frames(model_name: str, files: list[Path]) -> np.ndarray:
     return np.concatenate(out)
 
 
-def say_frames(texts: tuple[str, ...]) -> np.ndarray:
-    """(n_frames, 4) `facecast say` unit selection over ``texts`` (CSV output: t + 4 parameters)."""
+def say_frames(texts: tuple[str, ...], extra: tuple[str, ...] = ()) -> np.ndarray:
+    """(n_frames, 4) `facecast say` unit selection over ``texts`` (CSV output: t + 4 parameters); ``extra``: more
+    `facecast say` arguments (e.g. ``("--expression", "smile")``)."""
     out = []
     exe = REPO / ".venv" / "bin" / "facecast"
     with tempfile.TemporaryDirectory() as tmp:
         for i, text in enumerate(texts):
             csv = Path(tmp) / f"say{i}.csv"
             subprocess.run(
-                [str(exe), "say", text, "-o", str(csv)],
+                [str(exe), "say", text, "-o", str(csv), *extra],
                 check=True,
                 capture_output=True,
                 env={**os.environ, "PYTHONPATH": str(REPO)},

@@ -3,8 +3,8 @@
     python scripts/mouth_closeups.py --out D --only 3810 --view three_quarter [--ids] [--heldout]
 
 Renders the mouth crop of ``head_testset.mouth_renderer`` (CLOSE_UP_WIDTH IOD wide, 400x300 per pose) at
-``head_testset.POSES`` for every head whose name contains ``--only``, as one PNG per head and view
-(``D/SLUG_VIEW.png``). ``--ids``: also a face-id pass (``D/SLUG_VIEW_ids.npz``: (poses, h, w) int32, -1 =
+``head_testset.POSES`` (or at each ``--pose``) for every head whose name contains ``--only``, as one PNG per head
+and view (``D/SLUG_VIEW.png``). ``--ids``: also a face-id pass (``D/SLUG_VIEW_ids.npz``: (poses, h, w) int32, -1 =
 background), a picture painting every visible triangle in a colour of its id (``D/SLUG_VIEW_ids.png``), and
 the close-ups with every visible back face of the head (mouth cavity left out) tinted red
 (``D/SLUG_VIEW_backs.png``: what the renderer draws dark; ``realtime_core.face.checks.lip_backs_seen`` measures
@@ -97,6 +97,13 @@ def main() -> int:
     ap.add_argument("--view", choices=("front", "three_quarter"), default="three_quarter")
     ap.add_argument("--scale", type=int, default=1, help="pixels per close-up pixel (same crop, sharper)")
     ap.add_argument("--ids", action="store_true", help="also a face-id pass (npz + picture)")
+    ap.add_argument(
+        "--pose",
+        action="append",
+        default=[],
+        metavar="LABEL=A,B,C,D",
+        help="a pose to render instead of head_testset.POSES (the four parameters, IOD); repeatable",
+    )
     ap.add_argument("--heldout", action="store_true", help="the held-out heads (heldout_heads.py), not the test set")
     ap.add_argument("--build", type=Path, default=REPO / "build" / "heads", help="where derived head files go")
     ap.add_argument(
@@ -119,6 +126,14 @@ def main() -> int:
 
         heads = head_testset.derive(args.build, args.data)
     heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
+    poses: dict[str, tuple[float, ...]] = dict(POSES)
+    if args.pose:
+        poses = {}
+        for spec in args.pose:
+            label, _, values = spec.partition("=")
+            poses[label] = tuple(float(x) for x in values.split(","))
+            if len(poses[label]) != 4:
+                ap.error(f"--pose {spec!r}: four parameters expected")
     if not heads:
         print(f"no head's name contains {args.only!r}", file=sys.stderr)
         return 2
@@ -136,7 +151,7 @@ def main() -> int:
         n_cavity = int(head.rig.meta.get("mouth_cavity", 0) or 0)
         cavity = (t >= len(head.rig.neutral) - n_cavity).any(axis=1)
         with mr as r:
-            for label, p in POSES.items():
+            for label, p in poses.items():
                 v = head.rig.deformed(np.array(p))
                 img = Image.fromarray(r.render(v))
                 ImageDraw.Draw(img).text((6, 6), label, fill=(255, 255, 255))
@@ -156,7 +171,7 @@ def main() -> int:
         if args.ids:
             Image.fromarray(np.hstack(id_tiles)).save(args.out / f"{slug}_ids.png")
             Image.fromarray(np.hstack(back_tiles)).save(args.out / f"{slug}_backs.png")
-            np.savez_compressed(args.out / f"{slug}_ids.npz", ids=np.stack(ids), poses=np.array(list(POSES.values())))
+            np.savez_compressed(args.out / f"{slug}_ids.npz", ids=np.stack(ids), poses=np.array(list(poses.values())))
         print(f"{name}: {args.out / slug}.png", file=sys.stderr)
     return 0
 

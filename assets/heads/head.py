@@ -445,15 +445,31 @@ def rig_checked(
 
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):
-    """:func:`realtime_core.face.checks.check_rig` for a head: its landmarks from the rig's meta
-    (nearest vertices; a morph head from a file without them: ``landmark_finder(mesh)``), the two sides
-    of a cut lip seam as lip pairs, teeth from the mesh's part names; ``poses`` (None: the checks'
-    :data:`EXTREME_POSES`). Returns a RigReport."""
+    """:func:`realtime_core.face.checks.check_rig` for a head, with :func:`head_check_inputs`; ``poses`` (None:
+    the checks' :data:`EXTREME_POSES`). Returns a RigReport."""
+    from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
+
+    landmarks, inputs = head_check_inputs(head, landmark_finder=landmark_finder)
+    return check_rig(
+        head.rig,
+        landmarks,
+        **inputs,
+        limits=limits or RigCheckLimits(),
+        poses=EXTREME_POSES if poses is None else poses,
+        cavity_vertices=int(head.rig.meta.get("mouth_cavity", 0) or 0),
+    )
+
+
+def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = None):
+    """What the rig checks measure a head with: its mouth landmarks (from the rig's meta, nearest vertices; a
+    morph head from a file without them: ``landmark_finder(mesh)``) and the keyword arguments ``lip_pairs``
+    (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names)
+    and ``reference`` (the head as modelled) of :func:`realtime_core.face.checks.check_rig` and
+    :func:`realtime_core.face.checks.pose_figures`."""
     import numpy as np
     from scipy.spatial import cKDTree
 
     from assets.heads.rigging import mouth_landmarks
-    from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
 
     rig, mesh = head.rig, head.mesh
     v0 = np.asarray(rig.neutral, dtype=np.float64)
@@ -506,13 +522,4 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
         from realtime_core.face.rig import modelled_rest
 
         reference = modelled_rest(rig)  # folds are measured from the head as modelled
-    return check_rig(
-        rig,
-        mouth_landmarks(idx),
-        lip_pairs=pairs,
-        teeth=teeth,
-        limits=limits or RigCheckLimits(),
-        reference=reference,
-        poses=EXTREME_POSES if poses is None else poses,
-        cavity_vertices=int(rig.meta.get("mouth_cavity", 0) or 0),
-    )
+    return mouth_landmarks(idx), {"lip_pairs": pairs, "teeth": teeth, "reference": reference}

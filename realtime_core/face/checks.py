@@ -530,6 +530,74 @@ def bilabial_gap(
     return max(gaps)
 
 
+@dataclass(frozen=True)
+class PoseFigures:
+    """Per pose (P of them): the figures :func:`check_rig` takes the worst of (see the module docstring)."""
+
+    poses: np.ndarray
+    """(P, 4) the poses measured."""
+    flipped: np.ndarray
+    """(P,) int: triangles of the moving region turned by more than 90 degrees from the reference."""
+    stretch: np.ndarray
+    """(P,) the largest deformed / reference edge length ratio."""
+    interpenetration: np.ndarray
+    """(P,) IOD: the most negative vertical gap between paired upper and lower lip points, negated (> 0: the
+    lips pass each other; <= 0: apart)."""
+    teeth_ahead: np.ndarray | None
+    """(P,) IOD: how far the most forward teeth vertex lies in front of the front-most outer lip midpoint
+    (> 0: ahead); None: no teeth known."""
+
+
+def flipped_faces(vertices: np.ndarray, reference: np.ndarray, triangles: np.ndarray, iod: float) -> np.ndarray:
+    """Indices of the triangles whose normal turns by more than 90 degrees from ``reference`` (n, 3) to
+    ``vertices`` (n, 3), among those with a moved vertex (more than 1e-9 IOD) and a non-degenerate area."""
+    t = np.asarray(triangles, dtype=np.int64)
+    n0 = _normals(reference, t)
+    a0 = np.linalg.norm(n0, axis=1)
+    ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
+    moved = np.linalg.norm(vertices - reference, axis=1) > 1e-9 * iod
+    turned = np.einsum("ij,ij->i", n0, _normals(vertices, t)) < 0
+    return np.flatnonzero(turned & moved[t].any(axis=1) & ok_tri)
+
+
+def pose_figures(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    poses: Any,
+    *,
+    lip_pairs: np.ndarray | None = None,
+    teeth: np.ndarray | None = None,
+    reference: np.ndarray | None = None,
+) -> PoseFigures:
+    """Flipped triangles (:func:`flipped_faces`), edge stretch, lip interpenetration and teeth ahead of the
+    lips of ``rig`` at each of ``poses`` (P, 4); the arguments as :func:`check_rig` takes them."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    vr = v0 if reference is None else np.asarray(reference, dtype=np.float64)
+    fr = face_frame(v0, landmarks)
+    iod, up, fwd = fr.iod, fr.axes[1], fr.axes[2]
+    pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    l0 = np.linalg.norm(vr[e[:, 0]] - vr[e[:, 1]], axis=1)
+    ok_edge = l0 > 1e-9 * iod
+    has_teeth = teeth is not None and len(teeth) > 0
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
+    flipped = np.zeros(len(p), dtype=np.int64)
+    stretch, inter, ahead = np.ones(len(p)), np.zeros(len(p)), np.zeros(len(p))
+    for i, pose in enumerate(p):
+        v = np.asarray(rig.deformed(pose), dtype=np.float64)
+        flipped[i] = len(flipped_faces(v, vr, t, iod))
+        l1 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+        stretch[i] = float(np.max(np.where(ok_edge, l1 / np.maximum(l0, 1e-300), 1.0)))
+        inter[i] = -float(((v[pairs[:, 0]] - v[pairs[:, 1]]) @ up).min()) / iod
+        if has_teeth:
+            lip_front = max(float(v[landmarks.upper_lip] @ fwd), float(v[landmarks.lower_lip] @ fwd))
+            ahead[i] = (float((v[np.asarray(teeth)] @ fwd).max()) - lip_front) / iod
+    return PoseFigures(
+        poses=p, flipped=flipped, stretch=stretch, interpenetration=inter, teeth_ahead=ahead if has_teeth else None
+    )
+
+
 def check_rig(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -548,37 +616,18 @@ def check_rig(
     for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
     many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
-    t = np.asarray(rig.triangles, dtype=np.int64)
-    vr = v0 if reference is None else np.asarray(reference, dtype=np.float64)
     fr = face_frame(v0, landmarks)
-    iod, up, fwd = fr.iod, fr.axes[1], fr.axes[2]
+    iod, up = fr.iod, fr.axes[1]
     pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
     gap0 = float((v0[landmarks.upper_inner] - v0[landmarks.lower_inner]) @ up) / iod
     closure = (0.0, 0.0, -gap0, 0.0)
-    n0 = _normals(vr, t)
-    a0 = np.linalg.norm(n0, axis=1)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    l0 = np.linalg.norm(vr[e[:, 0]] - vr[e[:, 1]], axis=1)
-    ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
-    ok_edge = l0 > 1e-9 * iod
-    worst: tuple[float, ...] = ()
-    flipped, stretch, inter, ahead = 0, 1.0, 0.0, None
-    for pose in (*poses, closure):
-        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
-        moved = np.linalg.norm(v - vr, axis=1) > 1e-9 * iod
-        tri_moving = moved[t].any(axis=1) & ok_tri
-        n1 = _normals(v, t)
-        f = int(((np.einsum("ij,ij->i", n0, n1) < 0) & tri_moving).sum())
-        if f > flipped:
-            flipped, worst = f, tuple(float(x) for x in pose)
-        l1 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-        stretch = max(stretch, float(np.max(np.where(ok_edge, l1 / np.maximum(l0, 1e-300), 1.0))))
-        gaps = (v[pairs[:, 0]] - v[pairs[:, 1]]) @ up / iod
-        inter = max(inter, float(-gaps.min()))
-        if teeth is not None and len(teeth):
-            lip_front = max(float(v[landmarks.upper_lip] @ fwd), float(v[landmarks.lower_lip] @ fwd))
-            a = (float((v[np.asarray(teeth)] @ fwd).max()) - lip_front) / iod
-            ahead = a if ahead is None else max(ahead, a)
+    per = pose_figures(rig, landmarks, (*poses, closure), lip_pairs=pairs, teeth=teeth, reference=reference)
+    k = int(np.argmax(per.flipped))
+    flipped = int(per.flipped[k])
+    worst: tuple[float, ...] = tuple(float(x) for x in per.poses[k]) if flipped else ()
+    stretch = max(1.0, float(per.stretch.max()))
+    inter = max(0.0, float(per.interpenetration.max()))
+    ahead = None if per.teeth_ahead is None else float(per.teeth_ahead.max())
     vc = np.asarray(rig.deformed(np.asarray(closure)), dtype=np.float64)
     closure_gap = abs(float((vc[landmarks.upper_inner] - vc[landmarks.lower_inner]) @ up)) / iod
     widest = max(poses, key=lambda q: float(q[2]), default=None)

@@ -14,6 +14,8 @@ from realtime_core.face.checks import (
     SPEECH_POSES,
     SPEECH_SCALE,
     check_rig,
+    flipped_faces,
+    pose_figures,
 )
 from realtime_core.face.model import MouthLandmarks
 from training.articulatory import CLASSES
@@ -85,9 +87,8 @@ class _Fold:
         return v
 
 
-def test_check_catches_a_fold() -> None:
-    rig = _Fold()
-    lm = MouthLandmarks(
+def _fold_landmarks() -> MouthLandmarks:
+    return MouthLandmarks(
         eye_outer_left=2,
         eye_inner_left=5,
         eye_inner_right=3,
@@ -99,8 +100,39 @@ def test_check_catches_a_fold() -> None:
         upper_inner=7,
         lower_inner=7,
     )
-    rep = check_rig(rig, lm)
+
+
+def test_check_catches_a_fold() -> None:
+    rep = check_rig(_Fold(), _fold_landmarks())
     assert rep.flipped_triangles > 0 and not rep.passed
+
+
+def test_pose_figures_finds_the_fold_at_the_poses_that_make_it_and_its_faces() -> None:
+    # The centre vertex at x = 1 + 10 mouth_open: inside its neighbours up to mouth_open 0.1, past the right
+    # column (x = 2) beyond it. A triangle is flipped where its signed area in the plane changes sign; the
+    # longest edge is (3, 4), rest length 1, from x = 0 to x = 1 + 10 mouth_open.
+    rig = _Fold()
+    opens = np.array([0.0, 0.05, 0.09, 0.2, 0.45])
+    poses = np.column_stack([np.zeros((5, 2)), opens, np.zeros(5)])
+    per = pose_figures(rig, _fold_landmarks(), poses)
+    t = rig.triangles
+
+    def area(v: np.ndarray) -> np.ndarray:
+        a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+    for i, p in enumerate(poses):
+        v = rig.deformed(p)
+        want = np.flatnonzero(np.sign(area(v)) != np.sign(area(rig.neutral)))
+        assert list(flipped_faces(v, rig.neutral, t, 1.0)) == list(want)
+        assert per.flipped[i] == len(want)
+    assert list(per.flipped[:3]) == [0, 0, 0] and per.flipped[3] > 0
+    assert np.allclose(per.stretch[1:], 1 + 10 * opens[1:])
+    assert per.teeth_ahead is None
+    # check_rig reports the worst of these (its closure pose is the rest pose here: the lips are one vertex).
+    rep = check_rig(rig, _fold_landmarks(), poses=tuple(map(tuple, poses)))
+    assert rep.flipped_triangles == per.flipped.max() and np.isclose(rep.max_edge_stretch, per.stretch.max())
+    assert rep.worst_flip_pose == tuple(poses[int(np.argmax(per.flipped))])
 
 
 class _Lips:

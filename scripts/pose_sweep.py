@@ -1,0 +1,166 @@
+"""Sweep: the rig checks' per-pose figures on every head of the test set and the held-out heads at many poses.
+
+    python scripts/pose_sweep.py --out /tmp/sweep [--data ../shared/data] [--only TEXT] [--sets grid,extreme,say,test]
+
+Issue 12's goals hold "at any pose"; :func:`realtime_core.face.checks.check_rig` measures them at
+EXTREME_POSES only. This deforms each head (made as ``scripts/head_testset.py`` and
+``scripts/heldout_heads.py`` make them) at four pose sets and reports, per head and set, the worst of
+:func:`realtime_core.face.checks.pose_figures` (flipped triangles, max edge stretch, lip interpenetration,
+teeth ahead of the lips) and the pose where each is worst:
+
+- test: every frame (or every --test-stride-th) the shipped default model produces on the audio of the GRID s1
+  test split (reporting only: nothing is tuned on it), as ``scripts/measure_param_box.py`` runs the live path;
+- say: ``facecast say`` on --say-texts sentences with each expression (smile, sad, surprise, anger) at
+  intensity 1;
+- grid: 5 levels of each parameter over training.params.TYPICAL_RANGES (625 poses);
+- extreme: the checks' EXTREME_POSES.
+
+Prints a Markdown table (docs/animation.md, "Sweep: the goals at any pose") and writes OUT/sweep.json (per
+head and set: the figures, their worst poses, the faces flipped at the worst flip pose).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
+
+EXPRESSIONS = ("smile", "sad", "surprise", "anger")
+LEVELS = 5
+
+
+def grid_poses() -> np.ndarray:
+    """(LEVELS**4, 4) every combination of LEVELS evenly spaced values of each parameter's typical range."""
+    from training.params import TYPICAL_RANGES, VISUAL_PARAMS
+
+    axes = [np.linspace(*TYPICAL_RANGES[name], LEVELS) for name in VISUAL_PARAMS]
+    return np.array(list(itertools.product(*axes)), dtype=np.float64)
+
+
+def pose_sets(data: Path, sets: list[str], say_texts: int, test_stride: int = 1) -> dict[str, np.ndarray]:
+    """name -> (P, 4) poses; ``test_stride``: every so many frames of the test set."""
+    from measure_param_box import SAY_TEXTS, model_frames, say_frames
+
+    from assets.grid import split_of
+    from realtime_core.face.checks import EXTREME_POSES
+
+    out: dict[str, np.ndarray] = {}
+    for s in sets:
+        if s == "test":
+            videos = (data / "video" / "grid_s1" / "video").glob("*.mp4")
+            clips = sorted(p for p in videos if split_of(p.stem) == "test")
+            if not clips:
+                raise SystemExit(f"{data}: no GRID s1 test sentences (give --data)")
+            out[s] = model_frames("default", clips)[::test_stride]
+        elif s == "say":
+            out[s] = np.concatenate([say_frames(SAY_TEXTS[:say_texts], extra=("--expression", e)) for e in EXPRESSIONS])
+        elif s == "grid":
+            out[s] = grid_poses()
+        elif s == "extreme":
+            out[s] = np.asarray(EXTREME_POSES, dtype=np.float64)
+        else:
+            raise SystemExit(f"unknown pose set {s!r} (test, say, grid, extreme)")
+    return out
+
+
+def sweep(head, poses: np.ndarray, finder) -> dict:
+    """The worst of each per-pose figure over ``poses`` and where it is worst (as lists, for JSON)."""
+    from assets.heads.head import head_check_inputs
+    from realtime_core.face import face_frame
+    from realtime_core.face.checks import flipped_faces, pose_figures
+
+    landmarks, inputs = head_check_inputs(head, landmark_finder=finder)
+    per = pose_figures(head.rig, landmarks, poses, **inputs)
+    res: dict = {"poses": len(poses)}
+    for key, arr in (
+        ("flipped", per.flipped),
+        ("stretch", per.stretch),
+        ("interpenetration", per.interpenetration),
+        ("teeth_ahead", per.teeth_ahead),
+    ):
+        if arr is None:
+            res[key] = None
+            continue
+        k = int(np.argmax(arr))
+        res[key] = float(arr[k]) if key != "flipped" else int(arr[k])
+        res[key + "_pose"] = [round(float(x), 4) for x in per.poses[k]]
+    res["poses_flipping"] = int((per.flipped > 0).sum())
+    res["poses_interpenetrating"] = int((per.interpenetration > 0.005).sum())
+    if res["flipped"]:
+        v0 = np.asarray(head.rig.neutral, dtype=np.float64)
+        ref = v0 if inputs["reference"] is None else np.asarray(inputs["reference"], dtype=np.float64)
+        v = np.asarray(head.rig.deformed(np.asarray(res["flipped_pose"])), dtype=np.float64)
+        res["flipped_faces"] = [
+            int(f) for f in flipped_faces(v, ref, head.rig.triangles, face_frame(v0, landmarks).iod)
+        ]
+    return res
+
+
+def cell(r: dict | None) -> str:
+    """flipped / stretch / interpenetration / teeth ahead, as one table cell."""
+    if r is None:
+        return "-"
+    teeth = "n/a" if r["teeth_ahead"] is None else f"{r['teeth_ahead']:.3f}"
+    return f"{r['flipped']} / {r['stretch']:.2f} / {r['interpenetration']:.4f} / {teeth}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True, help="derived head files and sweep.json")
+    ap.add_argument(
+        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
+    )
+    ap.add_argument("--only", default=None, help="only the heads whose name contains this text")
+    ap.add_argument("--sets", default="grid,extreme,say,test", help="comma-separated pose sets")
+    ap.add_argument("--say-texts", type=int, default=3, help="`facecast say` sentences per expression")
+    ap.add_argument("--test-stride", type=int, default=1, help="every so many frames of the test set (30 fps)")
+    args = ap.parse_args()
+    import head_testset
+    import heldout_heads
+    from head_testset import _resolve
+    from tqdm import tqdm
+
+    from clients.render.landmarks import find_landmarks
+    from realtime_core.errors import FacecastError
+
+    heads = head_testset.derive(args.out / "heads", args.data)
+    heads.update(heldout_heads.derive(args.out / "heldout", args.data))
+    if args.only:
+        heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
+    sets = pose_sets(args.data, args.sets.split(","), args.say_texts, args.test_stride)
+    results: dict[str, dict[str, dict | None]] = {}
+    for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
+        try:
+            head = _resolve(spec, opts, find_landmarks)
+        except FacecastError as exc:
+            print(f"{name}: cannot rig ({exc})", file=sys.stderr)
+            results[name] = {s: None for s in sets}
+            continue
+        results[name] = {}
+        for s, poses in sets.items():
+            try:
+                results[name][s] = sweep(head, poses, find_landmarks)
+            except FacecastError as exc:  # no landmarks: not measurable, as the test set's table says
+                print(f"{name}: not checked ({exc})", file=sys.stderr)
+                results[name][s] = None
+            print(f"{name} [{s}]: {results[name][s]}", file=sys.stderr)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "sweep.json").write_text(json.dumps({"poses": {s: len(p) for s, p in sets.items()}, "heads": results}))
+    print("| head | " + " | ".join(f"{s} ({len(p)} poses)" for s, p in sets.items()) + " |")
+    print("|---|" + "---|" * len(sets))
+    for name, per_set in results.items():
+        print(f"| {name} | " + " | ".join(cell(per_set[s]) for s in sets) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
