@@ -33,6 +33,14 @@ INT16_SCALE = 32768.0
 """float full scale 1.0 = 32768 int16 steps (the wire format's audio scale)."""
 
 
+def is_silent(samples: np.ndarray) -> bool:
+    """Whether ``samples`` (n,) are digital silence: their absolute peak under :data:`SILENCE_PEAK` of full
+    scale (float in [-1, 1], or int16 counted against :data:`INT16_SCALE`); an empty array is silent."""
+    x = np.asarray(samples)
+    scale = INT16_SCALE if x.dtype.kind == "i" else 1.0
+    return float(np.max(np.abs(x.astype(np.float64)), initial=0.0)) / scale < SILENCE_PEAK
+
+
 def to_int16(samples: np.ndarray) -> np.ndarray:
     """float in [-1, 1] (n,) -> int16 (n,): ``x * 32768`` rounded, clipped to [-32768, 32767]."""
     return np.clip(np.rint(np.asarray(samples, dtype=np.float64) * INT16_SCALE), -32768, 32767).astype(np.int16)
@@ -108,7 +116,7 @@ def read_wav(
         raise WrongSampleRateError(path, f"wrong sample rate: file has {rate} Hz, manifest says {expected_rate_hz} Hz")
     if len(x) == 0:
         raise TruncatedFileError(path, "truncated WAV: no samples")
-    if check_silence and float(np.max(np.abs(x))) < SILENCE_PEAK:
+    if check_silence and is_silent(x):
         raise SilentAudioError(path, f"silent: peak amplitude {float(np.max(np.abs(x))):.1e} of full scale")
     return x.astype(np.float32), int(rate)
 

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from assets.audio import INT16_SCALE, SILENCE_PEAK
+from assets.audio import is_silent
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import ConfigError, RealtimeCoreError
@@ -98,8 +98,7 @@ class SessionConfig:
                     "(30-60 s is the intended amount)"
                 )
             raw = np.frombuffer(self.enrol_bytes(), dtype=P.SAMPLE_FORMATS[self.sample_format])
-            peak = float(np.max(np.abs(raw.astype(np.float64)), initial=0.0))
-            if peak / (INT16_SCALE if raw.dtype.kind == "i" else 1.0) < SILENCE_PEAK:
+            if is_silent(raw):
                 # as `facecast adapt`: the silence's frames would pull a component towards digital silence
                 raise ServerConfigError("enrol is silent: it needs a recording of the talker's speech")
 

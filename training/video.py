@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from assets.audio import SILENCE_PEAK, read_audio
+from assets.audio import is_silent, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from assets.mediapipe_log import native_stderr_quiet
 from realtime_core.face.registration import fit_similarity as similarity_fit
@@ -351,7 +351,7 @@ def measure_raw(
         first = next(ln for ln in err.splitlines() if _DAMAGE.search(ln))
         raise TruncatedFileError(path, f"truncated or damaged video: ffmpeg reports {first.strip()[-120:]!r}")
     samples = decode_audio(path, config.audio_rate_hz)
-    if float(np.max(np.abs(samples), initial=0.0)) < SILENCE_PEAK:
+    if is_silent(samples):
         raise SilentAudioError(path, "silent: the audio track holds no signal")
     # frame j of the video is shown at start_v + j / fps on the container clock; audio starts at start_a
     start_v = float(v.get("start_time") or 0.0)

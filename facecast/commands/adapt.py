@@ -43,10 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    import numpy as np
     from tqdm import tqdm
 
-    from assets.audio import SILENCE_PEAK, read_audio
+    from assets.audio import is_silent, read_audio
     from assets.errors import SilentAudioError
     from assets.modelfile import ModelFileError, load_model, save_model
     from realtime_core.adaptation import adapt_av_model
@@ -63,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     recordings = []
     for path in tqdm(args.speech, desc="reading speech", unit="file"):
         samples, _ = read_audio(path, rate_hz=model.sample_rate_hz)
-        if float(np.max(np.abs(samples), initial=0.0)) < SILENCE_PEAK:  # its frames would pull a component to silence
+        if is_silent(samples):  # its frames would pull a component to silence
             raise SilentAudioError(path, "silent: no voice to adapt to; nothing written")
         recordings.append(samples)
     seconds = sum(len(x) for x in recordings) / model.sample_rate_hz
