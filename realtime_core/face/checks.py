@@ -548,11 +548,20 @@ class PoseFigures:
     (> 0: ahead); None: no teeth known."""
 
 
-def flipped_faces(vertices: np.ndarray, reference: np.ndarray, triangles: np.ndarray, iod: float) -> np.ndarray:
+def flipped_faces(
+    vertices: np.ndarray,
+    reference: np.ndarray,
+    triangles: np.ndarray,
+    iod: float,
+    *,
+    reference_normals: np.ndarray | None = None,
+) -> np.ndarray:
     """Indices of the triangles whose normal turns by more than 90 degrees from ``reference`` (n, 3) to
-    ``vertices`` (n, 3), among those with a moved vertex (more than 1e-9 IOD) and a non-degenerate area."""
+    ``vertices`` (n, 3), among those with a moved vertex (more than 1e-9 IOD) and a non-degenerate area.
+    ``reference_normals`` (m, 3): the reference's unnormalised triangle normals when the caller measures many
+    poses against one reference (computed here otherwise)."""
     t = np.asarray(triangles, dtype=np.int64)
-    n0 = _normals(reference, t)
+    n0 = _normals(reference, t) if reference_normals is None else reference_normals
     a0 = np.linalg.norm(n0, axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     moved = np.linalg.norm(vertices - reference, axis=1) > 1e-9 * iod
@@ -584,9 +593,10 @@ def pose_figures(
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
     flipped = np.zeros(len(p), dtype=np.int64)
     stretch, inter, ahead = np.ones(len(p)), np.zeros(len(p)), np.zeros(len(p))
+    n0 = _normals(vr, t)  # once for every pose
     for i, pose in enumerate(p):
         v = np.asarray(rig.deformed(pose), dtype=np.float64)
-        flipped[i] = len(flipped_faces(v, vr, t, iod))
+        flipped[i] = len(flipped_faces(v, vr, t, iod, reference_normals=n0))
         l1 = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
         stretch[i] = float(np.max(np.where(ok_edge, l1 / np.maximum(l0, 1e-300), 1.0)))
         inter[i] = -float(((v[pairs[:, 0]] - v[pairs[:, 1]]) @ up).min()) / iod
