@@ -17,7 +17,9 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Coroutine, Iterable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 import pytest
@@ -28,6 +30,8 @@ from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, s
 from tests.prerequisites import missing
 from tests.speech import speechlike
 from wire import protocol as P
+
+T = TypeVar("T")
 
 # Three facecast processes and a real redis-server.
 pytestmark = [pytest.mark.system, pytest.mark.slow]
@@ -105,6 +109,15 @@ def _node(model_path, redis_url: str, name: str, role: str = "both", args: tuple
     return ServerProcess(model_path, head=False, config_toml=toml, args=args)
 
 
+def _run_then_stop(nodes: Iterable[ServerProcess], main: Coroutine[Any, Any, T], timeout_s: float) -> T:
+    """``main`` run on a fresh event loop (at most ``timeout_s``), then every node stopped, whatever happened."""
+    try:
+        return asyncio.run(asyncio.wait_for(main, timeout_s))
+    finally:
+        for n in nodes:
+            n.stop()
+
+
 async def _get_json(url: str, path: str) -> dict:
     status, body = await http_get(url, path)
     assert status == 200, (path, status, body[:200])
@@ -159,11 +172,7 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
         health = [await _get_json(u, "/health") for u in (a, b, c)]
         return ended, got, health
 
-    try:
-        ended, (ga, gb, gc), health = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes:
-            n.stop()
+    ended, (ga, gb, gc), health = _run_then_stop(nodes, main(), 90)
     n = ended["frames"]
     assert [m.index for m in ga.frames] == [m.index for m in gb.frames] == list(range(n))
     np.testing.assert_array_equal(gb.values(), ga.values())  # the same bytes decoded: identical
@@ -227,11 +236,7 @@ def test_a_late_text_viewer_on_any_node_gets_the_sentence_so_far(model_path, red
             )
         return spoken, joined_s, ended, (ma, va.close_code), (mb, vb.close_code), health
 
-    try:
-        spoken, joined_s, ended, (ma, ca), (mb, cb), health = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes:
-            n.stop()
+    spoken, joined_s, ended, (ma, ca), (mb, cb), health = _run_then_stop(nodes, main(), 90)
     assert joined_s < spoken["duration_s"] - 1.0  # they joined while the sentence played
     n = ended["frames"]
     assert [m.index for m in ma if m.kind != P.KIND_AUDIO] == list(range(n))  # from the sentence's first frame
@@ -276,11 +281,7 @@ def test_killing_an_edge_node_loses_no_session(model_path, redis_server):
             sessions = (await _get_json(a, "/sessions"))["sessions"]
         return got1, got2, ended, sessions
 
-    try:
-        got1, got2, ended, sessions = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes.values():
-            n.stop()
+    got1, got2, ended, sessions = _run_then_stop(nodes.values(), main(), 90)
     assert got1.close_code != P.CLOSE_NORMAL and len(got1.frames) > 0  # cut off by the kill
     idx2 = [m.index for m in got2.frames]
     assert idx2 == list(range(idx2[0], ended["frames"]))  # consecutive to the end after reconnecting
@@ -338,11 +339,7 @@ def test_far_viewers_of_a_session_whose_node_dies_are_told_it_is_lost(model_path
         print(f"cluster: the far viewer of the dead node's session was closed {lost_after_s:.2f} s after the kill")
         return lost, health, ended, kept
 
-    try:
-        lost, health, ended, kept = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes.values():
-            n.stop()
+    lost, health, ended, kept = _run_then_stop(nodes.values(), main(), 90)
     assert (lost.close_code, lost.close_reason) == (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
     assert len(lost.frames) > 0  # it was watching when a died
     assert health["remote_feeds"] == 1  # the feed of c's session only
@@ -391,11 +388,7 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
                 got_far = await asyncio.wait_for(collect_far, 20)
         return down, up, rows, ended, got, got_remote, got_far
 
-    try:
-        down, up, rows, ended, got, got_remote, got_far = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes:
-            n.stop()
+    down, up, rows, ended, got, got_remote, got_far = _run_then_stop(nodes, main(), 90)
     assert down["status"] == "degraded" and down["redis"].startswith("down")
     assert all(h["redis"] == "ok" for h in up) and rows[0]["node"] == "a"
     assert [m.index for m in got.frames] == list(range(ended["frames"]))  # the local viewer lost nothing
@@ -432,11 +425,7 @@ def test_an_ingest_landing_on_an_edge_node_is_forwarded(model_path, redis_server
                 got = await asyncio.wait_for(collect, 20)
         return rows, ended, got
 
-    try:
-        rows, ended, got = asyncio.run(asyncio.wait_for(main(), 60))
-    finally:
-        for n in nodes:
-            n.stop()
+    rows, ended, got = _run_then_stop(nodes, main(), 60)
     assert [(r["name"], r["node"]) for r in rows] == [("fw", "a")]  # computed on a, not on the edge
     assert ended["type"] == "ended" and [m.index for m in got.frames] == list(range(ended["frames"]))
     assert got.close_code == P.CLOSE_NORMAL
@@ -498,11 +487,7 @@ def test_a_far_viewer_joining_as_the_session_ends_gets_its_end(model_path, redis
         finally:
             await r.aclose()
 
-    try:
-        got, record = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes:
-            n.stop()
+    got, record = _run_then_stop(nodes, main(), 90)
     assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
     assert got.frames == [] and got.audio == []
     assert record == {"code": P.CLOSE_NORMAL, "reason": record["reason"]}
@@ -556,11 +541,7 @@ def test_far_viewers_joining_around_a_real_session_end_all_get_an_end(model_path
         finally:
             await r.aclose()
 
-    try:
-        codes = asyncio.run(asyncio.wait_for(main(), 90))
-    finally:
-        for n in nodes:
-            n.stop()
+    codes = _run_then_stop(nodes, main(), 90)
     assert set(codes) <= {P.CLOSE_NORMAL, P.CLOSE_NOT_FOUND}, codes
     assert P.CLOSE_NORMAL in codes and P.CLOSE_NOT_FOUND in codes  # some joined before the end, some after
 
