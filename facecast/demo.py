@@ -14,10 +14,14 @@ import signal
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from server.errors import AudioSourceError, ServerConfigError, ServerError
+
+if TYPE_CHECKING:
+    from server.app import FacecastServer
 
 SENTENCES: tuple[str, ...] = (
     "Hello! This face is driven by speech alone, in real time.",
@@ -101,12 +105,10 @@ def _announce(line: str) -> None:
     print(line, flush=True)
 
 
-async def run_demo(config: DemoConfig, model, head, *, announce=_announce) -> DemoResult:
-    """Serve, stream one live session, watch it as a client; returns what the viewer received."""
-    from clients.client import ViewerClient
+async def _serve(config: DemoConfig, model, head) -> FacecastServer:
+    """The demo's server on ``config``'s host, port, web root and node_modules, started."""
     from server.app import FacecastServer
     from server.config import ServerConfig
-    from server.sources import FileSource, MicConfig, MicSource
 
     server = FacecastServer(
         model,
@@ -116,6 +118,15 @@ async def run_demo(config: DemoConfig, model, head, *, announce=_announce) -> De
         ),
     )
     await server.start()
+    return server
+
+
+async def run_demo(config: DemoConfig, model, head, *, announce=_announce) -> DemoResult:
+    """Serve, stream one live session, watch it as a client; returns what the viewer received."""
+    from clients.client import ViewerClient
+    from server.sources import FileSource, MicConfig, MicSource
+
+    server = await _serve(config, model, head)
     loop = asyncio.get_running_loop()
     mic: MicSource | None = None
     source: MicSource | FileSource
@@ -190,18 +201,9 @@ async def serve_replay(
     at any time finds the head talking (the viewer reconnects when a session ends and starts
     again). Returns the number of passes played.
     """
-    from server.app import FacecastServer
-    from server.config import ServerConfig
     from server.sources import FileSource
 
-    server = FacecastServer(
-        model,
-        head=head,
-        config=ServerConfig(
-            host=config.host, port=config.port, web_root=config.web_root, node_modules=config.node_modules
-        ),
-    )
-    await server.start()
+    server = await _serve(config, model, head)
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

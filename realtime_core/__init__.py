@@ -16,6 +16,7 @@ or in random chunks.
     adaptation   speaker adaptation of a whole AvModel from enrolment speech
     synthesis    text-driven visible speech by unit selection (seed 001): EM-PCA, visemes, search, concat
     face         face models, registration, control-point projection, interpolation, rigs (Sec. 5)
+    normals      triangle normals (rig checks, fold repair, the heads' shading)
     blendshapes  ARKit-52 / OVR-15 blendshape weights from the four mouth parameters
     metrics      AMSE / ACC (eq. 11-12), Pearson R and normalised MSE (paper 002 eq. 6-8)
     motion_units Motion Units by PCA, expression units (eq. 1-2), MUP <-> keyframe least squares (eq. 3-4)

@@ -11,7 +11,9 @@ session:
   session's row (its facts for viewer descriptions and its ``/sessions`` row, plus the owner's node
   id and URL), with a TTL of ``3 x heartbeat``. A heartbeat task refreshes the rows and the node's
   own key ``facecast:node:ID`` every ``heartbeat_s``; a node that dies drops out within the TTL.
-  ``/sessions`` lists every node's sessions from Redis.
+  ``/sessions`` lists every node's sessions from Redis. A node with viewers of another node's session
+  keeps their number in ``facecast:viewers:NAME:ID`` (TTL); the owner adds those to its own viewers in
+  the row, so every node lists a session with all its viewers.
 * **Frames.** The owner publishes each binary message it sends its own viewers (exactly those
   bytes: header with the owner's send time, payload) on the Redis pub/sub channel
   ``facecast:frames:NAME``, for each (kind, encoding) some node wants, the audio relay included; at
@@ -108,6 +110,10 @@ def control_channel(node: str) -> str:
 
 def want_key(name: str, kind: int, encoding: int) -> str:
     return f"{PREFIX}:want:{name}:{kind}:{encoding}"
+
+
+def viewers_key(name: str, node: str) -> str:
+    return f"{PREFIX}:viewers:{name}:{node}"
 
 
 class SessionFacts:
@@ -293,6 +299,9 @@ class Cluster:
         self.error = ""
         self.local: dict[str, LiveSession] = {}
         self.wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
+        # Viewers other nodes hold of each local session (their viewers keys, read every heartbeat): the
+        # session's registry row counts them with its own, so /sessions on any node shows all its viewers.
+        self.far_viewers: dict[str, int] = {}
         # Wants announced while the heartbeat scans the want keys (None when it is not scanning): kept
         # through the scan's result, which may have missed their keys.
         self._wanted_meanwhile: set[tuple[str, int, int]] | None = None
@@ -388,6 +397,7 @@ class Cluster:
         row = summary(live)
         row.update(
             {
+                "viewers": row["viewers"] + self.far_viewers.get(live.name, 0),
                 "node": self.node,
                 "node_url": self.advertise,
                 "fps": s.fps,
@@ -536,6 +546,7 @@ class Cluster:
                 {(P.KIND_AUDIO, P.ENC_INT16)} if any(v.audio for v in feed.viewers) else set()
             ):
                 pipe.set(want_key(name, kind, enc), self.node, px=self.ttl_ms)
+            pipe.set(viewers_key(name, self.node), len(feed.viewers), px=self.ttl_ms)
         await pipe.execute()
         # The owner's side: which kinds of its sessions other nodes want now.
         wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
@@ -552,6 +563,13 @@ class Cluster:
             self.wanted = wanted
         finally:
             self._wanted_meanwhile = None
+        far: collections.Counter[str] = collections.Counter()
+        keys = [k async for k in r.scan_iter(match=f"{PREFIX}:viewers:*", count=500)] if self.local else []
+        for key, n in zip(keys, await r.mget(keys) if keys else []):
+            name = (key.decode() if isinstance(key, bytes) else key).split(":")[2]
+            if name in self.local and n is not None:
+                far[name] += int(n)
+        self.far_viewers = dict(far)
         if self._pubsub is not None and self._pubsub_ready and self._pubsub.connection is None:
             raise ConnectionError("subscription lost")
 

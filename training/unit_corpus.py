@@ -128,43 +128,25 @@ def build_stored_corpus(
     # The Utterance Motion Units of paper 002 (PCA by covariance eigenvectors, 97 % of the variance)
     # on the same lower-face displacements, so synthesised motion can also be given as MUPs.
     units = fit_motion_units(np.concatenate(motions))
-    frames, fo, labels, vis, st, en, po, neutral = [], [0], [], [], [], [], [0], []
+    sentences, neutral = [], []
     for (sid, track, rows), m in zip(tracks, motions):
-        n = len(m)
-        coeff = pca.transform(m)
-        frames.append(np.concatenate([coeff, track.params], axis=1).astype(np.float32))
-        fo.append(fo[-1] + n)
-        end_s = n / 30.0
-        kept = 0
+        end_s = len(m) / 30.0
+        phones = []
         for lab, a, b in sorted(phone_rows(rows), key=lambda r: r[1]):
             a, b = max(a, 0.0), min(b, end_s)
-            if b - a <= 1e-6:
-                continue
-            labels.append(lab)
-            vis.append(VISEME_ID[viseme_of(lab, "arpabet")])
-            st.append(a)
-            en.append(b)
-            kept += 1
-        if kept == 0:
+            if b - a > 1e-6:
+                phones.append((lab, VISEME_ID[viseme_of(lab, "arpabet")], a, b))
+        if not phones:
             raise ConfigError(f"sentence {sid}: no phone inside its {end_s:.2f} s of motion")
-        po.append(po[-1] + kept)
+        sentences.append((sid, np.concatenate([pca.transform(m), track.params], axis=1).astype(np.float32), phones))
         neutral.append(track.neutral[list(LOWER_FACE)])
     k = pca.n_components
-    corpus = MotionCorpus(
-        sentence_ids=tuple(sid for sid, _, _ in tracks),
-        frames=np.concatenate(frames),
-        frame_offsets=np.array(fo),
-        phone_labels=tuple(labels),
-        phone_visemes=np.array(vis, dtype=np.int16),
-        phone_start_s=np.array(st),
-        phone_end_s=np.array(en),
-        phone_offsets=np.array(po),
-        n_coefficients=k,
-        dim_names=tuple(f"pc{i + 1}" for i in range(k)) + VISUAL_PARAMS,
+    corpus = MotionCorpus.of_sentences(
+        sentences, n_coefficients=k, dim_names=tuple(f"pc{i + 1}" for i in range(k)) + VISUAL_PARAMS
     )
     info = {
         "n_sentences": corpus.n_sentences,
-        "n_frames": int(fo[-1]),
+        "n_frames": len(corpus.frames),
         "n_phones": corpus.n_phones,
         "n_components": k,
         "explained": float(pca.explained_ratio[-1]),

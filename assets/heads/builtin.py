@@ -76,16 +76,16 @@ def mouth_bag(
     vertices: np.ndarray, triangles: np.ndarray, part: np.ndarray, line: np.ndarray, frame: FaceFrame
 ) -> np.ndarray:
     """Indices of the skin vertices inside the mouth (the lips' lining, cheeks, palate, throat): the skin
-    hidden from the front (a surface lies > 0.01 IOD in front of it) connected to the lip contact line
+    hidden from the front (a surface lies > INSIDE_COVER IOD in front of it) connected to the lip contact line
     ``line`` (vertex indices) through such skin. The face, the nostrils and the neck under the chin are
     hidden or not, but never reach the contact line without crossing the visible face."""
     from scipy.sparse.csgraph import connected_components
 
-    from assets.heads.cavity import front_depth
+    from assets.heads.cavity import INSIDE_COVER, front_depth
     from realtime_core.face.projection import vertex_adjacency
 
     q = (vertices - frame.origin) @ frame.axes.T
-    hidden = front_depth(vertices, triangles, frame, q[:, :2]) - q[:, 2] > 0.01 * frame.iod
+    hidden = front_depth(vertices, triangles, frame, q[:, :2]) - q[:, 2] > INSIDE_COVER * frame.iod
     keep = (part == 0) & hidden
     keep[line] = True
     idx = np.flatnonzero(keep)

@@ -303,8 +303,10 @@ def with_dark_mouth_inside(
     contact = middle + (min(ends, middle) - middle) * np.clip(np.abs(q[:, 0] - mid[0]) / max(half, 1e-300), 0.0, 1.0)
     side, up, down = INSIDE_BOX
     dy = q[:, 1] - mid[1]
-    # A head with its own teeth, tongue or gums has a mouth bag around them: all of its hidden skin joined to the
-    # crease is inside, as the built-in head's (assets.heads.builtin.mouth_bag). Bounded by the box and the opening
+    # A head with its own teeth, tongue or gums has a mouth bag around them: all of its hidden skin behind the
+    # contact joined to the crease is inside, as the built-in head's (assets.heads.builtin.mouth_bag). Not one rule:
+    # the built-in's, seeded by its contact line, also takes the lips' hidden walls in front of the contact (141
+    # vertices its crease shade skips: under this rule they darken by up to 0.69). Bounded by the box and the opening
     # (below), its cheeks' inner walls behind the corners (up to 0.19 IOD past them) stayed skin-coloured and showed
     # as a light wall at the near corner in three-quarter view at /a/ (the multi-material OBJ, the --head-part row).
     # A head without one reaches further that way (a hollow scan's inside, the chin's fold): the box bounds it.

@@ -96,19 +96,22 @@ class _Buffer:
         return len(self.accessors) - 1
 
 
+def glb_container(doc: dict, body: bytes = b"") -> bytes:
+    """A GLB file of the glTF JSON ``doc`` and ``body``, its binary chunk (left out when empty): the header,
+    then the JSON chunk padded with spaces and the binary chunk with zeros, each to 4 bytes."""
+    js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
+    js += b" " * (-len(js) % 4)
+    body += b"\x00" * (-len(body) % 4)
+    chunks = struct.pack("<I4s", len(js), b"JSON") + js
+    if body:
+        chunks += struct.pack("<I4s", len(body), b"BIN\x00") + body
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
+
+
 def _glb(doc: dict, buf: _Buffer) -> bytes:
     body = b"".join(buf.blobs)
     doc.update({"buffers": [{"byteLength": len(body)}], "bufferViews": buf.views, "accessors": buf.accessors})
-    js = json.dumps(doc, separators=(",", ":"), allow_nan=False).encode()
-    js += b" " * (-len(js) % 4)  # the JSON chunk is padded with spaces, the binary chunk with zeros
-    total = 12 + 8 + len(js) + 8 + len(body)
-    return (
-        struct.pack("<4sII", b"glTF", 2, total)
-        + struct.pack("<I4s", len(js), b"JSON")
-        + js
-        + struct.pack("<I4s", len(body), b"BIN\x00")
-        + body
-    )
+    return glb_container(doc, body)
 
 
 def _primitive(

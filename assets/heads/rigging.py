@@ -75,6 +75,7 @@ from realtime_core.face.simple import (
     lip_contact_vertices,
     regional_shape_units,
 )
+from realtime_core.normals import triangle_normals
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
     ("mouthUpperUpLeft", "mouthUpperUpRight"),
@@ -770,8 +771,7 @@ def _lower_faces(
         # away from the viewer: dark shards by the corner, lip backs seen 4.55e-3 IOD^2 with a third face
         # (docs/animation.md, "The stylised head's lip shards"). A face facing down is the upper lip's, whichever
         # seeds are nearer.
-        f = t[idx]
-        normal = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        normal = triangle_normals(v, t[idx])
         normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
         lower[idx[normal @ up < -np.cos(np.radians(UNDERSIDE_FACING))]] = False
     return lower, near
@@ -922,7 +922,7 @@ def wound_inwards(
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     near = np.linalg.norm(v[t].mean(axis=1) - np.asarray(nose_tip, dtype=np.float64), axis=1) <= WINDING_REACH * iod
-    n = np.cross(v[t[near, 1]] - v[t[near, 0]], v[t[near, 2]] - v[t[near, 0]]).sum(axis=0)
+    n = triangle_normals(v, t[near]).sum(axis=0)
     return bool(n @ np.asarray(forward, dtype=np.float64) < 0)
 
 

@@ -29,6 +29,7 @@ from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
 from assets.mediapipe_log import native_stderr_quiet
 from realtime_core.face import face_frame_at
+from realtime_core.normals import triangle_normals
 
 MEDIAPIPE_INDEX: dict[str, int] = {
     "eye_outer_left": 263,
@@ -227,7 +228,7 @@ def _crease_vertices(mesh: HeadMesh, up: np.ndarray) -> np.ndarray:
     """(n,) bool: vertices with a triangle facing up and one facing down (CREASE_FACING) about them."""
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int64)
-    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n = triangle_normals(v, t)
     facing = (n @ up) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
     hi = np.full(len(v), -np.inf)
     lo = np.full(len(v), np.inf)

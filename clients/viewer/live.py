@@ -33,12 +33,18 @@ import numpy as np
 from assets.heads.mesh import HeadMesh
 from clients.errors import ClientError
 from clients.render.renderer import HeadRenderer, RenderConfig
-from clients.viewer.stream import ViewerStreamConfig, connect_viewer
+from clients.viewer.stream import ViewerStreamConfig, backoff, connect_viewer
 from clients.viewer.video import framing
 from wire import protocol as P
 
 REST_EASE_S = 0.2
 """How long the face takes to ease to rest after a session's last frame (the browser viewer's too)."""
+REWATCH_MAX_S = 1.0
+"""s: the longest wait between the window's attempts to watch its session again once it has ended (or before it
+starts): from :data:`clients.viewer.stream.RETRY_S` the wait doubles up to this. Retried every RETRY_S for as long as
+it stayed away, the window opened 17 connections a second (each one a WebSocket handshake the server closes with
+4004); now one a second, and a session that comes back is still picked up within this (the browser viewer retries
+a server it lost every second too)."""
 
 
 @dataclass
@@ -203,13 +209,15 @@ class _Receiver(threading.Thread):
 
     async def _main(self) -> None:
         cfg, inbox = self.cfg, self.inbox
+        waits = backoff(REWATCH_MAX_S)
         while True:
             try:
-                v = await connect_viewer(cfg)
+                v = await connect_viewer(cfg, waits=waits)
             except ClientError as exc:
                 inbox.put(("error", str(exc)))
-                await asyncio.sleep(0.5)
+                await asyncio.sleep(next(waits))
                 continue
+            waits = backoff(REWATCH_MAX_S)  # the next wait for the session starts fast again
             # A new connection's media times start again: the old blocks must not sound for them.
             self.audio.reset()
             rate = int((v.description.get("audio") or {}).get("rate_hz", 16000))

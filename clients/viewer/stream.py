@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from urllib.parse import quote
 
@@ -146,8 +147,18 @@ async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
         raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
 
 
-async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
-    """A connected viewer, retrying every :data:`RETRY_S` while the session does not exist (up to wait_s)."""
+def backoff(longest_s: float) -> Iterator[float]:
+    """Waits (s) between attempts: :data:`RETRY_S`, then each twice the last, up to ``longest_s``."""
+    wait = RETRY_S
+    while True:
+        yield wait
+        wait = min(2 * wait, longest_s)
+
+
+async def connect_viewer(cfg: ViewerStreamConfig, *, waits: Iterator[float] | None = None) -> ViewerClient:
+    """A connected viewer, retrying while the session does not exist (up to wait_s): every :data:`RETRY_S`,
+    or after each of ``waits`` (s) in turn (:func:`backoff`; the caller's iterator, so it can carry the
+    back-off over several calls)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
         v = ViewerClient(
@@ -162,7 +173,7 @@ async def connect_viewer(cfg: ViewerStreamConfig) -> ViewerClient:
         except OSError as exc:
             if time.monotonic() >= deadline:
                 raise ClientError(f"{cfg.url}: cannot connect: {exc}") from None
-        await asyncio.sleep(RETRY_S)
+        await asyncio.sleep(RETRY_S if waits is None else next(waits))
 
 
 async def record_stream(cfg: ViewerStreamConfig, *, on_frame=None, check_description=None) -> Recording:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from realtime_core.errors import ConfigError
+from realtime_core.normals import triangle_normals
 
 
 def affine_adaptation(
@@ -31,7 +32,7 @@ def affine_adaptation(
     y = s - s.mean(0)
     xt = np.transpose(x[t], (0, 2, 1))  # (m, 3, 3) columns x_i, x_j, x_k
     yt = np.transpose(y[t], (0, 2, 1))
-    area = 0.5 * np.linalg.norm(np.cross(g[t[:, 1]] - g[t[:, 0]], g[t[:, 2]] - g[t[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(triangle_normals(g, t), axis=1)
     cond = np.linalg.cond(xt)
     regular = np.isfinite(cond) & (cond < max_cond) & (area > 0)
     a = np.zeros_like(xt)

@@ -48,6 +48,7 @@ import numpy as np
 from realtime_core.errors import ConfigError
 from realtime_core.face.model import MouthLandmarks, face_frame
 from realtime_core.face.visibility import front_most
+from realtime_core.normals import triangle_normals
 
 # (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD.
 SPEECH_SCALE = 0.45 / 0.33
@@ -501,10 +502,6 @@ def lip_backs_seen(
     return worst, faces
 
 
-def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-
-
 def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: MouthLandmarks, fr: Any) -> np.ndarray:
     """IOD: the vertical gaps of the lip pairs (k, 2) whose rest position lies in the middle half of the
     corner-to-corner width, at the deformed vertices ``v``; the inner-lip landmarks' gap where none does
@@ -561,11 +558,11 @@ def flipped_faces(
     ``reference_normals`` (m, 3): the reference's unnormalised triangle normals when the caller measures many
     poses against one reference (computed here otherwise)."""
     t = np.asarray(triangles, dtype=np.int64)
-    n0 = _normals(reference, t) if reference_normals is None else reference_normals
+    n0 = triangle_normals(reference, t) if reference_normals is None else reference_normals
     a0 = np.linalg.norm(n0, axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     moved = np.linalg.norm(vertices - reference, axis=1) > 1e-9 * iod
-    turned = np.einsum("ij,ij->i", n0, _normals(vertices, t)) < 0
+    turned = np.einsum("ij,ij->i", n0, triangle_normals(vertices, t)) < 0
     return np.flatnonzero(turned & moved[t].any(axis=1) & ok_tri)
 
 
@@ -593,7 +590,7 @@ def pose_figures(
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
     flipped = np.zeros(len(p), dtype=np.int64)
     stretch, inter, ahead = np.ones(len(p)), np.zeros(len(p)), np.zeros(len(p))
-    n0 = _normals(vr, t)  # once for every pose
+    n0 = triangle_normals(vr, t)  # once for every pose
     for i, pose in enumerate(p):
         v = np.asarray(rig.deformed(pose), dtype=np.float64)
         flipped[i] = len(flipped_faces(v, vr, t, iod, reference_normals=n0))

@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from realtime_core.face.projection import vertex_adjacency
+from realtime_core.normals import triangle_normals
 
 
 @dataclass(frozen=True)
@@ -31,10 +32,6 @@ class RepairResult:
     rounds: int
     flips_left: int
     smoothed_rows: int
-
-
-def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
 
 
 def repair_folds(
@@ -102,7 +99,7 @@ def repair_folds(
         mix = sp.csr_matrix((coo.data[keep_entry], (coo.row[keep_entry], coo.col[keep_entry])), shape=(n, n))
     deg = np.asarray(mix.sum(axis=1)).ravel()
     mean_op = sp.diags(1.0 / np.maximum(deg, 1)) @ mix
-    n0 = _normals(v0, t)
+    n0 = triangle_normals(v0, t)
     a0 = np.linalg.norm(n0, axis=1)
     ok_tri = a0 > 1e-12 * max(float(a0.max()), 1e-300)
     e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
@@ -138,7 +135,7 @@ def repair_folds(
         t_m, e_m = t[tri], e[edge]
         for m in motions:
             v = v0 + (g @ m)
-            f = tri[np.einsum("ij,ij->i", n0[tri], _normals(v, t_m)) < 0]
+            f = tri[np.einsum("ij,ij->i", n0[tri], triangle_normals(v, t_m)) < 0]
             worst = max(worst, len(f))
             bad[t[f].ravel()] = True
             flipped_any[f] = True

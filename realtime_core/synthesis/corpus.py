@@ -11,6 +11,7 @@ four mouth parameters). Sans-I/O: :mod:`training.unit_corpus` builds and stores 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,6 +69,30 @@ class MotionCorpus:
             raise ConfigError("phone_visemes must be viseme class ids")
         if not 0 < self.n_coefficients <= f.shape[1] or len(self.dim_names) != f.shape[1]:
             raise ConfigError("n_coefficients must be in 1..D and dim_names must name every frame dim")
+
+    @classmethod
+    def of_sentences(
+        cls,
+        sentences: Sequence[tuple[str, np.ndarray, Sequence[tuple[str, int, float, float]]]],
+        *,
+        n_coefficients: int,
+        dim_names: tuple[str, ...],
+    ) -> MotionCorpus:
+        """The corpus of ``sentences`` laid end to end, each (id, frames (n, D), its phones as (label, viseme
+        class id, start s, end s) on its clock); the offsets are counted here."""
+        phones = [p for _, _, ph in sentences for p in ph]
+        return cls(
+            sentence_ids=tuple(sid for sid, _, _ in sentences),
+            frames=np.concatenate([f for _, f, _ in sentences]),
+            frame_offsets=np.cumsum([0, *(len(f) for _, f, _ in sentences)], dtype=np.int64),
+            phone_labels=tuple(p[0] for p in phones),
+            phone_visemes=np.array([p[1] for p in phones], dtype=np.int16),
+            phone_start_s=np.array([p[2] for p in phones], dtype=np.float64),
+            phone_end_s=np.array([p[3] for p in phones], dtype=np.float64),
+            phone_offsets=np.cumsum([0, *(len(ph) for _, _, ph in sentences)], dtype=np.int64),
+            n_coefficients=n_coefficients,
+            dim_names=dim_names,
+        )
 
     @property
     def n_sentences(self) -> int:

@@ -65,15 +65,14 @@ def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, c
 def _bad_heads(tmp: Path) -> dict[str, tuple[list[str], str, str]]:
     """case -> (head arguments, the file the message must name, words of the message)."""
     import json
-    import struct
 
     import trimesh
 
+    from assets.heads.glb import glb_container
+
     (tmp / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
-    js = json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": []}], "scene": 0}).encode()
-    js += b" " * (-len(js) % 4)
     (tmp / "nomesh.glb").write_bytes(
-        struct.pack("<4sII", b"glTF", 2, 20 + len(js)) + struct.pack("<I4s", len(js), b"JSON") + js
+        glb_container({"asset": {"version": "2.0"}, "scenes": [{"nodes": []}], "scene": 0})
     )
     trimesh.creation.icosphere(3).export(str(tmp / "sphere.obj"))
     from assets.heads.rigging import REQUIRED_LANDMARKS

@@ -189,6 +189,47 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
     )
 
 
+async def _same_rows_with(urls: Iterable[str], name: str, viewers: int) -> list[dict] | None:
+    """Session ``name``'s /sessions row as each node in ``urls`` lists it, when every node lists the same row
+    (whole JSON) and it counts ``viewers``; else None."""
+    rows = []
+    for u in urls:
+        rows += [r for r in (await _get_json(u, "/sessions"))["sessions"] if r["name"] == name]
+    return (
+        rows if len(rows) == len(list(urls)) and all(r == rows[0] and r["viewers"] == viewers for r in rows) else None
+    )
+
+
+def test_every_node_lists_a_session_with_its_viewers_on_every_node(model_path, redis_server):
+    """/sessions on the session's node and on another node list the same row (the registry's), and its
+    ``viewers`` counts the session's viewers on every node: it counted the owner's only (1 of 3 here, on
+    both nodes: the browser viewer on node b said "1 viewer" while it watched with another one there)."""
+    nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b")]
+    pcm = np.rint(speechlike(20.0, 16000, seed=4) * 32767).astype(np.int16)
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        async with IngestClient(a, session="x", sample_rate_hz=16000) as ing:
+            streaming = asyncio.ensure_future(stream_samples(ing, pcm, realtime=True, block_s=0.02))
+            await _until(lambda: _rows_if(b, "x"), what="registry")
+            near = ViewerClient(a, session="x", audio=False)
+            far = [ViewerClient(b, session="x", audio=False), ViewerClient(b, session="x", kind="blendshapes")]
+            for v in (near, *far):
+                await v.__aenter__()
+            both = await _until(lambda: _same_rows_with((a, b), "x", 3), what="three viewers listed on both nodes")
+            for v in far:
+                await v.__aexit__(None, None, None)
+            after = await _until(lambda: _same_rows_with((a, b), "x", 1), what="the far viewers gone from the rows")
+            await near.__aexit__(None, None, None)
+            streaming.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await streaming
+        return both, after
+
+    both, after = _run_then_stop(nodes, main(), 90)
+    assert both[0]["node"] == "a" and both[0]["viewers"] == 3 and after[0]["viewers"] == 1
+
+
 LONG = "Where were you when the lights went out, and the quick brown fox jumps over the lazy dog? "
 
 

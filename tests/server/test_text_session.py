@@ -46,28 +46,17 @@ def backend() -> TextBackend:
     from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
 
-    frames, fo, labels, vis, st, en, po = [], [0], [], [], [], [], [0]
-    for text in CORPUS_TEXT:
+    sentences = []
+    for i, text in enumerate(CORPUS_TEXT):
         s = speak(text, language="en")
         n = int(np.ceil(s.duration_s * 30))
         p = render_params([PhonemeSegment(*ph) for ph in s.phones], n, inventory="espeak-en")
-        frames.append(np.concatenate([p[:, 1:3], p], axis=1))  # 2 "coefficients" + the 4 parameters
-        fo.append(fo[-1] + n)
-        for lab, a, b in s.phones:
-            labels.append(lab)
-            vis.append(VISEME_ID[viseme_of(lab, "espeak-en", default="AH")])
-            st.append(a)
-            en.append(min(b, n / 30))
-        po.append(po[-1] + len(s.phones))
-    corpus = MotionCorpus(
-        sentence_ids=tuple(f"c{i}" for i in range(len(CORPUS_TEXT))),
-        frames=np.concatenate(frames),
-        frame_offsets=np.array(fo),
-        phone_labels=tuple(labels),
-        phone_visemes=np.array(vis, dtype=np.int16),
-        phone_start_s=np.array(st),
-        phone_end_s=np.array(en),
-        phone_offsets=np.array(po),
+        phones = [
+            (lab, VISEME_ID[viseme_of(lab, "espeak-en", default="AH")], a, min(b, n / 30)) for lab, a, b in s.phones
+        ]
+        sentences.append((f"c{i}", np.concatenate([p[:, 1:3], p], axis=1), phones))  # 2 "coefficients" + the 4 params
+    corpus = MotionCorpus.of_sentences(
+        sentences,
         n_coefficients=2,
         dim_names=("c1", "c2", "upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress"),
     )

@@ -13,7 +13,7 @@ import pytest
 from PIL import Image
 
 from assets.errors import MeshError
-from assets.heads.glb import mesh_glb
+from assets.heads.glb import glb_container, mesh_glb
 from assets.heads.mesh import HeadMesh, load_mesh
 from tests.prerequisites import require_tool
 
@@ -102,19 +102,6 @@ def test_obj_with_mtl_and_two_objects_gets_one_atlas_upright(tmp_path):
     assert _is(_colour_at(img, 0.45, right), (30, 200, 30)) and _is(_colour_at(img, 0.55, right), (200, 30, 30))
 
 
-def _gltf_doc(buffers: bytes, doc: dict) -> bytes:
-    js = json.dumps(doc).encode()
-    js += b" " * (-len(js) % 4)
-    body = buffers + b"\0" * (-len(buffers) % 4)
-    return (
-        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(body))
-        + struct.pack("<I4s", len(js), b"JSON")
-        + js
-        + struct.pack("<I4s", len(body), b"BIN\0")
-        + body
-    )
-
-
 def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
     v, t, _ = _box()
     q = np.round(v / 1.0 * 32767).astype("<i2")  # KHR_mesh_quantization: normalized int16 positions
@@ -174,7 +161,7 @@ def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
         "accessors": acc,
     }
     path = tmp_path / "q.glb"
-    path.write_bytes(_gltf_doc(b"".join(blobs), doc))
+    path.write_bytes(glb_container(doc, b"".join(blobs)))
     m = load_mesh(path)
     n = len(v)
     np.testing.assert_allclose(m.vertices[:n], v * 2 + [10, 0, 0], atol=1e-3)  # parent scale then translation
@@ -240,16 +227,7 @@ def _with_ktx2_texture(glb: bytes, ktx2: bytes) -> bytes:
     doc["images"] = [{"bufferView": len(doc["bufferViews"]) - 1, "mimeType": "image/ktx2"}]
     doc["textures"] = [{"extensions": {"KHR_texture_basisu": {"source": 0}}}]
     doc["extensionsUsed"] = doc["extensionsRequired"] = ["KHR_texture_basisu"]
-    js = json.dumps(doc).encode()
-    js += b" " * (-len(js) % 4)
-    total = 12 + 8 + len(js) + 8 + len(body)
-    return (
-        struct.pack("<4sII", b"glTF", 2, total)
-        + struct.pack("<I4s", len(js), b"JSON")
-        + js
-        + struct.pack("<I4s", len(body), b"BIN\x00")
-        + body
-    )
+    return glb_container(doc, body)
 
 
 @pytest.mark.parametrize("codec", ["etc1s", "uastc"])

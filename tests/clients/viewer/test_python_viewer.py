@@ -569,3 +569,47 @@ def test_record_reports_a_watch_error_while_a_new_head_is_still_rigging(live, tm
     assert code == 2 and "no session 'nobody'" in capsys.readouterr().err
     assert rigging and not rigged, "the error was reported only once the head had been rigged"
     assert not out.exists()
+
+
+def test_view_window_backs_off_while_its_session_is_away_and_picks_it_up_again(live):
+    """The window's receiver (no window needed: it only hands items to the window) watches a session, sees it
+    end, then waits for it to come back: it used to try /view every RETRY_S (17 connections a second, each one a
+    handshake the server closes with 4004, for as long as the session stayed away). Counted by the server over 4 s
+    of absence: 68 before, 8 with a back-off to REWATCH_MAX_S; the session started again is still watched within
+    that."""
+    import queue
+    import time
+
+    from clients.viewer.live import REWATCH_MAX_S, AudioOut, Playout, _Receiver
+    from clients.viewer.stream import ViewerStreamConfig
+    from tests.live_server import stream_session
+    from wire import protocol as P
+
+    def until(kind: str, timeout: float) -> tuple:
+        end = time.monotonic() + timeout
+        while True:
+            item = inbox.get(timeout=max(end - time.monotonic(), 0.001))  # queue.Empty: it never came
+            if item[0] == kind:
+                return item
+
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+    cfg = ViewerStreamConfig(url=live.url, session="away", kind="deltas", encoding="int16", wait_s=10)
+    rx = _Receiver(cfg, inbox, AudioOut(Playout(0.08)))
+    first = live.submit(stream_session(live.url, "away", 1.0))
+    rx.start()
+    try:
+        until("desc", 20)
+        assert until("closed", 20)[1] == P.CLOSE_NORMAL
+        first.result(10)
+        before = live.server.closes[P.CLOSE_NOT_FOUND]
+        time.sleep(4.0)
+        attempts = live.server.closes[P.CLOSE_NOT_FOUND] - before
+        print(f"view window: {attempts} attempts to watch in 4 s while the session was away")
+        assert 2 <= attempts <= 4 / REWATCH_MAX_S + 6  # 68 when retried every RETRY_S
+        again = live.submit(stream_session(live.url, "away", 3.0, seed=1))
+        t0 = time.monotonic()
+        until("desc", REWATCH_MAX_S + 2.0)  # the session is picked up again
+        print(f"view window: watching again {time.monotonic() - t0:.2f} s after the session came back")
+        again.result(20)
+    finally:
+        rx.close()

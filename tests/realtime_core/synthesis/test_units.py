@@ -57,29 +57,17 @@ def test_empca_rejects_bad_data():
 # ----------------------------------------------------------------------------- tiny corpora
 def tiny_corpus(rng: np.random.Generator, visemes_per_sentence: list[list[str]], d: int = 3) -> MotionCorpus:
     """Sentences of random phone durations with smooth random motion (d coefficients + 1 channel)."""
-    frames, fo, labels, vis, st, en, po = [], [0], [], [], [], [], [0]
-    for seq in visemes_per_sentence:
+    sentences = []
+    for k, seq in enumerate(visemes_per_sentence):
         dur = rng.uniform(0.05, 0.2, len(seq))
         edges = np.concatenate([[0.0], np.cumsum(dur)])
         n_fr = int(np.ceil(edges[-1] * FPS)) + 1
         t = np.arange(n_fr) / FPS
         f = np.stack([np.sin(rng.uniform(2, 12) * t + rng.uniform(0, 6)) for _ in range(d + 1)], axis=1)
-        frames.append(f)
-        fo.append(fo[-1] + n_fr)
-        labels += list(seq)
-        vis += [VISEME_ID[v] for v in seq]
-        st += list(edges[:-1])
-        en += list(edges[1:])
-        po.append(po[-1] + len(seq))
-    return MotionCorpus(
-        sentence_ids=tuple(f"s{k}" for k in range(len(visemes_per_sentence))),
-        frames=np.concatenate(frames),
-        frame_offsets=np.array(fo),
-        phone_labels=tuple(labels),
-        phone_visemes=np.array(vis, dtype=np.int16),
-        phone_start_s=np.array(st),
-        phone_end_s=np.array(en),
-        phone_offsets=np.array(po),
+        phones = [(v, VISEME_ID[v], a, b) for v, a, b in zip(seq, edges[:-1], edges[1:])]
+        sentences.append((f"s{k}", f, phones))
+    return MotionCorpus.of_sentences(
+        sentences,
         n_coefficients=d,
         dim_names=(*tuple(f"c{k}" for k in range(d)), "x"),
     )
