@@ -32,6 +32,23 @@ def test_rig_refuses_an_output_that_is_not_npz_before_rigging(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["train", "{tmp}/corpus", "-o", "{tmp}/my.json"],
+        ["readout", "default", "-o", "{tmp}/my.json"],
+        ["adapt", "default", "{tmp}/missing.wav", "-o", "{tmp}/my.json"],
+    ],
+    ids=["train", "readout", "adapt"],
+)
+def test_a_model_output_that_is_not_npz_is_refused_before_any_work(argv, tmp_path, capsys):
+    """`train -o my.json` trained for minutes, then wrote an npz archive under that name."""
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{tmp_path / 'my.json'}: a model file is written as .npz" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_record_refuses_arkit_morphs_on_a_mesh_head_before_watching(tmp_path, shared_data, capsys):
     """Was refused by the exporter only after the whole live take had been recorded."""
     head = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
