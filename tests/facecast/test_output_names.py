@@ -138,3 +138,13 @@ def test_a_take_whose_folder_cannot_be_made_is_refused_before_watching(argv, tmp
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_train_on_a_folder_of_videos_says_how_to_make_a_corpus(tmp_path, capsys):
+    """A studio's first try, `facecast train my_videos -o my.npz`, said only 'not a corpus folder'."""
+    (tmp_path / "videos").mkdir()
+    (tmp_path / "videos" / "take1.mp4").write_bytes(b"")
+    assert main(["train", str(tmp_path / "videos"), "-o", str(tmp_path / "my.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not a corpus folder" in err and "facecast extract VIDEOS -o DIR" in err, err
+    assert not (tmp_path / "my.npz").exists()
