@@ -120,12 +120,9 @@ class VideoFrames:
         return np.clip(i, 0, len(self.frames) - 1)
 
 
-def read_video_frames(path: str | Path, *, height: int | None = None) -> VideoFrames:
-    """Every picture of a video file with its time on the audio's clock; ``height``: scaled to that many
-    rows, the width keeping the aspect ratio (rounded to even, as H.264's 4:2:0 needs), so a long or
-    large video is held at the size it is shown. NotVideoError for a missing file, one without a picture
-    or with an unknown frame rate; TruncatedFileError when nothing decodes."""
-    path = Path(path)
+def probe_picture(path: Path) -> tuple[dict, dict, float]:
+    """``(probe(path), its video stream, frames per second)``; NotVideoError for a missing file, one without
+    a picture or with an unknown frame rate."""
     if not path.is_file():
         raise NotVideoError(path, "not found")
     info = probe(path)
@@ -135,6 +132,16 @@ def read_video_frames(path: str | Path, *, height: int | None = None) -> VideoFr
     fps = frame_rate(v)
     if fps <= 0:
         raise NotVideoError(path, "not a video: unknown frame rate")
+    return info, v, fps
+
+
+def read_video_frames(path: str | Path, *, height: int | None = None) -> VideoFrames:
+    """Every picture of a video file with its time on the audio's clock; ``height``: scaled to that many
+    rows, the width keeping the aspect ratio (rounded to even, as H.264's 4:2:0 needs), so a long or
+    large video is held at the size it is shown. NotVideoError for a missing file, one without a picture
+    or with an unknown frame rate; TruncatedFileError when nothing decodes."""
+    path = Path(path)
+    info, v, fps = probe_picture(path)
     width, rows = int(v["width"]), int(v["height"])
     if height is not None:
         width, rows = max(2, 2 * round(width * height / rows / 2)), height

@@ -50,7 +50,7 @@ import numpy as np
 from assets.audio import is_silent, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from assets.mediapipe_log import native_stderr_quiet
-from assets.video import decode_frames, frame_rate, frame_times, probe
+from assets.video import decode_frames, frame_times, probe_picture
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
@@ -60,7 +60,6 @@ from training.errors import (
     MissingDependencyError,
     NoFaceError,
     NotAudioError,
-    NotVideoError,
     SilentAudioError,
     TruncatedFileError,
 )
@@ -251,17 +250,9 @@ def measure_raw(
 ) -> RawTrack:
     """Decode one video and track its face: the cached, expensive part (module doc, steps 1-2)."""
     path = Path(path)
-    if not path.is_file():
-        raise NotVideoError(path, "not found")
-    info = probe(path)
-    v, a = info["video"], info["audio"]
-    if v is None or int(v.get("width", 0) or 0) == 0:
-        raise NotVideoError(path, "not a video: no video stream")
-    if a is None:
+    info, v, fps = probe_picture(path)
+    if info["audio"] is None:
         raise NotAudioError(path, "not audio: the video has no audio track")
-    fps = frame_rate(v)
-    if fps <= 0:
-        raise NotVideoError(path, "not a video: unknown frame rate")
     width, height = int(v["width"]), int(v["height"])
     declared = float(v.get("duration") or info["format"].get("duration") or 0.0)
     frames, err = decode_frames(path, width, height)
