@@ -105,7 +105,9 @@ __all__ = [
     "mouth_params",
 ]
 
-VIDEO_SUFFIXES = (".mp4", ".mpg", ".mpeg", ".webm", ".mov", ".avi", ".mkv")
+# Containers ffmpeg reads, cameras' own included (AVCHD .mts/.m2ts, broadcast .mxf): a folder of a camera's
+# .MTS files was passed over without a word ("no video found").
+VIDEO_SUFFIXES = (".mp4", ".m4v", ".mpg", ".mpeg", ".webm", ".mov", ".avi", ".mkv", ".mts", ".m2ts", ".mxf")
 Words = Sequence[tuple[float, float, str]]
 
 
@@ -676,11 +678,25 @@ def _init_worker() -> None:
 
 def find_videos(inputs: Sequence[str | Path]) -> list[Path]:
     """Video files among ``inputs`` (files, or folders searched recursively), sorted, unique."""
+    return _folder_files(inputs, videos=True)
+
+
+def passed_over(inputs: Sequence[str | Path]) -> list[Path]:
+    """Files in the folders among ``inputs`` that :func:`find_videos` leaves out (no video suffix), sorted:
+    ``facecast extract`` names them, so a container it does not know is not dropped silently."""
+    return _folder_files(inputs, videos=False)
+
+
+def _folder_files(inputs: Sequence[str | Path], *, videos: bool) -> list[Path]:
     out: set[Path] = set()
     for item in map(Path, inputs):
         if item.is_dir():
-            out.update(p for p in item.rglob("*") if p.suffix.lower() in VIDEO_SUFFIXES and p.is_file())
-        else:
+            out.update(
+                p
+                for p in item.rglob("*")
+                if (p.suffix.lower() in VIDEO_SUFFIXES) == videos and p.is_file() and not p.name.startswith(".")
+            )
+        elif videos:
             out.add(item)
     return sorted(out)
 
