@@ -45,6 +45,14 @@ class WrongSampleRateError(FileProblem):
     """The audio's sample rate is not one the reader accepts or not the one declared."""
 
 
+class NotVideoError(FileProblem):
+    """The file is not a readable video (no video stream, unknown format)."""
+
+
+class MissingDependencyError(AssetsError):
+    """An optional dependency (e.g. mediapipe for video) or tool (ffmpeg) is not installed."""
+
+
 class TruncatedFileError(FileProblem):
     """The file ends early: a truncated WAV or video, or fewer rows/frames than declared."""
 

@@ -44,6 +44,16 @@ DEFAULT_MLP_MODEL = Path(__file__).resolve().parent / "data" / "mlp_mapper.npz"
 by ``facecast mu`` on GRID s1 (Cooke, Barker, Cunningham, Shao 2006, CC BY 4.0; ``docs/motion_units.md``)."""
 
 
+def check_model_output(path: str | Path) -> Path:
+    """``path`` as a Path, or ModelFileError unless it ends in .npz; called before any work. A model
+    written as ``my.json`` is still an npz archive that no reader takes for one, and ``-o low-latency``
+    would write a file that ``--model low-latency`` never reads (a shipped name wins over a file)."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise ModelFileError(path, "a model file is written as .npz; give a name ending in .npz")
+    return path
+
+
 def save_model(path: str | Path, model: AvModel) -> Path:
     """Write ``model`` to ``path`` atomically (temporary file + rename)."""
     path = Path(path)

@@ -45,11 +45,13 @@ COMMANDS: dict[str, str] = {
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Shows defaults and keeps the descriptions' line breaks. A default is not appended where it would
     say nothing or say it twice: None, off flags, empty lists, required options, and help texts that
-    already state their default in words ("(default: the config's, else 8765)")."""
+    already state their default in words ("(default: the config's, else 8765)"); nor on an off switch
+    (``--no-energy``), whose default True would read as "off by default"."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
-        if action.required or action.default in (None, False, [], ()) or "(default" in text:
+        off_switch = isinstance(action, argparse._StoreFalseAction)
+        if action.required or action.default in (None, False, [], ()) or off_switch or "(default" in text:
             return action.help
         return super()._get_help_string(action)
 

@@ -150,7 +150,12 @@ def load_corpus(path: str | Path) -> list[Utterance]:
     root = Path(path)
     mpath = root / MANIFEST
     if not mpath.is_file():
-        raise CorpusFormatError(mpath, "missing: not a corpus folder (no manifest.json)")
+        # A folder of videos given straight to `facecast train` is the likely case: name the commands that make one.
+        raise CorpusFormatError(
+            mpath,
+            "missing: not a corpus folder (no manifest.json); make one with `facecast extract VIDEOS -o DIR` "
+            "(talking-face video) or `facecast corpus DIR` (synthetic speech)",
+        )
     try:
         doc = json.loads(mpath.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -10,7 +10,9 @@ from assets.errors import (  # file problems are the assets edge's; training rai
     AlignmentFormatError,
     CorpusFormatError,
     FileProblem,
+    MissingDependencyError,
     NotAudioError,
+    NotVideoError,
     SilentAudioError,
     SynthesisError,
     TruncatedFileError,
@@ -42,14 +44,6 @@ class TrainingError(FacecastError):
 
 class NoFaceError(FileProblem, TrainingError):
     """No face (or too few frames with a face) was found in a video."""
-
-
-class MissingDependencyError(TrainingError):
-    """An optional dependency (e.g. mediapipe for video) or tool (ffmpeg) is not installed."""
-
-
-class NotVideoError(FileProblem, TrainingError):
-    """The file is not a readable video (no video stream, unknown format)."""
 
 
 class LengthMismatchError(FileProblem, TrainingError):

@@ -35,17 +35,13 @@ Theory of operation
 from __future__ import annotations
 
 import hashlib
-import json
 import multiprocessing
 import os
 import re
-import shutil
-import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +50,7 @@ import numpy as np
 from assets.audio import is_silent, read_audio
 from assets.grid import SILENCE_WORDS, align_for_video, read_words
 from assets.mediapipe_log import native_stderr_quiet
+from assets.video import decode_frames, frame_times, probe_picture
 from realtime_core.face.registration import fit_similarity as similarity_fit
 from training.corpus import write_json, write_manifest, write_utterance
 from training.errors import (
@@ -63,7 +60,6 @@ from training.errors import (
     MissingDependencyError,
     NoFaceError,
     NotAudioError,
-    NotVideoError,
     SilentAudioError,
     TruncatedFileError,
 )
@@ -109,7 +105,9 @@ __all__ = [
     "mouth_params",
 ]
 
-VIDEO_SUFFIXES = (".mp4", ".mpg", ".mpeg", ".webm", ".mov", ".avi", ".mkv")
+# Containers ffmpeg reads, cameras' own included (AVCHD .mts/.m2ts, broadcast .mxf): a folder of a camera's
+# .MTS files was passed over without a word ("no video found").
+VIDEO_SUFFIXES = (".mp4", ".m4v", ".mpg", ".mpeg", ".webm", ".mov", ".avi", ".mkv", ".mts", ".m2ts", ".mxf")
 Words = Sequence[tuple[float, float, str]]
 
 
@@ -174,82 +172,10 @@ _DAMAGE = re.compile(
 )
 
 
-def _tool(name: str) -> str:
-    path = shutil.which(name)
-    if path is None:
-        raise MissingDependencyError(f"{name} is not installed (Debian package ffmpeg)")
-    return path
-
-
-def probe(path: Path) -> dict:
-    """ffprobe's stream list of ``path`` as {"video": {...}|None, "audio": {...}|None}."""
-    cmd = [
-        _tool("ffprobe"),
-        "-v",
-        "error",
-        "-show_entries",
-        "stream=codec_type,width,height,r_frame_rate,avg_frame_rate,start_time,duration,sample_rate,nb_frames"
-        ":format=duration",
-        "-of",
-        "json",
-        str(path),
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        msg = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"ffprobe exit {proc.returncode}"
-        with path.open("rb") as fh:
-            head = fh.read(12)
-        # an MP4 (valid "ftyp" box first) cut before its index (moov) was written
-        if "moov atom not found" in proc.stderr and head[4:8] == b"ftyp":
-            raise TruncatedFileError(path, "truncated video: the MP4 index (moov atom) is missing")
-        raise NotVideoError(path, f"not a video: ffprobe cannot read it ({msg})")
-    doc = json.loads(proc.stdout or "{}")
-    streams = doc.get("streams", [])
-    pick = lambda kind: next((s for s in streams if s.get("codec_type") == kind), None)  # noqa: E731
-    return {"video": pick("video"), "audio": pick("audio"), "format": doc.get("format", {})}
-
-
-def _rate(s: dict) -> float:
-    for key in ("avg_frame_rate", "r_frame_rate"):
-        v = s.get(key, "0/0")
-        try:
-            f = Fraction(v)
-        except (ValueError, ZeroDivisionError):
-            continue
-        if f > 0:
-            return float(f)
-    return 0.0
-
-
 def decode_audio(path: Path, rate_hz: int) -> np.ndarray:
     """(n,) float32 mono audio of a media file at ``rate_hz`` (the one ffmpeg decoder,
     :func:`assets.audio.read_audio`)."""
     return read_audio(path, rate_hz=rate_hz)[0]
-
-
-def decode_frames(path: Path, width: int, height: int) -> tuple[np.ndarray, str]:
-    """(n_frames, height, width, 3) uint8 RGB frames and ffmpeg's error text (may be empty)."""
-    cmd = [
-        _tool("ffmpeg"),
-        "-v",
-        "error",
-        "-nostdin",
-        "-i",
-        str(path),
-        "-an",
-        "-f",
-        "rawvideo",
-        "-pix_fmt",
-        "rgb24",
-        "-vsync",
-        "passthrough",
-        "pipe:1",
-    ]
-    proc = subprocess.run(cmd, capture_output=True)
-    size = width * height * 3
-    n = len(proc.stdout) // size
-    frames = np.frombuffer(proc.stdout[: n * size], np.uint8).reshape(n, height, width, 3)
-    return frames, proc.stderr.decode(errors="replace").strip()
 
 
 # --------------------------------------------------------------------------- landmarks (MediaPipe)
@@ -326,17 +252,9 @@ def measure_raw(
 ) -> RawTrack:
     """Decode one video and track its face: the cached, expensive part (module doc, steps 1-2)."""
     path = Path(path)
-    if not path.is_file():
-        raise NotVideoError(path, "not found")
-    info = probe(path)
-    v, a = info["video"], info["audio"]
-    if v is None or int(v.get("width", 0) or 0) == 0:
-        raise NotVideoError(path, "not a video: no video stream")
-    if a is None:
+    info, v, fps = probe_picture(path)
+    if info["audio"] is None:
         raise NotAudioError(path, "not audio: the video has no audio track")
-    fps = _rate(v)
-    if fps <= 0:
-        raise NotVideoError(path, "not a video: unknown frame rate")
     width, height = int(v["width"]), int(v["height"])
     declared = float(v.get("duration") or info["format"].get("duration") or 0.0)
     frames, err = decode_frames(path, width, height)
@@ -353,10 +271,7 @@ def measure_raw(
     samples = decode_audio(path, config.audio_rate_hz)
     if is_silent(samples):
         raise SilentAudioError(path, "silent: the audio track holds no signal")
-    # frame j of the video is shown at start_v + j / fps on the container clock; audio starts at start_a
-    start_v = float(v.get("start_time") or 0.0)
-    start_a = float(a.get("start_time") or 0.0)
-    times = start_v - start_a + np.arange(len(frames)) / fps
+    times = frame_times(info, len(frames), fps)
     audio_s, video_s = len(samples) / config.audio_rate_hz, times[-1] + 1.0 / fps
     if abs(audio_s - video_s) > config.max_av_mismatch_s:
         raise LengthMismatchError(
@@ -763,11 +678,25 @@ def _init_worker() -> None:
 
 def find_videos(inputs: Sequence[str | Path]) -> list[Path]:
     """Video files among ``inputs`` (files, or folders searched recursively), sorted, unique."""
+    return _folder_files(inputs, videos=True)
+
+
+def passed_over(inputs: Sequence[str | Path]) -> list[Path]:
+    """Files in the folders among ``inputs`` that :func:`find_videos` leaves out (no video suffix), sorted:
+    ``facecast extract`` names them, so a container it does not know is not dropped silently."""
+    return _folder_files(inputs, videos=False)
+
+
+def _folder_files(inputs: Sequence[str | Path], *, videos: bool) -> list[Path]:
     out: set[Path] = set()
     for item in map(Path, inputs):
         if item.is_dir():
-            out.update(p for p in item.rglob("*") if p.suffix.lower() in VIDEO_SUFFIXES and p.is_file())
-        else:
+            out.update(
+                p
+                for p in item.rglob("*")
+                if (p.suffix.lower() in VIDEO_SUFFIXES) == videos and p.is_file() and not p.name.startswith(".")
+            )
+        elif videos:
             out.add(item)
     return sorted(out)
 

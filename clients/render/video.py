@@ -75,6 +75,15 @@ def _caption_alpha(text: str, width: int, height: int) -> np.ndarray:
     return a
 
 
+def beside(picture: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """(h, w_p + w, 3) uint8: ``picture`` (h, w_p, 3), e.g. the recorded talker at this frame's media time
+    (:meth:`assets.video.VideoFrames.shown_at`), left of the rendered ``image`` (h, w, 3), to judge by
+    eye whether the mouths move together."""
+    if picture.shape[0] != image.shape[0]:
+        raise RenderError(f"a picture beside the head must be {image.shape[0]} rows high, got {picture.shape[0]}")
+    return np.concatenate([picture, image], axis=1)
+
+
 @dataclass(frozen=True)
 class VideoConfig:
     """fps: video frame rate; crf: H.264 quality (lower is better); preset: x264 speed preset
@@ -115,7 +124,8 @@ def write_video(
     config: VideoConfig = VideoConfig(),
 ) -> Path:
     """Render one frame per row of frames_params (F, 4) with ``render_frame(params) -> (h, w, 3) uint8``
-    and encode them (plus ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
+    (or per element of any sequence render_frame takes, e.g. frame indices) and encode them (plus
+    ``audio``) into ``out`` (.mp4); optionally also PNGs into ``png_dir``."""
     from assets.files import make_parent
 
     out = check_video_path(out)

@@ -41,20 +41,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
     from tqdm import tqdm
 
     from assets.audio import is_silent, read_audio
     from assets.errors import SilentAudioError
-    from assets.modelfile import ModelFileError, load_model, save_model
+    from assets.modelfile import check_model_output, load_model, save_model
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
 
-    # Model files are .npz (shipped, written, documented); `-o low-latency` would write a file that
-    # --model low-latency never reads (a shipped name wins over a file of that name).
-    if Path(args.output).suffix.lower() != ".npz":
-        raise ModelFileError(args.output, "a model file is written as .npz; give a name ending in .npz")
+    check_model_output(args.output)
     model = load_model(args.model)
     cfg = AdaptConfig(
         relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance, n_iter=args.iters

@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         find_videos,
         grid_split_of,
         load_face_track,
+        passed_over,
         save_plot,
         write_report,
         write_track_corpus,
@@ -77,6 +78,13 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = ExtractConfig(audio_rate_hz=args.audio_rate, language=args.language)
     videos = find_videos(args.videos)
+    others = passed_over(args.videos)
+    if others:
+        kinds = sorted({p.suffix.lower() or "(no suffix)" for p in others})
+        print(
+            f"passed over {len(others)} file(s) not named as video ({', '.join(kinds)}), e.g. {others[0]}",
+            file=sys.stderr,
+        )
     report = extract_corpus(
         videos,
         cache_dir=args.cache_dir,

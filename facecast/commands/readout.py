@@ -148,12 +148,13 @@ def _run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from assets.modelfile import load_model, save_model
+    from assets.modelfile import check_model_output, load_model, save_model
     from training.corpus import write_json
     from training.errors import ConfigError
     from training.readout import VtlpConfig, choose_readout, trace_clips, vtlp_copies
     from training.reallips import s1_clips
 
+    check_model_output(args.output)
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
     # Checked here, before the corpus is read: an unknown name or a weight <= 0 is a ConfigError naming it.
     candidates = [replace(spec, loss_weight=args.loss_weight) for spec in args.candidates]

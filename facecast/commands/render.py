@@ -38,11 +38,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fps", type=float, default=30.0, help="video frame rate")
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
     p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
+    p.add_argument(
+        "--beside",
+        metavar="VIDEO",
+        help="a recording of the same speech (usually SPEECH itself, e.g. the talker's clip) drawn left of the "
+        "head at every frame's media time, scaled to --height: judge the lip-sync by eye",
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
+
+    import numpy as np
 
     from assets.audio import check_audio_path
     from assets.files import make_parent
@@ -55,6 +63,11 @@ def run(args: argparse.Namespace) -> int:
     if args.png_dir:
         make_parent(Path(args.png_dir) / "frame_00000.png")
     check_audio_path(args.speech)
+    video = None
+    if args.beside:
+        from assets.video import read_video_frames
+
+        video = read_video_frames(args.beside, height=args.height)  # before the rig: a bad file fails now
     if args.params:
         frames = read_params_resampled(args.params, args.fps).values
     else:
@@ -73,15 +86,29 @@ def run(args: argparse.Namespace) -> int:
 
     credit = args.credit if args.credit is not None else credit_for(mesh.name)
     cfg = RenderConfig(width=args.width, height=args.height, view=args.view, samples=args.samples)
+    width = cfg.width
+    if video is not None:
+        from clients.render.video import beside
+
+        shown = video.shown_at(np.arange(len(frames)) / args.fps)  # the recorded picture of each frame's instant
+        width += video.frames.shape[2]
     with renderer_for_rig(rig, mesh, cfg) as r:
+
+        def draw(k: int) -> np.ndarray:
+            image = with_caption(r.render(rig.deformed(frames[k])), credit)
+            return image if video is None else beside(video.frames[shown[k]], image)
+
         out = write_video(
-            frames,
-            lambda p: with_caption(r.render(rig.deformed(p)), credit),
+            np.arange(len(frames)),
+            draw,
             args.output,
-            size=(cfg.width, cfg.height),
+            size=(width, cfg.height),
             audio=args.speech,
             png_dir=args.png_dir,
             config=VideoConfig(fps=args.fps),
         )
-    print(f"render {out}: {len(frames)} frames at {args.fps:g} fps, {cfg.width}x{cfg.height}, view {cfg.view}")
+    print(
+        f"render {out}: {len(frames)} frames at {args.fps:g} fps, {width}x{cfg.height}, view {cfg.view}"
+        + (f", {args.beside} at the left" if video is not None else "")
+    )
     return 0

@@ -98,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
     import logging
     import os
+    import time
+    from pathlib import Path
 
     from assets.modelfile import load_speech_model
     from facecast.commands.headopts import resolve_from_args
@@ -139,7 +141,19 @@ def run(args: argparse.Namespace) -> int:
         f"{model.frontend.algorithmic_delay_ms():.1f} ms (lag 0; docs/architecture.md, Delay)",
         flush=True,
     )
-    head = None if args.no_head else resolve_from_args(args, args.rig or args.head or "builtin")
+    spec = args.rig or args.head or "builtin"
+    mesh = not args.no_head and args.rig is None and Path(spec).suffix.lower() in (".glb", ".gltf", ".obj", ".ply")
+    if mesh:
+        # Rigging a new scan takes minutes; the server said nothing between its model line and "listening".
+        print(
+            f"facecast serve: head {spec}: a mesh is rigged on its first use (minutes for a scan), then read from "
+            "the rig cache; --rig RIG.npz (facecast rig) starts from a rig file",
+            flush=True,
+        )
+    started = time.perf_counter()
+    head = None if args.no_head else resolve_from_args(args, spec)
+    if mesh:
+        print(f"facecast serve: head ready in {time.perf_counter() - started:.1f} s", flush=True)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)

@@ -163,11 +163,12 @@ def _run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from assets.modelfile import load_model, save_model
+    from assets.modelfile import check_model_output, load_model, save_model
     from realtime_core.hmm import TrainConfig
     from training.corpus import load_corpus
     from training.trainer import TrainRecipe, train_av_model
 
+    check_model_output(args.output)  # before minutes of training (an -o my.json was written as an npz)
     exclude = {s for s in args.exclude_source.split(",") if s}
     utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
     data: dict[str, Any] = {"corpora": [str(c) for c in args.corpus]}

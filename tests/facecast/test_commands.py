@@ -134,9 +134,10 @@ def test_ply_round_trip(tmp_path, shared_data):
     np.testing.assert_array_equal(m2.triangles, m.triangles)
 
 
-def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, capsys):
-    if shutil.which("ffmpeg") is None:
-        missing("ffmpeg not installed")
+def _require_rendering(builtin_rig) -> None:
+    """Skip (fail under CI) without ffmpeg/ffprobe or an OpenGL 3.3 context through EGL."""
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        missing("ffmpeg/ffprobe not installed")
     from clients.errors import RenderError
     from clients.render.renderer import RenderConfig, renderer_for_rig
 
@@ -144,6 +145,10 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
         renderer_for_rig(*builtin_rig, RenderConfig(width=32, height=32)).close()
     except RenderError as exc:
         missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+
+
+def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, capsys):
+    _require_rendering(builtin_rig)
     csv = tmp_path / "p.csv"
     t = np.arange(0, 0.3, 1 / 30)
     rows = ["t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress"]
@@ -172,3 +177,50 @@ def test_mu_stages_only_refuses_a_mapper_trained_on_other_clips(tmp_path, shared
     err = capsys.readouterr().err
     assert rc == 2 and "mlp_mapper.npz" in err and "UMUP readout differs" in err, err
     assert not (out / "mlp_mapper.npz").exists()
+
+
+def _grey_ramp_video(path: Path, *, fps: int, n: int, picture_delay_s: float) -> np.ndarray:
+    """A 40x32 video whose frame j is uniformly grey (the returned (n,) levels), its picture starting
+    ``picture_delay_s`` after its sound (a second of a tone), H.264 at qp 0."""
+    import subprocess
+
+    levels = 16 + 8 * np.arange(n)
+    frames = np.repeat(levels.astype(np.uint8), 32 * 40 * 3).tobytes()
+    cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", "40x32", "-r", str(fps)]
+    cmd += ["-i", "-", "-f", "lavfi", "-i", "sine=frequency=220:duration=1.2"]
+    cmd += ["-vf", f"setpts=PTS+{picture_delay_s}/TB"]
+    cmd += ["-c:v", "libx264", "-qp", "0", "-pix_fmt", "yuv444p", "-c:a", "aac", str(path)]
+    subprocess.run(cmd, input=frames, check=True)
+    return levels
+
+
+def test_render_beside_shows_the_recorded_picture_of_each_frames_instant(tmp_path, builtin_rig, capsys):
+    """`render --beside VIDEO`: the video's picture on screen at each rendered frame's media time (on the
+    audio's clock: this picture starts 0.2 s after its sound), scaled to the render's height, left of
+    the head; a file that is not a video fails before any rendering."""
+    _require_rendering(builtin_rig)
+    clip = tmp_path / "talker.mp4"
+    levels = _grey_ramp_video(clip, fps=25, n=25, picture_delay_s=0.2)
+    csv = tmp_path / "p.csv"
+    t = np.arange(0, 1.1, 1 / 30)
+    csv.write_text(
+        "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n" + "".join(f"{x:.4f},0,0,0,0\n" for x in t)
+    )
+    png = tmp_path / "png"
+    args = ["render", str(clip), "--params", str(csv), "--beside", str(clip), "-o", str(tmp_path / "v.mp4")]
+    assert main([*args, "--width", "160", "--height", "120", "--png-dir", str(png)]) == 0
+    assert "310x120" in capsys.readouterr().out  # 40x32 scaled to 120 rows: 150 columns, then the head's 160
+    from PIL import Image
+
+    for k in range(len(t)):
+        img = np.asarray(Image.open(png / f"frame_{k:05d}.png"), dtype=np.float64)
+        assert img.shape == (120, 310, 3)
+        j = min(max(int(np.floor((k / 30 - 0.2) * 25 + 1e-6)), 0), len(levels) - 1)  # the picture shown at k/30
+        assert abs(img[:, :150].mean() - levels[j]) < 3, (k, j, img[:, :150].mean())
+    text = tmp_path / "notes.txt"
+    text.write_text("not a video\n")
+    out = tmp_path / "bad.mp4"
+    assert main(["render", str(clip), "--params", str(csv), "--beside", str(text), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "notes.txt: not a video" in err[0], err
+    assert not out.exists()

@@ -29,3 +29,12 @@ def test_help_keeps_informative_defaults(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "streaming (live) or batch HMMI (default: stream)" in text
     assert "(default: builtin)" in text
+
+
+def test_an_off_switch_shows_no_default(capsys):
+    """`train --no-energy` (store_false) has the default True, which read as "c0 left out by default"."""
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    option = re.search(r"--no-energy leave c0.*?(?= --level-norm )", text)
+    assert option is not None and "(default" not in option.group(0), option

@@ -32,6 +32,23 @@ def test_rig_refuses_an_output_that_is_not_npz_before_rigging(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["train", "{tmp}/corpus", "-o", "{tmp}/my.json"],
+        ["readout", "default", "-o", "{tmp}/my.json"],
+        ["adapt", "default", "{tmp}/missing.wav", "-o", "{tmp}/my.json"],
+    ],
+    ids=["train", "readout", "adapt"],
+)
+def test_a_model_output_that_is_not_npz_is_refused_before_any_work(argv, tmp_path, capsys):
+    """`train -o my.json` trained for minutes, then wrote an npz archive under that name."""
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{tmp_path / 'my.json'}: a model file is written as .npz" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_record_refuses_arkit_morphs_on_a_mesh_head_before_watching(tmp_path, shared_data, capsys):
     """Was refused by the exporter only after the whole live take had been recorded."""
     head = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
@@ -121,3 +138,13 @@ def test_a_take_whose_folder_cannot_be_made_is_refused_before_watching(argv, tmp
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "notes.txt is a file, not a folder" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_train_on_a_folder_of_videos_says_how_to_make_a_corpus(tmp_path, capsys):
+    """A studio's first try, `facecast train my_videos -o my.npz`, said only 'not a corpus folder'."""
+    (tmp_path / "videos").mkdir()
+    (tmp_path / "videos" / "take1.mp4").write_bytes(b"")
+    assert main(["train", str(tmp_path / "videos"), "-o", str(tmp_path / "my.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not a corpus folder" in err and "facecast extract VIDEOS -o DIR" in err, err
+    assert not (tmp_path / "my.npz").exists()

@@ -26,3 +26,17 @@ def test_the_start_line_names_the_mlp_mapper(tmp_path, capsys):
     assert main(["serve", "--port", "0", "--no-head", "--mapper", "mlp", "--file", str(notes)]) == 2
     out = capsys.readouterr().out
     assert "facecast serve: MLP mapper default, algorithmic delay" in out, out
+
+
+def test_a_mesh_head_is_announced_before_it_is_rigged(tmp_path, capsys):
+    """`serve --head SCAN.glb` printed its model line, then nothing for the minutes its first rig took."""
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    empty = tmp_path / "empty.obj"
+    empty.write_text("v 0 0 0\nv 1 0 0\n")  # fails while it is being rigged: after the announcement
+    assert main(["serve", "--port", "0", "--model", str(model), "--head", str(empty)]) == 2
+    out, err = capsys.readouterr()
+    assert f"facecast serve: head {empty}: a mesh is rigged on its first use" in out, out
+    assert len(err.strip().splitlines()) == 1 and "empty.obj" in err, err

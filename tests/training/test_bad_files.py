@@ -203,3 +203,18 @@ def test_cli_prints_one_line_error(tmp_path, capsys, ffmpeg) -> None:
     lines = [ln for ln in capsys.readouterr().err.splitlines() if "facecast extract: error:" in ln]
     assert len(lines) == 1 and lines[0].endswith("\r") is False
     assert f"facecast extract: error: {p}: not a video: ffprobe cannot read it" in lines[0]
+
+
+def test_a_folder_of_camera_files_is_found_and_other_files_are_named(tmp_path, capsys) -> None:
+    """A camera's AVCHD .MTS files were passed over without a word: `extract` said only "no video found"."""
+    from facecast.cli import main
+    from training.video import find_videos, passed_over
+
+    for name in ("a/take1.MTS", "a/take2.m2ts", "clip.MP4", "notes.txt", "still.jpg", ".DS_Store"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("x")
+    assert [p.name for p in find_videos([tmp_path])] == ["take1.MTS", "take2.m2ts", "clip.MP4"]
+    assert [p.name for p in passed_over([tmp_path])] == ["notes.txt", "still.jpg"]
+    assert main(["extract", str(tmp_path)]) == 2  # three text files named as video: skipped, none ok
+    err = capsys.readouterr().err
+    assert "passed over 2 file(s) not named as video (.jpg, .txt)" in err, err
