@@ -2,8 +2,9 @@
 
 Headless by default: ``moderngl.create_standalone_context(backend="egl")`` (Mesa llvmpipe when
 there is no GPU). Shading: Blinn-Phong per vertex with a key, a fill and a rim light on the texture
-(or the vertex colours, or a skin tone); normals are the neutral pose's (speech moves the surface too
-little to change lighting visibly, and it saves a normal pass per frame); back faces are drawn
+(or the vertex colours, or a skin tone); normals are the frame's own (:meth:`HeadRenderer.normals`:
+with the neutral pose's, a lip face that turns to the viewer kept the light of where it faced at rest,
+dark flecks at the stretched corners), smooth across texture seams; back faces are drawn
 dark so a cut-open mouth shows a dark cavity. Anti-aliasing by multisampling (``samples``), resolved
 into a plain framebuffer before reading. The camera looks along the face frame's -z at the face
 centre (front) or from 35 degrees to the face's left (three-quarter).
@@ -19,6 +20,15 @@ import numpy as np
 
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
 from clients.errors import RenderError
+from realtime_core.face.welding import weld
+
+SEAM_SMOOTH_ANGLE = 60.0
+"""Degrees: vertices that coincide at rest share one normal (while they still coincide) when their own normals
+(each from its own triangles) lie within this angle: a texture seam on a smooth surface (median 12, up to 47-61
+degrees on the test set's scans) and not a lip cut's copies at a fold (up to 175 degrees on the stylised head)."""
+TWIN_APART = 1e-6
+"""Fraction of the face size beyond which two rest twins no longer count as coinciding (a lip cut's copies part
+with the mouth; texture twins move as one)."""
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference
@@ -147,7 +157,10 @@ class HeadRenderer:
         v = np.asarray(mesh.vertices, dtype=np.float32)
         t = np.asarray(mesh.triangles, dtype=np.int32)
         self.n = len(v)
-        normals = vertex_normals(v.astype(np.float64), t)
+        self._triangles = t
+        self._twins = _seam_twins(v, t)
+        self._apart2 = (TWIN_APART * size) ** 2
+        normals = self.normals(v)
         colors = (
             np.asarray(mesh.colors, dtype=np.float32)
             if mesh.colors is not None
@@ -156,12 +169,17 @@ class HeadRenderer:
         uvs = np.asarray(mesh.uvs, dtype=np.float32) if mesh.uvs is not None else np.zeros((self.n, 2), np.float32)
         self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         self.pos_buf = ctx.buffer(v.tobytes(), dynamic=True)
-        static = np.hstack([normals, colors, uvs]).astype(np.float32)
+        self.normal_buf = ctx.buffer(normals.tobytes(), dynamic=True)
+        static = np.hstack([colors, uvs]).astype(np.float32)
         self.static_buf = ctx.buffer(static.tobytes())
         self.ibo = ctx.buffer(t.tobytes())
         self.vao = ctx.vertex_array(
             self.prog,
-            [(self.pos_buf, "3f", "in_pos"), (self.static_buf, "3f 3f 2f", "in_normal", "in_color", "in_uv")],
+            [
+                (self.pos_buf, "3f", "in_pos"),
+                (self.normal_buf, "3f", "in_normal"),
+                (self.static_buf, "3f 2f", "in_color", "in_uv"),
+            ],
             index_buffer=self.ibo,
         )
         self.texture = None
@@ -220,6 +238,7 @@ class HeadRenderer:
             if v.shape != (self.n, 3):
                 raise RenderError(f"vertices must be ({self.n}, 3), got {v.shape}")
             self.pos_buf.write(v)
+            self.normal_buf.write(self.normals(v))
         import moderngl
 
         target = self.fbo_ms or self.fbo
@@ -236,6 +255,17 @@ class HeadRenderer:
         self._out[:] = np.frombuffer(raw, dtype=np.uint8).reshape(h, w, 3)[::-1]
         return self._out.copy()
 
+    def normals(self, vertices: np.ndarray) -> np.ndarray:
+        """(n, 3) float32 unit vertex normals of the head at ``vertices`` (n, 3): area-weighted over the frame's
+        own triangles, one normal for seam twins (SEAM_SMOOTH_ANGLE) while they coincide."""
+        v = np.asarray(vertices, dtype=np.float32)
+        i, j = self._twins
+        owner = np.arange(self.n)
+        together = ((v[i] - v[j]) ** 2).sum(axis=1) <= self._apart2
+        np.minimum.at(owner, i[together], j[together])
+        owner = owner[owner]  # a twin whose lowest partner has a lower one still (tolerance is not transitive)
+        return vertex_normals(v, self._triangles, together=owner)
+
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (k, 2) (column, row from the top) of 3D points (k, 3)."""
         p = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))] @ self.mvp.T
@@ -250,6 +280,21 @@ class HeadRenderer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _seam_twins(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) (two (p,) int arrays, j < i) of vertices that coincide at rest and whose own normals lie
+    within SEAM_SMOOTH_ANGLE: the texture seams the renderer shades smooth."""
+    canon, _ = weld(np.asarray(vertices, dtype=np.float64))
+    own = vertex_normals(vertices, triangles)
+    order = np.argsort(canon, kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(canon[order])) + 1)
+    pairs = [(a, b) for g in groups if len(g) > 1 for k, a in enumerate(g) for b in g[:k]]
+    if not pairs:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    i, j = np.array(pairs, dtype=np.int64).T
+    keep = (own[i] * own[j]).sum(axis=1) >= np.cos(np.radians(SEAM_SMOOTH_ANGLE))
+    return i[keep], j[keep]
 
 
 def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
