@@ -3,8 +3,9 @@
 Headless by default: ``moderngl.create_standalone_context(backend="egl")`` (Mesa llvmpipe when
 there is no GPU). Shading: Blinn-Phong per vertex with a key, a fill and a rim light on the texture
 (or the vertex colours, or a skin tone); normals are the frame's own (:meth:`HeadRenderer.normals`:
-with the neutral pose's, a lip face that turns to the viewer kept the light of where it faced at rest,
-dark flecks at the stretched corners), smooth across texture seams; back faces are drawn
+with the neutral pose's, a face the mouth turns kept the light of where it faced at rest: a ledge turned to
+the viewer stayed dark, the inside of the opened mouth stayed lit), smooth across texture seams (given
+``parted``, as :func:`renderer_for_rig` gives it); back faces are drawn
 dark so a cut-open mouth shows a dark cavity. Anti-aliasing by multisampling (``samples``), resolved
 into a plain framebuffer before reading. The camera looks along the face frame's -z at the face
 centre (front) or from 35 degrees to the face's left (three-quarter).
@@ -23,12 +24,12 @@ from clients.errors import RenderError
 from realtime_core.face.welding import weld
 
 SEAM_SMOOTH_ANGLE = 60.0
-"""Degrees: vertices that coincide at rest share one normal (while they still coincide) when their own normals
-(each from its own triangles) lie within this angle: a texture seam on a smooth surface (median 12, up to 47-61
-degrees on the test set's scans) and not a lip cut's copies at a fold (up to 175 degrees on the stylised head)."""
-TWIN_APART = 1e-6
-"""Fraction of the face size beyond which two rest twins no longer count as coinciding (a lip cut's copies part
-with the mouth; texture twins move as one)."""
+"""Degrees: texture-seam twins share one normal only when their own normals (each from its own triangles) lie
+within this angle (median 12 degrees on the scans' seams; a seam along a fold keeps its crease)."""
+OPEN_POSE = (0.0, 0.0, 0.35, 0.0)
+"""Mouth parameters (IOD) at which :func:`renderer_for_rig` tells a lip split from a texture seam: a lip split's
+copies (a rig's cut, a model's own mouth opening, Candide-3's lips) part there, texture twins never part."""
+
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference
@@ -132,6 +133,10 @@ class HeadRenderer:
 
     mesh: the head (its vertices are the neutral pose); axes (3, 3) rows x (face's left), y (up),
     z (out of the face) and centre (3,), size (face height, mesh units) frame the camera.
+    parted: None, or (n, 3) the head's vertices with the mouth open (:func:`renderer_for_rig` passes the rig's at
+    OPEN_POSE): vertices that coincide at rest and still coincide there are texture-seam twins and share one
+    normal (SEAM_SMOOTH_ANGLE). Without it every vertex keeps its own: at rest a lip split (whose copies must
+    keep the closed lips' line) and a texture seam look alike.
     """
 
     def __init__(
@@ -142,6 +147,7 @@ class HeadRenderer:
         axes: np.ndarray,
         size: float,
         config: RenderConfig = RenderConfig(),
+        parted: np.ndarray | None = None,
     ) -> None:
         try:
             import moderngl
@@ -158,8 +164,7 @@ class HeadRenderer:
         t = np.asarray(mesh.triangles, dtype=np.int32)
         self.n = len(v)
         self._triangles = t
-        self._twins = _seam_twins(v, t)
-        self._apart2 = (TWIN_APART * size) ** 2
+        self._owner = None if parted is None else _seam_owner(v, t, parted, tolerance=1e-6 * size)
         normals = self.normals(v)
         colors = (
             np.asarray(mesh.colors, dtype=np.float32)
@@ -257,14 +262,8 @@ class HeadRenderer:
 
     def normals(self, vertices: np.ndarray) -> np.ndarray:
         """(n, 3) float32 unit vertex normals of the head at ``vertices`` (n, 3): area-weighted over the frame's
-        own triangles, one normal for seam twins (SEAM_SMOOTH_ANGLE) while they coincide."""
-        v = np.asarray(vertices, dtype=np.float32)
-        i, j = self._twins
-        owner = np.arange(self.n)
-        together = ((v[i] - v[j]) ** 2).sum(axis=1) <= self._apart2
-        np.minimum.at(owner, i[together], j[together])
-        owner = owner[owner]  # a twin whose lowest partner has a lower one still (tolerance is not transitive)
-        return vertex_normals(v, self._triangles, together=owner)
+        own triangles, one normal for each group of texture-seam twins (see ``parted``)."""
+        return vertex_normals(np.asarray(vertices, dtype=np.float32), self._triangles, together=self._owner)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (k, 2) (column, row from the top) of 3D points (k, 3)."""
@@ -282,19 +281,21 @@ class HeadRenderer:
         self.close()
 
 
-def _seam_twins(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (i, j) (two (p,) int arrays, j < i) of vertices that coincide at rest and whose own normals lie
-    within SEAM_SMOOTH_ANGLE: the texture seams the renderer shades smooth."""
-    canon, _ = weld(np.asarray(vertices, dtype=np.float64))
-    own = vertex_normals(vertices, triangles)
-    order = np.argsort(canon, kind="stable")
-    groups = np.split(order, np.flatnonzero(np.diff(canon[order])) + 1)
-    pairs = [(a, b) for g in groups if len(g) > 1 for k, a in enumerate(g) for b in g[:k]]
-    if not pairs:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    i, j = np.array(pairs, dtype=np.int64).T
-    keep = (own[i] * own[j]).sum(axis=1) >= np.cos(np.radians(SEAM_SMOOTH_ANGLE))
-    return i[keep], j[keep]
+def _seam_owner(rest: np.ndarray, triangles: np.ndarray, parted: np.ndarray, *, tolerance: float) -> np.ndarray:
+    """(n,) int: each vertex's lowest-index texture-seam twin (itself when it has none): the vertices that coincide
+    at ``rest`` (n, 3), still coincide (within ``tolerance``) at ``parted`` (n, 3), and whose own normals at rest
+    lie within SEAM_SMOOTH_ANGLE of the group's first vertex's."""
+    canon, _ = weld(np.asarray(rest, dtype=np.float64))
+    n = len(canon)
+    first = np.full(canon.max(initial=-1) + 1, n)
+    np.minimum.at(first, canon, np.arange(n))
+    head = first[canon]
+    own = vertex_normals(rest, triangles)
+    p = np.asarray(parted, dtype=np.float64)
+    twin = (np.linalg.norm(p - p[head], axis=1) <= tolerance) & (
+        (own * own[head]).sum(axis=1) >= np.cos(np.radians(SEAM_SMOOTH_ANGLE))
+    )
+    return np.where(twin, head, np.arange(n))
 
 
 def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
@@ -332,7 +333,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             lo, hi = pts[big].min(0), pts[big].max(0)
             w = float(max(hi[0] - lo[0], 1e-9))
             centre = np.array([0.5 * (lo[0] + hi[0]), hi[1] + 0.125 * w, hi[2] - 0.56 * w])
-            return HeadRenderer(mesh, centre=centre, axes=np.eye(3), size=1.24 * w, config=config)
+            return HeadRenderer(
+                mesh, centre=centre, axes=np.eye(3), size=1.24 * w, config=config, parted=parted_for(rig)
+            )
     axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))
@@ -344,4 +347,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
     if fr is not None:
         # Pivot inside the head (a turned view stays framed) and a little up (the skull shows).
         centre = centre - 0.5 * fr.iod * axes[2] + 0.35 * fr.iod * axes[1]
-    return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config)
+    return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config, parted=parted_for(rig))
+
+
+def parted_for(rig) -> np.ndarray:
+    """(n, 3) the rig's head with the mouth open (OPEN_POSE): :class:`HeadRenderer`'s ``parted``."""
+    return np.asarray(rig.deformed(np.asarray(OPEN_POSE, dtype=np.float64)), dtype=np.float64)
