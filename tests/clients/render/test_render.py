@@ -280,10 +280,9 @@ def _sheet_renderer(mesh, parted=None):
 
 def test_a_deformed_frame_is_lit_as_that_shape_is_at_rest():
     """Issue 12: the renderer lit every frame with the neutral pose's normals, so a lip face that turned to the viewer
-    kept the light of where it faced at rest (the stylised head's corner ledge, front-facing but unlit; the dark flecks
-    at stretched corners). A flat sheet turned 40 degrees about its vertical axis, away from and towards the key
-    light, must look as a renderer whose rest mesh is that turned sheet draws it (before: lit as the flat sheet,
-    the turned-away frame 30+ levels too bright)."""
+    kept the light of where it faced at rest (the stylised head's corner ledge, front-facing but unlit). A flat sheet
+    turned 40 degrees about its vertical axis, away from and towards the key light, must look as a renderer whose
+    rest mesh is that turned sheet draws it (before: lit as the flat sheet, up to 72 levels off)."""
     v, t = _sheet()
     flat = HeadMesh(vertices=v, triangles=t, name="sheet")
     with _sheet_renderer(flat) as r:
