@@ -21,7 +21,6 @@ import numpy as np
 
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
 from clients.errors import RenderError
-from realtime_core.face.welding import weld
 
 SEAM_SMOOTH_ANGLE = 60.0
 """Degrees: texture-seam twins share one normal only when their own normals (each from its own triangles) lie
@@ -285,6 +284,9 @@ def _seam_owner(rest: np.ndarray, triangles: np.ndarray, parted: np.ndarray, *, 
     """(n,) int: each vertex's lowest-index texture-seam twin (itself when it has none): the vertices that coincide
     at ``rest`` (n, 3), still coincide (within ``tolerance``) at ``parted`` (n, 3), and whose own normals at rest
     lie within SEAM_SMOOTH_ANGLE of the group's first vertex's."""
+    # Imported here: the package loads the rig stack, which a viewer drawing streamed frames never needs.
+    from realtime_core.face.welding import weld
+
     canon, _ = weld(np.asarray(rest, dtype=np.float64))
     n = len(canon)
     first = np.full(canon.max(initial=-1) + 1, n)
