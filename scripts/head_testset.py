@@ -170,7 +170,7 @@ def mouth_renderer(head, finder, config):
     """A renderer framed on the mouth (front view, CLOSE_UP_WIDTH IOD wide), from the rig's landmarks or
     the finder's (as :func:`assets.heads.head.head_checks` takes them); None when there are none."""
     from assets.heads.rigging import mouth_landmarks
-    from clients.render.renderer import HeadRenderer
+    from clients.render.renderer import HeadRenderer, parted_for
     from realtime_core.face import face_frame
 
     pts = head.rig.meta.get("landmarks") or dict(finder(head.mesh))
@@ -183,7 +183,7 @@ def mouth_renderer(head, finder, config):
     # Pivot behind the lips (as the face view's), a little below the corners (/a/ opens downwards).
     centre = mouth - 0.5 * fr.iod * fr.axes[2] - 0.08 * fr.iod * fr.axes[1]
     size = CLOSE_UP_WIDTH * fr.iod * config.height / config.width
-    return HeadRenderer(head.mesh, centre=centre, axes=fr.axes, size=size, config=config)
+    return HeadRenderer(head.mesh, centre=centre, axes=fr.axes, size=size, config=config, parted=parted_for(head.rig))
 
 
 def _resolve(spec, opts: dict, finder):

@@ -135,7 +135,8 @@ def _primitive(
         raise GlbError(f"triangles must be (m, 3) indices below {n}")
     attributes = {"POSITION": buf.accessor(v, "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)}
     # Without NORMAL a glTF client must shade flat (glTF 2.0 3.7.2.1): three.js showed the head faceted.
-    # The neutral face's smooth normals, as facecast's renderer lights every frame.
+    # The neutral face's smooth normals (the targets carry no NORMAL: a glTF viewer lights every frame with these;
+    # facecast's own renderer recomputes them per frame, clients/render/renderer.py).
     normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t)
     attributes["NORMAL"] = buf.accessor(np.ascontiguousarray(normals, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
     material: dict = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.8}, "doubleSided": True}

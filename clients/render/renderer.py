@@ -2,8 +2,10 @@
 
 Headless by default: ``moderngl.create_standalone_context(backend="egl")`` (Mesa llvmpipe when
 there is no GPU). Shading: Blinn-Phong per vertex with a key, a fill and a rim light on the texture
-(or the vertex colours, or a skin tone); normals are the neutral pose's (speech moves the surface too
-little to change lighting visibly, and it saves a normal pass per frame); back faces are drawn
+(or the vertex colours, or a skin tone); normals are the frame's own (:meth:`HeadRenderer.normals`:
+with the neutral pose's, a face the mouth turns kept the light of where it faced at rest: a ledge turned to
+the viewer stayed dark, the inside of the opened mouth stayed lit), smooth across texture seams (given
+``parted``, as :func:`renderer_for_rig` gives it); back faces are drawn
 dark so a cut-open mouth shows a dark cavity. Anti-aliasing by multisampling (``samples``), resolved
 into a plain framebuffer before reading. The camera looks along the face frame's -z at the face
 centre (front) or from 35 degrees to the face's left (three-quarter).
@@ -19,6 +21,14 @@ import numpy as np
 
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
 from clients.errors import RenderError
+
+SEAM_SMOOTH_ANGLE = 60.0
+"""Degrees: texture-seam twins share one normal only when their own normals (each from its own triangles) lie
+within this angle (median 12 degrees on the scans' seams; a seam along a fold keeps its crease)."""
+OPEN_POSE = (0.0, 0.0, 0.35, 0.0)
+"""Mouth parameters (IOD) at which :func:`renderer_for_rig` tells a lip split from a texture seam: a lip split's
+copies (a rig's cut, a model's own mouth opening, Candide-3's lips) part there, texture twins never part."""
+
 
 # Lighting is evaluated per vertex (Gouraud): on llvmpipe the fragment stage dominates and a
 # per-pixel Blinn-Phong doubled the draw time; at 640x480 on a ~10k-vertex head the difference
@@ -122,6 +132,10 @@ class HeadRenderer:
 
     mesh: the head (its vertices are the neutral pose); axes (3, 3) rows x (face's left), y (up),
     z (out of the face) and centre (3,), size (face height, mesh units) frame the camera.
+    parted: None, or (n, 3) the head's vertices with the mouth open (:func:`renderer_for_rig` passes the rig's at
+    OPEN_POSE): vertices that coincide at rest and still coincide there are texture-seam twins and share one
+    normal (SEAM_SMOOTH_ANGLE). Without it every vertex keeps its own: at rest a lip split (whose copies must
+    keep the closed lips' line) and a texture seam look alike.
     """
 
     def __init__(
@@ -132,6 +146,7 @@ class HeadRenderer:
         axes: np.ndarray,
         size: float,
         config: RenderConfig = RenderConfig(),
+        parted: np.ndarray | None = None,
     ) -> None:
         try:
             import moderngl
@@ -147,7 +162,9 @@ class HeadRenderer:
         v = np.asarray(mesh.vertices, dtype=np.float32)
         t = np.asarray(mesh.triangles, dtype=np.int32)
         self.n = len(v)
-        normals = vertex_normals(v.astype(np.float64), t)
+        self._triangles = t
+        self._owner = None if parted is None else _seam_owner(v, t, parted, tolerance=1e-6 * size)
+        normals = self.normals(v)
         colors = (
             np.asarray(mesh.colors, dtype=np.float32)
             if mesh.colors is not None
@@ -156,12 +173,17 @@ class HeadRenderer:
         uvs = np.asarray(mesh.uvs, dtype=np.float32) if mesh.uvs is not None else np.zeros((self.n, 2), np.float32)
         self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         self.pos_buf = ctx.buffer(v.tobytes(), dynamic=True)
-        static = np.hstack([normals, colors, uvs]).astype(np.float32)
+        self.normal_buf = ctx.buffer(normals.tobytes(), dynamic=True)
+        static = np.hstack([colors, uvs]).astype(np.float32)
         self.static_buf = ctx.buffer(static.tobytes())
         self.ibo = ctx.buffer(t.tobytes())
         self.vao = ctx.vertex_array(
             self.prog,
-            [(self.pos_buf, "3f", "in_pos"), (self.static_buf, "3f 3f 2f", "in_normal", "in_color", "in_uv")],
+            [
+                (self.pos_buf, "3f", "in_pos"),
+                (self.normal_buf, "3f", "in_normal"),
+                (self.static_buf, "3f 2f", "in_color", "in_uv"),
+            ],
             index_buffer=self.ibo,
         )
         self.texture = None
@@ -220,6 +242,7 @@ class HeadRenderer:
             if v.shape != (self.n, 3):
                 raise RenderError(f"vertices must be ({self.n}, 3), got {v.shape}")
             self.pos_buf.write(v)
+            self.normal_buf.write(self.normals(v))
         import moderngl
 
         target = self.fbo_ms or self.fbo
@@ -236,6 +259,11 @@ class HeadRenderer:
         self._out[:] = np.frombuffer(raw, dtype=np.uint8).reshape(h, w, 3)[::-1]
         return self._out.copy()
 
+    def normals(self, vertices: np.ndarray) -> np.ndarray:
+        """(n, 3) float32 unit vertex normals of the head at ``vertices`` (n, 3): area-weighted over the frame's
+        own triangles, one normal for each group of texture-seam twins (see ``parted``)."""
+        return vertex_normals(np.asarray(vertices, dtype=np.float32), self._triangles, together=self._owner)
+
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (k, 2) (column, row from the top) of 3D points (k, 3)."""
         p = np.c_[np.asarray(points, dtype=np.float64), np.ones(len(points))] @ self.mvp.T
@@ -250,6 +278,26 @@ class HeadRenderer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _seam_owner(rest: np.ndarray, triangles: np.ndarray, parted: np.ndarray, *, tolerance: float) -> np.ndarray:
+    """(n,) int: each vertex's lowest-index texture-seam twin (itself when it has none): the vertices that coincide
+    at ``rest`` (n, 3), still coincide (within ``tolerance``) at ``parted`` (n, 3), and whose own normals at rest
+    lie within SEAM_SMOOTH_ANGLE of the group's first vertex's."""
+    # Imported here: the package loads the rig stack, which a viewer drawing streamed frames never needs.
+    from realtime_core.face.welding import weld
+
+    canon, _ = weld(np.asarray(rest, dtype=np.float64))
+    n = len(canon)
+    first = np.full(canon.max(initial=-1) + 1, n)
+    np.minimum.at(first, canon, np.arange(n))
+    head = first[canon]
+    own = vertex_normals(rest, triangles)
+    p = np.asarray(parted, dtype=np.float64)
+    twin = (np.linalg.norm(p - p[head], axis=1) <= tolerance) & (
+        (own * own[head]).sum(axis=1) >= np.cos(np.radians(SEAM_SMOOTH_ANGLE))
+    )
+    return np.where(twin, head, np.arange(n))
 
 
 def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig()) -> HeadRenderer:
@@ -287,7 +335,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             lo, hi = pts[big].min(0), pts[big].max(0)
             w = float(max(hi[0] - lo[0], 1e-9))
             centre = np.array([0.5 * (lo[0] + hi[0]), hi[1] + 0.125 * w, hi[2] - 0.56 * w])
-            return HeadRenderer(mesh, centre=centre, axes=np.eye(3), size=1.24 * w, config=config)
+            return HeadRenderer(
+                mesh, centre=centre, axes=np.eye(3), size=1.24 * w, config=config, parted=parted_for(rig)
+            )
     axes = fr.axes if fr is not None else np.eye(3)
     q = (sv - sv.mean(0)) @ axes.T
     size = float(max(np.ptp(q[:, 1]), np.ptp(q[:, 0]) * config.height / config.width))
@@ -299,4 +349,9 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
     if fr is not None:
         # Pivot inside the head (a turned view stays framed) and a little up (the skull shows).
         centre = centre - 0.5 * fr.iod * axes[2] + 0.35 * fr.iod * axes[1]
-    return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config)
+    return HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=config, parted=parted_for(rig))
+
+
+def parted_for(rig) -> np.ndarray:
+    """(n, 3) the rig's head with the mouth open (OPEN_POSE): :class:`HeadRenderer`'s ``parted``."""
+    return np.asarray(rig.deformed(np.asarray(OPEN_POSE, dtype=np.float64)), dtype=np.float64)

@@ -8,6 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from assets.heads.mesh import HeadMesh
 from clients.errors import RenderError
 from clients.render.video import params_for_audio, write_video
 from tests.prerequisites import missing
@@ -239,3 +240,104 @@ def test_builtin_closed_lips_have_no_pale_corners(builtin_head, view, mode):
     pale, middle = _closed_lip_pixels(head, builtin_head.landmarks, view)
     assert pale == 0, (view, mode, pale)
     assert middle[0] > 150 and middle[0] - middle[2] > 50, (view, mode, middle)
+
+
+def _sheet(cols: int = 7, rows: int = 5, *, bend: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """A grid of cols x rows vertices over [-1, 1] x [-0.7, 0.7] facing +z (vertices (n, 3), triangles (m, 3), wound
+    towards +z), bent about the y axis: each column turned ``bend`` degrees further than the one to its left (a
+    cylinder's arc; 0: flat)."""
+    a = np.radians(bend) * (np.arange(cols) - (cols - 1) / 2)
+    radius = (2.0 / (cols - 1)) / max(np.radians(bend), 1e-9) if bend else None
+    ys = np.linspace(-0.7, 0.7, rows)
+    if radius is None:
+        xz = np.column_stack([np.linspace(-1, 1, cols), np.zeros(cols)])
+    else:
+        xz = np.column_stack([radius * np.sin(a), radius * (np.cos(a) - 1)])
+    v = np.array([[xz[i, 0], y, xz[i, 1]] for y in ys for i in range(cols)], dtype=np.float64)
+    t = []
+    for r in range(rows - 1):
+        for i in range(cols - 1):
+            k = r * cols + i
+            t += [[k, k + 1, k + cols + 1], [k, k + cols + 1, k + cols]]
+    return v, np.array(t, dtype=np.int64)
+
+
+def _sheet_renderer(mesh, parted=None):
+    from clients.render.renderer import HeadRenderer, RenderConfig
+
+    try:
+        return HeadRenderer(
+            mesh,
+            centre=np.zeros(3),
+            axes=np.eye(3),
+            size=2.4,
+            config=RenderConfig(width=96, height=96, samples=0, background=(0.0, 0.0, 0.0)),
+            parted=parted,
+        )
+    except RenderError as exc:
+        missing(f"no OpenGL 3.3 context through EGL here: {exc}")
+
+
+def test_a_deformed_frame_is_lit_as_that_shape_is_at_rest():
+    """Issue 12: the renderer lit every frame with the neutral pose's normals, so a lip face that turned to the viewer
+    kept the light of where it faced at rest (the stylised head's corner ledge, front-facing but unlit). A flat sheet
+    turned 40 degrees about its vertical axis, away from and towards the key light, must look as a renderer whose
+    rest mesh is that turned sheet draws it (before: lit as the flat sheet, up to 72 levels off)."""
+    v, t = _sheet()
+    flat = HeadMesh(vertices=v, triangles=t, name="sheet")
+    with _sheet_renderer(flat) as r:
+        lit = []
+        for deg in (-40.0, 40.0):
+            c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+            turned = v @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
+            img = r.render(turned).astype(int)
+            with _sheet_renderer(HeadMesh(vertices=turned, triangles=t, name="turned")) as ref:
+                want = ref.render().astype(int)
+            seen = want.sum(axis=2) > 0
+            assert seen.sum() > 1000
+            assert np.abs(img - want)[seen].max() <= 2, deg
+            lit.append(float(img[seen].mean()))
+        rest = r.render(v).astype(int)
+    # The key light comes from the face's left (+x): turning the sheet's normal to -x darkens it.
+    assert lit[0] < rest[rest.sum(axis=2) > 0].mean() - 10
+
+
+def test_texture_seam_twins_shade_as_one_surface_and_a_lip_split_keeps_its_line():
+    """Issue 12: a texture seam splits a vertex in two, each copy's normal from its own side only, so a bent surface
+    showed the seam as a crease in the light (Lee Perry-Smith's twins: normals 9-21 degrees (median) off the welded
+    one). Given the head with the mouth open (``parted``), the twins of a bent sheet split down its middle column
+    shade as the unsplit sheet does; twins that part there (a lip split: at rest its copies coincide too, and
+    shading them as one erased Candide-3's closed lip line) keep their own side's normal, as does every twin
+    without ``parted``; a seam along a knife fold (own normals 120 degrees apart) keeps its crease."""
+    from clients.render.renderer import SEAM_SMOOTH_ANGLE
+
+    cols = 7
+    v, t = _sheet(cols, bend=30.0)
+    mid = np.arange(cols // 2, len(v), cols)  # the middle column
+    twin = len(v) + np.arange(len(mid))
+    split_t = t.copy()
+    right = (v[t][:, :, 0] > 1e-9).any(axis=1)  # triangles right of the middle column
+    for m, k in zip(mid, twin):
+        split_t[right] = np.where(split_t[right] == m, k, split_t[right])
+    split_v = np.vstack([v, v[mid]])
+    seam = HeadMesh(vertices=split_v, triangles=split_t, name="seam")
+    moved = split_v.copy()
+    moved[np.unique(split_t[right])] += [0.0, 0.0, 0.1]  # the right half moved forward: the twins part
+
+    def angles(n: np.ndarray) -> np.ndarray:
+        return np.degrees(np.arccos(np.clip((n[mid] * n[twin]).sum(axis=1), -1, 1)))
+
+    with _sheet_renderer(HeadMesh(vertices=v, triangles=t, name="whole")) as r:
+        whole = r.render().astype(int)
+    with _sheet_renderer(seam, parted=split_v) as r:
+        assert np.abs(r.render().astype(int) - whole).max() <= 2
+        assert angles(r.normals(split_v)).max() < 1e-3
+    for parted in (moved, None):
+        with _sheet_renderer(seam, parted=parted) as r:
+            assert angles(r.normals(split_v)).min() > 20  # each copy its own side's (15 degrees each way)
+    c, s = np.cos(np.radians(120.0)), np.sin(np.radians(120.0))
+    folded = split_v.copy()
+    rr = np.unique(split_t[right])
+    folded[rr] = folded[rr] @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # about the middle column (x = z = 0)
+    with _sheet_renderer(HeadMesh(vertices=folded, triangles=split_t, name="fold"), parted=folded) as r:
+        assert angles(r.normals(folded)).min() > SEAM_SMOOTH_ANGLE
