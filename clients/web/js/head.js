@@ -231,7 +231,27 @@ export class HeadView {
     }
     this.lastPeak = peak;
     attr.needsUpdate = true;
+    // Light the frame as its own shape (as the offline renderer does): with the rest pose's normals an
+    // open mouth's inside stays lit and a turned lip keeps its rest shading. ~1 ms for 17k triangles.
+    this.mesh.geometry.computeVertexNormals();
     this.dirty = true;
+  }
+
+  /** Largest angle (degrees) between the normals drawn and those of the shape drawn (automation: 0
+   *  when every frame is lit as its own shape). */
+  normalsLag() {
+    if (!this.mesh) return null;
+    const fresh = this.mesh.geometry.clone();
+    fresh.computeVertexNormals();
+    const a = this.mesh.geometry.getAttribute("normal").array;
+    const b = fresh.getAttribute("normal").array;
+    let worst = 0;
+    for (let i = 0; i < a.length; i += 3) {
+      const dot = a[i] * b[i] + a[i + 1] * b[i + 1] + a[i + 2] * b[i + 2];
+      worst = Math.max(worst, Math.acos(Math.min(1, Math.max(-1, dot))));
+    }
+    fresh.dispose();
+    return (worst * 180) / Math.PI;
   }
 
   /** Draw if anything changed since the last draw (call once per animation frame). */

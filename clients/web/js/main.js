@@ -428,6 +428,7 @@ window.facecast = {
   },
   caught: () => caught,
   mouthBox: () => view.mouthBox(),
+  normalsLag: () => view.normalsLag(),
   morph: () => ({ names: view.morph?.names ?? null, index: shown?.index ?? null,
     weights: shown && state.kind === "morph" ? Array.from(shown.values) : null, influences: view.influences() }),
   audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped, syncMs: audio.syncMs }),

@@ -149,6 +149,9 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
 
     # The mouth region differs between a closed and an open frame.
     assert mouth["peaks"]["open"] > mouth["peaks"]["closed"]
+    # ... and each frame is lit as its own shape, not with the rest pose's normals (an open mouth's inside
+    # stayed lit; up to tens of degrees off at the lips before).
+    assert mouth["normalsLag"] is not None and mouth["normalsLag"] < 1.0, mouth["normalsLag"]
     closed, opened = _png(ARTIFACTS / "closed.png"), _png(ARTIFACTS / "open.png")
     assert closed.shape == opened.shape
     changed = np.mean(np.abs(opened - closed).sum(axis=2) > 60)

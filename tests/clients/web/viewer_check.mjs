@@ -47,10 +47,14 @@ async function main() {
   say({ step: "picker", buttons, smiled });
 
   // Then a frame near each end of the mouth's range, the same clip around the mouth.
-  const { shots, range, clip } = await captureMouth(page, outDir);
+  // On the frozen open frame: how far the normals drawn are from that shape's own.
+  const { shots, range, clip } = await captureMouth(page, outDir, "", async (p) => ({
+    normalsLag: await p.evaluate(() => window.facecast.normalsLag()),
+  }));
   await page.screenshot({ path: join(outDir, "viewer.png") });
   st = await page.evaluate(() => ({ ...window.facecast.state, audio: window.facecast.audio() }));
-  say({ step: "mouth", peaks: { closed: shots.closed.peak, open: shots.open.peak }, range, clip, state: st });
+  say({ step: "mouth", peaks: { closed: shots.closed.peak, open: shots.open.peak }, range, clip, state: st,
+    normalsLag: shots.open.normalsLag });
   // Reconnection: the test ends the session and starts it again; the page must follow by itself.
   const before = st.connections;
   say({ step: "waiting" });
