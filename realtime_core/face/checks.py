@@ -209,12 +209,21 @@ BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in
 :func:`bilabial_gap` measures that the lips close."""
 
 
+CLOSURE_REACH = 0.02
+"""IOD: how far below 0 the bound lets mouth_open go (the pose (0, 0, -CLOSURE_REACH, 0) joins its hull). The
+checks' closure pose is (0, 0, -gap, 0), gap the inner lips' gap as the head is modelled: a retargeted head
+modelled further apart than 0.01 IOD rests at its closure (assets.heads.rigging.REST_GAP_MAX, gap 0 then), a head
+driven by its own targets keeps its gap (0.007 IOD the built-in head, 0.0111 the ARKit test files). Bounded at 0,
+those lips stayed that far apart at closure."""
+
+
 @lru_cache(maxsize=1)
 def checked_bound() -> PoseBound:
     """The bound every head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
-    :data:`EXTREME_POSES`, the poses the rigs are repaired and checked at (a pose set added to the repair and
-    the checks joins the hull here, or the bound cuts what the rigs were made clean for). Built once (Qhull)."""
-    return PoseBound(poses=EXTREME_POSES)
+    :data:`EXTREME_POSES`, the poses the rigs are repaired and checked at, and of the closure reach
+    (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here, or the bound cuts
+    what the rigs were made clean for. Built once (Qhull)."""
+    return PoseBound(poses=(*EXTREME_POSES, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
 
 
 LIP_EDGE_NOTCH_LIMIT = 0.015

@@ -9,6 +9,7 @@ import pytest
 
 from realtime_core.errors import ConfigError
 from realtime_core.face.checks import (
+    CLOSURE_REACH,
     EXTREME_POSES,
     MEASURED_POSES,
     SINGLE_POSES,
@@ -399,11 +400,15 @@ def test_the_lip_gap_at_m_flags_a_rig_that_opens_its_lips_for_a_lowered_upper_li
 
 def test_the_pose_bound_keeps_checked_poses_and_gives_the_hull_point_nearest_any_other() -> None:
     bound = checked_bound()
-    v = np.array(EXTREME_POSES)
+    v = np.array(bound.poses)
+    assert set(EXTREME_POSES) < set(bound.poses)
     rng = np.random.default_rng(12)
     inside = rng.dirichlet(np.ones(len(v)), 50) @ v  # convex combinations of the checked poses
     np.testing.assert_array_equal(bound(inside), inside)
     np.testing.assert_array_equal(bound(np.zeros(4)), np.zeros(4))  # rest: the mouth_open 0 face of the hull
+    closure = np.array([0.0, 0.0, -0.0111, 0.0])  # the ARKit test files' closure pose: their lips close
+    np.testing.assert_array_equal(bound(closure), closure)
+    np.testing.assert_allclose(bound(np.array([0.0, 0.0, -1.0, 0.0])), [0.0, 0.0, -CLOSURE_REACH, 0.0], atol=1e-12)
     # The typical ranges' corner where ARKit heads' lips crossed (docs/animation.md, "Sweep"), and random poses
     # up to twice the ranges: each goes to the hull point q nearest it, which holds iff (x - q) . (v - q) <= 0
     # for every vertex v of the hull (the projection onto a convex set).
