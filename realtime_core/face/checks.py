@@ -164,7 +164,7 @@ class PoseBound:
     docs/animation.md, "Sweep: the goals at any pose")."""
 
     poses: tuple[tuple[float, ...], ...]
-    # Set in __post_init__: the hull's outward facet normals (F, 4), offsets (F,) and vertices (V, 4).
+    # Set in __post_init__: the hull's outward facet normals (F, 4), offsets (F,) (plus 1e-7 IOD) and vertices (V, 4).
     _normals: np.ndarray = field(init=False, repr=False, compare=False)
     _offsets: np.ndarray = field(init=False, repr=False, compare=False)
     _vertices: np.ndarray = field(init=False, repr=False, compare=False)
@@ -178,16 +178,19 @@ class PoseBound:
         except QhullError as exc:  # fewer than 5 poses, or all in a hyperplane
             raise ConfigError(f"a pose bound needs poses spanning the 4 parameters: {exc}") from exc
         object.__setattr__(self, "_normals", np.ascontiguousarray(hull.equations[:, :4]))
-        object.__setattr__(self, "_offsets", np.ascontiguousarray(-hull.equations[:, 4]))
+        object.__setattr__(self, "_offsets", np.ascontiguousarray(1e-7 - hull.equations[:, 4]))  # 1e-7 IOD slack
         object.__setattr__(self, "_vertices", pts[hull.vertices])
 
     def contains(self, params: np.ndarray) -> np.ndarray:
         """(...,) bool: whether each row of params (..., 4) (IOD) lies in the hull (within 1e-7 IOD)."""
         p = np.asarray(params, dtype=np.float64)
-        return np.all(p @ self._normals.T <= self._offsets + 1e-7, axis=-1)
+        return np.all(p @ self._normals.T <= self._offsets, axis=-1)
 
     def __call__(self, params: np.ndarray) -> np.ndarray:
+        """params (4,) or (T, 4) (IOD) -> the same shape, float64: each row, or the hull's point nearest it."""
         p = np.asarray(params, dtype=np.float64)
+        if p.ndim == 1 and (self._normals @ p <= self._offsets).all():
+            return p  # a live frame: one (F, 4) product (its rig's per-frame cost, a few microseconds)
         inside = self.contains(p)
         if np.all(inside):
             return p
