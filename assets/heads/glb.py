@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import replace
 
 import numpy as np
 
@@ -303,7 +304,9 @@ def rig_targets(rig) -> np.ndarray:
     """Morph targets (4, n, 3) float32 of a :class:`realtime_core.face.Rig`: the head displacement
     (mesh units) per unit (1 IOD) of each mouth parameter: the rig's linear field, without its
     lip-contact push (a whole IOD of one parameter crosses the lips of a rig with contact columns, and
-    the push at that unit pose would be baked into every frame's blend)."""
+    the push at that unit pose would be baked into every frame's blend). Unbounded: a unit pose lies outside
+    a head's :attr:`~realtime_core.face.Rig.bound`; the animation's weights are bounded instead (:func:`head_glb`)."""
+    rig = replace(rig, bound=None)
     out = np.zeros((4, len(rig.neutral), 3), dtype=np.float32)
     for j in range(4):
         e = np.zeros(4, dtype=np.float32)
@@ -343,6 +346,7 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
     # file deform exactly as the renderer and the server's deltas do (lips never pass each other).
     contact = np.zeros((len(rig.contact), len(rig.neutral), 3), dtype=np.float32)
     contact[:, rig.moving] = rig.contact_targets()
+    p = rig.bounded(p)  # the parameter curves as the renderer and the server drive the rig
     names = tuple(VISUAL_PARAMS) + tuple(f"lip_contact_{k:02d}" for k in range(len(rig.contact)))
     return animated_glb(
         vertices=rig.neutral,

@@ -23,7 +23,7 @@ from __future__ import annotations
 import contextlib
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -47,7 +47,11 @@ LANDMARK_CACHE_FAMILY = re.compile(r"a[0-9]+_[0-9a-f]{32}\.json")
 
 @dataclass(frozen=True)
 class Head:
-    """A head ready to animate: ``rig`` (Rig or MorphRig) and the ``mesh`` it deforms (same vertex order)."""
+    """A head ready to animate: ``rig`` (Rig or MorphRig) and the ``mesh`` it deforms (same vertex order).
+    The rig drives within :func:`realtime_core.face.checks.checked_bound` (set here when it has no bound): every
+    head the commands and the server animate is made here, and parameters outside the poses its rig was
+    repaired and checked at give the nearest checked pose instead of a fold (docs/animation.md, "Which poses,
+    and why")."""
 
     rig: AnyRig
     mesh: HeadMesh
@@ -57,6 +61,10 @@ class Head:
             raise MeshError(
                 f"{self.mesh.name}: mesh has {len(self.mesh.vertices)} vertices, its rig {len(self.rig.neutral)}"
             )
+        if self.rig.bound is None:
+            from realtime_core.face.checks import checked_bound
+
+            object.__setattr__(self, "rig", replace(self.rig, bound=checked_bound()))
 
     @property
     def kind(self) -> str:

@@ -40,7 +40,8 @@ reported as warnings and do not fail the rig.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -153,9 +154,80 @@ EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SI
 """The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
 
 
+@dataclass(frozen=True)
+class PoseBound:
+    """The parameters a head accepts: the convex hull of ``poses`` ((P, 4) IOD, the poses the rig checks
+    measure). Calling it with params (4,) or (T, 4) (IOD) gives each row unchanged when it lies in the hull
+    (within 1e-7 IOD) and else the hull's nearest point (Euclidean, IOD). The checks pass a rig at the
+    hull's vertices, and the rig is linear in the parameters (before the lip-contact push, which only
+    separates lips), so a bounded rig shows the figures the checks measured at any parameters it is given;
+    outside, a linear field folds at some scale (the typical ranges' corners fold 17 of 21 rows,
+    docs/animation.md, "Sweep: the goals at any pose")."""
+
+    poses: tuple[tuple[float, ...], ...]
+    # Set in __post_init__: the hull's outward facet normals (F, 4), offsets (F,) (plus 1e-7 IOD) and vertices (V, 4).
+    _normals: np.ndarray = field(init=False, repr=False, compare=False)
+    _offsets: np.ndarray = field(init=False, repr=False, compare=False)
+    _vertices: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        from scipy.spatial import ConvexHull, QhullError
+
+        pts = np.asarray(self.poses, dtype=np.float64).reshape(-1, 4)
+        try:
+            hull = ConvexHull(pts)
+        except QhullError as exc:  # fewer than 5 poses, or all in a hyperplane
+            raise ConfigError(f"a pose bound needs poses spanning the 4 parameters: {exc}") from exc
+        object.__setattr__(self, "_normals", np.ascontiguousarray(hull.equations[:, :4]))
+        object.__setattr__(self, "_offsets", np.ascontiguousarray(1e-7 - hull.equations[:, 4]))  # 1e-7 IOD slack
+        object.__setattr__(self, "_vertices", pts[hull.vertices])
+
+    def contains(self, params: np.ndarray) -> np.ndarray:
+        """(...,) bool: whether each row of params (..., 4) (IOD) lies in the hull (within 1e-7 IOD)."""
+        p = np.asarray(params, dtype=np.float64)
+        return np.all(p @ self._normals.T <= self._offsets, axis=-1)
+
+    def __call__(self, params: np.ndarray) -> np.ndarray:
+        """params (4,) or (T, 4) (IOD) -> the same shape, float64: each row, or the hull's point nearest it."""
+        p = np.asarray(params, dtype=np.float64)
+        if p.ndim == 1 and (self._normals @ p <= self._offsets).all():
+            return p  # a live frame: one (F, 4) product (its rig's per-frame cost, a few microseconds)
+        inside = self.contains(p)
+        if np.all(inside):
+            return p
+        from scipy.optimize import nnls
+
+        # The nearest point sum_i w_i v_i, w >= 0, sum w = 1: non-negative least squares with the sum as a
+        # heavily weighted extra row (its violation costs HEAVY^2 times a squared IOD), renormalised.
+        heavy = 1e4
+        m = np.vstack([self._vertices.T, np.full(len(self._vertices), heavy)])
+        flat = p.reshape(-1, 4).copy()
+        for i in np.flatnonzero(~np.asarray(inside).reshape(-1)):
+            w, _ = nnls(m, np.r_[flat[i], heavy])
+            flat[i] = (w / w.sum()) @ self._vertices
+        return flat.reshape(p.shape)
+
+
 BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in SPEECH_POSES if p[2] == 0.0)
 """The pressed bilabial rows of SPEECH_POSES (/m b p/: mouth_open 0, the upper lip lowered): where
 :func:`bilabial_gap` measures that the lips close."""
+
+
+CLOSURE_REACH = 0.02
+"""IOD: how far below 0 the bound lets mouth_open go (the pose (0, 0, -CLOSURE_REACH, 0) joins its hull). The
+checks' closure pose is (0, 0, -gap, 0), gap the inner lips' gap as the head is modelled: a retargeted head
+modelled further apart than 0.01 IOD rests at its closure (assets.heads.rigging.REST_GAP_MAX, gap 0 then), a head
+driven by its own targets keeps its gap (0.007 IOD the built-in head, 0.0111 the ARKit test files). Bounded at 0,
+those lips stayed that far apart at closure."""
+
+
+@lru_cache(maxsize=1)
+def checked_bound() -> PoseBound:
+    """The bound every head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
+    :data:`EXTREME_POSES`, the poses the rigs are repaired and checked at, and of the closure reach
+    (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here, or the bound cuts
+    what the rigs were made clean for. Built once (Qhull)."""
+    return PoseBound(poses=(*EXTREME_POSES, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
 
 
 LIP_EDGE_NOTCH_LIMIT = 0.015

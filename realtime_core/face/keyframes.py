@@ -41,12 +41,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from realtime_core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from realtime_core.face.checks import PoseBound
 
 CONTACT_TOL = 1e-5
 """IOD: a lip gap below its floor by less than this is kept (the dual search stops within it)."""
@@ -413,6 +416,9 @@ class MorphRig:
     keymap: KeyframeMap
     source: Callable[[np.ndarray], np.ndarray]
     meta: dict[str, Any] = field(default_factory=dict)
+    bound: PoseBound | None = None
+    """The parameters the rig accepts (:func:`realtime_core.face.checks.checked_bound`, set on every
+    :class:`assets.heads.head.Head`): params outside it give the weights of its nearest point. None: any."""
     # Set in __post_init__: the targets flattened to (P, n_moving*3) (a view of ``targets``).
     _rows: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -432,8 +438,11 @@ class MorphRig:
         object.__setattr__(self, "_rows", t.reshape(len(t), -1))
 
     def weights(self, params: np.ndarray) -> np.ndarray:
-        """Mouth parameters (..., 4) (IOD) -> the head's target weights (..., P) float32."""
+        """Mouth parameters (..., 4) (IOD) -> the head's target weights (..., P) float32 (the parameters within
+        :attr:`bound`: every consumer, renderer, server deltas and morph weights, exports, goes through here)."""
         p = np.asarray(params, dtype=np.float64)
+        if self.bound is not None:
+            p = self.bound(p)
         return self.keymap.weights(self.source(p)).astype(np.float32)
 
     def displacements(self, params: np.ndarray) -> np.ndarray:

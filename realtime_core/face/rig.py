@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,6 +25,9 @@ from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, Mou
 from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
+
+if TYPE_CHECKING:
+    from realtime_core.face.checks import PoseBound
 
 RIG_ALGORITHM = 48
 HARMONIC_MARGIN = 0.0
@@ -101,6 +104,10 @@ class Rig:
     contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
     contact_up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
     contact_spread: sp.csr_matrix | None = None
+    bound: PoseBound | None = None
+    """The parameters the rig accepts (:func:`realtime_core.face.checks.checked_bound`, set on every
+    :class:`assets.heads.head.Head`): params outside it drive the rig at its nearest point. None: any params (a
+    rig being built, whose calibration probes each parameter alone)."""
     # Set in __post_init__: the folded dense (n_moving*3, 4) map, or None to use the sparse product.
     _folded: np.ndarray | None = field(init=False, default=None, repr=False, compare=False)
     # Set in __post_init__: each contact vertex's row in the moving set (-1: it never moves).
@@ -150,9 +157,10 @@ class Rig:
         Then the lips' non-interpenetration constraint: in every lip column (``contact``) the lower
         lip's point is kept at or below the upper lip's along ``contact_up``; a column that would
         cross is pushed apart to touching, half each way (all of it on the side that moves, when
-        the other never does). Every consumer (renderer, server deltas, exports) goes through here.
+        the other never does). Every consumer (renderer, server deltas, exports) goes through here,
+        so the parameters are bounded here (:attr:`bound`).
         """
-        p = np.asarray(params, dtype=np.float32).reshape(4)
+        p = np.asarray(self.bounded(params), dtype=np.float32).reshape(4)
         if self._folded is not None:
             d = (self._folded @ p).reshape(-1, 3)
         else:
@@ -160,6 +168,10 @@ class Rig:
         if len(self.contact):
             d = d + self._contact_push(d)
         return d
+
+    def bounded(self, params: np.ndarray) -> np.ndarray:
+        """params (4,) or (T, 4) (IOD) as the rig is driven by them: within :attr:`bound` (unchanged without)."""
+        return params if self.bound is None else self.bound(params)
 
     def _contact_push(self, d: np.ndarray) -> np.ndarray:
         """(n_moving, 3) float32 correction that separates crossing lip columns, for displacements d."""
@@ -194,7 +206,7 @@ class Rig:
 
     def contact_push(self, params: np.ndarray) -> np.ndarray:
         """The constraint's part of :meth:`displacements` (n_moving, 3) float32 for params (4,)."""
-        p = np.asarray(params, dtype=np.float32).reshape(4)
+        p = np.asarray(self.bounded(params), dtype=np.float32).reshape(4)
         if not len(self.contact):
             return np.zeros((len(self.moving), 3), dtype=np.float32)
         d = (self._folded @ p) if self._folded is not None else (self.matrix @ (self.basis @ p))
@@ -203,8 +215,9 @@ class Rig:
     def contact_deficits(self, params: np.ndarray) -> np.ndarray:
         """(n_frames, k) float32: each lip column's crossing (head units) for params (n_frames, 4) (IOD),
         the weights of :meth:`contact_targets`: ``displacements(p) = linear(p) + deficits(p) @ targets``,
-        so an exporter can bake the (non-linear) constraint as k morph targets animated per frame."""
-        p = np.asarray(params, dtype=np.float32).reshape(-1, 4)
+        so an exporter can bake the (non-linear) constraint as k morph targets animated per frame (p within
+        :attr:`bound`: an exporter animates :meth:`bounded` params)."""
+        p = np.asarray(self.bounded(np.asarray(params, dtype=np.float64).reshape(-1, 4)), dtype=np.float32)
         out = np.zeros((len(p), len(self.contact)), dtype=np.float32)
         if len(self.contact):
             for i, row in enumerate(p):

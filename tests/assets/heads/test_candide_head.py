@@ -3,6 +3,8 @@ parameters it shows equal the ones asked for, it passes the rig checks, faces th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -16,7 +18,7 @@ FILES = ("candide3-3.1.6.wfm", "candide3-uv-variant.wfm")
 @pytest.mark.parametrize("name", FILES)
 def test_candide_head_shows_the_parameters_asked_for(shared_data, name):
     head = resolve_head(shared_data / "candide3" / name)
-    rig = head.rig
+    rig = replace(head.rig, bound=None)  # the units' own answer at any params (a Head bounds them, test_morph_heads)
     assert head.kind == "morph" and head.mesh.part_names == ("head", "mouth cavity")
     assert int((head.mesh.part == 0).sum()) == 113  # the wireframe, then the (still) mouth cavity
     # One of its own units per parameter: lip raiser, stretcher, jaw drop, corner depressor.

@@ -4,6 +4,7 @@ head as an ARKit file, visemes, user maps, exports."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -157,7 +158,7 @@ def test_morph_displacements_equal_the_reference_solve_and_a_float64_product(bui
     targets summed in float64, at speech poses from closed to wide open."""
     from realtime_core.face.checks import EXTREME_POSES
 
-    rig = builtin_morph.rig
+    rig = replace(builtin_morph.rig, bound=None)  # the solve at any params, not only within the head's bound
     rng = np.random.default_rng(4)
     poses = np.vstack([np.asarray(EXTREME_POSES, dtype=np.float64), rng.uniform(-0.1, 0.5, (20, 4))])
     x = rig.source(poses)
@@ -258,3 +259,54 @@ def test_builtin_morph_rig_is_cached_and_read_back_identical(tmp_path, monkeypat
     again = builtin_morph_head(tmp_path)
     assert len(builds) == 2
     np.testing.assert_array_equal(again.rig.weights(poses), built.rig.weights(poses))
+
+
+def test_a_head_drives_its_rig_within_the_checked_poses(builtin_morph):
+    """A typical-range corner (raised upper lip, full pucker, closed, corners up) crossed the lips 0.012 IOD
+    and folded 8 triangles of the built-in head's own targets (the ARKit weights' clip at 1 saturates the
+    upper lip's raise and not the shapes that close the lips); a Head's rig gives it its nearest checked pose,
+    everywhere it is driven: vertices, morph weights, the exported animation."""
+    from assets.heads.head import head_check_inputs
+    from realtime_core.face.checks import checked_bound, pose_figures
+
+    corner = np.array([0.06, -0.15, 0.0, -0.1])
+    rig = builtin_morph.rig
+    assert rig.bound is checked_bound()
+    lm, inputs = head_check_inputs(builtin_morph)
+    free = pose_figures(replace(rig, bound=None), lm, [corner], **inputs)
+    assert free.flipped[0] > 0 and free.interpenetration[0] > 0.005  # what the bound keeps the head from
+    held = pose_figures(rig, lm, [corner], **inputs)
+    assert held.flipped[0] == 0 and held.interpenetration[0] <= 0.005
+    nearest = checked_bound()(corner)
+    np.testing.assert_array_equal(rig.weights(corner), rig.weights(nearest))
+    np.testing.assert_array_equal(rig.deformed(corner), rig.deformed(nearest))
+    pygltflib = require_module("pygltflib")
+    g = pygltflib.GLTF2().load_from_bytes(head_glb(rig, builtin_morph.mesh, corner[None], 30.0))
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0))
+    np.testing.assert_allclose(w, rig.weights(nearest), atol=1e-6)
+
+
+def test_a_retargeted_head_drives_its_rig_within_the_checked_poses(builtin_rig_file):
+    """The built-in head's Sec. 5 rig folded 14 triangles at the typical ranges' corner (-0.05, -0.15, 0.45,
+    -0.0625) (docs/animation.md, "Sweep"); as a Head it gives the nearest checked pose there, in its vertex
+    deltas and in the exported animation's parameter curves (whose unit targets stay the rig's linear field)."""
+    from assets.heads.glb import rig_targets
+    from assets.heads.head import Head, head_check_inputs
+    from realtime_core.face.checks import checked_bound, pose_figures
+
+    head = Head(*builtin_rig_file)
+    corner = np.array([-0.05, -0.15, 0.45, -0.0625])
+    lm, inputs = head_check_inputs(head)
+    free = replace(head.rig, bound=None)
+    assert pose_figures(free, lm, [corner], **inputs).flipped[0] > 0
+    assert pose_figures(head.rig, lm, [corner], **inputs).flipped[0] == 0
+    nearest = checked_bound()(corner)
+    np.testing.assert_array_equal(head.rig.displacements(corner), free.displacements(nearest))
+    np.testing.assert_allclose(head.rig.bounded(corner[None]), nearest[None])
+    e = np.zeros(4, dtype=np.float32)
+    e[3] = 1.0  # a unit pose, far outside the bound: the exported target is the linear field's column
+    np.testing.assert_allclose(
+        rig_targets(head.rig)[3, head.rig.moving], free.displacements(e) - free.contact_push(e), atol=1e-6
+    )

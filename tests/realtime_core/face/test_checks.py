@@ -7,13 +7,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from realtime_core.errors import ConfigError
 from realtime_core.face.checks import (
+    CLOSURE_REACH,
     EXTREME_POSES,
     MEASURED_POSES,
     SINGLE_POSES,
     SPEECH_POSES,
     SPEECH_SCALE,
+    PoseBound,
     check_rig,
+    checked_bound,
     flipped_faces,
     pose_figures,
 )
@@ -392,3 +396,28 @@ def test_the_lip_gap_at_m_flags_a_rig_that_opens_its_lips_for_a_lowered_upper_li
     assert f"lip gap at /m/ {2.0 * lowered:.4f} IOD" in rep.summary()
     rep = check_rig(closing, closing.landmarks(), poses=poses)
     assert rep.bilabial_gap_iod == pytest.approx(0.0, abs=1e-12) and rep.warnings == () and rep.passed
+
+
+def test_the_pose_bound_keeps_checked_poses_and_gives_the_hull_point_nearest_any_other() -> None:
+    bound = checked_bound()
+    v = np.array(bound.poses)
+    assert set(EXTREME_POSES) < set(bound.poses)
+    rng = np.random.default_rng(12)
+    inside = rng.dirichlet(np.ones(len(v)), 50) @ v  # convex combinations of the checked poses
+    np.testing.assert_array_equal(bound(inside), inside)
+    np.testing.assert_array_equal(bound(np.zeros(4)), np.zeros(4))  # rest: the mouth_open 0 face of the hull
+    closure = np.array([0.0, 0.0, -0.0111, 0.0])  # the ARKit test files' closure pose: their lips close
+    np.testing.assert_array_equal(bound(closure), closure)
+    np.testing.assert_allclose(bound(np.array([0.0, 0.0, -1.0, 0.0])), [0.0, 0.0, -CLOSURE_REACH, 0.0], atol=1e-12)
+    # The typical ranges' corner where ARKit heads' lips crossed (docs/animation.md, "Sweep"), and random poses
+    # up to twice the ranges: each goes to the hull point q nearest it, which holds iff (x - q) . (v - q) <= 0
+    # for every vertex v of the hull (the projection onto a convex set).
+    far = np.vstack([[0.06, -0.15, 0.0, -0.1], rng.normal(size=(40, 4)) * [0.1, 0.25, 0.6, 0.15]])
+    q = bound(far)
+    assert q.shape == far.shape and bound.contains(q).all()
+    assert not bound.contains(far[0])
+    for x, qi in zip(far, q):
+        assert np.max((v - qi) @ (x - qi)) <= 1e-9 * np.linalg.norm(x - qi)
+    np.testing.assert_allclose(bound(far[3]), q[3])  # a single pose as in a batch
+    with pytest.raises(ConfigError):
+        PoseBound(poses=((0.0, 0.0, 0.0, 0.0), (0.1, 0.0, 0.0, 0.0), (0.0, 0.1, 0.0, 0.0)))
