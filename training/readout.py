@@ -11,6 +11,9 @@
   the model's output stage, keeps the best by the mean r of the four parameters, then re-chooses the
   closure band on val (the highest r(mouth_open) keeping >= ``min_closure`` of the bilabial closures;
   the readout changes how deep the dips go). The test split is never looked at.
+- A studio's own corpus (``facecast readout --corpus DIR``) stands in for GRID s1's train/val: :func:`split_corpus`
+  splits its utterances by sentence into a fitting and a choosing part, :func:`corpus_clips` gives each its
+  closure events (its /p b m/ phone labels, else the measured lips' own closures, a proxy).
 """
 
 from __future__ import annotations
