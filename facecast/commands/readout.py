@@ -97,9 +97,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--choose-fraction",
         type=float,
-        default=0.2,
+        # None: training.readout.CHOOSE_FRACTION (not imported here: see --candidates)
+        default=None,
         metavar="F",
-        help="with --corpus: the share of its utterances that choose the readout and the band (the rest fit)",
+        help="with --corpus: the share of its utterances that choose the readout and the band, the rest fit "
+        "(default 0.2: one in five)",
     )
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument(
@@ -219,9 +221,10 @@ def _corpus_parts(args: argparse.Namespace) -> dict:
     """--corpus: {"train": fit clips, "val": choose clips, "source": what the model records}, printed as `train`
     prints its data."""
     from training.corpus import load_corpus
-    from training.readout import corpus_clips, split_corpus
+    from training.readout import CHOOSE_FRACTION, corpus_clips, split_corpus
 
-    fit, choose = split_corpus(load_corpus(args.corpus), choose_fraction=args.choose_fraction, where=str(args.corpus))
+    fraction = CHOOSE_FRACTION if args.choose_fraction is None else args.choose_fraction
+    fit, choose = split_corpus(load_corpus(args.corpus), choose_fraction=fraction, where=str(args.corpus))
     fit_clips, _ = corpus_clips(fit)
     choose_clips, kinds = corpus_clips(choose)
     where = {"phones": "from /p b m/ phone labels", "lips": "from the measured lips at the closed pose (a proxy)"}
@@ -235,5 +238,5 @@ def _corpus_parts(args: argparse.Namespace) -> dict:
     return {
         "train": fit_clips,
         "val": choose_clips,
-        "source": {"fit": len(fit), "choose": len(choose), "choose_fraction": args.choose_fraction, "closures": kinds},
+        "source": {"fit": len(fit), "choose": len(choose), "choose_fraction": fraction, "closures": kinds},
     }
