@@ -80,9 +80,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "With --corpus DIR (a folder made by `facecast extract`, as `train` reads) the corpus stands in for\n"
             "GRID s1: its utterances are split by sentence (in order of id, every 1/F-th chooses: F =\n"
             "--choose-fraction) into a part that fits and one that chooses, each of 4 utterances or more. The\n"
-            "band is chosen on the closures\n"
-            "of the utterances' /p b m/ phone labels where they have them, else on the measured lips' own\n"
-            "closures (frames inside speech at the closed pose): a proxy, see docs/training.md."
+            "band is chosen on the closures of the utterances' /p b m/ phone labels where they have them, else\n"
+            "on the measured lips' own closures (frames inside speech at the closed pose): a proxy, see\n"
+            "docs/training.md."
         ),
     )
     p.add_argument("model", metavar="MODEL", help="model file (.npz) or a shipped name (default, low-latency)")
