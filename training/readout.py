@@ -11,6 +11,9 @@
   the model's output stage, keeps the best by the mean r of the four parameters, then re-chooses the
   closure band on val (the highest r(mouth_open) keeping >= ``min_closure`` of the bilabial closures;
   the readout changes how deep the dips go). The test split is never looked at.
+- A studio's own corpus (``facecast readout --corpus DIR``) stands in for GRID s1's train/val: :func:`split_corpus`
+  splits its utterances by sentence into a fitting and a choosing part, :func:`corpus_clips` gives each its
+  closure events (its /p b m/ phone labels, else the measured lips' own closures, a proxy).
 """
 
 from __future__ import annotations
@@ -173,6 +176,51 @@ def vtlp_copies(
         warps = [float(w) for w in rng.uniform(*config.warp_range, len(clips))]
         out += trace_clips(model, clips, warps=warps, progress=progress)
     return out
+
+
+CHOOSE_FRACTION = 0.2
+"""Share of a corpus's utterances that choose the readout and the closure band (the rest fit it): GRID s1's
+val split is about this share of its train + val."""
+MIN_PART_UTTERANCES = 4
+"""Fewest utterances in each part: fewer make the choice (of a readout, of a band) a coin toss."""
+
+
+def split_corpus(utts: Sequence[Any], *, choose_fraction: float = CHOOSE_FRACTION, where: str = "corpus") -> tuple:
+    """``(fit, choose)``: a corpus's utterances (one sentence each) split by sentence, deterministically: in
+    order of id, utterance i chooses when ``floor((i + 1) f) > floor(i f)`` (f = ``choose_fraction``), so
+    ``floor(n f)`` utterances spread evenly over the corpus choose and the same corpus always splits the same
+    way. ConfigError naming ``where`` when a part would hold fewer than :data:`MIN_PART_UTTERANCES`."""
+    if not 0.0 < choose_fraction < 1.0:
+        raise ConfigError(f"the choose fraction must be in (0, 1), got {choose_fraction}")
+    ordered = sorted(utts, key=lambda u: u.id)
+    pick = [math.floor((i + 1) * choose_fraction) > math.floor(i * choose_fraction) for i in range(len(ordered))]
+    fit = [u for u, c in zip(ordered, pick, strict=True) if not c]
+    choose = [u for u, c in zip(ordered, pick, strict=True) if c]
+    if min(len(fit), len(choose)) < MIN_PART_UTTERANCES:
+        raise ConfigError(
+            f"{where}: {len(ordered)} utterances are too few for a readout: {len(fit)} to fit and {len(choose)} to "
+            f"choose (choose fraction {choose_fraction}), each part needs at least {MIN_PART_UTTERANCES}"
+        )
+    return fit, choose
+
+
+def corpus_clips(utts: Sequence[Any]) -> tuple[list, dict[str, int]]:
+    """``[(id, utterance, closure spans)]`` of corpus utterances for :func:`trace_clips` (an ``Utterance`` has a
+    face track's samples, rate and params), and how many utterances had each kind of closure event: "phones"
+    (the /p b m/ phones of the utterance's phone labels) or "lips" (none: the measured lips' own closures,
+    :func:`training.reallips.lip_closure_spans`, a proxy)."""
+    from training.reallips import lip_closure_spans, phone_bilabial_spans
+
+    out, kinds = [], {"phones": 0, "lips": 0}
+    for u in utts:
+        if u.phonemes:
+            spans = phone_bilabial_spans(u.phonemes)
+            kinds["phones"] += 1
+        else:
+            spans = lip_closure_spans(u.params, loudness_db(u.samples, u.sample_rate_hz, len(u.params)))
+            kinds["lips"] += 1
+        out.append((u.id, u, spans))
+    return out, kinds
 
 
 def _features(spec: ReadoutSpec, model: AvModel, clips: Sequence[Traced]) -> np.ndarray:

@@ -305,8 +305,44 @@ class LipScores:
         }
 
 
+CLOSURE_TOL_IOD = 0.01
+"""mouth_open at or below this (IOD; 0 = the rest face) is the closed pose: a closure the estimate reaches
+(:func:`score_lips`) and, in a corpus without phone labels, a closure the measured lips make
+(:func:`lip_closure_spans`)."""
+
+
+def lip_closure_spans(
+    params: np.ndarray, level_db: np.ndarray, *, below_peak_db: float | None = None
+) -> list[tuple[float, float, str]]:
+    """``[(start_s, end_s, "lips")]``: the measured lips' own closures, the stand-in for /p b m/ labels where a
+    corpus has none. params ``(T, 4)`` IOD, level_db ``(T,)`` (``loudness_db``). A closure is a run of frames at
+    the closed pose (mouth_open <= :data:`CLOSURE_TOL_IOD`, the closure metric's own test) inside speech, the
+    frames from the clip's first to its last within ``below_peak_db`` of its loudest (default: the extraction's
+    quiet rule, ``ExtractConfig.quiet_below_db``), so the closed lips before and after the sentence are not
+    counted. A run shorter than ``CLOSURE_S`` is widened to it about its centre, as a stop closure lasts 50-120
+    ms and a phone label spans it: the estimate may reach the pose anywhere in that span, as with labels."""
+    if below_peak_db is None:
+        from training.video import ExtractConfig
+
+        below_peak_db = ExtractConfig().quiet_below_db
+    T = min(len(params), len(level_db))
+    loud = np.flatnonzero(level_db[:T] >= level_db[:T].max() - below_peak_db) if T else np.array([], int)
+    if not len(loud):
+        return []
+    closed = np.zeros(T + 2, bool)
+    lo, hi = loud[0], loud[-1] + 1
+    closed[lo + 1 : hi + 1] = params[lo:hi, MOUTH_OPEN] <= CLOSURE_TOL_IOD
+    edges = np.flatnonzero(np.diff(closed.astype(np.int8)))
+    out = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # closed frames a .. b - 1
+        start, end = a / FPS, (b - 1) / FPS
+        pad = max(CLOSURE_S - (end - start), 0.0) / 2
+        out.append((max(start - pad, 0.0), end + pad, "lips"))
+    return out
+
+
 def score_lips(
-    items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, list]], *, closure_tol_iod: float = 0.01
+    items: Sequence[tuple[str, np.ndarray, np.ndarray, np.ndarray, list]], *, closure_tol_iod: float = CLOSURE_TOL_IOD
 ) -> LipScores:
     """``items``: (name, truth (T, 4), estimate (T', 4), loudness (T,) dB, bilabial spans [(a, b, w)]).
 

@@ -10,6 +10,6 @@ adapt    speaker adaptation from enrolment speech           say      text -> spe
 units    build the unit-selection corpus                    phones   GRID s1 phone labels
 perceptual  perceptual tests with people                    headopts the shared --head options
 mu       paper 002 on GRID s1 (Motion Units, MLP mapper)     fit-maps re-fit the blendshape maps
-readout  fit a model's learned readout (GRID s1)
+readout  fit a model's learned readout (GRID s1, or your own corpus: --corpus DIR)
 speech_options  the shared --model/--mapper options
 """

@@ -1,4 +1,4 @@
-"""``facecast readout MODEL -o MODEL``: fit a model's learned readout on GRID s1 real lips (any HMM)."""
+"""``facecast readout MODEL -o MODEL``: fit a model's learned readout on GRID s1 or a corpus folder (any HMM)."""
 
 from __future__ import annotations
 
@@ -68,19 +68,42 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         "readout",
-        help="fit a model's learned readout after the HMM inversion on GRID s1 real lips (train fits, val chooses)",
+        help="fit a model's learned readout after the HMM inversion on real lips: GRID s1 (train fits, val chooses) "
+        "or --corpus DIR (a studio's own talker)",
         formatter_class=HelpFormatter,
         description=(
             "Runs MODEL's live path (lag 0, no readout) over the GRID s1 train and val sentences, fits every\n"
             "candidate readout (realtime_core.readout: causal taps of the eq. 7 estimate, the frame's audio\n"
             "context and posteriors -> the four parameters; linear ridge or one ReLU layer) on train, keeps the\n"
             "best on val (mean r of the four parameters), re-chooses the closure band on val and writes MODEL\n"
-            "with it. Re-runnable on any HMM; an existing readout of MODEL is replaced. The test split is never read."
+            "with it. Re-runnable on any HMM; an existing readout of MODEL is replaced. The test split is never read.\n"
+            "With --corpus DIR (a folder made by `facecast extract`, as `train` reads) the corpus stands in for\n"
+            "GRID s1: its utterances are split by sentence (in order of id, every 1/F-th chooses: F =\n"
+            "--choose-fraction) into a part that fits and one that chooses, each of 4 utterances or more. The\n"
+            "band is chosen on the closures of the utterances' /p b m/ phone labels where they have them, else\n"
+            "on the measured lips' own closures (frames inside speech at the closed pose): a proxy, see\n"
+            "docs/training.md."
         ),
     )
     p.add_argument("model", metavar="MODEL", help="model file (.npz) or a shipped name (default, low-latency)")
     p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
     p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
+    p.add_argument(
+        "--corpus",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="fit and choose on this corpus folder (made by `facecast extract`) instead of GRID s1",
+    )
+    p.add_argument(
+        "--choose-fraction",
+        type=float,
+        # None: training.readout.CHOOSE_FRACTION (not imported here: see --candidates)
+        default=None,
+        metavar="F",
+        help="with --corpus: the share of its utterances that choose the readout and the band, the rest fit "
+        "(default 0.2: one in five)",
+    )
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument(
         "--candidates",
@@ -106,7 +129,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--bands",
         type=lambda t: tuple(float(v) for v in t.split(",") if v),
         default=(0.02, 0.025, 0.03, 0.035, 0.04, 0.045, 0.05),
-        help="closure bands (IOD) to choose from on val after the readout",
+        help="closure bands (IOD) to choose from on val (or --corpus's choose part) after the readout",
     )
     p.add_argument(
         "--min-closure",
@@ -160,14 +183,22 @@ def _run(args: argparse.Namespace) -> int:
     candidates = [replace(spec, loss_weight=args.loss_weight) for spec in args.candidates]
     model = replace(load_model(args.model), readout=None)
     sets = {}
+    source: dict = {}
+    parts = _corpus_parts(args) if args.corpus is not None else {}
     for split in ("train", "val"):
-        clips = s1_clips(split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+        if parts:
+            clips = parts[split]
+        else:
+            clips = s1_clips(split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
         if not clips:
             raise ConfigError(f"no GRID s1 {split} sentences (video + .align) under {args.grid_s1}")
         sets[split] = trace_clips(model, clips, progress=tqdm)
         if split == "train" and vtlp.copies:
             sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)
-    print(f"{len(sets['train'])} train traces ({vtlp.copies} VTLP copies) and {len(sets['val'])} val sentences")
+    if parts:
+        source = {"corpus": str(args.corpus), **parts["source"]}
+    fit, choose = ("fit", "choose") if parts else ("train", "val")
+    print(f"{len(sets['train'])} {fit} traces ({vtlp.copies} VTLP copies) and {len(sets['val'])} {choose} sentences")
     fitted, report = choose_readout(
         model,
         sets["train"],
@@ -178,8 +209,35 @@ def _run(args: argparse.Namespace) -> int:
         log=tqdm.write,
     )
     report["chosen"]["vtlp"] = vtlp.as_json()
+    # Only a corpus run records where it was fitted: the GRID s1 recipe's file stays as it was.
+    report["chosen"].update(source)
     fitted = replace(fitted, metadata={**fitted.metadata, "readout": report["chosen"]})
     if args.report is not None:
         write_json(args.report, report)
     print(f"wrote {save_model(args.output, fitted)} (closure band {fitted.closure_band})")
     return 0
+
+
+def _corpus_parts(args: argparse.Namespace) -> dict:
+    """--corpus: {"train": fit clips, "val": choose clips, "source": what the model records}, printed as `train`
+    prints its data."""
+    from training.corpus import load_corpus
+    from training.readout import CHOOSE_FRACTION, corpus_clips, split_corpus
+
+    fraction = CHOOSE_FRACTION if args.choose_fraction is None else args.choose_fraction
+    fit, choose = split_corpus(load_corpus(args.corpus), choose_fraction=fraction, where=str(args.corpus))
+    fit_clips, _ = corpus_clips(fit)
+    choose_clips, kinds = corpus_clips(choose)
+    where = {"phones": "from /p b m/ phone labels", "lips": "from the measured lips at the closed pose (a proxy)"}
+    closures = "; ".join(f"{n} utterance(s) {where[k]}" for k, n in kinds.items() if n)
+    n_events = sum(len(spans) for _, _, spans in choose_clips)
+    print(
+        f"readout on {args.corpus}: {len(fit)} utterances fit, {len(choose)} choose "
+        f"({sum(u.duration_s for u in fit + choose) / 60:.1f} min of audio); the band is chosen on {n_events} "
+        f"closures, {closures}"
+    )
+    return {
+        "train": fit_clips,
+        "val": choose_clips,
+        "source": {"fit": len(fit), "choose": len(choose), "choose_fraction": fraction, "closures": kinds},
+    }

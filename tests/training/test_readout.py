@@ -10,6 +10,7 @@ import pytest
 
 from realtime_core import VISUAL_PARAMS
 from tests.realtime_core.test_readout import DA, DV, M, N, small_model
+from training.errors import ConfigError
 from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
 
 # The MLPs here are cut to a few epochs to keep the tests fast; the properties tested (the live path equals
@@ -109,7 +110,6 @@ def test_vtlp_copies_change_the_voice_not_the_lips():
     """trace_clips with warp 1 is the plain trace; a warped copy keeps the lips (truth) and the frame count and
     changes the audio rows the readout reads; vtlp_copies draws one warp per copy and clip, reproducibly."""
     from assets.modelfile import load_model
-    from training.errors import ConfigError
     from training.readout import VtlpConfig, trace_clips, vtlp_copies
 
     model = replace(load_model("default"), readout=None)
@@ -243,7 +243,6 @@ def test_a_weighted_readout_runs_live_as_its_nets_predict():
     ],
 )
 def test_bad_loss_weights_are_refused_naming_the_problem(weight, named):
-    from training.errors import ConfigError
 
     with pytest.raises(ConfigError, match="loss weight") as exc:
         ReadoutSpec(loss_weight=weight)
@@ -276,3 +275,118 @@ def test_readout_command_refuses_bad_loss_weights_before_any_work(tmp_path, caps
         rc = main(["readout", "default", "-o", str(out), "--loss-weight", bad, "--grid-s1", str(tmp_path)])
         err = capsys.readouterr().err
         assert rc != 0 and named in err and "GRID" not in err and "Traceback" not in err and not out.exists()
+
+
+def test_lip_closures_are_the_closed_frames_inside_speech_widened_to_a_stop():
+    """The measured lips' own closures: runs of frames at mouth_open <= 0.01 between the first and last frame
+    within 30 dB of the loudest; the closed rest before and after speech does not count, 0.011 is open, and a
+    run shorter than 100 ms is widened to 100 ms about its centre."""
+    from training.reallips import lip_closure_spans
+
+    T = 60
+    level = np.full(T, -80.0)
+    level[10:41] = -20.0
+    level[25] = -45.0  # a quieter frame inside speech is still inside it
+    mo = np.full(T, 0.2)
+    mo[:10] = mo[41:] = 0.0  # rest before and after the sentence
+    mo[20:23] = 0.005  # frames 20, 21, 22
+    mo[30] = 0.01  # at the tolerance: closed
+    mo[35] = 0.011  # just above: open
+    mo[38:41] = 0.0  # closed up to the last loud frame, then rest
+    params = np.zeros((T, 4))
+    params[:, VISUAL_PARAMS.index("mouth_open")] = mo
+    spans = lip_closure_spans(params, level)
+    want = [(20 / 30, 22 / 30), (30 / 30, 30 / 30), (38 / 30, 40 / 30)]
+    assert [w for *_, w in spans] == ["lips"] * 3
+    for (a, b, _), (fa, fb) in zip(spans, want, strict=True):
+        centre, length = (fa + fb) / 2, max(fb - fa, 0.1)
+        assert a == pytest.approx(centre - length / 2) and b == pytest.approx(centre + length / 2)
+
+
+def _utt(uid: str):
+    from training.corpus import Utterance
+
+    return Utterance(uid, np.zeros(160, np.float32), 16000, np.zeros((1, 4)), (), "v", "en", "video", "g")
+
+
+def test_a_corpus_splits_by_sentence_the_same_way_whatever_its_order():
+    """split_corpus: floor(n f) utterances choose, spread over the corpus in order of id, the rest fit; the
+    parts are disjoint, cover the corpus, and do not depend on the manifest's order."""
+    from training.readout import split_corpus
+
+    utts = [_utt(f"u{i:02d}") for i in range(23)]
+    fit, choose = split_corpus(utts, choose_fraction=0.25)
+    assert [u.id for u in choose] == ["u03", "u07", "u11", "u15", "u19"]  # floor(23 / 4) = 5, every 4th
+    assert sorted(u.id for u in fit + choose) == [u.id for u in utts]
+    fit2, choose2 = split_corpus(list(reversed(utts)), choose_fraction=0.25)
+    assert [u.id for u in fit2] == [u.id for u in fit] and [u.id for u in choose2] == [u.id for u in choose]
+    with pytest.raises(ConfigError, match=r"mycorpus: 19 utterances are too few.*3 to choose"):
+        split_corpus(utts[:19], choose_fraction=0.2, where="mycorpus")
+
+
+def _extracted_corpus(root, n: int) -> None:
+    """A corpus laid out as `facecast extract` writes it (source "video", no phone labels): noise bursts
+    (speech) between silences, the mouth open with the level and shut at two points inside the speech."""
+    from training.corpus import write_manifest, write_utterance
+
+    rng = np.random.default_rng(3)
+    entries = []
+    for i in range(n):
+        rate, T = 16000, 45  # 1.5 s
+        env = np.zeros(T)
+        env[6:39] = 0.2 + 0.15 * np.abs(np.sin(np.arange(33) / (2 + i % 3)))
+        env[[15, 16, 28]] = 0.0  # the lips shut inside the speech (a stop: the sound stops too)
+        frame = np.arange(T * rate // 30) * 30 // rate  # each sample's video frame
+        samples = (env[frame] * rng.standard_normal(len(frame)) + 1e-4 * rng.standard_normal(len(frame))).astype(
+            np.float32
+        )
+        params = np.zeros((T, 4))
+        params[:, VISUAL_PARAMS.index("mouth_open")] = env
+        params[:, VISUAL_PARAMS.index("lip_stretch")] = 0.3 * env
+        entries.append(
+            write_utterance(
+                root,
+                utt_id=f"video-clip{i:02d}",
+                samples=samples,
+                sample_rate_hz=rate,
+                params=params,
+                phonemes=(),
+                language="en",
+                voice=f"video:clip{i:02d}",
+                source="video",
+                speaker_group=f"video:clip{i:02d}",
+            )
+        )
+    write_manifest(root, entries, seed=None)
+
+
+@FEW_EPOCHS
+def test_readout_command_fits_and_chooses_on_an_extracted_corpus(tmp_path, capsys):
+    """`facecast readout MODEL --corpus DIR`: a studio's own corpus (no GRID, no phone labels) gives a model
+    whose readout is fitted and whose closure band is chosen on the corpus's choose part, with the lips' own
+    closures; it says what it fitted on and where it wrote. A corpus too small to split is refused naming it."""
+    from assets.modelfile import load_model, save_model
+    from facecast.cli import main
+
+    corpus = tmp_path / "mycorpus"
+    _extracted_corpus(corpus, 10)
+    model = save_model(tmp_path / "my.npz", small_model(0))  # closure band 0.02
+    out = tmp_path / "my_ro.npz"
+    args = ["readout", str(model), "--corpus", str(corpus), "-o", str(out), "--vtlp-copies", "0"]
+    bands = ["--bands", "0.03,0.1", "--candidates", "2:state:0:1"]
+    assert main([*args, *bands, "--choose-fraction", "0.4", "--grid-s1", str(tmp_path / "nowhere")]) == 0
+    printed = capsys.readouterr().out
+    assert "6 utterances fit, 4 choose" in printed and f"wrote {out}" in printed
+    back = load_model(out)
+    assert back.readout is not None and back.readout.taps == 2
+    meta = back.metadata["readout"]
+    assert meta["corpus"] == str(corpus) and meta["closures"] == {"phones": 0, "lips": 4}
+    # the band is one offered, chosen on the choose part (not the model's 0.02), and recorded as chosen
+    assert back.closure_band in (0.03, 0.1) and meta["band"] == back.closure_band
+
+    small = tmp_path / "small"
+    _extracted_corpus(small, 6)
+    rc = main([*args[:3], str(small), "-o", str(tmp_path / "no.npz")])
+    err = capsys.readouterr().err
+    assert rc != 0 and str(small) in err and "too few" in err and "Traceback" not in err
+    assert not (tmp_path / "no.npz").exists()
