@@ -1239,11 +1239,11 @@ def rig_head(
             )
             upper = upper_lip_side(v, t, seam, frame, x_range=(x_lo, x_hi))
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
-            from realtime_core.face.checks import EXTREME_POSES
+            from realtime_core.face.checks import CHECK_POSES
 
             rig = repair_rig(
                 rig,
-                EXTREME_POSES,
+                CHECK_POSES,
                 keep_apart=cut_copies,
                 tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                 measured=measured,
@@ -1260,7 +1260,7 @@ def rig_head(
                 basis[:, 2] /= r_open
                 rig = repair_rig(
                     replace(rig, basis=basis),
-                    EXTREME_POSES,
+                    CHECK_POSES,
                     keep_apart=cut_copies,
                     tiny=SLIVER_TIE if cut_copies is not None else 0.0,
                     measured=measured,

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core.errors import ConfigError
+from realtime_core.expressions import SPEECH_REACH
 from realtime_core.face.model import MouthLandmarks, face_frame
 from realtime_core.face.visibility import front_most
 
@@ -98,15 +99,13 @@ SPEECH_POSES: tuple[tuple[float, float, float, float], ...] = (
 # there rather than the box's 16 corners (all four ends at once is a face speech never makes: the frame
 # reaching furthest towards (+, +, +, +) is (0.053, 0.052, 0.333, -0.008)).
 
-# Each parameter alone at both ends of the measured box or of SPEECH_POSES, whichever is further.
-SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = (
-    (-0.084, 0.000, 0.000, 0.000),
-    (0.054, 0.000, 0.000, 0.000),
-    (0.000, -0.123, 0.000, 0.000),
-    (0.000, 0.094, 0.000, 0.000),
-    (0.000, 0.000, 0.465, 0.000),
-    (0.000, 0.000, 0.000, -0.103),
-    (0.000, 0.000, 0.000, 0.039),
+# Each parameter alone at both ends of the measured box or of SPEECH_POSES, whichever is further (the
+# expressions' SPEECH_REACH, where an expression on speech saturates).
+SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = tuple(
+    tuple(end if j == i else 0.0 for j in range(4))  # type: ignore[misc]
+    for i, ends in enumerate(SPEECH_REACH)
+    for end in ends
+    if end != 0.0
 )
 
 # Measured frames (rounded away from 0) chosen by the script one at a time, the one furthest outside
@@ -149,7 +148,72 @@ MEASURED_POSES: tuple[tuple[float, float, float, float], ...] = (
 )
 
 EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SINGLE_POSES + MEASURED_POSES
-"""The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
+"""The poses speech takes: every frame the shipped models produce lies in their hull (within 0.002 IOD)."""
+
+
+def hull_additions(base: np.ndarray, candidates: np.ndarray, *, tolerance: float) -> list[int]:
+    """Indices of ``candidates`` (n, 4) that, added to ``base`` (m, 4) one at a time (the one furthest outside
+    the hull first), leave every candidate within ``tolerance`` (IOD, distance outside a facet) of the hull."""
+    from scipy.spatial import ConvexHull
+
+    poses = [np.asarray(p, dtype=np.float64) for p in base]
+    c = np.asarray(candidates, dtype=np.float64)
+    added: list[int] = []
+    while True:
+        eq = ConvexHull(np.array(poses)).equations  # (facets, 5): unit normal . x + offset <= 0 inside
+        outside = (c @ eq[:, :4].T + eq[:, 4]).max(axis=1)
+        k = int(np.argmax(outside))
+        if outside[k] <= tolerance:
+            return added
+        added.append(k)
+        poses.append(c[k])
+
+
+def expression_poses(
+    poses: tuple[tuple[float, ...], ...], changes: np.ndarray, *, tolerance: float = 0.002
+) -> tuple[tuple[float, float, float, float], ...]:
+    """``poses`` (speech) under each expression's change ``changes`` (E, 4) (IOD, at intensity 1) as
+    :func:`realtime_core.expressions.add_expression` layers it at any intensity in [0, 1], pruned to those the
+    hull of ``poses`` and the kept ones needs to hold every such pose within ``tolerance`` IOD
+    (:func:`hull_additions`), rounded away from 0 to 4 decimals (so a kept pose lies at least as far out).
+
+    A pose under one expression is piecewise linear in the intensity a (the sum, then saturation at
+    :data:`realtime_core.expressions.SPEECH_REACH`): it bends where a parameter of the sum or of the change alone
+    meets an end of the reach, so those intensities and 1 are the candidates (their segments lie in the hull)."""
+    from realtime_core.expressions import SPEECH_REACH, add_expression
+
+    p = np.asarray(poses, dtype=np.float64)
+    reach = np.asarray(SPEECH_REACH, dtype=np.float64).T  # (2, 4)
+    shifted = []
+    for d in np.asarray(changes, dtype=np.float64):
+        safe = np.where(d != 0, d, np.inf)
+        for row in p:
+            bends = np.r_[((reach - row) / safe).reshape(-1), (reach / safe).reshape(-1)]
+            a = np.unique(np.r_[bends[(bends > 0) & (bends < 1)], 1.0])
+            shifted.append(add_expression(np.broadcast_to(row, (len(a), 4)), a[:, None] * d))
+    candidates = np.concatenate(shifted)
+    keep = candidates[hull_additions(p, candidates, tolerance=tolerance)]
+    keep = np.sign(keep) * np.ceil(np.abs(keep) * 1e4 - 1e-6) / 1e4 + 0.0
+    return tuple(tuple(float(x) for x in row) for row in keep)  # type: ignore[misc]
+
+
+def _expression_poses() -> tuple[tuple[float, float, float, float], ...]:
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    return expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)
+
+
+EXPRESSION_POSES: tuple[tuple[float, float, float, float], ...] = _expression_poses()
+"""Speech under an expression at intensity 1 (:data:`realtime_core.fitted_maps.EXPRESSION_PARAMS` added to
+:data:`EXTREME_POSES` by :func:`realtime_core.expressions.add_expression`), the poses outside the speech hull
+that its hull needs (:func:`expression_poses`): a smile on speech widens the lips to lip_stretch 0.25 with the
+corners up to -0.19, far past what speech alone reaches (0.094, -0.103), and folded lips there that every
+speech pose left clean (docs/animation.md, "Which poses, and why")."""
+
+CHECK_POSES: tuple[tuple[float, float, float, float], ...] = EXTREME_POSES + EXPRESSION_POSES
+"""The poses a rig must hold, speech under any expression: what rigging repairs folds at and decides which
+targets of a head's own are driven at; :func:`check_rig` fails a rig at :data:`EXTREME_POSES` and reports
+flips at :data:`EXPRESSION_POSES` (advisory, :attr:`RigReport.expression_flips`)."""
 
 
 BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in SPEECH_POSES if p[2] == 0.0)
@@ -229,6 +293,14 @@ class RigReport:
     """How many faces make :attr:`lip_backs_iod2`."""
     bilabial_gap_iod: float | None = None
     """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
+    expression_flips: int | None = None
+    """Advisory: the most flipped triangles at :data:`EXPRESSION_POSES` (speech under an expression at intensity up
+    to 1; None: not measured). Not a failure: the fold repair runs over these poses too, but on Lee Perry-Smith it
+    ends with 1-2 flips there (sad on the widest opening) in every rigging attempt, and failing them made
+    ``assets.heads.head.rig_checked`` fall back to its plain rig, whose lips show 8 shards (docs/animation.md,
+    "Which poses, and why")."""
+    expression_flip_pose: tuple[float, ...] = ()
+    """Where :attr:`expression_flips` is worst (empty: none flip)."""
 
     def as_dict(self) -> dict[str, Any]:
         """The figures as JSON holds them (tuples as lists): a rig's meta "checks" is the same dict before its
@@ -241,11 +313,13 @@ class RigReport:
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
+        expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
+            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD, "
+            f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -618,13 +692,16 @@ def check_rig(
     limits: RigCheckLimits = RigCheckLimits(),
     reference: np.ndarray | None = None,
     cavity_vertices: int = 0,
+    expression_poses: tuple[tuple[float, ...], ...] = EXPRESSION_POSES,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
     teeth: head vertex indices of the teeth (None: not known, not checked); reference: (n, 3) the
     head as modelled, which flips and stretch are measured from (default the rig's neutral; differs
     for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
-    many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`)."""
+    many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`);
+    expression_poses: speech under an expression (:data:`EXPRESSION_POSES`), where flipped triangles are an
+    advisory figure (:attr:`RigReport.expression_flips`: a warning, not a failure; see its docstring for why)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up = fr.iod, fr.axes[1]
@@ -681,6 +758,15 @@ def check_rig(
         )
     if at_m > limits.max_bilabial_gap:
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
+    expr_flips: int | None = None
+    expr_pose: tuple[float, ...] = ()
+    if expression_poses:
+        per_e = pose_figures(rig, landmarks, expression_poses, lip_pairs=pairs, teeth=teeth, reference=reference)
+        k_e = int(np.argmax(per_e.flipped))
+        expr_flips = int(per_e.flipped[k_e])
+        expr_pose = tuple(float(x) for x in per_e.poses[k_e]) if expr_flips else ()
+        if expr_flips > limits.max_flipped:
+            warns.append(f"{expr_flips} flipped triangles under an expression at pose {expr_pose}")
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -693,6 +779,8 @@ def check_rig(
         lip_edge_notch_iod=notch,
         lip_edge_shards=shards,
         warnings=tuple(warns),
+        expression_flips=expr_flips,
+        expression_flip_pose=expr_pose,
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,
