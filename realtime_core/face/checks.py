@@ -40,6 +40,7 @@ reported as warnings and do not fail the rig.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -151,22 +152,29 @@ EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SI
 """The poses speech takes: every frame the shipped models produce lies in their hull (within 0.002 IOD)."""
 
 
-def hull_additions(base: np.ndarray, candidates: np.ndarray, *, tolerance: float) -> list[int]:
-    """Indices of ``candidates`` (n, 4) that, added to ``base`` (m, 4) one at a time (the one furthest outside
-    the hull first), leave every candidate within ``tolerance`` (IOD, distance outside a facet) of the hull."""
+def hull_additions(
+    base: np.ndarray,
+    candidates: np.ndarray,
+    *,
+    tolerance: float,
+    snap: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[np.ndarray]:
+    """Poses (4,) to add to ``base`` (m, 4), one at a time, each the candidate (of ``candidates`` (n, 4)) furthest
+    outside the hull so far as ``snap`` places it (e.g. rounded away from 0; None: as it is), until every
+    candidate lies within ``tolerance`` (IOD, distance outside a facet) of the hull."""
     from scipy.spatial import ConvexHull
 
     poses = [np.asarray(p, dtype=np.float64) for p in base]
     c = np.asarray(candidates, dtype=np.float64)
-    added: list[int] = []
+    added: list[np.ndarray] = []
     while True:
         eq = ConvexHull(np.array(poses)).equations  # (facets, 5): unit normal . x + offset <= 0 inside
         outside = (c @ eq[:, :4].T + eq[:, 4]).max(axis=1)
         k = int(np.argmax(outside))
         if outside[k] <= tolerance:
             return added
-        added.append(k)
-        poses.append(c[k])
+        added.append(c[k] if snap is None else snap(c[k]))
+        poses.append(added[-1])
 
 
 def expression_poses(
@@ -191,8 +199,8 @@ def expression_poses(
             bends = np.r_[((reach - row) / safe).reshape(-1), (reach / safe).reshape(-1)]
             a = np.unique(np.r_[bends[(bends > 0) & (bends < 1)], 1.0])
             shifted.append(add_expression(np.broadcast_to(row, (len(a), 4)), a[:, None] * d))
-    candidates = np.concatenate(shifted)
-    keep = candidates[hull_additions(p, candidates, tolerance=tolerance)]
+
+    keep = np.array(hull_additions(p, np.concatenate(shifted), tolerance=tolerance))
     keep = np.sign(keep) * np.ceil(np.abs(keep) * 1e4 - 1e-6) / 1e4 + 0.0
     return tuple(tuple(float(x) for x in row) for row in keep)  # type: ignore[misc]
 
