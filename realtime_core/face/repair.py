@@ -37,6 +37,10 @@ def _normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
 
 
+MAX_ROUNDS = 200
+"""Smoothing rounds :func:`repair_folds` runs at most before its tie rounds (a repair that ends sooner settled)."""
+
+
 def repair_folds(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -44,7 +48,7 @@ def repair_folds(
     motions: np.ndarray,
     *,
     max_stretch: float = 3.0,
-    max_rounds: int = 200,
+    max_rounds: int = MAX_ROUNDS,
     steps: int = 2,
     fixed: np.ndarray | None = None,
     grow_every: int = 15,
