@@ -32,6 +32,9 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
   instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
 
+- flipped under expressions (advisory): the most flipped triangles at :data:`EXPRESSION_POSES`, speech under an
+  expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
+
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
 notch, the lip backs seen and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
 :attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are
