@@ -18,7 +18,12 @@ expression adds its own deformation to the utterance's), so speech excursions ar
 a rounded /u/ under a smile is narrower than the smile by exactly as much as without it. The inner-lip
 gap is the exception: ``mouth_open = m + alpha * dp_k[open] * g(m)`` with ``g(m) = clip(m / open_ref,
 0, 1)``: an expression never parts lips that speech holds closed (bilabial closures /p b m/ stay
-closed under any expression), and scales an open mouth only where speech opens it.
+closed under any expression), and scales an open mouth only where speech opens it. Each parameter then
+saturates: the sum goes no further than the furthest of :data:`SPEECH_REACH` (how far speech goes), the frame's
+speech and the expression alone, so a smile on a spread /i/ is as wide as the smile or the /i/, not their sum
+(excursions the other way, a rounded /u/ under a smile, are kept as they are). Summed, a full smile on speech's
+ends reached lip_stretch 0.25 with the corners at -0.19, where rigs that hold every speech pose and the smile
+alone folded (docs/animation.md, "Which poses, and why").
 
 Scheduling
 ----------
@@ -95,6 +100,13 @@ EXPRESSIONS: tuple[str, ...] = tuple(EXPRESSION_RECIPES)
 
 OPEN_REF_IOD = 0.05
 """Inner-lip gap (IOD) above which an expression's own mouth-opening change applies fully."""
+
+SPEECH_REACH: tuple[tuple[float, float], ...] = ((-0.084, 0.054), (-0.123, 0.094), (0.0, 0.465), (-0.103, 0.039))
+"""IOD, (low, high) per parameter in VISUAL_PARAMS order: how far speech takes the mouth, the ends of what the
+shipped models produce on real speech or of the articulatory targets, whichever is further (measured by
+``scripts/measure_param_box.py``; docs/animation.md, "Which poses, and why"). An expression on speech saturates
+there (:func:`add_expression`); the rig checks test each parameter alone at these ends
+(:data:`realtime_core.face.checks.SINGLE_POSES`)."""
 
 _OPEN = VISUAL_PARAMS.index("mouth_open")
 
@@ -245,7 +257,14 @@ def add_expression(params: np.ndarray, delta: np.ndarray) -> np.ndarray:
     if p.ndim != 2 or p.shape[1] != len(VISUAL_PARAMS) or d.shape != p.shape:
         raise ExpressionError(f"params (n, 4) and changes (n, 4) expected, got {p.shape}, {d.shape}")
     d[:, _OPEN] *= np.clip(p[:, _OPEN] / OPEN_REF_IOD, 0.0, 1.0)
-    return p + d
+    # Saturation: the sum goes no further than the furthest of speech's reach, this frame's speech and the
+    # expression alone. A full smile (lip_stretch +0.159, corners -0.086) on speech's own ends reached lip_stretch
+    # 0.25 and corners -0.19; rigs that every speech pose and the smile alone leave clean folded there (the
+    # built-in head's own ARKit targets, whose fold no repair reaches: mouthUpperUp 1.0 with mouthSmile 0.75).
+    reach = np.asarray(SPEECH_REACH, dtype=np.float64).T  # (2, 4)
+    lo = np.minimum(np.minimum(reach[0], p), d)
+    hi = np.maximum(np.maximum(reach[1], p), d)
+    return np.clip(p + d, lo, hi)
 
 
 def expression_arkit(alpha: np.ndarray, names: tuple[str, ...]) -> np.ndarray:

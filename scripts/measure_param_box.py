@@ -96,9 +96,7 @@ def away(p: np.ndarray) -> np.ndarray:
 def hull_poses(x: np.ndarray, *, tolerance: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """(single-parameter ends, added frames) whose hull with SPEECH_POSES holds every frame of ``x`` (n, 4)
     to within ``tolerance`` (IOD, distance outside the hull's facets)."""
-    from scipy.spatial import ConvexHull
-
-    from realtime_core.face.checks import SPEECH_POSES
+    from realtime_core.face.checks import SPEECH_POSES, hull_additions
 
     x = np.column_stack([x[:, :2], np.maximum(x[:, 2], 0.0), x[:, 3:]])  # mouth_open's floor is 0 (lips touching)
     speech = np.asarray(SPEECH_POSES, dtype=np.float64)
@@ -109,16 +107,7 @@ def hull_poses(x: np.ndarray, *, tolerance: float) -> tuple[list[np.ndarray], li
                 p = np.zeros(4)
                 p[j] = away(np.array([end]))[0]
                 singles.append(p)
-    poses = list(speech) + singles
-    added: list[np.ndarray] = []
-    while True:
-        eq = ConvexHull(np.array(poses)).equations  # (facets, 5): unit normal . x + offset <= 0 inside
-        outside = (x @ eq[:, :4].T + eq[:, 4]).max(axis=1)
-        k = int(np.argmax(outside))
-        if outside[k] <= tolerance:
-            return singles, added
-        added.append(away(x[k]))
-        poses.append(added[-1])
+    return singles, hull_additions(np.array(list(speech) + singles), x, tolerance=tolerance, snap=away)
 
 
 def main() -> int:

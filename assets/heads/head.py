@@ -112,7 +112,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         except (OSError, KeyError, ValueError):  # unreadable (ModelFormatError), another writer's: built again
             path.unlink(missing_ok=True)
     if rig is None:
-        # The build solves the keyframe map's QP at the probe and speech poses (0.8 s of a `facecast say`
+        # The build solves the keyframe map's QP at the probe and checked poses (0.8 s of a `facecast say`
         # on 2 cores); its result depends only on what the key holds.
         lips = reference_lips(b.mesh.vertices, b.mesh.triangles, b.targets["jawOpen"], b.landmarks)
         rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
@@ -454,7 +454,8 @@ def rig_checked(
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):
     """:func:`realtime_core.face.checks.check_rig` for a head, with :func:`head_check_inputs`; ``poses`` (None:
-    the checks' :data:`EXTREME_POSES`). Returns a RigReport."""
+    the checks' :data:`EXTREME_POSES`; flips under expressions are reported at check_rig's default poses).
+    Returns a RigReport."""
     from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
 
     landmarks, inputs = head_check_inputs(head, landmark_finder=landmark_finder)

@@ -290,9 +290,9 @@ def morph_rig(
     # Targets speech never drives (eyes, brows, cheeks of an ARKit head: their weights stay below
     # DRIVEN_MIN at every speech pose, carrying only the ridge's noise) are left out: each driven
     # target costs the per-frame solve, the wire and a renderer (a GPU loops over them per vertex).
-    from realtime_core.face.checks import EXTREME_POSES
+    from realtime_core.face.checks import CHECK_POSES
 
-    driven = keymap.weights(arkit_source(np.asarray(EXTREME_POSES, dtype=np.float64))).max(axis=0) >= DRIVEN_MIN
+    driven = keymap.weights(arkit_source(np.asarray(CHECK_POSES, dtype=np.float64))).max(axis=0) >= DRIVEN_MIN
     if driven.any() and not driven.all():
         head_names = tuple(n for n, k in zip(head_names, driven) if k)
         kprime = kprime[driven]
@@ -329,13 +329,13 @@ def morph_rig_key(
 ) -> str:
     """Hex digest of what the built-in head's morph rig is made from (:func:`morph_rig` of its own targets with
     :func:`reference_lips`): vertices (n, 3), triangles (m, 3), the 52 ARKit targets (n, 3) each, the landmark
-    vertex indices, the ARKit weights at the probe and speech poses (so a changed ARKit mapping or pose set
+    vertex indices, the ARKit weights at the probe and checked poses (so a changed ARKit mapping or pose set
     rebuilds it), the constants the build reads and the algorithm versions (this module's and the rig's, whose
     lip-column rule :func:`reference_lips` follows)."""
     import hashlib
 
     from realtime_core.face import keyframes
-    from realtime_core.face.checks import EXTREME_POSES
+    from realtime_core.face.checks import CHECK_POSES
     from realtime_core.face.rig import RIG_ALGORITHM
 
     consts = (
@@ -353,7 +353,7 @@ def morph_rig_key(
     for a in (vertices, triangles, *(targets[n] for n in ARKIT_NAMES)):
         h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
     h.update(json.dumps(dict(landmarks), sort_keys=True).encode())
-    poses = np.array([p for p, _ in ENOUGH_PROBES] + list(EXTREME_POSES), dtype=np.float64)
+    poses = np.array([p for p, _ in ENOUGH_PROBES] + list(CHECK_POSES), dtype=np.float64)
     h.update(arkit_source(poses).tobytes())
     return h.hexdigest()[:32]
 

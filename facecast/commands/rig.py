@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.heads.rigfile import save_rig
     from assets.heads.rigging import candide_face, resolve_landmarks
     from realtime_core.face import RigConfig
-    from realtime_core.face.checks import EXTREME_POSES
+    from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES
 
     if not args.output and not args.show_landmarks:
         raise SystemExit("facecast rig: error: give -o RIG.npz (or --show-landmarks PNG)")
@@ -125,7 +125,10 @@ def run(args: argparse.Namespace) -> int:
 
         simple = candide_face(read_wfm(args.simple))
     rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
-    print(f"rig checks at {len(EXTREME_POSES)} speech poses and closure: {report.summary()}")
+    print(
+        f"rig checks at {len(EXTREME_POSES)} speech poses and closure ({len(EXPRESSION_POSES)} under expressions):"
+        f" {report.summary()}"
+    )
     if not report.passed and not args.keep_failing:
         raise RigCheckError(
             f"{args.head}: the rig fails its checks ({'; '.join(report.failures)}); nothing written. "

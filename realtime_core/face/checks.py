@@ -32,6 +32,9 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
   instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
 
+- flipped under expressions (advisory): the most flipped triangles at :data:`EXPRESSION_POSES`, speech under an
+  expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
+
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
 notch, the lip backs seen and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
 :attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are
@@ -40,6 +43,7 @@ reported as warnings and do not fail the rig.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -47,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from realtime_core.errors import ConfigError
+from realtime_core.expressions import SPEECH_REACH
 from realtime_core.face.model import MouthLandmarks, face_frame
 from realtime_core.face.visibility import front_most
 from realtime_core.normals import triangle_normals
@@ -100,15 +105,13 @@ SPEECH_POSES: tuple[tuple[float, float, float, float], ...] = (
 # there rather than the box's 16 corners (all four ends at once is a face speech never makes: the frame
 # reaching furthest towards (+, +, +, +) is (0.053, 0.052, 0.333, -0.008)).
 
-# Each parameter alone at both ends of the measured box or of SPEECH_POSES, whichever is further.
-SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = (
-    (-0.084, 0.000, 0.000, 0.000),
-    (0.054, 0.000, 0.000, 0.000),
-    (0.000, -0.123, 0.000, 0.000),
-    (0.000, 0.094, 0.000, 0.000),
-    (0.000, 0.000, 0.465, 0.000),
-    (0.000, 0.000, 0.000, -0.103),
-    (0.000, 0.000, 0.000, 0.039),
+# Each parameter alone at both ends of the measured box or of SPEECH_POSES, whichever is further (the
+# expressions' SPEECH_REACH, where an expression on speech saturates).
+SINGLE_POSES: tuple[tuple[float, float, float, float], ...] = tuple(
+    tuple(end if j == i else 0.0 for j in range(4))  # type: ignore[misc]
+    for i, ends in enumerate(SPEECH_REACH)
+    for end in ends
+    if end != 0.0
 )
 
 # Measured frames (rounded away from 0) chosen by the script one at a time, the one furthest outside
@@ -151,7 +154,79 @@ MEASURED_POSES: tuple[tuple[float, float, float, float], ...] = (
 )
 
 EXTREME_POSES: tuple[tuple[float, float, float, float], ...] = SPEECH_POSES + SINGLE_POSES + MEASURED_POSES
-"""The poses :func:`check_rig` tests by default (the closure pose is added to them)."""
+"""The poses speech takes: every frame the shipped models produce lies in their hull (within 0.002 IOD)."""
+
+
+def hull_additions(
+    base: np.ndarray,
+    candidates: np.ndarray,
+    *,
+    tolerance: float,
+    snap: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[np.ndarray]:
+    """Poses (4,) to add to ``base`` (m, 4), one at a time, each the candidate (of ``candidates`` (n, 4)) furthest
+    outside the hull so far as ``snap`` places it (e.g. rounded away from 0; None: as it is), until every
+    candidate lies within ``tolerance`` (IOD, distance outside a facet) of the hull."""
+    from scipy.spatial import ConvexHull
+
+    poses = [np.asarray(p, dtype=np.float64) for p in base]
+    c = np.asarray(candidates, dtype=np.float64)
+    added: list[np.ndarray] = []
+    while True:
+        eq = ConvexHull(np.array(poses)).equations  # (facets, 5): unit normal . x + offset <= 0 inside
+        outside = (c @ eq[:, :4].T + eq[:, 4]).max(axis=1)
+        k = int(np.argmax(outside))
+        if outside[k] <= tolerance:
+            return added
+        added.append(c[k] if snap is None else snap(c[k]))
+        poses.append(added[-1])
+
+
+def expression_poses(
+    poses: tuple[tuple[float, ...], ...], changes: np.ndarray, *, tolerance: float = 0.002
+) -> tuple[tuple[float, float, float, float], ...]:
+    """``poses`` (speech) under each expression's change ``changes`` (E, 4) (IOD, at intensity 1) as
+    :func:`realtime_core.expressions.add_expression` layers it at any intensity in [0, 1], pruned to those the
+    hull of ``poses`` and the kept ones needs to hold every such pose within ``tolerance`` IOD
+    (:func:`hull_additions`), rounded away from 0 to 4 decimals (so a kept pose lies at least as far out).
+
+    A pose under one expression is piecewise linear in the intensity a (the sum, then saturation at
+    :data:`realtime_core.expressions.SPEECH_REACH`): it bends where a parameter of the sum or of the change alone
+    meets an end of the reach, so those intensities and 1 are the candidates (their segments lie in the hull)."""
+    from realtime_core.expressions import SPEECH_REACH, add_expression
+
+    p = np.asarray(poses, dtype=np.float64)
+    reach = np.asarray(SPEECH_REACH, dtype=np.float64).T  # (2, 4)
+    shifted = []
+    for d in np.asarray(changes, dtype=np.float64):
+        safe = np.where(d != 0, d, np.inf)
+        for row in p:
+            bends = np.r_[((reach - row) / safe).reshape(-1), (reach / safe).reshape(-1)]
+            a = np.unique(np.r_[bends[(bends > 0) & (bends < 1)], 1.0])
+            shifted.append(add_expression(np.broadcast_to(row, (len(a), 4)), a[:, None] * d))
+
+    keep = np.array(hull_additions(p, np.concatenate(shifted), tolerance=tolerance))
+    keep = np.sign(keep) * np.ceil(np.abs(keep) * 1e4 - 1e-6) / 1e4 + 0.0
+    return tuple(tuple(float(x) for x in row) for row in keep)  # type: ignore[misc]
+
+
+def _expression_poses() -> tuple[tuple[float, float, float, float], ...]:
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    return expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)
+
+
+EXPRESSION_POSES: tuple[tuple[float, float, float, float], ...] = _expression_poses()
+"""Speech under an expression at intensity 1 (:data:`realtime_core.fitted_maps.EXPRESSION_PARAMS` added to
+:data:`EXTREME_POSES` by :func:`realtime_core.expressions.add_expression`), the poses outside the speech hull
+that its hull needs (:func:`expression_poses`): a smile on speech widens the lips to lip_stretch 0.25 with the
+corners up to -0.19, far past what speech alone reaches (0.094, -0.103), and folded lips there that every
+speech pose left clean (docs/animation.md, "Which poses, and why")."""
+
+CHECK_POSES: tuple[tuple[float, float, float, float], ...] = EXTREME_POSES + EXPRESSION_POSES
+"""The poses a rig must hold, speech under any expression: what rigging repairs folds at and decides which
+targets of a head's own are driven at; :func:`check_rig` fails a rig at :data:`EXTREME_POSES` and reports
+flips at :data:`EXPRESSION_POSES` (advisory, :attr:`RigReport.expression_flips`)."""
 
 
 @dataclass(frozen=True)
@@ -224,10 +299,11 @@ those lips stayed that far apart at closure."""
 @lru_cache(maxsize=1)
 def checked_bound() -> PoseBound:
     """The bound every head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
-    :data:`EXTREME_POSES`, the poses the rigs are repaired and checked at, and of the closure reach
-    (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here, or the bound cuts
-    what the rigs were made clean for. Built once (Qhull)."""
-    return PoseBound(poses=(*EXTREME_POSES, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
+    :data:`CHECK_POSES`, the poses the rigs are repaired at (speech, and speech under each expression), and of
+    the closure reach (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here,
+    or the bound cuts what the rigs were made clean for (with EXTREME_POSES alone it cut a smile on speech back to
+    lip_stretch 0.094). Built once (Qhull)."""
+    return PoseBound(poses=(*CHECK_POSES, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
 
 
 LIP_EDGE_NOTCH_LIMIT = 0.015
@@ -302,6 +378,14 @@ class RigReport:
     """How many faces make :attr:`lip_backs_iod2`."""
     bilabial_gap_iod: float | None = None
     """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
+    expression_flips: int | None = None
+    """Advisory: the most flipped triangles at :data:`EXPRESSION_POSES` (speech under an expression at intensity up
+    to 1; None: not measured). Not a failure: the fold repair runs over these poses too, but on Lee Perry-Smith it
+    ends with 1-2 flips there (sad on the widest opening) in every rigging attempt, and failing them made
+    ``assets.heads.head.rig_checked`` fall back to its plain rig, whose lips show 8 shards (docs/animation.md,
+    "Which poses, and why")."""
+    expression_flip_pose: tuple[float, ...] = ()
+    """Where :attr:`expression_flips` is worst (empty: none flip)."""
 
     def as_dict(self) -> dict[str, Any]:
         """The figures as JSON holds them (tuples as lists): a rig's meta "checks" is the same dict before its
@@ -314,11 +398,13 @@ class RigReport:
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
+        expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD: "
+            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD, "
+            f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
         )
@@ -687,13 +773,16 @@ def check_rig(
     limits: RigCheckLimits = RigCheckLimits(),
     reference: np.ndarray | None = None,
     cavity_vertices: int = 0,
+    expression_poses: tuple[tuple[float, ...], ...] = EXPRESSION_POSES,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
     teeth: head vertex indices of the teeth (None: not known, not checked); reference: (n, 3) the
     head as modelled, which flips and stretch are measured from (default the rig's neutral; differs
     for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
-    many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`)."""
+    many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`);
+    expression_poses: speech under an expression (:data:`EXPRESSION_POSES`), where flipped triangles are an
+    advisory figure (:attr:`RigReport.expression_flips`: a warning, not a failure; see its docstring for why)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up = fr.iod, fr.axes[1]
@@ -750,6 +839,15 @@ def check_rig(
         )
     if at_m > limits.max_bilabial_gap:
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
+    expr_flips: int | None = None
+    expr_pose: tuple[float, ...] = ()
+    if expression_poses:
+        per_e = pose_figures(rig, landmarks, expression_poses, lip_pairs=pairs, teeth=teeth, reference=reference)
+        k_e = int(np.argmax(per_e.flipped))
+        expr_flips = int(per_e.flipped[k_e])
+        expr_pose = tuple(float(x) for x in per_e.poses[k_e]) if expr_flips else ()
+        if expr_flips > limits.max_flipped:
+            warns.append(f"{expr_flips} flipped triangles under an expression at pose {expr_pose}")
     return RigReport(
         flipped_triangles=flipped,
         worst_flip_pose=worst,
@@ -762,6 +860,8 @@ def check_rig(
         lip_edge_notch_iod=notch,
         lip_edge_shards=shards,
         warnings=tuple(warns),
+        expression_flips=expr_flips,
+        expression_flip_pose=expr_pose,
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,

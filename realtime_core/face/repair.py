@@ -34,6 +34,10 @@ class RepairResult:
     smoothed_rows: int
 
 
+MAX_ROUNDS = 200
+"""Smoothing rounds :func:`repair_folds` runs at most before its tie rounds (a repair that ends sooner settled)."""
+
+
 def repair_folds(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -41,7 +45,7 @@ def repair_folds(
     motions: np.ndarray,
     *,
     max_stretch: float = 3.0,
-    max_rounds: int = 200,
+    max_rounds: int = MAX_ROUNDS,
     steps: int = 2,
     fixed: np.ndarray | None = None,
     grow_every: int = 15,
@@ -50,12 +54,14 @@ def repair_folds(
     tie_rounds: int = 60,
     own_side: np.ndarray | None = None,
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
+    stretch_poses: int | None = None,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
     vertices (n, 3), triangles (m, 3) of a welded mesh (texture-seam twins merged, cut lip seams not);
     motions (n_poses, n_s, 3) the simple-model displacement at each pose; max_stretch: edges stretched
-    beyond this ratio count as folds too; fixed (n,) bool rows never changed (rigid parts).
+    beyond this ratio count as folds too, at the first ``stretch_poses`` poses (None: all); fixed (n,) bool rows
+    never changed (rigid parts).
     tiny: vertices joined by edges shorter than this fraction of the median edge move as one (their
     rows are averaged before and after every round): a scan's clusters of sliver triangles
     (0.001 IOD edges behind Lee Perry-Smith's mouth corners) flip at any motion difference the
@@ -133,12 +139,14 @@ def repair_folds(
         tri = np.flatnonzero(moves[t].any(axis=1) & ok_tri)
         edge = np.flatnonzero(moves[e].any(axis=1) & ok_edge_measured)
         t_m, e_m = t[tri], e[edge]
-        for m in motions:
+        for i, m in enumerate(motions):
             v = v0 + (g @ m)
             f = tri[np.einsum("ij,ij->i", n0[tri], triangle_normals(v, t_m)) < 0]
             worst = max(worst, len(f))
             bad[t[f].ravel()] = True
             flipped_any[f] = True
+            if stretch_poses is not None and i >= stretch_poses:
+                continue
             l1 = np.linalg.norm(v[e_m[:, 0]] - v[e_m[:, 1]], axis=1)
             s = edge[l1 > max_stretch * l0[edge]]
             bad[e[s].ravel()] = True

@@ -29,7 +29,7 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-RIG_ALGORITHM = 48
+RIG_ALGORITHM = 49
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
@@ -753,6 +753,7 @@ def repair_rig(
     measured: np.ndarray | None = None,
     own_side: np.ndarray | None = None,
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
+    stretch_poses: int | None = None,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
@@ -762,8 +763,9 @@ def repair_rig(
     and edges count (None: all; hidden faces about to be removed do not). ``own_side``: (n_h,) bool the
     vertices smoothed over each other only (see :func:`realtime_core.face.repair.repair_folds`; a welded
     vertex is on it when one of its twins is). ``ties``: head vertex -> the head vertex whose row it takes
-    throughout, or -> (head vertices, weights) whose rows' weighted sum it takes (ibid.). Records the repair in
-    meta."""
+    throughout, or -> (head vertices, weights) whose rows' weighted sum it takes (ibid.). ``stretch_poses``: only
+    the first so many poses count over-stretched edges (None: all; the rest count folds only). Records the
+    repair in meta."""
     from realtime_core.face.repair import repair_folds
 
     h = np.asarray(rig.neutral, dtype=np.float64)
@@ -796,6 +798,7 @@ def repair_rig(
         measured=measured,
         own_side=own_w,
         ties=None if ties is None else {int(canon[i]): _welded_tie(canon, j) for i, j in ties.items()},
+        stretch_poses=stretch_poses,
     )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)

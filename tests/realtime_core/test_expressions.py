@@ -9,9 +9,11 @@ import pytest
 from realtime_core.errors import ConfigError
 from realtime_core.expressions import (
     EXPRESSIONS,
+    SPEECH_REACH,
     ExpressionConfig,
     ExpressionError,
     ExpressionTrack,
+    add_expression,
     apply_expression,
     parse_expression,
 )
@@ -90,11 +92,34 @@ def test_composition_keeps_closures_and_rounding() -> None:
     alpha[:, SMILE] = 1.0
     out = apply_expression(speech, alpha, EXPRESSION_PARAMS)
     np.testing.assert_array_equal(out[::10, 2], 0.0)  # a closed mouth stays closed under a full smile
-    # Rounding excursions survive: lip_stretch moves by a constant offset only.
-    np.testing.assert_allclose(out[:, 1] - speech[:, 1], EXPRESSION_PARAMS[SMILE, 1])
+    # Rounding excursions survive: lip_stretch moves by a constant offset only where speech rounds the lips...
+    d = EXPRESSION_PARAMS[SMILE, 1]
+    rounded = speech[:, 1] < 0
+    assert rounded.sum() > 100
+    np.testing.assert_allclose(out[rounded, 1] - speech[rounded, 1], d)
+    # ...and spread lips saturate: no wider than the smile alone, speech's widest or this frame's speech.
+    want = np.minimum(speech[:, 1] + d, np.maximum(max(SPEECH_REACH[1][1], d), speech[:, 1]))
+    np.testing.assert_allclose(out[:, 1], want)
+    assert (out[:, 1] < speech[:, 1] + d - 1e-3).sum() > 50
     assert EXPRESSION_PARAMS[SMILE, 1] > 0.1 and EXPRESSION_PARAMS[SMILE, 3] < -0.05  # wider, corners up
     assert np.corrcoef(out[:, 2], speech[:, 2])[0, 1] > 0.99
     np.testing.assert_array_equal(apply_expression(speech, np.zeros_like(alpha), EXPRESSION_PARAMS), speech)
+
+
+def test_an_expression_on_speech_saturates_at_the_reach_of_speech_or_of_the_expression() -> None:
+    # A full smile on the spread /i/ (the close front target) and on speech's own ends: each parameter goes no
+    # further than the furthest of SPEECH_REACH, the speech and the smile alone; speech alone is left as it is,
+    # even beyond the reach (a model's frame is never clipped by this rule).
+    smile = EXPRESSION_PARAMS[SMILE]
+    i_vowel = np.array([[0.007, 0.089, 0.136, -0.027]])
+    out = add_expression(i_vowel, smile[None])[0]
+    assert np.isclose(out[1], smile[1])  # as wide as the smile alone (0.159; summed 0.248)
+    assert np.isclose(out[3], SPEECH_REACH[3][0])  # corners up: -0.027 - 0.086 past the -0.103 speech reaches
+    assert np.isclose(out[0], 0.007 + smile[0]) and np.isclose(out[2], 0.136 + smile[2])  # inside: summed
+    raised = add_expression(np.array([[SPEECH_REACH[0][1], 0.0, 0.0, 0.0]]), smile[None])[0]
+    assert np.isclose(raised[0], SPEECH_REACH[0][1])  # the upper lip raised as far as speech raises it
+    beyond = np.array([[0.07, 0.2, 0.5, -0.12]])
+    np.testing.assert_array_equal(add_expression(beyond, np.zeros((1, 4))), beyond)
 
 
 @pytest.mark.parametrize("name", EXPRESSIONS)

@@ -9,7 +9,9 @@ import pytest
 
 from realtime_core.errors import ConfigError
 from realtime_core.face.checks import (
+    CHECK_POSES,
     CLOSURE_REACH,
+    EXPRESSION_POSES,
     EXTREME_POSES,
     MEASURED_POSES,
     SINGLE_POSES,
@@ -70,6 +72,55 @@ def test_checked_poses_hold_every_frame_a_shipped_model_produces(shared_data: Pa
     eq = ConvexHull(np.array(EXTREME_POSES)).equations
     outside = (x @ eq[:, :4].T + eq[:, 4]).max(axis=1)
     assert outside.max() <= 0.002 + 1e-6, x[int(np.argmax(outside))]
+
+
+def test_checked_poses_hold_speech_under_every_expression() -> None:
+    # The live path layers an expression on speech by add_expression; speech at any intensity in [0, 1] of one
+    # expression lies between a speech pose and its copy at intensity 1. Independently of how EXPRESSION_POSES
+    # was pruned: every speech pose and every frame of it under each expression at intensities 0.1..1 lies in
+    # the hull of CHECK_POSES (within the 0.002 IOD the set was chosen to, plus its 0.0001 rounding).
+    from scipy.spatial import ConvexHull
+
+    from realtime_core.expressions import EXPRESSIONS, add_expression
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    speech = np.array(EXTREME_POSES)
+    eq = ConvexHull(np.array(CHECK_POSES)).equations
+    for k, name in enumerate(EXPRESSIONS):
+        for a in np.arange(1, 11) / 10:
+            x = add_expression(speech, np.tile(a * EXPRESSION_PARAMS[k], (len(speech), 1)))
+            outside = (x @ eq[:, :4].T + eq[:, 4]).max(axis=1)
+            assert outside.max() <= 0.002 + 1e-6, (name, a, x[int(np.argmax(outside))])
+    # Without the expression poses the smile on speech is far outside (the sweep's say set flipped there).
+    eq0 = ConvexHull(speech).equations
+    smile = add_expression(speech, np.tile(EXPRESSION_PARAMS[EXPRESSIONS.index("smile")], (len(speech), 1)))
+    assert (smile @ eq0[:, :4].T + eq0[:, 4]).max() > 0.05
+    assert set(EXTREME_POSES) <= set(CHECK_POSES) and len(CHECK_POSES) == len(EXTREME_POSES) + len(EXPRESSION_POSES)
+
+
+class _Stretch:
+    """The flat grid of _Fold whose centre vertex moves right with lip_stretch: inside its neighbours up to
+    lip_stretch 0.1 (past the speech end 0.094 only by a smile), past the right column beyond."""
+
+    def __init__(self) -> None:
+        self._grid = _Fold()
+        self.neutral, self.triangles = self._grid.neutral, self._grid.triangles
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = self.neutral.copy()
+        v[4, 0] += 10.0 * max(float(p[1]), 0.0)
+        return v
+
+
+def test_check_rig_reports_a_fold_only_an_expression_reaches() -> None:
+    # Folds at lip_stretch > 0.1: no speech pose reaches it (the widest 0.094), a smile on speech does. The
+    # check reports it under expressions (advisory: a warning) and passes the speech poses.
+    rep = check_rig(_Stretch(), _fold_landmarks())
+    assert rep.flipped_triangles == 0 and not any("flipped" in f for f in rep.failures), rep.failures
+    assert rep.expression_flips is not None and rep.expression_flips > 0
+    assert rep.expression_flip_pose[1] > 0.1
+    assert any("under an expression" in w for w in rep.warnings), rep.warnings
+    assert check_rig(_Fold(), _fold_landmarks(), expression_poses=()).expression_flips is None
 
 
 class _Fold:

@@ -107,6 +107,22 @@ def test_fold_repair_unfolds_a_pinned_spike():
     assert w.argmax() == centre and w.max() > 0.1
 
 
+def test_fold_repair_counts_stretch_only_at_the_first_stretch_poses():
+    """A vertex pulled straight up out of the grid stretches its edges (no triangle flips): counted at the first
+    pose, the repair smooths it; given as a later pose past ``stretch_poses`` (an expression pose, where rigging
+    repairs folds only), it leaves the field as it was; a fold there is still repaired."""
+    v, t = _grid()
+    n = len(v)
+    centre = n // 2
+    g = sp.csr_matrix(([1.0], ([centre], [0])), shape=(n, 1))
+    still, up = np.zeros((1, 1, 3)), np.array([[[0.0, 0.0, 1.0]]])  # 8 cells up: edges 8x their length
+    assert repair_folds(v, t, g, np.concatenate([up, still])).rounds > 0
+    kept = repair_folds(v, t, g, np.concatenate([still, up]), stretch_poses=1)
+    assert kept.rounds == 0 and (kept.weights != g).nnz == 0
+    side = np.array([[[0.3, 0.0, 0.0]]])  # a fold (test above)
+    assert repair_folds(v, t, g, np.concatenate([still, side]), stretch_poses=1).rounds > 0
+
+
 def test_fold_repair_ignores_folds_of_faces_it_is_told_are_not_seen():
     """Faces about to be removed (a hollow head's hidden inner lip walls) must not steer the repair: a fold
     made only of unmeasured faces leaves the field as it is (the repair once spent its 200 rounds on such
