@@ -124,8 +124,10 @@ def _primitive(
     texture: bytes | None,
     targets: np.ndarray | None,
     sparse: bool = False,
+    part: np.ndarray | None = None,
 ) -> dict:
-    """sparse: store a target that moves under a quarter of the vertices as a sparse accessor."""
+    """sparse: store a target that moves under a quarter of the vertices as a sparse accessor; part: each vertex's
+    part, whose seams with other parts are shaded as one surface (:func:`assets.heads.mesh.vertex_normals`)."""
     v = np.ascontiguousarray(vertices, dtype="<f4")
     t = np.ascontiguousarray(triangles, dtype="<u4")
     n = len(v)
@@ -136,7 +138,7 @@ def _primitive(
     attributes = {"POSITION": buf.accessor(v, "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)}
     # Without NORMAL a glTF client must shade flat (glTF 2.0 3.7.2.1): three.js showed the head faceted.
     # The neutral face's smooth normals, as facecast's renderer lights every frame.
-    normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t)
+    normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t, part)
     attributes["NORMAL"] = buf.accessor(np.ascontiguousarray(normals, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
     material: dict = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.8}, "doubleSided": True}
     if uvs is not None:
@@ -192,6 +194,7 @@ def mesh_glb(mesh: HeadMesh) -> bytes:
         mesh.colors,
         mesh.texture if mesh.uvs is not None else None,
         targets,
+        part=mesh.part,
     )
     m: dict = {"name": "head", "primitives": [prim]}
     if names:

@@ -47,10 +47,14 @@ class HeadMesh:
     part_names: tuple[str, ...] = ()
 
 
-def vertex_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+def vertex_normals(v: np.ndarray, t: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32 of vertices (n, 3) and triangles (m, 3), the
     smooth shading the renderer and the glb exports share. A vertex no triangle with area touches gets
     +z: glTF requires every NORMAL to be unit length, and such a vertex draws nothing anyway.
+    ``part`` (n,): each vertex's part; a vertex also takes the faces of the vertices of other parts at its position
+    (the seam of a head exported as several meshes, a separate jaw: shaded from one side each, its two sides showed
+    a jagged line of light and shade along the seam, issue 12). Copies within one part (a texture seam, a cut lip
+    seam's two sides) keep their own normals, as without ``part``.
 
     Not trimesh's: ``Trimesh.vertex_normals`` weights by corner angle (median 1.5, at worst 63 degrees off
     these on the built-in head; 1.2 and 135 on Lee Perry-Smith: every render and export would change) and
@@ -60,9 +64,28 @@ def vertex_normals(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     n = np.zeros((len(v), 3), dtype=np.float64)
     for c in range(3):
         np.add.at(n, t[:, c], fn)
+    if part is not None and len(np.unique(part)) > 1:
+        n = _with_other_parts(n, np.asarray(v, dtype=np.float64), np.asarray(part, dtype=np.int64))
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     out = np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), [0.0, 0.0, 1.0])
     return out.astype(np.float32)
+
+
+def _with_other_parts(n: np.ndarray, v: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """``n`` (n, 3) summed face normals, each vertex's plus those of the vertices of other parts at its position
+    (``v`` (n, 3) welded as the rig welds, ``part`` (n,))."""
+    from realtime_core.face.welding import weld
+
+    canon, welded = weld(v)
+    per_position = np.zeros((len(welded), 3))
+    np.add.at(per_position, canon, n)
+    # Per (position, part): the sum of that part's copies; a vertex takes its position's whole sum minus its own
+    # part's other copies.
+    key = canon * (int(part.max()) + 1) + part
+    _, group = np.unique(key, return_inverse=True)
+    per_group = np.zeros((int(group.max()) + 1, 3))
+    np.add.at(per_group, group, n)
+    return n + per_position[canon] - per_group[group]
 
 
 def _sibling_texture(path: Path) -> bytes | None:

@@ -43,7 +43,7 @@ from assets.heads.cavity import (
 )
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
-from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
+from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceFrame,
@@ -617,6 +617,25 @@ def with_rows_mixed(rig: Rig, mix: Mapping[int, tuple[np.ndarray, np.ndarray]]) 
     matrix.eliminate_zeros()
     spread = None if rig.contact_spread is None else (pick @ rig.contact_spread).tocsr()
     return replace(rig, moving=moving, matrix=matrix, contact_spread=spread)
+
+
+def with_seams_joined(rig: Rig, pairs: np.ndarray) -> Rig:
+    """``rig`` whose copies of one position in two meshes of the skin (``pairs`` (k, 2): each copy with the position's
+    first, :func:`assets.heads.parts.part_seam_pairs`) all move by the mean of their rows: a surface split into meshes
+    moves as one. The solve welds such copies already; steps after it that work per vertex (the cut's island rows, the
+    fold repair's own sides) gave the split Lee Perry-Smith's copies at its mouth corners rows up to 0.03 apart, a
+    0.36 mm crack at the widest opening (issue 12). Records ``part_seam_vertices`` in the meta."""
+    pr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    groups: dict[int, list[int]] = {}
+    for first, other in pr:
+        groups.setdefault(int(first), [int(first)]).append(int(other))
+    mix = {}
+    for members in groups.values():
+        anchors = np.array(members, dtype=np.int64)
+        for a in members:
+            mix[a] = (anchors, np.full(len(anchors), 1.0 / len(anchors)))
+    joined = with_rows_mixed(rig, mix)
+    return replace(joined, meta={**joined.meta, "part_seam_vertices": len(mix)})
 
 
 LIP_GLUE = 0.1
@@ -1339,11 +1358,16 @@ def rig_head(
         frame.axes,
         frame.iod,
         still=upper_row[upper_row < len(mesh.vertices)],
+        part_names=mesh.part_names,
     )
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]
         rig = with_jaw_weights(rig, jaw, snap["chin"] if row_ok else snap["lower_lip"])
+    if part is not None and len(mesh.part_names) > 1:
+        seams = part_seam_pairs(v, part, int(part[snap["nose_tip"]]), mesh.part_names, skip=cut_copies)
+        if len(seams):
+            rig = with_seams_joined(rig, seams)
     if not has_inner_mouth(mesh) and (
         cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):

@@ -147,7 +147,7 @@ class HeadRenderer:
         v = np.asarray(mesh.vertices, dtype=np.float32)
         t = np.asarray(mesh.triangles, dtype=np.int32)
         self.n = len(v)
-        normals = vertex_normals(v.astype(np.float64), t)
+        normals = vertex_normals(v.astype(np.float64), t, mesh.part)
         colors = (
             np.asarray(mesh.colors, dtype=np.float32)
             if mesh.colors is not None

@@ -26,7 +26,7 @@ from realtime_core.face.projection import project
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
 
-RIG_ALGORITHM = 48
+RIG_ALGORITHM = 49
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
