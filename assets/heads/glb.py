@@ -248,12 +248,14 @@ def animated_glb(
     audio: str | None = None,
     units: str = "IOD",
     sparse: bool = False,
+    part: np.ndarray | None = None,
 ) -> bytes:
     """GLB bytes. vertices (n, 3) neutral positions (mesh units); triangles (m, 3) vertex indices;
     targets (T, n, 3) displacement per unit weight; target_names (T,); weights (F, T) per frame at
     ``fps`` (the animation starts at 0 s); uvs (n, 2) with texture (PNG/JPEG bytes) or colors (n, 3)
     in [0, 1]; audio: file name recorded in asset.extras; units: what the weights measure; sparse: a
-    target that moves under a quarter of the vertices is stored as a glTF sparse accessor."""
+    target that moves under a quarter of the vertices is stored as a glTF sparse accessor; part (n,): each vertex's
+    part, for the normals (:func:`assets.heads.mesh.vertex_normals`)."""
     w = np.asarray(weights, dtype=np.float64)
     d = np.asarray(targets)
     if d.ndim != 3 or d.shape[0] != len(target_names):
@@ -272,7 +274,7 @@ def animated_glb(
             "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units, "curves": list(target_names)}},
         }
     }
-    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse)
+    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse, part=part)
     times = np.ascontiguousarray(np.arange(len(w)) / fps, dtype="<f4")
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(np.ascontiguousarray(w, dtype="<f4").reshape(-1), "SCALAR", _FLOAT, None)  # frame-major
@@ -339,6 +341,7 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
             texture=texture,
             audio=audio,
             units="morph weight",
+            part=mesh.part,
         )
     # The lip-contact push is not linear in the parameters, but it is linear in each lip column's
     # crossing (deficit): one sparse target per column, animated by its deficit per frame, makes the
@@ -359,4 +362,5 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
         audio=audio,
         units="IOD (mouth parameters); head units (lip_contact_k: that lip column's crossing, pushed apart)",
         sparse=True,
+        part=mesh.part,
     )
