@@ -122,8 +122,6 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             subprocess.run([str(cli), kind, str(lps), str(dst)], check=True, capture_output=True)
             heads[f"Lee Perry-Smith, {kind} (glTF-Transform)"] = (dst, {})
         # As the user had it: the .glb alone (no colour map beside it; automatic landmarks on the untextured render).
-        # With the map beside it the automatic right mouth corner lands on the Jaw mesh and the lip cut, searched on
-        # the mesh as loaded, cannot cross to the Head's left corner: "cannot rig" (issue 12, left open).
         (out / "jaw_split").mkdir(exist_ok=True)
         heads["Lee Perry-Smith, jaw as a separate mesh (glb, Z-up cm under a metres node)"] = (
             jaw_split_glb(lps, out / "jaw_split" / "lps_jaw_split.glb"),

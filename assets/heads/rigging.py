@@ -619,6 +619,32 @@ def with_rows_mixed(rig: Rig, mix: Mapping[int, tuple[np.ndarray, np.ndarray]]) 
     return replace(rig, moving=moving, matrix=matrix, contact_spread=spread)
 
 
+def joined_part_seams(mesh: HeadMesh, face: int) -> np.ndarray:
+    """(m, 3) ``mesh.triangles`` with each copy of a position in another skin part than the position's first copy
+    (:func:`assets.heads.parts.part_seam_pairs`; ``face``: the face's part) replaced by that first copy where the two
+    are true duplicates (the same texture coordinates and colour): the meshes of a surface split into several become
+    one mesh for rigging, the copies left unused. Their seam then holds edges the lip cut can follow: on the split Lee
+    Perry-Smith with its colour map beside it, the automatic right mouth corner lay on the Jaw mesh and the cut, which
+    searches the mesh as loaded, could not reach the Head's left corner ("cannot rig"); without it the cut followed the
+    Head's zigzag edge by that corner (86 cut vertices against the one-mesh head's 50, a dark sawtooth at rest).
+    Copies that differ (a head split by material, each its own texture tile) stay apart (:func:`with_seams_joined`
+    moves them together). The triangles unchanged when there are none (issue 12)."""
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    if mesh.part is None or len(mesh.part_names) < 2:
+        return mesh.triangles
+    pairs = part_seam_pairs(mesh.vertices, mesh.part, face, mesh.part_names)
+    same = np.ones(len(pairs), dtype=bool)
+    for attr in (mesh.uvs, mesh.colors):
+        if attr is not None:
+            a = np.asarray(attr)
+            same &= (a[pairs[:, 0]] == a[pairs[:, 1]]).all(axis=1)
+    if not same.any():
+        return mesh.triangles
+    to = np.arange(len(mesh.vertices))
+    to[pairs[same, 1]] = pairs[same, 0]
+    return to[t].astype(np.asarray(mesh.triangles).dtype)
+
+
 def with_seams_joined(rig: Rig, pairs: np.ndarray) -> Rig:
     """``rig`` whose copies of one position in two meshes of the skin (``pairs`` (k, 2): each copy with the position's
     first, :func:`assets.heads.parts.part_seam_pairs`) all move by the mean of their rows: a surface split into meshes
@@ -1085,6 +1111,7 @@ def rig_head(
     # automatic landmarks folded its rig: 24 flipped triangles against 9 at the vertices). The given points stay
     # in the meta and for steps that need the point itself, not a vertex (a coarse mesh's lip contact).
     at_vertex = {k: np.asarray(v[i], dtype=np.float64) for k, i in snap.items()}
+    t = joined_part_seams(mesh, int(mesh.part[snap["nose_tip"]])) if mesh.part is not None else t
     meta: dict[str, object] = {
         "head": mesh.name,
         "landmarks": {k: p.tolist() for k, p in points.items()},

@@ -290,3 +290,33 @@ def test_a_seam_between_two_meshes_is_shaded_as_one_surface():
     off = np.setdiff1d(np.arange(18), np.r_[ridge_l, ridge_r])
     np.testing.assert_array_equal(joined[off], apart[off])
     np.testing.assert_array_equal(vertex_normals(v, t, np.zeros(18, dtype=np.int16)), apart)  # one part: as before
+
+
+def test_true_duplicates_across_meshes_are_joined_for_rigging_and_others_kept_apart():
+    """Two strips meeting at a row of copies (a "Head" and a "Jaw" mesh): where a copy carries the same texture
+    coordinates as the Head's vertex it is a true duplicate, and the Jaw's faces take the Head's vertex for rigging
+    (one connected mesh: the lip cut can cross it); where it carries others (a head split by material, each its own
+    texture tile) it stays. Without such copies the triangles come back as they were (issue 12)."""
+    from assets.heads.mesh import HeadMesh
+    from assets.heads.rigging import joined_part_seams
+
+    top = np.array([[x, y, 0.0] for y in (1.0, 0.0) for x in (0.0, 1.0, 2.0)])
+    bottom = np.array([[x, y, 0.0] for y in (0.0, -1.0) for x in (0.0, 1.0, 2.0)])
+    quads = [(0, 1, 4, 3), (1, 2, 5, 4)]
+    t = np.array([tri for a, b, c, d in quads for tri in ((a, b, c), (a, c, d))])
+    v = np.vstack([top, bottom])
+    tris = np.vstack([t, t + 6])
+    uv = v[:, :2] * 0.1
+    part = np.r_[np.zeros(6), np.ones(6)].astype(np.int16)
+    mesh = HeadMesh(vertices=v, triangles=tris, uvs=uv, name="two", part=part, part_names=("Head", "Jaw"))
+    joined = joined_part_seams(mesh, 0)
+    want = np.where(np.isin(tris, [6, 7, 8]), tris - 3, tris)  # the Jaw's top row -> the Head's bottom row
+    np.testing.assert_array_equal(joined, want)
+    tiled = uv.copy()
+    tiled[7] += 0.5  # the middle copy in another texture tile
+    other = HeadMesh(vertices=v, triangles=tris, uvs=tiled, name="two", part=part, part_names=("Head", "Jaw"))
+    np.testing.assert_array_equal(joined_part_seams(other, 0), np.where(np.isin(tris, [6, 8]), tris - 3, tris))
+    one = HeadMesh(vertices=v, triangles=tris, uvs=uv, name="one", part=np.zeros(12, dtype=np.int16), part_names=("a",))
+    assert joined_part_seams(one, 0) is one.triangles
+    eyes = HeadMesh(vertices=v, triangles=tris, uvs=uv, name="e", part=part, part_names=("Head", "eyes"))
+    np.testing.assert_array_equal(joined_part_seams(eyes, 0), tris)  # eyes are never skin
