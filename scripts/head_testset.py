@@ -121,6 +121,12 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             dst = out / f"lps_{kind}.glb"
             subprocess.run([str(cli), kind, str(lps), str(dst)], check=True, capture_output=True)
             heads[f"Lee Perry-Smith, {kind} (glTF-Transform)"] = (dst, {})
+        # As the user had it: the .glb alone (no colour map beside it; automatic landmarks on the untextured render).
+        (out / "jaw_split").mkdir(exist_ok=True)
+        heads["Lee Perry-Smith, jaw as a separate mesh (glb, Z-up cm under a metres node)"] = (
+            jaw_split_glb(lps, out / "jaw_split" / "lps_jaw_split.glb"),
+            {},
+        )
         # Low-poly textured OBJ copies (decimated by meshoptimizer): found in the held-out heads, kept here.
         from heldout_heads import lowpoly_heads
 
@@ -160,6 +166,36 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
         },
     )
     return heads
+
+
+def jaw_split_glb(lps: Path, dst: Path) -> Path:
+    """Lee Perry-Smith as a studio may export it (issue 12): two meshes, "Head" and "Jaw" (the lower face below the
+    mouth line, in front, within the chin's width), their vertices in Z-up centimetres under an "Armature" node that
+    turns them into Y-up metres; the meshes meet at coincident vertices, not shared ones. Written to ``dst``."""
+    import trimesh
+
+    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+    from assets.heads.rigging import resolve_landmarks
+
+    src = trimesh.load(lps, force="scene")
+    g = next(iter(src.geometry.values()))
+    lm_path = shipped_landmarks(lps)
+    assert lm_path is not None  # the shipped hand landmarks
+    at = resolve_landmarks(read_landmarks(lm_path), np.asarray(g.vertices), str(lm_path))
+    c = g.triangles_center
+    mouth_y = at["upper_inner"][1]
+    cx = 0.5 * (at["corner_left"][0] + at["corner_right"][0])
+    jaw = (c[:, 1] < mouth_y) & (c[:, 2] > 0.3) & (np.abs(c[:, 0] - cx) < 2.2) & (c[:, 1] > mouth_y - 3.5)
+    z_up = trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0])
+    scene = trimesh.Scene()
+    to_metres_y_up = trimesh.transformations.scale_matrix(0.01) @ np.linalg.inv(z_up)
+    scene.graph.update(frame_to="Armature", frame_from=scene.graph.base_frame, matrix=to_metres_y_up)
+    for name, mask in (("Head", ~jaw), ("Jaw", jaw)):
+        sub = g.submesh([np.flatnonzero(mask)], append=True)
+        sub.apply_transform(z_up @ trimesh.transformations.scale_matrix(3.0))  # scan units -> cm (24 cm head), Z up
+        scene.add_geometry(sub, node_name=name, geom_name=name + "Mesh", parent_node_name="Armature")
+    scene.export(dst)
+    return dst
 
 
 CLOSE_UP_WIDTH = 1.1

@@ -79,7 +79,9 @@ def sweep(head, poses: np.ndarray, finder) -> dict:
     from realtime_core.face.checks import flipped_faces, pose_figures
 
     landmarks, inputs = head_check_inputs(head, landmark_finder=finder)
-    per = pose_figures(head.rig, landmarks, poses, **inputs)
+    per = pose_figures(
+        head.rig, landmarks, poses, lip_pairs=inputs["lip_pairs"], teeth=inputs["teeth"], reference=inputs["reference"]
+    )
     res: dict = {"poses": len(poses)}
     for key, arr in (
         ("flipped", per.flipped),

@@ -125,8 +125,10 @@ def _primitive(
     texture: bytes | None,
     targets: np.ndarray | None,
     sparse: bool = False,
+    part: np.ndarray | None = None,
 ) -> dict:
-    """sparse: store a target that moves under a quarter of the vertices as a sparse accessor."""
+    """sparse: store a target that moves under a quarter of the vertices as a sparse accessor; part: each vertex's
+    part, whose seams with other parts are shaded as one surface (:func:`assets.heads.mesh.vertex_normals`)."""
     v = np.ascontiguousarray(vertices, dtype="<f4")
     t = np.ascontiguousarray(triangles, dtype="<u4")
     n = len(v)
@@ -138,7 +140,7 @@ def _primitive(
     # Without NORMAL a glTF client must shade flat (glTF 2.0 3.7.2.1): three.js showed the head faceted.
     # The neutral face's smooth normals (the targets carry no NORMAL: a glTF viewer lights every frame with these;
     # facecast's own renderer recomputes them per frame, clients/render/renderer.py).
-    normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t)
+    normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t, part)
     attributes["NORMAL"] = buf.accessor(np.ascontiguousarray(normals, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
     material: dict = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.8}, "doubleSided": True}
     if uvs is not None:
@@ -194,6 +196,7 @@ def mesh_glb(mesh: HeadMesh) -> bytes:
         mesh.colors,
         mesh.texture if mesh.uvs is not None else None,
         targets,
+        part=mesh.part,
     )
     m: dict = {"name": "head", "primitives": [prim]}
     if names:
@@ -247,12 +250,14 @@ def animated_glb(
     audio: str | None = None,
     units: str = "IOD",
     sparse: bool = False,
+    part: np.ndarray | None = None,
 ) -> bytes:
     """GLB bytes. vertices (n, 3) neutral positions (mesh units); triangles (m, 3) vertex indices;
     targets (T, n, 3) displacement per unit weight; target_names (T,); weights (F, T) per frame at
     ``fps`` (the animation starts at 0 s); uvs (n, 2) with texture (PNG/JPEG bytes) or colors (n, 3)
     in [0, 1]; audio: file name recorded in asset.extras; units: what the weights measure; sparse: a
-    target that moves under a quarter of the vertices is stored as a glTF sparse accessor."""
+    target that moves under a quarter of the vertices is stored as a glTF sparse accessor; part (n,): each vertex's
+    part, for the normals (:func:`assets.heads.mesh.vertex_normals`)."""
     w = np.asarray(weights, dtype=np.float64)
     d = np.asarray(targets)
     if d.ndim != 3 or d.shape[0] != len(target_names):
@@ -271,7 +276,7 @@ def animated_glb(
             "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units, "curves": list(target_names)}},
         }
     }
-    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse)
+    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse, part=part)
     times = np.ascontiguousarray(np.arange(len(w)) / fps, dtype="<f4")
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(np.ascontiguousarray(w, dtype="<f4").reshape(-1), "SCALAR", _FLOAT, None)  # frame-major
@@ -340,6 +345,7 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
             texture=texture,
             audio=audio,
             units="morph weight",
+            part=mesh.part,
         )
     # The lip-contact push is not linear in the parameters, but it is linear in each lip column's
     # crossing (deficit): one sparse target per column, animated by its deficit per frame, makes the
@@ -361,4 +367,5 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
         audio=audio,
         units="IOD (mouth parameters); head units (lip_contact_k: that lip column's crossing, pushed apart)",
         sparse=True,
+        part=mesh.part,
     )

@@ -474,7 +474,8 @@ def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = No
     morph head from a file without them: ``landmark_finder(mesh)``) and the keyword arguments ``lip_pairs``
     (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names)
     and ``reference`` (the head as modelled) of :func:`realtime_core.face.checks.check_rig` and
-    :func:`realtime_core.face.checks.pose_figures`."""
+    :func:`realtime_core.face.checks.pose_figures`, and ``joined_pairs`` (the seams between the head's meshes,
+    :func:`assets.heads.parts.part_seam_pairs`; None: none) of check_rig."""
     import numpy as np
     from scipy.spatial import cKDTree
 
@@ -526,9 +527,20 @@ def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = No
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
         if ids:
             teeth = np.flatnonzero(np.isin(mesh.part, ids))
+    joined = None
+    if mesh.part is not None and len(mesh.part_names) > 1 and len(mesh.part) == len(v0):
+        # The seams between the head's meshes (a separate jaw mesh): the cut's copies and the cavity part on purpose.
+        from assets.heads.parts import part_seam_pairs
+
+        cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
+        n0 = len(v0) - cut - cavity
+        skip = np.r_[np.arange(n0, n0 + cut), np.arange(len(v0) - cavity, len(v0))]
+        joined = part_seam_pairs(v0, mesh.part, int(mesh.part[idx["nose_tip"]]), mesh.part_names, skip=skip)
+        joined = joined if len(joined) else None
     reference = None
     if rig.meta.get("rest_pose") is not None and isinstance(rig, Rig):
         from realtime_core.face.rig import modelled_rest
 
         reference = modelled_rest(rig)  # folds are measured from the head as modelled
-    return mouth_landmarks(idx), {"lip_pairs": pairs, "teeth": teeth, "reference": reference}
+    inputs = {"lip_pairs": pairs, "teeth": teeth, "reference": reference, "joined_pairs": joined}
+    return mouth_landmarks(idx), inputs

@@ -47,10 +47,16 @@ class HeadMesh:
     part_names: tuple[str, ...] = ()
 
 
-def vertex_normals(v: np.ndarray, t: np.ndarray, *, together: np.ndarray | None = None) -> np.ndarray:
+def vertex_normals(
+    v: np.ndarray, t: np.ndarray, part: np.ndarray | None = None, *, together: np.ndarray | None = None
+) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32 of vertices (n, 3) and triangles (m, 3), the
     smooth shading the renderer and the glb exports share. A vertex no triangle with area touches gets
     +z: glTF requires every NORMAL to be unit length, and such a vertex draws nothing anyway.
+    ``part`` (n,): each vertex's part; a vertex also takes the faces of the vertices of other parts at its position
+    (the seam of a head exported as several meshes, a separate jaw: shaded from one side each, its two sides showed
+    a jagged line of light and shade along the seam, issue 12). Copies within one part (a texture seam, a cut lip
+    seam's two sides) keep their own normals, as without ``part``, unless ``together`` joins them.
     together (n,) int or None: vertices with the same value share one normal, the sum over all of them
     (texture-seam twins: split, each side's normal sees only its own triangles and the seam shows as a
     crease in the lighting).
@@ -62,14 +68,35 @@ def vertex_normals(v: np.ndarray, t: np.ndarray, *, together: np.ndarray | None 
     v = np.asarray(v)
     t = np.asarray(t)
     fn = triangle_normals(v, t).astype(np.float64)
-    owner = t.reshape(-1) if together is None else np.asarray(together)[t.reshape(-1)]
     # bincount, not np.add.at: the renderer calls this every frame and np.add.at is ~10x slower.
-    n = np.stack([np.bincount(owner, weights=np.repeat(fn[:, c], 3), minlength=len(v)) for c in range(3)], axis=1)
+    n = np.stack(
+        [np.bincount(t.reshape(-1), weights=np.repeat(fn[:, c], 3), minlength=len(v)) for c in range(3)], axis=1
+    )
+    if part is not None and len(np.unique(part)) > 1:
+        n = _with_other_parts(n, np.asarray(v, dtype=np.float64), np.asarray(part, dtype=np.int64))
     if together is not None:
-        n = n[np.asarray(together)]
+        owner = np.asarray(together)
+        n = np.stack([np.bincount(owner, weights=n[:, c]) for c in range(3)], axis=1)[owner]
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     out = np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), [0.0, 0.0, 1.0])
     return out.astype(np.float32)
+
+
+def _with_other_parts(n: np.ndarray, v: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """``n`` (n, 3) summed face normals, each vertex's plus those of the vertices of other parts at its position
+    (``v`` (n, 3) welded as the rig welds, ``part`` (n,))."""
+    from realtime_core.face.welding import weld
+
+    canon, welded = weld(v)
+    per_position = np.zeros((len(welded), 3))
+    np.add.at(per_position, canon, n)
+    # Per (position, part): the sum of that part's copies; a vertex takes its position's whole sum minus its own
+    # part's other copies.
+    key = canon * (int(part.max()) + 1) + part
+    _, group = np.unique(key, return_inverse=True)
+    per_group = np.zeros((int(group.max()) + 1, 3))
+    np.add.at(per_group, group, n)
+    return n + per_position[canon] - per_group[group]
 
 
 def _sibling_texture(path: Path) -> bytes | None:

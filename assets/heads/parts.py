@@ -176,6 +176,7 @@ def inner_mouth_weights(
     iod: float,
     *,
     still: np.ndarray | None = None,
+    part_names: tuple[str, ...] = (),
 ) -> np.ndarray:
     """(n,) float64 in [0, 1]: how much each vertex of an *inner-mouth piece* (and of the surface within SEAM_RAMP of
     a texture seam joining one to it) follows the jaw, 0 elsewhere and at every position of ``still``.
@@ -203,6 +204,10 @@ def inner_mouth_weights(
     the surface's blend beside a seam gave it a trace of the jaw, which undid its upper lip's pinned rows: Lee
     Perry-Smith at ~1,500 triangles, 0.0017 of the jaw on the contact vertex by the right corner turned the corner's
     wall by 91 degrees at a wide /a/ (a flipped triangle; 89.1 without it).
+    The face's part is its skin as :func:`skin_parts` finds it (``part_names`` name the eyes, teeth and tongue, which
+    are never skin): a head exported as a "Head" and a "Jaw" mesh meeting along the lower face is one surface, and
+    weighted on the face's part alone, the Head's copies of the seam took up to 0.84 of the jaw while the Jaw's kept 0:
+    the seam opened 4.9 mm at mouth_open 0.3 (issue 12, Lee Perry-Smith with its jaw as a separate mesh).
     ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
     vertex index (corner_left, corner_right, chin, nose_tip)."""
     from realtime_core.face.welding import mesh_pieces, weld
@@ -211,8 +216,10 @@ def inner_mouth_weights(
     t = np.asarray(triangles, dtype=np.int64)
     n = len(v)
     out = np.zeros(n)
+    canon, welded = weld(v)
     if part is not None:
-        t = t[(np.asarray(part)[t] == part[landmarks["nose_tip"]]).all(axis=1)]
+        skin = skin_parts(canon, np.asarray(part), int(part[landmarks["nose_tip"]]), part_names)
+        t = t[np.isin(np.asarray(part)[t], skin).all(axis=1)]
     comp = mesh_pieces(n, t)
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
@@ -234,10 +241,58 @@ def inner_mouth_weights(
     outside = np.bincount(comp[used & ~inside], minlength=comp.max() + 1) > 0
     piece = inside & ~outside[comp]
     height = np.clip(local[:, 1] / (JAW_FULL * chin), 0.0, 1.0)
-    canon, welded = weld(v)
     if still is not None:
         height[np.isin(canon, canon[np.asarray(still, dtype=np.int64)])] = 0.0
     return np.where(used, height * _seam_blend(canon, welded, t, piece, used, iod), 0.0)
+
+
+def skin_parts(canon: np.ndarray, part: np.ndarray, face: int, part_names: tuple[str, ...] = ()) -> np.ndarray:
+    """Sorted part indices that are one surface with the face's part ``face``: it and every part that shares a
+    position with a skin part (``canon`` (n,): each vertex's welded position, :func:`realtime_core.face.welding.weld`;
+    ``part`` (n,) each vertex's part), unless ``part_names`` says eyes, teeth or tongue (:func:`part_kind`: they move by
+    their own rules). Meshes that meet at a seam (a separate jaw or chin, a head split by material) are skin; a part
+    that touches the face nowhere is not, so a head without such seams keeps the face's part alone."""
+    p = np.asarray(part, dtype=np.int64)
+    c = np.asarray(canon, dtype=np.int64)
+    n_parts = int(p.max()) + 1
+    own_rules = np.array([i < len(part_names) and part_kind(part_names[i]) is not None for i in range(n_parts)])
+    at = sp.csr_matrix((np.ones(len(p)), (c, p)), shape=(int(c.max()) + 1, n_parts))
+    meet = (at.T @ at).toarray() > 0  # (parts, parts): they share a position
+    skin = np.zeros(n_parts, dtype=bool)
+    skin[face] = True
+    while True:
+        more = meet[skin].any(axis=0) & ~own_rules & ~skin
+        if not more.any():
+            return np.flatnonzero(skin)
+        skin |= more
+
+
+def part_seam_pairs(
+    vertices: np.ndarray,
+    part: np.ndarray,
+    face: int,
+    part_names: tuple[str, ...] = (),
+    *,
+    skip: np.ndarray | None = None,
+) -> np.ndarray:
+    """(k, 2) vertex indices: copies of one position (``vertices`` (n, 3), welded as the rig welds) in two different
+    skin parts (:func:`skin_parts` of the face's part ``face``; ``part`` (n,)), each paired with the position's first
+    skin copy: the seams between a head's meshes, which must not open (the rig checks' seam gap). Positions holding
+    any of ``skip`` (a cut lip seam's copies, whose sides part on purpose; a mouth cavity) are left out."""
+    from realtime_core.face.welding import weld
+
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    p = np.asarray(part, dtype=np.int64)
+    skin = np.isin(p, skin_parts(canon, p, face, part_names))
+    if skip is not None and len(skip):
+        away = np.zeros(len(welded), dtype=bool)
+        away[canon[np.asarray(skip, dtype=np.int64)]] = True
+        skin &= ~away[canon]
+    idx = np.flatnonzero(skin)
+    first = np.full(len(welded), -1, dtype=np.int64)
+    first[canon[idx[::-1]]] = idx[::-1]
+    other = idx[p[idx] != p[first[canon[idx]]]]
+    return np.column_stack([first[canon[other]], other])
 
 
 def _seam_blend(

@@ -43,7 +43,7 @@ from assets.heads.cavity import (
 )
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
-from assets.heads.parts import inner_mouth_weights, with_jaw_weights, with_rigid_parts
+from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceFrame,
@@ -619,6 +619,51 @@ def with_rows_mixed(rig: Rig, mix: Mapping[int, tuple[np.ndarray, np.ndarray]]) 
     return replace(rig, moving=moving, matrix=matrix, contact_spread=spread)
 
 
+def joined_part_seams(mesh: HeadMesh, face: int) -> np.ndarray:
+    """(m, 3) ``mesh.triangles`` with each copy of a position in another skin part than the position's first copy
+    (:func:`assets.heads.parts.part_seam_pairs`; ``face``: the face's part) replaced by that first copy where the two
+    are true duplicates (the same texture coordinates and colour): the meshes of a surface split into several become
+    one mesh for rigging, the copies left unused. Their seam then holds edges the lip cut can follow: on the split Lee
+    Perry-Smith with its colour map beside it, the automatic right mouth corner lay on the Jaw mesh and the cut, which
+    searches the mesh as loaded, could not reach the Head's left corner ("cannot rig"); without it the cut followed the
+    Head's zigzag edge by that corner (86 cut vertices against the one-mesh head's 50, a dark sawtooth at rest).
+    Copies that differ (a head split by material, each its own texture tile) stay apart (:func:`with_seams_joined`
+    moves them together). The triangles unchanged when there are none (issue 12)."""
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    if mesh.part is None or len(mesh.part_names) < 2:
+        return mesh.triangles
+    pairs = part_seam_pairs(mesh.vertices, mesh.part, face, mesh.part_names)
+    same = np.ones(len(pairs), dtype=bool)
+    for attr in (mesh.uvs, mesh.colors):
+        if attr is not None:
+            a = np.asarray(attr)
+            same &= (a[pairs[:, 0]] == a[pairs[:, 1]]).all(axis=1)
+    if not same.any():
+        return mesh.triangles
+    to = np.arange(len(mesh.vertices))
+    to[pairs[same, 1]] = pairs[same, 0]
+    return to[t].astype(np.asarray(mesh.triangles).dtype)
+
+
+def with_seams_joined(rig: Rig, pairs: np.ndarray) -> Rig:
+    """``rig`` whose copies of one position in two meshes of the skin (``pairs`` (k, 2): each copy with the position's
+    first, :func:`assets.heads.parts.part_seam_pairs`) all move by the mean of their rows: a surface split into meshes
+    moves as one. The solve welds such copies already; steps after it that work per vertex (the cut's island rows, the
+    fold repair's own sides) gave the split Lee Perry-Smith's copies at its mouth corners rows up to 0.03 apart, a
+    0.36 mm crack at the widest opening (issue 12). Records ``part_seam_vertices`` in the meta."""
+    pr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    groups: dict[int, list[int]] = {}
+    for first, other in pr:
+        groups.setdefault(int(first), [int(first)]).append(int(other))
+    mix = {}
+    for members in groups.values():
+        anchors = np.array(members, dtype=np.int64)
+        for a in members:
+            mix[a] = (anchors, np.full(len(anchors), 1.0 / len(anchors)))
+    joined = with_rows_mixed(rig, mix)
+    return replace(joined, meta={**joined.meta, "part_seam_vertices": len(mix)})
+
+
 LIP_GLUE = 0.1
 """IOD: on a knife-cut mouth whose cut's lower side lies on the lower lip as another layer, a vertex of that side this
 near a face of the lower lip moves with that face through the fold repair (:func:`lip_edge_glue`)."""
@@ -1066,6 +1111,7 @@ def rig_head(
     # automatic landmarks folded its rig: 24 flipped triangles against 9 at the vertices). The given points stay
     # in the meta and for steps that need the point itself, not a vertex (a coarse mesh's lip contact).
     at_vertex = {k: np.asarray(v[i], dtype=np.float64) for k, i in snap.items()}
+    t = joined_part_seams(mesh, int(mesh.part[snap["nose_tip"]])) if mesh.part is not None else t
     meta: dict[str, object] = {
         "head": mesh.name,
         "landmarks": {k: p.tolist() for k, p in points.items()},
@@ -1352,11 +1398,16 @@ def rig_head(
         frame.axes,
         frame.iod,
         still=upper_row[upper_row < len(mesh.vertices)],
+        part_names=mesh.part_names,
     )
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]
         rig = with_jaw_weights(rig, jaw, snap["chin"] if row_ok else snap["lower_lip"])
+    if part is not None and len(mesh.part_names) > 1:
+        seams = part_seam_pairs(v, part, int(part[snap["nose_tip"]]), mesh.part_names, skip=cut_copies)
+        if len(seams):
+            rig = with_seams_joined(rig, seams)
     if not has_inner_mouth(mesh) and (
         cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):

@@ -161,4 +161,7 @@ def run(args: argparse.Namespace) -> int:
         f"{m.get('replacements', 0)} geodesic replacements, {m.get('bad_triangles', 0)} bad triangles, "
         f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
     )
+    # The file, not the mesh, is what saves the minutes: --head MESH rigs into its own cache (keyed by the mesh, the
+    # landmarks and how the command resolves the head), which this command does not fill.
+    print(f"rig: use it as --head {out} (every command; serve --rig {out} too); --head {args.head} would rig it again")
     return 0

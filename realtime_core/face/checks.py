@@ -30,7 +30,11 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   needs a turn over 90 degrees from rest; the notch looks from the front only);
 - lip gap at /m/: the largest inner-lip gap (IOD) at :data:`BILABIAL_POSES` (pressed lips, mouth_open 0:
   the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
-  instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it.
+  instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it;
+- seam gap: how far apart (IOD) vertices that coincide at rest and must stay together (``joined_pairs``: copies of
+  one position in two meshes of one surface, a separate jaw mesh beside the head's) move at the poses
+  (:func:`seam_gap`): a seam that opens is a crack in the render, which no figure above sees (each part's faces
+  stay whole). Measured only when such pairs are given.
 
 - flipped under expressions (advisory): the most flipped triangles at :data:`EXPRESSION_POSES`, speech under an
   expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
@@ -315,6 +319,10 @@ LIP_BACKS_LIMIT = 0.0005
 """IOD squared: the advisory limit of :func:`lip_backs_seen`, a patch about 8 pixels across in the test set's
 400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the test-set rows whose close-ups look
 clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
+SEAM_GAP_LIMIT = 0.001
+"""IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
+both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
+before (issue 12), a dark line. 0.001 IOD is under a pixel of the test set's mouth close-up (1.1 IOD in 400 pixels)."""
 MIN_OPEN_RESPONSE = 0.5
 """The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
 what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
@@ -338,6 +346,8 @@ class RigCheckLimits:
     max_bilabial_gap: float = 0.01
     """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
     the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
+    max_seam_gap: float = SEAM_GAP_LIMIT
+    """IOD: a larger :func:`seam_gap` fails the rig (a crack through the skin)."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
@@ -350,6 +360,8 @@ class RigCheckLimits:
             raise ConfigError("max_lip_backs must be > 0 (IOD squared)")
         if not self.max_bilabial_gap >= 0:
             raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
+        if not self.max_seam_gap >= 0:
+            raise ConfigError("max_seam_gap must be >= 0 (IOD)")
 
 
 @dataclass(frozen=True)
@@ -386,6 +398,8 @@ class RigReport:
     "Which poses, and why")."""
     expression_flip_pose: tuple[float, ...] = ()
     """Where :attr:`expression_flips` is worst (empty: none flip)."""
+    seam_gap_iod: float | None = None
+    """IOD: the largest :func:`seam_gap` over the poses (None: no joined pairs given)."""
 
     def as_dict(self) -> dict[str, Any]:
         """The figures as JSON holds them (tuples as lists): a rig's meta "checks" is the same dict before its
@@ -399,11 +413,12 @@ class RigReport:
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
+        seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD, "
+            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD{seam}, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
@@ -671,6 +686,19 @@ def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: Mo
     return (v[use[:, 0]] - v[use[:, 1]]) @ fr.axes[1] / fr.iod
 
 
+def seam_gap(rig: Any, pairs: np.ndarray, poses: Any, iod: float) -> float:
+    """IOD: the largest distance between the two vertices of any of ``pairs`` (k, 2; coincident at rest) of ``rig``
+    deformed at ``poses`` (P, 4); 0 without pairs."""
+    pr = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if not len(pr):
+        return 0.0
+    worst = 0.0
+    for pose in np.asarray(poses, dtype=np.float64).reshape(-1, 4):
+        v = np.asarray(rig.deformed(pose), dtype=np.float64)
+        worst = max(worst, float(np.linalg.norm(v[pr[:, 0]] - v[pr[:, 1]], axis=1).max()) / iod)
+    return worst
+
+
 def bilabial_gap(
     rig: Any, landmarks: MouthLandmarks, *, poses: tuple[tuple[float, ...], ...] = BILABIAL_POSES
 ) -> float:
@@ -774,6 +802,7 @@ def check_rig(
     reference: np.ndarray | None = None,
     cavity_vertices: int = 0,
     expression_poses: tuple[tuple[float, ...], ...] = EXPRESSION_POSES,
+    joined_pairs: np.ndarray | None = None,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
@@ -782,7 +811,9 @@ def check_rig(
     for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
     many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`);
     expression_poses: speech under an expression (:data:`EXPRESSION_POSES`), where flipped triangles are an
-    advisory figure (:attr:`RigReport.expression_flips`: a warning, not a failure; see its docstring for why)."""
+    advisory figure (:attr:`RigReport.expression_flips`: a warning, not a failure; see its docstring for why);
+    joined_pairs: (k, 2) vertex indices coincident at rest that must move together (:func:`seam_gap`; None: not
+    measured)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up = fr.iod, fr.axes[1]
@@ -819,6 +850,9 @@ def check_rig(
         fails.append(f"teeth {ahead:.4f} IOD in front of the lips")
     if opening is not None and opening < limits.min_open_response:
         fails.append(f"the lips part by {opening:.2f} of the mouth opening asked (< {limits.min_open_response})")
+    seam = None if joined_pairs is None else seam_gap(rig, joined_pairs, (*poses, closure), iod)
+    if seam is not None and seam > limits.max_seam_gap:
+        fails.append(f"the seam between the head's meshes opens by {seam:.4f} IOD (> {limits.max_seam_gap})")
     at_m = bilabial_gap(rig, landmarks)
     found = lip_edge_shards(
         rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
@@ -866,4 +900,5 @@ def check_rig(
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,
         bilabial_gap_iod=at_m,
+        seam_gap_iod=seam,
     )

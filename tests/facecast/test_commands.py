@@ -26,6 +26,8 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     assert out.is_file() and out.with_suffix(".png").is_file() and landmarks.is_file()
     printed = capsys.readouterr().out
     assert "220 control points" in printed and "rig checks at" in printed
+    # It says how to use the file: --head MESH would rig again (its own cache, which `rig` does not fill).
+    assert f"--head {out} (every command; serve --rig {out} too)" in printed
     from assets.heads.rigfile import load_rig
 
     rig, _mesh = load_rig(out)

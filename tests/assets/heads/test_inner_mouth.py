@@ -153,3 +153,71 @@ def test_jaw_weights_mix_a_vertexs_own_motion_with_the_jaws(builtin_rig, builtin
     rest = np.setdiff1d(np.arange(len(rig.neutral)), [mixed, still])
     np.testing.assert_allclose(got[rest], old[rest], atol=1e-6)
     assert new.meta["inner_mouth_pieces"] == 2 and still in new.moving
+
+
+def test_a_head_split_into_meshes_weighs_each_seam_position_once_and_its_seams_are_found():
+    """The face sheet of the first test exported as two meshes, "Head" and "Jaw", and its inner-mouth piece cut
+    between them at y = -0.3 (the Jaw's copies of the cut row at the same positions), with lower teeth (another part)
+    touching the Jaw at one position. Weighed on the face's part alone, the Jaw's half of the piece took 0 while the
+    Head's copies of the cut took the height's weight, and the seam opened with the jaw (issue 12: 4.9 mm on Lee
+    Perry-Smith with its jaw as a separate mesh). The Jaw is skin (it meets the Head): each half of the piece is
+    weighted by its height, both copies of the cut alike. The teeth stay their own part: unweighted, not skin, no seam.
+    """
+    from assets.heads.parts import part_seam_pairs, skin_parts
+    from realtime_core.face.welding import weld
+
+    xs, ys = np.meshgrid(np.linspace(-2, 2, 21), np.linspace(-2, 2, 21))
+    face = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    ft = _patch(-2, 2, -2, 2, 0, 0, n=21)[1]
+    hv, ht = _patch(-0.3, 0.3, -0.3, 0.3, -0.25, -0.3)  # the piece's upper half: its first row at y = -0.3
+    jv, jt = _patch(-0.3, 0.3, -0.8, -0.3, -0.2, -0.25)  # the lower half: its last row the cut's copies
+    jv[-5:] = hv[:5]
+    tv, tt = _patch(0.3, 0.5, -0.3, -0.6, -0.25, -0.25)  # teeth: their first corner on the cut's end
+    n_f, n_h, n_j = len(face), len(hv), len(jv)
+    v = np.vstack([face, hv, jv, tv])
+    t = np.vstack([ft, ht + n_f, jt + n_f + n_h, tt + n_f + n_h + n_j])
+    head, jaw = np.arange(n_f, n_f + n_h), np.arange(n_f + n_h, n_f + n_h + n_j)
+    teeth = np.arange(n_f + n_h + n_j, len(v))
+    # The Jaw mesh: the face sheet's lower rows too, whose top row copies the Head's row y = -1 (its own vertices).
+    low = np.flatnonzero(face[:, 1] < -1.0 - 1e-9)
+    row = np.flatnonzero(np.abs(face[:, 1] + 1.0) < 1e-9)
+    part = np.zeros(len(v), dtype=np.int64)
+    part[jaw] = 1
+    part[teeth] = 2
+    part[low] = 1
+    copies = len(v) + np.arange(len(row))
+    v = np.vstack([v, face[row]])
+    part = np.r_[part, np.ones(len(row), dtype=np.int64)]
+    remap = np.arange(len(v))
+    remap[row] = copies  # the Jaw's faces use its own copies of the row
+    below = np.zeros(len(t), dtype=bool)
+    below[: len(ft)] = face[ft, 1].mean(axis=1) < -1.0
+    t[below] = remap[t[below]]
+    names = ("Head", "Jaw", "lower teeth")
+    np.testing.assert_array_equal(v[jaw[-5:]], v[head[:5]])
+    np.testing.assert_array_equal(v[teeth[0]], v[head[4]])
+
+    def near(p):
+        return int(np.argmin(np.linalg.norm(face - p, axis=1)))
+
+    lm = {"corner_left": near([0.5, 0, 0]), "corner_right": near([-0.5, 0, 0]), "chin": near([0, -1, 0])}
+    lm["nose_tip"] = near([0, 0.6, 0])
+    canon, _ = weld(v)
+    np.testing.assert_array_equal(skin_parts(canon, part, 0, names), [0, 1])
+    np.testing.assert_array_equal(skin_parts(canon, part, 0, ("Head", "Jaw", "teeth_jaw")), [0, 1])
+    np.testing.assert_array_equal(skin_parts(canon, part, 0, ("Head", "Jaw", "chin")), [0, 1, 2])  # named as skin
+    w = inner_mouth_weights(v, t, part, lm, np.eye(3), 1.0, part_names=names)
+
+    def height(i):
+        return np.clip(-v[i, 1] / JAW_FULL, 0, 1)
+
+    np.testing.assert_array_equal(w[jaw[-5:]], w[head[:5]])  # one weight per position
+    np.testing.assert_allclose(w[jaw], height(jaw), atol=1e-12)
+    np.testing.assert_allclose(w[head], height(head), atol=1e-12)
+    assert (w[jaw] > 0.5).all() and not w[teeth].any() and not w[:n_f].any() and not w[copies].any()
+    # The seams between the meshes: the cut's row and the face's row y = -1, each Jaw copy with the Head's vertex.
+    pairs = part_seam_pairs(v, part, 0, names)
+    want = np.r_[np.c_[head[:5], jaw[-5:]], np.c_[row, copies]]
+    np.testing.assert_array_equal(pairs[np.lexsort(pairs.T[::-1])], want[np.lexsort(want.T[::-1])])
+    # Positions given to skip (a cut lip seam's) are no seam.
+    np.testing.assert_array_equal(part_seam_pairs(v, part, 0, names, skip=np.r_[jaw[-5:], copies]), np.zeros((0, 2)))

@@ -18,6 +18,7 @@ from realtime_core.face.checks import (
     SPEECH_POSES,
     SPEECH_SCALE,
     PoseBound,
+    RigCheckLimits,
     check_rig,
     checked_bound,
     flipped_faces,
@@ -476,3 +477,37 @@ def test_the_pose_bound_keeps_checked_poses_and_gives_the_hull_point_nearest_any
     np.testing.assert_allclose(bound(far[3]), q[3])  # a single pose as in a batch
     with pytest.raises(ConfigError):
         PoseBound(poses=((0.0, 0.0, 0.0, 0.0), (0.1, 0.0, 0.0, 0.0), (0.0, 0.1, 0.0, 0.0)))
+
+
+class _Seam(_Fold):
+    """The flat grid with a copy of its vertex 1 (vertex 9, as a second mesh's vertex at the seam would be) that
+    drops by ``drop`` x mouth_open while vertex 1 stays: a seam that opens with the jaw; nothing folds."""
+
+    def __init__(self, drop: float) -> None:
+        super().__init__()
+        self.neutral = np.vstack([self.neutral, self.neutral[1]])
+        self.drop = drop
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = self.neutral.copy()
+        v[9, 1] -= self.drop * p[2]
+        return v
+
+
+def test_check_fails_a_seam_between_meshes_that_opens_and_reports_its_gap() -> None:
+    lm = _fold_landmarks()
+    iod = 2.0  # the face frame of this grid: eye corners at x = 0 and 2
+    pairs = np.array([[1, 9]])
+    limits = RigCheckLimits(min_open_response=0.0)  # the grid's "lips" (one vertex) never part
+    opening = check_rig(_Seam(0.1), lm, joined_pairs=pairs, limits=limits)
+    widest = max(float(p[2]) for p in EXTREME_POSES)
+    assert opening.seam_gap_iod == pytest.approx(0.1 * widest / iod)
+    assert opening.failures == (
+        f"the seam between the head's meshes opens by {opening.seam_gap_iod:.4f} IOD (> 0.001)",
+    )
+    assert "parts' seam gap" in opening.summary()
+    shut = check_rig(_Seam(0.0), lm, joined_pairs=pairs, limits=limits)
+    assert shut.seam_gap_iod == 0.0 and shut.passed
+    # Not measured without pairs: the report as before.
+    plain = check_rig(_Seam(0.1), lm, limits=limits)
+    assert plain.seam_gap_iod is None and plain.passed and "seam" not in plain.summary()
