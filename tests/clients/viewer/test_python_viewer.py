@@ -96,7 +96,13 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     view = g.bufferViews[acc.bufferView]
     n_curves = len(g.meshes[0].extras["targetNames"])
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, n_curves)
-    np.testing.assert_array_equal(w[:, :4], ref)
+    # The glb drives the head within the checked poses: its curves are the bounded parameters (equal where they
+    # lie inside; this test model's output does not always).
+    from realtime_core.face.checks import checked_bound
+
+    np.testing.assert_allclose(w[:, :4], checked_bound()(ref), atol=1e-6)
+    inside = checked_bound().contains(ref)
+    np.testing.assert_array_equal(w[inside, :4], ref[inside])
     from assets.audio import read_audio
 
     audio, rate = read_audio(tmp_path / "take.wav")  # the session's audio beside the .glb
