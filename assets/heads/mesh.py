@@ -48,7 +48,12 @@ class HeadMesh:
 
 
 def vertex_normals(
-    v: np.ndarray, t: np.ndarray, part: np.ndarray | None = None, *, together: np.ndarray | None = None
+    v: np.ndarray,
+    t: np.ndarray,
+    part: np.ndarray | None = None,
+    *,
+    together: np.ndarray | None = None,
+    seams: PartSeams | None = None,
 ) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32 of vertices (n, 3) and triangles (m, 3), the
     smooth shading the renderer and the glb exports share. A vertex no triangle with area touches gets
@@ -60,6 +65,8 @@ def vertex_normals(
     together (n,) int or None: vertices with the same value share one normal, the sum over all of them
     (texture-seam twins: split, each side's normal sees only its own triangles and the seam shows as a
     crease in the lighting).
+    seams: :func:`part_seams` of ``part`` found once (a renderer drawing many frames of one head: the copies of a
+    seam stay together, so the positions need not be welded again every frame); used instead of ``part``.
 
     Not trimesh's: ``Trimesh.vertex_normals`` weights by corner angle (median 1.5, at worst 63 degrees off
     these on the built-in head; 1.2 and 135 on Lee Perry-Smith: every render and export would change) and
@@ -72,8 +79,10 @@ def vertex_normals(
     n = np.stack(
         [np.bincount(t.reshape(-1), weights=np.repeat(fn[:, c], 3), minlength=len(v)) for c in range(3)], axis=1
     )
-    if part is not None and len(np.unique(part)) > 1:
-        n = _with_other_parts(n, np.asarray(v, dtype=np.float64), np.asarray(part, dtype=np.int64))
+    if seams is None and part is not None:
+        seams = part_seams(v, part)
+    if seams is not None:
+        n = seams.with_other_parts(n)
     if together is not None:
         owner = np.asarray(together)
         n = np.stack([np.bincount(owner, weights=n[:, c]) for c in range(3)], axis=1)[owner]
@@ -82,21 +91,32 @@ def vertex_normals(
     return out.astype(np.float32)
 
 
-def _with_other_parts(n: np.ndarray, v: np.ndarray, part: np.ndarray) -> np.ndarray:
-    """``n`` (n, 3) summed face normals, each vertex's plus those of the vertices of other parts at its position
-    (``v`` (n, 3) welded as the rig welds, ``part`` (n,))."""
+@dataclass(frozen=True)
+class PartSeams:
+    """Where the meshes of a head made of several meet: ``canon`` (n,) each vertex's welded position (as the rig
+    welds) and ``group`` (n,) its (position, part) pair."""
+
+    canon: np.ndarray
+    group: np.ndarray
+
+    def with_other_parts(self, n: np.ndarray) -> np.ndarray:
+        """``n`` (n, 3) summed face normals -> each vertex's plus those of the vertices of other parts at its
+        position: its position's whole sum minus its own part's other copies."""
+        per_position = np.stack([np.bincount(self.canon, weights=n[:, c]) for c in range(3)], axis=1)
+        per_group = np.stack([np.bincount(self.group, weights=n[:, c]) for c in range(3)], axis=1)
+        return n + per_position[self.canon] - per_group[self.group]
+
+
+def part_seams(v: np.ndarray, part: np.ndarray) -> PartSeams | None:
+    """:class:`PartSeams` of vertices ``v`` (n, 3) in parts ``part`` (n,); None for a head of one part."""
     from realtime_core.face.welding import weld
 
-    canon, welded = weld(v)
-    per_position = np.zeros((len(welded), 3))
-    np.add.at(per_position, canon, n)
-    # Per (position, part): the sum of that part's copies; a vertex takes its position's whole sum minus its own
-    # part's other copies.
-    key = canon * (int(part.max()) + 1) + part
-    _, group = np.unique(key, return_inverse=True)
-    per_group = np.zeros((int(group.max()) + 1, 3))
-    np.add.at(per_group, group, n)
-    return n + per_position[canon] - per_group[group]
+    p = np.asarray(part, dtype=np.int64)
+    if len(np.unique(p)) < 2:
+        return None
+    canon, _ = weld(np.asarray(v, dtype=np.float64))
+    _, group = np.unique(canon * (int(p.max()) + 1) + p, return_inverse=True)
+    return PartSeams(canon=canon, group=group.reshape(-1))
 
 
 def _sibling_texture(path: Path) -> bytes | None:

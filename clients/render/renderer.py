@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from assets.heads.mesh import SKIN_COLOR, HeadMesh, vertex_normals
+from assets.heads.mesh import SKIN_COLOR, HeadMesh, part_seams, vertex_normals
 from clients.errors import RenderError
 
 SEAM_SMOOTH_ANGLE = 60.0
@@ -164,7 +164,7 @@ class HeadRenderer:
         self.n = len(v)
         self._triangles = t
         # A head exported as several meshes shades as one surface across their seams (vertex_normals' part).
-        self._part = mesh.part if mesh.part is not None and len(np.unique(mesh.part)) > 1 else None
+        self._seams = None if mesh.part is None else part_seams(v, mesh.part)  # found once, at rest
         self._owner = None if parted is None else _seam_owner(v, t, parted, tolerance=1e-6 * size)
         normals = self.normals(v)
         colors = (
@@ -264,7 +264,9 @@ class HeadRenderer:
     def normals(self, vertices: np.ndarray) -> np.ndarray:
         """(n, 3) float32 unit vertex normals of the head at ``vertices`` (n, 3): area-weighted over the frame's
         own triangles, one normal for each group of texture-seam twins (see ``parted``)."""
-        return vertex_normals(np.asarray(vertices, dtype=np.float32), self._triangles, self._part, together=self._owner)
+        return vertex_normals(
+            np.asarray(vertices, dtype=np.float32), self._triangles, together=self._owner, seams=self._seams
+        )
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Pixel coordinates (k, 2) (column, row from the top) of 3D points (k, 3)."""

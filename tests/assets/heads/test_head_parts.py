@@ -292,6 +292,13 @@ def test_a_seam_between_two_meshes_is_shaded_as_one_surface():
     off = np.setdiff1d(np.arange(18), np.r_[ridge_l, ridge_r])
     np.testing.assert_array_equal(joined[off], apart[off])
     np.testing.assert_array_equal(vertex_normals(v, t, np.zeros(18, dtype=np.int16)), apart)  # one part: as before
+    # The seams found once at rest (a renderer's many frames) shade a moved frame as finding them again does.
+    from assets.heads.mesh import part_seams
+
+    moved = v + 0.1 * np.sin(v[:, [1, 2, 0]])  # the ridge's copies move together
+    np.testing.assert_allclose(
+        vertex_normals(moved, t, seams=part_seams(v, part)), vertex_normals(moved, t, part), atol=1e-6
+    )
 
 
 def test_true_duplicates_across_meshes_are_joined_for_rigging_and_others_kept_apart():
