@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import re
+import shutil
 import struct
 import subprocess
 import sys
@@ -58,8 +59,11 @@ class ServerProcess:
         if not head:
             cmd.append("--no-head")
         cmd += args
+        self._config_dir: Path | None = None
+        """The temporary folder of ``config_toml``'s file, removed by ``stop()``."""
         if config_toml:
-            cfg = Path(tempfile.mkdtemp(prefix="fcbench")) / "server.toml"
+            self._config_dir = Path(tempfile.mkdtemp(prefix="fcbench"))
+            cfg = self._config_dir / "server.toml"
             cfg.write_text(config_toml)
             cmd += ["--config", str(cfg)]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -107,13 +111,17 @@ class ServerProcess:
         return out
 
     def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                return self.proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-        return self.proc.wait()
+        try:
+            if self.proc.poll() is None:
+                self.proc.terminate()
+                try:
+                    return self.proc.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+            return self.proc.wait()
+        finally:
+            if self._config_dir is not None:
+                shutil.rmtree(self._config_dir, ignore_errors=True)
 
 
 @dataclass

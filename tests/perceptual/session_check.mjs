@@ -10,7 +10,7 @@
 // server must answer "duplicate"). Prints one JSON line per step; the last is
 // {"step": "done", metrics: [...], console_errors: [...], duplicate: "..."}.
 import { chromium } from "playwright-core";
-import { mkdtempSync, readFileSync } from "node:fs";
+import { mkdtempSync, readFileSync, rmSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 
@@ -58,8 +58,9 @@ async function openPage() {
 
 const screen = (page) => page.evaluate(() => window.perceptual.state.screen);
 
+const profile = mkdtempSync(join(tmpdir(), "facecast-perceptual-"));
+
 async function main() {
-  const profile = mkdtempSync(join(tmpdir(), "facecast-perceptual-"));
   context = await chromium.launchPersistentContext(profile, {
     executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
     headless: true,
@@ -133,8 +134,13 @@ async function main() {
   say({ step: "done", participant, metrics, console_errors: errors, duplicate });
 }
 
-main().then(() => context.close()).catch(async (e) => {
+// The browser closed and its profile removed however the check ends.
+const close = async () => {
+  if (context) await context.close().catch(() => {});
+  rmSync(profile, { recursive: true, force: true, maxRetries: 5 });
+};
+main().then(close).catch(async (e) => {
   say({ step: "error", error: String(e && e.stack || e), console_errors: errors });
-  if (context) await context.close();
+  await close();
   process.exit(1);
 });

@@ -92,8 +92,11 @@ export async function captureMouth(page, outDir, prefix = "", describe = async (
 export function run(main) {
   const close = async () => {
     if (context) await context.close().catch(() => {});
-    rmSync(profile, { recursive: true, force: true });
+    rmSync(profile, { recursive: true, force: true, maxRetries: 5 });
   };
+  // The tests end a check with SIGTERM once they have read the step they wait for: close the browser
+  // and remove its profile then too, else every run leaves a 2 MB profile in the temp folder.
+  process.on("SIGTERM", () => { close().finally(() => process.exit(143)); });
   main()
     .then(async () => { await close(); process.exit(0); })
     .catch(async (err) => {

@@ -60,6 +60,17 @@ def _read_step(proc: subprocess.Popen, want: str) -> dict:
     pytest.fail(f"viewer_check.mjs ended before step {want!r}: {proc.stderr.read()}")
 
 
+def _end(proc: subprocess.Popen) -> None:
+    """Stop a check script: SIGTERM lets it close the browser and remove its profile; SIGKILL if it hangs."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    proc.wait(10)
+
+
 def _png(path: Path) -> np.ndarray:
     from PIL import Image
 
@@ -118,9 +129,7 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
         for i, fut in enumerate(sessions):
             if not fut.done():
                 servers[-1].loop.call_soon_threadsafe(stops[i].set)
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
+        _end(proc)
         for fut in sessions:
             if not fut.done():
                 fut.result(30)
@@ -211,9 +220,7 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
         deltas = _read_step(proc, "deltas")
         done = _read_step(proc, "done")
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
+        _end(proc)
         srv.loop.call_soon_threadsafe(stop.set)
         session.result(30)
         got = params.result(30)
@@ -278,9 +285,7 @@ def _watched_to_its_end(model, head, name: str, samples: np.ndarray) -> tuple[di
     try:
         ended = _read_step(proc, "ended")
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
+        _end(proc)
         reply = session.result(60)
         srv.stop()
     return ended, reply
@@ -340,9 +345,7 @@ def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
         session = srv.submit(stream_session(srv.url, name, 4.0, samples=speechlike(4.0, 16000, seed=5)))
         joined = _read_step(proc, "joined")
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(10)
+        _end(proc)
         if session is not None:
             session.result(60)
         srv.stop()
