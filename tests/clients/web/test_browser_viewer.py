@@ -261,11 +261,13 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
         )
     assert shots["open"]["weights"][jaw] > shots["closed"]["weights"][jaw] + 0.1, mouth["range"]
     lit = shots["open"]["normals"]
+    (ARTIFACTS / "morph_normals.json").write_text(json.dumps(lit))  # for the report (docs/animation.md)
     assert lit["count"] > 100, lit
     assert lit["restLag"]["p99"] > 10.0, lit  # the open mouth really turns its surface: rest normals are off
     assert lit["turned"]["p99"] > 0.5 * lit["restLag"]["p99"], lit  # the drawn normals turn with it ...
     # ... and follow the shape: the blend of per-target deltas is close to the true normals (docs/animation.md).
-    assert lit["lag"]["median"] < 2.0 and lit["lag"]["p99"] < 0.5 * lit["restLag"]["p99"], lit
+    # Two runs: median 1.1-1.4, 99th percentile 9.7-11.4 against the rest normals' 25-26 (main: equal to them).
+    assert lit["lag"]["median"] < 2.5 and lit["lag"]["p99"] < 0.6 * lit["restLag"]["p99"], lit
     closed, opened = _png(ARTIFACTS / "morph_closed.png"), _png(ARTIFACTS / "morph_open.png")
     assert closed.shape == opened.shape
     changed = np.mean(np.abs(opened - closed).sum(axis=2) > 60)
