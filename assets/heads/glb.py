@@ -3,8 +3,10 @@
 Vertex order is kept exactly (no re-indexing), so moving-vertex indices and vertex deltas address
 the written mesh directly. UVs are written as stored (glTF's convention, v down: facecast's own).
 
-Every primitive carries smooth NORMALs of the neutral mesh (without them glTF clients shade flat);
-vertex colours (sRGB in a HeadMesh) are written linear, as glTF's COLOR_0 is read.
+Every primitive carries smooth NORMALs of the neutral mesh (without them glTF clients shade flat), and a head's
+own morph targets (weights in [0, 1]) carry NORMAL deltas (:func:`assets.heads.mesh.target_normal_deltas`), so
+a viewer lights each pose as its shape rather than with the rest normals; vertex colours (sRGB in a HeadMesh) are
+written linear, as glTF's COLOR_0 is read.
 
 - :func:`mesh_glb` / :func:`mesh_json`: the static head the server offers (``/head/mesh``,
   ``/head/mesh.json``), with the head's morph targets when it has any.
@@ -27,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from assets.errors import GlbError
-from assets.heads.mesh import HeadMesh, srgb_to_linear, vertex_normals
+from assets.heads.mesh import HeadMesh, srgb_to_linear, target_normal_deltas, vertex_normals
 
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -126,9 +128,12 @@ def _primitive(
     targets: np.ndarray | None,
     sparse: bool = False,
     part: np.ndarray | None = None,
+    target_normals: bool = False,
 ) -> dict:
     """sparse: store a target that moves under a quarter of the vertices as a sparse accessor; part: each vertex's
-    part, whose seams with other parts are shaded as one surface (:func:`assets.heads.mesh.vertex_normals`)."""
+    part, whose seams with other parts are shaded as one surface (:func:`assets.heads.mesh.vertex_normals`);
+    target_normals: each target also carries its NORMAL deltas (morph weights in [0, 1]; not the rig's IOD-unit
+    targets, whose weight-1 shape is far outside any pose)."""
     v = np.ascontiguousarray(vertices, dtype="<f4")
     t = np.ascontiguousarray(triangles, dtype="<u4")
     n = len(v)
@@ -138,8 +143,8 @@ def _primitive(
         raise GlbError(f"triangles must be (m, 3) indices below {n}")
     attributes = {"POSITION": buf.accessor(v, "VEC3", _FLOAT, _ARRAY_BUFFER, minmax=True)}
     # Without NORMAL a glTF client must shade flat (glTF 2.0 3.7.2.1): three.js showed the head faceted.
-    # The neutral face's smooth normals (the targets carry no NORMAL: a glTF viewer lights every frame with these;
-    # facecast's own renderer recomputes them per frame, clients/render/renderer.py).
+    # The neutral face's smooth normals (facecast's own renderer recomputes them per frame, clients/render/renderer.py;
+    # a glTF viewer adds the targets' NORMAL deltas when they carry them, else lights every frame with these).
     normals = vertex_normals(np.asarray(vertices, dtype=np.float64), t, part)
     attributes["NORMAL"] = buf.accessor(np.ascontiguousarray(normals, dtype="<f4"), "VEC3", _FLOAT, _ARRAY_BUFFER)
     material: dict = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.8}, "doubleSided": True}
@@ -168,6 +173,17 @@ def _primitive(
             }
             for j in range(len(d))
         ]
+        if target_normals:
+            dn = target_normal_deltas(np.asarray(vertices, dtype=np.float64), t, d, part)
+            turned = (np.abs(dn).max(axis=2) > 0).sum(axis=1)
+            for j, target in enumerate(prim["targets"]):
+                # Sparse whatever ``sparse`` says: the deltas are 0 beyond the moved vertices' neighbours, and dense
+                # ones doubled the built-in head's ARKit glb (3.3 -> 6.3 MB).
+                target["NORMAL"] = (
+                    buf.sparse_vec3(dn[j])
+                    if turned[j] * 4 < n
+                    else buf.accessor(np.ascontiguousarray(dn[j]), "VEC3", _FLOAT, _ARRAY_BUFFER)
+                )
     prim["indices"] = buf.accessor(t.reshape(-1), "SCALAR", _UINT32, _ELEMENT_ARRAY_BUFFER)
     doc["materials"] = [material]
     return prim
@@ -183,7 +199,8 @@ def mesh_targets(mesh: HeadMesh, names: tuple[str, ...] | None = None) -> tuple[
 
 def mesh_glb(mesh: HeadMesh) -> bytes:
     """One-mesh GLB: POSITION and NORMAL (float32), TEXCOORD_0 + the embedded texture when present, COLOR_0
-    when the mesh has vertex colours, its morph targets (names in ``mesh.extras.targetNames``), uint32 indices."""
+    when the mesh has vertex colours, its morph targets (POSITION and NORMAL deltas, names in
+    ``mesh.extras.targetNames``), uint32 indices."""
     buf = _Buffer()
     doc: dict = {"asset": {"version": "2.0", "generator": "facecast"}}
     names, targets = mesh_targets(mesh)
@@ -197,6 +214,7 @@ def mesh_glb(mesh: HeadMesh) -> bytes:
         mesh.texture if mesh.uvs is not None else None,
         targets,
         part=mesh.part,
+        target_normals=True,
     )
     m: dict = {"name": "head", "primitives": [prim]}
     if names:
@@ -208,9 +226,12 @@ def mesh_glb(mesh: HeadMesh) -> bytes:
 
 def mesh_json(mesh: HeadMesh, morph_names: tuple[str, ...] | None = None) -> bytes:
     """{"vertices": [x, y, z, ...], "triangles": [i, j, k, ...], "uvs": [u, v, ...] | null,
-    "colors": [r, g, b, ...] | null, "morph": {"names": [...], "vertices": [...], "deltas": [[...]]} | null}
-    as UTF-8 JSON (vertex order as in the GLB). ``morph`` lists the targets ``morph_names`` (the ones a
-    :class:`MorphRig` drives; default all) sparsely: the vertices any of them moves and per target their x, y, z."""
+    "colors": [r, g, b, ...] | null, "morph": {"names": [...], "vertices": [...], "deltas": [[...]],
+    "normals": {"vertices": [...], "deltas": [[...]]}} | null} as UTF-8 JSON (vertex order as in the GLB). ``morph``
+    lists the targets ``morph_names`` (the ones a :class:`MorphRig` drives; default all) sparsely: the vertices any of
+    them moves and per target their x, y, z; ``normals`` the same for their normal deltas
+    (:func:`assets.heads.mesh.target_normal_deltas`), on the vertices any of them turns (the moved ones and their
+    neighbours)."""
 
     def flat(a: np.ndarray | None, dtype: str) -> list | None:
         return None if a is None else np.asarray(a, dtype=dtype).reshape(-1).tolist()
@@ -221,10 +242,19 @@ def mesh_json(mesh: HeadMesh, morph_names: tuple[str, ...] | None = None) -> byt
     if morph_names and mesh.targets:
         d = np.stack([np.asarray(mesh.targets[k], dtype=np.float32) for k in morph_names])
         idx = np.flatnonzero(np.abs(d).max(axis=(0, 2)) > 0)
+        # Relative to the rest normals the browser computes (three.js's computeVertexNormals: this area-weighted
+        # rule without part seams), so that rest + delta at weight 1 is the target's own shading there.
+        dn = target_normal_deltas(np.asarray(mesh.vertices, dtype=np.float32), mesh.triangles, d)
+        turned = np.flatnonzero(np.abs(dn).max(axis=(0, 2)) > 0)
         morph = {
             "names": list(morph_names),
             "vertices": idx.tolist(),
             "deltas": [flat(d[j, idx], "float64") for j in range(len(d))],
+            # 1e-4 of a unit normal (0.006 degrees) is finer than any lighting: the full float32 digits added 2.2 MB.
+            "normals": {
+                "vertices": turned.tolist(),
+                "deltas": [np.round(dn[j, turned], 4).reshape(-1).tolist() for j in range(len(d))],
+            },
         }
     doc = {
         "vertices": flat(np.asarray(mesh.vertices, np.float32), "float64"),
@@ -251,13 +281,15 @@ def animated_glb(
     units: str = "IOD",
     sparse: bool = False,
     part: np.ndarray | None = None,
+    target_normals: bool = False,
 ) -> bytes:
     """GLB bytes. vertices (n, 3) neutral positions (mesh units); triangles (m, 3) vertex indices;
     targets (T, n, 3) displacement per unit weight; target_names (T,); weights (F, T) per frame at
     ``fps`` (the animation starts at 0 s); uvs (n, 2) with texture (PNG/JPEG bytes) or colors (n, 3)
     in [0, 1]; audio: file name recorded in asset.extras; units: what the weights measure; sparse: a
     target that moves under a quarter of the vertices is stored as a glTF sparse accessor; part (n,): each vertex's
-    part, for the normals (:func:`assets.heads.mesh.vertex_normals`)."""
+    part, for the normals (:func:`assets.heads.mesh.vertex_normals`); target_normals: the targets carry NORMAL deltas
+    (weights in [0, 1]: a head's own morph targets)."""
     w = np.asarray(weights, dtype=np.float64)
     d = np.asarray(targets)
     if d.ndim != 3 or d.shape[0] != len(target_names):
@@ -276,7 +308,9 @@ def animated_glb(
             "extras": {"facecast": {"audio": audio, "fps": float(fps), "units": units, "curves": list(target_names)}},
         }
     }
-    prim = _primitive(buf, doc, vertices, triangles, uvs, colors, texture, d, sparse, part=part)
+    prim = _primitive(
+        buf, doc, vertices, triangles, uvs, colors, texture, d, sparse, part=part, target_normals=target_normals
+    )
     times = np.ascontiguousarray(np.arange(len(w)) / fps, dtype="<f4")
     t_in = buf.accessor(times, "SCALAR", _FLOAT, None, minmax=True)  # glTF requires min/max on inputs
     w_out = buf.accessor(np.ascontiguousarray(w, dtype="<f4").reshape(-1), "SCALAR", _FLOAT, None)  # frame-major
@@ -346,6 +380,7 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
             audio=audio,
             units="morph weight",
             part=mesh.part,
+            target_normals=True,
         )
     # The lip-contact push is not linear in the parameters, but it is linear in each lip column's
     # crossing (deficit): one sparse target per column, animated by its deficit per frame, makes the

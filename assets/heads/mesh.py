@@ -91,6 +91,26 @@ def vertex_normals(
     return out.astype(np.float32)
 
 
+def target_normal_deltas(
+    v: np.ndarray, t: np.ndarray, targets: np.ndarray, part: np.ndarray | None = None
+) -> np.ndarray:
+    """(T, n, 3) float32 per-target normal deltas of a head driven by its own morph targets: the
+    :func:`vertex_normals` of ``v + targets[j]`` (the target at weight 1) minus those of ``v`` (n, 3), with the same
+    ``part`` seams (found once, at rest). glTF morph targets carry them as NORMAL (three.js blends them, morphNormals):
+    without them a viewer lights every pose with the rest normals (a lower lip turned down keeps its rest shading).
+    A weighted sum of these deltas added to the rest normals and renormalised approximates the normals of the
+    blended shape (docs/animation.md measures how closely at /a/, /u/ and a smile); exactly 0 on the vertices no
+    target's triangles touch, so a sparse store keeps only the moved vertices and their neighbours."""
+    v = np.asarray(v, dtype=np.float64)
+    d = np.asarray(targets, dtype=np.float64)
+    seams = None if part is None else part_seams(v, part)
+    rest = vertex_normals(v, t, seams=seams)
+    out = np.empty(d.shape, dtype=np.float32)
+    for j in range(len(d)):
+        out[j] = vertex_normals(v + d[j], t, seams=seams) - rest
+    return out
+
+
 @dataclass(frozen=True)
 class PartSeams:
     """Where the meshes of a head made of several meet: ``canon`` (n,) each vertex's welded position (as the rig

@@ -33,9 +33,11 @@ def animated_glb(
     texture: bytes | None = None,
     audio: str | None = None,
     units: str = "IOD",
+    target_normals: bool = False,
 ) -> bytes:
     """:func:`assets.heads.glb.animated_glb` with the track's values as the weights (ExportError on bad input);
-    ``units``: what the weights measure, recorded in ``asset.extras.facecast``."""
+    ``units``: what the weights measure, recorded in ``asset.extras.facecast``; ``target_normals``: the targets
+    carry NORMAL deltas (morph weights in [0, 1])."""
     try:
         return glb.animated_glb(
             vertices=vertices,
@@ -49,6 +51,7 @@ def animated_glb(
             texture=texture,
             audio=audio,
             units=units,
+            target_normals=target_normals,
         )
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
@@ -112,4 +115,5 @@ def arkit_glb(
         texture=mesh.texture if mesh.uvs is not None else None,
         audio=audio,
         units="morph weight",  # ARKit weights in [0, 1], as a morph head's own targets' glb says
+        target_normals=True,
     )

@@ -97,3 +97,23 @@ def test_a_morph_heads_mesh_json_carries_the_driven_targets_in_wire_order(builti
     want = np.zeros_like(full)
     want[rig.moving] = rig.displacements(p)
     np.testing.assert_allclose(full, want, atol=1e-6 * np.abs(want).max())
+    # Each target's normal deltas (issue 12) are relative to the rest normals the browser computes (area-weighted,
+    # no welding: three.js's computeVertexNormals), computed here: rest + delta is the normal of rest + target.
+    v = np.array(m["vertices"]).reshape(-1, 3)
+    tris = np.array(m["triangles"]).reshape(-1, 3)
+
+    def normals(x):
+        fn = np.cross(x[tris[:, 1]] - x[tris[:, 0]], x[tris[:, 2]] - x[tris[:, 0]])
+        n = np.zeros_like(x)
+        for c in range(3):
+            np.add.at(n, tris[:, c], fn)
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+
+    turned = np.array(m["morph"]["normals"]["vertices"])
+    jaw = rig.names.index("jawOpen")
+    moved = v.copy()
+    moved[idx] += d[jaw]
+    lit = normals(v)
+    lit[turned] += np.array(m["morph"]["normals"]["deltas"][jaw]).reshape(-1, 3)
+    np.testing.assert_allclose(lit, normals(moved), atol=2e-4)  # 4 decimals sent
+    assert np.abs(normals(moved) - normals(v)).max() > 0.3  # the jaw does turn the surface

@@ -1,14 +1,17 @@
 // The head in three.js: built from the server's /head/mesh.json (+ /head/texture), moved by frames.
 //
 // The vertex order is the server's, so a frame's vertex deltas (x, y, z of each moving vertex, in
-// the description's moving_vertices order) are added to the neutral positions directly. Normals
-// stay those of the neutral pose, as in the offline renderer (speech barely changes the lighting).
+// the description's moving_vertices order) are added to the neutral positions directly, and each frame is
+// lit with its own shape's normals (applyDeltas), as in the offline renderer.
 // Back faces are drawn dark (the same mesh, both sides), so an open mouth shows a cavity.
 //
 // A head driven by its own morph targets (the description's head.morph) is moved the way an engine
 // moves it: mesh.json carries the targets (sparse: the vertices any target moves, x, y, z per target),
 // they become three.js morph attributes, and each frame of the "morph" kind sets
-// morphTargetInfluences (one weight per target, in head.morph.names order); the GPU adds them.
+// morphTargetInfluences (one weight per target, in head.morph.names order); the GPU adds them. The targets' normal
+// deltas (mesh.json's morph.normals, relative to computeVertexNormals' rest normals) become morph normals, which
+// three.js blends the same way: without them every pose was lit with the rest normals (a lower lip turned down
+// kept its rest shading, the open mouth's inner lip and chin crease looked flat).
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
@@ -161,6 +164,14 @@ export class HeadView {
       deltas.push(sparse);
       return new THREE.BufferAttribute(dense, 3);
     });
+    const turned = Int32Array.from(morph.normals.vertices);
+    geometry.morphAttributes.normal = morph.normals.deltas.map((flat) => {
+      const dense = new Float32Array(3 * n);
+      for (let i = 0; i < turned.length; i++) {
+        for (let c = 0; c < 3; c++) dense[3 * turned[i] + c] = flat[3 * i + c];
+      }
+      return new THREE.BufferAttribute(dense, 3);
+    });
     geometry.morphTargetsRelative = true;
     return { names: morph.names, vertices, deltas, reach };
   }
@@ -252,6 +263,60 @@ export class HeadView {
     }
     fresh.dispose();
     return (worst * 180) / Math.PI;
+  }
+
+  /** A morph head's lighting at the shown influences, over the vertices the frame moves most (>= 10% of the
+   *  largest displacement: lips, jaw, chin), as {count, turned, lag, restLag} (automation): turned, the angles
+   *  (degrees, median and 99th percentile) between the normals three.js draws (the rest normals plus the
+   *  influences times the morph normals, as its morphnormal_vertex shader adds them) and the rest normals; lag,
+   *  between the drawn normals and those computeVertexNormals gives the blended shape; restLag, between the rest
+   *  normals and the blended shape's. */
+  morphNormals() {
+    if (!this.mesh || !this.morph) return null;
+    const geo = this.mesh.geometry;
+    const inf = this.meshes[0].morphTargetInfluences;
+    const rest = geo.getAttribute("normal").array;
+    const pos = geo.getAttribute("position").array;
+    const n = pos.length / 3;
+    const shape = new Float32Array(pos);
+    const drawn = new Float32Array(rest);
+    const dn = geo.morphAttributes.normal ?? [];
+    geo.morphAttributes.position.forEach((attr, j) => {
+      if (!inf[j]) return;
+      for (let k = 0; k < 3 * n; k++) shape[k] += inf[j] * attr.array[k];
+      if (dn[j]) for (let k = 0; k < 3 * n; k++) drawn[k] += inf[j] * dn[j].array[k];
+    });
+    const fresh = new THREE.BufferGeometry();
+    fresh.setAttribute("position", new THREE.BufferAttribute(shape, 3));
+    fresh.setIndex(geo.getIndex());
+    fresh.computeVertexNormals();
+    const truth = fresh.getAttribute("normal").array;
+    fresh.dispose();
+    const moved = new Float32Array(n);
+    let top = 0;
+    for (let i = 0; i < n; i++) {
+      moved[i] = Math.hypot(shape[3 * i] - pos[3 * i], shape[3 * i + 1] - pos[3 * i + 1], shape[3 * i + 2] - pos[3 * i + 2]);
+      top = Math.max(top, moved[i]);
+    }
+    const angle = (a, b, i) => {
+      const o = 3 * i;
+      const dot = a[o] * b[o] + a[o + 1] * b[o + 1] + a[o + 2] * b[o + 2];
+      const len = Math.hypot(a[o], a[o + 1], a[o + 2]) * Math.hypot(b[o], b[o + 1], b[o + 2]) || 1;
+      return (Math.acos(Math.min(1, Math.max(-1, dot / len))) * 180) / Math.PI;
+    };
+    const turned = [], lag = [], restLag = [];
+    for (let i = 0; i < n; i++) {
+      if (!(top > 0) || moved[i] < 0.1 * top) continue;
+      turned.push(angle(drawn, rest, i));
+      lag.push(angle(drawn, truth, i));
+      restLag.push(angle(rest, truth, i));
+    }
+    const stats = (a) => {
+      const s = Float64Array.from(a).sort();
+      const at = (q) => (s.length ? s[Math.min(s.length - 1, Math.floor(q * s.length))] : null);
+      return { median: at(0.5), p99: at(0.99) };
+    };
+    return { count: turned.length, turned: stats(turned), lag: stats(lag), restLag: stats(restLag) };
   }
 
   /** Draw if anything changed since the last draw (call once per animation frame). */

@@ -6,7 +6,8 @@
 // the page falls back to vertex deltas, then to the mouth parameters, when the server has no such head).
 // Automation hook: window.facecast exposes the state shown in the panel, freeze(on) to hold the
 // displayed frame (screenshots), mouthBox() (where the mouth is on the canvas), morph() (the
-// shown frame's streamed weights and the morphTargetInfluences three.js draws with), applied(from)
+// shown frame's streamed weights and the morphTargetInfluences three.js draws with), morphNormals() (how
+// the normals drawn at the shown influences turn and follow the shape: HeadView.morphNormals), applied(from)
 // (the record of every frame applied: {n, index, peak}, n counting from 0), and freezeWhen({above}
 // or {below}) + caught(): the page itself freezes on the first frame applied after the call whose
 // peak passes the bound, so a check never depends on polling a value that changes 30 times a second.
@@ -429,6 +430,7 @@ window.facecast = {
   caught: () => caught,
   mouthBox: () => view.mouthBox(),
   normalsLag: () => view.normalsLag(),
+  morphNormals: () => view.morphNormals(),
   morph: () => ({ names: view.morph?.names ?? null, index: shown?.index ?? null,
     weights: shown && state.kind === "morph" ? Array.from(shown.values) : null, influences: view.influences() }),
   audio: () => ({ running: audio.running, played: audio.played, lateDropped: audio.lateDropped, syncMs: audio.syncMs }),

@@ -8,7 +8,8 @@
 // morph_open.png: the same mouth-region clip with the mouth closed and open; morph_viewer.png: the page).
 //   {"step":"samples", ...}  the page's kind and target names, and ~80 shown frames
 //                            {index, weights (streamed), influences (what three.js draws with)}
-//   {"step":"mouth", ...}    closed/open frames captured (their peaks, the clip box), draw time
+//   {"step":"mouth", ...}    closed/open frames captured (their peaks, weights, the normals drawn there:
+//                            HeadView.morphNormals; the clip box), draw time
 //   {"step":"deltas", ...}   the same session watched as vertex deltas (?kind=deltas): its draw time
 //   {"step":"done", "console_errors": [...]}
 // Exits 1 with {"step":"error", ...} when something does not happen within its time limit.
@@ -52,7 +53,7 @@ async function main() {
   // Closed and open frames (by the page's peak estimate), the same clip around the mouth.
   const { shots, range, clip } = await captureMouth(page, outDir, "morph_", async (p) => {
     const m = await p.evaluate(() => window.facecast.morph());
-    return { index: m.index, weights: m.weights };
+    return { index: m.index, weights: m.weights, normals: await p.evaluate(() => window.facecast.morphNormals()) };
   });
   await page.screenshot({ path: join(outDir, "morph_viewer.png") });
   const morphDraw = await drawTimes(page, 3);
