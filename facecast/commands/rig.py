@@ -69,12 +69,13 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.errors import MeshError, RigCheckError, RigFileError
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.head import builtin_morph_head, head_landmarks, rig_checked
+    from assets.heads.head import builtin_morph_head, head_landmarks, keep_rig, rig_cache_path, rig_checked
     from assets.heads.landmarks import credit_for, read_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
     from assets.heads.rigging import candide_face, resolve_landmarks
+    from clients.render.landmarks import find_landmarks
     from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES
 
@@ -108,8 +109,6 @@ def run(args: argparse.Namespace) -> int:
         source = args.landmarks or "builtin"
     else:
         mesh = load_mesh(args.head, parts=tuple(args.head_part))
-        from clients.render.landmarks import find_landmarks
-
         spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
     if args.show_landmarks:
         from assets.heads.plot import plot_landmarks
@@ -135,6 +134,11 @@ def run(args: argparse.Namespace) -> int:
             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
         )
     out = save_rig(rig, rigged, args.output)
+    cached = args.head != "builtin" and simple is None and cfg == RigConfig()
+    if cached:
+        # What --head MESH (say, render, serve) would rig from the same mesh, landmarks and options: kept in its rig
+        # cache too, so the next command reads it instead of rigging the head again (minutes for a scanned head).
+        keep_rig(rig, rigged, rig_cache_path(mesh, args.landmarks, cfg, find_landmarks))
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
     credit = credit_for(args.head)
     from clients.errors import RenderError
@@ -161,7 +165,19 @@ def run(args: argparse.Namespace) -> int:
         f"{m.get('replacements', 0)} geodesic replacements, {m.get('bad_triangles', 0)} bad triangles, "
         f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
     )
-    # The file, not the mesh, is what saves the minutes: --head MESH rigs into its own cache (keyed by the mesh, the
-    # landmarks and how the command resolves the head), which this command does not fill.
-    print(f"rig: use it as --head {out} (every command; serve --rig {out} too); --head {args.head} would rig it again")
+    same = (
+        f"--head {args.head}"
+        + "".join(f" --head-part {q}" for q in args.head_part)
+        + (f" --landmarks {args.landmarks}" if args.landmarks else "")
+        + (" --head-mode retarget" if mesh.targets else "")  # else its own morph targets drive it
+    )
+    again = (
+        f"{same} reads this rig from the cache"
+        if cached
+        else f"{same} rigs it again (--simple and rig options other than the defaults are only in the file)"
+    )
+    print(
+        f"rig: use it as --head {out} (every command; serve --rig {out} too)"
+        + (f"; {again}" if args.head != "builtin" else "")
+    )
     return 0
