@@ -130,6 +130,7 @@ OTHER_MAP_WORDS = frozenset(
         "normal", "nrm", "norm", "rough", "roughness", "gloss", "glossiness", "spec", "specular", "ao",
         "occlusion", "ambientocclusion", "bump", "height", "disp", "displacement", "metal", "metallic",
         "metalness", "opacity", "alpha", "emissive", "emission", "orm",
+        "tangent",  # a tangent-space normal map (three.js's Lee Perry-Smith: Infinite-Level_02_Tangent_SmoothUV.jpg)
     }
 )  # fmt: skip
 

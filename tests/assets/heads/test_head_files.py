@@ -139,6 +139,7 @@ def test_colour_map_beside_a_mesh_is_chosen_by_whole_words(tmp_path, capsys):
     # Only other maps or names that say nothing: no texture (a grey head beats a normal map painted on the skin).
     assert texture_of("none", {"collar.png": red, "school.png": green}) is None
     assert texture_of("normal", {"head_normal.png": red}) is None
+    assert texture_of("tangent", {"Infinite-Level_02_Tangent_SmoothUV.jpg": red}) is None  # three.js's normal map
     assert texture_of("maps", {"Map-NRM.png": red, "Map-SPEC.png": green, "roughnessMap.png": blue}) is None
     assert texture_of("only", {"face.png": grey}) == image("only", "face.png")  # the only image: as before
     # Two colour maps: the one sharing the mesh's name, and a warning naming it and the other.
