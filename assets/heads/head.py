@@ -275,6 +275,24 @@ def rig_cache_path(
     return (cache or cache_dir()) / "rigs" / f"{_rig_key(mesh, landmarks, config, finder)}.npz"
 
 
+def cached_rig(path: Path) -> tuple[Rig, HeadMesh, RigReport] | None:
+    """The rig kept at ``path`` (:func:`rig_cache_path`) with the checks measured when it was made (its meta
+    "checks", :func:`rig_checked`), or None: none there, unreadable, or without its checks (an older writer)."""
+    from assets.heads.rigfile import load_rig
+    from realtime_core.face.checks import RigReport
+
+    if not path.is_file():
+        return None
+    try:
+        rig, mesh = load_rig(path)
+        kept = rig.meta.get("checks")
+        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in dict(kept or {}).items()}
+        report = RigReport(**fields)
+    except (RigFileError, TypeError, ValueError):  # unreadable, or checks missing or of another version
+        return None
+    return rig, mesh, report
+
+
 def keep_rig(rig: Rig, mesh: HeadMesh, path: Path) -> None:
     """Write a rig into the rig cache (``path`` from :func:`rig_cache_path`), atomically, and remove the stale
     rigs there; a read-only cache costs the next command time, not the rig, so it is skipped silently."""

@@ -69,7 +69,14 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.errors import MeshError, RigCheckError, RigFileError
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.head import builtin_morph_head, head_landmarks, keep_rig, rig_cache_path, rig_checked
+    from assets.heads.head import (
+        builtin_morph_head,
+        cached_rig,
+        head_landmarks,
+        keep_rig,
+        rig_cache_path,
+        rig_checked,
+    )
     from assets.heads.landmarks import credit_for, read_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
@@ -123,7 +130,16 @@ def run(args: argparse.Namespace) -> int:
         from assets.heads.wfm import read_wfm
 
         simple = candide_face(read_wfm(args.simple))
-    rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
+    # With the options --head MESH uses, the rig is the one the rig cache keeps for it (--head MESH made it, or an
+    # earlier `rig`): read, not made again (minutes for a scanned head); otherwise made and kept there.
+    cached = args.head != "builtin" and simple is None and cfg == RigConfig()
+    cache_path = rig_cache_path(mesh, args.landmarks, cfg, find_landmarks) if cached else None
+    kept = cached_rig(cache_path) if cache_path is not None else None
+    if kept is not None:
+        rig, rigged, report = kept
+        print(f"rig: the rig of {args.head} with these landmarks and options, read from the rig cache ({cache_path})")
+    else:
+        rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     print(
         f"rig checks at {len(EXTREME_POSES)} speech poses and closure ({len(EXPRESSION_POSES)} under expressions):"
         f" {report.summary()}"
@@ -134,11 +150,10 @@ def run(args: argparse.Namespace) -> int:
             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
         )
     out = save_rig(rig, rigged, args.output)
-    cached = args.head != "builtin" and simple is None and cfg == RigConfig()
-    if cached:
+    if cache_path is not None and kept is None:
         # What --head MESH (say, render, serve) would rig from the same mesh, landmarks and options: kept in its rig
-        # cache too, so the next command reads it instead of rigging the head again (minutes for a scanned head).
-        keep_rig(rig, rigged, rig_cache_path(mesh, args.landmarks, cfg, find_landmarks))
+        # cache too, so the next command reads it instead of rigging the head again.
+        keep_rig(rig, rigged, cache_path)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
     credit = credit_for(args.head)
     from clients.errors import RenderError

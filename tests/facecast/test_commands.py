@@ -73,7 +73,18 @@ def test_rig_command_fills_the_rig_cache(tmp_path, shared_data, own_cache, capsy
     np.testing.assert_allclose(head.rig.neutral, rig.neutral)
     assert head.rig.displacements(p).any()
 
+    # The other way round (say --head MESH first, then rig): the rig command reads the kept rig, and its checks.
     capsys.readouterr()
+    again = tmp_path / "again.npz"
+    assert main(["rig", str(mp), "-o", str(again), "--keep-failing"]) == 0
+    printed = capsys.readouterr().out
+    assert f"read from the rig cache ({kept[0]})" in printed and "rig checks at" in printed
+    after = kept[0].stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    rig_again, _ = load_rig(again)
+    np.testing.assert_array_equal(rig_again.matrix.toarray(), rig.matrix.toarray())
+    assert rig_again.meta["checks"] == rig.meta["checks"]
+
     assert main(["rig", str(mp), "-o", str(tmp_path / "sec5.npz"), "--keep-failing", "--method", "sec5"]) == 0
     assert list((own_cache / "rigs").glob("*.npz")) == kept
     assert f"--head {mp} rigs it again" in capsys.readouterr().out
