@@ -99,6 +99,7 @@ def fit_maps(head, rig) -> dict:
     """head: :class:`assets.heads.builtin.BuiltinHead`; rig: its :class:`realtime_core.face.rig.Rig`."""
     from assets.heads.targets import reference_lips
     from realtime_core.face import MouthLandmarks
+    from realtime_core.face.checks import EXTREME_POSES, expression_poses
     from realtime_core.face.model import measure_mouth
     from training.articulatory import CLASSES
 
@@ -142,12 +143,15 @@ def fit_maps(head, rig) -> dict:
             for e in EXPRESSIONS
         ]
     )
+    # As the module writes them (6 significant digits): the poses below are computed from what the core reads.
+    expr = np.vectorize(lambda v: float(f"{v:.6g}"))(expr)
     return {
         "ARKIT_POS": a_pos,
         "ARKIT_NEG": a_neg,
         "OVR_KEYFRAMES": ovr,
         "OVR_RIDGE": np.array([OVR_RIDGE]),
         "EXPRESSION_PARAMS": expr,
+        "EXPRESSION_POSES": expression_poses(EXTREME_POSES, expr),
     }
 
 
@@ -180,7 +184,10 @@ ARKit targets to the head rig's motion for each signed parameter unit (+-{UNIT_I
 and rounded lips also reproduce its lip gaps and mouth corners (weight {LIP_GAP_WEIGHT:g}). OVR_KEYFRAMES
 ``(4, 14)``: the 14 non-silence OVR visemes in the four parameters, solved per frame (ridge OVR_RIDGE).
 See :mod:`training.fit_maps`. EXPRESSION_PARAMS ``(len(EXPRESSIONS), 4)``: each expression recipe's
-change of the four mouth parameters (IOD), measured on the built-in head.
+change of the four mouth parameters (IOD), measured on the built-in head. EXPRESSION_POSES: speech under
+those expressions, the poses the rig checks' hull needs,
+``realtime_core.face.checks.expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)`` (IOD; Qhull, a tenth of a
+second or more: kept here rather than computed on every import of the checks).
 """
 
 import numpy as np
@@ -189,4 +196,6 @@ import numpy as np
     body = []
     for name in ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS"):
         body.append(f"{_assignment(name, np.asarray(maps[name]))}\n{name}.setflags(write=False)\n")
+    rows = "".join(f"    ({', '.join(repr(float(v)) for v in row)}),\n" for row in maps["EXPRESSION_POSES"])
+    body.append(f"EXPRESSION_POSES: tuple[tuple[float, float, float, float], ...] = (\n{rows})\n")
     return head + "\n".join(body)

@@ -421,15 +421,23 @@ S1_CLIPS_IN_GRID = frozenset({"bbaf2n"})
 never counted as another talker."""
 
 
-def other_talker_clips(folder: str | Path, *, cache_dir: str | Path | None = None) -> list:
+def other_talker_clips(
+    folder: str | Path,
+    *,
+    cache_dir: str | Path | None = None,
+    progress: Callable | None = None,
+    desc: str = "other talkers",
+) -> list:
     """``[(name, FaceTrack, bilabial spans)]`` of the talking-face clips in ``folder`` not spoken by s1
-    (spans from a GRID word alignment beside the clip, :func:`bilabial_spans`; none without one)."""
+    (spans from a GRID word alignment beside the clip, :func:`bilabial_spans`; none without one).
+    ``progress(iterable, desc=, unit=)`` (e.g. tqdm) wraps the clips: measuring one takes seconds."""
     from training.video import VIDEO_SUFFIXES, load_face_track
 
+    wrap = progress or (lambda it, **_: it)
+    clips = sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
+    clips = [p for p in clips if not any(p.stem.endswith(s) for s in S1_CLIPS_IN_GRID)]
     out = []
-    for clip in sorted(p for p in Path(folder).iterdir() if p.suffix.lower() in VIDEO_SUFFIXES):
-        if any(clip.stem.endswith(s) for s in S1_CLIPS_IN_GRID):
-            continue
+    for clip in wrap(clips, desc=desc, unit="clip"):
         out.append((clip.stem, load_face_track(clip, cache_dir=cache_dir), bilabial_spans(words_of(clip) or [])))
     return out
 

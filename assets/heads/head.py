@@ -245,10 +245,9 @@ def _rig_mesh(
     """Rig ``mesh``, or read the rig cached for the same mesh content, landmarks, configuration and rig
     algorithm (``<cache>/rigs/``): rigging a scanned head takes minutes, and every command taking
     ``--head MESH`` would otherwise pay it again."""
-    from assets.heads.cache import cache_dir
-    from assets.heads.rigfile import load_rig, save_rig
+    from assets.heads.rigfile import load_rig
 
-    path = (cache or cache_dir()) / "rigs" / f"{_rig_key(mesh, landmarks, config, finder)}.npz"
+    path = rig_cache_path(mesh, landmarks, config, finder, cache=cache)
     if path.is_file():
         try:
             return Head(*load_rig(path))
@@ -256,10 +255,52 @@ def _rig_mesh(
             path.unlink(missing_ok=True)  # unreadable (an older writer): rig again below
     spec, source = head_landmarks(mesh, landmarks, finder)
     rig, rigged, _ = rig_checked(mesh, spec, landmark_source=source, config=config)
-    with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
-        save_rig(rig, rigged, path)
-        remove_stale_rigs(path)
+    keep_rig(rig, rigged, path)
     return Head(rig, rigged)
+
+
+def rig_cache_path(
+    mesh: HeadMesh,
+    landmarks: str | Path | Mapping[str, object] | None,
+    config: RigConfig,
+    finder: LandmarkFinder | None,
+    *,
+    cache: Path | None = None,
+) -> Path:
+    """Where the rig of ``mesh`` made from ``landmarks`` (as given: a file, a mapping, or None for the shipped
+    file or ``finder``) and ``config`` is cached: ``<cache>/rigs/<key>.npz`` (:func:`_rig_key`). ``facecast rig``
+    writes there too, so that ``--head MESH`` finds the rig it made."""
+    from assets.heads.cache import cache_dir
+
+    return (cache or cache_dir()) / "rigs" / f"{_rig_key(mesh, landmarks, config, finder)}.npz"
+
+
+def cached_rig(path: Path) -> tuple[Rig, HeadMesh, RigReport] | None:
+    """The rig kept at ``path`` (:func:`rig_cache_path`) with the checks measured when it was made (its meta
+    "checks", :func:`rig_checked`), or None: none there, unreadable, or without its checks (an older writer)."""
+    from assets.heads.rigfile import load_rig
+    from realtime_core.face.checks import RigReport
+
+    if not path.is_file():
+        return None
+    try:
+        rig, mesh = load_rig(path)
+        kept = rig.meta.get("checks")
+        fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in dict(kept or {}).items()}
+        report = RigReport(**fields)
+    except (RigFileError, TypeError, ValueError):  # unreadable, or checks missing or of another version
+        return None
+    return rig, mesh, report
+
+
+def keep_rig(rig: Rig, mesh: HeadMesh, path: Path) -> None:
+    """Write a rig into the rig cache (``path`` from :func:`rig_cache_path`), atomically, and remove the stale
+    rigs there; a read-only cache costs the next command time, not the rig, so it is skipped silently."""
+    from assets.heads.rigfile import save_rig
+
+    with contextlib.suppress(CannotWriteError):
+        save_rig(rig, mesh, path)
+        remove_stale_rigs(path)
 
 
 def remove_stale_rigs(written: Path) -> list[Path]:

@@ -5,8 +5,9 @@ kept as in the file so landmark vertex indices stay valid. glTF morph targets ar
 (they drive the head directly, :mod:`assets.heads.targets`). Texture: one per material; a mesh
 with several textured materials gets one atlas (the tiles side by side, each piece's UVs moved
 into its tile), so renderer, browser and exports all handle a single texture. Untextured pieces
-take their material colour as vertex colours. Without any material texture, a single colour-map
-image next to the file (``*col*``, ``*diffuse*``, ``*albedo*`` or the only image there) is used.
+take their material colour as vertex colours. Without any material texture, a colour-map image next to the
+file is used (named with a whole word col/color/diffuse/albedo/..., else like the mesh, else the only image there;
+never a normal, roughness, ... map: :func:`_sibling_texture`).
 UVs follow glTF's convention (v down, image row 0 at v = 0); OBJ/PLY UVs (v up) are flipped.
 Compressed glTF (meshopt, Draco, KTX2) is decoded first (:mod:`assets.heads.decompress`).
 """
@@ -14,6 +15,8 @@ Compressed glTF (meshopt, Draco, KTX2) is decoded first (:mod:`assets.heads.deco
 from __future__ import annotations
 
 import io
+import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -139,15 +142,52 @@ def part_seams(v: np.ndarray, part: np.ndarray) -> PartSeams | None:
     return PartSeams(canon=canon, group=group.reshape(-1))
 
 
+# Whole words of an image's name (split at non-letters and camelCase: "Head_BaseColor" -> head, base, color) that
+# name a colour map, and those that name another kind of map (never a colour map, whatever else the name says).
+COLOUR_MAP_WORDS = frozenset({"col", "color", "colour", "basecolor", "diffuse", "albedo", "diff"})
+OTHER_MAP_WORDS = frozenset(
+    {
+        "normal", "nrm", "norm", "rough", "roughness", "gloss", "glossiness", "spec", "specular", "ao",
+        "occlusion", "ambientocclusion", "bump", "height", "disp", "displacement", "metal", "metallic",
+        "metalness", "opacity", "alpha", "emissive", "emission", "orm",
+        "tangent",  # a tangent-space normal map (three.js's Lee Perry-Smith: Infinite-Level_02_Tangent_SmoothUV.jpg)
+    }
+)  # fmt: skip
+
+
+def name_words(stem: str) -> list[str]:
+    """The lower-case words of a file name's stem: split at anything not a letter or digit and at camelCase
+    boundaries ("Map-COL" -> map, col; "headNormal_col" -> head, normal, col; "collar" -> collar)."""
+    return [w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|[0-9]+", stem)]
+
+
 def _sibling_texture(path: Path) -> bytes | None:
-    images = sorted(p for p in path.parent.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
-    for key in ("col", "diffuse", "albedo", path.stem.lower()):
-        hits = [p for p in images if key in p.stem.lower()]
-        if len(hits) == 1:
-            return hits[0].read_bytes()
-    if len(images) == 1:
-        return images[0].read_bytes()
-    return None
+    """The colour map beside a mesh whose materials name no image (the fallback: a material's image decides
+    first, :func:`_assemble`): among the images there that are not another kind of map (``OTHER_MAP_WORDS``:
+    normal, roughness, ...), those named a colour map (``COLOUR_MAP_WORDS``, whole words: not "collar"), else
+    those named like the mesh, else the only image; of several, the one sharing most words with the mesh's name
+    (then the first by name), with a warning naming it and how to choose another. None when nothing fits."""
+    images = sorted(p for p in path.parent.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file())
+    words = {p: set(name_words(p.stem)) for p in images}
+    candidates = [p for p in images if not words[p] & OTHER_MAP_WORDS]
+    mesh_words = set(name_words(path.stem))
+    hits = [p for p in candidates if words[p] & COLOUR_MAP_WORDS] or [
+        p for p in candidates if mesh_words and mesh_words <= words[p]
+    ]
+    if not hits and len(candidates) == 1:
+        hits = candidates
+    if not hits:
+        return None
+    chosen = min(hits, key=lambda p: (-len(words[p] & mesh_words), p.name))
+    if len(hits) > 1:
+        others = ", ".join(p.name for p in hits if p != chosen)
+        print(
+            f"facecast: warning: {path}: its materials name no texture and {len(hits)} images beside it could be its "
+            f"colour map; using {chosen.name} (not {others}). To use another, name it in the material (map_Kd in the "
+            ".mtl, baseColorTexture in glTF) or keep one colour map beside the mesh",
+            file=sys.stderr,
+        )
+    return chosen.read_bytes()
 
 
 def check_mesh(mesh: HeadMesh) -> None:

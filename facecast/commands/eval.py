@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 
 SHARED = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve().parents[2].parent / "shared" / "data")
+OTHER_TALKERS = SHARED / "video" / "grid"
+"""The default --video-dir: four GRID clips, three of them by talkers other than s1 (the data README)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -20,7 +22,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Score a model with the live streaming path, beside a loudness baseline (the frame's RMS "
         "level in dB as a mouth-opening predictor). Real lips, truth measured by `facecast extract` (needs the "
         "video extra): (1) held-out GRID s1 sentences (the test split of assets.grid, never tuned on; --grid-split "
-        "val for choices); (2) the other talkers' clips in --video-dir (s1's clip there is left out). Per "
+        "val for choices); (2) the clips in --video-dir (default: other GRID talkers; s1's clip there is left "
+        "out). Per "
         "parameter: r at lag 0, the best lag and its r, nu = std(est)/std(true), the share of bilabial closures "
         "the estimate reaches (mouth_open <= 0.01 IOD). Then (3) held-out synthetic voices (espeak variants f5, "
         "m7; truth = the articulatory rules) and (4) real speech with phone alignments (truth = the rules on "
@@ -40,7 +43,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)",
     )
     p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
-    p.add_argument("--video-dir", type=Path, default=SHARED / "video" / "grid", help="other talkers' clips (GRID)")
+    p.add_argument(
+        "--video-dir",
+        type=Path,
+        default=None,
+        help="a folder of talking-face clips to score (default: the GRID clips of talkers other than s1, "
+        "shared data video/grid)",
+    )
     p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
     p.add_argument("--grid-split", choices=("test", "val"), default="test", help="GRID s1 split to score")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
@@ -97,13 +106,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.modelfile import load_speech_model
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set
-    from training.reallips import (
-        evaluate_lips,
-        lips_markdown,
-        other_talker_clips,
-        plot_lips,
-        s1_clips,
-    )
+    from training.reallips import evaluate_lips, lips_markdown, plot_lips, s1_clips
 
     if args.mu is not None:
         return _run_mu(args)
@@ -138,29 +141,18 @@ def run(args: argparse.Namespace) -> int:
             lips_md.append(f"![s1 {args.grid_split}]({png.name})\n\n")
     else:
         print(f"skipping GRID s1: {args.grid_s1} not found", file=sys.stderr)
-    if args.video_dir.is_dir():
-        clips = other_talker_clips(args.video_dir, cache_dir=args.cache_dir)
-        s, items = evaluate_lips(model, clips)
-        summary["other"] = s
-        goals = {
-            "r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
-            "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20,
-        }
-        lips_md.append(
-            lips_markdown(
-                "2. Real lips: other talkers (never used for any choice)",
-                s,
-                note=f"{len(clips)} clips of talkers other than s1 from {args.video_dir.name}/ "
-                "(s1's bbaf2n left out); closures only where a word alignment exists.",
-                goals=goals,
-            )
+    video_dir = args.video_dir if args.video_dir is not None else OTHER_TALKERS
+    if video_dir.is_dir():
+        section, summary["other"] = clips_section(
+            model, video_dir, cache_dir=args.cache_dir, plot_dir=plot_dir, stem=stem, progress=tqdm
         )
-        if plot_dir is not None:
-            png = plot_lips(items, s, plot_dir / f"{stem}_other_talkers.png", title="other talkers")
-            lips_md.append(f"![other talkers]({png.name})\n\n")
-    else:
-        print(f"skipping other talkers: {args.video_dir} not found", file=sys.stderr)
+        lips_md.append(section)
+    elif args.video_dir is not None:  # asked for by name: not found is the user's mistake, not a section to skip
+        from training.errors import ConfigError
 
+        raise ConfigError(f"--video-dir {args.video_dir}: folder not found")
+    else:
+        print(f"skipping other talkers: {video_dir} not found", file=sys.stderr)
     if args.speech_dir.is_dir():
         from training.reallips import real_speech_clips, score_real_speech
 
@@ -224,6 +216,44 @@ def run(args: argparse.Namespace) -> int:
         atomic_write_bytes(args.output, text.encode())
         print(f"wrote {args.output}")
     return 0
+
+
+def clips_section(
+    model, folder: Path, *, cache_dir=None, plot_dir: Path | None = None, stem: str = "accuracy", progress=None
+):
+    """The real-lips section of the talking-face clips in ``folder`` (their face tracks measured, or read from
+    the cache, with ``progress(iterable, desc=, unit=)`` around them, e.g. tqdm): ``(markdown, LipScores)``.
+    Titled "other talkers" for the default folder (:data:`OTHER_TALKERS`), else after the folder: a user's
+    folder may hold anyone, s1 included. ConfigError when it holds no clip."""
+    from training.errors import ConfigError
+    from training.reallips import evaluate_lips, lips_markdown, other_talker_clips, plot_lips
+
+    default = folder.resolve() == OTHER_TALKERS.resolve()
+    what = "other talkers" if default else f"clips in {folder}"
+    clips = other_talker_clips(folder, cache_dir=cache_dir, progress=progress, desc=what)
+    if not clips:
+        raise ConfigError(f"--video-dir {folder}: no talking-face clips there (video files, e.g. .mp4 .mpg)")
+    s, items = evaluate_lips(model, clips)
+    goals = {
+        "r(mouth_open) >= 0.70": s.r["mouth_open"] >= 0.70,
+        "r(mouth_open) >= loudness + 0.20": s.r["mouth_open"] >= s.r_loudness + 0.20,
+    }
+    if default:
+        title = "2. Real lips: other talkers (never used for any choice)"
+        note = f"{len(clips)} clips of talkers other than s1 from {folder.name}/ (s1's bbaf2n left out)"
+    else:
+        title = f"2. Real lips: {what}"
+        note = f"{len(clips)} clips from {folder}/ (any named like s1's GRID clip bbaf2n left out)"
+    md = lips_markdown(title, s, note=note + "; closures only where a word alignment exists.", goals=goals)
+    if plot_dir is not None:
+        import re
+
+        name = (
+            "other_talkers" if default else "clips_" + (re.sub(r"[^A-Za-z0-9]+", "_", folder.name).strip("_") or "dir")
+        )
+        png = plot_lips(items, s, plot_dir / f"{stem}_{name}.png", title=what)
+        md += f"![{what}]({png.name})\n\n"
+    return md, s
 
 
 def _run_mu(args: argparse.Namespace) -> int:

@@ -87,7 +87,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("model", metavar="MODEL", help="model file (.npz) or a shipped name (default, low-latency)")
     p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
-    p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
+    p.add_argument(
+        "--grid-s1",
+        type=Path,
+        default=None,
+        help="the GRID s1 corpus (default: the shared data's video/grid_s1); not with --corpus, which replaces it",
+    )
     p.add_argument(
         "--corpus",
         type=Path,
@@ -178,6 +183,19 @@ def _run(args: argparse.Namespace) -> int:
     from training.reallips import s1_clips
 
     check_model_output(args.output)
+    # --corpus replaces GRID s1 (its own utterances fit and choose): a --grid-s1 beside it would be ignored, and
+    # a --choose-fraction without it (GRID s1's train and val are fixed); either is a mistake the user should see.
+    if args.corpus is not None and args.grid_s1 is not None:
+        raise ConfigError(
+            f"--corpus {args.corpus} and --grid-s1 {args.grid_s1}: --corpus replaces GRID s1 (its utterances both fit "
+            "and choose the readout); give one of them"
+        )
+    if args.corpus is None and args.choose_fraction is not None:
+        raise ConfigError(
+            f"--choose-fraction {args.choose_fraction} splits a --corpus folder; GRID s1 fits on its train split "
+            "and chooses on val"
+        )
+    grid_s1 = args.grid_s1 if args.grid_s1 is not None else SHARED / "video" / "grid_s1"
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
     # Checked here, before the corpus is read: an unknown name or a weight <= 0 is a ConfigError naming it.
     candidates = [replace(spec, loss_weight=args.loss_weight) for spec in args.candidates]
@@ -189,9 +207,9 @@ def _run(args: argparse.Namespace) -> int:
         if parts:
             clips = parts[split]
         else:
-            clips = s1_clips(split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+            clips = s1_clips(split, root=grid_s1, cache_dir=args.cache_dir, progress=tqdm)
         if not clips:
-            raise ConfigError(f"no GRID s1 {split} sentences (video + .align) under {args.grid_s1}")
+            raise ConfigError(f"no GRID s1 {split} sentences (video + .align) under {grid_s1}")
         sets[split] = trace_clips(model, clips, progress=tqdm)
         if split == "train" and vtlp.copies:
             sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)

@@ -69,12 +69,20 @@ def run(args: argparse.Namespace) -> int:
 
     from assets.errors import MeshError, RigCheckError, RigFileError
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.head import builtin_morph_head, head_landmarks, rig_checked
+    from assets.heads.head import (
+        builtin_morph_head,
+        cached_rig,
+        head_landmarks,
+        keep_rig,
+        rig_cache_path,
+        rig_checked,
+    )
     from assets.heads.landmarks import credit_for, read_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
     from assets.heads.rigging import candide_face, resolve_landmarks
+    from clients.render.landmarks import find_landmarks
     from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES
 
@@ -108,8 +116,6 @@ def run(args: argparse.Namespace) -> int:
         source = args.landmarks or "builtin"
     else:
         mesh = load_mesh(args.head, parts=tuple(args.head_part))
-        from clients.render.landmarks import find_landmarks
-
         spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
     if args.show_landmarks:
         from assets.heads.plot import plot_landmarks
@@ -124,7 +130,16 @@ def run(args: argparse.Namespace) -> int:
         from assets.heads.wfm import read_wfm
 
         simple = candide_face(read_wfm(args.simple))
-    rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
+    # With the options --head MESH uses, the rig is the one the rig cache keeps for it (--head MESH made it, or an
+    # earlier `rig`): read, not made again (minutes for a scanned head); otherwise made and kept there.
+    cached = args.head != "builtin" and simple is None and cfg == RigConfig()
+    cache_path = rig_cache_path(mesh, args.landmarks, cfg, find_landmarks) if cached else None
+    kept = cached_rig(cache_path) if cache_path is not None else None
+    if kept is not None:
+        rig, rigged, report = kept
+        print(f"rig: the rig of {args.head} with these landmarks and options, read from the rig cache ({cache_path})")
+    else:
+        rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
     print(
         f"rig checks at {len(EXTREME_POSES)} speech poses and closure ({len(EXPRESSION_POSES)} under expressions):"
         f" {report.summary()}"
@@ -135,6 +150,10 @@ def run(args: argparse.Namespace) -> int:
             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
         )
     out = save_rig(rig, rigged, args.output)
+    if cache_path is not None and kept is None:
+        # What --head MESH (say, render, serve) would rig from the same mesh, landmarks and options: kept in its rig
+        # cache too, so the next command reads it instead of rigging the head again.
+        keep_rig(rig, rigged, cache_path)
     png = Path(args.png) if args.png else Path(args.output).with_suffix(".png")
     credit = credit_for(args.head)
     from clients.errors import RenderError
@@ -161,7 +180,19 @@ def run(args: argparse.Namespace) -> int:
         f"{m.get('replacements', 0)} geodesic replacements, {m.get('bad_triangles', 0)} bad triangles, "
         f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
     )
-    # The file, not the mesh, is what saves the minutes: --head MESH rigs into its own cache (keyed by the mesh, the
-    # landmarks and how the command resolves the head), which this command does not fill.
-    print(f"rig: use it as --head {out} (every command; serve --rig {out} too); --head {args.head} would rig it again")
+    same = (
+        f"--head {args.head}"
+        + "".join(f" --head-part {q}" for q in args.head_part)
+        + (f" --landmarks {args.landmarks}" if args.landmarks else "")
+        + (" --head-mode retarget" if mesh.targets else "")  # else its own morph targets drive it
+    )
+    again = (
+        f"{same} reads this rig from the cache"
+        if cached
+        else f"{same} rigs it again (--simple and rig options other than the defaults are only in the file)"
+    )
+    print(
+        f"rig: use it as --head {out} (every command; serve --rig {out} too)"
+        + (f"; {again}" if args.head != "builtin" else "")
+    )
     return 0

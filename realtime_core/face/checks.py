@@ -58,6 +58,7 @@ from realtime_core.errors import ConfigError
 from realtime_core.expressions import SPEECH_REACH
 from realtime_core.face.model import MouthLandmarks, face_frame
 from realtime_core.face.visibility import front_most
+from realtime_core.fitted_maps import EXPRESSION_POSES as GENERATED_EXPRESSION_POSES
 from realtime_core.normals import triangle_normals
 
 # (upper_lip_raise, lip_stretch, mouth_open, lip_corner_depress), IOD.
@@ -214,18 +215,15 @@ def expression_poses(
     return tuple(tuple(float(x) for x in row) for row in keep)  # type: ignore[misc]
 
 
-def _expression_poses() -> tuple[tuple[float, float, float, float], ...]:
-    from realtime_core.fitted_maps import EXPRESSION_PARAMS
-
-    return expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)
-
-
-EXPRESSION_POSES: tuple[tuple[float, float, float, float], ...] = _expression_poses()
+EXPRESSION_POSES: tuple[tuple[float, float, float, float], ...] = GENERATED_EXPRESSION_POSES
 """Speech under an expression at intensity 1 (:data:`realtime_core.fitted_maps.EXPRESSION_PARAMS` added to
 :data:`EXTREME_POSES` by :func:`realtime_core.expressions.add_expression`), the poses outside the speech hull
 that its hull needs (:func:`expression_poses`): a smile on speech widens the lips to lip_stretch 0.25 with the
 corners up to -0.19, far past what speech alone reaches (0.094, -0.103), and folded lips there that every
-speech pose left clean (docs/animation.md, "Which poses, and why")."""
+speech pose left clean (docs/animation.md, "Which poses, and why"). Computed by ``facecast fit-maps`` into
+:mod:`realtime_core.fitted_maps` beside the expression table (Qhull: 0.2-0.8 s that every import of this module,
+the server's start included, paid); tests/realtime_core/face/test_checks.py keeps it equal to a fresh
+``expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)``: after a change of either, run the fit-maps command it names."""
 
 CHECK_POSES: tuple[tuple[float, float, float, float], ...] = EXTREME_POSES + EXPRESSION_POSES
 """The poses a rig must hold, speech under any expression: what rigging repairs folds at and decides which

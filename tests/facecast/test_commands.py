@@ -26,8 +26,8 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     assert out.is_file() and out.with_suffix(".png").is_file() and landmarks.is_file()
     printed = capsys.readouterr().out
     assert "220 control points" in printed and "rig checks at" in printed
-    # It says how to use the file: --head MESH would rig again (its own cache, which `rig` does not fill).
-    assert f"--head {out} (every command; serve --rig {out} too)" in printed
+    # It says how to use the file, and that --head MESH reads the same rig (test_rig_command_fills_the_rig_cache).
+    assert f"--head {out} (every command; serve --rig {out} too); --head {mp} reads this rig from the cache" in printed
     from assets.heads.rigfile import load_rig
 
     rig, _mesh = load_rig(out)
@@ -43,6 +43,51 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     np.testing.assert_allclose(
         rig.displacements(p), replace(resolve_head(mp).rig, bound=None).displacements(p), atol=1e-9
     )
+
+
+def test_rig_command_fills_the_rig_cache(tmp_path, shared_data, own_cache, capsys):
+    """`facecast rig MESH -o RIG` leaves the rig where `--head MESH` (say, render, serve) looks for it: the next
+    command reads it instead of rigging the head again (it once rigged Lee Perry-Smith a second time). Rig options
+    --head cannot give (--method) make a rig of their own, kept out of the cache."""
+    import argparse
+
+    from facecast.commands.headopts import resolve_from_args
+
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    out = tmp_path / "mp.npz"
+    assert main(["rig", str(mp), "-o", str(out), "--keep-failing"]) == 0
+    kept = list((own_cache / "rigs").glob("*.npz"))
+    assert len(kept) == 1
+    before = kept[0].stat()
+    args = argparse.Namespace(head=str(mp), landmarks=None, head_mode="auto", target_map=None, head_part=[])
+    head = resolve_from_args(args)
+    # Read, not rigged again: a new rig would have replaced the file (atomic write: a new inode).
+    after = kept[0].stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    assert list((own_cache / "rigs").glob("*.npz")) == kept
+    from assets.heads.rigfile import load_rig
+
+    rig, _ = load_rig(out)
+    p = np.array([0.02, -0.05, 0.2, 0.03])
+    np.testing.assert_allclose(head.rig.matrix.toarray(), rig.matrix.toarray(), atol=1e-7)
+    np.testing.assert_allclose(head.rig.neutral, rig.neutral)
+    assert head.rig.displacements(p).any()
+
+    # The other way round (say --head MESH first, then rig): the rig command reads the kept rig, and its checks.
+    capsys.readouterr()
+    again = tmp_path / "again.npz"
+    assert main(["rig", str(mp), "-o", str(again), "--keep-failing"]) == 0
+    printed = capsys.readouterr().out
+    assert f"read from the rig cache ({kept[0]})" in printed and "rig checks at" in printed
+    after = kept[0].stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    rig_again, _ = load_rig(again)
+    np.testing.assert_array_equal(rig_again.matrix.toarray(), rig.matrix.toarray())
+    assert rig_again.meta["checks"] == rig.meta["checks"]
+
+    assert main(["rig", str(mp), "-o", str(tmp_path / "sec5.npz"), "--keep-failing", "--method", "sec5"]) == 0
+    assert list((own_cache / "rigs").glob("*.npz")) == kept
+    assert f"--head {mp} rigs it again" in capsys.readouterr().out
 
 
 def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, capsys):

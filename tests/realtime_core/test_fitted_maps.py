@@ -36,7 +36,7 @@ def test_the_module_is_written_as_ruff_formats_it() -> None:
 
     from training.fit_maps import module_text
 
-    names = ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS")
+    names = ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS", "EXPRESSION_POSES")
     text = module_text({n: getattr(fitted_maps, n) for n in names})
     assert text == Path(fitted_maps.__file__).read_text()
     long = module_text({**{n: getattr(fitted_maps, n) for n in names}, "OVR_KEYFRAMES": np.full((1, 14), 0.123456)})

@@ -158,6 +158,23 @@ def test_readout_command_names_a_corpus_folder_without_sentences(tmp_path, capsy
     assert "Traceback" not in err and not out.exists()
 
 
+def test_readout_command_refuses_corpus_with_grid_s1(tmp_path, capsys):
+    """`facecast readout --corpus DIR --grid-s1 S1`: --corpus replaces GRID s1, so --grid-s1 beside it was silently
+    ignored; now one line naming both options, exit 2, before any work. So is --choose-fraction without --corpus
+    (it splits a corpus folder; GRID s1's split is fixed)."""
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    corpus, s1 = tmp_path / "mycorpus", tmp_path / "s1"
+    rc = main(["readout", "default", "-o", str(out), "--corpus", str(corpus), "--grid-s1", str(s1)])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"--corpus {corpus} and --grid-s1 {s1}" in err and len(err.strip().splitlines()) == 1
+    rc = main(["readout", "default", "-o", str(out), "--choose-fraction", "0.3", "--grid-s1", str(s1)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--choose-fraction 0.3" in err and "--corpus" in err
+    assert not out.exists()
+
+
 def _inverter_traced(model, rng: np.random.Generator, n_clips: int, T: int = 50):
     """Clips of random audio rows through ``model``'s inverter, with a truth a readout can partly learn."""
     oa_clips = [rng.standard_normal((T, DA)) for _ in range(n_clips)]
@@ -374,7 +391,7 @@ def test_readout_command_fits_and_chooses_on_an_extracted_corpus(tmp_path, capsy
     out = tmp_path / "my_ro.npz"
     args = ["readout", str(model), "--corpus", str(corpus), "-o", str(out), "--vtlp-copies", "0"]
     bands = ["--bands", "0.03,0.1", "--candidates", "2:state:0:1"]
-    assert main([*args, *bands, "--choose-fraction", "0.4", "--grid-s1", str(tmp_path / "nowhere")]) == 0
+    assert main([*args, *bands, "--choose-fraction", "0.4"]) == 0
     printed = capsys.readouterr().out
     assert "6 utterances fit, 4 choose" in printed and f"wrote {out}" in printed
     back = load_model(out)

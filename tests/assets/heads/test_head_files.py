@@ -102,6 +102,57 @@ def test_obj_with_mtl_and_two_objects_gets_one_atlas_upright(tmp_path):
     assert _is(_colour_at(img, 0.45, right), (30, 200, 30)) and _is(_colour_at(img, 0.55, right), (200, 30, 30))
 
 
+def _textured_obj(folder: Path, images: dict[str, tuple], *, map_kd: str | None = None) -> Path:
+    """``folder/head.obj``: a box with UVs and no material image (or ``map_Kd map_kd``), beside PNGs named
+    ``images`` (name -> top colour, each file's bytes its own)."""
+    folder.mkdir()
+    for name, top in images.items():
+        (folder / name).write_bytes(_png(top, BOTTOM))
+    v, t, uv = _box()
+    lines = []
+    if map_kd is not None:
+        (folder / "head.mtl").write_text(f"newmtl skin\nmap_Kd {map_kd}\n")
+        lines += ["mtllib head.mtl", "usemtl skin"]
+    lines += [f"v {a} {b} {c}" for a, b, c in v] + [f"vt {a} {1 - b}" for a, b in uv]
+    lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in t]
+    (folder / "head.obj").write_text("\n".join(lines) + "\n")
+    return folder / "head.obj"
+
+
+def test_colour_map_beside_a_mesh_is_chosen_by_whole_words(tmp_path, capsys):
+    """Without a material image, the image beside the mesh named a colour map by a whole word of its name (not
+    "collar"), never a normal/roughness/... map; several: one named, with a warning. The material decides first."""
+
+    def texture_of(folder: str, images: dict[str, tuple], **kw) -> bytes | None:
+        return load_mesh(_textured_obj(tmp_path / folder, images, **kw)).texture
+
+    def image(folder: str, name: str) -> bytes:
+        return (tmp_path / folder / name).read_bytes()
+
+    red, green, blue, grey = (200, 30, 30), (30, 200, 30), (30, 30, 200), (120, 120, 120)
+    got = texture_of("words", {"collar.png": red, "Head_normal_col.png": green, "skin_albedo.png": blue})
+    assert got == image("words", "skin_albedo.png")
+    assert texture_of("camel", {"collar.png": red, "school.png": green, "faceBaseColor.jpg": blue}) == image(
+        "camel", "faceBaseColor.jpg"
+    )
+    assert capsys.readouterr().err == ""  # one colour map each time: nothing to warn about
+    # Only other maps or names that say nothing: no texture (a grey head beats a normal map painted on the skin).
+    assert texture_of("none", {"collar.png": red, "school.png": green}) is None
+    assert texture_of("normal", {"head_normal.png": red}) is None
+    assert texture_of("tangent", {"Infinite-Level_02_Tangent_SmoothUV.jpg": red}) is None  # three.js's normal map
+    assert texture_of("maps", {"Map-NRM.png": red, "Map-SPEC.png": green, "roughnessMap.png": blue}) is None
+    assert texture_of("only", {"face.png": grey}) == image("only", "face.png")  # the only image: as before
+    # Two colour maps: the one sharing the mesh's name, and a warning naming it and the other.
+    assert texture_of("two", {"eyes_diffuse.png": red, "head_col.png": green}) == image("two", "head_col.png")
+    err = capsys.readouterr().err
+    assert "warning" in err and "using head_col.png (not eyes_diffuse.png)" in err and "map_Kd" in err
+    assert len(err.strip().splitlines()) == 1
+    # The material's image decides, whatever lies beside it.
+    assert texture_of("mtl", {"collar.png": red, "skin_albedo.png": blue}, map_kd="collar.png") == image(
+        "mtl", "collar.png"
+    )
+
+
 def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
     v, t, _ = _box()
     q = np.round(v / 1.0 * 32767).astype("<i2")  # KHR_mesh_quantization: normalized int16 positions

@@ -75,6 +75,41 @@ def test_checked_poses_hold_every_frame_a_shipped_model_produces(shared_data: Pa
     assert outside.max() <= 0.002 + 1e-6, x[int(np.argmax(outside))]
 
 
+def test_the_generated_expression_poses_are_a_fresh_computation() -> None:
+    # EXPRESSION_POSES is a table `facecast fit-maps` writes into realtime_core/fitted_maps.py (computing it took
+    # 0.2-0.8 s of every import of the checks): it must be what the pruning gives for today's speech poses and
+    # expression table, or the checks and the bound hold a stale set.
+    from facecast.commands.fit_maps import REGENERATE
+    from realtime_core.face.checks import expression_poses
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    fresh = expression_poses(EXTREME_POSES, EXPRESSION_PARAMS)
+    assert fresh == EXPRESSION_POSES, f"realtime_core/fitted_maps.py is stale: run `{REGENERATE}`"
+    assert all(type(x) is float for row in EXPRESSION_POSES for x in row) and len(EXPRESSION_POSES) > 0
+
+
+def test_importing_the_checks_builds_no_hull() -> None:
+    # A fresh interpreter counting Qhull's hulls while the checks are imported: the pose set was pruned at import
+    # (67 poses, a hull per pose added), 0.2-0.8 s of every command with a head and of the server's start.
+    import subprocess
+    import sys
+
+    code = (
+        "import scipy.spatial as s\n"
+        "built = []\n"
+        "class Counted(s.ConvexHull):\n"
+        "    def __init__(self, *a, **k):\n"
+        "        built.append(1)\n"
+        "        super().__init__(*a, **k)\n"
+        "s.ConvexHull = Counted\n"
+        "import realtime_core.face.checks\n"
+        "print(len(built))\n"
+    )
+    root = Path(__file__).resolve().parents[3]
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True, cwd=root)
+    assert r.stdout.strip() == "0", r.stdout + r.stderr
+
+
 def test_checked_poses_hold_speech_under_every_expression() -> None:
     # The live path layers an expression on speech by add_expression; speech at any intensity in [0, 1] of one
     # expression lies between a speech pose and its copy at intensity 1. Independently of how EXPRESSION_POSES
