@@ -250,7 +250,8 @@ def _rig_mesh(
     path = rig_cache_path(mesh, landmarks, config, finder, cache=cache)
     if path.is_file():
         try:
-            return Head(*load_rig(path))
+            rig, kept = load_rig(path)
+            return Head(rig, _named(kept, mesh.name))
         except RigFileError:
             path.unlink(missing_ok=True)  # unreadable (an older writer): rig again below
     spec, source = head_landmarks(mesh, landmarks, finder)
@@ -275,9 +276,18 @@ def rig_cache_path(
     return (cache or cache_dir()) / "rigs" / f"{_rig_key(mesh, landmarks, config, finder)}.npz"
 
 
-def cached_rig(path: Path) -> tuple[Rig, HeadMesh, RigReport] | None:
+def _named(mesh: HeadMesh, name: str) -> HeadMesh:
+    """A cached rig's mesh under the name (path) the mesh was given as now: the cache is keyed by content, and
+    errors and pictures should name the file the user typed, not the one an earlier command was given."""
+    from dataclasses import replace
+
+    return mesh if mesh.name == name else replace(mesh, name=name)
+
+
+def cached_rig(path: Path, name: str | None = None) -> tuple[Rig, HeadMesh, RigReport] | None:
     """The rig kept at ``path`` (:func:`rig_cache_path`) with the checks measured when it was made (its meta
-    "checks", :func:`rig_checked`), or None: none there, unreadable, or without its checks (an older writer)."""
+    "checks", :func:`rig_checked`), its mesh named ``name`` when given (:func:`_named`), or None: none there,
+    unreadable, or without its checks (an older writer)."""
     from assets.heads.rigfile import load_rig
     from realtime_core.face.checks import RigReport
 
@@ -290,7 +300,7 @@ def cached_rig(path: Path) -> tuple[Rig, HeadMesh, RigReport] | None:
         report = RigReport(**fields)
     except (RigFileError, TypeError, ValueError):  # unreadable, or checks missing or of another version
         return None
-    return rig, mesh, report
+    return rig, mesh if name is None else _named(mesh, name), report
 
 
 def keep_rig(rig: Rig, mesh: HeadMesh, path: Path) -> None:
@@ -321,8 +331,9 @@ def _rig_key(
     config: RigConfig,
     finder: LandmarkFinder | None,
 ) -> str:
-    """Hex digest of everything a rig is made from: the mesh as loaded (its name included: errors and
-    pictures name it), the landmarks as given (a file's bytes, a mapping's JSON; without them the
+    """Hex digest of everything a rig is made from: the mesh as loaded (its content, not the path it was given as:
+    ``rig head.glb`` and ``--head /abs/head.glb`` share one rig; a cached rig is handed out under the name given
+    now, :func:`_named`), the landmarks as given (a file's bytes, a mapping's JSON; without them the
     shipped file's bytes, or which finder would place them), the rig configuration and the rig
     algorithm."""
     import hashlib
@@ -332,7 +343,7 @@ def _rig_key(
     from realtime_core.face.rig import RIG_ALGORITHM
 
     h = hashlib.sha256(f"rig {VERSION} {RIG_ALGORITHM} {config!r}".encode())
-    _hash_mesh(h, mesh)
+    _hash_mesh(h, mesh, name=False)
     if isinstance(landmarks, Mapping):
         h.update(json.dumps(landmarks, sort_keys=True, default=str).encode())
     else:
@@ -349,14 +360,15 @@ def _rig_key(
     return h.hexdigest()[:32]
 
 
-def _hash_mesh(h, mesh: HeadMesh) -> None:
-    """Feed ``h`` (a hashlib object) the mesh as loaded: its name, geometry, colours, texture and parts (what a
-    rig or a render of it is made from; its morph targets are not drawn at rest)."""
+def _hash_mesh(h, mesh: HeadMesh, *, name: bool = True) -> None:
+    """Feed ``h`` (a hashlib object) the mesh as loaded: its name (unless ``name`` is False), geometry, colours,
+    texture and parts (what a rig or a render of it is made from; its morph targets are not drawn at rest)."""
     import json
 
     import numpy as np
 
-    h.update(f" {mesh.name}".encode())
+    if name:
+        h.update(f" {mesh.name}".encode())
     for a in (mesh.vertices, mesh.triangles, mesh.uvs, mesh.colors, mesh.part):
         h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
     h.update(mesh.texture or b"-")

@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     # earlier `rig`): read, not made again (minutes for a scanned head); otherwise made and kept there.
     cached = args.head != "builtin" and simple is None and cfg == RigConfig()
     cache_path = rig_cache_path(mesh, args.landmarks, cfg, find_landmarks) if cached else None
-    kept = cached_rig(cache_path) if cache_path is not None else None
+    kept = cached_rig(cache_path, mesh.name) if cache_path is not None else None
     if kept is not None:
         rig, rigged, report = kept
         print(f"rig: the rig of {args.head} with these landmarks and options, read from the rig cache ({cache_path})")

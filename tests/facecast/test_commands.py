@@ -89,6 +89,21 @@ def test_rig_command_fills_the_rig_cache(tmp_path, shared_data, own_cache, capsy
     assert list((own_cache / "rigs").glob("*.npz")) == kept
     assert f"--head {mp} rigs it again" in capsys.readouterr().out
 
+    # The same file given as another path (a copy in another folder; the rig cache key once held the path as typed)
+    # is the same head: its rig is read from the cache, under the name given now (errors and pictures name the file
+    # the user typed).
+    import shutil
+
+    other = tmp_path / "elsewhere" / mp.name
+    other.parent.mkdir()
+    shutil.copyfile(mp, other)
+    args = argparse.Namespace(head=str(other), landmarks=None, head_mode="auto", target_map=None, head_part=[])
+    head = resolve_from_args(args)
+    assert list((own_cache / "rigs").glob("*.npz")) == kept
+    after = kept[0].stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    assert head.mesh.name == str(other)
+
 
 def test_rig_command_errors_name_the_file(tmp_path, shared_data, builtin_head, capsys):
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
