@@ -107,6 +107,33 @@ def sweep(head, poses: np.ndarray, finder) -> dict:
     return res
 
 
+def smile_reach(head) -> dict:
+    """How far a full smile on speech goes through the head's bound, against the bound of every checked pose: the
+    smile (intensity 1, ``add_expression``) on each of EXTREME_POSES, bounded both ways. Returns how many
+    expression poses the rig holds (of how many), the largest lip_stretch either way (IOD), the largest distance
+    between the two (IOD) and the median fraction of the smile's change from speech the head keeps."""
+    from realtime_core.expressions import EXPRESSIONS, add_expression
+    from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES, checked_bound
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    speech = np.asarray(EXTREME_POSES, dtype=np.float64)
+    smile = add_expression(speech, np.tile(EXPRESSION_PARAMS[EXPRESSIONS.index("smile")], (len(speech), 1)))
+    full, own = checked_bound()(smile), head.rig.bound(smile)
+    change = np.linalg.norm(full - speech, axis=1)
+    moved = change > 1e-9
+    kept = np.linalg.norm(own - speech, axis=1)[moved] / change[moved]
+    checks = head.rig.meta.get("checks")
+    held = checks.get("expressions_held") if isinstance(checks, dict) else None
+    return {
+        "expressions_held": None if held is None else len(held),
+        "expression_poses": len(EXPRESSION_POSES),
+        "smile_lip_stretch": round(float(own[:, 1].max()), 4),
+        "smile_lip_stretch_full": round(float(full[:, 1].max()), 4),
+        "smile_cut_iod": round(float(np.linalg.norm(own - full, axis=1).max()), 4),
+        "smile_kept": round(float(np.median(kept)), 3),
+    }
+
+
 def cell(r: dict | None) -> str:
     """flipped / stretch / interpenetration / teeth ahead, as one table cell."""
     if r is None:
@@ -140,6 +167,7 @@ def main() -> int:
         heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
     sets = pose_sets(args.data, args.sets.split(","), args.say_texts, args.test_stride)
     results: dict[str, dict[str, dict | None]] = {}
+    reach: dict[str, dict] = {}
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
@@ -148,6 +176,8 @@ def main() -> int:
             results[name] = {s: None for s in sets}
             continue
         results[name] = {}
+        reach[name] = smile_reach(head)
+        print(f"{name} [bound]: {reach[name]}", file=sys.stderr)
         for s, poses in sets.items():
             try:
                 results[name][s] = sweep(head, poses, find_landmarks)
@@ -156,11 +186,23 @@ def main() -> int:
                 results[name][s] = None
             print(f"{name} [{s}]: {results[name][s]}", file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "sweep.json").write_text(json.dumps({"poses": {s: len(p) for s, p in sets.items()}, "heads": results}))
+    doc = {"poses": {s: len(p) for s, p in sets.items()}, "heads": results, "bound": reach}
+    (args.out / "sweep.json").write_text(json.dumps(doc))
     print("| head | " + " | ".join(f"{s} ({len(p)} poses)" for s, p in sets.items()) + " |")
     print("|---|" + "---|" * len(sets))
     for name, per_set in results.items():
         print(f"| {name} | " + " | ".join(cell(per_set[s]) for s in sets) + " |")
+    # The head's bound (smile_reach): expression poses held; a full smile on speech, lip_stretch (IOD) through the
+    # head's bound / every checked pose's; largest cut (IOD); median fraction of the smile's change kept.
+    print("\n| head | expression poses held | smile lip_stretch (all poses) | smile cut (IOD) | smile kept |")
+    print("|---|---|---|---|---|")
+    for name, r in reach.items():
+        n = r["expressions_held"]
+        held = "not measured" if n is None else f"{n} of {r['expression_poses']}"
+        print(
+            f"| {name} | {held} | {r['smile_lip_stretch']:.3f} ({r['smile_lip_stretch_full']:.3f}) | "
+            f"{r['smile_cut_iod']:.3f} | {r['smile_kept']:.2f} |"
+        )
     return 0
 
 
