@@ -238,24 +238,26 @@ def morph_head(
     finder = None if landmark_finder is None else cached_finder(landmark_finder, cache)
     # The checks (and the bound they decide) once the cavity has placed its landmarks; unchanged without them.
     shaded = with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)
-    return Head(with_checks(shaded.rig, shaded.mesh), shaded.mesh)
+    return Head(with_checks(shaded.rig, shaded.mesh, landmark_finder=finder), shaded.mesh)
 
 
 R = TypeVar("R", Rig, MorphRig)
 
 
-def with_checks(rig: R, mesh: HeadMesh) -> R:
+def with_checks(rig: R, mesh: HeadMesh, *, landmark_finder: LandmarkFinder | None = None) -> R:
     """``rig`` (of ``mesh``) with its checks (:func:`head_checks`) kept in its meta "checks" and no bound, so that a
-    :class:`Head` drives it within the poses it holds, when its landmarks are known (its meta) and it records no
-    checks yet; else ``rig`` as it is. For rigs :func:`rig_checked` does not make (own targets, the built-in
-    head's): the full-body avatar's targets fold at some expression poses (issue 12)."""
+    :class:`Head` drives it within the poses it holds, when its landmarks are known (its meta, else
+    ``landmark_finder(mesh)``, e.g. :func:`cached_finder`'s) and it records no checks yet; else ``rig`` as it is.
+    For rigs :func:`rig_checked` does not make (own targets, the built-in head's): the full-body avatar's targets
+    fold at some expression poses, and the built-in head's exported with other target names at a closed-lip smile
+    (issue 12)."""
     from realtime_core.errors import FacecastError
 
-    if isinstance(rig.meta.get("checks"), dict) or not rig.meta.get("landmarks"):
+    if isinstance(rig.meta.get("checks"), dict) or not (rig.meta.get("landmarks") or landmark_finder):
         return rig
     try:
-        report = head_checks(Head(rig, mesh))
-    except FacecastError:  # landmarks the checks cannot use: bound by every checked pose, as before
+        report = head_checks(Head(rig, mesh), landmark_finder=landmark_finder)
+    except FacecastError:  # no landmarks found, or none the checks can use: bound by every checked pose, as before
         return rig
     return replace(rig, meta={**rig.meta, "checks": report.as_dict()}, bound=None)
 
