@@ -323,6 +323,23 @@ def test_a_head_is_bound_to_the_expression_poses_its_checks_say_its_rig_holds(bu
     np.testing.assert_allclose(head.rig.displacements(smile), free.displacements(nearest), atol=1e-9)
 
 
+def test_an_own_target_head_without_landmarks_in_its_file_is_checked_with_the_finder(tmp_path, builtin_morph):
+    """The built-in head's targets in a glb of their own carry no landmarks: with a landmark finder the head is checked
+    on load and bound like the built-in head (its targets fold at the same 2 expression poses; unchecked, a closed-lip
+    smile inside the full hull folded 1 triangle, docs/animation.md "Each head's own bound"); without one it keeps
+    every checked pose, as before."""
+    from realtime_core.face.checks import checked_bound
+
+    path = _arkit_file(tmp_path, builtin_morph, lambda k: k)
+    plain = resolve_head(path)
+    assert "checks" not in plain.rig.meta and plain.rig.bound is checked_bound()
+    points = builtin_morph.rig.meta["landmarks"]
+    head = resolve_head(path, landmark_finder=lambda mesh: points)
+    held = {tuple(p) for p in head.rig.meta["checks"]["expressions_held"]}
+    assert held == {tuple(p) for p in builtin_morph.rig.meta["checks"]["expressions_held"]}
+    assert head.rig.bound is builtin_morph.rig.bound and head.rig.bound is not checked_bound()
+
+
 def test_a_retargeted_head_drives_its_rig_within_the_checked_poses(builtin_rig_file):
     """The built-in head's Sec. 5 rig folded 14 triangles at the typical ranges' corner (-0.05, -0.15, 0.45,
     -0.0625) (docs/animation.md, "Sweep"); as a Head it gives the nearest checked pose there, in its vertex
