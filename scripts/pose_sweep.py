@@ -13,6 +13,7 @@ teeth ahead of the lips) and the pose where each is worst:
 - say: ``facecast say`` on --say-texts sentences with each expression (smile, sad, surprise, anger) at
   intensity 1;
 - grid: 5 levels of each parameter over training.params.TYPICAL_RANGES (625 poses);
+- hull: 600 random poses inside the hull of every checked pose (:func:`hull_poses`);
 - extreme: the checks' EXTREME_POSES.
 
 Prints a Markdown table (docs/animation.md, "Sweep: the goals at any pose") and writes OUT/sweep.json (per
@@ -46,6 +47,23 @@ def grid_poses() -> np.ndarray:
     return np.array(list(itertools.product(*axes)), dtype=np.float64)
 
 
+def hull_poses(n: int = 600, seed: int = 12) -> np.ndarray:
+    """(n, 4) poses inside the hull of every checked pose (``checked_bound()``), at random: half on segments between
+    two of its vertices, half convex combinations of four (Dirichlet 0.5). A head drives them through its own bound:
+    a rig flip-free at the poses of its hull can still fold between them (the field is linear in the parameters, a
+    triangle's orientation is not)."""
+    from realtime_core.face.checks import checked_bound
+
+    v = np.asarray(checked_bound().poses, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    half = n // 2
+    pairs = rng.integers(0, len(v), size=(half, 2))
+    t = rng.random((half, 1))
+    quads = rng.integers(0, len(v), size=(n - half, 4))
+    w = rng.dirichlet(np.full(4, 0.5), size=n - half)
+    return np.vstack([(1 - t) * v[pairs[:, 0]] + t * v[pairs[:, 1]], np.einsum("ij,ijk->ik", w, v[quads])])
+
+
 def pose_sets(data: Path, sets: list[str], say_texts: int, test_stride: int = 1) -> dict[str, np.ndarray]:
     """name -> (P, 4) poses; ``test_stride``: every so many frames of the test set."""
     from measure_param_box import SAY_TEXTS, model_frames, say_frames
@@ -65,10 +83,12 @@ def pose_sets(data: Path, sets: list[str], say_texts: int, test_stride: int = 1)
             out[s] = np.concatenate([say_frames(SAY_TEXTS[:say_texts], extra=("--expression", e)) for e in EXPRESSIONS])
         elif s == "grid":
             out[s] = grid_poses()
+        elif s == "hull":
+            out[s] = hull_poses()
         elif s == "extreme":
             out[s] = np.asarray(EXTREME_POSES, dtype=np.float64)
         else:
-            raise SystemExit(f"unknown pose set {s!r} (test, say, grid, extreme)")
+            raise SystemExit(f"unknown pose set {s!r} (test, say, grid, hull, extreme)")
     return out
 
 
@@ -107,6 +127,33 @@ def sweep(head, poses: np.ndarray, finder) -> dict:
     return res
 
 
+def smile_reach(head) -> dict:
+    """How far a full smile on speech goes through the head's bound, against the bound of every checked pose: the
+    smile (intensity 1, ``add_expression``) on each of EXTREME_POSES, bounded both ways. Returns how many
+    expression poses the rig holds (of how many), the mean lip_stretch either way (IOD), the largest distance
+    between the two (IOD) and the smallest fraction of the smile's change from speech the head keeps."""
+    from realtime_core.expressions import EXPRESSIONS, add_expression
+    from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES, checked_bound
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    speech = np.asarray(EXTREME_POSES, dtype=np.float64)
+    smile = add_expression(speech, np.tile(EXPRESSION_PARAMS[EXPRESSIONS.index("smile")], (len(speech), 1)))
+    full, own = checked_bound()(smile), head.rig.bound(smile)
+    change = np.linalg.norm(full - speech, axis=1)
+    moved = change > 1e-9
+    kept = np.linalg.norm(own - speech, axis=1)[moved] / change[moved]
+    checks = head.rig.meta.get("checks")
+    held = checks.get("expressions_held") if isinstance(checks, dict) else None
+    return {
+        "expressions_held": None if held is None else len(held),
+        "expression_poses": len(EXPRESSION_POSES),
+        "smile_lip_stretch": round(float(own[:, 1].mean()), 4),
+        "smile_lip_stretch_full": round(float(full[:, 1].mean()), 4),
+        "smile_cut_iod": round(float(np.linalg.norm(own - full, axis=1).max()), 4),
+        "smile_kept": round(float(kept.min()), 3),
+    }
+
+
 def cell(r: dict | None) -> str:
     """flipped / stretch / interpenetration / teeth ahead, as one table cell."""
     if r is None:
@@ -140,6 +187,7 @@ def main() -> int:
         heads = {k: v for k, v in heads.items() if args.only.lower() in k.lower()}
     sets = pose_sets(args.data, args.sets.split(","), args.say_texts, args.test_stride)
     results: dict[str, dict[str, dict | None]] = {}
+    reach: dict[str, dict] = {}
     for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
@@ -148,6 +196,8 @@ def main() -> int:
             results[name] = {s: None for s in sets}
             continue
         results[name] = {}
+        reach[name] = smile_reach(head)
+        print(f"{name} [bound]: {reach[name]}", file=sys.stderr)
         for s, poses in sets.items():
             try:
                 results[name][s] = sweep(head, poses, find_landmarks)
@@ -156,11 +206,23 @@ def main() -> int:
                 results[name][s] = None
             print(f"{name} [{s}]: {results[name][s]}", file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "sweep.json").write_text(json.dumps({"poses": {s: len(p) for s, p in sets.items()}, "heads": results}))
+    doc = {"poses": {s: len(p) for s, p in sets.items()}, "heads": results, "bound": reach}
+    (args.out / "sweep.json").write_text(json.dumps(doc))
     print("| head | " + " | ".join(f"{s} ({len(p)} poses)" for s, p in sets.items()) + " |")
     print("|---|" + "---|" * len(sets))
     for name, per_set in results.items():
         print(f"| {name} | " + " | ".join(cell(per_set[s]) for s in sets) + " |")
+    # The head's bound (smile_reach): expression poses held; a full smile on speech, mean lip_stretch (IOD) through
+    # the head's bound (every checked pose's); largest cut (IOD); smallest fraction of the smile's change kept.
+    print("\n| head | expression poses held | smile mean lip_stretch (all poses) | largest cut (IOD) | least kept |")
+    print("|---|---|---|---|---|")
+    for name, r in reach.items():
+        n = r["expressions_held"]
+        held = "not measured" if n is None else f"{n} of {r['expression_poses']}"
+        print(
+            f"| {name} | {held} | {r['smile_lip_stretch']:.3f} ({r['smile_lip_stretch_full']:.3f}) | "
+            f"{r['smile_cut_iod']:.3f} | {r['smile_kept']:.2f} |"
+        )
     return 0
 
 

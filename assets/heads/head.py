@@ -25,7 +25,7 @@ import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from assets.errors import CannotWriteError, LandmarkError, MeshError, RigFileError
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
@@ -51,7 +51,8 @@ class Head:
     The rig drives within :func:`realtime_core.face.checks.checked_bound` (set here when it has no bound): every
     head the commands and the server animate is made here, and parameters outside the poses its rig was
     repaired and checked at give the nearest checked pose instead of a fold (docs/animation.md, "Which poses,
-    and why")."""
+    and why"). The hull is speech and the expression poses its rig holds, as its checks measured them (meta
+    "checks", ``expressions_held``: :func:`rig_checked`, :func:`with_checks`); all of them when not measured."""
 
     rig: AnyRig
     mesh: HeadMesh
@@ -64,7 +65,10 @@ class Head:
         if self.rig.bound is None:
             from realtime_core.face.checks import checked_bound
 
-            object.__setattr__(self, "rig", replace(self.rig, bound=checked_bound()))
+            kept = self.rig.meta.get("checks")
+            held = kept.get("expressions_held") if isinstance(kept, dict) else None
+            poses = None if held is None else tuple(tuple(float(x) for x in p) for p in held)
+            object.__setattr__(self, "rig", replace(self.rig, bound=checked_bound(poses)))
 
     @property
     def kind(self) -> str:
@@ -118,6 +122,7 @@ def builtin_morph_head(cache: Path | None = None) -> Head:
         rig = morph_rig("builtin", mesh.vertices, mesh.triangles, b.targets, b.targets, lips=lips)
         assert rig is not None  # the reference reproduces itself
         rig.meta["landmarks"] = {k: b.mesh.vertices[i].tolist() for k, i in b.landmarks.items()}
+        rig = with_checks(rig, mesh)  # kept in the file's meta: measured once
         with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the rig
             atomic_savez(path, **morph_rig_arrays(rig))
             remove_stale_siblings(path, MORPH_CACHE_FAMILY)
@@ -231,7 +236,30 @@ def morph_head(
     from assets.heads.cavity import with_mouth_cavity
 
     finder = None if landmark_finder is None else cached_finder(landmark_finder, cache)
-    return with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)  # unchanged without landmarks
+    # The checks (and the bound they decide) once the cavity has placed its landmarks; unchanged without them.
+    shaded = with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)
+    return Head(with_checks(shaded.rig, shaded.mesh, landmark_finder=finder), shaded.mesh)
+
+
+R = TypeVar("R", Rig, MorphRig)
+
+
+def with_checks(rig: R, mesh: HeadMesh, *, landmark_finder: LandmarkFinder | None = None) -> R:
+    """``rig`` (of ``mesh``) with its checks (:func:`head_checks`) kept in its meta "checks" and no bound, so that a
+    :class:`Head` drives it within the poses it holds, when its landmarks are known (its meta, else
+    ``landmark_finder(mesh)``, e.g. :func:`cached_finder`'s) and it records no checks yet; else ``rig`` as it is.
+    For rigs :func:`rig_checked` does not make (own targets, the built-in head's): the full-body avatar's targets
+    fold at some expression poses, and the built-in head's exported with other target names at a closed-lip smile
+    (issue 12)."""
+    from realtime_core.errors import FacecastError
+
+    if isinstance(rig.meta.get("checks"), dict) or not (rig.meta.get("landmarks") or landmark_finder):
+        return rig
+    try:
+        report = head_checks(Head(rig, mesh), landmark_finder=landmark_finder)
+    except FacecastError:  # no landmarks found, or none the checks can use: bound by every checked pose, as before
+        return rig
+    return replace(rig, meta={**rig.meta, "checks": report.as_dict()}, bound=None)
 
 
 def _rig_mesh(

@@ -191,8 +191,11 @@ def builtin_rig(cache: Path | None = None) -> tuple[Rig, HeadMesh]:
         except RigFileError:
             pass
         path.unlink(missing_ok=True)  # unreadable or built by an older algorithm (or removed meanwhile): rebuilt below
+    from assets.heads.head import with_checks
+
     head = load_builtin_head(root)
     rig, mesh = rig_head(head.mesh, None, head=head)
+    rig = with_checks(rig, mesh)  # its checks (and the poses it holds) kept in the file: measured once
     save_rig(rig, mesh, path)
     remove_stale_siblings(path, BUILTIN_RIG_FAMILY)
     return rig, mesh

@@ -298,14 +298,24 @@ driven by its own targets keeps its gap (0.007 IOD the built-in head, 0.0111 the
 those lips stayed that far apart at closure."""
 
 
-@lru_cache(maxsize=1)
-def checked_bound() -> PoseBound:
-    """The bound every head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
-    :data:`CHECK_POSES`, the poses the rigs are repaired at (speech, and speech under each expression), and of
-    the closure reach (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here,
-    or the bound cuts what the rigs were made clean for (with EXTREME_POSES alone it cut a smile on speech back to
-    lip_stretch 0.094). Built once (Qhull)."""
-    return PoseBound(poses=(*CHECK_POSES, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
+def checked_bound(held: tuple[tuple[float, ...], ...] | None = None) -> PoseBound:
+    """The bound a head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
+    :data:`EXTREME_POSES` (speech), of ``held`` (those of :data:`EXPRESSION_POSES` the rig holds,
+    :attr:`RigReport.expressions_held`; None: all of them, the hull of :data:`CHECK_POSES`) and of the closure
+    reach (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here, or the bound
+    cuts what the rigs were made clean for (with EXTREME_POSES alone it cut a smile on speech back to lip_stretch
+    0.094); an expression pose the rig folds at stays out, so an expression on such a head goes only as far as
+    the poses it holds (docs/animation.md, "Sweep: the goals at any pose"). Built once per pose set (Qhull): every
+    head that holds them all shares one."""
+    if held is not None and set(held) >= set(EXPRESSION_POSES):
+        held = None
+    return _bound(held)
+
+
+@lru_cache(maxsize=16)
+def _bound(held: tuple[tuple[float, ...], ...] | None) -> PoseBound:
+    extra = EXPRESSION_POSES if held is None else held
+    return PoseBound(poses=(*EXTREME_POSES, *extra, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
 
 
 LIP_EDGE_NOTCH_LIMIT = 0.015
@@ -398,11 +408,19 @@ class RigReport:
     """Where :attr:`expression_flips` is worst (empty: none flip)."""
     seam_gap_iod: float | None = None
     """IOD: the largest :func:`seam_gap` over the poses (None: no joined pairs given)."""
+    expressions_held: tuple[tuple[float, ...], ...] | None = None
+    """The expression poses (of those measured, :data:`EXPRESSION_POSES`) at which the rig has no flipped triangle
+    and lips that interpenetrate by no more than the limit: the poses its bound's hull takes besides speech
+    (:func:`checked_bound`). None: not measured."""
 
     def as_dict(self) -> dict[str, Any]:
         """The figures as JSON holds them (tuples as lists): a rig's meta "checks" is the same dict before its
         file is written and after it is read."""
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+        def listed(v: Any) -> Any:
+            return [listed(x) for x in v] if isinstance(v, tuple) else v
+
+        return {k: listed(v) for k, v in asdict(self).items()}
 
     def summary(self) -> str:
         teeth = "n/a" if self.teeth_ahead_iod is None else f"{self.teeth_ahead_iod:.4f}"
@@ -873,11 +891,14 @@ def check_rig(
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     expr_flips: int | None = None
     expr_pose: tuple[float, ...] = ()
+    held: tuple[tuple[float, ...], ...] | None = None
     if expression_poses:
         per_e = pose_figures(rig, landmarks, expression_poses, lip_pairs=pairs, teeth=teeth, reference=reference)
         k_e = int(np.argmax(per_e.flipped))
         expr_flips = int(per_e.flipped[k_e])
         expr_pose = tuple(float(x) for x in per_e.poses[k_e]) if expr_flips else ()
+        ok = (per_e.flipped <= limits.max_flipped) & (per_e.interpenetration <= limits.max_interpenetration)
+        held = tuple(tuple(expression_poses[i]) for i in np.flatnonzero(ok))
         if expr_flips > limits.max_flipped:
             warns.append(f"{expr_flips} flipped triangles under an expression at pose {expr_pose}")
     return RigReport(
@@ -894,6 +915,7 @@ def check_rig(
         warnings=tuple(warns),
         expression_flips=expr_flips,
         expression_flip_pose=expr_pose,
+        expressions_held=held,
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,

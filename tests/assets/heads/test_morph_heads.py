@@ -271,14 +271,15 @@ def test_a_head_drives_its_rig_within_the_checked_poses(builtin_morph):
 
     corner = np.array([0.06, -0.15, 0.0, -0.1])
     rig = builtin_morph.rig
-    assert rig.bound is checked_bound()
+    held = tuple(tuple(p) for p in rig.meta["checks"]["expressions_held"])
+    assert rig.bound is checked_bound(held)
     lm, inputs = head_check_inputs(builtin_morph)
     inputs.pop("joined_pairs")  # the seam check is check_rig's, not a per-pose figure
     free = pose_figures(replace(rig, bound=None), lm, [corner], **inputs)
     assert free.flipped[0] > 0 and free.interpenetration[0] > 0.005  # what the bound keeps the head from
     held = pose_figures(rig, lm, [corner], **inputs)
     assert held.flipped[0] == 0 and held.interpenetration[0] <= 0.005
-    nearest = checked_bound()(corner)
+    nearest = rig.bound(corner)
     np.testing.assert_array_equal(rig.weights(corner), rig.weights(nearest))
     np.testing.assert_array_equal(rig.deformed(corner), rig.deformed(nearest))
     pygltflib = require_module("pygltflib")
@@ -287,6 +288,56 @@ def test_a_head_drives_its_rig_within_the_checked_poses(builtin_morph):
     view = g.bufferViews[acc.bufferView]
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0))
     np.testing.assert_allclose(w, rig.weights(nearest), atol=1e-6)
+
+
+def test_a_head_is_bound_to_the_expression_poses_its_checks_say_its_rig_holds(builtin_morph, builtin_rig_file):
+    """The hull a head drives within is speech and the expression poses its rig holds (its checks' meta
+    ``expressions_held``, measured when its rig is built and kept in the cached file; issue 12): the built-in head's
+    Sec. 5 rig holds every one and keeps the full hull; its own targets fold 2 triangles at 2 of them (the checks'
+    advisory "flipped under expressions"), which its bound leaves out; a rig whose checks say it holds only the
+    poses up to lip_stretch 0.1 gives a full smile on speech the nearest of those instead."""
+    from assets.heads.head import Head, head_check_inputs
+    from realtime_core.face.checks import EXPRESSION_POSES, checked_bound, pose_figures
+
+    rig, mesh = builtin_rig_file
+    assert {tuple(p) for p in rig.meta["checks"]["expressions_held"]} == set(EXPRESSION_POSES)
+    assert Head(rig, mesh).rig.bound is checked_bound()
+    own = builtin_morph.rig
+    kept = {tuple(p) for p in own.meta["checks"]["expressions_held"]}
+    left = sorted(set(EXPRESSION_POSES) - kept)
+    assert kept < set(EXPRESSION_POSES) and not any(own.bound.contains(np.array(left)))
+    lm, inputs = head_check_inputs(builtin_morph)
+    inputs.pop("joined_pairs")
+    free = pose_figures(replace(own, bound=None), lm, left, **inputs)
+    assert (free.flipped > 0).all()  # each left out folds there: what the bound keeps the head from
+    assert pose_figures(own, lm, left, **inputs).flipped.max() == 0
+    held = tuple(p for p in EXPRESSION_POSES if p[1] <= 0.1)
+    checks = {**rig.meta.get("checks", {}), "expressions_held": [list(p) for p in held]}
+    head = Head(replace(rig, meta={**rig.meta, "checks": checks}, bound=None), mesh)
+    assert head.rig.bound is checked_bound(held) and head.rig.bound is not checked_bound()
+    smile = np.array(max(EXPRESSION_POSES, key=lambda p: p[1]))  # the widest smile, lip_stretch > 0.1
+    assert checked_bound().contains(smile) and not head.rig.bound.contains(smile)
+    nearest = head.rig.bound(smile)
+    assert nearest[1] <= 0.1 + 1e-9
+    free = replace(head.rig, bound=None)
+    np.testing.assert_allclose(head.rig.displacements(smile), free.displacements(nearest), atol=1e-9)
+
+
+def test_an_own_target_head_without_landmarks_in_its_file_is_checked_with_the_finder(tmp_path, builtin_morph):
+    """The built-in head's targets in a glb of their own carry no landmarks: with a landmark finder the head is checked
+    on load and bound like the built-in head (its targets fold at the same 2 expression poses; unchecked, a closed-lip
+    smile inside the full hull folded 1 triangle, docs/animation.md "Each head's own bound"); without one it keeps
+    every checked pose, as before."""
+    from realtime_core.face.checks import checked_bound
+
+    path = _arkit_file(tmp_path, builtin_morph, lambda k: k)
+    plain = resolve_head(path)
+    assert "checks" not in plain.rig.meta and plain.rig.bound is checked_bound()
+    points = builtin_morph.rig.meta["landmarks"]
+    head = resolve_head(path, landmark_finder=lambda mesh: points)
+    held = {tuple(p) for p in head.rig.meta["checks"]["expressions_held"]}
+    assert held == {tuple(p) for p in builtin_morph.rig.meta["checks"]["expressions_held"]}
+    assert head.rig.bound is builtin_morph.rig.bound and head.rig.bound is not checked_bound()
 
 
 def test_a_retargeted_head_drives_its_rig_within_the_checked_poses(builtin_rig_file):

@@ -163,6 +163,39 @@ def test_check_rig_reports_a_fold_only_an_expression_reaches() -> None:
     assert check_rig(_Fold(), _fold_landmarks(), expression_poses=()).expression_flips is None
 
 
+def test_a_rig_that_folds_at_expression_poses_is_bound_to_those_it_holds() -> None:
+    # _Stretch folds where lip_stretch > 0.1 (its centre vertex passes the right column at x = 2): the smiles on
+    # speech reach past that, speech alone does not. Its checks list the expression poses it holds, those at
+    # lip_stretch <= 0.1 by that geometry, and the bound made of them drives it flip-free at any parameters.
+    from realtime_core.expressions import EXPRESSIONS, add_expression
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    rig, lm = _Stretch(), _fold_landmarks()
+    rep = check_rig(rig, lm)
+    assert rep.expressions_held is not None
+    want = {p for p in EXPRESSION_POSES if p[1] <= 0.1}
+    assert set(rep.expressions_held) == want and 0 < len(want) < len(EXPRESSION_POSES)
+    bound = checked_bound(rep.expressions_held)
+    assert set(bound.poses) == set(EXTREME_POSES) | want | {(0.0, 0.0, -CLOSURE_REACH, 0.0)}
+    speech = np.array(EXTREME_POSES)
+    smile = add_expression(speech, np.tile(EXPRESSION_PARAMS[EXPRESSIONS.index("smile")], (len(speech), 1)))
+    free = pose_figures(rig, lm, smile).flipped
+    assert free.max() > 0  # what the bound keeps this rig from
+    rng = np.random.default_rng(7)
+    far = np.vstack([smile, np.array(CHECK_POSES), rng.normal(size=(200, 4)) * [0.1, 0.25, 0.6, 0.15]])
+    held = bound(far)
+    assert pose_figures(rig, lm, held).flipped.max() == 0
+    assert held[:, 1].max() <= 0.1 + 1e-6
+    # Speech is not cut: every speech pose is kept as it is; the full set keeps every checked pose.
+    np.testing.assert_array_equal(bound(speech), speech)
+    assert set(checked_bound().poses) == set(CHECK_POSES) | {(0.0, 0.0, -CLOSURE_REACH, 0.0)}
+    # Kept in a rig's meta as JSON: the same poses after a round trip.
+    import json
+
+    again = json.loads(json.dumps(rep.as_dict()))["expressions_held"]
+    assert tuple(tuple(p) for p in again) == rep.expressions_held
+
+
 class _Fold:
     """A flat 2x2 grid of quads whose centre vertex moves through its neighbours with mouth_open."""
 
