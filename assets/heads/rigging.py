@@ -1286,7 +1286,7 @@ def rig_head(
             upper = upper_lip_side(v, t, seam, frame, x_range=(x_lo, x_hi))
         if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
             from realtime_core.face.checks import CHECK_POSES, EXTREME_POSES
-            from realtime_core.face.repair import MAX_ROUNDS
+            from realtime_core.face.repair import PATIENCE
 
             repair_options: dict[str, Any] = {
                 "keep_apart": cut_copies,
@@ -1296,10 +1296,15 @@ def rig_head(
                 "ties": {**behind, **glue} or None,
             }
 
-            def repaired(r: Rig, poses: tuple[tuple[float, ...], ...], stretch_poses: int | None) -> tuple[Rig, bool]:
-                """The repair at ``poses``, the opening restored, and whether every repair settled."""
-                out = repair_rig(r, poses, stretch_poses=stretch_poses, **repair_options)
-                settled = out.meta["fold_repair"]["rounds"] < MAX_ROUNDS
+            def repaired(
+                r: Rig, poses: tuple[tuple[float, ...], ...], stretch_poses: int | None, patience: int | None = None
+            ) -> tuple[Rig, bool]:
+                """The repair at ``poses``, the opening restored, and whether every repair settled (with
+                ``patience``, an unsettled result is returned as soon as it is known: the caller drops it)."""
+                out = repair_rig(r, poses, stretch_poses=stretch_poses, patience=patience, **repair_options)
+                settled = bool(out.meta["fold_repair"]["settled"])
+                if patience is not None and not settled:
+                    return out, False
                 # Smoothing softens the lips' answer to mouth_open: restore the opening the parameter
                 # asks for (so the closure pose closes the lips) and repair what that stretches again.
                 r_open = float(head_response(out, mouth_landmarks(snap))[2, 2])
@@ -1308,8 +1313,14 @@ def rig_head(
                 if head_calibration and in_range and abs(r_open - 1.0) > OPEN_RESPONSE_TOLERANCE:
                     basis = np.array(out.basis, dtype=np.float64)
                     basis[:, 2] /= r_open
-                    out = repair_rig(replace(out, basis=basis), poses, stretch_poses=stretch_poses, **repair_options)
-                    settled = settled and out.meta["fold_repair"]["rounds"] < MAX_ROUNDS
+                    out = repair_rig(
+                        replace(out, basis=basis),
+                        poses,
+                        stretch_poses=stretch_poses,
+                        patience=patience,
+                        **repair_options,
+                    )
+                    settled = settled and bool(out.meta["fold_repair"]["settled"])
                     out.meta["open_rescaled"] = round(1.0 / r_open, 4)
                 return out, settled
 
@@ -1319,8 +1330,10 @@ def rig_head(
             # settle within its rounds there (the avatar: 4.18; MediaPipe 2.99 -> 3.17; the 3,810 and 1,428
             # copies) smooths on at the cost of what speech shows: that head is repaired at the speech poses
             # alone, as before (from the field as it was), and its flips under expressions are reported by the
-            # checks.
-            held, settled = repaired(rig, CHECK_POSES, len(EXTREME_POSES))
+            # checks. That first attempt gives up once it stops making progress (PATIENCE rounds without a new low:
+            # MediaPipe after 58 rounds, not 200 + 200 with the rescaled opening's; docs/animation.md, "The fold
+            # repair's rounds").
+            held, settled = repaired(rig, CHECK_POSES, len(EXTREME_POSES), PATIENCE)
             if not settled:
                 held, _ = repaired(rig, EXTREME_POSES, None)
             held.meta["fold_repair"]["poses"] = (

@@ -26,16 +26,27 @@ from realtime_core.normals import triangle_normals
 
 @dataclass(frozen=True)
 class RepairResult:
-    """weights (n_w, n_s) CSR after repair; rounds run; flips left at the worst pose; rows smoothed."""
+    """weights (n_w, n_s) CSR after repair; rounds run; flips left at the worst pose; rows smoothed; settled:
+    no pose folds within ``max_rounds`` (False also when the repair gave up, see ``patience``); bad: per round, the
+    count of vertices on a fold or an over-stretched edge before that round's smoothing."""
 
     weights: sp.csr_matrix
     rounds: int
     flips_left: int
     smoothed_rows: int
+    settled: bool
+    bad: tuple[int, ...]
 
 
 MAX_ROUNDS = 200
 """Smoothing rounds :func:`repair_folds` runs at most before its tie rounds (a repair that ends sooner settled)."""
+
+PATIENCE = 40
+"""Rounds without a new low of the bad-vertex count after which a repair asked to (``patience``) gives up. The test
+set's heads that settle do so within 8 rounds, each round a new low or one back of it; the ones that do not settle
+are flat from round 3-4 on (docs/animation.md, "The fold repair's rounds"). A growing patch can raise the count
+for a while before it falls: 40 rounds leave room for two ``grow_every`` widenings (a 31 x 31 grid's disc
+needs 30, tests/realtime_core/face/test_contact_repair.py)."""
 
 
 def repair_folds(
@@ -55,6 +66,7 @@ def repair_folds(
     own_side: np.ndarray | None = None,
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
     stretch_poses: int | None = None,
+    patience: int | None = None,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -88,6 +100,10 @@ def repair_folds(
     the weighted sum of their rows, a point of a face it moves with (a knife-cut lower lip's edge glued to the
     lip under it, :func:`assets.heads.rigging.lip_edge_glue`); the smoothing then evens out the folds round them
     with the ties in place, and the tie rounds' apexes never replace them.
+    patience: give up when the count of bad vertices (on a fold or an over-stretched edge, at any pose) has not
+    reached a new low for this many rounds: the result is then not settled and runs no tie rounds (for a caller
+    that falls back to fewer poses when this repair does not settle; docs/animation.md, "The fold repair's
+    rounds"). None (the default): never give up.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -129,31 +145,39 @@ def repair_folds(
     tie_edges = _on_edge_operator(n, on_edge) if on_edge else sp.identity(n, format="csr")
     for _ in range(3 if on_edge else 0):
         g = (tie_edges @ g).tocsr()
+    flat = np.ascontiguousarray(np.asarray(motions, dtype=np.float64).transpose(1, 0, 2)).reshape(g.shape[1], -1)
+    n_poses = len(motions)
+    watch = _FoldWatch(
+        v0,
+        t,
+        e,
+        n0,
+        ok_tri,
+        ok_edge_measured,
+        max_stretch * l0,
+        flat,
+        n_poses if stretch_poses is None else stretch_poses,
+    )
+    history: list[int] = []
+    best = (n + 1, 0)  # (fewest bad vertices so far, the round that reached it)
+    gave_up = False
     for rounds in range(1, max_rounds + tie_rounds + 1):
+        flipped, stretched = watch.update(g)
+        worst = int(flipped.sum(axis=0).max()) if flipped.size else 0
+        flipped_any = flipped.any(axis=1)
         bad = np.zeros(n, dtype=bool)
-        flipped_any = np.zeros(len(t), dtype=bool)
-        worst = 0
-        # Only triangles and edges with a moving vertex can fold (the others keep their rest shape
-        # exactly): measuring those alone gives the same answer at a fraction of the cost.
-        moves = np.diff(g.indptr) > 0
-        tri = np.flatnonzero(moves[t].any(axis=1) & ok_tri)
-        edge = np.flatnonzero(moves[e].any(axis=1) & ok_edge_measured)
-        t_m, e_m = t[tri], e[edge]
-        for i, m in enumerate(motions):
-            v = v0 + (g @ m)
-            f = tri[np.einsum("ij,ij->i", n0[tri], triangle_normals(v, t_m)) < 0]
-            worst = max(worst, len(f))
-            bad[t[f].ravel()] = True
-            flipped_any[f] = True
-            if stretch_poses is not None and i >= stretch_poses:
-                continue
-            l1 = np.linalg.norm(v[e_m[:, 0]] - v[e_m[:, 1]], axis=1)
-            s = edge[l1 > max_stretch * l0[edge]]
-            bad[e[s].ravel()] = True
+        bad[t[flipped_any].ravel()] = True
+        bad[e[stretched].ravel()] = True
+        history.append(int(bad.sum()))
         # After max_rounds only flips keep the repair going (stretch alone ends it, as before).
         if not bad.any() or (rounds > max_rounds and worst == 0):
             worst = 0
             rounds -= 1
+            break
+        if history[-1] < best[0]:
+            best = (history[-1], rounds)
+        if patience is not None and rounds <= max_rounds and rounds - best[1] >= patience:
+            gave_up = True
             break
         if rounds > max_rounds:
             apexes = _apexes(v0, t[flipped_any], frozen).items()
@@ -185,7 +209,82 @@ def repair_folds(
         g = (tie @ g).tocsr()
         g.data[np.abs(g.data) < 1e-6] = 0.0
         g.eliminate_zeros()
-    return RepairResult(weights=g.tocsr(), rounds=rounds, flips_left=worst, smoothed_rows=int(touched.sum()))
+    return RepairResult(
+        weights=g.tocsr(),
+        rounds=rounds,
+        flips_left=worst,
+        smoothed_rows=int(touched.sum()),
+        settled=not gave_up and rounds < max_rounds,
+        bad=tuple(history),
+    )
+
+
+POSE_BLOCK = 32
+"""Poses :class:`_FoldWatch` deforms at once (bounds its (triangles, poses, 3) arrays on a dense full-body mesh)."""
+
+
+class _FoldWatch:
+    """The flipped triangles and over-stretched edges of a mesh at every pose as the repair changes its field.
+
+    Each round the repair smooths a few hundred rows (of 7,788 moving on Lee Perry-Smith); the other vertices keep
+    their motion exactly, so the triangles and edges none of whose vertices changed keep their state. Only the
+    changed rows' displacements are recomputed (all poses in one sparse-dense product) and only the triangles and
+    edges on them re-measured; triangles and edges whose vertices never move keep their rest shape and are never
+    flipped or stretched (the repair measured the moving ones alone before, pose by pose: the same answers)."""
+
+    def __init__(
+        self,
+        v0: np.ndarray,
+        triangles: np.ndarray,
+        edges: np.ndarray,
+        n0: np.ndarray,
+        tri_ok: np.ndarray,
+        edge_ok: np.ndarray,
+        longest: np.ndarray,
+        flat: np.ndarray,
+        n_stretch: int,
+    ) -> None:
+        """v0 (n, 3) rest; triangles (m, 3) with rest normals n0 (m, 3) and edges (3m, 2) with limits longest (3m,),
+        measured where tri_ok (m,) / edge_ok (3m,); flat (n_s, 3 * n_poses) the motions pose-major; edges count
+        as stretched at the first n_stretch poses."""
+        self.v0, self.t, self.e, self.n0, self.longest, self.flat = v0, triangles, edges, n0, longest, flat
+        self.tri_ok, self.edge_ok = tri_ok, edge_ok
+        self.n_poses = flat.shape[1] // 3
+        self.n_stretch = min(n_stretch, self.n_poses)
+        self.disp = np.zeros((len(v0), flat.shape[1]))  # (n, 3 * n_poses) each vertex's displacement at every pose
+        self.flipped = np.zeros((len(triangles), self.n_poses), dtype=bool)
+        self.stretched = np.zeros(len(edges), dtype=bool)
+        self.g: sp.csr_matrix | None = None
+
+    def update(self, g: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+        """(m, n_poses) bool flipped and (3m,) bool stretched under the field ``g`` (n, n_s) (views: read only)."""
+        if self.g is None:
+            rows = np.flatnonzero(np.diff(g.indptr) > 0)
+        else:
+            rows = np.flatnonzero(np.diff(sp.csr_matrix(g != self.g).indptr) > 0)
+        self.g = g
+        if rows.size == 0:
+            return self.flipped, self.stretched
+        self.disp[rows] = g[rows] @ self.flat
+        changed = np.zeros(len(self.v0), dtype=bool)
+        changed[rows] = True
+        tri = np.flatnonzero(changed[self.t].any(axis=1) & self.tri_ok)
+        edge = np.flatnonzero(changed[self.e].any(axis=1) & self.edge_ok)
+        t_m, e_m, n0 = self.t[tri], self.e[edge], self.n0[tri]
+        self.stretched[edge] = False
+        for lo in range(0, self.n_poses, POSE_BLOCK):
+            hi = min(lo + POSE_BLOCK, self.n_poses)
+            pa, pb, pc = (self._at(t_m[:, k], lo, hi) for k in range(3))
+            self.flipped[tri, lo:hi] = np.einsum("kj,kpj->kp", n0, np.cross(pb - pa, pc - pa)) < 0
+            if lo < self.n_stretch:
+                top = min(hi, self.n_stretch)
+                d = self._at(e_m[:, 0], lo, top) - self._at(e_m[:, 1], lo, top)
+                self.stretched[edge] |= (np.linalg.norm(d, axis=2) > self.longest[edge, None]).any(axis=1)
+        return self.flipped, self.stretched
+
+    def _at(self, vertices: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        """(k, hi - lo, 3) the positions of ``vertices`` (k,) at poses lo..hi-1."""
+        return self.v0[vertices][:, None, :] + self.disp[vertices, 3 * lo : 3 * hi].reshape(len(vertices), hi - lo, 3)
 
 
 def _apexes(v: np.ndarray, flipped: np.ndarray, frozen: np.ndarray) -> dict[int, tuple[int, int, float]]:

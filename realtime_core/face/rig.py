@@ -754,6 +754,7 @@ def repair_rig(
     own_side: np.ndarray | None = None,
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
     stretch_poses: int | None = None,
+    patience: int | None = None,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
@@ -764,8 +765,9 @@ def repair_rig(
     vertices smoothed over each other only (see :func:`realtime_core.face.repair.repair_folds`; a welded
     vertex is on it when one of its twins is). ``ties``: head vertex -> the head vertex whose row it takes
     throughout, or -> (head vertices, weights) whose rows' weighted sum it takes (ibid.). ``stretch_poses``: only
-    the first so many poses count over-stretched edges (None: all; the rest count folds only). Records the
-    repair in meta."""
+    the first so many poses count over-stretched edges (None: all; the rest count folds only). ``patience``: the
+    repair gives up after so many rounds without progress (ibid.; None: never). Records the repair in meta
+    (``fold_repair``: rounds, flips left, rows smoothed, whether it settled)."""
     from realtime_core.face.repair import repair_folds
 
     h = np.asarray(rig.neutral, dtype=np.float64)
@@ -799,12 +801,18 @@ def repair_rig(
         own_side=own_w,
         ties=None if ties is None else {int(canon[i]): _welded_tie(canon, j) for i, j in ties.items()},
         stretch_poses=stretch_poses,
+        patience=patience,
     )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
     s = sp.kron(g_new[moving], sp.identity(3, format="csr"), format="csr")
     meta = dict(rig.meta)
-    meta["fold_repair"] = {"rounds": res.rounds, "flips_left": res.flips_left, "rows": res.smoothed_rows}
+    meta["fold_repair"] = {
+        "rounds": res.rounds,
+        "flips_left": res.flips_left,
+        "rows": res.smoothed_rows,
+        "settled": res.settled,
+    }
     return replace(rig, moving=moving.astype(np.int64), matrix=s, meta=meta)
 
 

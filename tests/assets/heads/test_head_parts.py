@@ -176,7 +176,14 @@ def test_a_mesh_rig_is_cached_by_content_and_keeps_its_parts(split_head, tmp_pat
     assert again.mesh.part_names == first.mesh.part_names and again.rig.meta == first.rig.meta
 
     moved = json.loads((d / "lm.json").read_text())
-    moved["landmarks"]["chin"] = next(i for i in range(len(files["skin"][1])) if i != moved["landmarks"]["chin"])
+    # An eye corner moved to its nearest other vertex: a rig as sound as the first, which settles like it (the chin
+    # on vertex 0, above the nose, made a field whose fold repair at the expression poses did not settle: 389 repair
+    # rounds, 26 s of the test's 31).
+    key = "eye_outer_left"
+    skin_v = load_mesh(files["skin"][0]).vertices
+    dist = np.linalg.norm(skin_v - skin_v[moved["landmarks"][key]], axis=1)
+    dist[moved["landmarks"][key]] = np.inf
+    moved["landmarks"][key] = int(np.argmin(dist))
     (tmp_path / "lm2.json").write_text(json.dumps(moved))
     resolve_head(files["skin"][0], parts=parts, landmarks=tmp_path / "lm2.json", mode="retarget", cache=tmp_path)
     assert len(list((tmp_path / "rigs").glob("*.npz"))) == 2

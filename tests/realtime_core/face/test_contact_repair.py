@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from realtime_core.face import FaceModel, MouthCalibration, MouthLandmarks, Rig
-from realtime_core.face.repair import repair_folds
+from realtime_core.face.repair import MAX_ROUNDS, PATIENCE, POSE_BLOCK, repair_folds
 
 
 def _lip_rig(seed: int = 3) -> Rig:
@@ -233,6 +233,47 @@ def test_fold_repair_leaves_a_field_smoothing_unfolds_as_smoothing_left_it():
     without = repair_folds(v, t, g, motion, fixed=edge, tie_rounds=0)
     assert with_ties.flips_left == 0 and with_ties.rounds == without.rounds
     assert (with_ties.weights != without.weights).nnz == 0
+
+
+def test_a_repair_that_cannot_settle_gives_up_after_its_patience_and_says_so():
+    """A vertex fixed to a simple vertex that carries it 0.4 across a 15 x 15 grid folds the triangles round it at
+    any smoothing (its row is never changed): the count of bad vertices stops falling within a few rounds. With
+    ``patience`` the repair ends ``patience`` rounds after its last new low, not settled and with no tie rounds
+    (its caller falls back to fewer poses); without, it runs all its rounds and tie rounds. At poses spanning more
+    than one block of the batched measurement, its flips left are those a pose-by-pose count finds."""
+    v, t = _grid(15)
+    n = len(v)
+    fixed = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    fixed[n // 2] = True
+    g = sp.csr_matrix(([1.0], ([n // 2], [0])), shape=(n, 1))
+    motions = np.linspace(0.01, 0.4, POSE_BLOCK + 9)[:, None, None] * np.array([[1.0, 0.0, 0.0]])
+    full = repair_folds(v, t, g, motions, fixed=fixed)
+    assert not full.settled and full.rounds > MAX_ROUNDS
+    quick = repair_folds(v, t, g, motions, fixed=fixed, patience=PATIENCE)
+    best = quick.bad.index(min(quick.bad)) + 1
+    assert not quick.settled and quick.rounds == best + PATIENCE < MAX_ROUNDS // 4
+    assert quick.flips_left > 0
+    assert quick.flips_left == max(_flipped(v, t, quick.weights, m) for m in motions)
+    assert full.flips_left == max(_flipped(v, t, full.weights, m) for m in motions)
+
+
+def test_a_repair_that_settles_late_still_settles_with_patience():
+    """A disc of 37 vertices of a 31 x 31 grid carried 0.4 sideways, edges stretched beyond 1.2x counting as folds:
+    the smoothed patch first grows (the count of bad vertices rises from 46 to over 150) and falls below its first
+    count only after 30 rounds; it settles in 37. With the repair's patience it settles in the same rounds with the
+    same weights (a shorter patience, 25, would have given up)."""
+    v, t = _grid(31)
+    n = len(v)
+    fixed = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    disc = np.flatnonzero(np.linalg.norm(v - v[n // 2], axis=1) < 0.12)
+    g = sp.csr_matrix((np.ones(len(disc)), (disc, np.zeros(len(disc), dtype=int))), shape=(n, 1))
+    motion = np.array([[[0.4, 0.0, 0.0]]])
+    plain = repair_folds(v, t, g, motion, fixed=fixed, max_stretch=1.2)
+    assert plain.settled and plain.rounds > 30
+    patient = repair_folds(v, t, g, motion, fixed=fixed, max_stretch=1.2, patience=PATIENCE)
+    assert patient.settled and patient.rounds == plain.rounds and patient.flips_left == 0
+    assert (patient.weights != plain.weights).nnz == 0
+    assert not repair_folds(v, t, g, motion, fixed=fixed, max_stretch=1.2, patience=25).settled
 
 
 def _mouth_with_teeth() -> tuple[Rig, MouthLandmarks, np.ndarray, np.ndarray, np.ndarray]:
