@@ -53,6 +53,12 @@ head: Lee Perry-Smith at ~4,000 triangles cast its upper inner-lip point 1 IOD d
 or past open lips into a mouth bag. The point is then the first one on the lip met from it towards the
 outer lip midpoint (:func:`_onto_lips`). Every head of the test set casts its inner-lip points within
 0.02 IOD of the outer lip's depth or in front of it."""
+CORNER_OUTWARD = 0.3
+"""A mouth corner cast through the lips (INNER_LIP_DEPTH behind the outer lip midpoints) is looked for on the pixel
+segment from its pixel outwards, away from the mouth's centre, over this fraction of the mouth's half-width. Lips
+parted at rest with no mouth inside (a scan, Lee Perry-Smith with its lips 0.1 IOD apart): MediaPipe puts a corner
+in the opening's end, and its pixel showed the inside of the back of the head, 0.6 IOD below the mouth as cast
+(docs/animation.md, "Held-out heads", branch i12new)."""
 INNER_LIP_STEPS = 32  # pixels tried between an inner-lip point and its outer lip point
 LOWER_LIP_STEPS = 32  # pixels tried from the lower inner-lip point down to MediaPipe's lower vermilion edge
 LOWER_LIP_FLAT = 0.01
@@ -196,16 +202,20 @@ def _onto_lips(
 ) -> dict[str, np.ndarray]:
     """``points`` (name -> (3,), as cast from ``pixels``, name -> (2,)) with each inner-lip point that went
     through the lips (INNER_LIP_DEPTH) moved to the first point on the lip surface met on the pixel segment
-    from it to its outer lip midpoint's pixel; left as it is when none is found (the rig checks then judge)."""
+    from it to its outer lip midpoint's pixel, and each mouth corner that went through them to the first met going
+    outwards along the mouth (CORNER_OUTWARD); left as it is when none is found (the rig checks then judge)."""
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     front = min(float(points[k] @ forward) for k in INNER_LIP_OUTER.values())
     out = dict(points)
-    for inner, outer in INNER_LIP_OUTER.items():
+    mid = 0.5 * (pixels["corner_left"] + pixels["corner_right"])
+    towards = {inner: pixels[outer] for inner, outer in INNER_LIP_OUTER.items()}
+    towards |= {c: pixels[c] + CORNER_OUTWARD * (pixels[c] - mid) for c in ("corner_left", "corner_right")}
+    for inner, end in towards.items():
         if float(points[inner] @ forward) >= front - INNER_LIP_DEPTH * iod:
             continue
         s = np.linspace(0.0, 1.0, INNER_LIP_STEPS + 1)[1:, None]
-        line = pixels[inner][None, :] * (1.0 - s) + pixels[outer][None, :] * s
+        line = pixels[inner][None, :] * (1.0 - s) + end[None, :] * s
         hit = _cast(mesh, mvp, line, SIZE)
         on_lip = np.flatnonzero(np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod))
         if len(on_lip):
