@@ -401,11 +401,10 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     continue
                 turned = _facing_axes(got[2], axes)
                 if turned is not None:  # a head turned in its file: look again, straight at its face
-                    mesh = facing_viewer(mesh, turned)
-                    again = _framed(mesh, fc, turned, fspan, cfg)
+                    facing = facing_viewer(mesh, turned)
+                    again = _framed(facing, fc, turned, fspan, cfg)
                     if again is not None:
-                        got = again
-                        axes = turned
+                        got, axes, mesh = again, turned, facing
                 r_mvp, pixels, cast = got
                 found = _onto_lips(mesh, r_mvp, pixels, cast, np.asarray(axes[2], np.float64))
                 found = _refined(mesh, r_mvp, pixels, found)
