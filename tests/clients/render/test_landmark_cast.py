@@ -52,6 +52,8 @@ def test_an_inner_lip_point_cast_through_a_slit_between_the_lips_moves_onto_the_
         "eye_inner_right": [-0.4, 1.0, 0.0],  # IOD 1
         "upper_lip": [0.0, 0.3, 0.0],
         "lower_lip": [0.0, -0.3, 0.0],
+        "corner_left": [0.25, 0.1, 0.0],  # on the lip: left where it is
+        "corner_right": [-0.25, -0.1, 0.0],
     }
     pixels = {k: _pixel(np.array(p), mvp) for k, p in on_face.items()}
     pixels["upper_inner"] = _pixel(np.array([0.0, 0.01, 0.0]), mvp)  # in the slit
