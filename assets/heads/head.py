@@ -487,7 +487,9 @@ def rig_checked(
     ("Any head, cleanly"). A knife-cut (coarse) mouth whose four rigs fail is then rigged the same four ways with
     the simple face's mouth corners at the given corner points (``corners_at_points=True``; docs/animation.md, "A
     coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
-    with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail.
+    with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
+    whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
+    :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
@@ -527,6 +529,18 @@ def rig_checked(
     else:
         assert plain is not None  # the third try always runs
         rig, rigged, report = plain
+    if not report.passed:
+        # Last, for a head whose rigs all fail: the simple face's units carried with capped local gains (rig_head,
+        # gain_capped): a chin placed far behind the mouth (a heavy double chin) read as a 4.4x stretch of the jaw
+        # drop, which dragged the upper lip down into a V. Not the first try: on the MediaPipe face it folds.
+        capped: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
+        c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **capped)
+        c_report = head_checks(Head(c_rig, c_rigged))
+        if c_report.passed:
+            attempts.append({"failures": list(report.failures)})
+            rig, rigged, report = c_rig, c_rigged, c_report
+        else:
+            attempts.append({**capped, "failures": list(c_report.failures)})
     meta = {**rig.meta, "checks": report.as_dict()}
     if attempts:
         meta["rig_attempts"] = attempts

@@ -85,6 +85,15 @@ MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 WARP_RADIUS = 0.5  # landmark warp reach, in RMS radii of the landmark set (registration step 3)
 ADAPT_MAX_COND = 30.0  # condition-number limit of the per-triangle affine maps (paper 001 Sec. 3.9)
+ADAPT_MAX_GAIN = 2.0
+"""Largest singular value (times the models' size ratio) of a local map carrying the simple face's units to the head
+when its rig is made with ``gain_capped`` (:func:`rig_head`; :func:`assets.heads.head.rig_checked` tries it when every
+other rig of the head fails its checks). The paper's maps are measured from the model centre, so a part placed
+further off (the anny old heavy man's chin, 0.54 IOD behind its mouth corners) reads as a stretch: jawOpen came out
+4.4x as long, the field's lower lip dropped 1.3 IOD at /a/, the head-response correction answered with
+lip_corner_depress 0.61 and dragged the upper lip and the skin under the nose down (a long V; 6 flipped triangles).
+Not the default: capped on every head it folded the MediaPipe face (10 flips; docs/animation.md, "The old heavy
+man's V")."""
 LANDMARK_REACH = 0.05  # how far (fraction of the mesh extent) a landmark point may lie from the nearest vertex
 REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
@@ -1016,7 +1025,7 @@ def lips_connected(
     return bool(gap <= LIPS_TOUCH * iod)
 
 
-def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
+def _place(simple: SimpleFace, points: Mapping[str, np.ndarray], *, max_gain: float | None = None) -> FaceModel:
     names = list(REQUIRED_LANDMARKS)
     idx = np.array([simple.landmarks[k] for k in names])
     dst = np.stack([points[k] for k in names])
@@ -1025,7 +1034,9 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray]) -> FaceModel:
     generic = simple.model.transformed(reg.similarity.scale, reg.similarity.rotation, reg.similarity.translation)
     # Well-conditioned triangles only: with X = [x_i x_j x_k] measured from the model centre, small
     # or edge-on triangles give wild maps (Candide-3 flipped its jaw drop with the default 1e6).
-    maps = affine_adaptation(generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND)
+    maps = affine_adaptation(
+        generic.vertices, reg.model.vertices, simple.model.triangles, max_cond=ADAPT_MAX_COND, max_gain=max_gain
+    )
     units = {k: adapt_displacements(maps, d) for k, d in generic.animation_units.items()}
     return FaceModel(
         vertices=reg.model.vertices,
@@ -1067,6 +1078,7 @@ def rig_head(
     walls_in_repair: bool = True,
     clean_lips: bool = False,
     corners_at_points: bool = False,
+    gain_capped: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1089,6 +1101,8 @@ def rig_head(
     at the inner-lip point, under the rescale's floor (OPEN_RESPONSE_RANGE), and part by 0.38 (< 0.5); with the
     corners at their points 0.61 (docs/animation.md, "A coarse mouth's corners at their points";
     :func:`assets.heads.head.rig_checked` tries it on a knife-cut mouth whose other rigs fail).
+    ``gain_capped``: the simple face's units carried to the head with local maps of gain at most
+    :data:`ADAPT_MAX_GAIN` (meta "simple_gain_capped"; rig_checked's last try for a head whose rigs all fail).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1219,7 +1233,9 @@ def rig_head(
             for k in ("corner_left", "corner_right"):
                 at_vertex[k] = np.asarray(points[k], dtype=np.float64)
             meta["simple_corners_at_points"] = True
-        placed = _place(simple, at_vertex)
+        if gain_capped:
+            meta["simple_gain_capped"] = True
+        placed = _place(simple, at_vertex, max_gain=ADAPT_MAX_GAIN if gain_capped else None)
         slm = mouth_landmarks(simple.landmarks)
         # Calibrated on the simple model as it comes (its own shape), not as warped onto the head:
         # the warp can leave a lip barely answering one unit group (the MediaPipe face's upper lip),

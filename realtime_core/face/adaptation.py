@@ -16,7 +16,12 @@ from realtime_core.normals import triangle_normals
 
 
 def affine_adaptation(
-    generic: np.ndarray, specific: np.ndarray, triangles: np.ndarray, *, max_cond: float = 1e6
+    generic: np.ndarray,
+    specific: np.ndarray,
+    triangles: np.ndarray,
+    *,
+    max_cond: float = 1e6,
+    max_gain: float | None = None,
 ) -> np.ndarray:
     """Per-vertex affine maps (n, 3, 3) taking generic (n, 3) displacements to the specific (n, 3) mesh.
 
@@ -47,6 +52,19 @@ def affine_adaptation(
     out = np.broadcast_to(ratio * np.eye(3), acc.shape).copy()
     ok = wsum > 0
     out[ok] = acc[ok] / wsum[ok, None, None]
+    if max_gain is not None:
+        out = _gain_capped(out, max_gain * ratio)
+    return out
+
+
+def _gain_capped(maps: np.ndarray, cap: float) -> np.ndarray:
+    """``maps`` (n, 3, 3) with every singular value above ``cap`` lowered to it (directions kept); maps within the cap
+    are returned as they are, to the bit."""
+    out = maps.copy()
+    u, sv, vt = np.linalg.svd(maps)
+    over = sv[:, 0] > cap
+    if over.any():
+        out[over] = u[over] @ (np.minimum(sv[over], cap)[:, :, None] * vt[over])
     return out
 
 

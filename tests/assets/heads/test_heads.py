@@ -539,3 +539,27 @@ def test_a_head_exported_as_two_meshes_moves_as_one_surface(shared_data, builtin
     joined = head_check_inputs(head)[1]["joined_pairs"]
     assert len(joined) and len(joined) <= len(pairs)  # the cut lip seam's positions aside
     assert head_checks(head).seam_gap_iod == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_chin_far_behind_the_simple_faces_does_not_amplify_the_jaw_when_gains_are_capped(builtin_head):
+    """The simple face placed on a head whose chin lies 0.7 IOD further back than the built-in one's (a heavy
+    double chin: the anny old heavy man's lies 0.54 IOD behind its mouth corners, the built-in's 0.16 in front):
+    the paper's maps lengthen jawOpen 3x here (the old heavy man's 4.4x: its lower lip dropped 1.3 IOD at /a/ and
+    the head-response correction pulled the upper lip and the skin under the nose down with it, 6 flipped
+    triangles); with the gains capped (rig_head's gain_capped, rig_checked's last try) at most ADAPT_MAX_GAIN.
+    The built-in head's own placement is within the cap, so capping changes nothing there."""
+    from assets.heads.rigging import ADAPT_MAX_GAIN, _place, resolve_landmarks
+
+    h = builtin_head
+    s = simple_face(h)
+    points = resolve_landmarks(dict(h.landmarks), h.mesh.vertices, "built-in")
+    frame = face_frame(h.mesh.vertices, mouth_landmarks(h.landmarks))
+    moved = {**points, "chin": points["chin"] - 0.7 * frame.iod * frame.axes[2]}
+    generic = np.linalg.norm(s.model.animation_units["jawOpen"], axis=1).max()
+    loose = np.linalg.norm(_place(s, moved).animation_units["jawOpen"], axis=1).max()
+    assert loose > 2.5 * generic  # what the paper's maps make of it
+    capped = _place(s, moved, max_gain=ADAPT_MAX_GAIN)
+    assert np.linalg.norm(capped.animation_units["jawOpen"], axis=1).max() <= ADAPT_MAX_GAIN * generic
+    own, own_capped = _place(s, points), _place(s, points, max_gain=ADAPT_MAX_GAIN)
+    for k in own.animation_units:
+        np.testing.assert_array_equal(own.animation_units[k], own_capped.animation_units[k])
