@@ -25,7 +25,7 @@ into the repository:
   a child, a thin old woman, and none, the built-in head as one mesh: :func:`anny_faces`); *a head turned in its
   file* (Lee Perry-Smith 25 degrees yaw, 10 pitch, moved: in a glb node transform and baked into an OBJ,
   :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
-  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`). docs/animation.md,
+  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`; only with --with-dense). docs/animation.md,
   "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
@@ -458,8 +458,9 @@ def parted_lps(out: Path, data: Path) -> Path:
     return f
 
 
-def derive(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
-    """name -> (head file, resolve options): the held-out heads (not in the test set)."""
+def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
+    """name -> (head file, resolve options): the held-out heads (not in the test set); ``dense``: also the
+    subdivided scans (70,736 and 282,944 triangles: the first rigs in about 11 minutes)."""
     from assets.heads.builtin import load_builtin_head
     from assets.heads.glb import mesh_glb
     from assets.heads.mesh import HeadMesh, load_mesh
@@ -500,7 +501,7 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
     heads.update(anny_faces(out))
     heads.update(turned_lps(out, data))
     heads["Lee Perry-Smith, lips parted at rest, glb"] = (parted_lps(out, data), {})
-    for times in (1, 2):
+    for times in (1, 2) if dense else ():
         heads[f"Lee Perry-Smith, subdivided {times}x, glb"] = (subdivided_lps(out, data, times), {})
     return heads
 
@@ -517,8 +518,9 @@ def main() -> int:
     ap.add_argument("--with-lowpoly", action="store_true", help="also the low-poly rows of the head test set")
     ap.add_argument("--derive-only", action="store_true", help="write the files and list them, check nothing")
     ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")
+    ap.add_argument("--with-dense", action="store_true", help="also the subdivided (high-poly) scans: slow")
     args = ap.parse_args()
-    heads = derive(args.out, args.data)
+    heads = derive(args.out, args.data, dense=args.with_dense)
     if args.with_lowpoly:
         heads = {**lowpoly_heads(args.out, args.data), **heads}
     if args.only:
