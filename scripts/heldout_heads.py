@@ -25,8 +25,8 @@ into the repository:
   a child, a thin old woman, and none, the built-in head as one mesh: :func:`anny_faces`); *a head turned in its
   file* (Lee Perry-Smith 25 degrees yaw, 10 pitch, moved: in a glb node transform and baked into an OBJ,
   :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
-  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`; only with --with-dense). docs/animation.md,
-  "New held-out heads".
+  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`; only with
+  --with-dense). docs/animation.md, "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
