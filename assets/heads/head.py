@@ -52,7 +52,9 @@ class Head:
     head the commands and the server animate is made here, and parameters outside the poses its rig was
     repaired and checked at give the nearest checked pose instead of a fold (docs/animation.md, "Which poses,
     and why"). The hull is speech and the expression poses its rig holds, as its checks measured them (meta
-    "checks", ``expressions_held``: :func:`rig_checked`, :func:`with_checks`); all of them when not measured."""
+    "checks", ``expressions_held``: :func:`rig_checked`, :func:`with_checks`); all of them when not measured. Its
+    closure reach is the head's own (``closure_reach_iod``: mouth_open goes below 0 only until its lips meet),
+    :data:`realtime_core.face.checks.CLOSURE_REACH` when not measured."""
 
     rig: AnyRig
     mesh: HeadMesh
@@ -63,12 +65,15 @@ class Head:
                 f"{self.mesh.name}: mesh has {len(self.mesh.vertices)} vertices, its rig {len(self.rig.neutral)}"
             )
         if self.rig.bound is None:
-            from realtime_core.face.checks import checked_bound
+            from realtime_core.face.checks import CLOSURE_REACH, checked_bound
 
             kept = self.rig.meta.get("checks")
-            held = kept.get("expressions_held") if isinstance(kept, dict) else None
+            kept = kept if isinstance(kept, dict) else {}
+            held = kept.get("expressions_held")
             poses = None if held is None else tuple(tuple(float(x) for x in p) for p in held)
-            object.__setattr__(self, "rig", replace(self.rig, bound=checked_bound(poses)))
+            reach = kept.get("closure_reach_iod")
+            reach = CLOSURE_REACH if reach is None else float(reach)
+            object.__setattr__(self, "rig", replace(self.rig, bound=checked_bound(poses, reach)))
 
     @property
     def kind(self) -> str:
@@ -170,7 +175,10 @@ def resolve_head(
             raise MeshError(f"{p}: a Candide-3 model is driven by its own animation units; use --head-mode auto")
         if not p.is_file():
             raise MeshError(f"{p}: Candide-3 file not found")
-        return with_mouth_cavity(candide_head(p))  # a face mask: its open mouth shows a dark cavity
+        # A face mask: its open mouth shows a dark cavity. Checked (34 ms) so that it drives within the poses it
+        # holds and its own closure reach: its lips touch at rest, and the shared reach crossed them.
+        masked = with_mouth_cavity(candide_head(p))
+        return Head(with_checks(masked.rig, masked.mesh), masked.mesh)
     if p.suffix.lower() == ".npz":
         from assets.heads.rigfile import load_rig
 

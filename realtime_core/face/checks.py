@@ -291,31 +291,37 @@ BILABIAL_POSES: tuple[tuple[float, float, float, float], ...] = tuple(p for p in
 
 
 CLOSURE_REACH = 0.02
-"""IOD: how far below 0 the bound lets mouth_open go (the pose (0, 0, -CLOSURE_REACH, 0) joins its hull). The
-checks' closure pose is (0, 0, -gap, 0), gap the inner lips' gap as the head is modelled: a retargeted head
-modelled further apart than 0.01 IOD rests at its closure (assets.heads.rigging.REST_GAP_MAX, gap 0 then), a head
-driven by its own targets keeps its gap (0.007 IOD the built-in head, 0.0111 the ARKit test files). Bounded at 0,
-those lips stayed that far apart at closure."""
+"""IOD: how far below 0 the bound lets mouth_open go (the pose (0, 0, -CLOSURE_REACH, 0) joins its hull) for a rig
+whose checks did not measure its own reach (:attr:`RigReport.closure_reach_iod`: an older rig file or cache). A
+measured head's reach is its own closure pose's, (0, 0, -gap, 0), gap the inner lips' gap as the head is modelled: a
+retargeted head modelled further apart than 0.01 IOD rests at its closure (assets.heads.rigging.REST_GAP_MAX, gap 0
+then), a head driven by its own targets keeps its gap (0.007 IOD the built-in head, 0.0111 the ARKit test files).
+Bounded at 0, those lips stayed that far apart at closure; bounded at this shared reach, Candide-3's lips, which
+touch at rest, crossed by 0.0144 IOD at mouth_open -0.0144 (docs/animation.md, "Each head's own closure reach")."""
 
 
-def checked_bound(held: tuple[tuple[float, ...], ...] | None = None) -> PoseBound:
+def checked_bound(held: tuple[tuple[float, ...], ...] | None = None, reach: float = CLOSURE_REACH) -> PoseBound:
     """The bound a head's rig drives within (:class:`assets.heads.head.Head` sets it): the hull of
     :data:`EXTREME_POSES` (speech), of ``held`` (those of :data:`EXPRESSION_POSES` the rig holds,
-    :attr:`RigReport.expressions_held`; None: all of them, the hull of :data:`CHECK_POSES`) and of the closure
-    reach (:data:`CLOSURE_REACH`). A pose set added to the repair and the checks joins the hull here, or the bound
-    cuts what the rigs were made clean for (with EXTREME_POSES alone it cut a smile on speech back to lip_stretch
-    0.094); an expression pose the rig folds at stays out, so an expression on such a head goes only as far as
-    the poses it holds (docs/animation.md, "Sweep: the goals at any pose"). Built once per pose set (Qhull): every
-    head that holds them all shares one."""
+    :attr:`RigReport.expressions_held`; None: all of them, the hull of :data:`CHECK_POSES`) and of the closure pose
+    (0, 0, -``reach``, 0): the head's own (:attr:`RigReport.closure_reach_iod`, the pose its checks measured closure
+    at; mouth_open never further below 0 than where its lips meet), else :data:`CLOSURE_REACH`. A pose set added to
+    the repair and the checks joins the hull here, or the bound cuts what the rigs were made clean for (with
+    EXTREME_POSES alone it cut a smile on speech back to lip_stretch 0.094); an expression pose the rig folds at
+    stays out, so an expression on such a head goes only as far as the poses it holds (docs/animation.md, "Sweep:
+    the goals at any pose"). Built once per pose set (Qhull): every head that holds them all shares one."""
     if held is not None and set(held) >= set(EXPRESSION_POSES):
         held = None
-    return _bound(held)
+    if not (0.0 <= reach < 1.0):
+        raise ConfigError(f"closure reach {reach} IOD: must be in [0, 1)")
+    # Rounded so that heads whose gaps differ in the last bits share one hull (Qhull, built once per key).
+    return _bound(held, round(float(reach), 6))
 
 
 @lru_cache(maxsize=16)
-def _bound(held: tuple[tuple[float, ...], ...] | None) -> PoseBound:
+def _bound(held: tuple[tuple[float, ...], ...] | None, reach: float) -> PoseBound:
     extra = EXPRESSION_POSES if held is None else held
-    return PoseBound(poses=(*EXTREME_POSES, *extra, (0.0, 0.0, -CLOSURE_REACH, 0.0)))
+    return PoseBound(poses=(*EXTREME_POSES, *extra, (0.0, 0.0, -reach, 0.0)))
 
 
 LIP_EDGE_NOTCH_LIMIT = 0.015
@@ -408,6 +414,9 @@ class RigReport:
     """Where :attr:`expression_flips` is worst (empty: none flip)."""
     seam_gap_iod: float | None = None
     """IOD: the largest :func:`seam_gap` over the poses (None: no joined pairs given)."""
+    closure_reach_iod: float | None = None
+    """IOD: how far below 0 mouth_open goes at the closure pose the checks measured, (0, 0, -gap, 0) with gap the
+    inner lips' gap at rest (>= 0): the head's own reach of its bound (:func:`checked_bound`). None: not measured."""
     expressions_held: tuple[tuple[float, ...], ...] | None = None
     """The expression poses (of those measured, :data:`EXPRESSION_POSES`) at which the rig has no flipped triangle
     and lips that interpenetrate by no more than the limit: the poses its bound's hull takes besides speech
@@ -916,6 +925,7 @@ def check_rig(
         expression_flips=expr_flips,
         expression_flip_pose=expr_pose,
         expressions_held=held,
+        closure_reach_iod=max(0.0, gap0),
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,

@@ -59,3 +59,25 @@ def test_candide_head_faces_the_viewer_and_exports(shared_data, tmp_path):
     path.write_bytes(head_glb(head.rig, head.mesh, params, 30.0))
     back = load_mesh(path)
     assert sorted(back.targets) == sorted(head.rig.names)
+
+
+@pytest.mark.parametrize("name", FILES)
+def test_candide_head_never_presses_its_lips_through_each_other(shared_data, name):
+    """Candide-3's lips touch at rest (gap 0). The shared closure reach (mouth_open down to -0.02 IOD, made for heads
+    driven by their own targets whose lips are modelled apart) let a pose in its hull press them 0.0144 IOD through
+    each other; the head's own reach (its checks' closure pose) keeps mouth_open from going below where they meet."""
+    from assets.heads.head import head_check_inputs
+    from realtime_core.face.checks import CLOSURE_REACH, checked_bound, pose_figures
+
+    head = resolve_head(shared_data / "candide3" / name)
+    reach = head.rig.meta["checks"]["closure_reach_iod"]
+    assert reach == pytest.approx(0.0, abs=1e-6)
+    assert head.rig.bound is checked_bound(tuple(map(tuple, head.rig.meta["checks"]["expressions_held"])), reach)
+    pose = np.array([-0.0042, 0.0134, -0.0144, 0.0053])  # the hull pose where they crossed (docs/animation.md)
+    assert checked_bound(None, CLOSURE_REACH).contains(pose) and not head.rig.bound.contains(pose)
+    assert head.rig.bound(pose)[2] >= -1e-6  # mouth_open no further below 0 than the lips' gap at rest
+    lm, inputs = head_check_inputs(head)
+    inputs.pop("joined_pairs")  # the seam check is check_rig's, not a per-pose figure
+    shared = pose_figures(replace(head.rig, bound=checked_bound(None, CLOSURE_REACH)), lm, [pose], **inputs)
+    own = pose_figures(head.rig, lm, [pose], **inputs)
+    assert shared.interpenetration[0] > 0.01 and own.interpenetration[0] <= 1e-6

@@ -272,7 +272,7 @@ def test_a_head_drives_its_rig_within_the_checked_poses(builtin_morph):
     corner = np.array([0.06, -0.15, 0.0, -0.1])
     rig = builtin_morph.rig
     held = tuple(tuple(p) for p in rig.meta["checks"]["expressions_held"])
-    assert rig.bound is checked_bound(held)
+    assert rig.bound is checked_bound(held, rig.meta["checks"]["closure_reach_iod"])
     lm, inputs = head_check_inputs(builtin_morph)
     inputs.pop("joined_pairs")  # the seam check is check_rig's, not a per-pose figure
     free = pose_figures(replace(rig, bound=None), lm, [corner], **inputs)
@@ -301,7 +301,8 @@ def test_a_head_is_bound_to_the_expression_poses_its_checks_say_its_rig_holds(bu
 
     rig, mesh = builtin_rig_file
     assert {tuple(p) for p in rig.meta["checks"]["expressions_held"]} == set(EXPRESSION_POSES)
-    assert Head(rig, mesh).rig.bound is checked_bound()
+    reach = rig.meta["checks"]["closure_reach_iod"]  # the lips' gap at rest: its own closure pose's
+    assert Head(rig, mesh).rig.bound is checked_bound(None, reach)
     own = builtin_morph.rig
     kept = {tuple(p) for p in own.meta["checks"]["expressions_held"]}
     left = sorted(set(EXPRESSION_POSES) - kept)
@@ -314,7 +315,7 @@ def test_a_head_is_bound_to_the_expression_poses_its_checks_say_its_rig_holds(bu
     held = tuple(p for p in EXPRESSION_POSES if p[1] <= 0.1)
     checks = {**rig.meta.get("checks", {}), "expressions_held": [list(p) for p in held]}
     head = Head(replace(rig, meta={**rig.meta, "checks": checks}, bound=None), mesh)
-    assert head.rig.bound is checked_bound(held) and head.rig.bound is not checked_bound()
+    assert head.rig.bound is checked_bound(held, reach) and head.rig.bound is not checked_bound(None, reach)
     smile = np.array(max(EXPRESSION_POSES, key=lambda p: p[1]))  # the widest smile, lip_stretch > 0.1
     assert checked_bound().contains(smile) and not head.rig.bound.contains(smile)
     nearest = head.rig.bound(smile)
@@ -355,7 +356,7 @@ def test_a_retargeted_head_drives_its_rig_within_the_checked_poses(builtin_rig_f
     free = replace(head.rig, bound=None)
     assert pose_figures(free, lm, [corner], **inputs).flipped[0] > 0
     assert pose_figures(head.rig, lm, [corner], **inputs).flipped[0] == 0
-    nearest = checked_bound()(corner)
+    nearest = checked_bound(None, head.rig.meta["checks"]["closure_reach_iod"])(corner)
     np.testing.assert_array_equal(head.rig.displacements(corner), free.displacements(nearest))
     np.testing.assert_allclose(head.rig.bounded(corner[None]), nearest[None])
     e = np.zeros(4, dtype=np.float32)

@@ -54,10 +54,11 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
     # The glb drives the head within the checked poses (a viewer of the file must not see a fold): its
     # curves are the parameters' nearest checked poses, the parameters themselves wherever they lie inside.
     # (This test model's untrained output reaches 9 IOD: far outside.)
-    from realtime_core.face.checks import checked_bound
+    from assets.heads.head import resolve_head
 
-    np.testing.assert_allclose(w[:, :4], checked_bound()(js.values), rtol=1e-6, atol=1e-7)
-    inside = checked_bound().contains(js.values)
+    bound = resolve_head("builtin", mode="retarget").rig.bound  # the head's: its checked poses, its closure reach
+    np.testing.assert_allclose(w[:, :4], bound(js.values), rtol=1e-6, atol=1e-7)
+    inside = bound.contains(js.values)
     np.testing.assert_allclose(w[inside, :4], js.values[inside], rtol=1e-6, atol=1e-7)
     assert (tmp_path / "take.wav").is_file()
     assert read_tsv(out["tsv"].read_bytes())[-1].shape == "X"

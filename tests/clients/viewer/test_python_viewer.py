@@ -98,10 +98,11 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, n_curves)
     # The glb drives the head within the checked poses: its curves are the bounded parameters (equal where they
     # lie inside; this test model's output does not always).
-    from realtime_core.face.checks import checked_bound
+    from assets.heads.head import resolve_head
 
-    np.testing.assert_allclose(w[:, :4], checked_bound()(ref), atol=1e-6)
-    inside = checked_bound().contains(ref)
+    bound = resolve_head("builtin", mode="retarget").rig.bound  # the head's: its checked poses, its closure reach
+    np.testing.assert_allclose(w[:, :4], bound(ref), atol=1e-6)
+    inside = bound.contains(ref)
     np.testing.assert_array_equal(w[inside, :4], ref[inside])
     from assets.audio import read_audio
 

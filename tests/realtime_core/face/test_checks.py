@@ -579,3 +579,19 @@ def test_check_fails_a_seam_between_meshes_that_opens_and_reports_its_gap() -> N
     # Not measured without pairs: the report as before.
     plain = check_rig(_Seam(0.1), lm, limits=limits)
     assert plain.seam_gap_iod is None and plain.passed and "seam" not in plain.summary()
+
+
+def test_a_heads_own_closure_reach_stops_mouth_open_where_its_lips_meet() -> None:
+    """The bound's closure pose is (0, 0, -reach, 0): a head whose lips touch at rest (reach 0) never gets a
+    negative mouth_open, one modelled 0.0111 IOD apart closes them and no further; the default is CLOSURE_REACH."""
+    assert checked_bound() is checked_bound(None, CLOSURE_REACH)
+    for reach in (0.0, 0.0111):
+        bound = checked_bound(None, reach)
+        assert (0.0, 0.0, -reach, 0.0) in bound.poses and min(p[2] for p in bound.poses) == -reach
+        np.testing.assert_allclose(bound(np.array([0.0, 0.0, -1.0, 0.0])), [0.0, 0.0, -reach, 0.0], atol=1e-12)
+        pressed = np.array([0.0, 0.0, -reach - 0.005, 0.0])
+        assert not bound.contains(pressed) and checked_bound().contains(pressed)
+    assert checked_bound(None, 0.0111) is checked_bound(None, 0.0111 + 1e-9)  # one hull for gaps alike to 1e-6
+    for bad in (-0.01, 1.0, float("nan")):
+        with pytest.raises(ConfigError, match="closure reach"):
+            checked_bound(None, bad)
