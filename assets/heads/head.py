@@ -497,13 +497,15 @@ def rig_checked(
     coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
     with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
-    :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes.
+    :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes; if that fails too and its lower inner-lip
+    point lies on the upper lip (:func:`assets.heads.rigging.lower_inner_on_lower_lip`), once more as the first try
+    with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
     from dataclasses import replace
 
-    from assets.heads.rigging import rig_head
+    from assets.heads.rigging import lower_inner_on_lower_lip, rig_head
 
     tries: list[dict[str, Any]] = [
         {"clean_lips": True},
@@ -541,14 +543,25 @@ def rig_checked(
         # Last, for a head whose rigs all fail: the simple face's units carried with capped local gains (rig_head,
         # gain_capped): a chin placed far behind the mouth (a heavy double chin) read as a 4.4x stretch of the jaw
         # drop, which dragged the upper lip down into a V. Not the first try: on the MediaPipe face it folds.
-        capped: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
-        c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **capped)
+        last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
+        c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **last)
         c_report = head_checks(Head(c_rig, c_rigged))
+        moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
+        if moved is not None:
+            # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
+            # joined and were cut along a mouth the mesh has open. Once more, the point on the lower lip's front.
+            # Its gains as the first try's (on the thin old woman, capped: stretch 3.24; not: 3.58).
+            attempts.append({**last, "failures": list(c_report.failures)})
+            last = {"clean_lips": True}
+            c_rig, c_rigged = rig_head(mesh, moved, **rig_options, **last)
+            c_report = head_checks(Head(c_rig, c_rigged))
+            last["lower_inner_moved"] = True
+            c_rig = replace(c_rig, meta={**c_rig.meta, "lower_inner_moved": True})
         if c_report.passed:
             attempts.append({"failures": list(report.failures)})
             rig, rigged, report = c_rig, c_rigged, c_report
         else:
-            attempts.append({**capped, "failures": list(c_report.failures)})
+            attempts.append({**last, "failures": list(c_report.failures)})
     meta = {**rig.meta, "checks": report.as_dict()}
     if attempts:
         meta["rig_attempts"] = attempts

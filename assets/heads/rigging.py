@@ -1025,6 +1025,44 @@ def lips_connected(
     return bool(gap <= LIPS_TOUCH * iod)
 
 
+def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict[str, object] | None:
+    """``spec`` with its lower inner-lip point moved onto the lower lip when it lies on the upper one, else None.
+
+    On the mesh (welded, along its edges), the given lower inner-lip point's vertex lies on the upper lip when it is
+    nearer the upper lip's outer midpoint than the lower lip's. It then goes to the nearest vertex (in space) of the
+    lower lip's front: of the lower lip (nearer the lower lip's outer midpoint than the upper's, along the mesh) and
+    facing the front at least as much as up (its area-weighted normal in the face frame), where a frontal view sees
+    the lower lip's edge. An upper lip dropped over the lower one (anny's thin old woman: MediaPipe's lower inner
+    point cast onto the upper lip's underside, 0.041 IOD along the mesh from the upper inner point, 0.88 from the
+    lower lip's outer midpoint) read as lips joined within three edges: the head was cut as closed lips along a
+    mouth its mesh has open, which tore the lower lip from its inner wall (docs/animation.md, "The child and the
+    thin old woman"). With the point so moved its rig passes (0 flips, stretch 3.58); taken instead at the top of
+    the lower lip under the upper one (it faces up; 0.019 IOD higher, 0.030 further back), capped, it stretched 5.15.
+    :func:`assets.heads.head.rig_checked` tries this on a head whose rigs all fail."""
+    from realtime_core.face.welding import weld
+
+    points = resolve_landmarks(spec, mesh.vertices, "landmarks")
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    canon, welded = weld(v)
+    tw = canon[np.asarray(mesh.triangles, dtype=np.int64)]
+    snap = {k: int(canon[np.argmin(np.linalg.norm(v - points[k], axis=1))]) for k in points}
+    d = dijkstra(edge_length_graph(welded, tw), directed=False, indices=[snap["upper_lip"], snap["lower_lip"]])
+    to_upper, to_lower = d[0], d[1]
+    if not to_upper[snap["lower_inner"]] < to_lower[snap["lower_inner"]]:
+        return None
+    frame = face_frame(welded, mouth_landmarks(snap))
+    normals = np.zeros_like(welded)
+    face_n = triangle_normals(welded, tw)
+    for k in range(3):
+        np.add.at(normals, tw[:, k], face_n)
+    facing = normals @ frame.axes.T  # (n_w, 3): sideways, up, forward
+    lower = np.flatnonzero((to_lower < to_upper) & np.isfinite(to_lower) & (facing[:, 2] >= facing[:, 1]))
+    if not len(lower):
+        return None
+    at = lower[int(np.argmin(np.linalg.norm(welded[lower] - points["lower_inner"], axis=1)))]
+    return {**spec, "lower_inner": welded[at].tolist()}
+
+
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray], *, max_gain: float | None = None) -> FaceModel:
     names = list(REQUIRED_LANDMARKS)
     idx = np.array([simple.landmarks[k] for k in names])

@@ -563,3 +563,37 @@ def test_a_chin_far_behind_the_simple_faces_does_not_amplify_the_jaw_when_gains_
     own, own_capped = _place(s, points), _place(s, points, max_gain=ADAPT_MAX_GAIN)
     for k in own.animation_units:
         np.testing.assert_array_equal(own.animation_units[k], own_capped.animation_units[k])
+
+
+def test_a_lower_inner_lip_point_on_the_upper_lip_is_moved_to_the_lower_lips_front(builtin_head):
+    """An upper lip dropped over the lower one (anny's thin old woman): MediaPipe's lower inner-lip point landed on the
+    upper lip's underside, the lips read as joined and the head was cut along a mouth its mesh has open (a torn lower
+    lip, 3 flips). lower_inner_on_lower_lip (rig_checked's last try) leaves the built-in head's own point alone and
+    moves a lower inner point put on the upper inner one to the lower lip: below the upper inner point, in front,
+    near the head's own lower inner point, on the lower lip's side of the mesh."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from assets.heads.rigging import lower_inner_on_lower_lip, resolve_landmarks
+    from realtime_core.face.projection import edge_length_graph
+
+    h = builtin_head
+    v = np.asarray(h.mesh.vertices, dtype=np.float64)
+    points = resolve_landmarks(dict(h.landmarks), v, "built-in")
+    spec = {k: p.tolist() for k, p in points.items()}
+    assert lower_inner_on_lower_lip(h.mesh, spec) is None
+    frame = face_frame(v, mouth_landmarks(h.landmarks))
+    on_upper = {**spec, "lower_inner": spec["upper_inner"]}
+    moved = lower_inner_on_lower_lip(h.mesh, on_upper)
+    assert moved is not None
+    p = np.asarray(moved["lower_inner"])
+    assert {k: moved[k] for k in spec if k != "lower_inner"} == {k: spec[k] for k in spec if k != "lower_inner"}
+    local = (p - points["upper_inner"]) @ frame.axes.T / frame.iod  # sideways, up, forward
+    assert local[1] < 0 and abs(local[0]) < 0.05
+    assert np.linalg.norm(p - points["lower_inner"]) / frame.iod < 0.1
+    i = int(np.argmin(np.linalg.norm(v - p, axis=1)))
+    d = dijkstra(
+        edge_length_graph(v, h.mesh.triangles),
+        directed=False,
+        indices=[h.landmarks["upper_lip"], h.landmarks["lower_lip"]],
+    )
+    assert d[1, i] < d[0, i]
