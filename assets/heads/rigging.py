@@ -1268,6 +1268,14 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
+        # Lips modelled apart (not cut) with nothing behind them: a hollow scan with a mouth hole, or a face mask
+        # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
+        # the lips, and behind closed lips the rays meet the lips' own inner walls.
+        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
+        parted = not own and cut_copies is None and gap > REST_GAP_MAX
+        parted_hole = parted and not has_inner_mouth(mesh) and opens_onto_nothing(v, t, frame, snap)
+        if parted_hole:
+            rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
         walls = None
         if cut_copies is not None and not has_inner_mouth(mesh):
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
@@ -1306,7 +1314,7 @@ def rig_head(
 
             repair_options: dict[str, Any] = {
                 "keep_apart": cut_copies,
-                "tiny": SLIVER_TIE if cut_copies is not None else 0.0,
+                "tiny": SLIVER_TIE if cut_copies is not None or parted_hole else 0.0,
                 "measured": measured,
                 "own_side": upper,
                 "ties": {**behind, **glue} or None,
@@ -1349,9 +1357,22 @@ def rig_head(
             # checks. That first attempt gives up once it stops making progress (PATIENCE rounds without a new low:
             # MediaPipe after 58 rounds, not 200 + 200 with the rescaled opening's; docs/animation.md, "The fold
             # repair's rounds").
-            held, settled = repaired(rig, CHECK_POSES, len(EXTREME_POSES), PATIENCE)
+            # Lips parted at rest over nothing rest at the pose that closes them (with_rest_pose, below): the rig
+            # shows each pose p as p + (0, 0, -gap, 0) of the field repaired here (the rescaled opening answers
+            # mouth_open 1 : 1), so that is where it is repaired. Repaired at p itself, it never saw the lips
+            # closed: the parted Lee Perry-Smith folded at both corners between closure and a small opening
+            # (docs/animation.md, "Lips parted at rest").
+            check_poses: tuple[tuple[float, ...], ...] = CHECK_POSES
+            extreme_poses: tuple[tuple[float, ...], ...] = EXTREME_POSES
+            if parted_hole:
+                rest = np.array([0.0, 0.0, -gap, 0.0])
+                check_poses, extreme_poses = (
+                    tuple(tuple(float(x) for x in np.asarray(p) + rest) for p in ps)
+                    for ps in (CHECK_POSES, EXTREME_POSES)
+                )
+            held, settled = repaired(rig, check_poses, len(EXTREME_POSES), PATIENCE)
             if not settled:
-                held, _ = repaired(rig, EXTREME_POSES, None)
+                held, _ = repaired(rig, extreme_poses, None)
             held.meta["fold_repair"]["poses"] = (
                 "speech and expressions" if settled else "speech (expressions did not settle)"
             )
@@ -1386,8 +1407,7 @@ def rig_head(
             # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
             # lowered upper lip, 0.017 IOD at /m/ (docs/animation.md, "Lips apart at /m/").
             rig = decouple_opening(rig, mouth_landmarks(snap))
-        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
-        if not own and cut_copies is None and gap > REST_GAP_MAX:
+        if parted:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
             # rig's own response), so silence and /m b p/ show closed lips (mouth_open 0 = lips touching).
             # After the last change of the map: the checks measure folds from the head as modelled.
@@ -1438,7 +1458,7 @@ def rig_head(
         if len(seams):
             rig = with_seams_joined(rig, seams)
     if not has_inner_mouth(mesh) and (
-        cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
+        cut_copies is not None or parted_hole or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
         # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
