@@ -1066,6 +1066,38 @@ OPEN_RESPONSE_TOLERANCE = 0.05
 """Responses within this of 1 are left as they are (the rescale and second repair would change nothing visible)."""
 
 
+PARTED_CORNER_BAND = (0.15, 0.05)
+"""IOD: :func:`opening_ends` looks for a hole's ends among its edge's vertices within this of the mouth line (up or
+down) and at most this far behind the given corner (the lips' front, not the crease wall behind it)."""
+
+
+def opening_ends(
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> dict[str, int]:
+    """Lips parted over a hole: on each side, the vertex where the hole's edge ends (the edge's vertex furthest out from
+    the mouth's middle, near the mouth line and on the lips' front), or the given corner when none lies further out.
+    An automatic corner lies on the lips' surface: the parted Lee Perry-Smith's lie 0.07-0.09 IOD inside the
+    opening's ends. ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    edges = np.sort(t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    rim = np.unique(uniq[count == 1])
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    out = {}
+    for k in ("corner_left", "corner_right"):
+        c = landmarks[k]
+        side = np.sign(q[c, 0] - mid[0])
+        ok = rim[
+            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
+            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
+            & (side * (q[rim, 0] - q[c, 0]) > 0)
+        ]
+        out[k] = int(ok[np.argmax(side * q[ok, 0])]) if len(ok) else int(c)
+    return out
+
+
 def rig_head(
     mesh: HeadMesh,
     landmark_spec: Mapping[str, object] | None,
@@ -1462,8 +1494,11 @@ def rig_head(
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
         # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
+        # Lips parted over a hole: the cavity spans the hole's ends, which lie beyond the corners found on the lips
+        # (built round those, the parted Lee Perry-Smith's opening showed the head's lit inside at a corner at /a/).
+        ends = opening_ends(v, t, frame, snap) if parted_hole else snap
         rig, out_mesh = add_mouth_cavity(
-            rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
+            rig, out_mesh, frame, ends["corner_left"], ends["corner_right"], shape=MASK_CAVITY
         )
     if out_mesh.texture is None:
         # No texture: unless the file's colours paint the inside, the inner lip walls and the mouth bag would have
