@@ -1392,8 +1392,9 @@ def rig_head(
             # Lips parted at rest over nothing rest at the pose that closes them (with_rest_pose, below): the rig
             # shows each pose p as p + (0, 0, -gap, 0) of the field repaired here (the rescaled opening answers
             # mouth_open 1 : 1), so that is where it is repaired. Repaired at p itself, it never saw the lips
-            # closed: the parted Lee Perry-Smith folded at both corners between closure and a small opening
-            # (docs/animation.md, "Lips parted at rest").
+            # closed nor the first gap of the opening: the parted Lee Perry-Smith (its slivers tied) kept 4 flipped
+            # triangles at its corners and a 4.60 stretch, 2 and 3.59 so; the MediaPipe face's repair ran 200 rounds
+            # unsettled (stretch 2.99), none so (2.10) (docs/animation.md, "Lips parted at rest").
             check_poses: tuple[tuple[float, ...], ...] = CHECK_POSES
             extreme_poses: tuple[tuple[float, ...], ...] = EXTREME_POSES
             if parted_hole:
