@@ -1104,6 +1104,38 @@ OPEN_RESPONSE_TOLERANCE = 0.05
 """Responses within this of 1 are left as they are (the rescale and second repair would change nothing visible)."""
 
 
+PARTED_CORNER_BAND = (0.15, 0.05)
+"""IOD: :func:`opening_ends` looks for a hole's ends among its edge's vertices within this of the mouth line (up or
+down) and at most this far behind the given corner (the lips' front, not the crease wall behind it)."""
+
+
+def opening_ends(
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> dict[str, int]:
+    """Lips parted over a hole: on each side, the vertex where the hole's edge ends (the edge's vertex furthest out from
+    the mouth's middle, near the mouth line and on the lips' front), or the given corner when none lies further out.
+    An automatic corner lies on the lips' surface: the parted Lee Perry-Smith's lie 0.07-0.09 IOD inside the
+    opening's ends. ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    edges = np.sort(t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    rim = np.unique(uniq[count == 1])
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    out = {}
+    for k in ("corner_left", "corner_right"):
+        c = landmarks[k]
+        side = np.sign(q[c, 0] - mid[0])
+        ok = rim[
+            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
+            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
+            & (side * (q[rim, 0] - q[c, 0]) > 0)
+        ]
+        out[k] = int(ok[np.argmax(side * q[ok, 0])]) if len(ok) else int(c)
+    return out
+
+
 def rig_head(
     mesh: HeadMesh,
     landmark_spec: Mapping[str, object] | None,
@@ -1306,6 +1338,14 @@ def rig_head(
         )
         if head_calibration:
             rig = recalibrate(rig, mouth_landmarks(snap))
+        # Lips modelled apart (not cut) with nothing behind them: a hollow scan with a mouth hole, or a face mask
+        # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
+        # the lips, and behind closed lips the rays meet the lips' own inner walls.
+        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
+        parted = not own and cut_copies is None and gap > REST_GAP_MAX
+        parted_hole = parted and not has_inner_mouth(mesh) and opens_onto_nothing(v, t, frame, snap)
+        if parted_hole:
+            rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
         walls = None
         if cut_copies is not None and not has_inner_mouth(mesh):
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
@@ -1344,7 +1384,7 @@ def rig_head(
 
             repair_options: dict[str, Any] = {
                 "keep_apart": cut_copies,
-                "tiny": SLIVER_TIE if cut_copies is not None else 0.0,
+                "tiny": SLIVER_TIE if cut_copies is not None or parted_hole else 0.0,
                 "measured": measured,
                 "own_side": upper,
                 "ties": {**behind, **glue} or None,
@@ -1387,9 +1427,23 @@ def rig_head(
             # checks. That first attempt gives up once it stops making progress (PATIENCE rounds without a new low:
             # MediaPipe after 58 rounds, not 200 + 200 with the rescaled opening's; docs/animation.md, "The fold
             # repair's rounds").
-            held, settled = repaired(rig, CHECK_POSES, len(EXTREME_POSES), PATIENCE)
+            # Lips parted at rest over nothing rest at the pose that closes them (with_rest_pose, below): the rig
+            # shows each pose p as p + (0, 0, -gap, 0) of the field repaired here (the rescaled opening answers
+            # mouth_open 1 : 1), so that is where it is repaired. Repaired at p itself, it never saw the lips
+            # closed nor the first gap of the opening: the parted Lee Perry-Smith (its slivers tied) kept 4 flipped
+            # triangles at its corners and a 4.60 stretch, 2 and 3.59 so; the MediaPipe face's repair ran 200 rounds
+            # unsettled (stretch 2.99), none so (2.10) (docs/animation.md, "Lips parted at rest").
+            check_poses: tuple[tuple[float, ...], ...] = CHECK_POSES
+            extreme_poses: tuple[tuple[float, ...], ...] = EXTREME_POSES
+            if parted_hole:
+                rest = np.array([0.0, 0.0, -gap, 0.0])
+                check_poses, extreme_poses = (
+                    tuple(tuple(float(x) for x in np.asarray(p) + rest) for p in ps)
+                    for ps in (CHECK_POSES, EXTREME_POSES)
+                )
+            held, settled = repaired(rig, check_poses, len(EXTREME_POSES), PATIENCE)
             if not settled:
-                held, _ = repaired(rig, EXTREME_POSES, None)
+                held, _ = repaired(rig, extreme_poses, None)
             held.meta["fold_repair"]["poses"] = (
                 "speech and expressions" if settled else "speech (expressions did not settle)"
             )
@@ -1424,8 +1478,7 @@ def rig_head(
             # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
             # lowered upper lip, 0.017 IOD at /m/ (docs/animation.md, "Lips apart at /m/").
             rig = decouple_opening(rig, mouth_landmarks(snap))
-        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
-        if not own and cut_copies is None and gap > REST_GAP_MAX:
+        if parted:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
             # rig's own response), so silence and /m b p/ show closed lips (mouth_open 0 = lips touching).
             # After the last change of the map: the checks measure folds from the head as modelled.
@@ -1476,12 +1529,15 @@ def rig_head(
         if len(seams):
             rig = with_seams_joined(rig, seams)
     if not has_inner_mouth(mesh) and (
-        cut_copies is not None or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
+        cut_copies is not None or parted_hole or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
         # lips' inner surfaces stop short of the back): the wide cavity, so no rim shows beside it.
+        # Lips parted over a hole: the cavity spans the hole's ends, which lie beyond the corners found on the lips
+        # (built round those, the parted Lee Perry-Smith's opening showed the head's lit inside at a corner at /a/).
+        ends = opening_ends(v, t, frame, snap) if parted_hole else snap
         rig, out_mesh = add_mouth_cavity(
-            rig, out_mesh, frame, snap["corner_left"], snap["corner_right"], shape=MASK_CAVITY
+            rig, out_mesh, frame, ends["corner_left"], ends["corner_right"], shape=MASK_CAVITY
         )
     if out_mesh.texture is None:
         # No texture: unless the file's colours paint the inside, the inner lip walls and the mouth bag would have

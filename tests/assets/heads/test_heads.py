@@ -419,7 +419,9 @@ def test_candide3_as_the_simple_model(shared_data):
     spec = read_landmarks(shipped_landmarks(mp))
     rig, _rigged = rig_head(mesh, spec, simple=simple)
     assert len(rig.control) == 113 and len(set(rig.control.tolist())) == 113
-    assert not rig.displacements(np.zeros(4)).any()
+    # The face's lips are modelled apart and it rests at their closure: at rest its lip columns touch, so the lip
+    # push may act on float32 rounding (3.8e-8 IOD since branch i12parted repairs it at the rest's poses).
+    assert np.abs(rig.displacements(np.zeros(4))).max() < 1e-6 * rig.meta["iod"]
     up = face_frame(mesh.vertices, mouth_landmarks(spec)).axes[1]
     v = rig.deformed(np.array([0, 0, 0.1, 0]))
     drop = (v - rig.neutral) @ up

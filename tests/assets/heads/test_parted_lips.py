@@ -1,0 +1,110 @@
+"""Lips parted at rest with nothing behind them (a scan with a mouth hole): the rig closes them at rest, and the
+opening shows a dark mouth cavity, not the head's inside (docs/animation.md, "Lips parted at rest")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from assets.heads.cavity import lip_membrane
+from assets.heads.head import Head, head_checks
+from assets.heads.mesh import HeadMesh, load_mesh
+from assets.heads.rigging import mouth_landmarks, rig_head
+from realtime_core.face import face_frame
+from realtime_core.face.rig import modelled_rest
+
+# The MediaPipe canonical face's own vertex indices ("left" is the face's own left).
+MEDIAPIPE = {
+    "upper_lip": 0,
+    "lower_lip": 17,
+    "upper_inner": 13,
+    "lower_inner": 14,
+    "corner_left": 291,
+    "corner_right": 61,
+    "eye_outer_left": 263,
+    "eye_inner_left": 362,
+    "eye_outer_right": 33,
+    "eye_inner_right": 133,
+    "nose_tip": 1,
+    "chin": 152,
+}
+WALL_DEPTH = 0.15  # IOD: how far back the lips' inner walls reach
+WALL_INWARD = 0.6  # how far (fraction of the rim's height over the mouth line) a wall's back edge leans to that line
+
+
+def _parted_scan(path):
+    """The MediaPipe face (lips 0.09 IOD apart) as a scan with a mouth hole: its lip membrane removed and each lip's
+    inner edge carried back WALL_DEPTH IOD by a wall that leans towards the mouth line, as a lip's inner surface
+    curls (so closed lips meet their walls behind them; parted, the hole's middle is open to the back).
+    Returns (mesh, frame)."""
+    m = load_mesh(path)
+    v = np.asarray(m.vertices, dtype=np.float64)
+    lm = MEDIAPIPE
+    frame = face_frame(v, mouth_landmarks(lm))
+    t = np.asarray(m.triangles, dtype=np.int64)
+    t = t[~lip_membrane(v, t, lm["corner_left"], lm["corner_right"], lm["upper_inner"], lm["lower_inner"])]
+    e = np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]  # directed, as the faces wind them
+    _, inv, cnt = np.unique(np.sort(e, axis=1), axis=0, return_inverse=True, return_counts=True)
+    edge = e[cnt[inv.reshape(-1)] == 1]
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mouth = q[[lm["corner_left"], lm["corner_right"], lm["upper_inner"], lm["lower_inner"]]].mean(axis=0)
+    edge = edge[(np.abs(q[edge[:, 0], 0] - mouth[0]) < 0.5) & (np.abs(q[edge[:, 0], 1] - mouth[1]) < 0.2)]
+    assert len(edge) > 10  # the hole's rim
+    line = 0.5 * (q[lm["upper_inner"], 1] + q[lm["lower_inner"], 1])
+    rim = np.unique(edge)
+    back = {int(i): len(v) + k for k, i in enumerate(rim)}
+    wall_v = (
+        v[rim]
+        - WALL_DEPTH * frame.iod * frame.axes[2]
+        + (WALL_INWARD * (line - q[rim, 1]) * frame.iod)[:, None] * frame.axes[1]
+    )
+    walls = [[b, a, back[a]] for a, b in edge] + [[b, back[a], back[b]] for a, b in edge]
+    mesh = HeadMesh(vertices=np.vstack([v, wall_v]), triangles=np.vstack([t, np.array(walls)]), name="parted scan")
+    return mesh, frame
+
+
+def _first_hit(v: np.ndarray, t: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> int:
+    """The triangle a ray meets first (Moller-Trumbore over all of them), -1 for none."""
+    a, b, c = v[t[:, 0]], v[t[:, 1]], v[t[:, 2]]
+    e1, e2 = b - a, c - a
+    p = np.cross(direction, e2)
+    det = (e1 * p).sum(axis=1)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = origin - a
+    u = (s * p).sum(axis=1) * inv
+    qv = np.cross(s, e1)
+    w = (qv * direction).sum(axis=1) * inv
+    d = (e2 * qv).sum(axis=1) * inv
+    hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (d > 0)
+    return int(np.flatnonzero(hit)[np.argmin(d[hit])]) if hit.any() else -1
+
+
+def test_lips_parted_over_nothing_close_at_rest_and_open_onto_a_dark_cavity(shared_data):
+    """Judged on the closed rest, the walls behind the lips hid the hole (the parted Lee Perry-Smith: no cavity, its
+    opening a light sheet, the hollow head's inside); judged on the head as modelled it opens onto nothing."""
+    mesh, frame = _parted_scan(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    lm = MEDIAPIPE
+    rig, out = rig_head(mesh, lm)
+    n = len(mesh.vertices)
+    # The head as modelled is the file; at rest (silence, /m b p/: mouth_open 0 is the lips touching) they close.
+    np.testing.assert_allclose(modelled_rest(rig)[:n], mesh.vertices, atol=1e-5 * frame.iod)
+    up = frame.axes[1]
+    gap_file = float((mesh.vertices[lm["upper_inner"]] - mesh.vertices[lm["lower_inner"]]) @ up) / frame.iod
+    rest = np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
+    assert gap_file > 0.08
+    assert abs(float((rest[lm["upper_inner"]] - rest[lm["lower_inner"]]) @ up)) / frame.iod < 0.01
+    # Wide open (/a/), every ray from the front through the middle of the opening meets the cavity first: no sheet,
+    # no wall and no lip spans the opening.
+    cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
+    wide = np.asarray(rig.deformed(np.array([0.02, 0.027, 0.45, -0.007])), dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    in_cavity = (t >= len(wide) - cavity).all(axis=1)
+    upper, lower = wide[lm["upper_inner"]], wide[lm["lower_inner"]]
+    left, right = wide[lm["corner_left"]], wide[lm["corner_right"]]
+    for s in np.linspace(-0.3, 0.3, 5):  # across the middle of the opening, at half its height
+        at = 0.5 * (upper + lower) + s * (left - right) + frame.iod * frame.axes[2]
+        hit = _first_hit(wide, t, at, -frame.axes[2])
+        assert hit >= 0 and in_cavity[hit], (s, hit)
+    assert rig.meta.get("parted_over_nothing")
+    report = head_checks(Head(rig, out))
+    assert report.passed, report.failures
