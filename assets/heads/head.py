@@ -475,7 +475,7 @@ TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
 def rig_checked(
-    mesh: HeadMesh, spec: Mapping[str, object] | None, **rig_options: Any
+    mesh: HeadMesh, spec: Mapping[str, object] | None, *, dense_proxy: bool = False, **rig_options: Any
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
     ``(rig, the mesh it animates, RigReport)``. Tried in this order, the first rig that passes kept (else
@@ -490,12 +490,39 @@ def rig_checked(
     with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes.
+    ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy
+    (:mod:`assets.heads.dense`; off by default: on the once-subdivided Lee Perry-Smith it is 20x faster but its
+    carried rig still fails, docs/animation.md, "A dense scan through a decimated proxy").
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
     from dataclasses import replace
 
-    from assets.heads.rigging import rig_head
+    from assets.heads.dense import DENSE_TRIANGLES, proxy_mesh
+    from assets.heads.rigging import resolve_landmarks, rig_head
+
+    harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
+    if dense_proxy and len(mesh.triangles) > DENSE_TRIANGLES and harmonic:
+        # A dense scan: its decimated copy rigged and checked as any head, its field carried onto the dense mesh
+        # (cut along its own lips), which is then checked itself (assets/heads/dense.py).
+        source = str(rig_options.get("landmark_source", "landmarks"))
+        points = resolve_landmarks(spec, mesh.vertices, source) if spec is not None else None
+        proxy = proxy_mesh(mesh)
+        p_rig, p_rigged, _ = rig_checked(
+            proxy,
+            None if points is None else {k: p.tolist() for k, p in points.items()},
+            **rig_options,
+            record_hidden=True,
+        )
+        chosen: dict[str, Any] = {
+            "clean_lips": bool(p_rig.meta.get("clean_lips")),
+            "walls_in_repair": p_rig.meta.get("fold_repair_mesh") != "final",
+            "corners_at_points": bool(p_rig.meta.get("simple_corners_at_points")),
+            "gain_capped": bool(p_rig.meta.get("simple_gain_capped")),
+        }
+        rig, rigged = rig_head(mesh, spec, **rig_options, **chosen, proxy=(p_rig, p_rigged))
+        report = head_checks(Head(rig, rigged))
+        return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
 
     tries: list[dict[str, Any]] = [
         {"clean_lips": True},

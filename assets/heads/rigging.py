@@ -61,6 +61,7 @@ from realtime_core.face.checks import LIP_BACKS_BAND
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
+    RIG_ALGORITHM,
     contact_spread,
     decouple_opening,
     head_response,
@@ -1079,6 +1080,8 @@ def rig_head(
     clean_lips: bool = False,
     corners_at_points: bool = False,
     gain_capped: bool = False,
+    proxy: tuple[Rig, HeadMesh] | None = None,
+    record_hidden: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1103,6 +1106,11 @@ def rig_head(
     :func:`assets.heads.head.rig_checked` tries it on a knife-cut mouth whose other rigs fail).
     ``gain_capped``: the simple face's units carried to the head with local maps of gain at most
     :data:`ADAPT_MAX_GAIN` (meta "simple_gain_capped"; rig_checked's last try for a head whose rigs all fail).
+    ``proxy``: (rig, the mesh it animates) of a decimated copy of ``mesh`` (a dense scan,
+    :mod:`assets.heads.dense`): ``mesh`` is cut as always, but its field is the proxy's carried over, each lip's
+    side from that lip's side of the proxy (no field of its own, no recalibration, no fold repair).
+    ``record_hidden``: meta "hidden_faces" lists the crease's hidden wall faces removed (a proxy's lip sides are
+    measured along them: its cut may run inside the crease, whose vertices keep no face once they go).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1184,8 +1192,13 @@ def rig_head(
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
                 front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
-                path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
-                path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
+                if proxy is not None and int(proxy[0].meta.get("lip_seam_cut", 0) or 0):
+                    # A dense scan: cut where its proxy was cut, so the two meshes' lips part along one line.
+                    path = _path_along_proxy_cut(v, t, snap["corner_left"], snap["corner_right"], proxy[0])
+                    front = stand = min(path, key=lambda i: float(np.linalg.norm(v[i] - v[front])))
+                else:
+                    path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
+                    path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)
             # The simple face is placed at the front contact (placed at the detour's vertex, up the crease
@@ -1251,22 +1264,26 @@ def rig_head(
         glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
         if glue:
             meta["lip_edge_glued"] = len(glue)
-        rig = build_rig(
-            v,
-            t,
-            placed,
-            cal,
-            frame,
-            config=config,
-            head_uvs=uv,
-            allowed=allowed,
-            meta=meta,
-            keep_apart=cut_copies,
-            seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
-            pin_upper_lip=bool(behind),
-            seam_hinges=coarse,
-        )
-        if head_calibration:
+        if proxy is not None:
+            rig = _carried(proxy, v, t, cut_copies, None if cut_copies is None else origin[cut_copies], part, frame)
+            rig = replace(rig, meta={**meta, **rig.meta, "iod": frame.iod, "algorithm": RIG_ALGORITHM})
+        else:
+            rig = build_rig(
+                v,
+                t,
+                placed,
+                cal,
+                frame,
+                config=config,
+                head_uvs=uv,
+                allowed=allowed,
+                meta=meta,
+                keep_apart=cut_copies,
+                seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
+                pin_upper_lip=bool(behind),
+                seam_hinges=coarse,
+            )
+        if head_calibration and proxy is None:
             rig = recalibrate(rig, mouth_landmarks(snap))
         walls = None
         if cut_copies is not None and not has_inner_mouth(mesh):
@@ -1285,7 +1302,11 @@ def rig_head(
             # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
             # Perry-Smith, smoothing across the walls its hand-landmark rig).
             rig, cut_mesh = without_inner_lips(
-                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+                rig,
+                HeadMesh(vertices=v, triangles=t, name=mesh.name),
+                walls,
+                keep_holes=not coarse,
+                record=record_hidden,
             )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
@@ -1300,7 +1321,7 @@ def rig_head(
                 float((v[snap[k]] - frame.origin) @ frame.axes[0]) for k in ("corner_left", "corner_right")
             )
             upper = upper_lip_side(v, t, seam, frame, x_range=(x_lo, x_hi))
-        if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
+        if config.method == "harmonic" and proxy is None:  # (the built-in head too: its maps are refitted)
             from realtime_core.face.checks import CHECK_POSES, EXTREME_POSES
             from realtime_core.face.repair import PATIENCE
 
@@ -1358,7 +1379,11 @@ def rig_head(
             rig = held
         if walls is not None:
             rig, cut_mesh = without_inner_lips(
-                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+                rig,
+                HeadMesh(vertices=v, triangles=t, name=mesh.name),
+                walls,
+                keep_holes=not coarse,
+                record=record_hidden,
             )
             t = cut_mesh.triangles
         if clean_lips and seam is not None:
@@ -1452,6 +1477,87 @@ def rig_head(
         wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
         out_mesh = with_dark_mouth_inside(out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide)
     return rig, out_mesh
+
+
+def _carried(
+    proxy: tuple[Rig, HeadMesh],
+    v: np.ndarray,
+    t: np.ndarray,
+    copies: np.ndarray | None,
+    originals: np.ndarray | None,
+    part: np.ndarray | None,
+    frame: FaceFrame,
+) -> Rig:
+    """The proxy's field carried onto the cut dense mesh ``v``/``t`` (:func:`assets.heads.dense.carried_rig`),
+    each vertex within SIDE_REACH of its cut taking rows from its own lip's side of the proxy's."""
+    from assets.heads.dense import SIDE_REACH, carried_rig, lip_sides, seam_of
+
+    p_rig, p_mesh = proxy
+    reach = SIDE_REACH * frame.iod
+    no_cut = np.zeros(0, dtype=np.int64)
+    sides = lip_sides(
+        v,
+        t,
+        no_cut if copies is None else copies,
+        no_cut if originals is None else originals,
+        reach,
+    )
+    p_cut = int(p_rig.meta.get("lip_seam_cut", 0) or 0)
+    p_cavity = int(p_rig.meta.get("mouth_cavity", 0) or 0)
+    p_v = np.asarray(p_rig.neutral, dtype=np.float64)
+    p_copies, p_originals = seam_of(p_v, p_cut, p_cavity) if p_cut else (no_cut, no_cut)
+    # Along the crease's hidden walls too: the proxy's cut may run inside the crease (its vertices keep no face).
+    p_t = np.r_[np.asarray(p_rig.triangles, dtype=np.int64).reshape(-1, 3), _hidden_faces(p_rig)]
+    own = lip_sides(p_v, p_t, p_copies, p_originals, reach)[: len(p_v) - p_cavity]
+    # Each proxy vertex on the side of the dense vertex beside it, so both meshes split space alike where their cuts
+    # end at different places (round a corner, a proxy face whose corners then lie on both sides is no lip's); at the
+    # dense cut itself, where both of its sides lie, on its own side.
+    from scipy.spatial import cKDTree
+
+    _, near = cKDTree(v).query(p_v[: len(own)])
+    p_sides = sides[near]
+    seam = np.zeros(len(v), dtype=bool)
+    if copies is not None and originals is not None:
+        seam[copies] = seam[originals] = True
+    p_sides[seam[near]] = own[seam[near]]
+    p_part = None if p_mesh.part is None else np.asarray(p_mesh.part)[: len(p_v) - p_cavity]
+    return carried_rig(p_rig, p_mesh, v, t, sides=sides, proxy_sides=p_sides, part=part, proxy_part=p_part)
+
+
+def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, proxy: Rig) -> list[int]:
+    """The edge path from mouth corner ``left`` to ``right`` of the dense mesh ``v``/``t`` that keeps closest to
+    the proxy rig's cut (its seam's upper vertices, ordered from corner to corner): :func:`cut_path`'s costs with the
+    distance to that polyline in place of the distance to the corners' straight line."""
+    from scipy.spatial import cKDTree
+
+    from assets.heads.dense import seam_of
+
+    pv = np.asarray(proxy.neutral, dtype=np.float64)
+    _, originals = seam_of(pv, int(proxy.meta["lip_seam_cut"]), int(proxy.meta.get("mouth_cavity", 0) or 0))
+    a, b = v[left], v[right]
+    ab = b - a
+    seam = pv[originals]
+    seam = seam[np.argsort((seam - a) @ ab)]
+    knots = np.vstack([a, seam, b])
+    steps = np.linspace(0.0, 1.0, 12)[:, None, None]
+    line = (knots[:-1][None] * (1 - steps) + knots[1:][None] * steps).reshape(-1, 3)
+    tree = cKDTree(line)
+    adj = vertex_adjacency(len(v), np.asarray(t, dtype=np.int64)).tocoo()
+    elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
+    pen = tree.query(v[adj.row])[0] + tree.query(v[adj.col])[0]
+    g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
+    if not np.isfinite(dist[right]):
+        raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+    path = [right]
+    while path[-1] != left:
+        path.append(int(pred[path[-1]]))
+    return path[::-1]
+
+
+def _hidden_faces(rig: Rig) -> np.ndarray:
+    """(k, 3) int64 the crease's wall faces the rig's mesh lost (meta "hidden_faces", :func:`without_inner_lips`)."""
+    return np.asarray(rig.meta.get("hidden_faces", []), dtype=np.int64).reshape(-1, 3)
 
 
 WIDE_OPEN = 0.465
@@ -1622,14 +1728,20 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
     return small & ~bad[comp]
 
 
-def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True) -> tuple[R, HeadMesh]:
+def without_inner_lips(
+    rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True, record: bool = False
+) -> tuple[R, HeadMesh]:
     """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
     :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
-    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
+    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed (``record``: meta
+    "hidden_faces" lists them, added to any listed before)."""
     t = np.asarray(mesh.triangles, dtype=np.int64)
     gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
+    if record:
+        before: list[list[int]] = list(meta.get("hidden_faces", []))
+        meta["hidden_faces"] = before + np.asarray(t[gone]).tolist()
     keep = t[~gone]
     return replace(rig, triangles=keep.astype(np.int32), meta=meta), replace(mesh, triangles=keep)
 
