@@ -10,8 +10,9 @@ proxy surface, barycentrically (:func:`carried_rows`), a vertex on one lip's sid
 the proxy only (:func:`lip_sides`: closed lips touch, so the nearest proxy face of an upper-lip vertex may be the lower
 lip's, and a blend across the cut tears the lip at every opening). The checks then run on the dense rig.
 
-Not the default: the once-subdivided head rigs so in 24 s (0.98 GB) instead of 11-18 minutes, but FAILS worse (20 flips,
-stretch 11.4; the lip edges saw-toothed where the dense lips follow a 4,000-triangle proxy's long faces);
+Not the default: the proxy keeps the mouth region's own faces (MOUTH_KEEP) and passes, but the carried rig of the
+once-subdivided head still FAILS (4 flips, stretch 44.5: pink shards hang from the upper lip into the opening where
+the dense cut leaves the proxy's by a few vertices), in 165 s and 1.2 GB instead of 11-18 minutes and 1.7 GB;
 docs/animation.md, "A dense scan through a decimated proxy".
 """
 
@@ -34,10 +35,14 @@ from realtime_core.face.welding import weld
 DENSE_TRIANGLES = 40_000
 """Triangles above which a head may be rigged through a decimated proxy (``rig_checked(dense_proxy=True)``; Lee
 Perry-Smith as shipped, 17,519, and every other head of the test set and the held-out table lie below it)."""
-PROXY_TRIANGLES = 4_000
-"""The proxy's triangle count. On the once-subdivided Lee Perry-Smith a 4,000-triangle proxy rigs and passes at its
-first try (9 s); at 9,000 and 17,500 (Lee Perry-Smith's own resolution) the decimated copies fail their own checks
-(2-30 flips) after all five tries (3-4 minutes); docs/animation.md, "A dense scan through a decimated proxy"."""
+MOUTH_KEEP = 0.6
+"""Eye-corner distances: the proxy keeps the dense mesh's own faces within this of the mouth's centre (the lips, the
+crease and the corners; :func:`proxy_mesh`)."""
+PROXY_TRIANGLES = 6_000
+"""The proxy's triangles outside the mouth region (MOUTH_KEEP). Decimated whole, the once-subdivided Lee Perry-Smith's
+proxies failed their own checks at 17,500 and 9,000 triangles (2-30 flips) and passed at 4,000, whose long lip faces
+then saw-toothed the dense lips; with the mouth kept, 6,000 + 14,450 kept passes (docs/animation.md, "A dense scan
+through a decimated proxy")."""
 SIDE_REACH = 0.3
 """IOD: how far along the surface from the cut a vertex counts as on a lip's side (an upper lip is about 0.3 IOD
 tall); farther, the two lips' surfaces lie far apart and the nearest proxy face is on the right side anyway."""
@@ -48,27 +53,52 @@ CORNER_FANS = 3
 
 NO_SIDE, UPPER, LOWER = 0, 1, 2
 
-
 PROXY_AGGRESSIVENESS = 7.0
 """fast-simplification's ``agg`` (0-10; its default): at 17,500 triangles, 2 kept the lip line better (a cut of 51
 vertices against 30 at 7; the shipped head's 49) and its rig nearer passing (2 flips against 30), but left faces
-without area; at 4,000, 7 passes.)"""
+without area; at 4,000, 7 passes."""
 
 
-def proxy_mesh(mesh: HeadMesh, triangles: int = PROXY_TRIANGLES) -> HeadMesh:
+def proxy_mesh(
+    mesh: HeadMesh,
+    triangles: int = PROXY_TRIANGLES,
+    *,
+    mouth: np.ndarray | None = None,
+    keep: float = 0.0,
+) -> HeadMesh:
     """``mesh`` decimated to about ``triangles`` triangles (fast-simplification's quadric decimation of the
     welded surface, so texture seams do not open): positions and triangles, each vertex's part that of the nearest
-    vertex of ``mesh``; no UVs, texture or colours (the proxy is rigged, never drawn)."""
+    vertex of ``mesh``; no UVs, texture or colours (the proxy is rigged, never drawn). ``mouth`` (3,) and ``keep``
+    (head units): the faces within ``keep`` of ``mouth`` are kept as they are (the lips, where the rig's field
+    changes fastest and the proxy's cut must be the dense mesh's) and only the rest is decimated, its border with
+    them kept (``triangles`` then counts the rest only)."""
     import fast_simplification
 
     canon, welded = weld(mesh.vertices)
     t = canon[np.asarray(mesh.triangles, dtype=np.int64)]
     t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])]
+    kept = np.zeros(len(t), dtype=bool)
+    if mouth is not None and keep > 0:
+        kept = (np.linalg.norm(welded - np.asarray(mouth, dtype=np.float64), axis=1) < keep)[t].all(axis=1)
+    rest = t[~kept]
+    used = np.unique(rest)
+    remap = np.full(len(welded), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
     points, faces = fast_simplification.simplify(
-        welded.astype(np.float32), t.astype(np.int32), target_count=int(triangles), agg=PROXY_AGGRESSIVENESS
+        welded[used].astype(np.float64),
+        remap[rest].astype(np.int32),
+        target_count=int(triangles),
+        agg=PROXY_AGGRESSIVENESS,
+        preserve_border=bool(kept.any()),
     )
-    v = np.asarray(points, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
+    own = np.unique(t[kept])
+    at = np.full(len(welded), -1, dtype=np.int64)
+    at[own] = np.arange(len(own))
+    v = np.vstack([welded[own], np.asarray(points, dtype=np.float64)])
+    f = np.vstack([at[t[kept]], np.asarray(faces, dtype=np.int64) + len(own)])
+    joined, v = weld(v)  # the kept border's vertices, once in each part
+    f = joined[f]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
     used = np.unique(f)
     remap = np.full(len(v), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))

@@ -491,14 +491,16 @@ def rig_checked(
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes.
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy
-    (:mod:`assets.heads.dense`; off by default: on the once-subdivided Lee Perry-Smith it is 20x faster but its
+    (:mod:`assets.heads.dense`; off by default: on the once-subdivided Lee Perry-Smith it is 4-7x faster but its
     carried rig still fails, docs/animation.md, "A dense scan through a decimated proxy").
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
     from dataclasses import replace
 
-    from assets.heads.dense import DENSE_TRIANGLES, proxy_mesh
+    import numpy as np
+
+    from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.rigging import resolve_landmarks, rig_head
 
     harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
@@ -507,7 +509,11 @@ def rig_checked(
         # (cut along its own lips), which is then checked itself (assets/heads/dense.py).
         source = str(rig_options.get("landmark_source", "landmarks"))
         points = resolve_landmarks(spec, mesh.vertices, source) if spec is not None else None
-        proxy = proxy_mesh(mesh)
+        mouth, keep = None, 0.0
+        if points is not None:
+            mouth = np.mean([points[k] for k in ("corner_left", "corner_right", "upper_lip", "lower_lip")], axis=0)
+            keep = MOUTH_KEEP * float(np.linalg.norm(points["eye_outer_left"] - points["eye_outer_right"]))
+        proxy = proxy_mesh(mesh, mouth=mouth, keep=keep)
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},

@@ -1110,7 +1110,8 @@ def rig_head(
     :mod:`assets.heads.dense`): ``mesh`` is cut as always, but its field is the proxy's carried over, each lip's
     side from that lip's side of the proxy (no field of its own, no recalibration, no fold repair).
     ``record_hidden``: meta "hidden_faces" lists the crease's hidden wall faces removed (a proxy's lip sides are
-    measured along them: its cut may run inside the crease, whose vertices keep no face once they go).
+    measured along them: its cut may run inside the crease, whose vertices keep no face once they go) and meta
+    "cut_path" the cut's path (a dense scan is cut along it).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1220,6 +1221,8 @@ def rig_head(
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
                 hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
+            if record_hidden:
+                meta["cut_path"] = [int(i) for i in path]
             v, t, uv, origin = cut_mouth(
                 v,
                 t,
@@ -1536,8 +1539,10 @@ def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, p
     _, originals = seam_of(pv, int(proxy.meta["lip_seam_cut"]), int(proxy.meta.get("mouth_cavity", 0) or 0))
     a, b = v[left], v[right]
     ab = b - a
-    seam = pv[originals]
-    seam = seam[np.argsort((seam - a) @ ab)]
+    if "cut_path" in proxy.meta:  # its cut's path, in order (record_hidden)
+        seam = pv[np.asarray(proxy.meta["cut_path"], dtype=np.int64)[1:-1]]
+    else:
+        seam = pv[_walk(originals, np.r_[np.asarray(proxy.triangles, dtype=np.int64), _hidden_faces(proxy)], pv, a, ab)]
     knots = np.vstack([a, seam, b])
     steps = np.linspace(0.0, 1.0, 12)[:, None, None]
     line = (knots[:-1][None] * (1 - steps) + knots[1:][None] * steps).reshape(-1, 3)
@@ -1546,13 +1551,51 @@ def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, p
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = tree.query(v[adj.row])[0] + tree.query(v[adj.col])[0]
     g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
-    dist, pred = dijkstra(g, indices=left, return_predecessors=True)
-    if not np.isfinite(dist[right]):
-        raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
-    path = [right]
-    while path[-1] != left:
-        path.append(int(pred[path[-1]]))
-    return path[::-1]
+    # Through the dense vertex nearest each of the proxy's seam vertices in turn (where the proxy keeps the dense
+    # mouth's own vertices, its cut exactly), legs between them along the cheapest edges.
+    stops = [left, *cKDTree(v).query(knots[1:-1])[1].tolist(), right]
+    path = [left]
+    for a_, b_ in itertools.pairwise(stops):
+        if a_ == b_:
+            continue
+        dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
+        if not np.isfinite(dist[b_]):
+            raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+        leg = [int(b_)]
+        while leg[-1] != a_:
+            leg.append(int(pred[leg[-1]]))
+        path += leg[::-1][1:]
+    out: list[int] = []
+    for i in path:  # a leg back over the last ones: the loop it closes is left out
+        if i in out:
+            del out[out.index(i) + 1 :]
+        else:
+            out.append(i)
+    return out
+
+
+def _walk(seam: np.ndarray, t: np.ndarray, v: np.ndarray, start: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """The vertices ``seam`` (k,) in the order of the edge path they make in ``t`` (the cut's path detours into the
+    crease and back, so it is not ordered by its points' positions along the mouth), from the one nearest ``start``;
+    where the path does not go on along an edge, the rest by their position along ``along``."""
+    left = set(int(i) for i in seam)
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    edges = edges[np.isin(edges, seam).all(axis=1)]
+    nbrs: dict[int, set[int]] = {int(i): set() for i in seam}
+    for i, j in edges:
+        nbrs[int(i)].add(int(j))
+        nbrs[int(j)].add(int(i))
+    order = [int(seam[np.argmin(np.linalg.norm(v[seam] - start, axis=1))])]
+    left.discard(order[0])
+    while left:
+        nxt = nbrs[order[-1]] & left
+        if not nxt:
+            rest = np.array(sorted(left), dtype=np.int64)
+            order += rest[np.argsort((v[rest] - start) @ along)].tolist()
+            break
+        order.append(min(nxt, key=lambda j: float((v[j] - start) @ along)))
+        left.discard(order[-1])
+    return np.asarray(order, dtype=np.int64)
 
 
 def _hidden_faces(rig: Rig) -> np.ndarray:

@@ -129,3 +129,19 @@ def test_a_subdivided_head_carries_the_rig_to_the_same_displacements(builtin_rig
     assert skin.mean() > 0.9
     expected = 0.5 * (d_rig[ends[:, 0]] + d_rig[ends[:, 1]])
     np.testing.assert_allclose(d[n:][skin], expected[skin], atol=1e-5 * iod)
+
+
+def test_the_proxy_keeps_the_mouths_own_faces():
+    """With ``mouth`` and ``keep``, every face within ``keep`` of the mouth is in the proxy as it was (the lips and
+    their cut are the dense mesh's own), and the rest is decimated."""
+    v, t, _, _, _ = _creased_lips()
+    for _ in range(2):
+        v, t = trimesh.remesh.subdivide(v, t)
+    proxy = proxy_mesh(
+        HeadMesh(vertices=v, triangles=t, name="lips"), triangles=len(t) // 8, mouth=np.zeros(3), keep=0.3
+    )
+    inside = (np.linalg.norm(v, axis=1) < 0.3)[t].all(axis=1)
+    key = {tuple(sorted(map(tuple, np.round(v[f], 9)))) for f in t[inside]}
+    got = {tuple(sorted(map(tuple, np.round(proxy.vertices[f], 9)))) for f in proxy.triangles}
+    assert inside.sum() > 50 and key <= got
+    assert len(proxy.triangles) < 0.6 * len(t)
