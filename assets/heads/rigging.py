@@ -41,6 +41,7 @@ from assets.heads.cavity import (
     opens_onto_nothing,
     with_dark_mouth_inside,
 )
+from assets.heads.dense import seam_of
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
@@ -1223,18 +1224,28 @@ def rig_head(
                 hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
             if record_hidden:
                 meta["cut_path"] = [int(i) for i in path]
-            v, t, uv, origin = cut_mouth(
-                v,
-                t,
-                snap["corner_left"],
-                snap["corner_right"],
-                frame.axes[1],
-                uv,
-                path=path,
-                forward=frame.axes[2],
-                hidden=hidden,
-                underside=coarse,
-            )
+            copied = None
+            if proxy is not None:
+                p_rig = proxy[0]
+                p_v = np.asarray(p_rig.neutral, dtype=np.float64)
+                p_copies, _ = seam_of(p_v, int(p_rig.meta["lip_seam_cut"]), int(p_rig.meta.get("mouth_cavity", 0) or 0))
+                p_t = np.r_[np.asarray(p_rig.triangles, dtype=np.int64).reshape(-1, 3), _hidden_faces(p_rig)]
+                copied = cut_as_proxy(v, t, uv, p_v, p_t, p_copies)
+            if copied is not None:
+                v, t, uv, origin = copied
+            else:
+                v, t, uv, origin = cut_mouth(
+                    v,
+                    t,
+                    snap["corner_left"],
+                    snap["corner_right"],
+                    frame.axes[1],
+                    uv,
+                    path=path,
+                    forward=frame.axes[2],
+                    hidden=hidden,
+                    underside=coarse,
+                )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - n_base)
             cut_copies = np.arange(n_base, len(v))
@@ -1493,7 +1504,7 @@ def _carried(
 ) -> Rig:
     """The proxy's field carried onto the cut dense mesh ``v``/``t`` (:func:`assets.heads.dense.carried_rig`),
     each vertex within SIDE_REACH of its cut taking rows from its own lip's side of the proxy's."""
-    from assets.heads.dense import SIDE_REACH, carried_rig, lip_sides, seam_of
+    from assets.heads.dense import SIDE_REACH, carried_rig, lip_sides
 
     p_rig, p_mesh = proxy
     reach = SIDE_REACH * frame.iod
@@ -1533,8 +1544,6 @@ def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, p
     distance to that polyline in place of the distance to the corners' straight line."""
     from scipy.spatial import cKDTree
 
-    from assets.heads.dense import seam_of
-
     pv = np.asarray(proxy.neutral, dtype=np.float64)
     _, originals = seam_of(pv, int(proxy.meta["lip_seam_cut"]), int(proxy.meta.get("mouth_cavity", 0) or 0))
     a, b = v[left], v[right]
@@ -1572,6 +1581,55 @@ def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, p
         else:
             out.append(i)
     return out
+
+
+def cut_as_proxy(
+    v: np.ndarray,
+    t: np.ndarray,
+    uv: np.ndarray | None,
+    proxy_vertices: np.ndarray,
+    proxy_triangles: np.ndarray,
+    proxy_copies: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray] | None:
+    """The mesh ``v``/``t`` cut as a proxy of it was, where the proxy kept the dense mouth's own faces
+    (:func:`assets.heads.dense.proxy_mesh`, ``keep``): every face at the position of a proxy face (``proxy_triangles``
+    over ``proxy_vertices``, the crease's removed walls included) that took a cut copy (``proxy_copies``) takes copies
+    at the same corners (one per vertex), appended in order. Cut again along the proxy's path instead, 7 of the
+    once-subdivided Lee Perry-Smith's 104 cut vertices left the proxy's cut and tore the lip (docs/animation.md, "A
+    dense scan through a decimated proxy"). Returns (vertices, triangles, uvs, origin) as :func:`cut_mouth`, or None
+    when a proxy face with a copy has no face at its position (a decimated mouth: cut along the proxy's path)."""
+    from scipy.spatial import cKDTree
+
+    from realtime_core.face.welding import weld
+
+    pv = np.asarray(proxy_vertices, dtype=np.float64)
+    is_copy = np.zeros(len(pv), dtype=bool)
+    is_copy[np.asarray(proxy_copies, dtype=np.int64)] = True
+    pt = np.asarray(proxy_triangles, dtype=np.int64).reshape(-1, 3)
+    pt = pt[is_copy[pt].any(axis=1)]
+    tol = 1e-9 * float(np.ptp(v, axis=0).max())
+    t = np.asarray(t, dtype=np.int64)
+    d, near = cKDTree(v).query(pv[pt].reshape(-1, 3))  # each proxy corner's dense vertex (texture twins aside)
+    if (d > tol).any():
+        return None
+    # A dense face at a proxy face's position: the same three positions (welded, so a texture seam's twins match).
+    canon, _ = weld(v)
+    key = {tuple(sorted(canon[f].tolist())): i for i, f in enumerate(t)}
+    corner = canon[near.reshape(-1, 3)]
+    faces = [key.get(tuple(sorted(c.tolist()))) for c in corner]
+    if any(f is None for f in faces):
+        return None
+    t2 = t.copy()
+    new: dict[int, int] = {}
+    for f, pf, cc in zip(faces, pt, corner, strict=True):
+        assert f is not None
+        for k in range(3):
+            i = int(t[f, k])
+            j = int(np.flatnonzero(cc == canon[i])[0])
+            if is_copy[pf[j]]:
+                t2[f, k] = new.setdefault(i, len(v) + len(new))
+    origin = np.r_[np.arange(len(v)), np.array(list(new), dtype=np.int64)]
+    return v[origin], t2, None if uv is None else np.asarray(uv)[origin], origin
 
 
 def _walk(seam: np.ndarray, t: np.ndarray, v: np.ndarray, start: np.ndarray, along: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ from trimesh.triangles import closest_point
 
 from assets.heads.dense import LOWER, NO_SIDE, UPPER, carried_rig, carried_rows, lip_sides, proxy_mesh
 from assets.heads.mesh import HeadMesh
-from assets.heads.rigging import cut_mouth
+from assets.heads.rigging import cut_as_proxy, cut_mouth
 from realtime_core.face.welding import mesh_pieces
 from tests.assets.heads.test_lip_cut import _creased_lips
 
@@ -145,3 +145,28 @@ def test_the_proxy_keeps_the_mouths_own_faces():
     got = {tuple(sorted(map(tuple, np.round(proxy.vertices[f], 9)))) for f in proxy.triangles}
     assert inside.sum() > 50 and key <= got
     assert len(proxy.triangles) < 0.6 * len(t)
+
+
+def test_a_mesh_is_cut_exactly_as_its_proxy_where_the_proxy_kept_its_faces():
+    """The creased lips cut once (the proxy) and the same faces in another vertex order (the dense mesh, whose kept
+    mouth is the proxy's in its own numbering): cut as the proxy, every face that took a copy there takes one at the
+    same corners, so the two cuts' seams coincide vertex for vertex (re-cut along the proxy's path, 7 of 104 did not
+    on the once-subdivided Lee Perry-Smith, and the lip tore there)."""
+    v, t, left, right, mid = _creased_lips()
+    pv, pt, p_copies, _ = _cut_lips(v, t, left, right, mid)
+    order = np.random.default_rng(0).permutation(len(v))  # the dense mesh's own vertex numbering
+    rank = np.argsort(order)
+    dv, dt = v[order], rank[t]
+    got = cut_as_proxy(dv, dt, None, pv, pt, p_copies)
+    assert got is not None
+    v2, t2, _, origin = got
+    assert len(v2) - len(dv) == len(p_copies)
+    np.testing.assert_array_equal(v2[origin], v2)
+
+    def faces(vv: np.ndarray, tt: np.ndarray, copies: np.ndarray) -> set:
+        low = np.isin(tt, copies)  # which corners are copies, by position
+        return {tuple(sorted((tuple(np.round(vv[i], 9)), bool(c)) for i, c in zip(f, m))) for f, m in zip(tt, low)}
+
+    assert faces(v2, t2, np.arange(len(dv), len(v2))) == faces(pv, pt, p_copies)
+    # Not the same as any cut: a proxy whose lower side had no copies leaves the mesh whole.
+    assert cut_as_proxy(dv, dt, None, pv, pt, np.zeros(0, dtype=np.int64))[0].shape == dv.shape
