@@ -1,19 +1,17 @@
-"""Dense heads (scans of 50k-500k triangles) rigged through a coarser copy of the same surface (opt-in).
+"""Dense heads (scans of 50k-500k triangles) rigged through a coarser copy of the same surface.
 
 The rig's field, its fold repair and its checks cost time in the number of vertices: on Lee Perry-Smith subdivided
 once (70,736 triangles) the whole rig took 666-1,107 s and 1.7 GB, 87% of it in the fold repair, and failed (3 flips
-at mouth_open 0.465, stretch 3.38), while the same surface as shipped (17,519 triangles) rigs in 10 s and passes. With
-``rig_checked(dense_proxy=True)`` a head above :data:`DENSE_TRIANGLES` is decimated to :data:`PROXY_TRIANGLES`
-(:func:`proxy_mesh`), the proxy rigged and checked as any head, the dense mesh cut along the proxy's cut
-(``rig_head``'s ``proxy``), and each dense vertex takes the proxy's displacement rows at its nearest point on the
-proxy surface, barycentrically (:func:`carried_rows`), a vertex on one lip's side of the cut from that lip's side of
-the proxy only (:func:`lip_sides`: closed lips touch, so the nearest proxy face of an upper-lip vertex may be the lower
-lip's, and a blend across the cut tears the lip at every opening). The checks then run on the dense rig.
-
-Not the default: the proxy keeps the mouth region's own faces (MOUTH_KEEP) and passes, but the carried rig of the
-once-subdivided head still FAILS (4 flips, stretch 44.5: pink shards hang from the upper lip into the opening where
-the dense cut leaves the proxy's by a few vertices), in 165 s and 1.2 GB instead of 11-18 minutes and 1.7 GB;
-docs/animation.md, "A dense scan through a decimated proxy".
+at mouth_open 0.465, stretch 3.38), while the same surface as shipped (17,519 triangles) rigs in 10 s and passes. So
+(``rig_checked``, ``dense_proxy``) a head above :data:`DENSE_TRIANGLES` is decimated outside its mouth
+(:func:`proxy_mesh`: the faces within MOUTH_KEEP of the mouth kept as they are, the rest to PROXY_TRIANGLES), the
+proxy rigged and checked as any head, the dense mesh cut exactly as the proxy was (``rigging.cut_as_proxy``), and
+each dense vertex given the proxy's displacement rows at its nearest point on the proxy surface, barycentrically
+(:func:`carried_rows`; a kept vertex its own proxy vertex's rows), a vertex on one lip's side of the cut from that
+lip's side of the proxy only (:func:`lip_sides`: closed lips touch, so the nearest proxy face of an upper-lip vertex
+may be the lower lip's, and a blend across the cut tears the lip at every opening). The checks then run on the dense
+rig: the once-subdivided head PASSES (0 flips, stretch 3.43) in 160 s and 1.24 GB (docs/animation.md, "A dense scan
+through a decimated proxy").
 """
 
 from __future__ import annotations
@@ -33,8 +31,8 @@ from realtime_core.face.rig import modelled_rest
 from realtime_core.face.welding import weld
 
 DENSE_TRIANGLES = 40_000
-"""Triangles above which a head may be rigged through a decimated proxy (``rig_checked(dense_proxy=True)``; Lee
-Perry-Smith as shipped, 17,519, and every other head of the test set and the held-out table lie below it)."""
+"""Triangles above which a head is rigged through a decimated proxy (Lee Perry-Smith as shipped, 17,519, the full-body
+avatar, 27,676, and every other head of the test set and the held-out table lie below it and rig as before)."""
 MOUTH_KEEP = 0.6
 """Eye-corner distances: the proxy keeps the dense mesh's own faces within this of the mouth's centre (the lips, the
 crease and the corners; :func:`proxy_mesh`)."""

@@ -475,7 +475,7 @@ TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
 def rig_checked(
-    mesh: HeadMesh, spec: Mapping[str, object] | None, *, dense_proxy: bool = False, **rig_options: Any
+    mesh: HeadMesh, spec: Mapping[str, object] | None, *, dense_proxy: bool = True, **rig_options: Any
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
     ``(rig, the mesh it animates, RigReport)``. Tried in this order, the first rig that passes kept (else
@@ -490,9 +490,9 @@ def rig_checked(
     with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes.
-    ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy
-    (:mod:`assets.heads.dense`; off by default: on the once-subdivided Lee Perry-Smith it is 4-7x faster but its
-    carried rig still fails, docs/animation.md, "A dense scan through a decimated proxy").
+    ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
+    keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160 s, was
+    FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""

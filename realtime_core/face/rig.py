@@ -29,7 +29,7 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-RIG_ALGORITHM = 54  # 54: a head whose rigs all fail is tried with capped local gains (the old heavy man's V)
+RIG_ALGORITHM = 55  # 55: a head over 40,000 triangles is rigged through a decimated proxy (assets/heads/dense.py)
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
