@@ -483,7 +483,7 @@ TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
 def rig_checked(
-    mesh: HeadMesh, spec: Mapping[str, object] | None, **rig_options: Any
+    mesh: HeadMesh, spec: Mapping[str, object] | None, *, dense_proxy: bool = True, **rig_options: Any
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
     ``(rig, the mesh it animates, RigReport)``. Tried in this order, the first rig that passes kept (else
@@ -500,12 +500,50 @@ def rig_checked(
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes; if that fails too and its lower inner-lip
     point lies on the upper lip (:func:`assets.heads.rigging.lower_inner_on_lower_lip`), once more as the first try
     with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes.
+    ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
+    keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
+    FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
     from dataclasses import replace
 
-    from assets.heads.rigging import lower_inner_on_lower_lip, rig_head
+    import numpy as np
+
+    from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
+    from assets.heads.rigging import lower_inner_on_lower_lip, resolve_landmarks, rig_head
+
+    harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
+    if dense_proxy and len(mesh.triangles) > DENSE_TRIANGLES and harmonic:
+        # A dense scan: its decimated copy rigged and checked as any head, its field carried onto the dense mesh
+        # (cut along its own lips), which is then checked itself (assets/heads/dense.py).
+        source = str(rig_options.get("landmark_source", "landmarks"))
+        points = resolve_landmarks(spec, mesh.vertices, source) if spec is not None else None
+        mouth, keep = None, 0.0
+        if points is not None:
+            mouth = np.mean([points[k] for k in ("corner_left", "corner_right", "upper_lip", "lower_lip")], axis=0)
+            keep = MOUTH_KEEP * float(np.linalg.norm(points["eye_outer_left"] - points["eye_outer_right"]))
+        proxy = proxy_mesh(mesh, mouth=mouth, keep=keep)
+        p_rig, p_rigged, _ = rig_checked(
+            proxy,
+            None if points is None else {k: p.tolist() for k, p in points.items()},
+            **rig_options,
+            record_hidden=True,
+        )
+        chosen: dict[str, Any] = {
+            "clean_lips": bool(p_rig.meta.get("clean_lips")),
+            "walls_in_repair": p_rig.meta.get("fold_repair_mesh") != "final",
+            "corners_at_points": bool(p_rig.meta.get("simple_corners_at_points")),
+            "gain_capped": bool(p_rig.meta.get("simple_gain_capped")),
+        }
+        used = spec
+        if p_rig.meta.get("lower_inner_moved") and spec is not None:
+            # The proxy passed with its lower inner-lip point moved onto the lower lip (rig_checked's last try): the
+            # dense head takes the same point (the proxy keeps the mouth's faces, so it lies on both surfaces).
+            used = {**spec, "lower_inner": p_rig.meta["landmarks"]["lower_inner"]}
+        rig, rigged = rig_head(mesh, used, **rig_options, **chosen, proxy=(p_rig, p_rigged))
+        report = head_checks(Head(rig, rigged))
+        return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
 
     tries: list[dict[str, Any]] = [
         {"clean_lips": True},

@@ -41,6 +41,7 @@ from assets.heads.cavity import (
     opens_onto_nothing,
     with_dark_mouth_inside,
 )
+from assets.heads.dense import seam_of
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
 from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
@@ -61,6 +62,7 @@ from realtime_core.face.checks import LIP_BACKS_BAND
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
+    RIG_ALGORITHM,
     contact_spread,
     decouple_opening,
     head_response,
@@ -1149,6 +1151,8 @@ def rig_head(
     clean_lips: bool = False,
     corners_at_points: bool = False,
     gain_capped: bool = False,
+    proxy: tuple[Rig, HeadMesh] | None = None,
+    record_hidden: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1173,6 +1177,12 @@ def rig_head(
     :func:`assets.heads.head.rig_checked` tries it on a knife-cut mouth whose other rigs fail).
     ``gain_capped``: the simple face's units carried to the head with local maps of gain at most
     :data:`ADAPT_MAX_GAIN` (meta "simple_gain_capped"; rig_checked's last try for a head whose rigs all fail).
+    ``proxy``: (rig, the mesh it animates) of a decimated copy of ``mesh`` (a dense scan,
+    :mod:`assets.heads.dense`): ``mesh`` is cut as always, but its field is the proxy's carried over, each lip's
+    side from that lip's side of the proxy (no field of its own, no recalibration, no fold repair).
+    ``record_hidden``: meta "hidden_faces" lists the crease's hidden wall faces removed (a proxy's lip sides are
+    measured along them: its cut may run inside the crease, whose vertices keep no face once they go) and meta
+    "cut_path" the cut's path (a dense scan is cut along it).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1254,8 +1264,13 @@ def rig_head(
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
                 front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
-                path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
-                path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
+                if proxy is not None and int(proxy[0].meta.get("lip_seam_cut", 0) or 0):
+                    # A dense scan: cut where its proxy was cut, so the two meshes' lips part along one line.
+                    path = _path_along_proxy_cut(v, t, snap["corner_left"], snap["corner_right"], proxy[0])
+                    front = stand = min(path, key=lambda i: float(np.linalg.norm(v[i] - v[front])))
+                else:
+                    path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
+                    path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)
             # The simple face is placed at the front contact (placed at the detour's vertex, up the crease
@@ -1277,18 +1292,30 @@ def rig_head(
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
                 hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
-            v, t, uv, origin = cut_mouth(
-                v,
-                t,
-                snap["corner_left"],
-                snap["corner_right"],
-                frame.axes[1],
-                uv,
-                path=path,
-                forward=frame.axes[2],
-                hidden=hidden,
-                underside=coarse,
-            )
+            if record_hidden:
+                meta["cut_path"] = [int(i) for i in path]
+            copied = None
+            if proxy is not None:
+                p_rig = proxy[0]
+                p_v = np.asarray(p_rig.neutral, dtype=np.float64)
+                p_copies, _ = seam_of(p_v, int(p_rig.meta["lip_seam_cut"]), int(p_rig.meta.get("mouth_cavity", 0) or 0))
+                p_t = np.r_[np.asarray(p_rig.triangles, dtype=np.int64).reshape(-1, 3), _hidden_faces(p_rig)]
+                copied = cut_as_proxy(v, t, uv, p_v, p_t, p_copies)
+            if copied is not None:
+                v, t, uv, origin = copied
+            else:
+                v, t, uv, origin = cut_mouth(
+                    v,
+                    t,
+                    snap["corner_left"],
+                    snap["corner_right"],
+                    frame.axes[1],
+                    uv,
+                    path=path,
+                    forward=frame.axes[2],
+                    hidden=hidden,
+                    underside=coarse,
+                )
             colors = None if colors is None else colors[origin]
             meta["lip_seam_cut"] = int(len(v) - n_base)
             cut_copies = np.arange(n_base, len(v))
@@ -1321,22 +1348,26 @@ def rig_head(
         glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
         if glue:
             meta["lip_edge_glued"] = len(glue)
-        rig = build_rig(
-            v,
-            t,
-            placed,
-            cal,
-            frame,
-            config=config,
-            head_uvs=uv,
-            allowed=allowed,
-            meta=meta,
-            keep_apart=cut_copies,
-            seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
-            pin_upper_lip=bool(behind),
-            seam_hinges=coarse,
-        )
-        if head_calibration:
+        if proxy is not None:
+            rig = _carried(proxy, v, t, cut_copies, None if cut_copies is None else origin[cut_copies], part, frame)
+            rig = replace(rig, meta={**meta, **rig.meta, "iod": frame.iod, "algorithm": RIG_ALGORITHM})
+        else:
+            rig = build_rig(
+                v,
+                t,
+                placed,
+                cal,
+                frame,
+                config=config,
+                head_uvs=uv,
+                allowed=allowed,
+                meta=meta,
+                keep_apart=cut_copies,
+                seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
+                pin_upper_lip=bool(behind),
+                seam_hinges=coarse,
+            )
+        if head_calibration and proxy is None:
             rig = recalibrate(rig, mouth_landmarks(snap))
         # Lips modelled apart (not cut) with nothing behind them: a hollow scan with a mouth hole, or a face mask
         # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
@@ -1363,7 +1394,11 @@ def rig_head(
             # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
             # Perry-Smith, smoothing across the walls its hand-landmark rig).
             rig, cut_mesh = without_inner_lips(
-                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+                rig,
+                HeadMesh(vertices=v, triangles=t, name=mesh.name),
+                walls,
+                keep_holes=not coarse,
+                record=record_hidden,
             )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
@@ -1378,7 +1413,7 @@ def rig_head(
                 float((v[snap[k]] - frame.origin) @ frame.axes[0]) for k in ("corner_left", "corner_right")
             )
             upper = upper_lip_side(v, t, seam, frame, x_range=(x_lo, x_hi))
-        if config.method == "harmonic":  # (the built-in head too: its maps are refitted, facecast fit-maps)
+        if config.method == "harmonic" and proxy is None:  # (the built-in head too: its maps are refitted)
             from realtime_core.face.checks import CHECK_POSES, EXTREME_POSES
             from realtime_core.face.repair import PATIENCE
 
@@ -1450,7 +1485,11 @@ def rig_head(
             rig = held
         if walls is not None:
             rig, cut_mesh = without_inner_lips(
-                rig, HeadMesh(vertices=v, triangles=t, name=mesh.name), walls, keep_holes=not coarse
+                rig,
+                HeadMesh(vertices=v, triangles=t, name=mesh.name),
+                walls,
+                keep_holes=not coarse,
+                record=record_hidden,
             )
             t = cut_mesh.triangles
         if clean_lips and seam is not None:
@@ -1546,6 +1585,174 @@ def rig_head(
         wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
         out_mesh = with_dark_mouth_inside(out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide)
     return rig, out_mesh
+
+
+def _carried(
+    proxy: tuple[Rig, HeadMesh],
+    v: np.ndarray,
+    t: np.ndarray,
+    copies: np.ndarray | None,
+    originals: np.ndarray | None,
+    part: np.ndarray | None,
+    frame: FaceFrame,
+) -> Rig:
+    """The proxy's field carried onto the cut dense mesh ``v``/``t`` (:func:`assets.heads.dense.carried_rig`),
+    each vertex within SIDE_REACH of its cut taking rows from its own lip's side of the proxy's."""
+    from assets.heads.dense import SIDE_REACH, carried_rig, lip_sides
+
+    p_rig, p_mesh = proxy
+    reach = SIDE_REACH * frame.iod
+    no_cut = np.zeros(0, dtype=np.int64)
+    sides = lip_sides(
+        v,
+        t,
+        no_cut if copies is None else copies,
+        no_cut if originals is None else originals,
+        reach,
+    )
+    p_cut = int(p_rig.meta.get("lip_seam_cut", 0) or 0)
+    p_cavity = int(p_rig.meta.get("mouth_cavity", 0) or 0)
+    p_v = np.asarray(p_rig.neutral, dtype=np.float64)
+    p_copies, p_originals = seam_of(p_v, p_cut, p_cavity) if p_cut else (no_cut, no_cut)
+    # Along the crease's hidden walls too: the proxy's cut may run inside the crease (its vertices keep no face).
+    p_t = np.r_[np.asarray(p_rig.triangles, dtype=np.int64).reshape(-1, 3), _hidden_faces(p_rig)]
+    own = lip_sides(p_v, p_t, p_copies, p_originals, reach)[: len(p_v) - p_cavity]
+    # Each proxy vertex on the side of the dense vertex beside it, so both meshes split space alike where their cuts
+    # end at different places (round a corner, a proxy face whose corners then lie on both sides is no lip's); at the
+    # dense cut itself, where both of its sides lie, on its own side.
+    from scipy.spatial import cKDTree
+
+    _, near = cKDTree(v).query(p_v[: len(own)])
+    p_sides = sides[near]
+    seam = np.zeros(len(v), dtype=bool)
+    if copies is not None and originals is not None:
+        seam[copies] = seam[originals] = True
+    p_sides[seam[near]] = own[seam[near]]
+    p_part = None if p_mesh.part is None else np.asarray(p_mesh.part)[: len(p_v) - p_cavity]
+    return carried_rig(p_rig, p_mesh, v, t, sides=sides, proxy_sides=p_sides, part=part, proxy_part=p_part)
+
+
+def _path_along_proxy_cut(v: np.ndarray, t: np.ndarray, left: int, right: int, proxy: Rig) -> list[int]:
+    """The edge path from mouth corner ``left`` to ``right`` of the dense mesh ``v``/``t`` that keeps closest to
+    the proxy rig's cut (its seam's upper vertices, ordered from corner to corner): :func:`cut_path`'s costs with the
+    distance to that polyline in place of the distance to the corners' straight line."""
+    from scipy.spatial import cKDTree
+
+    pv = np.asarray(proxy.neutral, dtype=np.float64)
+    _, originals = seam_of(pv, int(proxy.meta["lip_seam_cut"]), int(proxy.meta.get("mouth_cavity", 0) or 0))
+    a, b = v[left], v[right]
+    ab = b - a
+    if "cut_path" in proxy.meta:  # its cut's path, in order (record_hidden)
+        seam = pv[np.asarray(proxy.meta["cut_path"], dtype=np.int64)[1:-1]]
+    else:
+        seam = pv[_walk(originals, np.r_[np.asarray(proxy.triangles, dtype=np.int64), _hidden_faces(proxy)], pv, a, ab)]
+    knots = np.vstack([a, seam, b])
+    steps = np.linspace(0.0, 1.0, 12)[:, None, None]
+    line = (knots[:-1][None] * (1 - steps) + knots[1:][None] * steps).reshape(-1, 3)
+    tree = cKDTree(line)
+    adj = vertex_adjacency(len(v), np.asarray(t, dtype=np.int64)).tocoo()
+    elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
+    pen = tree.query(v[adj.row])[0] + tree.query(v[adj.col])[0]
+    g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    # Through the dense vertex nearest each of the proxy's seam vertices in turn (where the proxy keeps the dense
+    # mouth's own vertices, its cut exactly), legs between them along the cheapest edges.
+    stops = [left, *cKDTree(v).query(knots[1:-1])[1].tolist(), right]
+    path = [left]
+    for a_, b_ in itertools.pairwise(stops):
+        if a_ == b_:
+            continue
+        dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
+        if not np.isfinite(dist[b_]):
+            raise MeshError("mouth corners are not connected by the mesh; cannot cut the lip seam")
+        leg = [int(b_)]
+        while leg[-1] != a_:
+            leg.append(int(pred[leg[-1]]))
+        path += leg[::-1][1:]
+    out: list[int] = []
+    for i in path:  # a leg back over the last ones: the loop it closes is left out
+        if i in out:
+            del out[out.index(i) + 1 :]
+        else:
+            out.append(i)
+    return out
+
+
+def cut_as_proxy(
+    v: np.ndarray,
+    t: np.ndarray,
+    uv: np.ndarray | None,
+    proxy_vertices: np.ndarray,
+    proxy_triangles: np.ndarray,
+    proxy_copies: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray] | None:
+    """The mesh ``v``/``t`` cut as a proxy of it was, where the proxy kept the dense mouth's own faces
+    (:func:`assets.heads.dense.proxy_mesh`, ``keep``): every face at the position of a proxy face (``proxy_triangles``
+    over ``proxy_vertices``, the crease's removed walls included) that took a cut copy (``proxy_copies``) takes copies
+    at the same corners (one per vertex), appended in order. Cut again along the proxy's path instead, 7 of the
+    once-subdivided Lee Perry-Smith's 104 cut vertices left the proxy's cut and tore the lip (docs/animation.md, "A
+    dense scan through a decimated proxy"). Returns (vertices, triangles, uvs, origin) as :func:`cut_mouth`, or None
+    when a proxy face with a copy has no face at its position (a decimated mouth: cut along the proxy's path)."""
+    from scipy.spatial import cKDTree
+
+    from realtime_core.face.welding import weld
+
+    pv = np.asarray(proxy_vertices, dtype=np.float64)
+    is_copy = np.zeros(len(pv), dtype=bool)
+    is_copy[np.asarray(proxy_copies, dtype=np.int64)] = True
+    pt = np.asarray(proxy_triangles, dtype=np.int64).reshape(-1, 3)
+    pt = pt[is_copy[pt].any(axis=1)]
+    tol = 1e-9 * float(np.ptp(v, axis=0).max())
+    t = np.asarray(t, dtype=np.int64)
+    d, near = cKDTree(v).query(pv[pt].reshape(-1, 3))  # each proxy corner's dense vertex (texture twins aside)
+    if (d > tol).any():
+        return None
+    # A dense face at a proxy face's position: the same three positions (welded, so a texture seam's twins match).
+    canon, _ = weld(v)
+    key = {tuple(sorted(canon[f].tolist())): i for i, f in enumerate(t)}
+    corner = canon[near.reshape(-1, 3)]
+    faces = [key.get(tuple(sorted(c.tolist()))) for c in corner]
+    if any(f is None for f in faces):
+        return None
+    t2 = t.copy()
+    new: dict[int, int] = {}
+    for f, pf, cc in zip(faces, pt, corner, strict=True):
+        assert f is not None
+        for k in range(3):
+            i = int(t[f, k])
+            j = int(np.flatnonzero(cc == canon[i])[0])
+            if is_copy[pf[j]]:
+                t2[f, k] = new.setdefault(i, len(v) + len(new))
+    origin = np.r_[np.arange(len(v)), np.array(list(new), dtype=np.int64)]
+    return v[origin], t2, None if uv is None else np.asarray(uv)[origin], origin
+
+
+def _walk(seam: np.ndarray, t: np.ndarray, v: np.ndarray, start: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """The vertices ``seam`` (k,) in the order of the edge path they make in ``t`` (the cut's path detours into the
+    crease and back, so it is not ordered by its points' positions along the mouth), from the one nearest ``start``;
+    where the path does not go on along an edge, the rest by their position along ``along``."""
+    left = set(int(i) for i in seam)
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    edges = edges[np.isin(edges, seam).all(axis=1)]
+    nbrs: dict[int, set[int]] = {int(i): set() for i in seam}
+    for i, j in edges:
+        nbrs[int(i)].add(int(j))
+        nbrs[int(j)].add(int(i))
+    order = [int(seam[np.argmin(np.linalg.norm(v[seam] - start, axis=1))])]
+    left.discard(order[0])
+    while left:
+        nxt = nbrs[order[-1]] & left
+        if not nxt:
+            rest = np.array(sorted(left), dtype=np.int64)
+            order += rest[np.argsort((v[rest] - start) @ along)].tolist()
+            break
+        order.append(min(nxt, key=lambda j: float((v[j] - start) @ along)))
+        left.discard(order[-1])
+    return np.asarray(order, dtype=np.int64)
+
+
+def _hidden_faces(rig: Rig) -> np.ndarray:
+    """(k, 3) int64 the crease's wall faces the rig's mesh lost (meta "hidden_faces", :func:`without_inner_lips`)."""
+    return np.asarray(rig.meta.get("hidden_faces", []), dtype=np.int64).reshape(-1, 3)
 
 
 WIDE_OPEN = 0.465
@@ -1716,14 +1923,20 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
     return small & ~bad[comp]
 
 
-def without_inner_lips(rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True) -> tuple[R, HeadMesh]:
+def without_inner_lips(
+    rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True, record: bool = False
+) -> tuple[R, HeadMesh]:
     """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
     :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
-    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed."""
+    lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed (``record``: meta
+    "hidden_faces" lists them, added to any listed before)."""
     t = np.asarray(mesh.triangles, dtype=np.int64)
     gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
+    if record:
+        before: list[list[int]] = list(meta.get("hidden_faces", []))
+        meta["hidden_faces"] = before + np.asarray(t[gone]).tolist()
     keep = t[~gone]
     return replace(rig, triangles=keep.astype(np.int32), meta=meta), replace(mesh, triangles=keep)
 
