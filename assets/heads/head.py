@@ -483,7 +483,12 @@ TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
 def rig_checked(
-    mesh: HeadMesh, spec: Mapping[str, object] | None, *, dense_proxy: bool = True, **rig_options: Any
+    mesh: HeadMesh,
+    spec: Mapping[str, object] | None,
+    *,
+    dense_proxy: bool = True,
+    progress: Callable[[str], None] | None = None,
+    **rig_options: Any,
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
     ``(rig, the mesh it animates, RigReport)``. Tried in this order, the first rig that passes kept (else
@@ -503,6 +508,8 @@ def rig_checked(
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
     keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
     FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
+    ``progress``: called with a line before each rig it makes (and why, when an earlier one failed): rigging a scan
+    takes from seconds to minutes, and a user waiting should see which way it is trying.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
@@ -512,6 +519,10 @@ def rig_checked(
 
     from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.rigging import lower_inner_on_lower_lip, resolve_landmarks, rig_head
+
+    def say(line: str) -> None:
+        if progress is not None:
+            progress(line)
 
     harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
     if dense_proxy and len(mesh.triangles) > DENSE_TRIANGLES and harmonic:
@@ -524,9 +535,14 @@ def rig_checked(
             mouth = np.mean([points[k] for k in ("corner_left", "corner_right", "upper_lip", "lower_lip")], axis=0)
             keep = MOUTH_KEEP * float(np.linalg.norm(points["eye_outer_left"] - points["eye_outer_right"]))
         proxy = proxy_mesh(mesh, mouth=mouth, keep=keep)
+        say(
+            f"{len(mesh.triangles):,} triangles (over {DENSE_TRIANGLES:,}): rigging a "
+            f"{len(proxy.triangles):,}-triangle copy that keeps the mouth's own faces, then carrying its rig over"
+        )
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},
+            progress=progress,
             **rig_options,
             record_hidden=True,
         )
@@ -541,6 +557,7 @@ def rig_checked(
             # The proxy passed with its lower inner-lip point moved onto the lower lip (rig_checked's last try): the
             # dense head takes the same point (the proxy keeps the mouth's faces, so it lies on both surfaces).
             used = {**spec, "lower_inner": p_rig.meta["landmarks"]["lower_inner"]}
+        say(f"carrying the copy's rig onto the {len(mesh.triangles):,}-triangle mesh and checking it")
         rig, rigged = rig_head(mesh, used, **rig_options, **chosen, proxy=(p_rig, p_rigged))
         report = head_checks(Head(rig, rigged))
         return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
@@ -558,13 +575,16 @@ def rig_checked(
     hollow = False  # known from the first rig: a cut whose crease's hidden walls were removed
     coarse = False  # known from the first rig: a knife-cut mouth
     plain: tuple[Rig, HeadMesh, RigReport] | None = None
+    failed: list[str] = []  # the last rig's failures (progress lines say why another is made)
     for options in tries:
         if options.get("walls_in_repair") is False and not hollow:
             continue
         if options.get("corners_at_points") and not coarse:
             continue
+        say(_trying(options, failed))
         rig, rigged = rig_head(mesh, spec, **rig_options, **options)
         report = head_checks(Head(rig, rigged))
+        failed = list(report.failures)
         if not rig.meta.get("lip_seam_cut"):
             break  # no cut: the other rigs would be this one
         hollow = bool(rig.meta.get("inner_lip_removed"))
@@ -582,6 +602,7 @@ def rig_checked(
         # gain_capped): a chin placed far behind the mouth (a heavy double chin) read as a 4.4x stretch of the jaw
         # drop, which dragged the upper lip down into a V. Not the first try: on the MediaPipe face it folds.
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
+        say(_trying(last, failed))
         c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **last)
         c_report = head_checks(Head(c_rig, c_rigged))
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
@@ -591,6 +612,7 @@ def rig_checked(
             # Its gains as the first try's (on the thin old woman, capped: stretch 3.24; not: 3.58).
             attempts.append({**last, "failures": list(c_report.failures)})
             last = {"clean_lips": True}
+            say(_trying({**last, "lower_inner_moved": True}, list(c_report.failures)))
             c_rig, c_rigged = rig_head(mesh, moved, **rig_options, **last)
             c_report = head_checks(Head(c_rig, c_rigged))
             last["lower_inner_moved"] = True
@@ -604,6 +626,27 @@ def rig_checked(
     if attempts:
         meta["rig_attempts"] = attempts
     return replace(rig, meta=meta), rigged, report
+
+
+_WAYS = {
+    "clean_lips": "clean lips",
+    "walls_in_repair": "the fold repair on the final mesh",
+    "corners_at_points": "the mouth corners at their points",
+    "gain_capped": "capped gains",
+    "lower_inner_moved": "the lower inner-lip point moved onto the lower lip",
+}
+
+
+def _trying(options: Mapping[str, Any], failed: list[str]) -> str:
+    """The progress line before a rig ``rig_checked`` makes: its way (``options``) and why (``failed``: the
+    failures of the rig made before it; empty for the first)."""
+    # walls_in_repair=False is the way named (the repair on the final mesh); the other options name theirs when set.
+    on = {k: (v is False) if k == "walls_in_repair" else bool(v) for k, v in options.items()}
+    ways = [w for k, w in _WAYS.items() if on.get(k)]
+    line = "rigging" + (f" ({', '.join(ways)})" if ways else "")
+    if failed:
+        line = f"the last rig fails its checks ({'; '.join(failed)}); " + line
+    return line
 
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):

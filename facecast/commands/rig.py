@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import time
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -139,7 +140,15 @@ def run(args: argparse.Namespace) -> int:
         rig, rigged, report = kept
         print(f"rig: the rig of {args.head} with these landmarks and options, read from the rig cache ({cache_path})")
     else:
-        rig, rigged, report = rig_checked(mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple)
+        start = time.monotonic()
+
+        def progress(line: str) -> None:  # rigging a scan takes seconds to minutes: say which way it is trying
+            print(f"rig: {line} ({time.monotonic() - start:.0f} s)", flush=True)
+
+        rig, rigged, report = rig_checked(
+            mesh, spec, landmark_source=source, config=cfg, head=head, simple=simple, progress=progress
+        )
+        print(f"rig: made in {time.monotonic() - start:.0f} s")
     print(
         f"rig checks at {len(EXTREME_POSES)} speech poses and closure ({len(EXPRESSION_POSES)} under expressions):"
         f" {report.summary()}"

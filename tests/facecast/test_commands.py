@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -26,6 +27,9 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     assert out.is_file() and out.with_suffix(".png").is_file() and landmarks.is_file()
     printed = capsys.readouterr().out
     assert "220 control points" in printed and "rig checks at" in printed
+    # Rigging a scan takes seconds to minutes: it says which way it is rigging, and how long it took.
+    assert re.search(r"^rig: rigging \(clean lips\) \(\d+ s\)$", printed, re.M), printed
+    assert re.search(r"^rig: made in \d+ s$", printed, re.M)
     # It says how to use the file, and that --head MESH reads the same rig (test_rig_command_fills_the_rig_cache).
     assert f"--head {out} (every command; serve --rig {out} too); --head {mp} reads this rig from the cache" in printed
     from assets.heads.rigfile import load_rig
