@@ -144,9 +144,11 @@ def resolve_head(
     cache: Path | None = None,
     landmark_finder: LandmarkFinder | None = None,
     parts: tuple[str | Path, ...] = (),
+    progress: Callable[[str], None] | None = None,
 ) -> Head:
     """The head named by ``spec`` ('builtin', a rig .npz or a mesh file), see the module docstring.
     parts: further mesh files of the same head (separate eyes, teeth), appended to a mesh file's head.
+    progress: told a line before each rig made for a mesh not in the rig cache (:func:`rig_checked`).
 
     mode: "auto" (own targets when enough, else retarget), "morph" (own targets or an error),
     "retarget" (always a Sec. 5 rig). target_map: a user mapping JSON for morph-target names.
@@ -164,7 +166,7 @@ def resolve_head(
 
             if landmarks is None:
                 return Head(*builtin_rig(cache))
-            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None, cache=cache)
+            return _rig_mesh(builtin_morph_head(cache).mesh, landmarks, config, None, cache=cache, progress=progress)
         return builtin_morph_head(cache)
     p = Path(spec)
     if p.suffix.lower() == ".wfm":  # Candide-3: a face model with its own animation units
@@ -208,7 +210,7 @@ def resolve_head(
                 f"{p}: {n} morph targets, none recognised as mouth shapes (ARKit, OVR visemes, VRM); "
                 "give a mapping with --target-map or use --head-mode retarget"
             )
-    return _rig_mesh(mesh, landmarks, config, landmark_finder, cache=cache)
+    return _rig_mesh(mesh, landmarks, config, landmark_finder, cache=cache, progress=progress)
 
 
 def morph_head(
@@ -277,6 +279,7 @@ def _rig_mesh(
     finder: LandmarkFinder | None,
     *,
     cache: Path | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> Head:
     """Rig ``mesh``, or read the rig cached for the same mesh content, landmarks, configuration and rig
     algorithm (``<cache>/rigs/``): rigging a scanned head takes minutes, and every command taking
@@ -291,7 +294,7 @@ def _rig_mesh(
         except RigFileError:
             path.unlink(missing_ok=True)  # unreadable (an older writer): rig again below
     spec, source = head_landmarks(mesh, landmarks, finder)
-    rig, rigged, _ = rig_checked(mesh, spec, landmark_source=source, config=config)
+    rig, rigged, _ = rig_checked(mesh, spec, landmark_source=source, config=config, progress=progress)
     keep_rig(rig, rigged, path)
     return Head(rig, rigged)
 

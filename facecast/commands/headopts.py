@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 
 
 def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head: str | None = None) -> None:
@@ -47,6 +49,11 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
     from clients.render.landmarks import find_landmarks
 
     name = str(spec if spec is not None else args.head)
+    start = time.monotonic()
+
+    def progress(line: str) -> None:  # a mesh not in the rig cache is rigged now: seconds to minutes
+        print(f"head {name}: {line} ({time.monotonic() - start:.0f} s)", file=sys.stderr, flush=True)
+
     head = resolve_head(
         name,
         landmarks=args.landmarks,
@@ -54,6 +61,7 @@ def resolve_from_args(args: argparse.Namespace, spec: object = None):
         target_map=args.target_map,
         landmark_finder=find_landmarks,
         parts=tuple(getattr(args, "head_part", ()) or ()),
+        progress=progress,
     )
     if name != "builtin":  # (the built-in head passes: tests/assets/heads)
         warn_failing_checks(head, name)
@@ -65,8 +73,6 @@ def warn_failing_checks(head, name: str) -> None:
     for); the head is used anyway. A rig that records its checks (meta "checks": a mesh rigged now or
     read from the rig cache, a ``facecast rig`` file) is not measured again; heads whose landmarks are
     unknown (own targets, none in the file) are not checked here (finding them means rendering the face)."""
-    import sys
-
     from assets.heads.head import head_checks
     from realtime_core.errors import FacecastError
 

@@ -49,6 +49,23 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     )
 
 
+def test_a_mesh_rigged_for_a_command_says_so_and_a_cached_one_does_not(tmp_path, shared_data, own_cache, capsys):
+    """--head MESH rigs a mesh not in the rig cache before the command's work (seconds to minutes for a scan): each
+    rig it makes is announced on stderr with the seconds so far; the next command reads the rig and says nothing."""
+    import argparse
+
+    from facecast.commands.headopts import resolve_from_args
+
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    args = argparse.Namespace(head=str(mp), landmarks=None, head_mode="auto", target_map=None, head_part=[])
+    capsys.readouterr()
+    resolve_from_args(args)
+    err = capsys.readouterr().err
+    assert re.search(rf"^head {re.escape(str(mp))}: rigging \(clean lips\) \(\d+ s\)$", err, re.M), err
+    resolve_from_args(args)
+    assert "rigging" not in capsys.readouterr().err
+
+
 def test_rig_command_fills_the_rig_cache(tmp_path, shared_data, own_cache, capsys):
     """`facecast rig MESH -o RIG` leaves the rig where `--head MESH` (say, render, serve) looks for it: the next
     command reads it instead of rigging the head again (it once rigged Lee Perry-Smith a second time). Rig options
