@@ -521,12 +521,17 @@ def rig_checked(
     import numpy as np
 
     from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
+    from assets.heads.mesh import check_mesh
     from assets.heads.rigging import lower_inner_on_lower_lip, resolve_landmarks, rig_head
 
     def say(line: str) -> None:
         if progress is not None:
             progress(line)
 
+    # Bad input names itself before any progress line (one line on stderr for the user, then nothing).
+    check_mesh(mesh)
+    if spec is not None:
+        resolve_landmarks(spec, mesh.vertices, str(rig_options.get("landmark_source", "landmarks")))
     harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
     if dense_proxy and len(mesh.triangles) > DENSE_TRIANGLES and harmonic:
         # A dense scan: its decimated copy rigged and checked as any head, its field carried onto the dense mesh

@@ -16,7 +16,7 @@ from tests.prerequisites import missing
 pytestmark = pytest.mark.system
 
 
-def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head, capsys):
+def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head, own_cache, capsys):
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     out = tmp_path / "mp.npz"
     # --keep-failing: the picture and file are written whatever the extreme-pose checks say

@@ -49,6 +49,7 @@ def test_a_first_rig_is_checked_once_and_a_reload_not_again(shared_data, own_cac
     mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
     args = build_parser().parse_args(["say", "hello", "-o", str(tmp_path / "x.glb"), "--head", str(mp)])
     first = resolve_from_args(args)
+    assert "rigging" in capsys.readouterr().err  # a mesh rigged now says so (its seconds to minutes)
     assert len(calls) == 1 and len(list((own_cache / "rigs").glob("*.npz"))) == 1
     kept = first.rig.meta["checks"]
     assert kept["passed"] is True and kept["failures"] == [] and kept["flipped_triangles"] == 0
