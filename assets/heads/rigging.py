@@ -43,7 +43,7 @@ from assets.heads.cavity import (
 )
 from assets.heads.dense import seam_of
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
-from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh
+from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh, vertex_normals
 from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
@@ -58,7 +58,7 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
-from realtime_core.face.checks import LIP_BACKS_BAND
+from realtime_core.face.checks import LIP_BACKS_BAND, boundary_edges
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
@@ -1053,11 +1053,7 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     if not to_upper[snap["lower_inner"]] < to_lower[snap["lower_inner"]]:
         return None
     frame = face_frame(welded, mouth_landmarks(snap))
-    normals = np.zeros_like(welded)
-    face_n = triangle_normals(welded, tw)
-    for k in range(3):
-        np.add.at(normals, tw[:, k], face_n)
-    facing = normals @ frame.axes.T  # (n_w, 3): sideways, up, forward
+    facing = vertex_normals(welded, tw) @ frame.axes.T  # (n_w, 3): sideways, up, forward
     lower = np.flatnonzero((to_lower < to_upper) & np.isfinite(to_lower) & (facing[:, 2] >= facing[:, 1]))
     if not len(lower):
         return None
@@ -1120,9 +1116,7 @@ def opening_ends(
     opening's ends. ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    edges = np.sort(t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    uniq, count = np.unique(edges, axis=0, return_counts=True)
-    rim = np.unique(uniq[count == 1])
+    rim = np.unique(boundary_edges(t)[0])
     q = (v - frame.origin) @ frame.axes.T / frame.iod
     mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
     out = {}
