@@ -507,7 +507,9 @@ def rig_checked(
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes; if that fails too and its lower inner-lip
     point lies on the upper lip (:func:`assets.heads.rigging.lower_inner_on_lower_lip`), once more as the first try
-    with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes.
+    with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes. Any of these rigs that
+    fails only by the inside shown through the skin is first tried with that inside moved with the skin in front of
+    it (:func:`_lined`; the anny thin old woman's mouth bag behind her cheeks), kept if that passes.
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
     keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
     FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
@@ -567,7 +569,7 @@ def rig_checked(
             used = {**spec, "lower_inner": p_rig.meta["landmarks"]["lower_inner"]}
         say(f"carrying the copy's rig onto the {len(mesh.triangles):,}-triangle mesh and checking it")
         rig, rigged = rig_head(mesh, used, **rig_options, **chosen, proxy=(p_rig, p_rigged))
-        report = head_checks(Head(rig, rigged))
+        rig, rigged, report = _lined(rig, rigged, head_checks(Head(rig, rigged)))
         return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
 
     tries: list[dict[str, Any]] = [
@@ -591,7 +593,7 @@ def rig_checked(
             continue
         say(_trying(options, failed))
         rig, rigged = rig_head(mesh, spec, **rig_options, **options)
-        report = head_checks(Head(rig, rigged))
+        rig, rigged, report = _lined(rig, rigged, head_checks(Head(rig, rigged)))
         failed = list(report.failures)
         if not rig.meta.get("lip_seam_cut"):
             break  # no cut: the other rigs would be this one
@@ -612,7 +614,7 @@ def rig_checked(
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
         say(_trying(last, failed))
         c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **last)
-        c_report = head_checks(Head(c_rig, c_rigged))
+        c_rig, c_rigged, c_report = _lined(c_rig, c_rigged, head_checks(Head(c_rig, c_rigged)))
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
         if moved is not None:
             # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
@@ -622,7 +624,7 @@ def rig_checked(
             last = {"clean_lips": True}
             say(_trying({**last, "lower_inner_moved": True}, list(c_report.failures)))
             c_rig, c_rigged = rig_head(mesh, moved, **rig_options, **last)
-            c_report = head_checks(Head(c_rig, c_rigged))
+            c_rig, c_rigged, c_report = _lined(c_rig, c_rigged, head_checks(Head(c_rig, c_rigged)))
             last["lower_inner_moved"] = True
             c_rig = replace(c_rig, meta={**c_rig.meta, "lower_inner_moved": True})
         if c_report.passed:
@@ -655,6 +657,26 @@ def _trying(options: Mapping[str, Any], failed: list[str]) -> str:
     if failed:
         line = f"the last rig fails its checks ({'; '.join(failed)}); " + line
     return line
+
+
+def _lined(rig: Rig, rigged: HeadMesh, report: RigReport) -> tuple[Rig, HeadMesh, RigReport]:
+    """A rig whose only failure is the inside shown through the skin (a mouth bag's wall through a thin cheek,
+    :func:`realtime_core.face.checks.inside_shown`) with that inside moved with the skin in front of it
+    (:func:`assets.heads.lining.with_lining_behind_skin`), if that passes; else the rig as it was (every other rig,
+    to the bit). The lining's rows are a blend of rows the rig has, so no rig is made again (a few seconds); meta
+    "inside_lined" says how many vertices were moved."""
+    from assets.heads.lining import with_lining_behind_skin
+    from realtime_core.face.checks import RigCheckLimits
+
+    limit = RigCheckLimits().max_inside_shown
+    if report.passed or len(report.failures) != 1 or not (report.inside_shown_iod or 0.0) > limit:
+        return rig, rigged, report
+    landmarks, _ = head_check_inputs(Head(rig, rigged))
+    lined = with_lining_behind_skin(rig, landmarks)
+    if lined is None:
+        return rig, rigged, report
+    lined_report = head_checks(Head(lined, rigged))
+    return (lined, rigged, lined_report) if lined_report.passed else (rig, rigged, report)
 
 
 def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | None = None, poses=None):

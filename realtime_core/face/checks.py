@@ -36,6 +36,11 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   (:func:`seam_gap`): a seam that opens is a crack in the render, which no figure above sees (each part's faces
   stay whole). Measured only when such pairs are given.
 
+- inside through the skin: how far (IOD, along the view) a face the skin covers at rest (a mouth bag's side wall
+  behind a thin cheek, the teeth) comes in front of the skin, front and three-quarter views (:func:`inside_shown`): a
+  renderer draws it over the cheek, a dark fleck where its back shows, which no figure above sees (they measure the
+  lips). The opening does not count.
+
 - flipped under expressions (advisory): the most flipped triangles at :data:`EXPRESSION_POSES`, speech under an
   expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
 
@@ -337,6 +342,9 @@ SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
 both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
 before (issue 12), a dark line. 0.001 IOD is under a pixel of the test set's mouth close-up (1.1 IOD in 400 pixels)."""
+INSIDE_SHOWN_LIMIT = 0.005
+"""IOD: how far a face the skin covered at rest may come in front of the skin (:func:`inside_shown`) before the rig
+fails (see docs/animation.md, "The inside shown through the skin", for the rows it was chosen from)."""
 MIN_OPEN_RESPONSE = 0.5
 """The least mouth opening a rig passes with: inner-lip gap gained per unit mouth_open (IOD / IOD). Half of
 what the parameter asks: the lower end of the range whose response rigging itself trusts and rescales
@@ -362,6 +370,9 @@ class RigCheckLimits:
     the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
     max_seam_gap: float = SEAM_GAP_LIMIT
     """IOD: a larger :func:`seam_gap` fails the rig (a crack through the skin)."""
+    max_inside_shown: float = INSIDE_SHOWN_LIMIT
+    """IOD: a face the skin covers at rest coming further in front of the skin (:func:`inside_shown`) fails the rig
+    (a dark fleck on the cheek; :data:`INSIDE_SHOWN_LIMIT`)."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
@@ -376,6 +387,8 @@ class RigCheckLimits:
             raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
         if not self.max_seam_gap >= 0:
             raise ConfigError("max_seam_gap must be >= 0 (IOD)")
+        if not self.max_inside_shown >= 0:
+            raise ConfigError("max_inside_shown must be >= 0 (IOD)")
 
 
 @dataclass(frozen=True)
@@ -417,6 +430,14 @@ class RigReport:
     closure_reach_iod: float | None = None
     """IOD: how far below 0 mouth_open goes at the closure pose the checks measured, (0, 0, -gap, 0) with gap the
     inner lips' gap at rest (>= 0): the head's own reach of its bound (:func:`checked_bound`). None: not measured."""
+    inside_shown_iod: float | None = None
+    """IOD: how far a face the skin covers at rest comes in front of the skin (:func:`inside_shown`; None: not
+    measured, or no face near the mouth)."""
+    inside_shown_points: int | None = None
+    """At the pose and view where :attr:`inside_shown_iod` is worst, how many of the skin's sample points show the
+    inside by more than the limit."""
+    inside_shown_pose: tuple[float, ...] = ()
+    """Where :attr:`inside_shown_iod` is worst (empty: nowhere)."""
     expressions_held: tuple[tuple[float, ...], ...] | None = None
     """The expression poses (of those measured, :data:`EXPRESSION_POSES`) at which the rig has no flipped triangle
     and lips that interpenetrate by no more than the limit: the poses its bound's hull takes besides speech
@@ -439,11 +460,13 @@ class RigReport:
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
+        inside = "n/a" if self.inside_shown_iod is None else f"{self.inside_shown_iod:.4f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
             f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD{seam}, "
+            f"inside through the skin {inside} IOD, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
@@ -878,6 +901,13 @@ def check_rig(
     seam = None if joined_pairs is None else seam_gap(rig, joined_pairs, (*poses, closure), iod)
     if seam is not None and seam > limits.max_seam_gap:
         fails.append(f"the seam between the head's meshes opens by {seam:.4f} IOD (> {limits.max_seam_gap})")
+    shown = inside_shown(rig, landmarks, poses=inside_poses((*poses, closure)))
+    inside, inside_points, inside_pose = (None, None, ()) if shown is None else shown
+    if inside is not None and inside > limits.max_inside_shown:
+        fails.append(
+            f"a face behind the skin comes {inside:.4f} IOD in front of it (> {limits.max_inside_shown}) at "
+            f"{inside_points} point{'s' if inside_points != 1 else ''}, pose {inside_pose}"
+        )
     at_m = bilabial_gap(rig, landmarks)
     found = lip_edge_shards(
         rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
@@ -931,4 +961,197 @@ def check_rig(
         lip_backs_faces=back_faces,
         bilabial_gap_iod=at_m,
         seam_gap_iod=seam,
+        inside_shown_iod=inside,
+        inside_shown_points=inside_points,
+        inside_shown_pose=inside_pose,
     )
+
+
+INSIDE_COVER = 0.01
+"""IOD: a face is *inside* in a view when, at rest, another face lies at least this far in front of each of its
+corners and its centroid (the mouth bag, the teeth, the cheeks' lining); any other face of the region is skin."""
+INSIDE_DEPTH = 0.25
+"""IOD: only inside faces at most this far behind the skin at rest are followed, and only skin with such a face
+behind it (the thin old woman's bag walls lie 0.07-0.08 behind her cheeks; speech moves the inside by at most
+about 0.45 IOD, mostly down: a face a quarter IOD deep does not reach the skin)."""
+INSIDE_REACH = 0.9
+"""IOD from the mouth's centre: the region :func:`inside_shown` looks at (the cheeks beside the mouth; the eyes,
+whose lids cover their balls, lie further; the back of a head never moves in front of the face)."""
+_INSIDE_CELL = 0.02
+"""IOD: the grid cell that sorts the faces for :func:`inside_shown` (0.015-0.06 tried: the same figures, 0.02 the
+fastest)."""
+
+
+def inside_poses(poses: tuple[tuple[float, ...], ...]) -> tuple[tuple[float, ...], ...]:
+    """The poses :func:`inside_shown` measures at, of ``poses``: each parameter's largest and smallest value (in the
+    order met, once each). The inside moves with the jaw and the cheeks, furthest at these ends: the full set's 70
+    poses cost 2-6 s a rig, these 8 about a tenth of it."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
+    if not len(p):
+        return ()
+    picks = sorted({int(k) for j in range(4) for k in (np.argmax(p[:, j]), np.argmin(p[:, j]))})
+    return tuple(tuple(float(x) for x in p[k]) for k in picks)
+
+
+def lips_band(vertices: np.ndarray, landmarks: MouthLandmarks) -> np.ndarray:
+    """(n,) bool: the vertices of the lips, at rest (``vertices`` (n, 3)): within LIP_BACKS_BAND IOD of the mouth
+    corners' height and no further sideways than LIP_BACKS_BEYOND IOD past them (the face's frame)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    fr = face_frame(v, landmarks)
+    cl, cr = v[landmarks.corner_left], v[landmarks.corner_right]
+    mid = 0.5 * (cl + cr)
+    local = (v - mid) @ fr.axes[:2].T / fr.iod
+    half = 0.5 * abs(float((cl - cr) @ fr.axes[0])) / fr.iod + LIP_BACKS_BEYOND
+    return (np.abs(local[:, 0]) < half) & (np.abs(local[:, 1]) < LIP_BACKS_BAND)
+
+
+@dataclass(frozen=True)
+class InsideSplit:
+    """A head's faces near the mouth split at rest, per view, into inside and skin (:func:`inside_split`)."""
+
+    faces: np.ndarray
+    """(m,) indices of the rig's triangles within INSIDE_REACH IOD of the mouth."""
+    origin: np.ndarray
+    """(3,) the mouth corners' midpoint (head units): the views' coordinates are about it."""
+    iod: float
+    to_views: tuple[np.ndarray, ...]
+    """Per view, (3, 3): head units (about ``origin``) -> (u, w, depth towards the viewer)."""
+    inside: tuple[np.ndarray, ...]
+    """Per view, indices into ``faces`` of the inside faces followed (within INSIDE_DEPTH behind the skin)."""
+    skin: tuple[np.ndarray, ...]
+    """Per view, indices into ``faces`` of the skin (seen at rest, not through the opening)."""
+    skin_vertices: tuple[np.ndarray, ...]
+    """Per view, the skin's vertices with an inside face behind them within INSIDE_DEPTH (rig vertex indices), off
+    the lips (:func:`lips_band`)."""
+    skin_centroids: tuple[np.ndarray, ...]
+    """Per view, indices into ``faces`` of the skin faces off the lips whose centroid has such an inside face behind
+    it."""
+
+
+def inside_split(
+    neutral: np.ndarray, triangles: np.ndarray, landmarks: MouthLandmarks, *, views: tuple[float, ...] = LIP_BACKS_VIEWS
+) -> InsideSplit | None:
+    """The faces within INSIDE_REACH IOD of the mouth of a head at rest (``neutral`` (n, 3), ``triangles`` (m, 3)),
+    split in each of ``views`` (degrees about the face's up axis, orthographic) into *inside*, those with another
+    face at least INSIDE_COVER IOD in front of each corner and the centroid and at most INSIDE_DEPTH (a mouth bag's
+    side walls behind a thin cheek, the teeth), and skin, those nothing covers, less the faces seen through the
+    opening (behind the mouth corners, between them). The skin's sample points leave out the lips (:func:`lips_band`):
+    a lip rolled out at a pucker shows its inner face, as lips do, and the lips have their own figures. None: no face
+    lies in the region."""
+    v0 = np.asarray(neutral, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    fr = face_frame(v0, landmarks)
+    iod = fr.iod
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
+    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < INSIDE_REACH * iod)[t].all(axis=1))
+    if not len(near):
+        return None
+    tn = t[near]
+    ax, up, fwd = fr.axes
+    local = (v0 - mid) @ fr.axes.T
+    mouth = ((local[:, 2] < 0) & (np.abs(local[:, 0]) < 0.5 * width))[tn].any(axis=1)
+    cell = _INSIDE_CELL * iod
+    to_views = []
+    for deg in views:
+        d = np.cos(np.radians(deg)) * fwd + np.sin(np.radians(deg)) * ax
+        to_views.append(np.stack([np.cross(up, d), up, d], axis=1))
+    # Every view side by side across u (one search for all of them: each search's own cost is most of it).
+    shift = 4.0 * INSIDE_REACH * iod
+    q0 = np.stack([(v0 - mid)[tn] @ tv for tv in to_views])  # (V, m, 3, 3), about the mouth
+    q0[..., 0] += shift * np.arange(len(views))[:, None, None]
+    # Probed at each vertex and centroid; a face's own depth there is the probe's, never INSIDE_COVER in front of it,
+    # so no face need be left out (each vertex probed once for its faces).
+    used, corner = np.unique(tn, return_inverse=True)
+    corner = corner.reshape(-1, 3)
+    at_v = np.stack([(v0[used] - mid) @ tv for tv in to_views])  # (V, u, 3)
+    at_v[..., 0] += shift * np.arange(len(views))[:, None]
+    cent = q0.mean(axis=2)  # (V, m, 3)
+    m, nu = len(tn), len(used)
+    pts = np.concatenate([at_v, cent], axis=1)  # (V, u + m, 3)
+    depth = front_most(pts[..., :2].reshape(-1, 2), q0.reshape(-1, 3, 3), cell=cell).reshape(len(views), nu + m)
+    front = np.concatenate([depth[:, :nu][:, corner], depth[:, nu:, None]], axis=2)  # (V, m, 4): corners, centroid
+    probe = np.concatenate([at_v[:, corner], cent[:, :, None]], axis=2)
+    covered = front > probe[..., 2] + INSIDE_COVER * iod  # NaN (nothing in front): False
+    inside_of = covered.all(axis=2) & np.all(front < probe[..., 2] + INSIDE_DEPTH * iod, axis=2)
+    skin_of = ~covered.any(axis=2) & ~mouth
+    lips = lips_band(v0, landmarks)
+    off_lips = np.asarray(~lips[tn].all(axis=1), dtype=bool)
+    inside, skin, verts, cents = [], [], [], []
+    for k in range(len(views)):
+        ins, sk = np.flatnonzero(inside_of[k]), np.flatnonzero(skin_of[k])
+        vs = np.unique(tn[sk])
+        vs = vs[~lips[vs]]
+        pts = np.concatenate([(v0[vs] - mid) @ to_views[k], q0[k, sk].mean(axis=1) - [shift * k, 0.0, 0.0]])
+        # Skin points with an inside face behind them at rest (within INSIDE_DEPTH of it).
+        behind = front_most(pts[:, :2], q0[k, ins] - [shift * k, 0.0, 0.0], cell=cell, below=pts[:, 2])
+        followed = np.asarray(behind > pts[:, 2] - INSIDE_DEPTH * iod, dtype=bool)  # NaN: False
+        inside.append(ins)
+        skin.append(sk)
+        verts.append(vs[followed[: len(vs)]])
+        cents.append(sk[followed[len(vs) :] & off_lips[sk]])
+    return InsideSplit(
+        faces=near,
+        origin=mid,
+        iod=iod,
+        to_views=tuple(to_views),
+        inside=tuple(inside),
+        skin=tuple(skin),
+        skin_vertices=tuple(verts),
+        skin_centroids=tuple(cents),
+    )
+
+
+def inside_shown(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    views: tuple[float, ...] = LIP_BACKS_VIEWS,
+) -> tuple[float, int, tuple[float, ...]] | None:
+    """(the furthest, IOD along the view, that a face covered by the skin at rest comes in front of all the skin;
+    at how many of the skin's sample points it lies more than INSIDE_SHOWN_LIMIT in front, at that pose and view;
+    the pose), over ``poses`` and ``views`` (degrees about the face's up axis, orthographic, as
+    :func:`lip_backs_seen`). The faces near the mouth are split at rest into inside and skin (:func:`inside_split`:
+    a mouth bag's side walls behind a thin cheek, the teeth; the skin nothing covers). The skin's sample points (its
+    vertices and its faces' centroids, those with an inside face behind them) move with the skin; at each pose an
+    inside face lying in front of the front-most skin face under a point shows there (the renderer draws it over the
+    cheek: a dark fleck where a back face comes through). The opening does not count: there the inside shows with
+    nothing in front of it, and skin seen through it at rest takes no sample point. None: no face lies near the
+    mouth."""
+    split = inside_split(rig.neutral, rig.triangles, landmarks, views=views)
+    if split is None:
+        return None
+    tn = np.asarray(rig.triangles, dtype=np.int64)[split.faces]
+    iod, mid = split.iod, split.origin
+    shift = 4.0 * INSIDE_REACH * iod
+    followed = [
+        k
+        for k in range(len(views))
+        if len(split.inside[k]) and (len(split.skin_vertices[k]) or len(split.skin_centroids[k]))
+    ]
+    if not followed or not poses:
+        return 0.0, 0, ()
+    # Every pose and view side by side across u: two searches in all.
+    blocks = [(pose, k) for pose in range(len(poses)) for k in followed]
+    deformed = [np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64) - mid for p in poses]
+    pts_all, ins_all, skin_all, owner = [], [], [], []
+    for b, (pose, k) in enumerate(blocks):
+        v, tv = deformed[pose], split.to_views[k]
+        off = np.array([shift * b, 0.0, 0.0])
+        q = v[tn] @ tv + off
+        pts_all.append(np.concatenate([v[split.skin_vertices[k]] @ tv + off, q[split.skin_centroids[k]].mean(axis=1)]))
+        ins_all.append(q[split.inside[k]])
+        skin_all.append(q[split.skin[k]])
+        owner.append(np.full(len(pts_all[-1]), b))
+    pts = np.concatenate(pts_all)[:, :2]
+    cell = _INSIDE_CELL * iod
+    over = front_most(pts, np.concatenate(ins_all), cell=cell) - front_most(pts, np.concatenate(skin_all), cell=cell)
+    over = np.where(np.isfinite(over), over / iod, 0.0)
+    who = np.concatenate(owner)
+    best = int(np.argmax(over))
+    if not over[best] > 0:
+        return 0.0, 0, ()
+    b = int(who[best])
+    points = int(np.count_nonzero((who == b) & (over > INSIDE_SHOWN_LIMIT)))
+    return float(over[best]), points, tuple(float(x) for x in poses[blocks[b][0]])
