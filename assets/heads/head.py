@@ -507,9 +507,12 @@ def rig_checked(
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes; if that fails too and its lower inner-lip
     point lies on the upper lip (:func:`assets.heads.rigging.lower_inner_on_lower_lip`), once more as the first try
-    with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes. Any of these rigs that
-    fails only by the inside shown through the skin is first tried with that inside moved with the skin in front of
-    it (:func:`_lined`; the anny thin old woman's mouth bag behind her cheeks), kept if that passes.
+    with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes; if that fails too (or was
+    not tried) and its lips were cut though they only touch, apart in the mesh
+    (:func:`assets.heads.rigging.lips_touch_apart`), once more not cut, rigged as apart with capped gains
+    (``touching_apart=True``, meta "lips_touching_apart"), kept if it passes. Any of these rigs that fails only by
+    the inside shown through the skin is first tried with that inside moved with the skin in front of it
+    (:func:`_lined`; the anny thin old woman's mouth bag behind her cheeks), kept if that passes.
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
     keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
     FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
@@ -524,7 +527,7 @@ def rig_checked(
 
     from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.mesh import check_mesh
-    from assets.heads.rigging import lower_inner_on_lower_lip, resolve_landmarks, rig_head
+    from assets.heads.rigging import lips_touch_apart, lower_inner_on_lower_lip, resolve_landmarks, rig_head
 
     def say(line: str) -> None:
         if progress is not None:
@@ -561,6 +564,7 @@ def rig_checked(
             "walls_in_repair": p_rig.meta.get("fold_repair_mesh") != "final",
             "corners_at_points": bool(p_rig.meta.get("simple_corners_at_points")),
             "gain_capped": bool(p_rig.meta.get("simple_gain_capped")),
+            "touching_apart": bool(p_rig.meta.get("lips_touching_apart")),
         }
         used = spec
         if p_rig.meta.get("lower_inner_moved") and spec is not None:
@@ -632,6 +636,19 @@ def rig_checked(
             rig, rigged, report = c_rig, c_rigged, c_report
         else:
             attempts.append({**last, "failures": list(c_report.failures)})
+            if rig.meta.get("lip_seam_cut") and spec is not None and lips_touch_apart(mesh, spec):
+                # Lips that touch but are apart in the mesh (anny's child: an open-mouthed base mesh whose lips a
+                # macro target brings together): cut as closed lips, the lower lip tore from its own inner wall. Once
+                # more, not cut, rigged as apart (rig_head, touching_apart), with capped gains (the child's field read
+                # -1.06 of lip_corner_depress per unit mouth_open, the old heavy man's fault: uncapped, stretch 4.09).
+                apart: dict[str, Any] = {"gain_capped": True, "touching_apart": True}
+                say(_trying(apart, list(c_report.failures)))
+                a_rig, a_rigged = rig_head(mesh, spec, **rig_options, **apart)
+                a_rig, a_rigged, a_report = _lined(a_rig, a_rigged, head_checks(Head(a_rig, a_rigged)))
+                if a_report.passed:
+                    rig, rigged, report = a_rig, a_rigged, a_report
+                else:
+                    attempts.append({**apart, "failures": list(a_report.failures)})
     meta = {**rig.meta, "checks": report.as_dict()}
     if attempts:
         meta["rig_attempts"] = attempts
@@ -644,6 +661,7 @@ _WAYS = {
     "corners_at_points": "the mouth corners at their points",
     "gain_capped": "capped gains",
     "lower_inner_moved": "the lower inner-lip point moved onto the lower lip",
+    "touching_apart": "lips that only touch rigged as apart, not cut",
 }
 
 

