@@ -29,7 +29,7 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-RIG_ALGORITHM = 58  # 58: dense scans through a decimated proxy (i12dense); 57: parted lips get a cavity
+RIG_ALGORITHM = 59  # 59: a sliver's stretch counted from 0.2 of the median edge (i12wall); 58: dense proxy
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
