@@ -230,17 +230,21 @@ def _resolve(spec, opts: dict, finder):
 
 def _warned(rep) -> str:
     """The advisory figures over their limits, as the table's checks column notes them."""
-    from realtime_core.face.checks import RigCheckLimits
+    from realtime_core.face.checks import SLIVER_REST, RigCheckLimits
 
     lim = RigCheckLimits()
     over = []
+    sliver = ""
+    if rep.sliver_stretch is not None and rep.max_edge_stretch > lim.max_stretch >= rep.sliver_stretch:
+        # The largest stretch is a sliver's: the rig is judged on it from SLIVER_REST of the median edge.
+        sliver = f" (a sliver's stretch: {rep.sliver_stretch:.2f} from {SLIVER_REST} of the median edge)"
     if rep.lip_edge_notch_iod is not None and rep.lip_edge_notch_iod > lim.max_lip_edge_notch:
         over.append("notch")
     if rep.lip_backs_iod2 is not None and rep.lip_backs_iod2 > lim.max_lip_backs:
         over.append("backs")
     if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
         over.append("/m/")
-    return f" ({' + '.join(over)} warning)" if over else ""
+    return sliver + (f" ({' + '.join(over)} warning)" if over else "")
 
 
 def check_and_draw(

@@ -15,6 +15,7 @@ from realtime_core.face.checks import (
     EXTREME_POSES,
     MEASURED_POSES,
     SINGLE_POSES,
+    SLIVER_REST,
     SPEECH_POSES,
     SPEECH_SCALE,
     PoseBound,
@@ -233,6 +234,57 @@ def _fold_landmarks() -> MouthLandmarks:
 def test_check_catches_a_fold() -> None:
     rep = check_rig(_Fold(), _fold_landmarks())
     assert rep.flipped_triangles > 0 and not rep.passed
+
+
+class _Band:
+    """A flat grid, 3 columns 1 apart, rows at y = 0, 1, 1 + ``height``, 2 + ``height``, 3 + ``height``: the row
+    between y = 1 and 1 + height is a band (a sliver when height is small). mouth_open p lifts every row above the
+    band by ``lift * p``, so only the band's vertical edges (rest length ``height``) and diagonals stretch."""
+
+    def __init__(self, height: float, lift: float) -> None:
+        ys = [0.0, 1.0, 1.0 + height, 2.0 + height, 3.0 + height]
+        self.neutral = np.array([[x, y, 0.0] for y in ys for x in range(3)], dtype=np.float64)
+        t = []
+        for r in range(4):
+            for c in range(2):
+                a = r * 3 + c
+                t += [[a, a + 1, a + 4], [a, a + 4, a + 3]]
+        self.triangles = np.array(t)
+        self.lift = lift
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = self.neutral.copy()
+        v[6:, 1] += self.lift * p[2]
+        return v
+
+
+def test_a_slivers_stretch_is_counted_from_a_fifth_of_the_median_edge() -> None:
+    # The widest opening of the checks' poses lifts the rows above the band; the band's vertical edge goes from
+    # `height` to height + lift * open. Its rest length is counted as at least SLIVER_REST of the median edge (1
+    # here: most edges are the grid's unit edges), so a sliver 0.1 tall stretched 4.5x (to 0.45, under half an
+    # edge) passes, reported with a warning; the same band stretched to 1.0 (10x, 5x from 0.2) fails, and an
+    # ordinary row stretched 4.5x fails as before.
+    widest = max(p[2] for p in EXTREME_POSES)
+    lm = _fold_landmarks()
+
+    def report(height: float, to: float):
+        rig = _Band(height, (to - height) / widest)
+        per = pose_figures(rig, lm, EXTREME_POSES)
+        # (The lips are one vertex here, so they never part: the opening's limit is off.)
+        return per, check_rig(rig, lm, limits=RigCheckLimits(min_open_response=0.0))
+
+    assert SLIVER_REST == 0.2
+    per, rep = report(0.1, 0.45)
+    assert np.isclose(per.stretch.max(), 4.5) and np.isclose(rep.max_edge_stretch, 4.5)
+    assert np.isclose(rep.sliver_stretch, 0.45 / 0.2)
+    assert rep.passed and rep.flipped_triangles == 0
+    assert any("sliver" in w for w in rep.warnings)
+    _, rep = report(0.1, 1.0)
+    assert np.isclose(rep.max_edge_stretch, 10.0) and np.isclose(rep.sliver_stretch, 5.0)
+    assert not rep.passed and any("edge stretch" in f for f in rep.failures)
+    _, rep = report(1.0, 4.5)
+    assert np.isclose(rep.max_edge_stretch, 4.5) and np.isclose(rep.sliver_stretch, 4.5)
+    assert not rep.passed and not any("sliver" in w for w in rep.warnings)
 
 
 def test_pose_figures_finds_the_fold_at_the_poses_that_make_it_and_its_faces() -> None:
