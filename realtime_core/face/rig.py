@@ -29,7 +29,7 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-RIG_ALGORITHM = 59  # 59: the inside shown through the skin checked and kept behind it (i12cheek); 58: dense proxy
+RIG_ALGORITHM = 60  # 60: a corner's lower-lip edge split (i12corner); 59: inside shown (i12cheek); 58: dense proxy
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
