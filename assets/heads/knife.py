@@ -50,6 +50,16 @@ of a handful of faces (Lee Perry-Smith at 1,428 triangles: 0.72 and 0.74), which
 face's upper lip and smooths on its own (:func:`assets.heads.rigging.rig_head`). Its 3,810 copy's longest is 0.45,
 the stylised held-out head's 0.32: split (with that rig), their lip backs seen rose, 1.64 -> 1.73 and 4.55 -> 27.97
 (1e-3 IOD^2; docs/animation.md, "The 1,428 copy's flap")."""
+CORNER_SPAN = 0.35
+"""A knife path whose first (or last) edge, from a mouth corner to the next path vertex, is longer than this fraction
+of the mouth's half-width (the lip line leaving the corner through one large face: the stylised held-out head's
+0.48; the other ends of the test sets' knife paths 0.08-0.24) gets the corner's edge to the lower lip split
+(:func:`split_lower_corner`)..."""
+CORNER_SPAN_MAX = 0.75
+"""...unless it is longer than this fraction: that side's lip is then one face from the corner to near the middle (Lee
+Perry-Smith at 1,428 triangles: 0.86), whose rig handles it as a whole (:data:`LIP_BACK_SPAN`); split there, its lip
+backs seen rose 4.99 -> 18.08 (1e-3 IOD^2) and the opening's corner stood as one straight triangle (docs/animation.md,
+"The stylised head's lower-lip corner")."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,6 +77,8 @@ class KnifeCut:
     path: list[int]
     behind: dict[int, int] = field(default_factory=dict)
     """New vertices on the upper lip's back (:func:`split_lip_back`) -> the path vertex in front of each."""
+    corners_split: int = 0
+    """How many mouth corners' edges to the lower lip were split (:func:`split_lower_corner`)."""
 
     def along_path(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """The new vertices on an edge the path runs along (:func:`split_long_edges`'s: both ends on the path),
@@ -191,13 +203,18 @@ def knife_contact(
     v3, t3, edge3, at3, path3 = split_long_edges(v2, t2, path[::-1], width / COARSE_EDGES, among=n)
     s3 = np.r_[s, np.zeros(len(v3) - n)]  # the knife's vertices lie on the curve
     v4, t4, edge4, at4, behind = split_lip_back(v3, t3, path3, s3, ax, iod=iod, longest=LIP_BACK_SPAN * width)
+    s4 = np.r_[s3, np.zeros(len(v4) - len(s3))]
+    v5, t5, edge5, at5 = split_lower_corner(
+        v4, t4, path3, s4, longest=CORNER_SPAN * 0.5 * width, at_most=CORNER_SPAN_MAX * 0.5 * width
+    )
     return KnifeCut(
-        vertices=v4,
-        triangles=t4,
-        edge=np.concatenate([edge.astype(np.int64), edge3, edge4]),
-        at=np.concatenate([at, at3, at4]),
+        vertices=v5,
+        triangles=t5,
+        edge=np.concatenate([edge.astype(np.int64), edge3, edge4, edge5]),
+        at=np.concatenate([at, at3, at4, at5]),
         path=path3,
         behind=behind,
+        corners_split=len(edge5),
     )
 
 
@@ -268,6 +285,37 @@ def split_lip_back(
         out_at.append(at)
         last[(a, b)] = (len(v2) - 1, fr)
     return v2, t2, np.asarray(out_edge, dtype=np.int64), np.asarray(out_at), behind
+
+
+def split_lower_corner(
+    vertices: np.ndarray, triangles: np.ndarray, path: list[int], s: np.ndarray, *, longest: float, at_most: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where the knife's ``path`` leaves a mouth corner through one edge longer than ``longest`` and no longer than
+    ``at_most`` (head units), the edge from the corner to the lower lip's vertex of the face below that edge (the
+    face's third vertex, below the contact curve: ``s`` (n,) < 0, :func:`contact_offset`) gets a vertex at its
+    middle. The lower lip's corner face otherwise spans from the corner, which the rig holds nearly still, to a vertex
+    that drops with the lower lip: on the stylised held-out head (the path's end edge 0.22 IOD, 0.48 of the
+    half-width) face [762, 969, 903] at /a/ stood as a lit wedge from the opening's bottom to the corner over a dark
+    crease past it (docs/animation.md, "The stylised head's lower-lip corner"). Split, the field bends the lower
+    lip's edge into the corner. Returns vertices (n + k, 3), triangles, the (k, 2) edges split and (k,) where
+    (0.5)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    pairs: list[tuple[int, int]] = []
+    for corner, nxt in ((path[0], path[1]), (path[-1], path[-2])):
+        if len(path) < 3 or not longest < float(np.linalg.norm(v[corner] - v[nxt])) <= at_most:
+            continue
+        faces = t[(t == corner).any(axis=1) & (t == nxt).any(axis=1)]
+        third = [int(x) for f in faces.tolist() for x in f if x not in (corner, nxt) and s[x] < 0]
+        if third:
+            low = min(third, key=lambda x: float(s[x]))
+            pairs.append((min(corner, low), max(corner, low)))
+    if not pairs:
+        return v, t, np.zeros((0, 2), dtype=np.int64), np.zeros(0)
+    edge = np.asarray(sorted(set(pairs)), dtype=np.int64)
+    at = np.full(len(edge), 0.5)
+    v2, t2 = _split_edges(v, t, edge, at)
+    return v2, t2, edge, at
 
 
 def split_long_edges(

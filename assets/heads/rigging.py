@@ -1279,6 +1279,8 @@ def rig_head(
                 behind = dict(knife.behind)
                 if behind:
                     meta["lip_back_vertices"] = len(behind)
+                if knife.corners_split:
+                    meta["lower_corner_split"] = knife.corners_split
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).

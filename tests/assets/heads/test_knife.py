@@ -10,6 +10,7 @@ import pytest
 
 from assets.heads.knife import (
     COARSE_EDGES,
+    CORNER_SPAN,
     KNIFE_SNAP,
     contact_offset,
     knife_contact,
@@ -285,6 +286,64 @@ def test_the_knife_cuts_along_the_contact_curve_and_keeps_the_surface_whole():
     assert (n[:, 2] > 0).all()
     # UVs (here: the positions' x, y) carried to the new vertices equal their own x, y.
     np.testing.assert_allclose(knife.carry(v[:, :2]), v2[:, :2], atol=1e-12)
+
+
+def test_a_path_leaving_a_corner_through_one_long_edge_gets_the_corners_lower_lip_edge_split():
+    """The contact curve of the test above leaves each corner through one knife piece across a face (0.27 and 0.19
+    of the mouth's 1.0 width on the 9 x 9 grid, between CORNER_SPAN and CORNER_SPAN_MAX of the half-width): the
+    edge from each corner to the lower lip's vertex of the face below that piece (on the corners' row, below the
+    curve) gets a vertex at its middle, and the surface stays whole. On the 17 x 17 grid the pieces are 0.14 and
+    0.09 long: nothing is split, and the cut is the one it was without the rule (the same vertices and triangles)."""
+    v, t, xs, _ = _grid_dome()
+    cols = len(xs)
+    row = 4
+    left, right = row * cols + 2, row * cols + 6
+    inner = np.array([0.0, 0.13, 0.4])
+    knife = knife_contact(v, t, left, right, inner, np.eye(3), iod=1.0)
+    assert knife is not None
+    p = knife.vertices[knife.path]
+    ends = np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[-1] - p[-2])
+    assert min(ends) > CORNER_SPAN * 0.5
+    assert knife.corners_split == 2
+    new = len(knife.vertices) - 2 + np.arange(2)
+    # Their edges: each corner to its row neighbour towards the middle (x -0.25 and 0.25, below the curve).
+    lower = {left: row * cols + 3, right: row * cols + 5}
+    assert {tuple(e) for e in knife.edge[-2:].tolist()} == {tuple(sorted((c, o))) for c, o in lower.items()}
+    np.testing.assert_allclose(
+        np.sort(knife.vertices[new], axis=0), np.sort([0.5 * (v[c] + v[o]) for c, o in lower.items()], axis=0)
+    )
+    assert (contact_offset(knife.vertices[new], v[left], v[right], inner) < 0).all()
+    t2 = knife.triangles
+    # Each new vertex is in the faces on both sides of its edge (no T-junction): 4 faces, and the corner no longer
+    # shares an edge with the lower lip's vertex.
+    for k in new:
+        assert int((t2 == k).any(axis=1).sum()) == 4
+    for c, o in lower.items():
+        assert not ((t2 == c).any(axis=1) & (t2 == o).any(axis=1)).any()
+    e = np.sort(np.concatenate([t2[:, [0, 1]], t2[:, [1, 2]], t2[:, [2, 0]]]), axis=1)
+    assert np.unique(e, axis=0, return_counts=True)[1].max() == 2
+    # A piece longer than CORNER_SPAN_MAX of the half-width is left whole: at 0.45 the 0.27 piece (0.54) is, the
+    # 0.19 one (0.39) is still split.
+    import assets.heads.knife as knife_module
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(knife_module, "CORNER_SPAN_MAX", 0.45)
+        capped = knife_contact(v, t, left, right, inner, np.eye(3), iod=1.0)
+    assert capped is not None and capped.corners_split == 1
+    long_end = left if ends[0] > ends[1] else right
+    assert long_end not in capped.edge[-1:].ravel()
+
+    fine_v, fine_t, fine_xs, _ = _grid_dome(17, 17)
+    fc = len(fine_xs)
+    fl, fr = 8 * fc + 4, 8 * fc + 12
+    fine = knife_contact(fine_v, fine_t, fl, fr, inner, np.eye(3), iod=1.0)
+    assert fine is not None and fine.corners_split == 0
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(knife_module, "CORNER_SPAN", 10.0)
+        without = knife_contact(fine_v, fine_t, fl, fr, inner, np.eye(3), iod=1.0)
+    assert without is not None
+    np.testing.assert_array_equal(fine.vertices, without.vertices)
+    np.testing.assert_array_equal(fine.triangles, without.triangles)
 
 
 @pytest.mark.slow
