@@ -772,6 +772,9 @@ def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = No
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
         if ids:
             teeth = np.flatnonzero(np.isin(mesh.part, ids))
+    if teeth is None and rig.meta.get("inner_rigid_pieces"):
+        # A one-mesh head's unnamed teeth rows and tongue, found and moved rigidly by the rig (rigid_inner_pieces).
+        teeth = np.asarray(rig.meta["inner_rigid_pieces"], dtype=np.int64)
     joined = None
     if mesh.part is not None and len(mesh.part_names) > 1 and len(mesh.part) == len(v0):
         # The seams between the head's meshes (a separate jaw mesh): the cut's copies and the cavity part on purpose.
