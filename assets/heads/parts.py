@@ -15,7 +15,9 @@ where it sits, and given a rigid motion:
 
 The part holding the face (the nose-tip landmark) is never reclassified, whatever its name. A teeth
 part whose name says neither upper nor lower is split by connected pieces: above the mouth line
-(the corners' midpoint, along the face's up direction) upper, below lower.
+(the corners' midpoint, along the face's up direction) upper, below lower. A head exported as one mesh with its teeth
+inside names no part: its teeth rows and tongue are found by shape (low, wide shells of their own behind the lips,
+:func:`rigid_inner_pieces`) and moved by the same rules.
 """
 
 from __future__ import annotations
