@@ -717,7 +717,8 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
 def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = None):
     """What the rig checks measure a head with: its mouth landmarks (from the rig's meta, nearest vertices; a
     morph head from a file without them: ``landmark_finder(mesh)``) and the keyword arguments ``lip_pairs``
-    (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names)
+    (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names; a one-mesh
+    head's teeth rows and tongue from the rig's meta ``inner_rigid_pieces``)
     and ``reference`` (the head as modelled) of :func:`realtime_core.face.checks.check_rig` and
     :func:`realtime_core.face.checks.pose_figures`, and ``joined_pairs`` (the seams between the head's meshes,
     :func:`assets.heads.parts.part_seam_pairs`; None: none) of check_rig."""
