@@ -34,10 +34,10 @@ if TYPE_CHECKING:
 # from 0.2 of the median edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart
 # (i12child); 59: the inside shown through the skin checked and kept behind it (i12cheek); 58: dense proxy (i12dense)
 RIG_ALGORITHM = 63
+"""Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
 0.5 did not remove the chin-line folds of Lee Perry-Smith and widened the moving region)."""
-"""Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 
 
 @dataclass(frozen=True)
