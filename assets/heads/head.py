@@ -33,7 +33,7 @@ from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
 
 if TYPE_CHECKING:
-    from realtime_core.face.checks import RigReport
+    from realtime_core.face.checks import RigCheckLimits, RigReport
 
 AnyRig = Rig | MorphRig
 LandmarkFinder = Callable[[HeadMesh], Mapping[str, object]]
@@ -491,6 +491,7 @@ def rig_checked(
     *,
     dense_proxy: bool = True,
     progress: Callable[[str], None] | None = None,
+    limits: RigCheckLimits | None = None,
     **rig_options: Any,
 ) -> tuple[Rig, HeadMesh, RigReport]:
     """:func:`assets.heads.rigging.rig_head` with ``rig_options``, checked (:func:`head_checks`): returns
@@ -516,11 +517,14 @@ def rig_checked(
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
     keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
     FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
+    ``limits``: the checks' limits every try is judged by (None: :class:`realtime_core.face.checks.RigCheckLimits`'
+    defaults); a dense scan's decimated copy is not judged on the inside it shows (its coarser skin), the dense rig is.
     ``progress``: called with a line before each rig it makes (and why, when an earlier one failed): rigging a scan
     takes from seconds to minutes, and a user waiting should see which way it is trying.
     Meta "rig_attempts": the failures of the rigs tried before the one returned; meta "checks": the returned
     rig's RigReport (:meth:`RigReport.as_dict`), kept with it (its file, the rig cache) so that loading it does
     not measure it again (:func:`facecast.commands.headopts.warn_failing_checks` reads it)."""
+    import math
     from dataclasses import replace
 
     import numpy as np
@@ -528,10 +532,15 @@ def rig_checked(
     from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.mesh import check_mesh
     from assets.heads.rigging import lips_touch_apart, lower_inner_on_lower_lip, resolve_landmarks, rig_head
+    from realtime_core.face.checks import RigCheckLimits
 
     def say(line: str) -> None:
         if progress is not None:
             progress(line)
+
+    def checked(r: Rig, m: HeadMesh) -> tuple[Rig, HeadMesh, RigReport]:
+        # A rig judged by ``limits``, lined where the inside only shows through the skin (_lined).
+        return _lined(r, m, head_checks(Head(r, m), limits=limits), limits)
 
     # Bad input names itself before any progress line (one line on stderr for the user, then nothing).
     check_mesh(mesh)
@@ -552,10 +561,15 @@ def rig_checked(
             f"{len(mesh.triangles):,} triangles (over {DENSE_TRIANGLES:,}): rigging a "
             f"{len(proxy.triangles):,}-triangle copy that keeps the mouth's own faces, then carrying its rig over"
         )
+        # The copy's own skin is not judged on the inside it shows: decimated outside the mouth, its cheeks lie
+        # nearer the mouth's inside than the scan's (the once-subdivided Lee Perry-Smith's copy: the cheek lining
+        # behind the right corner 0.062 IOD through the skin at (0, 0, 0.465, 0), so every try failed and all five
+        # ran, 271 s for 150; the carried dense rig 0.0000). The dense rig is checked in full below.
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},
             progress=progress,
+            limits=replace(limits or RigCheckLimits(), max_inside_shown=math.inf),
             **rig_options,
             record_hidden=True,
         )
@@ -573,7 +587,7 @@ def rig_checked(
             used = {**spec, "lower_inner": p_rig.meta["landmarks"]["lower_inner"]}
         say(f"carrying the copy's rig onto the {len(mesh.triangles):,}-triangle mesh and checking it")
         rig, rigged = rig_head(mesh, used, **rig_options, **chosen, proxy=(p_rig, p_rigged))
-        rig, rigged, report = _lined(rig, rigged, head_checks(Head(rig, rigged)))
+        rig, rigged, report = checked(rig, rigged)
         return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
 
     tries: list[dict[str, Any]] = [
@@ -597,7 +611,7 @@ def rig_checked(
             continue
         say(_trying(options, failed))
         rig, rigged = rig_head(mesh, spec, **rig_options, **options)
-        rig, rigged, report = _lined(rig, rigged, head_checks(Head(rig, rigged)))
+        rig, rigged, report = checked(rig, rigged)
         failed = list(report.failures)
         if not rig.meta.get("lip_seam_cut"):
             break  # no cut: the other rigs would be this one
@@ -618,7 +632,7 @@ def rig_checked(
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
         say(_trying(last, failed))
         c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **last)
-        c_rig, c_rigged, c_report = _lined(c_rig, c_rigged, head_checks(Head(c_rig, c_rigged)))
+        c_rig, c_rigged, c_report = checked(c_rig, c_rigged)
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
         if moved is not None:
             # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
@@ -628,7 +642,7 @@ def rig_checked(
             last = {"clean_lips": True}
             say(_trying({**last, "lower_inner_moved": True}, list(c_report.failures)))
             c_rig, c_rigged = rig_head(mesh, moved, **rig_options, **last)
-            c_rig, c_rigged, c_report = _lined(c_rig, c_rigged, head_checks(Head(c_rig, c_rigged)))
+            c_rig, c_rigged, c_report = checked(c_rig, c_rigged)
             last["lower_inner_moved"] = True
             c_rig = replace(c_rig, meta={**c_rig.meta, "lower_inner_moved": True})
         if c_report.passed:
@@ -644,7 +658,7 @@ def rig_checked(
                 apart: dict[str, Any] = {"gain_capped": True, "touching_apart": True}
                 say(_trying(apart, list(c_report.failures)))
                 a_rig, a_rigged = rig_head(mesh, spec, **rig_options, **apart)
-                a_rig, a_rigged, a_report = _lined(a_rig, a_rigged, head_checks(Head(a_rig, a_rigged)))
+                a_rig, a_rigged, a_report = checked(a_rig, a_rigged)
                 if a_report.passed:
                     rig, rigged, report = a_rig, a_rigged, a_report
                 else:
@@ -677,7 +691,9 @@ def _trying(options: Mapping[str, Any], failed: list[str]) -> str:
     return line
 
 
-def _lined(rig: Rig, rigged: HeadMesh, report: RigReport) -> tuple[Rig, HeadMesh, RigReport]:
+def _lined(
+    rig: Rig, rigged: HeadMesh, report: RigReport, limits: RigCheckLimits | None = None
+) -> tuple[Rig, HeadMesh, RigReport]:
     """A rig whose only failure is the inside shown through the skin (a mouth bag's wall through a thin cheek,
     :func:`realtime_core.face.checks.inside_shown`) with that inside moved with the skin in front of it
     (:func:`assets.heads.lining.with_lining_behind_skin`), if that passes; else the rig as it was (every other rig,
@@ -686,14 +702,14 @@ def _lined(rig: Rig, rigged: HeadMesh, report: RigReport) -> tuple[Rig, HeadMesh
     from assets.heads.lining import with_lining_behind_skin
     from realtime_core.face.checks import RigCheckLimits
 
-    limit = RigCheckLimits().max_inside_shown
+    limit = (limits or RigCheckLimits()).max_inside_shown
     if report.passed or len(report.failures) != 1 or not (report.inside_shown_iod or 0.0) > limit:
         return rig, rigged, report
     landmarks, _ = head_check_inputs(Head(rig, rigged))
     lined = with_lining_behind_skin(rig, landmarks)
     if lined is None:
         return rig, rigged, report
-    lined_report = head_checks(Head(lined, rigged))
+    lined_report = head_checks(Head(lined, rigged), limits=limits)
     return (lined, rigged, lined_report) if lined_report.passed else (rig, rigged, report)
 
 

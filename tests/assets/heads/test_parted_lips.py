@@ -156,3 +156,19 @@ def test_lips_that_touch_but_are_apart_in_the_mesh_are_rigged_apart_not_cut(shar
     rest = np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
     lm = MEDIAPIPE
     assert abs(float((rest[lm["upper_inner"]] - rest[lm["lower_inner"]]) @ frame.axes[1])) / frame.iod < 0.01
+
+
+def test_rig_checked_judges_every_try_by_the_limits_it_is_given(shared_data):
+    """The limits reach the checks of the rig rig_checked returns (a dense scan's decimated copy is judged without the
+    inside-through-the-skin limit this way, its dense rig with it): the MediaPipe face, whose rig passes at the
+    defaults (stretch well under 4), fails at a stretch limit of 1.01, and says so in its report and the rig's meta."""
+    from assets.heads.head import rig_checked
+    from realtime_core.face.checks import RigCheckLimits
+
+    path = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    m = load_mesh(path)
+    spec = {k: m.vertices[i].tolist() for k, i in MEDIAPIPE.items()}
+    rig, _, report = rig_checked(m, spec, limits=RigCheckLimits(max_stretch=1.01))
+    assert 1.01 < report.max_edge_stretch < 4.0  # it would pass at the default limit of 4
+    assert not report.passed and any("edge stretch" in f for f in report.failures)
+    assert rig.meta["checks"]["failures"] == list(report.failures)
