@@ -26,6 +26,7 @@ from realtime_core.face.checks import (
     lips_band,
 )
 from realtime_core.face.model import MouthLandmarks
+from realtime_core.face.projection import edge_length_graph
 from realtime_core.face.rig import Rig
 from realtime_core.face.visibility import front_most
 
@@ -92,13 +93,10 @@ def with_lining_behind_skin(
     sources = np.intersect1d(shown, movable)
     if not len(sources):
         return None
-    # Distance along the inside's own edges from the vertices that come through.
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    on = np.zeros(len(v0), dtype=bool)
-    on[movable] = True
-    e = e[on[e].all(axis=1)]
-    length = np.linalg.norm(v0[e[:, 0]] - v0[e[:, 1]], axis=1) / iod
-    graph = sp.coo_matrix((length, (e[:, 0], e[:, 1])), shape=(len(v0), len(v0))).tocsr()
+    # Distance along the inside's own edges (both ends movable) from the vertices that come through.
+    on = sp.diags(np.isin(np.arange(len(v0)), movable).astype(np.float64))
+    graph = (on @ edge_length_graph(v0 / iod, t) @ on).tocsr()
+    graph.eliminate_zeros()
     dist = dijkstra(graph, directed=False, indices=sources, min_only=True, limit=LINING_REACH)
     near = np.flatnonzero(np.isfinite(dist))
     s = np.clip(dist[near] / LINING_REACH, 0.0, 1.0)
