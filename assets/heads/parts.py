@@ -222,21 +222,16 @@ def inner_mouth_weights(
     the seam opened 4.9 mm at mouth_open 0.3 (issue 12, Lee Perry-Smith with its jaw as a separate mesh).
     ``vertices`` (n, 3) and ``triangles`` (m, 3) as the mesh came (before any cut); ``landmarks``: name ->
     vertex index (corner_left, corner_right, chin, nose_tip)."""
-    from realtime_core.face.welding import mesh_pieces, weld
+    from realtime_core.face.welding import mesh_pieces
 
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
     n = len(v)
     out = np.zeros(n)
-    canon, welded = weld(v)
-    if part is not None:
-        skin = skin_parts(canon, np.asarray(part), int(part[landmarks["nose_tip"]]), part_names)
-        t = t[np.isin(np.asarray(part)[t], skin).all(axis=1)]
+    canon, welded, t = _skin_faces(v, triangles, part, landmarks, part_names)
     comp = mesh_pieces(n, t)
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
-    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
-    local = (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod  # (n, 3): sideways, up, out
+    local = _mouth_local(v, landmarks, axes, iod)
     chin = float(local[landmarks["chin"], 1])
     if not chin < 0:
         return out
@@ -291,24 +286,19 @@ def rigid_inner_pieces(
     (:func:`assets.heads.rigging.rig_head`).
     ``vertices`` (n, 3), ``triangles`` (m, 3) as the mesh came; ``landmarks``: name -> vertex index (corners, chin,
     nose_tip, upper_lip, lower_lip, eye corners)."""
-    from realtime_core.face.welding import weld, welded_pieces
+    from realtime_core.face.welding import welded_pieces
 
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
     n = len(v)
     out = np.full(n, "", dtype=object)
-    if part is not None:
-        canon0, _ = weld(v)
-        skin = skin_parts(canon0, np.asarray(part), int(part[landmarks["nose_tip"]]), part_names)
-        t = t[np.isin(np.asarray(part)[t], skin).all(axis=1)]
+    _, _, t = _skin_faces(v, triangles, part, landmarks, part_names)
     if not len(t):
         return out
     canon, _, pieces = welded_pieces(v, t)
     comp = pieces[canon]
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
-    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
-    local = (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod  # (n, 3): sideways, up, out
+    local = _mouth_local(v, landmarks, axes, iod)
     chin = float(local[landmarks["chin"], 1])
     width = abs(float(local[landmarks["corner_left"], 0] - local[landmarks["corner_right"], 0]))
     front = max(float(local[landmarks["upper_lip"], 2]), float(local[landmarks["lower_lip"], 2]))
@@ -338,6 +328,31 @@ def rigid_inner_pieces(
         tongue = hi[2] - lo[2] > hi[0] - lo[0]
         out[sel] = "jaw" if tongue or float(local[sel, 1].mean()) < 0 else "skull"
     return out
+
+
+def _skin_faces(
+    v: np.ndarray,
+    triangles: np.ndarray,
+    part: np.ndarray | None,
+    landmarks: Mapping[str, int],
+    part_names: tuple[str, ...],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(each vertex's welded index (n,), the welded positions, the triangles of the face's skin (:func:`skin_parts`;
+    every triangle when the mesh has no parts)) of ``v`` (n, 3) as the mesh came."""
+    from realtime_core.face.welding import weld
+
+    t = np.asarray(triangles, dtype=np.int64)
+    canon, welded = weld(v)
+    if part is not None:
+        skin = skin_parts(canon, np.asarray(part), int(part[landmarks["nose_tip"]]), part_names)
+        t = t[np.isin(np.asarray(part)[t], skin).all(axis=1)]
+    return canon, welded, t
+
+
+def _mouth_local(v: np.ndarray, landmarks: Mapping[str, int], axes: np.ndarray, iod: float) -> np.ndarray:
+    """(n, 3) IOD: ``v`` about the mouth corners' midpoint along the face's axes (sideways, up, out)."""
+    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
+    return (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod
 
 
 def skin_parts(canon: np.ndarray, part: np.ndarray, face: int, part_names: tuple[str, ...] = ()) -> np.ndarray:
