@@ -7,18 +7,7 @@ import numpy as np
 import pytest
 
 from assets.heads.parts import JAW_FULL, SEAM_RAMP, inner_mouth_weights, with_jaw_weights
-
-
-def _patch(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, n: int = 5):
-    """A separate n x n grid patch from (x0, y0, z0) to (x1, y1, z1) (z varies along y): vertices, triangles."""
-    xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(0.0, 1.0, n))
-    v = np.c_[xs.ravel(), y0 + (y1 - y0) * ys.ravel(), z0 + (z1 - z0) * ys.ravel()]
-    t = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            t += [[a, a + n + 1, a + 1], [a, a + n, a + n + 1]]
-    return v, np.array(t)
+from tests.grids import patch as _patch
 
 
 def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line():

@@ -7,18 +7,7 @@ import numpy as np
 import pytest
 
 from assets.heads.parts import TEETH_FOLLOW, rigid_inner_pieces
-
-
-def _patch(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, n: int = 5):
-    """A separate n x n grid patch from (x0, y0, z0) to (x1, y1, z1) (z varies along y): vertices, triangles."""
-    xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(0.0, 1.0, n))
-    v = np.c_[xs.ravel(), y0 + (y1 - y0) * ys.ravel(), z0 + (z1 - z0) * ys.ravel()]
-    t = []
-    for j in range(n - 1):
-        for i in range(n - 1):
-            a = j * n + i
-            t += [[a, a + n + 1, a + 1], [a, a + n, a + n + 1]]
-    return v, np.array(t)
+from tests.grids import patch as _patch
 
 
 def test_only_low_wide_shells_behind_the_lips_are_rigid_upper_row_with_the_skull_lower_row_and_tongue_with_the_jaw():

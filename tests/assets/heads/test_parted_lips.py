@@ -31,17 +31,24 @@ WALL_DEPTH = 0.15  # IOD: how far back the lips' inner walls reach
 WALL_INWARD = 0.6  # how far (fraction of the rim's height over the mouth line) a wall's back edge leans to that line
 
 
+def _without_membrane(path):
+    """The MediaPipe face's vertices (n, 3) float64, its triangles less the lip membrane (an open mouth hole), and its
+    face frame."""
+    m = load_mesh(path)
+    v = np.asarray(m.vertices, dtype=np.float64)
+    lm = MEDIAPIPE
+    t = np.asarray(m.triangles, dtype=np.int64)
+    t = t[~lip_membrane(v, t, lm["corner_left"], lm["corner_right"], lm["upper_inner"], lm["lower_inner"])]
+    return v, t, face_frame(v, mouth_landmarks(lm))
+
+
 def _parted_scan(path):
     """The MediaPipe face (lips 0.09 IOD apart) as a scan with a mouth hole: its lip membrane removed and each lip's
     inner edge carried back WALL_DEPTH IOD by a wall that leans towards the mouth line, as a lip's inner surface
     curls (so closed lips meet their walls behind them; parted, the hole's middle is open to the back).
     Returns (mesh, frame)."""
-    m = load_mesh(path)
-    v = np.asarray(m.vertices, dtype=np.float64)
+    v, t, frame = _without_membrane(path)
     lm = MEDIAPIPE
-    frame = face_frame(v, mouth_landmarks(lm))
-    t = np.asarray(m.triangles, dtype=np.int64)
-    t = t[~lip_membrane(v, t, lm["corner_left"], lm["corner_right"], lm["upper_inner"], lm["lower_inner"])]
     e = np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]  # directed, as the faces wind them
     _, inv, cnt = np.unique(np.sort(e, axis=1), axis=0, return_inverse=True, return_counts=True)
     edge = e[cnt[inv.reshape(-1)] == 1]
@@ -115,12 +122,8 @@ def _touching_lips(path):
     lips a macro target brings together): its lip membrane removed, the lower lip's inner edge raised to 0.005 IOD
     under the upper one's at two points either side of the middle (0.16-0.17 IOD out), and 0.03 IOD under it in the
     middle. Returns (mesh, landmark points, frame)."""
-    m = load_mesh(path)
-    v = np.asarray(m.vertices, dtype=np.float64)
+    v, t, frame = _without_membrane(path)
     lm = MEDIAPIPE
-    frame = face_frame(v, mouth_landmarks(lm))
-    t = np.asarray(m.triangles, dtype=np.int64)
-    t = t[~lip_membrane(v, t, lm["corner_left"], lm["corner_right"], lm["upper_inner"], lm["lower_inner"])]
     up = frame.axes[1]
     w = v.copy()
     for lower, upper in ((178, 81), (402, 311)):  # lower-lip edge vertex -> the upper-lip edge vertex above it

@@ -26,6 +26,7 @@ from realtime_core.face.checks import (
     pose_figures,
 )
 from realtime_core.face.model import MouthLandmarks
+from tests.grids import grid_triangles
 from training.articulatory import CLASSES
 
 
@@ -203,12 +204,7 @@ class _Fold:
     def __init__(self) -> None:
         g = np.array([[x, y, 0.0] for y in range(3) for x in range(3)], dtype=np.float64)
         self.neutral = g
-        t = []
-        for y in range(2):
-            for x in range(2):
-                a = y * 3 + x
-                t += [[a, a + 1, a + 4], [a, a + 4, a + 3]]
-        self.triangles = np.array(t)
+        self.triangles = grid_triangles(3, 3)
 
     def deformed(self, p: np.ndarray) -> np.ndarray:
         v = self.neutral.copy()
@@ -244,12 +240,7 @@ class _Band:
     def __init__(self, height: float, lift: float) -> None:
         ys = [0.0, 1.0, 1.0 + height, 2.0 + height, 3.0 + height]
         self.neutral = np.array([[x, y, 0.0] for y in ys for x in range(3)], dtype=np.float64)
-        t = []
-        for r in range(4):
-            for c in range(2):
-                a = r * 3 + c
-                t += [[a, a + 1, a + 4], [a, a + 4, a + 3]]
-        self.triangles = np.array(t)
+        self.triangles = grid_triangles(5, 3)
         self.lift = lift
 
     def deformed(self, p: np.ndarray) -> np.ndarray:
