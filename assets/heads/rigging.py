@@ -1277,8 +1277,9 @@ def rig_head(
             # Lips parted over a hole: the mouth's corners are where the hole ends, where the two lips' edges meet. A
             # corner found on the lips lies inside that, on one lip's edge (the parted Lee Perry-Smith's left one 0.035
             # IOD inside, on the lower lip's edge where the edges cross at rest): placed there, the simple face's corner
-            # dragged that lip's corner vertices with it while the lip beside them dropped, 2 flipped triangles; at the
-            # ends, 0 (docs/animation.md, "A parted head's corners at the opening's ends").
+            # drags that lip's corner vertices with it while the lip beside them drops (its first and capped-gain rigs
+            # failed, 2 flips / 3.59 and 1 / 4.08; at the ends its capped-gain rig passes, 0 / 3.08: docs/animation.md,
+            # "A parted head's corners at the opening's ends").
             ends = opening_ends(v, t, frame, snap)
             moved = {k: (snap[k], i) for k, i in ends.items() if i != snap[k]}
             if moved:
