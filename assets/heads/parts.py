@@ -132,8 +132,8 @@ ROWS_CUT = 1.0
 """How long the cut between a shell's two rows may be (:func:`_rows_apart`: the summed length of the edges it
 severs), as a fraction of the narrower row's sideways extent: joined rows part where they are joined, a bridge (the
 built-in head's rows joined by two triangles each side: 0.70 of a row's width, 6 edges); a single row or a tongue cut
-between its top and bottom is cut right through, along its whole length (the built-in head's upper and lower rows: 1.89
-and 1.79 of their widths, its tongue 5.2 of the narrower side's). A length, not a count of edges: a cut's edges grow in
+between its top and bottom is cut right through, along its whole length (the built-in head's upper and lower rows: 1.97
+and 1.80 of the narrower side's width, its tongue 6.7). A length, not a count of edges: a cut's edges grow in
 number with the mesh's resolution, their summed length does not."""
 ROWS_OVERLAP = 0.5
 """Fraction of the narrower row's extent (sideways, and front to back) that the two rows of a shell holding both teeth
