@@ -257,12 +257,14 @@ def with_dark_mouth_inside(
     *,
     skip: int = 0,
     wide: np.ndarray | None = None,
+    inside: np.ndarray | None = None,
 ) -> HeadMesh:
     """``mesh`` (untextured) with the inside of its mouth darkened by its depth behind the lips' contact
     (:func:`inside_light`): its inner-mouth parts (teeth, tongue, gums; :func:`inner_mouth_vertices`) and its mouth
     bag; the last ``skip`` vertices, a mouth cavity, keep theirs. ``rest`` (n, 3): the rig's neutral, lips touching;
     ``snap``: landmark vertex indices; ``wide`` (n, 3): the rig at its widest opening (None: no opening limit on a
-    head without inner-mouth parts, and the contact's depth from the inner-lip points).
+    head without inner-mouth parts, and the contact's depth from the inner-lip points); ``inside`` (n,) bool: more
+    vertices of inner-mouth parts, unnamed ones found by shape (:func:`assets.heads.parts.unnamed_inner_parts`).
 
     The bag: every skin vertex that the closed lips hide from the front at ``rest`` (the surface within
     INSIDE_COVER IOD in front of it does not count) and that lies behind the lips' contact (the inner-lip landmarks'
@@ -295,6 +297,8 @@ def with_dark_mouth_inside(
     mid = 0.5 * (cl + cr)
     half = 0.5 * abs(float(cl[0] - cr[0]))
     inner = inner_mouth_vertices(mesh)
+    if inside is not None:
+        inner[: len(inside)] |= np.asarray(inside, dtype=bool)[: len(inner)]
     inner[n0 - skip :] = False
     # The lips' contact runs from the inner-lip points back to the corners (tucked in on some heads): its depth at
     # each vertex's place across the mouth, so the corners themselves keep their colour.

@@ -84,14 +84,23 @@ def rigid_labels(mesh: HeadMesh, landmarks: Mapping[str, int]) -> np.ndarray:
         if kind is None or i == face or not len(sel):
             continue
         if kind == "teeth":  # both rows in one part: each connected piece by its side of the mouth line
-            out[sel] = _split_rows(v, mesh.triangles, sel, mouth, up)
+            out[sel] = _split_rows(v, mesh.triangles, sel, mouth, up, landmarks)
         else:
             out[sel] = "skull" if kind in ("eyes", "upper teeth") else "jaw"
     return out
 
 
-def _split_rows(v: np.ndarray, triangles: np.ndarray, sel: np.ndarray, mouth: np.ndarray, up: np.ndarray) -> np.ndarray:
-    import scipy.sparse as sp
+def _split_rows(
+    v: np.ndarray,
+    triangles: np.ndarray,
+    sel: np.ndarray,
+    mouth: np.ndarray,
+    up: np.ndarray,
+    landmarks: Mapping[str, int],
+) -> np.ndarray:
+    """(len(sel),) "skull" / "jaw": each connected piece of the teeth part ``sel`` (vertex indices of ``v`` (n, 3)) by
+    its mean height above ``mouth`` along ``up``; a piece holding both rows (joined by gums or a palate:
+    :func:`_rows_apart`) by its rows."""
     from scipy.sparse.csgraph import connected_components
 
     local = -np.ones(len(v), dtype=np.int64)
@@ -103,7 +112,88 @@ def _split_rows(v: np.ndarray, triangles: np.ndarray, sel: np.ndarray, mouth: np
     _, comp = connected_components(adj, directed=False)
     height = (v[sel] - mouth) @ up
     mean = np.bincount(comp, weights=height) / np.bincount(comp)
-    return np.where(mean[comp] >= 0, "skull", "jaw")
+    out = np.where(mean[comp] >= 0, "skull", "jaw").astype(object)
+    frame = face_frame(v, MouthLandmarks.among(landmarks))
+    where = _mouth_local(v[sel], landmarks, frame.axes, frame.iod, mouth=mouth)
+    for c in np.unique(comp):
+        at = np.flatnonzero(comp == c)
+        keep = -np.ones(len(sel), dtype=np.int64)
+        keep[at] = np.arange(len(at))
+        upper = _rows_apart(where[at], keep[t[(comp[t] == c).all(axis=1)]])
+        if upper is not None:
+            out[at] = np.where(upper, "skull", "jaw")
+    return out
+
+
+ROWS_CORE = 0.1
+"""Share of a shell's vertices, its highest and its lowest, that :func:`_rows_apart` holds to be in the upper and the
+lower row whatever the cut between them (the top of the upper gum, the bottom of the lower)."""
+ROWS_CUT = 1.0
+"""How long the cut between a shell's two rows may be (:func:`_rows_apart`: the summed length of the edges it
+severs), as a fraction of the narrower row's sideways extent: joined rows part where they are joined, a bridge (the
+built-in head's rows joined by two triangles each side: 0.70 of a row's width, 6 edges); a single row or a tongue cut
+between its top and bottom is cut right through, along its whole length (the built-in head's upper and lower rows: 1.97
+and 1.80 of the narrower side's width, its tongue 6.7). A length, not a count of edges: a cut's edges grow in
+number with the mesh's resolution, their summed length does not."""
+ROWS_OVERLAP = 0.5
+"""Fraction of the narrower row's extent (sideways, and front to back) that the two rows of a shell holding both teeth
+rows share (:func:`_rows_apart`): they lie one above the other, so their footprints coincide (the built-in head's rows:
+1.0 sideways, 0.91 front to back)."""
+
+
+def _rows_apart(local: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
+    """(k,) bool, True on the upper row, for a shell holding both teeth rows (joined by gums, a palate or a few faces);
+    None for any other shell (one row, a tongue, a lining). ``local`` (k, 3): the shell's vertices about the mouth line
+    (sideways, up, out; :func:`_mouth_local`), ``triangles`` (m, 3) its faces in those indices, one connected piece.
+
+    The shell is cut where its top (ROWS_CORE of its vertices, the highest) and its bottom (the lowest) are joined by
+    the least: a minimum cut between them (maximum flow, each edge's capacity its length). The two sides are the rows
+    when that cut is no longer than ROWS_CUT of the narrower side's width (a bridge, not the body of a row), their
+    sideways and front-to-back extents share ROWS_OVERLAP or more (one above the other), and the upper side's mean
+    height lies above the mouth line, the lower's below. Not by the mouth line itself: the built-in head's rows reach
+    past it (its upper row down to -0.11 IOD, the lower's molars up to +0.21); nor by the Laplacian's Fiedler vector:
+    rows joined both sides make a ring, which it cut across the rows' middles (32 and 36 of the rows' 68 vertices)."""
+    from scipy.sparse.csgraph import breadth_first_order, maximum_flow
+
+    k = len(local)
+    if k < 8 or not len(triangles):
+        return None
+    t = np.asarray(triangles, dtype=np.int64)
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    e = e[e[:, 0] != e[:, 1]]
+    h = local[:, 1]
+    lo, hi = np.quantile(h, [ROWS_CORE, 1.0 - ROWS_CORE])
+    top, bottom = np.flatnonzero(h >= hi), np.flatnonzero(h <= lo)
+    if np.intersect1d(top, bottom).size:
+        return None
+    length = np.linalg.norm(local[e[:, 0]] - local[e[:, 1]], axis=1)
+    unit = max(float(np.median(length)), 1e-300) / 100.0  # integer capacities: lengths in 1/100 of the median edge
+    edge_cap = np.maximum(1, np.round(length / unit)).astype(np.int64)
+    src, sink = k, k + 1
+    rows = np.r_[e[:, 0], e[:, 1], np.full(len(top), src), bottom]
+    cols = np.r_[e[:, 1], e[:, 0], top, np.full(len(bottom), sink)]
+    cap = np.r_[edge_cap, edge_cap, np.full(len(top) + len(bottom), 2 * int(edge_cap.sum()) + 1)].astype(np.int32)
+    graph = sp.csr_matrix((cap, (rows, cols)), shape=(k + 2, k + 2))
+    res = maximum_flow(graph, src, sink)
+    residual = (graph - res.flow).tocsr()
+    residual.data = np.where(residual.data > 0, 1, 0).astype(np.int32)
+    residual.eliminate_zeros()
+    reached = breadth_first_order(residual, src, directed=True, return_predecessors=False)
+    upper = np.zeros(k, dtype=bool)
+    upper[reached[reached < k]] = True
+    if upper.all() or not upper.any():
+        return None
+    a, b = local[upper], local[~upper]
+    if res.flow_value * unit > ROWS_CUT * min(np.ptp(a[:, 0]), np.ptp(b[:, 0])):
+        return None
+    for axis in (0, 2):
+        shared = min(a[:, axis].max(), b[:, axis].max()) - max(a[:, axis].min(), b[:, axis].min())
+        if shared < ROWS_OVERLAP * min(np.ptp(a[:, axis]), np.ptp(b[:, axis])):
+            return None
+    if not (a[:, 1].mean() > 0 > b[:, 1].mean()):
+        return None
+    return upper
 
 
 TEETH_FOLLOW = 0.71
@@ -117,16 +207,21 @@ with the chin instead, a retarget's lower teeth dropped 0.54 of the lip (the ful
 def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int], *, pieces: np.ndarray | None = None):
     """The :class:`realtime_core.face.Rig` with the rows of its separate parts replaced by their rigid
     motion (see the module docstring); the rig unchanged when the mesh has no such parts. ``pieces``: (k,) labels
-    ("skull", "jaw", "") of the first k vertices, moved so where the part names say nothing: the unnamed teeth and
-    tongue of a one-mesh head (:func:`rigid_inner_pieces`), recorded as ``inner_rigid_pieces`` (their vertex
-    indices) in the meta. Records ``rigid_parts`` (label -> vertex count) in the rig's meta."""
+    ("skull", "jaw", "eye", "") of the first k vertices, moved so where the part names say nothing: the unnamed teeth
+    and tongue of a one-mesh head or of unnamed separate parts (:func:`rigid_inner_pieces`), recorded as
+    ``inner_rigid_pieces`` (their vertex indices) in the meta; "eye": an unnamed separate part in an eye socket, with
+    the skull (meta ``eye_rigid_pieces``: how many vertices). Records ``rigid_parts`` (label -> vertex count) in the
+    rig's meta."""
     labels = rigid_labels(mesh, landmarks)
     found = np.zeros(0, dtype=np.int64)
+    eyes = np.zeros(0, dtype=np.int64)
     if pieces is not None:
         extra = np.full(len(labels), "", dtype=object)
         extra[: len(pieces)] = pieces
-        found = np.flatnonzero((labels == "") & (extra != ""))
+        eyes = np.flatnonzero((labels == "") & (extra == "eye"))
+        found = np.flatnonzero((labels == "") & (extra != "") & (extra != "eye"))
         labels[found] = extra[found]
+        labels[eyes] = "skull"
     if not (labels != "").any():
         return rig
     n = len(rig.neutral)
@@ -153,6 +248,8 @@ def with_rigid_parts(rig, mesh: HeadMesh, landmarks: Mapping[str, int], *, piece
     meta = {**rig.meta, "rigid_parts": counts, "jaw_anchor": int(anchor)}
     if len(found):
         meta["inner_rigid_pieces"] = found.tolist()
+    if len(eyes):
+        meta["eye_rigid_pieces"] = len(eyes)
     spread = rig.contact_spread
     if spread is not None:
         # The lip-contact push is a correction of the lips' own surface: a part that follows the
@@ -272,18 +369,26 @@ def rigid_inner_pieces(
     *,
     part_names: tuple[str, ...] = (),
 ) -> np.ndarray:
-    """(n,) per-vertex label: "skull" (an upper teeth row), "jaw" (a lower row, a tongue) or "" for the unnamed teeth
-    and tongue of a head exported as one mesh: separate shells of the face's skin (:func:`skin_parts`) even where
-    texture seams are welded, lying wholly behind the front-most outer lip midpoint (along the face's z = axes[2]),
-    below half the eyes' height, above the chin and within INNER_REACH of the mouth, and no taller (along axes[1]) than
-    RIGID_PIECE_HEIGHT of the mouth's width nor than it is wide. Such a shell is a solid thing in the mouth, not the
-    skin's inside: moved by the height weights of :func:`inner_mouth_weights` as a scan's lining is, anny's upper row
-    dropped 0.11 IOD at /a/ (it should stay) and its lower row 0.12 while the lower lip dropped 0.54, and each row bent.
+    """(n,) per-vertex label: "skull" (an upper teeth row), "jaw" (a lower row, a tongue), "eye" (an unnamed separate
+    part in an eye socket) or "" for the unnamed teeth, tongue and eyes of a head: separate shells of the face's skin
+    (:func:`skin_parts`; a head exported as one mesh) even where texture seams are welded, or of its unnamed parts
+    that are no skin (teeth exported as a separate "Object001", "mesh_3", "Cube.002": :func:`part_kind` names nothing,
+    and they touch the face nowhere), lying wholly behind the front-most outer lip midpoint (along the face's z =
+    axes[2]), below half the eyes' height, above the chin and within INNER_REACH of the mouth, and no taller (along
+    axes[1]) than RIGID_PIECE_HEIGHT of the mouth's width nor than it is wide. Such a shell is a solid thing in the
+    mouth, not the skin's inside: moved by the height weights of :func:`inner_mouth_weights` as a scan's lining is,
+    anny's upper row dropped 0.11 IOD at /a/ (it should stay) and its lower row 0.12 while the lower lip dropped 0.54,
+    and each row bent; a separate part left to the rig moved as one lump with its centroid's row (the built-in head's
+    teeth as "Object003"/"Object004": the upper row dropped 0.085 IOD, the lower 0.179 against the named rows' 0.228).
     A lining is a piece only across seams (Lee Perry-Smith's gums and cheek insides continue the lips' inner walls) or
-    taller than that: it keeps those weights. A shell deeper (front to back) than it is wide is a tongue: with the jaw.
-    Else a row: its mean height above the mouth line (the corners' midpoint) is an upper row, with the skull; below, a
-    lower row, with the jaw. The built-in head (its mesh named "builtin") is left to its field by the rig
-    (:func:`assets.heads.rigging.rig_head`).
+    taller than that: it keeps those weights. A shell holding both rows (joined by gums, a palate: :func:`_rows_apart`)
+    is its two rows, upper with the skull and lower with the jaw, when it is low and wide as a whole or each row is and
+    the whole is no taller than wide (a lining is taller). A shell deeper (front to back) than it is wide is a tongue:
+    with the jaw. Else a row: its mean height above the mouth line (the corners' midpoint) is an upper row, with the
+    skull; below, a lower row, with the jaw. An unnamed separate part wholly within an eye's width (corner to corner)
+    of its corners' midpoint is an eye, with the skull (the built-in head's eyeballs reach 0.25 IOD from it, 0.49 of
+    that width); a one-mesh head's eyeballs are left to the field as before. The built-in head (its mesh named
+    "builtin") is left to its field by the rig (:func:`assets.heads.rigging.rig_head`).
     ``vertices`` (n, 3), ``triangles`` (m, 3) as the mesh came; ``landmarks``: name -> vertex index (corners, chin,
     nose_tip, upper_lip, lower_lip, eye corners)."""
     from realtime_core.face.welding import welded_pieces
@@ -291,9 +396,18 @@ def rigid_inner_pieces(
     v = np.asarray(vertices, dtype=np.float64)
     n = len(v)
     out = np.full(n, "", dtype=object)
-    _, _, t = _skin_faces(v, triangles, part, landmarks, part_names)
+    canon0, _, t = _skin_faces(v, triangles, part, landmarks, part_names)
     if not len(t):
         return out
+    loose = np.zeros(n, dtype=bool)  # the vertices of unnamed parts that are no skin
+    if part is not None:
+        p = np.asarray(part, dtype=np.int64)
+        skin = skin_parts(canon0, p, int(p[landmarks["nose_tip"]]), part_names)
+        named = [i for i, name in enumerate(part_names) if part_kind(name) is not None]
+        tri = np.asarray(triangles, dtype=np.int64)
+        tri = tri[~np.isin(p[tri], np.r_[skin, named]).any(axis=1)]
+        loose[tri.ravel()] = True
+        t = np.vstack([t, tri])
     canon, _, pieces = welded_pieces(v, t)
     comp = pieces[canon]
     used = np.zeros(n, dtype=bool)
@@ -318,16 +432,69 @@ def rigid_inner_pieces(
         & (local[:, 1] > chin)
         & (local[:, 1] < 0.5 * eyes)  # an upper gum reaches above the nose tip's height; the eyeballs lie higher
     )
+
+    def low_wide(sel: np.ndarray) -> bool:  # (n,) bool: a teeth row's or a tongue's shape
+        lo, hi = local[sel].min(axis=0), local[sel].max(axis=0)
+        return bool(hi[1] - lo[1] <= min(RIGID_PIECE_HEIGHT * width, hi[0] - lo[0]))
+
     for c in np.unique(comp[inside]):
         sel = used & (comp == c)
         if not inside[sel].all():
             continue
-        lo, hi = local[sel].min(axis=0), local[sel].max(axis=0)
-        if hi[1] - lo[1] > min(RIGID_PIECE_HEIGHT * width, hi[0] - lo[0]):
+        upper = _shell_rows(local, canon, t, sel)
+        if upper is not None:
+            extent = np.ptp(local[sel], axis=0)
+            if low_wide(sel) or (low_wide(upper) and low_wide(sel & ~upper) and extent[1] <= extent[0]):
+                out[upper], out[sel & ~upper] = "skull", "jaw"
+                continue
+        if not low_wide(sel):
             continue
+        lo, hi = local[sel].min(axis=0), local[sel].max(axis=0)
         tongue = hi[2] - lo[2] > hi[0] - lo[0]
         out[sel] = "jaw" if tongue or float(local[sel, 1].mean()) < 0 else "skull"
+    for side in ("left", "right") if loose.any() else ():
+        a, b = v[landmarks[f"eye_outer_{side}"]], v[landmarks[f"eye_inner_{side}"]]
+        near = np.linalg.norm(v - 0.5 * (a + b), axis=1) <= np.linalg.norm(a - b)
+        for c in np.unique(comp[loose & near]):
+            sel = used & (comp == c)
+            if (loose[sel] & near[sel]).all():
+                out[sel] = "eye"
     return out
+
+
+def unnamed_inner_parts(mesh: HeadMesh, landmarks: Mapping[str, int], pieces: np.ndarray) -> np.ndarray:
+    """(n,) bool: the vertices of the unnamed parts that are no skin (:func:`skin_parts`) and hold a teeth row or a
+    tongue found by shape (``pieces`` (n,): :func:`rigid_inner_pieces`' labels, "skull" or "jaw"): parts inside the
+    mouth as named teeth are (:func:`assets.heads.cavity.has_inner_mouth`), so a head whose teeth are "Object003" gets
+    the rules of one with teeth: its inside shaded as a modelled mouth's (teeth and tongue keep their hue; unnamed, the
+    built-in head's teeth as a separate "Object003" part came out a lighter, unshaded inside at /a/ and /u/), no mouth
+    cavity, no lip walls dropped. All False without parts, so a one-mesh head's rules stay as they were."""
+    n = len(mesh.vertices)
+    if mesh.part is None:
+        return np.zeros(n, dtype=bool)
+    from realtime_core.face.welding import weld
+
+    p = np.asarray(mesh.part, dtype=np.int64)
+    skin = skin_parts(
+        weld(np.asarray(mesh.vertices, dtype=np.float64))[0], p, int(p[landmarks["nose_tip"]]), mesh.part_names
+    )
+    labels = np.asarray(pieces, dtype=object)[:n]
+    found = np.unique(p[: len(labels)][(labels == "skull") | (labels == "jaw")])
+    return np.isin(p, np.setdiff1d(found, skin))
+
+
+def _shell_rows(local: np.ndarray, canon: np.ndarray, triangles: np.ndarray, sel: np.ndarray) -> np.ndarray | None:
+    """(n,) bool, True on the upper row of the shell ``sel`` (n,) bool when it holds both teeth rows
+    (:func:`_rows_apart` on its welded vertices: ``canon`` (n,) each vertex's welded index, ``triangles`` (m, 3) the
+    faces it is a piece of, ``local`` (n, 3) the vertices about the mouth line); None when it does not."""
+    at = np.unique(canon[sel])
+    keep = -np.ones(int(canon.max()) + 1, dtype=np.int64)
+    keep[at] = np.arange(len(at))
+    first = np.zeros(len(at), dtype=np.int64)  # a vertex at each welded position
+    first[keep[canon[sel]]] = np.flatnonzero(sel)
+    wt = keep[canon[np.asarray(triangles, dtype=np.int64)]]
+    upper = _rows_apart(local[first], wt[(wt >= 0).all(axis=1)])
+    return None if upper is None else sel & upper[keep[canon]]
 
 
 def _skin_faces(
@@ -349,9 +516,13 @@ def _skin_faces(
     return canon, welded, t
 
 
-def _mouth_local(v: np.ndarray, landmarks: Mapping[str, int], axes: np.ndarray, iod: float) -> np.ndarray:
-    """(n, 3) IOD: ``v`` about the mouth corners' midpoint along the face's axes (sideways, up, out)."""
-    mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
+def _mouth_local(
+    v: np.ndarray, landmarks: Mapping[str, int], axes: np.ndarray, iod: float, *, mouth: np.ndarray | None = None
+) -> np.ndarray:
+    """(n, 3) IOD: ``v`` about the mouth corners' midpoint (``mouth`` (3,), else taken from ``v`` at the corner
+    landmarks) along the face's axes (sideways, up, out)."""
+    if mouth is None:
+        mouth = 0.5 * (v[landmarks["corner_left"]] + v[landmarks["corner_right"]])
     return (v - mouth) @ np.asarray(axes, dtype=np.float64).T / iod
 
 

@@ -48,6 +48,7 @@ from assets.heads.parts import (
     inner_mouth_weights,
     part_seam_pairs,
     rigid_inner_pieces,
+    unnamed_inner_parts,
     with_jaw_weights,
     with_rigid_parts,
 )
@@ -1151,14 +1152,16 @@ def opening_ends(
 
 
 def parted_over_hole(
-    mesh: HeadMesh, vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int], *, modelled: bool
 ) -> bool:
     """Lips modelled apart (the inner-lip points further apart than :data:`REST_GAP_MAX`) with nothing behind them (no
-    inner-mouth part, :func:`assets.heads.cavity.opens_onto_nothing`): a hollow scan with a mouth hole, or a face mask.
-    ``vertices`` (n, 3) and ``triangles`` (m, 3) as rigged (not cut); ``landmarks``: name -> vertex index."""
+    inner-mouth part, ``modelled`` False: named ones, :func:`assets.heads.cavity.has_inner_mouth`, or unnamed ones found
+    by shape, :func:`assets.heads.parts.unnamed_inner_parts`; and :func:`assets.heads.cavity.opens_onto_nothing`): a
+    hollow scan with a mouth hole, or a face mask. ``vertices`` (n, 3) and ``triangles`` (m, 3) as rigged (not cut);
+    ``landmarks``: name -> vertex index."""
     v = np.asarray(vertices, dtype=np.float64)
     gap = float((v[landmarks["upper_inner"]] - v[landmarks["lower_inner"]]) @ frame.axes[1]) / frame.iod
-    return gap > REST_GAP_MAX and not has_inner_mouth(mesh) and opens_onto_nothing(v, triangles, frame, landmarks)
+    return gap > REST_GAP_MAX and not modelled and opens_onto_nothing(v, triangles, frame, landmarks)
 
 
 def rig_head(
@@ -1260,6 +1263,15 @@ def rig_head(
         if wound_inwards(v, t, points["nose_tip"], frame.axes[2], iod=frame.iod):
             t = np.ascontiguousarray(np.asarray(t)[:, ::-1])
             meta["winding_reversed"] = True
+        # Teeth or a tongue in unnamed separate parts ("Object003"), found by shape: a mouth with teeth, as named ones
+        # make it (has_inner_mouth): no lip walls dropped, no cavity added, the inside shaded as a modelled mouth's.
+        inside = np.zeros(len(mesh.vertices), dtype=bool)
+        if mesh.part is not None and mesh.name != "builtin":
+            found = rigid_inner_pieces(
+                mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod, part_names=mesh.part_names
+            )
+            inside = unnamed_inner_parts(mesh, snap, found)
+        modelled = has_inner_mouth(mesh) or bool(inside.any())
         # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
         # instead of cutting along one lip (which left it hanging from the other, keeping them apart).
         membrane = lip_membrane(
@@ -1273,7 +1285,7 @@ def rig_head(
         touch_only = touching_apart and closed and not lips_connected(v, t, snap["upper_inner"], snap["lower_inner"])
         if touch_only:
             meta["lips_touching_apart"] = True
-        if not closed and mesh.name != "builtin" and parted_over_hole(mesh, v, t, frame, snap):
+        if not closed and mesh.name != "builtin" and parted_over_hole(v, t, frame, snap, modelled=modelled):
             # Lips parted over a hole: the mouth's corners are where the hole ends, where the two lips' edges meet. A
             # corner found on the lips lies inside that, on one lip's edge (the parted Lee Perry-Smith's left one 0.035
             # IOD inside, on the lower lip's edge where the edges cross at rest): placed there, the simple face's corner
@@ -1342,7 +1354,7 @@ def rig_head(
             # A hollow head loses the crease's hidden walls after the cut (below): the cut leaves no island
             # on the faces that stay (see _without_islands).
             hidden = None
-            if clean_lips and has_inner_mouth(mesh):
+            if clean_lips and modelled:
                 hidden = np.zeros(len(t), dtype=bool)
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
@@ -1429,14 +1441,14 @@ def rig_head(
         # the lips, and behind closed lips the rays meet the lips' own inner walls.
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
         parted = not own and cut_copies is None and gap > REST_GAP_MAX
-        parted_hole = parted and parted_over_hole(mesh, v, t, frame, snap)
+        parted_hole = parted and parted_over_hole(v, t, frame, snap, modelled=modelled)
         if parted_hole:
             rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
         # Heads that rest at the pose closing their lips (below) and are repaired there: lips parted over nothing, and
         # lips that touch beside a gap between the inner-lip points (touching_apart).
         shown_at_rest = parted_hole or (touch_only and parted)
         walls = None
-        if cut_copies is not None and not has_inner_mouth(mesh):
+        if cut_copies is not None and not modelled:
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
             # measures only the faces that stay (it still smooths across the walls) and the lip-contact
             # spread is computed once they are gone, so both judge the mesh the rig animates. Measuring the
@@ -1637,7 +1649,7 @@ def rig_head(
         seams = part_seam_pairs(v, part, int(part[snap["nose_tip"]]), mesh.part_names, skip=cut_copies)
         if len(seams):
             rig = with_seams_joined(rig, seams)
-    if not has_inner_mouth(mesh) and (
+    if not modelled and (
         cut_copies is not None or parted_hole or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):
         # Open lips over nothing (a face mask, or a hollow scan whose closed lips were cut apart: its
@@ -1653,7 +1665,9 @@ def rig_head(
         # the skin's (or the material's one) colour; shade them dark.
         cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
         wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
-        out_mesh = with_dark_mouth_inside(out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide)
+        out_mesh = with_dark_mouth_inside(
+            out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide, inside=inside
+        )
     return rig, out_mesh
 
 

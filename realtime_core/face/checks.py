@@ -829,9 +829,14 @@ def pose_figures(
     reference: np.ndarray | None = None,
 ) -> PoseFigures:
     """Flipped triangles (:func:`flipped_faces`), edge stretch, lip interpenetration and teeth ahead of the
-    lips of ``rig`` at each of ``poses`` (P, 4); the arguments as :func:`check_rig` takes them."""
+    lips of ``rig`` at each of ``poses`` (P, 4); the arguments as :func:`check_rig` takes them. Faces wholly among the
+    ``teeth`` are not counted for flips and stretch: teeth move rigidly, and the only such face that deforms joins the
+    two rows of a shell holding both (gums, a palate; :func:`assets.heads.parts.rigid_inner_pieces`), hidden behind the
+    lips and stretched on purpose as the jaw drops (the built-in head's rows joined by two triangles each side: 41x)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
+    if teeth is not None and len(teeth):
+        t = t[~np.isin(t, np.asarray(teeth)).all(axis=1)]
     vr = v0 if reference is None else np.asarray(reference, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up, fwd = fr.iod, fr.axes[1], fr.axes[2]
@@ -881,7 +886,8 @@ def check_rig(
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
-    teeth: head vertex indices of the teeth (None: not known, not checked); reference: (n, 3) the
+    teeth: head vertex indices of the teeth (None: not known, not checked; their own faces count for no flip or
+    stretch, :func:`pose_figures`); reference: (n, 3) the
     head as modelled, which flips and stretch are measured from (default the rig's neutral; differs
     for a rig that rests in a pose, :func:`realtime_core.face.rig.with_rest_pose`); cavity_vertices: how
     many of the last vertices are an added mouth cavity (its rim is no lip edge for :func:`lip_edge_notch`);
