@@ -568,7 +568,7 @@ def rig_checked(
         # Its cut is levelled over CUT_DIP_WINDOW (the scan's short lip edges spread the cut's V over several: a pink
         # wedge of lower lip hung from the upper lip's middle at small openings), and its fold repair widens a stubborn
         # fold's patch ring after ring (widen_repair): levelled, the plain repair kept 2 chin flips through all its
-        # rounds; widened it settles in 51 (docs/animation.md, "The dense head's wedge levelled").
+        # rounds; widened it settles in 52 (docs/animation.md, "The dense head's wedge levelled").
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},

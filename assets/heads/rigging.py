@@ -260,9 +260,10 @@ def level_path(
     """``path`` with the vertex ``point`` bypassed when the path dips there by more than CONTACT_DIP IOD
     along ``up`` (the V it makes leaves a wedge of the lower lip's front on the upper side): its two path
     neighbours are joined by the shortest mesh path that avoids it and dips less. ``window`` (IOD): the dip is
-    measured from the first path vertices at least this far along the path either side, and the path between
-    them is bypassed (a dense mouth spreads the V over several edges: the once-subdivided Lee Perry-Smith's dipped
-    0.0145 IOD below its next vertices, 0.029 below those 0.06 IOD away; :data:`assets.heads.dense.CUT_DIP_WINDOW`).
+    measured from the path vertices where the V's sides stop rising, at most this far along the path either side,
+    and the path between them is bypassed (a dense mouth spreads the V over several edges: the once-subdivided Lee
+    Perry-Smith's dipped 0.0145 IOD below its next vertices, 0.029 below those 0.06 IOD away, and rose to the
+    crease's row 0.1 IOD away; :data:`assets.heads.dense.CUT_DIP_WINDOW`).
     Returns the path and the vertex that stands for ``point`` (itself, or the detour's vertex nearest it)."""
     v = np.asarray(vertices, dtype=np.float64)
     h = v @ (np.asarray(up, dtype=np.float64) / np.linalg.norm(up))
@@ -273,8 +274,12 @@ def level_path(
     if window is not None:
         step = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(v[path], axis=0), axis=1))]
         along = np.abs(step - step[i]) / iod
-        lo = max([k for k in range(i) if along[k] >= window] or [0])
-        hi = min([k for k in range(i + 1, len(path)) if along[k] >= window] or [len(path) - 1])
+        # Out along the V's sides while they rise, up to ``window`` away: ends on its shoulders, not past them (a
+        # flat stretch of the path beyond is the crease itself, which the detour must not be kept off).
+        while lo > 0 and along[lo] < window and h[path[lo - 1]] > h[path[lo]]:
+            lo -= 1
+        while hi < len(path) - 1 and along[hi] < window and h[path[hi + 1]] > h[path[hi]]:
+            hi += 1
     prev, nxt = path[lo], path[hi]
     if min(h[prev], h[nxt]) - h[point] <= CONTACT_DIP * iod:
         return path, point

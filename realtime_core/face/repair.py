@@ -110,8 +110,9 @@ def repair_folds(
     every head rigged before): each further ring grows only from vertices that were themselves on a fold that long,
     so a fold whose neighbours never fold keeps its one ring however long it stays: the once-subdivided Lee
     Perry-Smith's copy (its mouth at the scan's own edges, half the shipped head's) kept 2-3 flips through its 200
-    rounds and settled only by chance in the tie rounds (tied apexes then flipped their neighbours, round after
-    round); widened, it settles in 50 rounds (docs/animation.md, "The dense head's wedge levelled").
+    rounds, and the tie rounds (tied apexes flipping their neighbours, round after round) cleared them on its first
+    cut and left 2 on its levelled one; widened, it settles in 50-52 rounds (docs/animation.md, "The dense head's
+    wedge levelled").
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)

@@ -29,7 +29,7 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 65: a dense scan's copy levels its cut's dip over 0.05 IOD and widens its fold repair's stubborn patches
+# 65: a dense scan's copy levels its cut's dip over 0.08 IOD and widens its fold repair's stubborn patches
 # (i12dense3); 64: a dense scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows and
 # tongue inside a one-mesh head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long piece
 # splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge

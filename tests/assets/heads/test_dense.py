@@ -216,11 +216,27 @@ def test_a_dense_cuts_v_spread_over_several_edges_is_levelled_over_the_window():
     assert all(tuple(sorted(e)) in edges for e in itertools.pairwise(new))  # still an edge path
 
 
+def test_the_levelled_cut_runs_along_the_crease_the_v_left_not_a_row_below_it():
+    # The once-subdivided Lee Perry-Smith's V came down from the crease's row over three edges each side (y +0.022 ->
+    # +0.014 -> -0.001 -> -0.015 at the front contact); a window ending on its shoulders (0.05 IOD: the row at +0.013)
+    # joined them a row of faces below the crease: a thin pink strip of lower lip hung from the upper lip's middle.
+    # Over CUT_DIP_WINDOW the ends are on the crease's row and so is the whole detour.
+    v, t, at = _grid(0.025, 0.0145)
+    path = _v_path(at, depth=3)
+    point = at(0, -3)
+    up = np.array([0, 1.0, 0])
+    new, _ = level_path(v, t, path, point, up, iod=1.0, window=CUT_DIP_WINDOW)
+    assert point not in new and new[0] == path[0] and new[-1] == path[-1]
+    assert float(v[new, 1].min()) > -1e-9  # every vertex on the crease's row (y = 0)
+    short, _ = level_path(v, t, path, point, up, iod=1.0, window=0.05)
+    assert float(v[short, 1].min()) < -0.01  # the shoulders' window: a row below
+
+
 def test_the_window_leaves_a_cut_whose_next_vertices_are_already_that_far_as_it_was():
-    # The shipped Lee Perry-Smith's spacing (its cut's vertices ~0.05 IOD apart): the window measures from the same
-    # neighbours, so a path is levelled (or not) as before.
+    # A mouth as coarse as the window (its cut's vertices 0.09 IOD apart): the window measures from the same
+    # neighbours, so a path is levelled (or not) as without it.
     for depth, dy in ((1, 0.029), (1, 0.01)):
-        v, t, at = _grid(0.05, dy)
+        v, t, at = _grid(CUT_DIP_WINDOW + 0.01, dy)
         path = _v_path(at, depth=depth)
         point = at(0, -1)
         plain = level_path(v, t, path, point, np.array([0, 1.0, 0]), iod=1.0)
