@@ -51,6 +51,16 @@ CORNER_FANS = 3
 
 NO_SIDE, UPPER, LOWER = 0, 1, 2
 
+CUT_DIP_WINDOW = 0.08
+"""IOD: the proxy's closed-lip cut is levelled (``rigging.level_path``) from where the sides of its V stop rising, up
+to this far along it either side of the front contact, not from its next vertices. The kept mouth has the scan's
+short edges, which spread the cut's V down onto the lower lip's front over several of them: on the once-subdivided
+Lee Perry-Smith 0.0145 IOD below the next vertices (under ``CONTACT_DIP``, 0.015, so kept), 0.029 below those 0.06
+IOD away and 0.036 below the crease's row 0.1 IOD away, and the wedge of lower lip inside the V, on the upper side,
+hung from the upper lip's middle into every small opening (the shipped head's neighbours are 0.05 IOD away and its
+0.028 dip is bypassed). At 0.05 the detour joined the V's shoulders a row of faces below the crease: a thin pink strip
+was left hanging there; at 0.08 it runs along the crease. The dense mesh is cut as the proxy (``cut_as_proxy``)."""
+
 PROXY_AGGRESSIVENESS = 7.0
 """fast-simplification's ``agg`` (0-10; its default): at 17,500 triangles, 2 kept the lip line better (a cut of 51
 vertices against 30 at 7; the shipped head's 49) and its rig nearer passing (2 flips against 30), but left faces

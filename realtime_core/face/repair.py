@@ -67,6 +67,7 @@ def repair_folds(
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
     stretch_poses: int | None = None,
     patience: int | None = None,
+    widen: bool = False,
 ) -> RepairResult:
     """Smooth ``weights`` (n, n_s) (head vertex <- simple vertex) where the poses fold the mesh.
 
@@ -104,6 +105,15 @@ def repair_folds(
     reached a new low for this many rounds: the result is then not settled and runs no tie rounds (for a caller
     that falls back to fewer poses when this repair does not settle; docs/animation.md, "The fold repair's
     rounds"). None (the default): never give up.
+    widen: a stubborn fold's patch grows one ring for every ``grow_every`` rounds its vertex has been on a fold,
+    ring after ring outwards (a vertex folded 200 rounds smooths 14 rings round it). False (the default, the rows of
+    every head rigged before): each further ring grows only from vertices that were themselves on a fold that long,
+    so a fold whose neighbours never fold keeps its one ring however long it stays: the once-subdivided Lee
+    Perry-Smith's copy (its mouth at the scan's own edges, half the shipped head's) kept 2-3 flips through its 200
+    rounds, and the tie rounds (tied apexes flipping their neighbours, round after round) cleared them on its first
+    cut and left 2 on its levelled one; widened, it settles in 50-52 rounds (docs/animation.md, "The dense head's
+    wedge levelled"). Not for a coarse mesh, whose rings are wide: forced on Lee Perry-Smith's 3,810-triangle copy,
+    the patch grew over the whole mouth, which then no longer opened.
     """
     v0 = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -191,6 +201,8 @@ def repair_folds(
         sel = bad.copy()
         front = bad.copy()
         level = 0
+        if widen:
+            sel, front = _widened(bad, stuck, e, grow_every), np.zeros(n, dtype=bool)
         while front.any():
             sel |= adj @ front.astype(np.float64) > 0
             level += 1
@@ -285,6 +297,20 @@ class _FoldWatch:
     def _at(self, vertices: np.ndarray, lo: int, hi: int) -> np.ndarray:
         """(k, hi - lo, 3) the positions of ``vertices`` (k,) at poses lo..hi-1."""
         return self.v0[vertices][:, None, :] + self.disp[vertices, 3 * lo : 3 * hi].reshape(len(vertices), hi - lo, 3)
+
+
+def _widened(bad: np.ndarray, stuck: np.ndarray, edges: np.ndarray, grow_every: int) -> np.ndarray:
+    """(n,) bool the ``bad`` (n,) vertices and, round each, ``1 + stuck // grow_every`` rings of neighbours along
+    ``edges`` (k, 2) (one ring when ``grow_every`` is 0): the patch :func:`repair_folds` smooths with ``widen``."""
+    reach = np.full(len(bad), -1, dtype=np.int64)
+    reach[bad] = 1 + (stuck[bad] // grow_every if grow_every else 0)
+    for _ in range(int(reach.max(initial=0))):
+        # Each vertex the largest reach of a neighbour, one ring less: a multi-source breadth-first search.
+        grown = reach.copy()
+        np.maximum.at(grown, edges[:, 0], reach[edges[:, 1]] - 1)
+        np.maximum.at(grown, edges[:, 1], reach[edges[:, 0]] - 1)
+        reach = grown
+    return reach >= 0
 
 
 def _apexes(v: np.ndarray, flipped: np.ndarray, frozen: np.ndarray) -> dict[int, tuple[int, int, float]]:

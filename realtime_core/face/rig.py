@@ -29,14 +29,15 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 66: teeth as unnamed separate parts and a shell holding both teeth rows moved rigidly as rows, unnamed separate eyes
-# with the skull (i12parts2); 65: lips parted over a hole have their mouth corners at the hole's ends (i12parted3);
-# 64: a dense scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows and tongue
-# inside a one-mesh head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long piece splits
-# the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge (i12wall;
-# checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside shown through
-# the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 66
+# 67: a dense scan's copy levels its cut's dip over 0.08 IOD and widens its fold repair's stubborn patches
+# (i12dense3); 66: teeth as unnamed separate parts and a shell holding both teeth rows moved rigidly as rows, unnamed
+# separate eyes with the skull (i12parts2); 65: lips parted over a hole have their mouth corners at the hole's ends
+# (i12parted3); 64: a dense scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows and
+# tongue inside a one-mesh head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long piece
+# splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge
+# (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
+# shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
+RIG_ALGORITHM = 67
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
@@ -762,6 +763,7 @@ def repair_rig(
     ties: Mapping[int, int | tuple[Sequence[int], Sequence[float]]] | None = None,
     stretch_poses: int | None = None,
     patience: int | None = None,
+    widen: bool = False,
 ) -> Rig:
     """The rig with its field smoothed where ``poses`` (params (4,) each) fold or over-stretch the
     mesh (:func:`realtime_core.face.repair.repair_folds`); parts without control points (teeth,
@@ -773,7 +775,8 @@ def repair_rig(
     vertex is on it when one of its twins is). ``ties``: head vertex -> the head vertex whose row it takes
     throughout, or -> (head vertices, weights) whose rows' weighted sum it takes (ibid.). ``stretch_poses``: only
     the first so many poses count over-stretched edges (None: all; the rest count folds only). ``patience``: the
-    repair gives up after so many rounds without progress (ibid.; None: never). Records the repair in meta
+    repair gives up after so many rounds without progress (ibid.; None: never). ``widen``: a stubborn fold's patch
+    grows ring after ring (ibid.; False: as every head's before the dense scan's copy). Records the repair in meta
     (``fold_repair``: rounds, flips left, rows smoothed, whether it settled)."""
     from realtime_core.face.repair import repair_folds
 
@@ -809,6 +812,7 @@ def repair_rig(
         ties=None if ties is None else {int(canon[i]): _welded_tie(canon, j) for i, j in ties.items()},
         stretch_poses=stretch_poses,
         patience=patience,
+        widen=widen,
     )
     g_new = res.weights[canon]
     moving = np.flatnonzero(np.diff(g_new.indptr) > 0)

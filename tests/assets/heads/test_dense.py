@@ -3,15 +3,27 @@ dense mesh agree with the proxy's own displacements, and each lip takes its own 
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import trimesh.remesh
 from trimesh.triangles import closest_point
 
-from assets.heads.dense import LOWER, NO_SIDE, UPPER, carried_rig, carried_rows, lip_sides, proxy_mesh
+from assets.heads.dense import (
+    CUT_DIP_WINDOW,
+    LOWER,
+    NO_SIDE,
+    UPPER,
+    carried_rig,
+    carried_rows,
+    lip_sides,
+    proxy_mesh,
+)
 from assets.heads.mesh import HeadMesh
-from assets.heads.rigging import cut_as_proxy, cut_mouth
+from assets.heads.rigging import CONTACT_DIP, cut_as_proxy, cut_mouth, level_path
 from realtime_core.face.welding import mesh_pieces
 from tests.assets.heads.test_lip_cut import _creased_lips
+from tests.grids import grid_triangles
 
 
 def _cut_lips(v: np.ndarray, t: np.ndarray, left: int, right: int, mid: int):
@@ -170,3 +182,63 @@ def test_a_mesh_is_cut_exactly_as_its_proxy_where_the_proxy_kept_its_faces():
     assert faces(v2, t2, np.arange(len(dv), len(v2))) == faces(pv, pt, p_copies)
     # Not the same as any cut: a proxy whose lower side had no copies leaves the mesh whole.
     assert cut_as_proxy(dv, dt, None, pv, pt, np.zeros(0, dtype=np.int64))[0].shape == dv.shape
+
+
+def _grid(dx: float, dy: float, nx: int = 17, ny: int = 7):
+    """A flat lip region (IOD 1): vertices on a grid dx apart along x (the mouth) and dy along y (up), rows
+    y = -(ny - 1) / 2 dy .. +, each cell two triangles; returns (vertices, triangles, index of (i, j))."""
+    xs = (np.arange(nx) - nx // 2) * dx
+    ys = (np.arange(ny) - ny // 2) * dy
+    at = np.arange(nx * ny).reshape(ny, nx)
+    v = np.array([[x, y, 0.0] for y in ys for x in xs])
+    return v, grid_triangles(ny, nx), lambda i, j: int(at[ny // 2 + j, nx // 2 + i])
+
+
+def _v_path(at, half: int = 8, depth: int = 2) -> list[int]:
+    """Along the middle row from end to end, dipping ``depth`` rows down to a V at the middle (one row per column)."""
+    return [at(i, -max(depth - abs(i), 0)) for i in range(-half, half + 1)]
+
+
+def test_a_dense_cuts_v_spread_over_several_edges_is_levelled_over_the_window():
+    # The once-subdivided Lee Perry-Smith's proxy: its cut dipped 0.0145 IOD below its next vertices (under
+    # CONTACT_DIP, so the plain level_path keeps it) and 0.029 below those 0.06 IOD away: a wedge of lower lip on
+    # the upper side, hanging into every small opening.
+    v, t, at = _grid(0.025, 0.0145)
+    path = _v_path(at)
+    point = at(0, -2)
+    kept, stand = level_path(v, t, path, point, np.array([0, 1.0, 0]), iod=1.0)
+    assert kept == path and stand == point
+    new, stand = level_path(v, t, path, point, np.array([0, 1.0, 0]), iod=1.0, window=CUT_DIP_WINDOW)
+    assert point not in new and new[0] == path[0] and new[-1] == path[-1]
+    assert float(v[new, 1].min()) > -CONTACT_DIP  # level: no vertex below the ends by the dip
+    assert stand in new and np.linalg.norm(v[stand] - v[point]) < 0.03
+    edges = {tuple(sorted(e)) for f in t.tolist() for e in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0]))}
+    assert all(tuple(sorted(e)) in edges for e in itertools.pairwise(new))  # still an edge path
+
+
+def test_the_levelled_cut_runs_along_the_crease_the_v_left_not_a_row_below_it():
+    # The once-subdivided Lee Perry-Smith's V came down from the crease's row over three edges each side (y +0.022 ->
+    # +0.014 -> -0.001 -> -0.015 at the front contact); a window ending on its shoulders (0.05 IOD: the row at +0.013)
+    # joined them a row of faces below the crease: a thin pink strip of lower lip hung from the upper lip's middle.
+    # Over CUT_DIP_WINDOW the ends are on the crease's row and so is the whole detour.
+    v, t, at = _grid(0.025, 0.0145)
+    path = _v_path(at, depth=3)
+    point = at(0, -3)
+    up = np.array([0, 1.0, 0])
+    new, _ = level_path(v, t, path, point, up, iod=1.0, window=CUT_DIP_WINDOW)
+    assert point not in new and new[0] == path[0] and new[-1] == path[-1]
+    assert float(v[new, 1].min()) > -1e-9  # every vertex on the crease's row (y = 0)
+    short, _ = level_path(v, t, path, point, up, iod=1.0, window=0.05)
+    assert float(v[short, 1].min()) < -0.01  # the shoulders' window: a row below
+
+
+def test_the_window_leaves_a_cut_whose_next_vertices_are_already_that_far_as_it_was():
+    # A mouth as coarse as the window (its cut's vertices 0.09 IOD apart): the window measures from the same
+    # neighbours, so a path is levelled (or not) as without it.
+    for depth, dy in ((1, 0.029), (1, 0.01)):
+        v, t, at = _grid(CUT_DIP_WINDOW + 0.01, dy)
+        path = _v_path(at, depth=depth)
+        point = at(0, -1)
+        plain = level_path(v, t, path, point, np.array([0, 1.0, 0]), iod=1.0)
+        assert level_path(v, t, path, point, np.array([0, 1.0, 0]), iod=1.0, window=CUT_DIP_WINDOW) == plain
+        assert (point in plain[0]) == (dy <= CONTACT_DIP)

@@ -415,3 +415,30 @@ def test_a_tied_vertex_moves_as_its_vertex_through_the_repair():
     w = res.weights.toarray()
     np.testing.assert_allclose(w[left], w[spike], atol=1e-6)
     assert not np.allclose(w[spike], [0.0, 0.0, 1.0])  # the row it follows was smoothed
+
+
+def test_a_stubborn_folds_patch_widens_ring_after_ring_and_settles():
+    """A vertex fixed to a simple vertex that carries it 2.5 grid cells along a diagonal folds the two triangles
+    beside it, and only them: no other vertex is ever on a fold, so the plain repair's patch, which grows only
+    through vertices that were on a fold themselves, stays one ring wide round them; their fill from that ring folds
+    again however long it runs, and the tie rounds leave 2 flips (the once-subdivided Lee Perry-Smith's copy: 2 chin
+    flips). Widened (``widen``: one more ring for every ``grow_every`` rounds), the patch spreads the motion over
+    enough of the grid to unfold it: settled long before the rounds run out, 0 flips by an independent count."""
+    v, t = _grid(15)
+    n = len(v)
+    fixed = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    fixed[n // 2] = True
+    g = sp.csr_matrix(([1.0], ([n // 2], [0])), shape=(n, 1))
+    cell = 1.0 / 14
+    motion = (2.5 * cell * np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0))[None, None, :]
+    plain = repair_folds(v, t, g, motion, fixed=fixed)
+    assert not plain.settled and plain.rounds > MAX_ROUNDS and _flipped(v, t, plain.weights, motion[0]) > 0
+    wide = repair_folds(v, t, g, motion, fixed=fixed, widen=True)
+    assert wide.settled and wide.rounds < MAX_ROUNDS // 2 and wide.flips_left == 0
+    assert _flipped(v, t, wide.weights, motion[0]) == 0
+    # Wider than the plain patch (its rows: the folded vertices and one ring), the fixed rows untouched.
+    assert wide.smoothed_rows > 2 * plain.smoothed_rows
+    assert not (wide.weights[np.flatnonzero(fixed)] != g[np.flatnonzero(fixed)]).nnz
+    # The motion is spread, not removed: the pinned vertex still moves most.
+    w = np.asarray(wide.weights.todense()).ravel()
+    assert w.argmax() == n // 2
