@@ -92,13 +92,16 @@ def proxy_mesh(
     used = np.unique(rest)
     remap = np.full(len(welded), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
-    points, faces = fast_simplification.simplify(
-        welded[used].astype(np.float64),
-        remap[rest].astype(np.int32),
-        target_count=int(triangles),
-        agg=PROXY_AGGRESSIVENESS,
-        preserve_border=bool(kept.any()),
-    )
+    if len(rest) > int(triangles):
+        points, faces = fast_simplification.simplify(
+            welded[used].astype(np.float64),
+            remap[rest].astype(np.int32),
+            target_count=int(triangles),
+            agg=PROXY_AGGRESSIVENESS,
+            preserve_border=bool(kept.any()),
+        )
+    else:  # already as coarse as asked (a scan dense at its mouth only): the rest kept as it is
+        points, faces = welded[used], remap[rest]
     own = np.unique(t[kept])
     at = np.full(len(welded), -1, dtype=np.int64)
     at[own] = np.arange(len(own))

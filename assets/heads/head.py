@@ -572,6 +572,10 @@ def rig_checked(
         p_rig, p_rigged, _ = rig_checked(
             proxy,
             None if points is None else {k: p.tolist() for k, p in points.items()},
+            # The copy itself may hold more than DENSE_TRIANGLES when the scan's mouth alone is that dense (Lee
+            # Perry-Smith subdivided twice: 58,116 kept of 64,112): it is rigged directly, never through a copy of
+            # its own (whose decimated rest would be smaller than its target).
+            dense_proxy=False,
             progress=progress,
             limits=replace(limits or RigCheckLimits(), max_inside_shown=math.inf),
             **rig_options,

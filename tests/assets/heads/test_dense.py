@@ -159,6 +159,21 @@ def test_the_proxy_keeps_the_mouths_own_faces():
     assert len(proxy.triangles) < 0.6 * len(t)
 
 
+def test_a_proxy_whose_rest_is_already_coarse_keeps_it_as_it_is():
+    """A scan dense at its mouth only (Lee Perry-Smith subdivided twice: 58,116 of its copy's 64,112 triangles within
+    MOUTH_KEEP) leaves fewer faces outside the mouth than the copy's target: they are kept as they are (the
+    decimator refused such a target with a ValueError that reached the user)."""
+    v, t, _, _, _ = _creased_lips()
+    for _ in range(2):
+        v, t = trimesh.remesh.subdivide(v, t)
+    mesh = HeadMesh(vertices=v, triangles=t, name="lips")
+    inside = (np.linalg.norm(v, axis=1) < 0.3)[t].all(axis=1)
+    proxy = proxy_mesh(mesh, triangles=int((~inside).sum()) + 10, mouth=np.zeros(3), keep=0.3)
+    key = sorted(tuple(sorted(map(tuple, np.round(v[f], 9)))) for f in t)
+    got = sorted(tuple(sorted(map(tuple, np.round(proxy.vertices[f], 9)))) for f in proxy.triangles)
+    assert got == key  # every face, the mouth's and the rest's
+
+
 def test_a_mesh_is_cut_exactly_as_its_proxy_where_the_proxy_kept_its_faces():
     """The creased lips cut once (the proxy) and the same faces in another vertex order (the dense mesh, whose kept
     mouth is the proxy's in its own numbering): cut as the proxy, every face that took a copy there takes one at the
