@@ -3,8 +3,9 @@
     python scripts/upper_lip_peak.py HEAD [HEAD ...]
 
 HEAD: a mesh file or a rig .npz. Prints, per head, :func:`realtime_core.face.checks.upper_lip_peak` (IOD: how far
-the upper lip's lower edge at /a/ rises in the middle above a smooth arc through its sides; the anny old heavy man
-and child with capped gains 0.042 and 0.038, the rows that pass at their first rig -0.02 to 0.022), the edge's
+the upper lip's lower edge at /a/ rises in the middle above a smooth arc through its sides; the anny child's capped
+rig 0.038, the old heavy man's 0.042 before its upper lip was eased, the rows that pass at their first rig -0.02 to
+0.022), the edge's
 heights at -0.3 .. +0.3 of the mouth's width (IOD, from the middle's), and how the rig was made (docs/animation.md,
 "The upper lip drawn to a peak").
 """

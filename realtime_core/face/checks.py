@@ -694,8 +694,9 @@ def upper_lip_peak(
 ) -> tuple[float, np.ndarray]:
     """How far (IOD, along the face's up axis) the upper lip's lower edge at ``pose`` rises in the middle above a
     smooth arc through the edge at :data:`PEAK_COLUMNS` of the mouth's width on both sides (``a + b x^2`` fitted to
-    them, its value at the middle): positive for an edge drawn to a peak (a sneer: the anny old heavy man's and child's
-    capped rigs at /a/, 0.042 and 0.038), about 0 for a round arc (rows that pass at their first rig: -0.02 to 0.022).
+    them, its value at the middle): positive for an edge drawn to a peak (a sneer: the anny child's capped rig at /a/,
+    0.038; the old heavy man's 0.042 before its upper lip was eased, 0.007 so), about 0 for a round arc (rows that pass
+    at their first rig: -0.02 to 0.022).
     Returns (the figure, the edge's height (IOD, from the eye line) at the columns: -0.3 .. 0 .. +0.3 of the width).
 
     The edge, per column (``half_width`` IOD to each side of it): the lowest vertex at rest of the upper lip's front
