@@ -240,7 +240,14 @@ def _fans(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     return out
 
 
-CARRIED_META = ("fold_repair", "open_response", "open_rescaled", "simple_gain_capped", "simple_corners_at_points")
+CARRIED_META = (
+    "fold_repair",
+    "open_response",
+    "open_rescaled",
+    "simple_gain_capped",
+    "simple_corners_at_points",
+    "upper_lip_eased",
+)
 """The proxy rig's meta that describes the carried field (the rest describes the proxy's own mesh)."""
 
 

@@ -506,7 +506,9 @@ def rig_checked(
     coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
     with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
-    :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes; if that fails too and its lower inner-lip
+    :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes (each capped rig here is first made with its upper
+    lip eased, ``ease_upper_lip=True``, and made as before only if that one fails: docs/animation.md, "The upper lip
+    drawn to a peak"); if that fails too and its lower inner-lip
     point lies on the upper lip (:func:`assets.heads.rigging.lower_inner_on_lower_lip`), once more as the first try
     with that point on the lower lip's front (meta "lower_inner_moved"), kept if it passes; if that fails too (or was
     not tried) and its lips were cut though they only touch, apart in the mesh
@@ -541,6 +543,20 @@ def rig_checked(
     def checked(r: Rig, m: HeadMesh) -> tuple[Rig, HeadMesh, RigReport]:
         # A rig judged by ``limits``, lined where the inside only shows through the skin (_lined).
         return _lined(r, m, head_checks(Head(r, m), limits=limits), limits)
+
+    def eased_first(options: dict[str, Any], why: list[str]) -> tuple[Rig, HeadMesh, RigReport]:
+        # A capped rig with its upper lip eased (rig_head, ease_upper_lip: the correction drew it to a peak), else as
+        # before: the eased anny old heavy man passes (peak at /a/ 0.042 -> 0.007 IOD), the eased child does not
+        # (stretch 4.3 at its corners' short edges) and keeps its rig as it was.
+        say(_trying({**options, "ease_upper_lip": True}, why))
+        e_rig, e_rigged = rig_head(mesh, spec, **rig_options, **options, ease_upper_lip=True)
+        e_rig, e_rigged, e_report = checked(e_rig, e_rigged)
+        if e_report.passed:
+            return e_rig, e_rigged, e_report
+        attempts.append({**options, "ease_upper_lip": True, "failures": list(e_report.failures)})
+        say(_trying(options, list(e_report.failures)))
+        r, m = rig_head(mesh, spec, **rig_options, **options)
+        return checked(r, m)
 
     # Bad input names itself before any progress line (one line on stderr for the user, then nothing).
     check_mesh(mesh)
@@ -589,6 +605,7 @@ def rig_checked(
             "corners_at_points": bool(p_rig.meta.get("simple_corners_at_points")),
             "gain_capped": bool(p_rig.meta.get("simple_gain_capped")),
             "touching_apart": bool(p_rig.meta.get("lips_touching_apart")),
+            "ease_upper_lip": bool(p_rig.meta.get("upper_lip_eased")),
         }
         used = spec
         if p_rig.meta.get("lower_inner_moved") and spec is not None:
@@ -640,9 +657,7 @@ def rig_checked(
         # gain_capped): a chin placed far behind the mouth (a heavy double chin) read as a 4.4x stretch of the jaw
         # drop, which dragged the upper lip down into a V. Not the first try: on the MediaPipe face it folds.
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
-        say(_trying(last, failed))
-        c_rig, c_rigged = rig_head(mesh, spec, **rig_options, **last)
-        c_rig, c_rigged, c_report = checked(c_rig, c_rigged)
+        c_rig, c_rigged, c_report = eased_first(last, failed)
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
         if moved is not None:
             # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
@@ -666,9 +681,7 @@ def rig_checked(
                 # more, not cut, rigged as apart (rig_head, touching_apart), with capped gains (the child's field read
                 # -1.06 of lip_corner_depress per unit mouth_open, the old heavy man's fault: uncapped, stretch 4.09).
                 apart: dict[str, Any] = {"gain_capped": True, "touching_apart": True}
-                say(_trying(apart, list(c_report.failures)))
-                a_rig, a_rigged = rig_head(mesh, spec, **rig_options, **apart)
-                a_rig, a_rigged, a_report = checked(a_rig, a_rigged)
+                a_rig, a_rigged, a_report = eased_first(apart, list(c_report.failures))
                 if a_report.passed:
                     rig, rigged, report = a_rig, a_rigged, a_report
                 else:
@@ -686,6 +699,7 @@ _WAYS = {
     "gain_capped": "capped gains",
     "lower_inner_moved": "the lower inner-lip point moved onto the lower lip",
     "touching_apart": "lips that only touch rigged as apart, not cut",
+    "ease_upper_lip": "the upper lip eased",
 }
 
 

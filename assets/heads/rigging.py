@@ -72,6 +72,7 @@ from realtime_core.face.rig import (
     RIG_ALGORITHM,
     contact_spread,
     decouple_opening,
+    eased_field,
     head_response,
     lip_columns,
     recalibrate,
@@ -103,6 +104,12 @@ further off (the anny old heavy man's chin, 0.54 IOD behind its mouth corners) r
 lip_corner_depress 0.61 and dragged the upper lip and the skin under the nose down (a long V; 6 flipped triangles).
 Not the default: capped on every head it folded the MediaPipe face (10 flips; docs/animation.md, "The old heavy
 man's V")."""
+UPPER_LIP_EASE = (20, 0.5, 0.15)
+"""The upper lip's easing on a capped rig (:func:`upper_lip_easing`, ``rig_head(ease_upper_lip=True)``): Jacobi rounds,
+the band's half-width (fraction of the mouth's width, corner to corner) and its height above the outer upper-lip
+midpoint (IOD). 20 rounds over the band: the anny old heavy man's peak at /a/ 0.042 -> 0.007 IOD
+(:func:`realtime_core.face.checks.upper_lip_peak`); 10 left 0.022 and flipped 2 triangles without the feathered
+weights (docs/animation.md, "The upper lip drawn to a peak")."""
 LANDMARK_REACH = 0.05  # how far (fraction of the mesh extent) a landmark point may lie from the nearest vertex
 REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
@@ -1125,6 +1132,33 @@ def _place(simple: SimpleFace, points: Mapping[str, np.ndarray], *, max_gain: fl
     )
 
 
+def upper_lip_easing(rig: Rig, landmarks: MouthLandmarks, frame: FaceFrame) -> tuple[np.ndarray, np.ndarray]:
+    """(weight (n_h,) in [0, 1], upper side (n_h,) bool) for :func:`realtime_core.face.rig.eased_field` on the upper lip
+    and the skin up to :data:`UPPER_LIP_EASE`'s height above the outer upper-lip midpoint: the vertices that follow the
+    skull at /a/ (``rig``'s linear field lifts them more than the two inner-lip points' mean: the lower lip and the
+    jaw are left out, and only their own side is averaged over), from the upper inner-lip point's height up, at most
+    0.15 IOD behind it; the weight 1 in the middle, fading as (1 - (x / half-width)^2) across and linearly to 0 at the
+    band's top, so the eased field joins the rest without a seam."""
+    _, half, top = UPPER_LIP_EASE
+    v = np.asarray(rig.neutral, dtype=np.float64)
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    lm = landmarks
+    d = np.zeros_like(v)
+    d[rig.moving] = (rig.matrix @ (np.asarray(rig.basis, dtype=np.float64) @ np.array([0.0, 0.0, 0.35, 0.0]))).reshape(
+        -1, 3
+    )
+    rise = d @ frame.axes[1] / frame.iod
+    upper = rise > 0.5 * (rise[lm.upper_inner] + rise[lm.lower_inner])
+    middle = 0.5 * (q[lm.corner_left, 0] + q[lm.corner_right, 0])
+    width = abs(q[lm.corner_left, 0] - q[lm.corner_right, 0])
+    high = q[lm.upper_lip, 1] + top
+    band = upper & (q[:, 1] > q[lm.upper_inner, 1] - 0.01) & (q[:, 1] < high)
+    band &= q[:, 2] > q[lm.upper_inner, 2] - 0.15
+    across = np.clip(1.0 - ((q[:, 0] - middle) / (half * width)) ** 2, 0.0, 1.0)
+    up = np.clip((high - q[:, 1]) / top, 0.0, 1.0)
+    return np.where(band, across * up, 0.0), upper
+
+
 REST_GAP_MAX = 0.01
 """IOD: a head whose inner lips lie farther apart than this at rest (and are not cut open) rests at
 the pose that closes them (:func:`realtime_core.face.rig.with_rest_pose`); the checks' closure limit."""
@@ -1205,6 +1239,7 @@ def rig_head(
     touching_apart: bool = False,
     dip_window: float | None = None,
     widen_repair: bool = False,
+    ease_upper_lip: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1247,6 +1282,12 @@ def rig_head(
     points further apart than :data:`REST_GAP_MAX`, at rest at the pose that closes them, repaired at the poses that
     rest shows (docs/animation.md, "Lips that touch but are apart in the mesh"; rig_checked's last try,
     :func:`lips_touch_apart`). Cut along the lower lip's rim, the child's lower lip tore from its own inner wall.
+    ``ease_upper_lip``: after the head-response correction, the upper lip's and the skin above it's rows of the field
+    eased towards their neighbours' (:func:`upper_lip_easing`, :func:`realtime_core.face.rig.eased_field`; meta
+    "upper_lip_eased": the rows eased). The correction asks lip_corner_depress at /a/, whose units drop the upper
+    lip's sides and not its middle: pinned at the simple face's few upper-lip vertices, the lip came out drawn to a
+    peak with creases beside the nose, which the fold repair smooths away only where it folds (uncapped rigs); capped
+    rigs kept it (docs/animation.md, "The upper lip drawn to a peak"; rig_checked tries it before each capped rig).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1466,6 +1507,11 @@ def rig_head(
             )
         if head_calibration and proxy is None:
             rig = recalibrate(rig, mouth_landmarks(snap))
+            if ease_upper_lip:
+                # The correction drew the upper lip to a peak between its pins (see ease_upper_lip).
+                weight, upper_side = upper_lip_easing(rig, mouth_landmarks(snap), frame)
+                rig = eased_field(rig, weight, rounds=UPPER_LIP_EASE[0], among=upper_side, keep_apart=cut_copies)
+                rig = replace(rig, meta={**rig.meta, "upper_lip_eased": int(np.count_nonzero(weight))})
         # Lips modelled apart (not cut) with nothing behind them: a hollow scan with a mouth hole, or a face mask
         # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
         # the lips, and behind closed lips the rays meet the lips' own inner walls.

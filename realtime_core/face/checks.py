@@ -676,6 +676,76 @@ _BACKS_CELL = 0.02
 """IOD: the grid cell that sorts the possible occluders for :func:`lip_backs_seen` (about a low-poly lip face)."""
 
 
+PEAK_POSE = (0.0, 0.02, 0.35, 0.0)
+"""/a/ (IOD): the pose :func:`upper_lip_peak` reads the upper lip's edge at (the close-ups' /a/)."""
+
+PEAK_COLUMNS = (0.1, 0.15, 0.2, 0.25, 0.3)
+"""Fractions of the mouth's width (corner to corner) on each side of its middle where :func:`upper_lip_peak` reads
+the smooth arc the middle is measured against."""
+
+
+def upper_lip_peak(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    pose: tuple[float, ...] = PEAK_POSE,
+    teeth: np.ndarray | None = None,
+    half_width: float = 0.025,
+) -> tuple[float, np.ndarray]:
+    """How far (IOD, along the face's up axis) the upper lip's lower edge at ``pose`` rises in the middle above a
+    smooth arc through the edge at :data:`PEAK_COLUMNS` of the mouth's width on both sides (``a + b x^2`` fitted to
+    them, its value at the middle): positive for an edge drawn to a peak (a sneer: the anny child's capped rig at /a/,
+    0.038; the old heavy man's 0.042 before its upper lip was eased, 0.007 so), about 0 for a round arc (rows that pass
+    at their first rig: -0.02 to 0.022).
+    Returns (the figure, the edge's height (IOD, from the eye line) at the columns: -0.3 .. 0 .. +0.3 of the width).
+
+    The edge, per column (``half_width`` IOD to each side of it): the lowest vertex at rest of the upper lip's front
+    (rest normal facing forward, at most 0.15 IOD behind the upper inner-lip point, between 0.15 IOD below the inner
+    lips and the outer upper-lip midpoint) among the vertices that follow the skull at ``pose`` (they move up more
+    than the two inner-lip points' mean: the lower lip and the jaw move down with mouth_open), ``teeth`` left out; its
+    height at ``pose``. Taken on the moved vertices, not the rest edge's shape: a mouth modelled with a curved lip
+    line is not a peak. NaN when fewer than three columns on the sides hold such a vertex. Advisory, not a check: the
+    rigs the checks pass include peaked ones (docs/animation.md, "The upper lip drawn to a peak")."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64).reshape(-1, 3)
+    fr = face_frame(v0, landmarks)
+    q0 = (v0 - fr.origin) @ fr.axes.T / fr.iod
+    q1 = (np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64) - fr.origin) @ fr.axes.T
+    q1 /= fr.iod
+    n = np.zeros_like(q0)
+    tn = triangle_normals(q0, t)
+    for c in range(3):
+        np.add.at(n, t[:, c], tn)
+    facing = n[:, 2] > 0.3 * np.linalg.norm(n, axis=1)
+    lm = landmarks
+    rise = q1[:, 1] - q0[:, 1]
+    upper = rise > 0.5 * (rise[lm.upper_inner] + rise[lm.lower_inner])
+    if teeth is not None:
+        upper[np.asarray(teeth, dtype=np.int64)] = False
+    low = min(q0[lm.upper_inner, 1], q0[lm.lower_inner, 1]) - 0.15
+    band = upper & facing & (q0[:, 1] > low) & (q0[:, 1] < q0[lm.upper_lip, 1] + 0.02)
+    band &= q0[:, 2] > q0[lm.upper_inner, 2] - 0.15
+    middle = 0.5 * (q0[lm.corner_left, 0] + q0[lm.corner_right, 0])
+    width = abs(q0[lm.corner_left, 0] - q0[lm.corner_right, 0])
+    s = np.r_[-np.asarray(PEAK_COLUMNS)[::-1], 0.0, PEAK_COLUMNS]
+    edge = np.full(len(s), np.nan)
+    at = np.full(len(s), np.nan)  # the edge vertex's place across the mouth at rest (widths from the middle)
+    for j, f in enumerate(s):
+        off = np.abs(q0[:, 0] - (middle + f * width))
+        col = np.flatnonzero(band & (off < half_width))
+        if len(col):
+            # The lowest; of a row at one height, the one nearest the column (the same on both sides).
+            i = col[np.lexsort((off[col], np.round(q0[col, 1], 9)))[0]]
+            edge[j], at[j] = q1[i, 1], (q0[i, 0] - middle) / width
+    k = len(PEAK_COLUMNS)
+    sides, x2 = np.r_[edge[:k], edge[k + 1 :]], np.r_[at[:k], at[k + 1 :]] ** 2
+    ok = np.isfinite(sides)
+    if ok.sum() < 3 or not np.isfinite(edge[k]):
+        return float("nan"), edge
+    slope, arc = np.polyfit(x2[ok], sides[ok], 1)
+    return float(edge[k] - (arc + slope * at[k] ** 2)), edge  # the arc at the middle's own vertex
+
+
 def lip_backs_seen(
     rig: Any,
     landmarks: MouthLandmarks,

@@ -22,22 +22,23 @@ import scipy.sparse as sp
 from realtime_core.errors import ConfigError
 from realtime_core.face.interpolation import InterpolationConfig, interpolation_weights
 from realtime_core.face.model import FaceFrame, FaceModel, MouthCalibration, MouthLandmarks
-from realtime_core.face.projection import project
+from realtime_core.face.projection import project, vertex_adjacency
 from realtime_core.face.rbf import rbf_map
 from realtime_core.face.welding import weld, welded_pieces
 
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 67: a dense scan's copy levels its cut's dip over 0.08 IOD and widens its fold repair's stubborn patches
-# (i12dense3); 66: teeth as unnamed separate parts and a shell holding both teeth rows moved rigidly as rows, unnamed
-# separate eyes with the skull (i12parts2); 65: lips parted over a hole have their mouth corners at the hole's ends
-# (i12parted3); 64: a dense scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows and
-# tongue inside a one-mesh head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long piece
-# splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge
-# (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
-# shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 67
+# 68: a capped rig's upper lip eased after the head-response correction, tried first (i12peak); 67: a dense scan's
+# copy levels its cut's dip over 0.08 IOD and widens its fold repair's stubborn patches (i12dense3); 66: teeth as
+# unnamed separate parts and a shell holding both teeth rows moved rigidly as rows, unnamed separate eyes with the
+# skull (i12parts2); 65: lips parted over a hole have their mouth corners at the hole's ends (i12parted3); 64: a dense
+# scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows and tongue inside a one-mesh
+# head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long piece splits the corner's
+# edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge (i12wall; checks
+# only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside shown through the
+# skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
+RIG_ALGORITHM = 68
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
@@ -825,6 +826,57 @@ def repair_rig(
         "settled": res.settled,
     }
     return replace(rig, moving=moving.astype(np.int64), matrix=s, meta=meta)
+
+
+def eased_field(
+    rig: Rig,
+    weight: np.ndarray,
+    *,
+    rounds: int,
+    among: np.ndarray | None = None,
+    keep_apart: np.ndarray | None = None,
+) -> Rig:
+    """The rig with its field's rows eased towards their mesh neighbours' mean: ``rounds`` Jacobi steps
+    ``g_i <- (1 - w_i) g_i + w_i mean_j g_j`` of the per-vertex weights (head vertex <- simple vertex), ``weight``
+    (n_h,) w in [0, 1] (a head vertex and its texture-seam twins take their largest), the mean over the neighbours in
+    ``among`` (n_h,) bool (None: all; a vertex with none keeps its row). Rows of weight 0 everywhere, and rows of
+    parts without control points (teeth, eyes), are returned as they are, to the bit. ``keep_apart``: a cut lip
+    seam's copies (as in :func:`build_rig`), so the two lips are not eased into each other. Releases the pins of the
+    control points inside the eased region as the fold repair does (:mod:`realtime_core.face.repair`), smoothly
+    (``weight`` fading to 0 at its edges leaves no seam where the easing stops); a rig's recalibrated field drew the
+    upper lip to a peak between its pins (docs/animation.md, "The upper lip drawn to a peak")."""
+    h = np.asarray(rig.neutral, dtype=np.float64)
+    canon, welded, comp = welded_pieces(h, rig.triangles, keep_apart=keep_apart)
+    n_w = len(welded)
+    n_s = rig.simple.n_vertices
+    g_moving = rig.matrix.tocsr()[0::3][:, 0::3]
+    g = sp.lil_matrix((len(h), n_s))
+    g[rig.moving] = g_moving
+    g = g.tocsr()
+    first = np.full(n_w, -1, dtype=np.int64)
+    first[canon[::-1]] = np.arange(len(h))[::-1]
+    g_w = g[first]
+    has_ctrl = np.zeros(comp.max() + 1, dtype=bool)
+    has_ctrl[comp[canon[rig.control]]] = True
+    w_w = np.zeros(n_w)
+    np.maximum.at(w_w, canon, np.clip(np.asarray(weight, dtype=np.float64), 0.0, 1.0))
+    w_w[~has_ctrl[comp]] = 0.0
+    adj = vertex_adjacency(n_w, canon[np.asarray(rig.triangles, dtype=np.int64)]).tocsr().astype(np.float64)
+    if among is not None:
+        in_w = np.zeros(n_w, dtype=bool)
+        np.logical_or.at(in_w, canon, np.asarray(among, dtype=bool))
+        adj = adj @ sp.diags(in_w.astype(np.float64))
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    w_w[deg == 0] = 0.0
+    step = sp.diags(1.0 - w_w) + sp.diags(w_w / np.maximum(deg, 1.0)) @ adj
+    for _ in range(rounds):
+        g_w = (step @ g_w).tocsr()
+    eased = w_w[canon] > 0
+    g_new = (sp.diags((~eased).astype(np.float64)) @ g + sp.diags(eased.astype(np.float64)) @ g_w[canon]).tocsr()
+    g_new.eliminate_zeros()
+    moving = np.flatnonzero(np.diff(g_new.indptr) > 0)
+    s = sp.kron(g_new[moving], sp.identity(3, format="csr"), format="csr")
+    return replace(rig, moving=moving.astype(np.int64), matrix=s)
 
 
 def _welded_tie(

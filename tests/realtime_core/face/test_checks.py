@@ -638,3 +638,50 @@ def test_a_heads_own_closure_reach_stops_mouth_open_where_its_lips_meet() -> Non
     for bad in (-0.01, 1.0, float("nan")):
         with pytest.raises(ConfigError, match="closure reach"):
             checked_bound(None, bad)
+
+
+class _Sneer(_Lips):
+    """:class:`_Lips` (straight cut) whose mouth_open p also lowers the upper strip by ``p * drop(x)``: ``peaked``,
+    a tent from the middle (drop 0.6 |x| / 0.3, the edge drawn to a peak); else an arc with the same drop at the
+    corners (0.6 (x / 0.3)^2)."""
+
+    def __init__(self, peaked: bool) -> None:
+        super().__init__(zigzag=0.0)
+        x = np.tile(self.x, 3)
+        self.upper = np.arange(0, 3 * self.COLS)
+        self.sag = 0.6 * (np.abs(x) / 0.3 if peaked else (x / 0.3) ** 2)
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        v[self.upper, 1] -= float(p[2]) * self.sag
+        return v
+
+
+def test_upper_lip_peak_reads_a_tent_and_not_an_arc_with_the_same_corners() -> None:
+    from realtime_core.face.checks import PEAK_COLUMNS, PEAK_POSE, upper_lip_peak
+
+    tent, arc = _Sneer(peaked=True), _Sneer(peaked=False)
+    p_tent, e_tent = upper_lip_peak(tent, tent.landmarks())
+    p_arc, e_arc = upper_lip_peak(arc, arc.landmarks())
+    # Both lower the corners alike; each edge is symmetric and lies below the cut (y 0) it starts from.
+    pose = np.array(PEAK_POSE)
+    lm = tent.landmarks()
+    corners = [lm.corner_left, lm.corner_right]
+    assert np.allclose(tent.deformed(pose)[corners], arc.deformed(pose)[corners])
+    for e in (e_tent, e_arc):
+        sides = np.arange(len(e)) != len(e) // 2
+        assert len(e) == 2 * len(PEAK_COLUMNS) + 1 and np.allclose(e, e[::-1]) and np.all(e[sides] < -1.0)
+    # An arc a + b x^2 fits the arc's sides exactly: no peak; the tent's middle lies above the arc through its sides.
+    assert abs(p_arc) < 1e-9
+    assert p_tent > 0.02
+    # Turned and scaled, the head reads the same (IOD, in the face's own frame).
+    rot = np.array([[np.cos(0.4), 0.0, np.sin(0.4)], [0.0, 1.0, 0.0], [-np.sin(0.4), 0.0, np.cos(0.4)]])
+
+    class Moved:
+        neutral = 3.0 * tent.neutral @ rot.T + 1.0
+        triangles = tent.triangles
+
+        def deformed(self, p: np.ndarray) -> np.ndarray:
+            return 3.0 * tent.deformed(p) @ rot.T + 1.0
+
+    assert upper_lip_peak(Moved(), tent.landmarks())[0] == pytest.approx(p_tent, abs=1e-9)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -442,3 +443,68 @@ def test_a_stubborn_folds_patch_widens_ring_after_ring_and_settles():
     # The motion is spread, not removed: the pinned vertex still moves most.
     w = np.asarray(wide.weights.todense()).ravel()
     assert w.argmax() == n // 2
+
+
+def test_eased_field_smooths_a_pinned_kink_keeps_the_rest_and_takes_only_its_own_side() -> None:
+    """A grid whose field is a tent across x (rows 1 - |x|, |x| of a still and a dropping simple vertex: a kink in the
+    middle, the upper lip drawn to a peak) over a lower strip that follows a third (the jaw): eased with weight 1 inside
+    the upper grid and 0 on its border, the kink flattens, every row still sums to 1, the border's rows are the same to
+    the bit, and with ``among`` the upper grid only, no eased row takes the jaw's motion (without it, the rows beside
+    the lower strip do)."""
+    from realtime_core.face.rig import eased_field
+    from tests.grids import grid_triangles
+
+    cols, rows = 21, 7
+    xs = np.linspace(-1.0, 1.0, cols)
+    gx, gy = np.meshgrid(xs, np.linspace(0.0, 0.6, rows))
+    upper = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    lower = upper[:cols] - np.array([0.0, 0.1, 0.0])  # one row under the upper grid's bottom row, joined to it
+    neutral = np.vstack([upper, lower])
+    n_u = len(upper)
+    tri = [grid_triangles(rows, cols)]
+    for i in range(cols - 1):  # the strip joined to the bottom row
+        tri.append(np.array([[n_u + i, n_u + i + 1, i + 1], [n_u + i, i + 1, i]]))
+    tri_all = np.vstack(tri).astype(np.int32)
+    g = np.zeros((len(neutral), 3))
+    ax = np.abs(np.tile(xs, rows))
+    g[:n_u, 0], g[:n_u, 1] = 1.0 - ax, ax
+    g[n_u:, 2] = 1.0
+    basis = np.zeros((9, 4))
+    basis[4, 2] = -1.0  # mouth_open drops simple vertex 1 (the lip's sides)
+    basis[7, 2] = -2.0  # and the jaw (simple vertex 2) twice as far
+    rig = Rig(
+        neutral=neutral,
+        triangles=tri_all,
+        moving=np.arange(len(neutral)),
+        matrix=sp.kron(sp.csr_matrix(g), sp.identity(3), format="csr"),
+        basis=basis,
+        control=np.array([cols // 2, 0, n_u]),
+        simple=FaceModel(vertices=np.zeros((3, 3)), triangles=np.zeros((0, 3), int)),
+        calibration=MouthCalibration(groups=(("a",), ("b",), ("c",), ("d",)), response=np.eye(4), matrix=np.eye(4)),
+    )
+    border = np.zeros(len(neutral), dtype=bool)
+    border[:n_u] = (np.abs(upper[:, 0]) == 1.0) | (upper[:, 1] == 0.6)
+    border[n_u:] = True
+    weight = np.where(border, 0.0, 1.0)
+    own = np.r_[np.ones(n_u, dtype=bool), np.zeros(len(lower), dtype=bool)]
+    p = np.array([0.0, 0.0, 1.0, 0.0])
+    row = 3 * cols + np.arange(cols)  # a middle row of the upper grid
+
+    def kink(r: Rig) -> float:
+        dy = r.deformed(p)[row, 1] - neutral[row, 1]
+        mid = cols // 2
+        return float(0.5 * (dy[mid - 1] + dy[mid + 1]) - dy[mid])  # the tent's corner: its neighbours below it
+
+    eased = eased_field(rig, weight, rounds=20, among=own)
+    mixed = eased_field(rig, weight, rounds=20)
+    assert kink(rig) == pytest.approx(-0.1, abs=1e-6)
+    assert abs(kink(eased)) < 0.5 * abs(kink(rig))
+    w_new = eased.matrix.tocsr()[0::3][:, 0::3].toarray()
+    moving_rows = np.zeros((len(neutral), 3))
+    moving_rows[eased.moving] = w_new
+    assert np.allclose(moving_rows.sum(axis=1), 1.0)
+    assert np.array_equal(eased.deformed(p)[border], rig.deformed(p)[border])
+    assert np.all(moving_rows[:n_u, 2] == 0.0)  # the jaw's motion stays out of the upper grid
+    mixed_rows = np.zeros((len(neutral), 3))
+    mixed_rows[mixed.moving] = mixed.matrix.tocsr()[0::3][:, 0::3].toarray()
+    assert mixed_rows[cols + cols // 2, 2] > 0.01  # next to the strip, among all neighbours: it does
