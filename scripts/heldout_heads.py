@@ -588,10 +588,14 @@ def main() -> int:
         apart = bool(meta.get("lips_touching_apart"))  # rig_checked's last try: lips that only touch, not cut
         tries = len(meta.get("rig_attempts", [])) + 1 if meta.get("lip_seam_cut") or apart else 1
         src = "own targets" if head.kind == "morph" else ("found" if meta.get("landmarks") else "none")
+        joined = (
+            f"joined corners cut {meta.get('lips_joined_copies')} vertices, " if meta.get("lips_joined_cut") else ""
+        )
         return "", (
             f"{len(head.mesh.triangles)}; {src}; {'n/a' if opening is None else f'{opening:.2f}'}; "
             f"{'cut ' + str(meta.get('lip_seam_cut')) + ' vertices, ' if meta.get('lip_seam_cut') else ''}"
             f"{'touching lips not cut, ' if apart else ''}"
+            f"{joined}"
             f"attempt {tries}"
         )
 

@@ -331,6 +331,7 @@ def cut_mouth(
     forward: np.ndarray | None = None,
     hidden: np.ndarray | None = None,
     underside: bool = False,
+    whole: tuple[int, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Split a closed lip seam: the edge path from mouth corner ``left`` to ``right`` (vertex
     indices) that stays closest to the straight corner-to-corner line (passing through the vertex
@@ -344,8 +345,10 @@ def cut_mouth(
     the cut (a hollow head's crease walls; all False for none): if given, the side assignment is changed so
     that the cut leaves fewer islands on the faces that stay (:func:`_without_islands`) and no slit into the
     upper lip's skin (:func:`_without_rim_ties`). ``underside``: the faces near the path that face down (within
-    UNDERSIDE_FACING degrees) stay with the upper lip (a knife-cut mouth; see :func:`_lower_faces`). Returns new
-    vertices (n', 3), triangles, uvs and the (n',) index of the original vertex."""
+    UNDERSIDE_FACING degrees) stay with the upper lip (a knife-cut mouth; see :func:`_lower_faces`). ``whole``: the
+    path's ends never split (None: ``left`` and ``right``, the mouth's corners; a cut from a hole's end to a corner
+    splits the hole's end, :func:`joined_ends`). Returns new vertices (n', 3), triangles, uvs and the (n',) index of
+    the original vertex."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64).copy()
     a, b = v[left], v[right]
@@ -373,7 +376,7 @@ def cut_mouth(
     if hidden is not None:
         lower = _without_islands(v, t, path, lower, near, up, ab / length, (left, right), np.asarray(hidden, bool))
         lower = _without_rim_ties(v, t, path, lower, near, up, ab / length, np.asarray(hidden, bool))
-    split, take = _split_faces(v, t, path, lower, near, up, ab / length, (left, right))
+    split, take = _split_faces(v, t, path, lower, near, up, ab / length, (left, right) if whole is None else whole)
     if not len(split):
         return v, t, uvs, np.arange(len(v))
     new_index = np.arange(len(v))
@@ -393,7 +396,7 @@ def _split_faces(
     near: np.ndarray,
     up: np.ndarray,
     side_ax: np.ndarray,
-    corners: tuple[int, int],
+    corners: tuple[int, ...],
 ) -> tuple[np.ndarray, np.ndarray]:
     """The cut of :func:`cut_mouth` for a side assignment: ((k,) the vertices split, shared by a face
     above and a face below the mouth surface near the path, the corners never; (m,) bool the faces that
@@ -1208,6 +1211,97 @@ def opening_ends(
     return out
 
 
+JOINED_REACH = 0.25
+"""Fraction of the corner-to-corner distance: how far along the mesh from a joined stretch's cut path its faces may
+change lip (:func:`cut_mouth`'s ``reach`` for the closed lips' cut, in the same head units)."""
+JOINED_MIN = 0.01
+"""IOD: lips parted over a hole whose front edge ends more than this short of a mouth corner (sideways, in the face
+frame) are joined over that stretch (:func:`joined_ends`)."""
+
+
+def joined_ends(
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> dict[str, int]:
+    """Lips parted over a hole and joined (one surface) between the hole's end and a corner: corner name -> the hole's
+    end on that side (the front edge's vertex furthest out from the mouth's middle, near the mouth line, as
+    :func:`opening_ends` looks for it, in the outer half of the side), for the corners lying more than
+    :data:`JOINED_MIN` IOD beyond it. A hole whose edge runs back into the head as the lips' inner walls (the test's
+    parted MediaPipe face) has no front edge on its rim: the walls' back edge ends 0.17 IOD from the middle, inside
+    the outer half, and nothing is cut. A scan
+    modelled with the lips parted in the middle and touching near the corners; :func:`rig_head` cuts the stretch.
+    ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    rim = np.unique(boundary_edges(t)[0])
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    out = {}
+    for k in ("corner_left", "corner_right"):
+        c = landmarks[k]
+        side = np.sign(q[c, 0] - mid[0])
+        ok = rim[
+            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
+            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
+            & (side * (q[rim, 0] - mid[0]) > 0.5 * side * (q[c, 0] - mid[0]))
+        ]
+        if not len(ok):
+            continue
+        end = int(ok[np.argmax(side * q[ok, 0])])
+        if side * (q[c, 0] - q[end, 0]) > JOINED_MIN:
+            out[k] = end
+    return out
+
+
+RIM_TOUCH = LIPS_TOUCH
+"""IOD: two vertices of a hole's edge near a corner this close touch (:func:`touching_rim`)."""
+
+
+def touching_rim(
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> np.ndarray:
+    """(n,) int64: each vertex's index, or for a hole's edge vertex that touches the other lip's edge near a corner the
+    vertex it is joined to (the lower index of the touching group). Touching: two vertices of the hole's edge (on the
+    lips' front, near the mouth line, as :func:`opening_ends` looks for them) in the outer half of one side (further
+    from the mouth's middle than half the corner's distance) within :data:`RIM_TOUCH` IOD, sharing no edge. A hole
+    tapering to the corners ends in such a crack: the lips touch there, and :func:`rig_head` joins them and cuts them
+    again along the contact line (:func:`joined_ends`). ``landmarks``: name -> vertex index."""
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    rim = np.unique(boundary_edges(t)[0])
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    out = np.arange(len(v))
+    for k in ("corner_left", "corner_right"):
+        c = landmarks[k]
+        side = np.sign(q[c, 0] - mid[0])
+        ok = rim[
+            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
+            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
+            & (side * (q[rim, 0] - mid[0]) > 0.5 * side * (q[c, 0] - mid[0]))
+        ]
+        if len(ok) < 2:
+            continue
+        edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
+        for i, j in sorted(cKDTree(q[ok]).query_pairs(RIM_TOUCH)):
+            a, b = sorted((int(ok[i]), int(ok[j])))
+            if (a, b) in edges:
+                continue
+            while out[a] != a:
+                a = int(out[a])
+            while out[b] != b:
+                b = int(out[b])
+            if a != b:
+                out[max(a, b)] = min(a, b)
+    for i in range(len(out)):  # every vertex straight to its group's lowest index
+        r = i
+        while out[r] != r:
+            r = int(out[r])
+        out[i] = r
+    return out
+
+
 def parted_over_hole(
     vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int], *, modelled: bool
 ) -> bool:
@@ -1320,6 +1414,7 @@ def rig_head(
     part = mesh.part
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
     cut_copies = None
+    ends_cut = False  # lips parted over a hole, cut from the hole's ends to the corners (joined_ends)
     coarse = False  # a knife-cut mouth (assets/heads/knife.py): its crease walls keep no holes (_enclosed_holes)
     on_contact: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # knife vertices on a contact edge: its ends, weights
     behind: dict[int, int] = {}  # knife vertices on a long upper lip's back -> the cut's vertex in front (knife.py)
@@ -1373,6 +1468,52 @@ def rig_head(
                 meta["corners_at_opening_ends"] = {k: [int(a), int(b)] for k, (a, b) in moved.items()}
                 lm = mouth_landmarks(snap)
                 frame = face_frame(v, lm)
+            # Lips joined between the hole's end and a corner (a scan modelled parted in the middle, touching near the
+            # corners): that stretch is cut as closed lips are (cut_path, cut_mouth; the hole's end split too), so the
+            # opening reaches the corners and the rig treats the mouth as parted up to them, the corners at the
+            # opening's ends after the cut. Left joined, the lower lip pulled the stretch open with the upper lip above
+            # it: 14 flipped triangles, stretch 4.75 (docs/animation.md, "Lips joined at the corners").
+            # A stretch one edge long has no vertex to split (the MediaPipe face's: its corners 0.022 IOD beyond its
+            # hole's ends, one edge away): nothing is cut there, the mesh is left as it is.
+            welded = t
+            weld = np.arange(len(v))
+            if not moved:
+                weld = touching_rim(v, t, frame, snap)
+                if (weld != np.arange(len(v))).any():
+                    welded = weld[np.asarray(t, dtype=np.int64)]
+                    welded = welded[
+                        (welded[:, 0] != welded[:, 1]) & (welded[:, 1] != welded[:, 2]) & (welded[:, 2] != welded[:, 0])
+                    ]
+            paths = {k: cut_path(v, welded, snap[k], end) for k, end in joined_ends(v, welded, frame, snap).items()}
+            paths = {k: p for k, p in paths.items() if len(p) > 2}
+            if paths:
+                if welded is not t:
+                    # The lips touching in the hole's tapered ends are joined (the vertices joined away keep no face)
+                    # and cut below along the contact line: a tapered hole's crack zigzags (14 flips with it).
+                    meta["lips_touching_joined"] = int((weld != np.arange(len(v))).sum())
+                    t = welded
+                origin = np.arange(len(v))
+                width = float(np.linalg.norm(v[snap["corner_left"]] - v[snap["corner_right"]]))
+                for path in paths.values():
+                    seg = float(np.linalg.norm(v[path[-1]] - v[path[0]]))
+                    v, t, uv, step = cut_mouth(
+                        v,
+                        t,
+                        path[0],
+                        path[-1],
+                        frame.axes[1],
+                        uv,
+                        path=path,
+                        reach=JOINED_REACH * width / seg,
+                        whole=(path[0],),
+                    )
+                    origin = origin[step]
+                colors = None if colors is None else colors[origin]
+                part = None if part is None else part[origin]
+                ends_cut = len(v) > n_base
+                cut_copies = np.arange(n_base, len(v)) if ends_cut else None
+                meta["lips_joined_cut"] = {k: [int(p[0]), int(p[-1])] for k, p in paths.items()}
+                meta["lips_joined_copies"] = int(len(v) - n_base)
         if closed and not touch_only:
             knife = None
             if mouth_resolution(v, t, snap["corner_left"], snap["corner_right"], iod=frame.iod) < COARSE_EDGES:
@@ -1501,7 +1642,7 @@ def rig_head(
                 allowed=allowed,
                 meta=meta,
                 keep_apart=cut_copies,
-                seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None else None,
+                seam_smooth=SEAM_SMOOTH if clean_lips and cut_copies is not None and not ends_cut else None,
                 pin_upper_lip=bool(behind),
                 seam_hinges=coarse,
             )
@@ -1516,7 +1657,7 @@ def rig_head(
         # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
         # the lips, and behind closed lips the rays meet the lips' own inner walls.
         gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
-        parted = not own and cut_copies is None and gap > REST_GAP_MAX
+        parted = not own and (cut_copies is None or ends_cut) and gap > REST_GAP_MAX
         parted_hole = parted and parted_over_hole(v, t, frame, snap, modelled=modelled)
         if parted_hole:
             rig = replace(rig, meta={**rig.meta, "parted_over_nothing": True})
@@ -1524,7 +1665,7 @@ def rig_head(
         # lips that touch beside a gap between the inner-lip points (touching_apart).
         shown_at_rest = parted_hole or (touch_only and parted)
         walls = None
-        if cut_copies is not None and not modelled:
+        if cut_copies is not None and not modelled and not ends_cut:
             # A hollow head's cut crease: its hidden inner walls go (see inner_lip_vertices). The fold repair
             # measures only the faces that stay (it still smooths across the walls) and the lip-contact
             # spread is computed once they are gone, so both judge the mesh the rig animates. Measuring the
@@ -1639,7 +1780,7 @@ def rig_head(
                 record=record_hidden,
             )
             t = cut_mesh.triangles
-        if clean_lips and seam is not None:
+        if clean_lips and seam is not None and not ends_cut:
             before = np.asarray(t, dtype=np.int64)
             t, mix = join_path_islands(before, v, seam)
             rig = with_rows_mixed(rig, mix)
@@ -1678,7 +1819,10 @@ def rig_head(
             rig.meta["landmarks"] = {k: v[i].tolist() for k, i in snap.items()}
         # Every head, the built-in one too: its ARKit maps are fitted to the field without the push
         # (training/fit_maps.py), so the push keeps its pressed lips apart without changing them.
-        contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=seam)
+        contact = lip_columns(rig, mouth_landmarks(snap), frame, seam_pairs=None if ends_cut else seam)
+        if ends_cut and seam is not None:
+            # The hole's inner contours and the cut stretches' two sides.
+            contact = np.unique(np.vstack([contact, seam]), axis=0)
         rig = replace(rig, contact=contact, contact_up=frame.axes[1])
         rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
     except RealtimeCoreError as exc:

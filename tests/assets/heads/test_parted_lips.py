@@ -217,3 +217,55 @@ def test_lips_parted_over_a_hole_have_their_corners_at_the_holes_ends(shared_dat
     np.testing.assert_array_equal(moved.neutral, at_ends.neutral)
     np.testing.assert_array_equal(moved.basis, at_ends.basis)
     assert (moved.matrix != at_ends.matrix).nnz == 0
+
+
+# The MediaPipe face's hole near each corner: the lower edge's vertices welded onto the hole's end and onto the upper
+# edge's vertex beside it (lower -> upper), so the lips are one surface from the upper edge's vertex out to the corner.
+JOINED_WELDS = {292: 306, 324: 407, 62: 76, 95: 183}
+JOINED_HOLE_ENDS = {"corner_left": 407, "corner_right": 183}
+
+
+def test_lips_parted_in_the_middle_and_joined_at_the_corners_are_cut_to_the_corners(shared_data):
+    """A scan parted in the middle and joined near the corners (docs/animation.md, "Lips joined at the corners"): the
+    joined stretch is cut from the hole's end to the corner, the hole's end split too, so the opening runs to the
+    corners (the corners stay where they are: the opening's ends after the cut) and opening the mouth parts the lips
+    there; not cut, the hole's end and the stretch's vertices are one surface, and no lower-lip copy exists."""
+    from assets.heads.rigging import opening_ends
+
+    v, t, frame = _without_membrane(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    weld = np.arange(len(v))
+    for lower, upper in JOINED_WELDS.items():
+        weld[lower] = upper
+    t = weld[t]
+    t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0])]
+    used = np.unique(t)
+    new = np.full(len(v), -1)
+    new[used] = np.arange(len(used))
+    mesh = HeadMesh(vertices=v[used], triangles=new[t], name="joined corners")
+    lm = {k: int(new[i]) for k, i in MEDIAPIPE.items()}
+    ends = {k: int(new[i]) for k, i in JOINED_HOLE_ENDS.items()}
+    rig, out = rig_head(mesh, lm)
+    n = len(mesh.vertices)
+    assert rig.meta.get("parted_over_nothing") and "corners_at_opening_ends" not in rig.meta
+    assert rig.meta["lips_joined_cut"] == {k: [lm[k], ends[k]] for k in ends}
+    cut = int(rig.meta["lips_joined_copies"])
+    assert cut >= 4  # both hole ends and at least one vertex of each stretch
+    cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
+    t_rig = np.asarray(rig.triangles, dtype=np.int64)
+    uncavity = t_rig[(t_rig < n + cut).all(axis=1)]
+    # The opening after the cut ends at the given corners: no rim vertex lies further out.
+    assert opening_ends(np.asarray(rig.neutral)[: n + cut], uncavity, frame, lm) == {k: lm[k] for k in ends}
+    # Each copy lies on its original at rest as modelled and, once the mouth opens, below it (the lower lip's side).
+    rest = modelled_rest(rig)
+    copies = np.arange(n, n + cut)
+    twins = np.array([int(np.argmin(np.linalg.norm(rest[:n] - rest[c], axis=1))) for c in copies])
+    np.testing.assert_allclose(rest[copies], rest[twins], atol=1e-9 * frame.iod)
+    assert set(ends.values()) <= set(twins.tolist())
+    wide = np.asarray(rig.deformed(np.array([0.0, 0.0, 0.4, 0.0])), dtype=np.float64)
+    drop = ((wide[twins] - wide[copies]) @ frame.axes[1]) / frame.iod
+    assert drop.min() >= -1e-6 * frame.iod, (twins, drop)  # never above it
+    at_ends = np.isin(twins, list(ends.values()))
+    assert drop[at_ends].min() > 0.05, (twins, drop)  # the hole's ends part (the corners' neighbours barely: 0)
+    assert len(out.vertices) == n + cut + cavity
+    report = head_checks(Head(rig, out))
+    assert report.flipped_triangles == 0, report.failures
