@@ -586,7 +586,7 @@ def main() -> int:
         meta = head.rig.meta
         opening = None if report is None else report.open_response
         apart = bool(meta.get("lips_touching_apart"))  # rig_checked's last try: lips that only touch, not cut
-        tries = len(meta.get("rig_attempts", [])) + 1 if meta.get("lip_seam_cut") or apart else 1
+        tries = len(meta.get("rig_attempts", [])) + 1  # which of rig_checked's tries was kept
         src = "own targets" if head.kind == "morph" else ("found" if meta.get("landmarks") else "none")
         joined = (
             f"joined corners cut {meta.get('lips_joined_copies')} vertices, " if meta.get("lips_joined_cut") else ""
