@@ -1186,6 +1186,36 @@ PARTED_CORNER_BAND = (0.15, 0.05)
 down) and at most this far behind the given corner (the lips' front, not the crease wall behind it)."""
 
 
+def _rim_by_corner(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    frame: FaceFrame,
+    landmarks: Mapping[str, int],
+    *,
+    outer_half: bool,
+) -> tuple[np.ndarray, dict[str, tuple[int, float, np.ndarray]]]:
+    """The face-frame positions (n, 3) IOD of ``vertices`` and, per mouth corner, (the corner's vertex, its side along
+    x (+-1), the hole's edge vertices on the lips' front near the mouth line on that side (PARTED_CORNER_BAND)): beyond
+    the corner, or with ``outer_half`` further from the mouth's middle than half the corner's distance. What
+    :func:`opening_ends`, :func:`joined_ends` and :func:`touching_rim` look at."""
+    v = np.asarray(vertices, dtype=np.float64)
+    rim = np.unique(boundary_edges(np.asarray(triangles, dtype=np.int64))[0])
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    out = {}
+    for k in ("corner_left", "corner_right"):
+        c = int(landmarks[k])
+        side = float(np.sign(q[c, 0] - mid[0]))
+        start = mid[0] + 0.5 * (q[c, 0] - mid[0]) if outer_half else q[c, 0]
+        ok = rim[
+            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
+            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
+            & (side * (q[rim, 0] - start) > 0)
+        ]
+        out[k] = (c, side, ok)
+    return q, out
+
+
 def opening_ends(
     vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
 ) -> dict[str, int]:
@@ -1193,22 +1223,8 @@ def opening_ends(
     the mouth's middle, near the mouth line and on the lips' front), or the given corner when none lies further out.
     An automatic corner lies on the lips' surface: the parted Lee Perry-Smith's lie 0.07-0.09 IOD inside the
     opening's ends. ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    rim = np.unique(boundary_edges(t)[0])
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
-    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
-    out = {}
-    for k in ("corner_left", "corner_right"):
-        c = landmarks[k]
-        side = np.sign(q[c, 0] - mid[0])
-        ok = rim[
-            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
-            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
-            & (side * (q[rim, 0] - q[c, 0]) > 0)
-        ]
-        out[k] = int(ok[np.argmax(side * q[ok, 0])]) if len(ok) else int(c)
-    return out
+    q, sides = _rim_by_corner(vertices, triangles, frame, landmarks, outer_half=False)
+    return {k: int(ok[np.argmax(side * q[ok, 0])]) if len(ok) else c for k, (c, side, ok) in sides.items()}
 
 
 JOINED_REACH = 0.25
@@ -1230,20 +1246,9 @@ def joined_ends(
     the outer half, and nothing is cut. A scan
     modelled with the lips parted in the middle and touching near the corners; :func:`rig_head` cuts the stretch.
     ``landmarks``: name -> vertex index (corners, inner-lip midpoints)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    rim = np.unique(boundary_edges(t)[0])
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
-    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    q, sides = _rim_by_corner(vertices, triangles, frame, landmarks, outer_half=True)
     out = {}
-    for k in ("corner_left", "corner_right"):
-        c = landmarks[k]
-        side = np.sign(q[c, 0] - mid[0])
-        ok = rim[
-            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
-            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
-            & (side * (q[rim, 0] - mid[0]) > 0.5 * side * (q[c, 0] - mid[0]))
-        ]
+    for k, (c, side, ok) in sides.items():
         if not len(ok):
             continue
         end = int(ok[np.argmax(side * q[ok, 0])])
@@ -1265,41 +1270,28 @@ def touching_rim(
     from the mouth's middle than half the corner's distance) within :data:`RIM_TOUCH` IOD, sharing no edge. A hole
     tapering to the corners ends in such a crack: the lips touch there, and :func:`rig_head` joins them and cuts them
     again along the contact line (:func:`joined_ends`). ``landmarks``: name -> vertex index."""
+    from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    rim = np.unique(boundary_edges(t)[0])
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
-    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
-    out = np.arange(len(v))
-    for k in ("corner_left", "corner_right"):
-        c = landmarks[k]
-        side = np.sign(q[c, 0] - mid[0])
-        ok = rim[
-            (np.abs(q[rim, 1] - mid[1]) < PARTED_CORNER_BAND[0])
-            & (q[rim, 2] > q[c, 2] - PARTED_CORNER_BAND[1])
-            & (side * (q[rim, 0] - mid[0]) > 0.5 * side * (q[c, 0] - mid[0]))
-        ]
-        if len(ok) < 2:
-            continue
-        edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
-        for i, j in sorted(cKDTree(q[ok]).query_pairs(RIM_TOUCH)):
-            a, b = sorted((int(ok[i]), int(ok[j])))
-            if (a, b) in edges:
-                continue
-            while out[a] != a:
-                a = int(out[a])
-            while out[b] != b:
-                b = int(out[b])
-            if a != b:
-                out[max(a, b)] = min(a, b)
-    for i in range(len(out)):  # every vertex straight to its group's lowest index
-        r = i
-        while out[r] != r:
-            r = int(out[r])
-        out[i] = r
-    return out
+    q, sides = _rim_by_corner(vertices, triangles, frame, landmarks, outer_half=True)
+    edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
+    pairs = [
+        (int(ok[i]), int(ok[j]))
+        for _, _, ok in sides.values()
+        if len(ok) >= 2
+        for i, j in sorted(cKDTree(q[ok]).query_pairs(RIM_TOUCH))
+        if tuple(sorted((int(ok[i]), int(ok[j])))) not in edges
+    ]
+    n = len(q)
+    out = np.arange(n)
+    if not pairs:
+        return out
+    p = np.asarray(pairs, dtype=np.int64)
+    _, group = connected_components(sp.csr_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n)), directed=False)
+    lowest = np.full(group.max() + 1, n, dtype=np.int64)
+    np.minimum.at(lowest, group, out)
+    return lowest[group]  # each vertex joined to its touching group's lowest index (itself when alone)
 
 
 def parted_over_hole(
