@@ -22,3 +22,16 @@ def patch(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, n: i
     xs, ys = np.meshgrid(np.linspace(x0, x1, n), np.linspace(0.0, 1.0, n))
     v = np.c_[xs.ravel(), y0 + (y1 - y0) * ys.ravel(), z0 + (z1 - z0) * ys.ravel()]
     return v, grid_triangles(n, n)[:, ::-1]
+
+
+def stacked(face: np.ndarray, face_triangles: np.ndarray, pieces: dict[str, tuple[np.ndarray, np.ndarray]]):
+    """One mesh of a face sheet and separate ``pieces`` (name -> (vertices, triangles), e.g. :func:`patch`) after it:
+    (vertices (n, 3), triangles (m, 3), name -> the piece's vertex indices in the mesh)."""
+    v, t, at = [face], [face_triangles], {}
+    n = len(face)
+    for name, (pv, pt) in pieces.items():
+        at[name] = np.arange(n, n + len(pv))
+        v.append(pv)
+        t.append(pt + n)
+        n += len(pv)
+    return np.vstack(v), np.vstack(t), at

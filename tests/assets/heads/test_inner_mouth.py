@@ -8,6 +8,7 @@ import pytest
 
 from assets.heads.parts import JAW_FULL, SEAM_RAMP, inner_mouth_weights, with_jaw_weights
 from tests.grids import patch as _patch
+from tests.grids import stacked
 
 
 def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line():
@@ -26,14 +27,8 @@ def test_only_pieces_inside_the_mouth_follow_the_jaw_rising_below_the_mouth_line
         "front": _patch(-0.3, 0.3, -0.6, 0.0, -0.2, 0.1),
         "teeth": _patch(-0.3, 0.3, -0.5, 0.0, -0.1, -0.1),
     }
-    v, t, at = [face], [ft], {}
-    n = len(face)
-    for name, (pv, pt) in pieces.items():
-        at[name] = np.arange(n, n + len(pv))
-        v.append(pv)
-        t.append(pt + n)
-        n += len(pv)
-    v, t = np.vstack(v), np.vstack(t)
+    v, t, at = stacked(face, ft, pieces)
+    n = len(v)
     part = np.zeros(n, dtype=np.int64)
     part[at["teeth"]] = 1
 

@@ -9,6 +9,7 @@ import pytest
 
 from assets.heads.parts import TEETH_FOLLOW, rigid_inner_pieces
 from tests.grids import patch as _patch
+from tests.grids import stacked
 
 
 def _mouth_and_pieces():
@@ -36,14 +37,7 @@ def _mouth_and_pieces():
         "front": _patch(-0.3, 0.3, -0.6, 0.0, -0.2, 0.4),
         "eye": _patch(0.3, 0.7, 0.9, 1.1, -0.1, -0.1),
     }
-    v, t, at = [face], [ft], {}
-    n = len(face)
-    for name, (pv, pt) in pieces.items():
-        at[name] = np.arange(n, n + len(pv))
-        v.append(pv)
-        t.append(pt + n)
-        n += len(pv)
-    v, t = np.vstack(v), np.vstack(t)
+    v, t, at = stacked(face, ft, pieces)
     at["face"] = np.arange(len(face))
     seamed_top = at["seamed"][:5]
     v[seamed_top] = face[[near(p) for p in v[seamed_top, :2]]]  # copies of the face's positions, to the bit
