@@ -221,6 +221,10 @@ def repair_folds(
         g = (tie @ g).tocsr()
         g.data[np.abs(g.data) < 1e-6] = 0.0
         g.eliminate_zeros()
+    else:
+        # The rounds ran out after a smoothing: count the weights returned, not the ones before that round.
+        flipped, _ = watch.update(g)
+        worst = int(flipped.sum(axis=0).max()) if flipped.size else 0
     return RepairResult(
         weights=g.tocsr(),
         rounds=rounds,

@@ -508,3 +508,22 @@ def test_eased_field_smooths_a_pinned_kink_keeps_the_rest_and_takes_only_its_own
     mixed_rows = np.zeros((len(neutral), 3))
     mixed_rows[mixed.moving] = mixed.matrix.tocsr()[0::3][:, 0::3].toarray()
     assert mixed_rows[cols + cols // 2, 2] > 0.01  # next to the strip, among all neighbours: it does
+
+
+def test_a_repair_whose_rounds_run_out_reports_the_flips_of_the_weights_it_returns():
+    """The pinned spike of the first test, given one, two, ... rounds and no tie rounds: the rounds run out right
+    after a smoothing, and the flips reported are those of the returned weights (counted here pose by pose), not
+    the count before that last smoothing (which stayed above it while the spike unfolded)."""
+    v, t = _grid()
+    n = len(v)
+    g = sp.csr_matrix(([1.0], ([n // 2], [0])), shape=(n, 1))
+    motion = np.array([[[0.3, 0.0, 0.0]]])
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    before = _flipped(v, t, g, motion[0])
+    reported, counted = [], []
+    for rounds in range(1, 6):
+        res = repair_folds(v, t, g, motion, fixed=edge, max_rounds=rounds, tie_rounds=0)
+        reported.append(res.flips_left)
+        counted.append(_flipped(v, t, res.weights, motion[0]))
+    assert reported == counted
+    assert counted[0] < before  # the first round already unfolds some: a stale count would say `before`
