@@ -343,7 +343,8 @@ def _ply_parts(p: Path) -> _Parts:
     try:
         g = trimesh.load(str(p), process=False, maintain_order=True, force="mesh")
     except Exception as exc:  # trimesh raises many unrelated types for a bad file
-        raise MeshError(f"{p}: cannot read mesh: {exc}") from exc
+        why = f"{type(exc).__name__}: {exc}"
+        raise MeshError(f"{p}: malformed PLY ({why}); re-export the head as .glb or .obj") from exc
     v = np.asarray(getattr(g, "vertices", np.zeros((0, 3))), dtype=np.float64)
     t = np.asarray(getattr(g, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
     uv = getattr(getattr(g, "visual", None), "uv", None)

@@ -252,6 +252,11 @@ def test_bad_files_name_the_file(tmp_path):
     (tmp_path / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
     with pytest.raises(MeshError, match="no triangle mesh"):
         load_mesh(tmp_path / "empty.obj")
+    # A PLY whose header stops after its magic line: trimesh's own error (an IndexError) said only "list index out of
+    # range"; the message names the file, what it is and what to do.
+    (tmp_path / "cut.ply").write_text("ply\n")
+    with pytest.raises(MeshError, match=r"cut\.ply: malformed PLY \(.*\); re-export the head as \.glb or \.obj"):
+        load_mesh(tmp_path / "cut.ply")
 
 
 def _basisu() -> Path:
