@@ -5,6 +5,10 @@ Name matching (:func:`match_targets`) knows
 - ARKit's 52 blendshapes in Apple's spelling (``jawOpen``, ``mouthSmileLeft``) and the common
   variants: any case, ``_L/_R``, ``.L/.R``, ``Left/Right``, ``_l/_r``, snake case
   (``mouth_smile_left``), and exporter prefixes up to the last ``.`` or ``:`` (``blendShape1.jawOpen``);
+- Character Creator 4's facial profile, whose names are mostly ARKit's in snake case (``Mouth_Smile_L``,
+  ``Jaw_Open``) with its own words for some (``Mouth_Up_Upper_L`` = ``mouthUpperUpLeft``, :data:`CC_SIDED`)
+  and with ARKit's unsided targets split into sides or quarters (``Mouth_Roll_In_Upper_L`` is the left half of
+  ``mouthRollUpper``, ``Mouth_Funnel_Up_L`` a quarter of ``mouthFunnel``: :data:`CC_PARTS`, :func:`target_part`);
 - the 15 Oculus/OVR visemes (``viseme_aa``, ``viseme_PP``, ``v_aa``, ...);
 - VRM expressions (VRM 1.0 ``aa ih ou ee oh``, VRM 0.x ``A I U E O``, with or without a ``Fcl_MTH_`` prefix);
 - a user mapping file for anything else (:func:`read_target_map`).
@@ -89,8 +93,26 @@ _ARKIT_BY_KEY = {_norm(n): n for n in ARKIT_NAMES}
 _OVR_BY_KEY = {_norm(v): v for v in VISEME_ARKIT}
 
 
-def canonical_name(name: str) -> str | None:
-    """The ARKit name (``"jawOpen"``) or viseme (``"viseme:aa"``) a morph-target name stands for, or None."""
+CC_SIDED = {"mouthupupper": "mouthUpperUp", "mouthdownlower": "mouthLowerDown", "browdrop": "browDown"}
+"""Character Creator 4's words for sided ARKit targets (the stem, normalised, -> ARKit's stem; the side kept)."""
+
+CC_PARTS = {
+    "mouthrollinupper": ("mouthRollUpper", 2),
+    "mouthrollinlower": ("mouthRollLower", 2),
+    "mouthfunnelup": ("mouthFunnel", 4),
+    "mouthfunneldown": ("mouthFunnel", 4),
+    "mouthpuckerup": ("mouthPucker", 4),
+    "mouthpuckerdown": ("mouthPucker", 4),
+    "cheekpuff": ("cheekPuff", 2),
+    "browraiseinner": ("browInnerUp", 2),
+}
+"""Character Creator 4's sided parts of ARKit's unsided targets: the stem, normalised, -> (ARKit name, how many parts
+make it). Each part's correspondent is the whole target over the count: speech is symmetric, so the solve gives every
+part the whole target's weight and the parts together move the head as the whole target would."""
+
+
+def _base_and_side(name: str) -> tuple[str, str | None, str]:
+    """(the name without exporter prefixes, its side "left" / "right" or None, the stem before the side)."""
     segs = re.split(r"[.:|]", name.strip())
     base = segs[-1].strip()
     if len(segs) > 1 and base in ("L", "R", "l", "r"):  # Blender's "mouthSmile.L": the side, not a prefix
@@ -98,8 +120,24 @@ def canonical_name(name: str) -> str | None:
     # Side suffixes: _L/_R, .L/.R, -L, " L", _l, Left/Right in any case.
     m = re.match(r"^(.*?)[_\-. ]?([LlRr])$", base)
     if m and m.group(1) and not m.group(1).endswith(("Left", "Right", "left", "right")):
-        stem = m.group(1)
-        key = _norm(stem) + ("left" if m.group(2) in "Ll" else "right")
+        return base, "left" if m.group(2) in "Ll" else "right", m.group(1)
+    return base, None, base
+
+
+def target_part(name: str) -> tuple[str, float] | None:
+    """(ARKit name, share) for a target that is one side or quarter of an unsided ARKit target (Character Creator 4's
+    ``Mouth_Roll_In_Upper_L``: ``("mouthRollUpper", 0.5)``), or None."""
+    _, side, stem = _base_and_side(name)
+    part = CC_PARTS.get(_norm(stem)) if side is not None else None
+    return None if part is None else (part[0], 1.0 / part[1])
+
+
+def canonical_name(name: str) -> str | None:
+    """The ARKit name (``"jawOpen"``) or viseme (``"viseme:aa"``) a morph-target name stands for, or None."""
+    base, side, stem = _base_and_side(name)
+    if side is not None:
+        key = _norm(stem)
+        key = (_norm(CC_SIDED[key]) if key in CC_SIDED else key) + side
         if key in _ARKIT_BY_KEY:
             return _ARKIT_BY_KEY[key]
     key = _norm(base)
@@ -143,6 +181,8 @@ def correspondent(value: object) -> dict[str, float]:
     """An ARKit mixture for a mapping value (ARKit name, ``viseme:X`` or {ARKit name: weight})."""
     if isinstance(value, str):
         c = canonical_name(value) if not value.startswith("viseme:") else value
+        if c is None and (part := target_part(value)) is not None:
+            return {part[0]: part[1]}
         if c is None:
             raise ValueError(f"{value!r} is neither an ARKit name nor a viseme")
         return dict(VISEME_ARKIT[c[7:]]) if c.startswith("viseme:") else {c: 1.0}
@@ -167,15 +207,24 @@ def match_targets(
     The user map adds to (and overrides) the recognised names."""
     arkit: dict[str, dict[str, float]] = {}
     vis: dict[str, dict[str, float]] = {}
+    seen: set[str] = set()  # one head target per ARKit target or part of one (the first of its spellings)
     for n in names:
         c = canonical_name(n)
         if c is None:
+            part = target_part(n)
+            _, side, stem = _base_and_side(n)
+            if part is not None and (key := f"{part[0]}:{_norm(stem)}:{side}") not in seen:
+                seen.add(key)
+                arkit[n] = {part[0]: part[1]}
             continue
         if c.startswith("viseme:"):
             if VISEME_ARKIT[c[7:]] and c not in {canonical_name(x) for x in vis}:
                 vis[n] = dict(VISEME_ARKIT[c[7:]])
-        elif c not in {next(iter(m)) for m in arkit.values()}:
+        elif c not in seen:
+            seen.add(c)
             arkit[n] = {c: 1.0}
+    # A head with a whole target and its parts too: the whole one drives it (both would move the lips twice).
+    arkit = {k: m for k, m in arkit.items() if canonical_name(k) is not None or next(iter(m)) not in seen}
     n_mouth = sum(1 for m in arkit.values() if next(iter(m)).startswith(("jaw", "mouth")))
     out = dict(arkit) if n_mouth >= len(vis) else dict(vis)
     for k, v in (user_map or {}).items():

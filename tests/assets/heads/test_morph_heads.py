@@ -4,6 +4,7 @@ head as an ARKit file, visemes, user maps, exports."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -98,6 +99,60 @@ def test_an_arkit_glb_animates_through_its_own_targets_with_no_rig_step(tmp_path
     assert all(n.split(".")[-1].startswith(("Jaw", "Mouth")) for n in head.rig.names)
     for p in ([0, 0, 0.3, 0], [0.03, 0.05, 0.1, -0.02], [-0.02, -0.1, 0.05, 0.04]):
         np.testing.assert_allclose(head.rig.deformed(np.array(p)), builtin_morph.rig.deformed(np.array(p)), atol=1e-4)
+
+
+def test_a_character_creator_head_with_split_targets_moves_as_the_arkit_head(tmp_path, builtin_morph):
+    """The built-in head's ARKit targets in Character Creator 4's names: its own words for sided targets
+    (Mouth_Up_Upper_L) and ARKit's unsided targets split into halves (Mouth_Roll_In_Upper_L/R) or quarters
+    (Mouth_Funnel_Up_L ... Down_R) by smooth masks that sum to one. The head moves as the ARKit head does at
+    speech poses (the parts together are the whole target); without the CC4 names the upper lip's raise and
+    the rolled lips had no target (mouthUpperUp, mouthRollUpper unmatched) and the head moved otherwise."""
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    b = load_builtin_head()
+    v = b.mesh.vertices.astype(np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    x = (v - v[b.landmarks["upper_inner"]]) @ fr.axes[0] / fr.iod
+    y = (v - 0.5 * (v[b.landmarks["upper_inner"]] + v[b.landmarks["lower_inner"]])) @ fr.axes[1] / fr.iod
+    left, up = 0.5 * (1 + np.tanh(x / 0.05)), 0.5 * (1 + np.tanh(y / 0.03))
+    sides = {"L": left, "R": 1 - left}
+    halves = {"Up": up, "Down": 1 - up}
+    words = {"mouthUpperUp": "Mouth_Up_Upper", "mouthLowerDown": "Mouth_Down_Lower", "browDown": "Brow_Drop"}
+    cc: dict[str, np.ndarray] = {}
+    for name, d in b.targets.items():
+        d = np.asarray(d, dtype=np.float64)
+        if name in ("mouthRollUpper", "mouthRollLower"):
+            for s, m in sides.items():
+                cc[f"Mouth_Roll_In_{name[9:]}_{s}"] = d * m[:, None]
+        elif name in ("mouthFunnel", "mouthPucker"):
+            for h, mh in halves.items():
+                for s, m in sides.items():
+                    cc[f"Mouth_{name[5:]}_{h}_{s}"] = d * (mh * m)[:, None]
+        else:
+            stem, side = (
+                (name[:-4], "L")
+                if name.endswith("Left")
+                else (name[:-5], "R")
+                if name.endswith("Right")
+                else (name, "")
+            )
+            stem = words.get(stem, stem)
+            cc["_".join(w.capitalize() for w in re.findall(r"[A-Z]?[a-z]+", stem)) + ("_" + side if side else "")] = d
+    assert "Mouth_Up_Upper_L" in cc and "Mouth_Funnel_Down_R" in cc and "Jaw_Open" in cc
+    mesh = HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, name="cc", targets=cc)
+    path = tmp_path / "cc4_head.glb"
+    path.write_bytes(mesh_glb(mesh))
+    head = resolve_head(path)
+    assert head.kind == "morph"
+    assert {"Mouth_Up_Upper_L", "Mouth_Roll_In_Lower_R", "Mouth_Funnel_Up_L", "Mouth_Pucker_Down_R"} <= set(
+        head.rig.names
+    )
+    for p in ([0, 0, 0.3, 0], [0.03, 0.05, 0.1, -0.02], [-0.02, -0.1, 0.05, 0.04], [0.05, -0.08, 0.0, 0.0]):
+        want = builtin_morph.rig.deformed(np.array(p)).astype(np.float64)
+        got = head.rig.deformed(np.array(p)).astype(np.float64)
+        np.testing.assert_allclose(got, want, atol=2e-4 * fr.iod)
 
 
 def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
