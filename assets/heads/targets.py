@@ -4,7 +4,8 @@ Name matching (:func:`match_targets`) knows
 
 - ARKit's 52 blendshapes in Apple's spelling (``jawOpen``, ``mouthSmileLeft``) and the common
   variants: any case, ``_L/_R``, ``.L/.R``, ``Left/Right``, ``_l/_r``, snake case
-  (``mouth_smile_left``), and exporter prefixes up to the last ``.`` or ``:`` (``blendShape1.jawOpen``);
+  (``mouth_smile_left``), exporter prefixes up to the last ``.`` or ``:`` (``blendShape1.jawOpen``) and prefixes
+  joined by underscores (``AK_09_JawOpen``);
 - Character Creator 4's facial profile, whose names are mostly ARKit's in snake case (``Mouth_Smile_L``,
   ``Jaw_Open``) with its own words for some (``Mouth_Up_Upper_L`` = ``mouthUpperUpLeft``, :data:`CC_SIDED`)
   and with ARKit's unsided targets split into sides or quarters (``Mouth_Roll_In_Upper_L`` is the left half of
@@ -152,6 +153,14 @@ def canonical_name(name: str) -> str | None:
                 return "viseme:" + _VRM[rest]
     if key in _VRM and len(base) <= 2:  # a bare VRM vowel: "aa", "A", "ih", ...
         return "viseme:" + _VRM[key]
+    # Prefixes joined by underscores (Rocketbox's "AK_09_JawOpen", a Daz export's "Genesis8Female__jawOpen",
+    # "CTRL_expressions_jawOpen"): the rest after each, ARKit names only (a short rest such as "aa" after any prefix
+    # would read too many names as visemes).
+    tokens = [x for x in base.split("_") if x]
+    for i in range(1, len(tokens) - (side is not None)):
+        c = canonical_name("_".join(tokens[i:]))
+        if c is not None and not c.startswith("viseme:"):
+            return c
     return None
 
 

@@ -70,6 +70,13 @@ def test_bounded_keyframe_solve_matches_scipy_bvls():
         ("Fcl_MTH_A", "viseme:aa"),
         ("aa", "viseme:aa"),
         ("ih", "viseme:I"),
+        ("AK_09_JawOpen", "jawOpen"),
+        ("Genesis8Female__jawOpen", "jawOpen"),
+        ("CTRL_expressions_mouthSmile_L", "mouthSmileLeft"),
+        ("CC_Base_Body.Mouth_Up_Upper_L", "mouthUpperUpLeft"),
+        ("Mouth_Down_Lower_R", "mouthLowerDownRight"),
+        ("Mouth_Roll_In_Upper_L", None),  # a part of mouthRollUpper (target_part), not the whole target
+        ("Head_aa", None),  # a viseme only as the whole name or after a viseme prefix
         ("Body", None),
         ("Key 1", None),
     ],
