@@ -415,5 +415,5 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
         ) from exc
     raise LandmarkError(
         f"{mesh.name}: no face-like region found on renders of the head (stylised or not human-like?); "
-        "give --landmarks L.json (see docs/animation.md, 'Landmarks')"
+        "give --landmarks L.json (see docs/heads.md, 'Landmarks')"
     )

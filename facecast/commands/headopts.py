@@ -27,7 +27,7 @@ def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head
         "--landmarks",
         default=None,
         help="landmarks JSON for a head mesh rigged by retargeting (default: shipped for known heads, "
-        "else found automatically; see docs/animation.md)",
+        "else found automatically; see docs/heads.md)",
     )
     p.add_argument(
         "--head-mode",
@@ -39,7 +39,7 @@ def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head
     p.add_argument(
         "--target-map",
         default=None,
-        help="JSON mapping the head's morph-target names to ARKit names / visemes (docs/animation.md)",
+        help="JSON mapping the head's morph-target names to ARKit names / visemes (docs/heads.md)",
     )
 
 
@@ -92,6 +92,6 @@ def warn_failing_checks(head, name: str) -> None:
         print(
             f"facecast: warning: {name} fails the rig checks ({'; '.join(failures)}); used anyway. "
             "The mouth may tear or fold: check the landmarks (facecast rig HEAD --show-landmarks PNG), give "
-            "--landmarks, or try --head-mode morph/retarget (docs/animation.md, Rig checks)",
+            "--landmarks, or try --head-mode morph/retarget (docs/heads.md, Rig checks)",
             file=sys.stderr,
         )
