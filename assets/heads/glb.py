@@ -29,7 +29,14 @@ from dataclasses import replace
 import numpy as np
 
 from assets.errors import GlbError
-from assets.heads.mesh import HeadMesh, srgb_to_linear, target_normal_deltas, vertex_normals
+from assets.heads.mesh import (
+    CUTOUT_ALPHA,
+    HeadMesh,
+    srgb_to_linear,
+    target_normal_deltas,
+    texture_cutout,
+    vertex_normals,
+)
 
 _FLOAT, _UINT32 = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
@@ -159,6 +166,9 @@ def _primitive(
         doc["images"] = [{"bufferView": buf.view(texture), "mimeType": image_mime(texture)}]
         doc["textures"] = [{"source": 0}]
         material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+        if texture_cutout(texture):  # see-through texels (eyelashes, a cornea) stay so in every glTF viewer
+            material["alphaMode"] = "MASK"
+            material["alphaCutoff"] = CUTOUT_ALPHA
     prim: dict = {"attributes": attributes, "material": 0}
     if targets is not None and len(targets):
         d = np.ascontiguousarray(targets, dtype="<f4")

@@ -49,11 +49,17 @@ class Primitive:
 
 @dataclass
 class Material:
-    """base colour factor (4,) and the encoded base-colour image (PNG/JPEG bytes) or None."""
+    """base colour factor (4,) and the encoded base-colour image (PNG/JPEG bytes) or None; alpha_mode: glTF's
+    "OPAQUE" (the image's alpha ignored), "MASK" (drawn where alpha * factor >= alpha_cutoff) or "BLEND" (see-through
+    by alpha * factor); coverage: an image whose luminance is the coverage instead of the base image's alpha (an OBJ
+    material's ``map_d``) or None."""
 
     color: np.ndarray
     image: bytes | None
     name: str = ""
+    alpha_mode: str = "OPAQUE"
+    alpha_cutoff: float = 0.5
+    coverage: bytes | None = None
 
 
 def read_gltf_document(path: Path) -> tuple[dict, list[bytes]]:
@@ -302,13 +308,19 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                         node=str(node.get("name", ni)),
                     )
                 )
-        materials = []
+        materials: list[Material] = []
         for m in doc.get("materials", []):
             pbr = m.get("pbrMetallicRoughness") or {}
             color = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1]), dtype=np.float64)
             bct = pbr.get("baseColorTexture")
             image = rd.image(bct["index"]) if bct else None
-            materials.append(Material(color=color, image=image, name=str(m.get("name", ""))))
+            mode = str(m.get("alphaMode", "OPAQUE"))
+            if mode not in ("OPAQUE", "MASK", "BLEND"):
+                raise MeshError(f"{path}: material {m.get('name', len(materials))!r}: unknown alphaMode {mode!r}")
+            cutoff = float(m.get("alphaCutoff", 0.5))
+            materials.append(
+                Material(color=color, image=image, name=str(m.get("name", "")), alpha_mode=mode, alpha_cutoff=cutoff)
+            )
     except MeshError:
         raise
     except (KeyError, IndexError, ValueError, TypeError) as exc:

@@ -30,6 +30,62 @@ _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 SKIN_COLOR = (0.80, 0.62, 0.52)
 """RGB in [0, 1] of a head without colours or texture (the renderer paints it so)."""
 
+CUTOUT_ALPHA = 0.5
+"""Coverage under which a texel of a head's texture is not drawn. A head's texture has an alpha channel only when a
+material of its file is see-through (glTF's MASK and BLEND, an OBJ material's ``d`` or ``map_d``: eyelashes and hair
+cards, a cornea or eye-occlusion shell over the eyes): the loader bakes each material's rule into that channel as 0 or
+1 (MASK at its own cutoff, BLEND at half coverage: one mesh drawn in one pass has no order to blend in), so the
+renderer, the browser viewer and the glb exports cut at this one value (:func:`texture_cutout`)."""
+
+
+def texture_cutout(texture: bytes | None) -> bool:
+    """True when a head's encoded ``texture`` carries coverage, an alpha channel (:data:`CUTOUT_ALPHA`)."""
+    if texture is None:
+        return False
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(texture)) as im:  # the header only
+            return im.mode in ("RGBA", "LA", "PA") or "transparency" in im.info
+    except OSError:  # not an image: the renderer names the file when it decodes it
+        return False
+
+
+def _png(img) -> bytes:
+    buf = io.BytesIO()
+    img.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _opaque(texture: bytes) -> bytes:
+    """``texture`` without an alpha channel (an opaque material's alpha may hold anything: smoothness, a mask)."""
+    if not texture_cutout(texture):
+        return texture
+    from PIL import Image
+
+    return _png(Image.open(io.BytesIO(texture)).convert("RGB"))
+
+
+def _covered(image, material) -> object:
+    """A material's base image (PIL) as drawn: RGB for an opaque material, else RGBA whose alpha is its coverage
+    baked to 0 / 1 (:data:`CUTOUT_ALPHA`); an RGB image again when every texel is covered."""
+    from PIL import Image
+
+    if material is None or material.alpha_mode == "OPAQUE":
+        return image.convert("RGB")
+    rgba = np.array(image.convert("RGBA"))
+    if material.coverage is not None:
+        # An OBJ's map_d: its alpha channel when it has one (Blender writes the RGBA base image there), else its grey.
+        given = Image.open(io.BytesIO(material.coverage))
+        cover = given.getchannel("A") if given.mode in ("RGBA", "LA") else given.convert("L")
+        a = np.asarray(cover.resize(image.size, Image.Resampling.BILINEAR), dtype=np.float64) / 255.0
+    else:
+        a = rgba[..., 3] / 255.0
+    a = a * float(material.color[3])
+    cut = material.alpha_cutoff if material.alpha_mode == "MASK" else CUTOUT_ALPHA
+    rgba[..., 3] = np.where(a >= cut, 255, 0)
+    return Image.fromarray(rgba, "RGBA") if (rgba[..., 3] == 0).any() else Image.fromarray(rgba[..., :3], "RGB")
+
 
 @dataclass(frozen=True)
 class HeadMesh:
@@ -381,18 +437,26 @@ def _assemble(p: Path, parts: _Parts) -> HeadMesh:
         if img is not None and img not in images:
             images.append(img)
     texture, uvs = None, parts.uvs
+    see_through = [m for m in used if getattr(mats[m], "alpha_mode", "OPAQUE") != "OPAQUE"]
     if images and parts.uvs is not None:
         single = (
             len(images) == 1
             and all(getattr(mats[m], "image", None) is not None for m in used)
             and (parts.material >= 0).all()
+            and (not see_through or len(used) == 1)
         )
-        if single:
-            texture = images[0]
+        if single and see_through:
+            texture = _png(_covered(Image.open(io.BytesIO(images[0])), mats[used[0]]))
+        elif single:
+            texture = _opaque(images[0])
         else:
             texture, uvs = _atlas(parts, images)
+    elif parts.uvs is not None and any(float(mats[m].color[3]) < CUTOUT_ALPHA for m in see_through):
+        # No image, but a see-through material (a cornea over the eyes): colour tiles carry its coverage.
+        texture, uvs = _atlas(parts, images)
     elif parts.uvs is not None:
         texture = _sibling_texture(p)
+        texture = None if texture is None else _opaque(texture)
         if texture is not None and p.suffix.lower() in (".glb", ".gltf"):
             # An image beside a glTF that does not reference it was made for three.js's
             # TextureLoader (flipY = true, e.g. the Lee Perry-Smith example): flip it into glTF's convention.
@@ -428,28 +492,40 @@ def _atlas(parts: _Parts, images: list[bytes]) -> tuple[bytes, np.ndarray]:
     """One PNG with every material's image (or colour) as a square tile, and the UVs moved into the tiles."""
     from PIL import Image
 
-    tiles = [Image.open(io.BytesIO(b)).convert("RGB") for b in images]
+    tiles: list = []
     tile_of_material: dict[int, int] = {}
-    colour_tiles: dict[tuple, int] = {}
+    tile_keys: dict[tuple, int] = {}  # (image or colour, the material's coverage rule) -> tile
     for m in sorted({int(x) for x in np.unique(parts.material)}):
         mat = parts.materials[m] if m >= 0 else None
         img = getattr(mat, "image", None)
+        rule = (
+            None
+            if mat is None or mat.alpha_mode == "OPAQUE"
+            else (mat.alpha_mode, mat.alpha_cutoff, float(mat.color[3]), mat.coverage)
+        )
         if img is not None:
-            tile_of_material[m] = images.index(img)
+            key: tuple = ("image", images.index(img), rule)
+            if key not in tile_keys:
+                tile_keys[key] = len(tiles)
+                tiles.append(_covered(Image.open(io.BytesIO(img)), mat))
+            tile_of_material[m] = tile_keys[key]
             continue
         base = np.ones(3) if mat is None else np.asarray(mat.color[:3])
-        key = tuple(int(x) for x in np.round(_linear_to_srgb(base) * 255))
-        if key not in colour_tiles:
-            colour_tiles[key] = len(tiles)
-            tiles.append(Image.new("RGB", (8, 8), key))
-        tile_of_material[m] = colour_tiles[key]
+        rgb = tuple(int(x) for x in np.round(_linear_to_srgb(base) * 255))
+        key = ("colour", rgb, rule)
+        if key not in tile_keys:
+            tile_keys[key] = len(tiles)
+            tiles.append(_covered(Image.new("RGBA", (8, 8), (*rgb, 255)), mat))
+        tile_of_material[m] = tile_keys[key]
     size = min(ATLAS_MAX_TILE, max(max(t.size) for t in tiles))
     n = len(tiles)
     cols = int(np.ceil(np.sqrt(n)))
     rows = int(np.ceil(n / cols))
-    atlas = Image.new("RGB", (cols * size, rows * size))
+    mode = "RGBA" if any(t.mode == "RGBA" for t in tiles) else "RGB"
+    atlas = Image.new(mode, (cols * size, rows * size), (0, 0, 0, 255) if mode == "RGBA" else (0, 0, 0))
     for i, t in enumerate(tiles):
-        atlas.paste(t.resize((size, size), Image.Resampling.BILINEAR), ((i % cols) * size, (i // cols) * size))
+        tile = t.convert(mode).resize((size, size), Image.Resampling.BILINEAR)
+        atlas.paste(tile, ((i % cols) * size, (i // cols) * size))
     margin = 1.0 / size  # a texel inside the tile: bilinear filtering never reads the neighbour
     uv = np.asarray(parts.uvs, dtype=np.float64)
     uv = np.where((uv >= 0) & (uv <= 1), uv, uv - np.floor(uv))  # repeat-wrapped UVs folded into [0, 1)
@@ -457,6 +533,4 @@ def _atlas(parts: _Parts, images: list[bytes]) -> tuple[bytes, np.ndarray]:
     c, r = k % cols, k // cols
     u = (c + margin + uv[:, 0] * (1 - 2 * margin)) / cols
     v = (r + margin + uv[:, 1] * (1 - 2 * margin)) / rows
-    buf = io.BytesIO()
-    atlas.save(buf, format="PNG")
-    return buf.getvalue(), np.column_stack([u, v])
+    return _png(atlas), np.column_stack([u, v])

@@ -48,12 +48,23 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             continue
         elif key == "Kd":
             rgb = [float(x) for x in rest.split()[:3]]
-            out[cur].color = np.array([*rgb, 1.0])
+            out[cur].color = np.array([*rgb, out[cur].color[3]])  # a "d" line may come first
         elif key == "map_Kd":
             name = rest.split()[-1]  # options (-s, -o, ...) come before the file name
             img = path.parent / name.replace("\\", "/")
             if img.is_file():
                 out[cur].image = img.read_bytes()
+        elif key in ("d", "Tr") and rest.split():
+            # Dissolve (d: 1 opaque) or its complement (Tr): see-through as glTF's BLEND materials are.
+            a = float(rest.split()[-1])
+            out[cur].color[3] = a if key == "d" else 1.0 - a
+            if out[cur].color[3] < 1.0:
+                out[cur].alpha_mode = "BLEND"
+        elif key == "map_d":
+            img = path.parent / rest.split()[-1].replace("\\", "/")
+            if img.is_file():
+                out[cur].coverage = img.read_bytes()
+                out[cur].alpha_mode = "MASK"
     return out
 
 

@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from assets.heads.mesh import SKIN_COLOR, HeadMesh, part_seams, vertex_normals
+from assets.heads.mesh import CUTOUT_ALPHA, SKIN_COLOR, HeadMesh, part_seams, texture_cutout, vertex_normals
 from clients.errors import RenderError
 
 SEAM_SMOOTH_ANGLE = 60.0
@@ -67,13 +67,17 @@ _FS = """
 #version 330
 uniform sampler2D tex;
 uniform bool use_tex;
+uniform float cutout;
 in vec3 v_color;
 in vec2 v_uv;
 in vec3 v_light;
 in vec3 v_spec;
 out vec4 f_color;
 void main() {
-    vec3 base = use_tex ? texture(tex, v_uv).rgb : v_color;
+    vec4 texel = use_tex ? texture(tex, v_uv) : vec4(v_color, 1.0);
+    // A see-through material's texels (eyelashes, a cornea; assets.heads.mesh.CUTOUT_ALPHA): not drawn.
+    if (texel.a < cutout) discard;
+    vec3 base = texel.rgb;
     // Back faces (the inside of a cut-open mouth) are drawn dark.
     f_color = gl_FrontFacing ? vec4(base * v_light + v_spec, 1.0) : vec4(base * 0.08 + vec3(0.05, 0.01, 0.01), 1.0);
 }
@@ -195,10 +199,12 @@ class HeadRenderer:
 
             try:
                 # Rows go up as stored: texture row 0 is v = 0 (checked on the Lee Perry-Smith head).
-                img = Image.open(io.BytesIO(mesh.texture)).convert("RGB")
+                cut = texture_cutout(mesh.texture)
+                img = Image.open(io.BytesIO(mesh.texture)).convert("RGBA" if cut else "RGB")
             except Exception as exc:  # PIL raises several types for corrupt images
                 raise RenderError(f"{mesh.name}: cannot decode texture: {exc}") from exc
-            self.texture = ctx.texture(img.size, 3, img.tobytes())
+            self.texture = ctx.texture(img.size, 4 if cut else 3, img.tobytes())
+            self.prog["cutout"].value = CUTOUT_ALPHA if cut else 0.0
             self.texture.build_mipmaps()
             self.texture.use(0)
             self.prog["tex"].value = 0

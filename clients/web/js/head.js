@@ -116,6 +116,9 @@ export class HeadView {
       tex.flipY = false; // texture row 0 is v = 0 (as the offline renderer samples it)
       tex.colorSpace = THREE.SRGBColorSpace;
       material.map = tex;
+      // A see-through material's texels (eyelashes, a cornea) come with alpha 0 (assets.heads.mesh.CUTOUT_ALPHA);
+      // an opaque head's texture has no alpha channel, so the test cuts nothing there.
+      material.alphaTest = 0.5;
       material.vertexColors = false;
     }
     // One mesh drawn on both sides, back faces painted dark in the fragment shader: a second mesh

@@ -312,3 +312,67 @@ def test_ktx2_basisu_texture_is_decoded_upright(tmp_path, codec):
     img = _render_front(loaded)
     assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
     assert len(list((tmp_path / "cache" / "gltf").glob("*.glb"))) == 1  # cached, no temp file left
+
+
+def _rgba_png(rgb: tuple, alpha_top: int, alpha_bottom: int, size: int = 64) -> bytes:
+    a = np.zeros((size, size, 4), np.uint8)
+    a[..., :3] = rgb
+    a[: size // 2, :, 3] = alpha_top
+    a[size // 2 :, :, 3] = alpha_bottom
+    buf = io.BytesIO()
+    Image.fromarray(a, "RGBA").save(buf, "PNG")
+    return buf.getvalue()
+
+
+def _layered_obj(folder: Path, front_material: str) -> Path:
+    """``folder/head.obj``: a skin box textured TOP over BOTTOM and, 0.5 in front of it, a second box with the
+    material ``front`` (its MTL lines ``front_material``), as eyelashes or a cornea lie over the face."""
+    folder.mkdir()
+    (folder / "skin.png").write_bytes(_png(TOP, BOTTOM))
+    (folder / "head.mtl").write_text(f"newmtl skin\nmap_Kd skin.png\nnewmtl front\n{front_material}\n")
+    lines = ["mtllib head.mtl"]
+    off = 0
+    for name, dz in (("skin", 0.0), ("front", 0.5)):
+        v, t, uv = _box()
+        v[:, 2] += dz
+        lines += [f"o {name}", f"usemtl {name}"]
+        lines += [f"v {a} {b} {c}" for a, b, c in v] + [f"vt {a} {1 - b}" for a, b in uv]
+        lines += [
+            f"f {a + 1 + off}/{a + 1 + off} {b + 1 + off}/{b + 1 + off} {c + 1 + off}/{c + 1 + off}" for a, b, c in t
+        ]
+        off += len(v)
+    (folder / "head.obj").write_text("\n".join(lines) + "\n")
+    return folder / "head.obj"
+
+
+def test_see_through_materials_are_not_drawn_in_renders_and_exports(tmp_path):
+    """Eyelash cards and a cornea over the face: a material whose coverage (its image's alpha through map_d, glTF's
+    MASK / BLEND, an OBJ's d) is under half is not drawn, so the skin behind shows, in the renderer and through a glb
+    export (alphaMode MASK) read back; the covered half is drawn. Drawn opaque, the front box hid the skin's top."""
+    from assets.heads.mesh import texture_cutout
+
+    green = (30, 200, 30)
+    lash = tmp_path / "lash"
+    obj = _layered_obj(lash, "map_Kd lash.png\nmap_d lash.png")
+    (lash / "lash.png").write_bytes(_rgba_png(green, 0, 255))  # the top half see-through, the bottom covered
+    mesh = load_mesh(obj)
+    assert texture_cutout(mesh.texture)
+    img = _render_front(mesh)
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), green)
+    glb = mesh_glb(mesh)
+    n_json = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20 : 20 + n_json])
+    assert doc["materials"][0]["alphaMode"] == "MASK" and doc["materials"][0]["alphaCutoff"] == 0.5
+    (tmp_path / "lash.glb").write_bytes(glb)
+    again = _render_front(load_mesh(tmp_path / "lash.glb"))
+    assert _is(_colour_at(again, 0.3), TOP) and _is(_colour_at(again, 0.7), green)
+    # The same glb told its material is opaque: the image's alpha is ignored and the front box drawn whole.
+    del doc["materials"][0]["alphaMode"], doc["materials"][0]["alphaCutoff"]
+    (tmp_path / "opaque.glb").write_bytes(glb_container(doc, glb[28 + n_json :]))
+    opaque = load_mesh(tmp_path / "opaque.glb")
+    assert not texture_cutout(opaque.texture)
+    img = _render_front(opaque)
+    assert not _is(_colour_at(img, 0.3), TOP) and not _is(_colour_at(img, 0.7), TOP)
+    # A colour-only cornea, 10 % opaque (MTL "d 0.1"): not drawn at all.
+    img = _render_front(load_mesh(_layered_obj(tmp_path / "cornea", "Kd 0.9 0.9 0.9\nd 0.1")))
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
