@@ -7,7 +7,8 @@ files index vertices in the order primitives appear: scene nodes depth-first, pr
 order). Supported: every accessor component type with ``normalized`` and ``KHR_mesh_quantization``
 attributes, byte strides, sparse accessors, triangle lists/strips/fans, node matrices and TRS,
 skinned meshes posed by their joints' node transforms (the bind pose unless the file animates the
-rest pose), embedded (bufferView/data URI) and external images. Files that need a decoder
+rest pose), embedded (bufferView/data URI) and external images, ``KHR_texture_transform`` on the base colour
+texture (gltfpack's quantized UVs), material ``alphaMode`` (see-through cards and shells). Files that need a decoder
 (``EXT_meshopt_compression``, ``KHR_draco_mesh_compression``, ``KHR_texture_basisu``) are first
 rewritten without it by :mod:`assets.heads.decompress`.
 
@@ -179,6 +180,20 @@ class _Reader:
         return None
 
 
+def texture_transformed(uvs: np.ndarray, ext: dict | None) -> np.ndarray:
+    """UVs (n, 2) as a texture reads them through KHR_texture_transform ``ext`` (offset, rotation in radians
+    counter-clockwise, scale; the extension's matrix T R S): gltfpack quantizes UVs to a box and restores them so,
+    so a reader that ignored it put the texture off by the box. None or {}: the UVs as they are."""
+    if not ext:
+        return uvs
+    ox, oy = (float(x) for x in ext.get("offset", (0.0, 0.0)))
+    sx, sy = (float(x) for x in ext.get("scale", (1.0, 1.0)))
+    r = float(ext.get("rotation", 0.0))
+    c, s = np.cos(r), np.sin(r)
+    u, v = np.asarray(uvs, dtype=np.float64).T * np.array([[sx], [sy]])
+    return np.column_stack([c * u + s * v + ox, -s * u + c * v + oy])
+
+
 def _node_matrix(node: dict) -> np.ndarray:
     if "matrix" in node:
         return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major in the file
@@ -273,11 +288,15 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                 tris = _triangles(prim.get("mode", 4), idx)
                 uv_key = "TEXCOORD_0"
                 mat_i = prim.get("material", -1)
+                bct = None
                 if mat_i >= 0:
                     bct = (doc["materials"][mat_i].get("pbrMetallicRoughness") or {}).get("baseColorTexture")
                     if bct:
-                        uv_key = f"TEXCOORD_{bct.get('texCoord', 0)}"
+                        shift = (bct.get("extensions") or {}).get("KHR_texture_transform") or {}
+                        uv_key = f"TEXCOORD_{shift.get('texCoord', bct.get('texCoord', 0))}"
                 uvs = rd.accessor(attrs[uv_key])[:, :2] if uv_key in attrs else None
+                if uvs is not None and bct:
+                    uvs = texture_transformed(uvs, (bct.get("extensions") or {}).get("KHR_texture_transform"))
                 colors = rd.accessor(attrs["COLOR_0"])[:, :3] if "COLOR_0" in attrs else None
                 pnames = (prim.get("extras") or {}).get("targetNames") or names
                 targets: dict[str, np.ndarray] = {}

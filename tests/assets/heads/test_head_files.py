@@ -376,3 +376,26 @@ def test_see_through_materials_are_not_drawn_in_renders_and_exports(tmp_path):
     # A colour-only cornea, 10 % opaque (MTL "d 0.1"): not drawn at all.
     img = _render_front(load_mesh(_layered_obj(tmp_path / "cornea", "Kd 0.9 0.9 0.9\nd 0.1")))
     assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
+
+
+def test_texture_transform_restores_quantized_uvs(tmp_path):
+    """gltfpack stores UVs quantized to their box and restores them through KHR_texture_transform (offset, rotation,
+    scale on the material's texture): the reader applies it, so the UVs and the render are the original file's (the
+    box's top texel stays at the top). Independent: the extension's T R S matrix written out here by hand."""
+    v, t, uv = _box()
+    off, scale, rot = np.array([0.1, -0.2]), np.array([0.8, 1.25]), 0.3
+    c, s = np.cos(rot), np.sin(rot)
+    trs = np.array([[1, 0, off[0]], [0, 1, off[1]], [0, 0, 1]]) @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+    trs = trs @ np.diag([scale[0], scale[1], 1.0])
+    stored = (np.linalg.inv(trs) @ np.column_stack([uv, np.ones(len(uv))]).T).T[:, :2]
+    glb = mesh_glb(HeadMesh(vertices=v, triangles=t, uvs=stored, texture=_png(TOP, BOTTOM), name="box"))
+    n_json = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20 : 20 + n_json])
+    ext = {"offset": off.tolist(), "scale": scale.tolist(), "rotation": rot}
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {"KHR_texture_transform": ext}
+    doc["extensionsUsed"] = ["KHR_texture_transform"]
+    (tmp_path / "q.glb").write_bytes(glb_container(doc, glb[28 + n_json :]))
+    mesh = load_mesh(tmp_path / "q.glb")
+    np.testing.assert_allclose(mesh.uvs, uv, atol=1e-5)
+    img = _render_front(mesh)
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
