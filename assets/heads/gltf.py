@@ -171,6 +171,11 @@ class _Reader:
         tex = self.doc.get("textures", [])[tex_index]
         src = tex.get("source")
         if src is None:
+            # Only in an image-format extension (Ready Player Me's WebP textures): Pillow reads those formats and
+            # assets.heads.mesh turns them into PNG for the renderer, the browser and exports.
+            ext = tex.get("extensions") or {}
+            src = next((ext[k]["source"] for k in ("EXT_texture_webp", "EXT_texture_avif") if k in ext), None)
+        if src is None:
             return None
         img = self.doc["images"][src]
         if "bufferView" in img:

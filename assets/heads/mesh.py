@@ -58,8 +58,10 @@ def _png(img) -> bytes:
 
 
 def _opaque(texture: bytes) -> bytes:
-    """``texture`` without an alpha channel (an opaque material's alpha may hold anything: smoothness, a mask)."""
-    if not texture_cutout(texture):
+    """``texture`` as PNG or JPEG (glTF's core formats, which every glb export and browser reads; a WebP or AVIF
+    image becomes PNG) without an alpha channel (an opaque material's alpha may hold anything: smoothness, a mask)."""
+    core = texture[:8] == b"\x89PNG\r\n\x1a\n" or texture[:3] == b"\xff\xd8\xff"
+    if core and not texture_cutout(texture):
         return texture
     from PIL import Image
 

@@ -399,3 +399,33 @@ def test_texture_transform_restores_quantized_uvs(tmp_path):
     np.testing.assert_allclose(mesh.uvs, uv, atol=1e-5)
     img = _render_front(mesh)
     assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
+
+
+def test_a_webp_texture_given_only_through_its_extension_is_read_and_exported_as_png(tmp_path):
+    """EXT_texture_webp with no core source (Ready Player Me's WebP textures): the texture is read, drawn upright
+    and written by a glb export as PNG (glTF's core formats). Before, the head had no texture."""
+    v, t, uv = _box()
+    glb = mesh_glb(HeadMesh(vertices=v, triangles=t, uvs=uv, texture=_png(TOP, BOTTOM), name="box"))
+    n_json = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20 : 20 + n_json])
+    body = bytearray(glb[28 + n_json :])
+    webp = io.BytesIO()
+    Image.open(io.BytesIO(_png(TOP, BOTTOM))).save(webp, "WEBP", lossless=True)
+    doc["bufferViews"].append({"buffer": 0, "byteOffset": len(body), "byteLength": len(webp.getvalue())})
+    body += webp.getvalue() + b"\0" * (-len(webp.getvalue()) % 4)
+    doc["buffers"][0]["byteLength"] = len(body)
+    doc["images"] = [{"bufferView": len(doc["bufferViews"]) - 1, "mimeType": "image/webp"}]
+    doc["textures"] = [{"extensions": {"EXT_texture_webp": {"source": 0}}}]
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_texture_webp"]
+    (tmp_path / "webp.glb").write_bytes(glb_container(doc, bytes(body)))
+    mesh = load_mesh(tmp_path / "webp.glb")
+    assert mesh.texture is not None and mesh.texture[:8] == b"\x89PNG\r\n\x1a\n"
+    img = _render_front(mesh)
+    assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
+    again = load_mesh(_written(tmp_path / "again.glb", mesh_glb(mesh)))
+    assert _is(_colour_at(_render_front(again), 0.3), TOP)
+
+
+def _written(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
