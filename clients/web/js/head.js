@@ -114,6 +114,8 @@ export class HeadView {
     if (m.uvs && head.texture_url) {
       const tex = await new THREE.TextureLoader().loadAsync(withToken(base + head.texture_url));
       tex.flipY = false; // texture row 0 is v = 0 (as the offline renderer samples it)
+      // UVs beyond [0, 1] repeat, as glTF's default sampler and the offline renderer have it (three.js clamps).
+      tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
       tex.colorSpace = THREE.SRGBColorSpace;
       material.map = tex;
       // A see-through material's texels (eyelashes, a cornea) come with alpha 0 (assets.heads.mesh.CUTOUT_ALPHA);
