@@ -31,6 +31,17 @@ class ObjMesh:
     group_names: list[str]
 
 
+def _map_file(folder: Path, rest: str) -> Path | None:
+    """The image a ``map_*`` statement names: its options (-s, -o, -bm ...) come first, and a Windows exporter's file
+    name may hold spaces ("skin colour.png") or backslashes, so the longest tail of words naming a file wins."""
+    words = rest.replace("\\", "/").split()
+    for i in range(len(words)):
+        p = folder / " ".join(words[i:])
+        if p.is_file():
+            return p
+    return None
+
+
 def _read_mtl(path: Path) -> dict[str, Material]:
     out: dict[str, Material] = {}
     if not path.is_file():
@@ -50,9 +61,8 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             rgb = [float(x) for x in rest.split()[:3]]
             out[cur].color = np.array([*rgb, out[cur].color[3]])  # a "d" line may come first
         elif key == "map_Kd":
-            name = rest.split()[-1]  # options (-s, -o, ...) come before the file name
-            img = path.parent / name.replace("\\", "/")
-            if img.is_file():
+            img = _map_file(path.parent, rest)
+            if img is not None:
                 out[cur].image = img.read_bytes()
         elif key in ("d", "Tr") and rest.split():
             # Dissolve (d: 1 opaque) or its complement (Tr): see-through as glTF's BLEND materials are.
@@ -61,8 +71,8 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             if out[cur].color[3] < 1.0:
                 out[cur].alpha_mode = "BLEND"
         elif key == "map_d":
-            img = path.parent / rest.split()[-1].replace("\\", "/")
-            if img.is_file():
+            img = _map_file(path.parent, rest)
+            if img is not None:
                 out[cur].coverage = img.read_bytes()
                 out[cur].alpha_mode = "MASK"
     return out
