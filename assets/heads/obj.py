@@ -107,8 +107,10 @@ def read_obj(path: Path) -> ObjMesh:
                     groups.append(name)
                 grp = groups.index(name)
             elif key == "mtllib":
-                for lib in parts[1:]:
-                    materials.update(_read_mtl(path.parent / lib))
+                # Several files, or one whose name holds spaces ("my head.mtl", as Windows exporters write it).
+                whole = path.parent / " ".join(parts[1:])
+                for lib in [whole] if whole.is_file() else [path.parent / x for x in parts[1:]]:
+                    materials.update(_read_mtl(lib))
             elif key == "usemtl":
                 name = " ".join(parts[1:])
                 if name not in mat_names:

@@ -81,8 +81,8 @@ def test_obj_with_mtl_and_two_objects_gets_one_atlas_upright(tmp_path):
     (tmp_path / "a.png").write_bytes(_png(TOP, BOTTOM))
     # A Windows exporter's file name with a space, after an option (the last word alone named no file).
     (tmp_path / "b skin.png").write_bytes(_png((30, 200, 30), (200, 30, 30)))
-    (tmp_path / "m.mtl").write_text("newmtl A\nmap_Kd a.png\nnewmtl B\nmap_Kd -bm 1.0 b skin.png\n")
-    lines = ["mtllib m.mtl"]
+    (tmp_path / "m two.mtl").write_text("newmtl A\nmap_Kd a.png\nnewmtl B\nmap_Kd -bm 1.0 b skin.png\n")
+    lines = ["mtllib m two.mtl"]
     off = 0
     for name, x0 in (("left", 0.0), ("right", 1.5)):
         v, t, uv = _box(x0)
