@@ -27,6 +27,9 @@ into the repository:
   :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
   :func:`parted_lps`; and, branch i12parted3, joined at the corners, :func:`parted_joined_lps`); *high-poly scans*
   (subdivided once and twice, :func:`subdivided_lps`; only with --with-dense). docs/animation.md, "New held-out heads".
+- (branch i12cc) *a Character Creator 4 export*: the built-in head with CC4's target names and split targets, eyes,
+  cornea and eye-occlusion shells, eyelash cards, a WebP skin texture on quantized UVs, teeth and tongue, with and
+  without its targets (:func:`character_creator_glb`). docs/animation.md, "A Character Creator 4 export".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -723,7 +726,21 @@ def character_creator_glb(dst: Path, *, with_targets: bool) -> Path:
     vv = np.concatenate([vv, 0.81 + 0.17 * (y_in.max() - y_in) / max(np.ptp(y_in), 1e-9)])
     skin_idx = np.concatenate([skin_idx, skin_idx[island]])
     uv = np.column_stack([u, vv])
-    tex_img = _skin_texture(v[skin_idx], skin_t, colors[skin_idx], uv)
+    # The island in two colours, the median of its vertices inside the mouth (between the corners: dark red-brown)
+    # and of the rest (behind the ears, the nostrils): painted from its vertices, its walls laid over each other in
+    # the projection painted each other's texels, black and light shards at /a/; in one colour, the mouth's inside
+    # took the skin's.
+    paint = colors[skin_idx].copy()
+    cl, cr = v[b.landmarks["corner_left"]], v[b.landmarks["corner_right"]]
+    w = float(cl[0] - cr[0])
+    ids = np.arange(len(paint) - len(island), len(paint))
+    pv = v[skin_idx[ids]]
+    up = pv[:, 1] - 0.5 * (cl[1] + cr[1])
+    mouth = (np.abs(pv[:, 0] - 0.5 * (cl[0] + cr[0])) < 0.6 * w) & (up < 0.2 * w) & (up > -0.5 * w)  # not the nostrils
+    for group in (ids[mouth], ids[~mouth]):
+        if len(group):
+            paint[group] = np.median(colors[skin_idx[group]], axis=0)
+    tex_img = _skin_texture(v[skin_idx], skin_t, paint, uv)
     lo, hi = uv.min(0), uv.max(0)
     q = np.round((uv - lo) / (hi - lo) * 65535).astype(np.uint16)
     skin_tex = image(_png_rgba(tex_img, "WEBP"), "image/webp", webp=True)
