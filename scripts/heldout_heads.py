@@ -27,6 +27,9 @@ into the repository:
   :func:`turned_lps`); *lips parted at rest* (its own rig at mouth_open 0.1 IOD, no mouth inside,
   :func:`parted_lps`; and, branch i12parted3, joined at the corners, :func:`parted_joined_lps`); *high-poly scans*
   (subdivided once and twice, :func:`subdivided_lps`; only with --with-dense). docs/animation.md, "New held-out heads".
+- (branch i12cc) *a Character Creator 4 export*: the built-in head with CC4's target names and split targets, eyes,
+  cornea and eye-occlusion shells, eyelash cards, a WebP skin texture on quantized UVs, teeth and tongue, with and
+  without its targets (:func:`character_creator_glb`). docs/animation.md, "A Character Creator 4 export".
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -505,6 +508,363 @@ def parted_joined_lps(out: Path, data: Path) -> Path:
     return f
 
 
+_USHORT = 5123
+
+
+def _cc4_targets(b) -> dict[str, np.ndarray]:
+    """The built-in head's 52 ARKit targets (vertices (n, 3) displacements) as Character Creator 4's facial profile
+    names them: its own words for sided targets (Mouth_Up_Upper_L), ARKit's unsided mouth targets split into halves
+    (Mouth_Roll_In_Upper_L/R) or quarters (Mouth_Funnel_Up_L ... Down_R) by smooth masks that sum to one."""
+    import re
+
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    v = b.mesh.vertices.astype(np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    x = (v - v[b.landmarks["upper_inner"]]) @ fr.axes[0] / fr.iod
+    y = (v - 0.5 * (v[b.landmarks["upper_inner"]] + v[b.landmarks["lower_inner"]])) @ fr.axes[1] / fr.iod
+    left, up = 0.5 * (1 + np.tanh(x / 0.05)), 0.5 * (1 + np.tanh(y / 0.03))
+    sides = {"L": left, "R": 1 - left}
+    halves = {"Up": up, "Down": 1 - up}
+    words = {"mouthUpperUp": "Mouth_Up_Upper", "mouthLowerDown": "Mouth_Down_Lower", "browDown": "Brow_Drop"}
+    cc: dict[str, np.ndarray] = {}
+    for name, d in b.targets.items():
+        d = np.asarray(d, dtype=np.float64)
+        if name in ("mouthRollUpper", "mouthRollLower"):
+            for s, m in sides.items():
+                cc[f"Mouth_Roll_In_{name[9:]}_{s}"] = d * m[:, None]
+        elif name in ("mouthFunnel", "mouthPucker"):
+            for h, mh in halves.items():
+                for s, m in sides.items():
+                    cc[f"Mouth_{name[5:]}_{h}_{s}"] = d * (mh * m)[:, None]
+        else:
+            side = "L" if name.endswith("Left") else "R" if name.endswith("Right") else ""
+            stem = words.get(
+                name.removesuffix("Left").removesuffix("Right"), name.removesuffix("Left").removesuffix("Right")
+            )
+            cc["_".join(w.capitalize() for w in re.findall(r"[A-Z]?[a-z]+", stem)) + ("_" + side if side else "")] = d
+    return cc
+
+
+def _png_rgba(a: np.ndarray, fmt: str = "PNG") -> bytes:
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(a).save(buf, format=fmt, **({"quality": 90} if fmt == "WEBP" else {}))
+    return buf.getvalue()
+
+
+def _skin_texture(v: np.ndarray, t: np.ndarray, colors: np.ndarray, uv: np.ndarray, size: int = 1024) -> np.ndarray:
+    """(size, size, 3) uint8: the built-in head's vertex colours painted into ``uv`` (glTF's convention, v down),
+    each triangle flat in its mean colour, then blurred and grown past the islands' edges."""
+    from PIL import Image, ImageDraw, ImageFilter
+
+    img = Image.new("RGB", (size, size), (0, 0, 0))
+    mask = Image.new("L", (size, size), 0)
+    d, dm = ImageDraw.Draw(img), ImageDraw.Draw(mask)
+    c = np.clip(colors[t].mean(1) * 255, 0, 255).astype(int)
+    p = uv[t] * size
+    # A cylindrical projection lays the inner lips and nostrils over the face: the surfaces nearer the axis are
+    # painted first, so the outer (seen) ones win.
+    centre = 0.5 * (v.min(0) + v.max(0))
+    order = np.argsort(np.hypot(*(v[t].mean(1) - centre)[:, [0, 2]].T))
+    for tri, col in zip(p[order], c[order]):
+        pts = [tuple(q) for q in tri]
+        d.polygon(pts, fill=tuple(col))
+        dm.polygon(pts, fill=255)
+    img = img.filter(ImageFilter.GaussianBlur(1.5))
+    a = np.asarray(img, dtype=np.float64)
+    m = np.asarray(mask.filter(ImageFilter.GaussianBlur(1.5)), dtype=np.float64)[..., None] / 255
+    skin = a[m[..., 0] > 0.99].mean(0)
+    return np.clip(np.where(m > 0.05, a / np.maximum(m, 1e-3), skin), 0, 255).astype(np.uint8)
+
+
+def _lash_texture(w: int = 256, h: int = 64) -> np.ndarray:
+    """(h, w, 4) uint8: a comb of dark opaque strands (tapering to the tip at v = 1) on
+    transparent texels, as an eyelash card's texture: 21 strands, 5 texels wide, every 12 across one lid."""
+    a = np.zeros((h, w, 4), np.uint8)
+    a[..., :3] = (35, 25, 20)
+    rows = np.arange(h)
+    for k, x0 in enumerate(range(4, w - 6, 12)):
+        length = h * (0.7 + 0.3 * ((k * 7) % 5) / 4)
+        lean = 3.0 * ((k % 3) - 1)
+        for r in rows[rows < length]:
+            x = int(round(x0 + lean * r / h))
+            width = 5 if r < 0.5 * length else 3 if r < 0.8 * length else 2
+            a[r, x : x + width, 3] = 255
+    return a
+
+
+def _eye_texture(size: int = 256) -> np.ndarray:
+    """(size, size, 3) uint8: sclera, brown iris (radius 0.6), pupil (0.37) centred, as a front-projected eyeball."""
+    yy, xx = np.mgrid[0:size, 0:size]
+    r = np.hypot(xx - size / 2 + 0.5, yy - size / 2 + 0.5) / (size / 2)
+    a = np.empty((size, size, 3), np.uint8)
+    a[:] = (235, 232, 225)
+    a[r < 0.62] = (95, 60, 35)
+    a[r < 0.6] = (120, 80, 45)
+    a[r < 0.37] = (8, 8, 8)
+    return a
+
+
+def _split_seam(u: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A cylindrical ``u`` (n,) in [0, 1) whose triangles ``t`` straddle its wrap at the back: each such triangle's
+    low corners become copies at u + 1 (copies (k,) of vertex indices, the new triangles)."""
+    t = t.copy()
+    wrap = np.ptp(u[t], axis=1) > 0.5
+    low = np.unique(t[wrap][u[t[wrap]] < 0.5])
+    copy_of = {int(i): len(u) + k for k, i in enumerate(low)}
+    for f in np.flatnonzero(wrap):
+        t[f] = [copy_of[int(i)] if u[i] < 0.5 else i for i in t[f]]
+    return low, t
+
+
+def character_creator_glb(dst: Path, *, with_targets: bool) -> Path:
+    """The built-in head as a Character Creator 4 glb export delivers it (Y up, metres): CC_Base_Body with the skin
+    (Std_Skin_Head: a WebP texture through EXT_texture_webp, UVs quantized to unsigned shorts and restored by
+    KHR_texture_transform) and eyelash cards along the upper lids (Std_Eyelash: RGBA strands, MASK); CC_Base_Eye
+    (eyeballs, textured), CC_Base_Cornea (a shell, BLEND, alpha 0.1), CC_Base_EyeOcclusion (a shell over the eyes'
+    front, BLEND, a dark rim fading to clear, alpha at most 0.45), CC_Base_Teeth, CC_Base_Tongue. ``with_targets``:
+    the ARKit targets in CC4's names (:func:`_cc4_targets`) on the body (lashes follow their lid vertex), teeth
+    and tongue."""
+    from assets.heads.builtin import load_builtin_head
+
+    b = load_builtin_head()
+    v = b.mesh.vertices.astype(np.float64) * 0.1  # decimetres -> metres
+    tri = b.mesh.triangles
+    part = np.asarray(b.part)
+    colors = np.asarray(b.mesh.colors, dtype=np.float64)
+    targets = {k: d * 0.1 for k, d in _cc4_targets(b).items()} if with_targets else {}
+    g = _Gltf()
+    g.doc["extensionsUsed"] = ["KHR_texture_transform", "EXT_texture_webp", "KHR_mesh_quantization"]
+    g.doc["extensionsRequired"] = ["EXT_texture_webp", "KHR_mesh_quantization"]
+    g.doc["textures"], g.doc["images"], g.doc["samplers"] = [], [], [{}]
+
+    def image(data: bytes, mime: str, webp: bool = False) -> int:
+        while len(g.bin) % 4:
+            g.bin.append(0)
+        g.doc["bufferViews"].append({"buffer": 0, "byteOffset": len(g.bin), "byteLength": len(data)})
+        g.bin.extend(data)
+        g.doc["images"].append({"bufferView": len(g.doc["bufferViews"]) - 1, "mimeType": mime})
+        src = len(g.doc["images"]) - 1
+        tex: dict = {
+            "sampler": 0,
+            **({"extensions": {"EXT_texture_webp": {"source": src}}} if webp else {"source": src}),
+        }
+        g.doc["textures"].append(tex)
+        return len(g.doc["textures"]) - 1
+
+    def material(name: str, color=(1.0, 1.0, 1.0, 1.0), tex: int | None = None, **extra) -> int:
+        pbr: dict = {"baseColorFactor": list(color), "metallicFactor": 0.0, "roughnessFactor": 0.6}
+        if tex is not None:
+            pbr["baseColorTexture"] = {"index": tex, **extra.pop("texinfo", {})}
+        g.doc["materials"].append({"name": name, "pbrMetallicRoughness": pbr, **extra})
+        return len(g.doc["materials"]) - 1
+
+    def prim(pos, tris, uv, mat, moved: dict[str, np.ndarray] | None = None, quantized=None) -> dict:
+        attrs = {"POSITION": g.accessor(pos.astype(np.float32), "VEC3", _FLOAT, 34962, minmax=True)}
+        if quantized is not None:
+            attrs["TEXCOORD_0"] = g.accessor(quantized, "VEC2", _USHORT, 34962)
+            g.doc["accessors"][-1]["normalized"] = True
+        else:
+            attrs["TEXCOORD_0"] = g.accessor(uv.astype(np.float32), "VEC2", _FLOAT, 34962)
+        p: dict = {
+            "attributes": attrs,
+            "indices": g.accessor(tris.reshape(-1).astype(np.uint32), "SCALAR", _UINT, 34963),
+            "material": mat,
+        }
+        if moved:
+            p["targets"] = [
+                {"POSITION": g.accessor(d.astype(np.float32), "VEC3", _FLOAT, 34962, minmax=True)}
+                for d in moved.values()
+            ]
+        return p
+
+    def sub(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(vertex indices, local triangles) of the triangles all of whose corners ``keep`` (n,) holds."""
+        t = tri[keep[tri].all(axis=1)]
+        used = np.unique(t)
+        remap = np.full(len(v), -1, np.int64)
+        remap[used] = np.arange(len(used))
+        return used, remap[t], t
+
+    def moved_for(idx: np.ndarray) -> dict[str, np.ndarray]:
+        return {k: d[idx] for k, d in targets.items() if np.abs(d[idx]).max() > 0}
+
+    meshes: list[tuple[str, list[dict], list[str]]] = []
+    # Skin: cylindrical UVs about the head's vertical axis (its seam at the back split), painted with the built-in
+    # head's colours, WebP, quantized. The surfaces behind others in that projection (the inner lips, the mouth bag,
+    # the nostrils) get their own island below the face's, as an export's UV layout gives them their own texels
+    # (laid over the face's, the inner lips took the lips' colour: a light flap inside the mouth at /a/).
+    from scipy.spatial import cKDTree
+
+    skin_idx, skin_t, _ = sub(part == 0)
+    sv = v[skin_idx]
+    centre = 0.5 * (sv.min(0) + sv.max(0))
+    angle = np.arctan2(sv[:, 0] - centre[0], sv[:, 2] - centre[2])
+    radial = np.hypot(sv[:, 0] - centre[0], sv[:, 2] - centre[2])
+    flat = np.column_stack([angle * np.median(radial), sv[:, 1]])
+    hidden = np.zeros(len(sv), bool)
+    for i, near in enumerate(cKDTree(flat).query_ball_point(flat, 0.0025)):
+        hidden[i] = radial[near].max() > radial[i] + 0.003  # metres: 2.5 mm around, 3 mm further out
+    u = (angle / (2 * np.pi) + 0.5) % 1.0
+    low, skin_t = _split_seam(u, skin_t)
+    skin_idx = np.concatenate([skin_idx, skin_idx[low]])
+    hidden = np.concatenate([hidden, hidden[low]])
+    u = np.concatenate([u, u[low] + 1.0]) / 1.05  # the copies past the wrap stay inside [0, 1]
+    vv = 0.02 + 0.76 * (sv[:, 1].max() - v[skin_idx, 1]) / np.ptp(sv[:, 1])
+    inner_tri = hidden[skin_t].all(axis=1)
+    island = np.unique(skin_t[inner_tri])
+    copy_of = np.full(len(skin_idx), -1, np.int64)
+    copy_of[island] = len(skin_idx) + np.arange(len(island))
+    skin_t = np.where(inner_tri[:, None], copy_of[skin_t], skin_t)
+    y_in = v[skin_idx[island], 1]
+    u = np.concatenate([u, u[island]])
+    vv = np.concatenate([vv, 0.81 + 0.17 * (y_in.max() - y_in) / max(np.ptp(y_in), 1e-9)])
+    skin_idx = np.concatenate([skin_idx, skin_idx[island]])
+    uv = np.column_stack([u, vv])
+    # The island in two colours, the median of its vertices inside the mouth (between the corners: dark red-brown)
+    # and of the rest (behind the ears, the nostrils): painted from its vertices, its walls laid over each other in
+    # the projection painted each other's texels, black and light shards at /a/; in one colour, the mouth's inside
+    # took the skin's.
+    paint = colors[skin_idx].copy()
+    cl, cr = v[b.landmarks["corner_left"]], v[b.landmarks["corner_right"]]
+    w = float(cl[0] - cr[0])
+    ids = np.arange(len(paint) - len(island), len(paint))
+    pv = v[skin_idx[ids]]
+    up = pv[:, 1] - 0.5 * (cl[1] + cr[1])
+    mouth = (np.abs(pv[:, 0] - 0.5 * (cl[0] + cr[0])) < 0.6 * w) & (up < 0.2 * w) & (up > -0.5 * w)  # not the nostrils
+    for group in (ids[mouth], ids[~mouth]):
+        if len(group):
+            paint[group] = np.median(colors[skin_idx[group]], axis=0)
+    tex_img = _skin_texture(v[skin_idx], skin_t, paint, uv)
+    lo, hi = uv.min(0), uv.max(0)
+    q = np.round((uv - lo) / (hi - lo) * 65535).astype(np.uint16)
+    skin_tex = image(_png_rgba(tex_img, "WEBP"), "image/webp", webp=True)
+    skin_mat = material(
+        "Std_Skin_Head",
+        tex=skin_tex,
+        texinfo={"extensions": {"KHR_texture_transform": {"offset": lo.tolist(), "scale": (hi - lo).tolist()}}},
+    )
+    body_moved = moved_for(skin_idx)
+    names = list(body_moved)
+    prims = [prim(v[skin_idx], skin_t, None, skin_mat, body_moved, quantized=q)]
+    # Eyelash cards along the upper lid margins: the skin vertices outside the eyeball next to the lid's fold inside
+    # it (the built-in skin is closed: its lids tuck behind the eyeball), above the eye's centre, in front; a strip
+    # leaning forward and up from them, its vertices following their lid vertex's targets.
+    sk_t = tri[(part[tri] == 0).all(axis=1)]
+    edges = np.concatenate([sk_t[:, [0, 1]], sk_t[:, [1, 2]], sk_t[:, [2, 0]]])
+    lash_v, lash_t, lash_uv, lash_src = [], [], [], []
+    for side in (1, -1):
+        eye = np.flatnonzero((part == 1) & (np.sign(v[:, 0]) == side))
+        c = v[eye].mean(0)
+        r = np.linalg.norm(v[eye] - c, axis=1).max()
+        p = (v - c) / r
+        inside = (part == 0) & (np.linalg.norm(p, axis=1) < 1.0)
+        out_ok = (part == 0) & (np.linalg.norm(p, axis=1) < 1.15) & (p[:, 1] > 0) & (p[:, 2] > 0.3) & ~inside
+        margin = np.unique(
+            np.concatenate(
+                [
+                    edges[inside[edges[:, 0]] & out_ok[edges[:, 1]], 1],
+                    edges[inside[edges[:, 1]] & out_ok[edges[:, 0]], 0],
+                ]
+            )
+        )
+        # The margin has a front and a back row: the strip runs through their means in 12 steps across the eye
+        # (through the rows' zigzag it folded), each step's displacement the mean of its vertices'.
+        step = np.digitize(v[margin, 0], np.linspace(v[margin, 0].min(), v[margin, 0].max() + 1e-9, 13)) - 1
+        avg = np.zeros((12, len(v)))
+        avg[step, margin] = 1.0
+        avg = avg[avg.sum(1) > 0]
+        avg /= avg.sum(1, keepdims=True)
+        base = avg @ v + np.array([0, 0, 0.08 * r])
+        tip = base + np.array([0, 0.5, 0.75]) / np.hypot(0.5, 0.75) * 0.75 * r
+        s = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(base, axis=0), axis=1))]) / (2.5 * r)
+        k0 = sum(len(x) for x in lash_v)
+        nb = len(base)
+        lash_v += [base, tip]
+        lash_uv += [np.column_stack([s, np.zeros(nb)]), np.column_stack([s, np.ones(nb)])]
+        lash_src += [avg, avg]
+        for i in range(nb - 1):
+            a, bb, ta, tb = k0 + i, k0 + i + 1, k0 + nb + i, k0 + nb + i + 1
+            lash_t += [[a, bb, tb], [a, tb, ta]]
+    lv, luv, lsrc = (
+        np.concatenate(lash_v),
+        np.concatenate(lash_uv),
+        np.concatenate(lash_src),
+    )  # (lash vertices, n) averaging
+    lash_tex = image(_png_rgba(_lash_texture()), "image/png")
+    lash_mat = material("Std_Eyelash", tex=lash_tex, alphaMode="MASK", alphaCutoff=0.5, doubleSided=True)
+    prims.append(prim(lv, np.asarray(lash_t), luv, lash_mat, {k: lsrc @ targets[k] for k in names} or None))
+    meshes.append(("CC_Base_Body", prims, names))
+    # Eyes, cornea and eye-occlusion shells: each eyeball front-projected onto an iris texture.
+    eye_tex = image(_png_rgba(_eye_texture()), "image/png")
+    eye_mats = [material(f"Std_Eye_{s}", tex=eye_tex) for s in "LR"]
+    cornea_mats = [material(f"Std_Cornea_{s}", color=(1.0, 1.0, 1.0, 0.1), alphaMode="BLEND") for s in "LR"]
+    occ_img = np.zeros((64, 64, 4), np.uint8)
+    occ_img[..., :3] = (40, 25, 20)
+    occ_img[..., 3] = (0.45 * 255 * np.clip(1 - np.arange(64) / 32, 0, 1))[:, None].astype(np.uint8)
+    occ_tex = image(_png_rgba(occ_img), "image/png")
+    occ_mats = [material(f"Std_Eye_Occlusion_{s}", tex=occ_tex, alphaMode="BLEND") for s in "LR"]
+    eye_prims, cornea_prims, occ_prims = [], [], []
+    eye_names = list(moved_for(np.flatnonzero(part == 1)))
+    for k, side in enumerate((1, -1)):
+        idx, t_local, _ = sub((part == 1) & (np.sign(v[:, 0]) == side))
+        c = v[idx].mean(0)
+        r = np.linalg.norm(v[idx] - c, axis=1).max()
+        fuv = np.column_stack([0.5 + (v[idx, 0] - c[0]) / (2 * r), 0.5 - (v[idx, 1] - c[1]) / (2 * r)])
+        eye_prims.append(prim(v[idx], t_local, fuv, eye_mats[k], {n: targets[n][idx] for n in eye_names}))
+        cornea_prims.append(prim(c + 1.03 * (v[idx] - c), t_local, fuv, cornea_mats[k]))
+        front = (v[idx, 2] - c[2]) / r
+        keep = (front > 0.2)[t_local].all(axis=1)
+        ring_uv = np.column_stack([np.full(len(idx), 0.5), 1 - (front - 0.2) / 0.8])  # rim (v = 0) to centre (v = 1)
+        occ_prims.append(prim(c + 1.06 * (v[idx] - c), t_local[keep], ring_uv, occ_mats[k]))
+    meshes.append(("CC_Base_Eye", eye_prims, eye_names))
+    meshes.append(("CC_Base_Cornea", cornea_prims, []))
+    meshes.append(("CC_Base_EyeOcclusion", occ_prims, []))
+    teeth_prims: list[dict] = []
+    teeth_names = list(moved_for(np.flatnonzero(np.isin(part, (2, 3)))))
+    for pnum, nm, col in ((2, "Std_Upper_Teeth", (0.95, 0.93, 0.85, 1)), (3, "Std_Lower_Teeth", (0.95, 0.93, 0.85, 1))):
+        idx, t_local, _ = sub(part == pnum)
+        teeth_prims.append(
+            prim(
+                v[idx],
+                t_local,
+                np.zeros((len(idx), 2)),
+                material(nm, color=col),
+                {k: targets[k][idx] for k in teeth_names},
+            )
+        )
+    meshes.append(("CC_Base_Teeth", teeth_prims, teeth_names))
+    idx, t_local, _ = sub(part == 4)
+    mv = moved_for(idx)
+    meshes.append(
+        (
+            "CC_Base_Tongue",
+            [prim(v[idx], t_local, np.zeros((len(idx), 2)), material("Std_Tongue", color=(0.55, 0.22, 0.22, 1)), mv)],
+            list(mv),
+        )
+    )
+    for name, prims_, tnames in meshes:
+        for p in prims_:
+            if tnames and "targets" not in p:
+                p["targets"] = []
+        mesh: dict = {"name": name, "primitives": prims_}
+        if tnames:
+            mesh["weights"] = [0.0] * len(tnames)
+            mesh["extras"] = {"targetNames": tnames}
+        g.doc["meshes"].append(mesh)
+        g.doc["nodes"].append({"name": name, "mesh": len(g.doc["meshes"]) - 1})
+    g.doc["nodes"].insert(0, {"name": "CC_Base_BoneRoot", "children": list(range(1, len(meshes) + 1))})
+    g.doc["scene"] = 0
+    g.doc["scenes"] = [{"nodes": [0]}]
+    dst.write_bytes(g.glb())
+    return dst
+
+
 def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
     """name -> (head file, resolve options): the held-out heads (not in the test set); ``dense``: also the
     subdivided scans (70,736 and 282,944 triangles: the first rigs in about 11 minutes)."""
@@ -543,6 +903,14 @@ def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Pat
     d.mkdir(exist_ok=True)
     heads["Lee Perry-Smith, winding reversed, OBJ"] = (
         write_obj(d / "head.obj", full.vertices, full.triangles[:, ::-1], full.uvs, full.texture),
+        {},
+    )
+    heads["Character Creator 4 export, CC4 targets"] = (
+        character_creator_glb(out / "cc4_targets.glb", with_targets=True),
+        {},
+    )
+    heads["Character Creator 4 export, no targets"] = (
+        character_creator_glb(out / "cc4_plain.glb", with_targets=False),
         {},
     )
     heads.update(anny_faces(out))

@@ -206,6 +206,10 @@ class HeadRenderer:
             self.texture = ctx.texture(img.size, 4 if cut else 3, img.tobytes())
             self.prog["cutout"].value = CUTOUT_ALPHA if cut else 0.0
             self.texture.build_mipmaps()
+            if cut:
+                # Averaged, thin strands' coverage fell under the cut-off at a distance: eyelash cards drew as flecks.
+                for level, data in enumerate(cutout_levels(np.asarray(img)), start=1):
+                    self.texture.write(data.tobytes(), level=level)
             self.texture.use(0)
             self.prog["tex"].value = 0
         self.prog["use_tex"].value = bool(use_tex)
@@ -288,6 +292,50 @@ class HeadRenderer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def cutout_levels(rgba: np.ndarray, cut: float = CUTOUT_ALPHA) -> list[np.ndarray]:
+    """The mip levels below ``rgba`` (h, w, 4) uint8, a texture whose alpha is cut at ``cut`` (coverage 0 or 1), each
+    (max(1, h >> k), max(1, w >> k), 4) uint8 for k = 1, 2, ... down to 1 x 1 (OpenGL's chain). Colour is averaged
+    over the covered texels only; alpha is averaged, then scaled by the one factor per level that brings the share
+    of texels at or over ``cut`` closest to the full texture's (coverage-preserving mipmaps, Castano 2010), never
+    under 1 (an opaque texel stays opaque): a plain average turns a comb of thin strands (an eyelash card's tips, 3
+    texels in 10) into alpha under the cut-off a few levels down, and the strands vanish or break into flecks at a
+    distance (the Character Creator held-out head's lashes)."""
+    from PIL import Image
+
+    a0 = rgba[..., 3].astype(np.float64) / 255.0
+    share = float((a0 >= cut).mean())
+    covered = rgba[..., :3].astype(np.float64) * a0[..., None]
+    h, w = a0.shape
+    out: list[np.ndarray] = []
+    k = 1
+    while (h >> (k - 1)) > 1 or (w >> (k - 1)) > 1:
+        size = (max(1, w >> k), max(1, h >> k))
+
+        def shrunk(x: np.ndarray, size: tuple[int, int] = size) -> np.ndarray:
+            return np.asarray(Image.fromarray(x.astype(np.float32), "F").resize(size, Image.Resampling.BOX))
+
+        a = shrunk(a0)
+        rgb = np.stack([shrunk(covered[..., c]) for c in range(3)], axis=-1) / np.maximum(a, 1e-6)[..., None]
+        # Factors from 1 (alpha only ever raised: an opaque texel stays opaque) to one that covers every texel.
+        lo, hi = 1.0, 64.0 / max(float(a.max()), 1e-6)
+
+        def share_at(f: float, a: np.ndarray = a) -> float:
+            return float((np.minimum(a * f, 1.0) >= cut).mean())
+
+        for _ in range(30):  # the smallest factor whose share covered reaches the full texture's, and the one below
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if share_at(mid) >= share else (mid, hi)
+        # Whichever comes closer: a level whose texels all hold the same part of a strand is all or nothing, and a
+        # comb 0.375 covered drawn as a solid block is further from it than drawn as nothing.
+        f = hi if abs(share_at(hi) - share) <= abs(share_at(lo) - share) else lo
+        level = np.empty((size[1], size[0], 4), np.uint8)
+        level[..., :3] = np.clip(np.round(rgb), 0, 255)
+        level[..., 3] = np.clip(np.round(np.minimum(a * f, 1.0) * 255), 0, 255)
+        out.append(level)
+        k += 1
+    return out
 
 
 def _seam_owner(rest: np.ndarray, triangles: np.ndarray, parted: np.ndarray, *, tolerance: float) -> np.ndarray:

@@ -595,6 +595,31 @@ def _runs(over: np.ndarray, closed: bool) -> int:
     return starts - int(closed and over[0] and over[-1])
 
 
+SEAM_TWIN_TOLERANCE = 1e-6
+"""Fraction of the mesh's extent within which two vertices coincide, at rest and at every pose, for
+:func:`seam_twins`."""
+
+
+def seam_twins(rig: Any, poses: tuple[tuple[float, ...], ...]) -> np.ndarray:
+    """(n,) int: each of the rig's vertices' lowest-index twin (itself when it has none): vertices that coincide at
+    rest and still coincide at every pose in ``poses`` are one surface split by a texture seam (a UV island's edge);
+    a lip cut's copies coincide at rest and part when the mouth opens."""
+    from realtime_core.face.welding import weld
+
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    canon, _ = weld(v0)
+    n = len(v0)
+    first = np.full(int(canon.max(initial=-1)) + 1, n)
+    np.minimum.at(first, canon, np.arange(n))
+    head = first[canon]
+    tol = SEAM_TWIN_TOLERANCE * max(float(np.ptp(v0, axis=0).max()), 1e-300) if n else 0.0
+    twin = head != np.arange(n)
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        twin &= np.linalg.norm(v - v[head], axis=1) <= tol
+    return np.where(twin, head, np.arange(n))
+
+
 def lip_edge_shards(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -612,11 +637,15 @@ def lip_edge_shards(
     pose, and each point in the middle NOTCH_SPAN of the mouth's width scored by :func:`chord_offsets`
     over NOTCH_WINDOW IOD. A smooth edge scores its sagitta (<= 0.004 IOD away from the corners), a notch
     narrower than the window its depth, an edge that doubles back on itself (a slit, an island of faces,
-    a flap) up to NOTCH_WINDOW. None: the mouth has no free edge (lips joined, or a closed mouth bag)."""
+    a flap) up to NOTCH_WINDOW. A texture seam is no edge (:func:`seam_twins`). None: the mouth has no free edge
+    (lips joined, or a closed mouth bag)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
     if skip_vertices:
         t = t[(t < len(v0) - skip_vertices).all(axis=1)]
+    # A texture seam's two sides are one surface: unjoined, a UV island's edge along the inner lips (a Character
+    # Creator head's) was scored as a free lip edge doubling back (0.016-0.021 IOD: a notch warning on clean lips).
+    t = seam_twins(rig, poses)[t]
     fr = face_frame(v0, landmarks)
     cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
     mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))

@@ -341,3 +341,32 @@ def test_texture_seam_twins_shade_as_one_surface_and_a_lip_split_keeps_its_line(
     folded[rr] = folded[rr] @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])  # about the middle column (x = z = 0)
     with _sheet_renderer(HeadMesh(vertices=folded, triangles=split_t, name="fold"), parted=folded) as r:
         assert angles(r.normals(folded)).min() > SEAM_SMOOTH_ANGLE
+
+
+def test_a_cutout_textures_mip_levels_keep_thin_strands_covered() -> None:
+    """An eyelash card's comb (strands 3 texels wide every 10, opaque, on transparent white; 0.3 covered): a plain
+    average (what build_mipmaps gives) leaves no texel at the 0.5 cut-off from the 8-texel level on, every strand
+    gone at a distance; the levels keep some of the comb, as near the full texture's share as the level allows,
+    in the strands' colour (no white from the gaps)."""
+    from PIL import Image
+
+    from clients.render.renderer import cutout_levels
+
+    rgba = np.zeros((64, 240, 4), np.uint8)
+    rgba[..., :3] = 255
+    for x0 in range(0, 240, 10):
+        rgba[:, x0 : x0 + 3] = (30, 20, 10, 255)
+    share = float((rgba[..., 3] >= 128).mean())
+    levels = cutout_levels(rgba, 0.5)
+    assert [lv.shape[:2] for lv in levels][:3] == [(32, 120), (16, 60), (8, 30)] and levels[-1].shape[:2] == (1, 1)
+    alpha = Image.fromarray(rgba[..., 3].astype(np.float32) / 255, "F")
+    for k, lv in enumerate(levels[:4], start=1):
+        plain = np.asarray(alpha.resize((240 >> k, 64 >> k), Image.Resampling.BOX)) >= 0.5
+        covered = lv[..., 3] >= 128
+        assert covered.mean() > 0 and abs(covered.mean() - share) <= 0.3 + 1e-9
+        if k >= 3:
+            assert not plain.any()
+        assert (lv[covered][:, :3].astype(int) <= (30, 20, 10)).all()
+    opaque = np.full((16, 16, 4), 200, np.uint8)
+    opaque[..., 3] = 255
+    assert all((lv[..., 3] == 255).all() for lv in cutout_levels(opaque, 0.5))

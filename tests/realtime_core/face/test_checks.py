@@ -401,6 +401,36 @@ def test_lip_edge_notch_flags_an_island_in_the_opening() -> None:
     assert got > LIP_EDGE_NOTCH_LIMIT
 
 
+def test_lip_edge_notch_joins_a_texture_seam_across_the_lip() -> None:
+    """A UV island on the upper lip (its faces on copies of their vertices, which move with them: a Character
+    Creator head's inner lips) is one surface with the rest: its edges are no free lip edge. Unjoined, the island's
+    border inside the lips' band scored as an edge doubling back (0.035 IOD, over the limit) on a smooth opening."""
+    from realtime_core.face.checks import LIP_EDGE_NOTCH_LIMIT, lip_edge_notch, seam_twins
+
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0))
+    plain, island = _Lips(0.0), _Lips(0.0)
+    n = plain.COLS
+    for rig in (plain, island):
+        rig.neutral[n : 2 * n, 1] = 0.04  # the upper lip's first row of faces inside the lips' band
+    t = island.triangles
+    faces = [i for i, f in enumerate(t) if (f < 2 * n).all() and (f % n >= 8).all() and (f % n <= 16).all()]
+    used = np.unique(t[faces])
+    copy = np.full(len(island.neutral), -1)
+    copy[used] = len(island.neutral) + np.arange(len(used))
+    island.neutral = np.vstack([island.neutral, island.neutral[used]])
+    t[faces] = copy[t[faces]]
+    twins = seam_twins(island, poses)
+    assert (twins[copy[used]] == used).all() and (twins[: len(used)] == np.arange(len(used))).all()
+    # The lip cut's copies (the lower strip's first row) coincide at rest but part: not twins; at the corners, where
+    # the opening drops nothing, they stay together and are.
+    cut = seam_twins(plain, poses)[3 * n : 4 * n]
+    assert (cut[1:-1] == np.arange(3 * n + 1, 4 * n - 1)).all() and (cut[[0, -1]] == [0, n - 1]).all()
+    want = lip_edge_notch(plain, plain.landmarks(), poses=poses)
+    got = lip_edge_notch(island, island.landmarks(), poses=poses)
+    assert want is not None and got is not None
+    assert got == pytest.approx(want, abs=1e-9) and got < LIP_EDGE_NOTCH_LIMIT
+
+
 def test_lip_edge_notch_is_none_for_lips_without_a_free_edge() -> None:
     from realtime_core.face.checks import lip_edge_notch
 
