@@ -344,6 +344,12 @@ def with_dark_mouth_inside(
         ax, ay = 0.5 * abs(float(wl[0] - wr[0])), max(0.5 * abs(float(wu[1] - wd[1])), 1e-9 * iod)
         r = ((w[bag, 0] - cx) / ax) ** 2 + ((w[bag, 1] - cy) / ay) ** 2
         bag = bag[r <= INSIDE_OPENING**2]
+    textured = mesh.texture is not None
+    if textured:
+        # A texture paints the skin, the bag included, as its author meant (a scan's inner lip walls): only the teeth,
+        # tongue and gums are darkened, by vertex colours the texture is multiplied by (glTF's COLOR_0 rule; the
+        # renderer, the browser and exports apply it). Lit like the face they glowed white at the corners.
+        bag = bag[:0]
     inside = np.r_[bag, np.flatnonzero(inner)]
     if not len(inside):
         return mesh
@@ -356,11 +362,8 @@ def with_dark_mouth_inside(
         line = lip_contact_vertices(v[:n0], opening, frame, mouth_centre=centre, candidates=skin, spacing=0.01)
     lips = float(np.median(q[line, 2])) if len(line) else middle
     depth = (lips - q[inside, 2]) / iod
-    colors = (
-        np.array(mesh.colors, dtype=np.float32)
-        if mesh.colors is not None
-        else np.tile(np.asarray(SKIN_COLOR, dtype=np.float32), (n0, 1))
-    )
+    blank = np.ones(3, dtype=np.float32) if textured else np.asarray(SKIN_COLOR, dtype=np.float32)
+    colors = np.array(mesh.colors, dtype=np.float32) if mesh.colors is not None else np.tile(blank, (n0, 1))
     bright = colors.max(axis=1)
     deep = depth >= SHADED_DEPTH
     if deep.any() and float(bright[inside[deep]].mean()) < SHADED * float(np.median(bright)):
@@ -394,7 +397,7 @@ def with_mouth_cavity(
     rig, mesh = head.rig, head.mesh
     inner = has_inner_mouth(mesh)
     pts = landmark_points or rig.meta.get("landmarks")
-    if not pts and inner and mesh.texture is None and landmark_finder is not None:
+    if not pts and inner and landmark_finder is not None:
         try:
             pts = dict(landmark_finder(mesh))
         except LandmarkError:
@@ -421,8 +424,6 @@ def with_mouth_cavity(
                 for k, d in mesh.targets.items()
             }
         head = Head(new_rig, replace(new_mesh, targets=targets))
-    if head.mesh.texture is not None:
-        return head
     rest = np.asarray(head.rig.neutral, dtype=np.float64)
     wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
     cavity = int(head.rig.meta.get("mouth_cavity", 0) or 0)

@@ -1873,14 +1873,14 @@ def rig_head(
         rig, out_mesh = add_mouth_cavity(
             rig, out_mesh, frame, ends["corner_left"], ends["corner_right"], shape=MASK_CAVITY
         )
-    if out_mesh.texture is None:
-        # No texture: unless the file's colours paint the inside, the inner lip walls and the mouth bag would have
-        # the skin's (or the material's one) colour; shade them dark.
-        cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
-        wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
-        out_mesh = with_dark_mouth_inside(
-            out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide, inside=inside
-        )
+    # Unless the file's colours paint the inside, the inner lip walls and the mouth bag would have the skin's (or the
+    # material's one) colour, and teeth and tongue would be lit as the face: shade them dark (a textured head: its
+    # teeth, tongue and gums only, with_dark_mouth_inside).
+    cavity = int(rig.meta.get("mouth_cavity", 0) or 0)
+    wide = rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
+    out_mesh = with_dark_mouth_inside(
+        out_mesh, np.asarray(rig.neutral), frame, snap, skip=cavity, wide=wide, inside=inside
+    )
     return rig, out_mesh
 
 

@@ -74,7 +74,7 @@ in vec3 v_light;
 in vec3 v_spec;
 out vec4 f_color;
 void main() {
-    vec4 texel = use_tex ? texture(tex, v_uv) : vec4(v_color, 1.0);
+    vec4 texel = use_tex ? texture(tex, v_uv) * vec4(v_color, 1.0) : vec4(v_color, 1.0);
     // A see-through material's texels (eyelashes, a cornea; assets.heads.mesh.CUTOUT_ALPHA): not drawn.
     if (texel.a < cutout) discard;
     vec3 base = texel.rgb;
@@ -171,10 +171,14 @@ class HeadRenderer:
         self._seams = None if mesh.part is None else part_seams(v, mesh.part)  # found once, at rest
         self._owner = None if parted is None else _seam_owner(v, t, parted, tolerance=1e-6 * size)
         normals = self.normals(v)
+        textured = mesh.texture is not None and mesh.uvs is not None
+        # A textured head's colours multiply its texture (glTF's COLOR_0; a textured head's teeth shaded by their
+        # depth in the mouth, assets.heads.cavity.with_dark_mouth_inside): white when it has none.
+        blank = (1.0, 1.0, 1.0) if textured else SKIN
         colors = (
             np.asarray(mesh.colors, dtype=np.float32)
             if mesh.colors is not None
-            else np.tile(np.asarray(SKIN, dtype=np.float32), (self.n, 1))
+            else np.tile(np.asarray(blank, dtype=np.float32), (self.n, 1))
         )
         uvs = np.asarray(mesh.uvs, dtype=np.float32) if mesh.uvs is not None else np.zeros((self.n, 2), np.float32)
         self.prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)

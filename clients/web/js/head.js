@@ -118,10 +118,13 @@ export class HeadView {
       tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
       tex.colorSpace = THREE.SRGBColorSpace;
       material.map = tex;
+      // The texture alone paints the head (the skin colour above tinted it, darker and redder than the offline
+      // renderer's); colours with a texture multiply it (glTF's COLOR_0): a textured head's teeth darkened by depth.
+      material.color = new THREE.Color(1, 1, 1);
+      material.vertexColors = Boolean(m.colors);
       // A see-through material's texels (eyelashes, a cornea) come with alpha 0 (assets.heads.mesh.CUTOUT_ALPHA);
       // an opaque head's texture has no alpha channel, so the test cuts nothing there.
       material.alphaTest = 0.5;
-      material.vertexColors = false;
     }
     // One mesh drawn on both sides, back faces painted dark in the fragment shader: a second mesh
     // for the back faces would run the vertex work (the morph targets' loop) twice.

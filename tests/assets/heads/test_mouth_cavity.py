@@ -476,3 +476,49 @@ def test_an_own_target_head_without_landmarks_is_located_by_the_finder_and_keeps
     assert found.rig.meta["landmarks"] == points
     assert np.allclose(found.mesh.colors, with_mouth_cavity(head).mesh.colors, atol=1e-6)
     assert (np.asarray(found.mesh.colors) < colors - 1e-3).any(axis=1).sum() > 300
+
+
+def test_a_textured_heads_teeth_are_darkened_by_vertex_colours_that_multiply_its_texture(tmp_path):
+    """The built-in head given a white texture (a Character Creator export's kind): its skin keeps the texture as it
+    is (colour multiplier 1, the bag included: a texture paints it as its author meant), its teeth and tongue
+    get multipliers under 1 growing darker with depth behind the lips, and the renderer draws texture x colour:
+    a deep molar's pixel is darker than the same mesh drawn without the colours. Before, a textured head's teeth
+    were lit as the face: white wedges at the mouth corners."""
+    import io
+    from dataclasses import replace
+
+    from PIL import Image
+
+    from assets.heads.builtin import load_builtin_head
+    from assets.heads.cavity import inner_mouth_vertices, with_dark_mouth_inside
+    from clients.render.renderer import HeadRenderer, RenderConfig
+
+    b = load_builtin_head()
+    v = np.asarray(b.mesh.vertices, dtype=np.float64)
+    fr = face_frame(v, mouth_landmarks(b.landmarks))
+    buf = io.BytesIO()
+    Image.new("RGB", (8, 8), (240, 240, 240)).save(buf, "PNG")
+    uv = np.full((len(v), 2), 0.5)
+    names = ("skin", "eyes", "upper teeth", "lower teeth", "tongue")  # load_builtin_head's part labels
+    part = np.asarray(b.part, dtype=np.int16)
+    mesh = replace(b.mesh, colors=None, uvs=uv, texture=buf.getvalue(), part=part, part_names=names)
+    out = with_dark_mouth_inside(mesh, v, fr, b.landmarks)
+    assert out.colors is not None and out.texture == mesh.texture
+    inner = inner_mouth_vertices(mesh)
+    assert inner.sum() > 50
+    np.testing.assert_array_equal(out.colors[~inner], 1.0)
+    q, contact = _contact(v, fr, b.landmarks)
+    depth = contact[inner] - q[inner, 2]
+    shade = out.colors[inner, 0]
+    order = np.argsort(depth)
+    quarter = len(order) // 4
+    assert shade.min() < 0.5 and shade[order[-quarter:]].mean() < 0.8 * shade[order[:quarter]].mean()
+    deepest = np.flatnonzero(inner)[np.argmin(shade)]
+    # Drawn through the mouth of a head with no lips in front: the deepest tooth vertex's pixel, with and without.
+    centre = v[deepest]
+    seen = []
+    for m in (out, mesh):
+        front = replace(m, triangles=m.triangles[inner[m.triangles].all(axis=1)])
+        with HeadRenderer(front, centre=centre, axes=fr.axes, size=0.05 * fr.iod, config=RenderConfig(64, 64)) as r:
+            seen.append(r.render()[32, 32].astype(int))
+    assert seen[0].sum() < 0.7 * seen[1].sum()
