@@ -741,13 +741,17 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
     """:func:`realtime_core.face.checks.check_rig` for a head, with :func:`head_check_inputs`; ``poses`` (None:
     the checks' :data:`EXTREME_POSES`; flips under expressions are reported at check_rig's default poses).
     Returns a RigReport."""
+    import numpy as np
+
     from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
 
     landmarks, inputs = head_check_inputs(head, landmark_finder=landmark_finder)
+    layer = head.rig.meta.get("layer_vertices")  # a layer on the skin (assets/heads/layers.py): skin, not a cover
     return check_rig(
         head.rig,
         landmarks,
         **inputs,
+        layer=None if not isinstance(layer, list) else np.asarray(layer, dtype=np.int64),
         limits=limits or RigCheckLimits(),
         poses=EXTREME_POSES if poses is None else poses,
         cavity_vertices=int(head.rig.meta.get("mouth_cavity", 0) or 0),
