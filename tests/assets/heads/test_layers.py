@@ -5,11 +5,13 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 from trimesh.triangles import closest_point, points_to_barycentric
 
 from assets.heads.layers import LAYER_REACH, layer_vertices, with_layers
 from assets.heads.rigging import cut_mouth
+from realtime_core.face.rig import with_rest_pose
 from tests.grids import grid_triangles
 
 NX, NY, DX, DY = 13, 9, 0.1, 0.05  # IOD 1
@@ -64,11 +66,16 @@ def _rig(builtin_rig_file, v: np.ndarray, t: np.ndarray, lower: np.ndarray, laye
     )
 
 
-def test_a_layer_moves_as_the_skin_beneath_it_on_its_own_lips_side(builtin_rig_file):
+@pytest.mark.parametrize("rest", [0.0, 0.1])
+def test_a_layer_moves_as_the_skin_beneath_it_on_its_own_lips_side(builtin_rig_file, rest):
+    """``rest``: the rig rests at mouth_open ``rest`` (``with_rest_pose``, lips modelled apart): the layer rests with
+    its skin there too, so at every pose it lies where the skin beneath it does."""
     v, t, copies, originals, lm = _lips()
     lower = (v[:, 1] < -1e-9) | np.isin(np.arange(len(v)), copies)
     layer = _layer_points()
     rig = _rig(builtin_rig_file, v, t, lower, layer)
+    if rest:
+        rig = with_rest_pose(rig, np.array([0.0, 0.0, rest, 0.0]))
     n = len(v)
     ids = n + np.arange(len(layer))
     part = np.r_[np.zeros(n, dtype=np.int64), np.ones(len(layer), dtype=np.int64)]
