@@ -122,3 +122,5 @@ def test_a_part_on_the_skin_is_a_layer_and_one_apart_from_it_is_not():
     assert got[n : n + 20].all() and not got[:n].any() and not got[n + 20 :].any()
     named = layer_vertices(verts, tris, part, ("face", "eyelashes", "thing"), 0, 1.0)  # "lash": an eye part
     assert not named.any()
+    brows = layer_vertices(verts, tris, part, ("face", "Eyebrows", "thing"), 0, 1.0)  # brows are skin: a layer
+    np.testing.assert_array_equal(brows, got)
