@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from assets.heads.dense import LOWER, NO_SIDE, SIDE_REACH, UPPER, carried_rows, lip_sides
+from assets.heads.mesh import HeadMesh
 from assets.heads.parts import _mouth_local, part_kind, skin_parts
 from realtime_core.face import Rig
 from realtime_core.face.rig import modelled_rest
@@ -174,3 +175,31 @@ def with_layers(
         neutral[layer] = (rest[layer] + carry @ offset).astype(np.float32)
     meta = {**rig.meta, "layer_vertices": [int(i) for i in layer]}
     return replace(rig, neutral=neutral, moving=moving, matrix=matrix, contact_spread=spread, meta=meta)
+
+
+def without_layers(mesh: HeadMesh, nose_tip: int, iod: float) -> HeadMesh:
+    """``mesh`` without its layers (:func:`layer_vertices`; ``nose_tip``: a vertex of the face's part, ``iod`` head
+    units per IOD): the mesh a dense scan's decimated copy is made from (:func:`assets.heads.dense.proxy_mesh`). Each
+    proxy vertex takes the part of the nearest dense vertex, and a shell 0.02 IOD over the skin, decimated, had most of
+    its vertices nearest the skin's (the once-subdivided Lee Perry-Smith with a beard: 32 of a 79-vertex piece's): the
+    copy's rig then put control points on it and failed (3 flips, stretch 5.90). The dense rig moves the layer with its
+    own skin (:func:`with_layers`). ``mesh`` itself when it has none."""
+    if mesh.part is None:
+        return mesh
+    p = np.asarray(mesh.part, dtype=np.int64)
+    layer = layer_vertices(mesh.vertices, mesh.triangles, p, mesh.part_names, int(p[nose_tip]), iod)
+    if not layer.any():
+        return mesh
+    keep = ~layer
+    remap = np.cumsum(keep) - 1
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    t = remap[t[keep[t].all(axis=1)]]
+    return replace(
+        mesh,
+        vertices=mesh.vertices[keep],
+        triangles=t.astype(np.asarray(mesh.triangles).dtype),
+        uvs=None if mesh.uvs is None else mesh.uvs[keep],
+        colors=None if mesh.colors is None else mesh.colors[keep],
+        targets=None if mesh.targets is None else {k: d[keep] for k, d in mesh.targets.items()},
+        part=mesh.part[keep],
+    )

@@ -9,7 +9,8 @@ import pytest
 import scipy.sparse as sp
 from trimesh.triangles import closest_point, points_to_barycentric
 
-from assets.heads.layers import LAYER_REACH, layer_vertices, with_layers
+from assets.heads.layers import LAYER_REACH, layer_vertices, with_layers, without_layers
+from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import cut_mouth
 from realtime_core.face.rig import with_rest_pose
 from tests.grids import grid_triangles
@@ -124,3 +125,9 @@ def test_a_part_on_the_skin_is_a_layer_and_one_apart_from_it_is_not():
     assert not named.any()
     brows = layer_vertices(verts, tris, part, ("face", "Eyebrows", "thing"), 0, 1.0)  # brows are skin: a layer
     np.testing.assert_array_equal(brows, got)
+    # A dense scan's decimated copy is made without its layers (their decimated vertices took the skin's part).
+    mesh = HeadMesh(vertices=verts, triangles=tris, part=part.astype(np.int16), part_names=("face", "beard", "thing"))
+    bare = without_layers(mesh, 0, 1.0)
+    np.testing.assert_array_equal(bare.vertices, verts[~got])
+    assert (np.bincount(bare.part) == [n, 0, 20]).all() and len(bare.triangles) == len(tris) - 1
+    np.testing.assert_array_equal(bare.vertices[bare.triangles[-1]], away[:3])
