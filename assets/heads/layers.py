@@ -11,12 +11,14 @@ lids are not), no rule of :func:`assets.heads.parts.rigid_inner_pieces` took it 
 shape) and LAYER_SHARE of its vertices lie within LAYER_REACH of the skin's surface. Chosen by that rule, never by
 its name. Each of its vertices then moves as its nearest point on the rigged skin (barycentric rows of that face's
 corners, :func:`assets.heads.dense.carried_rows`, as a dense scan's vertices take its proxy's), the lip-contact push
-included: above the mouth line from the upper lip's side of the cut, below from the lower's (the cut's copies are
-the lower side's, :func:`assets.heads.dense.lip_sides`), so a layer over closed lips parts with them.
+included, from its own lip's side of the cut (:func:`layer_sides`: near the mouth line above it the upper lip's,
+below the lower's; the cut's copies are the lower side's, :func:`assets.heads.dense.lip_sides`), so a layer over
+closed lips parts with them.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import replace
 
@@ -82,27 +84,39 @@ def layer_vertices(
     return out
 
 
+LINE_BAND = 0.05
+"""IOD: a layer vertex this near the mouth line takes the side of the line it lies on (:func:`layer_sides`); farther,
+the side of the skin beneath it."""
+
+
 def layer_sides(
     vertices: np.ndarray,
     layer: np.ndarray,
-    sided: np.ndarray,
+    foot: np.ndarray,
     originals: np.ndarray,
     landmarks: Mapping[str, int],
     axes: np.ndarray,
     iod: float,
 ) -> np.ndarray:
-    """(k,) int8: UPPER, LOWER or NO_SIDE for each vertex ``layer`` (k,) of ``vertices`` (n, 3): a vertex whose nearest
-    skin face (``nearest_faces`` (k, 3) its corners) has a corner on a lip's side (``skin_sides`` (n,)) takes the upper
-    lip's side above the mouth line and the lower's below; else no side. The mouth line: the cut's upper side
-    ``originals`` between the corners (their heights along the face's up axis, ``axes`` (3, 3), about the corners'
-    midpoint), level with the corners beyond them."""
+    """(k,) int8: UPPER, LOWER or NO_SIDE for each vertex ``layer`` (k,) of ``vertices`` (n, 3), whose nearest skin
+    point lies on ``foot`` (k,): the lip side (:func:`assets.heads.dense.lip_sides`) of that point's heaviest corner.
+    Within LINE_BAND of the mouth line, a vertex over a lip's side takes the upper lip's side above the line and the
+    lower's below: closed lips touch, and a vertex just below the contact may lie nearest the upper lip's overhanging
+    underside. Farther, it keeps its foot's side: beside a corner the lower lip's side of the cut reaches above the
+    line (the once-subdivided Lee Perry-Smith: 0.07-0.16 IOD above it by the left corner), and sent to the upper lip's
+    faces there, the beard's faces flipped. The mouth line: the cut's upper side ``originals`` between the corners
+    (their heights along the face's up axis, ``axes`` (3, 3), about the corners' midpoint), level with the corners
+    beyond them."""
     local = _mouth_local(np.asarray(vertices, dtype=np.float64), landmarks, axes, iod)
     line_x = np.r_[local[np.asarray(originals, dtype=np.int64), 0], local[[landmarks["corner_left"]], 0]]
     line_x = np.r_[line_x, local[[landmarks["corner_right"]], 0]]
     line_y = np.r_[local[np.asarray(originals, dtype=np.int64), 1], 0.0, 0.0]
     order = np.argsort(line_x)
     height = local[layer, 1] - np.interp(local[layer, 0], line_x[order], line_y[order])
-    return np.where(np.asarray(sided, dtype=bool), np.where(height >= 0.0, UPPER, LOWER), NO_SIDE).astype(np.int8)
+    by_line = np.where(height >= 0.0, UPPER, LOWER)
+    foot = np.asarray(foot, dtype=np.int8)
+    side = np.where((np.abs(height) < LINE_BAND) | (foot == NO_SIDE), by_line, foot)
+    return np.where(foot != NO_SIDE, side, NO_SIDE).astype(np.int8)
 
 
 def with_layers(
@@ -140,9 +154,23 @@ def with_layers(
         s = np.asarray(seam, dtype=np.int64)
         sides = lip_sides(rest, st, s[:, 1], s[:, 0], SIDE_REACH * iod)
         first = carried_rows(rest, st, sides, rest[layer], layer_side)
-        sided = first @ (sides != NO_SIDE).astype(np.float64) > 0
-        layer_side = layer_sides(rest, layer, sided, s[:, 0], landmarks, axes, iod)
-    b = carried_rows(rest, st, sides, rest[layer], layer_side)  # (k, n)
+        heaviest = np.array(
+            [first.indices[i + int(np.argmax(first.data[i:j]))] for i, j in itertools.pairwise(first.indptr)]
+        )
+        layer_side = layer_sides(rest, layer, sides[heaviest], s[:, 0], landmarks, axes, iod)
+    # Each side's vertices from the faces touching no vertex of the other side. carried_rows' own rule (a face with a
+    # corner on the vertex's side) sent a layer vertex over skin whose faces have no sided corner (beyond SIDE_REACH)
+    # to a face 0.19 IOD away: the once-subdivided Lee Perry-Smith's beard, its faces flipped at /a/.
+    b = sp.csr_matrix((len(layer), n))
+    for side in (NO_SIDE, UPPER, LOWER):
+        who = np.flatnonzero(layer_side == side)
+        if not len(who):
+            continue
+        own = np.zeros(n, dtype=np.int8) if side == NO_SIDE else np.where(sides == NO_SIDE, side, sides).astype(np.int8)
+        rows = carried_rows(rest, st, own, rest[layer[who]], np.full(len(who), side, dtype=np.int8))
+        put = sp.csr_matrix((np.ones(len(who)), (who, np.arange(len(who)))), shape=(len(layer), len(who)))
+        b = b + put @ rows  # (k, n)
+    b = b.tocsr()
     row = -np.ones(n, dtype=np.int64)
     row[rig.moving] = np.arange(len(rig.moving))
     pick = sp.csr_matrix(
