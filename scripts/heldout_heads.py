@@ -30,6 +30,8 @@ into the repository:
 - (branch i12cc) *a Character Creator 4 export*: the built-in head with CC4's target names and split targets, eyes,
   cornea and eye-occlusion shells, eyelash cards, a WebP skin texture on quantized UVs, teeth and tongue, with and
   without its targets (:func:`character_creator_glb`). docs/animation.md, "A Character Creator 4 export".
+- (branch i12layer) *a layer on the skin*: Lee Perry-Smith with a beard shell as a separate file
+  (:func:`beard_lps`; docs/animation.md, "A layer on the skin").
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -865,6 +867,43 @@ def character_creator_glb(dst: Path, *, with_targets: bool) -> Path:
     return dst
 
 
+BEARD_OFF = 0.02  # IOD: the beard shell this far out along the skin's normals
+BEARD_BOX = (0.65, 0.12, 0.15, 0.45)  # IOD: half its width; below the nose tip by; below the chin by; how far back
+BEARD_HOLE = (0.5, 0.13)  # IOD: the half-axes (sideways, up) of the elliptic hole round the lips
+
+
+def beard_lps(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
+    """Lee Perry-Smith with a beard shell as a separate part (``--head-part beard.obj``, issue 12's layer on the skin):
+    its faces round the mouth, chin and upper lip (within BEARD_BOX of the upper inner-lip point, in the face's frame)
+    less an elliptic hole round the lips (BEARD_HOLE), pushed out BEARD_OFF IOD along the vertex normals: 496
+    vertices, 759 faces, an OBJ without texture beside the shared glb."""
+    import trimesh
+
+    from assets.heads.mesh import load_mesh
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    src = data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb"
+    m = load_mesh(src)
+    lm = json.loads((REPO / "assets" / "heads" / "landmarks" / "lee_perry_smith.json").read_text())["landmarks"]
+    v, t = m.vertices.astype(np.float64), np.asarray(m.triangles)
+    fr = face_frame(v, mouth_landmarks(lm))
+    x, y, z = ((v - v[lm["upper_inner"]]) @ fr.axes.T / fr.iod).T
+    width, below_nose, below_chin, back = BEARD_BOX
+    inside = (np.abs(x) < width) & (y < y[lm["nose_tip"]] - below_nose) & (y > y[lm["chin"]] - below_chin) & (z > -back)
+    hole = (x / BEARD_HOLE[0]) ** 2 + (y / BEARD_HOLE[1]) ** 2 < 1.0
+    sel = inside & ~hole
+    faces = t[sel[t].all(axis=1)]
+    used = np.unique(faces)
+    remap = -np.ones(len(v), dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    normals = trimesh.Trimesh(v, t, process=False).vertex_normals
+    d = out / "beard"
+    d.mkdir(exist_ok=True)
+    beard = write_obj(d / "beard.obj", v[used] + BEARD_OFF * fr.iod * normals[used], remap[faces], name="beard")
+    return {"Lee Perry-Smith with a beard shell (--head-part)": (src, {"parts": (str(beard),)})}
+
+
 def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
     """name -> (head file, resolve options): the held-out heads (not in the test set); ``dense``: also the
     subdivided scans (70,736 and 282,944 triangles: the first rigs in about 11 minutes)."""
@@ -917,6 +956,7 @@ def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Pat
     heads.update(turned_lps(out, data))
     heads["Lee Perry-Smith, lips parted at rest, glb"] = (parted_lps(out, data), {})
     heads["Lee Perry-Smith, lips parted at rest, joined at the corners, glb"] = (parted_joined_lps(out, data), {})
+    heads.update(beard_lps(out, data))
     for times in (1, 2) if dense else ():
         heads[f"Lee Perry-Smith, subdivided {times}x, glb"] = (subdivided_lps(out, data, times), {})
     return heads

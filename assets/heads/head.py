@@ -572,7 +572,16 @@ def rig_checked(
         if points is not None:
             mouth = np.mean([points[k] for k in ("corner_left", "corner_right", "upper_lip", "lower_lip")], axis=0)
             keep = MOUTH_KEEP * float(np.linalg.norm(points["eye_outer_left"] - points["eye_outer_right"]))
-        proxy = proxy_mesh(mesh, mouth=mouth, keep=keep)
+        base = mesh
+        if points is not None and mesh.part is not None:
+            # Its layers (a beard shell) left out of the copy: the dense rig moves them with its skin (layers.py).
+            from assets.heads.layers import without_layers
+            from assets.heads.rigging import mouth_landmarks
+            from realtime_core.face import face_frame
+
+            near = {k: int(np.argmin(np.linalg.norm(mesh.vertices - p, axis=1))) for k, p in points.items()}
+            base = without_layers(mesh, near["nose_tip"], face_frame(mesh.vertices, mouth_landmarks(near)).iod)
+        proxy = proxy_mesh(base, mouth=mouth, keep=keep)
         say(
             f"{len(mesh.triangles):,} triangles (over {DENSE_TRIANGLES:,}): rigging a "
             f"{len(proxy.triangles):,}-triangle copy that keeps the mouth's own faces, then carrying its rig over"
@@ -741,13 +750,17 @@ def head_checks(head: Head, *, limits=None, landmark_finder: LandmarkFinder | No
     """:func:`realtime_core.face.checks.check_rig` for a head, with :func:`head_check_inputs`; ``poses`` (None:
     the checks' :data:`EXTREME_POSES`; flips under expressions are reported at check_rig's default poses).
     Returns a RigReport."""
+    import numpy as np
+
     from realtime_core.face.checks import EXTREME_POSES, RigCheckLimits, check_rig
 
     landmarks, inputs = head_check_inputs(head, landmark_finder=landmark_finder)
+    layer = head.rig.meta.get("layer_vertices")  # a layer on the skin (assets/heads/layers.py): skin, not a cover
     return check_rig(
         head.rig,
         landmarks,
         **inputs,
+        layer=None if not isinstance(layer, list) else np.asarray(layer, dtype=np.int64),
         limits=limits or RigCheckLimits(),
         poses=EXTREME_POSES if poses is None else poses,
         cavity_vertices=int(head.rig.meta.get("mouth_cavity", 0) or 0),

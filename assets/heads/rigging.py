@@ -43,6 +43,7 @@ from assets.heads.cavity import (
 )
 from assets.heads.dense import seam_of
 from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
+from assets.heads.layers import layer_vertices, with_layers
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh, vertex_normals
 from assets.heads.parts import (
     inner_mouth_weights,
@@ -1423,11 +1424,25 @@ def rig_head(
             meta["winding_reversed"] = True
         # Teeth or a tongue in unnamed separate parts ("Object003"), found by shape: a mouth with teeth, as named ones
         # make it (has_inner_mouth): no lip walls dropped, no cavity added, the inside shaded as a modelled mouth's.
+        # A separate part lying on the skin (a beard shell, brows) is a layer (assets/heads/layers.py), never a teeth
+        # row: a beard's pieces beside the mouth corners, behind the lips' front, low and wide, were taken for teeth
+        # rows, and the head for one with a modelled mouth.
         inside = np.zeros(len(mesh.vertices), dtype=bool)
+        layer = np.zeros(len(mesh.vertices), dtype=bool)
         if mesh.part is not None and mesh.name != "builtin":
             found = rigid_inner_pieces(
                 mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod, part_names=mesh.part_names
             )
+            layer = layer_vertices(
+                mesh.vertices,
+                mesh.triangles,
+                mesh.part,
+                mesh.part_names,
+                int(mesh.part[snap["nose_tip"]]),
+                frame.iod,
+                taken=found == "eye",
+            )
+            found[layer] = ""
             inside = unnamed_inner_parts(mesh, snap, found)
         modelled = has_inner_mouth(mesh) or bool(inside.any())
         # Distinct inner lips joined by a strip of triangles (the MediaPipe face): open the strip
@@ -1614,6 +1629,10 @@ def rig_head(
         own = mesh.name == "builtin"
         cal = calibrate_mouth(placed if own else simple.model, slm, groups=simple.groups)
         allowed = None if mesh.name != "builtin" or head is None else np.asarray(head.part == 0)
+        if layer.any():
+            # A layer lies in front of the skin: the simple face's control points, placed on the nearest surface,
+            # went onto a beard shell (12 dropped, the skin's field 0.09 IOD off Lee Perry-Smith's alone at /a/).
+            allowed = ~np.r_[layer, np.zeros(len(v) - len(layer), dtype=bool)]
         # A knife-cut mouth's lower edge lying on the lower lip as another layer moves with it (lip_edge_glue).
         seam = None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies])
         glue = lip_edge_glue(v, t, seam, frame) if coarse and seam is not None else {}
@@ -1836,6 +1855,7 @@ def rig_head(
         pieces = rigid_inner_pieces(
             mesh.vertices, mesh.triangles, mesh.part, snap, frame.axes, frame.iod, part_names=mesh.part_names
         )
+        pieces[layer] = ""
     rig = with_rigid_parts(rig, out_mesh, snap, pieces=pieces)
     # A scan's inner-mouth pieces (pieces of the face's part behind the corners): with the jaw below the
     # mouth line, so none passes through the chin at a wide /a/ (judged on the mesh as it came; the cut's
@@ -1862,6 +1882,19 @@ def rig_head(
         seams = part_seam_pairs(v, part, int(part[snap["nose_tip"]]), mesh.part_names, skip=cut_copies)
         if len(seams):
             rig = with_seams_joined(rig, seams)
+    if layer.any() and part is not None:
+        # The layer moves as the skin beneath it, each lip's side with its own lip (assets/heads/layers.py). Heads
+        # without parts never come here.
+        rig = with_layers(
+            rig,
+            np.flatnonzero(layer),
+            part,
+            mesh.part_names,
+            snap,
+            frame.axes,
+            frame.iod,
+            seam=None if cut_copies is None else np.column_stack([origin[cut_copies], cut_copies]),
+        )
     if not modelled and (
         cut_copies is not None or parted_hole or opens_onto_nothing(out_mesh.vertices, out_mesh.triangles, frame, snap)
     ):

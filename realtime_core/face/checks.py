@@ -982,6 +982,7 @@ def check_rig(
     cavity_vertices: int = 0,
     expression_poses: tuple[tuple[float, ...], ...] = EXPRESSION_POSES,
     joined_pairs: np.ndarray | None = None,
+    layer: np.ndarray | None = None,
 ) -> RigReport:
     """Measure ``rig`` at ``poses`` and the closure pose. lip_pairs: (k, 2) head vertex indices
     (upper, lower) that touch when the mouth is closed (default: the inner-lip landmarks);
@@ -993,7 +994,8 @@ def check_rig(
     expression_poses: speech under an expression (:data:`EXPRESSION_POSES`), where flipped triangles are an
     advisory figure (:attr:`RigReport.expression_flips`: a warning, not a failure; see its docstring for why);
     joined_pairs: (k, 2) vertex indices coincident at rest that must move together (:func:`seam_gap`; None: not
-    measured)."""
+    measured); layer: vertex indices of a layer lying on the skin (a beard shell moved as the skin beneath it), whose
+    faces hide none of the skin (:func:`inside_split`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     iod, up = fr.iod, fr.axes[1]
@@ -1034,7 +1036,7 @@ def check_rig(
     seam = None if joined_pairs is None else seam_gap(rig, joined_pairs, (*poses, closure), iod)
     if seam is not None and seam > limits.max_seam_gap:
         fails.append(f"the seam between the head's meshes opens by {seam:.4f} IOD (> {limits.max_seam_gap})")
-    shown = inside_shown(rig, landmarks, poses=inside_poses((*poses, closure)))
+    shown = inside_shown(rig, landmarks, poses=inside_poses((*poses, closure)), layer=layer)
     inside, inside_points, inside_pose = (None, None, ()) if shown is None else shown
     if inside is not None and inside > limits.max_inside_shown:
         fails.append(
@@ -1168,15 +1170,23 @@ class InsideSplit:
 
 
 def inside_split(
-    neutral: np.ndarray, triangles: np.ndarray, landmarks: MouthLandmarks, *, views: tuple[float, ...] = LIP_BACKS_VIEWS
+    neutral: np.ndarray,
+    triangles: np.ndarray,
+    landmarks: MouthLandmarks,
+    *,
+    views: tuple[float, ...] = LIP_BACKS_VIEWS,
+    layer: np.ndarray | None = None,
 ) -> InsideSplit | None:
     """The faces within INSIDE_REACH IOD of the mouth of a head at rest (``neutral`` (n, 3), ``triangles`` (m, 3)),
     split in each of ``views`` (degrees about the face's up axis, orthographic) into *inside*, those with another
     face at least INSIDE_COVER IOD in front of each corner and the centroid and at most INSIDE_DEPTH (a mouth bag's
     side walls behind a thin cheek, the teeth), and skin, those nothing covers, less the faces seen through the
     opening (behind the mouth corners, between them). The skin's sample points leave out the lips (:func:`lips_band`):
-    a lip rolled out at a pucker shows its inner face, as lips do, and the lips have their own figures. None: no face
-    lies in the region."""
+    a lip rolled out at a pucker shows its inner face, as lips do, and the lips have their own figures. ``layer``:
+    vertex indices of a layer on the skin (a beard shell, moved as the skin beneath it): its faces (all corners in it)
+    are skin and cover nothing, so the skin under it stays skin. Counted as a cover, a beard 0.02 IOD over Lee
+    Perry-Smith's chin made the chin's skin beyond its rim (overhung at 35 degrees) inside, and that chin, dropping
+    over the neck at /a/, "came through" by 0.20 IOD at 2 points. None: no face lies in the region."""
     v0 = np.asarray(neutral, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     fr = face_frame(v0, landmarks)
@@ -1208,7 +1218,12 @@ def inside_split(
     cent = q0.mean(axis=2)  # (V, m, 3)
     m, nu = len(tn), len(used)
     pts = np.concatenate([at_v, cent], axis=1)  # (V, u + m, 3)
-    depth = front_most(pts[..., :2].reshape(-1, 2), q0.reshape(-1, 3, 3), cell=cell).reshape(len(views), nu + m)
+    covers = q0
+    if layer is not None and len(layer):
+        on = np.zeros(len(v0), dtype=bool)
+        on[np.asarray(layer, dtype=np.int64)] = True
+        covers = q0[:, ~on[tn].all(axis=1)]
+    depth = front_most(pts[..., :2].reshape(-1, 2), covers.reshape(-1, 3, 3), cell=cell).reshape(len(views), nu + m)
     front = np.concatenate([depth[:, :nu][:, corner], depth[:, nu:, None]], axis=2)  # (V, m, 4): corners, centroid
     probe = np.concatenate([at_v[:, corner], cent[:, :, None]], axis=2)
     covered = front > probe[..., 2] + INSIDE_COVER * iod  # NaN (nothing in front): False
@@ -1247,6 +1262,7 @@ def inside_shown(
     *,
     poses: tuple[tuple[float, ...], ...],
     views: tuple[float, ...] = LIP_BACKS_VIEWS,
+    layer: np.ndarray | None = None,
 ) -> tuple[float, int, tuple[float, ...]] | None:
     """(the furthest, IOD along the view, that a face covered by the skin at rest comes in front of all the skin;
     at how many of the skin's sample points it lies more than INSIDE_SHOWN_LIMIT in front, at that pose and view;
@@ -1257,8 +1273,8 @@ def inside_shown(
     inside face lying in front of the front-most skin face under a point shows there (the renderer draws it over the
     cheek: a dark fleck where a back face comes through). The opening does not count: there the inside shows with
     nothing in front of it, and skin seen through it at rest takes no sample point. None: no face lies near the
-    mouth."""
-    split = inside_split(rig.neutral, rig.triangles, landmarks, views=views)
+    mouth. ``layer``: a layer on the skin's vertex indices (:func:`inside_split`)."""
+    split = inside_split(rig.neutral, rig.triangles, landmarks, views=views, layer=layer)
     if split is None:
         return None
     tn = np.asarray(rig.triangles, dtype=np.int64)[split.faces]
