@@ -269,36 +269,3 @@ def test_lips_parted_in_the_middle_and_joined_at_the_corners_are_cut_to_the_corn
     assert len(out.vertices) == n + cut + cavity
     report = head_checks(Head(rig, out))
     assert report.flipped_triangles == 0, report.failures
-
-
-def test_a_joined_cracks_contact_points_are_found_by_lip_and_take_the_vertices_stacked_on_them(shared_data):
-    """docs/animation.md, "The joined corners by lip": which lip a vertex belongs to is the nearer lip middle along
-    the mesh as modelled (lip_of), not a distance; a join of both lips' edge vertices is a contact point
-    (contact_points) and a vertex off the edge tied to it by a sliver (under SLIVER_TIE of the median edge, what the
-    fold repair moves as one) joins it (stacked_on_contacts). Here on the MediaPipe face's hole: the lower edge's 324
-    moved 0.002 IOD under the upper edge's 407 (touching_rim joins them), the off-edge 408 0.003 IOD behind 407; on the
-    right, an off-edge neighbour of the upper edge's 183, which touches nothing, 0.003 IOD behind it: it stays apart."""
-    from assets.heads.rigging import contact_points, lip_of, stacked_on_contacts, touching_rim
-    from realtime_core.face.checks import boundary_edges
-
-    v, t, frame = _without_membrane(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
-    v = v.copy()
-    y, z = frame.axes[1] * frame.iod, frame.axes[2] * frame.iod
-    edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
-    rim = set(np.unique(boundary_edges(t)[0]).tolist())
-    right_off = min(j for a, b in edges if 183 in (a, b) for j in (a, b) if j not in rim)
-    assert {183, 324, 407} <= rim and 408 not in rim and (407, 408) in edges and (324, 407) not in edges
-    assert (touching_rim(v, t, frame, MEDIAPIPE) == np.arange(len(v))).all()  # as modelled: the block is not reached
-    v[324] = v[407] - 0.002 * y
-    v[408] = v[407] - 0.003 * z
-    v[right_off] = v[183] - 0.003 * z
-    lower = lip_of(v, t, MEDIAPIPE)
-    assert lower[324] and not lower[407] and not lower[408] and not lower[183]
-    assert lower[MEDIAPIPE["lower_inner"]] and not lower[MEDIAPIPE["upper_inner"]]
-    weld = touching_rim(v, t, frame, MEDIAPIPE)
-    assert weld[324] == weld[407] == 324 and weld[408] == 408
-    assert contact_points(weld, lower) == [324]
-    assert contact_points(weld, np.zeros(len(v), dtype=bool)) == []  # a join within one lip is a fold, no contact
-    out = stacked_on_contacts(v, t, weld, lower)
-    assert out[408] == 324 and out[right_off] == right_off
-    assert np.count_nonzero(out != weld) == 1
