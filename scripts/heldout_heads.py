@@ -513,42 +513,6 @@ def parted_joined_lps(out: Path, data: Path) -> Path:
 _USHORT = 5123
 
 
-def _cc4_targets(b) -> dict[str, np.ndarray]:
-    """The built-in head's 52 ARKit targets (vertices (n, 3) displacements) as Character Creator 4's facial profile
-    names them: its own words for sided targets (Mouth_Up_Upper_L), ARKit's unsided mouth targets split into halves
-    (Mouth_Roll_In_Upper_L/R) or quarters (Mouth_Funnel_Up_L ... Down_R) by smooth masks that sum to one."""
-    import re
-
-    from assets.heads.rigging import mouth_landmarks
-    from realtime_core.face import face_frame
-
-    v = b.mesh.vertices.astype(np.float64)
-    fr = face_frame(v, mouth_landmarks(b.landmarks))
-    x = (v - v[b.landmarks["upper_inner"]]) @ fr.axes[0] / fr.iod
-    y = (v - 0.5 * (v[b.landmarks["upper_inner"]] + v[b.landmarks["lower_inner"]])) @ fr.axes[1] / fr.iod
-    left, up = 0.5 * (1 + np.tanh(x / 0.05)), 0.5 * (1 + np.tanh(y / 0.03))
-    sides = {"L": left, "R": 1 - left}
-    halves = {"Up": up, "Down": 1 - up}
-    words = {"mouthUpperUp": "Mouth_Up_Upper", "mouthLowerDown": "Mouth_Down_Lower", "browDown": "Brow_Drop"}
-    cc: dict[str, np.ndarray] = {}
-    for name, d in b.targets.items():
-        d = np.asarray(d, dtype=np.float64)
-        if name in ("mouthRollUpper", "mouthRollLower"):
-            for s, m in sides.items():
-                cc[f"Mouth_Roll_In_{name[9:]}_{s}"] = d * m[:, None]
-        elif name in ("mouthFunnel", "mouthPucker"):
-            for h, mh in halves.items():
-                for s, m in sides.items():
-                    cc[f"Mouth_{name[5:]}_{h}_{s}"] = d * (mh * m)[:, None]
-        else:
-            side = "L" if name.endswith("Left") else "R" if name.endswith("Right") else ""
-            stem = words.get(
-                name.removesuffix("Left").removesuffix("Right"), name.removesuffix("Left").removesuffix("Right")
-            )
-            cc["_".join(w.capitalize() for w in re.findall(r"[A-Z]?[a-z]+", stem)) + ("_" + side if side else "")] = d
-    return cc
-
-
 def _png_rgba(a: np.ndarray, fmt: str = "PNG") -> bytes:
     import io
 
@@ -630,16 +594,17 @@ def character_creator_glb(dst: Path, *, with_targets: bool) -> Path:
     KHR_texture_transform) and eyelash cards along the upper lids (Std_Eyelash: RGBA strands, MASK); CC_Base_Eye
     (eyeballs, textured), CC_Base_Cornea (a shell, BLEND, alpha 0.1), CC_Base_EyeOcclusion (a shell over the eyes'
     front, BLEND, a dark rim fading to clear, alpha at most 0.45), CC_Base_Teeth, CC_Base_Tongue. ``with_targets``:
-    the ARKit targets in CC4's names (:func:`_cc4_targets`) on the body (lashes follow their lid vertex), teeth
+    the ARKit targets in CC4's names (``tests.heads.cc4_targets``) on the body (lashes follow their lid vertex), teeth
     and tongue."""
     from assets.heads.builtin import load_builtin_head
+    from tests.heads import cc4_targets
 
     b = load_builtin_head()
     v = b.mesh.vertices.astype(np.float64) * 0.1  # decimetres -> metres
     tri = b.mesh.triangles
     part = np.asarray(b.part)
     colors = np.asarray(b.mesh.colors, dtype=np.float64)
-    targets = {k: d * 0.1 for k, d in _cc4_targets(b).items()} if with_targets else {}
+    targets = {k: d * 0.1 for k, d in cc4_targets(b).items()} if with_targets else {}
     g = _Gltf()
     g.doc["extensionsUsed"] = ["KHR_texture_transform", "EXT_texture_webp", "KHR_mesh_quantization"]
     g.doc["extensionsRequired"] = ["EXT_texture_webp", "KHR_mesh_quantization"]

@@ -4,7 +4,6 @@ head as an ARKit file, visemes, user maps, exports."""
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import replace
 
 import numpy as np
@@ -117,36 +116,11 @@ def test_a_character_creator_head_with_split_targets_moves_as_the_arkit_head(tmp
     from assets.heads.builtin import load_builtin_head
     from assets.heads.rigging import mouth_landmarks
     from realtime_core.face import face_frame
+    from tests.heads import cc4_targets
 
     b = load_builtin_head()
-    v = b.mesh.vertices.astype(np.float64)
-    fr = face_frame(v, mouth_landmarks(b.landmarks))
-    x = (v - v[b.landmarks["upper_inner"]]) @ fr.axes[0] / fr.iod
-    y = (v - 0.5 * (v[b.landmarks["upper_inner"]] + v[b.landmarks["lower_inner"]])) @ fr.axes[1] / fr.iod
-    left, up = 0.5 * (1 + np.tanh(x / 0.05)), 0.5 * (1 + np.tanh(y / 0.03))
-    sides = {"L": left, "R": 1 - left}
-    halves = {"Up": up, "Down": 1 - up}
-    words = {"mouthUpperUp": "Mouth_Up_Upper", "mouthLowerDown": "Mouth_Down_Lower", "browDown": "Brow_Drop"}
-    cc: dict[str, np.ndarray] = {}
-    for name, d in b.targets.items():
-        d = np.asarray(d, dtype=np.float64)
-        if name in ("mouthRollUpper", "mouthRollLower"):
-            for s, m in sides.items():
-                cc[f"Mouth_Roll_In_{name[9:]}_{s}"] = d * m[:, None]
-        elif name in ("mouthFunnel", "mouthPucker"):
-            for h, mh in halves.items():
-                for s, m in sides.items():
-                    cc[f"Mouth_{name[5:]}_{h}_{s}"] = d * (mh * m)[:, None]
-        else:
-            stem, side = (
-                (name[:-4], "L")
-                if name.endswith("Left")
-                else (name[:-5], "R")
-                if name.endswith("Right")
-                else (name, "")
-            )
-            stem = words.get(stem, stem)
-            cc["_".join(w.capitalize() for w in re.findall(r"[A-Z]?[a-z]+", stem)) + ("_" + side if side else "")] = d
+    fr = face_frame(b.mesh.vertices.astype(np.float64), mouth_landmarks(b.landmarks))
+    cc = cc4_targets(b)
     assert "Mouth_Up_Upper_L" in cc and "Mouth_Funnel_Down_R" in cc and "Jaw_Open" in cc
     mesh = HeadMesh(vertices=b.mesh.vertices, triangles=b.mesh.triangles, name="cc", targets=cc)
     path = tmp_path / "cc4_head.glb"
