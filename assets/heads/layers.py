@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from assets.heads.dense import LOWER, NO_SIDE, SIDE_REACH, UPPER, carried_rows, lip_sides
 from assets.heads.mesh import HeadMesh
-from assets.heads.parts import _mouth_local, part_kind, skin_parts
+from assets.heads.parts import mouth_local, part_kind, skin_parts
 from realtime_core.face import Rig
 from realtime_core.face.rig import modelled_rest
 from realtime_core.face.welding import weld
@@ -107,7 +107,7 @@ def layer_sides(
     faces there, the beard's faces flipped. The mouth line: the cut's upper side ``originals`` between the corners
     (their heights along the face's up axis, ``axes`` (3, 3), about the corners' midpoint), level with the corners
     beyond them."""
-    local = _mouth_local(np.asarray(vertices, dtype=np.float64), landmarks, axes, iod)
+    local = mouth_local(np.asarray(vertices, dtype=np.float64), landmarks, axes, iod)
     line_x = np.r_[local[np.asarray(originals, dtype=np.int64), 0], local[[landmarks["corner_left"]], 0]]
     line_x = np.r_[line_x, local[[landmarks["corner_right"]], 0]]
     line_y = np.r_[local[np.asarray(originals, dtype=np.int64), 1], 0.0, 0.0]

@@ -114,7 +114,7 @@ def _split_rows(
     mean = np.bincount(comp, weights=height) / np.bincount(comp)
     out = np.where(mean[comp] >= 0, "skull", "jaw").astype(object)
     frame = face_frame(v, MouthLandmarks.among(landmarks))
-    where = _mouth_local(v[sel], landmarks, frame.axes, frame.iod, mouth=mouth)
+    where = mouth_local(v[sel], landmarks, frame.axes, frame.iod, mouth=mouth)
     for c in np.unique(comp):
         at = np.flatnonzero(comp == c)
         keep = -np.ones(len(sel), dtype=np.int64)
@@ -144,7 +144,7 @@ rows share (:func:`_rows_apart`): they lie one above the other, so their footpri
 def _rows_apart(local: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """(k,) bool, True on the upper row, for a shell holding both teeth rows (joined by gums, a palate or a few faces);
     None for any other shell (one row, a tongue, a lining). ``local`` (k, 3): the shell's vertices about the mouth line
-    (sideways, up, out; :func:`_mouth_local`), ``triangles`` (m, 3) its faces in those indices, one connected piece.
+    (sideways, up, out; :func:`mouth_local`), ``triangles`` (m, 3) its faces in those indices, one connected piece.
 
     The shell is cut where its top (ROWS_CORE of its vertices, the highest) and its bottom (the lowest) are joined by
     the least: a minimum cut between them (maximum flow, each edge's capacity its length). The two sides are the rows
@@ -328,7 +328,7 @@ def inner_mouth_weights(
     comp = mesh_pieces(n, t)
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
-    local = _mouth_local(v, landmarks, axes, iod)
+    local = mouth_local(v, landmarks, axes, iod)
     chin = float(local[landmarks["chin"], 1])
     if not chin < 0:
         return out
@@ -412,7 +412,7 @@ def rigid_inner_pieces(
     comp = pieces[canon]
     used = np.zeros(n, dtype=bool)
     used[t.ravel()] = True
-    local = _mouth_local(v, landmarks, axes, iod)
+    local = mouth_local(v, landmarks, axes, iod)
     chin = float(local[landmarks["chin"], 1])
     width = abs(float(local[landmarks["corner_left"], 0] - local[landmarks["corner_right"], 0]))
     front = max(float(local[landmarks["upper_lip"], 2]), float(local[landmarks["lower_lip"], 2]))
@@ -516,7 +516,7 @@ def _skin_faces(
     return canon, welded, t
 
 
-def _mouth_local(
+def mouth_local(
     v: np.ndarray, landmarks: Mapping[str, int], axes: np.ndarray, iod: float, *, mouth: np.ndarray | None = None
 ) -> np.ndarray:
     """(n, 3) IOD: ``v`` about the mouth corners' midpoint (``mouth`` (3,), else taken from ``v`` at the corner
