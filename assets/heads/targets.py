@@ -216,24 +216,23 @@ def match_targets(
     The user map adds to (and overrides) the recognised names."""
     arkit: dict[str, dict[str, float]] = {}
     vis: dict[str, dict[str, float]] = {}
+    parts: dict[str, dict[str, float]] = {}
     seen: set[str] = set()  # one head target per ARKit target or part of one (the first of its spellings)
     for n in names:
         c = canonical_name(n)
         if c is None:
             part = target_part(n)
-            _, side, stem = _base_and_side(n)
-            if part is not None and (key := f"{part[0]}:{_norm(stem)}:{side}") not in seen:
+            if part is not None and (key := "part:" + _norm(_base_and_side(n)[0])) not in seen:
                 seen.add(key)
-                arkit[n] = {part[0]: part[1]}
-            continue
-        if c.startswith("viseme:"):
+                parts[n] = {part[0]: part[1]}
+        elif c.startswith("viseme:"):
             if VISEME_ARKIT[c[7:]] and c not in {canonical_name(x) for x in vis}:
                 vis[n] = dict(VISEME_ARKIT[c[7:]])
         elif c not in seen:
             seen.add(c)
             arkit[n] = {c: 1.0}
     # A head with a whole target and its parts too: the whole one drives it (both would move the lips twice).
-    arkit = {k: m for k, m in arkit.items() if canonical_name(k) is not None or next(iter(m)) not in seen}
+    arkit.update({k: m for k, m in parts.items() if next(iter(m)) not in seen})
     n_mouth = sum(1 for m in arkit.values() if next(iter(m)).startswith(("jaw", "mouth")))
     out = dict(arkit) if n_mouth >= len(vis) else dict(vis)
     for k, v in (user_map or {}).items():
