@@ -362,3 +362,94 @@ def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
         srv.stop()
     assert joined["state"]["firstIndex"] <= 3, joined["state"]
     assert joined["console_errors"] == []
+
+
+TEXTURE_SCRIPT = Path(__file__).with_name("texture_check.mjs")
+
+
+def _half_cut_texture_head(morph_head):
+    """The built-in morph head painted by a texture through planar UVs (u from the head's side coordinate x,
+    v from its height): the texture is fully transparent (alpha 0, a see-through material's texels:
+    assets.heads.mesh.CUTOUT_ALPHA) where u >= 0.5 (the head's left, x > 0), and opaque where u < 0.5: white in
+    the image's first half of rows, green in the second. glTF's UV convention (facecast's: the first row is
+    v = 0) puts white below the head's middle height and green above it. No vertex colours: the texture alone
+    paints it."""
+    import dataclasses
+    import io
+
+    from PIL import Image
+
+    from assets.heads.head import Head
+
+    v = morph_head.mesh.vertices
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    uvs = np.stack([(v[:, 0] - lo[0]) / (hi[0] - lo[0]), (v[:, 1] - lo[1]) / (hi[1] - lo[1])], axis=1)
+    rgba = np.zeros((64, 64, 4), dtype=np.uint8)
+    rgba[:, :32] = 255  # columns are u: the left half opaque white, the right half alpha 0
+    rgba[32:, :32, [0, 2]] = 96  # rows are v: the second half green
+    buf = io.BytesIO()
+    Image.fromarray(rgba, "RGBA").save(buf, format="PNG")
+    mesh = dataclasses.replace(morph_head.mesh, uvs=uvs, texture=buf.getvalue(), colors=None)
+    return Head(rig=morph_head.rig, mesh=mesh), float(np.mean(v[:, 0] < 0))
+
+
+def test_browser_paints_a_textured_head_with_its_texture_alone_and_cuts_see_through_texels(model, morph_head):
+    """Issue 12: a textured head in the browser viewer is painted by its texture alone (the untextured skin
+    colour tinted every textured head redder and darker), and texels with alpha below 0.5 are cut (alphaTest:
+    eyelash cards and corneas drawn as black blocks otherwise). Checked on the page's pixels: the head's shown
+    half is lit white, neither skin-coloured (blue / red ~0.65 with the tint) nor dark, and the half whose texels
+    are transparent shows the background. And the texture stands as the offline renderer and the exports have it
+    (glTF's convention, issue 12: textures were upside down): green above the head's middle height, white below."""
+    _require_browser()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    head, right_share = _half_cut_texture_head(morph_head)
+    assert 0.4 < right_share < 0.6  # a symmetric head: the cut takes about half of it
+    name = "texturecheck"
+    srv = LiveServer(model, head)
+    stop = asyncio.Event()
+    session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(3)))
+    proc = subprocess.Popen(
+        ["node", str(TEXTURE_SCRIPT), srv.url, name, str(ARTIFACTS)],
+        cwd=REPO,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        shown = _read_step(proc, "shown")
+        done = _read_step(proc, "done")
+    finally:
+        _end(proc)
+        srv.loop.call_soon_threadsafe(stop.set)
+        session.result(30)
+        srv.stop()
+
+    assert shown["state"]["kind"] == "morph" and shown["state"]["frames"] >= 30
+    page = _png(ARTIFACTS / "texture_viewer.png")
+    canvas = page[:, : int(page.shape[1] * 0.6)]
+    background = np.median(canvas[:8].reshape(-1, 3), axis=0)  # the top rows: above the head
+    drawn = np.abs(canvas - background).sum(axis=2) > 30
+    cols = np.flatnonzero(drawn.any(axis=0))
+    assert len(cols) > 20, "no head drawn"
+    # The cut half shows the background: the head ends at its middle plane in a straight vertical edge (seen from
+    # the front), while the drawn half's outline curves (ear, jaw, neck). Without the cut both sides curve.
+    rows = np.flatnonzero(drawn.any(axis=1))
+    first = np.array([np.flatnonzero(drawn[r])[0] for r in rows])
+    last = np.array([np.flatnonzero(drawn[r])[-1] for r in rows])
+    straight = [float(np.mean(np.abs(e - np.median(e)) <= 3)) for e in (first, last)]
+    assert max(straight) > 0.8 and min(straight) < 0.5, straight
+    # Rows of the drawn head: the top third is above the head's middle height, the bottom third below it.
+    top, bottom = rows[: len(rows) // 3], rows[-(len(rows) // 3) :]
+
+    def lit(r: np.ndarray) -> np.ndarray:
+        p = canvas[r][drawn[r]]
+        return p[p.sum(axis=1) > 150]  # the lit side (shadows are dark in any colour)
+
+    upper, lower = lit(top), lit(bottom)
+    assert len(upper) > 300 and len(lower) > 300, (len(upper), len(lower))
+    green = [float(np.median(p[:, 1] / np.maximum(p[:, [0, 2]].mean(axis=1), 1.0))) for p in (upper, lower)]
+    assert green[0] > 1.5 and green[1] < 1.2, green  # green above, white below: the texture stands upright
+    blue_over_red = float(np.median(lower[:, 2] / np.maximum(lower[:, 0], 1.0)))
+    assert blue_over_red > 0.85, blue_over_red  # white texture, white lights: not skin-tinted
+    assert float(np.median(lower.sum(axis=1))) > 400  # and not darkened by the tint either
+    assert done["console_errors"] == []
