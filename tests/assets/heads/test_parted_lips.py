@@ -269,3 +269,68 @@ def test_lips_parted_in_the_middle_and_joined_at_the_corners_are_cut_to_the_corn
     assert len(out.vertices) == n + cut + cavity
     report = head_checks(Head(rig, out))
     assert report.flipped_triangles == 0, report.failures
+
+
+def test_a_joined_cracks_contact_points_are_found_by_lip_and_take_the_vertices_stacked_on_them(shared_data):
+    """docs/animation.md, "The joined corners by lip": which lip a vertex belongs to is the nearer lip middle along
+    the mesh as modelled (lip_of), not a distance; a join of both lips' edge vertices is a contact point
+    (contact_points) and a vertex off the edge tied to it by a sliver (under SLIVER_TIE of the median edge, what the
+    fold repair moves as one) joins it (stacked_on_contacts). Here on the MediaPipe face's hole: the lower edge's 324
+    moved 0.002 IOD under the upper edge's 407 (touching_rim joins them), the off-edge 408 0.003 IOD behind 407; on the
+    right, an off-edge neighbour of the upper edge's 183, which touches nothing, 0.003 IOD behind it: it stays apart."""
+    from assets.heads.rigging import contact_points, lip_of, stacked_on_contacts, touching_rim
+    from realtime_core.face.checks import boundary_edges
+
+    v, t, frame = _without_membrane(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    v = v.copy()
+    y, z = frame.axes[1] * frame.iod, frame.axes[2] * frame.iod
+    edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
+    rim = set(np.unique(boundary_edges(t)[0]).tolist())
+    right_off = min(j for a, b in edges if 183 in (a, b) for j in (a, b) if j not in rim)
+    assert {183, 324, 407} <= rim and 408 not in rim and (407, 408) in edges and (324, 407) not in edges
+    # As modelled the hole tapers to 0.04 IOD between the lips' last edge vertices (407, 324): open, nothing touches.
+    assert (touching_rim(v, t, frame, MEDIAPIPE, lip_of(v, t, MEDIAPIPE)) == np.arange(len(v))).all()
+    v[324] = v[407] - 0.002 * y
+    v[408] = v[407] - 0.003 * z
+    v[right_off] = v[183] - 0.003 * z
+    lower = lip_of(v, t, MEDIAPIPE)
+    assert lower[324] and not lower[407] and not lower[408] and not lower[183]
+    assert lower[MEDIAPIPE["lower_inner"]] and not lower[MEDIAPIPE["upper_inner"]]
+    weld = touching_rim(v, t, frame, MEDIAPIPE, lower)
+    assert weld[324] == weld[407] == 324 and weld[408] == 408
+    assert contact_points(weld, lower) == [324]
+    assert contact_points(weld, np.zeros(len(v), dtype=bool)) == []  # a join within one lip is a fold, no contact
+    out = stacked_on_contacts(v, t, weld, lower)
+    assert out[408] == 324 and out[right_off] == right_off
+    assert np.count_nonzero(out != weld) == 1
+
+
+def test_a_joined_cracks_touching_pairs_are_chosen_by_lip_and_stay_under_jitter(shared_data):
+    """docs/animation.md, "The joined corners' touching pairs by lip": near a corner each vertex of the lip with fewer
+    edge vertices there is joined to its nearest vertex of the other lip's edge when nearer than half its own edge's
+    spacing and a quarter of the lips' parting in the middle (touching_rim), not every pair within 0.01 IOD. On the
+    MediaPipe face's hole, the upper edge's 407 0.0105 IOD above the lower edge's 324: they touch whatever a +-0.002
+    IOD jitter of the two does (every pair within 0.01 IOD joined them for some seeds, not for others); 183 (the other
+    side's 407) 0.03 IOD above 95 stays apart (a quarter of the parting: 0.023 IOD)."""
+    from assets.heads.rigging import RIM_TOUCH, contact_points, lip_of, touching_rim
+
+    v, t, frame = _without_membrane(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    y = frame.axes[1] * frame.iod
+    v = v.copy()
+    v[324] = v[407] - 0.0105 * y
+    v[95] = v[183] - 0.03 * y
+    lower = lip_of(v, t, MEDIAPIPE)
+    assert lower[324] and lower[95] and not lower[407] and not lower[183]
+    joins, within = set(), set()
+    for seed in range(6):
+        w = v.copy()
+        w[[324, 407]] += np.random.default_rng(seed).uniform(-0.002, 0.002, (2, 3)) * frame.iod
+        within.add(bool(np.linalg.norm(w[324] - w[407]) / frame.iod < RIM_TOUCH))
+        weld = touching_rim(w, t, frame, MEDIAPIPE, lower)
+        joined = np.flatnonzero(weld != np.arange(len(v)))
+        joins.add(tuple(sorted(np.r_[joined, weld[joined]].tolist())))
+        assert weld[407] == 324, seed
+        assert weld[95] == 95 and weld[183] == 183
+        assert contact_points(weld, lower) == [324]
+    assert within == {True, False}  # the jitter moves the pair across 0.01 IOD
+    assert joins == {(324, 407)}
