@@ -1259,54 +1259,31 @@ def joined_ends(
 
 
 RIM_TOUCH = LIPS_TOUCH
-"""IOD: two vertices of one lip's edge near a corner this close touch (a fold of the edge: :func:`touching_rim`)."""
-RIM_PARTING = 0.25
-"""Fraction of the lips' parting in the middle (inner-lip points, IOD): a vertex of one lip's edge near a corner touches
-the other lip's edge only when nearer than this (:func:`touching_rim`). The MediaPipe face's hole tapers to 0.04 IOD
-between its lips' last edge vertices, a parting of 0.09 in the middle: open, not touching; the held-out joined head's
-touching pairs lie within 0.012 IOD of each other, its parting about 0.1."""
+"""IOD: two vertices of a hole's edge near a corner this close touch (:func:`touching_rim`)."""
 
 
 def touching_rim(
-    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int], lower: np.ndarray
+    vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
 ) -> np.ndarray:
-    """(n,) int64: each vertex's index, or for a hole's edge vertex that touches near a corner the vertex it is joined
-    to (the lower index of the touching group). The hole's edge vertices looked at: on the lips' front, near the mouth
-    line (as :func:`opening_ends` looks for them), in the outer half of one side (further from the mouth's middle than
-    half the corner's distance). Touching, by lip (``lower`` (n,) bool, :func:`lip_of`): each such vertex of the lip
-    with fewer of them on that side (the coarser edge) and its nearest vertex of the other lip's edge, when nearer than
-    half the coarser edge's own spacing there (its distance to the nearest other vertex of its edge: the lips touch
-    at the mesh's resolution); and, within one lip, two vertices within :data:`RIM_TOUCH` IOD sharing no edge (a fold
-    of the crumpled edge). A hole tapering to the corners ends in such a crack: the lips touch there, and
-    :func:`rig_head` joins them and cuts them again along the contact line (:func:`joined_ends`). All pairs within
-    0.01 IOD, whichever lip (main to RIG_ALGORITHM 72), let a +-0.002 IOD jitter of the held-out joined head's crack
-    move its lips' pairs across that bound and change its contact points (docs/animation.md, "The joined corners'
-    touching pairs by lip"). ``landmarks``: name -> vertex index."""
+    """(n,) int64: each vertex's index, or for a hole's edge vertex that touches the other lip's edge near a corner the
+    vertex it is joined to (the lower index of the touching group). Touching: two vertices of the hole's edge (on the
+    lips' front, near the mouth line, as :func:`opening_ends` looks for them) in the outer half of one side (further
+    from the mouth's middle than half the corner's distance) within :data:`RIM_TOUCH` IOD, sharing no edge. A hole
+    tapering to the corners ends in such a crack: the lips touch there, and :func:`rig_head` joins them and cuts them
+    again along the contact line (:func:`joined_ends`). ``landmarks``: name -> vertex index."""
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     t = np.asarray(triangles, dtype=np.int64)
-    lower = np.asarray(lower, dtype=bool)
     q, sides = _rim_by_corner(vertices, triangles, frame, landmarks, outer_half=True)
     edges = {(int(a), int(b)) for a, b in np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1)}
-    parting = float(np.linalg.norm(q[landmarks["upper_inner"]] - q[landmarks["lower_inner"]]))
-    pairs: list[tuple[int, int]] = []
-    for _, _, ok in sides.values():
-        lips = (ok[lower[ok]], ok[~lower[ok]])
-        for lip in lips:  # folds of one lip's edge
-            if len(lip) >= 2:
-                pairs += [
-                    (int(lip[i]), int(lip[j]))
-                    for i, j in sorted(cKDTree(q[lip]).query_pairs(RIM_TOUCH))
-                    if tuple(sorted((int(lip[i]), int(lip[j])))) not in edges
-                ]
-        coarse, fine = sorted(lips, key=len)
-        if len(coarse) < 2 or not len(fine):
-            continue
-        gap, near = cKDTree(q[fine]).query(q[coarse])
-        spacing = cKDTree(q[coarse]).query(q[coarse], k=2)[0][:, 1]
-        bound = np.minimum(0.5 * spacing, RIM_PARTING * parting)
-        pairs += [(int(c), int(fine[j])) for c, g, j, b in zip(coarse, gap, near, bound) if g < b]
+    pairs = [
+        (int(ok[i]), int(ok[j]))
+        for _, _, ok in sides.values()
+        if len(ok) >= 2
+        for i, j in sorted(cKDTree(q[ok]).query_pairs(RIM_TOUCH))
+        if tuple(sorted((int(ok[i]), int(ok[j])))) not in edges
+    ]
     n = len(q)
     out = np.arange(n)
     if not pairs:
@@ -1316,108 +1293,6 @@ def touching_rim(
     lowest = np.full(group.max() + 1, n, dtype=np.int64)
     np.minimum.at(lowest, group, out)
     return lowest[group]  # each vertex joined to its touching group's lowest index (itself when alone)
-
-
-def lip_of(vertices: np.ndarray, triangles: np.ndarray, landmarks: Mapping[str, int]) -> np.ndarray:
-    """(n,) bool: True for the vertices of lips parted over a hole (as modelled, not joined) that move with the lower
-    lip: nearer the lower lip's outer midpoint ("lower_lip") than the upper's ("upper_lip") along the mesh's edges.
-    The hole keeps the lips apart in the middle, so near its edge this is the lip whose body each vertex is part of.
-    ``landmarks``: name -> vertex index."""
-    v = np.asarray(vertices, dtype=np.float64)
-    d_up, d_lo = dijkstra(edge_length_graph(v, triangles), indices=[landmarks["upper_lip"], landmarks["lower_lip"]])
-    return np.asarray(d_lo < d_up)
-
-
-def contact_points(weld: np.ndarray, lower: np.ndarray) -> list[int]:
-    """The joined vertices of :func:`touching_rim`'s result ``weld`` (n,) that hold vertices of both lips as modelled
-    (``lower`` (n,) bool, :func:`lip_of`): where the lips meet in a crack. The held-out joined head's crack joins 12
-    vertices into 8, of which 3 are such points (2592 with 9284, 7386 with 9302, 7420 with 9309); the other joins are
-    folds of one lip (docs/animation.md, "The joined corners by lip")."""
-    weld = np.asarray(weld, dtype=np.int64)
-    away = np.flatnonzero(weld != np.arange(len(weld)))
-    members = np.union1d(away, weld[away])
-    return [int(g) for g in np.unique(weld[away]) if len(np.unique(lower[members[weld[members] == g]])) == 2]
-
-
-def stacked_on_contacts(vertices: np.ndarray, triangles: np.ndarray, weld: np.ndarray, lower: np.ndarray) -> np.ndarray:
-    """:func:`touching_rim`'s result ``weld`` (n,) with, for each of its contact points (:func:`contact_points`), the
-    vertices off the hole's edge tied to it by a sliver joined to it too: an edge of ``triangles`` (m, 3) as modelled,
-    once ``weld`` joined them, shorter than :data:`SLIVER_TIE` of the median edge, which the fold repair moves as one.
-    Such a vertex moves as the contact point does, so it is part of it; left apart, it is tied to the copy of one lip
-    once the contact point is cut, and its own lip's faces beside it fold (the held-out joined head's 2749, 0.0033 IOD
-    from 2592, tied to 2592's lower copy while it belongs to the upper lip: main's face 4866). The hole's edge vertices
-    are not joined so (:func:`touching_rim` joins those that touch). ``lower`` (n,) bool: :func:`lip_of`."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    weld = np.asarray(weld, dtype=np.int64).copy()
-    away = np.flatnonzero(weld != np.arange(len(weld)))
-    members = np.union1d(away, weld[away])
-    joined = weld[t]
-    joined = joined[(joined[:, 0] != joined[:, 1]) & (joined[:, 1] != joined[:, 2]) & (joined[:, 2] != joined[:, 0])]
-    e = np.unique(np.sort(np.r_[joined[:, [0, 1]], joined[:, [1, 2]], joined[:, [2, 0]]], axis=1), axis=0)
-    length = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-    sliver = e[length < SLIVER_TIE * float(np.median(length))]
-    rim = np.unique(boundary_edges(t)[0])
-    for g in contact_points(weld, lower):
-        for w in np.r_[sliver[sliver[:, 0] == g, 1], sliver[sliver[:, 1] == g, 0]]:
-            if weld[w] == w and w not in members and w not in rim:
-                weld[w] = g
-    return weld
-
-
-def parted_crack(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    origin: np.ndarray,
-    modelled: np.ndarray,
-    weld: np.ndarray,
-    lower: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The lips' contact points in a joined crack on their own lips, after :func:`rig_head` joined the crack
-    (:func:`touching_rim`, :func:`stacked_on_contacts`) and cut it (:func:`cut_mouth`): ``vertices`` (n', 3),
-    ``triangles`` (m, 3) and ``origin`` (n',) as cut; ``modelled`` (m, 3) each face's vertices as modelled (before the
-    join, slot for slot); ``weld`` (n,) the join; ``lower`` (n,) bool, :func:`lip_of`. A contact point
-    (:func:`contact_points`) the cut left whole is split: the faces of its lower lip's vertices take a copy. Beside one
-    the cut split, a vertex it did not split tied to a copy of the other lip by a sliver (an edge shorter than
-    :data:`SLIVER_TIE` of the median edge, which the fold repair moves as one) takes the copy of its own lip in its
-    faces. The held-out joined head's contact point 7420 (the lower edge's 9309 joined to it) lies inward of the
-    cut's end: whole, it pulled the upper lip's edge down with the lower lip (main's face 13582; docs/animation.md,
-    "The joined corners by lip"). Returns vertices, triangles, origin."""
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64).copy()
-    origin = np.asarray(origin, dtype=np.int64)
-    weld = np.asarray(weld, dtype=np.int64)
-    n0, n = len(weld), len(v)
-    away = np.flatnonzero(weld != np.arange(n0))
-    members = np.union1d(away, weld[away])
-    contact = contact_points(weld, lower)
-    below = np.full(n0, -1, dtype=np.int64)  # each vertex as modelled -> its copy below the cut, if split
-    below[origin[n0:]] = np.arange(n0, n)
-    slot_lower = lower[np.asarray(modelled, dtype=np.int64)]  # (m, 3) each slot's vertex's lip as modelled
-    extra: list[int] = []
-    for g in contact:
-        if below[g] >= 0:
-            continue
-        f, j = np.nonzero(t == g)
-        if slot_lower[f, j].any() and not slot_lower[f, j].all():
-            below[g] = n + len(extra)
-            extra.append(g)
-            t[f[slot_lower[f, j]], j[slot_lower[f, j]]] = below[g]
-    at = np.concatenate([v, v[np.asarray(extra, dtype=np.int64)]])
-    e = np.unique(np.sort(np.r_[t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1), axis=0)
-    length = np.linalg.norm(at[e[:, 0]] - at[e[:, 1]], axis=1)
-    sliver = e[length < SLIVER_TIE * float(np.median(length))]
-    for g in contact:
-        if below[g] < 0 or below[g] >= n:
-            continue
-        for w_lower, copy in ((False, below[g]), (True, g)):  # a vertex of one lip tied to the other's copy
-            tied = np.r_[sliver[sliver[:, 1] == copy, 0], sliver[sliver[:, 0] == copy, 1]]
-            for w in tied[(tied < n0) & ~np.isin(tied, members)]:
-                if below[w] >= 0 or bool(lower[w]) != w_lower:
-                    continue
-                held = (t == w).any(axis=1)[:, None] & (t == copy)
-                t[held] = below[g] if w_lower else g
-    return at, t, np.concatenate([origin, np.asarray(extra, dtype=np.int64)])
 
 
 def parted_over_hole(
@@ -1609,23 +1484,13 @@ def rig_head(
             # hole's ends, one edge away): nothing is cut there, the mesh is left as it is.
             welded = t
             weld = np.arange(len(v))
-            as_modelled = None  # each joined face's vertices as modelled (parted_crack)
-            lower = np.zeros(0, dtype=bool)
             if not moved:
-                # Which lip each vertex belongs to as modelled (lip_of) decides which of the crack's vertices touch
-                # (touching_rim), the contact points of the two lips, the vertices stacked on them joined with them
-                # (stacked_on_contacts), and after the cut the lip each contact point's faces go with (parted_crack).
-                # By distance alone (a vertex off the edge within 0.0051 IOD of a joined one) the held-out row passed
-                # inside a 0.0002 IOD window only.
-                lower = lip_of(v, t, snap)
-                weld = touching_rim(v, t, frame, snap, lower)
+                weld = touching_rim(v, t, frame, snap)
                 if (weld != np.arange(len(v))).any():
-                    weld = stacked_on_contacts(v, t, weld, lower)
                     welded = weld[np.asarray(t, dtype=np.int64)]
-                    kept = (
+                    welded = welded[
                         (welded[:, 0] != welded[:, 1]) & (welded[:, 1] != welded[:, 2]) & (welded[:, 2] != welded[:, 0])
-                    )
-                    welded, as_modelled = welded[kept], np.asarray(t, dtype=np.int64)[kept]
+                    ]
             paths = {k: cut_path(v, welded, snap[k], end) for k, end in joined_ends(v, welded, frame, snap).items()}
             paths = {k: p for k, p in paths.items() if len(p) > 2}
             if paths:
@@ -1650,10 +1515,6 @@ def rig_head(
                         whole=(path[0],),
                     )
                     origin = origin[step]
-                if as_modelled is not None:
-                    # The crack's faces on their own lips (parted_crack), the lip each vertex belongs to as modelled.
-                    v, t, origin = parted_crack(v, t, origin, as_modelled, weld, lower)
-                    uv = None if uv is None else np.concatenate([uv, np.asarray(uv)[origin[len(uv) :]]])
                 colors = None if colors is None else colors[origin]
                 part = None if part is None else part[origin]
                 ends_cut = len(v) > n_base
