@@ -351,7 +351,7 @@ class _Parts:
 def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     from assets.heads.decompress import decompressed
     from assets.heads.gltf import NEEDS_DECODER, read_gltf, read_gltf_document
-    from assets.heads.vrm import expression_targets, vrm_expressions
+    from assets.heads.vrm import VRM0_TURN, expression_targets, is_vrm0, vrm_expressions
 
     try:
         doc, _ = read_gltf_document(p)
@@ -388,8 +388,12 @@ def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
             if k in x.targets:
                 d[offs[i] : offs[i + 1]] = x.targets[k]
         targets[k] = d
+    vertices = np.concatenate([x.vertices for x in prims])
+    if is_vrm0(doc):  # a VRM 0.x avatar faces -z: turned to face +z as glTF's and VRM 1.0's do
+        vertices = vertices * VRM0_TURN
+        targets = {k: d * VRM0_TURN for k, d in targets.items()}
     return _Parts(
-        vertices=np.concatenate([x.vertices for x in prims]),
+        vertices=vertices,
         triangles=np.concatenate([x.triangles + offs[i] for i, x in enumerate(prims)]),
         uvs=np.concatenate([x.uvs for x in prims]) if have_uv else None,
         colors=colors,

@@ -36,9 +36,21 @@ VOWELS_1 = ("aa", "ih", "ou", "ee", "oh")
 VOWELS_0 = {"a": "aa", "i": "ih", "u": "ou", "e": "ee", "o": "oh"}
 """VRM 0.x's ``presetName`` of each vowel -> VRM 1.0's."""
 
+VRM0_TURN = np.array([-1.0, 1.0, -1.0])
+"""Per-axis sign turning a VRM 0.x avatar half way round about +y: VRM 0.x files face -z (UniVRM's convention),
+VRM 1.0 files and glTF's convention +z, which is where facecast looks for a face it has no landmarks of (a head
+driven by its own targets is framed from +z, :func:`clients.render.renderer.renderer_for_rig`); three-vrm turns them
+so too (``VRMUtils.rotateVRM0``)."""
+
 PREFIX = "vrm."
 """Morph-target name prefix of an expression (``vrm.aa``): exporter prefixes up to a ``.`` are dropped when names are
 matched, so the rest is the bare VRM vowel; a file whose own target is already named so gets ``vrm.expression.aa``."""
+
+
+def is_vrm0(doc: Mapping) -> bool:
+    """True for a VRM 0.x document (its extension ``VRM``, not VRM 1.0's ``VRMC_vrm``): it faces -z."""
+    ext = doc.get("extensions") or {}
+    return "VRM" in ext and "VRMC_vrm" not in ext
 
 
 @dataclass(frozen=True)
