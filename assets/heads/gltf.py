@@ -1,4 +1,5 @@
-"""glTF 2.0 reader (``.glb``/``.gltf``) for heads: geometry, node transforms, skins, morph targets, materials.
+"""glTF 2.0 reader (``.glb``/``.gltf``; ``.vrm``, a binary glTF, :mod:`assets.heads.vrm`) for heads: geometry, node
+transforms, skins, morph targets, materials.
 
 Read with numpy from the file itself, because the head needs what general mesh loaders drop:
 morph targets with their names (``mesh.extras.targetNames``, the three.js/Blender convention, or

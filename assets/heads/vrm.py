@@ -118,13 +118,13 @@ def expression_targets(
                 if not 0 <= b.index < len(p.by_index):
                     raise MeshError(
                         f"{path}: VRM expression {vowel!r} binds morph target {b.index} of node {p.node!r}, which has "
-                        f"{len(p.by_index)}"
+                        f"{len(p.by_index)} targets"
                     )
                 t = p.by_index[b.index]
                 if t is not None:  # a target without POSITION moves nothing here (normals only)
                     d[offs[i] : offs[i + 1]] += b.weight * t
                     hit = True
-        if hit:
-            name = next(n for n in (PREFIX + vowel, f"{PREFIX}expression.{vowel}") if n not in taken)
+        name = next((n for n in (PREFIX + vowel, f"{PREFIX}expression.{vowel}") if n not in taken), None)
+        if hit and name is not None:  # both names taken by the file's own targets: those stand for the vowel
             out[name] = d
     return out
