@@ -295,7 +295,9 @@ def _concat(pieces: list[_Parts]) -> _Parts:
     if any(x.colors is not None for x in pieces):
         colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in pieces])
     targets = {}
-    for k in sorted({k for x in pieces for k in x.targets}):  # a part without the target does not move with it
+    # In the files' order (a VRM's expressions first, as read, so they stay the vowels' first spelling); a part
+    # without the target does not move with it.
+    for k in dict.fromkeys(k for x in pieces for k in x.targets):
         targets[k] = np.concatenate([x.targets.get(k, np.zeros((len(x.vertices), 3))) for x in pieces])
     return _Parts(
         vertices=np.concatenate([x.vertices for x in pieces]),

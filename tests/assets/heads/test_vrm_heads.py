@@ -210,3 +210,26 @@ def test_say_renders_and_exports_a_vrm_through_its_vowels(tmp_path, builtin):
     lm = mouth_landmarks(builtin.landmarks)
     opening = [measure_mouth(mesh.vertices, mesh.vertices + np.einsum("p,pvc->vc", f, d), lm)[2] for f in w]
     assert max(opening) > 0.1
+
+
+def test_a_vrm_1_bind_moves_the_node_it_names_and_a_vrm_0_bind_every_node_of_its_mesh(tmp_path, builtin):
+    """The same mesh drawn by two nodes (the second 10 units aside): VRM 1.0 binds by node, VRM 0.x by mesh. With a
+    separate part (--head-part) the expression stays the vowel's first spelling, before the file's Fcl_MTH_A."""
+    n = len(builtin.mesh.vertices)
+    tol = 1e-6 * np.ptp(builtin.mesh.vertices, axis=0).max()
+    for version, moved in (("1.0", (True, False)), ("0.x", (True, True))):
+        path = _vrm(tmp_path / f"two_{version}.vrm", builtin, version, turn=BACK if version == "0.x" else FRONT)
+        doc, (body,) = read_gltf_document(path)
+        doc["nodes"].append({"mesh": 0, "name": "copy", "translation": [10.0, 0.0, 0.0]})  # moves no target
+        doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
+        mesh = load_mesh(_written(path, glb_container(doc, body)))
+        assert len(mesh.vertices) == 2 * n
+        for k, copy in enumerate((slice(0, n), slice(n, 2 * n))):
+            want = _mix(builtin, "aa") if moved[k] else np.zeros((n, 3))
+            np.testing.assert_allclose(mesh.targets["vrm.aa"][copy], want, atol=tol)
+    part = _written(
+        tmp_path / "part.glb", mesh_glb(HeadMesh(vertices=np.eye(3) + 5.0, triangles=[[0, 1, 2]], name="p"))
+    )
+    old = load_mesh(_vrm(tmp_path / "old.vrm", builtin, "0.x", turn=BACK), parts=(part,))
+    names = [k for k in old.targets if k in ("vrm.aa", "Fcl_MTH_A")]
+    assert names == ["vrm.aa", "Fcl_MTH_A"]
