@@ -1,4 +1,5 @@
-"""glTF 2.0 reader (``.glb``/``.gltf``) for heads: geometry, node transforms, skins, morph targets, materials.
+"""glTF 2.0 reader (``.glb``/``.gltf``; ``.vrm``, a binary glTF, :mod:`assets.heads.vrm`) for heads: geometry, node
+transforms, skins, morph targets, materials.
 
 Read with numpy from the file itself, because the head needs what general mesh loaders drop:
 morph targets with their names (``mesh.extras.targetNames``, the three.js/Blender convention, or
@@ -37,7 +38,10 @@ NEEDS_DECODER = ("EXT_meshopt_compression", "KHR_draco_mesh_compression", "KHR_t
 @dataclass
 class Primitive:
     """One drawable piece: vertices (n, 3) world units, triangles (m, 3) local indices, uvs (n, 2)
-    or None, colors (n, 3) or None, material index (-1 none), morph displacements name -> (n, 3)."""
+    or None, colors (n, 3) or None, material index (-1 none), morph displacements name -> (n, 3).
+    node_index / mesh_index: the glTF node drawing it and its mesh; by_index: the same displacements by the
+    primitive's target index (None where a target has no POSITION), for files that bind targets by index
+    (a VRM's expressions, :mod:`assets.heads.vrm`) and may give several the same name."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -46,6 +50,9 @@ class Primitive:
     material: int
     targets: dict[str, np.ndarray] = field(default_factory=dict)
     node: str = ""
+    node_index: int = -1
+    mesh_index: int = -1
+    by_index: tuple[np.ndarray | None, ...] = ()
 
 
 @dataclass
@@ -218,6 +225,12 @@ def _node_matrix(node: dict) -> np.ndarray:
     return m
 
 
+def _turned(d: np.ndarray, lin: np.ndarray) -> np.ndarray:
+    """Displacements d (n, 3) turned by the linear part of a node's world matrix (3, 3) or of each vertex's
+    blended joints (n, 3, 3)."""
+    return np.einsum("nij,nj->ni", lin, d) if lin.ndim == 3 else d @ lin.T
+
+
 def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
     if mode == 4:
         return idx[: len(idx) // 3 * 3].reshape(-1, 3)
@@ -305,22 +318,26 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                 colors = rd.accessor(attrs["COLOR_0"])[:, :3] if "COLOR_0" in attrs else None
                 pnames = (prim.get("extras") or {}).get("targetNames") or names
                 targets: dict[str, np.ndarray] = {}
+                indexed: list[np.ndarray | None] = []
                 for k, tgt in enumerate(prim.get("targets", [])):
+                    indexed.append(None)
                     if "POSITION" not in tgt:
                         continue
                     name = pnames[k] if pnames and k < len(pnames) else f"target_{k}"
-                    targets[str(name)] = rd.accessor(tgt["POSITION"])[:, :3]
+                    indexed[k] = targets[str(name)] = rd.accessor(tgt["POSITION"])[:, :3]
                 if joint_mats is not None and "JOINTS_0" in attrs and "WEIGHTS_0" in attrs:
                     j = rd.accessor(attrs["JOINTS_0"]).astype(np.int64)
                     w = rd.accessor(attrs["WEIGHTS_0"])
                     w = w / np.maximum(w.sum(1, keepdims=True), 1e-12)
                     m = np.einsum("nk,nkij->nij", w, joint_mats[j])  # (n, 4, 4) linear blend skinning
                     pos = np.einsum("nij,nj->ni", m[:, :3, :3], pos) + m[:, :3, 3]
-                    targets = {k: np.einsum("nij,nj->ni", m[:, :3, :3], d) for k, d in targets.items()}
+                    lin = m[:, :3, :3]  # (n, 3, 3): displacements turn with each vertex's blended joints
                 else:
                     wm = world[ni]
                     pos = pos @ wm[:3, :3].T + wm[:3, 3]
-                    targets = {k: d @ wm[:3, :3].T for k, d in targets.items()}
+                    lin = wm[:3, :3]
+                moved = {id(d): _turned(d, lin) for d in indexed if d is not None}
+                targets = {k: moved[id(d)] for k, d in targets.items()}
                 prims.append(
                     Primitive(
                         vertices=pos,
@@ -330,6 +347,9 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
                         material=mat_i,
                         targets=targets,
                         node=str(node.get("name", ni)),
+                        node_index=ni,
+                        mesh_index=int(node["mesh"]),
+                        by_index=tuple(None if d is None else moved[id(d)] for d in indexed),
                     )
                 )
         materials: list[Material] = []

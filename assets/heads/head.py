@@ -6,7 +6,7 @@
   its Sec. 5 rig instead);
 - a rig file (``.npz``, written by ``facecast rig``);
 - a Candide-3 model (``.wfm``): driven through its own animation units (:mod:`assets.heads.wfm`);
-- a head mesh (``.glb/.gltf/.obj/.ply``): driven through its own morph targets when it has enough
+- a head mesh (``.glb/.gltf/.vrm/.obj/.ply``): driven through its own morph targets when it has enough
   mouth targets (:mod:`assets.heads.targets`; no rig step), otherwise rigged now from landmarks
   (``landmarks`` JSON, else the file shipped for known heads, else ``landmark_finder(mesh)``, e.g.
   :func:`clients.render.landmarks.find_landmarks`, which finds them on a render of the face; the

@@ -1,8 +1,9 @@
-"""Head meshes at the edge: read glb/gltf (:mod:`assets.heads.gltf`) and obj/ply (trimesh) into a :class:`HeadMesh`.
+"""Head meshes at the edge: read glb/gltf/vrm (:mod:`assets.heads.gltf`) and obj/ply (trimesh) into a :class:`HeadMesh`.
 
 All pieces (primitives, objects) are merged with their node transforms applied; vertex order is
 kept as in the file so landmark vertex indices stay valid. glTF morph targets are kept by name
-(they drive the head directly, :mod:`assets.heads.targets`). Texture: one per material; a mesh
+(they drive the head directly, :mod:`assets.heads.targets`), and a VRM avatar's vowel expressions are added as
+targets of their own (:mod:`assets.heads.vrm`). Texture: one per material; a mesh
 with several textured materials gets one atlas (the tiles side by side, each piece's UVs moved
 into its tile), so renderer, browser and exports all handle a single texture. Untextured pieces
 take their material colour as vertex colours. Without any material texture, a colour-map image next to the
@@ -25,7 +26,9 @@ import numpy as np
 from assets.errors import MeshError
 from realtime_core.normals import triangle_normals
 
-MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".ply")
+MESH_SUFFIXES = (".glb", ".gltf", ".vrm", ".obj", ".ply")
+GLTF_SUFFIXES = (".glb", ".gltf", ".vrm")
+"""Read by the glTF reader: a VRM avatar is a binary glTF (its expressions: :mod:`assets.heads.vrm`)."""
 _IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 SKIN_COLOR = (0.80, 0.62, 0.52)
 """RGB in [0, 1] of a head without colours or texture (the renderer paints it so)."""
@@ -265,7 +268,7 @@ def check_mesh(mesh: HeadMesh) -> None:
 
 
 def load_mesh(path: str | Path, *, cache: Path | None = None, parts: tuple[str | Path, ...] = ()) -> HeadMesh:
-    """Read a head mesh (glb/gltf/obj/ply), with ``parts``: further files of the same head (eyes,
+    """Read a head mesh (glb/gltf/vrm/obj/ply), with ``parts``: further files of the same head (eyes,
     teeth, tongue delivered separately) appended after it in the given order, so the head file's
     vertex indices stay valid; each file's pieces are parts named ``STEM:OBJECT`` (see
     :mod:`assets.heads.parts`). Raises MeshError naming the file on any problem."""
@@ -292,7 +295,9 @@ def _concat(pieces: list[_Parts]) -> _Parts:
     if any(x.colors is not None for x in pieces):
         colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in pieces])
     targets = {}
-    for k in sorted({k for x in pieces for k in x.targets}):  # a part without the target does not move with it
+    # In the files' order (a VRM's expressions first, as read, so they stay the vowels' first spelling); a part
+    # without the target does not move with it.
+    for k in dict.fromkeys(k for x in pieces for k in x.targets):
         targets[k] = np.concatenate([x.targets.get(k, np.zeros((len(x.vertices), 3))) for x in pieces])
     return _Parts(
         vertices=np.concatenate([x.vertices for x in pieces]),
@@ -310,11 +315,11 @@ def _concat(pieces: list[_Parts]) -> _Parts:
 def _file_parts(p: Path, cache: Path | None) -> _Parts:
     """One mesh file's pieces (MeshError naming it when it is missing, unsupported or has no triangles)."""
     if not p.is_file():
-        raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .obj or .ply head, or 'builtin')")
+        raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .vrm, .obj or .ply head, or 'builtin')")
     if p.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{p}: unsupported mesh format {p.suffix!r}; convert it to one of {', '.join(MESH_SUFFIXES)}")
     suffix = p.suffix.lower()
-    if suffix in (".glb", ".gltf"):
+    if suffix in GLTF_SUFFIXES:
         parts = _gltf_parts(p, cache)
     elif suffix == ".obj":
         from assets.heads.obj import read_obj
@@ -348,6 +353,7 @@ class _Parts:
 def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     from assets.heads.decompress import decompressed
     from assets.heads.gltf import NEEDS_DECODER, read_gltf, read_gltf_document
+    from assets.heads.vrm import VRM0_TURN, expression_targets, is_vrm0, vrm_expressions
 
     try:
         doc, _ = read_gltf_document(p)
@@ -375,15 +381,21 @@ def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     if any(x.colors is not None for x in prims):
         colors = np.concatenate([x.colors if x.colors is not None else np.ones((len(x.vertices), 3)) for x in prims])
     names = sorted({k for x in prims for k in x.targets})
-    targets = {}
+    # A VRM's vowel expressions first: where the file's own targets spell the same vowel (VRoid's Fcl_MTH_A, which
+    # its "aa" binds), match_targets keeps the first spelling, the expression as the file defines the vowel.
+    targets = expression_targets(p, prims, vrm_expressions(p, doc), set(names))
     for k in names:
         d = np.zeros((int(offs[-1]), 3))
         for i, x in enumerate(prims):
             if k in x.targets:
                 d[offs[i] : offs[i + 1]] = x.targets[k]
         targets[k] = d
+    vertices = np.concatenate([x.vertices for x in prims])
+    if is_vrm0(doc):  # a VRM 0.x avatar faces -z: turned to face +z as glTF's and VRM 1.0's do
+        vertices = vertices * VRM0_TURN
+        targets = {k: d * VRM0_TURN for k, d in targets.items()}
     return _Parts(
-        vertices=np.concatenate([x.vertices for x in prims]),
+        vertices=vertices,
         triangles=np.concatenate([x.triangles + offs[i] for i, x in enumerate(prims)]),
         uvs=np.concatenate([x.uvs for x in prims]) if have_uv else None,
         colors=colors,
@@ -459,7 +471,7 @@ def _assemble(p: Path, parts: _Parts) -> HeadMesh:
     elif parts.uvs is not None:
         texture = _sibling_texture(p)
         texture = None if texture is None else _opaque(texture)
-        if texture is not None and p.suffix.lower() in (".glb", ".gltf"):
+        if texture is not None and p.suffix.lower() in GLTF_SUFFIXES:
             # An image beside a glTF that does not reference it was made for three.js's
             # TextureLoader (flipY = true, e.g. the Lee Perry-Smith example): flip it into glTF's convention.
             buf = io.BytesIO()

@@ -19,7 +19,8 @@ which carries the 52 ARKit targets): an ARKit target itself, or for a viseme a f
 (:data:`VISEME_ARKIT`). The mouth parameters become a reference motion through the ARKit-52
 weights facecast streams (``realtime_core.blendshapes``), and :class:`realtime_core.face.keyframes.KeyframeMap`
 solves for the head's own weights by bounded least squares. A head whose targets reproduce the
-jaw opening and most of the other parameters ("enough mouth targets", :func:`morph_rig`) is
+jaw opening and most of the other parameters ("enough mouth targets", :func:`morph_rig`), or whose
+mouth targets are the five vowels of a VRM avatar and open the jaw (:data:`VOWELS`), is
 animated this way by default, with no rig step.
 """
 
@@ -79,6 +80,13 @@ ENOUGH_PROBES: tuple[tuple[tuple[float, float, float, float], float], ...] = (
     ((0.0, 0.07, 0.0, 0.0), 0.9),
     ((0.0, -0.08, 0.0, 0.0), 0.9),
 )
+
+VOWELS = frozenset({"aa", "I", "U", "E", "O"})
+"""The five vowels (:data:`VISEME_ARKIT` keys) a VRM avatar's lip sync drives (its ``aa ih ou ee oh`` expressions,
+VRoid's ``Fcl_MTH_A`` ...). A head whose mouth targets are these five and no others is driven through them when they
+open the jaw (the first of :data:`ENOUGH_PROBES`), although they fail the others (no upper-lip raise; the built-in
+head's vowels reproduce 6 % of the lips' narrowing): they are the mouth its author made for speech, and a retarget
+needs a face the landmark finder recognises, which an anime avatar's often is not (docs/heads.md)."""
 
 
 DRIVEN_MIN = 0.01
@@ -306,7 +314,8 @@ def morph_rig(
 ) -> MorphRig | None:
     """A :class:`MorphRig` driving the head's own ``targets`` (name -> (n, 3) displacement at weight 1),
     or None when too few mouth targets are recognised (``require_enough``) to reproduce the
-    :data:`ENOUGH_PROBES`. ``reference``: the built-in head's 52 ARKit targets (name -> (n_ref, 3)).
+    :data:`ENOUGH_PROBES` (the five :data:`VOWELS` alone: the jaw's). ``reference``: the built-in head's 52 ARKit
+    targets (name -> (n_ref, 3)).
     ``lips``: the reference's lip columns (:func:`reference_lips`): the weights never cross them further
     than the reference motion does (None: not constrained)."""
     matched = match_targets(list(targets), user_map)
@@ -342,6 +351,9 @@ def morph_rig(
     keymap = KeyframeMap.from_reference(kprime, a, contact=contact)
     residuals = [keymap.residual(kprime, a, arkit_source(np.array(p))) for p, _ in ENOUGH_PROBES]
     enough = all(r <= lim for r, (_, lim) in zip(residuals, ENOUGH_PROBES))
+    mouth = {canonical_name(n) for n in head_names if any(k.startswith(("jaw", "mouth")) for k in matched[n])}
+    vowels = mouth == {f"viseme:{v}" for v in VOWELS}
+    enough = enough or (vowels and residuals[0] <= ENOUGH_PROBES[0][1])
     if require_enough and not enough:
         return None
     # Targets speech never drives (eyes, brows, cheeks of an ARKit head: their weights stay below
@@ -365,6 +377,7 @@ def morph_rig(
         "probe_residuals": [round(r, 4) for r in residuals],
         "undriven_targets": len(matched) - len(head_names),
         "enough_mouth_targets": bool(enough),
+        "vowels_only": vowels,
     }
     return MorphRig(
         neutral=vertices,

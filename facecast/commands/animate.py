@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
-    add_head_options(p, help_head="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/gltf/obj/ply)")
+    add_head_options(p, help_head="head for --glb: 'builtin', a rig file (.npz) or a mesh (glb/gltf/vrm/obj/ply)")
     p.add_argument(
         "--glb-morphs",
         choices=("units", "arkit52"),

@@ -13,7 +13,7 @@ def add_head_options(p: argparse.ArgumentParser, *, head: bool = True, help_head
         p.add_argument(
             "--head",
             default="builtin",
-            help=help_head or "'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)",
+            help=help_head or "'builtin', a rig file (.npz) or a head mesh (glb/gltf/vrm/obj/ply)",
         )
     p.add_argument(
         "--head-part",

@@ -19,7 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Heads whose lips are one closed surface are cut open along the mouth line."
         ),
     )
-    p.add_argument("head", help="head mesh file (.glb/.gltf/.obj/.ply) or 'builtin' for the default head")
+    p.add_argument("head", help="head mesh file (.glb/.gltf/.vrm/.obj/.ply) or 'builtin' for the default head")
     p.add_argument(
         "--landmarks",
         help="landmarks JSON (name -> vertex index or [x, y, z]); default: the shipped file for known heads",

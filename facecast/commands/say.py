@@ -75,7 +75,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.commands.speech_options import add_expression_options
 
     add_expression_options(p)
-    add_head_options(p, help_head="head for .mp4/.glb: 'builtin', a rig file (.npz) or a head mesh (glb/gltf/obj/ply)")
+    add_head_options(
+        p, help_head="head for .mp4/.glb: 'builtin', a rig file (.npz) or a head mesh (glb/gltf/vrm/obj/ply)"
+    )
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
     p.add_argument(

@@ -47,7 +47,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--head",
         type=Path,
         default=None,
-        help="head mesh (glb/gltf/obj/ply): its own morph targets, or rigged at start-up",
+        help="head mesh (glb/gltf/vrm/obj/ply): its own morph targets, or rigged at start-up",
     )
     head.add_argument("--rig", type=Path, default=None, help="rig file (.npz from facecast's rigging)")
     head.add_argument("--no-head", action="store_true", help="serve parameters and blendshapes only (no vertex deltas)")
@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
+    from assets.heads.mesh import MESH_SUFFIXES
     from assets.modelfile import load_speech_model
     from facecast.commands.headopts import resolve_from_args
     from server.app import FacecastServer, run_server
@@ -142,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     spec = args.rig or args.head or "builtin"
-    mesh = not args.no_head and args.rig is None and Path(spec).suffix.lower() in (".glb", ".gltf", ".obj", ".ply")
+    mesh = not args.no_head and args.rig is None and Path(spec).suffix.lower() in MESH_SUFFIXES
     if mesh:
         # Rigging a new scan takes minutes; the server said nothing between its model line and "listening".
         print(
