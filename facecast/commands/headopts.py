@@ -91,7 +91,25 @@ def warn_failing_checks(head, name: str) -> None:
     if not passed:
         print(
             f"facecast: warning: {name} fails the rig checks ({'; '.join(failures)}); used anyway. "
-            "The mouth may tear or fold: check the landmarks (facecast rig HEAD --show-landmarks PNG), give "
+            f"{_what_it_means(failures)}: check the landmarks (facecast rig HEAD --show-landmarks PNG), give "
             "--landmarks, or try --head-mode morph/retarget (docs/heads.md, Rig checks)",
             file=sys.stderr,
         )
+
+
+# What a user sees of each failure that does not tear the mouth (realtime_core.face.checks.check_rig's wording).
+_MILD = (
+    ("apart at closure", "the lips may not meet at /p b m/"),
+    ("the lips part by", "the mouth opens less than the speech asks"),
+)
+
+
+def _what_it_means(failures: list[str]) -> str:
+    """The sentence after the figures: what the failures look like. A head whose only failures are mild (a VRM
+    avatar's vowels cannot press its lips together: 0.011 IOD apart at closure) was told its mouth "may tear or
+    fold", which none of them does."""
+    mild = [next((says for key, says in _MILD if key in f), None) for f in failures]
+    if failures and all(mild):
+        said = list(dict.fromkeys(m for m in mild if m))
+        return "; ".join(said)[0].upper() + "; ".join(said)[1:]
+    return "The mouth may tear or fold"

@@ -25,6 +25,20 @@ def test_commands_say_when_a_head_fails_its_checks(shared_data, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "folded.wfm fails the rig checks" in err[0] and "flipped triangles" in err[0] and "--landmarks" in err[0]
+    assert "may tear or fold" in err[0]
+
+
+def test_a_head_failing_only_mildly_is_told_what_it_looks_like():
+    """A failure that tears nothing (lips apart at closure, a small opening) says what a viewer sees instead of
+    "the mouth may tear or fold"; with a fold among them, the fold's sentence."""
+    from facecast.commands.headopts import _what_it_means
+
+    assert _what_it_means(["lips 0.0111 IOD apart at closure"]) == "The lips may not meet at /p b m/"
+    both = _what_it_means(["lips 0.0111 IOD apart at closure", "the lips part by 0.41 of the mouth opening asked"])
+    assert both == "The lips may not meet at /p b m/; the mouth opens less than the speech asks"
+    assert _what_it_means(["lips 0.0111 IOD apart at closure", "2 flipped triangles at pose (0, 0, 0.4, 0)"]) == (
+        "The mouth may tear or fold"
+    )
 
 
 @pytest.mark.slow  # a real first rig of the MediaPipe face (~10 s)
