@@ -740,6 +740,8 @@ def lip_edge_glue(
     that surface at /a/ and its down-facing faces turned to the viewer: a light strip with a dark line under it
     across the lip, and a flap at the face's left corner (docs/animation.md, "The stylised head's lower lip as one
     layer"). On the decimated Lee Perry-Smith copies the cut's lower side is the lip's own surface (no such layer)."""
+    if not len(seam_pairs):  # a cut that split no vertex (the 1,428-triangle copy jittered by 0.002 IOD): no side
+        return {}
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     upper = np.asarray(seam_pairs[:, 0], dtype=np.int64)

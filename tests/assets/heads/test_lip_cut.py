@@ -811,3 +811,6 @@ def test_a_knife_cut_lower_edge_lying_on_the_lower_lip_moves_with_it():
     v2, t2, _, origin = cut_mouth(v, t, left, right, np.array([0, 1.0, 0]), through=mid)
     copies = np.arange(len(v), len(v2))
     assert lip_edge_glue(v2, t2, np.column_stack([origin[copies], copies]), frame) == {}
+    # A cut that split no vertex (the 1,428-triangle copy with its mouth jittered by 0.002 IOD): no side to glue
+    # (np.interp raised "array of sample points is empty" out of `facecast rig`).
+    assert lip_edge_glue(v2, t2, np.zeros((0, 2), dtype=np.int64), frame) == {}
