@@ -60,6 +60,13 @@ def _read_step(proc: subprocess.Popen, want: str) -> dict:
     pytest.fail(f"viewer_check.mjs ended before step {want!r}: {proc.stderr.read()}")
 
 
+def _start(script: Path, *args: str) -> subprocess.Popen:
+    """A check script (node SCRIPT ARGS...) started in the repository; its JSON lines: :func:`_read_step`."""
+    return subprocess.Popen(
+        ["node", str(script), *args], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+
+
 def _end(proc: subprocess.Popen) -> None:
     """Stop a check script: SIGTERM lets it close the browser and remove its profile; SIGKILL if it hangs."""
     if proc.poll() is None:
@@ -210,13 +217,7 @@ def test_browser_drives_a_morph_heads_own_targets_from_the_streamed_weights(mode
         raise AssertionError("the session never became watchable")
 
     params = srv.submit(watch_params())
-    proc = subprocess.Popen(
-        ["node", str(MORPH_SCRIPT), srv.url, name, str(ARTIFACTS)],
-        cwd=REPO,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    proc = _start(MORPH_SCRIPT, srv.url, name, str(ARTIFACTS))
     try:
         samples = _read_step(proc, "samples")
         mouth = _read_step(proc, "mouth")
@@ -290,9 +291,7 @@ def _watched_to_its_end(model, head, name: str, samples: np.ndarray) -> tuple[di
     _require_browser()
     srv = LiveServer(model, head)
     session = srv.submit(stream_session(srv.url, name, 0.0, samples=samples))
-    proc = subprocess.Popen(
-        ["node", str(END_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
+    proc = _start(END_SCRIPT, srv.url, name)
     try:
         ended = _read_step(proc, "ended")
     finally:
@@ -347,9 +346,7 @@ def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
     _require_browser()
     name = "startcheck"
     srv = LiveServer(model, head)
-    proc = subprocess.Popen(
-        ["node", str(START_SCRIPT), srv.url, name], cwd=REPO, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE
-    )
+    proc = _start(START_SCRIPT, srv.url, name)
     session = None
     try:
         _read_step(proc, "polled")
@@ -408,13 +405,7 @@ def test_browser_paints_a_textured_head_with_its_texture_alone_and_cuts_see_thro
     srv = LiveServer(model, head)
     stop = asyncio.Event()
     session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(3)))
-    proc = subprocess.Popen(
-        ["node", str(TEXTURE_SCRIPT), srv.url, name, str(ARTIFACTS)],
-        cwd=REPO,
-        text=True,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-    )
+    proc = _start(TEXTURE_SCRIPT, srv.url, name, str(ARTIFACTS))
     try:
         shown = _read_step(proc, "shown")
         done = _read_step(proc, "done")
