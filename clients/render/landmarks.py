@@ -60,6 +60,14 @@ parted at rest with no mouth inside (a scan, Lee Perry-Smith with its lips 0.1 I
 in the opening's end, and its pixel showed the inside of the back of the head, 0.6 IOD below the mouth as cast
 (docs/animation.md, "Held-out heads", branch i12new)."""
 INNER_LIP_STEPS = 32  # pixels tried between an inner-lip point and its outer lip point
+SLIT_WALL_STEP = 0.05
+"""IOD: where the next lip point met on the pixel segment of :func:`_onto_lips` lies more than this in front of the
+one before it (along the camera's view), the points before are the slit's wall seen edge-on, not the lip's front,
+and are passed over.
+The 3,810-triangle Lee Perry-Smith copy with its mouth jittered by +-0.002 IOD (seed 1) met its upper lip's slit wall
+0.106 IOD behind the outer lips' front and then the front at 0.020: the upper inner-lip point cast there took the
+cut inside the slit and the rig failed (8 flips, no opening; docs/animation.md, "The 3,810 copy under jitter").
+Consecutive points on a rounded lip's edge, 1/INNER_LIP_STEPS of the segment apart, differ by about 0.007 IOD."""
 LOWER_LIP_STEPS = 32  # pixels tried from the lower inner-lip point down to MediaPipe's lower vermilion edge
 LOWER_LIP_FLAT = 0.01
 """IOD: the lower lip's outer midpoint (``lower_lip``) is the lowest midline point of the lip's front, i.e. the
@@ -203,7 +211,8 @@ def _onto_lips(
     """``points`` (name -> (3,), as cast from ``pixels``, name -> (2,)) with each inner-lip point that went
     through the lips (INNER_LIP_DEPTH) moved to the first point on the lip surface met on the pixel segment
     from it to its outer lip midpoint's pixel, and each mouth corner that went through them to the first met going
-    outwards along the mouth (CORNER_OUTWARD); left as it is when none is found (the rig checks then judge)."""
+    outwards along the mouth (CORNER_OUTWARD), both past a slit's wall (SLIT_WALL_STEP); left as it is when none is
+    found (the rig checks then judge)."""
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     front = min(float(points[k] @ forward) for k in INNER_LIP_OUTER.values())
@@ -219,7 +228,10 @@ def _onto_lips(
         hit = _cast(mesh, mvp, line, SIZE)
         on_lip = np.flatnonzero(np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod))
         if len(on_lip):
-            out[inner] = hit[on_lip[0]]
+            depth = hit[on_lip] @ forward
+            # The points before the last forward jump (SLIT_WALL_STEP) are the slit's wall, seen edge-on.
+            jumps = np.flatnonzero(np.diff(depth) > SLIT_WALL_STEP * iod)
+            out[inner] = hit[on_lip[int(jumps[-1]) + 1 if len(jumps) else 0]]
     return out
 
 

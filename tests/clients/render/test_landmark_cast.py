@@ -12,6 +12,7 @@ from clients.render.landmarks import (
     INNER_LIP_DEPTH,
     LOWER_LIP_FLAT,
     SIZE,
+    SLIT_WALL_STEP,
     _cast,
     _crease_vertices,
     _into_corner_crease,
@@ -68,6 +69,58 @@ def test_an_inner_lip_point_cast_through_a_slit_between_the_lips_moves_onto_the_
     assert abs(got["upper_inner"][0]) < 1e-9  # on the segment to the outer lip point
     np.testing.assert_array_equal(got["lower_inner"], points["lower_inner"])
     assert all(np.array_equal(got[k], points[k]) for k in on_face)
+
+
+def _slit_with_wall(wall_depth: float) -> tuple[HeadMesh, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The slit of the test above with the upper lip's wall in it: a strip ``wall_depth`` behind the lips from
+    y = 0.02 up to the upper lip (y = 0.05), seen through the slit above the upper inner-lip pixel (y = 0.01), which
+    still shows the back wall. Returns (mesh, pixels, points as cast)."""
+    upper, tu = _quad(-0.3, 0.3, 0.05, 0.4, 0.0, 0)
+    lower, tl = _quad(-0.3, 0.3, -0.4, -0.05, 0.0, 4)
+    wall, tw = _quad(-2.0, 2.0, -2.0, 2.0, -1.0, 8)
+    side, ts = _quad(-0.3, 0.3, 0.02, 0.05, -wall_depth, 12)
+    mesh = HeadMesh(
+        vertices=np.vstack([upper, lower, wall, side]), triangles=np.vstack([tu, tl, tw, ts]), name="slit wall"
+    )
+    on_face = {
+        "eye_outer_left": [0.6, 1.0, 0.0],
+        "eye_inner_left": [0.4, 1.0, 0.0],
+        "eye_outer_right": [-0.6, 1.0, 0.0],
+        "eye_inner_right": [-0.4, 1.0, 0.0],  # IOD 1
+        "upper_lip": [0.0, 0.3, 0.0],
+        "lower_lip": [0.0, -0.3, 0.0],
+        "corner_left": [0.25, 0.1, 0.0],
+        "corner_right": [-0.25, -0.1, 0.0],
+        "upper_inner": [0.0, 0.01, 0.0],  # in the slit, below the wall
+        "lower_inner": [0.05, -0.1, 0.0],
+    }
+    pixels = {k: _pixel(np.array(p), MVP) for k, p in on_face.items()}
+    names = list(pixels)
+    cast = _cast(mesh, MVP, np.array([pixels[k] for k in names]), SIZE)
+    return mesh, pixels, dict(zip(names, cast))
+
+
+def test_an_inner_lip_point_cast_through_a_slit_passes_over_the_slits_wall_onto_the_lips_front():
+    """The 3,810-triangle Lee Perry-Smith copy jittered by +-0.002 IOD (seed 1): the first lip surface met above
+    the slit was the upper lip's wall inside the slit, 0.106 IOD behind the front, and the rig cut there failed.
+    A wall deeper than SLIT_WALL_STEP behind the next point met is passed over; the point lands on the front."""
+    depth = 2.0 * SLIT_WALL_STEP
+    assert depth < INNER_LIP_DEPTH  # the wall counts as on the lip by depth alone
+    mesh, pixels, points = _slit_with_wall(depth)
+    assert points["upper_inner"][2] == -1.0  # through the slit onto the back wall
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
+    assert abs(got["upper_inner"][0]) < 1e-9
+
+
+def test_an_inner_lip_point_keeps_a_shallow_step_on_the_lip():
+    """A step shallower than SLIT_WALL_STEP (a rounded lip edge seen from the front) is the lip: the point stays on
+    it, the first surface met above the slit."""
+    depth = 0.5 * SLIT_WALL_STEP
+    mesh, pixels, points = _slit_with_wall(depth)
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    assert abs(got["upper_inner"][2] + depth) < 1e-9
+    assert 0.01 < got["upper_inner"][1] < 0.05
 
 
 def _on_ray(pixel_x: float, z: float) -> float:
