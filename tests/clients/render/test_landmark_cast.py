@@ -21,7 +21,7 @@ from clients.render.landmarks import (
     _refined,
 )
 
-# A camera on +z looking back (w = 2 - z: nearer surfaces have smaller w), as in the first test.
+# A camera on +z looking back (w = 2 - z: nearer surfaces have smaller w).
 MVP = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, -1.0, 2.0]])
 
 
@@ -40,48 +40,28 @@ def test_an_inner_lip_point_cast_through_a_slit_between_the_lips_moves_onto_the_
     inner-lip pixel lies in the slit, and the front-most surface under it is far behind the lips (there: 1
     IOD deep, inside the head; here a back wall). The point moves to the first lip surface met from it
     towards the outer lip midpoint; a point on the lip is left where it is."""
-    upper, tu = _quad(-0.3, 0.3, 0.05, 0.4, 0.0, 0)
-    lower, tl = _quad(-0.3, 0.3, -0.4, -0.05, 0.0, 4)
-    wall, tw = _quad(-2.0, 2.0, -2.0, 2.0, -1.0, 8)
-    mesh = HeadMesh(vertices=np.vstack([upper, lower, wall]), triangles=np.vstack([tu, tl, tw]), name="slit")
-    # A camera on +z looking back (w = 2 - z: nearer surfaces have smaller w).
-    mvp = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, -1.0, 2.0]])
-    on_face = {
-        "eye_outer_left": [0.6, 1.0, 0.0],
-        "eye_inner_left": [0.4, 1.0, 0.0],
-        "eye_outer_right": [-0.6, 1.0, 0.0],
-        "eye_inner_right": [-0.4, 1.0, 0.0],  # IOD 1
-        "upper_lip": [0.0, 0.3, 0.0],
-        "lower_lip": [0.0, -0.3, 0.0],
-        "corner_left": [0.25, 0.1, 0.0],  # on the lip: left where it is
-        "corner_right": [-0.25, -0.1, 0.0],
-    }
-    pixels = {k: _pixel(np.array(p), mvp) for k, p in on_face.items()}
-    pixels["upper_inner"] = _pixel(np.array([0.0, 0.01, 0.0]), mvp)  # in the slit
-    pixels["lower_inner"] = _pixel(np.array([0.05, -0.1, 0.0]), mvp)  # on the lower lip
-    names = list(pixels)
-    cast = _cast(mesh, mvp, np.array([pixels[k] for k in names]), SIZE)
-    points = dict(zip(names, cast))
+    mesh, pixels, points = _slit()
     assert points["upper_inner"][2] == -1.0  # through the slit onto the wall
     assert INNER_LIP_DEPTH < 1.0
-    got = _onto_lips(mesh, mvp, pixels, points, np.array([0.0, 0.0, 1.0]))
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
     assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
     assert abs(got["upper_inner"][0]) < 1e-9  # on the segment to the outer lip point
     np.testing.assert_array_equal(got["lower_inner"], points["lower_inner"])
-    assert all(np.array_equal(got[k], points[k]) for k in on_face)
+    assert all(np.array_equal(got[k], points[k]) for k in pixels if not k.endswith("_inner"))  # corners on the lip
 
 
-def _slit_with_wall(wall_depth: float) -> tuple[HeadMesh, dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """The slit of the test above with the upper lip's wall in it: a strip ``wall_depth`` behind the lips from
-    y = 0.02 up to the upper lip (y = 0.05), seen through the slit above the upper inner-lip pixel (y = 0.01), which
-    still shows the back wall. Returns (mesh, pixels, points as cast)."""
+def _slit(wall_depth: float | None = None) -> tuple[HeadMesh, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Closed lips meeting in a slit (y -0.05 to 0.05) in front of a back wall 1 behind them; with ``wall_depth``, the
+    upper lip's wall in the slit too: a strip that far behind the lips from y = 0.02 up to the upper lip (y = 0.05),
+    seen through the slit above the upper inner-lip pixel (y = 0.01), which still shows the back wall. The corners
+    lie on the lips. Returns (mesh, pixels, points as cast)."""
     upper, tu = _quad(-0.3, 0.3, 0.05, 0.4, 0.0, 0)
     lower, tl = _quad(-0.3, 0.3, -0.4, -0.05, 0.0, 4)
     wall, tw = _quad(-2.0, 2.0, -2.0, 2.0, -1.0, 8)
-    side, ts = _quad(-0.3, 0.3, 0.02, 0.05, -wall_depth, 12)
-    mesh = HeadMesh(
-        vertices=np.vstack([upper, lower, wall, side]), triangles=np.vstack([tu, tl, tw, ts]), name="slit wall"
-    )
+    parts = [(upper, tu), (lower, tl), (wall, tw)]
+    if wall_depth is not None:
+        parts.append(_quad(-0.3, 0.3, 0.02, 0.05, -wall_depth, 12))
+    mesh = HeadMesh(vertices=np.vstack([p[0] for p in parts]), triangles=np.vstack([p[1] for p in parts]), name="slit")
     on_face = {
         "eye_outer_left": [0.6, 1.0, 0.0],
         "eye_inner_left": [0.4, 1.0, 0.0],
@@ -106,7 +86,7 @@ def test_an_inner_lip_point_cast_through_a_slit_passes_over_the_slits_wall_onto_
     A wall deeper than SLIT_WALL_STEP behind the next point met is passed over; the point lands on the front."""
     depth = 2.0 * SLIT_WALL_STEP
     assert depth < INNER_LIP_DEPTH  # the wall counts as on the lip by depth alone
-    mesh, pixels, points = _slit_with_wall(depth)
+    mesh, pixels, points = _slit(depth)
     assert points["upper_inner"][2] == -1.0  # through the slit onto the back wall
     got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
     assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
@@ -117,7 +97,7 @@ def test_an_inner_lip_point_keeps_a_shallow_step_on_the_lip():
     """A step shallower than SLIT_WALL_STEP (a rounded lip edge seen from the front) is the lip: the point stays on
     it, the first surface met above the slit."""
     depth = 0.5 * SLIT_WALL_STEP
-    mesh, pixels, points = _slit_with_wall(depth)
+    mesh, pixels, points = _slit(depth)
     got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
     assert abs(got["upper_inner"][2] + depth) < 1e-9
     assert 0.01 < got["upper_inner"][1] < 0.05
