@@ -2,9 +2,10 @@
 
     python scripts/morph_load_times.py [--out build/morph_load] [--runs 5] [--code DIR]
 
-Three heads, made here from the built-in head (nothing downloaded beyond it): the held-out Character Creator 4 export
-with its targets (``heldout_heads.character_creator_glb``), the test set's ARKit glb (exporter spellings, as
-``head_testset.derive`` writes it) and a VRM 1.0 avatar (``tests/assets/heads/test_vrm_heads._vrm``). Each is loaded
+Four heads, made here from the built-in head and its source (nothing downloaded beyond them): the held-out Character
+Creator 4 export with its targets (``heldout_heads.character_creator_glb``), the test set's ARKit glb (exporter
+spellings, as ``head_testset.derive`` writes it), a VRM 1.0 avatar (``tests/assets/heads/test_vrm_heads._vrm``) and
+the held-out full-body avatar with its targets, uncompressed (``heldout_heads.avatar_glb``). Each is loaded
 as the commands load a head (``resolve_head`` with the automatic landmark finder), in a new process each time, the
 time of that call alone (imports outside it): once in a fresh cache holding only the built-in head's file (cold),
 then ``--runs`` times in that cache (warm). ``--code DIR``: the facecast checkout the loads run (another commit's
@@ -38,8 +39,8 @@ print(json.dumps({"s": time.perf_counter() - t, "kind": head.kind, "n": len(head
 
 
 def make_heads(out: Path) -> list[Path]:
-    """The three heads, written into ``out``."""
-    from heldout_heads import character_creator_glb
+    """The four heads, written into ``out``."""
+    from heldout_heads import avatar_glb, character_creator_glb
 
     from assets.heads.builtin import load_builtin_head
     from assets.heads.glb import mesh_glb
@@ -55,7 +56,8 @@ def make_heads(out: Path) -> list[Path]:
     mesh = HeadMesh(vertices=b.vertices, triangles=b.triangles, colors=b.colors, name="a", targets=targets)
     arkit.write_bytes(mesh_glb(mesh))
     vrm = _vrm(out / "avatar.vrm", load_builtin_head(), "1.0")
-    return [cc4, arkit, vrm]
+    body = avatar_glb(out / "fullbody_targets.glb", with_targets=True)
+    return [cc4, arkit, vrm, body]
 
 
 def load_once(head: Path, cache: Path, code: Path) -> dict:
