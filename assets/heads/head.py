@@ -43,6 +43,15 @@ HEAD_MODES: tuple[str, ...] = ("auto", "morph", "retarget")
 MORPH_CACHE_FAMILY = re.compile(r"builtin_morph_[0-9a-f]+\.npz")
 # The automatic landmarks found for own-target heads (``landmarks/a<RIG_ALGORITHM>_<key>.json``, cached_finder).
 LANDMARK_CACHE_FAMILY = re.compile(r"a[0-9]+_[0-9a-f]{32}\.json")
+# Mesh heads driven by their own targets (``morph_heads/<key>.npz``, morph_head): the key hashes the generation in, so
+# only the file's "head_meta" tells an older generation's file (morph_head_generation).
+MORPH_HEAD_CACHE_FAMILY = re.compile(r"[0-9a-f]{32}\.npz")
+MORPH_HEAD_FORMAT = "facecast-morph-head"
+MORPH_HEAD_VERSION = 1
+"""Bump when :func:`morph_head` makes something else from the same inputs while neither
+:data:`assets.heads.targets.MORPH_RIG_VERSION` (the fit) nor ``RIG_ALGORITHM`` (the mouth cavity, its shading, the
+checks, the automatic landmarks) changes, or when its cache file's layout does: a head driven by its own targets is
+read from the cache under a key holding it (:func:`morph_head_generation`)."""
 
 
 @dataclass(frozen=True)
@@ -223,19 +232,56 @@ def morph_head(
 ) -> Head | None:
     """The mesh driven by its own targets, or None (no targets / not enough mouth targets).
     landmark_finder: where the mouth is when the file does not say and its dark inside needs it
-    (:func:`assets.heads.cavity.with_mouth_cavity`)."""
+    (:func:`assets.heads.cavity.with_mouth_cavity`).
+
+    What is made here (the fit, the mouth cavity and shading, the checks: 2-3 s on 2 cores for the built-in head's
+    size) is kept in ``<cache>/morph_heads/<key>.npz`` (:func:`morph_head_path`) and read from there by the next
+    load; a file that cannot be read back is made again and rewritten. The head made now is the one read back from
+    the arrays written, so a cold and a warm load give the same head to the bit."""
     from assets.heads.builtin import load_builtin_head
-    from assets.heads.targets import morph_rig, read_target_map, reference_lips
+    from assets.heads.cache import atomic_savez, remove_stale_siblings
+    from assets.heads.targets import read_target_map
 
     if not mesh.targets:
         return None
     user = read_target_map(target_map) if target_map is not None else None
     b = load_builtin_head(cache)
+    generation = morph_head_generation(b)
+    path = morph_head_path(mesh, user, landmark_finder, generation, cache=cache)
+    head = _cached_morph_head(path, mesh, generation)
+    if head is None:
+        made = _made_morph_head(mesh, b, user, require_enough, landmark_finder, cache)
+        if made is None:
+            return None
+        arrays = morph_head_arrays(made, mesh, generation)
+        head = morph_head_from_arrays(arrays, mesh, generation)
+        with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the head
+            atomic_savez(path, **arrays)
+            remove_stale_siblings(
+                path, MORPH_HEAD_CACHE_FAMILY, stale=lambda p: _morph_head_file_generation(p) != generation
+            )
+    if require_enough and not head.rig.meta.get("enough_mouth_targets"):
+        return None  # kept by a load that did not require them (--head-mode morph): not enough for "auto"
+    return head
+
+
+def _made_morph_head(
+    mesh: HeadMesh,
+    b,
+    user: Mapping[str, Mapping[str, float]] | None,
+    require_enough: bool,
+    landmark_finder: LandmarkFinder | None,
+    cache: Path | None,
+) -> Head | None:
+    """:func:`morph_head` computed: the fit against the built-in head ``b`` (a BuiltinHead), the mouth cavity and
+    shading, the checks; None when the mesh has too few mouth targets."""
+    from assets.heads.targets import morph_rig, reference_lips
+
     rig = morph_rig(
         mesh.name,
         mesh.vertices,
         mesh.triangles,
-        mesh.targets,
+        mesh.targets or {},
         b.targets,
         user_map=user,
         require_enough=require_enough,
@@ -249,6 +295,170 @@ def morph_head(
     # The checks (and the bound they decide) once the cavity has placed its landmarks; unchanged without them.
     shaded = with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)
     return Head(with_checks(shaded.rig, shaded.mesh, landmark_finder=finder), shaded.mesh)
+
+
+def morph_head_generation(b) -> str:
+    """Hex digest of what every cached own-target head depends on besides its own mesh: the built-in head ``b`` (a
+    BuiltinHead) as the fit's reference, with the fit's constants and versions
+    (:func:`assets.heads.targets.morph_rig_key`), the checks' poses and limits, :data:`MORPH_HEAD_VERSION`."""
+    import hashlib
+
+    import numpy as np
+
+    from assets.heads.targets import morph_rig_key
+    from realtime_core.face.checks import CHECK_POSES, CLOSURE_REACH, RigCheckLimits
+
+    h = hashlib.sha256(f"{MORPH_HEAD_FORMAT} {MORPH_HEAD_VERSION} {RigCheckLimits()!r} {CLOSURE_REACH!r}".encode())
+    h.update(morph_rig_key(b.mesh.vertices, b.mesh.triangles, b.targets, b.landmarks).encode())
+    h.update(np.asarray(CHECK_POSES, dtype=np.float64).tobytes())
+    return h.hexdigest()[:32]
+
+
+def morph_head_path(
+    mesh: HeadMesh,
+    user: Mapping[str, Mapping[str, float]] | None,
+    finder: LandmarkFinder | None,
+    generation: str,
+    *,
+    cache: Path | None = None,
+) -> Path:
+    """Where :func:`morph_head` keeps ``mesh`` driven by its own targets: ``<cache>/morph_heads/<key>.npz``, the key
+    a digest of the ``generation`` (:func:`morph_head_generation`), the mesh as loaded (its content, not its path:
+    :func:`_hash_mesh`), its targets in file order (the first of two spellings of one target drives it), the user's
+    target map as read (its order decides the driven targets' order) and which landmark finder would place the
+    mouth."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    from assets.heads.cache import cache_dir
+
+    h = hashlib.sha256(f"morph head {generation}".encode())
+    _hash_mesh(h, mesh, name=False)
+    for name, d in (mesh.targets or {}).items():
+        a = np.ascontiguousarray(d)
+        h.update(f" {name!r} {a.dtype} {a.shape}".encode())
+        h.update(a.tobytes())
+    h.update(b"-" if user is None else json.dumps(user).encode())
+    h.update(f" finder {'-' if finder is None else getattr(finder, '__qualname__', type(finder).__name__)}".encode())
+    return (cache or cache_dir()) / "morph_heads" / f"{h.hexdigest()[:32]}.npz"
+
+
+def morph_head_arrays(head: Head, loaded: HeadMesh, generation: str) -> dict[str, Any]:
+    """A head :func:`morph_head` made from ``loaded`` as plain arrays for an ``.npz`` (no pickle): its rig
+    (:func:`assets.heads.targets.morph_rig_arrays`, the checks in its meta) and its mesh as the mouth cavity and
+    shading left it, but for what :func:`morph_head_from_arrays` takes from ``loaded`` (the targets, a texture the
+    cavity did not change); "head_meta" (JSON) names the format, the ``generation`` and the part names."""
+    import json
+
+    import numpy as np
+
+    from assets.heads.targets import morph_rig_arrays
+
+    m, rig = head.mesh, head.rig
+    if not isinstance(rig, MorphRig):
+        raise TypeError(f"{m.name}: a head driven by its own targets has a MorphRig, not {type(rig).__name__}")
+    texture = "none" if m.texture is None else "loaded" if m.texture == loaded.texture else "stored"
+    info = {
+        "format": MORPH_HEAD_FORMAT,
+        "version": MORPH_HEAD_VERSION,
+        "generation": generation,
+        "part_names": list(m.part_names),
+        "texture": texture,
+    }
+    arrays: dict[str, Any] = {
+        **morph_rig_arrays(rig),
+        "head_meta": np.array(json.dumps(info)),
+        "mesh_vertices": np.asarray(m.vertices),
+        "mesh_triangles": np.asarray(m.triangles),
+    }
+    for key, a in (("mesh_uvs", m.uvs), ("mesh_colors", m.colors), ("mesh_part", m.part)):
+        if a is not None:
+            arrays[key] = np.asarray(a)
+    if texture == "stored":  # the cavity's dark strip added to a texture without a dark block
+        arrays["mesh_texture"] = np.frombuffer(m.texture or b"", dtype=np.uint8)
+    return arrays
+
+
+def morph_head_from_arrays(arrays: Mapping[str, Any], loaded: HeadMesh, generation: str) -> Head:
+    """The head :func:`morph_head_arrays` stored for ``loaded`` (named as ``loaded`` is now: the cache is keyed by
+    content). Raises KeyError / ValueError / TypeError / FacecastError when the arrays are not such a head's, of
+    another ``generation`` or for another mesh."""
+    import json
+
+    import numpy as np
+
+    from assets.heads.targets import morph_rig_from_arrays
+
+    info = json.loads(str(arrays["head_meta"]))
+    if (info.get("format"), info.get("version"), info.get("generation")) != (
+        MORPH_HEAD_FORMAT,
+        MORPH_HEAD_VERSION,
+        generation,
+    ):
+        raise ValueError(f"another kind or generation of file: {info.get('format')} {info.get('version')}")
+    v = np.asarray(arrays["mesh_vertices"])
+    t = np.asarray(arrays["mesh_triangles"])
+    n0, n = len(loaded.vertices), len(v)
+    if v.ndim != 2 or v.shape[1] != 3 or n < n0 or not np.array_equal(v[:n0], loaded.vertices):
+        raise ValueError(f"vertices {v.shape} are not the mesh's {len(loaded.vertices)}")
+    if t.ndim != 2 or t.shape[1] != 3 or (t.size and not 0 <= int(t.min()) <= int(t.max()) < n):
+        raise ValueError(f"triangles {t.shape} do not index {n} vertices")
+    targets = loaded.targets
+    if targets and n > n0:  # the mouth cavity's vertices (with_mouth_cavity): still under every target
+        targets = {k: np.vstack([d, np.zeros((n - n0, 3), dtype=np.asarray(d).dtype)]) for k, d in targets.items()}
+    kind = info["texture"]
+    if kind not in ("none", "loaded", "stored"):
+        raise ValueError(f"texture {kind!r}")
+    texture = loaded.texture if kind == "loaded" else None
+    if kind == "stored":
+        texture = np.asarray(arrays["mesh_texture"], dtype=np.uint8).tobytes()
+    mesh = HeadMesh(
+        vertices=v,
+        triangles=t,
+        uvs=arrays.get("mesh_uvs"),
+        texture=texture,
+        colors=arrays.get("mesh_colors"),
+        name=loaded.name,
+        targets=targets,
+        part=arrays.get("mesh_part"),
+        part_names=tuple(str(x) for x in info["part_names"]),
+    )
+    rig = morph_rig_from_arrays(arrays, v, t)
+    if len(rig.moving) and not 0 <= int(rig.moving.min()) <= int(rig.moving.max()) < n:
+        raise ValueError(f"moving vertices do not index {n} vertices")
+    return Head(replace(rig, meta={**rig.meta, "head": loaded.name}), mesh)
+
+
+def _cached_morph_head(path: Path, loaded: HeadMesh, generation: str) -> Head | None:
+    """The head :func:`morph_head` kept at ``path`` for ``loaded``, or None: none there, or unreadable (removed, to be
+    made again and rewritten: a corrupt file, another writer's, a generation the key did not tell apart)."""
+    from realtime_core.archive import npz_arrays
+    from realtime_core.errors import FacecastError
+
+    if not path.is_file():
+        return None
+    try:
+        return morph_head_from_arrays(npz_arrays(path.read_bytes(), "morph head"), loaded, generation)
+    except (OSError, KeyError, ValueError, TypeError, IndexError, FacecastError):
+        path.unlink(missing_ok=True)
+        return None
+
+
+def _morph_head_file_generation(path: Path) -> str | None:
+    """The generation (:func:`morph_head_generation`) a morph-head cache file was written at, reading only its
+    "head_meta"; None if it is not a readable one."""
+    import json
+
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            generation = json.loads(str(z["head_meta"]))["generation"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return generation if isinstance(generation, str) else None
 
 
 R = TypeVar("R", Rig, MorphRig)

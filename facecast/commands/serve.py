@@ -145,16 +145,19 @@ def run(args: argparse.Namespace) -> int:
     spec = args.rig or args.head or "builtin"
     mesh = not args.no_head and args.rig is None and Path(spec).suffix.lower() in MESH_SUFFIXES
     if mesh:
-        # Rigging a new scan takes minutes; the server said nothing between its model line and "listening".
+        # Rigging a new scan takes minutes; the server said nothing between its model line and "listening". Which
+        # way the head goes is known once it is read: a head with its own mouth targets is not rigged (issue 12).
         print(
-            f"facecast serve: head {spec}: a mesh is rigged on its first use (minutes for a scan), then read from "
-            "the rig cache; --rig RIG.npz (facecast rig) starts from a rig file",
+            f"facecast serve: head {spec}: loading; a mesh with enough mouth targets is driven by them (prepared "
+            "once, seconds), any other is rigged on its first use (minutes for a scan); both are read from the "
+            "cache after; --rig RIG.npz (facecast rig) starts from a rig file",
             flush=True,
         )
     started = time.perf_counter()
     head = None if args.no_head else resolve_from_args(args, spec)
-    if mesh:
-        print(f"facecast serve: head ready in {time.perf_counter() - started:.1f} s", flush=True)
+    if mesh and head is not None:
+        how = "driven by its own morph targets" if head.kind == "morph" else "retargeted (a rig)"
+        print(f"facecast serve: head ready in {time.perf_counter() - started:.1f} s, {how}", flush=True)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     logging.getLogger("websockets").setLevel(logging.WARNING)  # one line per HTTP request is noise
     server = FacecastServer(model, head=head, config=config)

@@ -38,5 +38,6 @@ def test_a_mesh_head_is_announced_before_it_is_rigged(tmp_path, capsys):
     empty.write_text("v 0 0 0\nv 1 0 0\n")  # fails while it is being rigged: after the announcement
     assert main(["serve", "--port", "0", "--model", str(model), "--head", str(empty)]) == 2
     out, err = capsys.readouterr()
-    assert f"facecast serve: head {empty}: a mesh is rigged on its first use" in out, out
+    assert f"facecast serve: head {empty}: loading; a mesh with enough mouth targets is driven by them" in out, out
+    assert "ready" not in out, out
     assert len(err.strip().splitlines()) == 1 and "empty.obj" in err, err
