@@ -48,6 +48,11 @@ nose and chin stay as they are)."""
 LIP_BACK_HEIGHT = 0.04
 """IOD: an edge whose ends lie on the knife's path or no higher than this above the contact curve, and which
 passes behind path vertices, is the upper lip's back running along the cut (:func:`split_lip_back`)."""
+LIP_BACK_DEPTH = 0.35
+"""IOD: ...and which passes at most this far behind them (a lip's back lies within the lip's height, KNIFE_HEIGHT, of
+its front; Lee Perry-Smith at 1,428 triangles: 0.04-0.06). The 3,810-triangle copy jittered (seeds 3, 4) had an edge
+of the mouth cavity's back, 1.5 IOD behind the lips and 0.46 IOD long, split as a lip's back: moved with the cut's
+upper edge, its faces flipped (docs/animation.md, "The knife's gap")."""
 LIP_BACK_SPAN = 0.5
 """Such an edge is split when it is at least this fraction of the mouth's corner-to-corner width long: an upper lip
 of a handful of faces (Lee Perry-Smith at 1,428 triangles: 0.72 and 0.74), which the rig also pins to the simple
@@ -261,7 +266,8 @@ def split_lip_back(
     """Split the upper lip's back where it runs behind the knife's ``path`` (corner to corner): every edge at
     least ``longest`` long (head units), not on the path, whose two ends are path vertices or lie no higher
     than LIP_BACK_HEIGHT IOD above the contact curve (``s`` (n,), :func:`contact_offset`, head units), gets a
-    vertex where it passes more than KNIFE_SNAP IOD behind an interior path vertex and not below it (the face
+    vertex where it passes more than KNIFE_SNAP IOD (and at most LIP_BACK_DEPTH) behind an interior path vertex
+    and not below it (the face
     frame's side coordinate; ``axes`` (3, 3) its rows), each split a fan as in :func:`split_long_edges`. On a
     decimated mouth such an edge can span most of the mouth (Lee Perry-Smith at 1,428 triangles: 292-410, 0.51
     IOD from beside the right corner, 0.04-0.06 IOD behind three path vertices): straight, it cannot follow the
@@ -293,8 +299,10 @@ def split_lip_back(
         length = float(np.linalg.norm(v[b] - v[a]))
         inside = (f * length > KNIFE_SNAP * iod) & ((1 - f) * length > KNIFE_SNAP * iod)
         point = q[a] + f[:, None] * (q[b] - q[a])
-        # Behind the path vertex and not below it: the lip's back, which the cut's upper edge hides at rest.
-        hidden = inside & (point[:, 2] < q[interior, 2] - KNIFE_SNAP * iod) & (point[:, 1] >= q[interior, 1])
+        # Behind the path vertex and not below it: the lip's back, which the cut's upper edge hides at rest; no
+        # further behind than LIP_BACK_DEPTH (an edge of the mouth cavity's back is not the lip's).
+        depth = q[interior, 2] - point[:, 2]
+        hidden = inside & (depth > KNIFE_SNAP * iod) & (depth <= LIP_BACK_DEPTH * iod) & (point[:, 1] >= q[interior, 1])
         for fr, p in sorted(zip(f[hidden].tolist(), interior[hidden].tolist(), strict=True)):
             edges.append((a, b))
             ats.append(fr)

@@ -12,6 +12,7 @@ from assets.heads.knife import (
     COARSE_EDGES,
     CORNER_SPAN,
     KNIFE_SNAP,
+    LIP_BACK_DEPTH,
     contact_offset,
     knife_contact,
     mouth_resolution,
@@ -201,7 +202,8 @@ def test_the_upper_lips_back_is_split_where_it_passes_behind_the_cut():
     cut's path (corners at x = -1, 1, path vertices at -0.5, 0, 0.5 on y = 0) and 0.05 behind it, under a face
     up to the lip's top T. Straight, A-B cannot follow the path when the corners drop; split_lip_back puts a
     vertex on it behind each interior path vertex (mapped to it), fans the faces on it, and leaves the surface
-    as it was (same area, each edge in at most two faces). A shorter edge than ``longest`` is left whole."""
+    as it was (same area, each edge in at most two faces). A shorter edge than ``longest`` is left whole, and so is
+    one further than LIP_BACK_DEPTH behind the path."""
     v = np.array(
         [
             [-1.0, 0.0, 0.0],  # 0 corner
@@ -232,6 +234,12 @@ def test_the_upper_lips_back_is_split_where_it_passes_behind_the_cut():
     assert np.unique(e, axis=0, return_counts=True)[1].max() <= 2
     assert not np.isin(t2, [5, 6]).all(axis=1).any()  # no face keeps the whole edge A-B
     assert split_lip_back(v, t, path, s, np.eye(3), iod=1.0, longest=2.0)[4] == {}
+    # The same edge LIP_BACK_DEPTH and more behind the path is the mouth cavity's, not the lip's back: left whole.
+    deep = v.copy()
+    deep[[5, 6], 2] = -LIP_BACK_DEPTH - 0.01
+    assert split_lip_back(deep, t, path, s, np.eye(3), iod=1.0, longest=1.0)[4] == {}
+    deep[[5, 6], 2] = -LIP_BACK_DEPTH + 0.01
+    assert sorted(split_lip_back(deep, t, path, s, np.eye(3), iod=1.0, longest=1.0)[4].values()) == [1, 2, 3]
 
 
 def _grid_dome(cols: int = 9, rows: int = 9):
