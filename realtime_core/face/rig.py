@@ -29,9 +29,9 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 74: a gap between the knife's pieces bridged along the cut faces' edges (i12knife); 73: an inner-lip point cast
-# through a slit passes over the slit's wall onto the lip's front (i12low4k); 72: a
-# separate part lying on the skin (a beard shell) moves as the skin beneath it (i12layer); 71: a textured head's
+# 74: a gap between the knife's pieces bridged along the cut faces' edges, a lip back no deeper than 0.35 IOD
+# (i12knife); 73: an inner-lip point cast through a slit passes over the slit's wall onto the lip's front (i12low4k);
+# 72: a separate part lying on the skin (a beard shell) moves as the skin beneath it (i12layer); 71: a textured head's
 # teeth, tongue and gums darkened by vertex colours that multiply its texture (lead); 70: a head's texture has an alpha
 # channel only for see-through materials, its coverage (a rig cached with an opaque material's RGBA texture would lose
 # texels; lead); 69: lips parted over a hole and joined (or touching) near the corners cut from the hole's ends to the
