@@ -38,12 +38,21 @@ KNIFE_DEPTH = 0.1
 lips' front and their contact; a hollow head's inner walls and the back of the head stay whole)."""
 KNIFE_SIDE = 0.02
 """IOD: how far beyond a mouth corner, sideways, a cut face's vertices may reach."""
+KNIFE_BRIDGE = 10.0
+"""Where the knife's pieces do not join the corners, the path bridges the gap along edges of the cut faces off the
+curve, taken only towards the right corner, each costing this many times its length against the pieces' own
+(:func:`knife_contact`): the path keeps to the pieces where it can and bridges with the fewest, shortest edges."""
 KNIFE_HEIGHT = 0.35
 """IOD: a cut face reaches within this distance above or below the contact curve (the lips' height; the
 nose and chin stay as they are)."""
 LIP_BACK_HEIGHT = 0.04
 """IOD: an edge whose ends lie on the knife's path or no higher than this above the contact curve, and which
 passes behind path vertices, is the upper lip's back running along the cut (:func:`split_lip_back`)."""
+LIP_BACK_DEPTH = 0.35
+"""IOD: ...and which passes at most this far behind them (a lip's back lies within the lip's height, KNIFE_HEIGHT, of
+its front; Lee Perry-Smith at 1,428 triangles: 0.04-0.06). The 3,810-triangle copy jittered (seeds 3, 4) had an edge
+of the mouth cavity's back, 1.5 IOD behind the lips and 0.46 IOD long, split as a lip's back: moved with the cut's
+upper edge, its faces flipped (docs/animation.md, "The knife's gap")."""
 LIP_BACK_SPAN = 0.5
 """Such an edge is split when it is at least this fraction of the mouth's corner-to-corner width long: an upper lip
 of a handful of faces (Lee Perry-Smith at 1,428 triangles: 0.72 and 0.74), which the rig also pins to the simple
@@ -79,6 +88,8 @@ class KnifeCut:
     """New vertices on the upper lip's back (:func:`split_lip_back`) -> the path vertex in front of each."""
     corners_split: int = 0
     """How many mouth corners' edges to the lower lip were split (:func:`split_lower_corner`)."""
+    bridged: int = 0
+    """How many of the path's edges leave the curve, bridging a gap between the cut's pieces (KNIFE_BRIDGE)."""
 
     def along_path(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """The new vertices on an edge the path runs along (:func:`split_long_edges`'s: both ends on the path),
@@ -154,7 +165,8 @@ def knife_contact(
     mesh stays conforming, and every new vertex lies on an old edge (the surface, its UVs and colours are
     unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the
     edge is split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`).
-    Returns None when the cut pieces do not join the corners."""
+    Where the cut pieces leave a gap between the corners (a face the curve crosses lies outside those bounds), the
+    path bridges it along the cut faces' edges (KNIFE_BRIDGE); returns None when even that does not join them."""
     ax = np.asarray(axes, dtype=np.float64)
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
@@ -187,19 +199,41 @@ def knife_contact(
     v2, t2 = _split_edges(v, t, edge, at)
     region2 = _knife_region(np.r_[q, v2[n:] @ ax.T], t2, left, right, iod, np.r_[s, np.zeros(len(edge))])
     # The curve's pieces: edges of the cut faces whose two ends are on the curve.
-    e2 = np.concatenate([t2[region2][:, [0, 1]], t2[region2][:, [1, 2]], t2[region2][:, [2, 0]]])
-    e2 = np.unique(np.sort(e2, axis=1), axis=0)
-    e2 = e2[on[e2[:, 0]] & on[e2[:, 1]]]
-    if not len(e2):
+    e_cut = np.concatenate([t2[region2][:, [0, 1]], t2[region2][:, [1, 2]], t2[region2][:, [2, 0]]])
+    e_cut = np.unique(np.sort(e_cut, axis=1), axis=0)
+    piece = on[e_cut[:, 0]] & on[e_cut[:, 1]]
+    if not piece.any():
         return None
+    e2 = e_cut[piece]
     lw = np.linalg.norm(v2[e2[:, 0]] - v2[e2[:, 1]], axis=1) + 1e-12 * iod
     g = sp.csr_matrix((np.r_[lw, lw], (np.r_[e2[:, 0], e2[:, 1]], np.r_[e2[:, 1], e2[:, 0]])), shape=(len(v2),) * 2)
     dist, pred = dijkstra(g, indices=left, return_predecessors=True)
     if not np.isfinite(dist[right]):
-        return None
+        # The pieces leave a gap: the curve crossed a face outside the region (a vertex past KNIFE_DEPTH or
+        # KNIFE_SIDE), whose crossed edges stayed whole. Followed on past the bounds the curve may wander into
+        # the lips' slit (the 3,810-triangle Lee Perry-Smith copy mirrored: from the loose end 0.09 IOD from the
+        # left corner it dips past 0.2 IOD behind the corners, and the pieces on either side turn back on
+        # themselves), so the gap is bridged along the cut faces' own edges instead: the path is the shortest from
+        # corner to corner over the pieces and those edges, each costing KNIFE_BRIDGE times its length and taken only
+        # towards the right corner (docs/animation.md, "The knife's gap"). Bridged in both directions the path
+        # turned back past a corner's neighbour (0 / 2.78 but the lips parting 0.40); bridged only between loose
+        # ends, it ran a hairpin out and back along the pieces (0 / 2.95, parting 0.35).
+        off = e_cut[~piece]
+        # Each off-curve edge only in the direction from the left corner's side to the right's: no bridge back.
+        ahead = (v2[off[:, 1]] - v2[off[:, 0]]) @ (v[right] - v[left]) >= 0
+        off = np.where(ahead[:, None], off, off[:, ::-1])
+        ow = KNIFE_BRIDGE * (np.linalg.norm(v2[off[:, 0]] - v2[off[:, 1]], axis=1) + 1e-12 * iod)
+        g = sp.csr_matrix(
+            (np.r_[lw, lw, ow], (np.r_[e2[:, 0], e2[:, 1], off[:, 0]], np.r_[e2[:, 1], e2[:, 0], off[:, 1]])),
+            shape=(len(v2),) * 2,
+        )
+        dist, pred = dijkstra(g, indices=left, return_predecessors=True)
+        if not np.isfinite(dist[right]):
+            return None
     path = [right]
     while path[-1] != left:
         path.append(int(pred[path[-1]]))
+    bridged = sum(1 for a, b in itertools.pairwise(path) if not (on[a] and on[b]))
     v3, t3, edge3, at3, path3 = split_long_edges(v2, t2, path[::-1], width / COARSE_EDGES, among=n)
     s3 = np.r_[s, np.zeros(len(v3) - n)]  # the knife's vertices lie on the curve
     v4, t4, edge4, at4, behind = split_lip_back(v3, t3, path3, s3, ax, iod=iod, longest=LIP_BACK_SPAN * width)
@@ -215,6 +249,7 @@ def knife_contact(
         path=path3,
         behind=behind,
         corners_split=len(edge5),
+        bridged=bridged,
     )
 
 
@@ -231,7 +266,8 @@ def split_lip_back(
     """Split the upper lip's back where it runs behind the knife's ``path`` (corner to corner): every edge at
     least ``longest`` long (head units), not on the path, whose two ends are path vertices or lie no higher
     than LIP_BACK_HEIGHT IOD above the contact curve (``s`` (n,), :func:`contact_offset`, head units), gets a
-    vertex where it passes more than KNIFE_SNAP IOD behind an interior path vertex and not below it (the face
+    vertex where it passes more than KNIFE_SNAP IOD (and at most LIP_BACK_DEPTH) behind an interior path vertex
+    and not below it (the face
     frame's side coordinate; ``axes`` (3, 3) its rows), each split a fan as in :func:`split_long_edges`. On a
     decimated mouth such an edge can span most of the mouth (Lee Perry-Smith at 1,428 triangles: 292-410, 0.51
     IOD from beside the right corner, 0.04-0.06 IOD behind three path vertices): straight, it cannot follow the
@@ -263,8 +299,10 @@ def split_lip_back(
         length = float(np.linalg.norm(v[b] - v[a]))
         inside = (f * length > KNIFE_SNAP * iod) & ((1 - f) * length > KNIFE_SNAP * iod)
         point = q[a] + f[:, None] * (q[b] - q[a])
-        # Behind the path vertex and not below it: the lip's back, which the cut's upper edge hides at rest.
-        hidden = inside & (point[:, 2] < q[interior, 2] - KNIFE_SNAP * iod) & (point[:, 1] >= q[interior, 1])
+        # Behind the path vertex and not below it: the lip's back, which the cut's upper edge hides at rest; no
+        # further behind than LIP_BACK_DEPTH (an edge of the mouth cavity's back is not the lip's).
+        depth = q[interior, 2] - point[:, 2]
+        hidden = inside & (depth > KNIFE_SNAP * iod) & (depth <= LIP_BACK_DEPTH * iod) & (point[:, 1] >= q[interior, 1])
         for fr, p in sorted(zip(f[hidden].tolist(), interior[hidden].tolist(), strict=True)):
             edges.append((a, b))
             ats.append(fr)

@@ -1548,6 +1548,8 @@ def rig_head(
                     meta["lip_back_vertices"] = len(behind)
                 if knife.corners_split:
                     meta["lower_corner_split"] = knife.corners_split
+                if knife.bridged:
+                    meta["knife_bridged"] = knife.bridged  # path edges off the curve, over a gap in the cut
             else:
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).

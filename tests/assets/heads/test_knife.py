@@ -12,6 +12,7 @@ from assets.heads.knife import (
     COARSE_EDGES,
     CORNER_SPAN,
     KNIFE_SNAP,
+    LIP_BACK_DEPTH,
     contact_offset,
     knife_contact,
     mouth_resolution,
@@ -201,7 +202,8 @@ def test_the_upper_lips_back_is_split_where_it_passes_behind_the_cut():
     cut's path (corners at x = -1, 1, path vertices at -0.5, 0, 0.5 on y = 0) and 0.05 behind it, under a face
     up to the lip's top T. Straight, A-B cannot follow the path when the corners drop; split_lip_back puts a
     vertex on it behind each interior path vertex (mapped to it), fans the faces on it, and leaves the surface
-    as it was (same area, each edge in at most two faces). A shorter edge than ``longest`` is left whole."""
+    as it was (same area, each edge in at most two faces). A shorter edge than ``longest`` is left whole, and so is
+    one further than LIP_BACK_DEPTH behind the path."""
     v = np.array(
         [
             [-1.0, 0.0, 0.0],  # 0 corner
@@ -232,6 +234,12 @@ def test_the_upper_lips_back_is_split_where_it_passes_behind_the_cut():
     assert np.unique(e, axis=0, return_counts=True)[1].max() <= 2
     assert not np.isin(t2, [5, 6]).all(axis=1).any()  # no face keeps the whole edge A-B
     assert split_lip_back(v, t, path, s, np.eye(3), iod=1.0, longest=2.0)[4] == {}
+    # The same edge LIP_BACK_DEPTH and more behind the path is the mouth cavity's, not the lip's back: left whole.
+    deep = v.copy()
+    deep[[5, 6], 2] = -LIP_BACK_DEPTH - 0.01
+    assert split_lip_back(deep, t, path, s, np.eye(3), iod=1.0, longest=1.0)[4] == {}
+    deep[[5, 6], 2] = -LIP_BACK_DEPTH + 0.01
+    assert sorted(split_lip_back(deep, t, path, s, np.eye(3), iod=1.0, longest=1.0)[4].values()) == [1, 2, 3]
 
 
 def _grid_dome(cols: int = 9, rows: int = 9):
@@ -286,6 +294,68 @@ def test_the_knife_cuts_along_the_contact_curve_and_keeps_the_surface_whole():
     assert (n[:, 2] > 0).all()
     # UVs (here: the positions' x, y) carried to the new vertices equal their own x, y.
     np.testing.assert_allclose(knife.carry(v[:, :2]), v2[:, :2], atol=1e-12)
+
+
+def _slit_dome(mirrored: bool):
+    """The 9 x 9 grid dome (x mirrored, its windings reversed, if ``mirrored``) with the corners at x -0.5 and 0.5 on
+    the middle row and the vertex above the mouth's middle (0, 0.25) pushed 0.3 back, past KNIFE_DEPTH (a lip's edge
+    folding into the slit, as on the 3,810-triangle Lee Perry-Smith copy mirrored). Returns v, t, left, right, that
+    vertex."""
+    v, t, xs, _ = _grid_dome()
+    cols = len(xs)
+    dip = 5 * cols + 4
+    v[dip, 2] -= 0.3
+    left, right = 4 * cols + 2, 4 * cols + 6
+    if mirrored:
+        v[:, 0] = -v[:, 0]
+        t = t[:, ::-1]
+        left, right = right, left
+    return v, t, left, right, dip
+
+
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_a_gap_between_the_knifes_pieces_is_bridged_along_the_cut_faces_edges(mirrored):
+    """The contact curve (through the corners and 0.13 above them at the middle) crosses the faces round a vertex
+    that lies past KNIFE_DEPTH: those faces are not cut, and the pieces on either side of them do not meet (with
+    KNIFE_BRIDGE infinite, the knife as it was: no cut). The path bridges the gap along edges of the cut faces: it
+    joins the corners through vertices of the mesh, never through the deep vertex, each within one grid step (0.25)
+    of the curve, never turning back towards the left corner off the curve, each step an edge of the cut mesh, and
+    the surface is kept whole (area, no edge in three faces, the boundary unchanged). The same on the mirrored
+    grid, whose diagonals run the other way."""
+    import assets.heads.knife as knife_module
+
+    v, t, left, right, dip = _slit_dome(mirrored)
+    inner = np.array([0.0, 0.13, 0.4])
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(knife_module, "KNIFE_BRIDGE", np.inf)
+        assert knife_contact(v, t, left, right, inner, np.eye(3), iod=1.0) is None
+    knife = knife_contact(v, t, left, right, inner, np.eye(3), iod=1.0)
+    assert knife is not None
+    path = knife.path
+    assert path[0] == left and path[-1] == right and len(set(path)) == len(path)
+    assert knife.bridged >= 1 and dip not in path
+    v2, t2 = knife.vertices, knife.triangles
+    p = v2[path]
+    off = np.abs(p[:, 1] - 0.13 * (1 - 4 * p[:, 0] ** 2))
+    assert off.max() <= 0.25
+    # A step to or from a vertex off the curve (a bridge) never turns back towards the left corner.
+    ahead = np.diff(p @ (v[right] - v[left]))
+    bridge = (off[:-1] > 1e-9) | (off[1:] > 1e-9)
+    assert bridge.sum() >= knife.bridged and (ahead[bridge] >= 0).all()
+    e = np.sort(np.concatenate([t2[:, [0, 1]], t2[:, [1, 2]], t2[:, [2, 0]]]), axis=1)
+    edges, counts = np.unique(e, axis=0, return_counts=True)
+    steps = np.sort(np.column_stack([path[:-1], path[1:]]), axis=1)
+    assert all((edges == step).all(axis=1).any() for step in steps)
+    assert counts.max() == 2
+    c0 = np.unique(
+        np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1), axis=0, return_counts=True
+    )
+    assert (counts == 1).sum() == (c0[1] == 1).sum()
+
+    def area(vv: np.ndarray, tt: np.ndarray) -> float:
+        return float(np.linalg.norm(np.cross(vv[tt[:, 1]] - vv[tt[:, 0]], vv[tt[:, 2]] - vv[tt[:, 0]]), axis=1).sum())
+
+    assert area(v2, t2) == pytest.approx(area(v, t), rel=1e-12)
 
 
 def test_a_path_leaving_a_corner_through_one_long_edge_gets_the_corners_lower_lip_edge_split():
