@@ -1297,6 +1297,115 @@ def touching_rim(
     return lowest[group]  # each vertex joined to its touching group's lowest index (itself when alone)
 
 
+PARTED_END_BAND = (0.035, 0.09, 0.15)
+"""IOD inwards from a parted hole's end along the mouth line: the lower lip's rows there are taken from its rim as a
+function of that position alone (:func:`parted_lower_lip_rows`) in full from the first to the second figure, eased in
+from the end to the first and out from the second to the third. Eased in over 0.02 only, a vertex 0.022 IOD inside
+the mirrored parted Lee Perry-Smith's end took the lower rim's rows in full beside the end's own and turned a face over
+the end at an expression pose (docs/animation.md, "The parted lower lip's ends")."""
+PARTED_END_REACH = (0.03, 0.06)
+"""IOD from the lower lip's rim (its hole edge) within which :func:`parted_lower_lip_rows` applies in full, and beyond
+which not at all (eased between)."""
+PARTED_END_OPEN = 0.35
+"""mouth_open at which :func:`parted_lower_lip_rows` tells the lower lip by its drop (/a/'s)."""
+PARTED_END_LOWER = 0.4
+"""Fraction of the lower inner-lip point's drop at :data:`PARTED_END_OPEN` beyond which a vertex is the lower lip's
+(:func:`parted_lower_lip_rows`)."""
+PARTED_END_TOP = 0.015
+"""IOD: the lower lip's hole edge vertices within this of the highest one about the same place along the mouth line
+(within :data:`PARTED_END_SIGMA`) are its top edge, whose rows :func:`parted_lower_lip_rows` averages."""
+PARTED_END_RINGS = (1, 2)
+"""Edges from the upper lip: a lower-lip vertex this many or fewer (the first figure) keeps its row, this many or more
+(the second) takes :func:`parted_lower_lip_rows`'s in full (eased between). The parted Lee Perry-Smith's hole ends
+ragged: 0.02-0.04 IOD inside its ends the lower lip's edge vertices lie 0.006-0.013 IOD below the upper lip's, joined to
+them by small faces; given the rim's rows there, they rose 0.13 IOD at rest (the pose that closes the lips) against the
+upper lip's 0.10 and passed it (the file as shipped 0 / 3.08 -> 9 / 7.99). Eased by distance from the upper lip instead
+(0.01-0.02 IOD), the rule left out the faces it is for (they lie 0.013-0.02 IOD from it too)."""
+PARTED_END_SIGMA = 0.015
+"""IOD: the width (a Gaussian's sigma, along the mouth line) over which :func:`parted_lower_lip_rows` averages the rim's
+rows. On the parted Lee Perry-Smith jittered and mirrored (its rigs as they were, the rule applied after): 0.009 and
+0.012 left 1-2 faces turned inside the band (the mean bends where the rim's vertices lie unevenly along the lip), 0.02
+and 0.03 a face at the band's edge; 0.015 none."""
+
+
+def parted_lower_lip_rows(
+    rig: Rig, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Lips parted over a hole: near each of the hole's ends, the lower lip's vertices (lip and inner wall, within
+    :data:`PARTED_END_REACH` of its hole edge) move as a smooth function of their position along the mouth line alone:
+    the hole edge's rows averaged by a Gaussian in that position (:data:`PARTED_END_SIGMA`), mixed in by
+    :data:`PARTED_END_BAND` and the reach; not the vertices above the line from the hole's end to the inner lips'
+    midpoint, nor those joined by an edge to the upper lip (:data:`PARTED_END_RINGS`). A displacement that depends on
+    the position along one axis only maps every triangle by a shear and a stretch along that axis, which turns no face
+    over unless the drop changes by more than twice the distance along the lip (a face facing sideways, across a lip
+    that narrows, somewhat sooner); the harmonic field's slope along the lip there varies with depth, and the small
+    faces of the lower lip's inner wall 0.04-0.06 IOD inside the ends, each a thin sliver across that slope, turned over
+    at /a/ whenever their inner vertex dropped 0.01 IOD more than the edge facing it (the parted Lee Perry-Smith, 5 of 7
+    copies jittered by 0.002 IOD or mirrored; docs/animation.md, "The parted lower lip's ends"). ``rig``: the head's rig
+    as repaired, at rest as modelled (parted, not cut); ``triangles`` (m, 3) the mesh it animates; ``landmarks``: name
+    -> vertex index, the corners at the hole's ends (:func:`opening_ends`). Returns :func:`with_rows_mixed`'s
+    ``mix``."""
+    v = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    # Which lip a vertex belongs to: how far the rig drops it as the mouth opens, against the lower inner-lip point.
+    # Near the hole's ends the lips' edges run within 0.01-0.02 IOD of each other, jagged, and neither side of the
+    # mouth line nor the nearer inner-lip point along the surface tells them apart (both took upper-lip vertices
+    # there for the lower lip's: their rows mixed with the lower lip's, the upper lip's raise tore them, stretch
+    # 11.85); at /a/ the lower lip's vertices there drop 0.17-0.30 IOD, the upper lip's at most 0.11.
+    opened = np.asarray(rig.deformed(np.array([0.0, 0.0, PARTED_END_OPEN, 0.0])), dtype=np.float64)
+    drop = -((opened - np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)) @ frame.axes[1]) / frame.iod
+    lower = drop > PARTED_END_LOWER * max(float(drop[landmarks["lower_inner"]]), 1e-9)
+    rim = np.unique(boundary_edges(t)[0])
+    mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
+    adj = vertex_adjacency(len(v), t).tocsr()
+    a, b, c = PARTED_END_BAND
+    mix: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for k in ("corner_left", "corner_right"):
+        end = int(landmarks[k])
+        side = float(np.sign(q[end, 0] - mid[0]))
+        inward = side * (q[end, 0] - q[:, 0])
+        near = np.linalg.norm(q - q[end], axis=1) < c + PARTED_END_REACH[1]
+        edge = rim[lower[rim] & near[rim] & (inward[rim] > -a) & (inward[rim] < c + 3 * PARTED_END_SIGMA)]
+        # The lower lip's top edge only: a hole's edge near its ends also runs down the lower lip's inner wall (the
+        # parted Lee Perry-Smith's 0.05-0.08 IOD below the top edge), whose rows, mixed in, moved the top edge against
+        # the upper lip's edge 0.006 IOD above it (9 faces turned over at its ends at rest).
+        top = np.array(
+            [
+                q[e, 1] >= q[edge[np.abs(q[edge, 0] - q[e, 0]) < PARTED_END_SIGMA], 1].max() - PARTED_END_TOP
+                for e in edge
+            ]
+        )
+        edge = edge[top] if len(edge) else edge
+        if len(edge) < 3:
+            continue
+        # Below the line from the hole's end to the inner lips' midpoint (a vertex above it beside the end is the
+        # corner's, however far it drops).
+        slope = (mid[1] - q[end, 1]) / (mid[0] - q[end, 0])
+        below = q[:, 1] < q[end, 1] + slope * (q[:, 0] - q[end, 0])
+        cand = np.flatnonzero(lower & near & below & (inward > 0) & (inward < c))
+        reach = np.min(np.linalg.norm(q[cand, None, :] - q[None, edge, :], axis=2), axis=1)
+        # Edges from the upper lip (PARTED_END_RINGS): a lower-lip vertex joined to it by a face keeps its row.
+        ring = np.full(len(v), PARTED_END_RINGS[1] + 1, dtype=np.int64)
+        front = (~lower) & near
+        ring[front] = 0
+        for r in range(1, PARTED_END_RINGS[1] + 1):
+            front = (adj @ front.astype(np.float64) > 0) & (ring > PARTED_END_RINGS[1])
+            ring[front] = r
+        w = (
+            np.clip((ring[cand] - PARTED_END_RINGS[0]) / (PARTED_END_RINGS[1] - PARTED_END_RINGS[0]), 0.0, 1.0)
+            * np.clip(inward[cand] / a, 0.0, 1.0)
+            * np.clip((c - inward[cand]) / (c - b), 0.0, 1.0)
+            * np.clip((PARTED_END_REACH[1] - reach) / (PARTED_END_REACH[1] - PARTED_END_REACH[0]), 0.0, 1.0)
+        )
+        for i, wi in zip(cand[w > 0], w[w > 0], strict=True):
+            kern = np.exp(-0.5 * ((q[edge, 0] - q[i, 0]) / PARTED_END_SIGMA) ** 2)
+            if kern.sum() < 1e-6:
+                continue
+            mix[int(i)] = (np.r_[int(i), edge], np.r_[1.0 - wi, wi * kern / kern.sum()])
+    return mix
+
+
 def parted_over_hole(
     vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int], *, modelled: bool
 ) -> bool:
@@ -1786,6 +1895,12 @@ def rig_head(
                 "speech and expressions" if settled else "speech (expressions did not settle)"
             )
             rig = held
+        if parted_hole and cut_copies is None:
+            # The lower lip at the hole's ends moves as a function of its position along the mouth line (see
+            # parted_lower_lip_rows): its small inner-wall faces there turned over at /a/ under any 0.002 IOD jitter.
+            ends_mix = parted_lower_lip_rows(rig, t, frame, snap)
+            mixed = with_rows_mixed(rig, ends_mix)
+            rig = replace(mixed, meta={**mixed.meta, "parted_ends_smoothed": len(ends_mix)})
         if walls is not None:
             rig, cut_mesh = without_inner_lips(
                 rig,
