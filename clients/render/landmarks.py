@@ -25,6 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 from assets.errors import LandmarkError
+from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
 from assets.mediapipe_log import native_stderr_quiet
@@ -120,6 +121,65 @@ def _detect(image: np.ndarray) -> np.ndarray | None:
     h, w = image.shape[:2]
     lm = res.multi_face_landmarks[0].landmark
     return np.array([[p.x * w, p.y * h] for p in lm[:468]])
+
+
+MIRROR_PARTNER: dict[int, int] = {263: 33, 362: 133, 291: 61, 234: 454}
+"""MediaPipe points used here whose mirror image is another point (the subject's left and right); the others used are
+on the midline (1, 10, 0, 17, 13, 14, 152)."""
+VIEW_ZOOMS: tuple[tuple[float, float, float], ...] = (
+    (1.0, 0.0, 0.0),
+    (0.92, 0.0, 0.0),
+    (1.08, 0.0, 0.0),
+    (1.0, 0.02, 0.02),
+)
+"""(zoom, x shift, y shift as fractions of the image) of the views of one render MediaPipe is run on, each also
+mirrored (:func:`_views`). MediaPipe's points move with how the face sits in the image and on which side it is: on
+one render of the untextured Lee Perry-Smith and its mirror image the inner-lip points lay up to 0.046 IOD apart.
+The views are the same render resampled (no render, ~0.02 s each), so their points map back to its pixels exactly."""
+
+
+def _mirror_order() -> np.ndarray:
+    """(468,) MediaPipe index -> the index of its mirror image (MIRROR_PARTNER both ways, the rest itself)."""
+    order = np.arange(468)
+    for a, b in MIRROR_PARTNER.items():
+        order[a], order[b] = b, a
+    return order
+
+
+def _views(image: np.ndarray, zooms: tuple[tuple[float, float, float], ...] = VIEW_ZOOMS) -> list[np.ndarray]:
+    """MediaPipe's points (468, 2) in ``image``'s pixels on each view of it (VIEW_ZOOMS, each also mirrored left to
+    right, its points flipped back and their sides swapped); views with no face found are left out. Their median is
+    mirror-symmetric by construction: a head's mirror image (rendered with mirror-symmetric light, RenderConfig's
+    "frontal") gives the same views mirrored."""
+    from PIL import Image
+
+    h, w = image.shape[:2]
+    half = np.array([w, h], dtype=np.float64) / 2.0
+    out: list[np.ndarray] = []
+    for flip in (False, True):
+        img = Image.fromarray(np.ascontiguousarray(image[:, ::-1] if flip else image))
+        bg = tuple(int(c) for c in image[0, 0])
+        for zoom, dx, dy in zooms:
+            shift = np.array([dx * w, dy * h])
+            # Output pixel q shows the render at half + (q - half) / zoom + shift (PIL's affine maps output to input).
+            a = 1.0 / zoom
+            c = half - a * half + shift
+            if flip:
+                c[0] = half[0] - a * half[0] - shift[0]  # the mirrored view's shift mirrored too (symmetric set)
+            if (zoom, dx, dy) == (1.0, 0.0, 0.0):
+                view = img  # the render itself (or its mirror image): nothing to resample
+            else:
+                affine = (a, 0.0, float(c[0]), 0.0, a, float(c[1]))
+                view = img.transform((w, h), Image.Transform.AFFINE, affine, Image.Resampling.BILINEAR, fillcolor=bg)
+            pts = _detect(np.asarray(view))
+            if pts is None:
+                continue
+            pts = pts * a + c
+            if flip:
+                pts[:, 0] = w - pts[:, 0]
+                pts = pts[_mirror_order()]
+            out.append(pts)
+    return out
 
 
 FACING_GRID = 24
@@ -345,21 +405,25 @@ avatar (0.6) and the stylised head (2.4, its eye corners found on a cartoon face
 
 def _framed(
     mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, cfg
-) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]] | None:
-    """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``) from a render of ``mesh`` framed on
-    ``centre`` (``size`` wide) along ``axes``; None when no face is found or a point misses the mesh."""
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], list[np.ndarray]] | None:
+    """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``, each view's pixels (12, 2) in
+    MEDIAPIPE_INDEX's order) from a render of ``mesh`` framed on ``centre`` (``size`` wide) along ``axes``: the
+    pixels are the median of MediaPipe's on its views (:func:`_views`); None when no face is found or a point misses
+    the mesh."""
     from clients.render.renderer import HeadRenderer
 
     with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=cfg) as r:
-        pts = _detect(r.render())
-        if pts is None:
-            return None
-        names = list(MEDIAPIPE_INDEX)
-        pix = pts[[MEDIAPIPE_INDEX[k] for k in names]]
-        p3 = _cast(mesh, r.mvp, pix, SIZE)
-        if np.isnan(p3).any():
-            return None
-        return r.mvp, dict(zip(names, pix)), dict(zip(names, p3))
+        views = _views(r.render())
+        mvp = r.mvp
+    if not views:
+        return None
+    names = list(MEDIAPIPE_INDEX)
+    each = [p[[MEDIAPIPE_INDEX[k] for k in names]] for p in views]
+    pix = np.median(np.stack(each), axis=0)
+    p3 = _cast(mesh, mvp, pix, SIZE)
+    if np.isnan(p3).any():
+        return None
+    return mvp, dict(zip(names, pix)), dict(zip(names, p3)), each
 
 
 def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray | None:
@@ -377,13 +441,52 @@ def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray 
     return np.stack([x, np.cross(fwd, x), fwd])
 
 
-def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
-    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units). LandmarkError when no face is found."""
+ALTERNATIVES = 3
+"""How many other landmark sets :func:`find_landmarks` gives besides the median of its views: the plain view's, the
+plain mirrored view's and the view farthest from the median (fewer where they coincide). A rig from the median that
+fails its checks is made again from these (assets.heads.head.rig_checked)."""
+
+
+def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray) -> dict[str, list[float]] | None:
+    """The twelve landmarks (name -> [x, y, z]) from their pixels ``pix`` (12, 2) in MEDIAPIPE_INDEX's order on the
+    render ``mvp``: cast, then taken to facecast's definitions (:func:`_onto_lips`, :func:`_refined`); None when a
+    pixel misses the mesh."""
+    names = list(MEDIAPIPE_INDEX)
+    p3 = _cast(mesh, mvp, pix, SIZE)
+    if np.isnan(p3).any():
+        return None
+    pixels = dict(zip(names, pix))
+    found = _onto_lips(mesh, mvp, pixels, dict(zip(names, p3)), forward)
+    found = _refined(mesh, mvp, pixels, found)
+    return {k: found[k].tolist() for k in names}
+
+
+def _alternatives(
+    mesh: HeadMesh, mvp: np.ndarray, median: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
+) -> list[dict[str, list[float]]]:
+    """Up to ALTERNATIVES landmark sets from single views (``each``, (12, 2) pixels; ``median`` their median), none
+    equal to ``chosen`` (the median's set) or to one another."""
+    far = int(np.argmax([np.abs(p - median).max() for p in each]))
+    picks = [0, len(each) // 2 if len(each) > 1 else 0, far]
+    out: list[dict[str, list[float]]] = []
+    for i in dict.fromkeys(picks):
+        got = _placed(mesh, mvp, each[i], forward)
+        if got is not None and got != chosen and got not in out:
+            out.append(got)
+    return out[:ALTERNATIVES]
+
+
+def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
+    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them (single
+    views' points, :data:`ALTERNATIVES`) as its ``alternatives``. LandmarkError when no face is found.
+
+    The render is lit mirror-symmetrically ("frontal") and MediaPipe runs on several views of it and their mirror
+    images (:func:`_views`); each point's pixel is the views' median, cast once."""
     from clients.errors import RenderError
     from clients.render.renderer import HeadRenderer, RenderConfig
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
-    cfg = RenderConfig(width=SIZE, height=SIZE, samples=4)
+    cfg = RenderConfig(width=SIZE, height=SIZE, samples=4, lighting="frontal")
     try:
         for up, fwd in ORIENTATIONS:
             axes = _axes(np.array(up, float), np.array(fwd, float))
@@ -399,11 +502,11 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                 span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
                 centre = c_q @ axes
                 with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=cfg) as r:
-                    pts = _detect(r.render())
-                    if pts is None:
+                    seen = _views(r.render(), zooms=VIEW_ZOOMS[:1])
+                    if not seen:
                         continue
-                    # Re-frame on the face for steadier points.
-                    face = _cast(mesh, r.mvp, pts[[1, 10, 152, 234, 454]], SIZE)
+                    # Re-frame on the face for steadier points (framed alike on the render and its mirror image).
+                    face = _cast(mesh, r.mvp, np.mean(seen, axis=0)[[1, 10, 152, 234, 454]], SIZE)
                 if np.isnan(face).any():
                     continue
                 fc = face.mean(0)
@@ -417,10 +520,13 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                     again = _framed(facing, fc, turned, fspan, cfg)
                     if again is not None:
                         got, axes, mesh = again, turned, facing
-                r_mvp, pixels, cast = got
-                found = _onto_lips(mesh, r_mvp, pixels, cast, np.asarray(axes[2], np.float64))
-                found = _refined(mesh, r_mvp, pixels, found)
-                return {k: found[k].tolist() for k in MEDIAPIPE_INDEX}
+                r_mvp, pixels, _, each = got
+                forward = np.asarray(axes[2], np.float64)
+                median = np.stack([pixels[k] for k in MEDIAPIPE_INDEX])
+                found = _placed(mesh, r_mvp, median, forward)
+                if found is None:
+                    continue
+                return FoundLandmarks(found, tuple(_alternatives(mesh, r_mvp, median, each, forward, found)))
     except RenderError as exc:
         raise LandmarkError(
             f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"

@@ -29,7 +29,9 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 73: an inner-lip point cast through a slit passes over the slit's wall onto the lip's front (i12low4k); 72: a
+# 74: automatic landmarks the median of MediaPipe on several views of a frontally lit render and their mirror
+# images, a rig that fails retried from single views' sets (i12steady); 73: an inner-lip point cast through a slit
+# passes over the slit's wall onto the lip's front (i12low4k); 72: a
 # separate part lying on the skin (a beard shell) moves as the skin beneath it (i12layer); 71: a textured head's
 # teeth, tongue and gums darkened by vertex colours that multiply its texture (lead); 70: a head's texture has an alpha
 # channel only for see-through materials, its coverage (a rig cached with an opaque material's RGBA texture would lose
@@ -43,7 +45,7 @@ if TYPE_CHECKING:
 # edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median edge (i12wall; checks only);
 # 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside shown through the skin
 # checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 73
+RIG_ALGORITHM = 74
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
