@@ -4,8 +4,11 @@
    trying the usual orientations in turn (glTF's +y up / face towards +z first, then -z, +x, -x,
    and z-up files), framed on the whole mesh and, for full-body avatars, on its top.
 2. Run MediaPipe Face Mesh (``mediapipe`` 0.10.14, legacy ``solutions.face_mesh``, static image mode)
-   on the render: 468 points in pixels.
-3. Re-render framed on the detected face (a larger face gives steadier points) and detect again.
+   on the render and its mirror image: 468 points in pixels. The renders are lit mirror-symmetrically
+   (RenderConfig's "frontal" lighting).
+3. Re-render framed on the detected face (a larger face gives steadier points) and detect again on several views of
+   that render (zoomed, shifted, each mirrored: :func:`_views`); each point's pixel is the views' median, so a head
+   and its mirror image get mirrored points. Single views' sets are kept as alternatives (:data:`ALTERNATIVES`).
 4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
    camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
 5. Take two points to facecast's definitions (:func:`_refined`): on lips modelled apart, a mouth corner hidden
@@ -20,7 +23,7 @@ found ("give --landmarks").
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,6 +32,7 @@ from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
 from assets.mediapipe_log import native_stderr_quiet
+from clients.render.renderer import RenderConfig
 from realtime_core.face import face_frame_at
 from realtime_core.normals import triangle_normals
 
@@ -146,9 +150,12 @@ def _mirror_order() -> np.ndarray:
     return order
 
 
-def _views(image: np.ndarray, zooms: tuple[tuple[float, float, float], ...] = VIEW_ZOOMS) -> list[np.ndarray]:
+def _views(
+    image: np.ndarray, zooms: tuple[tuple[float, float, float], ...] = VIEW_ZOOMS, mirrored: bool = True
+) -> list[np.ndarray]:
     """MediaPipe's points (468, 2) in ``image``'s pixels on each view of it (VIEW_ZOOMS, each also mirrored left to
-    right, its points flipped back and their sides swapped); views with no face found are left out. Their median is
+    right, its points flipped back and their sides swapped, unless not ``mirrored``); views with no face found are left
+    out. Their median is
     mirror-symmetric by construction: a head's mirror image (rendered with mirror-symmetric light, RenderConfig's
     "frontal") gives the same views mirrored."""
     from PIL import Image
@@ -156,7 +163,7 @@ def _views(image: np.ndarray, zooms: tuple[tuple[float, float, float], ...] = VI
     h, w = image.shape[:2]
     half = np.array([w, h], dtype=np.float64) / 2.0
     out: list[np.ndarray] = []
-    for flip in (False, True):
+    for flip in (False, True) if mirrored else (False,):
         img = Image.fromarray(np.ascontiguousarray(image[:, ::-1] if flip else image))
         bg = tuple(int(c) for c in image[0, 0])
         for zoom, dx, dy in zooms:
@@ -403,17 +410,37 @@ their points, to the bit: the cast eye lines of Lee Perry-Smith (0.3 degrees), t
 avatar (0.6) and the stylised head (2.4, its eye corners found on a cartoon face)."""
 
 
+@dataclass(frozen=True)
+class Look:
+    """How :func:`_located` looks at a head: the render's ``config`` (its lighting), the views of it MediaPipe runs on
+    (``zooms``, :data:`VIEW_ZOOMS`) and whether each is also mirrored."""
+
+    config: RenderConfig
+    zooms: tuple[tuple[float, float, float], ...]
+    mirrored: bool
+
+
+STEADY = Look(
+    config=RenderConfig(width=SIZE, height=SIZE, samples=4, lighting="frontal"), zooms=VIEW_ZOOMS, mirrored=True
+)
+"""The found set's look: mirror-symmetric light, eight views (docs/animation.md, "Steadier automatic landmarks")."""
+PLAIN = Look(config=RenderConfig(width=SIZE, height=SIZE, samples=4), zooms=((1.0, 0.0, 0.0),), mirrored=False)
+"""The first alternative's look, the finder's until RIG_ALGORITHM 73: the studio-lit render, MediaPipe once. Every head
+of the test set rigged from its points, and three of them (Lee Perry-Smith textured, the 3,810 and 1,428 copies) fail
+every try from the steady set's (corners and lips 0.02-0.03 IOD away) and pass from these."""
+
+
 def _framed(
-    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, cfg
+    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, look: Look
 ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], list[np.ndarray]] | None:
     """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``, each view's pixels (12, 2) in
     MEDIAPIPE_INDEX's order) from a render of ``mesh`` framed on ``centre`` (``size`` wide) along ``axes``: the
-    pixels are the median of MediaPipe's on its views (:func:`_views`); None when no face is found or a point misses
-    the mesh."""
+    pixels are the median of MediaPipe's on its views (:func:`_views`, as ``look`` says); None when no face is found or
+    a point misses the mesh."""
     from clients.render.renderer import HeadRenderer
 
-    with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=cfg) as r:
-        views = _views(r.render())
+    with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=look.config) as r:
+        views = _views(r.render(), look.zooms, look.mirrored)
         mvp = r.mvp
     if not views:
         return None
@@ -442,9 +469,9 @@ def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray 
 
 
 ALTERNATIVES = 3
-"""How many other landmark sets :func:`find_landmarks` gives besides the median of its views: the plain view's, the
-plain mirrored view's and the view farthest from the median (fewer where they coincide). A rig from the median that
-fails its checks is made again from these (assets.heads.head.rig_checked)."""
+"""How many other landmark sets :func:`find_landmarks` gives besides the median of its views: the PLAIN look's, the
+steady look's plain view's and its plain mirrored view's (fewer where they coincide). A rig from the median that fails
+its checks is made again from these in turn (assets.heads.head.rig_checked)."""
 
 
 def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray) -> dict[str, list[float]] | None:
@@ -464,10 +491,9 @@ def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarra
 def _alternatives(
     mesh: HeadMesh, mvp: np.ndarray, median: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
 ) -> list[dict[str, list[float]]]:
-    """Up to ALTERNATIVES landmark sets from single views (``each``, (12, 2) pixels; ``median`` their median), none
-    equal to ``chosen`` (the median's set) or to one another."""
-    far = int(np.argmax([np.abs(p - median).max() for p in each]))
-    picks = [0, len(each) // 2 if len(each) > 1 else 0, far]
+    """Landmark sets from the plain view and the plain mirrored view (``each``, (12, 2) pixels, VIEW_ZOOMS' order,
+    unmirrored first), none equal to ``chosen`` (the set from ``median``, their median) or to one another."""
+    picks = [0, len(each) // 2 if len(each) > 1 else 0]
     out: list[dict[str, list[float]]] = []
     for i in dict.fromkeys(picks):
         got = _placed(mesh, mvp, each[i], forward)
@@ -476,17 +502,46 @@ def _alternatives(
     return out[:ALTERNATIVES]
 
 
-def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
-    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them (single
-    views' points, :data:`ALTERNATIVES`) as its ``alternatives``. LandmarkError when no face is found.
+def _located(
+    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, span: float, look: Look
+) -> tuple[HeadMesh, np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]] | None:
+    """One look at ``mesh`` framed on ``centre`` (``span`` wide) along ``axes``, then re-framed on the face found and
+    turned to face it (:func:`_facing_axes`): (the mesh as wound for the view, its axes, the render's mvp, the
+    landmarks' median pixels (12, 2) in MEDIAPIPE_INDEX's order, each view's), or None when no face is found."""
+    from clients.render.renderer import HeadRenderer
 
-    The render is lit mirror-symmetrically ("frontal") and MediaPipe runs on several views of it and their mirror
-    images (:func:`_views`); each point's pixel is the views' median, cast once."""
+    with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=look.config) as r:
+        seen = _views(r.render(), look.zooms[:1], look.mirrored)
+        if not seen:
+            return None
+        # Re-frame on the face for steadier points (framed alike on the render and its mirror image).
+        face = _cast(mesh, r.mvp, np.mean(seen, axis=0)[[1, 10, 152, 234, 454]], SIZE)
+    if np.isnan(face).any():
+        return None
+    fc = face.mean(0)
+    fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
+    got = _framed(mesh, fc, axes, fspan, look)
+    if got is None:
+        return None
+    turned = _facing_axes(got[2], axes)
+    if turned is not None:  # a head turned in its file: look again, straight at its face
+        facing = facing_viewer(mesh, turned)
+        again = _framed(facing, fc, turned, fspan, look)
+        if again is not None:
+            got, axes, mesh = again, turned, facing
+    mvp, pixels, _, each = got
+    return mesh, axes, mvp, np.stack([pixels[k] for k in MEDIAPIPE_INDEX]), each
+
+
+def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
+    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them as its
+    ``alternatives`` (:data:`ALTERNATIVES`: the PLAIN look's, then single views'). LandmarkError when no face is found.
+
+    The render is lit mirror-symmetrically and MediaPipe runs on several views of it and their mirror images
+    (:data:`STEADY`, :func:`_views`); each point's pixel is the views' median, cast once."""
     from clients.errors import RenderError
-    from clients.render.renderer import HeadRenderer, RenderConfig
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
-    cfg = RenderConfig(width=SIZE, height=SIZE, samples=4, lighting="frontal")
     try:
         for up, fwd in ORIENTATIONS:
             axes = _axes(np.array(up, float), np.array(fwd, float))
@@ -501,32 +556,25 @@ def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
                 c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
                 span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
                 centre = c_q @ axes
-                with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=cfg) as r:
-                    seen = _views(r.render(), zooms=VIEW_ZOOMS[:1])
-                    if not seen:
-                        continue
-                    # Re-frame on the face for steadier points (framed alike on the render and its mirror image).
-                    face = _cast(mesh, r.mvp, np.mean(seen, axis=0)[[1, 10, 152, 234, 454]], SIZE)
-                if np.isnan(face).any():
-                    continue
-                fc = face.mean(0)
-                fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
-                got = _framed(mesh, fc, axes, fspan, cfg)
+                got = _located(mesh, centre, axes, span, STEADY)
                 if got is None:
                     continue
-                turned = _facing_axes(got[2], axes)
-                if turned is not None:  # a head turned in its file: look again, straight at its face
-                    facing = facing_viewer(mesh, turned)
-                    again = _framed(facing, fc, turned, fspan, cfg)
-                    if again is not None:
-                        got, axes, mesh = again, turned, facing
-                r_mvp, pixels, _, each = got
-                forward = np.asarray(axes[2], np.float64)
-                median = np.stack([pixels[k] for k in MEDIAPIPE_INDEX])
-                found = _placed(mesh, r_mvp, median, forward)
+                seen, s_axes, mvp, median, each = got
+                forward = np.asarray(s_axes[2], np.float64)
+                found = _placed(seen, mvp, median, forward)
                 if found is None:
                     continue
-                return FoundLandmarks(found, tuple(_alternatives(mesh, r_mvp, median, each, forward, found)))
+                others: list[dict[str, list[float]]] = []
+                plain = _located(mesh, centre, axes, span, PLAIN)
+                if plain is not None:
+                    p_mesh, p_axes, p_mvp, p_pix, _ = plain
+                    old = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
+                    if old is not None and old != found:
+                        others.append(old)
+                for single in _alternatives(seen, mvp, median, each, forward, found):
+                    if single not in others:
+                        others.append(single)
+                return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
     except RenderError as exc:
         raise LandmarkError(
             f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"
