@@ -4,11 +4,12 @@
    trying the usual orientations in turn (glTF's +y up / face towards +z first, then -z, +x, -x,
    and z-up files), framed on the whole mesh and, for full-body avatars, on its top.
 2. Run MediaPipe Face Mesh (``mediapipe`` 0.10.14, legacy ``solutions.face_mesh``, static image mode)
-   on the render and its mirror image: 468 points in pixels. The renders are lit mirror-symmetrically
-   (RenderConfig's "frontal" lighting).
-3. Re-render framed on the detected face (a larger face gives steadier points) and detect again on several views of
-   that render (zoomed, shifted, each mirrored: :func:`_views`); each point's pixel is the views' median, so a head
-   and its mirror image get mirrored points. Single views' sets are kept as alternatives (:data:`ALTERNATIVES`).
+   on the render: 468 points in pixels.
+3. Re-render framed on the detected face (a larger face gives steadier points) and detect again: the found set.
+   Its alternatives (:data:`ALTERNATIVES`), rigged from only when every rig from the found set fails: the same on a
+   render lit mirror-symmetrically (RenderConfig's "frontal" lighting), MediaPipe on several views of it (zoomed,
+   shifted, each mirrored: :func:`_views`), each point's pixel the views' median (a head and its mirror image get
+   mirrored points), then single views' sets.
 4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
    camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
 5. Take two points to facecast's definitions (:func:`_refined`): on lips modelled apart, a mouth corner hidden
@@ -423,11 +424,13 @@ class Look:
 STEADY = Look(
     config=RenderConfig(width=SIZE, height=SIZE, samples=4, lighting="frontal"), zooms=VIEW_ZOOMS, mirrored=True
 )
-"""The found set's look: mirror-symmetric light, eight views (docs/animation.md, "Steadier automatic landmarks")."""
+"""The first alternative's look: mirror-symmetric light, eight views, their median (docs/animation.md, "Steadier
+automatic landmarks"). The untextured Lee Perry-Smith mirrored fails every rig from the PLAIN set (44 flips) and passes
+from this one; as the found set it made three test-set heads fail every try (Lee Perry-Smith textured, the 3,810 and
+1,428 copies: corners and lips 0.02-0.03 IOD away), so it is not the found set."""
 PLAIN = Look(config=RenderConfig(width=SIZE, height=SIZE, samples=4), zooms=((1.0, 0.0, 0.0),), mirrored=False)
-"""The first alternative's look, the finder's until RIG_ALGORITHM 73: the studio-lit render, MediaPipe once. Every head
-of the test set rigged from its points, and three of them (Lee Perry-Smith textured, the 3,810 and 1,428 copies) fail
-every try from the steady set's (corners and lips 0.02-0.03 IOD away) and pass from these."""
+"""The found set's look (the finder's until RIG_ALGORITHM 73 too): the studio-lit render, MediaPipe once. Every head
+of the test set rigs from its points."""
 
 
 def _framed(
@@ -469,9 +472,9 @@ def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray 
 
 
 ALTERNATIVES = 3
-"""How many other landmark sets :func:`find_landmarks` gives besides the median of its views: the PLAIN look's, the
-steady look's plain view's and its plain mirrored view's (fewer where they coincide). A rig from the median that fails
-its checks is made again from these in turn (assets.heads.head.rig_checked)."""
+"""How many other landmark sets :func:`find_landmarks` gives besides the PLAIN look's: the STEADY look's median, its
+plain view's and its plain mirrored view's (fewer where they coincide). A rig from the found set that fails its checks
+is made again from these in turn (assets.heads.head.rig_checked)."""
 
 
 def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray) -> dict[str, list[float]] | None:
@@ -489,10 +492,10 @@ def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarra
 
 
 def _alternatives(
-    mesh: HeadMesh, mvp: np.ndarray, median: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
+    mesh: HeadMesh, mvp: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
 ) -> list[dict[str, list[float]]]:
     """Landmark sets from the plain view and the plain mirrored view (``each``, (12, 2) pixels, VIEW_ZOOMS' order,
-    unmirrored first), none equal to ``chosen`` (the set from ``median``, their median) or to one another."""
+    unmirrored first), none equal to ``chosen`` (the found set) or to one another."""
     picks = [0, len(each) // 2 if len(each) > 1 else 0]
     out: list[dict[str, list[float]]] = []
     for i in dict.fromkeys(picks):
@@ -535,10 +538,11 @@ def _located(
 
 def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
     """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them as its
-    ``alternatives`` (:data:`ALTERNATIVES`: the PLAIN look's, then single views'). LandmarkError when no face is found.
+    ``alternatives`` (:data:`ALTERNATIVES`). LandmarkError when no face is found.
 
-    The render is lit mirror-symmetrically and MediaPipe runs on several views of it and their mirror images
-    (:data:`STEADY`, :func:`_views`); each point's pixel is the views' median, cast once."""
+    The found set: MediaPipe on one studio-lit render (:data:`PLAIN`). The first alternative: the render lit
+    mirror-symmetrically, MediaPipe on several views of it and their mirror images (:data:`STEADY`, :func:`_views`),
+    each point's pixel the views' median, cast once; then single views' sets."""
     from clients.errors import RenderError
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
@@ -556,24 +560,27 @@ def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
                 c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
                 span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
                 centre = c_q @ axes
-                got = _located(mesh, centre, axes, span, STEADY)
-                if got is None:
+                # The found set is the PLAIN look's (one studio-lit render: every head that rigged from it still
+                # rigs the same); the STEADY look's median and single views are its alternatives, rigged from only
+                # when every rig from the found set fails (assets.heads.head.rig_checked).
+                plain = _located(mesh, centre, axes, span, PLAIN)
+                if plain is None:
                     continue
-                seen, s_axes, mvp, median, each = got
-                forward = np.asarray(s_axes[2], np.float64)
-                found = _placed(seen, mvp, median, forward)
+                p_mesh, p_axes, p_mvp, p_pix, _ = plain
+                found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
                 if found is None:
                     continue
                 others: list[dict[str, list[float]]] = []
-                plain = _located(mesh, centre, axes, span, PLAIN)
-                if plain is not None:
-                    p_mesh, p_axes, p_mvp, p_pix, _ = plain
-                    old = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
-                    if old is not None and old != found:
-                        others.append(old)
-                for single in _alternatives(seen, mvp, median, each, forward, found):
-                    if single not in others:
-                        others.append(single)
+                steady = _located(mesh, centre, axes, span, STEADY)
+                if steady is not None:
+                    seen, s_axes, mvp, median, each = steady
+                    forward = np.asarray(s_axes[2], np.float64)
+                    middle = _placed(seen, mvp, median, forward)
+                    if middle is not None and middle != found:
+                        others.append(middle)
+                    for single in _alternatives(seen, mvp, each, forward, found):
+                        if single not in others:
+                            others.append(single)
                 return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
     except RenderError as exc:
         raise LandmarkError(

@@ -165,9 +165,9 @@ def test_a_head_wound_the_other_way_round_gets_the_same_landmarks(shared_data):
 def test_a_head_and_its_mirror_image_get_mirrored_landmarks(shared_data, tmp_path):
     """The untextured Lee Perry-Smith (the .glb alone) mirrored left to right: MediaPipe's points on one render of it
     and on one of the head lay up to 0.046 IOD apart once mirrored back (the inner lips; the corners 0.03-0.04), and
-    its rig failed (44 flips) where the head's passed. The landmark render is lit mirror-symmetrically and the points
-    are the median of MediaPipe's on several views of it and their mirror images: within 0.015 IOD (measured 0.008).
-    Each alternative set is one view's and differs from the found set."""
+    its rig failed (44 flips) where the head's passed. The first alternative set's render is lit mirror-symmetrically
+    and its points are the median of MediaPipe's on several views of it and their mirror images: within 0.015 IOD
+    (measured 0.008). The found set is the one studio-lit render's, as before; each alternative differs from it."""
     import shutil
     from dataclasses import replace
 
@@ -175,14 +175,14 @@ def test_a_head_and_its_mirror_image_get_mirrored_landmarks(shared_data, tmp_pat
     mesh = load_mesh(tmp_path / "someone.glb")
     assert mesh.texture is None
     found = find_landmarks(mesh)
-    p = {k: np.asarray(x) for k, x in found.items()}
+    p = {k: np.asarray(x) for k, x in found.alternatives[0].items()}
     centre = 0.5 * (p["corner_left"] + p["corner_right"])
     v = np.array(mesh.vertices, dtype=np.float64)
     v[:, 0] = 2.0 * centre[0] - v[:, 0]
     mirrored = replace(mesh, vertices=v, triangles=np.ascontiguousarray(mesh.triangles[:, ::-1]))
     swap = {"left": "right", "right": "left"}
     back = {}
-    for k, x in find_landmarks(mirrored).items():
+    for k, x in find_landmarks(mirrored).alternatives[0].items():
         side = k.rsplit("_", 1)[-1]
         q = np.asarray(x, dtype=np.float64)
         back[k.rsplit("_", 1)[0] + "_" + swap[side] if side in swap else k] = np.array([2 * centre[0] - q[0], *q[1:]])
