@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from assets.errors import CannotWriteError, LandmarkError, MeshError, RigFileError
+from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
 from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
@@ -52,6 +53,8 @@ MORPH_HEAD_VERSION = 1
 :data:`assets.heads.targets.MORPH_RIG_VERSION` (the fit) nor ``RIG_ALGORITHM`` (the mouth cavity, its shading, the
 checks, the automatic landmarks) changes, or when its cache file's layout does: a head driven by its own targets is
 read from the cache under a key holding it (:func:`morph_head_generation`)."""
+LANDMARK_CACHE_VERSION = 2
+"""Of what cached_finder keeps: 2, with the finder's alternative sets (older files hold none, so are found again)."""
 
 
 @dataclass(frozen=True)
@@ -625,8 +628,9 @@ def _hash_mesh(h, mesh: HeadMesh, *, name: bool = True) -> None:
 
 
 def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> LandmarkFinder:
-    """``finder`` whose answer for a mesh is kept in ``<cache>/landmarks/`` (JSON, written atomically) under a
-    digest of the mesh as loaded, the finder's name and ``RIG_ALGORITHM`` (the automatic landmarks change with
+    """``finder`` whose answer for a mesh is kept in ``<cache>/landmarks/`` (JSON, written atomically; with its
+    ``alternatives``, :class:`assets.heads.landmarks.FoundLandmarks`) under a digest of the mesh as loaded, the
+    finder's name, LANDMARK_CACHE_VERSION and ``RIG_ALGORITHM`` (the automatic landmarks change with
     it, as the rigs they make do): an untextured head driven by its own targets with no landmarks in its file
     (a full-body avatar) is located on every load to shade its mouth's inside
     (:func:`assets.heads.cavity.with_mouth_cavity`), and the finder (an offscreen render and MediaPipe) took
@@ -642,8 +646,11 @@ def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> Landmark
 
     name = getattr(finder, "__qualname__", type(finder).__name__)
 
-    def find(mesh: HeadMesh) -> dict[str, object]:
-        h = hashlib.sha256(f"landmarks {name}".encode())
+    def listed(points: Mapping[str, object]) -> dict[str, object]:
+        return {k: np.asarray(p).tolist() for k, p in points.items()}
+
+    def find(mesh: HeadMesh) -> Mapping[str, object]:
+        h = hashlib.sha256(f"landmarks {LANDMARK_CACHE_VERSION} {name}".encode())
         _hash_mesh(h, mesh)
         path = (cache or cache_dir()) / "landmarks" / f"a{RIG_ALGORITHM}_{h.hexdigest()[:32]}.json"
         try:
@@ -653,12 +660,14 @@ def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> Landmark
         if isinstance(kept, dict) and "landmarks" in kept:
             if kept["landmarks"] is None:
                 raise LandmarkError(str(kept.get("error", f"{mesh.name}: no face found")))
-            return dict(kept["landmarks"])
+            return FoundLandmarks(dict(kept["landmarks"]), tuple(dict(a) for a in kept.get("alternatives", [])))
         try:
-            points: dict[str, object] | None = {k: np.asarray(p).tolist() for k, p in finder(mesh).items()}
-            doc: dict[str, object] = {"landmarks": points}
+            found = finder(mesh)
+            points: dict[str, object] | None = listed(found)
+            others = [listed(a) for a in getattr(found, "alternatives", ())]
+            doc: dict[str, object] = {"landmarks": points, "alternatives": others}
         except LandmarkError as exc:
-            points, doc = None, {"landmarks": None, "error": str(exc)}
+            points, others, doc = None, [], {"landmarks": None, "error": str(exc)}
         with contextlib.suppress(CannotWriteError):  # a read-only cache costs time, not the landmarks
             atomic_write_bytes(path, json.dumps(doc).encode())
             remove_stale_siblings(
@@ -666,16 +675,17 @@ def cached_finder(finder: LandmarkFinder, cache: Path | None = None) -> Landmark
             )
         if points is None:
             raise LandmarkError(str(doc["error"]))
-        return points
+        return FoundLandmarks(points, tuple(others))
 
     return find
 
 
 def head_landmarks(
     mesh: HeadMesh, landmarks: str | Path | Mapping[str, object] | None, finder: LandmarkFinder | None = None
-) -> tuple[dict[str, object] | None, str]:
+) -> tuple[Mapping[str, object] | None, str]:
     """The landmark spec for a mesh and where it came from: given (file or mapping), shipped for a
-    known head, the built-in head's own, or found automatically (LandmarkError when that fails)."""
+    known head, the built-in head's own, or found automatically (LandmarkError when that fails; a finder's
+    :class:`FoundLandmarks` kept as it is, with its alternatives for :func:`rig_checked`)."""
     from assets.heads.landmarks import read_landmarks, shipped_landmarks
 
     if isinstance(landmarks, Mapping):
@@ -689,13 +699,52 @@ def head_landmarks(
         return read_landmarks(shipped), str(shipped)
     if finder is None:
         raise LandmarkError(f"{mesh.name}: no landmarks file given (--landmarks L.json) and none shipped for this head")
-    return dict(finder(mesh)), "automatic landmarks"
+    found = finder(mesh)
+    return (found if isinstance(found, FoundLandmarks) else dict(found)), "automatic landmarks"
 
 
 TEETH_WORDS = ("teeth", "tooth", "gum", "dent")
 
 
 def rig_checked(
+    mesh: HeadMesh,
+    spec: Mapping[str, object] | None,
+    *,
+    dense_proxy: bool = True,
+    progress: Callable[[str], None] | None = None,
+    limits: RigCheckLimits | None = None,
+    **rig_options: Any,
+) -> tuple[Rig, HeadMesh, RigReport]:
+    """:func:`_rig_checked_once` (the tries, below) from ``spec``; when it was found automatically with alternatives
+    (:class:`assets.heads.landmarks.FoundLandmarks`) and every try fails, the same tries from each alternative set in
+    turn, the first rig that passes kept (meta "landmark_set": its number, 1 for the first alternative; meta
+    "landmark_sets_failed": the failures of the sets tried before it), else the rig from ``spec`` as before. MediaPipe's
+    points move by up to ~0.02 IOD between renders of one head (docs/animation.md, "Steadier automatic landmarks"), and
+    whether a rig passes can hang on where they fall. A rig that passes from ``spec`` is made exactly as before."""
+    alternatives = spec.alternatives if isinstance(spec, FoundLandmarks) else ()
+    points = None if spec is None else dict(spec)
+    options: dict[str, Any] = {"dense_proxy": dense_proxy, "progress": progress, "limits": limits, **rig_options}
+    rig, rigged, report = _rig_checked_once(mesh, points, **options)
+    if report.passed or not alternatives:
+        return rig, rigged, report
+    last = list(report.failures)
+    failed: list[dict[str, object]] = [{"set": 0, "failures": last}]
+    for n, other in enumerate(alternatives, start=1):
+        if progress is not None:
+            progress(
+                f"every rig from the automatic landmarks fails its checks ({'; '.join(last)}); "
+                f"rigging from another set of them ({n} of {len(alternatives)}: one view's points)"
+            )
+        a_rig, a_rigged, a_report = _rig_checked_once(mesh, dict(other), **options)
+        if a_report.passed:
+            meta = {**a_rig.meta, "landmark_set": n, "landmark_sets_failed": failed}
+            return replace(a_rig, meta=meta), a_rigged, a_report
+        last = list(a_report.failures)
+        failed.append({"set": n, "failures": last})
+    return replace(rig, meta={**rig.meta, "landmark_sets_failed": failed}), rigged, report
+
+
+def _rig_checked_once(
     mesh: HeadMesh,
     spec: Mapping[str, object] | None,
     *,

@@ -8,6 +8,8 @@ upper_inner, lower_inner, chin ("left" is the face's own left).
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -23,6 +25,26 @@ SHIPPED = {
     "leeperrysmith.glb": "lee_perry_smith.json",
     "canonical_face_model.obj": "mediapipe_canonical.json",
 }
+
+
+@dataclass(frozen=True)
+class FoundLandmarks(Mapping[str, object]):
+    """Landmarks found automatically: the mapping name -> [x, y, z] of ``points`` (what any landmark spec is), and
+    ``alternatives``, other plausible sets of the same points (the single views' of
+    :func:`clients.render.landmarks.find_landmarks`), which :func:`assets.heads.head.rig_checked` rigs from in turn
+    when every rig from ``points`` fails its checks (docs/animation.md, "Steadier automatic landmarks")."""
+
+    points: Mapping[str, object]
+    alternatives: tuple[Mapping[str, object], ...] = field(default=())
+
+    def __getitem__(self, key: str) -> object:
+        return self.points[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.points)
+
+    def __len__(self) -> int:
+        return len(self.points)
 
 
 def read_landmarks(path: str | Path) -> dict[str, object]:

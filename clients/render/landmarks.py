@@ -5,7 +5,11 @@
    and z-up files), framed on the whole mesh and, for full-body avatars, on its top.
 2. Run MediaPipe Face Mesh (``mediapipe`` 0.10.14, legacy ``solutions.face_mesh``, static image mode)
    on the render: 468 points in pixels.
-3. Re-render framed on the detected face (a larger face gives steadier points) and detect again.
+3. Re-render framed on the detected face (a larger face gives steadier points) and detect again: the found set.
+   Its alternatives (:data:`ALTERNATIVES`), rigged from only when every rig from the found set fails: the same on a
+   render lit mirror-symmetrically (RenderConfig's "frontal" lighting), MediaPipe on several views of it (zoomed,
+   shifted, each mirrored: :func:`_views`), each point's pixel the views' median (a head and its mirror image get
+   mirrored points), then single views' sets.
 4. Cast each needed point back onto the mesh: the mesh triangles are projected with the renderer's
    camera; the front-most triangle under the pixel gives the 3D point (barycentric interpolation).
 5. Take two points to facecast's definitions (:func:`_refined`): on lips modelled apart, a mouth corner hidden
@@ -20,14 +24,16 @@ found ("give --landmarks").
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from assets.errors import LandmarkError
+from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import HeadMesh
 from assets.heads.rigging import lips_connected
 from assets.mediapipe_log import native_stderr_quiet
+from clients.render.renderer import RenderConfig
 from realtime_core.face import face_frame_at
 from realtime_core.normals import triangle_normals
 
@@ -120,6 +126,68 @@ def _detect(image: np.ndarray) -> np.ndarray | None:
     h, w = image.shape[:2]
     lm = res.multi_face_landmarks[0].landmark
     return np.array([[p.x * w, p.y * h] for p in lm[:468]])
+
+
+MIRROR_PARTNER: dict[int, int] = {263: 33, 362: 133, 291: 61, 234: 454}
+"""MediaPipe points used here whose mirror image is another point (the subject's left and right); the others used are
+on the midline (1, 10, 0, 17, 13, 14, 152)."""
+VIEW_ZOOMS: tuple[tuple[float, float, float], ...] = (
+    (1.0, 0.0, 0.0),
+    (0.92, 0.0, 0.0),
+    (1.08, 0.0, 0.0),
+    (1.0, 0.02, 0.02),
+)
+"""(zoom, x shift, y shift as fractions of the image) of the views of one render MediaPipe is run on, each also
+mirrored (:func:`_views`). MediaPipe's points move with how the face sits in the image and on which side it is: on
+one render of the untextured Lee Perry-Smith and its mirror image the inner-lip points lay up to 0.046 IOD apart.
+The views are the same render resampled (no render, ~0.02 s each), so their points map back to its pixels exactly."""
+
+
+def _mirror_order() -> np.ndarray:
+    """(468,) MediaPipe index -> the index of its mirror image (MIRROR_PARTNER both ways, the rest itself)."""
+    order = np.arange(468)
+    for a, b in MIRROR_PARTNER.items():
+        order[a], order[b] = b, a
+    return order
+
+
+def _views(
+    image: np.ndarray, zooms: tuple[tuple[float, float, float], ...] = VIEW_ZOOMS, mirrored: bool = True
+) -> list[np.ndarray]:
+    """MediaPipe's points (468, 2) in ``image``'s pixels on each view of it (VIEW_ZOOMS, each also mirrored left to
+    right, its points flipped back and their sides swapped, unless not ``mirrored``); views with no face found are left
+    out. Their median is
+    mirror-symmetric by construction: a head's mirror image (rendered with mirror-symmetric light, RenderConfig's
+    "frontal") gives the same views mirrored."""
+    from PIL import Image
+
+    h, w = image.shape[:2]
+    half = np.array([w, h], dtype=np.float64) / 2.0
+    out: list[np.ndarray] = []
+    for flip in (False, True) if mirrored else (False,):
+        img = Image.fromarray(np.ascontiguousarray(image[:, ::-1] if flip else image))
+        bg = tuple(int(c) for c in image[0, 0])
+        for zoom, dx, dy in zooms:
+            shift = np.array([dx * w, dy * h])
+            # Output pixel q shows the render at half + (q - half) / zoom + shift (PIL's affine maps output to input).
+            a = 1.0 / zoom
+            c = half - a * half + shift
+            if flip:
+                c[0] = half[0] - a * half[0] - shift[0]  # the mirrored view's shift mirrored too (symmetric set)
+            if (zoom, dx, dy) == (1.0, 0.0, 0.0):
+                view = img  # the render itself (or its mirror image): nothing to resample
+            else:
+                affine = (a, 0.0, float(c[0]), 0.0, a, float(c[1]))
+                view = img.transform((w, h), Image.Transform.AFFINE, affine, Image.Resampling.BILINEAR, fillcolor=bg)
+            pts = _detect(np.asarray(view))
+            if pts is None:
+                continue
+            pts = pts * a + c
+            if flip:
+                pts[:, 0] = w - pts[:, 0]
+                pts = pts[_mirror_order()]
+            out.append(pts)
+    return out
 
 
 FACING_GRID = 24
@@ -343,23 +411,49 @@ their points, to the bit: the cast eye lines of Lee Perry-Smith (0.3 degrees), t
 avatar (0.6) and the stylised head (2.4, its eye corners found on a cartoon face)."""
 
 
+@dataclass(frozen=True)
+class Look:
+    """How :func:`_located` looks at a head: the render's ``config`` (its lighting), the views of it MediaPipe runs on
+    (``zooms``, :data:`VIEW_ZOOMS`) and whether each is also mirrored."""
+
+    config: RenderConfig
+    zooms: tuple[tuple[float, float, float], ...]
+    mirrored: bool
+
+
+STEADY = Look(
+    config=RenderConfig(width=SIZE, height=SIZE, samples=4, lighting="frontal"), zooms=VIEW_ZOOMS, mirrored=True
+)
+"""The first alternative's look: mirror-symmetric light, eight views, their median (docs/animation.md, "Steadier
+automatic landmarks"). The untextured Lee Perry-Smith mirrored fails every rig from the PLAIN set (44 flips) and passes
+from this one; as the found set it made three test-set heads fail every try (Lee Perry-Smith textured, the 3,810 and
+1,428 copies: corners and lips 0.02-0.03 IOD away), so it is not the found set."""
+PLAIN = Look(config=RenderConfig(width=SIZE, height=SIZE, samples=4), zooms=((1.0, 0.0, 0.0),), mirrored=False)
+"""The found set's look (the finder's until RIG_ALGORITHM 73 too): the studio-lit render, MediaPipe once. Every head
+of the test set rigs from its points."""
+
+
 def _framed(
-    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, cfg
-) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]] | None:
-    """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``) from a render of ``mesh`` framed on
-    ``centre`` (``size`` wide) along ``axes``; None when no face is found or a point misses the mesh."""
+    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, size: float, look: Look
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray], list[np.ndarray]] | None:
+    """(the render's mvp, the landmarks' pixels, their points cast on ``mesh``, each view's pixels (12, 2) in
+    MEDIAPIPE_INDEX's order) from a render of ``mesh`` framed on ``centre`` (``size`` wide) along ``axes``: the
+    pixels are the median of MediaPipe's on its views (:func:`_views`, as ``look`` says); None when no face is found or
+    a point misses the mesh."""
     from clients.render.renderer import HeadRenderer
 
-    with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=cfg) as r:
-        pts = _detect(r.render())
-        if pts is None:
-            return None
-        names = list(MEDIAPIPE_INDEX)
-        pix = pts[[MEDIAPIPE_INDEX[k] for k in names]]
-        p3 = _cast(mesh, r.mvp, pix, SIZE)
-        if np.isnan(p3).any():
-            return None
-        return r.mvp, dict(zip(names, pix)), dict(zip(names, p3))
+    with HeadRenderer(mesh, centre=centre, axes=axes, size=size, config=look.config) as r:
+        views = _views(r.render(), look.zooms, look.mirrored)
+        mvp = r.mvp
+    if not views:
+        return None
+    names = list(MEDIAPIPE_INDEX)
+    each = [p[[MEDIAPIPE_INDEX[k] for k in names]] for p in views]
+    pix = np.median(np.stack(each), axis=0)
+    p3 = _cast(mesh, mvp, pix, SIZE)
+    if np.isnan(p3).any():
+        return None
+    return mvp, dict(zip(names, pix)), dict(zip(names, p3)), each
 
 
 def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray | None:
@@ -377,13 +471,81 @@ def _facing_axes(points: dict[str, np.ndarray], axes: np.ndarray) -> np.ndarray 
     return np.stack([x, np.cross(fwd, x), fwd])
 
 
-def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
-    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units). LandmarkError when no face is found."""
+ALTERNATIVES = 3
+"""How many other landmark sets :func:`find_landmarks` gives besides the PLAIN look's: the STEADY look's median, its
+plain view's and its plain mirrored view's (fewer where they coincide). A rig from the found set that fails its checks
+is made again from these in turn (assets.heads.head.rig_checked)."""
+
+
+def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray) -> dict[str, list[float]] | None:
+    """The twelve landmarks (name -> [x, y, z]) from their pixels ``pix`` (12, 2) in MEDIAPIPE_INDEX's order on the
+    render ``mvp``: cast, then taken to facecast's definitions (:func:`_onto_lips`, :func:`_refined`); None when a
+    pixel misses the mesh."""
+    names = list(MEDIAPIPE_INDEX)
+    p3 = _cast(mesh, mvp, pix, SIZE)
+    if np.isnan(p3).any():
+        return None
+    pixels = dict(zip(names, pix))
+    found = _onto_lips(mesh, mvp, pixels, dict(zip(names, p3)), forward)
+    found = _refined(mesh, mvp, pixels, found)
+    return {k: found[k].tolist() for k in names}
+
+
+def _alternatives(
+    mesh: HeadMesh, mvp: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
+) -> list[dict[str, list[float]]]:
+    """Landmark sets from the plain view and the plain mirrored view (``each``, (12, 2) pixels, VIEW_ZOOMS' order,
+    unmirrored first), none equal to ``chosen`` (the found set) or to one another."""
+    picks = [0, len(each) // 2 if len(each) > 1 else 0]
+    out: list[dict[str, list[float]]] = []
+    for i in dict.fromkeys(picks):
+        got = _placed(mesh, mvp, each[i], forward)
+        if got is not None and got != chosen and got not in out:
+            out.append(got)
+    return out[:ALTERNATIVES]
+
+
+def _located(
+    mesh: HeadMesh, centre: np.ndarray, axes: np.ndarray, span: float, look: Look
+) -> tuple[HeadMesh, np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]] | None:
+    """One look at ``mesh`` framed on ``centre`` (``span`` wide) along ``axes``, then re-framed on the face found and
+    turned to face it (:func:`_facing_axes`): (the mesh as wound for the view, its axes, the render's mvp, the
+    landmarks' median pixels (12, 2) in MEDIAPIPE_INDEX's order, each view's), or None when no face is found."""
+    from clients.render.renderer import HeadRenderer
+
+    with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=look.config) as r:
+        seen = _views(r.render(), look.zooms[:1], look.mirrored)
+        if not seen:
+            return None
+        # Re-frame on the face for steadier points (framed alike on the render and its mirror image).
+        face = _cast(mesh, r.mvp, np.mean(seen, axis=0)[[1, 10, 152, 234, 454]], SIZE)
+    if np.isnan(face).any():
+        return None
+    fc = face.mean(0)
+    fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
+    got = _framed(mesh, fc, axes, fspan, look)
+    if got is None:
+        return None
+    turned = _facing_axes(got[2], axes)
+    if turned is not None:  # a head turned in its file: look again, straight at its face
+        facing = facing_viewer(mesh, turned)
+        again = _framed(facing, fc, turned, fspan, look)
+        if again is not None:
+            got, axes, mesh = again, turned, facing
+    mvp, pixels, _, each = got
+    return mesh, axes, mvp, np.stack([pixels[k] for k in MEDIAPIPE_INDEX]), each
+
+
+def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
+    """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them as its
+    ``alternatives`` (:data:`ALTERNATIVES`). LandmarkError when no face is found.
+
+    The found set: MediaPipe on one studio-lit render (:data:`PLAIN`). The first alternative: the render lit
+    mirror-symmetrically, MediaPipe on several views of it and their mirror images (:data:`STEADY`, :func:`_views`),
+    each point's pixel the views' median, cast once; then single views' sets."""
     from clients.errors import RenderError
-    from clients.render.renderer import HeadRenderer, RenderConfig
 
     v = np.asarray(mesh.vertices, dtype=np.float64)
-    cfg = RenderConfig(width=SIZE, height=SIZE, samples=4)
     try:
         for up, fwd in ORIENTATIONS:
             axes = _axes(np.array(up, float), np.array(fwd, float))
@@ -398,29 +560,28 @@ def find_landmarks(mesh: HeadMesh) -> dict[str, list[float]]:
                 c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
                 span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
                 centre = c_q @ axes
-                with HeadRenderer(mesh, centre=centre, axes=axes, size=span, config=cfg) as r:
-                    pts = _detect(r.render())
-                    if pts is None:
-                        continue
-                    # Re-frame on the face for steadier points.
-                    face = _cast(mesh, r.mvp, pts[[1, 10, 152, 234, 454]], SIZE)
-                if np.isnan(face).any():
+                # The found set is the PLAIN look's (one studio-lit render: every head that rigged from it still
+                # rigs the same); the STEADY look's median and single views are its alternatives, rigged from only
+                # when every rig from the found set fails (assets.heads.head.rig_checked).
+                plain = _located(mesh, centre, axes, span, PLAIN)
+                if plain is None:
                     continue
-                fc = face.mean(0)
-                fspan = float(np.linalg.norm(face[3] - face[4])) * 1.6
-                got = _framed(mesh, fc, axes, fspan, cfg)
-                if got is None:
+                p_mesh, p_axes, p_mvp, p_pix, _ = plain
+                found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
+                if found is None:
                     continue
-                turned = _facing_axes(got[2], axes)
-                if turned is not None:  # a head turned in its file: look again, straight at its face
-                    facing = facing_viewer(mesh, turned)
-                    again = _framed(facing, fc, turned, fspan, cfg)
-                    if again is not None:
-                        got, axes, mesh = again, turned, facing
-                r_mvp, pixels, cast = got
-                found = _onto_lips(mesh, r_mvp, pixels, cast, np.asarray(axes[2], np.float64))
-                found = _refined(mesh, r_mvp, pixels, found)
-                return {k: found[k].tolist() for k in MEDIAPIPE_INDEX}
+                others: list[dict[str, list[float]]] = []
+                steady = _located(mesh, centre, axes, span, STEADY)
+                if steady is not None:
+                    seen, s_axes, mvp, median, each = steady
+                    forward = np.asarray(s_axes[2], np.float64)
+                    middle = _placed(seen, mvp, median, forward)
+                    if middle is not None and middle != found:
+                        others.append(middle)
+                    for single in _alternatives(seen, mvp, each, forward, found):
+                        if single not in others:
+                            others.append(single)
+                return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
     except RenderError as exc:
         raise LandmarkError(
             f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"

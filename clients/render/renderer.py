@@ -90,7 +90,10 @@ SKIN = SKIN_COLOR
 class RenderConfig:
     """width/height in pixels; view: "front" or "three_quarter"; samples: MSAA samples (0 = none);
     fov: vertical field of view in degrees; margin: framing around the face (1 = the face box);
-    background: RGB in [0, 1]; backend: moderngl standalone backend ("egl" headless, None = default)."""
+    background: RGB in [0, 1]; backend: moderngl standalone backend ("egl" headless, None = default);
+    lighting: "studio" (the key light above and to the face's left, the fill from its right) or "frontal" (key
+    above the camera, fill from it, rim above behind: mirror-symmetric, so the render of a head mirrored left to
+    right is the render of the head mirrored; the automatic landmarks' renders, clients/render/landmarks.py)."""
 
     width: int = 640
     height: int = 480
@@ -100,6 +103,7 @@ class RenderConfig:
     margin: float = 1.7
     background: tuple[float, float, float] = (0.16, 0.17, 0.20)
     backend: str | None = "egl"
+    lighting: Literal["studio", "frontal"] = "studio"
 
     def __post_init__(self) -> None:
         if not (16 <= self.width <= 8192 and 16 <= self.height <= 8192):
@@ -108,6 +112,8 @@ class RenderConfig:
             raise RenderError(f"view must be 'front' or 'three_quarter', got {self.view!r}")
         if self.samples not in (0, 2, 4, 8, 16):
             raise RenderError(f"samples must be 0, 2, 4, 8 or 16, got {self.samples}")
+        if self.lighting not in ("studio", "frontal"):
+            raise RenderError(f"lighting must be 'studio' or 'frontal', got {self.lighting!r}")
 
 
 def _look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -244,9 +250,10 @@ class HeadRenderer:
         self.mvp = proj @ view
         self.prog["mvp"].write(self.mvp.T.astype(np.float32).tobytes())
         self.prog["eye"].value = tuple(float(x) for x in eye)
-        key = 0.55 * ax[2] + 0.45 * ax[1] + 0.45 * ax[0]
-        fill = 0.8 * ax[2] - 0.6 * ax[0]
-        rim = -0.5 * ax[2] + 0.6 * ax[1] - 0.6 * ax[0]
+        side = 0.0 if config.lighting == "frontal" else 1.0  # frontal: no light from either side
+        key = 0.55 * ax[2] + 0.45 * ax[1] + side * 0.45 * ax[0]
+        fill = 0.8 * ax[2] - side * 0.6 * ax[0]
+        rim = -0.5 * ax[2] + 0.6 * ax[1] - side * 0.6 * ax[0]
         for name, d in (("key_dir", key), ("fill_dir", fill), ("rim_dir", rim)):
             self.prog[name].value = tuple(d / np.linalg.norm(d))
         self._out = np.empty((h, w, 3), dtype=np.uint8)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Mapping
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         if args.head_part:
             raise MeshError("builtin: --head-part adds meshes to a head mesh file, not to the built-in head")
         mesh = builtin_morph_head().mesh  # with its parts (teeth) for the checks
-        spec = read_landmarks(args.landmarks) if args.landmarks else None
+        spec: Mapping[str, object] | None = read_landmarks(args.landmarks) if args.landmarks else None
         source = args.landmarks or "builtin"
     else:
         mesh = load_mesh(args.head, parts=tuple(args.head_part))

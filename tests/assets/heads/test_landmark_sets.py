@@ -1,0 +1,81 @@
+"""Landmarks found with alternatives (FoundLandmarks): kept with them in the landmark cache, and rigged from in turn
+by rig_checked when every rig from the found set fails its checks."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from assets.heads.head import LANDMARK_CACHE_VERSION, cached_finder, rig_checked
+from assets.heads.landmarks import FoundLandmarks
+from assets.heads.mesh import HeadMesh, load_mesh
+
+# The MediaPipe canonical face's own vertex indices ("left" is the face's own left).
+MEDIAPIPE = {
+    "upper_lip": 0,
+    "lower_lip": 17,
+    "upper_inner": 13,
+    "lower_inner": 14,
+    "corner_left": 291,
+    "corner_right": 61,
+    "eye_outer_left": 263,
+    "eye_inner_left": 362,
+    "eye_outer_right": 33,
+    "eye_inner_right": 133,
+    "nose_tip": 1,
+    "chin": 152,
+}
+
+
+def test_a_rig_from_landmarks_that_fail_is_made_again_from_their_alternatives(shared_data):
+    """The MediaPipe face with its upper inner-lip point on the nose tip (a landmark set that cannot rig: the cut runs
+    through the nose, 80 flips at /a/) given as found with the face's own points as the alternative: every try from the
+    found set fails, the alternative's rig passes, is the rig made from those points directly, and its meta and the
+    progress lines say which set passed and why the first did not. Found first, the good set is rigged once (no
+    alternative tried, no landmark_set in its meta)."""
+    m = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    good = {k: m.vertices[i].tolist() for k, i in MEDIAPIPE.items()}
+    bad = {**good, "upper_inner": good["nose_tip"]}
+    lines: list[str] = []
+    rig, _, report = rig_checked(m, FoundLandmarks(bad, (good,)), progress=lines.append)
+    assert report.passed
+    assert rig.meta["landmark_set"] == 1
+    (first,) = rig.meta["landmark_sets_failed"]
+    assert first["set"] == 0 and first["failures"]
+    assert any("rigging from another set of them (1 of 1" in line for line in lines)
+    direct, _, direct_report = rig_checked(m, good)
+    np.testing.assert_array_equal(rig.neutral, direct.neutral)
+    assert (rig.matrix != direct.matrix).nnz == 0
+    assert direct_report.passed and "landmark_set" not in direct.meta
+    lines.clear()
+    once, _, _ = rig_checked(m, FoundLandmarks(good, (bad,)), progress=lines.append)
+    assert "landmark_set" not in once.meta and "landmark_sets_failed" not in once.meta
+    assert not any("another set" in line for line in lines)
+    assert (once.matrix != direct.matrix).nnz == 0
+
+
+def test_the_landmark_cache_keeps_a_finders_alternatives(tmp_path):
+    """cached_finder keeps the alternatives with the points (JSON) and gives both back on the next load without
+    asking the finder; its file name carries the cache version, so a file kept before alternatives were (whose key
+    had no version) is not read."""
+    box = HeadMesh(
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.float64),
+        triangles=np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]),
+        name="box",
+    )
+    calls = []
+
+    def finder(mesh):
+        calls.append(mesh.name)
+        return FoundLandmarks({"nose_tip": [0.0, 0.0, 1.0]}, ({"nose_tip": [0.0, 0.1, 1.0]}, {"nose_tip": [0, 0, 0.9]}))
+
+    first = cached_finder(finder, tmp_path)(box)
+    again = cached_finder(finder, tmp_path)(box)
+    assert calls == ["box"]
+    assert isinstance(again, FoundLandmarks)
+    assert dict(again) == {"nose_tip": [0.0, 0.0, 1.0]} == dict(first)
+    assert again.alternatives == ({"nose_tip": [0.0, 0.1, 1.0]}, {"nose_tip": [0, 0, 0.9]})
+    (kept,) = (tmp_path / "landmarks").iterdir()
+    assert json.loads(kept.read_text())["alternatives"][0] == {"nose_tip": [0.0, 0.1, 1.0]}
+    assert LANDMARK_CACHE_VERSION >= 2
