@@ -10,22 +10,10 @@ import numpy as np
 from assets.heads.head import LANDMARK_CACHE_VERSION, cached_finder, rig_checked
 from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import HeadMesh, load_mesh
+from clients.render.landmarks import MEDIAPIPE_INDEX
 
-# The MediaPipe canonical face's own vertex indices ("left" is the face's own left).
-MEDIAPIPE = {
-    "upper_lip": 0,
-    "lower_lip": 17,
-    "upper_inner": 13,
-    "lower_inner": 14,
-    "corner_left": 291,
-    "corner_right": 61,
-    "eye_outer_left": 263,
-    "eye_inner_left": 362,
-    "eye_outer_right": 33,
-    "eye_inner_right": 133,
-    "nose_tip": 1,
-    "chin": 152,
-}
+# The MediaPipe canonical face's own vertex indices are MediaPipe's landmark indices ("left" is the face's own left).
+MEDIAPIPE = MEDIAPIPE_INDEX
 
 
 def test_a_rig_from_landmarks_that_fail_is_made_again_from_their_alternatives(shared_data):

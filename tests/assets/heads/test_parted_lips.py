@@ -9,24 +9,12 @@ from assets.heads.cavity import lip_membrane
 from assets.heads.head import Head, head_checks
 from assets.heads.mesh import HeadMesh, load_mesh
 from assets.heads.rigging import mouth_landmarks, rig_head
+from clients.render.landmarks import MEDIAPIPE_INDEX
 from realtime_core.face import face_frame
 from realtime_core.face.rig import modelled_rest
 
-# The MediaPipe canonical face's own vertex indices ("left" is the face's own left).
-MEDIAPIPE = {
-    "upper_lip": 0,
-    "lower_lip": 17,
-    "upper_inner": 13,
-    "lower_inner": 14,
-    "corner_left": 291,
-    "corner_right": 61,
-    "eye_outer_left": 263,
-    "eye_inner_left": 362,
-    "eye_outer_right": 33,
-    "eye_inner_right": 133,
-    "nose_tip": 1,
-    "chin": 152,
-}
+# The MediaPipe canonical face's own vertex indices are MediaPipe's landmark indices ("left" is the face's own left).
+MEDIAPIPE = MEDIAPIPE_INDEX
 WALL_DEPTH = 0.15  # IOD: how far back the lips' inner walls reach
 WALL_INWARD = 0.6  # how far (fraction of the rim's height over the mouth line) a wall's back edge leans to that line
 
