@@ -731,9 +731,11 @@ def rig_checked(
     failed: list[dict[str, object]] = [{"set": 0, "failures": last}]
     for n, other in enumerate(alternatives, start=1):
         if progress is not None:
+            # The first alternative is the steady views' median, the others single views' (find_landmarks).
+            before = "the automatic landmarks" if n == 1 else f"landmark set {n - 1}"
             progress(
-                f"every rig from the automatic landmarks fails its checks ({'; '.join(last)}); "
-                f"rigging from another set of them ({n} of {len(alternatives)}: one view's points)"
+                f"every rig from {before} fails its checks ({'; '.join(last)}); "
+                f"rigging from another set of them ({n} of {len(alternatives)}, found on other views of the head)"
             )
         a_rig, a_rigged, a_report = _rig_checked_once(mesh, dict(other), **options)
         if a_report.passed:
