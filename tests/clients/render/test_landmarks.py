@@ -181,16 +181,29 @@ def test_a_head_and_its_mirror_image_get_mirrored_landmarks(shared_data, tmp_pat
     v[:, 0] = 2.0 * centre[0] - v[:, 0]
     mirrored = replace(mesh, vertices=v, triangles=np.ascontiguousarray(mesh.triangles[:, ::-1]))
     swap = {"left": "right", "right": "left"}
-    back = {}
-    for k, x in find_landmarks(mirrored).alternatives[0].items():
-        side = k.rsplit("_", 1)[-1]
-        q = np.asarray(x, dtype=np.float64)
-        back[k.rsplit("_", 1)[0] + "_" + swap[side] if side in swap else k] = np.array([2 * centre[0] - q[0], *q[1:]])
+
+    def mirrored_back(points):
+        # The mirrored head's points mirrored back, left and right swapped: the head's own points if the finder is
+        # indifferent to the mirror.
+        back = {}
+        for k, x in points.items():
+            side = k.rsplit("_", 1)[-1]
+            q = np.asarray(x, dtype=np.float64)
+            name = k.rsplit("_", 1)[0] + "_" + swap[side] if side in swap else k
+            back[name] = np.array([2 * centre[0] - q[0], *q[1:]])
+        return back
+
+    found_mirrored = find_landmarks(mirrored)
     eyes = [0.5 * (p[f"eye_outer_{s}"] + p[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
+    back = mirrored_back(found_mirrored.alternatives[0])
     off = {k: float(np.linalg.norm(back[k] - p[k])) / iod for k in p}
     assert max(off.values()) < 0.015, off
-    assert 1 <= len(found.alternatives) <= 3
+    # The steady set is steadier than the one studio-lit render's (the found set), which the mirror moves by more.
+    plain = {k: np.asarray(x, dtype=np.float64) for k, x in found.items()}
+    plain_back = mirrored_back(found_mirrored)
+    plain_off = {k: float(np.linalg.norm(plain_back[k] - plain[k])) / iod for k in plain}
+    assert max(plain_off.values()) > 2 * max(off.values()), (plain_off, off)
     assert all(set(a) == set(found) and a != dict(found) for a in found.alternatives)
 
 
