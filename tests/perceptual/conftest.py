@@ -9,6 +9,13 @@ from tests.perceptual.harness import ARTIFACTS, grid_root, tiny_config
 from tests.prerequisites import require
 
 
+@pytest.fixture(autouse=True)
+def _node_tmpdir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The browser check's node process (and its Chromium profile) uses the test's own temporary folder
+    (as in tests/clients/web/conftest.py: a profile Chromium writes into after it closed stays there)."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path_factory.mktemp("node-tmp")))
+
+
 @pytest.fixture(scope="session")
 def stimuli():
     import shutil
