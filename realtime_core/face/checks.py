@@ -341,9 +341,11 @@ LIP_BACKS_LIMIT = 0.0005
 """IOD squared: the advisory limit of :func:`lip_backs_seen`, a patch about 8 pixels across in the test set's
 400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the test-set rows whose close-ups look
 clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
-LIP_TOPS_LIMIT = 0.0005
-"""IOD squared: the advisory limit of :func:`lip_tops_carried` (as :data:`LIP_BACKS_LIMIT`, a patch about 8 pixels
-across in the test set's close-ups)."""
+LIP_TOPS_LIMIT = 0.001
+"""IOD squared: the advisory limit of :func:`lip_tops_carried`, a patch about 11 pixels across in the test set's
+close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan with hand
+landmarks 0.60e-3 (14 corner faces, the pink flecks its lip backs already report), every other row 0 or none
+(docs/animation.md, "The low-poly pale strip")."""
 SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
 both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
