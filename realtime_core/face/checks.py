@@ -345,7 +345,7 @@ LIP_TOPS_LIMIT = 0.001
 """IOD squared: the advisory limit of :func:`lip_tops_carried`, a patch about 11 pixels across in the test set's
 close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan with hand
 landmarks 0.60e-3 (14 corner faces, the pink flecks its lip backs already report), every other row 0 or none
-(docs/animation.md, "The low-poly pale strip")."""
+(docs/animation.md, "The low-poly pale strip: the lower lip's top cut off with the upper lip")."""
 SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
 both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
@@ -488,6 +488,7 @@ class RigReport:
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
+        tops = "n/a" if self.lip_tops_iod2 is None else f"{1000 * self.lip_tops_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
@@ -496,7 +497,8 @@ class RigReport:
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD{seam}, "
+            f"lip backs seen {backs} IOD^2, lip tops carried {tops} IOD^2, mouth opening {opening}, "
+            f"lip gap at /m/ {at_m} IOD{seam}, "
             f"inside through the skin {inside} IOD, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")

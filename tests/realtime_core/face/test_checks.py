@@ -611,7 +611,9 @@ def test_lip_tops_carried_sees_the_lower_lips_top_moving_with_the_upper_lip() ->
     assert lip_tops_carried(follows, lm, poses=poses, lip_pairs=follows.pairs()) in (None, (0.0, 0))
     rep = check_rig(carried, lm, poses=poses, lip_pairs=carried.pairs())
     assert rep.passed and rep.flipped_triangles == 0 and rep.lip_tops_iod2 == pytest.approx(got[0])
-    assert any("lip-top faces" in w for w in rep.warnings)
+    assert (
+        any("lip-top faces" in w for w in rep.warnings) and f"lip tops carried {1000 * got[0]:.2f}e-3" in rep.summary()
+    )
     assert (rep.lip_edge_notch_iod or 0.0) <= 0.015 and (rep.lip_backs_iod2 or 0.0) == 0.0
     assert not any("lip-top" in w for w in check_rig(follows, lm, poses=poses, lip_pairs=follows.pairs()).warnings)
 
