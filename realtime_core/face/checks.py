@@ -343,8 +343,8 @@ LIP_BACKS_LIMIT = 0.0005
 clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
 LIP_TOPS_LIMIT = 0.001
 """IOD squared: the advisory limit of :func:`lip_tops_carried`, a patch about 11 pixels across in the test set's
-close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan with hand
-landmarks 0.60e-3 (14 corner faces, the pink flecks its lip backs already report), every other row 0 or none
+close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan's rows 0.25e-3
+to 0.60e-3 (4-9 faces at the mouth corners, the pink flecks their lip backs already report), every other row none
 (docs/animation.md, "The low-poly pale strip: the lower lip's top cut off with the upper lip")."""
 SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
