@@ -242,6 +242,8 @@ def _warned(rep) -> str:
         over.append("notch")
     if rep.lip_backs_iod2 is not None and rep.lip_backs_iod2 > lim.max_lip_backs:
         over.append("backs")
+    if rep.lip_tops_iod2 is not None and rep.lip_tops_iod2 > lim.max_lip_tops:
+        over.append("tops")
     if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
         over.append("/m/")
     return sliver + (f" ({' + '.join(over)} warning)" if over else "")

@@ -341,6 +341,11 @@ LIP_BACKS_LIMIT = 0.0005
 """IOD squared: the advisory limit of :func:`lip_backs_seen`, a patch about 8 pixels across in the test set's
 400x300 mouth close-up (1.1 IOD wide: 1 IOD squared is 132,000 pixels); the test-set rows whose close-ups look
 clean score 0, those with shards 4.5e-3 to 14.5e-3 (docs/animation.md, "Rig checks", *Lip backs seen*)."""
+LIP_TOPS_LIMIT = 0.001
+"""IOD squared: the advisory limit of :func:`lip_tops_carried`, a patch about 11 pixels across in the test set's
+close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan's rows 0.25e-3
+to 0.60e-3 (4-9 faces at the mouth corners, the pink flecks their lip backs already report), every other row none
+(docs/animation.md, "The low-poly pale strip: the lower lip's top cut off with the upper lip")."""
 SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
 both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
@@ -378,6 +383,8 @@ class RigCheckLimits:
     max_lip_backs: float = LIP_BACKS_LIMIT
     """IOD squared, advisory: a larger :func:`lip_backs_seen` is a warning in the report, not a failure."""
     min_open_response: float = MIN_OPEN_RESPONSE
+    max_lip_tops: float = LIP_TOPS_LIMIT
+    """IOD squared, advisory: a larger :func:`lip_tops_carried` is a warning in the report, not a failure."""
     max_bilabial_gap: float = 0.01
     """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
     the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
@@ -396,6 +403,8 @@ class RigCheckLimits:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
         if not self.max_lip_backs > 0:
             raise ConfigError("max_lip_backs must be > 0 (IOD squared)")
+        if not self.max_lip_tops > 0:
+            raise ConfigError("max_lip_tops must be > 0 (IOD squared)")
         if not self.max_bilabial_gap >= 0:
             raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
         if not self.max_seam_gap >= 0:
@@ -429,6 +438,11 @@ class RigReport:
     (:func:`lip_backs_seen`; None: no lip faces found)."""
     lip_backs_faces: int | None = None
     """How many faces make :attr:`lip_backs_iod2`."""
+    lip_tops_iod2: float | None = None
+    """IOD squared: the largest front-view area of lip-top faces that do not move with the lower lip
+    (:func:`lip_tops_carried`; None: not measured, or no lip-top face)."""
+    lip_tops_faces: int | None = None
+    """How many faces make :attr:`lip_tops_iod2`."""
     bilabial_gap_iod: float | None = None
     """The largest inner-lip gap at :data:`BILABIAL_POSES` (:func:`bilabial_gap`; None: not measured)."""
     expression_flips: int | None = None
@@ -474,6 +488,7 @@ class RigReport:
         notch = "n/a" if self.lip_edge_notch_iod is None else f"{self.lip_edge_notch_iod:.4f}"
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
+        tops = "n/a" if self.lip_tops_iod2 is None else f"{1000 * self.lip_tops_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
@@ -482,7 +497,8 @@ class RigReport:
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, mouth opening {opening}, lip gap at /m/ {at_m} IOD{seam}, "
+            f"lip backs seen {backs} IOD^2, lip tops carried {tops} IOD^2, mouth opening {opening}, "
+            f"lip gap at /m/ {at_m} IOD{seam}, "
             f"inside through the skin {inside} IOD, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
@@ -839,6 +855,108 @@ def lip_backs_seen(
     return worst, faces
 
 
+LIP_TOP_FACING = 0.5
+"""A lip face whose unit normal at rest has more than this up component (30 degrees above horizontal) is a lip's top,
+for :func:`lip_tops_carried`: the lower lip's top where the lips meet; an upper lip faces forward or down there."""
+LIP_TOP_FOLLOWS = 0.8
+"""...and follows the lower lip when, at the opening pose, it drops at least this fraction of the way from the upper
+lip's drop to the lower lip's at its place across the mouth (the lip pairs' drops, interpolated)."""
+LIP_TOP_DEPTH = 0.05
+"""IOD: ...and lies in front of the mouth corners less this (where the lips meet; a tongue's or teeth's top lies
+further back)."""
+LIP_TOP_POSE = (0.0, 0.0, 0.35, 0.0)
+"""IOD: the opening pose at which :func:`lip_tops_carried` reads which lip a face moves with (the close-ups' /a/)."""
+
+
+def lip_tops_carried(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    lip_pairs: np.ndarray | None = None,
+    skip_vertices: int = 0,
+    teeth: np.ndarray | None = None,
+) -> tuple[float, int] | None:
+    """(the largest area, IOD squared as seen from the front, of lip-top faces that do not move with the lower lip;
+    how many faces make it), over ``poses``. A lip-top face: in the lips' band (as :func:`lip_backs_seen`), facing up at
+    rest (LIP_TOP_FACING). It does not move with the lower lip when at LIP_TOP_POSE it drops less than LIP_TOP_FOLLOWS
+    of the way from the upper lip's drop to the lower lip's at its place across the mouth (``lip_pairs`` (k, 2)
+    upper, lower: a cut seam's two sides; None: the inner-lip landmarks). Such a face is the lower lip's top carried
+    by the upper lip (a cut that ran below where the lips meet: on the 3,810-triangle Lee Perry-Smith copy a strip lit
+    from above hangs under the upper lip, a pale line between dark ones at /m/ and a pale band over the slit at /u/)
+    or hung between the lips (a strip stretched across the opening at /a/). A face counts where its centroid is seen
+    from the front and it faces the viewer; the last ``skip_vertices`` vertices (a mouth cavity) are left out.
+    None: the mouth has no lip-top face."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    if skip_vertices:
+        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
+    fr = face_frame(v0, landmarks)
+    iod = fr.iod
+    _, up, fwd = fr.axes
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
+    x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
+    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
+    line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
+    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
+    band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
+    band &= (v0 - mid) @ fwd > -NOTCH_DEPTH * iod
+    lips = np.flatnonzero(band[t].all(axis=1))
+    if not len(lips):
+        return None
+    n0 = triangle_normals(v0, t[lips])
+    n0 /= np.maximum(np.linalg.norm(n0, axis=1), 1e-300)[:, None]
+    is_top = n0 @ up > LIP_TOP_FACING
+    tops = lips[is_top]
+    if lip_pairs is None or not len(tops):
+        return None
+    # In front of the mouth corners (LIP_TOP_DEPTH): the lips' meeting, not the tongue's or the teeth's tops.
+    front = (v0 - mid) @ fwd > -LIP_TOP_DEPTH * iod
+    if teeth is not None:
+        front[np.asarray(teeth, dtype=np.int64)] = False
+    pairs = np.asarray(lip_pairs, dtype=np.int64).reshape(-1, 2)
+    # On the upper lip's side of the lips' meeting: a face on one of the pairs' upper vertices (the faces the cut
+    # leaves hanging from the upper lip's edge).
+    on_upper = np.zeros(len(v0), dtype=bool)
+    on_upper[pairs[:, 0]] = True
+    tops = tops[front[t[tops]].all(axis=1) & on_upper[t[tops]].any(axis=1)]
+    if not len(tops):
+        return None
+    drop = (v0 - np.asarray(rig.deformed(np.asarray(LIP_TOP_POSE, dtype=np.float64)), dtype=np.float64)) @ up
+    px = x[pairs[:, 0]]
+    o = np.argsort(px)
+    fx = x[t[tops]].mean(axis=1)
+    d_up = np.interp(fx, px[o], drop[pairs[o, 0]])
+    d_lo = np.interp(fx, px[o], drop[pairs[o, 1]])
+    span = d_lo - d_up
+    share = (drop[t[tops]].mean(axis=1) - d_up) / np.where(span > 1e-9 * iod, span, 1.0)
+    carried = tops[(span > 1e-9 * iod) & (share < LIP_TOP_FOLLOWS)]
+    if not len(carried):
+        return 0.0, 0
+    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
+    at = np.full(len(t), -1, dtype=np.int64)
+    at[near] = np.arange(len(near))
+    to_view = np.stack([np.cross(up, fwd), up, fwd], axis=1)
+    worst, faces = 0.0, 0
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        tri = v[t[carried]]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        twice = np.linalg.norm(nrm, axis=1)
+        facing = (nrm / np.maximum(twice, 1e-300)[:, None]) @ fwd
+        toward = np.flatnonzero(facing > 0)
+        if not len(toward):
+            continue
+        centroids = tri[toward].mean(axis=1) @ to_view
+        nearest = front_most(centroids[:, :2], v[t[near]] @ to_view, cell=_BACKS_CELL * iod, skip=at[carried[toward]])
+        seen = ~(nearest > centroids[:, 2] + 1e-4 * iod)
+        area = float(np.sum(0.5 * twice[toward][seen] * facing[toward][seen])) / iod**2
+        if area > worst:
+            worst, faces = area, int(seen.sum())
+    return worst, faces
+
+
 def _middle_gaps(v: np.ndarray, v0: np.ndarray, pairs: np.ndarray, landmarks: MouthLandmarks, fr: Any) -> np.ndarray:
     """IOD: the vertical gaps of the lip pairs (k, 2) whose rest position lies in the middle half of the
     corner-to-corner width, at the deformed vertices ``v``; the inner-lip landmarks' gap where none does
@@ -1066,6 +1184,16 @@ def check_rig(
             f"lip faces show their back (a dark shard) over {1000 * backs:.2f}e-3 IOD^2 > "
             f"{1000 * limits.max_lip_backs:.2f}e-3 ({back_faces} face{'s' if back_faces != 1 else ''})"
         )
+    carried = lip_tops_carried(
+        rig, landmarks, poses=(*poses, closure), lip_pairs=lip_pairs, skip_vertices=cavity_vertices, teeth=teeth
+    )
+    tops, top_faces = (None, None) if carried is None else carried
+    if tops is not None and tops > limits.max_lip_tops:
+        warns.append(
+            f"lip-top faces not moving with the lower lip show over {1000 * tops:.2f}e-3 IOD^2 > "
+            f"{1000 * limits.max_lip_tops:.2f}e-3 ({top_faces} face{'s' if top_faces != 1 else ''}: a pale strip "
+            "between the lips)"
+        )
     if at_m > limits.max_bilabial_gap:
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     expr_flips: int | None = None
@@ -1101,6 +1229,8 @@ def check_rig(
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,
         bilabial_gap_iod=at_m,
+        lip_tops_iod2=tops,
+        lip_tops_faces=top_faces,
         seam_gap_iod=seam,
         inside_shown_iod=inside,
         inside_shown_points=inside_points,

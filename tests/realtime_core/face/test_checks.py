@@ -558,6 +558,66 @@ def test_lip_backs_seen_flags_a_face_turned_past_edge_on_that_no_other_figure_se
     assert hidden is not None and hidden[0] < 0.5 * got[0]
 
 
+class _Shelf(_Lips):
+    """:class:`_Lips` with a shelf hanging from the upper strip's cut row: a row of faces from the cut (y = 0, z = 0)
+    down and forward to y = -0.02, z = 0.05, facing up (the lower lip's top, cut off with the upper lip where a knife
+    ran below the lips' meeting: the 3,810-triangle Lee Perry-Smith copy), which stays with the upper strip.
+    ``follows``: the shelf hangs from the lower strip's cut row instead and drops with it (the lower lip's top where
+    it belongs)."""
+
+    def __init__(self, follows: bool) -> None:
+        super().__init__(0.0)
+        n = self.COLS
+        shelf = np.column_stack([self.x, np.full(n, -0.02), np.full(n, 0.05)])
+        s0 = len(self.neutral)
+        self.neutral = np.vstack([self.neutral, shelf])
+        t = []
+        for c in range(n - 1):
+            a, b = (3 * n if follows else 0) + c, s0 + c  # a strip's cut row, the shelf's row
+            t += [[a, b + 1, a + 1], [a, b, b + 1]]
+        self.triangles = np.vstack([self.triangles, t])
+        self.shelf = np.arange(s0, s0 + n)
+        self.follows = follows
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        if self.follows:
+            v[self.shelf, 1] -= float(p[2]) * self.drop[: self.COLS]
+        return v
+
+    def pairs(self) -> np.ndarray:
+        n = self.COLS
+        return np.column_stack([np.arange(n), 3 * n + np.arange(n)])
+
+
+def test_lip_tops_carried_sees_the_lower_lips_top_moving_with_the_upper_lip() -> None:
+    """A strip of the lower lip's top that the cut left on the upper lip hangs under it, lit from above: a pale line
+    between the lips at /m/ and a pale band over the slit at /u/, which no other figure sees (no flip, no notch, no
+    back). The lip tops carried measure it: its area as seen from the front, here its width times its drop (0.6 x
+    0.02 IOD), at rest and when the lips part. The same shelf on the lower lip, dropping with it, counts nothing, and
+    the smooth lips have no lip top."""
+    from realtime_core.face.checks import LIP_TOPS_LIMIT, lip_tops_carried
+
+    poses = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.3, 0.0))
+    smooth = _Lips(0.0)
+    assert lip_tops_carried(smooth, smooth.landmarks(), poses=poses, lip_pairs=_Shelf(False).pairs()) is None
+    carried = _Shelf(False)
+    lm = carried.landmarks()
+    got = lip_tops_carried(carried, lm, poses=poses, lip_pairs=carried.pairs())
+    assert got is not None
+    assert got[0] == pytest.approx(0.6 * 0.02, rel=1e-9) and got[1] == 2 * (carried.COLS - 1)
+    assert got[0] > LIP_TOPS_LIMIT
+    follows = _Shelf(True)
+    assert lip_tops_carried(follows, lm, poses=poses, lip_pairs=follows.pairs()) in (None, (0.0, 0))
+    rep = check_rig(carried, lm, poses=poses, lip_pairs=carried.pairs())
+    assert rep.passed and rep.flipped_triangles == 0 and rep.lip_tops_iod2 == pytest.approx(got[0])
+    assert (
+        any("lip-top faces" in w for w in rep.warnings) and f"lip tops carried {1000 * got[0]:.2f}e-3" in rep.summary()
+    )
+    assert (rep.lip_edge_notch_iod or 0.0) <= 0.015 and (rep.lip_backs_iod2 or 0.0) == 0.0
+    assert not any("lip-top" in w for w in check_rig(follows, lm, poses=poses, lip_pairs=follows.pairs()).warnings)
+
+
 class _LoweredUpperLip(_Lips):
     """:class:`_Lips` whose lowered upper lip (upper_lip_raise < 0) moves both strips down by as much, and
     also drops the lower strip by ``opens`` times it: a map that answers a lowered upper lip with a jaw
