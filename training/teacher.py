@@ -176,6 +176,24 @@ def espeak_clips(
     return out
 
 
+def padded_phones(phones: Sequence[tuple[str, float, float]], end_s: float, pause: str = "pau") -> list:
+    """Festival's phones shifted into padded audio ``[0, end_s)``: its own leading and trailing ``pause``
+    stretched to take the added silence (one pause at each end, which the synthesizer eases to rest), or a
+    pause added where it has none."""
+    rows = list(phones)
+    if rows and rows[0][0] == pause:
+        rows[0] = (pause, 0.0, rows[0][2])
+    elif rows:
+        rows.insert(0, (pause, 0.0, rows[0][1]))
+    else:
+        return [(pause, 0.0, end_s)]
+    if rows[-1][0] == pause:
+        rows[-1] = (pause, rows[-1][1], end_s)
+    else:
+        rows.append((pause, rows[-1][2], end_s))
+    return [(str(lab), float(a), float(b)) for lab, a, b in rows]
+
+
 def festival_clips(
     synth: UnitSynthesizer,
     n: int,
@@ -201,18 +219,7 @@ def festival_clips(
             n0, n1 = int(round(LEAD_PAUSE_S * rate)), int(round(END_PAUSE_S * rate))
             x = np.concatenate([np.zeros(n0), np.asarray(samples, np.float64), np.zeros(n1)])
             lead, end = n0 / rate, len(x) / rate
-            phones = [[p.phoneme, p.start_s + lead, p.end_s + lead] for p in segs]
-            # Festival's own leading and trailing "pau" take the added silence (one pause each end, so the
-            # synthesizer sees them as the leading and trailing pauses it eases to rest)
-            if phones and phones[0][0] == "pau":
-                phones[0][1] = 0.0
-            else:
-                phones.insert(0, ["pau", 0.0, lead])
-            if phones[-1][0] == "pau":
-                phones[-1][2] = end
-            else:
-                phones.append(["pau", phones[-1][2], end])
-            phones = [(str(lab), float(a), float(b)) for lab, a, b in phones]
+            phones = padded_phones([(p.phoneme, p.start_s + lead, p.end_s + lead) for p in segs], end)
             x = set_level(x, rate, float(rng.uniform(*LEVEL_DBFS)))
             params = teacher_params(synth, phones, "arpabet", n_frames_for(len(x) / rate), n_best=n_best)
             name = f"teacher-festival-{b0 + k:05d}-{voice.label}"

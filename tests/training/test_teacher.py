@@ -12,8 +12,10 @@ from training.teacher import (
     GRID_WORDS,
     TeacherClip,
     espeak_clips,
+    festival_clips,
     grid_texts,
     load_clips,
+    padded_phones,
     save_clips,
     set_level,
     teacher_params,
@@ -68,6 +70,29 @@ def test_espeak_labels_agree_with_an_independent_unit_selection_run_and_rest_in_
         np.testing.assert_array_equal(c0.samples, c1.samples)
         np.testing.assert_allclose(c0.params, c1.params, atol=1e-6)
         assert [(a, b) for a, b, _ in s0] == [(a, b) for a, b, _ in s1]
+
+
+def test_festival_labels_agree_with_an_independent_unit_selection_run(stored_corpus):
+    from tests.prerequisites import require_tool
+
+    require_tool("festival", "apt package festival")
+    clips = festival_clips(_synth(stored_corpus), 2, seed=2, n_best=1, batch=2)
+    for _, clip, _ in clips:
+        dur = len(clip.samples) / clip.sample_rate_hz
+        assert clip.phones[0][:2] == ("pau", 0.0) and clip.phones[-1][0] == "pau"
+        assert abs(clip.phones[-1][2] - dur) < 1e-9 and clip.phones[1][1] >= 0.2 - 1e-9
+        np.testing.assert_allclose(clip.params, _independent(stored_corpus, clip, 1), atol=1e-12)
+        assert np.all(clip.params[0] == 0) and np.all(clip.params[-1] == 0)
+
+
+def test_padded_phones_stretch_or_add_the_end_pauses():
+    assert padded_phones([("pau", 0.2, 0.3), ("b", 0.3, 0.4), ("pau", 0.4, 0.5)], 0.75) == [
+        ("pau", 0.0, 0.3),
+        ("b", 0.3, 0.4),
+        ("pau", 0.4, 0.75),
+    ]
+    assert padded_phones([("b", 0.2, 0.4)], 0.6) == [("pau", 0.0, 0.2), ("b", 0.2, 0.4), ("pau", 0.4, 0.6)]
+    assert padded_phones([], 0.6) == [("pau", 0.0, 0.6)]
 
 
 def test_a_silent_timeline_gives_the_rest_pose_throughout(stored_corpus):
