@@ -227,6 +227,27 @@ def festival_clips(
     return out
 
 
+def teacher_clips(
+    config: TeacherConfig,
+    root: str | Path | None = None,
+    *,
+    cache_dir: str | Path | None = None,
+    progress: Callable | None = None,
+    say: Callable[[str], None] = print,
+) -> list:
+    """``config``'s teacher clips: ``config.espeak`` espeak-ng utterances (seed ``config.seed``) then
+    ``config.festival`` Festival ones (seed ``config.seed + 1``), labelled over the GRID s1 train split under
+    ``root`` (:func:`train_synthesizer`); [] when both counts are 0 (no corpus is built)."""
+    if not config.espeak and not config.festival:
+        return []
+    synth = train_synthesizer(root, cache_dir=cache_dir, say=say)
+    out = espeak_clips(synth, config.espeak, seed=config.seed, n_best=config.n_best, progress=progress)
+    if config.festival:
+        more = festival_clips(synth, config.festival, seed=config.seed + 1, n_best=config.n_best, progress=progress)
+        out += more
+    return out
+
+
 def save_clips(path: str | Path, clips: Sequence) -> Path:
     """Teacher clips to one ``.npz`` (no pickle; written atomically): audio, rate, labels and phones per clip."""
     from assets.heads.cache import atomic_savez

@@ -108,3 +108,27 @@ def test_set_level_sets_the_mean_speech_block_level():
     blocks = y[16 * n :].reshape(32, n).astype(np.float64)  # the speech blocks; the silent ones are > 30 dB under
     assert np.mean(10 * np.log10(np.mean(blocks**2, axis=1))) == pytest.approx(-20.0, abs=1e-3)
     assert y.dtype == np.float32 and np.all(y[: 16 * n] == 0)
+
+
+def test_no_teacher_sentences_build_no_corpus(tmp_path):
+    """The default (0 + 0 sentences) returns no clips without reading GRID s1 (the folder does not exist)."""
+    from training.teacher import TeacherConfig, teacher_clips
+
+    assert teacher_clips(TeacherConfig(), tmp_path / "nowhere", cache_dir=tmp_path) == []
+    with pytest.raises(Exception, match="teacher config"):
+        TeacherConfig(espeak=-1)
+
+
+def test_readout_command_refuses_teacher_sentences_with_a_corpus_or_bad_counts(tmp_path, capsys):
+    """The teacher labels with GRID s1's lips: beside --corpus (another talker) it is refused, one line, before any
+    work; so is a negative count. No model is written."""
+    from facecast.cli import main
+
+    out, corpus = tmp_path / "m.npz", tmp_path / "mycorpus"
+    rc = main(["readout", "default", "-o", str(out), "--corpus", str(corpus), "--teacher-espeak", "10"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--teacher-espeak" in err and str(corpus) in err and len(err.strip().splitlines()) == 1
+    rc = main(["readout", "default", "-o", str(out), "--teacher-festival", "-3", "--grid-s1", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "teacher config" in err
+    assert not out.exists()
