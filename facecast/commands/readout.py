@@ -252,9 +252,9 @@ def _run(args: argparse.Namespace) -> int:
     if parts:
         source = {"corpus": str(args.corpus), **parts["source"]}
     fit, choose = ("fit", "choose") if parts else ("train", "val")
-    taught = f", {teacher.espeak} + {teacher.festival} teacher sentences" if teacher.espeak or teacher.festival else ""
+    extra = f", {teacher.espeak} + {teacher.festival} teacher sentences" if teacher.espeak or teacher.festival else ""
     print(
-        f"{len(sets['train'])} {fit} traces ({vtlp.copies} VTLP copies{taught}) and {len(sets['val'])} {choose} "
+        f"{len(sets['train'])} {fit} traces ({vtlp.copies} VTLP copies{extra}) and {len(sets['val'])} {choose} "
         "sentences"
     )
     fitted, report = choose_readout(
