@@ -54,6 +54,9 @@ CANDIDATES = {
     "C3": (("espeak", 1500), ("festival", 1500)),
     # added after C1 was scored (val r(mouth_open) -0.008 with 50 min of teacher speech): a third of each
     "C4": (("espeak", 500), ("festival", 500)),
+    # added after C1-C4 and R0 were scored: smaller teacher shares
+    "C5": (("espeak", 500),),
+    "C6": (("espeak", 250), ("festival", 250)),
 }
 
 
@@ -156,8 +159,9 @@ def score(names: list[str]) -> None:
     train: list = []
     for name in names:
         row: dict = {"name": name}
-        if name == "shipped":
-            ro, band = shipped.readout, shipped.closure_band
+        if name == "shipped" or name.endswith(".npz"):  # a model file's own readout and band, as stored
+            m = shipped if name == "shipped" else load_model(name)
+            ro, band = m.readout, m.closure_band
             sv = score_lips(estimates(base, val, ro, band))
         else:
             if not train:
@@ -195,7 +199,7 @@ def score(names: list[str]) -> None:
             real_speech_teacher=summary(ts),
             seconds=round(time.time() - t0),
         )
-        if name != "shipped":
+        if name in CANDIDATES:
             from assets.modelfile import save_model
 
             save_model(OUT / f"model_{name}.npz", replace(base, readout=ro, closure_band=band))

@@ -149,10 +149,12 @@ def espeak_clips(
     from assets.espeak import synthesizer as espeak
     from assets.tts import INVENTORY, Speech
 
-    rng = np.random.default_rng(seed)
     wrap = progress or (lambda it, **_: it)
     out = []
-    for i, text in enumerate(wrap(grid_texts(n, rng), desc="teacher espeak", unit="utt")):
+    for i in wrap(range(n), desc="teacher espeak", unit="utt"):
+        # one stream per utterance: the first k of an n-utterance set are the k-utterance set
+        rng = np.random.default_rng([seed, i])
+        text = grid_texts(1, rng)[0]
         voice = Voice(
             language="en",
             base=str(rng.choice(ESPEAK_BASES)),
@@ -209,13 +211,14 @@ def festival_clips(
     from assets.tts import END_PAUSE_S, LEAD_PAUSE_S
     from training.festival import VOICES, FestivalVoice, synthesize_batch
 
-    rng = np.random.default_rng(seed)
-    texts = grid_texts(n, rng)
     wrap = progress or (lambda it, **_: it)
     out = []
     for b0 in wrap(range(0, n, batch), desc="teacher festival", unit="batch"):
+        # one stream per batch: the first batches of a larger set are the smaller set
+        rng = np.random.default_rng([seed, b0 // batch])
         voice = FestivalVoice(name=VOICES[(b0 // batch) % len(VOICES)], stretch=float(rng.uniform(*FESTIVAL_STRETCH)))
-        for k, (samples, rate, segs) in enumerate(synthesize_batch(texts[b0 : b0 + batch], voice)):
+        texts = grid_texts(min(batch, n - b0), rng)
+        for k, (samples, rate, segs) in enumerate(synthesize_batch(texts, voice)):
             n0, n1 = int(round(LEAD_PAUSE_S * rate)), int(round(END_PAUSE_S * rate))
             x = np.concatenate([np.zeros(n0), np.asarray(samples, np.float64), np.zeros(n1)])
             lead, end = n0 / rate, len(x) / rate
