@@ -24,12 +24,15 @@ BAND=0.035
 SPEEDS="0.9,1.1"
 # The readout's form (third round of issue 10, chosen on val among `facecast readout`'s default candidates);
 # since the fourth round it is fitted on the train sentences plus 4 vocal-tract-length copies of each
-# (filterbank warps 0.85-1.18, chosen on val and its voice-changed copies; docs/default_model.md).
+# (filterbank warps 0.85-1.18, chosen on val and its voice-changed copies; docs/default_model.md); since the
+# eleventh round also on 250 espeak-ng + 250 Festival GRID-grammar sentences labelled with s1's lips by unit
+# selection over the train split (training/teacher.py; "Teacher labels for the readout").
 READOUT="5:state:64x3:1e-3"
 run extract "$grid/video" --workers 2 --require-alignment
 run train --grid-s1 "$grid" --grid-split train ${SPEEDS:+--speed "$SPEEDS"} -o assets/data/default_model.npz \
     --states 16 --mix 3 --covariance full --tc 3 --iters 12 --tol 3e-4 --seed 0 \
     --likelihood-scale "$KAPPA" --closure-band "$BAND"
 run readout assets/data/default_model.npz -o assets/data/default_model.npz --grid-s1 "$grid" \
-    --candidates "$READOUT" --vtlp-copies 4 --vtlp-range 0.85,1.18 --vtlp-seed 1
+    --candidates "$READOUT" --vtlp-copies 4 --vtlp-range 0.85,1.18 --vtlp-seed 1 \
+    --teacher-espeak 250 --teacher-festival 250
 run eval --grid-s1 "$grid" --output docs/accuracy.md

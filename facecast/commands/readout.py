@@ -158,6 +158,30 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the copies' filterbank warps, drawn uniformly per copy and sentence (> 1: a shorter vocal tract)",
     )
     p.add_argument("--vtlp-seed", type=int, default=1, help="seeds the copies' warps")
+    p.add_argument(
+        "--teacher-espeak",
+        type=int,
+        default=0,
+        metavar="N",
+        help="add N GRID-grammar sentences spoken by spread espeak-ng voices, rates and pitches to the fit, labelled "
+        "with s1's real lips by unit selection over the train split (training/teacher.py; issue 10, eleventh round: "
+        "measured, not shipped, docs/default_model.md); 0 = none",
+    )
+    p.add_argument(
+        "--teacher-festival",
+        type=int,
+        default=0,
+        metavar="N",
+        help="the same with N sentences spoken by Festival's voices (kal, ked diphones, slt HTS); 0 = none",
+    )
+    p.add_argument("--teacher-seed", type=int, default=0, help="seeds the teacher sentences, voices, rates and levels")
+    p.add_argument(
+        "--teacher-n-best",
+        type=int,
+        default=5,
+        metavar="K",
+        help="unit sequences averaged per teacher label (as `facecast say --n-best`)",
+    )
     p.add_argument("--report", type=Path, default=None, help="write the val scores of every candidate here (JSON)")
     p.set_defaults(run=run)
 
@@ -181,6 +205,7 @@ def _run(args: argparse.Namespace) -> int:
     from training.errors import ConfigError
     from training.readout import VtlpConfig, choose_readout, trace_clips, vtlp_copies
     from training.reallips import s1_clips
+    from training.teacher import TeacherConfig, teacher_clips
 
     check_model_output(args.output)
     # --corpus replaces GRID s1 (its own utterances fit and choose): a --grid-s1 beside it would be ignored, and
@@ -197,6 +222,14 @@ def _run(args: argparse.Namespace) -> int:
         )
     grid_s1 = args.grid_s1 if args.grid_s1 is not None else SHARED / "video" / "grid_s1"
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
+    teacher = TeacherConfig(
+        espeak=args.teacher_espeak, festival=args.teacher_festival, seed=args.teacher_seed, n_best=args.teacher_n_best
+    )
+    if args.corpus is not None and (teacher.espeak or teacher.festival):
+        raise ConfigError(
+            f"--corpus {args.corpus} with teacher sentences: the teacher labels with GRID s1's lips, not the corpus "
+            "talker's; give --teacher-espeak/--teacher-festival only with GRID s1"
+        )
     # Checked here, before the corpus is read: an unknown name or a weight <= 0 is a ConfigError naming it.
     candidates = [replace(spec, loss_weight=args.loss_weight) for spec in args.candidates]
     model = replace(load_model(args.model), readout=None)
@@ -213,10 +246,17 @@ def _run(args: argparse.Namespace) -> int:
         sets[split] = trace_clips(model, clips, progress=tqdm)
         if split == "train" and vtlp.copies:
             sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)
+        if split == "train" and not parts:
+            taught = teacher_clips(teacher, grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+            sets[split] += trace_clips(model, taught, progress=tqdm)
     if parts:
         source = {"corpus": str(args.corpus), **parts["source"]}
     fit, choose = ("fit", "choose") if parts else ("train", "val")
-    print(f"{len(sets['train'])} {fit} traces ({vtlp.copies} VTLP copies) and {len(sets['val'])} {choose} sentences")
+    extra = f", {teacher.espeak} + {teacher.festival} teacher sentences" if teacher.espeak or teacher.festival else ""
+    print(
+        f"{len(sets['train'])} {fit} traces ({vtlp.copies} VTLP copies{extra}) and {len(sets['val'])} {choose} "
+        "sentences"
+    )
     fitted, report = choose_readout(
         model,
         sets["train"],
@@ -227,6 +267,8 @@ def _run(args: argparse.Namespace) -> int:
         log=tqdm.write,
     )
     report["chosen"]["vtlp"] = vtlp.as_json()
+    if teacher.espeak or teacher.festival:  # a file fitted without teacher sentences stays as it was
+        report["chosen"]["teacher"] = teacher.as_json()
     # Only a corpus run records where it was fitted: the GRID s1 recipe's file stays as it was.
     report["chosen"].update(source)
     fitted = replace(fitted, metadata={**fitted.metadata, "readout": report["chosen"]})
