@@ -165,7 +165,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="add N GRID-grammar sentences spoken by spread espeak-ng voices, rates and pitches to the fit, labelled "
         "with s1's real lips by unit selection over the train split (training/teacher.py; issue 10, eleventh round: "
-        "measured, not shipped, docs/default_model.md); 0 = none",
+        "the default model uses 250, docs/default_model.md); 0 = none",
     )
     p.add_argument(
         "--teacher-festival",
