@@ -1410,8 +1410,10 @@ PARTED_INSIDE_BAND = (0.08, 0.18)
 """IOD inwards from a parted hole's end along the mouth line: :func:`parted_lower_inside_rows` leaves the rows as they
 are out to the first figure and takes its own in full from the second (eased between); the ends are
 :func:`parted_lower_lip_rows`'. Eased in from the end itself (or from 0.035), the parted Lee Perry-Smith's inside met
-the ragged ends' small faces moving with the upper lip: 2-3 flips, stretch 5.25-6.17 (docs/animation.md, "The parted
-lower lip's inside")."""
+the ragged ends' small faces moving with the upper lip: 2-3 flips, stretch 5.25-6.17. Eased in over 0.08-0.3 (less
+shear along the lip: its copy jittered by 0.002 IOD 2.65, not 3.85), the file's plain rig passed and was taken, its
+lining's partly moved sides two dark slabs beside a peaked lower lip at /a/ (docs/animation.md, "The parted lower
+lip's inside")."""
 PARTED_INSIDE_REACH = (0.5, 0.6)
 """IOD: :func:`parted_lower_inside_rows` takes the vertices at most the first figure below the lower inner-lip point and
 at most the second behind the lower lip's front (the lining of the mouth's floor behind the lip, the parted Lee
