@@ -1406,6 +1406,125 @@ def parted_lower_lip_rows(
     return mix
 
 
+PARTED_INSIDE_BAND = (0.08, 0.18)
+"""IOD inwards from a parted hole's end along the mouth line: :func:`parted_lower_inside_rows` leaves the rows as they
+are out to the first figure and takes its own in full from the second (eased between); the ends are
+:func:`parted_lower_lip_rows`'. Eased in from the end itself (or from 0.035), the parted Lee Perry-Smith's inside met
+the ragged ends' small faces moving with the upper lip: 2-3 flips, stretch 5.25-6.17. Eased in over 0.08-0.3 (less
+shear along the lip: its copy jittered by 0.002 IOD 2.65, not 3.85), the file's plain rig passed and was taken, its
+lining's partly moved sides two dark slabs beside a peaked lower lip at /a/ (docs/animation.md, "The parted lower
+lip's inside")."""
+PARTED_INSIDE_REACH = (0.5, 0.6)
+"""IOD: :func:`parted_lower_inside_rows` takes the vertices at most the first figure below the lower inner-lip point and
+at most the second behind the lower lip's front (the lining of the mouth's floor behind the lip, the parted Lee
+Perry-Smith's down to 0.45 IOD behind it). Out to 0.3 only, the rows fell from the lip's to none over 0.1 IOD of that
+lining and its thin faces turned over (16 flips)."""
+PARTED_INSIDE_BEHIND = (0.04, 0.01)
+"""IOD: the lower lip's own edge on the opening is its hole edge at least the first figure behind its front (the
+rest of that edge is the lip's front, which keeps its rows); the inside is what lies at least the second behind
+that edge. Measured from the lip's front instead (the first figure), the inside took the lips' contact columns and the
+lower inner-lip point, which crossed the upper lip at rest by 0.016 IOD."""
+PARTED_INSIDE_SIGMA = 0.03
+"""IOD: the width (a Gaussian's sigma, along the mouth line) over which :func:`parted_lower_inside_rows` averages the
+lower lip's edge rows for the edges of the inside that stay."""
+
+
+def parted_lower_inside_rows(
+    rig: Rig, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Lips parted over a hole: what lies behind the lower lip (the lining of the mouth's floor, below the mouth line,
+    behind the lower lip's edge on the opening, :data:`PARTED_INSIDE_REACH`, :data:`PARTED_INSIDE_BEHIND`) moves with
+    that lip. Its own hole edges (a lining modelled apart from the lip) take the lip edge's rows averaged by a Gaussian
+    along the mouth line (:data:`PARTED_INSIDE_SIGMA`), the rest the harmonic mean of what surrounds it (the lip's edge,
+    those hole edges, and the head beyond the reach), eased in by :data:`PARTED_INSIDE_BAND`. The lip's own rows are
+    kept. Why: the harmonic field dropped the parted Lee Perry-Smith's lower lip 0.2-0.3 IOD at /a/ and the lining
+    behind it 0.0-0.05, so the lining's ragged edge showed above the lowered lip as a dark band across the opening
+    (its lower edge "stepped", lip backs 21 faces); moving with the lip, the lining stays behind it as a jaw's does
+    (docs/animation.md, "The parted lower lip's inside"). Vertices at one position (texture seams) are one vertex here.
+    ``rig``: the head's rig as repaired, at rest as modelled (parted, not cut); ``triangles`` (m, 3) the mesh it
+    animates; ``landmarks``: name -> vertex index, the corners at the hole's ends. Returns :func:`with_rows_mixed`'s
+    ``mix``."""
+    from realtime_core.face.welding import weld
+
+    v = np.asarray(rig.neutral, dtype=np.float64)
+    n = len(v)
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    opened = np.asarray(rig.deformed(np.array([0.0, 0.0, PARTED_END_OPEN, 0.0])), dtype=np.float64)
+    drop = -((opened - np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)) @ frame.axes[1]) / frame.iod
+    lower = drop > PARTED_END_LOWER * max(float(drop[landmarks["lower_inner"]]), 1e-9)
+    (lx, ly), (hx, hy) = sorted(
+        (float(q[landmarks[k], 0]), float(q[landmarks[k], 1])) for k in ("corner_left", "corner_right")
+    )
+    li = q[landmarks["lower_inner"]]
+    mid = 0.5 * (q[landmarks["upper_inner"]] + li)
+    inward = np.minimum(q[:, 0] - lx, hx - q[:, 0])
+    # Below the mouth line: the ends joined to the inner lips' midpoint.
+    line = np.where(
+        q[:, 0] < mid[0],
+        np.interp(q[:, 0], [lx, mid[0]], [ly, mid[1]]),
+        np.interp(q[:, 0], [mid[0], hx], [mid[1], hy]),
+    )
+    canon, welded = weld(v)
+    first = np.full(len(welded), n, dtype=np.int64)
+    np.minimum.at(first, canon, np.arange(n))
+    own = first[canon] == np.arange(n)
+    tw = first[canon][np.asarray(triangles, dtype=np.int64)]
+    used = np.zeros(n, dtype=bool)
+    used[tw.ravel()] = True
+    adj = vertex_adjacency(n, tw).tocsr()
+    rim = np.zeros(n, dtype=bool)
+    rim[np.unique(boundary_edges(tw)[0])] = True
+    box = used & own & (inward > 0) & (q[:, 1] < line) & (q[:, 1] > li[1] - PARTED_INSIDE_REACH[0])
+    lip = np.flatnonzero(box & lower)
+    if len(lip) < 3:
+        return {}
+
+    def highest(of: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """(n,): the largest ``z`` of ``of`` within 0.03 IOD along the mouth line of each vertex (-inf: none)."""
+        return np.array([z[of[np.abs(q[of, 0] - x) < 0.03]].max(initial=-np.inf) for x in q[:, 0]])
+
+    front = highest(lip, q[:, 2])
+    near = box & (q[:, 2] > front - PARTED_INSIDE_REACH[1])
+    edge = np.flatnonzero(near & rim & lower & (q[:, 2] < front - PARTED_INSIDE_BEHIND[0]))
+    if len(edge) < 3:
+        return {}
+    inside = near & (q[:, 2] < highest(edge, q[:, 2]) - PARTED_INSIDE_BEHIND[1])
+    inside[edge] = False
+    lining = np.flatnonzero(inside & rim & ~lower)
+    free = np.flatnonzero(inside & ~rim)
+    kern = np.exp(-0.5 * ((q[lining, 0][:, None] - q[edge, 0][None, :]) / PARTED_INSIDE_SIGMA) ** 2)
+    kern /= np.maximum(kern.sum(axis=1, keepdims=True), 1e-300)
+    a, b = PARTED_INSIDE_BAND
+    ease = np.clip((inward - a) / (b - a), 0.0, 1.0)
+    # Each vertex's new row over the anchors (the lip's edge, then the free part's neighbours as they are).
+    bnd = np.flatnonzero((np.asarray(adj[free].sum(axis=0)).ravel() > 0) & ~np.isin(np.arange(n), free))
+    anchors = np.r_[edge, bnd]
+    at = -np.ones(n, dtype=np.int64)
+    at[lining] = np.arange(len(lining))
+    given = np.zeros((len(bnd), len(anchors)))
+    for k, i in enumerate(bnd):
+        w = ease[i] if at[i] >= 0 else 0.0
+        if w > 0:
+            given[k, : len(edge)] = w * kern[at[i]]
+        given[k, len(edge) + k] += 1.0 - w
+    mix: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    if len(free):
+        # The harmonic rows of the free part (uniform weights), its neighbours given: a part joined to none keeps its
+        # rows (least squares: its Laplacian is singular there; rows that sum to less than 1 are left alone).
+        lap = sp.diags(np.asarray(adj[free].sum(axis=1)).ravel().astype(np.float64)) - adj[free][:, free]
+        rows = np.linalg.lstsq(lap.toarray(), adj[free][:, bnd].toarray(), rcond=None)[0] @ given
+        for k, i in enumerate(free):
+            if ease[i] > 0 and abs(rows[k].sum() - 1.0) < 1e-3:
+                mix[int(i)] = (np.r_[int(i), anchors], np.r_[1.0 - ease[i], ease[i] * rows[k]])
+    for k, i in enumerate(lining):
+        if ease[i] > 0:
+            mix[int(i)] = (np.r_[int(i), edge], np.r_[1.0 - ease[i], ease[i] * kern[k]])
+    for i in np.flatnonzero(~own):  # every copy of a position as its first copy
+        if int(first[canon[i]]) in mix:
+            mix[int(i)] = mix[int(first[canon[i]])]
+    return {i: (s[np.abs(w) > 1e-6], w[np.abs(w) > 1e-6]) for i, (s, w) in mix.items()}
+
+
 def parted_over_hole(
     vertices: np.ndarray, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int], *, modelled: bool
 ) -> bool:
@@ -1901,6 +2020,11 @@ def rig_head(
             ends_mix = parted_lower_lip_rows(rig, t, frame, snap)
             mixed = with_rows_mixed(rig, ends_mix)
             rig = replace(mixed, meta={**mixed.meta, "parted_ends_smoothed": len(ends_mix)})
+            # What lies behind the lower lip moves with it (see parted_lower_inside_rows): left as the field made it,
+            # the lining behind the lip showed above it at /a/, a dark band with a ragged edge across the opening.
+            inside_mix = parted_lower_inside_rows(rig, t, frame, snap)
+            mixed = with_rows_mixed(rig, inside_mix)
+            rig = replace(mixed, meta={**mixed.meta, "parted_inside_moved": len(inside_mix)})
         if walls is not None:
             rig, cut_mesh = without_inner_lips(
                 rig,

@@ -259,3 +259,57 @@ def test_lips_parted_in_the_middle_and_joined_at_the_corners_are_cut_to_the_corn
     assert len(out.vertices) == n + cut + cavity
     report = head_checks(Head(rig, out))
     assert report.flipped_triangles == 0, report.failures
+
+
+def _lined_scan(path):
+    """:func:`_parted_scan` with a lining behind the lower lip, modelled apart from it (a hollow scan's mouth floor):
+    a row of vertices 0.03 IOD behind and 0.04 below the lower wall's back edge (within 0.2 IOD of the middle), free
+    towards the lip, joined through a row 0.4 IOD behind to the upper wall's back edge. Returns (mesh, frame, the lower
+    wall's back edge (k,), the lining's free row (k,)), both ordered along the mouth line."""
+    mesh, frame = _parted_scan(path)
+    v, t = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.triangles, dtype=np.int64)
+    lm = MEDIAPIPE
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    line = 0.5 * (q[lm["upper_inner"], 1] + q[lm["lower_inner"], 1])
+    walls = np.arange(len(load_mesh(path).vertices), len(v))  # _parted_scan's wall vertices
+    near = np.abs(q[walls, 0] - q[lm["lower_inner"], 0]) < 0.2
+    lower = walls[near & (q[walls, 1] < line)]
+    lower = lower[np.argsort(q[lower, 0])]
+    upper_all = walls[q[walls, 1] > line]
+    upper = np.array([upper_all[np.argmin(np.abs(q[upper_all, 0] - q[i, 0]))] for i in lower])
+    up, back = frame.axes[1] * frame.iod, frame.axes[2] * frame.iod
+    free = len(v) + np.arange(len(lower))
+    middle = free + len(lower)
+    rows = [v[lower] - 0.03 * back - 0.04 * up, v[lower] - 0.4 * back - 0.15 * up]
+    faces = []
+    for i in range(len(lower) - 1):
+        faces += [[free[i], middle[i], free[i + 1]], [free[i + 1], middle[i], middle[i + 1]]]
+        faces += [[middle[i], upper[i], middle[i + 1]], [middle[i + 1], upper[i], upper[i + 1]]]
+    lined = HeadMesh(vertices=np.vstack([v, *rows]), triangles=np.vstack([t, faces]), name="lined scan")
+    return lined, frame, lower, free
+
+
+def test_the_lining_behind_parted_lips_moves_with_the_lower_lip(shared_data):
+    """A hollow scan's mouth floor modelled apart from the lower lip stayed where it was as the lip dropped (the
+    harmonic field moves it as the upper lining it joins), so at /a/ its ragged edge showed above the lowered lip: a
+    dark band across the opening (the parted Lee Perry-Smith, docs/animation.md, "The parted lower lip's inside").
+    Its free edge drops as the lip's edge in front of it in the middle (without parted_lower_inside_rows: 0.00-0.03
+    IOD against the lip's 0.35), and the rig passes its checks."""
+    mesh, frame, lip_edge, lining_edge = _lined_scan(
+        shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    )
+    rig, out = rig_head(mesh, MEDIAPIPE)
+    rest = np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
+    wide = np.asarray(rig.deformed(np.array([0.0, 0.0, 0.35, 0.0])), dtype=np.float64)
+    drop = -((wide - rest) @ frame.axes[1]) / frame.iod
+    assert drop[lip_edge].min() > 0.2
+    # In the middle as the lip (the rows eased in from the hole's ends, PARTED_INSIDE_BAND), and at least half of it
+    # out to 0.2 IOD from the middle.
+    x = (np.asarray(mesh.vertices, dtype=np.float64)[lining_edge] - frame.origin) @ frame.axes[0] / frame.iod
+    middle = np.abs(x - np.median(x)) < 0.1
+    assert middle.sum() >= 3
+    np.testing.assert_allclose(drop[lining_edge][middle], drop[lip_edge][middle], rtol=0.1)
+    assert (drop[lining_edge] > 0.5 * drop[lip_edge]).all()
+    assert rig.meta.get("parted_inside_moved", 0) >= len(lining_edge)
+    report = head_checks(Head(rig, out))
+    assert report.passed, report.failures
