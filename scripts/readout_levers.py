@@ -51,6 +51,7 @@ from training.readout import (
     trace_clips,
     vtlp_copies,
 )
+from training.readout import choose_band as readout_choose_band
 from training.reallips import LipScores, real_speech_clips, s1_clips, score_lips, score_real_speech
 
 BANDS = (0.02, 0.025, 0.03, 0.035, 0.04, 0.045, 0.05)
@@ -133,15 +134,8 @@ def summary(s: LipScores) -> dict[str, Any]:
 
 
 def choose_band(score) -> tuple[float, LipScores]:
-    """``facecast readout``'s band rule: the highest val r(mouth_open) keeping >= MIN_CLOSURE of the closures."""
-    best: tuple[float, float, LipScores] | None = None
-    for band in BANDS:
-        s = score(band)
-        if s.closure_rate >= MIN_CLOSURE and (best is None or s.r["mouth_open"] > best[0]):
-            best = (s.r["mouth_open"], band, s)
-    if best is None:
-        return max(BANDS), score(max(BANDS))
-    return best[1], best[2]
+    """``facecast readout``'s band rule (:func:`training.readout.choose_band`) over BANDS at MIN_CLOSURE."""
+    return readout_choose_band(score, bands=BANDS, min_closure=MIN_CLOSURE)
 
 
 def main(names: list[str]) -> None:

@@ -29,6 +29,7 @@ from threadpoolctl import threadpool_limits
 from assets.modelfile import load_model
 from realtime_core import VISUAL_PARAMS
 from training.readout import ReadoutSpec, VtlpConfig, estimates, fit_readout, trace_clips, vtlp_copies
+from training.readout import choose_band as readout_choose_band
 from training.reallips import (
     LipScores,
     phone_bilabial_spans,
@@ -100,14 +101,8 @@ def summary(s: LipScores) -> dict:
 
 
 def choose_band(score) -> tuple[float, LipScores]:
-    best = None
-    for band in BANDS:
-        s = score(band)
-        if s.closure_rate >= MIN_CLOSURE and (best is None or s.r["mouth_open"] > best[0]):
-            best = (s.r["mouth_open"], band, s)
-    if best is None:
-        return max(BANDS), score(max(BANDS))
-    return best[1], best[2]
+    """``facecast readout``'s band rule (:func:`training.readout.choose_band`) over BANDS at MIN_CLOSURE."""
+    return readout_choose_band(score, bands=BANDS, min_closure=MIN_CLOSURE)
 
 
 def praat_sets(val_clips: list) -> dict:

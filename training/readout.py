@@ -353,22 +353,30 @@ def choose_readout(
     assert best is not None
     _, ro, _ = best
     band_rows = []
-    chosen: tuple[float, float, LipScores] | None = None
-    for band in bands:
+
+    def scored(band: float) -> LipScores:
         s = score_lips(estimates(model, val, ro, band))
         band_rows.append({"band": band, **_summary(s)})
         log(f"val band {band}: {_line(s)}")
-        ok = s.closure_rate >= min_closure
-        if ok and (chosen is None or s.r["mouth_open"] > chosen[0]):
-            chosen = (s.r["mouth_open"], band, s)
-    if chosen is None:  # no band keeps the closures: the widest closes the most
-        band = max(bands)
-        chosen = (0.0, band, score_lips(estimates(model, val, ro, band)))
-    _, band, s = chosen
+        return s
+
+    band, s = choose_band(scored, bands=bands, min_closure=min_closure)
     ro = replace(ro, metadata={**ro.metadata, "val": _summary(s), "band": band})
     report = {"candidates": rows, "bands": band_rows, "chosen": {**ro.metadata}, "val_without": _summary(base)}
     log(f"chosen {ro.metadata}")
     return replace(model, readout=ro, closure_band=band), report
+
+
+def choose_band(
+    score: Callable[[float], LipScores], *, bands: Sequence[float], min_closure: float
+) -> tuple[float, LipScores]:
+    """The closure band (IOD) of ``bands`` with the highest ``score(band)`` r(mouth_open) among those reaching
+    ``min_closure`` of the closures, and its scores; when none does, the widest band (it closes the most)."""
+    scores = {band: score(band) for band in bands}
+    kept = [band for band in bands if scores[band].closure_rate >= min_closure]
+    # max() keeps the first of equal r, as the bands are listed.
+    band = max(kept, key=lambda b: scores[b].r["mouth_open"]) if kept else max(bands)
+    return band, scores[band]
 
 
 def _summary(s: LipScores) -> dict[str, Any]:

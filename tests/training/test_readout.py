@@ -11,7 +11,7 @@ import pytest
 from realtime_core import VISUAL_PARAMS
 from tests.realtime_core.test_readout import DA, DV, M, N, small_model
 from training.errors import ConfigError
-from training.readout import ReadoutSpec, Traced, choose_readout, estimates, fit_readout
+from training.readout import ReadoutSpec, Traced, choose_band, choose_readout, estimates, fit_readout
 
 # The MLPs here are cut to a few epochs to keep the tests fast; the properties tested (the live path equals
 # the scoring, an ensemble is its members' mean) hold for any weights, so sklearn's "not converged" is noise.
@@ -407,3 +407,34 @@ def test_readout_command_fits_and_chooses_on_an_extracted_corpus(tmp_path, capsy
     err = capsys.readouterr().err
     assert rc != 0 and str(small) in err and "too few" in err and "Traceback" not in err
     assert not (tmp_path / "no.npz").exists()
+
+
+def test_the_band_is_the_best_r_among_bands_keeping_the_closures_else_the_widest():
+    from training.reallips import LipScores
+
+    def scores(r: float, closures: float) -> LipScores:
+        return LipScores(
+            r={"mouth_open": r},
+            best_lag={},
+            r_best={},
+            nu={},
+            closure_rate=closures,
+            truth_closure_rate=1.0,
+            n_closures=10,
+            r_loudness=0.0,
+            n_frames=100,
+            per_clip={},
+        )
+
+    table = {0.02: scores(0.91, 0.85), 0.03: scores(0.90, 0.95), 0.04: scores(0.90, 0.97), 0.05: scores(0.88, 1.0)}
+    called: list[float] = []
+
+    def score(band: float) -> LipScores:
+        called.append(band)
+        return table[band]
+
+    band, s = choose_band(score, bands=tuple(table), min_closure=0.9)
+    # 0.02 has the best r but misses the closures; 0.03 and 0.04 tie: the first listed wins. Each band scored once.
+    assert (band, s) == (0.03, table[0.03]) and called == list(table)
+    band, s = choose_band(lambda b: table[b], bands=tuple(table), min_closure=1.01)
+    assert (band, s) == (0.05, table[0.05])
