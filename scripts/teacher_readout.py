@@ -28,8 +28,7 @@ from threadpoolctl import threadpool_limits
 
 from assets.modelfile import load_model
 from realtime_core import VISUAL_PARAMS
-from training.readout import ReadoutSpec, VtlpConfig, estimates, fit_readout, trace_clips, vtlp_copies
-from training.readout import choose_band as readout_choose_band
+from training.readout import ReadoutSpec, VtlpConfig, choose_band, estimates, fit_readout, trace_clips, vtlp_copies
 from training.reallips import (
     LipScores,
     phone_bilabial_spans,
@@ -98,11 +97,6 @@ def summary(s: LipScores) -> dict:
         "closures": f"{round(s.closure_rate * s.n_closures)}/{s.n_closures}",
         "nu_mouth_open": round(float(s.nu["mouth_open"]), 3),
     }
-
-
-def choose_band(score) -> tuple[float, LipScores]:
-    """``facecast readout``'s band rule (:func:`training.readout.choose_band`) over BANDS at MIN_CLOSURE."""
-    return readout_choose_band(score, bands=BANDS, min_closure=MIN_CLOSURE)
 
 
 def praat_sets(val_clips: list) -> dict:
@@ -178,7 +172,9 @@ def score(names: list[str]) -> None:
             row["teacher_frames"] = int(sum(len(c.truth) for c in extra))
             ro = fit_readout(base, fit, SPEC)
             row["epochs"] = ro.metadata["epochs"]
-            band, sv = choose_band(lambda b, ro=ro: score_lips(estimates(base, val, ro, b)))
+            band, sv = choose_band(
+                lambda b, ro=ro: score_lips(estimates(base, val, ro, b)), bands=BANDS, min_closure=MIN_CLOSURE
+            )
         ps = {k: score_lips(estimates(base, v, ro, band)) for k, v in praat.items()}
         rs = score_real_speech(replace(base, readout=ro, closure_band=band), rules)
         ts = score_lips(estimates(base, teach, ro, band))

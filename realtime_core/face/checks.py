@@ -791,6 +791,30 @@ def upper_lip_peak(
     return float(edge[k] - (arc + slope * at[k] ** 2)), edge  # the arc at the middle's own vertex
 
 
+def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> tuple[Any, ...]:
+    """What :func:`lip_backs_seen` and :func:`lip_tops_carried` share: (rest vertices (n, 3), the rig's faces
+    (m, 3) less those on the last ``skip_vertices`` vertices (a mouth cavity), the face frame, the mouth's middle
+    (3,), its corner-to-corner width, each vertex's signed distance along the mouth line (n,), and the faces lying
+    in the lips' band: within LIP_BACKS_BEYOND of the corners along the mouth, LIP_BACKS_BAND of the mouth line
+    across it, not deeper than NOTCH_DEPTH behind the corners)."""
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    if skip_vertices:
+        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
+    fr = face_frame(v0, landmarks)
+    iod = fr.iod
+    _, up, fwd = fr.axes
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
+    x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
+    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
+    line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
+    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
+    band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
+    band &= (v0 - mid) @ fwd > -NOTCH_DEPTH * iod
+    return v0, t, fr, mid, width, x, np.flatnonzero(band[t].all(axis=1))
+
+
 def lip_backs_seen(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -805,21 +829,8 @@ def lip_backs_seen(
     frontal notch do not see. The lips' faces: LIP_BACKS_BAND; a face counts where its centroid is seen, no
     face of the rig (the last ``skip_vertices`` vertices, a mouth cavity, left out) lying in front of it.
     None: the mouth has no such face."""
-    v0 = np.asarray(rig.neutral, dtype=np.float64)
-    t = np.asarray(rig.triangles, dtype=np.int64)
-    if skip_vertices:
-        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
-    fr = face_frame(v0, landmarks)
+    v0, t, fr, mid, width, _, lips = _lip_band_faces(rig, landmarks, skip_vertices)
     iod = fr.iod
-    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
-    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
-    x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
-    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
-    line_h = (cr + along[:, None] * (cl - cr) - mid) @ fr.axes[1]
-    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
-    band &= np.abs((v0 - mid) @ fr.axes[1] - line_h) < LIP_BACKS_BAND * iod
-    band &= (v0 - mid) @ fr.axes[2] > -NOTCH_DEPTH * iod
-    lips = np.flatnonzero(band[t].all(axis=1))
     if not len(lips):
         return None
     # Occluders: what lies within reach of the mouth (a ray from a lip towards a viewer leaves the head there).
@@ -887,22 +898,9 @@ def lip_tops_carried(
     or hung between the lips (a strip stretched across the opening at /a/). A face counts where its centroid is seen
     from the front and it faces the viewer; the last ``skip_vertices`` vertices (a mouth cavity) are left out.
     None: the mouth has no lip-top face."""
-    v0 = np.asarray(rig.neutral, dtype=np.float64)
-    t = np.asarray(rig.triangles, dtype=np.int64)
-    if skip_vertices:
-        t = t[(t < len(v0) - skip_vertices).all(axis=1)]
-    fr = face_frame(v0, landmarks)
+    v0, t, fr, mid, width, x, lips = _lip_band_faces(rig, landmarks, skip_vertices)
     iod = fr.iod
     _, up, fwd = fr.axes
-    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
-    mid, width = 0.5 * (cl + cr), float(np.linalg.norm(cl - cr))
-    x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
-    along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
-    line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
-    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
-    band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
-    band &= (v0 - mid) @ fwd > -NOTCH_DEPTH * iod
-    lips = np.flatnonzero(band[t].all(axis=1))
     if not len(lips):
         return None
     n0 = triangle_normals(v0, t[lips])
