@@ -2,6 +2,7 @@
 
     python scripts/teacher_readout.py labels --espeak N --festival N [--n-best K]   # synthesise + label, cached
     python scripts/teacher_readout.py score NAME ...    # shipped | R0 | C1 | C2 | C3: one JSON line each
+    python scripts/teacher_readout.py score --model low-latency shipped FILE.npz   # on another shipped HMM
 
 The shipped HMM is traced over the 716 train sentences plus the shipped recipe's 4 vocal-tract-length copies
 (warps 0.85-1.18, seed 1) and, per candidate, the teacher clips (``training.teacher``: GRID-grammar
@@ -11,7 +12,9 @@ train split). Each candidate is the shipped readout form (5:state:64x3:1e-3) wit
 formants x1.15; formants x0.9; formants x1.18 with pitch x1.8) and P, their mean r(mouth_open); the real
 speech of other voices with the rules truth (6 clips) and with the teacher truth (the ARPAbet-labelled 5:
 unit-selection lips on their own phone timings, recorded pauses kept). Never the test split nor the
-other-talker GRID clips.
+other-talker GRID clips. ``--model NAME`` (a shipped name or file; default: the default model) is the HMM
+every row is traced with and "shipped" is its readout as stored; a FILE.npz row must carry that same HMM
+(the low-latency model's teacher candidate was scored this way, its readout fitted by ``facecast readout``).
 """
 
 from __future__ import annotations
@@ -132,9 +135,22 @@ def teacher_truth_speech(s, speech_root: Path) -> tuple[list, list]:
     return out, skipped
 
 
-def score(names: list[str]) -> None:
+def same_hmm(a, b) -> bool:
+    """Whether two models share the HMM, front end and CMVN statistics (a readout refit leaves these)."""
+    return (
+        a.frontend == b.frontend
+        and a.likelihood_scale == b.likelihood_scale
+        and all(np.array_equal(x, y) for x, y in ((a.cmvn_mean, b.cmvn_mean), (a.cmvn_var, b.cmvn_var)))
+        and all(
+            np.array_equal(getattr(a.hmm, f), getattr(b.hmm, f))
+            for f in ("startprob", "transmat", "weights", "means", "covars")
+        )
+    )
+
+
+def score(names: list[str], model: str | None = None) -> None:
     t0 = time.time()
-    shipped = load_model(None)
+    shipped = load_model(model)
     base = replace(shipped, readout=None)
     s = synth()
     val_clips = s1_clips("val")
@@ -149,7 +165,11 @@ def score(names: list[str]) -> None:
     for name in names:
         row: dict = {"name": name}
         if name == "shipped" or name.endswith(".npz"):  # a model file's own readout and band, as stored
+            while name != "shipped" and not Path(name).is_file():  # `facecast readout` may still be fitting it
+                time.sleep(20)
             m = shipped if name == "shipped" else load_model(name)
+            if not same_hmm(m, shipped):
+                raise SystemExit(f"{name}: not the HMM of {model or 'default'}; pass --model")
             ro, band = m.readout, m.closure_band
             sv = score_lips(estimates(base, val, ro, band))
         else:
@@ -210,4 +230,8 @@ if __name__ == "__main__":
             args = a.parse_args()
             labels(args.espeak, args.festival, args.n_best)
         else:
-            score(sys.argv[2:])
+            args_ = sys.argv[2:]
+            model_ = None
+            if args_[:1] == ["--model"]:
+                model_, args_ = args_[1], args_[2:]
+            score(args_, model_)
