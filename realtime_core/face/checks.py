@@ -58,7 +58,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -791,12 +791,31 @@ def upper_lip_peak(
     return float(edge[k] - (arc + slope * at[k] ** 2)), edge  # the arc at the middle's own vertex
 
 
-def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> tuple[Any, ...]:
-    """What :func:`lip_backs_seen` and :func:`lip_tops_carried` share: (rest vertices (n, 3), the rig's faces
-    (m, 3) less those on the last ``skip_vertices`` vertices (a mouth cavity), the face frame, the mouth's middle
-    (3,), its corner-to-corner width, each vertex's signed distance along the mouth line (n,), and the faces lying
-    in the lips' band: within LIP_BACKS_BEYOND of the corners along the mouth, LIP_BACKS_BAND of the mouth line
-    across it, not deeper than NOTCH_DEPTH behind the corners)."""
+class _LipBand(NamedTuple):
+    """What :func:`lip_backs_seen` and :func:`lip_tops_carried` share (:func:`_lip_band_faces`)."""
+
+    rest: np.ndarray
+    """(n, 3) the rig's vertices at rest."""
+    faces: np.ndarray
+    """(m, 3) the rig's faces less those on the last ``skip_vertices`` vertices (a mouth cavity)."""
+    frame: Any
+    """The face frame (:func:`face_frame`)."""
+    middle: np.ndarray
+    """(3,) the midpoint of the mouth corners."""
+    across: np.ndarray
+    """(n,) each vertex's signed distance along the mouth line (head units), from ``middle``."""
+    lips: np.ndarray
+    """Indices into ``faces`` of the faces in the lips' band: within LIP_BACKS_BEYOND of the corners along the mouth,
+    LIP_BACKS_BAND of the mouth line across it, not deeper than NOTCH_DEPTH behind the corners."""
+    near: np.ndarray
+    """Indices into ``faces`` of the faces that may hide a lip (within reach of the mouth: a ray from a lip towards a
+    viewer leaves the head there)."""
+    near_at: np.ndarray
+    """(m,) each face's index in ``near`` (-1: not one)."""
+
+
+def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> _LipBand:
+    """The lips' band of faces of ``rig`` and what lies around it (:class:`_LipBand`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(rig.triangles, dtype=np.int64)
     if skip_vertices:
@@ -812,7 +831,10 @@ def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> 
     band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
     band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
     band &= (v0 - mid) @ fwd > -NOTCH_DEPTH * iod
-    return v0, t, fr, mid, width, x, np.flatnonzero(band[t].all(axis=1))
+    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
+    at = np.full(len(t), -1, dtype=np.int64)
+    at[near] = np.arange(len(near))
+    return _LipBand(v0, t, fr, mid, x, np.flatnonzero(band[t].all(axis=1)), near, at)
 
 
 def lip_backs_seen(
@@ -829,14 +851,11 @@ def lip_backs_seen(
     frontal notch do not see. The lips' faces: LIP_BACKS_BAND; a face counts where its centroid is seen, no
     face of the rig (the last ``skip_vertices`` vertices, a mouth cavity, left out) lying in front of it.
     None: the mouth has no such face."""
-    v0, t, fr, mid, width, _, lips = _lip_band_faces(rig, landmarks, skip_vertices)
+    band = _lip_band_faces(rig, landmarks, skip_vertices)
+    t, fr, lips, near, at = band.faces, band.frame, band.lips, band.near, band.near_at
     iod = fr.iod
     if not len(lips):
         return None
-    # Occluders: what lies within reach of the mouth (a ray from a lip towards a viewer leaves the head there).
-    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
-    at = np.full(len(t), -1, dtype=np.int64)
-    at[near] = np.arange(len(near))
     ax, up, fwd = fr.axes
     frames = []
     for deg in LIP_BACKS_VIEWS:
@@ -898,7 +917,9 @@ def lip_tops_carried(
     or hung between the lips (a strip stretched across the opening at /a/). A face counts where its centroid is seen
     from the front and it faces the viewer; the last ``skip_vertices`` vertices (a mouth cavity) are left out.
     None: the mouth has no lip-top face."""
-    v0, t, fr, mid, width, x, lips = _lip_band_faces(rig, landmarks, skip_vertices)
+    band = _lip_band_faces(rig, landmarks, skip_vertices)
+    v0, t, fr, mid, x = band.rest, band.faces, band.frame, band.middle, band.across
+    lips, near, at = band.lips, band.near, band.near_at
     iod = fr.iod
     _, up, fwd = fr.axes
     if not len(lips):
@@ -932,9 +953,6 @@ def lip_tops_carried(
     carried = tops[(span > 1e-9 * iod) & (share < LIP_TOP_FOLLOWS)]
     if not len(carried):
         return 0.0, 0
-    near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
-    at = np.full(len(t), -1, dtype=np.int64)
-    at[near] = np.arange(len(near))
     to_view = np.stack([np.cross(up, fwd), up, fwd], axis=1)
     worst, faces = 0.0, 0
     for pose in poses:
