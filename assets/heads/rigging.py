@@ -1328,6 +1328,21 @@ rows. On the parted Lee Perry-Smith jittered and mirrored (its rigs as they were
 and 0.03 a face at the band's edge; 0.015 none."""
 
 
+def _lower_lip_by_drop(rig: Rig, frame: FaceFrame, landmarks: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(the rig's rest vertices in the face frame, IOD units (n, 3); which of them are the lower lip's (n,) bool) for
+    lips parted over a hole (:func:`parted_lower_lip_rows`, :func:`parted_lower_inside_rows`): a vertex is the lower
+    lip's when the rig drops it at mouth_open :data:`PARTED_END_OPEN` by more than :data:`PARTED_END_LOWER` of the
+    lower inner-lip point's drop. Near the hole's ends the lips' edges run within 0.01-0.02 IOD of each other, jagged,
+    and neither side of the mouth line nor the nearer inner-lip point along the surface tells them apart (both took
+    upper-lip vertices there for the lower lip's: their rows mixed with the lower lip's, the upper lip's raise tore
+    them, stretch 11.85); at /a/ the lower lip's vertices there drop 0.17-0.30 IOD, the upper lip's at most 0.11."""
+    v = np.asarray(rig.neutral, dtype=np.float64)
+    q = (v - frame.origin) @ frame.axes.T / frame.iod
+    opened = np.asarray(rig.deformed(np.array([0.0, 0.0, PARTED_END_OPEN, 0.0])), dtype=np.float64)
+    drop = -((opened - np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)) @ frame.axes[1]) / frame.iod
+    return q, drop > PARTED_END_LOWER * max(float(drop[landmarks["lower_inner"]]), 1e-9)
+
+
 def parted_lower_lip_rows(
     rig: Rig, triangles: np.ndarray, frame: FaceFrame, landmarks: Mapping[str, int]
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
@@ -1347,15 +1362,7 @@ def parted_lower_lip_rows(
     ``mix``."""
     v = np.asarray(rig.neutral, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
-    # Which lip a vertex belongs to: how far the rig drops it as the mouth opens, against the lower inner-lip point.
-    # Near the hole's ends the lips' edges run within 0.01-0.02 IOD of each other, jagged, and neither side of the
-    # mouth line nor the nearer inner-lip point along the surface tells them apart (both took upper-lip vertices
-    # there for the lower lip's: their rows mixed with the lower lip's, the upper lip's raise tore them, stretch
-    # 11.85); at /a/ the lower lip's vertices there drop 0.17-0.30 IOD, the upper lip's at most 0.11.
-    opened = np.asarray(rig.deformed(np.array([0.0, 0.0, PARTED_END_OPEN, 0.0])), dtype=np.float64)
-    drop = -((opened - np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)) @ frame.axes[1]) / frame.iod
-    lower = drop > PARTED_END_LOWER * max(float(drop[landmarks["lower_inner"]]), 1e-9)
+    q, lower = _lower_lip_by_drop(rig, frame, landmarks)
     rim = np.unique(boundary_edges(t)[0])
     mid = 0.5 * (q[landmarks["upper_inner"]] + q[landmarks["lower_inner"]])
     adj = vertex_adjacency(len(v), t).tocsr()
@@ -1448,10 +1455,7 @@ def parted_lower_inside_rows(
 
     v = np.asarray(rig.neutral, dtype=np.float64)
     n = len(v)
-    q = (v - frame.origin) @ frame.axes.T / frame.iod
-    opened = np.asarray(rig.deformed(np.array([0.0, 0.0, PARTED_END_OPEN, 0.0])), dtype=np.float64)
-    drop = -((opened - np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)) @ frame.axes[1]) / frame.iod
-    lower = drop > PARTED_END_LOWER * max(float(drop[landmarks["lower_inner"]]), 1e-9)
+    q, lower = _lower_lip_by_drop(rig, frame, landmarks)
     (lx, ly), (hx, hy) = sorted(
         (float(q[landmarks[k], 0]), float(q[landmarks[k], 1])) for k in ("corner_left", "corner_right")
     )
@@ -1480,8 +1484,11 @@ def parted_lower_inside_rows(
         return {}
 
     def highest(of: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """(n,): the largest ``z`` of ``of`` within 0.03 IOD along the mouth line of each vertex (-inf: none)."""
-        return np.array([z[of[np.abs(q[of, 0] - x) < 0.03]].max(initial=-np.inf) for x in q[:, 0]])
+        """(n,): the largest ``z`` of ``of`` within 0.03 IOD along the mouth line of each vertex in ``box`` (-inf:
+        none, or a vertex outside ``box``, which no caller reads)."""
+        out = np.full(n, -np.inf)
+        out[box] = [z[of[np.abs(q[of, 0] - x) < 0.03]].max(initial=-np.inf) for x in q[box, 0]]
+        return out
 
     front = highest(lip, q[:, 2])
     near = box & (q[:, 2] > front - PARTED_INSIDE_REACH[1])
