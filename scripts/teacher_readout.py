@@ -77,19 +77,14 @@ def labels(espeak_n: int, festival_n: int, n_best: int) -> None:
     from tqdm import tqdm
 
     s = synth()
-    if espeak_n:
+    for engine, n, make, seed in (("espeak", espeak_n, espeak_clips, 0), ("festival", festival_n, festival_clips, 1)):
+        if not n:
+            continue
         t = time.time()
-        clips = espeak_clips(s, espeak_n, seed=0, n_best=n_best, progress=tqdm)
-        save_clips(OUT / "teacher_espeak.npz", clips)
+        clips = make(s, n, seed=seed, n_best=n_best, progress=tqdm)
+        save_clips(OUT / f"teacher_{engine}.npz", clips)
         log(
-            f"espeak {len(clips)} clips, {sum(len(c[1].params) for c in clips) / 1800:.1f} min, {time.time() - t:.0f} s"
-        )
-    if festival_n:
-        t = time.time()
-        clips = festival_clips(s, festival_n, seed=1, n_best=n_best, progress=tqdm)
-        save_clips(OUT / "teacher_festival.npz", clips)
-        log(
-            f"festival {len(clips)} clips, {sum(len(c[1].params) for c in clips) / 1800:.1f} min, "
+            f"{engine} {len(clips)} clips, {sum(len(c[1].params) for c in clips) / 1800:.1f} min, "
             f"{time.time() - t:.0f} s"
         )
 
