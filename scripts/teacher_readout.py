@@ -13,8 +13,10 @@ formants x1.15; formants x0.9; formants x1.18 with pitch x1.8) and P, their mean
 speech of other voices with the rules truth (6 clips) and with the teacher truth (the ARPAbet-labelled 5:
 unit-selection lips on their own phone timings, recorded pauses kept). Never the test split nor the
 other-talker GRID clips. ``--model NAME`` (a shipped name or file; default: the default model) is the HMM
-every row is traced with and "shipped" is its readout as stored; a FILE.npz row must carry that same HMM
-(the low-latency model's teacher candidate was scored this way, its readout fitted by ``facecast readout``).
+every refitted row is traced with and "shipped" is its readout as stored (the low-latency model's teacher
+candidate was scored this way, its readout fitted by ``facecast readout``). A FILE.npz row is scored with its own
+readout and band through its own HMM: the val, Praat and real-speech sets are traced again when its HMM is not
+``--model``'s (issue 10's twelfth round: teacher clips in the HMM's training).
 """
 
 from __future__ import annotations
@@ -146,25 +148,41 @@ def same_hmm(a, b) -> bool:
 def score(names: list[str], model: str | None = None) -> None:
     t0 = time.time()
     shipped = load_model(model)
-    base = replace(shipped, readout=None)
     s = synth()
     val_clips = s1_clips("val")
-    val = trace_clips(base, val_clips)
-    praat = {k: trace_clips(base, v) for k, v in praat_sets(val_clips).items()}
-    log(f"val + Praat sets traced ({time.time() - t0:.0f} s)")
+    praat_clips = praat_sets(val_clips)
     rules = real_speech_clips(SHARED / "speech")
     tclips, skipped = teacher_truth_speech(s, SHARED / "speech")
-    teach = trace_clips(base, tclips)
     log(f"teacher-truth real speech: {[c[0] for c in tclips]}, skipped {skipped}")
+
+    def traced(m) -> tuple:
+        """(HMM without readout, val, Praat sets, teacher-truth speech) traced through ``m``'s HMM."""
+        b = replace(m, readout=None)
+        out = (
+            b,
+            trace_clips(b, val_clips),
+            {k: trace_clips(b, v) for k, v in praat_clips.items()},
+            trace_clips(b, tclips),
+        )
+        log(f"val, Praat and real-speech sets traced ({time.time() - t0:.0f} s)")
+        return out
+
+    shipped_sets: list = []  # traced on first use: a run of FILE rows with their own HMMs never needs them
     train: list = []
     for name in names:
         row: dict = {"name": name}
-        if name == "shipped" or name.endswith(".npz"):  # a model file's own readout and band, as stored
-            while name != "shipped" and not Path(name).is_file():  # `facecast readout` may still be fitting it
+        m = shipped
+        if name.endswith(".npz"):
+            while not Path(name).is_file():  # `facecast readout` may still be fitting it
                 time.sleep(20)
-            m = shipped if name == "shipped" else load_model(name)
-            if not same_hmm(m, shipped):
-                raise SystemExit(f"{name}: not the HMM of {model or 'default'}; pass --model")
+            m = load_model(name)
+        if same_hmm(m, shipped):
+            shipped_sets[:] = shipped_sets or traced(shipped)
+            base, val, praat, teach = shipped_sets
+        else:  # its own HMM (teacher clips in Baum-Welch): its own traces
+            base, val, praat, teach = traced(m)
+            row["own_hmm"] = True
+        if name == "shipped" or name.endswith(".npz"):  # a model file's own readout and band, as stored
             ro, band = m.readout, m.closure_band
             sv = score_lips(estimates(base, val, ro, band))
         else:
@@ -188,7 +206,9 @@ def score(names: list[str], model: str | None = None) -> None:
             ro = fit_readout(base, fit, SPEC)
             row["epochs"] = ro.metadata["epochs"]
             band, sv = choose_band(
-                lambda b, ro=ro: score_lips(estimates(base, val, ro, b)), bands=BANDS, min_closure=MIN_CLOSURE
+                lambda b, ro=ro, base=base, val=val: score_lips(estimates(base, val, ro, b)),
+                bands=BANDS,
+                min_closure=MIN_CLOSURE,
             )
         ps = {k: score_lips(estimates(base, v, ro, band)) for k, v in praat.items()}
         rs = score_real_speech(replace(base, readout=ro, closure_band=band), rules)

@@ -15,6 +15,9 @@ sees many vocal tracts mapped to real-lip motion.
   as ``facecast say``), with the pauses at rest for synthetic speech (no in-breath in it).
 - :func:`espeak_clips`, :func:`festival_clips`: GRID-grammar sentences spoken by spread voices and rates,
   ``[(name, TeacherClip, bilabial spans)]`` as :func:`training.readout.trace_clips` takes them.
+- :func:`teacher_clips`: a :class:`TeacherConfig`'s clips, made once and cached (``$FACECAST_CACHE/teacher``,
+  keyed by the config, the unit corpus and :data:`TEACHER_VERSION`), for ``facecast readout`` and
+  ``facecast train`` alike; :func:`teacher_utterances` turns them into HMM training utterances.
 """
 
 from __future__ import annotations
@@ -28,8 +31,13 @@ import numpy as np
 from realtime_core import VISUAL_PARAMS
 from realtime_core.synthesis.rest import RestPauses
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
+from training.corpus import Utterance
 from training.errors import ConfigError
 from training.params import n_frames_for
+
+TEACHER_VERSION = 1
+"""Part of the teacher clips' cache key: bump it when the same config would make different clips (voices,
+levels, padding, labelling), so cached clips are made again."""
 
 GRID_WORDS: tuple[tuple[str, ...], ...] = (
     ("bin", "lay", "place", "set"),
@@ -93,13 +101,20 @@ def train_synthesizer(
 ) -> UnitSynthesizer:
     """The unit synthesizer of the GRID s1 train split (the talker-specific HMM phone labels, as
     ``facecast units build``; built once, cached under ``$FACECAST_CACHE/unitsel``)."""
+    return _train_synthesizer(root, cache_dir=cache_dir, say=say)[0]
+
+
+def _train_synthesizer(
+    root: str | Path | None, *, cache_dir: str | Path | None, say: Callable[[str], None]
+) -> tuple[UnitSynthesizer, Path]:
+    """:func:`train_synthesizer` and its unit corpus's cache file (whose name carries the corpus's key)."""
     from assets import grid
     from training.grid_phones import HMM_PATH, read_grid_phones
     from training.unit_corpus import build_grid_corpus
 
     sents = grid.sentences(root, split="train")
-    stored, _ = build_grid_corpus(sents, read_grid_phones(HMM_PATH), cache_dir=cache_dir, say=say)
-    return UnitSynthesizer(stored.corpus, rest=stored.rest_frame())
+    stored, path = build_grid_corpus(sents, read_grid_phones(HMM_PATH), cache_dir=cache_dir, say=say)
+    return UnitSynthesizer(stored.corpus, rest=stored.rest_frame()), path
 
 
 def teacher_params(
@@ -240,14 +255,55 @@ def teacher_clips(
 ) -> list:
     """``config``'s teacher clips: ``config.espeak`` espeak-ng utterances (seed ``config.seed``) then
     ``config.festival`` Festival ones (seed ``config.seed + 1``), labelled over the GRID s1 train split under
-    ``root`` (:func:`train_synthesizer`); [] when both counts are 0 (no corpus is built)."""
+    ``root`` (:func:`train_synthesizer`); [] when both counts are 0 (no corpus is built). Made once and
+    cached beside the unit corpus (:func:`teacher_cache_path`), so ``facecast train`` and ``facecast
+    readout`` with the same options read the same clips."""
     if not config.espeak and not config.festival:
         return []
-    synth = train_synthesizer(root, cache_dir=cache_dir, say=say)
+    synth, corpus_path = _train_synthesizer(root, cache_dir=cache_dir, say=say)
+    path = teacher_cache_path(config, corpus_path)
+    if path.is_file():
+        return load_clips(path)
     out = espeak_clips(synth, config.espeak, seed=config.seed, n_best=config.n_best, progress=progress)
     if config.festival:
         more = festival_clips(synth, config.festival, seed=config.seed + 1, n_best=config.n_best, progress=progress)
         out += more
+    save_clips(path, out)
+    say(f"teacher: {len(out)} clips, {sum(len(c[1].params) for c in out)} frames -> {path}")
+    return out
+
+
+def teacher_cache_path(config: TeacherConfig, corpus_path: Path) -> Path:
+    """Where ``config``'s clips labelled over the unit corpus ``corpus_path`` are cached: ``teacher/`` beside
+    the corpus's ``unitsel/`` folder, named by a hash of the config, the corpus file's name (which holds its
+    key: the sentences, phones and extraction it was built from) and :data:`TEACHER_VERSION`."""
+    import hashlib
+    import json
+
+    blob = json.dumps({"v": TEACHER_VERSION, "config": config.as_json(), "corpus": corpus_path.name}, sort_keys=True)
+    key = hashlib.sha1(blob.encode()).hexdigest()[:16]
+    return corpus_path.parent.parent / "teacher" / f"teacher-{config.espeak}e{config.festival}f-{key}.npz"
+
+
+def teacher_utterances(clips: Sequence) -> list[Utterance]:
+    """Teacher clips as HMM training utterances (source "teacher", one speaker group per engine): the audio as
+    synthesised, the teacher's four parameters at 30 fps as the visual targets."""
+    out = []
+    for name, clip, _ in clips:
+        engine = "festival" if name.startswith("teacher-festival") else "espeak"
+        out.append(
+            Utterance(
+                id=name,
+                samples=np.asarray(clip.samples, dtype=np.float32),
+                sample_rate_hz=clip.sample_rate_hz,
+                params=np.asarray(clip.params, dtype=np.float64),
+                phonemes=(),
+                voice=name,
+                language="en",
+                source="teacher",
+                speaker_group=f"teacher:{engine}",
+            )
+        )
     return out
 
 
@@ -258,7 +314,8 @@ def save_clips(path: str | Path, clips: Sequence) -> Path:
     arrays: dict[str, np.ndarray] = {"names": np.array([c[0] for c in clips])}
     for i, (_, clip, spans) in enumerate(clips):
         arrays[f"x{i}"] = clip.samples
-        arrays[f"p{i}"] = clip.params.astype(np.float32)
+        # float64 as made: clips read from the cache fit exactly as freshly made ones
+        arrays[f"p{i}"] = np.asarray(clip.params, dtype=np.float64)
         arrays[f"r{i}"] = np.array([clip.sample_rate_hz])
         arrays[f"l{i}"] = np.array([clip.inventory] + [lab for lab, _, _ in clip.phones])
         arrays[f"t{i}"] = np.array([(a, b) for _, a, b in clip.phones], dtype=np.float64).reshape(-1, 2)

@@ -65,6 +65,7 @@ DEFAULT_CANDIDATES = (
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.teacher_options import add_teacher_options
 
     p = sub.add_parser(
         "readout",
@@ -158,30 +159,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the copies' filterbank warps, drawn uniformly per copy and sentence (> 1: a shorter vocal tract)",
     )
     p.add_argument("--vtlp-seed", type=int, default=1, help="seeds the copies' warps")
-    p.add_argument(
-        "--teacher-espeak",
-        type=int,
-        default=0,
-        metavar="N",
-        help="add N GRID-grammar sentences spoken by spread espeak-ng voices, rates and pitches to the fit, labelled "
-        "with s1's real lips by unit selection over the train split (training/teacher.py; issue 10, eleventh round: "
-        "the default model uses 250, docs/default_model.md); 0 = none",
-    )
-    p.add_argument(
-        "--teacher-festival",
-        type=int,
-        default=0,
-        metavar="N",
-        help="the same with N sentences spoken by Festival's voices (kal, ked diphones, slt HTS); 0 = none",
-    )
-    p.add_argument("--teacher-seed", type=int, default=0, help="seeds the teacher sentences, voices, rates and levels")
-    p.add_argument(
-        "--teacher-n-best",
-        type=int,
-        default=5,
-        metavar="K",
-        help="unit sequences averaged per teacher label (as `facecast say --n-best`)",
-    )
+    # (the default model uses 250 + 250, eleventh round)
+    add_teacher_options(p, "the readout's fit")
     p.add_argument("--report", type=Path, default=None, help="write the val scores of every candidate here (JSON)")
     p.set_defaults(run=run)
 
@@ -201,11 +180,12 @@ def _run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from assets.modelfile import check_model_output, load_model, save_model
+    from facecast.commands.teacher_options import teacher_config
     from training.corpus import write_json
     from training.errors import ConfigError
     from training.readout import VtlpConfig, choose_readout, trace_clips, vtlp_copies
     from training.reallips import s1_clips
-    from training.teacher import TeacherConfig, teacher_clips
+    from training.teacher import teacher_clips
 
     check_model_output(args.output)
     # --corpus replaces GRID s1 (its own utterances fit and choose): a --grid-s1 beside it would be ignored, and
@@ -222,9 +202,7 @@ def _run(args: argparse.Namespace) -> int:
         )
     grid_s1 = args.grid_s1 if args.grid_s1 is not None else SHARED / "video" / "grid_s1"
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
-    teacher = TeacherConfig(
-        espeak=args.teacher_espeak, festival=args.teacher_festival, seed=args.teacher_seed, n_best=args.teacher_n_best
-    )
+    teacher = teacher_config(args)
     if args.corpus is not None and (teacher.espeak or teacher.festival):
         raise ConfigError(
             f"--corpus {args.corpus} with teacher sentences: the teacher labels with GRID s1's lips, not the corpus "

@@ -24,6 +24,7 @@ def _ratio_range(text: str) -> tuple[float, float]:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.teacher_options import add_teacher_options
 
     p = sub.add_parser(
         "train",
@@ -80,6 +81,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="copies of every GRID utterance (and speed copy) through noise/reverberation/level/rate",
     )
+    add_teacher_options(p, "the HMM's training (with --grid-s1; each clip once, no speed copies)")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument("-o", "--output", type=Path, required=True, help="model file to write (.npz)")
     p.add_argument("--states", type=int, default=16, help="HMM states N")
@@ -164,11 +166,19 @@ def _run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from assets.modelfile import check_model_output, load_model, save_model
+    from facecast.commands.teacher_options import teacher_config
     from realtime_core.hmm import TrainConfig
     from training.corpus import load_corpus
     from training.trainer import TrainRecipe, train_av_model
 
     check_model_output(args.output)  # before minutes of training (an -o my.json was written as an npz)
+    teacher = teacher_config(args)
+    if (teacher.espeak or teacher.festival) and args.grid_s1 is None:
+        from training.errors import ConfigError
+
+        raise ConfigError(
+            "--teacher-espeak/--teacher-festival label with GRID s1's lips (its train split's units): give --grid-s1"
+        )
     exclude = {s for s in args.exclude_source.split(",") if s}
     utts = [u for c in args.corpus for u in load_corpus(c) if u.source not in exclude]
     data: dict[str, Any] = {"corpora": [str(c) for c in args.corpus]}
@@ -198,6 +208,21 @@ def _run(args: argparse.Namespace) -> int:
             ),
             "mic_copies": args.mic_copies,
         }
+        if teacher.espeak or teacher.festival:
+            from training.teacher import teacher_clips, teacher_utterances
+
+            # Once each, after the speed copies: the same clips `facecast readout` adds with these options.
+            # Baum-Welch weighs every frame alike, so a teacher frame counts as much as an s1 frame; the CMVN
+            # warm-start statistics are over all the training audio, teacher clips included.
+            taught = teacher_utterances(
+                teacher_clips(teacher, args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm, say=tqdm.write)
+            )
+            utts += taught
+            data["teacher"] = {
+                **teacher.as_json(),
+                "utterances": len(taught),
+                "frames": int(sum(len(u.params) for u in taught)),
+            }
     if not utts:
         from training.errors import ConfigError
 

@@ -137,3 +137,92 @@ def test_readout_command_refuses_teacher_sentences_with_a_corpus_or_bad_counts(t
     err = capsys.readouterr().err
     assert rc == 2 and "teacher config" in err
     assert not out.exists()
+
+
+def test_the_teacher_cache_key_follows_every_option_and_the_unit_corpus(tmp_path):
+    """The clips are cached by what makes them: another seed, count, n_best or unit corpus is another file (a stale
+    file is never read for other options); the same options are the same file, beside the corpus's ``unitsel``."""
+    from training.teacher import TeacherConfig, teacher_cache_path
+
+    corpus = tmp_path / "cache" / "unitsel" / "grid_s1_units-aaaa.npz"
+    base = TeacherConfig(espeak=250, festival=250)
+    path = teacher_cache_path(base, corpus)
+    assert path.parent == tmp_path / "cache" / "teacher"
+    assert teacher_cache_path(TeacherConfig(espeak=250, festival=250), corpus) == path
+    others = [
+        teacher_cache_path(TeacherConfig(espeak=250, festival=250, seed=1), corpus),
+        teacher_cache_path(TeacherConfig(espeak=250, festival=250, n_best=4), corpus),
+        teacher_cache_path(TeacherConfig(espeak=251, festival=250), corpus),
+        teacher_cache_path(TeacherConfig(espeak=250, festival=249), corpus),
+        teacher_cache_path(base, corpus.with_name("grid_s1_units-bbbb.npz")),
+    ]
+    assert len({path, *others}) == 6
+
+
+def test_cached_clips_read_back_bit_for_bit(tmp_path):
+    """The cache keeps the labels in float64: a readout fitted on cached clips is the one fitted on fresh ones."""
+    rng = np.random.default_rng(3)
+    params = rng.uniform(0, 0.3, (12, 4))
+    clip = TeacherClip(rng.uniform(-0.5, 0.5, 6400).astype(np.float32), 16000, params, (("pau", 0.0, 0.4),))
+    ((_, back, _),) = load_clips(save_clips(tmp_path / "c.npz", [("teacher-espeak-00000-x", clip, [])]))
+    assert back.params.dtype == np.float64 and np.array_equal(back.params, params)
+    np.testing.assert_array_equal(back.samples, clip.samples)
+
+
+def test_train_command_refuses_teacher_sentences_without_grid_s1(tmp_path, capsys):
+    from facecast.cli import main
+
+    out = tmp_path / "m.npz"
+    rc = main(["train", str(tmp_path / "corpus"), "-o", str(out), "--teacher-espeak", "3"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--grid-s1" in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.slow
+def test_train_on_grid_s1_with_teacher_clips_grows_by_exactly_the_clips(shared_data, tmp_path, espeak, ffmpeg):
+    """`facecast train --grid-s1 ROOT --teacher-espeak 3` on a three-sentence GRID copy (train split): the model
+    is trained on the GRID utterances and their speed copies plus the 3 teacher clips, once each (no speed copies),
+    every teacher frame a Baum-Welch frame: the utterance and frame counts grow by exactly the clips' (their
+    audio's 30 fps frame count, computed here from the cached clips' samples), and the metadata records them. The
+    clips are the cache's (the file the readout reads with the same options)."""
+    from tests.prerequisites import require_module
+
+    require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
+    import shutil
+
+    from assets.modelfile import load_model
+    from facecast.cli import main
+    from training.params import n_frames_for
+
+    s1 = shared_data / "video" / "grid_s1"
+    root = tmp_path / "grid"
+    (root / "video").mkdir(parents=True)
+    (root / "align").mkdir()
+    for sid in ("bbaf2n", "bbal6n", "bbbf6n"):
+        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
+        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    cache = tmp_path / "cache"
+    argv = ["train", "--grid-s1", str(root), "--speed", "1.1", "--cache-dir", str(cache)]
+    argv += ["--states", "2", "--mix", "1", "--iters", "1"]
+    assert main([*argv, "-o", str(tmp_path / "plain.npz")]) == 0
+    assert main([*argv, "-o", str(tmp_path / "taught.npz"), "--teacher-espeak", "3", "--teacher-seed", "5"]) == 0
+    plain, taught = load_model(tmp_path / "plain.npz"), load_model(tmp_path / "taught.npz")
+    (cached,) = (cache / "teacher").glob("teacher-3e0f-*.npz")
+    clips = load_clips(cached)
+    frames = sum(n_frames_for(len(c.samples) / c.sample_rate_hz) for _, c, _ in clips)
+    assert len(clips) == 3 and all(
+        len(c.params) == n_frames_for(len(c.samples) / c.sample_rate_hz) for _, c, _ in clips
+    )
+    assert taught.metadata["train_utterances"] == plain.metadata["train_utterances"] + 3
+    assert taught.metadata["train_frames"] == plain.metadata["train_frames"] + frames
+    assert taught.metadata["teacher"] == {
+        "espeak": 3,
+        "festival": 0,
+        "seed": 5,
+        "n_best": 5,
+        "utterances": 3,
+        "frames": frames,
+    }
+    assert "teacher" not in plain.metadata and plain.metadata["grid_s1"] == taught.metadata["grid_s1"]
+    # the teacher's audio moved the CMVN warm-start statistics (they are over all the training audio)
+    assert not np.allclose(plain.cmvn_mean, taught.cmvn_mean)
