@@ -36,6 +36,7 @@ from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
 from assets.heads.cavity import (
     CAVITY_COLOR,
+    front_depth,
     has_inner_mouth,
     lip_membrane,
     opens_onto_nothing,
@@ -1772,10 +1773,20 @@ def rig_head(
                 part = None if part is None else knife.carry_nearest(part)
                 n_base = len(v)
                 path = knife.path
-                # The inner-lip landmarks: the knife path's vertex nearest the inner-lip point (the cut
-                # splits it, so the rig's lower inner-lip vertex is its copy below the cut).
-                front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
+                # The inner-lip landmarks: of the knife path's vertices seen from the front at rest, the one nearest
+                # the inner-lip point the curve passes (the cut splits it, so the rig's lower inner-lip vertex is its
+                # copy below the cut). A path vertex behind the lips' front lies on the slit's floor under the upper
+                # lip: the simple face's lower inner-lip point placed there (the 3,810-triangle Lee Perry-Smith copy,
+                # the curve raised to the lips' meeting: 0.022 IOD behind) dropped it 0.14 IOD further than its
+                # neighbours on the path at the widest /a/, and three faces of the slit's floor beside it turned over.
+                interior = path[1:-1] or path
+                q_in = (v[interior] - frame.origin) @ frame.axes.T
+                shown = front_depth(v, t, frame, q_in[:, :2]) - q_in[:, 2] <= INNER_LIP_DEPTH * frame.iod
+                among = [i for i, ok in zip(interior, shown.tolist(), strict=True) if ok] or interior
+                front = stand = min(among, key=lambda i: float(np.linalg.norm(v[i] - knife.inner)))
                 meta["contact_knife"] = len(knife.edge)
+                if knife.raised:
+                    meta["knife_raised"] = round(knife.raised, 4)  # IOD: the curve moved up to the lips' meeting
                 coarse = True
                 on_contact = knife.along_path()
                 behind = dict(knife.behind)
@@ -1816,7 +1827,12 @@ def rig_head(
                 hidden = np.zeros(len(t), dtype=bool)
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
-                hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
+                uncut_walls = inner_lip_vertices(uncut, frame, snap)
+                shows = None
+                if coarse:
+                    near = np.isin(np.asarray(t, dtype=np.int64), uncut_walls).sum(axis=1) >= 2
+                    shows = faces_seen(v, t, frame, near)
+                hidden = inner_lip_faces(t, len(v), uncut_walls, keep_holes=not coarse, seen=shows)
             if record_hidden:
                 meta["cut_path"] = [int(i) for i in path]
             copied = None
@@ -1925,7 +1941,11 @@ def rig_head(
             # (a flipped triangle at closed lips with the corners up).
             cut_mesh = HeadMesh(vertices=v, triangles=t, name=mesh.name)
             walls = inner_lip_vertices(cut_mesh, frame, snap)
-        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls, keep_holes=not coarse)
+        # A knife-cut mouth's fins that show at rest stay (faces_seen): removed, they left a hole along the lips.
+        seen = None
+        if walls is not None and coarse:
+            seen = faces_seen(v, t, frame, np.isin(np.asarray(t, dtype=np.int64), walls).sum(axis=1) >= 2)
+        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls, keep_holes=not coarse, seen=seen)
         if walls is not None and not walls_in_repair:
             # The repair on the final mesh: it then smooths over the faces that stay only (docs/animation.md,
             # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
@@ -1936,6 +1956,7 @@ def rig_head(
                 walls,
                 keep_holes=not coarse,
                 record=record_hidden,
+                seen=seen,
             )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
@@ -2039,6 +2060,7 @@ def rig_head(
                 walls,
                 keep_holes=not coarse,
                 record=record_hidden,
+                seen=seen,
             )
             t = cut_mesh.triangles
         if clean_lips and seam is not None and not ends_cut:
@@ -2451,14 +2473,49 @@ FIN_ROUNDS = 10
 """At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
 
 
+def faces_seen(
+    vertices: np.ndarray, triangles: np.ndarray, frame, among: np.ndarray, *, depth: float = INNER_LIP_DEPTH
+) -> np.ndarray:
+    """(m,) bool: the faces ``among`` (m,) bool of ``triangles`` that show from the front at rest: a point of the face
+    (its centroid, or one halfway from it to a corner) within ``depth`` IOD of the front-most surface at its place
+    (:func:`assets.heads.cavity.front_depth`). A knife-cut mouth whose cut runs along the lips' slit (raised to the
+    lips' meeting, :func:`assets.heads.knife.lips_meeting`) leaves the lower lip's top by the corner in faces that
+    join the lower side by one edge, with two vertices hidden under the upper lip's overhang: removed as fins, they
+    left a dark gap along the lips at rest (docs/animation.md, "The low-poly pale strip")."""
+    from assets.heads.cavity import front_depth
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    idx = np.flatnonzero(among)
+    out = np.zeros(len(t), dtype=bool)
+    if not len(idx):
+        return out
+    corners = v[t[idx]]  # (k, 3, 3)
+    centre = corners.mean(axis=1, keepdims=True)
+    samples = np.concatenate([centre, 0.5 * (centre + corners)], axis=1)  # (k, 4, 3)
+    q = (samples.reshape(-1, 3) - frame.origin) @ frame.axes.T
+    front = front_depth(v, t, frame, q[:, :2])
+    shows = np.isfinite(front) & (front - q[:, 2] <= depth * frame.iod)
+    out[idx] = shows.reshape(len(idx), 4).any(axis=1)
+    return out
+
+
 def inner_lip_faces(
-    triangles: np.ndarray, n_vertices: int, inner: np.ndarray, *, keep_holes: bool = True
+    triangles: np.ndarray,
+    n_vertices: int,
+    inner: np.ndarray,
+    *,
+    keep_holes: bool = True,
+    seen: np.ndarray | None = None,
 ) -> np.ndarray:
     """(m,) bool: the faces :func:`without_inner_lips` removes from ``triangles`` (m, 3) of a mesh with
-    ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves."""
+    ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves, except those
+    ``seen`` (m,) bool (faces seen from the front at rest, :func:`faces_seen`: a fin that shows at rest is the lip's
+    surface, and removed it left a hole)."""
     t = np.asarray(triangles, dtype=np.int64)
     n_in = np.isin(t, inner).sum(axis=1)
     gone = n_in == 3
+    spared = np.zeros(len(t), dtype=bool) if seen is None else np.asarray(seen, dtype=bool)
     # Then the fins left hanging into the gap: a face with two inner vertices joined to the rest by one
     # edge alone (pink dashes floating in the opening at /a/); a face with two inner vertices along the
     # lip's edge (two or three neighbours) stays, or the edge turned into a sawtooth.
@@ -2468,7 +2525,7 @@ def inner_lip_faces(
         k, c = np.unique(key[~gone], return_counts=True)
         at = np.searchsorted(k, key).clip(max=len(k) - 1)
         shared = ((k[at] == key) & (c[at] > 1)).sum(axis=1)
-        fin = ~gone & (n_in >= 2) & (shared <= 1)
+        fin = ~gone & (n_in >= 2) & (shared <= 1) & ~spared
         if not fin.any():
             break
         gone |= fin
@@ -2504,14 +2561,21 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
 
 
 def without_inner_lips(
-    rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True, record: bool = False
+    rig: R,
+    mesh: HeadMesh,
+    inner: np.ndarray,
+    *,
+    keep_holes: bool = True,
+    record: bool = False,
+    seen: np.ndarray | None = None,
 ) -> tuple[R, HeadMesh]:
     """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
     :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
     lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed (``record``: meta
-    "hidden_faces" lists them, added to any listed before)."""
+    "hidden_faces" lists them, added to any listed before). ``seen``: faces the fin rule keeps
+    (:func:`inner_lip_faces`)."""
     t = np.asarray(mesh.triangles, dtype=np.int64)
-    gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes)
+    gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes, seen=seen)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
     if record:
