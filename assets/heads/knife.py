@@ -223,6 +223,7 @@ def knife_contact(
     axes: np.ndarray,
     *,
     iod: float,
+    meeting: bool = True,
 ) -> KnifeCut | None:
     """Cut ``triangles`` along the lip contact curve (:func:`contact_offset`: through the corner vertices ``left``,
     ``right`` and the inner-lip point ``inner`` (3,), raised to where the lips meet when it lies on the lower lip's
@@ -233,12 +234,13 @@ def knife_contact(
     are unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the edge is
     split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`). Where the cut
     pieces leave a gap between the corners (a face the curve crosses lies outside those bounds), the path bridges it
-    along the cut faces' edges (KNIFE_BRIDGE); returns None when even that does not join them."""
+    along the cut faces' edges (KNIFE_BRIDGE); returns None when even that does not join them. ``meeting``: False, the
+    curve passes through ``inner`` as given (not raised)."""
     ax = np.asarray(axes, dtype=np.float64)
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     width = float(np.linalg.norm(v[left] - v[right]))
-    raised = lips_meeting(v, t, inner, ax, iod=iod)
+    raised = lips_meeting(v, t, inner, ax, iod=iod) if meeting else 0.0
     inner = np.asarray(inner, dtype=np.float64) + raised * iod * ax[1]
     qi = inner @ ax.T
     q = v @ ax.T

@@ -43,7 +43,7 @@ from assets.heads.cavity import (
     with_dark_mouth_inside,
 )
 from assets.heads.dense import seam_of
-from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
+from assets.heads.knife import COARSE_EDGES, KnifeCut, knife_contact, mouth_resolution
 from assets.heads.layers import layer_vertices, with_layers
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh, vertex_normals
 from assets.heads.parts import (
@@ -1565,6 +1565,7 @@ def rig_head(
     dip_window: float | None = None,
     widen_repair: bool = False,
     ease_upper_lip: bool = False,
+    knife_meeting: bool = True,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1613,6 +1614,9 @@ def rig_head(
     lip's sides and not its middle: pinned at the simple face's few upper-lip vertices, the lip came out drawn to a
     peak with creases beside the nose, which the fold repair smooths away only where it folds (uncapped rigs); capped
     rigs kept it (docs/animation.md, "The upper lip drawn to a peak"; rig_checked tries it before each capped rig).
+    ``knife_meeting``: a knife-cut (coarse) mouth's curve is raised to where the lips meet
+    (:func:`assets.heads.knife.lips_meeting`; meta "knife_raised"); False: through the inner-lip point as given
+    (rig_checked's tries once the raised ones fail).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1765,7 +1769,17 @@ def rig_head(
                 # A coarse mouth: its lips touch along a few long edges and no vertex need lie near the
                 # inner-lip point; the knife puts vertices on the contact curve (assets/heads/knife.py).
                 inner = 0.5 * (points["upper_inner"] + points["lower_inner"])
-                knife = knife_contact(v, t, snap["corner_left"], snap["corner_right"], inner, frame.axes, iod=frame.iod)
+                corners = (snap["corner_left"], snap["corner_right"])
+                knife = knife_contact(v, t, *corners, inner, frame.axes, iod=frame.iod, meeting=knife_meeting)
+                seen_vertex = None if knife is None else seen_path_vertex(knife, frame, corners)
+                if knife is not None and knife.raised and seen_vertex is None:
+                    # The raised curve runs behind the lips' front by the point (no path vertex there seen from the
+                    # front): not where they meet; cut through the point as given. The 3,810 copy jittered (seed 4),
+                    # its first alternative landmarks: raised 0.010 IOD, the path 0.008-0.056 IOD behind the front
+                    # all along; its rig failed (the inner-lip vertex beside the corner, the only one seen: 3 flips;
+                    # the nearest one: passed with the lips parting 0.64), as the mirrored copy's third set did with a
+                    # pink shard of lower lip across the opening (lip tops carried 48.47e-3 IOD^2).
+                    knife = knife_contact(v, t, *corners, inner, frame.axes, iod=frame.iod, meeting=False)
             if knife is not None:
                 v, t = knife.vertices, knife.triangles
                 uv = None if uv is None else knife.carry(uv)
@@ -1773,17 +1787,14 @@ def rig_head(
                 part = None if part is None else knife.carry_nearest(part)
                 n_base = len(v)
                 path = knife.path
-                # The inner-lip landmarks: of the knife path's vertices seen from the front at rest, the one nearest
-                # the inner-lip point the curve passes (the cut splits it, so the rig's lower inner-lip vertex is its
-                # copy below the cut). A path vertex behind the lips' front lies on the slit's floor under the upper
-                # lip: the simple face's lower inner-lip point placed there (the 3,810-triangle Lee Perry-Smith copy,
-                # the curve raised to the lips' meeting: 0.022 IOD behind) dropped it 0.14 IOD further than its
-                # neighbours on the path at the widest /a/, and three faces of the slit's floor beside it turned over.
-                interior = path[1:-1] or path
-                q_in = (v[interior] - frame.origin) @ frame.axes.T
-                shown = front_depth(v, t, frame, q_in[:, :2]) - q_in[:, 2] <= INNER_LIP_DEPTH * frame.iod
-                among = [i for i, ok in zip(interior, shown.tolist(), strict=True) if ok] or interior
-                front = stand = min(among, key=lambda i: float(np.linalg.norm(v[i] - knife.inner)))
+                # The inner-lip landmarks: the knife path's vertex nearest the inner-lip point the curve passes (the
+                # cut splits it, so the rig's lower inner-lip vertex is its copy below the cut); on a raised curve the
+                # nearest seen from the front (seen_path_vertex).
+                front = stand = (
+                    seen_vertex
+                    if knife.raised and seen_vertex is not None
+                    else min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - knife.inner)))
+                )
                 meta["contact_knife"] = len(knife.edge)
                 if knife.raised:
                     meta["knife_raised"] = round(knife.raised, 4)  # IOD: the curve moved up to the lips' meeting
@@ -2471,6 +2482,29 @@ def inner_lip_vertices(
 
 FIN_ROUNDS = 10
 """At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
+INNER_VERTEX_REACH = 0.25
+"""A raised knife cut's inner-lip vertex lies within this fraction of the mouth's corner-to-corner width of the
+inner-lip point, sideways (:func:`seen_path_vertex`; the 3,810-triangle Lee Perry-Smith copy's: 0.15 of it)."""
+
+
+def seen_path_vertex(knife: KnifeCut, frame, corners: tuple[int, int]) -> int | None:
+    """The interior vertex of ``knife``'s path nearest its inner-lip point among those seen from the front at rest
+    (within INNER_LIP_DEPTH IOD of the front-most surface at its place) and within INNER_VERTEX_REACH of the width
+    between the mouth ``corners`` of the point, sideways; None when there is none. A path vertex behind the lips' front
+    lies on the slit's floor under the upper lip: the simple face's lower inner-lip point placed there (the
+    3,810-triangle Lee Perry-Smith copy, its curve raised to the lips' meeting: vertex 2155, 0.022 IOD behind) dropped
+    it 0.14 IOD further than its neighbours on the path at the widest /a/, and three faces of the slit's floor beside it
+    turned over. Seen beside a corner only, the path runs behind the front by the point: that vertex beside the corner
+    placed there, the lips parted by 0.14 of the opening asked (docs/animation.md, "The knife cut at the lips'
+    meeting")."""
+    v, t, path = knife.vertices, knife.triangles, knife.path
+    interior = path[1:-1] or path
+    q = (v[interior] - frame.origin) @ frame.axes.T
+    shown = front_depth(v, t, frame, q[:, :2]) - q[:, 2] <= INNER_LIP_DEPTH * frame.iod
+    reach = INNER_VERTEX_REACH * float(np.linalg.norm(v[corners[0]] - v[corners[1]]))
+    shown &= np.abs((v[interior] - knife.inner) @ frame.axes[0]) <= reach
+    among = [i for i, ok in zip(interior, shown.tolist(), strict=True) if ok]
+    return min(among, key=lambda i: float(np.linalg.norm(v[i] - knife.inner))) if among else None
 
 
 def faces_seen(

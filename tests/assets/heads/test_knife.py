@@ -668,3 +668,42 @@ def test_an_inner_lip_point_on_the_lower_lips_top_is_raised_to_where_the_lips_me
     assert knife is not None and knife.raised == pytest.approx(want, abs=1e-12)
     assert knife.inner[1] == pytest.approx(y0 + want, abs=1e-12)
     assert v[left, 1] == 0.005 and (knife.vertices[knife.path, 1] >= -1e-9).all()
+
+
+def test_a_raised_cuts_inner_lip_vertex_is_one_seen_from_the_front_by_the_point():
+    """:func:`assets.heads.rigging.seen_path_vertex`: of a knife path's interior vertices, the one nearest the
+    inner-lip point among those seen from the front at rest and within INNER_VERTEX_REACH of the mouth's width of it,
+    sideways; None when none is (the raised curve then runs behind the lips' front by the point and is dropped). Here a
+    path of five vertices 1 apart under a front sheet (z = 0.1) that covers x in [-1.2, 1.2] or not, the point at x 0.3:
+    the middle vertex under the sheet is hidden, the ones beside it seen or not as the sheet reaches."""
+    from assets.heads.knife import KnifeCut
+    from assets.heads.rigging import INNER_VERTEX_REACH, seen_path_vertex
+    from realtime_core.face.model import FaceFrame
+
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    path_v = np.array([[x, 0.0, 0.0] for x in (-2.0, -1.0, 0.0, 1.0, 2.0)])
+    # Two path faces so the path's vertices are on a surface (a strip below them).
+    strip = np.array([[x, -0.5, 0.0] for x in (-2.0, -1.0, 0.0, 1.0, 2.0)])
+
+    def cut(sheet_half_width: float | None) -> KnifeCut:
+        v = np.vstack([path_v, strip])
+        t = [[i, i + 5, i + 1] for i in range(4)] + [[i + 1, i + 5, i + 6] for i in range(4)]
+        if sheet_half_width is not None:
+            w = sheet_half_width
+            sheet = np.array([[-w, -0.2, 0.1], [w, -0.2, 0.1], [w, 0.2, 0.1], [-w, 0.2, 0.1]])
+            k = len(v)
+            v = np.vstack([v, sheet])
+            t += [[k, k + 1, k + 2], [k, k + 2, k + 3]]
+        return KnifeCut(
+            vertices=v,
+            triangles=np.asarray(t),
+            edge=np.zeros((0, 2), dtype=np.int64),
+            at=np.zeros(0),
+            path=[0, 1, 2, 3, 4],
+            inner=np.array([0.3, 0.0, 0.0]),
+        )
+
+    assert INNER_VERTEX_REACH * 4.0 >= 0.7  # the corners 4 apart: the vertex at x 1, 0.7 from the point, in reach
+    assert seen_path_vertex(cut(None), frame, (0, 4)) == 2  # nothing in front: the nearest
+    assert seen_path_vertex(cut(0.5), frame, (0, 4)) == 3  # the middle one hidden: the nearest seen beside it
+    assert seen_path_vertex(cut(1.2), frame, (0, 4)) is None  # all three hidden by the point
