@@ -764,8 +764,11 @@ def _rig_checked_once(
     the crease's hidden walls passes some rigs of Lee Perry-Smith, the repair on the final mesh others
     ("Any head, cleanly"). A knife-cut (coarse) mouth whose four rigs fail is then rigged the same four ways with
     the simple face's mouth corners at the given corner points (``corners_at_points=True``; docs/animation.md, "A
-    coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A head
-    with no cut is rigged once; a cut head up to four times (a knife-cut one eight), only while its rigs fail. A head
+    coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A knife-cut
+    mouth whose cut was raised to the lips' meeting (meta "knife_raised") is first rigged the first four ways so, and
+    when they fail all of the above with the cut through the inner-lip point (``knife_meeting=False``, every later rig
+    too). A head with no cut is rigged once; a cut head up to four times (a knife-cut one eight, twelve when raised),
+    only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes (each capped rig here is first made with its upper
     lip eased, ``ease_upper_lip=True``, and made as before only if that one fails: docs/animation.md, "The upper lip
@@ -901,7 +904,21 @@ def _rig_checked_once(
     coarse = False  # known from the first rig: a knife-cut mouth
     plain: tuple[Rig, HeadMesh, RigReport] | None = None
     failed: list[str] = []  # the last rig's failures (progress lines say why another is made)
-    for options in tries:
+    # A knife cut raised to the lips' meeting (rig_head, knife_meeting; assets/heads/knife.py, lips_meeting): its first
+    # four tries, and when they all fail every try as before, the knife through the inner-lip point as given (None in
+    # the queue: from there on knife_meeting=False, the capped and later rigs too). A held-back decimation of Lee
+    # Perry-Smith (the lead's check): its raised cut's lips parted by 0.26-0.41 of mouth_open at each of the four tries,
+    # its upper side's cut vertices dropping with the jaw; through the point its first try passes, as on main.
+    queue: list[dict[str, Any] | None] = list(tries)
+    at = 0
+    done = False
+    while at < len(queue):
+        options = queue[at]
+        at += 1
+        if options is None:
+            rig_options = {**rig_options, "knife_meeting": False}
+            say("the knife's cut raised to the lips' meeting fails its checks; cutting through the inner-lip point")
+            continue
         if options.get("walls_in_repair") is False and not hollow:
             continue
         if options.get("corners_at_points") and not coarse:
@@ -911,15 +928,19 @@ def _rig_checked_once(
         rig, rigged, report = checked(rig, rigged)
         failed = list(report.failures)
         if not rig.meta.get("lip_seam_cut"):
+            done = True
             break  # no cut: the other rigs would be this one
         hollow = bool(rig.meta.get("inner_lip_removed"))
         coarse = bool(rig.meta.get("contact_knife"))
         if report.passed:
+            done = True
             break
         attempts.append({**options, "failures": list(report.failures)})
         if not options:
             plain = (rig, rigged, report)
-    else:
+        if at == 1 and rig.meta.get("knife_raised") and rig_options.get("knife_meeting", True):
+            queue = [*tries[:4], None, *tries]
+    if not done:
         assert plain is not None  # the third try always runs
         rig, rigged, report = plain
     if not report.passed:

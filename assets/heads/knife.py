@@ -76,6 +76,17 @@ Perry-Smith at 1,428 triangles: 0.86), whose rig handles it as a whole (:data:`L
 backs seen rose 4.99 -> 18.08 (1e-3 IOD^2) and the opening's corner stood as one straight triangle (docs/animation.md,
 "The stylised head's lower-lip corner")."""
 
+MEETING_STEP = 0.002
+"""IOD: the rays that find where closed lips meet (:func:`lips_meeting`) lie this far apart, upwards."""
+MEETING_REACH = 0.02
+"""IOD: how far above the inner-lip point the lips' meeting is looked for (the 3,810-triangle Lee Perry-Smith copy:
+0.014, mirrored 0.010); found no lower than this, the point stays where it is. The 1,428-triangle copy's point lies
+on its lower lip's front, 0.024 IOD under the upper lip's underside: raised there, every try from three landmark sets
+failed (the lips parting 0.23-0.40 of the opening asked) and the fourth's rig tore across the chin at /a/."""
+TOP_FACING = 60.0
+"""Degrees: a face whose normal lies within this angle of straight up is a lip's top (:func:`lips_meeting`; the
+3,810-triangle Lee Perry-Smith copy's lower lip below its found inner-lip point: 46 degrees, then 31)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class KnifeCut:
@@ -96,6 +107,11 @@ class KnifeCut:
     """How many mouth corners' edges to the lower lip were split (:func:`split_lower_corner`)."""
     bridged: int = 0
     """How many of the path's edges leave the curve, bridging a gap between the cut's pieces (KNIFE_BRIDGE)."""
+    inner: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """(3,) the inner-lip point the curve passes through: the given one, raised to the lips' meeting
+    (:func:`lips_meeting`) when it lay on the lower lip's top."""
+    raised: float = 0.0
+    """IOD: how far :func:`lips_meeting` raised the inner-lip point."""
 
     def along_path(self) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """The new vertices on an edge the path runs along (:func:`split_long_edges`'s: both ends on the path),
@@ -153,6 +169,51 @@ def contact_offset(q: np.ndarray, left: np.ndarray, right: np.ndarray, inner: np
     return q[:, 1] - np.polyval(coef, q[:, 0])
 
 
+def lips_meeting(
+    vertices: np.ndarray, triangles: np.ndarray, inner: np.ndarray, axes: np.ndarray, *, iod: float
+) -> float:
+    """IOD: how far above the inner-lip point ``inner`` (3,) the closed lips meet, seen from the front (``axes`` (3, 3)
+    the face frame's side, up and forward axes, rows): rays along -forward at the point's side coordinate, every
+    MEETING_STEP IOD upwards from the point; while the front-most face a ray meets is a lip's top (normal within
+    TOP_FACING degrees of up, turned to face the viewer), the meeting lies higher. 0 when the point's own ray meets no
+    lip top, or no ray within MEETING_REACH leaves the lip's top (or a ray meets nothing).
+
+    An automatic inner-lip point can land on the lower lip's top, below the slit where the upper lip's overhang meets
+    it: on the 3,810-triangle Lee Perry-Smith copy 0.014 IOD below (docs/animation.md, "The low-poly pale strip"). The
+    knife's curve through it cut a strip of the lower lip's top off with the upper lip, a pale line between the lips
+    at /m/ and a pale band at /u/; through the meeting it runs along the slit."""
+    ax = np.asarray(axes, dtype=np.float64)
+    q = np.asarray(vertices, dtype=np.float64) @ ax.T
+    qt = q[np.asarray(triangles, dtype=np.int64)]  # (m, 3, 3) side, up, forward
+    x, y0 = (np.asarray(inner, dtype=np.float64) @ ax.T)[:2]
+    top = y0 + MEETING_REACH * iod
+    # The faces a ray can meet: spanning the point's side coordinate, within the heights the rays cover.
+    near = (qt[:, :, 0].min(axis=1) <= x) & (qt[:, :, 0].max(axis=1) >= x)
+    near &= (qt[:, :, 1].max(axis=1) >= y0) & (qt[:, :, 1].min(axis=1) <= top)
+    qt = qt[near]
+    if not len(qt):
+        return 0.0
+    n = np.cross(qt[:, 1] - qt[:, 0], qt[:, 2] - qt[:, 0])
+    n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None] / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    lip_top = n[:, 1] >= np.cos(np.radians(TOP_FACING))
+    a, b, c = qt[:, 0, :2], qt[:, 1, :2], qt[:, 2, :2]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    ok = np.abs(det) > 1e-18 * iod * iod  # faces seen edge-on hide nothing
+    for k in range(int(round(MEETING_REACH / MEETING_STEP)) + 1):
+        py = y0 + k * MEETING_STEP * iod
+        d = np.where(ok, det, 1.0)
+        wb = ((x - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (py - a[:, 1])) / d
+        wc = ((b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (x - a[:, 0]) * (b[:, 1] - a[:, 1])) / d
+        hit = ok & (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
+        if not hit.any():
+            return 0.0
+        z = qt[:, 0, 2] + wb * (qt[:, 1, 2] - qt[:, 0, 2]) + wc * (qt[:, 2, 2] - qt[:, 0, 2])
+        front = int(np.argmax(np.where(hit, z, -np.inf)))
+        if not lip_top[front]:
+            return k * MEETING_STEP
+    return 0.0
+
+
 def knife_contact(
     vertices: np.ndarray,
     triangles: np.ndarray,
@@ -162,22 +223,26 @@ def knife_contact(
     axes: np.ndarray,
     *,
     iod: float,
+    meeting: bool = True,
 ) -> KnifeCut | None:
-    """Cut ``triangles`` along the lip contact curve (:func:`contact_offset`: through the corner
-    vertices ``left``, ``right`` and the inner-lip point ``inner`` (3,)), ``axes`` (3, 3) the face
-    frame's side, up and forward axes (rows). Every face within the mouth's width and front (KNIFE_SIDE,
-    KNIFE_DEPTH, KNIFE_HEIGHT) that the curve crosses gets a vertex on each crossed edge (a crossing
-    within KNIFE_SNAP IOD of an end takes that end); faces sharing a split edge are split too, so the
-    mesh stays conforming, and every new vertex lies on an old edge (the surface, its UVs and colours are
-    unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the
-    edge is split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`).
-    Where the cut pieces leave a gap between the corners (a face the curve crosses lies outside those bounds), the
-    path bridges it along the cut faces' edges (KNIFE_BRIDGE); returns None when even that does not join them."""
+    """Cut ``triangles`` along the lip contact curve (:func:`contact_offset`: through the corner vertices ``left``,
+    ``right`` and the inner-lip point ``inner`` (3,), raised to where the lips meet when it lies on the lower lip's
+    top: :func:`lips_meeting`), ``axes`` (3, 3) the face frame's side, up and forward axes (rows). Every face within
+    the mouth's width and front (KNIFE_SIDE, KNIFE_DEPTH, KNIFE_HEIGHT) that the curve crosses gets a vertex on each
+    crossed edge (a crossing within KNIFE_SNAP IOD of an end takes that end); faces sharing a split edge are split
+    too, so the mesh stays conforming, and every new vertex lies on an old edge (the surface, its UVs and colours
+    are unchanged). Where the curve runs along an edge of the mesh (lips touching along one long edge), the edge is
+    split into pieces no longer than the mouth's width / COARSE_EDGES (:func:`split_long_edges`). Where the cut
+    pieces leave a gap between the corners (a face the curve crosses lies outside those bounds), the path bridges it
+    along the cut faces' edges (KNIFE_BRIDGE); returns None when even that does not join them. ``meeting``: False, the
+    curve passes through ``inner`` as given (not raised)."""
     ax = np.asarray(axes, dtype=np.float64)
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     width = float(np.linalg.norm(v[left] - v[right]))
-    qi = np.asarray(inner, dtype=np.float64) @ ax.T
+    raised = lips_meeting(v, t, inner, ax, iod=iod) if meeting else 0.0
+    inner = np.asarray(inner, dtype=np.float64) + raised * iod * ax[1]
+    qi = inner @ ax.T
     q = v @ ax.T
     s = contact_offset(q, q[left], q[right], qi)
     s[np.abs(s) <= 1e-9 * iod] = 0.0  # on the curve to rounding (a contact edge the curve runs along)
@@ -258,6 +323,8 @@ def knife_contact(
         behind=behind,
         corners_split=len(edge5),
         bridged=bridged,
+        inner=inner,
+        raised=raised,
     )
 
 

@@ -36,13 +36,14 @@ from assets.errors import LandmarkError, MeshError
 from assets.heads.builtin import BuiltinHead, load_builtin_head
 from assets.heads.cavity import (
     CAVITY_COLOR,
+    front_depth,
     has_inner_mouth,
     lip_membrane,
     opens_onto_nothing,
     with_dark_mouth_inside,
 )
 from assets.heads.dense import seam_of
-from assets.heads.knife import COARSE_EDGES, knife_contact, mouth_resolution
+from assets.heads.knife import COARSE_EDGES, KnifeCut, knife_contact, mouth_resolution
 from assets.heads.layers import layer_vertices, with_layers
 from assets.heads.mesh import SKIN_COLOR, HeadMesh, check_mesh, vertex_normals
 from assets.heads.parts import (
@@ -1564,6 +1565,7 @@ def rig_head(
     dip_window: float | None = None,
     widen_repair: bool = False,
     ease_upper_lip: bool = False,
+    knife_meeting: bool = True,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1612,6 +1614,9 @@ def rig_head(
     lip's sides and not its middle: pinned at the simple face's few upper-lip vertices, the lip came out drawn to a
     peak with creases beside the nose, which the fold repair smooths away only where it folds (uncapped rigs); capped
     rigs kept it (docs/animation.md, "The upper lip drawn to a peak"; rig_checked tries it before each capped rig).
+    ``knife_meeting``: a knife-cut (coarse) mouth's curve is raised to where the lips meet
+    (:func:`assets.heads.knife.lips_meeting`; meta "knife_raised"); False: through the inner-lip point as given
+    (rig_checked's tries once the raised ones fail).
     Raises MeshError / LandmarkError naming the file.
     """
     check_mesh(mesh)
@@ -1764,7 +1769,17 @@ def rig_head(
                 # A coarse mouth: its lips touch along a few long edges and no vertex need lie near the
                 # inner-lip point; the knife puts vertices on the contact curve (assets/heads/knife.py).
                 inner = 0.5 * (points["upper_inner"] + points["lower_inner"])
-                knife = knife_contact(v, t, snap["corner_left"], snap["corner_right"], inner, frame.axes, iod=frame.iod)
+                corners = (snap["corner_left"], snap["corner_right"])
+                knife = knife_contact(v, t, *corners, inner, frame.axes, iod=frame.iod, meeting=knife_meeting)
+                seen_vertex = None if knife is None else seen_path_vertex(knife, frame, corners)
+                if knife is not None and knife.raised and seen_vertex is None:
+                    # The raised curve runs behind the lips' front by the point (no path vertex there seen from the
+                    # front): not where they meet; cut through the point as given. The 3,810 copy jittered (seed 4),
+                    # its first alternative landmarks: raised 0.010 IOD, the path 0.008-0.056 IOD behind the front
+                    # all along; its rig failed (the inner-lip vertex beside the corner, the only one seen: 3 flips;
+                    # the nearest one: passed with the lips parting 0.64), as the mirrored copy's third set did with a
+                    # pink shard of lower lip across the opening (lip tops carried 48.47e-3 IOD^2).
+                    knife = knife_contact(v, t, *corners, inner, frame.axes, iod=frame.iod, meeting=False)
             if knife is not None:
                 v, t = knife.vertices, knife.triangles
                 uv = None if uv is None else knife.carry(uv)
@@ -1772,10 +1787,17 @@ def rig_head(
                 part = None if part is None else knife.carry_nearest(part)
                 n_base = len(v)
                 path = knife.path
-                # The inner-lip landmarks: the knife path's vertex nearest the inner-lip point (the cut
-                # splits it, so the rig's lower inner-lip vertex is its copy below the cut).
-                front = stand = min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - inner)))
+                # The inner-lip landmarks: the knife path's vertex nearest the inner-lip point the curve passes (the
+                # cut splits it, so the rig's lower inner-lip vertex is its copy below the cut); on a raised curve the
+                # nearest seen from the front (seen_path_vertex).
+                front = stand = (
+                    seen_vertex
+                    if knife.raised and seen_vertex is not None
+                    else min(path[1:-1] or path, key=lambda i: float(np.linalg.norm(v[i] - knife.inner)))
+                )
                 meta["contact_knife"] = len(knife.edge)
+                if knife.raised:
+                    meta["knife_raised"] = round(knife.raised, 4)  # IOD: the curve moved up to the lips' meeting
                 coarse = True
                 on_contact = knife.along_path()
                 behind = dict(knife.behind)
@@ -1816,7 +1838,12 @@ def rig_head(
                 hidden = np.zeros(len(t), dtype=bool)
             elif clean_lips:
                 uncut = HeadMesh(vertices=v, triangles=t, name=mesh.name)
-                hidden = inner_lip_faces(t, len(v), inner_lip_vertices(uncut, frame, snap), keep_holes=not coarse)
+                uncut_walls = inner_lip_vertices(uncut, frame, snap)
+                shows = None
+                if coarse:
+                    near = np.isin(np.asarray(t, dtype=np.int64), uncut_walls).sum(axis=1) >= 2
+                    shows = faces_seen(v, t, frame, near)
+                hidden = inner_lip_faces(t, len(v), uncut_walls, keep_holes=not coarse, seen=shows)
             if record_hidden:
                 meta["cut_path"] = [int(i) for i in path]
             copied = None
@@ -1925,7 +1952,11 @@ def rig_head(
             # (a flipped triangle at closed lips with the corners up).
             cut_mesh = HeadMesh(vertices=v, triangles=t, name=mesh.name)
             walls = inner_lip_vertices(cut_mesh, frame, snap)
-        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls, keep_holes=not coarse)
+        # A knife-cut mouth's fins that show at rest stay (faces_seen): removed, they left a hole along the lips.
+        seen = None
+        if walls is not None and coarse:
+            seen = faces_seen(v, t, frame, np.isin(np.asarray(t, dtype=np.int64), walls).sum(axis=1) >= 2)
+        measured = None if walls is None else ~inner_lip_faces(t, len(v), walls, keep_holes=not coarse, seen=seen)
         if walls is not None and not walls_in_repair:
             # The repair on the final mesh: it then smooths over the faces that stay only (docs/animation.md,
             # "Any head, cleanly": this passes the automatic-landmark and glTF-Transform copies of Lee
@@ -1936,6 +1967,7 @@ def rig_head(
                 walls,
                 keep_holes=not coarse,
                 record=record_hidden,
+                seen=seen,
             )
             t, walls, measured = cut_mesh.triangles, None, None
             rig.meta["fold_repair_mesh"] = "final"
@@ -2039,6 +2071,7 @@ def rig_head(
                 walls,
                 keep_holes=not coarse,
                 record=record_hidden,
+                seen=seen,
             )
             t = cut_mesh.triangles
         if clean_lips and seam is not None and not ends_cut:
@@ -2449,16 +2482,74 @@ def inner_lip_vertices(
 
 FIN_ROUNDS = 10
 """At most this many rounds of trimming the fins :func:`without_inner_lips` leaves."""
+INNER_VERTEX_REACH = 0.25
+"""A raised knife cut's inner-lip vertex lies within this fraction of the mouth's corner-to-corner width of the
+inner-lip point, sideways (:func:`seen_path_vertex`; the 3,810-triangle Lee Perry-Smith copy's: 0.15 of it)."""
+
+
+def seen_path_vertex(knife: KnifeCut, frame, corners: tuple[int, int]) -> int | None:
+    """The interior vertex of ``knife``'s path nearest its inner-lip point among those seen from the front at rest
+    (within INNER_LIP_DEPTH IOD of the front-most surface at its place) and within INNER_VERTEX_REACH of the width
+    between the mouth ``corners`` of the point, sideways; None when there is none. A path vertex behind the lips' front
+    lies on the slit's floor under the upper lip: the simple face's lower inner-lip point placed there (the
+    3,810-triangle Lee Perry-Smith copy, its curve raised to the lips' meeting: vertex 2155, 0.022 IOD behind) dropped
+    it 0.14 IOD further than its neighbours on the path at the widest /a/, and three faces of the slit's floor beside it
+    turned over. Seen beside a corner only, the path runs behind the front by the point: that vertex beside the corner
+    placed there, the lips parted by 0.14 of the opening asked (docs/animation.md, "The knife cut at the lips'
+    meeting")."""
+    v, t, path = knife.vertices, knife.triangles, knife.path
+    interior = path[1:-1] or path
+    q = (v[interior] - frame.origin) @ frame.axes.T
+    shown = front_depth(v, t, frame, q[:, :2]) - q[:, 2] <= INNER_LIP_DEPTH * frame.iod
+    reach = INNER_VERTEX_REACH * float(np.linalg.norm(v[corners[0]] - v[corners[1]]))
+    shown &= np.abs((v[interior] - knife.inner) @ frame.axes[0]) <= reach
+    among = [i for i, ok in zip(interior, shown.tolist(), strict=True) if ok]
+    return min(among, key=lambda i: float(np.linalg.norm(v[i] - knife.inner))) if among else None
+
+
+def faces_seen(
+    vertices: np.ndarray, triangles: np.ndarray, frame, among: np.ndarray, *, depth: float = INNER_LIP_DEPTH
+) -> np.ndarray:
+    """(m,) bool: the faces ``among`` (m,) bool of ``triangles`` that show from the front at rest: a point of the face
+    (its centroid, or one halfway from it to a corner) within ``depth`` IOD of the front-most surface at its place
+    (:func:`assets.heads.cavity.front_depth`). A knife-cut mouth whose cut runs along the lips' slit (raised to the
+    lips' meeting, :func:`assets.heads.knife.lips_meeting`) leaves the lower lip's top by the corner in faces that
+    join the lower side by one edge, with two vertices hidden under the upper lip's overhang: removed as fins, they
+    left a dark gap along the lips at rest (docs/animation.md, "The low-poly pale strip")."""
+    from assets.heads.cavity import front_depth
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    idx = np.flatnonzero(among)
+    out = np.zeros(len(t), dtype=bool)
+    if not len(idx):
+        return out
+    corners = v[t[idx]]  # (k, 3, 3)
+    centre = corners.mean(axis=1, keepdims=True)
+    samples = np.concatenate([centre, 0.5 * (centre + corners)], axis=1)  # (k, 4, 3)
+    q = (samples.reshape(-1, 3) - frame.origin) @ frame.axes.T
+    front = front_depth(v, t, frame, q[:, :2])
+    shows = np.isfinite(front) & (front - q[:, 2] <= depth * frame.iod)
+    out[idx] = shows.reshape(len(idx), 4).any(axis=1)
+    return out
 
 
 def inner_lip_faces(
-    triangles: np.ndarray, n_vertices: int, inner: np.ndarray, *, keep_holes: bool = True
+    triangles: np.ndarray,
+    n_vertices: int,
+    inner: np.ndarray,
+    *,
+    keep_holes: bool = True,
+    seen: np.ndarray | None = None,
 ) -> np.ndarray:
     """(m,) bool: the faces :func:`without_inner_lips` removes from ``triangles`` (m, 3) of a mesh with
-    ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves."""
+    ``n_vertices``: those whose three vertices are all in ``inner``, and the fins that leaves, except those
+    ``seen`` (m,) bool (faces seen from the front at rest, :func:`faces_seen`: a fin that shows at rest is the lip's
+    surface, and removed it left a hole)."""
     t = np.asarray(triangles, dtype=np.int64)
     n_in = np.isin(t, inner).sum(axis=1)
     gone = n_in == 3
+    spared = np.zeros(len(t), dtype=bool) if seen is None else np.asarray(seen, dtype=bool)
     # Then the fins left hanging into the gap: a face with two inner vertices joined to the rest by one
     # edge alone (pink dashes floating in the opening at /a/); a face with two inner vertices along the
     # lip's edge (two or three neighbours) stays, or the edge turned into a sawtooth.
@@ -2468,7 +2559,7 @@ def inner_lip_faces(
         k, c = np.unique(key[~gone], return_counts=True)
         at = np.searchsorted(k, key).clip(max=len(k) - 1)
         shared = ((k[at] == key) & (c[at] > 1)).sum(axis=1)
-        fin = ~gone & (n_in >= 2) & (shared <= 1)
+        fin = ~gone & (n_in >= 2) & (shared <= 1) & ~spared
         if not fin.any():
             break
         gone |= fin
@@ -2504,14 +2595,21 @@ def _enclosed_holes(t: np.ndarray, n_vertices: int, gone: np.ndarray) -> np.ndar
 
 
 def without_inner_lips(
-    rig: R, mesh: HeadMesh, inner: np.ndarray, *, keep_holes: bool = True, record: bool = False
+    rig: R,
+    mesh: HeadMesh,
+    inner: np.ndarray,
+    *,
+    keep_holes: bool = True,
+    record: bool = False,
+    seen: np.ndarray | None = None,
 ) -> tuple[R, HeadMesh]:
     """The rig and mesh without the triangles whose three vertices are all in ``inner`` (hidden at rest,
     :func:`inner_lip_vertices`), and the fins that leaves. The vertices stay (the rig's rows and the
     lip contact pairs keep their indices); meta "inner_lip_removed" counts the faces removed (``record``: meta
-    "hidden_faces" lists them, added to any listed before)."""
+    "hidden_faces" lists them, added to any listed before). ``seen``: faces the fin rule keeps
+    (:func:`inner_lip_faces`)."""
     t = np.asarray(mesh.triangles, dtype=np.int64)
-    gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes)
+    gone = inner_lip_faces(t, len(mesh.vertices), inner, keep_holes=keep_holes, seen=seen)
     meta = dict(rig.meta)
     meta["inner_lip_removed"] = int(gone.sum())
     if record:

@@ -29,27 +29,28 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 77: lips parted over a hole: what lies behind the lower lip (the lining of the mouth's floor) moves with that lip
-# (i12ragged); 76: automatic landmarks with alternatives (a mirror-symmetrically lit render, MediaPipe's median over
-# several views and their mirror images, then single views), rigged from when every rig from the found set fails
+# 78: a knife-cut mouth's curve raised to where the lips meet when a path vertex by the inner-lip point is seen from the
+# front (that vertex the inner-lip one), its four tries first, then every try as before; fins seen from the front kept
+# (i12strip); 77: lips parted over a hole: what lies behind the lower lip (the lining of the mouth's floor) moves with
+# that lip (i12ragged); 76: automatic landmarks with alternatives (a mirror-symmetrically lit render, MediaPipe's median
+# over several views and their mirror images, then single views), rigged from when every rig from the found set fails
 # (i12steady); 75: lips parted over a hole: the lower lip at the hole's ends moves as a function of its position along
 # the mouth line (i12partend); 74: a gap between the knife's pieces bridged along the cut faces' edges, a lip back no
-# deeper than 0.35 IOD (i12knife); 73: an inner-lip point cast through a slit passes over the slit's wall onto the
-# lip's front (i12low4k); 72: a separate part lying on the skin (a beard shell) moves as the skin beneath it
-# (i12layer); 71: a textured head's teeth, tongue and gums darkened by vertex colours that multiply its texture
-# (lead); 70: a head's texture has an alpha channel only for see-through materials, its coverage (a rig cached with an
-# opaque material's RGBA texture would lose texels; lead); 69: lips parted over a hole and joined (or touching) near
-# the corners cut from the hole's ends to the corners (i12joined); 68: a capped rig's upper lip eased after the
-# head-response correction, tried first (i12peak); 67: a dense scan's copy levels its cut's dip over 0.08 IOD and
-# widens its fold repair's stubborn patches (i12dense3); 66: teeth as unnamed separate parts and a shell holding both
-# teeth rows moved rigidly as rows, unnamed separate eyes with the skull (i12parts2); 65: lips parted over a hole have
-# their mouth corners at the hole's ends (i12parted3); 64: a dense scan's decimated copy not judged on the inside it
-# shows (lead); 63: unnamed teeth rows and tongue inside a one-mesh head move rigidly (i12teeth); 62: a knife cut
-# leaving a mouth corner through one long piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's
-# stretch counted from 0.2 of the median edge (i12wall; checks only); 60: lips that touch but are apart in the mesh
-# rigged as apart (i12child); 59: the inside shown through the skin checked and kept behind it (i12cheek); 58: dense
-# scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 77
+# deeper than 0.35 IOD (i12knife); 73: an inner-lip point cast through a slit passes over the slit's wall onto the lip's
+# front (i12low4k); 72: a separate part lying on the skin (a beard shell) moves as the skin beneath it (i12layer); 71: a
+# textured head's teeth, tongue and gums darkened by vertex colours that multiply its texture (lead); 70: a head's
+# texture has an alpha channel only for see-through materials, its coverage (a rig cached with an opaque material's RGBA
+# texture would lose texels; lead); 69: lips parted over a hole and joined (or touching) near the corners cut from the
+# hole's ends to the corners (i12joined); 68: a capped rig's upper lip eased after the head-response correction, tried
+# first (i12peak); 67: a dense scan's copy levels its cut's dip over 0.08 IOD and widens its fold repair's stubborn
+# patches (i12dense3); 66: teeth as unnamed separate parts and a shell holding both teeth rows moved rigidly as rows,
+# unnamed separate eyes with the skull (i12parts2); 65: lips parted over a hole have their mouth corners at the hole's
+# ends (i12parted3); 64: a dense scan's decimated copy not judged on the inside it shows (lead); 63: unnamed teeth rows
+# and tongue inside a one-mesh head move rigidly (i12teeth); 62: a knife cut leaving a mouth corner through one long
+# piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median
+# edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
+# shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
+RIG_ALGORITHM = 78
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;

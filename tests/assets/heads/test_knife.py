@@ -611,3 +611,99 @@ def test_a_decimated_upper_lips_back_does_not_hang_below_the_cut(tmp_path, share
     assert max(hang[:2]) <= 0.01 and hang[2] <= 0.02, hang
     report = head_checks(Head(rig, mesh))
     assert report.passed, report.summary()
+
+
+def _overhung_lips(cols: int = 11):
+    """Closed lips seen in section, swept along x from -1 to 1 (IOD 1, the face frame's axes): the lower lip's front
+    (forward-facing) rises to its top at (y, z) = (-0.02, 0.15), whose top runs back and up to (0.0, 0.05) (facing up,
+    11 degrees back); the crease's back wall rises to (0.005, 0.05) (facing forward); the upper lip's underside runs
+    forward to (0.015, 0.17) (facing down) and its front up to (0.3, 0.12). Seen from the front, the lower lip's top
+    covers y in (-0.02, 0), the crease's back (0, 0.005), the upper lip's underside (0.005, 0.015). Returns v, t and the
+    section's row of each vertex."""
+    profile = [(-0.3, 0.1), (-0.02, 0.15), (0.0, 0.05), (0.005, 0.05), (0.015, 0.17), (0.3, 0.12)]
+    xs = np.linspace(-1.0, 1.0, cols)
+    v = np.array([[x, y, z] for x in xs for y, z in profile])
+    k = len(profile)
+    t = []
+    for i in range(cols - 1):
+        for j in range(k - 1):
+            a, b = i * k + j, (i + 1) * k + j
+            t += [[a, b, b + 1], [a, b + 1, a + 1]]
+    t = np.array(t)
+    # Wound so each face's normal points away from the lips' inside (towards the viewer's side of the section).
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    row = t.min(axis=1) % k
+    outward = {0: (0, 0, 1), 1: (0, 1, 0), 2: (0, 0, 1), 3: (0, -1, 0), 4: (0, 0, 1)}
+    flip = np.array([float(n[f] @ np.array(outward[r])) < 0 for f, r in enumerate(row)])
+    return v, np.where(flip[:, None], t[:, ::-1], t), np.tile(np.arange(k), cols)
+
+
+def test_an_inner_lip_point_on_the_lower_lips_top_is_raised_to_where_the_lips_meet():
+    """An automatic inner-lip point on the lower lip's top, under the upper lip's overhang (the 3,810-triangle Lee
+    Perry-Smith copy: 0.014 IOD under the meeting): the knife's curve through it cut a strip of the lower lip's top off
+    with the upper lip (a pale strip between the lips at /m/ and /u/). :func:`lips_meeting` raises it by rays from the
+    front every MEETING_STEP until the front-most face is no lip top: here to the first step above y = 0, where the
+    lower lip's top ends (the section's own numbers). A point on the lower lip's front, or on the crease's back, stays;
+    a lip top reaching higher than MEETING_REACH above the point leaves it where it is. The knife then cuts no face of
+    the lower lip's top: every path vertex lies at or above its top's back edge."""
+    from assets.heads.knife import MEETING_REACH, MEETING_STEP, lips_meeting
+
+    v, t, row = _overhung_lips()
+    y0 = -0.015
+    want = MEETING_STEP * np.ceil(-y0 / MEETING_STEP + 1e-9)  # the first step past y = 0
+    assert want < MEETING_REACH
+    got = lips_meeting(v, t, np.array([0.05, y0, 0.13]), np.eye(3), iod=1.0)
+    assert got == pytest.approx(want, abs=1e-12) and 0.0 < y0 + got < 0.005
+    assert lips_meeting(v, t, np.array([0.05, -0.1, 0.13]), np.eye(3), iod=1.0) == 0.0  # the lower lip's front
+    assert lips_meeting(v, t, np.array([0.05, 0.002, 0.05]), np.eye(3), iod=1.0) == 0.0  # the crease's back
+    deep = v.copy()
+    deep[row == 1, 1] = -(MEETING_REACH + 0.02)  # the lower lip's top from further down than the reach
+    assert lips_meeting(deep, t, np.array([0.05, deep[1, 1] + 0.001, 0.149]), np.eye(3), iod=1.0) == 0.0
+    # The knife between corners on the crease's back at x = -0.8 and 0.8 (the mesh's vertices there).
+    left, right = (
+        int(np.flatnonzero((np.abs(v[:, 0] + 0.8) < 1e-9) & (row == 3))[0]),
+        int(np.flatnonzero((np.abs(v[:, 0] - 0.8) < 1e-9) & (row == 3))[0]),
+    )
+    knife = knife_contact(v, t, left, right, np.array([0.05, y0, 0.13]), np.eye(3), iod=1.0)
+    assert knife is not None and knife.raised == pytest.approx(want, abs=1e-12)
+    assert knife.inner[1] == pytest.approx(y0 + want, abs=1e-12)
+    assert v[left, 1] == 0.005 and (knife.vertices[knife.path, 1] >= -1e-9).all()
+
+
+def test_a_raised_cuts_inner_lip_vertex_is_one_seen_from_the_front_by_the_point():
+    """:func:`assets.heads.rigging.seen_path_vertex`: of a knife path's interior vertices, the one nearest the
+    inner-lip point among those seen from the front at rest and within INNER_VERTEX_REACH of the mouth's width of it,
+    sideways; None when none is (the raised curve then runs behind the lips' front by the point and is dropped). Here a
+    path of five vertices 1 apart under a front sheet (z = 0.1) that covers x in [-1.2, 1.2] or not, the point at x 0.3:
+    the middle vertex under the sheet is hidden, the ones beside it seen or not as the sheet reaches."""
+    from assets.heads.knife import KnifeCut
+    from assets.heads.rigging import INNER_VERTEX_REACH, seen_path_vertex
+    from realtime_core.face.model import FaceFrame
+
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    path_v = np.array([[x, 0.0, 0.0] for x in (-2.0, -1.0, 0.0, 1.0, 2.0)])
+    # Two path faces so the path's vertices are on a surface (a strip below them).
+    strip = np.array([[x, -0.5, 0.0] for x in (-2.0, -1.0, 0.0, 1.0, 2.0)])
+
+    def cut(sheet_half_width: float | None) -> KnifeCut:
+        v = np.vstack([path_v, strip])
+        t = [[i, i + 5, i + 1] for i in range(4)] + [[i + 1, i + 5, i + 6] for i in range(4)]
+        if sheet_half_width is not None:
+            w = sheet_half_width
+            sheet = np.array([[-w, -0.2, 0.1], [w, -0.2, 0.1], [w, 0.2, 0.1], [-w, 0.2, 0.1]])
+            k = len(v)
+            v = np.vstack([v, sheet])
+            t += [[k, k + 1, k + 2], [k, k + 2, k + 3]]
+        return KnifeCut(
+            vertices=v,
+            triangles=np.asarray(t),
+            edge=np.zeros((0, 2), dtype=np.int64),
+            at=np.zeros(0),
+            path=[0, 1, 2, 3, 4],
+            inner=np.array([0.3, 0.0, 0.0]),
+        )
+
+    assert INNER_VERTEX_REACH * 4.0 >= 0.7  # the corners 4 apart: the vertex at x 1, 0.7 from the point, in reach
+    assert seen_path_vertex(cut(None), frame, (0, 4)) == 2  # nothing in front: the nearest
+    assert seen_path_vertex(cut(0.5), frame, (0, 4)) == 3  # the middle one hidden: the nearest seen beside it
+    assert seen_path_vertex(cut(1.2), frame, (0, 4)) is None  # all three hidden by the point

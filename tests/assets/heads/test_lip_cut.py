@@ -814,3 +814,35 @@ def test_a_knife_cut_lower_edge_lying_on_the_lower_lip_moves_with_it():
     # A cut that split no vertex (the 1,428-triangle copy with its mouth jittered by 0.002 IOD): no side to glue
     # (np.interp raised "array of sample points is empty" out of `facecast rig`).
     assert lip_edge_glue(v2, t2, np.zeros((0, 2), dtype=np.int64), frame) == {}
+
+
+def test_a_fin_seen_from_the_front_stays_and_faces_seen_are_told_by_depth():
+    """The fin rule of :func:`inner_lip_faces` (a face with two hidden vertices joined to what stays by one edge) keeps
+    the faces ``seen`` from the front at rest: on the 3,810-triangle Lee Perry-Smith copy cut at the lips' meeting,
+    the lower lip's top by the corner joined its side by one edge with two vertices under the upper lip's overhang,
+    and removed it left a dark gap along the lips at rest. :func:`faces_seen`: of two planes one behind the other, the
+    back one's faces under the front one are hidden, those beside it seen."""
+    from assets.heads.rigging import faces_seen, inner_lip_faces
+    from realtime_core.face.model import FaceFrame
+
+    cols = rows = 9
+    t = _grid_triangles(rows, cols)
+    # Rows 0 and 1, columns 2..6 hidden: the cells between them go; the cells beside them on the grid's border
+    # keep two hidden vertices and are joined to the rest by one edge: fins.
+    inner = np.array([j * cols + i for j in (0, 1) for i in range(2, 7)])
+    n_in = np.isin(t, inner).sum(axis=1)
+    gone = inner_lip_faces(t, rows * cols, inner, keep_holes=False)
+    fins = gone & (n_in < 3)
+    assert fins.any() and gone[n_in == 3].all()
+    kept = inner_lip_faces(t, rows * cols, inner, keep_holes=False, seen=fins)
+    assert not kept[fins].any() and kept[n_in == 3].all()
+    np.testing.assert_array_equal(kept, gone & ~fins)
+
+    back = np.array([[x, y, 0.0] for y in (0.0, 1.0) for x in (0.0, 1.0, 2.0)])
+    front = np.array([[-0.1, -0.1, 0.1], [1.05, -0.1, 0.1], [1.05, 1.1, 0.1], [-0.1, 1.1, 0.1]])  # the left half
+    v = np.vstack([back, front])
+    tri = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [6, 7, 8], [6, 8, 9]])
+    frame = FaceFrame(origin=np.zeros(3), axes=np.eye(3), iod=1.0)
+    seen = faces_seen(v, tri, frame, np.ones(len(tri), dtype=bool))
+    np.testing.assert_array_equal(seen, [False, False, True, True, True, True])
+    assert not faces_seen(v, tri, frame, np.array([True, True, False, False, False, False])).any()
