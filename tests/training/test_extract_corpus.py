@@ -34,22 +34,12 @@ def _ffmpeg(*args: str) -> None:
     subprocess.run([shutil.which("ffmpeg") or "ffmpeg", "-v", "error", "-y", *args], check=True)
 
 
-def _grid_copy(s1: Path, dest: Path, ids: list[str]) -> Path:
-    """A GRID-layout folder (video/, align/) holding copies of some s1 sentences."""
-    (dest / "video").mkdir(parents=True)
-    (dest / "align").mkdir()
-    for sid in ids:
-        shutil.copy(s1 / "video" / f"{sid}.mp4", dest / "video")
-        shutil.copy(s1 / "align" / f"{sid}.align", dest / "align")
-    return dest
-
-
-def test_second_run_reads_the_cache_only(s1, tmp_path, ffmpeg) -> None:
+def test_second_run_reads_the_cache_only(grid_copy, tmp_path, ffmpeg) -> None:
     """The first run measures both clips; the second measures nothing and leaves the cache files
     untouched; a renamed copy of a clip (same bytes) is a cache hit too."""
     from training.video import extract_corpus
 
-    corpus = _grid_copy(s1, tmp_path / "grid", ["bbaf2n", "bbaf3s"])
+    corpus = grid_copy(["bbaf2n", "bbaf3s"])
     cache = tmp_path / "cache"
     first = extract_corpus([corpus / "video"], cache_dir=cache, workers=2)
     assert (first.n_extracted, first.n_cached, len(first.skipped)) == (2, 0, 0)
@@ -66,12 +56,12 @@ def test_second_run_reads_the_cache_only(s1, tmp_path, ffmpeg) -> None:
     assert by_name["bbaf2n"] == {**first.clips[0], "file": by_name["bbaf2n"]["file"]}
 
 
-def test_bad_clips_are_skipped_named_and_counted(s1, tmp_path, ffmpeg) -> None:
+def test_bad_clips_are_skipped_named_and_counted(s1, grid_copy, tmp_path, ffmpeg) -> None:
     """One run over a folder of good and bad clips: every bad clip is skipped with its reason and
     counted; the good ones are measured; nothing aborts."""
     from training.video import ExtractConfig, extract_corpus
 
-    root = _grid_copy(s1, tmp_path / "grid", ["bbaf2n", "bbaf3s", "bbaf4p", "bbaf5a"])
+    root = grid_copy(["bbaf2n", "bbaf3s", "bbaf4p", "bbaf5a"])
     v, a = root / "video", root / "align"
     src = s1 / "video" / "bbal6n.mp4"
     # no face at all: a grey picture with a tone

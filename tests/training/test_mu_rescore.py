@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 
 import pytest
 
@@ -17,20 +16,14 @@ pytestmark = [pytest.mark.slow, pytest.mark.system]  # MediaPipe on real GRID vi
 SENTENCES = ("bbaf2n", "bbaf3s", "bbaf4p", "bbaf5a", "bbal6n", "bbal7s", "bbal9a", "bbas1s", "bbas2p", "bbaz4n")
 
 
-def test_eval_mu_rescores_the_sentences_the_run_used(shared_data, tmp_path, capsys) -> None:
+def test_eval_mu_rescores_the_sentences_the_run_used(grid_copy, tmp_path, capsys) -> None:
     # `eval --mu` of a `mu --limit N` run measured the faces of every sentence in the corpus (900, ~1.3 s
     # each) and scored the models on test sentences the run's report never saw.
     require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
     from assets.grid import split_of
     from facecast.cli import main
 
-    s1 = shared_data / "video" / "grid_s1"
-    root = tmp_path / "grid"
-    (root / "video").mkdir(parents=True)
-    (root / "align").mkdir()
-    for sid in SENTENCES:
-        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
-        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    root = grid_copy(SENTENCES)
     assert [split_of(s) for s in SENTENCES[8:]] == ["test", "test"]
     out = tmp_path / "mu"
     argv = ["mu", "--root", str(root), "-o", str(out), "--limit", "8", "--classes", "4"]

@@ -108,24 +108,17 @@ def test_scores_match_independent_computations() -> None:
 
 
 @pytest.mark.slow
-def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
+def test_train_on_grid_s1_from_the_cli(grid_copy, tmp_path, ffmpeg) -> None:
     """`facecast train --grid-s1 ROOT --speed 1.1 --closure-band 0.02` on a three-sentence GRID copy:
     the model records its data, holds the speed copies, keeps the band, and its output never goes
     below the closed pose."""
     require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
-    import shutil
 
     from assets.modelfile import load_model
     from facecast.cli import main
     from realtime_core.pipeline import speech_to_params
 
-    s1 = shared_data / "video" / "grid_s1"
-    root = tmp_path / "grid"
-    (root / "video").mkdir(parents=True)
-    (root / "align").mkdir()
-    for sid in ("bbaf2n", "bbaf3s", "bbal6n"):
-        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
-        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    root = grid_copy(("bbaf2n", "bbaf3s", "bbal6n"))
     out = tmp_path / "m.npz"
     assert (
         main(
@@ -161,10 +154,9 @@ def test_train_on_grid_s1_from_the_cli(shared_data, tmp_path, ffmpeg) -> None:
 
 
 @pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
-def test_real_lips_evaluation_of_the_shipped_model(shared_data, tmp_path, ffmpeg) -> None:
+def test_real_lips_evaluation_of_the_shipped_model(grid_copy, tmp_path, ffmpeg) -> None:
     """Two s1 sentences through the eval path: closures counted on the shipped phone labels' /p b m/,
     the estimate never below the closed pose, and the markdown table lists every parameter."""
-    import shutil
 
     from assets.modelfile import load_model
     from training.grid_phones import read_grid_phones
@@ -175,13 +167,7 @@ def test_real_lips_evaluation_of_the_shipped_model(shared_data, tmp_path, ffmpeg
         s1_clips,
     )
 
-    s1 = shared_data / "video" / "grid_s1"
-    root = tmp_path / "grid"
-    (root / "video").mkdir(parents=True)
-    (root / "align").mkdir()
-    for sid in ("bbaf2n", "bbal6n"):
-        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
-        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    root = grid_copy(("bbaf2n", "bbal6n"))
     phones = read_grid_phones()
     clips = s1_clips(None, root=root, cache_dir=tmp_path / "cache", phones=phones)
     want = sum(len(phone_bilabial_spans(phones[sid].phones)) for sid in ("bbaf2n", "bbal6n"))

@@ -179,7 +179,7 @@ def test_train_command_refuses_teacher_sentences_without_grid_s1(tmp_path, capsy
 
 
 @pytest.mark.slow
-def test_train_on_grid_s1_with_teacher_clips_grows_by_exactly_the_clips(shared_data, tmp_path, espeak, ffmpeg):
+def test_train_on_grid_s1_with_teacher_clips_grows_by_exactly_the_clips(grid_copy, tmp_path, espeak, ffmpeg):
     """`facecast train --grid-s1 ROOT --teacher-espeak 3` on a three-sentence GRID copy (train split): the model
     is trained on the GRID utterances and their speed copies plus the 3 teacher clips, once each (no speed copies),
     every teacher frame a Baum-Welch frame: the utterance and frame counts grow by exactly the clips' (their
@@ -188,19 +188,12 @@ def test_train_on_grid_s1_with_teacher_clips_grows_by_exactly_the_clips(shared_d
     from tests.prerequisites import require_module
 
     require_module("mediapipe", "optional extra: pip install 'facecast[video]'")
-    import shutil
 
     from assets.modelfile import load_model
     from facecast.cli import main
     from training.params import n_frames_for
 
-    s1 = shared_data / "video" / "grid_s1"
-    root = tmp_path / "grid"
-    (root / "video").mkdir(parents=True)
-    (root / "align").mkdir()
-    for sid in ("bbaf2n", "bbal6n", "bbbf6n"):
-        shutil.copy(s1 / "video" / f"{sid}.mp4", root / "video")
-        shutil.copy(s1 / "align" / f"{sid}.align", root / "align")
+    root = grid_copy(("bbaf2n", "bbal6n", "bbbf6n"))
     cache = tmp_path / "cache"
     argv = ["train", "--grid-s1", str(root), "--speed", "1.1", "--cache-dir", str(cache)]
     argv += ["--states", "2", "--mix", "1", "--iters", "1"]
