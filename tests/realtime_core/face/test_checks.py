@@ -637,6 +637,20 @@ def test_skin_seen_dark_sees_a_chin_turned_past_edge_on_and_a_cavity_come_throug
     assert alone is not None and alone[0] == pytest.approx(float(shoelace.sum()), rel=1e-9)
 
 
+def test_skin_dark_poses_keep_the_widest_openings_and_every_parameters_ends() -> None:
+    """The poses the skin seen dark is measured at: each parameter's largest and smallest value among the checked
+    poses, and every pose within SKIN_DARK_WIDEST of the widest opening (the measured frames at 0.45 beside 0.465)."""
+    from realtime_core.face.checks import SKIN_DARK_WIDEST, skin_dark_poses
+
+    kept = skin_dark_poses(EXTREME_POSES)
+    p = np.array(EXTREME_POSES)
+    assert set(kept) <= set(EXTREME_POSES) and len(set(kept)) == len(kept) < len(EXTREME_POSES)
+    for j in range(4):
+        assert np.array(kept)[:, j].max() == p[:, j].max() and np.array(kept)[:, j].min() == p[:, j].min()
+    wide = {q for q in EXTREME_POSES if q[2] >= p[:, 2].max() - SKIN_DARK_WIDEST}
+    assert len(wide) > 1 and wide <= set(kept)
+
+
 class _Shelf(_Lips):
     """:class:`_Lips` with a shelf hanging from the upper strip's cut row: a row of faces from the cut (y = 0, z = 0)
     down and forward to y = -0.02, z = 0.05, facing up (the lower lip's top, cut off with the upper lip where a knife
