@@ -942,7 +942,7 @@ def skin_dark_poses(poses: tuple[tuple[float, ...], ...]) -> tuple[tuple[float, 
     """The poses :func:`check_rig` measures :func:`skin_dark_seen` at, of ``poses``: each parameter's ends
     (:func:`inside_poses`) and every pose whose mouth_open lies within SKIN_DARK_WIDEST of the widest (in the order met,
     once each). Every shard the figure found lies at the widest opening (mouth_open 0.465 on every row that scores, the
-    anny child's at a measured frame of 0.465 with the lips stretched); all 65 poses cost 1-5.5 s a rig (Lee Perry-Smith
+    anny child's at a measured frame of 0.465, lips narrowed); all 65 poses cost 1-5.5 s a rig (Lee Perry-Smith
     5.5 s on a head_checks of 1.7 s), these 10 a seventh of it."""
     p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
     if not len(p):
