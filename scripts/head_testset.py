@@ -244,6 +244,8 @@ def _warned(rep) -> str:
         over.append("backs")
     if rep.lip_tops_iod2 is not None and rep.lip_tops_iod2 > lim.max_lip_tops:
         over.append("tops")
+    if rep.skin_dark_iod2 is not None and rep.skin_dark_iod2 > lim.max_skin_dark:
+        over.append("dark")
     if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
         over.append("/m/")
     return sliver + (f" ({' + '.join(over)} warning)" if over else "")
@@ -271,9 +273,9 @@ def check_and_draw(
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
             "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | lip backs seen (1e-3 IOD^2) | "
-            "inside through the skin (IOD) | checks |"
+            "skin seen dark (1e-3 IOD^2) | inside through the skin (IOD) | checks |"
         ),
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     if describe is not None:
         rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
@@ -281,7 +283,8 @@ def check_and_draw(
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig | - | - | - | - | - | - | - | - | {exc} |")
+            dashes = " - |" * 9
+            rows.append(f"| {name} |{' - |' if describe else ''} cannot rig |{dashes} {exc} |")
             continue
         rep = None
         try:
@@ -293,11 +296,12 @@ def check_and_draw(
                 f"{'n/a' if rep.teeth_ahead_iod is None else f'{rep.teeth_ahead_iod:.3f}'} | "
                 f"{'n/a' if rep.lip_edge_notch_iod is None else f'{rep.lip_edge_notch_iod:.4f}'} | "
                 f"{'n/a' if rep.lip_backs_iod2 is None else f'{1000 * rep.lip_backs_iod2:.2f}'} | "
+                f"{'n/a' if rep.skin_dark_iod2 is None else f'{1000 * rep.skin_dark_iod2:.2f}'} | "
                 f"{'n/a' if rep.inside_shown_iod is None else f'{rep.inside_shown_iod:.4f}'} | "
                 f"{'pass' if rep.passed else 'FAIL'}{_warned(rep)}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
-            figs = f"- | - | - | - | - | - | - | - | not checked ({exc})"
+            figs = f"- | - | - | - | - | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
         tiles = []
         with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:

@@ -31,6 +31,11 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   three-quarter view (:func:`lip_backs_seen`): a renderer draws a back face dark, so a lip face turned past
   edge-on, or a cut's crease wall seen from the side, is a dark shard that no figure above sees (a flip
   needs a turn over 90 degrees from rest; the notch looks from the front only);
+- skin seen dark: how much of the skin around the mouth (chin, cheeks; the lips' band left out) that a front or
+  three-quarter view saw lit at rest it sees drawn dark at a pose (IOD squared, as seen; :func:`skin_dark_seen`):
+  skin turned past edge-on, or the dark mouth cavity come through the skin as the jaw drops the chin in front of it.
+  Shards there pass every figure above (no flip under 90 degrees; the lips' figures see the lips only; the inside
+  through the skin follows faces at most :data:`INSIDE_DEPTH` behind the skin, and the still cavity lay deeper);
 - lip gap at /m/: the largest inner-lip gap (IOD) at :data:`BILABIAL_POSES` (pressed lips, mouth_open 0:
   the source asks the lips to close), :func:`bilabial_gap`. The closure figure's pose lowers mouth_open
   instead, so a map that opens the lips for a lowered upper lip (a thin line of teeth at every /m/) passed it;
@@ -48,9 +53,9 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
 
 Limits (:class:`RigCheckLimits`) decide pass or fail; the figures are reported either way. The lip edge
-notch, the lip backs seen and the lip gap at /m/ are advisory (:attr:`RigCheckLimits.max_lip_edge_notch`,
-:attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are
-reported as warnings and do not fail the rig.
+notch, the lip backs seen, the skin seen dark and the lip gap at /m/ are advisory
+(:attr:`RigCheckLimits.max_lip_edge_notch`, :attr:`RigCheckLimits.max_lip_backs`, :attr:`RigCheckLimits.max_skin_dark`,
+:attr:`RigCheckLimits.max_bilabial_gap`): over their limits they are reported as warnings and do not fail the rig.
 """
 
 from __future__ import annotations
@@ -346,6 +351,14 @@ LIP_TOPS_LIMIT = 0.001
 close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan's rows 0.25e-3
 to 0.60e-3 (4-9 faces at the mouth corners, the pink flecks their lip backs already report), every other row none
 (docs/animation.md, "The low-poly pale strip: the lower lip's top cut off with the upper lip")."""
+SKIN_DARK_LIMIT = 0.002
+"""IOD squared: the advisory limit of :func:`skin_dark_seen`, a patch about 16 pixels across in the test set's 400x300
+mouth close-up (1 IOD squared is 132,000 pixels): every test-set row scores 0, the 5,716-triangle Lee Perry-Smith copy
+0.76e-3 (2 faces by a corner at one measured frame, nothing on its chin or cheeks in the close-up); the low-poly anny
+copies whose close-ups show shards on the chin or beside a corner 6.5e-3 to 195e-3 (the thin old woman's 2,956-triangle
+copy 74e-3). The held-out heads' full-resolution anny child and thin old woman and the beard shell score 2.25e-3 to
+3.62e-3 at mouth_open 0.465, each a small dark fleck on a cheek or by a corner there (docs/animation.md, "Rig checks",
+*Skin seen dark*)."""
 SEAM_GAP_LIMIT = 0.001
 """IOD: the most two copies of one position in two meshes of a surface may part (:func:`seam_gap`). Rows given to
 both copies alike keep them at 0; the split Lee Perry-Smith's jaw seam opened 0.15 IOD (4.9 mm) at mouth_open 0.3
@@ -382,6 +395,8 @@ class RigCheckLimits:
     """IOD, advisory: a larger :func:`lip_edge_notch` is a warning in the report, not a failure."""
     max_lip_backs: float = LIP_BACKS_LIMIT
     """IOD squared, advisory: a larger :func:`lip_backs_seen` is a warning in the report, not a failure."""
+    max_skin_dark: float = SKIN_DARK_LIMIT
+    """IOD squared, advisory: a larger :func:`skin_dark_seen` is a warning in the report, not a failure."""
     min_open_response: float = MIN_OPEN_RESPONSE
     max_lip_tops: float = LIP_TOPS_LIMIT
     """IOD squared, advisory: a larger :func:`lip_tops_carried` is a warning in the report, not a failure."""
@@ -403,6 +418,8 @@ class RigCheckLimits:
             raise ConfigError("max_lip_edge_notch must be > 0 (IOD)")
         if not self.max_lip_backs > 0:
             raise ConfigError("max_lip_backs must be > 0 (IOD squared)")
+        if not self.max_skin_dark > 0:
+            raise ConfigError("max_skin_dark must be > 0 (IOD squared)")
         if not self.max_lip_tops > 0:
             raise ConfigError("max_lip_tops must be > 0 (IOD squared)")
         if not self.max_bilabial_gap >= 0:
@@ -438,6 +455,14 @@ class RigReport:
     (:func:`lip_backs_seen`; None: no lip faces found)."""
     lip_backs_faces: int | None = None
     """How many faces make :attr:`lip_backs_iod2`."""
+    skin_dark_iod2: float | None = None
+    """IOD squared: the largest area of the skin around the mouth seen lit at rest and drawn dark at a pose, front or
+    three-quarter view (:func:`skin_dark_seen`: skin turned past edge-on, the mouth cavity come through it; None: not
+    measured, or no skin face near the mouth)."""
+    skin_dark_faces: int | None = None
+    """How many faces make :attr:`skin_dark_iod2`."""
+    skin_dark_pose: tuple[float, ...] = ()
+    """Where :attr:`skin_dark_iod2` is worst (empty: nowhere)."""
     lip_tops_iod2: float | None = None
     """IOD squared: the largest front-view area of lip-top faces that do not move with the lower lip
     (:func:`lip_tops_carried`; None: not measured, or no lip-top face)."""
@@ -489,6 +514,7 @@ class RigReport:
         opening = "n/a" if self.open_response is None else f"{self.open_response:.2f}"
         backs = "n/a" if self.lip_backs_iod2 is None else f"{1000 * self.lip_backs_iod2:.2f}e-3"
         tops = "n/a" if self.lip_tops_iod2 is None else f"{1000 * self.lip_tops_iod2:.2f}e-3"
+        dark = "n/a" if self.skin_dark_iod2 is None else f"{1000 * self.skin_dark_iod2:.2f}e-3"
         at_m = "n/a" if self.bilabial_gap_iod is None else f"{self.bilabial_gap_iod:.4f}"
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
@@ -497,7 +523,8 @@ class RigReport:
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
             f"{self.closure_gap_iod:.4f} IOD, teeth ahead of lips {teeth} IOD, lip edge notch {notch} IOD, "
-            f"lip backs seen {backs} IOD^2, lip tops carried {tops} IOD^2, mouth opening {opening}, "
+            f"lip backs seen {backs} IOD^2, skin seen dark {dark} IOD^2, lip tops carried {tops} IOD^2, "
+            f"mouth opening {opening}, "
             f"lip gap at /m/ {at_m} IOD{seam}, "
             f"inside through the skin {inside} IOD, "
             f"flipped under expressions {expr}: "
@@ -791,6 +818,19 @@ def upper_lip_peak(
     return float(edge[k] - (arc + slope * at[k] ** 2)), edge  # the arc at the middle's own vertex
 
 
+def view_frames(axes: np.ndarray, views: tuple[float, ...]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per view of ``views`` (degrees about the up axis of a face frame's ``axes`` (3, 3): side, up, forward;
+    orthographic): (the unit direction towards the viewer (3,), the (3, 3) matrix taking head units to the view's
+    (u, w, depth towards the viewer)). The views of :func:`lip_backs_seen`, :func:`skin_dark_seen` and
+    :func:`inside_split`."""
+    ax, up, fwd = np.asarray(axes, dtype=np.float64)
+    frames = []
+    for deg in views:
+        d = np.cos(np.radians(deg)) * fwd + np.sin(np.radians(deg)) * ax
+        frames.append((d, np.stack([np.cross(up, d), up, d], axis=1)))
+    return frames
+
+
 class _LipBand(NamedTuple):
     """What :func:`lip_backs_seen` and :func:`lip_tops_carried` share (:func:`_lip_band_faces`)."""
 
@@ -856,12 +896,7 @@ def lip_backs_seen(
     iod = fr.iod
     if not len(lips):
         return None
-    ax, up, fwd = fr.axes
-    frames = []
-    for deg in LIP_BACKS_VIEWS:
-        d = np.cos(np.radians(deg)) * fwd + np.sin(np.radians(deg)) * ax
-        side = np.cross(up, d)
-        frames.append((d, np.stack([side, up, d], axis=1)))  # (3, 3): head units -> (u, w, depth)
+    frames = view_frames(fr.axes, LIP_BACKS_VIEWS)
     worst, faces = 0.0, 0
     for pose in poses:
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
@@ -883,6 +918,139 @@ def lip_backs_seen(
             if area > worst:
                 worst, faces = area, int(seen.sum())
     return worst, faces
+
+
+SKIN_DARK_REACH = 0.9
+"""IOD from the mouth corners' midpoint: every corner of a skin face :func:`skin_dark_seen` samples lies within this
+(the chin under the lower lip and the cheeks beside the corners, which the jaw and the corners move; the region of
+:data:`INSIDE_REACH`)."""
+SKIN_DARK_OCCLUDERS = 1.5
+"""IOD from the mouth corners' midpoint: the faces with a corner within this may lie in front of the skin's sample
+points (a ray from the region towards a viewer leaves the head there)."""
+SKIN_DARK_SAMPLES = np.array(
+    [[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]], dtype=np.float64
+)
+"""(4, 3) barycentric: the points of each skin face :func:`skin_dark_seen` follows (its centroid and one towards
+each corner: a face partly covered counts in quarters)."""
+
+
+SKIN_DARK_WIDEST = 0.05
+"""IOD of mouth_open: :func:`skin_dark_poses` adds every pose within this of the widest opening."""
+
+
+def skin_dark_poses(poses: tuple[tuple[float, ...], ...]) -> tuple[tuple[float, ...], ...]:
+    """The poses :func:`check_rig` measures :func:`skin_dark_seen` at, of ``poses``: each parameter's ends
+    (:func:`inside_poses`) and every pose whose mouth_open lies within SKIN_DARK_WIDEST of the widest (in the order met,
+    once each). Every shard the figure found lies at the widest opening (mouth_open 0.465 on every row that scores, the
+    anny child's at a measured frame of 0.465, lips narrowed); all 65 poses cost 1-5.5 s a rig (Lee Perry-Smith
+    5.5 s on a head_checks of 1.7 s), these 10 a seventh of it."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 4)
+    if not len(p):
+        return ()
+    ends = set(inside_poses(poses))
+    wide = p[:, 2] >= float(p[:, 2].max()) - SKIN_DARK_WIDEST
+    return tuple(tuple(float(x) for x in q) for i, q in enumerate(p) if wide[i] or tuple(float(x) for x in q) in ends)
+
+
+def skin_dark_seen(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    cavity_vertices: int = 0,
+    teeth: np.ndarray | None = None,
+) -> tuple[float, int, tuple[float, ...]] | None:
+    """(the largest area, IOD squared as seen, of the skin around the mouth that a view saw lit at rest and sees
+    drawn dark at a pose; how many faces make it; that pose), over ``poses`` and the views LIP_BACKS_VIEWS
+    (orthographic, about the face's up axis, :func:`view_frames`).
+
+    The skin: the faces with every corner within SKIN_DARK_REACH IOD of the mouth corners' midpoint and some corner
+    outside the lips' band (across and along the mouth as :func:`lip_backs_seen`'s band, at any depth: the lips and
+    the opening have their own figures), less the teeth and the last ``cavity_vertices`` vertices (an added mouth
+    cavity). Each skin face is followed at SKIN_DARK_SAMPLES points that, at rest, face the view (normal towards it)
+    with no face of the rig in front of them. At a pose a point is dark where the front-most face over it is one the
+    renderer draws dark: a face turned away from the view by more than LIP_BACKS_FACING (the skin face itself turned
+    past edge-on, a fold's back) or a face of the mouth cavity (dark by its colour, facing either way), with no face
+    drawn lit as near. A face's area as seen at the pose, times the share of its points that are dark, counts.
+
+    It sees what the user calls a shard on the chin or a cheek, whichever way it comes: skin turned past edge-on
+    (no flip below 90 degrees from rest) or the mouth cavity come through the skin as the jaw drops the chin in
+    front of it (the thin old woman's 2,956-triangle copy: the cavity's floor lies 0.33 IOD behind her chin at rest,
+    past the :data:`INSIDE_DEPTH` that :func:`inside_shown` follows). None: no skin face near the mouth."""
+    band = _lip_band_faces(rig, landmarks, 0)
+    v0, t, fr, mid = band.rest, band.faces, band.frame, band.middle
+    iod = fr.iod
+    _, up, _ = fr.axes
+    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
+    width = float(np.linalg.norm(cl - cr))
+    along = np.clip(band.across / max(width, 1e-300) + 0.5, 0.0, 1.0)
+    line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
+    in_band = np.abs(band.across) <= 0.5 * width + LIP_BACKS_BEYOND * iod
+    in_band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
+    dist = np.linalg.norm(v0 - mid, axis=1) / iod
+    dark_part = np.zeros(len(v0), dtype=bool)
+    if cavity_vertices:
+        dark_part[len(v0) - cavity_vertices :] = True
+    cavity = dark_part[t].any(axis=1)
+    skip = dark_part.copy()
+    if teeth is not None:
+        skip[np.asarray(teeth, dtype=np.int64)] = True
+    skin = np.flatnonzero((dist < SKIN_DARK_REACH)[t].all(axis=1) & ~in_band[t].all(axis=1) & ~skip[t].any(axis=1))
+    if not len(skin):
+        return None
+    occ = np.flatnonzero((dist < SKIN_DARK_OCCLUDERS)[t].any(axis=1))
+    frames = view_frames(fr.axes, LIP_BACKS_VIEWS)
+    eps = 1e-4 * iod
+    cell = _BACKS_CELL * iod
+    b = SKIN_DARK_SAMPLES
+    ns = len(b)
+
+    def facing(v: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = triangle_normals(v, t[faces])
+        twice = np.linalg.norm(n, axis=1)
+        return n / np.maximum(twice, 1e-300)[:, None], twice
+
+    # At rest: per view, which points of the skin are seen lit (facing the view, nothing in front).
+    u0, _ = facing(v0, skin)
+    pts0 = np.einsum("sk,fkc->fsc", b, v0[t[skin]]).reshape(-1, 3)  # (faces * samples, 3)
+    lit0 = []
+    for d, to_view in frames:
+        p = pts0 @ to_view
+        front = front_most(p[:, :2], v0[t[occ]] @ to_view, cell=cell)
+        seen = ~(front > p[:, 2] + eps)
+        lit0.append(seen & np.repeat(u0 @ d > 0, ns))
+    worst, faces = 0.0, 0
+    where: tuple[float, ...] = ()
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        u, twice = facing(v, skin)
+        uo, _ = facing(v, occ)
+        pts = np.einsum("sk,fkc->fsc", b, v[t[skin]]).reshape(-1, 3)
+        tri_o = v[t[occ]]
+        for k, (d, to_view) in enumerate(frames):
+            follow = np.flatnonzero(lit0[k])
+            if not len(follow):
+                continue
+            p = pts[follow] @ to_view
+            q = tri_o @ to_view
+            drawn_dark = cavity[occ] | (uo @ d < -LIP_BACKS_FACING)
+            # The nearest dark face over each point, then (only where there is one: the few) the nearest lit one.
+            front = front_most(p[:, :2], q[drawn_dark], cell=cell)
+            under = np.flatnonzero(np.isfinite(front))
+            front_lit = front_most(p[under, :2], q[~drawn_dark], cell=cell)
+            under = under[~(front_lit >= front[under] - eps)]  # NaN (no lit face over it): dark
+            # Skin behind another followed skin face that turned away is counted once, as that face's own area.
+            turned = np.flatnonzero((u @ d < -LIP_BACKS_FACING) & lit0[k].reshape(-1, ns).any(axis=1))
+            if len(turned) and len(under):
+                at = np.full(len(skin), -1, dtype=np.int64)
+                at[turned] = np.arange(len(turned))
+                over = front_most(p[under, :2], v[t[skin[turned]]] @ to_view, cell=cell, skip=at[follow[under] // ns])
+                under = under[~(over >= front[under] - eps)]
+            share = np.bincount(follow[under] // ns, minlength=len(skin)) / ns
+            area = float(np.sum(0.5 * twice * np.abs(u @ d) * share)) / iod**2
+            if area > worst:
+                worst, faces, where = area, int(np.count_nonzero(share)), tuple(float(x) for x in pose)
+    return worst, faces, where
 
 
 LIP_TOP_FACING = 0.5
@@ -1200,6 +1368,16 @@ def check_rig(
             f"lip faces show their back (a dark shard) over {1000 * backs:.2f}e-3 IOD^2 > "
             f"{1000 * limits.max_lip_backs:.2f}e-3 ({back_faces} face{'s' if back_faces != 1 else ''})"
         )
+    darkened = skin_dark_seen(
+        rig, landmarks, poses=skin_dark_poses((*poses, closure)), cavity_vertices=cavity_vertices, teeth=teeth
+    )
+    dark, dark_faces, dark_pose = (None, None, ()) if darkened is None else darkened
+    if dark is not None and dark > limits.max_skin_dark:
+        warns.append(
+            f"skin around the mouth is drawn dark (a shard on the chin or a cheek) over {1000 * dark:.2f}e-3 IOD^2 "
+            f"> {1000 * limits.max_skin_dark:.2f}e-3 ({dark_faces} face{'s' if dark_faces != 1 else ''}, "
+            f"pose {dark_pose})"
+        )
     carried = lip_tops_carried(
         rig, landmarks, poses=(*poses, closure), lip_pairs=lip_pairs, skip_vertices=cavity_vertices, teeth=teeth
     )
@@ -1244,6 +1422,9 @@ def check_rig(
         open_response=opening,
         lip_backs_iod2=backs,
         lip_backs_faces=back_faces,
+        skin_dark_iod2=dark,
+        skin_dark_faces=dark_faces,
+        skin_dark_pose=dark_pose,
         bilabial_gap_iod=at_m,
         lip_tops_iod2=tops,
         lip_tops_faces=top_faces,
@@ -1343,14 +1524,10 @@ def inside_split(
     if not len(near):
         return None
     tn = t[near]
-    ax, up, fwd = fr.axes
     local = (v0 - mid) @ fr.axes.T
     mouth = ((local[:, 2] < 0) & (np.abs(local[:, 0]) < 0.5 * width))[tn].any(axis=1)
     cell = _INSIDE_CELL * iod
-    to_views = []
-    for deg in views:
-        d = np.cos(np.radians(deg)) * fwd + np.sin(np.radians(deg)) * ax
-        to_views.append(np.stack([np.cross(up, d), up, d], axis=1))
+    to_views = [to_view for _, to_view in view_frames(fr.axes, views)]
     # Every view side by side across u (one search for all of them: each search's own cost is most of it).
     shift = 4.0 * INSIDE_REACH * iod
     q0 = np.stack([(v0 - mid)[tn] @ tv for tv in to_views])  # (V, m, 3, 3), about the mouth

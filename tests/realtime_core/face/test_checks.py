@@ -558,6 +558,99 @@ def test_lip_backs_seen_flags_a_face_turned_past_edge_on_that_no_other_figure_se
     assert hidden is not None and hidden[0] < 0.5 * got[0]
 
 
+class _Chin(_Lips):
+    """:class:`_Lips` with a strip of chin skin below (z = 0, x -0.2..0.2, y -0.6..-0.7, facing the viewer), a ledge
+    hanging from its lower edge on the right half (x 0..0.2, ``LEDGE`` IOD long, tilted ``REST`` degrees up from
+    facing the viewer: its top faces up and forward, as the underside of a chin seen nearly edge-on faces down and
+    forward), and a mouth cavity's square (the last four vertices, facing the viewer) 0.3 IOD behind the chin's left
+    half. mouth_open p turns the ledge up about its hinge by ``TURN * p / 0.3`` degrees (under 90: no flip) and
+    brings the cavity's square to 0.05 IOD in front of the chin, as a jaw that drops the chin behind a cavity that
+    stays."""
+
+    LEDGE, REST, TURN = 0.1, 60.0, 50.0
+
+    def __init__(self) -> None:
+        super().__init__(0.0)
+        lips = len(self.neutral)
+        xs = np.linspace(-0.2, 0.2, 5)
+        top = np.column_stack([xs, np.full(5, -0.6), np.zeros(5)])
+        hinge = np.column_stack([xs, np.full(5, -0.7), np.zeros(5)])
+        right = xs[2:]
+        a = np.radians(self.REST)
+        tip = np.column_stack([right, np.full(3, -0.7 - self.LEDGE * np.cos(a)), np.full(3, self.LEDGE * np.sin(a))])
+        cavity = np.array([[-0.2, -0.7, -0.3], [0.0, -0.7, -0.3], [0.0, -0.6, -0.3], [-0.2, -0.6, -0.3]])
+        self.neutral = np.vstack([self.neutral, top, hinge, tip, cavity])
+        t0, h0, p0, c0 = lips, lips + 5, lips + 10, lips + 13
+        t = [[h0 + c, h0 + c + 1, t0 + c + 1] for c in range(4)] + [[h0 + c, t0 + c + 1, t0 + c] for c in range(4)]
+        # The ledge's faces: normal (0, sin REST, cos REST), up and towards the viewer.
+        t += [[p0 + c, p0 + c + 1, h0 + 2 + c + 1] for c in range(2)]
+        t += [[p0 + c, h0 + 2 + c + 1, h0 + 2 + c] for c in range(2)]
+        t += [[c0, c0 + 1, c0 + 2], [c0, c0 + 2, c0 + 3]]
+        self.triangles = np.vstack([self.triangles, t])
+        self.tip, self.cavity = np.arange(p0, p0 + 3), np.arange(c0, c0 + 4)
+        self.chin = t0
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        a = np.radians(self.REST + self.TURN * float(p[2]) / 0.3)
+        v[self.tip, 1] = -0.7 - self.LEDGE * np.cos(a)
+        v[self.tip, 2] = self.LEDGE * np.sin(a)
+        v[self.cavity, 2] = -0.3 + 0.35 * float(p[2]) / 0.3
+        return v
+
+
+def test_skin_seen_dark_sees_a_chin_turned_past_edge_on_and_a_cavity_come_through_it() -> None:
+    """The chin's ledge turned 50 degrees (no flip) shows its back to the front view, drawn dark; the cavity's square,
+    come in front of the chin, covers two of its cells with the cavity's dark: two shards outside the lips that no lip
+    figure sees. The skin seen dark measures them: by hand, the ledge's area as projected on the front view (its
+    faces' corners, the shoelace formula) and the two cells the square covers (0.2 x 0.1 IOD, facing the view); the
+    chin behind the turned ledge is not counted again. At rest, and with the ledge and the square left where they
+    were, nothing is dark."""
+    from realtime_core.face.checks import SKIN_DARK_LIMIT, lip_backs_seen, skin_dark_seen
+
+    chin = _Chin()
+    lm = chin.landmarks()
+    pose = (0.0, 0.0, 0.3, 0.0)
+    got = skin_dark_seen(chin, lm, poses=(pose,), cavity_vertices=4)
+    assert got is not None
+    v = chin.deformed(np.array(pose))
+    ledge = chin.triangles[-6:-2]
+    xy = v[ledge][:, :, :2]
+    shoelace = 0.5 * np.abs(
+        (xy[:, 1, 0] - xy[:, 0, 0]) * (xy[:, 2, 1] - xy[:, 0, 1])
+        - (xy[:, 2, 0] - xy[:, 0, 0]) * (xy[:, 1, 1] - xy[:, 0, 1])
+    )
+    want = float(shoelace.sum()) + 0.2 * 0.1
+    assert float(shoelace.sum()) == pytest.approx(0.2 * chin.LEDGE * abs(np.cos(np.radians(110.0))), rel=1e-9)
+    assert got[0] == pytest.approx(want, rel=1e-9) and got[1] == 4 + 4 and got[2] == pose
+    assert got[0] > SKIN_DARK_LIMIT
+    rest = (0.0, 0.0, 0.0, 0.0)
+    assert skin_dark_seen(chin, lm, poses=(rest,), cavity_vertices=4) == (0.0, 0, ())
+    assert skin_dark_seen(_Lips(0.0), lm, poses=(pose,)) == (0.0, 0, ())
+    rep = check_rig(chin, lm, poses=(pose,), cavity_vertices=4)
+    assert rep.flipped_triangles == 0 and rep.skin_dark_iod2 == pytest.approx(want, rel=1e-9)
+    assert lip_backs_seen(chin, lm, poses=(pose,), skip_vertices=4) == (0.0, 0)
+    assert any("drawn dark" in w for w in rep.warnings) and f"skin seen dark {1000 * want:.2f}e-3" in rep.summary()
+    # The cavity's square is dark by its colour, not by its facing: counted as a face of the rig's own, it is lit
+    # and covers the chin as any skin does (only the ledge's back remains).
+    alone = skin_dark_seen(chin, lm, poses=(pose,), cavity_vertices=0)
+    assert alone is not None and alone[0] == pytest.approx(float(shoelace.sum()), rel=1e-9)
+
+
+def test_skin_dark_poses_keep_the_widest_openings_and_every_parameters_ends() -> None:
+    """The poses the skin seen dark is measured at: each parameter's largest and smallest value among the checked
+    poses, and every pose within SKIN_DARK_WIDEST of the widest opening (the measured frames at 0.45 beside 0.465)."""
+    from realtime_core.face.checks import SKIN_DARK_WIDEST, skin_dark_poses
+
+    kept = skin_dark_poses(EXTREME_POSES)
+    p = np.array(EXTREME_POSES)
+    assert set(kept) <= set(EXTREME_POSES) and len(set(kept)) == len(kept) < len(EXTREME_POSES)
+    for j in range(4):
+        assert np.array(kept)[:, j].max() == p[:, j].max() and np.array(kept)[:, j].min() == p[:, j].min()
+    wide = {q for q in EXTREME_POSES if q[2] >= p[:, 2].max() - SKIN_DARK_WIDEST}
+    assert len(wide) > 1 and wide <= set(kept)
+
+
 class _Shelf(_Lips):
     """:class:`_Lips` with a shelf hanging from the upper strip's cut row: a row of faces from the cut (y = 0, z = 0)
     down and forward to y = -0.02, z = 0.05, facing up (the lower lip's top, cut off with the upper lip where a knife
