@@ -852,6 +852,8 @@ class _LipBand(NamedTuple):
     viewer leaves the head there)."""
     near_at: np.ndarray
     """(m,) each face's index in ``near`` (-1: not one)."""
+    across_line: np.ndarray
+    """(n,) bool: the vertices within the lips' band across and along the mouth (as ``lips``), at any depth."""
 
 
 def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> _LipBand:
@@ -868,13 +870,13 @@ def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> 
     x = (v0 - mid) @ ((cl - cr) / max(width, 1e-300))
     along = np.clip(x / max(width, 1e-300) + 0.5, 0.0, 1.0)
     line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
-    band = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
-    band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
-    band &= (v0 - mid) @ fwd > -NOTCH_DEPTH * iod
+    across_line = np.abs(x) <= 0.5 * width + LIP_BACKS_BEYOND * iod
+    across_line &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
+    band = across_line & ((v0 - mid) @ fwd > -NOTCH_DEPTH * iod)
     near = np.flatnonzero((np.linalg.norm(v0 - mid, axis=1) < 1.5 * width)[t].any(axis=1))
     at = np.full(len(t), -1, dtype=np.int64)
     at[near] = np.arange(len(near))
-    return _LipBand(v0, t, fr, mid, x, np.flatnonzero(band[t].all(axis=1)), near, at)
+    return _LipBand(v0, t, fr, mid, x, np.flatnonzero(band[t].all(axis=1)), near, at, across_line)
 
 
 def lip_backs_seen(
@@ -978,15 +980,8 @@ def skin_dark_seen(
     front of it (the thin old woman's 2,956-triangle copy: the cavity's floor lies 0.33 IOD behind her chin at rest,
     past the :data:`INSIDE_DEPTH` that :func:`inside_shown` follows). None: no skin face near the mouth."""
     band = _lip_band_faces(rig, landmarks, 0)
-    v0, t, fr, mid = band.rest, band.faces, band.frame, band.middle
+    v0, t, fr, mid, in_band = band.rest, band.faces, band.frame, band.middle, band.across_line
     iod = fr.iod
-    _, up, _ = fr.axes
-    cl, cr = v0[landmarks.corner_left], v0[landmarks.corner_right]
-    width = float(np.linalg.norm(cl - cr))
-    along = np.clip(band.across / max(width, 1e-300) + 0.5, 0.0, 1.0)
-    line_h = (cr + along[:, None] * (cl - cr) - mid) @ up
-    in_band = np.abs(band.across) <= 0.5 * width + LIP_BACKS_BEYOND * iod
-    in_band &= np.abs((v0 - mid) @ up - line_h) < LIP_BACKS_BAND * iod
     dist = np.linalg.norm(v0 - mid, axis=1) / iod
     dark_part = np.zeros(len(v0), dtype=bool)
     if cavity_vertices:
