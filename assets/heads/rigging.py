@@ -2516,8 +2516,6 @@ def faces_seen(
     lips' meeting, :func:`assets.heads.knife.lips_meeting`) leaves the lower lip's top by the corner in faces that
     join the lower side by one edge, with two vertices hidden under the upper lip's overhang: removed as fins, they
     left a dark gap along the lips at rest (docs/animation.md, "The low-poly pale strip")."""
-    from assets.heads.cavity import front_depth
-
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     idx = np.flatnonzero(among)
