@@ -221,15 +221,9 @@ def project(
         return cache[key]
 
     exhausted = np.zeros(len(s), dtype=bool)
-    # The triangles in order of their vertices' distances to the head (quantised as above), not of their index: each
-    # repair changes what the next may take, and a head and its mirror image, with a symmetric simple model placed
-    # mirrored, meet the same triangles in the same order (in index order 22 of the 3,810-triangle Lee Perry-Smith's
-    # control points differed from its mirror image's; docs/animation.md, "A head and its mirror image").
-    seq = np.lexsort((np.arange(len(tri)), np.round(dist[tri, 0].sum(axis=1) / quantum)))
     for _ in range(len(tri) * 4):
         changed = False
-        for t_i in seq:
-            a, b, c = tri[t_i]
+        for t_i, (a, b, c) in enumerate(tri):
             if bad[t_i]:
                 continue
             fails = [(u, v) for u, v in ((a, b), (b, c), (c, a)) if not edge_ok(int(control[u]), int(control[v]))]

@@ -50,7 +50,7 @@ if TYPE_CHECKING:
 # piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median
 # edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
 # shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 79
+RIG_ALGORITHM = 78
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;

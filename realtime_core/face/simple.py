@@ -64,33 +64,9 @@ def frontal_visible(q: np.ndarray, *, cell: float = 0.03, tolerance: float = 0.0
     return q[:, 2] >= best[ij[:, 0] + 1, ij[:, 1] + 1] - tolerance
 
 
-MIRROR_TOLERANCE = 1e-4
-"""IOD: a vertex whose mirror image in the face's midplane lies this close to another vertex (or to itself) has that
-vertex as its mirror partner (:func:`mirror_partners`)."""
-
-
-def mirror_partners(q: np.ndarray, *, tolerance: float = MIRROR_TOLERANCE) -> np.ndarray:
-    """(k,) int: for points ``q`` (k, 3) in the face frame (IOD units, x across the face), the index of each one's
-    mirror image (x negated) among them, or its own index when none lies within ``tolerance``."""
-    from scipy.spatial import cKDTree
-
-    q = np.asarray(q, dtype=np.float64)
-    d, j = cKDTree(q).query(q * [-1.0, 1.0, 1.0])
-    own = np.arange(len(q))
-    return np.where(d <= tolerance, j, own)
-
-
-def _fps(points: np.ndarray, seeds: list[int], n: int, partners: np.ndarray | None = None) -> list[int]:
-    """Farthest-point sampling of n indices into points (k, 3), starting from ``seeds``. ``partners`` (k,) int
-    (:func:`mirror_partners`): each point chosen brings its mirror partner with it (seeds too), so a mirror-symmetric
-    set of points gives a mirror-symmetric choice (n may then be exceeded by one). Taken one at a time, the farthest
-    of a pair of equally far mirror images is the one of lower index, and the last few picks left single points on
-    one side: the simple face derived from the (exactly symmetric) built-in head had 5 vertices without a mirror image
-    beside the lips, and a head and its mirror image rigged from mirrored landmarks came out differently (the 3,810
-    triangle Lee Perry-Smith: mouth opening 0.92 and 0.81 of mouth_open; docs/animation.md, "A head and its mirror
-    image")."""
-    mate = np.arange(len(points)) if partners is None else np.asarray(partners)
-    chosen = list(dict.fromkeys(int(k) for s in seeds for k in (s, mate[s])))
+def _fps(points: np.ndarray, seeds: list[int], n: int) -> list[int]:
+    """Farthest-point sampling of n indices into points (k, 3), starting from ``seeds``."""
+    chosen = list(dict.fromkeys(seeds))
     d = np.full(len(points), np.inf)
     for s in chosen:
         d = np.minimum(d, np.linalg.norm(points - points[s], axis=1))
@@ -98,52 +74,9 @@ def _fps(points: np.ndarray, seeds: list[int], n: int, partners: np.ndarray | No
         i = int(np.argmax(d))
         if d[i] <= 0:
             break
-        for k in dict.fromkeys((i, int(mate[i]))):
-            if d[k] > 0:
-                chosen.append(k)
-                d = np.minimum(d, np.linalg.norm(points - points[k], axis=1))
+        chosen.append(i)
+        d = np.minimum(d, np.linalg.norm(points - points[i], axis=1))
     return chosen
-
-
-def _mirrored_triangulation(q: np.ndarray, verts: np.ndarray, mate: np.ndarray) -> np.ndarray:
-    """(m, 3) triangles indexing ``verts``: the Delaunay triangulation of their frontal projection (``q`` (n_h, 3),
-    the face frame), without the triangles whose mirror image (by ``mate`` (n_h,), :func:`mirror_partners`) is no
-    triangle, when every vertex has its mirror image among ``verts``. Two mirror-image pairs of vertices make an
-    isosceles trapezoid across the midline, whose corners lie on one circle: Delaunay may take either diagonal, either
-    is the other's mirror image, so no triangulation of those four is symmetric (the built-in head's simple face took
-    one below the lower lip, and its jaw unit carried to a head and to its mirror image differed by 0.07 IOD there).
-    Such a trapezoid is left open (its corners keep their other triangles): a vertex added on the midline inside it
-    instead made the MediaPipe face's rig fold (4 flips at upper_lip_raise), dropping one of its pairs 11."""
-    verts = np.asarray(verts, dtype=np.int64)
-    tri = Delaunay(q[verts][:, :2]).simplices
-    at = {int(x): i for i, x in enumerate(verts)}
-    mirror = np.array([at.get(int(mate[x]), -1) for x in verts])
-    if (mirror < 0).any():
-        return tri  # not a symmetric set of vertices: nothing to match
-    have = {tuple(sorted(t)) for t in tri.tolist()}
-    return tri[[tuple(sorted(mirror[t].tolist())) in have for t in tri.tolist()]]
-
-
-def mirror_name(name: str) -> str:
-    """The unit of the other side (ARKit's ``...Left`` <-> ``...Right``); a unit of no side is its own."""
-    return name.replace("Left", "\0").replace("Right", "Left").replace("\0", "Right")
-
-
-def _mirror_averaged(
-    units: dict[str, np.ndarray], verts: np.ndarray, mate: np.ndarray, frame: FaceFrame
-) -> dict[str, np.ndarray]:
-    """``units`` (name -> (k, 3) displacements at head vertices ``verts``) each averaged with the mirror image of its
-    other side's unit (:func:`mirror_name`; a unit of no side with its own), reflected in the face frame's midplane,
-    when every vertex has its mirror partner among ``verts`` (``mate`` (n_h,), :func:`mirror_partners`); else as they
-    are. The built-in head's jawOpen and mouthFunnel are not symmetric (0.013 and 0.036 IOD off their mirror images):
-    carried from a simple face that moves one side otherwise than the other, a head and its mirror image would open
-    their mouths differently."""
-    at = {int(x): i for i, x in enumerate(verts)}
-    mirror = np.array([at.get(int(mate[x]), -1) for x in verts])
-    if (mirror < 0).any():
-        return units
-    r = frame.axes.T @ np.diag([-1.0, 1.0, 1.0]) @ frame.axes  # reflection in the midplane (head units)
-    return {name: 0.5 * (d + units.get(mirror_name(name), d)[mirror] @ r.T) for name, d in units.items()}
 
 
 def derive_simple_model(
@@ -174,10 +107,6 @@ def derive_simple_model(
         ok &= np.asarray(candidates, dtype=bool)
     vis = np.zeros(len(h), dtype=bool)
     vis[ok] = frontal_visible(q[ok])
-    # A vertex whose mirror image is visible is too: the z-buffer's cells split a symmetric head's vertices on a cell
-    # border by rounding (4 of the built-in head's, one of them then sampled without its mirror image).
-    mate = mirror_partners(q)
-    vis |= vis[mate] & ok
     lm_set = np.zeros(len(h), dtype=bool)
     lm_set[[int(x) for x in landmark_vertices.values()]] = True
     extra_idx = [] if extra is None else [int(x) for x in extra]
@@ -194,18 +123,11 @@ def derive_simple_model(
     near_mouth = np.linalg.norm(q[pool] - mc, axis=1) <= config.mouth_radius
     mouth_pool = np.flatnonzero(near_mouth)
     mouth_seeds = [int(np.flatnonzero(mouth_pool == s)[0]) for s in seeds if near_mouth[s]]
-    # Mirror images chosen together: a symmetric head gives a symmetric simple face, so a head and its mirror image
-    # are rigged alike (an asymmetric head's vertices have no partners and are sampled as before).
-    at = -np.ones(len(h), dtype=np.int64)
-    at[pool] = np.arange(len(pool))
-    partners = np.where(ok[mate[pool]], at[mate[pool]], np.arange(len(pool)))
-    mouth_at = -np.ones(len(pool), dtype=np.int64)
-    mouth_at[mouth_pool] = np.arange(len(mouth_pool))
-    mouth_partners = np.where(near_mouth[partners], mouth_at[partners], mouth_at)[mouth_pool]
-    chosen_mouth = [int(mouth_pool[i]) for i in _fps(q[pool][mouth_pool], mouth_seeds, config.n_mouth, mouth_partners)]
-    chosen = _fps(q[pool], list(dict.fromkeys(seeds + chosen_mouth)), config.n_total, partners)
+    chosen_mouth = [int(mouth_pool[i]) for i in _fps(q[pool][mouth_pool], mouth_seeds, config.n_mouth)]
+    chosen = _fps(q[pool], list(dict.fromkeys(seeds + chosen_mouth)), config.n_total)
     verts = pool[np.array(chosen)]
-    tri = _mirrored_triangulation(q, verts, mate)
+
+    tri = Delaunay(q[verts][:, :2]).simplices
     # Mesh-path lengths between the chosen vertices, bounded for speed.
     adj = vertex_adjacency(len(h), head_triangles).tocoo()
     w = np.linalg.norm(h[adj.row] - h[adj.col], axis=1)
@@ -225,9 +147,7 @@ def derive_simple_model(
     if not keep:
         raise ConfigError("no triangle of the simple model survived the surface checks")
     triangles = np.array(keep, dtype=np.int64)
-    units = _mirror_averaged(
-        {name: np.asarray(d, dtype=np.float64)[verts] for name, d in targets.items()}, verts, mate, frame
-    )
+    units = {name: np.asarray(d, dtype=np.float64)[verts] for name, d in targets.items()}
     model = FaceModel(vertices=h[verts], triangles=triangles, animation_units=units, name="simple")
     return model, verts
 
