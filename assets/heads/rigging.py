@@ -2635,10 +2635,11 @@ def add_mouth_cavity(
     inside instead of the back of the head or the background. Every cavity vertex stays at least
     0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
     so a wide cavity behind a thin mask or a curved face never pokes through the skin.
-    It is a separate, still part (``part_names`` gains "mouth cavity"): the lips and jaw open over
-    it. Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
-    (the renderer paints a textured head from its texture alone). ``rig``: a Rig or a MorphRig (the
-    cavity does not move, so only the neutral and the triangles grow)."""
+    It is a separate part (``part_names`` gains "mouth cavity"): its floor follows the jaw, its roof stays with
+    the skull (:func:`_cavity_floor_sources`), so the chin the jaw swings down and back never passes behind it.
+    Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
+    (the renderer paints a textured head from its texture alone). ``rig``: a Rig (the cavity's rows of ``matrix``
+    and ``contact_spread`` are its sources' rows, weighted) or a MorphRig (its targets' rows likewise)."""
     from assets.heads.cavity import front_depth
 
     v0 = np.asarray(mesh.vertices, dtype=np.float64)
@@ -2670,22 +2671,21 @@ def add_mouth_cavity(
         q[outside, :2] = qc[:2] + 0.9 * (q[outside, :2] - qc[:2])
         outside = outside[np.isnan(front_depth(v0, mesh.triangles, frame, q[outside, :2]))]
     cv = frame.origin + q @ ax
+    sources = _cavity_floor_sources(rig, mesh, frame, q, qc[1], shape.down * iod)
     # Only surfaces less than CAVITY_FAR_WALL IOD behind a vertex count: further back, the front-most
     # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
-    # skin-coloured back of the head as a flat pink disc.
-    posed = []
+    # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, along the face
+    # frame's x and y as well, so each vertex is measured where the pose carries it; a push straight back moves
+    # no vertex across, so the deepest push any pose asks is the one needed at every pose.
+    push = np.zeros(len(q))
     for p in CAVITY_POSES:
-        d = front_depth(
-            np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
-            mesh.triangles,
-            frame,
-            q[:, :2],
-        )
-        posed.append(np.where(d > q[:, 2] - CAVITY_FAR_WALL * iod, d, np.nan))
-    skin = np.fmin.reduce(posed)
-    deeper = np.isfinite(skin) & (q[:, 2] > skin - 0.1 * iod)
-    cv[deeper] -= (q[deeper, 2] - (skin[deeper] - 0.1 * iod))[:, None] * ax[2]
+        posed = np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64)
+        qp = q + (sources @ (posed[: len(v0)] - v0)) @ ax.T
+        d = front_depth(posed, mesh.triangles, frame, qp[:, :2])
+        d = np.where(d > qp[:, 2] - CAVITY_FAR_WALL * iod, d, np.nan)
+        push = np.fmax(push, np.nan_to_num(qp[:, 2] - (d - 0.1 * iod), nan=0.0))
+    cv -= push[:, None] * ax[2]
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
@@ -2728,10 +2728,71 @@ def add_mouth_cavity(
     )
     meta = dict(rig.meta)
     meta["mouth_cavity"] = int(n_c)
+    # The cavity's vertices that follow the jaw join the moving set (appended after every head vertex, so it
+    # stays sorted), each row the weighted sum of its sources' rows: the frame stays one product.
+    follows = np.flatnonzero(sources.getnnz(axis=1) > 0)
+    moving = np.asarray(rig.moving, dtype=np.int64)
+    picked = (sources[follows][:, moving]).tocsr()  # (n_follow, n_moving): weights over the moving rows
+    grown: dict[str, Any] = {"moving": np.r_[moving, n0 + follows]}
+    if isinstance(rig, MorphRig):
+        rows = np.einsum("fm,pmc->pfc", picked.toarray(), np.asarray(rig.targets, dtype=np.float64))
+        grown["targets"] = np.concatenate([rig.targets, rows.astype(np.float32)], axis=1)
+    else:
+        grown["matrix"] = sp.vstack([rig.matrix, sp.kron(picked, sp.identity(3), format="csr") @ rig.matrix]).tocsr()
+        if rig.contact_spread is not None:
+            grown["contact_spread"] = sp.vstack([rig.contact_spread, picked @ rig.contact_spread]).tocsr()
     new = replace(
         rig,
         neutral=out.vertices.astype(np.float32),
         triangles=out.triangles.astype(np.int32),
         meta=meta,
+        **grown,
     )
     return new, out
+
+
+CAVITY_SOURCES = 4
+"""How many lower-face skin vertices (nearest across the face, seen from the front) each mouth cavity vertex
+follows."""
+
+
+def _cavity_floor_sources(
+    rig: Rig | MorphRig, mesh: HeadMesh, frame, q: np.ndarray, line: float, reach: float
+) -> sp.csr_matrix:
+    """(n_c, n) CSR weights: the displacement of each mouth cavity vertex (face-frame points ``q`` (n_c, 3), head
+    units) is this times the displacement of the head's n vertices. A cavity vertex below the corners' line
+    (``line``, face-frame y) follows the CAVITY_SOURCES lower-face skin vertices nearest it seen from the front
+    (inverse distance), times a weight from 0 on the line to 1 at the cavity's floor, ``reach`` (head units) below
+    it, linear between: the cavity's lower half stretches evenly as the jaw drops (a weight reaching 1 0.3 IOD below
+    the line stretched the edge beside each corner 3.1 times at the widest opening on Candide-3, 1.6 evenly;
+    the checks' edge stretch counts the cavity's faces). Lower-face skin: the
+    rig's moving vertices below the line, front-most at their place at rest and carried down by the widest
+    opening (the lower lip, the chin and the cheeks beside them; not the upper lip where the mouth line sags).
+    A still cavity lay 0.33 IOD behind the thin old woman's chin at rest, and the jaw carried the chin 0.58 IOD back,
+    through it (docs/animation.md, "Skin seen dark"): following the skin in front of it, the floor keeps its depth
+    behind the chin."""
+    from scipy.spatial import cKDTree
+
+    from assets.heads.cavity import front_depth
+
+    v0 = np.asarray(mesh.vertices, dtype=np.float64)
+    iod, ax = frame.iod, frame.axes
+    n, n_c = len(v0), len(q)
+    weight = np.clip((line - q[:, 1]) / reach, 0.0, 1.0)
+    moving = np.asarray(rig.moving, dtype=np.int64)
+    moving = moving[moving < n]
+    qv = (v0[moving] - frame.origin) @ ax.T
+    wide = np.asarray(rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])), dtype=np.float64)[moving]
+    down = (wide - v0[moving]) @ ax[1] < 0.0
+    cand = moving[(qv[:, 1] < line) & down]
+    qv = qv[(qv[:, 1] < line) & down]
+    front = qv[:, 2] >= front_depth(v0, mesh.triangles, frame, qv[:, :2]) - 0.01 * iod
+    cand, qv = cand[front], qv[front]
+    follow = np.flatnonzero(weight > 0.0)
+    if len(cand) < CAVITY_SOURCES or not len(follow):
+        return sp.csr_matrix((n_c, n))
+    dist, near = cKDTree(qv[:, :2]).query(q[follow, :2], k=CAVITY_SOURCES)
+    w = 1.0 / (dist + 0.01 * iod)
+    w *= (weight[follow] / w.sum(axis=1))[:, None]
+    rows = np.repeat(follow, CAVITY_SOURCES)
+    return sp.csr_matrix((w.ravel(), (rows, cand[near].ravel())), shape=(n_c, n))
