@@ -67,7 +67,7 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
-from realtime_core.face.checks import LIP_BACKS_BAND, boundary_edges
+from realtime_core.face.checks import LIP_BACKS_BAND, LIP_BACKS_VIEWS, boundary_edges, view_frames
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
@@ -87,6 +87,7 @@ from realtime_core.face.simple import (
     lip_contact_vertices,
     regional_shape_units,
 )
+from realtime_core.face.visibility import front_most
 from realtime_core.normals import triangle_normals
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
@@ -2429,6 +2430,14 @@ CAVITY_FAR_WALL = 0.45
 seen through the open mouth, not skin the cavity must stay behind."""
 
 
+CAVITY_SKIN_REACH = 1.5
+"""IOD: the skin a mouth cavity must stay behind is the head's faces with a corner this near its centre (the cavity
+reaches 0.75 IOD down and 0.45 back; seen at 35 degrees, the skin in front of it lies within this)."""
+
+CAVITY_PUSH_ROUNDS = 4
+"""How many times the mouth cavity's push back is measured again (a push moves a vertex across an oblique view)."""
+
+
 CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.0, 0.0, 0.0, 0.0),
     *itertools.product((-0.085, 0.055), (-0.125, 0.095), (0.0, 0.47), (-0.105, 0.04)),
@@ -2633,8 +2642,8 @@ def add_mouth_cavity(
     mouth corners, ``shape.width`` of the mouth wide, reaching ``shape.up`` IOD up, ``shape.down`` IOD
     down (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
     inside instead of the back of the head or the background. Every cavity vertex stays at least
-    0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
-    so a wide cavity behind a thin mask or a curved face never pokes through the skin.
+    0.1 IOD behind the head's surface in front of it (front and three-quarter views, rest and CAVITY_POSES, where the
+    pose carries it), so a wide cavity behind a thin mask or a curved face never pokes through the skin.
     It is a separate part (``part_names`` gains "mouth cavity"): its floor follows the jaw, its roof stays with
     the skull (:func:`_cavity_floor_sources`), so the chin the jaw swings down and back never passes behind it.
     Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
@@ -2675,23 +2684,49 @@ def add_mouth_cavity(
     # Only surfaces less than CAVITY_FAR_WALL IOD behind a vertex count: further back, the front-most
     # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
-    # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, along the face
-    # frame's x and y as well, so each vertex is measured where the pose carries it; a push straight back moves
-    # no vertex across, so the deepest push any pose asks is the one needed at every pose.
-    push = np.zeros(len(q))
-    for p in CAVITY_POSES:
-        posed = np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64)
-        qp = q + (sources @ (posed[: len(v0)] - v0)) @ ax.T
-        d = front_depth(posed, mesh.triangles, frame, qp[:, :2])
-        d = np.where(d > qp[:, 2] - CAVITY_FAR_WALL * iod, d, np.nan)
-        push = np.fmax(push, np.nan_to_num(qp[:, 2] - (d - 0.1 * iod), nan=0.0))
-    cv -= push[:, None] * ax[2]
+    # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, so each vertex is
+    # measured where the pose carries it, from the front and from the three-quarter views (LIP_BACKS_VIEWS): the
+    # floor carried down with the chin came out through the narrower jaw's side seen from 35 degrees (skin seen
+    # dark on the 3,810-triangle Lee Perry-Smith 0 -> 5.5e-3 IOD^2 with the front alone). A push straight back
+    # moves a vertex across an oblique view, so the push is measured again until no view asks more.
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
         for j in range(segments):
             j1 = (j + 1) % segments
             tris += [[r0 + j, r0 + j1, r1 + j1], [r0 + j, r1 + j1, r1 + j]]
+    # Measured at the vertices and at the faces' centroids and edge midpoints (a face 0.2-0.3 IOD across, flat behind
+    # a curved jaw, came 0.04 IOD through MediaPipe's from 35 degrees between vertices 0.1 IOD behind it); pushing a
+    # face's corners back by as much pushes those points back by as much.
+    tr = np.asarray(tris, dtype=np.int64)
+    pairs = np.unique(np.sort(np.r_[tr[:, [0, 1]], tr[:, [1, 2]], tr[:, [2, 0]]], axis=1), axis=0)
+    corner = np.r_[np.arange(len(q)), tr.ravel(), pairs.ravel()]
+    point = np.r_[np.arange(len(q)), np.repeat(np.arange(len(tr)) + len(q), 3), np.repeat(np.arange(len(pairs)), 2)]
+    point[len(q) + tr.size :] += len(q) + len(tr)
+    share = np.r_[np.ones(len(q)), np.full(tr.size, 1.0 / 3.0), np.full(pairs.size, 0.5)]
+    samples = sp.csr_matrix((share, (point, corner)), shape=(len(q) + len(tr) + len(pairs), len(q)))
+    views = view_frames(ax, LIP_BACKS_VIEWS)
+    near = np.linalg.norm(v0 - centre, axis=1) < CAVITY_SKIN_REACH * iod
+    t_near = np.asarray(mesh.triangles, dtype=np.int64)
+    t_near = t_near[near[t_near].any(axis=1)]
+    posed_all = [np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64) for p in CAVITY_POSES]
+    moves = [sources @ (posed[: len(v0)] - v0) for posed in posed_all]
+    push = np.zeros(len(q))
+    for _ in range(CAVITY_PUSH_ROUNDS):
+        more = np.zeros(len(q))
+        for posed, move in zip(posed_all, moves, strict=True):
+            at = samples @ (cv - push[:, None] * ax[2] + move)
+            for d_, to_view in views:
+                pv = at @ to_view
+                depth = front_most(pv[:, :2], posed[t_near] @ to_view, tolerance=1e-9)
+                depth = np.where(depth > pv[:, 2] - CAVITY_FAR_WALL * iod, depth, np.nan)
+                # Back along the face's forward axis by s brings a vertex s * cos(view) deeper in the view.
+                need = np.nan_to_num((pv[:, 2] - (depth - 0.1 * iod)) / float(d_ @ ax[2]), nan=0.0)
+                np.maximum.at(more, corner, need[point])
+        if not (more > 1e-6 * iod).any():
+            break
+        push += more
+    cv -= push[:, None] * ax[2]
     n0 = len(v0)
     ct = np.array(tris, dtype=np.int64) + n0
     # Wound so the inside faces the viewer (normals towards +forward at the deepest point).
@@ -2751,9 +2786,9 @@ def add_mouth_cavity(
     return new, out
 
 
-CAVITY_SOURCES = 4
-"""How many lower-face skin vertices (nearest across the face, seen from the front) each mouth cavity vertex
-follows."""
+CAVITY_SOURCE_WIDTH = 0.2
+"""IOD: the standard deviation of the Gaussian of distance by which a mouth cavity vertex weights the lower-face skin
+it follows (:func:`_cavity_floor_sources`)."""
 
 
 def _cavity_floor_sources(
@@ -2761,18 +2796,21 @@ def _cavity_floor_sources(
 ) -> sp.csr_matrix:
     """(n_c, n) CSR weights: the displacement of each mouth cavity vertex (face-frame points ``q`` (n_c, 3), head
     units) is this times the displacement of the head's n vertices. A cavity vertex below the corners' line
-    (``line``, face-frame y) follows the CAVITY_SOURCES lower-face skin vertices nearest it seen from the front
-    (inverse distance), times a weight from 0 on the line to 1 at the cavity's floor, ``reach`` (head units) below
-    it, linear between: the cavity's lower half stretches evenly as the jaw drops (a weight reaching 1 0.3 IOD below
-    the line stretched the edge beside each corner 3.1 times at the widest opening on Candide-3, 1.6 evenly;
-    the checks' edge stretch counts the cavity's faces). Lower-face skin: the
-    rig's moving vertices below the line, front-most at their place at rest and carried down by the widest
-    opening (the lower lip, the chin and the cheeks beside them; not the upper lip where the mouth line sags).
-    A still cavity lay 0.33 IOD behind the thin old woman's chin at rest, and the jaw carried the chin 0.58 IOD back,
-    through it (docs/animation.md, "Skin seen dark"): following the skin in front of it, the floor keeps its depth
-    behind the chin."""
-    from scipy.spatial import cKDTree
+    (``line``, face-frame y) follows the lower-face skin around it: its vertices weighted by a Gaussian of their
+    distance (CAVITY_SOURCE_WIDTH IOD), normalised, times a weight from 0 on the line to 1 at the cavity's floor,
+    ``reach`` (head units) below it, linear between; the roof stays with the skull. Lower-face skin: the rig's
+    moving vertices from the line down to ``reach`` below it, front-most at their place at rest and carried down by
+    the widest opening (the lower lip, the chin and the jaw's sides; not the upper lip where the mouth line sags).
 
+    Why: a still cavity lay 0.33 IOD behind the thin old woman's decimated chin at rest, and the jaw carried the chin
+    0.58 IOD back, through it (docs/animation.md, "Skin seen dark"); moving with the chin, the floor keeps its depth
+    behind it. Tried first: the 4 skin vertices nearest each cavity vertex seen from the front (the floor's lowest
+    vertex under Lee Perry-Smith's chin, where the skin drops 0.2 IOD at the widest opening, and the one 0.1 IOD behind
+    it, behind the chin's front dropping 0.37, turned their face over: a flip, and the rig's next try was taken); the
+    nearest across the face alone (the whole column; the floor's sides, carried as far down as the lower lip, came
+    out through the narrower jaw's side seen from 35 degrees). A linear weight stretches the cavity's lower half
+    evenly as the jaw drops (a weight reaching 1 0.3 IOD below the line stretched the edge beside each corner 3.1
+    times on Candide-3, whose own faces stretch 1.59 at most; the checks' edge stretch counts the cavity's faces)."""
     from assets.heads.cavity import front_depth
 
     v0 = np.asarray(mesh.vertices, dtype=np.float64)
@@ -2783,16 +2821,16 @@ def _cavity_floor_sources(
     moving = moving[moving < n]
     qv = (v0[moving] - frame.origin) @ ax.T
     wide = np.asarray(rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])), dtype=np.float64)[moving]
-    down = (wide - v0[moving]) @ ax[1] < 0.0
-    cand = moving[(qv[:, 1] < line) & down]
-    qv = qv[(qv[:, 1] < line) & down]
+    lower = (qv[:, 1] < line) & (qv[:, 1] > line - reach) & ((wide - v0[moving]) @ ax[1] < 0.0)
+    cand, qv = moving[lower], qv[lower]
     front = qv[:, 2] >= front_depth(v0, mesh.triangles, frame, qv[:, :2]) - 0.01 * iod
     cand, qv = cand[front], qv[front]
     follow = np.flatnonzero(weight > 0.0)
-    if len(cand) < CAVITY_SOURCES or not len(follow):
+    if not len(cand) or not len(follow):
         return sp.csr_matrix((n_c, n))
-    dist, near = cKDTree(qv[:, :2]).query(q[follow, :2], k=CAVITY_SOURCES)
-    w = 1.0 / (dist + 0.01 * iod)
+    # (n_follow, n_cand); a harmonic rig's rows are folded to (rows, 4) (Rig), so many sources cost no frame time.
+    w = np.exp(-0.5 * (np.linalg.norm(q[follow, None] - qv[None], axis=2) / (CAVITY_SOURCE_WIDTH * iod)) ** 2)
+    w[w < 1e-3 * w.max(axis=1, keepdims=True)] = 0.0
     w *= (weight[follow] / w.sum(axis=1))[:, None]
-    rows = np.repeat(follow, CAVITY_SOURCES)
-    return sp.csr_matrix((w.ravel(), (rows, cand[near].ravel())), shape=(n_c, n))
+    rows, cols = np.nonzero(w)
+    return sp.csr_matrix((w[rows, cols], (follow[rows], cand[cols])), shape=(n_c, n))
