@@ -2709,6 +2709,16 @@ def add_mouth_cavity(
     near = np.linalg.norm(v0 - centre, axis=1) < CAVITY_SKIN_REACH * iod
     t_near = np.asarray(mesh.triangles, dtype=np.int64)
     t_near = t_near[near[t_near].any(axis=1)]
+    # The skin of each view: the faces it sees at rest (lips closed: no inner wall of a hollow head shows). Against
+    # every face, a 35-degree view through the open mouth found the far cheek's inner wall just behind the cavity and
+    # pushed it behind that wall: the opening showed the head's lit inside beside a narrow dark panel at /a/.
+    skins = []
+    for _, to_view in views:
+        tv = v0[t_near] @ to_view
+        mid = tv.mean(axis=1)
+        facing = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])[:, 2]
+        top = front_most(mid[:, :2], tv, tolerance=1e-9)
+        skins.append(t_near[(top <= mid[:, 2] + 1e-4 * iod) & (facing * np.sign(np.nanmedian(facing)) > 0)])
     posed_all = [np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64) for p in CAVITY_POSES]
     moves = [sources @ (posed[: len(v0)] - v0) for posed in posed_all]
     push = np.zeros(len(q))
@@ -2716,9 +2726,9 @@ def add_mouth_cavity(
         more = np.zeros(len(q))
         for posed, move in zip(posed_all, moves, strict=True):
             at = samples @ (cv - push[:, None] * ax[2] + move)
-            for d_, to_view in views:
+            for (d_, to_view), skin in zip(views, skins, strict=True):
                 pv = at @ to_view
-                depth = front_most(pv[:, :2], posed[t_near] @ to_view, tolerance=1e-9)
+                depth = front_most(pv[:, :2], posed[skin] @ to_view, tolerance=1e-9)
                 depth = np.where(depth > pv[:, 2] - CAVITY_FAR_WALL * iod, depth, np.nan)
                 # Back along the face's forward axis by s brings a vertex s * cos(view) deeper in the view.
                 need = np.nan_to_num((pv[:, 2] - (depth - 0.1 * iod)) / float(d_ @ ax[2]), nan=0.0)
