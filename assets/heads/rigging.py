@@ -67,7 +67,7 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
-from realtime_core.face.checks import LIP_BACKS_BAND, LIP_BACKS_VIEWS, boundary_edges, view_frames
+from realtime_core.face.checks import LIP_BACKS_BAND, boundary_edges, view_frames
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
@@ -2437,6 +2437,12 @@ reaches 0.75 IOD down and 0.45 back; seen at 35 degrees, the skin in front of it
 CAVITY_PUSH_ROUNDS = 4
 """How many times the mouth cavity's push back is measured again (a push moves a vertex across an oblique view)."""
 
+CAVITY_VIEWS = (0.0,)
+"""Degrees about the face's up axis: the views (orthographic) from which the mouth cavity is kept behind the skin each
+sees at rest. The front alone: with the three-quarter views (LIP_BACKS_VIEWS) too, the floor's sides stayed inside
+the jaw (skin seen dark on MediaPipe 1.04e-3 IOD^2 -> 0) but the push moved the cavity behind the far corner's inner
+lip wall, which showed lit inside the opening at /a/ seen from 35 degrees (Lee Perry-Smith, automatic landmarks)."""
+
 
 CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.0, 0.0, 0.0, 0.0),
@@ -2641,8 +2647,8 @@ def add_mouth_cavity(
     ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
     mouth corners, ``shape.width`` of the mouth wide, reaching ``shape.up`` IOD up, ``shape.down`` IOD
     down (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
-    inside instead of the back of the head or the background. Every cavity vertex stays at least
-    0.1 IOD behind the head's surface in front of it (front and three-quarter views, rest and CAVITY_POSES, where the
+    inside instead of the back of the head or the background. Every cavity vertex, face centroid and edge midpoint
+    stays at least 0.1 IOD behind the skin in front of it (seen from the front, at rest and at CAVITY_POSES, where the
     pose carries it), so a wide cavity behind a thin mask or a curved face never pokes through the skin.
     It is a separate part (``part_names`` gains "mouth cavity"): its floor follows the jaw, its roof stays with
     the skull (:func:`_cavity_floor_sources`), so the chin the jaw swings down and back never passes behind it.
@@ -2685,10 +2691,7 @@ def add_mouth_cavity(
     # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
     # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, so each vertex is
-    # measured where the pose carries it, from the front and from the three-quarter views (LIP_BACKS_VIEWS): the
-    # floor carried down with the chin came out through the narrower jaw's side seen from 35 degrees (skin seen
-    # dark on the 3,810-triangle Lee Perry-Smith 0 -> 5.5e-3 IOD^2 with the front alone). A push straight back
-    # moves a vertex across an oblique view, so the push is measured again until no view asks more.
+    # measured where the pose carries it (CAVITY_VIEWS).
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
@@ -2705,13 +2708,11 @@ def add_mouth_cavity(
     point[len(q) + tr.size :] += len(q) + len(tr)
     share = np.r_[np.ones(len(q)), np.full(tr.size, 1.0 / 3.0), np.full(pairs.size, 0.5)]
     samples = sp.csr_matrix((share, (point, corner)), shape=(len(q) + len(tr) + len(pairs), len(q)))
-    views = view_frames(ax, LIP_BACKS_VIEWS)
+    views = view_frames(ax, CAVITY_VIEWS)
     near = np.linalg.norm(v0 - centre, axis=1) < CAVITY_SKIN_REACH * iod
     t_near = np.asarray(mesh.triangles, dtype=np.int64)
     t_near = t_near[near[t_near].any(axis=1)]
-    # The skin of each view: the faces it sees at rest (lips closed: no inner wall of a hollow head shows). Against
-    # every face, a 35-degree view through the open mouth found the far cheek's inner wall just behind the cavity and
-    # pushed it behind that wall: the opening showed the head's lit inside beside a narrow dark panel at /a/.
+    # The skin of each view: the faces it sees at rest (lips closed: no inner wall of a hollow head shows).
     skins = []
     for _, to_view in views:
         tv = v0[t_near] @ to_view
