@@ -2828,11 +2828,13 @@ def _cavity_floor_sources(
     iod, ax = frame.iod, frame.axes
     n, n_c = len(v0), len(q)
     weight = np.clip((line - q[:, 1]) / reach, 0.0, 1.0)
+    # The rim's two ends lie on the line up to rounding (sin(pi) != 0): none of them moves, however the head is placed.
+    weight[weight < 1e-6] = 0.0
     moving = np.asarray(rig.moving, dtype=np.int64)
     moving = moving[moving < n]
     qv = (v0[moving] - frame.origin) @ ax.T
     wide = np.asarray(rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])), dtype=np.float64)[moving]
-    lower = (qv[:, 1] < line) & (qv[:, 1] > line - reach) & ((wide - v0[moving]) @ ax[1] < 0.0)
+    lower = (qv[:, 1] < line) & (qv[:, 1] > line - reach) & ((wide - v0[moving]) @ ax[1] < -1e-6 * iod)
     cand, qv = moving[lower], qv[lower]
     front = qv[:, 2] >= front_depth(v0, mesh.triangles, frame, qv[:, :2]) - 0.01 * iod
     cand, qv = cand[front], qv[front]
