@@ -15,8 +15,8 @@
    :mod:`assets.heads.knife`). Distinct inner
    lips joined by a strip of triangles (the MediaPipe face) have the strip removed instead
    (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
-   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
-   still mouth cavity (:func:`add_mouth_cavity`).
+   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark
+   mouth cavity whose floor follows the jaw (:func:`add_mouth_cavity`).
 4. Sec. 5 weights (or RBF), precomputed into the rig.
 """
 
