@@ -385,11 +385,11 @@ def with_mouth_cavity(
     landmark_finder: Callable[[HeadMesh], Mapping[str, object]] | None = None,
 ):
     """A head driven by its own targets (:class:`assets.heads.head.Head` with a MorphRig): one whose mouth opens onto
-    nothing gets the still, dark mouth cavity retargeted heads get; without a texture, the inside of its mouth is
-    darkened as a retargeted head's is (:func:`with_dark_mouth_inside`). Landmarks: ``landmark_points`` (name -> (3,)
-    point) or the rig's meta; for an untextured head with inner-mouth parts and neither, ``landmark_finder(mesh)``
-    (the automatic landmarks; a full-body avatar's glb carries none). Without landmarks (or when the finder finds
-    none) the head is returned unchanged (its mouth cannot be found)."""
+    nothing gets the dark mouth cavity retargeted heads get (its floor following the jaw); without a texture, the
+    inside of its mouth is darkened as a retargeted head's is (:func:`with_dark_mouth_inside`). Landmarks:
+    ``landmark_points`` (name -> (3,) point) or the rig's meta; for an untextured head with inner-mouth parts and
+    neither, ``landmark_finder(mesh)`` (the automatic landmarks; a full-body avatar's glb carries none). Without
+    landmarks (or when the finder finds none) the head is returned unchanged (its mouth cannot be found)."""
     from assets.heads.head import Head
     from assets.heads.rigging import MASK_CAVITY, WIDE_OPEN, add_mouth_cavity, mouth_landmarks
     from realtime_core.face import face_frame
@@ -416,16 +416,26 @@ def with_mouth_cavity(
         new_rig, new_mesh = add_mouth_cavity(
             rig, mesh, frame, idx["corner_left"], idx["corner_right"], shape=MASK_CAVITY
         )
-        n_c = len(new_mesh.vertices) - len(v)
         targets = None
         if mesh.targets:
-            targets = {
-                k: np.vstack([np.asarray(d), np.zeros((n_c, 3), dtype=np.asarray(d).dtype)])
-                for k, d in mesh.targets.items()
-            }
+            # The mesh's targets as the rig's: the cavity's floor follows the jaw (add_mouth_cavity).
+            targets = {k: target_with_cavity(np.asarray(d), new_rig, k, len(v)) for k, d in mesh.targets.items()}
         head = Head(new_rig, replace(new_mesh, targets=targets))
     rest = np.asarray(head.rig.neutral, dtype=np.float64)
     wide = head.rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0]))
     cavity = int(head.rig.meta.get("mouth_cavity", 0) or 0)
     shaded = with_dark_mouth_inside(head.mesh, rest, frame, idx, skip=cavity, wide=wide)
     return head if shaded is head.mesh else Head(head.rig, shaded)
+
+
+def target_with_cavity(d: np.ndarray, rig, name: str, n0: int) -> np.ndarray:
+    """A mesh target ``d`` (n0, 3) of the head's own vertices grown by the rows of the mouth cavity appended after
+    them (rig's vertices n0..): the rig's target ``name`` there (its floor following the jaw), zero where the rig
+    does not move the cavity or drives no such target (a Rig, which has no named targets)."""
+    out = np.zeros((len(rig.neutral), 3), dtype=d.dtype)
+    out[:n0] = d
+    rows = np.flatnonzero(np.asarray(rig.moving) >= n0)
+    names = tuple(getattr(rig, "names", ()))
+    if name in names and len(rows):
+        out[np.asarray(rig.moving)[rows]] = rig.targets[names.index(name)][rows]
+    return out

@@ -264,9 +264,8 @@ def carried_rig(proxy: Rig, proxy_mesh: HeadMesh, vertices: np.ndarray, triangle
     pt = np.asarray(proxy.triangles, dtype=np.int64)
     pt = pt[(pt < n_src).all(axis=1)]
     b = carried_rows(pv[:n_src], pt, vertices=vertices, **kw)  # type: ignore[arg-type]
-    pick = sp.csr_matrix(
-        (np.ones(len(proxy.moving)), (proxy.moving, np.arange(len(proxy.moving)))), shape=(n_src, len(proxy.moving))
-    )
+    own = np.flatnonzero(proxy.moving < n_src)  # the cavity's moving rows (its floor follows the jaw) are no source
+    pick = sp.csr_matrix((np.ones(len(own)), (proxy.moving[own], own)), shape=(n_src, len(proxy.moving)))
     b_moving = (b @ pick).tocsr()
     moving = np.flatnonzero(np.diff(b_moving.indptr) > 0)
     rows = sp.kron(b_moving[moving], sp.identity(3, format="csr"), format="csr") @ proxy.matrix.astype(np.float64)

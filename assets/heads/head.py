@@ -392,6 +392,7 @@ def morph_head_from_arrays(arrays: Mapping[str, Any], loaded: HeadMesh, generati
 
     import numpy as np
 
+    from assets.heads.cavity import target_with_cavity
     from assets.heads.targets import morph_rig_from_arrays
 
     info = json.loads(str(arrays["head_meta"]))
@@ -408,9 +409,12 @@ def morph_head_from_arrays(arrays: Mapping[str, Any], loaded: HeadMesh, generati
         raise ValueError(f"vertices {v.shape} are not the mesh's {len(loaded.vertices)}")
     if t.ndim != 2 or t.shape[1] != 3 or (t.size and not 0 <= int(t.min()) <= int(t.max()) < n):
         raise ValueError(f"triangles {t.shape} do not index {n} vertices")
+    rig = morph_rig_from_arrays(arrays, v, t)
+    if len(rig.moving) and not 0 <= int(rig.moving.min()) <= int(rig.moving.max()) < n:
+        raise ValueError(f"moving vertices do not index {n} vertices")
     targets = loaded.targets
-    if targets and n > n0:  # the mouth cavity's vertices (with_mouth_cavity): still under every target
-        targets = {k: np.vstack([d, np.zeros((n - n0, 3), dtype=np.asarray(d).dtype)]) for k, d in targets.items()}
+    if targets and n > n0:  # the mouth cavity's vertices (with_mouth_cavity): as the rig moves them (its floor)
+        targets = {k: target_with_cavity(np.asarray(d), rig, k, n0) for k, d in targets.items()}
     kind = info["texture"]
     if kind not in ("none", "loaded", "stored"):
         raise ValueError(f"texture {kind!r}")
@@ -428,9 +432,6 @@ def morph_head_from_arrays(arrays: Mapping[str, Any], loaded: HeadMesh, generati
         part=arrays.get("mesh_part"),
         part_names=tuple(str(x) for x in info["part_names"]),
     )
-    rig = morph_rig_from_arrays(arrays, v, t)
-    if len(rig.moving) and not 0 <= int(rig.moving.min()) <= int(rig.moving.max()) < n:
-        raise ValueError(f"moving vertices do not index {n} vertices")
     return Head(replace(rig, meta={**rig.meta, "head": loaded.name}), mesh)
 
 

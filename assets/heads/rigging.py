@@ -15,8 +15,8 @@
    :mod:`assets.heads.knife`). Distinct inner
    lips joined by a strip of triangles (the MediaPipe face) have the strip removed instead
    (:func:`assets.heads.cavity.lip_membrane`); lips modelled apart rest closed
-   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark,
-   still mouth cavity (:func:`add_mouth_cavity`).
+   (:func:`realtime_core.face.rig.with_rest_pose`). A mouth that opens onto nothing gets a dark
+   mouth cavity whose floor follows the jaw (:func:`add_mouth_cavity`).
 4. Sec. 5 weights (or RBF), precomputed into the rig.
 """
 
@@ -67,7 +67,7 @@ from realtime_core.face import (
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
-from realtime_core.face.checks import LIP_BACKS_BAND, boundary_edges
+from realtime_core.face.checks import LIP_BACKS_BAND, boundary_edges, view_frames
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.projection import edge_length_graph, vertex_adjacency
 from realtime_core.face.rig import (
@@ -87,6 +87,7 @@ from realtime_core.face.simple import (
     lip_contact_vertices,
     regional_shape_units,
 )
+from realtime_core.face.visibility import front_most
 from realtime_core.normals import triangle_normals
 
 MOUTH_GROUPS: tuple[tuple[str, ...], ...] = (
@@ -2429,6 +2430,20 @@ CAVITY_FAR_WALL = 0.45
 seen through the open mouth, not skin the cavity must stay behind."""
 
 
+CAVITY_SKIN_REACH = 1.5
+"""IOD: the skin a mouth cavity must stay behind is the head's faces with a corner this near its centre (the cavity
+reaches 0.75 IOD down and 0.45 back; seen at 35 degrees, the skin in front of it lies within this)."""
+
+CAVITY_PUSH_ROUNDS = 4
+"""How many times the mouth cavity's push back is measured again (a push moves a vertex across an oblique view)."""
+
+CAVITY_VIEWS = (0.0,)
+"""Degrees about the face's up axis: the views (orthographic) from which the mouth cavity is kept behind the skin each
+sees at rest. The front alone: with the three-quarter views (LIP_BACKS_VIEWS) too, the floor's sides stayed inside
+the jaw (skin seen dark on MediaPipe 1.04e-3 IOD^2 -> 0) but the push moved the cavity behind the far corner's inner
+lip wall, which showed lit inside the opening at /a/ seen from 35 degrees (Lee Perry-Smith, automatic landmarks)."""
+
+
 CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.0, 0.0, 0.0, 0.0),
     *itertools.product((-0.085, 0.055), (-0.125, 0.095), (0.0, 0.47), (-0.105, 0.04)),
@@ -2632,13 +2647,14 @@ def add_mouth_cavity(
     ellipsoid (``rings`` x ``segments`` quads) open towards the face, its rim 0.15 IOD behind the
     mouth corners, ``shape.width`` of the mouth wide, reaching ``shape.up`` IOD up, ``shape.down`` IOD
     down (below the widest opening, 0.45 IOD) and 0.45 IOD further back, so the open mouth shows a dark
-    inside instead of the back of the head or the background. Every cavity vertex stays at least
-    0.1 IOD behind the head's front surface at its place (:func:`assets.heads.cavity.front_depth`),
-    so a wide cavity behind a thin mask or a curved face never pokes through the skin.
-    It is a separate, still part (``part_names`` gains "mouth cavity"): the lips and jaw open over
-    it. Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
-    (the renderer paints a textured head from its texture alone). ``rig``: a Rig or a MorphRig (the
-    cavity does not move, so only the neutral and the triangles grow)."""
+    inside instead of the back of the head or the background. Every cavity vertex, face centroid and edge midpoint
+    stays at least 0.1 IOD behind the skin in front of it (seen from the front, at rest and at CAVITY_POSES, where the
+    pose carries it), so a wide cavity behind a thin mask or a curved face never pokes through the skin.
+    It is a separate part (``part_names`` gains "mouth cavity"): its floor follows the jaw, its roof stays with
+    the skull (:func:`_cavity_floor_sources`), so the chin the jaw swings down and back never passes behind it.
+    Its colour is CAVITY_COLOR; on a textured head its UVs point at the texture's darkest block
+    (the renderer paints a textured head from its texture alone). ``rig``: a Rig (the cavity's rows of ``matrix``
+    and ``contact_spread`` are its sources' rows, weighted) or a MorphRig (its targets' rows likewise)."""
     from assets.heads.cavity import front_depth
 
     v0 = np.asarray(mesh.vertices, dtype=np.float64)
@@ -2670,28 +2686,58 @@ def add_mouth_cavity(
         q[outside, :2] = qc[:2] + 0.9 * (q[outside, :2] - qc[:2])
         outside = outside[np.isnan(front_depth(v0, mesh.triangles, frame, q[outside, :2]))]
     cv = frame.origin + q @ ax
+    sources = _cavity_floor_sources(rig, mesh, frame, q, qc[1], shape.down * iod)
     # Only surfaces less than CAVITY_FAR_WALL IOD behind a vertex count: further back, the front-most
     # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
-    # skin-coloured back of the head as a flat pink disc.
-    posed = []
-    for p in CAVITY_POSES:
-        d = front_depth(
-            np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64),
-            mesh.triangles,
-            frame,
-            q[:, :2],
-        )
-        posed.append(np.where(d > q[:, 2] - CAVITY_FAR_WALL * iod, d, np.nan))
-    skin = np.fmin.reduce(posed)
-    deeper = np.isfinite(skin) & (q[:, 2] > skin - 0.1 * iod)
-    cv[deeper] -= (q[deeper, 2] - (skin[deeper] - 0.1 * iod))[:, None] * ax[2]
+    # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, so each vertex is
+    # measured where the pose carries it (CAVITY_VIEWS).
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
         for j in range(segments):
             j1 = (j + 1) % segments
             tris += [[r0 + j, r0 + j1, r1 + j1], [r0 + j, r1 + j1, r1 + j]]
+    # Measured at the vertices and at the faces' centroids and edge midpoints (a face 0.2-0.3 IOD across, flat behind
+    # a curved jaw, came 0.04 IOD through MediaPipe's from 35 degrees between vertices 0.1 IOD behind it); pushing a
+    # face's corners back by as much pushes those points back by as much.
+    tr = np.asarray(tris, dtype=np.int64)
+    pairs = np.unique(np.sort(np.r_[tr[:, [0, 1]], tr[:, [1, 2]], tr[:, [2, 0]]], axis=1), axis=0)
+    corner = np.r_[np.arange(len(q)), tr.ravel(), pairs.ravel()]
+    point = np.r_[np.arange(len(q)), np.repeat(np.arange(len(tr)) + len(q), 3), np.repeat(np.arange(len(pairs)), 2)]
+    point[len(q) + tr.size :] += len(q) + len(tr)
+    share = np.r_[np.ones(len(q)), np.full(tr.size, 1.0 / 3.0), np.full(pairs.size, 0.5)]
+    samples = sp.csr_matrix((share, (point, corner)), shape=(len(q) + len(tr) + len(pairs), len(q)))
+    views = view_frames(ax, CAVITY_VIEWS)
+    near = np.linalg.norm(v0 - centre, axis=1) < CAVITY_SKIN_REACH * iod
+    t_near = np.asarray(mesh.triangles, dtype=np.int64)
+    t_near = t_near[near[t_near].any(axis=1)]
+    # The skin of each view: the faces it sees at rest (lips closed: no inner wall of a hollow head shows).
+    skins = []
+    for _, to_view in views:
+        tv = v0[t_near] @ to_view
+        mid = tv.mean(axis=1)
+        facing = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])[:, 2]
+        top = front_most(mid[:, :2], tv, tolerance=1e-9)
+        skins.append(t_near[(top <= mid[:, 2] + 1e-4 * iod) & (facing * np.sign(np.nanmedian(facing)) > 0)])
+    posed_all = [np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64) for p in CAVITY_POSES]
+    moves = [sources @ (posed[: len(v0)] - v0) for posed in posed_all]
+    push = np.zeros(len(q))
+    for _ in range(CAVITY_PUSH_ROUNDS):
+        more = np.zeros(len(q))
+        for posed, move in zip(posed_all, moves, strict=True):
+            at = samples @ (cv - push[:, None] * ax[2] + move)
+            for (d_, to_view), skin in zip(views, skins, strict=True):
+                pv = at @ to_view
+                depth = front_most(pv[:, :2], posed[skin] @ to_view, tolerance=1e-9)
+                depth = np.where(depth > pv[:, 2] - CAVITY_FAR_WALL * iod, depth, np.nan)
+                # Back along the face's forward axis by s brings a vertex s * cos(view) deeper in the view.
+                need = np.nan_to_num((pv[:, 2] - (depth - 0.1 * iod)) / float(d_ @ ax[2]), nan=0.0)
+                np.maximum.at(more, corner, need[point])
+        if not (more > 1e-6 * iod).any():
+            break
+        push += more
+    cv -= push[:, None] * ax[2]
     n0 = len(v0)
     ct = np.array(tris, dtype=np.int64) + n0
     # Wound so the inside faces the viewer (normals towards +forward at the deepest point).
@@ -2728,10 +2774,76 @@ def add_mouth_cavity(
     )
     meta = dict(rig.meta)
     meta["mouth_cavity"] = int(n_c)
+    # The cavity's vertices that follow the jaw join the moving set (appended after every head vertex, so it
+    # stays sorted), each row the weighted sum of its sources' rows: the frame stays one product.
+    follows = np.flatnonzero(sources.getnnz(axis=1) > 0)
+    moving = np.asarray(rig.moving, dtype=np.int64)
+    picked = (sources[follows][:, moving]).tocsr()  # (n_follow, n_moving): weights over the moving rows
+    grown: dict[str, Any] = {"moving": np.r_[moving, n0 + follows]}
+    if isinstance(rig, MorphRig):
+        rows = np.einsum("fm,pmc->pfc", picked.toarray(), np.asarray(rig.targets, dtype=np.float64))
+        grown["targets"] = np.concatenate([rig.targets, rows.astype(np.float32)], axis=1)
+    else:
+        grown["matrix"] = sp.vstack([rig.matrix, sp.kron(picked, sp.identity(3), format="csr") @ rig.matrix]).tocsr()
+        if rig.contact_spread is not None:
+            grown["contact_spread"] = sp.vstack([rig.contact_spread, picked @ rig.contact_spread]).tocsr()
     new = replace(
         rig,
         neutral=out.vertices.astype(np.float32),
         triangles=out.triangles.astype(np.int32),
         meta=meta,
+        **grown,
     )
     return new, out
+
+
+CAVITY_SOURCE_WIDTH = 0.2
+"""IOD: the standard deviation of the Gaussian of distance by which a mouth cavity vertex weights the lower-face skin
+it follows (:func:`_cavity_floor_sources`)."""
+
+
+def _cavity_floor_sources(
+    rig: Rig | MorphRig, mesh: HeadMesh, frame, q: np.ndarray, line: float, reach: float
+) -> sp.csr_matrix:
+    """(n_c, n) CSR weights: the displacement of each mouth cavity vertex (face-frame points ``q`` (n_c, 3), head
+    units) is this times the displacement of the head's n vertices. A cavity vertex below the corners' line
+    (``line``, face-frame y) follows the lower-face skin around it: its vertices weighted by a Gaussian of their
+    distance (CAVITY_SOURCE_WIDTH IOD), normalised, times a weight from 0 on the line to 1 at the cavity's floor,
+    ``reach`` (head units) below it, linear between; the roof stays with the skull. Lower-face skin: the rig's
+    moving vertices from the line down to ``reach`` below it, front-most at their place at rest and carried down by
+    the widest opening (the lower lip, the chin and the jaw's sides; not the upper lip where the mouth line sags).
+
+    Why: a still cavity lay 0.33 IOD behind the thin old woman's decimated chin at rest, and the jaw carried the chin
+    0.58 IOD back, through it (docs/animation.md, "Skin seen dark"); moving with the chin, the floor keeps its depth
+    behind it. Tried first: the 4 skin vertices nearest each cavity vertex seen from the front (the floor's lowest
+    vertex under Lee Perry-Smith's chin, where the skin drops 0.2 IOD at the widest opening, and the one 0.1 IOD behind
+    it, behind the chin's front dropping 0.37, turned their face over: a flip, and the rig's next try was taken); the
+    nearest across the face alone (the whole column; the floor's sides, carried as far down as the lower lip, came
+    out through the narrower jaw's side seen from 35 degrees). A linear weight stretches the cavity's lower half
+    evenly as the jaw drops (a weight reaching 1 0.3 IOD below the line stretched the edge beside each corner 3.1
+    times on Candide-3, whose own faces stretch 1.59 at most; the checks' edge stretch counts the cavity's faces)."""
+    from assets.heads.cavity import front_depth
+
+    v0 = np.asarray(mesh.vertices, dtype=np.float64)
+    iod, ax = frame.iod, frame.axes
+    n, n_c = len(v0), len(q)
+    weight = np.clip((line - q[:, 1]) / reach, 0.0, 1.0)
+    # The rim's two ends lie on the line up to rounding (sin(pi) != 0): none of them moves, however the head is placed.
+    weight[weight < 1e-6] = 0.0
+    moving = np.asarray(rig.moving, dtype=np.int64)
+    moving = moving[moving < n]
+    qv = (v0[moving] - frame.origin) @ ax.T
+    wide = np.asarray(rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])), dtype=np.float64)[moving]
+    lower = (qv[:, 1] < line) & (qv[:, 1] > line - reach) & ((wide - v0[moving]) @ ax[1] < -1e-6 * iod)
+    cand, qv = moving[lower], qv[lower]
+    front = qv[:, 2] >= front_depth(v0, mesh.triangles, frame, qv[:, :2]) - 0.01 * iod
+    cand, qv = cand[front], qv[front]
+    follow = np.flatnonzero(weight > 0.0)
+    if not len(cand) or not len(follow):
+        return sp.csr_matrix((n_c, n))
+    # (n_follow, n_cand); a harmonic rig's rows are folded to (rows, 4) (Rig), so many sources cost no frame time.
+    w = np.exp(-0.5 * (np.linalg.norm(q[follow, None] - qv[None], axis=2) / (CAVITY_SOURCE_WIDTH * iod)) ** 2)
+    w[w < 1e-3 * w.max(axis=1, keepdims=True)] = 0.0
+    w *= (weight[follow] / w.sum(axis=1))[:, None]
+    rows, cols = np.nonzero(w)
+    return sp.csr_matrix((w[rows, cols], (follow[rows], cand[cols])), shape=(n_c, n))

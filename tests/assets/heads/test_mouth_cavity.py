@@ -522,3 +522,57 @@ def test_a_textured_heads_teeth_are_darkened_by_vertex_colours_that_multiply_its
         with HeadRenderer(front, centre=centre, axes=fr.axes, size=0.05 * fr.iod, config=RenderConfig(64, 64)) as r:
             seen.append(r.render()[32, 32].astype(int))
     assert seen[0].sum() < 0.7 * seen[1].sum()
+
+
+def test_the_cavity_floor_follows_the_jaw_and_stays_behind_the_skin(shared_data):
+    """Candide-3 (a face mask) gets a mouth cavity whose floor follows the jaw (add_mouth_cavity): at rest nothing
+    moves and the head's own vertices move exactly as without it at every pose; at the widest opening and at every
+    corner of the speech box (CAVITY_POSES) no cavity vertex lies in front of a surface within CAVITY_FAR_WALL
+    behind it, nor less than 0.1 IOD behind one in front of it (trimesh's barycentric coordinates over every face,
+    not the placement's own depth search); the floor drops with the chin and the roof stays."""
+    from trimesh.triangles import points_to_barycentric
+
+    from assets.heads.cavity import with_mouth_cavity
+    from assets.heads.rigging import CAVITY_FAR_WALL, CAVITY_POSES, WIDE_OPEN
+    from assets.heads.wfm import candide_head
+
+    bare = candide_head(shared_data / "candide3" / "candide3-3.1.6.wfm")
+    head = with_mouth_cavity(bare)
+    rig = head.rig
+    n0 = len(bare.rig.neutral)
+    n_c = int(rig.meta["mouth_cavity"])
+    assert len(rig.neutral) == n0 + n_c
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    idx = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in rig.meta["landmarks"].items()}
+    fr = face_frame(v0[:n0], mouth_landmarks(idx))
+    iod, ax = fr.iod, fr.axes
+    np.testing.assert_array_equal(rig.deformed(np.zeros(4)), rig.neutral)
+    poses = [(0.0, 0.0, WIDE_OPEN, 0.0), *CAVITY_POSES]
+    for p in poses:
+        np.testing.assert_allclose(rig.deformed(np.array(p))[:n0], bare.rig.deformed(np.array(p)), atol=1e-6)
+    t = np.asarray(rig.triangles, dtype=np.int64)
+    skin_t = t[(t < n0).all(axis=1)]
+    for p in poses:
+        q = (np.asarray(rig.deformed(np.array(p)), dtype=np.float64) - fr.origin) @ ax.T
+        # Every skin face under every cavity vertex seen from the front: barycentric coordinates of the vertex in
+        # the face flattened onto the view plane (trimesh), the face's depth there interpolated from its corners.
+        tri = np.repeat(q[skin_t][None], n_c, axis=0).reshape(-1, 3, 3)
+        flat = tri * np.array([1.0, 1.0, 0.0])
+        pts = np.repeat(q[n0:] * np.array([1.0, 1.0, 0.0]), len(skin_t), axis=0)
+        bary = points_to_barycentric(flat, pts)
+        under = (bary >= -1e-9).all(axis=1)
+        ahead = (np.einsum("ij,ij->i", bary, tri[:, :, 2]) - np.repeat(q[n0:, 2], len(skin_t))) / iod
+        # A surface behind the vertex within CAVITY_FAR_WALL is skin it would cover; one in front, skin it must stay
+        # 0.1 IOD behind.
+        assert not (under & (ahead > -CAVITY_FAR_WALL + 1e-6) & (ahead < 0.1 - 1e-6)).any(), p
+    # The floor (the lowest cavity vertices) drops with the chin at the widest opening; the roof does not move.
+    vw = np.asarray(rig.deformed(np.array([0.0, 0.0, WIDE_OPEN, 0.0])), dtype=np.float64)
+    y = (v0 - fr.origin) @ ax[1]
+    drop = (vw - v0) @ ax[1] / iod
+    line = 0.5 * (y[idx["corner_left"]] + y[idx["corner_right"]])
+    cavity_y = y[n0:]
+    floor = n0 + np.argsort(cavity_y)[:8]
+    chin = drop[:n0][(y[:n0] < line) & ((v0[:n0] - fr.origin) @ ax[0] == 0)].min()  # the lowest drop on the middle
+    assert drop[floor].min() < -0.15 and drop[floor].min() > chin - 1e-6
+    roof = n0 + np.flatnonzero(cavity_y >= line)
+    assert len(roof) > 10 and np.abs(vw[roof] - v0[roof]).max() == 0.0
