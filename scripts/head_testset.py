@@ -273,9 +273,10 @@ def check_and_draw(
         (
             "| head | driven by | flipped triangles | max edge stretch | lip interpenetration (IOD) | "
             "lip gap at closure (IOD) | teeth ahead (IOD) | lip edge notch (IOD) | lip backs seen (1e-3 IOD^2) | "
-            "skin seen dark (1e-3 IOD^2) | inside through the skin (IOD) | checks |"
+            "skin seen dark (1e-3 IOD^2) | inside through the skin (IOD) | closed lips seen dark (1e-3 IOD^2) | "
+            "checks |"
         ),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     if describe is not None:
         rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
@@ -283,7 +284,7 @@ def check_and_draw(
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:
-            dashes = " - |" * 9
+            dashes = " - |" * 10
             rows.append(f"| {name} |{' - |' if describe else ''} cannot rig |{dashes} {exc} |")
             continue
         rep = None
@@ -298,10 +299,11 @@ def check_and_draw(
                 f"{'n/a' if rep.lip_backs_iod2 is None else f'{1000 * rep.lip_backs_iod2:.2f}'} | "
                 f"{'n/a' if rep.skin_dark_iod2 is None else f'{1000 * rep.skin_dark_iod2:.2f}'} | "
                 f"{'n/a' if rep.inside_shown_iod is None else f'{rep.inside_shown_iod:.4f}'} | "
+                f"{'n/a' if rep.lips_dark_iod2 is None else f'{1000 * rep.lips_dark_iod2:.2f}'} | "
                 f"{'pass' if rep.passed else 'FAIL'}{_warned(rep)}"
             )
         except FacecastError as exc:  # a head without landmarks cannot be checked; say so in the table
-            figs = f"- | - | - | - | - | - | - | - | - | not checked ({exc})"
+            figs = f"- | - | - | - | - | - | - | - | - | - | not checked ({exc})"
         kind = "own targets" if head.kind == "morph" else "retarget (harmonic)"
         tiles = []
         with renderer_for_rig(head.rig, head.mesh, RenderConfig(width=260, height=260)) as r:

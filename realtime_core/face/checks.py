@@ -49,6 +49,12 @@ mouth-open parameter that closes the neutral inner-lip gap), and measures
   renderer draws it over the cheek, a dark fleck where its back shows, which no figure above sees (they measure the
   lips). The opening does not count.
 
+- closed lips seen dark: how much of the lips' band (IOD squared, as seen, front and three-quarter views) is drawn
+  dark at the closure pose and the pressed-lip poses (:func:`lips_dark_seen`): the mouth cavity seen between lips that
+  should meet, or a lip turned away. The lip gap at closure measures the lip pairs only, so a slit the pairs do not
+  span (a lip membrane removed from lips that were never parted, the pairs meeting at the middle point alone) passed
+  every figure above.
+
 - flipped under expressions (advisory): the most flipped triangles at :data:`EXPRESSION_POSES`, speech under an
   expression at intensity up to 1 (:attr:`RigReport.expression_flips`).
 
@@ -382,6 +388,16 @@ what the parameter asks: the lower end of the range whose response rigging itsel
 (assets.heads.rigging.OPEN_RESPONSE_RANGE); the test set's heads open 0.74-1.07 (docs/animation.md)."""
 
 
+LIPS_DARK_STEP = 0.005
+"""IOD: the spacing of the grid of view points :func:`lips_dark_seen` looks along (a slit 0.01 IOD high, 1 pixel of the
+test set's 400x300 mouth close-up, is two rows of it)."""
+LIPS_DARK_LIMIT = 0.01
+"""IOD squared: over this, :func:`lips_dark_seen` fails the rig: a slit 0.02 IOD high (about 7 pixels of the test set's
+400x300 mouth close-up) across a mouth 0.5 IOD wide. The thin dark line that closed lips leave between them scores up
+to 2.9e-3 (the MediaPipe face), the mirrored 1,428-triangle Lee Perry-Smith's slit 42e-3 (docs/animation.md, "A dark
+slit between closed lips")."""
+
+
 @dataclass(frozen=True)
 class RigCheckLimits:
     """Pass limits: flipped triangles, edge stretch ratio, interpenetration and closure gap (IOD), teeth (IOD)."""
@@ -408,6 +424,9 @@ class RigCheckLimits:
     max_inside_shown: float = INSIDE_SHOWN_LIMIT
     """IOD: a face the skin covers at rest coming further in front of the skin (:func:`inside_shown`) fails the rig
     (a dark fleck on the cheek; :data:`INSIDE_SHOWN_LIMIT`)."""
+    max_lips_dark: float = LIPS_DARK_LIMIT
+    """IOD squared: more of the lips' band drawn dark where the lips should meet (:func:`lips_dark_seen`) fails the
+    rig (a slit between closed lips; :data:`LIPS_DARK_LIMIT`)."""
 
     def __post_init__(self) -> None:
         if self.max_flipped < 0 or not self.max_stretch > 1:
@@ -428,6 +447,8 @@ class RigCheckLimits:
             raise ConfigError("max_seam_gap must be >= 0 (IOD)")
         if not self.max_inside_shown >= 0:
             raise ConfigError("max_inside_shown must be >= 0 (IOD)")
+        if not self.max_lips_dark >= 0:
+            raise ConfigError("max_lips_dark must be >= 0 (IOD squared)")
 
 
 @dataclass(frozen=True)
@@ -494,6 +515,11 @@ class RigReport:
     sliver_stretch: float | None = None
     """The largest stretch with each rest length counted as at least :data:`SLIVER_REST` of the median edge: over
     the limit, the rig fails (:attr:`max_edge_stretch` over it alone is a warning). None: not measured."""
+    lips_dark_iod2: float | None = None
+    """IOD squared: the largest area of the lips' band drawn dark at the closure pose or a pressed-lip pose, front or
+    three-quarter view (:func:`lips_dark_seen`: a slit between lips that should meet; None: not measured)."""
+    lips_dark_pose: tuple[float, ...] = ()
+    """Where :attr:`lips_dark_iod2` is worst (empty: nowhere)."""
     expressions_held: tuple[tuple[float, ...], ...] | None = None
     """The expression poses (of those measured, :data:`EXPRESSION_POSES`) at which the rig has no flipped triangle
     and lips that interpenetrate by no more than the limit: the poses its bound's hull takes besides speech
@@ -519,6 +545,7 @@ class RigReport:
         expr = "n/a" if self.expression_flips is None else str(self.expression_flips)
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
         inside = "n/a" if self.inside_shown_iod is None else f"{self.inside_shown_iod:.4f}"
+        slit = "n/a" if self.lips_dark_iod2 is None else f"{1000 * self.lips_dark_iod2:.2f}e-3"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
@@ -526,7 +553,7 @@ class RigReport:
             f"lip backs seen {backs} IOD^2, skin seen dark {dark} IOD^2, lip tops carried {tops} IOD^2, "
             f"mouth opening {opening}, "
             f"lip gap at /m/ {at_m} IOD{seam}, "
-            f"inside through the skin {inside} IOD, "
+            f"inside through the skin {inside} IOD, closed lips seen dark {slit} IOD^2, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
@@ -1048,6 +1075,64 @@ def skin_dark_seen(
     return worst, faces, where
 
 
+def lips_dark_seen(
+    rig: Any,
+    landmarks: MouthLandmarks,
+    *,
+    poses: tuple[tuple[float, ...], ...],
+    cavity_vertices: int = 0,
+) -> tuple[float, tuple[float, ...]] | None:
+    """(the largest area, IOD squared as seen, of the lips' band drawn dark at a pose where the lips should meet;
+    that pose), over ``poses`` (the closure poses: :func:`check_rig` gives the closure pose, rest when the lips are
+    closed there, and :data:`BILABIAL_POSES`) and the views LIP_BACKS_VIEWS (:func:`view_frames`).
+
+    The band: the 2-D box, in the view, of the lips' vertices (:func:`lip_backs_seen`'s band, deformed to the pose),
+    sampled on a grid of LIPS_DARK_STEP IOD. A grid point is dark where the front-most face over it is one the
+    renderer draws dark (a face of the mouth cavity, the last ``cavity_vertices`` vertices, facing either way; or a
+    face turned away from the view by more than LIP_BACKS_FACING) with no face drawn lit as near; each dark point
+    counts LIPS_DARK_STEP squared. It sees lips that do not meet although their contact pairs do (the closure gap
+    measures the pairs only): the mirrored 1,428-triangle Lee Perry-Smith's slit across the whole mouth at rest and
+    at /m/. None: the mouth has no lip vertex."""
+    band = _lip_band_faces(rig, landmarks, 0)
+    v0, t, fr, mid = band.rest, band.faces, band.frame, band.middle
+    iod = fr.iod
+    lips = band.across_line & ((v0 - mid) @ fr.axes[2] > -NOTCH_DEPTH * iod)
+    if cavity_vertices:
+        lips[len(v0) - cavity_vertices :] = False
+    if not lips.any():
+        return None
+    cavity = np.zeros(len(v0), dtype=bool)
+    if cavity_vertices:
+        cavity[len(v0) - cavity_vertices :] = True
+    occ = band.near
+    is_cavity = cavity[t[occ]].any(axis=1)
+    frames = view_frames(fr.axes, LIP_BACKS_VIEWS)
+    step, eps, cell = LIPS_DARK_STEP * iod, 1e-4 * iod, _BACKS_CELL * iod
+    worst = 0.0
+    where: tuple[float, ...] = ()
+    for pose in poses:
+        v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
+        n = triangle_normals(v, t[occ])
+        unit = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+        tri = v[t[occ]]
+        for d, to_view in frames:
+            box = v[lips] @ to_view
+            lo, hi = box[:, :2].min(axis=0), box[:, :2].max(axis=0)
+            # Cell centres (the midpoint rule): a row of points on a lip's edge would count half a step more lit.
+            gu, gw = np.meshgrid(*(np.arange(lo[k] + 0.5 * step, hi[k], step) for k in (0, 1)), indexing="ij")
+            p = np.stack([gu.ravel(), gw.ravel()], axis=1)
+            q = tri @ to_view
+            drawn_dark = is_cavity | (unit @ d < -LIP_BACKS_FACING)
+            front = front_most(p, q[drawn_dark], cell=cell)
+            under = np.flatnonzero(np.isfinite(front))
+            front_lit = front_most(p[under], q[~drawn_dark], cell=cell)
+            dark = np.count_nonzero(~(front_lit >= front[under] - eps))  # NaN (no lit face over it): dark
+            area = dark * LIPS_DARK_STEP**2
+            if area > worst:
+                worst, where = area, tuple(float(x) for x in pose)
+    return worst, where
+
+
 LIP_TOP_FACING = 0.5
 """A lip face whose unit normal at rest has more than this up component (30 degrees above horizontal) is a lip's top,
 for :func:`lip_tops_carried`: the lower lip's top where the lips meet; an upper lip faces forward or down there."""
@@ -1340,6 +1425,13 @@ def check_rig(
             f"a face behind the skin comes {inside:.4f} IOD in front of it (> {limits.max_inside_shown}) at "
             f"{inside_points} point{'s' if inside_points != 1 else ''}, pose {inside_pose}"
         )
+    slit_seen = lips_dark_seen(rig, landmarks, poses=(closure, *BILABIAL_POSES), cavity_vertices=cavity_vertices)
+    slit, slit_pose = (None, ()) if slit_seen is None else slit_seen
+    if slit is not None and slit > limits.max_lips_dark:
+        fails.append(
+            f"the lips' band is drawn dark over {1000 * slit:.2f}e-3 IOD^2 > {1000 * limits.max_lips_dark:.2f}e-3 "
+            f"where the lips should meet (a slit between closed lips), pose {slit_pose}"
+        )
     at_m = bilabial_gap(rig, landmarks)
     found = lip_edge_shards(
         rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices, limit=limits.max_lip_edge_notch
@@ -1427,6 +1519,8 @@ def check_rig(
         inside_shown_iod=inside,
         inside_shown_points=inside_points,
         inside_shown_pose=inside_pose,
+        lips_dark_iod2=slit,
+        lips_dark_pose=slit_pose,
     )
 
 

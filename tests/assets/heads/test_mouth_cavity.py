@@ -576,3 +576,47 @@ def test_the_cavity_floor_follows_the_jaw_and_stays_behind_the_skin(shared_data)
     assert drop[floor].min() < -0.15 and drop[floor].min() > chin - 1e-6
     roof = n0 + np.flatnonzero(cavity_y >= line)
     assert len(roof) > 10 and np.abs(vw[roof] - v0[roof]).max() == 0.0
+
+
+class _HeldApart:
+    """A rig whose lips never meet: every pose deformed with ``extra`` more mouth_open (the closure pose's lips held
+    apart, the slit of a lip membrane removed from lips that were never parted)."""
+
+    def __init__(self, rig, extra: float) -> None:
+        self.rig, self.extra = rig, extra
+        self.neutral, self.triangles = rig.neutral, rig.triangles
+
+    def deformed(self, params):
+        return self.rig.deformed(np.asarray(params, float) + np.array([0.0, 0.0, self.extra, 0.0]))
+
+
+@pytest.mark.slow
+def test_closed_lips_seen_dark_flags_lips_held_apart_and_passes_the_mediapipe_face(shared_data):
+    """The MediaPipe face's lips meet at closure over its cavity: nothing of its lips' band is drawn dark there. Its
+    rig held 0.1 mouth_open apart shows the cavity between the lips at the closure pose: the figure sees it and fails
+    the rig. By an independent estimate, the opening seen from the front is a lens between the inner lips: at most
+    their gap in the middle times the corners' width, at least 0.4 of it (a lens of two parabolas is 2/3)."""
+    from realtime_core.face.checks import LIPS_DARK_LIMIT, check_rig, lips_dark_seen
+
+    mp = shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj"
+    head = resolve_head(mp)
+    rep = head_checks(head)
+    assert rep.lips_dark_iod2 is not None and rep.lips_dark_iod2 <= LIPS_DARK_LIMIT, rep.summary()
+    lm = head.rig.meta["landmarks"]
+    v0 = np.asarray(head.rig.neutral, float)
+    near = mouth_landmarks({k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in lm.items()})
+    cavity = int(head.rig.meta["mouth_cavity"])
+    apart = _HeldApart(head.rig, 0.1)
+    closed = (0.0, 0.0, 0.0, 0.0)
+    got = lips_dark_seen(apart, near, poses=(closed,), cavity_vertices=cavity)
+    assert got is not None and got[1] == closed
+    v = np.asarray(apart.deformed(np.zeros(4)), float)
+    fr = face_frame(v0, near)
+    gap = float((v[near.upper_inner] - v[near.lower_inner]) @ fr.axes[1]) / fr.iod
+    width = float((v[near.corner_left] - v[near.corner_right]) @ fr.axes[0]) / fr.iod
+    assert gap > 0.05
+    assert 0.4 * gap * abs(width) <= got[0] <= gap * abs(width)
+    failed = check_rig(apart, near, cavity_vertices=cavity, expression_poses=())
+    assert not failed.passed and any("slit between closed lips" in f for f in failed.failures)
+    # Its closure pose lies 0.0008 mouth_open below rest: nearly the same slit.
+    assert failed.lips_dark_iod2 == pytest.approx(got[0], rel=0.05) and got[0] > LIPS_DARK_LIMIT

@@ -261,8 +261,9 @@ def test_a_slivers_stretch_is_counted_from_a_fifth_of_the_median_edge() -> None:
     def report(height: float, to: float):
         rig = _Band(height, (to - height) / widest)
         per = pose_figures(rig, lm, EXTREME_POSES)
-        # (The lips are one vertex here, so they never part: the opening's limit is off.)
-        return per, check_rig(rig, lm, limits=RigCheckLimits(min_open_response=0.0))
+        # (The lips are one vertex here, so they never part: the opening's limit is off; and the grid's faces turn
+        # their backs to the face frame's forward view, drawn dark where lips would meet: that limit is off too.)
+        return per, check_rig(rig, lm, limits=RigCheckLimits(min_open_response=0.0, max_lips_dark=np.inf))
 
     assert SLIVER_REST == 0.2
     per, rep = report(0.1, 0.45)
@@ -635,6 +636,46 @@ def test_skin_seen_dark_sees_a_chin_turned_past_edge_on_and_a_cavity_come_throug
     # and covers the chin as any skin does (only the ledge's back remains).
     alone = skin_dark_seen(chin, lm, poses=(pose,), cavity_vertices=0)
     assert alone is not None and alone[0] == pytest.approx(float(shoelace.sum()), rel=1e-9)
+
+
+class _Slit(_Lips):
+    """:class:`_Lips` over a mouth cavity's square (the last four vertices, facing the viewer, 0.3 IOD behind the lips,
+    wider than the mouth), its lower strip held ``apart`` more mouth_open at every pose: lips that never meet, the
+    cavity seen between them."""
+
+    def __init__(self, apart: float) -> None:
+        super().__init__(0.0)
+        self.apart = apart
+        c0 = len(self.neutral)
+        square = np.array([[-0.4, -0.3, -0.3], [0.4, -0.3, -0.3], [0.4, 0.3, -0.3], [-0.4, 0.3, -0.3]])
+        self.neutral = np.vstack([self.neutral, square])
+        self.triangles = np.vstack([self.triangles, [[c0, c0 + 1, c0 + 2], [c0, c0 + 2, c0 + 3]]])
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        return super().deformed(np.asarray(p, dtype=np.float64) + np.array([0.0, 0.0, self.apart, 0.0]))
+
+
+def test_closed_lips_seen_dark_measures_the_cavity_seen_between_lips_held_apart() -> None:
+    """Lips held 0.05 apart at the middle over a dark cavity: at the closure pose (and every pressed-lip pose) the
+    front view sees the cavity through a lens between the strips, 0.05 (1 - (x / 0.3)^2) high, of area
+    0.05 * 0.6 * 2/3 = 0.02 IOD^2 by hand (the three-quarter views see it narrower); the grid of LIPS_DARK_STEP
+    measures it within 2 %, and the rig fails on it (here the closure gap sees the middle pair apart too; on the
+    mirrored 1,428-triangle Lee Perry-Smith it did not). Lips that meet show nothing dark, and a square that is no
+    cavity (counted as the rig's own face, lit) is no slit."""
+    from realtime_core.face.checks import BILABIAL_POSES, LIPS_DARK_LIMIT, lips_dark_seen
+
+    slit = _Slit(0.05)
+    lm = slit.landmarks()
+    closed = (0.0, 0.0, 0.0, 0.0)
+    got = lips_dark_seen(slit, lm, poses=(closed, *BILABIAL_POSES), cavity_vertices=4)
+    assert got is not None and got[0] == pytest.approx(0.05 * 0.6 * 2 / 3, rel=0.02) and got[1] == closed
+    assert got[0] > LIPS_DARK_LIMIT
+    assert lips_dark_seen(_Slit(0.0), lm, poses=(closed, *BILABIAL_POSES), cavity_vertices=4) == (0.0, ())
+    assert lips_dark_seen(slit, lm, poses=(closed,), cavity_vertices=0) == (0.0, ())
+    rep = check_rig(slit, lm, poses=((0.0, 0.0, 0.3, 0.0),), cavity_vertices=4, expression_poses=())
+    assert not rep.passed and any("slit between closed lips" in f for f in rep.failures)
+    assert rep.lips_dark_iod2 == pytest.approx(got[0], rel=1e-9) and "closed lips seen dark" in rep.summary()
+    assert check_rig(_Slit(0.0), lm, poses=((0.0, 0.0, 0.3, 0.0),), cavity_vertices=4).lips_dark_iod2 == 0.0
 
 
 def test_skin_dark_poses_keep_the_widest_openings_and_every_parameters_ends() -> None:
