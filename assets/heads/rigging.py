@@ -2437,13 +2437,6 @@ reaches 0.75 IOD down and 0.45 back; seen at 35 degrees, the skin in front of it
 CAVITY_PUSH_ROUNDS = 4
 """How many times the mouth cavity's push back is measured again (a push moves a vertex across an oblique view)."""
 
-CAVITY_VIEWS = (0.0,)
-"""Degrees about the face's up axis: the views (orthographic) from which the mouth cavity is kept behind the skin each
-sees at rest. The front alone: with the three-quarter views (LIP_BACKS_VIEWS) too, the floor's sides stayed inside
-the jaw (skin seen dark on MediaPipe 1.04e-3 IOD^2 -> 0) but the push moved the cavity behind the far corner's inner
-lip wall, which showed lit inside the opening at /a/ seen from 35 degrees (Lee Perry-Smith, automatic landmarks)."""
-
-
 CAVITY_POSES: tuple[tuple[float, float, float, float], ...] = (
     (0.0, 0.0, 0.0, 0.0),
     *itertools.product((-0.085, 0.055), (-0.125, 0.095), (0.0, 0.47), (-0.105, 0.04)),
@@ -2691,7 +2684,10 @@ def add_mouth_cavity(
     # surface seen through the open lips is the inside of a hollow head's back (Lee Perry-Smith once
     # its lips were cut apart), and pushing the cavity behind that hid it: the opening showed the
     # skin-coloured back of the head as a flat pink disc. The cavity moves with its sources, so each vertex is
-    # measured where the pose carries it (CAVITY_VIEWS).
+    # measured where the pose carries it, seen from the front (orthographic). The front alone: with the three-quarter
+    # views (LIP_BACKS_VIEWS) too, the floor's sides stayed inside the jaw (skin seen dark on MediaPipe 1.04e-3
+    # IOD^2 -> 0) but the push moved the cavity behind the far corner's inner lip wall, which showed lit inside the
+    # opening at /a/ seen from 35 degrees (Lee Perry-Smith, automatic landmarks).
     tris = [[0, 1 + (j + 1) % segments, 1 + j] for j in range(segments)]
     for i in range(rings - 1):
         r0, r1 = 1 + i * segments, 1 + (i + 1) * segments
@@ -2708,32 +2704,28 @@ def add_mouth_cavity(
     point[len(q) + tr.size :] += len(q) + len(tr)
     share = np.r_[np.ones(len(q)), np.full(tr.size, 1.0 / 3.0), np.full(pairs.size, 0.5)]
     samples = sp.csr_matrix((share, (point, corner)), shape=(len(q) + len(tr) + len(pairs), len(q)))
-    views = view_frames(ax, CAVITY_VIEWS)
+    ((d_, to_view),) = view_frames(ax, (0.0,))
     near = np.linalg.norm(v0 - centre, axis=1) < CAVITY_SKIN_REACH * iod
     t_near = np.asarray(mesh.triangles, dtype=np.int64)
     t_near = t_near[near[t_near].any(axis=1)]
-    # The skin of each view: the faces it sees at rest (lips closed: no inner wall of a hollow head shows).
-    skins = []
-    for _, to_view in views:
-        tv = v0[t_near] @ to_view
-        mid = tv.mean(axis=1)
-        facing = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])[:, 2]
-        top = front_most(mid[:, :2], tv, tolerance=1e-9)
-        skins.append(t_near[(top <= mid[:, 2] + 1e-4 * iod) & (facing * np.sign(np.nanmedian(facing)) > 0)])
+    # The skin: the faces the view sees at rest (lips closed: no inner wall of a hollow head shows).
+    tv = v0[t_near] @ to_view
+    mid = tv.mean(axis=1)
+    facing = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])[:, 2]
+    top = front_most(mid[:, :2], tv, tolerance=1e-9)
+    skin = t_near[(top <= mid[:, 2] + 1e-4 * iod) & (facing * np.sign(np.nanmedian(facing)) > 0)]
     posed_all = [np.asarray(rig.deformed(np.asarray(p, dtype=np.float64)), dtype=np.float64) for p in CAVITY_POSES]
     moves = [sources @ (posed[: len(v0)] - v0) for posed in posed_all]
     push = np.zeros(len(q))
     for _ in range(CAVITY_PUSH_ROUNDS):
         more = np.zeros(len(q))
         for posed, move in zip(posed_all, moves, strict=True):
-            at = samples @ (cv - push[:, None] * ax[2] + move)
-            for (d_, to_view), skin in zip(views, skins, strict=True):
-                pv = at @ to_view
-                depth = front_most(pv[:, :2], posed[skin] @ to_view, tolerance=1e-9)
-                depth = np.where(depth > pv[:, 2] - CAVITY_FAR_WALL * iod, depth, np.nan)
-                # Back along the face's forward axis by s brings a vertex s * cos(view) deeper in the view.
-                need = np.nan_to_num((pv[:, 2] - (depth - 0.1 * iod)) / float(d_ @ ax[2]), nan=0.0)
-                np.maximum.at(more, corner, need[point])
+            pv = (samples @ (cv - push[:, None] * ax[2] + move)) @ to_view
+            depth = front_most(pv[:, :2], posed[skin] @ to_view, tolerance=1e-9)
+            depth = np.where(depth > pv[:, 2] - CAVITY_FAR_WALL * iod, depth, np.nan)
+            # Back along the face's forward axis by s brings a vertex s * cos(view) deeper in the view.
+            need = np.nan_to_num((pv[:, 2] - (depth - 0.1 * iod)) / float(d_ @ ax[2]), nan=0.0)
+            np.maximum.at(more, corner, need[point])
         if not (more > 1e-6 * iod).any():
             break
         push += more

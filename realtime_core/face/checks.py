@@ -981,6 +981,21 @@ def skin_dark_poses(poses: tuple[tuple[float, ...], ...]) -> tuple[tuple[float, 
     return tuple(tuple(float(x) for x in q) for i, q in enumerate(p) if wide[i] or tuple(float(x) for x in q) in ends)
 
 
+def _seen_dark(
+    points: np.ndarray, triangles: np.ndarray, drawn_dark: np.ndarray, *, cell: float, eps: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which of ``points`` ((n, 2), in a view's plane) the renderer shows dark among ``triangles`` ((m, 3, 3), in
+    the view's frame, depth third and larger nearer the viewer): those whose front-most face is one of
+    ``drawn_dark`` ((m,) bool) with no face drawn lit as near (within ``eps``). Returns (their indices, int64; the
+    front-most dark face's depth over every point, (n,) float64, not finite where there is none), for
+    :func:`skin_dark_seen` and :func:`lips_dark_seen`."""
+    # The nearest dark face over each point, then (only where there is one: the few) the nearest lit one.
+    front = front_most(points, triangles[drawn_dark], cell=cell)
+    under = np.flatnonzero(np.isfinite(front))
+    front_lit = front_most(points[under], triangles[~drawn_dark], cell=cell)
+    return under[~(front_lit >= front[under] - eps)], front  # NaN (no lit face over it): dark
+
+
 def skin_dark_seen(
     rig: Any,
     landmarks: MouthLandmarks,
@@ -1056,11 +1071,7 @@ def skin_dark_seen(
             p = pts[follow] @ to_view
             q = tri_o @ to_view
             drawn_dark = cavity[occ] | (uo @ d < -LIP_BACKS_FACING)
-            # The nearest dark face over each point, then (only where there is one: the few) the nearest lit one.
-            front = front_most(p[:, :2], q[drawn_dark], cell=cell)
-            under = np.flatnonzero(np.isfinite(front))
-            front_lit = front_most(p[under, :2], q[~drawn_dark], cell=cell)
-            under = under[~(front_lit >= front[under] - eps)]  # NaN (no lit face over it): dark
+            under, front = _seen_dark(p[:, :2], q, drawn_dark, cell=cell, eps=eps)
             # Skin behind another followed skin face that turned away is counted once, as that face's own area.
             turned = np.flatnonzero((u @ d < -LIP_BACKS_FACING) & lit0[k].reshape(-1, ns).any(axis=1))
             if len(turned) and len(under):
@@ -1123,11 +1134,7 @@ def lips_dark_seen(
             p = np.stack([gu.ravel(), gw.ravel()], axis=1)
             q = tri @ to_view
             drawn_dark = is_cavity | (unit @ d < -LIP_BACKS_FACING)
-            front = front_most(p, q[drawn_dark], cell=cell)
-            under = np.flatnonzero(np.isfinite(front))
-            front_lit = front_most(p[under], q[~drawn_dark], cell=cell)
-            dark = np.count_nonzero(~(front_lit >= front[under] - eps))  # NaN (no lit face over it): dark
-            area = dark * LIPS_DARK_STEP**2
+            area = len(_seen_dark(p, q, drawn_dark, cell=cell, eps=eps)[0]) * LIPS_DARK_STEP**2
             if area > worst:
                 worst, where = area, tuple(float(x) for x in pose)
     return worst, where
