@@ -13,12 +13,12 @@ beside the repository (never copied into it).
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 from assets.errors import AlignmentFormatError
+from assets.shared import shared_data_root
 
 Split = Literal["train", "val", "test"]
 
@@ -49,9 +49,7 @@ _ADVERB = {"a": "again", "n": "now", "p": "please", "s": "soon"}
 def default_root() -> Path:
     """``$FACECAST_SHARED_DATA/video/grid_s1`` when that variable is set, else
     ``../shared/data/video/grid_s1`` beside the repository checkout."""
-    shared = os.environ.get("FACECAST_SHARED_DATA")
-    base = Path(shared) if shared else Path(__file__).resolve().parents[2] / "shared" / "data"
-    return base / "video" / "grid_s1"
+    return shared_data_root() / "video" / "grid_s1"
 
 
 def split_of(sentence_id: str) -> Split:

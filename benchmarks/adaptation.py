@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+from assets.shared import shared_data_root
+
+SHARED = shared_data_root()
 
 
 def _r(truth: np.ndarray, est: np.ndarray) -> float:

@@ -21,7 +21,6 @@ Third-party heads are read from ../shared/data (or $FACECAST_SHARED_DATA).
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import subprocess
 import sys
@@ -32,6 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 POSES = {
     "closed": (0.0, 0.0, 0.0, 0.0),
@@ -348,9 +348,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=REPO / "build" / "heads")
     ap.add_argument("--images", type=Path, default=REPO / "docs" / "img" / "heads")
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
     ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")
     args = ap.parse_args()

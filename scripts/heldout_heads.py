@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import struct
 import subprocess
 import sys
@@ -53,6 +52,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 GLTF_TRANSFORM = REPO / "node_modules" / ".bin" / "gltf-transform"
 
@@ -931,9 +931,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=REPO / "build" / "heldout")
     ap.add_argument("--images", type=Path, default=None, help="pictures (default: OUT/img)")
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     ap.add_argument("--only", default=None, help="check only the heads whose name contains this text")
     ap.add_argument("--link", default="img/heldout", help="picture directory as the table links it")
     ap.add_argument("--with-lowpoly", action="store_true", help="also the low-poly rows of the head test set")

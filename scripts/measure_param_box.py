@@ -29,6 +29,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 NAMES = ("upper_lip_raise", "lip_stretch", "mouth_open", "lip_corner_depress")
 SAY_TEXTS = (
@@ -112,9 +113,7 @@ def hull_poses(x: np.ndarray, *, tolerance: float) -> tuple[list[np.ndarray], li
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     ap.add_argument("--grid", type=int, default=36, help="GRID s1 validation sentences")
     ap.add_argument("--say", type=int, default=6, help="`facecast say` sentences")
     ap.add_argument("--tolerance", type=float, default=0.002, help="IOD a frame may lie outside the poses' hull")

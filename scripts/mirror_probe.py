@@ -18,7 +18,6 @@ with left and right swapped, so that any difference is the rig's own, not MediaP
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import sys
 from dataclasses import replace
@@ -29,6 +28,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 JITTER = 0.002  # IOD, the largest move per axis
 JITTER_REACH = 0.35  # IOD from the mouth's centre (Lee Perry-Smith's hand landmarks)
@@ -97,9 +97,7 @@ def same_landmarks(name: str, mesh) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     ap.add_argument("--only", default=None, help="only the heads whose name contains this text")
     ap.add_argument("--which", default="none,mirror", help="none, mirror, jitterN (comma-separated)")
     ap.add_argument("--three-quarter", action="store_true", help="also the mouth close-ups in three-quarter view")

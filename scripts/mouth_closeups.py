@@ -16,7 +16,6 @@ Heads are made as the test set makes them (``--data``, ``--build``); nothing is 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -25,6 +24,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 _ID_VS = """
 #version 330
@@ -106,9 +106,7 @@ def main() -> int:
     )
     ap.add_argument("--heldout", action="store_true", help="the held-out heads (heldout_heads.py), not the test set")
     ap.add_argument("--build", type=Path, default=REPO / "build" / "heads", help="where derived head files go")
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     args = ap.parse_args()
 
     from head_testset import POSES, _resolve, mouth_renderer

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -34,6 +33,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "scripts"))
+from assets.shared import shared_data_root  # noqa: E402 (after the path: a worktree's own package)
 
 EXPRESSIONS = ("smile", "sad", "surprise", "anger")
 LEVELS = 5
@@ -165,9 +165,7 @@ def cell(r: dict | None) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True, help="derived head files and sweep.json")
-    ap.add_argument(
-        "--data", type=Path, default=Path(os.environ.get("FACECAST_SHARED_DATA", REPO.parent / "shared" / "data"))
-    )
+    ap.add_argument("--data", type=Path, default=shared_data_root())
     ap.add_argument("--only", default=None, help="only the heads whose name contains this text")
     ap.add_argument("--sets", default="grid,extreme,say,test", help="comma-separated pose sets")
     ap.add_argument("--say-texts", type=int, default=3, help="`facecast say` sentences per expression")

@@ -35,6 +35,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from assets.modelfile import load_model
+from assets.shared import shared_data_root
 from realtime_core import VISUAL_PARAMS
 from realtime_core.avmodel import AvModel
 from realtime_core.features import loudness_db
@@ -144,7 +145,7 @@ def main(names: list[str]) -> None:
     base = replace(shipped, readout=None)
     train_clips, val_clips = s1_clips("train"), s1_clips("val")
     val = trace_clips(base, val_clips)
-    speech = real_speech_clips("../shared/data/speech")
+    speech = real_speech_clips(shared_data_root() / "speech")
     vtlp = VtlpConfig(copies=4, warp_range=(0.85, 1.18), seed=1)
     train: list[Traced] = []
     for name in names:

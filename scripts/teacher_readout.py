@@ -22,7 +22,6 @@ readout and band through its own HMM: the val, Praat and real-speech sets are tr
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from dataclasses import replace
@@ -32,6 +31,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from assets.modelfile import load_model
+from assets.shared import shared_data_root
 from realtime_core import VISUAL_PARAMS
 from training.readout import ReadoutSpec, VtlpConfig, choose_band, estimates, fit_readout, trace_clips, vtlp_copies
 from training.reallips import (
@@ -47,7 +47,7 @@ from training.reallips import (
 from training.teacher import TeacherClip, espeak_clips, festival_clips, load_clips, save_clips, teacher_params
 
 OUT = Path("/tmp/i10teach")
-SHARED = Path(os.environ.get("FACECAST_SHARED_DATA", "../shared/data"))
+SHARED = shared_data_root()
 BANDS = (0.02, 0.025, 0.03, 0.035, 0.04, 0.045, 0.05)
 MIN_CLOSURE = 0.915
 PRAAT = {"pitch1.4": (1.0, 1.4), "formants1.15": (1.15, 1.0), "formants0.9": (0.9, 1.0), "female": (1.18, 1.8)}

@@ -11,9 +11,11 @@ from typing import NoReturn
 
 import pytest
 
+from assets.shared import shared_data_root
+
 REPO = Path(__file__).resolve().parents[1]
 # ../shared/data beside the checkout; FACECAST_SHARED_DATA overrides it (e.g. for a git worktree elsewhere).
-SHARED_DATA = Path(os.environ.get("FACECAST_SHARED_DATA") or REPO.parent / "shared" / "data")
+SHARED_DATA = shared_data_root()
 
 
 def in_ci() -> bool:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-SHARED = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve().parents[2].parent / "shared" / "data")
+from assets.shared import shared_data_root
+
+SHARED = shared_data_root()
 OTHER_TALKERS = SHARED / "video" / "grid"
 """The default --video-dir: four GRID clips, three of them by talkers other than s1 (the data README)."""
 

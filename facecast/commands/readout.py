@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
-SHARED = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve().parents[2].parent / "shared" / "data")
+from assets.shared import shared_data_root
+
+SHARED = shared_data_root()
 
 
 def _specs(text: str) -> list:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import subprocess
 
 import numpy as np
@@ -149,10 +148,10 @@ def test_say_spanish_and_bad_input(corpus_file, tmp_path, capsys):
 def test_say_from_a_recording_and_its_transcript(corpus_file, tmp_path, capsys):
     """A real recording (LibriVox, shared test data) and its transcript: forced alignment gives the
     phone timings; the motion covers the recording."""
-    from pathlib import Path
 
-    shared = Path(os.environ.get("FACECAST_SHARED_DATA") or Path(__file__).resolve().parents[3] / "shared" / "data")
-    stem = shared / "speech" / "librivox" / "sense_and_sensibility_01_austen_64kb-0880"
+    from assets.shared import shared_data_root
+
+    stem = shared_data_root() / "speech" / "librivox" / "sense_and_sensibility_01_austen_64kb-0880"
     require_data(stem.with_suffix(".wav"))
     from assets.audio import read_audio
 
