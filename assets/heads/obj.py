@@ -47,6 +47,7 @@ def _read_mtl(path: Path) -> dict[str, Material]:
     if not path.is_file():
         return out
     cur = None
+    cur_d: set[str] = set()  # the materials with a "d" line
     for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
         parts = line.strip().split(maxsplit=1)
         if not parts:
@@ -65,11 +66,21 @@ def _read_mtl(path: Path) -> dict[str, Material]:
             if img is not None:
                 out[cur].image = img.read_bytes()
         elif key in ("d", "Tr") and rest.split():
-            # Dissolve (d: 1 opaque) or its complement (Tr): see-through as glTF's BLEND materials are.
+            # Dissolve (d: 1 opaque) or its complement (Tr): see-through as glTF's BLEND materials are. A "d" line
+            # wins over "Tr" wherever it stands. "Tr 1" alone would make the material invisible, and MeshLab
+            # writes exactly that for every opaque material (menpo3d's james.obj scan, a whole face drawn as
+            # nothing): read as opacity then, as its writers meant it; any other Tr as the complement.
             a = float(rest.split()[-1])
-            out[cur].color[3] = a if key == "d" else 1.0 - a
-            if out[cur].color[3] < 1.0:
+            if key == "d":
+                cur_d.add(cur)
+            elif cur in cur_d:
+                continue
+            opacity = a if key == "d" or a >= 1.0 else 1.0 - a
+            out[cur].color[3] = opacity
+            if opacity < 1.0:
                 out[cur].alpha_mode = "BLEND"
+            elif out[cur].alpha_mode == "BLEND":  # an earlier Tr's, now overruled (a map_d's MASK stays)
+                out[cur].alpha_mode = "OPAQUE"
         elif key == "map_d":
             img = _map_file(path.parent, rest)
             if img is not None:

@@ -406,6 +406,23 @@ def test_see_through_materials_are_not_drawn_in_renders_and_exports(tmp_path):
     assert _is(_colour_at(img, 0.3), TOP) and _is(_colour_at(img, 0.7), BOTTOM)
 
 
+def test_an_mtl_tr_reads_as_transparency_but_d_wins_and_meshlabs_tr_1_is_opaque(tmp_path):
+    """MTL's Tr is the complement of d ("Tr 0.9": 10 % opaque, not drawn), but MeshLab writes "Tr 1.000000" for every
+    opaque material (menpo3d's james.obj face scan read as nothing, so no face was found on its renders): alone it
+    reads opaque. A "d" line wins over "Tr" before or after it."""
+    cases = {
+        "meshlab": ("Kd 0.1 0.8 0.1\nTr 1.000000", False),
+        "tr": ("Kd 0.1 0.8 0.1\nTr 0.9", True),
+        "d_first": ("Kd 0.1 0.8 0.1\nd 0.1\nTr 0.0", True),
+        "d_after": ("Kd 0.1 0.8 0.1\nTr 0.9\nd 1.0", False),
+    }
+    for name, (lines, see_through) in cases.items():
+        img = _render_front(load_mesh(_layered_obj(tmp_path / name, lines)))
+        # The front box drawn: the skin's top is hidden; not drawn: the skin shows top and bottom.
+        assert _is(_colour_at(img, 0.3), TOP) == see_through, name
+        assert _is(_colour_at(img, 0.7), BOTTOM) == see_through, name
+
+
 def test_texture_transform_restores_quantized_uvs(tmp_path):
     """gltfpack stores UVs quantized to their box and restores them through KHR_texture_transform (offset, rotation,
     scale on the material's texture): the reader applies it, so the UVs and the render are the original file's (the
