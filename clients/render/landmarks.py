@@ -536,6 +536,48 @@ def _located(
     return mesh, axes, mvp, np.stack([pixels[k] for k in MEDIAPIPE_INDEX]), each
 
 
+def _searched(mesh: HeadMesh) -> FoundLandmarks | None:
+    """:func:`find_landmarks`' search over the usual orientations and framings of ``mesh`` as drawn; None when no face
+    is found on any of its renders."""
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    for up, fwd in ORIENTATIONS:
+        axes = _axes(np.array(up, float), np.array(fwd, float))
+        mesh = facing_viewer(mesh, axes)
+        q = v @ axes.T
+        lo, hi = q.min(0), q.max(0)
+        height = hi[1] - lo[1]
+        # Whole mesh, then its top (a full-body avatar's head), then the top fifth.
+        for top in (1.0, 0.25, 0.12):
+            y0 = hi[1] - top * height
+            sel = q[:, 1] >= y0
+            c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
+            span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
+            centre = c_q @ axes
+            # The found set is the PLAIN look's (one studio-lit render: every head that rigged from it still
+            # rigs the same); the STEADY look's median and single views are its alternatives, rigged from only
+            # when every rig from the found set fails (assets.heads.head.rig_checked).
+            plain = _located(mesh, centre, axes, span, PLAIN)
+            if plain is None:
+                continue
+            p_mesh, p_axes, p_mvp, p_pix, _ = plain
+            found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
+            if found is None:
+                continue
+            others: list[dict[str, list[float]]] = []
+            steady = _located(mesh, centre, axes, span, STEADY)
+            if steady is not None:
+                seen, s_axes, mvp, median, each = steady
+                forward = np.asarray(s_axes[2], np.float64)
+                middle = _placed(seen, mvp, median, forward)
+                if middle is not None and middle != found:
+                    others.append(middle)
+                for single in _alternatives(seen, mvp, each, forward, found):
+                    if single not in others:
+                        others.append(single)
+            return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
+    return None
+
+
 def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
     """The twelve landmarks as [x, y, z] points on ``mesh`` (file units), with other plausible sets of them as its
     ``alternatives`` (:data:`ALTERNATIVES`). LandmarkError when no face is found.
@@ -545,43 +587,15 @@ def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
     each point's pixel the views' median, cast once; then single views' sets."""
     from clients.errors import RenderError
 
-    v = np.asarray(mesh.vertices, dtype=np.float64)
     try:
-        for up, fwd in ORIENTATIONS:
-            axes = _axes(np.array(up, float), np.array(fwd, float))
-            mesh = facing_viewer(mesh, axes)
-            q = v @ axes.T
-            lo, hi = q.min(0), q.max(0)
-            height = hi[1] - lo[1]
-            # Whole mesh, then its top (a full-body avatar's head), then the top fifth.
-            for top in (1.0, 0.25, 0.12):
-                y0 = hi[1] - top * height
-                sel = q[:, 1] >= y0
-                c_q = 0.5 * (q[sel].min(0) + q[sel].max(0))
-                span = float(max(np.ptp(q[sel, 0]), np.ptp(q[sel, 1])))
-                centre = c_q @ axes
-                # The found set is the PLAIN look's (one studio-lit render: every head that rigged from it still
-                # rigs the same); the STEADY look's median and single views are its alternatives, rigged from only
-                # when every rig from the found set fails (assets.heads.head.rig_checked).
-                plain = _located(mesh, centre, axes, span, PLAIN)
-                if plain is None:
-                    continue
-                p_mesh, p_axes, p_mvp, p_pix, _ = plain
-                found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
-                if found is None:
-                    continue
-                others: list[dict[str, list[float]]] = []
-                steady = _located(mesh, centre, axes, span, STEADY)
-                if steady is not None:
-                    seen, s_axes, mvp, median, each = steady
-                    forward = np.asarray(s_axes[2], np.float64)
-                    middle = _placed(seen, mvp, median, forward)
-                    if middle is not None and middle != found:
-                        others.append(middle)
-                    for single in _alternatives(seen, mvp, each, forward, found):
-                        if single not in others:
-                            others.append(single)
-                return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
+        found = _searched(mesh)
+        if found is None and (mesh.colors is not None or mesh.texture is not None):
+            # Its own colours hide the face from MediaPipe (a dense-correspondence template painted by position in
+            # rainbow hues: menpo3d's template.ply), so look at its shape alone, drawn as plain skin. Only after the
+            # painted look fails: every head found so far is found as before.
+            found = _searched(replace(mesh, colors=None, texture=None, uvs=None))
+        if found is not None:
+            return found
     except RenderError as exc:
         raise LandmarkError(
             f"{mesh.name}: cannot render the head to find its landmarks ({exc}); give --landmarks L.json"

@@ -162,6 +162,21 @@ def test_a_head_wound_the_other_way_round_gets_the_same_landmarks(shared_data):
     assert find_landmarks(reversed_) == find_landmarks(mesh)
 
 
+def test_a_head_whose_colours_hide_its_face_is_found_by_its_shape(shared_data):
+    """Lee Perry-Smith painted green all over (an orc's skin; menpo3d's template.ply, a face painted by position in
+    rainbow hues, alike): MediaPipe finds no face on any render of it as painted, so the search looks again at its
+    shape drawn as plain skin and finds the points of the head without its colours, to the bit."""
+    from dataclasses import replace
+
+    from clients.render.landmarks import _searched
+
+    mesh = load_mesh(shared_data / "heads" / "lee-perry-smith" / "LeePerrySmith.glb")
+    plain = replace(mesh, texture=None, uvs=None)
+    green = replace(plain, colors=np.tile(np.float32([0.1, 0.9, 0.1]), (len(mesh.vertices), 1)))
+    assert _searched(green) is None
+    assert find_landmarks(green) == find_landmarks(plain)
+
+
 def test_a_head_and_its_mirror_image_get_mirrored_landmarks(shared_data, tmp_path):
     """The untextured Lee Perry-Smith (the .glb alone) mirrored left to right: MediaPipe's points on one render of it
     and on one of the head lay up to 0.046 IOD apart once mirrored back (the inner lips; the corners 0.03-0.04), and
