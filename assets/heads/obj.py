@@ -89,18 +89,34 @@ def _read_mtl(path: Path) -> dict[str, Material]:
     return out
 
 
-def read_obj(path: Path) -> ObjMesh:
-    """Parse ``path`` (and its ``mtllib``); MeshError naming the file on a malformed line."""
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise MeshError(f"{path}: cannot read: {exc}") from exc
+@dataclass(frozen=True)
+class ObjPolygons:
+    """An OBJ file's statements as written: ``positions`` (n, 3) float64; ``texcoords`` (t, 2) float64 (OBJ's v up);
+    per polygon its corners as (position, texture coordinate) indices, 0-based (texture -1: none), its material index
+    into ``material_names`` (-1: none) and its group index into ``group_names`` (the ``o``/``g`` names, "default"
+    before any); ``mtllibs``: each ``mtllib`` statement's words. The one OBJ parser: :func:`read_obj` builds head meshes
+    from it, the built-in head's source is read with it."""
+
+    positions: np.ndarray
+    texcoords: np.ndarray
+    polygons: list[list[tuple[int, int]]]
+    polygon_material: list[int]
+    polygon_group: list[int]
+    material_names: list[str]
+    group_names: list[str]
+    mtllibs: list[list[str]]
+
+
+def parse_obj_text(text: str, source: str) -> ObjPolygons:
+    """Parse OBJ ``text``; MeshError naming ``source`` and the line on a malformed statement."""
     pos: list[list[float]] = []
     tex: list[list[float]] = []
-    corners: list[tuple[int, int, int, int]] = []  # (v, vt, material, group) per triangle corner
-    materials: dict[str, Material] = {}
+    polygons: list[list[tuple[int, int]]] = []
+    poly_mat: list[int] = []
+    poly_grp: list[int] = []
     mat_names: list[str] = []
     groups = ["default"]
+    mtllibs: list[list[str]] = []
     mat, grp = -1, 0
     for lineno, line in enumerate(text.splitlines(), 1):
         parts = line.split()
@@ -118,10 +134,7 @@ def read_obj(path: Path) -> ObjMesh:
                     groups.append(name)
                 grp = groups.index(name)
             elif key == "mtllib":
-                # Several files, or one whose name holds spaces ("my head.mtl", as Windows exporters write it).
-                whole = path.parent / " ".join(parts[1:])
-                for lib in [whole] if whole.is_file() else [path.parent / x for x in parts[1:]]:
-                    materials.update(_read_mtl(lib))
+                mtllibs.append(parts[1:])
             elif key == "usemtl":
                 name = " ".join(parts[1:])
                 if name not in mat_names:
@@ -136,13 +149,46 @@ def read_obj(path: Path) -> ObjMesh:
                     refs.append(
                         (vi - 1 if vi > 0 else len(pos) + vi, (ti - 1 if ti > 0 else len(tex) + ti) if ti else -1)
                     )
-                for k in range(1, len(refs) - 1):
-                    for vi, ti in (refs[0], refs[k], refs[k + 1]):
-                        corners.append((vi, ti, mat, grp))
+                polygons.append(refs)
+                poly_mat.append(mat)
+                poly_grp.append(grp)
         except (ValueError, IndexError) as exc:
-            raise MeshError(f"{path}: line {lineno}: cannot parse {line.strip()[:60]!r}") from exc
-    v = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
-    uv_src = np.asarray(tex, dtype=np.float64).reshape(-1, 2)
+            raise MeshError(f"{source}: line {lineno}: cannot parse {line.strip()[:60]!r}") from exc
+    return ObjPolygons(
+        positions=np.asarray(pos, dtype=np.float64).reshape(-1, 3),
+        texcoords=np.asarray(tex, dtype=np.float64).reshape(-1, 2),
+        polygons=polygons,
+        polygon_material=poly_mat,
+        polygon_group=poly_grp,
+        material_names=mat_names,
+        group_names=groups,
+        mtllibs=mtllibs,
+    )
+
+
+def read_obj(path: Path) -> ObjMesh:
+    """Parse ``path`` (and its ``mtllib``); MeshError naming the file on a malformed line."""
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise MeshError(f"{path}: cannot read: {exc}") from exc
+    parsed = parse_obj_text(text, str(path))
+    materials: dict[str, Material] = {}
+    for words in parsed.mtllibs:
+        # Several files, or one whose name holds spaces ("my head.mtl", as Windows exporters write it).
+        whole = path.parent / " ".join(words)
+        for lib in [whole] if whole.is_file() else [path.parent / x for x in words]:
+            materials.update(_read_mtl(lib))
+    mat_names, groups = parsed.material_names, parsed.group_names
+    # (v, vt, material, group) per triangle corner, the polygons fan-triangulated.
+    corners = [
+        (vi, ti, mat, grp)
+        for refs, mat, grp in zip(parsed.polygons, parsed.polygon_material, parsed.polygon_group, strict=True)
+        for k in range(1, len(refs) - 1)
+        for vi, ti in (refs[0], refs[k], refs[k + 1])
+    ]
+    v = parsed.positions
+    uv_src = parsed.texcoords
     if not corners:
         return ObjMesh(v, np.zeros((0, 3), np.int64), None, np.full(len(v), -1), [], np.zeros(len(v), np.int64), groups)
     c = np.asarray(corners, dtype=np.int64)

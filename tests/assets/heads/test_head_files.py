@@ -474,3 +474,24 @@ def test_a_webp_texture_given_only_through_its_extension_is_read_and_exported_as
 def _written(path: Path, data: bytes) -> Path:
     path.write_bytes(data)
     return path
+
+
+def test_a_malformed_obj_line_is_named_with_its_file_and_line(tmp_path):
+    head = tmp_path / "head.obj"
+    head.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n")
+    with pytest.raises(MeshError, match=r"head\.obj: line 4: cannot parse 'f 1 2 x'"):
+        load_mesh(head)
+
+
+def test_obj_polygons_keep_their_corners_groups_and_materials():
+    """The one OBJ parser, as the built-in head's source is read with it: a quad stays a quad (the head mesh reader
+    fan-triangulates it), texture indices -1 where a corner has none, negative indices count back from the end,
+    groups from o/g ("default" before any), materials from usemtl (-1 before any)."""
+    from assets.heads.obj import parse_obj_text
+
+    text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 1\nf 1 2 3\ng lips\nusemtl skin\nf 1/1 2/2 -2/1 -1/2\n"
+    p = parse_obj_text(text, "x.obj")
+    assert p.polygons == [[(0, -1), (1, -1), (2, -1)], [(0, 0), (1, 1), (2, 0), (3, 1)]]
+    assert [p.group_names[g] for g in p.polygon_group] == ["default", "lips"]
+    assert p.polygon_material == [-1, 0] and p.material_names == ["skin"]
+    np.testing.assert_array_equal(p.texcoords, [[0, 0], [1, 1]])
