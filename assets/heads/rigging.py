@@ -253,6 +253,79 @@ def cut_path(
     return path
 
 
+def seam_welded(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> np.ndarray | None:
+    """(n,) int each vertex's position's first copy (:func:`realtime_core.face.welding.weld`) when the mouth corners
+    ``left`` and ``right`` lie on pieces of ``triangles`` (m, 3) that only coincident copies join: a texture seam
+    through the lips (a scan written as two halves, each its own texture chart: menpo3d's james.obj; glTF splits
+    every seam so). None when the corners are joined by the mesh as it is, or not even once welded (issue 12)."""
+    from realtime_core.face.welding import mesh_pieces, weld
+
+    t = np.asarray(triangles, dtype=np.int64)
+    piece = mesh_pieces(len(vertices), t)
+    if piece[left] == piece[right]:
+        return None
+    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
+    joined = mesh_pieces(len(welded), canon[t])
+    if joined[canon[left]] != joined[canon[right]]:
+        return None
+    first = np.full(len(welded), len(vertices), dtype=np.int64)
+    np.minimum.at(first, canon, np.arange(len(vertices)))
+    return first[canon]
+
+
+def seam_unwelded(
+    rig: Rig,
+    triangles: np.ndarray,
+    split: np.ndarray,
+    first: np.ndarray,
+    origin: np.ndarray,
+    n_base: int,
+) -> tuple[Rig, np.ndarray, np.ndarray]:
+    """A rig built on a mesh whose texture-seam copies were welded (:func:`seam_welded`: ``first`` (n,) each file
+    vertex's first copy; ``split`` (m0, 3) the file's triangles, ``first[split]`` the ones rigged), given back its
+    seam: each of the rigged mesh's ``triangles`` (m, 3) whose corners are a file triangle's (by their first copies;
+    ``origin`` (n',) each vertex's file vertex, the cut's copies after the ``n_base`` file vertices) takes that
+    triangle's own copies again, so each side of the seam keeps its texture coordinates. A cut copy of a first copy
+    stands for the other copies too: each other copy a triangle needs on the cut's lower side is appended (after the
+    cut's copies; meta "lip_seam_cut" counts it). Every copy moves by its first copy's row, so the seam never opens.
+    Returns the rig, its triangles and (k,) the file vertex of each vertex appended."""
+    t = np.asarray(triangles, dtype=np.int64)
+    sp_ = np.asarray(split, dtype=np.int64)
+    base = np.asarray(origin, dtype=np.int64)[np.minimum(t, len(origin) - 1)]
+    base[t >= len(origin)] = -1  # a vertex added after the cut (none is, before the cavity)
+    file_face = {tuple(sorted(f)): i for i, f in reversed(list(enumerate(first[sp_].tolist())))}
+    out = t.copy()
+    added: dict[tuple[int, int], int] = {}
+    n = len(rig.neutral)
+    mix: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for f in np.flatnonzero((base >= 0).all(axis=1)):
+        i = file_face.get(tuple(sorted(base[f].tolist())))
+        if i is None:
+            continue
+        own = {int(first[w]): int(w) for w in sp_[i]}
+        for j in range(3):
+            k, w = int(t[f, j]), own[int(base[f, j])]
+            if w == base[f, j]:
+                continue
+            if k < n_base:
+                out[f, j] = w
+                mix[w] = (np.array([k]), np.ones(1))
+            else:
+                if (k, w) not in added:
+                    added[(k, w)] = n + len(added)
+                out[f, j] = added[(k, w)]
+    pairs = np.array(list(added), dtype=np.int64).reshape(-1, 2)
+    if len(pairs):
+        rig = replace(rig, neutral=np.vstack([np.asarray(rig.neutral), np.asarray(rig.neutral)[pairs[:, 0]]]))
+        for (k, _), new in added.items():
+            mix[new] = (np.array([k]), np.ones(1))
+    rig = with_rows_mixed(rig, mix)
+    meta = {**rig.meta, "texture_seam_copies": len(mix)}
+    if len(pairs):
+        meta["lip_seam_cut"] = int(meta.get("lip_seam_cut", 0) or 0) + len(pairs)
+    return replace(rig, triangles=out.astype(np.int32), meta=meta), out, pairs[:, 1]
+
+
 CONTACT_DIP = 0.015
 """IOD: on closed lips, a cut-path vertex this far below both its path neighbours (the inner-lip point the
 path is pulled through: Lee Perry-Smith's front-contact vertex 2889, 0.028 IOD) is bypassed (:func:`level_path`)."""
@@ -1646,6 +1719,14 @@ def rig_head(
         "landmarks": {k: p.tolist() for k, p in points.items()},
         "simple_landmarks": dict(simple.landmarks),
     }
+    # A texture seam through the lips (the corners on two pieces that only coincident copies join): rigged welded, as
+    # one surface, and given its seam back at the end (seam_unwelded). Heads whose corners the mesh joins are untouched.
+    seam_first = seam_welded(v, t, snap["corner_left"], snap["corner_right"])
+    seam_split = np.asarray(t, dtype=np.int64)
+    if seam_first is not None:
+        t = seam_first[seam_split].astype(np.asarray(t).dtype)
+        snap = {k: int(seam_first[i]) for k, i in snap.items()}
+        meta["texture_seam_welded"] = int(np.count_nonzero(seam_first != np.arange(len(v))))
     colors = mesh.colors
     part = mesh.part
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
@@ -2120,6 +2201,17 @@ def rig_head(
             contact = np.unique(np.vstack([contact, seam]), axis=0)
         rig = replace(rig, contact=contact, contact_up=frame.axes[1])
         rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
+        if seam_first is not None:
+            if cut_copies is None:
+                origin = np.arange(len(v))
+            rig, t, more = seam_unwelded(rig, t, seam_split, seam_first, origin, n_base)
+            if len(more):
+                v = np.vstack([v, np.asarray(v)[more]])
+                uv = None if uv is None else np.vstack([uv, np.asarray(uv)[more]])
+                colors = None if colors is None else np.vstack([colors, np.asarray(colors)[more]])
+                part = None if part is None else np.r_[part, np.asarray(part)[more]]
+                origin = np.r_[origin, more]
+                cut_copies = np.arange(n_base, len(v))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     out_mesh = HeadMesh(
