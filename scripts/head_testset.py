@@ -210,12 +210,12 @@ def seam_split_obj(lps: Path, dst: Path) -> Path:
     (automatic landmarks: not a shipped name)."""
     import io
 
+    from heldout_heads import write_obj
     from PIL import Image
 
     from assets.heads.landmarks import read_landmarks, shipped_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.rigging import resolve_landmarks
-    from heldout_heads import write_obj
 
     m = load_mesh(lps)
     assert m.uvs is not None and m.texture is not None  # its colour map lies beside it
