@@ -215,26 +215,30 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
     return out
 
 
-def cut_path(
-    vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, through: int | None = None
-) -> list[int]:
-    """The edge path (vertex indices) from mouth corner ``left`` to ``right`` that stays closest to the
-    straight corner-to-corner line, through the vertex ``through`` if given (see :func:`cut_mouth`)."""
+def _cut_graph(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> sp.csr_matrix:
+    """(n, n) CSR: the cost of each edge of ``triangles`` (m, 3) for the cut's path from mouth corner ``left`` to
+    ``right`` (:func:`cut_path`): its length plus a strong penalty for straying from the corners' line (both ends)."""
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
     a, b = v[left], v[right]
     ab = b - a
     length = float(np.linalg.norm(ab))
-    adj = vertex_adjacency(len(v), t).tocoo()
+    adj = vertex_adjacency(len(v), np.asarray(triangles, dtype=np.int64)).tocoo()
 
     def off_line(p: np.ndarray) -> np.ndarray:
         s = np.clip((p - a) @ ab / length**2, 0, 1)
         return np.linalg.norm(p - (a + s[:, None] * ab), axis=1)
 
-    # Edge cost: length plus a strong penalty for straying from the line (both ends).
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = off_line(v[adj.row]) + off_line(v[adj.col])
-    g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    return sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+
+
+def cut_path(
+    vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, through: int | None = None
+) -> list[int]:
+    """The edge path (vertex indices) from mouth corner ``left`` to ``right`` that stays closest to the
+    straight corner-to-corner line, through the vertex ``through`` if given (see :func:`cut_mouth`)."""
+    g = _cut_graph(vertices, triangles, left, right)
 
     def leg(a_: int, b_: int) -> list[int]:
         dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
@@ -253,23 +257,34 @@ def cut_path(
     return path
 
 
-def seam_welded(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> np.ndarray | None:
-    """(n,) int each vertex's position's first copy (:func:`realtime_core.face.welding.weld`) when the mouth corners
-    ``left`` and ``right`` lie on pieces of ``triangles`` (m, 3) that only coincident copies join: a texture seam
-    through the lips (a scan written as two halves, each its own texture chart: menpo3d's james.obj; glTF splits
-    every seam so). None when the corners are joined by the mesh as it is, or not even once welded (issue 12)."""
-    from realtime_core.face.welding import mesh_pieces, weld
+SEAM_DETOUR = 1.01
+"""A texture seam is welded for rigging when the cut's cheapest path from mouth corner to corner (:func:`cut_path`'s
+costs) across the seam's coincident copies costs less than 1 / this of the one along the mesh as loaded (or there is
+none along it): the seam turns the cut off the lip line (:func:`seam_welded`). The margin only keeps rounding out."""
 
+
+def seam_welded(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> np.ndarray | None:
+    """(n,) int each vertex's position's first copy (:func:`realtime_core.face.welding.weld`) when a texture seam turns
+    the cut's path between mouth corners ``left`` and ``right`` off the lip line (:data:`SEAM_DETOUR`; ``triangles``
+    (m, 3)): a seam through the lips, a scan written as two halves each its own texture chart (menpo3d's james.obj),
+    where the cut found no path at all, or halves that join round the seam's end, where the path went round it. glTF
+    splits every texture seam so. None otherwise: no seam crosses the path (issue 12)."""
+    from realtime_core.face.welding import weld
+
+    v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
-    piece = mesh_pieces(len(vertices), t)
-    if piece[left] == piece[right]:
+    canon, welded = weld(v)
+    if len(welded) == len(v):  # no two vertices at one place: no seam
         return None
-    canon, welded = weld(np.asarray(vertices, dtype=np.float64))
-    joined = mesh_pieces(len(welded), canon[t])
-    if joined[canon[left]] != joined[canon[right]]:
+    g_across = _cut_graph(welded, canon[t], int(canon[left]), int(canon[right]))
+    across = dijkstra(g_across, indices=int(canon[left]))[canon[right]]
+    if not np.isfinite(across):
         return None
-    first = np.full(len(welded), len(vertices), dtype=np.int64)
-    np.minimum.at(first, canon, np.arange(len(vertices)))
+    along = dijkstra(_cut_graph(v, t, left, right), indices=left)[right]
+    if along <= SEAM_DETOUR * across:
+        return None
+    first = np.full(len(welded), len(v), dtype=np.int64)
+    np.minimum.at(first, canon, np.arange(len(v)))
     return first[canon]
 
 

@@ -860,9 +860,10 @@ def _two_charts(v: np.ndarray, t: np.ndarray, right: np.ndarray) -> tuple[np.nda
 
 def test_a_texture_seam_through_the_lips_is_seen_through_for_the_cut():
     """Closed lips split down the middle into two texture charts: the corners lie on two pieces that only the seam's
-    coincident copies join, so the cut found no path (the james.obj scan: "mouth corners are not connected").
-    :func:`seam_welded` gives each vertex its first copy: the welded triangles are the unsplit mesh's, and the cut's
-    path over them runs from corner to corner. A mesh whose corners the mesh joins is left alone."""
+        coincident copies join, so the cut found no path (the james.obj scan: "mouth corners are not connected").
+        :func:`seam_welded` gives each vertex its first copy: the welded triangles are the unsplit mesh's, and the cut's
+        path over them runs from corner to corner; so where the halves join round the seam's end and the path went round it.
+    A mesh whose path crosses no seam is left alone."""
     from assets.errors import MeshError
     from assets.heads.rigging import cut_path, seam_welded
 
@@ -882,3 +883,13 @@ def test_a_texture_seam_through_the_lips_is_seen_through_for_the_cut():
     apart = v2.copy()
     apart[len(v) :, 2] += 1.0
     assert seam_welded(apart, t2, left, right2) is None
+    # The halves joined round the seam's end (the top row of faces left whole): the path as loaded goes up round it,
+    # off the lip line; across the seam it is the unsplit mesh's.
+    top = v[t].mean(axis=1)[:, 1] > 0.3
+    v3, t3, _ = _two_charts(v, t, v[t].mean(axis=1)[:, 0] > 0.0)
+    t3[top] = np.where(v[t[top], 0] == 0.0, t[top], t3[top])  # the midline's vertices there one copy
+    right3 = right + len(v)
+    assert np.abs(v3[cut_path(v3, t3, left, right3), 1]).max() >= 0.25  # up to the joined row
+    first = seam_welded(v3, t3, left, right3)
+    assert first is not None
+    assert cut_path(v3, first[t3], left, right, through=mid) == cut_path(v, t, left, right, through=mid)
