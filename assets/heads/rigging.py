@@ -1734,8 +1734,8 @@ def rig_head(
         "landmarks": {k: p.tolist() for k, p in points.items()},
         "simple_landmarks": dict(simple.landmarks),
     }
-    # A texture seam through the lips (the corners on two pieces that only coincident copies join): rigged welded, as
-    # one surface, and given its seam back at the end (seam_unwelded). Heads whose corners the mesh joins are untouched.
+    # A texture seam through the lips (the cut's path finds no way across it, or goes round its end): rigged welded, as
+    # one surface, and given its seam back at the end (seam_unwelded). Heads whose cut crosses no seam are untouched.
     seam_first = seam_welded(v, t, snap["corner_left"], snap["corner_right"])
     seam_split = np.asarray(t, dtype=np.int64)
     if seam_first is not None:
