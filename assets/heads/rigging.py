@@ -1734,14 +1734,8 @@ def rig_head(
         "landmarks": {k: p.tolist() for k, p in points.items()},
         "simple_landmarks": dict(simple.landmarks),
     }
-    # A texture seam through the lips (the cut's path finds no way across it, or goes round its end): rigged welded, as
-    # one surface, and given its seam back at the end (seam_unwelded). Heads whose cut crosses no seam are untouched.
-    seam_first = seam_welded(v, t, snap["corner_left"], snap["corner_right"])
+    seam_first = None  # a texture seam through closed lips, welded for the cut (seam_welded)
     seam_split = np.asarray(t, dtype=np.int64)
-    if seam_first is not None:
-        t = seam_first[seam_split].astype(np.asarray(t).dtype)
-        snap = {k: int(seam_first[i]) for k, i in snap.items()}
-        meta["texture_seam_welded"] = int(np.count_nonzero(seam_first != np.arange(len(v))))
     colors = mesh.colors
     part = mesh.part
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
@@ -1905,6 +1899,16 @@ def rig_head(
                 if knife.bridged:
                     meta["knife_bridged"] = knife.bridged  # path edges off the curve, over a gap in the cut
             else:
+                # A texture seam through the lips (the cut's path finds no way across it, or goes round its end): from
+                # here on rigged welded, as one surface, and given its seam back at the end (seam_unwelded). Only here,
+                # where the cut needs it: lips apart in the mesh (a Character Creator 4 export, its halves joined only
+                # by copies) rig as before, to the array.
+                seam_first = seam_welded(v, t, snap["corner_left"], snap["corner_right"])
+                if seam_first is not None:
+                    seam_split = np.asarray(t, dtype=np.int64)
+                    t = seam_first[seam_split].astype(np.asarray(t).dtype)
+                    snap = {k: int(seam_first[i]) for k, i in snap.items()}
+                    meta["texture_seam_welded"] = int(np.count_nonzero(seam_first != np.arange(len(v))))
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
                 front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)

@@ -862,8 +862,8 @@ def test_a_texture_seam_through_the_lips_is_seen_through_for_the_cut():
     """Closed lips split down the middle into two texture charts: the corners lie on two pieces that only the seam's
         coincident copies join, so the cut found no path (the james.obj scan: "mouth corners are not connected").
         :func:`seam_welded` gives each vertex its first copy: the welded triangles are the unsplit mesh's, and the cut's
-        path over them runs from corner to corner; so where the halves join round the seam's end and the path went round it.
-    A mesh whose path crosses no seam is left alone."""
+        path over them runs from corner to corner; so where the halves join round the seam's end and the path went round
+    it. A mesh whose path crosses no seam is left alone."""
     from assets.errors import MeshError
     from assets.heads.rigging import cut_path, seam_welded
 
