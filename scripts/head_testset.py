@@ -9,8 +9,9 @@ driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
-Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs (``heldout_heads.lowpoly_heads``;
-the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
+Lee Perry-Smith split at the face's midline into two texture charts as a textured OBJ (a texture seam through the
+lips, ``seam_split_obj``), Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs
+(``heldout_heads.lowpoly_heads``; the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
 Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
 the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
 fold, a tear, a sliver or a tooth past the lips shows at this size); the rig checks are printed
