@@ -9,8 +9,9 @@ driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
-Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs (``heldout_heads.lowpoly_heads``;
-the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
+Lee Perry-Smith split at the face's midline into two texture charts as a textured OBJ (a texture seam through the
+lips, ``seam_split_obj``), Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs
+(``heldout_heads.lowpoly_heads``; the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
 Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
 the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
 fold, a tear, a sliver or a tooth past the lips shows at this size); the rig checks are printed
@@ -127,6 +128,10 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             jaw_split_glb(lps, out / "jaw_split" / "lps_jaw_split.glb"),
             {},
         )
+        heads["Lee Perry-Smith, texture seam through the lips (OBJ, two charts)"] = (
+            seam_split_obj(lps, out / "seam_split" / "head.obj"),
+            {},
+        )
         # Low-poly textured OBJ copies (decimated by meshoptimizer): found in the held-out heads, kept here.
         from heldout_heads import lowpoly_heads
 
@@ -196,6 +201,44 @@ def jaw_split_glb(lps: Path, dst: Path) -> Path:
         scene.add_geometry(sub, node_name=name, geom_name=name + "Mesh", parent_node_name="Armature")
     scene.export(dst)
     return dst
+
+
+def seam_split_obj(lps: Path, dst: Path) -> Path:
+    """Lee Perry-Smith as a scanner may write it (issue 12: menpo3d's james.obj): its two halves, split at the face's
+    vertical midline (between the shipped mouth corners), each its own texture chart (the colour map twice side by
+    side, the right half's faces on the second copy), so the midline's vertices are true texture-seam copies (one
+    position, two texture coordinates) and the seam runs down through the lips. A textured OBJ written to ``dst``
+    (automatic landmarks: not a shipped name)."""
+    import io
+
+    from heldout_heads import write_obj
+    from PIL import Image
+
+    from assets.heads.landmarks import read_landmarks, shipped_landmarks
+    from assets.heads.mesh import load_mesh
+    from assets.heads.rigging import resolve_landmarks
+
+    m = load_mesh(lps)
+    assert m.uvs is not None and m.texture is not None  # its colour map lies beside it
+    lm_path = shipped_landmarks(lps)
+    assert lm_path is not None  # the shipped hand landmarks
+    at = resolve_landmarks(read_landmarks(lm_path), m.vertices, str(lm_path))
+    mid = 0.5 * (at["corner_left"][0] + at["corner_right"][0])
+    tri = np.asarray(m.triangles, dtype=np.int64)
+    right = m.vertices[tri].mean(axis=1)[:, 0] > mid
+    # Every vertex of the right half's faces a copy of its own: the copies of the midline's vertices make the seam.
+    n = len(m.vertices)
+    tri = np.where(right[:, None], tri + n, tri)
+    uv = np.asarray(m.uvs, dtype=np.float64)
+    uvs = np.vstack([uv * [0.5, 1.0], uv * [0.5, 1.0] + [0.5, 0.0]])
+    img = Image.open(io.BytesIO(m.texture)).convert("RGB")
+    both = Image.new("RGB", (2 * img.width, img.height))
+    both.paste(img, (0, 0))
+    both.paste(img, (img.width, 0))
+    buf = io.BytesIO()
+    both.save(buf, format="JPEG", quality=92)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    return write_obj(dst, np.vstack([m.vertices, m.vertices]), tri, uvs, buf.getvalue())
 
 
 CLOSE_UP_WIDTH = 1.1

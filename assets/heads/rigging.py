@@ -215,26 +215,30 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
     return out
 
 
-def cut_path(
-    vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, through: int | None = None
-) -> list[int]:
-    """The edge path (vertex indices) from mouth corner ``left`` to ``right`` that stays closest to the
-    straight corner-to-corner line, through the vertex ``through`` if given (see :func:`cut_mouth`)."""
+def _cut_graph(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> sp.csr_matrix:
+    """(n, n) CSR: the cost of each edge of ``triangles`` (m, 3) for the cut's path from mouth corner ``left`` to
+    ``right`` (:func:`cut_path`): its length plus a strong penalty for straying from the corners' line (both ends)."""
     v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
     a, b = v[left], v[right]
     ab = b - a
     length = float(np.linalg.norm(ab))
-    adj = vertex_adjacency(len(v), t).tocoo()
+    adj = vertex_adjacency(len(v), np.asarray(triangles, dtype=np.int64)).tocoo()
 
     def off_line(p: np.ndarray) -> np.ndarray:
         s = np.clip((p - a) @ ab / length**2, 0, 1)
         return np.linalg.norm(p - (a + s[:, None] * ab), axis=1)
 
-    # Edge cost: length plus a strong penalty for straying from the line (both ends).
     elen = np.linalg.norm(v[adj.row] - v[adj.col], axis=1)
     pen = off_line(v[adj.row]) + off_line(v[adj.col])
-    g = sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+    return sp.csr_matrix((elen + 20.0 * pen + 1e-12, (adj.row, adj.col)), shape=(len(v), len(v)))
+
+
+def cut_path(
+    vertices: np.ndarray, triangles: np.ndarray, left: int, right: int, *, through: int | None = None
+) -> list[int]:
+    """The edge path (vertex indices) from mouth corner ``left`` to ``right`` that stays closest to the
+    straight corner-to-corner line, through the vertex ``through`` if given (see :func:`cut_mouth`)."""
+    g = _cut_graph(vertices, triangles, left, right)
 
     def leg(a_: int, b_: int) -> list[int]:
         dist, pred = dijkstra(g, indices=a_, return_predecessors=True)
@@ -251,6 +255,90 @@ def cut_path(
     if len(set(path)) != len(path):  # the two legs touched: fall back to one leg
         path = leg(left, right)
     return path
+
+
+SEAM_DETOUR = 1.01
+"""A texture seam is welded for rigging when the cut's cheapest path from mouth corner to corner (:func:`cut_path`'s
+costs) across the seam's coincident copies costs less than 1 / this of the one along the mesh as loaded (or there is
+none along it): the seam turns the cut off the lip line (:func:`seam_welded`). The margin only keeps rounding out."""
+
+
+def seam_welded(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> np.ndarray | None:
+    """(n,) int each vertex's position's first copy (:func:`realtime_core.face.welding.weld`) when a texture seam turns
+    the cut's path between mouth corners ``left`` and ``right`` off the lip line (:data:`SEAM_DETOUR`; ``triangles``
+    (m, 3)): a seam through the lips, a scan written as two halves each its own texture chart (menpo3d's james.obj),
+    where the cut found no path at all, or halves that join round the seam's end, where the path went round it. glTF
+    splits every texture seam so. None otherwise: no seam crosses the path (issue 12)."""
+    from realtime_core.face.welding import weld
+
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    canon, welded = weld(v)
+    if len(welded) == len(v):  # no two vertices at one place: no seam
+        return None
+    g_across = _cut_graph(welded, canon[t], int(canon[left]), int(canon[right]))
+    across = dijkstra(g_across, indices=int(canon[left]))[canon[right]]
+    if not np.isfinite(across):
+        return None
+    along = dijkstra(_cut_graph(v, t, left, right), indices=left)[right]
+    if along <= SEAM_DETOUR * across:
+        return None
+    first = np.full(len(welded), len(v), dtype=np.int64)
+    np.minimum.at(first, canon, np.arange(len(v)))
+    return first[canon]
+
+
+def seam_unwelded(
+    rig: Rig,
+    triangles: np.ndarray,
+    split: np.ndarray,
+    first: np.ndarray,
+    origin: np.ndarray,
+    n_base: int,
+) -> tuple[Rig, np.ndarray, np.ndarray]:
+    """A rig built on a mesh whose texture-seam copies were welded (:func:`seam_welded`: ``first`` (n,) each file
+    vertex's first copy; ``split`` (m0, 3) the file's triangles, ``first[split]`` the ones rigged), given back its
+    seam: each of the rigged mesh's ``triangles`` (m, 3) whose corners are a file triangle's (by their first copies;
+    ``origin`` (n',) each vertex's file vertex, the cut's copies after the ``n_base`` file vertices) takes that
+    triangle's own copies again, so each side of the seam keeps its texture coordinates. A cut copy of a first copy
+    stands for the other copies too: each other copy a triangle needs on the cut's lower side is appended (after the
+    cut's copies; meta "lip_seam_cut" counts it). Every copy moves by its first copy's row, so the seam never opens.
+    Returns the rig, its triangles and (k,) the file vertex of each vertex appended."""
+    t = np.asarray(triangles, dtype=np.int64)
+    sp_ = np.asarray(split, dtype=np.int64)
+    base = np.asarray(origin, dtype=np.int64)[np.minimum(t, len(origin) - 1)]
+    base[t >= len(origin)] = -1  # a vertex added after the cut (none is, before the cavity)
+    file_face = {tuple(sorted(f)): i for i, f in reversed(list(enumerate(first[sp_].tolist())))}
+    out = t.copy()
+    added: dict[tuple[int, int], int] = {}
+    n = len(rig.neutral)
+    mix: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for f in np.flatnonzero((base >= 0).all(axis=1)):
+        i = file_face.get(tuple(sorted(base[f].tolist())))
+        if i is None:
+            continue
+        own = {int(first[w]): int(w) for w in sp_[i]}
+        for j in range(3):
+            k, w = int(t[f, j]), own[int(base[f, j])]
+            if w == base[f, j]:
+                continue
+            if k < n_base:
+                out[f, j] = w
+                mix[w] = (np.array([k]), np.ones(1))
+            else:
+                if (k, w) not in added:
+                    added[(k, w)] = n + len(added)
+                out[f, j] = added[(k, w)]
+    pairs = np.array(list(added), dtype=np.int64).reshape(-1, 2)
+    if len(pairs):
+        rig = replace(rig, neutral=np.vstack([np.asarray(rig.neutral), np.asarray(rig.neutral)[pairs[:, 0]]]))
+        for (k, _), new in added.items():
+            mix[new] = (np.array([k]), np.ones(1))
+    rig = with_rows_mixed(rig, mix)
+    meta = {**rig.meta, "texture_seam_copies": len(mix)}
+    if len(pairs):
+        meta["lip_seam_cut"] = int(meta.get("lip_seam_cut", 0) or 0) + len(pairs)
+    return replace(rig, triangles=out.astype(np.int32), meta=meta), out, pairs[:, 1]
 
 
 CONTACT_DIP = 0.015
@@ -1646,6 +1734,8 @@ def rig_head(
         "landmarks": {k: p.tolist() for k, p in points.items()},
         "simple_landmarks": dict(simple.landmarks),
     }
+    seam_first = None  # a texture seam through closed lips, welded for the cut (seam_welded)
+    seam_split = np.asarray(t, dtype=np.int64)
     colors = mesh.colors
     part = mesh.part
     n_base = len(mesh.vertices)  # vertices before the cut's copies (a knife cut's new vertices included)
@@ -1809,6 +1899,16 @@ def rig_head(
                 if knife.bridged:
                     meta["knife_bridged"] = knife.bridged  # path edges off the curve, over a gap in the cut
             else:
+                # A texture seam through the lips (the cut's path finds no way across it, or goes round its end): from
+                # here on rigged welded, as one surface, and given its seam back at the end (seam_unwelded). Only here,
+                # where the cut needs it: lips apart in the mesh (a Character Creator 4 export, its halves joined only
+                # by copies) rig as before, to the array.
+                seam_first = seam_welded(v, t, snap["corner_left"], snap["corner_right"])
+                if seam_first is not None:
+                    seam_split = np.asarray(t, dtype=np.int64)
+                    t = seam_first[seam_split].astype(np.asarray(t).dtype)
+                    snap = {k: int(seam_first[i]) for k, i in snap.items()}
+                    meta["texture_seam_welded"] = int(np.count_nonzero(seam_first != np.arange(len(v))))
                 # Closed lips: both inner-lip landmarks become the one vertex on the front of the lips'
                 # contact, where the cut passes (see CONTACT_FACING).
                 front = front_contact(v, t, snap["lower_inner"], frame.axes[2], reach=CONTACT_REACH * frame.iod)
@@ -2120,6 +2220,17 @@ def rig_head(
             contact = np.unique(np.vstack([contact, seam]), axis=0)
         rig = replace(rig, contact=contact, contact_up=frame.axes[1])
         rig = replace(rig, contact_spread=contact_spread(rig, keep_apart=cut_copies, iod=frame.iod))
+        if seam_first is not None:
+            if cut_copies is None:
+                origin = np.arange(len(v))
+            rig, t, more = seam_unwelded(rig, t, seam_split, seam_first, origin, n_base)
+            if len(more):
+                v = np.vstack([v, np.asarray(v)[more]])
+                uv = None if uv is None else np.vstack([uv, np.asarray(uv)[more]])
+                colors = None if colors is None else np.vstack([colors, np.asarray(colors)[more]])
+                part = None if part is None else np.r_[part, np.asarray(part)[more]]
+                origin = np.r_[origin, more]
+                cut_copies = np.arange(n_base, len(v))
     except RealtimeCoreError as exc:
         raise MeshError(f"{mesh.name}: cannot rig this head: {exc}") from exc
     out_mesh = HeadMesh(

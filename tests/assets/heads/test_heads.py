@@ -324,6 +324,74 @@ def test_closed_lips_are_cut_open(shared_data, builtin_head):
         assert gap.min() >= -1e-6 * rig.meta["iod"]
 
 
+def test_a_texture_seam_through_closed_lips_rigs_and_its_copies_move_as_one(shared_lps, builtin_head):
+    """Lee Perry-Smith in two texture charts split down the face's middle, as a scanner may write a head (menpo3d's
+    james.obj): the seam runs through the closed lips, whose corners lie on two pieces that only its coincident copies
+    join (the cut found no path: "cannot rig"). It rigs; the cut crosses the seam, its lower side taking a copy on each
+    side of it; every copy of one position on one side of the cut moves as one at every pose (no crack along the
+    seam), and each face keeps its own half's texture chart (no face spans the two: a smeared band)."""
+    from assets.errors import MeshError
+    from assets.heads.rigging import cut_path, resolve_landmarks
+    from realtime_core.face.checks import EXTREME_POSES
+
+    mesh = load_mesh(shared_lps)
+    points = resolve_landmarks(read_landmarks(shipped_landmarks(shared_lps)), mesh.vertices, "shipped")
+    mid = 0.5 * (points["corner_left"][0] + points["corner_right"][0])
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    right = mesh.vertices[t].mean(axis=1)[:, 0] > mid
+    n = len(mesh.vertices)
+    # Each half its own vertices (the midline's shared ones copied) and chart: u in [0, 0.5) left, [0.5, 1) right.
+    t2 = np.where(right[:, None], t + n, t)
+    used = np.unique(t2)
+    index = np.full(2 * n, -1)
+    index[used] = np.arange(len(used))
+    uv = np.asarray(mesh.uvs, dtype=np.float64) % 1.0 * [0.5, 1.0]
+    split = HeadMesh(
+        vertices=np.vstack([mesh.vertices, mesh.vertices])[used],
+        triangles=index[t2],
+        uvs=np.vstack([uv, uv + np.array([0.5, 0.0])])[used],
+        texture=mesh.texture,
+        name="two charts",
+    )
+    spec = {k: p.tolist() for k, p in points.items()}
+    corners = [
+        int(np.argmin(np.linalg.norm(split.vertices - points[k], axis=1))) for k in ("corner_left", "corner_right")
+    ]
+    with pytest.raises(MeshError, match="not connected"):
+        cut_path(split.vertices, split.triangles, *corners)
+    rig, rigged = rig_head(split, spec, head=builtin_head)
+    assert rig.meta["texture_seam_welded"] > 100 and rig.meta["texture_seam_copies"] > 100
+    n_file, cut, cavity = len(split.vertices), rig.meta["lip_seam_cut"], rig.meta["mouth_cavity"]
+    assert cut > 5
+    head_v = np.asarray(rigged.vertices[: n_file + cut], dtype=np.float64)
+    # Copies of one position on one side of the cut (file vertices: above it; the cut's copies: below).
+    from realtime_core.face.welding import weld
+
+    canon, _ = weld(head_v)
+    key = canon * 2 + (np.arange(len(head_v)) >= n_file)
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    a, b = order[:-1][same], order[1:][same]
+    assert (b >= n_file).any()  # the cut's lower side has copies on both sides of the seam
+    iod = rig.meta["iod"]
+    for p in ([0.0, 0.02, 0.35, 0.0], *EXTREME_POSES):
+        d = rig.deformed(np.array(p)).astype(np.float64)
+        assert np.linalg.norm(d[a] - d[b], axis=1).max() < 1e-5 * iod, p
+    # The lips part across the seam: the lower side's copies at the midline drop from the upper lip's vertices there.
+    lower = b[b >= n_file]
+    upper = np.array([int(np.flatnonzero((head_v[:n_file] == head_v[c]).all(axis=1))[0]) for c in lower])
+    d = rig.deformed(np.array([0.0, 0.02, 0.35, 0.0])).astype(np.float64)
+    assert np.linalg.norm(d[lower] - d[upper], axis=1).min() > 0.05 * iod
+    # Each face of the head on its own half's chart.
+    faces = np.asarray(rigged.triangles, dtype=np.int64)
+    faces = faces[(faces < n_file + cut).all(axis=1)]
+    u = np.asarray(rigged.uvs, dtype=np.float64)[faces, 0]
+    on_right = (u >= 0.5).all(axis=1)
+    assert (on_right | (u < 0.5).all(axis=1)).all()
+    np.testing.assert_array_equal(on_right, head_v[faces].mean(axis=1)[:, 0] > mid)
+    assert cavity > 0
+
+
 def test_cut_mouth_on_a_strip():
     # A flat 'mouth' strip 2 x 1 with the seam along y = 0 between (-1, 0) and (1, 0).
     xs, ys = np.meshgrid(np.linspace(-1, 1, 9), np.linspace(-0.5, 0.5, 5))

@@ -846,3 +846,50 @@ def test_a_fin_seen_from_the_front_stays_and_faces_seen_are_told_by_depth():
     seen = faces_seen(v, tri, frame, np.ones(len(tri), dtype=bool))
     np.testing.assert_array_equal(seen, [False, False, True, True, True, True])
     assert not faces_seen(v, tri, frame, np.array([True, True, False, False, False, False])).any()
+
+
+def _two_charts(v: np.ndarray, t: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh as a scanner writes it in two texture charts (menpo3d's james.obj): the faces ``right`` (m,) bool take
+    copies of all their vertices (appended), each copy its chart's texture coordinate (u in [0.5, 1) against the
+    first copies' [0, 0.5)), so the vertices both halves use are texture-seam copies. Returns vertices (2n, 3),
+    triangles, uvs (2n, 2)."""
+    n = len(v)
+    uv = np.c_[0.25 + 0.2 * v[:, 0], 0.5 + 0.4 * v[:, 1]]
+    return np.vstack([v, v]), np.where(right[:, None], t + n, t), np.vstack([uv, uv + np.array([0.5, 0.0])])
+
+
+def test_a_texture_seam_through_the_lips_is_seen_through_for_the_cut():
+    """Closed lips split down the middle into two texture charts: the corners lie on two pieces that only the seam's
+        coincident copies join, so the cut found no path (the james.obj scan: "mouth corners are not connected").
+        :func:`seam_welded` gives each vertex its first copy: the welded triangles are the unsplit mesh's, and the cut's
+        path over them runs from corner to corner; so where the halves join round the seam's end and the path went round
+    it. A mesh whose path crosses no seam is left alone."""
+    from assets.errors import MeshError
+    from assets.heads.rigging import cut_path, seam_welded
+
+    v, t, left, right, mid = _creased_lips()
+    assert seam_welded(v, t, left, right) is None
+    v2, t2, _ = _two_charts(v, t, v[t].mean(axis=1)[:, 0] > 0.0)
+    right2 = right + len(v)  # the right corner's copy, the one the right half's faces use
+    with pytest.raises(MeshError, match="not connected"):
+        cut_path(v2, t2, left, right2, through=mid)
+    first = seam_welded(v2, t2, left, right2)
+    assert first is not None
+    np.testing.assert_array_equal(v2[first], v2)
+    np.testing.assert_array_equal(first[t2], t)
+    assert first[right2] == right
+    assert cut_path(v2, first[t2], left, right, through=mid) == cut_path(v, t, left, right, through=mid)
+    # Two pieces apart in space too (no coincident copy joins them): still no path, as before.
+    apart = v2.copy()
+    apart[len(v) :, 2] += 1.0
+    assert seam_welded(apart, t2, left, right2) is None
+    # The halves joined round the seam's end (the top row of faces left whole): the path as loaded goes up round it,
+    # off the lip line; across the seam it is the unsplit mesh's.
+    top = v[t].mean(axis=1)[:, 1] > 0.3
+    v3, t3, _ = _two_charts(v, t, v[t].mean(axis=1)[:, 0] > 0.0)
+    t3[top] = np.where(v[t[top], 0] == 0.0, t[top], t3[top])  # the midline's vertices there one copy
+    right3 = right + len(v)
+    assert np.abs(v3[cut_path(v3, t3, left, right3), 1]).max() >= 0.25  # up to the joined row
+    first = seam_welded(v3, t3, left, right3)
+    assert first is not None
+    assert cut_path(v3, first[t3], left, right, through=mid) == cut_path(v, t, left, right, through=mid)
