@@ -1206,6 +1206,58 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     return {**spec, "lower_inner": welded[at].tolist()}
 
 
+def inner_lips_on_lips(vertices: np.ndarray, triangles: np.ndarray, points: Mapping[str, np.ndarray]) -> dict[str, int]:
+    """The inner-lip points (``upper_inner``, ``lower_inner``) whose nearest vertex lies on no lip -> a vertex of their
+    own lip's front; empty when both lie on the lips (the usual case). ``vertices`` (n, 3), ``triangles`` (m, 3);
+    ``points``: landmark name -> (3,) point, head units.
+
+    A point lies on no lip when its vertex is on another piece of the mesh than the outer lip points (welded, along
+    its edges: unreachable from both), such as teeth merged into the head's one primitive. A finder that casts its 2D
+    points onto the mesh casts one seen between slightly parted lips onto the teeth behind them: anny's built-in
+    proportions decimated to 6,000 triangles, its lower inner point 0.14 IOD behind the lips on the lower teeth, which
+    the rig then took for the lower lip (the lips parted by -0.00 of mouth_open; docs/animation.md, "Decimated heads").
+    A vertex that no face uses is on no lip either (Lee Perry-Smith with its lips parted at rest, a held-out head:
+    MediaPipe's upper inner point lay 0.010 IOD from such a vertex, left over where the mouth's faces were removed).
+    It goes to the vertex of its lip's front nearest it across the face (in the face frame's sideways-up plane: where
+    the frontal view that placed it sees that lip's edge), among the lip's vertices (nearer that lip's outer midpoint
+    than the other's along the mesh, as :func:`lower_inner_on_lower_lip`) facing the front (not the lip's inner wall)
+    and lying in front of the point (the view met what it hit behind the lip: through a hollow scan's mouth hole the
+    inside of the back of the head, 1.5 IOD behind, also faces the front and lies on the upper lip's side along the
+    mesh). Taken instead among those facing the front at least as much as towards the other lip, or the nearest in
+    space, on that scan it went to a vertex by the upper lip's outer midpoint, 0.06 IOD above the lip's edge."""
+    from realtime_core.face.welding import weld
+
+    v = np.asarray(vertices, dtype=np.float64)
+    canon, welded = weld(v)
+    tw = canon[np.asarray(triangles, dtype=np.int64)]
+    snap = {
+        k: int(canon[np.argmin(np.linalg.norm(v - np.asarray(p, dtype=np.float64), axis=1))]) for k, p in points.items()
+    }
+    d = dijkstra(edge_length_graph(welded, tw), directed=False, indices=[snap["upper_lip"], snap["lower_lip"]])
+    to_upper, to_lower = d[0], d[1]
+    off = [
+        k
+        for k in ("upper_inner", "lower_inner")
+        if not (np.isfinite(to_upper[snap[k]]) or np.isfinite(to_lower[snap[k]]))
+    ]
+    if not off:
+        return {}
+    frame = face_frame(welded, mouth_landmarks(snap))
+    forward = vertex_normals(welded, tw) @ frame.axes[2]  # (n_w,): how much each vertex faces the front
+    local = (welded - frame.origin) @ frame.axes.T  # (n_w, 3): sideways, up, forward
+    moved: dict[str, int] = {}
+    for k in off:
+        at = (np.asarray(points[k], dtype=np.float64) - frame.origin) @ frame.axes.T
+        own, other = (to_upper, to_lower) if k == "upper_inner" else (to_lower, to_upper)
+        front = (forward > 0) & (local[:, 2] > at[2])
+        lip = np.flatnonzero((own < other) & np.isfinite(own) & front)
+        if not len(lip):
+            continue
+        w = lip[int(np.argmin(np.linalg.norm(local[lip, :2] - at[:2], axis=1)))]
+        moved[k] = int(np.flatnonzero(canon == w)[0])
+    return moved
+
+
 def _place(simple: SimpleFace, points: Mapping[str, np.ndarray], *, max_gain: float | None = None) -> FaceModel:
     names = list(REQUIRED_LANDMARKS)
     idx = np.array([simple.landmarks[k] for k in names])
@@ -1723,6 +1775,11 @@ def rig_head(
     points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)
     v, t, uv = mesh.vertices, mesh.triangles, mesh.uvs
     snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
+    # An inner-lip point cast onto the teeth behind the lips goes to its lip's front (inner_lips_on_lips).
+    on_lips = inner_lips_on_lips(v, t, points)
+    for k, i in on_lips.items():
+        snap[k] = i
+        points[k] = np.asarray(v[i], dtype=np.float64)
     # One notion of a landmark: its vertex. The cut and the checks use the nearest vertex, so the simple
     # face is placed there too (placed at the given points, up to 0.03 IOD off those vertices, the avatar's
     # automatic landmarks folded its rig: 24 flipped triangles against 9 at the vertices). The given points stay
@@ -1734,6 +1791,8 @@ def rig_head(
         "landmarks": {k: p.tolist() for k, p in points.items()},
         "simple_landmarks": dict(simple.landmarks),
     }
+    if on_lips:
+        meta["inner_lip_on_lips"] = sorted(on_lips)
     seam_first = None  # a texture seam through closed lips, welded for the cut (seam_welded)
     seam_split = np.asarray(t, dtype=np.int64)
     colors = mesh.colors

@@ -669,3 +669,37 @@ def test_a_lower_inner_lip_point_on_the_upper_lip_is_moved_to_the_lower_lips_fro
         indices=[h.landmarks["upper_lip"], h.landmarks["lower_lip"]],
     )
     assert d[1, i] < d[0, i]
+
+
+def test_an_inner_lip_point_on_the_teeth_is_moved_to_its_lips_front(builtin_head):
+    """A finder's inner-lip point cast between slightly parted lips onto the teeth behind them (anny's built-in
+    proportions decimated to 6,000 triangles, its teeth merged into the head's one primitive: the rig took the lower
+    teeth for the lower lip and the lips never parted). inner_lips_on_lips leaves the built-in head's own points alone
+    and moves a point put on the teeth (a vertex of another piece of the mesh than the lips) to its own lip: on that
+    lip's side of the mesh, within 0.025 IOD of the head's own point for it (the upper one onto it, the lower one a
+    vertex beside it), on the lip's front (facing forward, in front of the teeth)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from assets.heads.mesh import vertex_normals
+    from assets.heads.rigging import inner_lips_on_lips, resolve_landmarks
+    from realtime_core.face.projection import edge_length_graph
+
+    h = builtin_head
+    v = np.asarray(h.mesh.vertices, dtype=np.float64)
+    t = np.asarray(h.mesh.triangles, dtype=np.int64)
+    points = resolve_landmarks(dict(h.landmarks), v, "built-in")
+    assert inner_lips_on_lips(v, t, points) == {}
+    frame = face_frame(v, mouth_landmarks(h.landmarks))
+    d = dijkstra(edge_length_graph(v, t), directed=False, indices=[h.landmarks["upper_lip"], h.landmarks["lower_lip"]])
+    other = np.flatnonzero(~np.isfinite(d).any(axis=0))  # no path to either lip: the teeth, the tongue, the eyes
+    facing = vertex_normals(v, t) @ frame.axes.T  # sideways, up, forward
+    for k, own in (("lower_inner", 1), ("upper_inner", 0)):
+        teeth = other[int(np.argmin(np.linalg.norm(v[other] - points[k], axis=1)))]
+        behind = float((points[k] - v[teeth]) @ frame.axes[2]) / frame.iod
+        assert 0.02 < behind < 0.5  # a piece behind the lips, as the decimated head's teeth (0.14 IOD)
+        moved = inner_lips_on_lips(v, t, {**points, k: v[teeth]})
+        assert list(moved) == [k]
+        i = moved[k]
+        assert d[own, i] < d[1 - own, i]
+        assert np.linalg.norm(v[i] - points[k]) / frame.iod < 0.025
+        assert facing[i, 2] > 0 and (v[i] - v[teeth]) @ frame.axes[2] > 0
