@@ -1172,6 +1172,25 @@ def lips_touch_apart(mesh: HeadMesh, spec: Mapping[str, object]) -> bool:
     return lips_connected(v, mesh.triangles, up, lo, iod=frame.iod) and not lips_connected(v, mesh.triangles, up, lo)
 
 
+def _along_to_lips(
+    vertices: np.ndarray, triangles: np.ndarray, points: Mapping[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int], np.ndarray, np.ndarray]:
+    """The mesh welded (texture-seam copies as one vertex) and each welded vertex's distance along its edges to the
+    upper and the lower lip's outer midpoints, for :func:`lower_inner_on_lower_lip` and :func:`inner_lips_on_lips`:
+    (canon (n,) each vertex's welded index, welded (n_w, 3), the welded triangles (m, 3), each landmark's welded
+    vertex, to_upper (n_w,), to_lower (n_w,); inf where unreachable)."""
+    from realtime_core.face.welding import weld
+
+    v = np.asarray(vertices, dtype=np.float64)
+    canon, welded = weld(v)
+    tw = canon[np.asarray(triangles, dtype=np.int64)]
+    snap = {
+        k: int(canon[np.argmin(np.linalg.norm(v - np.asarray(p, dtype=np.float64), axis=1))]) for k, p in points.items()
+    }
+    d = dijkstra(edge_length_graph(welded, tw), directed=False, indices=[snap["upper_lip"], snap["lower_lip"]])
+    return canon, welded, tw, snap, d[0], d[1]
+
+
 def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict[str, object] | None:
     """``spec`` with its lower inner-lip point moved onto the lower lip when it lies on the upper one, else None.
 
@@ -1186,15 +1205,9 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     thin old woman"). With the point so moved its rig passes (0 flips, stretch 3.58); taken instead at the top of
     the lower lip under the upper one (it faces up; 0.019 IOD higher, 0.030 further back), capped, it stretched 5.15.
     :func:`assets.heads.head.rig_checked` tries this on a head whose rigs all fail."""
-    from realtime_core.face.welding import weld
 
     points = resolve_landmarks(spec, mesh.vertices, "landmarks")
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    canon, welded = weld(v)
-    tw = canon[np.asarray(mesh.triangles, dtype=np.int64)]
-    snap = {k: int(canon[np.argmin(np.linalg.norm(v - points[k], axis=1))]) for k in points}
-    d = dijkstra(edge_length_graph(welded, tw), directed=False, indices=[snap["upper_lip"], snap["lower_lip"]])
-    to_upper, to_lower = d[0], d[1]
+    _, welded, tw, snap, to_upper, to_lower = _along_to_lips(mesh.vertices, mesh.triangles, points)
     if not to_upper[snap["lower_inner"]] < to_lower[snap["lower_inner"]]:
         return None
     frame = face_frame(welded, mouth_landmarks(snap))
@@ -1225,16 +1238,8 @@ def inner_lips_on_lips(vertices: np.ndarray, triangles: np.ndarray, points: Mapp
     inside of the back of the head, 1.5 IOD behind, also faces the front and lies on the upper lip's side along the
     mesh). Taken instead among those facing the front at least as much as towards the other lip, or the nearest in
     space, on that scan it went to a vertex by the upper lip's outer midpoint, 0.06 IOD above the lip's edge."""
-    from realtime_core.face.welding import weld
 
-    v = np.asarray(vertices, dtype=np.float64)
-    canon, welded = weld(v)
-    tw = canon[np.asarray(triangles, dtype=np.int64)]
-    snap = {
-        k: int(canon[np.argmin(np.linalg.norm(v - np.asarray(p, dtype=np.float64), axis=1))]) for k, p in points.items()
-    }
-    d = dijkstra(edge_length_graph(welded, tw), directed=False, indices=[snap["upper_lip"], snap["lower_lip"]])
-    to_upper, to_lower = d[0], d[1]
+    canon, welded, tw, snap, to_upper, to_lower = _along_to_lips(vertices, triangles, points)
     off = [
         k
         for k in ("upper_inner", "lower_inner")
