@@ -826,13 +826,13 @@ def _rig_checked_once(
     # Bad input names itself before any progress line (one line on stderr for the user, then nothing).
     check_mesh(mesh)
     if spec is not None:
-        resolve_landmarks(spec, mesh.vertices, str(rig_options.get("landmark_source", "landmarks")))
+        resolve_landmarks(spec, mesh.vertices, str(rig_options.get("landmark_source", "landmarks")), mesh.triangles)
     harmonic = (rig_options.get("config") or RigConfig()).method == "harmonic"
     if dense_proxy and len(mesh.triangles) > DENSE_TRIANGLES and harmonic:
         # A dense scan: its decimated copy rigged and checked as any head, its field carried onto the dense mesh
         # (cut along its own lips), which is then checked itself (assets/heads/dense.py).
         source = str(rig_options.get("landmark_source", "landmarks"))
-        points = resolve_landmarks(spec, mesh.vertices, source) if spec is not None else None
+        points = resolve_landmarks(spec, mesh.vertices, source, mesh.triangles) if spec is not None else None
         mouth, keep = None, 0.0
         if points is not None:
             mouth = np.mean([points[k] for k in ("corner_left", "corner_right", "upper_lip", "lower_lip")], axis=0)

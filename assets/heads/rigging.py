@@ -113,7 +113,7 @@ the band's half-width (fraction of the mouth's width, corner to corner) and its 
 midpoint (IOD). 20 rounds over the band: the anny old heavy man's peak at /a/ 0.042 -> 0.007 IOD
 (:func:`realtime_core.face.checks.upper_lip_peak`); 10 left 0.022 and flipped 2 triangles without the feathered
 weights (docs/animation.md, "The upper lip drawn to a peak")."""
-LANDMARK_REACH = 0.05  # how far (fraction of the mesh extent) a landmark point may lie from the nearest vertex
+LANDMARK_REACH = 0.05  # how far (fraction of the mesh extent) a landmark point may lie from the head
 REQUIRED_LANDMARKS = (*MouthLandmarks.__dataclass_fields__, "nose_tip", "chin")
 
 
@@ -178,9 +178,13 @@ def simple_face(head: BuiltinHead) -> SimpleFace:
     return SimpleFace(model=model, landmarks=slm, source=src)
 
 
-def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: str) -> dict[str, np.ndarray]:
+def resolve_landmarks(
+    spec: Mapping[str, object], vertices: np.ndarray, source: str, triangles: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """Named landmarks -> (3,) points: each value is a vertex index or an [x, y, z] point.
-    Raises LandmarkError naming ``source`` for missing names and bad values."""
+    Raises LandmarkError naming ``source`` for missing names and bad values, and for a point farther than
+    LANDMARK_REACH of the mesh's extent from the head: from its surface when ``triangles`` (m, 3) are given, else
+    from its nearest vertex (a point on a low-poly head's large face can lie farther than that from every vertex)."""
     missing = [k for k in REQUIRED_LANDMARKS if k not in spec]
     if missing:
         raise LandmarkError(f"{source}: missing landmarks {missing} (need {list(REQUIRED_LANDMARKS)})")
@@ -202,17 +206,30 @@ def resolve_landmarks(spec: Mapping[str, object], vertices: np.ndarray, source: 
             if a.shape != (3,) or pt.shape != (3,) or not np.all(np.isfinite(pt)):
                 raise LandmarkError(f"{source}: landmark {k!r} must be a vertex index or [x, y, z], got {val!r}")
             out[k] = pt
-    # Points must lie on the head: within LANDMARK_REACH of the mesh's extent from its nearest vertex.
+    # Points must lie on the head: within LANDMARK_REACH of the mesh's extent from it.
     v = np.asarray(vertices, dtype=np.float64)
     extent = float(np.ptp(v, axis=0).max())
     for k, pt in out.items():
         gap = float(np.min(np.linalg.norm(v - pt, axis=1)))
+        if gap > LANDMARK_REACH * extent and triangles is not None:
+            gap = _surface_gap(pt, v, np.asarray(triangles, dtype=np.int64), LANDMARK_REACH * extent)
         if gap > LANDMARK_REACH * extent:
             raise LandmarkError(
                 f"{source}: landmark {k!r} {np.round(pt, 4).tolist()} lies {gap:.3g} file units off the mesh "
                 f"(extent {extent:.3g}); give points on the head in its file units, or vertex indices"
             )
     return out
+
+
+def _surface_gap(p: np.ndarray, v: np.ndarray, t: np.ndarray, reach: float) -> float:
+    """The distance from ``p`` (3,) to the surface of triangles ``t`` (m, 3) over ``v`` (n, 3), found among the
+    triangles whose box grown by ``reach`` holds ``p`` (inf when none does: farther than ``reach`` anyway)."""
+    tri = v[t]
+    near = np.all((tri.min(axis=1) - reach <= p) & (tri.max(axis=1) + reach >= p), axis=1)
+    if not near.any():
+        return float("inf")
+    cand = tri[near]
+    return float(np.min(np.linalg.norm(closest_point(cand, np.broadcast_to(p, (len(cand), 3))) - p, axis=1)))
 
 
 def _cut_graph(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> sp.csr_matrix:
@@ -1164,7 +1181,7 @@ def lips_touch_apart(mesh: HeadMesh, spec: Mapping[str, object]) -> bool:
     """True if the lips of ``mesh`` at the landmarks ``spec`` touch (:func:`lips_connected` with the head's IOD) but
     are apart in the mesh (their inner-lip vertices not joined within three edges): :func:`rig_head` cuts them as
     closed lips, or with ``touching_apart`` rigs them as apart."""
-    points = resolve_landmarks(spec, mesh.vertices, "landmarks")
+    points = resolve_landmarks(spec, mesh.vertices, "landmarks", mesh.triangles)
     v = np.asarray(mesh.vertices, dtype=np.float64)
     snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
     frame = face_frame(v, mouth_landmarks(snap))
@@ -1206,7 +1223,7 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     the lower lip under the upper one (it faces up; 0.019 IOD higher, 0.030 further back), capped, it stretched 5.15.
     :func:`assets.heads.head.rig_checked` tries this on a head whose rigs all fail."""
 
-    points = resolve_landmarks(spec, mesh.vertices, "landmarks")
+    points = resolve_landmarks(spec, mesh.vertices, "landmarks", mesh.triangles)
     _, welded, tw, snap, to_upper, to_lower = _along_to_lips(mesh.vertices, mesh.triangles, points)
     if not to_upper[snap["lower_inner"]] < to_lower[snap["lower_inner"]]:
         return None
@@ -1777,7 +1794,7 @@ def rig_head(
         assert head is not None  # loaded above for the built-in mesh
         landmark_spec = dict(head.landmarks)
         landmark_source = "builtin landmarks"
-    points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source)
+    points = resolve_landmarks(landmark_spec, mesh.vertices, landmark_source, mesh.triangles)
     v, t, uv = mesh.vertices, mesh.triangles, mesh.uvs
     snap = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in points.items()}
     # An inner-lip point cast onto the teeth behind the lips goes to its lip's front (inner_lips_on_lips).

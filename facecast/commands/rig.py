@@ -122,7 +122,9 @@ def run(args: argparse.Namespace) -> int:
     if args.show_landmarks:
         from assets.heads.plot import plot_landmarks
 
-        pts = resolve_landmarks(spec if spec is not None else dict(head.landmarks), mesh.vertices, source)
+        pts = resolve_landmarks(
+            spec if spec is not None else dict(head.landmarks), mesh.vertices, source, mesh.triangles
+        )
         out = plot_landmarks(mesh, pts, args.show_landmarks, title=f"{Path(args.head).name}: landmarks ({source})")
         print(f"rig: landmarks picture {out}")
         if not args.output:

@@ -703,3 +703,30 @@ def test_an_inner_lip_point_on_the_teeth_is_moved_to_its_lips_front(builtin_head
         assert d[own, i] < d[1 - own, i]
         assert np.linalg.norm(v[i] - points[k]) / frame.iod < 0.025
         assert facing[i, 2] > 0 and (v[i] - v[teeth]) @ frame.axes[2] > 0
+
+
+def test_points_on_a_low_poly_heads_large_faces_are_on_it():
+    """A landmark point is judged by its distance to the head's surface, not to its nearest vertex: on a low-poly head
+    a point in the middle of a large face lies farther than LANDMARK_REACH of the extent from every vertex and is on
+    the head all the same (a decimated anny head's automatic chin was refused so); a point that far off the surface
+    is still refused, naming the landmark."""
+    import trimesh
+
+    from assets.heads.rigging import LANDMARK_REACH, REQUIRED_LANDMARKS, resolve_landmarks
+
+    ico = trimesh.creation.icosahedron()
+    v, t = np.asarray(ico.vertices), np.asarray(ico.faces)
+    centres = v[t].mean(axis=1)
+    spec = {k: centres[i].tolist() for i, k in enumerate(REQUIRED_LANDMARKS)}
+    extent = float(np.ptp(v, axis=0).max())
+    # The faces' centres lie farther from every vertex than the reach (else this tests nothing).
+    assert min(np.linalg.norm(v - centres[i], axis=1).min() for i in range(len(spec))) > LANDMARK_REACH * extent
+    with pytest.raises(LandmarkError, match="off the mesh"):
+        resolve_landmarks(spec, v, "coarse.json")
+    got = resolve_landmarks(spec, v, "coarse.json", t)
+    np.testing.assert_array_equal(got["chin"], spec["chin"])
+    # Pushed out along the face's normal by twice the reach: off the surface, refused with its name.
+    normal = np.asarray(ico.face_normals)[REQUIRED_LANDMARKS.index("chin")]
+    far = {**spec, "chin": (np.asarray(spec["chin"]) + 2 * LANDMARK_REACH * extent * normal).tolist()}
+    with pytest.raises(LandmarkError, match=r"coarse\.json: landmark 'chin'.*off the mesh"):
+        resolve_landmarks(far, v, "coarse.json", t)
