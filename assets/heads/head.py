@@ -768,7 +768,9 @@ def _rig_checked_once(
     coarse mouth's corners at their points"), the first that passes kept (else the plain one, as before). A knife-cut
     mouth whose cut was raised to the lips' meeting (meta "knife_raised") is first rigged the first four ways so, and
     when they fail all of the above with the cut through the inner-lip point (``knife_meeting=False``, every later rig
-    too). A head with no cut is rigged once; a cut head up to four times (a knife-cut one eight, twelve when raised),
+    too). A head whose lips read as joined only because its lower inner-lip point lies on the upper lip
+    (:func:`assets.heads.rigging.lips_joined_by_misplaced_point`: a decimated head's few lip vertices) has every rig
+    made with that point on the lower lip's front (meta "lower_inner_moved"). A head with no cut is rigged once; a cut head up to four times (a knife-cut one eight, twelve when raised),
     only while its rigs fail. A head
     whose rigs all fail is rigged once more with the simple face's local gains capped (``gain_capped=True``;
     :data:`assets.heads.rigging.ADAPT_MAX_GAIN`), kept if it passes (each capped rig here is first made with its upper
@@ -798,7 +800,13 @@ def _rig_checked_once(
 
     from assets.heads.dense import CUT_DIP_WINDOW, DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.mesh import check_mesh
-    from assets.heads.rigging import lips_touch_apart, lower_inner_on_lower_lip, resolve_landmarks, rig_head
+    from assets.heads.rigging import (
+        lips_joined_by_misplaced_point,
+        lips_touch_apart,
+        lower_inner_on_lower_lip,
+        resolve_landmarks,
+        rig_head,
+    )
     from realtime_core.face.checks import RigCheckLimits
 
     def say(line: str) -> None:
@@ -891,6 +899,13 @@ def _rig_checked_once(
         rig, rigged, report = checked(rig, rigged)
         return replace(rig, meta={**rig.meta, "checks": report.as_dict()}), rigged, report
 
+    # Lips read as joined only because the lower inner-lip point lies on the upper lip (a decimated head's few lip
+    # vertices; lips_joined_by_misplaced_point): every rig from the point on the lower lip's front. Cut as closed lips
+    # along the upper lip, anny's old heavy man at 3,000 triangles opened 0.16 of mouth_open, its lower face torn.
+    misread = None if spec is None else lips_joined_by_misplaced_point(mesh, spec)
+    if misread is not None:
+        say("the lower inner-lip point lies on the upper lip, joining lips the mesh has apart: moved to the lower lip")
+        spec = misread
     tries: list[dict[str, Any]] = [
         {"clean_lips": True},
         {"clean_lips": True, "walls_in_repair": False},
@@ -979,6 +994,8 @@ def _rig_checked_once(
                 else:
                     attempts.append({**apart, "failures": list(a_report.failures)})
     meta = {**rig.meta, "checks": report.as_dict()}
+    if misread is not None:
+        meta["lower_inner_moved"] = True
     if attempts:
         meta["rig_attempts"] = attempts
     return replace(rig, meta=meta), rigged, report
