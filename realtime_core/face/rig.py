@@ -29,8 +29,8 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 82: lips read as joined only because the lower inner-lip point lies on the upper lip (a decimated head's few lip
-# vertices) rigged from the point on the lower lip's front from the first try on (i12heavy).
+# 82: when every rig fails and the lips read as joined only because the lower inner-lip point lies on the upper lip
+# (a decimated head's few lip vertices), the rig from the point on the lower lip's front is returned (i12heavy).
 # 81: an inner-lip point whose vertex lies on no lip (teeth merged into the head's one primitive) moved to its
 # lip's front (i12low).
 # 80: a rig whose lips' band is drawn dark where the lips should meet (a slit at the closure pose or /m/) fails its
