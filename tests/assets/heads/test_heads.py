@@ -671,6 +671,42 @@ def test_a_lower_inner_lip_point_on_the_upper_lip_is_moved_to_the_lower_lips_fro
     assert d[1, i] < d[0, i]
 
 
+def test_lips_joined_only_by_a_lower_inner_point_on_the_upper_lip_are_read_apart(builtin_head):
+    """A decimated head's lower inner-lip point cast on the upper lip's underside (anny's old heavy man at 3,000
+    triangles: on the upper inner point's neighbour) joins lips its mesh has apart: lips_joined_by_misplaced_point
+    then gives the point on the lower lip's front (lower_inner_on_lower_lip's), which is more than three edges from the
+    upper inner point, while the given points were within three; it leaves the built-in head's own points alone (on
+    their own lips) and a lower inner point on the upper lip that does not join the lips (the upper lip's outer
+    midpoint, far from the upper inner point along the mesh)."""
+    from assets.heads.rigging import (
+        lips_connected,
+        lips_joined_by_misplaced_point,
+        lower_inner_on_lower_lip,
+        resolve_landmarks,
+    )
+
+    h = builtin_head
+    v = np.asarray(h.mesh.vertices, dtype=np.float64)
+    t = np.asarray(h.mesh.triangles, dtype=np.int64)
+    points = resolve_landmarks(dict(h.landmarks), v, "built-in")
+    spec = {k: p.tolist() for k, p in points.items()}
+    assert lips_joined_by_misplaced_point(h.mesh, spec) is None
+    up = h.landmarks["upper_inner"]
+    ring = np.unique(t[np.isin(t, up).any(axis=1)])
+    frame = face_frame(v, mouth_landmarks(h.landmarks))
+    under = ring[ring != up][int(np.argmin((v[ring[ring != up]] - v[up]) @ frame.axes[1]))]  # below it on its lip
+    for lower in (v[up], v[under]):
+        on_upper = {**spec, "lower_inner": lower.tolist()}
+        moved = lips_joined_by_misplaced_point(h.mesh, on_upper)
+        assert moved is not None and moved == lower_inner_on_lower_lip(h.mesh, on_upper)
+        i = int(np.argmin(np.linalg.norm(v - np.asarray(moved["lower_inner"]), axis=1)))
+        assert lips_connected(v, t, up, int(np.argmin(np.linalg.norm(v - lower, axis=1))))
+        assert not lips_connected(v, t, up, i)
+    far = {**spec, "lower_inner": spec["upper_lip"]}
+    assert lower_inner_on_lower_lip(h.mesh, far) is not None
+    assert lips_joined_by_misplaced_point(h.mesh, far) is None
+
+
 def test_an_inner_lip_point_on_the_teeth_is_moved_to_its_lips_front(builtin_head):
     """A finder's inner-lip point cast between slightly parted lips onto the teeth behind them (anny's built-in
     proportions decimated to 6,000 triangles, its teeth merged into the head's one primitive: the rig took the lower
