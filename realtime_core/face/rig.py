@@ -29,8 +29,6 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
-# 82: a sliver's vertices (edges under SLIVER_TIE of the median) move as one in the fold repair of every head but
-# the built-in one, uncut lips apart in the mesh too (i12corner).
 # 81: an inner-lip point whose vertex lies on no lip (teeth merged into the head's one primitive) moved to its
 # lip's front (i12low).
 # 80: a rig whose lips' band is drawn dark where the lips should meet (a slit at the closure pose or /m/) fails its
@@ -57,7 +55,7 @@ if TYPE_CHECKING:
 # piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median
 # edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
 # shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 82
+RIG_ALGORITHM = 81
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
