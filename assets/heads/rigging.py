@@ -1261,7 +1261,7 @@ def lips_joined_by_misplaced_point(mesh: HeadMesh, spec: Mapping[str, object]) -
     def vertex(p: object) -> int:
         return int(np.argmin(np.linalg.norm(v - np.asarray(p, dtype=np.float64), axis=1)))
 
-    given = resolve_landmarks(spec, v, "landmarks")
+    given = resolve_landmarks(spec, v, "landmarks", mesh.triangles)
     up = vertex(given["upper_inner"])
     if not lips_connected(v, mesh.triangles, up, vertex(given["lower_inner"])):
         return None
