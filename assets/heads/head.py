@@ -719,11 +719,9 @@ def rig_checked(
     """:func:`_rig_checked_once` (the tries, below) from ``spec``; when it was found automatically with alternatives
     (:class:`assets.heads.landmarks.FoundLandmarks`) and every try fails, the same tries from each alternative set in
     turn, the first rig that passes kept (meta "landmark_set": its number, 1 for the first alternative; meta
-    "landmark_sets_failed": the failures of the sets tried before it); when every set fails, the rig failing the
-    fewest checks (the earlier set on a tie; meta "landmark_set" as above when it is not the first set's,
-    "landmark_sets_failed" the other sets' failures). MediaPipe's points move by up to ~0.02 IOD between renders of
-    one head (docs/animation.md, "Steadier automatic landmarks"), and whether a rig passes can hang on where they
-    fall. A rig that passes from ``spec`` is made exactly as before."""
+    "landmark_sets_failed": the failures of the sets tried before it), else the rig from ``spec`` as before. MediaPipe's
+    points move by up to ~0.02 IOD between renders of one head (docs/animation.md, "Steadier automatic landmarks"), and
+    whether a rig passes can hang on where they fall. A rig that passes from ``spec`` is made exactly as before."""
     alternatives = spec.alternatives if isinstance(spec, FoundLandmarks) else ()
     points = None if spec is None else dict(spec)
     options: dict[str, Any] = {"dense_proxy": dense_proxy, "progress": progress, "limits": limits, **rig_options}
@@ -732,10 +730,6 @@ def rig_checked(
         return rig, rigged, report
     last = list(report.failures)
     failed: list[dict[str, object]] = [{"set": 0, "failures": last}]
-    # The rig kept when every set fails: the one failing the fewest checks, the earlier set on a tie. It is used
-    # anyway (animate, render: a warning), and a set whose points fell badly can fail far more of them than another
-    # (a decimated head cut along its upper lip: teeth ahead, the lips hardly parting, the inside through the skin).
-    least = (rig, rigged, report, 0)
     for n, other in enumerate(alternatives, start=1):
         if progress is not None:
             # The first alternative is the steady views' median, the others single views' (find_landmarks).
@@ -750,11 +744,7 @@ def rig_checked(
             return replace(a_rig, meta=meta), a_rigged, a_report
         last = list(a_report.failures)
         failed.append({"set": n, "failures": last})
-        if len(a_report.failures) < len(least[2].failures):
-            least = (a_rig, a_rigged, a_report, n)
-    rig, rigged, report, n = least
-    meta = {**rig.meta, "landmark_sets_failed": [f for f in failed if f["set"] != n]}
-    return replace(rig, meta={**meta, "landmark_set": n} if n else meta), rigged, report
+    return replace(rig, meta={**rig.meta, "landmark_sets_failed": failed}), rigged, report
 
 
 def _rig_checked_once(
