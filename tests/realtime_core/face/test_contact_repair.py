@@ -527,3 +527,43 @@ def test_a_repair_whose_rounds_run_out_reports_the_flips_of_the_weights_it_retur
         counted.append(_flipped(v, t, res.weights, motion[0]))
     assert reported == counted
     assert counted[0] < before  # the first round already unfolds some: a stale count would say `before`
+
+
+def test_one_round_replaces_the_folded_rows_and_one_ring_by_their_neighbours_mean_twice():
+    """The documented round, computed here with whole sparse matrices: the vertices of the flipped triangles and
+    one ring round them (not the fixed ones) take the mean of their mesh neighbours' rows, twice (Jacobi steps);
+    every other row is returned exactly. The repair rewrites only the rows it changes (a dense copy, row blocks):
+    it must give these very numbers."""
+    v, t = _grid()
+    n = len(v)
+    rng = np.random.default_rng(5)
+    dense = rng.random((n, 3)) * (rng.random((n, 3)) < 0.3)
+    dense[n // 2] = [1.0, 0.0, 0.5]
+    g = sp.csr_matrix(dense)
+    motion = np.zeros((1, 3, 3))
+    motion[0, 0] = [0.3, 0.0, 0.0]  # simple vertex 0 carries the centre 2.4 cells sideways: folds round it
+    edge = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
+    v1 = v + g @ motion[0]
+    n0 = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n1 = np.cross(v1[t[:, 1]] - v1[t[:, 0]], v1[t[:, 2]] - v1[t[:, 0]])
+    flipped = np.einsum("ij,ij->i", n0, n1) < 0
+    assert flipped.any()
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    length, rest = (np.linalg.norm(p[e[:, 0]] - p[e[:, 1]], axis=1) for p in (v1, v))
+    stretched = length > 3.0 * rest
+    bad = np.zeros(n, dtype=bool)
+    bad[t[flipped].ravel()] = True
+    bad[e[stretched].ravel()] = True
+    adj = sp.csr_matrix((np.ones(len(e) * 2), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    adj.data[:] = 1.0  # each neighbour once (every inner edge is on two triangles)
+    sel = (bad | (adj @ bad.astype(float) > 0)) & ~edge
+    mean = sp.diags(1.0 / np.asarray(adj.sum(axis=1)).ravel()) @ adj
+    keep, pick = sp.diags((~sel).astype(float)), sp.diags(sel.astype(float))
+    want = g
+    for _ in range(2):
+        want = keep @ want + pick @ (mean @ want)
+    want = want.toarray()
+    want[np.abs(want) < 1e-6] = 0.0
+    res = repair_folds(v, t, g, motion, fixed=edge, max_rounds=1, tie_rounds=0)
+    np.testing.assert_array_equal(res.weights.toarray(), want)
+    assert res.smoothed_rows == int(sel.sum())
