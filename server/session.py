@@ -169,7 +169,7 @@ class Frame:
         elif kind == P.KIND_MORPH:
             if not isinstance(self.rig, MorphRig):
                 raise ServerConfigError("morph weights need a head driven by its own morph targets")
-            values = self.rig.weights(self.params)  # (P,) float32 in [0, 1], the rig's target order
+            values = self.rig.weights(self.params)  # (P,) float32, the rig's target order (MorphRig.rest: < 0)
             stage = "encode_morph"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")

@@ -48,7 +48,7 @@ LANDMARK_CACHE_FAMILY = re.compile(r"a[0-9]+_[0-9a-f]{32}\.json")
 # only the file's "head_meta" tells an older generation's file (morph_head_generation).
 MORPH_HEAD_CACHE_FAMILY = re.compile(r"[0-9a-f]{32}\.npz")
 MORPH_HEAD_FORMAT = "facecast-morph-head"
-MORPH_HEAD_VERSION = 1
+MORPH_HEAD_VERSION = 2
 """Bump when :func:`morph_head` makes something else from the same inputs while neither
 :data:`assets.heads.targets.MORPH_RIG_VERSION` (the fit) nor ``RIG_ALGORITHM`` (the mouth cavity, its shading, the
 checks, the automatic landmarks) changes, or when its cache file's layout does: a head driven by its own targets is
@@ -295,9 +295,87 @@ def _made_morph_head(
     from assets.heads.cavity import with_mouth_cavity
 
     finder = None if landmark_finder is None else cached_finder(landmark_finder, cache)
-    # The checks (and the bound they decide) once the cavity has placed its landmarks; unchanged without them.
+    # The checks (and the bound they decide) once the cavity has placed its landmarks and lips modelled apart rest
+    # where they meet; unchanged without landmarks.
     shaded = with_mouth_cavity(Head(rig, mesh), landmark_finder=finder)
-    return Head(with_checks(shaded.rig, shaded.mesh, landmark_finder=finder), shaded.mesh)
+    rested = closing_rest(shaded.rig, shaded.mesh, gap=reference_rest_gap(b), landmark_finder=finder)
+    return Head(with_checks(rested, shaded.mesh, landmark_finder=finder), shaded.mesh)
+
+
+REST_JAW_MIN = -0.5
+"""The lowest jaw-target weight :func:`closing_rest` rests a head at: half a stroke of the jaw closing past the head as
+modelled. Its target is extrapolated there, linearly; a mouth modelled further open than that is left as modelled (the
+rig checks then warn that its lips stay apart at closure)."""
+REST_JAW_OPENS = 0.1
+"""IOD of inner-lip opening per unit weight below which a head's jaw target is not taken to close its lips (a jaw
+target that hardly parts them would need a weight far past the modelled head's to close them)."""
+
+
+def reference_rest_gap(b) -> float:
+    """IOD: how far apart the built-in head ``b`` (a BuiltinHead, the reference face whose motion own-target heads
+    are fitted to) models its inner lips, along its face's up axis (0.007: within the closure limit)."""
+    import numpy as np
+
+    from assets.heads.rigging import mouth_landmarks
+    from realtime_core.face import face_frame
+
+    v = np.asarray(b.mesh.vertices, dtype=np.float64)
+    lm = mouth_landmarks(dict(b.landmarks))
+    fr = face_frame(v, lm)
+    return float((v[lm.upper_inner] - v[lm.lower_inner]) @ fr.axes[1]) / fr.iod
+
+
+def closing_rest(
+    rig: MorphRig, mesh: HeadMesh, *, gap: float, landmark_finder: LandmarkFinder | None = None
+) -> MorphRig:
+    """``rig`` (a head's own targets, on ``mesh``), resting with its lips together when they are modelled apart.
+
+    The mouth parameters' zero is lips touching, and the model's closures (/m b p/, silence) give mouth_open 0; a head
+    whose own targets are fitted from its neutral keeps its lips as far apart as modelled there (a head modelled
+    with the jaw 0.05 of jawOpen open: 0.033 IOD apart at every /m/, 0.0135 even at its closure pose, which its other
+    targets cannot close). When its inner-lip landmarks lie more than :data:`assets.heads.rigging.REST_GAP_MAX` apart
+    along the face's up axis and it has a jaw target (the one mapped to ARKit ``jawOpen`` and nothing else) that
+    opens them at least :data:`REST_JAW_OPENS` IOD per unit, the rig rests at that target's weight that brings them
+    ``gap`` IOD apart (:attr:`realtime_core.face.keyframes.MorphRig.rest`, below 0; the targets are linear, so exact
+    at the landmarks), down to :data:`REST_JAW_MIN`. ``gap``: the reference face's own
+    (:func:`reference_rest_gap`), where the motions the fit reproduces start: closed to 0, a head modelled 0.05 of
+    jawOpen apart crossed its lips by 0.0103 IOD at an upper-lip raise of 0.054 (limit 0.005), the reference's lips
+    rising into each other from 0.007 apart; at 0.007, 0.0033 (docs/heads.md, "Lips modelled apart"). Retargeted
+    heads rest at their closure through their field (:func:`realtime_core.face.rig.with_rest_pose`). Recorded as meta
+    "rest_weights" (target -> weight). Else (no landmarks, lips within the limit, no such jaw target, a gap past its
+    reach) ``rig`` unchanged."""
+    import numpy as np
+
+    from assets.heads.rigging import REST_GAP_MAX
+    from realtime_core.errors import FacecastError
+    from realtime_core.face import face_frame
+
+    if rig.rest is not None:
+        return rig
+    try:
+        landmarks, _ = head_check_inputs(Head(rig, mesh), landmark_finder=landmark_finder)
+    except FacecastError:
+        return rig
+    v0 = np.asarray(rig.neutral, dtype=np.float64)
+    fr = face_frame(v0, landmarks)
+    ui, li = landmarks.upper_inner, landmarks.lower_inner
+    apart = float((v0[ui] - v0[li]) @ fr.axes[1]) / fr.iod
+    # The jaw: a target that is ARKit's jawOpen alone (not a viseme or vowel holding some of it: run backwards, an
+    # "aa" would not close a jaw but unround and unspread the lips too).
+    mapped = rig.meta.get("targets") or {}
+    jaw = [k for k, name in enumerate(rig.names) if set(mapped.get(name) or {}) == {"jawOpen"}]
+    if apart <= max(REST_GAP_MAX, gap) or not jaw:
+        return rig
+    k = jaw[0]
+    d = np.zeros((len(v0), 3))
+    d[rig.moving] = rig.targets[k]
+    opens = float((d[ui] - d[li]) @ fr.axes[1]) / fr.iod
+    if opens < REST_JAW_OPENS or -(apart - gap) / opens < REST_JAW_MIN:
+        return rig
+    rest = np.zeros(len(rig.names), dtype=np.float32)
+    rest[k] = -(apart - gap) / opens
+    meta = {**rig.meta, "rest_weights": {rig.names[k]: float(rest[k])}}
+    return replace(rig, rest=rest, meta=meta)
 
 
 def morph_head_generation(b) -> str:

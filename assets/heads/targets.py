@@ -430,8 +430,8 @@ def morph_rig_key(
 
 def morph_rig_arrays(rig: MorphRig) -> dict[str, np.ndarray]:
     """What :func:`morph_rig` computed, as plain arrays for an ``.npz`` (no pickle): the driven targets, the
-    vertices they move, the keyframe map's matrices and the meta as JSON. The neutral mesh, its triangles
-    and the source function are the caller's (:func:`morph_rig_from_arrays`)."""
+    vertices they move, the keyframe map's matrices, the rest weights (when set) and the meta as JSON. The neutral
+    mesh, its triangles and the source function are the caller's (:func:`morph_rig_from_arrays`)."""
     km = rig.keymap
     arrays = {
         "names": np.array(rig.names, dtype=str),
@@ -442,6 +442,8 @@ def morph_rig_arrays(rig: MorphRig) -> dict[str, np.ndarray]:
         "bounds": np.array([km.lo, km.hi]),
         "meta": np.array(json.dumps(rig.meta)),
     }
+    if rig.rest is not None:  # a head modelled with its lips apart rests where they meet
+        arrays["rest"] = rig.rest
     if km.contact_rest is not None and km.contact_rows is not None and km.contact_source is not None:
         arrays |= {
             "contact_rest": km.contact_rest,
@@ -473,4 +475,5 @@ def morph_rig_from_arrays(arrays: Mapping[str, np.ndarray], vertices: np.ndarray
         keymap=keymap,
         source=arkit_source,
         meta=json.loads(str(arrays["meta"])),
+        rest=arrays.get("rest"),
     )

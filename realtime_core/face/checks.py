@@ -1389,7 +1389,10 @@ def check_rig(
     fr = face_frame(v0, landmarks)
     iod, up = fr.iod, fr.axes[1]
     pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
-    gap0 = float((v0[landmarks.upper_inner] - v0[landmarks.lower_inner]) @ up) / iod
+    # The lips' gap where the rig rests (params 0): the head as modelled, but for a morph rig resting at added weights
+    # (MorphRig.rest: lips modelled apart that rest where they meet), whose closure is then at params 0.
+    v_rest = v0 if getattr(rig, "rest", None) is None else np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
+    gap0 = float((v_rest[landmarks.upper_inner] - v_rest[landmarks.lower_inner]) @ up) / iod
     closure = (0.0, 0.0, -gap0, 0.0)
     per = pose_figures(rig, landmarks, (*poses, closure), lip_pairs=pairs, teeth=teeth, reference=reference)
     k = int(np.argmax(per.flipped))

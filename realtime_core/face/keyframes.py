@@ -419,6 +419,11 @@ class MorphRig:
     bound: PoseBound | None = None
     """The parameters the rig accepts (:func:`realtime_core.face.checks.checked_bound`, set on every
     :class:`assets.heads.head.Head`): params outside it give the weights of its nearest point. None: any."""
+    rest: np.ndarray | None = None
+    """(P,) float32 weights added to every frame's (None: none), so that params 0 are lips touching on a head
+    modelled with its lips apart (the mouth parameters' closed pose; the fit's weights alone leave such lips as far
+    apart as modelled at every /m b p/): its jaw target below 0 (:func:`assets.heads.head.closing_rest`). The head as
+    modelled stays the rig's ``neutral``; weights may then be below 0."""
     # Set in __post_init__: the targets flattened to (P, n_moving*3) (a view of ``targets``).
     _rows: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -434,16 +439,23 @@ class MorphRig:
         object.__setattr__(self, "neutral", np.asarray(self.neutral, dtype=np.float32))
         object.__setattr__(self, "triangles", np.asarray(self.triangles, dtype=np.int32))
         object.__setattr__(self, "moving", np.asarray(self.moving, dtype=np.int64))
+        if self.rest is not None:
+            rest = np.asarray(self.rest, dtype=np.float32).reshape(-1)
+            if rest.shape != (len(self.names),) or not np.isfinite(rest).all():
+                raise ConfigError(f"rest weights {np.shape(self.rest)} must be {len(self.names)} finite numbers")
+            object.__setattr__(self, "rest", rest)
         # (P, n_moving*3): one row-vector product per frame.
         object.__setattr__(self, "_rows", t.reshape(len(t), -1))
 
     def weights(self, params: np.ndarray) -> np.ndarray:
         """Mouth parameters (..., 4) (IOD) -> the head's target weights (..., P) float32 (the parameters within
-        :attr:`bound`: every consumer, renderer, server deltas and morph weights, exports, goes through here)."""
+        :attr:`bound`, plus :attr:`rest`: every consumer, renderer, server deltas and morph weights, exports, goes
+        through here)."""
         p = np.asarray(params, dtype=np.float64)
         if self.bound is not None:
             p = self.bound(p)
-        return self.keymap.weights(self.source(p)).astype(np.float32)
+        w = self.keymap.weights(self.source(p)).astype(np.float32)
+        return w if self.rest is None else w + self.rest
 
     def displacements(self, params: np.ndarray) -> np.ndarray:
         """Head displacement (n_moving, 3) float32 for params (4,)."""

@@ -400,3 +400,49 @@ def test_a_retargeted_head_drives_its_rig_within_the_checked_poses(builtin_rig_f
     np.testing.assert_allclose(
         rig_targets(head.rig)[3, head.rig.moving], free.displacements(e) - free.contact_push(e), atol=1e-6
     )
+
+
+def test_an_own_target_head_modelled_with_its_lips_apart_rests_with_them_together(tmp_path, builtin_morph):
+    """The built-in head with 0.3 of its jawOpen baked into the mesh (its lips modelled about 0.18 IOD apart) and its
+    targets kept: no fit of them goes below its neutral, so every /m b p/ and silence (params 0) left the lips as far
+    apart as modelled. It now rests at jawOpen -0.3, which brings its inner lips to the built-in head's own gap
+    (the targets are linear): the built-in head's face at every pose, the head as modelled still the rig's neutral,
+    its checks passing with the lips 0.007 IOD apart at rest. The built-in head's own targets in a file, lips within
+    the closure limit, rest as modelled. The rest is read back from the cache."""
+    m = builtin_morph.mesh
+    v0 = np.asarray(builtin_morph.rig.neutral, dtype=np.float64)
+    marks = builtin_morph.rig.meta["landmarks"]
+    at = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in marks.items()}
+    parted_v = m.vertices + 0.3 * m.targets["jawOpen"]
+    path = tmp_path / "parted.glb"
+    path.write_bytes(
+        mesh_glb(HeadMesh(vertices=parted_v, triangles=m.triangles, colors=m.colors, name="p", targets=dict(m.targets)))
+    )
+    points = {k: parted_v[i].tolist() for k, i in at.items()}
+    head = resolve_head(path, landmark_finder=lambda mesh: points, cache=tmp_path)
+    assert head.kind == "morph" and list(head.rig.meta["rest_weights"]) == ["jawOpen"]
+    assert head.rig.meta["rest_weights"]["jawOpen"] == pytest.approx(-0.3, abs=0.005)
+    n = len(m.vertices)
+    np.testing.assert_array_equal(head.rig.neutral[:n], parted_v.astype(np.float32))
+    up = np.asarray(v0[at["upper_lip"]] - v0[at["chin"]])  # any upward axis: the gaps are compared, not measured
+
+    def gap(verts: np.ndarray) -> float:
+        return float((verts[at["upper_inner"]] - verts[at["lower_inner"]]) @ up)
+
+    unrested = replace(head.rig, rest=None)
+    assert gap(unrested.deformed(np.zeros(4))) > 10 * gap(builtin_morph.rig.deformed(np.zeros(4))) > 0
+    # Within 1e-3 head units (0.002 IOD): the rest (-0.3016) meets the reference gap as measured at the built-in
+    # head's own landmark vertices, a vertex or so from the points the finder gave.
+    for p in ([0, 0, 0, 0], [-0.02, 0, 0, 0], [0, 0.02, 0.35, 0], [0.03, 0.05, 0.1, -0.02]):
+        np.testing.assert_allclose(
+            head.rig.deformed(np.array(p))[:n], builtin_morph.rig.deformed(np.array(p))[:n], atol=1e-3
+        )
+    checks = head.rig.meta["checks"]
+    assert checks["passed"] and checks["closure_gap_iod"] <= 0.01 and checks["bilabial_gap_iod"] <= 0.01
+    own = builtin_morph.rig.meta["checks"]["closure_reach_iod"]  # the built-in head's lips at rest: 0.007 IOD
+    assert checks["closure_reach_iod"] == pytest.approx(own, abs=1e-3)
+    again = resolve_head(path, landmark_finder=lambda mesh: points, cache=tmp_path)
+    np.testing.assert_array_equal(again.rig.rest, head.rig.rest)
+    # Lips within the limit: no rest.
+    plain = resolve_head(_arkit_file(tmp_path, builtin_morph, lambda k: k), landmark_finder=lambda mesh: marks)
+    assert plain.rig.rest is None and "rest_weights" not in plain.rig.meta
