@@ -277,10 +277,17 @@ def _onto_lips(
     mesh: HeadMesh, mvp: np.ndarray, pixels: dict[str, np.ndarray], points: dict[str, np.ndarray], forward: np.ndarray
 ) -> dict[str, np.ndarray]:
     """``points`` (name -> (3,), as cast from ``pixels``, name -> (2,)) with each inner-lip point that went
-    through the lips (INNER_LIP_DEPTH) moved to the first point on the lip surface met on the pixel segment
-    from it to its outer lip midpoint's pixel, and each mouth corner that went through them to the first met going
-    outwards along the mouth (CORNER_OUTWARD), both past a slit's wall (SLIT_WALL_STEP); left as it is when none is
-    found (the rig checks then judge)."""
+    through the lips (INNER_LIP_DEPTH) or onto another mesh piece than its outer lip midpoint's moved to the first
+    point on that lip's piece met on the pixel segment from it to its outer lip midpoint's pixel, and each mouth corner
+    that went through the lips to the first met going outwards along the mouth (CORNER_OUTWARD), both past a slit's
+    wall (SLIT_WALL_STEP); left as it is when none is found (the rig checks then judge).
+
+    Another piece (texture seams welded): lips modelled apart in a one-file head with its teeth in it show the teeth
+    between them at MediaPipe's inner-lip pixel, only 0.085 IOD behind the lips' front (within INNER_LIP_DEPTH): the
+    built-in head with 0.1 of its jawOpen baked in took its upper inner-lip point on an upper tooth, and an upper-lip
+    raise then crossed "the lips" by 0.022 IOD (docs/animation.md, "Own targets with the lips modelled apart")."""
+    from realtime_core.face.welding import welded_pieces
+
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     front = min(float(points[k] @ forward) for k in INNER_LIP_OUTER.values())
@@ -288,13 +295,27 @@ def _onto_lips(
     mid = 0.5 * (pixels["corner_left"] + pixels["corner_right"])
     towards = {inner: pixels[outer] for inner, outer in INNER_LIP_OUTER.items()}
     towards |= {c: pixels[c] + CORNER_OUTWARD * (pixels[c] - mid) for c in ("corner_left", "corner_right")}
+    # Each face's mesh piece (texture seams welded), and the piece each inner-lip point's own lip is on (its outer
+    # midpoint's): an inner-lip point cast onto another piece (the teeth, seen between lips modelled apart) is not on
+    # its lip however shallow it lies.
+    canon, _, piece = welded_pieces(np.asarray(mesh.vertices, dtype=np.float64), mesh.triangles)
+    face_piece = piece[canon[np.asarray(mesh.triangles, dtype=np.int64)[:, 0]]]
+    names = list(INNER_LIP_OUTER) + list(INNER_LIP_OUTER.values())
+    _, faces = _cast_hits(mesh, mvp, np.stack([pixels[k] for k in names]), SIZE)
+    piece_of = {k: int(face_piece[f]) if f >= 0 else -1 for k, f in zip(names, faces, strict=True)}
+    lip_piece = {inner: piece_of[outer] for inner, outer in INNER_LIP_OUTER.items()}
     for inner, end in towards.items():
-        if float(points[inner] @ forward) >= front - INNER_LIP_DEPTH * iod:
+        want = lip_piece.get(inner, -1)
+        off_piece = want >= 0 and piece_of[inner] != want
+        if float(points[inner] @ forward) >= front - INNER_LIP_DEPTH * iod and not off_piece:
             continue
         s = np.linspace(0.0, 1.0, INNER_LIP_STEPS + 1)[1:, None]
         line = pixels[inner][None, :] * (1.0 - s) + end[None, :] * s
-        hit = _cast(mesh, mvp, line, SIZE)
-        on_lip = np.flatnonzero(np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod))
+        hit, hit_face = _cast_hits(mesh, mvp, line, SIZE)
+        ok = np.isfinite(hit).all(axis=1) & (hit @ forward >= front - INNER_LIP_DEPTH * iod)
+        if want >= 0:
+            ok &= (hit_face >= 0) & (face_piece[np.maximum(hit_face, 0)] == want)
+        on_lip = np.flatnonzero(ok)
         if len(on_lip):
             depth = hit[on_lip] @ forward
             # The points before the last forward jump (SLIT_WALL_STEP) are the slit's wall, seen edge-on.

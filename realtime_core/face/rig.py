@@ -29,6 +29,8 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
+# 83: an automatic inner-lip point cast onto another mesh piece than its outer lip midpoint (the teeth between lips
+# modelled apart) moves onto its lip (lead, stop 44).
 # 82: when every rig fails and the lips read as joined only because the lower inner-lip point lies on the upper lip
 # (a decimated head's few lip vertices), the rig from the point on the lower lip's front is returned (i12heavy).
 # 81: an inner-lip point whose vertex lies on no lip (teeth merged into the head's one primitive) moved to its
@@ -57,7 +59,7 @@ if TYPE_CHECKING:
 # piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median
 # edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
 # shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 82
+RIG_ALGORITHM = 83
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;

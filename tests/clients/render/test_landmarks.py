@@ -269,3 +269,36 @@ def test_mouth_corners_of_lips_parted_at_rest_are_found_on_the_lips(shared_data)
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     for k in ("corner_left", "corner_right"):
         assert np.linalg.norm(found[k] - straight[k]) / iod < 0.1, k
+
+
+def test_inner_lip_points_of_lips_modelled_apart_lie_on_the_lips_not_the_teeth(tmp_path):
+    """The built-in head (its teeth in the same file, separate pieces of it) with 0.1 of its jawOpen baked into the
+    mesh: the lips modelled 0.06 IOD apart show the teeth between them, only 0.085 IOD behind the lips' front, and the
+    upper inner-lip point was cast onto an upper tooth (an upper-lip raise then "crossed the lips" by 0.022 IOD). Both
+    inner-lip points now lie on the skin, each on the lip it belongs to: the upper one above the lower one, and
+    each within 0.05 IOD of the hand-placed landmark on that lip moved with the jaw."""
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head
+    from assets.heads.mesh import HeadMesh
+
+    head = builtin_morph_head()
+    b = head.mesh
+    v0 = np.asarray(b.vertices, dtype=np.float64)
+    marks = head.rig.meta["landmarks"]
+    hand = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in marks.items()}
+    path = tmp_path / "parted.glb"  # as a user's file (drawn from the file, the pixel fell on a tooth)
+    path.write_bytes(
+        mesh_glb(HeadMesh(vertices=v0 + 0.1 * b.targets["jawOpen"], triangles=b.triangles, colors=b.colors, name="p"))
+    )
+    parted = load_mesh(path)
+    found = {k: np.asarray(p, dtype=np.float64) for k, p in find_landmarks(parted).items()}
+    v = np.asarray(parted.vertices, dtype=np.float64)
+    skin = np.asarray(b.part) == list(b.part_names).index("skin")
+    eyes = [0.5 * (v[hand[f"eye_outer_{s}"]] + v[hand[f"eye_inner_{s}"]]) for s in ("left", "right")]
+    iod = float(np.linalg.norm(eyes[0] - eyes[1]))
+    for k in ("upper_inner", "lower_inner"):
+        nearest = int(np.argmin(np.linalg.norm(v - found[k], axis=1)))
+        assert skin[nearest], (k, nearest)
+        assert np.linalg.norm(found[k] - v[hand[k]]) / iod < 0.05, k
+    up = v[hand["upper_lip"]] - v[hand["chin"]]
+    assert (found["upper_inner"] - found["lower_inner"]) @ up > 0
