@@ -3,9 +3,9 @@
     python scripts/head_testset.py [--out build/heads] [--images docs/img/heads]
 
 Heads: the built-in head (own ARKit targets, and retargeted), the built-in head as an ARKit glb
-with exporter spellings, Lee Perry-Smith (hollow, closed lips; shipped landmarks and automatic
-ones, with and without its colour map), the MediaPipe canonical face, Candide-3 (both files,
-driven by their own animation units), plus
+with exporter spellings and with its lips modelled apart (0.1 of its jawOpen baked in, its teeth showing),
+Lee Perry-Smith (hollow, closed lips; shipped landmarks and automatic ones, with and without its colour map), the
+MediaPipe canonical face, Candide-3 (both files, driven by their own animation units), plus
 derived files: meshopt-compressed and quantized Lee Perry-Smith (glTF-Transform; vertex order changes,
 so automatic landmarks), the built-in head as a multi-material OBJ with separate eyes and teeth
 objects and as separate skin / eyes / teeth / tongue files (--head-part), a viseme-only glb, and
@@ -72,6 +72,22 @@ def derive(out: Path, data: Path) -> dict[str, tuple[Path | str, dict]]:
         )
     )
     heads["ARKit glb, exporter spellings"] = (arkit, {})
+    # Own targets on lips modelled apart, its teeth showing between them: 0.1 of its jawOpen baked into the mesh (the
+    # fit never drives a target below 0, so these lips stayed apart at every closure; the teeth took the finder's
+    # upper inner-lip point). docs/animation.md, "Own targets with the lips modelled apart".
+    parted = out / "arkit_lips_apart.glb"
+    parted.write_bytes(
+        mesh_glb(
+            HeadMesh(
+                vertices=b.vertices + 0.1 * b.targets["jawOpen"],
+                triangles=b.triangles,
+                colors=b.colors,
+                name="apart",
+                targets=dict(b.targets),
+            )
+        )
+    )
+    heads["ARKit glb, lips modelled apart, teeth showing"] = (parted, {})
     bh = load_builtin_head()
     vis = {f"viseme_{k}": sum(w * bh.targets[a] for a, w in mix.items()) for k, mix in VISEME_ARKIT.items() if mix}
     vg = out / "visemes_only.glb"
