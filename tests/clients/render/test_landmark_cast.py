@@ -50,17 +50,27 @@ def test_an_inner_lip_point_cast_through_a_slit_between_the_lips_moves_onto_the_
     assert all(np.array_equal(got[k], points[k]) for k in pixels if not k.endswith("_inner"))  # corners on the lip
 
 
-def _slit(wall_depth: float | None = None) -> tuple[HeadMesh, dict[str, np.ndarray], dict[str, np.ndarray]]:
+def _slit(
+    wall_depth: float | None = None, tooth_depth: float | None = None
+) -> tuple[HeadMesh, dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Closed lips meeting in a slit (y -0.05 to 0.05) in front of a back wall 1 behind them; with ``wall_depth``, the
     upper lip's wall in the slit too: a strip that far behind the lips from y = 0.02 up to the upper lip (y = 0.05),
-    seen through the slit above the upper inner-lip pixel (y = 0.01), which still shows the back wall. The corners
-    lie on the lips. Returns (mesh, pixels, points as cast)."""
+    seen through the slit above the upper inner-lip pixel (y = 0.01), which still shows the back wall, and joined to
+    the upper lip by a face seen edge-on (the lip's inner surface: one piece with the lip). With ``tooth_depth``, a
+    tooth that far behind the lips filling the slit (y -0.05 to 0.05), a piece of its own. The corners lie on the
+    lips. Returns (mesh, pixels, points as cast)."""
     upper, tu = _quad(-0.3, 0.3, 0.05, 0.4, 0.0, 0)
     lower, tl = _quad(-0.3, 0.3, -0.4, -0.05, 0.0, 4)
     wall, tw = _quad(-2.0, 2.0, -2.0, 2.0, -1.0, 8)
     parts = [(upper, tu), (lower, tl), (wall, tw)]
     if wall_depth is not None:
         parts.append(_quad(-0.3, 0.3, 0.02, 0.05, -wall_depth, 12))
+        # From the lip's lower edge (y 0.05, z 0) back to the strip's top edge (y 0.05, z -wall_depth).
+        joint = np.array([[-0.3, 0.05, 0.0], [0.3, 0.05, 0.0], [0.3, 0.05, -wall_depth], [-0.3, 0.05, -wall_depth]])
+        parts.append((joint, np.array([[0, 1, 2], [0, 2, 3]]) + 16))
+    if tooth_depth is not None:
+        base = sum(len(p[0]) for p in parts)
+        parts.append(_quad(-0.2, 0.2, -0.05, 0.05, -tooth_depth, base))
     mesh = HeadMesh(vertices=np.vstack([p[0] for p in parts]), triangles=np.vstack([p[1] for p in parts]), name="slit")
     on_face = {
         "eye_outer_left": [0.6, 1.0, 0.0],
@@ -101,6 +111,18 @@ def test_an_inner_lip_point_keeps_a_shallow_step_on_the_lip():
     got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
     assert abs(got["upper_inner"][2] + depth) < 1e-9
     assert 0.01 < got["upper_inner"][1] < 0.05
+
+
+def test_an_inner_lip_point_cast_onto_a_tooth_between_the_lips_moves_onto_its_lip():
+    """Lips modelled apart show the teeth between them, nearer than INNER_LIP_DEPTH behind the lips' front (the built-in
+    head with 0.1 of its jawOpen baked in: 0.085 IOD): the point cast there lies on another mesh piece than its outer
+    lip midpoint, so it is moved onto its lip as a point cast through the lips is; the lower one, on its lip, stays."""
+    depth = 0.5 * INNER_LIP_DEPTH
+    mesh, pixels, points = _slit(tooth_depth=depth)
+    assert abs(points["upper_inner"][2] + depth) < 1e-9  # on the tooth, shallow enough to pass the depth test
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
+    np.testing.assert_array_equal(got["lower_inner"], points["lower_inner"])
 
 
 def _on_ray(pixel_x: float, z: float) -> float:
