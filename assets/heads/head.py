@@ -317,12 +317,11 @@ def reference_rest_gap(b) -> float:
     import numpy as np
 
     from assets.heads.rigging import mouth_landmarks
-    from realtime_core.face import face_frame
+    from realtime_core.face import face_frame, inner_lip_gap
 
     v = np.asarray(b.mesh.vertices, dtype=np.float64)
     lm = mouth_landmarks(dict(b.landmarks))
-    fr = face_frame(v, lm)
-    return float((v[lm.upper_inner] - v[lm.lower_inner]) @ fr.axes[1]) / fr.iod
+    return inner_lip_gap(v, lm.upper_inner, lm.lower_inner, face_frame(v, lm))
 
 
 def closing_rest(
@@ -348,7 +347,7 @@ def closing_rest(
 
     from assets.heads.rigging import REST_GAP_MAX
     from realtime_core.errors import FacecastError
-    from realtime_core.face import face_frame
+    from realtime_core.face import face_frame, inner_lip_gap
 
     if rig.rest is not None:
         return rig
@@ -359,7 +358,7 @@ def closing_rest(
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
     ui, li = landmarks.upper_inner, landmarks.lower_inner
-    apart = float((v0[ui] - v0[li]) @ fr.axes[1]) / fr.iod
+    apart = inner_lip_gap(v0, ui, li, fr)
     # The jaw: a target that is ARKit's jawOpen alone (not a viseme or vowel holding some of it: run backwards, an
     # "aa" would not close a jaw but unround and unspread the lips too).
     mapped = rig.meta.get("targets") or {}
@@ -369,7 +368,7 @@ def closing_rest(
     k = jaw[0]
     d = np.zeros((len(v0), 3))
     d[rig.moving] = rig.targets[k]
-    opens = float((d[ui] - d[li]) @ fr.axes[1]) / fr.iod
+    opens = inner_lip_gap(d, ui, li, fr)  # per unit of the jaw's weight
     if opens < REST_JAW_OPENS or -(apart - gap) / opens < REST_JAW_MIN:
         return rig
     rest = np.zeros(len(rig.names), dtype=np.float32)

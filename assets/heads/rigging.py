@@ -64,6 +64,7 @@ from realtime_core.face import (
     build_rig,
     calibrate_mouth,
     face_frame,
+    inner_lip_gap,
     register,
 )
 from realtime_core.face.adaptation import adapt_displacements, affine_adaptation
@@ -1740,7 +1741,7 @@ def parted_over_hole(
     hollow scan with a mouth hole, or a face mask. ``vertices`` (n, 3) and ``triangles`` (m, 3) as rigged (not cut);
     ``landmarks``: name -> vertex index."""
     v = np.asarray(vertices, dtype=np.float64)
-    gap = float((v[landmarks["upper_inner"]] - v[landmarks["lower_inner"]]) @ frame.axes[1]) / frame.iod
+    gap = inner_lip_gap(v, landmarks["upper_inner"], landmarks["lower_inner"], frame)
     return gap > REST_GAP_MAX and not modelled and opens_onto_nothing(v, triangles, frame, landmarks)
 
 
@@ -2150,7 +2151,7 @@ def rig_head(
         # Lips modelled apart (not cut) with nothing behind them: a hollow scan with a mouth hole, or a face mask
         # (docs/animation.md, "Lips parted at rest"). Judged on the head as modelled: the rest pose (below) closes
         # the lips, and behind closed lips the rays meet the lips' own inner walls.
-        gap = float((v[snap["upper_inner"]] - v[snap["lower_inner"]]) @ frame.axes[1]) / frame.iod
+        gap = inner_lip_gap(v, snap["upper_inner"], snap["lower_inner"], frame)
         parted = not own and (cut_copies is None or ends_cut) and gap > REST_GAP_MAX
         parted_hole = parted and parted_over_hole(v, t, frame, snap, modelled=modelled)
         if parted_hole:

@@ -23,6 +23,7 @@ from realtime_core.face.model import (
     calibrate_mouth,
     face_frame,
     face_frame_at,
+    inner_lip_gap,
     measure_mouth,
 )
 from realtime_core.face.registration import Registration, Similarity, fit_similarity, register
@@ -42,6 +43,7 @@ __all__ = [
     "face_frame",
     "face_frame_at",
     "fit_similarity",
+    "inner_lip_gap",
     "measure_mouth",
     "parse_wfm",
     "register",

@@ -75,7 +75,7 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.expressions import SPEECH_REACH
-from realtime_core.face.model import MouthLandmarks, face_frame
+from realtime_core.face.model import MouthLandmarks, face_frame, inner_lip_gap
 from realtime_core.face.visibility import front_most
 from realtime_core.fitted_maps import EXPRESSION_POSES as GENERATED_EXPRESSION_POSES
 from realtime_core.normals import triangle_normals
@@ -1262,7 +1262,7 @@ def bilabial_gap(
     gaps = []
     for pose in poses:
         v = np.asarray(rig.deformed(np.asarray(pose, dtype=np.float64)), dtype=np.float64)
-        gaps.append(float((v[landmarks.upper_inner] - v[landmarks.lower_inner]) @ fr.axes[1]) / fr.iod)
+        gaps.append(inner_lip_gap(v, landmarks.upper_inner, landmarks.lower_inner, fr))
     return max(gaps)
 
 
@@ -1387,12 +1387,12 @@ def check_rig(
     faces hide none of the skin (:func:`inside_split`)."""
     v0 = np.asarray(rig.neutral, dtype=np.float64)
     fr = face_frame(v0, landmarks)
-    iod, up = fr.iod, fr.axes[1]
+    iod = fr.iod
     pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
     # The lips' gap where the rig rests (params 0): the head as modelled, but for a morph rig resting at added weights
     # (MorphRig.rest: lips modelled apart that rest where they meet), whose closure is then at params 0.
     v_rest = v0 if getattr(rig, "rest", None) is None else np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
-    gap0 = float((v_rest[landmarks.upper_inner] - v_rest[landmarks.lower_inner]) @ up) / iod
+    gap0 = inner_lip_gap(v_rest, landmarks.upper_inner, landmarks.lower_inner, fr)
     closure = (0.0, 0.0, -gap0, 0.0)
     per = pose_figures(rig, landmarks, (*poses, closure), lip_pairs=pairs, teeth=teeth, reference=reference)
     k = int(np.argmax(per.flipped))
@@ -1403,7 +1403,7 @@ def check_rig(
     inter = max(0.0, float(per.interpenetration.max()))
     ahead = None if per.teeth_ahead is None else float(per.teeth_ahead.max())
     vc = np.asarray(rig.deformed(np.asarray(closure)), dtype=np.float64)
-    closure_gap = abs(float((vc[landmarks.upper_inner] - vc[landmarks.lower_inner]) @ up)) / iod
+    closure_gap = abs(inner_lip_gap(vc, landmarks.upper_inner, landmarks.lower_inner, fr))
     widest = max(poses, key=lambda q: float(q[2]), default=None)
     opening = None
     if widest is not None and float(widest[2]) > closure[2] + 0.1:

@@ -198,6 +198,13 @@ def face_frame(neutral: np.ndarray, lm: MouthLandmarks) -> FaceFrame:
     )
 
 
+def inner_lip_gap(vertices: np.ndarray, upper_inner: int, lower_inner: int, frame: FaceFrame) -> float:
+    """IOD: how far the upper inner-lip vertex lies above the lower one along ``frame``'s up axis in ``vertices``
+    (n, 3) (negative: pressed past each other): the lips' gap every closure figure and rest rule reads."""
+    v = np.asarray(vertices)
+    return float((v[upper_inner] - v[lower_inner]) @ frame.axes[1]) / frame.iod
+
+
 def face_frame_at(*, eye_left: np.ndarray, eye_right: np.ndarray, mouth: np.ndarray) -> FaceFrame:
     """:func:`face_frame` from the two eye centres and the mouth centre, each (3,) (points off any mesh)."""
     el, er = np.asarray(eye_left, dtype=np.float64), np.asarray(eye_right, dtype=np.float64)
