@@ -8,8 +8,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from realtime_core import VISUAL_PARAMS
-from realtime_core.blendshapes import blendshape_names
+from realtime_core.blendshapes import blendshape_names, blendshape_weights
 from realtime_core.expressions import EXPRESSIONS, NEUTRAL
 from realtime_core.face.keyframes import MorphRig
 from wire import protocol as P
@@ -80,7 +82,29 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
     elif req.kind == "blendshapes":
         d["names"] = list(blendshape_names(req.encoding))
         d["values_per_frame"] = len(d["names"])
+    d["rest_values"] = rest_values(req, head)
     return d
+
+
+def rest_values(req: ViewRequest, head: Head | None) -> list[float] | None:
+    """The values (``values_per_frame``, the kind's layout) of a frame at the rest pose (mouth parameters 0:
+    lips touching, neutral expression), or None when they are all 0 (every head but one resting through its own
+    targets). A viewer shows them before a session's first frame and eases to them after its last.
+
+    Why: a head modelled with its lips apart rests through its targets (:attr:`MorphRig.rest`, its jaw below 0), so
+    zero weights or zero deltas are the head as modelled, lips apart: easing to zero at a session's end opened the
+    mouth the session's silences had shown closed."""
+    rig = head.rig if head is not None else None
+    zero = np.zeros(len(VISUAL_PARAMS))
+    if req.kind == "deltas" and rig is not None:
+        values = np.asarray(rig.displacements(zero), dtype=np.float32).reshape(-1)
+    elif req.kind == "morph" and isinstance(rig, MorphRig):
+        values = np.asarray(rig.weights(zero), dtype=np.float32)
+    elif req.kind == "blendshapes":
+        values = np.asarray(blendshape_weights(zero, req.encoding), dtype=np.float32)
+    else:  # params: the rest is 0 by definition
+        return None
+    return [float(v) for v in values] if np.any(values) else None
 
 
 def view_description_text(live: LiveSession | RemoteFeed, req: ViewRequest, head: Head | None) -> str:

@@ -17,6 +17,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.prerequisites import SHARED_DATA, missing, require_data, require_tool
@@ -67,6 +68,34 @@ def head(builtin_rig_file):
     from server.app import Head
 
     return Head(*builtin_rig_file)
+
+
+@pytest.fixture(scope="session")
+def parted_head(tmp_path_factory):
+    """The built-in head's ARKit glb with 0.3 of its jawOpen baked into the mesh (its lips modelled ~0.18 IOD apart,
+    targets kept), resolved as the commands resolve a file (:class:`assets.heads.head.Head`, landmarks at the
+    built-in head's own landmark vertices): it rests through its own targets (``rig.rest``, jawOpen ~ -0.3)."""
+    from assets.errors import AssetError
+    from assets.heads.glb import mesh_glb
+    from assets.heads.head import builtin_morph_head, resolve_head
+    from assets.heads.mesh import HeadMesh
+
+    try:
+        builtin = builtin_morph_head()
+    except AssetError as exc:
+        missing(f"built-in head unavailable (first use downloads it): {exc}")
+    m = builtin.mesh
+    v0 = np.asarray(builtin.rig.neutral, dtype=np.float64)
+    marks = builtin.rig.meta["landmarks"]
+    at = {k: int(np.argmin(np.linalg.norm(v0 - np.asarray(p), axis=1))) for k, p in marks.items()}
+    parted = m.vertices + 0.3 * m.targets["jawOpen"]
+    tmp = tmp_path_factory.mktemp("parted")
+    path = tmp / "parted.glb"
+    path.write_bytes(
+        mesh_glb(HeadMesh(vertices=parted, triangles=m.triangles, colors=m.colors, name="p", targets=dict(m.targets)))
+    )
+    points = {k: parted[i].tolist() for k, i in at.items()}
+    return resolve_head(path, landmark_finder=lambda mesh: points, cache=tmp)
 
 
 @pytest.fixture(scope="session")

@@ -286,9 +286,12 @@ def run_window(
         last_drawn: np.ndarray | None = None  # the deltas (3 k,) of the frame on screen
         # After a session's end its last frames are shown, then the face eases to rest: a session cut off
         # mid-word used to leave its open mouth in the window until it came back. to_rest: the session
-        # closed, the easing starts once the pending frames are drawn; rest: (start time, deltas eased).
+        # closed, the easing starts once the pending frames are drawn; rest: (start time, deltas eased);
+        # rest_deltas: the deltas of the rest pose (the description's rest_values: a head resting through its
+        # own targets, lips modelled apart, rests away from its neutral).
         to_rest = False
         rest: tuple[float, np.ndarray] | None = None
+        rest_deltas = np.zeros(0, np.float32)
 
         def draw(values: np.ndarray) -> None:
             nonlocal image, last_drawn
@@ -316,6 +319,7 @@ def run_window(
                     if (d.get("head") or {}).get("vertex_count") != len(neutral):
                         raise ClientError("the server's head changed; restart facecast view")
                     moving = np.asarray(d["head"]["moving_vertices"], dtype=np.int64)
+                    rest_deltas = np.asarray(d.get("rest_values") or np.zeros(3 * len(moving)), dtype=np.float32)
                     if renderer is None:
                         c, ax, size = framing(neutral, moving)
                         renderer = HeadRenderer(
@@ -328,6 +332,8 @@ def run_window(
                         with renderer.ctx:
                             renderer.render(neutral)
                         glfw.make_context_current(win)
+                    if last_drawn is None:
+                        draw(rest_deltas)  # the head at rest until the first frame (was: an empty window)
                     if audio.rate is None and d.get("audio"):
                         audio.open(int(d["audio"]["rate_hz"]))
                         stats.audio_device = audio.device
@@ -367,7 +373,8 @@ def run_window(
                 if rest is None:
                     rest, to_rest = (now, np.array(last_drawn, dtype=np.float32)), False
                 f = min(1.0, (now - rest[0]) / REST_EASE_S)
-                draw(rest[1] * np.float32(1 - f * f * (3 - 2 * f)))  # smoothstep: no jump at either end
+                k = np.float32(1 - f * f * (3 - 2 * f))  # smoothstep: no jump at either end
+                draw(rest_deltas + (rest[1] - rest_deltas) * k if len(rest_deltas) == len(rest[1]) else rest[1] * k)
                 stats.rest_steps += 1
                 if f >= 1.0:
                     rest = None

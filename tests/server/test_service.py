@@ -587,3 +587,52 @@ def test_controls_pipelined_between_blocks_apply_where_they_were_sent(model):
     assert len(plain) == len(waited) == len(pipelined) > 40
     np.testing.assert_array_equal(waited, pipelined)
     assert not np.array_equal(plain, waited)  # the controls changed the frames
+
+
+def test_a_head_resting_through_its_targets_describes_the_rest_its_frames_carry(model, head, parted_head):
+    """A head whose lips are modelled apart rests through its own targets (its jaw below 0): zero weights or zero
+    deltas are the head as modelled, lips apart, which the viewers showed before a session's first frame and eased
+    to after its last. The description now carries the rest (``rest_values``): for every kind, the values a frame
+    at mouth parameters 0 carries, decoded from the session's own encoding of such a frame; null where they are 0
+    (the built-in head); OVR-15's rest is ``sil``."""
+    from server.session import Frame
+
+    async def descriptions(h, queries):
+        async with running(model, h) as srv, IngestClient(srv.url, session="r", sample_rate_hz=16000):
+            out = {}
+            for q in queries:
+                async with connect(ws_url(srv.url, "/view?session=r&" + q), compression=None) as ws:
+                    out[q] = json.loads(await asyncio.wait_for(ws.recv(), 10))
+            return out
+
+    kinds = {
+        "kind=morph&encoding=float32": (P.KIND_MORPH, P.ENC_FLOAT32),
+        "kind=deltas&encoding=int16": (P.KIND_DELTAS, P.ENC_INT16),
+        "kind=deltas&encoding=float16": (P.KIND_DELTAS, P.ENC_FLOAT16),
+        "kind=params": (P.KIND_PARAMS, P.ENC_FLOAT32),
+        "kind=blendshapes&encoding=arkit52": (P.KIND_ARKIT52, P.ENC_FLOAT32),
+        "kind=blendshapes&encoding=ovr15": (P.KIND_OVR15, P.ENC_FLOAT32),
+    }
+    got = asyncio.run(descriptions(parted_head, list(kinds)))
+    zero = np.zeros(4)
+    for q, (kind, enc) in kinds.items():
+        frame = Frame(
+            index=0, media_time=0.0, params=zero, raw_params=zero, work_s=0.0, ready_perf=0.0, rig=parted_head.rig
+        )
+        data, count, scale = frame.payload(kind, enc)
+        sent = P.decode_message(P.pack_header(kind, enc, 0, count, scale, 0.0, 0.0) + data).values
+        rest = got[q]["rest_values"]
+        if not np.any(sent):
+            assert rest is None, q
+            continue
+        assert rest is not None and len(rest) == got[q]["values_per_frame"] == count, q
+        # int16 and float16 round what the description gives to float32 precision
+        np.testing.assert_allclose(sent, rest, atol=2e-3 * float(np.max(np.abs(rest))), err_msg=q)
+    jaw = got["kind=morph&encoding=float32"]["names"].index("jawOpen")
+    assert got["kind=morph&encoding=float32"]["rest_values"][jaw] == pytest.approx(-0.3, abs=0.01)
+    assert got["kind=deltas&encoding=int16"]["rest_values"] is not None
+    assert got["kind=params"]["rest_values"] is None and got["kind=blendshapes&encoding=arkit52"]["rest_values"] is None
+    assert got["kind=blendshapes&encoding=ovr15"]["rest_values"][0] == 1.0  # sil
+    # The built-in head rests at its neutral.
+    plain = asyncio.run(descriptions(head, ["kind=deltas&encoding=int16"]))
+    assert plain["kind=deltas&encoding=int16"]["rest_values"] is None

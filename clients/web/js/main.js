@@ -151,7 +151,8 @@ let armed = null; // freezeWhen's bound {above} or {below}, until a frame passes
 let caught = null; // the frame that froze the page {n, index, peak}
 // A session that ends mid-word (an audio or microphone session closed while the mouth is open) would
 // leave its last frame on screen until another session starts: once the frames queued at the close have
-// been shown, the face eases to rest (zero weights, deltas or parameters) over REST_EASE_S.
+// been shown, the face eases to rest over REST_EASE_S: the description's rest_values (a head resting through its
+// own targets, lips modelled apart: its jaw below 0), else zero weights, deltas or parameters.
 const REST_EASE_S = 0.2;
 let toRest = null; // null, or {start: null} from the close until the queue drains, then {start, from}
 
@@ -184,6 +185,8 @@ function connect(name) {
       const loadStart = performance.now();
       const ready = view.load(head).then(() => {
         state.headLoadMs = performance.now() - loadStart;
+        // Before a first frame the head shows its rest, not the head as modelled (lips apart on a resting head).
+        if (!shown && !queue.length && desc.rest_values) applyValues(Float32Array.from(desc.rest_values));
         state.connections += 1;
         setStatus(kind !== "params" ? `watching "${name}"` : `watching "${name}": mouth parameters only (the server has no head)`);
         $("bars").hidden = kind !== "params";
@@ -347,11 +350,19 @@ function applyValues(values) {
   }
 }
 
+function restValues(n) {
+  const r = desc?.rest_values;
+  return r && r.length === n ? Float32Array.from(r) : new Float32Array(n);
+}
+
 function easeToRest(now) {
-  if (toRest.start === null) toRest = { start: now, from: Float32Array.from(shown.values) };
+  if (toRest.start === null) {
+    const from = Float32Array.from(shown.values);
+    toRest = { start: now, from, to: restValues(from.length) };
+  }
   const f = Math.min(1, (now - toRest.start) / REST_EASE_S);
   const k = 1 - f * f * (3 - 2 * f); // smoothstep: no jump at either end
-  applyValues(toRest.from.map((v) => v * k));
+  applyValues(toRest.from.map((v, i) => toRest.to[i] + (v - toRest.to[i]) * k));
   if (f > 0 && f < 1) state.restSteps += 1;
   if (f >= 1) toRest = null;
 }

@@ -16,6 +16,7 @@ from clients.client import IngestClient
 from clients.export.rhubarb import read_tsv
 from facecast.cli import main
 from realtime_core.pipeline import speech_to_params
+from tests.live_server import LiveServer
 from tests.prerequisites import missing, require_module
 from tests.speech import speechlike
 
@@ -196,13 +197,11 @@ def test_view_window_shows_the_live_session(live, xvfb, tmp_path):
     assert img.shape == (240, 320) and img.std() > 20  # a head, not an empty window
 
 
-def test_view_window_eases_to_rest_after_the_session_ends_mid_word(live, xvfb, tmp_path):
-    """A session cut off mid-word ends on a frame with the mouth open; the window kept drawing that frame
-    until the session came back. It now eases to rest after the session's last frames: the window's last
-    image (--screenshot, taken 1 s or more after the end) is the neutral head, drawn here by the offline
-    renderer with the window's framing, and the session's last frame was not."""
-    require_module("glfw")
-
+def _window_after_a_cut_session(srv, name: str, tmp_path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Stream a session cut off mid-word on ``srv`` while ``facecast view`` watches it in a window and screenshots
+    it 1 s or more after the end; returns (the window's last image (240, 320, 3), the session's last frame's deltas
+    as a deltas viewer got them, the offline renderer's images with the window's framing: {"neutral": the head as
+    served, "last": with the last frame's deltas, "rest": with the rig's deltas at params 0})."""
     from PIL import Image
 
     from clients.render.renderer import HeadRenderer, RenderConfig
@@ -213,12 +212,12 @@ def test_view_window_eases_to_rest_after_the_session_ends_mid_word(live, xvfb, t
 
     x = cut_mid_word(8.0, seed=3)
     # the session's frames as a deltas viewer gets them: its last one is what the window used to keep
-    frames = live.submit(record_stream(ViewerStreamConfig(url=live.url, session="cut", kind="deltas", wait_s=20)))
-    fut = live.submit(stream_session(live.url, "cut", 0.0, samples=x))
-    shot = tmp_path / "window.png"
+    frames = srv.submit(record_stream(ViewerStreamConfig(url=srv.url, session=name, kind="deltas", wait_s=20)))
+    fut = srv.submit(stream_session(srv.url, name, 0.0, samples=x))
+    shot = tmp_path / f"{name}.png"
     try:
         proc = _run_view(
-            *(live.url, "--session", "cut", "--wait", "20", "--duration", f"{len(x) / 16000 + 1.0:.2f}"),
+            *(srv.url, "--session", name, "--wait", "20", "--duration", f"{len(x) / 16000 + 1.0:.2f}"),
             *("--screenshot", str(shot), "--width", "320", "--height", "240"),
             timeout=90,
         )
@@ -228,24 +227,52 @@ def test_view_window_eases_to_rest_after_the_session_ends_mid_word(live, xvfb, t
     assert proc.returncode == 0, proc.stderr
     assert "session closed (1000" in proc.stdout, proc.stdout  # it saw the end before its duration ran out
 
-    mesh = asyncio.run(fetch_head(live.url))
-    rig = live.server.head.rig
+    mesh = asyncio.run(fetch_head(srv.url))
+    rig = srv.server.head.rig
     neutral = np.asarray(mesh.vertices, dtype=np.float32)
     centre, axes, size = framing(neutral, rig.moving)
-    last = neutral.copy()
-    last[rig.moving] += rec.values[-1].astype(np.float32).reshape(-1, 3)
+    poses = {"neutral": neutral, "last": neutral.copy(), "rest": neutral.copy()}
+    poses["last"][rig.moving] += rec.values[-1].astype(np.float32).reshape(-1, 3)
+    poses["rest"][rig.moving] += rig.displacements(np.zeros(4))
     with HeadRenderer(
         mesh, centre=centre, axes=axes, size=size, config=RenderConfig(width=320, height=240, margin=1.25)
     ) as r:
-        at_rest, held = r.render(neutral).astype(np.float64), r.render(last).astype(np.float64)
-    img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.float64)
-    off_rest = float(np.mean(np.abs(img - at_rest) > 40))  # share of pixels unlike the neutral head
-    off_held = float(np.mean(np.abs(held - at_rest) > 40))  # ... of the held last frame
-    print(
-        f"view window: pixels off the neutral head at the end {off_rest:.4f}, with the last frame held {off_held:.4f}"
-    )
+        images = {k: r.render(v).astype(np.float64) for k, v in poses.items()}
+    return np.asarray(Image.open(shot).convert("RGB"), dtype=np.float64), rec.values[-1], images
+
+
+def _off(a: np.ndarray, b: np.ndarray) -> float:
+    """Share of pixels unlike (any channel more than 40/255 apart)."""
+    return float(np.mean(np.abs(a - b) > 40))
+
+
+def test_view_window_eases_to_rest_after_the_session_ends_mid_word(live, xvfb, tmp_path):
+    """A session cut off mid-word ends on a frame with the mouth open; the window kept drawing that frame
+    until the session came back. It now eases to rest after the session's last frames: the window's last
+    image (--screenshot, taken 1 s or more after the end) is the neutral head, drawn here by the offline
+    renderer with the window's framing, and the session's last frame was not."""
+    require_module("glfw")
+    img, _, r = _window_after_a_cut_session(live, "cut", tmp_path)
+    off_rest, off_held = _off(img, r["neutral"]), _off(r["last"], r["neutral"])
+    print(f"view window: pixels off the neutral head at the end {off_rest:.4f}, the last frame held {off_held:.4f}")
     assert off_held > 0.002  # the session ended with the mouth open
     assert off_rest < off_held / 10, "the window still shows the session's last frame"
+
+
+def test_view_window_eases_a_head_resting_through_its_targets_to_its_rest(model, parted_head, xvfb, tmp_path):
+    """A head whose lips are modelled apart rests at its jaw target below 0, lips touching: the window eased to
+    zero deltas after a session's end, the head as modelled with its lips apart. It now eases to the description's
+    rest (``rest_values``): its last image is the head at params 0, not as modelled."""
+    require_module("glfw")
+    srv = LiveServer(model, parted_head)
+    try:
+        img, _, r = _window_after_a_cut_session(srv, "partedcut", tmp_path)
+    finally:
+        srv.stop()
+    off_rest, off_modelled = _off(img, r["rest"]), _off(r["neutral"], r["rest"])
+    print(f"view window: pixels off the rest at the end {off_rest:.4f}; the head as modelled {off_modelled:.4f}")
+    assert off_modelled > 0.002  # its lips modelled apart show
+    assert off_rest < off_modelled / 10, "the window shows the head as modelled, not at its rest"
 
 
 def _found_in(signal: np.ndarray, ref: np.ndarray, piece: int = 1600, loud: float = 0.05) -> list[float]:

@@ -335,6 +335,20 @@ def test_browser_eases_to_rest_after_a_session_ends_mid_word(model, head):
     assert ended["console_errors"] == []
 
 
+def test_browser_eases_a_head_resting_through_its_targets_to_its_rest(model, parted_head):
+    """A head whose lips are modelled apart rests at its jaw target below 0 (lips touching): the page eased its
+    influences to 0 after a session's end, the head as modelled, its lips apart where the session's silences had
+    shown them closed. It now eases to the description's ``rest_values``, the weights of the rest pose."""
+    ended, reply = _watched_to_its_end(model, parted_head, "partedrest", cut_mid_word(8.0, seed=3))
+    assert ended["closeCode"] == 1000 and ended["kind"] == "morph"
+    assert ended["applied"][-1]["index"] == reply["frames"] - 1  # the session's last frame was shown
+    rest = parted_head.rig.weights(np.zeros(4))
+    assert rest[parted_head.rig.names.index("jawOpen")] < -0.25  # the head's rest: its jaw below 0
+    np.testing.assert_allclose(ended["influences"], rest, atol=1e-6)
+    assert ended["status"].startswith("session ended")
+    assert ended["console_errors"] == []
+
+
 START_SCRIPT = Path(__file__).with_name("start_check.mjs")
 
 
