@@ -74,10 +74,11 @@ def barycentric_2d(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -
     """Barycentric coordinates (..., 3) of 2D points p (..., 2) in triangles (a, b, c) (..., 2) each."""
     v0, v1, v2 = b - a, c - a, p - a
     den = v0[..., 0] * v1[..., 1] - v1[..., 0] * v0[..., 1]
+    # A degenerate triangle (den 0) gives inf/nan coordinates, which no inside test accepts: no warning for them.
     with np.errstate(divide="ignore", invalid="ignore"):
         l1 = (v2[..., 0] * v1[..., 1] - v1[..., 0] * v2[..., 1]) / den
         l2 = (v0[..., 0] * v2[..., 1] - v2[..., 0] * v0[..., 1]) / den
-    return np.stack([1.0 - l1 - l2, l1, l2], axis=-1)
+        return np.stack([1.0 - l1 - l2, l1, l2], axis=-1)
 
 
 def interpolation_weights(
