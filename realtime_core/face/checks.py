@@ -75,6 +75,7 @@ import numpy as np
 
 from realtime_core.errors import ConfigError
 from realtime_core.expressions import SPEECH_REACH
+from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.model import MouthLandmarks, face_frame, inner_lip_gap
 from realtime_core.face.visibility import front_most
 from realtime_core.fitted_maps import EXPRESSION_POSES as GENERATED_EXPRESSION_POSES
@@ -1391,7 +1392,8 @@ def check_rig(
     pairs = np.array([[landmarks.upper_inner, landmarks.lower_inner]]) if lip_pairs is None else np.asarray(lip_pairs)
     # The lips' gap where the rig rests (params 0): the head as modelled, but for a morph rig resting at added weights
     # (MorphRig.rest: lips modelled apart that rest where they meet), whose closure is then at params 0.
-    v_rest = v0 if getattr(rig, "rest", None) is None else np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64)
+    rests = isinstance(rig, MorphRig) and rig.rest is not None
+    v_rest = np.asarray(rig.deformed(np.zeros(4)), dtype=np.float64) if rests else v0
     gap0 = inner_lip_gap(v_rest, landmarks.upper_inner, landmarks.lower_inner, fr)
     closure = (0.0, 0.0, -gap0, 0.0)
     per = pose_figures(rig, landmarks, (*poses, closure), lip_pairs=pairs, teeth=teeth, reference=reference)
