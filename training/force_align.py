@@ -28,6 +28,9 @@ from training.errors import AlignmentFormatError, MissingDependencyError
 FRAME_S = 0.01
 """pocketsphinx's frame period: alignment times are multiples of 10 ms."""
 
+FAST_FRAME_RATE_HZ = 200
+"""Frames a second of the second try, when the phones of fast speech do not fit 10 ms frames (see force_align)."""
+
 SPEECH_BELOW_PEAK_DB = 25.0
 """A frame is speech when its level is within this of the recording's loud frames (95th percentile)."""
 
@@ -55,21 +58,32 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
     missing = sorted({w for w in words if decoder.lookup_word(w) is None})
     if missing:
         raise AlignmentFormatError(source, f"cannot align: words not in the pocketsphinx dictionary: {missing}")
-    try:
-        decoder.set_align_text(" ".join(words))
-        for second_pass in (False, True):
-            if second_pass:
-                decoder.set_alignment()
-            decoder.start_utt()
-            decoder.process_raw(pcm, full_utt=True)
-            decoder.end_utt()
-    except RuntimeError as exc:  # pocketsphinx found no path through the transcript
-        raise AlignmentFormatError(source, f"the transcript could not be aligned to the audio ({exc})") from None
+    # Each phone takes at least its three HMM states, a frame each: 30 ms at pocketsphinx's 100 frames a second.
+    # Fast speech (espeak-ng at its default 175 words a minute: /b/ 20 ms) has no such path, and the phone pass
+    # fails ("Failed to set up sub-word alignment"); at FAST_FRAME_RATE_HZ (5 ms frames) it aligns, the acoustic
+    # model's features taken at twice their rate (the shared LibriVox / LJ Speech clips align at 100 as before).
+    for frame_rate in (round(1 / FRAME_S), FAST_FRAME_RATE_HZ):
+        try:
+            if frame_rate == FAST_FRAME_RATE_HZ:
+                decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL", frate=frame_rate)
+            decoder.set_align_text(" ".join(words))
+            for second_pass in (False, True):
+                if second_pass:
+                    decoder.set_alignment()
+                decoder.start_utt()
+                decoder.process_raw(pcm, full_utt=True)
+                decoder.end_utt()
+            break
+        except RuntimeError as exc:  # pocketsphinx found no path through the transcript
+            if frame_rate == FAST_FRAME_RATE_HZ:
+                raise AlignmentFormatError(
+                    source, f"the transcript could not be aligned to the audio ({exc})"
+                ) from None
     phones: list[Phone] = []
     for word in decoder.get_alignment():
         for ph in word:
-            start = ph.start * FRAME_S
-            phones.append(Phone(ph.name, start, start + ph.duration * FRAME_S))
+            start = ph.start / frame_rate
+            phones.append(Phone(ph.name, start, start + ph.duration / frame_rate))
     if not phones:
         raise AlignmentFormatError(source, "pocketsphinx found no alignment for the transcript")
     return Alignment(tuple(phones), "arpabet", Path(source))
