@@ -14,6 +14,12 @@ from pathlib import Path
 from assets.errors import CannotWriteError
 
 
+def not_a_file(path: str | os.PathLike) -> str:
+    """Why ``path`` (not a file) cannot be read, for a message that names it: "is a folder, not a file" or
+    "not found" (a folder given where a file belongs used to read "not found", though it was there)."""
+    return "is a folder, not a file" if Path(path).is_dir() else "not found"
+
+
 def make_parent(path: str | os.PathLike) -> Path:
     """Create ``path``'s folder (and its parents); CannotWriteError naming ``path`` when the file system
     refuses (a parent is a file, no permission), so the command line prints one line, not a traceback."""
@@ -24,6 +30,23 @@ def make_parent(path: str | os.PathLike) -> Path:
         blocker = next((q for q in path.parents if q.exists() and not q.is_dir()), None)
         why = f"{blocker} is a file, not a folder" if blocker else f"{exc.strerror or exc} ({exc.filename})"
         raise CannotWriteError(path, f"cannot write here: {why}") from None
+    return path
+
+
+def check_writable(path: str | os.PathLike) -> Path:
+    """Before any work: ``path``'s folder made (:func:`make_parent`), ``path`` not a folder, and a file can be created
+    beside it (a probe file made and removed: permissions, read-only and special file systems such as /proc refuse
+    only when a file is made). CannotWriteError naming ``path`` otherwise, so a command refuses at once instead of
+    failing after its work with a traceback, and leaves none of its other outputs behind."""
+    path = make_parent(path)
+    if path.is_dir():
+        raise CannotWriteError(path, "is a folder: give a file name")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=path.parent)
+    except OSError as exc:
+        raise CannotWriteError(path, f"cannot write here: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
     return path
 
 

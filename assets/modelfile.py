@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from assets.errors import FileProblem
-from assets.files import atomic_write_bytes
+from assets.files import atomic_write_bytes, check_writable
 from realtime_core.avmodel import AvModel, decode_model, encode_model
 from realtime_core.errors import ConfigError, ModelFormatError
 from realtime_core.mapping import MAPPER_KINDS, MlpSpeechModel, SpeechModel, decode_mlp_model, encode_mlp_model
@@ -51,7 +51,7 @@ def check_model_output(path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() != ".npz":
         raise ModelFileError(path, "a model file is written as .npz; give a name ending in .npz")
-    return path
+    return check_writable(path)  # a folder or a read-only place refuses now, not after the training
 
 
 def save_model(path: str | Path, model: AvModel) -> Path:

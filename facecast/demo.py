@@ -249,12 +249,12 @@ def write_mp4(
     """Render params (n, 4) (IOD) on the head's rig with the offline renderer and mux audio (m,)
     float32 at audio_rate_hz into an H.264/AAC MP4 (``clients.render.video.write_video``, atomic)."""
     from assets.audio import write_wav
-    from assets.files import make_parent
+    from assets.files import check_writable
     from clients.errors import ClientError
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, write_video
 
-    path = make_parent(path)
+    path = check_writable(path)
     with tempfile.TemporaryDirectory(prefix=".facecast-demo-", dir=path.parent) as tmp:
         wav = Path(tmp) / "audio.wav"
         write_wav(wav, np.asarray(audio, dtype=np.float32), audio_rate_hz)

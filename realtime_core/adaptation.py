@@ -23,6 +23,10 @@ from realtime_core.hmm.adapt import (
     map_adapt,
 )
 
+MIN_ENROL_S = 1.0
+"""s: the least speech an adaptation takes (``facecast adapt`` and a session's ``enrol`` alike); 30-60 s is the
+intended amount. Under a second a few dozen frames would move the components they visit towards one syllable."""
+
 
 def enrolment_features(model: AvModel, recordings: Sequence[np.ndarray]) -> list[np.ndarray]:
     """``(n,)`` samples at ``model.sample_rate_hz`` each -> ``(T_i, Da)`` audio features, each

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from assets.errors import CannotWriteError, LandmarkError, MeshError, RigFileError
+from assets.files import not_a_file
 from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
 from realtime_core.face import Rig, RigConfig
@@ -172,6 +173,15 @@ def resolve_head(
         raise MeshError(
             f"{spec}: --head-part adds meshes to a head mesh file ({', '.join(MESH_SUFFIXES)}), not to this head"
         )
+    if target_map is not None and (
+        mode == "retarget" or str(spec) == "builtin" or Path(spec).suffix.lower() not in MESH_SUFFIXES
+    ):
+        # It was read only on the way to a mesh file's own targets: anywhere else a typo in it went unnoticed.
+        raise MeshError(
+            f"{target_map}: --target-map names a mesh file's own morph targets; {spec} "
+            + ("is retargeted" if mode == "retarget" else "is not a mesh file")
+            + " (give it with --head MESH.glb/.vrm and --head-mode auto or morph)"
+        )
     if str(spec) == "builtin":
         if mode == "retarget" or landmarks is not None:
             from assets.heads.rigfile import builtin_rig
@@ -188,7 +198,7 @@ def resolve_head(
         if mode == "retarget":
             raise MeshError(f"{p}: a Candide-3 model is driven by its own animation units; use --head-mode auto")
         if not p.is_file():
-            raise MeshError(f"{p}: Candide-3 file not found")
+            raise MeshError(f"{p}: Candide-3 file {not_a_file(p)}")
         # A face mask: its open mouth shows a dark cavity. Checked (34 ms) so that it drives within the poses it
         # holds and its own closure reach: its lips touch at rest, and the shared reach crossed them.
         masked = with_mouth_cavity(candide_head(p))

@@ -14,6 +14,7 @@ from importlib import resources
 from pathlib import Path
 
 from assets.errors import LandmarkError
+from assets.files import not_a_file
 
 CREDITS = {
     "leeperrysmith.glb": "Head: Lee Perry-Smith / Infinite Realities (CC BY 3.0)",
@@ -51,7 +52,7 @@ def read_landmarks(path: str | Path) -> dict[str, object]:
     """The ``landmarks`` mapping of a JSON file; LandmarkError naming the file on any problem."""
     p = Path(path)
     if not p.is_file():
-        raise LandmarkError(f"{p}: landmarks file not found")
+        raise LandmarkError(f"{p}: landmarks file {not_a_file(p)}")
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from assets.errors import MeshError
+from assets.files import not_a_file
 from realtime_core.normals import triangle_normals
 
 MESH_SUFFIXES = (".glb", ".gltf", ".vrm", ".obj", ".ply")
@@ -316,7 +317,7 @@ def _concat(pieces: list[_Parts]) -> _Parts:
 def _file_parts(p: Path, cache: Path | None) -> _Parts:
     """One mesh file's pieces (MeshError naming it when it is missing, unsupported or has no triangles)."""
     if not p.is_file():
-        raise MeshError(f"{p}: mesh file not found (give a .glb, .gltf, .vrm, .obj or .ply head, or 'builtin')")
+        raise MeshError(f"{p}: mesh file {not_a_file(p)} (give a .glb, .gltf, .vrm, .obj or .ply head, or 'builtin')")
     if p.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{p}: unsupported mesh format {p.suffix!r}; convert it to one of {', '.join(MESH_SUFFIXES)}")
     suffix = p.suffix.lower()

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from assets.errors import RigFileError
+from assets.files import not_a_file
 from assets.heads.cache import atomic_savez
 from assets.heads.mesh import HeadMesh
 from realtime_core.archive import NOT_NPZ
@@ -107,7 +108,7 @@ def load_rig(path: str | Path) -> tuple[Rig, HeadMesh]:
     """Read a rig file; RigFileError naming the file if it is missing, of another format or inconsistent."""
     p = Path(path)
     if not p.is_file():
-        raise RigFileError(f"{p}: rig file not found")
+        raise RigFileError(f"{p}: rig file {not_a_file(p)}")
     try:
         with p.open("rb") as fh:
             zipped = fh.read(2) == b"PK"

@@ -211,12 +211,15 @@ def resolve_landmarks(
     v = np.asarray(vertices, dtype=np.float64)
     extent = float(np.ptp(v, axis=0).max())
     for k, pt in out.items():
-        gap = float(np.min(np.linalg.norm(v - pt, axis=1)))
+        nearest = float(np.min(np.linalg.norm(v - pt, axis=1)))
+        gap = nearest
         if gap > LANDMARK_REACH * extent and triangles is not None:
             gap = _surface_gap(pt, v, np.asarray(triangles, dtype=np.int64), LANDMARK_REACH * extent)
         if gap > LANDMARK_REACH * extent:
+            # _surface_gap is inf past the reach: name the nearest vertex's distance then ("inf file units off").
             raise LandmarkError(
-                f"{source}: landmark {k!r} {np.round(pt, 4).tolist()} lies {gap:.3g} file units off the mesh "
+                f"{source}: landmark {k!r} {np.round(pt, 4).tolist()} lies "
+                f"{gap if np.isfinite(gap) else nearest:.3g} file units off the mesh "
                 f"(extent {extent:.3g}); give points on the head in its file units, or vertex indices"
             )
     return out

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from assets.audio import wav_bytes
-from assets.files import atomic_write_bytes
+from assets.files import atomic_write_bytes, check_writable
 from assets.tracks import encode_csv, encode_json
 from clients.export.errors import ExportError
 from clients.export.gltf import arkit_glb, head_glb
@@ -26,9 +26,10 @@ def audio_beside(path: str | Path) -> Path | None:
 
 
 def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> None:
-    """Refuse, before anything is written, exports of unknown format and a ``.wav`` beside a .glb/.json
+    """Refuse, before anything is written, exports of unknown format, a ``.wav`` beside a .glb/.json
     that would overwrite ``source`` (the speech the audio was read from: ``take.wav --glb take.glb``
-    would replace the user's recording by its mono copy) or another of ``paths``. Raises ExportError."""
+    would replace the user's recording by its mono copy) or another of ``paths``, and paths that cannot be written
+    (:func:`assets.files.check_writable`: a folder, a read-only place). Raises ExportError / CannotWriteError."""
     for p in paths:
         if p.suffix.lower() not in FORMATS:
             raise ExportError(f"{p}: unknown export format {p.suffix.lower()!r} (use {', '.join(FORMATS)})")
@@ -42,6 +43,11 @@ def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> Non
                 f"{p}: the audio written beside it, {wav}, would overwrite {taken[wav.resolve()]}; "
                 "give the export another name"
             )
+    for p in paths:  # last: the probes make the outputs' folders
+        check_writable(p)
+        wav = audio_beside(p)
+        if wav is not None and wav.is_dir():
+            raise ExportError(f"{p}: the audio written beside it, {wav}, is a folder; give the export another name")
 
 
 def export_track(

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from facecast.commands.argtypes import within
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -36,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--weight-relevance", type=float, default=8.0, help="relevance factor for the mixture weights, in frames"
     )
     p.add_argument("--no-weights", action="store_true", help="adapt the audio means only")
-    p.add_argument("--iters", type=int, default=5, help="EM iterations")
+    p.add_argument("--iters", type=within(int, 1, 100), default=5, help="EM iterations")
     p.set_defaults(run=run)
 
 
@@ -47,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
     from assets.audio import is_silent, read_audio
     from assets.errors import SilentAudioError
     from assets.modelfile import check_model_output, load_model, save_model
-    from realtime_core.adaptation import adapt_av_model
+    from realtime_core.adaptation import MIN_ENROL_S, adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
+    from training.errors import ConfigError
 
     check_model_output(args.output)
     model = load_model(args.model)
@@ -62,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
             raise SilentAudioError(path, "silent: no voice to adapt to; nothing written")
         recordings.append(samples)
     seconds = sum(len(x) for x in recordings) / model.sample_rate_hz
+    if seconds < MIN_ENROL_S:  # as a session's enrol: a second of speech at least
+        raise ConfigError(f"{seconds:.1f} s of speech; at least {MIN_ENROL_S:g} s is needed (30-60 s is intended)")
     if seconds < 10:
         print(f"note: only {seconds:.1f} s of speech; 30-60 s is the intended amount (few components will move)")
     from threadpoolctl import threadpool_limits

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from facecast.commands.argtypes import within
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -48,7 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_mapper_options(p)
     add_expression_options(p)
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
-    p.add_argument("--lag", type=int, default=0, help="extra frames of fixed-lag smoothing (stream mode)")
+    p.add_argument(
+        "--lag", type=within(int, 0, 30, "frames"), default=0, help="extra frames of fixed-lag smoothing (stream mode)"
+    )
     p.set_defaults(run=run)
 
 
@@ -65,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
 
     outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
     if not outputs:
-        raise SystemExit("facecast animate: error: give at least one output: --csv, --glb, --json or --tsv")
+        from training.errors import ConfigError
+
+        raise ConfigError("give at least one output: --csv, --glb, --json or --tsv")
     from clients.export.errors import ExportError
     from clients.export.files import check_outputs
 

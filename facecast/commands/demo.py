@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
 
     from threadpoolctl import threadpool_limits
 
-    from assets.files import make_parent
+    from assets.files import check_writable
     from assets.heads.head import resolve_head
     from assets.modelfile import load_model
     from clients.render.video import check_video_path
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         node_modules=npm if npm.is_dir() else None,
     )
     if cfg.video is not None:  # refused now, not after the session has been streamed in real time
-        make_parent(check_video_path(cfg.video))
+        check_writable(check_video_path(cfg.video))
     model = load_model(args.model)
     head = resolve_head(args.rig or "builtin")
     with threadpool_limits(1):

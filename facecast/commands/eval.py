@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from assets.shared import shared_data_root
+from facecast.commands.argtypes import floats, ints
 
 SHARED = shared_data_root()
 OTHER_TALKERS = SHARED / "video" / "grid"
@@ -43,7 +44,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="held-out synthetic corpus folder "
         "(default: build 40 utterances per language with voice variants f5,m7, seed 1234)",
     )
-    p.add_argument("--speech-dir", type=Path, default=SHARED / "speech", help="real speech with phone alignments")
+    p.add_argument(
+        "--speech-dir",
+        type=Path,
+        default=None,
+        help="real speech with phone alignments (default: shared data speech/, skipped when missing)",
+    )
     p.add_argument(
         "--video-dir",
         type=Path,
@@ -51,7 +57,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="a folder of talking-face clips to score (default: the GRID clips of talkers other than s1, "
         "shared data video/grid)",
     )
-    p.add_argument("--grid-s1", type=Path, default=SHARED / "video" / "grid_s1", help="the GRID s1 corpus")
+    p.add_argument(
+        "--grid-s1",
+        type=Path,
+        default=None,
+        help="the GRID s1 corpus (default: shared data video/grid_s1, skipped when missing)",
+    )
     p.add_argument("--grid-split", choices=("test", "val"), default="test", help="GRID s1 split to score")
     p.add_argument("--cache-dir", default=None, help="face-track cache (default $FACECAST_CACHE or ~/.cache/facecast)")
     p.add_argument(
@@ -72,13 +83,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--lags",
-        type=lambda t: tuple(int(v) for v in t.split(",") if v),
+        type=lambda t: tuple(ints(t)),
         default=(0,),
         help="fixed-lag smoothing frames for --dial, e.g. 0,1",
     )
     p.add_argument(
         "--kappas",
-        type=lambda t: tuple(float(v) for v in t.split(",") if v),
+        type=lambda t: tuple(floats(t)),
         default=None,
         help="with --dial: choose each model's audio-likelihood exponent per lag among these on the scored split "
         "(highest r(mouth_open) keeping >= 90%% of closures); shipped models (default, low-latency) always run "
@@ -98,6 +109,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def _default_folders(args: argparse.Namespace) -> None:
+    """--grid-s1 / --speech-dir: a folder given by name must exist (a typo used to skip its section and exit 0);
+    unset, the shared data's, whose sections are skipped with a line when it is missing."""
+    from training.errors import ConfigError
+
+    for option, attr, default in (
+        ("--grid-s1", "grid_s1", SHARED / "video" / "grid_s1"),
+        ("--speech-dir", "speech_dir", SHARED / "speech"),
+    ):
+        given = getattr(args, attr)
+        if given is not None and not given.is_dir():
+            raise ConfigError(f"{option} {given}: folder not found")
+        setattr(args, attr, default if given is None else given)
+
+
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
@@ -109,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from training.evaluation import format_markdown, real_speech_items, score_set
     from training.reallips import evaluate_lips, lips_markdown, plot_lips, s1_clips
 
+    _default_folders(args)
     if args.mu is not None:
         return _run_mu(args)
     if args.dial:

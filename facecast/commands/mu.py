@@ -6,15 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _ints(text: str) -> list[int]:
-    try:
-        out = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-    if not out:
-        raise argparse.ArgumentTypeError("expected at least one integer")
-    return out
+from facecast.commands.argtypes import ints
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -42,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--units", type=int, default=None, help="Utterance MUs to keep (default: fewest reaching --variance)"
     )
     p.add_argument("--variance", type=float, default=0.97, help="variance the kept MUs must explain")
-    p.add_argument("--classes", type=_ints, default=[4, 8, 16, 32, 44], help="candidate K (chosen on val)")
+    p.add_argument("--classes", type=ints, default=[4, 8, 16, 32, 44], help="candidate K (chosen on val)")
     p.add_argument("--hidden", type=int, default=20, help="hidden units per expert (the paper: 15-25)")
     p.add_argument("--baseline-hidden", type=int, default=600, help="hidden units of the single-MLP baseline (0: skip)")
     p.add_argument("--hmm-states", type=int, default=16, help="HMM states (0: skip the HMM)")

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     import contextlib
     import threading
 
-    from assets.files import make_parent
+    from assets.files import check_writable
     from clients.errors import ClientError
     from clients.export.files import FORMATS, export_track
     from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         raise ClientError(
             f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
         )
-    make_parent(args.output)  # a folder that cannot be made fails now, not after the whole take
+    check_writable(args.output)  # a folder that cannot be made fails now, not after the whole take
     token = token_from_env(args.token_env)
     glb = args.output.suffix.lower() == ".glb"
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from facecast.commands.argtypes import within
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -35,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--view", choices=("front", "three_quarter"), default="front", help="camera view")
     p.add_argument("--width", type=int, default=640, help="image width in pixels")
     p.add_argument("--height", type=int, default=480, help="image height in pixels")
-    p.add_argument("--fps", type=float, default=30.0, help="video frame rate")
+    p.add_argument("--fps", type=within(float, 1, 240, "fps"), default=30.0, help="video frame rate")
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
     p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
     p.add_argument(
@@ -53,15 +55,15 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from assets.audio import check_audio_path
-    from assets.files import make_parent
+    from assets.files import check_writable
     from assets.tracks import read_params_resampled
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
     from realtime_core.track import frames_from_samples
 
-    make_parent(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
+    check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     if args.png_dir:
-        make_parent(Path(args.png_dir) / "frame_00000.png")
+        check_writable(Path(args.png_dir) / "frame_00000.png")
     check_audio_path(args.speech)
     video = None
     if args.beside:

@@ -93,14 +93,14 @@ def run(args: argparse.Namespace) -> int:
     if args.output and Path(args.output).suffix.lower() != ".npz":
         # --head takes a rig by its suffix: any other name would make the file unusable (and rigging takes minutes)
         raise RigFileError(f"{args.output}: a rig file is written as .npz; give a name ending in .npz")
-    from assets.files import make_parent
+    from assets.files import check_writable
     from assets.heads.plot import check_picture_path
 
     for picture in (args.show_landmarks, args.png):
         if picture:
-            make_parent(check_picture_path(picture))
+            check_writable(check_picture_path(picture))
     if args.output:  # a folder that cannot be made fails now, not after the rigging
-        make_parent(args.output)
+        check_writable(args.output)
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )

@@ -146,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from assets.audio import read_audio, write_wav
-    from assets.files import make_parent
+    from assets.files import check_writable
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):
         raise ConfigError(f"{args.audio}: an output would overwrite the --audio recording; give it another name")
     for o in outs:  # before any work; an .mp4's temporary folder is made beside it, so its folder must exist
-        make_parent(o)
+        check_writable(o)
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:
@@ -289,5 +289,8 @@ def run(args: argparse.Namespace) -> int:
             f"| total {1000 * (time.perf_counter() - t_start):.0f} ms",
         )
     for out in outs:
-        print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s)")
+        if out.suffix.lower() == ".wav":
+            print(f"wrote {out}: {len(samples) / rate:.2f} s of speech at {rate} Hz")
+        else:
+            print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s)")
     return 0

@@ -6,12 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-
-def _ints(text: str) -> list[int]:
-    try:
-        return [int(v) for v in text.split(",") if v]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+from facecast.commands.argtypes import ints
 
 
 def _ratio_range(text: str) -> tuple[float, float]:
@@ -138,9 +133,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="model-selection mode over --grid-states/--grid-mix/"
         "--grid-tc, full and diagonal; writes Fig. 7/8 PNGs and a JSON report to --report-dir",
     )
-    p.add_argument("--grid-states", type=_ints, default=[4, 8, 16, 28], help="N values for --select")
-    p.add_argument("--grid-mix", type=_ints, default=[1, 3, 5], help="M values for --select")
-    p.add_argument("--grid-tc", type=_ints, default=[3], help="tc values for --select")
+    p.add_argument("--grid-states", type=ints, default=[4, 8, 16, 28], help="N values for --select")
+    p.add_argument("--grid-mix", type=ints, default=[1, 3, 5], help="M values for --select")
+    p.add_argument("--grid-tc", type=ints, default=[3], help="tc values for --select")
     p.add_argument(
         "--report-dir",
         type=Path,

@@ -100,10 +100,10 @@ def run(args: argparse.Namespace) -> int:
     token = token_from_env(args.token_env)
     if args.record is None:
         return _window(args, token)
-    from assets.files import make_parent
+    from assets.files import check_writable
     from clients.render.video import check_video_path
 
-    make_parent(check_video_path(args.record))  # before the session is watched, not after it ended
+    check_writable(check_video_path(args.record))  # before the session is watched, not after it ended
 
     async def main():
         session = await pick_session(args.url, args.session, args.wait, token)

@@ -148,3 +148,91 @@ def test_train_on_a_folder_of_videos_says_how_to_make_a_corpus(tmp_path, capsys)
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "not a corpus folder" in err and "facecast extract VIDEOS -o DIR" in err, err
     assert not (tmp_path / "my.npz").exists()
+
+
+def _speech(path) -> str:
+    """A 1.5 s speech-like WAV at 16 kHz (the commands read it; what it says does not matter here)."""
+    from assets.audio import write_wav
+    from tests.speech import speechlike
+
+    write_wav(path, speechlike(1.5, 16000, seed=1), 16000)
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    ("argv", "want"),
+    [
+        (["say", "hi there", "-o", "{tmp}/ok.csv", "-o", "{tmp}/folder.mp4"], "folder.mp4: is a folder"),
+        (["say", "hi there", "-o", "{tmp}/ok.csv", "-o", "/proc/x.mp4"], "/proc/x.mp4: cannot write here"),
+        (["animate", "{wav}", "--csv", "{tmp}/ok.csv", "--glb", "/proc/x.glb"], "/proc/x.glb: cannot write here"),
+        (["animate", "{wav}", "--csv", "{tmp}/ok.csv", "--tsv", "{tmp}/folder.tsv"], "folder.tsv: is a folder"),
+        (["render", "{wav}", "-o", "{tmp}/folder.mp4"], "folder.mp4: is a folder"),
+        (["rig", "builtin", "-o", "/proc/x.npz"], "/proc/x.npz: cannot write here"),
+        (["adapt", "default", "{wav}", "-o", "/proc/m.npz"], "/proc/m.npz: cannot write here"),
+    ],
+    ids=["say-folder", "say-proc", "animate-proc", "animate-folder", "render-folder", "rig-proc", "adapt-proc"],
+)
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(argv, want, tmp_path, capsys):
+    """`say -o ok.csv -o /proc/x.mp4` wrote ok.csv, then failed with a FileNotFoundError traceback (exit 1); a folder
+    named as the video was an IsADirectoryError after the render; `rig`/`adapt -o /proc/...` failed only after the
+    work. Each is now one line naming the output, exit 2, before anything is written."""
+    (tmp_path / "folder.mp4").mkdir()
+    (tmp_path / "folder.tsv").mkdir()
+    wav = _speech(tmp_path.parent / f"{tmp_path.name}_speech.wav")
+    assert main([a.format(tmp=tmp_path, wav=wav) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and want in err and "Traceback" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.mp4", "folder.tsv"]  # nothing else written
+    assert list((tmp_path / "folder.mp4").iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "want"),
+    [
+        (["render", "{wav}", "-o", "{tmp}/x.mp4", "--fps", "1e6"], "argument --fps: 1e6 is outside 1..240 fps"),
+        (["animate", "{wav}", "--csv", "{tmp}/x.csv", "--lag", "100000"], "--lag: 100000 is outside 0..30 frames"),
+        (["animate", "{wav}", "--csv", "{tmp}/x.csv", "--lag", "nan"], "--lag: expected an integer, got 'nan'"),
+        (["adapt", "default", "{wav}", "-o", "{tmp}/m.npz", "--iters", "0"], "--iters: 0 is outside 1..100"),
+        (["eval", "--lags", "abc"], "--lags: expected comma-separated integers, got 'abc'"),
+        (["eval", "--grid-s1", "{tmp}/nowhere"], "--grid-s1 {tmp}/nowhere: folder not found"),
+        (["eval", "--speech-dir", "{tmp}/nowhere"], "--speech-dir {tmp}/nowhere: folder not found"),
+        (["animate", "{wav}"], "give at least one output: --csv, --glb, --json or --tsv"),
+        (["rig", "{tmp}", "-o", "{tmp}/r.npz"], "{tmp}: mesh file is a folder, not a file"),
+        (["rig", "builtin", "--landmarks", "{tmp}", "-o", "{tmp}/r.npz"], "{tmp}: landmarks file is a folder"),
+        (
+            ["render", "{wav}", "--target-map", "map.json", "-o", "{tmp}/x.mp4"],
+            "map.json: --target-map names a mesh file's own morph targets; builtin is not a mesh file",
+        ),
+    ],
+    ids=[
+        *("fps", "lag", "lag-nan", "iters", "lags", "grid-s1", "speech-dir", "no-output", "mesh-dir", "landmarks-dir"),
+        "target-map-builtin",
+    ],
+)
+def test_absurd_options_and_folders_for_files_are_refused_in_one_line(argv, want, tmp_path, capsys):
+    """`render --fps 1e6` rendered for minutes, `animate --lag 100000` announced a 55-minute delay, `adapt --iters 0`
+    wrote an 'adapted' copy of its input, `eval --grid-s1 TYPO` skipped the section and exited 0, a folder given as
+    a mesh or landmarks file was "not found", a --target-map for the built-in head was ignored unread: each is now
+    one line naming the option, exit 2, nothing written."""
+    wav = _speech(tmp_path.parent / f"{tmp_path.name}_speech.wav")
+    try:
+        code = main([a.format(tmp=tmp_path, wav=wav) for a in argv])
+    except SystemExit as exc:  # argparse's own refusal: usage, then one error line
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert want.format(tmp=tmp_path) in err.splitlines()[-1] and "Traceback" not in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_adapt_refuses_less_than_a_second_of_speech(tmp_path, capsys):
+    """A session's enrol refused under a second of speech, `facecast adapt` took 0.2 s: one rule now."""
+    from assets.audio import write_wav
+    from realtime_core.adaptation import MIN_ENROL_S
+    from tests.speech import speechlike
+
+    write_wav(tmp_path / "short.wav", speechlike(0.5 * MIN_ENROL_S, 16000, seed=2), 16000)
+    assert main(["adapt", "default", str(tmp_path / "short.wav"), "-o", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "0.5 s of speech; at least 1 s is needed" in err, err
+    assert not (tmp_path / "m.npz").exists()
