@@ -38,3 +38,14 @@ def test_an_off_switch_shows_no_default(capsys):
     text = " ".join(capsys.readouterr().out.split())
     option = re.search(r"--no-energy leave c0.*?(?= --level-norm )", text)
     assert option is not None and "(default" not in option.group(0), option
+
+
+def test_version_names_the_installed_release(capsys):
+    """`facecast --version` was "unrecognized arguments"; it prints pyproject's version, exit 0."""
+    import tomllib
+    from pathlib import Path
+
+    want = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["version"]
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"facecast {want}"
