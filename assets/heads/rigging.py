@@ -225,6 +225,34 @@ def resolve_landmarks(
     return out
 
 
+# (lower, upper): the first lies below the second on every face, along the face's up (mouth -> eyes), and
+# (right, left) the first on the face's right of the second, along its eye line: the order no real or stylised face
+# breaks. The checks' own frame is made of the eyes and the mouth corners, so these are about the other landmarks.
+LAYOUT_BELOW = (("nose_tip", "eyes"), ("upper_lip", "nose_tip"), ("lower_lip", "upper_lip"), ("chin", "lower_lip"))
+LAYOUT_RIGHT_OF = (("eye_outer_right", "eye_inner_right"), ("eye_inner_left", "eye_outer_left"))
+
+
+def check_layout(points: Mapping[str, np.ndarray], frame: FaceFrame, source: str) -> None:
+    """LandmarkError naming the two landmarks when ``points`` (name -> (3,)) break the face's layout (LAYOUT_BELOW,
+    LAYOUT_RIGHT_OF) in ``frame`` (:func:`realtime_core.face.model.face_frame` of them): an upper lip placed on an eye
+    corner was refused only after a minute of rigging and failed tries, a chin swapped with the nose tip was read as
+    'left' and 'right' swapped."""
+    at = {k: (np.asarray(p, dtype=np.float64) - frame.origin) @ frame.axes.T / frame.iod for k, p in points.items()}
+    at["eyes"] = np.zeros(3)  # the frame's origin: between the eye centres
+    for low, high in LAYOUT_BELOW:
+        if at[low][1] >= at[high][1]:
+            raise LandmarkError(
+                f"{source}: {low!r} lies {at[low][1] - at[high][1]:.3g} IOD above {high!r} (the face's up runs from "
+                "the mouth to the eyes); check these landmarks (docs/heads.md shows each)"
+            )
+    for right, left in LAYOUT_RIGHT_OF:
+        if at[right][0] >= at[left][0]:
+            raise LandmarkError(
+                f"{source}: {right!r} lies on the face's left of {left!r} ('left' is the face's own left, and an "
+                "eye's outer corner is the one towards the ear); check these landmarks (docs/heads.md shows each)"
+            )
+
+
 def _surface_gap(p: np.ndarray, v: np.ndarray, t: np.ndarray, reach: float) -> float:
     """The distance from ``p`` (3,) to the surface of triangles ``t`` (m, 3) over ``v`` (n, 3), found among the
     triangles whose box grown by ``reach`` holds ``p`` (inf when none does: farther than ``reach`` anyway)."""
@@ -1867,6 +1895,7 @@ def rig_head(
     try:
         lm = mouth_landmarks(snap)
         frame = face_frame(v, lm)
+        check_layout(points, frame, landmark_source)
         if (points["nose_tip"] - frame.origin) @ frame.axes[2] <= 0:
             raise LandmarkError(
                 f"{landmark_source}: the nose tip lies behind the eyes in the face frame; are 'left' and "

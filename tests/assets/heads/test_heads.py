@@ -77,6 +77,19 @@ def test_landmarks_missing_or_out_of_range_name_the_file(tmp_path, shared_data, 
         swapped[a], swapped[b] = good[b], good[a]
     with pytest.raises(LandmarkError, match=r"lm.json: .*swapped"):
         rig_head(mesh, swapped, landmark_source="lm.json", head=builtin_head)
+    # Landmarks out of the face's layout are named at once (an upper lip on an eye corner rigged for a minute first;
+    # the chin and the nose tip swapped read as 'left' and 'right' swapped).
+    for wrong, want in (
+        (dict(good, upper_lip=good["eye_outer_left"]), r"'upper_lip' lies .* IOD above 'nose_tip'"),
+        (dict(good, nose_tip=good["chin"], chin=good["nose_tip"]), r"'upper_lip' lies .* IOD above 'nose_tip'"),
+        (dict(good, chin=good["upper_lip"], upper_lip=good["chin"]), r"'lower_lip' lies .* IOD above 'upper_lip'"),
+        (
+            dict(good, eye_outer_left=good["eye_inner_left"], eye_inner_left=good["eye_outer_left"]),
+            r"'eye_inner_left' lies on the face's left of 'eye_outer_left'",
+        ),
+    ):
+        with pytest.raises(LandmarkError, match=r"lm.json: " + want):
+            rig_head(mesh, wrong, landmark_source="lm.json", head=builtin_head)
     bad = dict(good, chin=[1.0, "x", 2.0])
     with pytest.raises(LandmarkError, match=r"lm.json: landmark 'chin' must be a vertex index"):
         rig_head(mesh, bad, landmark_source="lm.json", head=builtin_head)
