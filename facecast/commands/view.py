@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="PNG",
-        help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)",
+        help="window mode: save the last image shown as PNG on exit, Ctrl-C included (default %(default)s = none)",
     )
     p.add_argument(
         "--save-sound",
@@ -162,7 +162,9 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     )
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"
     print(
-        f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
+        f"facecast view: showed {st.shown} of {st.received} frames"
+        + ("" if st.first_index is None else f" received from frame {st.first_index}")
+        + f" ({st.lost} lost, {st.skipped} skipped, "
         f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
         f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
         + (
