@@ -21,7 +21,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "also be streamed by `facecast serve --file`.",
     )
     p.add_argument("speech", type=Path, help="speech audio file")
-    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument(
+        "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /ingest URL too)"
+    )
     p.add_argument("--session", default=None, help="session name (default %(default)s = the file's name)")
     p.add_argument("--fast", action="store_true", help="send as fast as the server takes it instead of in real time")
     add_token_option(p)
@@ -32,15 +34,16 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from assets.audio import check_audio_path
-    from clients.client import ingest_file
+    from clients.client import ingest_file, server_url
     from facecast.commands.view import token_from_env
 
     check_audio_path(args.speech)
+    url = server_url(args.url, "/ingest")  # the base URL also when given as the endpoint, ws://HOST:PORT/ingest
     token = token_from_env(args.token_env)
     session = args.session if args.session is not None else args.speech.stem
     pace = "as fast as the server takes it" if args.fast else "in real time"
-    print(f"facecast send: streaming {args.speech} as session {session!r} to {args.url} {pace}", flush=True)
-    ended = asyncio.run(ingest_file(args.url, args.speech, session=session, realtime=not args.fast, token=token))
+    print(f"facecast send: streaming {args.speech} as session {session!r} to {url} {pace}", flush=True)
+    ended = asyncio.run(ingest_file(url, args.speech, session=session, realtime=not args.fast, token=token))
     print(
         f"facecast send: session {session!r} ended: {ended.get('frames')} frames, "
         f"{float(ended.get('audio_s', 0.0)):.2f} s of audio"

@@ -540,6 +540,22 @@ def test_view_window_screenshot_is_written_when_stopped_with_ctrl_c(live, xvfb, 
     assert img.shape == (480, 640) and img.std() > 20  # a head, not an empty window
 
 
+def test_view_and_record_accept_the_view_endpoints_url(live, tmp_path, capsys):
+    """`facecast view --record` / `record` given the viewers' WebSocket URL (ws://HOST:PORT/view, as
+    docs/protocol.md writes it) watched /view/view; they watch the server's /view. The ingest's URL is refused
+    in one line."""
+    ws = live.url.replace("http://", "ws://")
+    fut = live.submit(_session_once_watched(live, "viewurl", 1.0, viewers=1))
+    out = tmp_path / "take.csv"
+    assert main(["record", f"{ws}/view", "--session", "viewurl", "-o", str(out), "--wait", "20"]) == 0
+    fut.result(30)
+    assert decode_csv(out.read_bytes()).n_frames == 30
+    assert f"from {ws}\n" in capsys.readouterr().out  # the server's base URL
+    assert main(["view", f"{live.url}/ingest", "--session", "x", "--record", str(tmp_path / "v.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "/ingest endpoint" in err, err
+
+
 def test_record_stopped_by_duration_says_so_not_closed_with_none(live, tmp_path, capsys):
     """`facecast record/view --duration` stops the viewer while the session goes on: the summary
     line used to read "session closed with None"."""
