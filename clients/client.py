@@ -229,13 +229,22 @@ async def stream_source(ing: IngestClient, source) -> int:
 
 
 async def ingest_file(
-    url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02, token: str | None = None
+    url: str,
+    path: str | Path,
+    *,
+    session: str,
+    realtime: bool = True,
+    block_s: float = 0.02,
+    token: str | None = None,
+    hold_s: float = 0.0,
 ) -> dict:
-    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply.
+    hold_s: seconds between the session's start and its first audio, in which viewers waiting for it connect."""
     from assets.audio import read_audio
 
     samples, rate = read_audio(path)
     async with IngestClient(url, session=session, sample_rate_hz=rate, token=token) as ing:
+        await asyncio.sleep(hold_s)
         await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
         return await ing.end()
 

@@ -556,6 +556,37 @@ def test_view_and_record_accept_the_view_endpoints_url(live, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "/ingest endpoint" in err, err
 
 
+def test_record_started_before_a_fast_send_gets_the_whole_session(live, tmp_path, capsys):
+    """`facecast record --session S` started before `facecast send a.wav --session S --fast`: the session's frames
+    all left within a few hundredths of a second of its start, so the recorder (retrying every RETRY_S) joined it
+    at 1.0 s (27 of 57 frames here; 18 of 56 at 1.27 s in the user's test) or found it over ("4004 no session"
+    once --wait ran out). `send --fast` now holds its audio FAST_HOLD_S, five retries, after the start: the
+    recording has every frame from frame 0. A session it never found is reported with how long it waited."""
+    from assets.audio import write_wav
+
+    wav = write_wav(tmp_path / "a.wav", speechlike(1.9, 16000, seed=5), 16000)
+    name = "fastsend"
+    sent: list[int] = []
+
+    def send() -> None:
+        sent.append(main(["send", str(wav), live.url, "--session", name, "--fast"]))
+
+    starter = _start_after_a_refusal(live, name, 20.0, session=send)
+    out = tmp_path / "take.csv"
+    try:
+        code = main(["record", live.url, "--session", name, "-o", str(out), "--wait", "5"])
+    finally:
+        starter.join(30)
+    printed = capsys.readouterr()
+    assert sent == [0] and code == 0, printed.err
+    frames = int(printed.out.split(f"session {name!r} ended: ")[1].split(" ")[0])
+    take = decode_csv(out.read_bytes())
+    assert frames == 57 and take.n_frames == frames and take.start_s == 0.0, printed.out
+
+    assert main(["record", live.url, "--session", "nobody", "-o", str(out), "--wait", "0.3"]) == 2
+    assert "no session 'nobody' (waited 0.3 s for it to start" in capsys.readouterr().err
+
+
 def test_record_stopped_by_duration_says_so_not_closed_with_none(live, tmp_path, capsys):
     """`facecast record/view --duration` stops the viewer while the session goes on: the summary
     line used to read "session closed with None"."""
