@@ -20,7 +20,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import urlencode
+from urllib.parse import urlencode, urlsplit
 
 import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
@@ -40,9 +40,35 @@ class ServerClosed(ClientError):
         self.reason = reason
 
 
+ENDPOINTS = ("/ingest", "/view", "/text")
+"""The server's WebSocket endpoints (docs/protocol.md section 1)."""
+
+
+def server_url(url: str, endpoint: str) -> str:
+    """The server's base URL (``http://h:p`` or ``ws://h:p``, no trailing slash) from ``url``, which may
+    already end in ``endpoint`` ("/ingest", "/view": the WebSocket URLs docs/protocol.md shows, e.g.
+    ``ws://h:p/ingest``; given to `facecast send` it connected to /ingest/ingest, a 404). ClientError,
+    in one line, for a URL ending in another endpoint or carrying a query (``/view?session=...``)."""
+    u = urlsplit(url)
+    if u.query or u.fragment:
+        raise ClientError(f"{url}: give the server's base URL (http://HOST:PORT), without a query or fragment")
+    base = url.rstrip("/")
+    path = urlsplit(base).path
+    for ep in ENDPOINTS:
+        if path.endswith(ep):
+            if ep != endpoint:
+                raise ClientError(
+                    f"{url}: ends in the server's {ep} endpoint, not {endpoint}: give the server's base URL "
+                    "(http://HOST:PORT)"
+                )
+            return base[: -len(ep)]
+    return base
+
+
 def ws_url(base: str, path: str) -> str:
-    """``http://h:p`` or ``ws://h:p`` + path -> ``ws://h:p/path``."""
-    b = base.rstrip("/")
+    """``http://h:p`` or ``ws://h:p`` (or either already ending in ``path``'s endpoint: :func:`server_url`)
+    + path -> ``ws://h:p/path``."""
+    b = server_url(base, path.split("?", 1)[0])
     if b.startswith("http://"):
         b = "ws://" + b[len("http://") :]
     elif b.startswith("https://"):
@@ -203,13 +229,22 @@ async def stream_source(ing: IngestClient, source) -> int:
 
 
 async def ingest_file(
-    url: str, path: str | Path, *, session: str, realtime: bool = True, block_s: float = 0.02, token: str | None = None
+    url: str,
+    path: str | Path,
+    *,
+    session: str,
+    realtime: bool = True,
+    block_s: float = 0.02,
+    token: str | None = None,
+    hold_s: float = 0.0,
 ) -> dict:
-    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply."""
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply.
+    hold_s: seconds between the session's start and its first audio, in which viewers waiting for it connect."""
     from assets.audio import read_audio
 
     samples, rate = read_audio(path)
     async with IngestClient(url, session=session, sample_rate_hz=rate, token=token) as ing:
+        await asyncio.sleep(hold_s)
         await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
         return await ing.end()
 
@@ -265,7 +300,12 @@ class ViewerClient:
         self.close_reason = ""
 
     async def __aenter__(self) -> ViewerClient:
-        self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        try:
+            self.ws = await connect(self.url, compression=None, max_size=self.max_size)
+        except InvalidURI:
+            raise ClientError(f"{self.url}: not a server URL (give http://HOST:PORT)") from None
+        except InvalidHandshake as exc:  # e.g. HTTP 401/403/404/429 instead of the upgrade: was a traceback
+            raise ClientError(f"{self.url}: the server refused the connection: {exc}") from None
         try:
             self.description = json.loads(await self.ws.recv())
         except ConnectionClosed as exc:
@@ -303,8 +343,6 @@ class ViewerClient:
 
 async def http_get(url: str, path: str) -> tuple[int, bytes]:
     """Minimal HTTP/1.1 GET over asyncio streams (no extra dependency): (status, body)."""
-    from urllib.parse import urlsplit
-
     u = urlsplit(url if "://" in url else "http://" + url)
     reader, writer = await asyncio.open_connection(u.hostname, u.port or 80)
     writer.write(f"GET {path} HTTP/1.1\r\nHost: {u.hostname}\r\nConnection: close\r\n\r\n".encode())

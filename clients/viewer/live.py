@@ -25,6 +25,7 @@ import os
 import queue
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -40,11 +41,13 @@ from wire import protocol as P
 REST_EASE_S = 0.2
 """How long the face takes to ease to rest after a session's last frame (the browser viewer's too)."""
 REWATCH_MAX_S = 1.0
-"""s: the longest wait between the window's attempts to watch its session again once it has ended (or before it
-starts): from :data:`clients.viewer.stream.RETRY_S` the wait doubles up to this. Retried every RETRY_S for as long as
-it stayed away, the window opened 17 connections a second (each one a WebSocket handshake the server closes with
-4004); now one a second, and a session that comes back is still picked up within this (the browser viewer retries
-a server it lost every second too)."""
+"""s: the longest wait between the window's attempts to watch its session again once it has ended (or once the
+first wait, ``wait_s``, has run out): from :data:`clients.viewer.stream.RETRY_S` the wait doubles up to this.
+Retried every RETRY_S for as long as it stayed away, the window opened 17 connections a second (each one a WebSocket
+handshake the server closes with 4004); now one a second, and a session that comes back is still picked up within
+this (the browser viewer retries a server it lost every second too). Not before the first session within
+``wait_s``: a window started first retries every RETRY_S then, as ``view --record`` does, and shows frame 0 (backed
+off from the start, it joined a session started 8 s later after 0.7-0.8 s: "showed 29 of 35 frames" of 59)."""
 
 
 @dataclass
@@ -54,6 +57,7 @@ class LiveStats:
     sound device played them, delivery delay median (ms, server send -> receipt)."""
 
     shown: int = 0
+    first_index: int | None = None  # the session's frame index of the first frame received (0: watched from its start)
     received: int = 0
     lost: int = 0
     skipped: int = 0
@@ -209,15 +213,18 @@ class _Receiver(threading.Thread):
 
     async def _main(self) -> None:
         cfg, inbox = self.cfg, self.inbox
-        waits = backoff(REWATCH_MAX_S)
+        # None: every RETRY_S for cfg.wait_s (the server replays nothing: a slower first wait misses the first
+        # frames); then, and after each session, a back-off (REWATCH_MAX_S)
+        waits: Iterator[float] | None = None
         while True:
             try:
                 v = await connect_viewer(cfg, waits=waits)
             except ClientError as exc:
                 inbox.put(("error", str(exc)))
+                waits = waits or backoff(REWATCH_MAX_S)
                 await asyncio.sleep(next(waits))
                 continue
-            waits = backoff(REWATCH_MAX_S)  # the next wait for the session starts fast again
+            waits = backoff(REWATCH_MAX_S)  # the wait for the session to come back starts fast again
             # A new connection's media times start again: the old blocks must not sound for them.
             self.audio.reset()
             rate = int((v.description.get("audio") or {}).get("rate_hz", 16000))
@@ -246,8 +253,9 @@ def run_window(
     status=print,
 ) -> LiveStats:
     """Open a window and show the session live until it is closed (or ``duration_s`` seconds after
-    the first frame); ``screenshot``: PNG path for the last frame shown; ``save_sound``: WAV path for
-    the sound as given to the device (silence included). ClientError without a display."""
+    the first frame); ``screenshot``: PNG path for the last image shown, written however the window stops
+    (Ctrl-C included); ``save_sound``: WAV path for the sound as given to the device (silence included).
+    ClientError without a display."""
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise ClientError("no display (DISPLAY is unset): use --record OUT.mp4, or open the server's URL in a browser")
     try:
@@ -263,6 +271,7 @@ def run_window(
     audio = AudioOut(playout, keep_played=save_sound is not None)
     rx = _Receiver(cfg, inbox, audio)
     renderer: HeadRenderer | None = None
+    image: np.ndarray | None = None  # (height, width, 3) uint8: the last image drawn (for the screenshot)
     last_error = None
     try:
         glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
@@ -282,7 +291,6 @@ def run_window(
         pending: list[tuple[float, P.Message]] = []
         last_index = -1
         first_shown: float | None = None
-        image = None
         last_drawn: np.ndarray | None = None  # the deltas (3 k,) of the frame on screen
         # After a session's end its last frames are shown, then the face eases to rest: a session cut off
         # mid-word used to leave its open mouth in the window until it came back. to_rest: the session
@@ -350,6 +358,7 @@ def run_window(
                     if last_index >= 0 and m.index > last_index + 1:
                         stats.lost += m.index - last_index - 1
                     last_index = m.index
+                    stats.first_index = m.index if stats.first_index is None else stats.first_index
                     stats.received += 1
                     stats.delivery_ms.append(1000 * (time.time() - m.send_time))
                     pending.append((playout.arrive(m.media_time, arrival), m))
@@ -387,14 +396,15 @@ def run_window(
         stats.resyncs = playout.resyncs
         stats.audio_blocks = audio.received
         stats.audio_underruns = audio.underruns
-        if screenshot is not None and image is not None:
-            from PIL import Image
-
-            Image.fromarray(image).save(screenshot)
         return stats
     finally:
         rx.close()
         audio.close()
+        # here, not after the loop: a window is mostly stopped with Ctrl-C (KeyboardInterrupt), which wrote no PNG
+        if screenshot is not None and image is not None:
+            from PIL import Image
+
+            Image.fromarray(image).save(screenshot)
         if save_sound is not None and audio.rate is not None:
             from assets.audio import write_wav
 

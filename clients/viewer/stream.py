@@ -169,7 +169,16 @@ async def connect_viewer(cfg: ViewerStreamConfig, *, waits: Iterator[float] | No
             return v
         except ServerClosed as exc:
             if exc.code != P.CLOSE_NOT_FOUND or time.monotonic() >= deadline:
-                raise ClientError(f"{cfg.url}: cannot watch session {cfg.session!r}: {exc.code} {exc.reason}") from None
+                # what a user waiting for the session needs to hear: it did not start while we looked (and a
+                # session that started and ended between two tries is not seen: the server replays nothing)
+                waited = (
+                    f" (waited {cfg.wait_s:g} s for it to start; one that starts and ends between two tries is missed)"
+                    if exc.code == P.CLOSE_NOT_FOUND and cfg.wait_s > 0
+                    else ""
+                )
+                raise ClientError(
+                    f"{cfg.url}: cannot watch session {cfg.session!r}: {exc.code} {exc.reason}{waited}"
+                ) from None
         except OSError as exc:
             if time.monotonic() >= deadline:
                 raise ClientError(f"{cfg.url}: cannot connect: {exc}") from None

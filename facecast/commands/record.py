@@ -20,7 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "weights, audio as .wav beside it), .csv / .json (curves with a time column t, s of the session), "
         ".tsv (Rhubarb-style mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`.",
     )
-    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument(
+        "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
+    )
     p.add_argument("--session", default=None, help="session to record (default %(default)s = the first live one)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
     add_head_options(p, help_head="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
@@ -41,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     import threading
 
     from assets.files import check_writable
+    from clients.client import server_url
     from clients.errors import ClientError
     from clients.export.files import FORMATS, export_track
     from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
@@ -55,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
         )
     check_writable(args.output)  # a folder that cannot be made fails now, not after the whole take
+    args.url = server_url(args.url, "/view")  # the base URL also when given as the viewers' ws://HOST:PORT/view
     token = token_from_env(args.token_env)
     glb = args.output.suffix.lower() == ".glb"
 

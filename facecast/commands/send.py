@@ -5,6 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+FAST_HOLD_S = 0.25
+"""s: how long ``send --fast`` waits after its session has started before sending audio. The server replays
+nothing, and a fast session's frames all leave within a few hundredths of a second of its start (57 frames of
+1.9 s in 0.04 s on loopback), so a `view` / `record` started first, retrying every 50 ms (RETRY_S), found it over
+(exit 2, "4004 no session" once --wait ran out) or joined it at 1.0-1.3 s. In real time the first frame leaves
+about 0.2 s after the start, which those retries catch; this is five of them."""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
@@ -21,9 +28,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "also be streamed by `facecast serve --file`.",
     )
     p.add_argument("speech", type=Path, help="speech audio file")
-    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument(
+        "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /ingest URL too)"
+    )
     p.add_argument("--session", default=None, help="session name (default %(default)s = the file's name)")
-    p.add_argument("--fast", action="store_true", help="send as fast as the server takes it instead of in real time")
+    p.add_argument(
+        "--fast",
+        action="store_true",
+        help=f"send as fast as the server takes it instead of in real time, after {FAST_HOLD_S:g} s in which "
+        "the viewers waiting for the session (view, record) connect, so they get it from its first frame",
+    )
     add_token_option(p)
     p.set_defaults(run=run)
 
@@ -32,15 +46,19 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
 
     from assets.audio import check_audio_path
-    from clients.client import ingest_file
+    from clients.client import ingest_file, server_url
     from facecast.commands.view import token_from_env
 
     check_audio_path(args.speech)
+    url = server_url(args.url, "/ingest")  # the base URL also when given as the endpoint, ws://HOST:PORT/ingest
     token = token_from_env(args.token_env)
     session = args.session if args.session is not None else args.speech.stem
     pace = "as fast as the server takes it" if args.fast else "in real time"
-    print(f"facecast send: streaming {args.speech} as session {session!r} to {args.url} {pace}", flush=True)
-    ended = asyncio.run(ingest_file(args.url, args.speech, session=session, realtime=not args.fast, token=token))
+    print(f"facecast send: streaming {args.speech} as session {session!r} to {url} {pace}", flush=True)
+    hold = FAST_HOLD_S if args.fast else 0.0
+    ended = asyncio.run(
+        ingest_file(url, args.speech, session=session, realtime=not args.fast, token=token, hold_s=hold)
+    )
     print(
         f"facecast send: session {session!r} ended: {ended.get('frames')} frames, "
         f"{float(ended.get('audio_s', 0.0)):.2f} s of audio"

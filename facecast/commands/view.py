@@ -23,7 +23,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "session, when the session ends (or after --duration). The browser viewer at the server's URL does "
         "the same in any browser.",
     )
-    p.add_argument("url", nargs="?", default=DEFAULT_URL, help="the server's base URL")
+    p.add_argument(
+        "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
+    )
     p.add_argument("--session", default=None, help="session to watch (default %(default)s = the first live one)")
     p.add_argument(
         "--record",
@@ -37,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="PNG",
-        help="window mode: save the last frame shown as PNG on exit (default %(default)s = none)",
+        help="window mode: save the last image shown as PNG on exit, Ctrl-C included (default %(default)s = none)",
     )
     p.add_argument(
         "--save-sound",
@@ -93,10 +95,12 @@ def token_from_env(var: str | None) -> str | None:
 def run(args: argparse.Namespace) -> int:
     import asyncio
 
+    from clients.client import server_url
     from clients.render.renderer import RenderConfig
     from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session, record_stream
     from clients.viewer.video import render_recording
 
+    args.url = server_url(args.url, "/view")  # the base URL also when given as the viewers' ws://HOST:PORT/view
     token = token_from_env(args.token_env)
     if args.record is None:
         return _window(args, token)
@@ -162,7 +166,9 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     )
     delivery = f"{statistics.median(st.delivery_ms):.1f} ms" if st.delivery_ms else "-"
     print(
-        f"facecast view: showed {st.shown} of {st.received} frames ({st.lost} lost, {st.skipped} skipped, "
+        f"facecast view: showed {st.shown} of {st.received} frames"
+        + ("" if st.first_index is None else f" received from frame {st.first_index}")
+        + f" ({st.lost} lost, {st.skipped} skipped, "
         f"{st.resyncs} resyncs), {st.connections} connection(s), delivery median {delivery}, "
         f"sound {'on ' + st.audio_device if st.audio_device else 'off'}"
         + (

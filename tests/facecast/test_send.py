@@ -83,3 +83,24 @@ def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
     finally:
         srv.stop()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.wav", "notes.txt"]  # nothing left behind
+
+
+def test_send_accepts_the_ingest_endpoints_url_and_refuses_another_endpoint(tmp_path, model, capsys):
+    """docs/protocol.md gives the ingest's URL as ws://HOST:PORT/ingest: `facecast send` given it (or
+    http://HOST:PORT/ingest/) connected to /ingest/ingest and exited 2 on a 404. It streams to the
+    server's /ingest; a URL naming the viewers' /view (or with a query) is refused in one line."""
+    wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
+    srv = LiveServer(model, None)
+    try:
+        ws = srv.url.replace("http://", "ws://")
+        for i, (url, base) in enumerate(((f"{ws}/ingest", ws), (f"{srv.url}/ingest/", srv.url))):
+            assert main(["send", str(wav), url, "--session", f"ep{i}", "--fast"]) == 0, capsys.readouterr().err
+            out = capsys.readouterr().out
+            assert f"session 'ep{i}' ended: 15 frames" in out and f"to {base} as fast" in out, out
+        for url, want in ((f"{ws}/view", "/view endpoint"), (f"{srv.url}/ingest?session=x", "without a query")):
+            assert main(["send", str(wav), url, "--fast"]) == 2, url
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and want in err, err
+        assert srv.server.closes.get(4004, 0) == 0 and not srv.server.sessions  # the refused ones never connected
+    finally:
+        srv.stop()

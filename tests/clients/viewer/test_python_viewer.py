@@ -444,9 +444,10 @@ def test_a_starved_sound_callback_is_counted_as_an_underrun_and_the_sound_resume
     assert loud > 0.3 * 22050 and after < 3.0 * 22050, proc.stdout
 
 
-def _start_after_a_refusal(live, name: str, within_s: float):
-    """A thread starting a 1.5 s session ``name`` once a viewer has been refused (4004: the recorder
-    under test is waiting for it), or after ``within_s`` seconds at the latest."""
+def _start_after_a_refusal(live, name: str, within_s: float, *, refusals: int = 1, session=None):
+    """A thread starting a 1.5 s session ``name`` once a viewer has been refused ``refusals`` times (4004:
+    the recorder under test is waiting for it), or after ``within_s`` seconds at the latest; ``session``:
+    what starts it instead (a callable), e.g. `facecast send`."""
     import threading
 
     from tests.live_server import stream_session
@@ -454,10 +455,13 @@ def _start_after_a_refusal(live, name: str, within_s: float):
     def start():
         before = live.server.closes[4004]
         for _ in range(int(within_s / 0.002)):  # the record command's first attempts are refused: not live yet
-            if live.server.closes[4004] > before:
+            if live.server.closes[4004] >= before + refusals:
                 break
             threading.Event().wait(0.002)
-        live.submit(stream_session(live.url, name, 1.5, seed=5)).result(30)
+        if session is not None:
+            session()
+        else:
+            live.submit(stream_session(live.url, name, 1.5, seed=5)).result(30)
 
     starter = threading.Thread(target=start)
     starter.start()
@@ -480,6 +484,107 @@ def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, 
     take = decode_csv(out.read_bytes())
     assert take.start_s == 0.0 and "joined at" not in printed, printed
     assert take.n_frames == 45  # the whole 1.5 s
+
+
+def test_view_window_started_before_the_session_gets_its_first_frame(live, xvfb):
+    """docs/protocol.md section 8: a viewer started before its session retries every RETRY_S and gets frame 0.
+    The window backed off (up to REWATCH_MAX_S) from its first wait on, so a session started a while after it
+    was joined up to 1 s late ("showed 29 of 35 frames" of 59). The session here starts once the window has
+    been refused 6 times: backed off, its next attempt was then 1 s away."""
+    require_module("glfw")
+    name = "early-window"
+    starter = _start_after_a_refusal(live, name, 40.0, refusals=6)
+    try:
+        proc = _run_view(
+            *(live.url, "--session", name, "--wait", "40", "--duration", "2.5", "--width", "320", "--height", "240")
+        )
+    finally:
+        starter.join(60)
+    assert proc.returncode == 0, proc.stderr
+    assert " of 45 frames received from frame 0 " in proc.stdout, proc.stdout  # the whole 1.5 s session
+
+
+def test_view_window_screenshot_is_written_when_stopped_with_ctrl_c(live, xvfb, tmp_path):
+    """`facecast view --screenshot PNG` wrote the PNG only when its loop ended by itself (--duration, the window
+    closed); stopped with Ctrl-C (exit 130, how a window is usually stopped) it wrote nothing. The window shows
+    the head at rest once it has the description, so the PNG holds a head."""
+    import os
+    import signal
+    import sys
+
+    from PIL import Image
+
+    from tests.live_server import REPO, stream_session
+
+    require_module("glfw")
+    stop = asyncio.Event()
+    fut = live.submit(stream_session(live.url, "ctrlc", 30.0, stop=stop))
+    shot = tmp_path / "ctrlc.png"
+    cmd = [sys.executable, "-m", "facecast", "view", live.url, "--session", "ctrlc", "--screenshot", str(shot)]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}  # its status lines as they are printed
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:  # "watching": the description came and the head is drawn
+            if "watching" in line:
+                break
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        live.loop.call_soon_threadsafe(stop.set)
+        fut.result(30)
+    assert proc.returncode == 130, err
+    img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
+    assert img.shape == (480, 640) and img.std() > 20  # a head, not an empty window
+
+
+def test_view_and_record_accept_the_view_endpoints_url(live, tmp_path, capsys):
+    """`facecast view --record` / `record` given the viewers' WebSocket URL (ws://HOST:PORT/view, as
+    docs/protocol.md writes it) watched /view/view; they watch the server's /view. The ingest's URL is refused
+    in one line."""
+    ws = live.url.replace("http://", "ws://")
+    fut = live.submit(_session_once_watched(live, "viewurl", 1.0, viewers=1))
+    out = tmp_path / "take.csv"
+    assert main(["record", f"{ws}/view", "--session", "viewurl", "-o", str(out), "--wait", "20"]) == 0
+    fut.result(30)
+    assert decode_csv(out.read_bytes()).n_frames == 30
+    assert f"from {ws}\n" in capsys.readouterr().out  # the server's base URL
+    assert main(["view", f"{live.url}/ingest", "--session", "x", "--record", str(tmp_path / "v.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "/ingest endpoint" in err, err
+
+
+def test_record_started_before_a_fast_send_gets_the_whole_session(live, tmp_path, capsys):
+    """`facecast record --session S` started before `facecast send a.wav --session S --fast`: the session's frames
+    all left within a few hundredths of a second of its start, so the recorder (retrying every RETRY_S) joined it
+    at 1.0 s (27 of 57 frames here; 18 of 56 at 1.27 s in the user's test) or found it over ("4004 no session"
+    once --wait ran out). `send --fast` now holds its audio FAST_HOLD_S, five retries, after the start: the
+    recording has every frame from frame 0. A session it never found is reported with how long it waited."""
+    from assets.audio import write_wav
+
+    wav = write_wav(tmp_path / "a.wav", speechlike(1.9, 16000, seed=5), 16000)
+    name = "fastsend"
+    sent: list[int] = []
+
+    def send() -> None:
+        sent.append(main(["send", str(wav), live.url, "--session", name, "--fast"]))
+
+    starter = _start_after_a_refusal(live, name, 20.0, session=send)
+    out = tmp_path / "take.csv"
+    try:
+        code = main(["record", live.url, "--session", name, "-o", str(out), "--wait", "5"])
+    finally:
+        starter.join(30)
+    printed = capsys.readouterr()
+    assert sent == [0] and code == 0, printed.err
+    frames = int(printed.out.split(f"session {name!r} ended: ")[1].split(" ")[0])
+    take = decode_csv(out.read_bytes())
+    assert frames == 57 and take.n_frames == frames and take.start_s == 0.0, printed.out
+
+    assert main(["record", live.url, "--session", "nobody", "-o", str(out), "--wait", "0.3"]) == 2
+    assert "no session 'nobody' (waited 0.3 s for it to start" in capsys.readouterr().err
 
 
 def test_record_stopped_by_duration_says_so_not_closed_with_none(live, tmp_path, capsys):
