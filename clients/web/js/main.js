@@ -158,8 +158,11 @@ let toRest = null; // null, or {start: null} from the close until the queue drai
 
 function connect(name) {
   if (ws) return;
-  // A new connection is a new timeline: what the last one left queued is dropped only now (see onclose).
-  resetStream();
+  // A new connection is a new timeline: what the last one left queued (and its easing to rest) is dropped when it
+  // is described, not before: a poll just after a session's end can still list it, and the attempt, refused with
+  // 4004, used to drop the session's last frames and stop its easing half way (see onclose).
+  let described = false;
+  const before = { ended: state.ended, status: state.status }; // what a refused attempt leaves as it was
   const kind = KINDS[kindLevel];
   const q = withToken(new URLSearchParams({ session: name, kind, audio: "1" }));
   if (kind === "deltas") q.set("encoding", "int16");
@@ -177,6 +180,10 @@ function connect(name) {
       if (text.type === "ack" || text.type === "rejected") {
         onControlReply(text);
         return;
+      }
+      if (!described) {
+        described = true;
+        resetStream();
       }
       desc = text;
       showExpressionPicker(desc.expressions ?? []);
@@ -217,9 +224,17 @@ function connect(name) {
       connect(name);
       return;
     }
+    if (!described && ev.code === CLOSE.NOT_FOUND && before.ended) {
+      // An attempt on a session that has just ended (still listed by the poll): the page stays as the end left
+      // it (its last frames, its easing, "session ended") and waits for the session to start again.
+      state.ended = before.ended;
+      setStatus(before.status);
+      setTimeout(pollSessions, POLL_S * 1000);
+      return;
+    }
     state.closeCode = ev.code;
     state.closeReason = ev.reason;
-    if (shown) toRest = { start: null };
+    if (shown && described) toRest = toRest ?? { start: null };
     // 1001 is also a cluster node's word that the session's own node stopped: the session is over.
     const lost = ev.code === CLOSE.GOING_AWAY && ev.reason.startsWith("session lost");
     const why = lost ? `session ended (${ev.reason})` : {
