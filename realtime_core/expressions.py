@@ -203,10 +203,10 @@ class ExpressionTrack:
         if isinstance(at_s, bool) or not isinstance(at_s, (int, float)) or not np.isfinite(at_s):
             raise ExpressionError(f"expression time must be a number of seconds, got {at_s!r}")
         if at_s < now_s - self.config.late_tolerance_s:
-            raise ExpressionError(f"expression time {at_s:.3f} s is in the past (media time is now {now_s:.3f} s)")
+            raise ExpressionError(f"expression time {at_s:.6g} s is in the past (media time is now {now_s:.3f} s)")
         if at_s > now_s + self.config.max_ahead_s:
             raise ExpressionError(
-                f"expression time {at_s:.3f} s is more than {self.config.max_ahead_s:g} s ahead "
+                f"expression time {at_s:.6g} s is more than {self.config.max_ahead_s:g} s ahead "
                 f"of the media time {now_s:.3f} s"
             )
         target = np.zeros(len(EXPRESSIONS))

@@ -21,13 +21,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import TypeGuard
+from typing import Any, TypeGuard
 
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
 from realtime_core.expressions import ExpressionError, ExpressionTrack, check_request
-from server.errors import ControlError
+from server.errors import ControlError, reason_value
 
 MAX_GAIN = 10.0
 MAX_SMOOTHING_MS = 1000.0
@@ -87,7 +87,21 @@ def control(name: str) -> Callable[[ControlHandler], ControlHandler]:
 
 
 def _number(value: object) -> TypeGuard[float]:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    """A finite JSON number. An integer is always finite: math.isfinite of one beyond a float's range (a
+    400-digit JSON integer) raised OverflowError, which the session took for an internal error."""
+    if isinstance(value, bool):
+        return False
+    return isinstance(value, int) or (isinstance(value, float) and math.isfinite(value))
+
+
+def _as_float(value: Any, what: str) -> Any:
+    """A JSON integer as a float (ControlError beyond a float's range); any other value as it is."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        try:
+            return float(value)
+        except OverflowError:
+            raise ControlError(f"expression: {what} {reason_value(value)} is out of range") from None
+    return value
 
 
 @control("gain")
@@ -98,9 +112,9 @@ def _gain(state: ControlState, value: object) -> None:
     gains = state.gains.copy()
     for name, g in value.items():
         if name not in VISUAL_PARAMS:
-            raise ControlError(f"gain: unknown parameter {name!r} (known: {', '.join(VISUAL_PARAMS)})")
+            raise ControlError(f"gain: unknown parameter {reason_value(name)} (known: {', '.join(VISUAL_PARAMS)})")
         if not _number(g) or not 0 <= g <= MAX_GAIN:
-            raise ControlError(f"gain for {name} must be a number in 0..{MAX_GAIN:g}, got {g!r}")
+            raise ControlError(f"gain for {name} must be a number in 0..{MAX_GAIN:g}, got {reason_value(g)}")
         gains[VISUAL_PARAMS.index(name)] = float(g)
     state.gains = gains
 
@@ -109,7 +123,7 @@ def _gain(state: ControlState, value: object) -> None:
 def _smoothing(state: ControlState, value: object) -> None:
     """smoothing_ms: time constant of a one-pole low-pass on the parameters, 0..1000 ms (0 = off)."""
     if not _number(value) or not 0 <= value <= MAX_SMOOTHING_MS:
-        raise ControlError(f"smoothing_ms must be a number in 0..{MAX_SMOOTHING_MS:g}, got {value!r}")
+        raise ControlError(f"smoothing_ms must be a number in 0..{MAX_SMOOTHING_MS:g}, got {reason_value(value)}")
     state.smoothing_ms = float(value)
 
 
@@ -123,8 +137,11 @@ def _expression(state: ControlState, value: object) -> None:
     if unknown:
         raise ControlError(f"expression: unknown field(s) {sorted(unknown)} (known: name, intensity, at)")
     try:
-        name, intensity = check_request(value["name"], value.get("intensity", 1.0))
-        state.expressions.schedule(name, intensity, value.get("at", state.now_s), now_s=state.now_s)
+        # JSON integers as floats: the track's np.isfinite raised TypeError on one beyond int64 (an internal
+        # error), and its reasons quoted every digit of a huge one.
+        at, intensity = (_as_float(value.get(k, d), k) for k, d in (("at", state.now_s), ("intensity", 1.0)))
+        name, intensity = check_request(value["name"], intensity)
+        state.expressions.schedule(name, intensity, at, now_s=state.now_s)
     except ExpressionError as exc:
         raise ControlError(f"expression: {exc}") from None
 
@@ -133,7 +150,7 @@ def _expression(state: ControlState, value: object) -> None:
 def _expression_ease(state: ControlState, value: object) -> None:
     """expression_ease_s: seconds an expression change takes, 0..10."""
     if not _number(value) or not 0 <= value <= MAX_EASE_S:
-        raise ControlError(f"expression_ease_s must be a number in 0..{MAX_EASE_S:g}, got {value!r}")
+        raise ControlError(f"expression_ease_s must be a number in 0..{MAX_EASE_S:g}, got {reason_value(value)}")
     state.expressions = state.expressions.copy(replace(state.expressions.config, ease_s=float(value)))
 
 
@@ -156,6 +173,6 @@ def apply_controls(state: ControlState, msg: dict, *, now_s: float | None = None
             continue
         handler = CONTROLS.get(key)
         if handler is None:
-            raise ControlError(f"unknown control {key!r} (known: {', '.join(CONTROLS)})")
+            raise ControlError(f"unknown control {reason_value(key)} (known: {', '.join(CONTROLS)})")
         handler(draft, value)
     return draft

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from decimal import Decimal
+
 from realtime_core.errors import ConfigError, FacecastError
 
 
@@ -40,3 +42,18 @@ class AudioSourceError(ServerError, RuntimeError):
 
 class IngestOverrun(ServerError):
     """An ingest ran ahead of real time beyond its burst on a server that closes instead of pacing."""
+
+
+def reason_value(value: object, limit: int = 40) -> str:
+    """A client-supplied value as quoted in a reason: a number in ``%.6g`` form (``at: 1e300`` was quoted
+    with 300 digits, a 400-digit JSON integer with all of them), anything else its repr cut to ``limit``
+    characters, so a reason stays short (and within a close frame)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) < 10**15:
+        return str(value)  # exact
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            return f"{float(value):.6g}"
+        except OverflowError:  # an integer beyond a float's range
+            return f"{Decimal(value):.6g}"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -42,7 +42,7 @@ import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from server.errors import ProtocolViolation, ServerConfigError
+from server.errors import ProtocolViolation, ServerConfigError, reason_value
 from server.session import SessionConfig
 from wire import protocol as P
 
@@ -251,7 +251,7 @@ class IngestProtocol:
             handler = MESSAGE_TYPES.get(kind) if isinstance(kind, str) else None
             if handler is None:
                 raise ProtocolViolation(
-                    P.CLOSE_POLICY, f"unknown message type {_short(kind)} (expected {' or '.join(MESSAGE_TYPES)})"
+                    P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected {' or '.join(MESSAGE_TYPES)})"
                 )
             return handler(self, msg)
         except ProtocolViolation as exc:
@@ -340,7 +340,7 @@ class IngestProtocol:
         start = loads_bounded(message, "start message", max_bytes=limit)
         if start.get("type") != "start":
             raise ProtocolViolation(
-                P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got type {_short(start.get("type"))}'
+                P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got type {reason_value(start.get("type"))}'
             )
         if not token_ok(start.get("token"), self.token):
             raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
@@ -350,7 +350,7 @@ class IngestProtocol:
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"input must be one of {sorted(SESSION_KINDS)}")
         unknown = sorted(set(start) - COMMON_START_FIELDS - kind.fields)
         if unknown:
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {_short(unknown[:5])}")
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {reason_value(unknown[:5])}")
         name = start.get("session")
         if not isinstance(name, str) or not P.SESSION_NAME.match(name):
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
@@ -397,12 +397,6 @@ def fit_close_reason(reason: str) -> str:
     ``"\\ud800"``) cannot be encoded at all: it becomes "?"."""
     data = reason.encode("utf-8", "replace")[:CLOSE_REASON_BYTES]
     return data.decode("utf-8", "ignore")  # "ignore" drops a character the cut split
-
-
-def _short(value: object, limit: int = 40) -> str:
-    """repr of a client-supplied value, cut so a reason stays within a close frame."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 # -- view ----------------------------------------------------------------------------------------------
@@ -460,15 +454,17 @@ def parse_view_query(
         raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
     name = args.get("session", "")
     if not P.SESSION_NAME.match(name):
-        raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {_short(name)}")
+        raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {reason_value(name)}")
     kind = args.get("kind", "params")
     encodings = P.VIEW_KINDS.get(kind)
     if encodings is None:
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"kind must be one of {sorted(P.VIEW_KINDS)}, got {_short(kind)}")
+        raise ProtocolViolation(
+            P.CLOSE_BAD_REQUEST, f"kind must be one of {sorted(P.VIEW_KINDS)}, got {reason_value(kind)}"
+        )
     enc_name = args.get("encoding", next(iter(encodings)))
     if enc_name not in encodings:
         raise ProtocolViolation(
-            P.CLOSE_BAD_REQUEST, f"encoding for {kind} must be one of {sorted(encodings)}, got {_short(enc_name)}"
+            P.CLOSE_BAD_REQUEST, f"encoding for {kind} must be one of {sorted(encodings)}, got {reason_value(enc_name)}"
         )
     if kind in ("deltas", "morph") and not has_head:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"this server has no head rig: {kind} are unavailable")

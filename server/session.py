@@ -37,10 +37,16 @@ from realtime_core.mapping import SpeechModel
 from realtime_core.mapping.expression import express
 from realtime_core.pipeline import SpeechToParams
 from server.controls import ControlState, apply_controls
-from server.errors import AudioFormatError, ServerConfigError
+from server.errors import AudioFormatError, ServerConfigError, reason_value
 from server.timing import StageTimes
 from wire import protocol as P
 
+F32_PEAK_MAX = 2.0
+"""f32le audio is at full scale 1; a block with a sample beyond +-F32_PEAK_MAX (+6 dBFS) closes the ingest
+(1007). The headroom is for float audio a client resampled or mixed, whose overshoot past 1 is routine
+(the model hears it as it hears a loud recording; the audio relayed to viewers is clipped to int16). What
+the check catches is int16 values sent as floats (hundreds to thousands on any block that is not
+near-silent). The limit was 64, so 5.0 passed while the reason said [-1, 1]."""
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
@@ -70,18 +76,23 @@ class SessionConfig:
             or not (MIN_RATE_HZ <= self.sample_rate_hz <= MAX_RATE_HZ)
         ):
             raise ServerConfigError(
-                f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {self.sample_rate_hz!r}"
+                f"sample_rate must be an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ}, "
+                f"got {reason_value(self.sample_rate_hz)}"
             )
         if (
             isinstance(self.channels, bool)
             or not isinstance(self.channels, int)
             or not 1 <= self.channels <= MAX_CHANNELS
         ):
-            raise ServerConfigError(f"channels must be an integer in 1..{MAX_CHANNELS}, got {self.channels!r}")
+            raise ServerConfigError(
+                f"channels must be an integer in 1..{MAX_CHANNELS}, got {reason_value(self.channels)}"
+            )
         if not isinstance(self.sample_format, str) or self.sample_format not in P.SAMPLE_FORMATS:
-            raise ServerConfigError(f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {self.sample_format!r}")
+            raise ServerConfigError(
+                f"format must be one of {sorted(P.SAMPLE_FORMATS)}, got {reason_value(self.sample_format)}"
+            )
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
-            raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {self.lag!r}")
+            raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {reason_value(self.lag)}")
         if self.enrol is not None:
             if not isinstance(self.enrol, str):
                 raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
@@ -342,7 +353,8 @@ class Session:
     # -- pushing audio ---------------------------------------------------------------------------
 
     def decode(self, data: bytes) -> np.ndarray:
-        """Binary block -> (n,) float64 mono in [-1, 1]; AudioFormatError naming the problem."""
+        """Binary block -> (n,) float64 mono, full scale 1 (f32le peaks up to F32_PEAK_MAX pass as they are);
+        AudioFormatError naming the problem."""
         if len(data) % self._frame_bytes:
             raise AudioFormatError(
                 f"audio block of {len(data)} bytes is not a whole number of {self.config.channels}-channel "
@@ -355,8 +367,11 @@ class Session:
             x = raw.astype(np.float64)
             if not np.isfinite(x).all():
                 raise AudioFormatError("f32le audio block contains NaN or infinite samples")
-            if np.abs(x).max(initial=0.0) > 64.0:
-                raise AudioFormatError("f32le samples must be in [-1, 1] (found values beyond 64: not float audio)")
+            peak = np.abs(x).max(initial=0.0)
+            if peak > F32_PEAK_MAX:
+                raise AudioFormatError(
+                    f"f32le samples must be in [-1, 1] (peaks up to {F32_PEAK_MAX:g} pass), got {reason_value(peak)}"
+                )
         if self.config.channels > 1:
             x = x.reshape(-1, self.config.channels).mean(axis=1)
         return x

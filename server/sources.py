@@ -15,6 +15,7 @@ against the loop clock, so sleeps never accumulate drift) or yielded as fast as 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -189,3 +190,22 @@ class FileSource:
             self.samples, self.sample_rate_hz, block_s=self.config.block_s, realtime=self.config.realtime
         ):
             yield block[:, None]
+
+
+def file_session_names(paths: Sequence[Path], *, taken: Iterable[str] = ()) -> list[str]:
+    """A session name for each file, unique among them and ``taken``: the file's stem with characters
+    outside the session-name set made ``_`` (at most 64), then ``-2``, ``-3``... for a repeat
+    (``a/x.wav``, ``b/x.wav`` -> ``x``, ``x-2``). Two files of one stem were one session, the second
+    refused with nothing said (``facecast serve --file a/x.wav --file b/x.wav``)."""
+    used = set(taken)
+    names = []
+    for path in paths:
+        stem = "".join(c if (c.isalnum() and c.isascii()) or c in "_.-" else "_" for c in path.stem)[:64] or "file"
+        name, n = stem, 1
+        while name in used:
+            n += 1
+            suffix = f"-{n}"
+            name = stem[: 64 - len(suffix)] + suffix
+        used.add(name)
+        names.append(name)
+    return names

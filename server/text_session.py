@@ -23,7 +23,6 @@ on serving its viewers.
 from __future__ import annotations
 
 import asyncio
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
 
@@ -43,12 +43,16 @@ from server.errors import (
     ControlError,
     ProtocolViolation,
     ServerConfigError,
+    reason_value,
 )
+from server.protocol import MAX_START_BYTES, loads_bounded
 from server.session import AudioBlock, Frame, Output
 from server.timing import StageTimes
 from wire import protocol as P
 
 FPS = 30
+REJECTED_TEXT_CHARS = 200
+"""A ``rejected`` reply quotes the text it refuses up to this many characters (a piece may hold 5000)."""
 
 
 class SpeechLike(Protocol):
@@ -107,7 +111,9 @@ class TextSession:
         self, backend: TextBackend, *, language: str, voice: str | None, rig=None, times: StageTimes | None = None
     ) -> None:
         if language not in backend.languages:
-            raise ServerConfigError(f"unsupported language {language!r}; supported: {list(backend.languages)}")
+            raise ServerConfigError(
+                f"unsupported language {reason_value(language)}; supported: {list(backend.languages)}"
+            )
         self.backend = backend
         self.language = language
         self.voice = voice
@@ -172,9 +178,13 @@ class TextSession:
         n = int(np.ceil(len(speech.samples) * FPS / speech.sample_rate_hz - 1e-9))
         if speech.sample_rate_hz != self.rate_hz:
             raise ServerConfigError(f"speech came at {speech.sample_rate_hz} Hz, the session runs at {self.rate_hz} Hz")
-        res = self.backend.synthesizer.synthesize(
-            list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best, rest_pauses=RestPauses()
-        )
+        # One BLAS thread, as `facecast say`: the matrices are small (more threads only contend on a loaded
+        # machine) and the thread count changes unit selection's sums in their last digits. `facecast serve`
+        # pins the whole process already (run_server); a server started otherwise (tests, embedding) did not.
+        with threadpool_limits(1):
+            res = self.backend.synthesizer.synthesize(
+                list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best, rest_pauses=RestPauses()
+            )
         t2 = time.perf_counter()
         self.times.add("text_speech", t1 - t0)
         self.times.add("text_units", t2 - t1)
@@ -239,13 +249,10 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
 def _text_message(raw: Any) -> dict:
     if not isinstance(raw, str):
         raise ProtocolViolation(P.CLOSE_UNSUPPORTED_DATA, "a text session takes JSON text messages, not binary")
-    try:
-        msg = json.loads(raw)
-    except ValueError:
-        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "message is not JSON") from None
-    if not isinstance(msg, dict):
-        raise ProtocolViolation(P.CLOSE_INVALID_PAYLOAD, "a message must be a JSON object")
-    return msg
+    # Nesting bounded like every client text (json.loads of "[[[..." raised RecursionError: an internal
+    # error, 1011). The size bound is the WebSocket's max_message_bytes, not /ingest's 64 KiB for control
+    # messages: a piece over 5000 characters is answered "rejected" and the session goes on, not closed.
+    return loads_bounded(raw, "message", max_bytes=MAX_START_BYTES)
 
 
 async def handle_text(server, ws: ServerConnection) -> None:
@@ -266,7 +273,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
         ) from None
     start = _text_message(first)
     if start.get("type") != "start":
-        raise ProtocolViolation(P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got {start.get("type")!r}')
+        got = reason_value(start.get("type"))
+        raise ProtocolViolation(P.CLOSE_POLICY, f'first message must be {{"type": "start"}}, got {got}')
     if not token_ok(start.get("token"), server.config.token):
         raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
     unknown = sorted(set(start) - {"type", "session", "language", "voice", "token"})
@@ -331,7 +339,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
             try:
                 outs, report = await asyncio.to_thread(session.speak, sentence)
             except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
-                await ws.send(P.dumps({"type": "rejected", "text": sentence[:200], "reason": str(exc)}))
+                reply = {"type": "rejected", "text": sentence[:REJECTED_TEXT_CHARS], "reason": str(exc)}
+                await ws.send(P.dumps(reply))
                 continue
             sentence_ends[outs[0].frames[0].index] = outs[-1].frames[-1].media_time + 1 / FPS
             for o in outs:
@@ -363,15 +372,16 @@ async def handle_text(server, ws: ServerConnection) -> None:
             kind = msg.get("type")
             if kind == "text":
                 text = msg.get("text")
-                if not isinstance(text, str):
-                    await ws.send(P.dumps({"type": "rejected", "reason": "text must be a string"}))
+                if not isinstance(text, str):  # no text to quote: null (docs/protocol.md section 9.5)
+                    reason = f"text must be a string, got {reason_value(text)}"
+                    await ws.send(P.dumps({"type": "rejected", "text": None, "reason": reason}))
                     continue
                 if not first_piece:
                     first_piece.append(time.perf_counter())
                 try:
                     done = session.push_text(text)
                 except TextError as exc:
-                    await ws.send(P.dumps({"type": "rejected", "reason": str(exc)}))
+                    await ws.send(P.dumps({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)}))
                     continue
                 if msg.get("flush"):
                     done += session.finish_text()
@@ -399,7 +409,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
             elif kind == "start":
                 raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
             else:
-                raise ProtocolViolation(P.CLOSE_POLICY, f"unknown message type {kind!r} (expected text, flush or end)")
+                raise ProtocolViolation(
+                    P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush or end)"
+                )
     except ProtocolViolation:
         code, reason = P.CLOSE_NORMAL, "session ended: its source broke the protocol"
         raise

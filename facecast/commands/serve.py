@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import asyncio
+    from collections.abc import Coroutine
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -109,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
     from server.errors import ServerConfigError
     from server.eventloop import process_loop
     from server.eventloop import run as run_on_loop
-    from server.sources import FileConfig, FileSource, MicConfig, MicSource
+    from server.session import SessionConfig
+    from server.sources import FileConfig, FileSource, MicConfig, MicSource, file_session_names
 
     token = None
     if args.token_env:
@@ -168,9 +174,14 @@ def run(args: argparse.Namespace) -> int:
 
     async def main() -> None:
         mic = MicSource(MicConfig()).open() if args.mic else None  # fail before listening
-        files = [(path, FileSource(FileConfig(path=path, realtime=not args.fast))) for path in args.file]  # too
+        files = [FileSource(FileConfig(path=path, realtime=not args.fast)) for path in args.file]  # too
+        names = file_session_names(args.file, taken=["mic"] if mic is not None else [])
+        for path, src in zip(args.file, files):
+            try:  # a rate no session takes fails here too, not once the server is listening
+                SessionConfig(sample_rate_hz=src.sample_rate_hz, channels=src.channels)
+            except ServerConfigError as exc:
+                raise ServerConfigError(f"--file {path}: {exc}") from None
         ready: asyncio.Future = asyncio.get_running_loop().create_future()
-        extra = []
         run = asyncio.ensure_future(run_server(server, ready=ready))
         await asyncio.wait({ready, run}, return_when=asyncio.FIRST_COMPLETED)
         if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
@@ -181,17 +192,17 @@ def run(args: argparse.Namespace) -> int:
             "Ctrl-C stops",
             flush=True,
         )
-        for path, src in files:
-            name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in path.stem)[:64] or "file"
-            extra.append(server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}"))
+        tasks = []
+        for path, src, name in zip(args.file, files, names):
+            print(f"facecast serve: file {path} ({src.duration_s:.1f} s) as session {name!r}", flush=True)
+            run_file = server.run_source(name, aiter(src), sample_rate_hz=src.sample_rate_hz, label=f"file {path}")
+            tasks.append(_reported(run_file, f"file {path}: session {name!r}"))
         if mic is not None:
             print(f"facecast serve: microphone at {mic.sample_rate_hz} Hz as session 'mic'", flush=True)
-            extra.append(
-                server.run_source(
-                    "mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels, label="microphone"
-                )
+            run_mic = server.run_source(
+                "mic", mic, sample_rate_hz=mic.sample_rate_hz, channels=mic.channels, label="microphone"
             )
-        tasks = [asyncio.ensure_future(c) for c in extra]
+            tasks.append(_reported(run_mic, "microphone: session 'mic'"))
         try:
             await run
         finally:
@@ -201,3 +212,26 @@ def run(args: argparse.Namespace) -> int:
     front = config.workers > 0 and config.worker_mode == "connections"
     run_on_loop(main(), process_loop(config.event_loop, connection_front=front))
     return 0
+
+
+def _reported(session: Coroutine[Any, Any, object], what: str) -> asyncio.Task:
+    """Run a local source's session as a task whose failure is logged in one line naming ``what`` (a file
+    and its session): nothing awaits these tasks while the server runs, and a refused or broken session
+    (its name taken, the server full, audio the model rejects) vanished without a word. The server goes on."""
+    import asyncio
+    import logging
+
+    from realtime_core.errors import FacecastError
+
+    def report(task: asyncio.Task) -> None:
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if isinstance(exc, FacecastError):  # a user-facing error: its message says it all
+            logging.getLogger("facecast.serve").error("%s failed: %s", what, exc)
+        elif exc is not None:  # a bug: its traceback
+            logging.getLogger("facecast.serve").error("%s failed", what, exc_info=exc)
+
+    task = asyncio.ensure_future(session)
+    task.add_done_callback(report)
+    return task

@@ -323,3 +323,78 @@ def test_connection_churn_neither_delays_nor_loses_a_healthy_viewers_frames(mode
     assert tally["accepted"] <= burst + rate_per_s * elapsed + 1  # the token bucket's bound
     assert got == list(range(n_frames)) and n_frames > 80  # nothing accepted is lost, in order
     assert max(behind) <= max_behind, f"the healthy viewer fell {max(behind):.1f} frames behind"
+
+
+def test_numbers_out_of_range_are_refused_in_short_reasons_and_the_session_goes_on(model):
+    """Controls with absurd numbers over a real socket: each is answered "rejected" with the number in %.6g
+    form (an expression at 1e300 was quoted with 300 digits), a JSON integer beyond a float's range too (it
+    raised OverflowError/TypeError: an internal error, close 1011), and the session streams on to its end."""
+    huge = "1" + "0" * 400  # a JSON integer no float holds
+    controls = [
+        (text.replace("HUGE", huge), number)
+        for text, number in [
+            ('{"type": "control", "expression": {"name": "smile", "at": 1e300}}', "1e+300"),
+            ('{"type": "control", "expression": {"name": "smile", "at": -1e300}}', "-1e+300"),
+            ('{"type": "control", "expression": {"name": "smile", "at": HUGE}}', "1.00000e+400"),
+            ('{"type": "control", "expression": {"name": "smile", "intensity": HUGE}}', "1.00000e+400"),
+            ('{"type": "control", "gain": {"mouth_open": HUGE}}', "1.00000e+400"),
+            ('{"type": "control", "smoothing_ms": -HUGE}', "-1.00000e+400"),
+            ('{"type": "control", "expression_ease_s": 1e300}', "1e+300"),
+        ]
+    ]
+
+    async def main():
+        async with running(model) as srv, connect(ws_url(srv.url, "/ingest"), compression=None) as ws:
+            await ws.send(json.dumps({"type": "start", "session": "n", "sample_rate": 16000}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            await ws.send(_pcm(0.5).tobytes())
+            replies = []
+            for text, _ in controls:
+                await ws.send(text)
+                replies.append(json.loads(await ws.recv()))
+            await ws.send(json.dumps({"type": "control", "expression": {"name": "smile", "at": 3}}))  # an int: fine
+            replies.append(json.loads(await ws.recv()))
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            await ws.wait_closed()
+            return replies, ended, ws.close_code, srv.metrics()
+
+    replies, ended, code, metrics = asyncio.run(asyncio.wait_for(main(), 60))
+    for (text, number), reply in zip(controls, replies):
+        assert reply["type"] == "rejected", (text[:60], reply)
+        assert number in reply["reason"] and len(reply["reason"]) < 120, reply["reason"]
+    assert replies[-1]["type"] == "ack" and replies[-1]["controls"]["expression"][-1]["at"] == 3.0
+    assert ended["type"] == "ended" and ended["frames"] > 0 and code == P.CLOSE_NORMAL
+    assert "1011" not in metrics["closes"]
+
+
+@pytest.mark.parametrize("peak, accepted", [(2.0, True), (-2.0, True), (2.001, False), (5.0, False), (32767.0, False)])
+def test_f32le_samples_beyond_the_peak_limit_close_with_1007(model, peak, accepted):
+    """docs/protocol.md sections 2 and 5: f32le is float audio at full scale 1 with headroom to +-2 (+6 dBFS,
+    a float mix's or resampler's overshoot); a block with a sample beyond it closes the ingest with 1007 and
+    a reason quoting it. 5.0 was accepted (the limit was 64) while the reason said [-1, 1]."""
+    from server.session import F32_PEAK_MAX
+
+    assert F32_PEAK_MAX == 2.0
+    block = (speechlike(0.5, 16000) * 0.5).astype("<f4")
+    block[4000] = peak
+
+    async def main():
+        async with running(model) as srv, connect(ws_url(srv.url, "/ingest"), compression=None) as ws:
+            await ws.send(json.dumps({"type": "start", "session": "f", "sample_rate": 16000, "format": "f32le"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            await ws.send(block.tobytes())
+            with contextlib.suppress(ConnectionClosed):
+                await ws.send(json.dumps({"type": "end"}))
+            with contextlib.suppress(ConnectionClosed):
+                while True:
+                    last = json.loads(await ws.recv())
+            await ws.wait_closed()
+            return last if accepted else None, ws.close_code, ws.close_reason
+
+    last, code, reason = asyncio.run(asyncio.wait_for(main(), 60))
+    if accepted:
+        assert code == P.CLOSE_NORMAL and last["type"] == "ended" and last["frames"] > 0
+    else:
+        assert code == P.CLOSE_INVALID_PAYLOAD
+        assert reason == f"f32le samples must be in [-1, 1] (peaks up to 2 pass), got {float(np.float32(peak)):.6g}"

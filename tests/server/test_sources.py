@@ -154,3 +154,125 @@ def test_a_source_feeds_a_remote_session_through_the_client(model, wav16k):
 
     got = asyncio.run(main())
     np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+
+
+def test_file_session_names_are_unique_and_valid():
+    """--file a/x.wav --file b/x.wav were both named "x" (the second refused without a word); a stem outside
+    the session-name set (``é``) made a name admission refuses. Names match wire's SESSION_NAME."""
+    from server.sources import file_session_names
+
+    paths = [Path("a/x.wav"), Path("b/x.wav"), Path("c/x.flac"), Path("mic.wav"), Path("café au lait.wav")]
+    names = file_session_names(paths, taken=["mic"])
+    assert names == ["x", "x-2", "x-3", "mic-2", "caf__au_lait"]
+    long = file_session_names([Path("d" * 80 + ".wav")] * 2)
+    assert long == ["d" * 64, "d" * 62 + "-2"]
+    assert all(P.SESSION_NAME.match(n) for n in names + long)
+
+
+def _serve(model_path: Path, *extra: str) -> tuple[subprocess.Popen, str, list[str]]:
+    """Start this checkout's `facecast serve --no-head` on a free port: its process, URL and its lines up to
+    "listening" and one " as session " line per --file (read on a thread: a server that never prints them
+    fails the test at the deadline instead of blocking it)."""
+    import queue
+    import threading
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "facecast", "serve", "--port", "0", "--model", str(model_path), "--no-head", *extra],
+        cwd=Path(__file__).resolve().parents[2],  # this checkout's facecast, not the venv's installed one
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    out: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [out.put(x) for x in proc.stdout], daemon=True).start()
+    lines: list[str] = []
+    url = None
+    deadline = time.monotonic() + 60
+    while not (url and sum(" as session " in x for x in lines) == extra.count("--file")):
+        try:
+            lines.append(out.get(timeout=max(0.0, deadline - time.monotonic())))
+        except queue.Empty:
+            proc.kill()
+            raise AssertionError(f"no start-up lines: {lines} {proc.communicate()[1]}") from None
+        m = re.search(r"listening on (http://\S+)", lines[-1])
+        url = url or (m.group(1) if m else None)
+    return proc, url, lines
+
+
+def _stop(proc: subprocess.Popen) -> tuple[int, str]:
+    """SIGINT (Ctrl-C): its exit code and everything it logged."""
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=20)
+        err = proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err
+
+
+def _session_names(url: str) -> set[str]:
+    import json
+
+    from clients.client import http_get
+
+    status, body = asyncio.run(http_get(url, "/sessions"))
+    assert status == 200
+    return {row["name"] for row in json.loads(body)["sessions"]}
+
+
+def test_serve_streams_files_of_one_stem_as_sessions_of_their_own(model_path, wav16k, tmp_path):
+    """`facecast serve --file a/x.wav --file b/x.wav`: two sessions, x and x-2, each named at start-up (the
+    second was dropped: one session "x", nothing logged, Ctrl-C exit 0)."""
+    import shutil
+
+    paths = [tmp_path / d / "x.wav" for d in ("a", "b")]
+    for p in paths:
+        p.parent.mkdir()
+        shutil.copy(wav16k, p)
+    proc, url, lines = _serve(model_path, "--file", str(paths[0]), "--file", str(paths[1]))
+    names = _session_names(url)  # both stream for 2 s (real time)
+    code, err = _stop(proc)
+    assert names == {"x", "x-2"}, (names, err)
+    assert any(f"file {paths[0]} (2.0 s) as session 'x'" in x for x in lines), lines
+    assert any(f"file {paths[1]} (2.0 s) as session 'x-2'" in x for x in lines), lines
+    assert code == 0 and "failed" not in err, err
+
+
+def test_serve_logs_a_file_session_that_fails_and_goes_on(model_path, wav16k, tmp_path):
+    """A file session the server refuses (here: it is full, max_sessions 1) is logged in one line naming the
+    file and the reason, and the server goes on serving (it vanished: an un-awaited task's exception)."""
+    config = tmp_path / "server.toml"
+    config.write_text("[server]\nmax_sessions = 1\n")
+    other = tmp_path / "other.wav"
+    other.write_bytes(wav16k.read_bytes())
+    proc, url, _ = _serve(model_path, "--config", str(config), "--file", str(wav16k), "--file", str(other))
+    names = _session_names(url)
+    code, err = _stop(proc)
+    failed = [x for x in err.splitlines() if "failed" in x]
+    assert len(names) == 1 and len(failed) == 1, (names, err)
+    refused = other if names == {wav16k.stem} else wav16k
+    assert f"file {refused}: session '{refused.stem}' failed: server is full (1 sessions)" in failed[0]
+    assert "Traceback" not in err and code == 0
+
+
+def test_serve_refuses_a_file_no_session_takes_before_listening(model_path, tmp_path):
+    """A file at a rate no session takes (4 kHz) stops `facecast serve` at start-up with one line naming it
+    (exit 2), as an unreadable file does; it was accepted and its session failed unseen once listening."""
+    from assets.audio import write_wav
+
+    low = tmp_path / "low.wav"
+    write_wav(low, np.zeros(4000, np.float32), 4000)
+    command = ["serve", "--port", "0", "--model", str(model_path), "--no-head", "--file", str(low)]
+    done = subprocess.run(
+        [sys.executable, "-m", "facecast", *command],
+        cwd=Path(__file__).resolve().parents[2],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2 and "listening" not in done.stdout
+    assert done.stderr.strip().splitlines() == [
+        f"facecast serve: error: --file {low}: sample_rate must be an integer in 8000..192000, got 4000"
+    ]

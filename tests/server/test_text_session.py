@@ -345,3 +345,66 @@ def test_text_session_is_registered_cluster_wide(model, backend, redis_server): 
     assert all(m.media_time == pytest.approx(m.index / 30) for m in got.frames)
     assert len(got.audio) == ended["frames"]
     assert got.close_code == P.CLOSE_NORMAL
+
+
+def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(model, backend):
+    """docs/protocol.md section 9.5: every "rejected" reply carries `text` (what was refused, its first 200
+    characters; null when the message's `text` was not a string: that reply lacked the field, as did the
+    one for a piece over 5000 characters), and the session goes on; JSON nested 30000 deep closes with
+    1007 (json.loads raised RecursionError: an internal error, 1011)."""
+    from realtime_core.synthesis.text import MAX_TEXT_CHARS
+
+    long_piece = "word " * (MAX_TEXT_CHARS // 5 + 1)
+
+    async def main():
+        async with running(model, backend) as srv:
+            url = srv.url.replace("http", "ws") + "/text"
+            async with connect(url) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "r", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                replies = []
+                for msg in ({"type": "text", "text": 42}, {"type": "text"}, {"type": "text", "text": long_piece}):
+                    await ws.send(json.dumps(msg))
+                    replies.append(json.loads(await ws.recv()))
+                await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now.", "flush": True}))
+                replies.append(json.loads(await ws.recv()))
+                await ws.send(json.dumps({"type": "end"}))
+                replies.append(json.loads(await ws.recv()))
+            async with connect(url, max_size=None) as ws:
+                await ws.send(json.dumps({"type": "start", "session": "deep", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await ws.send("[" * 30000 + "]" * 30000)
+                with contextlib.suppress(Exception):
+                    await ws.recv()
+                await ws.wait_closed()
+                deep = ws.close_code, ws.close_reason
+            return replies, deep, srv.metrics()
+
+    replies, deep, metrics = asyncio.run(asyncio.wait_for(main(), 60))
+    not_str, missing, too_long, spoken, ended = replies
+    assert not_str == {"type": "rejected", "text": None, "reason": "text must be a string, got 42"}
+    assert missing == {"type": "rejected", "text": None, "reason": "text must be a string, got None"}
+    assert set(too_long) == {"type", "text", "reason"} and too_long["text"] == long_piece[:200]
+    assert f"limit is {MAX_TEXT_CHARS}" in too_long["reason"]
+    assert spoken["type"] == "spoken" and ended["type"] == "ended" and ended["frames"] == spoken["frames"]
+    assert deep[0] == P.CLOSE_INVALID_PAYLOAD and "nests deeper" in deep[1]
+    assert "1011" not in metrics["closes"]
+
+
+def test_text_session_selects_units_on_one_blas_thread(backend):
+    """TextSession.speak pins BLAS to one thread around unit selection, as `facecast say` does (the thread
+    count changes the selection's sums in their last digits; on a 2-core machine more threads contend)."""
+    import dataclasses
+
+    from threadpoolctl import threadpool_info
+
+    class Recording(UnitSynthesizer):
+        def synthesize(self, *args, **kwargs):
+            self.blas_threads = {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+            return super().synthesize(*args, **kwargs)
+
+    synth = Recording(backend.synthesizer.corpus)
+    session = TextSession(dataclasses.replace(backend, synthesizer=synth), language="en", voice=None)
+    outs, report = session.speak("Bin blue at f two now.")
+    assert report["frames"] == len(outs) > 0
+    assert synth.blas_threads == {1}
