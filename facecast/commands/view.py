@@ -155,6 +155,12 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
     cfg = ViewerStreamConfig(
         url=args.url, session=session, kind="deltas", encoding="int16", token=token, wait_s=args.wait
     )
+    import signal
+
+    # Ctrl-C (SIGINT) stops the window, as it stops `facecast serve`, also when the window was started from a job
+    # that ignores SIGINT (a shell's background `&` does, and Python then keeps ignoring it): the window kept
+    # running, and its --screenshot was never written.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     st = run_window(
         cfg,
         mesh,

@@ -522,7 +522,13 @@ def test_view_window_screenshot_is_written_when_stopped_with_ctrl_c(live, xvfb, 
     shot = tmp_path / "ctrlc.png"
     cmd = [sys.executable, "-m", "facecast", "view", live.url, "--session", "ctrlc", "--screenshot", str(shot)]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}  # its status lines as they are printed
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    # Started with SIGINT ignored, as from a shell's background job (where CI may run): Ctrl-C must stop it still
+    # (it ran on, ignoring it, in a CI started with `&`).
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    finally:
+        signal.signal(signal.SIGINT, old)
     try:
         assert proc.stdout is not None
         for line in proc.stdout:  # "watching": the description came and the head is drawn
