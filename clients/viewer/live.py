@@ -383,7 +383,7 @@ def run_window(
                     rest, to_rest = (now, np.array(last_drawn, dtype=np.float32)), False
                 f = min(1.0, (now - rest[0]) / REST_EASE_S)
                 k = np.float32(1 - f * f * (3 - 2 * f))  # smoothstep: no jump at either end
-                draw(rest_deltas + (rest[1] - rest_deltas) * k if len(rest_deltas) == len(rest[1]) else rest[1] * k)
+                draw(rest_deltas + (rest[1] - rest_deltas) * k)
                 stats.rest_steps += 1
                 if f >= 1.0:
                     rest = None
