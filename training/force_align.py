@@ -52,7 +52,9 @@ def _decoder_class():
     try:
         from pocketsphinx import Decoder  # lazy: optional extra "align"
     except ImportError as exc:
-        raise MissingDependencyError("forced alignment and phone recognition need pocketsphinx: pip install 'facecast[align]'") from exc
+        raise MissingDependencyError(
+            "forced alignment and phone recognition need pocketsphinx: pip install 'facecast[align]'"
+        ) from exc
     return Decoder
 
 
