@@ -7,6 +7,10 @@ finds the words, the second (``set_alignment``) their phones and states; times a
 10 ms frames. Audio is resampled to 16 kHz first. Words missing from its dictionary cannot
 be aligned: they are reported in the error rather than guessed.
 
+Without a transcript, :func:`recognise_phones` runs the same decoder in its **allphone** mode: the
+phones themselves are recognised, with the acoustic model (trained on many US-English talkers) and
+the phone bigram language model the wheel ships (``en-us-phone.lm.bin``), in one pass.
+
 Transcripts are found next to the audio: ``<stem>.txt`` or an LJ Speech style
 ``metadata.csv`` (``id|text|normalised text``) in the same folder.
 """
@@ -35,6 +39,30 @@ SPEECH_BELOW_PEAK_DB = 25.0
 """A frame is speech when its level is within this of the recording's loud frames (95th percentile)."""
 
 
+ALLPHONE_LM_WEIGHT = 2.0
+"""Weight of the phone bigram language model against the acoustic scores in :func:`recognise_phones`
+(pocketsphinx's phoneme-recognition recipe: ``-lw 2.0`` with the wide beams below; its word-decoding
+default, 6.5, lets the bigram override what is heard)."""
+
+ALLPHONE_BEAM = 1e-20
+"""Beam and phone beam of the allphone search (the recipe's: every phone hypothesis is kept)."""
+
+
+def _decoder_class():
+    try:
+        from pocketsphinx import Decoder  # lazy: optional extra "align"
+    except ImportError as exc:
+        raise MissingDependencyError(
+            "forced alignment and phone recognition need pocketsphinx: pip install 'facecast[align]'"
+        ) from exc
+    return Decoder
+
+
+def _pcm16k(samples: np.ndarray, rate_hz: int) -> bytes:
+    """``samples`` ((n,) float in [-1, 1] at ``rate_hz``) as pocketsphinx reads them: 16 kHz 16-bit little-endian."""
+    return to_int16(resample_audio(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
+
+
 def normalise_transcript(text: str) -> list[str]:
     """Lower-case words without punctuation (apostrophes kept: "don't")."""
     return re.findall(r"[a-z']+", text.lower().replace("’", "'"))
@@ -46,14 +74,11 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
     Raises MissingDependencyError without pocketsphinx, AlignmentFormatError (naming
     ``source``) for words outside the dictionary or when the alignment fails.
     """
-    try:
-        from pocketsphinx import Decoder  # lazy: optional extra "align"
-    except ImportError as exc:
-        raise MissingDependencyError("forced alignment needs pocketsphinx: pip install 'facecast[align]'") from exc
+    Decoder = _decoder_class()
     words = normalise_transcript(text)
     if not words:
         raise AlignmentFormatError(source, "empty transcript")
-    pcm = to_int16(resample_audio(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
+    pcm = _pcm16k(samples, rate_hz)
     decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL")
     missing = sorted({w for w in words if decoder.lookup_word(w) is None})
     if missing:
@@ -86,6 +111,50 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
             phones.append(Phone(ph.name, start, start + ph.duration / frame_rate))
     if not phones:
         raise AlignmentFormatError(source, "pocketsphinx found no alignment for the transcript")
+    return Alignment(tuple(phones), "arpabet", Path(source))
+
+
+def recognise_phones(
+    samples: np.ndarray,
+    rate_hz: int,
+    *,
+    lm_weight: float = ALLPHONE_LM_WEIGHT,
+    source: str | Path = "<audio>",
+) -> Alignment:
+    """ARPAbet phones recognised in ``samples`` ((n,) float in [-1, 1] at ``rate_hz``) without a transcript:
+    pocketsphinx's allphone search (the shipped US-English acoustic model and phone bigram, ``lm_weight``
+    its language-model weight). A timeline of contiguous phones from 0 s to the last 10 ms frame, pauses
+    ``SIL``; its noise fillers (``+NSN+`` and the like, when they appear) are pauses too, since they carry no
+    articulation. Raises MissingDependencyError without pocketsphinx, AlignmentFormatError (naming
+    ``source``) when nothing was recognised (e.g. no audio)."""
+    import os
+
+    import pocketsphinx
+
+    Decoder = _decoder_class()
+    phone_lm = os.path.join(pocketsphinx.get_model_path(), "en-us", "en-us-phone.lm.bin")
+    decoder = Decoder(
+        samprate=16000,
+        allphone=phone_lm,
+        lw=lm_weight,
+        beam=ALLPHONE_BEAM,
+        pbeam=ALLPHONE_BEAM,
+        bestpath=False,
+        loglevel="FATAL",
+    )
+    decoder.start_utt()
+    decoder.process_raw(_pcm16k(samples, rate_hz), full_utt=True)
+    decoder.end_utt()
+    phones: list[Phone] = []
+    for seg in decoder.seg():  # end_frame is the segment's last frame, inclusive
+        name = "SIL" if seg.word.startswith(("+", "<")) else seg.word
+        start, end = seg.start_frame * FRAME_S, (seg.end_frame + 1) * FRAME_S
+        if phones and phones[-1].phoneme == name == "SIL":  # two fillers in a row: one pause
+            phones[-1] = Phone("SIL", phones[-1].start_s, end)
+        else:
+            phones.append(Phone(name, start, end))
+    if not phones:
+        raise AlignmentFormatError(source, "pocketsphinx recognised no phones in the audio")
     return Alignment(tuple(phones), "arpabet", Path(source))
 
 
