@@ -140,7 +140,7 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     24-bit and multichannel recorders write, mu-law) or at a rate outside ``ACCEPTED_RATES_HZ``
     (96 kHz) are decoded by ffmpeg at their own rate, or at ``rate_hz`` when given.
     Raises :class:`NotAudioError` (or another :class:`training.errors.FileProblem`) naming
-    the file and the problem.
+    the file and the problem, also for a float file holding NaN or inf samples (a live session refuses them too).
     """
     path = check_audio_path(path)
     if path.suffix.lower() == ".wav" and rate_hz is None:
@@ -153,38 +153,54 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     ffmpeg = shutil.which("ffmpeg")
     if ffmpeg is None:
         raise NotAudioError(path, "decoding this format needs ffmpeg, which is not installed (apt-get install ffmpeg)")
-    rate = rate_hz or _probe_rate(path)
-    cmd = [
-        ffmpeg,
-        "-v",
-        "error",
-        "-nostdin",
-        "-i",
-        str(path),
-        "-vn",
-        "-ac",
-        "1",
-        "-ar",
-        str(rate),
-        "-f",
-        "s16le",
-        "-acodec",
-        "pcm_s16le",
-        "-",
-    ]
+    codec: str | None = None
+    rate = rate_hz
+    if rate is None:
+        rate, codec = _probe(path)
+        if rate is None:
+            raise NotAudioError(path, "no audio stream found")
+    samples = _ffmpeg_decode(ffmpeg, path, rate, "s16le")
+    # 16-bit output hides NaN and inf: ffmpeg writes a NaN as -32768 on x86 (a full-scale click; 0 on ARM) and
+    # +-inf as full scale. Decoding every file to float instead would change its samples (ffmpeg downmixes stereo
+    # louder to float than to 16-bit), so a file that may hold them is decoded once more, to float, to look: a float
+    # file (its codec, from the probe that found its rate), or, when the rate was given and no probe ran (one more
+    # would double a video's decode time, 93 -> 172 ms), one whose 16-bit samples reach full scale.
+    if rate_hz is None:
+        may_hold_nan = codec in FLOAT_CODECS
+    else:
+        may_hold_nan = int(samples.min()) == -32768 or int(samples.max()) == 32767
+    if may_hold_nan:
+        raw = _ffmpeg_decode(ffmpeg, path, rate, "f32le")
+        broken = np.flatnonzero(~np.isfinite(raw))
+        if len(broken):  # a live session refuses such a block (1007): the file is refused alike, naming where
+            raise NotAudioError(
+                path, f"holds NaN/inf samples at {broken[0] / rate:.2f} s (written by a failed computation?)"
+            )
+    return samples.astype(np.float32) / INT16_SCALE, rate
+
+
+FLOAT_CODECS = frozenset({"pcm_f16le", "pcm_f24le", "pcm_f32le", "pcm_f32be", "pcm_f64le", "pcm_f64be"})
+"""ffmpeg's names of the float PCM encodings (WAV, AIFF-C, CAF, W64, Matroska...): the files that can hold NaN/inf."""
+
+
+def _ffmpeg_decode(ffmpeg: str, path: Path, rate_hz: int, fmt: str) -> np.ndarray:
+    """The first audio stream of ``path`` as mono at ``rate_hz``: (n,) int16 for ``fmt`` "s16le", float32 for
+    "f32le". NotAudioError with ffmpeg's last line when it cannot decode it."""
+    cmd = [ffmpeg, "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", "1", "-ar", str(rate_hz)]
+    cmd += ["-f", fmt, "-acodec", f"pcm_{fmt}", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:
         msg = proc.stderr.decode(errors="replace").strip().splitlines()
         raise NotAudioError(path, f"ffmpeg could not decode audio ({msg[-1] if msg else 'no audio stream'})")
-    samples = np.frombuffer(proc.stdout, dtype="<i2").astype(np.float32) / INT16_SCALE
-    return samples, rate
+    return np.frombuffer(proc.stdout, dtype="<i2" if fmt == "s16le" else "<f4")
 
 
-def _probe_rate(path: Path) -> int:
-    """The first audio stream's sample rate (ffprobe), 16 kHz if it cannot be told."""
+def _probe(path: Path) -> tuple[int | None, str | None]:
+    """The first audio stream's (sample rate, ffmpeg's codec name) by ffprobe: (16000, None) without ffprobe (the
+    rate cannot be told), (None, None) when it finds no audio stream."""
     ffprobe = shutil.which("ffprobe")
     if ffprobe is None:
-        return 16000
+        return 16000, None
     proc = subprocess.run(
         [
             ffprobe,
@@ -193,16 +209,17 @@ def _probe_rate(path: Path) -> int:
             "-select_streams",
             "a:0",
             "-show_entries",
-            "stream=sample_rate",
+            "stream=sample_rate,codec_name",
             "-of",
-            "default=noprint_wrappers=1:nokey=1",
+            "default=noprint_wrappers=1",
             str(path),
         ],
         capture_output=True,
         check=False,
         text=True,
     )
+    found = dict(line.split("=", 1) for line in proc.stdout.splitlines() if "=" in line)
     try:
-        return int(proc.stdout.strip().splitlines()[0])
-    except (ValueError, IndexError):
-        raise NotAudioError(path, "no audio stream found") from None
+        return int(found["sample_rate"]), found.get("codec_name")
+    except (KeyError, ValueError):
+        return None, None

@@ -193,15 +193,15 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from threadpoolctl import threadpool_limits
-    from tqdm import tqdm
 
     from assets.modelfile import load_model
+    from assets.progress import Progress
     from realtime_core.hmm.adapt import AdaptConfig
 
     model = load_model(args.model)
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=args.relevance)
     with threadpool_limits(1):  # small GEMMs: one BLAS thread is many times faster on 2 busy cores
-        rows = other_talkers(model, cfg, args.clips, tqdm)
+        rows = other_talkers(model, cfg, args.clips, Progress)
     print(f"model: {args.model or 'shipped default'}; relevance {args.relevance:g} frames")
     print("| clip | s | loudness | before | after (self, 3 s) | halves before | halves after (1.5 s) |")
     print("|---|---:|---:|---:|---:|---:|---:|")
@@ -225,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         for speed in [float(v) for v in args.speeds.split(",") if v]:
             with threadpool_limits(1):
                 s1 = s1_as_new_voice(
-                    model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, tqdm, speed=speed
+                    model, grid, args.grid_s1, args.enrol_seconds, args.val_sentences, Progress, speed=speed
                 )
             report["s1_new_voice"] += s1
             r0 = s1[0]

@@ -561,7 +561,7 @@ def _select_sentences(config: BuildConfig, n: int) -> list:
 
 def build(config: BuildConfig) -> Manifest:
     """Make (or reuse) every stimulus and write ``manifest.json``; returns the verified manifest."""
-    from tqdm import tqdm
+    from assets.progress import Progress
 
     c = config
     b = _Builder(c)
@@ -674,7 +674,7 @@ def build(config: BuildConfig) -> Manifest:
     jobs = [(blk, sid) for blk in blocks for sid in blk.stimulus_ids()]
     stimuli: dict[str, dict[str, Any]] = {}
     audio_cache: dict[str, tuple] = {}
-    bar = tqdm(jobs, desc="perceptual stimuli", unit="stim", disable=not c.progress)
+    bar = Progress(jobs, desc="perceptual stimuli", unit="stim", disable=not c.progress)
     try:
         for blk, sid in bar:
             _, item, cond, _snr = sid.split("|")

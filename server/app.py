@@ -32,6 +32,7 @@ import contextlib
 import logging
 import signal
 import socket
+import threading
 import time
 import urllib.parse
 from collections.abc import AsyncIterator, Callable, Coroutine
@@ -39,6 +40,7 @@ from http import HTTPStatus
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed, WebSocketException
@@ -93,6 +95,35 @@ class AdmissionRefused(ServerConfigError):
         self.reason = reason
 
 
+class _OneBlasThread:
+    """BLAS held at one thread while any :class:`FacecastServer` of the process serves: per-frame products and unit
+    selection's are tiny, and on a shared 2-core machine more BLAS threads only contend (and the thread count changes
+    unit selection's sums in their last digits: a text session then matches `facecast say`, which pins it too).
+    threadpoolctl's limit is the process's (OpenBLAS has one thread count), so the servers of a process share it: the
+    first to start sets it, the last to stop gives an embedding process its own count back."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._servers = 0
+        self._limits: threadpool_limits | None = None
+
+    def hold(self) -> None:
+        with self._lock:
+            if self._servers == 0:
+                self._limits = threadpool_limits(1)
+            self._servers += 1
+
+    def release(self) -> None:
+        with self._lock:
+            self._servers -= 1
+            if self._servers == 0 and self._limits is not None:
+                self._limits.restore_original_limits()
+                self._limits = None
+
+
+_ONE_BLAS_THREAD = _OneBlasThread()
+
+
 class FacecastServer:
     """The service. ``await start()``, then ``await stop()``; or :func:`run_server` for a process.
 
@@ -131,12 +162,30 @@ class FacecastServer:
         self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
         self._gc_pauses: GcPauses | None = None
+        self._holds_blas = False  # between start and stop (_ONE_BLAS_THREAD)
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
     async def start(self, *, listen: bool = True) -> None:
         """Bind and start accepting connections (port 0 picks a free port: see :attr:`port`).
-        listen=False: no listener; connections come through :meth:`adopt` (a connection worker)."""
+        listen=False: no listener; connections come through :meth:`adopt` (a connection worker).
+
+        BLAS is held at one thread from here until :meth:`stop` (:class:`_OneBlasThread`), for every server: `facecast
+        serve`, a test's, an embedder's."""
+        _ONE_BLAS_THREAD.hold()
+        self._holds_blas = True
+        try:
+            await self._start(listen)
+        except BaseException:
+            self._release_blas()
+            raise
+
+    def _release_blas(self) -> None:
+        if self._holds_blas:
+            self._holds_blas = False
+            _ONE_BLAS_THREAD.release()
+
+    async def _start(self, listen: bool) -> None:
         cfg = self.config
         if cfg.workers and cfg.worker_mode == "connections":
             if running_loop_name() != "asyncio":  # it would read every request itself: server.eventloop.process_loop
@@ -272,6 +321,7 @@ class FacecastServer:
         if self._gc_pauses is not None:
             self._gc_pauses.close()
             self._gc_pauses = None
+        self._release_blas()
 
     def spawn(self, coro: Coroutine[Any, Any, Any]) -> asyncio.Task[Any]:
         """Run a coroutine in the background, holding a reference until it is done."""
@@ -985,34 +1035,28 @@ def _response(reply: HttpReply) -> Response:
 
 async def run_server(server: FacecastServer, *, ready: asyncio.Future | None = None, extra: list | None = None) -> None:
     """Run until SIGINT/SIGTERM (or ``extra`` coroutines all finish), then shut down gracefully.
-
-    BLAS is pinned to one thread for the whole run: per-frame products are tiny and on a shared
-    2-core machine multi-threaded BLAS only adds contention.
-    """
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(1):
-        loop = asyncio.get_running_loop()
-        stop = asyncio.Event()
+    (BLAS is on one thread while the server serves: :meth:`FacecastServer.start`.)"""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await server.start()
+    freeze_heap()  # this process is the server's: the startup heap needs no more collecting
+    if ready is not None and not ready.done():
+        ready.set_result(server)
+    try:
+        waiters = [asyncio.ensure_future(stop.wait())]
+        if extra:
+            work = asyncio.ensure_future(asyncio.gather(*extra))
+            waiters.append(work)
+        await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+        for w in waiters:
+            failure = w.exception() if w.done() and w is not waiters[0] else None
+            if failure is not None:
+                raise failure
+    finally:
+        for w in waiters:
+            w.cancel()
         for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, stop.set)
-        await server.start()
-        freeze_heap()  # this process is the server's: the startup heap needs no more collecting
-        if ready is not None and not ready.done():
-            ready.set_result(server)
-        try:
-            waiters = [asyncio.ensure_future(stop.wait())]
-            if extra:
-                work = asyncio.ensure_future(asyncio.gather(*extra))
-                waiters.append(work)
-            await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
-            for w in waiters:
-                failure = w.exception() if w.done() and w is not waiters[0] else None
-                if failure is not None:
-                    raise failure
-        finally:
-            for w in waiters:
-                w.cancel()
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                loop.remove_signal_handler(sig)
-            await server.stop()
+            loop.remove_signal_handler(sig)
+        await server.stop()

@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
 
@@ -178,13 +177,10 @@ class TextSession:
         n = int(np.ceil(len(speech.samples) * FPS / speech.sample_rate_hz - 1e-9))
         if speech.sample_rate_hz != self.rate_hz:
             raise ServerConfigError(f"speech came at {speech.sample_rate_hz} Hz, the session runs at {self.rate_hz} Hz")
-        # One BLAS thread, as `facecast say`: the matrices are small (more threads only contend on a loaded
-        # machine) and the thread count changes unit selection's sums in their last digits. `facecast serve`
-        # pins the whole process already (run_server); a server started otherwise (tests, embedding) did not.
-        with threadpool_limits(1):
-            res = self.backend.synthesizer.synthesize(
-                list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best, rest_pauses=RestPauses()
-            )
+        # On one BLAS thread, as `facecast say`: the server holds BLAS so while it serves (FacecastServer.start).
+        res = self.backend.synthesizer.synthesize(
+            list(speech.phones), speech.inventory, n_frames=n, n_best=self.backend.n_best, rest_pauses=RestPauses()
+        )
         t2 = time.perf_counter()
         self.times.add("text_speech", t1 - t0)
         self.times.add("text_units", t2 - t1)

@@ -188,7 +188,7 @@ def _write_synthetic(
 
 def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> BuildReport:
     """Write the corpus described by ``cfg``; ``progress(iterable, total=, desc=)`` wraps loops
-    (pass ``tqdm.tqdm`` for a bar). Returns counts for the caller to print."""
+    (pass ``assets.progress.Progress`` for a bar). Returns counts for the caller to print."""
     wrap = progress or (lambda it, **_: it)
     out = Path(cfg.out_dir)
     out.mkdir(parents=True, exist_ok=True)

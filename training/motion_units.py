@@ -88,9 +88,8 @@ def load_clips(
 
     skipped: when given, sentences the extractor refuses (face lost, damaged file) are left out and
     listed there with the reason; otherwise the first refusal is raised."""
-    from tqdm import tqdm
-
     from assets.grid import default_root, sentences
+    from assets.progress import Progress
     from training.video import load_face_track
 
     root = Path(root) if root is not None else default_root()
@@ -101,7 +100,7 @@ def load_clips(
         raise ConfigError(f"no GRID sentences (video + align) under {root}")
     idx, lower = mu_landmark_indices(), lower_face_indices()
     out = []
-    for s in tqdm(items, desc="face tracks", disable=not progress, unit="clip"):
+    for s in Progress(items, desc="face tracks", disable=not progress, unit="clip"):
         try:
             tr = load_face_track(s.video, cache_dir=cache_dir)
         except FacecastError as exc:  # the extractor refuses a clip it cannot measure (e.g. face lost)

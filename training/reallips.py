@@ -430,7 +430,8 @@ def other_talker_clips(
 ) -> list:
     """``[(name, FaceTrack, bilabial spans)]`` of the talking-face clips in ``folder`` not spoken by s1
     (spans from a GRID word alignment beside the clip, :func:`bilabial_spans`; none without one).
-    ``progress(iterable, desc=, unit=)`` (e.g. tqdm) wraps the clips: measuring one takes seconds."""
+    ``progress(iterable, desc=, unit=)`` (e.g. assets.progress.Progress) wraps the clips: measuring one takes
+    seconds."""
     from training.video import VIDEO_SUFFIXES, load_face_track
 
     wrap = progress or (lambda it, **_: it)

@@ -25,11 +25,12 @@ def audio_beside(path: str | Path) -> Path | None:
     return p.with_suffix(".wav") if p.suffix.lower() in AUDIO_BESIDE else None
 
 
-def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> None:
+def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> frozenset[Path]:
     """Refuse, before anything is written, exports of unknown format, a ``.wav`` beside a .glb/.json
     that would overwrite ``source`` (the speech the audio was read from: ``take.wav --glb take.glb``
     would replace the user's recording by its mono copy) or another of ``paths``, and paths that cannot be written
-    (:func:`assets.files.check_writable`: a folder, a read-only place). Raises ExportError / CannotWriteError."""
+    (:func:`assets.files.check_writable`: a folder, a read-only place). Raises ExportError / CannotWriteError.
+    Returns the paths checked (resolved), for :func:`export_track`'s ``checked``."""
     for p in paths:
         if p.suffix.lower() not in FORMATS:
             raise ExportError(f"{p}: unknown export format {p.suffix.lower()!r} (use {', '.join(FORMATS)})")
@@ -48,6 +49,7 @@ def check_outputs(paths: list[Path], *, source: str | Path | None = None) -> Non
         wav = audio_beside(p)
         if wav is not None and wav.is_dir():
             raise ExportError(f"{p}: the audio written beside it, {wav}, is a folder; give the export another name")
+    return frozenset(Path(p).resolve() for p in paths)
 
 
 def export_track(
@@ -60,6 +62,7 @@ def export_track(
     arkit_targets: dict[str, np.ndarray] | None = None,
     arkit_track: Track | None = None,
     expression: np.ndarray | None = None,
+    checked: frozenset[Path] = frozenset(),
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
@@ -69,7 +72,9 @@ def export_track(
     "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights;
     with ``expression`` ``(n, len(EXPRESSIONS))`` intensities, the ARKit weights are those of
     ``arkit_track`` (the speech parameters before the expression; default ``track``) plus the expressions'
-    ARKit recipes, as a live session's ARKit output."""
+    ARKit recipes, as a live session's ARKit output. ``path`` is checked (:func:`check_outputs`: a probe file made
+    and removed) before anything is written unless it is in ``checked``, what a command's own check_outputs returned
+    before its work."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -79,7 +84,8 @@ def export_track(
         raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
     if suffix == ".glb" and morphs == "arkit52" and arkit_targets is None:
         raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
-    check_outputs([p])
+    if p.resolve() not in checked:
+        check_outputs([p])
     written: list[Path] = []
     wav_name = None
     wav = audio_beside(p)

@@ -273,8 +273,23 @@ def _cast_hits(mesh: HeadMesh, mvp: np.ndarray, pixels: np.ndarray, size: int) -
     return out, face
 
 
+def _face_pieces(mesh: HeadMesh) -> np.ndarray:
+    """(m,) int: each triangle's mesh piece once texture seams are welded (:func:`welded_pieces`). The same for every
+    mesh the landmark search draws (the file's, or :func:`facing_viewer`'s rewound copy: same vertices, same triangles
+    in the same order), so it is computed once per search: welding a 106k-vertex scan took 0.3 s a call."""
+    from realtime_core.face.welding import welded_pieces
+
+    canon, _, piece = welded_pieces(np.asarray(mesh.vertices, dtype=np.float64), mesh.triangles)
+    return np.asarray(piece[canon[np.asarray(mesh.triangles, dtype=np.int64)[:, 0]]])
+
+
 def _onto_lips(
-    mesh: HeadMesh, mvp: np.ndarray, pixels: dict[str, np.ndarray], points: dict[str, np.ndarray], forward: np.ndarray
+    mesh: HeadMesh,
+    mvp: np.ndarray,
+    pixels: dict[str, np.ndarray],
+    points: dict[str, np.ndarray],
+    forward: np.ndarray,
+    face_piece: np.ndarray,
 ) -> dict[str, np.ndarray]:
     """``points`` (name -> (3,), as cast from ``pixels``, name -> (2,)) with each inner-lip point that went
     through the lips (INNER_LIP_DEPTH) or onto another mesh piece than its outer lip midpoint's moved to the first
@@ -285,9 +300,8 @@ def _onto_lips(
     Another piece (texture seams welded): lips modelled apart in a one-file head with its teeth in it show the teeth
     between them at MediaPipe's inner-lip pixel, only 0.085 IOD behind the lips' front (within INNER_LIP_DEPTH): the
     built-in head with 0.1 of its jawOpen baked in took its upper inner-lip point on an upper tooth, and an upper-lip
-    raise then crossed "the lips" by 0.022 IOD (docs/animation.md, "Own targets with the lips modelled apart")."""
-    from realtime_core.face.welding import welded_pieces
-
+    raise then crossed "the lips" by 0.022 IOD (docs/animation.md, "Own targets with the lips modelled apart").
+    ``face_piece``: the mesh's :func:`_face_pieces`."""
     eyes = [0.5 * (points[f"eye_outer_{s}"] + points[f"eye_inner_{s}"]) for s in ("left", "right")]
     iod = float(np.linalg.norm(eyes[0] - eyes[1]))
     front = min(float(points[k] @ forward) for k in INNER_LIP_OUTER.values())
@@ -295,11 +309,8 @@ def _onto_lips(
     mid = 0.5 * (pixels["corner_left"] + pixels["corner_right"])
     towards = {inner: pixels[outer] for inner, outer in INNER_LIP_OUTER.items()}
     towards |= {c: pixels[c] + CORNER_OUTWARD * (pixels[c] - mid) for c in ("corner_left", "corner_right")}
-    # Each face's mesh piece (texture seams welded), and the piece each inner-lip point's own lip is on (its outer
-    # midpoint's): an inner-lip point cast onto another piece (the teeth, seen between lips modelled apart) is not on
-    # its lip however shallow it lies.
-    canon, _, piece = welded_pieces(np.asarray(mesh.vertices, dtype=np.float64), mesh.triangles)
-    face_piece = piece[canon[np.asarray(mesh.triangles, dtype=np.int64)[:, 0]]]
+    # The piece each inner-lip point's own lip is on (its outer midpoint's): an inner-lip point cast onto another
+    # piece (the teeth, seen between lips modelled apart) is not on its lip however shallow it lies.
     names = list(INNER_LIP_OUTER) + list(INNER_LIP_OUTER.values())
     _, faces = _cast_hits(mesh, mvp, np.stack([pixels[k] for k in names]), SIZE)
     piece_of = {k: int(face_piece[f]) if f >= 0 else -1 for k, f in zip(names, faces, strict=True)}
@@ -498,29 +509,31 @@ plain view's and its plain mirrored view's (fewer where they coincide). A rig fr
 is made again from these in turn (assets.heads.head.rig_checked)."""
 
 
-def _placed(mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray) -> dict[str, list[float]] | None:
+def _placed(
+    mesh: HeadMesh, mvp: np.ndarray, pix: np.ndarray, forward: np.ndarray, face_piece: np.ndarray
+) -> dict[str, list[float]] | None:
     """The twelve landmarks (name -> [x, y, z]) from their pixels ``pix`` (12, 2) in MEDIAPIPE_INDEX's order on the
-    render ``mvp``: cast, then taken to facecast's definitions (:func:`_onto_lips`, :func:`_refined`); None when a
-    pixel misses the mesh."""
+    render ``mvp``: cast, then taken to facecast's definitions (:func:`_onto_lips` with the mesh's ``face_piece``,
+    :func:`_refined`); None when a pixel misses the mesh."""
     names = list(MEDIAPIPE_INDEX)
     p3 = _cast(mesh, mvp, pix, SIZE)
     if np.isnan(p3).any():
         return None
     pixels = dict(zip(names, pix))
-    found = _onto_lips(mesh, mvp, pixels, dict(zip(names, p3)), forward)
+    found = _onto_lips(mesh, mvp, pixels, dict(zip(names, p3)), forward, face_piece)
     found = _refined(mesh, mvp, pixels, found)
     return {k: found[k].tolist() for k in names}
 
 
 def _alternatives(
-    mesh: HeadMesh, mvp: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict
+    mesh: HeadMesh, mvp: np.ndarray, each: list[np.ndarray], forward: np.ndarray, chosen: dict, face_piece: np.ndarray
 ) -> list[dict[str, list[float]]]:
     """Landmark sets from the plain view and the plain mirrored view (``each``, (12, 2) pixels, VIEW_ZOOMS' order,
     unmirrored first), none equal to ``chosen`` (the found set) or to one another."""
     picks = [0, len(each) // 2 if len(each) > 1 else 0]
     out: list[dict[str, list[float]]] = []
     for i in dict.fromkeys(picks):
-        got = _placed(mesh, mvp, each[i], forward)
+        got = _placed(mesh, mvp, each[i], forward, face_piece)
         if got is not None and got != chosen and got not in out:
             out.append(got)
     return out[:ALTERNATIVES]
@@ -557,9 +570,9 @@ def _located(
     return mesh, axes, mvp, np.stack([pixels[k] for k in MEDIAPIPE_INDEX]), each
 
 
-def _searched(mesh: HeadMesh) -> FoundLandmarks | None:
-    """:func:`find_landmarks`' search over the usual orientations and framings of ``mesh`` as drawn; None when no face
-    is found on any of its renders."""
+def _searched(mesh: HeadMesh, face_piece: np.ndarray) -> FoundLandmarks | None:
+    """:func:`find_landmarks`' search over the usual orientations and framings of ``mesh`` as drawn (``face_piece``: its
+    :func:`_face_pieces`); None when no face is found on any of its renders."""
     v = np.asarray(mesh.vertices, dtype=np.float64)
     for up, fwd in ORIENTATIONS:
         axes = _axes(np.array(up, float), np.array(fwd, float))
@@ -581,7 +594,7 @@ def _searched(mesh: HeadMesh) -> FoundLandmarks | None:
             if plain is None:
                 continue
             p_mesh, p_axes, p_mvp, p_pix, _ = plain
-            found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64))
+            found = _placed(p_mesh, p_mvp, p_pix, np.asarray(p_axes[2], np.float64), face_piece)
             if found is None:
                 continue
             others: list[dict[str, list[float]]] = []
@@ -589,10 +602,10 @@ def _searched(mesh: HeadMesh) -> FoundLandmarks | None:
             if steady is not None:
                 seen, s_axes, mvp, median, each = steady
                 forward = np.asarray(s_axes[2], np.float64)
-                middle = _placed(seen, mvp, median, forward)
+                middle = _placed(seen, mvp, median, forward, face_piece)
                 if middle is not None and middle != found:
                     others.append(middle)
-                for single in _alternatives(seen, mvp, each, forward, found):
+                for single in _alternatives(seen, mvp, each, forward, found, face_piece):
                     if single not in others:
                         others.append(single)
             return FoundLandmarks(found, tuple(others[:ALTERNATIVES]))
@@ -609,12 +622,13 @@ def find_landmarks(mesh: HeadMesh) -> FoundLandmarks:
     from clients.errors import RenderError
 
     try:
-        found = _searched(mesh)
+        face_piece = _face_pieces(mesh)  # the same for every render's mesh: welded once
+        found = _searched(mesh, face_piece)
         if found is None and (mesh.colors is not None or mesh.texture is not None):
             # Its own colours hide the face from MediaPipe (a dense-correspondence template painted by position in
             # rainbow hues: menpo3d's template.ply), so look at its shape alone, drawn as plain skin. Only after the
             # painted look fails: every head found so far is found as before.
-            found = _searched(replace(mesh, colors=None, texture=None, uvs=None))
+            found = _searched(replace(mesh, colors=None, texture=None, uvs=None), face_piece)
         if found is not None:
             return found
     except RenderError as exc:

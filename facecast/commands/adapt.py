@@ -44,11 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    from tqdm import tqdm
-
     from assets.audio import is_silent, read_audio
     from assets.errors import SilentAudioError
     from assets.modelfile import check_model_output, load_model, save_model
+    from assets.progress import Progress
     from realtime_core.adaptation import MIN_ENROL_S, adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
     from training.errors import ConfigError
@@ -59,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         relevance=args.relevance, weight_relevance=None if args.no_weights else args.weight_relevance, n_iter=args.iters
     )
     recordings = []
-    for path in tqdm(args.speech, desc="reading speech", unit="file"):
+    for path in Progress(args.speech, desc="reading speech", unit="file"):
         samples, _ = read_audio(path, rate_hz=model.sample_rate_hz)
         if is_silent(samples):  # its frames would pull a component to silence
             raise SilentAudioError(path, "silent: no voice to adapt to; nothing written")

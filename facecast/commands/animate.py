@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     for fmt, out in exports.items():
         if out is not None and out.suffix.lower() != f".{fmt}":
             raise ExportError(f"{out}: --{fmt} writes a .{fmt} file; give a name ending in .{fmt}")
-    check_outputs([o for o in exports.values() if o is not None], source=args.speech)
+    checked = check_outputs([o for o in exports.values() if o is not None], source=args.speech)
     if args.glb and args.glb_morphs == "arkit52" and args.head != "builtin":
         raise ExportError(f"{args.glb}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
     head = None
@@ -122,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
                     audio=(samples, rate),
                     morphs=args.glb_morphs,
                     arkit_targets=arkit,
+                    checked=checked,  # probed above: not again per file
                     # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
                     arkit_track=Track(values=speech),
                     expression=expression_intensities(args, len(params)),

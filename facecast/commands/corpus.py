@@ -61,8 +61,7 @@ def run(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
-    from tqdm import tqdm
-
+    from assets.progress import Progress
     from training.articulatory import ArticulatoryConfig
     from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
 
@@ -86,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         voices=voices,
     )
     t0 = time.perf_counter()
-    rep = build_corpus(cfg, progress=tqdm)
+    rep = build_corpus(cfg, progress=Progress)
     wall = time.perf_counter() - t0
     src = ", ".join(f"{k}: {v}" for k, v in sorted(rep.by_source.items()))
     print(
@@ -101,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
 def _festival(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from tqdm import tqdm
-
+    from assets.progress import Progress
     from training.articulatory import ArticulatoryConfig
     from training.build_corpus import load_sentences
     from training.festival import VOICES, FestivalVoice, build_festival_corpus
@@ -117,7 +115,7 @@ def _festival(args: argparse.Namespace) -> int:
         voices=voices,
         augment_audio=args.augment,
         articulatory=ArticulatoryConfig(lead_s=args.lead_ms / 1000.0),
-        progress=tqdm,
+        progress=Progress,
     )
     print(f"wrote {len(sentences)} Festival utterances -> {manifest}")
     return 0

@@ -127,10 +127,9 @@ def _default_folders(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
-    from tqdm import tqdm
-
     from assets.files import atomic_write_bytes
     from assets.modelfile import load_speech_model
+    from assets.progress import Progress
     from training.corpus import load_corpus
     from training.evaluation import format_markdown, real_speech_items, score_set
     from training.reallips import evaluate_lips, lips_markdown, plot_lips, s1_clips
@@ -145,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
     stem = args.output.stem if args.output is not None else "accuracy"
     lips_md, summary = [], {}
     if args.grid_s1.is_dir():
-        clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+        clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=Progress)
         s, items = evaluate_lips(model, clips)
         summary["s1"] = s
         goals = {
@@ -172,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     video_dir = args.video_dir if args.video_dir is not None else OTHER_TALKERS
     if video_dir.is_dir():
         section, summary["other"] = clips_section(
-            model, video_dir, cache_dir=args.cache_dir, plot_dir=plot_dir, stem=stem, progress=tqdm
+            model, video_dir, cache_dir=args.cache_dir, plot_dir=plot_dir, stem=stem, progress=Progress
         )
         lips_md.append(section)
     elif args.video_dir is not None:  # asked for by name: not found is the user's mistake, not a section to skip
@@ -250,7 +249,8 @@ def clips_section(
     model, folder: Path, *, cache_dir=None, plot_dir: Path | None = None, stem: str = "accuracy", progress=None
 ):
     """The real-lips section of the talking-face clips in ``folder`` (their face tracks measured, or read from
-    the cache, with ``progress(iterable, desc=, unit=)`` around them, e.g. tqdm): ``(markdown, LipScores)``.
+    the cache, with ``progress(iterable, desc=, unit=)`` around them, e.g. assets.progress.Progress):
+    ``(markdown, LipScores)``.
     Titled "other talkers" for the default folder (:data:`OTHER_TALKERS`), else after the folder: a user's
     folder may hold anyone, s1 included. ConfigError when it holds no clip."""
     from training.errors import ConfigError
@@ -301,10 +301,9 @@ def _run_dial(args: argparse.Namespace) -> int:
     """``--dial``: every model at every lag on the s1 split -> table (and plot, file section with --output)."""
     import json
 
-    from tqdm import tqdm
-
     from assets.files import atomic_write_bytes
     from assets.modelfile import SHIPPED_MODELS, load_model
+    from assets.progress import Progress
     from training.errors import ConfigError
     from training.latency import (
         dial_markdown,
@@ -318,9 +317,9 @@ def _run_dial(args: argparse.Namespace) -> int:
         raise ConfigError(f"--dial needs the GRID s1 corpus: {args.grid_s1} not found")
     # Shipped names as they are, files by their stem (the table's first column).
     models = [(name if name in SHIPPED_MODELS else Path(name).stem, load_model(name)) for name in args.dial]
-    clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+    clips = s1_clips(args.grid_split, root=args.grid_s1, cache_dir=args.cache_dir, progress=Progress)
     points = score_dial(
-        models, clips, lags=args.lags, likelihood_scales=args.kappas, keep_own=SHIPPED_MODELS.keys(), progress=tqdm
+        models, clips, lags=args.lags, likelihood_scales=args.kappas, keep_own=SHIPPED_MODELS.keys(), progress=Progress
     )
     png_name = None
     if args.output is not None:

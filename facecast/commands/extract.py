@@ -62,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from tqdm import tqdm
-
+    from assets.progress import Progress
     from training.video import (
         ExtractConfig,
         extract_corpus,
@@ -91,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         config=cfg,
         require_alignment=args.require_alignment,
-        progress=tqdm,
-        log=lambda line: tqdm.write(line, file=sys.stderr),
+        progress=Progress,
+        log=lambda line: Progress.write(line, file=sys.stderr),
     )
     doc = report.as_json()
     if not report.clips:
@@ -120,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     if out is not None:
         keep = [v for v in ok if args.split is None or grid_split_of(v) == args.split]
-        tracks = (load(v) for v in tqdm(keep, desc="corpus", unit="clip"))
+        tracks = (load(v) for v in Progress(keep, desc="corpus", unit="clip"))
         manifest = write_track_corpus(list(tracks), out, language=args.language)
         print(f"wrote {len(keep)} utterances -> {manifest}")
     if args.plots > 0 and ok:

@@ -54,9 +54,9 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     import numpy as np
-    from tqdm import tqdm
 
     from assets import grid
+    from assets.progress import Progress
     from training.errors import ConfigError
     from training.grid_phones import (
         ALIGN_RATE_HZ,
@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if not sents:
         raise ConfigError(f"no GRID sentences (video/*.mp4 with align/*.align) under {root}")
     labelled, skipped = label_corpus(
-        sents, workers=args.workers, align=not args.no_align, progress=tqdm, method=args.method, say=print
+        sents, workers=args.workers, align=not args.no_align, progress=Progress, method=args.method, say=print
     )
     out = write_grid_phones(Path(args.out) if args.out else DEFAULT_PATH, labelled)
 

@@ -178,9 +178,8 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from tqdm import tqdm
-
     from assets.modelfile import check_model_output, load_model, save_model
+    from assets.progress import Progress
     from facecast.commands.teacher_options import teacher_config
     from training.corpus import write_json
     from training.errors import ConfigError
@@ -219,15 +218,15 @@ def _run(args: argparse.Namespace) -> int:
         if parts:
             clips = parts[split]
         else:
-            clips = s1_clips(split, root=grid_s1, cache_dir=args.cache_dir, progress=tqdm)
+            clips = s1_clips(split, root=grid_s1, cache_dir=args.cache_dir, progress=Progress)
         if not clips:
             raise ConfigError(f"no GRID s1 {split} sentences (video + .align) under {grid_s1}")
-        sets[split] = trace_clips(model, clips, progress=tqdm)
+        sets[split] = trace_clips(model, clips, progress=Progress)
         if split == "train" and vtlp.copies:
-            sets[split] += vtlp_copies(model, clips, vtlp, progress=tqdm)
+            sets[split] += vtlp_copies(model, clips, vtlp, progress=Progress)
         if split == "train" and not parts:
-            taught = teacher_clips(teacher, grid_s1, cache_dir=args.cache_dir, progress=tqdm)
-            sets[split] += trace_clips(model, taught, progress=tqdm)
+            taught = teacher_clips(teacher, grid_s1, cache_dir=args.cache_dir, progress=Progress)
+            sets[split] += trace_clips(model, taught, progress=Progress)
     if parts:
         source = {"corpus": str(args.corpus), **parts["source"]}
     fit, choose = ("fit", "choose") if parts else ("train", "val")
@@ -243,7 +242,7 @@ def _run(args: argparse.Namespace) -> int:
         candidates,
         bands=args.bands,
         min_closure=args.min_closure,
-        log=tqdm.write,
+        log=Progress.write,
     )
     report["chosen"]["vtlp"] = vtlp.as_json()
     if teacher.espeak or teacher.festival:  # a file fitted without teacher sentences stays as it was

@@ -42,10 +42,9 @@ def run(args: argparse.Namespace) -> int:
     import contextlib
     import threading
 
-    from assets.files import check_writable
     from clients.client import server_url
     from clients.errors import ClientError
-    from clients.export.files import FORMATS, export_track
+    from clients.export.files import FORMATS, check_outputs, export_track
     from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
     from facecast.commands.view import token_from_env
     from realtime_core.track import Track
@@ -57,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         raise ClientError(
             f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
         )
-    check_writable(args.output)  # a folder that cannot be made fails now, not after the whole take
+    checked = check_outputs([args.output])  # a folder that cannot be made fails now, not after the whole take
     args.url = server_url(args.url, "/view")  # the base URL also when given as the viewers' ws://HOST:PORT/view
     token = token_from_env(args.token_env)
     glb = args.output.suffix.lower() == ".glb"
@@ -146,7 +145,9 @@ def run(args: argparse.Namespace) -> int:
     params, first = rec.timeline()
     track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
-    files = export_track(args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit)
+    files = export_track(
+        args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit, checked=checked
+    )
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "

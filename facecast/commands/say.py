@@ -161,12 +161,13 @@ def run(args: argparse.Namespace) -> int:
     bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", ".wav", *FORMATS)]
     if bad:
         raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, .wav, {', '.join(FORMATS)})")
-    check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
+    checked = check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
     apply_expressions(np.zeros((1, 4)), args)  # a misspelt --expression fails before any synthesis
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):
         raise ConfigError(f"{args.audio}: an output would overwrite the --audio recording; give it another name")
     for o in outs:  # before any work; an .mp4's temporary folder is made beside it, so its folder must exist
-        check_writable(o)
+        if o.resolve() not in checked:  # the exports were probed by check_outputs
+            check_writable(o)
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:
@@ -269,7 +270,7 @@ def run(args: argparse.Namespace) -> int:
         elif out.suffix.lower() == ".wav":  # the speech the motion is timed to (16-bit mono, its own rate)
             write_wav(out, samples, rate)
         else:
-            export_track(out, track, head=head, audio=(samples, rate))
+            export_track(out, track, head=head, audio=(samples, rate), checked=checked)
         t = lap(f"write {out.suffix}", t)
     sel = res.selection
     tgt = res.target

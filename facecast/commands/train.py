@@ -158,9 +158,8 @@ def _run(args: argparse.Namespace) -> int:
     from dataclasses import replace
     from typing import Any
 
-    from tqdm import tqdm
-
     from assets.modelfile import check_model_output, load_model, save_model
+    from assets.progress import Progress
     from facecast.commands.teacher_options import teacher_config
     from realtime_core.hmm import TrainConfig
     from training.corpus import load_corpus
@@ -182,7 +181,11 @@ def _run(args: argparse.Namespace) -> int:
 
         split = None if args.grid_split == "all" else args.grid_split
         grid = grid_utterances(
-            split, root=args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm, log=lambda line: tqdm.write(line)
+            split,
+            root=args.grid_s1 or None,
+            cache_dir=args.cache_dir,
+            progress=Progress,
+            log=Progress.write,
         )
         variety = Variety(
             speeds=args.speed,
@@ -210,7 +213,9 @@ def _run(args: argparse.Namespace) -> int:
             # Baum-Welch weighs every frame alike, so a teacher frame counts as much as an s1 frame; the CMVN
             # warm-start statistics are over all the training audio, teacher clips included.
             taught = teacher_utterances(
-                teacher_clips(teacher, args.grid_s1 or None, cache_dir=args.cache_dir, progress=tqdm, say=tqdm.write)
+                teacher_clips(
+                    teacher, args.grid_s1 or None, cache_dir=args.cache_dir, progress=Progress, say=Progress.write
+                )
             )
             utts += taught
             data["teacher"] = {
@@ -262,7 +267,7 @@ def _run(args: argparse.Namespace) -> int:
             # The resumed run scores the checkpoint's model again as its first objective.
             history = [float(v) for v in prev.metadata.get("em_history", [])][:done]
             print(f"resuming from {ckpt} (iteration {done})")
-    bar = tqdm(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
+    bar = Progress(total=args.iters, initial=done, desc="Baum-Welch", unit="iter")
 
     def on_iteration(it: int, objective: float, model) -> None:
         # Called after every E-step; the first scores the starting model (no iteration yet).
@@ -296,9 +301,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _select(args: argparse.Namespace, utts: list, recipe) -> int:
-    from tqdm import tqdm
-
     from assets.modelfile import save_model
+    from assets.progress import Progress
     from training.corpus import write_json
     from training.report import plot_selection, plot_tracks
     from training.trainer import evaluate, split_by_utterance, train_av_model
@@ -312,7 +316,7 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
         for m in args.grid_mix
     ]
     rows, best = [], None
-    for n, m, cov, tc in tqdm(grid, desc="model selection", unit="model"):
+    for n, m, cov, tc in Progress(grid, desc="model selection", unit="model"):
         model, _ = train_av_model(train, recipe(n, m, cov, tc))
         ev = evaluate(model, test)
         row = {
@@ -326,7 +330,7 @@ def _select(args: argparse.Namespace, utts: list, recipe) -> int:
             "stream_cost_MN2": m * n * n,
         }
         rows.append(row)
-        tqdm.write(json.dumps(row))
+        Progress.write(json.dumps(row))
         if cov == "full" and (best is None or ev.rho > best[0]):
             best = (ev.rho, model, ev, row)
     if best is None:

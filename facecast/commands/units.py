@@ -82,9 +82,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _corpus(args: argparse.Namespace):
-    from tqdm import tqdm
-
     from assets import grid
+    from assets.progress import Progress
     from training.grid_phones import HMM_PATH, read_grid_phones
     from training.unit_corpus import build_grid_corpus
 
@@ -93,7 +92,7 @@ def _corpus(args: argparse.Namespace):
     sents = [s for s in grid.sentences(root) if s.split != "test"]
     return (
         build_grid_corpus(
-            sents, phones, cache_dir=args.cache_dir, only_extracted=args.only_extracted, progress=tqdm, say=print
+            sents, phones, cache_dir=args.cache_dir, only_extracted=args.only_extracted, progress=Progress, say=print
         ),
         root,
         phones,
@@ -118,11 +117,11 @@ def _run_eval(args: argparse.Namespace) -> int:
     import json
 
     from threadpoolctl import threadpool_limits
-    from tqdm import tqdm
 
     from assets import grid
     from assets.files import atomic_write_bytes
     from assets.modelfile import load_model
+    from assets.progress import Progress
     from realtime_core.synthesis.recording import RecordingBlend
     from training.errors import ConfigError, FileProblem
     from training.unit_corpus import is_extracted, phone_rows
@@ -159,7 +158,7 @@ def _run_eval(args: argparse.Namespace) -> int:
             tests,
             model=load_model(args.model),
             n_best=n_best,
-            progress=tqdm,
+            progress=Progress,
             leave_one_out=args.split == "val",
             model_label=str(args.model) if args.model else "shipped default model",
             recording=recording,

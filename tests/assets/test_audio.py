@@ -67,3 +67,29 @@ def test_a_folder_or_a_missing_file_is_named_as_such(tmp_path):
         read_audio(tmp_path)
     with pytest.raises(NotAudioError, match=r"nope\.wav: file not found"):
         read_audio(tmp_path / "nope.wav")
+
+
+@pytest.mark.parametrize(
+    ("bad", "rate_hz"),
+    [(np.nan, None), (np.inf, None), (np.nan, 8000), (-np.inf, 8000)],
+    ids=["nan", "inf", "nan-resampled", "-inf-resampled"],
+)
+def test_a_float_wav_holding_nan_or_inf_is_refused_naming_the_file_and_where(tmp_path, ffmpeg, bad, rate_hz):
+    """A 32-bit float WAV with NaN (a failed computation written out) was decoded to 16-bit, where ffmpeg makes a NaN
+    -32768 (a full-scale click) and clips +-inf, and animated without a word, while a live session refuses such a
+    block (1007). It is refused, naming the file and the first bad sample's time, also when read at another rate
+    (a second decode, to float, for the files that may hold them: float output would change every stereo file's
+    downmix)."""
+    x = (0.3 * speechlike(1.0, 16000)).astype("<f4")
+    x[8000:8010] = bad  # at 0.50 s
+    wav = tmp_path / "broken.wav"
+    raw = ["-f", "f32le", "-ar", "16000", "-ac", "1", "-i", "-"]
+    subprocess.run([ffmpeg, "-v", "error", "-y", *raw, "-c:a", "pcm_f32le", str(wav)], input=x.tobytes(), check=True)
+    assert np.isnan(np.frombuffer(wav.read_bytes()[-len(x) * 4 :], dtype="<f4")).any() == np.isnan(bad)  # as written
+    with pytest.raises(NotAudioError, match=r"broken\.wav: holds NaN/inf samples at 0\.(49|50) s"):
+        read_audio(wav, rate_hz=rate_hz)
+    x[8000:8010] = 0.0
+    subprocess.run([ffmpeg, "-v", "error", "-y", *raw, "-c:a", "pcm_f32le", str(wav)], input=x.tobytes(), check=True)
+    got, rate = read_audio(wav)
+    assert rate == 16000
+    np.testing.assert_allclose(got, x, atol=0.5 / 32768)  # the file made whole reads as written (16-bit steps)

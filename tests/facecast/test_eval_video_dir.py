@@ -14,10 +14,9 @@ pytestmark = pytest.mark.system
 
 @pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
 def test_clips_section_is_titled_by_its_folder_with_progress(shared_data, tmp_path, ffmpeg, capsys, monkeypatch):
-    from tqdm import tqdm
-
     import facecast.commands.eval as eval_command
     from assets.modelfile import load_model
+    from assets.progress import Progress
     from training.errors import ConfigError
 
     folder = tmp_path / "my clips"
@@ -25,7 +24,7 @@ def test_clips_section_is_titled_by_its_folder_with_progress(shared_data, tmp_pa
     shutil.copy(shared_data / "video" / "grid" / "lbax4n.mpg", folder)
     model = load_model(None)
     md, scores = eval_command.clips_section(
-        model, folder, cache_dir=tmp_path / "cache", plot_dir=tmp_path, stem="acc", progress=tqdm
+        model, folder, cache_dir=tmp_path / "cache", plot_dir=tmp_path, stem="acc", progress=Progress
     )
     assert md.startswith(f"## 2. Real lips: clips in {folder}\n") and "other talkers" not in md
     assert f"1 clips from {folder}/" in md and all(f"| {p} |" in md for p in VISUAL_PARAMS)

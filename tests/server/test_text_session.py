@@ -391,20 +391,38 @@ def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(mode
     assert "1011" not in metrics["closes"]
 
 
-def test_text_session_selects_units_on_one_blas_thread(backend):
-    """TextSession.speak pins BLAS to one thread around unit selection, as `facecast say` does (the thread
-    count changes the selection's sums in their last digits; on a 2-core machine more threads contend)."""
+def test_a_server_selects_units_on_one_blas_thread_while_it_serves(model, backend):
+    """Unit selection runs on one BLAS thread, as `facecast say` does (the thread count changes the selection's sums
+    in their last digits; on a 2-core machine more threads contend): any FacecastServer holds BLAS at one thread from
+    start to stop (it was pinned per sentence, and `facecast serve`'s whole process once more), and gives the process
+    its own count back when it stops."""
     import dataclasses
 
-    from threadpoolctl import threadpool_info
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads() -> set[int]:
+        return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
 
     class Recording(UnitSynthesizer):
         def synthesize(self, *args, **kwargs):
-            self.blas_threads = {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+            self.blas_threads = blas_threads()
             return super().synthesize(*args, **kwargs)
 
     synth = Recording(backend.synthesizer.corpus)
-    session = TextSession(dataclasses.replace(backend, synthesizer=synth), language="en", voice=None)
-    outs, report = session.speak("Bin blue at f two now.")
-    assert report["frames"] == len(outs) > 0
-    assert synth.blas_threads == {1}
+
+    async def main():
+        async with running(model, dataclasses.replace(backend, synthesizer=synth)) as srv:
+            serving = blas_threads()
+            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
+                await ws.send(json.dumps({"type": "start", "session": "blas", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. "}))
+                spoken = json.loads(await ws.recv())
+        return serving, spoken
+
+    with threadpool_limits(2):  # the embedding process's own count, whatever the machine's default
+        serving, spoken = asyncio.run(asyncio.wait_for(main(), 60))
+        after = blas_threads()
+    assert spoken["type"] == "spoken" and spoken["frames"] > 0
+    assert serving == synth.blas_threads == {1}
+    assert after == {2}

@@ -181,3 +181,48 @@ def test_a_silent_take_animates_a_closed_mouth(tmp_path):
     assert np.all(track.values == track.values[0])  # no motion at all
     assert track.values[0, 2] == 0.0  # mouth_open at the closed pose
     assert [c.shape for c in read_tsv((tmp_path / "p.tsv").read_bytes())] == ["X"]
+
+
+_PROBES: list[str] = []
+_LISTENING: list[bool] = []
+
+
+def _probes_made(event: str, args: tuple) -> None:
+    """An audit hook (Python's own events: the files made, not a stand-in): the probe files check_writable makes."""
+    if _LISTENING and event == "tempfile.mkstemp" and str(args[0]).endswith(".probe"):
+        _PROBES.append(str(args[0]))
+
+
+def test_a_commands_exports_are_probed_once(tmp_path):
+    """`facecast animate --json --tsv`: check_outputs probes each output before the work (a file made and removed
+    beside it), and export_track probed it again when writing it; a command now hands its check over."""
+    import sys
+
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = write_wav(tmp_path / "s.wav", speechlike(1.0, 16000), 16000)
+    if not _LISTENING:
+        sys.addaudithook(_probes_made)  # hooks cannot be removed: it records only while _LISTENING is set
+    _PROBES.clear()
+    _LISTENING.append(True)
+    try:
+        rc = main(
+            [
+                "animate",
+                str(wav),
+                "--model",
+                str(model),
+                "--json",
+                str(tmp_path / "a.json"),
+                "--tsv",
+                str(tmp_path / "a.tsv"),
+            ]
+        )
+    finally:
+        _LISTENING.clear()
+    assert rc == 0 and (tmp_path / "a.json").is_file() and (tmp_path / "a.tsv").is_file()
+    probed = sorted(p.split("/")[-1].split(".")[1] for p in _PROBES)  # ".a.json.XXXX.probe" -> "a"
+    assert len(_PROBES) == 2 and probed == ["a", "a"], _PROBES

@@ -346,3 +346,17 @@ def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(t
     assert g.asset.extras["facecast"]["units"] == "morph weight"
     with pytest.raises(ExportError, match="need a head that has them"):
         export_track(tmp_path / "b.glb", tr, head=builtin_rig_file, morphs="arkit52")
+
+
+def test_a_library_export_to_a_path_it_cannot_write_fails_before_writing_anything(tmp_path):
+    """export_track called by a library (no command's check before it) still checks its path first: a name that is a
+    folder fails before the .wav beside it is written (it was the command's check that a command may now skip)."""
+    from assets.errors import CannotWriteError
+
+    (tmp_path / "take.json").mkdir()
+    track = Track(values=np.zeros((30, len(VISUAL_PARAMS))))
+    with pytest.raises(CannotWriteError, match=r"take\.json: is a folder"):
+        export_track(tmp_path / "take.json", track, audio=(np.zeros(16000), 16000))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take.json"]  # no take.wav left beside it
+    written = export_track(tmp_path / "ok.json", track, audio=(np.zeros(16000), 16000))
+    assert [p.name for p in written] == ["ok.json", "ok.wav"]

@@ -15,6 +15,7 @@ from clients.render.landmarks import (
     SLIT_WALL_STEP,
     _cast,
     _crease_vertices,
+    _face_pieces,
     _into_corner_crease,
     _lower_lip_front,
     _onto_lips,
@@ -43,7 +44,7 @@ def test_an_inner_lip_point_cast_through_a_slit_between_the_lips_moves_onto_the_
     mesh, pixels, points = _slit()
     assert points["upper_inner"][2] == -1.0  # through the slit onto the wall
     assert INNER_LIP_DEPTH < 1.0
-    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]), _face_pieces(mesh))
     assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
     assert abs(got["upper_inner"][0]) < 1e-9  # on the segment to the outer lip point
     np.testing.assert_array_equal(got["lower_inner"], points["lower_inner"])
@@ -98,7 +99,7 @@ def test_an_inner_lip_point_cast_through_a_slit_passes_over_the_slits_wall_onto_
     assert depth < INNER_LIP_DEPTH  # the wall counts as on the lip by depth alone
     mesh, pixels, points = _slit(depth)
     assert points["upper_inner"][2] == -1.0  # through the slit onto the back wall
-    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]), _face_pieces(mesh))
     assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
     assert abs(got["upper_inner"][0]) < 1e-9
 
@@ -108,7 +109,7 @@ def test_an_inner_lip_point_keeps_a_shallow_step_on_the_lip():
     it, the first surface met above the slit."""
     depth = 0.5 * SLIT_WALL_STEP
     mesh, pixels, points = _slit(depth)
-    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]), _face_pieces(mesh))
     assert abs(got["upper_inner"][2] + depth) < 1e-9
     assert 0.01 < got["upper_inner"][1] < 0.05
 
@@ -120,7 +121,7 @@ def test_an_inner_lip_point_cast_onto_a_tooth_between_the_lips_moves_onto_its_li
     depth = 0.5 * INNER_LIP_DEPTH
     mesh, pixels, points = _slit(tooth_depth=depth)
     assert abs(points["upper_inner"][2] + depth) < 1e-9  # on the tooth, shallow enough to pass the depth test
-    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]))
+    got = _onto_lips(mesh, MVP, pixels, points, np.array([0.0, 0.0, 1.0]), _face_pieces(mesh))
     assert got["upper_inner"][2] == 0.0 and 0.05 <= got["upper_inner"][1] < 0.05 + 0.3 / 32 + 1e-9
     np.testing.assert_array_equal(got["lower_inner"], points["lower_inner"])
 
