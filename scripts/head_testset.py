@@ -373,9 +373,9 @@ def check_and_draw(
     also from the renderer's three-quarter view (``SLUG_mouth_34.jpg``: a lip face that shows its back, drawn
     dark, shows there first; docs/animation.md, "Three-quarter view")."""
     from PIL import Image, ImageDraw
-    from tqdm import tqdm
 
     from assets.heads.head import head_checks
+    from assets.progress import Progress
     from clients.render.landmarks import find_landmarks
     from clients.render.renderer import RenderConfig, renderer_for_rig
     from realtime_core.errors import FacecastError
@@ -392,7 +392,7 @@ def check_and_draw(
     ]
     if describe is not None:
         rows = [rows[0].replace("| driven by |", f"| {describe(None, None)[0]} | driven by |"), rows[1] + "---|"]
-    for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
+    for name, (spec, opts) in Progress(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:

@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from assets.grid import Split
 from assets.modelfile import load_model
+from assets.progress import Progress
 from assets.unitcorpus import find_unit_corpus, load_unit_corpus
 from realtime_core.features import loudness_db
 from realtime_core.pipeline import speech_to_params
@@ -128,7 +128,7 @@ def run_set(name: str, clips: list[Clip], model, stored, synth, lm_weights, n_be
             add(f"(a) {tag}, n_best {nb}", clip, res.frames[:, k:], loud)
             add(f"(b) {tag} + HMM blend, n_best {nb}", clip, synth.with_recording(res, hp)[:, k:], loud)
 
-    for clip in tqdm(clips, desc=name, unit="clip", file=sys.stderr):
+    for clip in Progress(clips, desc=name, unit="clip", file=sys.stderr):
         n = len(clip.truth)
         loud = loudness_db(clip.samples, clip.rate, n)
         hp = fit_length(speech_to_params(model, clip.samples, clip.rate), n)

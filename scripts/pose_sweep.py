@@ -174,8 +174,8 @@ def main() -> int:
     import head_testset
     import heldout_heads
     from head_testset import _resolve
-    from tqdm import tqdm
 
+    from assets.progress import Progress
     from clients.render.landmarks import find_landmarks
     from realtime_core.errors import FacecastError
 
@@ -186,7 +186,7 @@ def main() -> int:
     sets = pose_sets(args.data, args.sets.split(","), args.say_texts, args.test_stride)
     results: dict[str, dict[str, dict | None]] = {}
     reach: dict[str, dict] = {}
-    for name, (spec, opts) in tqdm(heads.items(), desc="heads"):
+    for name, (spec, opts) in Progress(heads.items(), desc="heads"):
         try:
             head = _resolve(spec, opts, find_landmarks)
         except FacecastError as exc:

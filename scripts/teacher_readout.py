@@ -76,14 +76,14 @@ def synth():
 
 
 def labels(espeak_n: int, festival_n: int, n_best: int) -> None:
-    from tqdm import tqdm
+    from assets.progress import Progress
 
     s = synth()
     for engine, n, make, seed in (("espeak", espeak_n, espeak_clips, 0), ("festival", festival_n, festival_clips, 1)):
         if not n:
             continue
         t = time.time()
-        clips = make(s, n, seed=seed, n_best=n_best, progress=tqdm)
+        clips = make(s, n, seed=seed, n_best=n_best, progress=Progress)
         save_clips(OUT / f"teacher_{engine}.npz", clips)
         log(
             f"{engine} {len(clips)} clips, {sum(len(c[1].params) for c in clips) / 1800:.1f} min, "
