@@ -117,11 +117,11 @@ def run(args: argparse.Namespace) -> int:
     def same_head(head, description: dict) -> None:
         # checked on connecting (or when the head is ready): after the take, a wrong --head threw the
         # whole recording away
-        served = description.get("head")
-        if served is not None and served["vertex_count"] != len(head.mesh.vertices):
+        theirs = description.get("head")
+        if theirs is not None and theirs["vertex_count"] != len(head.mesh.vertices):
             raise ClientError(
                 f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
-                f"{served['vertex_count']}: pass the server's head"
+                f"{theirs['vertex_count']}: pass the server's head"
             )
 
     async def watch(kind: str, described: asyncio.Future[dict]):
@@ -146,7 +146,8 @@ def run(args: argparse.Namespace) -> int:
 
         checking = asyncio.ensure_future(checked_head())
         await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
-        if watching.done() and watching.exception() is not None:
+        failure = watching.exception() if watching.done() else None
+        if failure is not None:
             checking.cancel()
             mesh = await fetching  # a head that cannot be fetched is named first: why there are no morph frames
             if not mesh.targets:  # the server refused the morph kind (4400): its head drives no targets of its own
@@ -154,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
                     f"{args.url}: the server's head is retargeted (it drives no morph targets of its own), so its "
                     "motion cannot be rebuilt from what it sends: pass --head with the head the server was started with"
                 )
-            raise watching.exception()  # type: ignore[misc]
+            raise failure
         failure = checking.exception() if checking.done() else None
         if failure is not None:
             watching.cancel()
