@@ -130,7 +130,7 @@ async def fetch_head(url: str, token: str | None = None, *, targets: bool = Fals
     try:
         status, body = await http_get(url, "/head/mesh.json" + auth)
     except OSError as exc:
-        raise ClientError(f"cannot fetch the server's head {where}: {exc}") from None
+        raise ClientError(f"{url}: cannot connect: {exc}") from None  # as every request to a server says it
     if status != 200:
         why = {404: "the server has no head", 401: "wrong or missing token"}.get(status, "")
         raise ClientError(f"cannot fetch the server's head {where}: it answered {status} {why}".rstrip())
