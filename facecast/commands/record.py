@@ -15,8 +15,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "record",
         help="save a live session's animation (glTF, CSV, JSON or Rhubarb TSV)",
         formatter_class=HelpFormatter,
-        description="Watch one session's mouth parameters and audio until it ends (or --duration), then write "
-        "them in the format of the output's suffix: .glb (the server's head animated as its viewers saw it, audio "
+        description="Watch one session's mouth parameters (for a .glb without --head: the weights of the served "
+        "head's own targets) and audio until it ends (or --duration), then write them in the format of the output's "
+        "suffix: .glb (the server's head animated as its viewers saw it, audio "
         "as .wav beside it), .csv / .json (curves with a time column t, s of the session), .tsv (Rhubarb-style "
         "mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`. Without --head the .glb "
         "is the head the server serves, fetched from it, with the weights of its own morph targets it sent per "
