@@ -8,9 +8,10 @@ import numpy as np
 
 from assets.audio import wav_bytes
 from assets.files import atomic_write_bytes, check_writable
+from assets.heads.mesh import HeadMesh
 from assets.tracks import encode_csv, encode_json
 from clients.export.errors import ExportError
-from clients.export.gltf import arkit_glb, head_glb
+from clients.export.gltf import arkit_glb, head_glb, morph_glb
 from clients.export.rhubarb import tsv_bytes
 from realtime_core.track import Track
 
@@ -56,7 +57,7 @@ def export_track(
     path: str | Path,
     track: Track,
     *,
-    head: tuple | None = None,
+    head: tuple | HeadMesh | None = None,
     audio: tuple[np.ndarray, int] | None = None,
     morphs: str = "units",
     arkit_targets: dict[str, np.ndarray] | None = None,
@@ -65,7 +66,8 @@ def export_track(
     checked: frozenset[Path] = frozenset(),
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
-    files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb;
+    files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb; or a HeadMesh
+    whose own morph targets the track's curves weight (``track.names``: a served head, :func:`morph_glb`);
     audio: (samples (n,) float or int16, rate_hz) starting at the track's first frame, written as
     ``<stem>.wav`` beside a .glb or .json
     (and named inside it). morphs (.glb): "units" = the rig's 4 mouth units (exact deformation) or
@@ -82,6 +84,12 @@ def export_track(
     # Everything that can be refused is refused before the first byte is written (no .wav left behind).
     if suffix == ".glb" and head is None:
         raise ExportError(f"{p}: a .glb export needs the head (its rig and mesh)")
+    if suffix == ".glb" and isinstance(head, HeadMesh):
+        if morphs != "units":
+            raise ExportError(f"{p}: a head given by its own targets is exported with them (morphs 'units')")
+        lacking = [n for n in track.names if n not in (head.targets or {})]
+        if lacking:
+            raise ExportError(f"{p}: {head.name} has no morph targets {lacking[:5]} for the track's curves")
     if suffix == ".glb" and morphs == "arkit52" and arkit_targets is None:
         raise ExportError(f"{p}: ARKit-52 morph targets need a head that has them (the built-in head)")
     if p.resolve() not in checked:
@@ -94,7 +102,9 @@ def export_track(
         wav_name = wav.name
     if suffix == ".glb":
         assert head is not None  # refused above otherwise
-        if morphs == "units":
+        if isinstance(head, HeadMesh):
+            data = morph_glb(head, track, audio=wav_name)
+        elif morphs == "units":
             rig, mesh = head
             data = head_glb(rig, mesh, track, audio=wav_name)
         else:

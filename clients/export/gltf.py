@@ -5,6 +5,8 @@
   targets animated by the parameter curves in IOD; a :class:`realtime_core.face.keyframes.MorphRig`:
   the head's own morph targets animated by the weights it computes per frame).
 - :func:`arkit_glb`: a head with all 52 ARKit targets animated by the ARKit weights facecast streams.
+- :func:`morph_glb`: a head's own morph targets animated by weights given per frame (what ``facecast record``
+  writes from a server's head and its "morph" frames, without the head's file).
 ``asset.extras.facecast`` names the audio file written beside the .glb.
 """
 
@@ -18,7 +20,7 @@ from assets.heads.glb import rig_targets
 from clients.export.errors import ExportError
 from realtime_core.track import Track
 
-__all__ = ["animated_glb", "arkit_glb", "builtin_arkit_targets", "head_glb", "rig_targets"]
+__all__ = ["animated_glb", "arkit_glb", "builtin_arkit_targets", "head_glb", "morph_glb", "rig_targets"]
 
 
 def animated_glb(
@@ -63,6 +65,32 @@ def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
         return glb.head_glb(rig, mesh, track.values, track.fps, audio=audio)
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
+
+
+def morph_glb(mesh, track: Track, *, audio: str | None = None) -> bytes:
+    """The animated glb of a head driven by its own morph targets, from their weights per frame: ``mesh`` a
+    :class:`assets.heads.mesh.HeadMesh` whose ``targets`` include every name of ``track.names`` (the weights, in [0, 1]
+    but a lips-apart head's jaw below 0). The file :func:`head_glb` writes for a MorphRig from the parameters (the same
+    writer, units and normals), here from the weights a server sent (its "morph" kind: docs/protocol.md). Normals
+    without part seams: a served head carries no parts, and the browser viewer shades it so too."""
+    targets = mesh.targets or {}
+    missing = [n for n in track.names if n not in targets]
+    if missing:
+        more = "..." if len(missing) > 5 else ""
+        raise ExportError(f"{mesh.name}: the head has no morph targets {missing[:5]}{more}")
+    return animated_glb(
+        vertices=mesh.vertices,
+        triangles=mesh.triangles,
+        targets=np.stack([np.asarray(targets[n], dtype=np.float32) for n in track.names]),
+        target_names=track.names,
+        track=track,
+        uvs=mesh.uvs,
+        colors=mesh.colors,
+        texture=mesh.texture if mesh.uvs is not None else None,
+        audio=audio,
+        units="morph weight",
+        target_normals=True,
+    )
 
 
 def builtin_arkit_targets() -> dict[str, np.ndarray]:

@@ -120,31 +120,56 @@ class Recording:
         return out
 
 
-async def fetch_head(url: str, token: str | None = None) -> HeadMesh:
-    """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept)."""
+async def fetch_head(url: str, token: str | None = None, *, targets: bool = False) -> HeadMesh:
+    """The served head (``/head/mesh.json`` and ``/head/texture``) as a HeadMesh (vertex order kept). targets: also
+    the morph targets the head drives (``mesh.targets``: name -> (n, 3) float64, in the order of the morph kind's
+    weights; None for a retargeted head, which drives none). ClientError naming the URL and the reason when the
+    head cannot be fetched."""
     auth = f"?token={quote(token)}" if token else ""
+    where = f"{url}/head/mesh.json"
     try:
         status, body = await http_get(url, "/head/mesh.json" + auth)
     except OSError as exc:
-        raise ClientError(f"{url}: cannot connect: {exc}") from None
+        raise ClientError(f"{url}: cannot connect: {exc}") from None  # as every request to a server says it
     if status != 200:
-        raise ClientError(f"{url}: the server has no head (/head/mesh.json answered {status})")
+        why = {404: "the server has no head", 401: "wrong or missing token"}.get(status, "")
+        raise ClientError(f"cannot fetch the server's head {where}: it answered {status} {why}".rstrip())
     try:
         m = json.loads(body)
         texture = None
         if m.get("uvs") is not None:
             t_status, t_body = await http_get(url, "/head/texture" + auth)
             texture = t_body if t_status == 200 else None
+        vertices = np.asarray(m["vertices"], dtype=np.float64).reshape(-1, 3)
         return HeadMesh(
-            vertices=np.asarray(m["vertices"], dtype=np.float64).reshape(-1, 3),
+            vertices=vertices,
             triangles=np.asarray(m["triangles"], dtype=np.int64).reshape(-1, 3),
             uvs=None if m.get("uvs") is None else np.asarray(m["uvs"], dtype=np.float64).reshape(-1, 2),
             colors=None if m.get("colors") is None else np.asarray(m["colors"], dtype=np.float32).reshape(-1, 3),
             texture=texture,
-            name=f"{url}/head/mesh.json",
+            name=where,
+            targets=driven_targets(m.get("morph"), len(vertices)) if targets else None,
         )
-    except (ValueError, KeyError, TypeError) as exc:
-        raise ClientError(f"{url}: unreadable /head/mesh.json: {exc}") from exc
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise ClientError(f"{where}: unreadable: {exc}") from exc
+    except OSError as exc:  # the texture's request
+        raise ClientError(f"cannot fetch the server's head {url}/head/texture: {exc}") from None
+
+
+def driven_targets(morph: dict | None, n: int) -> dict[str, np.ndarray] | None:
+    """mesh.json's ``morph`` (docs/protocol.md: the vertices any driven target moves and per target their x, y, z)
+    as name -> (n, 3) float64 displacement at weight 1, in the served order; None without one (a retargeted head)."""
+    if not morph:
+        return None
+    moved = np.asarray(morph["vertices"], dtype=np.int64)
+    if len(moved) and (moved.min() < 0 or moved.max() >= n):
+        raise ValueError(f"morph vertices outside the mesh's {n}")
+    out = {}
+    for name, flat in zip(morph["names"], morph["deltas"], strict=True):
+        d = np.zeros((n, 3), dtype=np.float64)
+        d[moved] = np.asarray(flat, dtype=np.float64).reshape(len(moved), 3)
+        out[str(name)] = d
+    return out
 
 
 def backoff(longest_s: float) -> Iterator[float]:

@@ -15,17 +15,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "record",
         help="save a live session's animation (glTF, CSV, JSON or Rhubarb TSV)",
         formatter_class=HelpFormatter,
-        description="Watch one session's mouth parameters and audio until it ends (or --duration), then write "
-        "them in the format of the output's suffix: .glb (the head with the 4 parameters as morph-target "
-        "weights, audio as .wav beside it), .csv / .json (curves with a time column t, s of the session), "
-        ".tsv (Rhubarb-style mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`.",
+        description="Watch one session's mouth parameters (for a .glb without --head: the weights of the served "
+        "head's own targets) and audio until it ends (or --duration), then write them in the format of the output's "
+        "suffix: .glb (the server's head animated as its viewers saw it, audio "
+        "as .wav beside it), .csv / .json (curves with a time column t, s of the session), .tsv (Rhubarb-style "
+        "mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`. Without --head the .glb "
+        "is the head the server serves, fetched from it, with the weights of its own morph targets it sent per "
+        "frame; a retargeted head needs --head with its file.",
     )
     p.add_argument(
         "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
     )
     p.add_argument("--session", default=None, help="session to record (default %(default)s = the first live one)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
-    add_head_options(p, help_head="head of the .glb: 'builtin', a rig file (.npz) or a mesh; must be the server's head")
+    add_head_options(
+        p,
+        help_head="head of the .glb (default: the server's own, fetched from it; a head driven by its own targets): "
+        "'builtin', a rig file (.npz) or a mesh, which must be the server's head",
+    )
+    p.set_defaults(head=None)  # None: the served head (add_head_options' default is the built-in head)
     p.add_argument(
         "--glb-morphs",
         choices=("units", "arkit52"),
@@ -45,21 +53,29 @@ def run(args: argparse.Namespace) -> int:
     from clients.client import server_url
     from clients.errors import ClientError
     from clients.export.files import FORMATS, check_outputs, export_track
-    from clients.viewer.stream import ViewerStreamConfig, pick_session, record_stream
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session, record_stream
     from facecast.commands.view import token_from_env
+    from realtime_core import VISUAL_PARAMS
     from realtime_core.track import Track
 
     if args.output.suffix.lower() not in FORMATS:
         raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
-    if args.output.suffix.lower() == ".glb" and args.glb_morphs == "arkit52" and args.head != "builtin":
-        # refused before the session is watched: export_track would refuse it only after the whole take
-        raise ClientError(
-            f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
-        )
+    glb = args.output.suffix.lower() == ".glb"
+    if glb and args.glb_morphs == "arkit52":
+        if args.head not in (None, "builtin"):
+            # refused before the session is watched: export_track would refuse it only after the whole take
+            raise ClientError(
+                f"{args.output}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}"
+            )
+        args.head = "builtin"  # the ARKit targets are the built-in head's, resolved here as before
+    served = glb and args.head is None  # the .glb is the head the server serves, with the weights it sends
+    if served:
+        given = [opt for opt, dest, unset in _RESOLVING if getattr(args, dest) != unset]
+        if given:  # they shape a head resolved here: without --head nothing is, and they would do nothing
+            raise ClientError(f"{' and '.join(given)} need --head (without it the .glb is the server's head as served)")
     checked = check_outputs([args.output])  # a folder that cannot be made fails now, not after the whole take
     args.url = server_url(args.url, "/view")  # the base URL also when given as the viewers' ws://HOST:PORT/view
     token = token_from_env(args.token_env)
-    glb = args.output.suffix.lower() == ".glb"
 
     def resolve():  # (head, ARKit targets or None), in a thread: rigging a new mesh takes seconds
         from facecast.commands.headopts import resolve_from_args
@@ -102,26 +118,68 @@ def run(args: argparse.Namespace) -> int:
     def same_head(head, description: dict) -> None:
         # checked on connecting (or when the head is ready): after the take, a wrong --head threw the
         # whole recording away
-        served = description.get("head")
-        if served is not None and served["vertex_count"] != len(head.mesh.vertices):
+        theirs = description.get("head")
+        if theirs is not None and theirs["vertex_count"] != len(head.mesh.vertices):
             raise ClientError(
                 f"--head {args.head} has {len(head.mesh.vertices)} vertices but the server's head has "
-                f"{served['vertex_count']}: pass the server's head"
+                f"{theirs['vertex_count']}: pass the server's head"
+            )
+
+    async def watch(kind: str, described: asyncio.Future[dict]):
+        session = await pick_session(args.url, args.session, args.wait, token)
+        cfg = ViewerStreamConfig(
+            url=args.url, session=session, kind=kind, token=token, wait_s=args.wait, max_s=args.duration
+        )
+        print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
+        return session, await record_stream(cfg, check_description=described.set_result)
+
+    async def served_head():
+        # The head the viewers were sent and the weights of its own targets they were sent (the "morph" kind:
+        # what the browser viewer shows), fetched while the session is watched: nothing of the start is missed.
+        described: asyncio.Future[dict] = asyncio.get_running_loop().create_future()
+        fetching = asyncio.ensure_future(fetch_head(args.url, token, targets=True))
+        watching = asyncio.ensure_future(watch("morph", described))
+
+        async def checked_head():
+            mesh = await asyncio.shield(fetching)
+            served_matches(mesh, await described)
+            return mesh
+
+        checking = asyncio.ensure_future(checked_head())
+        await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
+        failure = watching.exception() if watching.done() else None
+        if failure is not None:
+            checking.cancel()
+            mesh = await fetching  # a head that cannot be fetched is named first: why there are no morph frames
+            if not mesh.targets:  # the server refused the morph kind (4400): its head drives no targets of its own
+                raise ClientError(
+                    f"{args.url}: the server's head is retargeted (it drives no morph targets of its own), so its "
+                    "motion cannot be rebuilt from what it sends: pass --head with the head the server was started with"
+                )
+            raise failure
+        failure = checking.exception() if checking.done() else None
+        if failure is not None:
+            watching.cancel()
+            await asyncio.gather(watching, return_exceptions=True)  # the viewer is closed before raising
+            raise failure
+        return *watching.result(), (checking.result(), None)
+
+    def served_matches(mesh, description: dict) -> None:
+        # The weights name the targets of the head they were sent for: a server whose /head/mesh.json is another
+        # head's (a cluster's node with another --head) is refused on connecting, not by a glb that moves wrongly.
+        head = description.get("head") or {}
+        if head.get("vertex_count") != len(mesh.vertices) or list(description.get("names", ())) != list(mesh.targets):
+            raise ClientError(
+                f"{args.url}: the head at /head/mesh.json ({len(mesh.vertices)} vertices, targets "
+                f"{list(mesh.targets or ())[:3]}...) is not the one the session's morph weights drive"
             )
 
     async def main():
+        if served:
+            return await served_head()
         described: asyncio.Future[dict] = asyncio.get_running_loop().create_future()
-
-        async def watch():
-            session = await pick_session(args.url, args.session, args.wait, token)
-            cfg = ViewerStreamConfig(
-                url=args.url, session=session, kind="params", token=token, wait_s=args.wait, max_s=args.duration
-            )
-            print(f"facecast record: recording session {session!r} from {args.url}", flush=True)
-            return session, await record_stream(cfg, check_description=described.set_result)
-
         if not glb:
-            return *(await watch()), (None, None)
+            return *(await watch("params", described)), (None, None)
 
         async def head_checked():
             resolved = await in_daemon_thread(resolve, name="facecast-record-head")
@@ -131,7 +189,8 @@ def run(args: argparse.Namespace) -> int:
         # The head resolves while the session is watched and its frames are kept: resolving first (0.8 s
         # with the rig cached, ~13 s for a new mesh) missed the start of a session started just after the
         # recorder. A head that fails, or is not the server's, ends the watch as soon as it is known.
-        watching, checking = asyncio.ensure_future(watch()), asyncio.ensure_future(head_checked())
+        watching = asyncio.ensure_future(watch("params", described))
+        checking = asyncio.ensure_future(head_checked())
         await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
         for task, other in ((checking, watching), (watching, checking)):
             failure = task.exception() if task.done() else None
@@ -142,8 +201,9 @@ def run(args: argparse.Namespace) -> int:
         return *watching.result(), checking.result()
 
     session, rec, (head, arkit) = asyncio.run(main())
-    params, first = rec.timeline()
-    track = Track(values=params, fps=rec.fps, start_s=first / rec.fps)
+    values, first = rec.timeline()
+    names = tuple(rec.description["names"]) if served else VISUAL_PARAMS  # the morph kind's: the targets' weights
+    track = Track(values=values, fps=rec.fps, start_s=first / rec.fps, names=names)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
     files = export_track(
         args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit, checked=checked
@@ -154,3 +214,12 @@ def run(args: argparse.Namespace) -> int:
         f"({track.duration_s:.2f} s) of {session!r}{late}; {rec.ending}"
     )
     return 0
+
+
+_RESOLVING: tuple[tuple[str, str, object], ...] = (
+    ("--head-part", "head_part", []),
+    ("--landmarks", "landmarks", None),
+    ("--head-mode", "head_mode", "auto"),
+    ("--target-map", "target_map", None),
+)
+"""The head options that only shape a head resolved here (``--head``): (option, dest, unset value)."""

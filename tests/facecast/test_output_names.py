@@ -60,6 +60,16 @@ def test_record_refuses_arkit_morphs_on_a_mesh_head_before_watching(tmp_path, sh
     assert list(tmp_path.iterdir()) == []
 
 
+def test_record_refuses_head_options_without_head_before_watching(tmp_path, capsys):
+    """Without --head a .glb is the server's head as served: --head-mode, --landmarks ... shape a head resolved
+    here and would do nothing, so they are refused (port 9: nothing listens; the options are refused first)."""
+    out = tmp_path / "take.glb"
+    assert main(["record", "http://127.0.0.1:9", "-o", str(out), "--head-mode", "retarget", "--landmarks", "l"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--landmarks and --head-mode need --head" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("option", ["--show-landmarks", "--png"])
 def test_rig_refuses_a_picture_name_matplotlib_cannot_write(option, tmp_path, capsys):
     """Was a matplotlib traceback from savefig (after rigging, for --png)."""

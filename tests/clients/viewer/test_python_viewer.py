@@ -82,9 +82,10 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     for suffix in ("json", "csv", "tsv", "glb"):
         out = tmp_path / f"take.{suffix}"
         fut = live.submit(_session_once_watched(live, f"rec-{suffix}", 1.5, viewers=1))
-        # --head-mode retarget: the .glb then animates the rig's 4 mouth units, which equal the parameters
-        # (then one lip-contact curve per lip column)
-        assert main(["record", live.url, "--session", f"rec-{suffix}", "-o", str(out), "--head-mode", "retarget"]) == 0
+        # --head builtin --head-mode retarget (the server's head, retargeted): the .glb then animates the rig's 4
+        # mouth units, which equal the parameters (then one lip-contact curve per lip column)
+        argv = ["record", live.url, "--session", f"rec-{suffix}", "-o", str(out), "--head", "builtin"]
+        assert main([*argv, "--head-mode", "retarget"]) == 0
         assert fut.result(30)["frames"] == len(ref)
         got[suffix] = out
     np.testing.assert_array_equal(decode_json(got["json"].read_bytes()).values.astype(np.float32), ref)
@@ -111,6 +112,73 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     assert rate == 16000 and len(audio) == round(len(ref) / 30 * 16000)
     n = min(len(audio), len(x))
     np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
+
+
+def test_record_without_head_writes_the_served_head_animated_by_the_morph_weights_sent(model, parted_head, tmp_path):
+    """`facecast record URL -o take.glb` without --head, from a server whose head is driven by its own targets: the
+    .glb is the head the server serves (/head/mesh.json) with the weights its "morph" frames carried, frame for frame
+    (another morph viewer of the same session is the reference), which are the head's rig's weights of the session's
+    parameters; the session's audio is beside it. No head file on the recording side."""
+    from assets.audio import read_audio
+    from assets.heads.gltf import read_gltf_document
+    from assets.heads.mesh import load_mesh
+    from clients.viewer.stream import ViewerStreamConfig, fetch_head, record_stream
+
+    x = speechlike(1.5, 16000, seed=3)
+    x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)  # as sent (int16)
+    srv = LiveServer(model, parted_head)
+    try:
+        name = "served"
+        sent = srv.submit(record_stream(ViewerStreamConfig(url=srv.url, session=name, kind="morph", wait_s=20)))
+        fut = srv.submit(_session_once_watched(srv, name, 1.5, viewers=2))  # starts once both watch it
+        out = tmp_path / "take.glb"
+        assert main(["record", srv.url, "--session", name, "-o", str(out), "--wait", "20"]) == 0
+        n_frames = fut.result(30)["frames"]
+        rec = sent.result(30)
+        served = asyncio.run(fetch_head(srv.url, targets=True))
+    finally:
+        srv.stop()
+    weights, first = rec.timeline()
+    assert first == 0 and len(weights) == n_frames == 45
+    names = rec.description["names"]
+    assert names == list(parted_head.rig.names) == list(served.targets)
+
+    got = load_mesh(out)  # the project's own glTF reader
+    np.testing.assert_array_equal(got.vertices, served.vertices)
+    np.testing.assert_array_equal(got.triangles, served.triangles)
+    assert list(got.targets) == names
+    for k in names:
+        np.testing.assert_array_equal(got.targets[k], served.targets[k].astype(np.float32))
+    doc, buffers = read_gltf_document(out)
+    acc = doc["accessors"][doc["animations"][0]["samplers"][0]["output"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    w = np.frombuffer(buffers[0], "<f4", acc["count"], view.get("byteOffset", 0) + acc.get("byteOffset", 0))
+    np.testing.assert_array_equal(w.reshape(-1, len(names)), weights)  # what the viewers were sent, exactly
+    ref = speech_to_params(model, x).astype(np.float32)  # the session's parameters, computed here
+    np.testing.assert_allclose(w.reshape(-1, len(names)), parted_head.rig.weights(ref), atol=1e-5)
+    assert doc["asset"]["extras"]["facecast"]["audio"] == "take.wav"
+    audio, rate = read_audio(tmp_path / "take.wav")  # the session's audio beside the .glb
+    assert rate == 16000 and len(audio) == round(n_frames / 30 * 16000)
+    n = min(len(audio), len(x))
+    np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
+
+
+def test_record_without_head_from_a_retargeted_or_headless_server_says_what_to_do(live, model, tmp_path, capsys):
+    """A retargeted head's motion is not linear in what the server sends (its pose bound and lip-contact push):
+    `record -o take.glb` without --head says to pass it, in one line, before any session is watched. A server
+    without a head is named with the URL it could not fetch the head from."""
+    out = tmp_path / "take.glb"
+    assert main(["record", live.url, "--session", "nobody", "-o", str(out), "--wait", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "the server's head is retargeted" in err and "pass --head" in err, err
+    bare = LiveServer(model, None)
+    try:
+        assert main(["record", bare.url, "--session", "nobody", "-o", str(out), "--wait", "0"]) == 2
+    finally:
+        bare.stop()
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{bare.url}/head/mesh.json: it answered 404 the server has no head" in err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_view_without_a_display_explains_itself(capsys, monkeypatch):
