@@ -8,7 +8,8 @@ Per clip of each set: (c) the shipped default model's live path on the audio; (a
 phones (``training.force_align.recognise_phones``, no transcript; one run per language-model weight) -> unit
 selection over the shipped corpus (``--n-best`` sequences, s1 val leave-one-out); (b) (a) mixed with (c) by
 region as ``facecast say --audio`` does (``UnitSynthesizer.with_recording``). Information rows: one sequence
-instead of ``--n-best``, and the reference phones (where a set has them) in place of the recognised ones.
+instead of ``--n-best``, and the reference phones in place of the recognised ones (the other-talker clips'
+from their GRID sentence force-aligned: the text + recording route).
 Scored as the model card scores its sets (``training.reallips.score_lips``: r(mouth_open) at lag 0, frames
 pooled, /p b m/ closures). Sets: ``val`` (s1 val, real lips), ``real`` (real speech of other voices, rules
 truth), ``other`` (the other-talker GRID clips, real lips), ``test`` (s1 test). Writes ``DIR/probe.md`` (the
@@ -27,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from assets.grid import Split
+from assets.grid import Split, sentence_text
 from assets.modelfile import load_model
 from assets.progress import Progress
 from assets.unitcorpus import find_unit_corpus, load_unit_corpus
@@ -36,7 +37,7 @@ from realtime_core.pipeline import speech_to_params
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
 from realtime_core.synthesis.visemes import viseme_of
 from training.alignments import Alignment, find_aligned_audio
-from training.force_align import recognise_phones
+from training.force_align import force_align, recognise_phones
 from training.grid_phones import HMM_PATH, read_grid_phones
 from training.reallips import LipScores, other_talker_clips, real_speech_clips, s1_clips, score_lips
 
@@ -90,8 +91,17 @@ def load_set(name: str, data: Path) -> list[Clip]:
             for n, x, r, truth, spans in real_speech_clips(data / "speech")
         ]
     if name == "other":
+        # Their reference phones: the GRID sentence named by the clip's code (its last six letters) force-aligned
+        # to the clip by pocketsphinx, as `facecast say TEXT --audio CLIP` does (text + recording).
         return [
-            Clip(name=n, samples=t.samples, rate=t.sample_rate_hz, truth=t.params, spans=spans, reference=None)
+            Clip(
+                name=n,
+                samples=t.samples,
+                rate=t.sample_rate_hz,
+                truth=t.params,
+                spans=spans,
+                reference=force_align(t.samples, t.sample_rate_hz, sentence_text(n[-6:]), source=n),
+            )
             for n, t, spans in other_talker_clips(data / "video" / "grid")
         ]
     raise ValueError(f"unknown set {name!r} (one of {', '.join(SETS)})")
