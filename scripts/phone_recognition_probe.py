@@ -66,6 +66,19 @@ class Clip:
     exclude: tuple[str, ...] = ()
 
 
+def _filmed(name: str, track, spans: list, reference: Alignment | None, exclude: tuple[str, ...] = ()) -> Clip:
+    """A clip of a filmed talker from its face track (``training.video.FaceTrack``: audio and real lips)."""
+    return Clip(
+        name=name,
+        samples=track.samples,
+        rate=track.sample_rate_hz,
+        truth=track.params,
+        spans=spans,
+        reference=reference,
+        exclude=exclude,
+    )
+
+
 def load_set(name: str, data: Path) -> list[Clip]:
     if name in ("val", "test"):
         # closures on the shipped labels (the model card's 110 of val); the reference phones are the
@@ -73,15 +86,7 @@ def load_set(name: str, data: Path) -> list[Clip]:
         labels = read_grid_phones(HMM_PATH)
         split: Split = "val" if name == "val" else "test"
         return [
-            Clip(
-                name=sid,
-                samples=t.samples,
-                rate=t.sample_rate_hz,
-                truth=t.params,
-                spans=spans,
-                reference=labels.get(sid),
-                exclude=(sid,) if name == "val" else (),
-            )
+            _filmed(sid, t, spans, labels.get(sid), exclude=(sid,) if name == "val" else ())
             for sid, t, spans in s1_clips(split, root=data / "video" / "grid_s1")
         ]
     if name == "real":
@@ -94,14 +99,7 @@ def load_set(name: str, data: Path) -> list[Clip]:
         # Their reference phones: the GRID sentence named by the clip's code (its last six letters) force-aligned
         # to the clip by pocketsphinx, as `facecast say TEXT --audio CLIP` does (text + recording).
         return [
-            Clip(
-                name=n,
-                samples=t.samples,
-                rate=t.sample_rate_hz,
-                truth=t.params,
-                spans=spans,
-                reference=force_align(t.samples, t.sample_rate_hz, sentence_text(n[-6:]), source=n),
-            )
+            _filmed(n, t, spans, force_align(t.samples, t.sample_rate_hz, sentence_text(n[-6:]), source=n))
             for n, t, spans in other_talker_clips(data / "video" / "grid")
         ]
     raise ValueError(f"unknown set {name!r} (one of {', '.join(SETS)})")

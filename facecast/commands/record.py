@@ -125,6 +125,21 @@ def run(args: argparse.Namespace) -> int:
                 f"{theirs['vertex_count']}: pass the server's head"
             )
 
+    async def both(watching: asyncio.Future, checking: asyncio.Future, *, explain=None):
+        # (the watch's result, the head check's) once both are done. The first failure (the head's first: a head
+        # that cannot be had is why the watch failed too) cancels the other and is raised, the viewer closed first;
+        # explain() may raise a clearer error for a failed watch.
+        await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
+        for task, other in ((checking, watching), (watching, checking)):
+            failure = task.exception() if task.done() else None
+            if failure is not None:
+                other.cancel()
+                await asyncio.gather(other, return_exceptions=True)  # the viewer is closed before raising
+                if task is watching and explain is not None:
+                    await explain()
+                raise failure
+        return watching.result(), checking.result()
+
     async def watch(kind: str, described: asyncio.Future[dict]):
         session = await pick_session(args.url, args.session, args.wait, token)
         cfg = ViewerStreamConfig(
@@ -145,24 +160,16 @@ def run(args: argparse.Namespace) -> int:
             served_matches(mesh, await described)
             return mesh
 
-        checking = asyncio.ensure_future(checked_head())
-        await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
-        failure = watching.exception() if watching.done() else None
-        if failure is not None:
-            checking.cancel()
+        async def why_no_morph_frames() -> None:
             mesh = await fetching  # a head that cannot be fetched is named first: why there are no morph frames
             if not mesh.targets:  # the server refused the morph kind (4400): its head drives no targets of its own
                 raise ClientError(
                     f"{args.url}: the server's head is retargeted (it drives no morph targets of its own), so its "
                     "motion cannot be rebuilt from what it sends: pass --head with the head the server was started with"
                 )
-            raise failure
-        failure = checking.exception() if checking.done() else None
-        if failure is not None:
-            watching.cancel()
-            await asyncio.gather(watching, return_exceptions=True)  # the viewer is closed before raising
-            raise failure
-        return *watching.result(), (checking.result(), None)
+
+        watched, mesh = await both(watching, asyncio.ensure_future(checked_head()), explain=why_no_morph_frames)
+        return *watched, (mesh, None)
 
     def served_matches(mesh, description: dict) -> None:
         # The weights name the targets of the head they were sent for: a server whose /head/mesh.json is another
@@ -189,16 +196,10 @@ def run(args: argparse.Namespace) -> int:
         # The head resolves while the session is watched and its frames are kept: resolving first (0.8 s
         # with the rig cached, ~13 s for a new mesh) missed the start of a session started just after the
         # recorder. A head that fails, or is not the server's, ends the watch as soon as it is known.
-        watching = asyncio.ensure_future(watch("params", described))
-        checking = asyncio.ensure_future(head_checked())
-        await asyncio.wait((watching, checking), return_when=asyncio.FIRST_EXCEPTION)
-        for task, other in ((checking, watching), (watching, checking)):
-            failure = task.exception() if task.done() else None
-            if failure is not None:
-                other.cancel()
-                await asyncio.gather(other, return_exceptions=True)  # the viewer is closed before raising
-                raise failure
-        return *watching.result(), checking.result()
+        watched, resolved = await both(
+            asyncio.ensure_future(watch("params", described)), asyncio.ensure_future(head_checked())
+        )
+        return *watched, resolved
 
     session, rec, (head, arkit) = asyncio.run(main())
     values, first = rec.timeline()
