@@ -129,9 +129,9 @@ def recognise_phones(
     ``source``) when nothing was recognised (e.g. no audio)."""
     import os
 
+    Decoder = _decoder_class()  # first: without pocketsphinx, the error that says how to install it
     import pocketsphinx
 
-    Decoder = _decoder_class()
     phone_lm = os.path.join(pocketsphinx.get_model_path(), "en-us", "en-us-phone.lm.bin")
     decoder = Decoder(
         samprate=16000,
