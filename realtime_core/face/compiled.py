@@ -317,3 +317,123 @@ def morph_displacements_int16(  # pragma: no cover - compiled
     arrays costs a few microseconds of argument checks, a tenth of a frame's work)."""
     morph_displacements(w, rows, values)
     return quantize_int16_rows(values, out, scales)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def flipped_at_poses(  # pragma: no cover - compiled
+    v0: np.ndarray, disp: np.ndarray, triangles: np.ndarray, n0: np.ndarray, which: np.ndarray, out: np.ndarray
+) -> None:
+    """The fold repair's flip test (:class:`realtime_core.face.repair._FoldWatch`): for each triangle ``which`` (k,)
+    int of ``triangles`` (m, 3) int64 and every pose p, ``out[f, p]`` = its normal at that pose points against its
+    rest normal ``n0[f]`` (m, 3) float64: ``n0 . ((b - a) x (c - a)) < 0``, a vertex i at pose p at
+    ``v0[i] + disp[i, 3p:3p+3]`` (v0 (n, 3), disp (n, 3 * n_poses) float64; out (m, n_poses) bool).
+
+    The same float64 operations in the same order as the numpy it replaces (``np.cross``'s products and differences,
+    then the dot product summed x, y, z), no fused multiply-add, so every decision is the same; one pass per triangle
+    instead of a dozen (k, poses, 3) temporaries: the repair's measurement was most of a coarse head's rig time
+    (a 4,500-triangle head's 3.6 min of rig tries, docs/animation.md "The repair's measurement compiled")."""
+    n_poses = out.shape[1]
+    for q in range(which.shape[0]):
+        f = which[q]
+        a, b, c = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        nx, ny, nz = n0[f, 0], n0[f, 1], n0[f, 2]
+        for p in range(n_poses):
+            o = 3 * p
+            ax, ay, az = v0[a, 0] + disp[a, o], v0[a, 1] + disp[a, o + 1], v0[a, 2] + disp[a, o + 2]
+            ux = (v0[b, 0] + disp[b, o]) - ax
+            uy = (v0[b, 1] + disp[b, o + 1]) - ay
+            uz = (v0[b, 2] + disp[b, o + 2]) - az
+            wx = (v0[c, 0] + disp[c, o]) - ax
+            wy = (v0[c, 1] + disp[c, o + 1]) - ay
+            wz = (v0[c, 2] + disp[c, o + 2]) - az
+            cx = uy * wz - uz * wy
+            cy = uz * wx - ux * wz
+            cz = ux * wy - uy * wx
+            s = nx * cx
+            s = s + ny * cy
+            s = s + nz * cz
+            out[f, p] = s < 0.0
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def stretched_at_poses(  # pragma: no cover - compiled
+    v0: np.ndarray,
+    disp: np.ndarray,
+    edges: np.ndarray,
+    longest: np.ndarray,
+    which: np.ndarray,
+    n_poses: int,
+    out: np.ndarray,
+) -> None:
+    """The fold repair's stretch test: for each edge ``which`` (k,) int of ``edges`` (E, 2) int64, ``out[e]`` =
+    its length exceeds ``longest[e]`` (E,) float64 at any of the first ``n_poses`` poses (positions as in
+    :func:`flipped_at_poses`; out (E,) bool). The length as ``np.linalg.norm`` computes it (the squares summed x, y,
+    z, then the square root), so the same decisions."""
+    for q in range(which.shape[0]):
+        e = which[q]
+        i, j = edges[e, 0], edges[e, 1]
+        limit = longest[e]
+        over = False
+        for p in range(n_poses):
+            o = 3 * p
+            dx = (v0[i, 0] + disp[i, o]) - (v0[j, 0] + disp[j, o])
+            dy = (v0[i, 1] + disp[i, o + 1]) - (v0[j, 1] + disp[j, o + 1])
+            dz = (v0[i, 2] + disp[i, o + 2]) - (v0[j, 2] + disp[j, o + 2])
+            s = dx * dx
+            s = s + dy * dy
+            s = s + dz * dz
+            if np.sqrt(s) > limit:
+                over = True
+                break
+        out[e] = over
+
+
+@njit(cache=True, nogil=True, boundscheck=False, error_model="numpy")
+def front_most_binned(  # pragma: no cover - compiled
+    points: np.ndarray,
+    tris: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    owner: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    skip: np.ndarray,
+    below: np.ndarray,
+    tolerance: float,
+    out: np.ndarray,
+) -> None:
+    """The search of :func:`realtime_core.face.visibility.front_most` once its grid is built: for each point i of
+    ``points`` (k, 2) float64, the triangles ``owner[start[i]:stop[i]]`` (int) of ``tris`` (m, 3, 3) float64 (u, w,
+    depth) binned in its cell, but ``skip[i]`` (k,) int64 (-1: none), each tested as front_most tests it (barycentric
+    coordinates as :func:`realtime_core.face.interpolation.barycentric_2d` computes them, within ``tolerance`` and
+    within the triangle's box ``lo``/``hi`` (m, 2), depth under ``below[i]`` (k,) float64, inf for no limit):
+    ``out[i]`` the largest depth found, NaN for none. The same float64 operations in the same order as the numpy
+    (the depth summed over the three corners in order), so the same answers; a loop over each point's candidates
+    instead of (pairs,)-long temporaries: the search was the rig checks' largest cost."""
+    for i in range(points.shape[0]):
+        px, py = points[i, 0], points[i, 1]
+        best = -np.inf
+        for q in range(start[i], stop[i]):
+            f = owner[q]
+            if f == skip[i]:
+                continue
+            if px < lo[f, 0] or py < lo[f, 1] or px > hi[f, 0] or py > hi[f, 1]:
+                continue
+            ax, ay = tris[f, 0, 0], tris[f, 0, 1]
+            v0x, v0y = tris[f, 1, 0] - ax, tris[f, 1, 1] - ay
+            v1x, v1y = tris[f, 2, 0] - ax, tris[f, 2, 1] - ay
+            v2x, v2y = px - ax, py - ay
+            den = v0x * v1y - v1x * v0y
+            l1 = (v2x * v1y - v1x * v2y) / den
+            l2 = (v0x * v2y - v2x * v0y) / den
+            l0 = 1.0 - l1 - l2
+            if not (np.isfinite(l0) and np.isfinite(l1) and np.isfinite(l2)):
+                continue
+            if l0 < -tolerance or l1 < -tolerance or l2 < -tolerance:
+                continue
+            depth = l0 * tris[f, 0, 2]
+            depth = depth + l1 * tris[f, 1, 2]
+            depth = depth + l2 * tris[f, 2, 2]
+            if depth < below[i] and depth > best:
+                best = depth
+        out[i] = best if np.isfinite(best) else np.nan

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from realtime_core.face.compiled import flipped_at_poses, stretched_at_poses
 from realtime_core.face.projection import vertex_adjacency
 from realtime_core.normals import triangle_normals
 
@@ -256,10 +257,6 @@ def repair_folds(
     )
 
 
-POSE_BLOCK = 32
-"""Poses :class:`_FoldWatch` deforms at once (bounds its (triangles, poses, 3) arrays on a dense full-body mesh)."""
-
-
 class _FoldWatch:
     """The flipped triangles and over-stretched edges of a mesh at every pose as the repair changes its field.
 
@@ -307,21 +304,11 @@ class _FoldWatch:
         tri = tri[self.tri_ok[tri]]
         edge = np.unique(self.vertex_edge[rows].indices)
         edge = edge[self.edge_ok[edge]]
-        t_m, e_m, n0 = self.t[tri], self.e[edge], self.n0[tri]
-        self.stretched[edge] = False
-        for lo in range(0, self.n_poses, POSE_BLOCK):
-            hi = min(lo + POSE_BLOCK, self.n_poses)
-            pa, pb, pc = (self._at(t_m[:, k], lo, hi) for k in range(3))
-            self.flipped[tri, lo:hi] = np.einsum("kj,kpj->kp", n0, np.cross(pb - pa, pc - pa)) < 0
-            if lo < self.n_stretch:
-                top = min(hi, self.n_stretch)
-                d = self._at(e_m[:, 0], lo, top) - self._at(e_m[:, 1], lo, top)
-                self.stretched[edge] |= (np.linalg.norm(d, axis=2) > self.longest[edge, None]).any(axis=1)
+        # Compiled (realtime_core.face.compiled): numpy's (triangles, poses, 3) temporaries were most of the repair's
+        # time; the kernels make the same float64 operations in the same order, so the same decisions.
+        flipped_at_poses(self.v0, self.disp, self.t, self.n0, tri, self.flipped)
+        stretched_at_poses(self.v0, self.disp, self.e, self.longest, edge, self.n_stretch, self.stretched)
         return self.flipped, self.stretched
-
-    def _at(self, vertices: np.ndarray, lo: int, hi: int) -> np.ndarray:
-        """(k, hi - lo, 3) the positions of ``vertices`` (k,) at poses lo..hi-1."""
-        return self.v0[vertices][:, None, :] + self.disp[vertices, 3 * lo : 3 * hi].reshape(len(vertices), hi - lo, 3)
 
 
 def _widened(bad: np.ndarray, stuck: np.ndarray, edges: np.ndarray, grow_every: int) -> np.ndarray:

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from realtime_core.face import FaceModel, MouthCalibration, MouthLandmarks, Rig
-from realtime_core.face.repair import MAX_ROUNDS, PATIENCE, POSE_BLOCK, repair_folds
+from realtime_core.face.repair import MAX_ROUNDS, PATIENCE, repair_folds
 
 
 def _lip_rig(seed: int = 3) -> Rig:
@@ -240,14 +240,14 @@ def test_a_repair_that_cannot_settle_gives_up_after_its_patience_and_says_so():
     """A vertex fixed to a simple vertex that carries it 0.4 across a 15 x 15 grid folds the triangles round it at
     any smoothing (its row is never changed): the count of bad vertices stops falling within a few rounds. With
     ``patience`` the repair ends ``patience`` rounds after its last new low, not settled and with no tie rounds
-    (its caller falls back to fewer poses); without, it runs all its rounds and tie rounds. At poses spanning more
-    than one block of the batched measurement, its flips left are those a pose-by-pose count finds."""
+    (its caller falls back to fewer poses); without, it runs all its rounds and tie rounds. At 41 poses (more than
+    the 32 the measurement once batched), its flips left are those a pose-by-pose count finds."""
     v, t = _grid(15)
     n = len(v)
     fixed = (v[:, 0] == 0) | (v[:, 0] == 1) | (v[:, 1] == 0) | (v[:, 1] == 1)
     fixed[n // 2] = True
     g = sp.csr_matrix(([1.0], ([n // 2], [0])), shape=(n, 1))
-    motions = np.linspace(0.01, 0.4, POSE_BLOCK + 9)[:, None, None] * np.array([[1.0, 0.0, 0.0]])
+    motions = np.linspace(0.01, 0.4, 41)[:, None, None] * np.array([[1.0, 0.0, 0.0]])
     full = repair_folds(v, t, g, motions, fixed=fixed)
     assert not full.settled and full.rounds > MAX_ROUNDS
     quick = repair_folds(v, t, g, motions, fixed=fixed, patience=PATIENCE)
@@ -567,3 +567,36 @@ def test_one_round_replaces_the_folded_rows_and_one_ring_by_their_neighbours_mea
     res = repair_folds(v, t, g, motion, fixed=edge, max_rounds=1, tie_rounds=0)
     np.testing.assert_array_equal(res.weights.toarray(), want)
     assert res.smoothed_rows == int(sel.sum())
+
+
+def test_the_compiled_fold_measure_decides_as_numpy_does():
+    """The repair's compiled flip and stretch tests (realtime_core.face.compiled) against numpy's arithmetic as the
+    repair used it before (np.cross, einsum, np.linalg.norm on (triangles, poses, 3) arrays): the same decisions
+    for every triangle, pose and edge, including triangles flattened to nearly zero area at some pose (where a
+    different order of operations could change the sign) and edges at exactly their limit."""
+    from realtime_core.face.compiled import flipped_at_poses, stretched_at_poses
+
+    rng = np.random.default_rng(7)
+    v, t = _grid(9)
+    n, m, n_poses = len(v), len(t), 45
+    disp = rng.normal(scale=0.08, size=(n, 3 * n_poses))
+    # Pose 3 puts every vertex on one line through the origin (zero area in exact arithmetic: signs by rounding).
+    disp[:, 9:12] = rng.uniform(size=(n, 1)) * np.array([0.3, 0.7, 0.1]) - v
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]).astype(np.int64)
+    n0 = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    pos = v[:, None, :] + disp.reshape(n, n_poses, 3)
+    longest = 2.5 * np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    longest[::5] = np.linalg.norm(pos[e[::5, 0], 2] - pos[e[::5, 1], 2], axis=1)  # exactly reached at pose 2
+    which_t, which_e = np.arange(m)[::2], np.arange(len(e))[1::2]
+    pa, pb, pc = (pos[t[which_t, k]] for k in range(3))
+    want_flip = np.einsum("kj,kpj->kp", n0[which_t], np.cross(pb - pa, pc - pa)) < 0
+    d = pos[e[which_e, 0], :30] - pos[e[which_e, 1], :30]
+    want_stretch = (np.linalg.norm(d, axis=2) > longest[which_e, None]).any(axis=1)
+    flipped = np.zeros((m, n_poses), dtype=bool)
+    stretched = np.ones(len(e), dtype=bool)
+    flipped_at_poses(v, disp, t.astype(np.int64), n0, which_t, flipped)
+    stretched_at_poses(v, disp, e, longest, which_e, 30, stretched)
+    assert np.array_equal(flipped[which_t], want_flip) and not flipped[1::2].any()
+    assert 0 < want_flip.sum() < want_flip.size and 0 < want_flip[:, 3].sum() < len(which_t)
+    assert np.array_equal(stretched[which_e], want_stretch) and stretched[::2].all()
+    assert 0 < want_stretch.sum() < len(which_e)
