@@ -437,3 +437,19 @@ def front_most_binned(  # pragma: no cover - compiled
             if depth < below[i] and depth > best:
                 best = depth
         out[i] = best if np.isfinite(best) else np.nan
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def triangle_boxes(tris: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``lo``, ``hi`` (m, 2) float64: the smallest and largest (u, w) of each triangle of ``tris`` (m, 3, 3) float64
+    over its three corners (NaN where a corner's coordinate is NaN, as numpy's min and max give): what
+    :func:`realtime_core.face.visibility.front_most` bins by, in one pass instead of two strided reductions."""
+    for f in range(tris.shape[0]):
+        for d in range(2):
+            a, b, c = tris[f, 0, d], tris[f, 1, d], tris[f, 2, d]
+            if np.isnan(a) or np.isnan(b) or np.isnan(c):
+                lo[f, d] = np.nan
+                hi[f, d] = np.nan
+            else:
+                lo[f, d] = min(a, b, c)
+                hi[f, d] = max(a, b, c)

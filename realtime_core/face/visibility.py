@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from realtime_core.face.interpolation import barycentric_2d
+from realtime_core.face.compiled import front_most_binned, triangle_boxes
 
 
 def front_most(
@@ -36,10 +36,12 @@ def front_most(
     out = np.full(k, np.nan)
     if not k or not len(tr):
         return out
-    lo, hi = tr[:, :, :2].min(axis=1), tr[:, :, :2].max(axis=1)
+    lo, hi = np.empty((len(tr), 2)), np.empty((len(tr), 2))
+    triangle_boxes(tr, lo, hi)
     if cell is None:
         cell = float(np.median((hi - lo).max(axis=1)))
-    cell = max(cell, 1e-12 * max(float(np.ptp(tr[:, :, :2])), 1e-300))
+    # The boxes' extremes are every coordinate's: np.ptp of the triangles' (u, w).
+    cell = max(cell, 1e-12 * max(float(hi.max() - lo.min()), 1e-300))
     lo_pt, hi_pt = p.min(axis=0), p.max(axis=0)
     use = np.flatnonzero((hi >= lo_pt).all(axis=1) & (lo <= hi_pt).all(axis=1))
     if not len(use):
@@ -60,22 +62,8 @@ def front_most(
     pg = np.floor((p - lo_pt) / cell).astype(np.int64)
     pk = pg[:, 1] * ncol + pg[:, 0]
     start, stop = np.searchsorted(key, pk, side="left"), np.searchsorted(key, pk, side="right")
-    n = stop - start
-    who = np.repeat(np.arange(k), n)
-    tri = owner[np.repeat(start, n) + np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)]
-    if skip is not None:
-        keep = tri != np.asarray(skip, dtype=np.int64)[who]
-        who, tri = who[keep], tri[keep]
-    t3 = tr[tri]
-    g = barycentric_2d(p[who], t3[:, 0, :2], t3[:, 1, :2], t3[:, 2, :2])
-    inside = np.all(g >= -tolerance, axis=1) & np.all(np.isfinite(g), axis=1)
-    # Within the triangle's box too, so the slack never reaches past its extent (a point on a vertex).
-    inside &= (p[who] >= lo[tri]).all(axis=1) & (p[who] <= hi[tri]).all(axis=1)
-    depth = np.einsum("ij,ij->i", np.where(np.isfinite(g), g, 0.0), t3[:, :, 2])
-    if below is not None:
-        inside &= depth < np.broadcast_to(np.asarray(below, dtype=np.float64), (k,))[who]
-    who, depth = who[inside], depth[inside]
-    best = np.full(k, -np.inf)
-    np.maximum.at(best, who, depth)
-    out[np.isfinite(best)] = best[np.isfinite(best)]
+    # Each point's candidates tested in one compiled loop (realtime_core.face.compiled), not as (pairs,) arrays.
+    skips = np.full(k, -1, dtype=np.int64) if skip is None else np.asarray(skip, dtype=np.int64).reshape(k)
+    limit = np.full(k, np.inf) if below is None else np.broadcast_to(np.asarray(below, dtype=np.float64), (k,)).copy()
+    front_most_binned(p, tr, lo, hi, owner, start, stop, skips, limit, float(tolerance), out)
     return out
