@@ -180,7 +180,8 @@ class ServerConfig:
 
     @classmethod
     def from_toml(cls, path: str | Path, **overrides: Any) -> ServerConfig:
-        """Read the ``[server]`` table of a TOML file (keys = field names); ``overrides`` (non-None) win."""
+        """Read the ``[server]`` table of a TOML file (keys = field names; nothing else may be in the file);
+        ``overrides`` (non-None) win."""
         p = Path(path)
         try:
             doc = tomllib.loads(p.read_text())
@@ -188,6 +189,13 @@ class ServerConfig:
             raise ServerConfigError(f"{p}: config file not found") from None
         except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ServerConfigError(f"{p}: cannot read config: {exc}") from None
+        # Anything outside [server] would be dropped without a word: a misspelled table or a bare
+        # `port = ...` above it would start on the defaults (and with no token), so refuse it.
+        stray = sorted(set(doc) - {"server"})
+        if stray:
+            raise ServerConfigError(
+                f"{p}: unknown top-level key or table {stray[0]!r} (settings go in the [server] table)"
+            )
         table = doc.get("server", {})
         if not isinstance(table, dict):
             raise ServerConfigError(f"{p}: [server] must be a table")

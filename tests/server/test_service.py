@@ -452,6 +452,10 @@ def test_config_from_toml(tmp_path):
         ("[server]\nmax_sessions = 0\n", "max_sessions"),
         ('[server]\nhost = "example.com"\n', "host must be an IP"),
         ("[server\n", "cannot read config"),
+        # outside [server]: a misspelled table, a bare key, a second table
+        ("[sever]\nport = 8850\n", "unknown top-level key or table 'sever'"),
+        ('port = 8850\n[server]\ntoken = "t"\n', "unknown top-level key or table 'port'"),
+        ("[server]\nport = 1\n[client]\nx = 1\n", "unknown top-level key or table 'client'"),
     ]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text)
