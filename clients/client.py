@@ -237,16 +237,26 @@ async def ingest_file(
     block_s: float = 0.02,
     token: str | None = None,
     hold_s: float = 0.0,
-) -> dict:
-    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``ended`` reply.
-    hold_s: seconds between the session's start and its first audio, in which viewers waiting for it connect."""
+    enrol: str | Path | None = None,
+) -> tuple[dict, dict]:
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``started`` and
+    ``ended`` replies. hold_s: seconds between the session's start and its first audio, in which viewers waiting
+    for it connect; enrol: a recording of the talker (any rate/format the reader takes) sent as the start's
+    enrolment, converted to this session's input (the speech file's rate, mono, pcm_s16le)."""
     from assets.audio import read_audio
+    from realtime_core.features.resample import resample_audio
 
     samples, rate = read_audio(path)
-    async with IngestClient(url, session=session, sample_rate_hz=rate, token=token) as ing:
+    ingest = IngestClient(url, session=session, sample_rate_hz=rate, token=token)
+    if enrol is not None:
+        voice, voice_rate = read_audio(enrol)
+        # The enrolment must be in the session's own rate/format/channels (docs/protocol.md, `enrol`): the
+        # server's resampler (resample_poly) on the whole recording, then the session's s16 encoding.
+        ingest.enrol = ingest.encode(resample_audio(voice, voice_rate, rate))
+    async with ingest as ing:
         await asyncio.sleep(hold_s)
         await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
-        return await ing.end()
+        return ing.started, await ing.end()
 
 
 @dataclass

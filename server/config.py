@@ -19,7 +19,11 @@ P_NODE = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 class ServerConfig:
     """host: interface to bind (127.0.0.1 = this machine only); port: TCP port (0 = any free port);
     token: shared secret required from ingest and viewers (None = open); max_message_bytes: largest
-    WebSocket message accepted (larger ones close that connection with 1009); max_sessions /
+    WebSocket message accepted (larger ones close that connection with 1009; 4 MiB by default so that a start
+    carrying 60 s of enrolment fits: 60 s of 16 kHz s16 mono is 2.6 MB in base64, of 24 kHz 3.8 MB. Other text
+    messages stay under protocol.MAX_TEXT_BYTES. A maximal start costs the server ~40 MiB while it is parsed and checked
+    (tracemalloc: 35 MiB beyond the 4 MiB frame: its text, the JSON string, the decoded bytes, float copies of the
+    samples), before the adaptation's own work; a binary audio message of 4 MiB costs about its size); max_sessions /
     max_viewers: server-wide limits (over them a connection is closed with 1013); viewer_queue:
     messages buffered per viewer before the oldest is dropped; viewer_max_behind_s: a viewer that
     keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
@@ -58,7 +62,7 @@ class ServerConfig:
     host: str = "127.0.0.1"
     port: int = 8765
     token: str | None = None
-    max_message_bytes: int = 1 << 20
+    max_message_bytes: int = 4 << 20
     max_sessions: int = 200
     max_viewers: int = 2000
     viewer_queue: int = 16

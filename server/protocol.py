@@ -50,7 +50,7 @@ MAX_JSON_DEPTH = 8  # control and start messages nest two levels; anything deepe
 MAX_TEXT_BYTES = 64 * 1024  # a text message is a start/control/end object, never this big
 MAX_START_BYTES = 64 << 20
 """A start message may carry an enrolment recording (base64 ``enrol``): it is bounded by the server's
-``max_message_bytes`` (the WebSocket limit, 1 MiB by default: about 24 s of 16 kHz pcm_s16le mono)
+``max_message_bytes`` (the WebSocket limit, 4 MiB by default: 60 s of up to 24 kHz pcm_s16le mono)
 rather than by MAX_TEXT_BYTES; its nesting is still bounded."""
 
 

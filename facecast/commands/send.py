@@ -38,6 +38,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help=f"send as fast as the server takes it instead of in real time, after {FAST_HOLD_S:g} s in which "
         "the viewers waiting for the session (view, record) connect, so they get it from its first frame",
     )
+    p.add_argument(
+        "--enrol",
+        type=Path,
+        default=None,
+        metavar="VOICE",
+        help="speaker enrolment: a recording of the talker (30-60 s intended, 1-120 s accepted; any audio file) "
+        "sent with the session's start, converted to the session's rate, mono, 16-bit; the server animates this "
+        "session with its model adapted to the voice (docs/protocol.md, `enrol`)",
+    )
     add_token_option(p)
     p.set_defaults(run=run)
 
@@ -50,15 +59,21 @@ def run(args: argparse.Namespace) -> int:
     from facecast.commands.view import token_from_env
 
     check_audio_path(args.speech)
+    if args.enrol is not None:
+        check_audio_path(args.enrol)
     url = server_url(args.url, "/ingest")  # the base URL also when given as the endpoint, ws://HOST:PORT/ingest
     token = token_from_env(args.token_env)
     session = args.session if args.session is not None else args.speech.stem
     pace = "as fast as the server takes it" if args.fast else "in real time"
     print(f"facecast send: streaming {args.speech} as session {session!r} to {url} {pace}", flush=True)
     hold = FAST_HOLD_S if args.fast else 0.0
-    ended = asyncio.run(
-        ingest_file(url, args.speech, session=session, realtime=not args.fast, token=token, hold_s=hold)
+    started, ended = asyncio.run(
+        ingest_file(
+            url, args.speech, session=session, realtime=not args.fast, token=token, hold_s=hold, enrol=args.enrol
+        )
     )
+    if "enrolled_s" in started:
+        print(f"facecast send: the server adapted the session to {started['enrolled_s']:.2f} s of {args.enrol}")
     print(
         f"facecast send: session {session!r} ended: {ended.get('frames')} frames, "
         f"{float(ended.get('audio_s', 0.0)):.2f} s of audio"

@@ -104,3 +104,33 @@ def test_send_accepts_the_ingest_endpoints_url_and_refuses_another_endpoint(tmp_
         assert srv.server.closes.get(4004, 0) == 0 and not srv.server.sessions  # the refused ones never connected
     finally:
         srv.stop()
+
+
+def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_path, model, shared_data, capsys):
+    """`send --enrol VOICE` carries the talker's recording in the start message, converted to the session's
+    rate (here LJSpeech's 22.05 kHz -> the speech file's 16 kHz), mono, s16. 40 s (30-60 s is the intended
+    amount) is 1.7 MB of base64: over the old 1 MiB default max_message_bytes (closed 1009), under the new one."""
+    from server.config import ServerConfig
+
+    wavs = sorted((shared_data / "speech" / "ljspeech").glob("LJ*.wav"))
+    parts, total = [], 0
+    for w in wavs:  # real speech of one talker, whole utterances up to 40 s
+        x, voice_rate = read_audio(w)
+        if total + len(x) > 40 * voice_rate:
+            continue
+        parts.append(x)
+        total += len(x)
+    voice = np.concatenate(parts)
+    assert voice_rate == 22050 and len(voice) > 35 * voice_rate
+    enrol = write_wav(tmp_path / "voice.wav", voice, voice_rate)
+    at_16k = -(-len(voice) * 320 // 441)  # resample_poly's ceil(n up / down) samples
+    assert 1 << 20 < 4 * (2 * at_16k) // 3 < ServerConfig().max_message_bytes  # base64 of the s16 samples
+    wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
+    srv = LiveServer(model, None)
+    try:
+        assert main(["send", str(wav), srv.url, "--enrol", str(enrol), "--fast"]) == 0, capsys.readouterr().err
+    finally:
+        srv.stop()
+    out = capsys.readouterr().out
+    assert f"adapted the session to {at_16k / 16000:.2f} s of {enrol}" in out, out
+    assert "session 'a' ended: 15 frames" in out, out
