@@ -21,7 +21,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "as .wav beside it), .csv / .json (curves with a time column t, s of the session), .tsv (Rhubarb-style "
         "mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`. Without --head the .glb "
         "is the head the server serves, fetched from it, with the weights of its own morph targets it sent per "
-        "frame; a retargeted head needs --head with its file.",
+        "frame; a retargeted head needs --head with its file. Exit status: 0 a whole take (or --duration's), 3 a partial take "
+        "(the server closed the session before its end, e.g. 1001 shutting down: what arrived is written), 2 an error.",
     )
     p.add_argument(
         "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from facecast.commands.view import token_from_env
     from realtime_core import VISUAL_PARAMS
     from realtime_core.track import Track
+    from wire import protocol as P
 
     if args.output.suffix.lower() not in FORMATS:
         raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
@@ -210,11 +212,20 @@ def run(args: argparse.Namespace) -> int:
         args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit, checked=checked
     )
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
+    # A session closed other than by its end (1001 server shutting down, 4000 too slow, ...) is a partial take:
+    # what arrived is written all the same, but the exit status says the take is not whole.
+    partial = not rec.stopped and rec.close_code != P.CLOSE_NORMAL
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
         f"({track.duration_s:.2f} s) of {session!r}{late}; {rec.ending}"
+        + ("; a partial take: the session did not end normally" if partial else "")
     )
-    return 0
+    return PARTIAL_EXIT if partial else 0
+
+
+PARTIAL_EXIT = 3
+"""Exit status of a take cut short by the server (its frames written): 0 is a whole take (or --duration's),
+2 an error before anything was written."""
 
 
 _RESOLVING: tuple[tuple[str, str, object], ...] = (

@@ -826,3 +826,29 @@ def test_view_window_backs_off_while_its_session_is_away_and_picks_it_up_again(l
         again.result(20)
     finally:
         rx.close()
+
+
+def test_record_of_a_session_cut_by_a_server_shutdown_writes_it_and_exits_3(model, tmp_path, capsys):
+    """A server shutting down mid-session (1001) used to leave `facecast record` exiting 0 with a part of the
+    take: the frames it got are written, it says the take is partial, and exits 3 (record.PARTIAL_EXIT)."""
+    import threading
+
+    from facecast.commands.record import PARTIAL_EXIT
+    from tests.live_server import stream_session
+
+    srv = LiveServer(model, None)
+    session = srv.submit(stream_session(srv.url, "cut", 8.0, seed=2))  # 240 frames in real time
+    out = tmp_path / "take.csv"
+    stopper = threading.Timer(2.0, srv.stop)  # the server shuts down about 2 s in
+    stopper.start()
+    try:
+        code = main(["record", srv.url, "--session", "cut", "-o", str(out), "--wait", "20"])
+    finally:
+        stopper.join(30)
+        with contextlib.suppress(Exception):  # the ingest was cut by the same shutdown
+            session.result(30)
+    printed = capsys.readouterr().out
+    assert code == PARTIAL_EXIT == 3, printed
+    assert "1001" in printed and "partial take" in printed, printed
+    take = decode_csv(out.read_bytes())
+    assert 20 <= take.n_frames < 200  # what arrived before the shutdown, not the whole 8 s
