@@ -1,4 +1,5 @@
-"""``facecast animate``: speech file -> mouth parameters at 30 fps (CSV), by the live path."""
+"""``facecast animate SPEECH -o OUT``: speech file -> mouth parameters at 30 fps (CSV, glTF, JSON, TSV), by the live
+path."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from facecast.commands.argtypes import within
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.outputs import add_output_option
     from facecast.commands.speech_options import add_expression_options, add_mapper_options
 
     p = sub.add_parser(
@@ -22,8 +24,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "frame; --mode batch runs batch HMM inversion (eq. 7 EM) over the whole file.",
     )
     p.add_argument("speech", type=Path, help="speech audio (WAV; other formats through ffmpeg)")
+    # Exports (clients/export); at least one -o or --csv/--glb/--json/--tsv is required. -o as `say` and `record`
+    # take it; the flags name the format themselves (the older spelling, kept).
+    add_output_option(p, formats=".csv/.glb/.json/.tsv", repeatable=True, required=False)
     p.add_argument("--csv", type=Path, default=None, help="output CSV: t (s, frame k at k/30) and the 4 parameters")
-    # Exports (clients/export); at least one of --csv/--glb/--json/--tsv is required.
     p.add_argument(
         "--glb",
         type=Path,
@@ -61,31 +65,34 @@ def run(args: argparse.Namespace) -> int:
     from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
     from assets.tracks import write_csv
+    from clients.export.errors import ExportError
+    from clients.export.files import FORMATS, check_outputs, export_track
+    from facecast.commands.outputs import check_output_formats
     from facecast.commands.speech_options import apply_expressions, expression_intensities
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
     from realtime_core.track import Track
 
-    outputs = [o for o in (args.csv, args.glb, args.json, args.tsv) if o is not None]
-    if not outputs:
+    exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}  # the format named by the flag
+    # -o's format follows the suffix; --csv writes CSV whatever the name (as it always has).
+    written = [*(args.output or ()), *(o for o in exports.values() if o is not None)]
+    if not written and args.csv is None:
         from training.errors import ConfigError
 
-        raise ConfigError("give at least one output: --csv, --glb, --json or --tsv")
-    from clients.export.errors import ExportError
-    from clients.export.files import check_outputs
-
+        raise ConfigError("give at least one output: -o OUT (.csv/.glb/.json/.tsv), --csv, --glb, --json or --tsv")
     # Every refusal comes before the first output is written (no partial set of files) and before the
     # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
-    exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}
     for fmt, out in exports.items():
         if out is not None and out.suffix.lower() != f".{fmt}":
             raise ExportError(f"{out}: --{fmt} writes a .{fmt} file; give a name ending in .{fmt}")
-    checked = check_outputs([o for o in exports.values() if o is not None], source=args.speech)
-    if args.glb and args.glb_morphs == "arkit52" and args.head != "builtin":
-        raise ExportError(f"{args.glb}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
+    check_output_formats(args.output or (), FORMATS)
+    checked = check_outputs(written, source=args.speech)
+    glbs = [o for o in written if o.suffix.lower() == ".glb"]
+    if glbs and args.glb_morphs == "arkit52" and args.head != "builtin":
+        raise ExportError(f"{glbs[0]}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
     head = None
-    if args.glb:
+    if glbs:
         from facecast.commands.headopts import resolve_from_args
 
         head = resolve_from_args(args)
@@ -105,33 +112,29 @@ def run(args: argparse.Namespace) -> int:
     track = Track(values=params)
     if args.csv is not None:
         write_csv(args.csv, track)
-    if args.glb or args.json or args.tsv:
-        from clients.export.files import export_track
+    arkit = None
+    if glbs and args.glb_morphs == "arkit52" and args.head == "builtin":
+        from clients.export.gltf import builtin_arkit_targets
 
-        arkit = None
-        if args.glb and args.glb_morphs == "arkit52" and args.head == "builtin":
-            from clients.export.gltf import builtin_arkit_targets
-
-            arkit = builtin_arkit_targets()
-        for out in (args.glb, args.json, args.tsv):
-            if out is not None:
-                export_track(
-                    out,
-                    track,
-                    head=head,
-                    audio=(samples, rate),
-                    morphs=args.glb_morphs,
-                    arkit_targets=arkit,
-                    checked=checked,  # probed above: not again per file
-                    # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
-                    arkit_track=Track(values=speech),
-                    expression=expression_intensities(args, len(params)),
-                )
+        arkit = builtin_arkit_targets()
+    for out in written:
+        export_track(
+            out,
+            track,
+            head=head,
+            audio=(samples, rate),
+            morphs=args.glb_morphs,
+            arkit_targets=arkit,
+            checked=checked,  # probed above: not again per file
+            # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
+            arkit_track=Track(values=speech),
+            expression=expression_intensities(args, len(params)),
+        )
     delay = (
         f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"
         if args.mode == "stream"
         else "batch"
     )
-    for out in outputs:
+    for out in [*([args.csv] if args.csv is not None else []), *written]:
         print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech} ({delay})")
     return 0

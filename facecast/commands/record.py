@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
+    from facecast.commands.outputs import add_output_option
     from facecast.commands.view import DEFAULT_URL, add_session_options
 
     p = sub.add_parser(
@@ -17,18 +17,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=HelpFormatter,
         description="Watch one session's mouth parameters (for a .glb without --head: the weights of the served "
         "head's own targets) and audio until it ends (or --duration), then write them in the format of the output's "
-        "suffix: .glb (the server's head animated as its viewers saw it, audio "
-        "as .wav beside it), .csv / .json (curves with a time column t, s of the session), .tsv (Rhubarb-style "
-        "mouth-shape cues). The same writers as `facecast animate --glb/--json/--tsv`. Without --head the .glb "
-        "is the head the server serves, fetched from it, with the weights of its own morph targets it sent per "
-        "frame; a retargeted head needs --head with its file. Exit status: 0 a whole take (or --duration's), 3 a partial take "
-        "(the server closed the session before its end, e.g. 1001 shutting down: what arrived is written), 2 an error.",
+        "suffix: .glb (the server's head animated as its viewers saw it, the audio as a .wav beside it), .csv "
+        "(curves with a time column t, s of the session), .json (the same curves, the audio as a .wav beside "
+        "it), .tsv (Rhubarb-style mouth-shape cues), .wav (the session's audio alone). The same writers as "
+        "`facecast animate -o`. Without --head the .glb is the head the server serves, fetched from it, with the "
+        "weights of its own morph targets it sent per frame; a retargeted head needs --head with its file. A "
+        "video of the session: `facecast view URL --record take.mp4`. Exit status: 0 a whole take (or "
+        "--duration's), 3 a partial take (the server closed the session before its end, e.g. 1001 shutting "
+        "down: what arrived is written), 2 an error.",
     )
     p.add_argument(
         "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
     )
     p.add_argument("--session", default=None, help="session to record (default %(default)s = the first live one)")
-    p.add_argument("-o", "--output", type=Path, required=True, help="output file: .glb, .csv, .json or .tsv")
+    add_output_option(
+        p, formats=".glb/.csv/.json/.tsv/.wav (a .glb or .json with a .wav beside it)", repeatable=False, required=True
+    )
     add_head_options(
         p,
         help_head="head of the .glb (default: the server's own, fetched from it; a head driven by its own targets): "
@@ -51,18 +55,21 @@ def run(args: argparse.Namespace) -> int:
     import contextlib
     import threading
 
+    from assets.audio import write_wav
+    from assets.files import check_writable
     from clients.client import server_url
     from clients.errors import ClientError
     from clients.export.files import FORMATS, check_outputs, export_track
     from clients.viewer.stream import ViewerStreamConfig, fetch_head, pick_session, record_stream
+    from facecast.commands.outputs import check_output_formats
     from facecast.commands.view import token_from_env
     from realtime_core import VISUAL_PARAMS
     from realtime_core.track import Track
     from wire import protocol as P
 
-    if args.output.suffix.lower() not in FORMATS:
-        raise ClientError(f"{args.output}: unknown export format (use {', '.join(FORMATS)})")
+    check_output_formats([args.output], (*FORMATS, ".wav"), hints=RECORD_HINTS)
     glb = args.output.suffix.lower() == ".glb"
+    audio_only = args.output.suffix.lower() == ".wav"
     if glb and args.glb_morphs == "arkit52":
         if args.head not in (None, "builtin"):
             # refused before the session is watched: export_track would refuse it only after the whole take
@@ -75,7 +82,10 @@ def run(args: argparse.Namespace) -> int:
         given = [opt for opt, dest, unset in _RESOLVING if getattr(args, dest) != unset]
         if given:  # they shape a head resolved here: without --head nothing is, and they would do nothing
             raise ClientError(f"{' and '.join(given)} need --head (without it the .glb is the server's head as served)")
-    checked = check_outputs([args.output])  # a folder that cannot be made fails now, not after the whole take
+    # a folder that cannot be made fails now, not after the whole take
+    checked = frozenset() if audio_only else check_outputs([args.output])
+    if audio_only:
+        check_writable(args.output)
     args.url = server_url(args.url, "/view")  # the base URL also when given as the viewers' ws://HOST:PORT/view
     token = token_from_env(args.token_env)
 
@@ -208,9 +218,12 @@ def run(args: argparse.Namespace) -> int:
     names = tuple(rec.description["names"]) if served else VISUAL_PARAMS  # the morph kind's: the targets' weights
     track = Track(values=values, fps=rec.fps, start_s=first / rec.fps, names=names)
     audio = (rec.audio_track(track.start_s, track.n_frames), rec.audio_rate_hz)
-    files = export_track(
-        args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit, checked=checked
-    )
+    if audio_only:  # the audio the frames were timed to, from the first frame on
+        files = [write_wav(args.output, *audio)]
+    else:
+        files = export_track(
+            args.output, track, head=head, audio=audio, morphs=args.glb_morphs, arkit_targets=arkit, checked=checked
+        )
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     # A session closed other than by its end (1001 server shutting down, 4000 too slow, ...) is a partial take:
     # what arrived is written all the same, but the exit status says the take is not whole.
@@ -227,6 +240,11 @@ PARTIAL_EXIT = 3
 """Exit status of a take cut short by the server (its frames written): 0 is a whole take (or --duration's),
 2 an error before anything was written."""
 
+
+RECORD_HINTS = {
+    ".mp4": "record writes the animation, not a video: `facecast view URL --session S --record take.mp4` renders one",
+}
+"""What to use instead of an output ``record`` does not write."""
 
 _RESOLVING: tuple[tuple[str, str, object], ...] = (
     ("--head-part", "head_part", []),

@@ -9,6 +9,7 @@ from pathlib import Path
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
+    from facecast.commands.outputs import add_output_option
 
     p = sub.add_parser(
         "say",
@@ -26,14 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "parameters and the Motion Unit parameters of paper 002).",
     )
     p.add_argument("text", help="what to say (for --audio: the transcript of the recording)")
-    p.add_argument(
-        "-o",
-        "--output",
-        type=Path,
-        action="append",
-        required=True,
-        help="output file, .mp4/.glb/.csv/.json/.tsv/.wav/.npz (repeatable)",
-    )
+    add_output_option(p, formats=".mp4/.glb/.csv/.json/.tsv/.wav/.npz", repeatable=True, required=True)
     p.add_argument(
         "--lang", choices=("en", "es"), default=None, help="language of TEXT (default: the --voice's, else en)"
     )
@@ -150,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
+    from facecast.commands.outputs import check_output_formats
     from facecast.commands.speech_options import apply_expressions
     from realtime_core.synthesis.rest import RestPauses
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
@@ -158,9 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
     t_start = time.perf_counter()
     outs = [Path(o) for o in args.output]
-    bad = [o for o in outs if o.suffix.lower() not in (".mp4", ".npz", ".wav", *FORMATS)]
-    if bad:
-        raise ConfigError(f"{bad[0]}: unknown output format (use .mp4, .npz, .wav, {', '.join(FORMATS)})")
+    check_output_formats(outs, (".mp4", ".npz", ".wav", *FORMATS))
     checked = check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
     apply_expressions(np.zeros((1, 4)), args)  # a misspelt --expression fails before any synthesis
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):

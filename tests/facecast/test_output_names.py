@@ -206,7 +206,7 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(argv, want,
         (["eval", "--lags", "abc"], "--lags: expected comma-separated integers, got 'abc'"),
         (["eval", "--grid-s1", "{tmp}/nowhere"], "--grid-s1 {tmp}/nowhere: folder not found"),
         (["eval", "--speech-dir", "{tmp}/nowhere"], "--speech-dir {tmp}/nowhere: folder not found"),
-        (["animate", "{wav}"], "give at least one output: --csv, --glb, --json or --tsv"),
+        (["animate", "{wav}"], "give at least one output: -o OUT (.csv/.glb/.json/.tsv), --csv, --glb"),
         (["rig", "{tmp}", "-o", "{tmp}/r.npz"], "{tmp}: mesh file is a folder, not a file"),
         (["rig", "builtin", "--landmarks", "{tmp}", "-o", "{tmp}/r.npz"], "{tmp}: landmarks file is a folder"),
         (

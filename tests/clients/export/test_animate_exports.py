@@ -64,6 +64,32 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
     assert read_tsv(out["tsv"].read_bytes())[-1].shape == "X"
 
 
+def test_animate_o_writes_by_suffix_the_same_files_as_the_format_flags(tmp_path, capsys):
+    """`animate x.wav -o x.csv` failed with the top-level usage (say and record take -o): -o (repeatable) picks
+    the format by the suffix and writes byte for byte what --csv/--json/--tsv write; an unknown suffix is
+    refused in one line before any work."""
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = write_wav(tmp_path / "s.wav", speechlike(1.0, 16000), 16000)
+    (tmp_path / "o").mkdir()
+    (tmp_path / "f").mkdir()
+    formats = ("csv", "json", "tsv")
+    by_o = [a for s in formats for a in ("-o", str(tmp_path / "o" / f"take.{s}"))]
+    by_flag = [a for s in formats for a in (f"--{s}", str(tmp_path / "f" / f"take.{s}"))]
+    for argv in (by_o, by_flag):
+        assert main(["animate", str(wav), "--model", str(model), *argv]) == 0, capsys.readouterr().err
+    for s in (*formats, "wav"):  # the .wav beside the .json too
+        assert (tmp_path / "o" / f"take.{s}").read_bytes() == (tmp_path / "f" / f"take.{s}").read_bytes(), s
+    capsys.readouterr()
+    assert main(["animate", str(wav), "--model", str(model), "-o", str(tmp_path / "take.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "take.mp4: unknown output format '.mp4'" in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "take.mp4").exists()
+
+
 def test_animate_needs_an_output(tmp_path, capsys):
     assert main(["animate", str(tmp_path / "missing.wav")]) == 2  # one line through the error root (was exit 1)
     assert "give at least one output" in capsys.readouterr().err

@@ -114,6 +114,28 @@ def test_record_saves_each_format_equal_to_the_session(live, tmp_path, model):
     np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
 
 
+def test_record_o_wav_writes_the_sessions_audio_and_o_mp4_points_to_view(live, tmp_path, capsys):
+    """`record -o take.wav` writes the session's audio alone (what a .glb/.json gets beside it); `-o take.mp4`
+    (record writes no video) is refused in one line naming `facecast view --record`, before connecting."""
+    from assets.audio import read_audio
+
+    x = speechlike(1.5, 16000, seed=3)
+    x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)  # as sent (int16)
+    out = tmp_path / "take.wav"
+    fut = live.submit(_session_once_watched(live, "rec-wav", 1.5, viewers=1))
+    assert main(["record", live.url, "--session", "rec-wav", "-o", str(out)]) == 0
+    frames = fut.result(30)["frames"]
+    audio, rate = read_audio(out)
+    assert rate == 16000 and len(audio) == round(frames / 30 * 16000)
+    n = min(len(audio), len(x))
+    np.testing.assert_allclose(audio[:n], x[:n], atol=0.5 / 32768)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take.wav"]
+    capsys.readouterr()
+    assert main(["record", "http://127.0.0.1:1", "-o", str(tmp_path / "take.mp4")]) == 2  # no server there: not asked
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "facecast view URL --session S --record take.mp4" in err, err
+
+
 def test_record_without_head_writes_the_served_head_animated_by_the_morph_weights_sent(model, parted_head, tmp_path):
     """`facecast record URL -o take.glb` without --head, from a server whose head is driven by its own targets: the
     .glb is the head the server serves (/head/mesh.json) with the weights its "morph" frames carried, frame for frame
