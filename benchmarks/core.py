@@ -289,14 +289,17 @@ def run_core_benchmark(config: CoreBenchConfig, *, as_json: bool, out: TextIO = 
 def _print_table(r: dict, out: TextIO) -> None:
     w = out.write
     w("facecast core benchmark (BLAS pinned to 1 thread; per video frame, microseconds)\n\n")
-    w(f"{'stage':44s} {'median':>9s} {'p99':>9s}\n")
-    for name, s in r["features"].items():
-        w(f"{'features/' + name:44s} {s['median_us']:9.1f} {s['p99_us']:9.1f}\n")
-    for name, s in r["streaming_inversion"].items():
-        w(f"{'streaming inversion ' + name:44s} {s['median_us']:9.1f} {s['p99_us']:9.1f}\n")
-    for name, s in r["live_samples_to_params"].items():
-        goal = "" if "numpy" in name else f"   (goal <= {100 if 'shipped' in name else 150} median)"
-        w(f"{'live ' + name:44s} {s['median_us']:9.1f} {s['p99_us']:9.1f}{goal}\n")
+    rows = [("features/" + name, s, "") for name, s in r["features"].items()]
+    rows += [("streaming inversion " + name, s, "") for name, s in r["streaming_inversion"].items()]
+    rows += [
+        ("live " + name, s, "" if "numpy" in name else f"   (goal <= {100 if 'shipped' in name else 150} median)")
+        for name, s in r["live_samples_to_params"].items()
+    ]
+    # The column is as wide as the longest stage ("live shipped N=16,M=3,D=88,float32 numpy reference" ran past 44).
+    width = max(44, *(len(name) for name, _, _ in rows))
+    w(f"{'stage':{width}s} {'median':>9s} {'p99':>9s}\n")
+    for name, s, goal in rows:
+        w(f"{name:{width}s} {s['median_us']:9.1f} {s['p99_us']:9.1f}{goal}\n")
     w("\nvisual mappers (--mapper hmm|mlp)              mapper step (median/p99)   live path (median/p99)\n")
     for name, s in r["mappers"].items():
         if name == "skipped":

@@ -7,7 +7,8 @@ import argparse
 FORWARDED: dict[str, tuple[str, str]] = {
     "latency": (
         "benchmarks.server_latency",
-        "per-stage and end-to-end latency of a live session vs the algorithmic delay (--short: CI gate)",
+        "per-stage and end-to-end latency of a live session vs the algorithmic delay: a table (--json: every "
+        "figure); --short: the CI gate, exit 1 over the 24 ms per-frame budget",
     ),
     "capacity": ("benchmarks.server_capacity", "concurrent real-time sessions and viewers sustained"),
     "soak": ("benchmarks.server_soak", "RSS growth, frames lost, loop lag and latency over minutes (--hostile)"),
