@@ -320,6 +320,9 @@ class ViewerClient:
             self.description = json.loads(await self.ws.recv())
         except ConnectionClosed as exc:
             raise _closed(exc) from None
+        except BaseException:  # cancelled (a window closing) or a bad description: no connection left open
+            await asyncio.shield(self.ws.close())
+            raise
         return self
 
     async def __aexit__(self, *exc: object) -> None:

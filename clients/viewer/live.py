@@ -69,6 +69,7 @@ class LiveStats:
     delivery_ms: list[float] = field(default_factory=list)
     saved_sound: Path | None = None  # the WAV written for save_sound (None: none asked, or no description came)
     rest_steps: int = 0  # images drawn easing the face to rest after sessions ended (REST_EASE_S each)
+    interrupted: bool = False  # stopped by Ctrl-C (KeyboardInterrupt), not by --duration or the window's close
 
 
 class Playout:
@@ -194,15 +195,15 @@ class _Receiver(threading.Thread):
         self.ready = threading.Event()
 
     def run(self) -> None:
-        self.loop = asyncio.new_event_loop()
-        try:
-            self.task = self.loop.create_task(self._main())
-            self.ready.set()
-            self.loop.run_until_complete(self.task)
-        except asyncio.CancelledError:
-            pass
-        finally:
-            self.loop.close()
+        # asyncio.Runner, not a bare loop: on closing it cancels and finishes what is still pending (a connection's
+        # keepalive task), where a loop closed over it printed "Task was destroyed but it is pending!".
+        with asyncio.Runner() as runner, contextlib.suppress(asyncio.CancelledError):
+            self.loop = runner.get_loop()
+            runner.run(self._main())
+
+    def _own_task(self) -> None:
+        self.task = asyncio.current_task()
+        self.ready.set()
 
     def close(self) -> None:
         self.ready.wait(2)
@@ -212,6 +213,7 @@ class _Receiver(threading.Thread):
         self.join(3)
 
     async def _main(self) -> None:
+        self._own_task()
         cfg, inbox = self.cfg, self.inbox
         # None: every RETRY_S for cfg.wait_s (the server replays nothing: a slower first wait misses the first
         # frames); then, and after each session, a back-off (REWATCH_MAX_S)
@@ -393,11 +395,12 @@ def run_window(
                 glfw.wait_events_timeout(0.004)
             if duration_s is not None and first_shown is not None and now - first_shown >= duration_s:
                 break
+    except KeyboardInterrupt:  # Ctrl-C, the usual way out of a window: the caller prints its summary as for --duration
+        stats.interrupted = True
+    finally:
         stats.resyncs = playout.resyncs
         stats.audio_blocks = audio.received
         stats.audio_underruns = audio.underruns
-        return stats
-    finally:
         rx.close()
         audio.close()
         # here, not after the loop: a window is mostly stopped with Ctrl-C (KeyboardInterrupt), which wrote no PNG
@@ -412,3 +415,4 @@ def run_window(
         if renderer is not None:
             renderer.close()
         glfw.terminate()
+    return stats

@@ -184,5 +184,6 @@ def _window(args: argparse.Namespace, token: str | None) -> int:
         )
         + (f"; wrote {args.screenshot}" if args.screenshot else "")
         + (f"; wrote {st.saved_sound}" if st.saved_sound else "")
+        + ("; stopped with Ctrl-C" if st.interrupted else "")
     )
-    return 0
+    return 0  # Ctrl-C included: it is how a window is stopped, not a failure
