@@ -63,6 +63,22 @@ def read_landmarks(path: str | Path) -> dict[str, object]:
     return lm
 
 
+def write_landmarks(path: str | Path, spec: Mapping[str, object], **extra: object) -> Path:
+    """Write ``spec`` (name -> vertex index or (3,) point) as the file :func:`read_landmarks` reads, atomically: vertex
+    indices stay indices, points become [x, y, z] (floats written exactly: the file gives back the same points);
+    ``extra``: other top-level keys (where the points came from)."""
+    import numpy as np
+
+    from assets.files import atomic_write_bytes
+
+    points = {k: np.asarray(v).tolist() for k, v in spec.items()}  # an index (numpy's too) stays an int
+    # one landmark a line, for a person correcting a point in an editor
+    rows = ",\n".join(f"  {json.dumps(k)}: {json.dumps(v)}" for k, v in points.items())
+    rest = "".join(f",\n {json.dumps(k)}: {json.dumps(v)}" for k, v in extra.items())
+    text = f'{{\n "landmarks": {{\n{rows}\n }}{rest}\n}}\n'
+    return atomic_write_bytes(Path(path), text.encode())
+
+
 def shipped_landmarks(mesh_path: str | Path) -> Path | None:
     """The shipped landmarks file for a known head file name, else None."""
     name = SHIPPED.get(Path(mesh_path).name.lower())

@@ -63,6 +63,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="write a picture of the head with its landmarks (numbered, named); without -o, only that",
     )
+    p.add_argument(
+        "--save-landmarks",
+        metavar="JSON",
+        default=None,
+        help="write the landmarks the rig was made from (found automatically, shipped or given) as a --landmarks "
+        "file, to correct a point and rig again with --landmarks; without -o, those --show-landmarks draws",
+    )
     p.set_defaults(run=run)
 
 
@@ -79,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         rig_cache_path,
         rig_checked,
     )
-    from assets.heads.landmarks import credit_for, read_landmarks
+    from assets.heads.landmarks import FoundLandmarks, credit_for, read_landmarks, write_landmarks
     from assets.heads.mesh import load_mesh
     from assets.heads.plot import plot_control_points
     from assets.heads.rigfile import save_rig
@@ -88,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.face import RigConfig
     from realtime_core.face.checks import EXPRESSION_POSES, EXTREME_POSES
 
-    if not args.output and not args.show_landmarks:
-        raise SystemExit("facecast rig: error: give -o RIG.npz (or --show-landmarks PNG)")
+    if not args.output and not args.show_landmarks and not args.save_landmarks:
+        raise SystemExit("facecast rig: error: give -o RIG.npz (or --show-landmarks PNG, --save-landmarks JSON)")
     if args.output and Path(args.output).suffix.lower() != ".npz":
         # --head takes a rig by its suffix: any other name would make the file unusable (and rigging takes minutes)
         raise RigFileError(f"{args.output}: a rig file is written as .npz; give a name ending in .npz")
@@ -99,8 +106,9 @@ def run(args: argparse.Namespace) -> int:
     for picture in (args.show_landmarks, args.png):
         if picture:
             check_writable(check_picture_path(picture))
-    if args.output:  # a folder that cannot be made fails now, not after the rigging
-        check_writable(args.output)
+    for path in (args.output, args.save_landmarks):  # a folder that cannot be made fails now, not after the rigging
+        if path:
+            check_writable(path)
     cfg = RigConfig(
         method=args.method, projection_2d=args.projection, beta=args.beta, normalize_fallback=args.normalize_fallback
     )
@@ -119,6 +127,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         mesh = load_mesh(args.head, parts=tuple(args.head_part))
         spec, source = head_landmarks(mesh, args.landmarks, find_landmarks)
+
+    def save_landmarks(used: Mapping[str, object]) -> None:
+        out = write_landmarks(args.save_landmarks, used, head=Path(args.head).name, source=source)
+        print(f"rig: landmarks {out} (correct a point there, then rig with --landmarks {out})")
+
+    if args.save_landmarks and not args.output:  # without a rig: the landmarks it would start from
+        save_landmarks(spec if spec is not None else head.landmarks)
     if args.show_landmarks:
         from assets.heads.plot import plot_landmarks
 
@@ -127,8 +142,8 @@ def run(args: argparse.Namespace) -> int:
         )
         out = plot_landmarks(mesh, pts, args.show_landmarks, title=f"{Path(args.head).name}: landmarks ({source})")
         print(f"rig: landmarks picture {out}")
-        if not args.output:
-            return 0  # only the picture was asked for; with -o the rig is made too
+    if not args.output:
+        return 0  # only the picture or the landmarks were asked for; with -o the rig is made too
     simple = None
     if args.simple:
         from assets.heads.wfm import read_wfm
@@ -162,6 +177,11 @@ def run(args: argparse.Namespace) -> int:
             "Check the landmarks (--show-landmarks PNG), or write it anyway with --keep-failing"
         )
     out = save_rig(rig, rigged, args.output)
+    if args.save_landmarks:
+        # the set the rig was made from: an automatic finder's alternative when the first set's rigs all failed
+        n = rig.meta.get("landmark_set")
+        used = spec.alternatives[n - 1] if n and isinstance(spec, FoundLandmarks) else spec
+        save_landmarks(used if used is not None else head.landmarks)
     if cache_path is not None and kept is None:
         # What --head MESH (say, render, serve) would rig from the same mesh, landmarks and options: kept in its rig
         # cache too, so the next command reads it instead of rigging the head again.

@@ -49,6 +49,38 @@ def test_rig_command_writes_rig_and_picture(tmp_path, shared_data, builtin_head,
     )
 
 
+def test_save_landmarks_round_trips_through_landmarks(tmp_path, shared_data, own_cache, capsys):
+    """docs/heads.md said "to correct a point, give a JSON file", which meant writing all 12 from scratch.
+    `rig HEAD --save-landmarks L.json` writes the automatic landmarks (a mesh without a shipped file: MediaPipe's
+    canonical face under another name) as the file --landmarks reads; rigging with it gives the same rig, and
+    saving again from it gives the same file. The built-in head's are its vertex indices."""
+    import shutil
+
+    from assets.heads.landmarks import read_landmarks
+    from assets.heads.rigfile import load_rig
+
+    face = tmp_path / "face.obj"  # not a shipped name: its landmarks are found automatically
+    shutil.copy(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj", face)
+    found, again = tmp_path / "found.json", tmp_path / "again.json"
+    argv = ["rig", str(face), "--keep-failing"]
+    assert main([*argv, "-o", str(tmp_path / "a.npz"), "--save-landmarks", str(found)]) == 0
+    assert f"rig: landmarks {found}" in capsys.readouterr().out
+    spec = read_landmarks(found)
+    assert len(spec) == 12 and all(len(v) == 3 for v in spec.values())  # [x, y, z] points
+    assert main([*argv, "--landmarks", str(found), "-o", str(tmp_path / "b.npz"), "--save-landmarks", str(again)]) == 0
+    assert read_landmarks(again) == spec
+    (a, _), (b, _) = load_rig(tmp_path / "a.npz"), load_rig(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a.control, b.control)
+    p = np.array([0.02, -0.05, 0.2, 0.03])
+    np.testing.assert_array_equal(a.displacements(p), b.displacements(p))
+    # without -o: only the file (no rig), the built-in head's vertex indices
+    assert main(["rig", "builtin", "--save-landmarks", str(tmp_path / "builtin.json")]) == 0
+    from assets.heads.builtin import load_builtin_head
+
+    assert read_landmarks(tmp_path / "builtin.json") == {k: int(v) for k, v in load_builtin_head().landmarks.items()}
+    assert not list(tmp_path.glob("builtin*.npz"))
+
+
 def test_a_mesh_rigged_for_a_command_says_so_and_a_cached_one_does_not(tmp_path, shared_data, own_cache, capsys):
     """--head MESH rigs a mesh not in the rig cache before the command's work (seconds to minutes for a scan): each
     rig it makes is announced on stderr with the seconds so far; the next command reads the rig and says nothing."""
