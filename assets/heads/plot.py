@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,26 @@ LANDMARK_HELP: dict[str, str] = {
 """Each landmark's definition, in the order of landmark files (``assets.heads.rigging.REQUIRED_LANDMARKS``)."""
 
 
+LABEL_GAP_IOD = 0.14
+"""Vertical distance between the stacked labels of the points on the face's midline (IOD)."""
+
+
+def _label_places(p: np.ndarray) -> list[tuple[float, float]]:
+    """Where each landmark's number goes, (x, y) in the picture's IOD units, p (n, 2): beside a point off the midline;
+    for the points on it (nose, the four lip midpoints, chin: 0.05-0.1 IOD apart on a mouth, their numbers overlapped)
+    a column right of the mouth corners, one LABEL_GAP_IOD apart in the points' top-down order, joined to them by
+    leader lines."""
+    mid = np.abs(p[:, 0]) < 0.2
+    column = float(np.max(np.abs(p[~mid, 0]), initial=0.5)) * 0.6 + 0.35  # beyond the mouth corners, inside the eyes'
+    places = [(float(x) + (0.08 if x >= 0 else -0.08), float(y) + 0.06) for x, y in p]
+    below = np.inf
+    for i in sorted(np.flatnonzero(mid), key=lambda i: -p[i, 1]):
+        y = min(float(p[i, 1]) - 0.2, below - LABEL_GAP_IOD)  # below and right: clear of the corner's own label
+        places[i] = (column, y)
+        below = y
+    return places
+
+
 def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, title: str = "") -> Path:
     """Frontal picture of the head (its vertices shaded by depth) with each landmark numbered and
     named, and the definitions beside it. mesh: a HeadMesh; points: name -> (3,) position."""
@@ -133,21 +154,25 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
     fig, (ax, tx) = plt.subplots(1, 2, figsize=(11, 6.5), dpi=110, gridspec_kw={"width_ratios": [1.1, 1]})
     order = np.argsort(q[near, 2])
     ax.scatter(q[near, 0][order], q[near, 1][order], s=1.2, c=q[near, 2][order], cmap="Greys")
-    for i, _k in enumerate(names):
-        ax.scatter(p[i, 0], p[i, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
-        dx = 0.08 if p[i, 0] >= 0 else -0.08
+    ax.scatter(p[:, 0], p[:, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
+    for i, xy in enumerate(_label_places(p[:, :2])):
         ax.annotate(
             str(i),
             (p[i, 0], p[i, 1]),
-            xytext=(p[i, 0] + dx, p[i, 1] + 0.05),
+            xytext=xy,
             fontsize=8,
             color="darkred",
-            ha="left" if dx > 0 else "right",
+            ha="left" if xy[0] >= p[i, 0] else "right",
+            va="center",
+            zorder=4,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
+            arrowprops={"arrowstyle": "-", "color": "darkred", "lw": 0.6, "shrinkA": 0, "shrinkB": 3},
         )
     ax.set_aspect("equal")
     ax.set_xlabel("x (IOD), as a viewer sees the face: the face's left is on the right of the picture")
     ax.set_ylabel("y (IOD)")
-    ax.set_title(title or "landmarks", fontsize=9)
+    # wrapped to the plot's width: a long title (a landmark file's path) ran off the figure's left edge
+    ax.set_title(textwrap.fill(title or "landmarks", 70), fontsize=9)
     tx.set_axis_off()
     lines = [f"{i:2d}  {k}: {LANDMARK_HELP[k]}" for i, k in enumerate(names)]
     lines += [
