@@ -115,20 +115,26 @@ LANDMARK_HELP: dict[str, str] = {
 
 LABEL_GAP_IOD = 0.14
 """Vertical distance between the stacked labels of the points on the face's midline (IOD)."""
+LABEL_COLUMN_IOD = 0.6
+"""x of the midline points' labels (IOD right of the midline): past the mouth corners (~0.4), inside the eyes."""
 
 
 def _label_places(p: np.ndarray) -> list[tuple[float, float]]:
     """Where each landmark's number goes, (x, y) in the picture's IOD units, p (n, 2): beside a point off the midline;
     for the points on it (nose, the four lip midpoints, chin: 0.05-0.1 IOD apart on a mouth, their numbers overlapped)
-    a column right of the mouth corners, one LABEL_GAP_IOD apart in the points' top-down order, joined to them by
-    leader lines."""
+    a column at LABEL_COLUMN_IOD, one LABEL_GAP_IOD apart in the points' top-down order, joined to them by leader
+    lines; a point level with a mouth corner gets its label 0.3 IOD below the corner, so that its line passes under
+    the corner, not through it."""
     mid = np.abs(p[:, 0]) < 0.2
-    column = float(np.max(np.abs(p[~mid, 0]), initial=0.5)) * 0.6 + 0.35  # beyond the mouth corners, inside the eyes'
     places = [(float(x) + (0.08 if x >= 0 else -0.08), float(y) + 0.06) for x, y in p]
     below = np.inf
     for i in sorted(np.flatnonzero(mid), key=lambda i: -p[i, 1]):
-        y = min(float(p[i, 1]) - 0.2, below - LABEL_GAP_IOD)  # below and right: clear of the corner's own label
-        places[i] = (column, y)
+        y = float(p[i, 1]) - 0.2
+        level = p[~mid, 1][np.abs(p[~mid, 1] - p[i, 1]) < 0.3]  # a mouth corner beside it
+        if level.size:
+            y = min(y, float(level.min()) - 0.3)
+        y = min(y, below - LABEL_GAP_IOD)
+        places[i] = (LABEL_COLUMN_IOD, y)
         below = y
     return places
 
@@ -155,7 +161,8 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
     order = np.argsort(q[near, 2])
     ax.scatter(q[near, 0][order], q[near, 1][order], s=1.2, c=q[near, 2][order], cmap="Greys")
     ax.scatter(p[:, 0], p[:, 1], s=28, c="red", zorder=3, edgecolors="white", linewidths=0.5)
-    for i, xy in enumerate(_label_places(p[:, :2])):
+    places = _label_places(p[:, :2])
+    for i, xy in enumerate(places):
         ax.annotate(
             str(i),
             (p[i, 0], p[i, 1]),
@@ -168,6 +175,10 @@ def plot_landmarks(mesh, points: dict[str, np.ndarray], path: str | Path, *, tit
             bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85},
             arrowprops={"arrowstyle": "-", "color": "darkred", "lw": 0.6, "shrinkA": 0, "shrinkB": 3},
         )
+    # the labels inside the plot (annotations do not widen its limits): the chin's may sit below the face
+    xs, ys = np.array(places).T
+    ax.set_xlim(min(ax.get_xlim()[0], xs.min() - 0.2), max(ax.get_xlim()[1], xs.max() + 0.2))
+    ax.set_ylim(min(ax.get_ylim()[0], ys.min() - 0.1), max(ax.get_ylim()[1], ys.max() + 0.1))
     ax.set_aspect("equal")
     ax.set_xlabel("x (IOD), as a viewer sees the face: the face's left is on the right of the picture")
     ax.set_ylabel("y (IOD)")
