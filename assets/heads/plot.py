@@ -129,7 +129,7 @@ def _label_places(p: np.ndarray) -> list[tuple[float, float]]:
     places = [(float(x) + (0.08 if x >= 0 else -0.08), float(y) + 0.06) for x, y in p]
     below = np.inf
     for i in sorted(np.flatnonzero(mid), key=lambda i: -p[i, 1]):
-        y = float(p[i, 1]) - 0.2
+        y = float(p[i, 1]) - 0.1
         level = p[~mid, 1][np.abs(p[~mid, 1] - p[i, 1]) < 0.3]  # a mouth corner beside it
         if level.size:
             y = min(y, float(level.min()) - 0.3)
