@@ -263,7 +263,9 @@ def bench_baum_welch(rng: np.random.Generator, *, hmmlearn_seqs: int, run_hmmlea
     return out
 
 
-def run_core_benchmark(config: CoreBenchConfig, *, as_json: bool, out: TextIO = sys.stdout) -> dict:
+def run_core_benchmark(config: CoreBenchConfig, *, as_json: bool, out: TextIO | None = None) -> dict:
+    # None: the stdout of the moment (a default of sys.stdout is the one at import, maybe closed since)
+    out = sys.stdout if out is None else out
     rng = np.random.default_rng(config.seed)
     n = 600 if config.quick else 3000
     with threadpool_limits(1):

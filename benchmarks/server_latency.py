@@ -138,9 +138,9 @@ def run_latency_benchmark(cfg: LatencyConfig) -> dict:
     return result
 
 
-def print_summary(r: dict, out: TextIO = sys.stdout) -> None:
-    """The figures a person reads first, as a table (the whole result: --json)."""
-    w = out.write
+def print_summary(r: dict, out: TextIO | None = None) -> None:
+    """The figures a person reads first, as a table (the whole result: --json), to ``out`` (default stdout)."""
+    w = (sys.stdout if out is None else out).write
     w(
         f"facecast server latency: {r['seconds_streamed']:g} s streamed in {r['block_ms']:g} ms blocks, "
         f"model {r['model']}\n"
