@@ -283,7 +283,8 @@ class ViewerClient:
     """Watch a session: ``async with`` receives the description; iterate for decoded messages.
 
     kind: "params", "deltas", "blendshapes" or "morph"; encoding: see docs/protocol.md (None = the kind's
-    default); audio: also receive the session's audio.
+    default); audio: also receive the session's audio; wait_s: how long the server may hold the viewer for a
+    session that has not started (0: refused with 4004 at once; docs/protocol.md section 3, ``wait``).
     """
 
     def __init__(
@@ -296,10 +297,13 @@ class ViewerClient:
         audio: bool = True,
         token: str | None = None,
         max_size: int | None = 64 << 20,
+        wait_s: float = 0.0,
     ) -> None:
         q = {"session": session, "kind": kind, "audio": "1" if audio else "0"}
         if encoding is not None:
             q["encoding"] = encoding
+        if wait_s > 0:
+            q["wait"] = f"{wait_s:.3f}"
         if token is not None:
             q["token"] = token
         self.url = ws_url(url, "/view?" + urlencode(q))

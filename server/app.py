@@ -73,7 +73,17 @@ from server.guard import (
     origin_allowed,
 )
 from server.http import HttpReply, HttpRouter
-from server.live import FAIR_SLICE_S, LiveSession, LocalSession, SessionHandle, TurnDeltas, Viewer, deliver
+from server.live import (
+    FAIR_SLICE_S,
+    HeldViewers,
+    Hold,
+    LiveSession,
+    LocalSession,
+    SessionHandle,
+    TurnDeltas,
+    Viewer,
+    deliver,
+)
 from server.session import Session, SessionConfig, warm_up
 from server.shards import ConnectionWorkers, FrontRegistry
 from server.timing import GcPauses, StageTimes, freeze_heap
@@ -84,6 +94,14 @@ if TYPE_CHECKING:  # imported lazily at run time: only `--text` servers load uni
     from server.text_session import TextBackend
 
 log = logging.getLogger("facecast.server")
+
+HELD_JOIN_S = 0.5
+"""s: the longest a session's opening waits for its held viewers to subscribe (:meth:`FacecastServer.release_held`).
+A held viewer subscribes within a turn or two of the loop (its description is written at once to a fresh socket);
+one whose socket would not take it then joins late, as an unheld viewer would, rather than hold up the session."""
+CLUSTER_HOLD_POLL_S = 0.05
+"""s: how often a viewer held on a cluster node looks for its session in the registry (one opened on another node
+wakes nobody here): the period at which the clients used to retry."""
 
 
 class AdmissionRefused(ServerConfigError):
@@ -141,7 +159,8 @@ class FacecastServer:
         self.dropped = 0
         self.closed_slow = 0
         self.closes: collections.Counter[int] = collections.Counter()
-        self.n_viewers = 0
+        self.n_viewers = 0  # viewers watching or held (a view query's wait) on this process
+        self.holds = HeldViewers()  # viewers held for sessions that have not opened yet
         self._server: Server | None = None
         self._tasks: set[asyncio.Task] = set()
         self.started = time.time()
@@ -298,6 +317,7 @@ class FacecastServer:
         """Graceful shutdown: end every session (viewers get their last frames, then 1001), wait for
         them (at most close_timeout_s), then close the listener and the remaining connections."""
         self.stopping = True
+        self.holds.refuse(None, P.CLOSE_GOING_AWAY, "server shutting down")
         for live in list(self.sessions.values()):
             live.ended.set()
         shards_stopped = asyncio.ensure_future(self.shards.stop()) if self.shards is not None else None
@@ -398,7 +418,16 @@ class FacecastServer:
                 del self.sessions[name]
                 await session.close()
                 raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
+        await self.release_held(live)
         return live
+
+    async def release_held(self, live: LiveSession) -> None:
+        """Subscribe the viewers held for a session that has just opened (view query ``wait``), before it is fed:
+        wake them, then wait until each has joined (at most :data:`HELD_JOIN_S`). Called by whatever registers a
+        session (:meth:`open_session`, text sessions) once it is registered and before its first block."""
+        joining = self.holds.open(live)
+        if joining:
+            await asyncio.wait(joining, timeout=HELD_JOIN_S)
 
     async def _new_session(self, config: SessionConfig) -> SessionHandle:
         rig = self.head.rig if self.head else None
@@ -669,33 +698,88 @@ class FacecastServer:
         return live
 
     async def _view(self, ws: ServerConnection) -> None:
-        req = SP.parse_view_query(
-            SP.query_args(_request_path(ws)),
+        args = SP.query_args(_request_path(ws))
+        req = SP.parse_view_query(  # the token first: nobody unauthorised is held
+            args,
             token=self.config.token,
             has_head=self.head is not None,
             morph_head=self.head is not None and self.head.kind == "morph",
         )
+        wait_s = SP.view_wait_s(args, longest_s=self.config.max_view_wait_s)
         live = self.sessions.get(req.session)
         if live is None and self.cluster is not None:
             row = await self.cluster.lookup(req.session)
             if row is not None:
                 return await self._view_remote(ws, req, row)
-        if live is None:
+        if live is None and (not wait_s or self.stopping):
             raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {req.session!r}")
         if self.n_viewers >= self.config.max_viewers:
             raise ProtocolViolation(P.CLOSE_TRY_LATER, f"server is full ({self.config.max_viewers} viewers)")
+        self.n_viewers += 1  # from here: a held viewer counts towards max_viewers too
+        hold = None
+        elsewhere = None
+        try:
+            if live is None:
+                hold = self.holds.add(req.session)
+                found = await self._held(ws, hold, wait_s)
+                if isinstance(found, LiveSession):
+                    await self._watch(ws, req, found, hold)
+                elif found is not None:
+                    elsewhere = found
+            else:
+                await self._watch(ws, req, live, None)
+        finally:
+            if hold is not None:
+                self.holds.drop(hold)
+            self.n_viewers -= 1
+        if elsewhere is not None:  # opened on another node of the cluster while held here
+            await self._view_remote(ws, req, elsewhere)
+
+    async def _held(self, ws: ServerConnection, hold: Hold, wait_s: float) -> LiveSession | dict | None:
+        """Hold a viewer until its session opens (:meth:`release_held` wakes it) or ``wait_s`` runs out (4004
+        saying how long it waited). Returns the session, or in a cluster the registry row of one opened on
+        another node (looked up every :data:`CLUSTER_HOLD_POLL_S`), or None when the viewer went away."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + wait_s
+        closed = asyncio.ensure_future(ws.wait_closed())
+        either: set[asyncio.Future[Any]] = {hold.opened, closed}
+        try:
+            while True:
+                if hold.opened.done():
+                    return hold.opened.result()  # raises what the hold was refused with (server stopping)
+                if closed.done():
+                    return None
+                if loop.time() >= deadline:
+                    raise ProtocolViolation(
+                        P.CLOSE_NOT_FOUND, f"no session {hold.name!r} (waited {wait_s:g} s for it to start)"
+                    )
+                step = deadline - loop.time()
+                if self.cluster is not None:
+                    row = await self.cluster.lookup(hold.name)
+                    if row is not None and not hold.opened.done():
+                        return row
+                    step = min(step, CLUSTER_HOLD_POLL_S)
+                await asyncio.wait(either, timeout=step, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            closed.cancel()
+
+    async def _watch(self, ws: ServerConnection, req: SP.ViewRequest, live: LiveSession, hold: Hold | None) -> None:
+        """Serve one viewer of a session on this process until either ends (counted in n_viewers by the caller).
+        hold: set for a viewer that was held for the session, told once the viewer is subscribed."""
         if self.config.viewer_socket_buffer_bytes is not None:
             sock = ws.transport.get_extra_info("socket")
             if sock is not None:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.config.viewer_socket_buffer_bytes)
         await ws.send(describe.view_description_text(live, req, self.head))
-        # A text session's sentence now playing, from its first frame (docs/protocol.md section 3).
+        # A text session's sentence now playing, from its first frame (docs/protocol.md section 3): none for a
+        # held viewer (it joins as the session opens), so it gets no sentence twice.
         await live.send_sentence(ws, req.header_kind, req.header_encoding, req.audio)
         if self.sessions.get(live.name) is not live:  # ended while we were sending the description
             raise ProtocolViolation(P.CLOSE_NORMAL, "session ended")
         viewer = Viewer(ws, live, kind=req.header_kind, encoding=req.header_encoding, audio=req.audio, server=self)
         live.viewers.add(viewer)
-        self.n_viewers += 1
+        if hold is not None:
+            hold.done_joining()
         sender = self.spawn(viewer.run())
         try:
             while True:
@@ -721,7 +805,6 @@ class FacecastServer:
         finally:
             sender.cancel()
             live.viewers.discard(viewer)
-            self.n_viewers -= 1
 
     async def _view_remote(self, ws: ServerConnection, req: SP.ViewRequest, row: dict) -> None:
         """A viewer of a session owned by another node: fed from that session's Redis channel."""
@@ -858,6 +941,7 @@ class FacecastServer:
             for key in (
                 "sessions",
                 "viewers",
+                "viewers_held",
                 "dropped_messages",
                 "viewers_closed_slow",
                 "delta_batches",
@@ -906,6 +990,7 @@ class FacecastServer:
         return {
             "sessions": len(self.sessions),
             "viewers": self.n_viewers,
+            "viewers_held": len(self.holds),  # of those, held for a session not yet started (view query wait)
             "dropped_messages": self.dropped,
             "viewers_closed_slow": self.closed_slow,
             # vertex deltas by loop turn (server.live.TurnDeltas): turns that computed deltas, and the

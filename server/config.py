@@ -50,7 +50,8 @@ class ServerConfig:
     when bound to loopback, else any); max_connections_per_client: open WebSocket connections per
     remote address; connect_rate_per_s / connect_burst: new WebSocket connections per remote address
     (a token bucket; beyond it 429; rate 0 = no limit); handshake_timeout_s: time to complete the
-    opening handshake; idle_timeout_s: an ingest that sends nothing for this long is closed (1008).
+    opening handshake; idle_timeout_s: an ingest that sends nothing for this long is closed (1008);
+    max_view_wait_s: the longest a viewer may ask (query ``wait``) to be held for a session not yet started.
 
     Cluster (docs/deploy.md): redis_url: the Redis every node of a cluster shares (None: one
     process, no Redis); node_id: this node's name in the registry (None: host-pid-port);
@@ -85,6 +86,7 @@ class ServerConfig:
     connect_burst: int = 1000
     handshake_timeout_s: float = 10.0
     idle_timeout_s: float = 60.0
+    max_view_wait_s: float = 60.0
     redis_url: str | None = None
     node_id: str | None = None
     advertise_url: str | None = None
@@ -117,6 +119,7 @@ class ServerConfig:
             "handshake_timeout_s",
             "idle_timeout_s",
             "ingest_burst_s",
+            "max_view_wait_s",
         ):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0 < v <= 3600:

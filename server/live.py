@@ -32,7 +32,7 @@ from websockets.protocol import OPEN
 
 from realtime_core.face.keyframes import MorphRig
 from server.describe import summary
-from server.errors import AudioFormatError, IngestOverrun
+from server.errors import AudioFormatError, IngestOverrun, ProtocolViolation
 from server.guard import IngestPacer
 from server.session import Frame as VideoFrame
 from server.session import Output, Session, morph_delta_payloads
@@ -301,6 +301,68 @@ class Viewer:
             finally:
                 self.sending = False
             self.behind_since = None
+
+
+class Hold:
+    """One viewer held for a session that has not opened yet: ``opened`` is set with the session when it opens
+    (or with the ProtocolViolation the viewer is closed with instead), ``joined`` by the viewer once it is
+    subscribed (or gone), which the opening waits for."""
+
+    def __init__(self, name: str) -> None:
+        loop = asyncio.get_running_loop()
+        self.name = name
+        self.opened: asyncio.Future[LiveSession] = loop.create_future()
+        self.joined: asyncio.Future[None] = loop.create_future()
+
+    def done_joining(self) -> None:
+        if not self.joined.done():
+            self.joined.set_result(None)
+
+
+class HeldViewers:
+    """Viewers held until their session opens (a view query's ``wait``), by session name.
+
+    Why: a viewer that connected just before its session started was refused (4004) and retried every 50 ms
+    (clients/viewer/stream.py RETRY_S); it joined after the session's first push, so it had the frames from frame
+    0 (they lag the audio by the model's context) but not the first audio block(s) (up to 630 samples at 16 kHz).
+    A held viewer is woken by the session's opening (:meth:`open`, from ``FacecastServer.release_held``), which
+    waits until it has subscribed before the session is fed anything: it gets every audio block and frame."""
+
+    def __init__(self) -> None:
+        self._held: dict[str, list[Hold]] = {}
+
+    def __len__(self) -> int:
+        return sum(len(h) for h in self._held.values())
+
+    def add(self, name: str) -> Hold:
+        hold = Hold(name)
+        self._held.setdefault(name, []).append(hold)
+        return hold
+
+    def drop(self, hold: Hold) -> None:
+        """Forget a hold whose viewer is done waiting (woken, out of time or gone)."""
+        held = self._held.get(hold.name, [])
+        if hold in held:
+            held.remove(hold)
+            if not held:
+                del self._held[hold.name]
+        hold.done_joining()
+
+    def open(self, live: LiveSession) -> list[asyncio.Future[None]]:
+        """Wake the viewers held for ``live``; returns what to await for them to have subscribed."""
+        holds = self._held.pop(live.name, [])
+        for hold in holds:
+            if not hold.opened.done():
+                hold.opened.set_result(live)
+        return [h.joined for h in holds]
+
+    def refuse(self, name: str | None, code: int, reason: str) -> None:
+        """Close the viewers held for session ``name`` (None: every one) with ``code`` and ``reason``."""
+        names = list(self._held) if name is None else [name]
+        for n in names:
+            for hold in self._held.pop(n, []):
+                if not hold.opened.done():
+                    hold.opened.set_exception(ProtocolViolation(code, reason))
 
 
 class LiveSession:

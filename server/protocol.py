@@ -29,8 +29,8 @@ whether binary messages are its input; text message types after the start are di
 :data:`MESSAGE_TYPES` (``control``, ``end``). A text-driven session adds a kind and a message type.
 
 :func:`parse_view_query` turns a ``/view`` query string into a :class:`ViewRequest` or raises
-:class:`~server.errors.ProtocolViolation` with the close code; :func:`loads_bounded` parses client
-JSON with size and depth limits (a protocol error, never a RecursionError).
+:class:`~server.errors.ProtocolViolation` with the close code (:func:`view_wait_s` reads its ``wait``);
+:func:`loads_bounded` parses client JSON with size and depth limits (a protocol error, never a RecursionError).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from __future__ import annotations
 import enum
 import hmac
 import json
+import math
 import urllib.parse
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -477,3 +478,20 @@ def parse_view_query(
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "audio must be 0 or 1")
     hk, he = encodings[enc_name]
     return ViewRequest(name, kind, enc_name, hk, he, audio == "1")
+
+
+def view_wait_s(args: Mapping[str, str], *, longest_s: float) -> float:
+    """A viewer query's ``wait``: seconds to hold the viewer for a session that has not started (0: answer 4004
+    at once, as without it), cut to the server's ``longest_s``; ProtocolViolation (4400) unless a number >= 0.
+    Kept out of :class:`ViewRequest`: that is the key of a session's cached descriptions, which a wait does not
+    change."""
+    raw = args.get("wait")
+    if raw is None:
+        return 0.0
+    try:
+        wait = float(raw)
+    except ValueError:
+        wait = math.nan
+    if not wait >= 0 or math.isinf(wait):  # NaN fails the comparison
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"wait must be a number of seconds >= 0, got {reason_value(raw)}")
+    return min(wait, longest_s)

@@ -328,6 +328,9 @@ class ConnectionWorkers:
             if refused is not None:
                 return list(refused)
             self.owner[name] = shard
+            # Viewers held here for it (view query wait) cannot follow a session into the worker: told to
+            # connect again, they are routed there (and held there until it opens, if they come before).
+            self.server.holds.refuse(name, P.CLOSE_NOT_FOUND, f"session {name!r} started in a worker: connect again")
             shard.names.add(name)
             if batch:
                 shard.batch.add(name)

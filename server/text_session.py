@@ -304,6 +304,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
         if owner is not None:
             del server.sessions[name]
             raise ProtocolViolation(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
+    await server.release_held(live)  # viewers held for it (view query wait) subscribe before its first sentence
     queue: asyncio.Queue = asyncio.Queue()
     clock: dict[str, float] = {}
     first_piece: list[float] = []

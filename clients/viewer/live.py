@@ -42,12 +42,13 @@ REST_EASE_S = 0.2
 """How long the face takes to ease to rest after a session's last frame (the browser viewer's too)."""
 REWATCH_MAX_S = 1.0
 """s: the longest wait between the window's attempts to watch its session again once it has ended (or once the
-first wait, ``wait_s``, has run out): from :data:`clients.viewer.stream.RETRY_S` the wait doubles up to this.
-Retried every RETRY_S for as long as it stayed away, the window opened 17 connections a second (each one a WebSocket
-handshake the server closes with 4004); now one a second, and a session that comes back is still picked up within
-this (the browser viewer retries a server it lost every second too). Not before the first session within
-``wait_s``: a window started first retries every RETRY_S then, as ``view --record`` does, and shows frame 0 (backed
-off from the start, it joined a session started 8 s later after 0.7-0.8 s: "showed 29 of 35 frames" of 59)."""
+first wait, ``wait_s``, has run out): from :data:`clients.viewer.stream.RETRY_S` the wait doubles up to this. Each
+attempt asks the server to hold the window for ``wait_s`` (the view query's ``wait``), so against this project's
+server a session that comes back is watched from its first frame and audio block, with one connection per
+``wait_s`` meanwhile; the back-off is for a server that holds nobody (or ``--wait 0``): retried every RETRY_S for as
+long as the session stayed away, the window opened 17 connections a second (each one a WebSocket handshake the server
+closes with 4004), backed off one a second, and a session that comes back is still picked up within this (the
+browser viewer retries a server it lost every second too)."""
 
 
 @dataclass
@@ -215,8 +216,9 @@ class _Receiver(threading.Thread):
     async def _main(self) -> None:
         self._own_task()
         cfg, inbox = self.cfg, self.inbox
-        # None: every RETRY_S for cfg.wait_s (the server replays nothing: a slower first wait misses the first
-        # frames); then, and after each session, a back-off (REWATCH_MAX_S)
+        # Each attempt is held by the server for cfg.wait_s. Refused at once (a server that holds nobody): None,
+        # every RETRY_S for cfg.wait_s (nothing is replayed: a slower first wait misses the first frames); then,
+        # and after each session, a back-off (REWATCH_MAX_S)
         waits: Iterator[float] | None = None
         while True:
             try:

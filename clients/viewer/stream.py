@@ -25,11 +25,14 @@ from clients.errors import ClientError
 from wire import protocol as P
 
 RETRY_S = 0.05
-"""Wait between attempts to watch a session that has not started (4004) or to find one. A session's
-first frame leaves the server about 0.2 s after its audio starts (the algorithmic delay and a block),
-and the server replays nothing to a later viewer: retried every 0.25 s, a recording started before
-the speech lost its first 3-11 frames (0.1-0.37 s). 20 attempts a second stay well inside a
-server's per-client connection rate (``connect_rate_per_s``, 50/s)."""
+"""Wait between attempts to watch a session that has not started (4004) or to find one. A viewer asks the server
+to hold it until the session starts (the view query's ``wait``, docs/protocol.md section 3), so against this
+project's server it connects once and gets the session from its first audio block; the retries are for a server
+that holds no viewers (an older one: it answers 4004 at once) and for a hold the server ended before ``wait_s``
+(its ``max_view_wait_s``; a session that started in another worker process). Against a server that holds no
+viewers a session's first frame leaves about 0.2 s after its audio starts and nothing is replayed to a later
+viewer: retried every 0.25 s, a recording started before the speech lost its first 3-11 frames (0.1-0.37 s).
+20 attempts a second stay well inside a server's per-client connection rate (``connect_rate_per_s``, 50/s)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -181,29 +184,36 @@ def backoff(longest_s: float) -> Iterator[float]:
 
 
 async def connect_viewer(cfg: ViewerStreamConfig, *, waits: Iterator[float] | None = None) -> ViewerClient:
-    """A connected viewer, retrying while the session does not exist (up to wait_s): every :data:`RETRY_S`,
-    or after each of ``waits`` (s) in turn (:func:`backoff`; the caller's iterator, so it can carry the
-    back-off over several calls)."""
+    """A connected viewer, held by the server until the session starts (up to wait_s: the view query's ``wait``).
+    Refused before wait_s is over (a server that holds no viewers, or ended the hold early), it tries again: at
+    once after a hold, else after :data:`RETRY_S` or each of ``waits`` (s) in turn (:func:`backoff`; the caller's
+    iterator, so it can carry the back-off over several calls)."""
     deadline = time.monotonic() + cfg.wait_s
     while True:
+        asked = time.monotonic()
         v = ViewerClient(
-            cfg.url, session=cfg.session, kind=cfg.kind, encoding=cfg.encoding, audio=True, token=cfg.token
+            cfg.url,
+            session=cfg.session,
+            kind=cfg.kind,
+            encoding=cfg.encoding,
+            audio=True,
+            token=cfg.token,
+            wait_s=max(0.0, deadline - asked),
         )
         try:
             await v.__aenter__()
             return v
         except ServerClosed as exc:
             if exc.code != P.CLOSE_NOT_FOUND or time.monotonic() >= deadline:
-                # what a user waiting for the session needs to hear: it did not start while we looked (and a
-                # session that started and ended between two tries is not seen: the server replays nothing)
-                waited = (
-                    f" (waited {cfg.wait_s:g} s for it to start; one that starts and ends between two tries is missed)"
+                # what a user waiting for the session needs to hear: it did not start while we waited
+                why = (
+                    f"{exc.code} no session {cfg.session!r} (waited {cfg.wait_s:g} s for it to start)"
                     if exc.code == P.CLOSE_NOT_FOUND and cfg.wait_s > 0
-                    else ""
+                    else f"{exc.code} {exc.reason}"
                 )
-                raise ClientError(
-                    f"{cfg.url}: cannot watch session {cfg.session!r}: {exc.code} {exc.reason}{waited}"
-                ) from None
+                raise ClientError(f"{cfg.url}: cannot watch session {cfg.session!r}: {why}") from None
+            if time.monotonic() - asked >= RETRY_S:
+                continue  # held, then let go early (the server's longest wait; started in another worker)
         except OSError as exc:
             if time.monotonic() >= deadline:
                 raise ClientError(f"{cfg.url}: cannot connect: {exc}") from None

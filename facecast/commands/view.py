@@ -58,7 +58,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def add_session_options(p: argparse.ArgumentParser) -> None:
     """--wait, --duration and --token-env: how view and record attach to a live session."""
-    p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the session to start")
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=10.0,
+        help="seconds to wait for the session to start (the server holds the viewer meanwhile: it gets the "
+        "session from its first audio block)",
+    )
     p.add_argument(
         "--duration",
         type=float,

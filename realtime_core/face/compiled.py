@@ -1,4 +1,6 @@
-"""Numba-compiled bounded keyframe solve (``KeyframeMap.weights(..., kernel="numba")``).
+"""Numba-compiled bounded keyframe solve (``KeyframeMap.weights(..., kernel="numba")``), a morph head's vertex
+frames, and, at rig time, the fold repair's measurement and the visibility search (the last four functions: each
+the same float64 operations in the same order as the numpy it replaced, so the same rigs).
 
 Why compiled: a head driven through its own morph targets solves a 52-variable box-constrained QP
 per frame (:func:`realtime_core.face.keyframes._box_qp`, an active-set method). In numpy that is

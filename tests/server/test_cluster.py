@@ -189,6 +189,43 @@ def test_viewers_on_any_node_get_the_same_frames(model_path, redis_server):
     )
 
 
+def test_a_viewer_held_on_one_node_watches_a_session_opened_on_another(model_path, redis_server):
+    """A viewer asking to wait (view query ``wait``) for a session not yet started is held by its node; the
+    session opens on another node, which wakes nobody there: the held viewer finds it in the registry (looked up
+    every CLUSTER_HOLD_POLL_S while held) and watches it through the cluster, to its end. (Held only for sessions
+    of its own node, it would have waited its whole wait and got 4004.) The owner publishes a kind once a node
+    wants it, so the audio is streamed here once b's wants have reached a."""
+    nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b")]
+    pcm = np.rint(speechlike(1.0, 16000, seed=8) * 32767).astype(np.int16)
+
+    async def main():
+        a, b = (n.url for n in nodes)
+        vb = ViewerClient(b, session="later", audio=True, wait_s=30)
+        joined = asyncio.ensure_future(vb.__aenter__())
+        await _until(lambda: _held(b, 1), what="the viewer held on b")
+        async with IngestClient(a, session="later", sample_rate_hz=16000) as ing:
+            await asyncio.wait_for(joined, 10)
+            await _until(
+                lambda: _published(a, "later", {(P.KIND_PARAMS, P.ENC_FLOAT32), (P.KIND_AUDIO, P.ENC_INT16)}),
+                what="b's wants reach the owner",
+            )
+            got = asyncio.ensure_future(vb.collect())
+            await stream_samples(ing, pcm, realtime=False, block_s=0.02)
+            ended = await ing.end()
+            rec = await asyncio.wait_for(got, 20)
+        held_after = (await _get_json(b, "/metrics"))["viewers_held"]
+        return ended, rec, held_after
+
+    ended, rec, held_after = _run_then_stop(nodes, main(), 90)
+    assert [m.index for m in rec.frames] == list(range(ended["frames"]))
+    assert len(rec.audio_samples()) == len(pcm) and rec.close_code == P.CLOSE_NORMAL
+    assert held_after == 0
+
+
+async def _held(url: str, n: int) -> bool:
+    return (await _get_json(url, "/metrics"))["viewers_held"] == n
+
+
 async def _same_rows_with(urls: Iterable[str], name: str, viewers: int) -> list[dict] | None:
     """Session ``name``'s /sessions row as each node in ``urls`` lists it, when every node lists the same row
     (whole JSON) and it counts ``viewers``; else None."""

@@ -94,7 +94,7 @@ binary_messages = st.one_of(st.binary(max_size=4000), st.integers(0, 2000).map(l
 first_messages = st.one_of(_start_messages(), text_messages, binary_messages)
 later_messages = st.lists(st.one_of(text_messages, binary_messages), max_size=5)
 view_queries = st.dictionaries(
-    st.sampled_from(["session", "kind", "encoding", "audio", "token", "zz"]), st.text(max_size=12), max_size=5
+    st.sampled_from(["session", "kind", "encoding", "audio", "token", "wait", "zz"]), st.text(max_size=12), max_size=5
 )
 
 
@@ -108,6 +108,7 @@ class _Server:
                 idle_timeout_s=1.0,
                 max_message_bytes=1 << 16,
                 close_timeout_s=0.5,
+                max_view_wait_s=0.1,  # a fuzzed `wait` that parses holds its viewer this long at most
                 workers=workers,
                 worker_mode="connections",
             ),

@@ -18,6 +18,7 @@ from clients.client import IngestClient, ServerClosed, ViewerClient, http_get, s
 from realtime_core.features.resample import resample_audio
 from realtime_core.pipeline import speech_to_params
 from tests.live_server import running
+from tests.server.test_held_viewers import _until
 from tests.server.test_service import _expect_close, _int16, _raw, _start
 from tests.speech import speechlike
 from wire import protocol as P
@@ -187,6 +188,35 @@ def test_a_dead_worker_ends_its_sessions_only(model):
     assert got_a.close_code is None  # no close frame: the connection dropped with its process
     assert a_failed and again_ended["frames"] == 30 and status == 200
     assert [m.index for m in got_b.frames] == list(range(b_ended["frames"])) and b_ended["frames"] == 90
+
+
+def test_a_viewer_held_by_the_front_of_connection_workers_watches_a_session_opened_in_a_worker(model):
+    """With connection workers an audio session runs in a worker: a viewer held by the front (which received it
+    before the session existed) is told to connect again when a worker takes the session's name, and the python
+    viewer does so at once: it watches the session, from frame 0."""
+    from clients.viewer.stream import ViewerStreamConfig, record_stream
+
+    pcm = _int16(speechlike(1.0, 16000, seed=6))
+
+    async def main():
+        async with running(model, workers=1, worker_mode="connections") as srv:
+            url = srv.url
+            cfg = ViewerStreamConfig(url=url, session="w", kind="params", wait_s=20)
+            rec = asyncio.ensure_future(record_stream(cfg))
+            await _until(lambda: len(srv.holds) == 1, "the viewer held by the front")
+            async with IngestClient(url, session="w", sample_rate_hz=16000) as ing:
+                for _ in range(400):  # the viewer, told to connect again, watches in the worker (at most 20 s)
+                    metrics = await srv._metrics_all()
+                    if metrics["viewers"] == 1 and not srv.holds:
+                        break
+                    await asyncio.sleep(0.05)
+                await stream_samples(ing, pcm, realtime=False, block_s=0.02)
+                ended = await ing.end()
+            return ended, await rec
+
+    ended, rec = asyncio.run(asyncio.wait_for(main(), 90))
+    assert rec.index == list(range(ended["frames"])) and rec.close_code == P.CLOSE_NORMAL
+    assert sum(len(b) for _, b in rec.audio) == len(pcm)
 
 
 def test_request_line_is_peeked_whole_or_not_at_all():

@@ -256,6 +256,41 @@ def test_a_viewer_joining_mid_sentence_gets_that_sentence_from_its_first_frame(m
     assert mid.close_code == after.close_code == P.CLOSE_NORMAL
 
 
+def test_a_viewer_held_for_a_text_session_gets_each_frame_once_from_frame_0(model, backend):
+    """A viewer that asks to wait (view query ``wait``) for a text session not yet started is subscribed as the
+    session opens, before its first sentence: it gets every frame and audio block from 0, each once (a viewer
+    joining while a sentence plays is first sent that sentence, SentenceReplay; a held viewer joins before any
+    sentence has begun, so none is sent twice)."""
+
+    async def held(srv):
+        async with ViewerClient(srv.url, session="bot", kind="params", wait_s=20) as viewer:
+            return await viewer.collect()
+
+    async def main():
+        async with running(model, backend) as srv:
+            rec = asyncio.ensure_future(held(srv))
+            for _ in range(2000):  # at most 10 s
+                if srv.holds:
+                    break
+                await asyncio.sleep(0.005)
+            assert len(srv.holds) == 1
+            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
+                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
+                assert json.loads(await ws.recv())["type"] == "started"
+                await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. Set white in a one soon. "}))
+                await ws.send(json.dumps({"type": "end"}))
+                replies = [json.loads(await ws.recv()) for _ in range(3)]
+            return replies, await asyncio.wait_for(rec, 30)
+
+    replies, rec = asyncio.run(asyncio.wait_for(main(), 90))
+    assert [r["type"] for r in replies] == ["spoken", "spoken", "ended"]
+    n = replies[-1]["frames"]
+    assert n == replies[0]["frames"] + replies[1]["frames"]
+    assert [m.index for m in rec.frames] == list(range(n))
+    assert [m.index for m in rec.audio] == list(range(n))
+    assert rec.close_code == P.CLOSE_NORMAL
+
+
 def test_a_text_session_that_speaks_nothing_ends_normally(model, backend):
     """Only unspeakable text, then end: `ended` with 0 frames and first_frame_ms null, close 1000 (was a
     NaN first_frame_ms that the JSON encoder refused: close 1011, an internal error)."""

@@ -59,10 +59,10 @@ def test_shapes_follow_the_documented_rules():
     rows = np.array(
         [
             [0.00, 0.0, 0.01, 0.0],  # closed, not pressed -> X
-            [-0.02, 0.0, 0.01, 0.0],  # closed, lips pressed -> A
-            [0.04, 0.0, 0.08, 0.0],  # upper lip raised, little open -> G
+            [-0.04, 0.0, 0.01, 0.0],  # closed, lips pressed -> A
+            [0.04, 0.0, 0.05, 0.0],  # upper lip raised, little open -> G
             [0.00, -0.10, 0.08, 0.0],  # puckered -> F
-            [0.00, -0.10, 0.20, 0.0],  # rounded, open -> E
+            [0.00, -0.10, 0.30, 0.0],  # rounded, open -> E
             [0.00, 0.0, 0.08, 0.0],  # B
             [0.00, 0.0, 0.18, 0.0],  # C
             [0.00, 0.0, 0.35, 0.0],  # D
@@ -91,7 +91,7 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
 def test_a_closure_inside_speech_is_an_a_cue_however_short():
     # A one-frame /b/ merged into the vowel before it, and lips closed without the press read as X, the
     # idle shape for pauses: 3 of the 9 /p b m/ of a 10-word `facecast say` sentence had no A cue.
-    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "A": [-0.02, 0, 0.01, 0], "B": [0, 0, 0.08, 0]}
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "A": [-0.04, 0, 0.01, 0], "B": [0, 0, 0.08, 0]}
     shapes = ["X"] * 8 + ["D"] * 4 + ["A"] + ["D"] * 4 + ["X"] * 2 + ["B"] * 4 + ["X"] * 8
     tr = Track(values=np.array([table[s] for s in shapes]))
     assert "".join(frame_shapes(tr.values)) == "".join(shapes)  # the per-frame rules are unchanged

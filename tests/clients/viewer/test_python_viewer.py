@@ -536,18 +536,17 @@ def test_a_starved_sound_callback_is_counted_as_an_underrun_and_the_sound_resume
     assert loud > 0.3 * 22050 and after < 3.0 * 22050, proc.stdout
 
 
-def _start_after_a_refusal(live, name: str, within_s: float, *, refusals: int = 1, session=None):
-    """A thread starting a 1.5 s session ``name`` once a viewer has been refused ``refusals`` times (4004:
-    the recorder under test is waiting for it), or after ``within_s`` seconds at the latest; ``session``:
-    what starts it instead (a callable), e.g. `facecast send`."""
+def _start_once_held(live, name: str, within_s: float, *, session=None):
+    """A thread starting a 1.5 s session ``name`` once a viewer is held for it (the recorder under test is waiting
+    for it: the view query's ``wait``), or after ``within_s`` seconds at the latest; ``session``: what starts it
+    instead (a callable), e.g. `facecast send`."""
     import threading
 
     from tests.live_server import stream_session
 
     def start():
-        before = live.server.closes[4004]
-        for _ in range(int(within_s / 0.002)):  # the record command's first attempts are refused: not live yet
-            if live.server.closes[4004] >= before + refusals:
+        for _ in range(int(within_s / 0.002)):  # the record command connects, and the server holds it
+            if live.server.holds:
                 break
             threading.Event().wait(0.002)
         if session is not None:
@@ -560,32 +559,40 @@ def _start_after_a_refusal(live, name: str, within_s: float, *, refusals: int = 
     return starter
 
 
-def test_record_started_before_the_session_gets_its_first_frame(live, tmp_path, capsys):
-    """`facecast record --session S` waits for S; the server replays nothing to a later viewer, so the
-    wait's retries must come faster than the session's first frame (about 0.2 s after its audio
-    starts). The session starts right after a refused attempt (4004): retried every 0.25 s, the
-    recording began at frame 2-11."""
+def test_record_started_before_the_session_gets_its_first_frame_and_all_its_audio(live, tmp_path, capsys):
+    """`facecast record --session S` waits for S: the server holds it (the view query's ``wait``) and subscribes it
+    as S opens, before S's first audio block. It used to be refused (4004) and retry every RETRY_S: it then had the
+    frames from frame 0 (retried every 0.25 s it began at frame 2-11) but joined after the session's first push, so
+    the first audio block(s) had gone out without it (0-630 samples missing in 2 of 4 runs of stop 46). The session
+    starts as soon as the recorder is held: the take's audio beside the .json is the session's, every sample."""
+    from assets.audio import read_audio
+
     name = "early"
-    starter = _start_after_a_refusal(live, name, 4.0)
-    out = tmp_path / "take.csv"
+    starter = _start_once_held(live, name, 4.0)
+    out = tmp_path / "take.json"
     try:
         assert main(["record", live.url, "--session", name, "-o", str(out), "--wait", "20"]) == 0
     finally:
         starter.join(30)
     printed = capsys.readouterr().out
-    take = decode_csv(out.read_bytes())
+    take = decode_json(out.read_bytes())
     assert take.start_s == 0.0 and "joined at" not in printed, printed
     assert take.n_frames == 45  # the whole 1.5 s
+    x = speechlike(1.5, 16000, seed=5)  # what the starter streamed (tests.live_server.stream_session), as sent
+    x = (np.clip(np.rint(x.astype(np.float64) * 32768), -32768, 32767) / 32768).astype(np.float32)
+    audio, rate = read_audio(tmp_path / "take.wav")
+    assert rate == 16000 and len(audio) == len(x)
+    np.testing.assert_allclose(audio, x, atol=0.5 / 32768)  # from its first sample
 
 
 def test_view_window_started_before_the_session_gets_its_first_frame(live, xvfb):
-    """docs/protocol.md section 8: a viewer started before its session retries every RETRY_S and gets frame 0.
-    The window backed off (up to REWATCH_MAX_S) from its first wait on, so a session started a while after it
-    was joined up to 1 s late ("showed 29 of 35 frames" of 59). The session here starts once the window has
-    been refused 6 times: backed off, its next attempt was then 1 s away."""
+    """docs/protocol.md section 8: a window started before its session is held by the server for --wait (the view
+    query's ``wait``) and gets frame 0. It used to retry, and once backed off from its first wait on a session
+    started a while after it was joined up to 1 s late ("showed 29 of 35 frames" of 59). The session here starts
+    once the window is held."""
     require_module("glfw")
     name = "early-window"
-    starter = _start_after_a_refusal(live, name, 40.0, refusals=6)
+    starter = _start_once_held(live, name, 40.0)
     try:
         proc = _run_view(
             *(live.url, "--session", name, "--wait", "40", "--duration", "2.5", "--width", "320", "--height", "240")
@@ -662,7 +669,9 @@ def test_record_started_before_a_fast_send_gets_the_whole_session(live, tmp_path
     all left within a few hundredths of a second of its start, so the recorder (retrying every RETRY_S) joined it
     at 1.0 s (27 of 57 frames here; 18 of 56 at 1.27 s in the user's test) or found it over ("4004 no session"
     once --wait ran out). `send --fast` now holds its audio FAST_HOLD_S, five retries, after the start: the
-    recording has every frame from frame 0. A session it never found is reported with how long it waited."""
+    recording has every frame from frame 0. (The recorder is now held by the server until the session opens, which
+    does not need the hold; a client that polls still does.) A session it never found is reported with how long
+    it waited."""
     from assets.audio import write_wav
 
     wav = write_wav(tmp_path / "a.wav", speechlike(1.9, 16000, seed=5), 16000)
@@ -672,7 +681,7 @@ def test_record_started_before_a_fast_send_gets_the_whole_session(live, tmp_path
     def send() -> None:
         sent.append(main(["send", str(wav), live.url, "--session", name, "--fast"]))
 
-    starter = _start_after_a_refusal(live, name, 20.0, session=send)
+    starter = _start_once_held(live, name, 20.0, session=send)
     out = tmp_path / "take.csv"
     try:
         code = main(["record", live.url, "--session", name, "-o", str(out), "--wait", "5"])
@@ -742,11 +751,11 @@ def test_record_with_a_new_head_started_before_the_session_gets_its_first_frame(
     """`record -o take.glb --head MESH` resolved (rigged) the head before connecting: ~13 s for a mesh
     never rigged, so a session started meanwhile was joined late (0.17 s in with a cached rig, 0.8 s
     to resolve). The head now resolves while the session is watched. The session here starts as
-    soon as the recorder has been refused once (it is watching), or 2 s after the recorder started
+    soon as the server holds the recorder for it (it is watching), or 2 s after the recorder started
     (before the fix it was still rigging then and found the 1.5 s session over)."""
     pygltflib = require_module("pygltflib")
     name = "new-head"
-    starter = _start_after_a_refusal(live, name, 2.0)
+    starter = _start_once_held(live, name, 2.0)
     out = tmp_path / "take.glb"
     argv = ["record", live.url, "--session", name, "-o", str(out), "--wait", "5"]
     try:
@@ -811,12 +820,15 @@ def test_record_reports_a_watch_error_while_a_new_head_is_still_rigging(live, tm
     assert not out.exists()
 
 
-def test_view_window_backs_off_while_its_session_is_away_and_picks_it_up_again(live):
+@pytest.mark.parametrize("wait_s", [10.0, 0.0])
+def test_view_window_waits_while_its_session_is_away_and_picks_it_up_again(live, wait_s):
     """The window's receiver (no window needed: it only hands items to the window) watches a session, sees it
     end, then waits for it to come back: it used to try /view every RETRY_S (17 connections a second, each one a
-    handshake the server closes with 4004, for as long as the session stayed away). Counted by the server over 4 s
-    of absence: 68 before, 8 with a back-off to REWATCH_MAX_S; the session started again is still watched within
-    that."""
+    handshake the server closes with 4004, for as long as the session stayed away). With --wait the server holds it
+    (the view query's ``wait``): no attempt refused over 4 s of absence, and the session started again is watched
+    from its frame 0. Without (--wait 0, as against a server that holds nobody) it backs off to REWATCH_MAX_S:
+    counted by the server over 4 s of absence, 68 attempts before the back-off, 8 with it; the session started
+    again is still watched within that."""
     import queue
     import time
 
@@ -833,7 +845,7 @@ def test_view_window_backs_off_while_its_session_is_away_and_picks_it_up_again(l
                 return item
 
     inbox: queue.SimpleQueue = queue.SimpleQueue()
-    cfg = ViewerStreamConfig(url=live.url, session="away", kind="deltas", encoding="int16", wait_s=10)
+    cfg = ViewerStreamConfig(url=live.url, session="away", kind="deltas", encoding="int16", wait_s=wait_s)
     rx = _Receiver(cfg, inbox, AudioOut(Playout(0.08)))
     first = live.submit(stream_session(live.url, "away", 1.0))
     rx.start()
@@ -844,12 +856,18 @@ def test_view_window_backs_off_while_its_session_is_away_and_picks_it_up_again(l
         before = live.server.closes[P.CLOSE_NOT_FOUND]
         time.sleep(4.0)
         attempts = live.server.closes[P.CLOSE_NOT_FOUND] - before
-        print(f"view window: {attempts} attempts to watch in 4 s while the session was away")
-        assert 2 <= attempts <= 4 / REWATCH_MAX_S + 6  # 68 when retried every RETRY_S
+        held = len(live.server.holds)
+        print(f"view window, --wait {wait_s:g}: {attempts} attempts refused in 4 s while the session was away")
+        if wait_s:
+            assert attempts == 0 and held == 1
+        else:
+            assert 2 <= attempts <= 4 / REWATCH_MAX_S + 6 and held == 0  # 68 when retried every RETRY_S
         again = live.submit(stream_session(live.url, "away", 3.0, seed=1))
         t0 = time.monotonic()
         until("desc", REWATCH_MAX_S + 2.0)  # the session is picked up again
         print(f"view window: watching again {time.monotonic() - t0:.2f} s after the session came back")
+        if wait_s:
+            assert until("msg", 10)[1].index == 0  # held: subscribed as the session opened
         again.result(20)
     finally:
         rx.close()
