@@ -90,6 +90,52 @@ def test_chunker_gives_the_same_sentences_for_any_chunking():
     assert all(len(s) <= 60 for s in want)
 
 
+ABBREVIATED = (
+    "Meet Dr. Smith at 3 p.m. today, e.g. now. Here is the list:\n1. Eggs\n2. Milk and bread\n"
+    "\u201cHi there.\u201d Then we left\u2026 Apples, pears, etc. Then more. Room No. 5 please. No. "
+    "J. R. Tolkien wrote it. Llame a la Sra. Garc\u00eda a las 3 p.m. ma\u00f1ana. Stop! "
+)
+
+
+def test_chunker_does_not_cut_at_abbreviations_initials_or_list_numbers():
+    """A user test: 'Meet Dr. Smith at 3 p.m. today, e.g. now.' came out as four sentences (each cut ~0.45 s of
+    silence), a markdown list's '1.' and '2.' as sentences, and a closing curly quote or an ellipsis was no end."""
+    c = SentenceChunker()
+    want = [
+        "Meet Dr. Smith at 3 p.m. today, e.g. now.",
+        "Here is the list:",
+        "1. Eggs",
+        "2. Milk and bread",
+        "\u201cHi there.\u201d",
+        "Then we left\u2026",
+        "Apples, pears, etc.",  # an abbreviation that ends a sentence: the next word is capitalised
+        "Then more.",
+        "Room No. 5 please.",
+        "No.",
+        "J. R. Tolkien wrote it.",
+        "Llame a la Sra. Garc\u00eda a las 3 p.m. ma\u00f1ana.",
+        "Stop!",
+    ]
+    assert c.push(ABBREVIATED) + c.flush() == want
+    # the same sentences whatever the chunking (an abbreviation's end waits for the next word's first letter)
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        c, got = SentenceChunker(), []
+        for piece in np.split(np.array(list(ABBREVIATED)), np.sort(rng.choice(len(ABBREVIATED), 12, replace=False))):
+            got += c.push("".join(piece))
+        assert got + c.flush() == want
+
+
+def test_a_stall_speaks_whole_words_and_a_long_sentence_can_start_at_a_clause():
+    c = SentenceChunker()
+    assert c.push("Then he went ho") == [] and c.flush_words() == ["Then he went"]
+    assert c.pending.strip() == "ho" and c.flush_words() == []  # a lone fragment waits
+    assert c.push("me and slept. ") == ["home and slept."]
+    c.push("Well, where were you when the lights went out, and the fox")
+    assert c.take_clause(8) == ["Well, where were you when the lights went out,"]  # not at "Well," (one word)
+    assert c.take_clause(8) == [] and c.flush() == ["and the fox"]
+
+
 def test_clean_text_keeps_pronounceable_characters_and_rejects_the_rest():
     assert clean_text("Hi\x00 there 😀 — ¿qué tal?") == "Hi there ¿qué tal?"
     for bad in ("", "   ", "😀🙂", "...!?", None):
