@@ -156,7 +156,7 @@ class SentenceChunker:
             pos = m.end()
         return None
 
-    def _ends_sentence(self, m: re.Match) -> bool | None:
+    def _ends_sentence(self, m: re.Match[str]) -> bool | None:
         """Whether candidate ``m`` ends a sentence (see the module doc); None: it depends on the next
         word's first character, not received yet."""
         if m.group(1) != ".":  # !, ?, ;, :, …, "..." or a newline
