@@ -232,8 +232,9 @@ def test_text_session_over_loopback(model, backend):
                     replies.append(json.loads(await ws.recv()))  # "Hello there, how are you?" spoken
                     await ws.send(json.dumps({"type": "text", "text": "😀😀. "}))
                     replies.append(json.loads(await ws.recv()))  # rejected, the session goes on
-                    await ws.send(json.dumps({"type": "text", "text": "I am fine thank you"}))
+                    await ws.send(json.dumps({"type": "text", "text": "I am fine thank you "}))
                     replies.append(json.loads(await ws.recv()))  # stalled: "I am fine thank you" after stall_s
+                    # (whole words: the trailing space; a last word without one would wait, as a fragment)
                     stall_wait = time.perf_counter() - t0
                     await ws.send(json.dumps({"type": "end"}))
                     replies.append(json.loads(await ws.recv()))
