@@ -15,14 +15,19 @@ messages, same description; the audio rate is the synthesiser's).
 
 The asyncio side (:func:`handle_text`) runs synthesis off the event loop (a thread), releases
 frames at the pace of real time plus ``lead_s`` (so viewers' queues never overflow and playback
-starts at once), speaks pending text after ``stall_s`` without a new piece (a stalled stream still
-gets its words out), and answers bad text with ``{"type": "rejected"}`` while the session goes
-on serving its viewers.
+starts at once), speaks pending text through its last whole word after ``stall_s`` without a new
+piece (a stalled stream still gets its words out; a trailing word fragment waits for
+``FRAGMENT_STALLS`` more stalls), starts a long sentence at a clause boundary when the viewers
+would otherwise wait for it (:data:`CLAUSE_WORDS`, :data:`CLAUSE_AHEAD_S`), stops the speech on
+``{"type": "cancel"}`` (the mouth eased to rest, the session open for more text), plays out every
+sentence accepted when its source drops without ``end`` (nothing accepted is lost), and answers bad
+text with ``{"type": "rejected"}`` while the session goes on serving its viewers.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +40,7 @@ from websockets.exceptions import ConnectionClosed
 
 from realtime_core.errors import ConfigError
 from realtime_core.synthesis.rest import RestPauses
+from realtime_core.synthesis.search import crossfade
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
 from realtime_core.synthesis.text import MAX_TEXT_CHARS, SentenceChunker, TextError
 from server.errors import (
@@ -52,6 +58,20 @@ from wire import protocol as P
 FPS = 30
 REJECTED_TEXT_CHARS = 200
 """A ``rejected`` reply quotes the text it refuses up to this many characters (a piece may hold 5000)."""
+FRAGMENT_STALLS = 2.0
+"""A word fragment left pending after a stall ("Then he went ho": "ho") is spoken after this many more
+``stall_s`` without a new piece (3 s more at the default 1.5 s). Why wait longer: a source that paused
+mid-word usually resumes (a network hiccup, a tool call), and a fragment spoken early is a wrong word
+("ho", then "me") where waiting costs only time; a source that stopped for good without ``end`` still
+gets its last word out."""
+CLAUSE_WORDS = 8
+"""A sentence still being written may be started at a clause boundary (comma, ``;``, ``:``, dash) once
+this many words are before it, when the viewers have less than :data:`CLAUSE_AHEAD_S` of speech queued.
+Why: a long first sentence was spoken only once it was complete (36 words at ~17 tokens/s: the first
+frame 2 s after the first piece); each cut costs the silences a sentence starts and ends with."""
+CLAUSE_AHEAD_S = 1.0
+"""Speech queued ahead of the viewers' clock (s) under which a clause is started (see CLAUSE_WORDS):
+with more queued, the rest of the sentence usually arrives before the viewers need it, and no cut."""
 
 
 class SpeechLike(Protocol):
@@ -78,7 +98,9 @@ class TextBackend:
     languages: the supported language codes; sample_rate_hz: the rate ``speak`` produces (must be a
     multiple of 30 Hz, e.g. espeak-ng's 22050 Hz); lead_s: how far frames run ahead of real time;
     stall_s: pending text is spoken after this long without a new piece; n_best: unit sequences
-    averaged (see UnitSynthesizer.synthesize)."""
+    averaged (see UnitSynthesizer.synthesize); language_of_voice(voice) -> the language a start with
+    a voice and no language speaks (:func:`assets.tts.language_of_voice`, as ``facecast say``; None:
+    "en")."""
 
     speak: Callable[[str, str, str | None], SpeechLike]
     synthesizer: UnitSynthesizer
@@ -87,6 +109,7 @@ class TextBackend:
     lead_s: float = 0.5
     stall_s: float = 1.5
     n_best: int = 1
+    language_of_voice: Callable[[str | None], str] | None = None
 
     def __post_init__(self) -> None:
         if self.sample_rate_hz % FPS:
@@ -224,12 +247,38 @@ class TextSession:
         }
         return outs, report
 
+    def cancel(self, next_index: int, last_params: np.ndarray | None) -> list[Output]:
+        """Interrupt the speech: the timeline rewound to ``next_index`` (the frames from there on were
+        not released and are dropped) and, when ``last_params`` ((4,) the last released frame's mouth
+        parameters) is given, frames easing from it to the rest pose over ``RestPauses.ramp_s`` (the
+        smoothstep a sentence's end eases with), with silent audio; the last frame is at rest."""
+        per = self.rate_hz // FPS
+        self.frames_out = self._audio_index = next_index
+        self.samples_out = next_index * per
+        if last_params is None:
+            return []
+        rest = self.backend.synthesizer.rest[self._k :]
+        n = max(1, round(RestPauses().ramp_s * FPS))
+        w = crossfade(np.arange(1, n + 1) / n)
+        now = time.perf_counter()
+        outs = []
+        for j in range(n):
+            k = self.frames_out
+            params = last_params + w[j] * (rest - last_params)
+            frame = Frame(k, k / FPS, params, params.copy(), 0.0, now, self.rig, self.times)
+            block = AudioBlock(self._audio_index, self.samples_out, self.samples_out / self.rate_hz, np.zeros(per))
+            self._audio_index += 1
+            self.samples_out += per
+            self.frames_out += 1
+            outs.append(Output([frame], block))
+        return outs
+
 
 def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> TextBackend:
     """The standard backend: espeak-ng speech (:mod:`assets.tts`) and unit selection over a unit corpus
     (``corpus`` None = the shipped or newest built one, :func:`assets.unitcorpus.find_unit_corpus`)."""
     from assets.espeak import synthesizer
-    from assets.tts import INVENTORY, speak
+    from assets.tts import INVENTORY, language_of_voice, speak
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
 
     stored = load_unit_corpus(find_unit_corpus(corpus))
@@ -239,6 +288,7 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
         languages=tuple(INVENTORY),
         sample_rate_hz=synthesizer().sample_rate_hz,
         n_best=n_best,
+        language_of_voice=language_of_voice,
     )
 
 
@@ -279,9 +329,12 @@ async def handle_text(server, ws: ServerConnection) -> None:
     name = start.get("session")
     if not isinstance(name, str) or not P.SESSION_NAME.match(name):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
-    language, voice = start.get("language", "en"), start.get("voice")
+    voice = start.get("voice")
     if voice is not None and not isinstance(voice, str):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "voice must be a string")
+    # `{"voice": "es"}` alone was refused (Spanish voice, English by default): the voice names its language
+    infer = backend.language_of_voice
+    language = start["language"] if "language" in start else infer(voice) if infer is not None else "en"
     try:
         session = TextSession(
             backend, language=language, voice=voice, rig=server.head.rig if server.head else None, times=server.times
@@ -309,6 +362,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
     clock: dict[str, float] = {}
     first_piece: list[float] = []
     sentence_ends: dict[int, float] = {}  # a sentence's first frame index -> its end, media time (s)
+    spans: list[tuple[int, int]] = []  # accepted sentences' frame ranges [first, end) not yet fully released
+    released: dict[str, Any] = {"next": 0, "params": None}  # the next frame to release, the last one's params
 
     async def pacer() -> None:
         """Release frames no earlier than ``lead_s`` before their media time on the wall clock."""
@@ -330,22 +385,44 @@ async def handle_text(server, ws: ServerConnection) -> None:
             if end is not None and live.replay is not None:  # a sentence starts: what a joining viewer gets
                 live.replay.begin(out.frames[0].index, clock["t0"] + end)
             live._fanout(out)
+            released["next"], released["params"] = out.frames[-1].index + 1, out.frames[-1].params
+
+    async def reply(msg: dict) -> None:
+        # a source that dropped still has its accepted speech played out (below): its replies go nowhere
+        with contextlib.suppress(ConnectionClosed):
+            await ws.send(P.dumps(msg))
+
+    def enqueue(outs: list[Output]) -> None:
+        spans[:] = [span for span in spans if span[1] > released["next"]]  # those played are no longer needed
+        first = outs[0].frames[0].index
+        sentence_ends[first] = outs[-1].frames[-1].media_time + 1 / FPS
+        spans.append((first, outs[-1].frames[-1].index + 1))
+        for o in outs:
+            queue.put_nowait(o)
 
     async def say(sentences: list[str]) -> None:
         for sentence in sentences:
             try:
                 outs, report = await asyncio.to_thread(session.speak, sentence)
             except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
-                reply = {"type": "rejected", "text": sentence[:REJECTED_TEXT_CHARS], "reason": str(exc)}
-                await ws.send(P.dumps(reply))
+                await reply({"type": "rejected", "text": sentence[:REJECTED_TEXT_CHARS], "reason": str(exc)})
                 continue
-            sentence_ends[outs[0].frames[0].index] = outs[-1].frames[-1].media_time + 1 / FPS
-            for o in outs:
-                queue.put_nowait(o)
-            await ws.send(P.dumps(report))
+            enqueue(outs)
+            await reply(report)
+
+    def ahead_s() -> float:
+        """Speech queued ahead of the viewers' clock (s): all of it before the first frame leaves."""
+        return session.frames_out / FPS - (time.perf_counter() - clock["t0"] if "t0" in clock else 0.0)
+
+    async def finish() -> None:
+        """Speak what is pending and wait until the last frame has been released."""
+        await say(session.finish_text())
+        queue.put_nowait(None)
+        await pace
 
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
+    stalled = False  # a stall spoke the pending words and left a word fragment waiting
     try:
         await ws.send(
             P.dumps(
@@ -360,35 +437,61 @@ async def handle_text(server, ws: ServerConnection) -> None:
             )
         )
         while True:
+            wait_s = (FRAGMENT_STALLS if stalled else 1.0) * backend.stall_s
             try:
-                raw = await asyncio.wait_for(ws.recv(), backend.stall_s if session.chunker.pending.strip() else None)
-            except TimeoutError:  # the stream stalled mid-sentence: speak what is there
-                await say(session.finish_text())
+                raw = await asyncio.wait_for(ws.recv(), wait_s if session.chunker.pending.strip() else None)
+            except TimeoutError:  # the stream stalled mid-sentence: speak its whole words (later the fragment)
+                done = session.finish_text() if stalled else session.chunker.flush_words()
+                stalled = bool(session.chunker.pending.strip())
+                await say(done)
                 continue
             msg = _text_message(raw)
             kind = msg.get("type")
             if kind == "text":
+                stalled = False
                 text = msg.get("text")
                 if not isinstance(text, str):  # no text to quote: null (docs/protocol.md section 9.5)
                     reason = f"text must be a string, got {reason_value(text)}"
-                    await ws.send(P.dumps({"type": "rejected", "text": None, "reason": reason}))
+                    await reply({"type": "rejected", "text": None, "reason": reason})
                     continue
                 if not first_piece:
                     first_piece.append(time.perf_counter())
                 try:
                     done = session.push_text(text)
                 except TextError as exc:
-                    await ws.send(P.dumps({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)}))
+                    await reply({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)})
                     continue
                 if msg.get("flush"):
                     done += session.finish_text()
+                elif not done and ahead_s() < CLAUSE_AHEAD_S:  # the viewers would wait for the whole sentence
+                    done = session.chunker.take_clause(CLAUSE_WORDS)
                 await say(done)
             elif kind == "flush":
+                stalled = False
                 await say(session.finish_text())
+            elif kind == "cancel":
+                # Barge-in: what is not yet released is dropped (frames already sent, up to lead_s, still play)
+                pace.cancel()
+                await asyncio.gather(pace, return_exceptions=True)
+                while not queue.empty():
+                    queue.get_nowait()
+                session.chunker.flush()
+                stalled = False
+                nxt = released["next"]
+                cut = [span for span in spans if span[1] > nxt]
+                mid_sentence = any(first < nxt for first, _ in cut)
+                spans.clear()
+                for k in [k for k in sentence_ends if k >= nxt]:
+                    del sentence_ends[k]
+                ease = session.cancel(nxt, released["params"] if mid_sentence else None)
+                if ease:
+                    sentence_ends[nxt] = ease[-1].frames[-1].media_time + 1 / FPS
+                    for o in ease:
+                        queue.put_nowait(o)
+                pace = asyncio.ensure_future(pacer())
+                await reply({"type": "cancelled", "dropped": len(cut), "media_time": nxt / FPS})
             elif kind == "end":
-                await say(session.finish_text())
-                queue.put_nowait(None)
-                await pace
+                await finish()
                 await ws.send(
                     P.dumps(
                         {
@@ -407,13 +510,15 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
             else:
                 raise ProtocolViolation(
-                    P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush or end)"
+                    P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush, cancel or end)"
                 )
     except ProtocolViolation:
         code, reason = P.CLOSE_NORMAL, "session ended: its source broke the protocol"
         raise
     except ConnectionClosed:
-        pass
+        # The source dropped without `end`: what it was told was spoken plays out to the viewers, and its
+        # pending text is spoken as `end` would (nothing accepted is lost); then the session ends.
+        await finish()
     finally:
         pace.cancel()
         await server._end_session(live, code, reason)

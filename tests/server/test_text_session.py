@@ -42,7 +42,7 @@ CORPUS_TEXT = [
 @pytest.fixture(scope="module")
 def backend() -> TextBackend:
     from assets.espeak import synthesizer
-    from assets.tts import INVENTORY, speak
+    from assets.tts import INVENTORY, language_of_voice, speak
     from realtime_core.phones import PhonemeSegment
     from training.articulatory import render_params
 
@@ -67,6 +67,7 @@ def backend() -> TextBackend:
         sample_rate_hz=synthesizer().sample_rate_hz,
         stall_s=0.5,
         lead_s=0.3,
+        language_of_voice=language_of_voice,
     )
 
 
@@ -88,6 +89,52 @@ def test_chunker_gives_the_same_sentences_for_any_chunking():
         assert got == want
     assert want[:3] == ["Hello there!", "How are you today?", "I am fine;"]
     assert all(len(s) <= 60 for s in want)
+
+
+ABBREVIATED = (
+    "Meet Dr. Smith at 3 p.m. today, e.g. now. Here is the list:\n1. Eggs\n2. Milk and bread\n"
+    "\u201cHi there.\u201d Then we left\u2026 Apples, pears, etc. Then more. Room No. 5 please. No. "
+    "J. R. Tolkien wrote it. Llame a la Sra. Garc\u00eda a las 3 p.m. ma\u00f1ana. Stop! "
+)
+
+
+def test_chunker_does_not_cut_at_abbreviations_initials_or_list_numbers():
+    """A user test: 'Meet Dr. Smith at 3 p.m. today, e.g. now.' came out as four sentences (each cut ~0.45 s of
+    silence), a markdown list's '1.' and '2.' as sentences, and a closing curly quote or an ellipsis was no end."""
+    c = SentenceChunker()
+    want = [
+        "Meet Dr. Smith at 3 p.m. today, e.g. now.",
+        "Here is the list:",
+        "1. Eggs",
+        "2. Milk and bread",
+        "\u201cHi there.\u201d",
+        "Then we left\u2026",
+        "Apples, pears, etc.",  # an abbreviation that ends a sentence: the next word is capitalised
+        "Then more.",
+        "Room No. 5 please.",
+        "No.",
+        "J. R. Tolkien wrote it.",
+        "Llame a la Sra. Garc\u00eda a las 3 p.m. ma\u00f1ana.",
+        "Stop!",
+    ]
+    assert c.push(ABBREVIATED) + c.flush() == want
+    # the same sentences whatever the chunking (an abbreviation's end waits for the next word's first letter)
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        c, got = SentenceChunker(), []
+        for piece in np.split(np.array(list(ABBREVIATED)), np.sort(rng.choice(len(ABBREVIATED), 12, replace=False))):
+            got += c.push("".join(piece))
+        assert got + c.flush() == want
+
+
+def test_a_stall_speaks_whole_words_and_a_long_sentence_can_start_at_a_clause():
+    c = SentenceChunker()
+    assert c.push("Then he went ho") == [] and c.flush_words() == ["Then he went"]
+    assert c.pending.strip() == "ho" and c.flush_words() == []  # a lone fragment waits
+    assert c.push("me and slept. ") == ["home and slept."]
+    c.push("Well, where were you when the lights went out, and the fox")
+    assert c.take_clause(8) == ["Well, where were you when the lights went out,"]  # not at "Well," (one word)
+    assert c.take_clause(8) == [] and c.flush() == ["and the fox"]
 
 
 def test_clean_text_keeps_pronounceable_characters_and_rejects_the_rest():
@@ -185,8 +232,9 @@ def test_text_session_over_loopback(model, backend):
                     replies.append(json.loads(await ws.recv()))  # "Hello there, how are you?" spoken
                     await ws.send(json.dumps({"type": "text", "text": "😀😀. "}))
                     replies.append(json.loads(await ws.recv()))  # rejected, the session goes on
-                    await ws.send(json.dumps({"type": "text", "text": "I am fine thank you"}))
+                    await ws.send(json.dumps({"type": "text", "text": "I am fine thank you "}))
                     replies.append(json.loads(await ws.recv()))  # stalled: "I am fine thank you" after stall_s
+                    # (whole words: the trailing space; a last word without one would wait, as a fragment)
                     stall_wait = time.perf_counter() - t0
                     await ws.send(json.dumps({"type": "end"}))
                     replies.append(json.loads(await ws.recv()))
@@ -325,6 +373,141 @@ def test_text_session_refuses_bad_starts(model, backend):
     assert code == P.CLOSE_BAD_REQUEST and "unsupported language" in reason
     code, reason = asyncio.run(attempt({"type": "start", "session": "x", "voice": "xx-nope"}))
     assert code == P.CLOSE_BAD_REQUEST and "voice" in reason
+
+
+def test_a_voice_without_a_language_speaks_the_voices_language(model, backend):
+    """`{"voice": "es"}` and no language was refused (4400: "es" is not an English voice) while `facecast say
+    --voice es` speaks Spanish: the language is inferred from the voice the same way (assets.tts.language_of_voice)."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "es", "voice": "es"}))
+            started = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "text", "text": "Hola, ¿qué tal? "}))
+            spoken = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            return started, spoken
+
+    started, spoken = asyncio.run(asyncio.wait_for(main(), 60))
+    assert started["type"] == "started" and started["language"] == "es"
+    assert spoken["type"] == "spoken" and spoken["frames"] > 0
+
+
+def test_a_source_that_drops_without_end_has_its_accepted_speech_played_out(model, backend):
+    """A user test: a source got `spoken` for a 79-frame sentence and dropped its connection; a viewer got 16
+    frames, then "1000 session ended". Nothing accepted is lost: every sentence spoken (and the pending text,
+    as `end` would) reaches the viewers whole, then the session ends."""
+
+    async def main():
+        async with running(model, backend) as srv:
+            ws = await connect(srv.url.replace("http", "ws") + "/text")
+            await ws.send(json.dumps({"type": "start", "session": "drop", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="drop", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG + "And then the"}))
+                spoken = json.loads(await ws.recv())
+                ws.transport.abort()  # dropped: no `end`, no close handshake
+                got = await asyncio.wait_for(collect, 60)
+            return spoken, got
+
+    spoken, got = asyncio.run(asyncio.wait_for(main(), 90))
+    idx = [m.index for m in got.frames]
+    assert spoken["frames"] > 60 and idx == list(range(len(idx)))
+    assert len(idx) > spoken["frames"] + 15  # the sentence whole, then "And then the" (spoken as `end` would)
+    assert [m.media_time for m in got.audio] == pytest.approx([k / 30 for k in range(len(idx))])
+    assert got.close_code == P.CLOSE_NORMAL
+
+
+def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on(model, backend):
+    """Barge-in: `{"type": "cancel"}` drops every frame not yet released (the sentence playing and those queued,
+    counted in the reply), eases the mouth from the last frame released to rest over RestPauses.ramp_s with
+    silent audio, and the session takes more text on the same timeline."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "cut", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="cut", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG + "Bin blue at f two now. "}))
+                first, second = json.loads(await ws.recv()), json.loads(await ws.recv())
+                await asyncio.sleep(1.0)  # mid-way through the first sentence (several seconds)
+                await ws.send(json.dumps({"type": "text", "text": "and this pending text is dropped too"}))
+                await ws.send(json.dumps({"type": "cancel"}))
+                cancelled = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "text", "text": "Thank you very much. "}))
+                third = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "end"}))
+                ended = json.loads(await ws.recv())
+                got = await asyncio.wait_for(collect, 60)
+            return first, second, cancelled, third, ended, got
+
+    first, second, cancelled, third, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert second["text"] == "Bin blue at f two now." and cancelled["type"] == "cancelled"
+    assert cancelled["dropped"] == 2  # the sentence playing and the one queued
+    cut = round(cancelled["media_time"] * 30)
+    assert 0 < cut < first["frames"]  # the first sentence was cut mid-way: the rest of it never left
+    n_ease = 6  # RestPauses().ramp_s * 30
+    assert third["text"] == "Thank you very much." and third["media_time"] == pytest.approx((cut + n_ease) / 30)
+    assert ended["frames"] == cut + n_ease + third["frames"]
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(ended["frames"]))  # one timeline, nothing dropped reached the viewer
+    values = np.array([m.values for m in got.frames])
+    ease = values[cut - 1 : cut + n_ease]  # the last frame released, then the ease
+    dist = np.abs(ease).max(axis=1)  # the rest pose is zero parameters here
+    assert dist[0] > 0.01 and np.all(np.diff(dist) <= 1e-6) and dist[-1] < 1e-6  # moving, eased, at rest
+    assert np.abs(np.diff(ease, axis=0)).max() <= 0.35 * dist[0] + 1e-6  # no jump: the smoothstep's steps
+    audio = np.concatenate([m.values for m in got.audio[cut : cut + n_ease]])
+    assert not np.any(audio)
+    assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
+
+
+def test_a_stall_mid_word_speaks_the_whole_words_and_the_fragment_waits(model, backend):
+    """A user test: after "Then he went ho" and a stall the server spoke "Then he went ho", then "me and slept".
+    A stall speaks through the last word boundary; the fragment waits for more text (or a longer stall)."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "stall", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            await ws.send(json.dumps({"type": "text", "text": "Then he went ho"}))
+            a = json.loads(await ws.recv())  # after stall_s
+            await asyncio.sleep(0.2)
+            await ws.send(json.dumps({"type": "text", "text": "me and slept. Good ni"}))
+            b = json.loads(await ws.recv())
+            c = json.loads(await ws.recv())  # "Good" after a stall, then "ni" after FRAGMENT_STALLS more
+            d = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            return [m["text"] for m in (a, b, c, d)]
+
+    assert asyncio.run(asyncio.wait_for(main(), 60)) == ["Then he went", "home and slept.", "Good", "ni"]
+
+
+def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
+    """A 36-word first sentence streamed at ~17 tokens/s was spoken only once complete (first frame 2 s after the
+    first piece): with nothing queued for the viewers, it is started at a clause boundary after >= 8 words."""
+    text = (
+        "Well, when you get to the old bridge by the river, turn left and keep walking past the bakery, "
+        "the school and the park until you see a small blue house with a red door on your right. "
+    )
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "clause", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            for word in text.split(" "):
+                await ws.send(json.dumps({"type": "text", "text": word + " "}))
+            await ws.send(json.dumps({"type": "end"}))
+            replies = []
+            while (m := json.loads(await ws.recv()))["type"] != "ended":
+                replies.append(m)
+            return replies
+
+    replies = asyncio.run(asyncio.wait_for(main(), 60))
+    texts = [m["text"] for m in replies]
+    assert texts[0] == "Well, when you get to the old bridge by the river,"  # not at "Well," (one word)
+    assert " ".join(texts) == " ".join(text.split())  # all of it, in order
 
 
 @pytest.mark.slow
