@@ -26,16 +26,16 @@ the audio, bilabial closures at low energy)::
 espeak-ng keeps global state (one voice, one callback), so all calls go through one
 process-wide lock; it is not re-entrant. The library is loaded lazily on first use.
 
-Each synthesis runs in a child forked from this process, whose espeak-ng is only ever initialised:
-espeak-ng 1.51 carries state from one ``espeak_Synth`` to the next. Its clause code reads the
-phoneme list past the current clause's end (``next2``/``next3`` in ``CalcLengths``), where the
-previous text's last clause still lies: "Sure!" after "Dr." (whose last clause ``d A: k t 3``) had a
-vowel of 0.331 s instead of 0.292 s and 10843 samples instead of 8900, to the end of the process,
-and no other call changed it back. Its wave generator also keeps phase and pitch (8900, 8897, 8898
-samples for "Sure!" three times). ``espeak_Cancel`` and a voice change reset neither, and
-``espeak_Terminate`` deadlocks (``pthread_cond_wait``). A fork is the state of a freshly loaded
-library, so the same text and voice give the same samples whatever was said before, and the
-same as ``facecast say`` in a new process.
+Each synthesis runs in a child forked from this process, whose espeak-ng is only ever initialised
+(and given voices, which leave no trace). espeak-ng 1.51 carries state from one ``espeak_Synth``
+to the next: it reads its phoneme list past the current clause's end (``next2``/``next3`` in
+``CalcLengths``), where the previous text's last clause still lies. In one process "Sure!" gave
+8900 samples, 10843 after "Dr." or "doctor hello hello." (vowel 0.331 s, not 0.292 s), 9102 after
+"Hello there, how are you?", and kept that until a text with another last clause; its wave
+generator also keeps its phase (8900, 8897, 8898 samples for "Sure!" thrice). ``espeak_Cancel``,
+a voice change or a primer text reset neither, and ``espeak_Terminate`` deadlocks
+(``pthread_cond_wait``). A fork has the state of a freshly loaded library, so the same text and
+voice give the same samples whatever was said before, as ``facecast say`` in a new process does.
 """
 
 from __future__ import annotations
@@ -236,7 +236,7 @@ class EspeakSynthesizer:
         self._libc = ctypes.CDLL(None)  # the process's C library: srand() for espeak's noise
         self._libc.srand.argtypes = [ctypes.c_uint]
         self.sample_rate_hz = int(rate)
-        self._chunks: list[np.ndarray] = []
+        self._chunks: list[bytes] = []  # int16 samples as espeak wrote them (native byte order)
         self._events: list[tuple[int, str]] = []  # (sample index, phoneme or "" for a boundary)
         # Keep a reference: ctypes frees the trampoline if the Python object dies.
         self._callback = _CALLBACK(self._on_synth)
@@ -244,7 +244,9 @@ class EspeakSynthesizer:
 
     def _on_synth(self, wav, n_samples, events) -> int:
         if n_samples > 0 and wav:
-            self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
+            # plain bytes, no numpy: this runs in the forked child, which should import nothing (another thread of
+            # the parent may have held the import lock when it forked)
+            self._chunks.append(ctypes.string_at(wav, 2 * n_samples))
         i = 0
         while events[i].type != _EVENT_LIST_TERMINATED:
             ev = events[i]
@@ -270,6 +272,10 @@ class EspeakSynthesizer:
         if not text.strip():
             raise ConfigError("cannot synthesise empty text")
         with self._lock:
+            # Load the voice here, not in each child (~4 ms): loading one leaves no trace in what the next says
+            # (measured: the same samples after any sequence of voices), synthesis does.
+            if self._lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
+                raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
             read_fd, write_fd = os.pipe()
             pid = os.fork()
             if pid == 0:  # the child: synthesise, write the result, and leave without Python's exit handlers
@@ -319,11 +325,11 @@ class EspeakSynthesizer:
             error = lib.espeak_Synth(data, len(data), 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)
             if error == 0:
                 lib.espeak_Synchronize()
-        samples = np.concatenate(self._chunks) if self._chunks and error == 0 else np.zeros(0, np.int16)
+        samples = b"".join(self._chunks) if error == 0 else b""
         events = self._events if error == 0 else []
         reply = (
-            _HEADER.pack(error, len(samples), len(events))
-            + samples.astype(np.int16).tobytes()
+            _HEADER.pack(error, len(samples) // 2, len(events))
+            + samples
             + b"".join(_EVENT_RECORD.pack(sample, name.encode("utf-8")[:8]) for sample, name in events)
         )
         view = memoryview(reply)
