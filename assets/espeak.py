@@ -26,16 +26,18 @@ the audio, bilabial closures at low energy)::
 espeak-ng keeps global state (one voice, one callback), so all calls go through one
 process-wide lock; it is not re-entrant. The library is loaded lazily on first use.
 
-Each synthesis runs in a child forked from this process, whose espeak-ng is only ever initialised
-(and given voices, which leave no trace). espeak-ng 1.51 carries state from one ``espeak_Synth``
-to the next: it reads its phoneme list past the current clause's end (``next2``/``next3`` in
-``CalcLengths``), where the previous text's last clause still lies. In one process "Sure!" gave
-8900 samples, 10843 after "Dr." or "doctor hello hello." (vowel 0.331 s, not 0.292 s), 9102 after
-"Hello there, how are you?", and kept that until a text with another last clause; its wave
-generator also keeps its phase (8900, 8897, 8898 samples for "Sure!" thrice). ``espeak_Cancel``,
-a voice change or a primer text reset neither, and ``espeak_Terminate`` deadlocks
-(``pthread_cond_wait``). A fork has the state of a freshly loaded library, so the same text and
-voice give the same samples whatever was said before, as ``facecast say`` in a new process does.
+Each synthesis runs in a child forked from this process, whose espeak-ng is only ever initialised;
+the child also loads the voice (~4 ms: with voices loaded here instead, what a child said changed
+after tests/assets/test_espeak.py had loaded its voices, and three alignment tests failed).
+espeak-ng 1.51 carries state from one ``espeak_Synth`` to the next: it reads its phoneme list past
+the current clause's end (``next2``/``next3`` in ``CalcLengths``), where the previous text's last
+clause still lies. In one process "Sure!" gave 8900 samples, 10843 after "Dr." or "doctor hello
+hello." (vowel 0.331 s, not 0.292 s), 9102 after "Hello there, how are you?", and kept that until
+a text with another last clause; its wave generator also keeps its phase (8900, 8897, 8898
+samples for "Sure!" thrice). ``espeak_Cancel``, a voice change or a primer text reset neither,
+and ``espeak_Terminate`` deadlocks (``pthread_cond_wait``). A fork has the state of a freshly
+loaded library, so the same text and voice give the same samples whatever was said before, as
+``facecast say`` in a new process does.
 """
 
 from __future__ import annotations
@@ -272,10 +274,6 @@ class EspeakSynthesizer:
         if not text.strip():
             raise ConfigError("cannot synthesise empty text")
         with self._lock:
-            # Load the voice here, not in each child (~4 ms): loading one leaves no trace in what the next says
-            # (measured: the same samples after any sequence of voices), synthesis does.
-            if self._lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
-                raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
             read_fd, write_fd = os.pipe()
             pid = os.fork()
             if pid == 0:  # the child: synthesise, write the result, and leave without Python's exit handlers
