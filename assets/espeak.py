@@ -25,11 +25,26 @@ the audio, bilabial closures at low energy)::
 
 espeak-ng keeps global state (one voice, one callback), so all calls go through one
 process-wide lock; it is not re-entrant. The library is loaded lazily on first use.
+
+Each synthesis runs in a child forked from this process, whose espeak-ng is only ever initialised;
+the child also loads the voice (~4 ms: with voices loaded here instead, what a child said changed
+after tests/assets/test_espeak.py had loaded its voices, and three alignment tests failed).
+espeak-ng 1.51 carries state from one ``espeak_Synth`` to the next: it reads its phoneme list past
+the current clause's end (``next2``/``next3`` in ``CalcLengths``), where the previous text's last
+clause still lies. In one process "Sure!" gave 8900 samples, 10843 after "Dr." or "doctor hello
+hello." (vowel 0.331 s, not 0.292 s), 9102 after "Hello there, how are you?", and kept that until
+a text with another last clause; its wave generator also keeps its phase (8900, 8897, 8898
+samples for "Sure!" thrice). ``espeak_Cancel``, a voice change or a primer text reset neither,
+and ``espeak_Terminate`` deadlocks (``pthread_cond_wait``). A fork has the state of a freshly
+loaded library, so the same text and voice give the same samples whatever was said before, as
+``facecast say`` in a new process does.
 """
 
 from __future__ import annotations
 
 import ctypes
+import os
+import struct
 import threading
 from dataclasses import dataclass
 
@@ -223,7 +238,7 @@ class EspeakSynthesizer:
         self._libc = ctypes.CDLL(None)  # the process's C library: srand() for espeak's noise
         self._libc.srand.argtypes = [ctypes.c_uint]
         self.sample_rate_hz = int(rate)
-        self._chunks: list[np.ndarray] = []
+        self._chunks: list[bytes] = []  # int16 samples as espeak wrote them (native byte order)
         self._events: list[tuple[int, str]] = []  # (sample index, phoneme or "" for a boundary)
         # Keep a reference: ctypes frees the trampoline if the Python object dies.
         self._callback = _CALLBACK(self._on_synth)
@@ -231,7 +246,9 @@ class EspeakSynthesizer:
 
     def _on_synth(self, wav, n_samples, events) -> int:
         if n_samples > 0 and wav:
-            self._chunks.append(np.ctypeslib.as_array(wav, shape=(n_samples,)).astype(np.int16, copy=True))
+            # plain bytes, no numpy: this runs in the forked child, which should import nothing (another thread of
+            # the parent may have held the import lock when it forked)
+            self._chunks.append(ctypes.string_at(wav, 2 * n_samples))
         i = 0
         while events[i].type != _EVENT_LIST_TERMINATED:
             ev = events[i]
@@ -246,38 +263,85 @@ class EspeakSynthesizer:
     def synthesize(self, text: str, voice: Voice, *, noise_seed: int | None = None) -> Synthesis:
         """Speak ``text`` with ``voice``; returns int16 samples and the phoneme timeline.
 
+        The same text, voice and ``noise_seed`` give the same samples whatever this process said
+        before (the synthesis runs in a forked child: see the module doc).
+
         noise_seed: if given, seeds the C library's ``rand()``, which espeak's wave generator
-            uses for frication/aspiration noise. Note that espeak also carries waveform state
-            (glottal phase, echo buffer) from one call to the next, so bit-identical output
-            needs the same sequence of calls in a freshly loaded library: a fresh process
-            (see :mod:`training.build_corpus`).
+            uses for frication/aspiration noise (unseeded, the noise is the same too: the child
+            starts from this process's ``rand()`` state, which espeak never draws from here).
         Raises SynthesisError if espeak rejects the voice or produces no audio.
         """
         if not text.strip():
             raise ConfigError("cannot synthesise empty text")
         with self._lock:
-            lib = self._lib
-            if noise_seed is not None:
-                self._libc.srand(ctypes.c_uint(noise_seed & 0xFFFFFFFF))
-            if lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
-                raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
+            read_fd, write_fd = os.pipe()
+            pid = os.fork()
+            if pid == 0:  # the child: synthesise, write the result, and leave without Python's exit handlers
+                status = 1
+                try:
+                    os.close(read_fd)
+                    self._synthesize_into(write_fd, text, voice, noise_seed)
+                    status = 0
+                finally:
+                    os._exit(status)
+            os.close(write_fd)
+            with os.fdopen(read_fd, "rb") as pipe:
+                reply = pipe.read()
+            _, wait_status = os.waitpid(pid, 0)
+        if os.waitstatus_to_exitcode(wait_status) != 0 or len(reply) < _HEADER.size:
+            raise SynthesisError(f"espeak-ng's synthesis process failed for {text[:40]!r} (status {wait_status})")
+        error, n_samples, n_events = _HEADER.unpack_from(reply)
+        if error == _NO_VOICE:
+            raise SynthesisError(f"espeak-ng has no voice {voice.espeak_name!r}")
+        if error != 0:
+            raise SynthesisError(f"espeak_Synth failed with code {error} for {text[:40]!r}")
+        if n_samples == 0:
+            raise SynthesisError(f"espeak produced no audio for {text[:40]!r} with {voice.espeak_name}")
+        offset = _HEADER.size + 2 * n_samples
+        samples = np.frombuffer(reply, dtype=np.int16, count=n_samples, offset=_HEADER.size).copy()
+        events = [
+            (sample, raw.split(b"\0", 1)[0].decode("utf-8", "replace"))
+            for sample, raw in _EVENT_RECORD.iter_unpack(reply[offset : offset + _EVENT_RECORD.size * n_events])
+        ]
+        return Synthesis(samples, self.sample_rate_hz, _timeline(events, n_samples, self.sample_rate_hz))
+
+    def _synthesize_into(self, fd: int, text: str, voice: Voice, noise_seed: int | None) -> None:
+        """In the forked child: synthesise and write header, int16 samples and event records to ``fd``."""
+        lib = self._lib
+        if noise_seed is not None:
+            self._libc.srand(ctypes.c_uint(noise_seed & 0xFFFFFFFF))
+        error = 0
+        if lib.espeak_SetVoiceByName(voice.espeak_name.encode()) != 0:
+            error = _NO_VOICE
+        else:
             # SetVoiceByName resets rate/pitch to the voice's defaults, so set them after it.
             lib.espeak_SetParameter(_PARAM_RATE, voice.rate_wpm, 0)
             lib.espeak_SetParameter(_PARAM_PITCH, voice.pitch, 0)
             lib.espeak_SetParameter(_PARAM_RANGE, voice.pitch_range, 0)
             lib.espeak_SetParameter(_PARAM_VOLUME, 100, 0)
-            self._chunks, self._events = [], []
             data = text.encode("utf-8") + b"\0"
-            err = lib.espeak_Synth(data, len(data), 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)
-            if err != 0:
-                raise SynthesisError(f"espeak_Synth failed with code {err} for {text[:40]!r}")
-            lib.espeak_Synchronize()
-            chunks, events = self._chunks, self._events
-            self._chunks, self._events = [], []
-        if not chunks:
-            raise SynthesisError(f"espeak produced no audio for {text[:40]!r} with {voice.espeak_name}")
-        samples = np.concatenate(chunks)
-        return Synthesis(samples, self.sample_rate_hz, _timeline(events, len(samples), self.sample_rate_hz))
+            error = lib.espeak_Synth(data, len(data), 0, _POS_CHARACTER, 0, _CHARS_UTF8, None, None)
+            if error == 0:
+                lib.espeak_Synchronize()
+        samples = b"".join(self._chunks) if error == 0 else b""
+        events = self._events if error == 0 else []
+        reply = (
+            _HEADER.pack(error, len(samples) // 2, len(events))
+            + samples
+            + b"".join(_EVENT_RECORD.pack(sample, name.encode("utf-8")[:8]) for sample, name in events)
+        )
+        view = memoryview(reply)
+        while view:  # os.write may take part of it (a pipe holds 64 KiB)
+            view = view[os.write(fd, view) :]
+
+
+_HEADER = struct.Struct("=iii")
+"""The child's reply header: error (0, ``_NO_VOICE`` or espeak_Synth's code), samples, events."""
+
+_EVENT_RECORD = struct.Struct("=i8s")
+"""One event in the child's reply: start sample and phoneme name (espeak's up to 8 bytes; empty = a boundary)."""
+
+_NO_VOICE = -1
 
 
 def _timeline(events: list[tuple[int, str]], n_samples: int, rate: int) -> tuple[PhonemeSegment, ...]:

@@ -4,8 +4,15 @@ runs offline).
 
 pocketsphinx aligns in two passes over the same audio: the first (with ``set_align_text``)
 finds the words, the second (``set_alignment``) their phones and states; times are in its
-10 ms frames. Audio is resampled to 16 kHz first. Words missing from its dictionary cannot
-be aligned: they are reported in the error rather than guessed.
+10 ms frames. Audio is resampled to 16 kHz first.
+
+The transcript is read as it is spoken (:func:`normalise_transcript`): accents are folded
+("café" -> "cafe", not "caf"), and numbers, ordinals, currency, percentages, symbols, initials
+and mid-sentence abbreviations ("20", "3rd", "$5", "50%", "&", "U.S.", "Dr. Smith") are kept as
+written. Those, and any word the pocketsphinx dictionary lacks ("woodcutters"), are pronounced by
+espeak-ng, whose text normalisation speaks numbers and whose letter-to-sound rules pronounce any
+word; its phones (:data:`ESPEAK_EN_TO_ARPABET`) are added to the aligner's dictionary. "20"
+was dropped before, so the mouth rested while "twenty" was said; one unknown word failed the run.
 
 Without a transcript, :func:`recognise_phones` runs the same decoder in its **allphone** mode: the
 phones themselves are recognised, with the acoustic model (trained on many US-English talkers) and
@@ -18,6 +25,7 @@ Transcripts are found next to the audio: ``<stem>.txt`` or an LJ Speech style
 from __future__ import annotations
 
 import re
+import unicodedata
 from pathlib import Path
 
 import numpy as np
@@ -63,16 +71,92 @@ def _pcm16k(samples: np.ndarray, rate_hz: int) -> bytes:
     return to_int16(resample_audio(np.asarray(samples, dtype=np.float64), rate_hz, 16000)).astype("<i2").tobytes()
 
 
+ESPEAK_EN_TO_ARPABET: dict[str, str] = {
+    # consonants (espeak's t#/d#/t2/t[ are its variants of /t d/; x only in loans: "loch")
+    "p": "P", "b": "B", "m": "M", "f": "F", "v": "V", "T": "TH", "D": "DH",
+    "t": "T", "t#": "T", "t2": "T", "t[": "T", "d": "D", "d#": "D", "d[": "D",
+    "n": "N", "l": "L", "l/": "L", "s": "S", "z": "Z", "S": "SH", "Z": "ZH", "tS": "CH", "dZ": "JH",
+    "k": "K", "g": "G", "N": "NG", "x": "K", "h": "HH", "r": "R", "r-": "R", "w": "W", "w#": "W", "j": "Y",
+    # syllabic consonants: the dictionary writes a schwa before them ("button" B AH T AH N)
+    "n-": "AH N", "@L": "AH L",
+    # vowels; r-coloured ones as the dictionary writes them ("near" N IH R, "sure" SH UH R)
+    "i:": "IY", "i": "IY", "I": "IH", "I2": "IH", "I#": "IH", "i@": "IH R", "i@3": "IH R", "IR": "IH R",
+    "e": "EH", "E": "EH", "e@": "EH R", "a": "AE", "aa": "AE", "a#": "AH",
+    "A:": "AA", "A@": "AA R", "0": "AA", "VR": "ER",
+    "@": "AH", "@2": "AH", "@5": "AH", "@-": "AH", "V": "AH", "3": "ER", "3:": "ER",
+    "O:": "AO", "O2": "AO", "O@": "AO R", "o@": "AO R",
+    "u:": "UW", "U": "UH", "U@": "UH R",
+    "eI": "EY", "aI": "AY", "aI2": "AY", "aI@": "AY ER", "aI3": "AY ER", "aU": "AW", "oU": "OW", "@U": "OW",
+    "OI": "OY",
+}  # fmt: skip
+"""espeak-ng's US-English phones (its ``en-us`` voice's phoneme events) as pocketsphinx's ARPAbet:
+one phone or a space-separated few. espeak's pauses (``_``, ``_:``), links (``;``) and glottal stop
+(``?``, which the dictionary never writes) carry no phone of their own and are left out."""
+
+_SILENT_ESPEAK = frozenset({"_", "_:", "_!", "_^_", ";", "?"})
+
+_WORD = re.compile(r"[a-z']+")
+_ABBREVIATION = re.compile(r"[A-Z][a-z]{0,3}\.")
+"""A capitalised short word with a full stop ("Dr.", "Mr.", "St."): followed by more words, an
+abbreviation, which espeak-ng reads ("Dr. Smith": "doctor"; the dictionary's "dr" is "drive")."""
+
+
+def _fold(text: str) -> str:
+    """Accents folded (NFKD without its combining marks: "naïve" -> "naive", "ﬁ" -> "fi"), quotes plain."""
+    decomposed = unicodedata.normalize("NFKD", text.replace("’", "'").replace("‘", "'"))
+    return "".join(c for c in decomposed if not unicodedata.combining(c))
+
+
 def normalise_transcript(text: str) -> list[str]:
-    """Lower-case words without punctuation (apostrophes kept: "don't")."""
-    return re.findall(r"[a-z']+", text.lower().replace("’", "'"))
+    """The transcript's spoken tokens, lower case: words without punctuation (apostrophes kept:
+    "don't"; accents folded: "café" -> "cafe"; "well-known" -> "well", "known"), and as written
+    what espeak-ng must read ("20", "3rd", "$5", "50%", "1,000", "&", "u.s.", a mid-sentence "dr.")."""
+    raw = _fold(text).split()
+    tokens: list[str] = []
+    for k, chunk in enumerate(raw):
+        bare = re.sub(r"^\W+", "", chunk)  # opening quotes and brackets
+        if _ABBREVIATION.fullmatch(bare) and k + 1 < len(raw):
+            tokens.append(bare.lower())
+            continue
+        for part in re.split(r"[-\u2013\u2014/]+", chunk.lower()):
+            # keep what is spoken of the edges: currency before a number, % after, a dot inside "u.s."
+            part = re.sub(r"^[^\w$£€¥&+#@]+|[^\w%&+]+$", "", part).strip("'")
+            if not part:
+                continue
+            if _WORD.fullmatch(part):
+                tokens.append(part)
+            elif re.fullmatch(r"(?:[a-z]\.)+[a-z]?", part):  # initials: "u.s", "e.g"
+                tokens.append(part + ".")
+            elif re.search(r"[\w$£€¥&+#@%]", part):
+                tokens.append(part)
+    return tokens
+
+
+def espeak_pronunciation(token: str) -> str | None:
+    """ARPAbet phones (space-separated) of ``token`` as espeak-ng's US-English voice says it (numbers,
+    symbols and abbreviations read out, unknown words by its letter-to-sound rules); None when it says
+    nothing or a phone :data:`ESPEAK_EN_TO_ARPABET` lacks."""
+    from assets.espeak import Voice, synthesizer
+
+    phones: list[str] = []
+    for seg in synthesizer().synthesize(token, Voice(language="en", base="en-us"), noise_seed=0).phonemes:
+        if seg.phoneme in _SILENT_ESPEAK:
+            continue
+        if seg.phoneme not in ESPEAK_EN_TO_ARPABET:
+            return None
+        for phone in ESPEAK_EN_TO_ARPABET[seg.phoneme].split():
+            # an r-coloured vowel before espeak's linking /r/ ("zero" z'i@roU): one R, as the dictionary has it
+            if not (phone == "R" and phones[-1:] == ["R"]):
+                phones.append(phone)
+    return " ".join(phones) or None
 
 
 def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | Path = "<audio>") -> Alignment:
     """ARPAbet phones of ``text`` in ``samples`` ((n,) float in [-1, 1] at ``rate_hz``).
 
+    Words outside the dictionary, numbers and symbols are pronounced by espeak-ng (module doc).
     Raises MissingDependencyError without pocketsphinx, AlignmentFormatError (naming
-    ``source``) for words outside the dictionary or when the alignment fails.
+    ``source``) when a token has no pronunciation or the alignment fails.
     """
     Decoder = _decoder_class()
     words = normalise_transcript(text)
@@ -80,9 +164,16 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
         raise AlignmentFormatError(source, "empty transcript")
     pcm = _pcm16k(samples, rate_hz)
     decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL")
-    missing = sorted({w for w in words if decoder.lookup_word(w) is None})
-    if missing:
-        raise AlignmentFormatError(source, f"cannot align: words not in the pocketsphinx dictionary: {missing}")
+    # Words the dictionary lacks, and what only espeak-ng reads (numbers, symbols, abbreviations), get its phones.
+    spoken = {
+        w: espeak_pronunciation(w) for w in sorted(set(words)) if not _WORD.fullmatch(w) or not decoder.lookup_word(w)
+    }
+    unpronounced = sorted(w for w, ph in spoken.items() if ph is None)
+    if unpronounced:
+        raise AlignmentFormatError(
+            source, f"cannot align: no pronunciation for {unpronounced}: spell them out in the transcript"
+        )
+    guessed = f" (pronounced by espeak-ng: {sorted(spoken)})" if spoken else ""
     # Each phone takes at least its three HMM states, a frame each: 30 ms at pocketsphinx's 100 frames a second.
     # Fast speech (espeak-ng at its default 175 words a minute: /b/ 20 ms) has no such path, and the phone pass
     # fails ("Failed to set up sub-word alignment"); at FAST_FRAME_RATE_HZ (5 ms frames) it aligns, the acoustic
@@ -91,6 +182,8 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
         try:
             if frame_rate == FAST_FRAME_RATE_HZ:
                 decoder = Decoder(samprate=16000, bestpath=False, loglevel="FATAL", frate=frame_rate)
+            for word, phones_of_word in spoken.items():
+                decoder.add_word(word, phones_of_word, True)
             decoder.set_align_text(" ".join(words))
             for second_pass in (False, True):
                 if second_pass:
@@ -102,7 +195,7 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
         except RuntimeError as exc:  # pocketsphinx found no path through the transcript
             if frame_rate == FAST_FRAME_RATE_HZ:
                 raise AlignmentFormatError(
-                    source, f"the transcript could not be aligned to the audio ({exc})"
+                    source, f"the transcript could not be aligned to the audio ({exc}){guessed}"
                 ) from None
     phones: list[Phone] = []
     for word in decoder.get_alignment():
