@@ -7,6 +7,22 @@ import sys
 from pathlib import Path
 
 
+class _ListVoices(argparse.Action):
+    """``--list-voices``: print the voices and exit before TEXT and -o are asked for (as ``--version`` does); the
+    list was only in the error for an unknown voice."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        from assets.espeak import LANGUAGES, VARIANTS
+
+        for lang, voices in LANGUAGES.items():
+            print(f"{lang}: {' '.join(voices)}")
+        print(f"variants (VOICE+VARIANT, or a variant alone): {' '.join(VARIANTS)}")
+        parser.exit()
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.outputs import add_output_option
@@ -35,6 +51,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--voice",
         default=None,
         help="espeak-ng voice, e.g. en-us, en-gb-x-rp+f3, es (Spanish without --lang), or a variant f3",
+    )
+    p.add_argument(
+        "--list-voices",
+        action=_ListVoices,
+        help="print the espeak-ng voices and variants --voice takes, by language, and exit",
     )
     p.add_argument("--rate", type=int, default=175, help="speaking rate, words per minute")
     p.add_argument(

@@ -288,3 +288,20 @@ def test_say_layers_expressions_on_the_text_driven_lips(corpus_file, tmp_path, c
     assert main(["say", text, "--corpus", str(corpus_file), "--expression", "grin", "-o", str(tmp_path / "g.csv")]) == 2
     err = capsys.readouterr().err
     assert "unknown expression 'grin'" in err and not (tmp_path / "g.csv").exists()
+
+
+def test_say_lists_its_voices_without_text_or_output(capsys):
+    """`facecast say --list-voices` prints every voice --voice takes, by language, and exits 0 before TEXT and -o are
+    asked for (the list was only in the error for an unknown voice); each listed voice is one parse_voice accepts."""
+    from assets.tts import language_of_voice, parse_voice
+
+    with pytest.raises(SystemExit) as done:
+        main(["say", "--list-voices"])
+    assert done.value.code == 0
+    lines = capsys.readouterr().out.splitlines()
+    voices = {line.split(":")[0]: line.split(":")[1].split() for line in lines if line[:3] in ("en:", "es:")}
+    assert set(voices) == {"en", "es"} and "en-us" in voices["en"] and "es" in voices["es"]
+    for lang, names in voices.items():
+        for name in names:
+            assert language_of_voice(name) == lang and parse_voice(lang, name).base == name
+    assert "f3" in lines[-1]
