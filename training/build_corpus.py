@@ -3,11 +3,12 @@ augment like a microphone, and write the corpus layout (:mod:`training.corpus`).
 
 Reproducibility: every random draw of utterance ``i`` comes from
 ``numpy.random.default_rng([seed, i])`` (sentence order from ``[seed, language]``), and the
-writers format numbers with fixed precision. espeak-ng itself is deterministic only from a
-freshly loaded library (its wave generator keeps phase/echo state across calls and draws
-noise from libc ``rand()``), so each build synthesises in its own fresh worker process and
-seeds ``rand()`` per utterance. The same :class:`BuildConfig` thus writes byte-identical
-files, also when built twice in one process.
+writers format numbers with fixed precision. espeak-ng is deterministic only from a freshly
+loaded library (it keeps phoneme-list and wave-generator state across calls and draws noise from
+libc ``rand()``): each synthesis runs in a child forked from a process that never synthesised
+(:mod:`assets.espeak`), and ``rand()`` is seeded per utterance. The same :class:`BuildConfig`
+thus writes byte-identical files, also when built twice in one process (since stop 47 every
+utterance from a fresh state: corpora built before differ from today's after each worker's first).
 
 Real speech (``real_dirs``): every (WAV, phone alignment) pair found under each folder (and,
 with ``force_align``, every transcribed WAV aligned by pocketsphinx) is labelled by the same rules
