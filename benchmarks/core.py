@@ -291,6 +291,13 @@ def run_core_benchmark(config: CoreBenchConfig, *, as_json: bool, out: TextIO | 
 def _print_table(r: dict, out: TextIO) -> None:
     w = out.write
     w("facecast core benchmark (BLAS pinned to 1 thread; per video frame, microseconds)\n\n")
+    _print_stages(r, out)
+    _print_rest(r, out)
+
+
+def _print_stages(r: dict, out: TextIO) -> None:
+    """The per-stage rows of the table: features, streaming inversion, the live path."""
+    w = out.write
     rows = [("features/" + name, s, "") for name, s in r["features"].items()]
     rows += [("streaming inversion " + name, s, "") for name, s in r["streaming_inversion"].items()]
     rows += [
@@ -302,6 +309,11 @@ def _print_table(r: dict, out: TextIO) -> None:
     w(f"{'stage':{width}s} {'median':>9s} {'p99':>9s}\n")
     for name, s, goal in rows:
         w(f"{name:{width}s} {s['median_us']:9.1f} {s['p99_us']:9.1f}{goal}\n")
+
+
+def _print_rest(r: dict, out: TextIO) -> None:
+    """The table's other parts: the visual mappers, batch HMMI, Baum-Welch against hmmlearn."""
+    w = out.write
     w("\nvisual mappers (--mapper hmm|mlp)              mapper step (median/p99)   live path (median/p99)\n")
     for name, s in r["mappers"].items():
         if name == "skipped":

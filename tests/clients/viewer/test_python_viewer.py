@@ -890,8 +890,9 @@ def test_record_of_a_session_cut_by_a_server_shutdown_writes_it_and_exits_3(mode
         code = main(["record", srv.url, "--session", "cut", "-o", str(out), "--wait", "20"])
     finally:
         stopper.join(30)
-        with contextlib.suppress(Exception):  # the ingest was cut by the same shutdown
-            session.result(30)
+        # The ingest ran on the server's loop, which stopped with the server: it never finishes (waiting for it
+        # took this test 30 s), so it is not waited for.
+        session.cancel()
     printed = capsys.readouterr().out
     assert code == PARTIAL_EXIT == 3, printed
     assert "1001" in printed and "partial take" in printed, printed
