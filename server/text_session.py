@@ -451,8 +451,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 stalled = False
                 text = msg.get("text")
                 if not isinstance(text, str):  # no text to quote: null (docs/protocol.md section 9.5)
-                    reason = f"text must be a string, got {reason_value(text)}"
-                    await reply({"type": "rejected", "text": None, "reason": reason})
+                    # its own name: `reason` is the session's close reason (it closed with this one at its end)
+                    why = f"text must be a string, got {reason_value(text)}"
+                    await reply({"type": "rejected", "text": None, "reason": why})
                     continue
                 if not first_piece:
                     first_piece.append(time.perf_counter())

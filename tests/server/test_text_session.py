@@ -588,6 +588,8 @@ def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(mode
                 replies.append(json.loads(await ws.recv()))
                 await ws.send(json.dumps({"type": "end"}))
                 replies.append(json.loads(await ws.recv()))
+                await ws.wait_closed()
+                closed = ws.close_code, ws.close_reason  # the session's, not a rejection's reason
             async with connect(url, max_size=None) as ws:
                 await ws.send(json.dumps({"type": "start", "session": "deep", "language": "en"}))
                 assert json.loads(await ws.recv())["type"] == "started"
@@ -596,10 +598,11 @@ def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(mode
                     await ws.recv()
                 await ws.wait_closed()
                 deep = ws.close_code, ws.close_reason
-            return replies, deep, srv.metrics()
+            return replies, closed, deep, srv.metrics()
 
-    replies, deep, metrics = asyncio.run(asyncio.wait_for(main(), 60))
+    replies, closed, deep, metrics = asyncio.run(asyncio.wait_for(main(), 60))
     not_str, missing, too_long, spoken, ended = replies
+    assert closed == (P.CLOSE_NORMAL, "session ended")
     assert not_str == {"type": "rejected", "text": None, "reason": "text must be a string, got 42"}
     assert missing == {"type": "rejected", "text": None, "reason": "text must be a string, got None"}
     assert set(too_long) == {"type", "text", "reason"} and too_long["text"] == long_piece[:200]
