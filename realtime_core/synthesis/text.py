@@ -34,6 +34,21 @@ MAX_TEXT_CHARS = 5000
 
 _KEEP_PUNCT = set(".,;:!?'\"-()¿¡’")
 _SPOKEN_SYMBOLS = set("%&+=/@°")
+_SCRIPTS = ("LATIN", "GREEK")
+"""Scripts whose letters are spoken (the voices are English and Spanish; a Greek letter is read by its name, "pi").
+espeak-ng reads a letter of any other script as its description: "你好世界" as "Chinese letter" four times, Arabic
+as "Arabic meem Arabic ra ...", with exit 0; such letters are left out like emoji, and text of only them refused."""
+_SPOKEN_SIGNS = set("µªº")  # micro, the Spanish ordinal indicators: letters named without a script
+
+
+def _spoken_letter_or_digit(ch: str, cat: str) -> bool:
+    """A letter of a spoken script (:data:`_SCRIPTS`) or a digit espeak-ng reads as a number (ASCII, or a
+    fraction or superscript such as ½ ²; another script's digits are read by their description)."""
+    if cat[0] == "L":
+        return ch in _SPOKEN_SIGNS or unicodedata.name(ch, "").split(" ")[0] in _SCRIPTS
+    return ch.isascii() or cat == "No"
+
+
 """Symbols the synthesiser reads as words ("percent", "and", "plus" ...); currency signs (category Sc) too."""
 _SENTENCE_END = re.compile(r"([.!?;:…]+)[\"'”’»)\]]*\s+|\n\s*")
 """A candidate sentence end: end marks, closing quotes or brackets, white space (group 1: the marks); or a newline."""
@@ -66,15 +81,22 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     if len(text) > max_chars:
         raise TextError(f"text is {len(text)} characters long; the limit is {max_chars}")
     out = []
+    other_script = False  # a letter or digit of a script the voices do not speak was left out
     for ch in unicodedata.normalize("NFC", text):
         cat = unicodedata.category(ch)
-        keep = cat[0] in "LN" or cat == "Sc" or ch in _KEEP_PUNCT or ch in _SPOKEN_SYMBOLS or ch.isspace()
+        if cat[0] in "LN":
+            keep = _spoken_letter_or_digit(ch, cat)
+            other_script = other_script or not keep
+        else:
+            keep = cat == "Sc" or ch in _KEEP_PUNCT or ch in _SPOKEN_SYMBOLS or ch.isspace()
         out.append(ch if keep else " ")
     cleaned = re.sub(r"\s+", " ", "".join(out)).strip()
+    # Why nothing is left, when it is the script: the voices speak Latin-script (and Greek) letters only.
+    script = " (the voices speak English and Spanish: Latin-script letters)" if other_script else ""
     if not cleaned:
-        raise TextError("empty text" if not text.strip() else f"no pronounceable characters in {text[:40]!r}")
+        raise TextError("empty text" if not text.strip() else f"no pronounceable characters in {text[:40]!r}{script}")
     if not any(unicodedata.category(c)[0] in "LN" for c in cleaned):
-        raise TextError(f"no pronounceable word in {text[:40]!r}")
+        raise TextError(f"no pronounceable word in {text[:40]!r}{script}")
     return cleaned
 
 

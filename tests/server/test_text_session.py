@@ -144,6 +144,17 @@ def test_clean_text_keeps_pronounceable_characters_and_rejects_the_rest():
             clean_text(bad)
 
 
+def test_clean_text_leaves_out_letters_of_scripts_the_voices_do_not_speak():
+    # espeak-ng read "你好世界" as "Chinese letter" four times and Arabic as "Arabic meem Arabic ra ...", exit 0.
+    for other in ("你好世界", "مرحبا بالعالم", "١٢٣", "Привет"):
+        with pytest.raises(TextError, match="Latin-script letters"):
+            clean_text(other)
+    assert clean_text("Hello 世界, bye") == "Hello , bye"
+    # Latin letters with their marks, Greek letters (read by name), micro, ordinals, fractions and superscripts stay.
+    kept = "π is 3.14, 5 µm, 1º, ½ cup, x² straße Zoë ñandú"
+    assert clean_text(kept) == kept
+
+
 def test_clean_text_keeps_the_symbols_a_synthesiser_reads_as_words():
     # "$19.99 or 50%" lost its dollar and percent: espeak-ng reads both signs, the cleaning dropped them.
     assert clean_text("Pay $19.99 or 50% (€5, £3) at 3:45 on 12/05 & a+b=c @ 20°") == (
