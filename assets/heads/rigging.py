@@ -188,7 +188,17 @@ def resolve_landmarks(
     from its nearest vertex (a point on a low-poly head's large face can lie farther than that from every vertex)."""
     missing = [k for k in REQUIRED_LANDMARKS if k not in spec]
     if missing:
-        raise LandmarkError(f"{source}: missing landmarks {missing} (need {list(REQUIRED_LANDMARKS)})")
+        import difflib
+
+        # A misspelt name ("chinn") was reported only as the missing one: name it and what it may have meant.
+        unknown = [str(k) for k in spec if k not in REQUIRED_LANDMARKS]
+        hints = [
+            f"{k!r} is no landmark name (did you mean {close[0]!r}?)"
+            for k in unknown
+            if (close := difflib.get_close_matches(k, missing, n=1))
+        ]
+        hint = f"; {'; '.join(hints)}" if hints else ""
+        raise LandmarkError(f"{source}: missing landmarks {missing} (need {list(REQUIRED_LANDMARKS)}){hint}")
     out: dict[str, np.ndarray] = {}
     for k in REQUIRED_LANDMARKS:
         val = spec[k]
@@ -229,7 +239,12 @@ def resolve_landmarks(
 # (right, left) the first on the face's right of the second, along its eye line: the order no real or stylised face
 # breaks. The checks' own frame is made of the eyes and the mouth corners, so these are about the other landmarks.
 LAYOUT_BELOW = (("nose_tip", "eyes"), ("upper_lip", "nose_tip"), ("lower_lip", "upper_lip"), ("chin", "lower_lip"))
-LAYOUT_RIGHT_OF = (("eye_outer_right", "eye_inner_right"), ("eye_inner_left", "eye_outer_left"))
+LAYOUT_RIGHT_OF = (
+    ("eye_outer_right", "eye_inner_right"),
+    ("eye_inner_left", "eye_outer_left"),
+    # Mouth corners swapped were accepted (the eyes set the frame): the opening came out tilted, 11 flips.
+    ("corner_right", "corner_left"),
+)
 
 
 def check_layout(points: Mapping[str, np.ndarray], frame: FaceFrame, source: str) -> None:

@@ -65,6 +65,11 @@ def test_landmarks_missing_or_out_of_range_name_the_file(tmp_path, shared_data, 
     del lack["chin"]
     with pytest.raises(LandmarkError, match=r"lm\.json: missing landmarks \['chin'\]"):
         rig_head(mesh, lack, landmark_source="lm.json", head=builtin_head)
+    # A misspelt name was reported only as the missing one.
+    with pytest.raises(
+        LandmarkError, match=r"missing landmarks \['chin'\].*'chinn' is no landmark name \(did you mean 'chin'\?\)"
+    ):
+        rig_head(mesh, dict(lack, chinn=good["chin"]), landmark_source="lm.json", head=builtin_head)
     far = dict(good, nose_tip=99999)
     with pytest.raises(LandmarkError, match=r"lm.json: landmark 'nose_tip' vertex 99999 out of range"):
         rig_head(mesh, far, landmark_source="lm.json", head=builtin_head)
@@ -86,6 +91,11 @@ def test_landmarks_missing_or_out_of_range_name_the_file(tmp_path, shared_data, 
         (
             dict(good, eye_outer_left=good["eye_inner_left"], eye_inner_left=good["eye_outer_left"]),
             r"'eye_inner_left' lies on the face's left of 'eye_outer_left'",
+        ),
+        # The mouth corners alone swapped were accepted: a tilted opening, 11 flips under an expression.
+        (
+            dict(good, corner_left=good["corner_right"], corner_right=good["corner_left"]),
+            r"'corner_right' lies on the face's left of 'corner_left'",
         ),
     ):
         with pytest.raises(LandmarkError, match=r"lm.json: " + want):
