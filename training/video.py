@@ -618,6 +618,7 @@ class ExtractReport:
             agg = {
                 "face_found_fraction_min": min(c["face_found_fraction"] for c in q),
                 "clips_with_jumps": sum(c["tracking_jumps"] > 0 for c in q),
+                "clips_without_alignment": sum(c.get("alignment") is None for c in q),
                 "neutral_methods": {
                     m: sum(c["neutral"]["method"] == m for c in q) for m in sorted({c["neutral"]["method"] for c in q})
                 },
@@ -654,7 +655,9 @@ def _work(job: tuple[str, ExtractConfig, str | None, bool]) -> dict:
         words, align = _words_for(video_p, require=require_alignment)
         track = derive_track(raw, words, config, alignment=align)
     except FileProblem as exc:
-        return {"file": video, "status": "skipped", "reason": exc.problem}
+        # The file at fault named when it is not the clip (a malformed .align beside it: its line 1 was the clip's).
+        reason = exc.problem if exc.path == video_p else f"{exc.path}: {exc.problem}"
+        return {"file": video, "status": "skipped", "reason": reason}
     except OSError as exc:
         return {"file": video, "status": "skipped", "reason": f"cannot be read ({exc})"}
     return {
@@ -750,6 +753,11 @@ def _collect(results, say: Callable[[str], None]) -> list[dict]:
     for r in results:
         if r["status"] == "skipped":
             say(f"skipped {r['file']}: {r['reason']}")
+        elif r["quality"].get("alignment") is None:
+            # Kept without a word alignment (a talker's own video has none), but said: its rest pose then comes from
+            # the audio level or the smallest lip gaps, not the aligned silences, and a corpus build for training
+            # skips such clips (--require-alignment). Counted in the report's summary (clips_without_alignment).
+            say(f"no word alignment for {r['file']}: kept, its rest pose without one (--require-alignment skips it)")
         out.append(r)
     return out
 

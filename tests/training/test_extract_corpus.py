@@ -109,15 +109,22 @@ def test_bad_clips_are_skipped_named_and_counted(s1, grid_copy, tmp_path, ffmpeg
     assert reasons["noface"].startswith("no face found in 75 of 75 frames")
     assert reasons["lost"].startswith("face lost for 1.0") and "from 1.0" in reasons["lost"]
     assert reasons["short"].startswith("audio (1.5") and "and video (3.00 s) differ in length" in reasons["short"]
-    assert "line 2 is not 'start end word'" in reasons["bbaf4p"]
+    # the file at fault named: the malformed .align, not only the clip beside it
+    assert reasons["bbaf4p"].startswith(f"{a / 'bbaf4p.align'}: line 2 is not 'start end word'")
     assert reasons["bbaf5a"] == "no word alignment found (missing .align)"
     assert report.as_json()["n_skipped"] == 5 and report.as_json()["n_ok"] == 2
     # one line each, naming the file and the reason
     assert len(lines) == 5 and all(ln.startswith("skipped ") for ln in lines)
     assert any(str(v / "lost.mp4") in ln and "face lost" in ln for ln in lines)
     # without the alignment requirement the clip with no .align is measured (rest from the audio level)
-    again = extract_corpus([v / "bbaf5a.mp4"], cache_dir=tmp_path / "cache", workers=1)
+    kept: list[str] = []
+    again = extract_corpus([v / "bbaf5a.mp4"], cache_dir=tmp_path / "cache", workers=1, log=kept.append)
     assert again.n_cached == 1 and again.clips[0]["neutral"]["method"] == "quiet"
+    # ... and said so in one line, counted in the report (it was kept without a word)
+    assert kept == [
+        f"no word alignment for {v / 'bbaf5a.mp4'}: kept, its rest pose without one (--require-alignment skips it)"
+    ]
+    assert again.as_json()["summary"]["clips_without_alignment"] == 1
     # a face lost for a short while is bridged and flagged
     short_gap = extract_corpus(
         [v / "lost.mp4"],
