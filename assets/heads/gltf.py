@@ -243,12 +243,19 @@ def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
     return np.zeros((0, 3), dtype=np.int64)
 
 
+UNREADABLE_HINT = (
+    "export it again from the modelling tool as .glb, or see what is wrong with `npx gltf-transform validate FILE`"
+)
+"""How to proceed, after a glTF file that cannot be read (issue 12: one line naming the file, the problem and what to
+do); glTF-Transform's command line comes with the project's npm packages (scripts/setup.sh)."""
+
+
 def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
     """Every triangle primitive of the default scene in world coordinates, and the materials."""
     try:
         doc, buffers = read_gltf_document(path)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, struct.error) as exc:
-        raise MeshError(f"{path}: not a readable glTF file: {exc}") from exc
+        raise MeshError(f"{path}: not a readable glTF file ({exc}); {UNREADABLE_HINT}") from exc
     used = set(doc.get("extensionsRequired", [])) | set(doc.get("extensionsUsed", []))
     if used & set(NEEDS_DECODER):
         raise MeshError(f"{path}: compressed with {sorted(used & set(NEEDS_DECODER))}; decompress it first")
@@ -368,5 +375,5 @@ def read_gltf(path: Path) -> tuple[list[Primitive], list[Material]]:
     except MeshError:
         raise
     except (KeyError, IndexError, ValueError, TypeError) as exc:
-        raise MeshError(f"{path}: malformed glTF ({type(exc).__name__}: {exc})") from exc
+        raise MeshError(f"{path}: malformed glTF ({type(exc).__name__}: {exc}); {UNREADABLE_HINT}") from exc
     return prims, materials

@@ -354,13 +354,13 @@ class _Parts:
 
 def _gltf_parts(p: Path, cache: Path | None) -> _Parts:
     from assets.heads.decompress import decompressed
-    from assets.heads.gltf import NEEDS_DECODER, read_gltf, read_gltf_document
+    from assets.heads.gltf import NEEDS_DECODER, UNREADABLE_HINT, read_gltf, read_gltf_document
     from assets.heads.vrm import VRM0_TURN, expression_targets, is_vrm0, vrm_expressions
 
     try:
         doc, _ = read_gltf_document(p)
     except Exception as exc:  # a bad file raises many unrelated types (struct, json, unicode)
-        raise MeshError(f"{p}: not a readable glTF file: {exc}") from exc
+        raise MeshError(f"{p}: not a readable glTF file ({exc}); {UNREADABLE_HINT}") from exc
     used = set(doc.get("extensionsRequired", [])) | set(doc.get("extensionsUsed", []))
     src = decompressed(p, cache) if used & set(NEEDS_DECODER) else p
     prims, materials = read_gltf(src)

@@ -286,6 +286,14 @@ def test_bad_files_name_the_file(tmp_path):
     (tmp_path / "bad.glb").write_bytes(b"glTF\x02\0\0\0\x10\0\0\0")
     with pytest.raises(MeshError, match=r"bad.glb"):
         load_mesh(tmp_path / "bad.glb")
+    # An empty and a truncated glb said only a parser's words ("Expecting value: line 1 column 1 (char 0)", "buffer
+    # is smaller than requested size"): now also what to do.
+    (tmp_path / "zero.glb").write_bytes(b"")
+    whole = mesh_glb(HeadMesh(vertices=np.eye(3), triangles=np.array([[0, 1, 2]])))
+    (tmp_path / "cut.glb").write_bytes(whole[: len(whole) - 20])
+    for name in ("zero.glb", "cut.glb"):
+        with pytest.raises(MeshError, match=rf"{name}: .*; export it again .* `npx gltf-transform validate FILE`"):
+            load_mesh(tmp_path / name)
     (tmp_path / "empty.obj").write_text("v 0 0 0\nv 1 0 0\n")
     with pytest.raises(MeshError, match="no triangle mesh"):
         load_mesh(tmp_path / "empty.obj")
