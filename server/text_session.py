@@ -455,13 +455,14 @@ async def handle_text(server, ws: ServerConnection) -> None:
                     why = f"text must be a string, got {reason_value(text)}"
                     await reply({"type": "rejected", "text": None, "reason": why})
                     continue
-                if not first_piece:
-                    first_piece.append(time.perf_counter())
+                received = time.perf_counter()
                 try:
                     done = session.push_text(text)
                 except TextError as exc:
                     await reply({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)})
                     continue
+                if not first_piece:  # the first piece accepted: a rejected one starts no speech (it counted 2.6 s)
+                    first_piece.append(received)
                 if msg.get("flush"):
                     done += session.finish_text()
                 elif not done and ahead_s() < CLAUSE_AHEAD_S:  # the viewers would wait for the whole sentence

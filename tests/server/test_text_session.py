@@ -595,6 +595,7 @@ def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(mode
                 for msg in ({"type": "text", "text": 42}, {"type": "text"}, {"type": "text", "text": long_piece}):
                     await ws.send(json.dumps(msg))
                     replies.append(json.loads(await ws.recv()))
+                await asyncio.sleep(1.5)  # the rejected pieces start no clock (first_frame_ms below)
                 await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now.", "flush": True}))
                 replies.append(json.loads(await ws.recv()))
                 await ws.send(json.dumps({"type": "end"}))
@@ -614,6 +615,8 @@ def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(mode
     replies, closed, deep, metrics = asyncio.run(asyncio.wait_for(main(), 60))
     not_str, missing, too_long, spoken, ended = replies
     assert closed == (P.CLOSE_NORMAL, "session ended")
+    # first_frame_ms runs from the first piece accepted, not from the rejected ones 1.5 s before it
+    assert ended["first_frame_ms"] < 1500
     assert not_str == {"type": "rejected", "text": None, "reason": "text must be a string, got 42"}
     assert missing == {"type": "rejected", "text": None, "reason": "text must be a string, got None"}
     assert set(too_long) == {"type", "text", "reason"} and too_long["text"] == long_piece[:200]
