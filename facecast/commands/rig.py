@@ -209,7 +209,10 @@ def run(args: argparse.Namespace) -> int:
     m = rig.meta
     print(
         f"rig {out}: {len(rig.neutral)} vertices, {len(rig.moving)} moving, {len(rig.control)} control points, "
-        f"{m.get('replacements', 0)} geodesic replacements, {m.get('bad_triangles', 0)} bad triangles, "
+        # "bad triangles" read as a fault of the mesh next to "flipped triangles 0 ... PASS": they are the simple face's
+        # triangles whose control points the geodesic check (Sec. 5) could not join along the head's surface
+        f"{m.get('replacements', 0)} geodesic replacements, "
+        f"{m.get('bad_triangles', 0)} simple-face triangles not joined along the surface (Sec. 5 geodesic check), "
         f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
     )
     same = (
