@@ -192,6 +192,12 @@ def run(args: argparse.Namespace) -> int:
             "Ctrl-C stops",
             flush=True,
         )
+        listening = time.perf_counter()
+        # What a client needs and what the server joined, said at start (a user found them only in the config file)
+        if config.token is not None:
+            print("facecast serve: a token is required (clients give it as ?token=T or in their start message)")
+        if server.cluster is not None:
+            print(f"facecast serve: cluster node {server.cluster.node!r} on {config.redis_url}", flush=True)
         tasks = []
         for path, src, name in zip(args.file, files, names):
             print(f"facecast serve: file {path} ({src.duration_s:.1f} s) as session {name!r}", flush=True)
@@ -208,6 +214,8 @@ def run(args: argparse.Namespace) -> int:
         finally:
             for t in tasks:
                 t.cancel()
+        # Ctrl-C printed nothing: say the server has stopped (its sessions ended, their viewers told 1001)
+        print(f"facecast serve: stopped after {time.perf_counter() - listening:.0f} s of serving", flush=True)
 
     front = config.workers > 0 and config.worker_mode == "connections"
     run_on_loop(main(), process_loop(config.event_loop, connection_front=front))

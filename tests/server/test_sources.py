@@ -276,3 +276,44 @@ def test_serve_refuses_a_file_no_session_takes_before_listening(model_path, tmp_
     assert done.stderr.strip().splitlines() == [
         f"facecast serve: error: --file {low}: sample_rate must be an integer in 8000..192000, got 4000"
     ]
+
+
+def test_serve_says_a_token_is_required_and_that_it_stopped(model_path, tmp_path):
+    """`facecast serve` with a token said nothing of it (a user found it only in the config file), and Ctrl-C printed
+    nothing: the start-up lines say a token is required, and Ctrl-C ends with a line saying the server stopped."""
+    config = tmp_path / "server.toml"
+    config.write_text('[server]\ntoken = "secret"\n')
+    log = tmp_path / "serve.log"
+    with log.open("w") as out:
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "facecast",
+                "serve",
+                "--port",
+                "0",
+                "--model",
+                str(model_path),
+                "--no-head",
+                "--config",
+                str(config),
+            ],
+            cwd=Path(__file__).resolve().parents[2],  # this checkout's facecast
+            stdout=out,
+            stderr=subprocess.DEVNULL,
+        )
+        try:
+            deadline = time.monotonic() + 60
+            while "listening on" not in log.read_text() and time.monotonic() < deadline and proc.poll() is None:
+                time.sleep(0.1)
+            proc.send_signal(signal.SIGINT)
+            code = proc.wait(timeout=20)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    lines = log.read_text().splitlines()
+    assert code == 0, lines
+    assert any("a token is required" in x for x in lines), lines
+    assert lines[-1].startswith("facecast serve: stopped after "), lines
