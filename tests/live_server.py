@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,14 +40,19 @@ async def running(model: AvModel, head=None, **config):
 class LiveServer:
     """A started FacecastServer on 127.0.0.1 (free port) served from a daemon thread's loop."""
 
-    def __init__(self, model: AvModel, head, *, port: int = 0) -> None:
+    def __init__(self, model: AvModel, head, *, port: int = 0, **settings: Any) -> None:
+        """settings: other ServerConfig fields (e.g. max_message_bytes), the defaults otherwise."""
         from server.app import FacecastServer
         from server.config import ServerConfig
         from server.eventloop import loop_factory
 
         nm = REPO / "node_modules"
         self.config = ServerConfig(
-            port=port, web_root=REPO / "clients" / "web", node_modules=nm if nm.is_dir() else None, close_timeout_s=0.5
+            port=port,
+            web_root=REPO / "clients" / "web",
+            node_modules=nm if nm.is_dir() else None,
+            close_timeout_s=0.5,
+            **settings,
         )
         self.server = FacecastServer(model, head=head, config=self.config)
         self.loop = loop_factory(self.config.event_loop)()  # the loop `facecast serve` would run it on

@@ -124,9 +124,17 @@ def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_pat
     assert voice_rate == 22050 and len(voice) > 35 * voice_rate
     enrol = write_wav(tmp_path / "voice.wav", voice, voice_rate)
     at_16k = -(-len(voice) * 320 // 441)  # resample_poly's ceil(n up / down) samples
-    assert 1 << 20 < 4 * (2 * at_16k) // 3 < ServerConfig().max_message_bytes  # base64 of the s16 samples
     wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
-    srv = LiveServer(model, None)
+    # A server at the old 1 MiB limit refuses this start message (too big: 1009) and send says so, exit 2.
+    old = LiveServer(model, None, max_message_bytes=1 << 20)
+    try:
+        assert main(["send", str(wav), old.url, "--enrol", str(enrol), "--fast"]) == 2
+    finally:
+        old.stop()
+    refused = capsys.readouterr()
+    assert "1009" in refused.err + refused.out, refused
+    srv = LiveServer(model, None)  # today's default takes it
+    assert srv.config.max_message_bytes == ServerConfig().max_message_bytes
     try:
         assert main(["send", str(wav), srv.url, "--enrol", str(enrol), "--fast"]) == 0, capsys.readouterr().err
     finally:
