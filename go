@@ -13,6 +13,7 @@ source "$here/.venv/bin/activate"
 case "${1:-demo}" in
   # The tests run from the checkout (pytest's rootdir and configuration); a facecast command from
   # where it was called, so relative paths (-o out.mp4, a speech file) mean what the caller meant.
-  test) shift; cd "$here"; exec python -m pytest "$@" ;;
+  # One worker per core, a whole test file per worker (module fixtures are built once); `-n 0` after it runs in one.
+  test) shift; cd "$here"; exec python -m pytest -n auto --dist loadfile "$@" ;;
   *) exec facecast "$@" ;;
 esac
