@@ -31,6 +31,11 @@ class InvalidAudioError(RealtimeCoreError, ValueError):
     """Audio samples have the wrong dtype/shape, contain NaN/inf, or are too short."""
 
 
+class NotSpeechError(InvalidAudioError):
+    """Valid audio that does not sound like speech (a tone, noise or music), where speech is needed: an enrolment
+    (:data:`realtime_core.adaptation.MIN_VISITED_SHARE`)."""
+
+
 class InvalidFeaturesError(RealtimeCoreError, ValueError):
     """A feature array has the wrong shape or non-finite values."""
 

@@ -693,6 +693,8 @@ class FacecastServer:
                     todo.extend(proto.refused(exc.code, exc.reason))
                 except AudioFormatError as exc:  # e.g. an enrolment recording the model rejects
                     todo.extend(proto.refused(P.CLOSE_INVALID_PAYLOAD, str(exc)))
+                except ServerConfigError as exc:  # an enrolment that is not speech: a bad start, as a silent one
+                    todo.extend(proto.refused(P.CLOSE_BAD_REQUEST, str(exc)))
                 else:
                     todo.extend(proto.opened(describe.started(live)))
         return live

@@ -30,7 +30,7 @@ from assets.audio import is_silent
 from realtime_core.adaptation import MIN_ENROL_S  # one rule with `facecast adapt`
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
-from realtime_core.errors import ConfigError, RealtimeCoreError
+from realtime_core.errors import ConfigError, NotSpeechError, RealtimeCoreError
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.rig import Rig
 from realtime_core.inversion import StreamConfig
@@ -319,6 +319,8 @@ class Session:
         x = resample_audio(x, self.config.sample_rate_hz, model.sample_rate_hz)
         try:
             adapted, result = adapt_av_model(model, [x])
+        except NotSpeechError as exc:  # a tone or noise: refused as the start's other bad enrolments are
+            raise ServerConfigError(f"enrol: {exc}") from None
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the enrolment audio: {exc}") from exc
         self.enrolment = dict(adapted.metadata.get("adaptation", {"frames": result.n_frames}))

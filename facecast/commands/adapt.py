@@ -49,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.modelfile import check_model_output, load_model, save_model
     from assets.progress import Progress
     from realtime_core.adaptation import MIN_ENROL_S, adapt_av_model
+    from realtime_core.errors import NotSpeechError
     from realtime_core.hmm.adapt import AdaptConfig
     from training.errors import ConfigError
 
@@ -73,7 +74,11 @@ def run(args: argparse.Namespace) -> int:
     # One BLAS thread: the E-step is many small GEMMs, which multi-threaded OpenBLAS made about
     # ten times slower on 2 busy cores (measured 2.9 s vs 0.28 s for 10 s of speech).
     with threadpool_limits(1):
-        adapted, result = adapt_av_model(model, recordings, config=cfg)
+        try:
+            adapted, result = adapt_av_model(model, recordings, config=cfg)
+        except NotSpeechError as exc:
+            names = ", ".join(str(p) for p in args.speech)
+            raise NotSpeechError(f"{names}: {exc}; nothing written") from None
     if result.n_frames == 0:
         print("no speech frames: the model is unchanged")
     out = save_model(args.output, adapted)

@@ -84,6 +84,24 @@ def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> Non
     ],
 )
 def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:
+    code, why = _refusal(model, enrol)
+    assert code == P.CLOSE_BAD_REQUEST and reason in why, (code, why)
+
+
+def test_an_enrolment_that_is_not_speech_is_refused_and_the_server_serves_on() -> None:
+    """10 s of a 220 Hz tone was adapted to (two of the shipped model's 48 components moved onto it) and the session
+    started; as `facecast adapt`, it is refused with the reason, and the next session is served."""
+    from assets.modelfile import load_model
+
+    tone = _i16(0.3 * np.sin(2 * np.pi * 220 * np.arange(10 * 16000) / 16000))
+    code, why = _refusal(load_model(), base64.b64encode(tone.tobytes()).decode(), then_serve=True)
+    assert code == P.CLOSE_BAD_REQUEST and why.startswith("enrol: it does not sound like speech"), (code, why)
+
+
+def _refusal(model, enrol: str, *, then_serve: bool = False) -> tuple[int | None, str]:
+    """(close code, reason) of an ingest whose start carries ``enrol``; ``then_serve``: a plain session on the same
+    server is then accepted (the refusal closed one connection, not the server)."""
+
     async def main():
         srv = FacecastServer(model, config=ServerConfig(port=0))
         await srv.start()
@@ -97,13 +115,17 @@ def test_bad_enrolment_is_refused_with_a_reason(model, enrol, reason) -> None:
                 try:
                     await asyncio.wait_for(ws.recv(), 10)
                 except ConnectionClosed as exc:
-                    return exc.rcvd.code, exc.rcvd.reason
-            return None, "not closed"
+                    closed = exc.rcvd.code, exc.rcvd.reason
+                else:
+                    return None, "not closed"
+            if then_serve:
+                async with IngestClient(srv.url, session="next", sample_rate_hz=16000) as ing:
+                    assert ing.started["type"] == "started", ing.started
+            return closed
         finally:
             await srv.stop()
 
-    code, why = asyncio.run(main())
-    assert code == P.CLOSE_BAD_REQUEST and reason in why, (code, why)
+    return asyncio.run(main())
 
 
 def test_session_core_adapts_only_its_own_copy(model, audio) -> None:

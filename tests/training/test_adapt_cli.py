@@ -69,6 +69,22 @@ def test_adapt_refuses_a_silent_recording_naming_it(tmp_path, capsys) -> None:
     assert not (tmp_path / "m.npz").exists()
 
 
+@pytest.mark.parametrize("sound", ["tone", "noise"])
+def test_adapt_refuses_a_recording_that_is_not_speech_naming_it(sound, tmp_path, capsys) -> None:
+    """Forty seconds of a pure 220 Hz tone were 'adapted' to (2 of 48 components visited) and written; white noise
+    the same. Real speech visits 7 or more from one second on (realtime_core.adaptation.MIN_VISITED_SHARE)."""
+    from assets.audio import write_wav
+
+    t = np.arange(10 * 16000) / 16000
+    x = 0.3 * np.sin(2 * np.pi * 220 * t) if sound == "tone" else np.random.default_rng(0).uniform(-0.3, 0.3, t.size)
+    wav = write_wav(tmp_path / f"{sound}.wav", x.astype(np.float32), 16000)
+    assert main(["adapt", "default", str(wav), "-o", str(tmp_path / "m.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    last = err.splitlines()[-1]
+    assert f"{wav}: it does not sound like speech" in last and last.endswith("nothing written"), err
+    assert not (tmp_path / "m.npz").exists()
+
+
 def test_adapt_refuses_an_output_that_is_not_npz_before_reading(tmp_path, capsys) -> None:
     """A model written as m.txt (it was) is not what --model expects; refused before the speech is read."""
     assert main(["adapt", "default", str(tmp_path / "missing.wav"), "-o", str(tmp_path / "m.txt")]) == 2
