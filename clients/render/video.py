@@ -113,6 +113,18 @@ def check_video_path(out: str | Path) -> Path:
     return p
 
 
+def check_video_size(width: int, height: int) -> None:
+    """RenderError unless a video of ``width`` x ``height`` pixels can be encoded; called before any work. H.264 in
+    4:2:0 (yuv420p, the chroma format players take) halves the colour planes both ways, so x264 refuses an odd width
+    or height, but only when the first frame arrives: after the model, the rig and the render (a whole live session
+    for ``view --record``)."""
+    if width % 2 or height % 2:
+        raise RenderError(
+            f"video size {width}x{height}: H.264 (yuv420p) needs an even width and height; "
+            f"give e.g. --width {width + width % 2} --height {height + height % 2}"
+        )
+
+
 def write_video(
     frames_params: np.ndarray,
     render_frame,
@@ -129,6 +141,7 @@ def write_video(
     from assets.files import make_parent
 
     out = check_video_path(out)
+    check_video_size(*size)
     exe = shutil.which(config.ffmpeg)
     if exe is None:
         raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")

@@ -58,10 +58,17 @@ def run(args: argparse.Namespace) -> int:
     from assets.files import check_writable
     from assets.tracks import read_params_resampled
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
+    from clients.render.video import (
+        VideoConfig,
+        check_video_path,
+        check_video_size,
+        params_for_audio,
+        write_video,
+    )
     from realtime_core.track import frames_from_samples
 
     check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
+    check_video_size(args.width, args.height)  # --beside adds an even width (assets.video.read_video_frames)
     if args.png_dir:
         check_writable(Path(args.png_dir) / "frame_00000.png")
     check_audio_path(args.speech)
