@@ -15,6 +15,7 @@ import queue
 import shutil
 import subprocess
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,12 +26,19 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.track import DEFAULT_FPS, Track
 
 
-def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str = "hmm") -> Track:
+def params_for_audio(
+    path: str | Path,
+    model: str | Path | None,
+    *,
+    mapper: str = "hmm",
+    check: Callable[[np.ndarray, int], None] | None = None,
+) -> Track:
     """Speech file -> the mouth-parameter track (F, 4) in IOD units at the model's 30 fps.
 
     The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
     computation as a live session) with the model loaded by ``assets.modelfile.load_model``
-    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
+    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead;
+    ``check(samples (n,) float, rate_hz)`` is called on the decoded speech first (the command's warnings).
     """
     from assets.audio import read_audio
     from assets.errors import FileProblem
@@ -40,6 +48,8 @@ def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str 
 
     av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
+    if check is not None:
+        check(samples, rate)
     try:
         params = speech_to_params(av, samples, rate)
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file

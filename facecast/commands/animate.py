@@ -68,7 +68,12 @@ def run(args: argparse.Namespace) -> int:
     from clients.export.errors import ExportError
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.outputs import check_output_formats
-    from facecast.commands.speech_options import apply_expressions, expression_intensities
+    from facecast.commands.speech_options import (
+        apply_expressions,
+        expression_intensities,
+        shipped_hmm,
+        warn_if_quiet,
+    )
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
@@ -98,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
         head = resolve_from_args(args)
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
+    if shipped_hmm(args):  # the shipped models' training level (a user's own may differ)
+        warn_if_quiet("animate", args.speech, samples, rate)
     mups = None
     try:
         if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:

@@ -80,7 +80,13 @@ def run(args: argparse.Namespace) -> int:
     if args.params:
         frames = read_params_resampled(args.params, args.fps).values
     else:
-        track = params_for_audio(args.speech, args.model, mapper=args.mapper)
+        from facecast.commands.speech_options import shipped_hmm, warn_if_quiet
+
+        def quiet(samples: np.ndarray, rate: int) -> None:
+            if shipped_hmm(args):
+                warn_if_quiet("render", args.speech, samples, rate)
+
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet)
         if track.fps != args.fps:
             track = frames_from_samples(track.times(), track.values, args.fps)
         frames = track.values
