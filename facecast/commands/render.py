@@ -113,8 +113,11 @@ def run(args: argparse.Namespace) -> int:
             image = with_caption(r.render(rig.deformed(frames[k])), credit)
             return image if video is None else beside(video.frames[shown[k]], image)
 
+        from assets.progress import Progress
+
         out = write_video(
-            np.arange(len(frames)),
+            # a 10-minute file renders for about as long: a bar on a terminal, a line every 30 s in a log
+            Progress(np.arange(len(frames)), desc="render", unit="frame"),
             draw,
             args.output,
             size=(width, cfg.height),
