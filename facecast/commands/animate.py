@@ -32,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--glb",
         type=Path,
         default=None,
-        help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it",
+        help="output glTF binary: the head animated by morph-target weights (a head's own targets, e.g. the built-in "
+        "head's ARKit mouth targets; a retargeted rig's 4 parameters; --glb-morphs), speech as .wav beside it",
     )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
