@@ -15,6 +15,7 @@ import queue
 import shutil
 import subprocess
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,12 +26,19 @@ from realtime_core import VISUAL_PARAMS
 from realtime_core.track import DEFAULT_FPS, Track
 
 
-def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str = "hmm") -> Track:
+def params_for_audio(
+    path: str | Path,
+    model: str | Path | None,
+    *,
+    mapper: str = "hmm",
+    check: Callable[[np.ndarray, int], None] | None = None,
+) -> Track:
     """Speech file -> the mouth-parameter track (F, 4) in IOD units at the model's 30 fps.
 
     The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
     computation as a live session) with the model loaded by ``assets.modelfile.load_model``
-    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead.
+    (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead;
+    ``check(samples (n,) float, rate_hz)`` is called on the decoded speech first (the command's warnings).
     """
     from assets.audio import read_audio
     from assets.errors import FileProblem
@@ -40,6 +48,8 @@ def params_for_audio(path: str | Path, model: str | Path | None, *, mapper: str 
 
     av = load_speech_model(mapper, model)
     samples, rate = read_audio(path)
+    if check is not None:
+        check(samples, rate)
     try:
         params = speech_to_params(av, samples, rate)
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
@@ -113,6 +123,18 @@ def check_video_path(out: str | Path) -> Path:
     return p
 
 
+def check_video_size(width: int, height: int) -> None:
+    """RenderError unless a video of ``width`` x ``height`` pixels can be encoded; called before any work. H.264 in
+    4:2:0 (yuv420p, the chroma format players take) halves the colour planes both ways, so x264 refuses an odd width
+    or height, but only when the first frame arrives: after the model, the rig and the render (a whole live session
+    for ``view --record``)."""
+    if width % 2 or height % 2:
+        raise RenderError(
+            f"video size {width}x{height}: H.264 (yuv420p) needs an even width and height; "
+            f"give e.g. --width {width + width % 2} --height {height + height % 2}"
+        )
+
+
 def write_video(
     frames_params: np.ndarray,
     render_frame,
@@ -129,6 +151,7 @@ def write_video(
     from assets.files import make_parent
 
     out = check_video_path(out)
+    check_video_size(*size)
     exe = shutil.which(config.ffmpeg)
     if exe is None:
         raise RenderError(f"{out}: ffmpeg not found ({config.ffmpeg!r}); install it to write videos")

@@ -32,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--glb",
         type=Path,
         default=None,
-        help="output glTF binary: the head with the 4 parameters as morph-target weights, speech as .wav beside it",
+        help="output glTF binary: the head animated by morph-target weights (a head's own targets, e.g. the built-in "
+        "head's ARKit mouth targets; a retargeted rig's 4 parameters; --glb-morphs), speech as .wav beside it",
     )
     p.add_argument("--json", type=Path, default=None, help="output JSON curves with a time column t (s)")
     p.add_argument("--tsv", type=Path, default=None, help="output Rhubarb-style mouth-shape cues (A-H, X) for 2D tools")
@@ -68,7 +69,12 @@ def run(args: argparse.Namespace) -> int:
     from clients.export.errors import ExportError
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.outputs import check_output_formats
-    from facecast.commands.speech_options import apply_expressions, expression_intensities
+    from facecast.commands.speech_options import (
+        apply_expressions,
+        expression_intensities,
+        shipped_hmm,
+        warn_if_quiet,
+    )
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
@@ -98,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         head = resolve_from_args(args)
     model = load_speech_model(args.mapper, args.model)
     samples, rate = read_audio(args.speech)
+    if shipped_hmm(args):  # the shipped models' training level (a user's own may differ)
+        warn_if_quiet("animate", args.speech, samples, rate)
     mups = None
     try:
         if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:

@@ -58,10 +58,17 @@ def run(args: argparse.Namespace) -> int:
     from assets.files import check_writable
     from assets.tracks import read_params_resampled
     from clients.render.renderer import RenderConfig, renderer_for_rig
-    from clients.render.video import VideoConfig, check_video_path, params_for_audio, write_video
+    from clients.render.video import (
+        VideoConfig,
+        check_video_path,
+        check_video_size,
+        params_for_audio,
+        write_video,
+    )
     from realtime_core.track import frames_from_samples
 
     check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
+    check_video_size(args.width, args.height)  # --beside adds an even width (assets.video.read_video_frames)
     if args.png_dir:
         check_writable(Path(args.png_dir) / "frame_00000.png")
     check_audio_path(args.speech)
@@ -73,7 +80,13 @@ def run(args: argparse.Namespace) -> int:
     if args.params:
         frames = read_params_resampled(args.params, args.fps).values
     else:
-        track = params_for_audio(args.speech, args.model, mapper=args.mapper)
+        from facecast.commands.speech_options import shipped_hmm, warn_if_quiet
+
+        def quiet(samples: np.ndarray, rate: int) -> None:
+            if shipped_hmm(args):
+                warn_if_quiet("render", args.speech, samples, rate)
+
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet)
         if track.fps != args.fps:
             track = frames_from_samples(track.times(), track.values, args.fps)
         frames = track.values
@@ -100,8 +113,11 @@ def run(args: argparse.Namespace) -> int:
             image = with_caption(r.render(rig.deformed(frames[k])), credit)
             return image if video is None else beside(video.frames[shown[k]], image)
 
+        from assets.progress import Progress
+
         out = write_video(
-            np.arange(len(frames)),
+            # a 10-minute file renders for about as long: a bar on a terminal, a line every 30 s in a log
+            Progress(np.arange(len(frames)), desc="render", unit="frame"),
             draw,
             args.output,
             size=(width, cfg.height),

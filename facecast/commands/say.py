@@ -182,6 +182,10 @@ def run(args: argparse.Namespace) -> int:
     for o in outs:  # before any work; an .mp4's temporary folder is made beside it, so its folder must exist
         if o.resolve() not in checked:  # the exports were probed by check_outputs
             check_writable(o)
+    if any(o.suffix.lower() == ".mp4" for o in outs):
+        from clients.render.video import check_video_size
+
+        check_video_size(args.width, args.height)
     timings: dict[str, float] = {}
 
     def lap(name: str, t0: float) -> float:

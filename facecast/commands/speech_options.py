@@ -58,3 +58,34 @@ def apply_expressions(
     from realtime_core.mapping.expression import express
 
     return express(params, alpha, mups=mups, mapper=getattr(model, "expressions", None))
+
+
+QUIET_BY_DB = 10.0
+"""A speech file whose speech level is more than this under the model's training level gets a warning: the shipped
+model reads loudness as mouth opening; four read-speech files (-23 to -25 dBFS, LJ Speech, ARCTIC, LibriVox) scaled
+by -12 dB gave r(mouth_open) 0.73-0.84 against their own output, by -20 dB 0.58-0.61 and about half the mean opening
+(docs/animation.md, "Audio as it comes"). 10 dB: those files as they are (5-6 dB under) are not warned about."""
+
+
+def shipped_hmm(args: argparse.Namespace) -> bool:
+    """Whether ``--mapper``/``--model`` name a shipped HMM model (trained at :data:`S1_SPEECH_LEVEL_DBFS`)."""
+    return args.mapper == "hmm" and (args.model is None or str(args.model) in ("default", "low-latency"))
+
+
+def warn_if_quiet(command: str, path, samples: np.ndarray, rate_hz: int) -> None:
+    """Print one warning line to stderr when the speech in ``samples`` (n,) float at ``rate_hz`` is more than
+    :data:`QUIET_BY_DB` under the level the shipped models were trained at, saying how to normalise it; nothing for
+    a file at that level, louder, or without speech (silence animates a closed mouth at any level)."""
+    import sys
+
+    from realtime_core.features.gain import S1_SPEECH_LEVEL_DBFS, speech_level_db
+
+    level = speech_level_db(samples, rate_hz)
+    if level is None or level >= S1_SPEECH_LEVEL_DBFS - QUIET_BY_DB:
+        return
+    print(
+        f"facecast {command}: warning: {path}: speech at {level:.1f} dBFS, {S1_SPEECH_LEVEL_DBFS - level:.0f} dB under "
+        f"the level the model was trained at ({S1_SPEECH_LEVEL_DBFS} dBFS): the mouth opens less than the words call "
+        f"for (about half at 20 dB under); normalise it first, e.g. ffmpeg -i IN -af loudnorm=I=-20:TP=-1.5 OUT.wav",
+        file=sys.stderr,
+    )

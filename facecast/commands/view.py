@@ -111,9 +111,10 @@ def run(args: argparse.Namespace) -> int:
     if args.record is None:
         return _window(args, token)
     from assets.files import check_writable
-    from clients.render.video import check_video_path
+    from clients.render.video import check_video_path, check_video_size
 
     check_writable(check_video_path(args.record))  # before the session is watched, not after it ended
+    check_video_size(args.width, args.height)
 
     async def main():
         session = await pick_session(args.url, args.session, args.wait, token)

@@ -81,6 +81,30 @@ class InputGainConfig:
         return max(1, round(sample_rate_hz * self.block_ms / 1000.0))
 
 
+DIGITAL_SILENCE_DBFS = -80.0
+"""A block this quiet (RMS, dBFS) is digital silence (padding, a muted stretch), not a room's noise floor."""
+
+
+def speech_level_db(samples: np.ndarray, sample_rate_hz: int, config: InputGainConfig | None = None) -> float | None:
+    """The mean level (dBFS, RMS per ``config.block_ms`` block) of the speech blocks of a whole recording ``samples``
+    (n,) float in [-1, 1]: blocks more than ``config.tracker.speech_above_floor_db`` over the tracked noise floor, the
+    rule :data:`S1_SPEECH_LEVEL_DBFS` was measured by, so the two compare. Blocks under :data:`DIGITAL_SILENCE_DBFS` are
+    left out: after a file's digitally silent padding the floor sat at -120 dB and took the speech's quiet tails for
+    speech (LJ Speech's LJ001-0001 between 3 s of zeros: -27.6 dBFS against its own -24.0). None when no block is
+    speech (silence, steady noise, shorter than a block)."""
+    cfg = InputGainConfig() if config is None else config
+    x = np.asarray(samples, dtype=np.float64)
+    b = cfg.block_len(sample_rate_hz)
+    n = x.size // b
+    level = 10.0 * np.log10(np.maximum(np.mean(x[: n * b].reshape(n, b) ** 2, axis=1), 1e-12))
+    level = level[level > DIGITAL_SILENCE_DBFS]
+    if level.size == 0:
+        return None
+    _, floor = LevelTracker(cfg.tracker).track(level)
+    speech = level > floor + cfg.tracker.speech_above_floor_db
+    return float(level[speech].mean()) if speech.any() else None
+
+
 class InputGain:
     """``push(samples (n,) float64) -> (n,) float64`` scaled samples, no delay (``flush()`` -> none);
     ``reset()``.

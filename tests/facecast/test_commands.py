@@ -279,7 +279,10 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
     args = ["render", str(wav), "--params", str(csv), "-o", str(out), "--width", "160", "--height", "120"]
     assert main(args) == 0
     assert out.is_file() and out.stat().st_size > 1000
-    assert f"{len(t)} frames at 30 fps" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert f"{len(t)} frames at 30 fps" in captured.out
+    # the frames counted as they render (a 10-minute file rendered for 10 minutes without a word)
+    assert f"render: 100%|##########| {len(t)}/{len(t)}" in captured.err, captured.err
 
 
 @pytest.mark.slow

@@ -24,6 +24,24 @@ def test_a_bad_video_name_is_refused_before_any_work(argv, tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["render", "{tmp}/missing.wav", "-o", "{tmp}/take.mp4", "--width", "641"],
+        ["say", "Hello.", "-o", "{tmp}/take.mp4", "--height", "481"],
+        ["view", "http://127.0.0.1:9", "--record", "{tmp}/take.mp4", "--width", "641"],  # port 9: nothing listens
+    ],
+    ids=["render", "say", "view"],
+)
+def test_an_odd_video_size_is_refused_before_any_work(argv, tmp_path, capsys):
+    """x264 refuses an odd width or height for 4:2:0 video, but only once the frames arrive: `render --width 641` failed
+    with ffmpeg's lines after the model, the rig and the frames; `view --record` after the whole live session."""
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "needs an even width and height" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_rig_refuses_an_output_that_is_not_npz_before_rigging(tmp_path, capsys):
     """A rig written as take.txt could never be given back as --head (heads are told apart by suffix)."""
     assert main(["rig", "builtin", "-o", str(tmp_path / "face.rig")]) == 2

@@ -23,3 +23,28 @@ def test_an_expression_late_in_a_long_file_is_scheduled():
     assert np.all(smile[: 700 * 30] == 0) and np.all(smile[700 * 30 + 1 :] == 0.5)
     with pytest.raises(ExpressionError, match="ahead"):  # beyond the file's end: still refused
         expression_intensities(_args("smile@900"), n)
+
+
+def test_animate_warns_of_speech_far_under_the_training_level_in_one_line(tmp_path, capsys):
+    """The shipped model reads loudness as mouth opening: speech 20 dB under its training level opened the mouth about
+    half as far, silently. The same speech at that level, and silence, give no warning; the file is written anyway."""
+    from assets.audio import write_wav
+    from facecast.cli import main
+    from realtime_core.features.gain import S1_SPEECH_LEVEL_DBFS, speech_level_db
+    from tests.speech import speechlike
+
+    x = speechlike(1.5, 16000, seed=3)
+    x = np.concatenate([np.zeros(8000), x, np.zeros(8000)])
+    at_level = x * 10.0 ** ((S1_SPEECH_LEVEL_DBFS - speech_level_db(x, 16000)) / 20.0)
+    for name, samples, warned in [
+        ("level", at_level, False),
+        ("quiet", at_level * 0.1, True),
+        ("silent", np.zeros(16000), False),
+    ]:
+        wav = tmp_path / f"{name}.wav"
+        write_wav(wav, samples, 16000)
+        assert main(["animate", str(wav), "-o", str(tmp_path / f"{name}.csv")]) == 0
+        err = capsys.readouterr().err
+        assert (f"{wav}: speech at {S1_SPEECH_LEVEL_DBFS - 20:.1f} dBFS, 20 dB under" in err) == warned, err
+        assert len(err.splitlines()) == int(warned), err
+        assert (tmp_path / f"{name}.csv").is_file()

@@ -107,3 +107,28 @@ def test_noise_alone_moves_the_live_path_exactly_as_without_the_stage():
     on = replace(shipped, frontend=replace(shipped.frontend, input_gain=CFG))
     x = np.random.default_rng(1).standard_normal(2 * RATE) * 10 ** (-50 / 20)
     np.testing.assert_array_equal(speech_to_params(on, x, RATE), speech_to_params(shipped, x, RATE))
+
+
+def test_speech_level_is_the_speech_blocks_level_and_moves_with_a_gain():
+    """speech_level_db on bursts of a 500 Hz tone at amplitude 0.1 (whole periods in every 32 ms block, the bursts on
+    block boundaries), pauses of noise at -60 dBFS: the bursts' own RMS level, 20 log10(0.1 / sqrt 2) dBFS; a gain
+    of g dB moves it by exactly g (the floor tracker is equivariant), what makes it a measure of the recording's gain;
+    silence and noise alone have no speech level."""
+    from realtime_core.features.gain import speech_level_db
+
+    b = CFG.block_len(RATE)
+    assert b == 512  # 16 periods of 500 Hz
+    rng = np.random.default_rng(5)
+    burst = 0.1 * np.sin(2 * np.pi * 500.0 * np.arange(20 * b) / RATE)
+    x = np.concatenate([np.zeros(15 * b), burst, np.zeros(10 * b), burst, np.zeros(10 * b)])
+    x = x + 1e-3 * rng.standard_normal(x.size)
+    level = speech_level_db(x, RATE)
+    assert level == pytest.approx(20.0 * np.log10(0.1 / np.sqrt(2.0)), abs=0.01)
+    # Digital silence around it (a file's padding) changes nothing: it took the floor to -120 dB, and the bursts'
+    # edges and the noise for speech.
+    assert speech_level_db(np.concatenate([np.zeros(40 * b), x, np.zeros(40 * b)]), RATE) == level
+    for g in (-20.0, 6.0):
+        assert speech_level_db(x * 10.0 ** (g / 20.0), RATE) == pytest.approx(level + g, abs=1e-6)
+    assert speech_level_db(np.zeros(RATE), RATE) is None
+    assert speech_level_db(1e-3 * rng.standard_normal(3 * RATE), RATE) is None
+    assert speech_level_db(x[: b - 1], RATE) is None
