@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NoReturn, Protocol
 
 import numpy as np
 from websockets.asyncio.server import ServerConnection
@@ -301,6 +301,15 @@ def _text_message(raw: Any) -> dict:
     return loads_bounded(raw, "message", max_bytes=MAX_START_BYTES)
 
 
+def _violation(kind: Any) -> NoReturn:
+    """A message a started text session does not take: a second start, or an unknown type."""
+    if kind == "start":
+        raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
+    raise ProtocolViolation(
+        P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush, cancel or end)"
+    )
+
+
 async def handle_text(server, ws: ServerConnection) -> None:
     """The ``/text`` endpoint (protocol in docs/protocol.md)."""
     from server.live import LiveSession, SentenceReplay
@@ -420,6 +429,64 @@ async def handle_text(server, ws: ServerConnection) -> None:
         queue.put_nowait(None)
         await pace
 
+    pace: asyncio.Future[None]  # the pacer task; a cancel replaces it
+
+    async def cancel() -> dict:
+        """Barge-in: what is not yet released is dropped (frames already sent, up to lead_s, still play), the pending
+        text too, and the mouth eases to rest; -> the `cancelled` reply."""
+        nonlocal pace
+        pace.cancel()
+        await asyncio.gather(pace, return_exceptions=True)
+        while not queue.empty():
+            queue.get_nowait()
+        session.chunker.flush()
+        nxt = released["next"]
+        cut = [span for span in spans if span[1] > nxt]
+        mid_sentence = any(first < nxt for first, _ in cut)
+        spans.clear()
+        for k in [k for k in sentence_ends if k >= nxt]:
+            del sentence_ends[k]
+        ease = session.cancel(nxt, released["params"] if mid_sentence else None)
+        if ease:
+            sentence_ends[nxt] = ease[-1].frames[-1].media_time + 1 / FPS
+            for o in ease:
+                queue.put_nowait(o)
+        pace = asyncio.ensure_future(pacer())
+        return {"type": "cancelled", "dropped": len(cut), "media_time": nxt / FPS}
+
+    async def play_out() -> None:
+        """After `end`: wait until the last frame has been released (the pacer met its end mark), still reading the
+        source: a `cancel` cuts the play-out (a chatbot's user talks over the answer's last sentences, which were
+        spoken to the end before), text is rejected (the session is ending), `flush` and `end` change nothing."""
+        reading: asyncio.Future | None = None
+        try:
+            while not pace.done():
+                if reading is None:
+                    reading = asyncio.ensure_future(ws.recv())
+                await asyncio.wait({pace, reading}, return_when=asyncio.FIRST_COMPLETED)
+                if not reading.done():
+                    continue
+                try:
+                    raw = reading.result()
+                except ConnectionClosed:  # the source left after `end`: its speech plays out all the same
+                    await pace
+                    return
+                reading = None
+                msg = _text_message(raw)
+                kind = msg.get("type")
+                if kind == "cancel":
+                    await reply(await cancel())
+                    queue.put_nowait(None)  # the session still ends, after the ease
+                elif kind == "text":
+                    text = msg.get("text")
+                    shown = text[:REJECTED_TEXT_CHARS] if isinstance(text, str) else None
+                    await reply({"type": "rejected", "text": shown, "reason": "after end: the session is ending"})
+                elif kind not in ("flush", "end"):
+                    _violation(kind)
+        finally:
+            if reading is not None:
+                reading.cancel()
+
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
     stalled = False  # a stall spoke the pending words and left a word fragment waiting
@@ -472,28 +539,12 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 stalled = False
                 await say(session.finish_text())
             elif kind == "cancel":
-                # Barge-in: what is not yet released is dropped (frames already sent, up to lead_s, still play)
-                pace.cancel()
-                await asyncio.gather(pace, return_exceptions=True)
-                while not queue.empty():
-                    queue.get_nowait()
-                session.chunker.flush()
                 stalled = False
-                nxt = released["next"]
-                cut = [span for span in spans if span[1] > nxt]
-                mid_sentence = any(first < nxt for first, _ in cut)
-                spans.clear()
-                for k in [k for k in sentence_ends if k >= nxt]:
-                    del sentence_ends[k]
-                ease = session.cancel(nxt, released["params"] if mid_sentence else None)
-                if ease:
-                    sentence_ends[nxt] = ease[-1].frames[-1].media_time + 1 / FPS
-                    for o in ease:
-                        queue.put_nowait(o)
-                pace = asyncio.ensure_future(pacer())
-                await reply({"type": "cancelled", "dropped": len(cut), "media_time": nxt / FPS})
+                await reply(await cancel())
             elif kind == "end":
-                await finish()
+                await say(session.finish_text())
+                queue.put_nowait(None)
+                await play_out()
                 await ws.send(
                     P.dumps(
                         {
@@ -508,12 +559,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
                     )
                 )
                 break
-            elif kind == "start":
-                raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
             else:
-                raise ProtocolViolation(
-                    P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush, cancel or end)"
-                )
+                _violation(kind)
     except ProtocolViolation:
         code, reason = P.CLOSE_NORMAL, "session ended: its source broke the protocol"
         raise

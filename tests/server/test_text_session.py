@@ -474,6 +474,37 @@ def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on
     assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
 
 
+def test_after_end_a_cancel_cuts_the_play_out_and_text_is_rejected(model, backend):
+    """A chatbot sends `end` after its answer's last piece, then its user talks over the answer: the cancel was not
+    read until the last frame had played (the answer was spoken to its end), and text sent after `end` got no reply.
+    Now the cancel cuts the play-out as before `end` (the ease, then `ended`) and the text is rejected."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "late", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="late", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG}))
+                spoken = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "end"}))
+                await asyncio.sleep(1.0)  # mid-way through the sentence (several seconds)
+                await ws.send(json.dumps({"type": "text", "text": "Too late. "}))
+                rejected = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "cancel"}))
+                cancelled, ended = json.loads(await ws.recv()), json.loads(await ws.recv())
+                got = await asyncio.wait_for(collect, 60)
+            return spoken, rejected, cancelled, ended, got
+
+    spoken, rejected, cancelled, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert rejected == {"type": "rejected", "text": "Too late. ", "reason": "after end: the session is ending"}
+    assert cancelled["type"] == "cancelled" and cancelled["dropped"] == 1
+    cut = round(cancelled["media_time"] * 30)
+    assert 0 < cut < spoken["frames"]  # cut mid-way: the rest of the sentence never left
+    assert ended["type"] == "ended" and ended["frames"] == cut + 6  # then the 0.2 s ease to rest
+    assert [m.index for m in got.frames] == list(range(ended["frames"])) and got.close_code == P.CLOSE_NORMAL
+
+
 def test_a_stall_mid_word_speaks_the_whole_words_and_the_fragment_waits(model, backend):
     """A user test: after "Then he went ho" and a stall the server spoke "Then he went ho", then "me and slept".
     A stall speaks through the last word boundary; the fragment waits for more text (or a longer stall)."""
