@@ -705,7 +705,7 @@ class FacecastServer:
             args,
             token=self.config.token,
             has_head=self.head is not None,
-            morph_head=self.head is not None and self.head.kind == "morph",
+            morph_head="morph" in self.view_kinds(),
         )
         wait_s = SP.view_wait_s(args, longest_s=self.config.max_view_wait_s)
         live = self.sessions.get(req.session)
@@ -967,8 +967,18 @@ class FacecastServer:
     async def _ask_shards(self, what: str) -> list[Any]:
         return [] if self.shards is None else await self.shards.ask(what)
 
-    def _sessions_reply(self) -> HttpReply:
-        return HttpReply.json({"sessions": self.session_list()})
+    def view_kinds(self) -> list[str]:
+        """The frame kinds a viewer may ask this node for, best first (docs/protocol.md section 3): ``morph`` for a
+        head driven by its own targets, ``deltas`` for any head, ``params`` always."""
+        if self.head is None:
+            return ["params"]
+        return (["morph"] if self.head.kind == "morph" else []) + ["deltas", "params"]
+
+    def _sessions_reply(self, rows: list[dict] | None = None, **extra: str) -> HttpReply:
+        # view_kinds: a page asks for the best kind this node offers at once (the browser asked for morph first and
+        # was refused, 4400, by every server whose head has no targets of its own)
+        rows = self.session_list() if rows is None else rows
+        return HttpReply.json({"sessions": rows, **extra, "view_kinds": self.view_kinds()})
 
     async def _sessions_reply_async(self) -> HttpReply:
         """/sessions: cluster-wide from the registry when there is one (this node's own otherwise)."""
@@ -977,11 +987,11 @@ class FacecastServer:
             if rows is not None:
                 local = {r["name"] for r in rows}
                 rows += [dict(r, node=self.cluster.node) for r in self.session_list() if r["name"] not in local]
-                return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"]), "scope": "cluster"})
-            return HttpReply.json({"sessions": self.session_list(), "scope": "node (Redis away)"})
+                return self._sessions_reply(sorted(rows, key=lambda r: r["name"]), scope="cluster")
+            return self._sessions_reply(scope="node (Redis away)")
         if self.shards is not None:
             rows = self.session_list() + [r for rows in await self._ask_shards("rows") for r in rows]
-            return HttpReply.json({"sessions": sorted(rows, key=lambda r: r["name"])})
+            return self._sessions_reply(sorted(rows, key=lambda r: r["name"]))
         return self._sessions_reply()
 
     def session_list(self) -> list[dict]:

@@ -640,3 +640,23 @@ def test_a_head_resting_through_its_targets_describes_the_rest_its_frames_carry(
     # The built-in head rests at its neutral.
     plain = asyncio.run(descriptions(head, ["kind=deltas&encoding=int16"]))
     assert plain["kind=deltas&encoding=int16"]["rest_values"] is None
+
+
+def test_sessions_say_which_view_kinds_this_node_serves(model, head):
+    """The browser viewer asked every server for "morph" first and was refused (4400) by any whose head has no
+    targets of its own, a refusal the server logged; /sessions now says what a viewer may ask for, best first."""
+    from assets.heads.head import builtin_morph_head
+
+    async def kinds(h):
+        srv = FacecastServer(model, head=h, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            status, body = await http_get(srv.url, "/sessions")
+        finally:
+            await srv.stop()
+        assert status == 200
+        return json.loads(body)["view_kinds"]
+
+    assert asyncio.run(kinds(None)) == ["params"]
+    assert asyncio.run(kinds(head)) == ["deltas", "params"]  # retargeted: vertex deltas
+    assert asyncio.run(kinds(builtin_morph_head())) == ["morph", "deltas", "params"]

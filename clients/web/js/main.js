@@ -90,6 +90,12 @@ async function pollSessions() {
     const res = await fetch(url, { cache: "no-store" });
     if (!res.ok) throw new Error(`HTTP ${res.status}`);
     const m = await res.json();
+    if (!ws && Array.isArray(m.view_kinds)) {
+      // The best kind this server offers, from the one asked for on: no attempt it would refuse (a head without
+      // targets of its own refused "morph" with 4400 at every connection, and logged it).
+      const offered = KINDS.slice(firstKind).find((k) => m.view_kinds.includes(k));
+      if (offered) kindLevel = KINDS.indexOf(offered);
+    }
     state.sessions = (m.sessions || []).map((s) => s.name);
     renderSessionList(m.sessions || []);
     if (!ws) {

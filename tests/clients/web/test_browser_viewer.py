@@ -19,9 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clients.client import http_get
 from tests.live_server import REPO, LiveServer, stream_session
 from tests.prerequisites import missing
 from tests.speech import cut_mid_word, speechlike
+from wire import protocol as P
 
 # Headless Chromium against a live server (about 30 s).
 pytestmark = [pytest.mark.system, pytest.mark.slow]
@@ -110,6 +112,8 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
 
     try:
         frames = _read_step(proc, "frames")
+        # the page asked for what /sessions offers (deltas for this head) at once: no "morph" refused with 4400
+        closes = json.loads(servers[0].call(http_get(servers[0].url, "/metrics"))[1])["closes"]
         picker = _read_step(proc, "picker")
         mouth = _read_step(proc, "mouth")
         _read_step(proc, "waiting")
@@ -150,6 +154,7 @@ def test_browser_viewer_shows_the_session_in_sync_and_reconnects(model, head):
     assert picker["smiled"] == "smile: applied"  # the server acknowledged the picker's control
     assert name in frames["listed"]  # the page lists the live session
     assert st["kind"] == "deltas" and st["frames"] >= 30 and st["connections"] == 1
+    assert str(P.CLOSE_BAD_REQUEST) not in closes, closes
     assert st["audio"]["running"] and st["audio"]["played"] > 0  # the relayed speech was scheduled
     # ... on the frames' timeline: each block is heard within 20 ms of its frames (joins snap <= 15 ms).
     assert mouth["state"]["audio"]["syncMs"] is not None and mouth["state"]["audio"]["syncMs"] < 20
