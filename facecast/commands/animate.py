@@ -58,10 +58,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--lag", type=within(int, 0, 30, "frames"), default=0, help="extra frames of fixed-lag smoothing (stream mode)"
     )
+    p.add_argument(
+        "--fps",
+        type=within(float, 1, 240, "fps"),
+        default=30.0,
+        help="frame rate of the written curves, cues and glb keys (the model runs at 30 fps; other rates are "
+        "linearly interpolated from it, e.g. 24 for film, 60 for a game)",
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from assets.audio import read_audio
     from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
@@ -78,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
-    from realtime_core.track import Track
+    from realtime_core.track import DEFAULT_FPS, Track, frames_from_samples
 
     exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}  # the format named by the flag
     # -o's format follows the suffix; --csv writes CSV whatever the name (as it always has).
@@ -116,8 +125,13 @@ def run(args: argparse.Namespace) -> int:
         raise FileProblem(args.speech, str(exc)) from None
     speech = params
     params = apply_expressions(params, args, mups=mups, model=model)
+    fps = float(args.fps)
+    if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
+        at = np.arange(len(params)) / DEFAULT_FPS
+        params = frames_from_samples(at, params, fps).values
+        speech = frames_from_samples(at, speech, fps).values
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
-    track = Track(values=params)
+    track = Track(values=params, fps=fps)
     if args.csv is not None:
         write_csv(args.csv, track)
     arkit = None
@@ -135,8 +149,8 @@ def run(args: argparse.Namespace) -> int:
             arkit_targets=arkit,
             checked=checked,  # probed above: not again per file
             # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
-            arkit_track=Track(values=speech),
-            expression=expression_intensities(args, len(params)),
+            arkit_track=Track(values=speech, fps=fps),
+            expression=expression_intensities(args, len(params), fps),
         )
     delay = (
         f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"
@@ -144,5 +158,7 @@ def run(args: argparse.Namespace) -> int:
         else "batch"
     )
     for out in [*([args.csv] if args.csv is not None else []), *written]:
-        print(f"wrote {out}: {len(params)} frames ({len(params) / 30:.2f} s) from {args.speech} ({delay})")
+        print(
+            f"wrote {out}: {len(params)} frames ({len(params) / fps:.2f} s at {fps:g} fps) from {args.speech} ({delay})"
+        )
     return 0

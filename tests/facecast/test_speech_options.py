@@ -48,3 +48,29 @@ def test_animate_warns_of_speech_far_under_the_training_level_in_one_line(tmp_pa
         assert (f"{wav}: speech at {S1_SPEECH_LEVEL_DBFS - 20:.1f} dBFS, 20 dB under" in err) == warned, err
         assert len(err.splitlines()) == int(warned), err
         assert (tmp_path / f"{name}.csv").is_file()
+
+
+def test_animate_writes_curves_and_glb_keys_at_the_asked_frame_rate(tmp_path):
+    """A game at 60 fps or a film at 24 asked for `animate --fps` (render had it, animate wrote 30 fps only): the
+    curves are the 30 fps output interpolated onto k / fps, and the glb's keys sit on the same times."""
+    import pygltflib
+
+    from assets.audio import write_wav
+    from assets.tracks import read_csv
+    from facecast.cli import main
+    from tests.speech import speechlike
+
+    wav = write_wav(tmp_path / "s.wav", speechlike(1.5, 16000, seed=5), 16000)
+    assert main(["animate", str(wav), "-o", str(tmp_path / "s30.csv")]) == 0
+    base = read_csv(tmp_path / "s30.csv")
+    for fps in (24, 60):
+        csv, glb = tmp_path / f"s{fps}.csv", tmp_path / f"s{fps}.glb"
+        assert main(["animate", str(wav), "--fps", str(fps), "-o", str(csv), "-o", str(glb)]) == 0
+        got = read_csv(csv, fps=fps)
+        n = int(np.floor((len(base.values) - 1) / 30 * fps + 1e-4)) + 1
+        assert got.fps == fps and got.values.shape == (n, 4)
+        want = np.stack([np.interp(np.arange(n) / fps, base.times(), base.values[:, j]) for j in range(4)], axis=1)
+        np.testing.assert_allclose(got.values, want, atol=1e-8)
+        g = pygltflib.GLTF2().load(str(glb))
+        keys = g.accessors[g.animations[0].samplers[0].input]
+        assert keys.count == n and keys.max[0] == pytest.approx((n - 1) / fps, abs=1e-6)
