@@ -48,3 +48,15 @@ def within(cast: type[int] | type[float], lo: float, hi: float, unit: str = "") 
 
     parse.__name__ = f"{cast.__name__} in {span}"  # what argparse names in its "invalid ... value" fallback
     return parse
+
+
+def colour(text: str) -> tuple[float, float, float]:
+    """A colour as matplotlib names it (``"white"``, ``"#1e2030"``, ``"0.5"`` for a grey) -> RGB in [0, 1]."""
+    from matplotlib.colors import to_rgb
+
+    try:
+        return tuple(float(c) for c in to_rgb(text))  # type: ignore[return-value]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a colour such as white, #1e2030 or 0.5 (grey), got {text!r}"
+        ) from None

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
-from facecast.commands.argtypes import within
+from facecast.commands.argtypes import colour, within
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +40,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=480, help="image height in pixels")
     p.add_argument("--fps", type=within(float, 1, 240, "fps"), default=30.0, help="video frame rate")
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
+    p.add_argument(
+        "--background",
+        type=colour,
+        default=None,
+        metavar="COLOUR",
+        help="background colour of the video: a name (white), #RRGGBB or a grey level 0..1 (default dark slate)",
+    )
     p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
     p.add_argument(
         "--beside",
@@ -101,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
 
     credit = args.credit if args.credit is not None else credit_for(mesh.name)
     cfg = RenderConfig(width=args.width, height=args.height, view=args.view, samples=args.samples)
+    if args.background is not None:
+        cfg = replace(cfg, background=args.background)
     width = cfg.width
     if video is not None:
         from clients.render.video import beside

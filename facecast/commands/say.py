@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
+
+from facecast.commands.argtypes import colour
 
 
 class _ListVoices(argparse.Action):
@@ -95,6 +98,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
+    p.add_argument(
+        "--background",
+        type=colour,
+        default=None,
+        metavar="COLOUR",
+        help="background colour of the video: a name (white), #RRGGBB or a grey level 0..1 (default dark slate)",
+    )
     p.add_argument(
         "--samples",
         type=int,
@@ -268,6 +278,8 @@ def run(args: argparse.Namespace) -> int:
             rig, mesh = head
             credit = credit_for(mesh.name)
             cfg = RenderConfig(width=args.width, height=args.height, samples=args.samples)
+            if args.background is not None:
+                cfg = replace(cfg, background=args.background)
             with tempfile.TemporaryDirectory(prefix=".facecast-say-", dir=out.resolve().parent) as tmp:
                 wav = write_wav(Path(tmp) / "speech.wav", samples, rate)
                 with renderer_for_rig(rig, mesh, cfg) as r:

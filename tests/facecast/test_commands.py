@@ -277,8 +277,12 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
     wav = shared_data / "speech" / "arctic" / "arctic_a0009.wav"
     out = tmp_path / "v.mp4"
     args = ["render", str(wav), "--params", str(csv), "-o", str(out), "--width", "160", "--height", "120"]
-    assert main(args) == 0
+    assert main([*args, "--background", "#ffe4c4", "--png-dir", str(tmp_path / "png")]) == 0
     assert out.is_file() and out.stat().st_size > 1000
+    from PIL import Image
+
+    corner = np.asarray(Image.open(tmp_path / "png" / "frame_00000.png").convert("RGB"))[2, 2]
+    assert np.abs(corner.astype(int) - [0xFF, 0xE4, 0xC4]).max() <= 2, corner  # --background (bisque)
     captured = capsys.readouterr()
     assert f"{len(t)} frames at 30 fps" in captured.out
     # the frames counted as they render (a 10-minute file rendered for 10 minutes without a word)
