@@ -94,7 +94,9 @@ class IngestClient:
     url: the server's base URL (http:// or ws://); session: its name; sample_rate_hz/channels: of
     the audio you send; sample_format: "pcm_s16le" or "f32le"; token: the shared secret if any;
     enrol: optional enrolment recording of the talker (raw bytes in the same rate/format/channels,
-    1-120 s; the start message carries it base64-encoded, so it must fit the server's message limit).
+    1-120 s; the start message carries it base64-encoded, so it must fit the server's message limit);
+    auto_gain: True/False asks the server to bring (or not) the input to the model's speech level, None leaves it
+    to the server's default.
     """
 
     def __init__(
@@ -108,6 +110,7 @@ class IngestClient:
         token: str | None = None,
         max_size: int | None = 1 << 20,
         enrol: bytes | None = None,
+        auto_gain: bool | None = None,
     ) -> None:
         if sample_format not in P.SAMPLE_FORMATS:
             raise ClientError(f"sample_format must be one of {sorted(P.SAMPLE_FORMATS)}")
@@ -119,6 +122,7 @@ class IngestClient:
         self.token = token
         self.max_size = max_size
         self.enrol = enrol
+        self.auto_gain = auto_gain
         self.ws: ClientConnection | None = None
         self.started: dict = {}
 
@@ -142,6 +146,8 @@ class IngestClient:
             start["token"] = self.token
         if self.enrol is not None:  # enrolment recording in this session's input format (server adapts its model)
             start["enrol"] = base64.b64encode(self.enrol).decode("ascii")
+        if self.auto_gain is not None:
+            start["auto_gain"] = self.auto_gain
         await self.ws.send(json.dumps(start))
         self.started = await self._reply("started")
         return self
@@ -238,16 +244,18 @@ async def ingest_file(
     token: str | None = None,
     hold_s: float = 0.0,
     enrol: str | Path | None = None,
+    auto_gain: bool | None = None,
 ) -> tuple[dict, dict]:
     """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``started`` and
     ``ended`` replies. hold_s: seconds between the session's start and its first audio, in which viewers waiting
     for it connect; enrol: a recording of the talker (any rate/format the reader takes) sent as the start's
-    enrolment, converted to this session's input (the speech file's rate, mono, pcm_s16le)."""
+    enrolment, converted to this session's input (the speech file's rate, mono, pcm_s16le); auto_gain: the start's
+    ``auto_gain`` (None: the server's default)."""
     from assets.audio import read_audio
     from realtime_core.features.resample import resample_audio
 
     samples, rate = read_audio(path)
-    ingest = IngestClient(url, session=session, sample_rate_hz=rate, token=token)
+    ingest = IngestClient(url, session=session, sample_rate_hz=rate, token=token, auto_gain=auto_gain)
     if enrol is not None:
         voice, voice_rate = read_audio(enrol)
         # The enrolment must be in the session's own rate/format/channels (docs/protocol.md, `enrol`): the

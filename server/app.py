@@ -36,6 +36,7 @@ import threading
 import time
 import urllib.parse
 from collections.abc import AsyncIterator, Callable, Coroutine
+from dataclasses import replace
 from http import HTTPStatus
 from typing import TYPE_CHECKING, Any
 
@@ -387,6 +388,8 @@ class FacecastServer:
     ) -> LiveSession:
         """Register a new live session (AdmissionRefused, a ServerConfigError, if the name is taken or
         the server is full). paced: hold its input to real time plus ``ingest_burst_s``."""
+        if config.auto_gain is None:  # the start did not say: this server's default
+            config = replace(config, auto_gain=self.config.auto_gain)
         self._admission(name, batch=batch)
         registry = self.registry
         if registry is not None:  # a connection worker: the name is claimed server-wide, at the front

@@ -28,18 +28,20 @@ class ServerConfig:
     messages buffered per viewer before the oldest is dropped; viewer_max_behind_s: a viewer that
     keeps dropping for this long is closed (4000); start_timeout_s: time an ingest connection has to
     send its start message; close_timeout_s: wait for a peer's close handshake before dropping TCP;
-    lag: extra fixed-lag smoothing frames of every session; workers: compute processes for the
-    sessions' per-frame work (0: on the event loop); worker_mode: what a worker process takes, "compute" (a
-    session's per-frame work, its sockets stay on the front's loop; server.workers) or "connections" (whole
-    sessions with their ingest and viewer sockets; server.shards); viewer_socket_buffer_bytes: kernel send
-    buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a
-    stalled viewer show up as behind within a few frames instead of seconds); web_root: directory served at ``/``
-    (None: a generated index page listing the sessions); node_modules: npm packages directory from which
-    ``/vendor/three/`` serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served);
-    event_loop: the loop ``facecast serve`` and its connection workers run on, "uvloop" (the default on Linux:
-    less CPU per received block, docs/service.md "uvloop") or "asyncio" (the standard loop; the default
-    elsewhere); the front of connection workers always runs on asyncio's (server.eventloop.process_loop), and
-    a server run inside a caller's loop (``run_server``) uses that loop.
+    lag: extra fixed-lag smoothing frames of every session; auto_gain: every audio session whose start does not say
+    otherwise brings its input to the model's training speech level first (a quiet microphone opened the mouth about
+    half as far at 20 dB under; realtime_core.features.gain.InputGainConfig, docs/protocol.md); workers: compute
+    processes for the sessions' per-frame work (0: on the event loop); worker_mode: what a worker process takes,
+    "compute" (a session's per-frame work, its sockets stay on the front's loop; server.workers) or "connections"
+    (whole sessions with their ingest and viewer sockets; server.shards); viewer_socket_buffer_bytes: kernel send
+    buffer of viewer sockets (None = the OS's autotuned default, up to megabytes: a small one makes a stalled viewer
+    show up as behind within a few frames instead of seconds); web_root: directory served at ``/`` (None: a
+    generated index page listing the sessions); node_modules: npm packages directory from which ``/vendor/three/``
+    serves three.js's ``build/`` and ``examples/jsm/`` to the browser viewer (None: not served); event_loop: the
+    loop ``facecast serve`` and its connection workers run on, "uvloop" (the default on Linux: less CPU per received
+    block, docs/service.md "uvloop") or "asyncio" (the standard loop; the default elsewhere); the front of
+    connection workers always runs on asyncio's (server.eventloop.process_loop), and a server run inside a caller's
+    loop (``run_server``) uses that loop.
 
     Hardening (docs/protocol.md section 7): ingest_burst_s: seconds of audio an ingest may run ahead
     of real time before it is paced (or closed with 4029 when ingest_overrun is "close"); batch
@@ -71,6 +73,7 @@ class ServerConfig:
     start_timeout_s: float = 10.0
     close_timeout_s: float = 2.0
     lag: int = 0
+    auto_gain: bool = False
     workers: int = 0
     worker_mode: str = "compute"
     viewer_socket_buffer_bytes: int | None = None
@@ -134,6 +137,8 @@ class ServerConfig:
             )
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30, got {self.lag!r}")
+        if not isinstance(self.auto_gain, bool):
+            raise ServerConfigError(f"auto_gain must be true or false, got {self.auto_gain!r}")
         b = self.viewer_socket_buffer_bytes
         if b is not None and (not isinstance(b, int) or not 1024 <= b <= 64 << 20):
             raise ServerConfigError(f"viewer_socket_buffer_bytes must be in 1024..{64 << 20} or absent, got {b!r}")

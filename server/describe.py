@@ -36,6 +36,8 @@ def started(live: LiveSession) -> dict:
     cfg = getattr(s, "config", None)
     if cfg is not None and getattr(cfg, "enrol", None) is not None:
         out["enrolled_s"] = round(cfg.enrol_seconds(), 2)  # the session's model copy is adapted to this voice
+    if cfg is not None and getattr(cfg, "auto_gain", None):
+        out["auto_gain"] = True  # its input is brought to the model's speech level
     return out
 
 

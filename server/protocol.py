@@ -172,11 +172,14 @@ def _audio_config(start: dict, lag: int) -> SessionConfig:
         sample_format=start.get("format", "pcm_s16le"),
         lag=lag,
         enrol=start.get("enrol"),
+        auto_gain=start.get("auto_gain"),
     )
 
 
 SESSION_KINDS: dict[str, SessionKind] = {
-    "audio": SessionKind(fields=frozenset({"sample_rate", "format", "channels", "enrol"}), build=_audio_config),
+    "audio": SessionKind(
+        fields=frozenset({"sample_rate", "format", "channels", "enrol", "auto_gain"}), build=_audio_config
+    ),
 }
 """Start-message ``input`` value -> session kind (``"audio"`` when absent)."""
 

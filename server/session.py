@@ -21,8 +21,8 @@ from __future__ import annotations
 import base64
 import binascii
 import time
-from dataclasses import dataclass, field
-from typing import NamedTuple
+from dataclasses import dataclass, field, replace
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -61,13 +61,17 @@ class SessionConfig:
     sample_format: "pcm_s16le" or "f32le"; lag: extra fixed-lag smoothing frames of the inverter
     (adds lag / fps seconds of delay); enrol: optional enrolment recording of the talker, base64 of
     audio in the session's own input format (rate, format, channels), 1-120 s: the session animates
-    with a copy of the model MAP-adapted to that voice (:mod:`realtime_core.adaptation`)."""
+    with a copy of the model MAP-adapted to that voice (:mod:`realtime_core.adaptation`); auto_gain: True brings
+    the input to the model's training speech level before its features (a causal gain stage,
+    :class:`realtime_core.features.gain.InputGainConfig`: a quiet microphone moves the mouth as a loud one), None
+    the server's default (:attr:`server.config.ServerConfig.auto_gain`)."""
 
     sample_rate_hz: int
     channels: int = 1
     sample_format: str = "f32le"
     lag: int = 0
     enrol: str | None = None
+    auto_gain: bool | None = None
 
     def __post_init__(self) -> None:
         if (
@@ -93,6 +97,8 @@ class SessionConfig:
             )
         if not isinstance(self.lag, int) or not 0 <= self.lag <= 30:
             raise ServerConfigError(f"lag must be an integer in 0..30 frames, got {reason_value(self.lag)}")
+        if self.auto_gain is not None and not isinstance(self.auto_gain, bool):
+            raise ServerConfigError(f"auto_gain must be true or false, got {reason_value(self.auto_gain)}")
         if self.enrol is not None:
             if not isinstance(self.enrol, str):
                 raise ServerConfigError("enrol must be a base64 string of audio in the session's input format")
@@ -289,6 +295,13 @@ class Session:
         self._dtype = P.SAMPLE_FORMATS[config.sample_format]
         self._frame_bytes = self._dtype.itemsize * config.channels
         self.enrolment: dict | None = None
+        if config.auto_gain:
+            # Before the enrolment: its recording is heard at the level the live input will be brought to.
+            from realtime_core.features.gain import InputGainConfig
+
+            # both mappers' models are frozen dataclasses with a front end (the SpeechModel protocol names no fields)
+            gained: Any = replace(cast(Any, model), frontend=replace(model.frontend, input_gain=InputGainConfig()))
+            self.model = model = gained
         if config.enrol is not None:
             if not isinstance(model, AvModel):
                 raise ServerConfigError("enrol adapts the HMM model; it is not available with the MLP mapper")

@@ -47,6 +47,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "sent with the session's start, converted to the session's rate, mono, 16-bit; the server animates this "
         "session with its model adapted to the voice (docs/protocol.md, `enrol`)",
     )
+    p.add_argument(
+        "--auto-gain",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="ask the server to bring the speech to the model's training level first (a quiet take moves the mouth "
+        "as a loud one), or not (--no-auto-gain); default: the server's setting",
+    )
     add_token_option(p)
     p.set_defaults(run=run)
 
@@ -69,9 +76,18 @@ def run(args: argparse.Namespace) -> int:
     hold = FAST_HOLD_S if args.fast else 0.0
     started, ended = asyncio.run(
         ingest_file(
-            url, args.speech, session=session, realtime=not args.fast, token=token, hold_s=hold, enrol=args.enrol
+            url,
+            args.speech,
+            session=session,
+            realtime=not args.fast,
+            token=token,
+            hold_s=hold,
+            enrol=args.enrol,
+            auto_gain=args.auto_gain,
         )
     )
+    if started.get("auto_gain"):
+        print("facecast send: the server brings the speech to the model's level (auto gain)")
     if "enrolled_s" in started:
         print(f"facecast send: the server adapted the session to {started['enrolled_s']:.2f} s of {args.enrol}")
     print(

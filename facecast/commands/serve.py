@@ -66,6 +66,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--mic", action="store_true", help="also run a session named 'mic' from the default microphone")
     p.add_argument(
+        "--auto-gain",
+        action="store_true",
+        default=None,
+        help="bring every audio session's input to the model's training speech level first (a quiet microphone "
+        "moves the mouth as a loud one); a start message's auto_gain still decides for its session",
+    )
+    p.add_argument(
         "--file",
         type=Path,
         action="append",
@@ -135,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         "node_modules": node_modules if node_modules.is_dir() else None,
         "workers": getattr(args, "workers", None),
         "worker_mode": getattr(args, "worker_mode", None),
+        "auto_gain": getattr(args, "auto_gain", None),  # None when not given: a config file's value stands
     }
     config = (
         ServerConfig.from_toml(args.config, **overrides)
@@ -145,7 +153,8 @@ def run(args: argparse.Namespace) -> int:
     kind = "MLP mapper" if args.mapper == "mlp" else "model"
     print(
         f"facecast serve: {kind} {args.model or 'default'}, algorithmic delay "
-        f"{model.frontend.algorithmic_delay_ms():.1f} ms (lag 0; docs/architecture.md, Delay)",
+        f"{model.frontend.algorithmic_delay_ms():.1f} ms (lag 0; docs/architecture.md, Delay)"
+        + ("; auto gain: every audio session's input brought to the model's speech level" if config.auto_gain else ""),
         flush=True,
     )
     spec = args.rig or args.head or "builtin"
