@@ -60,3 +60,14 @@ def colour(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(
             f"expected a colour such as white, #1e2030 or 0.5 (grey), got {text!r}"
         ) from None
+
+
+def add_background_option(p: argparse.ArgumentParser) -> None:
+    """``--background COLOUR`` of the commands that write a video (render, say); None keeps the renderer's."""
+    p.add_argument(
+        "--background",
+        type=colour,
+        default=None,
+        metavar="COLOUR",
+        help="background colour of the video: a name (white), #RRGGBB or a grey level 0..1 (default dark slate)",
+    )

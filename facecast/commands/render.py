@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from facecast.commands.argtypes import colour, within
+from facecast.commands.argtypes import add_background_option, within
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -40,13 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=480, help="image height in pixels")
     p.add_argument("--fps", type=within(float, 1, 240, "fps"), default=30.0, help="video frame rate")
     p.add_argument("--samples", type=int, default=4, help="MSAA samples (0 disables anti-aliasing)")
-    p.add_argument(
-        "--background",
-        type=colour,
-        default=None,
-        metavar="COLOUR",
-        help="background colour of the video: a name (white), #RRGGBB or a grey level 0..1 (default dark slate)",
-    )
+    add_background_option(p)
     p.add_argument("--credit", help="attribution text drawn on every frame (default: known heads' licence credit)")
     p.add_argument(
         "--beside",

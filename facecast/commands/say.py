@@ -7,7 +7,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from facecast.commands.argtypes import colour
+from facecast.commands.argtypes import add_background_option
 
 
 class _ListVoices(argparse.Action):
@@ -98,13 +98,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--width", type=int, default=640, help="video width (pixels)")
     p.add_argument("--height", type=int, default=480, help="video height (pixels)")
-    p.add_argument(
-        "--background",
-        type=colour,
-        default=None,
-        metavar="COLOUR",
-        help="background colour of the video: a name (white), #RRGGBB or a grey level 0..1 (default dark slate)",
-    )
+    add_background_option(p)
     p.add_argument(
         "--samples",
         type=int,
