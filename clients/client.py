@@ -35,7 +35,9 @@ class ServerClosed(ClientError):
     """The server closed the connection with a code and reason (e.g. 4004 no such session)."""
 
     def __init__(self, code: int | None, reason: str) -> None:
-        super().__init__(f"server closed the connection: {code} {reason}")
+        # code None: the connection ended without a close frame (it read "closed the connection: None ...").
+        closed = f"server closed the connection: {code} {reason}" if code is not None else f"lost the server: {reason}"
+        super().__init__(closed)
         self.code = code
         self.reason = reason
 
@@ -76,9 +78,12 @@ def ws_url(base: str, path: str) -> str:
     return b + path
 
 
+LOST_REASON = "the connection ended without a close frame (the server process died, or the network failed)"
+
+
 def _closed(exc: ConnectionClosed) -> ServerClosed:
     rcvd = exc.rcvd
-    return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
+    return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else LOST_REASON)
 
 
 def _open(ws: ClientConnection | None) -> ClientConnection:
