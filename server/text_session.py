@@ -423,6 +423,20 @@ async def handle_text(server, ws: ServerConnection) -> None:
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
     stalled = False  # a stall spoke the pending words and left a word fragment waiting
+    # A server stopping sets live.ended: the wait for the source's next message is cut short there, as an
+    # ingest's is. The text handler never looked: the server closed its socket after close_timeout_s (1001 with
+    # no reason), and the source's drop then played every accepted sentence out in real time before the
+    # process could exit (18.6 s after SIGTERM with 22 s of speech queued).
+    loop = asyncio.get_running_loop()
+    waiting: list[asyncio.Timeout] = []
+    stopping = asyncio.ensure_future(live.ended.wait())
+
+    def wake_on_shutdown(ended: asyncio.Future) -> None:
+        if not ended.cancelled():  # cancelled: the session ended first
+            for w in waiting:
+                w.reschedule(loop.time())
+
+    stopping.add_done_callback(wake_on_shutdown)
     try:
         await ws.send(
             P.dumps(
@@ -439,8 +453,18 @@ async def handle_text(server, ws: ServerConnection) -> None:
         while True:
             wait_s = (FRAGMENT_STALLS if stalled else 1.0) * backend.stall_s
             try:
-                raw = await asyncio.wait_for(ws.recv(), wait_s if session.chunker.pending.strip() else None)
+                if live.ended.is_set():
+                    raise TimeoutError
+                async with asyncio.timeout(wait_s if session.chunker.pending.strip() else None) as timeout:
+                    waiting.append(timeout)
+                    try:
+                        raw = await ws.recv()
+                    finally:
+                        waiting.clear()  # only a wait in progress is cut short
             except TimeoutError:  # the stream stalled mid-sentence: speak its whole words (later the fragment)
+                if live.ended.is_set():  # the server is stopping: what is not yet released is dropped
+                    code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
+                    break
                 done = session.finish_text() if stalled else session.chunker.flush_words()
                 stalled = bool(session.chunker.pending.strip())
                 await say(done)
@@ -519,9 +543,14 @@ async def handle_text(server, ws: ServerConnection) -> None:
         raise
     except ConnectionClosed:
         # The source dropped without `end`: what it was told was spoken plays out to the viewers, and its
-        # pending text is spoken as `end` would (nothing accepted is lost); then the session ends.
-        await finish()
+        # pending text is spoken as `end` would (nothing accepted is lost); then the session ends. Not when the
+        # server is stopping (its socket closed by the shutdown): nothing would wait for the speech.
+        if server.stopping:
+            code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
+        else:
+            await finish()
     finally:
         pace.cancel()
+        stopping.cancel()
         await server._end_session(live, code, reason)
     await server.close_ws(ws, code, reason)
