@@ -147,13 +147,21 @@ class IngestClient:
             start["token"] = self.token
         if self.enrol is not None:  # enrolment recording in this session's input format (server adapts its model)
             start["enrol"] = base64.b64encode(self.enrol).decode("ascii")
-        await self.ws.send(json.dumps(start))
+        await self._send_json(start)
         self.started = await self._reply("started")
         return self
 
     async def __aexit__(self, *exc: object) -> None:
         if self.ws is not None:
             await self.ws.close()
+
+    async def _send_json(self, msg: dict) -> None:
+        # A server may close before reading: an edge node with no computing node closes at once with 1013, and
+        # the start's send raised websockets' ConnectionClosedError (`facecast send` ended in a traceback).
+        try:
+            await _open(self.ws).send(json.dumps(msg))
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
 
     async def _reply(self, *types: str) -> dict:
         try:
@@ -185,12 +193,12 @@ class IngestClient:
 
     async def control(self, **controls: object) -> dict:
         """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
-        await _open(self.ws).send(json.dumps({"type": "control", **controls}))
+        await self._send_json({"type": "control", **controls})
         return await self._reply("ack", "rejected")
 
     async def end(self) -> dict:
         """End the session: the server flushes the last frames and replies ``ended``."""
-        await _open(self.ws).send(json.dumps({"type": "end"}))
+        await self._send_json({"type": "end"})
         return await self._reply("ended")
 
 

@@ -165,3 +165,24 @@ def test_send_to_a_server_that_dies_says_the_connection_was_lost(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "None" not in err, err
     assert "lost the server: the connection ended without a close frame" in err, err
+
+
+def test_send_to_a_server_that_refuses_before_the_start_says_its_close(tmp_path, capsys):
+    """An edge node with no computing node left (docs/deploy.md) closes an ingest with 1013 as it connects,
+    before the start message is read: `facecast send` ended in a traceback (websockets' ConnectionClosedError
+    from sending the start). The server here closes each connection so, at once."""
+    from websockets.asyncio.server import ServerConnection, serve
+
+    wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
+
+    async def refusing(ws: ServerConnection) -> None:
+        await ws.close(1013, "no computing node is available")
+
+    async def send_to_it() -> int:
+        async with serve(refusing, "127.0.0.1", 0, compression=None) as server:
+            port = server.sockets[0].getsockname()[1]
+            return await asyncio.to_thread(main, ["send", str(wav), f"http://127.0.0.1:{port}", "--fast"])
+
+    assert asyncio.run(asyncio.wait_for(send_to_it(), 20)) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "facecast send: error: server closed the connection: 1013 no computing node is available", err
