@@ -402,6 +402,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
 
     async def say(sentences: list[str]) -> None:
         for sentence in sentences:
+            if live.ended.is_set():  # the server is stopping: its loop below ends the session at once
+                return
             try:
                 outs, report = await asyncio.to_thread(session.speak, sentence)
             except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
@@ -552,5 +554,10 @@ async def handle_text(server, ws: ServerConnection) -> None:
     finally:
         pace.cancel()
         stopping.cancel()
+        if code == P.CLOSE_GOING_AWAY:
+            # The source first: the session's end lets the server's stop go on to close every socket left with
+            # 1001 and no reason, which the source's close (after the viewers') raced and sometimes lost.
+            await server.close_ws(ws, code, reason)
         await server._end_session(live, code, reason)
-    await server.close_ws(ws, code, reason)
+    if code != P.CLOSE_GOING_AWAY:
+        await server.close_ws(ws, code, reason)
