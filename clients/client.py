@@ -35,7 +35,9 @@ class ServerClosed(ClientError):
     """The server closed the connection with a code and reason (e.g. 4004 no such session)."""
 
     def __init__(self, code: int | None, reason: str) -> None:
-        super().__init__(f"server closed the connection: {code} {reason}")
+        # code None: the connection ended without a close frame (it read "closed the connection: None ...").
+        closed = f"server closed the connection: {code} {reason}" if code is not None else f"lost the server: {reason}"
+        super().__init__(closed)
         self.code = code
         self.reason = reason
 
@@ -76,9 +78,12 @@ def ws_url(base: str, path: str) -> str:
     return b + path
 
 
+LOST_REASON = "the connection ended without a close frame (the server process died, or the network failed)"
+
+
 def _closed(exc: ConnectionClosed) -> ServerClosed:
     rcvd = exc.rcvd
-    return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else "connection lost")
+    return ServerClosed(rcvd.code if rcvd else None, rcvd.reason if rcvd else LOST_REASON)
 
 
 def _open(ws: ClientConnection | None) -> ClientConnection:
@@ -148,13 +153,21 @@ class IngestClient:
             start["enrol"] = base64.b64encode(self.enrol).decode("ascii")
         if self.auto_gain is not None:
             start["auto_gain"] = self.auto_gain
-        await self.ws.send(json.dumps(start))
+        await self._send_json(start)
         self.started = await self._reply("started")
         return self
 
     async def __aexit__(self, *exc: object) -> None:
         if self.ws is not None:
             await self.ws.close()
+
+    async def _send_json(self, msg: dict) -> None:
+        # A server may close before reading: an edge node with no computing node closes at once with 1013, and
+        # the start's send raised websockets' ConnectionClosedError (`facecast send` ended in a traceback).
+        try:
+            await _open(self.ws).send(json.dumps(msg))
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
 
     async def _reply(self, *types: str) -> dict:
         try:
@@ -186,12 +199,12 @@ class IngestClient:
 
     async def control(self, **controls: object) -> dict:
         """Send ``{"type": "control", **controls}``; returns the ack or rejected reply."""
-        await _open(self.ws).send(json.dumps({"type": "control", **controls}))
+        await self._send_json({"type": "control", **controls})
         return await self._reply("ack", "rejected")
 
     async def end(self) -> dict:
         """End the session: the server flushes the last frames and replies ``ended``."""
-        await _open(self.ws).send(json.dumps({"type": "end"}))
+        await self._send_json({"type": "end"})
         return await self._reply("ended")
 
 

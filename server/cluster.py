@@ -62,6 +62,7 @@ import json
 import logging
 import os
 import time
+import urllib.parse
 from collections.abc import Callable, Coroutine
 from typing import TYPE_CHECKING, Any
 
@@ -90,6 +91,22 @@ PUBLISH_QUEUE = 4096  # messages waiting for Redis before the oldest is dropped
 ENDED_KEEP_MS = 10_000  # how long a session's end record outlives it: longer than a viewer's join takes
 # The close of far viewers whose session's node stopped without ending it (its row expired).
 LOST = (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
+
+
+def shown_url(url: str) -> str:
+    """``url`` with its password (``redis://user:PASSWORD@host`` or a ``password=`` query field) shown as
+    ``***``, for start-up lines, errors and logs: docs/deploy.md keeps a Redis password in the config
+    file's URL, and the lines that named the URL printed it to the terminal and the logs."""
+    parts = urllib.parse.urlsplit(url)
+    netloc = parts.netloc
+    if parts.password is not None:
+        user, _, host = netloc.rpartition("@")
+        netloc = f"{user.partition(':')[0]}:***@{host}"
+    fields = urllib.parse.parse_qsl(parts.query, keep_blank_values=True)
+    query = urllib.parse.urlencode([(k, "***" if k == "password" else v) for k, v in fields], safe="*")
+    # Rebuilt by hand: urlunsplit writes unix:///path as unix:/path.
+    head, sep, _ = url.partition("?")
+    return head.replace(parts.netloc, netloc, 1) + sep + (query if sep else "")
 
 
 def session_key(name: str) -> str:
@@ -346,7 +363,7 @@ class Cluster:
             await self.redis.ping()
         except (RedisError, OSError) as exc:
             await self.redis.aclose()
-            raise ServerError(f"cannot reach Redis at {self.url}: {exc}") from None
+            raise ServerError(f"cannot reach Redis at {shown_url(self.url)}: {exc}") from None
         self.up = True
         self._up_since = time.monotonic()
         self._tasks = [
@@ -512,7 +529,7 @@ class Cluster:
 
     def _down(self, exc: BaseException) -> None:
         if self.up:
-            log.warning("Redis unreachable at %s: %s (sessions go on; retrying)", self.url, exc)
+            log.warning("Redis unreachable at %s: %s (sessions go on; retrying)", shown_url(self.url), exc)
         self.up = False
         self.error = str(exc)[:200] or type(exc).__name__
 
@@ -523,7 +540,9 @@ class Cluster:
             try:
                 await self._beat()
                 if not self.up:
-                    log.warning("Redis is back at %s: %d local sessions re-registered", self.url, len(self.local))
+                    log.warning(
+                        "Redis is back at %s: %d local sessions re-registered", shown_url(self.url), len(self.local)
+                    )
                     self._up_since = time.monotonic()
                 self.up, self.error = True, ""
                 await self._end_lost_feeds()

@@ -411,6 +411,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
 
     async def say(sentences: list[str]) -> None:
         for sentence in sentences:
+            if live.ended.is_set():  # the server is stopping: its loop below ends the session at once
+                return
             try:
                 outs, report = await asyncio.to_thread(session.speak, sentence)
             except ConfigError as exc:  # TextError: nothing pronounceable; the session goes on
@@ -454,23 +456,27 @@ async def handle_text(server, ws: ServerConnection) -> None:
         pace = asyncio.ensure_future(pacer())
         return {"type": "cancelled", "dropped": len(cut), "media_time": nxt / FPS}
 
-    async def play_out() -> None:
+    async def play_out() -> bool:
         """After `end`: wait until the last frame has been released (the pacer met its end mark), still reading the
         source: a `cancel` cuts the play-out (a chatbot's user talks over the answer's last sentences, which were
-        spoken to the end before), text is rejected (the session is ending), `flush` and `end` change nothing."""
+        spoken to the end before), text is rejected (the session is ending), `flush` and `end` change nothing.
+        False when the server started stopping first (nothing waits for the rest of the speech then)."""
         reading: asyncio.Future | None = None
         try:
             while not pace.done():
+                if stopping.done():
+                    return False
                 if reading is None:
                     reading = asyncio.ensure_future(ws.recv())
-                await asyncio.wait({pace, reading}, return_when=asyncio.FIRST_COMPLETED)
+                await asyncio.wait({pace, reading, stopping}, return_when=asyncio.FIRST_COMPLETED)
                 if not reading.done():
                     continue
                 try:
                     raw = reading.result()
                 except ConnectionClosed:  # the source left after `end`: its speech plays out all the same
-                    await pace
-                    return
+                    ends: set[asyncio.Future[Any]] = {pace, stopping}
+                    await asyncio.wait(ends, return_when=asyncio.FIRST_COMPLETED)
+                    return pace.done()
                 reading = None
                 msg = _text_message(raw)
                 kind = msg.get("type")
@@ -486,10 +492,25 @@ async def handle_text(server, ws: ServerConnection) -> None:
         finally:
             if reading is not None:
                 reading.cancel()
+        return True
 
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
     stalled = False  # a stall spoke the pending words and left a word fragment waiting
+    # A server stopping sets live.ended: the wait for the source's next message is cut short there, as an
+    # ingest's is. The text handler never looked: the server closed its socket after close_timeout_s (1001 with
+    # no reason), and the source's drop then played every accepted sentence out in real time before the
+    # process could exit (18.6 s after SIGTERM with 22 s of speech queued).
+    loop = asyncio.get_running_loop()
+    waiting: list[asyncio.Timeout] = []
+    stopping = asyncio.ensure_future(live.ended.wait())
+
+    def wake_on_shutdown(ended: asyncio.Future) -> None:
+        if not ended.cancelled():  # cancelled: the session ended first
+            for w in waiting:
+                w.reschedule(loop.time())
+
+    stopping.add_done_callback(wake_on_shutdown)
     try:
         await ws.send(
             P.dumps(
@@ -506,8 +527,18 @@ async def handle_text(server, ws: ServerConnection) -> None:
         while True:
             wait_s = (FRAGMENT_STALLS if stalled else 1.0) * backend.stall_s
             try:
-                raw = await asyncio.wait_for(ws.recv(), wait_s if session.chunker.pending.strip() else None)
+                if live.ended.is_set():
+                    raise TimeoutError
+                async with asyncio.timeout(wait_s if session.chunker.pending.strip() else None) as timeout:
+                    waiting.append(timeout)
+                    try:
+                        raw = await ws.recv()
+                    finally:
+                        waiting.clear()  # only a wait in progress is cut short
             except TimeoutError:  # the stream stalled mid-sentence: speak its whole words (later the fragment)
+                if live.ended.is_set():  # the server is stopping: what is not yet released is dropped
+                    code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
+                    break
                 done = session.finish_text() if stalled else session.chunker.flush_words()
                 stalled = bool(session.chunker.pending.strip())
                 await say(done)
@@ -544,7 +575,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
             elif kind == "end":
                 await say(session.finish_text())
                 queue.put_nowait(None)
-                await play_out()
+                if not await play_out():  # the server is stopping: what is not yet released is dropped
+                    code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
+                    break
                 await ws.send(
                     P.dumps(
                         {
@@ -566,9 +599,19 @@ async def handle_text(server, ws: ServerConnection) -> None:
         raise
     except ConnectionClosed:
         # The source dropped without `end`: what it was told was spoken plays out to the viewers, and its
-        # pending text is spoken as `end` would (nothing accepted is lost); then the session ends.
-        await finish()
+        # pending text is spoken as `end` would (nothing accepted is lost); then the session ends. Not when the
+        # server is stopping (its socket closed by the shutdown): nothing would wait for the speech.
+        if server.stopping:
+            code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
+        else:
+            await finish()
     finally:
         pace.cancel()
+        stopping.cancel()
+        if code == P.CLOSE_GOING_AWAY:
+            # The source first: the session's end lets the server's stop go on to close every socket left with
+            # 1001 and no reason, which the source's close (after the viewers') raced and sometimes lost.
+            await server.close_ws(ws, code, reason)
         await server._end_session(live, code, reason)
-    await server.close_ws(ws, code, reason)
+    if code != P.CLOSE_GOING_AWAY:
+        await server.close_ws(ws, code, reason)

@@ -86,7 +86,15 @@ class Recording:
         --duration run printed "session closed with None" while the session went on)."""
         if self.stopped:
             return f"stopped after {len(self.index) / self.fps:.2f} s of frames (the session goes on)"
+        if self.close_code is None:  # no close frame: it read "session closed with None" after a kill -9
+            return f"lost the server: {self.close_reason}".rstrip(": ")
         return f"session closed with {self.close_code} {self.close_reason}".rstrip()
+
+    @property
+    def partial(self) -> bool:
+        """True when the session was closed other than by its end (1001 server shutting down, 4000 too slow, the
+        server lost): what arrived is a part of the take (a --duration stop is a whole one)."""
+        return not self.stopped and self.close_code != P.CLOSE_NORMAL
 
     @property
     def fps(self) -> float:

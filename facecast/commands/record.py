@@ -65,7 +65,6 @@ def run(args: argparse.Namespace) -> int:
     from facecast.commands.view import token_from_env
     from realtime_core import VISUAL_PARAMS
     from realtime_core.track import Track
-    from wire import protocol as P
 
     check_output_formats([args.output], (*FORMATS, ".wav"), hints=RECORD_HINTS)
     glb = args.output.suffix.lower() == ".glb"
@@ -227,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     late = f", joined at {track.start_s:.2f} s (earlier frames were not seen)" if first > 0 else ""
     # A session closed other than by its end (1001 server shutting down, 4000 too slow, ...) is a partial take:
     # what arrived is written all the same, but the exit status says the take is not whole.
-    partial = not rec.stopped and rec.close_code != P.CLOSE_NORMAL
+    partial = rec.partial
     print(
         f"facecast record: wrote {', '.join(map(str, files))}: {track.n_frames} frames "
         f"({track.duration_s:.2f} s) of {session!r}{late}; {rec.ending}"

@@ -117,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.modelfile import load_speech_model
     from facecast.commands.headopts import resolve_from_args
     from server.app import FacecastServer, run_server
+    from server.cluster import shown_url
     from server.config import ServerConfig
     from server.errors import ServerConfigError
     from server.eventloop import process_loop
@@ -206,7 +207,8 @@ def run(args: argparse.Namespace) -> int:
         if config.token is not None:
             print("facecast serve: a token is required (clients give it as ?token=T or in their start message)")
         if server.cluster is not None:
-            print(f"facecast serve: cluster node {server.cluster.node!r} on {config.redis_url}", flush=True)
+            redis = shown_url(server.cluster.url)
+            print(f"facecast serve: cluster node {server.cluster.node!r} on {redis}", flush=True)
         tasks = []
         for path, src, name in zip(args.file, files, names):
             print(f"facecast serve: file {path} ({src.duration_s:.1f} s) as session {name!r}", flush=True)

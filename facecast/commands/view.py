@@ -20,8 +20,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "speech in sync (frames and sound share one timeline, delayed by --buffer-ms); when the session ends "
         "or the server restarts the window waits for it to come back. --record OUT.mp4 instead renders every "
         "frame offscreen (EGL, no display needed) and muxes the session's audio in, frame k at k/30 s of the "
-        "session, when the session ends (or after --duration). The browser viewer at the server's URL does "
-        "the same in any browser.",
+        "session, when the session ends (or after --duration); it exits 3 when the server closed the session "
+        "before its end (a partial take, written), as `facecast record` does. The browser viewer at the server's "
+        "URL does the same in any browser.",
     )
     p.add_argument(
         "url", nargs="?", default=DEFAULT_URL, help="the server's base URL (http:// or ws://; its /view URL too)"
@@ -135,8 +136,14 @@ def run(args: argparse.Namespace) -> int:
     out, n = render_recording(
         rec, mesh, args.record, config=RenderConfig(width=args.width, height=args.height, margin=1.25)
     )
-    print(f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; {rec.ending}")
-    return 0
+    print(
+        f"facecast view: wrote {out}: {n} frames ({n / rec.fps:.2f} s) of {session!r} with its audio; {rec.ending}"
+        + ("; a partial take: the session did not end normally" if rec.partial else "")
+    )
+    # As `facecast record`'s: a script told a take cut short (1001, a server killed) from a whole one only there.
+    from facecast.commands.record import PARTIAL_EXIT
+
+    return PARTIAL_EXIT if rec.partial else 0
 
 
 def _window(args: argparse.Namespace, token: str | None) -> int:

@@ -664,3 +664,35 @@ def test_a_healthy_redis_never_reads_as_down_at_start(redis_server, caplog):
         seen = asyncio.run(asyncio.wait_for(main(), 30))
     assert all(seen), f"read as down in {seen.count(False)} of {len(seen)} polls"
     assert not [r for r in caplog.records if "unreachable" in r.getMessage()]
+
+
+@pytest.mark.parametrize(
+    ("url", "shown"),
+    [
+        ("redis://:hunter2@127.0.0.1:{port}/0", "redis://:***@127.0.0.1:{port}/0"),
+        ("rediss://default:hunter2@127.0.0.1:{port}/0", "rediss://default:***@127.0.0.1:{port}/0"),
+        ("redis://127.0.0.1:{port}/0?password=hunter2&db=0", "redis://127.0.0.1:{port}/0?password=***&db=0"),
+    ],
+)
+def test_a_redis_password_in_the_url_is_never_shown(url, shown):
+    """docs/deploy.md keeps a Redis password in the config file's URL; a node that could not reach Redis
+    printed the whole URL, password included ("cannot reach Redis at redis://:hunter2@..."), as did the
+    start-up line and the logs of Redis going away and coming back, which all show ``shown_url``."""
+    from server.cluster import Cluster, shown_url
+    from server.errors import ServerError
+
+    port = _free_port()  # nothing listens there: the connection is refused at once
+    url, shown = url.format(port=port), shown.format(port=port)
+    assert shown_url(url) == shown
+    assert shown_url(f"redis://127.0.0.1:{port}/0") == f"redis://127.0.0.1:{port}/0"  # nothing to hide
+
+    async def end_feed(feed) -> None:
+        return None
+
+    cluster = Cluster(
+        url, node="a", advertise="http://127.0.0.1:1", heartbeat_s=0.2, deliver=lambda *a: None, end_feed=end_feed
+    )
+    with pytest.raises(ServerError) as refused:
+        asyncio.run(asyncio.wait_for(cluster.start(), 10))
+    assert "hunter2" not in str(refused.value)
+    assert str(refused.value).startswith(f"cannot reach Redis at {shown}: ")

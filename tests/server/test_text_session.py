@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed
 
 from clients.client import ViewerClient
 from realtime_core.synthesis.corpus import MotionCorpus
@@ -428,6 +429,48 @@ def test_a_source_that_drops_without_end_has_its_accepted_speech_played_out(mode
     assert len(idx) > spoken["frames"] + 15  # the sentence whole, then "And then the" (spoken as `end` would)
     assert [m.media_time for m in got.audio] == pytest.approx([k / 30 for k in range(len(idx))])
     assert got.close_code == P.CLOSE_NORMAL
+
+
+@pytest.mark.parametrize("after_end", [False, True])
+def test_a_server_stopping_ends_a_text_session_at_once_with_1001(model, backend, after_end):
+    """SIGTERM with a chatbot mid-answer: the text handler never looked at the shutdown, so the server closed
+    its socket after close_timeout_s (1001 with no reason, to the source and the viewers), and the dropped source
+    then had every accepted sentence played out in real time before the process could exit (18.6 s after SIGTERM
+    with 22 s of speech queued). Now the source and viewers get 1001 "server shutting down" and the rest of the
+    speech is dropped, as for an audio session; also while `end` plays the answer out."""
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        srv.text_backend = backend
+        await srv.start()
+        stopped = None
+        try:
+            ws = await connect(srv.url.replace("http", "ws") + "/text")
+            await ws.send(json.dumps({"type": "start", "session": "stop", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="stop", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG * 8}))  # ~30 s of speech
+                spoken = json.loads(await ws.recv())
+                assert spoken["type"] == "spoken"
+                if after_end:
+                    await ws.send(json.dumps({"type": "end"}))
+                    await asyncio.sleep(0.5)
+                stopped = asyncio.ensure_future(srv.stop())
+                await asyncio.wait_for(asyncio.shield(stopped), 10)  # it waited for the speech to play out
+                got = await asyncio.wait_for(collect, 10)
+            with contextlib.suppress(ConnectionClosed):
+                while True:  # the other sentences' replies, then the close
+                    await ws.recv()
+            return spoken, got, ws.close_code, ws.close_reason
+        finally:
+            await (stopped if stopped is not None else srv.stop())
+
+    spoken, got, code, reason = asyncio.run(asyncio.wait_for(main(), 60))
+    assert (code, reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
+    assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(len(idx))) and len(idx) < 8 * spoken["frames"]  # not played out
 
 
 def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on(model, backend):

@@ -898,3 +898,30 @@ def test_record_of_a_session_cut_by_a_server_shutdown_writes_it_and_exits_3(mode
     assert "1001" in printed and "partial take" in printed, printed
     take = decode_csv(out.read_bytes())
     assert 20 <= take.n_frames < 200  # what arrived before the shutdown, not the whole 8 s
+
+
+def test_view_record_of_a_session_cut_by_a_server_shutdown_writes_it_and_exits_3(model, head, tmp_path, capsys):
+    """`facecast view --record` of a session cut by a server shutdown (1001) exited 0 where `facecast record`
+    exits 3: a script could not tell the part of a take from a whole one. Both now say so and exit 3."""
+    import threading
+
+    from facecast.commands.record import PARTIAL_EXIT
+    from tests.live_server import stream_session
+
+    if shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None:
+        missing("ffmpeg/ffprobe not installed")
+    live = LiveServer(model, head)  # its own: stopped by the test
+    session = live.submit(stream_session(live.url, "cutv", 8.0, seed=2))  # 240 frames in real time
+    out = tmp_path / "take.mp4"
+    stopper = threading.Timer(1.5, live.stop)  # the server shuts down about 1.5 s in
+    stopper.start()
+    try:
+        args = ["view", live.url, "--session", "cutv", "--record", str(out), "--width", "160", "--height", "120"]
+        code = main(args)
+    finally:
+        stopper.join(30)
+        session.cancel()  # its loop stopped with the server (see the test above)
+    printed = capsys.readouterr().out
+    assert code == PARTIAL_EXIT == 3, printed
+    assert "1001" in printed and "partial take" in printed, printed
+    assert 10 <= int(_probe(out)["video"]["nb_read_frames"]) < 200  # what arrived, not the whole 8 s
