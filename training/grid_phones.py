@@ -86,6 +86,14 @@ HMM_PATH = DEFAULT_PATH.with_name("grid_s1_phones_hmm.json")
 :mod:`training.phone_hmm`): what the unit-selection corpus and its evaluation use by default
 (chosen on the val split, docs/unit_selection.md); every other consumer reads DEFAULT_PATH."""
 
+
+def default_path(method: str) -> Path:
+    """The shipped labels file of a labelling ``method`` ("pocketsphinx" or "hmm"), which ``facecast phones``
+    writes without ``-o``: the HMM labels have a file of their own, so relabelling one way never replaces the
+    other's labels (whose readers differ: unit selection reads HMM_PATH, everything else DEFAULT_PATH)."""
+    return HMM_PATH if method == "hmm" else DEFAULT_PATH
+
+
 PRONUNCIATIONS: dict[str, tuple[str, ...]] = {
     w: tuple(p.split())
     for w, p in {

@@ -1,6 +1,6 @@
 """Landmark JSON files: ``{"landmarks": {name: vertex_index | [x, y, z], ...}}`` (extra keys allowed).
 
-Shipped files live in ``clients/heads/landmarks/``; :func:`shipped_landmarks` finds one by head
+Shipped files live in ``assets/heads/landmarks/``; :func:`shipped_landmarks` finds one by head
 file name. Names: eye_outer/inner_left/right, nose_tip, corner_left/right, upper_lip, lower_lip,
 upper_inner, lower_inner, chin ("left" is the face's own left).
 """

@@ -27,9 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "val for choices); (2) the clips in --video-dir (default: other GRID talkers; s1's clip there is left "
         "out). Per "
         "parameter: r at lag 0, the best lag and its r, nu = std(est)/std(true), the share of bilabial closures "
-        "the estimate reaches (mouth_open <= 0.01 IOD). Then (3) held-out synthetic voices (espeak variants f5, "
-        "m7; truth = the articulatory rules) and (4) real speech with phone alignments (truth = the rules on "
-        "the real phone timings).",
+        "the estimate reaches (mouth_open <= 0.01 IOD). Then (3) real speech with phone alignments (--speech-dir; "
+        "truth = the articulatory rules on the real phone timings), (4) held-out synthetic voices (espeak "
+        "variants f5, m7; truth = the rules) and (5) the real speech of (3) per clip.",
     )
     p.add_argument(
         "--model",

@@ -21,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "(the bank of K small MLPs picked by a Gaussian mixture, K chosen on the val split; one large MLP; the "
         "audio-visual HMM on the same MU parameters) and report R / nu / MSE (paper 002 eq. 6-8) on train and "
         "test. Writes OUT/mlp_mapper.npz (serve it with --mapper mlp), OUT/hmm_mups.npz, OUT/motion_units.npz, "
-        "OUT/report.json and OUT/variance.png. GRID: Cooke, Barker, Cunningham, Shao 2006 (CC BY 4.0).",
+        "OUT/report.json, OUT/report.md and OUT/variance.png. GRID: Cooke, Barker, Cunningham, Shao 2006 (CC BY 4.0).",
     )
     p.add_argument(
         "--root", type=Path, default=None, help="GRID s1 folder (video/ + align/); default ../shared/data/video/grid_s1"

@@ -33,7 +33,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out",
         default=None,
         metavar="JSON",
-        help="file to write (default: assets/data/grid_s1_phones.json in the repository)",
+        help="file to write (default: in the repository, assets/data/grid_s1_phones.json; with --method hmm, "
+        "assets/data/grid_s1_phones_hmm.json)",
     )
     p.add_argument("--workers", type=int, default=2, help="parallel processes")
     p.add_argument(
@@ -61,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
     from training.grid_phones import (
         ALIGN_RATE_HZ,
         BILABIALS,
-        DEFAULT_PATH,
         VOWELS,
         check_free_sentence,
         check_sentence,
+        default_path,
         label_corpus,
         save_phone_plot,
         write_grid_phones,
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     labelled, skipped = label_corpus(
         sents, workers=args.workers, align=not args.no_align, progress=Progress, method=args.method, say=print
     )
-    out = write_grid_phones(Path(args.out) if args.out else DEFAULT_PATH, labelled)
+    out = write_grid_phones(Path(args.out) if args.out else default_path(args.method), labelled)
 
     by_id = {s.sentence_id: s for s in sents}
     methods = Counter(s.method for s in labelled)

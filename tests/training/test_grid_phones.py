@@ -236,3 +236,14 @@ def test_shipped_hmm_file_covers_the_corpus_near_the_word_spans(grid_root) -> No
         durations += [d for _, d in chk.durations]
     d = np.array(durations)
     assert d.min() >= 0.03 - 1e-6 and np.median(d) == pytest.approx(0.075, abs=0.03)
+
+
+@pytest.mark.parametrize("method", ["pocketsphinx", "hmm"])
+def test_each_method_relabels_its_own_shipped_file(method) -> None:
+    """`facecast phones --method M` without -o writes the file whose labels are M's (the shipped files as
+    evidence), so relabelling with the HMM never replaces the pocketsphinx labels every reader but unit
+    selection uses (it did: both methods wrote grid_s1_phones.json)."""
+    from training.grid_phones import default_path
+
+    methods = {s.method for s in read_grid_phones_file(default_path(method)).values()}
+    assert (methods == {"hmm"}) == (method == "hmm")
