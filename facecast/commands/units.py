@@ -78,7 +78,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                 "text rows only)",
             )
             q.add_argument("--output", type=Path, default=None, help="write the markdown section here")
-            q.add_argument("--figure", type=Path, default=Path("docs/img/unitsel_fig8.png"), help="Fig. 8 PNG")
+            q.add_argument(
+                "--figure",
+                type=Path,
+                default=None,
+                help="Fig. 8 PNG (default: img/unitsel_fig8.png beside --output, _val before .png for --split val; "
+                "without --output, in the current folder)",
+            )
+
+
+def figure_path(figure: Path | None, output: Path | None, split: str) -> tuple[Path, str]:
+    """(where ``units eval`` writes its Fig. 8 PNG, the link to it from the ``output`` markdown). The default was
+    the relative ``docs/img/unitsel_fig8.png`` whatever ``--output`` said: a run from the checkout replaced the
+    committed test figure (with the val one for ``--split val``), a run elsewhere made a ``docs/img`` there."""
+    import os
+
+    if figure is None:
+        name = "unitsel_fig8.png" if split == "test" else f"unitsel_fig8_{split}.png"
+        figure = output.parent / "img" / name if output is not None else Path(name)
+    link = Path(os.path.relpath(figure, output.parent)).as_posix() if output is not None else figure.name
+    return figure, link
 
 
 def _corpus(args: argparse.Namespace):
@@ -164,12 +183,11 @@ def _run_eval(args: argparse.Namespace) -> int:
             recording=recording,
         )
     print(json.dumps(rows, indent=1))
-    fig = fig8(curves, args.figure)
+    fig, link = figure_path(args.figure, args.output, args.split)
+    fig = fig8(curves, fig)
     cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
     cmd += " --split val" if args.split == "val" else ""
-    text = markdown(
-        rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=f"img/{fig.name}", split=args.split
-    )
+    text = markdown(rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=link, split=args.split)
     print(text)
     if args.output is not None:
         atomic_write_bytes(args.output, text.encode())

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -119,3 +121,19 @@ def test_cache_key_changes_with_the_parameter_definitions_and_every_other_input(
     assert uc.corpus_key(s, {"bbaf2n": [("sil", 0.0, 0.5), ("b", 0.5, 0.65)]}, EmPcaConfig()) != key
     monkeypatch.setattr(uc, "DEFINITION_VERSION", DEFINITION_VERSION + 1)
     assert uc.corpus_key(s, phones, EmPcaConfig()) != key
+
+
+def test_units_eval_writes_its_figure_beside_its_output_never_into_the_checkouts_docs(tmp_path):
+    """`units eval`'s Fig. 8 went to the relative docs/img/unitsel_fig8.png whatever --output said: run from the
+    checkout it replaced the committed test figure (with the val one for --split val); run elsewhere it made a
+    docs/img there. It goes to img/ beside the markdown now, the link relative to it."""
+    from facecast.commands.units import figure_path
+
+    out = tmp_path / "report" / "sec.md"
+    assert figure_path(None, out, "test") == (tmp_path / "report" / "img" / "unitsel_fig8.png", "img/unitsel_fig8.png")
+    assert figure_path(None, out, "val") == (
+        tmp_path / "report" / "img" / "unitsel_fig8_val.png",
+        "img/unitsel_fig8_val.png",
+    )
+    assert figure_path(tmp_path / "f.png", out, "test") == (tmp_path / "f.png", "../f.png")
+    assert figure_path(None, None, "val") == (Path("unitsel_fig8_val.png"), "unitsel_fig8_val.png")
