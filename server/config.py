@@ -106,7 +106,7 @@ class ServerConfig:
             except ValueError:
                 raise ServerConfigError(f"host must be an IP address or 'localhost', got {self.host!r}") from None
         if not isinstance(self.port, int) or not 0 <= self.port <= 65535:
-            raise ServerConfigError(f"port must be in 0..65535, got {self.port!r}")
+            raise ServerConfigError(f"port must be an integer in 0..65535, got {self.port!r}")
         if self.token is not None and (not isinstance(self.token, str) or not self.token):
             raise ServerConfigError("token must be a non-empty string or absent")
         if not isinstance(self.max_message_bytes, int) or not 1024 <= self.max_message_bytes <= 64 << 20:
@@ -217,6 +217,6 @@ class ServerConfig:
             raise ServerConfigError(f"{p}: unknown [server] keys {unknown} (known: {sorted(known)})")
         try:
             base = cls(**table)
-        except TypeError as exc:
+        except (TypeError, ServerConfigError) as exc:  # a bad value names the file it is in
             raise ServerConfigError(f"{p}: {exc}") from None
         return replace(base, **{k: v for k, v in overrides.items() if v is not None})

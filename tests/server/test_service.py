@@ -456,11 +456,15 @@ def test_config_from_toml(tmp_path):
         ("[sever]\nport = 8850\n", "unknown top-level key or table 'sever'"),
         ('port = 8850\n[server]\ntoken = "t"\n', "unknown top-level key or table 'port'"),
         ("[server]\nport = 1\n[client]\nx = 1\n", "unknown top-level key or table 'client'"),
+        # a bad value names the file (it did not: "port must be in 0..65535, got '8799'")
+        ('[server]\nport = "8799"\n', "port must be an integer in 0..65535, got '8799'"),
+        ('[server]\nauto_gain = "yes"\n', "auto_gain must be true or false"),
     ]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text)
-        with pytest.raises(ServerConfigError, match=match):
+        with pytest.raises(ServerConfigError, match=match) as err:
             ServerConfig.from_toml(bad)
+        assert str(err.value).startswith(f"{bad}: "), err.value
     with pytest.raises(ServerConfigError, match="not found"):
         ServerConfig.from_toml(tmp_path / "missing.toml")
 
