@@ -84,6 +84,7 @@ from server.live import (
     TurnDeltas,
     Viewer,
     deliver,
+    sessions_log,
 )
 from server.session import Session, SessionConfig, warm_up
 from server.shards import ConnectionWorkers, FrontRegistry
@@ -422,6 +423,15 @@ class FacecastServer:
                 await session.close()
                 raise AdmissionRefused(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
         await self.release_held(live)
+        sessions_log.info(
+            "session %r started: %s, %d Hz x %d%s%s",
+            name,
+            source,
+            config.sample_rate_hz,
+            config.channels,
+            ", enrolled" if config.enrol is not None else "",
+            ", auto gain" if config.auto_gain else "",
+        )
         return live
 
     async def release_held(self, live: LiveSession) -> None:
@@ -467,6 +477,14 @@ class FacecastServer:
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
         self.turn_deltas.flush()  # its frames waiting for the turn's end go before the close
+        sessions_log.info(
+            "session %r ended (%d %s): %d frames, %d viewers",
+            live.name,
+            code,
+            reason,
+            live.session.frames_out,
+            len(live.viewers),
+        )
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]
             if self.registry is not None:

@@ -45,6 +45,9 @@ if TYPE_CHECKING:
     from server.protocol import ViewRequest
 
 log = logging.getLogger("facecast.server")
+sessions_log = logging.getLogger("facecast.sessions")
+"""One INFO line per session started and ended and per viewer closed for being too slow (a deployer saw them only
+as counts in /metrics); apart from ``facecast.server``'s incidents, which are rate-limited."""
 
 FAIR_SLICE_S = 0.1  # audio processed per turn of the loop when a client sends a large block
 # A viewer whose socket buffer holds less than this gets messages written synchronously
@@ -275,6 +278,12 @@ class Viewer:
                 self.closing = True
                 self.server.closed_slow += 1
                 self.queue.clear()
+                sessions_log.info(
+                    "a viewer of session %r closed (4000): behind for over %g s, %d messages dropped",
+                    self.live.name,
+                    self.server.config.viewer_max_behind_s,
+                    self.dropped,
+                )
                 self.server.spawn(
                     self.server.close_ws(
                         self.ws,

@@ -312,7 +312,7 @@ def _violation(kind: Any) -> NoReturn:
 
 async def handle_text(server, ws: ServerConnection) -> None:
     """The ``/text`` endpoint (protocol in docs/protocol.md)."""
-    from server.live import LiveSession, SentenceReplay
+    from server.live import LiveSession, SentenceReplay, sessions_log
     from server.protocol import token_ok
 
     backend: TextBackend | None = getattr(server, "text_backend", None)
@@ -367,6 +367,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
             del server.sessions[name]
             raise ProtocolViolation(P.CLOSE_CONFLICT, f"session {name!r} already exists (on node {owner})")
     await server.release_held(live)  # viewers held for it (view query wait) subscribe before its first sentence
+    sessions_log.info("session %r started: text, %s%s", name, language, f", voice {voice}" if voice else "")
     queue: asyncio.Queue = asyncio.Queue()
     clock: dict[str, float] = {}
     first_piece: list[float] = []

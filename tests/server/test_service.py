@@ -664,3 +664,22 @@ def test_sessions_say_which_view_kinds_this_node_serves(model, head):
     assert asyncio.run(kinds(None)) == ["params"]
     assert asyncio.run(kinds(head)) == ["deltas", "params"]  # retargeted: vertex deltas
     assert asyncio.run(kinds(builtin_morph_head())) == ["morph", "deltas", "params"]
+
+
+def test_sessions_starting_and_ending_are_logged(model, caplog):
+    """A deployer saw sessions only as counts in /metrics: each start and end is one INFO line of
+    ``facecast.sessions`` (the incidents of ``facecast.server`` stay rate-limited apart)."""
+    import logging
+
+    async def main():
+        async with running(model) as srv, IngestClient(srv.url, session="logged", sample_rate_hz=16000) as ing:
+            await stream_samples(ing, speechlike(0.5, 16000), realtime=False)
+            return await ing.end()
+
+    with caplog.at_level(logging.INFO, logger="facecast.sessions"):
+        ended = asyncio.run(main())
+    lines = [r.getMessage() for r in caplog.records if r.name == "facecast.sessions"]
+    assert lines == [
+        "session 'logged' started: ingest, 16000 Hz x 1",
+        f"session 'logged' ended (1000 session ended): {ended['frames']} frames, 0 viewers",
+    ], lines
