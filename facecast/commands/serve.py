@@ -208,7 +208,12 @@ def run(args: argparse.Namespace) -> int:
             print("facecast serve: a token is required (clients give it as ?token=T or in their start message)")
         if server.cluster is not None:
             redis = shown_url(server.cluster.url)
-            print(f"facecast serve: cluster node {server.cluster.node!r} on {redis}", flush=True)
+            role = {
+                "both": "computes sessions and serves viewers",
+                "compute": "computes sessions",
+                "edge": "serves viewers and relays ingests to a computing node",
+            }[config.role]
+            print(f"facecast serve: cluster node {server.cluster.node!r} on {redis} ({role})", flush=True)
         tasks = []
         for path, src, name in zip(args.file, files, names):
             print(f"facecast serve: file {path} ({src.duration_s:.1f} s) as session {name!r}", flush=True)

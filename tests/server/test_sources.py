@@ -282,7 +282,7 @@ def test_serve_says_a_token_is_required_and_that_it_stopped(model_path, tmp_path
     """`facecast serve` with a token said nothing of it (a user found it only in the config file), and Ctrl-C printed
     nothing: the start-up lines say a token is required, and Ctrl-C ends with a line saying the server stopped."""
     config = tmp_path / "server.toml"
-    config.write_text('[server]\ntoken = "secret"\n')
+    config.write_text('[server]\ntoken = "secret"\nauto_gain = true\n')
     log = tmp_path / "serve.log"
     with log.open("w") as out:
         proc = subprocess.Popen(
@@ -316,4 +316,5 @@ def test_serve_says_a_token_is_required_and_that_it_stopped(model_path, tmp_path
     lines = log.read_text().splitlines()
     assert code == 0, lines
     assert any("a token is required" in x for x in lines), lines
+    assert any("auto gain: every audio session's input" in x for x in lines), lines  # the config's auto_gain
     assert lines[-1].startswith("facecast serve: stopped after "), lines
