@@ -23,6 +23,14 @@ def stimuli():
     root = grid_root()
     require(root is not None, "GRID s1 corpus not found in ../shared/data/video/grid_s1")
     require(shutil.which("ffmpeg") is not None, "ffmpeg is not installed")
+    import fcntl
+
     from perceptual.stimuli import build
 
-    return build(tiny_config(ARTIFACTS / "stimuli", root))
+    # `./go test` runs test files in parallel processes (pytest-xdist): the four files that use the stimuli may
+    # land in two, each with this session fixture. One builds while the other waits on the lock, then reuses what
+    # was built (build() reuses finished stimuli); never two processes writing the same files.
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    with open(ARTIFACTS / "stimuli.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return build(tiny_config(ARTIFACTS / "stimuli", root))
