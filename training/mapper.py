@@ -92,15 +92,21 @@ def _fit_mlp(x: np.ndarray, y: np.ndarray, recipe: MapperRecipe, hidden: int, se
         learning_rate_init=1e-3,
         batch_size=min(256, len(x)),
     )
+    return fit_within_budget(mlp, x, y)
+
+
+def fit_within_budget(mlp: MLPRegressor, x: np.ndarray, y: np.ndarray) -> MLPRegressor:
+    """``mlp.fit(x, y)`` for a scikit-learn net whose ``max_iter`` is a budget, not a convergence promise: early
+    stopping on a validation tenth ends most fits before it, and one that reaches it is kept as it is (its epochs are
+    ``mlp.n_iter_``). sklearn's ConvergenceWarning said so in traceback-like lines in the middle of `facecast mu` and
+    `facecast readout` output; it is not shown."""
     import warnings
 
     from sklearn.exceptions import ConvergenceWarning
 
     with warnings.catch_warnings():
-        # max_iter is a budget here; early stopping on a validation tenth ends most fits before it.
         warnings.simplefilter("ignore", ConvergenceWarning)
-        mlp.fit(x, y)
-    return mlp
+        return mlp.fit(x, y)
 
 
 def fit_selector(centre: np.ndarray, recipe: MapperRecipe) -> GaussianMixture:

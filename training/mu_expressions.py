@@ -135,6 +135,8 @@ def fit_second_stage(
     :class:`realtime_core.mapping.expression.ExpressionStage` takes them."""
     from sklearn.neural_network import MLPRegressor
 
+    from training.mapper import fit_within_budget
+
     c0, ck = analyse(mu, ex, d_k)
     y = np.hstack([c0, ck])
     xm, xs = est_umup.mean(0), np.maximum(est_umup.std(0), 1e-9)
@@ -148,7 +150,7 @@ def fit_second_stage(
         n_iter_no_change=10,
         random_state=seed,
     )
-    mlp.fit((est_umup - xm) / xs, (y - ym) / ys)
+    fit_within_budget(mlp, (est_umup - xm) / xs, (y - ym) / ys)
     w1, w2 = mlp.coefs_
     b1, b2 = mlp.intercepts_
     # tanh(((x - xm) / xs) W1 + b1) = tanh(x (W1 / xs) + (b1 - (xm / xs) W1)); y = (h W2 + b2) ys + ym

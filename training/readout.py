@@ -299,11 +299,13 @@ def mlp_layers(spec: ReadoutSpec, phi: np.ndarray, y: np.ndarray) -> tuple[Any, 
     the scaler folded into w1/b1 and the ensemble mean into w2/b2 (the live readout's form)."""
     from sklearn.preprocessing import StandardScaler
 
+    from training.mapper import fit_within_budget
+
     scaler = StandardScaler().fit(phi)
     sd = scaler.scale_
     w1s, b1s, w2s, b2s, epochs = [], [], [], [], []
     for k in range(spec.ensemble):
-        mlp = mlp_regressor(spec, k).fit(scaler.transform(phi), y)
+        mlp = fit_within_budget(mlp_regressor(spec, k), scaler.transform(phi), y)
         epochs.append(int(mlp.n_iter_))
         # relu(((phi - mu) / sd) @ W + b) = relu(phi @ (W / sd) + (b - (mu / sd) @ W))
         w1s.append(mlp.coefs_[0] / sd[:, None])
