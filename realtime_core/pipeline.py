@@ -16,11 +16,13 @@ equal what a live session produces frame for frame; ``mode="batch"`` uses batch 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, cast
 
 import numpy as np
 
 from realtime_core.avmodel import AvModel
 from realtime_core.errors import ConfigError, InvalidAudioError
+from realtime_core.features.gain import InputGainConfig
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
@@ -123,6 +125,18 @@ class SpeechToParams:
         self._observe("inversion")
         self.frames_out += len(out)
         return out
+
+
+def with_auto_gain(model: SpeechModel, config: InputGainConfig | None = None) -> SpeechModel:
+    """``model`` whose front end first brings its input to the training speech level (the causal gain stage,
+    :class:`realtime_core.features.gain.InputGainConfig`, default settings when ``config`` is None): a quiet take
+    moves the mouth as a loud one once the speech level has been heard (a few seconds). Both mappers' models are
+    frozen dataclasses with a ``frontend`` (the SpeechModel protocol names no fields, hence the cast)."""
+    from dataclasses import replace
+
+    gain = InputGainConfig() if config is None else config
+    gained: Any = replace(cast(Any, model), frontend=replace(model.frontend, input_gain=gain))
+    return cast(SpeechModel, gained)
 
 
 def _ignore(stage: str) -> None:

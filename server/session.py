@@ -21,8 +21,8 @@ from __future__ import annotations
 import base64
 import binascii
 import time
-from dataclasses import dataclass, field, replace
-from typing import Any, NamedTuple, cast
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -297,11 +297,9 @@ class Session:
         self.enrolment: dict | None = None
         if config.auto_gain:
             # Before the enrolment: its recording is heard at the level the live input will be brought to.
-            from realtime_core.features.gain import InputGainConfig
+            from realtime_core.pipeline import with_auto_gain
 
-            # both mappers' models are frozen dataclasses with a front end (the SpeechModel protocol names no fields)
-            gained: Any = replace(cast(Any, model), frontend=replace(model.frontend, input_gain=InputGainConfig()))
-            self.model = model = gained
+            self.model = model = with_auto_gain(model)
         if config.enrol is not None:
             if not isinstance(model, AvModel):
                 raise ServerConfigError("enrol adapts the HMM model; it is not available with the MLP mapper")

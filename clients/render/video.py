@@ -32,21 +32,26 @@ def params_for_audio(
     *,
     mapper: str = "hmm",
     check: Callable[[np.ndarray, int], None] | None = None,
+    auto_gain: bool = False,
 ) -> Track:
     """Speech file -> the mouth-parameter track (F, 4) in IOD units at the model's 30 fps.
 
     The real-time core's offline path (``realtime_core.pipeline.speech_to_params``, the same
     computation as a live session) with the model loaded by ``assets.modelfile.load_model``
     (``model`` None = the default model); ``mapper`` "mlp" loads an MLP mapper file instead;
-    ``check(samples (n,) float, rate_hz)`` is called on the decoded speech first (the command's warnings).
+    ``check(samples (n,) float, rate_hz)`` is called on the decoded speech first (the command's warnings);
+    ``auto_gain``: the model's front end first brings the speech to its training level
+    (:func:`realtime_core.pipeline.with_auto_gain`).
     """
     from assets.audio import read_audio
     from assets.errors import FileProblem
     from assets.modelfile import load_speech_model
     from realtime_core.errors import InvalidAudioError
-    from realtime_core.pipeline import speech_to_params
+    from realtime_core.pipeline import speech_to_params, with_auto_gain
 
     av = load_speech_model(mapper, model)
+    if auto_gain:
+        av = with_auto_gain(av)
     samples, rate = read_audio(path)
     if check is not None:
         check(samples, rate)

@@ -13,7 +13,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
     from facecast.commands.outputs import add_output_option
-    from facecast.commands.speech_options import add_expression_options, add_mapper_options
+    from facecast.commands.speech_options import add_auto_gain_option, add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "animate",
@@ -53,6 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--mapper mlp: default the shipped MLP mapper",
     )
     add_mapper_options(p)
+    add_auto_gain_option(p)
     add_expression_options(p)
     p.add_argument("--mode", choices=("stream", "batch"), default="stream", help="streaming (live) or batch HMMI")
     p.add_argument(
@@ -86,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
-    from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups
+    from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups, with_auto_gain
     from realtime_core.track import DEFAULT_FPS, Track, frames_from_samples
 
     exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}  # the format named by the flag
@@ -112,8 +113,10 @@ def run(args: argparse.Namespace) -> int:
 
         head = resolve_from_args(args)
     model = load_speech_model(args.mapper, args.model)
+    if args.auto_gain:
+        model = with_auto_gain(model)
     samples, rate = read_audio(args.speech)
-    if shipped_hmm(args):  # the shipped models' training level (a user's own may differ)
+    if shipped_hmm(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
         warn_if_quiet("animate", args.speech, samples, rate)
     mups = None
     try:

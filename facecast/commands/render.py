@@ -11,7 +11,7 @@ from facecast.commands.argtypes import add_background_option, within
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from facecast.cli import HelpFormatter
     from facecast.commands.headopts import add_head_options
-    from facecast.commands.speech_options import add_expression_options, add_mapper_options
+    from facecast.commands.speech_options import add_auto_gain_option, add_expression_options, add_mapper_options
 
     p = sub.add_parser(
         "render",
@@ -31,6 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "default, low-latency",
     )
     add_mapper_options(p)
+    add_auto_gain_option(p)
     add_expression_options(p)
     p.add_argument("--params", help="mouth parameters CSV (or facecast's JSON curves) instead of the speech model")
     p.add_argument("-o", "--output", required=True, help="video file to write (.mp4; also .mov, .m4v, .mkv)")
@@ -85,10 +86,10 @@ def run(args: argparse.Namespace) -> int:
         from facecast.commands.speech_options import shipped_hmm, warn_if_quiet
 
         def quiet(samples: np.ndarray, rate: int) -> None:
-            if shipped_hmm(args):
+            if shipped_hmm(args) and not args.auto_gain:
                 warn_if_quiet("render", args.speech, samples, rate)
 
-        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet)
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet, auto_gain=args.auto_gain)
         if track.fps != args.fps:
             track = frames_from_samples(track.times(), track.values, args.fps)
         frames = track.values

@@ -18,6 +18,15 @@ def add_mapper_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_auto_gain_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--auto-gain",
+        action="store_true",
+        help="bring the speech to the model's training level first (the live sessions' causal gain stage): a quiet "
+        "take moves the mouth as a loud one once its level has been heard, a few seconds in",
+    )
+
+
 def add_expression_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--expression",
@@ -86,6 +95,7 @@ def warn_if_quiet(command: str, path, samples: np.ndarray, rate_hz: int) -> None
     print(
         f"facecast {command}: warning: {path}: speech at {level:.1f} dBFS, {S1_SPEECH_LEVEL_DBFS - level:.0f} dB under "
         f"the level the model was trained at ({S1_SPEECH_LEVEL_DBFS} dBFS): the mouth opens less than the words call "
-        f"for (about half at 20 dB under); normalise it first, e.g. ffmpeg -i IN -af loudnorm=I=-20:TP=-1.5 OUT.wav",
+        f"for (about half at 20 dB under); give --auto-gain, or normalise it first, e.g. "
+        "ffmpeg -i IN -af loudnorm=I=-20:TP=-1.5 OUT.wav",
         file=sys.stderr,
     )
