@@ -374,6 +374,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
     sentence_ends: dict[int, float] = {}  # a sentence's first frame index -> its end, media time (s)
     spans: list[tuple[int, int]] = []  # accepted sentences' frame ranges [first, end) not yet fully released
     released: dict[str, Any] = {"next": 0, "params": None}  # the next frame to release, the last one's params
+    easing = [0, 0]  # the frames [first, end) of the last cancel's ease to rest
 
     async def pacer() -> None:
         """Release frames no earlier than ``lead_s`` before their media time on the wall clock."""
@@ -445,11 +446,14 @@ async def handle_text(server, ws: ServerConnection) -> None:
         session.chunker.flush()
         nxt = released["next"]
         cut = [span for span in spans if span[1] > nxt]
-        mid_sentence = any(first < nxt for first, _ in cut)
+        # Moving: a sentence cut mid-way, or an earlier cancel's ease not yet all released (a second cancel during
+        # it dropped the rest of the ease and left the mouth open where it was).
+        moving = any(first < nxt for first, _ in cut) or easing[1] > nxt
         spans.clear()
         for k in [k for k in sentence_ends if k >= nxt]:
             del sentence_ends[k]
-        ease = session.cancel(nxt, released["params"] if mid_sentence else None)
+        ease = session.cancel(nxt, released["params"] if moving else None)
+        easing[:] = [nxt, nxt + len(ease)]
         if ease:
             sentence_ends[nxt] = ease[-1].frames[-1].media_time + 1 / FPS
             for o in ease:

@@ -548,6 +548,36 @@ def test_after_end_a_cancel_cuts_the_play_out_and_text_is_rejected(model, backen
     assert [m.index for m in got.frames] == list(range(ended["frames"])) and got.close_code == P.CLOSE_NORMAL
 
 
+def test_a_second_cancel_during_the_ease_eases_again_from_where_the_mouth_is(model, backend):
+    """A second `cancel` 50 ms after the first dropped the ease's frames not yet released and eased nothing (its
+    sentence spans were gone), so the session ended with the mouth open (mouth_open 0.096 in a user's take)."""
+
+    async def main():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "twice", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="twice", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG}))
+                assert json.loads(await ws.recv())["type"] == "spoken"
+                await ws.send(json.dumps({"type": "end"}))
+                await asyncio.sleep(1.0)
+                await ws.send(json.dumps({"type": "cancel"}))
+                first = json.loads(await ws.recv())
+                await asyncio.sleep(0.05)
+                await ws.send(json.dumps({"type": "cancel"}))
+                second, ended = json.loads(await ws.recv()), json.loads(await ws.recv())
+                got = await asyncio.wait_for(collect, 60)
+            return first, second, ended, got
+
+    first, second, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert first["type"] == second["type"] == "cancelled" and ended["type"] == "ended"
+    cut2 = round(second["media_time"] * 30)
+    assert ended["frames"] == cut2 + 6  # eased again from the last frame released
+    values = np.array([m.values for m in got.frames])
+    assert len(values) == ended["frames"] and np.abs(values[-1]).max() < 1e-6  # at rest at the end
+
+
 def test_a_stall_mid_word_speaks_the_whole_words_and_the_fragment_waits(model, backend):
     """A user test: after "Then he went ho" and a stall the server spoke "Then he went ho", then "me and slept".
     A stall speaks through the last word boundary; the fragment waits for more text (or a longer stall)."""
