@@ -477,13 +477,16 @@ class FacecastServer:
 
     async def _end_session(self, live: LiveSession, code: int, reason: str) -> None:
         self.turn_deltas.flush()  # its frames waiting for the turn's end go before the close
+        n_viewers = len(live.viewers)
         sessions_log.info(
-            "session %r ended (%d %s): %d frames, %d viewers",
+            # computed: a text session stopped mid-answer had frames made that were never released to its viewers
+            "session %r ended (%d %s): %d frames computed, %d viewer%s",
             live.name,
             code,
             reason,
             live.session.frames_out,
-            len(live.viewers),
+            n_viewers,
+            "" if n_viewers == 1 else "s",
         )
         if self.sessions.get(live.name) is live:
             del self.sessions[live.name]

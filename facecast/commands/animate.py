@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from facecast.commands.speech_options import (
         apply_expressions,
         expression_intensities,
-        shipped_hmm,
+        shipped_model,
         warn_if_quiet,
     )
     from realtime_core.errors import InvalidAudioError
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     if args.auto_gain:
         model = with_auto_gain(model)
     samples, rate = read_audio(args.speech)
-    if shipped_hmm(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
+    if shipped_model(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
         warn_if_quiet("animate", args.speech, samples, rate)
     mups = None
     try:

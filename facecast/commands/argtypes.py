@@ -52,14 +52,17 @@ def within(cast: type[int] | type[float], lo: float, hi: float, unit: str = "") 
 
 def colour(text: str) -> tuple[float, float, float]:
     """A colour as matplotlib names it (``"white"``, ``"#1e2030"``, ``"0.5"`` for a grey) -> RGB in [0, 1]."""
-    from matplotlib.colors import to_rgb
+    from matplotlib.colors import to_rgba
 
     try:
-        return tuple(float(c) for c in to_rgb(text))  # type: ignore[return-value]
+        r, g, b, a = to_rgba(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected a colour such as white, #1e2030 or 0.5 (grey), got {text!r}"
         ) from None
+    if a < 1.0:  # 'none' or '#rrggbb00': a video has no transparency (it came out black)
+        raise argparse.ArgumentTypeError(f"{text!r} is transparent; a video background needs an opaque colour")
+    return (float(r), float(g), float(b))
 
 
 def add_background_option(p: argparse.ArgumentParser) -> None:

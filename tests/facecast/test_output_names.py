@@ -231,10 +231,13 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(argv, want,
             ["render", "{wav}", "--target-map", "map.json", "-o", "{tmp}/x.mp4"],
             "map.json: --target-map names a mesh file's own morph targets; builtin is not a mesh file",
         ),
+        # matplotlib reads 'none' as a transparent colour; the video came out black
+        (["render", "{wav}", "-o", "{tmp}/x.mp4", "--background", "none"], "'none' is transparent"),
+        (["say", "hi", "-o", "{tmp}/x.mp4", "--background", "nocolour"], "expected a colour such as white"),
     ],
     ids=[
         *("fps", "lag", "lag-nan", "iters", "lags", "grid-s1", "speech-dir", "no-output", "mesh-dir", "landmarks-dir"),
-        "target-map-builtin",
+        *("target-map-builtin", "background-none", "background-unknown"),
     ],
 )
 def test_absurd_options_and_folders_for_files_are_refused_in_one_line(argv, want, tmp_path, capsys):

@@ -681,5 +681,5 @@ def test_sessions_starting_and_ending_are_logged(model, caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == "facecast.sessions"]
     assert lines == [
         "session 'logged' started: ingest, 16000 Hz x 1",
-        f"session 'logged' ended (1000 session ended): {ended['frames']} frames, 0 viewers",
+        f"session 'logged' ended (1000 session ended): {ended['frames']} frames computed, 0 viewers",
     ], lines
