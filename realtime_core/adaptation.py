@@ -28,23 +28,39 @@ MIN_ENROL_S = 1.0
 """s: the least speech an adaptation takes (``facecast adapt`` and a session's ``enrol`` alike); 30-60 s is the
 intended amount. Under a second a few dozen frames would move the components they visit towards one syllable."""
 
-MIN_VISITED_SHARE = 0.1
-"""The least share of the model's audio components (states x mixtures) an enrolment must visit (occupancy over one
-frame) to be taken as speech. Measured with the shipped models (48 components): one second of real speech visits
-7-8 of them, 3-220 s 17-23; 40 s of a pure tone, white or pink noise or a three-note chord 1-3. Adapting to those
-would pull one or two components onto the sound and leave the voice unadapted, so it is refused."""
+MIN_VISITED_SHARE = 0.25
+"""The least share of the model's audio components (states x mixtures) an enrolment of :data:`CHECK_SPEECH_FROM_S`
+or more must visit (occupancy over one frame) to be taken as speech. Measured with the shipped models (48
+components): read speech of 7-220 s visits 21-23 of them (ARCTIC, LibriVox, LJ Speech), 3 s of GRID 17; 40 s of a
+pure tone, white or pink noise, a three-note chord or music 1-5, 5 s of speech then 40 s of a tone 6. Adapting to
+those would pull a few components onto the sound and leave the voice unadapted, so it is refused."""
+
+CHECK_SPEECH_FROM_S = 10.0
+"""s of sound from which an enrolment is checked to sound like speech: a short take of real speech visits few
+components (1-1.5 s of LJ Speech or LibriVox 2-5 of 48, ARCTIC 8), as few as a tone."""
+
+DIGITAL_SILENCE_PEAK = 1e-4
+"""Full scale 1: a frame whose analysis window stays under this is digital silence (a file's padding, a muted
+stretch), never in a live microphone's input; it is left out of the enrolment. 30 s of zeros between 9 s of speech
+pulled the adaptation onto them (audio log-likelihood per frame -43 -> +212)."""
 
 
 def enrolment_features(model: AvModel, recordings: Sequence[np.ndarray]) -> list[np.ndarray]:
     """``(n,)`` samples at ``model.sample_rate_hz`` each -> ``(T_i, Da)`` audio features, each
-    recording through a fresh front end (as a live session would see it)."""
+    recording through a fresh front end (as a live session would see it), split where frames of digital
+    silence (:data:`DIGITAL_SILENCE_PEAK`) are left out."""
+    mfcc = model.frontend.mfcc
     out = []
     for samples in recordings:
         x = as_float_samples(samples)
         fe = model.front_end()
         oa = np.concatenate([fe.push(x), fe.flush()])
-        if len(oa):
-            out.append(oa)
+        if not len(oa):
+            continue
+        starts = (np.arange(len(oa)) * int(mfcc.sample_rate_hz)) // int(mfcc.frame_rate_hz)  # frame_start(k)
+        peaks = np.array([np.abs(x[a : a + mfcc.window_len]).max(initial=0.0) for a in starts])
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], (peaks >= DIGITAL_SILENCE_PEAK).astype(int), [0]])))
+        out += [oa[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True)]
     return out
 
 
@@ -65,7 +81,8 @@ def adapt_av_model(
     # map_adapt fills occupancy whenever it saw frames (n_frames > 0 here)
     visited = int(np.sum(result.occupancy > 1.0)) if result.occupancy is not None else 0
     n_components = model.hmm.n_states * model.hmm.n_mix
-    if visited < MIN_VISITED_SHARE * n_components:
+    fps = model.frontend.mfcc.frame_rate_hz
+    if result.n_frames >= CHECK_SPEECH_FROM_S * fps and visited < MIN_VISITED_SHARE * n_components:
         raise NotSpeechError(
             f"it does not sound like speech: {visited} of {n_components} audio components visited "
             "(a tone, noise or music?)"

@@ -67,8 +67,6 @@ def run(args: argparse.Namespace) -> int:
     seconds = sum(len(x) for x in recordings) / model.sample_rate_hz
     if seconds < MIN_ENROL_S:  # as a session's enrol: a second of speech at least
         raise ConfigError(f"{seconds:.1f} s of speech; at least {MIN_ENROL_S:g} s is needed (30-60 s is intended)")
-    if seconds < 10:
-        print(f"note: only {seconds:.1f} s of speech; 30-60 s is the intended amount (few components will move)")
     from threadpoolctl import threadpool_limits
 
     # One BLAS thread: the E-step is many small GEMMs, which multi-threaded OpenBLAS made about
@@ -81,11 +79,14 @@ def run(args: argparse.Namespace) -> int:
             raise NotSpeechError(f"{names}: {exc}; nothing written") from None
     if result.n_frames == 0:
         print("no speech frames: the model is unchanged")
+    sound_s = result.n_frames / model.frontend.mfcc.frame_rate_hz  # digital silence is left out (its frames)
+    if sound_s < 10:
+        print(f"note: only {sound_s:.1f} s of sound; 30-60 s of speech is the intended amount (few components move)")
     out = save_model(args.output, adapted)
     info = adapted.metadata.get("adaptation", {})
     ll0, ll1 = info.get("audio_loglik_per_frame", [float("nan")] * 2)
     print(
-        f"adapted on {len(recordings)} file(s), {seconds:.1f} s ({result.n_frames} frames): "
+        f"adapted on {len(recordings)} file(s), {seconds:.1f} s of audio ({result.n_frames} frames of sound): "
         f"{info.get('components_visited', 0)} of {model.hmm.n_states * model.hmm.n_mix} components visited; "
         f"audio log-likelihood per frame {ll0:.2f} -> {ll1:.2f} ({len(result.history) - 1} EM iterations)"
     )

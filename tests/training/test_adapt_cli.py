@@ -91,3 +91,26 @@ def test_adapt_refuses_an_output_that_is_not_npz_before_reading(tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{tmp_path / 'm.txt'}: a model file is written as .npz" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_adapt_leaves_digital_silence_out_and_takes_a_short_real_take(ljspeech, tmp_path, capsys) -> None:
+    """Two LJ Speech clips 30 s of zeros apart were adapted on all 39 s: the zeros pulled the model onto them (audio
+    log-likelihood per frame -43 -> +212). The zeros are left out now. One second of real speech visits as few
+    components as a tone (2 of 48 for LJ Speech) and is taken: the speech check starts at 10 s of sound."""
+    from assets.audio import read_audio, write_wav
+
+    a, rate = read_audio(ljspeech[0])
+    b, _ = read_audio(ljspeech[1], rate_hz=rate)
+    gaps = write_wav(tmp_path / "gaps.wav", np.concatenate([a, np.zeros(30 * rate), b]), rate)
+    assert main(["adapt", "default", str(gaps), "-o", str(tmp_path / "g.npz"), "--iters", "2"]) == 0
+    out = capsys.readouterr().out
+    from assets.modelfile import load_model
+
+    meta = load_model(tmp_path / "g.npz").metadata["adaptation"]
+    speech_frames = round((len(a) + len(b)) / rate * 30)
+    assert abs(meta["frames"] - speech_frames) <= 4, (meta["frames"], speech_frames)  # the zeros' frames left out
+    assert meta["audio_loglik_per_frame"][1] < 0, meta  # it was +212 with the zeros' frames in
+    assert "frames of sound" in out
+    one = write_wav(tmp_path / "one.wav", a[:rate], rate)
+    assert main(["adapt", "default", str(one), "-o", str(tmp_path / "one.npz")]) == 0
+    assert "only 1.0 s of sound" in capsys.readouterr().out
