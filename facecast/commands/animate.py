@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         apply_expressions,
         expression_intensities,
         shipped_model,
+        warn_if_clipped,
         warn_if_quiet,
     )
     from realtime_core.errors import InvalidAudioError
@@ -118,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
     samples, rate = read_audio(args.speech)
     if shipped_model(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
         warn_if_quiet("animate", args.speech, samples, rate)
+    warn_if_clipped("animate", args.speech, samples)
     mups = None
     try:
         if args.expression and args.mode == "stream" and getattr(model, "expressions", None) is not None:

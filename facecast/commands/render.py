@@ -83,11 +83,12 @@ def run(args: argparse.Namespace) -> int:
     if args.params:
         frames = read_params_resampled(args.params, args.fps).values
     else:
-        from facecast.commands.speech_options import shipped_model, warn_if_quiet
+        from facecast.commands.speech_options import shipped_model, warn_if_clipped, warn_if_quiet
 
         def quiet(samples: np.ndarray, rate: int) -> None:
             if shipped_model(args) and not args.auto_gain:
                 warn_if_quiet("render", args.speech, samples, rate)
+            warn_if_clipped("render", args.speech, samples)
 
         track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet, auto_gain=args.auto_gain)
         if track.fps != args.fps:
