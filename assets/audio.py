@@ -22,12 +22,13 @@ from assets.errors import (
     WrongSampleRateError,
 )
 from assets.files import atomic_write_bytes
+from realtime_core.features.gain import DIGITAL_SILENCE_PEAK
 
 ACCEPTED_RATES_HZ = (8000, 11025, 16000, 22050, 24000, 32000, 44100, 48000)
 """Sample rates a corpus WAV may have (the rates microphones and codecs actually use)."""
 
-SILENCE_PEAK = 1e-4
-"""Audio whose absolute peak is below this (float full scale 1.0) counts as silent (~-80 dBFS)."""
+SILENCE_PEAK = DIGITAL_SILENCE_PEAK
+"""Audio whose absolute peak is below this (float full scale 1.0) counts as silent (-80 dBFS; the core's constant)."""
 
 INT16_SCALE = 32768.0
 """float full scale 1.0 = 32768 int16 steps (the wire format's audio scale)."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from realtime_core.avmodel import AvModel
 from realtime_core.errors import NotSpeechError
+from realtime_core.features.gain import DIGITAL_SILENCE_PEAK
 from realtime_core.features.mfcc import as_float_samples
 from realtime_core.hmm.adapt import (
     AdaptConfig,
@@ -39,16 +40,13 @@ CHECK_SPEECH_FROM_S = 10.0
 """s of sound from which an enrolment is checked to sound like speech: a short take of real speech visits few
 components (1-1.5 s of LJ Speech or LibriVox 2-5 of 48, ARCTIC 8), as few as a tone."""
 
-DIGITAL_SILENCE_PEAK = 1e-4
-"""Full scale 1: a frame whose analysis window stays under this is digital silence (a file's padding, a muted
-stretch), never in a live microphone's input; it is left out of the enrolment. 30 s of zeros between 9 s of speech
-pulled the adaptation onto them (audio log-likelihood per frame -43 -> +212)."""
-
 
 def enrolment_features(model: AvModel, recordings: Sequence[np.ndarray]) -> list[np.ndarray]:
     """``(n,)`` samples at ``model.sample_rate_hz`` each -> ``(T_i, Da)`` audio features, each
     recording through a fresh front end (as a live session would see it), split where frames of digital
-    silence (:data:`DIGITAL_SILENCE_PEAK`) are left out."""
+    silence (a window's peak under :data:`realtime_core.features.gain.DIGITAL_SILENCE_PEAK`) are left out: never in
+    a live microphone's input, 30 s of zeros between 9 s of speech pulled the adaptation onto them (audio
+    log-likelihood per frame -43 -> +212)."""
     mfcc = model.frontend.mfcc
     out = []
     for samples in recordings:

@@ -84,6 +84,10 @@ class InputGainConfig:
 DIGITAL_SILENCE_DBFS = -80.0
 """A block this quiet (RMS, dBFS) is digital silence (padding, a muted stretch), not a room's noise floor."""
 
+DIGITAL_SILENCE_PEAK = 1e-4
+"""The same level as a peak (full scale 1, -80 dBFS): samples whose absolute peak stays under it are digital silence
+(``assets.audio.is_silent`` of a whole recording, the enrolment's frames in :mod:`realtime_core.adaptation`)."""
+
 
 def speech_level_db(samples: np.ndarray, sample_rate_hz: int, config: InputGainConfig | None = None) -> float | None:
     """The mean level (dBFS, RMS per ``config.block_ms`` block) of the speech blocks of a whole recording ``samples``
