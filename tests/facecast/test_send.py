@@ -144,11 +144,24 @@ def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_pat
     assert "session 'a' ended: 15 frames" in out, out
 
 
+def _send_to(handler, wav) -> int:
+    """`facecast send --fast WAV` into a bare WebSocket server on loopback whose connections ``handler``
+    serves (a stand-in for a server that misbehaves in one precise way); returns the exit code."""
+    from websockets.asyncio.server import serve
+
+    async def send_to_it() -> int:
+        async with serve(handler, "127.0.0.1", 0, compression=None) as server:
+            port = server.sockets[0].getsockname()[1]
+            return await asyncio.to_thread(main, ["send", str(wav), f"http://127.0.0.1:{port}", "--fast"])
+
+    return asyncio.run(asyncio.wait_for(send_to_it(), 20))
+
+
 def test_send_to_a_server_that_dies_says_the_connection_was_lost(tmp_path, capsys):
     """A server killed mid-session (`kill -9` of a cluster node, docs/deploy.md) drops the ingest's socket
     without a close frame: `facecast send` printed "server closed the connection: None connection lost".
     The server here is a WebSocket server whose socket goes as a killed process's does, after the start."""
-    from websockets.asyncio.server import ServerConnection, serve
+    from websockets.asyncio.server import ServerConnection
 
     wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
 
@@ -156,12 +169,7 @@ def test_send_to_a_server_that_dies_says_the_connection_was_lost(tmp_path, capsy
         await ws.recv()  # the start message
         ws.transport.abort()  # no close frame, as from a process killed with SIGKILL
 
-    async def send_to_it() -> int:
-        async with serve(killed, "127.0.0.1", 0, compression=None) as server:
-            port = server.sockets[0].getsockname()[1]
-            return await asyncio.to_thread(main, ["send", str(wav), f"http://127.0.0.1:{port}", "--fast"])
-
-    assert asyncio.run(asyncio.wait_for(send_to_it(), 20)) == 2
+    assert _send_to(killed, wav) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "None" not in err, err
     assert "lost the server: the connection ended without a close frame" in err, err
@@ -171,18 +179,13 @@ def test_send_to_a_server_that_refuses_before_the_start_says_its_close(tmp_path,
     """An edge node with no computing node left (docs/deploy.md) closes an ingest with 1013 as it connects,
     before the start message is read: `facecast send` ended in a traceback (websockets' ConnectionClosedError
     from sending the start). The server here closes each connection so, at once."""
-    from websockets.asyncio.server import ServerConnection, serve
+    from websockets.asyncio.server import ServerConnection
 
     wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
 
     async def refusing(ws: ServerConnection) -> None:
         await ws.close(1013, "no computing node is available")
 
-    async def send_to_it() -> int:
-        async with serve(refusing, "127.0.0.1", 0, compression=None) as server:
-            port = server.sockets[0].getsockname()[1]
-            return await asyncio.to_thread(main, ["send", str(wav), f"http://127.0.0.1:{port}", "--fast"])
-
-    assert asyncio.run(asyncio.wait_for(send_to_it(), 20)) == 2
+    assert _send_to(refusing, wav) == 2
     err = capsys.readouterr().err.strip()
     assert err == "facecast send: error: server closed the connection: 1013 no computing node is available", err
