@@ -51,7 +51,7 @@ class NoiseGateConfig:
     tracker: the noise floor's rates per frame (its peak and ``silence_*`` fields are unused here).
     """
 
-    margin_db: float = 1.5
+    margin_db: float = 2.5
     ramp_db: float = 2.0
     hold_frames: int = 30
     release_frames: int = 6
@@ -118,6 +118,8 @@ class NoiseGate:
                 g = 1.0
             elif cfg.release_frames > 0:
                 g = max(g, self._gain - 1.0 / cfg.release_frames)
+                if g < 1e-9:  # the fade's steps of 1/r leave rounding (1e-16) where the rest pose must be exact
+                    g = 0.0
             self._gain = g
             gains[i] = g
             self._row += 1
