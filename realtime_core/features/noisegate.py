@@ -21,9 +21,10 @@ of c0, the measure of the absolute silence gate) and the stream's noise floor ``
   mouth fades in over the frames before the sound, as it moves before it; the lookahead is the front end's own
   context ``tc``, which the row waits for anyway: no added delay);
 - falling by at most ``1 / release_frames`` per frame (a fade, not a step, when the gate closes);
-- 1 for the first ``warmup_frames`` of a stream, whose floor is one frame's guess (s1's clips start 0.3 s before
-  the in-breath: gated from the first frame, r(mouth_open) on s1 val fell 0.901 -> 0.900 and on the other GRID
-  talkers 0.663 -> 0.641, all of it in those frames);
+- 1 before the stream's first frame over digital silence and for ``warmup_frames`` from it, while the floor is
+  one frame's guess (gated from the first frame, r(mouth_open) on s1 val fell 0.9012 -> 0.8997 and on the other
+  GRID talkers 0.663 -> 0.644, all of it in those frames, where the talkers hold the mouth open before speaking);
+  a take of digital silence alone is left exactly as the model gives it (no motion);
 
 and the row becomes ``gain * row``: the rest pose is the neutral face, every parameter 0. Row ``t`` uses frames
 ``<= t + lookahead`` only, all of which the front end has computed before it releases the row, so the output is
@@ -87,6 +88,7 @@ class NoiseGate:
         self._open: list[float] = []  # openness of frames self._first .. self._first + len - 1
         self._first = 0
         self._row = 0
+        self._heard: int | None = None  # the stream's first frame over digital silence
         self._gain = 1.0
         self.gain = np.ones(0)
         """The gains (m,) the last :meth:`apply` used."""
@@ -97,6 +99,8 @@ class NoiseGate:
             if x < DIGITAL_SILENCE_DBFS:  # padding, a muted stretch: no evidence of the room's floor
                 self._open.append(0.0)
                 continue
+            if self._heard is None:
+                self._heard = self._first + len(self._open)
             _, floor = self._tracker.track(np.array([x]))
             over = float(x - floor[0]) - cfg.margin_db
             self._open.append(min(max(over / cfg.ramp_db, 0.0), 1.0) if cfg.ramp_db > 0 else float(over > 0))
@@ -114,7 +118,7 @@ class NoiseGate:
             for d in range(1, self.lookahead + 1):
                 if t + d - first < len(a):
                     g = max(g, a[t + d - first] * (1.0 - d / (self.lookahead + 1)))
-            if t < cfg.warmup_frames:
+            if self._heard is None or t < self._heard + cfg.warmup_frames:
                 g = 1.0
             elif cfg.release_frames > 0:
                 g = max(g, self._gain - 1.0 / cfg.release_frames)

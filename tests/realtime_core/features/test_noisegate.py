@@ -136,6 +136,21 @@ def test_digital_silence_does_not_drag_the_floor_down():
     np.testing.assert_array_equal(g[CFG.warmup_frames + CFG.release_frames :], 0.0)
 
 
+def test_digital_silence_alone_is_left_as_the_model_gives_it(shipped):
+    """Silence gives no motion: a take of digital silence is the model's own rest, row for row, with the gate as
+    without it; the warm-up starts at the first frame over digital silence (a stream that opens muted)."""
+    silence = np.zeros(2 * RATE)
+    np.testing.assert_array_equal(
+        speech_to_params(shipped, silence, RATE), speech_to_params(shipped, silence, RATE, noise_gate=None)
+    )
+    lv = np.concatenate([np.full(20, -100.0), np.full(60, -55.0)])
+    g = _gains(lv)
+    w, r = 20 + CFG.warmup_frames, CFG.release_frames
+    np.testing.assert_array_equal(g[:w], 1.0)
+    np.testing.assert_allclose(g[w : w + r], 1.0 - np.arange(1, r + 1) / r, atol=1e-12)
+    np.testing.assert_array_equal(g[w + r :], 0.0)
+
+
 def test_config_is_validated_and_rows_wait_for_their_levels():
     for bad in (dict(margin_db=-1.0), dict(ramp_db=61.0), dict(hold_frames=-1), dict(release_frames=5000)):
         with pytest.raises(ConfigError):
