@@ -22,8 +22,8 @@ of c0, the measure of the absolute silence gate) and the stream's noise floor ``
   context ``tc``, which the row waits for anyway: no added delay);
 - falling by at most ``1 / release_frames`` per frame (a fade, not a step, when the gate closes);
 - 1 before the stream's first frame over digital silence and for ``warmup_frames`` from it, while the floor is
-  one frame's guess (gated from the first frame, r(mouth_open) on s1 val fell 0.9012 -> 0.8997 and on the other
-  GRID talkers 0.663 -> 0.644, all of it in those frames, where the talkers hold the mouth open before speaking);
+  one frame's guess (r(mouth_open) on s1 val 0.9012 ungated, 0.8997 gated from the first frame, 0.9007 with the
+  warm-up; on the other GRID talkers 0.663, 0.644, 0.661: the talkers hold the mouth open before speaking);
   a take of digital silence alone is left exactly as the model gives it (no motion);
 
 and the row becomes ``gain * row``: the rest pose is the neutral face, every parameter 0. Row ``t`` uses frames
