@@ -24,6 +24,7 @@ from realtime_core.avmodel import AvModel
 from realtime_core.errors import ConfigError, InvalidAudioError
 from realtime_core.features.gain import InputGainConfig
 from realtime_core.features.mfcc import as_float_samples
+from realtime_core.features.noisegate import NoiseGate, NoiseGateConfig
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
 from realtime_core.mapping import SpeechModel, VisualMapper
@@ -46,6 +47,9 @@ class SpeechToParams:
     model: any :class:`realtime_core.mapping.SpeechModel`; ``stream`` sets the HMM inverter's lag,
     dtype and likelihood scale (an MLP model takes its lag and dtype), and the per-frame kernels of
     the front end and the inverter (``stream.kernel``: compiled "numba" or the "numpy" reference).
+    noise_gate: the output noise gate (:mod:`realtime_core.features.noisegate`: a room's steady noise alone
+    fades the mouth to the rest pose; its lookahead is the front end's context, no added delay), or None for
+    the mapper's rows as they are.
     """
 
     def __init__(
@@ -55,6 +59,7 @@ class SpeechToParams:
         rate_hz: int | None = None,
         stream: StreamConfig = StreamConfig(),
         observer: StageObserver | None = None,
+        noise_gate: NoiseGateConfig | None = NoiseGateConfig(),
     ) -> None:
         self.model = model
         self.rate_hz = int(rate_hz) if rate_hz is not None else model.sample_rate_hz
@@ -67,6 +72,7 @@ class SpeechToParams:
             self._inv = model.inverter(stream)
         else:
             self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
+        self._gate = NoiseGate(noise_gate, lookahead=model.frontend.tc) if noise_gate is not None else None
         self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
         self.last_mups: np.ndarray | None = None
@@ -93,6 +99,8 @@ class SpeechToParams:
             self._resampler.reset()
         self._fe.reset()
         self._inv.reset()
+        if self._gate is not None:
+            self._gate.reset()
         self.frames_out = 0
 
     def push(self, samples: np.ndarray) -> np.ndarray:
@@ -103,8 +111,12 @@ class SpeechToParams:
         self.model_audio = x
         self._observe("resample")
         feats = self._fe.push(x)
+        if self._gate is not None:
+            self._gate.push_levels(self._fe.last_level_db)
         self._observe("features")
         out = self._inv.push(feats)
+        if self._gate is not None:
+            out = self._gate.apply(out)
         self.last_mups = getattr(self._inv, "last_mups", None)
         self._observe("inversion")
         self.frames_out += len(out)
@@ -114,12 +126,18 @@ class SpeechToParams:
         self.model_audio = self._resampler.flush() if self._resampler is not None else np.zeros(0)
         self._observe("resample")
         tail = self._fe.push(self.model_audio) if self.model_audio.size else np.zeros((0, 0))
+        if self._gate is not None and self.model_audio.size:
+            self._gate.push_levels(self._fe.last_level_db)
         feats = self._fe.flush()
+        if self._gate is not None:
+            self._gate.push_levels(self._fe.last_level_db)
         feats = np.concatenate([tail, feats]) if len(tail) else feats
         self._observe("features")
         head = self._inv.push(feats)
         mups = getattr(self._inv, "last_mups", None)
         out = np.concatenate([head, self._inv.flush()])
+        if self._gate is not None:
+            out = self._gate.apply(out)
         tail_mups = getattr(self._inv, "last_mups", None)
         self.last_mups = None if mups is None or tail_mups is None else np.concatenate([mups, tail_mups])
         self._observe("inversion")
@@ -144,14 +162,18 @@ def _ignore(stage: str) -> None:
 
 
 def speech_to_params_and_mups(
-    model: SpeechModel, samples: np.ndarray, rate_hz: int | None = None
+    model: SpeechModel,
+    samples: np.ndarray,
+    rate_hz: int | None = None,
+    *,
+    noise_gate: NoiseGateConfig | None = NoiseGateConfig(),
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The live path over a whole utterance, keeping the mapper's MU parameters: ``(params (n, Dv),
     mups (n, A0) or None)`` (None when the model's mapper emits none)."""
     x = as_float_samples(samples)
     if rate_hz is not None and int(rate_hz) != model.sample_rate_hz:
         x = resample_audio(x, int(rate_hz), model.sample_rate_hz)
-    return _run_blocks(SpeechToParams(model), x)
+    return _run_blocks(SpeechToParams(model, noise_gate=noise_gate), x)
 
 
 PUSH_BLOCK_S = 10.0
@@ -184,13 +206,15 @@ def speech_to_params(
     mode: str = "stream",
     stream: StreamConfig = StreamConfig(),
     hmmi: HmmiConfig = HmmiConfig(),
+    noise_gate: NoiseGateConfig | None = NoiseGateConfig(),
 ) -> np.ndarray:
     """Whole utterance: ``(n,)`` samples at ``rate_hz`` (default the model's) -> ``(n_frames, n_visual)``.
 
     mode "stream" is exactly the live path (the same :class:`SpeechToParams` objects, with the model's
     readout and output stage); "batch" is batch HMMI (eq. 7 EM, HMM models only) on the same resampled
     audio, then the output stage: the paper's offline estimator, without the learned readout (which is
-    fitted on the live path's filtered posteriors, not HMMI's).
+    fitted on the live path's filtered posteriors, not HMMI's) and without the noise gate.
+    noise_gate: the live path's output noise gate (:class:`SpeechToParams`), None for none.
     """
     if mode not in ("stream", "batch"):
         raise ConfigError(f"mode must be 'stream' or 'batch', got {mode!r}")
@@ -206,7 +230,7 @@ def speech_to_params(
             f"({x.size} < {model.frontend.mfcc.window_len} samples at {model.sample_rate_hz} Hz)"
         )
     if mode == "stream":
-        return _run_blocks(SpeechToParams(model, stream=stream), x)[0]
+        return _run_blocks(SpeechToParams(model, stream=stream, noise_gate=noise_gate), x)[0]
     assert isinstance(model, AvModel)  # refused above otherwise; narrows the type for what follows
     fe = model.front_end()
     oa = np.concatenate([fe.push(x), fe.flush()])

@@ -5,6 +5,7 @@ mfcc      MfccConfig, MfccStream (MFCCs on the exact 30 fps grid), mfcc (whole s
 cmvn      CmvnConfig, RunningCmvn (warm-started, speech-gated running mean/variance), mel_level_db
 gain      InputGainConfig, InputGain (run-time input gain to the training speech level, causal)
 level     LevelNormConfig, LevelTracker (the speech peak and noise floor per stream: gain-invariant c0)
+noisegate NoiseGateConfig, NoiseGate (a room's steady noise alone fades the output to the rest pose)
 context   ContextStacker, stack_context (+-tc frames of context)
 frontend  FrontEndConfig, FrontEnd (MFCC -> CMVN -> context), extract_features, raw_mfcc_with_level
 resample  StreamingResampler (any input rate -> the model's, chunk-invariant), resample_audio (whole signal)
@@ -23,6 +24,7 @@ from realtime_core.features.mfcc import (
     mel_filterbank,
     mfcc,
 )
+from realtime_core.features.noisegate import NoiseGate, NoiseGateConfig
 
 __all__ = [
     "CmvnConfig",
@@ -35,6 +37,8 @@ __all__ = [
     "LevelTracker",
     "MfccConfig",
     "MfccStream",
+    "NoiseGate",
+    "NoiseGateConfig",
     "RunningCmvn",
     "extract_features",
     "frame_log_energy_db",

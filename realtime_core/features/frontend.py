@@ -129,6 +129,9 @@ class FrontEnd:
         self._tail = (
             _CompiledTail(config, self._level, self._cmvn) if kernel == "numba" and config.level_norm is None else None
         )
+        self.last_level_db = np.zeros(0)
+        """The levels (k,) dB (:func:`mel_level_db` of c0, before any gate) of the MFCC frames the last push/flush
+        computed, in order: frame t of the stream is row t's centre (the output noise gate reads them)."""
 
     def reset(self) -> None:
         if self._tail is not None:
@@ -149,15 +152,22 @@ class FrontEnd:
     def push(self, samples: np.ndarray) -> np.ndarray:
         if self._gain is not None:
             samples = self._gain.push(as_float_samples(samples))
+        raw = self._frames(self._mfcc.push(samples))
         if self._tail is not None:
-            return self._tail.push(self._mfcc.push(samples), final=False)
-        return self._ctx.push(self._normalise(self._mfcc.push(samples)))
+            return self._tail.push(raw, final=False)
+        return self._ctx.push(self._normalise(raw))
 
     def flush(self) -> np.ndarray:
+        raw = self._frames(self._mfcc.flush())
         if self._tail is not None:
-            return self._tail.push(self._mfcc.flush(), final=True)
-        rows = self._ctx.push(self._normalise(self._mfcc.flush()))
+            return self._tail.push(raw, final=True)
+        rows = self._ctx.push(self._normalise(raw))
         return np.concatenate([rows, self._ctx.flush()])
+
+    def _frames(self, c0_ceps: np.ndarray) -> np.ndarray:
+        """Raw ``[c0, c1..] (k, n_ceps + 1)`` as computed; keeps their levels."""
+        self.last_level_db = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+        return c0_ceps
 
     def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
         ceps, level = self._level.push(c0_ceps)

@@ -33,7 +33,9 @@ def _run(model: AvModel, x: np.ndarray, rate_hz: int, lag: int) -> np.ndarray:
     # A small likelihood scale keeps the posteriors soft: one-hot posteriors (a random model's 35
     # context dims make them so at kappa 1) would hide the smoothing's dependence on later frames.
     stream = StreamConfig(lag=lag, dtype="float64", likelihood_scale=0.01)
-    chain = SpeechToParams(model, rate_hz=rate_hz, stream=stream)
+    # Without the output noise gate: it would rest this steady noise, and a one-sample click (+0.04 dB) does not open
+    # it. It cannot add delay: it returns every row in the push that produced it, looking ahead tc frames at most.
+    chain = SpeechToParams(model, rate_hz=rate_hz, stream=stream, noise_gate=None)
     return np.concatenate([chain.push(x), chain.flush()])
 
 

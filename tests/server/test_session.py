@@ -46,6 +46,21 @@ def test_session_params_equal_speech_to_params(model):
     assert [a.start for a in audio] == list(np.cumsum([0] + [a.samples.size for a in audio])[:-1])
 
 
+def test_an_idle_microphone_serves_the_rest_pose(model):
+    """A live session at a microphone's 48 kHz fed only room hiss (-54 dBFS, int16, random pushes): after the noise
+    gate's warm-up and fade every served frame is the neutral face; the same session ungated moves."""
+    from realtime_core.features import NoiseGateConfig
+
+    settled = NoiseGateConfig().warmup_frames + NoiseGateConfig().release_frames
+    hiss = np.random.default_rng(4).standard_normal(3 * 48000) * 10 ** (-54 / 20)
+    pcm = np.rint(hiss * 32768).astype("<i2").tobytes()
+    _s, frames, _ = _session_params(model, pcm, 48000)
+    assert len(frames) == 90
+    np.testing.assert_array_equal(np.array([f.params for f in frames[settled:]]), 0.0)
+    ungated = speech_to_params(model, np.frombuffer(pcm, "<i2") / 32768.0, 48000, noise_gate=None)
+    assert np.abs(ungated[settled:]).max() > 0.01
+
+
 def test_session_resamples_and_mixes_down(model):
     from realtime_core.features.resample import resample_audio
 

@@ -1,0 +1,163 @@
+"""The output noise gate: room noise alone gives no motion, speech after it moves as without the gate,
+streaming equals whole, and the gate's own arithmetic on known levels."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from realtime_core import ConfigError
+from realtime_core.features import NoiseGate, NoiseGateConfig
+from realtime_core.pipeline import SpeechToParams, speech_to_params
+from tests.chunking import assert_chunk_invariant
+from tests.speech import speechlike
+
+RATE = 16000
+CFG = NoiseGateConfig()
+SETTLED = CFG.warmup_frames + CFG.release_frames
+"""Rows from here on are gated in steady noise (the warm-up, then the fade)."""
+
+
+def _noise(kind: str, seconds: float, dbfs: float, seed: int = 0) -> np.ndarray:
+    """Steady room-like noise (n,) at ``dbfs`` RMS: white, or pink (1/f by shaping the spectrum)."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(int(seconds * RATE))
+    if kind == "pink":
+        f = np.fft.rfftfreq(x.size, 1 / RATE)
+        x = np.fft.irfft(np.fft.rfft(x) / np.sqrt(np.maximum(f, 20.0)), x.size)
+    return x * 10 ** (dbfs / 20) / np.sqrt(np.mean(x**2))
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    from assets.modelfile import load_model
+
+    return load_model(None)
+
+
+@pytest.mark.parametrize(("kind", "dbfs"), [("white", -60.0), ("white", -54.0), ("pink", -54.0), ("white", -48.0)])
+def test_room_noise_alone_gives_no_motion(shipped, kind: str, dbfs: float):
+    """The user's case: an idle microphone in a room. Without the gate the shipped model mumbles (measured: mouth_open
+    0.04-0.05 IOD on average, up to 0.10); with it every parameter is exactly the rest pose once the warm-up and the
+    fade are over."""
+    x = _noise(kind, 4.0, dbfs)
+    off = speech_to_params(shipped, x, RATE, noise_gate=None)
+    on = speech_to_params(shipped, x, RATE)
+    assert off[SETTLED:, 2].max() > 0.03  # the defect, so the test can fail
+    np.testing.assert_array_equal(on[SETTLED:], 0.0)
+    np.testing.assert_array_equal(on[: CFG.warmup_frames], off[: CFG.warmup_frames])
+
+
+def test_speech_after_noise_moves_as_without_the_gate(shipped, shared_data):
+    """3 s of room noise, then a GRID s1 sentence with the same noise under it (its own leading pause included): from
+    the first word to the end the rows are those without the gate bit for bit, and the noise before is at rest."""
+    from assets.audio import read_audio
+    from assets.grid import read_words, sentences
+
+    s = sentences(shared_data / "video" / "grid_s1", split="train")[0]
+    speech = read_audio(s.video, rate_hz=RATE)[0].astype(np.float64)
+    lead = 3.0
+    x = _noise("white", lead, -54.0)
+    x = np.concatenate([x, speech + _noise("white", speech.size / RATE, -54.0, seed=1)])
+    off = speech_to_params(shipped, x, RATE, noise_gate=None)
+    on = speech_to_params(shipped, x, RATE)
+    first_word = next(a for a, _, w in read_words(s.align) if w not in ("sil", "sp"))
+    k = int(np.floor((lead + first_word) * 30))
+    np.testing.assert_array_equal(on[k:], off[k:])
+    assert off[k:, 2].max() > 0.1  # the sentence opens the mouth
+    # up to the frames that look ahead into the recording (its own leading pause is over the room's floor)
+    rest = int(lead * 30) - shipped.frontend.tc
+    np.testing.assert_array_equal(on[SETTLED:rest], 0.0)
+    assert off[SETTLED:rest, 2].max() > 0.03
+
+
+def test_streaming_equals_whole_sample_by_sample_and_in_random_chunks(shipped):
+    """Noise, a burst of speech-like sound and noise again: the gate closes, opens and closes in this input (its gains
+    take 0, 1 and values between), and the chain gives the same rows for any chunking."""
+    x = np.concatenate(
+        [_noise("white", 1.5, -54.0), 0.3 * speechlike(0.6, RATE, seed=2), _noise("white", 1.8, -54.0, seed=3)]
+    )
+    p = SpeechToParams(shipped)
+    np.concatenate([p.push(x), p.flush()])
+    assert p._gate is not None
+    gains = []
+    p.reset()
+    for i in range(0, x.size, 1600):
+        p.push(x[i : i + 1600])
+        gains.append(p._gate.gain)
+    p.flush()
+    gains.append(p._gate.gain)
+    g = np.concatenate(gains)
+    assert g.min() == 0.0 and g.max() == 1.0 and ((g > 0) & (g < 1)).sum() >= 6
+    assert_chunk_invariant(lambda: SpeechToParams(shipped), x, max_examples=8)
+
+
+def _gains(levels: np.ndarray, cfg: NoiseGateConfig = CFG, *, lookahead: int = 3, cuts=()) -> np.ndarray:
+    """The gate's gains for ``levels`` (one row of ones per frame), levels and rows pushed at ``cuts``, each row
+    after the levels it may look ahead to."""
+    gate = NoiseGate(cfg, lookahead=lookahead)
+    out = []
+    edges = [0, *cuts, len(levels)]
+    for a, b in itertools.pairwise(edges):
+        gate.push_levels(levels[a:b])
+        out.append(gate.apply(np.ones((max(b - lookahead - gate._row, 0), 1)))[:, 0])
+    out.append(gate.apply(np.ones((len(levels) - gate._row, 1)))[:, 0])
+    return np.concatenate(out)
+
+
+def test_gate_arithmetic_on_known_levels():
+    """Steady noise at -55 dB with a 5-frame sound 20 dB over it at frames 60-64 (an independent account of the
+    rules): closed after the warm-up's fade, fading in over the lookahead before the sound (1/4, 2/4, 3/4), open
+    through the hold after it, then fading out by 1/6 a frame."""
+    lv = np.full(150, -55.0)
+    lv[60:65] = -35.0
+    g = _gains(lv)
+    w, r = CFG.warmup_frames, CFG.release_frames
+    np.testing.assert_array_equal(g[:w], 1.0)
+    np.testing.assert_allclose(g[w : w + r], 1.0 - np.arange(1, r + 1) / r, atol=1e-12)
+    np.testing.assert_array_equal(g[w + r : 57], 0.0)
+    np.testing.assert_allclose(g[57:60], [0.25, 0.5, 0.75])
+    hold_end = 64 + CFG.hold_frames
+    np.testing.assert_array_equal(g[60 : hold_end + 1], 1.0)
+    np.testing.assert_allclose(g[hold_end + 1 : hold_end + 1 + r], 1.0 - np.arange(1, r + 1) / r, atol=1e-12)
+    np.testing.assert_array_equal(g[hold_end + r :], 0.0)
+    for cuts in ([1, 2, 3], [7, 59, 61, 100], list(range(1, 150))):
+        np.testing.assert_array_equal(_gains(lv, cuts=cuts), g)
+
+
+def test_digital_silence_does_not_drag_the_floor_down():
+    """A muted stretch (zeros: -100 dB) inside the room's noise leaves the floor where it was: the noise after it stays
+    gated. Were it tracked, the floor would fall 45 dB and the noise read as sound for the seconds the floor takes to
+    rise back."""
+    lv = np.concatenate([np.full(60, -55.0), np.full(30, -100.0), np.full(60, -55.0)])
+    g = _gains(lv)
+    np.testing.assert_array_equal(g[CFG.warmup_frames + CFG.release_frames :], 0.0)
+
+
+def test_digital_silence_alone_is_left_as_the_model_gives_it(shipped):
+    """Silence gives no motion: a take of digital silence is the model's own rest, row for row, with the gate as
+    without it; the warm-up starts at the first frame over digital silence (a stream that opens muted)."""
+    silence = np.zeros(2 * RATE)
+    np.testing.assert_array_equal(
+        speech_to_params(shipped, silence, RATE), speech_to_params(shipped, silence, RATE, noise_gate=None)
+    )
+    lv = np.concatenate([np.full(20, -100.0), np.full(60, -55.0)])
+    g = _gains(lv)
+    w, r = 20 + CFG.warmup_frames, CFG.release_frames
+    np.testing.assert_array_equal(g[:w], 1.0)
+    np.testing.assert_allclose(g[w : w + r], 1.0 - np.arange(1, r + 1) / r, atol=1e-12)
+    np.testing.assert_array_equal(g[w + r :], 0.0)
+
+
+def test_config_is_validated_and_rows_wait_for_their_levels():
+    for bad in (dict(margin_db=-1.0), dict(ramp_db=61.0), dict(hold_frames=-1), dict(release_frames=5000)):
+        with pytest.raises(ConfigError):
+            NoiseGateConfig(**bad)
+    with pytest.raises(ConfigError):
+        NoiseGate(CFG, lookahead=-1)
+    gate = NoiseGate(CFG, lookahead=3)
+    gate.push_levels(np.full(2, -50.0))
+    with pytest.raises(ConfigError, match="before its frame's level"):
+        gate.apply(np.ones((3, 4)))
