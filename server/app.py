@@ -76,6 +76,7 @@ from server.guard import (
 from server.http import HttpReply, HttpRouter
 from server.live import (
     FAIR_SLICE_S,
+    EndWake,
     HeldViewers,
     Hold,
     LiveSession,
@@ -591,19 +592,10 @@ class FacecastServer:
                 _handled(ws)
             if live is None:
                 return
-            # Each message is awaited directly under one timeout (the idle limit), not as a task raced
-            # against the shutdown event: a block then reaches the session one loop turn after it
-            # arrives instead of three, and under a flood of other connections' work every turn
-            # counts. A shutdown cuts the wait short by moving the timeout to now.
+            # Each message is awaited directly under one timeout (the idle limit), which a shutdown moves
+            # to now (EndWake): under a flood of other connections' work every loop turn counts.
             loop = asyncio.get_running_loop()
-            waiting: list[asyncio.Timeout] = []
-            ended = asyncio.ensure_future(live.ended.wait())
-
-            def wake_on_shutdown(_: asyncio.Future) -> None:
-                for w in waiting:
-                    w.reschedule(loop.time())
-
-            ended.add_done_callback(wake_on_shutdown)
+            wake = EndWake(live.ended)
             fast = ws if isinstance(ws, FacecastConnection) else None
             if fast is not None:
                 self._fast_feed(fast, proto, live)
@@ -623,8 +615,7 @@ class FacecastServer:
                                 # waiting, so no idle timer (a Timeout and a timer handle per block).
                                 msg = await ws.recv()
                             else:
-                                async with asyncio.timeout_at(idle_from + idle_s) as timeout:
-                                    waiting.append(timeout)
+                                async with wake.until(idle_from + idle_s):
                                     msg = await ws.recv()
                         except TimeoutError:
                             if live.ended.is_set():
@@ -638,8 +629,6 @@ class FacecastServer:
                             actions = proto.connection_lost()
                         else:
                             actions, received, idle_from = proto.receive(msg), True, loop.time()
-                        finally:
-                            waiting.clear()
                     await self._perform(ws, proto, actions, live)
                     if received:
                         _handled(ws)
@@ -652,7 +641,7 @@ class FacecastServer:
                             share = 0.0
                             await asyncio.sleep(0)
             finally:
-                ended.cancel()
+                wake.close()
                 if fast is not None:
                     fast.sink = None
         finally:

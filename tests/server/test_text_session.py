@@ -473,6 +473,40 @@ def test_a_server_stopping_ends_a_text_session_at_once_with_1001(model, backend,
     assert idx == list(range(len(idx))) and len(idx) < 8 * spoken["frames"]  # not played out
 
 
+def test_a_server_stopping_while_a_dropped_source_plays_out_ends_it_at_once(model, backend):
+    """A source that drops without `end` has its accepted speech played out in real time; a server stopping
+    meanwhile waited for all of it (the play-out did not look at the shutdown): stop() with ~30 s queued took
+    until the speech had played. Now the viewers get 1001 "server shutting down" and the rest is dropped."""
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        srv.text_backend = backend
+        await srv.start()
+        stopped = None
+        try:
+            ws = await connect(srv.url.replace("http", "ws") + "/text")
+            await ws.send(json.dumps({"type": "start", "session": "gone", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="gone", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG * 8}))  # ~30 s of speech
+                spoken = json.loads(await ws.recv())
+                assert spoken["type"] == "spoken"
+                ws.transport.abort()  # dropped: its speech plays out to the viewer (nothing accepted is lost)...
+                await asyncio.sleep(0.5)
+                stopped = asyncio.ensure_future(srv.stop())  # ...unless the server stops
+                await asyncio.wait_for(asyncio.shield(stopped), 10)  # it waited for the speech to play out
+                got = await asyncio.wait_for(collect, 10)
+            return spoken, got
+        finally:
+            await (stopped if stopped is not None else srv.stop())
+
+    spoken, got = asyncio.run(asyncio.wait_for(main(), 60))
+    assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(len(idx))) and 0 < len(idx) < 8 * spoken["frames"]  # not played out
+
+
 def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on(model, backend):
     """Barge-in: `{"type": "cancel"}` drops every frame not yet released (the sentence playing and those queued,
     counted in the reply), eases the mouth from the last frame released to rest over RestPauses.ramp_s with
