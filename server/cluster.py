@@ -93,6 +93,27 @@ ENDED_KEEP_MS = 10_000  # how long a session's end record outlives it: longer th
 LOST = (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
 
 
+def check_reachable(url: str, timeout_s: float = 2.0) -> None:
+    """Raise ServerError ``cannot reach Redis at URL: REASON`` unless a Redis at ``url`` answers a PING within
+    ``timeout_s``. ``facecast serve`` asks before it loads its model and head (seconds): a wrong address was said
+    only once the server started, 13.8 s after the command (``Cluster.start`` still asks, for an embedder)."""
+    import redis
+    from redis.exceptions import RedisError
+
+    client = redis.Redis.from_url(url, socket_connect_timeout=timeout_s, socket_timeout=timeout_s)
+    try:
+        client.ping()
+    except (RedisError, OSError) as exc:
+        raise ServerError(unreachable(url, exc)) from None
+    finally:
+        client.close()
+
+
+def unreachable(url: str, exc: BaseException) -> str:
+    """The one line saying a Redis cannot be reached (its password hidden)."""
+    return f"cannot reach Redis at {shown_url(url)}: {exc}"
+
+
 def shown_url(url: str) -> str:
     """``url`` with its password (``redis://user:PASSWORD@host`` or a ``password=`` query field) shown as
     ``***``, for start-up lines, errors and logs: docs/deploy.md keeps a Redis password in the config
@@ -363,7 +384,7 @@ class Cluster:
             await self.redis.ping()
         except (RedisError, OSError) as exc:
             await self.redis.aclose()
-            raise ServerError(f"cannot reach Redis at {shown_url(self.url)}: {exc}") from None
+            raise ServerError(unreachable(self.url, exc)) from None
         self.up = True
         self._up_since = time.monotonic()
         self._tasks = [

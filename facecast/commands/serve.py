@@ -59,6 +59,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_head_options(p, head=False)
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
     p.add_argument(
+        "--redis",
+        default=argparse.SUPPRESS,
+        metavar="URL",
+        help="join the cluster sharing this Redis (redis://HOST:PORT/DB; default: the config's redis_url, else "
+        "none: one process; docs/deploy.md)",
+    )
+    p.add_argument(
         "--token-env",
         default=None,
         metavar="VAR",
@@ -144,12 +151,17 @@ def run(args: argparse.Namespace) -> int:
         "workers": getattr(args, "workers", None),
         "worker_mode": getattr(args, "worker_mode", None),
         "auto_gain": getattr(args, "auto_gain", None),  # None when not given: a config file's value stands
+        "redis_url": getattr(args, "redis", None),
     }
     config = (
         ServerConfig.from_toml(args.config, **overrides)
         if args.config
         else ServerConfig(**{k: v for k, v in overrides.items() if v is not None})
     )
+    if config.redis_url is not None:
+        from server.cluster import check_reachable
+
+        check_reachable(config.redis_url)  # before the model and head load (seconds): a wrong address at once
     model = load_speech_model(args.mapper, args.model)
     kind = "MLP mapper" if args.mapper == "mlp" else "model"
     print(

@@ -41,3 +41,20 @@ def test_a_mesh_head_is_announced_before_it_is_rigged(tmp_path, capsys):
     assert f"facecast serve: head {empty}: loading; a mesh with enough mouth targets is driven by them" in out, out
     assert "ready" not in out, out
     assert len(err.strip().splitlines()) == 1 and "empty.obj" in err, err
+
+
+def test_a_wrong_redis_address_fails_before_the_model_loads(tmp_path, capsys):
+    """`serve --redis redis://127.0.0.1:PORT` with nothing there said so only once the server started, after its
+    model and head had loaded (13.8 s). It is asked first: one line naming the address, exit 2, nothing loaded (the
+    model named here does not even exist: its error would come first otherwise)."""
+    import socket
+
+    with socket.socket() as held:  # bound, never listening: a connection to it is refused
+        held.bind(("127.0.0.1", 0))
+        url = f"redis://127.0.0.1:{held.getsockname()[1]}/0"
+        missing = tmp_path / "missing.npz"
+        assert main(["serve", "--port", "0", "--no-head", "--model", str(missing), "--redis", url]) == 2
+    out, err = capsys.readouterr()
+    assert "facecast serve: model" not in out and "listening" not in out, out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"cannot reach Redis at {url}: " in lines[0] and "refused" in lines[0], err
