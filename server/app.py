@@ -71,6 +71,7 @@ from server.guard import (
     IncidentLog,
     IngestPacer,
     host_allowed,
+    http_url,
     origin_allowed,
 )
 from server.http import HttpReply, HttpRouter
@@ -314,7 +315,7 @@ class FacecastServer:
 
     @property
     def url(self) -> str:
-        return f"http://{self.config.host}:{self.port}"
+        return http_url(self.config.host, self.port)
 
     async def stop(self) -> None:
         """Graceful shutdown: end every session (viewers get their last frames, then 1001), wait for
