@@ -63,6 +63,7 @@ from server.errors import (
     ProtocolViolation,
     ServerConfigError,
     ServerError,
+    ServerSideClose,
 )
 from server.eventloop import running_loop_name
 from server.guard import (
@@ -531,6 +532,8 @@ class FacecastServer:
                 await handle_text(self, ws)
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+        except ServerSideClose as exc:  # normal operation (the hand-off to a connection worker), said where it happens
+            await self.close_ws(ws, exc.code, exc.reason)
         except ProtocolViolation as exc:
             self.incidents.client_error(exc.code, exc.reason, time.monotonic())
             await self.close_ws(ws, exc.code, exc.reason)

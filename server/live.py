@@ -32,7 +32,7 @@ from websockets.protocol import OPEN
 
 from realtime_core.face.keyframes import MorphRig
 from server.describe import summary
-from server.errors import AudioFormatError, IngestOverrun, ProtocolViolation
+from server.errors import AudioFormatError, IngestOverrun, ServerSideClose
 from server.guard import IngestPacer
 from server.session import Frame as VideoFrame
 from server.session import Output, Session, morph_delta_payloads
@@ -365,13 +365,17 @@ class HeldViewers:
                 hold.opened.set_result(live)
         return [h.joined for h in holds]
 
-    def refuse(self, name: str | None, code: int, reason: str) -> None:
-        """Close the viewers held for session ``name`` (None: every one) with ``code`` and ``reason``."""
+    def refuse(self, name: str | None, code: int, reason: str) -> int:
+        """Close the viewers held for session ``name`` (None: every one) with ``code`` and ``reason`` (the server's
+        own: the hand-off to a connection worker, a shutdown); returns how many were held."""
         names = list(self._held) if name is None else [name]
+        n_held = 0
         for n in names:
             for hold in self._held.pop(n, []):
                 if not hold.opened.done():
-                    hold.opened.set_exception(ProtocolViolation(code, reason))
+                    hold.opened.set_exception(ServerSideClose(code, reason))
+                    n_held += 1
+        return n_held
 
 
 class EndWake:
