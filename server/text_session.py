@@ -56,6 +56,8 @@ from server.timing import StageTimes
 from wire import protocol as P
 
 FPS = 30
+MAX_VOICE_CHARS = 64
+"""A start's ``voice`` is an espeak-ng voice name (``en-gb-x-rp``): longer is refused before it is looked up."""
 REJECTED_TEXT_CHARS = 200
 """A ``rejected`` reply quotes the text it refuses up to this many characters (a piece may hold 5000)."""
 FRAGMENT_STALLS = 2.0
@@ -339,8 +341,12 @@ async def handle_text(server, ws: ServerConnection) -> None:
     if not isinstance(name, str) or not P.SESSION_NAME.match(name):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
     voice = start.get("voice")
-    if voice is not None and not isinstance(voice, str):
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "voice must be a string")
+    if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
+        # quoted short: a 100,000-character voice was quoted whole, and the close frame's limit cut off the voices
+        got = reason_value(voice)
+        raise ProtocolViolation(
+            P.CLOSE_BAD_REQUEST, f"voice must be a name of at most {MAX_VOICE_CHARS} characters, got {got}"
+        )
     # `{"voice": "es"}` alone was refused (Spanish voice, English by default): the voice names its language
     infer = backend.language_of_voice
     language = start["language"] if "language" in start else infer(voice) if infer is not None else "en"

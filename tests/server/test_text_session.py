@@ -387,6 +387,24 @@ def test_text_session_refuses_bad_starts(model, backend):
     assert code == P.CLOSE_BAD_REQUEST and "voice" in reason
 
 
+def test_an_overlong_voice_is_refused_quoted_short(model, backend):
+    """A start whose voice held 100,000 characters was answered with all of them quoted in the reason (the close
+    frame then cut it to its first 123 bytes: the voice's own characters, not what was wrong)."""
+
+    async def attempt():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "x", "voice": "x" * 100_000}))
+            with contextlib.suppress(ConnectionClosed):
+                await ws.recv()
+            return ws.close_code, ws.close_reason
+
+    code, reason = asyncio.run(attempt())
+    assert code == P.CLOSE_BAD_REQUEST and reason.startswith("voice must be a name of at most 64 characters, got 'x"), (
+        reason
+    )
+    assert reason.endswith("...") and len(reason) < 123, reason  # the repr cut to 40 characters
+
+
 def test_a_voice_without_a_language_speaks_the_voices_language(model, backend):
     """`{"voice": "es"}` and no language was refused (4400: "es" is not an English voice) while `facecast say
     --voice es` speaks Spanish: the language is inferred from the voice the same way (assets.tts.language_of_voice)."""
