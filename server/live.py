@@ -422,9 +422,9 @@ class _EndOrDeadline:
         self.wake._waits.append(self.timeout)
         return self.timeout
 
-    async def __aexit__(self, *exc: Any) -> bool | None:
+    async def __aexit__(self, *exc: Any) -> None:
         self.wake._waits.remove(self.timeout)
-        return await self.timeout.__aexit__(*exc)
+        await self.timeout.__aexit__(*exc)  # raises TimeoutError for a wait it cut short; never suppresses
 
 
 class LiveSession:
