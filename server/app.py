@@ -47,7 +47,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.frames import DATA_OPCODES, Frame, Opcode
 from websockets.http11 import Request, Response
-from websockets.protocol import Event
+from websockets.protocol import OPEN, Event
 from websockets.server import ServerProtocol
 
 from assets.heads.head import Head
@@ -183,6 +183,7 @@ class FacecastServer:
         self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
         self.http.route("/sessions", self._sessions_reply)
         self.clients = ConnectionCounter(config.max_connections_per_client)
+        self._handled: set[ServerConnection] = set()  # WebSocket connections whose handler runs (stop() tells them)
         self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
         self._gc_pauses: GcPauses | None = None
@@ -329,6 +330,10 @@ class FacecastServer:
         deadline = time.monotonic() + self.config.close_timeout_s
         while self.sessions and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
+        # Connections with no session to end (a source that had not sent its start, one whose enrolment was being
+        # adapted) are told why as the sessions' were: the listener's own close said 1001 with no reason.
+        left = [ws for ws in self._handled if ws.protocol.state is OPEN]
+        await asyncio.gather(*(self.close_ws(ws, P.CLOSE_GOING_AWAY, "server shutting down") for ws in left))
         if self._server is not None:
             self._server.close(close_connections=True)
             await self._server.wait_closed()
@@ -356,8 +361,10 @@ class FacecastServer:
         return task
 
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
-        """Close one connection with a code and reason (counted in metrics)."""
-        self.closes[code] += 1
+        """Close one connection with a code and reason (counted in metrics when this call closes it: a shutdown and
+        the connection's own handler may both ask)."""
+        if ws.protocol.state is OPEN:
+            self.closes[code] += 1
         with contextlib.suppress(ConnectionClosed):
             await ws.close(code, SP.fit_close_reason(reason))
 
@@ -519,6 +526,7 @@ class FacecastServer:
         path = urllib.parse.urlsplit(_request_path(ws)).path
         client = _client_address(ws)
         self.clients.add(client)
+        self._handled.add(ws)
         try:
             if path == "/ingest" and self.config.role == "edge":
                 await self._forward_ingest(ws)
@@ -544,6 +552,7 @@ class FacecastServer:
             await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")  # never a traceback or path
         finally:
             self.clients.remove(client)
+            self._handled.discard(ws)
 
     async def _forward_ingest(self, ws: ServerConnection) -> None:
         """An edge node relays an ingest to the least loaded computing node, both ways, close code
