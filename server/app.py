@@ -47,7 +47,7 @@ from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed, WebSocketException
 from websockets.frames import DATA_OPCODES, Frame, Opcode
 from websockets.http11 import Request, Response
-from websockets.protocol import Event
+from websockets.protocol import OPEN, Event
 from websockets.server import ServerProtocol
 
 from assets.heads.head import Head
@@ -63,6 +63,7 @@ from server.errors import (
     ProtocolViolation,
     ServerConfigError,
     ServerError,
+    ServerSideClose,
 )
 from server.eventloop import running_loop_name
 from server.guard import (
@@ -71,11 +72,13 @@ from server.guard import (
     IncidentLog,
     IngestPacer,
     host_allowed,
+    http_url,
     origin_allowed,
 )
 from server.http import HttpReply, HttpRouter
 from server.live import (
     FAIR_SLICE_S,
+    EndWake,
     HeldViewers,
     Hold,
     LiveSession,
@@ -180,6 +183,7 @@ class FacecastServer:
         self.http.route("/metrics", lambda: HttpReply.json(self.metrics()))
         self.http.route("/sessions", self._sessions_reply)
         self.clients = ConnectionCounter(config.max_connections_per_client)
+        self._handled: set[ServerConnection] = set()  # WebSocket connections whose handler runs (stop() tells them)
         self.connect_rate = ConnectionRate(config.connect_rate_per_s, config.connect_burst)
         self.incidents = IncidentLog(log)
         self._gc_pauses: GcPauses | None = None
@@ -313,7 +317,7 @@ class FacecastServer:
 
     @property
     def url(self) -> str:
-        return f"http://{self.config.host}:{self.port}"
+        return http_url(self.config.host, self.port)
 
     async def stop(self) -> None:
         """Graceful shutdown: end every session (viewers get their last frames, then 1001), wait for
@@ -326,6 +330,10 @@ class FacecastServer:
         deadline = time.monotonic() + self.config.close_timeout_s
         while self.sessions and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
+        # Connections with no session to end (a source that had not sent its start, one whose enrolment was being
+        # adapted) are told why as the sessions' were: the listener's own close said 1001 with no reason.
+        left = [ws for ws in self._handled if ws.protocol.state is OPEN]
+        await asyncio.gather(*(self.close_ws(ws, P.CLOSE_GOING_AWAY, "server shutting down") for ws in left))
         if self._server is not None:
             self._server.close(close_connections=True)
             await self._server.wait_closed()
@@ -353,8 +361,10 @@ class FacecastServer:
         return task
 
     async def close_ws(self, ws: ServerConnection, code: int, reason: str) -> None:
-        """Close one connection with a code and reason (counted in metrics)."""
-        self.closes[code] += 1
+        """Close one connection with a code and reason (counted in metrics when this call closes it: a shutdown and
+        the connection's own handler may both ask)."""
+        if ws.protocol.state is OPEN:
+            self.closes[code] += 1
         with contextlib.suppress(ConnectionClosed):
             await ws.close(code, SP.fit_close_reason(reason))
 
@@ -516,6 +526,7 @@ class FacecastServer:
         path = urllib.parse.urlsplit(_request_path(ws)).path
         client = _client_address(ws)
         self.clients.add(client)
+        self._handled.add(ws)
         try:
             if path == "/ingest" and self.config.role == "edge":
                 await self._forward_ingest(ws)
@@ -529,6 +540,8 @@ class FacecastServer:
                 await handle_text(self, ws)
             else:
                 raise ProtocolViolation(P.CLOSE_NOT_FOUND, "no WebSocket endpoint here (use /ingest or /view)")
+        except ServerSideClose as exc:  # normal operation (the hand-off to a connection worker), said where it happens
+            await self.close_ws(ws, exc.code, exc.reason)
         except ProtocolViolation as exc:
             self.incidents.client_error(exc.code, exc.reason, time.monotonic())
             await self.close_ws(ws, exc.code, exc.reason)
@@ -539,6 +552,7 @@ class FacecastServer:
             await self.close_ws(ws, P.CLOSE_INTERNAL, "internal server error")  # never a traceback or path
         finally:
             self.clients.remove(client)
+            self._handled.discard(ws)
 
     async def _forward_ingest(self, ws: ServerConnection) -> None:
         """An edge node relays an ingest to the least loaded computing node, both ways, close code
@@ -591,19 +605,10 @@ class FacecastServer:
                 _handled(ws)
             if live is None:
                 return
-            # Each message is awaited directly under one timeout (the idle limit), not as a task raced
-            # against the shutdown event: a block then reaches the session one loop turn after it
-            # arrives instead of three, and under a flood of other connections' work every turn
-            # counts. A shutdown cuts the wait short by moving the timeout to now.
+            # Each message is awaited directly under one timeout (the idle limit), which a shutdown moves
+            # to now (EndWake): under a flood of other connections' work every loop turn counts.
             loop = asyncio.get_running_loop()
-            waiting: list[asyncio.Timeout] = []
-            ended = asyncio.ensure_future(live.ended.wait())
-
-            def wake_on_shutdown(_: asyncio.Future) -> None:
-                for w in waiting:
-                    w.reschedule(loop.time())
-
-            ended.add_done_callback(wake_on_shutdown)
+            wake = EndWake(live.ended)
             fast = ws if isinstance(ws, FacecastConnection) else None
             if fast is not None:
                 self._fast_feed(fast, proto, live)
@@ -623,8 +628,7 @@ class FacecastServer:
                                 # waiting, so no idle timer (a Timeout and a timer handle per block).
                                 msg = await ws.recv()
                             else:
-                                async with asyncio.timeout_at(idle_from + idle_s) as timeout:
-                                    waiting.append(timeout)
+                                async with wake.until(idle_from + idle_s):
                                     msg = await ws.recv()
                         except TimeoutError:
                             if live.ended.is_set():
@@ -638,8 +642,6 @@ class FacecastServer:
                             actions = proto.connection_lost()
                         else:
                             actions, received, idle_from = proto.receive(msg), True, loop.time()
-                        finally:
-                            waiting.clear()
                     await self._perform(ws, proto, actions, live)
                     if received:
                         _handled(ws)
@@ -652,7 +654,7 @@ class FacecastServer:
                             share = 0.0
                             await asyncio.sleep(0)
             finally:
-                ended.cancel()
+                wake.close()
                 if fast is not None:
                     fast.sink = None
         finally:

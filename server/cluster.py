@@ -93,6 +93,43 @@ ENDED_KEEP_MS = 10_000  # how long a session's end record outlives it: longer th
 LOST = (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
 
 
+REFRESH_ROW = """
+local cur = redis.call('GET', KEYS[1])
+if cur then
+  local ok, row = pcall(cjson.decode, cur)
+  if ok and type(row) == 'table' and type(row.node) == 'string' and row.node ~= ARGV[2] then
+    return row.node
+  end
+end
+redis.call('SET', KEYS[1], ARGV[1], 'PX', ARGV[3])
+return false
+"""
+"""A heartbeat's refresh of one local session's row (KEYS[1]; ARGV: the row, this node, the TTL in ms), in one step
+in Redis: written unless the row names another node, whose name it returns (a session of that name opened there
+while this one was unregistered: Redis away, or restarted empty). Claims are SET NX (:meth:`Cluster.claim`)."""
+
+
+def check_reachable(url: str, timeout_s: float = 2.0) -> None:
+    """Raise ServerError ``cannot reach Redis at URL: REASON`` unless a Redis at ``url`` answers a PING within
+    ``timeout_s``. ``facecast serve`` asks before it loads its model and head (seconds): a wrong address was said
+    only once the server started, 13.8 s after the command (``Cluster.start`` still asks, for an embedder)."""
+    import redis
+    from redis.exceptions import RedisError
+
+    client = redis.Redis.from_url(url, socket_connect_timeout=timeout_s, socket_timeout=timeout_s)
+    try:
+        client.ping()
+    except (RedisError, OSError) as exc:
+        raise ServerError(unreachable(url, exc)) from None
+    finally:
+        client.close()
+
+
+def unreachable(url: str, exc: BaseException) -> str:
+    """The one line saying a Redis cannot be reached (its password hidden)."""
+    return f"cannot reach Redis at {shown_url(url)}: {exc}"
+
+
 def shown_url(url: str) -> str:
     """``url`` with its password (``redis://user:PASSWORD@host`` or a ``password=`` query field) shown as
     ``***``, for start-up lines, errors and logs: docs/deploy.md keeps a Redis password in the config
@@ -342,6 +379,7 @@ class Cluster:
         self.replays_answered = 0
         self._up_since = 0.0  # time.monotonic() when Redis was last seen back (or first reached)
         self.feeds_lost = 0
+        self.names_yielded = 0  # local sessions whose name another node held when Redis came back (_yield_name)
 
     @property
     def _client(self) -> aioredis.Redis:
@@ -363,7 +401,7 @@ class Cluster:
             await self.redis.ping()
         except (RedisError, OSError) as exc:
             await self.redis.aclose()
-            raise ServerError(f"cannot reach Redis at {shown_url(self.url)}: {exc}") from None
+            raise ServerError(unreachable(self.url, exc)) from None
         self.up = True
         self._up_since = time.monotonic()
         self._tasks = [
@@ -403,6 +441,7 @@ class Cluster:
             "publish_dropped": self.publish_dropped,
             "replays_answered": self.replays_answered,
             "feeds_lost": self.feeds_lost,
+            "names_yielded": self.names_yielded,
         }
 
     # -- sessions this node owns --------------------------------------------------------------------------
@@ -465,6 +504,25 @@ class Cluster:
             await self._client.delete(session_key(live.name))
         except (RedisError, OSError) as exc:
             self._down(exc)
+
+    def _yield_name(self, name: str, live: LiveSession, owner: str) -> None:
+        """Another node registered a live session of this name while this node's was unregistered (both opened
+        while Redis was away, or this one then): the name is the other's in the cluster. This node's session
+        goes on for its own ingest and viewers, no longer registered or published (its end publishes nothing and
+        deletes no row). Before, both nodes rewrote the row every heartbeat and published on the one channel: a
+        viewer on a third node got the two sessions' frames interleaved, then 1001 "session lost"."""
+        if self.local.get(name) is not live:
+            return
+        del self.local[name]
+        self.wanted.pop(name, None)
+        self.names_yielded += 1
+        log.warning(
+            "session %r is also live on node %s (both opened while Redis was away): the cluster's is %s's; this "
+            "node's goes on for its own ingest and viewers, unpublished",
+            name,
+            owner,
+            owner,
+        )
 
     def wants(self, name: str) -> set[tuple[int, int]]:
         """(kind, encoding) pairs other nodes watch of local session ``name`` (audio: KIND_AUDIO, int16)."""
@@ -558,15 +616,19 @@ class Cluster:
             json.dumps({"node": self.node, "url": self.advertise, "role": self.role, "sessions": len(self.local)}),
             px=self.ttl_ms,
         )
-        for name, live in self.local.items():
-            pipe.set(session_key(name), self._row(live), px=self.ttl_ms)
+        local = list(self.local.items())
+        for name, live in local:  # refreshed, unless another node holds the name (below)
+            pipe.eval(REFRESH_ROW, 1, session_key(name), self._row(live), self.node, self.ttl_ms)
         for name, feed in self.feeds.items():
             for kind, enc in {(v.kind, v.encoding) for v in feed.viewers} | (
                 {(P.KIND_AUDIO, P.ENC_INT16)} if any(v.audio for v in feed.viewers) else set()
             ):
                 pipe.set(want_key(name, kind, enc), self.node, px=self.ttl_ms)
             pipe.set(viewers_key(name, self.node), len(feed.viewers), px=self.ttl_ms)
-        await pipe.execute()
+        results = await pipe.execute()
+        for (name, live), owner in zip(local, results[1 : 1 + len(local)]):
+            if owner is not None:
+                self._yield_name(name, live, owner.decode() if isinstance(owner, bytes) else str(owner))
         # The owner's side: which kinds of its sessions other nodes want now.
         wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
         self._wanted_meanwhile = set()

@@ -28,6 +28,12 @@ class ProtocolViolation(ServerError):
         self.reason = reason
 
 
+class ServerSideClose(ProtocolViolation):
+    """A connection closed for the server's own reason, not the peer's fault: a viewer held for a session that
+    opened in a connection worker told to connect again (4004, the hand-off to that worker), held viewers of a
+    server stopping (1001). Closed with its code and reason as any violation, not logged as a client error."""
+
+
 class AudioFormatError(ServerError, ValueError):
     """A block of audio cannot be used: partial samples, NaN/inf or out-of-range floats, wrong shape."""
 

@@ -78,6 +78,31 @@ def host_allowed(host_header: str | None, *, bound_host: str, allowed: tuple[str
     return True
 
 
+WILDCARD_HOSTS = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}
+"""A server bound to every interface is reached from its own machine at the loopback address."""
+
+
+def http_url(host: str, port: int) -> str:
+    """``http://host:port``, an IPv6 address in brackets (``http://::1:8765`` is no URL)."""
+    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+
+
+def client_url(bound_host: str, port: int, allowed: tuple[str, ...] | None) -> str | None:
+    """A URL of a server bound to ``bound_host``:``port`` whose Host the Host check (:func:`host_allowed`)
+    accepts: the bound address (loopback for every interface), else a loopback name ``allowed`` lists for a server
+    on loopback; None when ``allowed`` admits none of them (clients must come by a name it lists: a proxy, DNS).
+    ``facecast serve`` printed the bound address whatever ``allowed_hosts`` said: every request to it was 403."""
+    host = WILDCARD_HOSTS.get(bound_host, bound_host)
+    candidates = [host]
+    if _is_loopback(host):
+        candidates += sorted(LOOPBACK_NAMES - {host})
+    for name in candidates:
+        url = http_url(name, port)
+        if host_allowed(urllib.parse.urlsplit(url).netloc, bound_host=bound_host, allowed=allowed):
+            return url
+    return None
+
+
 def origin_allowed(origin: str | None, host_header: str | None, allowed: tuple[str, ...]) -> bool:
     """Is a WebSocket upgrade with this ``Origin`` acceptable? No Origin (not a browser): yes;
     ``null`` (sandboxed frames, file: pages): no; same origin as ``Host``, or listed: yes."""

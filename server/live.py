@@ -23,7 +23,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from websockets.asyncio.server import ServerConnection, broadcast
@@ -32,7 +32,7 @@ from websockets.protocol import OPEN
 
 from realtime_core.face.keyframes import MorphRig
 from server.describe import summary
-from server.errors import AudioFormatError, IngestOverrun, ProtocolViolation
+from server.errors import AudioFormatError, IngestOverrun, ServerSideClose
 from server.guard import IngestPacer
 from server.session import Frame as VideoFrame
 from server.session import Output, Session, morph_delta_payloads
@@ -365,13 +365,66 @@ class HeldViewers:
                 hold.opened.set_result(live)
         return [h.joined for h in holds]
 
-    def refuse(self, name: str | None, code: int, reason: str) -> None:
-        """Close the viewers held for session ``name`` (None: every one) with ``code`` and ``reason``."""
+    def refuse(self, name: str | None, code: int, reason: str) -> int:
+        """Close the viewers held for session ``name`` (None: every one) with ``code`` and ``reason`` (the server's
+        own: the hand-off to a connection worker, a shutdown); returns how many were held."""
         names = list(self._held) if name is None else [name]
+        n_held = 0
         for n in names:
             for hold in self._held.pop(n, []):
                 if not hold.opened.done():
-                    hold.opened.set_exception(ProtocolViolation(code, reason))
+                    hold.opened.set_exception(ServerSideClose(code, reason))
+                    n_held += 1
+        return n_held
+
+
+class EndWake:
+    """Cuts a session handler's waits short when its session is ended from outside (the server stopping sets
+    :attr:`LiveSession.ended`): each wait runs under an ``asyncio.Timeout`` (a deadline, or None) that the end
+    moves to now, so the awaited call raises TimeoutError and the handler looks at ``ended``. One await per wait,
+    not a task raced against the end: an ingest's block then reaches its session one loop turn after it arrives
+    instead of three. The ingest (its idle limit) and the text session (its stall timer, the play-out after
+    `end` or after its source dropped) wait this one way."""
+
+    def __init__(self, ended: asyncio.Event) -> None:
+        self.ended = ended
+        self._loop = asyncio.get_running_loop()
+        self._waits: list[asyncio.Timeout] = []
+        self._watch = asyncio.ensure_future(ended.wait())
+        self._watch.add_done_callback(self._wake)
+
+    def _wake(self, watch: asyncio.Future) -> None:
+        if not watch.cancelled():  # cancelled: closed, the handler ended first
+            for t in self._waits:
+                if not t.expired():  # one that has just run out raises its TimeoutError already
+                    t.reschedule(self._loop.time())
+
+    def until(self, when: float | None) -> _EndOrDeadline:
+        """``async with wake.until(loop_time or None):`` a wait that raises TimeoutError at ``when`` or at the
+        session's end, whichever is first (at once when it has ended already)."""
+        return _EndOrDeadline(self, self._loop.time() if self.ended.is_set() else when)
+
+    def close(self) -> None:
+        self._watch.cancel()
+
+
+class _EndOrDeadline:
+    """One wait of :class:`EndWake` (a plain class: the ingest enters one per block)."""
+
+    __slots__ = ("timeout", "wake")
+
+    def __init__(self, wake: EndWake, when: float | None) -> None:
+        self.wake = wake
+        self.timeout = asyncio.timeout_at(when)
+
+    async def __aenter__(self) -> asyncio.Timeout:
+        await self.timeout.__aenter__()
+        self.wake._waits.append(self.timeout)
+        return self.timeout
+
+    async def __aexit__(self, *exc: Any) -> None:
+        self.wake._waits.remove(self.timeout)
+        await self.timeout.__aexit__(*exc)  # raises TimeoutError for a wait it cut short; never suppresses
 
 
 class LiveSession:

@@ -331,7 +331,9 @@ class Session:
         try:
             adapted, result = adapt_av_model(model, [x])
         except NotSpeechError as exc:  # a tone or noise: refused as the start's other bad enrolments are
-            raise ServerConfigError(f"enrol: {exc}") from None
+            # Or speech at another rate than the start's: ~50 s of LJ Speech (22050 Hz) sent as 48000 Hz was refused as
+            # "a tone, noise or music?" (as 8000 Hz it passes: slowed speech still sounds like speech).
+            raise ServerConfigError(f"enrol: {exc} Recorded at {self.config.sample_rate_hz} Hz?") from None
         except RealtimeCoreError as exc:
             raise AudioFormatError(f"the model rejected the enrolment audio: {exc}") from exc
         self.enrolment = dict(adapted.metadata.get("adaptation", {"frames": result.n_frames}))

@@ -329,8 +329,18 @@ class ConnectionWorkers:
                 return list(refused)
             self.owner[name] = shard
             # Viewers held here for it (view query wait) cannot follow a session into the worker: told to
-            # connect again, they are routed there (and held there until it opens, if they come before).
-            self.server.holds.refuse(name, P.CLOSE_NOT_FOUND, f"session {name!r} started in a worker: connect again")
+            # connect again, they are routed there (and held there until it opens, if they come before). Normal
+            # operation: one INFO line, not a client error per viewer (it was "closed a client connection: 4004").
+            reason = f"session {name!r} started in a worker: connect again"
+            n_held = self.server.holds.refuse(name, P.CLOSE_NOT_FOUND, reason)
+            if n_held:
+                log.info(
+                    "session %r opened in connection worker %d: %d viewer(s) held for it told to connect again "
+                    "(4004), to be handed to that worker",
+                    name,
+                    shard.slot,
+                    n_held,
+                )
             shard.names.add(name)
             if batch:
                 shard.batch.add(name)

@@ -56,6 +56,8 @@ from server.timing import StageTimes
 from wire import protocol as P
 
 FPS = 30
+MAX_VOICE_CHARS = 64
+"""A start's ``voice`` is an espeak-ng voice name (``en-gb-x-rp``): longer is refused before it is looked up."""
 REJECTED_TEXT_CHARS = 200
 """A ``rejected`` reply quotes the text it refuses up to this many characters (a piece may hold 5000)."""
 FRAGMENT_STALLS = 2.0
@@ -312,7 +314,7 @@ def _violation(kind: Any) -> NoReturn:
 
 async def handle_text(server, ws: ServerConnection) -> None:
     """The ``/text`` endpoint (protocol in docs/protocol.md)."""
-    from server.live import LiveSession, SentenceReplay, sessions_log
+    from server.live import EndWake, LiveSession, SentenceReplay, sessions_log
     from server.protocol import token_ok
 
     backend: TextBackend | None = getattr(server, "text_backend", None)
@@ -339,8 +341,12 @@ async def handle_text(server, ws: ServerConnection) -> None:
     if not isinstance(name, str) or not P.SESSION_NAME.match(name):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
     voice = start.get("voice")
-    if voice is not None and not isinstance(voice, str):
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "voice must be a string")
+    if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
+        # quoted short: a 100,000-character voice was quoted whole, and the close frame's limit cut off the voices
+        got = reason_value(voice)
+        raise ProtocolViolation(
+            P.CLOSE_BAD_REQUEST, f"voice must be a name of at most {MAX_VOICE_CHARS} characters, got {got}"
+        )
     # `{"voice": "es"}` alone was refused (Spanish voice, English by default): the voice names its language
     infer = backend.language_of_voice
     language = start["language"] if "language" in start else infer(voice) if infer is not None else "en"
@@ -468,32 +474,32 @@ async def handle_text(server, ws: ServerConnection) -> None:
         False when the server started stopping first (nothing waits for the rest of the speech then)."""
         reading: asyncio.Future | None = None
         try:
-            while not pace.done():
-                if stopping.done():
-                    return False
-                if reading is None:
-                    reading = asyncio.ensure_future(ws.recv())
-                await asyncio.wait({pace, reading, stopping}, return_when=asyncio.FIRST_COMPLETED)
-                if not reading.done():
-                    continue
-                try:
-                    raw = reading.result()
-                except ConnectionClosed:  # the source left after `end`: its speech plays out all the same
-                    ends: set[asyncio.Future[Any]] = {pace, stopping}
-                    await asyncio.wait(ends, return_when=asyncio.FIRST_COMPLETED)
-                    return pace.done()
-                reading = None
-                msg = _text_message(raw)
-                kind = msg.get("type")
-                if kind == "cancel":
-                    await reply(await cancel())
-                    queue.put_nowait(None)  # the session still ends, after the ease
-                elif kind == "text":
-                    text = msg.get("text")
-                    shown = text[:REJECTED_TEXT_CHARS] if isinstance(text, str) else None
-                    await reply({"type": "rejected", "text": shown, "reason": "after end: the session is ending"})
-                elif kind not in ("flush", "end"):
-                    _violation(kind)
+            async with wake.until(None):
+                while not pace.done():
+                    if reading is None:
+                        reading = asyncio.ensure_future(ws.recv())
+                    await asyncio.wait({pace, reading}, return_when=asyncio.FIRST_COMPLETED)
+                    if not reading.done():
+                        continue
+                    try:
+                        raw = reading.result()
+                    except ConnectionClosed:  # the source left after `end`: its speech plays out all the same
+                        await asyncio.wait({pace})
+                        return True
+                    reading = None
+                    msg = _text_message(raw)
+                    kind = msg.get("type")
+                    if kind == "cancel":
+                        await reply(await cancel())
+                        queue.put_nowait(None)  # the session still ends, after the ease
+                    elif kind == "text":
+                        text = msg.get("text")
+                        shown = text[:REJECTED_TEXT_CHARS] if isinstance(text, str) else None
+                        await reply({"type": "rejected", "text": shown, "reason": "after end: the session is ending"})
+                    elif kind not in ("flush", "end"):
+                        _violation(kind)
+        except TimeoutError:  # only the server stopping ends this wait
+            return False
         finally:
             if reading is not None:
                 reading.cancel()
@@ -502,20 +508,13 @@ async def handle_text(server, ws: ServerConnection) -> None:
     pace = asyncio.ensure_future(pacer())
     code, reason = P.CLOSE_NORMAL, "session ended"
     stalled = False  # a stall spoke the pending words and left a word fragment waiting
-    # A server stopping sets live.ended: the wait for the source's next message is cut short there, as an
-    # ingest's is. The text handler never looked: the server closed its socket after close_timeout_s (1001 with
-    # no reason), and the source's drop then played every accepted sentence out in real time before the
-    # process could exit (18.6 s after SIGTERM with 22 s of speech queued).
+    # A server stopping sets live.ended: every wait of this handler (the source's next message, the play-out after
+    # `end` or after the source dropped) is cut short there, as an ingest's is (EndWake). The text handler never
+    # looked: the server closed its socket after close_timeout_s (1001 with no reason), and the source's drop then
+    # played every accepted sentence out in real time before the process could exit (18.6 s after SIGTERM with
+    # 22 s of speech queued).
     loop = asyncio.get_running_loop()
-    waiting: list[asyncio.Timeout] = []
-    stopping = asyncio.ensure_future(live.ended.wait())
-
-    def wake_on_shutdown(ended: asyncio.Future) -> None:
-        if not ended.cancelled():  # cancelled: the session ended first
-            for w in waiting:
-                w.reschedule(loop.time())
-
-    stopping.add_done_callback(wake_on_shutdown)
+    wake = EndWake(live.ended)
     try:
         await ws.send(
             P.dumps(
@@ -534,12 +533,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
             try:
                 if live.ended.is_set():
                     raise TimeoutError
-                async with asyncio.timeout(wait_s if session.chunker.pending.strip() else None) as timeout:
-                    waiting.append(timeout)
-                    try:
-                        raw = await ws.recv()
-                    finally:
-                        waiting.clear()  # only a wait in progress is cut short
+                async with wake.until(loop.time() + wait_s if session.chunker.pending.strip() else None):
+                    raw = await ws.recv()
             except TimeoutError:  # the stream stalled mid-sentence: speak its whole words (later the fragment)
                 if live.ended.is_set():  # the server is stopping: what is not yet released is dropped
                     code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
@@ -606,13 +601,16 @@ async def handle_text(server, ws: ServerConnection) -> None:
         # The source dropped without `end`: what it was told was spoken plays out to the viewers, and its
         # pending text is spoken as `end` would (nothing accepted is lost); then the session ends. Not when the
         # server is stopping (its socket closed by the shutdown): nothing would wait for the speech.
-        if server.stopping:
+        try:
+            if server.stopping:
+                raise TimeoutError
+            async with wake.until(None):
+                await finish()
+        except TimeoutError:  # the server is stopping: what is not yet released is dropped
             code, reason = P.CLOSE_GOING_AWAY, "server shutting down"
-        else:
-            await finish()
     finally:
         pace.cancel()
-        stopping.cancel()
+        wake.close()
         if code == P.CLOSE_GOING_AWAY:
             # The source first: the session's end lets the server's stop go on to close every socket left with
             # 1001 and no reason, which the source's close (after the viewers') raced and sometimes lost.

@@ -59,6 +59,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_head_options(p, head=False)
     p.add_argument("--config", type=Path, default=None, help="TOML file with a [server] table (ServerConfig fields)")
     p.add_argument(
+        "--redis",
+        default=argparse.SUPPRESS,
+        metavar="URL",
+        help="join the cluster sharing this Redis (redis://HOST:PORT/DB; default: the config's redis_url, else "
+        "none: one process; docs/deploy.md)",
+    )
+    p.add_argument(
         "--token-env",
         default=None,
         metavar="VAR",
@@ -122,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
     from server.errors import ServerConfigError
     from server.eventloop import process_loop
     from server.eventloop import run as run_on_loop
+    from server.guard import WILDCARD_HOSTS, client_url, http_url
     from server.session import SessionConfig
     from server.sources import FileConfig, FileSource, MicConfig, MicSource, file_session_names
 
@@ -144,12 +152,17 @@ def run(args: argparse.Namespace) -> int:
         "workers": getattr(args, "workers", None),
         "worker_mode": getattr(args, "worker_mode", None),
         "auto_gain": getattr(args, "auto_gain", None),  # None when not given: a config file's value stands
+        "redis_url": getattr(args, "redis", None),
     }
     config = (
         ServerConfig.from_toml(args.config, **overrides)
         if args.config
         else ServerConfig(**{k: v for k, v in overrides.items() if v is not None})
     )
+    if config.redis_url is not None:
+        from server.cluster import check_reachable
+
+        check_reachable(config.redis_url)  # before the model and head load (seconds): a wrong address at once
     model = load_speech_model(args.mapper, args.model)
     kind = "MLP mapper" if args.mapper == "mlp" else "model"
     print(
@@ -197,11 +210,23 @@ def run(args: argparse.Namespace) -> int:
         if not ready.done():  # start-up failed (port taken, Redis unreachable): its one-line error
             run.result()
         endpoints = "/ingest, /view" + (", /text" if args.text else "")
-        print(
-            f"facecast serve: listening on {server.url} (ws {server.url.replace('http', 'ws')}{endpoints}); "
-            "Ctrl-C stops",
-            flush=True,
-        )
+        # A URL whose Host the server accepts (allowed_hosts): the bound address was printed whatever it said
+        url = client_url(config.host, server.port, config.allowed_hosts)
+        if url is not None:
+            everywhere = f", bound to {config.host or '*'}: every interface" if config.host in WILDCARD_HOSTS else ""
+            print(
+                f"facecast serve: listening on {url} (ws {url.replace('http', 'ws')}{endpoints}{everywhere}); "
+                "Ctrl-C stops",
+                flush=True,
+            )
+        else:
+            hosts = ", ".join(config.allowed_hosts or ())
+            print(
+                f"facecast serve: listening on {config.host} port {server.port} ({endpoints}); Ctrl-C stops. "
+                f"allowed_hosts admits only {hosts}: clients must come by one of those names (a proxy, DNS); "
+                f"{http_url(config.host, server.port)} itself is refused (403 Host not allowed)",
+                flush=True,
+            )
         listening = time.perf_counter()
         # What a client needs and what the server joined, said at start (a user found them only in the config file)
         if config.token is not None:

@@ -475,6 +475,55 @@ def test_redis_going_away_shows_on_health_and_nodes_recover(model_path, redis_se
     assert got_far.frames[-1].index == ended["frames"] - 1  # it went on to the end after the outage
 
 
+def test_a_name_opened_on_two_nodes_while_redis_was_away_has_one_owner_after(model_path, redis_server):
+    """Redis restarted under a running cluster: session "dup" streams on node a, watched from node c; while Redis is
+    away an ingest opens "dup" on node b too (a claim cannot be checked then: it opens locally). Both nodes used to
+    rewrite the row every heartbeat once Redis was back and both published on the one channel: c's viewer got the two
+    sessions' frames interleaved (indices going backwards 20 times in 87 frames), then 1001 "session lost: its node
+    stopped". Now the first to re-register keeps the name, the other's session goes on for its own ingest only."""
+    nodes = [_node(model_path, redis_server.url, n) for n in ("a", "b", "c")]
+    pcm_a = np.rint(speechlike(5.0, 16000, seed=9) * 32767).astype(np.int16)
+    pcm_b = np.rint(speechlike(3.0, 16000, seed=10) * 32767).astype(np.int16)
+
+    async def main():
+        a, b, c = (n.url for n in nodes)
+        async with IngestClient(a, session="dup", sample_rate_hz=16000) as ing_a:
+            await _until(lambda: _rows_if(c, "dup"), what="registry")
+            async with ViewerClient(c, session="dup", audio=False) as far:
+                await _until(lambda: _published(a, "dup", {(P.KIND_PARAMS, P.ENC_FLOAT32)}), what="wants")
+                collect = asyncio.ensure_future(far.collect())
+                feed_a = asyncio.ensure_future(stream_samples(ing_a, pcm_a, realtime=True, block_s=0.02))
+                await asyncio.sleep(0.5)
+                redis_server.stop()
+                await _until(lambda: _health_if(b, "degraded"), what="degraded health")
+                async with IngestClient(b, session="dup", sample_rate_hz=16000) as ing_b:  # opens locally
+                    feed_b = asyncio.ensure_future(stream_samples(ing_b, pcm_b, realtime=True, block_s=0.02))
+                    await asyncio.sleep(0.3)
+                    redis_server.start()
+                    for u in (a, b, c):
+                        await _until(lambda u=u: _health_if(u, "ok"), 15, what="recovery")
+                    await asyncio.sleep(1.0)  # five heartbeats with both sessions live
+                    owners = [[r["node"] for r in (await _get_json(u, "/sessions"))["sessions"]] for u in (a, b, c)]
+                    yielded = [(await _get_json(u, "/health"))["names_yielded"] for u in (a, b)]
+                    await feed_b
+                    ended_b = await ing_b.end()
+                await feed_a
+                ended_a = await ing_a.end()
+                got = await asyncio.wait_for(collect, 20)
+        return owners, yielded, ended_a, ended_b, got
+
+    owners, yielded, ended_a, ended_b, got = _run_then_stop(nodes, main(), 90)
+    assert ended_a["frames"] == 150 and ended_b["frames"] == 90  # both ingests were served whole
+    idx = [m.index for m in got.frames]
+    assert idx == sorted(set(idx)) and idx, idx  # one session's frames, never the other's between them
+    assert owners[0] == owners[1] == owners[2] and len(owners[0]) == 1, owners  # one row, the same on every node
+    assert sorted(yielded) == [0, 1], yielded  # the other node's session yielded the name
+    if owners[0] == ["a"]:  # a kept the name: c's viewer went on to a's end
+        assert idx[-1] == ended_a["frames"] - 1 and got.close_code == P.CLOSE_NORMAL
+    else:  # b took it first: c's viewer of a's session is told it is lost
+        assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "session lost: its node stopped")
+
+
 async def _health_if(url: str, status: str) -> dict | None:
     h = await _get_json(url, "/health")
     return h if h["status"] == status else None

@@ -96,6 +96,7 @@ def test_an_enrolment_that_is_not_speech_is_refused_and_the_server_serves_on() -
     tone = _i16(0.3 * np.sin(2 * np.pi * 220 * np.arange(10 * 16000) / 16000))
     code, why = _refusal(load_model(), base64.b64encode(tone.tobytes()).decode(), then_serve=True)
     assert code == P.CLOSE_BAD_REQUEST and why.startswith("enrol: it does not sound like speech"), (code, why)
+    assert why.endswith("Recorded at 16000 Hz?"), why  # speech at another rate than the start's is refused so too
 
 
 def _refusal(model, enrol: str, *, then_serve: bool = False) -> tuple[int | None, str]:

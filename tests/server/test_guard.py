@@ -11,6 +11,7 @@ from server.guard import (
     ConnectionRate,
     IncidentLog,
     IngestPacer,
+    client_url,
     host_allowed,
     host_name,
     origin_allowed,
@@ -56,6 +57,28 @@ HOSTS = [
 @pytest.mark.parametrize("host, bound, allowed, ok", HOSTS)
 def test_host(host, bound, allowed, ok):
     assert host_allowed(host, bound_host=bound, allowed=allowed) is ok
+
+
+# (bound host, allowed_hosts, the URL `facecast serve` prints, None: none the Host check accepts)
+CLIENT_URLS = [
+    ("127.0.0.1", None, "http://127.0.0.1:8765"),
+    ("127.0.0.1", ("localhost",), "http://localhost:8765"),  # was http://127.0.0.1:8765: 403
+    ("127.0.0.1", ("face.example.org", "10.0.0.11"), None),  # docs/deploy.md's node config as printed
+    ("0.0.0.0", None, "http://127.0.0.1:8765"),
+    ("0.0.0.0", ("face.example.org",), None),
+    ("::", None, "http://[::1]:8765"),
+    ("::1", None, "http://[::1]:8765"),  # was http://::1:8765
+    ("10.0.0.11", ("face.example.org", "10.0.0.11"), "http://10.0.0.11:8765"),
+    ("127.0.0.1", ("*",), "http://127.0.0.1:8765"),
+]
+
+
+@pytest.mark.parametrize("bound, allowed, url", CLIENT_URLS)
+def test_the_printed_url_is_one_the_host_check_accepts(bound, allowed, url):
+    got = client_url(bound, 8765, allowed)
+    assert got == url
+    if got is not None:  # independently: the Host a client sends for it passes
+        assert host_allowed(got.removeprefix("http://"), bound_host=bound, allowed=allowed)
 
 
 def test_host_name():

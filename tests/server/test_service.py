@@ -521,6 +521,30 @@ def test_shutdown_flushes_sessions_and_says_going_away(model, layout):
     assert idx == list(range(len(idx))) and 20 <= len(idx) < 90  # about 1 s of frames, none lost
 
 
+def test_shutdown_tells_connections_without_a_session_why(model):
+    """SIGTERM with connections that had no session yet (an ingest or text source that had not sent its start, as
+    one whose enrolment is being adapted): the listener's own close gave them 1001 with no reason, while sessions'
+    sources and viewers got "server shutting down"; now every connection is told so, and counted in /metrics."""
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        conns = [
+            await connect(ws_url(srv.url, path), compression=None)
+            for path in ("/ingest", "/ingest", "/view?session=x&wait=30")
+        ]
+        await asyncio.sleep(0.2)  # the handshakes done, the handlers waiting for a start (and the held viewer)
+        await srv.stop()
+        for ws in conns:
+            with contextlib.suppress(ConnectionClosed):
+                await asyncio.wait_for(ws.recv(), 5)
+        return [(ws.close_code, ws.close_reason) for ws in conns], dict(srv.closes)
+
+    closes, counted = asyncio.run(main())
+    assert closes == [(P.CLOSE_GOING_AWAY, "server shutting down")] * 3, closes
+    assert counted.get(P.CLOSE_GOING_AWAY) == 3, counted
+
+
 @pytest.mark.slow
 def test_compute_workers_give_the_same_frames_and_errors(model, head, wav48k):
     samples, rate = read_audio(wav48k)

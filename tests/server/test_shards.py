@@ -190,10 +190,14 @@ def test_a_dead_worker_ends_its_sessions_only(model):
     assert [m.index for m in got_b.frames] == list(range(b_ended["frames"])) and b_ended["frames"] == 90
 
 
-def test_a_viewer_held_by_the_front_of_connection_workers_watches_a_session_opened_in_a_worker(model):
+def test_a_viewer_held_by_the_front_of_connection_workers_watches_a_session_opened_in_a_worker(model, caplog):
     """With connection workers an audio session runs in a worker: a viewer held by the front (which received it
     before the session existed) is told to connect again when a worker takes the session's name, and the python
-    viewer does so at once: it watches the session, from frame 0."""
+    viewer does so at once: it watches the session, from frame 0. The hand-off is normal operation: one INFO line
+    saying so, not "closed a client connection: 4004 ..." (a client error) per viewer."""
+    import logging
+
+    caplog.set_level(logging.DEBUG, logger="facecast")
     from clients.viewer.stream import ViewerStreamConfig, record_stream
 
     pcm = _int16(speechlike(1.0, 16000, seed=6))
@@ -217,6 +221,10 @@ def test_a_viewer_held_by_the_front_of_connection_workers_watches_a_session_open
     ended, rec = asyncio.run(asyncio.wait_for(main(), 90))
     assert rec.index == list(range(ended["frames"])) and rec.close_code == P.CLOSE_NORMAL
     assert sum(len(b) for _, b in rec.audio) == len(pcm)
+    told = [r for r in caplog.records if "connect again" in r.getMessage()]
+    assert [(r.name, r.levelno) for r in told] == [("facecast.shards", logging.INFO)], caplog.text
+    assert "session 'w' opened in connection worker 0: 1 viewer(s) held for it told to connect again" in told[0].message
+    assert not [r for r in caplog.records if "closed a client connection" in r.getMessage()], caplog.text
 
 
 def test_request_line_is_peeked_whole_or_not_at_all():

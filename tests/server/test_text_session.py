@@ -387,6 +387,24 @@ def test_text_session_refuses_bad_starts(model, backend):
     assert code == P.CLOSE_BAD_REQUEST and "voice" in reason
 
 
+def test_an_overlong_voice_is_refused_quoted_short(model, backend):
+    """A start whose voice held 100,000 characters was answered with all of them quoted in the reason (the close
+    frame then cut it to its first 123 bytes: the voice's own characters, not what was wrong)."""
+
+    async def attempt():
+        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
+            await ws.send(json.dumps({"type": "start", "session": "x", "voice": "x" * 100_000}))
+            with contextlib.suppress(ConnectionClosed):
+                await ws.recv()
+            return ws.close_code, ws.close_reason
+
+    code, reason = asyncio.run(attempt())
+    assert code == P.CLOSE_BAD_REQUEST and reason.startswith("voice must be a name of at most 64 characters, got 'x"), (
+        reason
+    )
+    assert reason.endswith("...") and len(reason) < 123, reason  # the repr cut to 40 characters
+
+
 def test_a_voice_without_a_language_speaks_the_voices_language(model, backend):
     """`{"voice": "es"}` and no language was refused (4400: "es" is not an English voice) while `facecast say
     --voice es` speaks Spanish: the language is inferred from the voice the same way (assets.tts.language_of_voice)."""
@@ -471,6 +489,40 @@ def test_a_server_stopping_ends_a_text_session_at_once_with_1001(model, backend,
     assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
     idx = [m.index for m in got.frames]
     assert idx == list(range(len(idx))) and len(idx) < 8 * spoken["frames"]  # not played out
+
+
+def test_a_server_stopping_while_a_dropped_source_plays_out_ends_it_at_once(model, backend):
+    """A source that drops without `end` has its accepted speech played out in real time; a server stopping
+    meanwhile waited for all of it (the play-out did not look at the shutdown): stop() with ~30 s queued took
+    until the speech had played. Now the viewers get 1001 "server shutting down" and the rest is dropped."""
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        srv.text_backend = backend
+        await srv.start()
+        stopped = None
+        try:
+            ws = await connect(srv.url.replace("http", "ws") + "/text")
+            await ws.send(json.dumps({"type": "start", "session": "gone", "language": "en"}))
+            assert json.loads(await ws.recv())["type"] == "started"
+            async with ViewerClient(srv.url, session="gone", kind="params") as viewer:
+                collect = asyncio.ensure_future(viewer.collect())
+                await ws.send(json.dumps({"type": "text", "text": LONG * 8}))  # ~30 s of speech
+                spoken = json.loads(await ws.recv())
+                assert spoken["type"] == "spoken"
+                ws.transport.abort()  # dropped: its speech plays out to the viewer (nothing accepted is lost)...
+                await asyncio.sleep(0.5)
+                stopped = asyncio.ensure_future(srv.stop())  # ...unless the server stops
+                await asyncio.wait_for(asyncio.shield(stopped), 10)  # it waited for the speech to play out
+                got = await asyncio.wait_for(collect, 10)
+            return spoken, got
+        finally:
+            await (stopped if stopped is not None else srv.stop())
+
+    spoken, got = asyncio.run(asyncio.wait_for(main(), 60))
+    assert (got.close_code, got.close_reason) == (P.CLOSE_GOING_AWAY, "server shutting down")
+    idx = [m.index for m in got.frames]
+    assert idx == list(range(len(idx))) and 0 < len(idx) < 8 * spoken["frames"]  # not played out
 
 
 def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on(model, backend):
