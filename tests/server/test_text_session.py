@@ -215,6 +215,16 @@ def test_a_piece_over_the_text_limit_is_rejected_whole(backend):
 
 
 @contextlib.asynccontextmanager
+async def started_text(server_url: str, session: str):
+    """A text client of the server at ``server_url`` whose English session ``session`` has started (its
+    `started` reply read and checked)."""
+    async with connect(server_url.replace("http", "ws") + "/text") as ws:
+        await ws.send(json.dumps({"type": "start", "session": session, "language": "en"}))
+        assert json.loads(await ws.recv())["type"] == "started"
+        yield ws
+
+
+@contextlib.asynccontextmanager
 async def running(model, backend):
     srv = FacecastServer(model, config=ServerConfig(port=0))
     srv.text_backend = backend
@@ -288,9 +298,7 @@ def test_a_viewer_joining_mid_sentence_gets_that_sentence_from_its_first_frame(m
 
     async def main():
         async with running(model, backend) as srv:
-            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
+            async with started_text(srv.url, "bot") as ws:
                 await ws.send(json.dumps({"type": "text", "text": LONG}))
                 first = json.loads(await ws.recv())
                 t_spoken = time.perf_counter()
@@ -334,9 +342,7 @@ def test_a_viewer_held_for_a_text_session_gets_each_frame_once_from_frame_0(mode
                     break
                 await asyncio.sleep(0.005)
             assert len(srv.holds) == 1
-            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
+            async with started_text(srv.url, "bot") as ws:
                 await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. Set white in a one soon. "}))
                 await ws.send(json.dumps({"type": "end"}))
                 replies = [json.loads(await ws.recv()) for _ in range(3)]
@@ -356,9 +362,7 @@ def test_a_text_session_that_speaks_nothing_ends_normally(model, backend):
     NaN first_frame_ms that the JSON encoder refused: close 1011, an internal error)."""
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "mute", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "mute") as ws:
             await ws.send(json.dumps({"type": "text", "text": "\u0001\u0002"}))
             rejected = json.loads(await ws.recv())
             await ws.send(json.dumps({"type": "end"}))
@@ -531,9 +535,7 @@ def test_cancel_stops_the_speech_eases_the_mouth_to_rest_and_the_session_goes_on
     silent audio, and the session takes more text on the same timeline."""
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "cut", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "cut") as ws:
             async with ViewerClient(srv.url, session="cut", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG + "Bin blue at f two now. "}))
@@ -575,9 +577,7 @@ def test_after_end_a_cancel_cuts_the_play_out_and_text_is_rejected(model, backen
     Now the cancel cuts the play-out as before `end` (the ease, then `ended`) and the text is rejected."""
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "late", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "late") as ws:
             async with ViewerClient(srv.url, session="late", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG}))
@@ -605,9 +605,7 @@ def test_a_second_cancel_during_the_ease_eases_again_from_where_the_mouth_is(mod
     sentence spans were gone), so the session ended with the mouth open (mouth_open 0.096 in a user's take)."""
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "twice", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "twice") as ws:
             async with ViewerClient(srv.url, session="twice", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG}))
@@ -635,9 +633,7 @@ def test_a_stall_mid_word_speaks_the_whole_words_and_the_fragment_waits(model, b
     A stall speaks through the last word boundary; the fragment waits for more text (or a longer stall)."""
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "stall", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "stall") as ws:
             await ws.send(json.dumps({"type": "text", "text": "Then he went ho"}))
             a = json.loads(await ws.recv())  # after stall_s
             await asyncio.sleep(0.2)
@@ -660,9 +656,7 @@ def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
     )
 
     async def main():
-        async with running(model, backend) as srv, connect(srv.url.replace("http", "ws") + "/text") as ws:
-            await ws.send(json.dumps({"type": "start", "session": "clause", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+        async with running(model, backend) as srv, started_text(srv.url, "clause") as ws:
             for word in text.split(" "):
                 await ws.send(json.dumps({"type": "text", "text": word + " "}))
             await ws.send(json.dumps({"type": "end"}))
@@ -694,9 +688,7 @@ def test_text_session_is_registered_cluster_wide(model, backend, redis_server): 
         await a.start()
         await b.start()
         try:
-            async with connect(a.url.replace("http", "ws") + "/text") as ws:
-                await ws.send(json.dumps({"type": "start", "session": "bot", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
+            async with started_text(a.url, "bot") as ws:
                 status, body = await http_get(b.url, "/sessions")
                 listed = json.loads(body)
                 async with connect(b.url.replace("http", "ws") + "/text") as ws2:
@@ -804,9 +796,7 @@ def test_a_server_selects_units_on_one_blas_thread_while_it_serves(model, backen
     async def main():
         async with running(model, dataclasses.replace(backend, synthesizer=synth)) as srv:
             serving = blas_threads()
-            async with connect(srv.url.replace("http", "ws") + "/text") as ws:
-                await ws.send(json.dumps({"type": "start", "session": "blas", "language": "en"}))
-                assert json.loads(await ws.recv())["type"] == "started"
+            async with started_text(srv.url, "blas") as ws:
                 await ws.send(json.dumps({"type": "text", "text": "Bin blue at f two now. "}))
                 spoken = json.loads(await ws.recv())
         return serving, spoken
