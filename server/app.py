@@ -64,6 +64,7 @@ from server.errors import (
     ServerConfigError,
     ServerError,
     ServerSideClose,
+    reason_value,
 )
 from server.eventloop import running_loop_name
 from server.guard import (
@@ -381,7 +382,7 @@ class FacecastServer:
         sessions of connection workers too when this is their front."""
         shards = self.shards
         if not P.SESSION_NAME.match(name):
-            return P.CLOSE_BAD_REQUEST, f"session name must match {P.SESSION_NAME.pattern}, got {name!r}"
+            return P.CLOSE_BAD_REQUEST, f"{P.SESSION_NAME_RULE}, got {reason_value(name)}"
         if self.stopping:
             return P.CLOSE_GOING_AWAY, "server shutting down"
         if name in self.sessions or (shards is not None and shards.owns(name)):

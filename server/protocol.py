@@ -357,7 +357,7 @@ class IngestProtocol:
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {reason_value(unknown[:5])}")
         name = start.get("session")
         if not isinstance(name, str) or not P.SESSION_NAME.match(name):
-            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+            raise ProtocolViolation(P.CLOSE_BAD_REQUEST, P.SESSION_NAME_RULE)
         batch = start.get("batch", False)
         if not isinstance(batch, bool):
             raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "batch must be true or false")
@@ -456,9 +456,12 @@ def parse_view_query(
     has_head: the server has a head (vertex deltas); morph_head: it is driven by its own morph targets."""
     if not token_ok(args.get("token"), token):
         raise ProtocolViolation(P.CLOSE_UNAUTHORIZED, "missing or wrong token")
-    name = args.get("session", "")
+    name = args.get("session")
+    # 4400, not 4004: a client retries 4004 (the session may start), never a query that cannot name a session
+    if name is None:
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "the view query needs session=NAME")
     if not P.SESSION_NAME.match(name):
-        raise ProtocolViolation(P.CLOSE_NOT_FOUND, f"no session {reason_value(name)}")
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"{P.SESSION_NAME_RULE}, got {reason_value(name)}")
     kind = args.get("kind", "params")
     encodings = P.VIEW_KINDS.get(kind)
     if encodings is None:

@@ -339,7 +339,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, f"unknown start fields {unknown}")
     name = start.get("session")
     if not isinstance(name, str) or not P.SESSION_NAME.match(name):
-        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, "session must be 1-64 characters of A-Z a-z 0-9 _ . -")
+        raise ProtocolViolation(P.CLOSE_BAD_REQUEST, P.SESSION_NAME_RULE)
     voice = start.get("voice")
     if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
         # quoted short: a 100,000-character voice was quoted whole, and the close frame's limit cut off the voices

@@ -73,6 +73,8 @@ VIEW_KINDS: dict[str, dict[str, tuple[int, int]]] = {
 SAMPLE_FORMATS: dict[str, np.dtype] = {"pcm_s16le": np.dtype("<i2"), "f32le": np.dtype("<f4")}
 
 SESSION_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+SESSION_NAME_RULE = "session must be 1-64 characters of A-Z a-z 0-9 _ . -"
+"""The one wording of :data:`SESSION_NAME` in a refusal (start messages, view queries, admission)."""
 
 # WebSocket close codes used by the server (RFC 6455 section 7.4 plus application codes 4000-4999).
 CLOSE_NORMAL = 1000  # the session ended normally

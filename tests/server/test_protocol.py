@@ -184,8 +184,11 @@ VIEW_QUERIES = [
     ("session=a", "sesame", False, P.CLOSE_UNAUTHORIZED, "token"),
     ("session=a&token=nope", "sesame", False, P.CLOSE_UNAUTHORIZED, "token"),
     ("session=a&token=sesame", "sesame", False, None, ("params", "float32", True)),
-    ("", None, False, P.CLOSE_NOT_FOUND, "no session"),
-    ("session=" + "x" * 500, None, False, P.CLOSE_NOT_FOUND, "no session"),
+    ("", None, False, P.CLOSE_BAD_REQUEST, "needs session=NAME"),
+    ("kind=params", None, False, P.CLOSE_BAD_REQUEST, "needs session=NAME"),
+    ("session=", None, False, P.CLOSE_BAD_REQUEST, "needs session=NAME"),
+    ("session=" + "x" * 500, None, False, P.CLOSE_BAD_REQUEST, "session must be 1-64 characters"),
+    ("session=a%20b", None, False, P.CLOSE_BAD_REQUEST, "got 'a b'"),
     ("&".join(f"f{i}=1" for i in range(100)), None, False, P.CLOSE_BAD_REQUEST, "too many query fields"),
 ]
 
