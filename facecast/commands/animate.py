@@ -86,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         warn_if_clipped,
         warn_if_quiet,
     )
+    from realtime_core import VISUAL_PARAMS
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups, with_auto_gain
@@ -132,9 +133,13 @@ def run(args: argparse.Namespace) -> int:
     params = apply_expressions(params, args, mups=mups, model=model)
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
+        # One interpolation of both tracks' channels side by side (the same frame times; without an expression the
+        # speech's parameters are the parameters, interpolated once).
         at = np.arange(len(params)) / DEFAULT_FPS
-        params = frames_from_samples(at, params, fps).values
-        speech = frames_from_samples(at, speech, fps).values
+        both = params if speech is params else np.hstack([params, speech])
+        names = tuple(f"{n}{i}" for i in range(both.shape[1] // len(VISUAL_PARAMS)) for n in VISUAL_PARAMS)
+        both = frames_from_samples(at, both, fps, names=names).values
+        params, speech = both[:, : len(VISUAL_PARAMS)], both[:, -len(VISUAL_PARAMS) :]
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params, fps=fps)
     if args.csv is not None:
