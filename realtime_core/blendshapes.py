@@ -133,29 +133,41 @@ def _columns(names: tuple[str, ...]) -> np.ndarray:
     return np.array([index[n] for n in names], dtype=np.int64)
 
 
-_ANTAGONIST_COLUMNS = tuple((_columns(a), _columns(b)) for a, b in ARKIT_ANTAGONISTS)
 _SPEECH_COLUMNS = _columns(ARKIT_SPEECH)
 _RESOLVED_COLUMNS = _columns(ARKIT_RESOLVED)
 
 
+def _sides() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The antagonists' columns (c,), the side each is on (c,) and each side's size per weight (52, 2 x pairs):
+    column 2j is pair j's first side, 2j + 1 its second."""
+    cols, side = [], []
+    sizes = np.zeros((len(ARKIT_NAMES), 2 * len(ARKIT_ANTAGONISTS)))
+    for j, pair in enumerate(ARKIT_ANTAGONISTS):
+        for k, names in enumerate(pair):
+            c = _columns(names)
+            cols.append(c)
+            side.append(np.full(len(c), 2 * j + k))
+            sizes[c, 2 * j + k] = fitted_maps.ARKIT_SIZE[c]
+    return np.concatenate(cols), np.concatenate(side), sizes
+
+
+_NETTED_COLUMNS, _SIDE_OF, _SIDE_SIZES = _sides()
+_OPPOSITE = np.arange(2 * len(ARKIT_ANTAGONISTS)) ^ 1  # side 2j <-> 2j + 1
+
+
 def cancel_antagonists(w: np.ndarray) -> np.ndarray:
-    """ARKit weights ``(..., 52)`` (>= 0) -> a copy with each :data:`ARKIT_ANTAGONISTS` pair netted: the side of
+    """ARKit weights ``(n, 52)`` (>= 0) -> a copy with each :data:`ARKIT_ANTAGONISTS` pair netted: the side of
     larger size (sum of weight x :data:`realtime_core.fitted_maps.ARKIT_SIZE`, its target's displacement norm) scaled
     to the difference of the two sizes, the other side 0 (at a tie both). Other weights unchanged."""
     out = np.array(w, dtype=np.float64, copy=True)
-    size = fitted_maps.ARKIT_SIZE
-    for a, b in _ANTAGONIST_COLUMNS:
-        u = out[..., a] @ size[a]
-        v = out[..., b] @ size[b]
-        net = u - v
-        keep_a = np.divide(np.maximum(net, 0.0), u, out=np.zeros_like(u), where=u > 0)
-        keep_b = np.divide(np.maximum(-net, 0.0), v, out=np.zeros_like(v), where=v > 0)
-        out[..., a] *= keep_a[..., None]
-        out[..., b] *= keep_b[..., None]
+    size = out @ _SIDE_SIZES  # (n, 2 x pairs)
+    left = np.maximum(size - size[:, _OPPOSITE], 0.0)
+    keep = np.divide(left, size, out=np.zeros_like(size), where=size > 0)
+    out[:, _NETTED_COLUMNS] *= keep[:, _SIDE_OF]
     return out
 
 
-_NETTED = np.isin(_SPEECH_COLUMNS, np.concatenate([np.concatenate(pair) for pair in _ANTAGONIST_COLUMNS]))
+_NETTED = np.isin(_SPEECH_COLUMNS, _NETTED_COLUMNS)
 
 
 @lru_cache(maxsize=1)
@@ -174,7 +186,8 @@ def _arkit_speech(w: np.ndarray) -> np.ndarray:
     net = cancel_antagonists(w)
     x = w[:, _SPEECH_COLUMNS].copy()
     x[:, _NETTED] -= net[:, _SPEECH_COLUMNS[_NETTED]]
-    net[:, _RESOLVED_COLUMNS] = _resolve_map().weights(x)
+    # One frame (a live session's) through the solve's single-frame path, without its batch loop.
+    net[:, _RESOLVED_COLUMNS] = _resolve_map().weights(x[0] if len(x) == 1 else x)
     return net
 
 
