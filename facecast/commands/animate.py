@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups, with_auto_gain
-    from realtime_core.track import DEFAULT_FPS, Track, frames_from_samples
+    from realtime_core.track import DEFAULT_FPS, Track
 
     exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}  # the format named by the flag
     # -o's format follows the suffix; --csv writes CSV whatever the name (as it always has).
@@ -135,10 +135,10 @@ def run(args: argparse.Namespace) -> int:
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
         # One interpolation of both tracks' channels side by side (the same frame times; without an expression the
         # speech's parameters are the parameters, interpolated once).
-        at = np.arange(len(params)) / DEFAULT_FPS
         both = params if speech is params else np.hstack([params, speech])
         names = tuple(f"{n}{i}" for i in range(both.shape[1] // len(VISUAL_PARAMS)) for n in VISUAL_PARAMS)
-        both = frames_from_samples(at, both, fps, names=names).values
+        # As long as the 30 fps frames at any rate (each frame starting before their end; render --fps alike).
+        both = Track(values=both, names=names).at_fps(fps).values
         params, speech = both[:, : len(VISUAL_PARAMS)], both[:, -len(VISUAL_PARAMS) :]
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params, fps=fps)
