@@ -176,7 +176,12 @@ def _resolve_map() -> KeyframeMap:
     I, C = K^T K' over the ARKIT_SPEECH targets; x: what the others are to reproduce, :func:`_arkit_speech`)."""
     from realtime_core.face.keyframes import KeyframeMap  # scipy.linalg: paid by the first ARKit frame only
 
-    return KeyframeMap(gram=fitted_maps.ARKIT_RESOLVE_GRAM, cross=fitted_maps.ARKIT_RESOLVE_CROSS, lo=0.0, hi=1.0)
+    # Writable copies: the compiled solve is specialised on its arrays' type, and a read-only array (the generated
+    # module's) is another type than the morph heads' maps, a second compilation on the first ARKit frame.
+    gram, cross = (
+        np.array(a, dtype=np.float64) for a in (fitted_maps.ARKIT_RESOLVE_GRAM, fitted_maps.ARKIT_RESOLVE_CROSS)
+    )
+    return KeyframeMap(gram=gram, cross=cross, lo=0.0, hi=1.0)
 
 
 def _arkit_speech(w: np.ndarray) -> np.ndarray:
