@@ -72,6 +72,19 @@ class Track:
         """``(n_frames,) float64`` seconds: the media time of each row."""
         return self.start_s + np.arange(self.n_frames) / self.fps
 
+    def at_fps(self, fps: float) -> Track:
+        """The track on the frame grid ``k / fps`` (from 0 s) covering as long as it does: every frame that starts
+        before its end (``start_s + duration_s``, its last row lasting one frame period), linearly interpolated
+        between rows and each channel held after the last. A video of it then lasts as long as the speech its rows
+        cover: put on the grid through the last row's time instead (:func:`frames_from_samples`'s default), 93
+        frames at 30 fps (3.1 s, for 3.095 s of speech) became 92 at 29.97 (3.0697 s), and `render --fps 29.97`'s
+        video ended 25 ms before the speech, which ffmpeg's ``-shortest`` then cut there."""
+        if fps == self.fps and self.start_s == 0:
+            return self
+        return frames_from_samples(
+            self.times(), self.values, fps, names=self.names, until_s=self.start_s + self.duration_s
+        )
+
     def channel(self, name: str) -> np.ndarray:
         """``(n_frames,)`` values of channel ``name``."""
         try:
@@ -81,11 +94,18 @@ class Track:
 
 
 def frames_from_samples(
-    times_s: np.ndarray, values: np.ndarray, fps: float, *, names: tuple[str, ...] = VISUAL_PARAMS
+    times_s: np.ndarray,
+    values: np.ndarray,
+    fps: float,
+    *,
+    names: tuple[str, ...] = VISUAL_PARAMS,
+    until_s: float | None = None,
 ) -> Track:
     """Samples at strictly increasing ``times_s`` ``(T,)`` seconds with ``values`` ``(T, C)`` -> the
     track at frames ``k / fps`` for ``k < floor(times_s[-1] * fps + 1e-4) + 1``, linearly interpolated per
-    channel (held constant before the first sample). Starts at 0 s whatever the first time."""
+    channel (held constant before the first sample and after the last). Starts at 0 s whatever the first time.
+    ``until_s``: instead, every frame that starts before this time (s; one starting within 1e-4 frame of it is not
+    added): ``ceil(until_s * fps - 1e-4)`` frames, so that they cover as long (:meth:`Track.at_fps`)."""
     t = np.asarray(times_s, dtype=np.float64)
     v = np.asarray(values, dtype=np.float64)
     if t.ndim != 1 or v.ndim != 2 or len(t) != len(v) or len(t) == 0:
@@ -96,7 +116,10 @@ def frames_from_samples(
         raise ConfigError(f"fps must be > 0, got {fps}")
     # A sample within 1e-4 of a frame before its time is that frame's: a track file's times are rounded
     # (facecast's CSV writes 1/30 s as 0.033333, 1.5e-5 frames early), and a strict floor dropped the last frame.
-    n = max(int(np.floor(t[-1] * fps + 1e-4)) + 1, 0)
+    if until_s is None:
+        n = max(int(np.floor(t[-1] * fps + 1e-4)) + 1, 0)
+    else:
+        n = max(int(np.ceil(until_s * fps - 1e-4)), 1)
     ft = np.arange(n) / fps
     out = np.zeros((n, v.shape[1]))
     for j in range(v.shape[1]):

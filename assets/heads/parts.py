@@ -199,7 +199,8 @@ def _rows_apart(local: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
 TEETH_FOLLOW = 0.71
 """Fraction of the lower inner lip's drop (at its middle, along the face's up axis) the lower teeth and tongue take
 (:func:`with_rigid_parts`). The built-in head driven by its own targets at /a/ (mouth open 0.35): its lower incisors'
-edge drops 0.234 IOD, its lower inner lip 0.329 (0.71); the edge shows above the lip, not the teeth's front. Moved
+edge drops 0.234 IOD, its lower inner lip 0.329 (0.71; 0.73 since the streamed ARKit map nets its antagonists, not
+re-tuned: cached rigs' keys do not hold this constant); the edge shows above the lip, not the teeth's front. Moved
 with the chin instead, a retarget's lower teeth dropped 0.54 of the lip (the full-body avatar without targets: chin
 0.177 IOD, lip 0.329) and a tall band of lower-teeth fronts filled the opening's lower half."""
 

@@ -86,10 +86,11 @@ def run(args: argparse.Namespace) -> int:
         warn_if_clipped,
         warn_if_quiet,
     )
+    from realtime_core import VISUAL_PARAMS
     from realtime_core.errors import InvalidAudioError
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params, speech_to_params_and_mups, with_auto_gain
-    from realtime_core.track import DEFAULT_FPS, Track, frames_from_samples
+    from realtime_core.track import DEFAULT_FPS, Track
 
     exports = {"glb": args.glb, "json": args.json, "tsv": args.tsv}  # the format named by the flag
     # -o's format follows the suffix; --csv writes CSV whatever the name (as it always has).
@@ -132,9 +133,13 @@ def run(args: argparse.Namespace) -> int:
     params = apply_expressions(params, args, mups=mups, model=model)
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
-        at = np.arange(len(params)) / DEFAULT_FPS
-        params = frames_from_samples(at, params, fps).values
-        speech = frames_from_samples(at, speech, fps).values
+        # One interpolation of both tracks' channels side by side (the same frame times; without an expression the
+        # speech's parameters are the parameters, interpolated once).
+        both = params if speech is params else np.hstack([params, speech])
+        names = tuple(f"{n}{i}" for i in range(both.shape[1] // len(VISUAL_PARAMS)) for n in VISUAL_PARAMS)
+        # As long as the 30 fps frames at any rate (each frame starting before their end; render --fps alike).
+        both = Track(values=both, names=names).at_fps(fps).values
+        params, speech = both[:, : len(VISUAL_PARAMS)], both[:, -len(VISUAL_PARAMS) :]
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params, fps=fps)
     if args.csv is not None:

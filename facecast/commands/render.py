@@ -68,7 +68,6 @@ def run(args: argparse.Namespace) -> int:
         params_for_audio,
         write_video,
     )
-    from realtime_core.track import frames_from_samples
 
     check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     check_video_size(args.width, args.height)  # --beside adds an even width (assets.video.read_video_frames)
@@ -91,9 +90,7 @@ def run(args: argparse.Namespace) -> int:
             warn_if_clipped("render", args.speech, samples)
 
         track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet, auto_gain=args.auto_gain)
-        if track.fps != args.fps:
-            track = frames_from_samples(track.times(), track.values, args.fps)
-        frames = track.values
+        frames = track.at_fps(args.fps).values  # as long as the speech at any rate (the video is not cut short)
     from facecast.commands.speech_options import apply_expressions
 
     frames = apply_expressions(frames, args, fps=args.fps)

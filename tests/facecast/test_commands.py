@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from facecast.cli import main
-from tests.prerequisites import missing
+from tests.prerequisites import missing, require_tool
 
 # CLI subprocesses with real rendering and ffmpeg.
 pytestmark = pytest.mark.system
@@ -351,3 +351,26 @@ def test_render_beside_shows_the_recorded_picture_of_each_frames_instant(tmp_pat
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "notes.txt: not a video" in err[0], err
     assert not out.exists()
+
+
+def test_render_at_any_frame_rate_covers_the_whole_speech(tmp_path, own_cache):
+    """`render --fps 29.97` of 3.095 s of speech wrote 92 frames (3.0697 s: its frames were put on the grid only up to
+    the last 30 fps frame's time, not to that frame's end) and ffmpeg's -shortest cut the speech to the video. At 24,
+    29.97 and 60 fps the video now lasts at least as long as the speech, less than one frame longer, and the audio
+    stream is the whole speech (ffprobe's durations of both streams)."""
+    require_tool("ffprobe", "apt package ffmpeg")
+    from assets.audio import write_wav
+    from assets.video import probe
+    from tests.speech import speechlike
+
+    rate = 16000
+    n = int(3.095 * rate)  # 92.85 frames at 30 fps, 92.76 at 29.97: the last frame's end past the speech
+    wav = write_wav(tmp_path / "s.wav", speechlike(n / rate, rate, seed=3)[:n], rate)
+    for fps in (29.97, 24.0, 60.0):
+        out = tmp_path / f"s{fps:g}.mp4"
+        assert main(["render", str(wav), "-o", str(out), "--fps", f"{fps:g}", "--width", "96", "--height", "96"]) == 0
+        streams = probe(out)
+        video, audio = float(streams["video"]["duration"]), float(streams["audio"]["duration"])
+        assert n / rate <= video < n / rate + 1 / fps + 1e-3, (fps, video)
+        assert audio == pytest.approx(n / rate, abs=2e-3), (fps, audio)  # the whole speech, not cut at the video
+        assert int(streams["video"]["nb_frames"]) == int(np.ceil(n / rate * fps))

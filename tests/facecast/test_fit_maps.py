@@ -50,5 +50,14 @@ def test_it_writes_the_fitted_maps_where_it_is_told(tmp_path, capsys) -> None:
     assert spec is not None and spec.loader is not None
     written = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(written)
-    for name in ("ARKIT_POS", "ARKIT_NEG", "OVR_KEYFRAMES", "OVR_RIDGE", "EXPRESSION_PARAMS"):
+    for name in (
+        "ARKIT_POS",
+        "ARKIT_NEG",
+        "ARKIT_SIZE",
+        "ARKIT_RESOLVE_GRAM",
+        "ARKIT_RESOLVE_CROSS",
+        "OVR_KEYFRAMES",
+        "OVR_RIDGE",
+        "EXPRESSION_PARAMS",
+    ):
         np.testing.assert_allclose(getattr(written, name), getattr(fitted_maps, name), atol=2e-5, rtol=1e-5)

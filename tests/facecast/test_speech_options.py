@@ -52,7 +52,8 @@ def test_animate_warns_of_speech_far_under_the_training_level_in_one_line(tmp_pa
 
 def test_animate_writes_curves_and_glb_keys_at_the_asked_frame_rate(tmp_path):
     """A game at 60 fps or a film at 24 asked for `animate --fps` (render had it, animate wrote 30 fps only): the
-    curves are the 30 fps output interpolated onto k / fps, and the glb's keys sit on the same times."""
+    curves are the 30 fps output interpolated onto k / fps (held after its last frame: as long as it, as render),
+    and the glb's keys sit on the same times."""
     import pygltflib
 
     from assets.audio import write_wav
@@ -67,7 +68,7 @@ def test_animate_writes_curves_and_glb_keys_at_the_asked_frame_rate(tmp_path):
         csv, glb = tmp_path / f"s{fps}.csv", tmp_path / f"s{fps}.glb"
         assert main(["animate", str(wav), "--fps", str(fps), "-o", str(csv), "-o", str(glb)]) == 0
         got = read_csv(csv, fps=fps)
-        n = int(np.floor((len(base.values) - 1) / 30 * fps + 1e-4)) + 1
+        n = int(np.ceil(len(base.values) / 30 * fps - 1e-4))  # every frame starting within the 30 fps frames' span
         assert got.fps == fps and got.values.shape == (n, 4)
         want = np.stack([np.interp(np.arange(n) / fps, base.times(), base.values[:, j]) for j in range(4)], axis=1)
         np.testing.assert_allclose(got.values, want, atol=1e-8)

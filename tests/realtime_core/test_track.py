@@ -60,3 +60,20 @@ def test_frames_from_samples_agrees_with_scipy_interp1d_and_refuses_bad_times():
     assert f.n_frames == int(np.floor(t[-1] * 30)) + 1
     with pytest.raises(ConfigError, match="strictly increasing"):
         frames_from_samples(np.array([0.0, 0.0]), np.zeros((2, 4)), 30.0)
+
+
+def test_a_track_at_another_rate_covers_as_long_as_it_does():
+    """93 frames at 30 fps cover 3.1 s; on the grid only up to the last frame's time (3.0667 s) they became 92 frames
+    at 29.97 fps, 3.0697 s (a video 25 ms shorter than its speech). Every frame starting before the end, interpolated
+    between rows and held after the last (np.interp computed here), and the same track at its own rate."""
+    rng = np.random.default_rng(1)
+    tr = Track(values=rng.standard_normal((93, 4)))
+    for fps, n in ((29.97, 93), (24.0, 75), (60.0, 186), (25.0, 78)):
+        got = tr.at_fps(fps)
+        assert got.n_frames == n and got.fps == fps and got.duration_s >= tr.duration_s > (n - 1) / fps
+        want = np.stack([np.interp(np.arange(n) / fps, tr.times(), tr.values[:, j]) for j in range(4)], axis=1)
+        np.testing.assert_allclose(got.values, want, atol=1e-12)
+    assert frames_from_samples(tr.times(), tr.values, 29.97).n_frames == 92  # through the last row's time only
+    assert tr.at_fps(30.0) is tr
+    one = Track(values=np.ones((1, 4)))
+    assert one.at_fps(24.0).n_frames == 1 and one.at_fps(90.0).n_frames == 3  # 1/30 s: 3 frames at 90 fps
