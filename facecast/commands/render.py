@@ -52,6 +52,30 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def _params_for_speech(frames, args: argparse.Namespace):
+    """``--params`` frames (F, 4) at ``args.fps`` cut to the speech they are muxed with, with one warning line when
+    the two differ by more than a frame. A file longer than the speech failed after the whole render with "ffmpeg
+    failed (-1)" (ffmpeg ends the video with its sound and stopped reading the frames), and one shorter ended the
+    video, and its sound, where the file ends without a word (3 s of parameters for 164 s of speech: a 3 s video)."""
+    import math
+    import sys
+
+    from assets.audio import read_audio
+
+    samples, rate = read_audio(args.speech)
+    speech_s = len(samples) / rate
+    n_speech = math.ceil(speech_s * args.fps - 1e-9)  # the speech path's count: the last frame starts in the sound
+    if abs(len(frames) - n_speech) > 1:
+        shorter = "the speech" if n_speech < len(frames) else "the parameters"
+        print(
+            f"facecast render: warning: {args.params}: {len(frames) / args.fps:.2f} s of mouth parameters for "
+            f"{speech_s:.2f} s of speech in {args.speech}: the video ends with {shorter}, at "
+            f"{min(n_speech, len(frames)) / args.fps:.2f} s",
+            file=sys.stderr,
+        )
+    return frames[:n_speech]
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -81,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
 
         video = read_video_frames(args.beside, height=args.height)  # before the rig: a bad file fails now
     if args.params:
-        frames = read_params_resampled(args.params, args.fps).values
+        frames = _params_for_speech(read_params_resampled(args.params, args.fps).values, args)
     else:
         from facecast.commands.speech_options import shipped_model, warn_if_clipped, warn_if_quiet
 

@@ -289,6 +289,58 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
     assert f"render: 100%|##########| {len(t)}/{len(t)}" in captured.err, captured.err
 
 
+def test_render_params_longer_or_shorter_than_the_speech(tmp_path, builtin_rig, capsys):
+    """`render SPEECH --params P` with P 2 s longer than the speech failed after the whole render with "ffmpeg failed
+    (-1)" (ffmpeg ended the video with its sound and stopped reading frames); P much shorter ended the video there
+    without a word. Now the video ends with the shorter of the two and one warning line says so."""
+    _require_rendering(builtin_rig)
+    from assets.audio import write_wav
+    from assets.video import probe
+    from tests.speech import speechlike
+
+    wav = tmp_path / "s.wav"
+    write_wav(wav, speechlike(0.5, 16000), 16000)  # 15 frames at 30 fps
+    for seconds, frames, shorter in ((2.5, 15, "the speech, at 0.50 s"), (0.2, 6, "the parameters, at 0.20 s")):
+        csv = tmp_path / f"p{seconds}.csv"
+        t = np.arange(round(seconds * 30)) / 30
+        rows = ["t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress"]
+        csv.write_text("\n".join(rows + [f"{x:.6f},0,0,{0.1 * np.sin(10 * x) ** 2:.4f},0" for x in t]) + "\n")
+        out = tmp_path / f"v{seconds}.mp4"
+        assert main(["render", str(wav), "--params", str(csv), "-o", str(out), "--width", "96", "--height", "64"]) == 0
+        got = capsys.readouterr()
+        assert f"{frames} frames at 30 fps" in got.out
+        warnings = [ln for ln in got.err.splitlines() if "warning" in ln]
+        assert warnings == [
+            f"facecast render: warning: {csv}: {seconds:.2f} s of mouth parameters for 0.50 s of speech in {wav}: "
+            f"the video ends with {shorter}"
+        ], got.err
+        assert int(probe(out)["video"]["nb_frames"]) == frames
+    # parameters of the speech's own length (an edited `animate` CSV): no warning
+    csv = tmp_path / "same.csv"
+    csv.write_text(
+        "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n"
+        + "".join(f"{k / 30:.6f},0,0,0.05,0\n" for k in range(15))
+    )
+    assert (
+        main(
+            [
+                "render",
+                str(wav),
+                "--params",
+                str(csv),
+                "-o",
+                str(tmp_path / "same.mp4"),
+                "--width",
+                "96",
+                "--height",
+                "64",
+            ]
+        )
+        == 0
+    )
+    assert "warning" not in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_mu_stages_only_refuses_a_mapper_trained_on_other_clips(tmp_path, shared_data, capsys):
     """`facecast mu --stages-only` keeps the speech bank and refits only the second stages, so the Utterance MUs
