@@ -81,6 +81,25 @@ def test_save_landmarks_round_trips_through_landmarks(tmp_path, shared_data, own
     assert not list(tmp_path.glob("builtin*.npz"))
 
 
+def test_rig_prints_paths_with_spaces_as_a_shell_reads_them(tmp_path, shared_data, own_cache, capsys):
+    """`rig "my heads/my face.obj" -o "rigs ü/r.npz"` said "use it as --head rigs ü/r.npz ... --head my heads/my
+    face.obj reads this rig": pasted into a shell, each path split in two. Now each is quoted as a shell reads it."""
+    import shlex
+    import shutil
+
+    face = tmp_path / "my heads" / "my face.obj"
+    face.parent.mkdir()
+    shutil.copy(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj", face)
+    rig, lm = tmp_path / "rigs ü" / "r.npz", tmp_path / "rigs ü" / "l m.json"
+    assert main(["rig", str(face), "--keep-failing", "-o", str(rig), "--save-landmarks", str(lm)]) == 0
+    out = capsys.readouterr().out
+    use = next(ln for ln in out.splitlines() if ln.startswith("rig: use it as "))
+    words = shlex.split(use.replace("(", " ").replace(")", " ").replace(";", " "))
+    assert [words[i + 1] for i, w in enumerate(words) if w in ("--head", "--rig")] == [str(rig), str(rig), str(face)]
+    saved = next(ln for ln in out.splitlines() if ln.startswith("rig: landmarks "))
+    assert shlex.split(saved.rstrip(")"))[-1] == str(lm)
+
+
 def test_a_mesh_rigged_for_a_command_says_so_and_a_cached_one_does_not(tmp_path, shared_data, own_cache, capsys):
     """--head MESH rigs a mesh not in the rig cache before the command's work (seconds to minutes for a scan): each
     rig it makes is announced on stderr with the seconds so far; the next command reads the rig and says nothing."""
