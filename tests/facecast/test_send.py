@@ -137,11 +137,25 @@ def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_pat
     assert srv.config.max_message_bytes == ServerConfig().max_message_bytes
     try:
         assert main(["send", str(wav), srv.url, "--enrol", str(enrol), "--fast"]) == 0, capsys.readouterr().err
+        out = capsys.readouterr().out
+        assert f"adapted the session to {at_16k / 16000:.2f} s of {enrol}" in out, out
+        assert "session 'a' ended: 15 frames" in out, out
+        # The same 40 s beside speech at 48 kHz is sent at 48 kHz (5.1 MB of base64): over the default limit. The
+        # close said only "1009 frame with 5120108 bytes exceeds limit of 4194304 bytes"; now the line names the
+        # enrolment, its rate and how to proceed.
+        wav48 = write_wav(tmp_path / "a48.wav", speechlike(0.5, 48000, seed=1), 48000)
+        assert main(["send", str(wav48), srv.url, "--enrol", str(enrol), "--fast"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"facecast send: error: {enrol}: the enrolment, "), err
+        assert "s sent at 48000 Hz (the speech's rate), is over the server's message limit (1009 " in err[0]
+        assert f"ffmpeg -i {wav48} -ar 16000 OUT.wav" in err[0]
+        # Over 120 s: refused before connecting (the server refuses it too, after a 1009 for its size).
+        long = write_wav(tmp_path / "long.wav", np.tile(voice, 4)[: 121 * voice_rate], voice_rate)
+        assert main(["send", str(wav), srv.url, "--enrol", str(long), "--fast"]) == 2
+        err = capsys.readouterr().err
+        assert f"error: {long}: 121.0 s of speech; an enrolment takes 1-120 s (30-60 s intended)" in err, err
     finally:
         srv.stop()
-    out = capsys.readouterr().out
-    assert f"adapted the session to {at_16k / 16000:.2f} s of {enrol}" in out, out
-    assert "session 'a' ended: 15 frames" in out, out
 
 
 def test_send_to_a_server_that_dies_says_the_connection_was_lost(tmp_path, capsys):
