@@ -224,13 +224,15 @@ async def stream_samples(
     realtime: bool = True,
     block_s: float = 0.02,
     int16: np.ndarray | None = None,
+    ahead_s: float = 0.0,
 ) -> list[SentBlock]:
     """Send ``samples`` ((n,) or (n, channels) float, or int16 when the format is pcm_s16le) in
-    blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
+    blocks of ``block_s`` seconds; real time paces block i to leave ``ahead_s`` before its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
     x = np.asarray(samples if int16 is None else int16)
     log: list[SentBlock] = []
-    async for i, block in paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime):
+    blocks = paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime, offset_s=-ahead_s)
+    async for i, block in blocks:
         await ing.send(block)
         log.append(SentBlock(i, len(block), time.time()))
     return log
@@ -258,12 +260,13 @@ async def ingest_file(
     hold_s: float = 0.0,
     enrol: str | Path | None = None,
     auto_gain: bool | None = None,
+    ahead_s: float = 0.0,
 ) -> tuple[dict, dict]:
-    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``started`` and
-    ``ended`` replies. hold_s: seconds between the session's start and its first audio, in which viewers waiting
-    for it connect; enrol: a recording of the talker (any rate/format the reader takes) sent as the start's
-    enrolment, converted to this session's input (the speech file's rate, mono, pcm_s16le); auto_gain: the start's
-    ``auto_gain`` (None: the server's default)."""
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session, in real time (``ahead_s`` ahead of
+    it) or as fast as the socket takes it; returns the ``started`` and ``ended`` replies. hold_s: seconds between
+    the session's start and its first audio, in which viewers waiting for it connect; enrol: a recording of the
+    talker (any rate/format the reader takes) sent as the start's enrolment, converted to this session's input (the
+    speech file's rate, mono, pcm_s16le); auto_gain: the start's ``auto_gain`` (None: the server's default)."""
     from shlex import quote
 
     from assets.audio import read_audio
@@ -285,7 +288,7 @@ async def ingest_file(
     try:
         async with ingest as ing:
             await asyncio.sleep(hold_s)
-            await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
+            await stream_samples(ing, samples, realtime=realtime, block_s=block_s, ahead_s=ahead_s)
             return ing.started, await ing.end()
     except ServerClosed as exc:
         if exc.code != P.CLOSE_TOO_BIG or ingest.enrol is None:

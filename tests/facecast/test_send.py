@@ -53,6 +53,20 @@ def test_send_streams_a_file_as_a_live_session_equal_to_animate(tmp_path, model,
         np.testing.assert_allclose(v, want[k], atol=1e-5)
 
 
+def test_send_fast_keeps_within_the_servers_burst(tmp_path, model, capsys):
+    """A server holds an ingest to real time plus its burst (2 s): `send --fast` sent the whole file at once, so on
+    a file of minutes the audio queued in the sockets with the keepalive pings behind it, and the session ended
+    after 40 s with "1011 keepalive ping timeout". A server that closes an ingest running over its burst (4029)
+    shows the same overrun at once: 4 s of audio was closed; now the first 1.5 s go at once, the rest in real time."""
+    wav = write_wav(tmp_path / "four.wav", speechlike(4.0, 16000, seed=5), 16000)
+    srv = LiveServer(model, None, ingest_overrun="close")
+    try:
+        assert main(["send", str(wav), srv.url, "--fast"]) == 0, capsys.readouterr().err
+    finally:
+        srv.stop()
+    assert "session 'four' ended: 120 frames, 4.00 s of audio" in capsys.readouterr().out
+
+
 def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
     wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
     with socket.socket() as s:  # a port that was free a moment ago: nothing listens on it
