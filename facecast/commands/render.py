@@ -76,6 +76,30 @@ def _params_for_speech(frames, args: argparse.Namespace):
     return frames[:n_speech]
 
 
+BESIDE_SLACK_S = 0.2
+"""s: a --beside recording whose picture ends further than this from the speech is said to (a clip's audio and
+picture are taken as one recording within the same 0.2 s by `facecast extract`)."""
+
+
+def _warn_if_beside_differs(video, speech_s: float, path) -> None:
+    """One warning line when the --beside picture (``video``: assets.video.VideoFrames) ends more than
+    :data:`BESIDE_SLACK_S` from the speech's ``speech_s`` seconds: a 1 s clip beside 3 s of speech froze on its last
+    picture for 2 s without a word."""
+    import sys
+
+    import numpy as np
+
+    times = video.times_s
+    picture_s = float(times[-1] + (np.median(np.diff(times)) if len(times) > 1 else 0.0))
+    if abs(picture_s - speech_s) > BESIDE_SLACK_S:
+        then = "its last picture is held to the end" if picture_s < speech_s else "the video ends with the speech"
+        print(
+            f"facecast render: warning: {path}: {picture_s:.2f} s of picture beside {speech_s:.2f} s of speech: "
+            f"{then} (--beside takes a recording of the same speech)",
+            file=sys.stderr,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -136,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
         from clients.render.video import beside
 
         shown = video.shown_at(np.arange(len(frames)) / args.fps)  # the recorded picture of each frame's instant
+        _warn_if_beside_differs(video, len(frames) / args.fps, args.beside)
         width += video.frames.shape[2]
     with renderer_for_rig(rig, mesh, cfg) as r:
 

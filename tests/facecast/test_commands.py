@@ -246,8 +246,9 @@ def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(tmp_path, own_cac
             argv = ["rig", *head, "-o", "out.npz"]
         else:
             argv = ["render", str(speech), "--params", "p.csv", "--head", head[0], *head[1:], "-o", "out.mp4"]
-            (tmp_path / "p.csv").write_text(
-                "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n0.000000,0,0,0,0\n"
+            (tmp_path / "p.csv").write_text(  # the speech's 0.1 s: 3 frames (else a warning says they differ)
+                "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n"
+                + "".join(f"{k / 30:.6f},0,0,0,0\n" for k in range(3))
             )
         assert main(argv) == 2, case
         err = capfd.readouterr().err.strip().splitlines()
@@ -390,6 +391,33 @@ def _grey_ramp_video(path: Path, *, fps: int, n: int, picture_delay_s: float) ->
     cmd += ["-c:v", "libx264", "-qp", "0", "-pix_fmt", "yuv444p", "-c:a", "aac", str(path)]
     subprocess.run(cmd, input=frames, check=True)
     return levels
+
+
+def test_render_a_video_larger_than_the_render_as_its_speech(tmp_path, builtin_rig, ffmpeg, capsys):
+    """`render clip.mp4 --beside clip.mp4` (docs/training.md) with a 1280x720 clip: ffmpeg, not told which input's
+    picture to keep, took the clip's (the larger) and stopped reading the rendered frames: "ffmpeg failed (-1)",
+    nothing written (at a render larger than the clip it worked). A --beside picture that ends away from the speech
+    (a 1 s clip beside 2 s of it froze for a second) is said in one warning line."""
+    import subprocess
+
+    from assets.video import probe
+
+    _require_rendering(builtin_rig)
+    clip = tmp_path / "hd.mp4"
+    cmd = [ffmpeg, "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=1280x720:rate=25:duration=2"]
+    cmd += ["-f", "lavfi", "-i", "sine=frequency=220:duration=2", "-c:v", "libx264", "-preset", "ultrafast"]
+    subprocess.run([*cmd, "-c:a", "aac", "-shortest", str(clip)], check=True)
+    out = tmp_path / "v.mp4"
+    assert main(["render", str(clip), "-o", str(out), "--width", "96", "--height", "64"]) == 0, capsys.readouterr()
+    video, audio = probe(out)["video"], probe(out)["audio"]
+    assert (int(video["width"]), int(video["height"])) == (96, 64) and audio is not None
+    assert "warning" not in capsys.readouterr().err
+    short = tmp_path / "one.mp4"
+    subprocess.run([ffmpeg, "-v", "error", "-y", "-i", str(clip), "-t", "1", str(short)], check=True)
+    args = ["render", str(clip), "--beside", str(short), "-o", str(tmp_path / "b.mp4"), "--width", "96"]
+    assert main([*args, "--height", "64"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {short}: 1.00 s of picture beside " in err and "its last picture is held to the end" in err
 
 
 def test_render_beside_shows_the_recorded_picture_of_each_frames_instant(tmp_path, builtin_rig, capsys):
