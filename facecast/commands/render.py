@@ -117,7 +117,14 @@ def run(args: argparse.Namespace) -> int:
         write_video,
     )
     from realtime_core.track import frames_from_samples
+    from training.errors import ConfigError
 
+    out = Path(args.output).resolve()
+    inputs = (("speech", args.speech), ("--beside video", args.beside), ("--params file", args.params))
+    for what, given in inputs:
+        # as `say --audio`: a talking-face clip given as the speech (or --beside) was replaced by the render
+        if given is not None and Path(given).resolve() == out:
+            raise ConfigError(f"{args.output}: the video would overwrite the {what} it is made from; give another name")
     check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     check_video_size(args.width, args.height)  # --beside adds an even width (assets.video.read_video_frames)
     if args.png_dir:

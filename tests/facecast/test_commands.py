@@ -418,6 +418,13 @@ def test_render_a_video_larger_than_the_render_as_its_speech(tmp_path, builtin_r
     assert main([*args, "--height", "64"]) == 0
     err = capsys.readouterr().err
     assert f"warning: {short}: 1.00 s of picture beside " in err and "its last picture is held to the end" in err
+    # `-o` onto the clip it is made from replaced the user's recording by the render (`say --audio` refuses it)
+    before = clip.read_bytes()
+    for argv in (["render", str(clip)], ["render", str(tmp_path / "one.mp4"), "--beside", str(clip)]):
+        assert main([*argv, "-o", str(tmp_path / "." / "hd.mp4")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "hd.mp4: the video would overwrite the " in err[0] and "give another name" in err[0]
+    assert clip.read_bytes() == before
 
 
 def test_render_beside_shows_the_recorded_picture_of_each_frames_instant(tmp_path, builtin_rig, capsys):
