@@ -57,6 +57,11 @@ class TruncatedFileError(FileProblem):
     """The file ends early: a truncated WAV or video, or fewer rows/frames than declared."""
 
 
+class GridNotFoundError(FileProblem):
+    """The folder given as the GRID s1 corpus holds none of its sentences (a ``video/*.mp4`` with its
+    ``align/*.align``): missing, mistyped, or the shared data not where the default looks."""
+
+
 class CorpusFormatError(FileProblem):
     """A track or corpus file (manifest, params.csv, phonemes.json) does not follow its layout."""
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-from assets.errors import AlignmentFormatError
-from assets.shared import shared_data_root
+from assets.errors import AlignmentFormatError, GridNotFoundError
+from assets.shared import ENV, shared_data_root
 
 Split = Literal["train", "val", "test"]
 
@@ -72,16 +72,26 @@ class GridSentence:
 
 
 def sentences(root: str | Path | None = None, *, split: Split | None = None) -> list[GridSentence]:
-    """Every sentence under ``root`` with both a video and an alignment, sorted by id."""
+    """Every sentence under ``root`` with both a video and an alignment, sorted by id.
+
+    Raises :class:`GridNotFoundError` naming ``root`` when it holds no sentence at all (of any split): a folder
+    missing or mistyped, or the shared data elsewhere, was an empty list that each command reported as its own
+    "no sentences to build a unit corpus from" or "no utterances left to train on (check the corpus folders and
+    --exclude-source)"."""
     root = Path(root) if root is not None else default_root()
-    out = []
+    every = []
     for video in sorted((root / "video").glob("*.mp4")):
         align = root / "align" / f"{video.stem}.align"
         if align.is_file():
-            s = GridSentence(sentence_id=video.stem, video=video, align=align)
-            if split is None or s.split == split:
-                out.append(s)
-    return out
+            every.append(GridSentence(sentence_id=video.stem, video=video, align=align))
+    if not every:
+        where = "no such folder" if not root.is_dir() else "no video/*.mp4 with its align/*.align in it"
+        raise GridNotFoundError(
+            root,
+            f"no GRID s1 sentences ({where}): give the GRID s1 folder (it holds video/ and align/), or set "
+            f"{ENV} to the shared data folder that holds video/grid_s1",
+        )
+    return [s for s in every if split is None or s.split == split]
 
 
 def read_words(path: str | Path) -> list[tuple[float, float, str]]:

@@ -51,6 +51,15 @@ class Progress(tqdm):
         self._line_n = self.n
         return True
 
+    def set_postfix(self, ordered_dict: Any = None, refresh: bool = True, **kwargs: Any) -> None:
+        # In a log a postfix waits for the next line (tqdm's default refresh wrote one per call: `facecast train`
+        # logged every Baum-Welch iteration, 9 lines in a second, each with the objective of the iteration after
+        # the count it showed).
+        super().set_postfix(ordered_dict, refresh=refresh and not self._in_log, **kwargs)
+
+    def set_postfix_str(self, s: str = "", refresh: bool = True) -> None:
+        super().set_postfix_str(s, refresh=refresh and not self._in_log)
+
     def clear(self, nolock: bool = False) -> None:
         if not self._in_log:
             super().clear(nolock)

@@ -224,13 +224,15 @@ async def stream_samples(
     realtime: bool = True,
     block_s: float = 0.02,
     int16: np.ndarray | None = None,
+    ahead_s: float = 0.0,
 ) -> list[SentBlock]:
     """Send ``samples`` ((n,) or (n, channels) float, or int16 when the format is pcm_s16le) in
-    blocks of ``block_s`` seconds; real time paces block i to leave once its last sample exists
+    blocks of ``block_s`` seconds; real time paces block i to leave ``ahead_s`` before its last sample exists
     (absolute schedule on the loop clock, no drift), otherwise as fast as the socket takes them."""
     x = np.asarray(samples if int16 is None else int16)
     log: list[SentBlock] = []
-    async for i, block in paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime):
+    blocks = paced_blocks(x, ing.sample_rate_hz, block_s=block_s, realtime=realtime, offset_s=-ahead_s)
+    async for i, block in blocks:
         await ing.send(block)
         log.append(SentBlock(i, len(block), time.time()))
     return log
@@ -258,26 +260,47 @@ async def ingest_file(
     hold_s: float = 0.0,
     enrol: str | Path | None = None,
     auto_gain: bool | None = None,
+    ahead_s: float = 0.0,
 ) -> tuple[dict, dict]:
-    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session; returns the ``started`` and
-    ``ended`` replies. hold_s: seconds between the session's start and its first audio, in which viewers waiting
-    for it connect; enrol: a recording of the talker (any rate/format the reader takes) sent as the start's
-    enrolment, converted to this session's input (the speech file's rate, mono, pcm_s16le); auto_gain: the start's
-    ``auto_gain`` (None: the server's default)."""
+    """Stream a WAV/FLAC/... file (mono mixdown by the reader) as one session, in real time (``ahead_s`` ahead of
+    it) or as fast as the socket takes it; returns the ``started`` and ``ended`` replies. hold_s: seconds between
+    the session's start and its first audio, in which viewers waiting for it connect; enrol: a recording of the
+    talker (any rate/format the reader takes) sent as the start's enrolment, converted to this session's input (the
+    speech file's rate, mono, pcm_s16le); auto_gain: the start's ``auto_gain`` (None: the server's default)."""
+    from shlex import quote
+
     from assets.audio import read_audio
+    from realtime_core.adaptation import MAX_ENROL_S, MIN_ENROL_S
     from realtime_core.features.resample import resample_audio
 
     samples, rate = read_audio(path)
     ingest = IngestClient(url, session=session, sample_rate_hz=rate, token=token, auto_gain=auto_gain)
     if enrol is not None:
         voice, voice_rate = read_audio(enrol)
+        if len(voice) / voice_rate > MAX_ENROL_S:  # refused by the server too, but only after a 1009 for its size
+            raise ClientError(
+                f"{enrol}: {len(voice) / voice_rate:.1f} s of speech; an enrolment takes {MIN_ENROL_S:g}-"
+                f"{MAX_ENROL_S:g} s (30-60 s intended): cut it, e.g. ffmpeg -i {quote(str(enrol))} -t 60 OUT.wav"
+            )
         # The enrolment must be in the session's own rate/format/channels (docs/protocol.md, `enrol`): the
         # server's resampler (resample_poly) on the whole recording, then the session's s16 encoding.
         ingest.enrol = ingest.encode(resample_audio(voice, voice_rate, rate))
-    async with ingest as ing:
-        await asyncio.sleep(hold_s)
-        await stream_samples(ing, samples, realtime=realtime, block_s=block_s)
-        return ing.started, await ing.end()
+    try:
+        async with ingest as ing:
+            await asyncio.sleep(hold_s)
+            await stream_samples(ing, samples, realtime=realtime, block_s=block_s, ahead_s=ahead_s)
+            return ing.started, await ing.end()
+    except ServerClosed as exc:
+        if exc.code != P.CLOSE_TOO_BIG or ingest.enrol is None:
+            raise
+        # The start carries the enrolment at the speech's rate: 45 s at 48 kHz is 5.8 MB, over a server's default
+        # 4 MiB, and the close said only "1009 frame with 5760108 bytes exceeds limit of 4194304 bytes".
+        raise ClientError(
+            f"{enrol}: the enrolment, {len(voice) / voice_rate:.1f} s sent at {rate} Hz (the speech's rate), is "
+            f"over the server's message limit ({exc.code} {exc.reason}; 4 MiB by default holds 60 s at 16-24 kHz): "
+            f"give a shorter recording, the speech at a lower rate (ffmpeg -i {quote(str(path))} -ar 16000 OUT.wav), "
+            "or raise the server's max_message_bytes"
+        ) from None
 
 
 @dataclass

@@ -29,6 +29,10 @@ MIN_ENROL_S = 1.0
 """s: the least speech an adaptation takes (``facecast adapt`` and a session's ``enrol`` alike); 30-60 s is the
 intended amount. Under a second a few dozen frames would move the components they visit towards one syllable."""
 
+MAX_ENROL_S = 120.0
+"""s: the most speech a session's ``enrol`` takes (and ``facecast send --enrol`` sends); 30-60 s is the intended
+amount."""
+
 MIN_VISITED_SHARE = 0.25
 """The least share of the model's audio components (states x mixtures) an enrolment of :data:`CHECK_SPEECH_FROM_S`
 or more must visit (occupancy over one frame) to be taken as speech. Measured with the shipped models (48

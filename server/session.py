@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from assets.audio import is_silent
-from realtime_core.adaptation import MIN_ENROL_S  # one rule with `facecast adapt`
+from realtime_core.adaptation import MAX_ENROL_S, MIN_ENROL_S  # one rule with `facecast adapt` and `send --enrol`
 from realtime_core.avmodel import AvModel
 from realtime_core.blendshapes import blendshape_weights
 from realtime_core.errors import ConfigError, NotSpeechError, RealtimeCoreError
@@ -51,8 +51,6 @@ near-silent). The limit was 64, so 5.0 passed while the reason said [-1, 1]."""
 MIN_RATE_HZ = 8000
 MAX_RATE_HZ = 192000
 MAX_CHANNELS = 8
-MAX_ENROL_S = 120.0
-"""Accepted length of an enrolment recording (30-60 s is the intended amount)."""
 
 
 @dataclass(frozen=True, kw_only=True)

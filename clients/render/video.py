@@ -180,7 +180,10 @@ def write_video(
         "-",
     ]
     if audio is not None:
-        cmd += ["-i", str(audio), "-c:a", "aac", "-b:a", "128k", "-shortest"]
+        # Each stream named: without -map ffmpeg takes the largest picture among the inputs, so a speech file that is
+        # a 1280x720 talking-face video (`render clip.mp4 --beside clip.mp4`) gave its own picture, and stopped
+        # reading the frames piped in ("ffmpeg failed (-1)"). The first audio stream, as the reader decodes.
+        cmd += ["-i", str(audio), "-map", "0:v:0", "-map", "1:a:0", "-c:a", "aac", "-b:a", "128k", "-shortest"]
     cmd += [
         "-c:v",
         "libx264",

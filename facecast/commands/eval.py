@@ -124,6 +124,24 @@ def _default_folders(args: argparse.Namespace) -> None:
         setattr(args, attr, default if given is None else given)
 
 
+def _reproduce(args: argparse.Namespace) -> str:
+    """The command the report's "Produced by" line names: every option that changes what it scores (it named
+    --model and --grid-split only, so a report on `--video-dir myheldout` read as one on the other GRID talkers).
+    After :func:`_default_folders`: a folder equal to its default is left out."""
+    from shlex import quote
+
+    given = [
+        ("--model", args.model),
+        ("--mapper", None if args.mapper == "hmm" else args.mapper),
+        ("--grid-split", None if args.grid_split == "test" else args.grid_split),
+        ("--grid-s1", None if args.grid_s1 == SHARED / "video" / "grid_s1" else args.grid_s1),
+        ("--video-dir", args.video_dir),
+        ("--speech-dir", None if args.speech_dir == SHARED / "speech" else args.speech_dir),
+        ("--synthetic", args.synthetic),
+    ]
+    return "facecast eval" + "".join(f" {o} {quote(str(v))}" for o, v in given if v is not None)
+
+
 def run(args: argparse.Namespace) -> int:
     import tempfile
 
@@ -222,12 +240,7 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(f"skipping real speech: {args.speech_dir} not found", file=sys.stderr)
-    command = (
-        "facecast eval"
-        + (f" --model {args.model}" if args.model else "")
-        + (f" --grid-split {args.grid_split}" if args.grid_split != "test" else "")
-    )
-    rest = format_markdown(results, command)
+    rest = format_markdown(results, _reproduce(args))
     head, _, body = rest.partition("\n## ")
     text = head + "".join(lips_md) + ("## " + body if body else "")
     print(text)

@@ -5,10 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assets.shared import shared_data_root
-
-SHARED = shared_data_root()
-
 
 def _specs(text: str) -> list:
     """``TAPS:POSTERIORS:HIDDEN[xENSEMBLE]:ALPHA[:audio|noaudio]`` candidates, comma-separated."""
@@ -200,7 +196,9 @@ def _run(args: argparse.Namespace) -> int:
             f"--choose-fraction {args.choose_fraction} splits a --corpus folder; GRID s1 fits on its train split "
             "and chooses on val"
         )
-    grid_s1 = args.grid_s1 if args.grid_s1 is not None else SHARED / "video" / "grid_s1"
+    from assets.grid import default_root
+
+    grid_s1 = args.grid_s1 if args.grid_s1 is not None else default_root()
     vtlp = VtlpConfig(copies=args.vtlp_copies, warp_range=args.vtlp_range, seed=args.vtlp_seed)
     teacher = teacher_config(args)
     if args.corpus is not None and (teacher.espeak or teacher.festival):

@@ -52,6 +52,54 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def _params_for_speech(frames, args: argparse.Namespace):
+    """``--params`` frames (F, 4) at ``args.fps`` cut to the speech they are muxed with, with one warning line when
+    the two differ by more than a frame. A file longer than the speech failed after the whole render with "ffmpeg
+    failed (-1)" (ffmpeg ends the video with its sound and stopped reading the frames), and one shorter ended the
+    video, and its sound, where the file ends without a word (3 s of parameters for 164 s of speech: a 3 s video)."""
+    import math
+    import sys
+
+    from assets.audio import read_audio
+
+    samples, rate = read_audio(args.speech)
+    speech_s = len(samples) / rate
+    n_speech = math.ceil(speech_s * args.fps - 1e-9)  # the speech path's count: the last frame starts in the sound
+    if abs(len(frames) - n_speech) > 1:
+        shorter = "the speech" if n_speech < len(frames) else "the parameters"
+        print(
+            f"facecast render: warning: {args.params}: {len(frames) / args.fps:.2f} s of mouth parameters for "
+            f"{speech_s:.2f} s of speech in {args.speech}: the video ends with {shorter}, at "
+            f"{min(n_speech, len(frames)) / args.fps:.2f} s",
+            file=sys.stderr,
+        )
+    return frames[:n_speech]
+
+
+BESIDE_SLACK_S = 0.2
+"""s: a --beside recording whose picture ends further than this from the speech is said to (a clip's audio and
+picture are taken as one recording within the same 0.2 s by `facecast extract`)."""
+
+
+def _warn_if_beside_differs(video, speech_s: float, path) -> None:
+    """One warning line when the --beside picture (``video``: assets.video.VideoFrames) ends more than
+    :data:`BESIDE_SLACK_S` from the speech's ``speech_s`` seconds: a 1 s clip beside 3 s of speech froze on its last
+    picture for 2 s without a word."""
+    import sys
+
+    import numpy as np
+
+    times = video.times_s
+    picture_s = float(times[-1] + (np.median(np.diff(times)) if len(times) > 1 else 0.0))
+    if abs(picture_s - speech_s) > BESIDE_SLACK_S:
+        then = "its last picture is held to the end" if picture_s < speech_s else "the video ends with the speech"
+        print(
+            f"facecast render: warning: {path}: {picture_s:.2f} s of picture beside {speech_s:.2f} s of speech: "
+            f"{then} (--beside takes a recording of the same speech)",
+            file=sys.stderr,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -68,7 +116,14 @@ def run(args: argparse.Namespace) -> int:
         params_for_audio,
         write_video,
     )
+    from training.errors import ConfigError
 
+    out = Path(args.output).resolve()
+    inputs = (("speech", args.speech), ("--beside video", args.beside), ("--params file", args.params))
+    for what, given in inputs:
+        # as `say --audio`: a talking-face clip given as the speech (or --beside) was replaced by the render
+        if given is not None and Path(given).resolve() == out:
+            raise ConfigError(f"{args.output}: the video would overwrite the {what} it is made from; give another name")
     check_writable(check_video_path(args.output))  # before any work: a folder that cannot be made fails now
     check_video_size(args.width, args.height)  # --beside adds an even width (assets.video.read_video_frames)
     if args.png_dir:
@@ -80,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 
         video = read_video_frames(args.beside, height=args.height)  # before the rig: a bad file fails now
     if args.params:
-        frames = read_params_resampled(args.params, args.fps).values
+        frames = _params_for_speech(read_params_resampled(args.params, args.fps).values, args)
     else:
         from facecast.commands.speech_options import shipped_model, warn_if_clipped, warn_if_quiet
 
@@ -109,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         from clients.render.video import beside
 
         shown = video.shown_at(np.arange(len(frames)) / args.fps)  # the recorded picture of each frame's instant
+        _warn_if_beside_differs(video, len(frames) / args.fps, args.beside)
         width += video.frames.shape[2]
     with renderer_for_rig(rig, mesh, cfg) as r:
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Mapping
+from shlex import quote
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -130,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
 
     def save_landmarks(used: Mapping[str, object]) -> None:
         out = write_landmarks(args.save_landmarks, used, head=Path(args.head).name, source=source)
-        print(f"rig: landmarks {out} (correct a point there, then rig with --landmarks {out})")
+        print(f"rig: landmarks {out} (correct a point there, then rig with --landmarks {quote(str(out))})")
 
     if args.save_landmarks and not args.output:  # without a rig: the landmarks it would start from
         save_landmarks(spec if spec is not None else head.landmarks)
@@ -215,10 +216,11 @@ def run(args: argparse.Namespace) -> int:
         f"{m.get('bad_triangles', 0)} simple-face triangles not joined along the surface (Sec. 5 geodesic check), "
         f"lip seam cut: {m.get('lip_seam_cut', 0)} vertices; picture {png}"
     )
+    # Options to copy into a shell: a path with a space was printed bare, and pasted back it split in two.
     same = (
-        f"--head {args.head}"
-        + "".join(f" --head-part {q}" for q in args.head_part)
-        + (f" --landmarks {args.landmarks}" if args.landmarks else "")
+        f"--head {quote(str(args.head))}"
+        + "".join(f" --head-part {quote(str(q))}" for q in args.head_part)
+        + (f" --landmarks {quote(str(args.landmarks))}" if args.landmarks else "")
         + (" --head-mode retarget" if mesh.targets else "")  # else its own morph targets drive it
     )
     again = (
@@ -227,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
         else f"{same} rigs it again (--simple and rig options other than the defaults are only in the file)"
     )
     print(
-        f"rig: use it as --head {out} (every command; serve --rig {out} too)"
+        f"rig: use it as --head {quote(str(out))} (every command; serve --rig {quote(str(out))} too)"
         + (f"; {again}" if args.head != "builtin" else "")
     )
     return 0

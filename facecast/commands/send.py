@@ -5,6 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+FAST_AHEAD_S = 1.5
+"""s: how far ahead of real time ``send --fast`` sends. A server holds an ingest to real time plus its
+``ingest_burst_s`` (2 s by default; docs/protocol.md section 7), so audio sent further ahead only queued in the
+sockets (~95 s of 22.05 kHz s16 on loopback) with the keepalive pings and pongs behind it: `send --fast` of 164 s
+ended after 40 s with "1011 keepalive ping timeout" (a server with ``ingest_overrun`` "close" closed it with 4029 at
+2 s). A file this long or shorter goes at once."""
+
 FAST_HOLD_S = 0.25
 """s: how long ``send --fast`` waits after its session has started before sending audio. The server replays
 nothing, and a fast session's frames all leave within a few hundredths of a second of its start (57 frames of
@@ -36,7 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--fast",
         action="store_true",
         help=f"send as fast as the server takes it instead of in real time, after {FAST_HOLD_S:g} s in which "
-        "the viewers waiting for the session (view, record) connect, so they get it from its first frame",
+        "the viewers waiting for the session (view, record) connect, so they get it from its first frame: the "
+        f"first {FAST_AHEAD_S:g} s of audio at once, the rest in real time (a server holds an ingest to real time "
+        "plus 2 s)",
     )
     p.add_argument(
         "--enrol",
@@ -79,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
             url,
             args.speech,
             session=session,
-            realtime=not args.fast,
+            ahead_s=FAST_AHEAD_S if args.fast else 0.0,
             token=token,
             hold_s=hold,
             enrol=args.enrol,

@@ -81,6 +81,25 @@ def test_save_landmarks_round_trips_through_landmarks(tmp_path, shared_data, own
     assert not list(tmp_path.glob("builtin*.npz"))
 
 
+def test_rig_prints_paths_with_spaces_as_a_shell_reads_them(tmp_path, shared_data, own_cache, capsys):
+    """`rig "my heads/my face.obj" -o "rigs ü/r.npz"` said "use it as --head rigs ü/r.npz ... --head my heads/my
+    face.obj reads this rig": pasted into a shell, each path split in two. Now each is quoted as a shell reads it."""
+    import shlex
+    import shutil
+
+    face = tmp_path / "my heads" / "my face.obj"
+    face.parent.mkdir()
+    shutil.copy(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj", face)
+    rig, lm = tmp_path / "rigs ü" / "r.npz", tmp_path / "rigs ü" / "l m.json"
+    assert main(["rig", str(face), "--keep-failing", "-o", str(rig), "--save-landmarks", str(lm)]) == 0
+    out = capsys.readouterr().out
+    use = next(ln for ln in out.splitlines() if ln.startswith("rig: use it as "))
+    words = shlex.split(use.replace("(", " ").replace(")", " ").replace(";", " "))
+    assert [words[i + 1] for i, w in enumerate(words) if w in ("--head", "--rig")] == [str(rig), str(rig), str(face)]
+    saved = next(ln for ln in out.splitlines() if ln.startswith("rig: landmarks "))
+    assert shlex.split(saved.rstrip(")"))[-1] == str(lm)
+
+
 def test_a_mesh_rigged_for_a_command_says_so_and_a_cached_one_does_not(tmp_path, shared_data, own_cache, capsys):
     """--head MESH rigs a mesh not in the rig cache before the command's work (seconds to minutes for a scan): each
     rig it makes is announced on stderr with the seconds so far; the next command reads the rig and says nothing."""
@@ -227,8 +246,9 @@ def test_bad_heads_fail_with_one_line_exit_2_and_leave_nothing(tmp_path, own_cac
             argv = ["rig", *head, "-o", "out.npz"]
         else:
             argv = ["render", str(speech), "--params", "p.csv", "--head", head[0], *head[1:], "-o", "out.mp4"]
-            (tmp_path / "p.csv").write_text(
-                "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n0.000000,0,0,0,0\n"
+            (tmp_path / "p.csv").write_text(  # the speech's 0.1 s: 3 frames (else a warning says they differ)
+                "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n"
+                + "".join(f"{k / 30:.6f},0,0,0,0\n" for k in range(3))
             )
         assert main(argv) == 2, case
         err = capfd.readouterr().err.strip().splitlines()
@@ -289,6 +309,58 @@ def test_render_command_with_params_csv(tmp_path, shared_data, builtin_rig, caps
     assert f"render: 100%|##########| {len(t)}/{len(t)}" in captured.err, captured.err
 
 
+def test_render_params_longer_or_shorter_than_the_speech(tmp_path, builtin_rig, capsys):
+    """`render SPEECH --params P` with P 2 s longer than the speech failed after the whole render with "ffmpeg failed
+    (-1)" (ffmpeg ended the video with its sound and stopped reading frames); P much shorter ended the video there
+    without a word. Now the video ends with the shorter of the two and one warning line says so."""
+    _require_rendering(builtin_rig)
+    from assets.audio import write_wav
+    from assets.video import probe
+    from tests.speech import speechlike
+
+    wav = tmp_path / "s.wav"
+    write_wav(wav, speechlike(0.5, 16000), 16000)  # 15 frames at 30 fps
+    for seconds, frames, shorter in ((2.5, 15, "the speech, at 0.50 s"), (0.2, 6, "the parameters, at 0.20 s")):
+        csv = tmp_path / f"p{seconds}.csv"
+        t = np.arange(round(seconds * 30)) / 30
+        rows = ["t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress"]
+        csv.write_text("\n".join(rows + [f"{x:.6f},0,0,{0.1 * np.sin(10 * x) ** 2:.4f},0" for x in t]) + "\n")
+        out = tmp_path / f"v{seconds}.mp4"
+        assert main(["render", str(wav), "--params", str(csv), "-o", str(out), "--width", "96", "--height", "64"]) == 0
+        got = capsys.readouterr()
+        assert f"{frames} frames at 30 fps" in got.out
+        warnings = [ln for ln in got.err.splitlines() if "warning" in ln]
+        assert warnings == [
+            f"facecast render: warning: {csv}: {seconds:.2f} s of mouth parameters for 0.50 s of speech in {wav}: "
+            f"the video ends with {shorter}"
+        ], got.err
+        assert int(probe(out)["video"]["nb_frames"]) == frames
+    # parameters of the speech's own length (an edited `animate` CSV): no warning
+    csv = tmp_path / "same.csv"
+    csv.write_text(
+        "t,upper_lip_raise,lip_stretch,mouth_open,lip_corner_depress\n"
+        + "".join(f"{k / 30:.6f},0,0,0.05,0\n" for k in range(15))
+    )
+    assert (
+        main(
+            [
+                "render",
+                str(wav),
+                "--params",
+                str(csv),
+                "-o",
+                str(tmp_path / "same.mp4"),
+                "--width",
+                "96",
+                "--height",
+                "64",
+            ]
+        )
+        == 0
+    )
+    assert "warning" not in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_mu_stages_only_refuses_a_mapper_trained_on_other_clips(tmp_path, shared_data, capsys):
     """`facecast mu --stages-only` keeps the speech bank and refits only the second stages, so the Utterance MUs
@@ -319,6 +391,40 @@ def _grey_ramp_video(path: Path, *, fps: int, n: int, picture_delay_s: float) ->
     cmd += ["-c:v", "libx264", "-qp", "0", "-pix_fmt", "yuv444p", "-c:a", "aac", str(path)]
     subprocess.run(cmd, input=frames, check=True)
     return levels
+
+
+def test_render_a_video_larger_than_the_render_as_its_speech(tmp_path, builtin_rig, ffmpeg, capsys):
+    """`render clip.mp4 --beside clip.mp4` (docs/training.md) with a 1280x720 clip: ffmpeg, not told which input's
+    picture to keep, took the clip's (the larger) and stopped reading the rendered frames: "ffmpeg failed (-1)",
+    nothing written (at a render larger than the clip it worked). A --beside picture that ends away from the speech
+    (a 1 s clip beside 2 s of it froze for a second) is said in one warning line."""
+    import subprocess
+
+    from assets.video import probe
+
+    _require_rendering(builtin_rig)
+    clip = tmp_path / "hd.mp4"
+    cmd = [ffmpeg, "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=1280x720:rate=25:duration=2"]
+    cmd += ["-f", "lavfi", "-i", "sine=frequency=220:duration=2", "-c:v", "libx264", "-preset", "ultrafast"]
+    subprocess.run([*cmd, "-c:a", "aac", "-shortest", str(clip)], check=True)
+    out = tmp_path / "v.mp4"
+    assert main(["render", str(clip), "-o", str(out), "--width", "96", "--height", "64"]) == 0, capsys.readouterr()
+    video, audio = probe(out)["video"], probe(out)["audio"]
+    assert (int(video["width"]), int(video["height"])) == (96, 64) and audio is not None
+    assert "warning" not in capsys.readouterr().err
+    short = tmp_path / "one.mp4"
+    subprocess.run([ffmpeg, "-v", "error", "-y", "-i", str(clip), "-t", "1", str(short)], check=True)
+    args = ["render", str(clip), "--beside", str(short), "-o", str(tmp_path / "b.mp4"), "--width", "96"]
+    assert main([*args, "--height", "64"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {short}: 1.00 s of picture beside " in err and "its last picture is held to the end" in err
+    # `-o` onto the clip it is made from replaced the user's recording by the render (`say --audio` refuses it)
+    before = clip.read_bytes()
+    for argv in (["render", str(clip)], ["render", str(tmp_path / "one.mp4"), "--beside", str(clip)]):
+        assert main([*argv, "-o", str(tmp_path / "." / "hd.mp4")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "hd.mp4: the video would overwrite the " in err[0] and "give another name" in err[0]
+    assert clip.read_bytes() == before
 
 
 def test_render_beside_shows_the_recorded_picture_of_each_frames_instant(tmp_path, builtin_rig, capsys):

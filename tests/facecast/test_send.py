@@ -53,6 +53,20 @@ def test_send_streams_a_file_as_a_live_session_equal_to_animate(tmp_path, model,
         np.testing.assert_allclose(v, want[k], atol=1e-5)
 
 
+def test_send_fast_keeps_within_the_servers_burst(tmp_path, model, capsys):
+    """A server holds an ingest to real time plus its burst (2 s): `send --fast` sent the whole file at once, so on
+    a file of minutes the audio queued in the sockets with the keepalive pings behind it, and the session ended
+    after 40 s with "1011 keepalive ping timeout". A server that closes an ingest running over its burst (4029)
+    shows the same overrun at once: 4 s of audio was closed; now the first 1.5 s go at once, the rest in real time."""
+    wav = write_wav(tmp_path / "four.wav", speechlike(4.0, 16000, seed=5), 16000)
+    srv = LiveServer(model, None, ingest_overrun="close")
+    try:
+        assert main(["send", str(wav), srv.url, "--fast"]) == 0, capsys.readouterr().err
+    finally:
+        srv.stop()
+    assert "session 'four' ended: 120 frames, 4.00 s of audio" in capsys.readouterr().out
+
+
 def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
     wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 16000, seed=1), 16000)
     with socket.socket() as s:  # a port that was free a moment ago: nothing listens on it
@@ -137,11 +151,25 @@ def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_pat
     assert srv.config.max_message_bytes == ServerConfig().max_message_bytes
     try:
         assert main(["send", str(wav), srv.url, "--enrol", str(enrol), "--fast"]) == 0, capsys.readouterr().err
+        out = capsys.readouterr().out
+        assert f"adapted the session to {at_16k / 16000:.2f} s of {enrol}" in out, out
+        assert "session 'a' ended: 15 frames" in out, out
+        # The same 40 s beside speech at 48 kHz is sent at 48 kHz (5.1 MB of base64): over the default limit. The
+        # close said only "1009 frame with 5120108 bytes exceeds limit of 4194304 bytes"; now the line names the
+        # enrolment, its rate and how to proceed.
+        wav48 = write_wav(tmp_path / "a48.wav", speechlike(0.5, 48000, seed=1), 48000)
+        assert main(["send", str(wav48), srv.url, "--enrol", str(enrol), "--fast"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"facecast send: error: {enrol}: the enrolment, "), err
+        assert "s sent at 48000 Hz (the speech's rate), is over the server's message limit (1009 " in err[0]
+        assert f"ffmpeg -i {wav48} -ar 16000 OUT.wav" in err[0]
+        # Over 120 s: refused before connecting (the server refuses it too, after a 1009 for its size).
+        long = write_wav(tmp_path / "long.wav", np.tile(voice, 4)[: 121 * voice_rate], voice_rate)
+        assert main(["send", str(wav), srv.url, "--enrol", str(long), "--fast"]) == 2
+        err = capsys.readouterr().err
+        assert f"error: {long}: 121.0 s of speech; an enrolment takes 1-120 s (30-60 s intended)" in err, err
     finally:
         srv.stop()
-    out = capsys.readouterr().out
-    assert f"adapted the session to {at_16k / 16000:.2f} s of {enrol}" in out, out
-    assert "session 'a' ended: 15 frames" in out, out
 
 
 def _send_to(handler, wav) -> int:

@@ -99,6 +99,20 @@ def test_train_resumes_from_its_checkpoint(corpora, tmp_path, capsys):
     assert load_model(out).hmm.n_states == 3
 
 
+def test_train_logs_its_progress_in_whole_lines_with_each_counts_own_objective(corpora, tmp_path, capsys):
+    """`facecast train ... 2> log`: the bar's postfix (the objective) forced a line per Baum-Welch iteration
+    whatever the log interval (4 iterations: 5 lines in under a second), each showing the objective of the
+    iteration after its count. Now a run this short logs the bar's start and its final count, with that
+    iteration's objective (the model's own history)."""
+    out = tmp_path / "p.npz"
+    assert main(["train", str(corpora[0]), "-o", str(out), "--states", "3", "--mix", "1", "--iters", "4"]) == 0
+    bars = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("Baum-Welch:")]
+    history = load_model(out).metadata["em_history"]
+    assert len(history) == 5  # the starting model, then one per iteration
+    assert len(bars) == 2 and "0/4" in bars[0] and "4/4" in bars[1], bars
+    assert bars[1].endswith(f"objective={history[-1]:.4f}]"), (bars, history)
+
+
 def test_continued_training_equals_an_uninterrupted_run(corpora, tmp_path):
     """A finished file renamed to the checkpoint continues to more --iters and ends where one run of
     that many iterations ends: the same HMM to the last bit and the same objective history (how the
