@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import time
 
 import numpy as np
 import pytest
@@ -88,9 +89,13 @@ def test_send_bad_inputs_say_one_line_and_exit_2(tmp_path, model, capsys):
             assert main(["send", *args]) == 2, args
             err = capsys.readouterr().err.strip()
             assert len(err.splitlines()) == 1 and want in err, (args, err)
-        for _ in range(200):  # the other session is live once its start is accepted
-            if main(["send", str(wav), srv.url, "--session", "taken", "--fast"]) == 2:
+        # Wait for the other session to be live: a send tried before its start was accepted took the name
+        # itself (exit 0), and the retries after it found the name free again (a flaky failure).
+        for _ in range(1000):
+            if "taken" in srv.server.sessions:
                 break
+            time.sleep(0.01)
+        assert main(["send", str(wav), srv.url, "--session", "taken", "--fast"]) == 2
         err = capsys.readouterr().err.strip()
         assert "4009" in err and "taken" in err, err
         live.cancel()
