@@ -1,3 +1,3 @@
-from facecast.cli import main
+from facecast.cli import entry
 
-raise SystemExit(main())
+raise SystemExit(entry())

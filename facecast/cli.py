@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 
 from realtime_core.errors import FacecastError
@@ -79,6 +80,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is: it ends as on Ctrl-C (partial outputs removed, a take saved), exit 143."""
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+def entry() -> int:
+    """The console script: SIGTERM (`kill PID`, a job scheduler's stop) ends a command as Ctrl-C does; by default it
+    killed the process where it stood (a render left its half-written `.NAME.tmp.mp4` beside the output). Commands
+    that run an event loop (serve, demo) handle SIGTERM themselves. Not in :func:`main`: tests call it off the main
+    thread, where no signal handler can be set."""
+    signal.signal(signal.SIGTERM, _terminated)
+    return main()
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     from facecast.commands.bench import FORWARDED, run_forwarded
@@ -95,5 +113,5 @@ def main(argv: list[str] | None = None) -> int:
     except FacecastError as exc:  # the one root: a user-facing error prints one line, no traceback
         print(f"facecast {command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 130
+    except KeyboardInterrupt as exc:
+        return 128 + signal.SIGTERM if isinstance(exc, Terminated) else 130
