@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
         raise FileProblem(args.speech, str(exc)) from None
     speech = params
-    params = apply_expressions(params, args, mups=mups, model=model)
+    params = apply_expressions(params, args, mups=mups, model=model, command="animate")
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
         # One interpolation of both tracks' channels side by side (the same frame times; without an expression the

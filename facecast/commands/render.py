@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         frames = track.at_fps(args.fps).values  # as long as the speech at any rate (the video is not cut short)
     from facecast.commands.speech_options import apply_expressions
 
-    frames = apply_expressions(frames, args, fps=args.fps)
+    frames = apply_expressions(frames, args, fps=args.fps, command="render")
     from facecast.commands.headopts import resolve_from_args
 
     rig, mesh = resolve_from_args(args)

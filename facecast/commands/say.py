@@ -254,7 +254,7 @@ def run(args: argparse.Namespace) -> int:
     k = stored.corpus.n_coefficients
     # Expressions layer on the four parameters as on an audio-driven file (animate, render): every output
     # carries them, the .npz's parameter columns too (its landmark coefficients stay the recorded lips').
-    params = apply_expressions(motion[:, k:], args)
+    params = apply_expressions(motion[:, k:], args, command="say")
     if args.expression:
         motion = np.concatenate([motion[:, :k], params], axis=1)
     track = Track(values=params)

@@ -56,17 +56,42 @@ def expression_intensities(args: argparse.Namespace, n_frames: int, fps: float =
 
 
 def apply_expressions(
-    params: np.ndarray, args: argparse.Namespace, fps: float = 30.0, *, mups: np.ndarray | None = None, model=None
+    params: np.ndarray,
+    args: argparse.Namespace,
+    fps: float = 30.0,
+    *,
+    mups: np.ndarray | None = None,
+    model=None,
+    command: str | None = None,
 ) -> np.ndarray:
     """``params (n, 4)`` at ``fps`` -> the same under ``args.expression`` (unchanged when none). With
     ``mups (n, A0)`` and an MLP ``model`` that has expression stages, paper 002's second-stage MLPs
-    (:func:`realtime_core.mapping.expression.express`), as a live session does."""
+    (:func:`realtime_core.mapping.expression.express`), as a live session does. ``command``: the command whose
+    output ``params`` are; one warning line for each expression set at or after their end (never shown: a user's
+    `--expression surprise@9` on a 3 s take was dropped without a word)."""
     alpha = expression_intensities(args, len(params), fps)
     if alpha is None:
         return params
+    if command is not None:
+        _warn_if_after_the_end(command, args.expression, len(params) / fps)
     from realtime_core.mapping.expression import express
 
     return express(params, alpha, mups=mups, mapper=getattr(model, "expressions", None))
+
+
+def _warn_if_after_the_end(command: str, specs: list[str], duration_s: float) -> None:
+    import sys
+
+    from realtime_core.expressions import parse_expression
+
+    for spec in specs:
+        at = parse_expression(spec)[2]
+        if at >= duration_s:
+            print(
+                f"facecast {command}: warning: --expression {spec} starts at {at:g} s, after the speech ends "
+                f"({duration_s:.2f} s): it is not shown",
+                file=sys.stderr,
+            )
 
 
 QUIET_BY_DB = 10.0

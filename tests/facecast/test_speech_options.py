@@ -115,3 +115,17 @@ def test_animate_warns_of_clipped_speech_in_one_line(tmp_path, capsys):
         assert main(["animate", str(wav), "-o", str(tmp_path / f"{name}.csv")]) == 0
         err = capsys.readouterr().err
         assert ("of the samples are clipped (at full scale)" in err) == warned, err
+
+
+def test_an_expression_set_after_the_speech_ends_is_warned_of_once(tmp_path, capsys):
+    """`--expression surprise@9` on a 2 s take was dropped without a word; one set within the take is not warned of."""
+    from assets.audio import write_wav
+    from facecast.cli import main
+    from tests.speech import speechlike
+
+    wav = write_wav(tmp_path / "take.wav", 0.3 * speechlike(2.0, 16000, seed=4), 16000)
+    for spec, warned in [("smile@1.5", False), ("surprise@9", True)]:
+        assert main(["animate", str(wav), "-o", str(tmp_path / "x.csv"), "--expression", spec]) == 0
+        err = capsys.readouterr().err
+        want = f"facecast animate: warning: --expression {spec} starts at 9 s, after the speech ends (2.0"
+        assert err.count(want) == warned, err
