@@ -380,6 +380,12 @@ class Cluster:
         self._up_since = 0.0  # time.monotonic() when Redis was last seen back (or first reached)
         self.feeds_lost = 0
         self.names_yielded = 0  # local sessions whose name another node held when Redis came back (_yield_name)
+        # Local sessions whose registry row Redis has confirmed as this node's since Redis was last reached: a claim
+        # that set it, or a heartbeat's refresh. Only they publish. While Redis is away (and after, until the next
+        # heartbeat) a session of the same name may open on another node; the first heartbeat back decides whose it
+        # is (REFRESH_ROW). Publishing before that let both nodes' frames onto the one channel in that window (a
+        # third node's viewer saw indices go backwards, under load).
+        self.held: set[str] = set()
 
     @property
     def _client(self) -> aioredis.Redis:
@@ -474,6 +480,7 @@ class Cluster:
             ok = await self._client.set(session_key(live.name), self._row(live), nx=True, px=self.ttl_ms)
             if ok:  # an earlier session of this name has ended: its end record is not this one's
                 await self._client.delete(ended_key(live.name))
+                self.held.add(live.name)
             else:
                 raw = await self._client.get(session_key(live.name))
                 owner = json.loads(raw).get("node", "?") if raw else None
@@ -492,6 +499,9 @@ class Cluster:
             return
         del self.local[live.name]
         self.wanted.pop(live.name, None)
+        if live.name not in self.held:  # the row may be another node's now: its end and row are not this one's
+            return
+        self.held.discard(live.name)
         end = json.dumps({"code": code, "reason": reason})
         try:
             # Before the marker: a node that subscribes after the marker went out finds the end here
@@ -515,6 +525,7 @@ class Cluster:
             return
         del self.local[name]
         self.wanted.pop(name, None)
+        self.held.discard(name)
         self.names_yielded += 1
         log.warning(
             "session %r is also live on node %s (both opened while Redis was away): the cluster's is %s's; this "
@@ -525,8 +536,9 @@ class Cluster:
         )
 
     def wants(self, name: str) -> set[tuple[int, int]]:
-        """(kind, encoding) pairs other nodes watch of local session ``name`` (audio: KIND_AUDIO, int16)."""
-        return self.wanted.get(name, set())
+        """(kind, encoding) pairs other nodes watch of local session ``name`` (audio: KIND_AUDIO, int16); none while
+        Redis has not confirmed the name as this node's (:attr:`held`)."""
+        return self.wanted.get(name, set()) if name in self.held else set()
 
     def publish(self, name: str, message: bytes) -> None:
         """Send one message to the session's channel: written at once on the publish connection when it
@@ -589,6 +601,7 @@ class Cluster:
         if self.up:
             log.warning("Redis unreachable at %s: %s (sessions go on; retrying)", shown_url(self.url), exc)
         self.up = False
+        self.held.clear()  # whose each name is gets decided again by the first heartbeat back
         self.error = str(exc)[:200] or type(exc).__name__
 
     async def _heartbeat(self) -> None:
@@ -629,6 +642,8 @@ class Cluster:
         for (name, live), owner in zip(local, results[1 : 1 + len(local)]):
             if owner is not None:
                 self._yield_name(name, live, owner.decode() if isinstance(owner, bytes) else str(owner))
+            elif self.local.get(name) is live:  # still live (not ended while the pipeline ran): the row is this node's
+                self.held.add(name)
         # The owner's side: which kinds of its sessions other nodes want now.
         wanted: dict[str, set[tuple[int, int]]] = collections.defaultdict(set)
         self._wanted_meanwhile = set()
@@ -828,7 +843,7 @@ class Cluster:
             log.warning("malformed replay request %.200r ignored", request)
             return
         live = self.local.get(name)
-        if live is not None:
+        if live is not None and name in self.held:  # not held: the name may be another node's (answered: done)
             self._want(name, kind, encoding)
             if audio:
                 self._want(name, P.KIND_AUDIO, P.ENC_INT16)
