@@ -50,7 +50,7 @@ const state = {
   // a software renderer draws after that: displayHz tells how often the browser manages a picture)
   headLoadMs: null, // description -> head downloaded and built (or reused)
   ticks: 0, // animation frames the page has run
-  displayHz: null, // display refreshes per second over the last second (below 30: frames are skipped)
+  displayHz: null, // display refreshes per second over the last second of play (below 30: frames are skipped)
   lastPeak: 0, // largest vertex delta of the shown frame (mesh units)
   kind: null,
   closeCode: null,
@@ -395,8 +395,12 @@ function easeToRest(now) {
 function tick() {
   state.ticks += 1;
   const now = nowS();
-  display.tick(now);
-  state.displayHz = display.hz;
+  // The rate while frames play (the queue holds some): kept after a session ends, when an idle page
+  // refreshes at the screen's rate again (it draws nothing), so the panel still says why frames were skipped.
+  if (queue.length) {
+    display.tick(now);
+    state.displayHz = display.hz;
+  }
   const due = takeDue(queue, now);
   // While frozen, due frames are consumed unseen (neither shown nor skipped: the page holds one on purpose).
   const show = frozen ? null : due.show;
