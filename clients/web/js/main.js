@@ -8,12 +8,13 @@
 // displayed frame (screenshots), mouthBox() (where the mouth is on the canvas), morph() (the
 // shown frame's streamed weights and the morphTargetInfluences three.js draws with), morphNormals() (how
 // the normals drawn at the shown influences turn and follow the shape: HeadView.morphNormals), applied(from)
-// (the record of every frame applied: {n, index, peak}, n counting from 0), and freezeWhen({above}
+// (the record of every frame applied: {n, index, peak, late}, n counting from 0, late: s its time had passed
+// when the refresh that showed it came), and freezeWhen({above}
 // or {below}) + caught(): the page itself freezes on the first frame applied after the call whose
 // peak passes the bound, so a check never depends on polling a value that changes 30 times a second.
 
 import { decodeMessage, KIND, CLOSE } from "./protocol.js";
-import { PlayoutClock, AudioOut, nowS } from "./playout.js";
+import { PlayoutClock, AudioOut, DisplayRate, nowS, takeDue } from "./playout.js";
 import { HeadView } from "./head.js";
 
 const opts = new URLSearchParams(location.search);
@@ -40,14 +41,16 @@ const state = {
   received: 0, // frames received on this connection
   firstIndex: null, // index of the first frame received on this connection (0: watched from the start)
   lost: 0, // frames the server dropped or never sent (gaps in the frame index)
-  skipped: 0, // frames due together with a newer one (display too slow): not shown
+  skipped: 0, // frames due together with a newer one in one display refresh (display too slow): not shown
   resyncs: 0, // timeline moves: later after a late frame, earlier once frames come early again
   deliveryMs: null, // server send -> browser receipt (median of the last 30 frames)
   behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
   waitMs: null, // frame arrival -> shown (jitter buffer)
-  drawMs: null, // time the page spends applying a frame and drawing (median of the last 30)
+  drawMs: null, // time the page's script spends applying a frame and submitting the draw (median of the last 30;
+  // a software renderer draws after that: displayHz tells how often the browser manages a picture)
   headLoadMs: null, // description -> head downloaded and built (or reused)
-  ticks: 0, // animation frames the page has run (its display rate: ticks per second)
+  ticks: 0, // animation frames the page has run
+  displayHz: null, // display refreshes per second over the last second of play (below 30: frames are skipped)
   lastPeak: 0, // largest vertex delta of the shown frame (mesh units)
   kind: null,
   closeCode: null,
@@ -63,6 +66,7 @@ let queue = []; // received frames {msg, due, arrival} waiting for their due tim
 let desc = null;
 let lastIndex = -1;
 let frozen = false;
+const display = new DisplayRate();
 let audioArrivals = []; // [{start, end, arrival}] of recent audio blocks (media s, performance s)
 const windows = { delivery: [], behind: [], wait: [], draw: [] };
 
@@ -150,7 +154,7 @@ const KINDS = ["morph", "deltas", "params"];
 const firstKind = Math.max(0, KINDS.indexOf(opts.get("kind") ?? "morph"));
 let kindLevel = firstKind;
 let shown = null; // the last frame shown {index, values} (automation)
-const appliedLog = []; // the last APPLIED_KEEP frames applied {n, index, peak} (automation)
+const appliedLog = []; // the last APPLIED_KEEP frames applied {n, index, peak, late} (automation)
 const APPLIED_KEEP = 2000;
 let appliedCount = 0;
 let armed = null; // freezeWhen's bound {above} or {below}, until a frame passes it
@@ -391,20 +395,23 @@ function easeToRest(now) {
 function tick() {
   state.ticks += 1;
   const now = nowS();
-  let show = null;
-  while (queue.length && queue[0].due <= now) {
-    const item = queue.shift();
-    if (frozen) continue;
-    if (show) state.skipped += 1;
-    show = item;
+  // The rate while frames play (the queue holds some): kept after a session ends, when an idle page
+  // refreshes at the screen's rate again (it draws nothing), so the panel still says why frames were skipped.
+  if (queue.length) {
+    display.tick(now);
+    state.displayHz = display.hz;
   }
+  const due = takeDue(queue, now);
+  // While frozen, due frames are consumed unseen (neither shown nor skipped: the page holds one on purpose).
+  const show = frozen ? null : due.show;
+  if (!frozen) state.skipped += due.skipped.length;
   const drawStart = performance.now();
   if (!show && toRest && !queue.length && !frozen) easeToRest(now);
   if (show) {
     applyValues(show.msg.values);
     state.frames += 1;
     shown = { index: show.msg.index, values: show.msg.values };
-    const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak };
+    const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak, late: now - show.due };
     appliedLog.push(rec);
     if (appliedLog.length > APPLIED_KEEP) appliedLog.shift();
     if (armed && (armed.above !== undefined ? rec.peak >= armed.above : rec.peak <= armed.below)) {
@@ -432,6 +439,7 @@ function updatePanel() {
     `frames shown   ${state.frames}`,
     `lost (gaps)    ${state.lost}`,
     `skipped        ${state.skipped}`,
+    `display        ${fmt(state.displayHz, " /s")}`,
     `delivery       ${fmt(state.deliveryMs)}`,
     `behind audio   ${fmt(state.behindAudioMs)}`,
     `buffer         ${fmt(state.waitMs)}`,

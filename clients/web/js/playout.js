@@ -9,7 +9,11 @@
 // pushes offset later by its lateness (a "resync": motion and sound stay together, a short silence
 // absorbs the step). When every frame of the last 3 s arrived well ahead of time (the hiccup that
 // caused a resync is over), offset moves back by half the excess (a "catch-up": the audio player
-// skips the few milliseconds that now overlap), so the delay does not only ever grow.
+// skips the few milliseconds that now overlap), so the delay does not only ever grow; but never
+// earlier than the first frame put it: a catch-up gives back what resyncs added, no more. Frames that
+// come early by design (a text session's 0.5 s lead, `send --fast`, a late viewer's replay of the sentence
+// from its start) used to trigger catch-ups too, and each one cut what the step skipped from both the
+// frames and the speech (a text session: 8 frames and 8 audio blocks, 0.27 s, at 6 s in).
 //
 // WebAudio runs on its own clock; AudioContext.getOutputTimestamp() pairs a context time with the
 // performance time at which it leaves the speakers, which converts due(m) into a start time that
@@ -24,6 +28,7 @@ export class PlayoutClock {
   constructor({ bufferS = 0.08 } = {}) {
     this.bufferS = bufferS;
     this.offset = null; // s: due = media + offset
+    this.baseOffset = null; // s: the offset the first frame set (catch-ups stop there)
     this.resyncs = 0;
     this.catchups = 0;
     this.minSlack = Infinity; // smallest (due - arrival) since windowStart (s)
@@ -32,6 +37,7 @@ export class PlayoutClock {
 
   reset() {
     this.offset = null;
+    this.baseOffset = null;
     this.minSlack = Infinity;
     this.windowStart = null;
   }
@@ -40,6 +46,7 @@ export class PlayoutClock {
   arrive(mediaTime, arrival) {
     if (this.offset === null) {
       this.offset = arrival - mediaTime + this.bufferS;
+      this.baseOffset = this.offset;
       this.windowStart = arrival;
     }
     const due = mediaTime + this.offset;
@@ -53,8 +60,9 @@ export class PlayoutClock {
     }
     this.minSlack = Math.min(this.minSlack, due - arrival);
     if (arrival - this.windowStart >= 3.0) {
-      if (this.minSlack > 1.5 * this.bufferS) {
-        this.offset -= (this.minSlack - this.bufferS) / 2;
+      const back = Math.min((this.minSlack - this.bufferS) / 2, this.offset - this.baseOffset);
+      if (this.minSlack > 1.5 * this.bufferS && back > 0.001) {
+        this.offset -= back;
         this.catchups += 1;
       }
       this.minSlack = Infinity;
@@ -65,6 +73,54 @@ export class PlayoutClock {
 
   due(mediaTime) {
     return this.offset === null ? null : mediaTime + this.offset;
+  }
+}
+
+/**
+ * The frames at the head of `queue` ({due, ...} in frame order; due: s, performance clock) whose due time
+ * is at or before `now` (s), taken off the queue: `show` the newest of them (null: none due), `skipped` the
+ * older ones. A display refresh shows one frame, so of two frames due in one refresh the older is dropped
+ * for the newer (the sound goes on; showing it late would put the face behind the speech). On a steady
+ * timeline that one's time passed by at least one frame period (the newer one is a frame later), so a
+ * frame is dropped only when the display refreshes less often than frames come (`DisplayRate`) or one
+ * refresh came more than a frame late; a catch-up (`PlayoutClock`) also drops the frames it steps over, as
+ * the audio player skips their sound. Frames are never shown out of order.
+ */
+export function takeDue(queue, now) {
+  const skipped = [];
+  let show = null;
+  while (queue.length && queue[0].due <= now) {
+    if (show) skipped.push(show);
+    show = queue.shift();
+  }
+  return { show, skipped };
+}
+
+/**
+ * Display refreshes per second: the requestAnimationFrame callbacks of the last second. The browser runs
+ * them at the screen's rate (60/s on most screens) unless drawing the previous picture took longer: a
+ * browser drawing WebGL in software (no GPU: headless Chromium with SwiftShader) refreshes a 600 x 600
+ * canvas of the head ~15-20 times a second, so about every second frame of a 30 frames/s session is
+ * skipped (`takeDue`).
+ */
+export class DisplayRate {
+  constructor({ windowS = 1.0 } = {}) {
+    this.windowS = windowS;
+    this.times = []; // s: the refreshes of the last windowS
+  }
+
+  /** A refresh at time t (s). */
+  tick(t) {
+    this.times.push(t);
+    while (this.times.length && this.times[0] < t - this.windowS) this.times.shift();
+  }
+
+  /** Refreshes per second over the window (null before two refreshes). */
+  get hz() {
+    const n = this.times.length;
+    if (n < 2) return null;
+    const span = this.times[n - 1] - this.times[0];
+    return span > 0 ? (n - 1) / span : null;
   }
 }
 

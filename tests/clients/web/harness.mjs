@@ -22,8 +22,9 @@ export function watch(page) {
   return page;
 }
 
-/** A page of the browser (launched on first use) showing `url`, as soon as it has loaded. */
-export async function openPage(url) {
+/** A page of the browser (launched on first use) showing `url`, as soon as it has loaded; `init` (optional): a
+ *  function the page runs before its own scripts (page.addInitScript). */
+export async function openPage(url, init = null) {
   if (!context) {
     context = await chromium.launchPersistentContext(profile, {
       executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
@@ -36,6 +37,7 @@ export async function openPage(url) {
   }
   const fresh = context.pages().find((p) => p.url() === "about:blank");
   const page = watch(fresh ?? (await context.newPage()));
+  if (init) await page.addInitScript(init);
   await page.goto(url);
   return page;
 }

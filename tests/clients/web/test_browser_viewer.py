@@ -381,6 +381,70 @@ def test_browser_waiting_for_a_session_shows_it_from_its_start(model, head):
     assert joined["console_errors"] == []
 
 
+PLAYOUT_SCRIPT = Path(__file__).with_name("playout_check.mjs")
+
+
+async def _stream_ahead(url: str, name: str, samples: np.ndarray, lead_s: float) -> dict:
+    """Start session ``name``, wait until a viewer watches it, then ingest ``samples`` ((n,) float32, 16 kHz)
+    ``lead_s`` (s) ahead of real time: the first ``lead_s`` at once, as a text session's server sends its
+    frames; returns the server's ``ended`` reply."""
+    from assets.pacing import paced_blocks
+    from clients.client import IngestClient
+
+    async with IngestClient(url, session=name, sample_rate_hz=16000) as ing:
+        for _ in range(600):  # the page polls /sessions every 0.1 s while it waits, then connects
+            rows = json.loads((await http_get(url, "/sessions"))[1])["sessions"]
+            if any(r["name"] == name and r["viewers"] > 0 for r in rows):
+                break
+            await asyncio.sleep(0.05)
+        else:
+            raise AssertionError(f"no viewer joined {name!r} within 30 s")
+        async for _, block in paced_blocks(samples, 16000, block_s=0.02, offset_s=-lead_s):
+            await ing.send(block)
+        return await ing.end()
+
+
+def test_browser_plays_out_a_session_sent_ahead_of_time_without_dropping_it(model, head):
+    """A session whose frames come 0.5 s ahead of their time (as a text session's server sends them) is played
+    out on the timeline its first frame set: no catch-up, so no speech cut and no frame dropped for one (the
+    page used to move its timeline 0.25 s earlier 6 s in, dropping 8 frames and 0.27 s of speech). Every frame
+    received is shown or skipped, in order; a shown frame's time had passed by less than a frame when the
+    refresh that showed it came (a frame is skipped only for a newer one due in the same refresh: at 60
+    refreshes a second none is, in software-rendered headless Chromium ~15-20 a second, about every second
+    one); the page's display rate is the refreshes counted by the check."""
+    _require_browser()
+    name = "playoutcheck"
+    seconds = 8.0  # the first catch-up came at the end of the second 3 s window
+    srv = LiveServer(model, head)
+    proc = _start(PLAYOUT_SCRIPT, srv.url, name)
+    session = None
+    try:
+        _read_step(proc, "polled")
+        samples = speechlike(seconds, 16000, seed=6)
+        session = srv.submit(_stream_ahead(srv.url, name, samples, lead_s=0.5))
+        played = _read_step(proc, "played")
+    finally:
+        _end(proc)
+        if session is not None:
+            session.result(60)
+        srv.stop()
+    st, audio, applied = played["state"], played["audio"], played["applied"]
+    # The counters for the report (not asserted: how many frames a display skips depends on the machine).
+    keep = ("received", "frames", "skipped", "resyncs", "waitMs", "deliveryMs", "displayHz")
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    (ARTIFACTS / "playout.json").write_text(json.dumps({"state": {k: st[k] for k in keep}, "audio": audio}))
+    assert played["console_errors"] == []
+    assert st["firstIndex"] == 0 and st["received"] >= seconds * 30 and st["lost"] == 0, st
+    assert st["resyncs"] == 0 and audio["lateDropped"] == 0, (st, audio)  # the lead is no hiccup: nothing cut
+    assert st["frames"] + st["skipped"] == st["received"], st
+    index = [r["index"] for r in applied]
+    assert index == sorted(set(index)) and len(index) == st["frames"]  # in order, each once
+    late = np.array([r["late"] for r in applied[:-1]])  # the last frame has no newer one to be skipped for
+    assert late.min() >= 0 and late.max() < 1 / 30, late.max()
+    d = played["display"]
+    assert d["page"] == pytest.approx(d["counted"], rel=0.1), d
+
+
 TEXTURE_SCRIPT = Path(__file__).with_name("texture_check.mjs")
 
 

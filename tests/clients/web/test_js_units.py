@@ -1,6 +1,7 @@
 """The viewer's JavaScript modules under Node: the browser decodes exactly what wire/protocol.py
-encodes (every kind, the head's own morph weights included; both twins number the kinds alike), and the
-playout clock resyncs on a late frame and catches up when frames come early again."""
+encodes (every kind, the head's own morph weights included; both twins number the kinds alike), the
+playout clock resyncs on a late frame and catches up when frames come early again (never earlier than its
+first frame put it), and the play-out drops only frames whose time passed by a frame (fake clock)."""
 
 from __future__ import annotations
 
@@ -68,3 +69,27 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
     assert slack[60] >= 0  # ... so that it is shown, not skipped
     assert r["catchups"] >= 1 and r["afterRecovery"] < r["afterLate"]  # and it moves back once frames are early
     assert slack[61:].min() >= 0.08 - 1e-9  # never so far that a frame would be late
+    assert r["afterRecovery"] >= r["baseOffset"] - 1e-12  # nor earlier than the first frame put the timeline
+
+    # A text session's frames come 0.5 s ahead of their time by design: no hiccup to recover from, so the
+    # timeline stays where the first frame put it. Catch-ups used to move it 0.25 s, then 0.125 s earlier,
+    # each dropping the frames (and the speech) the step passed over.
+    text = r["text"]
+    assert text["catchups"] == 0 and text["resyncs"] == 0 and text["offset"] == text["baseOffset"]
+    frames = text["frames"]
+    assert all(f["fate"] in ("shown", "skipped") for f in frames)  # every frame was shown or dropped
+    assert text["shown"] == sorted(set(text["shown"]))  # in order, each once
+    fps = 30
+    for f in frames:
+        late = f["tick"] - f["due"]  # how far its time had passed when the refresh that took it came
+        assert late >= -1e-9
+        # Dropped only for a newer frame due in the same refresh: its own time had passed by a frame or more;
+        # a frame whose time passed by less than a frame is shown.
+        assert (f["fate"] == "skipped") == (late >= 1 / fps - 1e-9), f
+    # So a display refreshing at 60/s drops nothing; one refreshing every 40-100 ms (4-8 s) drops what it must.
+    skipped_at = np.array([f["tick"] for f in frames if f["fate"] == "skipped"])
+    assert skipped_at.size > 0 and np.all((skipped_at >= 4.0) & (skipped_at < 8.2))
+
+    # The display rate: refreshes per second over the last second.
+    rates = r["rates"]
+    assert rates[59] == pytest.approx(60) and rates[-1] == pytest.approx(20)
