@@ -7,6 +7,7 @@ One int16 scale everywhere (the wire's): float -> int16 is ``x * 32768`` rounded
 from __future__ import annotations
 
 import io
+import logging
 import shutil
 import subprocess
 import wave
@@ -110,7 +111,7 @@ def read_wav(
     else:
         raise NotAudioError(path, f"not audio: unsupported sample width {width} bytes")
     if ch > 1:
-        x = x.reshape(-1, ch).mean(axis=1)
+        x = to_mono(x.reshape(-1, ch), path)
     if rate not in ACCEPTED_RATES_HZ:
         raise WrongSampleRateError(path, f"wrong sample rate: {rate} Hz is not one of {ACCEPTED_RATES_HZ}")
     if expected_rate_hz is not None and rate != expected_rate_hz:
@@ -161,6 +162,12 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
         if rate is None:
             raise NotAudioError(path, "no audio stream found")
     samples = _ffmpeg_decode(ffmpeg, path, rate, "s16le")
+    if len(samples) and np.abs(samples).max() < QUIET_MIX_PEAK * INT16_SCALE:
+        # Quiet as mixed: look at the channels themselves (only then: a second decode) in case they cancelled.
+        pair = _ffmpeg_decode(ffmpeg, path, rate, "s16le", channels=2).reshape(-1, 2)
+        mono = to_mono(pair.astype(np.float32), path)
+        if np.abs(mono).max() > np.abs(samples).max() * 2:  # they did: the loudest channel (to_mono warned)
+            samples = np.rint(mono).astype(np.int16)
     # 16-bit output hides NaN and inf: ffmpeg writes a NaN as -32768 on x86 (a full-scale click; 0 on ARM) and
     # +-inf as full scale. Decoding every file to float instead would change its samples (ffmpeg downmixes stereo
     # louder to float than to 16-bit), so a file that may hold them is decoded once more, to float, to look: a float
@@ -180,14 +187,45 @@ def read_audio(path: str | Path, *, rate_hz: int | None = None) -> tuple[np.ndar
     return samples.astype(np.float32) / INT16_SCALE, rate
 
 
+CANCELLED_BY_DB = 20.0
+"""Channels whose mean is this far under the loudest channel's level cancel each other: one wired (or edited) in
+opposite polarity. The mean of such a stereo take is silence or near it (a user's out-of-phase file animated a
+closed mouth without a word); two microphones, or a stereo mix, lose at most ~3 dB in the mean."""
+QUIET_MIX_PEAK = 0.01
+"""A file decoded by ffmpeg whose mono mix peaks under this (full scale 1) is decoded once more as two channels to
+look for cancelling channels (:data:`CANCELLED_BY_DB`)."""
+
+log = logging.getLogger(__name__)
+
+
+def to_mono(frames: np.ndarray, path: str | Path) -> np.ndarray:
+    """Frames ``(n, channels)`` float -> ``(n,)``: the channels' mean; when that mean is :data:`CANCELLED_BY_DB` under
+    the loudest channel (opposite polarity), the loudest channel instead, with one warning naming ``path``."""
+    mean = frames.mean(axis=1)
+    level = np.sqrt(np.mean(np.square(frames, dtype=np.float64), axis=0))  # (channels,) RMS
+    loudest = int(np.argmax(level))
+    mixed = float(np.sqrt(np.mean(np.square(mean, dtype=np.float64))))
+    if level[loudest] > 0 and mixed < level[loudest] * 10 ** (-CANCELLED_BY_DB / 20):
+        how = "silent" if mixed == 0 else f"{20 * np.log10(level[loudest] / mixed):.0f} dB under channel {loudest + 1}"
+        log.warning(
+            "warning: %s: its channels cancel when mixed to mono (one in opposite polarity?): the mix is %s; "
+            "channel %d is used",
+            path,
+            how,
+            loudest + 1,
+        )
+        return frames[:, loudest].copy()
+    return mean
+
+
 FLOAT_CODECS = frozenset({"pcm_f16le", "pcm_f24le", "pcm_f32le", "pcm_f32be", "pcm_f64le", "pcm_f64be"})
 """ffmpeg's names of the float PCM encodings (WAV, AIFF-C, CAF, W64, Matroska...): the files that can hold NaN/inf."""
 
 
-def _ffmpeg_decode(ffmpeg: str, path: Path, rate_hz: int, fmt: str) -> np.ndarray:
-    """The first audio stream of ``path`` as mono at ``rate_hz``: (n,) int16 for ``fmt`` "s16le", float32 for
-    "f32le". NotAudioError with ffmpeg's last line when it cannot decode it."""
-    cmd = [ffmpeg, "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", "1", "-ar", str(rate_hz)]
+def _ffmpeg_decode(ffmpeg: str, path: Path, rate_hz: int, fmt: str, *, channels: int = 1) -> np.ndarray:
+    """The first audio stream of ``path`` mixed to ``channels`` at ``rate_hz``: (n * channels,) interleaved, int16 for
+    ``fmt`` "s16le", float32 for "f32le". NotAudioError with ffmpeg's last line when it cannot decode it."""
+    cmd = [ffmpeg, "-v", "error", "-nostdin", "-i", str(path), "-vn", "-ac", str(channels), "-ar", str(rate_hz)]
     cmd += ["-f", fmt, "-acodec", f"pcm_{fmt}", "-"]
     proc = subprocess.run(cmd, capture_output=True, check=False)
     if proc.returncode != 0 or not proc.stdout:

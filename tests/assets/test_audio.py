@@ -5,6 +5,7 @@ to the same samples as the 16-bit original."""
 from __future__ import annotations
 
 import subprocess
+import wave
 
 import numpy as np
 import pytest
@@ -93,3 +94,34 @@ def test_a_float_wav_holding_nan_or_inf_is_refused_naming_the_file_and_where(tmp
     got, rate = read_audio(wav)
     assert rate == 16000
     np.testing.assert_allclose(got, x, atol=0.5 / 32768)  # the file made whole reads as written (16-bit steps)
+
+
+@pytest.mark.parametrize("suffix", [".wav", ".flac"])  # the PCM reader, and ffmpeg's decode
+def test_channels_in_opposite_polarity_are_not_mixed_to_silence(tmp_path, suffix, caplog):
+    """A stereo take with one channel inverted (a miswired microphone) was mixed to digital silence: the mouth never
+    opened and nothing was said. The loudest channel is used instead, with one warning; a real stereo take (two
+    channels that differ) is still mixed to their mean."""
+    import logging
+
+    x = (0.3 * speechlike(1.0, 16000, seed=3)).astype(np.float32)
+    wav = tmp_path / "inverted.wav"
+    pcm = np.rint(np.stack([x, -x], axis=1) * 32767).astype("<i2")
+    with wave.open(str(wav), "wb") as w:
+        w.setnchannels(2), w.setsampwidth(2), w.setframerate(16000), w.writeframes(pcm.tobytes())
+    path = wav
+    if suffix != ".wav":
+        path = tmp_path / f"inverted{suffix}"
+        subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(wav), str(path)], check=True)
+    with caplog.at_level(logging.WARNING, logger="assets.audio"):
+        got, rate = read_audio(path)
+    assert rate == 16000
+    np.testing.assert_allclose(got, x, atol=2 / 32767)  # the first channel, not silence
+    assert sum("channels cancel when mixed to mono" in r.getMessage() for r in caplog.records) == 1
+    caplog.clear()
+    y = (0.3 * speechlike(1.0, 16000, seed=4)).astype(np.float32)  # another voice on the other channel
+    pcm = np.rint(np.stack([x, y], axis=1) * 32767).astype("<i2")
+    with wave.open(str(wav), "wb") as w:
+        w.setnchannels(2), w.setsampwidth(2), w.setframerate(16000), w.writeframes(pcm.tobytes())
+    got, _ = read_audio(wav)
+    np.testing.assert_allclose(got, pcm.astype(np.float32).mean(axis=1) / 32768, atol=1e-6)
+    assert not caplog.records
