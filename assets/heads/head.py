@@ -1128,7 +1128,8 @@ def _rig_checked_once(
     return replace(rig, meta=meta), rigged, report
 
 
-# The advisory figures of a RigReport that a close-up shows (lower is better; None: nothing measured, as 0).
+# The advisory figures of a RigReport that a close-up shows, and flips under expressions (lower is better; None:
+# nothing measured, as 0).
 _SEEN_FIGURES = (
     "lip_edge_notch_iod",
     "lip_backs_iod2",
@@ -1137,6 +1138,7 @@ _SEEN_FIGURES = (
     "bilabial_gap_iod",
     "inside_shown_iod",
     "lips_dark_iod2",
+    "expression_flips",
 )
 
 
