@@ -360,6 +360,8 @@ def _warned(rep) -> str:
         over.append("dark")
     if rep.bilabial_gap_iod is not None and rep.bilabial_gap_iod > lim.max_bilabial_gap:
         over.append("/m/")
+    if rep.lip_crumple_deg is not None and rep.lip_crumple_deg > lim.max_lip_crumple:
+        over.append("crumple")
     return sliver + (f" ({' + '.join(over)} warning)" if over else "")
 
 

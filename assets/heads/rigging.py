@@ -1811,6 +1811,7 @@ def rig_head(
     widen_repair: bool = False,
     ease_upper_lip: bool = False,
     knife_meeting: bool = True,
+    open_depress_left: bool = False,
 ) -> tuple[Rig, HeadMesh]:
     """Rig ``mesh`` (the built-in head when ``mesh.name == 'builtin'`` and no landmarks are given).
 
@@ -1833,6 +1834,8 @@ def rig_head(
     at the inner-lip point, under the rescale's floor (OPEN_RESPONSE_RANGE), and part by 0.38 (< 0.5); with the
     corners at their points 0.61 (docs/animation.md, "A coarse mouth's corners at their points";
     :func:`assets.heads.head.rig_checked` tries it on a knife-cut mouth whose other rigs fail).
+    ``open_depress_left``: the head-response correction leaves the lip_corner_depress that mouth_open shows on the
+    head as it is (:func:`realtime_core.face.rig.recalibrate`; rig_checked's retry of a rig whose lip crumples).
     ``gain_capped``: the simple face's units carried to the head with local maps of gain at most
     :data:`ADAPT_MAX_GAIN` (meta "simple_gain_capped"; rig_checked's last try for a head whose rigs all fail).
     ``proxy``: (rig, the mesh it animates) of a decimated copy of ``mesh`` (a dense scan,
@@ -2189,7 +2192,7 @@ def rig_head(
                 seam_hinges=coarse,
             )
         if head_calibration and proxy is None:
-            rig = recalibrate(rig, mouth_landmarks(snap))
+            rig = recalibrate(rig, mouth_landmarks(snap), open_depress_left=open_depress_left)
             if ease_upper_lip:
                 # The correction drew the upper lip to a peak between its pins (see ease_upper_lip).
                 weight, upper_side = upper_lip_easing(rig, mouth_landmarks(snap), frame)

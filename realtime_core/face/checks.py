@@ -358,6 +358,14 @@ LIP_TOPS_LIMIT = 0.001
 close-up: the decimated Lee Perry-Smith rows, whose strip shows, score 6.8e-3 and 9.9e-3; the full scan's rows 0.25e-3
 to 0.60e-3 (4-9 faces at the mouth corners, the pink flecks their lip backs already report), every other row none
 (docs/animation.md, "The low-poly pale strip: the lower lip's top cut off with the upper lip")."""
+LIP_CRUMPLE_LIMIT = 60.0
+"""Degrees: the advisory limit of :func:`lip_crumple`, from the test set and the held-out anny heads at the checks'
+poses (docs/animation.md, "Lip crumple"): the built-in head (own targets 21, retargeted 47), Lee Perry-Smith (hollow,
+closed lips: 49) and the other clean rows score under it; the anny head as one mesh, whose close-up shows a zig-zag
+along the lower lip at mouth_open 0.465, 65, the anny child's V notch in the upper lip's edge 123. Test-set rows over
+it, each with a defect of its own: Lee Perry-Smith's texture-seam copy (78; 70 after the retry of
+``assets.heads.head.rig_checked``), its 3,810-triangle copy (86), its meshopt and quantized copies (65), james (68).
+Not seen by it: the anny old heavy man's crumpled lower lip (32)."""
 SKIN_DARK_LIMIT = 0.002
 """IOD squared: the advisory limit of :func:`skin_dark_seen`, a patch about 16 pixels across in the test set's 400x300
 mouth close-up (1 IOD squared is 132,000 pixels): every test-set row scores 0, the 5,716-triangle Lee Perry-Smith copy
@@ -417,6 +425,8 @@ class RigCheckLimits:
     min_open_response: float = MIN_OPEN_RESPONSE
     max_lip_tops: float = LIP_TOPS_LIMIT
     """IOD squared, advisory: a larger :func:`lip_tops_carried` is a warning in the report, not a failure."""
+    max_lip_crumple: float = LIP_CRUMPLE_LIMIT
+    """Degrees, advisory: a larger :func:`lip_crumple` is a warning in the report, not a failure."""
     max_bilabial_gap: float = 0.01
     """IOD, advisory: a larger :func:`bilabial_gap` is a warning, not a failure (the closure figure's limit;
     the OVR-visemes head's per-frame solve still opens its lips at /m/, docs/animation.md)."""
@@ -442,6 +452,8 @@ class RigCheckLimits:
             raise ConfigError("max_skin_dark must be > 0 (IOD squared)")
         if not self.max_lip_tops > 0:
             raise ConfigError("max_lip_tops must be > 0 (IOD squared)")
+        if not self.max_lip_crumple > 0:
+            raise ConfigError("max_lip_crumple must be > 0 (degrees)")
         if not self.max_bilabial_gap >= 0:
             raise ConfigError("max_bilabial_gap must be >= 0 (IOD)")
         if not self.max_seam_gap >= 0:
@@ -521,6 +533,11 @@ class RigReport:
     three-quarter view (:func:`lips_dark_seen`: a slit between lips that should meet; None: not measured)."""
     lips_dark_pose: tuple[float, ...] = ()
     """Where :attr:`lips_dark_iod2` is worst (empty: nowhere)."""
+    lip_crumple_deg: float | None = None
+    """Degrees: the largest valley a pair of the lips' front faces folds into beyond its rest fold (:func:`lip_crumple`:
+    a zig-zag crumple or a V notch; None: not measured, or no front lip faces)."""
+    lip_crumple_pose: tuple[float, ...] = ()
+    """Where :attr:`lip_crumple_deg` is worst (empty: nowhere)."""
     expressions_held: tuple[tuple[float, ...], ...] | None = None
     """The expression poses (of those measured, :data:`EXPRESSION_POSES`) at which the rig has no flipped triangle
     and lips that interpenetrate by no more than the limit: the poses its bound's hull takes besides speech
@@ -547,6 +564,7 @@ class RigReport:
         seam = "" if self.seam_gap_iod is None else f", parts' seam gap {self.seam_gap_iod:.4f} IOD"
         inside = "n/a" if self.inside_shown_iod is None else f"{self.inside_shown_iod:.4f}"
         slit = "n/a" if self.lips_dark_iod2 is None else f"{1000 * self.lips_dark_iod2:.2f}e-3"
+        crumple = "n/a" if self.lip_crumple_deg is None else f"{self.lip_crumple_deg:.0f}"
         return (
             f"flipped triangles {self.flipped_triangles}, max edge stretch {self.max_edge_stretch:.2f}, "
             f"lip interpenetration {self.lip_interpenetration_iod:.4f} IOD, lip gap at closure "
@@ -555,6 +573,7 @@ class RigReport:
             f"mouth opening {opening}, "
             f"lip gap at /m/ {at_m} IOD{seam}, "
             f"inside through the skin {inside} IOD, closed lips seen dark {slit} IOD^2, "
+            f"lip crumple {crumple} deg, "
             f"flipped under expressions {expr}: "
             + ("PASS" if self.passed else "FAIL (" + "; ".join(self.failures) + ")")
             + ("" if not self.warnings else " (warning: " + "; ".join(self.warnings) + ")")
@@ -905,6 +924,77 @@ def _lip_band_faces(rig: Any, landmarks: MouthLandmarks, skip_vertices: int) -> 
     at = np.full(len(t), -1, dtype=np.int64)
     at[near] = np.arange(len(near))
     return _LipBand(v0, t, fr, mid, x, np.flatnonzero(band[t].all(axis=1)), near, at, across_line)
+
+
+LIP_CRUMPLE_FACING = 0.2
+"""The least component along the face's forward axis of a lip face's unit normal at rest for :func:`lip_crumple` to
+measure it: the lips' front, what a close-up shows (the inner lining, which rolls as the jaw drops, is left out)."""
+LIP_CRUMPLE_DEPTH = 0.02
+"""IOD: :func:`lip_crumple` measures faces whose centre lies no further than this behind the mouth corners."""
+LIP_CRUMPLE_SPAN = 0.6
+"""The middle fraction of the corner-to-corner width whose edges :func:`lip_crumple` scores: the corners fold sharply
+by shape as the lips stretch (Lee Perry-Smith's scan: 72 degrees at a corner at stretch-, 49 over its middle)."""
+
+
+def lip_crumple(
+    rig: Any, landmarks: MouthLandmarks, *, poses: Any, skip_vertices: int = 0
+) -> tuple[float, tuple[float, ...]] | None:
+    """Degrees, and the pose: the largest valley that two neighbouring faces of the lips' front (the lips' band of
+    :func:`lip_backs_seen`, faces facing the viewer at rest, :data:`LIP_CRUMPLE_FACING`, no deeper than
+    :data:`LIP_CRUMPLE_DEPTH` behind the corners, edges over the middle :data:`LIP_CRUMPLE_SPAN` of the mouth's width)
+    fold into at any of ``poses`` (P, 4) beyond their valley at rest (a ridge at rest counts as no valley). A lip
+    that rolls or stretches bends its rows a little at a time; a zig-zag crumple or a V notch folds one edge into a
+    deep crease that the other figures do not see (no face flips, no edge stretches). The winding is taken from the
+    faces themselves (most of the front faces the viewer). None: no such face pair."""
+    band = _lip_band_faces(rig, landmarks, skip_vertices)
+    v0, fr = band.rest, band.frame
+    fwd = fr.axes[2]
+    t = band.faces[band.lips]
+    if not len(t):
+        return None
+
+    def unit_normals(v: np.ndarray, faces: np.ndarray) -> np.ndarray:
+        n = triangle_normals(v, faces)
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    n0 = unit_normals(v0, t)
+    facing = n0 @ fwd
+    sign = 1.0 if float(np.median(facing)) >= 0 else -1.0  # a head wound the other way faces -normal
+    corners_z = 0.5 * (v0[landmarks.corner_left] + v0[landmarks.corner_right]) @ fwd
+    front = (sign * facing > LIP_CRUMPLE_FACING) & (v0[t].mean(axis=1) @ fwd > corners_z - LIP_CRUMPLE_DEPTH * fr.iod)
+    t = t[front]
+    # Interior edges: each with its two faces (a, b) and b's vertex off the edge.
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    off = np.concatenate([t[:, 2], t[:, 0], t[:, 1]])
+    face = np.tile(np.arange(len(t)), 3)
+    key = np.sort(e, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, off, face = key[order], off[order], face[order]
+    pair = np.flatnonzero((key[1:] == key[:-1]).all(axis=1))
+    if not len(pair):
+        return None
+    edge, fa, fb, ob = key[pair], face[pair], face[pair + 1], off[pair + 1]
+    half = 0.5 * float(np.linalg.norm(v0[landmarks.corner_left] - v0[landmarks.corner_right]))
+    middle = np.abs(band.across[edge].mean(axis=1)) < LIP_CRUMPLE_SPAN * max(half, 1e-300)
+    edge, fa, fb, ob = edge[middle], fa[middle], fb[middle], ob[middle]
+    if not len(edge):
+        return None
+
+    def valleys(v: np.ndarray) -> np.ndarray:
+        n = sign * unit_normals(v, t)
+        bend = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n[fa], n[fb]), -1.0, 1.0)))
+        # A valley: b's far vertex lies on the side a's (outward) normal points to.
+        into = np.einsum("ij,ij->i", v[ob] - v[edge[:, 0]], n[fa]) > 0
+        return np.where(into, bend, 0.0)
+
+    rest = valleys(v0)
+    worst = 0.0
+    at: tuple[float, ...] = ()
+    for pose in np.asarray(poses, dtype=np.float64).reshape(-1, 4):
+        gained = float(np.max(valleys(np.asarray(rig.deformed(pose), dtype=np.float64)) - rest))
+        if gained > worst:
+            worst, at = gained, tuple(float(x) for x in pose)
+    return worst, at
 
 
 def lip_backs_seen(
@@ -1487,6 +1577,13 @@ def check_rig(
             f"{1000 * limits.max_lip_tops:.2f}e-3 ({top_faces} face{'s' if top_faces != 1 else ''}: a pale strip "
             "between the lips)"
         )
+    crumpled = lip_crumple(rig, landmarks, poses=(*poses, closure), skip_vertices=cavity_vertices)
+    crumple, crumple_pose = (None, ()) if crumpled is None else crumpled
+    if crumple is not None and crumple > limits.max_lip_crumple:
+        warns.append(
+            f"two lip faces fold into a {crumple:.0f} degree crease > {limits.max_lip_crumple:.0f} "
+            f"(a crumpled lip or a notch), pose {crumple_pose}"
+        )
     if at_m > limits.max_bilabial_gap:
         warns.append(f"lips {at_m:.4f} IOD apart at /m/ > {limits.max_bilabial_gap} (pressed lips show the teeth)")
     expr_flips: int | None = None
@@ -1533,6 +1630,8 @@ def check_rig(
         inside_shown_pose=inside_pose,
         lips_dark_iod2=slit,
         lips_dark_pose=slit_pose,
+        lip_crumple_deg=crumple,
+        lip_crumple_pose=crumple_pose,
     )
 
 

@@ -29,6 +29,8 @@ from realtime_core.face.welding import weld, welded_pieces
 if TYPE_CHECKING:
     from realtime_core.face.checks import PoseBound
 
+# 84: a rig that passes with a crumpled lip (checks' lip crumple over its limit) is made once more with the
+# lip_corner_depress that mouth_open shows left uncorrected, kept if it passes and crumples less (lip49).
 # 83: an automatic inner-lip point cast onto another mesh piece than its outer lip midpoint (the teeth between lips
 # modelled apart) moves onto its lip (lead, stop 44).
 # 82: when every rig fails and the lips read as joined only because the lower inner-lip point lies on the upper lip
@@ -59,7 +61,7 @@ if TYPE_CHECKING:
 # piece splits the corner's edge to the lower lip (i12corner); 61: a sliver's stretch counted from 0.2 of the median
 # edge (i12wall; checks only); 60: lips that touch but are apart in the mesh rigged as apart (i12child); 59: the inside
 # shown through the skin checked and kept behind it (i12cheek); 58: dense scans through a decimated proxy (i12dense)
-RIG_ALGORITHM = 83
+RIG_ALGORITHM = 84
 """Bumped whenever rig building changes its output, so cached rigs are rebuilt."""
 HARMONIC_MARGIN = 0.0
 """IOD: how far the harmonic field extends beyond the vertices Sec. 5.2 moves (0: the same region;
@@ -734,14 +736,23 @@ def head_response(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05) -
     return r
 
 
-def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max_cond: float = 20.0) -> Rig:
+def recalibrate(
+    rig: Rig,
+    landmarks: MouthLandmarks,
+    *,
+    probe: float = 0.05,
+    max_cond: float = 20.0,
+    open_depress_left: bool = False,
+) -> Rig:
     """The rig with its basis corrected so the *head* shows the requested parameters.
 
     The simple model is calibrated on its own geometry, but the interpolation (eq. 10's beta, the
     fading) changes how far the head's own lips move. Measuring the head's response R (4, 4) with
     :func:`head_response` and using basis @ R^-1 makes the parameters geometric on the target head
     (to first order). Skipped (meta "head_calibration": "skipped ...") when R is ill-conditioned or
-    a diagonal entry is not positive (landmarks that do not see the motion).
+    a diagonal entry is not positive (landmarks that do not see the motion). ``open_depress_left``: the
+    lip_corner_depress that mouth_open shows on the head is left uncorrected (meta "open_depress_left": how much per
+    unit): see the comment below.
     """
     r = head_response(rig, landmarks, probe=probe)
     meta = dict(rig.meta)
@@ -751,7 +762,16 @@ def recalibrate(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05, max
         meta["head_calibration"] = f"skipped (condition {cond:.3g}, diagonal {np.diag(r).round(3).tolist()})"
         return replace(rig, meta=meta)
     meta["head_calibration"] = "applied"
-    return replace(rig, basis=rig.basis.astype(np.float64) @ np.linalg.inv(r), meta=meta)
+    corrected = r
+    if open_depress_left:
+        # The lip_corner_depress that mouth_open shows is the outer lower-lip midpoint dropping more than the corners
+        # (a jaw drop the simple face's placement carried longer onto the head: 1.7x on the anny head as one mesh, -0.44
+        # of depress per unit of opening), and correcting it pulls the corners down with every opening, which rolls the
+        # lower lip's inner rows forward into a zig-zag crease (docs/animation.md, "A crumpled lower lip").
+        corrected = r.copy()
+        corrected[3, 2] = 0.0
+        meta["open_depress_left"] = round(float(r[3, 2]), 4)
+    return replace(rig, basis=rig.basis.astype(np.float64) @ np.linalg.inv(corrected), meta=meta)
 
 
 def decouple_opening(rig: Rig, landmarks: MouthLandmarks, *, probe: float = 0.05) -> Rig:

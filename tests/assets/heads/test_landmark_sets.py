@@ -67,3 +67,28 @@ def test_the_landmark_cache_keeps_a_finders_alternatives(tmp_path):
     (kept,) = (tmp_path / "landmarks").iterdir()
     assert json.loads(kept.read_text())["alternatives"][0] == {"nose_tip": [0.0, 0.1, 1.0]}
     assert LANDMARK_CACHE_VERSION >= 2
+
+
+def test_a_rig_whose_lip_crumples_is_made_once_more_and_kept_only_if_it_crumples_less(shared_data):
+    """rig_checked makes a rig that passes with its lip crumple over the limit once more with the corners' depress
+    read off mouth_open left uncorrected (rig_head, open_depress_left), and keeps the first rig, to the bit, unless
+    the new one passes and crumples less. The MediaPipe face judged with the limit at 10 degrees (its rig crumples 33):
+    the retry is made and said; whichever rig is returned passes and crumples no more than the first."""
+    from realtime_core.face.checks import RigCheckLimits
+
+    m = load_mesh(shared_data / "heads" / "mediapipe-canonical" / "canonical_face_model.obj")
+    good = {k: m.vertices[i].tolist() for k, i in MEDIAPIPE.items()}
+    first, _, first_report = rig_checked(m, good)
+    assert first_report.passed and first_report.lip_crumple_deg is not None
+    assert "open_depress_left" not in first.meta
+    lines: list[str] = []
+    limits = RigCheckLimits(max_lip_crumple=10.0)
+    rig, _, report = rig_checked(m, good, progress=lines.append, limits=limits)
+    assert any("lip crumple" in line and "left uncorrected" in line for line in lines)
+    assert report.passed and report.lip_crumple_deg is not None
+    assert report.lip_crumple_deg <= first_report.lip_crumple_deg
+    if "open_depress_left" in rig.meta:
+        assert report.lip_crumple_deg < first_report.lip_crumple_deg
+        assert any("lip crumple" in f for a in rig.meta["rig_attempts"] for f in a["failures"])
+    else:
+        assert (rig.matrix != first.matrix).nnz == 0 and "rig_attempts" not in rig.meta

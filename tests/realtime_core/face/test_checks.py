@@ -909,3 +909,44 @@ def test_upper_lip_peak_reads_a_tent_and_not_an_arc_with_the_same_corners() -> N
             return 3.0 * tent.deformed(p) @ rot.T + 1.0
 
     assert upper_lip_peak(Moved(), tent.landmarks())[0] == pytest.approx(p_tent, abs=1e-9)
+
+
+class _Crease(_Lips):
+    """:class:`_Lips` whose lower strip's middle column sinks ``depth`` IOD away from the viewer (-z) at
+    mouth_open 0.3 (in proportion to mouth_open): the faces either side of it tilt towards it, a V crease along
+    the column, as a crumpled lower lip folds; no face flips and no edge stretches past the limit (4x)."""
+
+    def __init__(self, depth: float) -> None:
+        super().__init__(0.0)
+        self.depth = depth
+        self.column = self.lower[np.isclose(self.neutral[self.lower, 0], 0.0)]
+
+    def deformed(self, p: np.ndarray) -> np.ndarray:
+        v = super().deformed(p)
+        v[self.column, 2] -= self.depth * float(p[2]) / 0.3
+        return v
+
+
+def test_lip_crumple_measures_the_crease_a_lip_folds_into() -> None:
+    """The smooth opening folds no lip face (0 degrees); a column of the lower lip sunk by h between columns 0.025
+    IOD apart makes a valley of 2 atan(h / 0.025) along it (each side's faces tilt by atan(h / 0.025)), and over
+    the limit the report warns (no other figure fails: no flip, no stretch)."""
+    from realtime_core.face.checks import LIP_CRUMPLE_LIMIT, lip_crumple
+
+    poses = ((0.0, 0.0, 0.15, 0.0), (0.0, 0.0, 0.3, 0.0))
+    smooth = _Lips(0.0)
+    got = lip_crumple(smooth, smooth.landmarks(), poses=poses)
+    assert got is not None and got[0] == pytest.approx(0.0, abs=1e-6)
+    h = 0.025 * np.tan(np.radians(40.0))
+    crease = _Crease(h)
+    got = lip_crumple(crease, crease.landmarks(), poses=poses)
+    assert got is not None
+    assert got[0] == pytest.approx(2 * np.degrees(np.arctan(h / 0.025)), abs=1e-6) and got[1] == poses[1]
+    assert got[0] > LIP_CRUMPLE_LIMIT
+    rep = check_rig(crease, crease.landmarks(), poses=poses)
+    assert rep.flipped_triangles == 0 and rep.sliver_stretch is not None and rep.sliver_stretch < 4.0
+    assert rep.passed and any("crease" in w for w in rep.warnings) and "lip crumple 80 deg" in rep.summary()
+    # A bulge towards the viewer is a ridge along the column: its sides' valleys are half as deep, 40 degrees.
+    bulge = _Crease(-h)
+    got = lip_crumple(bulge, bulge.landmarks(), poses=poses)
+    assert got is not None and got[0] == pytest.approx(np.degrees(np.arctan(h / 0.025)), abs=1e-6)

@@ -222,3 +222,11 @@ def test_recalibrate_makes_the_head_show_the_requested_parameters():
     fixed = recalibrate(rig, lm)
     assert fixed.meta["head_calibration"] == "applied"
     np.testing.assert_allclose(head_response(fixed, lm), np.eye(4), atol=0.02)
+    # open_depress_left: the corners are not pulled down to cancel the depress an opening shows. Here the outer
+    # lower-lip midpoint drops with the inner one, so a gap of 1 IOD lowers the outer midpoints' mean by 0.5 IOD
+    # with the corners still: lip_corner_depress -0.5 per unit of mouth_open, the rest corrected as before.
+    left = recalibrate(rig, lm, open_depress_left=True)
+    want = np.eye(4)
+    want[3, 2] = -0.5
+    np.testing.assert_allclose(head_response(left, lm), want, atol=0.02)
+    assert left.meta["open_depress_left"] == pytest.approx(r[3, 2], abs=1e-4)
