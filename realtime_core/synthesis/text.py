@@ -104,8 +104,10 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     cleaned = re.sub(r"\s+", " ", "".join(out)).strip()
     # Why nothing is left, when it is the script: the voices speak Latin-script (and Greek) letters only.
     script = " (the voices speak English and Spanish: Latin-script letters)" if other_script else ""
+    if not cleaned and text.strip() and not prose.strip():  # it was "empty text": a code block is text, not spoken
+        raise TextError(f"nothing to speak in {text[:40]!r}: a fenced code block is not spoken")
     if not cleaned:
-        raise TextError("empty text" if not prose.strip() else f"no pronounceable characters in {text[:40]!r}{script}")
+        raise TextError("empty text" if not text.strip() else f"no pronounceable characters in {text[:40]!r}{script}")
     if not any(unicodedata.category(c)[0] in "LN" for c in cleaned):
         raise TextError(f"no pronounceable word in {text[:40]!r}{script}")
     return cleaned

@@ -713,6 +713,8 @@ def test_fenced_code_is_not_spoken_and_a_link_is_spoken_as_its_text():
     assert [clean_text(s) for s in want[2:4]] == ["That's it!", "See the docs now."]
     # `facecast say` cleans a whole answer at once: the same words
     assert clean_text(answer) == "Getting started Here is how : That's it! See the docs now. Done. Inline x stays."
+    with pytest.raises(TextError, match="a fenced code block is not spoken"):
+        clean_text("```\nls -la\n```")
     # a new answer after a cancel does not start inside the cut answer's code block
     c = SentenceChunker()
     assert c.push("Look:\n```\ncode\n") == ["Look:"]
