@@ -18,7 +18,8 @@ frames at the pace of real time plus ``lead_s`` (so viewers' queues never overfl
 starts at once), speaks pending text through its last whole word after ``stall_s`` without a new
 piece (a stalled stream still gets its words out; a trailing word fragment waits for
 ``FRAGMENT_STALLS`` more stalls), starts a long sentence at a clause boundary when the viewers
-would otherwise wait for it (:data:`CLAUSE_WORDS`, :data:`CLAUSE_AHEAD_S`), stops the speech on
+would otherwise wait for it (:data:`CLAUSE_WORDS`, :data:`CLAUSE_AHEAD_S`; without a clause boundary at
+its last whole word, :data:`RUN_ON_WORDS`), stops the speech on
 ``{"type": "cancel"}`` (the mouth eased to rest, the session open for more text), plays out every
 sentence accepted when its source drops without ``end`` (nothing accepted is lost), and answers bad
 text with ``{"type": "rejected"}`` while the session goes on serving its viewers.
@@ -71,6 +72,11 @@ CLAUSE_WORDS = 8
 this many words are before it, when the viewers have less than :data:`CLAUSE_AHEAD_S` of speech queued.
 Why: a long first sentence was spoken only once it was complete (36 words at ~17 tokens/s: the first
 frame 2 s after the first piece); each cut costs the silences a sentence starts and ends with."""
+RUN_ON_WORDS = 20
+"""A sentence still being written with no clause boundary is started at its last whole word once this many
+words are pending, when the viewers have less than :data:`CLAUSE_AHEAD_S` of speech queued. Why: 600
+characters without punctuation waited for the 300-character cut, the first frame 5.3 s after the first
+piece; 20 words is past most sentences without a comma (a cut costs the silences and the intonation)."""
 CLAUSE_AHEAD_S = 1.0
 """Speech queued ahead of the viewers' clock (s) under which a clause is started (see CLAUSE_WORDS):
 with more queued, the rest of the sentence usually arrives before the viewers need it, and no cut."""
@@ -449,7 +455,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
         await asyncio.gather(pace, return_exceptions=True)
         while not queue.empty():
             queue.get_nowait()
-        session.chunker.flush()
+        session.chunker.reset()  # a new answer follows: not inside the cut one's code block
         nxt = released["next"]
         cut = [span for span in spans if span[1] > nxt]
         # Moving: a sentence cut mid-way, or an earlier cancel's ease not yet all released (a second cancel during
@@ -564,7 +570,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 if msg.get("flush"):
                     done += session.finish_text()
                 elif not done and ahead_s() < CLAUSE_AHEAD_S:  # the viewers would wait for the whole sentence
-                    done = session.chunker.take_clause(CLAUSE_WORDS)
+                    done = session.chunker.take_clause(CLAUSE_WORDS) or session.chunker.take_words(RUN_ON_WORDS)
                 await say(done)
             elif kind == "flush":
                 stalled = False

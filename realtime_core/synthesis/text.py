@@ -18,7 +18,10 @@ boundary (:meth:`SentenceChunker.take_clause`).
 space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``:
 espeak-ng reads "$20 or 50%" as "dollar twenty or fifty percent"; without the signs it was "twenty or
 fifty"); anything else (control characters, emoji, other symbols) becomes a space. ``#``
-and ``*`` go too: in a chatbot's markdown they are headings and emphasis, not words. Text with nothing
+and ``*`` go too: in a chatbot's markdown they are headings and emphasis, not words; a markdown link
+``[the docs](https://...)`` is spoken as its text ("the docs"), and a fenced code block (a line starting
+with ```` ``` ```` or ``~~~`` to the next such line) is not spoken at all: read out, a chatbot's answer
+said "python", "print hello", "x equals one, two, three" and its URLs letter by letter. Text with nothing
 pronounceable left raises :class:`TextError` naming the problem.
 """
 
@@ -63,6 +66,13 @@ word and an abbreviation: it is one only before a digit. Dotted initialisms ("U.
 _WORD_BEFORE = re.compile(r"(\S*)$")
 _LIST_NUMBER = re.compile(r"(?:^|\n)[ \t]*\d{1,3}$")
 _INITIALISM = re.compile(r"(?:\w\.)+\w")
+_FENCE = re.compile(r"[ \t]{0,3}(?:`{3,}[^`\n]*|~{3,}.*)$")
+"""A markdown code fence line (CommonMark: up to 3 spaces of indent, 3+ backticks or tildes, an info string
+such as ``python``; a backtick fence's info string holds no backtick, so ```` ```x``` ```` is inline code)."""
+_CODE_BLOCK = re.compile(r"^[ \t]{0,3}(`{3,}|~{3,})[^\n]*\n.*?(?:^[ \t]{0,3}\1[ \t]*$|\Z)", re.M | re.S)
+"""A whole fenced code block in a text (:func:`clean_text`): from its opening fence to a closing one, or the end."""
+_LINK = re.compile(r"!?\[([^\]\n]*)\]\([^)\s]*\)")
+"""A markdown link or image ``[text](url)``: spoken as its text."""
 _OPENERS = "\"'“‘«([¿¡"
 _WORD_END = tuple(".,;:!?…\"'”’»)]")
 
@@ -80,9 +90,10 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
         raise TextError(f"text must be a string, got {type(text).__name__}")
     if len(text) > max_chars:
         raise TextError(f"text is {len(text)} characters long; the limit is {max_chars}")
+    prose = _LINK.sub(r"\1", _CODE_BLOCK.sub("\n", text))
     out = []
     other_script = False  # a letter or digit of a script the voices do not speak was left out
-    for ch in unicodedata.normalize("NFC", text):
+    for ch in unicodedata.normalize("NFC", prose):
         cat = unicodedata.category(ch)
         if cat[0] in "LN":
             keep = _spoken_letter_or_digit(ch, cat)
@@ -93,6 +104,8 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     cleaned = re.sub(r"\s+", " ", "".join(out)).strip()
     # Why nothing is left, when it is the script: the voices speak Latin-script (and Greek) letters only.
     script = " (the voices speak English and Spanish: Latin-script letters)" if other_script else ""
+    if not cleaned and text.strip() and not prose.strip():  # it was "empty text": a code block is text, not spoken
+        raise TextError(f"nothing to speak in {text[:40]!r}: a fenced code block is not spoken")
     if not cleaned:
         raise TextError("empty text" if not text.strip() else f"no pronounceable characters in {text[:40]!r}{script}")
     if not any(unicodedata.category(c)[0] in "LN" for c in cleaned):
@@ -111,6 +124,7 @@ class SentenceChunker:
         self.max_chars = max_chars
         self._buf = ""
         self._line_start = True  # the pending text starts a line (a list number there is no sentence end)
+        self._in_code = False  # inside a fenced code block: its lines are not spoken
 
     @property
     def pending(self) -> str:
@@ -133,12 +147,16 @@ class SentenceChunker:
                 out.append(self._take(cut if cut > 0 else self.max_chars))
                 continue
             break
-        return [s.strip() for s in out if s.strip()]
+        return [s for s in out if s]
 
     def flush(self) -> list[str]:
         """The remaining text as a last sentence (end of the stream)."""
-        rest = self._take(len(self._buf)).strip()
+        rest = self._take(len(self._buf))
         return [rest] if rest else []
+
+    def reset(self) -> None:
+        """Drop the pending text and start afresh (a new answer after a cancel: not inside a code block)."""
+        self._buf, self._line_start, self._in_code = "", True, False
 
     def flush_words(self) -> list[str]:
         """The pending text through its last word boundary as a sentence (a stalled stream); a trailing
@@ -146,7 +164,7 @@ class SentenceChunker:
         if self._buf.endswith(_WORD_END) or self._buf[-1:].isspace():
             return self.flush()
         cut = max(self._buf.rfind(" "), self._buf.rfind("\n"), self._buf.rfind("\t"))
-        head = self._take(cut).strip() if cut > 0 else ""
+        head = self._take(cut) if cut > 0 else ""
         return [head] if head else []
 
     def take_clause(self, min_words: int) -> list[str]:
@@ -155,15 +173,32 @@ class SentenceChunker:
         For a first sentence: speech can start before the whole sentence has been written."""
         for m in _CLAUSE_END.finditer(self._buf):
             if len(self._buf[: m.start()].split()) >= min_words:
-                return [self._take(m.end()).strip()]
+                head = self._take(m.end())
+                return [head] if head else []
         return []
 
+    def take_words(self, min_words: int) -> list[str]:
+        """The pending text through its last whole word as a sentence once at least ``min_words`` whole words
+        are pending; [] before. For a run-on first sentence without a clause boundary (600 characters without
+        punctuation waited for the 300-character cut: the first frame 5.3 s after the first piece)."""
+        cut = max(self._buf.rfind(" "), self._buf.rfind("\n"), self._buf.rfind("\t"))
+        if cut <= 0 or len(self._buf[:cut].split()) < min_words:
+            return []
+        head = self._take(cut)
+        return [head] if head else []
+
     def _take(self, end: int) -> str:
-        """Remove and return the first ``end`` characters of the pending text."""
+        """Remove the first ``end`` characters of the pending text -> them stripped, as a sentence to speak, or
+        "" when they are white space or code: a fence line (toggling the code block) or a line inside one."""
+        at_line_start = self._line_start
         head, self._buf = self._buf[:end], self._buf[end:]
         if head:
             self._line_start = "\n" in head[len(head.rstrip()) :]
-        return head
+        text = head.strip()
+        if at_line_start and _FENCE.fullmatch(text):
+            self._in_code = not self._in_code
+            return ""
+        return "" if self._in_code else text
 
     def _sentence_end(self) -> int | None:
         """Where the first complete sentence of the pending text ends, None when there is none yet

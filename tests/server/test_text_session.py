@@ -671,6 +671,57 @@ def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
     assert " ".join(texts) == " ".join(text.split())  # all of it, in order
 
 
+def test_a_run_on_first_sentence_starts_at_a_word_boundary(model, backend):
+    """600 characters without punctuation waited for the 300-character cut (first frame 5.3 s after the first
+    piece at LLM pace): with nothing queued and no clause boundary, the text is started at its last whole word
+    once 20 words are pending; the rest follows, nothing lost or doubled."""
+    from server.text_session import RUN_ON_WORDS
+
+    text = " ".join(f"word{i} and more" for i in range(8))  # 24 words, no punctuation
+
+    async def main():
+        async with running(model, backend) as srv, started_text(srv.url, "runon") as ws:
+            for word in text.split(" "):
+                await ws.send(json.dumps({"type": "text", "text": word + " "}))
+            await ws.send(json.dumps({"type": "end"}))
+            replies = []
+            while (m := json.loads(await ws.recv()))["type"] != "ended":
+                replies.append(m)
+            return replies
+
+    texts = [m["text"] for m in asyncio.run(asyncio.wait_for(main(), 60))]
+    assert texts[0] == " ".join(text.split()[:RUN_ON_WORDS])  # started as soon as 20 whole words were there
+    assert " ".join(texts) == text
+
+
+def test_fenced_code_is_not_spoken_and_a_link_is_spoken_as_its_text():
+    """A chatbot's markdown answer read its code block aloud ("python", "print hello", "x equals one, two, three"),
+    answered `rejected` for the closing fence and read a link's URL letter by letter ("h t t p s colon slash...")."""
+    answer = (
+        '# Getting started\n\nHere is **how**:\n\n```python\nprint("hello. world")\nx = [1, 2, 3]\n```\n'
+        "That's it! See [the docs](https://example.com/docs?x=1) now.\n  ~~~\nmore code; here\n  ~~~\nDone. "
+        "Inline ```x``` stays.\n```\nunclosed code at the end"
+    )
+    want = ["# Getting started", "Here is **how**:", "That's it!", "See [the docs](https://example.com/docs?x=1) now."]
+    want += ["Done.", "Inline ```x``` stays."]
+    rng = np.random.default_rng(2)
+    for n_cuts in (0, 5, 40):  # the same sentences whatever the chunking: a fence line is judged whole
+        c, got = SentenceChunker(), []
+        for piece in np.split(np.array(list(answer)), np.sort(rng.choice(len(answer), n_cuts, replace=False))):
+            got += c.push("".join(piece))
+        assert got + c.flush() == want
+    assert [clean_text(s) for s in want[2:4]] == ["That's it!", "See the docs now."]
+    # `facecast say` cleans a whole answer at once: the same words
+    assert clean_text(answer) == "Getting started Here is how : That's it! See the docs now. Done. Inline x stays."
+    with pytest.raises(TextError, match="a fenced code block is not spoken"):
+        clean_text("```\nls -la\n```")
+    # a new answer after a cancel does not start inside the cut answer's code block
+    c = SentenceChunker()
+    assert c.push("Look:\n```\ncode\n") == ["Look:"]
+    c.reset()
+    assert c.push("Hello there. ") == ["Hello there."]
+
+
 @pytest.mark.slow
 def test_text_session_is_registered_cluster_wide(model, backend, redis_server):  # noqa: F811 (fixture)
     """Two nodes share a real redis-server: a text session on node A is listed by /sessions on node B,
