@@ -148,3 +148,13 @@ class NoiseGate:
         self.gain = gains
         y *= gains[:, None]
         return y
+
+    def fade(self, values: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """Other values ``(m, D)`` of the rows the last :meth:`apply` gated (e.g. the mapper's MU parameters) ->
+        ``(m, D)`` float64 faded by the same gains towards their own rest ``rest (D,)``; rows at gain 1 are left
+        bit for bit as they are."""
+        v = np.asarray(values, dtype=np.float64)
+        g = self.gain[:, None]
+        if len(v) != len(g):
+            raise ConfigError(f"NoiseGate.fade: {len(v)} rows for the {len(g)} the last apply gated")
+        return np.where(g == 1.0, v, rest + g * (v - rest))
