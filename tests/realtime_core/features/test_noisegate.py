@@ -210,12 +210,13 @@ def test_levels_a_rounding_apart_give_the_same_gains():
 
 
 def test_continuous_read_speech_is_never_faded(shipped, shared_data):
-    """3.7 min of read speech (LJ Speech's 32 clips back to back, no pause longer than the clips' own), clean and
-    under white noise at -54 dBFS: the gain is 1 from the warm-up to the last second (the take's end may fade), so
-    every speech row is the ungated one. A floor that followed the speech's own level would close the gate in it."""
+    """106 s of read speech (LJ Speech's first 16 clips back to back, no pause longer than the clips' own),
+    clean and under white noise at -54 dBFS: the gain is 1 from the warm-up to the last second (the take's end may
+    fade), so every speech row is the ungated one. A floor that followed the speech's own level would close the gate
+    in it (`scripts/noise_gate_check.py` measures all 32 clips, and under pink noise)."""
     from assets.audio import read_audio
 
-    clips = sorted((shared_data / "speech" / "ljspeech").glob("*.wav"))
+    clips = sorted((shared_data / "speech" / "ljspeech").glob("*.wav"))[:16]
     x = np.concatenate([read_audio(f, rate_hz=RATE)[0].astype(np.float64) for f in clips])
     for take in (x, x + _noise("white", x.size / RATE, -54.0, seed=5)):
         fe = shipped.front_end()
@@ -223,7 +224,7 @@ def test_continuous_read_speech_is_never_faded(shipped, shared_data):
         levels = [fe.last_level_db]
         fe.flush()
         g = _gains(np.concatenate([levels[0], fe.last_level_db]), lookahead=shipped.frontend.tc)
-        assert len(g) > 6000
+        assert len(g) > 3000
         np.testing.assert_array_equal(g[: len(g) - 30], 1.0)
 
 
