@@ -28,6 +28,7 @@ from realtime_core.features.noisegate import NoiseGate, NoiseGateConfig
 from realtime_core.features.resample import StreamingResampler, resample_audio
 from realtime_core.inversion import HmmiConfig, StreamConfig, hmm_inversion
 from realtime_core.mapping import SpeechModel, VisualMapper
+from realtime_core.mapping.model import MlpSpeechModel
 
 StageObserver = Callable[[str], None]
 """Called with a stage name (``"resample"``, ``"features"``, ``"inversion"``) right after that stage
@@ -73,6 +74,12 @@ class SpeechToParams:
         else:
             self._inv = model.visual_mapper(lag=stream.lag, dtype=stream.dtype)
         self._gate = NoiseGate(noise_gate, lookahead=model.frontend.tc) if noise_gate is not None else None
+        # The MUPs a gated row's expression is computed from are faded with it (towards the silent face's).
+        self._rest_mups = (
+            model.rest_mups(stream.dtype)
+            if self._gate is not None and isinstance(model, MlpSpeechModel) and model.expressions is not None
+            else None
+        )
         self._observe: StageObserver = observer if observer is not None else _ignore
         self.frames_out = 0
         self.last_mups: np.ndarray | None = None
@@ -115,9 +122,11 @@ class SpeechToParams:
             self._gate.push_levels(self._fe.last_level_db)
         self._observe("features")
         out = self._inv.push(feats)
+        self.last_mups = getattr(self._inv, "last_mups", None)
         if self._gate is not None:
             out = self._gate.apply(out)
-        self.last_mups = getattr(self._inv, "last_mups", None)
+            if self.last_mups is not None and self._rest_mups is not None:
+                self.last_mups = self._gate.fade(self.last_mups, self._rest_mups)
         self._observe("inversion")
         self.frames_out += len(out)
         return out
@@ -136,10 +145,12 @@ class SpeechToParams:
         head = self._inv.push(feats)
         mups = getattr(self._inv, "last_mups", None)
         out = np.concatenate([head, self._inv.flush()])
-        if self._gate is not None:
-            out = self._gate.apply(out)
         tail_mups = getattr(self._inv, "last_mups", None)
         self.last_mups = None if mups is None or tail_mups is None else np.concatenate([mups, tail_mups])
+        if self._gate is not None:
+            out = self._gate.apply(out)
+            if self.last_mups is not None and self._rest_mups is not None:
+                self.last_mups = self._gate.fade(self.last_mups, self._rest_mups)
         self._observe("inversion")
         self.frames_out += len(out)
         return out

@@ -95,6 +95,23 @@ class MlpSpeechModel:
             raise ConfigError(f"the MLP mapper has no smoothing lag (its context is the front end's); got lag={lag}")
         return StreamingMlpMapper(self.mapper(dtype), output=self.output_stage, with_mups=self.expressions is not None)
 
+    def rest_mups(self, dtype: str = "float32") -> np.ndarray:
+        """``(n_mups,)`` float64: the MU parameters the mapper gives for digital silence at a stream's start (the face
+        at rest as the mapper represents it; every silent frame's features are one vector, which never moves the
+        CMVN). The output noise gate fades the MUPs of the rows it rests towards them, so an expression's change,
+        which paper 002's second stage computes from the MUPs, is that of the silent face, not of the noise."""
+        rest = self._rest.get(dtype)
+        if rest is None:
+            fe = self.front_end()
+            oa = np.concatenate([fe.push(np.zeros(self.frontend.mfcc.window_len * 4)), fe.flush()])
+            rest = self._rest[dtype] = self.mapper(dtype).mups(oa[len(oa) // 2 : len(oa) // 2 + 1])[0]
+            rest.setflags(write=False)
+        return rest
+
+    @cached_property
+    def _rest(self) -> dict[str, np.ndarray]:
+        return {}
+
     @cached_property
     def output_stage(self) -> OutputStage:
         """The closed-pose floor and closure band every served estimate goes through."""

@@ -193,3 +193,21 @@ def test_mlp_session_uses_the_second_stage_mlps() -> None:
     assert np.abs(pa[smile] - fixed[smile]).max() > 1e-3  # not the fixed-offset rule
     # Frame by frame: the change follows the UMUPs (not a constant).
     assert np.std(pa[smile, 1] - speech[smile, 1]) > 1e-4
+
+
+def test_an_mlp_session_smiling_at_room_noise_holds_still() -> None:
+    """The shipped MLP mapper (second-stage expression MLPs) in a live session with a smile, fed only room hiss
+    (-54 dBFS, random pushes): after the noise gate's warm-up and fade every served frame is the same pose, the smile
+    on the silent face. The expression's change follows the MUPs, which the gate fades with the rows (it took the
+    noise's MUPs before: the smile moved 0.0015-0.0032 IOD)."""
+    from assets.modelfile import load_speech_model
+    from realtime_core.features import NoiseGateConfig
+
+    model = load_speech_model("mlp")
+    settled = NoiseGateConfig().warmup_frames + NoiseGateConfig().release_frames
+    hiss = np.random.default_rng(4).standard_normal(3 * 16000) * 10 ** (-54 / 20)
+    smile = (0, {"type": "control", "expression": {"name": "smile", "intensity": 0.7, "at": 0.0}})
+    frames = _run(model, hiss, [smile], 3)
+    served = np.array([f.params for f in frames[settled:]])
+    assert np.abs(served[0]).max() > 0.05  # the smile shows on the neutral face
+    np.testing.assert_array_equal(served, np.broadcast_to(served[0], served.shape))

@@ -161,3 +161,118 @@ def test_config_is_validated_and_rows_wait_for_their_levels():
     gate.push_levels(np.full(2, -50.0))
     with pytest.raises(ConfigError, match="before its frame's level"):
         gate.apply(np.ones((3, 4)))
+
+
+@pytest.mark.parametrize("quiet_dbfs", [-64.0, -74.0])
+def test_a_noise_that_steps_up_rests_within_three_seconds(shipped, quiet_dbfs: float):
+    """A fan switched on: white noise steps from a quiet room up to -54 dBFS. The gate's floor (the minimum of the
+    smoothed level over 1.5 s) is the new noise 1.5 s later; with the 1 s hold and the 0.2 s fade every row from 3 s
+    after the step is the rest pose. Measured before (a floor rising by 0.5 % of the gap a frame): the mouth moved up
+    to 0.12 IOD for 12.1 s after the step (16.1 s from -74 dBFS)."""
+    step = 4.0
+    x = np.concatenate([_noise("white", step, quiet_dbfs), _noise("white", 8.0, -54.0, seed=1)])
+    off = speech_to_params(shipped, x, RATE, noise_gate=None)
+    on = speech_to_params(shipped, x, RATE)
+    k = int((step + 3.0) * 30)
+    np.testing.assert_array_equal(on[k:], 0.0)
+    assert off[k:, 2].max() > 0.03  # the noise moves the ungated mouth there
+
+
+def test_the_floor_follows_a_step_up_on_known_levels():
+    """Levels step from -65 to -55 dB at frame 60 (an independent account of the floor: the level smoothed by 0.3
+    of its gap a frame, its minimum over the last 45 frames): the gain is 1 while a frame of the last second was
+    over the margin, then fades by 1/6 a frame to 0; the floor never falls for a rise, only rises 45 frames on."""
+    lv = np.concatenate([np.full(60, -65.0), np.full(140, -55.0)])
+    cfg = CFG
+    s = np.empty_like(lv)
+    s[0] = lv[0]
+    for i in range(1, len(lv)):
+        s[i] = s[i - 1] + cfg.floor_smoothing * (lv[i] - s[i - 1])
+    w = cfg.floor_window_frames
+    floor = np.array([s[max(i - w + 1, 0) : i + 1].min() for i in range(len(lv))])
+    openness = np.clip((lv - floor - cfg.margin_db) / cfg.ramp_db, 0.0, 1.0)
+    full, last = int(np.flatnonzero(openness == 1.0)[-1]), int(np.flatnonzero(openness > 0.0)[-1])
+    assert 60 + w <= last <= 60 + w + 5  # the floor catches up the window after the step
+    g = _gains(lv)
+    np.testing.assert_array_equal(g[60 : full + cfg.hold_frames + 1], 1.0)
+    assert np.all(np.diff(g[full + cfg.hold_frames :]) <= 0.0)  # then it only falls: a fade ...
+    np.testing.assert_array_equal(g[last + cfg.hold_frames + cfg.release_frames :], 0.0)  # ... to rest
+
+
+def test_levels_a_rounding_apart_give_the_same_gains():
+    """The front end's level of a frame differs in its last bits with the chunking (2e-14 dB measured, whole against
+    sample by sample); the gate reads levels at float32, so a fractional openness does not pass that on."""
+    lv = np.full(120, -55.0)
+    lv[60:64] = -51.7  # openness 0.4: fractional
+    g = _gains(lv)
+    assert ((g > 0) & (g < 1)).any()
+    np.testing.assert_array_equal(_gains(lv + 2e-14), g)
+
+
+def test_continuous_read_speech_is_never_faded(shipped, shared_data):
+    """106 s of read speech (LJ Speech's first 16 clips back to back, no pause longer than the clips' own),
+    clean and under white noise at -54 dBFS: the gain is 1 from the warm-up to the last second (the take's end may
+    fade), so every speech row is the ungated one. A floor that followed the speech's own level would close the gate
+    in it (`scripts/noise_gate_check.py` measures all 32 clips, and under pink noise)."""
+    from assets.audio import read_audio
+
+    clips = sorted((shared_data / "speech" / "ljspeech").glob("*.wav"))[:16]
+    x = np.concatenate([read_audio(f, rate_hz=RATE)[0].astype(np.float64) for f in clips])
+    for take in (x, x + _noise("white", x.size / RATE, -54.0, seed=5)):
+        fe = shipped.front_end()
+        fe.push(take)
+        levels = [fe.last_level_db]
+        fe.flush()
+        g = _gains(np.concatenate([levels[0], fe.last_level_db]), lookahead=shipped.frontend.tc)
+        assert len(g) > 3000
+        np.testing.assert_array_equal(g[: len(g) - 30], 1.0)
+
+
+def test_an_expression_on_room_noise_holds_still_with_the_mlp_mapper():
+    """Paper 002's second stage computes an expression's change from the mapper's MUPs: the gate fades them with the
+    rows, towards the MUPs of digital silence, so a smile (or any expression) on room noise is one still pose; the
+    ungated MUPs under the gated rows moved it (measured: 0.0015-0.0032 IOD peak to peak, smile 0.7, -54 dBFS)."""
+    from assets.modelfile import load_speech_model
+    from realtime_core.expressions import EXPRESSIONS
+    from realtime_core.mapping.expression import express
+    from realtime_core.pipeline import speech_to_params_and_mups
+
+    model = load_speech_model("mlp")
+    rest = model.rest_mups()
+    _, silent = speech_to_params_and_mups(model, np.zeros(RATE), RATE)
+    np.testing.assert_array_equal(silent, np.broadcast_to(rest, silent.shape))  # the chain's own MUPs of silence
+    x = _noise("white", 4.0, -54.0)
+    params, mups = speech_to_params_and_mups(model, x, RATE)
+    _, raw = speech_to_params_and_mups(model, x, RATE, noise_gate=None)
+    assert mups is not None and raw is not None
+    np.testing.assert_array_equal(mups[: CFG.warmup_frames], raw[: CFG.warmup_frames])
+    np.testing.assert_array_equal(mups[SETTLED:], np.broadcast_to(rest, mups[SETTLED:].shape))
+    for k in range(len(EXPRESSIONS)):
+        alpha = np.zeros((len(params), len(EXPRESSIONS)))
+        alpha[:, k] = 0.7
+        out = express(params, alpha, mups=mups, mapper=model.expressions)[SETTLED:]
+        np.testing.assert_array_equal(out, np.broadcast_to(out[0], out.shape))
+        before = express(params, alpha, mups=raw, mapper=model.expressions)[SETTLED:]
+        assert np.ptp(before, axis=0).max() > 1e-3  # the defect, so the test can fail
+
+
+def test_mups_of_speech_after_noise_are_the_ungated_ones(shared_data):
+    """A GRID s1 sentence after 3 s of room noise, with the MLP mapper: from the first word on the MUPs (and rows)
+    are those without the gate bit for bit."""
+    from assets.audio import read_audio
+    from assets.grid import read_words, sentences
+    from assets.modelfile import load_speech_model
+    from realtime_core.pipeline import speech_to_params_and_mups
+
+    model = load_speech_model("mlp")
+    s = sentences(shared_data / "video" / "grid_s1", split="train")[0]
+    speech = read_audio(s.video, rate_hz=RATE)[0].astype(np.float64)
+    x = np.concatenate([_noise("white", 3.0, -54.0), speech + _noise("white", speech.size / RATE, -54.0, seed=1)])
+    on, mon = speech_to_params_and_mups(model, x, RATE)
+    off, moff = speech_to_params_and_mups(model, x, RATE, noise_gate=None)
+    assert mon is not None and moff is not None
+    first_word = next(a for a, _, w in read_words(s.align) if w not in ("sil", "sp"))
+    k = int(np.floor((3.0 + first_word) * 30))
+    np.testing.assert_array_equal(on[k:], off[k:])
+    np.testing.assert_array_equal(mon[k:], moff[k:])
+    assert not np.array_equal(mon[SETTLED:60], moff[SETTLED:60])  # the noise before is faded
