@@ -50,14 +50,7 @@ def test_it_writes_the_fitted_maps_where_it_is_told(tmp_path, capsys) -> None:
     assert spec is not None and spec.loader is not None
     written = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(written)
-    for name in (
-        "ARKIT_POS",
-        "ARKIT_NEG",
-        "ARKIT_SIZE",
-        "ARKIT_RESOLVE_GRAM",
-        "ARKIT_RESOLVE_CROSS",
-        "OVR_KEYFRAMES",
-        "OVR_RIDGE",
-        "EXPRESSION_PARAMS",
-    ):
+    from training.fit_maps import ARRAY_NAMES
+
+    for name in ARRAY_NAMES:
         np.testing.assert_allclose(getattr(written, name), getattr(fitted_maps, name), atol=2e-5, rtol=1e-5)

@@ -34,19 +34,9 @@ def test_the_module_is_written_as_ruff_formats_it() -> None:
     comes back byte for byte; a row too long for 120 columns is split one value a line, as ruff splits it."""
     from pathlib import Path
 
-    from training.fit_maps import module_text
+    from training.fit_maps import ARRAY_NAMES, module_text
 
-    names = (
-        "ARKIT_POS",
-        "ARKIT_NEG",
-        "ARKIT_SIZE",
-        "ARKIT_RESOLVE_GRAM",
-        "ARKIT_RESOLVE_CROSS",
-        "OVR_KEYFRAMES",
-        "OVR_RIDGE",
-        "EXPRESSION_PARAMS",
-        "EXPRESSION_POSES",
-    )
+    names = (*ARRAY_NAMES, "EXPRESSION_POSES")
     text = module_text({n: getattr(fitted_maps, n) for n in names})
     assert text == Path(fitted_maps.__file__).read_text()
     long = module_text({**{n: getattr(fitted_maps, n) for n in names}, "OVR_KEYFRAMES": np.full((1, 14), 0.123456)})
