@@ -71,6 +71,10 @@ _FENCE = re.compile(r"[ \t]{0,3}(?:`{3,}[^`\n]*|~{3,}.*)$")
 such as ``python``; a backtick fence's info string holds no backtick, so ```` ```x``` ```` is inline code)."""
 _CODE_BLOCK = re.compile(r"^[ \t]{0,3}(`{3,}|~{3,})[^\n]*\n.*?(?:^[ \t]{0,3}\1[ \t]*$|\Z)", re.M | re.S)
 """A whole fenced code block in a text (:func:`clean_text`): from its opening fence to a closing one, or the end."""
+_MARKUP_LINE = re.compile(r"[ \t]{0,3}(?:(?:[-*_][ \t]*){3,}|\|?(?:[ \t]*:?-+:?[ \t]*\|)+(?:[ \t]*:?-+:?[ \t]*)?)$")
+"""A markdown line that is layout, not words: a thematic break (``---``, ``***``, ``___``) or a table's delimiter
+row (``|---|:--:|``). Sent alone it has nothing to speak, and each got a `rejected` reply a chatbot's client had
+to tell from a real refusal; it is skipped as a fence is (:meth:`SentenceChunker._take`)."""
 _LINK = re.compile(r"!?\[([^\]\n]*)\]\([^)\s]*\)")
 """A markdown link or image ``[text](url)``: spoken as its text."""
 _OPENERS = "\"'“‘«([¿¡"
@@ -189,7 +193,8 @@ class SentenceChunker:
 
     def _take(self, end: int) -> str:
         """Remove the first ``end`` characters of the pending text -> them stripped, as a sentence to speak, or
-        "" when they are white space or code: a fence line (toggling the code block) or a line inside one."""
+        "" when they are white space or code: a fence line (toggling the code block) or a line inside one; or a
+        markdown layout line (:data:`_MARKUP_LINE`)."""
         at_line_start = self._line_start
         head, self._buf = self._buf[:end], self._buf[end:]
         if head:
@@ -198,7 +203,9 @@ class SentenceChunker:
         if at_line_start and _FENCE.fullmatch(text):
             self._in_code = not self._in_code
             return ""
-        return "" if self._in_code else text
+        if self._in_code or (at_line_start and _MARKUP_LINE.fullmatch(text)):
+            return ""
+        return text
 
     def _sentence_end(self) -> int | None:
         """Where the first complete sentence of the pending text ends, None when there is none yet

@@ -722,6 +722,21 @@ def test_fenced_code_is_not_spoken_and_a_link_is_spoken_as_its_text():
     assert c.push("Hello there. ") == ["Hello there."]
 
 
+def test_markdown_rules_and_table_delimiters_are_skipped_not_rejected():
+    """A chatbot's table delimiter row (`|---|---|`) and thematic break (`---`) each came back `rejected` ("no
+    pronounceable characters"), a refusal its client had to tell from a real one: they are layout, skipped as a
+    fence is, whatever the chunking; a line that starts with dashes and has words is still spoken."""
+    answer = "Results:\n\n| name | score |\n|:---|---:|\n| Ann | 3 |\n\n---\n* * *\n-- and that is all. "
+    want = ["Results:", "| name | score |", "| Ann | 3 |", "-- and that is all."]
+    rng = np.random.default_rng(5)
+    for n_cuts in (0, 7, 30):
+        c, got = SentenceChunker(), []
+        for piece in np.split(np.array(list(answer)), np.sort(rng.choice(len(answer), n_cuts, replace=False))):
+            got += c.push("".join(piece))
+        assert got + c.flush() == want
+    assert clean_text(want[1]) == "name score"
+
+
 @pytest.mark.slow
 def test_text_session_is_registered_cluster_wide(model, backend, redis_server):  # noqa: F811 (fixture)
     """Two nodes share a real redis-server: a text session on node A is listed by /sessions on node B,
