@@ -15,7 +15,8 @@ word's first letter. A stalled stream is spoken through its last word boundary
 boundary (:meth:`SentenceChunker.take_clause`).
 
 :func:`clean_text` keeps what a synthesiser can pronounce: letters of any alphabet, digits, white
-space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``:
+space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``, the maths
+signs ``× ÷ − ± ≤ ≥ ≠ ≈``, which its Spanish voice mostly skips:
 espeak-ng reads "$20 or 50%" as "dollar twenty or fifty percent"; without the signs it was "twenty or
 fifty"); anything else (control characters, emoji, other symbols) becomes a space. ``#``
 and ``*`` go too: in a chatbot's markdown they are headings and emphasis, not words; a markdown link
@@ -36,7 +37,7 @@ MAX_TEXT_CHARS = 5000
 """Longest text accepted in one request (about five minutes of speech)."""
 
 _KEEP_PUNCT = set(".,;:!?'\"-()¿¡’")
-_SPOKEN_SYMBOLS = set("%&+=/@°")
+_SPOKEN_SYMBOLS = set("%&+=/@°×÷−±≤≥≠≈")  # the maths signs: "3 × 4" was "3 4" (English espeak-ng reads them)
 _SCRIPTS = ("LATIN", "GREEK")
 """Scripts whose letters are spoken (the voices are English and Spanish; a Greek letter is read by its name, "pi").
 espeak-ng reads a letter of any other script as its description: "你好世界" as "Chinese letter" four times, Arabic

@@ -163,6 +163,9 @@ def test_clean_text_keeps_the_symbols_a_synthesiser_reads_as_words():
     )
     # Markdown marks and emoji are not words.
     assert clean_text("## Title **bold** 👍") == "Title bold"
+    # "3.14 × 1,000,000" was spoken "three point one four one million": the maths signs are read too
+    maths = "3.14 × 1,000,000 ≈ 3 ± 0.2; 6 ÷ 2 − 1 ≤ 2 ≥ 1 ≠ 0"
+    assert clean_text(maths) == maths
 
 
 def test_spoken_symbols_reach_the_synthesiser(espeak):
@@ -171,6 +174,8 @@ def test_spoken_symbols_reach_the_synthesiser(espeak):
     # More phones with the sign than without: the words "percent" and "dollar" are spoken.
     with_signs, without = speak("$20 or 50%", language="en"), speak("20 or 50", language="en")
     assert len(with_signs.phones) >= len(without.phones) + 8
+    times, bare = speak("3 × 4", language="en"), speak("3 4", language="en")  # "times"
+    assert len(times.phones) >= len(bare.phones) + 4
 
 
 def test_sentences_share_one_media_timeline(backend):
