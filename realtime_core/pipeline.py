@@ -110,6 +110,21 @@ class SpeechToParams:
             self._gate.reset()
         self.frames_out = 0
 
+    def _with_levels(self, feats: np.ndarray) -> np.ndarray:
+        """``feats``, the rows the front end has just given; their frames' levels go to the noise gate."""
+        if self._gate is not None:
+            self._gate.push_levels(self._fe.last_level_db)
+        return feats
+
+    def _gated(self, out: np.ndarray) -> np.ndarray:
+        """The rows ``out`` (and :attr:`last_mups`, theirs) through the output noise gate, when there is one."""
+        if self._gate is None:
+            return out
+        out = self._gate.apply(out)
+        if self.last_mups is not None and self._rest_mups is not None:
+            self.last_mups = self._gate.fade(self.last_mups, self._rest_mups)
+        return out
+
     def push(self, samples: np.ndarray) -> np.ndarray:
         """samples: (n,) float32/float64 in [-1, 1] or int16, at ``rate_hz``."""
         x = as_float_samples(samples)
@@ -117,16 +132,11 @@ class SpeechToParams:
             x = self._resampler.push(x)
         self.model_audio = x
         self._observe("resample")
-        feats = self._fe.push(x)
-        if self._gate is not None:
-            self._gate.push_levels(self._fe.last_level_db)
+        feats = self._with_levels(self._fe.push(x))
         self._observe("features")
         out = self._inv.push(feats)
         self.last_mups = getattr(self._inv, "last_mups", None)
-        if self._gate is not None:
-            out = self._gate.apply(out)
-            if self.last_mups is not None and self._rest_mups is not None:
-                self.last_mups = self._gate.fade(self.last_mups, self._rest_mups)
+        out = self._gated(out)
         self._observe("inversion")
         self.frames_out += len(out)
         return out
@@ -134,12 +144,8 @@ class SpeechToParams:
     def flush(self) -> np.ndarray:
         self.model_audio = self._resampler.flush() if self._resampler is not None else np.zeros(0)
         self._observe("resample")
-        tail = self._fe.push(self.model_audio) if self.model_audio.size else np.zeros((0, 0))
-        if self._gate is not None and self.model_audio.size:
-            self._gate.push_levels(self._fe.last_level_db)
-        feats = self._fe.flush()
-        if self._gate is not None:
-            self._gate.push_levels(self._fe.last_level_db)
+        tail = self._with_levels(self._fe.push(self.model_audio)) if self.model_audio.size else np.zeros((0, 0))
+        feats = self._with_levels(self._fe.flush())
         feats = np.concatenate([tail, feats]) if len(tail) else feats
         self._observe("features")
         head = self._inv.push(feats)
@@ -147,10 +153,7 @@ class SpeechToParams:
         out = np.concatenate([head, self._inv.flush()])
         tail_mups = getattr(self._inv, "last_mups", None)
         self.last_mups = None if mups is None or tail_mups is None else np.concatenate([mups, tail_mups])
-        if self._gate is not None:
-            out = self._gate.apply(out)
-            if self.last_mups is not None and self._rest_mups is not None:
-                self.last_mups = self._gate.fade(self.last_mups, self._rest_mups)
+        out = self._gated(out)
         self._observe("inversion")
         self.frames_out += len(out)
         return out
