@@ -219,13 +219,19 @@ def test_a_piece_over_the_text_limit_is_rejected_whole(backend):
     assert all(0 < len(x) <= s.chunker.max_chars for x in s.push_text("word " * (MAX_TEXT_CHARS // 5 - 1)))
 
 
+async def open_text(server_url: str, session: str):
+    """A text client of the server at ``server_url`` whose English session ``session`` has started (its
+    `started` reply read and checked); the caller closes (or drops) it."""
+    ws = await connect(server_url.replace("http", "ws") + "/text")
+    await ws.send(json.dumps({"type": "start", "session": session, "language": "en"}))
+    assert json.loads(await ws.recv())["type"] == "started"
+    return ws
+
+
 @contextlib.asynccontextmanager
 async def started_text(server_url: str, session: str):
-    """A text client of the server at ``server_url`` whose English session ``session`` has started (its
-    `started` reply read and checked)."""
-    async with connect(server_url.replace("http", "ws") + "/text") as ws:
-        await ws.send(json.dumps({"type": "start", "session": session, "language": "en"}))
-        assert json.loads(await ws.recv())["type"] == "started"
+    """:func:`open_text`, closed on leaving."""
+    async with await open_text(server_url, session) as ws:
         yield ws
 
 
@@ -439,9 +445,7 @@ def test_a_source_that_drops_without_end_has_its_accepted_speech_played_out(mode
 
     async def main():
         async with running(model, backend) as srv:
-            ws = await connect(srv.url.replace("http", "ws") + "/text")
-            await ws.send(json.dumps({"type": "start", "session": "drop", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+            ws = await open_text(srv.url, "drop")
             async with ViewerClient(srv.url, session="drop", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG + "And then the"}))
@@ -472,9 +476,7 @@ def test_a_server_stopping_ends_a_text_session_at_once_with_1001(model, backend,
         await srv.start()
         stopped = None
         try:
-            ws = await connect(srv.url.replace("http", "ws") + "/text")
-            await ws.send(json.dumps({"type": "start", "session": "stop", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+            ws = await open_text(srv.url, "stop")
             async with ViewerClient(srv.url, session="stop", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG * 8}))  # ~30 s of speech
@@ -511,9 +513,7 @@ def test_a_server_stopping_while_a_dropped_source_plays_out_ends_it_at_once(mode
         await srv.start()
         stopped = None
         try:
-            ws = await connect(srv.url.replace("http", "ws") + "/text")
-            await ws.send(json.dumps({"type": "start", "session": "gone", "language": "en"}))
-            assert json.loads(await ws.recv())["type"] == "started"
+            ws = await open_text(srv.url, "gone")
             async with ViewerClient(srv.url, session="gone", kind="params") as viewer:
                 collect = asyncio.ensure_future(viewer.collect())
                 await ws.send(json.dumps({"type": "text", "text": LONG * 8}))  # ~30 s of speech
