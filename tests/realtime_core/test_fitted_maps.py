@@ -43,6 +43,19 @@ def test_the_module_is_written_as_ruff_formats_it() -> None:
     assert "        (\n            0.123456,\n" in long and max(map(len, long.splitlines())) <= 120
 
 
+def _speech_poses(n: int = 60) -> np.ndarray:
+    """``(n, 4)`` random poses over the range speech drives the four parameters (IOD), seed 0."""
+    rng = np.random.default_rng(0)
+    return np.column_stack(
+        [
+            rng.uniform(-0.03, 0.05, n),
+            rng.uniform(-0.10, 0.08, n),
+            rng.uniform(0, 0.35, n),
+            rng.uniform(-0.05, 0.04, n),
+        ]
+    )
+
+
 def test_arkit_weights_reproduce_the_parameters_on_the_head(head_and_rig) -> None:
     from realtime_core.face import MouthLandmarks
     from realtime_core.face.model import measure_mouth
@@ -51,15 +64,7 @@ def test_arkit_weights_reproduce_the_parameters_on_the_head(head_and_rig) -> Non
     lm = MouthLandmarks(**{k: head.landmarks[k] for k in MouthLandmarks.__dataclass_fields__})
     v0 = head.mesh.vertices
     targets = np.stack([head.targets[n] for n in ARKIT_NAMES])
-    rng = np.random.default_rng(0)
-    p = np.column_stack(
-        [
-            rng.uniform(-0.03, 0.05, 60),
-            rng.uniform(-0.10, 0.08, 60),
-            rng.uniform(0, 0.35, 60),
-            rng.uniform(-0.05, 0.04, 60),
-        ]
-    )
+    p = _speech_poses()
     w = blendshape_weights(p, "arkit52").astype(np.float64)
     got = np.array([measure_mouth(v0, v0 + np.tensordot(wi, targets, 1), lm) for wi in w])
     r = [np.corrcoef(p[:, i], got[:, i])[0, 1] for i in range(4)]
@@ -134,15 +139,7 @@ def test_antagonists_never_act_together_and_keep_their_net(head_and_rig) -> None
     from realtime_core.face.model import measure_mouth
 
     head, _ = head_and_rig
-    rng = np.random.default_rng(0)
-    random = np.column_stack(
-        [
-            rng.uniform(-0.03, 0.05, 60),
-            rng.uniform(-0.10, 0.08, 60),
-            rng.uniform(0, 0.35, 60),
-            rng.uniform(-0.05, 0.04, 60),
-        ]
-    )
+    random = _speech_poses()
     p = np.vstack([np.asarray(EXTREME_POSES, dtype=np.float64), [[0.04, 0.0, 0.25, 0.0]], random])
     w = blendshape_weights(p, "arkit52").astype(np.float64)
     linear = np.maximum(p, 0) @ fitted_maps.ARKIT_POS.T + np.maximum(-p, 0) @ fitted_maps.ARKIT_NEG.T
