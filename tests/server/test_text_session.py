@@ -878,3 +878,43 @@ def test_a_server_selects_units_on_one_blas_thread_while_it_serves(model, backen
     assert spoken["type"] == "spoken" and spoken["frames"] > 0
     assert serving == synth.blas_threads == {1}
     assert after == {2}
+
+
+def test_a_text_message_can_change_the_language_and_keeps_the_session(model, backend):
+    """A conversation that turns to Spanish had to end its session (its viewers closed) and start another: a text
+    message's `language` / `voice` now switch the session from that piece on. The pending English words are spoken
+    first, in English; the Spanish piece in Spanish (its frame count is what Spanish espeak-ng makes of it, not
+    English); an unsupported language is rejected with the piece and the session goes on in its language."""
+    from assets.tts import speak
+
+    def frames(text: str, language: str) -> int:
+        s = speak(text, language=language).padded()
+        return int(np.ceil(len(s.samples) * 30 / s.sample_rate_hz - 1e-9))
+
+    async def main():
+        async with running(model, backend) as srv:
+            async with started_text(srv.url, "bot") as ws, ViewerClient(srv.url, session="bot", kind="params") as v:
+                collect = asyncio.ensure_future(v.collect())
+                await ws.send(json.dumps({"type": "text", "text": "Thank you very"}))
+                await ws.send(json.dumps({"type": "text", "text": "Mañana", "language": "fr"}))
+                rejected = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "text", "text": "Hasta mañana, amigo. ", "language": "es"}))
+                english, spanish = json.loads(await ws.recv()), json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "text", "text": "Gracias. ", "voice": "f3"}))  # a variant: still es
+                variant = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "end"}))
+                ended = json.loads(await ws.recv())
+                got = await asyncio.wait_for(collect, 60)
+            return rejected, english, spanish, variant, ended, got
+
+    rejected, english, spanish, variant, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert rejected["type"] == "rejected" and "unsupported language 'fr'" in rejected["reason"]
+    assert rejected["text"] == "Mañana"  # refused with its piece: not spoken in the old language either
+    assert english == {**english, "type": "spoken", "text": "Thank you very", "language": "en"}
+    assert english["frames"] == frames("Thank you very", "en")
+    assert spanish == {**spanish, "type": "spoken", "text": "Hasta mañana, amigo.", "language": "es"}
+    es, en = frames("Hasta mañana, amigo.", "es"), frames("Hasta mañana, amigo.", "en")
+    assert es != en and spanish["frames"] == es
+    assert variant["language"] == "es" and spanish["media_time"] == pytest.approx(english["frames"] / 30)
+    # one session, one viewer stream through the change: every frame in order
+    assert [m.index for m in got.frames] == list(range(ended["frames"])) and got.close_code == P.CLOSE_NORMAL
