@@ -78,7 +78,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--height", type=int, default=480, help="video height")
     b.add_argument("--seed", type=int, default=0, help="sentence choice and noise seed")
     b.add_argument("--level", type=float, default=-20.0, help="presentation level: RMS over speech, dBFS")
-    b.add_argument("--expression-strength", type=float, default=1.0, help="scale of the smile/sad targets")
+    b.add_argument(
+        "--expression-strength",
+        type=float,
+        default=1.0,
+        help="intensity 0..1 of the smiling and sad faces (as render --expression smile:X)",
+    )
     b.set_defaults(run=run_build)
 
     s = ps.add_parser(
