@@ -74,9 +74,10 @@ def export_track(
     "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights;
     with ``expression`` ``(n, len(EXPRESSIONS))`` intensities, the ARKit weights are those of
     ``arkit_track`` (the speech parameters before the expression; default ``track``) plus the expressions'
-    ARKit recipes, as a live session's ARKit output. ``path`` is checked (:func:`check_outputs`: a probe file made
-    and removed) before anything is written unless it is in ``checked``, what a command's own check_outputs returned
-    before its work."""
+    ARKit recipes, as a live session's ARKit output; a head driven by its own targets ("units") shows them on its own
+    face shapes (:attr:`realtime_core.face.keyframes.MorphRig.face_recipe`) beside ``track``'s expressed mouth.
+    ``path`` is checked (:func:`check_outputs`: a probe file made and removed) before anything is written unless it
+    is in ``checked``, what a command's own check_outputs returned before its work."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -106,7 +107,7 @@ def export_track(
             data = morph_glb(head, track, audio=wav_name)
         elif morphs == "units":
             rig, mesh = head
-            data = head_glb(rig, mesh, track, audio=wav_name)
+            data = head_glb(rig, mesh, track, audio=wav_name, expression=expression)
         else:
             assert arkit_targets is not None  # refused above otherwise
             data = arkit_glb(

@@ -146,9 +146,10 @@ def run(args: argparse.Namespace) -> int:
 
         track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet, auto_gain=args.auto_gain)
         frames = track.at_fps(args.fps).values  # as long as the speech at any rate (the video is not cut short)
-    from facecast.commands.speech_options import apply_expressions
+    from facecast.commands.speech_options import apply_expressions, expression_intensities
 
     frames = apply_expressions(frames, args, fps=args.fps, command="render")
+    alpha = expression_intensities(args, len(frames), args.fps)  # a head's own face shapes (brows, eyes, cheeks)
     from facecast.commands.headopts import resolve_from_args
 
     rig, mesh = resolve_from_args(args)
@@ -169,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     with renderer_for_rig(rig, mesh, cfg) as r:
 
         def draw(k: int) -> np.ndarray:
-            image = with_caption(r.render(rig.deformed(frames[k])), credit)
+            image = with_caption(r.render(rig.deformed(frames[k], None if alpha is None else alpha[k])), credit)
             return image if video is None else beside(video.frames[shown[k]], image)
 
         from assets.progress import Progress
