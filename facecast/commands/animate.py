@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.tracks import write_csv
     from clients.export.errors import ExportError
     from clients.export.files import FORMATS, check_outputs, export_track
-    from facecast.commands.outputs import check_output_formats
+    from facecast.commands.outputs import check_distinct_outputs, check_output_formats
     from facecast.commands.speech_options import (
         apply_expressions,
         expression_intensities,
@@ -99,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         from training.errors import ConfigError
 
         raise ConfigError("give at least one output: -o OUT (.csv/.glb/.json/.tsv), --csv, --glb, --json or --tsv")
+    check_distinct_outputs([*([args.csv] if args.csv is not None else []), *written])
     # Every refusal comes before the first output is written (no partial set of files) and before the
     # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
     for fmt, out in exports.items():

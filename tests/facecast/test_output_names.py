@@ -267,3 +267,24 @@ def test_adapt_refuses_less_than_a_second_of_speech(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "0.5 s of speech; at least 1 s is needed" in err, err
     assert not (tmp_path / "m.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["animate", "missing.wav", "-o", "a.csv", "-o", "a.csv"], "a.csv: given twice as an output;"),
+        (["animate", "missing.wav", "-o", "a.csv", "-o", "./a.csv"], "a.csv: given twice as an output;"),
+        (["animate", "missing.wav", "--csv", "a.csv", "-o", "{tmp}/a.csv"], "given twice as an output (as a.csv);"),
+        (["animate", "missing.wav", "-o", "a.json", "--json", "sub/../a.json"], "(as a.json);"),
+        (["say", "Hello.", "-o", "a.mp4", "-o", "b.csv", "-o", "./a.mp4"], "a.mp4: given twice as an output;"),
+    ],
+    ids=["same", "dot-slash", "csv-flag", "json-flag", "say"],
+)
+def test_an_output_given_twice_is_refused_before_any_work(argv, said, tmp_path, monkeypatch, capsys):
+    """`animate SPEECH -o a.csv -o a.csv` wrote a.csv twice (and `-o a.csv -o ./a.csv`, `--csv a.csv -o a.csv`);
+    `say` rendered the same video twice. One line naming it, exit 2, before the speech is read or synthesised."""
+    monkeypatch.chdir(tmp_path)
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and said in err and err.endswith("give each output once"), err
+    assert list(tmp_path.iterdir()) == []
