@@ -82,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from facecast.commands.speech_options import (
         apply_expressions,
         expression_intensities,
+        quiet_speech_db,
         shipped_model,
         warn_if_clipped,
         warn_if_quiet,
@@ -119,8 +120,8 @@ def run(args: argparse.Namespace) -> int:
     if args.auto_gain:
         model = with_auto_gain(model)
     samples, rate = read_audio(args.speech)
-    if shipped_model(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
-        warn_if_quiet("animate", args.speech, samples, rate)
+    # the shipped models' training level (a user's own may differ); said after the animation, with the noise gate's say
+    quiet = quiet_speech_db(samples, rate) if shipped_model(args) and not args.auto_gain else None
     warn_if_clipped("animate", args.speech, samples)
     mups = None
     try:
@@ -131,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
         raise FileProblem(args.speech, str(exc)) from None
     speech = params
+    warn_if_quiet("animate", args.speech, quiet, speech)
     params = apply_expressions(params, args, mups=mups, model=model, command="animate")
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
