@@ -78,10 +78,11 @@ def run(args: argparse.Namespace) -> int:
     from assets.tracks import write_csv
     from clients.export.errors import ExportError
     from clients.export.files import FORMATS, check_outputs, export_track
-    from facecast.commands.outputs import check_output_formats
+    from facecast.commands.outputs import check_distinct_outputs, check_output_formats
     from facecast.commands.speech_options import (
         apply_expressions,
         expression_intensities,
+        quiet_speech_db,
         shipped_model,
         warn_if_clipped,
         warn_if_quiet,
@@ -99,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         from training.errors import ConfigError
 
         raise ConfigError("give at least one output: -o OUT (.csv/.glb/.json/.tsv), --csv, --glb, --json or --tsv")
+    check_distinct_outputs([*([args.csv] if args.csv is not None else []), *written])
     # Every refusal comes before the first output is written (no partial set of files) and before the
     # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
     for fmt, out in exports.items():
@@ -118,8 +120,8 @@ def run(args: argparse.Namespace) -> int:
     if args.auto_gain:
         model = with_auto_gain(model)
     samples, rate = read_audio(args.speech)
-    if shipped_model(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
-        warn_if_quiet("animate", args.speech, samples, rate)
+    # the shipped models' training level (a user's own may differ); said after the animation, with the noise gate's say
+    quiet = quiet_speech_db(samples, rate) if shipped_model(args) and not args.auto_gain else None
     warn_if_clipped("animate", args.speech, samples)
     mups = None
     try:
@@ -130,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
         raise FileProblem(args.speech, str(exc)) from None
     speech = params
+    warn_if_quiet("animate", args.speech, quiet, speech)
     params = apply_expressions(params, args, mups=mups, model=model, command="animate")
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)

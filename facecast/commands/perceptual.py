@@ -112,6 +112,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_build(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.files import check_writable_folder
     from perceptual.design import SYLLABLES
     from perceptual.errors import BuildError
     from perceptual.stimuli import BuildConfig, build
@@ -123,7 +124,7 @@ def run_build(args: argparse.Namespace) -> int:
             raise BuildError(f"--mos-clip {spec!r}: expected SYSTEM=CLIP.mp4")
         clips.append((system, Path(path)))
     cfg = BuildConfig(
-        out_dir=Path(args.output),
+        out_dir=check_writable_folder(args.output),  # before any stimulus is rendered
         grid_root=Path(args.grid) if args.grid else None,
         snrs_db=tuple(args.snr),
         cv_snrs_db=tuple(args.cv_snr),
