@@ -278,16 +278,18 @@ _TLDS = (
     "com org net edu gov int mil io dev ai app co info biz uk us ca au nz ie de fr it es pt nl be ch eu mx ar cl "
     "pe br jp cn ru"
 )
+_URL_END = r"(?=[.,;:!?)\]}>'\"»”’*_`]*(?:\s|$))"
+"""Where a URL ends: before white space, or the punctuation or markdown marks that close the sentence or wrap it."""
 _URL = re.compile(
     r"(?<![\w@/.-])(?:(?:https?|ftp)://(?:[^\s/@]+@)?|www\.)"  # a scheme (and user info) or "www."
     r"(?P<host>[\w-]+(?:\.[\w-]+)*)(?::(?P<port>\d{1,5}))?"
-    r"(?P<rest>[/?#]\S*?)?(?=[.,;:!?)\]}'\"»”’]*(?:\s|$))",  # path, query, fragment; not the sentence's end
+    rf"(?P<rest>[/?#]\S*?)?{_URL_END}",  # path, query, fragment; not the sentence's end
     re.I,
 )
 """A URL with a scheme, or one starting "www.": spoken as its host (and port)."""
 _DOMAIN = re.compile(
     rf"(?<![\w@/.:-])(?P<host>(?:[\w-]+\.)+(?:{'|'.join(_TLDS.split())}))(?![\w-]|\.\w)"
-    r"(?::(?P<port>\d{1,5}))?(?P<rest>/\S*?)?(?=[.,;:!?)\]}'\"»”’]*(?:\s|$))",
+    rf"(?::(?P<port>\d{{1,5}}))?(?P<rest>/\S*?)?{_URL_END}",
     re.I,
 )
 """A bare domain ("example.com/docs", "docs.python.org"): a known top-level domain, so "Node.js" and "file.py" stay."""
@@ -301,9 +303,9 @@ _PHONE_EN = re.compile(
 )
 """A phone number as written in English: international ("+44 20 7946 0958") or North American ("(555) 123-4567",
 "555-123-4567", "555-0199"): read digit by digit in its groups."""
-_RANGE = re.compile(r"(?<![\w.,:/-])(\d+(?:[.,:]\d+)*)(?:-|\s?–\s?)(?=[$€£¥]?\d)")
+_RANGE = re.compile(r"(?<![\w.,:/-])(\d+(?:[.,:]\d+)*)(?:-|\s?–\s?)([$€£¥]?\d+(?:[.,:]\d+)*)(?![\w-]|[.,:]\d)")
 """A range "10-20", "5–10", "9:00-17:00" ("ten dash twenty", "five ten"): "10 to 20" / "10 a 20". A hyphen
-between spaces is a minus ("5 - 3") and stays."""
+between spaces is a minus ("5 - 3") and stays, as a chain ("912-345-678", a Spanish phone number)."""
 _TIME = re.compile(r"(?<![\w.,:])(\d{1,2}):(\d{2})(?![\d:])(?P<h>\s?h\b)?")
 _AMPM = re.compile(r"\s?(?:[ap]\.?m\.?)(?!\w)", re.I)
 _VERSION = re.compile(r"(?<![\w.])v(\d+(?:\.\d+)*)\b")
@@ -455,7 +457,7 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
 
     def span(m: re.Match[str]) -> str:
         between = "y" if language == "es" and re.search(r"\bentre\s$", m.string[: m.start()], re.I) else words["to"]
-        return f"{m.group(1)} {between} "
+        return f"{m.group(1)} {between} {m.group(2)}"
 
     text = _RANGE.sub(span, text)
 
@@ -467,7 +469,8 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
         if language == "es":
             if hours:
                 return f"{h} horas" if mi == 0 else f"{m.group(1)}:{m.group(2)} horas"
-            return (f"{h}" if h else "0 horas") if mi == 0 else f"{h} y {mi}" if mi < 10 else m.group(0)
+            # "9:05" "nueve y cinco"; "14:05" stays "catorce cero cinco", as a 24-hour time is read
+            return (f"{h}" if h else "0 horas") if mi == 0 else f"{h} y {mi}" if mi < 10 and h <= 12 else m.group(0)
         if mi == 0:
             said = f"{h}" if ampm else "midnight" if h in (0, 24) else f"{h} o'clock" if h <= 12 else f"{h} hundred"
         elif mi < 10:
@@ -490,7 +493,15 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
         return f"{number} {one if single else many}"
 
     text = re.sub(rf"(?<![\w.,])(\d+(?:[.,]\d+)?)\s?({symbol})(?![\w/°º])", unit, text)
-    text = _VERSION.sub(lambda m: f"{words['version']} {m.group(1)}", text)
+    # "v2.1.3" "vee two point one point three"; "version v2" is not said twice
+    text = _VERSION.sub(
+        lambda m: (
+            m.group(1)
+            if re.search(r"versi[oó]n\s$", m.string[: m.start()], re.I)
+            else f"{words['version']} {m.group(1)}"
+        ),
+        text,
+    )
     if language == "es":  # "1.º" "uno punto o", "2.ª" "dos punto a": primero, segunda; "1.er" primer
 
         def ordinal(m: re.Match[str]) -> str:
