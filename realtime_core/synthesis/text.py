@@ -14,6 +14,8 @@ word's first letter. A stalled stream is spoken through its last word boundary
 (:meth:`SentenceChunker.flush_words`), and a long first sentence can be started at a clause
 boundary (:meth:`SentenceChunker.take_clause`).
 
+:func:`normalise_for_speech` writes out what espeak-ng reads badly as a person reads it, per language (a URL as
+its host, dates, times, amounts, units, ranges; :func:`clean_text` calls it first when given the language).
 :func:`clean_text` keeps what a synthesiser can pronounce: letters of any alphabet, digits, white
 space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``, the maths
 signs ``× ÷ − ± ≤ ≥ ≠ ≈``, which its Spanish voice mostly skips:
@@ -139,56 +141,23 @@ def clean_text(
 # "12.5%", ordinals ("3rd"), "e.g.", "Dr.", "@mentions", Spanish phone numbers read in groups.
 
 _MONTHS = {
-    "en": [
-        "January",
-        "February",
-        "March",
-        "April",
-        "May",
-        "June",
-        "July",
-        "August",
-        "September",
-        "October",
-        "November",
-        "December",
-    ],
-    "es": [
-        "enero",
-        "febrero",
-        "marzo",
-        "abril",
-        "mayo",
-        "junio",
-        "julio",
-        "agosto",
-        "septiembre",
-        "octubre",
-        "noviembre",
-        "diciembre",
-    ],
+    "en": "January February March April May June July August September October November December".split(),  # noqa: SIM905
+    "es": "enero febrero marzo abril mayo junio julio agosto septiembre octubre noviembre diciembre".split(),  # noqa: SIM905
 }
 _MONTH_ABBR = {  # a month's short form, only next to a day number ("Mar" and "may" are words on their own)
     "en": {**{m[:3]: i for i, m in enumerate(_MONTHS["en"])}, "Sept": 8},
     "es": {**{m[:3]: i for i, m in enumerate(_MONTHS["es"])}, "sept": 8},
 }
-_WEEKDAYS = {
-    "en": dict(
-        zip(
-            ["mon", "tue", "wed", "thu", "fri", "sat", "sun"],
-            ["Monday", "Tuesday", "Wednesday", "Thursday", "Friday", "Saturday", "Sunday"],
-            strict=True,
-        )
+_WEEKDAYS = {  # short form -> name, only in a range ("Mon-Fri": "mon fry"); "Sun", "Sat" and "mar" are words
+    language: {name[:3].lower(): name for name in names.split()} | other_forms
+    for language, names, other_forms in (
+        (
+            "en",
+            "Monday Tuesday Wednesday Thursday Friday Saturday Sunday",
+            {"tues": "Tuesday", "thur": "Thursday", "thurs": "Thursday"},
+        ),
+        ("es", "lunes martes miércoles jueves viernes sábado domingo", {"mie": "miércoles", "sab": "sábado"}),
     )
-    | {"tues": "Tuesday", "thur": "Thursday", "thurs": "Thursday"},
-    "es": dict(
-        zip(
-            ["lun", "mar", "mié", "jue", "vie", "sáb", "dom"],
-            ["lunes", "martes", "miércoles", "jueves", "viernes", "sábado", "domingo"],
-            strict=True,
-        )
-    )
-    | {"mie": "miércoles", "sab": "sábado"},
 }
 _WORDS = {  # per language: the words the rewrites put in
     "en": {"dot": "dot", "port": "port", "to": "to", "version": "version"},
@@ -309,10 +278,6 @@ between spaces is a minus ("5 - 3") and stays, as a chain ("912-345-678", a Span
 _TIME = re.compile(r"(?<![\w.,:])(\d{1,2}):(\d{2})(?![\d:])(?P<h>\s?h\b)?")
 _AMPM = re.compile(r"\s?(?:[ap]\.?m\.?)(?!\w)", re.I)
 _VERSION = re.compile(r"(?<![\w.])v(\d+(?:\.\d+)*)\b")
-
-
-def _n(digits: str) -> int:
-    return int(digits.replace(",", "").replace(".", ""))
 
 
 def _month_en(name: str) -> int:
