@@ -742,6 +742,65 @@ def test_markdown_rules_and_table_delimiters_are_skipped_not_rejected():
     assert clean_text(want[1]) == "name score"
 
 
+def _contains(seq: list[str], part: list[str]) -> bool:
+    """Whether ``part`` occurs in ``seq`` as a contiguous run."""
+    return any(seq[i : i + len(part)] == part for i in range(len(seq) - len(part) + 1))
+
+
+def test_a_url_is_spoken_as_its_host_through_facecast_serve_text(model_path, espeak):
+    """A chatbot's bare URL was read letter by letter ("h t t p s colon slash slash docs dot python dot org slash
+    three slash library ..."). Through a real `facecast serve --text` over loopback: the sentence is spoken with
+    the URL as its host; the viewer's audio is espeak-ng's reading of the text written out by hand (so its phone
+    events are the server's), in which no letter of "https" and no "colon" or "slash" is spelled; every phone is
+    one the unit selection knows, and the mouth moves through the whole sentence."""
+    from assets.espeak import Voice
+    from assets.tts import speak
+    from benchmarks.server_harness import ServerProcess
+
+    sentence = "See https://docs.python.org/3/library/re.html?highlight=sub#re.sub for the details."
+    by_hand = "See docs.python.org for the details."
+    srv = ServerProcess(model_path, head=False, args=("--text",))
+
+    async def main():
+        async with started_text(srv.url, "bot") as ws, ViewerClient(srv.url, session="bot") as viewer:
+            collect = asyncio.ensure_future(viewer.collect())
+            await ws.send(json.dumps({"type": "text", "text": sentence + " "}))
+            spoken = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            return spoken, ended, await collect
+
+    try:
+        spoken, ended, got = asyncio.run(asyncio.wait_for(main(), 60))
+    finally:
+        srv.stop()
+    assert spoken["type"] == "spoken" and spoken["text"] == by_hand and spoken["unknown_phones"] == []
+    assert ended["type"] == "ended" and ended["frames"] == spoken["frames"]
+    # the viewer heard exactly espeak-ng reading the text written by hand (int16 on the wire)
+    speech = speak(by_hand, language="en")
+    want = speech.padded()
+    audio = np.concatenate([m.values for m in got.audio])
+    assert len(audio) == spoken["frames"] * 22050 // 30 >= len(want.samples)
+    np.testing.assert_allclose(audio[: len(want.samples)], want.samples, atol=1.5 / 32768)
+    assert not np.any(audio[len(want.samples) :])
+
+    def phones(text: str) -> list[str]:  # espeak-ng's phone events for text as given (no normalisation), no pauses
+        syn = espeak.synthesize(text, Voice(language="en", base="en-us"), noise_seed=0)
+        return [p.phoneme for p in syn.phonemes if p.phoneme not in ("_", "_:", "_!", "_^_", ";")]
+
+    said, before = phones(by_hand), phones(clean_text(sentence))  # before: the URL as the cleaning left it
+    assert said == [p for p, _, _ in speech.phones if p not in ("_", "_:", "_!", "_^_", ";")]
+    for spelled in ("h t t p s", "colon", "slash", "library"):  # what the URL was read as
+        assert _contains(before, phones(spelled)) and not _contains(said, phones(spelled)), spelled
+    # the mouth moves in every quarter of the speech (unit selection got phones for every word)
+    speech = [(a, b) for p, a, b in want.phones if not p.startswith("_")]
+    t0, t1 = speech[0][0], speech[-1][1]
+    mouth = np.array([m.values[2] for m in got.frames])
+    for q in range(4):
+        k0, k1 = int(30 * (t0 + q * (t1 - t0) / 4)), int(30 * (t0 + (q + 1) * (t1 - t0) / 4))
+        assert np.ptp(mouth[k0 : k1 + 1]) > 0.03, (q, mouth[k0 : k1 + 1])
+
+
 @pytest.mark.slow
 def test_text_session_is_registered_cluster_wide(model, backend, redis_server):  # noqa: F811 (fixture)
     """Two nodes share a real redis-server: a text session on node A is listed by /sessions on node B,
