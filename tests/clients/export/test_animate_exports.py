@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from assets.tracks import decode_csv, decode_json
-from clients.export.rhubarb import read_tsv
+from clients.export.rhubarb import Cue, read_tsv
 from facecast.cli import main
 from tests.prerequisites import require_module
 from tests.speech import speechlike
@@ -206,7 +206,7 @@ def test_a_silent_take_animates_a_closed_mouth(tmp_path):
     assert track.n_frames == 30
     assert np.all(track.values == track.values[0])  # no motion at all
     assert track.values[0, 2] == 0.0  # mouth_open at the closed pose
-    assert [c.shape for c in read_tsv((tmp_path / "p.tsv").read_bytes())] == ["X"]
+    assert read_tsv((tmp_path / "p.tsv").read_bytes()) == [Cue(0.0, "X"), Cue(1.0, "X")]  # rest, and its end
 
 
 _PROBES: list[str] = []
