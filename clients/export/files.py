@@ -64,6 +64,7 @@ def export_track(
     arkit_track: Track | None = None,
     expression: np.ndarray | None = None,
     checked: frozenset[Path] = frozenset(),
+    units: str = "IOD",
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb; or a HeadMesh
@@ -76,7 +77,8 @@ def export_track(
     ``arkit_track`` (the speech parameters before the expression; default ``track``) plus the expressions'
     ARKit recipes, as a live session's ARKit output. ``path`` is checked (:func:`check_outputs`: a probe file made
     and removed) before anything is written unless it is in ``checked``, what a command's own check_outputs returned
-    before its work."""
+    before its work. units: what the track's curves measure, recorded in a .json (the mouth parameters' IOD, or
+    blendshape weights: ``animate --curves``)."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -119,7 +121,7 @@ def export_track(
     elif suffix == ".csv":
         data = encode_csv(track)
     elif suffix == ".json":
-        data = encode_json(track, audio=wav_name)
+        data = encode_json(track, audio=wav_name, units=units)
     else:
         data = tsv_bytes(track)
     written.insert(0, atomic_write_bytes(p, data))
