@@ -348,6 +348,37 @@ def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin
 
 
 @pytest.mark.system
+def test_an_exported_glb_loads_back_as_a_head_or_says_why_not(tmp_path, builtin_rig_file, capsys):
+    """A glb of a head driven by its own targets is a head with ARKit targets (``render --head take.glb``); a
+    retargeted head's glb was rigged again as a new mesh without a word, its lips already cut open and a cavity
+    added (Lee Perry-Smith's tore: a jagged dark slit at rest, after 110 s of rigging): refused in one line naming
+    the file and what to give instead, before any work, exit 2."""
+    from assets.errors import MeshError
+    from assets.heads.head import builtin_morph_head, resolve_head
+    from facecast.cli import main
+
+    tr = syllable_track(30)
+    own, retargeted = tmp_path / "own.glb", tmp_path / "retargeted.glb"
+    morph = builtin_morph_head()
+    export_track(own, tr, head=(morph.rig, morph.mesh))
+    export_track(retargeted, tr, head=builtin_rig_file)
+    back = resolve_head(own)
+    assert type(back.rig) is type(morph.rig) and back.rig.names == morph.rig.names  # its own ARKit targets
+    np.testing.assert_allclose(back.rig.weights(tr.values), morph.rig.weights(tr.values), atol=1e-5)
+    with pytest.raises(MeshError, match="retargeted head") as err:
+        resolve_head(retargeted)
+    assert str(retargeted) in str(err.value) and "--head-mode retarget" in str(err.value)
+    capsys.readouterr()
+    wav = tmp_path / "s.wav"
+    from assets.audio import write_wav
+
+    write_wav(wav, np.zeros(16000, np.float32), 16000)
+    assert main(["animate", str(wav), "--head", str(retargeted), "-o", str(tmp_path / "out.glb")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "retargeted.glb" in lines[0] and not (tmp_path / "out.glb").exists()
+
+
+@pytest.mark.system
 def test_arkit52_glb_carries_the_built_in_heads_blendshapes_and_mapped_weights(tmp_path, builtin_rig_file):
     pygltflib = require_module("pygltflib")
     from clients.export.gltf import builtin_arkit_targets
