@@ -51,7 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default="params",
         help=".csv/.json curves: the 4 mouth parameters (IOD), or blendshape weights in [0, 1] for an engine's own "
         "face: arkit52 = ARKit's 52 (Apple's names and order; speech plus --expression's shapes: what --glb-morphs "
-        "arkit52 animates and a live session's arkit52 kind sends), ovr15 = the 15 Oculus visemes (the ovr15 kind)",
+        "arkit52 animates and a live viewer of kind blendshapes receives), ovr15 = the 15 Oculus visemes (its ovr15 "
+        "encoding)",
     )
     p.add_argument(
         "--model",
