@@ -20,7 +20,7 @@ Three ways in, one parser:
 
 JSON (``facecast-curves`` version 1)::
 
-    {"format": "facecast-curves", "version": 1, "fps": 30.0, "start_s": 0.0, "units": "IOD",
+    {"format": "facecast-curves", "version": 1, "fps": 30.0, "start_s": 0.0, "units": "IOD" (or what the curves are),
      "names": [...], "t": [...F times, s...], "curves": {"<name>": [...F values...], ...},
      "audio": "take.wav" | null}
 
@@ -167,14 +167,15 @@ def read_csv_resampled(path: str | Path, fps: float, *, names: tuple[str, ...] |
     return frames_from_samples(t, a[:, cols], fps, names=want, until_s=until_s)
 
 
-def encode_json(track: Track, *, audio: str | None = None) -> bytes:
-    """The track as UTF-8 JSON (see the module docstring); ``audio``: name of the audio file beside it."""
+def encode_json(track: Track, *, audio: str | None = None, units: str = "IOD") -> bytes:
+    """The track as UTF-8 JSON (see the module docstring); ``audio``: name of the audio file beside it; ``units``:
+    what the curves measure (the mouth parameters' IOD, or e.g. blendshape weights)."""
     doc = {
         "format": JSON_FORMAT,
         "version": JSON_VERSION,
         "fps": track.fps,
         "start_s": track.start_s,
-        "units": "IOD",
+        "units": units,
         "names": list(track.names),
         "t": [round(float(t), 9) for t in track.times()],
         "curves": {n: [float(v) for v in track.values[:, j]] for j, n in enumerate(track.names)},

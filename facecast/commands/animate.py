@@ -1,5 +1,5 @@
 """``facecast animate SPEECH -o OUT``: speech file -> mouth parameters at 30 fps (CSV, glTF, JSON, TSV), by the live
-path."""
+path; ``--curves arkit52|ovr15``: the CSV / JSON as blendshape weights."""
 
 from __future__ import annotations
 
@@ -44,6 +44,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default="units",
         help="--glb morph targets: the head's own (its own targets, or a retargeted rig's 4 mouth units) "
         "or ARKit's 52 blendshapes (built-in head)",
+    )
+    p.add_argument(
+        "--curves",
+        choices=("params", "arkit52", "ovr15"),
+        default="params",
+        help=".csv/.json curves: the 4 mouth parameters (IOD), or blendshape weights in [0, 1] for an engine's own "
+        "face: arkit52 = ARKit's 52 (Apple's names and order; speech plus --expression's shapes: what --glb-morphs "
+        "arkit52 animates and a live viewer of kind blendshapes receives), ovr15 = the 15 Oculus visemes (its ovr15 "
+        "encoding)",
     )
     p.add_argument(
         "--model",
@@ -109,6 +118,12 @@ def run(args: argparse.Namespace) -> int:
     check_output_formats(args.output or (), FORMATS)
     checked = check_outputs(written, source=args.speech)
     glbs = [o for o in written if o.suffix.lower() == ".glb"]
+    if (
+        args.curves != "params"
+        and args.csv is None
+        and not [o for o in written if o.suffix.lower() in (".csv", ".json")]
+    ):
+        raise ExportError(f"--curves {args.curves} is what a .csv or .json output holds: give one (-o OUT.csv)")
     if glbs and args.glb_morphs == "arkit52" and args.head != "builtin":
         raise ExportError(f"{glbs[0]}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
     head = None
@@ -145,8 +160,21 @@ def run(args: argparse.Namespace) -> int:
         params, speech = both[:, : len(VISUAL_PARAMS)], both[:, -len(VISUAL_PARAMS) :]
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params, fps=fps)
+    intensities = expression_intensities(args, len(params), fps)
+    curves, units = track, "IOD"  # what a .csv / .json holds
+    if args.curves != "params":
+        from realtime_core.blendshapes import blendshape_names, blendshape_weights
+
+        # As a live session's blendshape kinds: ARKit has the expressions' own shapes (the speech's weights plus
+        # their recipes), the visemes have none (the parameters with the expression applied).
+        if args.curves == "arkit52" and intensities is not None:
+            weights = blendshape_weights(speech, "arkit52", expression=intensities)
+        else:
+            weights = blendshape_weights(params, args.curves)
+        curves = Track(values=weights, names=blendshape_names(args.curves), fps=fps)
+        units = f"{args.curves} blendshape weight [0, 1]"
     if args.csv is not None:
-        write_csv(args.csv, track)
+        write_csv(args.csv, curves)
     arkit = None
     if glbs and args.glb_morphs == "arkit52" and args.head == "builtin":
         from clients.export.gltf import builtin_arkit_targets
@@ -155,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
     for out in written:
         export_track(
             out,
-            track,
+            curves if out.suffix.lower() in (".csv", ".json") else track,
+            units=units,
             head=head,
             audio=(samples, rate),
             morphs=args.glb_morphs,
@@ -163,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
             checked=checked,  # probed above: not again per file
             # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
             arkit_track=Track(values=speech, fps=fps),
-            expression=expression_intensities(args, len(params), fps),
+            expression=intensities,
         )
     delay = (
         f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"
