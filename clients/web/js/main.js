@@ -42,7 +42,8 @@ const state = {
   firstIndex: null, // index of the first frame received on this connection (0: watched from the start)
   lost: 0, // frames the server dropped or never sent (gaps in the frame index)
   skipped: 0, // frames due together with a newer one in one display refresh (display too slow): not shown
-  resyncs: 0, // timeline moves: later after a late frame, earlier once frames come early again
+  resyncs: 0, // timeline moves later after a late frame
+  catchups: 0, // timeline moves earlier once frames come early again (never before where the first frame put it)
   deliveryMs: null, // server send -> browser receipt (median of the last 30 frames)
   behindAudioMs: null, // frame arrival - arrival of the audio of the same media time
   waitMs: null, // frame arrival -> shown (jitter buffer)
@@ -324,9 +325,10 @@ function onFrame(msg, arrival) {
   state.deliveryMs = median(windows.delivery, 1000 * (Date.now() / 1000 - msg.sendTime));
   const a = audioArrivals.find((b) => b.start <= msg.mediaTime && msg.mediaTime < b.end);
   if (a) state.behindAudioMs = median(windows.behind, 1000 * (arrival - a.arrival));
-  const before = clock.resyncs + clock.catchups;
+  const [resyncs, catchups] = [clock.resyncs, clock.catchups];
   const due = clock.arrive(msg.mediaTime, arrival);
-  state.resyncs += clock.resyncs + clock.catchups - before;
+  state.resyncs += clock.resyncs - resyncs;
+  state.catchups += clock.catchups - catchups;
   state.waitMs = median(windows.wait, 1000 * (due - arrival));
   queue.push({ msg, due });
   // Audio that arrived before the first frame fixed the timeline is scheduled now.
@@ -444,7 +446,7 @@ function updatePanel() {
     `behind audio   ${fmt(state.behindAudioMs)}`,
     `buffer         ${fmt(state.waitMs)}`,
     `draw           ${fmt(state.drawMs)}`,
-    `resyncs        ${state.resyncs}`,
+    `resyncs        ${state.resyncs} (+${state.catchups} catch-ups)`,
     `audio          ${audio.running ? `on (${audio.played} blocks)` : "off"}`,
     `audio sync     ${fmt(audio.syncMs)}`,
   ].join("\n");

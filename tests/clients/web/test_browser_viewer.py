@@ -430,12 +430,17 @@ def test_browser_plays_out_a_session_sent_ahead_of_time_without_dropping_it(mode
         srv.stop()
     st, audio, applied = played["state"], played["audio"], played["applied"]
     # The counters for the report (not asserted: how many frames a display skips depends on the machine).
-    keep = ("received", "frames", "skipped", "resyncs", "waitMs", "deliveryMs", "displayHz")
+    keep = ("received", "frames", "skipped", "resyncs", "catchups", "waitMs", "deliveryMs", "displayHz")
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     (ARTIFACTS / "playout.json").write_text(json.dumps({"state": {k: st[k] for k in keep}, "audio": audio}))
     assert played["console_errors"] == []
     assert st["firstIndex"] == 0 and st["received"] >= seconds * 30 and st["lost"] == 0, st
-    assert st["resyncs"] == 0 and audio["lateDropped"] == 0, (st, audio)  # the lead is no hiccup: nothing cut
+    # The lead is no hiccup: frames early by design never move the timeline earlier (the page caught up past the first
+    # frame's timeline 6 s in, cutting 0.27 s of speech with no late frame at all). A frame delivered late (a loaded
+    # machine: the suite beside 3 CPU-bound jobs made 3) moves it later, and a catch-up may then give that back, no
+    # more: so no catch-up without a resync before it, and no speech cut when no frame came late.
+    assert st["catchups"] <= st["resyncs"], (st, audio)
+    assert st["resyncs"] > 0 or audio["lateDropped"] == 0, (st, audio)
     assert st["frames"] + st["skipped"] == st["received"], st
     index = [r["index"] for r in applied]
     assert index == sorted(set(index)) and len(index) == st["frames"]  # in order, each once
