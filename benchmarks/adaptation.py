@@ -100,19 +100,27 @@ def s1_as_new_voice(
     ``speed`` != 1 both played that much faster (``training.reallips.speed_perturb``: pitch,
     formants and tempo scale together, the lip track re-timed): a new voice for a model trained
     on s1 as recorded."""
+    from assets.audio import read_audio
+    from assets.grid import sentences
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-    from training.reallips import grid_utterances, speed_perturb
+    from training.reallips import speed_audio, speed_perturb, track_to_utterance
+    from training.video import load_face_track
 
+    # Enrolment is audio only: the train sentences' lips are never measured (the whole split was, 716 clips
+    # through MediaPipe on an empty cache, for the first 16 sentences' audio). Only the scored val clips are.
     enrol, total = [], 0.0
-    for u in grid_utterances("train", root=root):
-        u = speed_perturb(u, speed)
-        enrol.append(_at_model_rate(model, u.samples, u.sample_rate_hz))
-        total += len(u.samples) / u.sample_rate_hz
+    for s in sentences(root, split="train"):
+        x, _ = read_audio(s.video, rate_hz=model.sample_rate_hz)
+        enrol.append(speed_audio(x, speed))
+        total += len(enrol[-1]) / model.sample_rate_hz
         if total >= enrol_seconds:
             break
-    val = [speed_perturb(u, speed) for u in grid_utterances("val", root=root)[:n_val]]
+    val = [
+        speed_perturb(track_to_utterance(load_face_track(s.video, require_alignment=True), utt_id=s.sentence_id), speed)
+        for s in progress(sentences(root, split="val")[:n_val], desc="s1 val lips", unit="clip")
+    ]
     truth = np.concatenate([u.params[:, MOUTH_OPEN] for u in val])
     loud = np.concatenate([loudness_db(u.samples, u.sample_rate_hz, len(u.params)) for u in val])
 
