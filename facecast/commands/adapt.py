@@ -91,4 +91,12 @@ def run(args: argparse.Namespace) -> int:
         f"audio log-likelihood per frame {ll0:.2f} -> {ll1:.2f} ({len(result.history) - 1} EM iterations)"
     )
     print(f"wrote {out}")
+    # Nothing here sees the talker's lips, and a higher audio likelihood is not a better mouth: 45-48 s of a new voice
+    # lowered r(mouth_open) on held-out speech of that voice with the shipped default model (docs/training.md).
+    print(
+        "caution: nothing here checks the adapted model against lips, and adaptation can make it worse: with the "
+        "shipped default model it lowered r(mouth_open) on held-out speech of each new voice measured, with "
+        "low-latency it raised it for two of three (docs/training.md, 'Speaker adaptation'). Compare both on a video "
+        f"of the talker first: facecast eval --model {out} --video-dir FOLDER, then --model {args.model}"
+    )
     return 0
