@@ -52,13 +52,24 @@ def _at_model_rate(model, samples: np.ndarray, rate: int) -> np.ndarray:
     return resample(samples, rate, model.sample_rate_hz)
 
 
-def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
+def _clips(clips_dir: Path) -> list[Path]:
+    """The talking-face clips of ``clips_dir`` but s1's ``bbaf2n``; ConfigError naming the folder if there are none."""
+    from training.errors import ConfigError
+
+    if not clips_dir.is_dir():
+        raise ConfigError(f"--clips {clips_dir}: folder not found")
+    clips = sorted(p for p in clips_dir.iterdir() if p.suffix.lower() in (".mpg", ".mp4") and p.stem != "bbaf2n")
+    if not clips:
+        raise ConfigError(f"--clips {clips_dir}: no talking-face clips there (.mpg or .mp4)")
+    return clips
+
+
+def other_talkers(model, cfg, clips: list[Path], progress) -> list[dict]:
     from realtime_core.adaptation import adapt_av_model
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
     from training.video import measure_video
 
     rows = []
-    clips = sorted(p for p in clips_dir.iterdir() if p.suffix.lower() in (".mpg", ".mp4") and p.stem != "bbaf2n")
     for clip in progress(clips, desc="other talkers", unit="clip"):
         tr = measure_video(clip)
         x, rate, truth = tr.samples, tr.sample_rate_hz, tr.params
@@ -207,9 +218,16 @@ def main(argv: list[str] | None = None) -> int:
     from realtime_core.hmm.adapt import AdaptConfig
 
     model = load_model(args.model)
+    # Both folders before any work: a missing --clips was a FileNotFoundError traceback, and a missing --grid-s1 was
+    # refused only after the other talkers had been measured.
+    clips = _clips(args.clips)
+    if not args.no_s1:
+        from assets.grid import sentences
+
+        sentences(args.grid_s1)  # GridNotFoundError naming the folder
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=args.relevance)
     with threadpool_limits(1):  # small GEMMs: one BLAS thread is many times faster on 2 busy cores
-        rows = other_talkers(model, cfg, args.clips, Progress)
+        rows = other_talkers(model, cfg, clips, Progress)
     print(f"model: {args.model or 'shipped default'}; relevance {args.relevance:g} frames")
     print("| clip | s | loudness | before | after (self, 3 s) | halves before | halves after (1.5 s) |")
     print("|---|---:|---:|---:|---:|---:|---:|")
