@@ -52,13 +52,24 @@ def _at_model_rate(model, samples: np.ndarray, rate: int) -> np.ndarray:
     return resample(samples, rate, model.sample_rate_hz)
 
 
-def other_talkers(model, cfg, clips_dir: Path, progress) -> list[dict]:
+def _clips(clips_dir: Path) -> list[Path]:
+    """The talking-face clips of ``clips_dir`` but s1's ``bbaf2n``; ConfigError naming the folder if there are none."""
+    from training.errors import ConfigError
+
+    if not clips_dir.is_dir():
+        raise ConfigError(f"--clips {clips_dir}: folder not found")
+    clips = sorted(p for p in clips_dir.iterdir() if p.suffix.lower() in (".mpg", ".mp4") and p.stem != "bbaf2n")
+    if not clips:
+        raise ConfigError(f"--clips {clips_dir}: no talking-face clips there (.mpg or .mp4)")
+    return clips
+
+
+def other_talkers(model, cfg, clips: list[Path], progress) -> list[dict]:
     from realtime_core.adaptation import adapt_av_model
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
     from training.video import measure_video
 
     rows = []
-    clips = sorted(p for p in clips_dir.iterdir() if p.suffix.lower() in (".mpg", ".mp4") and p.stem != "bbaf2n")
     for clip in progress(clips, desc="other talkers", unit="clip"):
         tr = measure_video(clip)
         x, rate, truth = tr.samples, tr.sample_rate_hz, tr.params
@@ -100,19 +111,27 @@ def s1_as_new_voice(
     ``speed`` != 1 both played that much faster (``training.reallips.speed_perturb``: pitch,
     formants and tempo scale together, the lip track re-timed): a new voice for a model trained
     on s1 as recorded."""
+    from assets.audio import read_audio
+    from assets.grid import sentences
     from realtime_core.adaptation import adapt_av_model
     from realtime_core.hmm.adapt import AdaptConfig
     from training.evaluation import MOUTH_OPEN, loudness_db, pearson
-    from training.reallips import grid_utterances, speed_perturb
+    from training.reallips import speed_audio, speed_perturb, track_to_utterance
+    from training.video import load_face_track
 
+    # Enrolment is audio only: the train sentences' lips are never measured (the whole split was, 716 clips
+    # through MediaPipe on an empty cache, for the first 16 sentences' audio). Only the scored val clips are.
     enrol, total = [], 0.0
-    for u in grid_utterances("train", root=root):
-        u = speed_perturb(u, speed)
-        enrol.append(_at_model_rate(model, u.samples, u.sample_rate_hz))
-        total += len(u.samples) / u.sample_rate_hz
+    for s in sentences(root, split="train"):
+        x, _ = read_audio(s.video, rate_hz=model.sample_rate_hz)
+        enrol.append(speed_audio(x, speed))
+        total += len(enrol[-1]) / model.sample_rate_hz
         if total >= enrol_seconds:
             break
-    val = [speed_perturb(u, speed) for u in grid_utterances("val", root=root)[:n_val]]
+    val = [
+        speed_perturb(track_to_utterance(load_face_track(s.video, require_alignment=True), utt_id=s.sentence_id), speed)
+        for s in progress(sentences(root, split="val")[:n_val], desc="s1 val lips", unit="clip")
+    ]
     truth = np.concatenate([u.params[:, MOUTH_OPEN] for u in val])
     loud = np.concatenate([loudness_db(u.samples, u.sample_rate_hz, len(u.params)) for u in val])
 
@@ -199,9 +218,16 @@ def main(argv: list[str] | None = None) -> int:
     from realtime_core.hmm.adapt import AdaptConfig
 
     model = load_model(args.model)
+    # Both folders before any work: a missing --clips was a FileNotFoundError traceback, and a missing --grid-s1 was
+    # refused only after the other talkers had been measured.
+    clips = _clips(args.clips)
+    if not args.no_s1:
+        from assets.grid import sentences
+
+        sentences(args.grid_s1)  # GridNotFoundError naming the folder
     cfg = AdaptConfig(relevance=args.relevance, weight_relevance=args.relevance)
     with threadpool_limits(1):  # small GEMMs: one BLAS thread is many times faster on 2 busy cores
-        rows = other_talkers(model, cfg, args.clips, Progress)
+        rows = other_talkers(model, cfg, clips, Progress)
     print(f"model: {args.model or 'shipped default'}; relevance {args.relevance:g} frames")
     print("| clip | s | loudness | before | after (self, 3 s) | halves before | halves after (1.5 s) |")
     print("|---|---:|---:|---:|---:|---:|---:|")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -291,6 +292,15 @@ async def ingest_file(
             await stream_samples(ing, samples, realtime=realtime, block_s=block_s, ahead_s=ahead_s)
             return ing.started, await ing.end()
     except ServerClosed as exc:
+        if ingest.enrol is not None and exc.code == P.CLOSE_BAD_REQUEST and exc.reason.startswith("enrol"):
+            # Named by file, without the reason's "Recorded at RATE Hz?": that asks a client which may have declared
+            # the wrong rate, and this one converted the recording to the session's rate itself (40 s of music was
+            # answered "... (a tone, noise or music?) Recorded at 22050 Hz?").
+            why = re.sub(r" Recorded at \d+ Hz\?$", "", exc.reason)
+            raise ClientError(
+                f"{enrol}: the server refused it as the enrolment ({exc.code} {why}); give a recording of the talker's "
+                "speech (30-60 s)"
+            ) from None
         if exc.code != P.CLOSE_TOO_BIG or ingest.enrol is None:
             raise
         # The start carries the enrolment at the speech's rate: 45 s at 48 kHz is 5.8 MB, over a server's default

@@ -189,6 +189,7 @@ class FacecastServer:
         self.incidents = IncidentLog(log)
         self._gc_pauses: GcPauses | None = None
         self._holds_blas = False  # between start and stop (_ONE_BLAS_THREAD)
+        self._enrolling = asyncio.Lock()  # enrolments adapt one at a time (_new_session)
 
     # -- lifecycle ---------------------------------------------------------------------------------
 
@@ -455,10 +456,19 @@ class FacecastServer:
 
     async def _new_session(self, config: SessionConfig) -> SessionHandle:
         rig = self.head.rig if self.head else None
+        if config.enrol is not None:  # adaptation is CPU work: keep the event loop serving others
+            # One at a time: the adaptation holds the GIL for much of its ~0.6 s (60 s of speech), and each thread
+            # adapting at once took another share of it from the loop: a streaming session's frames came up to 112 ms
+            # late while three enrolments adapted together, beyond the browser viewer's 80 ms jitter buffer.
+            async with self._enrolling:
+                session = await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times)
+            if self.pool is None:
+                return LocalSession(session)
+            # Adapted here, not in the worker: a worker serves its sessions one request at a time, and adapting there
+            # froze every other session on it (with --workers 1, 1.6-1.9 s of frames late for 60 s of enrolment).
+            return await self.pool.open(config, rig=rig, times=self.times, enrolled=session.model)
         if self.pool is not None:
             return await self.pool.open(config, rig=rig, times=self.times)
-        if config.enrol is not None:  # adaptation is CPU work: keep the event loop serving others
-            return LocalSession(await asyncio.to_thread(Session, self.model, config=config, rig=rig, times=self.times))
         return LocalSession(Session(self.model, config=config, rig=rig, times=self.times))
 
     async def run_source(

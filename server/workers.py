@@ -32,11 +32,12 @@ import multiprocessing as mp
 import os
 import pickle
 import time
-from dataclasses import asdict
+from dataclasses import fields, replace
 
 import numpy as np
 
 from realtime_core import VISUAL_PARAMS
+from realtime_core.avmodel import AvModel
 from realtime_core.face.keyframes import MorphRig
 from realtime_core.face.rig import Rig
 from realtime_core.mapping import SpeechModel
@@ -100,7 +101,11 @@ def _worker_main(conn, model_bytes: bytes, rig_bytes: bytes | None = None) -> No
             try:
                 if op == "open":
                     rec = _Recorder()
-                    sessions[sid] = (Session(model, config=SessionConfig(**msg[2]), rig=rig, times=rec), rec)
+                    m = model
+                    if len(msg) > 3:  # enrolled by the server: its adapted audio means and mixture weights
+                        assert isinstance(model, AvModel)
+                        m = replace(model, hmm=replace(model.hmm, means=msg[3][0], weights=msg[3][1]))
+                    sessions[sid] = (Session(m, config=SessionConfig(**msg[2]), rig=rig, times=rec), rec)
                     conn.send(("ok", None))
                 elif op == "push":
                     s, rec = sessions[sid]
@@ -218,11 +223,26 @@ class WorkerPool:
                 w.proc.kill()
         self.workers = []
 
-    async def open(self, config: SessionConfig, *, rig: Rig | MorphRig | None, times: StageTimes) -> RemoteSession:
+    async def open(
+        self,
+        config: SessionConfig,
+        *,
+        rig: Rig | MorphRig | None,
+        times: StageTimes,
+        enrolled: SpeechModel | None = None,
+    ) -> RemoteSession:
+        """A session in the least busy worker. enrolled: the session's model already adapted to ``config.enrol`` by
+        the caller (the worker gets its audio means and mixture weights, the rest of the model it holds)."""
         w = min(self.workers, key=lambda x: x.sessions)
         self._next_id += 1
         sid = self._next_id
-        await w.request(("open", sid, asdict(config)))
+        options = {f.name: getattr(config, f.name) for f in fields(config) if f.init}  # not its decoded enrol
+        if enrolled is None:
+            await w.request(("open", sid, options))
+        else:
+            assert isinstance(enrolled, AvModel)  # a Session adapts only an HMM model
+            options["enrol"] = None
+            await w.request(("open", sid, options, (enrolled.hmm.means, enrolled.hmm.weights)))
         w.sessions += 1
         return RemoteSession(self.model, config, w, sid, rig=rig, times=times, worker_rig=self.rig is not None)
 

@@ -114,19 +114,28 @@ def grid_utterances(split: Split | None, **kwargs) -> list[Utterance]:
     return [track_to_utterance(t, utt_id=f"grid-s1-{s.sentence_id}") for s, t in grid_tracks(split, **kwargs)]
 
 
-def speed_perturb(utt: Utterance, factor: float) -> Utterance:
-    """``utt`` played ``factor`` times faster (0.8 .. 1.25): audio resampled (pitch, formants and
-    tempo scale together), the parameter track re-timed (frame k of the result is the original at
-    ``k * factor / 30`` s, linear interpolation). ``factor`` 1 returns ``utt``."""
+def speed_audio(samples: np.ndarray, factor: float) -> np.ndarray:
+    """``(n,)`` samples played ``factor`` times faster (0.8 .. 1.25) at the same rate: ``(~n / factor,)``
+    float32, resampled, so pitch, formants and tempo scale together (the audio of :func:`speed_perturb`,
+    for speech without a lip track). ``factor`` 1 returns ``samples``."""
     from scipy.signal import resample_poly
 
     if not 0.8 <= factor <= 1.25:
         raise ConfigError(f"speed factor must be in [0.8, 1.25], got {factor}")
     if factor == 1.0:
-        return utt
+        return samples
     # play faster = keep the samples, declare them at rate * factor, convert back to the rate
+    return resample_poly(np.asarray(samples, dtype=np.float64), 1000, round(1000 * factor)).astype(np.float32)
+
+
+def speed_perturb(utt: Utterance, factor: float) -> Utterance:
+    """``utt`` played ``factor`` times faster (0.8 .. 1.25): audio resampled (pitch, formants and
+    tempo scale together, :func:`speed_audio`), the parameter track re-timed (frame k of the result is
+    the original at ``k * factor / 30`` s, linear interpolation). ``factor`` 1 returns ``utt``."""
+    audio = speed_audio(utt.samples, factor)  # checks the factor's range
+    if factor == 1.0:
+        return utt
     up, down = 1000, round(1000 * factor)
-    audio = resample_poly(utt.samples.astype(np.float64), up, down).astype(np.float32)
     n = n_frames_for(len(audio) / utt.sample_rate_hz)
     t_src = np.arange(len(utt.params)) / FPS
     t_new = np.minimum(np.arange(n) * down / up / FPS, t_src[-1])

@@ -125,3 +125,18 @@ def test_channels_in_opposite_polarity_are_not_mixed_to_silence(tmp_path, suffix
     got, _ = read_audio(wav)
     np.testing.assert_allclose(got, pcm.astype(np.float32).mean(axis=1) / 32768, atol=1e-6)
     assert not caplog.records
+
+
+def test_is_silent_reads_the_peak_of_either_sign_in_int16_and_float() -> None:
+    """The peak from the extremes (no float64 |x| copy): a lone negative sample counts as much as a positive one, int16
+    against 32768, -32768 included (whose |x| does not fit int16)."""
+    from assets.audio import SILENCE_PEAK, is_silent
+
+    threshold = int(np.ceil(SILENCE_PEAK * 32768))  # the least int16 peak that is not silent
+    for value, silent in ((threshold - 1, True), (threshold, False), (-threshold, False), (-32768, False)):
+        x = np.zeros(16000, np.int16)
+        x[123] = value
+        assert is_silent(x) is silent, value
+        assert is_silent(x / 32768.0) is silent, value  # the same samples as float
+    assert is_silent(np.zeros(0, np.int16)) and is_silent(np.zeros(0))
+    assert is_silent(np.full(10, -0.5 * SILENCE_PEAK)) and not is_silent(np.full(10, -2 * SILENCE_PEAK))

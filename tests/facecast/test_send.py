@@ -177,6 +177,29 @@ def test_send_enrols_40_s_of_real_speech_under_the_default_message_limit(tmp_pat
         srv.stop()
 
 
+def test_send_names_an_enrolment_the_server_refuses_without_asking_its_rate(tmp_path, capsys):
+    """12 s of music-like tones as `--enrol`: the server refuses it (4400, not speech); send said "server closed the
+    connection: 4400 enrol: ... (a tone, noise or music?) Recorded at 22050 Hz?", the file unnamed and a rate question
+    that cannot apply (send converts the enrolment to the session's rate itself). Now one line naming the file."""
+    from assets.modelfile import load_model
+
+    t = np.arange(12 * 22050) / 22050
+    tune = 0.2 * np.sin(2 * np.pi * (220 + 110 * np.floor(t * 2 % 4)) * t)  # a four-note figure, 0.5 s per note
+    enrol = write_wav(tmp_path / "tune.wav", tune, 22050)
+    wav = write_wav(tmp_path / "a.wav", speechlike(0.5, 22050, seed=1), 22050)
+    srv = LiveServer(load_model(), None)
+    try:
+        assert main(["send", str(wav), srv.url, "--enrol", str(enrol), "--fast"]) == 2
+    finally:
+        srv.stop()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(
+        f"facecast send: error: {enrol}: the server refused it as the enrolment (4400 enrol: it does not sound like "
+        "speech: "
+    ), err
+    assert "Recorded at" not in err[0] and err[0].endswith("give a recording of the talker's speech (30-60 s)"), err
+
+
 def _send_to(handler, wav) -> int:
     """`facecast send --fast WAV` into a bare WebSocket server on loopback whose connections ``handler``
     serves (a stand-in for a server that misbehaves in one precise way); returns the exit code."""

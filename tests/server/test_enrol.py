@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import itertools
 import json
 import math
 
@@ -70,6 +71,112 @@ def test_enrolled_session_streams_the_adapted_models_frames(model, audio) -> Non
     assert len(got.frames) == len(ref)
     np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
     np.testing.assert_array_equal(got2.values(), plain.astype(np.float32))
+
+
+def test_enrolments_started_together_are_adapted_one_at_a_time(model, audio) -> None:
+    """Three sessions start with an enrolment at once: the server adapts them one after another, so the adaptation
+    (which holds the GIL for much of its run) competes with the event loop from one thread at most. Each in a thread
+    of its own, three 60 s enrolments made another session's frames up to 112-158 ms late (37 ms now; load 3-4)."""
+    enrol, _ = audio
+
+    async def main():
+        srv = FacecastServer(model, config=ServerConfig(port=0))
+        await srv.start()
+        try:
+            clients = [
+                IngestClient(srv.url, session=f"e{i}", sample_rate_hz=16000, enrol=enrol.tobytes()) for i in range(3)
+            ]
+            await asyncio.gather(*(c.__aenter__() for c in clients))
+            spans = sorted(srv.sessions[f"e{i}"].session.core.adapted_during for i in range(3))
+            await asyncio.gather(*(c.__aexit__(None, None, None) for c in clients))
+            return spans
+        finally:
+            await srv.stop()
+
+    spans = asyncio.run(main())
+    assert all(a[1] <= b[0] for a, b in itertools.pairwise(spans)), spans  # no two overlap
+
+
+def test_with_compute_workers_an_enrolled_session_streams_the_adapted_frames(model, audio) -> None:
+    """`facecast serve --workers 1`: the server adapts the model and the worker runs the session with the adapted audio
+    means and weights: its frames are those of the adapted model, as without workers (auto gain heard first as there);
+    a plain session on the same worker keeps the shared model."""
+    from realtime_core.pipeline import with_auto_gain
+    from tests.live_server import running
+
+    enrol, speech = audio
+    adapted, _ = adapt_av_model(with_auto_gain(model), [enrol / 32768.0])
+    ref = speech_to_params(adapted, speech / 32768.0)
+
+    async def run(url, name, enrol_bytes):
+        async with (
+            IngestClient(url, session=name, sample_rate_hz=16000, enrol=enrol_bytes, auto_gain=True) as ing,
+            ViewerClient(url, session=name, kind="params") as v,
+        ):
+            task = asyncio.ensure_future(v.collect())
+            await stream_samples(ing, speech, realtime=False)
+            await ing.end()
+            return ing.started, await task
+
+    async def main():
+        async with running(model, workers=1) as srv:
+            return await run(srv.url, "enrolled", enrol.tobytes()), await run(srv.url, "plain", None)
+
+    (started, got), (_, plain) = asyncio.run(main())
+    assert started["enrolled_s"] == 8.0 and started["auto_gain"] is True
+    np.testing.assert_array_equal(got.values(), ref.astype(np.float32))
+    np.testing.assert_array_equal(
+        plain.values(), speech_to_params(with_auto_gain(model), speech / 32768.0).astype(np.float32)
+    )
+
+
+@pytest.mark.slow
+def test_with_compute_workers_an_enrolment_does_not_stop_the_workers_other_sessions(shared_data) -> None:
+    """`facecast serve --workers 1`, one session streaming in real time, then another starts with 55 s of LJ Speech as
+    its enrolment: the streaming session's frames keep arriving while the enrolment is adapted (0.6-1 s for the
+    shipped model). The worker adapted it itself and served nothing else meanwhile: frames 1.6-1.9 s late, 1-3 of them
+    between the enrolment's start and its started reply (those pushed before it)."""
+    from assets.audio import read_audio, to_int16
+    from assets.modelfile import load_model
+    from tests.live_server import running
+
+    voice = np.concatenate(
+        [
+            read_audio(shared_data / "speech" / "ljspeech" / f"LJ001-00{i:02d}.wav", rate_hz=16000)[0]
+            for i in range(3, 11)
+        ]
+    )
+    speech, _ = read_audio(shared_data / "speech" / "ljspeech" / "LJ001-0020.wav", rate_hz=16000)
+
+    async def main():
+        async with running(load_model(), workers=1) as srv:
+            async with (
+                IngestClient(srv.url, session="talking", sample_rate_hz=16000) as ing,
+                ViewerClient(srv.url, session="talking", kind="params", audio=False) as v,
+            ):
+                frames: list[float] = []
+
+                async def watch():
+                    async for _ in v:
+                        frames.append(asyncio.get_running_loop().time())
+
+                watching = asyncio.ensure_future(watch())
+                streaming = asyncio.ensure_future(stream_samples(ing, speech))  # 4.7 s in real time
+                while len(frames) < 10:  # the session is under way
+                    await asyncio.sleep(0.01)
+                began = asyncio.get_running_loop().time()
+                async with IngestClient(
+                    srv.url, session="enrolling", sample_rate_hz=16000, enrol=to_int16(voice).tobytes()
+                ) as enrolling:
+                    done = asyncio.get_running_loop().time()
+                    assert enrolling.started["enrolled_s"] > 50
+                await streaming
+                await ing.end()
+                await watching
+                return sum(began < t < done for t in frames)
+
+    during = asyncio.run(main())
+    assert during >= 8, during  # 16-24 measured; 1-3 when the worker adapted
 
 
 @pytest.mark.parametrize(
