@@ -36,6 +36,25 @@ VOWELS_1 = ("aa", "ih", "ou", "ee", "oh")
 VOWELS_0 = {"a": "aa", "i": "ih", "u": "ou", "e": "ee", "o": "oh"}
 """VRM 0.x's ``presetName`` of each vowel -> VRM 1.0's."""
 
+EMOTIONS = {"smile": "happy", "anger": "angry", "sad": "sad", "surprise": "surprised"}
+"""facecast's expression (:data:`realtime_core.expressions.EXPRESSIONS`) -> the VRM 1.0 preset emotion expression an
+avatar's artist made for it (``relaxed`` has none: facecast has no such expression). Its target ``vrm.happy`` ...
+is the expression's face shape on that avatar (:func:`assets.heads.targets.face_targets`)."""
+
+EMOTIONS_0 = {"joy": "happy", "angry": "angry", "sorrow": "sad", "surprised": "surprised"}
+"""VRM 0.x's ``presetName`` of each emotion -> VRM 1.0's (``fun`` has no facecast expression)."""
+
+
+def emotion_of(name: str) -> str | None:
+    """The facecast expression a morph target named as an emotion expression is made into (``vrm.happy``,
+    ``vrm.expression.happy``: :func:`expression_targets`) stands for (``"smile"``), or None."""
+    for prefix in (PREFIX, PREFIX + "expression."):
+        if name.startswith(prefix):
+            rest = name[len(prefix) :]
+            return next((e for e, v in EMOTIONS.items() if v == rest), None)
+    return None
+
+
 VRM0_TURN = np.array([-1.0, 1.0, -1.0])
 """Per-axis sign turning a VRM 0.x avatar half way round about +y: VRM 0.x files face -z (UniVRM's convention),
 VRM 1.0 files and glTF's convention +z, which is where facecast looks for a face it has no landmarks of (a head

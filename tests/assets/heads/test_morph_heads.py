@@ -138,6 +138,23 @@ def test_a_character_creator_head_with_split_targets_moves_as_the_arkit_head(tmp
         want = builtin_morph.rig.deformed(np.array(p)).astype(np.float64)
         got = head.rig.deformed(np.array(p)).astype(np.float64)
         np.testing.assert_allclose(got, want, atol=2e-4 * fr.iod)
+    # Each expression's face shapes in CC4's words: Brow_Raise_Outer_L (browOuterUpLeft), Cheek_Raise_L
+    # (cheekSquintLeft) and the inner brow split in halves (Brow_Raise_Inner_L/R). Before, none of these was
+    # recognised: on a CC4 head a surprise raised no brow, a sad face no inner brow, a smile no cheek.
+    from realtime_core.expressions import EXPRESSIONS
+
+    assert {"Brow_Raise_Outer_L", "Cheek_Raise_R", "Brow_Raise_Inner_L", "Brow_Raise_Inner_R"} <= set(
+        head.rig.names[-head.rig.n_face :]
+    )
+    p = np.array([0.01, 0.02, 0.1, 0.0])
+    for k, name in enumerate(EXPRESSIONS):
+        alpha = np.zeros(len(EXPRESSIONS))
+        alpha[k] = 0.8
+        want = builtin_morph.rig.deformed(p, alpha).astype(np.float64)
+        got = head.rig.deformed(p, alpha).astype(np.float64)
+        moved = np.abs(want - builtin_morph.rig.deformed(p)).max()
+        assert moved > 0.02 * fr.iod, name  # the expression moves the face beyond the mouth
+        np.testing.assert_allclose(got, want, atol=2e-4 * fr.iod, err_msg=name)
 
 
 def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
@@ -157,6 +174,9 @@ def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
     got = measure_mouth(b.mesh.vertices, head.rig.deformed(p).astype(float), lm)
     ref = measure_mouth(b.mesh.vertices, builtin_morph.rig.deformed(p).astype(float), lm)
     assert got[2] > 0.6 * ref[2] > 0  # the jaw opens most of the way the ARKit head does
+    # No face shapes: an expression reaches such a head through the mouth parameters only, as before.
+    assert head.rig.n_face == 0 and head.rig.face_recipe is None
+    np.testing.assert_array_equal(head.rig.weights(p, np.ones(4)), head.rig.weights(p))
 
 
 def test_too_few_mouth_targets_fall_back_and_user_maps_add_names(tmp_path, builtin_morph):
