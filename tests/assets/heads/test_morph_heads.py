@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -532,3 +533,26 @@ def test_a_frame_without_an_expression_skips_the_face_shapes_bit_for_bit(builtin
     whole = morph_displacements(w, rig.flat_targets, np.empty((6, rig.flat_targets.shape[1]), dtype=np.float32))
     assert rig.displacements_rows(w).tobytes() == whole.tobytes()
     assert rig.displacements_rows(w, kernel="numpy").shape == whole.shape
+
+
+def test_a_head_without_landmarks_is_framed_on_its_speech_targets_not_its_face_shapes(tmp_path, builtin_morph):
+    """A head driven by its own targets with no landmarks is framed on the vertices its targets move most (lips, jaw,
+    chin). Since the face shapes joined the rig, brows and eyes counted too: the box reached the brows and an ARKit
+    glb, a Character Creator or a VRM head with emotion expressions was drawn higher, its chin cut at the picture's
+    bottom edge. The same head without its face-shape targets must be framed identically (the same pixels)."""
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    full = resolve_head(_arkit_file(tmp_path, builtin_morph, lambda n: n))
+    assert full.rig.n_face == 13 and not full.rig.meta.get("landmarks")
+    shapes = {k for e in EXPRESSIONS for k in face_shapes(e)}
+    (tmp_path / "bare").mkdir()
+    bare_mesh = replace(builtin_morph.mesh, targets={k: v for k, v in full.mesh.targets.items() if k not in shapes})
+    bare = resolve_head(_arkit_file(tmp_path / "bare", SimpleNamespace(mesh=bare_mesh), lambda n: n))
+    assert bare.rig.n_face == 0
+    cfg = RenderConfig(width=160, height=120, samples=0)
+    shots = []
+    for head in (full, bare):
+        with renderer_for_rig(head.rig, head.mesh, cfg) as r:
+            shots.append(r.render(head.rig.deformed(np.zeros(4))))
+    assert np.array_equal(shots[0], shots[1])
