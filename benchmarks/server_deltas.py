@@ -10,7 +10,8 @@ and (a morph head) all B in one ``server.session.morph_delta_payloads`` call, as
 against the numpy reference frame by frame (the server's path before the compiled one), alternating.
 Also numpy's one-pass product ``(B, P) @ (P, n)`` and the compiled one (``MorphRig.displacements_rows``)
 against B row products (BLAS pinned to one thread as in the server): time per frame and whether each
-gives the same bytes as the rows one by one.
+gives the same bytes as the rows one by one. On a head with face shapes, what an expression adds to a frame: the
+delta payloads and the morph weights with none and with a surprise, interleaved (``expression_per_frame_us``).
 
 ``python -m benchmarks.server_deltas [--evict-mb 0,2,32] [--repeats 200]``
 """
@@ -83,6 +84,8 @@ def main(argv: list[str] | None = None) -> dict:
                     row[f"B={b} together"] = round(float(np.median(together)), 1)
                     row[f"B={b} numpy frame by frame"] = round(float(np.median(reference)), 1)
             report["per_frame_us"][f"evict {mb} MB"] = row
+        if isinstance(rig, MorphRig) and rig.n_face:
+            report["expression_per_frame_us"] = expression_costs(rig, params, args, sizes)
         if isinstance(rig, MorphRig):  # a morph head: the one-pass product against the row products
             rows = rig._rows
             w = rig.weights(params[:8])
@@ -116,6 +119,51 @@ def main(argv: list[str] | None = None) -> dict:
             report["product_per_frame_warm"] = gemm
     print(json.dumps(report, indent=1))
     return report
+
+
+def expression_costs(rig, params: np.ndarray, args: argparse.Namespace, sizes: list[int]) -> dict:
+    """CPU time per frame of the int16 delta payloads (``morph_delta_payloads``, B frames together) and of the morph
+    weights (``Frame.payload(KIND_MORPH)``) with no expression and with a surprise at full intensity, interleaved
+    (alternating order) after the same memory sweeps: what the head's face shapes (MorphRig.n_face targets, the
+    vertices only they move) add to a frame that shows an expression; a frame without one skips them
+    (MorphRig.active)."""
+    from realtime_core.expressions import EXPRESSIONS
+    from server.session import Frame, morph_delta_payloads
+    from wire import protocol as P
+
+    surprise = np.zeros(len(EXPRESSIONS))
+    surprise[EXPRESSIONS.index("surprise")] = 1.0
+    out: dict = {}
+    for mb in (int(x) for x in args.evict_mb.split(",")):
+        junk = np.ones(max(mb, 1) << 20, dtype=np.uint8)
+        for b in sizes:
+            cost: dict[str, list[float]] = {
+                k: [] for k in ("deltas none", "deltas surprise", "morph none", "morph surprise")
+            }
+            for r in range(args.repeats):
+                ps = [params[(r * b + i) % len(params)] for i in range(b)]
+                for which in ("none", "surprise") if r % 2 else ("surprise", "none"):
+                    e = None if which == "none" else surprise
+                    frames = [
+                        Frame(i, 0.0, p, p, 0.0, 0.0, rig, expression=e, speech_params=p) for i, p in enumerate(ps)
+                    ]
+                    if mb:
+                        junk[::64] += 1
+                    t0 = time.thread_time_ns()
+                    morph_delta_payloads(frames, P.ENC_INT16)
+                    cost[f"deltas {which}"].append((time.thread_time_ns() - t0) / b / 1e3)
+                    if mb:
+                        junk[::64] += 1
+                    t0 = time.thread_time_ns()
+                    for f in frames:
+                        f.payload(P.KIND_MORPH, P.ENC_FLOAT32)
+                    cost[f"morph {which}"].append((time.thread_time_ns() - t0) / b / 1e3)
+            med = {k: float(np.median(v)) for k, v in cost.items()}
+            out[f"evict {mb} MB, B={b}"] = {k: round(v, 1) for k, v in med.items()} | {
+                "deltas ratio": round(med["deltas surprise"] / med["deltas none"], 2),
+                "morph ratio": round(med["morph surprise"] / med["morph none"], 2),
+            }
+    return out
 
 
 if __name__ == "__main__":

@@ -102,7 +102,13 @@ _ARKIT_BY_KEY = {_norm(n): n for n in ARKIT_NAMES}
 _OVR_BY_KEY = {_norm(v): v for v in VISEME_ARKIT}
 
 
-CC_SIDED = {"mouthupupper": "mouthUpperUp", "mouthdownlower": "mouthLowerDown", "browdrop": "browDown"}
+CC_SIDED = {
+    "mouthupupper": "mouthUpperUp",
+    "mouthdownlower": "mouthLowerDown",
+    "browdrop": "browDown",
+    "browraiseouter": "browOuterUp",
+    "cheekraise": "cheekSquint",
+}
 """Character Creator 4's words for sided ARKit targets (the stem, normalised, -> ARKit's stem; the side kept)."""
 
 CC_PARTS = {
@@ -291,9 +297,10 @@ def reference_lips(
     return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
 
 
-MORPH_RIG_VERSION = 2
+MORPH_RIG_VERSION = 3
 """Bump when :func:`morph_rig` or :func:`reference_lips` builds something else from the same inputs: the built-in
-head's morph rig is cached under a key holding it (:func:`morph_rig_key`). (2: the expressions' face shapes.)"""
+head's morph rig is cached under a key holding it (:func:`morph_rig_key`). (2: the expressions' face shapes; 3:
+Character Creator 4's brow and cheek raises and split inner brow among them, and a VRM avatar's emotion expressions.)"""
 
 
 def arkit_source(params: np.ndarray) -> np.ndarray:
@@ -375,7 +382,7 @@ def morph_rig(
         "head": name,
         "kind": "morph",
         "targets": {n: matched[n] for n in head_names},
-        "face_shapes": {n: canonical_name(n) for n in face_names},
+        "face_shapes": {n: face_shape_meaning(n) for n in face_names},
         "probe_residuals": [round(r, 4) for r in residuals],
         "undriven_targets": len(matched) - len(head_names),
         "enough_mouth_targets": bool(enough),
@@ -397,23 +404,61 @@ def morph_rig(
 def face_targets(
     targets: Mapping[str, np.ndarray], *, exclude: tuple[str, ...] = ()
 ) -> tuple[tuple[str, ...], np.ndarray | None]:
-    """The head's own targets that are the face shapes of the expressions' recipes (cheeks, eyes, brows, nose:
-    :func:`realtime_core.expressions.face_shapes`) by their ARKit name in any spelling :func:`canonical_name`
-    knows, the first spelling of each, none of ``exclude`` (the targets speech drives) and none that moves nothing ->
-    (their names (F,), the (E, F) recipe weights per expression of :data:`realtime_core.expressions.EXPRESSIONS`),
-    or ``((), None)`` when the head has none."""
+    """The head's own targets that show the expressions beside the mouth, none of ``exclude`` (the targets speech
+    drives) and none that moves nothing -> (their names (F,), the (E, F) weights per expression of
+    :data:`realtime_core.expressions.EXPRESSIONS` at full intensity), or ``((), None)`` when the head has none:
+
+    - a VRM avatar's own emotion expression (``vrm.happy``, :data:`assets.heads.vrm.EMOTIONS`) at weight 1 for the
+      expression it stands for: the face its artist made, which a VRM user sees for "happy" in any VRM app;
+    - for an expression without one, its recipe's face shapes (cheeks, eyes, brows, nose:
+      :func:`realtime_core.expressions.face_shapes`) by their ARKit name in any spelling :func:`canonical_name` knows
+      (the first spelling of each), or Character Creator 4's sided halves of an unsided one (``Brow_Raise_Inner_L``
+      and ``_R``: each at the whole target's weight, as the speech solve gives parts, :data:`CC_PARTS`)."""
+    from assets.heads.vrm import emotion_of
     from realtime_core.expressions import EXPRESSIONS, face_shapes
 
-    wanted = {k for e in EXPRESSIONS for k in face_shapes(e)}
-    chosen: dict[str, str] = {}  # ARKit name -> the head's target
-    for n, t in targets.items():
+    live = {n: t for n, t in targets.items() if n not in exclude and np.abs(np.asarray(t)).max(initial=0.0) > 0}
+    presets: dict[str, str] = {}  # facecast expression -> the VRM avatar's own expression target
+    for n in live:
+        e = emotion_of(n)
+        if e is not None and e not in presets:
+            presets[e] = n
+    wanted = {k for e in EXPRESSIONS if e not in presets for k in face_shapes(e)}
+    whole: dict[str, str] = {}  # ARKit name -> the head's target
+    parts: dict[str, list[str]] = {}  # ARKit name -> the head's targets that are parts of it
+    for n in live:
         c = canonical_name(n)
-        if c in wanted and c not in chosen and n not in exclude and np.abs(np.asarray(t)).max(initial=0.0) > 0:
-            chosen[c] = n
-    if not chosen:
+        part = target_part(n) if c is None else None
+        if c in wanted and c not in whole:
+            whole[c] = n
+        elif part is not None and part[0] in wanted:
+            parts.setdefault(part[0], []).append(n)
+    # A head with a whole target and its parts too: the whole one (both would move the face twice).
+    shapes = {n: c for c, n in whole.items()} | {n: c for c, ns in parts.items() if c not in whole for n in ns}
+    names = (*presets.values(), *shapes)
+    if not names:
         return (), None
-    recipe = np.array([[face_shapes(e).get(c, 0.0) for c in chosen] for e in EXPRESSIONS], dtype=np.float32)
-    return tuple(chosen.values()), recipe
+    recipe = np.array(
+        [
+            [float(n == presets[e]) if e in presets else face_shapes(e).get(shapes.get(n, ""), 0.0) for n in names]
+            for e in EXPRESSIONS
+        ],
+        dtype=np.float32,
+    )
+    return names, recipe
+
+
+def face_shape_meaning(name: str) -> str | None:
+    """What a face-shape target of :func:`face_targets` stands for: its ARKit name (``"browInnerUp"``, also for a
+    part of it) or ``"expression:smile"`` for a VRM emotion expression; None for any other name."""
+    from assets.heads.vrm import emotion_of
+
+    e = emotion_of(name)
+    if e is not None:
+        return "expression:" + e
+    c = canonical_name(name)
+    part = target_part(name) if c is None else None
+    return c if part is None else part[0]
 
 
 def morph_rig_key(

@@ -396,10 +396,13 @@ def renderer_for_rig(rig, mesh: HeadMesh, config: RenderConfig = RenderConfig())
             # avatar). Their width W is about the jaw's; the ratios reproduce the landmark framing
             # below on the built-in head (size 1.24 W, centre 0.125 W above their top, 0.56 W behind
             # their front).
+            # Speech's targets only: a head's face shapes (brows, eyes: MorphRig.n_face, last) moved the box up to
+            # the brows and framed an ARKit head without landmarks with its mouth at the picture's bottom edge.
             targets = getattr(rig, "targets", None)
             big = np.ones(len(pts), dtype=bool)
             if targets is not None and len(rig.moving):
-                mag = np.abs(np.asarray(targets)).max(axis=(0, 2))
+                speech = np.asarray(targets)[: len(targets) - getattr(rig, "n_face", 0)]
+                mag = np.abs(speech).max(axis=(0, 2))
                 big = mag > 0.1 * max(float(mag.max()), 1e-30)
             lo, hi = pts[big].min(0), pts[big].max(0)
             w = float(max(hi[0] - lo[0], 1e-9))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -138,6 +139,23 @@ def test_a_character_creator_head_with_split_targets_moves_as_the_arkit_head(tmp
         want = builtin_morph.rig.deformed(np.array(p)).astype(np.float64)
         got = head.rig.deformed(np.array(p)).astype(np.float64)
         np.testing.assert_allclose(got, want, atol=2e-4 * fr.iod)
+    # Each expression's face shapes in CC4's words: Brow_Raise_Outer_L (browOuterUpLeft), Cheek_Raise_L
+    # (cheekSquintLeft) and the inner brow split in halves (Brow_Raise_Inner_L/R). Before, none of these was
+    # recognised: on a CC4 head a surprise raised no brow, a sad face no inner brow, a smile no cheek.
+    from realtime_core.expressions import EXPRESSIONS
+
+    assert {"Brow_Raise_Outer_L", "Cheek_Raise_R", "Brow_Raise_Inner_L", "Brow_Raise_Inner_R"} <= set(
+        head.rig.names[-head.rig.n_face :]
+    )
+    p = np.array([0.01, 0.02, 0.1, 0.0])
+    for k, name in enumerate(EXPRESSIONS):
+        alpha = np.zeros(len(EXPRESSIONS))
+        alpha[k] = 0.8
+        want = builtin_morph.rig.deformed(p, alpha).astype(np.float64)
+        got = head.rig.deformed(p, alpha).astype(np.float64)
+        moved = np.abs(want - builtin_morph.rig.deformed(p)).max()
+        assert moved > 0.02 * fr.iod, name  # the expression moves the face beyond the mouth
+        np.testing.assert_allclose(got, want, atol=2e-4 * fr.iod, err_msg=name)
 
 
 def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
@@ -157,6 +175,9 @@ def test_a_viseme_only_head_opens_its_jaw(tmp_path, builtin_morph):
     got = measure_mouth(b.mesh.vertices, head.rig.deformed(p).astype(float), lm)
     ref = measure_mouth(b.mesh.vertices, builtin_morph.rig.deformed(p).astype(float), lm)
     assert got[2] > 0.6 * ref[2] > 0  # the jaw opens most of the way the ARKit head does
+    # No face shapes: an expression reaches such a head through the mouth parameters only, as before.
+    assert head.rig.n_face == 0 and head.rig.face_recipe is None
+    np.testing.assert_array_equal(head.rig.weights(p, np.ones(4)), head.rig.weights(p))
 
 
 def test_too_few_mouth_targets_fall_back_and_user_maps_add_names(tmp_path, builtin_morph):
@@ -512,3 +533,26 @@ def test_a_frame_without_an_expression_skips_the_face_shapes_bit_for_bit(builtin
     whole = morph_displacements(w, rig.flat_targets, np.empty((6, rig.flat_targets.shape[1]), dtype=np.float32))
     assert rig.displacements_rows(w).tobytes() == whole.tobytes()
     assert rig.displacements_rows(w, kernel="numpy").shape == whole.shape
+
+
+def test_a_head_without_landmarks_is_framed_on_its_speech_targets_not_its_face_shapes(tmp_path, builtin_morph):
+    """A head driven by its own targets with no landmarks is framed on the vertices its targets move most (lips, jaw,
+    chin). Since the face shapes joined the rig, brows and eyes counted too: the box reached the brows and an ARKit
+    glb, a Character Creator or a VRM head with emotion expressions was drawn higher, its chin cut at the picture's
+    bottom edge. The same head without its face-shape targets must be framed identically (the same pixels)."""
+    from clients.render.renderer import RenderConfig, renderer_for_rig
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    full = resolve_head(_arkit_file(tmp_path, builtin_morph, lambda n: n))
+    assert full.rig.n_face == 13 and not full.rig.meta.get("landmarks")
+    shapes = {k for e in EXPRESSIONS for k in face_shapes(e)}
+    (tmp_path / "bare").mkdir()
+    bare_mesh = replace(builtin_morph.mesh, targets={k: v for k, v in full.mesh.targets.items() if k not in shapes})
+    bare = resolve_head(_arkit_file(tmp_path / "bare", SimpleNamespace(mesh=bare_mesh), lambda n: n))
+    assert bare.rig.n_face == 0
+    cfg = RenderConfig(width=160, height=120, samples=0)
+    shots = []
+    for head in (full, bare):
+        with renderer_for_rig(head.rig, head.mesh, cfg) as r:
+            shots.append(r.render(head.rig.deformed(np.zeros(4))))
+    assert np.array_equal(shots[0], shots[1])

@@ -22,6 +22,16 @@ pytestmark = pytest.mark.system
 
 VOWELS = {"aa": "aa", "ih": "I", "ou": "U", "ee": "E", "oh": "O"}  # VRM 1.0 vowel -> its ARKit mixture (VISEME_ARKIT)
 VOWELS_0 = {"aa": "a", "ih": "i", "ou": "u", "ee": "e", "oh": "o"}  # -> VRM 0.x presetName
+# An artist's emotion expressions (VRM 1.0 preset -> ARKit targets of the built-in head it binds, weight): a closed-eye
+# smile as anime avatars have it, a frown, a sad face, a surprise; "relaxed" (0.x "fun") has no facecast expression.
+EMOTIONS = {
+    "happy": {"eyeBlinkLeft": 1.0, "eyeBlinkRight": 1.0, "mouthSmileLeft": 0.6, "mouthSmileRight": 0.6},
+    "angry": {"browDownLeft": 1.0, "browDownRight": 1.0, "noseSneerLeft": 0.5, "noseSneerRight": 0.5},
+    "sad": {"browInnerUp": 1.0, "mouthFrownLeft": 0.5, "mouthFrownRight": 0.5},
+    "surprised": {"browInnerUp": 1.0, "browOuterUpLeft": 1.0, "browOuterUpRight": 1.0, "eyeWideLeft": 1.0},
+    "relaxed": {"eyeSquintLeft": 1.0, "eyeSquintRight": 1.0},
+}
+EMOTIONS_0 = {"happy": "joy", "sad": "sorrow", "relaxed": "fun"}  # -> VRM 0.x presetName (others spelled alike)
 FRONT = np.ones(3)  # the built-in head as it is: facing +z
 BACK = np.array([-1.0, 1.0, -1.0])  # VRM 0.x avatars face -Z: the head turned half way round about +Y
 
@@ -38,12 +48,13 @@ def _mix(b, vowel: str) -> np.ndarray:
     return sum(w * b.targets[a] for a, w in VISEME_ARKIT[VOWELS[vowel]].items())
 
 
-def _vrm(path: Path, b, version: str, *, turn: np.ndarray = FRONT, split: bool = False) -> Path:
+def _vrm(path: Path, b, version: str, *, turn: np.ndarray = FRONT, split: bool = False, emotions: bool = False) -> Path:
     """The built-in head as a VRM ``version`` ("1.0" or "0.x") file whose ARKit targets are named "Key 0" ...
     "Key 51" and whose expressions bind: aa, ih, ee one vowel target each, stored at twice the vowel and bound at
     half weight (VRM 0.x's aa: VRoid's "Fcl_MTH_A", at full weight, a name matched by itself too); ou, oh several
     ARKit targets with their mixture's weights; blink the eye targets (not read). ``turn``: per-axis sign of the
-    file's vertices; ``split``: the mesh as two primitives (each triangle half with its own copy of the vertices)."""
+    file's vertices; ``split``: the mesh as two primitives (each triangle half with its own copy of the vertices);
+    ``emotions``: also the emotion expressions of :data:`EMOTIONS`."""
     targets = {f"Key {i}": b.targets[n] * turn for i, n in enumerate(ARKIT_NAMES)}
     single = {v: f"Key {60 + i}" for i, v in enumerate(("aa", "ih", "ee"))}
     if version == "0.x":
@@ -62,6 +73,9 @@ def _vrm(path: Path, b, version: str, *, turn: np.ndarray = FRONT, split: bool =
     for v in ("ou", "oh"):
         binds[v] = [(ARKIT_NAMES.index(a), w * scale) for a, w in VISEME_ARKIT[VOWELS[v]].items()]
     binds["blink"] = [(ARKIT_NAMES.index("eyeBlinkLeft"), scale), (ARKIT_NAMES.index("eyeBlinkRight"), scale)]
+    if emotions:
+        for e, mix in EMOTIONS.items():
+            binds[e] = [(ARKIT_NAMES.index(a), w * scale) for a, w in mix.items()]
     if version == "1.0":
         preset = {
             v: {"morphTargetBinds": [{"node": 0, "index": k, "weight": w} for k, w in bs]} for v, bs in binds.items()
@@ -72,7 +86,7 @@ def _vrm(path: Path, b, version: str, *, turn: np.ndarray = FRONT, split: bool =
         groups = [
             {
                 "name": v,
-                "presetName": VOWELS_0.get(v, v),
+                "presetName": VOWELS_0.get(v) or EMOTIONS_0.get(v, v),
                 "binds": [{"mesh": 0, "index": k, "weight": w} for k, w in bs],
             }
             for v, bs in binds.items()
@@ -233,3 +247,49 @@ def test_a_vrm_1_bind_moves_the_node_it_names_and_a_vrm_0_bind_every_node_of_its
     old = load_mesh(_vrm(tmp_path / "old.vrm", builtin, "0.x", turn=BACK), parts=(part,))
     names = [k for k in old.targets if k in ("vrm.aa", "Fcl_MTH_A")]
     assert names == ["vrm.aa", "Fcl_MTH_A"]
+
+
+@pytest.mark.parametrize("version", ["1.0", "0.x"])
+def test_facecasts_expressions_show_the_avatars_own_emotion_expressions(tmp_path, builtin, version):
+    """A VRM user who presses "smile" expects the avatar's own happy face, the one its artist made and every VRM app
+    shows (here a closed-eye smile). Before, facecast read only the vowels: on an avatar whose targets are not named
+    as ARKit's (VRoid's Fcl_*, "Key 12") an expression moved nothing but the mouth through five vowels, which cannot
+    smile. Now smile / anger / sad / surprise drive happy / angry / sad / surprised (0.x: joy / angry / sorrow /
+    surprised) at the expression's intensity: the head moves by the bound targets of the built-in head (read here,
+    not from the rig) times the intensity, its vowels as without the expression; relaxed / fun stay unread."""
+    from realtime_core.expressions import EXPRESSIONS
+
+    turn = BACK if version == "0.x" else FRONT
+    head = resolve_head(_vrm(tmp_path / f"feel_{version}.vrm", builtin, version, turn=turn, emotions=True))
+    rig = head.rig
+    assert head.kind == "morph" and rig.meta["vowels_only"]
+    face = rig.names[-rig.n_face :]
+    assert set(face) == {"vrm.happy", "vrm.angry", "vrm.sad", "vrm.surprised"}
+    preset = {"smile": "happy", "anger": "angry", "sad": "sad", "surprise": "surprised"}
+    p = np.array([0.01, 0.02, 0.2, 0.0])
+    w0 = rig.weights(p)
+    assert not w0[-rig.n_face :].any()  # no expression: the avatar's emotions rest
+    tol = 1e-5 * np.ptp(builtin.mesh.vertices, axis=0).max()
+    for k, name in enumerate(EXPRESSIONS):
+        alpha = np.zeros(len(EXPRESSIONS))
+        alpha[k] = 0.7
+        np.testing.assert_array_equal(rig.weights(p, alpha)[: -rig.n_face], w0[: -rig.n_face])
+        moved = rig.deformed(p, alpha).astype(np.float64) - rig.deformed(p).astype(np.float64)
+        want = sum(0.7 * w * builtin.targets[a] for a, w in EMOTIONS[preset[name]].items())
+        np.testing.assert_allclose(moved, want, atol=tol, err_msg=name)
+
+
+def test_an_avatar_with_arkit_targets_and_emotions_shows_its_own_emotion_where_it_has_one():
+    """A "perfect sync" avatar carries ARKit's targets beside its emotion expressions: an expression with one of its
+    own (surprise: vrm.surprised) shows that alone, not the ARKit recipe on top (both raised its brows twice); one
+    without (sad) keeps the recipe's ARKit face shapes."""
+    from assets.heads.targets import face_targets
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    one = np.ones((3, 3))
+    names, recipe = face_targets({"browInnerUp": one, "eyeWideLeft": one, "vrm.surprised": one, "vrm.relaxed": one})
+    assert recipe is not None and set(names) == {"vrm.surprised", "browInnerUp", "eyeWideLeft"}
+    col = {n: recipe[:, i] for i, n in enumerate(names)}
+    surprise, sad = EXPRESSIONS.index("surprise"), EXPRESSIONS.index("sad")
+    assert col["vrm.surprised"][surprise] == 1 and col["browInnerUp"][surprise] == col["eyeWideLeft"][surprise] == 0
+    assert col["browInnerUp"][sad] == pytest.approx(face_shapes("sad")["browInnerUp"])
