@@ -297,6 +297,34 @@ def clips_section(
     return md, s
 
 
+def _dial_made_by(args: argparse.Namespace) -> str:
+    """The dial section's "made by": the command as run, reading back as the same run (models as given, not by
+    their stems; the GRID s1 folder when not the default), and `scripts/latency_dial.sh` only when it scored that
+    script's tcT_whW models: `eval --dial default low-latency` (scripts/train_low_latency_model.sh) was reported
+    as made by the dial script, and `tc3_wh2` named a file that is not there."""
+    import re
+    from shlex import quote
+
+    from assets.modelfile import SHIPPED_MODELS
+
+    command = (
+        f"facecast eval --dial {' '.join(quote(str(m)) for m in args.dial)}"
+        + ("" if args.grid_s1 == SHARED / "video" / "grid_s1" else f" --grid-s1 {quote(str(args.grid_s1))}")
+        + f" --grid-split {args.grid_split}"
+        + (f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "")
+        + (f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
+    )
+    swept = any(
+        m not in SHIPPED_MODELS and re.fullmatch(r"tc\d+_wh[\d.]+", Path(m).stem) is not None for m in args.dial
+    )
+    if not swept:
+        return f"made by `{command}`"
+    return (
+        f"made by `bash scripts/latency_dial.sh` (it trains the tcT_whW models with one s1-only recipe, only t_c "
+        f"and the window changed) running `{command}`"
+    )
+
+
 def _run_mu(args: argparse.Namespace) -> int:
     from assets.files import atomic_write_bytes
     from training.mu_report import mu_markdown
@@ -342,18 +370,11 @@ def _run_dial(args: argparse.Namespace) -> int:
             title=f"GRID s1 {args.grid_split} split, {len(clips)} sentences",
         )
         png_name = png.name
-    command = (
-        f"facecast eval --dial {' '.join(name for name, _ in models)} --grid-split {args.grid_split}"
-        + (f" --lags {','.join(map(str, args.lags))}" if tuple(args.lags) != (0,) else "")
-        + (f" --kappas {','.join(f'{k:g}' for k in args.kappas)}" if args.kappas else "")
-    )
     section = dial_markdown(
         points,
         split=args.grid_split,
         png_name=png_name,
-        note=f"{len(clips)} sentences; made by `bash scripts/latency_dial.sh` (it trains the "
-        f"tcT_whW models with one s1-only recipe, only t_c and the window changed) "
-        f"running `{command}`. The shipped pair and the choice between them: "
+        note=f"{len(clips)} sentences; {_dial_made_by(args)}. The shipped pair and the choice between them: "
         "docs/default_model.md.",
     )
     print(section)

@@ -132,6 +132,24 @@ def _run_build(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reproduce(args: argparse.Namespace) -> str:
+    """The command the section names: every option that changes what ``units eval`` scores, so that run again it
+    is the same table (it named --split and --only-extracted only: the val table of ``--n-best 1,3,5,10`` read as
+    one of ``--split val``, whose rows are 1 and 10). Options at their defaults are left out."""
+    from shlex import quote
+
+    given = [
+        ("--grid", args.grid),
+        ("--phones", args.phones),
+        ("--model", args.model),
+        ("--n-best", None if args.n_best == "1,10" else args.n_best),
+        ("--split", None if args.split == "test" else args.split),
+        ("--recording", None if args.recording == "default" else args.recording),
+    ]
+    cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
+    return cmd + "".join(f" {o} {quote(str(v))}" for o, v in given if v is not None)
+
+
 def _run_eval(args: argparse.Namespace) -> int:
     import json
 
@@ -188,9 +206,9 @@ def _run_eval(args: argparse.Namespace) -> int:
         )
     print(json.dumps(rows, indent=1))
     fig = fig8(curves, fig)
-    cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
-    cmd += " --split val" if args.split == "val" else ""
-    text = markdown(rows, n_sentences=len(tests), corpus_meta=stored.meta, command=cmd, figure=link, split=args.split)
+    text = markdown(
+        rows, n_sentences=len(tests), corpus_meta=stored.meta, command=_reproduce(args), figure=link, split=args.split
+    )
     print(text)
     if args.output is not None:
         atomic_write_bytes(args.output, text.encode())
