@@ -221,7 +221,9 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
             have = {wav for wav, _ in pairs}
             transcribed += [(Path(d), wav, text) for wav, text in find_transcripts(d).items() if wav not in have]
     skipped: list[tuple[str, str]] = [(str(wav), why) for wav, why in unaligned]
-    for root, wav, text in wrap(transcribed, total=len(transcribed), desc="aligning", unit="utt"):
+    for root, wav, text in (
+        wrap(transcribed, total=len(transcribed), desc="aligning", unit="utt") if transcribed else ()
+    ):
         from training.force_align import force_align
 
         try:
@@ -231,7 +233,8 @@ def build_corpus(cfg: BuildConfig, *, progress: Callable | None = None) -> Build
             skipped.append((str(wav), exc.problem))
     real.sort(key=lambda item: str(item[1]))
     n_real = 0  # utterance ids count the recordings used, so a skipped one leaves no gap
-    for root, wav, al in wrap(real, total=len(real), desc="real speech", unit="utt"):
+    # no bar for no real speech: `facecast corpus` without --real printed "aligning: 0utt" and "real speech: 0utt"
+    for root, wav, al in wrap(real, total=len(real), desc="real speech", unit="utt") if real else ():
         try:
             samples, rate = read_wav(wav)
         except FileProblem as exc:  # one bad recording never aborts a build of hundreds
