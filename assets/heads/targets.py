@@ -373,7 +373,7 @@ def morph_rig(
         head_names = tuple(n for n, k in zip(head_names, driven) if k)
         kprime = kprime[driven]
         keymap = KeyframeMap.from_reference(kprime, a, contact=contact)
-    face_names, recipe = face_targets(targets, exclude=head_names)
+    face_names, recipe = face_targets(targets, exclude=head_names, user_map=user_map)
     d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names + face_names])  # (P + F, n, 3)
     if d.shape[1:] != np.asarray(vertices).shape:
         raise MeshError(f"{name}: morph targets do not match the mesh's {len(vertices)} vertices")
@@ -382,7 +382,9 @@ def morph_rig(
         "head": name,
         "kind": "morph",
         "targets": {n: matched[n] for n in head_names},
-        "face_shapes": {n: face_shape_meaning(n) for n in face_names},
+        "face_shapes": {
+            n: next(iter(user_map[n])) if user_map and n in user_map else face_shape_meaning(n) for n in face_names
+        },
         "probe_residuals": [round(r, 4) for r in residuals],
         "undriven_targets": len(matched) - len(head_names),
         "enough_mouth_targets": bool(enough),
@@ -402,7 +404,10 @@ def morph_rig(
 
 
 def face_targets(
-    targets: Mapping[str, np.ndarray], *, exclude: tuple[str, ...] = ()
+    targets: Mapping[str, np.ndarray],
+    *,
+    exclude: tuple[str, ...] = (),
+    user_map: Mapping[str, Mapping[str, float]] | None = None,
 ) -> tuple[tuple[str, ...], np.ndarray | None]:
     """The head's own targets that show the expressions beside the mouth, none of ``exclude`` (the targets speech
     drives) and none that moves nothing -> (their names (F,), the (E, F) weights per expression of
@@ -413,7 +418,9 @@ def face_targets(
     - for an expression without one, its recipe's face shapes (cheeks, eyes, brows, nose:
       :func:`realtime_core.expressions.face_shapes`) by their ARKit name in any spelling :func:`canonical_name` knows
       (the first spelling of each), or Character Creator 4's sided halves of an unsided one (``Brow_Raise_Inner_L``
-      and ``_R``: each at the whole target's weight, as the speech solve gives parts, :data:`CC_PARTS`)."""
+      and ``_R``: each at the whole target's weight, as the speech solve gives parts, :data:`CC_PARTS`), or a target
+      the user's ``--target-map`` names as one face shape (``{"BrowsUp": "browInnerUp"}``; ``{"BrowsUp":
+      {"browInnerUp": 0.5}}``: the target is half of it, so it is driven at twice the recipe's weight)."""
     from assets.heads.vrm import emotion_of
     from realtime_core.expressions import EXPRESSIONS, face_shapes
 
@@ -426,7 +433,14 @@ def face_targets(
     wanted = {k for e in EXPRESSIONS if e not in presets for k in face_shapes(e)}
     whole: dict[str, str] = {}  # ARKit name -> the head's target
     parts: dict[str, list[str]] = {}  # ARKit name -> the head's targets that are parts of it
+    scale: dict[str, float] = {}  # a user-mapped target's weight per unit of its ARKit shape
+    for n, mix in (user_map or {}).items():  # the user's names first: they override the recognised ones
+        shape = next(iter(mix), "")
+        if n in live and len(mix) == 1 and shape in wanted and shape not in whole and mix[shape] > 0:
+            whole[shape], scale[n] = n, 1.0 / float(mix[shape])
     for n in live:
+        if n in (user_map or {}):
+            continue
         c = canonical_name(n)
         part = target_part(n) if c is None else None
         if c in wanted and c not in whole:
@@ -440,7 +454,12 @@ def face_targets(
         return (), None
     recipe = np.array(
         [
-            [float(n == presets[e]) if e in presets else face_shapes(e).get(shapes.get(n, ""), 0.0) for n in names]
+            [
+                float(n == presets[e])
+                if e in presets
+                else face_shapes(e).get(shapes.get(n, ""), 0.0) * scale.get(n, 1.0)
+                for n in names
+            ]
             for e in EXPRESSIONS
         ],
         dtype=np.float32,

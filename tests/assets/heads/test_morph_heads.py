@@ -556,3 +556,32 @@ def test_a_head_without_landmarks_is_framed_on_its_speech_targets_not_its_face_s
         with renderer_for_rig(head.rig, head.mesh, cfg) as r:
             shots.append(r.render(head.rig.deformed(np.zeros(4))))
     assert np.array_equal(shots[0], shots[1])
+
+
+def test_a_target_map_names_a_face_shape_an_expression_then_drives(tmp_path, builtin_morph):
+    """`--target-map` naming a brow target (`{"BrowsUp": "browInnerUp"}`) mapped it for speech but not for an
+    expression: a surprise left the head's own brows still. A map entry naming one face shape now drives it (at the
+    recipe's weight over the map's: `{"Half": {"browInnerUp": 0.5}}` is driven at twice the weight)."""
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    b = builtin_morph.mesh
+    targets = {k: v for k, v in b.targets.items() if k.startswith(("jaw", "mouth"))}
+    targets["BrowsUp"] = b.targets["browInnerUp"]
+    targets["HalfWide"] = 0.5 * b.targets["eyeWideLeft"]
+    path = tmp_path / "mapped.glb"
+    path.write_bytes(mesh_glb(HeadMesh(vertices=b.vertices, triangles=b.triangles, name="m", targets=targets)))
+    tmap = tmp_path / "map.json"
+    tmap.write_text(json.dumps({"targets": {"BrowsUp": "browInnerUp", "HalfWide": {"eyeWideLeft": 0.5}}}))
+    without = resolve_head(path, mode="morph", landmark_finder=lambda mesh: builtin_morph.rig.meta["landmarks"])
+    assert "BrowsUp" not in without.rig.names  # not an ARKit spelling: only the map says what it is
+    head = resolve_head(
+        path, mode="morph", target_map=tmap, landmark_finder=lambda mesh: builtin_morph.rig.meta["landmarks"]
+    )
+    names = list(head.rig.names)
+    assert head.rig.meta["face_shapes"] == {"BrowsUp": "browInnerUp", "HalfWide": "eyeWideLeft"}
+    alpha = np.zeros(len(EXPRESSIONS))
+    alpha[EXPRESSIONS.index("surprise")] = 1.0
+    w = head.rig.weights(np.zeros(4), alpha)
+    want = face_shapes("surprise")
+    assert w[names.index("BrowsUp")] == pytest.approx(want["browInnerUp"])
+    assert w[names.index("HalfWide")] == pytest.approx(min(1.0, 2 * want["eyeWideLeft"]))
