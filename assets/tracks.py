@@ -20,7 +20,7 @@ Three ways in, one parser:
 
 JSON (``facecast-curves`` version 1)::
 
-    {"format": "facecast-curves", "version": 1, "fps": 30.0, "start_s": 0.0, "units": "IOD",
+    {"format": "facecast-curves", "version": 1, "fps": 30.0, "start_s": 0.0, "units": "IOD" (or what the curves are),
      "names": [...], "t": [...F times, s...], "curves": {"<name>": [...F values...], ...},
      "audio": "take.wav" | null}
 
@@ -150,7 +150,10 @@ def read_csv(
 def read_csv_resampled(path: str | Path, fps: float, *, names: tuple[str, ...] | None = None) -> Track:
     """A CSV of samples at any strictly increasing times (the renderer's input: another tool's rate,
     extra columns, any column order) -> the ``names`` channels (default: the four mouth parameters)
-    on the frame grid ``k / fps`` by :func:`realtime_core.track.frames_from_samples`."""
+    on the frame grid ``k / fps`` by :func:`realtime_core.track.frames_from_samples`, covering as long as the
+    file does (as :meth:`Track.at_fps`): every frame that starts before its last row's own frame ends, that row
+    lasting the file's median row spacing. Put on the grid only through the last row's time, `animate --fps 24`'s
+    2.14 s of speech rendered at 30 fps made a 2.133 s video (64 frames for 65), and at 60 fps 2 frames short."""
     want = tuple(VISUAL_PARAMS if names is None else names)
     got, a = _parse(_read_bytes(path, "parameters file"), Path(path))
     missing = [n for n in want if n not in got]
@@ -159,17 +162,20 @@ def read_csv_resampled(path: str | Path, fps: float, *, names: tuple[str, ...] |
     if np.any(np.diff(a[:, 0]) <= 0):
         raise CorpusFormatError(path, "times must be strictly increasing")
     cols = [1 + got.index(n) for n in want]
-    return frames_from_samples(a[:, 0], a[:, cols], fps, names=want)
+    t = a[:, 0]
+    until_s = float(t[-1] + np.median(np.diff(t))) if len(t) > 1 else None  # one row: one frame, its length unknown
+    return frames_from_samples(t, a[:, cols], fps, names=want, until_s=until_s)
 
 
-def encode_json(track: Track, *, audio: str | None = None) -> bytes:
-    """The track as UTF-8 JSON (see the module docstring); ``audio``: name of the audio file beside it."""
+def encode_json(track: Track, *, audio: str | None = None, units: str = "IOD") -> bytes:
+    """The track as UTF-8 JSON (see the module docstring); ``audio``: name of the audio file beside it; ``units``:
+    what the curves measure (the mouth parameters' IOD, or e.g. blendshape weights)."""
     doc = {
         "format": JSON_FORMAT,
         "version": JSON_VERSION,
         "fps": track.fps,
         "start_s": track.start_s,
-        "units": "IOD",
+        "units": units,
         "names": list(track.names),
         "t": [round(float(t), 9) for t in track.times()],
         "curves": {n: [float(v) for v in track.values[:, j]] for j, n in enumerate(track.names)},
@@ -211,4 +217,4 @@ def read_params_resampled(path: str | Path, fps: float, *, names: tuple[str, ...
     if missing or not len(tr.values):
         raise CorpusFormatError(path, f"expected curves {list(want)} and at least one frame, got {list(tr.names)}")
     cols = [tr.names.index(n) for n in want]
-    return frames_from_samples(tr.times(), tr.values[:, cols], fps, names=want)
+    return Track(values=tr.values[:, cols], names=want, fps=tr.fps, start_s=tr.start_s).at_fps(fps)

@@ -1,6 +1,7 @@
 """Text -> speech with phone timings for unit selection (espeak-ng; the phones of its own voice).
 
-One call: :func:`speak` cleans the text (:func:`realtime_core.synthesis.text.clean_text`),
+One call: :func:`speak` cleans the text (:func:`realtime_core.synthesis.text.clean_text`: what espeak-ng reads
+badly, URLs, dates, times, amounts, written out as said in the language),
 synthesises it with an espeak-ng voice of the language and returns the samples and the phone
 timeline in the inventory the viseme table knows (``espeak-en``, ``espeak-es``). espeak-ng
 pronounces any word, known or not (it spells letters and applies its letter-to-sound rules), which
@@ -32,7 +33,8 @@ frames of the pause's start: "Hello there." ended at mouth_open 0.095 without it
 @dataclass(frozen=True, kw_only=True)
 class Speech:
     """samples: (n,) float32 in [-1, 1]; sample_rate_hz; phones: ((label, start_s, end_s), ...) on the
-    samples' clock; inventory: the labels' phone set; text: what was spoken (cleaned)."""
+    samples' clock; inventory: the labels' phone set; text: what was spoken (cleaned, and written out as said:
+    "see example dot com", :func:`realtime_core.synthesis.text.clean_text`)."""
 
     samples: np.ndarray
     sample_rate_hz: int
@@ -94,7 +96,10 @@ def parse_voice(language: str, voice: str | None = None, *, rate_wpm: int = 175)
 def speak(text: str, *, language: str = "en", voice: str | None = None, rate_wpm: int = 175) -> Speech:
     """Speak ``text``; raises TextError (nothing to say) or ConfigError (language, voice)."""
     v = parse_voice(language, voice, rate_wpm=rate_wpm)
-    cleaned = clean_text(text)
+    # URLs, dates, times, amounts written out as said in the language; "07/12/2026" is July 12 to a US voice
+    cleaned = clean_text(
+        text, language=language, day_first=None if language != "en" else not v.base.startswith("en-us")
+    )
     syn = synthesizer().synthesize(cleaned, v, noise_seed=0)
     phones = tuple((p.phoneme, p.start_s, p.end_s) for p in syn.phonemes)
     if not any(lab not in ("_", "_:", "_!", "_^_", ";") for lab, _, _ in phones):

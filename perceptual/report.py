@@ -50,9 +50,9 @@ def write_report(db: str | Path, out_dir: str | Path, *, include_incomplete: boo
     res["events"] = {
         k: sum(1 for e in events if e["kind"] == k) for k in ("duplicate", "conflict", "id_reused", "reload", "pause")
     }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    from assets.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes, check_writable_folder
+
+    out = check_writable_folder(out_dir)  # one line naming it (a FileNotFoundError traceback in /proc)
 
     atomic_write_bytes(out / "results.json", (json.dumps(res, indent=1) + "\n").encode())
     md = _markdown(res, out)

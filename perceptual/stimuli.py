@@ -51,10 +51,15 @@ from perceptual.design import (
     truth_of,
 )
 from perceptual.errors import BuildError, ManifestError
+from realtime_core.expressions import EXPRESSION_RECIPES, face_shapes
+from realtime_core.expressions import EXPRESSIONS as CORE_EXPRESSIONS
+from realtime_core.fitted_maps import EXPRESSION_PARAMS
+from realtime_core.mapping.expression import express
 
 FORMAT = "facecast-perceptual-stimuli"
-KIT_VERSION = 1
-"""Bump when the way stimuli are made changes: manifests and cache entries of other versions are stale."""
+KIT_VERSION = 2
+"""Bump when the way stimuli are made changes: manifests and cache entries of other versions are stale. (2: the
+smiling and sad faces are the product's expressions; 1 had a stand-in recipe of the kit's own.)"""
 
 GRID_CREDIT = "GRID audio-visual corpus: M. Cooke, J. Barker, S. Cunningham, X. Shao (2006), CC BY 4.0"
 
@@ -69,32 +74,6 @@ _ESPEAK_VOWEL = {"en": {"a": "A:", "i": "i:", "u": "u:"}, "es": {"a": "a", "i": 
 _VOICES = {"en": "en-us", "es": "es"}
 CV_PAD_S = 0.35
 """Silence before and after a synthesised syllable (the face is visible before the sound starts)."""
-
-EXPRESSION_TARGETS: dict[str, dict[str, float]] = {
-    "neutral": {},
-    "smile": {
-        "mouthSmileLeft": 1.0,
-        "mouthSmileRight": 1.0,
-        "cheekSquintLeft": 0.7,
-        "cheekSquintRight": 0.7,
-        "eyeSquintLeft": 0.4,
-        "eyeSquintRight": 0.4,
-        "mouthDimpleLeft": 0.3,
-        "mouthDimpleRight": 0.3,
-    },
-    "sad": {
-        "mouthFrownLeft": 1.0,
-        "mouthFrownRight": 1.0,
-        "browInnerUp": 1.0,
-        "browDownLeft": 0.25,
-        "browDownRight": 0.25,
-        "mouthShrugLower": 0.4,
-        "eyeSquintLeft": 0.2,
-        "eyeSquintRight": 0.2,
-    },
-}
-"""ARKit targets of the built-in head added for each expression (weights before ``expression_strength``).
-Stand-in until the Motion Units' learned expressions are on main."""
 
 
 def sha256_file(path: str | Path) -> str:
@@ -153,7 +132,8 @@ class BuildConfig:
     cv_syllables: a subset of the 27 (e.g. for a quick pilot);
     emotion_sentences: neutral sentences shown neutral/smiling/sad; mos_sentences: sentences rated real
     vs synthetic; mos_clips: extra ``(system, path)`` clips to rate; width/height/fps: rendered video;
-    level_dbfs: presentation level; expression_strength: 0..1 scale of the expression targets.
+    level_dbfs: presentation level; expression_strength: 0..1, the intensity of the smiling and sad faces (as
+    ``facecast render --expression smile:STRENGTH``).
     """
 
     out_dir: Path
@@ -195,8 +175,8 @@ class BuildConfig:
             raise BuildError(f"cv_design must be 'latin' or 'factorial', got {self.cv_design!r}")
         if not (64 <= self.width <= 4096 and 64 <= self.height <= 4096) or self.width % 2 or self.height % 2:
             raise BuildError(f"video size must be even and 64..4096, got {self.width}x{self.height}")
-        if not 0 <= self.expression_strength <= 1.5:
-            raise BuildError(f"expression_strength must be in 0..1.5, got {self.expression_strength}")
+        if not 0 <= self.expression_strength <= 1:
+            raise BuildError(f"expression_strength must be in 0..1, got {self.expression_strength}")
         for system, path in self.mos_clips:
             if not system or "|" in system or "/" in system:
                 raise BuildError(f"clip system label {system!r} must be non-empty without '|' or '/'")
@@ -463,7 +443,8 @@ class _Builder:
             "speech": sha256_file(speech),
             "expression": expression,
             "strength": self.c.expression_strength,
-            "weights": EXPRESSION_TARGETS[expression],
+            "recipe": dict(EXPRESSION_RECIPES.get(expression, {})),
+            "expression_params": EXPRESSION_PARAMS.tolist(),
             "size": [self.c.width, self.c.height],
             "fps": self.c.fps,
             "crf": self.c.crf,
@@ -480,8 +461,15 @@ class _Builder:
             frames = track.values
             rig, head, r = self.renderer()
             offset = np.zeros_like(rig.neutral, dtype=np.float32)
-            for name, w in EXPRESSION_TARGETS[expression].items():
-                offset += np.float32(self.c.expression_strength * w) * head.targets[name].astype(np.float32)
+            if expression != "neutral":
+                # The product's expression (`facecast render --expression`): the mouth through the four parameters
+                # (paper 002 eq. 2), and the rest of the face the recipe moves (cheeks, eyes, brows), which the
+                # parameters do not carry, from the head's own ARKit targets.
+                alpha = np.zeros((len(frames), len(CORE_EXPRESSIONS)))
+                alpha[:, CORE_EXPRESSIONS.index(expression)] = self.c.expression_strength
+                frames = express(frames, alpha)
+                for name, w in face_shapes(expression).items():
+                    offset += np.float32(self.c.expression_strength * w) * head.targets[name].astype(np.float32)
             write_video(
                 frames,
                 lambda q: r.render(rig.deformed(q) + offset),

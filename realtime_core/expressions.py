@@ -98,6 +98,18 @@ EXPRESSION_RECIPES = MappingProxyType(
 EXPRESSIONS: tuple[str, ...] = tuple(EXPRESSION_RECIPES)
 """Known expressions (besides "neutral"), in the column order of every intensity array."""
 
+
+def face_shapes(name: str) -> dict[str, float]:
+    """The ARKit weights of expression ``name``'s recipe at full intensity that the four mouth parameters do not
+    carry: every shape but ``mouth*`` and ``jaw*`` (cheeks, eyes, brows, nose), which a renderer adds from a head's
+    own ARKit targets beside the expressed parameters; ``{}`` for "neutral". Raises :class:`ExpressionError`."""
+    if name == NEUTRAL:
+        return {}
+    if name not in EXPRESSION_RECIPES:
+        raise ExpressionError(f"unknown expression {name!r}; known: {[NEUTRAL, *EXPRESSIONS]}")
+    return {k: w for k, w in EXPRESSION_RECIPES[name].items() if not k.startswith(("mouth", "jaw"))}
+
+
 OPEN_REF_IOD = 0.05
 """Inner-lip gap (IOD) above which an expression's own mouth-opening change applies fully."""
 

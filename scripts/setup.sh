@@ -30,11 +30,22 @@ fi
 stamp=.venv/.facecast-installed
 # Reinstall when the project metadata or the set of top-level packages changes (an editable
 # install only maps the packages that existed when it was made).
-want="$(cat pyproject.toml */__init__.py 2>/dev/null | sha256sum | cut -d' ' -f1)"
-if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  echo "setup: installing Python packages"
+# Every package at the exact version in constraints.txt (the versions CI last passed with): a new
+# release on PyPI must not change what a fresh clone installs. `scripts/setup.sh --refresh-constraints`
+# installs the newest versions pyproject.toml allows and writes them there (run the whole CI after).
+want="$(cat pyproject.toml constraints.txt */__init__.py 2>/dev/null | sha256sum | cut -d' ' -f1)"
+if [ "${1:-}" = "--refresh-constraints" ]; then
+  echo "setup: installing the newest allowed Python packages and writing constraints.txt"
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q -e '.[dev]'
+  .venv/bin/python -m pip install -q --upgrade --upgrade-strategy eager -e '.[dev]'
+  { sed -n '/^#/p' constraints.txt; .venv/bin/python -m pip freeze --exclude-editable; } > constraints.txt.new
+  mv constraints.txt.new constraints.txt
+  want="$(cat pyproject.toml constraints.txt */__init__.py 2>/dev/null | sha256sum | cut -d' ' -f1)"
+  echo "$want" > "$stamp"
+elif [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  echo "setup: installing Python packages (constraints.txt)"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -c constraints.txt -e '.[dev]'
   echo "$want" > "$stamp"
 fi
 

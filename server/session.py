@@ -186,7 +186,8 @@ class Frame:
         elif kind == P.KIND_MORPH:
             if not isinstance(self.rig, MorphRig):
                 raise ServerConfigError("morph weights need a head driven by its own morph targets")
-            values = self.rig.weights(self.params)  # (P,) float32, the rig's target order (MorphRig.rest: < 0)
+            # (P,) float32, the rig's target order (MorphRig.rest: < 0); the expression drives the head's face shapes
+            values = self.rig.weights(self.params, self.expression)
             stage = "encode_morph"
         elif kind == P.KIND_OVR15:
             values = blendshape_weights(self.params, "ovr15")
@@ -226,12 +227,15 @@ def morph_delta_payloads(frames: list[Frame], encoding: int) -> None:
     t0 = time.perf_counter()
     w = np.empty((len(todo), len(rig.names)), dtype=np.float32)
     for i, f in enumerate(todo):
-        w[i] = rig.weights(f.params)  # each frame's own call: the same weights alone or batched
+        w[i] = rig.weights(f.params, f.expression)  # each frame's own call: the same weights alone or batched
     if encoding == P.ENC_INT16:
         from realtime_core.face.compiled import morph_displacements_int16
 
         values, scales = np.empty((len(todo), 3 * len(rig.moving)), dtype=np.float32), np.empty(len(todo))
-        q = morph_displacements_int16(w, rig.flat_targets, values, np.empty(values.shape, dtype="<i2"), scales)
+        w, rows = rig.active(w)  # the face shapes' rows only when an expression moves them
+        q = morph_displacements_int16(
+            np.ascontiguousarray(w), rows, values, np.empty(values.shape, dtype="<i2"), scales
+        )
         out = [(q[i].tobytes(), values.shape[1], float(scales[i])) for i in range(len(todo))]
     else:
         values = rig.displacements_rows(w)  # (B, n_moving*3) float32

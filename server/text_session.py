@@ -106,9 +106,9 @@ class TextBackend:
     languages: the supported language codes; sample_rate_hz: the rate ``speak`` produces (must be a
     multiple of 30 Hz, e.g. espeak-ng's 22050 Hz); lead_s: how far frames run ahead of real time;
     stall_s: pending text is spoken after this long without a new piece; n_best: unit sequences
-    averaged (see UnitSynthesizer.synthesize); language_of_voice(voice) -> the language a start with
-    a voice and no language speaks (:func:`assets.tts.language_of_voice`, as ``facecast say``; None:
-    "en")."""
+    averaged (see UnitSynthesizer.synthesize); language_of_voice(voice, default="en") -> the language a
+    start (or a text message) with a voice and no language speaks, ``default`` for a bare variant
+    (:func:`assets.tts.language_of_voice`, as ``facecast say``; None: "en", or the session's language)."""
 
     speak: Callable[[str, str, str | None], SpeechLike]
     synthesizer: UnitSynthesizer
@@ -117,7 +117,7 @@ class TextBackend:
     lead_s: float = 0.5
     stall_s: float = 1.5
     n_best: int = 1
-    language_of_voice: Callable[[str | None], str] | None = None
+    language_of_voice: Callable[..., str] | None = None
 
     def __post_init__(self) -> None:
         if self.sample_rate_hz % FPS:
@@ -252,6 +252,7 @@ class TextSession:
             "junctions_outside_corpus": sel.n_mismatched,
             "unknown_phones": sorted(set(tgt.unknown)),
             "synthesis_ms": round(1000 * (t2 - t0), 1),
+            "language": self.language,
         }
         return outs, report
 
@@ -298,6 +299,26 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
         n_best=n_best,
         language_of_voice=language_of_voice,
     )
+
+
+async def _language_switch(session: TextSession, msg: dict, backend: TextBackend) -> tuple[str, str | None] | None:
+    """A text message's ``language`` / ``voice`` -> the session's new ``(language, voice)``, or None when they are
+    the session's already. Without ``language`` the voice names it (as a start's); without ``voice`` the language's
+    default voice. Raises ConfigError (a TextError) naming a bad language or voice; a voice is tried first (off the
+    event loop), so a bad one fails here, not mid-sentence."""
+    voice = msg.get("voice", session.voice if "language" not in msg else None)
+    if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
+        raise TextError(f"voice must be a name of at most {MAX_VOICE_CHARS} characters, got {reason_value(voice)}")
+    infer = backend.language_of_voice
+    # a bare variant ("f3") keeps the session's language: a Spanish session asking for a female voice stays Spanish
+    language = msg["language"] if "language" in msg else infer(voice, session.language) if infer else session.language
+    if not isinstance(language, str) or language not in backend.languages:
+        raise TextError(f"unsupported language {reason_value(language)}; supported: {list(backend.languages)}")
+    if (language, voice) == (session.language, session.voice):
+        return None
+    if voice is not None:
+        await asyncio.to_thread(backend.speak, "a", language, voice)
+    return language, voice
 
 
 def _text_message(raw: Any) -> dict:
@@ -559,6 +580,20 @@ async def handle_text(server, ws: ServerConnection) -> None:
                     why = f"text must be a string, got {reason_value(text)}"
                     await reply({"type": "rejected", "text": None, "reason": why})
                     continue
+                if "language" in msg or "voice" in msg:
+                    # A conversation that changes language keeps its session (and its viewers): the text pending
+                    # in the old language is spoken first, in it; this piece and what follows in the new one.
+                    try:
+                        switch = await _language_switch(session, msg, backend)
+                    except ConfigError as exc:
+                        await reply({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)})
+                        continue
+                    if switch is not None:
+                        await say(session.finish_text())
+                        session.language, session.voice = switch
+                        sessions_log.info(
+                            "session %r now speaks %s%s", name, switch[0], f", voice {switch[1]}" * bool(switch[1])
+                        )
                 received = time.perf_counter()
                 try:
                     done = session.push_text(text)

@@ -13,6 +13,9 @@ written. Those, and any word the pocketsphinx dictionary lacks ("woodcutters"), 
 espeak-ng, whose text normalisation speaks numbers and whose letter-to-sound rules pronounce any
 word; its phones (:data:`ESPEAK_EN_TO_ARPABET`) are added to the aligner's dictionary. "20"
 was dropped before, so the mouth rested while "twenty" was said; one unknown word failed the run.
+What espeak-ng reads badly is written out first as `facecast say` does
+(:func:`realtime_core.synthesis.text.normalise_for_speech`: "$5.50" was "dollar five point five zero", "9:00"
+"nine zero zero"; now "five dollars and fifty cents", "nine o'clock").
 
 Without a transcript, :func:`recognise_phones` runs the same decoder in its **allphone** mode: the
 phones themselves are recognised, with the acoustic model (trained on many US-English talkers) and
@@ -33,6 +36,7 @@ import numpy as np
 from assets.audio import to_int16
 from realtime_core.features.mfcc import loudness_db
 from realtime_core.features.resample import resample_audio
+from realtime_core.synthesis.text import normalise_for_speech
 from realtime_core.synthesis.visemes import viseme_of
 from training.alignments import Alignment, Phone
 from training.errors import AlignmentFormatError, MissingDependencyError
@@ -159,7 +163,9 @@ def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | P
     ``source``) when a token has no pronunciation or the alignment fails.
     """
     Decoder = _decoder_class()
-    words = normalise_transcript(text)
+    # what `facecast say` writes out before espeak-ng reads it ("$5.50" "5 dollars and 50 cents", "9:00" "9 o'clock"),
+    # so a take of `say`'s own speech aligns with its transcript, and a person's reading is matched as said
+    words = normalise_transcript(normalise_for_speech(text, language="en"))
     if not words:
         raise AlignmentFormatError(source, "empty transcript")
     pcm = _pcm16k(samples, rate_hz)

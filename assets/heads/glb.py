@@ -364,9 +364,18 @@ def rig_targets(rig) -> np.ndarray:
     return out
 
 
-def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str | None = None) -> bytes:
+def head_glb(
+    rig,
+    mesh: HeadMesh,
+    params: np.ndarray,
+    fps: float,
+    *,
+    audio: str | None = None,
+    expression: np.ndarray | None = None,
+) -> bytes:
     """The animated GLB of a rigged head for mouth parameters (F, 4) at ``fps``: a MorphRig animates the
-    head's own targets (its weights per frame), a Rig its four exact parameter targets (IOD curves)."""
+    head's own targets (its weights per frame; ``expression`` (F, E) intensities drive its face shapes, None: none),
+    a Rig its four exact parameter targets (IOD curves; an expression reaches it through the parameters only)."""
     from realtime_core import VISUAL_PARAMS
     from realtime_core.face.keyframes import MorphRig
 
@@ -382,7 +391,7 @@ def head_glb(rig, mesh: HeadMesh, params: np.ndarray, fps: float, *, audio: str 
             triangles=mesh.triangles,
             targets=rig.dense_targets(),
             target_names=rig.names,
-            weights=rig.weights(p),
+            weights=rig.weights(p, expression),
             fps=fps,
             uvs=mesh.uvs,
             colors=mesh.colors,

@@ -31,6 +31,7 @@ from assets.errors import CannotWriteError, LandmarkError, MeshError, RigFileErr
 from assets.files import not_a_file
 from assets.heads.landmarks import FoundLandmarks
 from assets.heads.mesh import MESH_SUFFIXES, HeadMesh
+from realtime_core import VISUAL_PARAMS
 from realtime_core.face import Rig, RigConfig
 from realtime_core.face.keyframes import MorphRig
 
@@ -220,6 +221,16 @@ def resolve_head(
     from assets.heads.mesh import load_mesh
 
     mesh = load_mesh(p, cache=cache, parts=parts)
+    if mode == "auto" and set(VISUAL_PARAMS) <= set(mesh.targets or {}):
+        # facecast's own glb of a retargeted head (assets.heads.glb.head_glb): its lips cut open and a cavity added in
+        # the mesh, which a rig made again reads as a new head's: Lee Perry-Smith's tore (a jagged dark slit at rest,
+        # 110 s of rigging), the built-in head's crumpled its lower lip. Its own targets are not ARKit's, so "auto"
+        # rigged it without a word.
+        raise MeshError(
+            f"{p}: a glb facecast exported from a retargeted head (its morph targets are the mouth parameters "
+            f"{', '.join(VISUAL_PARAMS)}), its lips already cut open and a mouth cavity added: rigged again they "
+            "tear; give the head it was exported from, or --head-mode retarget to rig this file all the same"
+        )
     if mode != "retarget":
         head = morph_head(
             mesh, target_map=target_map, cache=cache, require_enough=mode == "auto", landmark_finder=landmark_finder

@@ -224,6 +224,15 @@ def name_words(stem: str) -> list[str]:
     return [w.lower() for w in re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|[0-9]+", stem)]
 
 
+def _painted(colors: np.ndarray | None) -> bool:
+    """Whether a mesh's vertex colours (n, 3) in [0, 1] paint it: they vary over it by more than 1/255 in a channel.
+    Such a mesh has said its colour, and an image beside it is none of its: facecast's own glb exports carry UVs and
+    COLOR_0, and ``render --head take.glb`` drew the built-in head's export in a frame grab lying beside it
+    (``take_0.3.png``, "named like the mesh"; its automatic landmarks, found on that render, then failed the rig
+    checks). One colour everywhere (a default white) says nothing: such a mesh still takes the colour map beside it."""
+    return colors is not None and len(colors) > 0 and float(np.ptp(colors, axis=0).max()) > 1 / 255
+
+
 def _sibling_texture(path: Path) -> bytes | None:
     """The colour map beside a mesh whose materials name no image (the fallback: a material's image decides
     first, :func:`_assemble`): among the images there that are not another kind of map (``OTHER_MAP_WORDS``:
@@ -470,7 +479,7 @@ def _assemble(p: Path, parts: _Parts, cache: Path | None = None) -> HeadMesh:
     elif parts.uvs is not None and any(float(mats[m].color[3]) < CUTOUT_ALPHA for m in see_through):
         # No image, but a see-through material (a cornea over the eyes): colour tiles carry its coverage.
         texture, uvs = _atlas(parts, images, cache)
-    elif parts.uvs is not None:
+    elif parts.uvs is not None and not _painted(parts.colors):
         texture = _sibling_texture(p)
         texture = None if texture is None else _opaque(texture)
         if texture is not None and p.suffix.lower() in GLTF_SUFFIXES:

@@ -291,9 +291,9 @@ def reference_lips(
     return ReferenceLips(pairs=pr, rest=(v[pr[:, 0]] - v[pr[:, 1]]) @ axis, axis=axis)
 
 
-MORPH_RIG_VERSION = 1
+MORPH_RIG_VERSION = 2
 """Bump when :func:`morph_rig` or :func:`reference_lips` builds something else from the same inputs: the built-in
-head's morph rig is cached under a key holding it (:func:`morph_rig_key`)."""
+head's morph rig is cached under a key holding it (:func:`morph_rig_key`). (2: the expressions' face shapes.)"""
 
 
 def arkit_source(params: np.ndarray) -> np.ndarray:
@@ -366,7 +366,8 @@ def morph_rig(
         head_names = tuple(n for n, k in zip(head_names, driven) if k)
         kprime = kprime[driven]
         keymap = KeyframeMap.from_reference(kprime, a, contact=contact)
-    d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names])  # (P, n, 3)
+    face_names, recipe = face_targets(targets, exclude=head_names)
+    d = np.stack([np.asarray(targets[n], dtype=np.float64) for n in head_names + face_names])  # (P + F, n, 3)
     if d.shape[1:] != np.asarray(vertices).shape:
         raise MeshError(f"{name}: morph targets do not match the mesh's {len(vertices)} vertices")
     moving = np.flatnonzero(np.abs(d).max(axis=(0, 2)) > 0)
@@ -374,6 +375,7 @@ def morph_rig(
         "head": name,
         "kind": "morph",
         "targets": {n: matched[n] for n in head_names},
+        "face_shapes": {n: canonical_name(n) for n in face_names},
         "probe_residuals": [round(r, 4) for r in residuals],
         "undriven_targets": len(matched) - len(head_names),
         "enough_mouth_targets": bool(enough),
@@ -382,13 +384,36 @@ def morph_rig(
     return MorphRig(
         neutral=vertices,
         triangles=triangles,
-        names=head_names,
+        names=head_names + face_names,
         targets=d[:, moving],
         moving=moving,
         keymap=keymap,
         source=arkit_source,
         meta=meta,
+        face_recipe=recipe,
     )
+
+
+def face_targets(
+    targets: Mapping[str, np.ndarray], *, exclude: tuple[str, ...] = ()
+) -> tuple[tuple[str, ...], np.ndarray | None]:
+    """The head's own targets that are the face shapes of the expressions' recipes (cheeks, eyes, brows, nose:
+    :func:`realtime_core.expressions.face_shapes`) by their ARKit name in any spelling :func:`canonical_name`
+    knows, the first spelling of each, none of ``exclude`` (the targets speech drives) and none that moves nothing ->
+    (their names (F,), the (E, F) recipe weights per expression of :data:`realtime_core.expressions.EXPRESSIONS`),
+    or ``((), None)`` when the head has none."""
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    wanted = {k for e in EXPRESSIONS for k in face_shapes(e)}
+    chosen: dict[str, str] = {}  # ARKit name -> the head's target
+    for n, t in targets.items():
+        c = canonical_name(n)
+        if c in wanted and c not in chosen and n not in exclude and np.abs(np.asarray(t)).max(initial=0.0) > 0:
+            chosen[c] = n
+    if not chosen:
+        return (), None
+    recipe = np.array([[face_shapes(e).get(c, 0.0) for c in chosen] for e in EXPRESSIONS], dtype=np.float32)
+    return tuple(chosen.values()), recipe
 
 
 def morph_rig_key(
@@ -444,6 +469,8 @@ def morph_rig_arrays(rig: MorphRig) -> dict[str, np.ndarray]:
     }
     if rig.rest is not None:  # a head modelled with its lips apart rests where they meet
         arrays["rest"] = rig.rest
+    if rig.face_recipe is not None:  # the last F targets: face shapes driven by expressions
+        arrays["face_recipe"] = rig.face_recipe
     if km.contact_rest is not None and km.contact_rows is not None and km.contact_source is not None:
         arrays |= {
             "contact_rest": km.contact_rest,
@@ -476,4 +503,5 @@ def morph_rig_from_arrays(arrays: Mapping[str, np.ndarray], vertices: np.ndarray
         source=arkit_source,
         meta=json.loads(str(arrays["meta"])),
         rest=arrays.get("rest"),
+        face_recipe=arrays.get("face_recipe"),
     )

@@ -64,6 +64,7 @@ def export_track(
     arkit_track: Track | None = None,
     expression: np.ndarray | None = None,
     checked: frozenset[Path] = frozenset(),
+    units: str = "IOD",
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb; or a HeadMesh
@@ -74,9 +75,11 @@ def export_track(
     "arkit52" = ARKit's 52 blendshapes from ``arkit_targets`` (name -> (n, 3)) with mapped weights;
     with ``expression`` ``(n, len(EXPRESSIONS))`` intensities, the ARKit weights are those of
     ``arkit_track`` (the speech parameters before the expression; default ``track``) plus the expressions'
-    ARKit recipes, as a live session's ARKit output. ``path`` is checked (:func:`check_outputs`: a probe file made
-    and removed) before anything is written unless it is in ``checked``, what a command's own check_outputs returned
-    before its work."""
+    ARKit recipes, as a live session's ARKit output; a head driven by its own targets ("units") shows them on its own
+    face shapes (:attr:`realtime_core.face.keyframes.MorphRig.face_recipe`) beside ``track``'s expressed mouth.
+    ``path`` is checked (:func:`check_outputs`: a probe file made and removed) before anything is written unless it
+    is in ``checked``, what a command's own check_outputs returned before its work. units: what the track's curves
+    measure, recorded in a .json (the mouth parameters' IOD, or blendshape weights: ``animate --curves``)."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -106,7 +109,7 @@ def export_track(
             data = morph_glb(head, track, audio=wav_name)
         elif morphs == "units":
             rig, mesh = head
-            data = head_glb(rig, mesh, track, audio=wav_name)
+            data = head_glb(rig, mesh, track, audio=wav_name, expression=expression)
         else:
             assert arkit_targets is not None  # refused above otherwise
             data = arkit_glb(
@@ -119,7 +122,7 @@ def export_track(
     elif suffix == ".csv":
         data = encode_csv(track)
     elif suffix == ".json":
-        data = encode_json(track, audio=wav_name)
+        data = encode_json(track, audio=wav_name, units=units)
     else:
         data = tsv_bytes(track)
     written.insert(0, atomic_write_bytes(p, data))

@@ -59,10 +59,11 @@ def animated_glb(
         raise ExportError(str(exc)) from exc
 
 
-def head_glb(rig, mesh, track: Track, *, audio: str | None = None) -> bytes:
-    """The animated glb of a rigged head (``rig`` and its :class:`assets.heads.mesh.HeadMesh`)."""
+def head_glb(rig, mesh, track: Track, *, audio: str | None = None, expression: np.ndarray | None = None) -> bytes:
+    """The animated glb of a rigged head (``rig`` and its :class:`assets.heads.mesh.HeadMesh`); ``expression``
+    (frames, E) intensities drive a MorphRig's face shapes (None: none)."""
     try:
-        return glb.head_glb(rig, mesh, track.values, track.fps, audio=audio)
+        return glb.head_glb(rig, mesh, track.values, track.fps, audio=audio, expression=expression)
     except GlbError as exc:
         raise ExportError(str(exc)) from exc
 

@@ -20,13 +20,15 @@ or G (held-out test sentences, macro-F1 over the eight shapes: the model's outpu
 measured lips 0.243 -> 0.343; docs/accuracy.md, "Mouth shapes").
 
 H is never chosen: the four parameters do not observe the tongue. Lips closed for at most
-``closure_frames`` (0.2 s) between open frames are a closure, A, pressed or not: X is Rhubarb's idle
+``closure_s`` (0.2 s) between open frames are a closure, A, pressed or not: X is Rhubarb's idle
 shape for pauses, and a /m/ closed without the press read as a pause inside the word. Consecutive
-frames of one shape merge into one cue; a run shorter than ``min_cue_frames`` joins the cue before it
-(Rhubarb, too, avoids one-frame flicker), except A: a closure is shown however short (merged, a
+frames of one shape merge into one cue; a run shorter than ``min_cue_s`` (2 frames at 30 fps) joins the cue
+before it (Rhubarb, too, avoids one-frame flicker), except A: a closure is shown however short (merged, a
 one-frame /b/ vanished into the vowel before it; 3 of the 9 /p b m/ of a 10-word `facecast say`
-sentence had no A cue). TSV: one ``start<TAB>shape`` line per cue, start in seconds with 2
-decimals, and a last ``end<TAB>X`` line (the mouth rests after the speech), as Rhubarb writes.
+sentence had no A cue). Both are durations, read at the track's own rate: counted in frames, ``animate --fps 60``
+let 33 ms G cues flicker that the 30 fps cues of the same speech merge. TSV: one ``start<TAB>shape`` line per cue,
+start in seconds with 2 decimals, and always a last ``end<TAB>X`` line at the track's end, as Rhubarb writes
+(its closing line: the only place a TSV says how long the animation lasts).
 """
 
 from __future__ import annotations
@@ -59,8 +61,8 @@ documentation's assignment, diphthongs by their first part): what :class:`ShapeT
 
 @dataclass(frozen=True, kw_only=True)
 class ShapeThresholds:
-    """Thresholds of the rules in the module docstring, in IOD; min_cue_frames >= 1 and closure_frames >= 0
-    in frames."""
+    """Thresholds of the rules in the module docstring, in IOD; min_cue_s > 0 and closure_s >= 0 in seconds (at the
+    track's own frame rate: a run lasts its frames over the fps)."""
 
     closed: float = 0.02
     press: float = 0.03
@@ -70,16 +72,16 @@ class ShapeThresholds:
     rounded_open: float = 0.25
     b_open: float = 0.15
     c_open: float = 0.21
-    min_cue_frames: int = 2
-    closure_frames: int = 6
+    min_cue_s: float = 2 / 30
+    closure_s: float = 0.2
 
     def __post_init__(self) -> None:
         if not 0 < self.closed < self.b_open < self.c_open:
             raise ExportError("thresholds must satisfy 0 < closed < b_open < c_open")
-        if not isinstance(self.min_cue_frames, int) or self.min_cue_frames < 1:
-            raise ExportError(f"min_cue_frames must be an integer >= 1, got {self.min_cue_frames!r}")
-        if not isinstance(self.closure_frames, int) or self.closure_frames < 0:
-            raise ExportError(f"closure_frames must be an integer >= 0, got {self.closure_frames!r}")
+        if not self.min_cue_s > 0:
+            raise ExportError(f"min_cue_s must be > 0 seconds, got {self.min_cue_s!r}")
+        if not self.closure_s >= 0:
+            raise ExportError(f"closure_s must be >= 0 seconds, got {self.closure_s!r}")
 
 
 @dataclass(frozen=True)
@@ -117,6 +119,9 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"mouth shapes need the parameters {VISUAL_PARAMS}, got {track.names}")
     shapes = frame_shapes(track.values, th)
+    # The durations in frames at this track's rate (a hair of slack: 0.2 s at 30 fps is 6 frames, not 5.999...).
+    min_cue = th.min_cue_s * track.fps - 1e-6
+    closure = th.closure_s * track.fps + 1e-6
     closed = [s in "AX" for s in shapes]
     k = 0
     while k < len(shapes):  # a short closed run between open frames is a closure: A
@@ -126,7 +131,7 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
         end = k
         while end < len(shapes) and closed[end]:
             end += 1
-        if k > 0 and end < len(shapes) and end - k <= th.closure_frames:
+        if k > 0 and end < len(shapes) and end - k <= closure:
             shapes[k:end] = ["A"] * (end - k)
         k = end
     runs: list[list] = []  # [first frame, shape, length]
@@ -137,7 +142,7 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
             runs.append([k, s, 1])
     merged: list[list] = []
     for first, shape, length in runs:
-        if merged and ((length < th.min_cue_frames and shape != "A") or merged[-1][1] == shape):
+        if merged and ((length < min_cue and shape != "A") or merged[-1][1] == shape):
             merged[-1][2] += length  # too short to show, or equal to the cue it now follows
         else:
             merged.append([first, shape, length])
@@ -145,12 +150,13 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
 
 
 def tsv_bytes(track: Track, th: ShapeThresholds = ShapeThresholds()) -> bytes:
-    """Rhubarb TSV text (UTF-8) of the track's cues, ending with ``end<TAB>X``."""
-    cs = cues(track, th)
-    lines = [f"{c.start_s:.2f}\t{c.shape}" for c in cs]
-    end = track.start_s + track.duration_s
-    if not cs or cs[-1].shape != "X":
-        lines.append(f"{end:.2f}\tX")
+    """Rhubarb TSV text (UTF-8) of the track's cues, ending with ``end<TAB>X`` at the track's end, whatever the last
+    cue (Rhubarb's closing line; without it a take ending in a pause said nothing of the seconds after its last cue)."""
+    end = f"{track.start_s + track.duration_s:.2f}"
+    lines = [f"{c.start_s:.2f}\t{c.shape}" for c in cues(track, th)]
+    # A cue starting within the track's last hundredth (a high --fps) would print at the end's own time: read_tsv and
+    # Rhubarb's readers take times that increase, so the closing line replaces it.
+    lines = [line for line in lines if not line.startswith(f"{end}\t")] + [f"{end}\tX"]
     return ("\n".join(lines) + "\n").encode("utf-8")
 
 

@@ -1,5 +1,5 @@
 """``facecast animate SPEECH -o OUT``: speech file -> mouth parameters at 30 fps (CSV, glTF, JSON, TSV), by the live
-path."""
+path; ``--curves arkit52|ovr15``: the CSV / JSON as blendshape weights."""
 
 from __future__ import annotations
 
@@ -46,6 +46,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "or ARKit's 52 blendshapes (built-in head)",
     )
     p.add_argument(
+        "--curves",
+        choices=("params", "arkit52", "ovr15"),
+        default="params",
+        help=".csv/.json curves: the 4 mouth parameters (IOD), or blendshape weights in [0, 1] for an engine's own "
+        "face: arkit52 = ARKit's 52 (Apple's names and order; speech plus --expression's shapes: what --glb-morphs "
+        "arkit52 animates and a live viewer of kind blendshapes receives), ovr15 = the 15 Oculus visemes (its ovr15 "
+        "encoding)",
+    )
+    p.add_argument(
         "--model",
         type=Path,
         default=None,
@@ -78,10 +87,11 @@ def run(args: argparse.Namespace) -> int:
     from assets.tracks import write_csv
     from clients.export.errors import ExportError
     from clients.export.files import FORMATS, check_outputs, export_track
-    from facecast.commands.outputs import check_output_formats
+    from facecast.commands.outputs import check_distinct_outputs, check_output_formats
     from facecast.commands.speech_options import (
         apply_expressions,
         expression_intensities,
+        quiet_speech_db,
         shipped_model,
         warn_if_clipped,
         warn_if_quiet,
@@ -99,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         from training.errors import ConfigError
 
         raise ConfigError("give at least one output: -o OUT (.csv/.glb/.json/.tsv), --csv, --glb, --json or --tsv")
+    check_distinct_outputs([*([args.csv] if args.csv is not None else []), *written])
     # Every refusal comes before the first output is written (no partial set of files) and before the
     # model runs: the export formats, the .wav beside a .glb/.json (never the input speech), the head.
     for fmt, out in exports.items():
@@ -107,6 +118,12 @@ def run(args: argparse.Namespace) -> int:
     check_output_formats(args.output or (), FORMATS)
     checked = check_outputs(written, source=args.speech)
     glbs = [o for o in written if o.suffix.lower() == ".glb"]
+    if (
+        args.curves != "params"
+        and args.csv is None
+        and not [o for o in written if o.suffix.lower() in (".csv", ".json")]
+    ):
+        raise ExportError(f"--curves {args.curves} is what a .csv or .json output holds: give one (-o OUT.csv)")
     if glbs and args.glb_morphs == "arkit52" and args.head != "builtin":
         raise ExportError(f"{glbs[0]}: --glb-morphs arkit52 needs the built-in head (ARKit targets), not {args.head}")
     head = None
@@ -118,8 +135,8 @@ def run(args: argparse.Namespace) -> int:
     if args.auto_gain:
         model = with_auto_gain(model)
     samples, rate = read_audio(args.speech)
-    if shipped_model(args) and not args.auto_gain:  # the shipped models' training level (a user's own may differ)
-        warn_if_quiet("animate", args.speech, samples, rate)
+    # the shipped models' training level (a user's own may differ); said after the animation, with the noise gate's say
+    quiet = quiet_speech_db(samples, rate) if shipped_model(args) and not args.auto_gain else None
     warn_if_clipped("animate", args.speech, samples)
     mups = None
     try:
@@ -130,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
     except InvalidAudioError as exc:  # e.g. shorter than one analysis window: name the file
         raise FileProblem(args.speech, str(exc)) from None
     speech = params
+    warn_if_quiet("animate", args.speech, quiet, speech)
     params = apply_expressions(params, args, mups=mups, model=model, command="animate")
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
@@ -142,8 +160,21 @@ def run(args: argparse.Namespace) -> int:
         params, speech = both[:, : len(VISUAL_PARAMS)], both[:, -len(VISUAL_PARAMS) :]
     # Every output goes through the one track codec (assets.tracks) or the exporters built on it.
     track = Track(values=params, fps=fps)
+    intensities = expression_intensities(args, len(params), fps)
+    curves, units = track, "IOD"  # what a .csv / .json holds
+    if args.curves != "params":
+        from realtime_core.blendshapes import blendshape_names, blendshape_weights
+
+        # As a live session's blendshape kinds: ARKit has the expressions' own shapes (the speech's weights plus
+        # their recipes), the visemes have none (the parameters with the expression applied).
+        if args.curves == "arkit52" and intensities is not None:
+            weights = blendshape_weights(speech, "arkit52", expression=intensities)
+        else:
+            weights = blendshape_weights(params, args.curves)
+        curves = Track(values=weights, names=blendshape_names(args.curves), fps=fps)
+        units = f"{args.curves} blendshape weight [0, 1]"
     if args.csv is not None:
-        write_csv(args.csv, track)
+        write_csv(args.csv, curves)
     arkit = None
     if glbs and args.glb_morphs == "arkit52" and args.head == "builtin":
         from clients.export.gltf import builtin_arkit_targets
@@ -152,7 +183,8 @@ def run(args: argparse.Namespace) -> int:
     for out in written:
         export_track(
             out,
-            track,
+            curves if out.suffix.lower() in (".csv", ".json") else track,
+            units=units,
             head=head,
             audio=(samples, rate),
             morphs=args.glb_morphs,
@@ -160,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
             checked=checked,  # probed above: not again per file
             # ARKit: the speech's weights plus the expressions' own shapes (mouthSmile, brows ...)
             arkit_track=Track(values=speech, fps=fps),
-            expression=expression_intensities(args, len(params), fps),
+            expression=intensities,
         )
     delay = (
         f"algorithmic delay {model.frontend.algorithmic_delay_ms(args.lag):.1f} ms"

@@ -61,10 +61,12 @@ def run(args: argparse.Namespace) -> int:
     import time
     from pathlib import Path
 
+    from assets.files import check_writable_folder
     from assets.progress import Progress
     from training.articulatory import ArticulatoryConfig
     from training.build_corpus import BuildConfig, VoiceSampling, build_corpus
 
+    check_writable_folder(args.out_dir)  # before any speech is synthesised (a traceback after, otherwise)
     if args.engine == "festival":
         return _festival(args)
     langs = tuple(s.strip() for s in args.languages.split(",") if s.strip())

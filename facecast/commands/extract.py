@@ -75,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
         write_track_corpus,
     )
 
+    if args.out:
+        from assets.files import check_writable_folder
+
+        check_writable_folder(args.out)  # before the clips are measured
     cfg = ExtractConfig(audio_rate_hz=args.audio_rate, language=args.language)
     videos = find_videos(args.videos)
     others = passed_over(args.videos)

@@ -50,7 +50,7 @@ def _package_holding(path: Path) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     from assets.errors import CannotWriteError
-    from assets.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes, check_writable
     from assets.heads.builtin import load_builtin_head
     from assets.heads.rigfile import builtin_rig
     from training.fit_maps import fit_maps, module_text
@@ -62,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         raise CannotWriteError(
             args.output, f"inside the installed facecast package {package!r}: not written (give --into-package)"
         )
+    check_writable(args.output)  # before the fit, not after it
     rig, _ = builtin_rig()
     atomic_write_bytes(args.output, module_text(fit_maps(load_builtin_head(), rig)).encode())
     print(f"wrote {args.output}")

@@ -54,8 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assets.files import check_writable_folder
     from training.mu_train import MuTrainConfig, train_and_score
 
+    check_writable_folder(args.out)  # before the training (it failed with a FileNotFoundError traceback)
     cfg = MuTrainConfig(
         units=args.units,
         variance=args.variance,

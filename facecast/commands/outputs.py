@@ -1,5 +1,5 @@
 """``-o OUT``: the output option of the commands that write animation files, the format chosen by the name's suffix
-(``say``, ``animate``, ``record``): one option and one check, so the commands take and refuse the same names."""
+(``say``, ``animate``, ``record``): one option and one set of checks, so the commands take and refuse the same names."""
 
 from __future__ import annotations
 
@@ -35,3 +35,18 @@ def check_output_formats(outs: Iterable[Path], formats: Iterable[str], hints: Ma
         if suffix not in allowed:
             hint = (hints or {}).get(suffix, f"use {', '.join(allowed)}")
             raise ExportError(f"{o}: unknown output format {suffix or '(no suffix)'!r} ({hint})")
+
+
+def check_distinct_outputs(outs: Iterable[Path]) -> None:
+    """Refuse (ExportError, before any work) the second of ``outs`` that names the same file as an earlier one
+    (resolved: ``a.csv`` and ``./a.csv``, a link to it): ``animate SPEECH -o a.csv -o a.csv`` wrote the file twice
+    and printed "wrote a.csv" twice, and ``-o a.csv --csv a.csv`` the same."""
+    from clients.export.errors import ExportError
+
+    seen: dict[Path, Path] = {}
+    for o in map(Path, outs):
+        first = seen.get(o.resolve())
+        if first is not None:
+            same = "" if first == o else f" (as {first})"
+            raise ExportError(f"{o}: given twice as an output{same}; give each output once")
+        seen[o.resolve()] = o

@@ -78,7 +78,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--height", type=int, default=480, help="video height")
     b.add_argument("--seed", type=int, default=0, help="sentence choice and noise seed")
     b.add_argument("--level", type=float, default=-20.0, help="presentation level: RMS over speech, dBFS")
-    b.add_argument("--expression-strength", type=float, default=1.0, help="scale of the smile/sad targets")
+    b.add_argument(
+        "--expression-strength",
+        type=float,
+        default=1.0,
+        help="intensity 0..1 of the smiling and sad faces (as render --expression smile:X)",
+    )
     b.set_defaults(run=run_build)
 
     s = ps.add_parser(
@@ -107,6 +112,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_build(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from assets.files import check_writable_folder
     from perceptual.design import SYLLABLES
     from perceptual.errors import BuildError
     from perceptual.stimuli import BuildConfig, build
@@ -118,7 +124,7 @@ def run_build(args: argparse.Namespace) -> int:
             raise BuildError(f"--mos-clip {spec!r}: expected SYSTEM=CLIP.mp4")
         clips.append((system, Path(path)))
     cfg = BuildConfig(
-        out_dir=Path(args.output),
+        out_dir=check_writable_folder(args.output),  # before any stimulus is rendered
         grid_root=Path(args.grid) if args.grid else None,
         snrs_db=tuple(args.snr),
         cv_snrs_db=tuple(args.cv_snr),

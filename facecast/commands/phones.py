@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from assets import grid
+    from assets.files import check_writable
     from assets.progress import Progress
     from training.errors import ConfigError
     from training.grid_phones import (
@@ -71,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         write_grid_phones,
     )
 
+    out = check_writable(Path(args.out) if args.out else default_path(args.method))  # not after minutes of labelling
     root = Path(args.root) if args.root else grid.default_root()
     sents = grid.sentences(root)
     if not sents:
@@ -78,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     labelled, skipped = label_corpus(
         sents, workers=args.workers, align=not args.no_align, progress=Progress, method=args.method, say=print
     )
-    out = write_grid_phones(Path(args.out) if args.out else default_path(args.method), labelled)
+    out = write_grid_phones(out, labelled)
 
     by_id = {s.sentence_id: s for s in sents}
     methods = Counter(s.method for s in labelled)

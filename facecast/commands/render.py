@@ -137,18 +137,22 @@ def run(args: argparse.Namespace) -> int:
     if args.params:
         frames = _params_for_speech(read_params_resampled(args.params, args.fps).values, args)
     else:
-        from facecast.commands.speech_options import shipped_model, warn_if_clipped, warn_if_quiet
+        from facecast.commands.speech_options import quiet_speech_db, shipped_model, warn_if_clipped, warn_if_quiet
 
-        def quiet(samples: np.ndarray, rate: int) -> None:
+        level: list[float | None] = [None]  # the quiet speech's level, said with the noise gate's rows after the model
+
+        def check(samples: np.ndarray, rate: int) -> None:
             if shipped_model(args) and not args.auto_gain:
-                warn_if_quiet("render", args.speech, samples, rate)
+                level[0] = quiet_speech_db(samples, rate)
             warn_if_clipped("render", args.speech, samples)
 
-        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=quiet, auto_gain=args.auto_gain)
+        track = params_for_audio(args.speech, args.model, mapper=args.mapper, check=check, auto_gain=args.auto_gain)
+        warn_if_quiet("render", args.speech, level[0], track.values)
         frames = track.at_fps(args.fps).values  # as long as the speech at any rate (the video is not cut short)
-    from facecast.commands.speech_options import apply_expressions
+    from facecast.commands.speech_options import apply_expressions, expression_intensities
 
     frames = apply_expressions(frames, args, fps=args.fps, command="render")
+    alpha = expression_intensities(args, len(frames), args.fps)  # a head's own face shapes (brows, eyes, cheeks)
     from facecast.commands.headopts import resolve_from_args
 
     rig, mesh = resolve_from_args(args)
@@ -169,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
     with renderer_for_rig(rig, mesh, cfg) as r:
 
         def draw(k: int) -> np.ndarray:
-            image = with_caption(r.render(rig.deformed(frames[k])), credit)
+            image = with_caption(r.render(rig.deformed(frames[k], None if alpha is None else alpha[k])), credit)
             return image if video is None else beside(video.frames[shown[k]], image)
 
         from assets.progress import Progress

@@ -169,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
     from assets.unitcorpus import find_unit_corpus, load_unit_corpus
     from clients.export.files import FORMATS, check_outputs, export_track
     from facecast.commands.headopts import resolve_from_args
-    from facecast.commands.outputs import check_output_formats
+    from facecast.commands.outputs import check_distinct_outputs, check_output_formats
     from facecast.commands.speech_options import apply_expressions
     from realtime_core.synthesis.rest import RestPauses
     from realtime_core.synthesis.synthesizer import UnitSynthesizer
@@ -179,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     outs = [Path(o) for o in args.output]
     check_output_formats(outs, (".mp4", ".npz", ".wav", *FORMATS))
+    check_distinct_outputs(outs)
     checked = check_outputs([o for o in outs if o.suffix.lower() in FORMATS], source=args.audio)  # never over --audio
     apply_expressions(np.zeros((1, 4)), args)  # a misspelt --expression fails before any synthesis
     if args.audio is not None and any(o.resolve() == args.audio.resolve() for o in outs):

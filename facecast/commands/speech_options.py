@@ -110,24 +110,48 @@ def shipped_model(args: argparse.Namespace) -> bool:
     return args.mapper == "hmm" and str(args.model) in ("default", "low-latency")
 
 
-def warn_if_quiet(command: str, path, samples: np.ndarray, rate_hz: int) -> None:
-    """Print one warning line to stderr when the speech in ``samples`` (n,) float at ``rate_hz`` is more than
-    :data:`QUIET_BY_DB` under the level the shipped models were trained at, saying how to normalise it; nothing for
-    a file at that level, louder, or without speech (silence animates a closed mouth at any level)."""
-    import sys
-
+def quiet_speech_db(samples: np.ndarray, rate_hz: int) -> float | None:
+    """The speech level (dBFS, :func:`realtime_core.features.gain.speech_level_db`) of ``samples`` (n,) float at
+    ``rate_hz`` when it is more than :data:`QUIET_BY_DB` under the level the shipped models were trained at; None for
+    a file at that level, louder, or without speech (silence animates a closed mouth at any level). Measured on the
+    decoded samples, before the animation, so that they need not be kept for :func:`warn_if_quiet`."""
     from realtime_core.features.gain import S1_SPEECH_LEVEL_DBFS, speech_level_db
 
     level = speech_level_db(samples, rate_hz)
-    if level is None or level >= S1_SPEECH_LEVEL_DBFS - QUIET_BY_DB:
+    return None if level is None or level >= S1_SPEECH_LEVEL_DBFS - QUIET_BY_DB else level
+
+
+def warn_if_quiet(command: str, path, level_db: float | None, rows: np.ndarray) -> None:
+    """Print one warning line to stderr when :func:`quiet_speech_db` gave ``level_db`` (not None), saying how to
+    normalise the file. ``rows`` (F, 4): the file's mouth parameters from the live path, before expressions; those at
+    the neutral face exactly (every parameter 0, which no model row is) are the ones the output noise gate faded as
+    room noise (:mod:`realtime_core.features.noisegate`). When there are any, the line says how much of the file they
+    are and does not call the rest speech: 5 s of white noise at -54 dBFS faded in over 0.1 s was warned about as
+    "speech at -54.0 dBFS" (the faded start held both noise floors low for a while, so its first seconds counted as
+    sound over it), while the gate rested the face for the last 45 % of it."""
+    import sys
+
+    from realtime_core.features.gain import S1_SPEECH_LEVEL_DBFS
+
+    if level_db is None:
         return
-    print(
-        f"facecast {command}: warning: {path}: speech at {level:.1f} dBFS, {S1_SPEECH_LEVEL_DBFS - level:.0f} dB under "
-        f"the level the model was trained at ({S1_SPEECH_LEVEL_DBFS} dBFS): the mouth opens less than the words call "
-        f"for (about half at 20 dB under); give --auto-gain, or normalise it first, e.g. "
-        "ffmpeg -i IN -af loudnorm=I=-20:TP=-1.5 OUT.wav",
-        file=sys.stderr,
-    )
+    under = f"{S1_SPEECH_LEVEL_DBFS - level_db:.0f} dB under the level the model was trained at"
+    under += f" ({S1_SPEECH_LEVEL_DBFS} dBFS)"
+    fix = "give --auto-gain, or normalise it first, e.g. ffmpeg -i IN -af loudnorm=I=-20:TP=-1.5 OUT.wav"
+    rows = np.asarray(rows)
+    noise = float(np.mean(np.all(rows == 0.0, axis=1))) if len(rows) else 0.0
+    if noise > 0:
+        said = (
+            f"the noise gate took {100 * noise:.0f} % of it for room noise (the face rests there); the sound taken "
+            f"for speech elsewhere is at {level_db:.1f} dBFS, {under}: if it is speech, the mouth opens less than the "
+            f"words call for; {fix}"
+        )
+    else:
+        said = (
+            f"speech at {level_db:.1f} dBFS, {under}: the mouth opens less than the words call for (about half at 20 "
+            f"dB under); {fix}"
+        )
+    print(f"facecast {command}: warning: {path}: {said}", file=sys.stderr)
 
 
 CLIPPED_SHARE = 0.01

@@ -138,7 +138,7 @@ def _run_eval(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
     from assets import grid
-    from assets.files import atomic_write_bytes
+    from assets.files import atomic_write_bytes, check_writable
     from assets.modelfile import load_model
     from assets.progress import Progress
     from realtime_core.synthesis.recording import RecordingBlend
@@ -159,6 +159,10 @@ def _run_eval(args: argparse.Namespace) -> int:
                 f"--recording: expected LEAD,SPEECH,TRAIL weights, default or none, got {args.recording!r}"
             ) from None
         recording = RecordingBlend(lead=lead, speech=speech, trail=trail)
+    fig, link = figure_path(args.figure, args.output, args.split)
+    for out in (args.output, fig):  # before the corpus is built and searched (minutes), not after
+        if out is not None:
+            check_writable(out)
     (stored, _), root, phones = _corpus(args)
     tests = []
     for s in grid.sentences(root, split=args.split):
@@ -183,7 +187,6 @@ def _run_eval(args: argparse.Namespace) -> int:
             recording=recording,
         )
     print(json.dumps(rows, indent=1))
-    fig, link = figure_path(args.figure, args.output, args.split)
     fig = fig8(curves, fig)
     cmd = "facecast units eval" + (" --only-extracted" if args.only_extracted else "")
     cmd += " --split val" if args.split == "val" else ""

@@ -424,6 +424,12 @@ class MorphRig:
     modelled with its lips apart (the mouth parameters' closed pose; the fit's weights alone leave such lips as far
     apart as modelled at every /m b p/): its jaw target below 0 (:func:`assets.heads.head.closing_rest`). The head as
     modelled stays the rig's ``neutral``; weights may then be below 0."""
+    face_recipe: np.ndarray | None = None
+    """(E, F) float32: the last F of :attr:`names` are the head's own face shapes (cheeks, eyes, brows) that no mouth
+    parameter drives, weighted per expression of :data:`realtime_core.expressions.EXPRESSIONS` at full intensity
+    (:func:`realtime_core.expressions.face_shapes`); :meth:`weights` gives them ``expression @ face_recipe`` (0 with no
+    expression). Why: through the four parameters alone an expression moves only the mouth, and on a head with brow
+    and eye targets a "surprise" without raised brows or wide eyes looked like no expression. None: no such shapes."""
     # Set in __post_init__: the targets flattened to (P, n_moving*3) (a view of ``targets``).
     _rows: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -433,8 +439,17 @@ class MorphRig:
             raise ConfigError(
                 f"morph targets {t.shape} do not match {len(self.names)} names, {len(self.moving)} moving vertices"
             )
-        if self.keymap.n_keyframes != len(self.names):
-            raise ConfigError(f"keyframe map has {self.keymap.n_keyframes} keyframes for {len(self.names)} targets")
+        n_face = 0
+        if self.face_recipe is not None:
+            recipe = np.asarray(self.face_recipe, dtype=np.float32)
+            if recipe.ndim != 2 or not 0 < recipe.shape[1] < len(self.names) or not np.isfinite(recipe).all():
+                raise ConfigError(f"face recipe {recipe.shape} must be (E, F) finite, F < {len(self.names)} targets")
+            object.__setattr__(self, "face_recipe", recipe)
+            n_face = recipe.shape[1]
+        if self.keymap.n_keyframes != len(self.names) - n_face:
+            raise ConfigError(
+                f"keyframe map has {self.keymap.n_keyframes} keyframes for {len(self.names) - n_face} speech targets"
+            )
         object.__setattr__(self, "targets", t)
         object.__setattr__(self, "neutral", np.asarray(self.neutral, dtype=np.float32))
         object.__setattr__(self, "triangles", np.asarray(self.triangles, dtype=np.int32))
@@ -447,22 +462,42 @@ class MorphRig:
         # (P, n_moving*3): one row-vector product per frame.
         object.__setattr__(self, "_rows", t.reshape(len(t), -1))
 
-    def weights(self, params: np.ndarray) -> np.ndarray:
+    @property
+    def n_face(self) -> int:
+        """How many of :attr:`names` (the last ones) are face shapes driven by expressions only."""
+        return 0 if self.face_recipe is None else int(self.face_recipe.shape[1])
+
+    def weights(self, params: np.ndarray, expression: np.ndarray | None = None) -> np.ndarray:
         """Mouth parameters (..., 4) (IOD) -> the head's target weights (..., P) float32 (the parameters within
         :attr:`bound`, plus :attr:`rest`: every consumer, renderer, server deltas and morph weights, exports, goes
-        through here)."""
+        through here). ``expression`` (..., E) intensities in [0, 1] (None: none) drive the face shapes
+        (:attr:`face_recipe`); the mouth takes the expression through ``params`` already (paper 002 eq. 2)."""
         p = np.asarray(params, dtype=np.float64)
         if self.bound is not None:
             p = self.bound(p)
         w = self.keymap.weights(self.source(p)).astype(np.float32)
+        if self.face_recipe is not None:
+            face = np.zeros((*w.shape[:-1], self.n_face), dtype=np.float32)
+            if expression is not None:
+                a = np.asarray(expression, dtype=np.float32)
+                face = np.clip(np.broadcast_to(a @ self.face_recipe, face.shape), 0.0, 1.0).astype(np.float32)
+            w = np.concatenate([w, face], axis=-1)
         return w if self.rest is None else w + self.rest
 
-    def displacements(self, params: np.ndarray) -> np.ndarray:
-        """Head displacement (n_moving, 3) float32 for params (4,)."""
-        w = self.weights(np.asarray(params, dtype=np.float64).reshape(4))
+    def displacements(self, params: np.ndarray, expression: np.ndarray | None = None) -> np.ndarray:
+        """Head displacement (n_moving, 3) float32 for params (4,) (and expression intensities (E,), None: none)."""
+        w, rows = self.active(self.weights(np.asarray(params, dtype=np.float64).reshape(4), expression))
         # w @ (P, n_moving*3): a row-major product streams each target once; the (n_moving*3, P)
         # matrix times w walks P-float rows and took ~2.3x longer per frame (a server's vertex viewer).
-        return np.dot(w, self._rows).reshape(-1, 3)
+        return np.dot(w, rows).reshape(-1, 3)
+
+    def active(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Target weights (..., P) -> (the weights, the flat targets (P', n_moving*3)) a product needs: without the
+        face shapes when every one of them is 0 (no expression), so a frame without one costs what it did before the
+        rig had them (the built-in head: 22 of 35 targets). Exact: the dropped terms are zeros added last."""
+        if self.n_face and not np.any(weights[..., -self.n_face :]):
+            return weights[..., : -self.n_face], self._rows[: len(self.names) - self.n_face]
+        return weights, self._rows
 
     @property
     def flat_targets(self) -> np.ndarray:
@@ -480,18 +515,19 @@ class MorphRig:
         w = np.ascontiguousarray(weights, dtype=np.float32)
         if w.ndim != 2 or w.shape[1] != len(self.names):
             raise ConfigError(f"weights must be (B, {len(self.names)}), got {w.shape}")
+        w, rows = self.active(w)
         if kernel == "numpy":
-            return np.stack([np.dot(row, self._rows) for row in w]) if len(w) else np.empty((0, self._rows.shape[1]))
+            return np.stack([np.dot(row, rows) for row in w]) if len(w) else np.empty((0, rows.shape[1]))
         if kernel != "numba":
             raise ConfigError(f"kernel must be 'numba' or 'numpy', got {kernel!r}")
         from realtime_core.face.compiled import morph_displacements  # numba's import is paid only here
 
-        return morph_displacements(w, self._rows, np.empty((len(w), self._rows.shape[1]), dtype=np.float32))
+        return morph_displacements(np.ascontiguousarray(w), rows, np.empty((len(w), rows.shape[1]), dtype=np.float32))
 
-    def deformed(self, params: np.ndarray) -> np.ndarray:
-        """All head vertices (n, 3) float32 for params (4,)."""
+    def deformed(self, params: np.ndarray, expression: np.ndarray | None = None) -> np.ndarray:
+        """All head vertices (n, 3) float32 for params (4,) (and expression intensities (E,), None: none)."""
         out = np.array(self.neutral, dtype=np.float32, copy=True)
-        out[self.moving] += self.displacements(params)
+        out[self.moving] += self.displacements(params, expression)
         return out
 
     def dense_targets(self) -> np.ndarray:

@@ -268,8 +268,10 @@ class Rig:
             out[j] = self._push_of(unit)
         return out
 
-    def deformed(self, params: np.ndarray) -> np.ndarray:
-        """All head vertices (n_h, 3) float32 for params (4,)."""
+    def deformed(self, params: np.ndarray, expression: np.ndarray | None = None) -> np.ndarray:
+        """All head vertices (n_h, 3) float32 for params (4,). ``expression`` is accepted as a head driven by its own
+        targets takes it (:meth:`MorphRig.deformed`) and ignored: a retargeted head shows an expression through the
+        four parameters only (it has no face shapes of its own)."""
         out = np.array(self.neutral, dtype=np.float32, copy=True)
         out[self.moving] += self.displacements(params)
         return out

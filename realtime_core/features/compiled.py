@@ -4,9 +4,9 @@ Why compiled: a live push is one video frame, and the front end's numpy code spe
 some forty calls on vectors of 12..1025 values (power spectrum, mel energies, log, DCT, the
 running CMVN's per-frame update, context stacking). A live push is three calls: :func:`frames_push`
 (pre-emphasis, buffer, framing, window, on preallocated state), numpy's FFT (numba has none), then
-:func:`spectrum_to_ceps`; and :func:`normalise_stack` (silence gate, CMVN, context stacking) when the
-front end has no level normalisation. Each does the reference's arithmetic in the same order. Fewer
-calls matter more than the arithmetic here: inside the live loop the inverter's matrices evict the
+:func:`spectrum_to_ceps`; and :func:`normalise_stack` (silence gate, CMVN, context stacking, and the frames' levels
+for the output noise gate) when the front end has no level normalisation. Each does the reference's arithmetic in
+the same order. Fewer calls matter more than the arithmetic here: inside the live loop the inverter's matrices evict the
 caches every frame, and each numpy call then costs several times what it costs timed alone (see
 :mod:`realtime_core.inversion.compiled`). The numpy code (``kernel="numpy"``) is the reference;
 tests/realtime_core/features/test_compiled.py holds the two equal to rounding.
@@ -172,7 +172,7 @@ def normalise_stack(  # pragma: no cover - compiled
     cist: np.ndarray,
     tc: int,
     final: bool,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """The front end after the MFCCs, for ``level_norm=None`` (the numpy reference: ``_LevelStage``,
     :class:`RunningCmvn` and :class:`ContextStacker`): raw ``[c0, c1..] (k, n_ceps + 1)`` -> the
     context-stacked rows now final ``(j, (2 tc + 1) n_feat)``; with ``final``, then the utterance's
@@ -182,7 +182,10 @@ def normalise_stack(  # pragma: no cover - compiled
     unless ``energy``; the running CMVN (state m, v ``(n_feat,)`` and ``cst = [count]``, in place) unless
     not ``has_cmvn``; then context stacking on the ring ``(2 tc + 1, n_feat)`` of the last frames (slot i
     holds frame ``n - 2 tc - 1 + i``, clipped at frame 0: the first frame fills every slot) with
-    ``cist = [frames received, next row]``, in place."""
+    ``cist = [frames received, next row]``, in place.
+
+    Returns ``(rows, levels (k,))``: the levels (dB) of the k frames before the gate, the silence gate's own (the
+    output noise gate reads them; numpy recomputed them from c0 on every live push)."""
     k = c0_ceps.shape[0]
     w, d = ring.shape
     first = 0 if energy else 1
@@ -191,8 +194,10 @@ def normalise_stack(  # pragma: no cover - compiled
     n_out = 0
     c = cst[0]
     row = np.empty(d)
+    levels = np.empty(k)
     for i in range(k):
         level = c0_ceps[i, 0] * db_per_c0
+        levels[i] = level
         if level < floor_db:
             for q in range(d):
                 row[q] = silence[first + q]
@@ -231,4 +236,4 @@ def normalise_stack(  # pragma: no cover - compiled
                 nxt += 1
     cst[0] = c
     cist[0], cist[1] = n, nxt
-    return out[:n_out]
+    return out[:n_out], levels

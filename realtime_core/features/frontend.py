@@ -152,28 +152,21 @@ class FrontEnd:
     def push(self, samples: np.ndarray) -> np.ndarray:
         if self._gain is not None:
             samples = self._gain.push(as_float_samples(samples))
-        raw = self._frames(self._mfcc.push(samples))
-        if self._tail is not None:
-            return self._tail.push(raw, final=False)
-        return self._ctx.push(self._normalise(raw))
+        return self._rows(self._mfcc.push(samples), final=False)
 
     def flush(self) -> np.ndarray:
-        raw = self._frames(self._mfcc.flush())
+        return self._rows(self._mfcc.flush(), final=True)
+
+    def _rows(self, c0_ceps: np.ndarray, *, final: bool) -> np.ndarray:
+        """Raw ``[c0, c1..] (k, n_ceps + 1)`` -> the rows now final; keeps the frames' levels, computed once: by the
+        compiled tail with its silence gate (the live path), else here for the reference stages."""
         if self._tail is not None:
-            return self._tail.push(raw, final=True)
-        rows = self._ctx.push(self._normalise(raw))
-        return np.concatenate([rows, self._ctx.flush()])
-
-    def _frames(self, c0_ceps: np.ndarray) -> np.ndarray:
-        """Raw ``[c0, c1..] (k, n_ceps + 1)`` as computed; keeps their levels."""
+            rows, self.last_level_db = self._tail.push(c0_ceps, final=final)
+            return rows
         self.last_level_db = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
-        return c0_ceps
-
-    def _normalise(self, c0_ceps: np.ndarray) -> np.ndarray:
-        ceps, level = self._level.push(c0_ceps)
-        if self._cmvn is None:
-            return ceps
-        return self._cmvn.push(ceps, level)
+        ceps, level = self._level.push(c0_ceps, self.last_level_db)
+        rows = self._ctx.push(ceps if self._cmvn is None else self._cmvn.push(ceps, level))
+        return np.concatenate([rows, self._ctx.flush()]) if final else rows
 
 
 _SILENT_DB = -1000.0
@@ -201,8 +194,9 @@ class _LevelStage:
         if self._tracker is not None:
             self._tracker.reset()
 
-    def push(self, c0_ceps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels)
+    def push(self, c0_ceps: np.ndarray, level_db: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``level_db``: the frames' levels (k,) when already computed (:func:`mel_level_db` of c0)."""
+        level = mel_level_db(c0_ceps[:, 0], self.config.mfcc.n_mels) if level_db is None else level_db
         if self._tracker is not None and self.config.level_norm is not None:
             ln = self.config.level_norm
             peak, floor = self._tracker.track(level)
@@ -248,8 +242,9 @@ class _CompiledTail:
         self.cist = np.zeros(2, dtype=np.int64)
         """[frames received, rows released]"""
 
-    def push(self, c0_ceps: np.ndarray, *, final: bool) -> np.ndarray:
-        rows: np.ndarray = self._kernel(
+    def push(self, c0_ceps: np.ndarray, *, final: bool) -> tuple[np.ndarray, np.ndarray]:
+        """-> ``(rows now final, levels (k,) dB of the frames before the silence gate)``."""
+        out: tuple[np.ndarray, np.ndarray] = self._kernel(
             c0_ceps,
             self._db_per_c0,
             self._floor_db,
@@ -265,7 +260,7 @@ class _CompiledTail:
             self.config.tc,
             final,
         )
-        return rows
+        return out
 
 
 def raw_mfcc_with_level(samples: np.ndarray, config: FrontEndConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,8 @@ word's first letter. A stalled stream is spoken through its last word boundary
 (:meth:`SentenceChunker.flush_words`), and a long first sentence can be started at a clause
 boundary (:meth:`SentenceChunker.take_clause`).
 
+:func:`normalise_for_speech` writes out what espeak-ng reads badly as a person reads it, per language (a URL as
+its host, dates, times, amounts, units, ranges; :func:`clean_text` calls it first when given the language).
 :func:`clean_text` keeps what a synthesiser can pronounce: letters of any alphabet, digits, white
 space, ordinary punctuation and the symbols espeak-ng reads as words (currency signs, ``% & + = / @ °``, the maths
 signs ``× ÷ − ± ≤ ≥ ≠ ≈``, which its Spanish voice mostly skips:
@@ -28,6 +30,7 @@ pronounceable left raises :class:`TextError` naming the problem.
 
 from __future__ import annotations
 
+import functools
 import re
 import unicodedata
 
@@ -58,12 +61,16 @@ _SENTENCE_END = re.compile(r"([.!?;:…]+)[\"'”’»)\]]*\s+|\n\s*")
 """A candidate sentence end: end marks, closing quotes or brackets, white space (group 1: the marks); or a newline."""
 _CLAUSE_END = re.compile(r"(?:[,;:]|\s[-–—]|[–—])[\"'”’»)\]]*\s+")
 """A clause boundary: a comma (or ``;`` ``:``), or a dash, followed by white space."""
-TITLES = frozenset("dr dra mr mrs ms prof profa st sr sra srta sres mt gen col lt sgt capt rev vs".split())  # noqa: SIM905 (a word list)
+TITLES = frozenset("dr dra mr mrs ms prof profa st sr sra srta sres mt gen col lt sgt capt rev vs ee".split())  # noqa: SIM905 (a word list)
 """Words before a name: a ``.`` after them never ends a sentence (compared lower-case, without the dot)."""
-ABBREVIATIONS = frozenset("etc e.g i.e a.m p.m jr approx dept fig inc ltd no núm pág tel ud uds vol aprox".split())  # noqa: SIM905 (a word list)
+ABBREVIATIONS = frozenset(
+    "etc e.g i.e a.m p.m jr approx dept fig inc ltd no núm pág tel ud uds vol aprox ej uu".split()  # noqa: SIM905
+    + "jan feb mar apr jun jul aug sep sept oct nov dec ene abr ago dic".split()  # noqa: SIM905 (month short forms)
+)
 """Abbreviations that also end sentences ("... apples, pears, etc. Then"): a ``.`` after one ends a
-sentence only when the next word starts with a capital letter. ``no`` (number, "No. 5") is both a
-word and an abbreviation: it is one only before a digit. Dotted initialisms ("U.S.") count as these."""
+sentence only when the next word starts with a capital letter ("Dec. 7" is one sentence, as "p. ej. manzanas"
+and "EE. UU. es"). ``no`` (number, "No. 5") is both a word and an abbreviation: it is one only before a
+digit. Dotted initialisms ("U.S.") count as these."""
 _WORD_BEFORE = re.compile(r"(\S*)$")
 _LIST_NUMBER = re.compile(r"(?:^|\n)[ \t]*\d{1,3}$")
 _INITIALISM = re.compile(r"(?:\w\.)+\w")
@@ -86,8 +93,12 @@ class TextError(ConfigError):
     """Text that cannot be spoken: empty, too long, or nothing pronounceable in it."""
 
 
-def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
-    """``text`` with unpronounceable characters replaced by spaces and white space collapsed.
+def clean_text(
+    text: object, *, language: str | None = None, day_first: bool | None = None, max_chars: int = MAX_TEXT_CHARS
+) -> str:
+    """``text`` with unpronounceable characters replaced by spaces and white space collapsed; with a ``language``
+    ("en", "es") also what espeak-ng reads badly written out as said (:func:`normalise_for_speech`, ``day_first``
+    there): URLs, dates, times, amounts, units (before the characters are filtered: a URL's ``#`` and ``_`` too).
 
     Raises TextError for a non-string, an empty text, one longer than ``max_chars`` or one without
     a letter or digit."""
@@ -96,6 +107,8 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     if len(text) > max_chars:
         raise TextError(f"text is {len(text)} characters long; the limit is {max_chars}")
     prose = _LINK.sub(r"\1", _CODE_BLOCK.sub("\n", text))
+    if language is not None:
+        prose = normalise_for_speech(prose, language=language, day_first=day_first)
     out = []
     other_script = False  # a letter or digit of a script the voices do not speak was left out
     for ch in unicodedata.normalize("NFC", prose):
@@ -116,6 +129,363 @@ def clean_text(text: object, *, max_chars: int = MAX_TEXT_CHARS) -> str:
     if not any(unicodedata.category(c)[0] in "LN" for c in cleaned):
         raise TextError(f"no pronounceable word in {text[:40]!r}{script}")
     return cleaned
+
+
+# --- What a chatbot writes that espeak-ng reads badly (:func:`normalise_for_speech`) -----------------------------
+# Survey (session text50, espeak-ng 1.51, en-us and es): "https://docs.python.org/3/" was read "h t t p s colon
+# slash slash docs dot python dot org slash three slash", "2026-12-07" "two thousand twenty six dash twelve dash
+# zero seven", "9:00" "nine zero zero", "$5" "dollar five", "5 km" "five k m", "Dec 7" "deck seven",
+# "(555) 123-4567" "five hundred fifty five one hundred twenty three dash four thousand ...", Spanish "1.º" "uno
+# punto o", "p. ej." "pe ex". Only these are rewritten; what espeak-ng reads well is left to it: e-mail addresses
+# ("support at example dot com", "soporte arroba ejemplo punto com"), "14:30" ("fourteen thirty"), "2:30 pm",
+# "12.5%", ordinals ("3rd"), "e.g.", "Dr.", "@mentions", Spanish phone numbers read in groups.
+
+_MONTHS = {
+    "en": "January February March April May June July August September October November December".split(),  # noqa: SIM905
+    "es": "enero febrero marzo abril mayo junio julio agosto septiembre octubre noviembre diciembre".split(),  # noqa: SIM905
+}
+_MONTH_ABBR = {  # a month's short form, only next to a day number ("Mar" and "may" are words on their own)
+    "en": {**{m[:3]: i for i, m in enumerate(_MONTHS["en"])}, "Sept": 8},
+    "es": {**{m[:3]: i for i, m in enumerate(_MONTHS["es"])}, "sept": 8},
+}
+_WEEKDAYS = {  # short form -> name, only in a range ("Mon-Fri": "mon fry"); "Sun", "Sat" and "mar" are words
+    language: {name[:3].lower(): name for name in names.split()} | other_forms
+    for language, names, other_forms in (
+        (
+            "en",
+            "Monday Tuesday Wednesday Thursday Friday Saturday Sunday",
+            {"tues": "Tuesday", "thur": "Thursday", "thurs": "Thursday"},
+        ),
+        ("es", "lunes martes miércoles jueves viernes sábado domingo", {"mie": "miércoles", "sab": "sábado"}),
+    )
+}
+_WORDS = {  # per language: the words the rewrites put in
+    "en": {"dot": "dot", "port": "port", "to": "to", "version": "version"},
+    "es": {"dot": "punto", "port": "puerto", "to": "a", "version": "versión"},
+}
+_CURRENCY = {  # sign or ISO code -> (one, many, one hundredth, many hundredths)
+    "en": {
+        "$": ("dollar", "dollars", "cent", "cents"),
+        "€": ("euro", "euros", "cent", "cents"),
+        "£": ("pound", "pounds", "penny", "pence"),
+        "¥": ("yen", "yen", "sen", "sen"),
+    },
+    "es": {
+        "$": ("dólar", "dólares", "centavo", "centavos"),
+        "€": ("euro", "euros", "céntimo", "céntimos"),
+        "£": ("libra", "libras", "penique", "peniques"),
+        "¥": ("yen", "yenes", "sen", "sen"),
+    },
+}
+_CODES = {"USD": "$", "EUR": "€", "GBP": "£", "JPY": "¥"}
+_UNITS = {  # symbol after a number -> (one, many); "m", "s", "l" are left alone ("$5m", "the 90s")
+    "en": {
+        "km/h": ("kilometer per hour", "kilometers per hour"),
+        "km": ("kilometer", "kilometers"),
+        "cm": ("centimeter", "centimeters"),
+        "mm": ("millimeter", "millimeters"),
+        "kg": ("kilogram", "kilograms"),
+        "mg": ("milligram", "milligrams"),
+        "g": ("gram", "grams"),
+        "ml": ("milliliter", "milliliters"),
+        "TB": ("terabyte", "terabytes"),
+        "GB": ("gigabyte", "gigabytes"),
+        "MB": ("megabyte", "megabytes"),
+        "KB": ("kilobyte", "kilobytes"),
+        "kB": ("kilobyte", "kilobytes"),
+        "GHz": ("gigahertz", "gigahertz"),
+        "MHz": ("megahertz", "megahertz"),
+        "kHz": ("kilohertz", "kilohertz"),
+        "Hz": ("hertz", "hertz"),
+        "ms": ("millisecond", "milliseconds"),
+        "min": ("minute", "minutes"),
+        "h": ("hour", "hours"),
+        "°C": ("degree Celsius", "degrees Celsius"),
+        "ºC": ("degree Celsius", "degrees Celsius"),
+        "°F": ("degree Fahrenheit", "degrees Fahrenheit"),
+    },
+    # espeak-ng's Spanish reads "gigabytes" as written ("jigabites"): spelt as said ("gigabáits")
+    "es": {
+        "km/h": ("kilómetro por hora", "kilómetros por hora"),
+        "km": ("kilómetro", "kilómetros"),
+        "cm": ("centímetro", "centímetros"),
+        "mm": ("milímetro", "milímetros"),
+        "kg": ("kilo", "kilos"),
+        "mg": ("miligramo", "miligramos"),
+        "g": ("gramo", "gramos"),
+        "ml": ("mililitro", "mililitros"),
+        "TB": ("terabáit", "terabáits"),
+        "GB": ("gigabáit", "gigabáits"),
+        "MB": ("megabáit", "megabáits"),
+        "KB": ("kilobáit", "kilobáits"),
+        "kB": ("kilobáit", "kilobáits"),
+        "GHz": ("gigahercio", "gigahercios"),
+        "MHz": ("megahercio", "megahercios"),
+        "kHz": ("kilohercio", "kilohercios"),
+        "Hz": ("hercio", "hercios"),
+        "ms": ("milisegundo", "milisegundos"),
+        "min": ("minuto", "minutos"),
+        "h": ("hora", "horas"),
+        "°C": ("grado Celsius", "grados Celsius"),
+        "ºC": ("grado Celsius", "grados Celsius"),
+        "°F": ("grado Fahrenheit", "grados Fahrenheit"),
+    },
+}
+_ORDINALS_ES = ["primer", "segund", "tercer", "cuart", "quint", "sext", "séptim", "octav", "noven", "décim"]
+_ABBREVIATIONS_SPOKEN = {  # abbreviations espeak-ng spells or clips ("p. ej." "pe ex", "etc." "etk")
+    "en": {r"vs\.": "versus", r"approx\.": "approximately", r"and/or": "and or"},
+    "es": {
+        r"p\.\s?ej\.": "por ejemplo",
+        r"etc\.": "etcétera",
+        r"aprox\.": "aproximadamente",
+        r"EE\.\s?UU\.": "Estados Unidos",
+        r"vs\.": "contra",
+        r"y/o": "y o",
+    },
+}
+_TLDS = (
+    "com org net edu gov int mil io dev ai app co info biz uk us ca au nz ie de fr it es pt nl be ch eu mx ar cl "
+    "pe br jp cn ru"
+)
+_URL_END = r"(?=[.,;:!?)\]}>'\"»”’*_`]*(?:\s|$))"
+"""Where a URL ends: before white space, or the punctuation or markdown marks that close the sentence or wrap it."""
+_URL = re.compile(
+    r"(?<![\w@/.-])(?:(?:https?|ftp)://(?:[^\s/@]+@)?|www\.)"  # a scheme (and user info) or "www."
+    r"(?P<host>[\w-]+(?:\.[\w-]+)*)(?::(?P<port>\d{1,5}))?"
+    rf"(?P<rest>[/?#]\S*?)?{_URL_END}",  # path, query, fragment; not the sentence's end
+    re.I,
+)
+"""A URL with a scheme, or one starting "www.": spoken as its host (and port)."""
+_DOMAIN = re.compile(
+    rf"(?<![\w@/.:-])(?P<host>(?:[\w-]+\.)+(?:{'|'.join(_TLDS.split())}))(?![\w-]|\.\w)"
+    rf"(?::(?P<port>\d{{1,5}}))?(?P<rest>/\S*?)?{_URL_END}",
+    re.I,
+)
+"""A bare domain ("example.com/docs", "docs.python.org"): a known top-level domain, so "Node.js" and "file.py" stay."""
+_NOT_AFTER = r"(?![\w/-]|[.,:]\d)"
+_DOT = r"(?:\.(?!\s*$))?"
+"""An abbreviation's full stop, unless it ends the text (then it is the sentence's, and stays)."""
+_ISO_DATE = re.compile(rf"(?<![\w.,:/-])(\d{{4}})-(\d{{2}})-(\d{{2}}){_NOT_AFTER}")
+_NUMERIC_DATE = re.compile(rf"(?<![\w.,:/-])(\d{{1,2}})([/.-])(\d{{1,2}})\2(\d{{4}}){_NOT_AFTER}")
+_PHONE_EN = re.compile(
+    r"(?<![\w.+/-])(?:\+\d{1,3}(?:[ .-]?\(?\d{1,4}\)?){2,5}|(?:\(\d{3}\)\s?|\d{3}[.-])?\d{3}[.-]\d{4})(?![\w-]|[.,]\d)"
+)
+"""A phone number as written in English: international ("+44 20 7946 0958") or North American ("(555) 123-4567",
+"555-123-4567", "555-0199"): read digit by digit in its groups."""
+_RANGE = re.compile(r"(?<![\w.,:/-])(\d+(?:[.,:]\d+)*)(?:-|\s?–\s?)([$€£¥]?\d+(?:[.,:]\d+)*)(?![\w-]|[.,:]\d)")
+"""A range "10-20", "5–10", "9:00-17:00" ("ten dash twenty", "five ten"): "10 to 20" / "10 a 20". A hyphen
+between spaces is a minus ("5 - 3") and stays, as a chain ("912-345-678", a Spanish phone number)."""
+_TIME = re.compile(r"(?<![\w.,:])(\d{1,2}):(\d{2})(?![\d:])(?P<h>\s?h\b)?")
+_AMPM = re.compile(r"\s?(?:[ap]\.?m\.?)(?!\w)", re.I)
+_VERSION = re.compile(r"(?<![\w.])v(\d+(?:\.\d+)*)\b")
+
+
+def _month_en(name: str) -> int:
+    """An English month's index 0-11 from its name or short form ("Dec", "Sept")."""
+    return _MONTH_ABBR["en"][name] if name in _MONTH_ABBR["en"] else _MONTHS["en"].index(name)
+
+
+def _money(text: str, language: str) -> str:
+    """Amounts as said: "$5" -> "5 dollars" (espeak-ng: "dollar five"), "$19.99" -> "19 dollars and 99 cents",
+    "3,50 €" -> "3 euros con 50 céntimos", "20 EUR" -> "20 euros" ("twenty your"), "$5 million" -> "5 million
+    dollars"; Spanish "1" as "un" ("un euro", espeak-ng: "uno euro")."""
+    names = _CURRENCY[language]
+    sign = r"[$€£¥]|(?:USD|EUR|GBP|JPY)"
+    # English writes 1,000.50; Spanish 1.000,50 (and, from a chatbot, often 19.99)
+    integer, decimal = (r"\d{1,3}(?:,\d{3})+|\d+", r"\.") if language == "en" else (r"\d{1,3}(?:\.\d{3})+|\d+", r"[.,]")
+    scales = r"thousand|million|billion|trillion|k|M|bn" if language == "en" else r"mil millones|millones|millón|mil"
+    amount = rf"(?P<int>{integer})(?:{decimal}(?P<dec>\d+))?(?!\d)"
+
+    def said(m: re.Match[str]) -> str:
+        one, many, cent, cents = names[_CODES.get(m.group("sign"), m.group("sign"))]
+        whole, dec, scale = m.group("int"), m.group("dec"), m.groupdict().get("scale")
+        if scale:  # "$1.5 million": the number as written, then the scale
+            scale = {"k": "thousand", "M": "million", "bn": "billion"}.get(scale, scale)
+            number = m.group(0)[m.start("int") - m.start() : m.end("dec" if dec else "int") - m.start()]
+            return (
+                f"{number} {scale} {many}" if language == "en" else f"{number} {scale}{' de' * (scale != 'mil')} {many}"
+            )
+        if dec is not None and len(dec) != 2:  # "$1.5": a number, not cents
+            return f"{whole}{m.group(0)[m.end('int') - m.start()]}{dec} {many}"
+        c = int(dec or 0)
+        if language == "es":
+            un = "una" if one == "libra" else "un"
+            main = f"{un if whole == '1' else whole} {one if whole == '1' else many}"
+            return main + (f" con {'un' if c == 1 else c} {cent if c == 1 else cents}" if c else "")
+        main = f"{whole} {one if whole == '1' else many}"
+        if c and whole == "0":
+            return f"{c} {cent if c == 1 else cents}"
+        return main + (f" and {c} {cent if c == 1 else cents}" if c else "")
+
+    text = re.sub(rf"(?<![\w.,])(?P<sign>{sign})\s?{amount}(?:\s?(?P<scale>{scales})\b)?", said, text)
+    return re.sub(rf"(?<![\w.,]){amount}\s?(?P<sign>[$€£¥]|(?:USD|EUR|GBP|JPY)\b)", said, text)
+
+
+def _ordinal_en(day: int) -> str:
+    suffix = "th" if 10 <= day % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(day % 10, "th")
+    return f"{day}{suffix}"
+
+
+def _date(language: str, year: str | None, month: int, day: int) -> str:
+    """A date as said: "December 7th, 2026", "7 de diciembre de 2026" (month 0-11)."""
+    name = _MONTHS[language][month]
+    if language == "es":
+        return f"{day} de {name}" + (f" de {year}" if year else "")
+    return f"{name} {_ordinal_en(day)}" + (f", {year}" if year else "")
+
+
+def _host(m: re.Match[str], language: str) -> str:
+    """A URL's host as said: as written ("docs.python.org": espeak-ng says "docs dot python dot org", "docs punto
+    python punto org"), without "www." and the scheme, path, query and fragment; a port as "port 8080" (it was
+    "colon eight thousand eighty"); an IP address's numbers joined by "dot" ("192.168.1.10" was "one hundred
+    ninety two point one six eight point ...")."""
+    host = m.group("host")
+    if host.lower().startswith("www."):
+        host = host[4:]
+    if re.fullmatch(r"\d+(?:\.\d+){3}", host):
+        host = f" {_WORDS[language]['dot']} ".join(host.split("."))
+    return host + (f" {_WORDS[language]['port']} {m.group('port')}" if m.group("port") else "")
+
+
+def normalise_for_speech(text: str, *, language: str, day_first: bool | None = None) -> str:
+    """``text`` with what espeak-ng reads badly written out as a person reads it, in ``language`` ("en", "es"):
+    a URL as its host ("https://example.com/docs?q=1" -> "example.com": "example dot com"), dates ("2026-12-07"
+    -> "December 7th, 2026" / "7 de diciembre de 2026"; "Dec 7" -> "December 7th"), whole hours and minutes under
+    ten ("9:00" -> "9 o'clock", "9:05" -> "9 oh 5"; "a las 9:00" -> "a las 9"), amounts ("$5" -> "5 dollars",
+    "3,50 €" -> "3 euros con 50 céntimos"), units after a number ("5 km" -> "5 kilometers"), ranges ("10-20" ->
+    "10 to 20"), versions ("v2.1.3" -> "version 2.1.3"), English phone numbers digit by digit, Spanish ordinals
+    ("1.º" -> "primero") and abbreviations ("p. ej." -> "por ejemplo"). ``day_first``: how "07/12/2026" is read
+    when both fields could be the month; None = the language's custom (Spanish day first; English month first,
+    as the default en-us voice). Everything else is left as written: espeak-ng reads it well (the survey above)."""
+    if language not in _WORDS:
+        raise ConfigError(f"unsupported language {language!r}; supported: {sorted(_WORDS)}")
+    words = _WORDS[language]
+    day_first = language != "en" if day_first is None else day_first
+    text = _URL.sub(lambda m: _host(m, language), text)
+    text = _DOMAIN.sub(lambda m: _host(m, language), text)
+
+    def iso(m: re.Match[str]) -> str:
+        y, mo, d = m.group(1), int(m.group(2)), int(m.group(3))
+        return _date(language, y, mo - 1, d) if 1 <= mo <= 12 and 1 <= d <= 31 else m.group(0)
+
+    def numeric(m: re.Match[str]) -> str:
+        a, b, y = int(m.group(1)), int(m.group(3)), m.group(4)
+        # a field over 12 is the day whatever the custom ("15/01/2025" in English too)
+        d, mo = (a, b) if a > 12 or (day_first and b <= 12) else (b, a)
+        return _date(language, y, mo - 1, d) if 1 <= mo <= 12 and 1 <= d <= 31 else m.group(0)
+
+    text = _NUMERIC_DATE.sub(numeric, _ISO_DATE.sub(iso, text))
+    abbr = _MONTH_ABBR[language]
+    if language == "en":
+        month = "|".join(_MONTHS["en"] + sorted(abbr, key=len, reverse=True))
+        text = re.sub(  # "Dec 7", "December 7, 2026" -> "December 7th, 2026" (espeak-ng: "deck seven")
+            rf"\b({month})\.?\s(\d{{1,2}})(?:st|nd|rd|th)?\b(?!:|[.,]\d)(?:,?\s(\d{{4}})\b)?",
+            lambda m: (
+                _date("en", m.group(3), _month_en(m.group(1)), int(m.group(2))) if int(m.group(2)) <= 31 else m.group(0)
+            ),
+            text,
+        )
+        text = re.sub(  # "7 Dec 2026" -> "the 7th of December 2026"
+            rf"(?<![\w.,:])(\d{{1,2}})(?:st|nd|rd|th)?\s({month})\b{_DOT}(?:,?\s(\d{{4}})\b)?",
+            lambda m: (
+                f"the {_ordinal_en(int(m.group(1)))} of {_MONTHS['en'][_month_en(m.group(2))]}"
+                + (f" {m.group(3)}" if m.group(3) else "")
+                if int(m.group(1)) <= 31
+                else m.group(0)
+            ),
+            text,
+        )
+
+        def phone(m: re.Match[str]) -> str:
+            groups = re.findall(r"\d+", m.group(0))
+            if sum(map(len, groups)) < 7:
+                return m.group(0)
+            return "plus " * m.group(0).startswith("+") + ", ".join(" ".join(g) for g in groups)
+
+        text = _PHONE_EN.sub(phone, text)
+    else:
+        short = "|".join(sorted(abbr, key=len, reverse=True))
+        text = re.sub(  # "7 dic. 2026" -> "7 de diciembre de 2026"
+            rf"(?<![\w.,:])(\d{{1,2}})\s(?:de\s)?({short})\b{_DOT}(?:\s(?:de\s)?(\d{{4}})\b)?",
+            lambda m: _date("es", m.group(3), abbr[m.group(2).lower()], int(m.group(1))),
+            text,
+            flags=re.I,
+        )
+    days = _WEEKDAYS[language]
+    day = "|".join(sorted(days, key=len, reverse=True))
+    text = re.sub(  # "Mon-Fri" -> "Monday to Friday"
+        rf"\b({day})\.?\s?[-–]\s?({day})\b{_DOT}",
+        lambda m: f"{days[m.group(1).lower()]} {words['to']} {days[m.group(2).lower()]}",
+        text,
+        flags=re.I,
+    )
+
+    def span(m: re.Match[str]) -> str:
+        between = "y" if language == "es" and re.search(r"\bentre\s$", m.string[: m.start()], re.I) else words["to"]
+        return f"{m.group(1)} {between} {m.group(2)}"
+
+    text = _RANGE.sub(span, text)
+
+    def clock(m: re.Match[str]) -> str:
+        h, mi, hours = int(m.group(1)), int(m.group(2)), m.group("h")
+        if h > 24 or mi > 59:
+            return m.group(0)
+        ampm = _AMPM.match(m.string, m.end()) is not None
+        if language == "es":
+            if hours:
+                return f"{h} horas" if mi == 0 else f"{m.group(1)}:{m.group(2)} horas"
+            # "9:05" "nueve y cinco"; "14:05" stays "catorce cero cinco", as a 24-hour time is read
+            return (f"{h}" if h else "0 horas") if mi == 0 else f"{h} y {mi}" if mi < 10 and h <= 12 else m.group(0)
+        if mi == 0:
+            said = f"{h}" if ampm else "midnight" if h in (0, 24) else f"{h} o'clock" if h <= 12 else f"{h} hundred"
+        elif mi < 10:
+            said = f"{h} oh {mi}"
+        else:
+            return m.group(0)
+        return said + (" hours" if hours else "")
+
+    text = _TIME.sub(clock, text)
+    text = _money(text, language)
+    units = _UNITS[language]
+    symbol = "|".join(re.escape(u) for u in sorted(units, key=len, reverse=True))
+
+    def unit(m: re.Match[str]) -> str:
+        number, (one, many) = m.group(1), units[m.group(2)]
+        if language == "es" and number == "1":  # espeak-ng: "uno kilómetro"
+            return f"{'una' if one == 'hora' else 'un'} {one}"
+        # "a 5 km run": "a 5 kilometer run", as an adjective the unit is singular
+        single = number == "1" or (language == "en" and re.search(r"\ban?\s$", m.string[: m.start()], re.I))
+        return f"{number} {one if single else many}"
+
+    text = re.sub(rf"(?<![\w.,])(\d+(?:[.,]\d+)?)\s?({symbol})(?![\w/°º])", unit, text)
+    # "v2.1.3" "vee two point one point three"; "version v2" is not said twice
+    text = _VERSION.sub(
+        lambda m: (
+            m.group(1)
+            if re.search(r"versi[oó]n\s$", m.string[: m.start()], re.I)
+            else f"{words['version']} {m.group(1)}"
+        ),
+        text,
+    )
+    if language == "es":  # "1.º" "uno punto o", "2.ª" "dos punto a": primero, segunda; "1.er" primer
+
+        def ordinal(m: re.Match[str]) -> str:
+            n, mark = int(m.group(1)), m.group(2)
+            # "1.º lugar": "primer lugar" (before a masculine noun 1 and 3 lose their -o, as "1.er" writes it)
+            noun = re.match(r"\s+(?!(?:de|del|y|e|o|u|en|a|al|con|por|para)\b)[a-záéíóúñ]", m.string[m.end() :])
+            if mark == "er" or (mark == "º" and n in (1, 3) and noun):
+                return _ORDINALS_ES[n - 1] if n in (1, 3) else m.group(0)
+            return _ORDINALS_ES[n - 1] + ("o" if mark == "º" else "a")
+
+        text = re.sub(r"(?<![\w.,])(10|[1-9])\.?(º|ª|er)(?!\w)", ordinal, text)
+
+    def written_out(m: re.Match[str], said: str) -> str:
+        # the full stop of an abbreviation that ends the sentence is the sentence's: kept ("..., etcétera.")
+        return said + "." * (not m.string[m.end() :].strip())
+
+    for pattern, said in _ABBREVIATIONS_SPOKEN[language].items():
+        text = re.sub(rf"(?<!\w){pattern}(?!\w)", functools.partial(written_out, said=said), text)
+    return text
 
 
 class SentenceChunker:

@@ -142,6 +142,24 @@ def test_resampling_reader_keeps_every_frame_of_a_facecast_csv(tmp_path):
         np.testing.assert_allclose(back.values, tr.values, atol=1e-6)
 
 
+def test_resampling_reader_covers_as_long_as_a_file_at_another_rate(tmp_path):
+    """`animate --fps 24` rows read at 25, 30, 60 fps: every frame that starts before the last row's own frame ends
+    (n rows at 24 fps last n / 24 s; Track.at_fps's count), from the CSV and the JSON alike. Read only through the
+    last row's time, 52 rows at 30 fps gave 64 frames (2.133 s) for 2.167 s of rows, shorter than the speech."""
+    from assets.tracks import read_params_resampled
+
+    for n in (2, 52, 73, 74):
+        tr = Track(values=syllable_track(n).values, fps=24.0)
+        write_csv(tmp_path / "take.csv", tr)
+        (tmp_path / "take.json").write_bytes(encode_json(tr))
+        for fps in (24.0, 25.0, 30.0, 60.0):
+            covering = int(np.ceil(n / 24 * fps - 1e-6))  # frames k with k / fps < n / 24
+            for ext in ("csv", "json"):
+                got = read_params_resampled(tmp_path / f"take.{ext}", fps)
+                assert got.n_frames == covering, (n, fps, ext, got.n_frames)
+                np.testing.assert_allclose(got.values[0], tr.values[0], atol=1e-6)
+
+
 def test_render_reads_a_facecast_json_like_its_csv(tmp_path):
     """`render --params take.json` (facecast's own `animate --json` export) was refused: "header must be
     't,<channel names>'". Now the same frames as the CSV of the same track, at 30 fps and resampled."""

@@ -480,3 +480,32 @@ def test_render_at_any_frame_rate_covers_the_whole_speech(tmp_path, own_cache):
         assert n / rate <= video < n / rate + 1 / fps + 1e-3, (fps, video)
         assert audio == pytest.approx(n / rate, abs=2e-3), (fps, audio)  # the whole speech, not cut at the video
         assert int(streams["video"]["nb_frames"]) == int(np.ceil(n / rate * fps))
+
+
+def test_render_params_written_at_another_rate_covers_the_whole_speech(tmp_path, own_cache, capsys):
+    """`animate SPEECH --fps 24 -o p.csv` then `render SPEECH --params p.csv --fps 30` (or 60) of 2.14 s of speech:
+    the rows were put on the grid only up to the last row's time (2.125 s), a video of 64 frames (2.133 s) for the
+    speech's 65 (at 60 fps 128 for 129). Now the video covers the speech, less than one frame longer, the audio
+    stream is the whole speech, and no warning (the file covers the speech)."""
+    require_tool("ffprobe", "apt package ffmpeg")
+    from assets.audio import write_wav
+    from assets.video import probe
+    from tests.speech import speechlike
+
+    rate = 16000
+    n = int(2.14 * rate)  # 52 rows at 24 fps, the last at 2.125 s: short of the speech at 30 and 60 fps
+    wav = write_wav(tmp_path / "s.wav", speechlike(n / rate, rate, seed=5)[:n], rate)
+    csv = tmp_path / "p.csv"
+    assert main(["animate", str(wav), "--fps", "24", "-o", str(csv)]) == 0
+    capsys.readouterr()
+    for fps in (30.0, 60.0):
+        out = tmp_path / f"s{fps:g}.mp4"
+        argv = ["render", str(wav), "--params", str(csv), "-o", str(out), "--fps", f"{fps:g}"]
+        assert main([*argv, "--width", "96", "--height", "96"]) == 0
+        assert "warning" not in capsys.readouterr().err
+        streams = probe(out)
+        video, audio = float(streams["video"]["duration"]), float(streams["audio"]["duration"])
+        assert n / rate <= video < n / rate + 1 / fps + 1e-3, (fps, video)
+        assert audio == pytest.approx(n / rate, abs=2e-3), (fps, audio)
+        assert abs(video - audio) < 1 / fps, (fps, video, audio)
+        assert int(streams["video"]["nb_frames"]) == int(np.ceil(n / rate * fps))

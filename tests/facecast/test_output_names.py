@@ -187,23 +187,57 @@ def _speech(path) -> str:
     return str(path)
 
 
+PROC = "folder /proc is not writable (its file system takes no new files); give a path in another folder"
+PROC_D = f"folder /proc/d is missing and cannot be made: {PROC}"
+
+
 @pytest.mark.parametrize(
     ("argv", "want"),
     [
         (["say", "hi there", "-o", "{tmp}/ok.csv", "-o", "{tmp}/folder.mp4"], "folder.mp4: is a folder"),
-        (["say", "hi there", "-o", "{tmp}/ok.csv", "-o", "/proc/x.mp4"], "/proc/x.mp4: cannot write here"),
-        (["animate", "{wav}", "--csv", "{tmp}/ok.csv", "--glb", "/proc/x.glb"], "/proc/x.glb: cannot write here"),
+        (["say", "hi there", "-o", "{tmp}/ok.csv", "-o", "/proc/x.mp4"], f"/proc/x.mp4: cannot write here: {PROC}"),
+        (["say", "hi there", "-o", "/proc/d/x.mp4"], f"/proc/d/x.mp4: cannot write here: {PROC_D}"),
+        (
+            ["animate", "{wav}", "--csv", "{tmp}/ok.csv", "--glb", "/proc/x.glb"],
+            f"/proc/x.glb: cannot write here: {PROC}",
+        ),
         (["animate", "{wav}", "--csv", "{tmp}/ok.csv", "--tsv", "{tmp}/folder.tsv"], "folder.tsv: is a folder"),
         (["render", "{wav}", "-o", "{tmp}/folder.mp4"], "folder.mp4: is a folder"),
-        (["rig", "builtin", "-o", "/proc/x.npz"], "/proc/x.npz: cannot write here"),
-        (["adapt", "default", "{wav}", "-o", "/proc/m.npz"], "/proc/m.npz: cannot write here"),
+        (["render", "{wav}", "-o", "/proc/x.mp4"], f"/proc/x.mp4: cannot write here: {PROC}"),
+        (["record", "http://127.0.0.1:9", "-o", "/proc/x.csv"], f"/proc/x.csv: cannot write here: {PROC}"),
+        (["view", "http://127.0.0.1:9", "--record", "/proc/x.mp4"], f"/proc/x.mp4: cannot write here: {PROC}"),
+        (["rig", "builtin", "-o", "/proc/x.npz"], f"/proc/x.npz: cannot write here: {PROC}"),
+        (["adapt", "default", "{wav}", "-o", "/proc/m.npz"], f"/proc/m.npz: cannot write here: {PROC}"),
+        (["train", "{tmp}/corpus", "-o", "/proc/m.npz"], f"/proc/m.npz: cannot write here: {PROC}"),
+        (["readout", "default", "-o", "/proc/m.npz"], f"/proc/m.npz: cannot write here: {PROC}"),
+        (["fit-maps", "-o", "/proc/x.py"], f"/proc/x.py: cannot write here: {PROC}"),
+        (["phones", "-o", "/proc/x.json"], f"/proc/x.json: cannot write here: {PROC}"),
+        (["units", "eval", "--output", "/proc/x.md"], f"/proc/x.md: cannot write here: {PROC}"),
+        (["mu", "-o", "/proc/d"], f"/proc/d: cannot write here: {PROC_D}"),
+        (["extract", "{wav}", "-o", "/proc/d"], f"/proc/d: cannot write here: {PROC_D}"),
+        (["perceptual", "build", "-o", "/proc/d"], f"/proc/d: cannot write here: {PROC_D}"),
+        (["corpus", "/proc/d"], f"/proc/d: cannot write here: {PROC_D}"),
     ],
-    ids=["say-folder", "say-proc", "animate-proc", "animate-folder", "render-folder", "rig-proc", "adapt-proc"],
+    ids=[
+        *("say-folder", "say-proc", "say-missing-folder", "animate-proc", "animate-folder", "render-folder"),
+        *("render-proc", "record-proc", "view-proc", "rig-proc", "adapt-proc", "train-proc", "readout-proc"),
+        *(
+            "fit-maps-proc",
+            "phones-proc",
+            "units-eval-proc",
+            "mu-proc",
+            "extract-proc",
+            "perceptual-proc",
+            "corpus-proc",
+        ),
+    ],
 )
 def test_an_output_that_cannot_be_written_is_refused_before_any_work(argv, want, tmp_path, capsys):
     """`say -o ok.csv -o /proc/x.mp4` wrote ok.csv, then failed with a FileNotFoundError traceback (exit 1); a folder
     named as the video was an IsADirectoryError after the render; `rig`/`adapt -o /proc/...` failed only after the
-    work. Each is now one line naming the output, exit 2, before anything is written."""
+    work; then "cannot write here: No such file or directory" of /proc, a folder that is there; `phones`, `units
+    eval` and `fit-maps` failed after their work, `mu`, `corpus` and `perceptual build -o /proc/d` with a traceback.
+    Each is now one line naming the output and its folder's problem, exit 2, before anything is written."""
     (tmp_path / "folder.mp4").mkdir()
     (tmp_path / "folder.tsv").mkdir()
     wav = _speech(tmp_path.parent / f"{tmp_path.name}_speech.wav")
@@ -267,3 +301,24 @@ def test_adapt_refuses_less_than_a_second_of_speech(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "0.5 s of speech; at least 1 s is needed" in err, err
     assert not (tmp_path / "m.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        (["animate", "missing.wav", "-o", "a.csv", "-o", "a.csv"], "a.csv: given twice as an output;"),
+        (["animate", "missing.wav", "-o", "a.csv", "-o", "./a.csv"], "a.csv: given twice as an output;"),
+        (["animate", "missing.wav", "--csv", "a.csv", "-o", "{tmp}/a.csv"], "given twice as an output (as a.csv);"),
+        (["animate", "missing.wav", "-o", "a.json", "--json", "sub/../a.json"], "(as a.json);"),
+        (["say", "Hello.", "-o", "a.mp4", "-o", "b.csv", "-o", "./a.mp4"], "a.mp4: given twice as an output;"),
+    ],
+    ids=["same", "dot-slash", "csv-flag", "json-flag", "say"],
+)
+def test_an_output_given_twice_is_refused_before_any_work(argv, said, tmp_path, monkeypatch, capsys):
+    """`animate SPEECH -o a.csv -o a.csv` wrote a.csv twice (and `-o a.csv -o ./a.csv`, `--csv a.csv -o a.csv`);
+    `say` rendered the same video twice. One line naming it, exit 2, before the speech is read or synthesised."""
+    monkeypatch.chdir(tmp_path)
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and said in err and err.endswith("give each output once"), err
+    assert list(tmp_path.iterdir()) == []

@@ -77,6 +77,33 @@ def test_animate_writes_curves_and_glb_keys_at_the_asked_frame_rate(tmp_path):
         assert keys.count == n and keys.max[0] == pytest.approx((n - 1) / fps, abs=1e-6)
 
 
+def test_the_quiet_warning_does_not_call_room_noise_speech(tmp_path, ffmpeg, capsys):
+    """5 s of white noise at -54 dBFS faded in over 0.1 s (ffmpeg): `animate` warned of "speech at -54.0 dBFS",
+    while the output noise gate rested the face for 45 % of the file. The line now gives that share (the rows the gate
+    brought to the neutral face: zero with the gate and not without it, on the live path computed here) and does
+    not call the file speech (`render` prints the same line, from the same function)."""
+    import subprocess
+
+    from assets.audio import read_audio
+    from assets.modelfile import load_model
+    from facecast.cli import main
+    from realtime_core.pipeline import speech_to_params
+
+    wav = tmp_path / "room.wav"
+    noise = "anoisesrc=color=white:amplitude=0.00346:duration=5:sample_rate=16000:seed=7,afade=t=in:d=0.1"
+    subprocess.run([ffmpeg, "-v", "error", "-f", "lavfi", "-i", noise, "-c:a", "pcm_s16le", str(wav)], check=True)
+    x, rate = read_audio(wav)
+    model = load_model()
+    gated, ungated = speech_to_params(model, x, rate), speech_to_params(model, x, rate, noise_gate=None)
+    rested = np.all(gated == 0, axis=1) & np.any(ungated != 0, axis=1)
+    assert 0.2 < rested.mean() < 0.9, rested.mean()  # the gate rests part of it, the rest is animated
+    assert main(["animate", str(wav), "-o", str(tmp_path / "room.csv")]) == 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "speech at" not in err, err
+    assert f"{wav}: the noise gate took {100 * rested.mean():.0f} % of it for room noise" in err, err
+    assert "dB under the level the model was trained at" in err and "if it is speech" in err, err
+
+
 def test_animate_auto_gain_brings_a_quiet_take_to_the_models_level_without_a_warning(tmp_path, capsys, shared_data):
     """The warning for quiet speech had only ffmpeg to offer: `--auto-gain` runs the live sessions' gain stage, so the
     quiet take's curves are the gain stage's (the offline path computed here) and near the take at its own level."""

@@ -174,3 +174,22 @@ def test_the_shipped_mlp_mappers_second_stages_move_the_mouth_corners(name: str)
     corners = [lm.corner_left, lm.corner_right]
     moved = np.linalg.norm(rig.deformed(out[0])[corners] - rig.deformed(speech[k])[corners], axis=1) / iod
     assert moved.min() >= 0.02, (name, moved)
+
+
+def test_face_shapes_are_the_recipe_less_what_the_mouth_parameters_carry():
+    """Every shape of a recipe is either carried by the four parameters (mouth*, jaw*: the expression's fitted
+    parameter change, EXPRESSION_PARAMS, is non-zero where the recipe has one) or a face shape a renderer adds from
+    the head's own targets, never both; the perceptual kit's faces are these (it had a recipe of its own)."""
+    from realtime_core.expressions import EXPRESSION_RECIPES, EXPRESSIONS, ExpressionError, face_shapes
+    from realtime_core.fitted_maps import EXPRESSION_PARAMS
+
+    assert face_shapes("neutral") == {}
+    for k, name in enumerate(EXPRESSIONS):
+        face = face_shapes(name)
+        mouth = {n: w for n, w in EXPRESSION_RECIPES[name].items() if n not in face}
+        assert face.keys() | mouth.keys() == EXPRESSION_RECIPES[name].keys() and not face.keys() & mouth.keys()
+        assert all(n.startswith(("mouth", "jaw")) for n in mouth)
+        assert all(not n.startswith(("mouth", "jaw")) for n in face) and face
+        assert (np.abs(EXPRESSION_PARAMS[:, k]).max() > 0.005) == bool(mouth), name
+    with pytest.raises(ExpressionError, match="unknown expression 'grin'"):
+        face_shapes("grin")

@@ -211,3 +211,25 @@ def test_an_mlp_session_smiling_at_room_noise_holds_still() -> None:
     served = np.array([f.params for f in frames[settled:]])
     assert np.abs(served[0]).max() > 0.05  # the smile shows on the neutral face
     np.testing.assert_array_equal(served, np.broadcast_to(served[0], served.shape))
+
+
+def test_a_head_driven_by_its_own_targets_shows_the_expression_on_its_face_shapes() -> None:
+    """The browser's default kind (morph weights) and vertex deltas of the built-in head carried an expression through
+    the mouth only: a surprise raised no brows. Its own brow/eye targets now take the recipe, in both kinds alike."""
+    from assets.heads.head import builtin_morph_head
+
+    rig = builtin_morph_head().rig
+    model = small_model()
+    s = Session(model, config=SessionConfig(sample_rate_hz=16000), rig=rig)
+    s.apply_control({"type": "control", "expression": {"name": "surprise", "intensity": 1.0, "at": 0.5}})
+    frames = s.push(speechlike(2.0, 16000)).frames + s.flush().frames
+    brow = next(i for i, n in enumerate(rig.names) if rig.meta["face_shapes"].get(n) == "browInnerUp")
+    before, after = frames[5], frames[-1]
+    for f in (before, after):
+        w = np.frombuffer(f.payload(P.KIND_MORPH, P.ENC_FLOAT32)[0], "<f4")
+        np.testing.assert_allclose(w, rig.weights(f.params, f.expression), atol=1e-6)
+        d = np.frombuffer(f.payload(P.KIND_DELTAS, P.ENC_FLOAT32)[0], "<f4").reshape(-1, 3)
+        np.testing.assert_allclose(d, rig.displacements(f.params, f.expression), atol=1e-5)
+    w0 = np.frombuffer(before.payload(P.KIND_MORPH, P.ENC_FLOAT32)[0], "<f4")
+    w1 = np.frombuffer(after.payload(P.KIND_MORPH, P.ENC_FLOAT32)[0], "<f4")
+    assert w0[brow] == 0 and w1[brow] == pytest.approx(0.7, abs=1e-6)

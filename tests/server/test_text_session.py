@@ -742,6 +742,65 @@ def test_markdown_rules_and_table_delimiters_are_skipped_not_rejected():
     assert clean_text(want[1]) == "name score"
 
 
+def _contains(seq: list[str], part: list[str]) -> bool:
+    """Whether ``part`` occurs in ``seq`` as a contiguous run."""
+    return any(seq[i : i + len(part)] == part for i in range(len(seq) - len(part) + 1))
+
+
+def test_a_url_is_spoken_as_its_host_through_facecast_serve_text(model_path, espeak):
+    """A chatbot's bare URL was read letter by letter ("h t t p s colon slash slash docs dot python dot org slash
+    three slash library ..."). Through a real `facecast serve --text` over loopback: the sentence is spoken with
+    the URL as its host; the viewer's audio is espeak-ng's reading of the text written out by hand (so its phone
+    events are the server's), in which no letter of "https" and no "colon" or "slash" is spelled; every phone is
+    one the unit selection knows, and the mouth moves through the whole sentence."""
+    from assets.espeak import Voice
+    from assets.tts import speak
+    from benchmarks.server_harness import ServerProcess
+
+    sentence = "See https://docs.python.org/3/library/re.html?highlight=sub#re.sub for the details."
+    by_hand = "See docs.python.org for the details."
+    srv = ServerProcess(model_path, head=False, args=("--text",))
+
+    async def main():
+        async with started_text(srv.url, "bot") as ws, ViewerClient(srv.url, session="bot") as viewer:
+            collect = asyncio.ensure_future(viewer.collect())
+            await ws.send(json.dumps({"type": "text", "text": sentence + " "}))
+            spoken = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            return spoken, ended, await collect
+
+    try:
+        spoken, ended, got = asyncio.run(asyncio.wait_for(main(), 60))
+    finally:
+        srv.stop()
+    assert spoken["type"] == "spoken" and spoken["text"] == by_hand and spoken["unknown_phones"] == []
+    assert ended["type"] == "ended" and ended["frames"] == spoken["frames"]
+    # the viewer heard exactly espeak-ng reading the text written by hand (int16 on the wire)
+    speech = speak(by_hand, language="en")
+    want = speech.padded()
+    audio = np.concatenate([m.values for m in got.audio])
+    assert len(audio) == spoken["frames"] * 22050 // 30 >= len(want.samples)
+    np.testing.assert_allclose(audio[: len(want.samples)], want.samples, atol=1.5 / 32768)
+    assert not np.any(audio[len(want.samples) :])
+
+    def phones(text: str) -> list[str]:  # espeak-ng's phone events for text as given (no normalisation), no pauses
+        syn = espeak.synthesize(text, Voice(language="en", base="en-us"), noise_seed=0)
+        return [p.phoneme for p in syn.phonemes if p.phoneme not in ("_", "_:", "_!", "_^_", ";")]
+
+    said, before = phones(by_hand), phones(clean_text(sentence))  # before: the URL as the cleaning left it
+    assert said == [p for p, _, _ in speech.phones if p not in ("_", "_:", "_!", "_^_", ";")]
+    for spelled in ("h t t p s", "colon", "slash", "library"):  # what the URL was read as
+        assert _contains(before, phones(spelled)) and not _contains(said, phones(spelled)), spelled
+    # the mouth moves in every quarter of the speech (unit selection got phones for every word)
+    speech = [(a, b) for p, a, b in want.phones if not p.startswith("_")]
+    t0, t1 = speech[0][0], speech[-1][1]
+    mouth = np.array([m.values[2] for m in got.frames])
+    for q in range(4):
+        k0, k1 = int(30 * (t0 + q * (t1 - t0) / 4)), int(30 * (t0 + (q + 1) * (t1 - t0) / 4))
+        assert np.ptp(mouth[k0 : k1 + 1]) > 0.03, (q, mouth[k0 : k1 + 1])
+
+
 @pytest.mark.slow
 def test_text_session_is_registered_cluster_wide(model, backend, redis_server):  # noqa: F811 (fixture)
     """Two nodes share a real redis-server: a text session on node A is listed by /sessions on node B,
@@ -878,3 +937,43 @@ def test_a_server_selects_units_on_one_blas_thread_while_it_serves(model, backen
     assert spoken["type"] == "spoken" and spoken["frames"] > 0
     assert serving == synth.blas_threads == {1}
     assert after == {2}
+
+
+def test_a_text_message_can_change_the_language_and_keeps_the_session(model, backend):
+    """A conversation that turns to Spanish had to end its session (its viewers closed) and start another: a text
+    message's `language` / `voice` now switch the session from that piece on. The pending English words are spoken
+    first, in English; the Spanish piece in Spanish (its frame count is what Spanish espeak-ng makes of it, not
+    English); an unsupported language is rejected with the piece and the session goes on in its language."""
+    from assets.tts import speak
+
+    def frames(text: str, language: str) -> int:
+        s = speak(text, language=language).padded()
+        return int(np.ceil(len(s.samples) * 30 / s.sample_rate_hz - 1e-9))
+
+    async def main():
+        async with running(model, backend) as srv:
+            async with started_text(srv.url, "bot") as ws, ViewerClient(srv.url, session="bot", kind="params") as v:
+                collect = asyncio.ensure_future(v.collect())
+                await ws.send(json.dumps({"type": "text", "text": "Thank you very"}))
+                await ws.send(json.dumps({"type": "text", "text": "Mañana", "language": "fr"}))
+                rejected = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "text", "text": "Hasta mañana, amigo. ", "language": "es"}))
+                english, spanish = json.loads(await ws.recv()), json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "text", "text": "Gracias. ", "voice": "f3"}))  # a variant: still es
+                variant = json.loads(await ws.recv())
+                await ws.send(json.dumps({"type": "end"}))
+                ended = json.loads(await ws.recv())
+                got = await asyncio.wait_for(collect, 60)
+            return rejected, english, spanish, variant, ended, got
+
+    rejected, english, spanish, variant, ended, got = asyncio.run(asyncio.wait_for(main(), 90))
+    assert rejected["type"] == "rejected" and "unsupported language 'fr'" in rejected["reason"]
+    assert rejected["text"] == "Mañana"  # refused with its piece: not spoken in the old language either
+    assert english == {**english, "type": "spoken", "text": "Thank you very", "language": "en"}
+    assert english["frames"] == frames("Thank you very", "en")
+    assert spanish == {**spanish, "type": "spoken", "text": "Hasta mañana, amigo.", "language": "es"}
+    es, en = frames("Hasta mañana, amigo.", "es"), frames("Hasta mañana, amigo.", "en")
+    assert es != en and spanish["frames"] == es
+    assert variant["language"] == "es" and spanish["media_time"] == pytest.approx(english["frames"] / 30)
+    # one session, one viewer stream through the change: every frame in order
+    assert [m.index for m in got.frames] == list(range(ended["frames"])) and got.close_code == P.CLOSE_NORMAL

@@ -152,6 +152,23 @@ def test_numbers_are_aligned_as_spoken(espeak) -> None:
     assert len(said) == len(th) == 1 and abs(said[0] - th[0]) < 0.05, (said, th)
 
 
+def test_a_transcript_is_read_as_facecast_say_reads_it(espeak) -> None:
+    """`say "I paid $5.50 at 9:00 on Dec 7." -o say.wav` now speaks "5 dollars and 50 cents at 9 o'clock on December
+    7th"; the aligner read the same transcript as espeak-ng did before ("dollar five point five zero ... nine zero
+    zero ... deck seven"), so `say TEXT --audio say.wav` looked for words that were not said. It reads it as said."""
+    from assets.tts import speak
+    from training.force_align import force_align
+
+    text = "I paid $5.50 at 9:00 on Dec 7."
+    speech = speak(text).padded()
+    assert speech.text == "I paid 5 dollars and 50 cents at 9 o'clock on December 7th."
+    got = force_align(speech.samples, speech.sample_rate_hz, text, source="say.wav")
+    said = " ".join(p.phoneme for p in got.phones if p.phoneme != "SIL")
+    assert "F AY V D AO L ER Z AH N D F IH F T IY S EH N T S" in said, said  # not "dollar five point five zero"
+    assert "N AY N AH K L AA K" in said, said  # "nine o'clock", not "nine zero zero"
+    assert "D IH S EH M B ER S EH V AH N TH" in said, said  # "December seventh", not "deck seven"
+
+
 def test_a_word_outside_the_dictionary_aligns(shared_data) -> None:
     """LJ001-0003 says "woodcutters", which the pocketsphinx dictionary lacks: it failed the run (exit 2, no hint).
     espeak-ng's letter-to-sound rules pronounce it now, and the clip aligns with those phones in their place."""

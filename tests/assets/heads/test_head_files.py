@@ -181,6 +181,26 @@ def test_colour_map_beside_a_mesh_is_chosen_by_whole_words(tmp_path, capsys):
     )
 
 
+def test_a_mesh_painted_by_its_vertex_colours_takes_no_image_beside_it(tmp_path, capsys):
+    """facecast's own glb exports carry UVs and vertex colours and no texture: loaded back as a head beside frame
+    grabs named like it (``take_0.3.png``), one of them was drawn on it as its colour map. Colours that paint the
+    mesh keep it; one colour everywhere (an exporter's default white) still takes the colour map beside it."""
+    v, t, uv = _box()
+    painted = np.column_stack([np.linspace(0.2, 0.9, len(v)), np.full(len(v), 0.4), np.full(len(v), 0.3)])
+    for name, colors, takes in (("painted", painted, False), ("white", np.ones((len(v), 3)), True)):
+        folder = tmp_path / name
+        folder.mkdir()
+        glb = folder / "take.glb"
+        glb.write_bytes(mesh_glb(HeadMesh(vertices=v, triangles=t, uvs=uv, colors=colors.astype(np.float32))))
+        for grab in ("take_0.3.png", "take_1.0.png"):
+            (folder / grab).write_bytes(_png((200, 30, 30), BOTTOM))
+        mesh = load_mesh(glb)
+        assert (mesh.texture is not None) is takes, name
+        if not takes:
+            np.testing.assert_allclose(mesh.colors, colors, atol=1e-5)  # the file's own colours, as written
+            assert capsys.readouterr().err == ""  # nothing chosen, nothing to warn about
+
+
 def test_gltf_node_transforms_quantized_sparse_and_skinned(tmp_path):
     v, t, _ = _box()
     q = np.round(v / 1.0 * 32767).astype("<i2")  # KHR_mesh_quantization: normalized int16 positions

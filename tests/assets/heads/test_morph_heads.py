@@ -101,9 +101,12 @@ def test_an_arkit_glb_animates_through_its_own_targets_with_no_rig_step(tmp_path
     path = _arkit_file(tmp_path, builtin_morph, rename)
     head = resolve_head(path)  # no landmarks anywhere: must not need a rig
     # The 22 targets speech drives (jaw, mouth: 19 before the antagonists' netting, whose re-solve also recruits
-    # mouthPressLeft, mouthRollLower and mouthShrugLower); eyes, brows, cheeks are left out (weights < 0.001).
-    assert head.kind == "morph" and len(head.rig.names) == 22
-    assert all(n.split(".")[-1].startswith(("Jaw", "Mouth")) for n in head.rig.names)
+    # mouthPressLeft, mouthRollLower and mouthShrugLower); eyes, brows, cheeks are driven by expressions only: the
+    # 13 face shapes of the recipes after them (realtime_core.expressions.face_shapes), found in these spellings too.
+    speech = head.rig.names[: len(head.rig.names) - head.rig.n_face]
+    assert head.kind == "morph" and len(speech) == 22 and head.rig.n_face == 13
+    assert all(n.split(".")[-1].startswith(("Jaw", "Mouth")) for n in speech)
+    assert not any(n.split(".")[-1].startswith(("Jaw", "Mouth")) for n in head.rig.names[len(speech) :])
     for p in ([0, 0, 0.3, 0], [0.03, 0.05, 0.1, -0.02], [-0.02, -0.1, 0.05, 0.04]):
         np.testing.assert_allclose(head.rig.deformed(np.array(p)), builtin_morph.rig.deformed(np.array(p)), atol=1e-4)
 
@@ -202,7 +205,7 @@ def test_morph_displacements_equal_the_reference_solve_and_a_float64_product(bui
     ref_w = rig.keymap.weights(x, kernel="numpy")
     assert 0.1 < np.mean((ref_w <= 0) | (ref_w >= 1)) < 0.95  # bounds active: the active set matters
     np.testing.assert_allclose(rig.keymap.weights(x), ref_w, rtol=0, atol=1e-10)
-    targets = rig.targets.astype(np.float64)  # (P, n_moving, 3)
+    targets = rig.targets[: len(rig.names) - rig.n_face].astype(np.float64)  # (P, n_moving, 3): the speech targets
     for p, w in zip(poses, ref_w):
         want = np.einsum("p,pvc->vc", w.astype(np.float32).astype(np.float64), targets)
         got = rig.displacements(p)
@@ -449,3 +452,63 @@ def test_an_own_target_head_modelled_with_its_lips_apart_rests_with_them_togethe
     # Lips within the limit: no rest.
     plain = resolve_head(_arkit_file(tmp_path, builtin_morph, lambda k: k), landmark_finder=lambda mesh: marks)
     assert plain.rig.rest is None and "rest_weights" not in plain.rig.meta
+
+
+def test_an_expression_moves_the_heads_own_face_shapes_and_leaves_the_speech_weights(builtin_morph):
+    """Through the four parameters alone an expression moved only the mouth: `render --expression surprise` on the
+    built-in head showed no raised brows and no wide eyes, and the browser's expression buttons hardly changed the
+    face. The head's own cheek, eye and brow targets now take each recipe's face shapes: the vertices move by exactly
+    the recipe's weights times the mesh's own targets (read from the file, not from the rig), and the speech
+    targets' weights are those without the expression, bit for bit."""
+    from realtime_core.expressions import EXPRESSIONS, face_shapes
+
+    rig, mesh = builtin_morph.rig, builtin_morph.mesh
+    assert rig.n_face > 0 and set(rig.meta["face_shapes"]) == set(rig.names[-rig.n_face :])
+    p = np.array([0.01, 0.02, 0.2, 0.0])
+    w0 = rig.weights(p)
+    assert not w0[-rig.n_face :].any()  # no expression: the face shapes rest
+    for k, name in enumerate(EXPRESSIONS):
+        alpha = np.zeros(len(EXPRESSIONS))
+        alpha[k] = 0.8
+        w = rig.weights(p, alpha)
+        np.testing.assert_array_equal(w[: -rig.n_face], w0[: -rig.n_face])
+        moved = rig.deformed(p, alpha).astype(np.float64) - rig.deformed(p).astype(np.float64)
+        want = sum(0.8 * wt * np.asarray(mesh.targets[n], dtype=np.float64) for n, wt in face_shapes(name).items())
+        np.testing.assert_allclose(moved, want, atol=1e-5)
+        assert np.abs(want).max() > 1e-3, name  # each expression moves the face beyond the mouth
+    # intensities over several expressions at once: clipped to a target's [0, 1]
+    assert rig.weights(p, np.ones(len(EXPRESSIONS)))[-rig.n_face :].max() <= 1.0
+
+
+def test_the_face_shapes_survive_the_rig_file_and_reach_the_glb(tmp_path, builtin_morph):
+    pygltflib = require_module("pygltflib")
+    from assets.heads.targets import morph_rig_arrays, morph_rig_from_arrays
+    from realtime_core.expressions import EXPRESSIONS
+
+    rig = builtin_morph.rig
+    back = morph_rig_from_arrays(morph_rig_arrays(rig), rig.neutral, rig.triangles)
+    np.testing.assert_array_equal(back.face_recipe, rig.face_recipe)
+    alpha = np.zeros((2, len(EXPRESSIONS)))
+    alpha[1, EXPRESSIONS.index("surprise")] = 1.0
+    params = np.array([[0, 0, 0.1, 0], [0, 0, 0.1, 0]], float)
+    g = pygltflib.GLTF2().load_from_bytes(head_glb(rig, builtin_morph.mesh, params, 30.0, expression=alpha))
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(2, -1)
+    names = g.meshes[0].extras["targetNames"]
+    brow = names.index(next(n for n in names if canonical_name(n) == "browInnerUp"))
+    assert w[0, brow] == 0 and w[1, brow] == pytest.approx(0.7)
+
+
+def test_a_frame_without_an_expression_skips_the_face_shapes_bit_for_bit(builtin_morph):
+    """The face shapes add 13 targets and 699 moving vertices to the built-in head: a frame without an expression
+    multiplies only the speech targets (MorphRig.active), with exactly the displacements of the whole product."""
+    from realtime_core.face.compiled import morph_displacements
+
+    rig = builtin_morph.rig
+    w = rig.weights(np.random.default_rng(5).uniform(-0.05, 0.3, (6, 4)))
+    trimmed, rows = rig.active(w)
+    assert trimmed.shape[1] == rows.shape[0] == len(rig.names) - rig.n_face
+    whole = morph_displacements(w, rig.flat_targets, np.empty((6, rig.flat_targets.shape[1]), dtype=np.float32))
+    assert rig.displacements_rows(w).tobytes() == whole.tobytes()
+    assert rig.displacements_rows(w, kernel="numpy").shape == whole.shape

@@ -3,19 +3,28 @@
 from __future__ import annotations
 
 import functools
+import json
 import operator
 
 import numpy as np
 import pytest
 
 from assets.tracks import decode_csv, decode_json
-from clients.export.rhubarb import read_tsv
+from clients.export.rhubarb import Cue, read_tsv
 from facecast.cli import main
 from tests.prerequisites import require_module
 from tests.speech import speechlike
 
 # `facecast animate` in a subprocess.
 pytestmark = pytest.mark.system
+
+
+def _animated_weights(g) -> np.ndarray:
+    """(frames, targets) float32: the morph weights a facecast glb's one animation sampler holds (pygltflib GLTF2)."""
+    acc = g.accessors[g.animations[0].samplers[0].output]
+    view = g.bufferViews[acc.bufferView]
+    n = len(g.meshes[0].extras["targetNames"])
+    return np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, n)
 
 
 def test_animate_writes_every_export_with_equal_curves(tmp_path):
@@ -47,10 +56,7 @@ def test_animate_writes_every_export_with_equal_curves(tmp_path):
     assert csv_t.n_frames == js.n_frames == 30
     np.testing.assert_allclose(js.values, csv_t.values, rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
     g = pygltflib.GLTF2().load(str(out["glb"]))
-    acc = g.accessors[g.animations[0].samplers[0].output]
-    view = g.bufferViews[acc.bufferView]
-    n_curves = len(g.meshes[0].extras["targetNames"])
-    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, n_curves)
+    w = _animated_weights(g)
     # The glb drives the head within the checked poses (a viewer of the file must not see a fold): its
     # curves are the parameters' nearest checked poses, the parameters themselves wherever they lie inside.
     # (This test model's untrained output reaches 9 IOD: far outside.)
@@ -116,9 +122,7 @@ def test_animate_arkit_glb_carries_the_expression_shapes(tmp_path):
     assert main([*argv, "--glb-morphs", "arkit52", "--expression", "smile:0.7@1.2"]) == 0
     g = pygltflib.GLTF2().load(str(glb))
     assert g.meshes[0].extras["targetNames"] == list(ARKIT_NAMES)
-    acc = g.accessors[g.animations[0].samplers[0].output]
-    view = g.bufferViews[acc.bufferView]
-    w = np.frombuffer(g.binary_blob(), "<f4", acc.count, view.byteOffset + (acc.byteOffset or 0)).reshape(-1, 52)
+    w = _animated_weights(g)
     from assets.audio import read_audio
 
     samples, _ = read_audio(wav)
@@ -136,6 +140,50 @@ def test_animate_arkit_glb_carries_the_expression_shapes(tmp_path):
     p = decode_csv(csv.read_bytes()).values
     np.testing.assert_allclose(p[t < 1.2], speech[t < 1.2], rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
     assert np.abs(p[late] - speech[late]).max() > 1e-3
+
+
+def test_animate_curves_writes_the_blendshape_weights_an_engine_drives_as_csv_and_json(tmp_path, capsys):
+    """An engine's own ARKit face (a VTuber's "perfect sync" avatar, a MetaHuman) takes per-frame ARKit weights, which
+    only a glb carried: ``--curves arkit52`` writes them as the CSV / JSON, the same numbers as the ``--glb-morphs
+    arkit52`` glb of the same run animates, expression included; ``ovr15`` the visemes; the TSV stays the mouth
+    shapes. Without a .csv/.json to hold them the option is refused in one line."""
+    pygltflib = require_module("pygltflib")
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from realtime_core.expressions import EXPRESSION_RECIPES
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = write_wav(tmp_path / "s.wav", speechlike(2.0, 16000), 16000)
+    run = ["animate", str(wav), "--model", str(model), "--expression", "smile:0.7@1.0"]
+    outs = [tmp_path / f"w.{s}" for s in ("csv", "json", "glb", "tsv")]
+    assert (
+        main([*run, "--curves", "arkit52", "--glb-morphs", "arkit52", *(a for o in outs for a in ("-o", str(o)))]) == 0
+    )
+    assert main([*run, "-o", str(tmp_path / "p.tsv"), "-o", str(tmp_path / "p.csv")]) == 0
+    g = pygltflib.GLTF2().load(str(outs[2]))
+    names = g.meshes[0].extras["targetNames"]
+    w = _animated_weights(g)
+    csv_t, js = decode_csv(outs[0].read_bytes()), decode_json(outs[1].read_bytes())
+    assert csv_t.names == js.names == tuple(names) and len(set(names)) == 52  # the glb's names and order
+    assert js.fps == 30.0 and csv_t.n_frames == len(w) == 60 and csv_t.times()[0] == 0.0
+    np.testing.assert_allclose(csv_t.values, w, rtol=1e-7, atol=1e-9)  # float32 weights, 9 significant digits
+    np.testing.assert_allclose(js.values, csv_t.values, rtol=1e-8, atol=1e-12)  # CSV: 9 significant digits
+    assert w.min() >= 0.0 and w.max() <= 1.0
+    assert "blendshape weight" in json.loads(outs[1].read_bytes())["units"]
+    smile = names.index("cheekSquintLeft")  # the expression's own shape, in no speech weight
+    assert w[:30, smile].max() == 0.0 and w[-1, smile] == pytest.approx(
+        0.7 * EXPRESSION_RECIPES["smile"]["cheekSquintLeft"]
+    )
+    assert outs[3].read_bytes() == (tmp_path / "p.tsv").read_bytes()  # cues of the parameters, not of weights
+    assert decode_csv((tmp_path / "p.csv").read_bytes()).names[2] == "mouth_open"  # the default is unchanged
+    assert main([*run, "--curves", "ovr15", "--csv", str(tmp_path / "v.csv")]) == 0
+    v = decode_csv((tmp_path / "v.csv").read_bytes())
+    assert v.names[:3] == ("sil", "PP", "FF") and len(v.names) == 15 and 0.0 <= v.values.min() <= v.values.max() <= 1
+    capsys.readouterr()
+    assert main([*run, "--curves", "arkit52", "-o", str(tmp_path / "only.tsv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--curves arkit52" in err and not (tmp_path / "only.tsv").exists()
 
 
 def test_animate_refuses_before_writing_anything(tmp_path, capsys):
@@ -206,7 +254,7 @@ def test_a_silent_take_animates_a_closed_mouth(tmp_path):
     assert track.n_frames == 30
     assert np.all(track.values == track.values[0])  # no motion at all
     assert track.values[0, 2] == 0.0  # mouth_open at the closed pose
-    assert [c.shape for c in read_tsv((tmp_path / "p.tsv").read_bytes())] == ["X"]
+    assert read_tsv((tmp_path / "p.tsv").read_bytes()) == [Cue(0.0, "X"), Cue(1.0, "X")]  # rest, and its end
 
 
 _PROBES: list[str] = []

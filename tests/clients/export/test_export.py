@@ -16,7 +16,7 @@ from assets.tracks import decode_csv, decode_json
 from clients.export.errors import ExportError
 from clients.export.files import export_track
 from clients.export.gltf import animated_glb, rig_targets
-from clients.export.rhubarb import SHAPES, ShapeThresholds, cues, frame_shapes, read_tsv, tsv_bytes
+from clients.export.rhubarb import SHAPES, Cue, ShapeThresholds, cues, frame_shapes, read_tsv, tsv_bytes
 from realtime_core import VISUAL_PARAMS
 from realtime_core.track import Track
 from tests.prerequisites import require_module, require_tool
@@ -75,7 +75,7 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
     shapes = ["X"] * 5 + ["D"] * 6 + ["C"] + ["B"] * 4  # the single C is too short to show
     table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "C": [0, 0, 0.18, 0], "B": [0, 0, 0.08, 0]}
     tr = Track(values=np.array([table[s] for s in shapes]))
-    cs = cues(tr, ShapeThresholds(min_cue_frames=2))
+    cs = cues(tr, ShapeThresholds(min_cue_s=2 / 30))
     assert [(round(c.start_s, 4), c.shape) for c in cs] == [
         (0.0, "X"),
         (round(5 / 30, 4), "D"),
@@ -88,6 +88,31 @@ def test_tsv_cues_merge_runs_and_end_at_rest():
     assert all(c.shape in SHAPES for c in real) and len(real) >= 4
 
 
+def test_tsv_ends_at_the_tracks_end_even_after_a_pause():
+    # Rhubarb closes every TSV with `end<TAB>X`, the only line that says how long the animation lasts; a take ending
+    # in a pause (every GRID sentence, every `say`) ended at its last cue's start: bbaf3s.wav (3.00 s) at "1.67 X".
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0]}
+    tr = Track(values=np.array([table[s] for s in ["X"] * 5 + ["D"] * 6 + ["X"] * 19]))  # 30 frames: 1.00 s
+    assert tsv_bytes(tr).decode().splitlines() == ["0.00\tX", "0.17\tD", "0.37\tX", "1.00\tX"]
+    assert read_tsv(tsv_bytes(Track(values=np.zeros((30, 4)))))[-1] == Cue(1.0, "X")  # silence: rest, then its end
+    # At 240 fps a cue may start within the last hundredth: the closing line takes its place, times still increase.
+    late = Track(values=np.array([table[s] for s in ["X"] * 239 + ["D"]]), fps=240)
+    assert tsv_bytes(late, ShapeThresholds(min_cue_s=1 / 240)).decode().splitlines() == ["0.00\tX", "1.00\tX"]
+
+
+def test_tsv_cues_do_not_depend_on_the_frame_rate_they_are_written_at():
+    # The merge and closure rules are durations: counted in frames, `animate --fps 60` showed the 33 ms G cues of a
+    # raised lip that the 30 fps cues of the same speech merge (bbaf3s.wav: "1.25 G 1.28 A 1.38 G" at 60 fps only).
+    table = {"X": [0, 0, 0.0, 0], "B": [0, 0, 0.08, 0], "G": [0.04, 0, 0.05, 0], "D": [0, 0, 0.35, 0]}
+    seq = ["X"] * 4 + ["B"] * 5 + ["G"] + ["B"] * 5 + ["X"] * 3 + ["D"] * 6 + ["X"] * 6
+    at30 = Track(values=np.array([table[s] for s in seq]))
+    assert "G" in frame_shapes(at30.at_fps(60).values)  # the blip lasts 3 frames at 60 fps: 50 ms, under 2/30 s
+    for fps in (60.0, 120.0):
+        got, want = cues(at30.at_fps(fps)), cues(at30)
+        assert [c.shape for c in got] == [c.shape for c in want] == ["X", "B", "A", "D", "X"]
+        assert all(abs(g.start_s - w.start_s) <= 1 / 30 for g, w in zip(got, want, strict=True))
+
+
 def test_a_closure_inside_speech_is_an_a_cue_however_short():
     # A one-frame /b/ merged into the vowel before it, and lips closed without the press read as X, the
     # idle shape for pauses: 3 of the 9 /p b m/ of a 10-word `facecast say` sentence had no A cue.
@@ -98,7 +123,7 @@ def test_a_closure_inside_speech_is_an_a_cue_however_short():
     got = [(round(c.start_s * 30), c.shape) for c in cues(tr)]
     # the rests before and after stay X; the pressed frame and the unpressed closure are A
     assert got == [(0, "X"), (8, "D"), (12, "A"), (13, "D"), (17, "A"), (19, "B"), (23, "X")]
-    assert [c.shape for c in cues(tr, ShapeThresholds(closure_frames=1))][4] == "X"  # 2 frames: a pause
+    assert [c.shape for c in cues(tr, ShapeThresholds(closure_s=1 / 30))][4] == "X"  # 2 frames: a pause
 
 
 def _synthetic_head(n: int = 60, seed: int = 1):
@@ -320,6 +345,37 @@ def test_export_track_writes_every_format_and_the_audio_beside(tmp_path, builtin
     with pytest.raises(ExportError, match="unknown export format"):
         export_track(tmp_path / "x.fbx", tr)
     assert not list(tmp_path.glob(".*tmp"))  # atomic writes leave no temporaries
+
+
+@pytest.mark.system
+def test_an_exported_glb_loads_back_as_a_head_or_says_why_not(tmp_path, builtin_rig_file, capsys):
+    """A glb of a head driven by its own targets is a head with ARKit targets (``render --head take.glb``); a
+    retargeted head's glb was rigged again as a new mesh without a word, its lips already cut open and a cavity
+    added (Lee Perry-Smith's tore: a jagged dark slit at rest, after 110 s of rigging): refused in one line naming
+    the file and what to give instead, before any work, exit 2."""
+    from assets.errors import MeshError
+    from assets.heads.head import builtin_morph_head, resolve_head
+    from facecast.cli import main
+
+    tr = syllable_track(30)
+    own, retargeted = tmp_path / "own.glb", tmp_path / "retargeted.glb"
+    morph = builtin_morph_head()
+    export_track(own, tr, head=(morph.rig, morph.mesh))
+    export_track(retargeted, tr, head=builtin_rig_file)
+    back = resolve_head(own)
+    assert type(back.rig) is type(morph.rig) and back.rig.names == morph.rig.names  # its own ARKit targets
+    np.testing.assert_allclose(back.rig.weights(tr.values), morph.rig.weights(tr.values), atol=1e-5)
+    with pytest.raises(MeshError, match="retargeted head") as err:
+        resolve_head(retargeted)
+    assert str(retargeted) in str(err.value) and "--head-mode retarget" in str(err.value)
+    capsys.readouterr()
+    wav = tmp_path / "s.wav"
+    from assets.audio import write_wav
+
+    write_wav(wav, np.zeros(16000, np.float32), 16000)
+    assert main(["animate", str(wav), "--head", str(retargeted), "-o", str(tmp_path / "out.glb")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "retargeted.glb" in lines[0] and not (tmp_path / "out.glb").exists()
 
 
 @pytest.mark.system

@@ -276,3 +276,54 @@ def test_mups_of_speech_after_noise_are_the_ungated_ones(shared_data):
     np.testing.assert_array_equal(on[k:], off[k:])
     np.testing.assert_array_equal(mon[k:], moff[k:])
     assert not np.array_equal(mon[SETTLED:60], moff[SETTLED:60])  # the noise before is faded
+
+
+class _GateLevels:
+    """The levels (k,) dB the live chain hands the noise gate after each push/flush (``SpeechToParams`` passes the
+    front end's ``last_level_db``), as a streaming stage for :func:`tests.chunking.assert_chunk_invariant`."""
+
+    def __init__(self, model, kernel: str) -> None:
+        self.fe = model.front_end(kernel=kernel)
+
+    def push(self, x: np.ndarray) -> np.ndarray:
+        self.fe.push(x)
+        return self.fe.last_level_db
+
+    def flush(self) -> np.ndarray:
+        self.fe.flush()
+        return self.fe.last_level_db
+
+
+def _frame_levels_db(x: np.ndarray, mcfg) -> np.ndarray:
+    """Each analysis frame's level computed here from the samples: pre-emphasis, Hamming window, power spectrum, mel
+    energies floored, then the mean of 10 log10 over the mel bands (what c0 of the orthonormal DCT measures)."""
+    from realtime_core.features.mfcc import mel_filterbank
+
+    pre = x - mcfg.preemphasis * np.concatenate([[0.0], x[:-1]])
+    n, win = mcfg.n_frames_for(x.size), mcfg.window_len
+    padded = np.concatenate([pre, np.zeros(win)])
+    frames = np.stack([padded[mcfg.frame_start(k) : mcfg.frame_start(k) + win] for k in range(n)]) * np.hamming(win)
+    power = np.abs(np.fft.rfft(frames, n=mcfg.n_fft, axis=1)) ** 2 / mcfg.n_fft
+    fb = mel_filterbank(
+        sample_rate_hz=mcfg.sample_rate_hz, n_fft=mcfg.n_fft, n_mels=mcfg.n_mels, fmin_hz=0.0, fmax_hz=RATE / 2
+    )
+    return np.mean(10.0 * np.log10(np.maximum(power @ fb, mcfg.energy_floor)), axis=1)
+
+
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])
+def test_the_gates_levels_are_the_frames_levels_for_any_chunking(kernel, shipped, shared_data):
+    """The compiled front end now hands over the levels its silence gate computed (the live path computed them a
+    second time in numpy on every push): on a real GRID s1 sentence with room noise before it, fed whole, sample by
+    sample and in random chunks, they are each frame's level computed independently here."""
+    from assets.audio import read_audio
+    from assets.grid import sentences
+
+    assert shipped.frontend.mfcc.warp == 1.0 and shipped.frontend.mfcc.fmin_hz == 0.0  # the reference below assumes
+    s = sentences(shared_data / "video" / "grid_s1", split="train")[1]
+    speech = read_audio(s.video, rate_hz=RATE)[0].astype(np.float64)
+    x = np.concatenate([_noise("white", 0.5, -54.0), speech])
+    got = assert_chunk_invariant(lambda: _GateLevels(shipped, kernel), x, atol=1e-10, max_examples=6)
+    want = _frame_levels_db(x, shipped.frontend.mfcc)
+    assert got.shape == want.shape == (shipped.frontend.mfcc.n_frames_for(x.size),)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    assert want.max() - want[:10].mean() > 20  # the sentence stands well over the room noise
