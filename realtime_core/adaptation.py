@@ -3,7 +3,8 @@
 The enrolment recordings go through the model's own front end (MFCC -> CMVN -> context, as
 the live path computes them), then :func:`realtime_core.hmm.adapt.map_adapt` re-estimates the
 audio means and mixture weights. The result is a new :class:`AvModel` (same front end, CMVN
-statistics and visual side) whose streaming matrices are recomputed from the adapted HMM when
+statistics, visual side and learned readout, the readout re-centred so it sees the audio rows it was
+fitted on: :meth:`AvModel.with_hmm`) whose streaming matrices are recomputed from the adapted HMM when
 first used. No I/O: reading the audio and saving the model are the caller's.
 """
 
@@ -100,4 +101,4 @@ def adapt_av_model(
         "audio_loglik_per_frame": [round(before, 4), round(after, 4)],
         "components_visited": visited,
     }
-    return replace(model, hmm=result.model, metadata=meta), result
+    return replace(model.with_hmm(result.model), metadata=meta), result

@@ -100,6 +100,15 @@ class AvModel:
         """Precomputed inversion matrices (computed once per model)."""
         return ConditionalForm.from_model(self.hmm)
 
+    def with_hmm(self, hmm: AvHmm) -> AvModel:
+        """This model with ``hmm`` (the same sizes; speaker adaptation's audio means and weights) in place of its
+        own, everything else kept: the readout re-centred (:meth:`Readout.recentred`) so that it sees the audio
+        rows it was fitted on, whatever centre the new HMM's streaming matrices expand around."""
+        adapted = replace(self, hmm=hmm)
+        if self.readout is not None:
+            adapted = replace(adapted, readout=self.readout.recentred(adapted.form.center - self.form.center))
+        return adapted
+
     @property
     def sample_rate_hz(self) -> int:
         return int(self.frontend.mfcc.sample_rate_hz)

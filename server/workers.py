@@ -104,7 +104,7 @@ def _worker_main(conn, model_bytes: bytes, rig_bytes: bytes | None = None) -> No
                     m = model
                     if len(msg) > 3:  # enrolled by the server: its adapted audio means and mixture weights
                         assert isinstance(model, AvModel)
-                        m = replace(model, hmm=replace(model.hmm, means=msg[3][0], weights=msg[3][1]))
+                        m = model.with_hmm(replace(model.hmm, means=msg[3][0], weights=msg[3][1]))
                     sessions[sid] = (Session(m, config=SessionConfig(**msg[2]), rig=rig, times=rec), rec)
                     conn.send(("ok", None))
                 elif op == "push":

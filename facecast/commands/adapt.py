@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         "caution: nothing here checks the adapted model against lips, and adaptation can make it worse: with the "
         "shipped default model it lowered r(mouth_open) on held-out speech of each new voice measured, with "
-        "low-latency it raised it for two of three (docs/training.md, 'Speaker adaptation'). Compare both on a video "
+        "low-latency it raised it for one of three (docs/training.md, 'Speaker adaptation'). Compare both on a video "
         f"of the talker first: facecast eval --model {out} --video-dir FOLDER, then --model {args.model}"
     )
     return 0

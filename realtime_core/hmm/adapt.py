@@ -54,9 +54,9 @@ from realtime_core.hmm.model import LOG_2PI, AvHmm
 @dataclass(frozen=True, kw_only=True)
 class AdaptConfig:
     """relevance: tau, the prior's weight on each audio mean in frames (Gauvain & Lee; 8-20 is
-    usual for GMM-UBM speaker adaptation); weight_relevance: tau_w for the mixture weights
-    (``None``: no weight adaptation); n_iter: EM iterations; tol: stop when the MAP objective
-    gains less than this per frame."""
+    usual for GMM-UBM speaker adaptation; ``inf``: the means kept as they are); weight_relevance: tau_w
+    for the mixture weights (``None`` or ``inf``: no weight adaptation); n_iter: EM iterations; tol: stop
+    when the MAP objective gains less than this per frame."""
 
     relevance: float = 8.0
     weight_relevance: float | None = 8.0
@@ -138,13 +138,16 @@ def audio_log_likelihood(model: AvHmm, sequences: Sequence[np.ndarray]) -> float
 
 
 def _log_prior(model: AvHmm, prior: AvHmm, config: AdaptConfig) -> float:
-    """Log MAP prior of ``model``'s audio means and weights (up to a constant)."""
+    """Log MAP prior of ``model``'s audio means and weights (up to a constant). An infinite relevance is a point
+    mass at the prior, which the M-step keeps: its term is that constant (0), not ``inf * 0``."""
     n, m, _ = model.means.shape
     da = model.n_audio
-    diff = (model.means[:, :, :da] - prior.means[:, :, :da]).reshape(n * m, da)
-    z = np.linalg.solve(_audio_chol(prior), diff[..., None])[..., 0]  # L^-1 (mu - mu0): same covariances
-    total = -0.5 * config.relevance * float(np.sum(z**2))
-    if config.weight_relevance is not None:
+    total = 0.0
+    if np.isfinite(config.relevance):
+        diff = (model.means[:, :, :da] - prior.means[:, :, :da]).reshape(n * m, da)
+        z = np.linalg.solve(_audio_chol(prior), diff[..., None])[..., 0]  # L^-1 (mu - mu0): same covariances
+        total -= 0.5 * config.relevance * float(np.sum(z**2))
+    if config.weight_relevance is not None and np.isfinite(config.weight_relevance):
         with np.errstate(divide="ignore"):
             total += config.weight_relevance * float(np.sum(prior.weights * np.log(model.weights)))
     return total
@@ -203,9 +206,10 @@ def map_adapt(model: AvHmm, sequences: Sequence[np.ndarray], *, config: AdaptCon
         if it == config.n_iter or (len(history) > 1 and history[-1] - history[-2] < config.tol):
             break
         means = prior.means.copy()
-        means[:, :, :da] = (tau * prior.means[:, :, :da] + s1) / (tau + occ)[:, :, None]
+        if np.isfinite(tau):  # an infinite prior weight keeps the means bit for bit (inf * mu0 / inf is NaN)
+            means[:, :, :da] = (tau * prior.means[:, :, :da] + s1) / (tau + occ)[:, :, None]
         weights = prior.weights
-        if config.weight_relevance is not None:
+        if config.weight_relevance is not None and np.isfinite(config.weight_relevance):
             tw = config.weight_relevance
             weights = (tw * prior.weights + occ) / (tw + occ.sum(axis=1, keepdims=True))
             weights = weights / weights.sum(axis=1, keepdims=True)

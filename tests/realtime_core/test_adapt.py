@@ -105,3 +105,49 @@ def test_bad_input_is_named(setup) -> None:
         map_adapt(si, [np.full((10, 3), np.nan)])
     with pytest.raises(ConfigError, match="relevance"):
         AdaptConfig(relevance=0)
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    """The shipped default model (it has a learned readout that takes the centred audio row) and 8 s of
+    speech-like sound as an enrolment."""
+    from assets.modelfile import load_model
+    from tests.speech import speechlike
+
+    return load_model(None), speechlike(8.0, 16000, seed=3) * 0.6
+
+
+def test_an_infinite_relevance_gives_back_the_model_and_its_live_output_bit_for_bit(shipped) -> None:
+    """MAP with an infinite prior weight is no adaptation: the same HMM arrays and the same live frames (it was
+    inf * mu0 / inf = NaN, refused as 'weights contains NaN or inf')."""
+    from realtime_core.adaptation import adapt_av_model
+    from realtime_core.pipeline import speech_to_params
+
+    model, enrol = shipped
+    inf = float("inf")
+    adapted, res = adapt_av_model(model, [enrol], config=AdaptConfig(relevance=inf, weight_relevance=inf))
+    assert res.n_frames > 150 and np.all(np.isfinite(res.history))
+    for name in ("means", "weights", "covars", "transmat", "startprob"):
+        np.testing.assert_array_equal(getattr(adapted.hmm, name), getattr(model.hmm, name))
+    speech = enrol[::-1].copy()  # other sounds of the same "voice"
+    np.testing.assert_array_equal(speech_to_params(adapted, speech), speech_to_params(model, speech))
+
+
+def test_adapting_leaves_the_readout_the_audio_rows_it_was_fitted_on(shipped) -> None:
+    """The inverter centres each audio row at ``form.center``, a mean of the audio means and weights, which adaptation
+    moves: the adapted model's readout must map the newly centred rows as the original readout maps the rows centred
+    as it was fitted (it saw them shifted by up to 0.26 per feature with 48 s of GRID s1 before)."""
+    from realtime_core.adaptation import adapt_av_model
+    from realtime_core.inversion import StreamConfig
+
+    model, enrol = shipped
+    adapted, _ = adapt_av_model(model, [enrol])
+    shift = adapted.form.center - model.form.center
+    assert np.abs(shift).max() > 0.01  # the centre did move
+    fe = adapted.front_end(kernel="numpy")
+    oa = np.concatenate([fe.push(enrol), fe.flush()])
+    raw, post, audio = adapted.inverter(StreamConfig(kernel="numpy", dtype="float64")).trace(oa)
+    np.testing.assert_allclose(
+        adapted.readout.apply(raw, post, audio), model.readout.apply(raw, post, audio + shift), atol=1e-9
+    )
+    assert not np.allclose(model.readout.apply(raw, post, audio), model.readout.apply(raw, post, audio + shift))
