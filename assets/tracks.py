@@ -39,6 +39,7 @@ import numpy as np
 from assets.errors import CorpusFormatError, TruncatedFileError
 from assets.files import atomic_write_bytes
 from realtime_core import VISUAL_PARAMS
+from realtime_core.blendshapes import BLENDSHAPE_SETS, blendshape_names
 from realtime_core.errors import ConfigError
 from realtime_core.track import DEFAULT_FPS, Track, frames_from_samples
 
@@ -158,13 +159,27 @@ def read_csv_resampled(path: str | Path, fps: float, *, names: tuple[str, ...] |
     got, a = _parse(_read_bytes(path, "parameters file"), Path(path))
     missing = [n for n in want if n not in got]
     if missing or not len(a):
-        raise CorpusFormatError(path, f"expected columns {['t', *want]} and at least one row, got {['t', *got]}")
+        raise CorpusFormatError(path, _not_these_curves(want, got, "columns", "row"))
     if np.any(np.diff(a[:, 0]) <= 0):
         raise CorpusFormatError(path, "times must be strictly increasing")
     cols = [1 + got.index(n) for n in want]
     t = a[:, 0]
     until_s = float(t[-1] + np.median(np.diff(t))) if len(t) > 1 else None  # one row: one frame, its length unknown
     return frames_from_samples(t, a[:, cols], fps, names=want, until_s=until_s)
+
+
+def _not_these_curves(want: tuple[str, ...], got: tuple[str, ...] | list[str], what: str, row: str) -> str:
+    """Why a curves file lacks the ``want`` curves. A file of blendshape weights (``animate --curves arkit52|ovr15``)
+    is named as such with what to give instead: listing its 52 columns against the four wanted said neither what the
+    file was nor which file to give (`render --params` of an `animate --curves arkit52` CSV)."""
+    for which in BLENDSHAPE_SETS:
+        if tuple(want) == VISUAL_PARAMS and set(blendshape_names(which)) <= set(got):
+            return (
+                f"holds {which} blendshape weights (animate --curves {which}), not the four mouth parameters; give "
+                "the curves of 'facecast animate SPEECH -o OUT.csv' (or .json) without --curves"
+            )
+    t = ["t"] if what == "columns" else []
+    return f"expected {what} {[*t, *want]} and at least one {row}, got {[*t, *got]}"
 
 
 def encode_json(track: Track, *, audio: str | None = None, units: str = "IOD") -> bytes:
@@ -215,6 +230,6 @@ def read_params_resampled(path: str | Path, fps: float, *, names: tuple[str, ...
     tr = read_json(path)
     missing = [n for n in want if n not in tr.names]
     if missing or not len(tr.values):
-        raise CorpusFormatError(path, f"expected curves {list(want)} and at least one frame, got {list(tr.names)}")
+        raise CorpusFormatError(path, _not_these_curves(want, tr.names, "curves", "frame"))
     cols = [tr.names.index(n) for n in want]
     return Track(values=tr.values[:, cols], names=want, fps=tr.fps, start_s=tr.start_s).at_fps(fps)

@@ -210,3 +210,25 @@ def test_a_json_given_for_a_csv_is_refused_in_a_short_line(tmp_path):
     with pytest.raises(CorpusFormatError, match=r"take\.json: header must be 't,<channel names>'") as info:
         read_csv_resampled(p, 30.0)
     assert len(str(info.value)) < len(str(p)) + 150 and '{"format":"facecast-curves"' in str(info.value)
+
+
+@pytest.mark.parametrize("which", ["arkit52", "ovr15"])
+@pytest.mark.parametrize("ext", ["csv", "json"])
+def test_a_blendshape_curves_file_given_for_the_mouth_parameters_is_named_as_such(tmp_path, which, ext):
+    """`render --params` of an `animate --curves arkit52` CSV listed its 52 columns against the four wanted, naming
+    neither what the file holds nor what to give; now one line says both."""
+    from assets.tracks import read_params_resampled
+    from realtime_core.blendshapes import blendshape_names
+
+    names = blendshape_names(which)
+    tr = Track(values=np.full((4, len(names)), 0.25), names=names)
+    path = tmp_path / f"w.{ext}"
+    if ext == "csv":
+        write_csv(path, tr)
+    else:
+        path.write_bytes(encode_json(tr, units=f"{which} blendshape weight [0, 1]"))
+    with pytest.raises(CorpusFormatError) as err:
+        read_params_resampled(path, 30.0)
+    msg = str(err.value)
+    assert f"w.{ext}: holds {which} blendshape weights" in msg and "without --curves" in msg
+    assert "eyeBlinkLeft" not in msg and "\n" not in msg
