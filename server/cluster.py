@@ -195,6 +195,7 @@ class RemoteFeed:
         self.frames = 0
         self.dropped = 0
         self.session = self.facts  # what descriptions read, as of a LiveSession
+        self.source = str(row.get("source", "ingest"))  # the session's source kind, as LiveSession.source
         self.descriptions: dict[ViewRequest, str] = {}  # server.describe.view_description_text's cache
         self.joining: dict[bytes, ReplayJoin] = {}  # viewers being sent the owner's replay, by request id
 

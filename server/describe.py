@@ -55,7 +55,10 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
         "header_encoding": req.header_encoding,
         "header_bytes": P.HEADER_BYTES,
         "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
-        "expressions": [NEUTRAL, *EXPRESSIONS],  # what a viewer's expression control may name
+        # What a viewer's expression control may name. None for a text session: its frames are made a whole
+        # sentence ahead of their play-out and it answers every control `rejected` (the browser viewer offered
+        # buttons a text session then refused: "text sessions have no controls").
+        "expressions": [] if live.source == "text" else [NEUTRAL, *EXPRESSIONS],
         "algorithmic_delay_s": s.algorithmic_delay_s,
         "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if req.audio else None,
         "values_per_frame": len(VISUAL_PARAMS),

@@ -289,6 +289,9 @@ def test_text_session_over_loopback(model, backend):
     assert idx == list(range(ended["frames"]))
     assert all(m.media_time == pytest.approx(m.index / 30) for m in got.frames)
     assert got.description["audio"]["rate_hz"] == 22050
+    # A text session takes no expression control, so its viewers are offered none (the browser viewer showed the
+    # four buttons, each then answered "text sessions have no controls").
+    assert got.description["expressions"] == []
     audio_t = [m.media_time for m in got.audio]
     assert audio_t == pytest.approx([k / 30 for k in range(len(audio_t))])
     assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
@@ -845,6 +848,7 @@ def test_text_session_is_registered_cluster_wide(model, backend, redis_server): 
     assert status == 200 and listed["scope"] == "cluster"
     rows = {r["name"]: r for r in listed["sessions"]}
     assert rows["bot"]["node"] == "na" and rows["bot"]["source"] == "text"
+    assert got.description["expressions"] == []  # a viewer on another node is offered no expressions either
     assert taken[0] == P.CLOSE_CONFLICT and "na" in taken[1]
     assert spoken["type"] == "spoken" and ended["frames"] == spoken["frames"]
     idx = [m.index for m in got.frames]

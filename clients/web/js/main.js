@@ -271,7 +271,7 @@ function showExpressionPicker(names) {
   box.replaceChildren();
   box.classList.toggle("none", names.length === 0);
   if (names.length === 0) {
-    box.textContent = "none (this server has no expressions)";
+    box.textContent = "none (this session takes no expressions)";
     return;
   }
   for (const name of names) {
