@@ -160,8 +160,8 @@ _WEEKDAYS = {  # short form -> name, only in a range ("Mon-Fri": "mon fry"); "Su
     )
 }
 _WORDS = {  # per language: the words the rewrites put in
-    "en": {"dot": "dot", "port": "port", "to": "to", "version": "version"},
-    "es": {"dot": "punto", "port": "puerto", "to": "a", "version": "versión"},
+    "en": {"dot": "dot", "port": "port", "to": "to", "version": "version", "between": "between", "and": "and"},
+    "es": {"dot": "punto", "port": "puerto", "to": "a", "version": "versión", "between": "entre", "and": "y"},
 }
 _CURRENCY = {  # sign or ISO code -> (one, many, one hundredth, many hundredths)
     "en": {
@@ -421,7 +421,9 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
     )
 
     def span(m: re.Match[str]) -> str:
-        between = "y" if language == "es" and re.search(r"\bentre\s$", m.string[: m.start()], re.I) else words["to"]
+        # "between 10-20" is "between 10 and 20" ("between 10 to 20" was said), as "entre 10 y 20"
+        after_between = re.search(rf"\b{words['between']}\s[$€£¥]?$", m.string[: m.start()], re.I)
+        between = words["and"] if after_between else words["to"]
         return f"{m.group(1)} {between} {m.group(2)}"
 
     text = _RANGE.sub(span, text)

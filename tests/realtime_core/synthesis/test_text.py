@@ -72,6 +72,8 @@ REWRITTEN = [
         "Expect 10 to 20 minutes, pages 5 to 10, 10 dollars to 20 dollars.",
     ),
     ("es", "Tardará entre 10-20 minutos, de lun-vie.", "Tardará entre 10 y 20 minutos, de lunes a viernes."),
+    # after "between" a range is "and", as after "entre" ("between 10 to 20 people" was said)
+    ("en", "Between 10-20 people, between $10-$20.", "Between 10 and 20 people, between 10 dollars and 20 dollars."),
     # Spanish ordinals ("uno punto o") and abbreviations ("pe ex", "etk", "ee uu")
     ("es", "Llegó en 1.º lugar y ella en 2.ª posición.", "Llegó en primer lugar y ella en segunda posición."),
     ("es", "El 3.er día, 1.º de la lista.", "El tercer día, primero de la lista."),
