@@ -196,6 +196,9 @@ class RemoteFeed:
         self.dropped = 0
         self.session = self.facts  # what descriptions read, as of a LiveSession
         self.source = str(row.get("source", "ingest"))  # the session's source kind, as LiveSession.source
+        # A viewer on this node sends nothing (its message closes it: the owner is on another node), so its
+        # description offers no expressions (server.describe.view_description).
+        self.takes_viewer_controls = False
         self.descriptions: dict[ViewRequest, str] = {}  # server.describe.view_description_text's cache
         self.joining: dict[bytes, ReplayJoin] = {}  # viewers being sent the owner's replay, by request id
 

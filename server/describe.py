@@ -55,10 +55,9 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
         "header_encoding": req.header_encoding,
         "header_bytes": P.HEADER_BYTES,
         "params": {"names": list(VISUAL_PARAMS), "units": "inter-ocular distances (IOD)"},
-        # What a viewer's expression control may name. None for a text session: its frames are made a whole
-        # sentence ahead of their play-out and it answers every control `rejected` (the browser viewer offered
-        # buttons a text session then refused: "text sessions have no controls").
-        "expressions": [] if live.source == "text" else [NEUTRAL, *EXPRESSIONS],
+        # What a viewer's expression control may name: every session takes them (a text session applies them as its
+        # frames are released); none for a viewer of another node's session, whose node takes no viewer messages.
+        "expressions": [NEUTRAL, *EXPRESSIONS] if live.takes_viewer_controls else [],
         "algorithmic_delay_s": s.algorithmic_delay_s,
         "audio": {"rate_hz": s.rate_hz, "channels": 1, "encoding": "int16", "scale": 1 / 32768} if req.audio else None,
         "values_per_frame": len(VISUAL_PARAMS),

@@ -435,6 +435,7 @@ class LiveSession:
         self.session = session
         self.server = server
         self.source = source
+        self.takes_viewer_controls = True  # its viewers' expression controls reach it (server.app._watch)
         self.viewers: set[Viewer] = set()
         self.dropped = 0
         self.started = time.time()

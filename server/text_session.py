@@ -20,9 +20,16 @@ piece (a stalled stream still gets its words out; a trailing word fragment waits
 ``FRAGMENT_STALLS`` more stalls), starts a long sentence at a clause boundary when the viewers
 would otherwise wait for it (:data:`CLAUSE_WORDS`, :data:`CLAUSE_AHEAD_S`; without a clause boundary at
 its last whole word, :data:`RUN_ON_WORDS`), stops the speech on
-``{"type": "cancel"}`` (the mouth eased to rest, the session open for more text), plays out every
+``{"type": "cancel"}`` (the mouth eased to rest, the session open for more text), takes expression controls
+from its source and its viewers as an audio session does (applied as each frame is released: below), plays out every
 sentence accepted when its source drops without ``end`` (nothing accepted is lost), and answers bad
 text with ``{"type": "rejected"}`` while the session goes on serving its viewers.
+
+Expressions: frames are synthesised a sentence ahead and released up to ``lead_s`` before their media time, so the
+session's expression (:class:`server.controls.ControlState`, an :class:`realtime_core.expressions.ExpressionTrack`
+on the media clock) is applied when a frame is released (:meth:`TextSession.release`), not when it is made: a
+control takes effect, with its ease, on every frame not yet released, and a control's "now" (its default ``at``,
+its lateness check) is the next frame to be released.
 """
 
 from __future__ import annotations
@@ -40,10 +47,12 @@ from websockets.asyncio.server import ServerConnection
 from websockets.exceptions import ConnectionClosed
 
 from realtime_core.errors import ConfigError
+from realtime_core.mapping.expression import express
 from realtime_core.synthesis.rest import RestPauses
 from realtime_core.synthesis.search import crossfade
 from realtime_core.synthesis.synthesizer import UnitSynthesizer
 from realtime_core.synthesis.text import MAX_TEXT_CHARS, SentenceChunker, TextError
+from server.controls import CONTROLS, ControlState, apply_controls
 from server.errors import (
     AudioFormatError,
     ControlError,
@@ -77,6 +86,9 @@ RUN_ON_WORDS = 20
 words are pending, when the viewers have less than :data:`CLAUSE_AHEAD_S` of speech queued. Why: 600
 characters without punctuation waited for the 300-character cut, the first frame 5.3 s after the first
 piece; 20 words is past most sentences without a comma (a cut costs the silences and the intonation)."""
+TEXT_CONTROLS = ("expression", "expression_ease_s")
+"""The controls a text session takes. Not gain or smoothing_ms: its mouth comes from recorded lips (unit
+selection), not from a model whose output a user tunes."""
 CLAUSE_AHEAD_S = 1.0
 """Speech queued ahead of the viewers' clock (s) under which a clause is started (see CLAUSE_WORDS):
 with more queued, the rest of the sentence usually arrives before the viewers need it, and no cut."""
@@ -160,15 +172,41 @@ class TextSession:
         self.sentences = 0
         self.finished = False
         self._k = backend.synthesizer.corpus.n_coefficients
+        self.controls = ControlState()
+        self.released = 0  # the next frame to be released (release): a control's media time "now" is released / FPS
 
     # -- the parts of a session handle (server.live.SessionHandle) that live sessions use --------
     frame_bytes = 2  # nominal: text sessions take no audio
 
     def control_state(self) -> dict:
-        return {}
+        state = self.controls.describe()
+        return {k: state[k] for k in TEXT_CONTROLS}
 
     async def apply_control(self, msg: dict) -> dict:
-        raise ControlError("text sessions have no controls")
+        """A control message ``{"type": "control", "expression": {...}, "expression_ease_s": s}`` -> the control
+        state, as :meth:`server.session.Session.apply_control` (same validation and reasons); ``at`` is media time,
+        checked against (and by default) the next frame to be released. ControlError (nothing applied) otherwise."""
+        for key in msg:
+            if key != "type" and key in CONTROLS and key not in TEXT_CONTROLS:
+                raise ControlError(
+                    f"a text session takes only the controls {', '.join(TEXT_CONTROLS)}, not {reason_value(key)}"
+                )
+        self.controls = apply_controls(self.controls, msg, now_s=self.released / FPS)
+        return self.control_state()
+
+    def release(self, out: Output) -> Output:
+        """Frames leaving for the viewers now -> the same frames under the session's expression at their media time
+        (``params`` expressed, ``expression`` and ``speech_params`` set as :class:`server.session.Session` does, so
+        ARKit-52 weights carry the recipes and a head driven by its own targets its face shapes); untouched (the
+        same bytes) while no expression was ever set. In place: no payload of a frame is made before its release."""
+        frames = out.frames
+        alpha = self.controls.expression_at(np.array([f.media_time for f in frames]))
+        if alpha is not None:
+            speech = np.array([f.raw_params for f in frames])
+            for f, p, a, s in zip(frames, express(speech, alpha), alpha, speech):
+                f.params, f.expression, f.speech_params = p, a, s
+        self.released = frames[-1].index + 1
+        return out
 
     async def push_bytes(self, data: bytes) -> Output:
         raise AudioFormatError("a text session takes text messages, not audio")
@@ -335,7 +373,7 @@ def _violation(kind: Any) -> NoReturn:
     if kind == "start":
         raise ProtocolViolation(P.CLOSE_POLICY, "second start message: the session has started")
     raise ProtocolViolation(
-        P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush, cancel or end)"
+        P.CLOSE_POLICY, f"unknown message type {reason_value(kind)} (expected text, flush, cancel, control or end)"
     )
 
 
@@ -428,8 +466,9 @@ async def handle_text(server, ws: ServerConnection) -> None:
             end = sentence_ends.pop(out.frames[0].index, None)
             if end is not None and live.replay is not None:  # a sentence starts: what a joining viewer gets
                 live.replay.begin(out.frames[0].index, clock["t0"] + end)
-            live._fanout(out)
-            released["next"], released["params"] = out.frames[-1].index + 1, out.frames[-1].params
+            live._fanout(session.release(out))
+            # the speech params (before the expression): a cancel's ease starts there and is expressed as it leaves
+            released["next"], released["params"] = out.frames[-1].index + 1, out.frames[-1].raw_params
 
     async def reply(msg: dict) -> None:
         # a source that dropped still has its accepted speech played out (below): its replies go nowhere
@@ -494,6 +533,13 @@ async def handle_text(server, ws: ServerConnection) -> None:
         pace = asyncio.ensure_future(pacer())
         return {"type": "cancelled", "dropped": len(cut), "media_time": nxt / FPS}
 
+    async def control(msg: dict) -> dict:
+        """A control message from the source -> its reply, as an ingest's (``ack`` or ``rejected`` with the reason)."""
+        try:
+            return {"type": "ack", "controls": await live.control(msg)}
+        except ControlError as exc:
+            return {"type": "rejected", "reason": str(exc)}
+
     async def play_out() -> bool:
         """After `end`: wait until the last frame has been released (the pacer met its end mark), still reading the
         source: a `cancel` cuts the play-out (a chatbot's user talks over the answer's last sentences, which were
@@ -523,6 +569,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
                         text = msg.get("text")
                         shown = text[:REJECTED_TEXT_CHARS] if isinstance(text, str) else None
                         await reply({"type": "rejected", "text": shown, "reason": "after end: the session is ending"})
+                    elif kind == "control":  # the frames still to be released take it
+                        await reply(await control(msg))
                     elif kind not in ("flush", "end"):
                         _violation(kind)
         except TimeoutError:  # only the server stopping ends this wait
@@ -613,6 +661,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
             elif kind == "cancel":
                 stalled = False
                 await reply(await cancel())
+            elif kind == "control":
+                await reply(await control(msg))
             elif kind == "end":
                 await say(session.finish_text())
                 queue.put_nowait(None)

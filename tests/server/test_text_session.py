@@ -289,9 +289,8 @@ def test_text_session_over_loopback(model, backend):
     assert idx == list(range(ended["frames"]))
     assert all(m.media_time == pytest.approx(m.index / 30) for m in got.frames)
     assert got.description["audio"]["rate_hz"] == 22050
-    # A text session takes no expression control, so its viewers are offered none (the browser viewer showed the
-    # four buttons, each then answered "text sessions have no controls").
-    assert got.description["expressions"] == []
+    # A text session takes expression controls, so its viewers are offered them (the browser viewer's buttons).
+    assert got.description["expressions"] == ["neutral", "smile", "sad", "surprise", "anger"]
     audio_t = [m.media_time for m in got.audio]
     assert audio_t == pytest.approx([k / 30 for k in range(len(audio_t))])
     assert len(got.audio) == ended["frames"] and got.close_code == P.CLOSE_NORMAL
@@ -848,7 +847,8 @@ def test_text_session_is_registered_cluster_wide(model, backend, redis_server): 
     assert status == 200 and listed["scope"] == "cluster"
     rows = {r["name"]: r for r in listed["sessions"]}
     assert rows["bot"]["node"] == "na" and rows["bot"]["source"] == "text"
-    assert got.description["expressions"] == []  # a viewer on another node is offered no expressions either
+    # A viewer on another node sends nothing (its node takes no viewer messages): it is offered no expressions.
+    assert got.description["expressions"] == []
     assert taken[0] == P.CLOSE_CONFLICT and "na" in taken[1]
     assert spoken["type"] == "spoken" and ended["frames"] == spoken["frames"]
     idx = [m.index for m in got.frames]
@@ -981,3 +981,91 @@ def test_a_text_message_can_change_the_language_and_keeps_the_session(model, bac
     assert variant["language"] == "es" and spanish["media_time"] == pytest.approx(english["frames"] / 30)
     # one session, one viewer stream through the change: every frame in order
     assert [m.index for m in got.frames] == list(range(ended["frames"])) and got.close_code == P.CLOSE_NORMAL
+
+
+def _smoothstep(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3 - 2 * u)
+
+
+def test_a_text_session_takes_expression_controls_on_the_frames_not_yet_released(model, backend):
+    """A chatbot's avatar smiling while it speaks: a viewer's expression control (the browser's button) reaches a text
+    session, whose frames were made a sentence ahead; the frames from the control's media time on carry it (eased),
+    the frames released before are the speech alone, bit for bit; a bad control from the text source gets the reply an
+    audio session gives and the session streams on (it answered every control 'text sessions have no controls')."""
+    from realtime_core.blendshapes import blendshape_weights
+    from realtime_core.expressions import EXPRESSIONS
+    from realtime_core.mapping.expression import express
+
+    text = LONG + "Bin blue at f two now. "
+    bad = {"type": "control", "expression": {"name": "grin"}}
+
+    async def speak(srv, name, smile: bool):
+        url = srv.url.replace("http", "ws")
+        async with (
+            started_text(srv.url, name) as ws,
+            ViewerClient(srv.url, session=name, kind="params", audio=False) as params,
+            ViewerClient(srv.url, session=name, kind="blendshapes", encoding="arkit52", audio=False) as arkit,
+        ):
+            collect = asyncio.gather(params.collect(), arkit.collect())
+            await ws.send(json.dumps({"type": "text", "text": text}))
+            spoken = [json.loads(await ws.recv()), json.loads(await ws.recv())]  # both sentences made
+            ack = rejected = None
+            if smile:
+                await asyncio.sleep(1.0)  # mid-way through the first sentence (several seconds)
+                async with connect(f"{url}/view?session={name}&kind=params&audio=0") as button:
+                    await button.recv()  # the description
+                    ctl = {"name": "smile", "intensity": 0.6}
+                    await button.send(json.dumps({"type": "control", "expression": ctl, "expression_ease_s": 0.2}))
+                    while isinstance(ack := await button.recv(), bytes):  # the ack comes between the frames
+                        pass
+                await ws.send(json.dumps(bad))
+                rejected = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "end"}))
+            ended = json.loads(await ws.recv())
+            got_params, got_arkit = await asyncio.wait_for(collect, 60)
+        return spoken, ack, rejected, ended, got_params, got_arkit
+
+    async def main():
+        async with running(model, backend) as srv:
+            plain = await speak(srv, "plain", smile=False)
+            smiling = await speak(srv, "smiling", smile=True)
+            async with connect(srv.url.replace("http", "ws") + "/ingest") as audio:  # an audio session's reply
+                await audio.send(json.dumps({"type": "start", "session": "audio", "sample_rate": 16000}))
+                assert json.loads(await audio.recv())["type"] == "started"
+                await audio.send(json.dumps(bad))
+                audio_rejected = json.loads(await audio.recv())
+        return plain, smiling, audio_rejected
+
+    plain, smiling, audio_rejected = asyncio.run(asyncio.wait_for(main(), 120))
+    *_, p_ended, p_params, p_arkit = plain
+    spoken, ack, rejected, ended, s_params, s_arkit = smiling
+    assert p_params.description["expressions"] == s_params.description["expressions"] == ["neutral", *EXPRESSIONS]
+    assert rejected == audio_rejected and rejected["type"] == "rejected" and "grin" in rejected["reason"]
+    ack = json.loads(ack)
+    assert ack["type"] == "ack" and ack["controls"]["expression_ease_s"] == 0.2
+    (event,) = ack["controls"]["expression"]
+    at = event["at"]  # the next frame to be released when the button was pressed
+    n = ended["frames"]
+    assert n == p_ended["frames"] == spoken[0]["frames"] + spoken[1]["frames"]
+    assert [m.index for m in s_params.frames] == list(range(n)) and s_params.close_code == P.CLOSE_NORMAL
+    t = np.arange(n) / 30
+    before = t < at - 1e-9
+    k = int(before.sum())
+    assert 0 < k < spoken[0]["frames"]  # pressed mid-way through the first sentence, made before the press
+    speech = np.array([m.values for m in p_params.frames], dtype=np.float64)
+    got = np.array([m.values for m in s_params.frames], dtype=np.float64)
+    np.testing.assert_array_equal(got[before], speech[before])  # released before the press: speech alone
+    # From the press on: eased to 0.6 of a smile over 0.2 s from `at` (smoothstep), the speech under it.
+    alpha = np.zeros((n, len(EXPRESSIONS)))
+    alpha[:, EXPRESSIONS.index("smile")] = 0.6 * _smoothstep((t - at) / 0.2)
+    want = express(speech, alpha)
+    np.testing.assert_allclose(got[~before], want[~before], atol=1e-6)
+    assert np.abs(got[k + 6 :] - speech[k + 6 :]).max() > 0.01  # the smile moves the mouth
+    # ARKit-52: the speech's weights plus the recipe (cheeks, eyes: shapes speech does not drive), as computed here.
+    arkit = np.array([m.values for m in s_arkit.frames])
+    plain_arkit = np.array([m.values for m in p_arkit.frames])
+    np.testing.assert_array_equal(arkit[before], plain_arkit[before])
+    np.testing.assert_allclose(arkit, blendshape_weights(speech, "arkit52", expression=alpha), atol=2e-6)
+    cheek = s_arkit.description["names"].index("cheekSquintLeft")
+    assert arkit[k + 6 :, cheek] == pytest.approx(0.6 * 0.5) and not np.any(plain_arkit[:, cheek])
