@@ -223,13 +223,24 @@ class TextSession:
         """Nothing to release."""
 
     # -- text ---------------------------------------------------------------------------------
-    def push_text(self, text: str) -> list[str]:
+    def push_text(self, text: str, expression: object = None) -> list[str]:
         """A piece of text -> the sentences it completed (speak each with :meth:`speak`). Raises
         TextError for a piece over MAX_TEXT_CHARS (nothing of it is kept): the limit holds per
-        message, not only per sentence, or one message could queue minutes of speech."""
+        message, not only per sentence, or one message could queue minutes of speech.
+
+        expression: a text message's ``expression`` (a control's value, ``{"name", "intensity", "at"}``), ``at``
+        by default where the next sentence spoken starts (the one holding the piece's first words): a language model
+        that tags each sentence's emotion. ControlError for a bad one (nothing of the piece is kept then either)."""
         if len(text) > MAX_TEXT_CHARS:
             raise TextError(f"text piece is {len(text)} characters long; the limit is {MAX_TEXT_CHARS}")
-        return self.chunker.push(text)
+        controls = self.controls
+        if expression is not None:
+            if isinstance(expression, dict):
+                expression = {"at": self.frames_out / FPS, **expression}
+            controls = apply_controls(self.controls, {"expression": expression}, now_s=self.released / FPS)
+        done = self.chunker.push(text)
+        self.controls = controls
+        return done
 
     def finish_text(self) -> list[str]:
         """The pending text as a sentence (stall or end of the stream)."""
@@ -623,7 +634,7 @@ async def handle_text(server, ws: ServerConnection) -> None:
             if kind == "text":
                 stalled = False
                 text = msg.get("text")
-                if not isinstance(text, str):  # no text to quote: null (docs/protocol.md section 9.5)
+                if not isinstance(text, str):  # no text to quote: null (docs/protocol.md section 9.6)
                     # its own name: `reason` is the session's close reason (it closed with this one at its end)
                     why = f"text must be a string, got {reason_value(text)}"
                     await reply({"type": "rejected", "text": None, "reason": why})
@@ -644,8 +655,8 @@ async def handle_text(server, ws: ServerConnection) -> None:
                         )
                 received = time.perf_counter()
                 try:
-                    done = session.push_text(text)
-                except TextError as exc:
+                    done = session.push_text(text, msg.get("expression"))
+                except (TextError, ControlError) as exc:
                     await reply({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)})
                     continue
                 if not first_piece:  # the first piece accepted: a rejected one starts no speech (it counted 2.6 s)

@@ -859,7 +859,7 @@ def test_text_session_is_registered_cluster_wide(model, backend, redis_server): 
 
 
 def test_text_session_rejections_quote_the_text_and_hostile_json_is_refused(model, backend):
-    """docs/protocol.md section 9.5: every "rejected" reply carries `text` (what was refused, its first 200
+    """docs/protocol.md section 9.6: every "rejected" reply carries `text` (what was refused, its first 200
     characters; null when the message's `text` was not a string: that reply lacked the field, as did the
     one for a piece over 5000 characters), and the session goes on; JSON nested 30000 deep closes with
     1007 (json.loads raised RecursionError: an internal error, 1011)."""
@@ -1069,3 +1069,30 @@ def test_a_text_session_takes_expression_controls_on_the_frames_not_yet_released
     np.testing.assert_allclose(arkit, blendshape_weights(speech, "arkit52", expression=alpha), atol=2e-6)
     cheek = s_arkit.description["names"].index("cheekSquintLeft")
     assert arkit[k + 6 :, cheek] == pytest.approx(0.6 * 0.5) and not np.any(plain_arkit[:, cheek])
+
+
+def test_a_text_message_expression_starts_with_its_sentence(backend):
+    """A language model tagging each sentence's emotion: `{"type": "text", "text": ..., "expression": {...}}` sets the
+    expression from where the piece's sentence starts on the media clock, eased; frames released before any
+    expression are the speech alone (no expression set), and a bad expression refuses the piece whole."""
+    from realtime_core.expressions import EXPRESSIONS
+    from server.errors import ControlError
+
+    s = TextSession(backend, language="en", voice=None)
+    outs1, _ = s.speak(*s.push_text("Hello world. "))
+    first = [s.release(o).frames[0] for o in outs1]
+    assert all(f.expression is None and f.speech_params is None for f in first)
+    assert all(np.array_equal(f.params, f.raw_params) for f in first)
+    with pytest.raises(ControlError, match="grin"):
+        s.push_text("Good morning to you. ", {"name": "grin"})
+    assert s.chunker.pending == ""  # nothing of the refused piece was kept
+    outs2, report = s.speak(*s.push_text("Good morning to you. ", {"name": "sad", "intensity": 0.5}))
+    assert report["media_time"] == pytest.approx(len(outs1) / 30)
+    frames = [s.release(o).frames[0] for o in outs2]
+    sad = np.array([f.expression[EXPRESSIONS.index("sad")] for f in frames])
+    u = np.clip(np.arange(len(frames)) / 30 / 0.3, 0, 1)  # eased over the default 0.3 s from the sentence's start
+    np.testing.assert_allclose(sad, 0.5 * u * u * (3 - 2 * u), atol=1e-12)
+    assert all(np.array_equal(f.speech_params, f.raw_params) for f in frames)
+    assert s.control_state()["expression"] == [
+        {"at": pytest.approx(len(outs1) / 30), "intensity": pytest.approx({e: 0.5 * (e == "sad") for e in EXPRESSIONS})}
+    ]
