@@ -22,6 +22,7 @@ import pytest
 from clients.client import http_get
 from tests.live_server import REPO, LiveServer, stream_session
 from tests.prerequisites import missing
+from tests.server.test_text_session import backend  # noqa: F401  (the text sessions' espeak backend fixture)
 from tests.speech import cut_mid_word, speechlike
 from wire import protocol as P
 
@@ -533,3 +534,34 @@ def test_browser_paints_a_textured_head_with_its_texture_alone_and_cuts_see_thro
     assert blue_over_red > 0.85, blue_over_red  # white texture, white lights: not skin-tinted
     assert float(np.median(lower.sum(axis=1))) > 400  # and not darkened by the tint either
     assert done["console_errors"] == []
+
+
+TEXT_EXPRESSION_SCRIPT = Path(__file__).with_name("text_expression_check.mjs")
+
+
+def test_browser_offers_expressions_on_a_text_session_and_the_session_takes_them(model, head, backend):  # noqa: F811
+    """A chatbot's session (/text): the page showed "none (this session takes no expressions)" (the description's
+    `[]`, as the session refused every control); now its buttons are the audio session's and a click on smile is
+    acknowledged by the text session."""
+    _require_browser()
+    srv = LiveServer(model, head)
+    srv.server.text_backend = backend
+
+    async def speak(url: str) -> None:  # minutes of speech: the session outlives the check
+        from tests.server.test_text_session import LONG, open_text
+
+        ws = await open_text(url, "chatbot")
+        await ws.send(json.dumps({"type": "text", "text": LONG * 20}))
+        await ws.recv()  # the first sentence spoken; the server's stop ends the session
+
+    proc = None
+    try:
+        srv.call(speak(srv.url))
+        proc = _start(TEXT_EXPRESSION_SCRIPT, srv.url, "chatbot")
+        picker = _read_step(proc, "picker")
+    finally:
+        if proc is not None:
+            _end(proc)
+        srv.stop()
+    assert picker["buttons"] == ["neutral", "smile", "sad", "surprise", "anger"]
+    assert picker["smiled"] == "smile: applied" and picker["console_errors"] == []
