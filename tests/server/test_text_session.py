@@ -654,16 +654,12 @@ def test_a_stall_mid_word_speaks_the_whole_words_and_the_fragment_waits(model, b
     assert asyncio.run(asyncio.wait_for(main(), 60)) == ["Then he went", "home and slept.", "Good", "ni"]
 
 
-def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
-    """A 36-word first sentence streamed at ~17 tokens/s was spoken only once complete (first frame 2 s after the
-    first piece): with nothing queued for the viewers, it is started at a clause boundary after >= 8 words."""
-    text = (
-        "Well, when you get to the old bridge by the river, turn left and keep walking past the bakery, "
-        "the school and the park until you see a small blue house with a red door on your right. "
-    )
+def _streamed_word_by_word(model, backend, session: str, text: str) -> list[dict]:
+    """``text`` sent to a new text session a word a piece (as a language model streams it), then `end`: the
+    replies before `ended`."""
 
     async def main():
-        async with running(model, backend) as srv, started_text(srv.url, "clause") as ws:
+        async with running(model, backend) as srv, started_text(srv.url, session) as ws:
             for word in text.split(" "):
                 await ws.send(json.dumps({"type": "text", "text": word + " "}))
             await ws.send(json.dumps({"type": "end"}))
@@ -672,8 +668,18 @@ def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
                 replies.append(m)
             return replies
 
-    replies = asyncio.run(asyncio.wait_for(main(), 60))
-    texts = [m["text"] for m in replies]
+    return asyncio.run(asyncio.wait_for(main(), 60))
+
+
+def test_a_long_first_sentence_starts_at_a_clause_boundary(model, backend):
+    """A 36-word first sentence streamed at ~17 tokens/s was spoken only once complete (first frame 2 s after the
+    first piece): with nothing queued for the viewers, it is started at a clause boundary after >= 8 words."""
+    text = (
+        "Well, when you get to the old bridge by the river, turn left and keep walking past the bakery, "
+        "the school and the park until you see a small blue house with a red door on your right. "
+    )
+
+    texts = [m["text"] for m in _streamed_word_by_word(model, backend, "clause", text)]
     assert texts[0] == "Well, when you get to the old bridge by the river,"  # not at "Well," (one word)
     assert " ".join(texts) == " ".join(text.split())  # all of it, in order
 
@@ -686,17 +692,7 @@ def test_a_run_on_first_sentence_starts_at_a_word_boundary(model, backend):
 
     text = " ".join(f"word{i} and more" for i in range(8))  # 24 words, no punctuation
 
-    async def main():
-        async with running(model, backend) as srv, started_text(srv.url, "runon") as ws:
-            for word in text.split(" "):
-                await ws.send(json.dumps({"type": "text", "text": word + " "}))
-            await ws.send(json.dumps({"type": "end"}))
-            replies = []
-            while (m := json.loads(await ws.recv()))["type"] != "ended":
-                replies.append(m)
-            return replies
-
-    texts = [m["text"] for m in asyncio.run(asyncio.wait_for(main(), 60))]
+    texts = [m["text"] for m in _streamed_word_by_word(model, backend, "runon", text)]
     assert texts[0] == " ".join(text.split()[:RUN_ON_WORDS])  # started as soon as 20 whole words were there
     assert " ".join(texts) == text
 
