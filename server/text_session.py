@@ -350,22 +350,23 @@ def espeak_backend(corpus: str | Path | None = None, *, n_best: int = 1) -> Text
     )
 
 
-async def _language_switch(session: TextSession, msg: dict, backend: TextBackend) -> tuple[str, str | None] | None:
-    """A text message's ``language`` / ``voice`` -> the session's new ``(language, voice)``, or None when they are
-    the session's already. Without ``language`` the voice names it (as a start's); without ``voice`` the language's
-    default voice. Raises ConfigError (a TextError) naming a bad language or voice; a voice is tried first (off the
-    event loop), so a bad one fails here, not mid-sentence."""
-    voice = msg.get("voice", session.voice if "language" not in msg else None)
+async def _speech_choice(
+    msg: dict, backend: TextBackend, *, language: str, voice: str | None, current: tuple[str, str | None] | None = None
+) -> tuple[str, str | None]:
+    """A start's or a text message's ``language`` / ``voice`` -> ``(language, voice)`` to speak with; ``language`` and
+    ``voice`` are what holds without them (a voice given alone names its language; a bare variant such as "f3" keeps
+    ``language``: a Spanish session asking for a female voice stays Spanish; a language given alone takes its default
+    voice). Raises ConfigError (a TextError) naming a bad language or voice. A voice other than ``current`` is tried
+    (off the event loop), so a bad one fails here, not mid-sentence."""
+    voice = msg.get("voice", voice if "language" not in msg else None)
     if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
+        # quoted short: a 100,000-character voice was quoted whole, and the close frame's limit cut off the voices
         raise TextError(f"voice must be a name of at most {MAX_VOICE_CHARS} characters, got {reason_value(voice)}")
     infer = backend.language_of_voice
-    # a bare variant ("f3") keeps the session's language: a Spanish session asking for a female voice stays Spanish
-    language = msg["language"] if "language" in msg else infer(voice, session.language) if infer else session.language
+    language = msg["language"] if "language" in msg else infer(voice, language) if infer else language
     if not isinstance(language, str) or language not in backend.languages:
         raise TextError(f"unsupported language {reason_value(language)}; supported: {list(backend.languages)}")
-    if (language, voice) == (session.language, session.voice):
-        return None
-    if voice is not None:
+    if voice is not None and (language, voice) != current:
         await asyncio.to_thread(backend.speak, "a", language, voice)
     return language, voice
 
@@ -416,22 +417,12 @@ async def handle_text(server, ws: ServerConnection) -> None:
     name = start.get("session")
     if not isinstance(name, str) or not P.SESSION_NAME.match(name):
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, P.SESSION_NAME_RULE)
-    voice = start.get("voice")
-    if voice is not None and (not isinstance(voice, str) or len(voice) > MAX_VOICE_CHARS):
-        # quoted short: a 100,000-character voice was quoted whole, and the close frame's limit cut off the voices
-        got = reason_value(voice)
-        raise ProtocolViolation(
-            P.CLOSE_BAD_REQUEST, f"voice must be a name of at most {MAX_VOICE_CHARS} characters, got {got}"
-        )
-    # `{"voice": "es"}` alone was refused (Spanish voice, English by default): the voice names its language
-    infer = backend.language_of_voice
-    language = start["language"] if "language" in start else infer(voice) if infer is not None else "en"
     try:
+        # `{"voice": "es"}` alone was refused (Spanish voice, English by default): the voice names its language
+        language, voice = await _speech_choice(start, backend, language="en", voice=None)
         session = TextSession(
             backend, language=language, voice=voice, rig=server.head.rig if server.head else None, times=server.times
         )
-        if voice is not None:
-            await asyncio.to_thread(backend.speak, "a", language, voice)  # a bad voice fails now, not mid-stream
     except ConfigError as exc:
         raise ProtocolViolation(P.CLOSE_BAD_REQUEST, str(exc)) from None
     try:
@@ -642,12 +633,13 @@ async def handle_text(server, ws: ServerConnection) -> None:
                 if "language" in msg or "voice" in msg:
                     # A conversation that changes language keeps its session (and its viewers): the text pending
                     # in the old language is spoken first, in it; this piece and what follows in the new one.
+                    now = (session.language, session.voice)
                     try:
-                        switch = await _language_switch(session, msg, backend)
+                        switch = await _speech_choice(msg, backend, language=now[0], voice=now[1], current=now)
                     except ConfigError as exc:
                         await reply({"type": "rejected", "text": text[:REJECTED_TEXT_CHARS], "reason": str(exc)})
                         continue
-                    if switch is not None:
+                    if switch != now:
                         await say(session.finish_text())
                         session.language, session.voice = switch
                         sessions_log.info(
