@@ -51,7 +51,7 @@ from perceptual.design import (
     truth_of,
 )
 from perceptual.errors import BuildError, ManifestError
-from realtime_core.expressions import EXPRESSION_RECIPES, face_shapes
+from realtime_core.expressions import EXPRESSION_RECIPES
 from realtime_core.expressions import EXPRESSIONS as CORE_EXPRESSIONS
 from realtime_core.fitted_maps import EXPRESSION_PARAMS
 from realtime_core.mapping.expression import express
@@ -59,7 +59,8 @@ from realtime_core.mapping.expression import express
 FORMAT = "facecast-perceptual-stimuli"
 KIT_VERSION = 2
 """Bump when the way stimuli are made changes: manifests and cache entries of other versions are stale. (2: the
-smiling and sad faces are the product's expressions; 1 had a stand-in recipe of the kit's own.)"""
+smiling and sad faces are the product's expressions on the head `facecast render` draws; 1 had a stand-in recipe
+of the kit's own on the retargeted head.)"""
 
 GRID_CREDIT = "GRID audio-visual corpus: M. Cooke, J. Barker, S. Cunningham, X. Shao (2006), CC BY 4.0"
 
@@ -306,7 +307,7 @@ class _Builder:
             raise BuildError("ffmpeg is not installed (apt-get install ffmpeg); it encodes every stimulus")
         self.ffmpeg: str = ffmpeg
         self.sources: dict[str, str] = {}
-        self._renderer: tuple[Any, Any, Any] | None = None
+        self._renderer: tuple[Any, Any] | None = None  # (the head's rig, its renderer)
         self.made = 0
         self.reused = 0
 
@@ -419,16 +420,14 @@ class _Builder:
     # -- video ------------------------------------------------------------------------------
     def renderer(self):
         if self._renderer is None:
-            from assets.heads.builtin import load_builtin_head
-            from assets.heads.rigfile import builtin_rig
+            from assets.heads.head import resolve_head
             from clients.render.renderer import RenderConfig, renderer_for_rig
 
-            rig, mesh = builtin_rig()
-            head = load_builtin_head()
-            if len(head.mesh.vertices) != len(rig.neutral):
-                raise BuildError("the built-in rig and head differ in vertex count; cannot add expressions")
-            r = renderer_for_rig(rig, mesh, RenderConfig(width=self.c.width, height=self.c.height))
-            self._renderer = (rig, head, r)
+            # The head `facecast render` draws by default: the built-in head through its own ARKit targets, whose face
+            # shapes (cheeks, eyes, brows) show an expression beside the mouth (MorphRig.face_recipe).
+            head = resolve_head("builtin")
+            r = renderer_for_rig(head.rig, head.mesh, RenderConfig(width=self.c.width, height=self.c.height))
+            self._renderer = (head.rig, r)
         return self._renderer
 
     def model_digest(self) -> str:
@@ -443,6 +442,7 @@ class _Builder:
             "speech": sha256_file(speech),
             "expression": expression,
             "strength": self.c.expression_strength,
+            "head": "builtin, own targets",
             "recipe": dict(EXPRESSION_RECIPES.get(expression, {})),
             "expression_params": EXPRESSION_PARAMS.tolist(),
             "size": [self.c.width, self.c.height],
@@ -459,20 +459,16 @@ class _Builder:
             if track.fps != self.c.fps:
                 track = frames_from_samples(track.times(), track.values, self.c.fps)
             frames = track.values
-            rig, head, r = self.renderer()
-            offset = np.zeros_like(rig.neutral, dtype=np.float32)
+            rig, r = self.renderer()
+            alpha = np.zeros((len(frames), len(CORE_EXPRESSIONS)))
             if expression != "neutral":
                 # The product's expression (`facecast render --expression`): the mouth through the four parameters
-                # (paper 002 eq. 2), and the rest of the face the recipe moves (cheeks, eyes, brows), which the
-                # parameters do not carry, from the head's own ARKit targets.
-                alpha = np.zeros((len(frames), len(CORE_EXPRESSIONS)))
+                # (paper 002 eq. 2), the rest of the face through the head's own face shapes.
                 alpha[:, CORE_EXPRESSIONS.index(expression)] = self.c.expression_strength
                 frames = express(frames, alpha)
-                for name, w in face_shapes(expression).items():
-                    offset += np.float32(self.c.expression_strength * w) * head.targets[name].astype(np.float32)
             write_video(
-                frames,
-                lambda q: r.render(rig.deformed(q) + offset),
+                np.arange(len(frames)),
+                lambda k: r.render(rig.deformed(frames[k], alpha[k])),
                 p,
                 size=(self.c.width, self.c.height),
                 config=VideoConfig(fps=self.c.fps, crf=self.c.crf),
@@ -710,7 +706,7 @@ def build(config: BuildConfig) -> Manifest:
     finally:
         bar.close()
         if b._renderer is not None:
-            b._renderer[2].close()
+            b._renderer[1].close()
     block_json = [blk.to_json() for blk in blocks]
     data = {
         "format": FORMAT,
