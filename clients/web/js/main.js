@@ -8,8 +8,8 @@
 // displayed frame (screenshots), mouthBox() (where the mouth is on the canvas), morph() (the
 // shown frame's streamed weights and the morphTargetInfluences three.js draws with), morphNormals() (how
 // the normals drawn at the shown influences turn and follow the shape: HeadView.morphNormals), applied(from)
-// (the record of every frame applied: {n, index, peak, late}, n counting from 0, late: s its time had passed
-// when the refresh that showed it came), and freezeWhen({above}
+// (the record of every frame applied: {n, index, peak, late, gap}, n counting from 0, late: s its time had
+// passed when the refresh that showed it came, gap: s since the refresh before), and freezeWhen({above}
 // or {below}) + caught(): the page itself freezes on the first frame applied after the call whose
 // peak passes the bound, so a check never depends on polling a value that changes 30 times a second.
 
@@ -158,6 +158,7 @@ let shown = null; // the last frame shown {index, values} (automation)
 const appliedLog = []; // the last APPLIED_KEEP frames applied {n, index, peak, late} (automation)
 const APPLIED_KEEP = 2000;
 let appliedCount = 0;
+let lastTickAt = null; // s: the refresh before this one (a shown frame's lateness is bounded by the gap since)
 let armed = null; // freezeWhen's bound {above} or {below}, until a frame passes it
 let caught = null; // the frame that froze the page {n, index, peak}
 // A session that ends mid-word (an audio or microphone session closed while the mouth is open) would
@@ -413,7 +414,8 @@ function tick() {
     applyValues(show.msg.values);
     state.frames += 1;
     shown = { index: show.msg.index, values: show.msg.values };
-    const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak, late: now - show.due };
+    const gap = lastTickAt === null ? null : now - lastTickAt;
+    const rec = { n: appliedCount++, index: show.msg.index, peak: state.lastPeak, late: now - show.due, gap };
     appliedLog.push(rec);
     if (appliedLog.length > APPLIED_KEEP) appliedLog.shift();
     if (armed && (armed.above !== undefined ? rec.peak >= armed.above : rec.peak <= armed.below)) {
@@ -425,6 +427,7 @@ function tick() {
   view.render();
   if (show) state.drawMs = median(windows.draw, performance.now() - drawStart);
   updatePanel();
+  lastTickAt = now;
   requestAnimationFrame(tick);
 }
 

@@ -409,10 +409,10 @@ def test_browser_plays_out_a_session_sent_ahead_of_time_without_dropping_it(mode
     """A session whose frames come 0.5 s ahead of their time (as a text session's server sends them) is played
     out on the timeline its first frame set: no catch-up, so no speech cut and no frame dropped for one (the
     page used to move its timeline 0.25 s earlier 6 s in, dropping 8 frames and 0.27 s of speech). Every frame
-    received is shown or skipped, in order; a shown frame's time had passed by less than a frame when the
-    refresh that showed it came (a frame is skipped only for a newer one due in the same refresh: at 60
-    refreshes a second none is, in software-rendered headless Chromium ~15-20 a second, about every second
-    one); the page's display rate is the refreshes counted by the check."""
+    received is shown or skipped, in order; a frame is shown at the first refresh after its time came (one is
+    skipped only for a newer one due in the same refresh: at 60 refreshes a second none is, in
+    software-rendered headless Chromium ~15-20 a second, about every second one); the page's display rate is
+    the refreshes counted by the check."""
     _require_browser()
     name = "playoutcheck"
     seconds = 8.0  # the first catch-up came at the end of the second 3 s window
@@ -445,8 +445,13 @@ def test_browser_plays_out_a_session_sent_ahead_of_time_without_dropping_it(mode
     assert st["frames"] + st["skipped"] == st["received"], st
     index = [r["index"] for r in applied]
     assert index == sorted(set(index)) and len(index) == st["frames"]  # in order, each once
-    late = np.array([r["late"] for r in applied[:-1]])  # the last frame has no newer one to be skipped for
-    assert late.min() >= 0 and late.max() < 1 / 30, late.max()
+    # Each frame is shown at the first refresh after its time came: it was not yet due (or not yet received, and
+    # then a resync put its time after its arrival) at the refresh before. How late that refresh comes is the
+    # machine's: in software-rendered Chromium ~50-70 ms when the suite loads both cores, so the bound is the gap
+    # between the two refreshes, not a frame period (which a late refresh exceeds with no fault of the page's).
+    late = np.array([r["late"] for r in applied])
+    gap = np.array([np.inf if r["gap"] is None else r["gap"] for r in applied])
+    assert late.min() >= 0 and np.all(late < gap + 0.002), [(r["late"], r["gap"]) for r in applied if r["late"] >= 0.03]
     d = played["display"]
     assert d["page"] == pytest.approx(d["counted"], rel=0.1), d
 
