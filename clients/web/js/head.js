@@ -15,6 +15,7 @@
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { DEFAULT_BACKGROUND } from "./options.js";
 
 // /head/* are private routes when the server has a token: pass the page's ?token= along.
 function withToken(url) {
@@ -31,13 +32,17 @@ function srgbToLinear(c) {
 const BACK_FACE = [0x14 / 255, 0x04 / 255, 0x04 / 255].map((c) => c.toFixed(4)); // output (sRGB) colour of back faces
 
 export class HeadView {
-  constructor(canvas) {
+  /** background: a 0xRRGGBB colour behind the head, or null for a transparent canvas (the page behind shows:
+   *  an avatar embedded in a chat page, a streaming tool's browser source over video). */
+  constructor(canvas, { background = DEFAULT_BACKGROUND } = {}) {
     this.canvas = canvas;
-    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+    // premultipliedAlpha (three.js's default) composites the anti-aliased silhouette over the page without a halo.
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true, alpha: background === null });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
     this.renderer.outputColorSpace = THREE.SRGBColorSpace;
     this.scene = new THREE.Scene();
-    this.scene.background = new THREE.Color(0x292b33);
+    if (background === null) this.renderer.setClearColor(0x000000, 0);
+    else this.scene.background = new THREE.Color(background);
     this.camera = new THREE.PerspectiveCamera(25, 1, 0.01, 1000);
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.enableDamping = true;

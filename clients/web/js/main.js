@@ -16,6 +16,7 @@
 import { decodeMessage, KIND, CLOSE } from "./protocol.js";
 import { PlayoutClock, AudioOut, DisplayRate, nowS, takeDue } from "./playout.js";
 import { HeadView } from "./head.js";
+import { pageOptions } from "./options.js";
 
 const opts = new URLSearchParams(location.search);
 const token = opts.get("token");
@@ -28,7 +29,11 @@ const WAIT_POLL_S = 0.1;
 let waitTimer = null;
 
 const $ = (id) => document.getElementById(id);
-const view = new HeadView($("view"));
+const page = pageOptions(opts);
+for (const w of page.warnings) console.warn(`facecast viewer: ${w}`);
+document.body.classList.toggle("embed", page.embed);
+document.documentElement.classList.toggle("transparent", page.background === null);
+const view = new HeadView($("view"), { background: page.background });
 const audio = new AudioOut();
 
 const state = {

@@ -456,6 +456,57 @@ def test_browser_plays_out_a_session_sent_ahead_of_time_without_dropping_it(mode
     assert d["page"] == pytest.approx(d["counted"], rel=0.1), d
 
 
+EMBED_SCRIPT = Path(__file__).with_name("embed_check.mjs")
+
+
+def test_browser_embeds_the_head_alone_on_a_transparent_or_coloured_background(model, morph_head):
+    """An avatar embedded in a chat page or a streaming tool's browser source: ``?embed=1`` shows the head alone,
+    filling the page (no side panel), and ``?background=transparent`` leaves every pixel but the head's
+    transparent, so whatever is behind the page shows; ``?background=%23ff8000`` paints that colour behind the head
+    (panel kept); a value the page does not know is a console warning and the default background, never a blank page."""
+    from PIL import Image
+
+    _require_browser()
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    name = "embedcheck"
+    srv = LiveServer(model, morph_head)
+    stop = asyncio.Event()
+    session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(3)))
+    proc = _start(EMBED_SCRIPT, srv.url, name, str(ARTIFACTS))
+    try:
+        embedded = _read_step(proc, "embedded")
+        coloured = _read_step(proc, "coloured")
+        done = _read_step(proc, "done")
+    finally:
+        _end(proc)
+        srv.loop.call_soon_threadsafe(stop.set)
+        session.result(30)
+        srv.stop()
+
+    lay = embedded["layout"]
+    assert lay["aside"]["display"] == "none" and embedded["state"]["frames"] >= 30
+    assert (lay["canvas"]["width"], lay["canvas"]["height"]) == (lay["viewport"]["width"], lay["viewport"]["height"])
+    rgba = np.asarray(Image.open(ARTIFACTS / "embed_transparent.png").convert("RGBA"), dtype=np.float64)
+    alpha = rgba[..., 3]
+    # The page's corners and edges are the background: fully transparent. The head is opaque and sits in the middle.
+    edge = np.concatenate([alpha[:6].ravel(), alpha[-6:].ravel(), alpha[:, :6].ravel(), alpha[:, -6:].ravel()])
+    assert edge.max() == 0, edge.max()
+    opaque = alpha > 250
+    assert 0.03 < opaque.mean() < 0.6, opaque.mean()
+    rows, cols = np.flatnonzero(opaque.any(axis=1)), np.flatnonzero(opaque.any(axis=0))
+    centre = ((cols[0] + cols[-1]) / 2 / alpha.shape[1], (rows[0] + rows[-1]) / 2 / alpha.shape[0])
+    assert abs(centre[0] - 0.5) < 0.1 and abs(centre[1] - 0.5) < 0.15, centre  # centred in the whole page now
+    assert float(np.median(rgba[opaque][:, :3].sum(axis=1))) > 150  # a lit head, not a black silhouette
+
+    lay = coloured["layout"]
+    assert lay["aside"]["display"] != "none" and lay["canvas"]["width"] < lay["viewport"]["width"]
+    page = _png(ARTIFACTS / "embed_coloured.png")
+    corner = np.median(page[:8, :8].reshape(-1, 3), axis=0)
+    np.testing.assert_allclose(corner, [255, 128, 0], atol=3)
+    assert done["console_errors"] == []
+    assert any("background=red" in w and "default kept" in w for w in done["console_warnings"]), done
+
+
 TEXTURE_SCRIPT = Path(__file__).with_name("texture_check.mjs")
 
 

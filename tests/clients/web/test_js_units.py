@@ -93,3 +93,25 @@ def test_js_decoder_matches_the_python_protocol_and_playout_clock_adapts(tmp_pat
     # The display rate: refreshes per second over the last second.
     rates = r["rates"]
     assert rates[59] == pytest.approx(60) and rates[-1] == pytest.approx(20)
+
+    # The page's look from its URL: embed hides the panel, background sets the colour or none (transparent);
+    # a value it does not know keeps the default and says so.
+    page, default = r["page"], 0x292B33
+    want = {
+        "": (False, default),
+        "embed=1": (True, default),
+        "embed": (True, default),
+        "embed=0": (False, default),
+        "embed=maybe": (False, default),
+        "background=transparent": (False, None),
+        "background=%23ff8000": (False, 0xFF8000),
+        "background=ff8000": (False, 0xFF8000),
+        "background=F80": (False, 0xFF8800),
+        "background=red": (False, default),
+        "background=12345": (False, default),
+        "embed=1&background=none": (True, None),
+    }
+    assert {q: (p["embed"], p["background"]) for q, p in page.items()} == want
+    warned = {q for q, p in page.items() if p["warnings"]}
+    assert warned == {"embed=maybe", "background=red", "background=12345"}
+    assert "expected transparent or a hex colour" in page["background=red"]["warnings"][0]

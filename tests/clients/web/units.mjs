@@ -5,6 +5,7 @@ import { readFileSync, readdirSync } from "node:fs";
 import { join } from "node:path";
 import { decodeMessage, KIND, ENC } from "../../../wire/protocol.js";
 import { DisplayRate, PlayoutClock, takeDue } from "../../../clients/web/js/playout.js";
+import { pageOptions } from "../../../clients/web/js/options.js";
 
 const dir = process.argv[2];
 const decoded = {};
@@ -71,5 +72,10 @@ for (let i = 0; i <= 120; i++) {
   rates.push(rate.hz);
 }
 
+// The page's look from its query (clients/web/js/options.js): one result per query string.
+const queries = ["", "embed=1", "embed", "embed=0", "embed=maybe", "background=transparent", "background=%23ff8000",
+  "background=ff8000", "background=F80", "background=red", "background=12345", "embed=1&background=none"];
+const page = Object.fromEntries(queries.map((q) => [q, pageOptions(new URLSearchParams(q))]));
+
 console.log(JSON.stringify({ decoded, rejected, kinds: KIND, encodings: ENC, beforeLate, afterLate, ...recovery, slack,
-  text: textPlayout(), rates }));
+  text: textPlayout(), rates, page }));
