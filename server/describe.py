@@ -64,18 +64,7 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
         "head": None,
     }
     if head is not None:
-        rig, mesh = head.rig, head.mesh
-        d["head"] = {
-            "mesh_url": "/head/mesh",
-            "mesh_json_url": "/head/mesh.json",
-            "texture_url": "/head/texture" if mesh.texture is not None else None,
-            "vertex_count": int(len(mesh.vertices)),
-            "moving_vertices": rig.moving.astype(int).tolist(),
-            "units": "mesh units",
-            # A head driven by its own targets: their names in the order of the morph kind's weights
-            # (mesh.json carries the targets themselves); null for a retargeted head.
-            "morph": {"names": list(rig.names)} if isinstance(rig, MorphRig) else None,
-        }
+        d["head"] = head_description(head)
     if req.kind == "deltas" and head is not None:
         d["values_per_frame"] = 3 * int(len(head.rig.moving))
         d["layout"] = "x, y, z of each moving vertex in moving_vertices order, added to the neutral mesh"
@@ -90,7 +79,39 @@ def view_description(live: LiveSession | RemoteFeed, req: ViewRequest, head: Hea
     return d
 
 
+def head_description(head: Head) -> dict:
+    """The served head as a viewer's description names it: where to download it and which vertices move."""
+    rig, mesh = head.rig, head.mesh
+    return {
+        "mesh_url": "/head/mesh",
+        "mesh_json_url": "/head/mesh.json",
+        "texture_url": "/head/texture" if mesh.texture is not None else None,
+        "vertex_count": int(len(mesh.vertices)),
+        "moving_vertices": rig.moving.astype(int).tolist(),
+        "units": "mesh units",
+        # A head driven by its own targets: their names in the order of the morph kind's weights
+        # (mesh.json carries the targets themselves); null for a retargeted head.
+        "morph": {"names": list(rig.names)} if isinstance(rig, MorphRig) else None,
+    }
+
+
+def head_at_rest(head: Head) -> dict:
+    """``/head/description.json``: the head's description and its rest values for each frame kind it serves
+    (``{"morph": [...] or null, "deltas": [...] or null}``; null: all 0). A page waiting for a session (an
+    embedded chatbot avatar before its first answer) shows the head at rest instead of an empty canvas."""
+    kinds = ("morph", "deltas") if isinstance(head.rig, MorphRig) else ("deltas",)
+    return {
+        "head": head_description(head),
+        "rest_values": {kind: rest_values_of(kind, "float32", head) for kind in kinds},
+    }
+
+
 def rest_values(req: ViewRequest, head: Head | None) -> list[float] | None:
+    """:func:`rest_values_of` for a viewer's subscription."""
+    return rest_values_of(req.kind, req.encoding, head)
+
+
+def rest_values_of(kind: str, encoding: str, head: Head | None) -> list[float] | None:
     """The values (``values_per_frame``, the kind's layout) of a frame at the rest pose (mouth parameters 0:
     lips touching, neutral expression), or None when they are all 0 (every head but one resting through its own
     targets). A viewer shows them before a session's first frame and eases to them after its last.
@@ -100,12 +121,12 @@ def rest_values(req: ViewRequest, head: Head | None) -> list[float] | None:
     mouth the session's silences had shown closed."""
     rig = head.rig if head is not None else None
     zero = np.zeros(len(VISUAL_PARAMS))
-    if req.kind == "deltas" and rig is not None:
+    if kind == "deltas" and rig is not None:
         values = np.asarray(rig.displacements(zero), dtype=np.float32).reshape(-1)
-    elif req.kind == "morph" and isinstance(rig, MorphRig):
+    elif kind == "morph" and isinstance(rig, MorphRig):
         values = np.asarray(rig.weights(zero), dtype=np.float32)
-    elif req.kind == "blendshapes":
-        values = np.asarray(blendshape_weights(zero, req.encoding), dtype=np.float32)
+    elif kind == "blendshapes":
+        values = np.asarray(blendshape_weights(zero, encoding), dtype=np.float32)
     else:  # params: the rest is 0 by definition
         return None
     return [float(v) for v in values] if np.any(values) else None

@@ -1,10 +1,11 @@
 """Plain HTTP on the service's port: a small router answering GET requests before any WebSocket handshake.
 
 Routes: ``/health``, ``/metrics``, ``/sessions``, ``/head/mesh`` (binary glTF), ``/head/mesh.json``,
-``/head/texture``, ``/`` (the web root's ``index.html``, else a generated session list), then static
-files under the web root, ``/js/protocol.js`` (the wire format's JS twin) and ``/vendor/three/...``
-(three.js from ``node_modules``). One MIME table: the standard library's :mod:`mimetypes`, with the
-few types it lacks added to a private instance (no change to global state).
+``/head/description.json`` (the head and its rest, for a page waiting for a session), ``/head/texture``, ``/``
+(the web root's ``index.html``, else a generated session list), then static files under the web root,
+``/js/protocol.js`` (the wire format's JS twin) and ``/vendor/three/...`` (three.js from ``node_modules``).
+One MIME table: the standard library's :mod:`mimetypes`, with the few types it lacks added to a private
+instance (no change to global state).
 
 The router returns an :class:`HttpReply` (status, body, content type); the asyncio shell turns it into
 a websockets ``Response``. Exact routes are a dict (:meth:`HttpRouter.route` adds one), so other parts
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from assets.heads.glb import mesh_glb, mesh_json, texture_mime
+from server.describe import head_at_rest
 from wire import JS_PROTOCOL
 from wire import protocol as P
 
@@ -132,6 +134,8 @@ class HttpRouter:
                 # The targets the head drives, in the order of the morph kind's weights (none for a retarget).
                 names = tuple(getattr(self.head.rig, "names", ())) if self.head.kind == "morph" else ()
                 hit = HttpReply(HTTPStatus.OK, mesh_json(mesh, names), "application/json")
+            elif path == "/head/description.json":
+                hit = HttpReply.json(head_at_rest(self.head))
             elif path == "/head/texture" and mesh.texture is not None:
                 hit = HttpReply(HTTPStatus.OK, mesh.texture, texture_mime(mesh) or "application/octet-stream")
             else:

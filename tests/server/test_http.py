@@ -47,6 +47,7 @@ ROUTES = [
     ("/js", HTTPStatus.NOT_FOUND, None),  # a directory
     ("/a\x00b", HTTPStatus.NOT_FOUND, None),
     ("/head/mesh", HTTPStatus.NOT_FOUND, None),  # no head
+    ("/head/description.json", HTTPStatus.NOT_FOUND, None),
     ("/" + "a" * 300, HTTPStatus.REQUEST_URI_TOO_LONG, None),  # one name over the file system's limit
     ("/" + "a/" * 600, HTTPStatus.REQUEST_URI_TOO_LONG, None),
 ]
@@ -117,3 +118,42 @@ def test_a_morph_heads_mesh_json_carries_the_driven_targets_in_wire_order(builti
     lit[turned] += np.array(m["morph"]["normals"]["deltas"][jaw]).reshape(-1, 3)
     np.testing.assert_allclose(lit, normals(moved), atol=2e-4)  # 4 decimals sent
     assert np.abs(normals(moved) - normals(v)).max() > 0.3  # the jaw does turn the surface
+
+
+def test_the_head_at_rest_is_served_for_a_page_waiting_for_a_session(head):
+    """/head/description.json: what a viewer's description says of the head, and its rest values for each kind the
+    head serves, so a page waiting for a session shows the head at rest. The two kinds agree: the rest weights
+    times the head's own targets (mesh.json) are the rest deltas; a retargeted head serves deltas only (at rest 0:
+    null); the route is private like the other head downloads."""
+    import json
+
+    import numpy as np
+
+    from assets.heads.head import builtin_morph_head
+
+    retargeted, head = head, builtin_morph_head()
+    router = HttpRouter(web_root=None, node_modules=None, head=head, sessions=list)
+    reply = router.handle("/head/description.json")
+    assert reply.status == HTTPStatus.OK and reply.content_type == "application/json"
+    d = json.loads(reply.body)
+    assert d["head"]["morph"]["names"] == list(head.rig.names)
+    assert d["head"]["moving_vertices"] == head.rig.moving.tolist()
+    assert set(d["rest_values"]) == {"morph", "deltas"}
+    m = json.loads(router.handle("/head/mesh.json").body)
+    targets = np.array(m["morph"]["deltas"]).reshape(len(head.rig.names), -1, 3)
+    weights = (
+        np.zeros(len(head.rig.names)) if d["rest_values"]["morph"] is None else np.array(d["rest_values"]["morph"])
+    )
+    full = np.zeros((len(m["vertices"]) // 3, 3))
+    full[np.array(m["morph"]["vertices"])] = np.tensordot(weights, targets, axes=1)
+    deltas = d["rest_values"]["deltas"]
+    want = np.zeros((len(head.rig.moving), 3)) if deltas is None else np.array(deltas).reshape(-1, 3)
+    np.testing.assert_allclose(full[head.rig.moving], want, atol=1e-6)
+    assert router.handle("/head/description.json", authorized=False).status == HTTPStatus.UNAUTHORIZED
+
+    retarget = json.loads(
+        HttpRouter(web_root=None, node_modules=None, head=retargeted, sessions=list)
+        .handle("/head/description.json")
+        .body
+    )
+    assert retarget["head"]["morph"] is None and set(retarget["rest_values"]) == {"deltas"}

@@ -52,6 +52,7 @@ export class HeadView {
     const fill = new THREE.DirectionalLight(0xffffff, 0.5);
     fill.position.set(-0.6, 0.0, 0.8);
     this.scene.add(key, fill);
+    this.loading = null; // the last load (each waits for the one before)
     this.key = null; // what the loaded mesh is (to reload only when the server's head changes)
     this.mesh = null;
     this.moving = null; // Int32Array of moving vertex indices
@@ -77,8 +78,15 @@ export class HeadView {
     this.dirty = true;
   }
 
-  /** Load the head described by a viewer description's `head` (null clears it). */
-  async load(head, base = "") {
+  /** Load the head described by a viewer description's `head` (null clears it). Loads run one after another:
+   *  two overlapping downloads (the head shown at rest while waiting, then the session's) each added a mesh. */
+  load(head, base = "") {
+    const next = (this.loading ?? Promise.resolve()).catch(() => {}).then(() => this.loadNow(head, base));
+    this.loading = next;
+    return next;
+  }
+
+  async loadNow(head, base) {
     const key = head ? `${head.mesh_json_url}|${head.vertex_count}|${head.moving_vertices.length}|${head.morph?.names?.length ?? 0}` : null;
     const wantMorph = Boolean(head && head.morph);
     if (head && key === this.key && wantMorph === Boolean(this.morph)) {

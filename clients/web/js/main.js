@@ -116,6 +116,7 @@ async function pollSessions() {
         // replace "session ended" by a bare "waiting").
         const waiting = state.wanted ? `waiting for session "${state.wanted}"` : "waiting for a live session";
         setStatus(state.ended ? `${state.ended}; ${waiting}` : waiting);
+        showHeadAtRest();
         clearTimeout(waitTimer); // one pending fast poll at most (the POLL_S interval also calls this)
         waitTimer = setTimeout(pollSessions, WAIT_POLL_S * 1000);
       }
@@ -125,6 +126,31 @@ async function pollSessions() {
     kindLevel = firstKind; // the server that comes back may have another head
     renderSessionList([]);
     if (!ws) setStatus("server unreachable, retrying");
+  }
+}
+
+let restAsked = false; // the served head was asked for to show at rest while no session plays
+/** While the page waits for a session and has shown none, the server's head at rest (an embedded chatbot avatar
+ *  is there before its first answer, not an empty canvas). Once; again after a failure (the server was away). */
+async function showHeadAtRest() {
+  if (restAsked || ws || shown) return;
+  restAsked = true;
+  try {
+    const url = token ? `/head/description.json?token=${encodeURIComponent(token)}` : "/head/description.json";
+    const res = await fetch(url, { cache: "no-store" });
+    if (res.status === 404) return; // a server without a head: nothing to show before the parameters come
+    if (!res.ok) throw new Error(`HTTP ${res.status}`);
+    const d = await res.json();
+    const kind = KINDS.slice(kindLevel).find((k) => k in d.rest_values);
+    if (!kind || ws || shown) return;
+    await view.load({ ...d.head, morph: kind === "morph" ? d.head.morph : null });
+    if (ws || shown) return; // a session began meanwhile: its description and frames take over
+    const rest = d.rest_values[kind];
+    if (rest && kind === "morph") view.applyWeights(Float32Array.from(rest));
+    else if (rest) view.applyDeltas(Float32Array.from(rest));
+  } catch (err) {
+    console.warn("head at rest:", err);
+    restAsked = false;
   }
 }
 

@@ -4,14 +4,16 @@
 //   node embed_check.mjs URL SESSION OUTDIR
 //
 // Prints one JSON object per line on stdout:
-//   {"step":"embedded", layout, state}  ?embed=1&background=transparent drew 30 frames of SESSION;
+//   {"step":"resting", morph, rest}     ?embed=1&background=transparent opened before SESSION exists shows the
+//                                       server's head at rest (/head/description.json); OUTDIR/embed_rest.png
+//   {"step":"embedded", layout, state}  the same page drew 30 frames of SESSION (the test starts it after "resting");
 //                                       OUTDIR/embed_transparent.png written with the page's alpha
 //   {"step":"coloured", layout, state}  ?background=%23ff8000 (panel kept) drew 30 frames; OUTDIR/embed_coloured.png
 //   {"step":"done", "console_errors": [...], "console_warnings": [...]}  after ?background=red (a warning, default kept)
 // Exits 1 with {"step":"error", ...} when something does not happen within its time limit.
 
 import { join } from "node:path";
-import { errors, openViewer, run, say } from "./harness.mjs";
+import { errors, openPage, openViewer, run, say } from "./harness.mjs";
 
 const [url, session, outDir] = process.argv.slice(2);
 const base = `${url}/?session=${encodeURIComponent(session)}`;
@@ -26,7 +28,15 @@ function layout() {
 }
 
 async function main() {
-  let page = await openViewer(`${base}&embed=1&background=transparent`);
+  let page = await openPage(`${base}&embed=1&background=transparent`);
+  // Before SESSION exists the page shows the server's head at rest (fetched once the page knows it waits).
+  await page.waitForFunction(() => window.facecast && /waiting for session/.test(window.facecast.state.status)
+    && window.facecast.morph().names !== null, null, { timeout: 30000 });
+  await page.waitForTimeout(500); // a refresh or two to draw it
+  await page.screenshot({ path: join(outDir, "embed_rest.png"), omitBackground: true });
+  say({ step: "resting", morph: await page.evaluate(() => window.facecast.morph()),
+    rest: await page.evaluate(async () => (await (await fetch("/head/description.json")).json()).rest_values) });
+  await page.waitForFunction(() => window.facecast.state.frames >= 30, null, { timeout: 30000 });
   await page.screenshot({ path: join(outDir, "embed_transparent.png"), omitBackground: true });
   say({ step: "embedded", layout: await page.evaluate(layout), state: await page.evaluate(() => ({ ...window.facecast.state })) });
   page = await openViewer(`${base}&background=%23ff8000`);

@@ -463,7 +463,9 @@ def test_browser_embeds_the_head_alone_on_a_transparent_or_coloured_background(m
     """An avatar embedded in a chat page or a streaming tool's browser source: ``?embed=1`` shows the head alone,
     filling the page (no side panel), and ``?background=transparent`` leaves every pixel but the head's
     transparent, so whatever is behind the page shows; ``?background=%23ff8000`` paints that colour behind the head
-    (panel kept); a value the page does not know is a console warning and the default background, never a blank page."""
+    (panel kept); a value the page does not know is a console warning and the default background, never a blank page.
+    Before the session exists the embedded page already shows the server's head at rest (a chatbot's avatar is
+    there before its first answer; the page used to stay empty until a session's description came)."""
     from PIL import Image
 
     _require_browser()
@@ -471,17 +473,27 @@ def test_browser_embeds_the_head_alone_on_a_transparent_or_coloured_background(m
     name = "embedcheck"
     srv = LiveServer(model, morph_head)
     stop = asyncio.Event()
-    session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(3)))
     proc = _start(EMBED_SCRIPT, srv.url, name, str(ARTIFACTS))
+    session = None
     try:
+        resting = _read_step(proc, "resting")
+        session = srv.submit(stream_session(srv.url, name, SESSION_S, stop=stop, samples=_speech(3)))
         embedded = _read_step(proc, "embedded")
         coloured = _read_step(proc, "coloured")
         done = _read_step(proc, "done")
     finally:
         _end(proc)
         srv.loop.call_soon_threadsafe(stop.set)
-        session.result(30)
+        if session is not None:
+            session.result(30)
         srv.stop()
+
+    # Before the session: the head is there, at rest (its own targets at the rest weights the server serves).
+    assert resting["morph"]["names"] == list(morph_head.rig.names)
+    want = resting["rest"]["morph"] or [0.0] * len(morph_head.rig.names)
+    np.testing.assert_allclose(resting["morph"]["influences"], want, atol=1e-6)
+    alpha = np.asarray(Image.open(ARTIFACTS / "embed_rest.png").convert("RGBA"))[..., 3]
+    assert 0.03 < (alpha > 250).mean() < 0.6 and alpha[:6].max() == 0, (alpha > 250).mean()
 
     lay = embedded["layout"]
     assert lay["aside"]["display"] == "none" and embedded["state"]["frames"] >= 30
