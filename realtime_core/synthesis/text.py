@@ -139,6 +139,13 @@ def clean_text(
 # punto o", "p. ej." "pe ex". Only these are rewritten; what espeak-ng reads well is left to it: e-mail addresses
 # ("support at example dot com", "soporte arroba ejemplo punto com"), "14:30" ("fourteen thirty"), "2:30 pm",
 # "12.5%", ordinals ("3rd"), "e.g.", "Dr.", "@mentions", Spanish phone numbers read in groups.
+# Survey (session text52, issue 13): "Python 3.12" "three point one two", "v2.0.1" "two point zero point one", "3/4"
+# "three slash four", "100-2000" "one zero zero, two zero zero zero" (as a phone number), "17:00" "seventeen hundred",
+# "24/7" "twenty four slash seven", "x2" "eks two", "#1" "one", "i.e." "I E", "1st-3rd" "first third", "5'10"" "five
+# ten", "9am–5pm" "nine a m five p m"; a word in capitals of up to three letters espeak-ng does not know is spelled in a
+# sentence ("RAM" "R A M", "TOO" "T O O", "NO" "ene o"). Left alone: "/usr/bin" ("slash usser slash bin"), "e.g."
+# ("for example"), "etc.", "21st", "&" ("and"), "10-20%", emoji and markdown (clean_text drops them), "CPU", "API",
+# "USA", "NASA", "OK" and the Spanish acronyms in a sentence ("la IA", "el USB": spelled).
 
 _MONTHS = {
     "en": "January February March April May June July August September October November December".split(),  # noqa: SIM905
@@ -488,10 +495,13 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
     -> "December 7th, 2026" / "7 de diciembre de 2026"; "Dec 7" -> "December 7th"), whole hours and minutes under
     ten ("9:00" -> "9 o'clock", "9:05" -> "9 oh 5"; "a las 9:00" -> "a las 9"), amounts ("$5" -> "5 dollars",
     "3,50 €" -> "3 euros con 50 céntimos"), units after a number ("5 km" -> "5 kilometers"), ranges ("10-20" ->
-    "10 to 20"), versions ("v2.1.3" -> "version 2.1.3"), English phone numbers digit by digit, Spanish ordinals
-    ("1.º" -> "primero") and abbreviations ("p. ej." -> "por ejemplo"). ``day_first``: how "07/12/2026" is read
-    when both fields could be the month; None = the language's custom (Spanish day first; English month first,
-    as the default en-us voice). Everything else is left as written: espeak-ng reads it well (the survey above)."""
+    "10 to 20"), versions ("v2.1.3" -> "version 2 point 1 point 3"; "Python 3.12" -> "Python 3 point 12"), English
+    phone numbers digit by digit, Spanish ordinals ("1.º" -> "primero") and abbreviations ("p. ej." -> "por
+    ejemplo"), fractions ("3/4" -> "3 quarters"), scores ("4.5/5" -> "4.5 out of 5"), "24/7", "x2", "#1", "5'10"",
+    English 24-hour afternoon times ("17:00" -> "5 pm") and capitals espeak-ng spells (:data:`_SPOKEN_CAPS`).
+    ``day_first``: how "07/12/2026" is read when both fields could be the month; None = the language's custom
+    (Spanish day first; English month first, as the default en-us voice). Everything else is left as written:
+    espeak-ng reads it well (the surveys above)."""
     if language not in _WORDS:
         raise ConfigError(f"unsupported language {language!r}; supported: {sorted(_WORDS)}")
     words = _WORDS[language]
