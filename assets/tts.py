@@ -93,13 +93,17 @@ def parse_voice(language: str, voice: str | None = None, *, rate_wpm: int = 175)
     return Voice(language=language, base=base, variant=variant, rate_wpm=rate_wpm)
 
 
+def day_first(voice: Voice) -> bool | None:
+    """How ``voice`` reads an ambiguous numeric date ("07/12/2026", :func:`clean_text`): a US English voice month
+    first, a British (or other) English one day first; None = the language's custom (Spanish day first)."""
+    return None if voice.language != "en" else not voice.base.startswith("en-us")
+
+
 def speak(text: str, *, language: str = "en", voice: str | None = None, rate_wpm: int = 175) -> Speech:
     """Speak ``text``; raises TextError (nothing to say) or ConfigError (language, voice)."""
     v = parse_voice(language, voice, rate_wpm=rate_wpm)
     # URLs, dates, times, amounts written out as said in the language; "07/12/2026" is July 12 to a US voice
-    cleaned = clean_text(
-        text, language=language, day_first=None if language != "en" else not v.base.startswith("en-us")
-    )
+    cleaned = clean_text(text, language=language, day_first=day_first(v))
     syn = synthesizer().synthesize(cleaned, v, noise_seed=0)
     phones = tuple((p.phoneme, p.start_s, p.end_s) for p in syn.phonemes)
     if not any(lab not in ("_", "_:", "_!", "_^_", ";") for lab, _, _ in phones):

@@ -155,17 +155,21 @@ def espeak_pronunciation(token: str) -> str | None:
     return " ".join(phones) or None
 
 
-def force_align(samples: np.ndarray, rate_hz: int, text: str, *, source: str | Path = "<audio>") -> Alignment:
+def force_align(
+    samples: np.ndarray, rate_hz: int, text: str, *, source: str | Path = "<audio>", day_first: bool | None = None
+) -> Alignment:
     """ARPAbet phones of ``text`` in ``samples`` ((n,) float in [-1, 1] at ``rate_hz``).
 
-    Words outside the dictionary, numbers and symbols are pronounced by espeak-ng (module doc).
+    Words outside the dictionary, numbers and symbols are pronounced by espeak-ng (module doc). ``day_first``: how
+    the transcript's "07/12/2026" was read (:func:`realtime_core.synthesis.text.normalise_for_speech`; None: month
+    first, as a US English talker, whom pocketsphinx's model is of).
     Raises MissingDependencyError without pocketsphinx, AlignmentFormatError (naming
     ``source``) when a token has no pronunciation or the alignment fails.
     """
     Decoder = _decoder_class()
     # what `facecast say` writes out before espeak-ng reads it ("$5.50" "5 dollars and 50 cents", "9:00" "9 o'clock"),
     # so a take of `say`'s own speech aligns with its transcript, and a person's reading is matched as said
-    words = normalise_transcript(normalise_for_speech(text, language="en"))
+    words = normalise_transcript(normalise_for_speech(text, language="en", day_first=day_first))
     if not words:
         raise AlignmentFormatError(source, "empty transcript")
     pcm = _pcm16k(samples, rate_hz)

@@ -204,12 +204,16 @@ def run(args: argparse.Namespace) -> int:
     lang = args.lang or language_of_voice(args.voice)
     t = time.perf_counter()
     if args.audio is not None:
+        from assets.tts import day_first, parse_voice
         from training.force_align import force_align, speech_in_pauses_s
 
         if lang != "en":
             raise ConfigError("--audio needs English (the forced aligner's model is US English)")
         samples, rate = read_audio(args.audio)
-        alignment = force_align(samples, rate, args.text, source=args.audio)
+        # "07/12/2026" in the transcript is 7 December to a British --voice, as `say` without --audio reads it
+        # (it was July 12 whatever the voice: the recording said one date, the alignment expected another)
+        first = day_first(parse_voice(lang, args.voice, rate_wpm=args.rate))
+        alignment = force_align(samples, rate, args.text, source=args.audio, day_first=first)
         speech_s, unaligned_s = speech_in_pauses_s(samples, rate, alignment)
         if unaligned_s > 1.0 and unaligned_s > 0.3 * speech_s:
             # pocketsphinx aligns any transcript: one that does not match the recording used to pass silently

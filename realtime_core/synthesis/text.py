@@ -139,6 +139,13 @@ def clean_text(
 # punto o", "p. ej." "pe ex". Only these are rewritten; what espeak-ng reads well is left to it: e-mail addresses
 # ("support at example dot com", "soporte arroba ejemplo punto com"), "14:30" ("fourteen thirty"), "2:30 pm",
 # "12.5%", ordinals ("3rd"), "e.g.", "Dr.", "@mentions", Spanish phone numbers read in groups.
+# Survey (session text52, issue 13): "Python 3.12" "three point one two", "v2.0.1" "two point zero point one", "3/4"
+# "three slash four", "100-2000" "one zero zero, two zero zero zero" (as a phone number), "17:00" "seventeen hundred",
+# "24/7" "twenty four slash seven", "x2" "eks two", "#1" "one", "i.e." "I E", "1st-3rd" "first third", "5'10"" "five
+# ten", "9am–5pm" "nine a m five p m"; a word in capitals of up to three letters espeak-ng does not know is spelled in a
+# sentence ("RAM" "R A M", "TOO" "T O O", "NO" "ene o"). Left alone: "/usr/bin" ("slash usser slash bin"), "e.g."
+# ("for example"), "etc.", "21st", "&" ("and"), "10-20%", emoji and markdown (clean_text drops them), "CPU", "API",
+# "USA", "NASA", "OK" and the Spanish acronyms in a sentence ("la IA", "el USB": spelled).
 
 _MONTHS = {
     "en": "January February March April May June July August September October November December".split(),  # noqa: SIM905
@@ -233,7 +240,7 @@ _UNITS = {  # symbol after a number -> (one, many); "m", "s", "l" are left alone
 }
 _ORDINALS_ES = ["primer", "segund", "tercer", "cuart", "quint", "sext", "séptim", "octav", "noven", "décim"]
 _ABBREVIATIONS_SPOKEN = {  # abbreviations espeak-ng spells or clips ("p. ej." "pe ex", "etc." "etk")
-    "en": {r"vs\.": "versus", r"approx\.": "approximately", r"and/or": "and or"},
+    "en": {r"vs\.": "versus", r"approx\.": "approximately", r"and/or": "and or", r"i\.\s?e\.": "that is"},
     "es": {
         r"p\.\s?ej\.": "por ejemplo",
         r"etc\.": "etcétera",
@@ -241,6 +248,7 @@ _ABBREVIATIONS_SPOKEN = {  # abbreviations espeak-ng spells or clips ("p. ej." "
         r"EE\.\s?UU\.": "Estados Unidos",
         r"vs\.": "contra",
         r"y/o": "y o",
+        r"i\.\s?e\.": "es decir",
     },
 }
 _TLDS = (
@@ -268,16 +276,91 @@ _DOT = r"(?:\.(?!\s*$))?"
 _ISO_DATE = re.compile(rf"(?<![\w.,:/-])(\d{{4}})-(\d{{2}})-(\d{{2}}){_NOT_AFTER}")
 _NUMERIC_DATE = re.compile(rf"(?<![\w.,:/-])(\d{{1,2}})([/.-])(\d{{1,2}})\2(\d{{4}}){_NOT_AFTER}")
 _PHONE_EN = re.compile(
-    r"(?<![\w.+/-])(?:\+\d{1,3}(?:[ .-]?\(?\d{1,4}\)?){2,5}|(?:\(\d{3}\)\s?|\d{3}[.-])?\d{3}[.-]\d{4})(?![\w-]|[.,]\d)"
+    r"(?<![\w.+/-])(?:\+\d{1,3}(?:[ .-]?\(?\d{1,4}\)?){2,5}|(?:1[ .-])?(?:\(\d{3}\)\s?|\d{3}[.-])?\d{3}[.-]\d{4})"
+    r"(?![\w-]|[.,]\d)"
 )
 """A phone number as written in English: international ("+44 20 7946 0958") or North American ("(555) 123-4567",
-"555-123-4567", "555-0199"): read digit by digit in its groups."""
+"555-123-4567", "555-0199", "1-800-555-0199"): read digit by digit in its groups, a toll-free "800" as "8 hundred"."""
 _RANGE = re.compile(r"(?<![\w.,:/-])(\d+(?:[.,:]\d+)*)(?:-|\s?–\s?)([$€£¥]?\d+(?:[.,:]\d+)*)(?![\w-]|[.,:]\d)")
 """A range "10-20", "5–10", "9:00-17:00" ("ten dash twenty", "five ten"): "10 to 20" / "10 a 20". A hyphen
 between spaces is a minus ("5 - 3") and stays, as a chain ("912-345-678", a Spanish phone number)."""
 _TIME = re.compile(r"(?<![\w.,:])(\d{1,2}):(\d{2})(?![\d:])(?P<h>\s?h\b)?")
 _AMPM = re.compile(r"\s?(?:[ap]\.?m\.?)(?!\w)", re.I)
 _VERSION = re.compile(r"(?<![\w.])v(\d+(?:\.\d+)*)\b")
+_DOTTED = re.compile(r"(?<![\w.,])(\d+)((?:\.\d+)+)(?![\w]|[.,]\d)")
+"""A number with dotted parts: a decimal ("3.12"), a version ("Python 3.12", "2.0.1") or an IP address."""
+_VERSION_WORDS = "version|versión|release|update|patch|build|v"
+_VERSIONED = (
+    "python java node ruby php perl rust go swift kotlin scala ubuntu debian fedora windows macos ios android linux "
+    "chrome firefox safari edge django flask react angular vue rails postgres postgresql mysql redis docker "
+    "kubernetes typescript javascript gpt claude gemini llama bluetooth usb http html tls ssl wi-fi openssl unity "
+    "blender numpy pandas pytorch tensorflow cuda xcode gradle spring laravel wordpress drupal excel office"
+)
+_NAMES_WITH_VERSIONS = frozenset(_VERSIONED.split())
+"""Names a version number follows even at a sentence's start ("Python 3.12 is out"); elsewhere any capitalised name
+does ("use Ubuntu 22.04", "on iOS 17.2")."""
+_SCALE_AFTER = re.compile(r"\s?(?:%|percent|por ciento|thousand|million|billion|trillion|mil|millones?)\b", re.I)
+_FRACTIONS = {  # denominator -> (one, many); "3/4" "three slash four"
+    "en": {
+        2: ("half", "halves"),
+        3: ("third", "thirds"),
+        4: ("quarter", "quarters"),
+        5: ("fifth", "fifths"),
+        6: ("sixth", "sixths"),
+        8: ("eighth", "eighths"),
+        10: ("tenth", "tenths"),
+        16: ("sixteenth", "sixteenths"),
+        32: ("thirty-second", "thirty-seconds"),
+        64: ("sixty-fourth", "sixty-fourths"),
+        100: ("hundredth", "hundredths"),
+    },
+    "es": {
+        2: ("medio", "medios"),
+        3: ("tercio", "tercios"),
+        4: ("cuarto", "cuartos"),
+        5: ("quinto", "quintos"),
+        6: ("sexto", "sextos"),
+        8: ("octavo", "octavos"),
+        10: ("décimo", "décimos"),
+        16: ("dieciseisavo", "dieciseisavos"),
+        100: ("centésimo", "centésimos"),
+    },
+}
+_FRACTION = re.compile(r"(?<![\w.,/:-])(?:(\d+)\s)?(\d+(?:[.,]\d+)?)/(\d{1,3})(?![\w/]|[.,]\d)")
+"""A fraction or a score without a year after it ("3/4 cup", "1 1/2", "4.5/5"; "3/4/2025" is a date)."""
+_OUT_OF = {5, 10, 100}
+"""Denominators of a score: "4.5/5", "10/10" are "4.5 out of 5" (a numerator not below the denominator)."""
+_FEET_INCHES = re.compile(r"(?<![\w.,])(\d)['’′]\s?(\d{1,2})(?:\"|”|″|'')?(?![\w'’\"”])")
+_TIMES = re.compile(
+    r"(?<![\w.])(?:(?P<n>\d+(?:\.\d+)?)x|x(?P<m>10|\d(?:\.\d+)?)|(?P<a>[1-9]\d*)(?P<s>\s?)x(?P=s)(?P<b>\d+))(?![\w-]|[.,]\d)"
+)
+"""A multiplier, a size or a product: "2x faster", "speed x2", "1920x1080", "3 x 4" ("two eks", "eks two"; "1x1" "one
+eks one")."""
+_AMPM_RANGE = re.compile(
+    r"(?<![\w.,:])(\d{1,2}(?::\d{2})?(?:\s?[ap]\.?m\.?)?)\s?[-–]\s?(\d{1,2}(?::\d{2})?\s?[ap]\.?m\.?)(?!\w)", re.I
+)
+"""A range of 12-hour times ("9am–5pm", "9-5 pm"): the en dash was dropped, "nine a m five p m"."""
+_ORDINAL_RANGE = re.compile(r"(?<![\w.,])(\d+(?:st|nd|rd|th|\.?[ºª]))\s?[-–]\s?(\d+(?:st|nd|rd|th|\.?[ºª]))(?!\w)")
+_SPOKEN_CAPS = {
+    # espeak-ng spells a word in capitals of up to three letters it does not know ("RAM" "R A M", "TOO" "T O O",
+    # Spanish "NO" "ene o", "MUY" "eme u i griega"): these are said as words. Others it reads as a word though they
+    # are spelled ("ETA" "eeta"). An acronym it spells, "CPU", "API", "USA", and one it says, "NASA", is left to it.
+    "en": {
+        **{w: w.lower() for w in "RAM ROM SIM PIN LAN WAN ZIP".split()},  # noqa: SIM905
+        **{
+            w: w.lower()  # emphasis ("It is TOO big", "a BIG deal")
+            for w in "ALL ANY ASK BAD BIG BUT CAN DAY END FEW GET HOT HOW NEW NOT NOW OFF OLD ONE OUR OUT "  # noqa: SIM905
+            "PUT RUN SAY SEE SET TOO TOP TRY TWO USE WAY WHY YES YET YOU".split()
+        },
+        "ETA": "E.T.A.",
+        "IMHO": "I.M.H.O.",
+        "SaaS": "sass",
+    },
+    "es": {
+        w: w.lower()
+        for w in "NO SÍ YA HOY MÁS MUY SIN CON POR QUÉ TÚ YO ES TAN MAL FIN".split()  # noqa: SIM905
+    },
+}
 
 
 def _month_en(name: str) -> int:
@@ -347,16 +430,78 @@ def _host(m: re.Match[str], language: str) -> str:
     return host + (f" {_WORDS[language]['port']} {m.group('port')}" if m.group("port") else "")
 
 
+def _dotted(m: re.Match[str], language: str) -> str:
+    """A number with dotted parts as said: an IP address's parts joined by "dot" ("192.168.1.10" was "one hundred
+    ninety two point one six eight point ..."); in English a version as "3 point 12" ("Python 3.12" was "three
+    point one two", a decimal's reading) and "2 point oh point 1" ("two point zero point one"), when it follows a
+    version word or a name (:data:`_NAMES_WITH_VERSIONS`, a capitalised word not starting the sentence) or has
+    three parts; a decimal is left to espeak-ng. espeak-ng's Spanish reads "3.12" "tres punto doce" already."""
+    parts = [m.group(1), *m.group(2)[1:].split(".")]
+    if len(parts) == 4 and all(len(p) <= 3 and int(p) <= 255 for p in parts):
+        return f" {_WORDS[language]['dot']} ".join(parts)
+    if language != "en" or _SCALE_AFTER.match(m.string, m.end()):
+        return m.group(0)
+    before = m.string[: m.start()]
+    word = re.search(r"([\w.+#-]+)\s$", before)
+    name = word.group(1).rstrip(".") if word else ""
+    starts_sentence = word is not None and re.search(r"(?:^|[.!?:]\s+|\n\s*)$", before[: word.start()]) is not None
+    named = name.lower() in _NAMES_WITH_VERSIONS or (
+        any(c.isupper() for c in name) and name[:1].isalpha() and not starts_sentence
+    )
+    after_version = re.search(rf"\b(?:{_VERSION_WORDS})\s?$", before, re.I) is not None
+    if len(parts) == 2 and not (named or after_version):
+        return m.group(0)
+    # a part's leading zeros are said "oh" ("2.05": "two point oh five"); the first part is a number ("0.9")
+    said = [parts[0]] + [" ".join(["oh"] * (len(p) - len(p.lstrip("0"))) + [p.lstrip("0")]).strip() for p in parts[1:]]
+    return " point ".join(said)
+
+
+def _fraction(m: re.Match[str], language: str) -> str:
+    """A fraction as said ("3/4" "3 quarters", "1/2" "a half", "1 1/2" "1 and a half"; Spanish "3 cuartos", "media
+    taza") or a score ("4.5/5" "4.5 out of 5", "4,5 de 5"); anything else ("10/20", a path) as written."""
+    whole, num, den = m.group(1), m.group(2), int(m.group(3))
+    names = _FRACTIONS[language]
+    decimal = not num.isdigit()
+    if den in _OUT_OF and (decimal or int(num) >= den) and not whole:
+        return f"{num} {'out of' if language == 'en' else 'de'} {den}"
+    if decimal or den not in names or not 0 < int(num) < den:
+        return m.group(0)
+    one, many = names[den]
+    n = int(num)
+    if language == "es":
+        # "1/2 taza" "media taza": medio agrees with the noun after it (a feminine one mostly ends in -a)
+        feminine = den == 2 and re.match(r"\s+(?:de\s+)?\w*as?\b", m.string[m.end() :]) is not None
+        one = "media" if feminine else one
+        said = (one if den == 2 else f"un {one}") if n == 1 else f"{n} {many}"
+        return f"{whole} y {said}" if whole else said
+    said = f"a {one}" if n == 1 else f"{n} {many}"
+    return f"{whole} and {said}" if whole else said
+
+
+def _times(m: re.Match[str], language: str) -> str:
+    """A multiplier or size as said: "2x" "2 times", "x2" "times 2", "1920x1080" "1920 by 1080" ("2 veces", "por 2",
+    "1920 por 1080"); "3 x 4" "3 times 4"; "0x1F" (hexadecimal) is no match."""
+    times, by = ("times", "by") if language == "en" else ("veces", "por")
+    if m.group("n"):
+        return f"{m.group('n')} {times}"
+    if m.group("m"):
+        return f"{'times' if language == 'en' else 'por'} {m.group('m')}"
+    return f"{m.group('a')} {by if not m.group('s') else times if language == 'en' else 'por'} {m.group('b')}"
+
+
 def normalise_for_speech(text: str, *, language: str, day_first: bool | None = None) -> str:
     """``text`` with what espeak-ng reads badly written out as a person reads it, in ``language`` ("en", "es"):
     a URL as its host ("https://example.com/docs?q=1" -> "example.com": "example dot com"), dates ("2026-12-07"
     -> "December 7th, 2026" / "7 de diciembre de 2026"; "Dec 7" -> "December 7th"), whole hours and minutes under
     ten ("9:00" -> "9 o'clock", "9:05" -> "9 oh 5"; "a las 9:00" -> "a las 9"), amounts ("$5" -> "5 dollars",
     "3,50 €" -> "3 euros con 50 céntimos"), units after a number ("5 km" -> "5 kilometers"), ranges ("10-20" ->
-    "10 to 20"), versions ("v2.1.3" -> "version 2.1.3"), English phone numbers digit by digit, Spanish ordinals
-    ("1.º" -> "primero") and abbreviations ("p. ej." -> "por ejemplo"). ``day_first``: how "07/12/2026" is read
-    when both fields could be the month; None = the language's custom (Spanish day first; English month first,
-    as the default en-us voice). Everything else is left as written: espeak-ng reads it well (the survey above)."""
+    "10 to 20"), versions ("v2.1.3" -> "version 2 point 1 point 3"; "Python 3.12" -> "Python 3 point 12"), English
+    phone numbers digit by digit, Spanish ordinals ("1.º" -> "primero") and abbreviations ("p. ej." -> "por
+    ejemplo"), fractions ("3/4" -> "3 quarters"), scores ("4.5/5" -> "4.5 out of 5"), "24/7", "x2", "#1", "5'10"",
+    English 24-hour afternoon times ("17:00" -> "5 pm") and capitals espeak-ng spells (:data:`_SPOKEN_CAPS`).
+    ``day_first``: how "07/12/2026" is read when both fields could be the month; None = the language's custom
+    (Spanish day first; English month first, as the default en-us voice). Everything else is left as written:
+    espeak-ng reads it well (the surveys above)."""
     if language not in _WORDS:
         raise ConfigError(f"unsupported language {language!r}; supported: {sorted(_WORDS)}")
     words = _WORDS[language]
@@ -375,6 +520,10 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
         return _date(language, y, mo - 1, d) if 1 <= mo <= 12 and 1 <= d <= 31 else m.group(0)
 
     text = _NUMERIC_DATE.sub(numeric, _ISO_DATE.sub(iso, text))
+    # after the dates ("3/4/2025" is one): "24/7" "twenty four slash seven", "5'10"" "five ... ten"
+    text = re.sub(r"(?<![\w/])(?:24/7(?:/365)?|50/50)(?![\w/])", lambda m: m.group(0).replace("/", " "), text)
+    text = _FEET_INCHES.sub(lambda m: f"{m.group(1)} {'foot' if language == 'en' else 'pies'} {m.group(2)}", text)
+    text = _FRACTION.sub(lambda m: _fraction(m, language), text)
     abbr = _MONTH_ABBR[language]
     if language == "en":
         month = "|".join(_MONTHS["en"] + sorted(abbr, key=len, reverse=True))
@@ -400,7 +549,13 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
             groups = re.findall(r"\d+", m.group(0))
             if sum(map(len, groups)) < 7:
                 return m.group(0)
-            return "plus " * m.group(0).startswith("+") + ", ".join(" ".join(g) for g in groups)
+            # "100-2000" is a range: a local number's exchange starts 2-9, and one of round hundreds is no number
+            if len(groups) == 2 and (groups[0][0] in "01" or (groups[0].endswith("00") and groups[1].endswith("00"))):
+                return m.group(0)
+            said = [
+                g[0] + " hundred" if len(groups) == 4 and re.fullmatch(r"[89]00", g) else " ".join(g) for g in groups
+            ]
+            return "plus " * m.group(0).startswith("+") + ", ".join(said)
 
         text = _PHONE_EN.sub(phone, text)
     else:
@@ -426,6 +581,9 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
         between = words["and"] if after_between else words["to"]
         return f"{m.group(1)} {between} {m.group(2)}"
 
+    to = words["to"]
+    text = _ORDINAL_RANGE.sub(rf"\1 {to} \2", text)  # "1st-3rd" "first third", with a pause between
+    text = _AMPM_RANGE.sub(rf"\1 {to} \2", text)  # "9am–5pm": the en dash was dropped, "nine a m five p m"
     text = _RANGE.sub(span, text)
 
     def clock(m: re.Match[str]) -> str:
@@ -438,6 +596,8 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
                 return f"{h} horas" if mi == 0 else f"{m.group(1)}:{m.group(2)} horas"
             # "9:05" "nueve y cinco"; "14:05" stays "catorce cero cinco", as a 24-hour time is read
             return (f"{h}" if h else "0 horas") if mi == 0 else f"{h} y {mi}" if mi < 10 and h <= 12 else m.group(0)
+        if 12 < h < 24 and not hours:  # "17:00" "seventeen hundred", "14:30" "fourteen thirty": 5 pm, 2:30 pm
+            return (f"{h - 12}" if mi == 0 else f"{h - 12} oh {mi}" if mi < 10 else f"{h - 12}:{mi}") + " pm"
         if mi == 0:
             said = f"{h}" if ampm else "midnight" if h in (0, 24) else f"{h} o'clock" if h <= 12 else f"{h} hundred"
         elif mi < 10:
@@ -467,6 +627,24 @@ def normalise_for_speech(text: str, *, language: str, day_first: bool | None = N
             if re.search(r"versi[oó]n\s$", m.string[: m.start()], re.I)
             else f"{words['version']} {m.group(1)}"
         ),
+        text,
+    )
+    text = _DOTTED.sub(lambda m: _dotted(m, language), text)
+    text = _TIMES.sub(lambda m: _times(m, language), text)
+    number = "number" if language == "en" else "número"
+    text = re.sub(r"(?<![\w#&])#(?=\d)", f"{number} ", text)  # "#1": clean_text drops "#" as markdown ("we're 1")
+    text = re.sub(r"\b([A-G])#(?!\w)", r"\1 sharp", text)  # "C#", "F#": "C"
+    # "~5", ">50", "<10": clean_text drops the sign ("5 minutes" for about 5)
+    signs = (
+        {"~": "about", ">": "more than", "<": "less than"}
+        if language == "en"
+        else {"~": "unos", ">": "más de", "<": "menos de"}
+    )
+    text = re.sub(r"(?<![\w~<>=])([~<>])\s?(?=\d)", lambda m: f"{signs[m.group(1)]} ", text)
+    caps = _SPOKEN_CAPS[language]
+    text = re.sub(
+        rf"(?<![\w.])({'|'.join(sorted(caps, key=len, reverse=True))})(s?)(?![\w'’]|\.\w)",
+        lambda m: caps[m.group(1)] + m.group(2),
         text,
     )
     if language == "es":  # "1.º" "uno punto o", "2.ª" "dos punto a": primero, segunda; "1.er" primer

@@ -186,3 +186,20 @@ def test_a_word_outside_the_dictionary_aligns(shared_data) -> None:
     assert _runs(names, ["DH", "AH", "W", "UH", "D", "K", "AH", "T", "ER", "Z", "AH", "V"]), names
     speech_s, in_pauses_s = speech_in_pauses_s(samples, rate, got)
     assert in_pauses_s < 0.15 * speech_s, (speech_s, in_pauses_s)  # the words cover the speech
+
+
+def test_a_transcripts_numeric_date_is_read_as_the_voice_reads_it(espeak) -> None:
+    """`say "It is due 07/12/2026." --voice en-gb-x-rp --audio rec.wav`: the British voice says "December 7th" (day
+    first), but the aligner read the transcript month first whatever the voice ("July 12th") and failed ("Failed to
+    set up sub-word alignment"). It takes the voice's reading, as `say` without --audio does."""
+    from assets.tts import day_first, parse_voice, speak
+    from training.force_align import force_align
+
+    text = "It is due 07/12/2026."
+    speech = speak(text, voice="en-gb-x-rp").padded()
+    assert speech.text == "It is due December 7th, 2026."
+    first = day_first(parse_voice("en", "en-gb-x-rp"))
+    assert first is True and day_first(parse_voice("en", None)) is False and day_first(parse_voice("es")) is None
+    got = force_align(speech.samples, speech.sample_rate_hz, text, source="rec.wav", day_first=first)
+    said = " ".join(p.phoneme for p in got.phones if p.phoneme != "SIL")
+    assert "D IH S EH M B ER" in said and "JH UW L AY" not in said, said  # "December", not "July"
