@@ -494,8 +494,8 @@ def evaluate_lips(
 ) -> tuple[LipScores, list]:
     """Score ``model``'s live path (``lag`` frames of smoothing) on ``[(name, FaceTrack, bilabial spans)]``;
     returns the scores and the items. ``progress``: as :func:`lip_items`'."""
-    clips = [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips]
-    items = lip_items(model, clips, lag=lag, progress=progress)
+    audio = [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips]
+    items = lip_items(model, audio, lag=lag, progress=progress)
     return score_lips(items), items
 
 
