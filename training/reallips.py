@@ -403,14 +403,23 @@ def score_lips(
     )
 
 
-def lip_items(model, clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]], *, lag: int = 0) -> list:
+def lip_items(
+    model,
+    clips: Sequence[tuple[str, np.ndarray, int, np.ndarray, list]],
+    *,
+    lag: int = 0,
+    progress: Callable | None = None,
+    desc: str = "scoring",
+) -> list:
     """Run the live path of ``model`` (with ``lag`` frames of fixed-lag smoothing) on ``clips`` (name,
-    samples, rate_hz, truth (T, 4), bilabial spans [(start_s, end_s, label)]) -> items for :func:`score_lips`."""
+    samples, rate_hz, truth (T, 4), bilabial spans [(start_s, end_s, label)]) -> items for :func:`score_lips`.
+    ``progress(iterable, desc=, unit=)`` (e.g. assets.progress.Progress) wraps the clips (about a second each)."""
     from realtime_core.inversion import StreamConfig
     from realtime_core.pipeline import speech_to_params
 
+    wrap = progress or (lambda it, **_: it)
     out = []
-    for name, samples, rate, truth, spans in clips:
+    for name, samples, rate, truth, spans in wrap(clips, desc=desc, unit="clip"):
         est = speech_to_params(model, samples, rate, stream=StreamConfig(lag=lag))
         out.append((name, truth, est, loudness_db(samples, rate, len(truth)), list(spans)))
     return out
@@ -480,10 +489,13 @@ def phone_bilabial_spans(phones: Sequence) -> list[tuple[float, float, str]]:
     return [(p.start_s, p.end_s, p.phoneme) for p in phones if p.phoneme.rstrip("012") in BILABIAL_PHONES]
 
 
-def evaluate_lips(model, clips: Sequence[tuple[str, Any, list]], *, lag: int = 0) -> tuple[LipScores, list]:
+def evaluate_lips(
+    model, clips: Sequence[tuple[str, Any, list]], *, lag: int = 0, progress: Callable | None = None
+) -> tuple[LipScores, list]:
     """Score ``model``'s live path (``lag`` frames of smoothing) on ``[(name, FaceTrack, bilabial spans)]``;
-    returns the scores and the items."""
-    items = lip_items(model, [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips], lag=lag)
+    returns the scores and the items. ``progress``: as :func:`lip_items`'."""
+    audio = [(n, t.samples, t.sample_rate_hz, t.params, w) for n, t, w in clips]
+    items = lip_items(model, audio, lag=lag, progress=progress)
     return score_lips(items), items
 
 

@@ -50,7 +50,7 @@ LANDMARK_CACHE_FAMILY = re.compile(r"a[0-9]+_[0-9a-f]{32}\.json")
 # only the file's "head_meta" tells an older generation's file (morph_head_generation).
 MORPH_HEAD_CACHE_FAMILY = re.compile(r"[0-9a-f]{32}\.npz")
 MORPH_HEAD_FORMAT = "facecast-morph-head"
-MORPH_HEAD_VERSION = 2
+MORPH_HEAD_VERSION = 3
 """Bump when :func:`morph_head` makes something else from the same inputs while neither
 :data:`assets.heads.targets.MORPH_RIG_VERSION` (the fit) nor ``RIG_ALGORITHM`` (the mouth cavity, its shading, the
 checks, the automatic landmarks) changes, or when its cache file's layout does: a head driven by its own targets is
@@ -327,6 +327,12 @@ REST_JAW_MIN = -0.5
 """The lowest jaw-target weight :func:`closing_rest` rests a head at: half a stroke of the jaw closing past the head as
 modelled. Its target is extrapolated there, linearly; a mouth modelled further open than that is left as modelled (the
 rig checks then warn that its lips stay apart at closure)."""
+REST_UP_TILT_DEG = 10.3
+"""Degrees the face frame's up axis is known to: the built-in head's automatic landmarks (MediaPipe's eye corners on
+the skin) tilt it 10.3 degrees from its shipped ones (eye points deeper in the head). Its lower inner lip lies 0.022 IOD
+behind the upper, so the one mesh read 0.0070 IOD apart in one frame and 0.0111 in the other, over
+:data:`assets.heads.rigging.REST_GAP_MAX`: its own targets in a glb rested at jawOpen -0.007. :func:`closing_rest` takes
+lips within the limit along any up axis this close to the frame's as not modelled apart."""
 REST_JAW_OPENS = 0.1
 """IOD of inner-lip opening per unit weight below which a head's jaw target is not taken to close its lips (a jaw
 target that hardly parts them would need a weight far past the modelled head's to close them)."""
@@ -354,10 +360,11 @@ def closing_rest(
     whose own targets are fitted from its neutral keeps its lips as far apart as modelled there (a head modelled
     with the jaw 0.05 of jawOpen open: 0.033 IOD apart at every /m/, 0.0135 even at its closure pose, which its other
     targets cannot close). When its inner-lip landmarks lie more than :data:`assets.heads.rigging.REST_GAP_MAX` apart
-    along the face's up axis and it has a jaw target (the one mapped to ARKit ``jawOpen`` and nothing else) that
-    opens them at least :data:`REST_JAW_OPENS` IOD per unit, the rig rests at that target's weight that brings them
-    ``gap`` IOD apart (:attr:`realtime_core.face.keyframes.MorphRig.rest`, below 0; the targets are linear, so exact
-    at the landmarks), down to :data:`REST_JAW_MIN`. ``gap``: the reference face's own
+    along the face's up axis, and along every axis within :data:`REST_UP_TILT_DEG` of it (the frame's uncertainty), and
+    it has a jaw target (the one mapped to ARKit ``jawOpen`` and nothing else) that opens them at least
+    :data:`REST_JAW_OPENS` IOD per unit, the rig rests at that target's weight that brings them ``gap`` IOD apart
+    (:attr:`realtime_core.face.keyframes.MorphRig.rest`, below 0; the targets are linear, so exact at the landmarks),
+    down to :data:`REST_JAW_MIN`. ``gap``: the reference face's own
     (:func:`reference_rest_gap`), where the motions the fit reproduces start: closed to 0, a head modelled 0.05 of
     jawOpen apart crossed its lips by 0.0103 IOD at an upper-lip raise of 0.054 (limit 0.005), the reference's lips
     rising into each other from 0.007 apart; at 0.007, 0.0033 (docs/heads.md, "Lips modelled apart"). Retargeted
@@ -380,11 +387,16 @@ def closing_rest(
     fr = face_frame(v0, landmarks)
     ui, li = landmarks.upper_inner, landmarks.lower_inner
     apart = inner_lip_gap(v0, ui, li, fr)
+    # The smallest gap along an up axis tilted back or forward by the frame's uncertainty (about the eye line): lips
+    # within the limit there are the reference's own, read in another frame (a copy of the built-in head: 0.0111 IOD).
+    tilt = np.radians(REST_UP_TILT_DEG)
+    lips = (v0[ui] - v0[li]) / fr.iod
+    least = min(apart, *(float(lips @ (np.cos(tilt) * fr.axes[1] + s * np.sin(tilt) * fr.axes[2])) for s in (-1, 1)))
     # The jaw: a target that is ARKit's jawOpen alone (not a viseme or vowel holding some of it: run backwards, an
     # "aa" would not close a jaw but unround and unspread the lips too).
     mapped = rig.meta.get("targets") or {}
     jaw = [k for k, name in enumerate(rig.names) if set(mapped.get(name) or {}) == {"jawOpen"}]
-    if apart <= max(REST_GAP_MAX, gap) or not jaw:
+    if least <= max(REST_GAP_MAX, gap) or not jaw:
         return rig
     k = jaw[0]
     d = np.zeros((len(v0), 3))

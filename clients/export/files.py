@@ -65,6 +65,7 @@ def export_track(
     expression: np.ndarray | None = None,
     checked: frozenset[Path] = frozenset(),
     units: str = "IOD",
+    cue_fps: float | None = None,
 ) -> list[Path]:
     """Write ``track`` to ``path`` in the format of its suffix (.glb, .csv, .json, .tsv); returns the
     files written. head: an :class:`assets.heads.head.Head` (or (rig, HeadMesh)), required for .glb; or a HeadMesh
@@ -79,7 +80,9 @@ def export_track(
     face shapes (:attr:`realtime_core.face.keyframes.MorphRig.face_recipe`) beside ``track``'s expressed mouth.
     ``path`` is checked (:func:`check_outputs`: a probe file made and removed) before anything is written unless it
     is in ``checked``, what a command's own check_outputs returned before its work. units: what the track's curves
-    measure, recorded in a .json (the mouth parameters' IOD, or blendshape weights: ``animate --curves``)."""
+    measure, recorded in a .json (the mouth parameters' IOD, or blendshape weights: ``animate --curves``).
+    cue_fps (.tsv): the rate the cues are written at, ``track`` being the model's own frames (``animate --fps``: cues
+    of curves interpolated onto 24 fps lost one-frame closures; :func:`clients.export.rhubarb.cues`)."""
     if morphs not in MORPHS:
         raise ExportError(f"morphs must be one of {MORPHS}, got {morphs!r}")
     p = Path(path)
@@ -124,6 +127,6 @@ def export_track(
     elif suffix == ".json":
         data = encode_json(track, audio=wav_name, units=units)
     else:
-        data = tsv_bytes(track)
+        data = tsv_bytes(track, fps=cue_fps)
     written.insert(0, atomic_write_bytes(p, data))
     return written

@@ -29,6 +29,11 @@ sentence had no A cue). Both are durations, read at the track's own rate: counte
 let 33 ms G cues flicker that the 30 fps cues of the same speech merge. TSV: one ``start<TAB>shape`` line per cue,
 start in seconds with 2 decimals, and always a last ``end<TAB>X`` line at the track's end, as Rhubarb writes
 (its closing line: the only place a TSV says how long the animation lasts).
+
+Cues written at another frame rate (``animate --fps 24``) are the cues of the model's own frames, each start moved to
+the nearest frame ``k / fps`` of that rate (:func:`cues`' ``fps``), a closure keeping a frame of its own: cues of the
+curves interpolated onto 24 fps lost a one-frame /m b p/ wherever the 30 fps closure fell between two 24 fps frames
+(the interpolated lips never closed there; 5 of 6 phases of one synthetic closure had no A cue at 24 fps, 5 at 25).
 """
 
 from __future__ import annotations
@@ -114,8 +119,11 @@ def frame_shapes(params: np.ndarray, th: ShapeThresholds = ShapeThresholds()) ->
     return out
 
 
-def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
-    """The track's cues: runs of equal shapes, short runs merged into the previous cue."""
+def cues(track: Track, th: ShapeThresholds = ShapeThresholds(), *, fps: float | None = None) -> list[Cue]:
+    """The track's cues: runs of equal shapes, short runs merged into the previous cue. fps: the frame rate they are
+    written at (frames ``k / fps`` s from 0 s; None: the track's own frames): each start on the nearest such frame, a
+    closure (A) on a frame of its own (the cue it would share a frame with gives way: the one before it, a frame
+    shorter than one output frame at this rate, or the one after it, a frame later)."""
     if track.names != VISUAL_PARAMS:
         raise ExportError(f"mouth shapes need the parameters {VISUAL_PARAMS}, got {track.names}")
     shapes = frame_shapes(track.values, th)
@@ -146,14 +154,40 @@ def cues(track: Track, th: ShapeThresholds = ShapeThresholds()) -> list[Cue]:
             merged[-1][2] += length  # too short to show, or equal to the cue it now follows
         else:
             merged.append([first, shape, length])
-    return [Cue(track.start_s + first / track.fps, shape) for first, shape, _ in merged]
+    out = [Cue(track.start_s + first / track.fps, shape) for first, shape, _ in merged]
+    return out if fps is None else _on_frames(out, fps)
 
 
-def tsv_bytes(track: Track, th: ShapeThresholds = ShapeThresholds()) -> bytes:
+def _on_frames(cs: list[Cue], fps: float) -> list[Cue]:
+    """Cues (strictly increasing starts) with each start moved to the nearest frame ``k / fps``. Two landing on one
+    frame keep the later one, unless the earlier is a closure (A), which keeps the frame and moves the later one to
+    the next; equal shapes that then meet merge, a closure merged into the one before still showing on its own
+    nearest frame. Starts stay strictly increasing, none later than the frame after its nearest, and every closure's
+    nearest frame shows A."""
+    if not fps > 0:
+        raise ExportError(f"fps must be > 0, got {fps!r}")
+    placed: list[list] = []  # [first frame, shape, last frame it must show: a closure's nearest frames, else its first]
+    for c in cs:
+        k = int(np.floor(c.start_s * fps + 0.5))  # the nearest frame (a half: the later)
+        while placed and k <= placed[-1][2] and placed[-1][1] != "A":
+            placed.pop()  # shorter than a frame at this rate: the later cue is what that frame shows
+        if placed and placed[-1][1] == c.shape:
+            if c.shape == "A":  # two closures a frame apart or less: the one cue shows both their frames
+                placed[-1][2] = max(placed[-1][2], k)
+            continue
+        if placed and k <= placed[-1][2]:  # (the cue before is a closure: only closures are left there)
+            k = placed[-1][2] + 1  # the closure keeps its frames, this cue starts after them
+        placed.append([k, c.shape, k])
+    return [Cue(k / fps, shape) for k, shape, _ in placed]
+
+
+def tsv_bytes(track: Track, th: ShapeThresholds = ShapeThresholds(), *, fps: float | None = None) -> bytes:
     """Rhubarb TSV text (UTF-8) of the track's cues, ending with ``end<TAB>X`` at the track's end, whatever the last
-    cue (Rhubarb's closing line; without it a take ending in a pause said nothing of the seconds after its last cue)."""
-    end = f"{track.start_s + track.duration_s:.2f}"
-    lines = [f"{c.start_s:.2f}\t{c.shape}" for c in cues(track, th)]
+    cue (Rhubarb's closing line; without it a take ending in a pause said nothing of the seconds after its last cue).
+    fps: the cues placed on the frames of this rate (:func:`cues`), the end that of :meth:`Track.at_fps` at it."""
+    end_s = track.start_s + track.duration_s if fps is None else track.at_fps(fps).duration_s
+    end = f"{end_s:.2f}"
+    lines = [f"{c.start_s:.2f}\t{c.shape}" for c in cues(track, th, fps=fps)]
     # A cue starting within the track's last hundredth (a high --fps) would print at the end's own time: read_tsv and
     # Rhubarb's readers take times that increase, so the closing line replaces it.
     lines = [line for line in lines if not line.startswith(f"{end}\t")] + [f"{end}\tX"]

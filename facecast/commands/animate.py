@@ -149,6 +149,9 @@ def run(args: argparse.Namespace) -> int:
     speech = params
     warn_if_quiet("animate", args.speech, quiet, speech)
     params = apply_expressions(params, args, mups=mups, model=model, command="animate")
+    # The cues of the model's own frames, placed on the asked rate's frames (a one-frame closure between two of them
+    # vanished from the interpolated curves: clients.export.rhubarb.cues).
+    model_track = Track(values=params)
     fps = float(args.fps)
     if fps != DEFAULT_FPS:  # the model's frames, interpolated onto the asked rate (as `render --fps`)
         # One interpolation of both tracks' channels side by side (the same frame times; without an expression the
@@ -181,9 +184,11 @@ def run(args: argparse.Namespace) -> int:
 
         arkit = builtin_arkit_targets()
     for out in written:
+        suffix = out.suffix.lower()
         export_track(
             out,
-            curves if out.suffix.lower() in (".csv", ".json") else track,
+            curves if suffix in (".csv", ".json") else model_track if suffix == ".tsv" else track,
+            cue_fps=fps,
             units=units,
             head=head,
             audio=(samples, rate),

@@ -43,3 +43,24 @@ def test_clips_section_is_titled_by_its_folder_with_progress(shared_data, tmp_pa
     (empty / "notes.txt").write_text("no clips here\n")
     with pytest.raises(ConfigError, match="no talking-face clips"):
         eval_command.clips_section(model, empty)
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("mediapipe") is None, reason="mediapipe not installed")
+def test_video_dir_scores_only_its_clips(shared_data, tmp_path, ffmpeg, capsys):
+    """`eval --video-dir DIR` for a user's own clips also built the synthetic corpus (espeak, 80 utterances) and scored
+    GRID s1's 90 test sentences and the shared speech besides: 3 clips took 90 s on a first run. Now the clips alone
+    (their extraction and scoring with progress), the other sections only when named."""
+    from facecast.cli import main
+
+    folder = tmp_path / "mine"
+    folder.mkdir()
+    shutil.copy(shared_data / "video" / "grid" / "lbax4n.mpg", folder)
+    assert (shared_data / "video" / "grid_s1").is_dir()  # the default s1 section would have run
+    capsys.readouterr()
+    assert main(["eval", "--video-dir", str(folder), "--cache-dir", str(tmp_path / "cache")]) == 0
+    out, err = capsys.readouterr()
+    headings = [line for line in out.splitlines() if line.startswith("## ")]
+    assert headings == [f"## 2. Real lips: clips in {folder}"], headings
+    assert "GRID s1" not in err and "skipping" not in err  # nothing else measured, nothing said to be skipped
+    assert f"clips in {folder}" in err and "scoring" in err and "1/1" in err  # extraction, then scoring, with progress
+    assert f"Produced by `facecast eval --video-dir {folder}`" in out

@@ -475,6 +475,21 @@ def test_an_own_target_head_modelled_with_its_lips_apart_rests_with_them_togethe
     assert plain.rig.rest is None and "rest_weights" not in plain.rig.meta
 
 
+def test_the_builtin_heads_own_targets_in_a_file_rest_as_modelled_under_automatic_landmarks(tmp_path, builtin_morph):
+    """The built-in head's targets in a glb, loaded as `--head x.glb` loads it (the automatic landmarks): it rested at
+    jawOpen -0.007. Those landmarks tilt the face's up axis 10.3 degrees from the shipped ones, and its lower inner
+    lip lies behind the upper, so its 0.0070 IOD lips read 0.0111, over the 0.01 limit. Its rest is its own: no rest
+    weights, every target 0 at params 0, the face at params 0 its neutral, its checks passing."""
+    from clients.render.landmarks import find_landmarks
+
+    path = _arkit_file(tmp_path, builtin_morph, lambda k: k)
+    head = resolve_head(path, landmark_finder=find_landmarks, cache=tmp_path / "cache")
+    assert head.kind == "morph" and head.rig.rest is None and "rest_weights" not in head.rig.meta
+    np.testing.assert_array_equal(head.rig.weights(np.zeros((1, 4)))[0], 0.0)
+    np.testing.assert_array_equal(head.rig.deformed(np.zeros(4)), head.rig.neutral)
+    assert head.rig.meta["checks"]["passed"]
+
+
 def test_an_expression_moves_the_heads_own_face_shapes_and_leaves_the_speech_weights(builtin_morph):
     """Through the four parameters alone an expression moved only the mouth: `render --expression surprise` on the
     built-in head showed no raised brows and no wide eyes, and the browser's expression buttons hardly changed the

@@ -186,6 +186,26 @@ def test_animate_curves_writes_the_blendshape_weights_an_engine_drives_as_csv_an
     assert len(err.splitlines()) == 1 and "--curves arkit52" in err and not (tmp_path / "only.tsv").exists()
 
 
+def test_animate_fps_writes_the_model_rates_cues_on_its_own_frames(tmp_path):
+    """`animate --fps 24 -o x.tsv` writes the cues of the 30 fps parameters placed on 24 fps frames (cues of curves
+    interpolated onto 24 fps lost one-frame closures): the same bytes as the exporter's from the 30 fps CSV."""
+    from assets.audio import write_wav
+    from assets.modelfile import save_model
+    from clients.export.rhubarb import tsv_bytes
+    from tests.speech import small_model
+
+    model = save_model(tmp_path / "m.npz", small_model())
+    wav = write_wav(tmp_path / "s.wav", speechlike(2.0, 16000), 16000)
+    assert main(["animate", str(wav), "--model", str(model), "-o", str(tmp_path / "p.csv")]) == 0
+    at30 = decode_csv((tmp_path / "p.csv").read_bytes())
+    for fps in (24, 60):
+        out = tmp_path / f"p{fps}.tsv"
+        assert main(["animate", str(wav), "--model", str(model), "--fps", str(fps), "-o", str(out)]) == 0
+        assert out.read_bytes() == tsv_bytes(at30, fps=fps)
+        got = read_tsv(out.read_bytes())
+        assert all(abs(c.start_s * fps - round(c.start_s * fps)) <= 0.005 * fps + 1e-9 for c in got)  # 2 decimals
+
+
 def test_animate_refuses_before_writing_anything(tmp_path, capsys):
     """Every refusal is one line, exit 2, and leaves no file: the .wav beside a .glb/.json would be the input
     speech itself (a stereo recording would be replaced by its mono copy), an export whose suffix is not its

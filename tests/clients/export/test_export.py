@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import itertools
 import subprocess
 import wave
 from pathlib import Path
@@ -124,6 +125,46 @@ def test_a_closure_inside_speech_is_an_a_cue_however_short():
     # the rests before and after stay X; the pressed frame and the unpressed closure are A
     assert got == [(0, "X"), (8, "D"), (12, "A"), (13, "D"), (17, "A"), (19, "B"), (23, "X")]
     assert [c.shape for c in cues(tr, ShapeThresholds(closure_s=1 / 30))][4] == "X"  # 2 frames: a pause
+
+
+def test_a_one_frame_closure_keeps_its_cue_at_any_output_rate():
+    # `animate --fps 24` put the cues on the curves interpolated onto 24 fps: a /b/ closed for one 30 fps frame
+    # between two 24 fps frames never closed there, and its A cue vanished (5 of these 6 phases at 24 fps, 5 at 25).
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "A": [-0.04, 0, 0.01, 0], "B": [0, 0, 0.08, 0]}
+    for before in range(4, 10):  # the closure at 6 successive 30 fps frames: every phase against 24 and 25 fps
+        shapes = ["X"] * 8 + ["D"] * before + ["A"] + ["B"] * 5 + ["X"] * 6
+        tr = Track(values=np.array([table[s] for s in shapes]))
+        closure_s = (8 + before) / 30
+        for fps in (24.0, 25.0, 30.0, 60.0):
+            got = read_tsv(tsv_bytes(tr, fps=fps))  # read_tsv refuses times that do not increase
+            assert [c.shape for c in got] == ["X", "D", "A", "B", "X", "X"], (before, fps)
+            a = got[2].start_s
+            assert abs(a - closure_s) <= 1 / fps, (before, fps)  # on the output frame nearest the closure
+            placed = cues(tr, fps=fps)
+            assert all(abs(c.start_s * fps - round(c.start_s * fps)) < 1e-9 for c in placed)  # on the output frames
+            assert got[-1].start_s == float(f"{tr.at_fps(fps).duration_s:.2f}")  # the end of the frames written
+        assert tsv_bytes(tr, fps=30.0) == tsv_bytes(tr)  # at the model's own rate: as before
+
+
+def test_closures_denser_than_the_output_frames_each_keep_a_cue():
+    # At 10 fps three 30 fps cues share one output frame: the closures keep theirs, the others give way, and no cue
+    # starts later than the frame after its nearest one.
+    table = {"X": [0, 0, 0.0, 0], "D": [0, 0, 0.35, 0], "A": [-0.04, 0, 0.01, 0]}
+    shapes = ["X"] * 3 + (["D"] * 2 + ["A"]) * 8 + ["D"] * 2 + ["X"] * 3
+    tr = Track(values=np.array([table[s] for s in shapes]))
+    model = cues(tr, ShapeThresholds(min_cue_s=1 / 30))
+    for fps in (5.0, 10.0, 24.0):
+        got = cues(tr, ShapeThresholds(min_cue_s=1 / 30), fps=fps)
+        starts = [c.start_s for c in got]
+        assert starts == sorted(set(starts)) and starts[0] == 0.0
+        frames = [round(c.start_s * fps) for c in got]
+        assert all(abs(c.start_s * fps - f) < 1e-9 for c, f in zip(got, frames, strict=True))  # on the output frames
+        shown = [got[int(np.searchsorted(frames, k, side="right")) - 1].shape for k in range(frames[-1] + 1)]
+        nearest = [(int(np.floor(m.start_s * fps + 0.5)), m.shape) for m in model]
+        assert all(shown[k] == "A" for k, shape in nearest if shape == "A")  # what a closure's nearest frame shows
+        # each cue is one of the model's, on its nearest frame or the one after (after a closure's)
+        assert all((f, c.shape) in nearest or (f - 1, c.shape) in nearest for c, f in zip(got, frames, strict=True))
+        assert all(a.shape != b.shape for a, b in itertools.pairwise(got))  # equal neighbours merged
 
 
 def _synthetic_head(n: int = 60, seed: int = 1):
